@@ -1,0 +1,134 @@
+"""Sensor frames: timestamped arrays per sensor with validity flags.
+
+Produced by trn_env.sensors (or read from a log of a real flight) and consumed by navigators. They live
+here, not in trn_env, because navigators must run without the simulator. Units are SI; frames are
+body FRD and navigation NED unless a field name says otherwise. Every sample has a time `t_s`
+(seconds since scenario start) and a boolean `valid`; an invalid sample's values are NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+
+def _check_lengths(frame) -> None:
+    n = frame.t_s.shape[0]
+    for f in fields(frame):
+        v = getattr(frame, f.name)
+        if isinstance(v, np.ndarray) and v.shape[:1] != (n,):
+            raise ValueError(f"{type(frame).__name__}.{f.name} has {v.shape[0]} rows, t_s has {n}")
+
+
+@dataclass
+class ImuFrame:
+    """Accelerometer and gyro triads at the IMU rate (body FRD)."""
+
+    t_s: np.ndarray
+    f_b_mps2: np.ndarray         # (n, 3) measured specific force
+    omega_ib_b_rps: np.ndarray   # (n, 3) measured inertial angular rate
+    valid: np.ndarray
+
+    def __post_init__(self):
+        _check_lengths(self)
+
+
+@dataclass
+class BaroFrame:
+    """Barometric (pressure) altitude, ISA, metres."""
+
+    t_s: np.ndarray
+    h_baro_m: np.ndarray
+    valid: np.ndarray
+
+    def __post_init__(self):
+        _check_lengths(self)
+
+
+@dataclass
+class RadarAltimeterFrame:
+    """Range to the closest terrain point in the beam cone, metres."""
+
+    t_s: np.ndarray
+    range_m: np.ndarray
+    valid: np.ndarray
+
+    def __post_init__(self):
+        _check_lengths(self)
+
+
+@dataclass
+class IraFrame:
+    """Interferometric radar altimeter: slant range R and look angle theta (seed 000 section 3.3).
+
+    theta is measured in the antennas' cross-track plane (body y-z) from the body's down axis, positive
+    toward the right wing (+y FRD). This is the sign of seed 000 eqs 11, 13 and 35 (the right antenna is
+    the closer one for theta > 0); the paper's eqs 18-19 state the opposite sign, which its later equations
+    do not use.
+    """
+
+    t_s: np.ndarray
+    range_m: np.ndarray
+    look_angle_rad: np.ndarray
+    valid: np.ndarray
+
+    def __post_init__(self):
+        _check_lengths(self)
+
+
+@dataclass
+class GnssFrame:
+    """GNSS position and velocity fixes."""
+
+    t_s: np.ndarray
+    lat_rad: np.ndarray
+    lon_rad: np.ndarray
+    h_m: np.ndarray
+    v_ned_mps: np.ndarray   # (n, 3)
+    valid: np.ndarray
+
+    def __post_init__(self):
+        _check_lengths(self)
+
+
+@dataclass
+class AirDataFrame:
+    """Air data: true airspeed (m/s), angle of attack and sideslip (rad)."""
+
+    t_s: np.ndarray
+    tas_mps: np.ndarray
+    alpha_rad: np.ndarray
+    beta_rad: np.ndarray
+    valid: np.ndarray
+
+    def __post_init__(self):
+        _check_lengths(self)
+
+
+@dataclass
+class HeadingFrame:
+    """Compensated compass heading, converted to true heading (rad, clockwise from north)."""
+
+    t_s: np.ndarray
+    heading_rad: np.ndarray
+    valid: np.ndarray
+
+    def __post_init__(self):
+        _check_lengths(self)
+
+
+@dataclass
+class SensorFrames:
+    """Everything the sensors produced over one interval [t_start_s, t_end_s). Absent sensors are None."""
+
+    t_start_s: float
+    t_end_s: float
+    imu: ImuFrame | None = None
+    baro: BaroFrame | None = None
+    radar_altimeter: RadarAltimeterFrame | None = None
+    ira: IraFrame | None = None
+    gnss: GnssFrame | None = None
+    air_data: AirDataFrame | None = None
+    heading: HeadingFrame | None = None
+    extra: dict = field(default_factory=dict)

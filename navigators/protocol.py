@@ -1,0 +1,71 @@
+"""The one interface every navigator implements, and the estimate it returns.
+
+    nav.reset(initial: Estimate)            # initial state and covariance
+    est = nav.update(frames: SensorFrames)  # consume one interval of sensor data, return the estimate at
+                                            # frames.t_end_s (or the last sample time)
+
+A navigator may keep any internal state (an INS, a particle cloud, a TERCOM batch). It must never raise
+on bad data: a NaN sample, a no-return, a window off the map or a covariance that stops being positive
+definite is skipped, counted in `Health`, and reported in `Health.events` for the log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .frames import SensorFrames
+
+
+@dataclass
+class Health:
+    """Navigator health: ok is False when the estimate should not be trusted (diverged, lost lock)."""
+
+    ok: bool = True
+    status: str = "ok"                                   # short word: ok, acquiring, degraded, diverged, ...
+    skipped: dict[str, int] = field(default_factory=dict)  # reason -> count of measurements skipped so far
+    events: list[tuple[float, str]] = field(default_factory=list)  # (t_s, message) since the last update
+
+    def skip(self, t_s: float, reason: str, message: str | None = None) -> None:
+        self.skipped[reason] = self.skipped.get(reason, 0) + 1
+        self.events.append((float(t_s), message or reason))
+
+
+@dataclass
+class Estimate:
+    """A navigation estimate at time t_s.
+
+    covariance is over the error state [north_m, east_m, down_m, v_n, v_e, v_d, roll, pitch, yaw] (9 x 9,
+    SI units, radians for attitude); navigators with more states report this 9 x 9 block. Position errors
+    are in metres in NED even though the position itself is geodetic.
+    """
+
+    t_s: float
+    lat_rad: float
+    lon_rad: float
+    h_m: float
+    v_ned_mps: np.ndarray
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+    covariance: np.ndarray
+    health: Health = field(default_factory=Health)
+    extra: dict = field(default_factory=dict)   # navigator-specific outputs (e.g. a TERCOM fix and its quality)
+
+    @property
+    def sigma_ned_m(self) -> np.ndarray:
+        """One-sigma position uncertainty north, east, down (m)."""
+        return np.sqrt(np.clip(np.diag(self.covariance)[:3], 0.0, None))
+
+
+@runtime_checkable
+class Navigator(Protocol):
+    """Any estimator that runs on SensorFrames."""
+
+    name: str
+
+    def reset(self, initial: Estimate) -> None: ...
+
+    def update(self, frames: SensorFrames) -> Estimate: ...

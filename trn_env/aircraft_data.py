@@ -1,0 +1,49 @@
+"""Where the JSBSim aircraft data lives, and a bare FGFDMExec loaded with it.
+
+The data is installed as the package `trn_env.aircraft` (mapped from the repository's top-level
+aircraft/ folder), so it is found from any working directory; a source checkout falls back to the
+repository folder.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import jsbsim
+
+
+def aircraft_root() -> Path:
+    """Folder holding one sub-folder per aircraft (e.g. kingair/kingair.xml)."""
+    try:
+        root = Path(str(resources.files("trn_env.aircraft")))
+        if root.is_dir():
+            return root
+    except ModuleNotFoundError:
+        pass
+    root = Path(__file__).resolve().parents[1] / "aircraft"
+    if root.is_dir():
+        return root
+    raise FileNotFoundError("trn-env aircraft data not found: reinstall the package (pip install .)")
+
+
+def available_aircraft() -> list[str]:
+    root = aircraft_root()
+    return sorted(p.name for p in root.iterdir() if (p / f"{p.name}.xml").is_file())
+
+
+def new_fdm(aircraft: str = "kingair", dt_s: float = 0.01) -> jsbsim.FGFDMExec:
+    """An FGFDMExec with `aircraft` loaded and its integration step set; no initial condition applied."""
+    known = available_aircraft()
+    if aircraft not in known:
+        raise ValueError(f"unknown aircraft {aircraft!r}; available: {', '.join(known) or 'none'}")
+    root = aircraft_root()
+    fdm = jsbsim.FGFDMExec(str(root), None)
+    fdm.set_debug_level(0)
+    fdm.set_aircraft_path(str(root))
+    fdm.set_engine_path(str(root / aircraft / "Engines"))
+    fdm.set_systems_path(str(root / aircraft / "Systems"))
+    if not fdm.load_model(aircraft):
+        raise RuntimeError(f"JSBSim could not load aircraft {aircraft!r} from {root / aircraft}")
+    fdm.set_dt(dt_s)
+    return fdm

@@ -1,0 +1,78 @@
+"""The true flight, in SI units, one row per JSBSim step.
+
+The flight core fills a `TruthChunk` from cached JSBSim property nodes; sensors, logs, rewards and
+`info` read it. Navigators never see it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+# name -> trailing shape of each per-step field (the leading axis is the step index).
+TRUTH_FIELDS: dict[str, tuple[int, ...]] = {
+    "t_s": (),              # seconds since scenario start
+    "lat_rad": (),          # WGS84 geodetic latitude
+    "lon_rad": (),          # WGS84 longitude
+    "h_msl_m": (),          # height above MSL (the DEM's vertical datum), metres
+    "v_ned_mps": (3,),      # velocity relative to the Earth in NED, m/s
+    "roll_rad": (),         # 3-2-1 Euler angles of the body (FRD) relative to NED
+    "pitch_rad": (),
+    "yaw_rad": (),          # true heading, (-pi, pi]
+    "C_bn": (3, 3),         # rotation body (FRD) -> NED
+    "omega_ib_b_rps": (3,),  # body angular rate relative to inertial space, body axes (what gyros sense)
+    "omega_eb_b_rps": (3,),  # body angular rate relative to the Earth, body axes (JSBSim p, q, r)
+    "f_b_mps2": (3,),       # specific force at the IMU location, body axes (what accelerometers sense)
+    "tas_mps": (),          # true airspeed
+    "alpha_rad": (),        # angle of attack
+    "beta_rad": (),         # sideslip angle
+    "p_static_pa": (),      # ambient static pressure
+    "T_static_K": (),       # ambient static temperature
+    "wind_ned_mps": (3,),   # total wind (steady + turbulence + gust) in NED, m/s
+    "h_agl_m": (),          # height above the terrain JSBSim knows (written by guidance), metres
+}
+
+
+@dataclass
+class TruthChunk:
+    """Per-step true state for steps [0, n). All arrays share the leading length n."""
+
+    t_s: np.ndarray
+    lat_rad: np.ndarray
+    lon_rad: np.ndarray
+    h_msl_m: np.ndarray
+    v_ned_mps: np.ndarray
+    roll_rad: np.ndarray
+    pitch_rad: np.ndarray
+    yaw_rad: np.ndarray
+    C_bn: np.ndarray
+    omega_ib_b_rps: np.ndarray
+    omega_eb_b_rps: np.ndarray
+    f_b_mps2: np.ndarray
+    tas_mps: np.ndarray
+    alpha_rad: np.ndarray
+    beta_rad: np.ndarray
+    p_static_pa: np.ndarray
+    T_static_K: np.ndarray
+    wind_ned_mps: np.ndarray
+    h_agl_m: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    @classmethod
+    def empty(cls, n: int) -> TruthChunk:
+        """Preallocated chunk of n steps (filled with NaN)."""
+        return cls(**{k: np.full((n,) + shape, np.nan) for k, shape in TRUTH_FIELDS.items()})
+
+    def slice(self, start: int, stop: int) -> TruthChunk:
+        """Rows [start, stop) as views."""
+        return TruthChunk(**{f.name: getattr(self, f.name)[start:stop] for f in fields(self)})
+
+    def copy(self) -> TruthChunk:
+        return TruthChunk(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    @staticmethod
+    def concatenate(chunks: list[TruthChunk]) -> TruthChunk:
+        return TruthChunk(**{k: np.concatenate([getattr(c, k) for c in chunks]) for k in TRUTH_FIELDS})
