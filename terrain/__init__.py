@@ -1,1 +1,33 @@
-"""Terrain: DEMs, map error models, terrain queries and metrics. Imports neither trn_env nor navigators."""
+"""Terrain: DEMs, map error models, terrain queries and metrics. Imports neither trn_env nor navigators.
+
+`terrain.load(name_or_path, fill_voids=False) -> Dem`:
+    "jacksboro"            the bundled real USGS 3" DEM (matplotlib sample data)
+    "synthetic:<preset>"   a seeded synthetic terrain (presets in terrain.synthetic.PRESETS)
+    a path                 .tif/.tiff, .hgt, .dt0/.dt1/.dt2 (rasterio) or .npz (terrain.loaders)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from terrain.dem import Dem
+from terrain.loaders import DemLoadError
+
+BUNDLED = ("jacksboro",)
+
+__all__ = ["Dem", "DemLoadError", "load", "BUNDLED"]
+
+
+def load(name_or_path, fill_voids: bool = False) -> Dem:
+    """Load a DEM by bundled name, "synthetic:<preset>" or file path (see the module docstring)."""
+    from terrain import loaders
+
+    if isinstance(name_or_path, str):
+        key = name_or_path.strip()
+        if key.lower() in ("jacksboro", "jacksboro_fault", "default"):
+            return loaders.load_jacksboro(fill_voids)
+        if key.lower().startswith("synthetic:"):
+            from terrain import synthetic
+
+            return synthetic.from_preset(key.split(":", 1)[1])
+    return loaders.load_path(Path(name_or_path), fill_voids)

@@ -1,0 +1,364 @@
+"""INS + batch TERCOM + error-state Kalman filter (seed 000 section 4.3), and the free-inertial navigator.
+
+Error state (13, computed minus true, feedback form - corrected into the INS and zeroed after each fix):
+
+    0-2   position error north, east, down (m)
+    3-5   velocity error NED (m/s)
+    6-8   attitude error psi (rad, NED small angles: C_true = (I + [psi x]) C_computed)
+    9-11  accelerometer bias, body FRD (m/s^2)
+    12    z-gyro bias (rad/s) - the least observable gyro term and the one that drives heading drift
+
+Propagation at 50 Hz (seed 000 Table 2) with the psi-angle error model: d(dr) = dv;
+d(dv) = f^n x psi + C_bn b_a - (2 w_ie + w_en) x dv + dg (dg = -g/R dr_h, +2g/R dr_d; the vertical is the
+baro-damped channel of navigators.ins); d(psi) = -w_in x psi - C_bn [0, 0, b_gz]. Measurement: the TERCOM
+fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (Table 2), chi-square gated.
+"Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
+back into the INS at every fix, so the next batch is collected with the compensated INS.
+
+Built on filterpy.kalman.KalmanFilter (predict with our Phi/Q, Joseph-form update).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from terrain.geodesy import OMEGA_EARTH_RPS, meridian_radius_m, prime_vertical_radius_m
+
+from .frames import SensorFrames
+from .ins import StrapdownIns, quat_to_dcm
+from .ira_geometry import FORMULAS, closest_point_ned
+from .protocol import Estimate, Health
+from .tercom import TercomBatch, TercomFix, correlate
+
+G0 = 9.80665
+N_ERR = 13
+CHI2_2DOF_99_99 = 18.42
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _is_pd(P: np.ndarray) -> bool:
+    if not np.all(np.isfinite(P)):
+        return False
+    try:
+        np.linalg.cholesky(0.5 * (P + P.T))
+        return True
+    except np.linalg.LinAlgError:
+        return False
+
+
+class InsTrnNavigator:
+    """Strapdown INS + baro, optionally aided by batch TERCOM fixes through a 13-state error-state KF.
+
+    aiding: None (free inertial, name "ins"), "ira" (seed 000 eq 2, default of "ins_tercom") or
+    "radar_altimeter" (eq 1). formula: IRA closest-point formula ("proposed" default). dem: the navigator's
+    terrain map (terrain.Dem, or a name/path for terrain.load) - required when aiding is set.
+    Sensor noise settings (1 sigma) default to seed 000 Table 2.
+    """
+
+    def __init__(self, aiding: str | None = None, dem=None, formula: str = "proposed",
+                 fix_period_s: float = 40.0, half_cells: int = 50, cell_m: float = 5.0,
+                 fix_sigma_m: float = 10.0, ekf_rate_hz: float = 50.0, gravity_model: str = "j2",
+                 tau_baro_s: float = 30.0, accel_bias_mps2: float = 50e-6 * G0,
+                 accel_noise_mps2_rthz: float = 10e-6 * G0, gyro_bias_rps: float = np.radians(0.005) / 3600,
+                 gyro_noise_rps_rthz: float = np.radians(0.005) / 60, ira_decimation: int = 1,
+                 gate_chi2: float = CHI2_2DOF_99_99, min_samples: int = 20,
+                 dp_min_m: float = 0.0, dp_reference_formula: str = "conventional", name: str | None = None):
+        if aiding not in (None, "ira", "radar_altimeter"):
+            raise ValueError(f"aiding must be None, 'ira' or 'radar_altimeter', got {aiding!r}")
+        if formula not in FORMULAS:
+            raise ValueError(f"formula must be one of {FORMULAS}, got {formula!r}")
+        if dp_reference_formula not in FORMULAS:
+            raise ValueError(f"dp_reference_formula must be one of {FORMULAS}, got {dp_reference_formula!r}")
+        for key, val in (("fix_period_s", fix_period_s), ("cell_m", cell_m), ("fix_sigma_m", fix_sigma_m),
+                         ("ekf_rate_hz", ekf_rate_hz), ("tau_baro_s", tau_baro_s)):
+            if not (np.isfinite(val) and val > 0):
+                raise ValueError(f"{key} must be a positive number, got {val}")
+        if int(half_cells) < 1 or int(ira_decimation) < 1:
+            raise ValueError("half_cells and ira_decimation must be >= 1")
+        if aiding is not None:
+            if dem is None:
+                raise ValueError("dem: the navigator's terrain map is required when aiding is set")
+            if isinstance(dem, str):
+                import terrain
+                dem = terrain.load(dem)
+        self.name = name or ("ins" if aiding is None else "ins_tercom")
+        self.aiding = aiding
+        self.dem = dem
+        self.formula = formula
+        self.fix_period_s = float(fix_period_s)
+        self.half_cells = int(half_cells)
+        self.cell_m = float(cell_m)
+        self.fix_sigma_m = float(fix_sigma_m)
+        self.dt_ekf = 1.0 / float(ekf_rate_hz)
+        self.ins = StrapdownIns(gravity_model, tau_baro_s)
+        self.sig_ba = float(accel_bias_mps2)
+        self.q_acc = float(accel_noise_mps2_rthz) ** 2
+        self.sig_bg = float(gyro_bias_rps)
+        self.q_gyr = float(gyro_noise_rps_rthz) ** 2
+        self.ira_decimation = int(ira_decimation)
+        self.gate_chi2 = float(gate_chi2)
+        self.min_samples = int(min_samples)
+        self.dp_min_m = float(dp_min_m)
+        self.dp_reference_formula = dp_reference_formula
+        self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
+        self.health = Health()
+        self.batch = TercomBatch()
+        self.fixes: list[TercomFix] = []
+        self._t_ekf = np.nan
+        self._t_batch0 = np.nan
+        self._last_f_b = np.array([0.0, 0.0, -G0])
+
+    # ------------------------------------------------------------------ protocol
+    def reset(self, initial: Estimate) -> None:
+        self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
+                       initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
+        P = np.zeros((N_ERR, N_ERR))
+        cov = np.asarray(initial.covariance, float)
+        if cov.shape != (9, 9) or not _is_pd(cov):
+            raise ValueError("initial.covariance must be a positive definite 9 x 9 matrix")
+        P[:9, :9] = cov
+        P[9:12, 9:12] = np.eye(3) * self.sig_ba ** 2
+        P[12, 12] = self.sig_bg ** 2
+        self.kf.x = np.zeros((N_ERR, 1))
+        self.kf.P = P
+        self._P_good = P.copy()
+        self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
+        self.batch.clear()
+        self.fixes = []
+        self._t_ekf = float(initial.t_s)
+        self._t_batch0 = float(initial.t_s)
+
+    def update(self, frames: SensorFrames) -> Estimate:
+        self.health.events = []
+        imu = frames.imu
+        if imu is None or imu.t_s.size == 0:
+            self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
+            return self.estimate()
+        t = np.asarray(imu.t_s, float)
+        n = t.size
+        a = 0
+        while a < n:     # split the chunk at fix times so that fixes are applied when they fall due
+            if self.aiding is None:
+                b = n
+            else:
+                t_fix = self._t_batch0 + self.fix_period_s
+                b = min(max(int(np.searchsorted(t, t_fix, side="left")) + 1, a + 1), n)
+            self._segment(frames, a, b)
+            if self.aiding is not None and t[b - 1] >= self._t_batch0 + self.fix_period_s - 1e-9:
+                self._fix(float(t[b - 1]))
+            a = b
+        return self.estimate()
+
+    # ------------------------------------------------------------------ internals
+    def _segment(self, frames: SensorFrames, a: int, b: int) -> None:
+        imu = frames.imu
+        sl = slice(a, b)
+        bad0 = self.ins.bad_imu_samples
+        baro = frames.baro
+        tb = hb = vb = None
+        if baro is not None:
+            tb, hb, vb = baro.t_s, baro.h_baro_m, baro.valid & np.isfinite(baro.h_baro_m)
+            if (~vb).any():
+                self._count_skip(float(imu.t_s[a]), "baro_invalid", int((~vb).sum()), "baro samples invalid")
+        hist = self.ins.propagate(imu.t_s[sl], imu.f_b_mps2[sl], imu.omega_ib_b_rps[sl], imu.valid[sl], tb, hb, vb)
+        nbad = self.ins.bad_imu_samples - bad0
+        if nbad:
+            self._count_skip(float(imu.t_s[a]), "imu_invalid", nbad, "IMU samples invalid (held previous)")
+        good = imu.valid[sl] & np.all(np.isfinite(imu.f_b_mps2[sl]), axis=1)
+        if good.any():
+            self._last_f_b = imu.f_b_mps2[sl][good][-1].copy()
+        self._predict_to(float(imu.t_s[b - 1]), imu.t_s[sl], imu.f_b_mps2[sl], hist)
+        if self.aiding is not None:
+            self._collect(frames, imu.t_s[sl], hist)
+
+    def _predict_to(self, t_end: float, t_imu: np.ndarray, f_b: np.ndarray, hist: np.ndarray) -> None:
+        """Propagate the error covariance in steps of 1/ekf_rate_hz up to t_end along the INS history."""
+        if not np.isfinite(self._t_ekf):
+            self._t_ekf = t_end
+        n_steps = int(np.floor((t_end - self._t_ekf) / self.dt_ekf + 1e-9))
+        dt = self.dt_ekf
+        tau = self.ins.tau_baro_s
+        Q = np.zeros((N_ERR, N_ERR))
+        Q[3:6, 3:6] = np.eye(3) * self.q_acc * dt
+        Q[6:9, 6:9] = np.eye(3) * self.q_gyr * dt
+        Q[9:12, 9:12] = np.eye(3) * (0.01 * self.sig_ba) ** 2 * dt / 3600.0
+        Q[12, 12] = (0.01 * self.sig_bg) ** 2 * dt / 3600.0
+        Q[2, 2] = 0.01 * dt                        # baro noise entering through the loop
+        self.kf.Q = Q
+        F = np.zeros((N_ERR, N_ERR))
+        F[0:3, 3:6] = np.eye(3)
+        F[2, 2] = -3.0 / tau                       # baro loop on the vertical channel (navigators.ins)
+        I13 = np.eye(N_ERR)
+        ks = np.clip(np.searchsorted(t_imu, self._t_ekf + dt * np.arange(1, n_steps + 1)), 0, t_imu.size - 1)
+        for k in ks:
+            st = hist[k]
+            if not np.all(np.isfinite(st)):
+                st = self.ins.state
+            lat, h = st[0], st[2]
+            vn, ve = st[3], st[4]
+            C = quat_to_dcm(st[6:10])
+            fb = f_b[k] if np.all(np.isfinite(f_b[k])) else self._last_f_b
+            f_n = C @ (fb - self.ins.accel_bias_b)
+            rn = meridian_radius_m(lat) + h
+            re = prime_vertical_radius_m(lat) + h
+            w_ie = np.array([OMEGA_EARTH_RPS * np.cos(lat), 0.0, -OMEGA_EARTH_RPS * np.sin(lat)])
+            w_en = np.array([ve / re, -vn / rn, -ve * np.tan(lat) / re])
+            g_over_r = G0 / np.sqrt(rn * re)
+            F[3, 0] = F[4, 1] = -g_over_r
+            F[5, 2] = 2.0 * g_over_r - 3.0 / tau ** 2
+            F[3:6, 3:6] = -_skew(2.0 * w_ie + w_en)
+            F[3:6, 6:9] = _skew(f_n)
+            F[3:6, 9:12] = C
+            F[6:9, 6:9] = -_skew(w_ie + w_en)
+            F[6:9, 12] = -C[:, 2]
+            Fd = F * dt
+            self.kf.F = I13 + Fd + 0.5 * (Fd @ Fd)
+            self.kf.predict()
+        if n_steps > 0 and not _is_pd(self.kf.P):
+            P = self.kf.P
+            if np.all(np.isfinite(P)):
+                w, V = np.linalg.eigh(0.5 * (P + P.T))
+                self.kf.P = (V * np.clip(w, 1e-12, None)) @ V.T
+            else:
+                self.kf.P = self._P_good.copy()
+            self._count_skip(t_end, "covariance_not_pd", 1, "covariance repaired after prediction")
+        self._P_good = self.kf.P.copy()
+        self.kf.x[:] = 0.0
+        self._t_ekf += n_steps * dt
+
+    def _collect(self, frames: SensorFrames, t_imu: np.ndarray, hist: np.ndarray) -> None:
+        t0, t1 = float(t_imu[0]), float(t_imu[-1])
+        baro = frames.baro
+        if self.aiding == "ira":
+            src = frames.ira
+            if src is None:
+                return
+            rng_m, theta = src.range_m, src.look_angle_rad
+        else:
+            src = frames.radar_altimeter
+            if src is None:
+                return
+            rng_m, theta = src.range_m, np.zeros_like(src.range_m)
+        ts = np.asarray(src.t_s, float)
+        sel = (ts >= t0) & (ts <= t1)
+        if self.aiding == "ira" and self.ira_decimation > 1:
+            idx = np.nonzero(sel)[0]
+            keep = np.zeros_like(sel)
+            keep[idx[::self.ira_decimation]] = True
+            sel = keep
+        if not sel.any():
+            return
+        ok = sel & src.valid & np.isfinite(rng_m) & np.isfinite(theta) & (rng_m > 0)
+        nbad = int((sel & ~ok).sum())
+        if nbad:
+            self._count_skip(t0, "altimeter_no_return", nbad, f"{nbad} altimeter samples without a valid return")
+        if not ok.any():
+            return
+        ts_ok = ts[ok]
+        k = np.clip(np.searchsorted(t_imu, ts_ok), 0, t_imu.size - 1)
+        st = hist[k]
+        good_state = np.all(np.isfinite(st), axis=1)
+        st, ts_ok = st[good_state], ts_ok[good_state]
+        R = rng_m[ok][good_state]
+        th = theta[ok][good_state]
+        if st.shape[0] == 0:
+            return
+        # baro height at the sample times (fall back to the baro-damped INS height)
+        h_ref = st[:, 2].copy()
+        if baro is not None:
+            bv = baro.valid & np.isfinite(baro.h_baro_m)
+            if bv.sum() >= 1:
+                h_ref = np.interp(ts_ok, baro.t_s[bv], baro.h_baro_m[bv])
+        if self.aiding == "ira":
+            C = np.stack([quat_to_dcm(q) for q in st[:, 6:10]])
+            p = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.formula, C_bn=C)
+            if self.dp_min_m > 0.0:     # seed 000 Table 3: keep samples where the formulas differ by > dp
+                p_ref = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.dp_reference_formula,
+                                          C_bn=C)
+                dp = np.hypot(p[:, 0] - p_ref[:, 0], p[:, 1] - p_ref[:, 1])
+                keep = dp > self.dp_min_m
+                p, st, h_ref, ts_ok = p[keep], st[keep], h_ref[keep], ts_ok[keep]
+            nan = ~np.all(np.isfinite(p), axis=1)
+            if nan.any():
+                self._count_skip(t0, "ira_geometry", int(nan.sum()), "IRA samples with no closest-point solution")
+            h_meas = h_ref - np.abs(p[:, 2])                 # seed 000 eq 2: h_baro - |p_alt|
+            self.batch.add(ts_ok, st[:, 0], st[:, 1], h_meas, p[:, 0], p[:, 1])
+        else:
+            h_meas = h_ref - R                               # seed 000 eq 1
+            self.batch.add(ts_ok, st[:, 0], st[:, 1], h_meas)
+
+    def _fix(self, t_s: float) -> None:
+        s = self.batch.samples
+        self.batch.clear()
+        nxt = self._t_batch0 + self.fix_period_s
+        self._t_batch0 = nxt if t_s - nxt < self.fix_period_s else t_s
+        if s.shape[0] < self.min_samples:
+            self._count_skip(t_s, "tercom_too_few_samples", 1, f"TERCOM batch with {s.shape[0]} samples")
+            return
+        fix = correlate(self.dem, t_s, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], half=self.half_cells,
+                        cell_m=self.cell_m)
+        self.fixes.append(fix)
+        if not fix.valid:
+            self._count_skip(t_s, f"tercom_{fix.reason}", 1, f"TERCOM fix rejected: {fix.reason}")
+            return
+        z = -np.array([[fix.dn_m], [fix.de_m]])              # INS minus matched position
+        H = np.zeros((2, N_ERR))
+        H[0, 0] = H[1, 1] = 1.0
+        Rm = np.eye(2) * self.fix_sigma_m ** 2
+        S = H @ self.kf.P @ H.T + Rm
+        d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])
+        if not np.isfinite(d2) or d2 > self.gate_chi2:
+            self._count_skip(t_s, "tercom_gated", 1, f"TERCOM fix failed the chi-square gate ({d2:.1f})")
+            return
+        saved = copy.deepcopy((self.kf.x, self.kf.P))
+        self.kf.update(z, R=Rm, H=H)
+        dx = self.kf.x.ravel()
+        if not (_is_pd(self.kf.P) and np.all(np.isfinite(dx))):
+            self.kf.x, self.kf.P = saved
+            self._count_skip(t_s, "covariance_not_pd", 1, "fix skipped: covariance not positive definite")
+            return
+        self.ins.correct(dx[0:3], dx[3:6], dx[6:9])
+        self.ins.accel_bias_b += dx[9:12]
+        self.ins.gyro_bias_b[2] += dx[12]
+        self.kf.x[:] = 0.0
+        self.health.status = "ok"
+        self.health.ok = True
+        self.health.events.append((t_s, f"TERCOM fix dn={fix.dn_m:.1f} m de={fix.de_m:.1f} m q={fix.quality:.2f}"))
+
+    def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
+        self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)
+        self.health.events.append((float(t_s), message))
+
+    # ------------------------------------------------------------------ output
+    def estimate(self) -> Estimate:
+        st = self.ins.state
+        roll, pitch, yaw = self.ins.euler_rad
+        P = self.kf.P[:9, :9].copy()
+        sig_h = float(np.sqrt(max(P[0, 0] + P[1, 1], 0.0)))
+        if not np.all(np.isfinite(st)):
+            self.health.ok, self.health.status = False, "diverged"
+        elif self.aiding is not None and sig_h > 2000.0:
+            self.health.ok, self.health.status = False, "degraded"
+        extra = {"accel_bias_b_mps2": self.ins.accel_bias_b.copy(), "gyro_bias_z_rps": float(self.ins.gyro_bias_b[2])}
+        if self.fixes:
+            f = self.fixes[-1]
+            extra.update(last_fix_t_s=f.t_s, last_fix_dn_m=f.dn_m, last_fix_de_m=f.de_m,
+                         last_fix_quality=f.quality, last_fix_valid=f.valid)
+        health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
+                        events=list(self.health.events))
+        return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
+                        v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
+                        health=health, extra=extra)
+
+
+def initial_covariance(sigma_ne_m: float = 30.0, sigma_d_m: float = 15.0, sigma_v_mps: float = 0.1,
+                       sigma_tilt_rad: float = 0.05e-3, sigma_yaw_rad: float = 1e-3) -> np.ndarray:
+    """9 x 9 initial covariance; defaults are seed 000 Table 2's initial errors."""
+    return np.diag([sigma_ne_m ** 2, sigma_ne_m ** 2, sigma_d_m ** 2] + [sigma_v_mps ** 2] * 3
+                   + [sigma_tilt_rad ** 2, sigma_tilt_rad ** 2, sigma_yaw_rad ** 2])

@@ -1,0 +1,193 @@
+"""`Dem`: a digital elevation model on a regular geodetic (latitude/longitude) grid.
+
+Heights are metres above MSL in a float64 array (n_lat, n_lon); row 0 is the southmost row, column 0 the
+westmost; NaN marks a void. Post (i, j) sits at latitude lat0_rad + i * dlat_rad and longitude
+lon0_rad + j * dlon_rad. Lookups outside the grid or over voids return NaN and never raise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from terrain import geodesy, kernels
+
+_METHODS = ("bilinear", "bicubic")
+
+
+@dataclass
+class Dem:
+    """Geodetic elevation grid; see the module docstring for the layout. Angles in radians, heights in m."""
+
+    heights_m: np.ndarray
+    lat0_rad: float
+    lon0_rad: float
+    dlat_rad: float
+    dlon_rad: float
+    name: str = "dem"
+
+    def __post_init__(self):
+        h = np.ascontiguousarray(np.asarray(self.heights_m, dtype=np.float64))
+        if h.ndim != 2 or h.shape[0] < 2 or h.shape[1] < 2:
+            raise ValueError(f"Dem {self.name!r}: heights_m must be 2-D with at least 2 x 2 posts, got {h.shape}")
+        for field_name in ("lat0_rad", "lon0_rad", "dlat_rad", "dlon_rad"):
+            value = float(getattr(self, field_name))
+            if not np.isfinite(value):
+                raise ValueError(f"Dem {self.name!r}: {field_name} is not finite ({value})")
+            setattr(self, field_name, value)
+        if self.dlat_rad <= 0.0 or self.dlon_rad <= 0.0:
+            raise ValueError(f"Dem {self.name!r}: post spacing must be positive, got dlat_rad={self.dlat_rad}, "
+                             f"dlon_rad={self.dlon_rad}")
+        lat_max = self.lat0_rad + (h.shape[0] - 1) * self.dlat_rad
+        if self.lat0_rad < -np.pi / 2 or lat_max > np.pi / 2:
+            raise ValueError(f"Dem {self.name!r}: latitude range [{self.lat0_rad}, {lat_max}] rad is beyond the poles")
+        if not np.isfinite(h).any():
+            raise ValueError(f"Dem {self.name!r}: every post is a void (NaN)")
+        self.heights_m = h
+        self._pyramid = None
+
+    # ----------------------------------------------------------------- geometry
+    @property
+    def n_lat(self) -> int:
+        return int(self.heights_m.shape[0])
+
+    @property
+    def n_lon(self) -> int:
+        return int(self.heights_m.shape[1])
+
+    @property
+    def grid(self):
+        """(heights_m, lat0_rad, lon0_rad, dlat_rad, dlon_rad) for numba kernels."""
+        return self.heights_m, self.lat0_rad, self.lon0_rad, self.dlat_rad, self.dlon_rad
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(lat_min, lat_max, lon_min, lon_max) of the outermost posts, radians."""
+        return (self.lat0_rad, self.lat0_rad + (self.n_lat - 1) * self.dlat_rad,
+                self.lon0_rad, self.lon0_rad + (self.n_lon - 1) * self.dlon_rad)
+
+    @property
+    def lat_rad(self) -> np.ndarray:
+        """Latitudes of the rows (south to north), radians."""
+        return self.lat0_rad + np.arange(self.n_lat) * self.dlat_rad
+
+    @property
+    def lon_rad(self) -> np.ndarray:
+        """Longitudes of the columns (west to east), radians."""
+        return self.lon0_rad + np.arange(self.n_lon) * self.dlon_rad
+
+    @property
+    def center_rad(self) -> tuple[float, float]:
+        """(lat, lon) of the grid centre, radians."""
+        b = self.bounds
+        return 0.5 * (b[0] + b[1]), 0.5 * (b[2] + b[3])
+
+    @property
+    def spacing_m(self) -> tuple[float, float]:
+        """(north, east) post spacing in metres at the grid centre (seed 000 eq 2 radii)."""
+        lat_c, _ = self.center_rad
+        return (self.dlat_rad * geodesy.meridian_radius_m(lat_c),
+                self.dlon_rad * geodesy.prime_vertical_radius_m(lat_c) * np.cos(lat_c))
+
+    @property
+    def extent_m(self) -> tuple[float, float]:
+        """(north, east) size of the grid in metres at the grid centre."""
+        dn, de = self.spacing_m
+        return dn * (self.n_lat - 1), de * (self.n_lon - 1)
+
+    @property
+    def void_fraction(self) -> float:
+        return float(np.isnan(self.heights_m).mean())
+
+    def contains(self, lat_rad, lon_rad):
+        """True where (lat, lon) lies inside the grid's outermost posts (scalar or array)."""
+        lat = np.asarray(lat_rad, dtype=np.float64)
+        lon = np.asarray(lon_rad, dtype=np.float64)
+        b = self.bounds
+        inside = (lat >= b[0]) & (lat <= b[1]) & (lon >= b[2]) & (lon <= b[3])
+        return bool(inside) if inside.ndim == 0 else inside
+
+    # ----------------------------------------------------------------- lookups
+    def height(self, lat_rad, lon_rad, method: str = "bilinear"):
+        """Terrain height (m above MSL) at (lat, lon) radians; scalars or arrays; NaN outside or over voids."""
+        if method not in _METHODS:
+            raise ValueError(f"Dem.height: method must be one of {_METHODS}, got {method!r}")
+        lat, lon = np.broadcast_arrays(np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64))
+        flat_lat = np.ascontiguousarray(lat).ravel()
+        flat_lon = np.ascontiguousarray(lon).ravel()
+        out = np.empty(flat_lat.shape[0])
+        kernel = kernels.bilinear_batch if method == "bilinear" else kernels.bicubic_batch
+        kernel(self.heights_m, self.lat0_rad, self.lon0_rad, self.dlat_rad, self.dlon_rad, flat_lat, flat_lon, out)
+        if lat.ndim == 0:
+            return float(out[0])
+        return out.reshape(lat.shape)
+
+    def gradient(self, lat_rad, lon_rad, method: str = "bilinear"):
+        """(dh_dn, dh_de): terrain slope along north and east (m/m) at (lat, lon); NaN outside."""
+        if method not in _METHODS:
+            raise ValueError(f"Dem.gradient: method must be one of {_METHODS}, got {method!r}")
+        lat, lon = np.broadcast_arrays(np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64))
+        flat_lat = np.ascontiguousarray(lat).ravel()
+        flat_lon = np.ascontiguousarray(lon).ravel()
+        g_lat = np.empty(flat_lat.shape[0])
+        g_lon = np.empty(flat_lat.shape[0])
+        kernel = kernels.gradient_batch if method == "bilinear" else kernels.bicubic_gradient_batch
+        kernel(self.heights_m, self.lat0_rad, self.lon0_rad, self.dlat_rad, self.dlon_rad,
+               flat_lat, flat_lon, g_lat, g_lon)
+        s = np.sin(flat_lat)
+        w = 1.0 - geodesy.WGS84_E2 * s * s
+        r_n = geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w))
+        r_e = geodesy.WGS84_A_M / np.sqrt(w)
+        dh_dn = g_lat / r_n
+        dh_de = g_lon / (r_e * np.cos(flat_lat))
+        if lat.ndim == 0:
+            return float(dh_dn[0]), float(dh_de[0])
+        return dh_dn.reshape(lat.shape), dh_de.reshape(lat.shape)
+
+    # ----------------------------------------------------------------- displacements
+    def offset_to_latlon(self, lat_rad, lon_rad, dn_m, de_m, h_m=0.0):
+        """Add north/east displacements (m) to positions (seed 000 eq 2); returns (lat, lon) radians."""
+        lat = np.asarray(lat_rad, dtype=np.float64)
+        s = np.sin(lat)
+        w = 1.0 - geodesy.WGS84_E2 * s * s
+        r_n = geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w)) + h_m
+        r_e = geodesy.WGS84_A_M / np.sqrt(w) + h_m
+        return lat + np.asarray(dn_m) / r_n, np.asarray(lon_rad) + np.asarray(de_m) / (r_e * np.cos(lat))
+
+    def latlon_to_offset(self, lat0_rad, lon0_rad, lat_rad, lon_rad, h_m=0.0):
+        """North/east displacement (m) from (lat0, lon0) to (lat, lon) (small-offset seed 000 eq 2)."""
+        lat0 = np.asarray(lat0_rad, dtype=np.float64)
+        s = np.sin(lat0)
+        w = 1.0 - geodesy.WGS84_E2 * s * s
+        r_n = geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w)) + h_m
+        r_e = geodesy.WGS84_A_M / np.sqrt(w) + h_m
+        return (np.asarray(lat_rad) - lat0) * r_n, (np.asarray(lon_rad) - lon0_rad) * r_e * np.cos(lat0)
+
+    def latlon_of_offset_from_center(self, dn_m, de_m):
+        """(lat, lon) of a north/east offset (m) from the grid centre."""
+        lat_c, lon_c = self.center_rad
+        return self.offset_to_latlon(lat_c, lon_c, dn_m, de_m)
+
+    # ----------------------------------------------------------------- sub-grids
+    def subset(self, lat_min_rad: float, lat_max_rad: float, lon_min_rad: float, lon_max_rad: float,
+               name: str | None = None) -> Dem:
+        """The posts inside [lat_min, lat_max] x [lon_min, lon_max] (plus one post of margin) as a new Dem."""
+        i0 = max(int(np.floor((lat_min_rad - self.lat0_rad) / self.dlat_rad)) - 1, 0)
+        i1 = min(int(np.ceil((lat_max_rad - self.lat0_rad) / self.dlat_rad)) + 1, self.n_lat - 1)
+        j0 = max(int(np.floor((lon_min_rad - self.lon0_rad) / self.dlon_rad)) - 1, 0)
+        j1 = min(int(np.ceil((lon_max_rad - self.lon0_rad) / self.dlon_rad)) + 1, self.n_lon - 1)
+        if i1 - i0 < 1 or j1 - j0 < 1:
+            raise ValueError(f"Dem {self.name!r}: subset region does not overlap the grid")
+        return Dem(self.heights_m[i0:i1 + 1, j0:j1 + 1].copy(), self.lat0_rad + i0 * self.dlat_rad,
+                   self.lon0_rad + j0 * self.dlon_rad, self.dlat_rad, self.dlon_rad,
+                   name or f"{self.name}[subset]")
+
+    def with_heights(self, heights_m: np.ndarray, name: str | None = None) -> Dem:
+        """A Dem on the same grid with other heights."""
+        return Dem(heights_m, self.lat0_rad, self.lon0_rad, self.dlat_rad, self.dlon_rad, name or self.name)
+
+    def __repr__(self) -> str:
+        b = np.degrees(self.bounds)
+        return (f"Dem({self.name!r}, {self.n_lat} x {self.n_lon} posts, lat {b[0]:.4f}..{b[1]:.4f} deg, "
+                f"lon {b[2]:.4f}..{b[3]:.4f} deg, spacing {self.spacing_m[0]:.1f} x {self.spacing_m[1]:.1f} m)")

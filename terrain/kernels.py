@@ -1,0 +1,162 @@
+"""Numba interpolation kernels on a geodetic grid (arrays only, no Python objects).
+
+Grid convention (shared by every kernel): `heights[i, j]` is the elevation (m above MSL) of the post at
+latitude `lat0 + i * dlat` and longitude `lon0 + j * dlon` (radians); row 0 is the southmost row. NaN marks
+a void. Every lookup outside the grid (or touching a void) returns NaN - the hot path never raises.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def bilinear(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
+    """Bilinear height (m) at (lat, lon) in radians; NaN outside the grid or next to a void."""
+    n_lat, n_lon = heights.shape
+    fi = (lat - lat0) / dlat
+    fj = (lon - lon0) / dlon
+    if not (fi >= 0.0 and fj >= 0.0 and fi <= n_lat - 1 and fj <= n_lon - 1):
+        return np.nan
+    i = int(fi)
+    j = int(fj)
+    if i > n_lat - 2:
+        i = n_lat - 2
+    if j > n_lon - 2:
+        j = n_lon - 2
+    u = fi - i
+    v = fj - j
+    h00 = heights[i, j]
+    h01 = heights[i, j + 1]
+    h10 = heights[i + 1, j]
+    h11 = heights[i + 1, j + 1]
+    a = h00 + v * (h01 - h00)
+    b = h10 + v * (h11 - h10)
+    return a + u * (b - a)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, lat, lon):
+    """(h_m, dh/dlat, dh/dlon) of the bilinear surface, derivatives in m/rad; NaNs outside the grid."""
+    n_lat, n_lon = heights.shape
+    fi = (lat - lat0) / dlat
+    fj = (lon - lon0) / dlon
+    if not (fi >= 0.0 and fj >= 0.0 and fi <= n_lat - 1 and fj <= n_lon - 1):
+        return np.nan, np.nan, np.nan
+    i = min(int(fi), n_lat - 2)
+    j = min(int(fj), n_lon - 2)
+    u = fi - i
+    v = fj - j
+    h00 = heights[i, j]
+    h01 = heights[i, j + 1]
+    h10 = heights[i + 1, j]
+    h11 = heights[i + 1, j + 1]
+    a = h00 + v * (h01 - h00)
+    b = h10 + v * (h11 - h10)
+    dh_du = b - a
+    dh_dv = (h01 - h00) + u * ((h11 - h10) - (h01 - h00))
+    return a + u * (b - a), dh_du / dlat, dh_dv / dlon
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _cubic_weights(t):
+    # Keys cubic convolution, a = -0.5 (Catmull-Rom): interpolating, C1.
+    t2 = t * t
+    t3 = t2 * t
+    w0 = -0.5 * t3 + t2 - 0.5 * t
+    w1 = 1.5 * t3 - 2.5 * t2 + 1.0
+    w2 = -1.5 * t3 + 2.0 * t2 + 0.5 * t
+    w3 = 0.5 * t3 - 0.5 * t2
+    return w0, w1, w2, w3
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def bicubic(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
+    """Bicubic (Catmull-Rom) height (m); edge posts are replicated beyond the border; NaN outside."""
+    n_lat, n_lon = heights.shape
+    fi = (lat - lat0) / dlat
+    fj = (lon - lon0) / dlon
+    if not (fi >= 0.0 and fj >= 0.0 and fi <= n_lat - 1 and fj <= n_lon - 1):
+        return np.nan
+    i = min(int(fi), n_lat - 2)
+    j = min(int(fj), n_lon - 2)
+    wu = _cubic_weights(fi - i)
+    wv = _cubic_weights(fj - j)
+    acc = 0.0
+    for a in range(4):
+        ii = min(max(i - 1 + a, 0), n_lat - 1)
+        row = 0.0
+        for b in range(4):
+            jj = min(max(j - 1 + b, 0), n_lon - 1)
+            row += wv[b] * heights[ii, jj]
+        acc += wu[a] * row
+    return acc
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out):
+    """Bilinear heights for 1-D arrays lat, lon (rad) into out (m); NaN outside. Single thread."""
+    n_lat, n_lon = heights.shape
+    inv_dlat = 1.0 / dlat
+    inv_dlon = 1.0 / dlon
+    max_i = n_lat - 1.0
+    max_j = n_lon - 1.0
+    for k in range(lat.shape[0]):
+        fi = (lat[k] - lat0) * inv_dlat
+        fj = (lon[k] - lon0) * inv_dlon
+        if not (fi >= 0.0 and fj >= 0.0 and fi <= max_i and fj <= max_j):
+            out[k] = np.nan
+            continue
+        i = min(int(fi), n_lat - 2)
+        j = min(int(fj), n_lon - 2)
+        u = fi - i
+        v = fj - j
+        h00 = heights[i, j]
+        h01 = heights[i, j + 1]
+        h10 = heights[i + 1, j]
+        h11 = heights[i + 1, j + 1]
+        a = h00 + v * (h01 - h00)
+        b = h10 + v * (h11 - h10)
+        out[k] = a + u * (b - a)
+    return out
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def bicubic_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out):
+    """Bicubic heights for 1-D arrays lat, lon (rad) into out (m); NaN outside."""
+    for k in range(lat.shape[0]):
+        out[k] = bicubic(heights, lat0, lon0, dlat, dlon, lat[k], lon[k])
+    return out
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def gradient_batch(heights, lat0, lon0, dlat, dlon, lat, lon, dh_dlat, dh_dlon):
+    """Bilinear-surface gradients (m/rad) for 1-D arrays lat, lon; NaN outside."""
+    for k in range(lat.shape[0]):
+        _, g_lat, g_lon = bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, lat[k], lon[k])
+        dh_dlat[k] = g_lat
+        dh_dlon[k] = g_lon
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def bicubic_gradient_batch(heights, lat0, lon0, dlat, dlon, lat, lon, dh_dlat, dh_dlon):
+    """Central-difference gradient (m/rad) of the bicubic surface (step 1e-3 post); NaN outside."""
+    n_lat, n_lon = heights.shape
+    for k in range(lat.shape[0]):
+        hi = 1e-3 * dlat
+        hj = 1e-3 * dlon
+        la = lat[k]
+        lo = lon[k]
+        la_p = min(la + hi, lat0 + (n_lat - 1) * dlat)
+        la_m = max(la - hi, lat0)
+        lo_p = min(lo + hj, lon0 + (n_lon - 1) * dlon)
+        lo_m = max(lo - hj, lon0)
+        if la_p <= la_m or lo_p <= lo_m:
+            dh_dlat[k] = np.nan
+            dh_dlon[k] = np.nan
+            continue
+        dh_dlat[k] = (bicubic(heights, lat0, lon0, dlat, dlon, la_p, lo)
+                      - bicubic(heights, lat0, lon0, dlat, dlon, la_m, lo)) / (la_p - la_m)
+        dh_dlon[k] = (bicubic(heights, lat0, lon0, dlat, dlon, la, lo_p)
+                      - bicubic(heights, lat0, lon0, dlat, dlon, la, lo_m)) / (lo_p - lo_m)

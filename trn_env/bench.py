@@ -1,0 +1,121 @@
+"""`trn-env bench`: throughput figures from one run, each beside its reference measured in the same run.
+
+Collects the component benchmarks that exist (trn_env.bench_flight, terrain.bench, trn_env.sensors.bench:
+each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
+
+- closed_loop_steps_per_s: JSBSim steps per wall second of the full default-scenario loop (flight,
+  sensors, navigator, guidance, termination checks, logging);
+- closed_loop_jsbsim_reference_steps_per_s: a bare `fdm.run()` loop of the same aircraft, trimmed at the
+  same initial condition, timed just before and just after the closed loop (the faster is kept);
+- closed_loop_ratio: their ratio (target >= 0.5);
+- env_sim_seconds_per_wall_second: simulated seconds per wall second of the gymnasium env (default
+  scenario, random actions, resets included).
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import math
+import time
+import traceback
+
+import numpy as np
+
+
+def _component(module: str, quick: bool) -> dict:
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as exc:
+        return {f"{module}.error": f"not available: {exc}"}
+    fn = getattr(mod, "benchmark", None)
+    if fn is None:
+        return {f"{module}.error": "no benchmark() function"}
+    kwargs = {"quick": quick} if "quick" in inspect.signature(fn).parameters else {}
+    try:
+        out = fn(**kwargs)
+    except Exception as exc:  # noqa: BLE001 - a failing component must not hide the others' figures
+        return {f"{module}.error": f"{type(exc).__name__}: {exc}", f"{module}.traceback": traceback.format_exc()}
+    return dict(out)
+
+
+def bare_jsbsim_steps_per_s(fdm, n_steps: int) -> float:
+    """Steps per second of a bare `run()` loop on an already initialised FGFDMExec."""
+    run = fdm.run
+    t0 = time.perf_counter()
+    for _ in range(n_steps):
+        run()
+    return n_steps / (time.perf_counter() - t0)
+
+
+def closed_loop_benchmark(quick: bool = False, scenario: str = "default") -> dict:
+    """Full closed loop of `scenario` vs a bare JSBSim loop at the same initial condition."""
+    from .scenario import load_scenario
+    from .sim import ClosedLoop
+
+    sim_s = 40.0 if quick else 120.0
+    sc = load_scenario(scenario, duration_s=sim_s + 20.0)
+    loop = ClosedLoop(sc, log_sensors=True)
+    # bare reference: a second flight at the same (trimmed) initial condition, run() only
+    from . import components
+    ref_flight = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
+    n_ref = int(round(sim_s / loop.dt_s))
+    # warm-up (numba dispatch, first sensor and navigator calls), not timed
+    for _ in range(int(round(10.0 / (loop.steps_per_tick * loop.dt_s)))):
+        loop.tick()
+    bare_before = bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref)
+    steps0 = loop.jsbsim_steps
+    t0 = time.perf_counter()
+    while loop.termination is None and (loop.jsbsim_steps - steps0) < n_ref:
+        loop.tick()
+    wall = time.perf_counter() - t0
+    # the faster of two bare timings (before and after), so machine-load drift cannot flatter the ratio
+    bare = max(bare_before, bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref))
+    steps = loop.jsbsim_steps - steps0
+    cl = steps / wall if wall > 0 else math.nan
+    return {
+        "closed_loop_steps_per_s": cl,
+        "closed_loop_jsbsim_reference_steps_per_s": bare,
+        "closed_loop_ratio": cl / bare if bare > 0 else math.nan,
+        "closed_loop_realtime_factor": steps * loop.dt_s / wall if wall > 0 else math.nan,
+        "closed_loop_scenario": scenario,
+        "closed_loop_navigator": sc.navigator_name,
+        "closed_loop_sim_seconds": steps * loop.dt_s,
+    }
+
+
+def env_benchmark(quick: bool = False) -> dict:
+    """Simulated seconds per wall second of TerrainNav-v0 under random actions (resets included)."""
+    from .env import TerrainNavEnv
+
+    env = TerrainNavEnv("default", decision_interval_s=5.0, max_episode_s=60.0 if quick else 120.0)
+    env.action_space.seed(0)
+    n_steps = 12 if quick else 40
+    t0 = time.perf_counter()
+    env.reset(seed=0)
+    sim_s = 0.0
+    for _ in range(n_steps):
+        t_before = env._loop.t_s
+        _, _, term, trunc, _ = env.step(env.action_space.sample())
+        sim_s += env._loop.t_s - t_before
+        if term or trunc:
+            env.reset()
+    wall = time.perf_counter() - t0
+    env.close()
+    return {"env_sim_seconds_per_wall_second": sim_s / wall if wall > 0 else math.nan,
+            "env_decision_interval_s": 5.0, "env_steps_measured": n_steps}
+
+
+def run_all(quick: bool = False) -> dict:
+    """Every figure, as one flat dict (the JSON `trn-env bench` prints)."""
+    out: dict = {}
+    for module in ("trn_env.bench_flight", "terrain.bench", "trn_env.sensors.bench"):
+        out.update(_component(module, quick))
+    for name, fn in (("closed_loop", closed_loop_benchmark), ("env", env_benchmark)):
+        try:
+            out.update(fn(quick))
+        except Exception as exc:  # noqa: BLE001
+            out[f"{name}.error"] = f"{type(exc).__name__}: {exc}"
+            out[f"{name}.traceback"] = traceback.format_exc()
+    out["quick"] = bool(quick)
+    return out

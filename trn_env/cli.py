@@ -1,0 +1,172 @@
+"""The `trn-env` command line: fly a scenario, list scenarios, validate one, run the benchmarks.
+
+    trn-env fly [SCENARIO] [--seed N] [--out DIR] [--navigator NAME] [--duration S] [--no-plots]
+    trn-env scenarios
+    trn-env validate SCENARIO
+    trn-env bench [--quick]
+
+Exit status: 0 success, 2 invalid scenario (every problem printed, nothing written), 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="trn-env", description="Closed-loop terrain-referenced-navigation test range.")
+    sub = p.add_subparsers(dest="command", required=True)
+    fly = sub.add_parser("fly", help="fly a scenario in closed loop and write summary, log and plots")
+    fly.add_argument("scenario", nargs="?", default="default", help="built-in name or TOML path (default: default)")
+    fly.add_argument("--seed", type=int, default=None, help="override the scenario seed")
+    fly.add_argument("--out", type=Path, default=None, help="output directory (default runs/<scenario>-<time>)")
+    fly.add_argument("--navigator", default=None, help="override the navigator (e.g. ins, ins_tercom)")
+    fly.add_argument("--duration", type=float, default=None, help="override the time limit, seconds")
+    fly.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    fly.add_argument("--quiet", action="store_true", help="no progress bar")
+    sub.add_parser("scenarios", help="list the built-in scenarios")
+    val = sub.add_parser("validate", help="check a scenario file and list every problem")
+    val.add_argument("scenario")
+    bench = sub.add_parser("bench", help="print throughput figures as one JSON object")
+    bench.add_argument("--quick", action="store_true", help="shorter measurements (less precise)")
+    return p
+
+
+def _print_problems(err) -> None:
+    print(f"error: scenario {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
+    for prob in err.problems:
+        print(f"  - {prob}", file=sys.stderr)
+
+
+def cmd_scenarios() -> int:
+    from .scenario import list_scenarios
+    rows = list_scenarios()
+    width = max(len(n) for n, _ in rows) if rows else 0
+    for name, desc in rows:
+        print(f"{name:<{width}}  {desc}")
+    return 0
+
+
+def cmd_validate(args) -> int:
+    from .scenario import ScenarioError, load_scenario
+    try:
+        sc = load_scenario(args.scenario)
+    except ScenarioError as err:
+        _print_problems(err)
+        return 2
+    print(f"{sc.source}: ok (scenario {sc.name!r}, navigator {sc.navigator_name}, seed {sc.seed}, "
+          f"time limit {sc.duration_s:g} s)")
+    return 0
+
+
+def _summary_table(summary: dict, out_dir: Path):
+    from rich.table import Table
+    table = Table(title=f"trn-env fly: {summary['scenario']}  ->  {out_dir}", show_header=True)
+    table.add_column("figure")
+    table.add_column("value", justify="right")
+    rows = [
+        ("termination", summary["termination"]),
+        ("navigator", summary["navigator"]),
+        ("seed", str(summary["seed"])),
+        ("simulated time", f"{summary['sim_time_s']:.1f} s"),
+        ("wall time", f"{summary['wall_time_s']:.1f} s"),
+        ("real-time factor", f"{summary['realtime_factor']:.1f} x"),
+        ("distance flown", f"{summary['distance_flown_m'] / 1000:.1f} km"),
+        ("GNSS-denied time", f"{summary['gnss_denied_time_s']:.0f} s"),
+        ("horizontal error RMS", f"{summary['horizontal_error_rms_m']:.1f} m"),
+        ("horizontal error final", f"{summary['horizontal_error_final_m']:.1f} m"),
+        ("horizontal error max", f"{summary['horizontal_error_max_m']:.1f} m"),
+        ("vertical error RMS", f"{summary['vertical_error_rms_m']:.1f} m"),
+        ("final 1-sigma horizontal", f"{summary['horizontal_sigma_final_m']:.1f} m"),
+        ("within 3 sigma (N and E)", f"{100 * summary['fraction_within_3sigma']:.0f} %"),
+        ("min true height above ground", f"{summary['min_true_agl_m']:.0f} m"),
+        ("navigator status", summary["navigator_status"]),
+    ]
+    for k, v in rows:
+        table.add_row(k, v)
+    return table
+
+
+def cmd_fly(args) -> int:
+    from .scenario import ScenarioError, load_scenario
+    try:
+        scenario = load_scenario(args.scenario, seed=args.seed, navigator=args.navigator,
+                                 duration_s=args.duration)
+    except ScenarioError as err:
+        _print_problems(err)
+        return 2
+    import time
+
+    from rich.console import Console
+    from tqdm import tqdm
+
+    from .output import default_out_dir, write_run
+    from .sim import ClosedLoop
+
+    out_dir = args.out or default_out_dir(scenario.name)
+    console = Console()
+    bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
+               disable=args.quiet, bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+
+    def progress(t_s: float, _total: float) -> None:
+        bar.update(max(0.0, round(t_s, 1) - bar.n))
+
+    try:
+        loop = ClosedLoop(scenario, progress=progress)
+        wall0 = time.perf_counter()
+        while loop.termination is None:
+            loop.tick()
+        result = loop.result(time.perf_counter() - wall0)
+    except KeyboardInterrupt:
+        bar.close()
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+    bar.close()
+    plot = None if args.no_plots else _plotter(result)
+    try:
+        write_run(out_dir, result.summary, result.arrays, result.events, plot=plot)
+    except KeyboardInterrupt:
+        print("interrupted while writing: no summary written", file=sys.stderr)
+        return 130
+    console.print(_summary_table(result.summary, out_dir))
+    return 0
+
+
+def _plotter(result):
+    from . import plots
+
+    def plot(tmp: Path) -> list[str]:
+        sc = result.scenario
+        wps = [(w["lat_deg"], w["lon_deg"]) for w in sc.data["route"]["waypoints"]]
+        title = f"{sc.name} / {sc.navigator_name} / seed {sc.seed}: {result.termination}"
+        plots.plot_track(tmp / "track.png", result.world_dem, result.arrays, title=title, waypoints_deg=wps)
+        plots.plot_errors(tmp / "errors.png", result.arrays, title=title)
+        return ["track.png", "errors.png"]
+
+    return plot
+
+
+def cmd_bench(args) -> int:
+    from .bench import run_all
+    print(json.dumps(run_all(quick=args.quick), indent=2))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == "scenarios":
+        return cmd_scenarios()
+    if args.command == "validate":
+        return cmd_validate(args)
+    if args.command == "fly":
+        return cmd_fly(args)
+    if args.command == "bench":
+        return cmd_bench(args)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,553 @@
+"""Flight core: JSBSim flying the aircraft, truth recorded per step in SI units.
+
+    flight = Flight(InitialCondition(lat_rad, lon_rad, h_msl_m, tas_mps, heading_rad), wind=WindConfig(...),
+                    seed=7)
+    truth = flight.advance(10)                 # TruthChunk, 10 JSBSim steps of dt_s = 0.01 s
+    flight.set_targets(AutopilotTargets(...))  # writes the ap/* properties of the aircraft's autopilot
+    flight.set_terrain_elevation(h_m)          # terrain under the aircraft, for height-above-ground hold
+
+The per-step Python work in `advance` is `run()` plus copying 20 cached property nodes into one flat buffer;
+unit conversions, frame rotations, Euler/C_bn assembly and derived quantities are vectorised after the loop.
+
+Frames. JSBSim 1.3's local frame (v-north-fps, phi/theta/psi, wind) is the geodetic NED frame of the WGS84
+ellipsoid at the vehicle (checked in tests/test_flight.py against ECEF velocity and the Earth-rate part of the
+body rates), so vectors and Euler angles are used as they are. Heights are geodetic (position/geod-alt-ft,
+the WGS84 height; position/h-sl-ft is the radial height above the sea-level radius, off by centimetres),
+which this project uses as "MSL" (the DEM's datum).
+
+Timing. Row k holds the state after the k-th step (t_s = k * dt_s from the start of the flight). JSBSim
+evaluates forces, air data and wind at the start of a step and then integrates, so f_b_mps2, p_static_pa,
+T_static_K and the turbulence part of wind_ned_mps in row k are the values applied over the step ending at
+t_s[k] (like an IMU delta-v sample). TAS, alpha and beta are recomputed from the row's velocity, attitude and
+wind. The IMU is at the centre of gravity: f_b is (total non-gravitational force) / mass, body FRD.
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from dataclasses import dataclass, fields
+from enum import IntEnum
+
+import jsbsim
+import numpy as np
+from numba import njit
+
+from terrain.geodesy import OMEGA_EARTH_RPS
+from trn_env.aircraft_data import new_fdm
+from trn_env.truth import TruthChunk
+from trn_env.wind import FT_PER_M, WindConfig
+
+M_PER_FT = 0.3048
+G0_MPS2 = 9.80665            # JSBSim's standard gravity, the unit of accelerations/N{x,y,z}
+PSF_TO_PA = 47.88025898033584
+RANKINE_TO_K = 5.0 / 9.0
+
+
+class TrimError(RuntimeError):
+    """JSBSim could not trim the aircraft at the requested initial condition."""
+
+
+class FlightDiverged(RuntimeError):
+    """The simulated state turned NaN (or infinite)."""
+
+    def __init__(self, message: str, quantity: str, t_s: float):
+        super().__init__(message)
+        self.quantity = quantity
+        self.t_s = t_s
+
+
+class LateralMode(IntEnum):
+    WINGS_LEVEL = 0
+    HEADING = 1
+    TRACK = 2
+
+
+class VerticalMode(IntEnum):
+    PITCH_HOLD = 0
+    ALTITUDE_MSL = 1
+    HEIGHT_AGL = 2
+    VERTICAL_SPEED = 3
+
+
+class SpeedMode(IntEnum):
+    MANUAL = 0
+    TAS = 1
+
+
+def _check_finite(owner: str, name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{owner}.{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{owner}.{name} must be finite, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class InitialCondition:
+    """Where and how the flight starts (SI). heading_rad is the true heading; flaps is normalised 0..1;
+    fuel_fraction scales every tank to that fraction of its capacity (None = as in the aircraft file);
+    gamma_rad is the initial flight-path angle (0 = level)."""
+
+    lat_rad: float
+    lon_rad: float
+    h_msl_m: float
+    tas_mps: float
+    heading_rad: float = 0.0
+    flaps: float = 0.0
+    fuel_fraction: float | None = None
+    gamma_rad: float = 0.0
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None and f.name == "fuel_fraction":
+                continue
+            _check_finite("InitialCondition", f.name, v)
+        if not -math.pi / 2 <= self.lat_rad <= math.pi / 2:
+            raise ValueError(f"InitialCondition.lat_rad must be within +-pi/2, got {self.lat_rad}")
+        if self.tas_mps <= 0.0:
+            raise ValueError(f"InitialCondition.tas_mps must be > 0, got {self.tas_mps}")
+        if self.h_msl_m < -500.0:
+            raise ValueError(f"InitialCondition.h_msl_m must be above -500 m, got {self.h_msl_m}")
+        if not 0.0 <= self.flaps <= 1.0:
+            raise ValueError(f"InitialCondition.flaps must be within 0..1, got {self.flaps}")
+        if self.fuel_fraction is not None and not 0.0 <= self.fuel_fraction <= 1.0:
+            raise ValueError(f"InitialCondition.fuel_fraction must be within 0..1, got {self.fuel_fraction}")
+        if abs(self.gamma_rad) > math.radians(30.0):
+            raise ValueError(f"InitialCondition.gamma_rad must be within +-30 deg, got {self.gamma_rad}")
+
+
+@dataclass
+class AutopilotTargets:
+    """Targets for the aircraft's JSBSim autopilot (all SI; angles true, radians).
+
+    lateral_mode: 0 wings level, 1 heading hold (heading_cmd_rad), 2 ground-track hold (track_cmd_rad);
+    vertical_mode: 0 pitch hold, 1 altitude MSL (altitude_cmd_m), 2 height above ground (agl_cmd_m),
+    3 vertical speed (vs_cmd_mps, up positive); speed_mode: 0 manual throttle, 1 TAS hold (tas_cmd_mps).
+    """
+
+    lateral_mode: LateralMode = LateralMode.TRACK
+    heading_cmd_rad: float = 0.0
+    track_cmd_rad: float = 0.0
+    bank_limit_rad: float = math.radians(25.0)
+    vertical_mode: VerticalMode = VerticalMode.ALTITUDE_MSL
+    altitude_cmd_m: float = 1500.0
+    agl_cmd_m: float = 300.0
+    vs_cmd_mps: float = 0.0
+    speed_mode: SpeedMode = SpeedMode.TAS
+    tas_cmd_mps: float = 85.0
+    engage: bool = True
+
+    def __post_init__(self):
+        for name, enum in (("lateral_mode", LateralMode), ("vertical_mode", VerticalMode),
+                           ("speed_mode", SpeedMode)):
+            v = getattr(self, name)
+            try:
+                setattr(self, name, enum(v))
+            except ValueError:
+                raise ValueError(f"AutopilotTargets.{name} must be one of "
+                                 f"{[int(m) for m in enum]}, got {v!r}") from None
+        for name in ("heading_cmd_rad", "track_cmd_rad", "bank_limit_rad", "altitude_cmd_m", "agl_cmd_m",
+                     "vs_cmd_mps", "tas_cmd_mps"):
+            _check_finite("AutopilotTargets", name, getattr(self, name))
+        if not 0.0 < self.bank_limit_rad <= math.radians(60.0):
+            raise ValueError(f"AutopilotTargets.bank_limit_rad must be within (0, 60 deg], "
+                             f"got {self.bank_limit_rad}")
+        if self.tas_cmd_mps <= 0.0:
+            raise ValueError(f"AutopilotTargets.tas_cmd_mps must be > 0, got {self.tas_cmd_mps}")
+        if self.agl_cmd_m <= 0.0:
+            raise ValueError(f"AutopilotTargets.agl_cmd_m must be > 0, got {self.agl_cmd_m}")
+
+    def properties(self) -> dict[str, float]:
+        """The ap/* property values these targets write."""
+        return {
+            "ap/lateral-mode": float(self.lateral_mode),
+            "ap/heading-cmd-rad": float(self.heading_cmd_rad),
+            "ap/track-cmd-rad": float(self.track_cmd_rad),
+            "ap/bank-limit-rad": float(self.bank_limit_rad),
+            "ap/vertical-mode": float(self.vertical_mode),
+            "ap/altitude-cmd-m": float(self.altitude_cmd_m),
+            "ap/agl-cmd-m": float(self.agl_cmd_m),
+            "ap/vs-cmd-mps": float(self.vs_cmd_mps),
+            "ap/speed-mode": float(self.speed_mode),
+            "ap/tas-cmd-mps": float(self.tas_cmd_mps),
+            "ap/engage": 1.0 if self.engage else 0.0,
+        }
+
+
+# Properties copied every step, in buffer-column order (JSBSim units; converted after the loop). The three
+# total-wind columns are read only when turbulence or gusts are configured; otherwise the wind is the steady
+# wind this module wrote. Pressure and temperature are not read: they are JSBSim's standard atmosphere
+# evaluated at each row's own altitude (see _std_atmosphere; tests check it against atmosphere/P-psf, T-R).
+_RECORDED = (
+    "position/lat-geod-rad",                 # 0
+    "position/long-gc-rad",                  # 1
+    "position/geod-alt-ft",                  # 2
+    "velocities/v-north-fps",                # 3
+    "velocities/v-east-fps",                 # 4
+    "velocities/v-down-fps",                 # 5
+    "attitude/phi-rad",                      # 6
+    "attitude/theta-rad",                    # 7
+    "attitude/psi-rad",                      # 8
+    "velocities/pi-rad_sec",                 # 9  body rates relative to inertial space
+    "velocities/qi-rad_sec",                 # 10
+    "velocities/ri-rad_sec",                 # 11
+    "accelerations/Nx",                      # 12 non-gravitational force / (mass g0), body x
+    "accelerations/Ny",                      # 13
+    "accelerations/Nz",                      # 14 (sign: +1 in level flight, i.e. -f_z / g0)
+    "atmosphere/total-wind-north-fps",       # 15 (only with turbulence or gusts)
+    "atmosphere/total-wind-east-fps",        # 16
+    "atmosphere/total-wind-down-fps",        # 17
+)
+_N_STATE = 15
+_NAN_NAMES = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps[north]", "v_ned_mps[east]", "v_ned_mps[down]",
+              "roll_rad", "pitch_rad", "yaw_rad",
+              "omega_ib_b_rps[x]", "omega_ib_b_rps[y]", "omega_ib_b_rps[z]",
+              "f_b_mps2[x]", "f_b_mps2[y]", "f_b_mps2[z]",
+              "wind_ned_mps[north]", "wind_ned_mps[east]", "wind_ned_mps[down]")
+
+# JSBSim's standard atmosphere (FGStandardAtmosphere, 1976 tables below 20 km): sea-level values in its
+# own units converted exactly, R* / M_air as JSBSim defines them, geopotential altitude from the height
+# above JSBSim's sea-level radius (position/h-sl-ft).
+_ATM_P0_PA = 2116.228 * PSF_TO_PA
+_ATM_T0_K = 288.15
+_ATM_R = 8.31432 / 0.0289645
+_ATM_LAPSE = -0.0065
+_ATM_RE_M = 20855531.5 * M_PER_FT       # JSBSim's radius for geopotential altitude
+_ATM_H11 = 11000.0
+_WGS84_A = 6378137.0
+_WGS84_B = 6356752.314245179
+_WGS84_E2 = 1.0 - (_WGS84_B / _WGS84_A) ** 2
+
+# Rows of the converted block (fields, one row each; vector fields take 3 rows).
+_B_T, _B_LAT, _B_LON, _B_H, _B_V, _B_ROLL, _B_PITCH, _B_YAW = 0, 1, 2, 3, 4, 7, 8, 9
+_B_WIB, _B_WEB, _B_F, _B_TAS, _B_ALPHA, _B_BETA = 10, 13, 16, 19, 20, 21
+_B_P, _B_TK, _B_WIND, _B_AGL = 22, 23, 24, 27
+_B_ROWS = 28
+
+
+@njit(cache=True)
+def _std_atmosphere(lat_rad, lon_rad, h_m):  # pragma: no cover - compiled
+    """(p_static_pa, T_static_K) of JSBSim's standard atmosphere at a geodetic position."""
+    s, c = np.sin(lat_rad), np.cos(lat_rad)
+    n = _WGS84_A / np.sqrt(1.0 - _WGS84_E2 * s * s)
+    rxy = (n + h_m) * c
+    z = (n * (1.0 - _WGS84_E2) + h_m) * s
+    radius = np.sqrt(rxy * rxy + z * z)
+    sea_level_radius = _WGS84_A / np.sqrt(1.0 + _WGS84_E2 * s * s / (1.0 - _WGS84_E2))
+    h_sl = radius - sea_level_radius
+    hgp = _ATM_RE_M * h_sl / (_ATM_RE_M + h_sl)
+    g0 = G0_MPS2
+    if hgp < _ATM_H11:
+        t = _ATM_T0_K + _ATM_LAPSE * hgp
+        p = _ATM_P0_PA * (t / _ATM_T0_K) ** (-g0 / (_ATM_R * _ATM_LAPSE))
+    else:
+        t = _ATM_T0_K + _ATM_LAPSE * _ATM_H11
+        p11 = _ATM_P0_PA * (t / _ATM_T0_K) ** (-g0 / (_ATM_R * _ATM_LAPSE))
+        p = p11 * np.exp(-g0 * (hgp - _ATM_H11) / (_ATM_R * t))
+    return p, t
+
+
+@njit(cache=True)
+def _convert_raw(raw, ncol, wind_ned_mps, first_step, dt_s, terrain_elevation_m):  # pragma: no cover
+    """Recorded JSBSim values (flat, ncol per step) -> (index of the first non-finite value or -1, block of
+    SI fields (_B_ROWS, n), C_bn (n, 3, 3)). One pass over the chunk, no Python objects."""
+    n = raw.shape[0] // ncol
+    bad = -1
+    for k in range(n * ncol):
+        if not np.isfinite(raw[k]):
+            bad = k
+            break
+    b = np.empty((_B_ROWS, n))
+    c = np.empty((n, 3, 3))
+    for i in range(n):
+        r = raw[i * ncol:(i + 1) * ncol]
+        lat, h = r[0], r[2] * M_PER_FT
+        b[_B_T, i] = (first_step + i) * dt_s
+        b[_B_LAT, i] = lat
+        b[_B_LON, i] = r[1]
+        b[_B_H, i] = h
+        b[_B_AGL, i] = h - terrain_elevation_m
+        for k in range(3):
+            b[_B_V + k, i] = r[3 + k] * M_PER_FT
+            b[_B_WIB + k, i] = r[9 + k]
+            b[_B_WIND + k, i] = r[15 + k] * M_PER_FT if ncol > _N_STATE else wind_ned_mps[k]
+        ph, th, ps = r[6], r[7], r[8]
+        if ps > np.pi:
+            ps -= 2.0 * np.pi          # JSBSim gives [0, 2 pi); ours is (-pi, pi]
+        b[_B_ROLL, i], b[_B_PITCH, i], b[_B_YAW, i] = ph, th, ps
+        cr, sr, cp, sp, cy, sy = np.cos(ph), np.sin(ph), np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
+        # 3-2-1 body (FRD) -> NED, as terrain.geodesy.euler_to_C_bn
+        c[i, 0, 0] = cp * cy
+        c[i, 0, 1] = sr * sp * cy - cr * sy
+        c[i, 0, 2] = cr * sp * cy + sr * sy
+        c[i, 1, 0] = cp * sy
+        c[i, 1, 1] = sr * sp * sy + cr * cy
+        c[i, 1, 2] = cr * sp * sy - sr * cy
+        c[i, 2, 0] = -sp
+        c[i, 2, 1] = sr * cp
+        c[i, 2, 2] = cr * cp
+        # Earth rate in NED at the geodetic latitude, into body axes: omega_eb = omega_ib - C_nb omega_ie^n
+        wn = OMEGA_EARTH_RPS * np.cos(lat)
+        wd = -OMEGA_EARTH_RPS * np.sin(lat)
+        for k in range(3):
+            b[_B_WEB + k, i] = r[9 + k] - (c[i, 0, k] * wn + c[i, 2, k] * wd)
+        b[_B_F, i] = r[12] * G0_MPS2
+        b[_B_F + 1, i] = r[13] * G0_MPS2
+        b[_B_F + 2, i] = -r[14] * G0_MPS2
+        # air-relative velocity in body axes: C_nb (v - wind)
+        an = b[_B_V, i] - b[_B_WIND, i]
+        ae = b[_B_V + 1, i] - b[_B_WIND + 1, i]
+        ad = b[_B_V + 2, i] - b[_B_WIND + 2, i]
+        u = c[i, 0, 0] * an + c[i, 1, 0] * ae + c[i, 2, 0] * ad
+        vb = c[i, 0, 1] * an + c[i, 1, 1] * ae + c[i, 2, 1] * ad
+        wb = c[i, 0, 2] * an + c[i, 1, 2] * ae + c[i, 2, 2] * ad
+        b[_B_TAS, i] = np.sqrt(u * u + vb * vb + wb * wb)
+        b[_B_ALPHA, i] = np.arctan2(wb, u)
+        b[_B_BETA, i] = np.arctan2(vb, np.sqrt(u * u + wb * wb))
+        b[_B_P, i], b[_B_TK, i] = _std_atmosphere(lat, r[1], h)
+    return bad, b, c
+
+
+def _record_state(n: int, run, extend, getters) -> None:
+    """The hot loop: run() and copy the 15 cached state nodes' values, nothing else. The getters are bound
+    to locals and called in one tuple expression (measurably cheaper than iterating over them)."""
+    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14) = getters
+    for _ in range(n):
+        run()
+        extend((g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(), g13(),
+                g14()))
+
+
+def _record_state_wind(n: int, run, extend, getters) -> None:
+    """As _record_state, plus the three total-wind nodes (turbulence or gusts configured)."""
+    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15, g16, g17) = getters
+    for _ in range(n):
+        run()
+        extend((g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(), g13(), g14(),
+                g15(), g16(), g17()))
+
+
+class Flight:
+    """One JSBSim flight: loads the aircraft, applies and trims the initial condition, advances in chunks.
+
+    aircraft: folder name under the aircraft data (ValueError if unknown); dt_s: JSBSim step; wind: a
+    WindConfig (default calm); seed: JSBSim's random seed (turbulence), same seed -> identical truth;
+    terrain_elevation_m: terrain height under the aircraft at the start (WGS84, m); targets: autopilot
+    targets to engage after trim (default: hold the trimmed track, altitude and TAS).
+    """
+
+    def __init__(self, ic: InitialCondition, *, aircraft: str = "kingair", dt_s: float = 0.01,
+                 wind: WindConfig | None = None, seed: int = 0, terrain_elevation_m: float = 0.0,
+                 targets: AutopilotTargets | None = None):
+        if not isinstance(ic, InitialCondition):
+            raise ValueError(f"ic must be an InitialCondition, got {type(ic).__name__}")
+        dt_s = _check_finite("Flight", "dt_s", dt_s)
+        if not 0.0 < dt_s <= 0.05:
+            raise ValueError(f"Flight.dt_s must be within (0, 0.05] s, got {dt_s}")
+        terrain_elevation_m = _check_finite("Flight", "terrain_elevation_m", terrain_elevation_m)
+        if terrain_elevation_m >= ic.h_msl_m:
+            raise ValueError(f"InitialCondition.h_msl_m ({ic.h_msl_m} m) is not above the terrain "
+                             f"({terrain_elevation_m} m)")
+        if wind is None:
+            wind = WindConfig()
+        if not isinstance(wind, WindConfig):
+            raise ValueError(f"wind must be a WindConfig, got {type(wind).__name__}")
+        self.ic = ic
+        self.aircraft = aircraft
+        self.dt_s = dt_s
+        self.wind = wind
+        self.seed = int(seed)
+        self.fdm = fdm = new_fdm(aircraft, dt_s)   # ValueError for an unknown aircraft
+        pm = fdm.get_property_manager()
+        self._node = lambda name: pm.get_node(name, True)
+        self._run = fdm.run
+        self._all_getters = tuple(self._node(n).get_double_value for n in _RECORDED)
+        self._wind_setters = tuple(self._node(f"atmosphere/wind-{a}-fps").set_double_value
+                                   for a in ("north", "east", "down"))
+        self._terrain_setter = self._node("position/terrain-elevation-asl-ft").set_double_value
+        self._terrain_elevation_m = terrain_elevation_m
+        self._written_wind: tuple[float, float, float] | None = None
+        self._steady_wind_mps = np.zeros(3)
+        self._steps = 0
+        self._gust_index = 0
+        self._targets: AutopilotTargets | None = None
+        self._last_h_m = ic.h_msl_m
+        self._select_recorder()
+
+        fdm["simulation/randomseed"] = float(self.seed % 2**31)
+        wind.apply_turbulence(fdm)
+        self._write_steady_wind(ic.h_msl_m)
+        self._apply_ic(ic, terrain_elevation_m)
+        self._trim()
+        self._write_steady_wind(ic.h_msl_m)
+        if targets is None:
+            row = self.snapshot()
+            v = row.v_ned_mps[0]
+            targets = AutopilotTargets(
+                lateral_mode=LateralMode.TRACK, heading_cmd_rad=float(row.yaw_rad[0]),
+                track_cmd_rad=math.atan2(v[1], v[0]), vertical_mode=VerticalMode.ALTITUDE_MSL,
+                altitude_cmd_m=ic.h_msl_m, agl_cmd_m=max(ic.h_msl_m - terrain_elevation_m, 1.0),
+                speed_mode=SpeedMode.TAS, tas_cmd_mps=ic.tas_mps)
+        self.set_targets(targets)
+
+    # ----------------------------------------------------------------------------------------- set-up
+    def _apply_ic(self, ic: InitialCondition, terrain_elevation_m: float) -> None:
+        fdm = self.fdm
+        h_ft = ic.h_msl_m * FT_PER_M
+        fdm["ic/terrain-elevation-ft"] = terrain_elevation_m * FT_PER_M
+        fdm["ic/h-sl-ft"] = h_ft
+        fdm["ic/lat-geod-rad"] = ic.lat_rad
+        fdm["ic/long-gc-rad"] = ic.lon_rad
+        # ic/h-sl-ft is the radial height above the sea-level radius; correct it to the geodetic height.
+        for _ in range(3):
+            fdm["ic/h-sl-ft"] = fdm["ic/h-sl-ft"] + (h_ft - fdm["ic/geod-alt-ft"])
+        fdm["ic/psi-true-rad"] = ic.heading_rad
+        fdm["ic/gamma-rad"] = ic.gamma_rad
+        fdm["ic/phi-rad"] = 0.0
+        fdm["ic/vt-fps"] = ic.tas_mps * FT_PER_M
+        fdm["fcs/flap-cmd-norm"] = ic.flaps
+        fdm["gear/gear-cmd-norm"] = 0.0
+        if ic.fuel_fraction is not None:
+            self._set_fuel(ic.fuel_fraction)
+        if not fdm.run_ic():
+            raise TrimError(f"JSBSim rejected the initial condition {ic}")
+        fdm["gear/gear-pos-norm"] = 0.0
+        fdm["propulsion/set-running"] = -1
+        self._terrain_setter(terrain_elevation_m * FT_PER_M)
+
+    def _set_fuel(self, fraction: float) -> None:
+        pm = self.fdm.get_property_manager()
+        i = 0
+        while (contents := pm.get_node(f"propulsion/tank[{i}]/contents-lbs")) is not None:
+            pct = pm.get_node(f"propulsion/tank[{i}]/pct-full").get_double_value()
+            if pct <= 0.0:
+                raise ValueError(f"InitialCondition.fuel_fraction: tank {i} of {self.aircraft!r} is empty in "
+                                 "the aircraft file, so its capacity is unknown")
+            contents.set_double_value(fraction * contents.get_double_value() / (pct / 100.0))
+            i += 1
+
+    def _trim(self) -> None:
+        ic, fdm = self.ic, self.fdm
+        what = (f"level flight at h = {ic.h_msl_m:.0f} m, TAS = {ic.tas_mps:.1f} m/s, "
+                f"flight-path angle = {math.degrees(ic.gamma_rad):.1f} deg, flaps = {ic.flaps:.2f}")
+        try:
+            fdm["simulation/do_simple_trim"] = 1   # full longitudinal + lateral trim
+        except jsbsim.TrimFailureError:
+            raise TrimError(f"JSBSim cannot trim {self.aircraft!r} in {what}") from None
+        state = np.array([g() for g in self._all_getters])
+        if not np.all(np.isfinite(state)):
+            raise TrimError(f"JSBSim's trim of {self.aircraft!r} in {what} gave a non-finite state")
+
+    # ---------------------------------------------------------------------------------------- control
+    @property
+    def targets(self) -> AutopilotTargets | None:
+        return self._targets
+
+    def set_targets(self, targets: AutopilotTargets) -> None:
+        """Write autopilot targets to the ap/* properties (Python sets targets; JSBSim flies)."""
+        if not isinstance(targets, AutopilotTargets):
+            raise ValueError(f"targets must be AutopilotTargets, got {type(targets).__name__}")
+        for name, value in targets.properties().items():
+            self._node(name).set_double_value(value)
+        self._targets = targets
+
+    def set_terrain_elevation(self, h_m: float) -> None:
+        """Terrain height (WGS84 / MSL, m) under the aircraft, read by the autopilot's AGL hold."""
+        h_m = _check_finite("Flight", "terrain_elevation_m", h_m)
+        self._terrain_elevation_m = h_m
+        self._terrain_setter(h_m * FT_PER_M)
+
+    @property
+    def terrain_elevation_m(self) -> float:
+        return self._terrain_elevation_m
+
+    def set_wind(self, wind: WindConfig) -> None:
+        """Replace the wind configuration (steady layers take effect at the next advance)."""
+        if not isinstance(wind, WindConfig):
+            raise ValueError(f"wind must be a WindConfig, got {type(wind).__name__}")
+        self.wind = wind
+        self._written_wind = None
+        self._gust_index = 0
+        while (self._gust_index < len(wind.gusts)
+               and wind.gusts[self._gust_index].start_time_s < self.t_s - 0.5 * self.dt_s):
+            self._gust_index += 1
+        wind.apply_turbulence(self.fdm)
+        self._select_recorder()
+
+    def _write_steady_wind(self, h_m: float) -> None:
+        w_ned = self.wind.steady_wind_ned_tuple(h_m)
+        if w_ned != self._written_wind:
+            for setter, value in zip(self._wind_setters, w_ned, strict=True):
+                setter(value * FT_PER_M)
+            self._written_wind = w_ned
+            self._steady_wind_mps = np.array(w_ned)
+
+    # ---------------------------------------------------------------------------------------- stepping
+    @property
+    def t_s(self) -> float:
+        """Time since the start of the flight (s)."""
+        return self._steps * self.dt_s
+
+    @property
+    def steps(self) -> int:
+        return self._steps
+
+    def snapshot(self) -> TruthChunk:
+        """The current state as a one-row TruthChunk (no step taken)."""
+        raw = np.array([g() for g in self._getters])
+        return self._convert(raw, self._steps)
+
+    def advance(self, n_steps: int) -> TruthChunk:
+        """Run n_steps JSBSim steps; return their truth (one row per step, SI). Raises FlightDiverged if
+        the state turns NaN. The steady wind is set for the current altitude first; gusts start on time."""
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        self._write_steady_wind(self._last_h_m)
+        buf = array("d")
+        if self._gust_index < len(self.wind.gusts):
+            self._record_with_gusts(int(n_steps), buf)
+        else:
+            self._recorder(n_steps, self._run, buf.extend, self._getters)
+        first_step = self._steps + 1
+        self._steps += n_steps
+        self._last_h_m = buf[len(buf) - self._ncol + 2] * M_PER_FT
+        return self._convert(np.frombuffer(buf, dtype=np.float64), first_step)
+
+    def _record_with_gusts(self, n_steps: int, buf: array) -> None:
+        gusts = self.wind.gusts
+        done = 0
+        while done < n_steps:
+            seg = n_steps - done
+            if self._gust_index < len(gusts):
+                k_start = int(round(gusts[self._gust_index].start_time_s / self.dt_s))
+                until = k_start - (self._steps + done)
+                if until <= 0:
+                    WindConfig.start_gust(self.fdm, gusts[self._gust_index])
+                    self._gust_index += 1
+                    continue
+                seg = min(seg, until)
+            self._recorder(seg, self._run, buf.extend, self._getters)
+            done += seg
+
+    def _select_recorder(self) -> None:
+        self._read_wind = self.wind.turbulence.model != "none" or bool(self.wind.gusts)
+        self._ncol = len(_RECORDED) if self._read_wind else _N_STATE
+        self._getters = self._all_getters[:self._ncol]
+        self._recorder = _record_state_wind if self._read_wind else _record_state
+
+    def _convert(self, raw: np.ndarray, first_step: int) -> TruthChunk:
+        bad, b, c_bn = _convert_raw(raw, self._ncol, self._steady_wind_mps, first_step, self.dt_s,
+                                    self._terrain_elevation_m)
+        if bad >= 0:
+            row, col = divmod(bad, self._ncol)
+            t = (first_step + row) * self.dt_s
+            name = _NAN_NAMES[col]
+            raise FlightDiverged(f"flight diverged: {name} turned {raw[bad]} at t = {t:.2f} s "
+                                 f"(aircraft {self.aircraft!r})", name, t)
+        bt = b.T
+        return TruthChunk(b[0], b[1], b[2], b[3], bt[:, 4:7], b[7], b[8], b[9], c_bn, bt[:, 10:13],
+                          bt[:, 13:16], bt[:, 16:19], b[19], b[20], b[21], b[22], b[23], bt[:, 24:27], b[27])

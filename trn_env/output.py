@@ -1,0 +1,160 @@
+"""Run outputs: summary.json, the time-series log (log.npz + timeline.csv), events, and plots.
+
+Everything is written atomically: the files go into a temporary directory next to the target, and only
+when all of them are complete is that directory renamed onto the target (or, if the target already holds
+files, each file is moved in with os.replace, summary.json last). A Ctrl-C or a kill therefore leaves
+either a complete run directory or no summary.json at all - never a half-written file.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# The columns of timeline.csv (a subset of the log arrays, one row per logged tick).
+TIMELINE_COLUMNS = [
+    "t_s", "true_lat_deg", "true_lon_deg", "true_h_msl_m", "true_h_agl_m", "true_yaw_deg", "tas_mps",
+    "est_lat_deg", "est_lon_deg", "est_h_m", "est_yaw_deg",
+    "err_n_m", "err_e_m", "err_d_m", "err_h_m", "sigma_n_m", "sigma_e_m", "sigma_d_m",
+    "gnss_available", "nav_ok",
+]
+
+
+def default_out_dir(scenario_name: str, now: str | None = None) -> Path:
+    """runs/<scenario>-<UTC timestamp>."""
+    import datetime as _dt
+    stamp = now or _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    return Path("runs") / f"{scenario_name}-{stamp}"
+
+
+def _json_default(o: Any):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _clean_json(o: Any):
+    """NaN/inf are not JSON: write them as null."""
+    if isinstance(o, dict):
+        return {str(k): _clean_json(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean_json(v) for v in o]
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(float(o)) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    return o
+
+
+def write_summary(path: Path, summary: dict) -> None:
+    path.write_text(json.dumps(_clean_json(summary), indent=2, default=_json_default) + "\n", encoding="utf-8")
+
+
+def write_log_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    with open(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
+
+
+def timeline_table(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The per-tick columns of the log in display units (degrees where named)."""
+    a = arrays
+    cov = a["est_cov_diag"]
+    sig = np.sqrt(np.clip(cov[:, :3], 0.0, None))
+    return {
+        "t_s": a["t_s"],
+        "true_lat_deg": np.degrees(a["true_lat_rad"]),
+        "true_lon_deg": np.degrees(a["true_lon_rad"]),
+        "true_h_msl_m": a["true_h_msl_m"],
+        "true_h_agl_m": a["true_h_agl_m"],
+        "true_yaw_deg": np.degrees(a["true_yaw_rad"]),
+        "tas_mps": a["true_tas_mps"],
+        "est_lat_deg": np.degrees(a["est_lat_rad"]),
+        "est_lon_deg": np.degrees(a["est_lon_rad"]),
+        "est_h_m": a["est_h_m"],
+        "est_yaw_deg": np.degrees(a["est_yaw_rad"]),
+        "err_n_m": a["err_ned_m"][:, 0],
+        "err_e_m": a["err_ned_m"][:, 1],
+        "err_d_m": a["err_ned_m"][:, 2],
+        "err_h_m": np.hypot(a["err_ned_m"][:, 0], a["err_ned_m"][:, 1]),
+        "sigma_n_m": sig[:, 0],
+        "sigma_e_m": sig[:, 1],
+        "sigma_d_m": sig[:, 2],
+        "gnss_available": a["gnss_available"].astype(int),
+        "nav_ok": a["nav_ok"].astype(int),
+    }
+
+
+def write_timeline_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    table = timeline_table(arrays)
+    cols = [table[c] for c in TIMELINE_COLUMNS]
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(TIMELINE_COLUMNS)
+        for row in zip(*cols):
+            w.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else int(v) for v in row])
+
+
+def write_events_csv(path: Path, events: list[tuple[float, str, str]]) -> None:
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(["t_s", "source", "message"])
+        for t, src, msg in events:
+            w.writerow([repr(float(t)), src, msg])
+
+
+def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
+              events: list[tuple[float, str, str]] | None = None,
+              plot: Callable[[Path], list[str]] | None = None) -> Path:
+    """Write a complete run directory atomically; returns the directory.
+
+    `plot(tmp_dir)` may add figures; it returns their file names (listed in summary['files']).
+    """
+    out_dir = Path(out_dir)
+    parent = out_dir.resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=parent))
+    try:
+        files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
+        write_log_npz(tmp / "log.npz", arrays)
+        write_timeline_csv(tmp / "timeline.csv", arrays)
+        write_events_csv(tmp / "events.csv", events or [])
+        if plot is not None:
+            files += plot(tmp)
+        summary = dict(summary)
+        summary["files"] = files
+        write_summary(tmp / "summary.json", summary)
+        _commit(tmp, out_dir)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return out_dir
+
+
+def _commit(tmp: Path, out_dir: Path) -> None:
+    """Move the finished files into place; summary.json goes last so its presence means 'complete'."""
+    if not out_dir.exists():
+        os.replace(tmp, out_dir)
+        return
+    if not out_dir.is_dir():
+        raise NotADirectoryError(f"--out {out_dir} exists and is not a directory")
+    stale = out_dir / "summary.json"
+    if stale.exists():
+        stale.unlink()   # the old run's summary must not vouch for a mix of old and new files
+    names = sorted(p.name for p in tmp.iterdir())
+    for name in [n for n in names if n != "summary.json"] + ["summary.json"]:
+        os.replace(tmp / name, out_dir / name)

@@ -1,0 +1,147 @@
+"""The plots a navigation engineer looks at first, drawn with matplotlib's Agg backend.
+
+- track.png: true and estimated tracks over a hillshade of the true terrain;
+- errors.png: north, east, horizontal and vertical navigation error against time with the filter's
+  +-3 sigma bounds, GNSS outages shaded.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def _pyplot():
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def hillshade(heights_m: np.ndarray, dx_m: float, dy_m: float) -> np.ndarray:
+    """Grey hillshade (0..1) of a south-up grid (row 0 = south), sun from the north-west at 45 deg."""
+    from matplotlib.colors import LightSource
+    h = np.where(np.isfinite(heights_m), heights_m, np.nanmin(heights_m))
+    ls = LightSource(azdeg=315, altdeg=45)
+    # LightSource assumes row 0 is the top (north): flip, shade, flip back.
+    return ls.hillshade(h[::-1], vert_exag=2.0, dx=dx_m, dy=dy_m)[::-1]
+
+
+def _dem_extent_deg(dem) -> tuple[float, float, float, float]:
+    lat_min, lat_max, lon_min, lon_max = dem.bounds
+    return (math.degrees(lon_min), math.degrees(lon_max), math.degrees(lat_min), math.degrees(lat_max))
+
+
+def plot_track(path: Path, dem, arrays: dict[str, np.ndarray], title: str = "",
+               waypoints_deg: list[tuple[float, float]] | None = None) -> None:
+    """True and estimated tracks over the hillshade of `dem` (any object with heights_m and bounds)."""
+    plt = _pyplot()
+    lon0, lon1, lat0, lat1 = _dem_extent_deg(dem)
+    lat_mid = math.radians(0.5 * (lat0 + lat1))
+    heights = np.asarray(dem.heights_m, float)
+    ny, nx = heights.shape
+    dy_m = math.radians(lat1 - lat0) * 6.371e6 / max(ny - 1, 1)
+    dx_m = math.radians(lon1 - lon0) * 6.371e6 * math.cos(lat_mid) / max(nx - 1, 1)
+    fig, ax = plt.subplots(figsize=(8, 7), dpi=110)
+    ax.imshow(hillshade(heights, dx_m, dy_m), cmap="gray", origin="lower", extent=(lon0, lon1, lat0, lat1),
+              vmin=0, vmax=1)
+    im = ax.imshow(heights, cmap="terrain", origin="lower", extent=(lon0, lon1, lat0, lat1), alpha=0.35)
+    fig.colorbar(im, ax=ax, shrink=0.7, label="terrain height (m MSL)")
+    ax.plot(np.degrees(arrays["true_lon_rad"]), np.degrees(arrays["true_lat_rad"]), "-", color="black",
+            lw=1.6, label="true track")
+    ax.plot(np.degrees(arrays["est_lon_rad"]), np.degrees(arrays["est_lat_rad"]), "--", color="red",
+            lw=1.2, label="estimated track")
+    if waypoints_deg:
+        wl = np.array(waypoints_deg)
+        ax.plot(wl[:, 1], wl[:, 0], "o:", color="blue", ms=5, lw=0.8, label="route")
+    ax.plot(np.degrees(arrays["true_lon_rad"][:1]), np.degrees(arrays["true_lat_rad"][:1]), "k^", ms=8,
+            label="start")
+    ax.set_aspect(1.0 / math.cos(lat_mid))
+    ax.set_xlabel("longitude (deg)")
+    ax.set_ylabel("latitude (deg)")
+    ax.set_title(title or "true and estimated tracks")
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _shade_outages(ax, t: np.ndarray, available: np.ndarray) -> None:
+    if t.size == 0:
+        return
+    off = ~available.astype(bool)
+    edges = np.flatnonzero(np.diff(np.r_[0, off.astype(int), 0]))
+    for a, b in zip(edges[::2], edges[1::2]):
+        ax.axvspan(t[a], t[min(b, t.size) - 1], color="0.9", zorder=0)
+
+
+def plot_errors(path: Path, arrays: dict[str, np.ndarray], title: str = "") -> None:
+    """Navigation error against time with +-3 sigma bounds of the navigator's covariance."""
+    plt = _pyplot()
+    t = arrays["t_s"]
+    err = arrays["err_ned_m"]
+    sig = np.sqrt(np.clip(arrays["est_cov_diag"][:, :3], 0.0, None))
+    fig, axes = plt.subplots(4, 1, figsize=(9, 9), dpi=110, sharex=True)
+    panels = [
+        ("north error (m)", err[:, 0], 3 * sig[:, 0], True),
+        ("east error (m)", err[:, 1], 3 * sig[:, 1], True),
+        ("horizontal error (m)", np.hypot(err[:, 0], err[:, 1]), 3 * np.hypot(sig[:, 0], sig[:, 1]), False),
+        ("vertical error, est - true (m)", -err[:, 2], 3 * sig[:, 2], True),
+    ]
+    for ax, (label, e, s3, symmetric) in zip(axes, panels):
+        _shade_outages(ax, t, arrays["gnss_available"])
+        ax.plot(t, e, color="C0", lw=1.0, label="error")
+        ax.plot(t, s3, color="C3", lw=0.8, ls="--", label="+3 sigma")
+        if symmetric:
+            ax.plot(t, -s3, color="C3", lw=0.8, ls="--", label="-3 sigma")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        finite = np.concatenate([np.abs(e[np.isfinite(e)]), s3[np.isfinite(s3)]])
+        if finite.size:
+            lim = 1.15 * min(float(np.max(finite)), 1e5) + 1.0
+            ax.set_ylim(-lim if symmetric else 0.0, lim)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (s); grey = GNSS not used")
+    fig.suptitle(title or "navigation error")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def render_tracks_rgb(dem, true_track, est_track, goal_rad, cache=None, size_px: int = 480) -> np.ndarray:
+    """(H, W, 3) uint8 image of the map hillshade with the true (black) and estimated (red) tracks.
+
+    `cache` (any object) keeps the rendered hillshade between calls in its `_background` attribute.
+    """
+    plt = _pyplot()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    lon0, lon1, lat0, lat1 = _dem_extent_deg(dem)
+    lat_mid = math.radians(0.5 * (lat0 + lat1))
+    bg = getattr(cache, "_background", None) if cache is not None else None
+    if bg is None:
+        heights = np.asarray(dem.heights_m, float)
+        ny, nx = heights.shape
+        dy_m = math.radians(lat1 - lat0) * 6.371e6 / max(ny - 1, 1)
+        dx_m = math.radians(lon1 - lon0) * 6.371e6 * math.cos(lat_mid) / max(nx - 1, 1)
+        bg = hillshade(heights, dx_m, dy_m)
+        if cache is not None:
+            cache._background = bg
+    fig = plt.figure(figsize=(size_px / 100, size_px / 100), dpi=100)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0, 0, 1, 1))
+    ax.imshow(bg, cmap="gray", origin="lower", extent=(lon0, lon1, lat0, lat1), vmin=0, vmax=1)
+    tt = np.degrees(np.asarray(true_track, float).reshape(-1, 2))
+    et = np.degrees(np.asarray(est_track, float).reshape(-1, 2))
+    ax.plot(tt[:, 1], tt[:, 0], "-", color="black", lw=2)
+    ax.plot(et[:, 1], et[:, 0], "--", color="red", lw=1.5)
+    ax.plot(math.degrees(goal_rad[1]), math.degrees(goal_rad[0]), "*", color="gold", ms=14, mec="black")
+    ax.set_xlim(lon0, lon1)
+    ax.set_ylim(lat0, lat1)
+    ax.set_aspect(1.0 / math.cos(lat_mid))
+    ax.axis("off")
+    canvas.draw()
+    img = np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
+    plt.close(fig)
+    return img

@@ -1,0 +1,410 @@
+"""Scenario files: load a TOML scenario, validate it completely, and list the built-in ones.
+
+A scenario is a TOML file holding everything one closed-loop run needs (see
+trn_env/scenarios/schema.json and the built-in files beside it). `load_scenario` checks it in two passes
+before any flight starts and reports EVERY problem, each prefixed with the field's path
+(e.g. ``route.waypoints[2].lat_deg: 95 is greater than the maximum of 90``):
+
+1. the JSON schema (types, ranges, required keys, unknown keys);
+2. semantic checks that need the data: exactly one altitude per waypoint, GNSS outages ordered, the
+   DEM files readable, the initial position and every waypoint inside the true terrain and the
+   navigator's map, the navigator name known, the component settings accepted by their components.
+
+Problems are raised together as one `ScenarioError` whose `.problems` is the list of messages.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import sys
+from dataclasses import dataclass, field
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+# seed 000 Table 2: initial position error 30 m, 30 m, 15 m (1 sigma); velocity 0.1 m/s; attitude
+# 0.05 mrad, 0.05 mrad, 1 mrad (roll, pitch, heading).
+DEFAULT_INITIAL_ERRORS: dict[str, list[float]] = {
+    "position_ned_m": [30.0, 30.0, 15.0],
+    "velocity_ned_mps": [0.1, 0.1, 0.1],
+    "attitude_mrad": [0.05, 0.05, 1.0],
+}
+DEFAULT_SEED = 0
+DEFAULT_DURATION_S = 600.0
+DEFAULT_GUIDANCE_RATE_HZ = 10.0
+DEFAULT_LOG_RATE_HZ = 10.0
+DEFAULT_MAX_HORIZONTAL_SIGMA_M = 5000.0
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be flown. `.problems` lists every problem, each starting with its field path."""
+
+    def __init__(self, source: str, problems: list[str]):
+        self.source = source
+        self.problems = list(problems)
+        lines = "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(f"scenario {source}: {len(self.problems)} problem(s)\n{lines}")
+
+
+@dataclass
+class Scenario:
+    """A validated scenario. `data` is the parsed TOML with defaults filled in; the other fields are shortcuts."""
+
+    name: str
+    source: str
+    data: dict[str, Any]
+    description: str = ""
+    seed: int = DEFAULT_SEED
+    duration_s: float = DEFAULT_DURATION_S
+    extras: dict[str, Any] = field(default_factory=dict)   # not part of the file (e.g. loaded DEMs)
+
+    @property
+    def navigator_name(self) -> str:
+        return str(self.data["navigator"]["name"])
+
+    def with_overrides(self, **overrides: Any) -> Scenario:
+        """A re-validated copy with `seed`, `duration_s` or `navigator` replaced (None = keep)."""
+        data = apply_overrides(self.data, **overrides)
+        return validate(data, source=self.source)
+
+
+# ----------------------------------------------------------------------------------------------- files
+
+def _builtin_dir():
+    return resources.files("trn_env.scenarios")
+
+
+def builtin_names() -> list[str]:
+    """Names of the scenarios shipped with the package (the TOML files in trn_env/scenarios/)."""
+    return sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".toml"))
+
+
+def list_scenarios() -> list[tuple[str, str]]:
+    """(name, description) of every built-in scenario."""
+    out = []
+    for name in builtin_names():
+        text = (_builtin_dir() / f"{name}.toml").read_text(encoding="utf-8")
+        try:
+            desc = str(tomllib.loads(text).get("description", ""))
+        except tomllib.TOMLDecodeError as exc:
+            desc = f"(unreadable: {exc})"
+        out.append((name, desc))
+    return out
+
+
+@lru_cache(maxsize=1)
+def schema() -> dict:
+    """The scenario JSON schema (trn_env/scenarios/schema.json)."""
+    return json.loads((_builtin_dir() / "schema.json").read_text(encoding="utf-8"))
+
+
+def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
+    """Parse a built-in scenario name or a TOML path into a dict; returns (data, source description)."""
+    text_path = Path(name_or_path)
+    if str(name_or_path) in builtin_names() and not text_path.suffix:
+        res = _builtin_dir() / f"{name_or_path}.toml"
+        source = f"built-in '{name_or_path}'"
+        text = res.read_text(encoding="utf-8")
+    else:
+        source = str(text_path)
+        if not text_path.is_file():
+            known = ", ".join(builtin_names())
+            raise ScenarioError(source, [f"file: no such scenario file or built-in name (built-ins: {known})"])
+        try:
+            text = text_path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ScenarioError(source, [f"file: cannot read: {exc}"]) from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(source, [f"file: not valid TOML: {exc}"]) from exc
+    if source == str(text_path):
+        data.setdefault("name", text_path.stem)
+    return data, source
+
+
+def load_scenario(name_or_path: str | Path = "default", *, check_components: bool = True,
+                  **overrides: Any) -> Scenario:
+    """Read, override (seed=, duration_s=, navigator=) and validate a scenario. Raises ScenarioError."""
+    data, source = read_scenario_file(name_or_path)
+    data = apply_overrides(data, **overrides)
+    base = Path(name_or_path).resolve().parent if source == str(Path(name_or_path)) else None
+    return validate(data, source=source, base_dir=base, check_components=check_components)
+
+
+def apply_overrides(data: dict, *, seed: int | None = None, duration_s: float | None = None,
+                    navigator: str | None = None) -> dict:
+    """A copy of `data` with the command-line overrides applied."""
+    data = copy.deepcopy(data)
+    if seed is not None:
+        data["seed"] = seed
+    if duration_s is not None:
+        data["duration_s"] = duration_s
+    if navigator is not None:
+        nav = data.setdefault("navigator", {})
+        if isinstance(nav, dict):
+            if nav.get("name") != navigator:
+                nav.pop("settings", None)   # settings belong to the navigator they were written for
+            nav["name"] = navigator
+    return data
+
+
+# ------------------------------------------------------------------------------------------ validation
+
+def field_path(parts) -> str:
+    """`route.waypoints[2].lat_deg` from a jsonschema absolute path."""
+    out = ""
+    for p in parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out or "(top level)"
+
+
+def schema_problems(data: dict) -> list[str]:
+    """Every JSON-schema violation, as 'field.path: message', in document order."""
+    validator = jsonschema.Draft202012Validator(schema())
+    problems = []
+    for err in sorted(validator.iter_errors(data), key=lambda e: [str(p) for p in e.absolute_path]):
+        path = list(err.absolute_path)
+        if err.validator == "additionalProperties":
+            allowed = sorted(err.schema.get("properties", {}))
+            extra = sorted(set(err.instance) - set(allowed)) if isinstance(err.instance, dict) else []
+            for key in extra:
+                problems.append(f"{field_path(path + [key])}: unknown key (allowed here: {', '.join(allowed)})")
+            continue
+        if err.validator == "required":
+            missing = err.message.split("'")[1] if "'" in err.message else err.message
+            problems.append(f"{field_path(path + [missing])}: required key is missing")
+            continue
+        if err.validator in ("oneOf", "anyOf") and err.context:
+            alternatives = sorted({sub.message for sub in err.context if not sub.relative_path})
+            problems.append(f"{field_path(path)}: {' / '.join(alternatives)}")
+            continue
+        problems.append(f"{field_path(path)}: {err.message}")
+    return problems
+
+
+def _fill_defaults(data: dict) -> dict:
+    """A copy with every optional key filled; tolerant of malformed data (the schema reports that)."""
+    d = copy.deepcopy(data)
+    for key in ("initial", "route", "terrain", "navigator"):
+        if not isinstance(d.get(key), dict):
+            d[key] = {}
+    d["terrain"].setdefault("world", {"dem": "jacksboro"})
+    if not isinstance(d["terrain"]["world"], dict):
+        d["terrain"]["world"] = {"dem": "jacksboro"}
+    d["initial"].setdefault("tas_mps", 85.0)
+    d.setdefault("description", "")
+    d.setdefault("seed", DEFAULT_SEED)
+    d.setdefault("duration_s", DEFAULT_DURATION_S)
+    d.setdefault("aircraft", {})
+    d["aircraft"].setdefault("name", "kingair")
+    d["aircraft"].setdefault("dt_s", 0.01)
+    d["aircraft"].setdefault("settings", {})
+    errs = d.setdefault("initial_errors", {})
+    for k, v in DEFAULT_INITIAL_ERRORS.items():
+        errs.setdefault(k, list(v))
+    d["route"].setdefault("tas_mps", d["initial"]["tas_mps"])
+    d["route"].setdefault("settings", {})
+    d.setdefault("wind", {})
+    d["wind"].setdefault("layers", [])
+    d["wind"].setdefault("turbulence", {"model": "none"})
+    d["wind"].setdefault("gusts", [])
+    d["terrain"].setdefault("map", {})
+    d["terrain"]["map"].setdefault("dem", "world")
+    d["terrain"]["world"].setdefault("fill_voids", False)
+    d.setdefault("gnss", {})
+    d["gnss"].setdefault("outages", [])
+    d["navigator"].setdefault("settings", {})
+    d.setdefault("guidance", {})
+    d["guidance"].setdefault("rate_hz", DEFAULT_GUIDANCE_RATE_HZ)
+    d["guidance"].setdefault("log_rate_hz", DEFAULT_LOG_RATE_HZ)
+    d.setdefault("limits", {})
+    d["limits"].setdefault("max_horizontal_sigma_m", DEFAULT_MAX_HORIZONTAL_SIGMA_M)
+    return d
+
+
+def _resolve_dem_path(value: str, base_dir: Path | None) -> str:
+    """A DEM value that looks like a relative file path is taken relative to the scenario file."""
+    p = Path(value)
+    if base_dir is not None and not p.is_absolute() and (p.suffix or "/" in value):
+        cand = base_dir / p
+        if cand.exists():
+            return str(cand)
+    return value
+
+
+def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, extras: dict,
+                       tolerant: bool = False) -> list[str]:
+    """Checks that need more than the schema. With `tolerant` (the data already failed the schema) a
+    check that trips over malformed data is skipped instead of raising, so the remaining problems are
+    still reported."""
+    problems: list[str] = []
+    checks = [_altitude_problems, _gnss_problems, _wind_problems, _rate_problems, _aircraft_problems,
+              _navigator_problems, lambda dd: _terrain_problems(dd, base_dir, extras)]
+    for check in checks:
+        try:
+            problems += check(d)
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError):
+            if not tolerant:
+                raise
+    if check_components and not problems and not tolerant:
+        problems += _component_problems(d, extras)
+    return problems
+
+
+def _places(d: dict) -> list[tuple[str, dict]]:
+    out = []
+    if isinstance(d.get("initial"), dict):
+        out.append(("initial", d["initial"]))
+    wps = d.get("route", {}).get("waypoints", []) if isinstance(d.get("route"), dict) else []
+    for i, w in enumerate(wps if isinstance(wps, list) else []):
+        if isinstance(w, dict):
+            out.append((f"route.waypoints[{i}]", w))
+    return out
+
+
+def _altitude_problems(d: dict) -> list[str]:
+    """Exactly one of h_msl_m / h_agl_m at the initial state and at every waypoint."""
+    problems = []
+    for path, obj in _places(d):
+        n = ("h_msl_m" in obj) + ("h_agl_m" in obj)
+        if n != 1:
+            problems.append(f"{path}: give exactly one of h_msl_m or h_agl_m (got {n})")
+    return problems
+
+
+def _gnss_problems(d: dict) -> list[str]:
+    problems = []
+    for i, o in enumerate(d["gnss"]["outages"]):
+        if "end_s" in o and o["end_s"] <= o["start_s"]:
+            problems.append(f"gnss.outages[{i}].end_s: must be after start_s ({o['end_s']} <= {o['start_s']})")
+    return problems
+
+
+def _wind_problems(d: dict) -> list[str]:
+    problems = []
+    hs = [layer["altitude_m"] for layer in d["wind"]["layers"]]
+    for i in range(1, len(hs)):
+        if hs[i] <= hs[i - 1]:
+            problems.append(f"wind.layers[{i}].altitude_m: altitudes must increase ({hs[i]} <= {hs[i - 1]})")
+    return problems
+
+
+def _rate_problems(d: dict) -> list[str]:
+    steps = 1.0 / (d["guidance"]["rate_hz"] * d["aircraft"]["dt_s"])
+    if abs(steps - round(steps)) > 1e-6:
+        return [f"guidance.rate_hz: {d['guidance']['rate_hz']} Hz is not a whole number of "
+                f"JSBSim steps of aircraft.dt_s = {d['aircraft']['dt_s']} s"]
+    return []
+
+
+def _aircraft_problems(d: dict) -> list[str]:
+    from .aircraft_data import available_aircraft
+    try:
+        known = available_aircraft()
+    except FileNotFoundError as exc:
+        return [f"aircraft.name: {exc}"]
+    if d["aircraft"]["name"] not in known:
+        return [f"aircraft.name: unknown aircraft {d['aircraft']['name']!r} "
+                f"(available: {', '.join(known) or 'none'})"]
+    return []
+
+
+def _navigator_problems(d: dict) -> list[str]:
+    try:
+        from navigators import registry
+    except ImportError as exc:
+        return [f"navigator.name: navigators.registry is not available ({exc})"]
+    names = _registry_names(registry)
+    name = d["navigator"]["name"]
+    if names is not None and name not in names:
+        return [f"navigator.name: unknown navigator {name!r} (known: {', '.join(sorted(names))})"]
+    return []
+
+
+def _registry_names(registry) -> list[str] | None:
+    for attr in ("names", "available", "list_navigators"):
+        fn = getattr(registry, attr, None)
+        if callable(fn):
+            return list(fn())
+    for attr in ("NAVIGATORS", "REGISTRY", "_REGISTRY"):
+        table = getattr(registry, attr, None)
+        if isinstance(table, dict):
+            return list(table)
+    return None
+
+
+def _load_dem(value: str, fill_voids: bool):
+    import terrain
+    return terrain.load(value, fill_voids=fill_voids)
+
+
+def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]:
+    """DEM files readable; the initial position and every waypoint inside the world and the map."""
+    problems: list[str] = []
+    places = _places(d)
+    world_cfg = d["terrain"]["world"]
+    world_cfg["dem"] = _resolve_dem_path(world_cfg["dem"], base_dir)
+    map_cfg = d["terrain"]["map"]
+    if map_cfg["dem"] != "world":
+        map_cfg["dem"] = _resolve_dem_path(map_cfg["dem"], base_dir)
+    dems = {}
+    for key, cfg in (("world", world_cfg), ("map", map_cfg)):
+        if key == "map" and cfg["dem"] == "world":
+            continue
+        try:
+            dems[key] = _load_dem(cfg["dem"], bool(cfg.get("fill_voids", world_cfg["fill_voids"])))
+        except Exception as exc:  # noqa: BLE001 - any loader failure is a problem to report
+            problems.append(f"terrain.{key}.dem: cannot load DEM {cfg['dem']!r}: {exc}")
+    extras["world_dem_raw"] = dems.get("world")
+    extras["map_dem_raw"] = dems.get("map")
+    for key, dem in dems.items():
+        lat_min, lat_max, lon_min, lon_max = dem.bounds
+        for path, obj in places:
+            lat, lon = math.radians(obj["lat_deg"]), math.radians(obj["lon_deg"])
+            if not (lat_min <= lat <= lat_max and lon_min <= lon <= lon_max):
+                problems.append(
+                    f"{path}: ({obj['lat_deg']:.5f}, {obj['lon_deg']:.5f}) deg is outside the "
+                    f"{'true terrain' if key == 'world' else 'navigator map'} terrain.{key}.dem "
+                    f"(lat {math.degrees(lat_min):.4f}..{math.degrees(lat_max):.4f}, "
+                    f"lon {math.degrees(lon_min):.4f}..{math.degrees(lon_max):.4f} deg)")
+            elif key == "world" and "h_msl_m" in obj:
+                h_ground = float(dem.height(lat, lon))
+                if math.isfinite(h_ground) and obj["h_msl_m"] <= h_ground:
+                    problems.append(f"{path}.h_msl_m: {obj['h_msl_m']} m is at or below the terrain "
+                                    f"({h_ground:.0f} m MSL there)")
+    return problems
+
+
+def _component_problems(d: dict, extras: dict) -> list[str]:
+    """Hand each component its settings; whatever it rejects becomes a problem at that field."""
+    from . import components
+    return components.check(d, extras)
+
+
+def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None,
+             check_components: bool = True) -> Scenario:
+    """Validate a parsed scenario (schema, then semantics); raise ScenarioError listing every problem."""
+    problems = schema_problems(data)
+    extras: dict = {}
+    try:
+        d = _fill_defaults(data)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        if not problems:
+            raise
+        raise ScenarioError(source, problems) from None
+    problems += _semantic_problems(d, base_dir, check_components, extras, tolerant=bool(problems))
+    if problems:
+        raise ScenarioError(source, problems)
+    return Scenario(name=d["name"], source=source, data=d, description=d["description"], seed=int(d["seed"]),
+                    duration_s=float(d["duration_s"]), extras=extras)

@@ -1,0 +1,93 @@
+"""Air data: true airspeed, angle of attack and sideslip with a per-run bias and white noise.
+
+Defaults follow the thesis appendix's airspeed indicator class (+-3 kt = 1.5 m/s): bias 1 m/s and noise
+0.5 m/s (1 sigma, together about 1.1 m/s); alpha/beta vanes 0.3 deg bias, 0.2 deg noise (our choice).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, NamedTuple
+
+import numpy as np
+from numba import njit
+
+from navigators.frames import AirDataFrame
+from trn_env.sensors.common import check_nonneg, check_positive, config_from_mapping, sample_steps
+from trn_env.truth import TruthChunk
+
+
+@dataclass(frozen=True)
+class AirDataConfig:
+    """Air-data computer; 1 sigma; biases drawn once per run."""
+
+    rate_hz: float = 10.0
+    tas_bias_mps: float = 1.0
+    tas_noise_mps: float = 0.5
+    alpha_bias_deg: float = 0.3
+    alpha_noise_deg: float = 0.2
+    beta_bias_deg: float = 0.3
+    beta_noise_deg: float = 0.2
+
+    def __post_init__(self):
+        check_positive("AirDataConfig", "rate_hz", self.rate_hz)
+        for name in ("tas_bias_mps", "tas_noise_mps", "alpha_bias_deg", "alpha_noise_deg", "beta_bias_deg",
+                     "beta_noise_deg"):
+            check_nonneg("AirDataConfig", name, getattr(self, name))
+
+    @classmethod
+    def noise_free(cls, **overrides: Any) -> AirDataConfig:
+        return replace(cls(tas_bias_mps=0.0, tas_noise_mps=0.0, alpha_bias_deg=0.0, alpha_noise_deg=0.0,
+                           beta_bias_deg=0.0, beta_noise_deg=0.0), **overrides)
+
+    @classmethod
+    def from_mapping(cls, mapping: dict[str, Any] | None) -> AirDataConfig:
+        mapping = dict(mapping or {})
+        if mapping.pop("noise_free", False):
+            return config_from_mapping(cls, mapping, cls.noise_free())
+        return config_from_mapping(cls, mapping)
+
+
+class AirDataState(NamedTuple):
+    last_k: int | None
+    bias: np.ndarray    # (3,) tas (m/s), alpha (rad), beta (rad), drawn once per run
+    sigma: np.ndarray   # (3,) white-noise sigmas, same units
+
+    @classmethod
+    def initial(cls, config: AirDataConfig, rng: np.random.Generator) -> AirDataState:
+        sig_b = np.array([config.tas_bias_mps, np.deg2rad(config.alpha_bias_deg),
+                          np.deg2rad(config.beta_bias_deg)])
+        sig_w = np.array([config.tas_noise_mps, np.deg2rad(config.alpha_noise_deg),
+                          np.deg2rad(config.beta_noise_deg)])
+        return cls(None, rng.standard_normal(3) * sig_b, sig_w)
+
+
+@njit(cache=True)
+def _air_kernel(idx, tas, alpha, beta, w, bias, sigma):
+    m = idx.shape[0]
+    out = np.empty((3, m))
+    valid = np.empty(m, dtype=np.bool_)
+    for i in range(m):
+        j = idx[i]
+        out[0, i] = tas[j] + bias[0] + sigma[0] * w[i, 0]
+        out[1, i] = alpha[j] + bias[1] + sigma[1] * w[i, 1]
+        out[2, i] = beta[j] + bias[2] + sigma[2] * w[i, 2]
+        valid[i] = np.isfinite(out[0, i]) and np.isfinite(out[1, i]) and np.isfinite(out[2, i])
+        if not valid[i]:
+            out[0, i] = out[1, i] = out[2, i] = np.nan
+    return out, valid
+
+
+def sample_air_data(truth: TruthChunk, terrain, rng: np.random.Generator, config: AirDataConfig,
+                    state: AirDataState | None = None) -> tuple[AirDataFrame, AirDataState]:
+    """Air-data samples over the chunk (terrain unused)."""
+    if state is None:
+        state = AirDataState.initial(config, rng)
+    idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
+    w = rng.standard_normal((idx.shape[0], 3))
+    out, valid = _air_kernel(idx, truth.tas_mps, truth.alpha_rad, truth.beta_rad, w, state.bias, state.sigma)
+    frame = AirDataFrame(t_s=truth.t_s[idx], tas_mps=out[0], alpha_rad=out[1], beta_rad=out[2], valid=valid)
+    return frame, AirDataState(last_k, state.bias, state.sigma)
+
+
+__all__ = ["AirDataConfig", "AirDataState", "sample_air_data"]

@@ -1,0 +1,154 @@
+"""Shared machinery of the sensor models: config validation, absolute-time sampling, error recursions.
+
+Sampling rule: a sensor at `rate_hz` owns the time grid k / rate_hz (k integer). Truth step i is a sample
+when its grid index floor(t_i * rate_hz) differs from the previous step's, i.e. the first truth step at or
+after each grid instant is sampled. When the rate divides the truth rate this is exactly the steps whose
+t_s lies on the grid. The previous step's index is carried between chunks, so where the chunk boundaries
+fall never changes which steps are sampled.
+
+Random numbers: each sensor call draws exactly one standard-normal block of shape (n_samples, m) from its
+Generator (plus one fixed-size block when its state is created), so sampling a flight chunk by chunk gives
+bit-for-bit the same output as sampling it in one call.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import fields, replace
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from terrain.geodesy import C_en, ecef_to_lla, lla_to_ecef
+
+_GRID_EPS = 1e-6   # tolerance, in grid periods, for "on the grid" (t_s is a float multiple of the step)
+
+
+def check_nonneg(cls_name: str, name: str, value: float) -> None:
+    if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= 0):
+        raise ValueError(f"{cls_name}.{name} must be a finite number >= 0, got {value!r}")
+
+
+def check_positive(cls_name: str, name: str, value: float) -> None:
+    if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value > 0):
+        raise ValueError(f"{cls_name}.{name} must be a finite number > 0, got {value!r}")
+
+
+def check_vector3(cls_name: str, name: str, value) -> tuple[float, float, float]:
+    try:
+        v = tuple(float(x) for x in value)
+    except TypeError as exc:
+        raise ValueError(f"{cls_name}.{name} must be 3 numbers (metres, body FRD), got {value!r}") from exc
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise ValueError(f"{cls_name}.{name} must be 3 finite numbers (metres, body FRD), got {value!r}")
+    return v
+
+
+def config_from_mapping(cls, mapping: dict[str, Any] | None, base=None):
+    """Build config dataclass `cls` from a mapping; unknown keys raise ValueError naming them.
+
+    `base` (an instance) supplies the defaults; without it the dataclass defaults apply.
+    """
+    mapping = dict(mapping or {})
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(mapping) - known)
+    if unknown:
+        raise ValueError(f"{cls.__name__}: unknown field(s) {', '.join(unknown)}; "
+                         f"known: {', '.join(sorted(known))}")
+    return replace(base, **mapping) if base is not None else cls(**mapping)
+
+
+def initial_grid_index(t0_s: float, rate_hz: float) -> int:
+    """Grid index 'before' the first step so that a first step lying on the grid is sampled."""
+    return int(math.ceil(t0_s * rate_hz - _GRID_EPS)) - 1
+
+
+def sample_steps(t_s: np.ndarray, rate_hz: float, last_k: int | None) -> tuple[np.ndarray, int | None]:
+    """Indices of the truth steps sampled by a sensor at `rate_hz` and the grid index to carry forward."""
+    if t_s.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64), last_k
+    if last_k is None:
+        last_k = initial_grid_index(float(t_s[0]), rate_hz)
+    idx, k = _grid_indices(t_s, float(rate_hz), int(last_k))
+    return idx, int(k)
+
+
+@njit(cache=True)
+def _grid_indices(t_s, rate_hz, last_k):
+    n = t_s.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    m = 0
+    prev = last_k
+    for i in range(n):
+        k = np.int64(np.floor(t_s[i] * rate_hz + _GRID_EPS))
+        if k > prev:
+            out[m] = i
+            m += 1
+        prev = k
+    return out[:m], prev
+
+
+def gm_coefficients(sigma, tau_s, dt_s: float):
+    """phi and drive of a stationary discrete Gauss-Markov process with std sigma and correlation time tau
+    (x_k = phi x_{k-1} + drive w_k); scalars or arrays."""
+    phi = np.exp(-dt_s / np.asarray(tau_s, float))
+    return phi, np.asarray(sigma, float) * np.sqrt(1.0 - phi * phi)
+
+
+def antenna_positions(lat_rad: np.ndarray, lon_rad: np.ndarray, h_m: np.ndarray, C_bn: np.ndarray,
+                      lever_arm_b_m: tuple[float, float, float]):
+    """Geodetic position of a point at body-FRD offset `lever_arm_b_m` from the truth position."""
+    arm = np.asarray(lever_arm_b_m, float)
+    if not np.any(arm):
+        return lat_rad, lon_rad, h_m
+    d_ned = C_bn @ arm
+    return ned_displace(lat_rad, lon_rad, h_m, d_ned)
+
+
+def ned_displace(lat_rad, lon_rad, h_m, d_ned_m):
+    """Exact (through ECEF) geodetic position of (lat, lon, h) displaced by d_ned_m (n, 3) metres."""
+    lat = np.atleast_1d(np.asarray(lat_rad, float))
+    lon = np.atleast_1d(np.asarray(lon_rad, float))
+    h = np.atleast_1d(np.asarray(h_m, float))
+    d = np.atleast_2d(np.asarray(d_ned_m, float))
+    return _ned_displace(lat, lon, h, d)
+
+
+@njit(cache=True)
+def _ned_displace(lat, lon, h, d):
+    n = lat.shape[0]
+    out_lat, out_lon, out_h = np.empty(n), np.empty(n), np.empty(n)
+    for i in range(n):
+        x, y, z = lla_to_ecef(lat[i], lon[i], h[i])
+        c = C_en(lat[i], lon[i])
+        dx = c[0, 0] * d[i, 0] + c[0, 1] * d[i, 1] + c[0, 2] * d[i, 2]
+        dy = c[1, 0] * d[i, 0] + c[1, 1] * d[i, 1] + c[1, 2] * d[i, 2]
+        dz = c[2, 0] * d[i, 0] + c[2, 1] * d[i, 1] + c[2, 2] * d[i, 2]
+        out_lat[i], out_lon[i], out_h[i] = ecef_to_lla(x + dx, y + dy, z + dz)
+    return out_lat, out_lon, out_h
+
+
+def ned_vector_between(lat0, lon0, h0, lat1, lon1, h1) -> np.ndarray:
+    """Exact NED vector (n, 3), resolved at point 0, from geodetic points 0 to 1 (through ECEF)."""
+    lat0 = np.atleast_1d(np.asarray(lat0, float))
+    lon0 = np.atleast_1d(np.asarray(lon0, float))
+    h0 = np.atleast_1d(np.asarray(h0, float))
+    lat1 = np.atleast_1d(np.asarray(lat1, float))
+    lon1 = np.atleast_1d(np.asarray(lon1, float))
+    h1 = np.atleast_1d(np.asarray(h1, float))
+    return _ned_vector_between(lat0, lon0, h0, lat1, lon1, h1)
+
+
+@njit(cache=True)
+def _ned_vector_between(lat0, lon0, h0, lat1, lon1, h1):
+    n = lat0.shape[0]
+    out = np.empty((n, 3))
+    for i in range(n):
+        x0, y0, z0 = lla_to_ecef(lat0[i], lon0[i], h0[i])
+        x1, y1, z1 = lla_to_ecef(lat1[i], lon1[i], h1[i])
+        c = C_en(lat0[i], lon0[i])
+        dx, dy, dz = x1 - x0, y1 - y0, z1 - z0
+        for j in range(3):
+            out[i, j] = c[0, j] * dx + c[1, j] * dy + c[2, j] * dz
+    return out

@@ -1,0 +1,364 @@
+"""The multi-rate closed loop: flight -> sensors -> navigator -> guidance -> flight.
+
+One guidance tick (10 Hz by default) is:
+
+    chunk  = flight.advance(steps_per_tick)          JSBSim at 100 Hz, truth for the tick
+    frames = sensors.sample(chunk)                   every sensor at its own rate inside the tick
+    frames.gnss kept only while GNSS is available    (scenario [gnss] outages)
+    est    = navigator.update(frames)                the navigator never sees truth
+    targets = guidance.command(est, t)               guidance flies the route on the ESTIMATE
+    flight.set_targets(targets); flight.set_terrain_elevation(map height under the estimate)
+
+A run ends with `completed` (route flown), `terrain_collision` (true height above the true terrain < 0 at
+any JSBSim step), `off_map` (truth outside the true DEM), `diverged` (estimate not finite, horizontal
+sigma above the scenario limit, or navigator health 'diverged'), or `time_limit`.
+
+Randomness: the scenario seed -> numpy SeedSequence -> one Generator per component (flight/turbulence,
+sensors, map errors, initial estimate errors, navigator), so one seed gives the same run bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from navigators.frames import SensorFrames
+from navigators.protocol import Estimate, Health
+from terrain.geodesy import latlon_to_ned_offset
+
+from . import components
+from .scenario import Scenario, load_scenario
+from .truth import TruthChunk
+
+TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "time_limit")
+
+# Order of the child seeds spawned from the scenario seed; append only (changing it changes every run).
+RNG_STREAMS = ("flight", "sensors", "map", "initial_errors", "navigator")
+
+
+def spawn_seeds(seed: int) -> dict[str, np.random.SeedSequence]:
+    """One independent child SeedSequence per component from one scenario seed."""
+    children = np.random.SeedSequence(int(seed)).spawn(len(RNG_STREAMS))
+    return dict(zip(RNG_STREAMS, children, strict=True))
+
+
+def spawn_rngs(seed: int) -> dict[str, np.random.Generator]:
+    """One independent Generator per component from one scenario seed."""
+    return {name: np.random.default_rng(s) for name, s in spawn_seeds(seed).items()}
+
+
+def perturbed_estimate(truth: TruthChunk, i: int, sigmas: dict[str, list[float]],
+                       rng: np.random.Generator) -> Estimate:
+    """Initial estimate = truth at row i + Gaussian errors with the scenario's 1-sigma values.
+
+    Covariance = diag(sigma^2) over [n, e, d, vn, ve, vd, roll, pitch, yaw] (seed 000 Table 2 defaults).
+    """
+    s_pos = np.asarray(sigmas["position_ned_m"], float)
+    s_vel = np.asarray(sigmas["velocity_ned_mps"], float)
+    s_att = 1e-3 * np.asarray(sigmas["attitude_mrad"], float)
+    e = rng.standard_normal(9) * np.concatenate([s_pos, s_vel, s_att])
+    from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+    lat, lon, h = float(truth.lat_rad[i]), float(truth.lon_rad[i]), float(truth.h_msl_m[i])
+    r_n = meridian_radius_m(lat) + h
+    r_e = prime_vertical_radius_m(lat) + h
+    cov = np.diag(np.concatenate([s_pos, s_vel, s_att]) ** 2)
+    yaw = float(truth.yaw_rad[i]) + e[8]
+    return Estimate(
+        t_s=float(truth.t_s[i]),
+        lat_rad=lat + e[0] / r_n,                      # seed 000 eq 2
+        lon_rad=lon + e[1] / (r_e * math.cos(lat)),
+        h_m=h - e[2],
+        v_ned_mps=np.asarray(truth.v_ned_mps[i], float) + e[3:6],
+        roll_rad=float(truth.roll_rad[i]) + e[6],
+        pitch_rad=float(truth.pitch_rad[i]) + e[7],
+        yaw_rad=math.atan2(math.sin(yaw), math.cos(yaw)),
+        covariance=cov,
+        health=Health(),
+    )
+
+
+def gnss_available_mask(t_s: np.ndarray, outages: list[dict]) -> np.ndarray:
+    """True where GNSS fixes reach the navigator: outside every [start_s, end_s) outage."""
+    ok = np.ones(np.shape(t_s), bool)
+    for o in outages:
+        end = o.get("end_s", math.inf)
+        ok &= ~((t_s >= o["start_s"]) & (t_s < end))
+    return ok
+
+
+def _gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
+    g = frames.gnss
+    if g is None or not outages:
+        return frames
+    keep = gnss_available_mask(g.t_s, outages)
+    if keep.all():
+        return frames
+    if not keep.any():
+        frames.gnss = None
+        return frames
+    frames.gnss = type(g)(**{k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in vars(g).items()})
+    return frames
+
+
+@dataclass
+class SimLog:
+    """In-memory log: per-tick truth/estimate rows, full-rate sensor readings, events."""
+
+    ticks: dict[str, list] = field(default_factory=dict)
+    sensors: dict[str, list] = field(default_factory=dict)
+    events: list[tuple[float, str, str]] = field(default_factory=list)
+
+    def add_tick(self, **values) -> None:
+        for k, v in values.items():
+            self.ticks.setdefault(k, []).append(v)
+
+    def add_frames(self, frames: SensorFrames) -> None:
+        for name in ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading"):
+            fr = getattr(frames, name)
+            if fr is None:
+                continue
+            for k, v in vars(fr).items():
+                if isinstance(v, np.ndarray):
+                    self.sensors.setdefault(f"{name}_{k}", []).append(v)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        out = {k: np.asarray(v) for k, v in self.ticks.items()}
+        for k, parts in self.sensors.items():
+            out[f"sensor_{k}"] = np.concatenate(parts) if parts else np.zeros(0)
+        return out
+
+
+@dataclass
+class RunResult:
+    scenario: Scenario
+    termination: str
+    sim_time_s: float
+    wall_time_s: float
+    jsbsim_steps: int
+    arrays: dict[str, np.ndarray]
+    events: list[tuple[float, str, str]]
+    summary: dict
+    world_dem: object = None
+
+
+Commander = Callable[[Estimate, float], object]
+
+
+class ClosedLoop:
+    """One closed-loop flight of a validated scenario, advanced one guidance tick at a time.
+
+    `commander(estimate, t_s) -> AutopilotTargets` replaces the scenario's route guidance (the gymnasium
+    env uses this); `dems=(world, map)` reuses already-built terrain.
+    """
+
+    def __init__(self, scenario: Scenario, *, commander: Commander | None = None, dems=None,
+                 log_sensors: bool = True, progress: Callable[[float, float], None] | None = None):
+        self.scenario = scenario
+        d = scenario.data
+        self.seeds = spawn_seeds(scenario.seed)
+        self.rngs = {name: np.random.default_rng(s) for name, s in self.seeds.items()}
+        if dems is None:
+            dems = components.build_terrain(d, scenario.extras, self.rngs["map"])
+        self.world_dem, self.map_dem = dems
+        self.dt_s = float(d["aircraft"]["dt_s"])
+        self.steps_per_tick = int(round(1.0 / (d["guidance"]["rate_hz"] * self.dt_s)))
+        self.log_every = max(1, int(round(d["guidance"]["rate_hz"] / d["guidance"]["log_rate_hz"])))
+        self.duration_s = float(scenario.duration_s)
+        self.outages = list(d["gnss"]["outages"])
+        self.max_sigma_h_m = float(d["limits"]["max_horizontal_sigma_m"])
+        self.max_err_h_m = d["limits"].get("max_horizontal_error_m")
+        self.log_sensors = log_sensors
+        self.progress = progress
+
+        self.flight = components.build_flight(d, self.world_dem, self.rngs["flight"])
+        self.sensors = components.build_sensors(d, self.seeds["sensors"])
+        self.navigator = components.build_navigator(d, self.map_dem, self.rngs["navigator"])
+        self.guidance = components.build_guidance(d, self.map_dem) if commander is None else None
+        self.commander = commander
+
+        truth0 = self.flight.snapshot()
+        self.estimate = perturbed_estimate(truth0, 0, d["initial_errors"], self.rngs["initial_errors"])
+        self.navigator.reset(self.estimate)
+        self.t_s = float(truth0.t_s[0])
+        self.last_truth = truth0
+        self.jsbsim_steps = 0
+        self.n_ticks = 0
+        self.termination: str | None = None
+        self.log = SimLog()
+        self._log_tick(truth0, 0, self.estimate)
+        self._command(self.estimate)
+
+    # ------------------------------------------------------------------------------------------ loop
+    def _command(self, est: Estimate) -> None:
+        if self.commander is not None:
+            targets = self.commander(est, self.t_s)
+        else:
+            targets = self.guidance.command(est, self.t_s)
+        self.flight.set_targets(targets)
+        h_ground = components.map_height(self.map_dem, est.lat_rad, est.lon_rad)
+        if math.isfinite(h_ground):
+            self.flight.set_terrain_elevation(h_ground)
+
+    def route_complete(self) -> bool:
+        return self.guidance is not None and components.guidance_complete(self.guidance)
+
+    def tick(self) -> str | None:
+        """Advance one guidance tick; returns the termination reason once the run has ended."""
+        if self.termination is not None:
+            raise RuntimeError(f"the run has already ended ({self.termination})")
+        chunk = self.flight.advance(self.steps_per_tick)
+        self.jsbsim_steps += len(chunk)
+        frames = self.sensors.sample(chunk, self.world_dem)
+        frames = _gate_gnss(frames, self.outages)
+        est = self.navigator.update(frames)
+        self.estimate = est
+        self.t_s = float(chunk.t_s[-1])
+        self.last_truth = chunk
+        self.n_ticks += 1
+        if self.log_sensors:
+            self.log.add_frames(frames)
+        for t_ev, msg in est.health.events:
+            self.log.events.append((t_ev, "navigator", msg))
+        reason = self._check_end(chunk, est)
+        if reason is not None or self.n_ticks % self.log_every == 0:
+            self._log_tick(chunk, len(chunk) - 1, est)
+        if reason is None:
+            self._command(est)
+        else:
+            self.termination = reason
+            self.log.events.append((self.t_s, "sim", f"termination: {reason}"))
+        if self.progress is not None:
+            self.progress(self.t_s, self.duration_s)
+        return reason
+
+    def _check_end(self, chunk: TruthChunk, est: Estimate) -> str | None:
+        h_ground = components.world_height(self.world_dem, chunk.lat_rad, chunk.lon_rad)
+        if not np.all(np.isfinite(h_ground)):
+            if not np.all(components.world_contains(self.world_dem, chunk.lat_rad, chunk.lon_rad)):
+                return "off_map"
+        agl = chunk.h_msl_m - h_ground
+        if np.any(agl < 0.0):
+            return "terrain_collision"
+        if self._diverged(chunk, est):
+            return "diverged"
+        if self.route_complete():
+            return "completed"
+        if self.t_s >= self.duration_s - 0.5 * self.dt_s:
+            return "time_limit"
+        return None
+
+    def _diverged(self, chunk: TruthChunk, est: Estimate) -> bool:
+        vals = (est.lat_rad, est.lon_rad, est.h_m)
+        if not all(math.isfinite(v) for v in vals) or not np.all(np.isfinite(est.covariance[:3, :3])):
+            return True
+        if est.health.status == "diverged":
+            return True
+        sig_h = math.sqrt(max(est.covariance[0, 0], 0.0) + max(est.covariance[1, 1], 0.0))
+        if sig_h > self.max_sigma_h_m:
+            return True
+        if self.max_err_h_m is not None:
+            e = self._err_ned(chunk, len(chunk) - 1, est)
+            if math.hypot(e[0], e[1]) > self.max_err_h_m:
+                return True
+        return False
+
+    @staticmethod
+    def _err_ned(truth: TruthChunk, i: int, est: Estimate) -> np.ndarray:
+        """Estimate minus truth in NED metres (at the true position)."""
+        lat, lon, h = float(truth.lat_rad[i]), float(truth.lon_rad[i]), float(truth.h_msl_m[i])
+        dn, de = latlon_to_ned_offset(lat, lon, h, est.lat_rad, est.lon_rad)
+        return np.array([dn, de, -(est.h_m - h)])
+
+    def _log_tick(self, truth: TruthChunk, i: int, est: Estimate) -> None:
+        lat, lon, h = float(truth.lat_rad[i]), float(truth.lon_rad[i]), float(truth.h_msl_m[i])
+        h_ground = float(components.world_height(self.world_dem, np.array([lat]), np.array([lon]))[0])
+        self.log.add_tick(
+            t_s=float(truth.t_s[i]),
+            true_lat_rad=lat, true_lon_rad=lon, true_h_msl_m=h, true_h_agl_m=h - h_ground,
+            true_v_ned_mps=np.array(truth.v_ned_mps[i]), true_roll_rad=float(truth.roll_rad[i]),
+            true_pitch_rad=float(truth.pitch_rad[i]), true_yaw_rad=float(truth.yaw_rad[i]),
+            true_tas_mps=float(truth.tas_mps[i]), true_alpha_rad=float(truth.alpha_rad[i]),
+            true_beta_rad=float(truth.beta_rad[i]), true_wind_ned_mps=np.array(truth.wind_ned_mps[i]),
+            est_t_s=float(est.t_s), est_lat_rad=float(est.lat_rad), est_lon_rad=float(est.lon_rad),
+            est_h_m=float(est.h_m), est_v_ned_mps=np.array(est.v_ned_mps, float),
+            est_roll_rad=float(est.roll_rad), est_pitch_rad=float(est.pitch_rad), est_yaw_rad=float(est.yaw_rad),
+            est_cov=np.array(est.covariance[:9, :9], float),
+            est_cov_diag=np.diag(est.covariance)[:9].astype(float),
+            err_ned_m=self._err_ned(truth, i, est),
+            gnss_available=bool(gnss_available_mask(np.array([float(truth.t_s[i])]), self.outages)[0]),
+            nav_ok=bool(est.health.ok),
+        )
+
+    def run(self) -> RunResult:
+        """Fly until a termination; returns the result with its log and summary."""
+        wall0 = time.perf_counter()
+        while self.termination is None:
+            self.tick()
+        wall = time.perf_counter() - wall0
+        return self.result(wall)
+
+    def result(self, wall_time_s: float) -> RunResult:
+        arrays = self.log.arrays()
+        summary = summarise(self.scenario, self.termination or "time_limit", arrays, wall_time_s,
+                            self.jsbsim_steps, self.estimate)
+        return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
+                         self.jsbsim_steps, arrays, list(self.log.events), summary, self.world_dem)
+
+
+def _rms(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+
+
+def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wall_time_s: float,
+              jsbsim_steps: int, final: Estimate) -> dict:
+    """summary.json contents (DESIGN.md fields first, then extras)."""
+    t = a["t_s"]
+    err = a["err_ned_m"]
+    e_h = np.hypot(err[:, 0], err[:, 1])
+    e_v = -err[:, 2]
+    sig = np.sqrt(np.clip(a["est_cov_diag"][:, :3], 0.0, None))
+    sig_h = np.hypot(sig[:, 0], sig[:, 1])
+    denied = ~a["gnss_available"].astype(bool)
+    sim_time = float(t[-1] - t[0]) if t.size else 0.0
+    step = np.hypot(np.diff(a["true_lat_rad"]) * 6.371e6,
+                    np.diff(a["true_lon_rad"]) * 6.371e6 * np.cos(a["true_lat_rad"][:-1]))
+    within3 = (np.abs(err[:, 0]) <= 3 * sig[:, 0]) & (np.abs(err[:, 1]) <= 3 * sig[:, 1])
+    return {
+        "scenario": scenario.name,
+        "seed": scenario.seed,
+        "navigator": scenario.navigator_name,
+        "sim_time_s": sim_time,
+        "wall_time_s": float(wall_time_s),
+        "realtime_factor": sim_time / wall_time_s if wall_time_s > 0 else float("nan"),
+        "horizontal_error_rms_m": _rms(e_h),
+        "horizontal_error_final_m": float(e_h[-1]) if e_h.size else float("nan"),
+        "vertical_error_rms_m": _rms(e_v),
+        "termination": termination,
+        "horizontal_error_max_m": float(np.nanmax(e_h)) if e_h.size else float("nan"),
+        "horizontal_error_rms_gnss_denied_m": _rms(e_h[denied]),
+        "north_error_rms_m": _rms(err[:, 0]),
+        "east_error_rms_m": _rms(err[:, 1]),
+        "vertical_error_final_m": float(e_v[-1]) if e_v.size else float("nan"),
+        "horizontal_sigma_final_m": float(sig_h[-1]) if sig_h.size else float("nan"),
+        "fraction_within_3sigma": float(np.mean(within3)) if within3.size else float("nan"),
+        "gnss_denied_time_s": float(np.sum(denied[1:]) * np.median(np.diff(t))) if t.size > 1 else 0.0,
+        "distance_flown_m": float(np.sum(step)),
+        "min_true_agl_m": float(np.nanmin(a["true_h_agl_m"])) if t.size else float("nan"),
+        "jsbsim_steps": int(jsbsim_steps),
+        "closed_loop_steps_per_s": jsbsim_steps / wall_time_s if wall_time_s > 0 else float("nan"),
+        "navigator_status": final.health.status,
+        "navigator_skipped": dict(final.health.skipped),
+        "scenario_source": scenario.source,
+        "duration_limit_s": scenario.duration_s,
+    }
+
+
+def run_scenario(name_or_path="default", *, progress=None, **overrides) -> RunResult:
+    """Load, validate and fly a scenario (overrides: seed=, duration_s=, navigator=)."""
+    scenario = load_scenario(name_or_path, **overrides)
+    return ClosedLoop(scenario, progress=progress).run()
