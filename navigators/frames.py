@@ -66,6 +66,13 @@ class IraFrame:
     toward the right wing (+y FRD). This is the sign of seed 000 eqs 11, 13 and 35 (the right antenna is
     the closer one for theta > 0); the paper's eqs 18-19 state the opposite sign, which its later equations
     do not use.
+
+    Precisely, theta is what the interferometer measures from the antennas' range differences (seed 000
+    eqs 18-19, seed 002 eq 26): sin(theta) = y_b / R for the closest point at body-frame offset
+    (x_b, y_b, z_b), R = its range, i.e. the angle between the line of sight and the body x-z plane. It
+    equals atan2(y_b, z_b) only when x_b = 0 (closest point abeam in the body y-z plane); the closest point
+    is given by seed 000 eq 30: the unit line of sight u lies in the zero-Doppler plane and C_bn[:, 1] . u
+    = sin(theta).
     """
 
     t_s: np.ndarray

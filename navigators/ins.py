@@ -135,13 +135,14 @@ def _rates(lat, h, vn, ve):
 
 @njit(cache=True)
 def propagate_chunk(state, prev_imu, baro_state, t_imu, f_b, w_b, imu_ok, t_baro, h_baro, baro_ok,
-                    accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model, out):
+                    accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model, interval_samples, out):
     """Advance the INS over IMU samples t_imu[k] (k = 0..n-1).
 
     state (10,): lat, lon, h, vn, ve, vd, q_bn (w, x, y, z); updated in place.
     prev_imu (7,): t, f_b (3), w_b (3) of the previous sample (t NaN: none yet); updated in place.
     baro_state (3,): last baro time, last baro height (NaN: none), vertical accel correction; in place.
     accel_bias_b, gyro_bias_b (3,): subtracted from the samples.
+    interval_samples: True if each sample is the mean over the step ending at its time (JSBSim's f_b).
     out (n, 10): state after each sample. Returns the number of replaced (invalid) IMU samples.
     """
     n = t_imu.shape[0]
@@ -180,8 +181,12 @@ def propagate_chunk(state, prev_imu, baro_state, t_imu, f_b, w_b, imu_ok, t_baro
                 out[k, j] = state[j]
             continue
         dt = t_imu[k] - prev_imu[0]
-        f0 = prev_imu[1:4]
-        w0 = prev_imu[4:7]
+        if interval_samples:     # sample k is the mean over (t_{k-1}, t_k]: use it alone for the step
+            f0 = f1
+            w0 = w1
+        else:                    # instantaneous samples: trapezoid of the two ends
+            f0 = prev_imu[1:4]
+            w0 = prev_imu[4:7]
         if dt <= 0.0:
             for j in range(N_STATE):
                 out[k, j] = state[j]
@@ -261,16 +266,22 @@ def quat_from_C_bn(C: np.ndarray) -> np.ndarray:
 class StrapdownIns:
     """Strapdown INS state and chunked propagation (see module docstring).
 
-    gravity_model: "somigliana" | "j2"; tau_baro_s: baro loop time constant (None: undamped vertical channel).
+    gravity_model: "somigliana" | "j2"; tau_baro_s: baro loop time constant (None: undamped vertical channel);
+    imu_samples: "instant" (samples at instants, trapezoid between them) or "interval" (each sample is the
+    mean over the step ending at its time stamp, like a delta-v / delta-theta sample).
     The accelerometer and gyro bias estimates (body, m/s^2 and rad/s) are subtracted from every sample;
     an error-state filter sets them.
     """
 
-    def __init__(self, gravity_model: str = "j2", tau_baro_s: float | None = 30.0):
+    def __init__(self, gravity_model: str = "j2", tau_baro_s: float | None = 30.0,
+                 imu_samples: str = "instant"):
         if gravity_model not in GRAVITY_MODELS:
             raise ValueError(f"gravity_model must be one of {list(GRAVITY_MODELS)}, got {gravity_model!r}")
         if tau_baro_s is not None and not tau_baro_s > 0:
             raise ValueError(f"tau_baro_s must be positive, got {tau_baro_s}")
+        if imu_samples not in ("instant", "interval"):
+            raise ValueError(f"imu_samples must be 'instant' or 'interval', got {imu_samples!r}")
+        self.imu_samples = imu_samples
         self.gravity_model = gravity_model
         self.tau_baro_s = tau_baro_s
         self.state = np.full(N_STATE, np.nan)
@@ -313,7 +324,7 @@ class StrapdownIns:
         bad = propagate_chunk(self.state, self.prev_imu, self.baro_state, t_imu,
                               np.ascontiguousarray(f_b_mps2, float), np.ascontiguousarray(omega_ib_b_rps, float),
                               ok, t_baro, h_baro_m, baro_valid, self.accel_bias_b, self.gyro_bias_b, tau,
-                              GRAVITY_MODELS[self.gravity_model], out)
+                              GRAVITY_MODELS[self.gravity_model], self.imu_samples == "interval", out)
         self.bad_imu_samples += int(bad)
         if n:
             self.t_s = float(t_imu[-1])

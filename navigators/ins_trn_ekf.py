@@ -36,6 +36,7 @@ from .tercom import TercomBatch, TercomFix, correlate
 G0 = 9.80665
 N_ERR = 13
 CHI2_2DOF_99_99 = 18.42
+R0_GEOPOTENTIAL_M = 6356766.0      # US Standard Atmosphere 1976 Earth radius for geopotential height
 
 
 def _skew(v):
@@ -58,7 +59,12 @@ class InsTrnNavigator:
     aiding: None (free inertial, name "ins"), "ira" (seed 000 eq 2, default of "ins_tercom") or
     "radar_altimeter" (eq 1). formula: IRA closest-point formula ("proposed" default). dem: the navigator's
     terrain map (terrain.Dem, or a name/path for terrain.load) - required when aiding is set.
-    Sensor noise settings (1 sigma) default to seed 000 Table 2.
+    Sensor noise settings (1 sigma) default to seed 000 Table 2. imu_samples: "interval" (each IMU sample is
+    the mean over the step ending at its time, as trn_env.sensors' integrating IMU) or "instant".
+    dp_min_m > 0 keeps only IRA samples whose proposed and dp_reference_formula closest points differ
+    horizontally by more than dp_min_m (seed 000 Table 3 cases). baro_geopotential: the baro reports ISA
+    pressure altitude, a geopotential height; convert it to geometric height (h = r0 H / (r0 - H), r0 =
+    6356766 m, US 1976) before eq 1/2 (about +5 m at 5600 m). remove_bias: mean-removed MAD (tercom).
     """
 
     def __init__(self, aiding: str | None = None, dem=None, formula: str = "proposed",
@@ -68,7 +74,8 @@ class InsTrnNavigator:
                  accel_noise_mps2_rthz: float = 10e-6 * G0, gyro_bias_rps: float = np.radians(0.005) / 3600,
                  gyro_noise_rps_rthz: float = np.radians(0.005) / 60, ira_decimation: int = 1,
                  gate_chi2: float = CHI2_2DOF_99_99, min_samples: int = 20,
-                 dp_min_m: float = 0.0, dp_reference_formula: str = "conventional", name: str | None = None):
+                 dp_min_m: float = 0.0, dp_reference_formula: str = "conventional", imu_samples: str = "interval",
+                 name: str | None = None):
         if aiding not in (None, "ira", "radar_altimeter"):
             raise ValueError(f"aiding must be None, 'ira' or 'radar_altimeter', got {aiding!r}")
         if formula not in FORMULAS:
@@ -96,7 +103,7 @@ class InsTrnNavigator:
         self.cell_m = float(cell_m)
         self.fix_sigma_m = float(fix_sigma_m)
         self.dt_ekf = 1.0 / float(ekf_rate_hz)
-        self.ins = StrapdownIns(gravity_model, tau_baro_s)
+        self.ins = StrapdownIns(gravity_model, tau_baro_s, imu_samples)
         self.sig_ba = float(accel_bias_mps2)
         self.q_acc = float(accel_noise_mps2_rthz) ** 2
         self.sig_bg = float(gyro_bias_rps)
@@ -106,6 +113,8 @@ class InsTrnNavigator:
         self.min_samples = int(min_samples)
         self.dp_min_m = float(dp_min_m)
         self.dp_reference_formula = dp_reference_formula
+        self.baro_geopotential = bool(baro_geopotential)
+        self.remove_bias = bool(remove_bias)
         self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
         self.health = Health()
         self.batch = TercomBatch()
@@ -275,13 +284,15 @@ class InsTrnNavigator:
             bv = baro.valid & np.isfinite(baro.h_baro_m)
             if bv.sum() >= 1:
                 h_ref = np.interp(ts_ok, baro.t_s[bv], baro.h_baro_m[bv])
+                if self.baro_geopotential:
+                    h_ref = R0_GEOPOTENTIAL_M * h_ref / (R0_GEOPOTENTIAL_M - h_ref)
         if self.aiding == "ira":
             C = np.stack([quat_to_dcm(q) for q in st[:, 6:10]])
             p = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.formula, C_bn=C)
             if self.dp_min_m > 0.0:     # seed 000 Table 3: keep samples where the formulas differ by > dp
-                p_ref = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.dp_reference_formula,
-                                          C_bn=C)
-                dp = np.hypot(p[:, 0] - p_ref[:, 0], p[:, 1] - p_ref[:, 1])
+                pa, pb = (closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=f, C_bn=C)
+                          for f in ("proposed", self.dp_reference_formula))
+                dp = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])     # eqs 37-39
                 keep = dp > self.dp_min_m
                 p, st, h_ref, ts_ok = p[keep], st[keep], h_ref[keep], ts_ok[keep]
             nan = ~np.all(np.isfinite(p), axis=1)
@@ -302,7 +313,7 @@ class InsTrnNavigator:
             self._count_skip(t_s, "tercom_too_few_samples", 1, f"TERCOM batch with {s.shape[0]} samples")
             return
         fix = correlate(self.dem, t_s, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], half=self.half_cells,
-                        cell_m=self.cell_m)
+                        cell_m=self.cell_m, remove_bias=self.remove_bias)
         self.fixes.append(fix)
         if not fix.valid:
             self._count_skip(t_s, f"tercom_{fix.reason}", 1, f"TERCOM fix rejected: {fix.reason}")

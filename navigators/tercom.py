@@ -26,12 +26,15 @@ from terrain.kernels import bilinear
 
 
 @njit(cache=True, error_model="numpy")
-def mad_surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half):
+def mad_surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half,
+                remove_bias):
     """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
-    lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad)."""
+    lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad).
+    remove_bias: subtract each cell's mean difference first (a height-bias-insensitive variant, not eq 1/2)."""
     n = 2 * half + 1
     m = lat_k.shape[0]
     out = np.empty((n, n))
+    d = np.empty(m)
     for a in range(n):
         dla = (a - half) * dlat_cell
         for b in range(n):
@@ -43,8 +46,16 @@ def mad_surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_ce
                 if not np.isfinite(hdb):
                     bad = True
                     break
-                s += abs(h_meas_k[k] - hdb)
-            out[a, b] = np.inf if bad else s / m
+                d[k] = h_meas_k[k] - hdb
+                s += d[k]
+            if bad:
+                out[a, b] = np.inf
+                continue
+            mean = s / m if remove_bias else 0.0
+            acc = 0.0
+            for k in range(m):
+                acc += abs(d[k] - mean)
+            out[a, b] = acc / m
     return out
 
 
@@ -85,13 +96,15 @@ def _second_minimum(surface: np.ndarray, ia: int, ib: int, exclusion: int) -> fl
 
 
 def correlate(grid, t_s: float, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_rel_m=None, half: int = 50,
-              cell_m: float = 5.0, exclusion_cells: int = 4) -> TercomFix:
+              cell_m: float = 5.0, exclusion_cells: int = 4, remove_bias: bool = False) -> TercomFix:
     """Batch MAD fix from M samples (seed 000 eqs 1-2).
 
     grid: Dem.grid tuple (heights_m, lat0, lon0, dlat, dlon) or an object with `.grid`.
     lat_rad, lon_rad: INS positions (M,); h_meas_m: measured terrain heights (M,) (baro - RA range, or baro -
     |p_alt| for the IRA); dn_rel_m, de_rel_m: horizontal closest-point offsets (M,) for the IRA (None: 0).
     Non-finite samples are dropped. half: reference matrix is (2 half + 1)^2 cells of cell_m metres.
+    remove_bias: correlate after removing each cell's mean height difference (insensitive to a baro bias;
+    seed 000 uses plain MAD, the default).
     """
     if hasattr(grid, "grid"):
         grid = grid.grid
@@ -117,7 +130,7 @@ def correlate(grid, t_s: float, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_re
     d_lon_cell = cell_m / r_ew
     surf = mad_surface(heights, float(lat0), float(lon0), float(dlat), float(dlon),
                        np.ascontiguousarray(lat_k), np.ascontiguousarray(lon_k), np.ascontiguousarray(hm),
-                       d_lat_cell, d_lon_cell, half)
+                       d_lat_cell, d_lon_cell, half, bool(remove_bias))
     if not np.isfinite(surf).any():
         return TercomFix(t_s, False, "off_map", np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, False,
                          int(lat.size), surf, cell_m)

@@ -236,25 +236,31 @@ def _pattern_search(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, d
     f = f0
     touched = False
     it = 0
-    while step > 2e-5 and it < 400:
+    while step > 1e-4 and it < 400:
         it += 1
         best_f = f
         best_i = fi
         best_j = fj
-        for di in (-1.0, 0.0, 1.0):
-            for dj in (-1.0, 0.0, 1.0):
-                if di == 0.0 and dj == 0.0:
-                    continue
-                ci = fi + di * step
-                cj = fj + dj * step
-                fc = _ra_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb,
-                              max_range, ci, cj)
-                if fc == _INF and step < 0.05:
-                    touched = True
-                if fc < best_f:
-                    best_f = fc
-                    best_i = ci
-                    best_j = cj
+        # compass moves first; the diagonals only when no compass move improves
+        for q in range(8):
+            if q == 4 and best_f < f:
+                break
+            if q < 4:
+                di = 1.0 if q == 0 else (-1.0 if q == 1 else 0.0)
+                dj = 1.0 if q == 2 else (-1.0 if q == 3 else 0.0)
+            else:
+                di = 1.0 if q < 6 else -1.0
+                dj = 1.0 if q % 2 == 0 else -1.0
+            ci = fi + di * step
+            cj = fj + dj * step
+            fc = _ra_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb,
+                          max_range, ci, cj)
+            if fc == _INF and step < 0.05:
+                touched = True
+            if fc < best_f:
+                best_f = fc
+                best_i = ci
+                best_j = cj
         if best_f < f:
             f = best_f
             fi = best_i
@@ -273,8 +279,27 @@ def _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, l
     dx = cosb * ax + sinb * (ca * e1x + sa * e2x)
     dy = cosb * ay + sinb * (ca * e1y + sa * e2y)
     dz = cosb * az + sinb * (ca * e1z + sa * e2z)
+    # secant from the previous range (any crossing on the boundary ray is a terrain point in the cone)
+    t0 = t_guess
+    g0 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t0)
+    t1 = t_guess + 1.0
+    if g0 == g0:
+        for _ in range(12):
+            g1 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t1)
+            if g1 != g1:
+                break
+            if abs(g1) < 1e-5:
+                if t1 > 0.0 and t1 <= max_range:
+                    return t1, dx, dy, dz
+                break
+            if g1 == g0:
+                break
+            t2 = t1 - g1 * (t1 - t0) / (g1 - g0)
+            if abs(t2 - t1) > 4.0 * cell_m:
+                break
+            t0, g0, t1 = t1, g1, t2
     horiz = np.sqrt(dx * dx + dy * dy)
-    back = 4.0 * cell_m / max(horiz, 1e-3)
+    back = 2.0 * cell_m / max(horiz, 1e-3)
     t_from = t_guess - back
     if t_from < 0.0:
         t_from = 0.0
@@ -375,7 +400,8 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
         n_hi = min(n_hi, rho)
         e_lo = max(e_lo, -rho)
         e_hi = min(e_hi, rho)
-    # 3) scan the posts inside the box; keep the K best in-cone posts as start points
+    # 3) scan the posts inside the box; start points = in-cone posts that are local minima of the range
+    #    among their 8 neighbours (out-of-cone neighbours count as +inf), the K lowest
     kk = 6
     cand_f = np.full(kk, _INF)
     cand_i = np.zeros(kk)
@@ -387,30 +413,43 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
         i_hi = min(int(np.ceil((lat + n_hi / mh - lat0) / dlat)) + 1, n_lat - 1)
         j_lo = max(int(np.floor((lon + e_lo / nh - lon0) / dlon)) - 1, 0)
         j_hi = min(int(np.ceil((lon + e_hi / nh - lon0) / dlon)) + 1, n_lon - 1)
-        for i in range(i_lo, i_hi + 1):
-            dphi = lat0 + i * dlat - lat
-            for j in range(j_lo, j_hi + 1):
-                hp = heights[i, j]
-                if hp != hp:
-                    continue
-                dlam = lon0 + j * dlon - lon
-                x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
-                r2 = x * x + y * y + z * z
-                worst = cand_f[kk - 1]
-                if r2 >= worst * worst:
-                    continue
-                r = np.sqrt(r2)
-                if r > max_range or x * ax + y * ay + z * az < cosb * r:
-                    continue
-                q = kk - 1
-                while q > 0 and cand_f[q - 1] > r:
-                    cand_f[q] = cand_f[q - 1]
-                    cand_i[q] = cand_i[q - 1]
-                    cand_j[q] = cand_j[q - 1]
-                    q -= 1
-                cand_f[q] = r
-                cand_i[q] = i
-                cand_j[q] = j
+        ni = i_hi - i_lo + 1
+        nj = j_hi - j_lo + 1
+        if ni > 0 and nj > 0:
+            rbuf = np.full((ni + 2, nj + 2), _INF)
+            for i in range(i_lo, i_hi + 1):
+                dphi = lat0 + i * dlat - lat
+                for j in range(j_lo, j_hi + 1):
+                    hp = heights[i, j]
+                    if hp != hp:
+                        continue
+                    dlam = lon0 + j * dlon - lon
+                    x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
+                    r = np.sqrt(x * x + y * y + z * z)
+                    if r > max_range or x * ax + y * ay + z * az < cosb * r:
+                        continue
+                    rbuf[i - i_lo + 1, j - j_lo + 1] = r
+            for a_i in range(1, ni + 1):
+                for a_j in range(1, nj + 1):
+                    r = rbuf[a_i, a_j]
+                    if r == _INF or r >= cand_f[kk - 1]:
+                        continue
+                    is_min = True
+                    for di in range(-1, 2):
+                        for dj in range(-1, 2):
+                            if (di != 0 or dj != 0) and rbuf[a_i + di, a_j + dj] < r:
+                                is_min = False
+                    if not is_min:
+                        continue
+                    q = kk - 1
+                    while q > 0 and cand_f[q - 1] > r:
+                        cand_f[q] = cand_f[q - 1]
+                        cand_i[q] = cand_i[q - 1]
+                        cand_j[q] = cand_j[q - 1]
+                        q -= 1
+                    cand_f[q] = r
+                    cand_i[q] = i_lo + a_i - 1
+                    cand_j[q] = j_lo + a_j - 1
     # 4) local refinement from distinct start points
     done_i = np.empty(kk + 1)
     done_j = np.empty(kk + 1)
@@ -418,18 +457,18 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
     touched_best = False
     for q in range(-1, kk):
         if q < 0:
-            if t_ax != t_ax or best == _INF:
-                continue
+            if t_ax != t_ax or best == _INF or cand_f[0] < _INF:
+                continue  # the axis hit is a start point only when no post lies in the beam
             fi0, fj0, f0 = best_i, best_j, best
         else:
             if cand_f[q] == _INF:
                 break
-            if q > 0 and cand_f[q] > best + 0.5 * cell_m:
+            if cand_f[q] > best + 0.5 * cell_m:
                 break
             fi0, fj0, f0 = cand_i[q], cand_j[q], cand_f[q]
         near = False
         for p in range(n_done):
-            if abs(done_i[p] - fi0) <= 1.5 and abs(done_j[p] - fj0) <= 1.5:
+            if abs(done_i[p] - fi0) <= 0.25 and abs(done_j[p] - fj0) <= 0.25:
                 near = True
         if near or n_done >= 4:
             continue
@@ -458,9 +497,9 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
         centre = az0
         t_ref = fb if fb < _INF else best
         w = width
-        while w > 1e-9:
-            improved = False
-            for sgn in (-1.0, -0.5, 0.5, 1.0):
+        w_min = 2e-4 / max(best * sinb, 1e-6)
+        while w > w_min:
+            for sgn in (-0.5, 0.5):
                 a = centre + sgn * w
                 fa, _, _, _ = _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon,
                                              ha, s, c, m, n, dm, ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb,
@@ -468,11 +507,10 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
                 if fa < fb:
                     fb = fa
                     centre = a
-                    improved = True
+                    break
             if fb < _INF:
                 t_ref = fb
-            if not improved:
-                w *= 0.5
+            w *= 0.5
         if fb < best:
             _, dx, dy, dz = _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
                                            s, c, m, n, dm, ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb,
@@ -515,7 +553,7 @@ def _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C_bn, half_b
 # ----------------------------------------------------------------------------------------- IRA
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh,
-              sv, t_guess):
+              sv, t_guess, tol):
     """Terrain point on the zero-Doppler plane at across-track nominal coordinate sv (m).
 
     Nominal horizontal coordinates (north, east) = sv * w_h + t * u_h, w_h = right-perpendicular of the
@@ -540,7 +578,7 @@ def _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx,
             return np.nan, x, y, z, dphi, dlam, hp
         x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
         p = vx * x + vy * y + vz * z
-        if abs(p) < 1e-6:
+        if abs(p) < tol:
             return tt, x, y, z, dphi, dlam, hp
         if it == 0:
             p0 = p
@@ -563,10 +601,10 @@ def _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx,
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ira_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh,
-              C, tan_w, max_range, sv, t_guess):
+              C, tan_w, max_range, sv, t_guess, tol):
     """(f, t) at across-track coordinate sv: range if the point is inside the look-angle window, else inf."""
     t, x, y, z, dphi, dlam, hp = _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm,
-                                           vx, vy, vz, uhx, uhy, vh, sv, t_guess)
+                                           vx, vy, vz, uhx, uhy, vh, sv, t_guess, tol)
     if t != t:
         return _INF, t_guess
     r = np.sqrt(x * x + y * y + z * z)
@@ -627,7 +665,7 @@ def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
             if best < _INF and d_top > 0.0 and horiz_lb > 0.0 and horiz_lb * horiz_lb + d_top * d_top > best * best:
                 break
             f, t = _ira_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz,
-                             uhx, uhy, vh, C, tan_w, max_range, sv, t_prev)
+                             uhx, uhy, vh, C, tan_w, max_range, sv, t_prev, 1e-3)
             buf_f[q] = f
             buf_t[q] = t
             if t == t:
@@ -670,19 +708,17 @@ def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
         fc = fq
         tc = buf_t[qq]
         w = step
-        while w > 1e-4:
-            improved = False
-            for sgn in (-1.0, -0.5, 0.5, 1.0):
+        while w > 2e-4:
+            for sgn in (-0.5, 0.5):
                 sv = centre + sgn * w
                 f, t = _ira_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz,
-                                 uhx, uhy, vh, C, tan_w, max_range, sv, tc)
+                                 uhx, uhy, vh, C, tan_w, max_range, sv, tc, 2e-5)
                 if f < fc:
                     fc = f
                     centre = sv
                     tc = t
-                    improved = True
-            if not improved:
-                w *= 0.5
+                    break
+            w *= 0.5
         if fc < final:
             final = fc
             best_s = centre
@@ -690,7 +726,7 @@ def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
     if final == _INF:
         return
     t, x, y, z, dphi, dlam, hp = _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm,
-                                           vx, vy, vz, uhx, uhy, vh, best_s, best_t)
+                                           vx, vy, vz, uhx, uhy, vh, best_s, best_t, 1e-6)
     out[0] = 1.0
     out[1] = np.sqrt(x * x + y * y + z * z)
     out[2] = lat + dphi

@@ -31,12 +31,14 @@ def start_in_flight(
     lat_rad: float = math.radians(33.2),
     lon_rad: float = math.radians(-98.2),
     gamma_rad: float = 0.0,
+    flaps_norm: float = 0.0,
     trim: bool = True,
     fdm: jsbsim.FGFDMExec | None = None,
 ) -> jsbsim.FGFDMExec:
-    """King Air at altitude h_m (MSL), true airspeed tas_mps, true heading psi_rad, engines running,
-    gear and flaps up, flight-path angle gamma_rad (0 = level); trimmed by JSBSim (full trim) when `trim`. Raises RuntimeError if the
-    trim fails."""
+    """King Air at altitude h_m (MSL), true airspeed tas_mps, true heading psi_rad, engines running at
+    2,200 propeller rpm (advance lever 1), gear up, flaps at flaps_norm (0 up, 1 = 35 deg), flight-path
+    angle gamma_rad (0 = level), calm air; trimmed by JSBSim (full trim) when `trim`. Raises
+    RuntimeError if the trim fails."""
     if fdm is None:
         fdm = new_fdm("kingair", 0.01)
     fdm["ic/h-sl-ft"] = h_m * FT_PER_M
@@ -51,8 +53,8 @@ def start_in_flight(
         fdm[f"fcs/mixture-cmd-norm[{i}]"] = 1.0
     fdm["gear/gear-cmd-norm"] = 0.0
     fdm["gear/gear-pos-norm"] = 0.0
-    fdm["fcs/flap-cmd-norm"] = 0.0
-    fdm["fcs/flap-pos-deg"] = 0.0
+    fdm["fcs/flap-cmd-norm"] = flaps_norm
+    fdm["fcs/flap-pos-deg"] = 35.0 * flaps_norm  # 0..1 -> 0..35 deg; set directly, no deployment transient
     fdm.run_ic()
     if trim:
         try:

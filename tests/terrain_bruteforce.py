@@ -174,3 +174,62 @@ def ira(dem, lat, lon, h, v_ned, C_bn, half_window, max_range=12000.0, s_half_m=
         return (np.nan,) * 5
     la, lo, hh = ecef_to_lla(a + cen @ ned[k])
     return float(r[k]), float(la), float(lo), float(hh), float(theta[k])
+
+
+def _first_hits(dem, a, dirs_ecef, t_lo, t_hi, dt):
+    """First terrain crossing along each ECEF ray (rows of dirs_ecef) in [t_lo, t_hi]: dense march, then
+    bisection. Returns t (inf where no crossing)."""
+    t_vals = np.arange(t_lo, t_hi + dt, dt)
+    p = a + dirs_ecef[:, None, :] * t_vals[None, :, None]
+    la, lo, hh = ecef_to_lla(p)
+    above = hh - bilinear(dem, la, lo)
+    below = above < 0
+    has = below.any(axis=1)
+    k = np.argmax(below, axis=1)
+    ok = has & (k > 0)
+    t_a = np.where(ok, t_vals[np.maximum(k - 1, 0)], np.nan)
+    t_b = np.where(ok, t_vals[k], np.nan)
+    for _ in range(45):
+        tm = 0.5 * (t_a + t_b)
+        la, lo, hh = ecef_to_lla(a + dirs_ecef * tm[:, None])
+        am = hh - bilinear(dem, la, lo)
+        t_a = np.where(am >= 0, tm, t_a)
+        t_b = np.where(am >= 0, t_b, tm)
+    return np.where(ok, 0.5 * (t_a + t_b), np.inf)
+
+
+def radar_altimeter_boundary(dem, lat, lon, h, C_bn, half_beam, max_range=8000.0):
+    """Closest terrain point ON the cone boundary: dense azimuth scan of boundary rays (first hits), then a
+    fine scan around the best. Returns (range, lat, lon, h)."""
+    a = lla_to_ecef(lat, lon, h)
+    cen = ned_to_ecef_matrix(lat, lon)
+    ax = C_bn[:, 2]
+    e1 = np.cross(ax, [0.0, 0.0, 1.0] if abs(ax[2]) < 0.9 else [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(ax, e1)
+    hmin, hmax = np.nanmin(dem.heights_m), np.nanmax(dem.heights_m)
+
+    def dirs(c):
+        d = np.cos(half_beam) * ax + np.sin(half_beam) * (np.cos(c)[:, None] * e1 + np.sin(c)[:, None] * e2)
+        return d @ cen.T, d
+
+    def hits(c, t_lo, t_hi, dt):
+        de, dn = dirs(c)
+        lo = t_lo if np.ndim(t_lo) == 0 else t_lo
+        return _first_hits(dem, a, de, lo, t_hi, dt), dn
+
+    c = np.linspace(-np.pi, np.pi, 720, endpoint=False)
+    de, dn = dirs(c)
+    down = np.clip(dn[:, 2], 1e-3, None)
+    t_lo = max(0.0, (h - hmax - 5.0) / down.max())
+    t_hi = min(max_range, (h - hmin + 10.0) / max(down.min(), 0.05))
+    t = _first_hits(dem, a, de, t_lo, t_hi, 2.0)
+    if not np.isfinite(t).any():
+        return np.nan, np.nan, np.nan, np.nan
+    k = int(np.argmin(t))
+    c_f = np.linspace(c[k] - np.radians(1.0), c[k] + np.radians(1.0), 2001)
+    de_f, _ = dirs(c_f)
+    t_f = _first_hits(dem, a, de_f, max(0.0, t[k] - 40.0), t[k] + 40.0, 0.5)
+    k = int(np.argmin(t_f))
+    la, lo, hh = ecef_to_lla(a + de_f[k] * t_f[k])
+    return float(t_f[k]), float(la), float(lo), float(hh)

@@ -95,3 +95,12 @@ def test_sampling_off_grid_start_and_non_dividing_rate():
     assert idx.shape[0] == 90
     grid = np.arange(90) / 30.0
     assert np.all(t[idx] >= grid - 1e-9) and np.all(t[idx] < grid + 0.01)
+
+
+def test_rate_above_truth_rate_is_refused():
+    t = 0.01 * np.arange(10)
+    with pytest.raises(ValueError, match="rate_hz"):
+        sample_steps(t, 200.0, None)
+    _, last = sample_steps(t[:5], 100.0, None)
+    with pytest.raises(ValueError, match="rate_hz"):
+        sample_steps(t[5:], 300.0, last * 3)

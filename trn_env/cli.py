@@ -109,7 +109,8 @@ def cmd_fly(args) -> int:
     out_dir = args.out or default_out_dir(scenario.name)
     console = Console()
     bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
-               disable=args.quiet, bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+               disable=args.quiet, mininterval=0.5,
+               bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
 
     def progress(t_s: float, _total: float) -> None:
         bar.update(max(0.0, round(t_s, 1) - bar.n))

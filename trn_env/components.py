@@ -10,7 +10,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import contextlib
 import math
+import os
+import sys
 
 import numpy as np
 
@@ -65,8 +68,16 @@ def apply_map_errors(dem, settings: dict, rng: np.random.Generator):
 
 
 def world_height(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:
-    """True terrain height (m MSL) at arrays of positions; NaN off the grid or over voids."""
-    return np.asarray(dem.height(lat_rad, lon_rad), float)
+    """Terrain height (m MSL) at 1-D arrays of positions; NaN off the grid or over voids (bilinear).
+
+    Calls the terrain package's numba batch kernel directly (this runs every guidance tick)."""
+    from terrain import kernels
+    lat = np.ascontiguousarray(lat_rad, dtype=np.float64).ravel()
+    lon = np.ascontiguousarray(lon_rad, dtype=np.float64).ravel()
+    out = np.empty(lat.shape[0])
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out)
+    return out
 
 
 def world_contains(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:
@@ -106,6 +117,26 @@ def initial_h_msl_m(d: dict, world) -> float:
     return float(init["h_agl_m"]) + h_ground
 
 
+@contextlib.contextmanager
+def quiet_stdout():
+    """Silence C-level stdout (JSBSim's start-up banner and trim chatter) for the duration."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):   # stdout replaced (pytest capture, notebooks)
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    try:
+        yield
+    finally:
+        os.dup2(saved, fd)
+        os.close(saved)
+        os.close(devnull)
+
+
 def build_flight(d: dict, world, rng: np.random.Generator):
     """trn_env.flight.Flight at the scenario's initial condition, trimmed, with its wind and a JSBSim seed."""
     from .flight import Flight, InitialCondition
@@ -114,8 +145,9 @@ def build_flight(d: dict, world, rng: np.random.Generator):
     ic = InitialCondition(lat_rad=lat, lon_rad=lon, h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
                           heading_rad=math.radians(init["heading_deg"]), **d["aircraft"]["settings"])
     seed = int(rng.integers(0, 2**31 - 1))
-    return Flight(ic, aircraft=d["aircraft"]["name"], dt_s=float(d["aircraft"]["dt_s"]), wind=build_wind(d),
-                  seed=seed, terrain_elevation_m=map_height(world, lat, lon))
+    with quiet_stdout():
+        return Flight(ic, aircraft=d["aircraft"]["name"], dt_s=float(d["aircraft"]["dt_s"]),
+                      wind=build_wind(d), seed=seed, terrain_elevation_m=map_height(world, lat, lon))
 
 
 # ----------------------------------------------------------------------------------------------- sensors
@@ -202,3 +234,60 @@ def track_agl_targets(track_rad: float, agl_m: float, tas_mps: float):
     return AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=float(track_rad),
                             heading_cmd_rad=float(track_rad), vertical_mode=VerticalMode.HEIGHT_AGL,
                             agl_cmd_m=float(agl_m), speed_mode=SpeedMode.TAS, tas_cmd_mps=float(tas_mps))
+
+
+def build_route(d: dict):
+    """trn_env.guidance.Route of the scenario's waypoints (h_msl_m -> alt_ref msl, h_agl_m -> agl)."""
+    from .guidance import Route, Waypoint
+    wps = []
+    for w in d["route"]["waypoints"]:
+        ref, alt = ("agl", w["h_agl_m"]) if "h_agl_m" in w else ("msl", w["h_msl_m"])
+        wps.append(Waypoint.from_deg(w["lat_deg"], w["lon_deg"], float(alt), ref))
+    return Route(wps)
+
+
+def build_guidance(d: dict, map_dem=None):
+    """trn_env.guidance.Guidance flying the scenario's route at route.tas_mps (route.settings = its kwargs)."""
+    from .guidance import Guidance
+    return Guidance(build_route(d), tas_mps=float(d["route"]["tas_mps"]), **d["route"]["settings"])
+
+
+def guidance_complete(guidance) -> bool:
+    """True once the guidance has passed the route's last waypoint."""
+    return bool(getattr(guidance, "done", False))
+
+
+# ------------------------------------------------------------------------------- terrain information
+
+# bearings (relative to the commanded track) of the terrain-information samples around the estimate
+INFO_BEARINGS_RAD = (None, 0.0, -math.pi / 4, math.pi / 4, -math.pi / 2, math.pi / 2)
+
+
+def terrain_information_map(dem):
+    """The map's terrain-information grid (terrain.metrics), as a Dem-shaped object with heights_m = info."""
+    from terrain import metrics
+    fn = getattr(metrics, "terrain_information_map", None) or getattr(metrics, "information_map", None)
+    if fn is None:
+        raise ValueError("terrain.metrics has no terrain_information_map function")
+    info = fn(dem)
+    grid = np.asarray(getattr(info, "heights_m", info), float)
+    if grid.shape != dem.heights_m.shape:
+        raise ValueError(f"terrain information map shape {grid.shape} differs from the DEM's {dem.heights_m.shape}")
+    return dem.with_heights(np.where(np.isfinite(grid), grid, 0.0), name=f"{dem.name}-information")
+
+
+def sample_information(info_map, dem, lat_rad: float, lon_rad: float, track_rad: float,
+                       offset_m: float) -> np.ndarray:
+    """Terrain information at the estimate and offset_m away at INFO_BEARINGS_RAD from the track (0 off-map)."""
+    from terrain.geodesy import ned_offset_to_latlon
+    lats = np.empty(len(INFO_BEARINGS_RAD))
+    lons = np.empty(len(INFO_BEARINGS_RAD))
+    for k, b in enumerate(INFO_BEARINGS_RAD):
+        if b is None:
+            lats[k], lons[k] = lat_rad, lon_rad
+        else:
+            brg = track_rad + b
+            lats[k], lons[k] = ned_offset_to_latlon(lat_rad, lon_rad, 0.0, offset_m * math.cos(brg),
+                                                    offset_m * math.sin(brg))
+    vals = world_height(info_map, lats, lons)
+    return np.where(np.isfinite(vals), vals, 0.0)

@@ -6,8 +6,10 @@
     flight.set_targets(AutopilotTargets(...))  # writes the ap/* properties of the aircraft's autopilot
     flight.set_terrain_elevation(h_m)          # terrain under the aircraft, for height-above-ground hold
 
-The per-step Python work in `advance` is `run()` plus copying 20 cached property nodes into one flat buffer;
-unit conversions, frame rotations, Euler/C_bn assembly and derived quantities are vectorised after the loop.
+The per-step Python work in `advance` is `run()` plus copying 15 cached property nodes (18 with turbulence
+or gusts: the total wind) into one flat buffer; unit conversions, Euler/C_bn assembly, the Earth-rate
+correction of body rates, air data and the standard atmosphere are computed after the loop in one numba
+kernel.
 
 Frames. JSBSim 1.3's local frame (v-north-fps, phi/theta/psi, wind) is the geodetic NED frame of the WGS84
 ellipsoid at the vehicle (checked in tests/test_flight.py against ECEF velocity and the Earth-rate part of the
@@ -15,11 +17,11 @@ body rates), so vectors and Euler angles are used as they are. Heights are geode
 the WGS84 height; position/h-sl-ft is the radial height above the sea-level radius, off by centimetres),
 which this project uses as "MSL" (the DEM's datum).
 
-Timing. Row k holds the state after the k-th step (t_s = k * dt_s from the start of the flight). JSBSim
-evaluates forces, air data and wind at the start of a step and then integrates, so f_b_mps2, p_static_pa,
-T_static_K and the turbulence part of wind_ned_mps in row k are the values applied over the step ending at
-t_s[k] (like an IMU delta-v sample). TAS, alpha and beta are recomputed from the row's velocity, attitude and
-wind. The IMU is at the centre of gravity: f_b is (total non-gravitational force) / mass, body FRD.
+Timing. Row k holds the state after the k-th step, t_s = k * dt_s from the start of the flight. JSBSim 1.3
+integrates first and then evaluates every model at the new state, so all fields of a row describe the same
+instant: f_b_mps2 is the specific force at that state (what an ideal accelerometer senses), TAS, alpha and
+beta follow from the row's velocity, attitude and wind, and p/T are JSBSim's standard atmosphere at the
+row's altitude. The IMU is at the centre of gravity: f_b = (total non-gravitational force) / mass, FRD.
 """
 
 from __future__ import annotations
@@ -237,7 +239,8 @@ def _std_atmosphere(lat_rad, lon_rad, h_m):  # pragma: no cover - compiled
     rxy = (n + h_m) * c
     z = (n * (1.0 - _WGS84_E2) + h_m) * s
     radius = np.sqrt(rxy * rxy + z * z)
-    sea_level_radius = _WGS84_A / np.sqrt(1.0 + _WGS84_E2 * s * s / (1.0 - _WGS84_E2))
+    s_gc = z / radius                                   # sine of the geocentric latitude
+    sea_level_radius = _WGS84_A / np.sqrt(1.0 + _WGS84_E2 * s_gc * s_gc / (1.0 - _WGS84_E2))
     h_sl = radius - sea_level_radius
     hgp = _ATM_RE_M * h_sl / (_ATM_RE_M + h_sl)
     g0 = G0_MPS2
@@ -379,10 +382,10 @@ class Flight:
         self._select_recorder()
 
         fdm["simulation/randomseed"] = float(self.seed % 2**31)
-        wind.apply_turbulence(fdm)
-        self._write_steady_wind(ic.h_msl_m)
         self._apply_ic(ic, terrain_elevation_m)
         self._trim()
+        self._add_wind_to_trim()
+        wind.apply_turbulence(fdm)
         self._write_steady_wind(ic.h_msl_m)
         if targets is None:
             row = self.snapshot()
@@ -406,9 +409,13 @@ class Flight:
         for _ in range(3):
             fdm["ic/h-sl-ft"] = fdm["ic/h-sl-ft"] + (h_ft - fdm["ic/geod-alt-ft"])
         fdm["ic/psi-true-rad"] = ic.heading_rad
-        fdm["ic/gamma-rad"] = ic.gamma_rad
         fdm["ic/phi-rad"] = 0.0
-        fdm["ic/vt-fps"] = ic.tas_mps * FT_PER_M
+        # Trim in calm air: the air velocity along the heading (zero sideslip) at the flight-path angle.
+        # The wind is added afterwards by _add_wind_to_trim (JSBSim's own trim in wind is unreliable).
+        v_h = ic.tas_mps * math.cos(ic.gamma_rad)
+        fdm["ic/vn-fps"] = v_h * math.cos(ic.heading_rad) * FT_PER_M
+        fdm["ic/ve-fps"] = v_h * math.sin(ic.heading_rad) * FT_PER_M
+        fdm["ic/vd-fps"] = -ic.tas_mps * math.sin(ic.gamma_rad) * FT_PER_M
         fdm["fcs/flap-cmd-norm"] = ic.flaps
         fdm["gear/gear-cmd-norm"] = 0.0
         if ic.fuel_fraction is not None:
@@ -441,6 +448,27 @@ class Flight:
         state = np.array([g() for g in self._all_getters])
         if not np.all(np.isfinite(state)):
             raise TrimError(f"JSBSim's trim of {self.aircraft!r} in {what} gave a non-finite state")
+
+    def _add_wind_to_trim(self) -> None:
+        """Move the calm-air trim into the steady wind at the initial altitude: same attitude, controls and
+        air-relative velocity; ground velocity = air velocity + wind (a trim point of the air mass)."""
+        fdm = self.fdm
+        w_n, w_e, w_d = self.wind.steady_wind_ned_tuple(self.ic.h_msl_m)
+        if w_n == 0.0 and w_e == 0.0 and w_d == 0.0:
+            return
+        att = [fdm[f"attitude/{a}-rad"] for a in ("phi", "theta", "psi")]
+        v_air = [fdm[f"velocities/v-{a}-fps"] for a in ("north", "east", "down")]
+        fdm["ic/phi-rad"], fdm["ic/theta-rad"], fdm["ic/psi-true-rad"] = att
+        fdm["ic/vw-mag-fps"] = math.hypot(w_n, w_e) * FT_PER_M
+        fdm["ic/vw-dir-deg"] = math.degrees(math.atan2(w_e, w_n))   # direction the air moves TOWARDS
+        fdm["ic/vn-fps"] = v_air[0] + w_n * FT_PER_M
+        fdm["ic/ve-fps"] = v_air[1] + w_e * FT_PER_M
+        fdm["ic/vd-fps"] = v_air[2] + w_d * FT_PER_M
+        for a in ("p", "q", "r"):
+            fdm[f"ic/{a}-rad_sec"] = 0.0
+        if not fdm.run_ic():
+            raise TrimError(f"JSBSim rejected the wind of the initial condition {self.ic}")
+        self._terrain_setter(self._terrain_elevation_m * FT_PER_M)
 
     # ---------------------------------------------------------------------------------------- control
     @property

@@ -128,6 +128,9 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
     parent = out_dir.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)          # mkdtemp makes it private; the run directory should not be
     try:
         files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
         write_log_npz(tmp / "log.npz", arrays)

@@ -28,7 +28,7 @@ import numpy as np
 
 from navigators.frames import SensorFrames
 from navigators.protocol import Estimate, Health
-from terrain.geodesy import latlon_to_ned_offset
+from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
 
 from . import components
 from .scenario import Scenario, load_scenario
@@ -61,7 +61,6 @@ def perturbed_estimate(truth: TruthChunk, i: int, sigmas: dict[str, list[float]]
     s_vel = np.asarray(sigmas["velocity_ned_mps"], float)
     s_att = 1e-3 * np.asarray(sigmas["attitude_mrad"], float)
     e = rng.standard_normal(9) * np.concatenate([s_pos, s_vel, s_att])
-    from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
     lat, lon, h = float(truth.lat_rad[i]), float(truth.lon_rad[i]), float(truth.h_msl_m[i])
     r_n = meridian_radius_m(lat) + h
     r_e = prime_vertical_radius_m(lat) + h
@@ -104,17 +103,28 @@ def _gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
     return frames
 
 
+_TRUTH_LOGGED = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps",
+                 "alpha_rad", "beta_rad", "wind_ned_mps")
+
+
 @dataclass
 class SimLog:
-    """In-memory log: per-tick truth/estimate rows, full-rate sensor readings, events."""
+    """In-memory log: per-tick truth rows and estimates, full-rate sensor readings, events.
 
-    ticks: dict[str, list] = field(default_factory=dict)
+    The per-tick work is appending references (the truth chunk and a row index) and copies of the
+    estimate's numbers; arrays are assembled once, in `arrays()`.
+    """
+
+    truth_rows: list[tuple[TruthChunk, int]] = field(default_factory=list)
+    est_rows: list[tuple] = field(default_factory=list)
     sensors: dict[str, list] = field(default_factory=dict)
     events: list[tuple[float, str, str]] = field(default_factory=list)
 
-    def add_tick(self, **values) -> None:
-        for k, v in values.items():
-            self.ticks.setdefault(k, []).append(v)
+    def add_tick(self, truth: TruthChunk, i: int, est: Estimate) -> None:
+        self.truth_rows.append((truth, i))
+        self.est_rows.append((float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
+                              np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
+                              float(est.yaw_rad), np.array(est.covariance[:9, :9], float), bool(est.health.ok)))
 
     def add_frames(self, frames: SensorFrames) -> None:
         for name in ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading"):
@@ -125,11 +135,38 @@ class SimLog:
                 if isinstance(v, np.ndarray):
                     self.sensors.setdefault(f"{name}_{k}", []).append(v)
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        out = {k: np.asarray(v) for k, v in self.ticks.items()}
+    def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
+        """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
+        position), gnss_available, nav_ok, and sensor_<sensor>_<field> at the sensors' own rates."""
+        out: dict[str, np.ndarray] = {}
+        out["t_s"] = np.array([float(c.t_s[i]) for c, i in self.truth_rows])
+        for name in _TRUTH_LOGGED:
+            out[f"true_{name}"] = np.array([getattr(c, name)[i] for c, i in self.truth_rows], float)
+        h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
+        out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
+        cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 10
+        names = ("est_t_s", "est_lat_rad", "est_lon_rad", "est_h_m", "est_v_ned_mps", "est_roll_rad",
+                 "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok")
+        for name, col in zip(names, cols, strict=True):
+            out[name] = np.array(col)
+        out["est_cov_diag"] = np.diagonal(out["est_cov"], axis1=1, axis2=2).copy()
+        out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
+                                       out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])
+        out["gnss_available"] = gnss_available_mask(out["t_s"], outages)
         for k, parts in self.sensors.items():
             out[f"sensor_{k}"] = np.concatenate(parts) if parts else np.zeros(0)
         return out
+
+
+def error_ned_m(lat_rad, lon_rad, h_m, est_lat_rad, est_lon_rad, est_h_m) -> np.ndarray:
+    """Estimate minus truth, NED metres at the true position (seed 000 eq 2 small-offset radii)."""
+    lat = np.asarray(lat_rad, float)
+    r_n = np.array([meridian_radius_m(x) for x in lat]) + h_m
+    r_e = np.array([prime_vertical_radius_m(x) for x in lat]) + h_m
+    dn = (np.asarray(est_lat_rad) - lat) * r_n
+    de = (np.asarray(est_lon_rad) - np.asarray(lon_rad)) * r_e * np.cos(lat)
+    dd = -(np.asarray(est_h_m) - np.asarray(h_m))
+    return np.stack([dn, de, dd], axis=-1).reshape(-1, 3)
 
 
 @dataclass
@@ -189,6 +226,7 @@ class ClosedLoop:
         self.n_ticks = 0
         self.termination: str | None = None
         self.log = SimLog()
+        self._last_targets = None
         self._log_tick(truth0, 0, self.estimate)
         self._command(self.estimate)
 
@@ -198,7 +236,9 @@ class ClosedLoop:
             targets = self.commander(est, self.t_s)
         else:
             targets = self.guidance.command(est, self.t_s)
-        self.flight.set_targets(targets)
+        if targets != self._last_targets:        # unchanged targets need no property writes
+            self.flight.set_targets(targets)
+            self._last_targets = targets
         h_ground = components.map_height(self.map_dem, est.lat_rad, est.lon_rad)
         if math.isfinite(h_ground):
             self.flight.set_terrain_elevation(h_ground)
@@ -274,24 +314,7 @@ class ClosedLoop:
         return np.array([dn, de, -(est.h_m - h)])
 
     def _log_tick(self, truth: TruthChunk, i: int, est: Estimate) -> None:
-        lat, lon, h = float(truth.lat_rad[i]), float(truth.lon_rad[i]), float(truth.h_msl_m[i])
-        h_ground = float(components.world_height(self.world_dem, np.array([lat]), np.array([lon]))[0])
-        self.log.add_tick(
-            t_s=float(truth.t_s[i]),
-            true_lat_rad=lat, true_lon_rad=lon, true_h_msl_m=h, true_h_agl_m=h - h_ground,
-            true_v_ned_mps=np.array(truth.v_ned_mps[i]), true_roll_rad=float(truth.roll_rad[i]),
-            true_pitch_rad=float(truth.pitch_rad[i]), true_yaw_rad=float(truth.yaw_rad[i]),
-            true_tas_mps=float(truth.tas_mps[i]), true_alpha_rad=float(truth.alpha_rad[i]),
-            true_beta_rad=float(truth.beta_rad[i]), true_wind_ned_mps=np.array(truth.wind_ned_mps[i]),
-            est_t_s=float(est.t_s), est_lat_rad=float(est.lat_rad), est_lon_rad=float(est.lon_rad),
-            est_h_m=float(est.h_m), est_v_ned_mps=np.array(est.v_ned_mps, float),
-            est_roll_rad=float(est.roll_rad), est_pitch_rad=float(est.pitch_rad), est_yaw_rad=float(est.yaw_rad),
-            est_cov=np.array(est.covariance[:9, :9], float),
-            est_cov_diag=np.diag(est.covariance)[:9].astype(float),
-            err_ned_m=self._err_ned(truth, i, est),
-            gnss_available=bool(gnss_available_mask(np.array([float(truth.t_s[i])]), self.outages)[0]),
-            nav_ok=bool(est.health.ok),
-        )
+        self.log.add_tick(truth, i, est)
 
     def run(self) -> RunResult:
         """Fly until a termination; returns the result with its log and summary."""
@@ -302,7 +325,7 @@ class ClosedLoop:
         return self.result(wall)
 
     def result(self, wall_time_s: float) -> RunResult:
-        arrays = self.log.arrays()
+        arrays = self.log.arrays(self.world_dem, self.outages)
         summary = summarise(self.scenario, self.termination or "time_limit", arrays, wall_time_s,
                             self.jsbsim_steps, self.estimate)
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,

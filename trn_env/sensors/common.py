@@ -65,28 +65,39 @@ def initial_grid_index(t0_s: float, rate_hz: float) -> int:
 
 
 def sample_steps(t_s: np.ndarray, rate_hz: float, last_k: int | None) -> tuple[np.ndarray, int | None]:
-    """Indices of the truth steps sampled by a sensor at `rate_hz` and the grid index to carry forward."""
+    """Indices of the truth steps sampled by a sensor at `rate_hz` and the grid index to carry forward.
+
+    Raises ValueError if the sensor's grid is finer than the truth steps (rate above the truth rate).
+    """
     if t_s.shape[0] == 0:
         return np.zeros(0, dtype=np.int64), last_k
-    if last_k is None:
+    first = last_k is None
+    if first:
         last_k = initial_grid_index(float(t_s[0]), rate_hz)
-    idx, k = _grid_indices(t_s, float(rate_hz), int(last_k))
+    idx, k, max_jump = _grid_indices(t_s, float(rate_hz), int(last_k), first)
+    if max_jump > 1:
+        dt = float(t_s[1] - t_s[0]) if t_s.shape[0] > 1 else float("nan")
+        raise ValueError(f"rate_hz = {rate_hz} exceeds the truth step rate (step {dt} s): a sensor samples "
+                         "truth steps, so its rate must not exceed the flight core's")
     return idx, int(k)
 
 
 @njit(cache=True)
-def _grid_indices(t_s, rate_hz, last_k):
+def _grid_indices(t_s, rate_hz, last_k, first):
     n = t_s.shape[0]
     out = np.empty(n, dtype=np.int64)
     m = 0
     prev = last_k
+    max_jump = 0
     for i in range(n):
         k = np.int64(np.floor(t_s[i] * rate_hz + _GRID_EPS))
         if k > prev:
             out[m] = i
             m += 1
+            if not (first and i == 0) and k - prev > max_jump:
+                max_jump = k - prev
         prev = k
-    return out[:m], prev
+    return out[:m], prev, max_jump
 
 
 def gm_coefficients(sigma, tau_s, dt_s: float):
@@ -129,19 +140,10 @@ def _ned_displace(lat, lon, h, d):
     return out_lat, out_lon, out_h
 
 
-def ned_vector_between(lat0, lon0, h0, lat1, lon1, h1) -> np.ndarray:
-    """Exact NED vector (n, 3), resolved at point 0, from geodetic points 0 to 1 (through ECEF)."""
-    lat0 = np.atleast_1d(np.asarray(lat0, float))
-    lon0 = np.atleast_1d(np.asarray(lon0, float))
-    h0 = np.atleast_1d(np.asarray(h0, float))
-    lat1 = np.atleast_1d(np.asarray(lat1, float))
-    lon1 = np.atleast_1d(np.asarray(lon1, float))
-    h1 = np.atleast_1d(np.asarray(h1, float))
-    return _ned_vector_between(lat0, lon0, h0, lat1, lon1, h1)
-
-
 @njit(cache=True)
-def _ned_vector_between(lat0, lon0, h0, lat1, lon1, h1):
+def ned_vectors_kernel(lat0, lon0, h0, lat1, lon1, h1):
+    """Exact NED vectors (n, 3), resolved at points 0, from geodetic points 0 to points 1 (through ECEF);
+    all inputs (n,) float arrays (rad, rad, m)."""
     n = lat0.shape[0]
     out = np.empty((n, 3))
     for i in range(n):

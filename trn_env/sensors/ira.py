@@ -22,18 +22,20 @@ Noise: sigma_R = 3.5 m, sigma_theta = 0.1 deg (seed 002 Table 1); rate 50 Hz (se
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+from numba import njit
 
 from navigators.frames import IraFrame
+from terrain import queries
 from trn_env.sensors.common import (
     antenna_positions,
     check_nonneg,
     check_positive,
     check_vector3,
     config_from_mapping,
-    ned_vector_between,
+    ned_vectors_kernel,
     sample_steps,
 )
 from trn_env.truth import TruthChunk
@@ -83,74 +85,82 @@ class IraConfig:
         return config_from_mapping(cls, mapping)
 
 
-@dataclass(frozen=True)
-class IraState:
+class IraState(NamedTuple):
     last_k: int | None
 
     @classmethod
     def initial(cls, config: IraConfig, rng: np.random.Generator) -> IraState:
-        return cls(last_k=None)
+        return cls(None)
 
 
 def look_angle_from_ranges(r_m: np.ndarray, r_left_m: np.ndarray, r_right_m: np.ndarray, l1_m: float,
                            l2_m: float, method: str = "range_difference") -> np.ndarray:
     """Look angle (rad, + toward the right wing) from the three antennas' ranges (seed 000 eqs 18-23)."""
-    if method == "range_difference":
-        s = (r_left_m - r_right_m) / (l1_m + l2_m)                      # eqs 18 + 19
-    elif method == "exact":
-        y_l = (r_left_m**2 - r_m**2 - l1_m**2) / (2.0 * l1_m)           # eqs 20, 22
-        y_r = (r_m**2 + l2_m**2 - r_right_m**2) / (2.0 * l2_m)          # eqs 21, 23
-        s = 0.5 * (y_l + y_r) / r_m
-    else:
+    if method not in LOOK_ANGLE_METHODS:
         raise ValueError(f"look_angle_method must be one of {LOOK_ANGLE_METHODS}, got {method!r}")
-    return np.arcsin(np.clip(s, -1.0, 1.0))
+    r, rl, rr = (np.atleast_1d(np.asarray(a, float)) for a in (r_m, r_left_m, r_right_m))
+    out = np.empty(r.shape[0])
+    for i in range(r.shape[0]):
+        out[i] = _look_angle(r[i], rl[i], rr[i], l1_m, l2_m, LOOK_ANGLE_METHODS.index(method))
+    return out
 
 
-def antenna_ranges(p_ned_m: np.ndarray, C_bn: np.ndarray, l1_m: float, l2_m: float):
-    """Ranges (m) from the centre, left and right antennas to the point p (n, 3) NED from the centre.
+@njit(cache=True)
+def _look_angle(r, r_l, r_r, l1, l2, method):
+    if method == 0:
+        s = (r_l - r_r) / (l1 + l2)                                  # eqs 18 + 19
+    else:
+        y_l = (r_l * r_l - r * r - l1 * l1) / (2.0 * l1)             # eqs 20, 22
+        y_r = (r * r + l2 * l2 - r_r * r_r) / (2.0 * l2)             # eqs 21, 23
+        s = 0.5 * (y_l + y_r) / r
+    return np.arcsin(min(1.0, max(-1.0, s)))
 
-    Antenna offsets x_l^b = [0, -L1, 0], x_r^b = [0, +L2, 0] (body FRD; seed 000 eqs 14-15) rotated to NED
-    with C_bn (eqs 16-17).
-    """
-    y_n = C_bn[:, :, 1]                        # body lateral (+right) axis in NED
-    r = np.linalg.norm(p_ned_m, axis=1)
-    r_l = np.linalg.norm(p_ned_m + l1_m * y_n, axis=1)
-    r_r = np.linalg.norm(p_ned_m - l2_m * y_n, axis=1)
-    return r, r_l, r_r
+
+@njit(cache=True)
+def _ira_kernel(lat, lon, h, q_valid, q_lat, q_lon, q_h, C_bn, l1, l2, method, max_range, w, sig_r, sig_th):
+    """R and theta from the closest points q seen from antennas (lat, lon, h); noise w (n, 2)."""
+    n = lat.shape[0]
+    p = ned_vectors_kernel(lat, lon, h, q_lat, q_lon, q_h)
+    r_out = np.empty(n)
+    th_out = np.empty(n)
+    valid = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        r = r_l = r_r = 0.0
+        for a in range(3):
+            y = C_bn[i, a, 1]                  # body lateral (+right) axis, NED component a
+            r += p[i, a] * p[i, a]
+            r_l += (p[i, a] + l1 * y) ** 2     # left antenna at -L1 y_b (eqs 14, 16)
+            r_r += (p[i, a] - l2 * y) ** 2     # right antenna at +L2 y_b (eqs 15, 17)
+        r, r_l, r_r = np.sqrt(r), np.sqrt(r_l), np.sqrt(r_r)
+        th = _look_angle(r, r_l, r_r, l1, l2, method)
+        ok = q_valid[i] and np.isfinite(r) and np.isfinite(th) and r <= max_range
+        valid[i] = ok
+        r_out[i] = r + sig_r * w[i, 0] if ok else np.nan
+        th_out[i] = th + sig_th * w[i, 1] if ok else np.nan
+    return r_out, th_out, valid
 
 
 def sample_ira(truth: TruthChunk, terrain, rng: np.random.Generator, config: IraConfig,
                state: IraState | None = None) -> tuple[IraFrame, IraState]:
     """IRA samples (R, theta) over the chunk against the true terrain `terrain` (a terrain.Dem)."""
-    from terrain import queries
-
     if state is None:
         state = IraState.initial(config, rng)
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
-    n = idx.shape[0]
-    w = rng.standard_normal((n, 2))
-    t = truth.t_s[idx].copy()
-    if n == 0:
-        empty = np.zeros(0)
-        return IraFrame(t_s=t, range_m=empty, look_angle_rad=empty.copy(), valid=np.zeros(0, bool)), \
-            replace(state, last_k=last_k)
-    C_bn = np.ascontiguousarray(truth.C_bn[idx])
+    w = rng.standard_normal((idx.shape[0], 2))
+    t = truth.t_s[idx]
+    if idx.shape[0] == 0:
+        return IraFrame(t_s=t, range_m=np.zeros(0), look_angle_rad=np.zeros(0),
+                        valid=np.zeros(0, bool)), IraState(last_k)
+    C_bn = truth.C_bn[idx]
     lat, lon, h = antenna_positions(truth.lat_rad[idx], truth.lon_rad[idx], truth.h_msl_m[idx], C_bn,
                                     config.lever_arm_b_m)
-    lat, lon, h = (np.ascontiguousarray(a, dtype=float) for a in (lat, lon, h))
-    ret = queries.ira_return(terrain, lat, lon, h, np.ascontiguousarray(truth.v_ned_mps[idx]), C_bn,
+    ret = queries.ira_return(terrain, lat, lon, h, truth.v_ned_mps[idx], C_bn,
                              np.deg2rad(config.half_window_deg), config.max_range_m)
-    valid = np.asarray(ret.valid, bool).copy()
-    p = ned_vector_between(lat, lon, h, np.asarray(ret.lat_rad, float), np.asarray(ret.lon_rad, float),
-                           np.asarray(ret.h_m, float))
-    r, r_l, r_r = antenna_ranges(p, C_bn, config.baseline_left_m, config.baseline_right_m)
-    theta = look_angle_from_ranges(r, r_l, r_r, config.baseline_left_m, config.baseline_right_m,
-                                   config.look_angle_method)
-    valid &= np.isfinite(r) & np.isfinite(theta) & (r <= config.max_range_m)
-    r_meas = np.where(valid, r + config.range_noise_m * w[:, 0], np.nan)
-    theta_meas = np.where(valid, theta + np.deg2rad(config.look_angle_noise_deg) * w[:, 1], np.nan)
-    frame = IraFrame(t_s=t, range_m=r_meas, look_angle_rad=theta_meas, valid=valid)
-    return frame, replace(state, last_k=last_k)
+    r, theta, valid = _ira_kernel(lat, lon, h, ret.valid, ret.lat_rad, ret.lon_rad, ret.h_m, C_bn,
+                                  config.baseline_left_m, config.baseline_right_m,
+                                  LOOK_ANGLE_METHODS.index(config.look_angle_method), config.max_range_m, w,
+                                  config.range_noise_m, np.deg2rad(config.look_angle_noise_deg))
+    return IraFrame(t_s=t, range_m=r, look_angle_rad=theta, valid=valid), IraState(last_k)
 
 
-__all__ = ["IraConfig", "IraState", "antenna_ranges", "look_angle_from_ranges", "sample_ira"]
+__all__ = ["IraConfig", "IraState", "look_angle_from_ranges", "sample_ira"]

@@ -10,11 +10,13 @@ sigma = noise_const_m + noise_fraction * range (default 0.6 m + 2 %, the thesis'
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+from numba import njit
 
 from navigators.frames import RadarAltimeterFrame
+from terrain import queries
 from trn_env.sensors.common import (
     antenna_positions,
     check_nonneg,
@@ -60,41 +62,47 @@ class RadarAltimeterConfig:
         return config_from_mapping(cls, mapping)
 
 
-@dataclass(frozen=True)
-class RadarAltimeterState:
+class RadarAltimeterState(NamedTuple):
     last_k: int | None
 
     @classmethod
     def initial(cls, config: RadarAltimeterConfig, rng: np.random.Generator) -> RadarAltimeterState:
-        return cls(last_k=None)
+        return cls(None)
+
+
+@njit(cache=True)
+def _ra_noise(q_valid, q_range, w, a_m, b, max_range):
+    n = q_range.shape[0]
+    out = np.empty(n)
+    valid = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        r = q_range[i]
+        ok = q_valid[i] and np.isfinite(r) and r <= max_range
+        valid[i] = ok
+        out[i] = max(r + w[i] * (a_m + b * r), 0.0) if ok else np.nan
+    return out, valid
 
 
 def sample_radar_altimeter(truth: TruthChunk, terrain, rng: np.random.Generator, config: RadarAltimeterConfig,
                            state: RadarAltimeterState | None = None
                            ) -> tuple[RadarAltimeterFrame, RadarAltimeterState]:
     """Radar-altimeter ranges over the chunk against the true terrain `terrain` (a terrain.Dem)."""
-    from terrain import queries
-
     if state is None:
         state = RadarAltimeterState.initial(config, rng)
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
-    n = idx.shape[0]
-    w = rng.standard_normal(n)
-    t = truth.t_s[idx].copy()
-    if n == 0:
-        frame = RadarAltimeterFrame(t_s=t, range_m=np.zeros(0), valid=np.zeros(0, bool))
-        return frame, replace(state, last_k=last_k)
-    C_bn = np.ascontiguousarray(truth.C_bn[idx])
+    w = rng.standard_normal(idx.shape[0])
+    t = truth.t_s[idx]
+    if idx.shape[0] == 0:
+        return RadarAltimeterFrame(t_s=t, range_m=np.zeros(0), valid=np.zeros(0, bool)), \
+            RadarAltimeterState(last_k)
+    C_bn = truth.C_bn[idx]
     lat, lon, h = antenna_positions(truth.lat_rad[idx], truth.lon_rad[idx], truth.h_msl_m[idx], C_bn,
                                     config.lever_arm_b_m)
-    half_beam_rad = np.deg2rad(0.5 * config.beamwidth_deg)
-    ret = queries.radar_altimeter_return(terrain, np.ascontiguousarray(lat), np.ascontiguousarray(lon),
-                                         np.ascontiguousarray(h), C_bn, half_beam_rad, config.max_range_m)
-    r_true = np.asarray(ret.range_m, float)
-    valid = np.asarray(ret.valid, bool) & np.isfinite(r_true) & (r_true <= config.max_range_m)
-    r = r_true + w * (config.noise_const_m + config.noise_fraction * r_true)
-    r = np.where(valid, np.maximum(r, 0.0), np.nan)
-    return RadarAltimeterFrame(t_s=t, range_m=r, valid=valid), replace(state, last_k=last_k)
+    ret = queries.radar_altimeter_return(terrain, lat, lon, h, C_bn, np.deg2rad(0.5 * config.beamwidth_deg),
+                                         config.max_range_m)
+    r, valid = _ra_noise(ret.valid, ret.range_m, w, config.noise_const_m, config.noise_fraction,
+                         config.max_range_m)
+    return RadarAltimeterFrame(t_s=t, range_m=r, valid=valid), RadarAltimeterState(last_k)
 
 
 __all__ = ["RadarAltimeterConfig", "RadarAltimeterState", "sample_radar_altimeter"]

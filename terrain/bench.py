@@ -1,0 +1,98 @@
+"""Terrain throughput benchmark: `benchmark() -> dict` (run `python -m terrain.bench`).
+
+Figures (one thread; numba kernels compiled before timing):
+  bilinear_lookups_per_s        numba batch bilinear (terrain.kernels.bilinear_batch)
+  numpy_bilinear_lookups_per_s  numpy's vectorised bilinear formula on the same points (reference)
+  ira_queries_per_s             terrain.queries.ira_return on a level-to-banked flight sample
+  radar_altimeter_queries_per_s terrain.queries.radar_altimeter_return on the same sample
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from terrain import geodesy, kernels, queries
+from terrain.dem import Dem
+
+
+def _numpy_bilinear(heights, lat0, lon0, dlat, dlon, lat, lon):
+    fi = (lat - lat0) / dlat
+    fj = (lon - lon0) / dlon
+    ok = (fi >= 0) & (fj >= 0) & (fi <= heights.shape[0] - 1) & (fj <= heights.shape[1] - 1)
+    i = np.clip(fi.astype(np.int64), 0, heights.shape[0] - 2)
+    j = np.clip(fj.astype(np.int64), 0, heights.shape[1] - 2)
+    u = fi - i
+    v = fj - j
+    a = heights[i, j] + v * (heights[i, j + 1] - heights[i, j])
+    b = heights[i + 1, j] + v * (heights[i + 1, j + 1] - heights[i + 1, j])
+    return np.where(ok, a + u * (b - a), np.nan)
+
+
+def _best_rate(fn, n_items: int, repeats: int) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return n_items / best
+
+
+def flight_sample(dem: Dem, n: int, seed: int = 0, agl_m: float = 1500.0):
+    """Antenna states for query benchmarks/tests: positions over the DEM, headings, +-30 deg bank,
+    -5..10 deg pitch, 110 m/s with up to 20 m/s crosswind. Returns (lat, lon, h, v_ned, C_bn)."""
+    rng = np.random.default_rng(seed)
+    dn_m, de_m = dem.extent_m
+    lat_c, lon_c = dem.center_rad
+    lat, lon = dem.offset_to_latlon(lat_c, lon_c, rng.uniform(-0.3, 0.3, n) * dn_m, rng.uniform(-0.3, 0.3, n) * de_m)
+    h = dem.height(lat, lon) + agl_m * rng.uniform(0.5, 1.5, n)
+    yaw = rng.uniform(0, 2 * np.pi, n)
+    roll = np.radians(rng.uniform(-30, 30, n))
+    pitch = np.radians(rng.uniform(-5, 10, n))
+    C = geodesy.euler_to_C_bn(roll, pitch, yaw)
+    cross = rng.uniform(-20, 20, n)
+    v = np.stack([110 * np.cos(yaw) - cross * np.sin(yaw), 110 * np.sin(yaw) + cross * np.cos(yaw),
+                  rng.uniform(-3, 3, n)], axis=1)
+    return lat, lon, h, v, C
+
+
+def benchmark(dem: Dem | None = None, n_lookups: int = 2_000_000, n_queries: int = 20_000,
+              half_beamwidth_rad: float = np.radians(20.0), half_window_rad: float = np.radians(45.0),
+              repeats: int = 3) -> dict:
+    """Throughput figures (see the module docstring) on `dem` (default: the bundled jacksboro DEM)."""
+    if dem is None:
+        from terrain import load
+
+        dem = load("jacksboro")
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    rng = np.random.default_rng(1)
+    b = dem.bounds
+    lat = rng.uniform(b[0], b[1], n_lookups)
+    lon = rng.uniform(b[2], b[3], n_lookups)
+    out = np.empty(n_lookups)
+    kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, lat[:10], lon[:10], out[:10])
+    nb = _best_rate(lambda: kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out),
+                    n_lookups, repeats)
+    npb = _best_rate(lambda: _numpy_bilinear(heights, lat0, lon0, dlat, dlon, lat, lon), n_lookups, repeats)
+    ref = _numpy_bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
+    if not np.allclose(out, ref, equal_nan=True):
+        raise RuntimeError("benchmark: numba and numpy bilinear disagree")
+    qlat, qlon, qh, qv, qC = flight_sample(dem, n_queries)
+    queries.ira_return(dem, qlat[:4], qlon[:4], qh[:4], qv[:4], qC[:4], half_window_rad)
+    queries.radar_altimeter_return(dem, qlat[:4], qlon[:4], qh[:4], qC[:4], half_beamwidth_rad)
+    ira = _best_rate(lambda: queries.ira_return(dem, qlat, qlon, qh, qv, qC, half_window_rad), n_queries, repeats)
+    ra = _best_rate(lambda: queries.radar_altimeter_return(dem, qlat, qlon, qh, qC, half_beamwidth_rad),
+                    n_queries, repeats)
+    return {
+        "terrain_dem": dem.name,
+        "bilinear_lookups_per_s": float(nb),
+        "numpy_bilinear_lookups_per_s": float(npb),
+        "ira_queries_per_s": float(ira),
+        "radar_altimeter_queries_per_s": float(ra),
+    }
+
+
+if __name__ == "__main__":
+    print(json.dumps(benchmark(), indent=2))

@@ -1,0 +1,153 @@
+"""The `trn-env` command line: fly (outputs, atomic writes, bad input), scenarios, validate, bench."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trn_env import cli, output
+from trn_env.scenario import builtin_names
+from trn_env.sensors.common import ned_vector_between
+from trn_env.sim import ClosedLoop
+
+SCEN = Path(__file__).parent / "scenarios"
+DESIGN_FIELDS = ("scenario", "seed", "navigator", "sim_time_s", "wall_time_s", "realtime_factor",
+                 "horizontal_error_rms_m", "horizontal_error_final_m", "vertical_error_rms_m", "termination")
+TERMINATIONS = {"completed", "terrain_collision", "off_map", "diverged", "time_limit"}
+
+
+def _fly(tmp_path, *extra) -> tuple[int, Path]:
+    out = tmp_path / "run"
+    code = cli.main(["fly", str(SCEN / "default_short.toml"), "--out", str(out), "--quiet",
+                     "--duration", "15", *extra])
+    return code, out
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("fly")
+    code, out = _fly(tmp, "--seed", "3")
+    return code, out
+
+
+def test_fly_writes_summary_log_and_plots(flown):
+    code, out = flown
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in DESIGN_FIELDS:
+        assert key in summary, key
+    assert summary["seed"] == 3 and summary["termination"] in TERMINATIONS
+    assert summary["sim_time_s"] == pytest.approx(15.0)
+    assert summary["realtime_factor"] == pytest.approx(summary["sim_time_s"] / summary["wall_time_s"])
+    assert set(summary["files"]) >= {"summary.json", "log.npz", "timeline.csv", "track.png", "errors.png"}
+    # the log is loadable by numpy and pandas and agrees with the summary (errors recomputed via ECEF)
+    log = np.load(out / "log.npz")
+    d = ned_vector_between(log["true_lat_rad"], log["true_lon_rad"], log["true_h_msl_m"], log["est_lat_rad"],
+                           log["est_lon_rad"], log["est_h_m"])
+    e_h = np.hypot(d[:, 0], d[:, 1])
+    assert summary["horizontal_error_rms_m"] == pytest.approx(np.sqrt(np.mean(e_h ** 2)), rel=1e-3)
+    assert summary["horizontal_error_final_m"] == pytest.approx(e_h[-1], rel=1e-3)
+    assert summary["vertical_error_rms_m"] == pytest.approx(np.sqrt(np.mean(d[:, 2] ** 2)), rel=1e-3)
+    table = pd.read_csv(out / "timeline.csv")
+    assert list(table.columns) == output.TIMELINE_COLUMNS
+    assert len(table) == log["t_s"].shape[0] == 151
+    assert np.allclose(table["err_h_m"], e_h, atol=0.05)
+    assert np.allclose(table["true_lat_deg"], np.degrees(log["true_lat_rad"]))
+    for png in ("track.png", "errors.png"):
+        data = (out / png).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+    assert not list(out.parent.glob(".run.partial-*"))
+
+
+def test_fly_rerun_into_existing_dir_replaces_summary(flown, tmp_path):
+    _, out = flown
+    target = tmp_path / "run"
+    shutil.copytree(out, target)
+    (target / "stale.txt").write_text("x")
+    code = cli.main(["fly", str(SCEN / "default_short.toml"), "--out", str(target), "--quiet",
+                     "--duration", "5", "--seed", "4", "--no-plots"])
+    assert code == 0
+    summary = json.loads((target / "summary.json").read_text())
+    assert summary["seed"] == 4 and summary["sim_time_s"] == pytest.approx(5.0)
+    assert np.load(target / "log.npz")["t_s"].shape[0] == 51
+
+
+def test_bad_scenario_exits_nonzero_lists_problems_writes_nothing(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    text = (SCEN / "default_short.toml").read_text()
+    text = text.replace('name = "ins_tercom"', 'name = "warp_drive"')
+    text = text.replace("duration_s = ", "extra_key = 1\nduration_s = ")
+    bad.write_text(text)
+    out = tmp_path / "never"
+    code = cli.main(["fly", str(bad), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "extra_key: unknown key" in err
+    assert "navigator.name: unknown navigator 'warp_drive'" in err
+    assert not out.exists()
+    assert not list(tmp_path.glob(".never*"))
+
+
+def test_interrupted_flight_writes_nothing(tmp_path, monkeypatch, capsys):
+    real_tick = ClosedLoop.tick
+    count = {"n": 0}
+
+    def tick_then_interrupt(self):
+        count["n"] += 1
+        if count["n"] == 30:
+            raise KeyboardInterrupt
+        return real_tick(self)
+
+    monkeypatch.setattr(ClosedLoop, "tick", tick_then_interrupt)
+    code, out = _fly(tmp_path)
+    assert code == 130 and count["n"] == 30
+    assert not out.exists() and not list(tmp_path.glob(".run.partial-*"))
+    assert "interrupted" in capsys.readouterr().err
+
+
+def test_interrupted_while_writing_leaves_no_summary(tmp_path, monkeypatch):
+    """Ctrl-C after log.npz and timeline.csv are written (inside the plots) leaves no run directory."""
+    from trn_env import plots
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plots, "plot_errors", boom)
+    code, out = _fly(tmp_path)
+    assert code == 130
+    assert not out.exists() and not list(tmp_path.glob(".run.partial-*"))
+    # into an existing run directory: its old summary is not left vouching for new files
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+    monkeypatch.setattr(output, "write_timeline_csv", boom)
+    code, _ = _fly(tmp_path)
+    assert code == 130
+    assert (out / "summary.json").read_text() == "{}"          # untouched: nothing was moved in
+    assert not (out / "log.npz").exists()
+
+
+def test_scenarios_command_console_script():
+    exe = shutil.which("trn-env")
+    cmd = [exe, "scenarios"] if exe else [sys.executable, "-m", "trn_env.cli", "scenarios"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.strip().splitlines()
+    assert [ln.split()[0] for ln in lines] == builtin_names()
+    assert all(len(ln.split(None, 1)) == 2 for ln in lines)
+
+
+def test_validate_command(capsys, tmp_path):
+    assert cli.main(["validate", "default"]) == 0
+    assert "ok" in capsys.readouterr().out
+    bad = tmp_path / "b.toml"
+    bad.write_text('name = "x"\n[initial]\nlat_deg = 100\n')
+    assert cli.main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "initial.lat_deg:" in err and "route: required key is missing" in err
