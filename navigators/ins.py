@@ -31,7 +31,7 @@ GRAVITY_MODELS = {"somigliana": 0, "j2": 1}
 # JSBSim FGInertia constants (ft units converted): GM = 14.0764417572e15 ft^3/s^2, J2 = 1.08262982e-3,
 # a = 20925646.32546 ft.
 _FT = 0.3048
-JSBSIM_GM = 14.0764417572e15 * _FT ** 3
+JSBSIM_GM = 14.0764417572e15 * _FT**3
 JSBSIM_J2 = 1.08262982e-3
 JSBSIM_A_M = 20925646.32546 * _FT
 GM_WGS84 = 3.986004418e14
@@ -50,22 +50,25 @@ def gravity_ned(lat: float, h: float, model: int) -> np.ndarray:
     if model == 0:
         # Somigliana normal gravity on the ellipsoid (Groves eq 2.134)
         g0 = 9.7803253359 * (1.0 + 0.001931853 * sl * sl) / np.sqrt(1.0 - WGS84_E2 * sl * sl)
-        m = OMEGA_EARTH_RPS ** 2 * WGS84_A_M ** 2 * WGS84_A_M * (1.0 - WGS84_F) / GM_WGS84
+        m = OMEGA_EARTH_RPS**2 * WGS84_A_M**2 * WGS84_A_M * (1.0 - WGS84_F) / GM_WGS84
         # height correction (Groves eq 2.139)
-        g[2] = g0 * (1.0 - 2.0 / WGS84_A_M * (1.0 + WGS84_F + m - 2.0 * WGS84_F * sl * sl) * h
-                     + 3.0 * h * h / WGS84_A_M ** 2)
+        g[2] = g0 * (
+            1.0
+            - 2.0 / WGS84_A_M * (1.0 + WGS84_F + m - 2.0 * WGS84_F * sl * sl) * h
+            + 3.0 * h * h / WGS84_A_M**2
+        )
         g[0] = -8.08e-9 * h * np.sin(2.0 * lat)
         return g
     # J2 gravitation in ECEF (JSBSim FGInertia::GetGravityJ2) + centrifugal, rotated to NED
     r_e = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * sl * sl)
     x = (r_e + h) * cl
-    z = (r_e * (1.0 - WGS84_E2) + h) * sl          # meridian plane: lon = 0 without loss of generality
+    z = (r_e * (1.0 - WGS84_E2) + h) * sl  # meridian plane: lon = 0 without loss of generality
     r = np.sqrt(x * x + z * z)
     s_gc = z / r
     adivr = JSBSIM_A_M / r
     pre = 1.5 * JSBSIM_J2 * adivr * adivr
     gm_r2 = JSBSIM_GM / (r * r)
-    gx = -gm_r2 * (1.0 + pre * (1.0 - 5.0 * s_gc * s_gc)) * x / r + OMEGA_EARTH_RPS ** 2 * x
+    gx = -gm_r2 * (1.0 + pre * (1.0 - 5.0 * s_gc * s_gc)) * x / r + OMEGA_EARTH_RPS**2 * x
     gz = -gm_r2 * (1.0 + pre * (3.0 - 5.0 * s_gc * s_gc)) * z / r
     # NED axes at lon = 0: N = (-sl, 0, cl), D = (-cl, 0, -sl) in (x, y, z)
     g[0] = -sl * gx + cl * gz
@@ -75,10 +78,14 @@ def gravity_ned(lat: float, h: float, model: int) -> np.ndarray:
 
 @njit(cache=True)
 def _qmul(a, b):
-    return np.array([a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-                     a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-                     a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-                     a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
+    return np.array(
+        [
+            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+        ]
+    )
 
 
 @njit(cache=True)
@@ -134,8 +141,24 @@ def _rates(lat, h, vn, ve):
 
 
 @njit(cache=True)
-def propagate_chunk(state, prev_imu, baro_state, t_imu, f_b, w_b, imu_ok, t_baro, h_baro, baro_ok,
-                    accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model, interval_samples, out):
+def propagate_chunk(
+    state,
+    prev_imu,
+    baro_state,
+    t_imu,
+    f_b,
+    w_b,
+    imu_ok,
+    t_baro,
+    h_baro,
+    baro_ok,
+    accel_bias_b,
+    gyro_bias_b,
+    tau_baro_s,
+    gravity_model,
+    interval_samples,
+    out,
+):
     """Advance the INS over IMU samples t_imu[k] (k = 0..n-1).
 
     state (10,): lat, lon, h, vn, ve, vd, q_bn (w, x, y, z); updated in place.
@@ -150,8 +173,8 @@ def propagate_chunk(state, prev_imu, baro_state, t_imu, f_b, w_b, imu_ok, t_baro
     jb = 0
     bad = 0
     k1 = 3.0 / tau_baro_s
-    k2 = 3.0 / tau_baro_s ** 2
-    k3 = 1.0 / tau_baro_s ** 3
+    k2 = 3.0 / tau_baro_s**2
+    k3 = 1.0 / tau_baro_s**3
     for k in range(n):
         f1 = f_b[k] - accel_bias_b
         w1 = w_b[k] - gyro_bias_b
@@ -181,10 +204,10 @@ def propagate_chunk(state, prev_imu, baro_state, t_imu, f_b, w_b, imu_ok, t_baro
                 out[k, j] = state[j]
             continue
         dt = t_imu[k] - prev_imu[0]
-        if interval_samples:     # sample k is the mean over (t_{k-1}, t_k]: use it alone for the step
+        if interval_samples:  # sample k is the mean over (t_{k-1}, t_k]: use it alone for the step
             f0 = f1
             w0 = w1
-        else:                    # instantaneous samples: trapezoid of the two ends
+        else:  # instantaneous samples: trapezoid of the two ends
             f0 = prev_imu[1:4]
             w0 = prev_imu[4:7]
         if dt <= 0.0:
@@ -238,8 +261,11 @@ def propagate_chunk(state, prev_imu, baro_state, t_imu, f_b, w_b, imu_ok, t_baro
 
 def euler_from_C_bn(C: np.ndarray) -> tuple[float, float, float]:
     """3-2-1 Euler angles (roll, pitch, yaw; rad) of a body FRD -> NED matrix."""
-    return (float(np.arctan2(C[2, 1], C[2, 2])), float(-np.arcsin(np.clip(C[2, 0], -1.0, 1.0))),
-            float(np.arctan2(C[1, 0], C[0, 0])))
+    return (
+        float(np.arctan2(C[2, 1], C[2, 2])),
+        float(-np.arcsin(np.clip(C[2, 0], -1.0, 1.0))),
+        float(np.arctan2(C[1, 0], C[0, 0])),
+    )
 
 
 def quat_from_C_bn(C: np.ndarray) -> np.ndarray:
@@ -273,8 +299,9 @@ class StrapdownIns:
     an error-state filter sets them.
     """
 
-    def __init__(self, gravity_model: str = "j2", tau_baro_s: float | None = 30.0,
-                 imu_samples: str = "instant"):
+    def __init__(
+        self, gravity_model: str = "j2", tau_baro_s: float | None = 30.0, imu_samples: str = "instant"
+    ):
         if gravity_model not in GRAVITY_MODELS:
             raise ValueError(f"gravity_model must be one of {list(GRAVITY_MODELS)}, got {gravity_model!r}")
         if tau_baro_s is not None and not tau_baro_s > 0:
@@ -292,9 +319,19 @@ class StrapdownIns:
         self.t_s = np.nan
         self.bad_imu_samples = 0
 
-    def reset(self, t_s: float, lat_rad: float, lon_rad: float, h_m: float, v_ned_mps, roll_rad: float,
-              pitch_rad: float, yaw_rad: float) -> None:
+    def reset(
+        self,
+        t_s: float,
+        lat_rad: float,
+        lon_rad: float,
+        h_m: float,
+        v_ned_mps,
+        roll_rad: float,
+        pitch_rad: float,
+        yaw_rad: float,
+    ) -> None:
         from terrain.geodesy import euler_to_C_bn
+
         self.state = np.empty(N_STATE)
         self.state[:3] = (lat_rad, lon_rad, h_m)
         self.state[3:6] = np.asarray(v_ned_mps, float)
@@ -306,8 +343,9 @@ class StrapdownIns:
         self.t_s = float(t_s)
         self.bad_imu_samples = 0
 
-    def propagate(self, t_imu, f_b_mps2, omega_ib_b_rps, imu_valid=None, t_baro=None, h_baro_m=None,
-                  baro_valid=None) -> np.ndarray:
+    def propagate(
+        self, t_imu, f_b_mps2, omega_ib_b_rps, imu_valid=None, t_baro=None, h_baro_m=None, baro_valid=None
+    ) -> np.ndarray:
         """Advance over IMU samples; returns the (n, 10) state history [lat, lon, h, v_ned, q_bn]."""
         t_imu = np.ascontiguousarray(t_imu, dtype=float)
         n = t_imu.shape[0]
@@ -317,14 +355,29 @@ class StrapdownIns:
         else:
             t_baro = np.ascontiguousarray(t_baro, float)
             h_baro_m = np.ascontiguousarray(h_baro_m, float)
-            baro_valid = (np.ones(len(t_baro), bool) if baro_valid is None
-                          else np.ascontiguousarray(baro_valid, bool))
+            baro_valid = (
+                np.ones(len(t_baro), bool) if baro_valid is None else np.ascontiguousarray(baro_valid, bool)
+            )
         out = np.empty((n, N_STATE))
         tau = 1e30 if self.tau_baro_s is None else float(self.tau_baro_s)
-        bad = propagate_chunk(self.state, self.prev_imu, self.baro_state, t_imu,
-                              np.ascontiguousarray(f_b_mps2, float), np.ascontiguousarray(omega_ib_b_rps, float),
-                              ok, t_baro, h_baro_m, baro_valid, self.accel_bias_b, self.gyro_bias_b, tau,
-                              GRAVITY_MODELS[self.gravity_model], self.imu_samples == "interval", out)
+        bad = propagate_chunk(
+            self.state,
+            self.prev_imu,
+            self.baro_state,
+            t_imu,
+            np.ascontiguousarray(f_b_mps2, float),
+            np.ascontiguousarray(omega_ib_b_rps, float),
+            ok,
+            t_baro,
+            h_baro_m,
+            baro_valid,
+            self.accel_bias_b,
+            self.gyro_bias_b,
+            tau,
+            GRAVITY_MODELS[self.gravity_model],
+            self.imu_samples == "interval",
+            out,
+        )
         self.bad_imu_samples += int(bad)
         if n:
             self.t_s = float(t_imu[-1])
@@ -343,6 +396,7 @@ class StrapdownIns:
         """Subtract estimated errors: position error (m, NED), velocity error (m/s), attitude error (rad,
         small rotation of the computed navigation frame: C_true = (I + [psi x]) C_computed)."""
         from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
         lat, h = self.state[0], self.state[2]
         if d_ned_m is not None:
             dn, de, dd = d_ned_m

@@ -36,7 +36,7 @@ from .tercom import TercomBatch, TercomFix, correlate
 G0 = 9.80665
 N_ERR = 13
 CHI2_2DOF_99_99 = 18.42
-R0_GEOPOTENTIAL_M = 6356766.0      # US Standard Atmosphere 1976 Earth radius for geopotential height
+R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 
 
 def _skew(v):
@@ -67,23 +67,45 @@ class InsTrnNavigator:
     6356766 m, US 1976) before eq 1/2 (about +5 m at 5600 m). remove_bias: mean-removed MAD (tercom).
     """
 
-    def __init__(self, aiding: str | None = None, dem=None, formula: str = "proposed",
-                 fix_period_s: float = 40.0, half_cells: int = 50, cell_m: float = 5.0,
-                 fix_sigma_m: float = 10.0, ekf_rate_hz: float = 50.0, gravity_model: str = "j2",
-                 tau_baro_s: float = 30.0, accel_bias_mps2: float = 50e-6 * G0,
-                 accel_noise_mps2_rthz: float = 10e-6 * G0, gyro_bias_rps: float = np.radians(0.005) / 3600,
-                 gyro_noise_rps_rthz: float = np.radians(0.005) / 60, ira_decimation: int = 1,
-                 gate_chi2: float = CHI2_2DOF_99_99, min_samples: int = 20,
-                 dp_min_m: float = 0.0, dp_reference_formula: str = "conventional", imu_samples: str = "interval",
-                 name: str | None = None):
+    def __init__(
+        self,
+        aiding: str | None = None,
+        dem=None,
+        formula: str = "proposed",
+        fix_period_s: float = 40.0,
+        half_cells: int = 50,
+        cell_m: float = 5.0,
+        fix_sigma_m: float = 10.0,
+        ekf_rate_hz: float = 50.0,
+        gravity_model: str = "j2",
+        tau_baro_s: float = 30.0,
+        accel_bias_mps2: float = 50e-6 * G0,
+        accel_noise_mps2_rthz: float = 10e-6 * G0,
+        gyro_bias_rps: float = np.radians(0.005) / 3600,
+        gyro_noise_rps_rthz: float = np.radians(0.005) / 60,
+        ira_decimation: int = 1,
+        gate_chi2: float = CHI2_2DOF_99_99,
+        min_samples: int = 20,
+        dp_min_m: float = 0.0,
+        dp_reference_formula: str = "conventional",
+        imu_samples: str = "interval",
+        baro_geopotential: bool = True,
+        remove_bias: bool = False,
+        name: str | None = None,
+    ):
         if aiding not in (None, "ira", "radar_altimeter"):
             raise ValueError(f"aiding must be None, 'ira' or 'radar_altimeter', got {aiding!r}")
         if formula not in FORMULAS:
             raise ValueError(f"formula must be one of {FORMULAS}, got {formula!r}")
         if dp_reference_formula not in FORMULAS:
             raise ValueError(f"dp_reference_formula must be one of {FORMULAS}, got {dp_reference_formula!r}")
-        for key, val in (("fix_period_s", fix_period_s), ("cell_m", cell_m), ("fix_sigma_m", fix_sigma_m),
-                         ("ekf_rate_hz", ekf_rate_hz), ("tau_baro_s", tau_baro_s)):
+        for key, val in (
+            ("fix_period_s", fix_period_s),
+            ("cell_m", cell_m),
+            ("fix_sigma_m", fix_sigma_m),
+            ("ekf_rate_hz", ekf_rate_hz),
+            ("tau_baro_s", tau_baro_s),
+        ):
             if not (np.isfinite(val) and val > 0):
                 raise ValueError(f"{key} must be a positive number, got {val}")
         if int(half_cells) < 1 or int(ira_decimation) < 1:
@@ -93,6 +115,7 @@ class InsTrnNavigator:
                 raise ValueError("dem: the navigator's terrain map is required when aiding is set")
             if isinstance(dem, str):
                 import terrain
+
                 dem = terrain.load(dem)
         self.name = name or ("ins" if aiding is None else "ins_tercom")
         self.aiding = aiding
@@ -125,15 +148,23 @@ class InsTrnNavigator:
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
-        self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
-                       initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
+        self.ins.reset(
+            initial.t_s,
+            initial.lat_rad,
+            initial.lon_rad,
+            initial.h_m,
+            initial.v_ned_mps,
+            initial.roll_rad,
+            initial.pitch_rad,
+            initial.yaw_rad,
+        )
         P = np.zeros((N_ERR, N_ERR))
         cov = np.asarray(initial.covariance, float)
         if cov.shape != (9, 9) or not _is_pd(cov):
             raise ValueError("initial.covariance must be a positive definite 9 x 9 matrix")
         P[:9, :9] = cov
-        P[9:12, 9:12] = np.eye(3) * self.sig_ba ** 2
-        P[12, 12] = self.sig_bg ** 2
+        P[9:12, 9:12] = np.eye(3) * self.sig_ba**2
+        P[12, 12] = self.sig_bg**2
         self.kf.x = np.zeros((N_ERR, 1))
         self.kf.P = P
         self._P_good = P.copy()
@@ -152,7 +183,7 @@ class InsTrnNavigator:
         t = np.asarray(imu.t_s, float)
         n = t.size
         a = 0
-        while a < n:     # split the chunk at fix times so that fixes are applied when they fall due
+        while a < n:  # split the chunk at fix times so that fixes are applied when they fall due
             if self.aiding is None:
                 b = n
             else:
@@ -173,9 +204,13 @@ class InsTrnNavigator:
         tb = hb = vb = None
         if baro is not None:
             tb, hb, vb = baro.t_s, baro.h_baro_m, baro.valid & np.isfinite(baro.h_baro_m)
+            if self.baro_geopotential:
+                hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
             if (~vb).any():
                 self._count_skip(float(imu.t_s[a]), "baro_invalid", int((~vb).sum()), "baro samples invalid")
-        hist = self.ins.propagate(imu.t_s[sl], imu.f_b_mps2[sl], imu.omega_ib_b_rps[sl], imu.valid[sl], tb, hb, vb)
+        hist = self.ins.propagate(
+            imu.t_s[sl], imu.f_b_mps2[sl], imu.omega_ib_b_rps[sl], imu.valid[sl], tb, hb, vb
+        )
         nbad = self.ins.bad_imu_samples - bad0
         if nbad:
             self._count_skip(float(imu.t_s[a]), "imu_invalid", nbad, "IMU samples invalid (held previous)")
@@ -198,11 +233,11 @@ class InsTrnNavigator:
         Q[6:9, 6:9] = np.eye(3) * self.q_gyr * dt
         Q[9:12, 9:12] = np.eye(3) * (0.01 * self.sig_ba) ** 2 * dt / 3600.0
         Q[12, 12] = (0.01 * self.sig_bg) ** 2 * dt / 3600.0
-        Q[2, 2] = 0.01 * dt                        # baro noise entering through the loop
+        Q[2, 2] = 0.01 * dt  # baro noise entering through the loop
         self.kf.Q = Q
         F = np.zeros((N_ERR, N_ERR))
         F[0:3, 3:6] = np.eye(3)
-        F[2, 2] = -3.0 / tau                       # baro loop on the vertical channel (navigators.ins)
+        F[2, 2] = -3.0 / tau  # baro loop on the vertical channel (navigators.ins)
         I13 = np.eye(N_ERR)
         ks = np.clip(np.searchsorted(t_imu, self._t_ekf + dt * np.arange(1, n_steps + 1)), 0, t_imu.size - 1)
         for k in ks:
@@ -220,7 +255,7 @@ class InsTrnNavigator:
             w_en = np.array([ve / re, -vn / rn, -ve * np.tan(lat) / re])
             g_over_r = G0 / np.sqrt(rn * re)
             F[3, 0] = F[4, 1] = -g_over_r
-            F[5, 2] = 2.0 * g_over_r - 3.0 / tau ** 2
+            F[5, 2] = 2.0 * g_over_r - 3.0 / tau**2
             F[3:6, 3:6] = -_skew(2.0 * w_ie + w_en)
             F[3:6, 6:9] = _skew(f_n)
             F[3:6, 9:12] = C
@@ -259,14 +294,16 @@ class InsTrnNavigator:
         if self.aiding == "ira" and self.ira_decimation > 1:
             idx = np.nonzero(sel)[0]
             keep = np.zeros_like(sel)
-            keep[idx[::self.ira_decimation]] = True
+            keep[idx[:: self.ira_decimation]] = True
             sel = keep
         if not sel.any():
             return
         ok = sel & src.valid & np.isfinite(rng_m) & np.isfinite(theta) & (rng_m > 0)
         nbad = int((sel & ~ok).sum())
         if nbad:
-            self._count_skip(t0, "altimeter_no_return", nbad, f"{nbad} altimeter samples without a valid return")
+            self._count_skip(
+                t0, "altimeter_no_return", nbad, f"{nbad} altimeter samples without a valid return"
+            )
         if not ok.any():
             return
         ts_ok = ts[ok]
@@ -289,19 +326,23 @@ class InsTrnNavigator:
         if self.aiding == "ira":
             C = np.stack([quat_to_dcm(q) for q in st[:, 6:10]])
             p = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.formula, C_bn=C)
-            if self.dp_min_m > 0.0:     # seed 000 Table 3: keep samples where the formulas differ by > dp
-                pa, pb = (closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=f, C_bn=C)
-                          for f in ("proposed", self.dp_reference_formula))
-                dp = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])     # eqs 37-39
+            if self.dp_min_m > 0.0:  # seed 000 Table 3: keep samples where the formulas differ by > dp
+                pa, pb = (
+                    closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=f, C_bn=C)
+                    for f in ("proposed", self.dp_reference_formula)
+                )
+                dp = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])  # eqs 37-39
                 keep = dp > self.dp_min_m
                 p, st, h_ref, ts_ok = p[keep], st[keep], h_ref[keep], ts_ok[keep]
             nan = ~np.all(np.isfinite(p), axis=1)
             if nan.any():
-                self._count_skip(t0, "ira_geometry", int(nan.sum()), "IRA samples with no closest-point solution")
-            h_meas = h_ref - np.abs(p[:, 2])                 # seed 000 eq 2: h_baro - |p_alt|
+                self._count_skip(
+                    t0, "ira_geometry", int(nan.sum()), "IRA samples with no closest-point solution"
+                )
+            h_meas = h_ref - np.abs(p[:, 2])  # seed 000 eq 2: h_baro - |p_alt|
             self.batch.add(ts_ok, st[:, 0], st[:, 1], h_meas, p[:, 0], p[:, 1])
         else:
-            h_meas = h_ref - R                               # seed 000 eq 1
+            h_meas = h_ref - R  # seed 000 eq 1
             self.batch.add(ts_ok, st[:, 0], st[:, 1], h_meas)
 
     def _fix(self, t_s: float) -> None:
@@ -312,16 +353,26 @@ class InsTrnNavigator:
         if s.shape[0] < self.min_samples:
             self._count_skip(t_s, "tercom_too_few_samples", 1, f"TERCOM batch with {s.shape[0]} samples")
             return
-        fix = correlate(self.dem, t_s, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], half=self.half_cells,
-                        cell_m=self.cell_m, remove_bias=self.remove_bias)
+        fix = correlate(
+            self.dem,
+            t_s,
+            s[:, 1],
+            s[:, 2],
+            s[:, 3],
+            s[:, 4],
+            s[:, 5],
+            half=self.half_cells,
+            cell_m=self.cell_m,
+            remove_bias=self.remove_bias,
+        )
         self.fixes.append(fix)
         if not fix.valid:
             self._count_skip(t_s, f"tercom_{fix.reason}", 1, f"TERCOM fix rejected: {fix.reason}")
             return
-        z = -np.array([[fix.dn_m], [fix.de_m]])              # INS minus matched position
+        z = -np.array([[fix.dn_m], [fix.de_m]])  # INS minus matched position
         H = np.zeros((2, N_ERR))
         H[0, 0] = H[1, 1] = 1.0
-        Rm = np.eye(2) * self.fix_sigma_m ** 2
+        Rm = np.eye(2) * self.fix_sigma_m**2
         S = H @ self.kf.P @ H.T + Rm
         d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])
         if not np.isfinite(d2) or d2 > self.gate_chi2:
@@ -340,7 +391,9 @@ class InsTrnNavigator:
         self.kf.x[:] = 0.0
         self.health.status = "ok"
         self.health.ok = True
-        self.health.events.append((t_s, f"TERCOM fix dn={fix.dn_m:.1f} m de={fix.de_m:.1f} m q={fix.quality:.2f}"))
+        self.health.events.append(
+            (t_s, f"TERCOM fix dn={fix.dn_m:.1f} m de={fix.de_m:.1f} m q={fix.quality:.2f}")
+        )
 
     def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
         self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)
@@ -356,20 +409,50 @@ class InsTrnNavigator:
             self.health.ok, self.health.status = False, "diverged"
         elif self.aiding is not None and sig_h > 2000.0:
             self.health.ok, self.health.status = False, "degraded"
-        extra = {"accel_bias_b_mps2": self.ins.accel_bias_b.copy(), "gyro_bias_z_rps": float(self.ins.gyro_bias_b[2])}
+        extra = {
+            "accel_bias_b_mps2": self.ins.accel_bias_b.copy(),
+            "gyro_bias_z_rps": float(self.ins.gyro_bias_b[2]),
+        }
         if self.fixes:
             f = self.fixes[-1]
-            extra.update(last_fix_t_s=f.t_s, last_fix_dn_m=f.dn_m, last_fix_de_m=f.de_m,
-                         last_fix_quality=f.quality, last_fix_valid=f.valid)
-        health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
-                        events=list(self.health.events))
-        return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
-                        v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
-                        health=health, extra=extra)
+            extra.update(
+                last_fix_t_s=f.t_s,
+                last_fix_dn_m=f.dn_m,
+                last_fix_de_m=f.de_m,
+                last_fix_quality=f.quality,
+                last_fix_valid=f.valid,
+            )
+        health = Health(
+            ok=self.health.ok,
+            status=self.health.status,
+            skipped=dict(self.health.skipped),
+            events=list(self.health.events),
+        )
+        return Estimate(
+            t_s=self.ins.t_s,
+            lat_rad=float(st[0]),
+            lon_rad=float(st[1]),
+            h_m=float(st[2]),
+            v_ned_mps=st[3:6].copy(),
+            roll_rad=roll,
+            pitch_rad=pitch,
+            yaw_rad=yaw,
+            covariance=P,
+            health=health,
+            extra=extra,
+        )
 
 
-def initial_covariance(sigma_ne_m: float = 30.0, sigma_d_m: float = 15.0, sigma_v_mps: float = 0.1,
-                       sigma_tilt_rad: float = 0.05e-3, sigma_yaw_rad: float = 1e-3) -> np.ndarray:
+def initial_covariance(
+    sigma_ne_m: float = 30.0,
+    sigma_d_m: float = 15.0,
+    sigma_v_mps: float = 0.1,
+    sigma_tilt_rad: float = 0.05e-3,
+    sigma_yaw_rad: float = 1e-3,
+) -> np.ndarray:
     """9 x 9 initial covariance; defaults are seed 000 Table 2's initial errors."""
-    return np.diag([sigma_ne_m ** 2, sigma_ne_m ** 2, sigma_d_m ** 2] + [sigma_v_mps ** 2] * 3
-                   + [sigma_tilt_rad ** 2, sigma_tilt_rad ** 2, sigma_yaw_rad ** 2])
+    return np.diag(
+        [sigma_ne_m**2, sigma_ne_m**2, sigma_d_m**2]
+        + [sigma_v_mps**2] * 3
+        + [sigma_tilt_rad**2, sigma_tilt_rad**2, sigma_yaw_rad**2]
+    )

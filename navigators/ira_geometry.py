@@ -48,8 +48,8 @@ def velocity_angles(v_ned_mps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     beta = ground-track angle from north (eq 10, computed with atan2 over all quadrants)."""
     v = np.atleast_2d(np.asarray(v_ned_mps, dtype=float))
     v_h = np.hypot(v[:, 0], v[:, 1])
-    alpha = np.arctan2(-v[:, 2], v_h)          # eq 9: atan(v_u / sqrt(v_e^2 + v_n^2)), v_u = -v_d
-    beta = np.arctan2(v[:, 1], v[:, 0])        # eq 10 (atan2 form)
+    alpha = np.arctan2(-v[:, 2], v_h)  # eq 9: atan(v_u / sqrt(v_e^2 + v_n^2)), v_u = -v_d
+    beta = np.arctan2(v[:, 1], v[:, 0])  # eq 10 (atan2 form)
     return alpha, beta
 
 
@@ -82,16 +82,16 @@ def effective_look_angle(theta_rad, C_bn: np.ndarray, v_ned_mps: np.ndarray) -> 
     n = C.shape[0]
     theta = _as_n(theta_rad, n)
     s1, s2 = zero_doppler_basis(v_ned_mps)
-    y_b = C[:, :, 1]                                    # body right axis in NED
-    t1 = np.einsum("ij,ij->i", y_b, s1)                 # eq 31
+    y_b = C[:, :, 1]  # body right axis in NED
+    t1 = np.einsum("ij,ij->i", y_b, s1)  # eq 31
     t2 = np.einsum("ij,ij->i", y_b, s2)
     rho = np.hypot(t1, t2)
     ratio = np.sin(theta) / np.where(rho > 0.0, rho, np.nan)  # eq 32
     valid = np.isfinite(ratio) & (np.abs(ratio) <= 1.0)
-    asn = np.arcsin(np.clip(ratio, -1.0, 1.0))          # eq 34
-    eta = np.arctan2(t1, t2)                            # eq 33: sin eta = t1/rho, cos eta = t2/rho
-    xi_a = asn - eta                                    # eq 35, first branch
-    xi_b = np.pi - asn - eta                            # second solution of sin(eta + xi) = sin theta / rho
+    asn = np.arcsin(np.clip(ratio, -1.0, 1.0))  # eq 34
+    eta = np.arctan2(t1, t2)  # eq 33: sin eta = t1/rho, cos eta = t2/rho
+    xi_a = asn - eta  # eq 35, first branch
+    xi_b = np.pi - asn - eta  # second solution of sin(eta + xi) = sin theta / rho
     # roll of the body about the velocity: the branch nearest the conventional angle is the physical one.
     roll = np.arctan2(C[:, 2, 1], C[:, 2, 2])
     ref = conventional_angle(theta, roll)
@@ -108,8 +108,16 @@ def _in_plane(range_m: np.ndarray, angle: np.ndarray, v_ned_mps: np.ndarray) -> 
     return range_m[:, None] * (np.cos(angle)[:, None] * s1 + np.sin(angle)[:, None] * s2)
 
 
-def closest_point_ned(range_m, theta_rad, roll_rad, pitch_rad, yaw_rad, v_ned_mps,
-                      formula: str = "proposed", C_bn: np.ndarray | None = None) -> np.ndarray:
+def closest_point_ned(
+    range_m,
+    theta_rad,
+    roll_rad,
+    pitch_rad,
+    yaw_rad,
+    v_ned_mps,
+    formula: str = "proposed",
+    C_bn: np.ndarray | None = None,
+) -> np.ndarray:
     """Relative position (m, NED, shape (n, 3)) from the antenna to the IRA closest point.
 
     range_m: slant range R (n,); theta_rad: look angle (n,), IraFrame convention; roll/pitch/yaw (n,) INS
@@ -133,17 +141,18 @@ def closest_point_ned(range_m, theta_rad, roll_rad, pitch_rad, yaw_rad, v_ned_mp
     if formula == "simple":
         # eq 3: p_(e,n) = R sin(theta) x (cross-track unit vector), p_u = -R cos(theta); in NED the
         # cross-track (right) direction of heading psi is [-sin psi, cos psi, 0].
-        return np.stack([-R * np.sin(theta) * np.sin(yaw), R * np.sin(theta) * np.cos(yaw),
-                         R * np.cos(theta)], axis=1)
+        return np.stack(
+            [-R * np.sin(theta) * np.sin(yaw), R * np.sin(theta) * np.cos(yaw), R * np.cos(theta)], axis=1
+        )
     if formula == "attitude":
         # eqs 4-8: body look vector [0, sin theta, cos theta] (FRD; paper: [0, 0, -R] rotated by the look
         # angle about the forward axis) taken to NED with the INS attitude matrix.
         d_b = np.stack([np.zeros(n), np.sin(theta), np.cos(theta)], axis=1)
         return R[:, None] * np.einsum("nij,nj->ni", C, d_b)
     if formula == "conventional":
-        return _in_plane(R, conventional_angle(theta, roll), v)       # eqs 9-13
-    xi, valid = effective_look_angle(theta, C, v)                     # eqs 14-35
-    p = _in_plane(R, xi, v)                                           # eq 36
+        return _in_plane(R, conventional_angle(theta, roll), v)  # eqs 9-13
+    xi, valid = effective_look_angle(theta, C, v)  # eqs 14-35
+    p = _in_plane(R, xi, v)  # eq 36
     p[~valid] = np.nan
     return p
 

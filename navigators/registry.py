@@ -1,8 +1,8 @@
 """Navigator registry: `create(name, **settings)` and `available()`.
 
-    "ins"          strapdown INS + barometer, no terrain aiding (navigators.ins_trn_ekf.InsTrnNavigator)
-    "ins_tercom"   INS + batch TERCOM (IRA by default, aiding="radar_altimeter" for eq 1) + 13-state EKF;
-                   needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
+"ins"          strapdown INS + barometer, no terrain aiding (navigators.ins_trn_ekf.InsTrnNavigator)
+"ins_tercom"   INS + batch TERCOM (IRA by default, aiding="radar_altimeter" for eq 1) + 13-state EKF;
+               needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
 """
 
 from __future__ import annotations

@@ -26,11 +26,12 @@ from terrain.kernels import bilinear
 
 
 @njit(cache=True, error_model="numpy")
-def mad_surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half,
-                remove_bias):
+def mad_surface(
+    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
+):
     """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
     lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad).
-    remove_bias: subtract each cell's mean difference first (a height-bias-insensitive variant, not eq 1/2)."""
+    remove_bias: subtract each cell's mean difference first (bias-insensitive variant, not eq 1/2)."""
     n = 2 * half + 1
     m = lat_k.shape[0]
     out = np.empty((n, n))
@@ -66,16 +67,16 @@ class TercomFix:
 
     t_s: float
     valid: bool
-    reason: str                # "ok" or why the fix is unusable (no_samples, off_map, ...)
+    reason: str  # "ok" or why the fix is unusable (no_samples, off_map, ...)
     dn_m: float
     de_m: float
     dlat_rad: float
     dlon_rad: float
     mad_min_m: float
-    quality: float             # second-best separated local minimum / best (>= 1; larger = more distinct)
-    on_edge: bool              # minimum on the border of the reference matrix (true offset may lie outside)
+    quality: float  # second-best separated local minimum / best (>= 1; larger = more distinct)
+    on_edge: bool  # minimum on the border of the reference matrix (true offset may lie outside)
     n_samples: int
-    surface_m: np.ndarray      # (2 half + 1, 2 half + 1), rows north shift, columns east shift
+    surface_m: np.ndarray  # (2 half + 1, 2 half + 1), rows north shift, columns east shift
     cell_m: float
 
 
@@ -89,14 +90,25 @@ def _second_minimum(surface: np.ndarray, ia: int, ib: int, exclusion: int) -> fl
     for da in (-1, 0, 1):
         for db in (-1, 0, 1):
             if da or db:
-                is_min &= core <= pad[1 + da:n + 1 + da, 1 + db:n + 1 + db]
+                is_min &= core <= pad[1 + da : n + 1 + da, 1 + db : n + 1 + db]
     a, b = np.nonzero(is_min)
     far = np.maximum(np.abs(a - ia), np.abs(b - ib)) > exclusion
     return float(s[a[far], b[far]].min()) if far.any() else np.inf
 
 
-def correlate(grid, t_s: float, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_rel_m=None, half: int = 50,
-              cell_m: float = 5.0, exclusion_cells: int = 4, remove_bias: bool = False) -> TercomFix:
+def correlate(
+    grid,
+    t_s: float,
+    lat_rad,
+    lon_rad,
+    h_meas_m,
+    dn_rel_m=None,
+    de_rel_m=None,
+    half: int = 50,
+    cell_m: float = 5.0,
+    exclusion_cells: int = 4,
+    remove_bias: bool = False,
+) -> TercomFix:
     """Batch MAD fix from M samples (seed 000 eqs 1-2).
 
     grid: Dem.grid tuple (heights_m, lat0, lon0, dlat, dlon) or an object with `.grid`.
@@ -118,22 +130,59 @@ def correlate(grid, t_s: float, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_re
     n = 2 * half + 1
     empty = np.full((n, n), np.inf)
     if ok.sum() < 2:
-        return TercomFix(t_s, False, "no_samples", np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, False,
-                         int(ok.sum()), empty, cell_m)
+        return TercomFix(
+            t_s,
+            False,
+            "no_samples",
+            np.nan,
+            np.nan,
+            np.nan,
+            np.nan,
+            np.nan,
+            np.nan,
+            False,
+            int(ok.sum()),
+            empty,
+            cell_m,
+        )
     lat, lon, hm, dn, de = lat[ok], lon[ok], hm[ok], dn[ok], de[ok]
     lat_c = float(np.mean(lat))
     r_ns = meridian_radius_m(lat_c)
     r_ew = prime_vertical_radius_m(lat_c) * np.cos(lat_c)
-    lat_k = lat + dn / r_ns          # seed 000 eq 2: p_lat = p_n / R_ns
-    lon_k = lon + de / r_ew          #                p_lon = p_e / R_ew
+    lat_k = lat + dn / r_ns  # seed 000 eq 2: p_lat = p_n / R_ns
+    lon_k = lon + de / r_ew  #                p_lon = p_e / R_ew
     d_lat_cell = cell_m / r_ns
     d_lon_cell = cell_m / r_ew
-    surf = mad_surface(heights, float(lat0), float(lon0), float(dlat), float(dlon),
-                       np.ascontiguousarray(lat_k), np.ascontiguousarray(lon_k), np.ascontiguousarray(hm),
-                       d_lat_cell, d_lon_cell, half, bool(remove_bias))
+    surf = mad_surface(
+        heights,
+        float(lat0),
+        float(lon0),
+        float(dlat),
+        float(dlon),
+        np.ascontiguousarray(lat_k),
+        np.ascontiguousarray(lon_k),
+        np.ascontiguousarray(hm),
+        d_lat_cell,
+        d_lon_cell,
+        half,
+        bool(remove_bias),
+    )
     if not np.isfinite(surf).any():
-        return TercomFix(t_s, False, "off_map", np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, False,
-                         int(lat.size), surf, cell_m)
+        return TercomFix(
+            t_s,
+            False,
+            "off_map",
+            np.nan,
+            np.nan,
+            np.nan,
+            np.nan,
+            np.nan,
+            np.nan,
+            False,
+            int(lat.size),
+            surf,
+            cell_m,
+        )
     ia, ib = np.unravel_index(int(np.argmin(surf)), surf.shape)
     best = float(surf[ia, ib])
     second = _second_minimum(surf, ia, ib, exclusion_cells)
@@ -142,7 +191,10 @@ def correlate(grid, t_s: float, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_re
     partly_off = not np.isfinite(surf).all()
     dn_fix = (ia - half) * cell_m
     de_fix = (ib - half) * cell_m
-    near = surf[max(ia - exclusion_cells, 0):ia + exclusion_cells + 1, max(ib - exclusion_cells, 0):ib + exclusion_cells + 1]
+    near = surf[
+        max(ia - exclusion_cells, 0) : ia + exclusion_cells + 1,
+        max(ib - exclusion_cells, 0) : ib + exclusion_cells + 1,
+    ]
     valid = not on_edge and bool(np.isfinite(near).all())
     if on_edge:
         reason = "edge"
@@ -150,8 +202,21 @@ def correlate(grid, t_s: float, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_re
         reason = "minimum_next_to_map_edge"
     else:
         reason = "ok_partial_map" if partly_off else "ok"
-    return TercomFix(t_s, valid, reason, dn_fix, de_fix, dn_fix / r_ns, de_fix / r_ew, best, quality,
-                     on_edge, int(lat.size), surf, cell_m)
+    return TercomFix(
+        t_s,
+        valid,
+        reason,
+        dn_fix,
+        de_fix,
+        dn_fix / r_ns,
+        de_fix / r_ew,
+        best,
+        quality,
+        on_edge,
+        int(lat.size),
+        surf,
+        cell_m,
+    )
 
 
 class TercomBatch:
@@ -166,7 +231,14 @@ class TercomBatch:
     def add(self, t_s, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_rel_m=None) -> None:
         t = np.atleast_1d(np.asarray(t_s, float))
         z = np.zeros_like(t)
-        cols = [t, lat_rad, lon_rad, h_meas_m, z if dn_rel_m is None else dn_rel_m, z if de_rel_m is None else de_rel_m]
+        cols = [
+            t,
+            lat_rad,
+            lon_rad,
+            h_meas_m,
+            z if dn_rel_m is None else dn_rel_m,
+            z if de_rel_m is None else de_rel_m,
+        ]
         self._parts.append(np.stack([np.broadcast_to(np.asarray(c, float), t.shape) for c in cols], 1))
 
     @property

@@ -10,6 +10,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+# Points within 1e-9 post of the outermost posts count as inside (round-off in the index arithmetic).
+_EDGE = 1e-9
+
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def bilinear(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
@@ -17,14 +20,10 @@ def bilinear(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
     n_lat, n_lon = heights.shape
     fi = (lat - lat0) / dlat
     fj = (lon - lon0) / dlon
-    if not (fi >= 0.0 and fj >= 0.0 and fi <= n_lat - 1 and fj <= n_lon - 1):
+    if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
         return np.nan
-    i = int(fi)
-    j = int(fj)
-    if i > n_lat - 2:
-        i = n_lat - 2
-    if j > n_lon - 2:
-        j = n_lon - 2
+    i = min(max(int(fi), 0), n_lat - 2)
+    j = min(max(int(fj), 0), n_lon - 2)
     u = fi - i
     v = fj - j
     h00 = heights[i, j]
@@ -42,10 +41,10 @@ def bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, lat, lon):
     n_lat, n_lon = heights.shape
     fi = (lat - lat0) / dlat
     fj = (lon - lon0) / dlon
-    if not (fi >= 0.0 and fj >= 0.0 and fi <= n_lat - 1 and fj <= n_lon - 1):
+    if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
         return np.nan, np.nan, np.nan
-    i = min(int(fi), n_lat - 2)
-    j = min(int(fj), n_lon - 2)
+    i = min(max(int(fi), 0), n_lat - 2)
+    j = min(max(int(fj), 0), n_lon - 2)
     u = fi - i
     v = fj - j
     h00 = heights[i, j]
@@ -77,10 +76,10 @@ def bicubic(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
     n_lat, n_lon = heights.shape
     fi = (lat - lat0) / dlat
     fj = (lon - lon0) / dlon
-    if not (fi >= 0.0 and fj >= 0.0 and fi <= n_lat - 1 and fj <= n_lon - 1):
+    if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
         return np.nan
-    i = min(int(fi), n_lat - 2)
-    j = min(int(fj), n_lon - 2)
+    i = min(max(int(fi), 0), n_lat - 2)
+    j = min(max(int(fj), 0), n_lon - 2)
     wu = _cubic_weights(fi - i)
     wv = _cubic_weights(fj - j)
     acc = 0.0
@@ -105,11 +104,11 @@ def bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out):
     for k in range(lat.shape[0]):
         fi = (lat[k] - lat0) * inv_dlat
         fj = (lon[k] - lon0) * inv_dlon
-        if not (fi >= 0.0 and fj >= 0.0 and fi <= max_i and fj <= max_j):
+        if not (fi >= -_EDGE and fj >= -_EDGE and fi <= max_i + _EDGE and fj <= max_j + _EDGE):
             out[k] = np.nan
             continue
-        i = min(int(fi), n_lat - 2)
-        j = min(int(fj), n_lon - 2)
+        i = min(max(int(fi), 0), n_lat - 2)
+        j = min(max(int(fj), 0), n_lon - 2)
         u = fi - i
         v = fj - j
         h00 = heights[i, j]

@@ -64,7 +64,7 @@ def start_in_flight(
     return fdm
 
 
-def set_mass_kg(fdm: jsbsim.FGFDMExec, payload_kg: float) -> None:
+def set_payload_kg(fdm: jsbsim.FGFDMExec, payload_kg: float) -> None:
     """Set the cabin payload point mass (kg); with full fuel and 170 kg crew, 250 kg gives ~MTOW."""
     fdm["inertia/pointmass-weight-lbs[1]"] = payload_kg * LBS_PER_KG
 

@@ -7,15 +7,21 @@ A = 6378137.0
 E2 = 6.69437999014e-3
 OMEGA = 7.292115e-5
 FT = 0.3048
-GM = 14.0764417572e15 * FT**3     # JSBSim FGInertia
+GM = 14.0764417572e15 * FT**3  # JSBSim FGInertia
 J2 = 1.08262982e-3
 A_J2 = 20925646.32546 * FT
 
 
 def lla_to_ecef(lat, lon, h):
     re = A / np.sqrt(1 - E2 * np.sin(lat) ** 2)
-    return np.stack([(re + h) * np.cos(lat) * np.cos(lon), (re + h) * np.cos(lat) * np.sin(lon),
-                     (re * (1 - E2) + h) * np.sin(lat)], -1)
+    return np.stack(
+        [
+            (re + h) * np.cos(lat) * np.cos(lon),
+            (re + h) * np.cos(lat) * np.sin(lon),
+            (re * (1 - E2) + h) * np.sin(lat),
+        ],
+        -1,
+    )
 
 
 def gravitation_j2(r):
@@ -23,8 +29,14 @@ def gravitation_j2(r):
     s = r[..., 2] / rn
     pre = 1.5 * J2 * (A_J2 / rn) ** 2
     k = -GM / rn**3
-    return np.stack([k * (1 + pre * (1 - 5 * s * s)) * r[..., 0], k * (1 + pre * (1 - 5 * s * s)) * r[..., 1],
-                     k * (1 + pre * (3 - 5 * s * s)) * r[..., 2]], -1)
+    return np.stack(
+        [
+            k * (1 + pre * (1 - 5 * s * s)) * r[..., 0],
+            k * (1 + pre * (1 - 5 * s * s)) * r[..., 1],
+            k * (1 + pre * (3 - 5 * s * s)) * r[..., 2],
+        ],
+        -1,
+    )
 
 
 def C_en(lat, lon):
@@ -38,9 +50,14 @@ def C_en(lat, lon):
 
 def C_bn(r, p, y):
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.stack([np.stack([cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy], -1),
-                     np.stack([cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy], -1),
-                     np.stack([-sp, sr * cp, cr * cp], -1)], -2)
+    return np.stack(
+        [
+            np.stack([cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy], -1),
+            np.stack([cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy], -1),
+            np.stack([-sp, sr * cp, cr * cp], -1),
+        ],
+        -2,
+    )
 
 
 LAT0, LON0, H0 = np.radians(33.2), np.radians(-98.1), 3000.0
@@ -54,8 +71,11 @@ def lla(t):
 
 
 def euler(t):
-    return (0.4 * np.sin(2 * np.pi * t / 60), 0.05 + 0.05 * np.sin(2 * np.pi * t / 45),
-            0.5 * np.sin(2 * np.pi * t / 200) + 0.3 * np.sin(2 * np.pi * t / 33))
+    return (
+        0.4 * np.sin(2 * np.pi * t / 60),
+        0.05 + 0.05 * np.sin(2 * np.pi * t / 45),
+        0.5 * np.sin(2 * np.pi * t / 200) + 0.3 * np.sin(2 * np.pi * t / 33),
+    )
 
 
 def _d(fun, t, k, h):
@@ -81,8 +101,14 @@ def imu_and_truth(t, lla=lla, euler=euler):
     Cbe = Cbe_of(t)
     Cdot = _d(Cbe_of, t, 1, 0.01)
     Om = np.swapaxes(Cbe, -1, -2) @ Cdot
-    w_eb = np.stack([0.5 * (Om[:, 2, 1] - Om[:, 1, 2]), 0.5 * (Om[:, 0, 2] - Om[:, 2, 0]),
-                     0.5 * (Om[:, 1, 0] - Om[:, 0, 1])], -1)
+    w_eb = np.stack(
+        [
+            0.5 * (Om[:, 2, 1] - Om[:, 1, 2]),
+            0.5 * (Om[:, 0, 2] - Om[:, 2, 0]),
+            0.5 * (Om[:, 1, 0] - Om[:, 0, 1]),
+        ],
+        -1,
+    )
     w_ib = w_eb + np.einsum("nji,j->ni", Cbe, W)
     f_b = np.einsum("nji,nj->ni", Cbe, f_e)
     v_ned = np.einsum("nji,nj->ni", C_en(lat, lon), rd)

@@ -132,7 +132,7 @@ def ira(dem, lat, lon, h, v_ned, C_bn, half_window, max_range=12000.0, s_half_m=
         b = ned @ C_bn
         theta = np.arctan2(b[:, 1], b[:, 2])
         r = np.linalg.norm(ned, axis=1)
-        r = np.where((b[:, 2] > 0) & (np.abs(theta) <= half_window + 0.02), r, np.inf)
+        r = np.where((b[:, 2] > 0) & (np.abs(theta) <= half_window), r, np.inf)
         for i_loc, rv, zv in zip(ii, r, zz):
             g = chunk[i_loc]
             if rv < col_r[g]:

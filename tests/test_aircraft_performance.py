@@ -24,7 +24,7 @@ from jsbsim_helpers import (
     start_in_flight,
 )
 
-from trn_env.aircraft_data import available_aircraft
+from trn_env.aircraft_data import available_aircraft, new_fdm
 
 ELEVATOR_MIN_RAD = -0.349  # 20 deg trailing edge up
 ELEVATOR_MAX_RAD = 0.244  # 14 deg trailing edge down
@@ -67,6 +67,8 @@ def test_trims_level_flight_alpha_0_to_8deg_throttle_below_1(h_m: float, tas_mps
     alpha_deg = fdm["aero/alpha-deg"]
     throttle = fdm["fcs/throttle-cmd-norm[0]"]
     elevator_rad = fdm["fcs/elevator-pos-rad"]
+    print(f"trim {h_m:.0f} m {tas_mps:.0f} m/s: alpha {alpha_deg:.2f} deg, throttle {throttle:.3f}, "
+          f"elevator {math.degrees(elevator_rad):.2f} deg")
     assert -0.5 < alpha_deg < 8.0
     assert 0.05 < throttle < 1.0
     assert ELEVATOR_MIN_RAD * 0.8 < elevator_rad < ELEVATOR_MAX_RAD * 0.8
@@ -97,6 +99,7 @@ def test_stall_speed_at_mtow(
     k = int(np.argmax(cl))
     cl_max = cl[k]
     vs_eas_mps = math.sqrt(2.0 * mass_kg(fdm) * G0_MPS2 / (RHO0_KGPM3 * WING_AREA_M2 * cl_max))
+    print(f"stall flaps {35 * flaps_norm:.0f} deg: CLmax {cl_max:.3f}, Vs {vs_eas_mps:.2f} m/s EAS")
     assert mass_kg(fdm) == pytest.approx(MTOW_KG, rel=0.01)
     assert vs_min_mps <= vs_eas_mps <= vs_max_mps
     assert k < len(cl) - 100, "lift coefficient still rising at the end: no stall reached"
@@ -110,6 +113,7 @@ def test_max_level_speed_5000m_between_115_and_135_mps() -> None:
     over the last 50 s) and reached at constant altitude (+-10 m)."""
     rec = _full_power_level_run(5000.0, 115.0, 40000)
     v_max = rec[-1, 0]
+    print(f"max level speed at 5000 m: {v_max:.2f} m/s TAS")
     assert 115.0 <= v_max <= 135.0
     assert abs(rec[-1, 0] - rec[-5000, 0]) < 0.1
     assert np.abs(rec[:, 2] - 5000.0).max() < 10.0
@@ -127,5 +131,78 @@ def test_sea_level_climb_rate_at_mtow_between_8_and_12_mps() -> None:
     ps = v * dv_dt / G0_MPS2 + h_dot
     window = slice(300, 3900)  # engines spooled up; away from the filter edges
     k = int(np.argmax(ps[window]))
+    print(f"sea-level best climb: {ps[window][k]:.2f} m/s at {v[window][k]:.1f} m/s TAS")
     assert 8.0 <= ps[window][k] <= 12.0
     assert 55.0 < v[window][k] < 95.0
+
+
+def test_inertia_at_mtow_matches_roskam_radii_of_gyration() -> None:
+    """At MTOW the moments of inertia JSBSim assembles (empty + fuel tanks + point masses) equal Roskam's
+    twin-engine-propeller estimate I = m (k R / 2)^2 (Rx 0.34 span, Ry 0.29 length, Rz 0.44 mean of span and
+    length) within 3 %, and the centre of gravity sits within 0.1 m of the aerodynamic reference point."""
+    fdm = start_in_flight(1500.0, 85.0, trim=False)
+    m_kg, span_m, length_m = mass_kg(fdm), 15.3, 10.8
+    expected = {
+        "inertia/ixx-slugs_ft2": m_kg * (span_m * 0.34 / 2.0) ** 2,
+        "inertia/iyy-slugs_ft2": m_kg * (length_m * 0.29 / 2.0) ** 2,
+        "inertia/izz-slugs_ft2": m_kg * ((span_m + length_m) / 2.0 * 0.44 / 2.0) ** 2,
+    }
+    for prop, i_kgm2 in expected.items():
+        assert fdm[prop] * 1.3558179 == pytest.approx(i_kgm2, rel=0.03), prop
+    assert fdm["inertia/cg-x-in"] * 0.0254 == pytest.approx(4.80, abs=0.1)
+
+
+def _first_two_peaks(x: np.ndarray, dt_s: float) -> tuple[float, float]:
+    """Period (s) and damping ratio from the first two positive peaks of a decaying oscillation."""
+    peaks = [k for k in range(1, len(x) - 1) if x[k] > x[k - 1] and x[k] >= x[k + 1] and x[k] > 0]
+    assert len(peaks) >= 2, "no oscillation found"
+    period_s = (peaks[1] - peaks[0]) * dt_s
+    log_dec = math.log(x[peaks[0]] / x[peaks[1]])
+    return period_s, log_dec / math.sqrt(4.0 * math.pi**2 + log_dec**2)
+
+
+def test_dutch_roll_and_phugoid_meet_mil_f_8785c_level_1() -> None:
+    """Bare airframe (autopilot off) at 1,500 m / 85 m/s. Rudder doublet: Dutch roll damping ratio
+    >= 0.08 and natural frequency >= 0.4 rad/s (MIL-F-8785C Level 1, Class II). Elevator doublet: the
+    phugoid is stable with damping ratio >= 0.04 and a period of 20-90 s (light twins: ~30-60 s)."""
+    fdm = start_in_flight(1500.0, 85.0)
+    r0 = fdm["fcs/rudder-cmd-norm"]
+    for dr, n in ((0.3, 100), (-0.3, 100), (0.0, 1)):
+        fdm["fcs/rudder-cmd-norm"] = r0 + dr
+        fly(fdm, n, [])
+    beta = fly(fdm, 2000, ["aero/beta-rad"])[:, 0]
+    period_s, zeta = _first_two_peaks(beta, 0.01)
+    omega_n = 2.0 * math.pi / period_s / math.sqrt(1.0 - zeta**2)
+    print(f"dutch roll: zeta {zeta:.3f}, omega_n {omega_n:.2f} rad/s")
+    assert zeta >= 0.08
+    assert omega_n >= 0.4
+
+    fdm = start_in_flight(1500.0, 85.0)
+    e0 = fdm["fcs/elevator-cmd-norm"]
+    for de, n in ((-0.1, 50), (0.1, 50), (0.0, 1)):
+        fdm["fcs/elevator-cmd-norm"] = e0 + de
+        fly(fdm, n, [])
+    tas = fly(fdm, 30000, ["velocities/vtrue-fps"])[:, 0]
+    period_s, zeta = _first_two_peaks(tas - tas.mean(), 0.01)
+    print(f"phugoid: period {period_s:.1f} s, zeta {zeta:.3f}")
+    assert 20.0 <= period_s <= 90.0
+    assert zeta >= 0.04
+
+
+def test_sits_level_on_tricycle_gear_with_8_to_16_percent_on_the_nose_wheel() -> None:
+    """Parked at MTOW: all three wheels on the ground, attitude within 1 deg of level, the gear carries
+    the weight, and the nose wheel 8-16 % of it (spring force = compression x stiffness; the statics of the
+    CG 3.35 m behind the nose wheel and 0.45 m ahead of the mains give 11.8 %)."""
+    fdm = new_fdm("kingair", 0.01)
+    fdm["ic/terrain-elevation-ft"] = 500.0
+    fdm["ic/h-agl-ft"] = 0.0
+    fdm["ic/vt-kts"] = 0.0
+    fdm.run_ic()
+    fly(fdm, 500, [])
+    weight_n = mass_kg(fdm) * G0_MPS2
+    stiffness_npm = (60000.0, 200000.0, 200000.0)
+    loads_n = [fdm[f"gear/unit[{i}]/compression-ft"] * 0.3048 * stiffness_npm[i] for i in range(3)]
+    assert all(fdm[f"gear/unit[{i}]/WOW"] == 1 for i in range(3))
+    assert abs(fdm["attitude/theta-deg"]) < 1.0 and abs(fdm["attitude/phi-deg"]) < 1.0
+    assert sum(loads_n) == pytest.approx(weight_n, rel=0.03)
+    assert 0.08 <= loads_n[0] / weight_n <= 0.16

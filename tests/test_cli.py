@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from _ecef import ned_between as ned_vector_between
 
 from trn_env import cli, output
 from trn_env.scenario import builtin_names
-from trn_env.sensors.common import ned_vector_between
 from trn_env.sim import ClosedLoop
 
 SCEN = Path(__file__).parent / "scenarios"

@@ -7,12 +7,12 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from _ecef import ned_between as ned_vector_between
 from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 
 import trn_env  # noqa: F401 - registers the env id
 from trn_env.env import TerrainNavEnv
-from trn_env.sensors.common import ned_vector_between
 
 # cheap episodes: 1 s decisions, 12 s of flight, INS-only navigator
 SMALL = dict(decision_interval_s=1.0, max_episode_s=12.0, navigator="ins")
@@ -34,17 +34,22 @@ def test_registered_and_make_works():
 
 
 def test_check_env_passes():
-    e = TerrainNavEnv("default", render_mode="rgb_array", **SMALL)
-    check_env(e, skip_render_check=False)
+    e = gym.make("trn_env/TerrainNav-v0", render_mode="rgb_array", **SMALL)
+    check_env(e.unwrapped, skip_render_check=False)
     e.close()
 
 
 def test_spaces_and_aircraft_limits(env):
     a = env.action_space
     assert a.shape == (2,) and a.dtype == np.float32
+    assert np.all(a.low == -1.0) and np.all(a.high == 1.0)
     # 1 s decisions: rate-one turn (3 deg/s) and 5 m/s climb
-    assert np.allclose(a.high, [math.radians(3.0), 5.0], rtol=1e-6)
-    assert np.allclose(a.low, -a.high)
+    assert np.allclose(env.action_limits, [math.radians(3.0), 5.0])
+    env.reset(seed=0)
+    track0, agl0 = env._track_cmd_rad, env._agl_cmd_m
+    env.step(np.array([0.5, -1.0], np.float32))
+    assert env._track_cmd_rad - track0 == pytest.approx(math.radians(1.5))
+    assert env._agl_cmd_m - agl0 == pytest.approx(-5.0)
     assert env.observation_space.shape == (19,)
 
 
@@ -72,9 +77,9 @@ def test_identical_seeds_identical_episodes():
 def test_action_outside_space_raises(env):
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"action\[0\].*outside the action space"):
-        env.step(np.array([1.0, 0.0], np.float32))              # 57 deg in one second
+        env.step(np.array([1.5, 0.0], np.float32))
     with pytest.raises(ValueError, match=r"action\[1\].*outside"):
-        env.step(np.array([0.0, -50.0], np.float32))
+        env.step(np.array([0.0, -1.01], np.float32))
     with pytest.raises(ValueError, match="shape"):
         env.step(np.zeros(3, np.float32))
     with pytest.raises(ValueError, match="finite"):
@@ -103,10 +108,11 @@ def test_step_before_reset_and_after_end_raise():
 def test_observation_and_reward_match_independent_computation(env):
     obs0, info0 = env.reset(seed=5)
     est = env._loop.estimate
-    goal = ned_vector_between(est.lat_rad, est.lon_rad, est.h_m, env.goal_lat_rad, env.goal_lon_rad, est.h_m)[0]
+    goal = ned_vector_between(est.lat_rad, est.lon_rad, est.h_m, env.goal_lat_rad, env.goal_lon_rad,
+                              est.h_m)[0]
     assert np.allclose(obs0[:2], goal[:2] / 1000.0, atol=2e-3)       # km; small-offset vs ECEF
     assert np.allclose(obs0[8:11], np.log10(1.0 + est.sigma_ned_m), rtol=1e-5)
-    obs1, r, term, trunc, info1 = env.step(np.array([0.02, 3.0], np.float32))
+    obs1, r, term, trunc, info1 = env.step(np.array([0.5, 0.6], np.float32))
     expected = ((info0["true_distance_to_goal_m"] - info1["true_distance_to_goal_m"]) / 1000.0
                 - env.error_weight * info1["true_horizontal_error_m"] / 1000.0)
     assert r == pytest.approx(expected, rel=1e-9)
@@ -153,7 +159,7 @@ def test_render_rgb_array_shows_tracks():
     e.reset(seed=0)
     first = e.render()
     for _ in range(6):
-        e.step(np.array([0.05, 0.0], np.float32))
+        e.step(np.array([1.0, 0.0], np.float32))
     later = e.render()
     assert first.dtype == np.uint8 and first.ndim == 3 and first.shape[2] == 3
     assert first.shape == later.shape
@@ -170,6 +176,7 @@ def test_random_policy_through_async_vector_env():
     obs, _ = venv.reset(seed=[0, 1])
     assert obs.shape == (n_envs, 19)
     low, high = venv.single_action_space.low, venv.single_action_space.high
+    assert np.all(low == -1.0) and np.all(high == 1.0)
     episodes = 0
     total_steps = 200
     for _ in range(total_steps):

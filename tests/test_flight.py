@@ -276,7 +276,7 @@ def test_fuel_fraction_changes_the_mass():
 
 # ------------------------------------------------------------------------------------------ benchmark
 def test_benchmark_reports_its_figures():
-    out = benchmark(n_steps=200, chunk_steps=10, block_steps=100, ic=_ic())
+    out = benchmark(n_steps=400, chunk_steps=10, long_chunk_steps=100, block_steps=200, ic=_ic())
     assert set(out) >= {"jsbsim_steps_per_s", "flight_steps_per_s", "flight_ratio"}
     assert out["jsbsim_steps_per_s"] > 0 and out["flight_steps_per_s"] > 0
     assert out["flight_ratio"] == pytest.approx(out["flight_steps_per_s"] / out["jsbsim_steps_per_s"],

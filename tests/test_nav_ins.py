@@ -23,7 +23,7 @@ def _stationary_imu(lat, h, roll, pitch, yaw, n, model=1):
 
 
 def test_schuler_oscillation_from_accelerometer_bias():
-    """North accelerometer bias b at the equator: dx(t) = (b / w_s^2)(1 - cos w_s t), w_s^2 = g / (R_N + h)."""
+    """North accel bias b at the equator: dx(t) = (b / w_s^2)(1 - cos w_s t), w_s^2 = g / (R_N + h)."""
     lat, h, dt = 0.0, 0.0, 0.1
     t = np.arange(0.0, 2 * 5100.0, dt)
     f, w = _stationary_imu(lat, h, 0.0, 0.0, 0.0, t.size, model=0)
@@ -36,7 +36,7 @@ def test_schuler_oscillation_from_accelerometer_bias():
     w_s = np.sqrt(gravity_ned(lat, h, 0)[2] / (meridian_radius_m(lat) + h))
     assert 84.0 < 2 * np.pi / w_s / 60 < 84.6
     x_ref = b / w_s**2 * (1 - np.cos(w_s * t))
-    assert np.max(np.abs(x - x_ref)) < 0.01 * x_ref.max()     # amplitude ~1270 m, within 1 %
+    assert np.max(np.abs(x - x_ref)) < 0.01 * x_ref.max()  # amplitude ~1270 m, within 1 %
     # the period: the error returns to ~0 after one Schuler period and peaks at half of it
     k = int(round(2 * np.pi / w_s / dt))
     assert abs(x[k]) < 15.0 and x[k // 2] > 0.99 * 2 * b / w_s**2
@@ -61,7 +61,9 @@ def _run_reference(model, chunks=1):
     f, w, (lat, lon, h, v, eu) = imu_and_truth(t)
     ins = StrapdownIns(model, tau_baro_s=30.0)
     ins.reset(0.0, lat[0], lon[0], h[0], v[0], eu[0][0], eu[1][0], eu[2][0])
-    outs = [ins.propagate(t[s], f[s], w[s], None, t[s], h[s]) for s in np.array_split(np.arange(t.size), chunks)]
+    outs = [
+        ins.propagate(t[s], f[s], w[s], None, t[s], h[s]) for s in np.array_split(np.arange(t.size), chunks)
+    ]
     out = np.concatenate(outs)
     dn = (out[:, 0] - lat) * 6.37e6
     de = (out[:, 1] - lon) * 6.37e6 * np.cos(lat)

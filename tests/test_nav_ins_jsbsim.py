@@ -13,31 +13,59 @@ from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 flight_mod = pytest.importorskip("trn_env.flight")
 
 FT = 0.3048
-PLAN = [(0, 60, 3000), (60, 150, 3200), (150, -30, 3200), (240, 100, 2900), (330, 200, 3100), (420, 20, 3100),
-        (510, -80, 3000)]       # (start s, heading deg, altitude m)
-PROPS = ("position/lat-geod-rad", "position/long-gc-rad", "position/geod-alt-ft", "velocities/v-north-fps",
-         "velocities/v-east-fps", "velocities/v-down-fps", "attitude/phi-rad", "attitude/theta-rad",
-         "attitude/psi-rad", "velocities/pi-rad_sec", "velocities/qi-rad_sec", "velocities/ri-rad_sec",
-         "forces/fbx-total-lbs", "forces/fby-total-lbs", "forces/fbz-total-lbs", "inertia/mass-slugs")
+PLAN = [
+    (0, 60, 3000),
+    (60, 150, 3200),
+    (150, -30, 3200),
+    (240, 100, 2900),
+    (330, 200, 3100),
+    (420, 20, 3100),
+    (510, -80, 3000),
+]  # (start s, heading deg, altitude m)
+PROPS = (
+    "position/lat-geod-rad",
+    "position/long-gc-rad",
+    "position/geod-alt-ft",
+    "velocities/v-north-fps",
+    "velocities/v-east-fps",
+    "velocities/v-down-fps",
+    "attitude/phi-rad",
+    "attitude/theta-rad",
+    "attitude/psi-rad",
+    "velocities/pi-rad_sec",
+    "velocities/qi-rad_sec",
+    "velocities/ri-rad_sec",
+    "forces/fbx-total-lbs",
+    "forces/fby-total-lbs",
+    "forces/fbz-total-lbs",
+    "inertia/mass-slugs",
+)
 
 
 def _flight():
-    ic = flight_mod.InitialCondition(math.radians(36.85), math.radians(-84.25), 3000.0, 90.0, math.radians(60))
+    ic = flight_mod.InitialCondition(
+        math.radians(36.85), math.radians(-84.25), 3000.0, 90.0, math.radians(60)
+    )
     try:
         return flight_mod.Flight(ic)
-    except flight_mod.TrimError as exc:       # the aircraft model is still being tuned
+    except flight_mod.TrimError as exc:  # the aircraft model is still being tuned
         pytest.skip(f"flight core cannot trim: {exc}")
 
 
 def _targets(hd, alt):
-    return flight_mod.AutopilotTargets(lateral_mode=flight_mod.LateralMode.HEADING, heading_cmd_rad=math.radians(hd),
-                                       altitude_cmd_m=alt, tas_cmd_mps=90.0, bank_limit_rad=math.radians(30))
+    return flight_mod.AutopilotTargets(
+        lateral_mode=flight_mod.LateralMode.HEADING,
+        heading_cmd_rad=math.radians(hd),
+        altitude_cmd_m=alt,
+        tas_cmd_mps=90.0,
+        bank_limit_rad=math.radians(30),
+    )
 
 
 def _ins_error(t, lat, lon, h, v, eu, f_b, w_ib, mode):
     ins = StrapdownIns("j2", tau_baro_s=30.0, imu_samples=mode)
     ins.reset(t[0], lat[0], lon[0], h[0], v[0], eu[0][0], eu[1][0], eu[2][0])
-    out = ins.propagate(t, f_b, w_ib, None, t, h)      # baro = true height (perfect)
+    out = ins.propagate(t, f_b, w_ib, None, t, h)  # baro = true height (perfect)
     dn = (out[:, 0] - lat) * (meridian_radius_m(lat[0]) + h)
     de = (out[:, 1] - lon) * (prime_vertical_radius_m(lat[0]) + h) * np.cos(lat)
     return np.hypot(dn, de), np.abs(out[:, 2] - h)
@@ -63,9 +91,10 @@ def test_ins_follows_jsbsim_with_specific_force_from_total_forces():
     f_b = r[:, 12:15] / r[:, 15:16] * FT
     f_b = 0.5 * (f_b + np.concatenate([f_b[:1], f_b[:-1]]))
     w_ib = np.concatenate([r[:1, 9:12], r[:-1, 9:12]])
-    assert np.ptp(np.degrees(r[:, 6])) > 40.0          # it manoeuvred (banks both ways)
-    hor, ver = _ins_error(t, r[:, 0], r[:, 1], r[:, 2] * FT, r[:, 3:6] * FT, (r[:, 6], r[:, 7], r[:, 8]),
-                          f_b, w_ib, "interval")
+    assert np.ptp(np.degrees(r[:, 6])) > 40.0  # it manoeuvred (banks both ways)
+    hor, ver = _ins_error(
+        t, r[:, 0], r[:, 1], r[:, 2] * FT, r[:, 3:6] * FT, (r[:, 6], r[:, 7], r[:, 8]), f_b, w_ib, "interval"
+    )
     # measured 0.9-1.1 m after 10 min (depends on the current aircraft tuning): the residual grows like
     # t^2, i.e. a ~0.5 micro-g horizontal acceleration difference we have not traced; without the timing
     # alignment above the error is 12-40 m. Bound: 1.5 m (the issue asks 1 m).
@@ -73,9 +102,12 @@ def test_ins_follows_jsbsim_with_specific_force_from_total_forces():
     assert ver.max() < 1.0, ver.max()
 
 
-@pytest.mark.xfail(reason="trn_env.flight records f_b from accelerations/N{x,y,z}, which disagrees with JSBSim's "
-                          "own velocity history (~0.05 m/s over 10 min, ~40 m of INS drift); forces/fb*-total/mass "
-                          "agrees (test above). Reported to the lead.", strict=False)
+@pytest.mark.xfail(
+    reason="trn_env.flight records f_b from accelerations/N{x,y,z}, which disagrees with JSBSim's "
+    "own velocity history (~0.05 m/s over 10 min, ~40 m of INS drift); forces/fb*-total/mass "
+    "agrees (test above). Reported to the lead.",
+    strict=False,
+)
 def test_ins_follows_flight_core_truth_chunk():
     fl = _flight()
     chunks = [fl.snapshot()]
@@ -86,6 +118,15 @@ def test_ins_follows_flight_core_truth_chunk():
     tr = type(chunks[0]).concatenate(chunks)
     f_b = 0.5 * (tr.f_b_mps2 + np.concatenate([tr.f_b_mps2[:1], tr.f_b_mps2[:-1]]))
     w_ib = np.concatenate([tr.omega_ib_b_rps[:1], tr.omega_ib_b_rps[:-1]])
-    hor, ver = _ins_error(tr.t_s, tr.lat_rad, tr.lon_rad, tr.h_msl_m, tr.v_ned_mps,
-                          (tr.roll_rad, tr.pitch_rad, tr.yaw_rad), f_b, w_ib, "interval")
+    hor, ver = _ins_error(
+        tr.t_s,
+        tr.lat_rad,
+        tr.lon_rad,
+        tr.h_msl_m,
+        tr.v_ned_mps,
+        (tr.roll_rad, tr.pitch_rad, tr.yaw_rad),
+        f_b,
+        w_ib,
+        "interval",
+    )
     assert hor.max() < 1.0 and ver.max() < 1.0

@@ -23,7 +23,7 @@ LAT_C, LON_C = DEM.center_rad
 H = 2500.0
 V = 83.0
 HEADING = np.radians(70.0)
-CRAB = np.radians(8.0)     # crosswind: body yaw differs from the track by the crab angle
+CRAB = np.radians(8.0)  # crosswind: body yaw differs from the track by the crab angle
 T_END = 130.0
 
 
@@ -31,8 +31,11 @@ def _lla(t):
     r_n = meridian_radius_m(LAT_C) + H
     r_e = (prime_vertical_radius_m(LAT_C) + H) * np.cos(LAT_C)
     n0, e0 = -5500.0, -9000.0
-    return (LAT_C + (n0 + V * np.cos(HEADING) * t) / r_n, LON_C + (e0 + V * np.sin(HEADING) * t) / r_e,
-            np.full_like(t, H))
+    return (
+        LAT_C + (n0 + V * np.cos(HEADING) * t) / r_n,
+        LON_C + (e0 + V * np.sin(HEADING) * t) / r_e,
+        np.full_like(t, H),
+    )
 
 
 def _euler(t):
@@ -79,17 +82,30 @@ def _frames(fl, a, b, ira_valid=None, imu_f=None):
     iv = np.ones(kk.size, bool) if ira_valid is None else ira_valid[sel]
     R = np.where(iv, fl["R"][sel], np.nan)
     th = np.where(iv, fl["theta"][sel], np.nan)
-    return SensorFrames(t[0], t[-1] + 0.01, imu=ImuFrame(t, fb, fl["w"][a:b], ones),
-                        baro=BaroFrame(t[::5], fl["h"][a:b][::5], ones[::5]),
-                        ira=IraFrame(fl["t"][kk], R, th, iv),
-                        radar_altimeter=RadarAltimeterFrame(fl["t"][kk], fl["ra"][sel], np.ones(kk.size, bool)))
+    return SensorFrames(
+        t[0],
+        t[-1] + 0.01,
+        imu=ImuFrame(t, fb, fl["w"][a:b], ones),
+        baro=BaroFrame(t[::5], fl["h"][a:b][::5], ones[::5]),
+        ira=IraFrame(fl["t"][kk], R, th, iv),
+        radar_altimeter=RadarAltimeterFrame(fl["t"][kk], fl["ra"][sel], np.ones(kk.size, bool)),
+    )
 
 
 def _initial(fl, dn=60.0, de=-45.0):
     r_n = meridian_radius_m(fl["lat"][0]) + H
     r_e = (prime_vertical_radius_m(fl["lat"][0]) + H) * np.cos(fl["lat"][0])
-    return Estimate(0.0, fl["lat"][0] + dn / r_n, fl["lon"][0] + de / r_e, fl["h"][0], fl["v"][0].copy(),
-                    fl["eu"][0][0], fl["eu"][1][0], fl["eu"][2][0], initial_covariance())
+    return Estimate(
+        0.0,
+        fl["lat"][0] + dn / r_n,
+        fl["lon"][0] + de / r_e,
+        fl["h"][0],
+        fl["v"][0].copy(),
+        fl["eu"][0][0],
+        fl["eu"][1][0],
+        fl["eu"][2][0],
+        initial_covariance(),
+    )
 
 
 def _hor_err(est, fl, k):
@@ -113,7 +129,7 @@ def test_tercom_fixes_remove_initial_position_error(flight, aiding, formula):
     ests = _run(nav, flight)
     err0 = _hor_err(ests[0], flight, 99)
     err = _hor_err(ests[-1], flight, flight["t"].size - 1)
-    assert err0 > 60.0                         # the free-inertial start keeps the 75 m initial error
+    assert err0 > 60.0  # the free-inertial start keeps the 75 m initial error
     assert len([f for f in nav.fixes if f.valid]) >= 3
     assert err < 8.0, (err, [(f.dn_m, f.de_m, f.reason) for f in nav.fixes])
     assert ests[-1].health.status == "ok"
@@ -124,7 +140,7 @@ def test_free_inertial_keeps_initial_error(flight):
     nav = registry.create("ins")
     ests = _run(nav, flight, step=1000)
     err = _hor_err(ests[-1], flight, flight["t"].size - 1)
-    assert 74.0 < err < 76.5                   # perfect IMU: the 75 m initial offset stays
+    assert 74.0 < err < 76.5  # perfect IMU: the 75 m initial offset stays
     assert ests[-1].health.status == "free_inertial" and ests[-1].sigma_ned_m[0] > 29.0
 
 
@@ -151,6 +167,7 @@ def test_bad_input_is_skipped_and_reported(flight):
 def test_window_leaving_the_map_is_skipped(flight):
     """A navigator whose map is a small piece of the DEM: fixes off that map are rejected, never applied."""
     from terrain.dem import Dem
+
     h, lat0, lon0, dlat, dlon = DEM.grid
     small = Dem(h[:40, :40], lat0, lon0, dlat, dlon, "corner")
     nav = registry.create("ins_tercom", dem=small)
@@ -162,7 +179,7 @@ def test_window_leaving_the_map_is_skipped(flight):
 def test_covariance_not_positive_definite_is_repaired(flight):
     nav = registry.create("ins_tercom", dem=DEM)
     nav.reset(_initial(flight))
-    nav.kf.P[0, 0] = -5.0                       # corrupt the filter
+    nav.kf.P[0, 0] = -5.0  # corrupt the filter
     est = nav.update(_frames(flight, 0, 100))
     assert est.health.skipped.get("covariance_not_pd", 0) >= 1
     assert np.all(np.linalg.eigvalsh(nav.kf.P) > 0)

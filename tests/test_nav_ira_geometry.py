@@ -23,7 +23,7 @@ def _scene(n, rng, wind_mps, bank_max_deg=25.0):
     vh = v / np.linalg.norm(v, axis=1)[:, None]
     h_agl = rng.uniform(800, 5500, n)
     q = np.stack([rng.uniform(-0.3, 0.3, n) * h_agl, rng.uniform(-0.3, 0.3, n) * h_agl, h_agl], 1)
-    p = q - np.einsum("ni,ni->n", q, vh)[:, None] * vh     # project onto the plane normal to v
+    p = q - np.einsum("ni,ni->n", q, vh)[:, None] * vh  # project onto the plane normal to v
     R = np.linalg.norm(p, axis=1)
     L = 0.05
     x_r = np.einsum("nij,j->ni", C, [0.0, L, 0.0])
@@ -40,7 +40,9 @@ def test_proposed_recovers_closest_point_in_crosswind_and_bank():
     err = np.linalg.norm(p - s["p"], axis=1)
     assert np.all(err < 1.0), err.max()
     # the conventional formula does not (this is the point of seed 000)
-    pc = closest_point_ned(s["R"], s["theta"], s["roll"], s["pitch"], s["yaw"], s["v"], formula="conventional")
+    pc = closest_point_ned(
+        s["R"], s["theta"], s["roll"], s["pitch"], s["yaw"], s["v"], formula="conventional"
+    )
     assert np.max(np.linalg.norm(pc - s["p"], axis=1)) > 20.0
 
 
@@ -73,8 +75,12 @@ def test_simple_exact_for_level_flight():
     yaw = np.radians([0.0, 90.0])
     p = closest_point_ned(R, theta, 0.0, 0.0, yaw, np.array([[80.0, 0, 0], [0, 80.0, 0]]), formula="simple")
     # heading north, 10 deg right -> east; heading east, 20 deg left -> north
-    np.testing.assert_allclose(p[0], [0, 1000 * np.sin(np.radians(10)), 1000 * np.cos(np.radians(10))], atol=1e-9)
-    np.testing.assert_allclose(p[1], [2000 * np.sin(np.radians(20)), 0, 2000 * np.cos(np.radians(20))], atol=1e-9)
+    np.testing.assert_allclose(
+        p[0], [0, 1000 * np.sin(np.radians(10)), 1000 * np.cos(np.radians(10))], atol=1e-9
+    )
+    np.testing.assert_allclose(
+        p[1], [2000 * np.sin(np.radians(20)), 0, 2000 * np.cos(np.radians(20))], atol=1e-9
+    )
 
 
 def test_conventional_minus_proposed_matches_eq40():
@@ -87,12 +93,14 @@ def test_conventional_minus_proposed_matches_eq40():
     for k in s:
         s[k] = s[k][keep]
     pp = closest_point_ned(s["R"], s["theta"], s["roll"], s["pitch"], s["yaw"], s["v"], formula="proposed")
-    pc = closest_point_ned(s["R"], s["theta"], s["roll"], s["pitch"], s["yaw"], s["v"], formula="conventional")
-    dp = np.hypot(pp[:, 0] - pc[:, 0], pp[:, 1] - pc[:, 1])   # eqs 37-39
+    pc = closest_point_ned(
+        s["R"], s["theta"], s["roll"], s["pitch"], s["yaw"], s["v"], formula="conventional"
+    )
+    dp = np.hypot(pp[:, 0] - pc[:, 0], pp[:, 1] - pc[:, 1])  # eqs 37-39
     xi, ok = effective_look_angle(s["theta"], s["C"], s["v"])
     assert ok.all()
     est = np.abs(horizontal_difference_estimate_m(s["R"], s["theta"], s["roll"], xi))
-    assert np.median(dp) > 5.0          # the wind makes a real difference
+    assert np.median(dp) > 5.0  # the wind makes a real difference
     np.testing.assert_array_less(np.abs(dp - est), 0.06 * est + 0.2)
 
 

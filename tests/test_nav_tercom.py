@@ -37,7 +37,7 @@ def test_synthetic_plain_altimeter_offset_recovered(offset):
     dem = _synthetic_dem()
     lat_c, lon_c = dem.center_rad
     t, lat, lon, r_n, r_e = _track(dem, lat_c - 0.0003, lon_c - 0.0004, np.radians(30))
-    h_terrain = dem.height(lat, lon)                   # baro height - RA range = terrain below (eq 1)
+    h_terrain = dem.height(lat, lon)  # baro height - RA range = terrain below (eq 1)
     ins_lat, ins_lon = lat + offset[0] / r_n, lon + offset[1] / r_e
     fix = correlate(dem, t[-1], ins_lat, ins_lon, h_terrain)
     assert fix.valid and fix.reason == "ok"
@@ -54,7 +54,7 @@ def test_jacksboro_ira_offset_recovered_with_closest_point_offsets():
     t, lat, lon, r_n, r_e = _track(dem, lat_c, lon_c, np.radians(-60), rate=50.0)
     dn_rel = rng.uniform(-400, 400, t.size)
     de_rel = rng.uniform(-400, 400, t.size)
-    h_meas = dem.height(lat + dn_rel / r_n, lon + de_rel / r_e)    # baro - |p_alt| = height of the point
+    h_meas = dem.height(lat + dn_rel / r_n, lon + de_rel / r_e)  # baro - |p_alt| = height of the point
     off = (-63.0, 141.0)
     ins_lat, ins_lon = lat + off[0] / r_n, lon + off[1] / r_e
     fix = correlate(dem, t[-1], ins_lat, ins_lon, h_meas, dn_rel, de_rel)
@@ -91,3 +91,18 @@ def test_batch_buffer_shift():
     assert len(b) == 3 and s.shape == (3, 6)
     np.testing.assert_allclose(s[:, 1], 0.1 + 1e-6)
     np.testing.assert_allclose(s[2, 4:], [3.0, 4.0])
+
+
+def test_mean_removed_mad_tolerates_a_height_bias():
+    """A 25 m baro bias: the mean-removed variant still recovers the offset and reports a small MAD; the
+    plain MAD of eq 1 sees the bias as its floor."""
+    dem = _synthetic_dem(3)
+    lat_c, lon_c = dem.center_rad
+    t, lat, lon, r_n, r_e = _track(dem, lat_c - 0.0002, lon_c, np.radians(-20))
+    h_meas = dem.height(lat, lon) + 25.0
+    off = (48.0, 71.0)
+    fix = correlate(dem, t[-1], lat + off[0] / r_n, lon + off[1] / r_e, h_meas, remove_bias=True)
+    assert fix.valid and abs(fix.dn_m + off[0]) <= 5.0 and abs(fix.de_m + off[1]) <= 5.0
+    assert fix.mad_min_m < 2.0
+    plain = correlate(dem, t[-1], lat + off[0] / r_n, lon + off[1] / r_e, h_meas)
+    assert plain.mad_min_m > 10.0

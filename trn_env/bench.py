@@ -35,7 +35,8 @@ def _component(module: str, quick: bool) -> dict:
     try:
         out = fn(**kwargs)
     except Exception as exc:  # noqa: BLE001 - a failing component must not hide the others' figures
-        return {f"{module}.error": f"{type(exc).__name__}: {exc}", f"{module}.traceback": traceback.format_exc()}
+        return {f"{module}.error": f"{type(exc).__name__}: {exc}",
+                f"{module}.traceback": traceback.format_exc()}
     return dict(out)
 
 

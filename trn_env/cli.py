@@ -17,12 +17,15 @@ from pathlib import Path
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="trn-env", description="Closed-loop terrain-referenced-navigation test range.")
+    p = argparse.ArgumentParser(prog="trn-env",
+                                description="Closed-loop terrain-referenced-navigation test range.")
     sub = p.add_subparsers(dest="command", required=True)
     fly = sub.add_parser("fly", help="fly a scenario in closed loop and write summary, log and plots")
-    fly.add_argument("scenario", nargs="?", default="default", help="built-in name or TOML path (default: default)")
+    fly.add_argument("scenario", nargs="?", default="default",
+                     help="built-in name or TOML path (default: default)")
     fly.add_argument("--seed", type=int, default=None, help="override the scenario seed")
-    fly.add_argument("--out", type=Path, default=None, help="output directory (default runs/<scenario>-<time>)")
+    fly.add_argument("--out", type=Path, default=None,
+                     help="output directory (default runs/<scenario>-<time>)")
     fly.add_argument("--navigator", default=None, help="override the navigator (e.g. ins, ins_tercom)")
     fly.add_argument("--duration", type=float, default=None, help="override the time limit, seconds")
     fly.add_argument("--no-plots", action="store_true", help="skip the PNG plots")

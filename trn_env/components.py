@@ -7,9 +7,6 @@ path, so a scenario is fully checked before the flight starts.
 
 from __future__ import annotations
 
-import math
-from typing import Any
-
 import contextlib
 import math
 import os
@@ -142,7 +139,8 @@ def build_flight(d: dict, world, rng: np.random.Generator):
     from .flight import Flight, InitialCondition
     init = d["initial"]
     lat, lon = math.radians(init["lat_deg"]), math.radians(init["lon_deg"])
-    ic = InitialCondition(lat_rad=lat, lon_rad=lon, h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
+    ic = InitialCondition(lat_rad=lat, lon_rad=lon, h_msl_m=initial_h_msl_m(d, world),
+                          tas_mps=float(init["tas_mps"]),
                           heading_rad=math.radians(init["heading_deg"]), **d["aircraft"]["settings"])
     seed = int(rng.integers(0, 2**31 - 1))
     with quiet_stdout():
@@ -247,7 +245,7 @@ def build_route(d: dict):
 
 
 def build_guidance(d: dict, map_dem=None):
-    """trn_env.guidance.Guidance flying the scenario's route at route.tas_mps (route.settings = its kwargs)."""
+    """trn_env.guidance.Guidance flying the scenario's route at route.tas_mps (route.settings: kwargs)."""
     from .guidance import Guidance
     return Guidance(build_route(d), tas_mps=float(d["route"]["tas_mps"]), **d["route"]["settings"])
 
@@ -272,13 +270,15 @@ def terrain_information_map(dem):
     info = fn(dem)
     grid = np.asarray(getattr(info, "heights_m", info), float)
     if grid.shape != dem.heights_m.shape:
-        raise ValueError(f"terrain information map shape {grid.shape} differs from the DEM's {dem.heights_m.shape}")
+        raise ValueError(f"terrain information map shape {grid.shape} differs from the DEM's "
+                         f"{dem.heights_m.shape}")
     return dem.with_heights(np.where(np.isfinite(grid), grid, 0.0), name=f"{dem.name}-information")
 
 
 def sample_information(info_map, dem, lat_rad: float, lon_rad: float, track_rad: float,
                        offset_m: float) -> np.ndarray:
-    """Terrain information at the estimate and offset_m away at INFO_BEARINGS_RAD from the track (0 off-map)."""
+    """Terrain information at the estimate and offset_m away at INFO_BEARINGS_RAD from the track (0 off
+    the map)."""
     from terrain.geodesy import ned_offset_to_latlon
     lats = np.empty(len(INFO_BEARINGS_RAD))
     lons = np.empty(len(INFO_BEARINGS_RAD))

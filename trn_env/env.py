@@ -31,17 +31,18 @@ class TerrainNavEnv(gym.Env):
     seconds of the full closed loop (flight 100 Hz, sensors, navigator, autopilot at 10 Hz).
 
     ## Action Space
-    `Box(low=[-dpsi_max, -dagl_max], high=[dpsi_max, dagl_max], dtype=float32)`:
+    `Box(-1, 1, shape=(2,), dtype=float32)`, each a fraction of what the aircraft can do in one step:
 
-    | index | action | unit |
-    |-------|--------|------|
-    | 0 | change of the commanded ground track this step (positive = clockwise / right) | rad |
-    | 1 | change of the commanded height above ground this step (positive = up) | m |
+    | index | action | scaled to |
+    |-------|--------|-----------|
+    | 0 | change of the commanded ground track (positive = clockwise / right) | `dpsi_max` rad |
+    | 1 | change of the commanded height above ground (positive = up) | `dagl_max` m |
 
-    The limits are the aircraft's: `dpsi_max = min(turn_rate_max * decision_interval_s, pi/3)` with the
-    rate-one turn (3 deg/s), and `dagl_max = climb_rate_max_mps * decision_interval_s`. The commanded
-    height above ground is kept in `[agl_min_m, agl_max_m]`. An action outside the space (or not finite)
-    raises `ValueError` naming the bound it breaks.
+    The limits are the aircraft's: `dpsi_max = min(turn_rate_max_dps * decision_interval_s, 60 deg)` (the
+    rate-one turn, 3 deg/s, by default) and `dagl_max = climb_rate_max_mps * decision_interval_s`
+    (`env.action_limits` holds both). The commanded height above ground is kept in
+    `[agl_min_m, agl_max_m]`. An action outside the space (or not finite) raises `ValueError` naming the
+    bound it breaks.
 
     ## Observation Space
     `Box(float32)` of shape `(19,)`, everything from what the aircraft knows (the navigator's estimate
@@ -56,9 +57,13 @@ class TerrainNavEnv(gym.Env):
     | 6 | estimated height above the map terrain | km |
     | 7 | commanded height above ground | km |
     | 8, 9, 10 | log10(1 + sigma) of the estimate, north, east, down (sigma in m) | - |
-    | 11-16 | terrain information of the MAP (`terrain.metrics`) at the estimate and 3 km ahead, ahead-left, ahead-right, left, right (log10(1 + value)) | - |
+    | 11-16 | terrain information of the map around the estimate (below) | - |
     | 17 | fraction of the episode time used | - |
     | 18 | navigator health ok (1) or not (0) | - |
+
+    Terrain information (11-16) is log10(1 + value) of the navigator's MAP's terrain-information grid
+    (`terrain.metrics`), sampled at the estimate and `info_offset_m` away ahead, ahead-left, ahead-right,
+    left and right of the commanded track: where a route would let the TRN fix well.
 
     ## Rewards
     Each step: `progress_km - error_weight * true_horizontal_error_km`, where progress is the decrease
@@ -133,8 +138,8 @@ class TerrainNavEnv(gym.Env):
 
         dpsi = min(math.radians(turn_rate_max_dps) * self.decision_interval_s, math.pi / 3)
         dagl = climb_rate_max_mps * self.decision_interval_s
-        self.action_space = spaces.Box(low=np.array([-dpsi, -dagl], np.float32),
-                                       high=np.array([dpsi, dagl], np.float32), dtype=np.float32)
+        self.action_limits = np.array([dpsi, dagl])          # rad, m per decision step
+        self.action_space = spaces.Box(low=-1.0, high=1.0, shape=(2,), dtype=np.float32)
         self.observation_space = spaces.Box(low=-1e4, high=1e4, shape=(19,), dtype=np.float32)
 
         self._dems = components.build_terrain(d, sc.extras, spawn_rngs(sc.seed)["map"])
@@ -226,26 +231,27 @@ class TerrainNavEnv(gym.Env):
     def _check_action(self, action) -> np.ndarray:
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
-            raise ValueError(f"action must have shape {self.action_space.shape} (track change rad, AGL change m),"
-                             f" got shape {a.shape}")
+            raise ValueError(f"action must have shape {self.action_space.shape} (track change, AGL change), "
+                             f"got shape {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action must be finite, got {a.tolist()}")
         lo = self.action_space.low.astype(np.float64)
         hi = self.action_space.high.astype(np.float64)
         tol = 1e-6 * np.maximum(1.0, np.abs(hi))
-        names = ("track change (rad)", "AGL change (m)")
+        names = ("track change (fraction of the turn limit)", "AGL change (fraction of the climb limit)")
         for i in range(2):
             if a[i] < lo[i] - tol[i] or a[i] > hi[i] + tol[i]:
                 raise ValueError(f"action[{i}] {names[i]} = {a[i]:.6g} is outside the action space "
                                  f"[{lo[i]:.6g}, {hi[i]:.6g}]")
-        return np.clip(a, lo, hi)
+        return np.clip(a, lo, hi) * self.action_limits
 
     def step(self, action):
         if self._loop is None or self._needs_reset:
             raise ResetNeeded("Cannot call env.step() before calling env.reset() (the episode has ended or "
                               "never started)")
         a = self._check_action(action)
-        self._track_cmd_rad = math.atan2(math.sin(self._track_cmd_rad + a[0]), math.cos(self._track_cmd_rad + a[0]))
+        track = self._track_cmd_rad + a[0]
+        self._track_cmd_rad = math.atan2(math.sin(track), math.cos(track))
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m + a[1], self.agl_min_m, self.agl_max_m))
         lat, lon, h = self._truth_now()
         d_before = math.hypot(*self._offset_to_goal(lat, lon, h))

@@ -256,9 +256,9 @@ def _std_atmosphere(lat_rad, lon_rad, h_m):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _convert_raw(raw, ncol, wind_ned_mps, first_step, dt_s, terrain_elevation_m):  # pragma: no cover
-    """Recorded JSBSim values (flat, ncol per step) -> (index of the first non-finite value or -1, block of
-    SI fields (_B_ROWS, n), C_bn (n, 3, 3)). One pass over the chunk, no Python objects."""
-    n = raw.shape[0] // ncol
+    """Recorded JSBSim values (flat float64 array, ncol per step) -> (index of the first non-finite value or
+    -1, block of SI fields (_B_ROWS, n), C_bn (n, 3, 3)). One pass over the chunk, no Python objects."""
+    n = len(raw) // ncol
     bad = -1
     for k in range(n * ncol):
         if not np.isfinite(raw[k]):

@@ -62,7 +62,8 @@ def _clean_json(o: Any):
 
 
 def write_summary(path: Path, summary: dict) -> None:
-    path.write_text(json.dumps(_clean_json(summary), indent=2, default=_json_default) + "\n", encoding="utf-8")
+    text = json.dumps(_clean_json(summary), indent=2, default=_json_default) + "\n"
+    path.write_text(text, encoding="utf-8")
 
 
 def write_log_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
@@ -105,7 +106,7 @@ def write_timeline_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(TIMELINE_COLUMNS)
-        for row in zip(*cols):
+        for row in zip(*cols, strict=True):
             w.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else int(v) for v in row])
 
 

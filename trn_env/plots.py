@@ -73,7 +73,7 @@ def _shade_outages(ax, t: np.ndarray, available: np.ndarray) -> None:
         return
     off = ~available.astype(bool)
     edges = np.flatnonzero(np.diff(np.r_[0, off.astype(int), 0]))
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
         ax.axvspan(t[a], t[min(b, t.size) - 1], color="0.9", zorder=0)
 
 
@@ -90,7 +90,7 @@ def plot_errors(path: Path, arrays: dict[str, np.ndarray], title: str = "") -> N
         ("horizontal error (m)", np.hypot(err[:, 0], err[:, 1]), 3 * np.hypot(sig[:, 0], sig[:, 1]), False),
         ("vertical error, est - true (m)", -err[:, 2], 3 * sig[:, 2], True),
     ]
-    for ax, (label, e, s3, symmetric) in zip(axes, panels):
+    for ax, (label, e, s3, symmetric) in zip(axes, panels, strict=True):
         _shade_outages(ax, t, arrays["gnss_available"])
         ax.plot(t, e, color="C0", lw=1.0, label="error")
         ax.plot(t, s3, color="C3", lw=0.8, ls="--", label="+3 sigma")

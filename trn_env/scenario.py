@@ -58,7 +58,7 @@ class ScenarioError(ValueError):
 
 @dataclass
 class Scenario:
-    """A validated scenario. `data` is the parsed TOML with defaults filled in; the other fields are shortcuts."""
+    """A validated scenario. `data`: the parsed TOML with defaults filled in; the rest are shortcuts."""
 
     name: str
     source: str
@@ -119,7 +119,8 @@ def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
         source = str(text_path)
         if not text_path.is_file():
             known = ", ".join(builtin_names())
-            raise ScenarioError(source, [f"file: no such scenario file or built-in name (built-ins: {known})"])
+            raise ScenarioError(source, [f"file: no such scenario file or built-in name "
+                                         f"(built-ins: {known})"])
         try:
             text = text_path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -179,7 +180,8 @@ def schema_problems(data: dict) -> list[str]:
             allowed = sorted(err.schema.get("properties", {}))
             extra = sorted(set(err.instance) - set(allowed)) if isinstance(err.instance, dict) else []
             for key in extra:
-                problems.append(f"{field_path(path + [key])}: unknown key (allowed here: {', '.join(allowed)})")
+                problems.append(f"{field_path(path + [key])}: unknown key "
+                                f"(allowed here: {', '.join(allowed)})")
             continue
         if err.validator == "required":
             missing = err.message.split("'")[1] if "'" in err.message else err.message
@@ -287,7 +289,8 @@ def _gnss_problems(d: dict) -> list[str]:
     problems = []
     for i, o in enumerate(d["gnss"]["outages"]):
         if "end_s" in o and o["end_s"] <= o["start_s"]:
-            problems.append(f"gnss.outages[{i}].end_s: must be after start_s ({o['end_s']} <= {o['start_s']})")
+            problems.append(f"gnss.outages[{i}].end_s: must be after start_s "
+                            f"({o['end_s']} <= {o['start_s']})")
     return problems
 
 

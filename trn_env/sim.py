@@ -124,7 +124,8 @@ class SimLog:
         self.truth_rows.append((truth, i))
         self.est_rows.append((float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
                               np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
-                              float(est.yaw_rad), np.array(est.covariance[:9, :9], float), bool(est.health.ok)))
+                              float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
+                              bool(est.health.ok)))
 
     def add_frames(self, frames: SensorFrames) -> None:
         for name in ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading"):

@@ -1,0 +1,134 @@
+"""DEM loaders: GeoTIFF, SRTM .hgt, DTED, NPZ written into tmp_path and read back; bad input errors."""
+
+import numpy as np
+import pytest
+import rasterio
+import rasterio.shutil
+from rasterio.transform import Affine
+
+import terrain
+from terrain import loaders
+from terrain.dem import Dem
+
+
+def from_origin(west, north, xsize, ysize):
+    return Affine(xsize, 0.0, west, 0.0, -ysize, north)
+
+
+def _write_tif(path, arr, transform, crs="EPSG:4326", nodata=None):
+    with rasterio.open(path, "w", driver="GTiff", height=arr.shape[0], width=arr.shape[1], count=1,
+                       dtype=arr.dtype, crs=crs, transform=transform, nodata=nodata) as ds:
+        ds.write(arr, 1)
+
+
+def test_geotiff_georeferencing_and_row_order(tmp_path):
+    # 30 x 40 posts, 1 arcsec, north-up: pixel (0, 0) is the NORTH-west post
+    step = 1.0 / 3600.0
+    arr = (np.arange(30 * 40).reshape(30, 40) % 700).astype(np.float32) + 100
+    arr[3, 4] = -9999.0
+    path = tmp_path / "dem.tif"
+    _write_tif(path, arr, from_origin(10.0 - step / 2, 47.0 + step / 2, step, step), nodata=-9999.0)
+    dem = terrain.load(path)
+    assert np.degrees(dem.lat0_rad) == pytest.approx(47.0 - 29 * step, abs=1e-10)  # south-west post
+    assert np.degrees(dem.lon0_rad) == pytest.approx(10.0, abs=1e-10)
+    assert np.degrees(dem.dlat_rad) == pytest.approx(step) and np.degrees(dem.dlon_rad) == pytest.approx(step)
+    # north-west post (raster row 0, col 0) is now the last row
+    assert dem.heights_m[-1, 0] == arr[0, 0]
+    assert dem.height(np.radians(47.0), np.radians(10.0)) == pytest.approx(arr[0, 0])
+    assert dem.height(np.radians(47.0 - 29 * step), np.radians(10.0 + 39 * step)) == pytest.approx(arr[29, 39])
+    assert np.isnan(dem.heights_m[29 - 3, 4])  # the nodata post
+    filled = terrain.load(path, fill_voids=True)
+    neighbours = [arr[2, 4], arr[4, 4], arr[3, 3], arr[3, 5]]
+    assert min(neighbours) <= filled.heights_m[29 - 3, 4] <= max(neighbours)
+
+
+def test_srtm_hgt_written_by_hand(tmp_path):
+    # SRTM 3" tile: raw big-endian int16, 1201 x 1201, the name gives the south-west corner
+    n = 1201
+    arr = ((np.arange(n * n) % 997).reshape(n, n) + 200).astype(">i2")
+    arr[600, 700] = -32768
+    arr[600, 701] = -32768
+    path = tmp_path / "N36W085.hgt"
+    arr.tofile(path)
+    dem = terrain.load(path)
+    assert dem.heights_m.shape == (n, n)
+    assert np.degrees(dem.lat0_rad) == pytest.approx(36.0, abs=1e-9)
+    assert np.degrees(dem.lon0_rad) == pytest.approx(-85.0, abs=1e-9)
+    assert np.degrees(dem.dlat_rad) == pytest.approx(3.0 / 3600.0)
+    assert dem.heights_m[0, 0] == arr[n - 1, 0]          # south-west post
+    assert dem.heights_m[n - 1, n - 1] == arr[0, n - 1]  # north-east post
+    assert np.isnan(dem.heights_m[n - 1 - 600, 700]) and np.isnan(dem.heights_m[n - 1 - 600, 701])
+    assert dem.height(np.radians(37.0), np.radians(-85.0)) == pytest.approx(arr[0, 0])
+    filled = terrain.load(path, fill_voids=True)
+    assert np.isfinite(filled.heights_m).all()
+    lo, hi = sorted((arr[600, 699], arr[600, 702]))
+    assert lo - 1 <= filled.heights_m[n - 1 - 600, 700] <= hi + 1
+
+
+def test_dted_level0(tmp_path):
+    step = 30.0 / 3600.0
+    arr = ((np.arange(121 * 121) % 500).reshape(121, 121) + 300).astype(np.int16)
+    tif = tmp_path / "tile.tif"
+    _write_tif(tif, arr, from_origin(-85.0 - step / 2, 37.0 + step / 2, step, step))
+    path = tmp_path / "tile.dt0"
+    rasterio.shutil.copy(tif, path, driver="DTED")
+    dem = terrain.load(path)
+    assert np.degrees(dem.lat0_rad) == pytest.approx(36.0, abs=1e-7)
+    assert np.degrees(dem.lon0_rad) == pytest.approx(-85.0, abs=1e-7)
+    assert dem.heights_m[0, 0] == arr[120, 0] and dem.heights_m[120, 37] == arr[0, 37]
+
+
+def test_npz_round_trip(tmp_path):
+    dem = Dem(np.arange(12.0).reshape(3, 4), np.radians(36.5), np.radians(-84.2), 1e-5, 2e-5, "tiny")
+    path = loaders.save_npz(dem, tmp_path / "tiny.npz")
+    back = terrain.load(path)
+    np.testing.assert_array_equal(back.heights_m, dem.heights_m)
+    assert back.lat0_rad == pytest.approx(dem.lat0_rad, abs=1e-15)
+    assert back.dlon_rad == pytest.approx(dem.dlon_rad, rel=1e-12)
+    assert back.name == "tiny"
+
+
+def test_missing_and_unsupported_files(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothere.tif"):
+        terrain.load(tmp_path / "nothere.tif")
+    bad = tmp_path / "dem.xyz"
+    bad.write_text("1 2 3\n")
+    with pytest.raises(terrain.DemLoadError, match=r"dem\.xyz.*unsupported"):
+        terrain.load(bad)
+    junk = tmp_path / "junk.tif"
+    junk.write_bytes(b"not a tiff at all")
+    with pytest.raises(terrain.DemLoadError, match="junk.tif"):
+        terrain.load(junk)
+
+
+def test_all_void_dem_is_an_error(tmp_path):
+    path = tmp_path / "void.tif"
+    _write_tif(path, np.full((5, 5), -32768, np.int16), from_origin(10, 47, 0.001, 0.001), nodata=-32768)
+    with pytest.raises(terrain.DemLoadError, match=r"void\.tif.*void"):
+        terrain.load(path)
+    with pytest.raises(terrain.DemLoadError, match=r"void\.tif.*void"):
+        terrain.load(path, fill_voids=True)
+
+
+def test_inconsistent_georeferencing(tmp_path):
+    arr = np.ones((5, 5), np.float32)
+    projected = tmp_path / "utm.tif"
+    _write_tif(projected, arr, from_origin(500000, 4000000, 30, 30), crs="EPSG:32616")
+    with pytest.raises(terrain.DemLoadError, match=r"utm\.tif.*projected"):
+        terrain.load(projected)
+    rotated = tmp_path / "rot.tif"
+    _write_tif(rotated, arr, Affine(0.001, 0.0002, 10.0, 0.0002, -0.001, 47.0))
+    with pytest.raises(terrain.DemLoadError, match=r"rot\.tif.*rotated"):
+        terrain.load(rotated)
+    bad = tmp_path / "shape.npz"
+    np.savez(bad, elevation=np.ones((10, 10)), dx=0.001, dy=0.001, xmin=0.0, xmax=0.02, ymin=1.0, ymax=1.01)
+    with pytest.raises(terrain.DemLoadError, match=r"shape\.npz.*shape"):
+        terrain.load(bad)
+    neg = tmp_path / "neg.npz"
+    np.savez(neg, heights_m=np.ones((3, 3)), lat0_deg=36.0, lon0_deg=-84.0, dlat_deg=-0.001, dlon_deg=0.001)
+    with pytest.raises(terrain.DemLoadError, match=r"neg\.npz.*spacing"):
+        terrain.load(neg)
+    missing = tmp_path / "keys.npz"
+    np.savez(missing, heights_m=np.ones((3, 3)))
+    with pytest.raises(terrain.DemLoadError, match=r"keys\.npz.*misses"):
+        terrain.load(missing)
