@@ -261,13 +261,30 @@ def guidance_complete(guidance) -> bool:
 INFO_BEARINGS_RAD = (None, 0.0, -math.pi / 4, math.pi / 4, -math.pi / 2, math.pi / 2)
 
 
+def local_roughness_m(dem, window_m: float = 1000.0) -> np.ndarray:
+    """Standard deviation of the heights (m) in a window_m square around each post: the terrain roughness
+    sigma_T that TERCOM's fix accuracy scales with. Used when terrain.metrics is not available."""
+    from scipy import ndimage
+    dy_m, dx_m = dem.spacing_m
+    size = (max(3, int(round(window_m / dy_m)) | 1), max(3, int(round(window_m / dx_m)) | 1))
+    h = np.asarray(dem.heights_m, float)
+    fill = np.where(np.isfinite(h), h, np.nanmean(h))
+    m1 = ndimage.uniform_filter(fill, size, mode="nearest")
+    m2 = ndimage.uniform_filter(fill * fill, size, mode="nearest")
+    return np.sqrt(np.clip(m2 - m1 * m1, 0.0, None))
+
+
 def terrain_information_map(dem):
-    """The map's terrain-information grid (terrain.metrics), as a Dem-shaped object with heights_m = info."""
-    from terrain import metrics
-    fn = getattr(metrics, "terrain_information_map", None) or getattr(metrics, "information_map", None)
-    if fn is None:
-        raise ValueError("terrain.metrics has no terrain_information_map function")
-    info = fn(dem)
+    """The map's terrain-information grid, as a Dem whose heights_m hold the information.
+
+    terrain.metrics.terrain_information_map when the terrain package has it; otherwise the local terrain
+    roughness (local_roughness_m)."""
+    try:
+        from terrain import metrics
+        fn = getattr(metrics, "terrain_information_map", None) or getattr(metrics, "information_map", None)
+    except ImportError:
+        fn = None
+    info = fn(dem) if fn is not None else local_roughness_m(dem)
     grid = np.asarray(getattr(info, "heights_m", info), float)
     if grid.shape != dem.heights_m.shape:
         raise ValueError(f"terrain information map shape {grid.shape} differs from the DEM's "

@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from terrain.geodesy import latlon_to_ned_offset
+from terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
 
 from . import components
 from .scenario import Scenario, load_scenario
@@ -159,7 +159,12 @@ class TerrainNavEnv(gym.Env):
         return components.track_agl_targets(self._track_cmd_rad, self._agl_cmd_m, self.tas_mps)
 
     def _offset_to_goal(self, lat, lon, h=0.0) -> tuple[float, float]:
-        return latlon_to_ned_offset(lat, lon, h, self.goal_lat_rad, self.goal_lon_rad)
+        """North/east (m) of the goal in the local level frame at (lat, lon, h), exact through ECEF (the goal
+        is tens of km away: no small-offset approximation), the goal taken at the same height."""
+        r0 = np.array(lla_to_ecef(lat, lon, h))
+        r1 = np.array(lla_to_ecef(self.goal_lat_rad, self.goal_lon_rad, h))
+        d_ned = C_en(lat, lon).T @ (r1 - r0)
+        return float(d_ned[0]), float(d_ned[1])
 
     def _obs(self) -> np.ndarray:
         loop = self._loop
