@@ -65,6 +65,7 @@ class InsTrnNavigator:
     horizontally by more than dp_min_m (seed 000 Table 3 cases). baro_geopotential: the baro reports ISA
     pressure altitude, a geopotential height; convert it to geometric height (h = r0 H / (r0 - H), r0 =
     6356766 m, US 1976) before eq 1/2 (about +5 m at 5600 m). remove_bias: mean-removed MAD (tercom).
+    init_height_from_baro: take the INS height from the first baro sample after reset (see _segment).
     """
 
     def __init__(
@@ -91,6 +92,7 @@ class InsTrnNavigator:
         imu_samples: str = "interval",
         baro_geopotential: bool = True,
         remove_bias: bool = False,
+        init_height_from_baro: bool = True,
         name: str | None = None,
     ):
         if aiding not in (None, "ira", "radar_altimeter"):
@@ -138,6 +140,8 @@ class InsTrnNavigator:
         self.dp_reference_formula = dp_reference_formula
         self.baro_geopotential = bool(baro_geopotential)
         self.remove_bias = bool(remove_bias)
+        self.init_height_from_baro = bool(init_height_from_baro)
+        self._height_initialised = False
         self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
         self.health = Health()
         self.batch = TercomBatch()
@@ -173,6 +177,7 @@ class InsTrnNavigator:
         self.fixes = []
         self._t_ekf = float(initial.t_s)
         self._t_batch0 = float(initial.t_s)
+        self._height_initialised = False
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
@@ -206,6 +211,12 @@ class InsTrnNavigator:
             tb, hb, vb = baro.t_s, baro.h_baro_m, baro.valid & np.isfinite(baro.h_baro_m)
             if self.baro_geopotential:
                 hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
+            if self.init_height_from_baro and not self._height_initialised and vb.any():
+                # vertical channel initialised from the first baro height: a height error left to the baro
+                # loop would tilt the INS velocity while it converges, and a vertical velocity error dv_d
+                # moves every IRA closest point along track by about R dv_d / V (the zero-Doppler plane).
+                self.ins.state[2] = float(hb[np.argmax(vb)])
+                self._height_initialised = True
             if (~vb).any():
                 self._count_skip(float(imu.t_s[a]), "baro_invalid", int((~vb).sum()), "baro samples invalid")
         hist = self.ins.propagate(

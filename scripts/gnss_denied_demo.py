@@ -61,16 +61,26 @@ def main(argv=None) -> dict:
     half = 0.5 * args.tas * args.leg_s
     r_n, r_e = meridian_radius_m(lat_c), prime_vertical_radius_m(lat_c) * math.cos(lat_c)
     lat0, lon0 = lat_c - half / r_n, lon_c - half / r_e
-    fl = Flight(InitialCondition(lat0, lon0, args.h, args.tas, 0.0), wind=WindConfig.constant(270.0, args.wind),
-                terrain_elevation_m=float(np.nanmax(dem.heights_m)))
+    fl = Flight(
+        InitialCondition(lat0, lon0, args.h, args.tas, 0.0),
+        wind=WindConfig.constant(270.0, args.wind),
+        terrain_elevation_m=float(np.nanmax(dem.heights_m)),
+    )
     chunks = [fl.snapshot()]
     n_s = int(args.minutes * 60)
     for k in range(n_s):
         if k % int(args.leg_s) == 0:
             leg = (k // int(args.leg_s)) % 4
-            fl.set_targets(AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=leg * math.pi / 2,
-                                            vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=args.h,
-                                            tas_cmd_mps=args.tas, bank_limit_rad=math.radians(25)))
+            fl.set_targets(
+                AutopilotTargets(
+                    lateral_mode=LateralMode.TRACK,
+                    track_cmd_rad=leg * math.pi / 2,
+                    vertical_mode=VerticalMode.ALTITUDE_MSL,
+                    altitude_cmd_m=args.h,
+                    tas_cmd_mps=args.tas,
+                    bank_limit_rad=math.radians(25),
+                )
+            )
         chunks.append(fl.advance(int(round(1.0 / fl.dt_s))))
     truth = TruthChunk.concatenate(chunks)
     print(f"flown {len(truth)} steps ({time.time() - t_wall:.0f} s wall)")
@@ -89,9 +99,17 @@ def main(argv=None) -> dict:
     e = np.array([3.0, 3.0, 5.0, 0.05, 0.05, 0.05, 0.2e-3, 0.2e-3, 1e-3]) * rng.standard_normal(9)
     rn0 = meridian_radius_m(truth.lat_rad[0]) + truth.h_msl_m[0]
     re0 = (prime_vertical_radius_m(truth.lat_rad[0]) + truth.h_msl_m[0]) * math.cos(truth.lat_rad[0])
-    init = Estimate(0.0, truth.lat_rad[0] + e[0] / rn0, truth.lon_rad[0] + e[1] / re0, truth.h_msl_m[0] - e[2],
-                    truth.v_ned_mps[0] + e[3:6], truth.roll_rad[0] + e[6], truth.pitch_rad[0] + e[7],
-                    truth.yaw_rad[0] + e[8], initial_covariance(3.0, 5.0, 0.05, 0.2e-3, 1e-3))
+    init = Estimate(
+        0.0,
+        truth.lat_rad[0] + e[0] / rn0,
+        truth.lon_rad[0] + e[1] / re0,
+        truth.h_msl_m[0] - e[2],
+        truth.v_ned_mps[0] + e[3:6],
+        truth.roll_rad[0] + e[6],
+        truth.pitch_rad[0] + e[7],
+        truth.yaw_rad[0] + e[8],
+        initial_covariance(3.0, 5.0, 0.05, 0.2e-3, 1e-3),
+    )
     curves = {}
     summary = {"args": vars(args)}
     for name in ("ins", "ins_tercom"):
@@ -104,14 +122,22 @@ def main(argv=None) -> dict:
             rn = meridian_radius_m(truth.lat_rad[j]) + truth.h_msl_m[j]
             re = (prime_vertical_radius_m(truth.lat_rad[j]) + truth.h_msl_m[j]) * math.cos(truth.lat_rad[j])
             ts.append(est.t_s)
-            err.append(math.hypot((est.lat_rad - truth.lat_rad[j]) * rn, (est.lon_rad - truth.lon_rad[j]) * re))
+            err.append(
+                math.hypot((est.lat_rad - truth.lat_rad[j]) * rn, (est.lon_rad - truth.lon_rad[j]) * re)
+            )
             sig.append(float(np.hypot(*est.sigma_ned_m[:2])))
         curves[name] = (np.array(ts), np.array(err), np.array(sig))
-        summary[name] = {"horizontal_error_final_m": err[-1], "horizontal_error_max_m": max(err),
-                         "horizontal_error_rms_m": float(np.sqrt(np.mean(np.square(err)))),
-                         "skipped": est.health.skipped, "status": est.health.status}
-        print(f"{name:<11} final {err[-1]:8.1f} m  max {max(err):8.1f} m  rms "
-              f"{summary[name]['horizontal_error_rms_m']:8.1f} m  ({est.health.status})")
+        summary[name] = {
+            "horizontal_error_final_m": err[-1],
+            "horizontal_error_max_m": max(err),
+            "horizontal_error_rms_m": float(np.sqrt(np.mean(np.square(err)))),
+            "skipped": est.health.skipped,
+            "status": est.health.status,
+        }
+        print(
+            f"{name:<11} final {err[-1]:8.1f} m  max {max(err):8.1f} m  rms "
+            f"{summary[name]['horizontal_error_rms_m']:8.1f} m  ({est.health.status})"
+        )
     summary["wall_time_s"] = time.time() - t_wall
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
     import matplotlib

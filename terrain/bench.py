@@ -46,21 +46,34 @@ def flight_sample(dem: Dem, n: int, seed: int = 0, agl_m: float = 1500.0):
     rng = np.random.default_rng(seed)
     dn_m, de_m = dem.extent_m
     lat_c, lon_c = dem.center_rad
-    lat, lon = dem.offset_to_latlon(lat_c, lon_c, rng.uniform(-0.3, 0.3, n) * dn_m, rng.uniform(-0.3, 0.3, n) * de_m)
+    lat, lon = dem.offset_to_latlon(
+        lat_c, lon_c, rng.uniform(-0.3, 0.3, n) * dn_m, rng.uniform(-0.3, 0.3, n) * de_m
+    )
     h = dem.height(lat, lon) + agl_m * rng.uniform(0.5, 1.5, n)
     yaw = rng.uniform(0, 2 * np.pi, n)
     roll = np.radians(rng.uniform(-30, 30, n))
     pitch = np.radians(rng.uniform(-5, 10, n))
     C = geodesy.euler_to_C_bn(roll, pitch, yaw)
     cross = rng.uniform(-20, 20, n)
-    v = np.stack([110 * np.cos(yaw) - cross * np.sin(yaw), 110 * np.sin(yaw) + cross * np.cos(yaw),
-                  rng.uniform(-3, 3, n)], axis=1)
+    v = np.stack(
+        [
+            110 * np.cos(yaw) - cross * np.sin(yaw),
+            110 * np.sin(yaw) + cross * np.cos(yaw),
+            rng.uniform(-3, 3, n),
+        ],
+        axis=1,
+    )
     return lat, lon, h, v, C
 
 
-def benchmark(dem: Dem | None = None, n_lookups: int = 2_000_000, n_queries: int = 20_000,
-              half_beamwidth_rad: float = np.radians(20.0), half_window_rad: float = np.radians(45.0),
-              repeats: int = 3) -> dict:
+def benchmark(
+    dem: Dem | None = None,
+    n_lookups: int = 2_000_000,
+    n_queries: int = 20_000,
+    half_beamwidth_rad: float = np.radians(20.0),
+    half_window_rad: float = np.radians(45.0),
+    repeats: int = 3,
+) -> dict:
     """Throughput figures (see the module docstring) on `dem` (default: the bundled jacksboro DEM)."""
     if dem is None:
         from terrain import load
@@ -73,8 +86,9 @@ def benchmark(dem: Dem | None = None, n_lookups: int = 2_000_000, n_queries: int
     lon = rng.uniform(b[2], b[3], n_lookups)
     out = np.empty(n_lookups)
     kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, lat[:10], lon[:10], out[:10])
-    nb = _best_rate(lambda: kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out),
-                    n_lookups, repeats)
+    nb = _best_rate(
+        lambda: kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out), n_lookups, repeats
+    )
     npb = _best_rate(lambda: _numpy_bilinear(heights, lat0, lon0, dlat, dlon, lat, lon), n_lookups, repeats)
     ref = _numpy_bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
     if not np.allclose(out, ref, equal_nan=True):
@@ -82,9 +96,14 @@ def benchmark(dem: Dem | None = None, n_lookups: int = 2_000_000, n_queries: int
     qlat, qlon, qh, qv, qC = flight_sample(dem, n_queries)
     queries.ira_return(dem, qlat[:4], qlon[:4], qh[:4], qv[:4], qC[:4], half_window_rad)
     queries.radar_altimeter_return(dem, qlat[:4], qlon[:4], qh[:4], qC[:4], half_beamwidth_rad)
-    ira = _best_rate(lambda: queries.ira_return(dem, qlat, qlon, qh, qv, qC, half_window_rad), n_queries, repeats)
-    ra = _best_rate(lambda: queries.radar_altimeter_return(dem, qlat, qlon, qh, qC, half_beamwidth_rad),
-                    n_queries, repeats)
+    ira = _best_rate(
+        lambda: queries.ira_return(dem, qlat, qlon, qh, qv, qC, half_window_rad), n_queries, repeats
+    )
+    ra = _best_rate(
+        lambda: queries.radar_altimeter_return(dem, qlat, qlon, qh, qC, half_beamwidth_rad),
+        n_queries,
+        repeats,
+    )
     return {
         "terrain_dem": dem.name,
         "bilinear_lookups_per_s": float(nb),

@@ -30,18 +30,24 @@ class Dem:
     def __post_init__(self):
         h = np.ascontiguousarray(np.asarray(self.heights_m, dtype=np.float64))
         if h.ndim != 2 or h.shape[0] < 2 or h.shape[1] < 2:
-            raise ValueError(f"Dem {self.name!r}: heights_m must be 2-D with at least 2 x 2 posts, got {h.shape}")
+            raise ValueError(
+                f"Dem {self.name!r}: heights_m must be 2-D with at least 2 x 2 posts, got {h.shape}"
+            )
         for field_name in ("lat0_rad", "lon0_rad", "dlat_rad", "dlon_rad"):
             value = float(getattr(self, field_name))
             if not np.isfinite(value):
                 raise ValueError(f"Dem {self.name!r}: {field_name} is not finite ({value})")
             setattr(self, field_name, value)
         if self.dlat_rad <= 0.0 or self.dlon_rad <= 0.0:
-            raise ValueError(f"Dem {self.name!r}: post spacing must be positive, got dlat_rad={self.dlat_rad}, "
-                             f"dlon_rad={self.dlon_rad}")
+            raise ValueError(
+                f"Dem {self.name!r}: post spacing must be positive, got dlat_rad={self.dlat_rad}, "
+                f"dlon_rad={self.dlon_rad}"
+            )
         lat_max = self.lat0_rad + (h.shape[0] - 1) * self.dlat_rad
         if self.lat0_rad < -np.pi / 2 or lat_max > np.pi / 2:
-            raise ValueError(f"Dem {self.name!r}: latitude range [{self.lat0_rad}, {lat_max}] rad is beyond the poles")
+            raise ValueError(
+                f"Dem {self.name!r}: latitude range [{self.lat0_rad}, {lat_max}] rad is beyond the poles"
+            )
         if not np.isfinite(h).any():
             raise ValueError(f"Dem {self.name!r}: every post is a void (NaN)")
         self.heights_m = h
@@ -56,6 +62,13 @@ class Dem:
     def n_lon(self) -> int:
         return int(self.heights_m.shape[1])
 
+    def block_bounds(self, block: int = 8):
+        """(block, max, min): per-block height bounds (terrain.kernels.block_bounds), cached."""
+        if self._pyramid is None or self._pyramid[0] != block:
+            bmax, bmin = kernels.block_bounds(self.heights_m, block)
+            self._pyramid = (block, bmax, bmin)
+        return self._pyramid
+
     @property
     def grid(self):
         """(heights_m, lat0_rad, lon0_rad, dlat_rad, dlon_rad) for numba kernels."""
@@ -64,8 +77,12 @@ class Dem:
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         """(lat_min, lat_max, lon_min, lon_max) of the outermost posts, radians."""
-        return (self.lat0_rad, self.lat0_rad + (self.n_lat - 1) * self.dlat_rad,
-                self.lon0_rad, self.lon0_rad + (self.n_lon - 1) * self.dlon_rad)
+        return (
+            self.lat0_rad,
+            self.lat0_rad + (self.n_lat - 1) * self.dlat_rad,
+            self.lon0_rad,
+            self.lon0_rad + (self.n_lon - 1) * self.dlon_rad,
+        )
 
     @property
     def lat_rad(self) -> np.ndarray:
@@ -87,8 +104,10 @@ class Dem:
     def spacing_m(self) -> tuple[float, float]:
         """(north, east) post spacing in metres at the grid centre (seed 000 eq 2 radii)."""
         lat_c, _ = self.center_rad
-        return (self.dlat_rad * geodesy.meridian_radius_m(lat_c),
-                self.dlon_rad * geodesy.prime_vertical_radius_m(lat_c) * np.cos(lat_c))
+        return (
+            self.dlat_rad * geodesy.meridian_radius_m(lat_c),
+            self.dlon_rad * geodesy.prime_vertical_radius_m(lat_c) * np.cos(lat_c),
+        )
 
     @property
     def extent_m(self) -> tuple[float, float]:
@@ -110,15 +129,26 @@ class Dem:
 
     # ----------------------------------------------------------------- lookups
     def height(self, lat_rad, lon_rad, method: str = "bilinear"):
-        """Terrain height (m above MSL) at (lat, lon) radians; scalars or arrays; NaN outside or over voids."""
+        """Height (m above MSL) at (lat, lon) radians; scalars or arrays; NaN off-grid or over voids."""
         if method not in _METHODS:
             raise ValueError(f"Dem.height: method must be one of {_METHODS}, got {method!r}")
-        lat, lon = np.broadcast_arrays(np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64))
+        lat, lon = np.broadcast_arrays(
+            np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64)
+        )
         flat_lat = np.ascontiguousarray(lat).ravel()
         flat_lon = np.ascontiguousarray(lon).ravel()
         out = np.empty(flat_lat.shape[0])
         kernel = kernels.bilinear_batch if method == "bilinear" else kernels.bicubic_batch
-        kernel(self.heights_m, self.lat0_rad, self.lon0_rad, self.dlat_rad, self.dlon_rad, flat_lat, flat_lon, out)
+        kernel(
+            self.heights_m,
+            self.lat0_rad,
+            self.lon0_rad,
+            self.dlat_rad,
+            self.dlon_rad,
+            flat_lat,
+            flat_lon,
+            out,
+        )
         if lat.ndim == 0:
             return float(out[0])
         return out.reshape(lat.shape)
@@ -127,14 +157,25 @@ class Dem:
         """(dh_dn, dh_de): terrain slope along north and east (m/m) at (lat, lon); NaN outside."""
         if method not in _METHODS:
             raise ValueError(f"Dem.gradient: method must be one of {_METHODS}, got {method!r}")
-        lat, lon = np.broadcast_arrays(np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64))
+        lat, lon = np.broadcast_arrays(
+            np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64)
+        )
         flat_lat = np.ascontiguousarray(lat).ravel()
         flat_lon = np.ascontiguousarray(lon).ravel()
         g_lat = np.empty(flat_lat.shape[0])
         g_lon = np.empty(flat_lat.shape[0])
         kernel = kernels.gradient_batch if method == "bilinear" else kernels.bicubic_gradient_batch
-        kernel(self.heights_m, self.lat0_rad, self.lon0_rad, self.dlat_rad, self.dlon_rad,
-               flat_lat, flat_lon, g_lat, g_lon)
+        kernel(
+            self.heights_m,
+            self.lat0_rad,
+            self.lon0_rad,
+            self.dlat_rad,
+            self.dlon_rad,
+            flat_lat,
+            flat_lon,
+            g_lat,
+            g_lon,
+        )
         s = np.sin(flat_lat)
         w = 1.0 - geodesy.WGS84_E2 * s * s
         r_n = geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w))
@@ -170,8 +211,14 @@ class Dem:
         return self.offset_to_latlon(lat_c, lon_c, dn_m, de_m)
 
     # ----------------------------------------------------------------- sub-grids
-    def subset(self, lat_min_rad: float, lat_max_rad: float, lon_min_rad: float, lon_max_rad: float,
-               name: str | None = None) -> Dem:
+    def subset(
+        self,
+        lat_min_rad: float,
+        lat_max_rad: float,
+        lon_min_rad: float,
+        lon_max_rad: float,
+        name: str | None = None,
+    ) -> Dem:
         """The posts inside [lat_min, lat_max] x [lon_min, lon_max] (plus one post of margin) as a new Dem."""
         i0 = max(int(np.floor((lat_min_rad - self.lat0_rad) / self.dlat_rad)) - 1, 0)
         i1 = min(int(np.ceil((lat_max_rad - self.lat0_rad) / self.dlat_rad)) + 1, self.n_lat - 1)
@@ -179,9 +226,14 @@ class Dem:
         j1 = min(int(np.ceil((lon_max_rad - self.lon0_rad) / self.dlon_rad)) + 1, self.n_lon - 1)
         if i1 - i0 < 1 or j1 - j0 < 1:
             raise ValueError(f"Dem {self.name!r}: subset region does not overlap the grid")
-        return Dem(self.heights_m[i0:i1 + 1, j0:j1 + 1].copy(), self.lat0_rad + i0 * self.dlat_rad,
-                   self.lon0_rad + j0 * self.dlon_rad, self.dlat_rad, self.dlon_rad,
-                   name or f"{self.name}[subset]")
+        return Dem(
+            self.heights_m[i0 : i1 + 1, j0 : j1 + 1].copy(),
+            self.lat0_rad + i0 * self.dlat_rad,
+            self.lon0_rad + j0 * self.dlon_rad,
+            self.dlat_rad,
+            self.dlon_rad,
+            name or f"{self.name}[subset]",
+        )
 
     def with_heights(self, heights_m: np.ndarray, name: str | None = None) -> Dem:
         """A Dem on the same grid with other heights."""
@@ -189,5 +241,7 @@ class Dem:
 
     def __repr__(self) -> str:
         b = np.degrees(self.bounds)
-        return (f"Dem({self.name!r}, {self.n_lat} x {self.n_lon} posts, lat {b[0]:.4f}..{b[1]:.4f} deg, "
-                f"lon {b[2]:.4f}..{b[3]:.4f} deg, spacing {self.spacing_m[0]:.1f} x {self.spacing_m[1]:.1f} m)")
+        return (
+            f"Dem({self.name!r}, {self.n_lat} x {self.n_lon} posts, lat {b[0]:.4f}..{b[1]:.4f} deg, "
+            f"lon {b[2]:.4f}..{b[3]:.4f} deg, spacing {self.spacing_m[0]:.1f} x {self.spacing_m[1]:.1f} m)"
+        )

@@ -155,7 +155,40 @@ def bicubic_gradient_batch(heights, lat0, lon0, dlat, dlon, lat, lon, dh_dlat, d
             dh_dlat[k] = np.nan
             dh_dlon[k] = np.nan
             continue
-        dh_dlat[k] = (bicubic(heights, lat0, lon0, dlat, dlon, la_p, lo)
-                      - bicubic(heights, lat0, lon0, dlat, dlon, la_m, lo)) / (la_p - la_m)
-        dh_dlon[k] = (bicubic(heights, lat0, lon0, dlat, dlon, la, lo_p)
-                      - bicubic(heights, lat0, lon0, dlat, dlon, la, lo_m)) / (lo_p - lo_m)
+        dh_dlat[k] = (
+            bicubic(heights, lat0, lon0, dlat, dlon, la_p, lo)
+            - bicubic(heights, lat0, lon0, dlat, dlon, la_m, lo)
+        ) / (la_p - la_m)
+        dh_dlon[k] = (
+            bicubic(heights, lat0, lon0, dlat, dlon, la, lo_p)
+            - bicubic(heights, lat0, lon0, dlat, dlon, la, lo_m)
+        ) / (lo_p - lo_m)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def block_bounds(heights, block):
+    """(max, min) height of each block of block x block cells; block (bi, bj) spans posts
+    [bi*block, bi*block + block] x [bj*block, bj*block + block] (shared edges), so it bounds the bilinear
+    surface of its cells. Voids are ignored; an all-void block has max = -inf, min = +inf."""
+    n_lat, n_lon = heights.shape
+    nbi = max((n_lat - 2) // block + 1, 1)
+    nbj = max((n_lon - 2) // block + 1, 1)
+    bmax = np.full((nbi, nbj), -np.inf)
+    bmin = np.full((nbi, nbj), np.inf)
+    for bi in range(nbi):
+        i1 = min(bi * block + block, n_lat - 1)
+        for bj in range(nbj):
+            j1 = min(bj * block + block, n_lon - 1)
+            hi = -np.inf
+            lo = np.inf
+            for i in range(bi * block, i1 + 1):
+                for j in range(bj * block, j1 + 1):
+                    v = heights[i, j]
+                    if v == v:
+                        if v > hi:
+                            hi = v
+                        if v < lo:
+                            lo = v
+            bmax[bi, bj] = hi
+            bmin[bi, bj] = lo
+    return bmax, bmin

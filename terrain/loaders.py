@@ -57,34 +57,48 @@ def fill_voids(heights_m: np.ndarray, source: str = "dem") -> np.ndarray:
     return h
 
 
-def _finish(heights: np.ndarray, lat0_deg, lon0_deg, dlat_deg, dlon_deg, name: str, source: str,
-            fill: bool) -> Dem:
+def _finish(
+    heights: np.ndarray, lat0_deg, lon0_deg, dlat_deg, dlon_deg, name: str, source: str, fill: bool
+) -> Dem:
     heights = np.asarray(heights, dtype=np.float64)
     if heights.ndim != 2 or heights.shape[0] < 2 or heights.shape[1] < 2:
-        raise DemLoadError(f"{source}: elevation must be a 2-D grid of at least 2 x 2 posts, got {heights.shape}")
+        raise DemLoadError(
+            f"{source}: elevation must be a 2-D grid of at least 2 x 2 posts, got {heights.shape}"
+        )
     for key, value in (("lat0", lat0_deg), ("lon0", lon0_deg), ("dlat", dlat_deg), ("dlon", dlon_deg)):
         if not np.isfinite(value):
             raise DemLoadError(f"{source}: georeferencing {key} is not finite ({value})")
     if not (dlat_deg > 0.0 and dlon_deg > 0.0):
-        raise DemLoadError(f"{source}: post spacing must be positive, got dlat={dlat_deg} deg, dlon={dlon_deg} deg")
+        raise DemLoadError(
+            f"{source}: post spacing must be positive, got dlat={dlat_deg} deg, dlon={dlon_deg} deg"
+        )
     lat_top = lat0_deg + (heights.shape[0] - 1) * dlat_deg
     if lat0_deg < -90.0 or lat_top > 90.0 or abs(lon0_deg) > 360.0:
-        raise DemLoadError(f"{source}: georeferencing is not geographic degrees (lat {lat0_deg}..{lat_top}, "
-                           f"lon0 {lon0_deg})")
+        raise DemLoadError(
+            f"{source}: georeferencing is not geographic degrees (lat {lat0_deg}..{lat_top}, lon0 {lon0_deg})"
+        )
     if not np.isfinite(heights).any():
         raise DemLoadError(f"{source}: every post is a void (nodata); no terrain in this DEM")
     if fill:
         heights = fill_voids(heights, source)
-    return Dem(heights, np.radians(lat0_deg), np.radians(lon0_deg), np.radians(dlat_deg), np.radians(dlon_deg), name)
+    return Dem(
+        heights, np.radians(lat0_deg), np.radians(lon0_deg), np.radians(dlat_deg), np.radians(dlon_deg), name
+    )
 
 
 # --------------------------------------------------------------------------------------------- NPZ
 def save_npz(dem: Dem, path) -> Path:
     """Write `dem` in our NPZ format (keys in the module docstring)."""
     path = Path(path)
-    np.savez_compressed(path, heights_m=dem.heights_m, lat0_deg=np.degrees(dem.lat0_rad),
-                        lon0_deg=np.degrees(dem.lon0_rad), dlat_deg=np.degrees(dem.dlat_rad),
-                        dlon_deg=np.degrees(dem.dlon_rad), name=np.array(dem.name))
+    np.savez_compressed(
+        path,
+        heights_m=dem.heights_m,
+        lat0_deg=np.degrees(dem.lat0_rad),
+        lon0_deg=np.degrees(dem.lon0_rad),
+        dlat_deg=np.degrees(dem.dlat_rad),
+        dlon_deg=np.degrees(dem.dlon_rad),
+        name=np.array(dem.name),
+    )
     return path
 
 
@@ -112,8 +126,10 @@ def _matplotlib_npz(data, source: str, name: str, fill: bool) -> Dem:
     south, north = min(y_a, y_b), max(y_a, y_b)
     n_rows, n_cols = elev.shape
     if abs((xmax - xmin) / dx - n_cols) > 0.5 or abs((north - south) / dy - n_rows) > 0.5:
-        raise DemLoadError(f"{source}: shape {elev.shape} does not match the extent/spacing "
-                           f"({(north - south) / dy:.1f} x {(xmax - xmin) / dx:.1f} cells)")
+        raise DemLoadError(
+            f"{source}: shape {elev.shape} does not match the extent/spacing "
+            f"({(north - south) / dy:.1f} x {(xmax - xmin) / dx:.1f} cells)"
+        )
     if y_a > y_b:  # row 0 is the north edge (see docstring): flip to row 0 = south
         elev = elev[::-1]
     return _finish(elev, south + 0.5 * dy, xmin + 0.5 * dx, dy, dx, name, source, fill)
@@ -143,18 +159,28 @@ def _npz_to_dem(data, source: str, name: str, fill: bool) -> Dem:
     heights = np.asarray(data["heights_m"], dtype=np.float64)
     if "name" in keys:
         name = str(data["name"])
-    return _finish(heights, float(data["lat0_deg"]), float(data["lon0_deg"]), float(data["dlat_deg"]),
-                   float(data["dlon_deg"]), name, source, fill)
+    return _finish(
+        heights,
+        float(data["lat0_deg"]),
+        float(data["lon0_deg"]),
+        float(data["dlat_deg"]),
+        float(data["dlon_deg"]),
+        name,
+        source,
+        fill,
+    )
 
 
 def load_jacksboro(fill_voids: bool = False) -> Dem:
-    """The bundled real DEM: USGS 3-arc-second Jacksboro fault area (Tennessee) from matplotlib's sample data."""
+    """The bundled real DEM: USGS 3" Jacksboro fault area, Tennessee, from matplotlib's sample data."""
     from matplotlib import cbook
 
     data = cbook.get_sample_data("jacksboro_fault_dem.npz")
     if isinstance(data, np.lib.npyio.NpzFile):
         with data:
-            return _npz_to_dem(data, "matplotlib sample data jacksboro_fault_dem.npz", "jacksboro", fill_voids)
+            return _npz_to_dem(
+                data, "matplotlib sample data jacksboro_fault_dem.npz", "jacksboro", fill_voids
+            )
     with np.load(data) as npz:  # older matplotlib returns a path or file object
         return _npz_to_dem(npz, "matplotlib sample data jacksboro_fault_dem.npz", "jacksboro", fill_voids)
 
@@ -177,16 +203,22 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
             raise DemLoadError(f"{path}: raster has no bands")
         crs = ds.crs
         if crs is None:
-            raise DemLoadError(f"{path}: no coordinate reference system; need geographic lat/lon (e.g. EPSG:4326)")
+            raise DemLoadError(
+                f"{path}: no coordinate reference system; need geographic lat/lon (e.g. EPSG:4326)"
+            )
         if not crs.is_geographic:
-            raise DemLoadError(f"{path}: CRS {crs.to_string()} is projected; only geographic latitude/longitude "
-                               "grids are supported (reproject to EPSG:4326 first)")
+            raise DemLoadError(
+                f"{path}: CRS {crs.to_string()} is projected; only geographic latitude/longitude "
+                "grids are supported (reproject to EPSG:4326 first)"
+            )
         t = ds.transform
         if abs(t.b) > 0.0 or abs(t.d) > 0.0:
             raise DemLoadError(f"{path}: rotated/sheared geotransform {tuple(t)[:6]} is not supported")
         if t.a <= 0.0 or t.e == 0.0:
-            raise DemLoadError(f"{path}: invalid pixel size (x {t.a}, y {t.e}); need positive x spacing and "
-                               "non-zero y spacing")
+            raise DemLoadError(
+                f"{path}: invalid pixel size (x {t.a}, y {t.e}); need positive x spacing and "
+                "non-zero y spacing"
+            )
         raw = ds.read(1)
         nodata = ds.nodata
         suffix = path.suffix.lower()
@@ -217,5 +249,6 @@ def load_path(path, fill_voids: bool = False) -> Dem:
         return load_raster(path, fill_voids)
     if not path.exists():
         raise FileNotFoundError(f"DEM file not found: {path}")
-    raise DemLoadError(f"{path}: unsupported DEM format {suffix!r}; supported: "
-                       f"{', '.join(NPZ_SUFFIXES + RASTER_SUFFIXES)}")
+    raise DemLoadError(
+        f"{path}: unsupported DEM format {suffix!r}; supported: {', '.join(NPZ_SUFFIXES + RASTER_SUFFIXES)}"
+    )

@@ -37,6 +37,7 @@ from terrain.geodesy import WGS84_A_M, WGS84_E2
 from terrain.kernels import bilinear
 
 _INF = np.inf
+BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
 
 
 @dataclass
@@ -65,7 +66,7 @@ def _consts(lat):
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ned(dphi, dlam, hp, ha, s, c, m, n, dm):
-    """NED (m) of the point (lat_a + dphi, lon_a + dlam, hp) from the antenna at height ha (see module doc)."""
+    """NED (m) of the point (lat_a + dphi, lon_a + dlam, hp) from the antenna at height ha."""
     mh = m + ha
     nh = n + ha
     x = (m + hp) * dphi + 0.5 * nh * s * c * dlam * dlam + 0.5 * dm * dphi * dphi
@@ -138,8 +139,29 @@ def _refine_root(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, 
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ray_hit(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-             dx, dy, dz, t_from, t_to):
+def _ray_hit(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    h_min,
+    h_max,
+    cell_m,
+    lat,
+    lon,
+    ha,
+    s,
+    c,
+    m,
+    n,
+    dm,
+    dx,
+    dy,
+    dz,
+    t_from,
+    t_to,
+):
     """First crossing of the ray (unit NED direction dx, dy, dz) into the terrain for t in [t_from, t_to].
 
     Marches half a post horizontally per step, starting no earlier than the depth of the highest post.
@@ -171,8 +193,9 @@ def _ray_hit(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
         t_b = min(t_a + step, t_to)
         g_b = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t_b)
         if g_a == g_a and g_b == g_b and g_b < 0.0:
-            return _refine_root(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz,
-                                t_a, g_a, t_b, g_b)
+            return _refine_root(
+                heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t_a, g_a, t_b, g_b
+            )
         if g_b == g_b and dz > 0.0:
             # ray point already below the lowest post and still descending: nothing further to hit
             dphi, dlam, hp = _geo_of_ned(t_b * dx, t_b * dy, t_b * dz, ha, s, c, m, n, dm)
@@ -183,8 +206,9 @@ def _ray_hit(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ray_cast_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, dirs, max_range,
-                    valid, rng, lat_out, lon_out, h_out):
+def _ray_cast_batch(
+    heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, dirs, max_range, valid, rng, lat_out, lon_out, h_out
+):
     h_min, h_max = _finite_range(heights)
     for k in range(lat.shape[0]):
         valid[k] = False
@@ -200,8 +224,29 @@ def _ray_cast_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, dirs, 
         dy /= norm
         dz /= norm
         s, c, m, n, dm = _consts(lat[k])
-        t = _ray_hit(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat[k], lon[k], h[k], s, c, m, n, dm,
-                     dx, dy, dz, 0.0, max_range)
+        t = _ray_hit(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            h_min,
+            h_max,
+            cell_m,
+            lat[k],
+            lon[k],
+            h[k],
+            s,
+            c,
+            m,
+            n,
+            dm,
+            dx,
+            dy,
+            dz,
+            0.0,
+            max_range,
+        )
         if t == t:
             dphi, dlam, hp = _geo_of_ned(t * dx, t * dy, t * dz, h[k], s, c, m, n, dm)
             valid[k] = True
@@ -213,7 +258,9 @@ def _ray_cast_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, dirs, 
 
 # ----------------------------------------------------------------------------------------- radar altimeter
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj):
+def _ra_eval(
+    heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj
+):
     """Range to the terrain point at grid coordinates (fi, fj) if inside the cone, else inf."""
     la = lat0 + fi * dlat
     lo = lon0 + fj * dlon
@@ -228,8 +275,9 @@ def _ra_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, 
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _pattern_search(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range,
-                    fi, fj, f0):
+def _pattern_search(
+    heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj, f0
+):
     """Compass + diagonal pattern search in grid coordinates from (fi, fj); returns (f, fi, fj, touched)
     where touched says an out-of-cone neighbour was met at the finest steps."""
     step = 0.5
@@ -253,8 +301,28 @@ def _pattern_search(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, d
                 dj = 1.0 if q % 2 == 0 else -1.0
             ci = fi + di * step
             cj = fj + dj * step
-            fc = _ra_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb,
-                          max_range, ci, cj)
+            fc = _ra_eval(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat,
+                lon,
+                ha,
+                s,
+                c,
+                m,
+                n,
+                dm,
+                ax,
+                ay,
+                az,
+                cosb,
+                max_range,
+                ci,
+                cj,
+            )
             if fc == _INF and step < 0.05:
                 touched = True
             if fc < best_f:
@@ -271,8 +339,38 @@ def _pattern_search(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, d
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                   ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, az_rad, t_guess):
+def _boundary_eval(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    h_min,
+    h_max,
+    cell_m,
+    lat,
+    lon,
+    ha,
+    s,
+    c,
+    m,
+    n,
+    dm,
+    ax,
+    ay,
+    az,
+    e1x,
+    e1y,
+    e1z,
+    e2x,
+    e2y,
+    e2z,
+    cosb,
+    sinb,
+    max_range,
+    az_rad,
+    t_guess,
+):
     """Range of the first terrain hit along the cone-boundary ray at azimuth az_rad (inf if none)."""
     ca = np.cos(az_rad)
     sa = np.sin(az_rad)
@@ -306,17 +404,62 @@ def _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, l
     g0 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t_from)
     if not (g0 == g0 and g0 >= 0.0):
         t_from = 0.0
-    t = _ray_hit(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                 dx, dy, dz, t_from, max_range)
+    t = _ray_hit(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        h_min,
+        h_max,
+        cell_m,
+        lat,
+        lon,
+        ha,
+        s,
+        c,
+        m,
+        n,
+        dm,
+        dx,
+        dy,
+        dz,
+        t_from,
+        max_range,
+    )
     if t != t:
         return _INF, dx, dy, dz
     return t, dx, dy, dz
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, ax, ay, az, cosb, sinb,
-            max_range, out):
-    """Closest terrain point in the beam cone; writes (valid, range, lat, lon, h) into out[0:5]."""
+def _ra_one(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    h_min,
+    h_max,
+    cell_m,
+    lat,
+    lon,
+    ha,
+    ax,
+    ay,
+    az,
+    cosb,
+    sinb,
+    max_range,
+    bs,
+    bmax,
+    bmin,
+    out,
+):
+    """Closest terrain point in the beam cone; writes (valid, range, lat, lon, h) into out[0:5].
+
+    bs, bmax, bmin: block size and per-block height bounds (terrain.kernels.block_bounds) used to skip
+    blocks that cannot hold a point closer than the best so far or that lie outside the cone."""
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
@@ -342,14 +485,36 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
     best_i = np.nan
     best_j = np.nan
     # 1) the axis ray: an upper bound and a start point
-    t_ax = _ray_hit(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                    ax, ay, az, 0.0, max_range)
+    t_ax = _ray_hit(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        h_min,
+        h_max,
+        cell_m,
+        lat,
+        lon,
+        ha,
+        s,
+        c,
+        m,
+        n,
+        dm,
+        ax,
+        ay,
+        az,
+        0.0,
+        max_range,
+    )
     if t_ax == t_ax:
         dphi, dlam, hp = _geo_of_ned(t_ax * ax, t_ax * ay, t_ax * az, ha, s, c, m, n, dm)
         fi = (lat + dphi - lat0) / dlat
         fj = (lon + dlam - lon0) / dlon
-        f = _ra_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range,
-                     fi, fj)
+        f = _ra_eval(
+            heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj
+        )
         if f < best:
             best, best_i, best_j = f, fi, fj
     # 2) footprint bounding box (NED north/east) of the cone between the highest and lowest terrain depths
@@ -417,39 +582,94 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
         nj = j_hi - j_lo + 1
         if ni > 0 and nj > 0:
             rbuf = np.full((ni + 2, nj + 2), _INF)
-            for i in range(i_lo, i_hi + 1):
-                dphi = lat0 + i * dlat - lat
-                for j in range(j_lo, j_hi + 1):
-                    hp = heights[i, j]
-                    if hp != hp:
+            nbi, nbj = bmax.shape
+            half_beam = np.arccos(cosb)
+            post_best = best
+            bi0 = i_lo // bs
+            bi1 = min(i_hi // bs, nbi - 1)
+            bj0 = j_lo // bs
+            bj1 = min(j_hi // bs, nbj - 1)
+            scanned = np.zeros((bi1 - bi0 + 1, bj1 - bj0 + 1), dtype=np.bool_)
+            for bi in range(bi0, bi1 + 1):
+                pi0 = max(bi * bs, i_lo)
+                pi1 = min(bi * bs + bs - 1 if bi < nbi - 1 else n_lat - 1, i_hi)
+                if pi0 > pi1:
+                    continue
+                n0 = (lat0 + bi * bs * dlat - lat) * mh
+                n1 = (lat0 + min(bi * bs + bs, n_lat - 1) * dlat - lat) * mh
+                dn_ = n0 if n0 > 0.0 else (-n1 if n1 < 0.0 else 0.0)
+                for bj in range(bj0, bj1 + 1):
+                    pj0 = max(bj * bs, j_lo)
+                    pj1 = min(bj * bs + bs - 1 if bj < nbj - 1 else n_lon - 1, j_hi)
+                    hmx = bmax[bi, bj]
+                    if pj0 > pj1 or hmx == -_INF:
                         continue
-                    dlam = lon0 + j * dlon - lon
-                    x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
-                    r = np.sqrt(x * x + y * y + z * z)
-                    if r > max_range or x * ax + y * ay + z * az < cosb * r:
+                    hmn = bmin[bi, bj]
+                    e0 = (lon0 + bj * bs * dlon - lon) * nh
+                    e1 = (lon0 + min(bj * bs + bs, n_lon - 1) * dlon - lon) * nh
+                    de_ = e0 if e0 > 0.0 else (-e1 if e1 < 0.0 else 0.0)
+                    # lower bound of the range to any point of the block (curvature only adds depth)
+                    dh = max(np.sqrt(dn_ * dn_ + de_ * de_) * 0.998 - 2.0, 0.0)
+                    dv = max(ha - hmx, 0.0)
+                    bound = post_best + 0.5 * cell_m
+                    if dh * dh + dv * dv > bound * bound:
                         continue
-                    rbuf[i - i_lo + 1, j - j_lo + 1] = r
-            for a_i in range(1, ni + 1):
-                for a_j in range(1, nj + 1):
-                    r = rbuf[a_i, a_j]
-                    if r == _INF or r >= cand_f[kk - 1]:
+                    # the block's bounding sphere must reach into the cone
+                    cx = 0.5 * (n0 + n1)
+                    cy = 0.5 * (e0 + e1)
+                    cz = ha - 0.5 * (hmx + hmn)
+                    rad = 0.5 * np.sqrt((n1 - n0) ** 2 + (e1 - e0) ** 2 + (hmx - hmn) ** 2)
+                    cn = np.sqrt(cx * cx + cy * cy + cz * cz)
+                    rad += 0.5 * (cn + rad) ** 2 / 6.3e6 + 0.002 * cn + 2.0
+                    if cn > rad:
+                        cos_c = (cx * ax + cy * ay + cz * az) / cn
+                        cos_c = min(max(cos_c, -1.0), 1.0)
+                        if np.arccos(cos_c) - np.arcsin(rad / cn) > half_beam:
+                            continue
+                    scanned[bi - bi0, bj - bj0] = True
+                    for i in range(pi0, pi1 + 1):
+                        dphi = lat0 + i * dlat - lat
+                        for j in range(pj0, pj1 + 1):
+                            hp = heights[i, j]
+                            if hp != hp:
+                                continue
+                            dlam = lon0 + j * dlon - lon
+                            x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
+                            r = np.sqrt(x * x + y * y + z * z)
+                            if r > max_range or x * ax + y * ay + z * az < cosb * r:
+                                continue
+                            rbuf[i - i_lo + 1, j - j_lo + 1] = r
+                            if r < post_best:
+                                post_best = r
+            for bi in range(bi0, bi1 + 1):
+                for bj in range(bj0, bj1 + 1):
+                    if not scanned[bi - bi0, bj - bj0]:
                         continue
-                    is_min = True
-                    for di in range(-1, 2):
-                        for dj in range(-1, 2):
-                            if (di != 0 or dj != 0) and rbuf[a_i + di, a_j + dj] < r:
-                                is_min = False
-                    if not is_min:
-                        continue
-                    q = kk - 1
-                    while q > 0 and cand_f[q - 1] > r:
-                        cand_f[q] = cand_f[q - 1]
-                        cand_i[q] = cand_i[q - 1]
-                        cand_j[q] = cand_j[q - 1]
-                        q -= 1
-                    cand_f[q] = r
-                    cand_i[q] = i_lo + a_i - 1
-                    cand_j[q] = j_lo + a_j - 1
+                    pi0 = max(bi * bs, i_lo)
+                    pi1 = min(bi * bs + bs - 1 if bi < nbi - 1 else n_lat - 1, i_hi)
+                    pj0 = max(bj * bs, j_lo)
+                    pj1 = min(bj * bs + bs - 1 if bj < nbj - 1 else n_lon - 1, j_hi)
+                    for a_i in range(pi0 - i_lo + 1, pi1 - i_lo + 2):
+                        for a_j in range(pj0 - j_lo + 1, pj1 - j_lo + 2):
+                            r = rbuf[a_i, a_j]
+                            if r == _INF or r >= cand_f[kk - 1]:
+                                continue
+                            is_min = True
+                            for di in range(-1, 2):
+                                for dj in range(-1, 2):
+                                    if (di != 0 or dj != 0) and rbuf[a_i + di, a_j + dj] < r:
+                                        is_min = False
+                            if not is_min:
+                                continue
+                            q = kk - 1
+                            while q > 0 and cand_f[q - 1] > r:
+                                cand_f[q] = cand_f[q - 1]
+                                cand_i[q] = cand_i[q - 1]
+                                cand_j[q] = cand_j[q - 1]
+                                q -= 1
+                            cand_f[q] = r
+                            cand_i[q] = i_lo + a_i - 1
+                            cand_j[q] = j_lo + a_j - 1
     # 4) local refinement from distinct start points
     done_i = np.empty(kk + 1)
     done_j = np.empty(kk + 1)
@@ -472,8 +692,29 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
                 near = True
         if near or n_done >= 4:
             continue
-        f, fi, fj, touched = _pattern_search(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm,
-                                             ax, ay, az, cosb, max_range, fi0, fj0, f0)
+        f, fi, fj, touched = _pattern_search(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            lat,
+            lon,
+            ha,
+            s,
+            c,
+            m,
+            n,
+            dm,
+            ax,
+            ay,
+            az,
+            cosb,
+            max_range,
+            fi0,
+            fj0,
+            f0,
+        )
         done_i[n_done] = fi
         done_j[n_done] = fj
         n_done += 1
@@ -491,9 +732,38 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
     if touched_best or cos_off < cosb + 1e-6:
         az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
         width = min(np.pi, 3.0 * cell_m / max(best * sinb, 1e-6))
-        fb, dx, dy, dz = _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
-                                        s, c, m, n, dm, ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb,
-                                        max_range, az0, best)
+        fb, dx, dy, dz = _boundary_eval(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            h_min,
+            h_max,
+            cell_m,
+            lat,
+            lon,
+            ha,
+            s,
+            c,
+            m,
+            n,
+            dm,
+            ax,
+            ay,
+            az,
+            e1x,
+            e1y,
+            e1z,
+            e2x,
+            e2y,
+            e2z,
+            cosb,
+            sinb,
+            max_range,
+            az0,
+            best,
+        )
         centre = az0
         t_ref = fb if fb < _INF else best
         w = width
@@ -501,9 +771,38 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
         while w > w_min:
             for sgn in (-0.5, 0.5):
                 a = centre + sgn * w
-                fa, _, _, _ = _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon,
-                                             ha, s, c, m, n, dm, ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb,
-                                             sinb, max_range, a, t_ref)
+                fa, _, _, _ = _boundary_eval(
+                    heights,
+                    lat0,
+                    lon0,
+                    dlat,
+                    dlon,
+                    h_min,
+                    h_max,
+                    cell_m,
+                    lat,
+                    lon,
+                    ha,
+                    s,
+                    c,
+                    m,
+                    n,
+                    dm,
+                    ax,
+                    ay,
+                    az,
+                    e1x,
+                    e1y,
+                    e1z,
+                    e2x,
+                    e2y,
+                    e2z,
+                    cosb,
+                    sinb,
+                    max_range,
+                    a,
+                    t_ref,
+                )
                 if fa < fb:
                     fb = fa
                     centre = a
@@ -512,9 +811,38 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
                 t_ref = fb
             w *= 0.5
         if fb < best:
-            _, dx, dy, dz = _boundary_eval(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
-                                           s, c, m, n, dm, ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb,
-                                           max_range, centre, t_ref)
+            _, dx, dy, dz = _boundary_eval(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                h_min,
+                h_max,
+                cell_m,
+                lat,
+                lon,
+                ha,
+                s,
+                c,
+                m,
+                n,
+                dm,
+                ax,
+                ay,
+                az,
+                e1x,
+                e1y,
+                e1z,
+                e2x,
+                e2y,
+                e2z,
+                cosb,
+                sinb,
+                max_range,
+                centre,
+                t_ref,
+            )
             dphi, dlam, hpb = _geo_of_ned(fb * dx, fb * dy, fb * dz, ha, s, c, m, n, dm)
             best = fb
             out_lat = lat + dphi
@@ -528,9 +856,30 @@ def _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha,
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C_bn, half_beam, max_range,
-              valid, rng, lat_out, lon_out, h_out):
-    h_min, h_max = _finite_range(heights)
+def _ra_batch(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    cell_m,
+    lat,
+    lon,
+    h,
+    C_bn,
+    half_beam,
+    max_range,
+    bs,
+    bmax,
+    bmin,
+    valid,
+    rng,
+    lat_out,
+    lon_out,
+    h_out,
+):
+    h_min = _finite_range(bmin)[0]
+    h_max = _finite_range(bmax)[1]
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
     out = np.empty(5)
@@ -541,8 +890,29 @@ def _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C_bn, half_b
             valid[k] = False
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
-        _ra_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat[k], lon[k], h[k],
-                ax / nrm, ay / nrm, az / nrm, cosb, sinb, max_range, out)
+        _ra_one(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            h_min,
+            h_max,
+            cell_m,
+            lat[k],
+            lon[k],
+            h[k],
+            ax / nrm,
+            ay / nrm,
+            az / nrm,
+            cosb,
+            sinb,
+            max_range,
+            bs,
+            bmax,
+            bmin,
+            out,
+        )
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
         lat_out[k] = out[2]
@@ -552,8 +922,9 @@ def _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C_bn, half_b
 
 # ----------------------------------------------------------------------------------------- IRA
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh,
-              sv, t_guess, tol):
+def _zd_point(
+    heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, sv, t_guess, tol
+):
     """Terrain point on the zero-Doppler plane at across-track nominal coordinate sv (m).
 
     Nominal horizontal coordinates (north, east) = sv * w_h + t * u_h, w_h = right-perpendicular of the
@@ -600,11 +971,58 @@ def _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx,
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ira_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh,
-              C, tan_w, max_range, sv, t_guess, tol):
+def _ira_eval(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat,
+    lon,
+    ha,
+    s,
+    c,
+    m,
+    n,
+    dm,
+    vx,
+    vy,
+    vz,
+    uhx,
+    uhy,
+    vh,
+    C,
+    tan_w,
+    max_range,
+    sv,
+    t_guess,
+    tol,
+):
     """(f, t) at across-track coordinate sv: range if the point is inside the look-angle window, else inf."""
-    t, x, y, z, dphi, dlam, hp = _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm,
-                                           vx, vy, vz, uhx, uhy, vh, sv, t_guess, tol)
+    t, x, y, z, dphi, dlam, hp = _zd_point(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        lat,
+        lon,
+        ha,
+        s,
+        c,
+        m,
+        n,
+        dm,
+        vx,
+        vy,
+        vz,
+        uhx,
+        uhy,
+        vh,
+        sv,
+        t_guess,
+        tol,
+    )
     if t != t:
         return _INF, t_guess
     r = np.sqrt(x * x + y * y + z * z)
@@ -617,8 +1035,51 @@ def _ira_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx,
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, v, C, tan_w, max_range,
-             buf_s, buf_f, buf_t, out):
+def _region_max(bs, bmax, n_lat, n_lon, lat0, lon0, dlat, dlon, lat, lon, mh, nhc, n_a, n_b, e_a, e_b):
+    """Upper bound of the terrain height over the NED rectangle [n_a, n_b] x [e_a, e_b] (-inf: no terrain)."""
+    i_a = int(np.floor((lat + n_a / mh - lat0) / dlat))
+    i_b = int(np.ceil((lat + n_b / mh - lat0) / dlat))
+    j_a = int(np.floor((lon + e_a / nhc - lon0) / dlon))
+    j_b = int(np.ceil((lon + e_b / nhc - lon0) / dlon))
+    if i_b < 0 or j_b < 0 or i_a > n_lat - 1 or j_a > n_lon - 1:
+        return -_INF
+    nbi, nbj = bmax.shape
+    bi_a = min(max(i_a, 0) // bs, nbi - 1)
+    bi_b = min(min(i_b, n_lat - 1) // bs, nbi - 1)
+    bj_a = min(max(j_a, 0) // bs, nbj - 1)
+    bj_b = min(min(j_b, n_lon - 1) // bs, nbj - 1)
+    hi = -_INF
+    for bi in range(bi_a, bi_b + 1):
+        for bj in range(bj_a, bj_b + 1):
+            if bmax[bi, bj] > hi:
+                hi = bmax[bi, bj]
+    return hi
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _ira_one(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    h_min,
+    h_max,
+    cell_m,
+    lat,
+    lon,
+    ha,
+    v,
+    C,
+    tan_w,
+    max_range,
+    buf_s,
+    buf_f,
+    buf_t,
+    bs,
+    bmax,
+    out,
+):
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
@@ -662,10 +1123,77 @@ def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
             horiz_lb = abs(sv) * 0.998 - 2.0
             if horiz_lb > max_range:
                 break
-            if best < _INF and d_top > 0.0 and horiz_lb > 0.0 and horiz_lb * horiz_lb + d_top * d_top > best * best:
+            if (
+                best < _INF
+                and d_top > 0.0
+                and horiz_lb > 0.0
+                and horiz_lb * horiz_lb + d_top * d_top > best * best
+            ):
                 break
-            f, t = _ira_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz,
-                             uhx, uhy, vh, C, tan_w, max_range, sv, t_prev, 1e-3)
+            if best < _INF and horiz_lb > 0.0:
+                # skip the sample when the blocks its terrain point can lie in are too low to beat the best
+                tz = -(vz / vh)
+                t_a = tz * (ha - h_max - 5.0)
+                t_b = tz * (ha - h_min + 5.0 + sv * sv / 6.3e6)
+                t_lo = min(t_a, t_b) - 5.0 - 0.01 * abs(sv)
+                t_hi = max(t_a, t_b) + 5.0 + 0.01 * abs(sv)
+                na = -sv * uhy + t_lo * uhx
+                nb = -sv * uhy + t_hi * uhx
+                ea = sv * uhx + t_lo * uhy
+                eb = sv * uhx + t_hi * uhy
+                hb = _region_max(
+                    bs,
+                    bmax,
+                    heights.shape[0],
+                    heights.shape[1],
+                    lat0,
+                    lon0,
+                    dlat,
+                    dlon,
+                    lat,
+                    lon,
+                    m + ha,
+                    (n + ha) * c,
+                    min(na, nb) - cell_m,
+                    max(na, nb) + cell_m,
+                    min(ea, eb) - cell_m,
+                    max(ea, eb) + cell_m,
+                )
+                dv = ha - hb
+                if dv > 0.0 and horiz_lb * horiz_lb + dv * dv > best * best:
+                    if q < lo_q:
+                        lo_q = q
+                    if q > hi_q:
+                        hi_q = q
+                    k += 1
+                    continue
+            f, t = _ira_eval(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat,
+                lon,
+                ha,
+                s,
+                c,
+                m,
+                n,
+                dm,
+                vx,
+                vy,
+                vz,
+                uhx,
+                uhy,
+                vh,
+                C,
+                tan_w,
+                max_range,
+                sv,
+                t_prev,
+                1e-3,
+            )
             buf_f[q] = f
             buf_t[q] = t
             if t == t:
@@ -711,8 +1239,33 @@ def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
         while w > 2e-4:
             for sgn in (-0.5, 0.5):
                 sv = centre + sgn * w
-                f, t = _ira_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz,
-                                 uhx, uhy, vh, C, tan_w, max_range, sv, tc, 2e-5)
+                f, t = _ira_eval(
+                    heights,
+                    lat0,
+                    lon0,
+                    dlat,
+                    dlon,
+                    lat,
+                    lon,
+                    ha,
+                    s,
+                    c,
+                    m,
+                    n,
+                    dm,
+                    vx,
+                    vy,
+                    vz,
+                    uhx,
+                    uhy,
+                    vh,
+                    C,
+                    tan_w,
+                    max_range,
+                    sv,
+                    tc,
+                    2e-5,
+                )
                 if f < fc:
                     fc = f
                     centre = sv
@@ -725,8 +1278,30 @@ def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
             best_t = tc
     if final == _INF:
         return
-    t, x, y, z, dphi, dlam, hp = _zd_point(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm,
-                                           vx, vy, vz, uhx, uhy, vh, best_s, best_t, 1e-6)
+    t, x, y, z, dphi, dlam, hp = _zd_point(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        lat,
+        lon,
+        ha,
+        s,
+        c,
+        m,
+        n,
+        dm,
+        vx,
+        vy,
+        vz,
+        uhx,
+        uhy,
+        vh,
+        best_s,
+        best_t,
+        1e-6,
+    )
     out[0] = 1.0
     out[1] = np.sqrt(x * x + y * y + z * z)
     out[2] = lat + dphi
@@ -735,9 +1310,31 @@ def _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ira_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, v_ned, C_bn, half_window, max_range,
-               valid, rng, lat_out, lon_out, h_out):
-    h_min, h_max = _finite_range(heights)
+def _ira_batch(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    cell_m,
+    lat,
+    lon,
+    h,
+    v_ned,
+    C_bn,
+    half_window,
+    max_range,
+    bs,
+    bmax,
+    bmin,
+    valid,
+    rng,
+    lat_out,
+    lon_out,
+    h_out,
+):
+    h_min = _finite_range(bmin)[0]
+    h_max = _finite_range(bmax)[1]
     tan_w = np.tan(half_window)
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
     buf_s = np.empty(n_max)
@@ -749,8 +1346,29 @@ def _ira_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, v_ned, C_bn
             valid[k] = False
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
-        _ira_one(heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat[k], lon[k], h[k], v_ned[k],
-                 C_bn[k], tan_w, max_range, buf_s, buf_f, buf_t, out)
+        _ira_one(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            h_min,
+            h_max,
+            cell_m,
+            lat[k],
+            lon[k],
+            h[k],
+            v_ned[k],
+            C_bn[k],
+            tan_w,
+            max_range,
+            buf_s,
+            buf_f,
+            buf_t,
+            bs,
+            bmax,
+            out,
+        )
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
         lat_out[k] = out[2]
@@ -774,7 +1392,9 @@ def _stack(name, arr, n, shape):
     if a.shape == shape:
         a = np.broadcast_to(a, (n,) + shape)
     if a.shape != (n,) + shape:
-        raise ValueError(f"{name} must have shape {shape} or ({n}, {', '.join(map(str, shape))}), got {a.shape}")
+        raise ValueError(
+            f"{name} must have shape {shape} or ({n}, {', '.join(map(str, shape))}), got {a.shape}"
+        )
     return np.ascontiguousarray(a)
 
 
@@ -800,13 +1420,30 @@ def ray_cast(dem, lat_rad, lon_rad, h_m, dir_ned, max_range_m: float = 20000.0) 
     dirs = _stack("dir_ned", dir_ned, lat.shape[0], (3,))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
     heights, lat0, lon0, dlat, dlon = dem.grid
-    _ray_cast_batch(heights, lat0, lon0, dlat, dlon, _cell_m(dem), lat, lon, h, dirs, float(max_range_m),
-                    valid, rng, la, lo, hh)
+    _ray_cast_batch(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        _cell_m(dem),
+        lat,
+        lon,
+        h,
+        dirs,
+        float(max_range_m),
+        valid,
+        rng,
+        la,
+        lo,
+        hh,
+    )
     return TerrainReturn(valid, rng, la, lo, hh)
 
 
-def radar_altimeter_return(dem, lat_rad, lon_rad, h_m, C_bn, half_beamwidth_rad: float,
-                           max_range_m: float = 8000.0) -> TerrainReturn:
+def radar_altimeter_return(
+    dem, lat_rad, lon_rad, h_m, C_bn, half_beamwidth_rad: float, max_range_m: float = 8000.0
+) -> TerrainReturn:
     """Closest terrain point inside the cone of half-angle half_beamwidth_rad around the body down axis
     (C_bn[:, :, 2] in NED), for antennas at (lat, lon rad, h m MSL); C_bn is (n, 3, 3) or (3, 3)."""
     if not (0.0 < half_beamwidth_rad < np.pi / 2):
@@ -816,13 +1453,32 @@ def radar_altimeter_return(dem, lat_rad, lon_rad, h_m, C_bn, half_beamwidth_rad:
     C = _stack("C_bn", C_bn, lat.shape[0], (3, 3))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
     heights, lat0, lon0, dlat, dlon = dem.grid
-    _ra_batch(heights, lat0, lon0, dlat, dlon, _cell_m(dem), lat, lon, h, C, float(half_beamwidth_rad),
-              float(max_range_m), valid, rng, la, lo, hh)
+    _ra_batch(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        _cell_m(dem),
+        lat,
+        lon,
+        h,
+        C,
+        float(half_beamwidth_rad),
+        float(max_range_m),
+        *dem.block_bounds(BLOCK_POSTS),
+        valid,
+        rng,
+        la,
+        lo,
+        hh,
+    )
     return TerrainReturn(valid, rng, la, lo, hh)
 
 
-def ira_return(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float,
-               max_range_m: float = 12000.0) -> TerrainReturn:
+def ira_return(
+    dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float, max_range_m: float = 12000.0
+) -> TerrainReturn:
     """Closest terrain point on the zero-Doppler plane (through the antenna, perpendicular to v_ned (n, 3))
     whose look angle |theta| = |atan2(y_b, z_b)| <= half_window_rad (body FRD via C_bn (n, 3, 3))."""
     if not (0.0 < half_window_rad < np.pi / 2):
@@ -834,8 +1490,27 @@ def ira_return(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float,
     C = _stack("C_bn", C_bn, n, (3, 3))
     valid, rng, la, lo, hh = _outputs(n)
     heights, lat0, lon0, dlat, dlon = dem.grid
-    _ira_batch(heights, lat0, lon0, dlat, dlon, _cell_m(dem), lat, lon, h, v, C, float(half_window_rad),
-               float(max_range_m), valid, rng, la, lo, hh)
+    _ira_batch(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        _cell_m(dem),
+        lat,
+        lon,
+        h,
+        v,
+        C,
+        float(half_window_rad),
+        float(max_range_m),
+        *dem.block_bounds(BLOCK_POSTS),
+        valid,
+        rng,
+        la,
+        lo,
+        hh,
+    )
     return TerrainReturn(valid, rng, la, lo, hh)
 
 
@@ -852,8 +1527,9 @@ def ned_of_points(lat_rad, lon_rad, h_m, lat_p_rad, lon_p_rad, h_p_m) -> np.ndar
     """(n, 3) NED vectors (m) from antennas to points, via the second-order expansion of the module doc."""
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     out = np.empty((lat.shape[0], 3))
-    _ned_batch(lat, lon, h, np.asarray(lat_p_rad, float), np.asarray(lon_p_rad, float),
-               np.asarray(h_p_m, float), out)
+    _ned_batch(
+        lat, lon, h, np.asarray(lat_p_rad, float), np.asarray(lon_p_rad, float), np.asarray(h_p_m, float), out
+    )
     return out
 
 

@@ -33,19 +33,21 @@ class TerrainPreset:
 PRESETS = {
     "flat": TerrainPreset(rms_height_m=4.0, correlation_length_m=3000.0, hurst=0.9, mean_height_m=100.0),
     "rolling": TerrainPreset(rms_height_m=40.0, correlation_length_m=1500.0, hurst=0.8, mean_height_m=300.0),
-    "mountainous": TerrainPreset(rms_height_m=300.0, correlation_length_m=4000.0, hurst=0.7,
-                                 mean_height_m=1500.0),
+    "mountainous": TerrainPreset(
+        rms_height_m=300.0, correlation_length_m=4000.0, hurst=0.7, mean_height_m=1500.0
+    ),
 }
 
 
-def psd_field(shape, spacing_m: float, correlation_length_m: float, hurst: float,
-              rng: np.random.Generator) -> np.ndarray:
+def psd_field(
+    shape, spacing_m: float, correlation_length_m: float, hurst: float, rng: np.random.Generator
+) -> np.ndarray:
     """Zero-mean, unit-RMS Gaussian field (shape) with the von Karman spectrum of the module docstring."""
     n_y, n_x = shape
     ky = 2.0 * np.pi * np.fft.fftfreq(n_y, d=spacing_m)
     kx = 2.0 * np.pi * np.fft.rfftfreq(n_x, d=spacing_m)
     k2 = ky[:, None] ** 2 + kx[None, :] ** 2
-    amp = (1.0 + k2 * correlation_length_m ** 2) ** (-(hurst + 1.0) / 2.0)
+    amp = (1.0 + k2 * correlation_length_m**2) ** (-(hurst + 1.0) / 2.0)
     amp[0, 0] = 0.0
     noise = np.fft.rfft2(rng.standard_normal((n_y, n_x)))
     field = np.fft.irfft2(noise * amp, s=(n_y, n_x))
@@ -56,10 +58,19 @@ def psd_field(shape, spacing_m: float, correlation_length_m: float, hurst: float
     return field / rms
 
 
-def generate(n_lat: int = 256, n_lon: int = 256, spacing_m: float = 90.0, rms_height_m: float = 40.0,
-             correlation_length_m: float = 1500.0, hurst: float = 0.8, mean_height_m: float = 300.0,
-             seed: int | np.random.Generator = 0, lat0_deg: float = 36.5, lon0_deg: float = -84.3,
-             name: str = "synthetic") -> Dem:
+def generate(
+    n_lat: int = 256,
+    n_lon: int = 256,
+    spacing_m: float = 90.0,
+    rms_height_m: float = 40.0,
+    correlation_length_m: float = 1500.0,
+    hurst: float = 0.8,
+    mean_height_m: float = 300.0,
+    seed: int | np.random.Generator = 0,
+    lat0_deg: float = 36.5,
+    lon0_deg: float = -84.3,
+    name: str = "synthetic",
+) -> Dem:
     """A seeded synthetic DEM of n_lat x n_lon posts spaced spacing_m (north and east) from the SW post."""
     if n_lat < 2 or n_lon < 2:
         raise ValueError(f"generate: need at least 2 x 2 posts, got n_lat={n_lat}, n_lon={n_lon}")
@@ -80,12 +91,28 @@ def generate(n_lat: int = 256, n_lon: int = 256, spacing_m: float = 90.0, rms_he
     return Dem(heights, lat0, np.radians(lon0_deg), dlat, dlon, name)
 
 
-def from_preset(preset: str, seed: int | np.random.Generator = 0, n_lat: int = 334, n_lon: int = 334,
-                spacing_m: float = 90.0, **grid) -> Dem:
+def from_preset(
+    preset: str,
+    seed: int | np.random.Generator = 0,
+    n_lat: int = 334,
+    n_lon: int = 334,
+    spacing_m: float = 90.0,
+    **grid,
+) -> Dem:
     """Synthetic DEM from a named preset ('flat', 'rolling', 'mountainous'); 30 x 30 km at 90 m by default."""
     key = preset.strip().lower()
     if key not in PRESETS:
         raise ValueError(f"unknown synthetic terrain preset {preset!r}; choose from {sorted(PRESETS)}")
     p = PRESETS[key]
-    return generate(n_lat, n_lon, spacing_m, p.rms_height_m, p.correlation_length_m, p.hurst, p.mean_height_m,
-                    seed=seed, name=f"synthetic:{key}", **grid)
+    return generate(
+        n_lat,
+        n_lon,
+        spacing_m,
+        p.rms_height_m,
+        p.correlation_length_m,
+        p.hurst,
+        p.mean_height_m,
+        seed=seed,
+        name=f"synthetic:{key}",
+        **grid,
+    )

@@ -151,3 +151,40 @@ def test_validate_command(capsys, tmp_path):
     assert cli.main(["validate", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "initial.lat_deg:" in err and "route: required key is missing" in err
+
+
+def test_bench_closed_loop_and_env_figures():
+    from trn_env import bench
+    cl = bench.closed_loop_benchmark(sim_s=3.0)
+    assert cl["closed_loop_steps_per_s"] > 0 and cl["closed_loop_jsbsim_reference_steps_per_s"] > 0
+    assert cl["closed_loop_ratio"] == pytest.approx(
+        cl["closed_loop_steps_per_s"] / cl["closed_loop_jsbsim_reference_steps_per_s"])
+    assert cl["closed_loop_sim_seconds"] == pytest.approx(3.0)
+    env = bench.env_benchmark(n_steps=3, decision_interval_s=1.0)
+    assert env["env_sim_seconds_measured"] == pytest.approx(3.0)
+    assert env["env_sim_seconds_per_wall_second"] > 0
+
+
+def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsys):
+    import types
+
+    from trn_env import bench
+    good = types.ModuleType("fake_good")
+    good.benchmark = lambda quick=False: {"jsbsim_steps_per_s": 1.0, "quick_seen": quick}
+    bad = types.ModuleType("fake_bad")
+
+    def explode():
+        raise RuntimeError("broken component")
+
+    bad.benchmark = explode
+    monkeypatch.setitem(sys.modules, "trn_env.bench_flight", good)
+    monkeypatch.setitem(sys.modules, "terrain.bench", bad)
+    monkeypatch.setitem(sys.modules, "trn_env.sensors.bench", types.ModuleType("fake_none"))
+    monkeypatch.setattr(bench, "closed_loop_benchmark", lambda quick: {"closed_loop_ratio": 0.25})
+    monkeypatch.setattr(bench, "env_benchmark", lambda quick: {"env_sim_seconds_per_wall_second": 9.0})
+    assert cli.main(["bench", "--quick"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["jsbsim_steps_per_s"] == 1.0 and out["quick_seen"] is True
+    assert "broken component" in out["terrain.bench.error"]
+    assert out["trn_env.sensors.bench.error"] == "no benchmark() function"
+    assert out["closed_loop_ratio"] == 0.25 and out["env_sim_seconds_per_wall_second"] == 9.0

@@ -112,6 +112,14 @@ def test_observation_and_reward_match_independent_computation(env):
                               est.h_m)[0]
     assert np.allclose(obs0[:2], goal[:2] / 1000.0, atol=1e-5)       # km (float32)
     assert np.allclose(obs0[8:11], np.log10(1.0 + est.sigma_ned_m), rtol=1e-5)
+    # terrain information at the estimate: the CRLB of terrain.metrics on the navigator's map
+    from terrain import metrics
+    the_map = env._dems[1]
+    crlb = metrics.terrain_information(the_map, 5.0, 2000.0).crlb_sigma_h_m
+    here = the_map.with_heights(np.minimum(np.nan_to_num(crlb, nan=1e4, posinf=1e4), 1e4)).height(
+        est.lat_rad, est.lon_rad)
+    assert obs0[11] == pytest.approx(np.log10(1.0 + here), rel=1e-5)
+    assert np.all(obs0[11:17] > 0.0)
     obs1, r, term, trunc, info1 = env.step(np.array([0.5, 0.6], np.float32))
     expected = ((info0["true_distance_to_goal_m"] - info1["true_distance_to_goal_m"]) / 1000.0
                 - env.error_weight * info1["true_horizontal_error_m"] / 1000.0)

@@ -42,6 +42,11 @@ def _euler(t):
     return np.full_like(t, np.radians(3.0)), np.full_like(t, 0.02), np.full_like(t, HEADING - CRAB)
 
 
+def _geopotential(h_m):
+    """A perfect ISA baro reports geopotential height (US 1976 radius 6356766 m)."""
+    return 6356766.0 * h_m / (6356766.0 + h_m)
+
+
 def _ray_to_terrain(lat, lon, h, d_ned):
     """Bisection along unit directions d_ned (n, 3) from (lat, lon, h) to the DEM surface."""
     r_n = meridian_radius_m(lat) + h
@@ -86,7 +91,7 @@ def _frames(fl, a, b, ira_valid=None, imu_f=None):
         t[0],
         t[-1] + 0.01,
         imu=ImuFrame(t, fb, fl["w"][a:b], ones),
-        baro=BaroFrame(t[::5], fl["h"][a:b][::5], ones[::5]),
+        baro=BaroFrame(t[::5], _geopotential(fl["h"][a:b][::5]), ones[::5]),
         ira=IraFrame(fl["t"][kk], R, th, iv),
         radar_altimeter=RadarAltimeterFrame(fl["t"][kk], fl["ra"][sel], np.ones(kk.size, bool)),
     )
@@ -195,3 +200,16 @@ def test_registry_and_settings_errors():
         registry.create("ins_tercom", dem=DEM, formula="magic")
     with pytest.raises(ValueError, match="bad settings"):
         registry.create("ins", colour="red")
+
+
+def test_height_initialised_from_baro_and_geopotential_converted(flight):
+    nav = registry.create("ins")
+    init = _initial(flight)
+    init.h_m += 15.0
+    nav.reset(init)
+    est = nav.update(_frames(flight, 0, 100))
+    assert abs(est.h_m - flight["h"][99]) < 0.05     # 1 m geopotential difference at 2500 m removed too
+    nav = registry.create("ins", init_height_from_baro=False, baro_geopotential=False)
+    nav.reset(init)
+    est = nav.update(_frames(flight, 0, 100))
+    assert est.h_m - flight["h"][99] > 10.0

@@ -144,6 +144,21 @@ def test_component_settings_rejected_at_their_field():
     assert any(p.startswith("sensors.imu:") for p in exc.value.problems), exc.value.problems
 
 
+def test_component_problems_reported_with_other_problems():
+    data = _default_data()
+    data["unexpected"] = 1
+    data["sensors"]["imu"] = {"grade": "navigation", "no_such": 1}
+    data["sensors"]["baro"] = {"bias_m": -3.0}
+    data["wind"]["turbulence"]["severity"] = "apocalyptic"
+    with pytest.raises(ScenarioError) as exc:
+        validate(data, source="test")
+    probs = exc.value.problems
+    assert any(p.startswith("unexpected: unknown key") for p in probs), probs
+    assert any(p.startswith("sensors.imu:") and "no_such" in p for p in probs), probs
+    assert any(p.startswith("sensors.baro:") and "bias_m" in p for p in probs), probs
+    assert sum(p.startswith("wind") for p in probs) == 1, probs       # schema only, no follow-on message
+
+
 def test_overrides_revalidated():
     sc = load_scenario("default", seed=7, duration_s=30.0, navigator="ins")
     assert (sc.seed, sc.duration_s, sc.navigator_name) == (7, 30.0, "ins")

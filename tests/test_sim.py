@@ -226,3 +226,24 @@ def test_diverged_on_covariance_and_on_nan():
     loop.navigator.update = nan_after_5
     res = loop.run()
     assert res.termination == "diverged" and res.sim_time_s == pytest.approx(0.5)
+
+
+def test_map_error_model_and_refined_world():
+    data = _short(3.0)
+    data["terrain"]["world"]["refinement"] = {"spacing_m": 30.0, "region_deg": [36.47, 36.56, -84.40, -84.33]}
+    data["terrain"]["map"] = {"dem": "world", "error_model": {"bias_m": 40.0, "tilt_n": 1e-3}}
+    data["route"]["waypoints"] = data["route"]["waypoints"][:1] + [
+        {"lat_deg": 36.55, "lon_deg": -84.36, "h_agl_m": 1500.0}]
+    loop = ClosedLoop(validate(data, source="test"))
+    world, the_map = loop.world_dem, loop.map_dem
+    assert max(world.spacing_m) < 31.0 and min(world.spacing_m) > 15.0
+    lat = np.radians(np.array([36.49, 36.50, 36.52]))
+    lon = np.radians(np.array([-84.37, -84.36, -84.35]))
+    lat_c = the_map.center_rad[0]
+    north = (lat - lat_c) * 6.36e6                       # tilt over a few km: 0.1 % radius error is << 1 m
+    assert np.allclose(the_map.height(lat, lon), world.height(lat, lon) + 40.0 + 1e-3 * north, atol=0.5)
+    assert loop.run().termination == "time_limit"
+    data["route"]["waypoints"][1]["lat_deg"] = 36.60     # outside the refined region
+    with pytest.raises(Exception) as exc:
+        validate(data, source="test")
+    assert any(p.startswith("route.waypoints[1]:") and "region_deg" in p for p in exc.value.problems)

@@ -11,8 +11,14 @@ from terrain.dem import Dem
 def _plane_dem(a=3.0, b=-2.0, c=500.0, n=40):
     """Heights linear in the grid indices: h = c + a*i + b*j (bilinear and bicubic reproduce it)."""
     i, j = np.meshgrid(np.arange(n), np.arange(n + 5), indexing="ij")
-    return Dem(c + a * i + b * j, np.radians(36.0), np.radians(-84.0), np.radians(3 / 3600), np.radians(3 / 3600),
-               "plane")
+    return Dem(
+        c + a * i + b * j,
+        np.radians(36.0),
+        np.radians(-84.0),
+        np.radians(3 / 3600),
+        np.radians(3 / 3600),
+        "plane",
+    )
 
 
 def test_bilinear_and_bicubic_reproduce_a_plane():
@@ -30,10 +36,10 @@ def test_bilinear_and_bicubic_reproduce_a_plane():
 
 def test_bicubic_reproduces_quadratic_and_bilinear_does_not():
     i, j = np.meshgrid(np.arange(30), np.arange(30), indexing="ij")
-    dem = Dem(0.5 * i ** 2 + 0.25 * i * j, 0.6, -1.4, 1e-5, 1e-5)
+    dem = Dem(0.5 * i**2 + 0.25 * i * j, 0.6, -1.4, 1e-5, 1e-5)
     fi, fj = 10.3, 12.7
     lat, lon = 0.6 + fi * 1e-5, -1.4 + fj * 1e-5
-    exact = 0.5 * fi ** 2 + 0.25 * fi * fj
+    exact = 0.5 * fi**2 + 0.25 * fi * fj
     assert dem.height(lat, lon, "bicubic") == pytest.approx(exact, abs=1e-6)
     assert abs(dem.height(lat, lon) - exact) > 0.05
 
@@ -45,7 +51,7 @@ def test_scalar_kernel_matches_batch_and_grid_tuple():
     lat = rng.uniform(b[0], b[1], 200)
     lon = rng.uniform(b[2], b[3], 200)
     batch = dem.height(lat, lon)
-    scalar = np.array([kernels.bilinear(*dem.grid, la, lo) for la, lo in zip(lat, lon)])
+    scalar = np.array([kernels.bilinear(*dem.grid, la, lo) for la, lo in zip(lat, lon, strict=True)])
     np.testing.assert_allclose(batch, scalar, rtol=0, atol=1e-9)
     assert isinstance(dem.height(lat[0], lon[0]), float)
 
@@ -121,6 +127,6 @@ def test_jacksboro_is_the_bundled_real_dem():
     # terrain 15 rows either side. With unflipped rows this line crosses no ridge.
     cols = np.arange(280, 380)
     rows = np.round(235 + (cols - 280) * 60 / 90).astype(int)
-    crest = np.array([h[r - 3:r + 4, c].max() for r, c in zip(rows, cols)])
-    beside = np.array([0.5 * (h[r - 15, c] + h[r + 15, c]) for r, c in zip(rows, cols)])
+    crest = np.array([h[r - 3 : r + 4, c].max() for r, c in zip(rows, cols, strict=True)])
+    beside = np.array([0.5 * (h[r - 15, c] + h[r + 15, c]) for r, c in zip(rows, cols, strict=True)])
     assert np.mean(crest - beside) > 80.0

@@ -16,8 +16,18 @@ def from_origin(west, north, xsize, ysize):
 
 
 def _write_tif(path, arr, transform, crs="EPSG:4326", nodata=None):
-    with rasterio.open(path, "w", driver="GTiff", height=arr.shape[0], width=arr.shape[1], count=1,
-                       dtype=arr.dtype, crs=crs, transform=transform, nodata=nodata) as ds:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        height=arr.shape[0],
+        width=arr.shape[1],
+        count=1,
+        dtype=arr.dtype,
+        crs=crs,
+        transform=transform,
+        nodata=nodata,
+    ) as ds:
         ds.write(arr, 1)
 
 
@@ -35,7 +45,9 @@ def test_geotiff_georeferencing_and_row_order(tmp_path):
     # north-west post (raster row 0, col 0) is now the last row
     assert dem.heights_m[-1, 0] == arr[0, 0]
     assert dem.height(np.radians(47.0), np.radians(10.0)) == pytest.approx(arr[0, 0])
-    assert dem.height(np.radians(47.0 - 29 * step), np.radians(10.0 + 39 * step)) == pytest.approx(arr[29, 39])
+    assert dem.height(np.radians(47.0 - 29 * step), np.radians(10.0 + 39 * step)) == pytest.approx(
+        arr[29, 39]
+    )
     assert np.isnan(dem.heights_m[29 - 3, 4])  # the nodata post
     filled = terrain.load(path, fill_voids=True)
     neighbours = [arr[2, 4], arr[4, 4], arr[3, 3], arr[3, 5]]
@@ -55,7 +67,7 @@ def test_srtm_hgt_written_by_hand(tmp_path):
     assert np.degrees(dem.lat0_rad) == pytest.approx(36.0, abs=1e-9)
     assert np.degrees(dem.lon0_rad) == pytest.approx(-85.0, abs=1e-9)
     assert np.degrees(dem.dlat_rad) == pytest.approx(3.0 / 3600.0)
-    assert dem.heights_m[0, 0] == arr[n - 1, 0]          # south-west post
+    assert dem.heights_m[0, 0] == arr[n - 1, 0]  # south-west post
     assert dem.heights_m[n - 1, n - 1] == arr[0, n - 1]  # north-east post
     assert np.isnan(dem.heights_m[n - 1 - 600, 700]) and np.isnan(dem.heights_m[n - 1 - 600, 701])
     assert dem.height(np.radians(37.0), np.radians(-85.0)) == pytest.approx(arr[0, 0])

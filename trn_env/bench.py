@@ -8,6 +8,8 @@ each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
 - closed_loop_jsbsim_reference_steps_per_s: a bare `fdm.run()` loop of the same aircraft, trimmed at the
   same initial condition, timed just before and just after the closed loop (the faster is kept);
 - closed_loop_ratio: their ratio (target >= 0.5);
+- closed_loop_ms_per_tick_by_stage: where a guidance tick's wall time goes (flight core, sensors,
+  navigator, the rest of the loop: termination checks, logging, guidance);
 - env_sim_seconds_per_wall_second: simulated seconds per wall second of the gymnasium env (default
   scenario, random actions, resets included).
 """
@@ -49,12 +51,13 @@ def bare_jsbsim_steps_per_s(fdm, n_steps: int) -> float:
     return n_steps / (time.perf_counter() - t0)
 
 
-def closed_loop_benchmark(quick: bool = False, scenario: str = "default") -> dict:
-    """Full closed loop of `scenario` vs a bare JSBSim loop at the same initial condition."""
+def closed_loop_benchmark(quick: bool = False, scenario: str = "default", sim_s: float | None = None) -> dict:
+    """Full closed loop of `scenario` (sim_s seconds after a 10 s warm-up) vs a bare JSBSim loop at the same
+    initial condition."""
     from .scenario import load_scenario
     from .sim import ClosedLoop
 
-    sim_s = 40.0 if quick else 120.0
+    sim_s = sim_s or (40.0 if quick else 120.0)
     sc = load_scenario(scenario, duration_s=sim_s + 20.0)
     loop = ClosedLoop(sc, log_sensors=True)
     # bare reference: a second flight at the same (trimmed) initial condition, run() only
@@ -66,6 +69,7 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default") -> dic
         loop.tick()
     bare_before = bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref)
     steps0 = loop.jsbsim_steps
+    stage0 = dict(loop.stage_s)
     t0 = time.perf_counter()
     while loop.termination is None and (loop.jsbsim_steps - steps0) < n_ref:
         loop.tick()
@@ -73,6 +77,7 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default") -> dic
     # the faster of two bare timings (before and after), so machine-load drift cannot flatter the ratio
     bare = max(bare_before, bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref))
     steps = loop.jsbsim_steps - steps0
+    ticks = steps // loop.steps_per_tick
     cl = steps / wall if wall > 0 else math.nan
     return {
         "closed_loop_steps_per_s": cl,
@@ -82,16 +87,21 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default") -> dic
         "closed_loop_scenario": scenario,
         "closed_loop_navigator": sc.navigator_name,
         "closed_loop_sim_seconds": steps * loop.dt_s,
+        "closed_loop_steps_per_tick": loop.steps_per_tick,
+        "closed_loop_ms_per_tick_by_stage": {k: round(1e3 * (v - stage0[k]) / max(ticks, 1), 4)
+                                             for k, v in loop.stage_s.items()},
     }
 
 
-def env_benchmark(quick: bool = False) -> dict:
-    """Simulated seconds per wall second of TerrainNav-v0 under random actions (resets included)."""
+def env_benchmark(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
+    """Simulated seconds per wall second of TerrainNav-v0 (default scenario) under random actions, resets
+    included."""
     from .env import TerrainNavEnv
 
-    env = TerrainNavEnv("default", decision_interval_s=5.0, max_episode_s=60.0 if quick else 120.0)
+    env = TerrainNavEnv("default", decision_interval_s=decision_interval_s,
+                        max_episode_s=60.0 if quick else 120.0)
     env.action_space.seed(0)
-    n_steps = 12 if quick else 40
+    n_steps = n_steps or (12 if quick else 40)
     t0 = time.perf_counter()
     env.reset(seed=0)
     sim_s = 0.0
@@ -104,7 +114,8 @@ def env_benchmark(quick: bool = False) -> dict:
     wall = time.perf_counter() - t0
     env.close()
     return {"env_sim_seconds_per_wall_second": sim_s / wall if wall > 0 else math.nan,
-            "env_decision_interval_s": 5.0, "env_steps_measured": n_steps}
+            "env_decision_interval_s": env.decision_interval_s, "env_steps_measured": n_steps,
+            "env_sim_seconds_measured": sim_s}
 
 
 def run_all(quick: bool = False) -> dict:

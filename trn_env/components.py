@@ -43,25 +43,37 @@ def build_terrain(d: dict, extras: dict, rng: np.random.Generator):
 
 
 def refine_dem(dem, settings: dict, rng: np.random.Generator):
-    """Synthetic sub-grid detail on the true terrain (terrain.synthetic)."""
-    from terrain import synthetic
-    fn = getattr(synthetic, "refine", None) or getattr(synthetic, "add_detail", None)
-    if fn is None:
-        raise ValueError("terrain.world.refinement: terrain.synthetic has no refine/add_detail function")
-    return fn(dem, rng=rng, **settings)
+    """The true terrain with synthetic sub-grid detail (terrain.refine.refine; region_deg in degrees)."""
+    from terrain.refine import refine
+    kw = dict(settings)
+    if "region_deg" in kw:
+        kw["region"] = tuple(math.radians(x) for x in kw.pop("region_deg"))
+    return refine(dem, seed=rng, **kw)
+
+
+def map_error_model(settings: dict, rng: np.random.Generator):
+    """terrain.map_error.MapErrorModel of the scenario's error_model table: a preset accuracy class drawn
+    from `rng` (with bias_fraction / correlation_length_m), then any explicit fields override it."""
+    from dataclasses import replace
+
+    from terrain import map_error
+    kw = dict(settings)
+    preset = kw.pop("preset", None)
+    if preset is None:
+        kw.pop("bias_fraction", None)
+        return map_error.MapErrorModel(**kw)
+    cls_kw = {k: kw.pop(k) for k in ("bias_fraction", "correlation_length_m") if k in kw}
+    model = map_error.model_for_class(preset, rng, **cls_kw)
+    if "correlation_length_m" in cls_kw:
+        kw["correlation_length_m"] = cls_kw["correlation_length_m"]
+    return replace(model, **kw)
 
 
 def apply_map_errors(dem, settings: dict, rng: np.random.Generator):
-    """The navigator's map = the world with a map error model (terrain.map_error) applied."""
+    """The navigator's map = `dem` with the scenario's map error model applied (terrain.map_error.apply)."""
     from terrain import map_error
-    settings = dict(settings)
-    preset = settings.pop("preset", None)
-    fn = getattr(map_error, "apply", None)
-    if fn is None:
-        raise ValueError("terrain.map.error_model: terrain.map_error has no apply function")
-    if preset is not None:
-        return fn(dem, preset=preset, rng=rng, **settings)
-    return fn(dem, rng=rng, **settings)
+    model = map_error_model(settings, rng)
+    return map_error.apply(dem, model, rng, name=f"{dem.name}[map]")
 
 
 def world_height(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:
@@ -82,8 +94,10 @@ def world_contains(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:
 
 
 def map_height(dem, lat_rad: float, lon_rad: float) -> float:
-    """Map height (m MSL) at one position; NaN off the map."""
-    return float(dem.height(float(lat_rad), float(lon_rad)))
+    """Map height (m MSL) at one position; NaN off the map (bilinear, the terrain package's numba kernel)."""
+    from terrain import kernels
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    return float(kernels.bilinear(heights, lat0, lon0, dlat, dlon, float(lat_rad), float(lon_rad)))
 
 
 # ------------------------------------------------------------------------------------------ flight, wind
@@ -136,12 +150,10 @@ def quiet_stdout():
 
 def build_flight(d: dict, world, rng: np.random.Generator):
     """trn_env.flight.Flight at the scenario's initial condition, trimmed, with its wind and a JSBSim seed."""
-    from .flight import Flight, InitialCondition
+    from .flight import Flight
     init = d["initial"]
     lat, lon = math.radians(init["lat_deg"]), math.radians(init["lon_deg"])
-    ic = InitialCondition(lat_rad=lat, lon_rad=lon, h_msl_m=initial_h_msl_m(d, world),
-                          tas_mps=float(init["tas_mps"]),
-                          heading_rad=math.radians(init["heading_deg"]), **d["aircraft"]["settings"])
+    ic = _initial_condition(d, world)
     seed = int(rng.integers(0, 2**31 - 1))
     with quiet_stdout():
         return Flight(ic, aircraft=d["aircraft"]["name"], dt_s=float(d["aircraft"]["dt_s"]),
@@ -184,44 +196,57 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
 
 # ------------------------------------------------------------------------------------ component checks
 
-def check(d: dict, extras: dict) -> list[str]:
-    """Hand each component its scenario settings; every rejection becomes 'field.path: message'."""
-    problems: list[str] = []
-    try:
-        build_wind(d)
-    except (ValueError, TypeError) as exc:
-        problems.append(f"wind: {exc}")
-    problems += _sensor_problems(d)
+def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool = False) -> list[str]:
+    """Hand each component its scenario settings; every rejection becomes 'field.path: message'.
+
+    `known`: problems found already; a component whose fields (by path prefix) are among them is skipped.
+    `tolerant`: the data failed the schema, so a component tripping over malformed data is skipped too.
+    """
+    known = list(known or [])
+
+    def blocked(*prefixes: str) -> bool:
+        return any(p.startswith(prefixes) for p in known)
+
     world = extras.get("world_dem_raw")
     the_map = extras.get("map_dem_raw") or world
+    checks = []
+    if not blocked("wind"):
+        checks.append(("wind", lambda: build_wind(d)))
+    if not blocked("sensors"):
+        checks.append(("", lambda: _sensor_problems(d)))
     err = d["terrain"]["map"].get("error_model")
-    if err:
+    if err and the_map is not None and not blocked("terrain.map"):
+        checks.append(("terrain.map.error_model",
+                       lambda: apply_map_errors(the_map, err, np.random.default_rng(0))))
+    refinement = d["terrain"]["world"].get("refinement")
+    if refinement and world is not None and not blocked("terrain.world"):
+        checks.append(("terrain.world.refinement",
+                       lambda: refine_dem(world, refinement, np.random.default_rng(0))))
+    if the_map is not None and not blocked("navigator", "terrain"):
+        checks.append(("navigator.settings", lambda: build_navigator(d, the_map)))
+    if world is not None and not blocked("initial", "aircraft", "terrain.world"):
+        checks.append(("aircraft.settings", lambda: _initial_condition(d, world)))
+    if not blocked("route"):
+        checks.append(("route", lambda: build_guidance(d, the_map)))
+    problems: list[str] = []
+    for path, fn in checks:
         try:
-            the_map = apply_map_errors(the_map, err, np.random.default_rng(0))
-        except (ValueError, TypeError, KeyError) as exc:
-            problems.append(f"terrain.map.error_model: {exc}")
-    if d["terrain"]["world"].get("refinement"):
-        try:
-            refine_dem(world, d["terrain"]["world"]["refinement"], np.random.default_rng(0))
-        except (ValueError, TypeError, KeyError) as exc:
-            problems.append(f"terrain.world.refinement: {exc}")
-    try:
-        build_navigator(d, the_map)
-    except (ValueError, TypeError) as exc:
-        problems.append(f"navigator.settings: {exc}")
-    try:
-        init = d["initial"]
-        from .flight import InitialCondition
-        InitialCondition(lat_rad=math.radians(init["lat_deg"]), lon_rad=math.radians(init["lon_deg"]),
-                         h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
-                         heading_rad=math.radians(init["heading_deg"]), **d["aircraft"]["settings"])
-    except (ValueError, TypeError) as exc:
-        problems.append(f"aircraft.settings: {exc}")
-    try:
-        build_guidance(d, the_map)
-    except (ValueError, TypeError) as exc:
-        problems.append(f"route: {exc}")
+            out = fn()
+            if path == "":
+                problems += out
+        except (ValueError, TypeError, KeyError, AttributeError) as exc:
+            if tolerant and not isinstance(exc, ValueError):
+                continue
+            problems.append(f"{path}: {exc}")
     return problems
+
+
+def _initial_condition(d: dict, world):
+    from .flight import InitialCondition
+    init = d["initial"]
+    return InitialCondition(lat_rad=math.radians(init["lat_deg"]), lon_rad=math.radians(init["lon_deg"]),
+                            h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
+                            heading_rad=math.radians(init["heading_deg"]), **d["aircraft"]["settings"])
 
 
 # --------------------------------------------------------------------------------------------- guidance
@@ -261,41 +286,24 @@ def guidance_complete(guidance) -> bool:
 INFO_BEARINGS_RAD = (None, 0.0, -math.pi / 4, math.pi / 4, -math.pi / 2, math.pi / 2)
 
 
-def local_roughness_m(dem, window_m: float = 1000.0) -> np.ndarray:
-    """Standard deviation of the heights (m) in a window_m square around each post: the terrain roughness
-    sigma_T that TERCOM's fix accuracy scales with. Used when terrain.metrics is not available."""
-    from scipy import ndimage
-    dy_m, dx_m = dem.spacing_m
-    size = (max(3, int(round(window_m / dy_m)) | 1), max(3, int(round(window_m / dx_m)) | 1))
-    h = np.asarray(dem.heights_m, float)
-    fill = np.where(np.isfinite(h), h, np.nanmean(h))
-    m1 = ndimage.uniform_filter(fill, size, mode="nearest")
-    m2 = ndimage.uniform_filter(fill * fill, size, mode="nearest")
-    return np.sqrt(np.clip(m2 - m1 * m1, 0.0, None))
+NO_INFORMATION_SIGMA_M = 1.0e4      # CRLB stand-in where the terrain (or the map) gives no fix at all
 
 
-def terrain_information_map(dem):
-    """The map's terrain-information grid, as a Dem whose heights_m hold the information.
-
-    terrain.metrics.terrain_information_map when the terrain package has it; otherwise the local terrain
-    roughness (local_roughness_m)."""
-    try:
-        from terrain import metrics
-        fn = getattr(metrics, "terrain_information_map", None) or getattr(metrics, "information_map", None)
-    except ImportError:
-        fn = None
-    info = fn(dem) if fn is not None else local_roughness_m(dem)
-    grid = np.asarray(getattr(info, "heights_m", info), float)
-    if grid.shape != dem.heights_m.shape:
-        raise ValueError(f"terrain information map shape {grid.shape} differs from the DEM's "
-                         f"{dem.heights_m.shape}")
-    return dem.with_heights(np.where(np.isfinite(grid), grid, 0.0), name=f"{dem.name}-information")
+def terrain_information_map(dem, sigma_m: float = 5.0, window_m: float = 2000.0):
+    """The map's terrain information as a Dem whose heights_m hold the horizontal position CRLB (m):
+    terrain.metrics.terrain_information (Fisher information of altimeter heights with noise sigma_m over a
+    window_m square) -> sqrt(trace(I^-1)); flat terrain (singular I) and voids -> NO_INFORMATION_SIGMA_M."""
+    from terrain import metrics
+    info = metrics.terrain_information(dem, sigma_m, window_m)
+    crlb = np.asarray(info.crlb_sigma_h_m, float)
+    crlb = np.where(np.isfinite(crlb), np.minimum(crlb, NO_INFORMATION_SIGMA_M), NO_INFORMATION_SIGMA_M)
+    return dem.with_heights(crlb, name=f"{dem.name}-crlb")
 
 
 def sample_information(info_map, dem, lat_rad: float, lon_rad: float, track_rad: float,
                        offset_m: float) -> np.ndarray:
-    """Terrain information at the estimate and offset_m away at INFO_BEARINGS_RAD from the track (0 off
-    the map)."""
+    """Position CRLB (m) from `info_map` at the estimate and offset_m away at INFO_BEARINGS_RAD from the
+    track; NO_INFORMATION_SIGMA_M off the map."""
     from terrain.geodesy import ned_offset_to_latlon
     lats = np.empty(len(INFO_BEARINGS_RAD))
     lons = np.empty(len(INFO_BEARINGS_RAD))
@@ -307,4 +315,4 @@ def sample_information(info_map, dem, lat_rad: float, lon_rad: float, track_rad:
             lats[k], lons[k] = ned_offset_to_latlon(lat_rad, lon_rad, 0.0, offset_m * math.cos(brg),
                                                     offset_m * math.sin(brg))
     vals = world_height(info_map, lats, lons)
-    return np.where(np.isfinite(vals), vals, 0.0)
+    return np.where(np.isfinite(vals), vals, NO_INFORMATION_SIGMA_M)

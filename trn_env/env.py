@@ -61,9 +61,11 @@ class TerrainNavEnv(gym.Env):
     | 17 | fraction of the episode time used | - |
     | 18 | navigator health ok (1) or not (0) | - |
 
-    Terrain information (11-16) is log10(1 + value) of the navigator's MAP's terrain-information grid
-    (`terrain.metrics`), sampled at the estimate and `info_offset_m` away ahead, ahead-left, ahead-right,
-    left and right of the commanded track: where a route would let the TRN fix well.
+    Terrain information (11-16) is log10(1 + CRLB) of the horizontal position a TRN could reach from the
+    navigator's MAP (`terrain.metrics.terrain_information`: Fisher information of altimeter heights with
+    noise `info_sigma_m` over an `info_window_m` square; CRLB in m, 1e4 m where the terrain is flat or off
+    the map), sampled at the estimate and `info_offset_m` away ahead, ahead-left, ahead-right, left and
+    right of the commanded track: low values mark where a route would let the TRN fix well.
 
     ## Rewards
     Each step: `progress_km - error_weight * true_horizontal_error_km`, where progress is the decrease
@@ -89,7 +91,8 @@ class TerrainNavEnv(gym.Env):
     `gymnasium.make("trn_env/TerrainNav-v0", scenario="default", render_mode=None, decision_interval_s=5.0,
     max_episode_s=300.0, navigator=None, goal_deg=None, goal_radius_m=1000.0, error_weight=1.0,
     goal_bonus=10.0, collision_penalty=100.0, agl_min_m=300.0, agl_max_m=3000.0, climb_rate_max_mps=5.0,
-    turn_rate_max_dps=3.0, info_offset_m=3000.0, log_sensors=False)`.
+    turn_rate_max_dps=3.0, info_offset_m=3000.0, info_sigma_m=5.0, info_window_m=2000.0,
+    log_sensors=False)`.
     `scenario` is a built-in name, a TOML path or a `Scenario`; `goal_deg=(lat, lon)` defaults to the
     route's last waypoint. The terrain (and the map's error draw) is built once per env from the
     scenario seed; each episode's flight, sensor and navigator randomness comes from the reset seed.
@@ -103,7 +106,8 @@ class TerrainNavEnv(gym.Env):
                  goal_deg: tuple[float, float] | None = None, goal_radius_m: float = 1000.0,
                  error_weight: float = 1.0, goal_bonus: float = 10.0, collision_penalty: float = 100.0,
                  agl_min_m: float = 300.0, agl_max_m: float = 3000.0, climb_rate_max_mps: float = 5.0,
-                 turn_rate_max_dps: float = 3.0, info_offset_m: float = 3000.0, log_sensors: bool = False):
+                 turn_rate_max_dps: float = 3.0, info_offset_m: float = 3000.0, info_sigma_m: float = 5.0,
+                 info_window_m: float = 2000.0, log_sensors: bool = False):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         for name, v in (("decision_interval_s", decision_interval_s), ("max_episode_s", max_episode_s),
@@ -143,7 +147,7 @@ class TerrainNavEnv(gym.Env):
         self.observation_space = spaces.Box(low=-1e4, high=1e4, shape=(19,), dtype=np.float32)
 
         self._dems = components.build_terrain(d, sc.extras, spawn_rngs(sc.seed)["map"])
-        self._info_map = components.terrain_information_map(self._dems[1])
+        self._info_map = components.terrain_information_map(self._dems[1], info_sigma_m, info_window_m)
         if not self._dems[0].contains(self.goal_lat_rad, self.goal_lon_rad):
             raise ValueError(f"goal_deg {g} is outside the terrain")
         self._loop: ClosedLoop | None = None
@@ -260,7 +264,7 @@ class TerrainNavEnv(gym.Env):
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m + a[1], self.agl_min_m, self.agl_max_m))
         lat, lon, h = self._truth_now()
         d_before = math.hypot(*self._offset_to_goal(lat, lon, h))
-        self._loop._command(self._loop.estimate)      # new targets take effect now
+        self._loop.command_now(self._loop.estimate)      # new targets take effect now
         reason = None
         for _ in range(self.ticks_per_decision):
             reason = self._loop.tick()

@@ -246,10 +246,12 @@ def _resolve_dem_path(value: str, base_dir: Path | None) -> str:
 
 
 def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, extras: dict,
-                       tolerant: bool = False) -> list[str]:
+                       prior: list[str] | None = None) -> list[str]:
     """Checks that need more than the schema. With `tolerant` (the data already failed the schema) a
     check that trips over malformed data is skipped instead of raising, so the remaining problems are
-    still reported."""
+    still reported. `prior`: the schema's problems (non-empty makes the checks tolerant)."""
+    prior = list(prior or [])
+    tolerant = bool(prior)
     problems: list[str] = []
     checks = [_altitude_problems, _gnss_problems, _wind_problems, _rate_problems, _aircraft_problems,
               _navigator_problems, lambda dd: _terrain_problems(dd, base_dir, extras)]
@@ -259,8 +261,8 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
         except (KeyError, TypeError, ValueError, AttributeError, IndexError):
             if not tolerant:
                 raise
-    if check_components and not problems and not tolerant:
-        problems += _component_problems(d, extras)
+    if check_components:
+        problems += _component_problems(d, extras, prior + problems, tolerant)
     return problems
 
 
@@ -371,6 +373,13 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]
             problems.append(f"terrain.{key}.dem: cannot load DEM {cfg['dem']!r}: {exc}")
     extras["world_dem_raw"] = dems.get("world")
     extras["map_dem_raw"] = dems.get("map")
+    region = (world_cfg.get("refinement") or {}).get("region_deg")
+    if region is not None:
+        lat0, lat1, lon0, lon1 = region
+        for path, obj in places:
+            if not (lat0 <= obj["lat_deg"] <= lat1 and lon0 <= obj["lon_deg"] <= lon1):
+                problems.append(f"{path}: ({obj['lat_deg']:.5f}, {obj['lon_deg']:.5f}) deg is outside "
+                                f"terrain.world.refinement.region_deg {list(region)}")
     for key, dem in dems.items():
         lat_min, lat_max, lon_min, lon_max = dem.bounds
         for path, obj in places:
@@ -389,10 +398,11 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]
     return problems
 
 
-def _component_problems(d: dict, extras: dict) -> list[str]:
-    """Hand each component its settings; whatever it rejects becomes a problem at that field."""
+def _component_problems(d: dict, extras: dict, known: list[str], tolerant: bool) -> list[str]:
+    """Hand each component its settings; whatever it rejects becomes a problem at that field. Components
+    whose fields already have a problem are not built (no duplicate or follow-on messages)."""
     from . import components
-    return components.check(d, extras)
+    return components.check(d, extras, known, tolerant)
 
 
 def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None,
@@ -406,7 +416,7 @@ def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None
         if not problems:
             raise
         raise ScenarioError(source, problems) from None
-    problems += _semantic_problems(d, base_dir, check_components, extras, tolerant=bool(problems))
+    problems += _semantic_problems(d, base_dir, check_components, extras, prior=problems)
     if problems:
         raise ScenarioError(source, problems)
     return Scenario(name=d["name"], source=source, data=d, description=d["description"], seed=int(d["seed"]),

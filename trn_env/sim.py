@@ -91,7 +91,13 @@ def gnss_available_mask(t_s: np.ndarray, outages: list[dict]) -> np.ndarray:
 
 def _gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
     g = frames.gnss
-    if g is None or not outages:
+    if g is None or not outages or g.t_s.shape[0] == 0:
+        return frames
+    t_first, t_last = float(g.t_s[0]), float(g.t_s[-1])
+    if all(t_last < o["start_s"] or t_first >= o.get("end_s", math.inf) for o in outages):
+        return frames                                   # no outage touches this frame
+    if any(t_first >= o["start_s"] and t_last < o.get("end_s", math.inf) for o in outages):
+        frames.gnss = None                              # the whole frame is inside one outage
         return frames
     keep = gnss_available_mask(g.t_s, outages)
     if keep.all():
@@ -117,7 +123,7 @@ class SimLog:
 
     truth_rows: list[tuple[TruthChunk, int]] = field(default_factory=list)
     est_rows: list[tuple] = field(default_factory=list)
-    sensors: dict[str, list] = field(default_factory=dict)
+    frames: list[SensorFrames] = field(default_factory=list)
     events: list[tuple[float, str, str]] = field(default_factory=list)
 
     def add_tick(self, truth: TruthChunk, i: int, est: Estimate) -> None:
@@ -128,13 +134,20 @@ class SimLog:
                               bool(est.health.ok)))
 
     def add_frames(self, frames: SensorFrames) -> None:
-        for name in ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading"):
-            fr = getattr(frames, name)
-            if fr is None:
-                continue
-            for k, v in vars(fr).items():
-                if isinstance(v, np.ndarray):
-                    self.sensors.setdefault(f"{name}_{k}", []).append(v)
+        self.frames.append(frames)
+
+    def sensor_arrays(self) -> dict[str, np.ndarray]:
+        """sensor_<sensor>_<field>: every logged frame's arrays, concatenated per sensor and field."""
+        parts: dict[str, list] = {}
+        for frames in self.frames:
+            for name in ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading"):
+                fr = getattr(frames, name)
+                if fr is None:
+                    continue
+                for k, v in vars(fr).items():
+                    if isinstance(v, np.ndarray):
+                        parts.setdefault(f"sensor_{name}_{k}", []).append(v)
+        return {k: np.concatenate(v) for k, v in parts.items()}
 
     def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
@@ -154,8 +167,7 @@ class SimLog:
         out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
                                        out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])
         out["gnss_available"] = gnss_available_mask(out["t_s"], outages)
-        for k, parts in self.sensors.items():
-            out[f"sensor_{k}"] = np.concatenate(parts) if parts else np.zeros(0)
+        out.update(self.sensor_arrays())
         return out
 
 
@@ -227,12 +239,16 @@ class ClosedLoop:
         self.n_ticks = 0
         self.termination: str | None = None
         self.log = SimLog()
+        # wall time spent per stage of tick() (flight core, sensors, navigator, the rest of the loop)
+        self.stage_s = {"flight": 0.0, "sensors": 0.0, "navigator": 0.0, "loop": 0.0}
         self._last_targets = None
         self._log_tick(truth0, 0, self.estimate)
-        self._command(self.estimate)
+        self.command_now(self.estimate)
 
     # ------------------------------------------------------------------------------------------ loop
-    def _command(self, est: Estimate) -> None:
+    def command_now(self, est: Estimate) -> None:
+        """Targets for `est` from the guidance (or commander) written to the flight now, with the map height
+        under the estimate for the autopilot's height-above-ground hold."""
         if self.commander is not None:
             targets = self.commander(est, self.t_s)
         else:
@@ -251,11 +267,16 @@ class ClosedLoop:
         """Advance one guidance tick; returns the termination reason once the run has ended."""
         if self.termination is not None:
             raise RuntimeError(f"the run has already ended ({self.termination})")
+        clock = time.perf_counter
+        t0 = clock()
         chunk = self.flight.advance(self.steps_per_tick)
+        t1 = clock()
         self.jsbsim_steps += len(chunk)
         frames = self.sensors.sample(chunk, self.world_dem)
         frames = _gate_gnss(frames, self.outages)
+        t2 = clock()
         est = self.navigator.update(frames)
+        t3 = clock()
         self.estimate = est
         self.t_s = float(chunk.t_s[-1])
         self.last_truth = chunk
@@ -268,21 +289,27 @@ class ClosedLoop:
         if reason is not None or self.n_ticks % self.log_every == 0:
             self._log_tick(chunk, len(chunk) - 1, est)
         if reason is None:
-            self._command(est)
+            self.command_now(est)
         else:
             self.termination = reason
             self.log.events.append((self.t_s, "sim", f"termination: {reason}"))
+        st = self.stage_s
+        st["flight"] += t1 - t0
+        st["sensors"] += t2 - t1
+        st["navigator"] += t3 - t2
+        st["loop"] += clock() - t3
         if self.progress is not None:
             self.progress(self.t_s, self.duration_s)
         return reason
 
     def _check_end(self, chunk: TruthChunk, est: Estimate) -> str | None:
         h_ground = components.world_height(self.world_dem, chunk.lat_rad, chunk.lon_rad)
-        if not np.all(np.isfinite(h_ground)):
+        agl_min = float(np.min(chunk.h_msl_m - h_ground))     # NaN if any step is off the grid or over a void
+        if agl_min != agl_min:
             if not np.all(components.world_contains(self.world_dem, chunk.lat_rad, chunk.lon_rad)):
                 return "off_map"
-        agl = chunk.h_msl_m - h_ground
-        if np.any(agl < 0.0):
+            agl_min = float(np.nanmin(chunk.h_msl_m - h_ground))   # over a void: judge the other steps
+        if agl_min < 0.0:
             return "terrain_collision"
         if self._diverged(chunk, est):
             return "diverged"
@@ -329,6 +356,7 @@ class ClosedLoop:
         arrays = self.log.arrays(self.world_dem, self.outages)
         summary = summarise(self.scenario, self.termination or "time_limit", arrays, wall_time_s,
                             self.jsbsim_steps, self.estimate)
+        summary["wall_time_by_stage_s"] = {k: round(v, 4) for k, v in self.stage_s.items()}
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
                          self.jsbsim_steps, arrays, list(self.log.events), summary, self.world_dem)
 

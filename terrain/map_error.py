@@ -1,0 +1,208 @@
+"""The navigator's map: a DEM derived from the world DEM through an error model.
+
+`MapErrorModel` fields (all optional, SI):
+    bias_m                 constant vertical offset
+    tilt_n, tilt_e         vertical ramp, metres per metre of north / east displacement from the grid centre
+    random_sigma_m         spatially correlated random vertical error, standard deviation
+    correlation_length_m   its correlation length L: covariance sigma^2 exp(-d^2 / (2 L^2))
+    shift_n_m, shift_e_m   horizontal shift: a feature at true position p appears at p + shift in the map
+    spacing_arcsec         coarser post spacing (area-averaged like a real DEM product); None keeps the grid
+
+Accuracy classes (`ACCURACY_CLASSES`) turn published 90 % figures into a random model: CE90 (circular
+horizontal error) -> per-axis sigma_h = CE90 / 2.1460; LE90 (linear vertical error) -> sigma_v = LE90 /
+1.6449 (Gaussian). A realisation draws the shift from N(0, sigma_h^2) per axis and splits the vertical
+variance between a bias (fraction `bias_fraction` of the variance, drawn once) and correlated random error.
+The split and the correlation length (default 500 m) are modelling assumptions, not from the sources.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from terrain import geodesy, kernels
+from terrain.dem import Dem
+
+CE90_PER_SIGMA = 2.1460  # circular normal: P(r < 2.146 sigma) = 0.90
+LE90_PER_SIGMA = 1.6449  # normal: P(|z| < 1.6449 sigma) = 0.90
+
+
+@dataclass(frozen=True)
+class MapErrorModel:
+    """Deterministic map error parameters (see the module docstring for units and meaning)."""
+
+    bias_m: float = 0.0
+    tilt_n: float = 0.0
+    tilt_e: float = 0.0
+    random_sigma_m: float = 0.0
+    correlation_length_m: float = 500.0
+    shift_n_m: float = 0.0
+    shift_e_m: float = 0.0
+    spacing_arcsec: float | None = None
+
+    def __post_init__(self):
+        if not (self.random_sigma_m >= 0.0):
+            raise ValueError(f"MapErrorModel.random_sigma_m must be >= 0, got {self.random_sigma_m}")
+        if not (self.correlation_length_m > 0.0):
+            raise ValueError(
+                f"MapErrorModel.correlation_length_m must be > 0, got {self.correlation_length_m}"
+            )
+        if self.spacing_arcsec is not None and not (self.spacing_arcsec > 0.0):
+            raise ValueError(f"MapErrorModel.spacing_arcsec must be > 0, got {self.spacing_arcsec}")
+
+
+@dataclass(frozen=True)
+class AccuracyClass:
+    """A DEM product's published accuracy: post spacing (arcsec), CE90 and LE90 (m), and the source."""
+
+    spacing_arcsec: float
+    ce90_m: float
+    le90_m: float
+    source: str
+
+    @property
+    def sigma_h_m(self) -> float:
+        return self.ce90_m / CE90_PER_SIGMA
+
+    @property
+    def sigma_v_m(self) -> float:
+        return self.le90_m / LE90_PER_SIGMA
+
+
+ACCURACY_CLASSES = {
+    # seed 003 Table 1 (Digital Elevation Models and their Accuracies): post spacing, CEP and LEP at 90 %
+    "srtm": AccuracyClass(3.0, 15.0, 16.0, "seed 003 Table 1: SRTM, 3 arcsec, CE 15 m 90 %, LE 16 m 90 %"),
+    "cartodem": AccuracyClass(
+        3.0, 15.0, 8.0, "seed 003 Table 1: CartoDEM30 (hilly), 3 arcsec, CE 15 m 90 %, LE 8 m 90 %"
+    ),
+    "aster": AccuracyClass(
+        3.0,
+        17.0,
+        17.0,
+        "seed 003 Table 1: Aster-USGS, 3 arcsec, CE 17 m 90 %, LE 'TBD' in the table; "
+        "LE90 17 m assumed here (of the order of the published ASTER GDEM validation)",
+    ),
+    # DTED levels: spacing and absolute accuracies of the DTED specification (MIL-PRF-89020B), not in the
+    # seeds; seed 003 reports DTED-1 absolute disparities ~ N(0, 18.9^2) m, consistent with LE90 30 m.
+    "dted0": AccuracyClass(
+        30.0, 50.0, 30.0, "DTED level 0 (MIL-PRF-89020B): 30 arcsec, CE90 50 m, LE90 30 m"
+    ),
+    "dted1": AccuracyClass(
+        3.0,
+        50.0,
+        30.0,
+        "DTED level 1 (MIL-PRF-89020B): 3 arcsec, CE90 50 m, LE90 30 m; seed 003: disparity sigma 18.9 m",
+    ),
+    "dted2": AccuracyClass(1.0, 23.0, 18.0, "DTED level 2 (MIL-PRF-89020B): 1 arcsec, CE90 23 m, LE90 18 m"),
+}
+
+
+def model_for_class(
+    name: str,
+    seed: int | np.random.Generator = 0,
+    bias_fraction: float = 0.5,
+    correlation_length_m: float = 500.0,
+) -> MapErrorModel:
+    """A random MapErrorModel realising accuracy class `name` (see ACCURACY_CLASSES and the module doc)."""
+    key = name.strip().lower()
+    if key not in ACCURACY_CLASSES:
+        raise ValueError(f"unknown DEM accuracy class {name!r}; choose from {sorted(ACCURACY_CLASSES)}")
+    if not (0.0 <= bias_fraction <= 1.0):
+        raise ValueError(f"bias_fraction must be in [0, 1], got {bias_fraction}")
+    cls = ACCURACY_CLASSES[key]
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    sigma_b = cls.sigma_v_m * np.sqrt(bias_fraction)
+    sigma_r = cls.sigma_v_m * np.sqrt(1.0 - bias_fraction)
+    shift = rng.normal(0.0, cls.sigma_h_m, 2)
+    return MapErrorModel(
+        bias_m=float(rng.normal(0.0, sigma_b)),
+        random_sigma_m=float(sigma_r),
+        correlation_length_m=correlation_length_m,
+        shift_n_m=float(shift[0]),
+        shift_e_m=float(shift[1]),
+        spacing_arcsec=cls.spacing_arcsec,
+    )
+
+
+def correlated_field(
+    shape, dy_m: float, dx_m: float, sigma_m: float, correlation_length_m: float, rng: np.random.Generator
+) -> np.ndarray:
+    """Gaussian field with covariance sigma^2 exp(-d^2 / (2 L^2)) (white noise smoothed by a Gaussian of
+    standard deviation L / sqrt(2) in the Fourier domain), scaled to the sample standard deviation sigma."""
+    ny, nx = shape
+    fy = np.fft.fftfreq(ny, d=dy_m)
+    fx = np.fft.rfftfreq(nx, d=dx_m)
+    s = correlation_length_m / np.sqrt(2.0)
+    gain = np.exp(-2.0 * np.pi**2 * s**2 * (fy[:, None] ** 2 + fx[None, :] ** 2))
+    field = np.fft.irfft2(np.fft.rfft2(rng.standard_normal(shape)) * gain, s=shape)
+    field -= field.mean()
+    sd = field.std()
+    return field * (sigma_m / sd) if sd > 0 else field
+
+
+def _coarsen(dem: Dem, spacing_arcsec: float) -> Dem:
+    step = np.radians(spacing_arcsec / 3600.0)
+    r_i = step / dem.dlat_rad
+    r_j = step / dem.dlon_rad
+    if r_i <= 1.0 + 1e-9 and r_j <= 1.0 + 1e-9:
+        return dem
+    size = (max(1, int(round(r_i))), max(1, int(round(r_j))))
+    h = dem.heights_m
+    smooth = ndimage.uniform_filter(np.nan_to_num(h, nan=0.0), size=size, mode="nearest")
+    weight = ndimage.uniform_filter(np.isfinite(h).astype(float), size=size, mode="nearest")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        smooth = np.where(weight > 0.999, smooth / np.maximum(weight, 1e-12), np.nan)
+    b = dem.bounds
+    n_lat = int(np.floor((b[1] - b[0]) / step + 1e-9)) + 1
+    n_lon = int(np.floor((b[3] - b[2]) / step + 1e-9)) + 1
+    if n_lat < 2 or n_lon < 2:
+        raise ValueError(f"map spacing {spacing_arcsec} arcsec leaves fewer than 2 x 2 posts on {dem.name!r}")
+    lat = b[0] + np.arange(n_lat) * step
+    lon = b[2] + np.arange(n_lon) * step
+    la, lo = np.meshgrid(lat, lon, indexing="ij")
+    out = np.empty(la.size)
+    kernels.bilinear_batch(
+        smooth, dem.lat0_rad, dem.lon0_rad, dem.dlat_rad, dem.dlon_rad, la.ravel(), lo.ravel(), out
+    )
+    return Dem(out.reshape(la.shape), b[0], b[2], step, step, dem.name)
+
+
+def apply(
+    dem: Dem, model: MapErrorModel, seed: int | np.random.Generator = 0, name: str | None = None
+) -> Dem:
+    """The map the navigator carries: `dem` (the world) transformed by `model`. Seeded; order: horizontal
+    shift, coarser posts, then vertical bias + tilt + correlated random error."""
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    lat_c, lon_c = dem.center_rad
+    r_n = geodesy.meridian_radius_m(lat_c)
+    r_e = geodesy.prime_vertical_radius_m(lat_c) * np.cos(lat_c)
+    out = dem
+    if model.shift_n_m != 0.0 or model.shift_e_m != 0.0:
+        la, lo = np.meshgrid(dem.lat_rad, dem.lon_rad, indexing="ij")
+        shifted = dem.height(la - model.shift_n_m / r_n, lo - model.shift_e_m / r_e, method="bicubic")
+        out = dem.with_heights(shifted) if np.isfinite(shifted).any() else None
+        if out is None:
+            raise ValueError(
+                f"map shift ({model.shift_n_m}, {model.shift_e_m}) m moves everything off {dem.name!r}"
+            )
+    if model.spacing_arcsec is not None:
+        out = _coarsen(out, model.spacing_arcsec)
+    h = out.heights_m.copy()
+    la = out.lat_rad[:, None]
+    lo = out.lon_rad[None, :]
+    north = (la - lat_c) * r_n
+    east = (lo - lon_c) * r_e
+    h += model.bias_m + model.tilt_n * north + model.tilt_e * east
+    if model.random_sigma_m > 0.0:
+        dy, dx = out.spacing_m
+        h += correlated_field(h.shape, dy, dx, model.random_sigma_m, model.correlation_length_m, rng)
+    return Dem(h, out.lat0_rad, out.lon0_rad, out.dlat_rad, out.dlon_rad, name or f"{dem.name}[map]")
+
+
+def make_map(dem: Dem, accuracy: str | MapErrorModel, seed: int | np.random.Generator = 0) -> Dem:
+    """Convenience: `apply(dem, model_for_class(accuracy, rng) if a class name else accuracy, rng)`."""
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    model = model_for_class(accuracy, rng) if isinstance(accuracy, str) else accuracy
+    return apply(dem, model, rng, name=f"{dem.name}[{accuracy if isinstance(accuracy, str) else 'map'}]")
