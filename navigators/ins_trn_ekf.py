@@ -217,8 +217,10 @@ class InsTrnNavigator:
                 # moves every IRA closest point along track by about R dv_d / V (the zero-Doppler plane).
                 self.ins.state[2] = float(hb[np.argmax(vb)])
                 self._height_initialised = True
-            if (~vb).any():
-                self._count_skip(float(imu.t_s[a]), "baro_invalid", int((~vb).sum()), "baro samples invalid")
+            in_seg = (tb > (imu.t_s[a - 1] if a > 0 else -np.inf)) & (tb <= imu.t_s[b - 1])
+            if (in_seg & ~vb).any():
+                nb = int((in_seg & ~vb).sum())
+                self._count_skip(float(imu.t_s[a]), "baro_invalid", nb, "baro samples invalid")
         hist = self.ins.propagate(
             imu.t_s[sl], imu.f_b_mps2[sl], imu.omega_ib_b_rps[sl], imu.valid[sl], tb, hb, vb
         )

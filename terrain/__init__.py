@@ -4,6 +4,10 @@
     "jacksboro"            the bundled real USGS 3" DEM (matplotlib sample data)
     "synthetic:<preset>"   a seeded synthetic terrain (presets in terrain.synthetic.PRESETS)
     a path                 .tif/.tiff, .hgt, .dt0/.dt1/.dt2 (rasterio) or .npz (terrain.loaders)
+
+Modules: dem (Dem), kernels (numba interpolation), loaders, queries (ray cast, radar-altimeter and IRA
+closest points), synthetic (spectral terrain), refine (world finer than the map), map_error (the navigator's
+map), spectrum (PSD), metrics (roughness, slope, ACF, terrain information), bench (throughput).
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@
 Heights are metres above MSL in a float64 array (n_lat, n_lon); row 0 is the southmost row, column 0 the
 westmost; NaN marks a void. Post (i, j) sits at latitude lat0_rad + i * dlat_rad and longitude
 lon0_rad + j * dlon_rad. Lookups outside the grid or over voids return NaN and never raise.
+Treat heights_m as read-only once queries have run (block height bounds are cached); use with_heights().
 """
 
 from __future__ import annotations

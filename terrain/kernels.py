@@ -32,7 +32,40 @@ def bilinear(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
     h11 = heights[i + 1, j + 1]
     a = h00 + v * (h01 - h00)
     b = h10 + v * (h11 - h10)
-    return a + u * (b - a)
+    r = a + u * (b - a)
+    if r != r:
+        return _edge_retry(heights, i, j, u, v)
+    return r
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _edge_retry(heights, i, j, u, v):
+    """A point on (within 1e-7 post of) a grid line between a void cell and a valid one belongs to both:
+    evaluate it in the neighbouring cell. NaN when that cell is void too."""
+    n_lat, n_lon = heights.shape
+    tol = 1e-7
+    for di in (0, -1, 1):
+        for dj in (0, -1, 1):
+            if di == 0 and dj == 0:
+                continue
+            if di == -1 and not (u < tol and i > 0):
+                continue
+            if di == 1 and not (u > 1.0 - tol and i < n_lat - 2):
+                continue
+            if dj == -1 and not (v < tol and j > 0):
+                continue
+            if dj == 1 and not (v > 1.0 - tol and j < n_lon - 2):
+                continue
+            ii = i + di
+            jj = j + dj
+            uu = u - di
+            vv = v - dj
+            a = heights[ii, jj] + vv * (heights[ii, jj + 1] - heights[ii, jj])
+            b = heights[ii + 1, jj] + vv * (heights[ii + 1, jj + 1] - heights[ii + 1, jj])
+            r = a + uu * (b - a)
+            if r == r:
+                return r
+    return np.nan
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -117,7 +150,10 @@ def bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out):
         h11 = heights[i + 1, j + 1]
         a = h00 + v * (h01 - h00)
         b = h10 + v * (h11 - h10)
-        out[k] = a + u * (b - a)
+        r = a + u * (b - a)
+        if r != r:
+            r = _edge_retry(heights, i, j, u, v)
+        out[k] = r
     return out
 
 

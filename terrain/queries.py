@@ -37,7 +37,10 @@ from terrain.geodesy import WGS84_A_M, WGS84_E2
 from terrain.kernels import bilinear
 
 _INF = np.inf
+_OUT_OF_CONE = 1e300  # _ra_eval's value outside the beam (inf: no terrain / beyond max range)
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
+_COS24 = np.cos(2.0 * np.pi * np.arange(24) / 24)  # azimuths sampling the beam-cone boundary
+_SIN24 = np.sin(2.0 * np.pi * np.arange(24) / 24)
 
 
 @dataclass
@@ -207,9 +210,25 @@ def _ray_hit(
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ray_cast_batch(
-    heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, dirs, max_range, valid, rng, lat_out, lon_out, h_out
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    cell_m,
+    lat,
+    lon,
+    h,
+    dirs,
+    max_range,
+    h_min,
+    h_max,
+    valid,
+    rng,
+    lat_out,
+    lon_out,
+    h_out,
 ):
-    h_min, h_max = _finite_range(heights)
     for k in range(lat.shape[0]):
         valid[k] = False
         rng[k] = np.nan
@@ -269,8 +288,10 @@ def _ra_eval(
         return _INF
     x, y, z = _ned(la - lat, lo - lon, hp, ha, s, c, m, n, dm)
     r = np.sqrt(x * x + y * y + z * z)
-    if r > max_range or x * ax + y * ay + z * az < cosb * r:
+    if r > max_range:
         return _INF
+    if x * ax + y * ay + z * az < cosb * r:
+        return _OUT_OF_CONE
     return r
 
 
@@ -284,7 +305,7 @@ def _pattern_search(
     f = f0
     touched = False
     it = 0
-    while step > 1e-4 and it < 400:
+    while step > 5e-4 and it < 400:
         it += 1
         best_f = f
         best_i = fi
@@ -323,7 +344,7 @@ def _pattern_search(
                 ci,
                 cj,
             )
-            if fc == _INF and step < 0.05:
+            if fc == _OUT_OF_CONE and step < 0.05:
                 touched = True
             if fc < best_f:
                 best_f = fc
@@ -335,6 +356,8 @@ def _pattern_search(
             fj = best_j
         else:
             step *= 0.5
+        if touched and step < 0.02:
+            break  # on the cone boundary: the 1-D boundary search takes over from here
     return f, fi, fj, touched
 
 
@@ -386,7 +409,7 @@ def _boundary_eval(
             g1 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t1)
             if g1 != g1:
                 break
-            if abs(g1) < 1e-5:
+            if abs(g1) < 1e-4:
                 if t1 > 0.0 and t1 <= max_range:
                     return t1, dx, dy, dz
                 break
@@ -515,7 +538,7 @@ def _ra_one(
         f = _ra_eval(
             heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj
         )
-        if f < best:
+        if f < best and f < _OUT_OF_CONE:
             best, best_i, best_j = f, fi, fj
     # 2) footprint bounding box (NED north/east) of the cone between the highest and lowest terrain depths
     d_top = ha - h_max
@@ -532,9 +555,8 @@ def _ra_one(
     n_az = 24
     for k in range(n_az + 1):
         if k < n_az:
-            a = 2.0 * np.pi * k / n_az
-            ca = np.cos(a)
-            sa = np.sin(a)
+            ca = _COS24[k]
+            sa = _SIN24[k]
             dx = cosb * ax + sinb * (ca * e1x + sa * e2x)
             dy = cosb * ay + sinb * (ca * e1y + sa * e2y)
             dz = cosb * az + sinb * (ca * e1z + sa * e2z)
@@ -686,6 +708,29 @@ def _ra_one(
             if cand_f[q] > best + 0.5 * cell_m:
                 break
             fi0, fj0, f0 = cand_i[q], cand_j[q], cand_f[q]
+            if n_done > 0:
+                # skip a start whose surroundings (+-2 posts) cannot beat the best refined point
+                ci = int(fi0)
+                cj = int(fj0)
+                i_a = max(ci - 2, 0)
+                i_b = min(ci + 2, n_lat - 1)
+                j_a = max(cj - 2, 0)
+                j_b = min(cj + 2, n_lon - 1)
+                hmx = -_INF
+                for i in range(i_a, i_b + 1):
+                    for j in range(j_a, j_b + 1):
+                        if heights[i, j] > hmx:
+                            hmx = heights[i, j]
+                n_a = (lat0 + i_a * dlat - lat) * (m + ha)
+                n_b = (lat0 + i_b * dlat - lat) * (m + ha)
+                e_a = (lon0 + j_a * dlon - lon) * (n + ha) * c
+                e_b = (lon0 + j_b * dlon - lon) * (n + ha) * c
+                dn_ = n_a if n_a > 0.0 else (-n_b if n_b < 0.0 else 0.0)
+                de_ = e_a if e_a > 0.0 else (-e_b if e_b < 0.0 else 0.0)
+                dh = max(np.sqrt(dn_ * dn_ + de_ * de_) * 0.998 - 2.0, 0.0)
+                dv = max(ha - hmx, 0.0)
+                if dh * dh + dv * dv > best * best:
+                    continue
         near = False
         for p in range(n_done):
             if abs(done_i[p] - fi0) <= 0.25 and abs(done_j[p] - fj0) <= 0.25:
@@ -767,7 +812,7 @@ def _ra_one(
         centre = az0
         t_ref = fb if fb < _INF else best
         w = width
-        w_min = 2e-4 / max(best * sinb, 1e-6)
+        w_min = 1e-3 / max(best * sinb, 1e-6)
         while w > w_min:
             for sgn in (-0.5, 0.5):
                 a = centre + sgn * w
@@ -1402,6 +1447,11 @@ def _outputs(n):
     return (np.zeros(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
 
 
+def _height_range(dem) -> tuple[float, float]:
+    _, bmax, bmin = dem.block_bounds(BLOCK_POSTS)
+    return float(bmin.min()), float(bmax.max())
+
+
 def _cell_m(dem) -> float:
     dn, de = dem.spacing_m
     return float(min(dn, de))
@@ -1432,6 +1482,7 @@ def ray_cast(dem, lat_rad, lon_rad, h_m, dir_ned, max_range_m: float = 20000.0) 
         h,
         dirs,
         float(max_range_m),
+        *_height_range(dem),
         valid,
         rng,
         la,

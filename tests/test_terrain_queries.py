@@ -48,8 +48,8 @@ def bf_ned_to_ecef_matrix(lat, lon):
 
 def bf_bilinear(dem, lat, lon):
     h = dem.heights_m
-    fi = (np.asarray(lat) - dem.lat0_rad) / dem.dlat_rad
-    fj = (np.asarray(lon) - dem.lon0_rad) / dem.dlon_rad
+    fi = np.nan_to_num((np.asarray(lat) - dem.lat0_rad) / dem.dlat_rad, nan=-1.0)
+    fj = np.nan_to_num((np.asarray(lon) - dem.lon0_rad) / dem.dlon_rad, nan=-1.0)
     ok = (fi >= 0) & (fj >= 0) & (fi <= h.shape[0] - 1) & (fj <= h.shape[1] - 1)
     i = np.clip(np.floor(fi).astype(int), 0, h.shape[0] - 2)
     j = np.clip(np.floor(fj).astype(int), 0, h.shape[1] - 2)
@@ -411,7 +411,9 @@ def test_queries_on_a_refined_10m_world_match_brute_force(dems):
 
     coarse = dems["jacksboro"]
     lat_c, lon_c = coarse.center_rad
-    fine = refine.refine(coarse, 10.0, seed=2, region=(lat_c - 4e-4, lat_c + 4e-4, lon_c - 5e-4, lon_c + 5e-4))
+    fine = refine.refine(
+        coarse, 10.0, seed=2, region=(lat_c - 4e-4, lat_c + 4e-4, lon_c - 5e-4, lon_c + 5e-4)
+    )
     lat, lon = fine.center_rad
     h = float(np.nanmax(fine.heights_m)) + 500.0
     C = geodesy.euler_to_C_bn(*np.radians([25.0, 8.0, 70.0]))
@@ -428,3 +430,23 @@ def test_queries_on_a_refined_10m_world_match_brute_force(dems):
     ref = bf_ira(fine, lat, lon, h, v, C, HALF_WINDOW, 12000.0, s_half_m=got.range_m[0] + 10.0, coarse_m=2.0)
     assert got.range_m[0] == pytest.approx(ref[0], abs=0.5)
     assert _horizontal_m(got.lat_rad[0], got.lon_rad[0], ref[1], ref[2]) < 0.5
+
+
+def test_voids_are_no_terrain():
+    """A void under the antenna: the altimeter returns the nearest valid terrain outside it, the ray
+    passes through the hole (no hit inside it)."""
+    world = synthetic.generate(120, 120, 90.0, rms_height_m=0.0, mean_height_m=300.0, seed=0)
+    h = world.heights_m.copy()
+    h[57:63, 57:63] = np.nan  # the closest valid terrain is 3 posts (270 m) from post 60
+    holed = world.with_heights(h, "holed")
+    lat = holed.lat0_rad + 60 * holed.dlat_rad
+    lon = holed.lon0_rad + 60 * holed.dlon_rad
+    ra = queries.radar_altimeter_return(holed, lat, lon, 1300.0, np.eye(3), np.radians(30.0))
+    assert ra.valid[0] and np.isfinite(ra.h_m[0])
+    fi = (ra.lat_rad[0] - holed.lat0_rad) / holed.dlat_rad
+    fj = (ra.lon_rad[0] - holed.lon0_rad) / holed.dlon_rad
+    assert max(abs(fi - 60.0), abs(fj - 60.0)) >= 3.0 - 1e-6  # posts 57..62 void: valid from post 63
+    assert ra.range_m[0] > 1000.0 + 5.0  # not straight down (the hole), but not far off either
+    assert ra.range_m[0] < 1000.0 / np.cos(np.radians(30.0))
+    down = queries.ray_cast(holed, lat, lon, 1300.0, np.array([0.0, 0.0, 1.0]))
+    assert not down.valid[0] and np.isnan(down.range_m[0])
