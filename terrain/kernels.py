@@ -228,3 +228,34 @@ def block_bounds(heights, block):
             bmax[bi, bj] = hi
             bmin[bi, bj] = lo
     return bmax, bmin
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def block_slopes(heights, block, dn_m, de_m):
+    """Upper bound of the bilinear surface's gradient magnitude (m/m) in each block (same block layout as
+    block_bounds): sqrt(max|dh along rows|^2 / dn^2 + max|dh along columns|^2 / de^2) over the block's cell
+    edges; within a bilinear cell each partial derivative is a convex combination of two edge differences.
+    Edges touching a void are ignored (the surface is NaN there); an all-void block gets 0."""
+    n_lat, n_lon = heights.shape
+    nbi = max((n_lat - 2) // block + 1, 1)
+    nbj = max((n_lon - 2) // block + 1, 1)
+    out = np.zeros((nbi, nbj))
+    for bi in range(nbi):
+        i1 = min(bi * block + block, n_lat - 1)
+        for bj in range(nbj):
+            j1 = min(bj * block + block, n_lon - 1)
+            gi = 0.0
+            gj = 0.0
+            for i in range(bi * block, i1 + 1):
+                for j in range(bj * block, j1 + 1):
+                    v = heights[i, j]
+                    if i < i1:
+                        d = abs(heights[i + 1, j] - v)
+                        if d > gi:
+                            gi = d
+                    if j < j1:
+                        d = abs(heights[i, j + 1] - v)
+                        if d > gj:
+                            gj = d
+            out[bi, bj] = np.sqrt(gi * gi / (dn_m * dn_m) + gj * gj / (de_m * de_m))
+    return out

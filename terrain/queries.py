@@ -16,14 +16,18 @@ the cone of half-angle `half_beamwidth_rad` around the body down axis C_bn[:, 2]
 
 IRA (seed 000 sections 2.2, 3.2-3.3; seed 002 Fig. 1): the terrain point closest to the antenna on the
 zero-Doppler line, i.e. on the plane through the antenna perpendicular to the velocity vector, whose look
-angle theta = atan2(y_b, z_b) (body y-z plane, from body down, positive toward the right wing) satisfies
-|theta| <= half_window_rad.
+angle theta = asin(y_b / R) satisfies |theta| <= half_window_rad and that lies below the antenna (z_b > 0).
+(y_b, z_b): body-FRD components of the antenna->point vector, R its length; theta is the interferometric
+angle from the plane perpendicular to the baseline (body y axis), positive toward the right wing (seed 000
+eqs 18-19, 26-30).
 
 Search: a coarse scan (posts in the beam footprint for the altimeter; samples one post apart along the
-zero-Doppler curve for the IRA) pruned by the lower bound range >= sqrt(horizontal^2 + (h_a - h_max)^2),
-then local refinement: pattern search in continuous grid-index coordinates (the bilinear surface's kinks
-lie on grid lines, so axis moves follow ridges), and a 1-D shrinking search along the cone boundary (in
-azimuth) or along the zero-Doppler curve. Ranges agree with a dense brute-force search to a few cm.
+zero-Doppler curve for the IRA) pruned by the lower bound range >= sqrt(horizontal^2 + (h_a - h_max)^2).
+Altimeter: pattern search in continuous grid-index coordinates (the bilinear surface's kinks lie on grid
+lines, so axis moves follow ridges) from every post that is a local minimum within a slope-derived margin
+of the best post, then a 1-D shrinking search along the cone boundary (in azimuth). IRA: branch and bound
+over the intervals between coarse samples with Lipschitz / curvature bounds from per-block slopes and per-
+cell twists (see _ira_one). Ranges agree with a dense brute-force search to a few cm.
 """
 
 from __future__ import annotations
@@ -33,11 +37,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from terrain import geodesy, kernels
 from terrain.geodesy import WGS84_A_M, WGS84_E2
 from terrain.kernels import bilinear
 
 _INF = np.inf
 _OUT_OF_CONE = 1e300  # _ra_eval's value outside the beam (inf: no terrain / beyond max range)
+_PRUNED = 1e301  # IRA coarse sample skipped by the block bound (it and its intervals cannot beat the best)
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
 _COS24 = np.cos(2.0 * np.pi * np.arange(24) / 24)  # azimuths sampling the beam-cone boundary
 _SIN24 = np.sin(2.0 * np.pi * np.arange(24) / 24)
@@ -1037,13 +1043,14 @@ def _ira_eval(
     uhy,
     vh,
     C,
-    tan_w,
+    sin_w,
     max_range,
     sv,
     t_guess,
     tol,
 ):
-    """(f, t) at across-track coordinate sv: range if the point is inside the look-angle window, else inf."""
+    """(f, t, r, z) at across-track coordinate sv: f = range if the point is inside the look-angle window
+    (else inf), t its along-track coordinate, r the raw range (inf: no point), z its NED down (m)."""
     t, x, y, z, dphi, dlam, hp = _zd_point(
         heights,
         lat0,
@@ -1069,14 +1076,14 @@ def _ira_eval(
         tol,
     )
     if t != t:
-        return _INF, t_guess
+        return _INF, t_guess, _INF, np.nan
     r = np.sqrt(x * x + y * y + z * z)
-    # body coordinates: b = C_bn^T x
+    # body coordinates: b = C_bn^T x; look angle theta = asin(y_b / R) (seed 000 eqs 18-19), |theta| <= window
     by = C[0, 1] * x + C[1, 1] * y + C[2, 1] * z
     bz = C[0, 2] * x + C[1, 2] * y + C[2, 2] * z
-    if r > max_range or bz <= 0.0 or abs(by) > tan_w * bz:
-        return _INF, t
-    return r, t
+    if r > max_range or bz <= 0.0 or abs(by) > sin_w * r:
+        return _INF, t, r, z
+    return r, t, r, z
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -1102,6 +1109,28 @@ def _region_max(bs, bmax, n_lat, n_lon, lat0, lon0, dlat, dlon, lat, lon, mh, nh
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
+def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
+    """Upper bound of |dr/ds| on the zero-Doppler curve for s in [a, b] (r = range, s = across-track m).
+
+    r' = (P . P') / r with P_h . P_h' = s + t t' and z z' (P = antenna->point NED): |r'| <= (max|s| +
+    max|t| tp + max|z| zp) / min r, tp and zp bounding |t'| and |z'|. Falls back to |P'| when the range
+    can come near zero."""
+    w = b - a
+    if ta != ta:
+        ta = tb
+    if tb != tb:
+        tb = ta
+    t_max = max(abs(ta), abs(tb)) + tp * w
+    z_max = max(abs(za), abs(zb)) + zp * w
+    s_max = max(abs(a), abs(b))
+    l_crude = np.sqrt(1.0 + tp * tp + zp * zp)  # |P'|: P_h' = w + t' u_h (w, u_h orthonormal), z'
+    r_min = min(ra, rb) - l_crude * w
+    if not (r_min > 0.05 * min(ra, rb)):
+        return l_crude * g_pad
+    return min((s_max + t_max * tp + z_max * zp) / r_min, l_crude) * g_pad
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
 def _ira_one(
     heights,
     lat0,
@@ -1116,15 +1145,28 @@ def _ira_one(
     ha,
     v,
     C,
-    tan_w,
+    sin_w,
     max_range,
     buf_s,
     buf_f,
     buf_t,
+    buf_r,
+    buf_z,
+    stack,
     bs,
     bmax,
+    bslope,
     out,
 ):
+    """Closest in-window zero-Doppler terrain point; writes (valid, range, lat, lon, h) into out[0:5].
+
+    1) coarse march along the curve one post apart, outward from the across-track coordinate s = 0, stopping
+       where no farther point can beat the best and skipping samples whose neighbourhood (+-1 post) lies in
+       blocks too low to beat it; 2) branch and bound over the intervals between samples: the range is
+       Lipschitz in s with a constant from the blocks' maximum slopes (_ira_lipschitz), so an interval with
+       (f_a + f_b - L w) / 2 >= best - tol cannot hold a closer point and is dropped, the others are
+       bisected (split where the chord crosses a grid line, so that the pieces are smooth and the bound
+       from the cell's slope and twist on r'' applies: min(f_a, f_b) - K w^2 / 8)."""
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
@@ -1140,32 +1182,40 @@ def _ira_one(
     uhx = vx / vh
     uhy = vy / vh
     s, c, m, n, dm = _consts(lat)
+    mh = m + ha
+    nhc = (n + ha) * c
+    n_lat = heights.shape[0]
+    n_lon = heights.shape[1]
     d_top = ha - h_max
     step = cell_m
+    gam = abs(vz) / vh
     n_max = buf_s.shape[0]
     half = n_max // 2
     best = _INF
-    # coarse march outward from sv = 0 in both directions (buffer index half + k <-> sv = k * step)
     for q in range(n_max):
         buf_f[q] = _INF
         buf_s[q] = (q - half) * step
         buf_t[q] = np.nan
+        buf_r[q] = _INF
+        buf_z[q] = np.nan
     t0 = 0.0
     hp0 = bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
     if hp0 == hp0:
         t0 = -(vz / vh) * (ha - hp0)
     lo_q = half
     hi_q = half
+    n_coarse = 0
+    # 1) coarse march outward from s = 0 in both directions (buffer index half + k <-> s = k * step)
     for direction in (1, -1):
         t_prev = t0
         misses = 0
         k = 0 if direction == 1 else 1
         while True:
             q = half + direction * k
-            if q < 0 or q >= n_max:
+            if q < 1 or q >= n_max - 1:
                 break
             sv = buf_s[q]
-            horiz_lb = abs(sv) * 0.998 - 2.0
+            horiz_lb = (abs(sv) - step) * 0.998 - 2.0  # covers the neighbouring intervals too
             if horiz_lb > max_range:
                 break
             if (
@@ -1175,8 +1225,13 @@ def _ira_one(
                 and horiz_lb * horiz_lb + d_top * d_top > best * best
             ):
                 break
+            if q < lo_q:
+                lo_q = q
+            if q > hi_q:
+                hi_q = q
             if best < _INF and horiz_lb > 0.0:
-                # skip the sample when the blocks its terrain point can lie in are too low to beat the best
+                # skip the sample when the blocks its terrain point (and the intervals on either side) can
+                # lie in are too low to beat the best
                 tz = -(vz / vh)
                 t_a = tz * (ha - h_max - 5.0)
                 t_b = tz * (ha - h_min + 5.0 + sv * sv / 6.3e6)
@@ -1189,59 +1244,36 @@ def _ira_one(
                 hb = _region_max(
                     bs,
                     bmax,
-                    heights.shape[0],
-                    heights.shape[1],
+                    n_lat,
+                    n_lon,
                     lat0,
                     lon0,
                     dlat,
                     dlon,
                     lat,
                     lon,
-                    m + ha,
-                    (n + ha) * c,
-                    min(na, nb) - cell_m,
-                    max(na, nb) + cell_m,
-                    min(ea, eb) - cell_m,
-                    max(ea, eb) + cell_m,
+                    mh,
+                    nhc,
+                    min(na, nb) - step,
+                    max(na, nb) + step,
+                    min(ea, eb) - step,
+                    max(ea, eb) + step,
                 )
                 dv = ha - hb
                 if dv > 0.0 and horiz_lb * horiz_lb + dv * dv > best * best:
-                    if q < lo_q:
-                        lo_q = q
-                    if q > hi_q:
-                        hi_q = q
+                    buf_f[q] = _PRUNED
                     k += 1
                     continue
-            f, t = _ira_eval(
-                heights,
-                lat0,
-                lon0,
-                dlat,
-                dlon,
-                lat,
-                lon,
-                ha,
-                s,
-                c,
-                m,
-                n,
-                dm,
-                vx,
-                vy,
-                vz,
-                uhx,
-                uhy,
-                vh,
-                C,
-                tan_w,
-                max_range,
-                sv,
-                t_prev,
-                1e-3,
+            f, t, r, z = _ira_eval(
+                heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+                sin_w, max_range, sv, t_prev, 1e-3,
             )
+            n_coarse += 1
             buf_f[q] = f
             buf_t[q] = t
-            if t == t:
+            buf_r[q] = r
+            buf_z[q] = z
+            if t == t and r < _INF:
                 t_prev = t
                 misses = 0
             else:
@@ -1250,108 +1282,227 @@ def _ira_one(
                     break
             if f < best:
                 best = f
-            if q < lo_q:
-                lo_q = q
-            if q > hi_q:
-                hi_q = q
             k += 1
     if best == _INF:
         return
-    # refine local minima of the coarse samples whose value is near the best
     best_s = np.nan
     best_t = np.nan
-    final = _INF
-    for _pass in range(3):
-        # pick the lowest not-yet-refined local minimum
-        qq = -1
-        fq = _INF
-        for q in range(lo_q, hi_q + 1):
-            fqq = buf_f[q]
-            if fqq == _INF or fqq != fqq or fqq < 0.0:
-                continue
-            left = buf_f[q - 1] if q > lo_q else _INF
-            right = buf_f[q + 1] if q < hi_q else _INF
-            if fqq <= left and fqq <= right and fqq < fq:
-                qq = q
-                fq = fqq
-        if qq < 0 or fq > best + 0.5 * step:
+    for q in range(lo_q, hi_q + 1):
+        if buf_f[q] == best:
+            best_s = buf_s[q]
+            best_t = buf_t[q]
             break
-        buf_f[qq] = -fq - 1.0  # mark as used (negative: not a candidate again, still < any inf)
-        centre = buf_s[qq]
-        fc = fq
-        tc = buf_t[qq]
-        w = step
-        while w > 2e-4:
-            for sgn in (-0.5, 0.5):
-                sv = centre + sgn * w
-                f, t = _ira_eval(
-                    heights,
-                    lat0,
-                    lon0,
-                    dlat,
-                    dlon,
-                    lat,
-                    lon,
-                    ha,
-                    s,
-                    c,
-                    m,
-                    n,
-                    dm,
-                    vx,
-                    vy,
-                    vz,
-                    uhx,
-                    uhy,
-                    vh,
-                    C,
-                    tan_w,
-                    max_range,
-                    sv,
-                    tc,
-                    2e-5,
+    # 2) branch and bound over the intervals between coarse samples
+    g_glob = _finite_range(bslope)[1]
+    tol = 5e-3  # m: an interval must promise at least this much improvement to be searched
+    n_st = 0
+    cap = stack.shape[0]
+    for q in range(lo_q, hi_q):
+        fa = buf_f[q]
+        fb = buf_f[q + 1]
+        if fa == _PRUNED or fb == _PRUNED or (fa == _INF and fb == _INF):
+            continue
+        if buf_r[q] == _INF and buf_r[q + 1] == _INF:
+            continue
+        if n_st < cap:
+            # insertion by key min(f_a, f_b), descending, so the most promising interval is popped first
+            key = min(fa, fb)
+            row = n_st
+            while row > 0 and min(stack[row - 1, 1], stack[row - 1, 6]) < key:
+                stack[row, :] = stack[row - 1, :]
+                row -= 1
+            stack[row, 0] = buf_s[q]
+            stack[row, 1] = fa
+            stack[row, 2] = buf_t[q]
+            stack[row, 3] = buf_r[q]
+            stack[row, 4] = buf_z[q]
+            stack[row, 5] = buf_s[q + 1]
+            stack[row, 6] = fb
+            stack[row, 7] = buf_t[q + 1]
+            stack[row, 8] = buf_r[q + 1]
+            stack[row, 9] = buf_z[q + 1]
+            n_st += 1
+    n_eval = 0
+    while n_st > 0 and n_eval < 20000:
+        n_st -= 1
+        a = stack[n_st, 0]
+        fa = stack[n_st, 1]
+        ta = stack[n_st, 2]
+        ra = stack[n_st, 3]
+        za = stack[n_st, 4]
+        b = stack[n_st, 5]
+        fb = stack[n_st, 6]
+        tb = stack[n_st, 7]
+        rb = stack[n_st, 8]
+        zb = stack[n_st, 9]
+        w = b - a
+        split = 0.5 * (a + b)
+        if ra == _INF or rb == _INF:
+            # an end without terrain/point: unknown geometry there, bisect until the interval is tiny
+            if w < 0.05:
+                continue
+            lb = min(fa, fb) - (1.0 + g_glob) * 2.0 * w
+        else:
+            # grid coordinates of the two ends (exact: _zd_point's north/east -> lat/lon map)
+            fia = (lat + (-a * uhy + ta * uhx) / mh - lat0) / dlat
+            fja = (lon + (a * uhx + ta * uhy) / nhc - lon0) / dlon
+            fib = (lat + (-b * uhy + tb * uhx) / mh - lat0) / dlat
+            fjb = (lon + (b * uhx + tb * uhy) / nhc - lon0) / dlon
+            cia = min(max(int(np.floor(fia)), 0), n_lat - 2)
+            cja = min(max(int(np.floor(fja)), 0), n_lon - 2)
+            cib = min(max(int(np.floor(fib)), 0), n_lat - 2)
+            cjb = min(max(int(np.floor(fjb)), 0), n_lon - 2)
+            one_cell = cia == cib and cja == cjb
+            if one_cell:
+                # smooth piece inside one bilinear cell: the cell's own slope and twist bound r' and r''
+                h00 = heights[cia, cja]
+                h01 = heights[cia, cja + 1]
+                h10 = heights[cia + 1, cja]
+                h11 = heights[cia + 1, cja + 1]
+                dn_c = dlat * mh
+                de_c = dlon * nhc
+                gu = max(abs(h10 - h00), abs(h11 - h01)) / dn_c
+                gv = max(abs(h01 - h00), abs(h11 - h10)) / de_c
+                g = np.sqrt(gu * gu + gv * gv)
+                h_ne = abs(h00 - h01 - h10 + h11) / (dn_c * de_c)
+            else:
+                # slope bound over the region the curve segment can cross
+                tt = ta if ta == ta else tb
+                t_lo = min(ta, tb) if (ta == ta and tb == tb) else tt
+                t_hi = max(ta, tb) if (ta == ta and tb == tb) else tt
+                t_lo -= 0.2 * w + 1.0
+                t_hi += 0.2 * w + 1.0
+                na = -a * uhy
+                nb = -b * uhy
+                ea = a * uhx
+                eb = b * uhx
+                n_lo = min(na, nb) + min(t_lo * uhx, t_hi * uhx) - 1.0
+                n_hi = max(na, nb) + max(t_lo * uhx, t_hi * uhx) + 1.0
+                e_lo = min(ea, eb) + min(t_lo * uhy, t_hi * uhy) - 1.0
+                e_hi = max(ea, eb) + max(t_lo * uhy, t_hi * uhy) + 1.0
+                g = _region_max(
+                    bs, bslope, n_lat, n_lon, lat0, lon0, dlat, dlon, lat, lon, mh, nhc, n_lo, n_hi, e_lo, e_hi
                 )
-                if f < fc:
-                    fc = f
-                    centre = sv
-                    tc = t
-                    break
-            w *= 0.5
-        if fc < final:
-            final = fc
-            best_s = centre
-            best_t = tc
-    if final == _INF:
-        return
+                h_ne = 0.0
+                # split where the straight chord first crosses a grid line: the pieces are smooth
+                lam = 2.0
+                if cia != cib:
+                    li = cia + 1.0 if fib > fia else float(cia)
+                    lam = min(lam, (li - fia) / (fib - fia))
+                if cja != cjb:
+                    lj = cja + 1.0 if fjb > fja else float(cja)
+                    lam = min(lam, (lj - fja) / (fjb - fja))
+                if lam * w > 1e-3 and (1.0 - lam) * w > 1e-3:
+                    split = a + lam * w
+            if not (g >= 0.0):
+                g = g_glob
+            den = 1.0 - gam * g
+            if den < 0.1:
+                den = 0.1
+            zp = g / den + max(abs(a), abs(b)) / 6.3e6
+            tp = gam * zp
+            lip = _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, 1.02)
+            if fa < _INF and fb < _INF:
+                lb = 0.5 * (fa + fb - lip * w)
+                if one_cell:
+                    # |r''| <= |P'|^2 / r + |P''| with |z''| <= (h_ne |x'|^2 + 1/R) / (1 - gamma g)
+                    p1sq = 1.0 + tp * tp + zp * zp
+                    r_lo = max(min(ra, rb) - np.sqrt(p1sq) * w, 0.05 * min(ra, rb))
+                    zpp = (h_ne * (1.0 + tp * tp) + 1.0 / 6.3e6) / den
+                    kk = 1.05 * (p1sq / r_lo + (1.0 + gam) * zpp)
+                    lb = max(lb, min(fa, fb) - 0.125 * kk * w * w)
+            else:
+                lb = min(fa, fb) - lip * w
+        if lb >= best - tol or w < 1e-4:
+            continue
+        mid = split
+        tg = ta if ta == ta else tb
+        if tg != tg:
+            tg = best_t if best_t == best_t else t0
+        fm, tm, rm, zm = _ira_eval(
+            heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+            sin_w, max_range, mid, tg, 1e-3,
+        )
+        n_eval += 1
+        if fm < best:
+            best = fm
+            best_s = mid
+            best_t = tm
+        if n_st + 2 > cap:
+            continue
+        # push the less promising half first so the more promising one is searched first
+        first_left = fa <= fb
+        for side in range(2):
+            left = (side == 1) == first_left
+            row = n_st
+            if left:
+                stack[row, 0] = a
+                stack[row, 1] = fa
+                stack[row, 2] = ta
+                stack[row, 3] = ra
+                stack[row, 4] = za
+                stack[row, 5] = mid
+                stack[row, 6] = fm
+                stack[row, 7] = tm
+                stack[row, 8] = rm
+                stack[row, 9] = zm
+            else:
+                stack[row, 0] = mid
+                stack[row, 1] = fm
+                stack[row, 2] = tm
+                stack[row, 3] = rm
+                stack[row, 4] = zm
+                stack[row, 5] = b
+                stack[row, 6] = fb
+                stack[row, 7] = tb
+                stack[row, 8] = rb
+                stack[row, 9] = zb
+            n_st += 1
+    # 3) polish the location (the bound stops at tol in range, which on a flat minimum leaves metres of
+    #    slack in position): three-point steps with a parabolic jump, h = 1 m, 0.1 m, 0.01 m
+    centre = best_s
+    tc = best_t
+    fc = best
+    h_p = 1.0
+    for _it in range(12):
+        if h_p < 5e-3:
+            break
+        fm, tm, _, _ = _ira_eval(
+            heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+            sin_w, max_range, centre - h_p, tc, 1e-4,
+        )
+        fp, tp_, _, _ = _ira_eval(
+            heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+            sin_w, max_range, centre + h_p, tc, 1e-4,
+        )
+        if fm < fc and fm <= fp:
+            centre, fc, tc = centre - h_p, fm, tm
+            continue
+        if fp < fc:
+            centre, fc, tc = centre + h_p, fp, tp_
+            continue
+        den = fm - 2.0 * fc + fp
+        if den > 0.0 and den < _INF:
+            x_v = centre + 0.5 * h_p * (fm - fp) / den
+            fx, tx, _, _ = _ira_eval(
+                heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+                sin_w, max_range, x_v, tc, 1e-4,
+            )
+            if fx < fc:
+                centre, fc, tc = x_v, fx, tx
+        h_p *= 0.1
     t, x, y, z, dphi, dlam, hp = _zd_point(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
-        lat,
-        lon,
-        ha,
-        s,
-        c,
-        m,
-        n,
-        dm,
-        vx,
-        vy,
-        vz,
-        uhx,
-        uhy,
-        vh,
-        best_s,
-        best_t,
+        heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, centre, tc,
         1e-6,
     )
+    if t != t:
+        return
     out[0] = 1.0
     out[1] = np.sqrt(x * x + y * y + z * z)
     out[2] = lat + dphi
     out[3] = lon + dlam
     out[4] = hp
+    out[5] = n_eval + 1000 * n_coarse
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -1372,6 +1523,7 @@ def _ira_batch(
     bs,
     bmax,
     bmin,
+    bslope,
     valid,
     rng,
     lat_out,
@@ -1380,12 +1532,15 @@ def _ira_batch(
 ):
     h_min = _finite_range(bmin)[0]
     h_max = _finite_range(bmax)[1]
-    tan_w = np.tan(half_window)
+    sin_w = np.sin(half_window)
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
     buf_s = np.empty(n_max)
     buf_f = np.empty(n_max)
     buf_t = np.empty(n_max)
-    out = np.empty(5)
+    buf_r = np.empty(n_max)
+    buf_z = np.empty(n_max)
+    stack = np.empty((4096, 10))
+    out = np.empty(6)
     for k in range(lat.shape[0]):
         if h[k] != h[k] or lat[k] != lat[k] or lon[k] != lon[k]:
             valid[k] = False
@@ -1405,13 +1560,17 @@ def _ira_batch(
             h[k],
             v_ned[k],
             C_bn[k],
-            tan_w,
+            sin_w,
             max_range,
             buf_s,
             buf_f,
             buf_t,
+            buf_r,
+            buf_z,
+            stack,
             bs,
             bmax,
+            bslope,
             out,
         )
         valid[k] = out[0] > 0.5
@@ -1450,6 +1609,22 @@ def _outputs(n):
 def _height_range(dem) -> tuple[float, float]:
     _, bmax, bmin = dem.block_bounds(BLOCK_POSTS)
     return float(bmin.min()), float(bmax.max())
+
+
+def _block_slopes(dem) -> np.ndarray:
+    """Per-block maximum slope (terrain.kernels.block_slopes, BLOCK_POSTS blocks), cached on the Dem next
+    to its height bounds (keyed by the heights array, which is read-only once queries have run)."""
+    cached = getattr(dem, "_query_block_slopes", None)
+    if cached is not None and cached[0] is dem.heights_m:
+        return cached[1]
+    b = dem.bounds
+    lat_far = max(abs(b[0]), abs(b[1]))
+    lat_near = 0.0 if b[0] <= 0.0 <= b[1] else min(abs(b[0]), abs(b[1]))
+    dn = dem.dlat_rad * geodesy.meridian_radius_m(lat_near)  # shortest rows
+    de = dem.dlon_rad * geodesy.prime_vertical_radius_m(lat_far) * np.cos(lat_far)  # narrowest columns
+    slopes = kernels.block_slopes(dem.heights_m, BLOCK_POSTS, float(dn), float(de))
+    dem._query_block_slopes = (dem.heights_m, slopes)
+    return slopes
 
 
 def _cell_m(dem) -> float:
@@ -1531,7 +1706,7 @@ def ira_return(
     dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float, max_range_m: float = 12000.0
 ) -> TerrainReturn:
     """Closest terrain point on the zero-Doppler plane (through the antenna, perpendicular to v_ned (n, 3))
-    whose look angle |theta| = |atan2(y_b, z_b)| <= half_window_rad (body FRD via C_bn (n, 3, 3))."""
+    whose look angle |theta| = |asin(y_b / R)| <= half_window_rad and z_b > 0 (body FRD via C_bn (n, 3, 3))."""
     if not (0.0 < half_window_rad < np.pi / 2):
         raise ValueError(f"half_window_rad must be in (0, pi/2), got {half_window_rad}")
     _check_positive("max_range_m", max_range_m)
@@ -1556,6 +1731,7 @@ def ira_return(
         float(half_window_rad),
         float(max_range_m),
         *dem.block_bounds(BLOCK_POSTS),
+        _block_slopes(dem),
         valid,
         rng,
         la,
@@ -1566,12 +1742,13 @@ def ira_return(
 
 
 def look_angle_rad(C_bn, lat_rad, lon_rad, h_m, ret: TerrainReturn) -> np.ndarray:
-    """Look angle theta = atan2(y_b, z_b) (rad, + toward the right wing) of returned points from antennas."""
+    """Interferometric look angle theta = asin(y_b / R) (rad, + toward the right wing; seed 000 eqs 18-19) of
+    returned points from antennas; y_b is the body-FRD y component of the antenna->point vector, R its length."""
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     C = _stack("C_bn", C_bn, lat.shape[0], (3, 3))
     ned = ned_of_points(lat, lon, h, ret.lat_rad, ret.lon_rad, ret.h_m)
     b = np.einsum("kji,kj->ki", C, ned)
-    return np.arctan2(b[:, 1], b[:, 2])
+    return np.arcsin(np.clip(b[:, 1] / np.linalg.norm(b, axis=1), -1.0, 1.0))
 
 
 def ned_of_points(lat_rad, lon_rad, h_m, lat_p_rad, lon_p_rad, h_p_m) -> np.ndarray:

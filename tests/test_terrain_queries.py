@@ -144,8 +144,8 @@ def bf_ira(dem, lat, lon, h, v_ned, C_bn, half_window, max_range=12000.0, s_half
         zz = 0.5 * (z_all[kk] + z_all[kk + 1])
         ned = s_all[chunk][ii, None] * w + zz[:, None] * q
         b = ned @ C_bn
-        theta = np.arctan2(b[:, 1], b[:, 2])
         r = np.linalg.norm(ned, axis=1)
+        theta = np.arcsin(b[:, 1] / r)  # interferometric look angle (seed 000 eqs 18-19)
         r = np.where((b[:, 2] > 0) & (np.abs(theta) <= half_window), r, np.inf)
         for i_loc, rv, zv in zip(ii, r, zz, strict=True):
             g = chunk[i_loc]
@@ -181,8 +181,8 @@ def bf_ira(dem, lat, lon, h, v_ned, C_bn, half_window, max_range=12000.0, s_half
     zm = 0.5 * (z_lo + z_hi)
     ned = s_c[:, None] * w + zm[:, None] * q
     b = ned @ C_bn
-    theta = np.arctan2(b[:, 1], b[:, 2])
     r = np.linalg.norm(ned, axis=1)
+    theta = np.arcsin(b[:, 1] / r)
     r = np.where((b[:, 2] > 0) & (np.abs(theta) <= half_window) & (r <= max_range), r, np.inf)
     k = int(np.argmin(r))
     if not np.isfinite(r[k]):

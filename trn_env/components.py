@@ -119,6 +119,12 @@ def build_wind(d: dict):
     return WindConfig(layers=layers, turbulence=turb, gusts=gusts)
 
 
+def build_atmosphere(d: dict):
+    """trn_env.atmosphere.Atmosphere of the scenario's optional [atmosphere] table (absent: standard)."""
+    from .atmosphere import Atmosphere
+    return Atmosphere.from_mapping(d.get("atmosphere"))
+
+
 def initial_h_msl_m(d: dict, world) -> float:
     """Initial height above MSL: h_msl_m, or h_agl_m above the TRUE terrain at the start."""
     init = d["initial"]
@@ -157,7 +163,8 @@ def build_flight(d: dict, world, rng: np.random.Generator):
     seed = int(rng.integers(0, 2**31 - 1))
     with quiet_stdout():
         return Flight(ic, aircraft=d["aircraft"]["name"], dt_s=float(d["aircraft"]["dt_s"]),
-                      wind=build_wind(d), seed=seed, terrain_elevation_m=map_height(world, lat, lon))
+                      wind=build_wind(d), seed=seed, terrain_elevation_m=map_height(world, lat, lon),
+                      atmosphere=build_atmosphere(d))
 
 
 # ----------------------------------------------------------------------------------------------- sensors
@@ -212,6 +219,8 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
     checks = []
     if not blocked("wind"):
         checks.append(("wind", lambda: build_wind(d)))
+    if not blocked("atmosphere"):
+        checks.append(("atmosphere", lambda: build_atmosphere(d)))
     if not blocked("sensors"):
         checks.append(("", lambda: _sensor_problems(d)))
     err = d["terrain"]["map"].get("error_model")

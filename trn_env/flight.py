@@ -20,7 +20,8 @@ which this project uses as "MSL" (the DEM's datum).
 Timing. Row k holds the state after the k-th step, t_s = k * dt_s from the start of the flight. JSBSim 1.3
 integrates first and then evaluates every model at the new state, so all fields of a row describe the same
 instant: f_b_mps2 is the specific force at that state (what an ideal accelerometer senses), TAS, alpha and
-beta follow from the row's velocity, attitude and wind, and p/T are JSBSim's standard atmosphere at the
+beta follow from the row's velocity, attitude and wind, and p/T are the flight's atmosphere (JSBSim's
+standard atmosphere with the day's temperature offset and sea-level pressure, trn_env.atmosphere) at the
 row's altitude. The IMU is at the centre of gravity: f_b = (total non-gravitational force) / mass, FRD.
 """
 
@@ -37,7 +38,8 @@ from numba import njit
 
 from terrain.geodesy import OMEGA_EARTH_RPS
 from trn_env.aircraft_data import new_fdm
-from trn_env.truth import TruthChunk
+from trn_env.atmosphere import JSBSIM_P_SL_PA, Atmosphere, static_p_T
+from trn_env.truth import SCALAR_FIELDS, VECTOR_FIELDS, TruthChunk
 from trn_env.wind import FT_PER_M, WindConfig
 
 M_PER_FT = 0.3048
@@ -182,8 +184,9 @@ class AutopilotTargets:
 
 # Properties copied every step, in buffer-column order (JSBSim units; converted after the loop). The three
 # total-wind columns are read only when turbulence or gusts are configured; otherwise the wind is the steady
-# wind this module wrote. Pressure and temperature are not read: they are JSBSim's standard atmosphere
-# evaluated at each row's own altitude (see _std_atmosphere; tests check it against atmosphere/P-psf, T-R).
+# wind this module wrote. Pressure and temperature are not read: they are the flight's atmosphere (the model
+# JSBSim flies in, trn_env.atmosphere.static_p_T) evaluated at each row's own position (tests check it against
+# atmosphere/P-psf, T-R).
 _RECORDED = (
     "position/lat-geod-rad",                 # 0
     "position/long-gc-rad",                  # 1
@@ -211,77 +214,58 @@ _NAN_NAMES = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps[north]", "v_ned_mps[ea
               "f_b_mps2[x]", "f_b_mps2[y]", "f_b_mps2[z]",
               "wind_ned_mps[north]", "wind_ned_mps[east]", "wind_ned_mps[down]")
 
-# JSBSim's standard atmosphere (FGStandardAtmosphere, 1976 tables below 20 km): sea-level values in its
-# own units converted exactly, R* / M_air as JSBSim defines them, geopotential altitude from the height
-# above JSBSim's sea-level radius (position/h-sl-ft).
-_ATM_P0_PA = 2116.228 * PSF_TO_PA
-_ATM_T0_K = 288.15
-_ATM_R = 8.31432 / 0.0289645
-_ATM_LAPSE = -0.0065
-_ATM_RE_M = 20855531.5 * M_PER_FT       # JSBSim's radius for geopotential altitude
-_ATM_H11 = 11000.0
-_WGS84_A = 6378137.0
-_WGS84_B = 6356752.314245179
-_WGS84_E2 = 1.0 - (_WGS84_B / _WGS84_A) ** 2
-
-# Rows of the converted block (fields, one row each; vector fields take 3 rows).
-_B_T, _B_LAT, _B_LON, _B_H, _B_V, _B_ROLL, _B_PITCH, _B_YAW = 0, 1, 2, 3, 4, 7, 8, 9
-_B_WIB, _B_WEB, _B_F, _B_TAS, _B_ALPHA, _B_BETA = 10, 13, 16, 19, 20, 21
-_B_P, _B_TK, _B_WIND, _B_AGL = 22, 23, 24, 27
-_B_ROWS = 28
+# Rows of the converted scalar block (one row per field) and of the vector block (5, 3, n): the layout of
+# TruthChunk.from_blocks.
+(_S_T, _S_LAT, _S_LON, _S_H, _S_ROLL, _S_PITCH, _S_YAW, _S_TAS, _S_ALPHA, _S_BETA, _S_P, _S_TK,
+ _S_AGL) = (SCALAR_FIELDS.index(k) for k in (
+    "t_s", "lat_rad", "lon_rad", "h_msl_m", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps", "alpha_rad",
+    "beta_rad", "p_static_pa", "T_static_K", "h_agl_m"))
+_S_ROWS = len(SCALAR_FIELDS)
+_V_V, _V_WIB, _V_WEB, _V_F, _V_WIND = (VECTOR_FIELDS.index(k) for k in (
+    "v_ned_mps", "omega_ib_b_rps", "omega_eb_b_rps", "f_b_mps2", "wind_ned_mps"))
+_V_ROWS = len(VECTOR_FIELDS)
 
 
 @njit(cache=True)
 def _std_atmosphere(lat_rad, lon_rad, h_m):  # pragma: no cover - compiled
-    """(p_static_pa, T_static_K) of JSBSim's standard atmosphere at a geodetic position."""
-    s, c = np.sin(lat_rad), np.cos(lat_rad)
-    n = _WGS84_A / np.sqrt(1.0 - _WGS84_E2 * s * s)
-    rxy = (n + h_m) * c
-    z = (n * (1.0 - _WGS84_E2) + h_m) * s
-    radius = np.sqrt(rxy * rxy + z * z)
-    s_gc = z / radius                                   # sine of the geocentric latitude
-    sea_level_radius = _WGS84_A / np.sqrt(1.0 + _WGS84_E2 * s_gc * s_gc / (1.0 - _WGS84_E2))
-    h_sl = radius - sea_level_radius
-    hgp = _ATM_RE_M * h_sl / (_ATM_RE_M + h_sl)
-    g0 = G0_MPS2
-    if hgp < _ATM_H11:
-        t = _ATM_T0_K + _ATM_LAPSE * hgp
-        p = _ATM_P0_PA * (t / _ATM_T0_K) ** (-g0 / (_ATM_R * _ATM_LAPSE))
-    else:
-        t = _ATM_T0_K + _ATM_LAPSE * _ATM_H11
-        p11 = _ATM_P0_PA * (t / _ATM_T0_K) ** (-g0 / (_ATM_R * _ATM_LAPSE))
-        p = p11 * np.exp(-g0 * (hgp - _ATM_H11) / (_ATM_R * t))
-    return p, t
+    """(p_static_pa, T_static_K) of JSBSim's default standard atmosphere at a geodetic position."""
+    return static_p_T(lat_rad, lon_rad, h_m, 0.0, JSBSIM_P_SL_PA)
 
 
 @njit(cache=True)
-def _convert_raw(raw, ncol, wind_ned_mps, first_step, dt_s, terrain_elevation_m):  # pragma: no cover
-    """Recorded JSBSim values (flat float64 array, ncol per step) -> (index of the first non-finite value or
-    -1, block of SI fields (_B_ROWS, n), C_bn (n, 3, 3)). One pass over the chunk, no Python objects."""
+def _convert_raw(raw, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain_elevation_m, delta_T_K,
+                 p_sl_pa, s, vb, c):  # pragma: no cover - compiled
+    """Recorded JSBSim values (flat float64 buffer, ncol per step) -> SI fields written into the
+    preallocated scalar block s (_S_ROWS, n), vector block vb (_V_ROWS, 3, n) and C_bn c (n, 3, 3), in one
+    pass. Returns the index of the first non-finite raw value, or -1. No Python objects."""
     n = len(raw) // ncol
     bad = -1
     for k in range(n * ncol):
         if not np.isfinite(raw[k]):
             bad = k
             break
-    b = np.empty((_B_ROWS, n))
-    c = np.empty((n, 3, 3))
     for i in range(n):
-        r = raw[i * ncol:(i + 1) * ncol]
-        lat, h = r[0], r[2] * M_PER_FT
-        b[_B_T, i] = (first_step + i) * dt_s
-        b[_B_LAT, i] = lat
-        b[_B_LON, i] = r[1]
-        b[_B_H, i] = h
-        b[_B_AGL, i] = h - terrain_elevation_m
+        o = i * ncol
+        lat, lon, h = raw[o], raw[o + 1], raw[o + 2] * M_PER_FT
+        s[_S_T, i] = (first_step + i) * dt_s
+        s[_S_LAT, i] = lat
+        s[_S_LON, i] = lon
+        s[_S_H, i] = h
+        s[_S_AGL, i] = h - terrain_elevation_m
         for k in range(3):
-            b[_B_V + k, i] = r[3 + k] * M_PER_FT
-            b[_B_WIB + k, i] = r[9 + k]
-            b[_B_WIND + k, i] = r[15 + k] * M_PER_FT if ncol > _N_STATE else wind_ned_mps[k]
-        ph, th, ps = r[6], r[7], r[8]
+            vb[_V_V, k, i] = raw[o + 3 + k] * M_PER_FT
+            vb[_V_WIB, k, i] = raw[o + 9 + k]
+        if ncol > _N_STATE:
+            for k in range(3):
+                vb[_V_WIND, k, i] = raw[o + 15 + k] * M_PER_FT
+        else:
+            vb[_V_WIND, 0, i] = wind_n
+            vb[_V_WIND, 1, i] = wind_e
+            vb[_V_WIND, 2, i] = wind_d
+        ph, th, ps = raw[o + 6], raw[o + 7], raw[o + 8]
         if ps > np.pi:
             ps -= 2.0 * np.pi          # JSBSim gives [0, 2 pi); ours is (-pi, pi]
-        b[_B_ROLL, i], b[_B_PITCH, i], b[_B_YAW, i] = ph, th, ps
+        s[_S_ROLL, i], s[_S_PITCH, i], s[_S_YAW, i] = ph, th, ps
         cr, sr, cp, sp, cy, sy = np.cos(ph), np.sin(ph), np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
         # 3-2-1 body (FRD) -> NED, as terrain.geodesy.euler_to_C_bn
         c[i, 0, 0] = cp * cy
@@ -297,22 +281,22 @@ def _convert_raw(raw, ncol, wind_ned_mps, first_step, dt_s, terrain_elevation_m)
         wn = OMEGA_EARTH_RPS * np.cos(lat)
         wd = -OMEGA_EARTH_RPS * np.sin(lat)
         for k in range(3):
-            b[_B_WEB + k, i] = r[9 + k] - (c[i, 0, k] * wn + c[i, 2, k] * wd)
-        b[_B_F, i] = r[12] * G0_MPS2
-        b[_B_F + 1, i] = r[13] * G0_MPS2
-        b[_B_F + 2, i] = -r[14] * G0_MPS2
+            vb[_V_WEB, k, i] = raw[o + 9 + k] - (c[i, 0, k] * wn + c[i, 2, k] * wd)
+        vb[_V_F, 0, i] = raw[o + 12] * G0_MPS2
+        vb[_V_F, 1, i] = raw[o + 13] * G0_MPS2
+        vb[_V_F, 2, i] = -raw[o + 14] * G0_MPS2
         # air-relative velocity in body axes: C_nb (v - wind)
-        an = b[_B_V, i] - b[_B_WIND, i]
-        ae = b[_B_V + 1, i] - b[_B_WIND + 1, i]
-        ad = b[_B_V + 2, i] - b[_B_WIND + 2, i]
+        an = vb[_V_V, 0, i] - vb[_V_WIND, 0, i]
+        ae = vb[_V_V, 1, i] - vb[_V_WIND, 1, i]
+        ad = vb[_V_V, 2, i] - vb[_V_WIND, 2, i]
         u = c[i, 0, 0] * an + c[i, 1, 0] * ae + c[i, 2, 0] * ad
-        vb = c[i, 0, 1] * an + c[i, 1, 1] * ae + c[i, 2, 1] * ad
-        wb = c[i, 0, 2] * an + c[i, 1, 2] * ae + c[i, 2, 2] * ad
-        b[_B_TAS, i] = np.sqrt(u * u + vb * vb + wb * wb)
-        b[_B_ALPHA, i] = np.arctan2(wb, u)
-        b[_B_BETA, i] = np.arctan2(vb, np.sqrt(u * u + wb * wb))
-        b[_B_P, i], b[_B_TK, i] = _std_atmosphere(lat, r[1], h)
-    return bad, b, c
+        v = c[i, 0, 1] * an + c[i, 1, 1] * ae + c[i, 2, 1] * ad
+        w = c[i, 0, 2] * an + c[i, 1, 2] * ae + c[i, 2, 2] * ad
+        s[_S_TAS, i] = np.sqrt(u * u + v * v + w * w)
+        s[_S_ALPHA, i] = np.arctan2(w, u)
+        s[_S_BETA, i] = np.arctan2(v, np.sqrt(u * u + w * w))
+        s[_S_P, i], s[_S_TK, i] = static_p_T(lat, lon, h, delta_T_K, p_sl_pa)
+    return bad
 
 
 def _record_state(n: int, run, extend, getters) -> None:
@@ -340,12 +324,14 @@ class Flight:
     aircraft: folder name under the aircraft data (ValueError if unknown); dt_s: JSBSim step; wind: a
     WindConfig (default calm); seed: JSBSim's random seed (turbulence), same seed -> identical truth;
     terrain_elevation_m: terrain height under the aircraft at the start (WGS84, m); targets: autopilot
-    targets to engage after trim (default: hold the trimmed track, altitude and TAS).
+    targets to engage after trim (default: hold the trimmed track, altitude and TAS); atmosphere: the day's
+    trn_env.atmosphere.Atmosphere (temperature offset, sea-level pressure; default standard), set in JSBSim
+    before the trim and used for the truth's p_static_pa / T_static_K.
     """
 
     def __init__(self, ic: InitialCondition, *, aircraft: str = "kingair", dt_s: float = 0.01,
                  wind: WindConfig | None = None, seed: int = 0, terrain_elevation_m: float = 0.0,
-                 targets: AutopilotTargets | None = None):
+                 targets: AutopilotTargets | None = None, atmosphere: Atmosphere | None = None):
         if not isinstance(ic, InitialCondition):
             raise ValueError(f"ic must be an InitialCondition, got {type(ic).__name__}")
         dt_s = _check_finite("Flight", "dt_s", dt_s)
@@ -359,6 +345,10 @@ class Flight:
             wind = WindConfig()
         if not isinstance(wind, WindConfig):
             raise ValueError(f"wind must be a WindConfig, got {type(wind).__name__}")
+        if atmosphere is None:
+            atmosphere = Atmosphere()
+        if not isinstance(atmosphere, Atmosphere):
+            raise ValueError(f"atmosphere must be an Atmosphere, got {type(atmosphere).__name__}")
         self.ic = ic
         self.aircraft = aircraft
         self.dt_s = dt_s
@@ -375,6 +365,7 @@ class Flight:
         self._terrain_elevation_m = terrain_elevation_m
         self._written_wind: tuple[float, float, float] | None = None
         self._steady_wind_mps = np.zeros(3)
+        self._steady_wind_t = (0.0, 0.0, 0.0)
         self._steps = 0
         self._gust_index = 0
         self._targets: AutopilotTargets | None = None
@@ -382,6 +373,8 @@ class Flight:
         self._select_recorder()
 
         fdm["simulation/randomseed"] = float(self.seed % 2**31)
+        self.atmosphere = atmosphere
+        atmosphere.apply(fdm)
         self._apply_ic(ic, terrain_elevation_m)
         self._trim()
         self._add_wind_to_trim()
@@ -505,6 +498,14 @@ class Flight:
             self._gust_index += 1
         wind.apply_turbulence(self.fdm)
         self._select_recorder()
+        self._write_steady_wind(self._last_h_m)
+
+    def set_atmosphere(self, atmosphere: Atmosphere) -> None:
+        """Change the day's atmosphere in flight (JSBSim's air and the truth's p/T from the next step)."""
+        if not isinstance(atmosphere, Atmosphere):
+            raise ValueError(f"atmosphere must be an Atmosphere, got {type(atmosphere).__name__}")
+        atmosphere.apply(self.fdm)
+        self.atmosphere = atmosphere
 
     def _write_steady_wind(self, h_m: float) -> None:
         w_ned = self.wind.steady_wind_ned_tuple(h_m)
@@ -513,6 +514,7 @@ class Flight:
                 setter(value * FT_PER_M)
             self._written_wind = w_ned
             self._steady_wind_mps = np.array(w_ned)
+            self._steady_wind_t = w_ned
 
     # ---------------------------------------------------------------------------------------- stepping
     @property
@@ -526,24 +528,24 @@ class Flight:
 
     def snapshot(self) -> TruthChunk:
         """The current state as a one-row TruthChunk (no step taken)."""
-        raw = np.array([g() for g in self._getters])
-        return self._convert(raw, self._steps)
+        return self._convert(array("d", [g() for g in self._getters]), self._steps)
 
     def advance(self, n_steps: int) -> TruthChunk:
         """Run n_steps JSBSim steps; return their truth (one row per step, SI). Raises FlightDiverged if
         the state turns NaN. The steady wind is set for the current altitude first; gusts start on time."""
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
-        self._write_steady_wind(self._last_h_m)
+        if self._wind_varies:
+            self._write_steady_wind(self._last_h_m)
         buf = array("d")
-        if self._gust_index < len(self.wind.gusts):
+        if self._gust_index < self._n_gusts:
             self._record_with_gusts(int(n_steps), buf)
         else:
             self._recorder(n_steps, self._run, buf.extend, self._getters)
         first_step = self._steps + 1
         self._steps += n_steps
         self._last_h_m = buf[len(buf) - self._ncol + 2] * M_PER_FT
-        return self._convert(np.frombuffer(buf, dtype=np.float64), first_step)
+        return self._convert(buf, first_step)
 
     def _record_with_gusts(self, n_steps: int, buf: array) -> None:
         gusts = self.wind.gusts
@@ -562,20 +564,30 @@ class Flight:
             done += seg
 
     def _select_recorder(self) -> None:
+        self._n_gusts = len(self.wind.gusts)
+        self._wind_varies = len(self.wind.layers) > 1
         self._read_wind = self.wind.turbulence.model != "none" or bool(self.wind.gusts)
         self._ncol = len(_RECORDED) if self._read_wind else _N_STATE
         self._getters = self._all_getters[:self._ncol]
         self._recorder = _record_state_wind if self._read_wind else _record_state
 
-    def _convert(self, raw: np.ndarray, first_step: int) -> TruthChunk:
-        bad, b, c_bn = _convert_raw(raw, self._ncol, self._steady_wind_mps, first_step, self.dt_s,
-                                    self._terrain_elevation_m)
+    def _convert(self, raw: array, first_step: int) -> TruthChunk:
+        """The recorded raw buffer -> TruthChunk: one numba pass into three preallocated blocks (scalar fields
+        are rows of one block, vector fields (n, 3) views of another, C_bn its own array); the per-field views
+        are built on the chunk's first field access (TruthChunk.from_blocks)."""
+        ncol = self._ncol
+        n = len(raw) // ncol
+        s = np.empty((_S_ROWS, n))
+        vb = np.empty((_V_ROWS, 3, n))
+        c_bn = np.empty((n, 3, 3))
+        w = self._steady_wind_t
+        atm = self.atmosphere
+        bad = _convert_raw(raw, ncol, w[0], w[1], w[2], first_step, self.dt_s, self._terrain_elevation_m,
+                           atm.delta_T_K, atm.p_sl_pa, s, vb, c_bn)
         if bad >= 0:
-            row, col = divmod(bad, self._ncol)
+            row, col = divmod(bad, ncol)
             t = (first_step + row) * self.dt_s
             name = _NAN_NAMES[col]
             raise FlightDiverged(f"flight diverged: {name} turned {raw[bad]} at t = {t:.2f} s "
                                  f"(aircraft {self.aircraft!r})", name, t)
-        bt = b.T
-        return TruthChunk(b[0], b[1], b[2], b[3], bt[:, 4:7], b[7], b[8], b[9], c_bn, bt[:, 10:13],
-                          bt[:, 13:16], bt[:, 16:19], b[19], b[20], b[21], b[22], b[23], bt[:, 24:27], b[27])
+        return TruthChunk.from_blocks(s, vb, c_bn)

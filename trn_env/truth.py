@@ -76,3 +76,38 @@ class TruthChunk:
     @staticmethod
     def concatenate(chunks: list[TruthChunk]) -> TruthChunk:
         return TruthChunk(**{k: np.concatenate([getattr(c, k) for c in chunks]) for k in TRUTH_FIELDS})
+
+    @staticmethod
+    def from_blocks(scalars: np.ndarray, vectors: np.ndarray, C_bn: np.ndarray) -> TruthChunk:
+        """A chunk over three blocks, without building its per-field views yet (the flight core's fast
+        path): scalars (len(SCALAR_FIELDS), n), row k = SCALAR_FIELDS[k]; vectors (len(VECTOR_FIELDS), 3, n),
+        field k = vectors[k].T (an (n, 3) view); C_bn (n, 3, 3). All views are built together on the first
+        access of any field; the result behaves as a TruthChunk in every other respect."""
+        chunk = _BlockTruthChunk.__new__(_BlockTruthChunk)
+        chunk.__dict__["_blocks"] = (scalars, vectors, C_bn)
+        return chunk
+
+
+# Row order of TruthChunk.from_blocks' blocks.
+SCALAR_FIELDS: tuple[str, ...] = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "roll_rad", "pitch_rad", "yaw_rad",
+                                  "tas_mps", "alpha_rad", "beta_rad", "p_static_pa", "T_static_K", "h_agl_m")
+VECTOR_FIELDS: tuple[str, ...] = ("v_ned_mps", "omega_ib_b_rps", "omega_eb_b_rps", "f_b_mps2", "wind_ned_mps")
+_FIELD_SET = frozenset(TRUTH_FIELDS)
+
+
+class _BlockTruthChunk(TruthChunk):
+    """TruthChunk whose field views are made from its blocks on first access (see TruthChunk.from_blocks).
+    Once built they are ordinary instance attributes; constructing it with field values (dataclasses.replace)
+    gives an ordinary chunk."""
+
+    def __getattr__(self, name: str):
+        blocks = self.__dict__.get("_blocks")
+        if name not in _FIELD_SET or blocks is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        scalars, vectors, c_bn = blocks
+        d = self.__dict__
+        d.update(zip(SCALAR_FIELDS, scalars, strict=True))
+        d.update(zip(VECTOR_FIELDS, vectors.transpose(0, 2, 1), strict=True))
+        d["C_bn"] = c_bn
+        del d["_blocks"]
+        return d[name]
