@@ -483,6 +483,7 @@ def _ra_one(
     bs,
     bmax,
     bmin,
+    g_max,
     out,
 ):
     """Closest terrain point in the beam cone; writes (valid, range, lat, lon, h) into out[0:5].
@@ -510,6 +511,8 @@ def _ra_one(
     e2y = az * e1x - ax * e1z
     e2z = ax * e1y - ay * e1x
 
+    # a point within 0.71 post of a post is at most 0.71 post * |dP/dx| <= 0.71 post * sqrt(1 + g^2) closer
+    margin = 0.75 * cell_m * np.sqrt(1.0 + g_max * g_max)
     best = _INF
     best_i = np.nan
     best_j = np.nan
@@ -595,7 +598,14 @@ def _ra_one(
         e_hi = min(e_hi, rho)
     # 3) scan the posts inside the box; start points = in-cone posts that are local minima of the range
     #    among their 8 neighbours (out-of-cone neighbours count as +inf), the K lowest
-    kk = 6
+    kk = 12
+    kb = 16
+    tilt = np.arccos(min(max(az, -1.0), 1.0))  # axis angle from the local down
+    dz_max = 1.0 if np.arccos(cosb) >= tilt else np.cos(tilt - np.arccos(cosb))  # steepest boundary ray
+    bnd_key = np.full(kb, _INF)
+    bnd_f = np.full(kb, _INF)
+    bnd_i = np.zeros(kb)
+    bnd_j = np.zeros(kb)
     cand_f = np.full(kk, _INF)
     cand_i = np.zeros(kk)
     cand_j = np.zeros(kk)
@@ -664,7 +674,10 @@ def _ra_one(
                             dlam = lon0 + j * dlon - lon
                             x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
                             r = np.sqrt(x * x + y * y + z * z)
-                            if r > max_range or x * ax + y * ay + z * az < cosb * r:
+                            if r > max_range:
+                                continue
+                            if x * ax + y * ay + z * az < cosb * r:
+                                rbuf[i - i_lo + 1, j - j_lo + 1] = -r  # out of the cone: raw range, negated
                                 continue
                             rbuf[i - i_lo + 1, j - j_lo + 1] = r
                             if r < post_best:
@@ -680,14 +693,33 @@ def _ra_one(
                     for a_i in range(pi0 - i_lo + 1, pi1 - i_lo + 2):
                         for a_j in range(pj0 - j_lo + 1, pj1 - j_lo + 2):
                             r = rbuf[a_i, a_j]
-                            if r == _INF or r >= cand_f[kk - 1]:
+                            if r == _INF or r < 0.0:
                                 continue
                             is_min = True
+                            edge_key = _INF
                             for di in range(-1, 2):
                                 for dj in range(-1, 2):
-                                    if (di != 0 or dj != 0) and rbuf[a_i + di, a_j + dj] < r:
+                                    rn = rbuf[a_i + di, a_j + dj]
+                                    if rn < 0.0:
+                                        edge_key = min(edge_key, -rn)
+                                    elif (di != 0 or dj != 0) and rn < r:
                                         is_min = False
-                            if not is_min:
+                            if edge_key < _INF:
+                                # a post next to the cone boundary: a seed for the boundary search
+                                edge_key = min(edge_key, r)
+                                if edge_key < bnd_key[kb - 1]:
+                                    q = kb - 1
+                                    while q > 0 and bnd_key[q - 1] > edge_key:
+                                        bnd_key[q] = bnd_key[q - 1]
+                                        bnd_f[q] = bnd_f[q - 1]
+                                        bnd_i[q] = bnd_i[q - 1]
+                                        bnd_j[q] = bnd_j[q - 1]
+                                        q -= 1
+                                    bnd_key[q] = edge_key
+                                    bnd_f[q] = r
+                                    bnd_i[q] = i_lo + a_i - 1
+                                    bnd_j[q] = j_lo + a_j - 1
+                            if not is_min or r >= cand_f[kk - 1]:
                                 continue
                             q = kk - 1
                             while q > 0 and cand_f[q - 1] > r:
@@ -699,10 +731,12 @@ def _ra_one(
                             cand_i[q] = i_lo + a_i - 1
                             cand_j[q] = j_lo + a_j - 1
     # 4) local refinement from distinct start points
-    done_i = np.empty(kk + 1)
-    done_j = np.empty(kk + 1)
+    done_i = np.empty(kk + 1 + kb)
+    done_j = np.empty(kk + 1 + kb)
     n_done = 0
-    touched_best = False
+    res_f = np.empty(kk + 1 + kb)
+    res_key = np.empty(kk + 1 + kb)
+    res_t = np.zeros(kk + 1 + kb, dtype=np.bool_)
     for q in range(-1, kk):
         if q < 0:
             if t_ax != t_ax or best == _INF or cand_f[0] < _INF:
@@ -711,7 +745,7 @@ def _ra_one(
         else:
             if cand_f[q] == _INF:
                 break
-            if cand_f[q] > best + 0.5 * cell_m:
+            if cand_f[q] > best + margin:
                 break
             fi0, fj0, f0 = cand_i[q], cand_j[q], cand_f[q]
             if n_done > 0:
@@ -768,101 +802,88 @@ def _ra_one(
         )
         done_i[n_done] = fi
         done_j[n_done] = fj
+        res_f[n_done] = f
+        res_key[n_done] = f
+        res_t[n_done] = touched
         n_done += 1
         if f < best:
-            best, best_i, best_j, touched_best = f, fi, fj, touched
+            best, best_i, best_j = f, fi, fj
+    if n_done == 0 and best < _INF:
+        done_i[0] = best_i
+        done_j[0] = best_j
+        res_f[0] = best
+        res_key[0] = best
+        res_t[0] = False
+        n_done = 1
+    # boundary seeds (posts next to the cone edge whose neighbourhood may hold a closer boundary point),
+    # at least 1.5 posts apart: the boundary search from each covers +-1.5 posts of arc
+    n_ref = n_done
+    for q in range(kb):
+        if bnd_key[q] == _INF or bnd_key[q] > best + margin:
+            break
+        # height bound: a boundary point within +-2 posts sits at depth >= ha - (their max height), and a
+        # cone-boundary ray descends at most cos(half_beam - axis tilt) per metre of range
+        ci = int(bnd_i[q])
+        cj = int(bnd_j[q])
+        hmx = -_INF
+        for i in range(max(ci - 2, 0), min(ci + 2, n_lat - 1) + 1):
+            for j in range(max(cj - 2, 0), min(cj + 2, n_lon - 1) + 1):
+                if heights[i, j] > hmx:
+                    hmx = heights[i, j]
+        # steepest descent rate (down component of the unit direction) of the boundary rays within the
+        # searched arc (+-2.5 posts) around the seed's azimuth
+        la_q = lat0 + bnd_i[q] * dlat
+        lo_q = lon0 + bnd_j[q] * dlon
+        x, y, z = _ned(la_q - lat, lo_q - lon, heights[ci, cj], ha, s, c, m, n, dm)
+        ua = x * ax + y * ay + z * az
+        px = x - ua * ax
+        py = y - ua * ay
+        pz = z - ua * az
+        pn = np.sqrt(px * px + py * py + pz * pz)
+        dz_b = dz_max
+        if pn > 1e-9:
+            # d(dz)/d(azimuth) <= sin(half beam) sin(tilt); the arc spans <= 2.5 posts / |perp| rad
+            dz_b = cosb * az + sinb * pz / pn + sinb * np.sin(tilt) * min(2.5 * cell_m / pn, np.pi)
+            dz_b = min(dz_b, dz_max)
+        if dz_b > 0.0 and (ha - hmx) > best * dz_b:
+            continue
+        near = False
+        for p in range(n_ref, n_done):
+            if abs(done_i[p] - bnd_i[q]) <= 2.5 and abs(done_j[p] - bnd_j[q]) <= 2.5:
+                near = True
+        if near:
+            continue
+        done_i[n_done] = bnd_i[q]
+        done_j[n_done] = bnd_j[q]
+        res_f[n_done] = bnd_f[q]
+        res_key[n_done] = bnd_key[q]
+        res_t[n_done] = True
+        n_done += 1
     if best == _INF:
         return
-    # 5) on the cone boundary the pattern search can stall: 1-D search in azimuth along the boundary
-    la = lat0 + best_i * dlat
-    lo = lon0 + best_j * dlon
-    hp = bilinear(heights, lat0, lon0, dlat, dlon, la, lo)
-    x, y, z = _ned(la - lat, lo - lon, hp, ha, s, c, m, n, dm)
-    cos_off = (x * ax + y * ay + z * az) / best
-    out_lat, out_lon, out_h = la, lo, hp
-    if touched_best or cos_off < cosb + 1e-6:
-        az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
-        width = min(np.pi, 3.0 * cell_m / max(best * sinb, 1e-6))
-        fb, dx, dy, dz = _boundary_eval(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            h_min,
-            h_max,
-            cell_m,
-            lat,
-            lon,
-            ha,
-            s,
-            c,
-            m,
-            n,
-            dm,
-            ax,
-            ay,
-            az,
-            e1x,
-            e1y,
-            e1z,
-            e2x,
-            e2y,
-            e2z,
-            cosb,
-            sinb,
-            max_range,
-            az0,
-            best,
-        )
-        centre = az0
-        t_ref = fb if fb < _INF else best
-        w = width
-        w_min = 1e-3 / max(best * sinb, 1e-6)
-        while w > w_min:
-            for sgn in (-0.5, 0.5):
-                a = centre + sgn * w
-                fa, _, _, _ = _boundary_eval(
-                    heights,
-                    lat0,
-                    lon0,
-                    dlat,
-                    dlon,
-                    h_min,
-                    h_max,
-                    cell_m,
-                    lat,
-                    lon,
-                    ha,
-                    s,
-                    c,
-                    m,
-                    n,
-                    dm,
-                    ax,
-                    ay,
-                    az,
-                    e1x,
-                    e1y,
-                    e1z,
-                    e2x,
-                    e2y,
-                    e2z,
-                    cosb,
-                    sinb,
-                    max_range,
-                    a,
-                    t_ref,
-                )
-                if fa < fb:
-                    fb = fa
-                    centre = a
-                    break
-            if fb < _INF:
-                t_ref = fb
-            w *= 0.5
-        if fb < best:
-            _, dx, dy, dz = _boundary_eval(
+    # 5) on the cone boundary the pattern search can stall: 1-D search in azimuth along the boundary from
+    #    every refined point near the best (the closest point may lie on another stretch of the boundary)
+    final = _INF
+    n_bsearch = 0
+    fin_lat = fin_lon = fin_h = np.nan
+    for p_res in range(n_done):
+        if res_key[p_res] > final + margin or res_f[p_res] == _INF:
+            continue
+        best = res_f[p_res]
+        best_i = done_i[p_res]
+        best_j = done_j[p_res]
+        touched_best = res_t[p_res]
+        la = lat0 + best_i * dlat
+        lo = lon0 + best_j * dlon
+        hp = bilinear(heights, lat0, lon0, dlat, dlon, la, lo)
+        x, y, z = _ned(la - lat, lo - lon, hp, ha, s, c, m, n, dm)
+        cos_off = (x * ax + y * ay + z * az) / best
+        out_lat, out_lon, out_h = la, lo, hp
+        if touched_best or cos_off < cosb + 1e-6:
+            n_bsearch += 1
+            az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
+            width = min(np.pi, 3.0 * cell_m / max(best * sinb, 1e-6))
+            fb, dx, dy, dz = _boundary_eval(
                 heights,
                 lat0,
                 lon0,
@@ -891,14 +912,99 @@ def _ra_one(
                 cosb,
                 sinb,
                 max_range,
-                centre,
-                t_ref,
+                az0,
+                best,
             )
-            dphi, dlam, hpb = _geo_of_ned(fb * dx, fb * dy, fb * dz, ha, s, c, m, n, dm)
-            best = fb
-            out_lat = lat + dphi
-            out_lon = lon + dlam
-            out_h = bilinear(heights, lat0, lon0, dlat, dlon, out_lat, out_lon)
+            centre = az0
+            t_ref = fb if fb < _INF else best
+            w = width
+            w_min = 1e-3 / max(best * sinb, 1e-6)
+            while w > w_min:
+                for sgn in (-0.5, 0.5):
+                    a = centre + sgn * w
+                    fa, _, _, _ = _boundary_eval(
+                        heights,
+                        lat0,
+                        lon0,
+                        dlat,
+                        dlon,
+                        h_min,
+                        h_max,
+                        cell_m,
+                        lat,
+                        lon,
+                        ha,
+                        s,
+                        c,
+                        m,
+                        n,
+                        dm,
+                        ax,
+                        ay,
+                        az,
+                        e1x,
+                        e1y,
+                        e1z,
+                        e2x,
+                        e2y,
+                        e2z,
+                        cosb,
+                        sinb,
+                        max_range,
+                        a,
+                        t_ref,
+                    )
+                    if fa < fb:
+                        fb = fa
+                        centre = a
+                        break
+                if fb < _INF:
+                    t_ref = fb
+                w *= 0.5
+            if fb < best:
+                _, dx, dy, dz = _boundary_eval(
+                    heights,
+                    lat0,
+                    lon0,
+                    dlat,
+                    dlon,
+                    h_min,
+                    h_max,
+                    cell_m,
+                    lat,
+                    lon,
+                    ha,
+                    s,
+                    c,
+                    m,
+                    n,
+                    dm,
+                    ax,
+                    ay,
+                    az,
+                    e1x,
+                    e1y,
+                    e1z,
+                    e2x,
+                    e2y,
+                    e2z,
+                    cosb,
+                    sinb,
+                    max_range,
+                    centre,
+                    t_ref,
+                )
+                dphi, dlam, hpb = _geo_of_ned(fb * dx, fb * dy, fb * dz, ha, s, c, m, n, dm)
+                best = fb
+                out_lat = lat + dphi
+                out_lon = lon + dlam
+                out_h = bilinear(heights, lat0, lon0, dlat, dlon, out_lat, out_lon)
+        if best < final:
+            final = best
+            fin_lat, fin_lon, fin_h = out_lat, out_lon, out_h
+    best = final
+    out_lat, out_lon, out_h = fin_lat, fin_lon, fin_h
+    out[5] = n_bsearch + 100 * (n_done - n_ref)
     out[0] = 1.0
     out[1] = best
     out[2] = out_lat
@@ -923,6 +1029,7 @@ def _ra_batch(
     bs,
     bmax,
     bmin,
+    bslope,
     valid,
     rng,
     lat_out,
@@ -931,9 +1038,10 @@ def _ra_batch(
 ):
     h_min = _finite_range(bmin)[0]
     h_max = _finite_range(bmax)[1]
+    g_max = _finite_range(bslope)[1]
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
-    out = np.empty(5)
+    out = np.empty(6)
     for k in range(lat.shape[0]):
         ax, ay, az = C_bn[k, 0, 2], C_bn[k, 1, 2], C_bn[k, 2, 2]
         nrm = np.sqrt(ax * ax + ay * ay + az * az)
@@ -962,6 +1070,7 @@ def _ra_batch(
             bs,
             bmax,
             bmin,
+            g_max,
             out,
         )
         valid[k] = out[0] > 0.5
@@ -1693,6 +1802,7 @@ def radar_altimeter_return(
         float(half_beamwidth_rad),
         float(max_range_m),
         *dem.block_bounds(BLOCK_POSTS),
+        _block_slopes(dem),
         valid,
         rng,
         la,

@@ -134,8 +134,8 @@ def _baro_error_m(sc) -> tuple[float, float, float]:
 
 def test_scenario_atmosphere_table_gives_the_baro_error():
     """A scenario's [atmosphere] table reaches the flight: ISA+20 with a high sea-level pressure makes the
-    noise-free altimeter (set to standard pressure) read low by the independently computed amount; the standard day reads true
-    (within the geopotential-versus-geometric metre)."""
+    noise-free altimeter (set to standard pressure) read low by the independently computed amount; the
+    standard day reads true (within the geopotential-versus-geometric metre)."""
     err_std, _, expected_std = _baro_error_m(_scenario(None))
     assert abs(err_std) < 2.0 and err_std == pytest.approx(expected_std, abs=0.1)
     err_hot, h_hot, expected_hot = _baro_error_m(_scenario({"delta_T_K": 20.0, "p_sl_pa": 102500.0}))

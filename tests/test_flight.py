@@ -281,3 +281,54 @@ def test_benchmark_reports_its_figures():
     assert out["jsbsim_steps_per_s"] > 0 and out["flight_steps_per_s"] > 0
     assert out["flight_ratio"] == pytest.approx(out["flight_steps_per_s"] / out["jsbsim_steps_per_s"],
                                                 rel=1e-2)
+
+
+# ------------------------------------------------------------------------------------------ chunk layout
+def test_chunks_are_independent_block_views_equal_to_jsbsim_each_step():
+    """Each advance returns its own memory (the reused raw buffer never leaks into a chunk): a chunk kept
+    from earlier is unchanged by later advances; every row equals JSBSim's properties read at that step;
+    the fields have the documented shapes and layouts and behave as an ordinary TruthChunk (slice, copy,
+    concatenate, dataclasses.replace)."""
+    import dataclasses
+
+    from trn_env.truth import TruthChunk
+    f = Flight(_ic())
+    rows = []
+    chunks = []
+    for _ in range(3):
+        c = f.advance(4)
+        chunks.append(c)
+        fdm = f.fdm
+        rows.append((fdm["position/geod-alt-ft"] * FT, fdm["attitude/phi-rad"], fdm["accelerations/Nz"]))
+    kept = chunks[0].copy()
+    f.advance(50)
+    for name in TRUTH_FIELDS:
+        np.testing.assert_array_equal(getattr(chunks[0], name), getattr(kept, name), err_msg=name)
+    for c, (h, phi, nz) in zip(chunks, rows, strict=True):
+        assert c.h_msl_m[-1] == h and c.roll_rad[-1] == phi and c.f_b_mps2[-1, 2] == -nz * 9.80665
+    c = chunks[1]
+    assert isinstance(c, TruthChunk) and len(c) == 4
+    assert c.v_ned_mps.shape == (4, 3) and c.C_bn.shape == (4, 3, 3) and c.C_bn.flags.c_contiguous
+    assert not np.shares_memory(chunks[0].t_s, chunks[1].t_s)
+    np.testing.assert_allclose(c.t_s, [0.05, 0.06, 0.07, 0.08])
+    both = TruthChunk.concatenate([chunks[0], chunks[1]])
+    np.testing.assert_array_equal(both.slice(4, 8).wind_ned_mps, c.wind_ned_mps)
+    moved = dataclasses.replace(c, h_msl_m=c.h_msl_m + 1.0)
+    np.testing.assert_array_equal(moved.h_msl_m, c.h_msl_m + 1.0)
+    np.testing.assert_array_equal(moved.C_bn, c.C_bn)
+    with pytest.raises(AttributeError):
+        _ = c.no_such_field
+
+
+def test_gusts_split_the_recording_without_losing_rows():
+    """A gust starting mid-chunk splits the recording loop into segments written at offsets of one buffer:
+    the rows stay contiguous in time and the gust shows in the recorded total wind from its start."""
+    from trn_env.wind import CosineGust
+    wind = WindConfig(gusts=[CosineGust(start_time_s=0.155, magnitude_mps=8.0, startup_s=0.2, steady_s=1.0,
+                                        end_s=0.2, direction=(0.0, 1.0, 0.0), frame="ned")])
+    f = Flight(_ic(), wind=wind)
+    c = f.advance(60)
+    np.testing.assert_allclose(np.diff(c.t_s), 0.01, atol=1e-12)
+    gust = np.linalg.norm(c.wind_ned_mps, axis=1)
+    assert np.all(gust[:15] == 0.0) and gust[-1] > 7.0
+    assert f.fdm["atmosphere/total-wind-east-fps"] * FT == pytest.approx(c.wind_ned_mps[-1, 1], abs=1e-12)

@@ -112,12 +112,17 @@ def test_waypoint_switching_turn_anticipation_and_done():
     wps = [Waypoint(LAT0, LON0, 1500.0), Waypoint(*_off(10000.0, 0.0), 1500.0),
            Waypoint(*_off(10000.0, 10000.0), 1500.0)]
     g = Guidance(Route(wps), tas_mps=80.0, bank_limit_rad=math.radians(25.0))
-    radius = 80.0 ** 2 / (9.80665 * math.tan(math.radians(25.0)))
+    # calm (the estimate has no heading): planned at 0.8 of the bank limit
+    radius = 80.0 ** 2 / (9.80665 * math.tan(0.8 * math.radians(25.0)))
     anticipation = radius * math.tan(math.radians(45.0))          # 90-degree turn
     g.command(_est(*_off(10000.0 - anticipation - 30.0, 0.0)))
-    assert g.leg == 0
+    assert g.leg == 0 and g.turn is None
     g.command(_est(*_off(10000.0 - anticipation + 30.0, 0.0)))
     assert g.leg == 1 and not g.done
+    assert g.turn is not None and g.turn.direction == 1 and g.turn.radius_m == pytest.approx(radius, rel=1e-3)
+    assert g.turn.exit_along_m == pytest.approx(anticipation, rel=1e-3)
+    g.command(_est(*_off(10000.0, anticipation + 30.0)))           # past the exit half-plane
+    assert g.turn is None and g.leg == 1
     g.command(_est(*_off(10000.0, 9990.0)))
     assert not g.done
     t = g.command(_est(*_off(10000.0, 10010.0)))
@@ -157,12 +162,107 @@ def test_route_following_in_wind_keeps_cross_track_small():
         est = position_from_truth(c)
         st = g.leg_state(est)
         xte.append(st.cross_m)
-        legs.append(st.leg)
+        legs.append(st.leg if g.turn is None else -1)      # -1: flying the turn onto the leg
         h.append(est.h_m)
     assert g.done
     xte, legs, h = np.array(xte), np.array(legs), np.array(h)
+    assert np.count_nonzero(legs == -1) > 150              # the 77-degree turn is flown as a fillet
     for leg in (0, 1):
         on_leg = np.abs(xte[legs == leg])
         assert on_leg.size > 400
-        assert on_leg[300:].max() < 30.0, leg         # after 30 s on the leg
+        assert on_leg[300:].max() < 30.0, leg         # after 30 s on the leg (after its turn)
     assert h[-1] == pytest.approx(1600.0, abs=15.0)   # climbed to the last waypoint's altitude
+
+
+# ------------------------------------------------------------------------------------------ turns
+def _brute_force_signed_distances(lat_a, lon_a, lat_b, lon_b, lats, lons) -> np.ndarray:
+    """Signed distance (m, + right of A->B) of each position to the leg A-B by nearest-sample search: the
+    leg is sampled every 0.25 m on the ellipsoid surface (ECEF chord pushed up along the normal) and each
+    position's nearest sample found with a KD-tree over the samples."""
+    from scipy.spatial import cKDTree
+    a = np.array(lla_to_ecef(lat_a, lon_a, 0.0))
+    b = np.array(lla_to_ecef(lat_b, lon_b, 0.0))
+    n = int(np.linalg.norm(b - a) / 0.25) + 1
+    chord = a[None, :] + np.linspace(0.0, 1.0, n)[:, None] * (b - a)[None, :]
+    # push each chord point to the surface: scale towards the geodetic surface point below it
+    lat_s, lon_s = _ecef_to_latlon_vec(chord)
+    surface = _latlon_to_ecef_vec(lat_s, lon_s)
+    pts = _latlon_to_ecef_vec(np.asarray(lats), np.asarray(lons))
+    dist, _ = cKDTree(surface).query(pts)
+    up = _latlon_to_ecef_vec(np.asarray(lats), np.asarray(lons), 1.0) - pts
+    side = np.sign(np.einsum("ij,ij->i", np.cross(b - a, pts - a), up))   # + when left of A->B
+    return -side * dist
+
+
+def _latlon_to_ecef_vec(lat, lon, h=0.0) -> np.ndarray:
+    from terrain.geodesy import WGS84_A_M, WGS84_E2
+    n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
+    return np.stack([(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon),
+                     (n * (1.0 - WGS84_E2) + h) * np.sin(lat)], axis=-1)
+
+
+def _ecef_to_latlon_vec(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    lat_lon = np.array([ecef_to_lla(*x)[:2] for x in xyz[:: max(1, len(xyz) // 2000)]])
+    # the chord is smooth: interpolate the sparse exact conversions to every sample
+    s_sparse = np.linspace(0.0, 1.0, len(lat_lon))
+    s = np.linspace(0.0, 1.0, len(xyz))
+    return np.interp(s, s_sparse, lat_lon[:, 0]), np.interp(s, s_sparse, lat_lon[:, 1])
+
+
+def test_fillet_circle_is_tangent_to_both_legs():
+    """The turn's circle (centre, radius) is tangent to both legs: the brute-force distance from its centre
+    to each leg line equals the radius, and the turn starts/ends at the tangent points."""
+    wps = [Waypoint(LAT0, LON0, 1500.0), Waypoint(*_off(10000.0, 0.0), 1500.0),
+           Waypoint(*_off(10000.0 - 10000.0 * 0.5, 10000.0 * math.sin(math.radians(120.0))), 1500.0)]
+    g = Guidance(Route(wps), tas_mps=85.0)
+    radius = 85.0 ** 2 / (9.80665 * math.tan(0.8 * math.radians(25.0)))
+    d_turn = radius * math.tan(math.radians(60.0))
+    g.command(_est(*_off(10000.0 - d_turn + 5.0, 0.0)))
+    t = g.turn
+    assert t is not None and g.leg == 1 and t.direction == 1
+    assert t.radius_m == pytest.approx(radius, rel=1e-3)
+    lat_c, lon_c, _ = ecef_to_lla(*t.centre_ecef_m)
+    d0 = _brute_force_signed_distances(wps[0].lat_rad, wps[0].lon_rad, wps[1].lat_rad, wps[1].lon_rad,
+                                       [lat_c], [lon_c])[0]
+    d1 = _brute_force_signed_distances(wps[1].lat_rad, wps[1].lon_rad, wps[2].lat_rad, wps[2].lon_rad,
+                                       [lat_c], [lon_c])[0]
+    assert d0 == pytest.approx(radius, abs=3.0)          # right of the first leg (a right turn)
+    assert d1 == pytest.approx(radius, abs=3.0)          # right of the second leg
+    # on the circle the command is the tangent plus the lead; outside it steers in
+    on = ned_offset_to_latlon(lat_c, lon_c, 0.0, radius, 0.0)            # north of the centre
+    chi = g.command(PositionEstimate(*on, 1500.0, np.array([0.0, 85.0, 0.0]))).track_cmd_rad
+    lead = 5.0 * 85.0 / radius
+    assert chi == pytest.approx(math.pi / 2 + lead, abs=2e-3)
+    out = ned_offset_to_latlon(lat_c, lon_c, 0.0, 1.5 * radius, 0.0)
+    chi_out = g.command(PositionEstimate(*out, 1500.0, np.array([0.0, 85.0, 0.0]))).track_cmd_rad
+    assert chi_out == pytest.approx(math.pi / 2 + lead + math.atan(4.0 * 0.5), abs=2e-3)
+
+
+@pytest.mark.parametrize("turn_deg, wind_from_deg", [(120.0, 270.0), (-120.0, 90.0), (120.0, 180.0)])
+def test_120_degree_turn_in_wind_overshoots_the_new_leg_little(turn_deg, wind_from_deg):
+    """A 120-degree turn in a 20 m/s wind (each case blows the aircraft out of the turn somewhere): the
+    aircraft never gets more than 100 m outside the new leg (brute-force distance to the leg; the former
+    TAS-based early switch plus straight-line capture swung 720-740 m out in these three cases), and it
+    stays within 30 m of the leg from 10 s after the turn."""
+    chi2 = math.radians(turn_deg)
+    p1 = (10000.0, 0.0)
+    p2 = (p1[0] + 10000.0 * math.cos(chi2), p1[1] + 10000.0 * math.sin(chi2))
+    wps = [Waypoint(LAT0, LON0, 1500.0), Waypoint(*_off(*p1), 1500.0), Waypoint(*_off(*p2), 1500.0)]
+    f = Flight(InitialCondition(LAT0, LON0, 1500.0, 85.0, 0.0), wind=WindConfig.constant(wind_from_deg, 20.0))
+    g = Guidance(Route(wps), tas_mps=85.0)
+    est = position_from_truth(f.snapshot())
+    lat, lon, turning = [], [], []
+    while not g.done and f.t_s < 500.0:
+        f.set_targets(g.command(est, f.t_s))
+        est = position_from_truth(f.advance(10))
+        if g.leg == 1:
+            lat.append(est.lat_rad)
+            lon.append(est.lon_rad)
+            turning.append(g.turn is not None)
+    assert g.done
+    d = _brute_force_signed_distances(wps[1].lat_rad, wps[1].lon_rad, wps[2].lat_rad, wps[2].lon_rad,
+                                      lat, lon)
+    outside = -math.copysign(1.0, turn_deg) * d       # the outside of a right turn is left of the new leg
+    assert outside.max() < 100.0
+    after = np.abs(d[~np.array(turning)])
+    assert after.size > 300 and after[100:].max() < 30.0

@@ -219,10 +219,6 @@ def test_ira_r_theta_reconstruct_the_returned_closest_point():
     assert np.ptp(frame.look_angle_rad) > np.deg2rad(2.0)   # the closest point wanders across track
 
 
-@pytest.mark.xfail(strict=False, reason="terrain.queries.ira_return misses a closer zero-Doppler point by "
-                   "0.2-1.2 m on 3 of 100 rows of this rough terrain (rows 54, 148, 154 of "
-                   "_crosswind_truth); "
-                   "reported to the lead - remove this mark when the query is fixed")
 def test_ira_closest_point_matches_brute_force_rough_terrain():
     dem, truth = rough_dem(2), _crosswind_truth()
     frame, _ = sample_ira(truth, dem, np.random.default_rng(0), IraConfig.noise_free(half_window_deg=50.0))

@@ -7,9 +7,10 @@
     flight.set_terrain_elevation(h_m)          # terrain under the aircraft, for height-above-ground hold
 
 The per-step Python work in `advance` is `run()` plus copying 15 cached property nodes (18 with turbulence
-or gusts: the total wind) into one flat buffer; unit conversions, Euler/C_bn assembly, the Earth-rate
-correction of body rates, air data and the standard atmosphere are computed after the loop in one numba
-kernel.
+or gusts: the total wind) into one preallocated float64 buffer with one struct.pack_into call; unit
+conversions, Euler/C_bn assembly, the Earth-rate correction of body rates, air data and the atmosphere are
+computed after the loop in one numba kernel, which writes three preallocated blocks that the TruthChunk's
+fields view (built on first access, TruthChunk.from_blocks).
 
 Frames. JSBSim 1.3's local frame (v-north-fps, phi/theta/psi, wind) is the geodetic NED frame of the WGS84
 ellipsoid at the vehicle (checked in tests/test_flight.py against ECEF velocity and the Earth-rate part of the
@@ -28,7 +29,7 @@ row's altitude. The IMU is at the centre of gravity: f_b = (total non-gravitatio
 from __future__ import annotations
 
 import math
-from array import array
+import struct
 from dataclasses import dataclass, fields
 from enum import IntEnum
 
@@ -233,12 +234,11 @@ def _std_atmosphere(lat_rad, lon_rad, h_m):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _convert_raw(raw, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain_elevation_m, delta_T_K,
+def _convert_raw(raw, n, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain_elevation_m, delta_T_K,
                  p_sl_pa, s, vb, c):  # pragma: no cover - compiled
-    """Recorded JSBSim values (flat float64 buffer, ncol per step) -> SI fields written into the
-    preallocated scalar block s (_S_ROWS, n), vector block vb (_V_ROWS, 3, n) and C_bn c (n, 3, 3), in one
-    pass. Returns the index of the first non-finite raw value, or -1. No Python objects."""
-    n = len(raw) // ncol
+    """The first n steps of recorded JSBSim values (flat float64 buffer, ncol per step) -> SI fields written
+    into the preallocated scalar block s (_S_ROWS, n), vector block vb (_V_ROWS, 3, n) and C_bn c (n, 3, 3),
+    in one pass. Returns the index of the first non-finite raw value, or -1. No Python objects."""
     bad = -1
     for k in range(n * ncol):
         if not np.isfinite(raw[k]):
@@ -299,23 +299,34 @@ def _convert_raw(raw, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain_el
     return bad
 
 
-def _record_state(n: int, run, extend, getters) -> None:
-    """The hot loop: run() and copy the 15 cached state nodes' values, nothing else. The getters are bound
-    to locals and called in one tuple expression (measurably cheaper than iterating over them)."""
+_PACK_STATE = struct.Struct(f"{_N_STATE}d").pack_into
+_PACK_STATE_WIND = struct.Struct(f"{len(_RECORDED)}d").pack_into
+
+
+def _record_state(n: int, run, buf: np.ndarray, start: int, getters) -> int:
+    """The hot loop: run() and copy the 15 cached state nodes' values into buf (float64) from byte
+    `start` on, nothing else; returns the next offset. The getters are bound to locals and their values
+    packed straight into the preallocated buffer by one struct call (no tuple, no list, no resizing)."""
     (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14) = getters
-    for _ in range(n):
+    pack = _PACK_STATE
+    step = 8 * _N_STATE
+    for offset in range(start, start + n * step, step):
         run()
-        extend((g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(), g13(),
-                g14()))
+        pack(buf, offset, g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(),
+             g13(), g14())
+    return start + n * step
 
 
-def _record_state_wind(n: int, run, extend, getters) -> None:
+def _record_state_wind(n: int, run, buf: np.ndarray, start: int, getters) -> int:
     """As _record_state, plus the three total-wind nodes (turbulence or gusts configured)."""
     (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15, g16, g17) = getters
-    for _ in range(n):
+    pack = _PACK_STATE_WIND
+    step = 8 * len(_RECORDED)
+    for offset in range(start, start + n * step, step):
         run()
-        extend((g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(), g13(), g14(),
-                g15(), g16(), g17()))
+        pack(buf, offset, g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(),
+             g13(), g14(), g15(), g16(), g17())
+    return start + n * step
 
 
 class Flight:
@@ -366,6 +377,7 @@ class Flight:
         self._written_wind: tuple[float, float, float] | None = None
         self._steady_wind_mps = np.zeros(3)
         self._steady_wind_t = (0.0, 0.0, 0.0)
+        self._raw = np.empty(0)
         self._steps = 0
         self._gust_index = 0
         self._targets: AutopilotTargets | None = None
@@ -528,7 +540,7 @@ class Flight:
 
     def snapshot(self) -> TruthChunk:
         """The current state as a one-row TruthChunk (no step taken)."""
-        return self._convert(array("d", [g() for g in self._getters]), self._steps)
+        return self._convert(np.array([g() for g in self._getters]), self._steps)
 
     def advance(self, n_steps: int) -> TruthChunk:
         """Run n_steps JSBSim steps; return their truth (one row per step, SI). Raises FlightDiverged if
@@ -537,17 +549,20 @@ class Flight:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
         if self._wind_varies:
             self._write_steady_wind(self._last_h_m)
-        buf = array("d")
+        ncol = self._ncol
+        buf = self._raw
+        if len(buf) < n_steps * ncol:       # the raw buffer is reused: the kernel copies out of it
+            buf = self._raw = np.empty(n_steps * ncol)
         if self._gust_index < self._n_gusts:
             self._record_with_gusts(int(n_steps), buf)
         else:
-            self._recorder(n_steps, self._run, buf.extend, self._getters)
+            self._recorder(n_steps, self._run, buf, 0, self._getters)
         first_step = self._steps + 1
         self._steps += n_steps
-        self._last_h_m = buf[len(buf) - self._ncol + 2] * M_PER_FT
-        return self._convert(buf, first_step)
+        self._last_h_m = float(buf[(n_steps - 1) * ncol + 2]) * M_PER_FT
+        return self._convert(buf, first_step, n_steps)
 
-    def _record_with_gusts(self, n_steps: int, buf: array) -> None:
+    def _record_with_gusts(self, n_steps: int, buf: np.ndarray) -> None:
         gusts = self.wind.gusts
         done = 0
         while done < n_steps:
@@ -560,7 +575,7 @@ class Flight:
                     self._gust_index += 1
                     continue
                 seg = min(seg, until)
-            self._recorder(seg, self._run, buf.extend, self._getters)
+            self._recorder(seg, self._run, buf, done * 8 * self._ncol, self._getters)
             done += seg
 
     def _select_recorder(self) -> None:
@@ -571,18 +586,18 @@ class Flight:
         self._getters = self._all_getters[:self._ncol]
         self._recorder = _record_state_wind if self._read_wind else _record_state
 
-    def _convert(self, raw: array, first_step: int) -> TruthChunk:
+    def _convert(self, raw: np.ndarray, first_step: int, n_steps: int | None = None) -> TruthChunk:
         """The recorded raw buffer -> TruthChunk: one numba pass into three preallocated blocks (scalar fields
         are rows of one block, vector fields (n, 3) views of another, C_bn its own array); the per-field views
         are built on the chunk's first field access (TruthChunk.from_blocks)."""
         ncol = self._ncol
-        n = len(raw) // ncol
+        n = int(n_steps) if n_steps is not None else len(raw) // ncol
         s = np.empty((_S_ROWS, n))
         vb = np.empty((_V_ROWS, 3, n))
         c_bn = np.empty((n, 3, 3))
         w = self._steady_wind_t
         atm = self.atmosphere
-        bad = _convert_raw(raw, ncol, w[0], w[1], w[2], first_step, self.dt_s, self._terrain_elevation_m,
+        bad = _convert_raw(raw, n, ncol, w[0], w[1], w[2], first_step, self.dt_s, self._terrain_elevation_m,
                            atm.delta_T_K, atm.p_sl_pa, s, vb, c_bn)
         if bad >= 0:
             row, col = divmod(bad, ncol)

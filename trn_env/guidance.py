@@ -13,11 +13,24 @@ Aircraft" (2012) eq. 10.8: commanded ground track chi_c = chi_leg - chi_inf * (2
 e_y the signed cross-track error (positive right of the leg). The aircraft's autopilot holds chi_c in its
 ground-track mode, so crosswind is handled by the autopilot's crab, and e_y -> 0 along the leg.
 
-Geometry is on the WGS84 ellipsoid: the leg's end points are taken to ECEF and expressed in the local NED
-tangent frame at the estimated position (terrain.geodesy.lla_to_ecef, C_en), so the cross-track error and
-the leg direction are exact at the aircraft however long the leg is. A waypoint is passed when the
-along-track distance reaches the leg length less the turn anticipation R tan(dchi / 2), R = V^2 / (g tan
-bank_limit) (no anticipation for the last waypoint).
+Turns: waypoints are joined by fillets, the path manager of Beard & McLain (2012) ch. 11. A turn by dchi
+starts where the incoming leg touches a circle of radius R tangent to both legs, R tan(|dchi| / 2) before the
+waypoint (the turn anticipation); the aircraft then follows that circle with the orbit vector field
+(Beard & McLain 2012 sec. 10.3: chi_c = phi + lambda (pi/2 + atan(k_orbit (d - R) / R)), phi the bearing
+from the centre, d the distance to it, lambda +1 for a right turn), plus a feed-forward lead for the
+autopilot's lag, until it crosses the half-plane where the circle touches the outgoing leg, and then follows
+that leg. R = V^2 / (g tan(0.8 bank_limit)) with V the largest ground speed of the turn, TAS + |wind|, so
+the ground-track circle is flyable within the bank limit even with a tailwind (0.8:
+Guidance.turn_bank_fraction, a margin for roll-in). The wind is estimated from the estimate's ground
+velocity and heading (v_ned - TAS along yaw) when the estimate has both, else taken as calm. The active leg
+(`leg`) switches to the outgoing leg when the turn starts. The anticipation is capped by the legs (half of
+a leg shared by two turns, all of the first and last legs; the circle shrinks to fit, so a near-reversal
+turn still overshoots); there is no anticipation for the last waypoint, which is passed when the
+along-track distance reaches the leg length.
+
+Geometry is on the WGS84 ellipsoid: the leg's end points (and a turn's centre) are taken to ECEF and
+expressed in the local NED tangent frame at the estimated position (terrain.geodesy.lla_to_ecef, C_en), so
+the cross-track error and the leg direction are exact at the aircraft however long the leg is.
 """
 
 from __future__ import annotations
@@ -28,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrain.geodesy import C_en, lla_to_ecef
+from terrain.geodesy import C_en, lla_to_ecef, ned_offset_to_latlon
 from trn_env.flight import AutopilotTargets, LateralMode, SpeedMode, VerticalMode
 from trn_env.truth import TruthChunk
 
@@ -103,22 +116,30 @@ class Route:
         d_ned = (self._ecef - r0) @ C_en(lat_rad, lon_rad)   # rows: C_ne (r - r0)
         return d_ned[:, :2]
 
+    def local_ne_m_with(self, extra_ecef: np.ndarray, lat_rad: float, lon_rad: float) -> np.ndarray:
+        """As local_ne_m, for the waypoints followed by extra ECEF points (rows of extra_ecef)."""
+        r0 = np.array(lla_to_ecef(lat_rad, lon_rad, 0.0))
+        pts = np.vstack([self._ecef, extra_ecef])
+        return ((pts - r0) @ C_en(lat_rad, lon_rad))[:, :2]
+
 
 @dataclass
 class PositionEstimate:
-    """The minimum guidance needs: geodetic position and (optionally) NED velocity."""
+    """The minimum guidance needs: geodetic position and (optionally) NED velocity and true heading (with
+    both, guidance estimates the wind for its turns)."""
 
     lat_rad: float
     lon_rad: float
     h_m: float
     v_ned_mps: np.ndarray | None = None
     t_s: float = 0.0
+    yaw_rad: float | None = None
 
 
 def position_from_truth(chunk: TruthChunk, i: int = -1) -> PositionEstimate:
     """Row i of a truth chunk as a PositionEstimate (for flying on the truth)."""
     return PositionEstimate(float(chunk.lat_rad[i]), float(chunk.lon_rad[i]), float(chunk.h_msl_m[i]),
-                            np.array(chunk.v_ned_mps[i], float), float(chunk.t_s[i]))
+                            np.array(chunk.v_ned_mps[i], float), float(chunk.t_s[i]), float(chunk.yaw_rad[i]))
 
 
 @dataclass
@@ -132,24 +153,49 @@ class LegState:
     track_rad: float        # direction of the leg at the estimate
 
 
+@dataclass(frozen=True)
+class Turn:
+    """A fillet in progress onto leg `leg`: circle centre (ECEF, on the ellipsoid), radius, direction
+    (+1 right / clockwise seen from above, -1 left), and the along-track distance on the new leg at which
+    the circle touches it (the exit half-plane)."""
+
+    leg: int
+    centre_ecef_m: np.ndarray
+    radius_m: float
+    direction: int
+    exit_along_m: float
+
+
 class Guidance:
     """Flies a Route leg by leg from supplied estimates, returning AutopilotTargets.
 
-    tas_mps: commanded true airspeed; bank_limit_rad: passed to the autopilot and used for turn
-    anticipation; k_per_m and chi_inf_rad: the vector-field gains (approach angle far from the leg
-    chi_inf, slope k at the leg); vertical: "step" (each leg flies the altitude of its end waypoint) or
-    "linear" (interpolated along the leg when both ends use the same reference).
+    tas_mps: commanded true airspeed; bank_limit_rad: passed to the autopilot and used for the turn radius;
+    k_per_m and chi_inf_rad: the straight-line vector-field gains (approach angle far from the leg chi_inf,
+    slope k at the leg); k_orbit: the orbit vector-field gain (turns); turn_lead_s: feed-forward of the
+    turns, the autopilot's track-error -> turn-rate time constant (5 s in aircraft/kingair's autopilot: it
+    commands turn rate = track error / 5 s), so the orbit command leads the circle's tangent by
+    turn_lead_s * V_ground / R and the aircraft turns at the circle's rate without a standing offset (0 = no
+    feed-forward); turn_bank_fraction: turns are planned at this fraction of the bank limit (margin for
+    roll-in and gusts); wind_tau_s: time constant of the wind estimate's low-pass filter; vertical: "step"
+    (each leg flies the altitude of its end waypoint) or "linear" (interpolated along the leg when both
+    ends use the same reference).
     """
 
     def __init__(self, route: Route, *, tas_mps: float = 85.0, bank_limit_rad: float = math.radians(25.0),
                  k_per_m: float = 1.0 / 400.0, chi_inf_rad: float = math.radians(45.0),
-                 vertical: str = "step"):
+                 vertical: str = "step", k_orbit: float = 4.0, turn_lead_s: float = 5.0,
+                 wind_tau_s: float = 5.0, turn_bank_fraction: float = 0.8):
         if not isinstance(route, Route):
             raise ValueError(f"route must be a Route, got {type(route).__name__}")
         for name, v in (("tas_mps", tas_mps), ("bank_limit_rad", bank_limit_rad), ("k_per_m", k_per_m),
-                        ("chi_inf_rad", chi_inf_rad)):
-            if not math.isfinite(v) or v <= 0.0:
+                        ("chi_inf_rad", chi_inf_rad), ("k_orbit", k_orbit), ("wind_tau_s", wind_tau_s)):
+            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v) or v <= 0.0:
                 raise ValueError(f"Guidance.{name} must be a positive finite number, got {v!r}")
+        if not isinstance(turn_lead_s, (int, float, np.floating, np.integer)) or not 0 <= turn_lead_s < 60:
+            raise ValueError(f"Guidance.turn_lead_s must be within [0, 60) s, got {turn_lead_s!r}")
+        frac = turn_bank_fraction
+        if not isinstance(frac, (int, float, np.floating)) or not 0.3 <= frac <= 1:
+            raise ValueError(f"Guidance.turn_bank_fraction must be within [0.3, 1], got {frac!r}")
         if chi_inf_rad > math.pi / 2:
             raise ValueError(f"Guidance.chi_inf_rad must be <= pi/2, got {chi_inf_rad}")
         if vertical not in ("step", "linear"):
@@ -159,46 +205,138 @@ class Guidance:
         self.bank_limit_rad = float(bank_limit_rad)
         self.k_per_m = float(k_per_m)
         self.chi_inf_rad = float(chi_inf_rad)
+        self.k_orbit = float(k_orbit)
+        self.turn_lead_s = float(turn_lead_s)
+        self.turn_bank_fraction = float(turn_bank_fraction)
+        self.wind_tau_s = float(wind_tau_s)
         self.vertical = vertical
         self.leg = 0
         self.done = False
+        self.turn: Turn | None = None
+        self.wind_ne_mps = np.zeros(2)          # low-pass wind estimate (north, east)
+        self._wind_t_s: float | None = None
 
-    def leg_state(self, estimate) -> LegState:
-        """Along/cross-track position of `estimate` on the active leg."""
-        ne = self.route.local_ne_m(float(estimate.lat_rad), float(estimate.lon_rad), float(estimate.h_m))
-        a, b = ne[self.leg], ne[self.leg + 1]
+    # ------------------------------------------------------------------------------------------ geometry
+    def _leg_state_ne(self, ne: np.ndarray, leg: int) -> LegState:
+        a, b = ne[leg], ne[leg + 1]
         ab = b - a
         length = float(math.hypot(ab[0], ab[1]))
         u = ab / length
         rel = -a                                    # the estimate is the origin of the local frame
         along = float(rel @ u)
         cross = float(u[0] * rel[1] - u[1] * rel[0])
-        return LegState(self.leg, along, cross, length, math.atan2(u[1], u[0]))
+        return LegState(leg, along, cross, length, math.atan2(u[1], u[0]))
 
-    def _anticipation_m(self, state: LegState, estimate) -> float:
-        if self.leg + 1 >= self.route.n_legs:
-            return 0.0
+    def leg_state(self, estimate) -> LegState:
+        """Along/cross-track position of `estimate` on the active leg."""
         ne = self.route.local_ne_m(float(estimate.lat_rad), float(estimate.lon_rad), float(estimate.h_m))
-        nxt = ne[self.leg + 2] - ne[self.leg + 1]
-        dchi = abs(_wrap_pi(math.atan2(nxt[1], nxt[0]) - state.track_rad))
-        radius = self.tas_mps ** 2 / (G_MPS2 * math.tan(self.bank_limit_rad))
-        return min(radius * math.tan(0.5 * min(dchi, math.radians(150.0))), 0.5 * state.length_m)
+        return self._leg_state_ne(ne, self.leg)
 
+    def turn_radius_m(self) -> float:
+        """Radius of the ground-track circle flyable at turn_bank_fraction of the bank limit at the turn's
+        largest ground speed TAS + |wind|: R = V^2 / (g tan(turn_bank_fraction * bank_limit))."""
+        v = self.tas_mps + float(math.hypot(*self.wind_ne_mps))
+        return v * v / (G_MPS2 * math.tan(self.turn_bank_fraction * self.bank_limit_rad))
+
+    def _turn_geometry(self, ne: np.ndarray, leg: int) -> tuple[float, float, int]:
+        """(anticipation distance, radius, direction) of the fillet from leg `leg` onto leg + 1, in the
+        local frame ne; (0, 0, 0) for the last waypoint or a turn below 1 deg."""
+        if leg + 1 >= self.route.n_legs:
+            return 0.0, 0.0, 0
+        a, w, b = ne[leg], ne[leg + 1], ne[leg + 2]
+        q_in = (w - a) / math.hypot(*(w - a))
+        q_out = (b - w) / math.hypot(*(b - w))
+        cross = q_in[0] * q_out[1] - q_in[1] * q_out[0]
+        dchi = abs(math.atan2(cross, float(q_in @ q_out)))
+        if dchi < math.radians(1.0):
+            return 0.0, 0.0, 0
+        radius = self.turn_radius_m()
+        half = math.tan(0.5 * dchi)
+        # each leg shared by two turns gives each half of its length; the first and last legs all of it
+        share_in = 1.0 if leg == 0 else 0.5
+        share_out = 1.0 if leg + 2 >= self.route.n_legs else 0.5
+        d_max = min(share_in * self.route.leg_length_m(leg), share_out * self.route.leg_length_m(leg + 1))
+        if radius * half > d_max:
+            radius = d_max / half              # the circle shrinks to fit the legs
+        return radius * half, radius, 1 if cross > 0.0 else -1
+
+    def _start_turn(self, ne: np.ndarray, leg: int, estimate) -> Turn | None:
+        """The fillet from leg onto leg + 1 (Beard & McLain 2012 ch. 11): centre on the bisector at
+        R / cos(dchi / 2) from the waypoint."""
+        d_turn, radius, direction = self._turn_geometry(ne, leg)
+        if direction == 0:
+            return None
+        a, w, b = ne[leg], ne[leg + 1], ne[leg + 2]
+        q_in = (w - a) / math.hypot(*(w - a))
+        q_out = (b - w) / math.hypot(*(b - w))
+        bis = q_out - q_in
+        dchi = math.acos(max(-1.0, min(1.0, float(q_in @ q_out))))
+        centre = w + radius / math.cos(0.5 * dchi) * bis / math.hypot(*bis)
+        lat_c, lon_c = ned_offset_to_latlon(float(estimate.lat_rad), float(estimate.lon_rad), 0.0,
+                                            float(centre[0]), float(centre[1]))
+        return Turn(leg + 1, np.array(lla_to_ecef(lat_c, lon_c, 0.0)), radius, direction, d_turn)
+
+    def _update_wind(self, estimate, t_s: float | None) -> None:
+        v = getattr(estimate, "v_ned_mps", None)
+        yaw = getattr(estimate, "yaw_rad", None)
+        if v is None or yaw is None or not math.isfinite(float(yaw)):
+            return
+        w = np.array([float(v[0]) - self.tas_mps * math.cos(yaw), float(v[1]) - self.tas_mps * math.sin(yaw)])
+        if not np.all(np.isfinite(w)):
+            return
+        if self._wind_t_s is None or t_s is None:
+            gain = 1.0 if self._wind_t_s is None else 0.1
+        else:
+            gain = 1.0 - math.exp(-max(t_s - self._wind_t_s, 0.0) / self.wind_tau_s)
+        self.wind_ne_mps = self.wind_ne_mps + gain * (w - self.wind_ne_mps)
+        self._wind_t_s = t_s if t_s is not None else (self._wind_t_s or 0.0)
+
+    # ------------------------------------------------------------------------------------------- command
     def command(self, estimate, t_s: float | None = None) -> AutopilotTargets:
-        """Autopilot targets for the current estimate (switching legs as waypoints are passed)."""
+        """Autopilot targets for the current estimate (switching legs and flying turns as waypoints come)."""
         for name in ("lat_rad", "lon_rad", "h_m"):
             v = getattr(estimate, name, None)
             if v is None or not math.isfinite(float(v)):
                 raise ValueError(f"guidance estimate.{name} must be a finite number, got {v!r}")
-        state = self.leg_state(estimate)
-        while not self.done and state.along_m >= state.length_m - self._anticipation_m(state, estimate):
+        self._update_wind(estimate, t_s)
+        lat, lon = float(estimate.lat_rad), float(estimate.lon_rad)
+        ne_all = self.route.local_ne_m_with(
+            self.turn.centre_ecef_m[None, :] if self.turn is not None else np.zeros((0, 3)), lat, lon)
+        ne = ne_all[:len(self.route)]
+        state = self._leg_state_ne(ne, self.leg)
+        if self.turn is not None and state.along_m >= self.turn.exit_along_m:
+            self.turn = None                          # crossed the exit half-plane: follow the leg
+        while self.turn is None and not self.done:
+            d_turn = self._turn_geometry(ne, self.leg)[0]
+            if state.along_m < state.length_m - d_turn:
+                break
             if self.leg + 1 >= self.route.n_legs:
                 self.done = True
                 break
+            turn = self._start_turn(ne, self.leg, estimate)
             self.leg += 1
-            state = self.leg_state(estimate)
-        # Beard & McLain (2012) eq. 10.8: vector field for straight-line following.
-        chi_c = state.track_rad - self.chi_inf_rad * (2.0 / math.pi) * math.atan(self.k_per_m * state.cross_m)
+            state = self._leg_state_ne(ne, self.leg)
+            if turn is not None and state.along_m < turn.exit_along_m:
+                self.turn = turn
+                c = self.route.local_ne_m_with(turn.centre_ecef_m[None, :], lat, lon)[-1]
+                ne_all = np.vstack([ne, c[None, :]])
+        if self.turn is not None:
+            # Beard & McLain (2012) sec. 10.3: orbit vector field around the fillet's centre.
+            c = ne_all[-1]
+            rel = -c                                  # estimate relative to the centre
+            d = float(math.hypot(rel[0], rel[1]))
+            phi = math.atan2(rel[1], rel[0])
+            r = self.turn.radius_m
+            v = getattr(estimate, "v_ned_mps", None)
+            v_g = math.hypot(float(v[0]), float(v[1])) if v is not None else self.tas_mps
+            if not math.isfinite(v_g) or v_g <= 0.0:
+                v_g = self.tas_mps
+            lead = min(self.turn_lead_s * v_g / r, math.radians(60.0))   # feed-forward of the turn rate
+            chi_c = phi + self.turn.direction * (0.5 * math.pi + math.atan(self.k_orbit * (d - r) / r) + lead)
+        else:
+            # Beard & McLain (2012) eq. 10.8: vector field for straight-line following.
+            chi_c = state.track_rad - self.chi_inf_rad * (2.0 / math.pi) * math.atan(
+                self.k_per_m * state.cross_m)
         chi_c = _wrap_pi(chi_c)
         wp_from, wp_to = self.route.waypoints[self.leg], self.route.waypoints[self.leg + 1]
         alt = wp_to.alt_m
