@@ -15,7 +15,10 @@ fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (T
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS.
 
-Built on filterpy.kalman.KalmanFilter (predict with our Phi/Q, Joseph-form update).
+Built on filterpy.kalman.KalmanFilter: its state and covariance hold the filter, the TERCOM fix goes
+through its (Joseph-form) update; the 50 Hz covariance propagation P = Phi P Phi^T + Q (filterpy's predict
+algebra with our Phi/Q) and the IRA batch collection run in numba kernels (navigators._ekf_kernels), one
+call per segment, for speed.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from filterpy.kalman import KalmanFilter
 
 from terrain.geodesy import OMEGA_EARTH_RPS, meridian_radius_m, prime_vertical_radius_m
 
+from . import _ekf_kernels as kern
 from .frames import SensorFrames
 from .ins import StrapdownIns, quat_to_dcm
 from .ira_geometry import FORMULAS, closest_point_ned
@@ -37,6 +41,7 @@ G0 = 9.80665
 N_ERR = 13
 CHI2_2DOF_99_99 = 18.42
 R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
+_EMPTY = np.zeros(0)
 
 
 def _skew(v):
@@ -149,6 +154,8 @@ class InsTrnNavigator:
         self._t_ekf = np.nan
         self._t_batch0 = np.nan
         self._last_f_b = np.array([0.0, 0.0, -G0])
+        self._Q = None
+        self._rows = np.empty((0, 6))
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
@@ -234,62 +241,81 @@ class InsTrnNavigator:
         if self.aiding is not None:
             self._collect(frames, imu.t_s[sl], hist)
 
-    def _predict_to(self, t_end: float, t_imu: np.ndarray, f_b: np.ndarray, hist: np.ndarray) -> None:
-        """Propagate the error covariance in steps of 1/ekf_rate_hz up to t_end along the INS history."""
-        if not np.isfinite(self._t_ekf):
-            self._t_ekf = t_end
-        n_steps = int(np.floor((t_end - self._t_ekf) / self.dt_ekf + 1e-9))
-        dt = self.dt_ekf
-        tau = self.ins.tau_baro_s
+    def _process_noise(self, dt: float) -> np.ndarray:
         Q = np.zeros((N_ERR, N_ERR))
         Q[3:6, 3:6] = np.eye(3) * self.q_acc * dt
         Q[6:9, 6:9] = np.eye(3) * self.q_gyr * dt
         Q[9:12, 9:12] = np.eye(3) * (0.01 * self.sig_ba) ** 2 * dt / 3600.0
         Q[12, 12] = (0.01 * self.sig_bg) ** 2 * dt / 3600.0
         Q[2, 2] = 0.01 * dt  # baro noise entering through the loop
-        self.kf.Q = Q
-        F = np.zeros((N_ERR, N_ERR))
-        F[0:3, 3:6] = np.eye(3)
-        F[2, 2] = -3.0 / tau  # baro loop on the vertical channel (navigators.ins)
-        I13 = np.eye(N_ERR)
-        ks = np.clip(np.searchsorted(t_imu, self._t_ekf + dt * np.arange(1, n_steps + 1)), 0, t_imu.size - 1)
-        for k in ks:
-            st = hist[k]
-            if not np.all(np.isfinite(st)):
-                st = self.ins.state
-            lat, h = st[0], st[2]
-            vn, ve = st[3], st[4]
-            C = quat_to_dcm(st[6:10])
-            fb = f_b[k] if np.all(np.isfinite(f_b[k])) else self._last_f_b
-            f_n = C @ (fb - self.ins.accel_bias_b)
-            rn = meridian_radius_m(lat) + h
-            re = prime_vertical_radius_m(lat) + h
-            w_ie = np.array([OMEGA_EARTH_RPS * np.cos(lat), 0.0, -OMEGA_EARTH_RPS * np.sin(lat)])
-            w_en = np.array([ve / re, -vn / rn, -ve * np.tan(lat) / re])
-            g_over_r = G0 / np.sqrt(rn * re)
-            F[3, 0] = F[4, 1] = -g_over_r
-            F[5, 2] = 2.0 * g_over_r - 3.0 / tau**2
-            F[3:6, 3:6] = -_skew(2.0 * w_ie + w_en)
-            F[3:6, 6:9] = _skew(f_n)
-            F[3:6, 9:12] = C
-            F[6:9, 6:9] = -_skew(w_ie + w_en)
-            F[6:9, 12] = -C[:, 2]
-            Fd = F * dt
-            self.kf.F = I13 + Fd + 0.5 * (Fd @ Fd)
-            self.kf.predict()
-        if n_steps > 0 and not _is_pd(self.kf.P):
+        return Q
+
+    def _predict_to(self, t_end: float, t_imu: np.ndarray, f_b: np.ndarray, hist: np.ndarray) -> None:
+        """Propagate the error covariance in steps of 1/ekf_rate_hz up to t_end along the INS history
+        (navigators._ekf_kernels.predict_covariance: F, Phi = I + F dt + (F dt)^2/2, P = Phi P Phi^T + Q)."""
+        if not np.isfinite(self._t_ekf):
+            self._t_ekf = t_end
+        n_steps = int(np.floor((t_end - self._t_ekf) / self.dt_ekf + 1e-9))
+        dt = self.dt_ekf
+        if self._Q is None:
+            self._Q = self._process_noise(dt)
+            self.kf.Q = self._Q
+        if n_steps > 0:
             P = self.kf.P
-            if np.all(np.isfinite(P)):
-                w, V = np.linalg.eigh(0.5 * (P + P.T))
-                self.kf.P = (V * np.clip(w, 1e-12, None)) @ V.T
-            else:
-                self.kf.P = self._P_good.copy()
-            self._count_skip(t_end, "covariance_not_pd", 1, "covariance repaired after prediction")
-        self._P_good = self.kf.P.copy()
+            if not (P.flags.c_contiguous and P.dtype == np.float64):
+                P = self.kf.P = np.ascontiguousarray(P, dtype=float)
+            kern.predict_covariance(P, self._Q, t_imu, f_b, hist, self.ins.state, self._last_f_b,
+                                    self.ins.accel_bias_b, self._t_ekf, dt, n_steps, float(self.ins.tau_baro_s))
+            if not kern.is_positive_definite(P):
+                if np.all(np.isfinite(P)):
+                    w, V = np.linalg.eigh(0.5 * (P + P.T))
+                    self.kf.P = (V * np.clip(w, 1e-12, None)) @ V.T
+                else:
+                    self.kf.P = self._P_good.copy()
+                self._count_skip(t_end, "covariance_not_pd", 1, "covariance repaired after prediction")
+            self._t_ekf += n_steps * dt
+        self._P_good[:] = self.kf.P
         self.kf.x[:] = 0.0
-        self._t_ekf += n_steps * dt
 
     def _collect(self, frames: SensorFrames, t_imu: np.ndarray, hist: np.ndarray) -> None:
+        if self.aiding == "ira" and self.dp_min_m <= 0.0 and self.formula in kern.FORMULA_CODES:
+            self._collect_ira_fast(frames, t_imu, hist)
+        else:
+            self._collect_general(frames, t_imu, hist)
+
+    def _collect_ira_fast(self, frames: SensorFrames, t_imu: np.ndarray, hist: np.ndarray) -> None:
+        """_collect_general's IRA path ("conventional"/"proposed", no dp selection) in one numba call."""
+        src = frames.ira
+        if src is None:
+            return
+        ts = src.t_s
+        n = ts.shape[0]
+        if n == 0:
+            return
+        baro = frames.baro
+        have_baro = False
+        tb = hb = _EMPTY
+        if baro is not None:
+            bv = baro.valid & np.isfinite(baro.h_baro_m)
+            if bv.all() and bv.size:
+                tb, hb, have_baro = baro.t_s, baro.h_baro_m, True
+            elif bv.any():
+                tb, hb, have_baro = baro.t_s[bv], baro.h_baro_m[bv], True
+        if self._rows.shape[0] < n:
+            self._rows = np.empty((max(n, 64), 6))
+        m, n_bad, n_nan = kern.collect_ira(
+            float(t_imu[0]), float(t_imu[-1]), t_imu, hist, ts, src.range_m, src.look_angle_rad, src.valid,
+            self.ira_decimation, tb, hb, have_baro, self.baro_geopotential, kern.FORMULA_CODES[self.formula],
+            self._rows)
+        t0 = float(t_imu[0])
+        if n_bad:
+            self._count_skip(t0, "altimeter_no_return", n_bad, f"{n_bad} altimeter samples without a valid return")
+        if n_nan:
+            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
+        if m:
+            self.batch.add_rows(self._rows[:m].copy())
+
+    def _collect_general(self, frames: SensorFrames, t_imu: np.ndarray, hist: np.ndarray) -> None:
         t0, t1 = float(t_imu[0]), float(t_imu[-1])
         baro = frames.baro
         if self.aiding == "ira":

@@ -3,8 +3,11 @@
 Figures (one thread; numba kernels compiled before timing):
   bilinear_lookups_per_s        numba batch bilinear (terrain.kernels.bilinear_batch)
   numpy_bilinear_lookups_per_s  numpy's vectorised bilinear formula on the same points (reference)
-  ira_queries_per_s             terrain.queries.ira_return on a level-to-banked flight sample
+  ira_queries_per_s             terrain.queries.ira_return on a level-to-banked flight sample (1500 m AGL)
   radar_altimeter_queries_per_s terrain.queries.radar_altimeter_return on the same sample
+  *_5km_agl                     the same two queries with the sample at 5 km AGL
+  *_refined_10m                 the same two queries (1500 m AGL) on a 10 m world refined from the DEM
+                                (terrain.refine.refine, central 12 x 12 km; refined_10m_posts gives its size)
 """
 
 from __future__ import annotations
@@ -66,6 +69,18 @@ def flight_sample(dem: Dem, n: int, seed: int = 0, agl_m: float = 1500.0):
     return lat, lon, h, v, C
 
 
+def _query_rates(dem, n, half_beamwidth_rad, half_window_rad, repeats, agl_m):
+    """(IRA, radar altimeter) queries per second on a flight_sample of n states at agl_m."""
+    qlat, qlon, qh, qv, qC = flight_sample(dem, n, agl_m=agl_m)
+    queries.ira_return(dem, qlat[:4], qlon[:4], qh[:4], qv[:4], qC[:4], half_window_rad)
+    queries.radar_altimeter_return(dem, qlat[:4], qlon[:4], qh[:4], qC[:4], half_beamwidth_rad)
+    ira = _best_rate(lambda: queries.ira_return(dem, qlat, qlon, qh, qv, qC, half_window_rad), n, repeats)
+    ra = _best_rate(
+        lambda: queries.radar_altimeter_return(dem, qlat, qlon, qh, qC, half_beamwidth_rad), n, repeats
+    )
+    return ira, ra
+
+
 def benchmark(
     dem: Dem | None = None,
     n_lookups: int = 2_000_000,
@@ -93,23 +108,29 @@ def benchmark(
     ref = _numpy_bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
     if not np.allclose(out, ref, equal_nan=True):
         raise RuntimeError("benchmark: numba and numpy bilinear disagree")
-    qlat, qlon, qh, qv, qC = flight_sample(dem, n_queries)
-    queries.ira_return(dem, qlat[:4], qlon[:4], qh[:4], qv[:4], qC[:4], half_window_rad)
-    queries.radar_altimeter_return(dem, qlat[:4], qlon[:4], qh[:4], qC[:4], half_beamwidth_rad)
-    ira = _best_rate(
-        lambda: queries.ira_return(dem, qlat, qlon, qh, qv, qC, half_window_rad), n_queries, repeats
-    )
-    ra = _best_rate(
-        lambda: queries.radar_altimeter_return(dem, qlat, qlon, qh, qC, half_beamwidth_rad),
-        n_queries,
-        repeats,
-    )
+    ira, ra = _query_rates(dem, n_queries, half_beamwidth_rad, half_window_rad, repeats, 1500.0)
+    ira5, ra5 = _query_rates(dem, n_queries, half_beamwidth_rad, half_window_rad, repeats, 5000.0)
+    from terrain import refine
+
+    lat_c, lon_c = dem.center_rad
+    dn_m, de_m = dem.extent_m
+    half_lat = min(6000.0 / dn_m, 0.5) * (dem.bounds[1] - dem.bounds[0])
+    half_lon = min(6000.0 / de_m, 0.5) * (dem.bounds[3] - dem.bounds[2])
+    fine = refine.refine(dem, 10.0, seed=0, region=(lat_c - half_lat, lat_c + half_lat, lon_c - half_lon,
+                                                    lon_c + half_lon))
+    n_fine = max(n_queries // 4, 100)
+    ira10, ra10 = _query_rates(fine, n_fine, half_beamwidth_rad, half_window_rad, repeats, 1500.0)
     return {
         "terrain_dem": dem.name,
         "bilinear_lookups_per_s": float(nb),
         "numpy_bilinear_lookups_per_s": float(npb),
         "ira_queries_per_s": float(ira),
         "radar_altimeter_queries_per_s": float(ra),
+        "ira_queries_per_s_5km_agl": float(ira5),
+        "radar_altimeter_queries_per_s_5km_agl": float(ra5),
+        "ira_queries_per_s_refined_10m": float(ira10),
+        "radar_altimeter_queries_per_s_refined_10m": float(ra10),
+        "refined_10m_posts": int(fine.heights_m.size),
     }
 
 

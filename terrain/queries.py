@@ -848,8 +848,9 @@ def _ra_one(
         if dz_b > 0.0 and (ha - hmx) > best * dz_b:
             continue
         near = False
-        for p in range(n_ref, n_done):
-            if abs(done_i[p] - bnd_i[q]) <= 2.5 and abs(done_j[p] - bnd_j[q]) <= 2.5:
+        for p in range(n_done):
+            sep = 2.5 if p >= n_ref else (1.5 if res_t[p] else -1.0)
+            if abs(done_i[p] - bnd_i[q]) <= sep and abs(done_j[p] - bnd_j[q]) <= sep:
                 near = True
         if near:
             continue
@@ -864,7 +865,6 @@ def _ra_one(
     # 5) on the cone boundary the pattern search can stall: 1-D search in azimuth along the boundary from
     #    every refined point near the best (the closest point may lie on another stretch of the boundary)
     final = _INF
-    n_bsearch = 0
     fin_lat = fin_lon = fin_h = np.nan
     for p_res in range(n_done):
         if res_key[p_res] > final + margin or res_f[p_res] == _INF:
@@ -880,7 +880,6 @@ def _ra_one(
         cos_off = (x * ax + y * ay + z * az) / best
         out_lat, out_lon, out_h = la, lo, hp
         if touched_best or cos_off < cosb + 1e-6:
-            n_bsearch += 1
             az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
             width = min(np.pi, 3.0 * cell_m / max(best * sinb, 1e-6))
             fb, dx, dy, dz = _boundary_eval(
@@ -918,7 +917,7 @@ def _ra_one(
             centre = az0
             t_ref = fb if fb < _INF else best
             w = width
-            w_min = 1e-3 / max(best * sinb, 1e-6)
+            w_min = 5e-3 / max(best * sinb, 1e-6)
             while w > w_min:
                 for sgn in (-0.5, 0.5):
                     a = centre + sgn * w
@@ -1004,7 +1003,6 @@ def _ra_one(
             fin_lat, fin_lon, fin_h = out_lat, out_lon, out_h
     best = final
     out_lat, out_lon, out_h = fin_lat, fin_lon, fin_h
-    out[5] = n_bsearch + 100 * (n_done - n_ref)
     out[0] = 1.0
     out[1] = best
     out[2] = out_lat
@@ -1041,7 +1039,7 @@ def _ra_batch(
     g_max = _finite_range(bslope)[1]
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
-    out = np.empty(6)
+    out = np.empty(5)
     for k in range(lat.shape[0]):
         ax, ay, az = C_bn[k, 0, 2], C_bn[k, 1, 2], C_bn[k, 2, 2]
         nrm = np.sqrt(ax * ax + ay * ay + az * az)
@@ -1313,7 +1311,6 @@ def _ira_one(
         t0 = -(vz / vh) * (ha - hp0)
     lo_q = half
     hi_q = half
-    n_coarse = 0
     # 1) coarse march outward from s = 0 in both directions (buffer index half + k <-> s = k * step)
     for direction in (1, -1):
         t_prev = t0
@@ -1377,7 +1374,6 @@ def _ira_one(
                 heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
                 sin_w, max_range, sv, t_prev, 1e-3,
             )
-            n_coarse += 1
             buf_f[q] = f
             buf_t[q] = t
             buf_r[q] = r
@@ -1490,7 +1486,8 @@ def _ira_one(
                 e_lo = min(ea, eb) + min(t_lo * uhy, t_hi * uhy) - 1.0
                 e_hi = max(ea, eb) + max(t_lo * uhy, t_hi * uhy) + 1.0
                 g = _region_max(
-                    bs, bslope, n_lat, n_lon, lat0, lon0, dlat, dlon, lat, lon, mh, nhc, n_lo, n_hi, e_lo, e_hi
+                    bs, bslope, n_lat, n_lon, lat0, lon0, dlat, dlon, lat, lon, mh, nhc, n_lo, n_hi, e_lo,
+                    e_hi,
                 )
                 h_ne = 0.0
                 # split where the straight chord first crosses a grid line: the pieces are smooth
@@ -1572,7 +1569,7 @@ def _ira_one(
     centre = best_s
     tc = best_t
     fc = best
-    h_p = 1.0
+    h_p = 0.5
     for _it in range(12):
         if h_p < 5e-3:
             break
@@ -1611,7 +1608,6 @@ def _ira_one(
     out[2] = lat + dphi
     out[3] = lon + dlam
     out[4] = hp
-    out[5] = n_eval + 1000 * n_coarse
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -1649,7 +1645,7 @@ def _ira_batch(
     buf_r = np.empty(n_max)
     buf_z = np.empty(n_max)
     stack = np.empty((4096, 10))
-    out = np.empty(6)
+    out = np.empty(5)
     for k in range(lat.shape[0]):
         if h[k] != h[k] or lat[k] != lat[k] or lon[k] != lon[k]:
             valid[k] = False
@@ -1816,7 +1812,8 @@ def ira_return(
     dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float, max_range_m: float = 12000.0
 ) -> TerrainReturn:
     """Closest terrain point on the zero-Doppler plane (through the antenna, perpendicular to v_ned (n, 3))
-    whose look angle |theta| = |asin(y_b / R)| <= half_window_rad and z_b > 0 (body FRD via C_bn (n, 3, 3))."""
+    whose look angle |theta| = |asin(y_b / R)| <= half_window_rad and z_b > 0 (body FRD via C_bn (n, 3,
+    3)); theta per seed 000 eqs 18-19."""
     if not (0.0 < half_window_rad < np.pi / 2):
         raise ValueError(f"half_window_rad must be in (0, pi/2), got {half_window_rad}")
     _check_positive("max_range_m", max_range_m)
@@ -1852,8 +1849,8 @@ def ira_return(
 
 
 def look_angle_rad(C_bn, lat_rad, lon_rad, h_m, ret: TerrainReturn) -> np.ndarray:
-    """Interferometric look angle theta = asin(y_b / R) (rad, + toward the right wing; seed 000 eqs 18-19) of
-    returned points from antennas; y_b is the body-FRD y component of the antenna->point vector, R its length."""
+    """Interferometric look angle theta = asin(y_b / R) (rad, + toward the right wing; seed 000 eqs
+    18-19) of returned points from antennas; y_b: body-FRD y of the antenna->point vector, R its length."""
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     C = _stack("C_bn", C_bn, lat.shape[0], (3, 3))
     ned = ned_of_points(lat, lon, h, ret.lat_rad, ret.lon_rad, ret.h_m)

@@ -93,6 +93,16 @@ def test_flight_flies_in_and_records_the_days_atmosphere():
     assert s.p_static_pa[0] == pytest.approx(std.fdm["atmosphere/P-psf"] * PSF, abs=2e-3)
 
 
+def test_set_atmosphere_in_flight_changes_jsbsim_and_the_truth():
+    f = Flight(InitialCondition(LAT0, LON0, 2000.0, 80.0, 0.0))
+    before = f.advance(5)
+    f.set_atmosphere(Atmosphere(delta_T_K=-10.0))
+    after = f.advance(5)
+    assert after.T_static_K[-1] == pytest.approx(before.T_static_K[-1] - 10.0, abs=0.05)
+    assert after.T_static_K[-1] == pytest.approx(f.fdm["atmosphere/T-R"] / 1.8, abs=1e-6)
+    assert after.p_static_pa[-1] == pytest.approx(f.fdm["atmosphere/P-psf"] * PSF, abs=2e-3)
+
+
 def test_hot_day_pressure_altitude_reads_about_200_m_low_at_3000_m():
     """ISA+20 at true 3000 m: the truth's static pressure equals the independent hydrostatic integral, and
     the barometric altimeter (ISA pressure altitude, noise-free) reads the independent pressure altitude,

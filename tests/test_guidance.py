@@ -49,6 +49,12 @@ def test_bad_waypoints_and_settings_are_named():
         Guidance(route, tas_mps=-1.0)
     with pytest.raises(ValueError, match="estimate.lat_rad"):
         Guidance(route).command(_est(float("nan"), LON0))
+    with pytest.raises(ValueError, match="Guidance.turn_bank_fraction"):
+        Guidance(route, turn_bank_fraction=1.5)
+    with pytest.raises(ValueError, match="Guidance.turn_lead_s"):
+        Guidance(route, turn_lead_s=-1.0)
+    with pytest.raises(ValueError, match="Guidance.k_orbit"):
+        Guidance(route, k_orbit=0.0)
 
 
 # ------------------------------------------------------------------------------------------ geometry
@@ -260,6 +266,9 @@ def test_120_degree_turn_in_wind_overshoots_the_new_leg_little(turn_deg, wind_fr
             lon.append(est.lon_rad)
             turning.append(g.turn is not None)
     assert g.done
+    # the guidance's wind estimate (ground velocity - TAS along the heading) found the wind
+    true_wind = WindConfig.constant(wind_from_deg, 20.0).steady_wind_ned_mps(1500.0)[:2]
+    np.testing.assert_allclose(g.wind_ne_mps, true_wind, atol=1.5)
     d = _brute_force_signed_distances(wps[1].lat_rad, wps[1].lon_rad, wps[2].lat_rad, wps[2].lon_rad,
                                       lat, lon)
     outside = -math.copysign(1.0, turn_deg) * d       # the outside of a right turn is left of the new leg

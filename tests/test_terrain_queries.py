@@ -6,6 +6,7 @@ import pytest
 
 import terrain
 from terrain import geodesy, queries, synthetic
+from terrain.dem import Dem
 
 # ---------------------------------------------------------------------------------------------------------
 # Independent brute force (kept apart from terrain/queries.py on purpose): exact WGS84 ECEF conversions in
@@ -450,3 +451,98 @@ def test_voids_are_no_terrain():
     assert ra.range_m[0] < 1000.0 / np.cos(np.radians(30.0))
     down = queries.ray_cast(holed, lat, lon, 1300.0, np.array([0.0, 0.0, 1.0]))
     assert not down.valid[0] and np.isnan(down.range_m[0])
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Regression: rough terrain with post-to-post noise has many near-tied local minima; the closest one must win.
+def _noisy_dem():
+    n = 400
+    rng = np.random.default_rng(2)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    hills = 300 + 120 * np.sin(i / 37.0) * np.cos(j / 23.0) + 60 * np.sin((i + 2 * j) / 11.0)
+    d = np.radians(1.0 / 3600.0)
+    lat0, lon0 = np.radians(33.0) - 0.5 * n * d, np.radians(-98.5) - 0.5 * n * d
+    return Dem(hills + rng.normal(0.0, 15.0, (n, n)), lat0, lon0, d, d, name="noisy")
+
+
+def _noisy_states(dem, rows):
+    """Antenna states along a straight crabbed, climbing, banked track over the noisy DEM (1 row = 10 m)."""
+    lat_c, lon_c = dem.center_rad
+    track = np.radians(20.0)
+    out = []
+    for k in rows:
+        lat, lon = dem.offset_to_latlon(lat_c, lon_c, 10.0 * k * np.cos(track), 10.0 * k * np.sin(track))
+        C = geodesy.euler_to_C_bn(*np.radians([10.0, 5.0, 31.5]))
+        v = np.array([100 * np.cos(track), 100 * np.sin(track) + 20 * np.cos(track), -3.0])
+        out.append((float(lat), float(lon), 1400.0, C, v))
+    return out
+
+
+def bf_ira_curve(dem, lat, lon, h, v_ned, C_bn, half_window, s_half_m=1500.0):
+    """Closest in-window zero-Doppler terrain point by a dense 1-D scan along the curve (exact ECEF geometry):
+    0.5 m steps in the horizontal across-track coordinate, each point slid down the plane onto the terrain,
+    then bounded minimisation around the 8 lowest local minima of the scan."""
+    from scipy.optimize import minimize_scalar
+
+    a = bf_lla_to_ecef(lat, lon, h)
+    cen = bf_ned_to_ecef_matrix(lat, lon)
+    vhat = v_ned / np.linalg.norm(v_ned)
+    e1 = np.array([0.0, 0.0, 1.0]) - vhat[2] * vhat
+    e1 /= np.linalg.norm(e1)  # in-plane, most downward
+    e2 = np.cross(vhat, e1)  # in-plane, horizontal
+
+    def ranges(s):
+        s = np.atleast_1d(s)
+        b = np.full(s.shape, h - 300.0)
+        for _ in range(12):
+            x = s[:, None] * e2 + b[:, None] * e1
+            la, lo, hh = bf_ecef_to_lla(a + x @ cen.T)
+            b = b + (hh - bf_bilinear(dem, la, lo)) / e1[2]
+        x = s[:, None] * e2 + b[:, None] * e1
+        xb = x @ C_bn
+        r = np.linalg.norm(x, axis=1)
+        ok = (xb[:, 2] > 0) & (np.abs(np.arcsin(xb[:, 1] / r)) <= half_window)
+        return np.where(ok, r, np.inf)
+
+    s = np.arange(-s_half_m, s_half_m, 0.5)
+    r = ranges(s)
+    local = np.flatnonzero((r[1:-1] <= r[:-2]) & (r[1:-1] <= r[2:])) + 1
+    best = np.inf
+    for i in local[np.argsort(r[local])[:8]]:
+        res = minimize_scalar(lambda x: ranges(x)[0], bounds=(s[i] - 0.5, s[i] + 0.5), method="bounded",
+                              options={"xatol": 1e-6})
+        best = min(best, float(res.fun), float(r[i]))
+    return best
+
+
+IRA_NOISY_ROWS = [1, 18, 5, -30]  # 1, 18: the old local-minimum refinement missed by 4.3 m and 0.18 m
+
+
+def test_ira_finds_the_closest_of_near_tied_minima_on_noisy_terrain():
+    dem = _noisy_dem()
+    states = _noisy_states(dem, IRA_NOISY_ROWS)
+    lat, lon, h = (np.array([st[q] for st in states]) for q in range(3))
+    C = np.stack([st[3] for st in states])
+    v = np.stack([st[4] for st in states])
+    got = queries.ira_return(dem, lat, lon, h, v, C, np.radians(50.0), 10000.0)
+    for k, st in enumerate(states):
+        ref = bf_ira_curve(dem, *st[:3], st[4], st[3], np.radians(50.0))
+        assert got.range_m[k] == pytest.approx(ref, abs=0.05), (IRA_NOISY_ROWS[k], got.range_m[k], ref)
+
+
+# -27, 16, 50: the old search (<= 4 starts, one boundary search from the best) missed by 10.7, 4.1, 31 m
+RA_NOISY_ROWS = [-27, 16, 50, 3]
+
+
+def test_radar_altimeter_finds_the_closest_edge_point_on_noisy_terrain():
+    dem = _noisy_dem()
+    half_beam = np.radians(20.0)
+    states = _noisy_states(dem, RA_NOISY_ROWS)
+    lat, lon, h = (np.array([st[q] for st in states]) for q in range(3))
+    C = np.stack([st[3] for st in states])
+    got = queries.radar_altimeter_return(dem, lat, lon, h, C, half_beam)
+    for k, st in enumerate(states):
+        inner = bf_radar_altimeter(dem, *st[:4], half_beam, 8000.0, search_half_m=900.0, coarse_m=4.0)
+        edge = bf_radar_altimeter_boundary(dem, *st[:4], half_beam, 8000.0)
+        ref = min(inner[0], edge[0])
+        assert got.range_m[k] == pytest.approx(ref, abs=0.05), (RA_NOISY_ROWS[k], got.range_m[k], ref)

@@ -235,7 +235,8 @@ class Guidance:
     def turn_radius_m(self) -> float:
         """Radius of the ground-track circle flyable at turn_bank_fraction of the bank limit at the turn's
         largest ground speed TAS + |wind|: R = V^2 / (g tan(turn_bank_fraction * bank_limit))."""
-        v = self.tas_mps + float(math.hypot(*self.wind_ne_mps))
+        # the wind estimate is capped at 0.6 TAS (a bad heading estimate must not blow the circle up)
+        v = self.tas_mps + min(float(math.hypot(*self.wind_ne_mps)), 0.6 * self.tas_mps)
         return v * v / (G_MPS2 * math.tan(self.turn_bank_fraction * self.bank_limit_rad))
 
     def _turn_geometry(self, ne: np.ndarray, leg: int) -> tuple[float, float, int]:

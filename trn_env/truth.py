@@ -92,22 +92,46 @@ class TruthChunk:
 SCALAR_FIELDS: tuple[str, ...] = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "roll_rad", "pitch_rad", "yaw_rad",
                                   "tas_mps", "alpha_rad", "beta_rad", "p_static_pa", "T_static_K", "h_agl_m")
 VECTOR_FIELDS: tuple[str, ...] = ("v_ned_mps", "omega_ib_b_rps", "omega_eb_b_rps", "f_b_mps2", "wind_ned_mps")
-_FIELD_SET = frozenset(TRUTH_FIELDS)
+
+
+class _BlockView:
+    """Non-data descriptor standing for one field of a _BlockTruthChunk until its views are built (the
+    instance attributes then take precedence, so later accesses are plain attribute lookups)."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        return obj._build_views()[self.name]
 
 
 class _BlockTruthChunk(TruthChunk):
     """TruthChunk whose field views are made from its blocks on first access (see TruthChunk.from_blocks).
     Once built they are ordinary instance attributes; constructing it with field values (dataclasses.replace)
-    gives an ordinary chunk."""
+    gives ordinary instance attributes too."""
 
-    def __getattr__(self, name: str):
-        blocks = self.__dict__.get("_blocks")
-        if name not in _FIELD_SET or blocks is None:
-            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        scalars, vectors, c_bn = blocks
+    def _build_views(self) -> dict:
         d = self.__dict__
-        d.update(zip(SCALAR_FIELDS, scalars, strict=True))
-        d.update(zip(VECTOR_FIELDS, vectors.transpose(0, 2, 1), strict=True))
-        d["C_bn"] = c_bn
-        del d["_blocks"]
-        return d[name]
+        scalars, vectors, c_bn = d.pop("_blocks")
+        (t_s, lat_rad, lon_rad, h_msl_m, roll_rad, pitch_rad, yaw_rad, tas_mps, alpha_rad, beta_rad,
+         p_static_pa, T_static_K, h_agl_m) = scalars
+        v_ned_mps, omega_ib_b_rps, omega_eb_b_rps, f_b_mps2, wind_ned_mps = vectors.transpose(0, 2, 1)
+        d.update(t_s=t_s, lat_rad=lat_rad, lon_rad=lon_rad, h_msl_m=h_msl_m, v_ned_mps=v_ned_mps,
+                 roll_rad=roll_rad, pitch_rad=pitch_rad, yaw_rad=yaw_rad, C_bn=c_bn,
+                 omega_ib_b_rps=omega_ib_b_rps, omega_eb_b_rps=omega_eb_b_rps, f_b_mps2=f_b_mps2,
+                 tas_mps=tas_mps, alpha_rad=alpha_rad, beta_rad=beta_rad, p_static_pa=p_static_pa,
+                 T_static_K=T_static_K, wind_ned_mps=wind_ned_mps, h_agl_m=h_agl_m)
+        return d
+
+
+for _name in TRUTH_FIELDS:
+    setattr(_BlockTruthChunk, _name, _BlockView(_name))
+del _name
+assert SCALAR_FIELDS == ("t_s", "lat_rad", "lon_rad", "h_msl_m", "roll_rad", "pitch_rad", "yaw_rad",
+                         "tas_mps", "alpha_rad", "beta_rad", "p_static_pa", "T_static_K", "h_agl_m")
+assert VECTOR_FIELDS == ("v_ned_mps", "omega_ib_b_rps", "omega_eb_b_rps", "f_b_mps2", "wind_ned_mps")
+assert set(SCALAR_FIELDS) | set(VECTOR_FIELDS) | {"C_bn"} == set(TRUTH_FIELDS)

@@ -1,0 +1,257 @@
+"""Numba kernels of the INS/TRN error-state filter's per-tick work (navigators.ins_trn_ekf).
+
+- `predict_covariance`: the 13-state psi-angle error model's covariance propagation over all the EKF
+  steps of one segment in one call (F at each step, Phi = I + F dt + (F dt)^2 / 2, P = Phi P Phi^T + Q -
+  the same algebra as filterpy's KalmanFilter.predict with our Phi and Q);
+- `is_positive_definite`: Cholesky test of the symmetrised matrix (what numpy.linalg.cholesky accepts);
+- `collect_ira`: the IRA samples of one segment turned into TERCOM batch rows (INS state at each sample,
+  baro reference height, closest point by the "conventional" or "proposed" formula of
+  navigators.ira_geometry - seed 000 eqs 9-13 and 14-36 - and eq 2's measured terrain height).
+
+Arrays only, no Python objects; every kernel is @njit(cache=True).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
+
+from .ins import quat_to_dcm
+
+N_ERR = 13
+G0 = 9.80665
+R0_GEOPOTENTIAL_M = 6356766.0
+FORMULA_CODES = {"conventional": 0, "proposed": 1}
+
+
+@njit(cache=True)
+def _radii(lat, h):
+    s = math.sin(lat)
+    w = 1.0 - WGS84_E2 * s * s
+    rn = WGS84_A_M * (1.0 - WGS84_E2) / (w * math.sqrt(w)) + h
+    re = WGS84_A_M / math.sqrt(w) + h
+    return rn, re
+
+
+@njit(cache=True)
+def _set_skew(F, r0, c0, v0, v1, v2, sign):
+    F[r0, c0] = 0.0
+    F[r0, c0 + 1] = -sign * v2
+    F[r0, c0 + 2] = sign * v1
+    F[r0 + 1, c0] = sign * v2
+    F[r0 + 1, c0 + 1] = 0.0
+    F[r0 + 1, c0 + 2] = -sign * v0
+    F[r0 + 2, c0] = -sign * v1
+    F[r0 + 2, c0 + 1] = sign * v0
+    F[r0 + 2, c0 + 2] = 0.0
+
+
+@njit(cache=True)
+def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b, t_ekf0, dt, n_steps, tau):
+    """Propagate P (13, 13, in place) over n_steps EKF steps of dt seconds after t_ekf0 along the INS history.
+
+    Step s uses the IMU sample at searchsorted(t_imu, t_ekf0 + s dt) (clipped) and its INS state row of
+    `hist` (ins_state if that row is not finite), the specific force f_b minus the accelerometer bias
+    estimate (last_f_b if the sample is not finite). Error model in navigators.ins_trn_ekf's docstring.
+    """
+    n = t_imu.shape[0]
+    F = np.zeros((N_ERR, N_ERR))
+    F[0, 3] = 1.0
+    F[1, 4] = 1.0
+    F[2, 5] = 1.0
+    F[2, 2] = -3.0 / tau  # baro loop on the vertical channel (navigators.ins)
+    Phi = np.empty((N_ERR, N_ERR))
+    T = np.empty((N_ERR, N_ERR))
+    st = np.empty(10)
+    fb = np.empty(3)
+    for s in range(1, n_steps + 1):
+        k = np.searchsorted(t_imu, t_ekf0 + dt * s)
+        if k > n - 1:
+            k = n - 1
+        ok = True
+        for j in range(10):
+            if not np.isfinite(hist[k, j]):
+                ok = False
+        for j in range(10):
+            st[j] = hist[k, j] if ok else ins_state[j]
+        okf = np.isfinite(f_b[k, 0]) and np.isfinite(f_b[k, 1]) and np.isfinite(f_b[k, 2])
+        for j in range(3):
+            fb[j] = (f_b[k, j] if okf else last_f_b[j]) - accel_bias_b[j]
+        lat, h, vn, ve = st[0], st[2], st[3], st[4]
+        C = quat_to_dcm(st[6:10])
+        fn0 = C[0, 0] * fb[0] + C[0, 1] * fb[1] + C[0, 2] * fb[2]
+        fn1 = C[1, 0] * fb[0] + C[1, 1] * fb[1] + C[1, 2] * fb[2]
+        fn2 = C[2, 0] * fb[0] + C[2, 1] * fb[1] + C[2, 2] * fb[2]
+        rn, re = _radii(lat, h)
+        wie0 = OMEGA_EARTH_RPS * math.cos(lat)
+        wie2 = -OMEGA_EARTH_RPS * math.sin(lat)
+        wen0 = ve / re
+        wen1 = -vn / rn
+        wen2 = -ve * math.tan(lat) / re
+        g_over_r = G0 / math.sqrt(rn * re)
+        F[3, 0] = -g_over_r
+        F[4, 1] = -g_over_r
+        F[5, 2] = 2.0 * g_over_r - 3.0 / tau**2
+        _set_skew(F, 3, 3, 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2, -1.0)
+        _set_skew(F, 3, 6, fn0, fn1, fn2, 1.0)
+        _set_skew(F, 6, 6, wie0 + wen0, wen1, wie2 + wen2, -1.0)
+        for i in range(3):
+            for j in range(3):
+                F[3 + i, 9 + j] = C[i, j]
+            F[6 + i, 12] = -C[i, 2]
+        # Phi = I + F dt + (F dt)^2 / 2
+        for i in range(N_ERR):
+            for j in range(N_ERR):
+                acc = 0.0
+                for m in range(N_ERR):
+                    acc += F[i, m] * F[m, j]
+                Phi[i, j] = F[i, j] * dt + 0.5 * acc * dt * dt
+            Phi[i, i] += 1.0
+        # P = Phi P Phi^T + Q
+        for i in range(N_ERR):
+            for j in range(N_ERR):
+                acc = 0.0
+                for m in range(N_ERR):
+                    acc += Phi[i, m] * P[m, j]
+                T[i, j] = acc
+        for i in range(N_ERR):
+            for j in range(N_ERR):
+                acc = 0.0
+                for m in range(N_ERR):
+                    acc += T[i, m] * Phi[j, m]
+                P[i, j] = acc + Q[i, j]
+
+
+@njit(cache=True)
+def is_positive_definite(P):
+    """True if P is finite and its symmetric part has a Cholesky factor (all pivots > 0)."""
+    n = P.shape[0]
+    L = np.zeros((n, n))
+    for i in range(n):
+        for j in range(n):
+            if not np.isfinite(P[i, j]):
+                return False
+    for j in range(n):
+        d = 0.5 * (P[j, j] + P[j, j])
+        for m in range(j):
+            d -= L[j, m] * L[j, m]
+        if not d > 0.0:
+            return False
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            a = 0.5 * (P[i, j] + P[j, i])
+            for m in range(j):
+                a -= L[i, m] * L[j, m]
+            L[i, j] = a / L[j, j]
+    return True
+
+
+@njit(cache=True)
+def _wrap(x):
+    return math.atan2(math.sin(x), math.cos(x))
+
+
+@njit(cache=True)
+def closest_point_one(R, theta, v0, v1, v2, C, formula, out):
+    """p (NED, m) from the antenna to the IRA closest point for one sample (navigators.ira_geometry:
+    formula 0 = conventional, seed 000 eqs 9-13; 1 = proposed, eqs 14-36). NaN when no solution."""
+    alpha = math.atan2(-v2, math.hypot(v0, v1))  # eq 9
+    beta = math.atan2(v1, v0)  # eq 10 (atan2 form)
+    sa, ca, sb, cb = math.sin(alpha), math.cos(alpha), math.sin(beta), math.cos(beta)
+    s1n, s1e, s1d = sa * cb, sa * sb, ca  # eq 12 (NED)
+    s2n, s2e = -sb, cb
+    roll = math.atan2(C[2, 1], C[2, 2])
+    ref = theta - roll  # conventional angle (project signs)
+    if formula == 0:
+        xi = ref
+    else:
+        t1 = C[0, 1] * s1n + C[1, 1] * s1e + C[2, 1] * s1d  # eq 31
+        t2 = C[0, 1] * s2n + C[1, 1] * s2e
+        rho = math.hypot(t1, t2)
+        ratio = math.sin(theta) / rho if rho > 0.0 else np.nan  # eq 32
+        if not (np.isfinite(ratio) and abs(ratio) <= 1.0):
+            out[0] = np.nan
+            out[1] = np.nan
+            out[2] = np.nan
+            return False
+        asn = math.asin(ratio)  # eq 34
+        eta = math.atan2(t1, t2)  # eq 33
+        xi_a = asn - eta  # eq 35
+        xi_b = math.pi - asn - eta
+        xi = xi_a if abs(_wrap(xi_a - ref)) <= abs(_wrap(xi_b - ref)) else xi_b
+        xi = _wrap(xi)
+    c = math.cos(xi)
+    s = math.sin(xi)
+    out[0] = R * (c * s1n + s * s2n)  # eq 36 / 13
+    out[1] = R * (c * s1e + s * s2e)
+    out[2] = R * (c * s1d)
+    return True
+
+
+@njit(cache=True)
+def collect_ira(t0, t1, t_imu, hist, ts, rng_m, theta, valid, decimation, tb, hb, have_baro, geopotential,
+                formula, out):
+    """TERCOM batch rows of the IRA samples with t0 <= t <= t1 (every `decimation`-th of them).
+
+    tb, hb: valid baro times and heights (interpolated at the sample times when have_baro, else the INS
+    height is the reference); geopotential: convert the baro height to geometric (US 1976 r0).
+    out (>= n samples, 6): t, INS lat, INS lon, h_meas = h_ref - |p_d| (seed 000 eq 2), p_n, p_e.
+    Returns (rows written, samples without a valid return, rows with no closest-point solution).
+    """
+    n_imu = t_imu.shape[0]
+    m = 0
+    n_bad = 0
+    n_nan = 0
+    sel_count = 0
+    p = np.empty(3)
+    for i in range(ts.shape[0]):
+        t = ts[i]
+        if not (t >= t0 and t <= t1):
+            continue
+        if sel_count % decimation != 0:
+            sel_count += 1
+            continue
+        sel_count += 1
+        R = rng_m[i]
+        th = theta[i]
+        if not (valid[i] and np.isfinite(R) and np.isfinite(th) and R > 0.0):
+            n_bad += 1
+            continue
+        k = np.searchsorted(t_imu, t)
+        if k > n_imu - 1:
+            k = n_imu - 1
+        good = True
+        for j in range(10):
+            if not np.isfinite(hist[k, j]):
+                good = False
+        if not good:
+            continue
+        if have_baro:
+            h_ref = np.interp(t, tb, hb)
+            if geopotential:
+                h_ref = R0_GEOPOTENTIAL_M * h_ref / (R0_GEOPOTENTIAL_M - h_ref)
+        else:
+            h_ref = hist[k, 2]
+        C = quat_to_dcm(hist[k, 6:10])
+        if not closest_point_one(R, th, hist[k, 3], hist[k, 4], hist[k, 5], C, formula, p):
+            n_nan += 1
+        out[m, 0] = t
+        out[m, 1] = hist[k, 0]
+        out[m, 2] = hist[k, 1]
+        out[m, 3] = h_ref - abs(p[2])
+        out[m, 4] = p[0]
+        out[m, 5] = p[1]
+        m += 1
+    return m, n_bad, n_nan
+
+
+@njit(cache=True)
+def euler_from_quat(q):
+    """3-2-1 Euler angles (roll, pitch, yaw; rad) of the body -> NED quaternion q."""
+    C = quat_to_dcm(q)
+    c20 = min(max(C[2, 0], -1.0), 1.0)
+    return math.atan2(C[2, 1], C[2, 2]), -math.asin(c20), math.atan2(C[1, 0], C[0, 0])
