@@ -255,3 +255,15 @@ def euler_from_quat(q):
     C = quat_to_dcm(q)
     c20 = min(max(C[2, 0], -1.0), 1.0)
     return math.atan2(C[2, 1], C[2, 2]), -math.asin(c20), math.atan2(C[1, 0], C[0, 0])
+
+
+@njit(cache=True)
+def last_good_row(valid, f, out):
+    """Copy into out the last row of f (n, 3) that is valid and finite; False (out untouched) if none."""
+    for k in range(f.shape[0] - 1, -1, -1):
+        if valid[k] and np.isfinite(f[k, 0]) and np.isfinite(f[k, 1]) and np.isfinite(f[k, 2]):
+            out[0] = f[k, 0]
+            out[1] = f[k, 1]
+            out[2] = f[k, 2]
+            return True
+    return False

@@ -156,6 +156,7 @@ class InsTrnNavigator:
         self._last_f_b = np.array([0.0, 0.0, -G0])
         self._Q = None
         self._rows = np.empty((0, 6))
+        self._baro_cache = None
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
@@ -208,38 +209,53 @@ class InsTrnNavigator:
         return self.estimate()
 
     # ------------------------------------------------------------------ internals
+    def _baro(self, frames: SensorFrames):
+        """(t, geometric height, usable mask, all usable) of the frame's baro samples, computed once per
+        frame; None without a baro frame."""
+        baro = frames.baro
+        if baro is None:
+            return None
+        if self._baro_cache is not None and self._baro_cache[0] is baro:
+            return self._baro_cache[1]
+        tb, hb = baro.t_s, baro.h_baro_m
+        vb = baro.valid & np.isfinite(hb)
+        if self.baro_geopotential:
+            hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
+        out = (tb, hb, vb, bool(vb.all()))
+        self._baro_cache = (baro, out)
+        return out
+
     def _segment(self, frames: SensorFrames, a: int, b: int) -> None:
         imu = frames.imu
-        sl = slice(a, b)
+        if a == 0 and b == imu.t_s.shape[0]:
+            t_seg, f_seg, w_seg, ok_seg = imu.t_s, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid
+        else:
+            t_seg, f_seg = imu.t_s[a:b], imu.f_b_mps2[a:b]
+            w_seg, ok_seg = imu.omega_ib_b_rps[a:b], imu.valid[a:b]
         bad0 = self.ins.bad_imu_samples
-        baro = frames.baro
         tb = hb = vb = None
+        baro = self._baro(frames)
         if baro is not None:
-            tb, hb, vb = baro.t_s, baro.h_baro_m, baro.valid & np.isfinite(baro.h_baro_m)
-            if self.baro_geopotential:
-                hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
-            if self.init_height_from_baro and not self._height_initialised and vb.any():
+            tb, hb, vb, vb_all = baro
+            if self.init_height_from_baro and not self._height_initialised and (vb_all or vb.any()):
                 # vertical channel initialised from the first baro height: a height error left to the baro
                 # loop would tilt the INS velocity while it converges, and a vertical velocity error dv_d
                 # moves every IRA closest point along track by about R dv_d / V (the zero-Doppler plane).
                 self.ins.state[2] = float(hb[np.argmax(vb)])
                 self._height_initialised = True
-            in_seg = (tb > (imu.t_s[a - 1] if a > 0 else -np.inf)) & (tb <= imu.t_s[b - 1])
-            if (in_seg & ~vb).any():
+            if not vb_all:
+                in_seg = (tb > (imu.t_s[a - 1] if a > 0 else -np.inf)) & (tb <= imu.t_s[b - 1])
                 nb = int((in_seg & ~vb).sum())
-                self._count_skip(float(imu.t_s[a]), "baro_invalid", nb, "baro samples invalid")
-        hist = self.ins.propagate(
-            imu.t_s[sl], imu.f_b_mps2[sl], imu.omega_ib_b_rps[sl], imu.valid[sl], tb, hb, vb
-        )
+                if nb:
+                    self._count_skip(float(imu.t_s[a]), "baro_invalid", nb, "baro samples invalid")
+        hist = self.ins.propagate(t_seg, f_seg, w_seg, ok_seg, tb, hb, vb)
         nbad = self.ins.bad_imu_samples - bad0
         if nbad:
             self._count_skip(float(imu.t_s[a]), "imu_invalid", nbad, "IMU samples invalid (held previous)")
-        good = imu.valid[sl] & np.all(np.isfinite(imu.f_b_mps2[sl]), axis=1)
-        if good.any():
-            self._last_f_b = imu.f_b_mps2[sl][good][-1].copy()
-        self._predict_to(float(imu.t_s[b - 1]), imu.t_s[sl], imu.f_b_mps2[sl], hist)
+        kern.last_good_row(ok_seg, f_seg, self._last_f_b)
+        self._predict_to(float(t_seg[-1]), t_seg, f_seg, hist)
         if self.aiding is not None:
-            self._collect(frames, imu.t_s[sl], hist)
+            self._collect(frames, t_seg, hist)
 
     def _process_noise(self, dt: float) -> np.ndarray:
         Q = np.zeros((N_ERR, N_ERR))

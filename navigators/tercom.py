@@ -22,16 +22,15 @@ import numpy as np
 from numba import njit
 
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from terrain.kernels import bilinear
+from terrain.kernels import _EDGE, bilinear
 
 
 @njit(cache=True, error_model="numpy")
-def mad_surface(
+def mad_surface_reference(
     heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
 ):
-    """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
-    lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad).
-    remove_bias: subtract each cell's mean difference first (bias-insensitive variant, not eq 1/2)."""
+    """mad_surface by one terrain.kernels.bilinear lookup per (cell, sample): the plain definition, kept as
+    the reference the fast kernel is tested against."""
     n = 2 * half + 1
     m = lat_k.shape[0]
     out = np.empty((n, n))
@@ -57,6 +56,110 @@ def mad_surface(
             for k in range(m):
                 acc += abs(d[k] - mean)
             out[a, b] = acc / m
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _axis_cells(x0, step, n, origin, spacing, n_posts, idx, frac, ok):
+    """Grid cell index and fraction of x0 + (c - half) step for c in 0..n-1 along one DEM axis, as
+    terrain.kernels.bilinear computes them (ok False: outside the grid on this axis)."""
+    half = (n - 1) // 2
+    for c in range(n):
+        f = ((x0 + (c - half) * step) - origin) / spacing
+        ok[c] = f >= -_EDGE and f <= n_posts - 1 + _EDGE
+        i = min(max(int(f), 0), n_posts - 2) if ok[c] else 0
+        idx[c] = i
+        frac[c] = f - i
+
+
+@njit(cache=True, error_model="numpy")
+def mad_surface(
+    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
+):
+    """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
+    lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad).
+    remove_bias: subtract each cell's mean difference first (bias-insensitive variant, not eq 1/2).
+
+    Same numbers as mad_surface_reference (one bilinear lookup per cell and sample), computed separably:
+    for each sample the bilinear's along-longitude interpolation (its `a`/`b` terms) is done once per DEM
+    row and east shift, then each cell needs one interpolation along latitude - the same operations in the
+    same order, so the surface is bit-identical. Points that the bilinear would retry at a void edge go
+    through terrain.kernels.bilinear itself."""
+    n = 2 * half + 1
+    m = lat_k.shape[0]
+    n_lat, n_lon = heights.shape
+    acc = np.zeros((n, n))
+    ssum = np.zeros((n, n))
+    ri = np.empty(n, np.int64)
+    ru = np.empty(n)
+    rok = np.empty(n, np.bool_)
+    cj = np.empty(n, np.int64)
+    cv = np.empty(n)
+    cok = np.empty(n, np.bool_)
+    row_ok = np.ones(n, np.bool_)
+    tmp = np.empty(n)
+    col_ok = np.ones(n, np.bool_)
+    n_pass = 2 if remove_bias else 1
+    for pss in range(n_pass):
+        for k in range(m):
+            _axis_cells(lat_k[k], dlat_cell, n, lat0, dlat, n_lat, ri, ru, rok)
+            _axis_cells(lon_k[k], dlon_cell, n, lon0, dlon, n_lon, cj, cv, cok)
+            i_lo = n_lat
+            i_hi = -1
+            for a in range(n):
+                if rok[a]:
+                    i_lo = min(i_lo, ri[a])
+                    i_hi = max(i_hi, ri[a] + 1)
+                else:
+                    row_ok[a] = False
+            for b in range(n):
+                if not cok[b]:
+                    col_ok[b] = False
+            if i_hi < 0:
+                continue
+            # along-longitude interpolation on each DEM row the shifts touch (bilinear's a / b terms)
+            g = np.empty((i_hi - i_lo + 1, n))
+            for r in range(i_lo, i_hi + 1):
+                for b in range(n):
+                    j = cj[b]
+                    h0 = heights[r, j]
+                    g[r - i_lo, b] = h0 + cv[b] * (heights[r, j + 1] - h0)
+            hk = h_meas_k[k]
+            for a in range(n):
+                if not rok[a]:
+                    continue
+                ga = g[ri[a] - i_lo]
+                gb = g[ri[a] + 1 - i_lo]
+                u = ru[a]
+                chk = 0.0
+                for b in range(n):  # bilinear's r = a + u (b - a)
+                    x = ga[b]
+                    hdb = x + u * (gb[b] - x)
+                    tmp[b] = hdb
+                    chk += hdb
+                if chk != chk:  # a NaN (void): the points bilinear retries at a void's edge
+                    dla = (a - half) * dlat_cell
+                    for b in range(n):
+                        if tmp[b] != tmp[b] and cok[b]:
+                            tmp[b] = bilinear(heights, lat0, lon0, dlat, dlon, lat_k[k] + dla,
+                                              lon_k[k] + (b - half) * dlon_cell)
+                acc_a = acc[a]
+                if pss == 1:
+                    s_a = ssum[a]
+                    for b in range(n):
+                        acc_a[b] += abs((hk - tmp[b]) - s_a[b] / m)
+                elif remove_bias:
+                    s_a = ssum[a]
+                    for b in range(n):
+                        s_a[b] += hk - tmp[b]
+                else:
+                    for b in range(n):
+                        acc_a[b] += abs(hk - tmp[b])
+    out = np.empty((n, n))
+    for a in range(n):
+        for b in range(n):
+            v = acc[a, b] / m
+            out[a, b] = v if (row_ok[a] and col_ok[b] and np.isfinite(v)) else np.inf
     return out
 
 
@@ -240,6 +343,13 @@ class TercomBatch:
             z if de_rel_m is None else de_rel_m,
         ]
         self._parts.append(np.stack([np.broadcast_to(np.asarray(c, float), t.shape) for c in cols], 1))
+
+    def add_rows(self, rows: np.ndarray) -> None:
+        """Append an (n, 6) float array of rows (t, lat, lon, h_meas, dn_rel, de_rel), taken as is."""
+        rows = np.asarray(rows, float)
+        if rows.ndim != 2 or rows.shape[1] != 6:
+            raise ValueError(f"rows must be an (n, 6) array, got shape {rows.shape}")
+        self._parts.append(rows)
 
     @property
     def samples(self) -> np.ndarray:

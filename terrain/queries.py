@@ -1299,12 +1299,7 @@ def _ira_one(
     n_max = buf_s.shape[0]
     half = n_max // 2
     best = _INF
-    for q in range(n_max):
-        buf_f[q] = _INF
-        buf_s[q] = (q - half) * step
-        buf_t[q] = np.nan
-        buf_r[q] = _INF
-        buf_z[q] = np.nan
+    # the buffers are written for every visited sample, and the visited samples are contiguous: lo_q..hi_q
     t0 = 0.0
     hp0 = bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
     if hp0 == hp0:
@@ -1320,7 +1315,7 @@ def _ira_one(
             q = half + direction * k
             if q < 1 or q >= n_max - 1:
                 break
-            sv = buf_s[q]
+            sv = (q - half) * step
             horiz_lb = (abs(sv) - step) * 0.998 - 2.0  # covers the neighbouring intervals too
             if horiz_lb > max_range:
                 break
@@ -1367,13 +1362,18 @@ def _ira_one(
                 )
                 dv = ha - hb
                 if dv > 0.0 and horiz_lb * horiz_lb + dv * dv > best * best:
+                    buf_s[q] = sv
                     buf_f[q] = _PRUNED
+                    buf_t[q] = np.nan
+                    buf_r[q] = _INF
+                    buf_z[q] = np.nan
                     k += 1
                     continue
             f, t, r, z = _ira_eval(
                 heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
                 sin_w, max_range, sv, t_prev, 1e-3,
             )
+            buf_s[q] = sv
             buf_f[q] = f
             buf_t[q] = t
             buf_r[q] = r
@@ -1511,10 +1511,12 @@ def _ira_one(
             if fa < _INF and fb < _INF:
                 lb = 0.5 * (fa + fb - lip * w)
                 if one_cell:
-                    # |r''| <= |P'|^2 / r + |P''| with |z''| <= (h_ne |x'|^2 + 1/R) / (1 - gamma g)
+                    # |r''| <= |P'|^2 / r + |P''| with |z''| <= (|h_ss| + 1/R) / (1 - gamma g)
                     p1sq = 1.0 + tp * tp + zp * zp
                     r_lo = max(min(ra, rb) - np.sqrt(p1sq) * w, 0.05 * min(ra, rb))
-                    zpp = (h_ne * (1.0 + tp * tp) + 1.0 / 6.3e6) / den
+                    # h_ss = 2 h_ne x'_n x'_e on the bilinear cell, x' = w_h + t' u_h
+                    xnxe = (abs(uhy) + tp * abs(uhx)) * (abs(uhx) + tp * abs(uhy))
+                    zpp = (2.0 * h_ne * xnxe + 1.0 / 6.3e6) / den
                     kk = 1.05 * (p1sq / r_lo + (1.0 + gam) * zpp)
                     lb = max(lb, min(fa, fb) - 0.125 * kk * w * w)
             else:

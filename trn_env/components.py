@@ -13,6 +13,9 @@ import os
 import sys
 
 import numpy as np
+from numba import njit
+
+from terrain.kernels import bilinear
 
 SENSOR_KEYS = ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading")
 
@@ -87,6 +90,27 @@ def world_height(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:
     heights, lat0, lon0, dlat, dlon = dem.grid
     kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out)
     return out
+
+
+@njit(cache=True)
+def _min_height_above_terrain(heights, lat0, lon0, dlat, dlon, lat, lon, h):
+    m = np.inf
+    n_nan = 0
+    for i in range(lat.shape[0]):
+        d = h[i] - bilinear(heights, lat0, lon0, dlat, dlon, lat[i], lon[i])
+        if d != d:
+            n_nan += 1
+        elif d < m:
+            m = d
+    return m, n_nan
+
+
+def min_height_above_terrain(dem, lat_rad: np.ndarray, lon_rad: np.ndarray, h_msl_m: np.ndarray):
+    """(smallest height above the terrain over the finite points (m; inf if none), number of points off
+    the grid or over voids) of 1-D arrays of positions (bilinear, the terrain package's numba kernel)."""
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    m, n_nan = _min_height_above_terrain(heights, lat0, lon0, dlat, dlon, lat_rad, lon_rad, h_msl_m)
+    return float(m), int(n_nan)
 
 
 def world_contains(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:

@@ -303,12 +303,11 @@ class ClosedLoop:
         return reason
 
     def _check_end(self, chunk: TruthChunk, est: Estimate) -> str | None:
-        h_ground = components.world_height(self.world_dem, chunk.lat_rad, chunk.lon_rad)
-        agl_min = float(np.min(chunk.h_msl_m - h_ground))     # NaN if any step is off the grid or over a void
-        if agl_min != agl_min:
+        agl_min, n_nan = components.min_height_above_terrain(self.world_dem, chunk.lat_rad, chunk.lon_rad,
+                                                             chunk.h_msl_m)
+        if n_nan:   # a step off the grid or over a void (then the other steps are judged)
             if not np.all(components.world_contains(self.world_dem, chunk.lat_rad, chunk.lon_rad)):
                 return "off_map"
-            agl_min = float(np.nanmin(chunk.h_msl_m - h_ground))   # over a void: judge the other steps
         if agl_min < 0.0:
             return "terrain_collision"
         if self._diverged(chunk, est):
@@ -320,12 +319,14 @@ class ClosedLoop:
         return None
 
     def _diverged(self, chunk: TruthChunk, est: Estimate) -> bool:
-        vals = (est.lat_rad, est.lon_rad, est.h_m)
-        if not all(math.isfinite(v) for v in vals) or not np.all(np.isfinite(est.covariance[:3, :3])):
+        if not (math.isfinite(est.lat_rad) and math.isfinite(est.lon_rad) and math.isfinite(est.h_m)):
+            return True
+        c = est.covariance
+        if not math.isfinite(float(c[:3, :3].sum())):   # a NaN or inf anywhere in the position block
             return True
         if est.health.status == "diverged":
             return True
-        sig_h = math.sqrt(max(est.covariance[0, 0], 0.0) + max(est.covariance[1, 1], 0.0))
+        sig_h = math.sqrt(max(c[0, 0], 0.0) + max(c[1, 1], 0.0))
         if sig_h > self.max_sigma_h_m:
             return True
         if self.max_err_h_m is not None:
