@@ -24,6 +24,7 @@ call per segment, for speed.
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
@@ -189,6 +190,7 @@ class InsTrnNavigator:
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
+        self._baro_cache = None
         imu = frames.imu
         if imu is None or imu.t_s.size == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
@@ -219,9 +221,10 @@ class InsTrnNavigator:
             return self._baro_cache[1]
         tb, hb = baro.t_s, baro.h_baro_m
         vb = baro.valid & np.isfinite(hb)
+        hb_raw = hb
         if self.baro_geopotential:
             hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
-        out = (tb, hb, vb, bool(vb.all()))
+        out = (tb, hb, vb, bool(vb.all()), hb_raw)
         self._baro_cache = (baro, out)
         return out
 
@@ -236,7 +239,7 @@ class InsTrnNavigator:
         tb = hb = vb = None
         baro = self._baro(frames)
         if baro is not None:
-            tb, hb, vb, vb_all = baro
+            tb, hb, vb, vb_all, _ = baro
             if self.init_height_from_baro and not self._height_initialised and (vb_all or vb.any()):
                 # vertical channel initialised from the first baro height: a height error left to the baro
                 # loop would tilt the INS velocity while it converges, and a vertical velocity error dv_d
@@ -308,15 +311,15 @@ class InsTrnNavigator:
         n = ts.shape[0]
         if n == 0:
             return
-        baro = frames.baro
+        baro = self._baro(frames)
         have_baro = False
         tb = hb = _EMPTY
         if baro is not None:
-            bv = baro.valid & np.isfinite(baro.h_baro_m)
-            if bv.all() and bv.size:
-                tb, hb, have_baro = baro.t_s, baro.h_baro_m, True
+            t_b, _, bv, bv_all, h_raw = baro
+            if bv_all and bv.size:
+                tb, hb, have_baro = t_b, h_raw, True
             elif bv.any():
-                tb, hb, have_baro = baro.t_s[bv], baro.h_baro_m[bv], True
+                tb, hb, have_baro = t_b[bv], h_raw[bv], True
         if self._rows.shape[0] < n:
             self._rows = np.empty((max(n, 64), 6))
         m, n_bad, n_nan = kern.collect_ira(
@@ -457,10 +460,10 @@ class InsTrnNavigator:
     # ------------------------------------------------------------------ output
     def estimate(self) -> Estimate:
         st = self.ins.state
-        roll, pitch, yaw = self.ins.euler_rad
+        roll, pitch, yaw = kern.euler_from_quat(st[6:10])
         P = self.kf.P[:9, :9].copy()
-        sig_h = float(np.sqrt(max(P[0, 0] + P[1, 1], 0.0)))
-        if not np.all(np.isfinite(st)):
+        sig_h = math.sqrt(max(P[0, 0] + P[1, 1], 0.0))
+        if not math.isfinite(float(st.sum())):
             self.health.ok, self.health.status = False, "diverged"
         elif self.aiding is not None and sig_h > 2000.0:
             self.health.ok, self.health.status = False, "degraded"

@@ -821,17 +821,17 @@ def _ra_one(
     for q in range(kb):
         if bnd_key[q] == _INF or bnd_key[q] > best + margin:
             break
-        # height bound: a boundary point within +-2 posts sits at depth >= ha - (their max height), and a
-        # cone-boundary ray descends at most cos(half_beam - axis tilt) per metre of range
+        # height bound: a boundary point in the 4 cells around the seed sits at depth >= ha - (their max
+        # height), and a cone-boundary ray descends at most cos(half_beam - axis tilt) per metre of range
         ci = int(bnd_i[q])
         cj = int(bnd_j[q])
         hmx = -_INF
-        for i in range(max(ci - 2, 0), min(ci + 2, n_lat - 1) + 1):
-            for j in range(max(cj - 2, 0), min(cj + 2, n_lon - 1) + 1):
+        for i in range(max(ci - 1, 0), min(ci + 1, n_lat - 1) + 1):
+            for j in range(max(cj - 1, 0), min(cj + 1, n_lon - 1) + 1):
                 if heights[i, j] > hmx:
                     hmx = heights[i, j]
         # steepest descent rate (down component of the unit direction) of the boundary rays within the
-        # searched arc (+-2.5 posts) around the seed's azimuth
+        # arc of those cells (+-1.5 posts) around the seed's azimuth
         la_q = lat0 + bnd_i[q] * dlat
         lo_q = lon0 + bnd_j[q] * dlon
         x, y, z = _ned(la_q - lat, lo_q - lon, heights[ci, cj], ha, s, c, m, n, dm)
@@ -842,8 +842,8 @@ def _ra_one(
         pn = np.sqrt(px * px + py * py + pz * pz)
         dz_b = dz_max
         if pn > 1e-9:
-            # d(dz)/d(azimuth) <= sin(half beam) sin(tilt); the arc spans <= 2.5 posts / |perp| rad
-            dz_b = cosb * az + sinb * pz / pn + sinb * np.sin(tilt) * min(2.5 * cell_m / pn, np.pi)
+            # d(dz)/d(azimuth) <= sin(half beam) sin(tilt); the arc spans <= 1.5 posts / |perp| rad
+            dz_b = cosb * az + sinb * pz / pn + sinb * np.sin(tilt) * min(1.5 * cell_m / pn, np.pi)
             dz_b = min(dz_b, dz_max)
         if dz_b > 0.0 and (ha - hmx) > best * dz_b:
             continue

@@ -6,7 +6,7 @@
     flight.set_targets(AutopilotTargets(...))  # writes the ap/* properties of the aircraft's autopilot
     flight.set_terrain_elevation(h_m)          # terrain under the aircraft, for height-above-ground hold
 
-The per-step Python work in `advance` is `run()` plus copying 15 cached property nodes (18 with turbulence
+The per-step Python work in `advance` is `run()` plus copying 16 cached property nodes (19 with turbulence
 or gusts: the total wind) into one preallocated float64 buffer with one struct.pack_into call; unit
 conversions, Euler/C_bn assembly, the Earth-rate correction of body rates, air data and the atmosphere are
 computed after the loop in one numba kernel, which writes three preallocated blocks that the TruthChunk's
@@ -44,7 +44,6 @@ from trn_env.truth import SCALAR_FIELDS, VECTOR_FIELDS, TruthChunk
 from trn_env.wind import FT_PER_M, WindConfig
 
 M_PER_FT = 0.3048
-G0_MPS2 = 9.80665            # JSBSim's standard gravity, the unit of accelerations/N{x,y,z}
 PSF_TO_PA = 47.88025898033584
 RANKINE_TO_K = 5.0 / 9.0
 
@@ -201,18 +200,19 @@ _RECORDED = (
     "velocities/pi-rad_sec",                 # 9  body rates relative to inertial space
     "velocities/qi-rad_sec",                 # 10
     "velocities/ri-rad_sec",                 # 11
-    "accelerations/Nx",                      # 12 non-gravitational force / (mass g0), body x
-    "accelerations/Ny",                      # 13
-    "accelerations/Nz",                      # 14 (sign: +1 in level flight, i.e. -f_z / g0)
-    "atmosphere/total-wind-north-fps",       # 15 (only with turbulence or gusts)
-    "atmosphere/total-wind-east-fps",        # 16
-    "atmosphere/total-wind-down-fps",        # 17
+    "forces/fbx-total-lbs",                  # 12 total non-gravitational force, body x; f_b = force / mass
+    "forces/fby-total-lbs",                  # 13 (accelerations/N{x,y,z} disagree with JSBSim's own velocity
+    "forces/fbz-total-lbs",                  # 14 history by up to 0.7 m/s^2 in manoeuvres: test_nav_ins_jsbsim)
+    "inertia/mass-slugs",                    # 15 per step: fuel burn moves f_b by ~1 micro-g per second
+    "atmosphere/total-wind-north-fps",       # 16 (only with turbulence or gusts)
+    "atmosphere/total-wind-east-fps",        # 17
+    "atmosphere/total-wind-down-fps",        # 18
 )
-_N_STATE = 15
+_N_STATE = 16
 _NAN_NAMES = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps[north]", "v_ned_mps[east]", "v_ned_mps[down]",
               "roll_rad", "pitch_rad", "yaw_rad",
               "omega_ib_b_rps[x]", "omega_ib_b_rps[y]", "omega_ib_b_rps[z]",
-              "f_b_mps2[x]", "f_b_mps2[y]", "f_b_mps2[z]",
+              "f_b_mps2[x]", "f_b_mps2[y]", "f_b_mps2[z]", "mass",
               "wind_ned_mps[north]", "wind_ned_mps[east]", "wind_ned_mps[down]")
 
 # Rows of the converted scalar block (one row per field) and of the vector block (5, 3, n): the layout of
@@ -257,7 +257,7 @@ def _convert_raw(raw, n, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain
             vb[_V_WIB, k, i] = raw[o + 9 + k]
         if ncol > _N_STATE:
             for k in range(3):
-                vb[_V_WIND, k, i] = raw[o + 15 + k] * M_PER_FT
+                vb[_V_WIND, k, i] = raw[o + 16 + k] * M_PER_FT
         else:
             vb[_V_WIND, 0, i] = wind_n
             vb[_V_WIND, 1, i] = wind_e
@@ -282,9 +282,8 @@ def _convert_raw(raw, n, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain
         wd = -OMEGA_EARTH_RPS * np.sin(lat)
         for k in range(3):
             vb[_V_WEB, k, i] = raw[o + 9 + k] - (c[i, 0, k] * wn + c[i, 2, k] * wd)
-        vb[_V_F, 0, i] = raw[o + 12] * G0_MPS2
-        vb[_V_F, 1, i] = raw[o + 13] * G0_MPS2
-        vb[_V_F, 2, i] = -raw[o + 14] * G0_MPS2
+        for k in range(3):       # lbf / slug = ft/s^2
+            vb[_V_F, k, i] = raw[o + 12 + k] * M_PER_FT / raw[o + 15]
         # air-relative velocity in body axes: C_nb (v - wind)
         an = vb[_V_V, 0, i] - vb[_V_WIND, 0, i]
         ae = vb[_V_V, 1, i] - vb[_V_WIND, 1, i]
@@ -304,28 +303,28 @@ _PACK_STATE_WIND = struct.Struct(f"{len(_RECORDED)}d").pack_into
 
 
 def _record_state(n: int, run, buf: np.ndarray, start: int, getters) -> int:
-    """The hot loop: run() and copy the 15 cached state nodes' values into buf (float64) from byte
+    """The hot loop: run() and copy the 16 cached state nodes' values into buf (float64) from byte
     `start` on, nothing else; returns the next offset. The getters are bound to locals and their values
     packed straight into the preallocated buffer by one struct call (no tuple, no list, no resizing)."""
-    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14) = getters
+    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15) = getters
     pack = _PACK_STATE
     step = 8 * _N_STATE
     for offset in range(start, start + n * step, step):
         run()
         pack(buf, offset, g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(),
-             g13(), g14())
+             g13(), g14(), g15())
     return start + n * step
 
 
 def _record_state_wind(n: int, run, buf: np.ndarray, start: int, getters) -> int:
     """As _record_state, plus the three total-wind nodes (turbulence or gusts configured)."""
-    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15, g16, g17) = getters
+    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15, g16, g17, g18) = getters
     pack = _PACK_STATE_WIND
     step = 8 * len(_RECORDED)
     for offset in range(start, start + n * step, step):
         run()
         pack(buf, offset, g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(),
-             g13(), g14(), g15(), g16(), g17())
+             g13(), g14(), g15(), g16(), g17(), g18())
     return start + n * step
 
 
