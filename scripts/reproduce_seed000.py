@@ -240,7 +240,7 @@ def main(argv=None) -> dict:
 
     table = {}
     print("\nTable 4 (average over fix times of the RMS over runs of the error at each fix), metres")
-    print(f"{'method':<14}{'error':<18}" + "".join(f"case #{c:<6}" for c in cases))
+    print(f"{'method':<14}{'error':<18}" + "".join(f"{'case #' + str(c):>10}" for c in cases))
     for f in formulas:
         rows = {"Latitude Error": [], "Longitude Error": [], "Position Error": []}
         for c in cases:
@@ -264,7 +264,7 @@ def main(argv=None) -> dict:
                 "valid_fix_fraction": float(a[:, :, 3].mean()),
             }
         for i, (name, vals) in enumerate(rows.items()):
-            print(f"{(f + ' method') if i == 0 else '':<14}{name:<18}" + "".join(f"{v:<12.2f}" for v in vals))
+            print(f"{f if i == 0 else '':<14}{name:<18}" + "".join(f"{v:>10.2f}" for v in vals))
     summary = {
         "args": vars(args),
         "tas_mps": tas,
