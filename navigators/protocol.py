@@ -25,7 +25,8 @@ class Health:
 
     ok: bool = True
     status: str = "ok"                                   # short word: ok, acquiring, degraded, diverged, ...
-    skipped: dict[str, int] = field(default_factory=dict)  # reason -> count of measurements skipped so far
+    # reason -> count of measurements skipped so far
+    skipped: dict[str, int] = field(default_factory=dict)
     events: list[tuple[float, str]] = field(default_factory=list)  # (t_s, message) since the last update
 
     def skip(self, t_s: float, reason: str, message: str | None = None) -> None:
@@ -52,7 +53,8 @@ class Estimate:
     yaw_rad: float
     covariance: np.ndarray
     health: Health = field(default_factory=Health)
-    extra: dict = field(default_factory=dict)   # navigator-specific outputs (e.g. a TERCOM fix and its quality)
+    # navigator-specific outputs (e.g. a TERCOM fix and its quality)
+    extra: dict = field(default_factory=dict)
 
     @property
     def sigma_ned_m(self) -> np.ndarray:

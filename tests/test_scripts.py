@@ -46,5 +46,6 @@ def test_gnss_denied_demo_ins_drifts_and_trn_stays_bounded(tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert (tmp_path / "gnss_denied.png").is_file()
     ins, trn = summary["ins"], summary["ins_tercom"]
-    assert ins["horizontal_error_final_m"] > 500.0                  # tactical-grade INS alone, 8 min without GNSS
-    assert trn["horizontal_error_final_m"] < 0.2 * ins["horizontal_error_final_m"]   # INS + TRN stays bounded on the same flight
+    # a tactical-grade INS alone drifts in 8 min without GNSS; INS + TRN stays bounded on the same flight
+    assert ins["horizontal_error_final_m"] > 500.0
+    assert trn["horizontal_error_final_m"] < 0.2 * ins["horizontal_error_final_m"]

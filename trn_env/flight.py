@@ -201,8 +201,8 @@ _RECORDED = (
     "velocities/qi-rad_sec",                 # 10
     "velocities/ri-rad_sec",                 # 11
     "forces/fbx-total-lbs",                  # 12 total non-gravitational force, body x; f_b = force / mass
-    "forces/fby-total-lbs",                  # 13 (accelerations/N{x,y,z} disagree with JSBSim's own velocity
-    "forces/fbz-total-lbs",                  # 14 history by up to 0.7 m/s^2 in manoeuvres: test_nav_ins_jsbsim)
+    "forces/fby-total-lbs",                  # 13 (accelerations/N{x,y,z} disagree with JSBSim's velocity
+    "forces/fbz-total-lbs",                  # 14 history by up to 0.7 m/s^2 in turns: test_nav_ins_jsbsim)
     "inertia/mass-slugs",                    # 15 per step: fuel burn moves f_b by ~1 micro-g per second
     "atmosphere/total-wind-north-fps",       # 16 (only with turbulence or gusts)
     "atmosphere/total-wind-east-fps",        # 17
