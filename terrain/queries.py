@@ -842,8 +842,8 @@ def _ra_one(
         pn = np.sqrt(px * px + py * py + pz * pz)
         dz_b = dz_max
         if pn > 1e-9:
-            # d(dz)/d(azimuth) <= sin(half beam) sin(tilt); the arc spans <= 1.5 posts / |perp| rad
-            dz_b = cosb * az + sinb * pz / pn + sinb * np.sin(tilt) * min(1.5 * cell_m / pn, np.pi)
+            # d(dz)/d(azimuth) <= sin(half beam) sin(tilt); the arc spans <= 2 posts (diagonal) / |perp| rad
+            dz_b = cosb * az + sinb * pz / pn + sinb * np.sin(tilt) * min(2.0 * cell_m / pn, np.pi)
             dz_b = min(dz_b, dz_max)
         if dz_b > 0.0 and (ha - hmx) > best * dz_b:
             continue
@@ -1263,6 +1263,7 @@ def _ira_one(
     bs,
     bmax,
     bslope,
+    g_glob,
     out,
 ):
     """Closest in-window zero-Doppler terrain point; writes (valid, range, lat, lon, h) into out[0:5].
@@ -1398,7 +1399,6 @@ def _ira_one(
             best_t = buf_t[q]
             break
     # 2) branch and bound over the intervals between coarse samples
-    g_glob = _finite_range(bslope)[1]
     tol = 5e-3  # m: an interval must promise at least this much improvement to be searched
     n_st = 0
     cap = stack.shape[0]
@@ -1640,6 +1640,7 @@ def _ira_batch(
     h_min = _finite_range(bmin)[0]
     h_max = _finite_range(bmax)[1]
     sin_w = np.sin(half_window)
+    g_glob = _finite_range(bslope)[1]
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
     buf_s = np.empty(n_max)
     buf_f = np.empty(n_max)
@@ -1678,6 +1679,7 @@ def _ira_batch(
             bs,
             bmax,
             bslope,
+            g_glob,
             out,
         )
         valid[k] = out[0] > 0.5
