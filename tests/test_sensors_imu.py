@@ -131,7 +131,7 @@ def test_quantiser_carries_the_remainder():
 
 
 def test_scale_factor_and_misalignment_draws():
-    cfg = ImuConfig.noise_free(accel_scale_factor_ppm=1000.0, accel_misalignment_rad=2e-3)
+    cfg = ImuConfig.noise_free(accel_scale_factor_ppm=1000.0, accel_misalignment_rad=2e-3, sampling="instant")
     truth = straight_truth(60)
     rng_f = np.random.default_rng(11)
     truth.f_b_mps2[:] = rng_f.normal(0, 10, (60, 3))     # excite all axes
@@ -172,3 +172,35 @@ def test_from_mapping_rejects_unknown_keys_and_grades():
     with pytest.raises(ValueError, match="grade"):
         ImuConfig.from_mapping({"grade": "military"})
     assert ImuConfig.from_mapping({"grade": "tactical", "rate_hz": 200}).rate_hz == 200
+
+
+def test_interval_sampling_is_the_mean_over_each_interval_across_chunks():
+    """sampling="interval": each sample is the trapezoid mean of f and the step-start mean of omega over
+    (t_{k-1}, t_k], computed here independently; chunking does not change it."""
+    truth = straight_truth(400)
+    rng = np.random.default_rng(3)
+    truth.f_b_mps2[:] = rng.normal(0, 3, (400, 3))
+    truth.omega_ib_b_rps[:] = rng.normal(0, 0.1, (400, 3))
+    for rate_hz, step in ((100.0, 1), (50.0, 2), (20.0, 5)):
+        cfg = ImuConfig.noise_free(rate_hz=rate_hz)
+        whole, _ = sample_imu(truth, None, np.random.default_rng(0), cfg)
+        parts, state = [], None
+        for a, b in ((0, 7), (7, 130), (130, 131), (131, 400)):
+            fr, state = sample_imu(truth.slice(a, b), None, np.random.default_rng(0), cfg, state)
+            parts.append(fr)
+        chunked_f = np.concatenate([p.f_b_mps2 for p in parts])
+        np.testing.assert_allclose(chunked_f, whole.f_b_mps2, rtol=0, atol=1e-12)
+        rows = np.flatnonzero(np.isin(truth.t_s, whole.t_s))
+        for i in range(1, len(rows)):
+            j0, j1 = rows[i - 1], rows[i]
+            assert j1 - j0 == step
+            f = truth.f_b_mps2
+            want_f = np.mean([(f[m - 1] + f[m]) / 2 for m in range(j0 + 1, j1 + 1)], axis=0)
+            want_w = truth.omega_ib_b_rps[j0:j1].mean(axis=0)
+            np.testing.assert_allclose(whole.f_b_mps2[i], want_f, atol=1e-12)
+            np.testing.assert_allclose(whole.omega_ib_b_rps[i], want_w, atol=1e-12)
+
+
+def test_unknown_sampling_is_rejected():
+    with pytest.raises(ValueError, match="ImuConfig.sampling"):
+        ImuConfig(sampling="sometimes")

@@ -7,6 +7,13 @@ quantised as increments with the remainder carried (an integrating IMU). Per axi
 - white noise: density N (velocity / angle random walk); a sample averaged over dt has std N / sqrt(dt);
 - scale factor: diagonal, drawn N(0, (ppm 1e-6)^2); misalignment: off-diagonal, drawn N(0, rad^2).
 
+Sampling. A real strapdown IMU integrates: each output at t_k is the velocity and angle increment over
+(t_{k-1}, t_k] divided by the interval. `sampling="interval"` (the default) reproduces that from the truth
+rows consistently with JSBSim's own integration: the specific force is the trapezoid mean of the rows in the
+interval and the rate the mean of the rates at the start of each step (JSBSim's rectangular rotational
+integrator), so a perfect IMU integrated by an "interval" INS follows JSBSim to about a metre over 10 min
+(tests/test_nav_ins_jsbsim.py); `sampling="instant"` reports the truth at the sample instants instead.
+
 Grade presets. "navigation" is seed 000 Table 2: accelerometer bias 50 ug, random walk 10 ug; gyro bias
 0.005 deg/h, random walk 0.005 deg/h (all 1 sigma). The table gives the random walks without a time unit;
 we read them, as the thesis appendix table does (ug/sqrt(Hz), deg/sqrt(h)), as white-noise densities:
@@ -69,6 +76,8 @@ class ImuConfig:
     gyro_scale_factor_ppm: float = 0.0
     gyro_misalignment_rad: float = 0.0
     gyro_quantum_rad: float = 0.0                           # angle-increment quantum; 0 = none
+    sampling: str = "interval"                              # "interval" means or "instant" values
+
 
     def __post_init__(self):
         check_positive("ImuConfig", "rate_hz", self.rate_hz)
@@ -76,6 +85,8 @@ class ImuConfig:
         check_positive("ImuConfig", "gyro_bias_tau_s", self.gyro_bias_tau_s)
         for name in _ERROR_FIELDS:
             check_nonneg("ImuConfig", name, getattr(self, name))
+        if self.sampling not in ("interval", "instant"):
+            raise ValueError(f"ImuConfig.sampling must be 'interval' or 'instant', got {self.sampling!r}")
 
     @classmethod
     def grade(cls, name: str, **overrides: Any) -> ImuConfig:
@@ -136,11 +147,14 @@ class ImuState(NamedTuple):
     params: M_a (9, row-major), M_g (9), turn-on biases b_a (3), b_g (3), then phi_a, drive_a, phi_g,
     drive_g, white sigma_a, white sigma_g, quantum_a, quantum_g, dt (see `_imu_kernel`).
     dynamic: Gauss-Markov biases gm_a (3), gm_g (3), quantiser remainders res_a (3), res_g (3).
+    carry: interval sampling's running sums: previous truth row f (3) and omega (3), sums of f (3) and
+    omega (3) since the last sample, their count, and 1 once a previous row exists (14).
     """
 
     last_k: int | None
     params: np.ndarray
     dynamic: np.ndarray
+    carry: np.ndarray | None = None
 
     @classmethod
     def initial(cls, config: ImuConfig, rng: np.random.Generator) -> ImuState:
@@ -161,7 +175,7 @@ class ImuState(NamedTuple):
              config.accel_quantum_mps, config.gyro_quantum_rad, dt_s]])
         dynamic = np.concatenate([z[24:27] * config.accel_bias_instability_mps2,
                                   z[27:30] * config.gyro_bias_instability_rps, np.zeros(6)])
-        return cls(None, params, dynamic)
+        return cls(None, params, dynamic, np.zeros(14))
 
     @property
     def accel_matrix(self) -> np.ndarray:
@@ -228,6 +242,42 @@ def _imu_kernel(idx, f_b, om_b, w, params, dynamic):
     return f, om, valid, d
 
 
+@njit(cache=True)
+def _interval_means(f_b, om_b, idx, carry):
+    """Means over each sample's interval (t_{k-1}, t_k] of the truth rows: specific force by the trapezoid
+    rule, rate by the step-start (rectangular) rule. Every truth row is one step; idx are the sample rows.
+    Sums run across chunk boundaries through `carry` (see ImuState). Returns f (n, 3), omega (n, 3), carry.
+    """
+    c = carry.copy()
+    n = idx.shape[0]
+    f = np.empty((n, 3))
+    om = np.empty((n, 3))
+    k = 0
+    for m in range(f_b.shape[0]):
+        if c[13] > 0.0:                      # the step from the previous row to row m
+            for a in range(3):
+                c[6 + a] += 0.5 * (c[a] + f_b[m, a])
+                c[9 + a] += c[3 + a]
+            c[12] += 1.0
+        for a in range(3):
+            c[a] = f_b[m, a]
+            c[3 + a] = om_b[m, a]
+        c[13] = 1.0
+        if k < n and idx[k] == m:
+            for a in range(3):
+                if c[12] > 0.0:
+                    f[k, a] = c[6 + a] / c[12]
+                    om[k, a] = c[9 + a] / c[12]
+                else:                        # the very first row: no interval behind it yet
+                    f[k, a] = f_b[m, a]
+                    om[k, a] = om_b[m, a]
+                c[6 + a] = 0.0
+                c[9 + a] = 0.0
+            c[12] = 0.0
+            k += 1
+    return f, om, c
+
+
 def sample_imu(truth: TruthChunk, terrain, rng: np.random.Generator, config: ImuConfig,
                state: ImuState | None = None) -> tuple[ImuFrame, ImuState]:
     """IMU samples over the chunk (terrain unused). Returns the frame and the state for the next chunk."""
@@ -235,9 +285,15 @@ def sample_imu(truth: TruthChunk, terrain, rng: np.random.Generator, config: Imu
         state = ImuState.initial(config, rng)
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 12))
-    f, om, valid, dyn = _imu_kernel(idx, truth.f_b_mps2, truth.omega_ib_b_rps, w, state.params, state.dynamic)
+    carry = state.carry if state.carry is not None else np.zeros(14)
+    if config.sampling == "interval":
+        f_true, om_true, carry = _interval_means(truth.f_b_mps2, truth.omega_ib_b_rps, idx, carry)
+        rows = np.arange(idx.shape[0])
+    else:
+        f_true, om_true, rows = truth.f_b_mps2, truth.omega_ib_b_rps, idx
+    f, om, valid, dyn = _imu_kernel(rows, f_true, om_true, w, state.params, state.dynamic)
     frame = ImuFrame(t_s=truth.t_s[idx], f_b_mps2=f, omega_ib_b_rps=om, valid=valid)
-    return frame, ImuState(last_k, state.params, dyn)
+    return frame, ImuState(last_k, state.params, dyn, carry)
 
 
 __all__ = ["IMU_GRADES", "ImuConfig", "ImuState", "sample_imu"]
