@@ -20,7 +20,7 @@ from numba import njit
 
 from terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
 
-from .ins import quat_to_dcm
+from .ins import propagate_chunk, quat_to_dcm
 
 N_ERR = 13
 G0 = 9.80665
@@ -66,6 +66,7 @@ def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b
     F[2, 2] = -3.0 / tau  # baro loop on the vertical channel (navigators.ins)
     Phi = np.empty((N_ERR, N_ERR))
     T = np.empty((N_ERR, N_ERR))
+    U = np.empty((N_ERR, N_ERR))
     st = np.empty(10)
     fb = np.empty(3)
     for s in range(1, n_steps + 1):
@@ -103,27 +104,38 @@ def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b
             for j in range(3):
                 F[3 + i, 9 + j] = C[i, j]
             F[6 + i, 12] = -C[i, 2]
-        # Phi = I + F dt + (F dt)^2 / 2
+        # Phi = I + F dt + (F dt)^2 / 2 (row-wise axpy over the nonzeros of F: F is sparse)
         for i in range(N_ERR):
             for j in range(N_ERR):
-                acc = 0.0
-                for m in range(N_ERR):
-                    acc += F[i, m] * F[m, j]
-                Phi[i, j] = F[i, j] * dt + 0.5 * acc * dt * dt
+                T[i, j] = 0.0
+            for m in range(N_ERR):
+                fim = F[i, m]
+                if fim != 0.0:
+                    for j in range(N_ERR):
+                        T[i, j] += fim * F[m, j]
+            for j in range(N_ERR):
+                Phi[i, j] = F[i, j] * dt + 0.5 * T[i, j] * dt * dt
             Phi[i, i] += 1.0
-        # P = Phi P Phi^T + Q
+        # P = Phi P Phi^T + Q = Phi (Phi P)^T + Q (P symmetric), both products over the nonzeros of Phi
         for i in range(N_ERR):
             for j in range(N_ERR):
-                acc = 0.0
-                for m in range(N_ERR):
-                    acc += Phi[i, m] * P[m, j]
-                T[i, j] = acc
+                T[i, j] = 0.0
+            for m in range(N_ERR):
+                pim = Phi[i, m]
+                if pim != 0.0:
+                    for j in range(N_ERR):
+                        T[i, j] += pim * P[m, j]
         for i in range(N_ERR):
             for j in range(N_ERR):
-                acc = 0.0
-                for m in range(N_ERR):
-                    acc += T[i, m] * Phi[j, m]
-                P[i, j] = acc + Q[i, j]
+                U[i, j] = Q[i, j]
+            for m in range(N_ERR):
+                pim = Phi[i, m]
+                if pim != 0.0:
+                    for j in range(N_ERR):
+                        U[i, j] += pim * T[j, m]
+        for i in range(N_ERR):
+            for j in range(N_ERR):
+                P[i, j] = 0.5 * (U[i, j] + U[j, i])
 
 
 @njit(cache=True)
@@ -267,3 +279,66 @@ def last_good_row(valid, f, out):
             out[2] = f[k, 2]
             return True
     return False
+
+
+@njit(cache=True)
+def baro_prepare(valid, h_baro_m, geopotential, usable, h_geometric):
+    """usable = valid & finite height; h_geometric = geometric height of the ISA pressure altitude
+    (h = r0 H / (r0 - H), US 1976 r0) if geopotential, else the height itself. Returns all(usable)."""
+    all_ok = True
+    for i in range(h_baro_m.shape[0]):
+        hb = h_baro_m[i]
+        ok = valid[i] and np.isfinite(hb)
+        usable[i] = ok
+        all_ok = all_ok and ok
+        h_geometric[i] = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb) if geopotential else hb
+    return all_ok
+
+
+@njit(cache=True)
+def fused_segment(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, h_baro_raw, baro_valid,
+                  geopotential, baro_usable, h_baro_geo, accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model,
+                  interval_samples, hist, P, Q, last_f_b, t_ekf0, dt_ekf, collect, ts, rng_m, theta,
+                  ira_valid, decimation, formula, rows):
+    """One whole frame of navigators.ins_trn_ekf's segment work in one call (no fix inside the frame):
+    baro_prepare, ins.propagate_chunk, last_good_row, predict_covariance, is_positive_definite and (when
+    collect) collect_ira - the same kernels, in the same order, as the step-by-step path.
+
+    Returns (bad IMU samples, invalid baro samples, EKF steps, covariance PD, rows, no-returns, no-solution).
+    """
+    n_b = t_baro.shape[0]
+    all_ok = baro_prepare(baro_valid, h_baro_raw, geopotential, baro_usable, h_baro_geo)
+    n_baro_bad = 0
+    if not all_ok:
+        for i in range(n_b):
+            if t_baro[i] <= t[t.shape[0] - 1] and not baro_usable[i]:
+                n_baro_bad += 1
+    bad = propagate_chunk(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, h_baro_geo,
+                          baro_usable, accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model, interval_samples,
+                          hist)
+    last_good_row(imu_ok, f_b, last_f_b)
+    n_steps = int(np.floor((t[t.shape[0] - 1] - t_ekf0) / dt_ekf + 1e-9))
+    pd = True
+    if n_steps > 0:
+        predict_covariance(P, Q, t, f_b, hist, ins_state, last_f_b, accel_bias_b, t_ekf0, dt_ekf, n_steps,
+                           tau_baro_s)
+        pd = is_positive_definite(P)
+    m = n_ret = n_nan = 0
+    if collect:
+        have_baro = n_b > 0
+        if all_ok:
+            m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ts, rng_m, theta, ira_valid,
+                                          decimation, t_baro, h_baro_raw, have_baro, geopotential, formula,
+                                          rows)
+        else:
+            k = 0
+            tb = np.empty(n_b)
+            hb = np.empty(n_b)
+            for i in range(n_b):
+                if baro_usable[i]:
+                    tb[k] = t_baro[i]
+                    hb[k] = h_baro_raw[i]
+                    k += 1
+            m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ts, rng_m, theta, ira_valid,
+                                          decimation, tb[:k], hb[:k], k > 0, geopotential, formula, rows)
+    return bad, n_baro_bad, n_steps, pd, m, n_ret, n_nan

@@ -29,11 +29,9 @@ import math
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from terrain.geodesy import OMEGA_EARTH_RPS, meridian_radius_m, prime_vertical_radius_m
-
 from . import _ekf_kernels as kern
 from .frames import SensorFrames
-from .ins import StrapdownIns, quat_to_dcm
+from .ins import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
 from .ira_geometry import FORMULAS, closest_point_ned
 from .protocol import Estimate, Health
 from .tercom import TercomBatch, TercomFix, correlate
@@ -43,10 +41,7 @@ N_ERR = 13
 CHI2_2DOF_99_99 = 18.42
 R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 _EMPTY = np.zeros(0)
-
-
-def _skew(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+_EMPTY_BOOL = np.zeros(0, np.bool_)
 
 
 def _is_pd(P: np.ndarray) -> bool:
@@ -72,6 +67,8 @@ class InsTrnNavigator:
     pressure altitude, a geopotential height; convert it to geometric height (h = r0 H / (r0 - H), r0 =
     6356766 m, US 1976) before eq 1/2 (about +5 m at 5600 m). remove_bias: mean-removed MAD (tercom).
     init_height_from_baro: take the INS height from the first baro sample after reset (see _segment).
+    Speed: a frame with no fix due inside it runs as one numba call (navigators._ekf_kernels.fused_segment);
+    set the attribute `fused = False` for the step-by-step path (the same numbers, to round-off).
     """
 
     def __init__(
@@ -158,6 +155,10 @@ class InsTrnNavigator:
         self._Q = None
         self._rows = np.empty((0, 6))
         self._baro_cache = None
+        self._hist = np.empty((0, 10))
+        self._bbuf = np.empty(0)
+        self._vbuf = np.empty(0, np.bool_)
+        self.fused = True  # False: the step-by-step path (same numbers; kept for tests and fixes)
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
@@ -197,6 +198,9 @@ class InsTrnNavigator:
             return self.estimate()
         t = np.asarray(imu.t_s, float)
         n = t.size
+        if self._fused_ok(frames, t):
+            self._fused_segment(frames, t)
+            return self.estimate()
         a = 0
         while a < n:  # split the chunk at fix times so that fixes are applied when they fall due
             if self.aiding is None:
@@ -211,6 +215,85 @@ class InsTrnNavigator:
         return self.estimate()
 
     # ------------------------------------------------------------------ internals
+    def _fused_ok(self, frames: SensorFrames, t: np.ndarray) -> bool:
+        """The common frame - no fix falls due inside it, the INS height is initialised, and the aiding (if
+        any) is the IRA with a closest-point formula of the kernels - runs as one kernel call."""
+        if not self.fused:
+            return False
+        if self.init_height_from_baro and not self._height_initialised and frames.baro is not None:
+            return False
+        if self.aiding is None:
+            return True
+        return (self.aiding == "ira" and self.dp_min_m <= 0.0 and self.formula in kern.FORMULA_CODES
+                and float(t[-1]) < self._t_batch0 + self.fix_period_s - 1e-9)
+
+    def _fused_segment(self, frames: SensorFrames, t: np.ndarray) -> None:
+        """_segment(frames, 0, n) as one numba call (navigators._ekf_kernels.fused_segment)."""
+        imu = frames.imu
+        n = t.shape[0]
+        ins = self.ins
+        baro = frames.baro
+        if baro is not None:  # (tau_baro_s is always set here: validated positive)
+            tb, hb_raw, vb_raw = baro.t_s, baro.h_baro_m, baro.valid
+        else:
+            tb, hb_raw, vb_raw = _EMPTY, _EMPTY, _EMPTY_BOOL
+        nb = tb.shape[0]
+        if self._hist.shape[0] < n:
+            self._hist = np.empty((max(n, 16), 10))
+        if self._bbuf.shape[0] < nb:
+            self._bbuf = np.empty(max(nb, 16))
+            self._vbuf = np.empty(max(nb, 16), np.bool_)
+        ira = frames.ira if self.aiding == "ira" else None
+        collect = ira is not None and ira.t_s.shape[0] > 0
+        if collect:
+            ts, rng_m, theta, iv = ira.t_s, ira.range_m, ira.look_angle_rad, ira.valid
+            if self._rows.shape[0] < ts.shape[0]:
+                self._rows = np.empty((max(ts.shape[0], 64), 6))
+        else:
+            ts = rng_m = theta = _EMPTY
+            iv = _EMPTY_BOOL
+        if not np.isfinite(self._t_ekf):
+            self._t_ekf = float(t[-1])
+        if self._Q is None:
+            self._Q = self._process_noise(self.dt_ekf)
+            self.kf.Q = self._Q
+        P = self.kf.P
+        if not (P.flags.c_contiguous and P.dtype == np.float64):
+            P = self.kf.P = np.ascontiguousarray(P, dtype=float)
+        tau = 1e30 if ins.tau_baro_s is None else float(ins.tau_baro_s)
+        bad, n_baro_bad, n_steps, pd, m, n_ret, n_nan = kern.fused_segment(
+            ins.state, ins.prev_imu, ins.baro_state, t, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid,
+            tb, hb_raw, vb_raw, self.baro_geopotential, self._vbuf[:nb], self._bbuf[:nb],
+            ins.accel_bias_b, ins.gyro_bias_b, tau, GRAVITY_MODELS[ins.gravity_model],
+            ins.imu_samples == "interval", self._hist[:n], P, self._Q, self._last_f_b, float(self._t_ekf),
+            self.dt_ekf, collect, ts, rng_m, theta, iv, self.ira_decimation,
+            kern.FORMULA_CODES.get(self.formula, 1), self._rows)
+        t0 = float(t[0])
+        if n_baro_bad:
+            self._count_skip(t0, "baro_invalid", n_baro_bad, "baro samples invalid")
+        ins.bad_imu_samples += int(bad)
+        ins.t_s = float(t[-1])
+        if bad:
+            self._count_skip(t0, "imu_invalid", bad, "IMU samples invalid (held previous)")
+        if n_steps > 0:
+            if not pd:
+                if np.all(np.isfinite(P)):
+                    w, V = np.linalg.eigh(0.5 * (P + P.T))
+                    self.kf.P = (V * np.clip(w, 1e-12, None)) @ V.T
+                else:
+                    self.kf.P = self._P_good.copy()
+                self._count_skip(float(t[-1]), "covariance_not_pd", 1, "covariance repaired after prediction")
+            self._t_ekf += n_steps * self.dt_ekf
+        self._P_good[:] = self.kf.P
+        self.kf.x[:] = 0.0
+        if n_ret:
+            self._count_skip(t0, "altimeter_no_return", n_ret,
+                             f"{n_ret} altimeter samples without a valid return")
+        if n_nan:
+            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
+        if m:
+            self.batch.add_rows(self._rows[:m].copy())
+
     def _baro(self, frames: SensorFrames):
         """(t, geometric height, usable mask, all usable) of the frame's baro samples, computed once per
         frame; None without a baro frame."""
@@ -219,12 +302,12 @@ class InsTrnNavigator:
             return None
         if self._baro_cache is not None and self._baro_cache[0] is baro:
             return self._baro_cache[1]
-        tb, hb = baro.t_s, baro.h_baro_m
-        vb = baro.valid & np.isfinite(hb)
-        hb_raw = hb
-        if self.baro_geopotential:
-            hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
-        out = (tb, hb, vb, bool(vb.all()), hb_raw)
+        tb, hb_raw = baro.t_s, baro.h_baro_m
+        n = hb_raw.shape[0]
+        vb = np.empty(n, np.bool_)
+        hb = np.empty(n)
+        all_ok = kern.baro_prepare(baro.valid, hb_raw, self.baro_geopotential, vb, hb)
+        out = (tb, hb, vb, bool(all_ok), hb_raw)
         self._baro_cache = (baro, out)
         return out
 
@@ -284,7 +367,8 @@ class InsTrnNavigator:
             if not (P.flags.c_contiguous and P.dtype == np.float64):
                 P = self.kf.P = np.ascontiguousarray(P, dtype=float)
             kern.predict_covariance(P, self._Q, t_imu, f_b, hist, self.ins.state, self._last_f_b,
-                                    self.ins.accel_bias_b, self._t_ekf, dt, n_steps, float(self.ins.tau_baro_s))
+                                    self.ins.accel_bias_b, self._t_ekf, dt, n_steps,
+                                    float(self.ins.tau_baro_s))
             if not kern.is_positive_definite(P):
                 if np.all(np.isfinite(P)):
                     w, V = np.linalg.eigh(0.5 * (P + P.T))
@@ -328,7 +412,8 @@ class InsTrnNavigator:
             self._rows)
         t0 = float(t_imu[0])
         if n_bad:
-            self._count_skip(t0, "altimeter_no_return", n_bad, f"{n_bad} altimeter samples without a valid return")
+            self._count_skip(t0, "altimeter_no_return", n_bad,
+                             f"{n_bad} altimeter samples without a valid return")
         if n_nan:
             self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
         if m:

@@ -73,6 +73,28 @@ def _axis_cells(x0, step, n, origin, spacing, n_posts, idx, frac, ok):
 
 
 @njit(cache=True, error_model="numpy")
+def _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, span_lat, span_lon):
+    """True if the DEM posts around every sample +- the shift spans hold no NaN (no lookup can be void)."""
+    n_lat, n_lon = heights.shape
+    lat_lo = lat_hi = lat_k[0]
+    lon_lo = lon_hi = lon_k[0]
+    for k in range(lat_k.shape[0]):
+        lat_lo = min(lat_lo, lat_k[k])
+        lat_hi = max(lat_hi, lat_k[k])
+        lon_lo = min(lon_lo, lon_k[k])
+        lon_hi = max(lon_hi, lon_k[k])
+    r0 = max(int(np.floor((lat_lo - span_lat - lat0) / dlat)) - 1, 0)
+    r1 = min(int(np.floor((lat_hi + span_lat - lat0) / dlat)) + 2, n_lat - 1)
+    c0 = max(int(np.floor((lon_lo - span_lon - lon0) / dlon)) - 1, 0)
+    c1 = min(int(np.floor((lon_hi + span_lon - lon0) / dlon)) + 2, n_lon - 1)
+    for r in range(r0, r1 + 1):
+        for c in range(c0, c1 + 1):
+            if heights[r, c] != heights[r, c]:
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def mad_surface(
     heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
 ):
@@ -100,6 +122,8 @@ def mad_surface(
     tmp = np.empty(n)
     col_ok = np.ones(n, np.bool_)
     n_pass = 2 if remove_bias else 1
+    void_free = _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, half * abs(dlat_cell),
+                                 half * abs(dlon_cell))
     for pss in range(n_pass):
         for k in range(m):
             _axis_cells(lat_k[k], dlat_cell, n, lat0, dlat, n_lat, ri, ru, rok)
@@ -125,6 +149,18 @@ def mad_surface(
                     h0 = heights[r, j]
                     g[r - i_lo, b] = h0 + cv[b] * (heights[r, j + 1] - h0)
             hk = h_meas_k[k]
+            if void_free and not remove_bias:  # the common case in one fused loop per row
+                for a in range(n):
+                    if not rok[a]:
+                        continue
+                    ga = g[ri[a] - i_lo]
+                    gb = g[ri[a] + 1 - i_lo]
+                    u = ru[a]
+                    acc_a = acc[a]
+                    for b in range(n):
+                        x = ga[b]
+                        acc_a[b] += abs(hk - (x + u * (gb[b] - x)))
+                continue
             for a in range(n):
                 if not rok[a]:
                     continue

@@ -9,7 +9,9 @@ each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
   same initial condition, timed just before and just after the closed loop (the faster is kept);
 - closed_loop_ratio: their ratio (target >= 0.5);
 - closed_loop_ms_per_tick_by_stage: where a guidance tick's wall time goes (flight core, sensors,
-  navigator, the rest of the loop: termination checks, logging, guidance);
+  navigator - TERCOM fixes amortised, closed_loop_tercom_fixes of them fall in the timed window - the rest
+  of the loop: termination checks, logging, guidance), beside closed_loop_ms_per_tick and the bare
+  JSBSim time for the same steps (closed_loop_bare_jsbsim_ms_per_tick). Everything runs single-threaded.
 - env_sim_seconds_per_wall_second: simulated seconds per wall second of the gymnasium env (default
   scenario, random actions, resets included).
 """
@@ -69,6 +71,7 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default", sim_s:
         loop.tick()
     bare_before = bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref)
     steps0 = loop.jsbsim_steps
+    fixes0 = len(getattr(loop.navigator, "fixes", ()))
     stage0 = dict(loop.stage_s)
     t0 = time.perf_counter()
     while loop.termination is None and (loop.jsbsim_steps - steps0) < n_ref:
@@ -77,6 +80,7 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default", sim_s:
     # the faster of two bare timings (before and after), so machine-load drift cannot flatter the ratio
     bare = max(bare_before, bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref))
     steps = loop.jsbsim_steps - steps0
+    n_fixes = len(getattr(loop.navigator, "fixes", ())) - fixes0
     ticks = steps // loop.steps_per_tick
     cl = steps / wall if wall > 0 else math.nan
     return {
@@ -88,8 +92,11 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default", sim_s:
         "closed_loop_navigator": sc.navigator_name,
         "closed_loop_sim_seconds": steps * loop.dt_s,
         "closed_loop_steps_per_tick": loop.steps_per_tick,
+        "closed_loop_ms_per_tick": 1e3 * wall / max(ticks, 1),
+        "closed_loop_bare_jsbsim_ms_per_tick": 1e3 * loop.steps_per_tick / bare if bare > 0 else math.nan,
         "closed_loop_ms_per_tick_by_stage": {k: round(1e3 * (v - stage0[k]) / max(ticks, 1), 4)
                                              for k, v in loop.stage_s.items()},
+        "closed_loop_tercom_fixes": n_fixes,
     }
 
 
