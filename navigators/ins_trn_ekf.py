@@ -67,6 +67,10 @@ class InsTrnNavigator:
     pressure altitude, a geopotential height; convert it to geometric height (h = r0 H / (r0 - H), r0 =
     6356766 m, US 1976) before eq 1/2 (about +5 m at 5600 m). remove_bias: mean-removed MAD (tercom).
     init_height_from_baro: take the INS height from the first baro sample after reset (see _segment).
+    baro_bias_sigma_m: 1-sigma bias of the barometric height the vertical channel is slaved to. The filter
+    does not estimate it (the IRA/TERCOM fixes are horizontal), so the height error follows the baro's bias
+    and the reported down-position variance adds baro_bias_sigma_m^2 (without it the baro loop's variance
+    collapses to a metre while the true height error is the baro bias).
     Speed: a frame with no fix due inside it runs as one numba call (navigators._ekf_kernels.fused_segment);
     set the attribute `fused = False` for the step-by-step path (the same numbers, to round-off).
     """
@@ -96,6 +100,7 @@ class InsTrnNavigator:
         baro_geopotential: bool = True,
         remove_bias: bool = False,
         init_height_from_baro: bool = True,
+        baro_bias_sigma_m: float = 10.0,
         name: str | None = None,
     ):
         if aiding not in (None, "ira", "radar_altimeter"):
@@ -144,6 +149,9 @@ class InsTrnNavigator:
         self.baro_geopotential = bool(baro_geopotential)
         self.remove_bias = bool(remove_bias)
         self.init_height_from_baro = bool(init_height_from_baro)
+        if not (math.isfinite(baro_bias_sigma_m) and baro_bias_sigma_m >= 0.0):
+            raise ValueError(f"baro_bias_sigma_m must be a finite number >= 0, got {baro_bias_sigma_m!r}")
+        self.baro_bias_sigma_m = float(baro_bias_sigma_m)
         self._height_initialised = False
         self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
         self.health = Health()
@@ -547,6 +555,7 @@ class InsTrnNavigator:
         st = self.ins.state
         roll, pitch, yaw = kern.euler_from_quat(st[6:10])
         P = self.kf.P[:9, :9].copy()
+        P[2, 2] += self.baro_bias_sigma_m**2
         sig_h = math.sqrt(max(P[0, 0] + P[1, 1], 0.0))
         if not math.isfinite(float(st.sum())):
             self.health.ok, self.health.status = False, "diverged"

@@ -119,3 +119,15 @@ def test_crosswind_short_proposed_beats_conventional():
     assert prop.size > 3000                                            # 50 Hz over two minutes
     assert np.median(prop) < 0.6 * np.median(conv)
     assert np.median(prop) < 10.0 and np.median(conv) > 10.0
+
+
+def test_default_short_vertical_error_is_inside_the_reported_3_sigma(default_short):
+    """The vertical channel follows the barometer, whose bias the filter cannot observe: the reported
+    down sigma must cover it (before the baro-bias term it collapsed to ~0.3 m while the error was ~8 m)."""
+    _, res, _ = default_short
+    a = res.arrays
+    settled = a["t_s"] >= 20.0
+    err_d = np.abs(a["err_ned_m"][settled, 2])
+    sigma_d = np.sqrt(a["est_cov_diag"][settled, 2])
+    assert np.mean(err_d <= 3.0 * sigma_d) > 0.95
+    assert np.median(sigma_d) < 30.0          # and it is not inflated beyond the baro class
