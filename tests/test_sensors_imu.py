@@ -175,8 +175,9 @@ def test_from_mapping_rejects_unknown_keys_and_grades():
 
 
 def test_interval_sampling_is_the_mean_over_each_interval_across_chunks():
-    """sampling="interval": each sample is the trapezoid mean of f and the step-start mean of omega over
-    (t_{k-1}, t_k], computed here independently; chunking does not change it."""
+    """sampling="interval": each sample is the trapezoid mean of f and the step-start mean of omega (scaled to
+    the rotation of JSBSim's Euler quaternion step) over (t_{k-1}, t_k], computed here independently;
+    chunking does not change it."""
     truth = straight_truth(400)
     rng = np.random.default_rng(3)
     truth.f_b_mps2[:] = rng.normal(0, 3, (400, 3))
@@ -196,7 +197,9 @@ def test_interval_sampling_is_the_mean_over_each_interval_across_chunks():
             assert j1 - j0 == step
             f = truth.f_b_mps2
             want_f = np.mean([(f[m - 1] + f[m]) / 2 for m in range(j0 + 1, j1 + 1)], axis=0)
-            want_w = truth.omega_ib_b_rps[j0:j1].mean(axis=0)
+            w = truth.omega_ib_b_rps[j0:j1]
+            wdt = np.linalg.norm(w, axis=1) * (truth.t_s[1] - truth.t_s[0])
+            want_w = (w * (2 * np.arctan(wdt / 2) / wdt)[:, None]).mean(axis=0)
             np.testing.assert_allclose(whole.f_b_mps2[i], want_f, atol=1e-12)
             np.testing.assert_allclose(whole.omega_ib_b_rps[i], want_w, atol=1e-12)
 

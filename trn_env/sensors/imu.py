@@ -11,8 +11,10 @@ Sampling. A real strapdown IMU integrates: each output at t_k is the velocity an
 (t_{k-1}, t_k] divided by the interval. `sampling="interval"` (the default) reproduces that from the truth
 rows consistently with JSBSim's own integration: the specific force is the trapezoid mean of the rows in the
 interval and the rate the mean of the rates at the start of each step (JSBSim's rectangular rotational
-integrator), so a perfect IMU integrated by an "interval" INS follows JSBSim to about a metre over 10 min
-(tests/test_nav_ins_jsbsim.py); `sampling="instant"` reports the truth at the sample instants instead.
+integrator). JSBSim advances its attitude quaternion by one Euler step per frame and renormalises, so the
+body turns by 2 atan(|w| dt / 2) per step about the rate it reports, not |w| dt: the rate of each step is
+scaled to the rotation the body actually made (what a real gyro senses). A perfect IMU integrated by an
+"interval" INS then follows JSBSim to a few centimetres over 10 min (tests/test_nav_ins_jsbsim.py); `sampling="instant"` reports the truth at the sample instants instead.
 
 Grade presets. "navigation" is seed 000 Table 2: accelerometer bias 50 ug, random walk 10 ug; gyro bias
 0.005 deg/h, random walk 0.005 deg/h (all 1 sigma). The table gives the random walks without a time unit;
@@ -40,6 +42,7 @@ from trn_env.sensors.common import (
     config_from_mapping,
     gm_coefficients,
     sample_steps,
+    trusted_frame,
 )
 from trn_env.truth import TruthChunk
 
@@ -148,7 +151,7 @@ class ImuState(NamedTuple):
     drive_g, white sigma_a, white sigma_g, quantum_a, quantum_g, dt (see `_imu_kernel`).
     dynamic: Gauss-Markov biases gm_a (3), gm_g (3), quantiser remainders res_a (3), res_g (3).
     carry: interval sampling's running sums: previous truth row f (3) and omega (3), sums of f (3) and
-    omega (3) since the last sample, their count, and 1 once a previous row exists (14).
+    omega (3) since the last sample, their count, 1 once a previous row exists, the previous row's time (15).
     """
 
     last_k: int | None
@@ -175,7 +178,7 @@ class ImuState(NamedTuple):
              config.accel_quantum_mps, config.gyro_quantum_rad, dt_s]])
         dynamic = np.concatenate([z[24:27] * config.accel_bias_instability_mps2,
                                   z[27:30] * config.gyro_bias_instability_rps, np.zeros(6)])
-        return cls(None, params, dynamic, np.zeros(14))
+        return cls(None, params, dynamic, np.zeros(15))
 
     @property
     def accel_matrix(self) -> np.ndarray:
@@ -243,7 +246,7 @@ def _imu_kernel(idx, f_b, om_b, w, params, dynamic):
 
 
 @njit(cache=True)
-def _interval_means(f_b, om_b, idx, carry):
+def _interval_means(t_s, f_b, om_b, idx, carry):
     """Means over each sample's interval (t_{k-1}, t_k] of the truth rows: specific force by the trapezoid
     rule, rate by the step-start (rectangular) rule. Every truth row is one step; idx are the sample rows.
     Sums run across chunk boundaries through `carry` (see ImuState). Returns f (n, 3), omega (n, 3), carry.
@@ -255,14 +258,18 @@ def _interval_means(f_b, om_b, idx, carry):
     k = 0
     for m in range(f_b.shape[0]):
         if c[13] > 0.0:                      # the step from the previous row to row m
+            dt = t_s[m] - c[14]
+            w = np.sqrt(c[3] * c[3] + c[4] * c[4] + c[5] * c[5]) * dt
+            scale = 2.0 * np.arctan(0.5 * w) / w if w > 1e-12 else 1.0   # JSBSim's Euler quaternion step
             for a in range(3):
                 c[6 + a] += 0.5 * (c[a] + f_b[m, a])
-                c[9 + a] += c[3 + a]
+                c[9 + a] += c[3 + a] * scale
             c[12] += 1.0
         for a in range(3):
             c[a] = f_b[m, a]
             c[3 + a] = om_b[m, a]
         c[13] = 1.0
+        c[14] = t_s[m]
         if k < n and idx[k] == m:
             for a in range(3):
                 if c[12] > 0.0:
@@ -285,14 +292,14 @@ def sample_imu(truth: TruthChunk, terrain, rng: np.random.Generator, config: Imu
         state = ImuState.initial(config, rng)
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 12))
-    carry = state.carry if state.carry is not None else np.zeros(14)
+    carry = state.carry if state.carry is not None else np.zeros(15)
     if config.sampling == "interval":
-        f_true, om_true, carry = _interval_means(truth.f_b_mps2, truth.omega_ib_b_rps, idx, carry)
+        f_true, om_true, carry = _interval_means(truth.t_s, truth.f_b_mps2, truth.omega_ib_b_rps, idx, carry)
         rows = np.arange(idx.shape[0])
     else:
         f_true, om_true, rows = truth.f_b_mps2, truth.omega_ib_b_rps, idx
     f, om, valid, dyn = _imu_kernel(rows, f_true, om_true, w, state.params, state.dynamic)
-    frame = ImuFrame(t_s=truth.t_s[idx], f_b_mps2=f, omega_ib_b_rps=om, valid=valid)
+    frame = trusted_frame(ImuFrame, t_s=truth.t_s[idx], f_b_mps2=f, omega_ib_b_rps=om, valid=valid)
     return frame, ImuState(last_k, state.params, dyn, carry)
 
 
