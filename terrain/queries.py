@@ -44,6 +44,9 @@ from terrain.kernels import bilinear
 _INF = np.inf
 _OUT_OF_CONE = 1e300  # _ra_eval's value outside the beam (inf: no terrain / beyond max range)
 _PRUNED = 1e301  # IRA coarse sample skipped by the block bound (it and its intervals cannot beat the best)
+W_MIN_M = 0.02  # arc length (m) at which the cone-boundary search stops
+COARSE_ARC_M = 20.0  # arc step (m) at which the boundary searches' coarse phase stops
+FINE_SLOPE = 2.0  # bound on |d range / d arc| along the cone boundary used to skip fine phases
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
 _COS24 = np.cos(2.0 * np.pi * np.arange(24) / 24)  # azimuths sampling the beam-cone boundary
 _SIN24 = np.sin(2.0 * np.pi * np.arange(24) / 24)
@@ -89,13 +92,19 @@ def _geo_of_ned(x, y, z, ha, s, c, m, n, dm):
     """Inverse of _ned: (dphi, dlam, h_p) of the NED point (x, y, z) by fixed-point iteration."""
     mh = m + ha
     nh = n + ha
-    hp = ha - z
-    dphi = x / (m + hp)
-    dlam = y / ((n + hp) * c)
+    hp0 = ha - z
+    # 1 / (m + hp) = im0 (1 - (hp - hp0) im0) to (8 m / 6.4e6 m)^2 relative: two divisions per call
+    im0 = 1.0 / (m + hp0)
+    in0 = 1.0 / (n + hp0)
+    ic = 1.0 / c
+    dphi = x * im0
+    dlam = y * in0 * ic
+    hp = hp0
     for _ in range(3):
-        hp = ha - z + 0.5 * mh * dphi * dphi + 0.5 * nh * c * c * dlam * dlam
-        dphi = (x - 0.5 * nh * s * c * dlam * dlam - 0.5 * dm * dphi * dphi) / (m + hp)
-        dlam = (y + mh * s * dphi * dlam) / ((n + hp) * c)
+        hp = hp0 + 0.5 * mh * dphi * dphi + 0.5 * nh * c * c * dlam * dlam
+        d = hp - hp0
+        dphi = (x - 0.5 * nh * s * c * dlam * dlam - 0.5 * dm * dphi * dphi) * (im0 * (1.0 - d * im0))
+        dlam = (y + mh * s * dphi * dlam) * (in0 * (1.0 - d * in0)) * ic
     return dphi, dlam, hp
 
 
@@ -311,7 +320,7 @@ def _pattern_search(
     f = f0
     touched = False
     it = 0
-    while step > 5e-4 and it < 400:
+    while step > 1e-3 and it < 400:
         it += 1
         best_f = f
         best_i = fi
@@ -399,6 +408,7 @@ def _boundary_eval(
     max_range,
     az_rad,
     t_guess,
+    sl_guess,
 ):
     """Range of the first terrain hit along the cone-boundary ray at azimuth az_rad (inf if none)."""
     ca = np.cos(az_rad)
@@ -409,7 +419,14 @@ def _boundary_eval(
     # secant from the previous range (any crossing on the boundary ray is a terrain point in the cone)
     t0 = t_guess
     g0 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t0)
+    if g0 == g0 and abs(g0) < 1e-4 and t0 > 0.0 and t0 <= max_range:
+        return t0, dx, dy, dz, sl_guess
     t1 = t_guess + 1.0
+    if sl_guess < 0.0 and g0 == g0:
+        # Newton step with the slope dg/dt of the neighbouring boundary ray (secant from then on)
+        step_n = -g0 / sl_guess
+        if abs(step_n) < 2.0 * cell_m and abs(step_n) > 1e-6:
+            t1 = t_guess + step_n
     if g0 == g0:
         for _ in range(12):
             g1 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t1)
@@ -417,7 +434,8 @@ def _boundary_eval(
                 break
             if abs(g1) < 1e-4:
                 if t1 > 0.0 and t1 <= max_range:
-                    return t1, dx, dy, dz
+                    sl = (g1 - g0) / (t1 - t0)
+                    return t1, dx, dy, dz, sl
                 break
             if g1 == g0:
                 break
@@ -457,8 +475,50 @@ def _boundary_eval(
         max_range,
     )
     if t != t:
-        return _INF, dx, dy, dz
-    return t, dx, dy, dz
+        return _INF, dx, dy, dz, 0.0
+    return t, dx, dy, dz, 0.0
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _boundary_search(
+    heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm, ax, ay, az, e1x, e1y,
+    e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, w_stop,
+):
+    """Shrinking local 1-D search in azimuth along the cone boundary for the closest boundary terrain hit.
+
+    st (float64[9]): resumable state (best range fb, centre azimuth, its ray dx, dy, dz, range guess t_ref,
+    slope dg/dt, current step w rad, unused); halves w until w <= w_stop. The reach from the start azimuth is
+    +-(initial w)."""
+    fb = st[0]
+    centre = st[1]
+    t_ref = st[5]
+    sl = st[6]
+    w = st[7]
+    while w > w_stop:
+        for sgn in (-0.5, 0.5):
+            a = centre + sgn * w
+            fa, ddx, ddy, ddz, sla = _boundary_eval(
+                heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
+                ax, ay, az,
+                e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, a, t_ref, sl,
+            )
+            if sla < 0.0:
+                sl = sla
+            if fa < fb:
+                fb = fa
+                centre = a
+                st[2] = ddx
+                st[3] = ddy
+                st[4] = ddz
+                break
+        if fb < _INF:
+            t_ref = fb
+        w *= 0.5
+    st[0] = fb
+    st[1] = centre
+    st[5] = t_ref
+    st[6] = sl
+    st[7] = w
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -627,7 +687,12 @@ def _ra_one(
             bi1 = min(i_hi // bs, nbi - 1)
             bj0 = j_lo // bs
             bj1 = min(j_hi // bs, nbj - 1)
-            scanned = np.zeros((bi1 - bi0 + 1, bj1 - bj0 + 1), dtype=np.bool_)
+            nbw = bj1 - bj0 + 1
+            scanned = np.zeros((bi1 - bi0 + 1, nbw), dtype=np.bool_)
+            # blocks in the box that may hold a point in the cone, with the lower bound of their range
+            blk_lb2 = np.empty((bi1 - bi0 + 1) * nbw)
+            blk_id = np.empty((bi1 - bi0 + 1) * nbw, dtype=np.int64)
+            n_blk = 0
             for bi in range(bi0, bi1 + 1):
                 pi0 = max(bi * bs, i_lo)
                 pi1 = min(bi * bs + bs - 1 if bi < nbi - 1 else n_lat - 1, i_hi)
@@ -649,8 +714,9 @@ def _ra_one(
                     # lower bound of the range to any point of the block (curvature only adds depth)
                     dh = max(np.sqrt(dn_ * dn_ + de_ * de_) * 0.998 - 2.0, 0.0)
                     dv = max(ha - hmx, 0.0)
+                    lb2 = dh * dh + dv * dv
                     bound = post_best + 0.5 * cell_m
-                    if dh * dh + dv * dv > bound * bound:
+                    if lb2 > bound * bound:
                         continue
                     # the block's bounding sphere must reach into the cone
                     cx = 0.5 * (n0 + n1)
@@ -664,24 +730,40 @@ def _ra_one(
                         cos_c = min(max(cos_c, -1.0), 1.0)
                         if np.arccos(cos_c) - np.arcsin(rad / cn) > half_beam:
                             continue
-                    scanned[bi - bi0, bj - bj0] = True
-                    for i in range(pi0, pi1 + 1):
-                        dphi = lat0 + i * dlat - lat
-                        for j in range(pj0, pj1 + 1):
-                            hp = heights[i, j]
-                            if hp != hp:
-                                continue
-                            dlam = lon0 + j * dlon - lon
-                            x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
-                            r = np.sqrt(x * x + y * y + z * z)
-                            if r > max_range:
-                                continue
-                            if x * ax + y * ay + z * az < cosb * r:
-                                rbuf[i - i_lo + 1, j - j_lo + 1] = -r  # out of the cone: raw range, negated
-                                continue
-                            rbuf[i - i_lo + 1, j - j_lo + 1] = r
-                            if r < post_best:
-                                post_best = r
+                    blk_lb2[n_blk] = lb2
+                    blk_id[n_blk] = (bi - bi0) * nbw + (bj - bj0)
+                    n_blk += 1
+            # best first: the closest posts found early prune the remaining blocks
+            order = np.argsort(blk_lb2[:n_blk])
+            for q_blk in range(n_blk):
+                bound = post_best + 0.5 * cell_m
+                if blk_lb2[order[q_blk]] > bound * bound:
+                    break
+                bid = blk_id[order[q_blk]]
+                bi = bi0 + bid // nbw
+                bj = bj0 + bid % nbw
+                pi0 = max(bi * bs, i_lo)
+                pi1 = min(bi * bs + bs - 1 if bi < nbi - 1 else n_lat - 1, i_hi)
+                pj0 = max(bj * bs, j_lo)
+                pj1 = min(bj * bs + bs - 1 if bj < nbj - 1 else n_lon - 1, j_hi)
+                scanned[bi - bi0, bj - bj0] = True
+                for i in range(pi0, pi1 + 1):
+                    dphi = lat0 + i * dlat - lat
+                    for j in range(pj0, pj1 + 1):
+                        hp = heights[i, j]
+                        if hp != hp:
+                            continue
+                        dlam = lon0 + j * dlon - lon
+                        x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
+                        r = np.sqrt(x * x + y * y + z * z)
+                        if r > max_range:
+                            continue
+                        if x * ax + y * ay + z * az < cosb * r:
+                            rbuf[i - i_lo + 1, j - j_lo + 1] = -r  # out of the cone: raw range, negated
+                            continue
+                        rbuf[i - i_lo + 1, j - j_lo + 1] = r
+                        if r < post_best:
+                            post_best = r
             for bi in range(bi0, bi1 + 1):
                 for bj in range(bj0, bj1 + 1):
                     if not scanned[bi - bi0, bj - bj0]:
@@ -864,143 +946,77 @@ def _ra_one(
         return
     # 5) on the cone boundary the pattern search can stall: 1-D search in azimuth along the boundary from
     #    every refined point near the best (the closest point may lie on another stretch of the boundary)
+    #    Two phases: every boundary search first shrinks to a coarse step; only those whose coarse best
+    #    lies within the fine phase's possible gain of the overall best are finished.
     final = _INF
     fin_lat = fin_lon = fin_h = np.nan
+    n_b = 0
+    bst = np.empty((n_done, 9))
     for p_res in range(n_done):
         if res_key[p_res] > final + margin or res_f[p_res] == _INF:
             continue
         best = res_f[p_res]
         best_i = done_i[p_res]
         best_j = done_j[p_res]
-        touched_best = res_t[p_res]
         la = lat0 + best_i * dlat
         lo = lon0 + best_j * dlon
         hp = bilinear(heights, lat0, lon0, dlat, dlon, la, lo)
         x, y, z = _ned(la - lat, lo - lon, hp, ha, s, c, m, n, dm)
         cos_off = (x * ax + y * ay + z * az) / best
-        out_lat, out_lon, out_h = la, lo, hp
-        if touched_best or cos_off < cosb + 1e-6:
-            az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
-            width = min(np.pi, 3.0 * cell_m / max(best * sinb, 1e-6))
-            fb, dx, dy, dz = _boundary_eval(
-                heights,
-                lat0,
-                lon0,
-                dlat,
-                dlon,
-                h_min,
-                h_max,
-                cell_m,
-                lat,
-                lon,
-                ha,
-                s,
-                c,
-                m,
-                n,
-                dm,
-                ax,
-                ay,
-                az,
-                e1x,
-                e1y,
-                e1z,
-                e2x,
-                e2y,
-                e2z,
-                cosb,
-                sinb,
-                max_range,
-                az0,
-                best,
-            )
-            centre = az0
-            t_ref = fb if fb < _INF else best
-            w = width
-            w_min = 5e-3 / max(best * sinb, 1e-6)
-            while w > w_min:
-                for sgn in (-0.5, 0.5):
-                    a = centre + sgn * w
-                    fa, _, _, _ = _boundary_eval(
-                        heights,
-                        lat0,
-                        lon0,
-                        dlat,
-                        dlon,
-                        h_min,
-                        h_max,
-                        cell_m,
-                        lat,
-                        lon,
-                        ha,
-                        s,
-                        c,
-                        m,
-                        n,
-                        dm,
-                        ax,
-                        ay,
-                        az,
-                        e1x,
-                        e1y,
-                        e1z,
-                        e2x,
-                        e2y,
-                        e2z,
-                        cosb,
-                        sinb,
-                        max_range,
-                        a,
-                        t_ref,
-                    )
-                    if fa < fb:
-                        fb = fa
-                        centre = a
-                        break
-                if fb < _INF:
-                    t_ref = fb
-                w *= 0.5
-            if fb < best:
-                _, dx, dy, dz = _boundary_eval(
-                    heights,
-                    lat0,
-                    lon0,
-                    dlat,
-                    dlon,
-                    h_min,
-                    h_max,
-                    cell_m,
-                    lat,
-                    lon,
-                    ha,
-                    s,
-                    c,
-                    m,
-                    n,
-                    dm,
-                    ax,
-                    ay,
-                    az,
-                    e1x,
-                    e1y,
-                    e1z,
-                    e2x,
-                    e2y,
-                    e2z,
-                    cosb,
-                    sinb,
-                    max_range,
-                    centre,
-                    t_ref,
-                )
-                dphi, dlam, hpb = _geo_of_ned(fb * dx, fb * dy, fb * dz, ha, s, c, m, n, dm)
-                best = fb
-                out_lat = lat + dphi
-                out_lon = lon + dlam
-                out_h = bilinear(heights, lat0, lon0, dlat, dlon, out_lat, out_lon)
         if best < final:
             final = best
-            fin_lat, fin_lon, fin_h = out_lat, out_lon, out_h
+            fin_lat, fin_lon, fin_h = la, lo, hp
+        if res_t[p_res] or cos_off < cosb + 1e-6:
+            az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
+            r_arc = max(best * sinb, 1e-6)
+            st = bst[n_b]
+            fb, dx, dy, dz, sl = _boundary_eval(
+                heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
+                ax, ay, az,
+                e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, az0, best, 0.0,
+            )
+            st[0] = fb
+            st[1] = az0
+            st[2] = dx
+            st[3] = dy
+            st[4] = dz
+            st[5] = fb if fb < _INF else best
+            st[6] = sl
+            st[7] = min(np.pi, 3.0 * cell_m / r_arc)
+            st[8] = r_arc
+            _boundary_search(
+                heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
+                ax, ay, az,
+                e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, COARSE_ARC_M / r_arc,
+            )
+            n_b += 1
+            if st[0] < final:
+                final = st[0]
+                fin_lat = np.nan  # position filled in below
+    # fine phase, most promising first; gain bound = fine reach (arc) x range slope along the boundary
+    for _rep in range(n_b):
+        q_best = -1
+        for q in range(n_b):
+            if bst[q, 0] < _INF and (q_best < 0 or bst[q, 0] < bst[q_best, 0]):
+                q_best = q
+        if q_best < 0:
+            break
+        st = bst[q_best]
+        gain = FINE_SLOPE * st[7] * st[8] + 0.05
+        if st[0] - gain > final:
+            break
+        _boundary_search(
+            heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm, ax, ay, az,
+            e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, W_MIN_M / st[8],
+        )
+        fb = st[0]
+        if fb <= final:
+            final = fb
+            dphi, dlam, _ = _geo_of_ned(fb * st[2], fb * st[3], fb * st[4], ha, s, c, m, n, dm)
+            fin_lat = lat + dphi
+            fin_lon = lon + dlam
+            fin_h = bilinear(heights, lat0, lon0, dlat, dlon, fin_lat, fin_lon)
+        st[0] = _INF  # done
     best = final
     out_lat, out_lon, out_h = fin_lat, fin_lon, fin_h
     out[0] = 1.0

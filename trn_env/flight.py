@@ -165,6 +165,28 @@ class AutopilotTargets:
         if self.agl_cmd_m <= 0.0:
             raise ValueError(f"AutopilotTargets.agl_cmd_m must be > 0, got {self.agl_cmd_m}")
 
+    @classmethod
+    def trusted(cls, lateral_mode: LateralMode, heading_cmd_rad: float, track_cmd_rad: float,
+                bank_limit_rad: float, vertical_mode: VerticalMode, altitude_cmd_m: float, agl_cmd_m: float,
+                vs_cmd_mps: float, speed_mode: SpeedMode, tas_cmd_mps: float,
+                engage: bool = True) -> AutopilotTargets:
+        """Targets from values the caller has already checked (enum modes, finite floats within the limits
+        of __post_init__), without re-validating them: the guidance loop's per-tick constructor."""
+        t = cls.__new__(cls)
+        t.__dict__.update(lateral_mode=lateral_mode, heading_cmd_rad=heading_cmd_rad,
+                          track_cmd_rad=track_cmd_rad, bank_limit_rad=bank_limit_rad,
+                          vertical_mode=vertical_mode, altitude_cmd_m=altitude_cmd_m, agl_cmd_m=agl_cmd_m,
+                          vs_cmd_mps=vs_cmd_mps, speed_mode=speed_mode, tas_cmd_mps=tas_cmd_mps,
+                          engage=engage)
+        return t
+
+    def property_values(self) -> tuple[float, ...]:
+        """The ap/* values in AP_PROPERTIES order."""
+        return (float(self.lateral_mode), float(self.heading_cmd_rad), float(self.track_cmd_rad),
+                float(self.bank_limit_rad), float(self.vertical_mode), float(self.altitude_cmd_m),
+                float(self.agl_cmd_m), float(self.vs_cmd_mps), float(self.speed_mode),
+                float(self.tas_cmd_mps), 1.0 if self.engage else 0.0)
+
     def properties(self) -> dict[str, float]:
         """The ap/* property values these targets write."""
         return {
@@ -180,6 +202,11 @@ class AutopilotTargets:
             "ap/tas-cmd-mps": float(self.tas_cmd_mps),
             "ap/engage": 1.0 if self.engage else 0.0,
         }
+
+
+AP_PROPERTIES = ("ap/lateral-mode", "ap/heading-cmd-rad", "ap/track-cmd-rad", "ap/bank-limit-rad",
+                 "ap/vertical-mode", "ap/altitude-cmd-m", "ap/agl-cmd-m", "ap/vs-cmd-mps", "ap/speed-mode",
+                 "ap/tas-cmd-mps", "ap/engage")
 
 
 # Properties copied every step, in buffer-column order (JSBSim units; converted after the loop). The three
@@ -372,6 +399,8 @@ class Flight:
         self._wind_setters = tuple(self._node(f"atmosphere/wind-{a}-fps").set_double_value
                                    for a in ("north", "east", "down"))
         self._terrain_setter = self._node("position/terrain-elevation-asl-ft").set_double_value
+        self._ap_setters = tuple(self._node(n).set_double_value for n in AP_PROPERTIES)
+        self._ap_written: list[float | None] = [None] * len(AP_PROPERTIES)
         self._terrain_elevation_m = terrain_elevation_m
         self._written_wind: tuple[float, float, float] | None = None
         self._steady_wind_mps = np.zeros(3)
@@ -483,8 +512,11 @@ class Flight:
         """Write autopilot targets to the ap/* properties (Python sets targets; JSBSim flies)."""
         if not isinstance(targets, AutopilotTargets):
             raise ValueError(f"targets must be AutopilotTargets, got {type(targets).__name__}")
-        for name, value in targets.properties().items():
-            self._node(name).set_double_value(value)
+        written = self._ap_written
+        for k, value in enumerate(targets.property_values()):
+            if value != written[k]:         # only the values that changed (nothing else writes ap/*)
+                self._ap_setters[k](value)
+                written[k] = value
         self._targets = targets
 
     def set_terrain_elevation(self, h_m: float) -> None:

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrain.geodesy import C_en, lla_to_ecef, ned_offset_to_latlon
+from terrain.geodesy import WGS84_A_M, WGS84_E2, C_en, lla_to_ecef, ned_offset_to_latlon
 from trn_env.flight import AutopilotTargets, LateralMode, SpeedMode, VerticalMode
 from trn_env.truth import TruthChunk
 
@@ -50,6 +50,21 @@ G_MPS2 = 9.80665
 
 def _wrap_pi(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
+
+
+def _local_ne(points_ecef, lat_rad: float, lon_rad: float) -> list[tuple[float, float]]:
+    """North/east (m) of ECEF points (sequence of 3-tuples) in the tangent frame at (lat, lon, h = 0):
+    C_ne (r - r0), as Route.local_ne_m, in scalar math (this runs every guidance tick)."""
+    sl, cl = math.sin(lat_rad), math.cos(lat_rad)
+    so, co = math.sin(lon_rad), math.cos(lon_rad)
+    r_e = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * sl * sl)
+    x0, y0, z0 = r_e * cl * co, r_e * cl * so, r_e * (1.0 - WGS84_E2) * sl
+    c00, c10, c01 = -sl * co, -sl * so, -so
+    out = []
+    for x, y, z in points_ecef:
+        dx, dy, dz = x - x0, y - y0, z - z0
+        out.append((dx * c00 + dy * c10 + dz * cl, dx * c01 + dy * co))
+    return out
 
 
 @dataclass(frozen=True)
@@ -91,8 +106,10 @@ class Route:
                 raise ValueError(f"route waypoint {i} must be a Waypoint, got {w!r}")
         self.waypoints: tuple[Waypoint, ...] = tuple(wps)
         self._ecef = np.array([lla_to_ecef(w.lat_rad, w.lon_rad, 0.0) for w in wps])
-        for i in range(len(wps) - 1):
-            d = float(np.linalg.norm(self._ecef[i + 1] - self._ecef[i]))
+        self._ecef_t = tuple(tuple(float(x) for x in r) for r in self._ecef)
+        self._leg_lengths_m = tuple(float(np.linalg.norm(self._ecef[i + 1] - self._ecef[i]))
+                                    for i in range(len(wps) - 1))
+        for i, d in enumerate(self._leg_lengths_m):
             if d < 1.0:
                 raise ValueError(f"route waypoints {i} and {i + 1} coincide (leg {i} is {d:.2f} m long)")
 
@@ -104,7 +121,7 @@ class Route:
         return len(self.waypoints) - 1
 
     def leg_length_m(self, leg: int) -> float:
-        return float(np.linalg.norm(self._ecef[leg + 1] - self._ecef[leg]))
+        return self._leg_lengths_m[leg]
 
     def length_m(self) -> float:
         return sum(self.leg_length_m(i) for i in range(self.n_legs))
@@ -165,6 +182,11 @@ class Turn:
     direction: int
     exit_along_m: float
 
+    @property
+    def centre_ecef_t(self) -> tuple[float, float, float]:
+        c = self.centre_ecef_m
+        return float(c[0]), float(c[1]), float(c[2])
+
 
 class Guidance:
     """Flies a Route leg by leg from supplied estimates, returning AutopilotTargets.
@@ -196,6 +218,8 @@ class Guidance:
         frac = turn_bank_fraction
         if not isinstance(frac, (int, float, np.floating)) or not 0.3 <= frac <= 1:
             raise ValueError(f"Guidance.turn_bank_fraction must be within [0.3, 1], got {frac!r}")
+        if bank_limit_rad > math.radians(60.0):
+            raise ValueError(f"Guidance.bank_limit_rad must be <= 60 deg, got {bank_limit_rad}")
         if chi_inf_rad > math.pi / 2:
             raise ValueError(f"Guidance.chi_inf_rad must be <= pi/2, got {chi_inf_rad}")
         if vertical not in ("step", "linear"):
@@ -213,19 +237,30 @@ class Guidance:
         self.leg = 0
         self.done = False
         self.turn: Turn | None = None
-        self.wind_ne_mps = np.zeros(2)          # low-pass wind estimate (north, east)
+        self._wind_n = 0.0                      # low-pass wind estimate (north, east), m/s
+        self._wind_e = 0.0
         self._wind_t_s: float | None = None
 
+    @property
+    def wind_ne_mps(self) -> np.ndarray:
+        """The low-pass wind estimate (north, east), m/s."""
+        return np.array([self._wind_n, self._wind_e])
+
+    @wind_ne_mps.setter
+    def wind_ne_mps(self, value) -> None:
+        self._wind_n, self._wind_e = float(value[0]), float(value[1])
+
     # ------------------------------------------------------------------------------------------ geometry
-    def _leg_state_ne(self, ne: np.ndarray, leg: int) -> LegState:
-        a, b = ne[leg], ne[leg + 1]
-        ab = b - a
-        length = float(math.hypot(ab[0], ab[1]))
-        u = ab / length
-        rel = -a                                    # the estimate is the origin of the local frame
-        along = float(rel @ u)
-        cross = float(u[0] * rel[1] - u[1] * rel[0])
-        return LegState(leg, along, cross, length, math.atan2(u[1], u[0]))
+    def _leg_state_ne(self, ne, leg: int) -> LegState:
+        """ne: the waypoints' local north/east (rows of an array or 2-tuples)."""
+        a_n, a_e = float(ne[leg][0]), float(ne[leg][1])
+        ab_n, ab_e = float(ne[leg + 1][0]) - a_n, float(ne[leg + 1][1]) - a_e
+        length = math.hypot(ab_n, ab_e)
+        u_n, u_e = ab_n / length, ab_e / length
+        rel_n, rel_e = -a_n, -a_e                   # the estimate is the origin of the local frame
+        along = rel_n * u_n + rel_e * u_e
+        cross = u_n * rel_e - u_e * rel_n
+        return LegState(leg, along, cross, length, math.atan2(u_e, u_n))
 
     def leg_state(self, estimate) -> LegState:
         """Along/cross-track position of `estimate` on the active leg."""
@@ -236,19 +271,27 @@ class Guidance:
         """Radius of the ground-track circle flyable at turn_bank_fraction of the bank limit at the turn's
         largest ground speed TAS + |wind|: R = V^2 / (g tan(turn_bank_fraction * bank_limit))."""
         # the wind estimate is capped at 0.6 TAS (a bad heading estimate must not blow the circle up)
-        v = self.tas_mps + min(float(math.hypot(*self.wind_ne_mps)), 0.6 * self.tas_mps)
+        v = self.tas_mps + min(math.hypot(self._wind_n, self._wind_e), 0.6 * self.tas_mps)
         return v * v / (G_MPS2 * math.tan(self.turn_bank_fraction * self.bank_limit_rad))
 
-    def _turn_geometry(self, ne: np.ndarray, leg: int) -> tuple[float, float, int]:
+    @staticmethod
+    def _unit_legs(ne, leg: int):
+        """Unit vectors (n, e) of legs `leg` and leg + 1 in the local frame ne, and the waypoint between."""
+        a, w, b = ne[leg], ne[leg + 1], ne[leg + 2]
+        w_n, w_e = float(w[0]), float(w[1])
+        i_n, i_e = w_n - float(a[0]), w_e - float(a[1])
+        o_n, o_e = float(b[0]) - w_n, float(b[1]) - w_e
+        li, lo = math.hypot(i_n, i_e), math.hypot(o_n, o_e)
+        return (i_n / li, i_e / li), (o_n / lo, o_e / lo), (w_n, w_e)
+
+    def _turn_geometry(self, ne, leg: int) -> tuple[float, float, int]:
         """(anticipation distance, radius, direction) of the fillet from leg `leg` onto leg + 1, in the
         local frame ne; (0, 0, 0) for the last waypoint or a turn below 1 deg."""
         if leg + 1 >= self.route.n_legs:
             return 0.0, 0.0, 0
-        a, w, b = ne[leg], ne[leg + 1], ne[leg + 2]
-        q_in = (w - a) / math.hypot(*(w - a))
-        q_out = (b - w) / math.hypot(*(b - w))
+        q_in, q_out, _ = self._unit_legs(ne, leg)
         cross = q_in[0] * q_out[1] - q_in[1] * q_out[0]
-        dchi = abs(math.atan2(cross, float(q_in @ q_out)))
+        dchi = abs(math.atan2(cross, q_in[0] * q_out[0] + q_in[1] * q_out[1]))
         if dchi < math.radians(1.0):
             return 0.0, 0.0, 0
         radius = self.turn_radius_m()
@@ -267,43 +310,51 @@ class Guidance:
         d_turn, radius, direction = self._turn_geometry(ne, leg)
         if direction == 0:
             return None
-        a, w, b = ne[leg], ne[leg + 1], ne[leg + 2]
-        q_in = (w - a) / math.hypot(*(w - a))
-        q_out = (b - w) / math.hypot(*(b - w))
-        bis = q_out - q_in
-        dchi = math.acos(max(-1.0, min(1.0, float(q_in @ q_out))))
-        centre = w + radius / math.cos(0.5 * dchi) * bis / math.hypot(*bis)
+        q_in, q_out, w = self._unit_legs(ne, leg)
+        bis_n, bis_e = q_out[0] - q_in[0], q_out[1] - q_in[1]
+        dchi = math.acos(max(-1.0, min(1.0, q_in[0] * q_out[0] + q_in[1] * q_out[1])))
+        k = radius / math.cos(0.5 * dchi) / math.hypot(bis_n, bis_e)
         lat_c, lon_c = ned_offset_to_latlon(float(estimate.lat_rad), float(estimate.lon_rad), 0.0,
-                                            float(centre[0]), float(centre[1]))
+                                            w[0] + k * bis_n, w[1] + k * bis_e)
         return Turn(leg + 1, np.array(lla_to_ecef(lat_c, lon_c, 0.0)), radius, direction, d_turn)
 
     def _update_wind(self, estimate, t_s: float | None) -> None:
         v = getattr(estimate, "v_ned_mps", None)
         yaw = getattr(estimate, "yaw_rad", None)
-        if v is None or yaw is None or not math.isfinite(float(yaw)):
+        if v is None or yaw is None:
             return
-        w = np.array([float(v[0]) - self.tas_mps * math.cos(yaw), float(v[1]) - self.tas_mps * math.sin(yaw)])
-        if not np.all(np.isfinite(w)):
+        yaw = float(yaw)
+        if not math.isfinite(yaw):
+            return
+        w_n = float(v[0]) - self.tas_mps * math.cos(yaw)
+        w_e = float(v[1]) - self.tas_mps * math.sin(yaw)
+        if not (math.isfinite(w_n) and math.isfinite(w_e)):
             return
         if self._wind_t_s is None or t_s is None:
             gain = 1.0 if self._wind_t_s is None else 0.1
         else:
             gain = 1.0 - math.exp(-max(t_s - self._wind_t_s, 0.0) / self.wind_tau_s)
-        self.wind_ne_mps = self.wind_ne_mps + gain * (w - self.wind_ne_mps)
+        self._wind_n += gain * (w_n - self._wind_n)
+        self._wind_e += gain * (w_e - self._wind_e)
         self._wind_t_s = t_s if t_s is not None else (self._wind_t_s or 0.0)
 
     # ------------------------------------------------------------------------------------------- command
     def command(self, estimate, t_s: float | None = None) -> AutopilotTargets:
         """Autopilot targets for the current estimate (switching legs and flying turns as waypoints come)."""
-        for name in ("lat_rad", "lon_rad", "h_m"):
-            v = getattr(estimate, name, None)
+        lat = getattr(estimate, "lat_rad", None)
+        lon = getattr(estimate, "lon_rad", None)
+        h = getattr(estimate, "h_m", None)
+        for name, v in (("lat_rad", lat), ("lon_rad", lon), ("h_m", h)):
             if v is None or not math.isfinite(float(v)):
                 raise ValueError(f"guidance estimate.{name} must be a finite number, got {v!r}")
         self._update_wind(estimate, t_s)
-        lat, lon = float(estimate.lat_rad), float(estimate.lon_rad)
-        ne_all = self.route.local_ne_m_with(
-            self.turn.centre_ecef_m[None, :] if self.turn is not None else np.zeros((0, 3)), lat, lon)
-        ne = ne_all[:len(self.route)]
+        lat, lon = float(lat), float(lon)
+        route = self.route
+        n_wp = len(route.waypoints)
+        if self.turn is not None:
+            ne = _local_ne(route._ecef_t + (self.turn.centre_ecef_t,), lat, lon)
+        else:
+            ne = _local_ne(route._ecef_t, lat, lon)
         state = self._leg_state_ne(ne, self.leg)
         if self.turn is not None and state.along_m >= self.turn.exit_along_m:
             self.turn = None                          # crossed the exit half-plane: follow the leg
@@ -311,7 +362,7 @@ class Guidance:
             d_turn = self._turn_geometry(ne, self.leg)[0]
             if state.along_m < state.length_m - d_turn:
                 break
-            if self.leg + 1 >= self.route.n_legs:
+            if self.leg + 1 >= route.n_legs:
                 self.done = True
                 break
             turn = self._start_turn(ne, self.leg, estimate)
@@ -319,14 +370,13 @@ class Guidance:
             state = self._leg_state_ne(ne, self.leg)
             if turn is not None and state.along_m < turn.exit_along_m:
                 self.turn = turn
-                c = self.route.local_ne_m_with(turn.centre_ecef_m[None, :], lat, lon)[-1]
-                ne_all = np.vstack([ne, c[None, :]])
+                ne = ne[:n_wp] + _local_ne((turn.centre_ecef_t,), lat, lon)
         if self.turn is not None:
             # Beard & McLain (2012) sec. 10.3: orbit vector field around the fillet's centre.
-            c = ne_all[-1]
-            rel = -c                                  # estimate relative to the centre
-            d = float(math.hypot(rel[0], rel[1]))
-            phi = math.atan2(rel[1], rel[0])
+            c_n, c_e = ne[-1]
+            rel_n, rel_e = -c_n, -c_e                 # estimate relative to the centre
+            d = math.hypot(rel_n, rel_e)
+            phi = math.atan2(rel_e, rel_n)
             r = self.turn.radius_m
             v = getattr(estimate, "v_ned_mps", None)
             v_g = math.hypot(float(v[0]), float(v[1])) if v is not None else self.tas_mps
@@ -345,9 +395,9 @@ class Guidance:
             frac = min(max(state.along_m / state.length_m, 0.0), 1.0)
             alt = wp_from.alt_m + frac * (wp_to.alt_m - wp_from.alt_m)
         agl = wp_to.alt_ref == "agl"
-        return AutopilotTargets(
-            lateral_mode=LateralMode.TRACK, heading_cmd_rad=chi_c, track_cmd_rad=chi_c,
-            bank_limit_rad=self.bank_limit_rad,
-            vertical_mode=VerticalMode.HEIGHT_AGL if agl else VerticalMode.ALTITUDE_MSL,
-            altitude_cmd_m=alt if not agl else float(estimate.h_m), agl_cmd_m=alt if agl else 300.0,
-            vs_cmd_mps=0.0, speed_mode=SpeedMode.TAS, tas_cmd_mps=self.tas_mps)
+        # every value is checked already (finite estimate, positive TAS and bank limit, waypoint heights)
+        return AutopilotTargets.trusted(
+            LateralMode.TRACK, chi_c, chi_c, self.bank_limit_rad,
+            VerticalMode.HEIGHT_AGL if agl else VerticalMode.ALTITUDE_MSL,
+            float(alt) if not agl else float(h), float(alt) if agl else 300.0,
+            0.0, SpeedMode.TAS, self.tas_mps)

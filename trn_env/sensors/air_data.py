@@ -13,7 +13,16 @@ import numpy as np
 from numba import njit
 
 from navigators.frames import AirDataFrame
-from trn_env.sensors.common import check_nonneg, check_positive, config_from_mapping, sample_steps
+from trn_env.sensors.common import (
+    EMPTY_B,
+    EMPTY_F,
+    check_nonneg,
+    check_positive,
+    config_from_mapping,
+    no_sample_due,
+    sample_steps,
+    trusted_frame,
+)
 from trn_env.truth import TruthChunk
 
 
@@ -83,10 +92,14 @@ def sample_air_data(truth: TruthChunk, terrain, rng: np.random.Generator, config
     """Air-data samples over the chunk (terrain unused)."""
     if state is None:
         state = AirDataState.initial(config, rng)
+    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+        return trusted_frame(AirDataFrame, t_s=EMPTY_F, tas_mps=EMPTY_F, alpha_rad=EMPTY_F, beta_rad=EMPTY_F,
+                             valid=EMPTY_B), state
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 3))
     out, valid = _air_kernel(idx, truth.tas_mps, truth.alpha_rad, truth.beta_rad, w, state.bias, state.sigma)
-    frame = AirDataFrame(t_s=truth.t_s[idx], tas_mps=out[0], alpha_rad=out[1], beta_rad=out[2], valid=valid)
+    frame = trusted_frame(AirDataFrame, t_s=truth.t_s[idx], tas_mps=out[0], alpha_rad=out[1], beta_rad=out[2],
+                          valid=valid)
     return frame, AirDataState(last_k, state.bias, state.sigma)
 
 

@@ -22,6 +22,7 @@ from trn_env.sensors.common import (
     check_positive,
     config_from_mapping,
     sample_steps,
+    trusted_frame,
 )
 from trn_env.truth import TruthChunk
 
@@ -161,7 +162,7 @@ def sample_baro(truth: TruthChunk, terrain, rng: np.random.Generator, config: Ba
     w = rng.standard_normal(idx.shape[0])
     h, valid, y, t = _baro_kernel(truth.t_s, truth.p_static_pa, idx, w, state.bias_m, config.noise_m,
                                   config.lag_tau_s, state.lag_y_m, state.lag_t_s)
-    frame = BaroFrame(t_s=truth.t_s[idx], h_baro_m=h, valid=valid)
+    frame = trusted_frame(BaroFrame, t_s=truth.t_s[idx], h_baro_m=h, valid=valid)
     return frame, BaroState(last_k, state.bias_m, y, t)
 
 

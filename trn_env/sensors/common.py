@@ -64,6 +64,28 @@ def initial_grid_index(t0_s: float, rate_hz: float) -> int:
     return int(math.ceil(t0_s * rate_hz - _GRID_EPS)) - 1
 
 
+def no_sample_due(t_s: np.ndarray, rate_hz: float, last_k: int | None) -> bool:
+    """True when a sensor at `rate_hz` with carried grid index `last_k` samples no step of t_s (its last
+    step's grid index is not past last_k; t_s increases), so sample_steps would return no indices and
+    carry last_k unchanged. Same floating-point expression as _grid_indices."""
+    n = t_s.shape[0]
+    return last_k is not None and (n == 0 or math.floor(float(t_s[n - 1]) * rate_hz + _GRID_EPS) <= last_k)
+
+
+def trusted_frame(cls, **values):
+    """A frame dataclass (navigators.frames) built from arrays the sensor model made consistent itself,
+    without its per-construction length check (the hot path constructs several frames per tick)."""
+    frame = object.__new__(cls)
+    frame.__dict__.update(values)
+    return frame
+
+
+# zero-length arrays shared by the frames of sensors with no sample due in a chunk (nothing to write)
+EMPTY_F = np.zeros(0)
+EMPTY_B = np.zeros(0, dtype=bool)
+EMPTY_F3 = np.zeros((0, 3))
+
+
 def sample_steps(t_s: np.ndarray, rate_hz: float, last_k: int | None) -> tuple[np.ndarray, int | None]:
     """Indices of the truth steps sampled by a sensor at `rate_hz` and the grid index to carry forward.
 

@@ -16,11 +16,16 @@ from numba import njit
 from navigators.frames import GnssFrame
 from terrain.geodesy import WGS84_A_M, WGS84_E2
 from trn_env.sensors.common import (
+    EMPTY_B,
+    EMPTY_F,
+    EMPTY_F3,
     check_nonneg,
     check_positive,
     config_from_mapping,
     gm_coefficients,
+    no_sample_due,
     sample_steps,
+    trusted_frame,
 )
 from trn_env.truth import TruthChunk
 
@@ -144,12 +149,15 @@ def sample_gnss(truth: TruthChunk, terrain, rng: np.random.Generator, config: Gn
     """GNSS fixes over the chunk (terrain unused); invalid (NaN) inside outage windows."""
     if state is None:
         state = GnssState.initial(config, rng)
+    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+        return trusted_frame(GnssFrame, t_s=EMPTY_F, lat_rad=EMPTY_F, lon_rad=EMPTY_F, h_m=EMPTY_F,
+                             v_ned_mps=EMPTY_F3, valid=EMPTY_B), state
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 9))
     t, lat, lon, h, v, valid, drift = _gnss_kernel(
         idx, truth.t_s, truth.lat_rad, truth.lon_rad, truth.h_msl_m, truth.v_ned_mps, w, state.params,
         state.drift_ned_m, state.outages)
-    frame = GnssFrame(t_s=t, lat_rad=lat, lon_rad=lon, h_m=h, v_ned_mps=v, valid=valid)
+    frame = trusted_frame(GnssFrame, t_s=t, lat_rad=lat, lon_rad=lon, h_m=h, v_ned_mps=v, valid=valid)
     return frame, GnssState(last_k, drift, state.params, state.outages)
 
 

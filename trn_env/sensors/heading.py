@@ -15,7 +15,16 @@ import numpy as np
 from numba import njit
 
 from navigators.frames import HeadingFrame
-from trn_env.sensors.common import check_nonneg, check_positive, config_from_mapping, sample_steps
+from trn_env.sensors.common import (
+    EMPTY_B,
+    EMPTY_F,
+    check_nonneg,
+    check_positive,
+    config_from_mapping,
+    no_sample_due,
+    sample_steps,
+    trusted_frame,
+)
 from trn_env.truth import TruthChunk
 
 
@@ -84,10 +93,12 @@ def sample_heading(truth: TruthChunk, terrain, rng: np.random.Generator, config:
     """Heading samples over the chunk (terrain unused)."""
     if state is None:
         state = HeadingState.initial(config, rng)
+    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+        return trusted_frame(HeadingFrame, t_s=EMPTY_F, heading_rad=EMPTY_F, valid=EMPTY_B), state
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal(idx.shape[0])
     out, valid = _heading_kernel(idx, truth.yaw_rad, w, state.coefficients_rad, state.noise_rad)
-    frame = HeadingFrame(t_s=truth.t_s[idx], heading_rad=out, valid=valid)
+    frame = trusted_frame(HeadingFrame, t_s=truth.t_s[idx], heading_rad=out, valid=valid)
     return frame, HeadingState(last_k, state.coefficients_rad, state.noise_rad)
 
 

@@ -14,7 +14,8 @@ interval and the rate the mean of the rates at the start of each step (JSBSim's 
 integrator). JSBSim advances its attitude quaternion by one Euler step per frame and renormalises, so the
 body turns by 2 atan(|w| dt / 2) per step about the rate it reports, not |w| dt: the rate of each step is
 scaled to the rotation the body actually made (what a real gyro senses). A perfect IMU integrated by an
-"interval" INS then follows JSBSim to a few centimetres over 10 min (tests/test_nav_ins_jsbsim.py); `sampling="instant"` reports the truth at the sample instants instead.
+"interval" INS then follows JSBSim to a few centimetres over 10 min (tests/test_nav_ins_jsbsim.py).
+`sampling="instant"` reports the truth at the sample instants instead.
 
 Grade presets. "navigation" is seed 000 Table 2: accelerometer bias 50 ug, random walk 10 ug; gyro bias
 0.005 deg/h, random walk 0.005 deg/h (all 1 sigma). The table gives the random walks without a time unit;

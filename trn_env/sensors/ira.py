@@ -30,13 +30,17 @@ from numba import njit
 from navigators.frames import IraFrame
 from terrain import queries
 from trn_env.sensors.common import (
+    EMPTY_B,
+    EMPTY_F,
     antenna_positions,
     check_nonneg,
     check_positive,
     check_vector3,
     config_from_mapping,
     ned_vectors_kernel,
+    no_sample_due,
     sample_steps,
+    trusted_frame,
 )
 from trn_env.truth import TruthChunk
 
@@ -72,6 +76,11 @@ class IraConfig:
             raise ValueError(f"IraConfig.look_angle_method must be one of {LOOK_ANGLE_METHODS}, "
                              f"got {self.look_angle_method!r}")
         object.__setattr__(self, "lever_arm_b_m", check_vector3(name, "lever_arm_b_m", self.lever_arm_b_m))
+        # derived constants of the per-chunk hot path (not fields: eq, hash and replace ignore them)
+        object.__setattr__(self, "_half_window_rad", float(np.deg2rad(hw)))
+        object.__setattr__(self, "_look_angle_noise_rad", float(np.deg2rad(self.look_angle_noise_deg)))
+        object.__setattr__(self, "_method_index", LOOK_ANGLE_METHODS.index(self.look_angle_method))
+        object.__setattr__(self, "_has_lever_arm", any(x != 0.0 for x in self.lever_arm_b_m))
 
     @classmethod
     def noise_free(cls, **overrides: Any) -> IraConfig:
@@ -117,6 +126,23 @@ def _look_angle(r, r_l, r_r, l1, l2, method):
 
 
 @njit(cache=True)
+def _gather(idx, t_s, lat, lon, h, C_bn, v_ned):
+    """Rows idx of the truth fields the IRA needs, in one pass (contiguous copies)."""
+    m = idx.shape[0]
+    t, la, lo, hh = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    c = np.empty((m, 3, 3))
+    v = np.empty((m, 3))
+    for i in range(m):
+        j = idx[i]
+        t[i], la[i], lo[i], hh[i] = t_s[j], lat[j], lon[j], h[j]
+        for a in range(3):
+            v[i, a] = v_ned[j, a]
+            for b in range(3):
+                c[i, a, b] = C_bn[j, a, b]
+    return t, la, lo, hh, c, v
+
+
+@njit(cache=True)
 def _ira_kernel(lat, lon, h, q_valid, q_lat, q_lon, q_h, C_bn, l1, l2, method, max_range, w, sig_r, sig_th):
     """R and theta from the closest points q seen from antennas (lat, lon, h); noise w (n, 2)."""
     n = lat.shape[0]
@@ -145,22 +171,23 @@ def sample_ira(truth: TruthChunk, terrain, rng: np.random.Generator, config: Ira
     """IRA samples (R, theta) over the chunk against the true terrain `terrain` (a terrain.Dem)."""
     if state is None:
         state = IraState.initial(config, rng)
+    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+        return trusted_frame(IraFrame, t_s=EMPTY_F, range_m=EMPTY_F, look_angle_rad=EMPTY_F,
+                             valid=EMPTY_B), state
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 2))
-    t = truth.t_s[idx]
     if idx.shape[0] == 0:
-        return IraFrame(t_s=t, range_m=np.zeros(0), look_angle_rad=np.zeros(0),
-                        valid=np.zeros(0, bool)), IraState(last_k)
-    C_bn = truth.C_bn[idx]
-    lat, lon, h = antenna_positions(truth.lat_rad[idx], truth.lon_rad[idx], truth.h_msl_m[idx], C_bn,
-                                    config.lever_arm_b_m)
-    ret = queries.ira_return(terrain, lat, lon, h, truth.v_ned_mps[idx], C_bn,
-                             np.deg2rad(config.half_window_deg), config.max_range_m)
+        return trusted_frame(IraFrame, t_s=EMPTY_F, range_m=EMPTY_F, look_angle_rad=EMPTY_F,
+                             valid=EMPTY_B), IraState(last_k)
+    t, lat, lon, h, C_bn, v_ned = _gather(idx, truth.t_s, truth.lat_rad, truth.lon_rad, truth.h_msl_m,
+                                          truth.C_bn, truth.v_ned_mps)
+    if config._has_lever_arm:
+        lat, lon, h = antenna_positions(lat, lon, h, C_bn, config.lever_arm_b_m)
+    ret = queries.ira_return(terrain, lat, lon, h, v_ned, C_bn, config._half_window_rad, config.max_range_m)
     r, theta, valid = _ira_kernel(lat, lon, h, ret.valid, ret.lat_rad, ret.lon_rad, ret.h_m, C_bn,
-                                  config.baseline_left_m, config.baseline_right_m,
-                                  LOOK_ANGLE_METHODS.index(config.look_angle_method), config.max_range_m, w,
-                                  config.range_noise_m, np.deg2rad(config.look_angle_noise_deg))
-    return IraFrame(t_s=t, range_m=r, look_angle_rad=theta, valid=valid), IraState(last_k)
+                                  config.baseline_left_m, config.baseline_right_m, config._method_index,
+                                  config.max_range_m, w, config.range_noise_m, config._look_angle_noise_rad)
+    return trusted_frame(IraFrame, t_s=t, range_m=r, look_angle_rad=theta, valid=valid), IraState(last_k)
 
 
 __all__ = ["IraConfig", "IraState", "look_angle_from_ranges", "sample_ira"]

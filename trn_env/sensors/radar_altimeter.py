@@ -18,12 +18,16 @@ from numba import njit
 from navigators.frames import RadarAltimeterFrame
 from terrain import queries
 from trn_env.sensors.common import (
+    EMPTY_B,
+    EMPTY_F,
     antenna_positions,
     check_nonneg,
     check_positive,
     check_vector3,
     config_from_mapping,
+    no_sample_due,
     sample_steps,
+    trusted_frame,
 )
 from trn_env.truth import TruthChunk
 
@@ -89,6 +93,8 @@ def sample_radar_altimeter(truth: TruthChunk, terrain, rng: np.random.Generator,
     """Radar-altimeter ranges over the chunk against the true terrain `terrain` (a terrain.Dem)."""
     if state is None:
         state = RadarAltimeterState.initial(config, rng)
+    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+        return trusted_frame(RadarAltimeterFrame, t_s=EMPTY_F, range_m=EMPTY_F, valid=EMPTY_B), state
     idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal(idx.shape[0])
     t = truth.t_s[idx]
@@ -102,7 +108,7 @@ def sample_radar_altimeter(truth: TruthChunk, terrain, rng: np.random.Generator,
                                          config.max_range_m)
     r, valid = _ra_noise(ret.valid, ret.range_m, w, config.noise_const_m, config.noise_fraction,
                          config.max_range_m)
-    return RadarAltimeterFrame(t_s=t, range_m=r, valid=valid), RadarAltimeterState(last_k)
+    return trusted_frame(RadarAltimeterFrame, t_s=t, range_m=r, valid=valid), RadarAltimeterState(last_k)
 
 
 __all__ = ["RadarAltimeterConfig", "RadarAltimeterState", "sample_radar_altimeter"]

@@ -76,6 +76,14 @@ class SensorSuite:
         self.states: dict[str, Any] = {name: None for name in SENSOR_NAMES}
         self._t_next_s: float | None = None
         self._dt_s = 0.01
+        self._plan = self._make_plan()
+
+    def _make_plan(self) -> tuple:
+        """(name, sample function, config, rng, needs terrain) of each configured sensor, in order (the
+        configs and generators are fixed at construction)."""
+        models = SENSOR_MODELS
+        return tuple((n, models[n].sample, self.configs[n], self.rngs[n], models[n].needs_terrain)
+                     for n in SENSOR_NAMES if self.configs[n] is not None)
 
     @classmethod
     def from_config(cls, mapping: dict[str, Any], seed: int | np.random.SeedSequence | None) -> SensorSuite:
@@ -99,12 +107,11 @@ class SensorSuite:
         t1 = float(truth.t_s[-1]) + self._dt_s if n else t0
         self._t_next_s = t1
         frames = SensorFrames(t_start_s=t0, t_end_s=t1)
-        for name in self.active:
-            model = SENSOR_MODELS[name]
-            if model.needs_terrain and terrain is None:
+        states = self.states
+        for name, sample, config, rng, needs_terrain in self._plan:
+            if needs_terrain and terrain is None:
                 raise ValueError(f"sensors.{name} needs the true terrain (a terrain.Dem); got None")
-            frame, self.states[name] = model.sample(truth, terrain, self.rngs[name], self.configs[name],
-                                                    self.states[name])
+            frame, states[name] = sample(truth, terrain, rng, config, states[name])
             setattr(frames, name, frame)
         return frames
 
