@@ -44,7 +44,7 @@ from terrain.kernels import bilinear
 _INF = np.inf
 _OUT_OF_CONE = 1e300  # _ra_eval's value outside the beam (inf: no terrain / beyond max range)
 _PRUNED = 1e301  # IRA coarse sample skipped by the block bound (it and its intervals cannot beat the best)
-W_MIN_M = 0.02  # arc length (m) at which the cone-boundary search stops
+W_MIN_M = 0.1  # arc length (m) at which the cone-boundary search stops
 COARSE_ARC_M = 20.0  # arc step (m) at which the boundary searches' coarse phase stops
 FINE_SLOPE = 2.0  # bound on |d range / d arc| along the cone boundary used to skip fine phases
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches

@@ -111,23 +111,31 @@ def _gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
 
 _TRUTH_LOGGED = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps",
                  "alpha_rad", "beta_rad", "wind_ned_mps")
+# columns of SimLog.truth_rows: t_s, then _TRUTH_LOGGED with the vectors' three components
+_TRUTH_ROW = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "v_n", "v_e", "v_d", "roll_rad", "pitch_rad", "yaw_rad",
+              "tas_mps", "alpha_rad", "beta_rad", "wind_n", "wind_e", "wind_d")
 
 
 @dataclass
 class SimLog:
     """In-memory log: per-tick truth rows and estimates, full-rate sensor readings, events.
 
-    The per-tick work is appending references (the truth chunk and a row index) and copies of the
-    estimate's numbers; arrays are assembled once, in `arrays()`.
+    The per-tick work is appending tuples of the truth row's and the estimate's numbers (the truth chunk
+    itself is not kept, so its memory is reused); arrays are assembled once, in `arrays()`.
     """
 
-    truth_rows: list[tuple[TruthChunk, int]] = field(default_factory=list)
+    truth_rows: list[tuple] = field(default_factory=list)
     est_rows: list[tuple] = field(default_factory=list)
     frames: list[SensorFrames] = field(default_factory=list)
     events: list[tuple[float, str, str]] = field(default_factory=list)
 
     def add_tick(self, truth: TruthChunk, i: int, est: Estimate) -> None:
-        self.truth_rows.append((truth, i))
+        v, w = truth.v_ned_mps, truth.wind_ned_mps
+        # row values in _TRUTH_ROW order
+        self.truth_rows.append((truth.t_s[i], truth.lat_rad[i], truth.lon_rad[i], truth.h_msl_m[i],
+                                v[i, 0], v[i, 1], v[i, 2], truth.roll_rad[i], truth.pitch_rad[i],
+                                truth.yaw_rad[i], truth.tas_mps[i], truth.alpha_rad[i], truth.beta_rad[i],
+                                w[i, 0], w[i, 1], w[i, 2]))
         self.est_rows.append((float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
                               np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
                               float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
@@ -153,9 +161,13 @@ class SimLog:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
         position), gnss_available, nav_ok, and sensor_<sensor>_<field> at the sensors' own rates."""
         out: dict[str, np.ndarray] = {}
-        out["t_s"] = np.array([float(c.t_s[i]) for c, i in self.truth_rows])
+        rows = np.array(self.truth_rows, float).reshape(-1, len(_TRUTH_ROW))
+        out["t_s"] = rows[:, 0].copy()
+        col = 1
         for name in _TRUTH_LOGGED:
-            out[f"true_{name}"] = np.array([getattr(c, name)[i] for c, i in self.truth_rows], float)
+            width = 3 if name in ("v_ned_mps", "wind_ned_mps") else 1
+            out[f"true_{name}"] = rows[:, col:col + width].copy() if width == 3 else rows[:, col].copy()
+            col += width
         h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
         out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
         cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 10
