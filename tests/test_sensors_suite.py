@@ -108,7 +108,8 @@ def test_real_flight_over_real_dem(dem):
         fl = flight_mod.Flight(ic, terrain_elevation_m=float(dem.height(lat, lon)))
     except flight_mod.TrimError as exc:     # the flight core's business, not the sensors'
         pytest.skip(f"flight core could not trim: {exc}")
-    cfg = {"imu": {"grade": "noise_free", "sampling": "instant"}, "baro": {"noise_free": True}, "gnss": {"noise_free": True},
+    cfg = {"imu": {"grade": "noise_free", "sampling": "instant"}, "baro": {"noise_free": True},
+           "gnss": {"noise_free": True},
            "radar_altimeter": {"noise_free": True, "beamwidth_deg": 17.0}, "ira": {"noise_free": True},
            "air_data": {"noise_free": True}, "heading": {"noise_free": True}}
     suite = SensorSuite.from_config(cfg, 0)
