@@ -951,7 +951,7 @@ def _ra_one(
     final = _INF
     fin_lat = fin_lon = fin_h = np.nan
     n_b = 0
-    bst = np.empty((n_done, 9))
+    bst = np.empty((2 * n_done, 9))
     for p_res in range(n_done):
         if res_key[p_res] > final + margin or res_f[p_res] == _INF:
             continue
@@ -969,30 +969,32 @@ def _ra_one(
         if res_t[p_res] or cos_off < cosb + 1e-6:
             az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
             r_arc = max(best * sinb, 1e-6)
-            st = bst[n_b]
-            fb, dx, dy, dz, sl = _boundary_eval(
+            fb0, dx0, dy0, dz0, sl0 = _boundary_eval(
                 heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                ax, ay, az,
-                e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, az0, best, 0.0,
+                ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, az0, best, 0.0,
             )
-            st[0] = fb
-            st[1] = az0
-            st[2] = dx
-            st[3] = dy
-            st[4] = dz
-            st[5] = fb if fb < _INF else best
-            st[6] = sl
-            st[7] = min(np.pi, 3.0 * cell_m / r_arc)
-            st[8] = r_arc
-            _boundary_search(
-                heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                ax, ay, az,
-                e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, COARSE_ARC_M / r_arc,
-            )
-            n_b += 1
-            if st[0] < final:
-                final = st[0]
-                fin_lat = np.nan  # position filled in below
+            # two reaches (+-3 and +-1.5 posts of arc): the wide search can step over a nearby minimum
+            for width_posts in (3.0, 1.5):
+                if width_posts < 2.0 and abs(bst[n_b - 1, 1] - az0) * r_arc < 0.75 * cell_m:
+                    break  # the wide search stayed near its start: the narrow one finds the same minimum
+                st = bst[n_b]
+                st[0] = fb0
+                st[1] = az0
+                st[2] = dx0
+                st[3] = dy0
+                st[4] = dz0
+                st[5] = fb0 if fb0 < _INF else best
+                st[6] = sl0
+                st[7] = min(np.pi, width_posts * cell_m / r_arc)
+                st[8] = r_arc
+                _boundary_search(
+                    heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
+                    ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, COARSE_ARC_M / r_arc,
+                )
+                n_b += 1
+                if st[0] < final:
+                    final = st[0]
+                    fin_lat = np.nan  # position filled in below
     # fine phase, most promising first; gain bound = fine reach (arc) x range slope along the boundary
     for _rep in range(n_b):
         q_best = -1

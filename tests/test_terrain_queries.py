@@ -546,3 +546,21 @@ def test_radar_altimeter_finds_the_closest_edge_point_on_noisy_terrain():
         edge = bf_radar_altimeter_boundary(dem, *st[:4], half_beam, 8000.0)
         ref = min(inner[0], edge[0])
         assert got.range_m[k] == pytest.approx(ref, abs=0.05), (RA_NOISY_ROWS[k], got.range_m[k], ref)
+
+
+# flight_sample states (seed 0, 20,000 states; (agl_m, index)) where the search with only the wide boundary
+# search (reach +-3 posts of arc) returned a cone-edge point 1.6 / 1.9 m farther than the closest one: it
+# stepped over a nearby local minimum of the range along the cone edge (fixed by the narrow second search).
+RA_EDGE_STATES = [(1500.0, 7841), (5000.0, 4893)]
+
+
+@pytest.mark.parametrize("agl_m, index", RA_EDGE_STATES)
+def test_radar_altimeter_edge_minimum_next_to_the_start_on_jacksboro(dems, agl_m, index):
+    from terrain.bench import flight_sample
+
+    dem = dems["jacksboro"]
+    lat, lon, h, _, C = flight_sample(dem, 20000, agl_m=agl_m)
+    st = (lat[index], lon[index], h[index], C[index])
+    got = queries.radar_altimeter_return(dem, *st, np.radians(20.0))
+    edge = bf_radar_altimeter_boundary(dem, *st, np.radians(20.0), 8000.0)
+    assert got.range_m[0] == pytest.approx(edge[0], abs=0.05), (got.range_m[0], edge[0])

@@ -7,7 +7,6 @@ repository folder.
 
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 
 import jsbsim
@@ -15,16 +14,11 @@ import jsbsim
 
 def aircraft_root() -> Path:
     """Folder holding one sub-folder per aircraft (e.g. kingair/kingair.xml)."""
-    try:
-        root = Path(str(resources.files("trn_env.aircraft")))
-        if root.is_dir():
+    here = Path(__file__).resolve().parent
+    for root in (here / "aircraft", here.parent / "aircraft"):   # installed package, then source checkout
+        if root.is_dir() and any(root.glob("*/*.xml")):
             return root
-    except ModuleNotFoundError:
-        pass
-    root = Path(__file__).resolve().parents[1] / "aircraft"
-    if root.is_dir():
-        return root
-    raise FileNotFoundError("trn-env aircraft data not found: reinstall the package (pip install .)")
+    raise FileNotFoundError(f"trn-env aircraft data not found next to {here}: reinstall (pip install .)")
 
 
 def available_aircraft() -> list[str]:
