@@ -16,9 +16,9 @@ from navigators.frames import AirDataFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
+    MappingConfig,
     check_nonneg,
     check_positive,
-    config_from_mapping,
     no_sample_due,
     sample_steps,
     trusted_frame,
@@ -27,7 +27,7 @@ from trn_env.truth import TruthChunk
 
 
 @dataclass(frozen=True)
-class AirDataConfig:
+class AirDataConfig(MappingConfig):
     """Air-data computer; 1 sigma; biases drawn once per run."""
 
     rate_hz: float = 10.0
@@ -49,12 +49,6 @@ class AirDataConfig:
         return replace(cls(tas_bias_mps=0.0, tas_noise_mps=0.0, alpha_bias_deg=0.0, alpha_noise_deg=0.0,
                            beta_bias_deg=0.0, beta_noise_deg=0.0), **overrides)
 
-    @classmethod
-    def from_mapping(cls, mapping: dict[str, Any] | None) -> AirDataConfig:
-        mapping = dict(mapping or {})
-        if mapping.pop("noise_free", False):
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping)
 
 
 class AirDataState(NamedTuple):

@@ -18,9 +18,9 @@ from numba import njit
 
 from navigators.frames import BaroFrame
 from trn_env.sensors.common import (
+    MappingConfig,
     check_nonneg,
     check_positive,
-    config_from_mapping,
     sample_steps,
     trusted_frame,
 )
@@ -78,7 +78,7 @@ def isa_pressure_altitude_m(p_pa):
 
 
 @dataclass(frozen=True)
-class BaroConfig:
+class BaroConfig(MappingConfig):
     """Barometric altimeter. Sigmas are 1 sigma."""
 
     rate_hz: float = 10.0
@@ -96,12 +96,6 @@ class BaroConfig:
         """No bias, noise or lag: the ISA pressure altitude of the true static pressure."""
         return replace(cls(bias_m=0.0, noise_m=0.0, lag_tau_s=0.0), **overrides)
 
-    @classmethod
-    def from_mapping(cls, mapping: dict[str, Any] | None) -> BaroConfig:
-        mapping = dict(mapping or {})
-        if mapping.pop("noise_free", False):
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping)
 
 
 class BaroState(NamedTuple):

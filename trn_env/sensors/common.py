@@ -176,3 +176,16 @@ def ned_vectors_kernel(lat0, lon0, h0, lat1, lon1, h1):
         for j in range(3):
             out[i, j] = c[0, j] * dx + c[1, j] * dy + c[2, j] * dz
     return out
+
+
+class MappingConfig:
+    """Mixin for sensor config dataclasses: `from_mapping` builds one from a scenario table, where the key
+    `noise_free = true` starts from the class's `noise_free()` configuration and the other keys override it.
+    Unknown keys and bad values raise ValueError naming the field (config_from_mapping)."""
+
+    @classmethod
+    def from_mapping(cls, mapping: dict | None):
+        mapping = dict(mapping or {})
+        if mapping.pop("noise_free", False):
+            return config_from_mapping(cls, mapping, cls.noise_free())
+        return config_from_mapping(cls, mapping)

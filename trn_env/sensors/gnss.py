@@ -19,9 +19,9 @@ from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     EMPTY_F3,
+    MappingConfig,
     check_nonneg,
     check_positive,
-    config_from_mapping,
     gm_coefficients,
     no_sample_due,
     sample_steps,
@@ -49,7 +49,7 @@ def _check_outages(value) -> tuple[tuple[float, float], ...]:
 
 
 @dataclass(frozen=True)
-class GnssConfig:
+class GnssConfig(MappingConfig):
     """GNSS fix model, SI, 1 sigma per axis."""
 
     rate_hz: float = 1.0
@@ -74,12 +74,6 @@ class GnssConfig:
         return replace(cls(horizontal_noise_m=0.0, vertical_noise_m=0.0, horizontal_drift_m=0.0,
                            vertical_drift_m=0.0, velocity_noise_mps=0.0), **overrides)
 
-    @classmethod
-    def from_mapping(cls, mapping: dict[str, Any] | None) -> GnssConfig:
-        mapping = dict(mapping or {})
-        if mapping.pop("noise_free", False):
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping)
 
     def available(self, t_s: np.ndarray) -> np.ndarray:
         """True where t_s lies outside every outage window."""

@@ -18,9 +18,9 @@ from navigators.frames import HeadingFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
+    MappingConfig,
     check_nonneg,
     check_positive,
-    config_from_mapping,
     no_sample_due,
     sample_steps,
     trusted_frame,
@@ -29,7 +29,7 @@ from trn_env.truth import TruthChunk
 
 
 @dataclass(frozen=True)
-class HeadingConfig:
+class HeadingConfig(MappingConfig):
     """Compass model, degrees, 1 sigma."""
 
     rate_hz: float = 10.0
@@ -46,12 +46,6 @@ class HeadingConfig:
     def noise_free(cls, **overrides: Any) -> HeadingConfig:
         return replace(cls(bias_deg=0.0, deviation_deg=0.0, noise_deg=0.0), **overrides)
 
-    @classmethod
-    def from_mapping(cls, mapping: dict[str, Any] | None) -> HeadingConfig:
-        mapping = dict(mapping or {})
-        if mapping.pop("noise_free", False):
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping)
 
 
 class HeadingState(NamedTuple):

@@ -32,11 +32,11 @@ from terrain import queries
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
+    MappingConfig,
     antenna_positions,
     check_nonneg,
     check_positive,
     check_vector3,
-    config_from_mapping,
     ned_vectors_kernel,
     no_sample_due,
     sample_steps,
@@ -48,7 +48,7 @@ LOOK_ANGLE_METHODS = ("range_difference", "exact")
 
 
 @dataclass(frozen=True)
-class IraConfig:
+class IraConfig(MappingConfig):
     """IRA model. Baselines and ranges in metres, angles in degrees, sigmas 1 sigma."""
 
     rate_hz: float = 50.0
@@ -86,12 +86,6 @@ class IraConfig:
     def noise_free(cls, **overrides: Any) -> IraConfig:
         return replace(cls(range_noise_m=0.0, look_angle_noise_deg=0.0), **overrides)
 
-    @classmethod
-    def from_mapping(cls, mapping: dict[str, Any] | None) -> IraConfig:
-        mapping = dict(mapping or {})
-        if mapping.pop("noise_free", False):
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping)
 
 
 class IraState(NamedTuple):

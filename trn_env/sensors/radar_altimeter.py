@@ -20,11 +20,11 @@ from terrain import queries
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
+    MappingConfig,
     antenna_positions,
     check_nonneg,
     check_positive,
     check_vector3,
-    config_from_mapping,
     no_sample_due,
     sample_steps,
     trusted_frame,
@@ -33,7 +33,7 @@ from trn_env.truth import TruthChunk
 
 
 @dataclass(frozen=True)
-class RadarAltimeterConfig:
+class RadarAltimeterConfig(MappingConfig):
     """Radar altimeter; beamwidth is the full cone angle (deg), lever arm in body FRD metres."""
 
     rate_hz: float = 20.0
@@ -58,12 +58,6 @@ class RadarAltimeterConfig:
     def noise_free(cls, **overrides: Any) -> RadarAltimeterConfig:
         return replace(cls(noise_const_m=0.0, noise_fraction=0.0), **overrides)
 
-    @classmethod
-    def from_mapping(cls, mapping: dict[str, Any] | None) -> RadarAltimeterConfig:
-        mapping = dict(mapping or {})
-        if mapping.pop("noise_free", False):
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping)
 
 
 class RadarAltimeterState(NamedTuple):
