@@ -149,7 +149,7 @@ def mad_surface(
                     h0 = heights[r, j]
                     g[r - i_lo, b] = h0 + cv[b] * (heights[r, j + 1] - h0)
             hk = h_meas_k[k]
-            if void_free and not remove_bias:  # the common case in one fused loop per row
+            if void_free:  # the common case in one fused loop per row (per pass with remove_bias)
                 for a in range(n):
                     if not rok[a]:
                         continue
@@ -157,9 +157,19 @@ def mad_surface(
                     gb = g[ri[a] + 1 - i_lo]
                     u = ru[a]
                     acc_a = acc[a]
-                    for b in range(n):
-                        x = ga[b]
-                        acc_a[b] += abs(hk - (x + u * (gb[b] - x)))
+                    s_a = ssum[a]
+                    if not remove_bias:
+                        for b in range(n):
+                            x = ga[b]
+                            acc_a[b] += abs(hk - (x + u * (gb[b] - x)))
+                    elif pss == 0:
+                        for b in range(n):
+                            x = ga[b]
+                            s_a[b] += hk - (x + u * (gb[b] - x))
+                    else:
+                        for b in range(n):
+                            x = ga[b]
+                            acc_a[b] += abs((hk - (x + u * (gb[b] - x))) - s_a[b] / m)
                 continue
             for a in range(n):
                 if not rok[a]:

@@ -52,14 +52,14 @@ def ins_only_short():
 
 
 def test_default_short_tercom_bounds(default_short):
-    """Measured (seed 0, 30 m fractal world, 3" map): 31 m initial error, 31 m RMS after the first fix,
-    11 m at the end."""
+    """Measured (seed 0, 30 m fractal world, 3" map, bias-removed MAD): 31 m initial error, 14.5 m RMS
+    after the first fix, 11 m at the end (seed 1: 74 m initial, 13 m RMS after the first fix)."""
     _, res, _ = default_short
     a = res.arrays
     assert res.termination == "completed"
     e_h = _horizontal(a)
     after_fix = a["t_s"] >= FIX_PERIOD_S + 0.5
-    assert np.sqrt(np.mean(e_h[after_fix] ** 2)) < 45.0
+    assert np.sqrt(np.mean(e_h[after_fix] ** 2)) < 30.0
     assert e_h[-1] < 20.0
     assert res.summary["vertical_error_rms_m"] < 30.0
     fixes = [ev for ev in res.events if ev[1] == "navigator" and "fix dn=" in ev[2]]
