@@ -21,13 +21,16 @@ angle theta = asin(y_b / R) satisfies |theta| <= half_window_rad and that lies b
 angle from the plane perpendicular to the baseline (body y axis), positive toward the right wing (seed 000
 eqs 18-19, 26-30).
 
-Search: a coarse scan (posts in the beam footprint for the altimeter; samples one post apart along the
-zero-Doppler curve for the IRA) pruned by the lower bound range >= sqrt(horizontal^2 + (h_a - h_max)^2).
-Altimeter: pattern search in continuous grid-index coordinates (the bilinear surface's kinks lie on grid
-lines, so axis moves follow ridges) from every post that is a local minimum within a slope-derived margin
-of the best post, then a 1-D shrinking search along the cone boundary (in azimuth). IRA: branch and bound
-over the intervals between coarse samples with Lipschitz / curvature bounds from per-block slopes and per-
-cell twists (see _ira_one). Ranges agree with a dense brute-force search to a few cm.
+Altimeter search (_ra_bnb): best-first branch and bound. Incumbent: the beam-axis ray hit. Lower bound of
+a block / cell: the distance to its box (horizontal rectangle x [-, max height]); blocks and cells whose
+bounding sphere misses the cone are pruned. Each surviving cell, in order of bound, is solved exactly
+(_cell_min): in the antenna's NED frame the cell is a bilinear patch A + u B + v C + u v D; each row v is a
+segment whose in-cone part is one interval (the cone is convex), so min over u is a clamped projection and
+the cell minimum is a 1-D minimisation over v (samples, edge points, golden section).
+IRA search: a coarse scan (samples one post apart along the zero-Doppler curve) pruned by the lower bound
+range >= sqrt(horizontal^2 + (h_a - h_max)^2), then branch and bound over the intervals between coarse
+samples with Lipschitz / curvature bounds from per-block slopes and per-cell twists (see _ira_one). Ranges
+agree with a dense brute-force search to a few cm.
 """
 
 from __future__ import annotations
@@ -42,14 +45,9 @@ from terrain.geodesy import WGS84_A_M, WGS84_E2
 from terrain.kernels import bilinear
 
 _INF = np.inf
-_OUT_OF_CONE = 1e300  # _ra_eval's value outside the beam (inf: no terrain / beyond max range)
 _PRUNED = 1e301  # IRA coarse sample skipped by the block bound (it and its intervals cannot beat the best)
-W_MIN_M = 0.1  # arc length (m) at which the cone-boundary search stops
-COARSE_ARC_M = 20.0  # arc step (m) at which the boundary searches' coarse phase stops
-FINE_SLOPE = 2.0  # bound on |d range / d arc| along the cone boundary used to skip fine phases
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
-_COS24 = np.cos(2.0 * np.pi * np.arange(24) / 24)  # azimuths sampling the beam-cone boundary
-_SIN24 = np.sin(2.0 * np.pi * np.arange(24) / 24)
+N_SAMP = 6  # rows sampled per cell by the altimeter's exact cell solver (_cell_min), at most 16
 
 
 @dataclass
@@ -292,740 +290,410 @@ def _ray_cast_batch(
 
 # ----------------------------------------------------------------------------------------- radar altimeter
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_eval(
-    heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj
-):
-    """Range to the terrain point at grid coordinates (fi, fj) if inside the cone, else inf."""
-    la = lat0 + fi * dlat
-    lo = lon0 + fj * dlon
-    hp = bilinear(heights, lat0, lon0, dlat, dlon, la, lo)
-    if hp != hp:
-        return _INF
-    x, y, z = _ned(la - lat, lo - lon, hp, ha, s, c, m, n, dm)
-    r = np.sqrt(x * x + y * y + z * z)
-    if r > max_range:
-        return _INF
-    if x * ax + y * ay + z * az < cosb * r:
-        return _OUT_OF_CONE
-    return r
+def _line_in_cone(p0x, p0y, p0z, qx, qy, qz, ax, ay, az, k):
+    """Feasible interval [lo, hi] of u in [0, 1] where P0 + u Q lies in the cone (P.a >= sqrt(k) |P|);
+    the cone is convex, so the set is one interval (lo > hi: empty). k = cos(half beam)^2."""
+    w0 = p0x * ax + p0y * ay + p0z * az
+    wq = qx * ax + qy * ay + qz * az
+    pq = p0x * qx + p0y * qy + p0z * qz
+    qq = qx * qx + qy * qy + qz * qz
+    pp = p0x * p0x + p0y * p0y + p0z * p0z
+    c2 = wq * wq - k * qq
+    c1 = 2.0 * (w0 * wq - k * pq)
+    c0 = w0 * w0 - k * pp
+    # split [0, 1] at the roots t1 <= t2 of c2 u^2 + c1 u + c0 and keep the pieces whose midpoint is in the
+    # cone (zero-length pieces are single points)
+    t1 = 0.0
+    t2 = 0.0
+    scale = abs(c2) + abs(c1) + abs(c0)
+    if abs(c2) > 1e-12 * scale:
+        disc = c1 * c1 - 4.0 * c2 * c0
+        if disc >= 0.0:
+            sq = np.sqrt(disc)
+            qv = -0.5 * (c1 + sq if c1 >= 0.0 else c1 - sq)
+            r1 = qv / c2
+            r2 = c0 / qv if qv != 0.0 else r1
+            if r1 > r2:
+                r1, r2 = r2, r1
+            t1 = min(max(r1, 0.0), 1.0)
+            t2 = min(max(r2, 0.0), 1.0)
+    elif abs(c1) > 1e-12 * scale:
+        t1 = min(max(-c0 / c1, 0.0), 1.0)
+        t2 = t1
+    lo = 2.0
+    hi = -1.0
+    for q in range(3):
+        a = 0.0 if q == 0 else (t1 if q == 1 else t2)
+        b = t1 if q == 0 else (t2 if q == 1 else 1.0)
+        um = 0.5 * (a + b)
+        if w0 + um * wq >= 0.0 and c2 * um * um + c1 * um + c0 >= 0.0:
+            if a < lo:
+                lo = a
+            if b > hi:
+                hi = b
+    if lo > hi:
+        # a single feasible point (tangency): test the cut points themselves
+        for q in range(4):
+            u = 0.0 if q == 0 else (t1 if q == 1 else (t2 if q == 2 else 1.0))
+            if w0 + u * wq >= 0.0 and c2 * u * u + c1 * u + c0 >= -1e-9 * scale:
+                return u, u
+    return lo, hi
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _pattern_search(
-    heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj, f0
-):
-    """Compass + diagonal pattern search in grid coordinates from (fi, fj); returns (f, fi, fj, touched)
-    where touched says an out-of-cone neighbour was met at the finest steps."""
-    step = 0.5
-    f = f0
-    touched = False
-    it = 0
-    while step > 1e-3 and it < 400:
-        it += 1
-        best_f = f
-        best_i = fi
-        best_j = fj
-        # compass moves first; the diagonals only when no compass move improves
-        for q in range(8):
-            if q == 4 and best_f < f:
-                break
-            if q < 4:
-                di = 1.0 if q == 0 else (-1.0 if q == 1 else 0.0)
-                dj = 1.0 if q == 2 else (-1.0 if q == 3 else 0.0)
+def _line_min(p0x, p0y, p0z, qx, qy, qz, ax, ay, az, k):
+    """(squared distance, u) of the closest in-cone point of P0 + u Q, u in [0, 1] (inf when none);
+    k < 0: the segment is known to lie inside the cone."""
+    if k < 0.0:
+        lo, hi = 0.0, 1.0
+    else:
+        lo, hi = _line_in_cone(p0x, p0y, p0z, qx, qy, qz, ax, ay, az, k)
+    if lo > hi:
+        return _INF, 0.0
+    qq = qx * qx + qy * qy + qz * qz
+    u = lo
+    if qq > 0.0:
+        u = -(p0x * qx + p0y * qy + p0z * qz) / qq
+        u = min(max(u, lo), hi)
+    px = p0x + u * qx
+    py = p0y + u * qy
+    pz = p0z + u * qz
+    return px * px + py * py + pz * pz, u
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _patch_g(cell, v, ax, ay, az, k):
+    """G(v) = min over u of the squared distance on the patch row v (cell: A, B, C, D NED vectors)."""
+    p0x = cell[0] + v * cell[6]
+    p0y = cell[1] + v * cell[7]
+    p0z = cell[2] + v * cell[8]
+    qx = cell[3] + v * cell[9]
+    qy = cell[4] + v * cell[10]
+    qz = cell[5] + v * cell[11]
+    return _line_min(p0x, p0y, p0z, qx, qy, qz, ax, ay, az, k)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _golden_g(cell, ax, ay, az, k, a, b, bv, best, bu, best_v):
+    """Golden-section minimum of G on [a, b] (bv: a feasible point inside, guiding the search while both
+    probes are infeasible); returns the better of it and (best, bu, best_v)."""
+    gr = 0.6180339887498949
+    x1 = b - gr * (b - a)
+    x2 = a + gr * (b - a)
+    f1, u1 = _patch_g(cell, x1, ax, ay, az, k)
+    f2, u2 = _patch_g(cell, x2, ax, ay, az, k)
+    while b - a > 5e-5:
+        if f1 == _INF and f2 == _INF:
+            # both probes outside the feasible rows: keep the side of the best point (which is feasible)
+            if bv >= x2:
+                a = x1
+                x1, f1, u1 = x2, f2, u2
+                x2 = a + gr * (b - a)
+                f2, u2 = _patch_g(cell, x2, ax, ay, az, k)
             else:
-                di = 1.0 if q < 6 else -1.0
-                dj = 1.0 if q % 2 == 0 else -1.0
-            ci = fi + di * step
-            cj = fj + dj * step
-            fc = _ra_eval(
-                heights,
-                lat0,
-                lon0,
-                dlat,
-                dlon,
-                lat,
-                lon,
-                ha,
-                s,
-                c,
-                m,
-                n,
-                dm,
-                ax,
-                ay,
-                az,
-                cosb,
-                max_range,
-                ci,
-                cj,
-            )
-            if fc == _OUT_OF_CONE and step < 0.05:
-                touched = True
-            if fc < best_f:
-                best_f = fc
-                best_i = ci
-                best_j = cj
-        if best_f < f:
-            f = best_f
-            fi = best_i
-            fj = best_j
+                b = x2
+                x2, f2, u2 = x1, f1, u1
+                x1 = b - gr * (b - a)
+                f1, u1 = _patch_g(cell, x1, ax, ay, az, k)
+        elif f1 <= f2:
+            b = x2
+            x2, f2, u2 = x1, f1, u1
+            x1 = b - gr * (b - a)
+            f1, u1 = _patch_g(cell, x1, ax, ay, az, k)
         else:
-            step *= 0.5
-        if touched and step < 0.02:
-            break  # on the cone boundary: the 1-D boundary search takes over from here
-    return f, fi, fj, touched
+            a = x1
+            x1, f1, u1 = x2, f2, u2
+            x2 = a + gr * (b - a)
+            f2, u2 = _patch_g(cell, x2, ax, ay, az, k)
+    if f1 < best:
+        best, bu, best_v = f1, u1, x1
+    if f2 < best:
+        best, bu, best_v = f2, u2, x2
+    return best, bu, best_v
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _boundary_eval(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
-    h_min,
-    h_max,
-    cell_m,
-    lat,
-    lon,
-    ha,
-    s,
-    c,
-    m,
-    n,
-    dm,
-    ax,
-    ay,
-    az,
-    e1x,
-    e1y,
-    e1z,
-    e2x,
-    e2y,
-    e2z,
-    cosb,
-    sinb,
-    max_range,
-    az_rad,
-    t_guess,
-    sl_guess,
-):
-    """Range of the first terrain hit along the cone-boundary ray at azimuth az_rad (inf if none)."""
-    ca = np.cos(az_rad)
-    sa = np.sin(az_rad)
-    dx = cosb * ax + sinb * (ca * e1x + sa * e2x)
-    dy = cosb * ay + sinb * (ca * e1y + sa * e2y)
-    dz = cosb * az + sinb * (ca * e1z + sa * e2z)
-    # secant from the previous range (any crossing on the boundary ray is a terrain point in the cone)
-    t0 = t_guess
-    g0 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t0)
-    if g0 == g0 and abs(g0) < 1e-4 and t0 > 0.0 and t0 <= max_range:
-        return t0, dx, dy, dz, sl_guess
-    t1 = t_guess + 1.0
-    if sl_guess < 0.0 and g0 == g0:
-        # Newton step with the slope dg/dt of the neighbouring boundary ray (secant from then on)
-        step_n = -g0 / sl_guess
-        if abs(step_n) < 2.0 * cell_m and abs(step_n) > 1e-6:
-            t1 = t_guess + step_n
-    if g0 == g0:
-        for _ in range(12):
-            g1 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t1)
-            if g1 != g1:
-                break
-            if abs(g1) < 1e-4:
-                if t1 > 0.0 and t1 <= max_range:
-                    sl = (g1 - g0) / (t1 - t0)
-                    return t1, dx, dy, dz, sl
-                break
-            if g1 == g0:
-                break
-            t2 = t1 - g1 * (t1 - t0) / (g1 - g0)
-            if abs(t2 - t1) > 4.0 * cell_m:
-                break
-            t0, g0, t1 = t1, g1, t2
-    horiz = np.sqrt(dx * dx + dy * dy)
-    back = 2.0 * cell_m / max(horiz, 1e-3)
-    t_from = t_guess - back
-    if t_from < 0.0:
-        t_from = 0.0
-    g0 = _g_ray(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, dx, dy, dz, t_from)
-    if not (g0 == g0 and g0 >= 0.0):
-        t_from = 0.0
-    t = _ray_hit(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
-        h_min,
-        h_max,
-        cell_m,
-        lat,
-        lon,
-        ha,
-        s,
-        c,
-        m,
-        n,
-        dm,
-        dx,
-        dy,
-        dz,
-        t_from,
-        max_range,
-    )
-    if t != t:
-        return _INF, dx, dy, dz, 0.0
-    return t, dx, dy, dz, 0.0
+def _cell_min(cell, ax, ay, az, k, n_samp):
+    """Closest in-cone point of the bilinear patch P(u, v) = A + u B + v C + u v D, u, v in [0, 1]:
+    (squared distance, u, v). For fixed v the patch row is a segment: its in-cone part is an interval
+    (convex cone) and the closest point a clamped projection, so the 2-D problem reduces to the 1-D
+    G(v) = min_u |P|^2, minimised by sampling n_samp + 1 rows (plus the closest in-cone points of the edges
+    u = 0, 1 and the ends of the feasible rows) and golden-section searches around every local minimum.
+    cell: float64[12 + n_samp + 1] (A, B, C, D, then scratch)."""
+    best = _INF
+    bu = 0.0
+    bv = 0.0
+    inv = 1.0 / n_samp
+    g_prev = _INF
+    for q in range(n_samp + 1):
+        v = q * inv
+        g, u = _patch_g(cell, v, ax, ay, az, k)
+        cell[12 + q] = g
+        if g < best:
+            best, bu, bv = g, u, v
+        if q > 0 and (g == _INF) != (g_prev == _INF):
+            # the rows' in-cone part vanishes between the samples (a tangent row of the cone curve, where G
+            # may drop steeply): bisect to that end of the feasible range and keep it as a candidate
+            v_in = v if g < _INF else v - inv
+            v_out = v - inv if g < _INF else v
+            g_in = g if g < _INF else g_prev
+            u_in = u
+            if g == _INF:
+                g_in, u_in = _patch_g(cell, v_in, ax, ay, az, k)
+            for _ in range(18):
+                vm = 0.5 * (v_in + v_out)
+                gm, um = _patch_g(cell, vm, ax, ay, az, k)
+                if gm < _INF:
+                    v_in, g_in, u_in = vm, gm, um
+                else:
+                    v_out = vm
+            if g_in < best:
+                best, bu, bv = g_in, u_in, v_in
+        g_prev = g
+    # edges u = 0 and u = 1 as segments in v (catch in-cone slivers between samples)
+    for e in range(2):
+        fe = float(e)
+        g, v = _line_min(
+            cell[0] + fe * cell[3], cell[1] + fe * cell[4], cell[2] + fe * cell[5],
+            cell[6] + fe * cell[9], cell[7] + fe * cell[10], cell[8] + fe * cell[11], ax, ay, az, k,
+        )
+        if g < best:
+            g2, u2 = _patch_g(cell, v, ax, ay, az, k)
+            if g2 < g:
+                best, bu, bv = g2, u2, v
+            else:
+                best, bu, bv = g, fe, v
+    if best == _INF:
+        return _INF, 0.0, 0.0
+    # golden-section search around every local minimum of the samples (G can have several basins) and
+    # around the best point when it is not a sample (edge point / end of the feasible range)
+    v_extra = bv if bv * n_samp != np.floor(bv * n_samp) else -1.0
+    for q in range(n_samp + 1):
+        g = cell[12 + q]
+        if g == _INF:
+            continue
+        if q > 0 and cell[11 + q] < g:
+            continue
+        if q < n_samp and cell[13 + q] < g:
+            continue
+        v = q * inv
+        best, bu, bv = _golden_g(cell, ax, ay, az, k, max(v - inv, 0.0), min(v + inv, 1.0), v, best, bu, bv)
+    if v_extra >= 0.0:
+        best, bu, bv = _golden_g(
+            cell, ax, ay, az, k, max(v_extra - inv, 0.0), min(v_extra + inv, 1.0), v_extra, best, bu, bv
+        )
+    return best, bu, bv
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _boundary_search(
-    heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm, ax, ay, az, e1x, e1y,
-    e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, w_stop,
-):
-    """Shrinking local 1-D search in azimuth along the cone boundary for the closest boundary terrain hit.
-
-    st (float64[9]): resumable state (best range fb, centre azimuth, its ray dx, dy, dz, range guess t_ref,
-    slope dg/dt, current step w rad, unused); halves w until w <= w_stop. The reach from the start azimuth is
-    +-(initial w)."""
-    fb = st[0]
-    centre = st[1]
-    t_ref = st[5]
-    sl = st[6]
-    w = st[7]
-    while w > w_stop:
-        for sgn in (-0.5, 0.5):
-            a = centre + sgn * w
-            fa, ddx, ddy, ddz, sla = _boundary_eval(
-                heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                ax, ay, az,
-                e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, a, t_ref, sl,
-            )
-            if sla < 0.0:
-                sl = sla
-            if fa < fb:
-                fb = fa
-                centre = a
-                st[2] = ddx
-                st[3] = ddy
-                st[4] = ddz
-                break
-        if fb < _INF:
-            t_ref = fb
-        w *= 0.5
-    st[0] = fb
-    st[1] = centre
-    st[5] = t_ref
-    st[6] = sl
-    st[7] = w
+def _ra_patch(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, i, j, cell):
+    """Grid cell (i, j) (rows i, i + 1, columns j, j + 1) as the bilinear patch A + u B + v C + u v D in the
+    antenna's NED frame (u east along the row, v north): cell[0:12] = A, B, C, D. The exact map of the
+    bilinear surface differs from this patch by the curvature terms' variation inside a cell (< 1 mm)."""
+    dphi0 = lat0 + i * dlat - lat
+    dlam0 = lon0 + j * dlon - lon
+    x00, y00, z00 = _ned(dphi0, dlam0, heights[i, j], ha, s, c, m, n, dm)
+    x01, y01, z01 = _ned(dphi0, dlam0 + dlon, heights[i, j + 1], ha, s, c, m, n, dm)
+    x10, y10, z10 = _ned(dphi0 + dlat, dlam0, heights[i + 1, j], ha, s, c, m, n, dm)
+    x11, y11, z11 = _ned(dphi0 + dlat, dlam0 + dlon, heights[i + 1, j + 1], ha, s, c, m, n, dm)
+    cell[0] = x00
+    cell[1] = y00
+    cell[2] = z00
+    cell[3] = x01 - x00
+    cell[4] = y01 - y00
+    cell[5] = z01 - z00
+    cell[6] = x10 - x00
+    cell[7] = y10 - y00
+    cell[8] = z10 - z00
+    cell[9] = x11 - x10 - x01 + x00
+    cell[10] = y11 - y10 - y01 + y00
+    cell[11] = z11 - z10 - z01 + z00
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_one(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
-    h_min,
-    h_max,
-    cell_m,
-    lat,
-    lon,
-    ha,
-    ax,
-    ay,
-    az,
-    cosb,
-    sinb,
-    max_range,
-    bs,
-    bmax,
-    bmin,
-    g_max,
-    out,
-):
-    """Closest terrain point in the beam cone; writes (valid, range, lat, lon, h) into out[0:5].
+def _sphere_curved(cx, cy, cz_flat, rad, mh):
+    """Bounding sphere of a box given in the flat-Earth frame (centre cx, cy, cz_flat, radius rad) moved down
+    by the curvature drop (module docstring) at its centre, with a radius margin of 4e-4 of the horizontal
+    distance for the second-order horizontal terms and the drop's variation across the box."""
+    d2 = cx * cx + cy * cy
+    return cz_flat + 0.5 * d2 / mh, rad + 4e-4 * np.sqrt(d2)
 
-    bs, bmax, bmin: block size and per-block height bounds (terrain.kernels.block_bounds) used to skip
-    blocks that cannot hold a point closer than the best so far or that lie outside the cone."""
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
+    """True when the sphere (centre c NED, radius rad) lies entirely outside the cone around a."""
+    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
+    if rad >= dc:
+        return False
+    q = rad / dc
+    # angle(c, a) > half beam + asin(q)  <=>  cos(angle) < cos(half beam + asin(q))
+    return cx * ax + cy * ay + cz * az < dc * (cosb * np.sqrt(1.0 - q * q) - sinb * q)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
+    """True when the sphere (centre c NED, radius rad) lies entirely inside the cone around a."""
+    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
+    if rad >= dc:
+        return False
+    q = rad / dc
+    if q >= sinb:
+        return False
+    # angle(c, a) < half beam - asin(q)
+    return cx * ax + cy * ay + cz * az > dc * (cosb * np.sqrt(1.0 - q * q) + sinb * q)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _ra_bnb(
+    heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, ax, ay, az, cosb, sinb, max_range,
+    bs, bmax, bmin, blk_lb, blk_id, cell, out,
+):
+    """Closest terrain point in the beam cone by best-first branch and bound over DEM blocks; writes
+    (valid, range, lat, lon, h) into out[0:5]. blk_lb, blk_id, cell: scratch arrays.
+
+    Incumbent: the beam-axis ray hit. Block lower bound: distance to its box (horizontal rectangle x
+    [-, block max height]); blocks whose bounding sphere misses the cone are pruned. Surviving cells (own
+    box bound < incumbent, sphere touching the cone) are solved exactly by _cell_min."""
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
     n_lat, n_lon = heights.shape
     s, c, m, n, dm = _consts(lat)
-    # cone frame: e1, e2 perpendicular to the axis
-    if abs(az) < 0.9:
-        px, py, pz = 0.0, 0.0, 1.0
-    else:
-        px, py, pz = 1.0, 0.0, 0.0
-    e1x = ay * pz - az * py
-    e1y = az * px - ax * pz
-    e1z = ax * py - ay * px
-    nrm = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
-    e1x /= nrm
-    e1y /= nrm
-    e1z /= nrm
-    e2x = ay * e1z - az * e1y
-    e2y = az * e1x - ax * e1z
-    e2z = ax * e1y - ay * e1x
-
-    # a point within 0.71 post of a post is at most 0.71 post * |dP/dx| <= 0.71 post * sqrt(1 + g^2) closer
-    margin = 0.75 * cell_m * np.sqrt(1.0 + g_max * g_max)
-    best = _INF
+    k = cosb * cosb
+    best2 = max_range * max_range
     best_i = np.nan
     best_j = np.nan
-    # 1) the axis ray: an upper bound and a start point
     t_ax = _ray_hit(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
-        h_min,
-        h_max,
-        cell_m,
-        lat,
-        lon,
-        ha,
-        s,
-        c,
-        m,
-        n,
-        dm,
-        ax,
-        ay,
-        az,
-        0.0,
+        heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm, ax, ay, az, 0.0,
         max_range,
     )
     if t_ax == t_ax:
-        dphi, dlam, hp = _geo_of_ned(t_ax * ax, t_ax * ay, t_ax * az, ha, s, c, m, n, dm)
-        fi = (lat + dphi - lat0) / dlat
-        fj = (lon + dlam - lon0) / dlon
-        f = _ra_eval(
-            heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, ax, ay, az, cosb, max_range, fi, fj
-        )
-        if f < best and f < _OUT_OF_CONE:
-            best, best_i, best_j = f, fi, fj
-    # 2) footprint bounding box (NED north/east) of the cone between the highest and lowest terrain depths
-    d_top = ha - h_max
-    d_bot = ha - h_min + 0.5 * max_range * max_range / 6.3e6 + 1.0
-    n_lo = _INF
-    n_hi = -_INF
-    e_lo = _INF
-    e_hi = -_INF
-    if d_top <= 0.0:
-        n_lo = min(n_lo, 0.0)
-        n_hi = max(n_hi, 0.0)
-        e_lo = min(e_lo, 0.0)
-        e_hi = max(e_hi, 0.0)
-    n_az = 24
-    for k in range(n_az + 1):
-        if k < n_az:
-            ca = _COS24[k]
-            sa = _SIN24[k]
-            dx = cosb * ax + sinb * (ca * e1x + sa * e2x)
-            dy = cosb * ay + sinb * (ca * e1y + sa * e2y)
-            dz = cosb * az + sinb * (ca * e1z + sa * e2z)
-        else:
-            dx, dy, dz = ax, ay, az
-        for dd in (d_top, d_bot):
-            if dz > 1e-9:
-                t = dd / dz
-                if t < 0.0:
-                    t = 0.0
-                if t > max_range:
-                    t = max_range
-            else:
-                t = max_range
-            n_lo = min(n_lo, t * dx)
-            n_hi = max(n_hi, t * dx)
-            e_lo = min(e_lo, t * dy)
-            e_hi = max(e_hi, t * dy)
-    pad_n = 0.03 * (n_hi - n_lo) + 2.0 * cell_m
-    pad_e = 0.03 * (e_hi - e_lo) + 2.0 * cell_m
-    n_lo -= pad_n
-    n_hi += pad_n
-    e_lo -= pad_e
-    e_hi += pad_e
-    if best < _INF and d_top > 0.0:
-        rho = np.sqrt(max(best * best - d_top * d_top, 0.0)) * 1.002 + 2.0 * cell_m
-        n_lo = max(n_lo, -rho)
-        n_hi = min(n_hi, rho)
-        e_lo = max(e_lo, -rho)
-        e_hi = min(e_hi, rho)
-    # 3) scan the posts inside the box; start points = in-cone posts that are local minima of the range
-    #    among their 8 neighbours (out-of-cone neighbours count as +inf), the K lowest
-    kk = 12
-    kb = 16
-    tilt = np.arccos(min(max(az, -1.0), 1.0))  # axis angle from the local down
-    dz_max = 1.0 if np.arccos(cosb) >= tilt else np.cos(tilt - np.arccos(cosb))  # steepest boundary ray
-    bnd_key = np.full(kb, _INF)
-    bnd_f = np.full(kb, _INF)
-    bnd_i = np.zeros(kb)
-    bnd_j = np.zeros(kb)
-    cand_f = np.full(kk, _INF)
-    cand_i = np.zeros(kk)
-    cand_j = np.zeros(kk)
-    if n_lo <= n_hi and e_lo <= e_hi:
-        mh = m + ha
-        nh = (n + ha) * c
-        i_lo = max(int(np.floor((lat + n_lo / mh - lat0) / dlat)) - 1, 0)
-        i_hi = min(int(np.ceil((lat + n_hi / mh - lat0) / dlat)) + 1, n_lat - 1)
-        j_lo = max(int(np.floor((lon + e_lo / nh - lon0) / dlon)) - 1, 0)
-        j_hi = min(int(np.ceil((lon + e_hi / nh - lon0) / dlon)) + 1, n_lon - 1)
-        ni = i_hi - i_lo + 1
-        nj = j_hi - j_lo + 1
-        if ni > 0 and nj > 0:
-            rbuf = np.full((ni + 2, nj + 2), _INF)
-            nbi, nbj = bmax.shape
-            half_beam = np.arccos(cosb)
-            post_best = best
-            bi0 = i_lo // bs
-            bi1 = min(i_hi // bs, nbi - 1)
-            bj0 = j_lo // bs
-            bj1 = min(j_hi // bs, nbj - 1)
-            nbw = bj1 - bj0 + 1
-            scanned = np.zeros((bi1 - bi0 + 1, nbw), dtype=np.bool_)
-            # blocks in the box that may hold a point in the cone, with the lower bound of their range
-            blk_lb2 = np.empty((bi1 - bi0 + 1) * nbw)
-            blk_id = np.empty((bi1 - bi0 + 1) * nbw, dtype=np.int64)
-            n_blk = 0
-            for bi in range(bi0, bi1 + 1):
-                pi0 = max(bi * bs, i_lo)
-                pi1 = min(bi * bs + bs - 1 if bi < nbi - 1 else n_lat - 1, i_hi)
-                if pi0 > pi1:
-                    continue
-                n0 = (lat0 + bi * bs * dlat - lat) * mh
-                n1 = (lat0 + min(bi * bs + bs, n_lat - 1) * dlat - lat) * mh
-                dn_ = n0 if n0 > 0.0 else (-n1 if n1 < 0.0 else 0.0)
-                for bj in range(bj0, bj1 + 1):
-                    pj0 = max(bj * bs, j_lo)
-                    pj1 = min(bj * bs + bs - 1 if bj < nbj - 1 else n_lon - 1, j_hi)
-                    hmx = bmax[bi, bj]
-                    if pj0 > pj1 or hmx == -_INF:
-                        continue
-                    hmn = bmin[bi, bj]
-                    e0 = (lon0 + bj * bs * dlon - lon) * nh
-                    e1 = (lon0 + min(bj * bs + bs, n_lon - 1) * dlon - lon) * nh
-                    de_ = e0 if e0 > 0.0 else (-e1 if e1 < 0.0 else 0.0)
-                    # lower bound of the range to any point of the block (curvature only adds depth)
-                    dh = max(np.sqrt(dn_ * dn_ + de_ * de_) * 0.998 - 2.0, 0.0)
-                    dv = max(ha - hmx, 0.0)
-                    lb2 = dh * dh + dv * dv
-                    bound = post_best + 0.5 * cell_m
-                    if lb2 > bound * bound:
-                        continue
-                    # the block's bounding sphere must reach into the cone
-                    cx = 0.5 * (n0 + n1)
-                    cy = 0.5 * (e0 + e1)
-                    cz = ha - 0.5 * (hmx + hmn)
-                    rad = 0.5 * np.sqrt((n1 - n0) ** 2 + (e1 - e0) ** 2 + (hmx - hmn) ** 2)
-                    cn = np.sqrt(cx * cx + cy * cy + cz * cz)
-                    rad += 0.5 * (cn + rad) ** 2 / 6.3e6 + 0.002 * cn + 2.0
-                    if cn > rad:
-                        cos_c = (cx * ax + cy * ay + cz * az) / cn
-                        cos_c = min(max(cos_c, -1.0), 1.0)
-                        if np.arccos(cos_c) - np.arcsin(rad / cn) > half_beam:
-                            continue
-                    blk_lb2[n_blk] = lb2
-                    blk_id[n_blk] = (bi - bi0) * nbw + (bj - bj0)
-                    n_blk += 1
-            # best first: the closest posts found early prune the remaining blocks
-            order = np.argsort(blk_lb2[:n_blk])
-            for q_blk in range(n_blk):
-                bound = post_best + 0.5 * cell_m
-                if blk_lb2[order[q_blk]] > bound * bound:
-                    break
-                bid = blk_id[order[q_blk]]
-                bi = bi0 + bid // nbw
-                bj = bj0 + bid % nbw
-                pi0 = max(bi * bs, i_lo)
-                pi1 = min(bi * bs + bs - 1 if bi < nbi - 1 else n_lat - 1, i_hi)
-                pj0 = max(bj * bs, j_lo)
-                pj1 = min(bj * bs + bs - 1 if bj < nbj - 1 else n_lon - 1, j_hi)
-                scanned[bi - bi0, bj - bj0] = True
-                for i in range(pi0, pi1 + 1):
-                    dphi = lat0 + i * dlat - lat
-                    for j in range(pj0, pj1 + 1):
-                        hp = heights[i, j]
-                        if hp != hp:
-                            continue
-                        dlam = lon0 + j * dlon - lon
-                        x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
-                        r = np.sqrt(x * x + y * y + z * z)
-                        if r > max_range:
-                            continue
-                        if x * ax + y * ay + z * az < cosb * r:
-                            rbuf[i - i_lo + 1, j - j_lo + 1] = -r  # out of the cone: raw range, negated
-                            continue
-                        rbuf[i - i_lo + 1, j - j_lo + 1] = r
-                        if r < post_best:
-                            post_best = r
-            for bi in range(bi0, bi1 + 1):
-                for bj in range(bj0, bj1 + 1):
-                    if not scanned[bi - bi0, bj - bj0]:
-                        continue
-                    pi0 = max(bi * bs, i_lo)
-                    pi1 = min(bi * bs + bs - 1 if bi < nbi - 1 else n_lat - 1, i_hi)
-                    pj0 = max(bj * bs, j_lo)
-                    pj1 = min(bj * bs + bs - 1 if bj < nbj - 1 else n_lon - 1, j_hi)
-                    for a_i in range(pi0 - i_lo + 1, pi1 - i_lo + 2):
-                        for a_j in range(pj0 - j_lo + 1, pj1 - j_lo + 2):
-                            r = rbuf[a_i, a_j]
-                            if r == _INF or r < 0.0:
-                                continue
-                            is_min = True
-                            edge_key = _INF
-                            for di in range(-1, 2):
-                                for dj in range(-1, 2):
-                                    rn = rbuf[a_i + di, a_j + dj]
-                                    if rn < 0.0:
-                                        edge_key = min(edge_key, -rn)
-                                    elif (di != 0 or dj != 0) and rn < r:
-                                        is_min = False
-                            if edge_key < _INF:
-                                # a post next to the cone boundary: a seed for the boundary search
-                                edge_key = min(edge_key, r)
-                                if edge_key < bnd_key[kb - 1]:
-                                    q = kb - 1
-                                    while q > 0 and bnd_key[q - 1] > edge_key:
-                                        bnd_key[q] = bnd_key[q - 1]
-                                        bnd_f[q] = bnd_f[q - 1]
-                                        bnd_i[q] = bnd_i[q - 1]
-                                        bnd_j[q] = bnd_j[q - 1]
-                                        q -= 1
-                                    bnd_key[q] = edge_key
-                                    bnd_f[q] = r
-                                    bnd_i[q] = i_lo + a_i - 1
-                                    bnd_j[q] = j_lo + a_j - 1
-                            if not is_min or r >= cand_f[kk - 1]:
-                                continue
-                            q = kk - 1
-                            while q > 0 and cand_f[q - 1] > r:
-                                cand_f[q] = cand_f[q - 1]
-                                cand_i[q] = cand_i[q - 1]
-                                cand_j[q] = cand_j[q - 1]
-                                q -= 1
-                            cand_f[q] = r
-                            cand_i[q] = i_lo + a_i - 1
-                            cand_j[q] = j_lo + a_j - 1
-    # 4) local refinement from distinct start points
-    done_i = np.empty(kk + 1 + kb)
-    done_j = np.empty(kk + 1 + kb)
-    n_done = 0
-    res_f = np.empty(kk + 1 + kb)
-    res_key = np.empty(kk + 1 + kb)
-    res_t = np.zeros(kk + 1 + kb, dtype=np.bool_)
-    for q in range(-1, kk):
-        if q < 0:
-            if t_ax != t_ax or best == _INF or cand_f[0] < _INF:
-                continue  # the axis hit is a start point only when no post lies in the beam
-            fi0, fj0, f0 = best_i, best_j, best
-        else:
-            if cand_f[q] == _INF:
-                break
-            if cand_f[q] > best + margin:
-                break
-            fi0, fj0, f0 = cand_i[q], cand_j[q], cand_f[q]
-            if n_done > 0:
-                # skip a start whose surroundings (+-2 posts) cannot beat the best refined point
-                ci = int(fi0)
-                cj = int(fj0)
-                i_a = max(ci - 2, 0)
-                i_b = min(ci + 2, n_lat - 1)
-                j_a = max(cj - 2, 0)
-                j_b = min(cj + 2, n_lon - 1)
-                hmx = -_INF
-                for i in range(i_a, i_b + 1):
-                    for j in range(j_a, j_b + 1):
-                        if heights[i, j] > hmx:
-                            hmx = heights[i, j]
-                n_a = (lat0 + i_a * dlat - lat) * (m + ha)
-                n_b = (lat0 + i_b * dlat - lat) * (m + ha)
-                e_a = (lon0 + j_a * dlon - lon) * (n + ha) * c
-                e_b = (lon0 + j_b * dlon - lon) * (n + ha) * c
-                dn_ = n_a if n_a > 0.0 else (-n_b if n_b < 0.0 else 0.0)
+        best2 = t_ax * t_ax
+        dphi, dlam, _ = _geo_of_ned(t_ax * ax, t_ax * ay, t_ax * az, ha, s, c, m, n, dm)
+        best_i = (lat + dphi - lat0) / dlat
+        best_j = (lon + dlam - lon0) / dlon
+    reach = np.sqrt(best2) * 1.003 + 2.0  # margin for the second-order horizontal terms (module docstring)
+    # metres per grid step (horizontal)
+    mn = (m + h_min) * dlat
+    me = (n + h_min) * c * dlon
+    fi = (lat - lat0) / dlat
+    fj = (lon - lon0) / dlon
+    i_lo = max(int(np.floor(fi - reach / mn)) - 1, 0)
+    i_hi = min(int(np.ceil(fi + reach / mn)) + 1, n_lat - 2)
+    j_lo = max(int(np.floor(fj - reach / me)) - 1, 0)
+    j_hi = min(int(np.ceil(fj + reach / me)) + 1, n_lon - 2)
+    if i_lo > i_hi or j_lo > j_hi:
+        return
+    nbi, nbj = bmax.shape
+    bi0 = i_lo // bs
+    bi1 = min(i_hi // bs, nbi - 1)
+    bj0 = j_lo // bs
+    bj1 = min(j_hi // bs, nbj - 1)
+    nb = 0
+    for bi in range(bi0, bi1 + 1):
+        ia = bi * bs
+        ib = min(ia + bs, n_lat - 1)
+        n_a = (ia - fi) * mn
+        n_b = (ib - fi) * mn
+        dn_ = n_a if n_a > 0.0 else (-n_b if n_b < 0.0 else 0.0)
+        for bj in range(bj0, bj1 + 1):
+            hx = bmax[bi, bj]
+            if hx == -np.inf:
+                continue
+            ja = bj * bs
+            jb = min(ja + bs, n_lon - 1)
+            e_a = (ja - fj) * me
+            e_b = (jb - fj) * me
+            de_ = e_a if e_a > 0.0 else (-e_b if e_b < 0.0 else 0.0)
+            dh = max(np.sqrt(dn_ * dn_ + de_ * de_) * 0.998 - 2.0, 0.0)
+            dv = max(ha - hx, 0.0)
+            lb2 = dh * dh + dv * dv
+            if lb2 > best2:
+                continue
+            hmn = bmin[bi, bj]
+            cx = 0.5 * (n_a + n_b)
+            cy = 0.5 * (e_a + e_b)
+            hz = 0.5 * (hx - hmn)
+            rad = np.sqrt(0.25 * (n_b - n_a) ** 2 + 0.25 * (e_b - e_a) ** 2 + hz * hz) * 1.002 + 5.0
+            cz, rad = _sphere_curved(cx, cy, ha - 0.5 * (hx + hmn), rad, m + ha)
+            if _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
+                continue
+            # insertion into the list sorted by lower bound
+            q = nb
+            while q > 0 and blk_lb[q - 1] > lb2:
+                blk_lb[q] = blk_lb[q - 1]
+                blk_id[q] = blk_id[q - 1]
+                q -= 1
+            blk_lb[q] = lb2
+            blk_id[q] = bi * nbj + bj
+            nb += 1
+    # cells of the surviving blocks, blocks best first: box bound, cone test, then the projection bound
+    # |P| >= P.g >= min over the corners of P_corner.g (g: unit vector to the cell centre; P.g is bilinear
+    # in (u, v), so its minimum is at a corner), which is within (half diagonal)^2 / (2 range) of exact
+    for q_blk in range(nb):
+        if blk_lb[q_blk] > best2:
+            break
+        bi = blk_id[q_blk] // nbj
+        bj = blk_id[q_blk] % nbj
+        ia = bi * bs
+        ib = min(ia + bs, n_lat - 1)
+        ja = bj * bs
+        jb = min(ja + bs, n_lon - 1)
+        for i in range(ia, ib):
+            n_a = (i - fi) * mn
+            n_b = n_a + mn
+            dn_ = n_a if n_a > 0.0 else (-n_b if n_b < 0.0 else 0.0)
+            for j in range(ja, jb):
+                h00 = heights[i, j]
+                h01 = heights[i, j + 1]
+                h10 = heights[i + 1, j]
+                h11 = heights[i + 1, j + 1]
+                hx = max(max(h00, h01), max(h10, h11))
+                if hx != hx:
+                    continue  # a void corner: no terrain in this cell
+                e_a = (j - fj) * me
+                e_b = e_a + me
                 de_ = e_a if e_a > 0.0 else (-e_b if e_b < 0.0 else 0.0)
                 dh = max(np.sqrt(dn_ * dn_ + de_ * de_) * 0.998 - 2.0, 0.0)
-                dv = max(ha - hmx, 0.0)
-                if dh * dh + dv * dv > best * best:
+                dv = max(ha - hx, 0.0)
+                if dh * dh + dv * dv > best2:
                     continue
-        near = False
-        for p in range(n_done):
-            if abs(done_i[p] - fi0) <= 0.25 and abs(done_j[p] - fj0) <= 0.25:
-                near = True
-        if near or n_done >= 4:
-            continue
-        f, fi, fj, touched = _pattern_search(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            lat,
-            lon,
-            ha,
-            s,
-            c,
-            m,
-            n,
-            dm,
-            ax,
-            ay,
-            az,
-            cosb,
-            max_range,
-            fi0,
-            fj0,
-            f0,
-        )
-        done_i[n_done] = fi
-        done_j[n_done] = fj
-        res_f[n_done] = f
-        res_key[n_done] = f
-        res_t[n_done] = touched
-        n_done += 1
-        if f < best:
-            best, best_i, best_j = f, fi, fj
-    if n_done == 0 and best < _INF:
-        done_i[0] = best_i
-        done_j[0] = best_j
-        res_f[0] = best
-        res_key[0] = best
-        res_t[0] = False
-        n_done = 1
-    # boundary seeds (posts next to the cone edge whose neighbourhood may hold a closer boundary point),
-    # at least 1.5 posts apart: the boundary search from each covers +-1.5 posts of arc
-    n_ref = n_done
-    for q in range(kb):
-        if bnd_key[q] == _INF or bnd_key[q] > best + margin:
-            break
-        # height bound: a boundary point in the 4 cells around the seed sits at depth >= ha - (their max
-        # height), and a cone-boundary ray descends at most cos(half_beam - axis tilt) per metre of range
-        ci = int(bnd_i[q])
-        cj = int(bnd_j[q])
-        hmx = -_INF
-        for i in range(max(ci - 1, 0), min(ci + 1, n_lat - 1) + 1):
-            for j in range(max(cj - 1, 0), min(cj + 1, n_lon - 1) + 1):
-                if heights[i, j] > hmx:
-                    hmx = heights[i, j]
-        # steepest descent rate (down component of the unit direction) of the boundary rays within the
-        # arc of those cells (+-1.5 posts) around the seed's azimuth
-        la_q = lat0 + bnd_i[q] * dlat
-        lo_q = lon0 + bnd_j[q] * dlon
-        x, y, z = _ned(la_q - lat, lo_q - lon, heights[ci, cj], ha, s, c, m, n, dm)
-        ua = x * ax + y * ay + z * az
-        px = x - ua * ax
-        py = y - ua * ay
-        pz = z - ua * az
-        pn = np.sqrt(px * px + py * py + pz * pz)
-        dz_b = dz_max
-        if pn > 1e-9:
-            # d(dz)/d(azimuth) <= sin(half beam) sin(tilt); the arc spans <= 2 posts (diagonal) / |perp| rad
-            dz_b = cosb * az + sinb * pz / pn + sinb * np.sin(tilt) * min(2.0 * cell_m / pn, np.pi)
-            dz_b = min(dz_b, dz_max)
-        if dz_b > 0.0 and (ha - hmx) > best * dz_b:
-            continue
-        near = False
-        for p in range(n_done):
-            sep = 2.5 if p >= n_ref else (1.5 if res_t[p] else -1.0)
-            if abs(done_i[p] - bnd_i[q]) <= sep and abs(done_j[p] - bnd_j[q]) <= sep:
-                near = True
-        if near:
-            continue
-        done_i[n_done] = bnd_i[q]
-        done_j[n_done] = bnd_j[q]
-        res_f[n_done] = bnd_f[q]
-        res_key[n_done] = bnd_key[q]
-        res_t[n_done] = True
-        n_done += 1
-    if best == _INF:
+                hmn = min(min(h00, h01), min(h10, h11))
+                hz = 0.5 * (hx - hmn)
+                rad = np.sqrt(0.25 * mn * mn + 0.25 * me * me + hz * hz) * 1.002 + 2.0
+                cx = 0.5 * (n_a + n_b)
+                cy = 0.5 * (e_a + e_b)
+                cz, rad = _sphere_curved(cx, cy, ha - 0.5 * (hx + hmn), rad, m + ha)
+                if _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
+                    continue
+                inside = _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb)
+                _ra_patch(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, i, j, cell)
+                gx = cell[0] + 0.5 * cell[3] + 0.5 * cell[6] + 0.25 * cell[9]
+                gy = cell[1] + 0.5 * cell[4] + 0.5 * cell[7] + 0.25 * cell[10]
+                gz = cell[2] + 0.5 * cell[5] + 0.5 * cell[8] + 0.25 * cell[11]
+                gn = np.sqrt(gx * gx + gy * gy + gz * gz)
+                if gn > 0.0:
+                    p00 = cell[0] * gx + cell[1] * gy + cell[2] * gz
+                    pb = cell[3] * gx + cell[4] * gy + cell[5] * gz
+                    pc = cell[6] * gx + cell[7] * gy + cell[8] * gz
+                    pd = cell[9] * gx + cell[10] * gy + cell[11] * gz
+                    lbp = min(min(p00, p00 + pb), min(p00 + pc, p00 + pb + pc + pd)) / gn
+                    if lbp > 0.0 and lbp * lbp > best2:
+                        continue
+                d2, u, v = _cell_min(cell, ax, ay, az, -1.0 if inside else k, N_SAMP)
+                if d2 < best2:
+                    best2 = d2
+                    best_i = i + v
+                    best_j = j + u
+    if best_i != best_i:
         return
-    # 5) on the cone boundary the pattern search can stall: 1-D search in azimuth along the boundary from
-    #    every refined point near the best (the closest point may lie on another stretch of the boundary)
-    #    Two phases: every boundary search first shrinks to a coarse step; only those whose coarse best
-    #    lies within the fine phase's possible gain of the overall best are finished.
-    final = _INF
-    fin_lat = fin_lon = fin_h = np.nan
-    n_b = 0
-    bst = np.empty((2 * n_done, 9))
-    for p_res in range(n_done):
-        if res_key[p_res] > final + margin or res_f[p_res] == _INF:
-            continue
-        best = res_f[p_res]
-        best_i = done_i[p_res]
-        best_j = done_j[p_res]
-        la = lat0 + best_i * dlat
-        lo = lon0 + best_j * dlon
-        hp = bilinear(heights, lat0, lon0, dlat, dlon, la, lo)
-        x, y, z = _ned(la - lat, lo - lon, hp, ha, s, c, m, n, dm)
-        cos_off = (x * ax + y * ay + z * az) / best
-        if best < final:
-            final = best
-            fin_lat, fin_lon, fin_h = la, lo, hp
-        if res_t[p_res] or cos_off < cosb + 1e-6:
-            az0 = np.arctan2(x * e2x + y * e2y + z * e2z, x * e1x + y * e1y + z * e1z)
-            r_arc = max(best * sinb, 1e-6)
-            fb0, dx0, dy0, dz0, sl0 = _boundary_eval(
-                heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, az0, best, 0.0,
-            )
-            # two reaches (+-3 and +-1.5 posts of arc): the wide search can step over a nearby minimum
-            for width_posts in (3.0, 1.5):
-                if width_posts < 2.0 and abs(bst[n_b - 1, 1] - az0) * r_arc < 0.75 * cell_m:
-                    break  # the wide search stayed near its start: the narrow one finds the same minimum
-                st = bst[n_b]
-                st[0] = fb0
-                st[1] = az0
-                st[2] = dx0
-                st[3] = dy0
-                st[4] = dz0
-                st[5] = fb0 if fb0 < _INF else best
-                st[6] = sl0
-                st[7] = min(np.pi, width_posts * cell_m / r_arc)
-                st[8] = r_arc
-                _boundary_search(
-                    heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm,
-                    ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, COARSE_ARC_M / r_arc,
-                )
-                n_b += 1
-                if st[0] < final:
-                    final = st[0]
-                    fin_lat = np.nan  # position filled in below
-    # fine phase, most promising first; gain bound = fine reach (arc) x range slope along the boundary
-    for _rep in range(n_b):
-        q_best = -1
-        for q in range(n_b):
-            if bst[q, 0] < _INF and (q_best < 0 or bst[q, 0] < bst[q_best, 0]):
-                q_best = q
-        if q_best < 0:
-            break
-        st = bst[q_best]
-        gain = FINE_SLOPE * st[7] * st[8] + 0.05
-        if st[0] - gain > final:
-            break
-        _boundary_search(
-            heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat, lon, ha, s, c, m, n, dm, ax, ay, az,
-            e1x, e1y, e1z, e2x, e2y, e2z, cosb, sinb, max_range, st, W_MIN_M / st[8],
-        )
-        fb = st[0]
-        if fb <= final:
-            final = fb
-            dphi, dlam, _ = _geo_of_ned(fb * st[2], fb * st[3], fb * st[4], ha, s, c, m, n, dm)
-            fin_lat = lat + dphi
-            fin_lon = lon + dlam
-            fin_h = bilinear(heights, lat0, lon0, dlat, dlon, fin_lat, fin_lon)
-        st[0] = _INF  # done
-    best = final
-    out_lat, out_lon, out_h = fin_lat, fin_lon, fin_h
+    la = lat0 + best_i * dlat
+    lo = lon0 + best_j * dlon
     out[0] = 1.0
-    out[1] = best
-    out[2] = out_lat
-    out[3] = out_lon
-    out[4] = out_h
+    out[1] = np.sqrt(best2)
+    out[2] = la
+    out[3] = lo
+    out[4] = bilinear(heights, lat0, lon0, dlat, dlon, la, lo)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -1045,7 +713,6 @@ def _ra_batch(
     bs,
     bmax,
     bmin,
-    bslope,
     valid,
     rng,
     lat_out,
@@ -1054,10 +721,12 @@ def _ra_batch(
 ):
     h_min = _finite_range(bmin)[0]
     h_max = _finite_range(bmax)[1]
-    g_max = _finite_range(bslope)[1]
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
     out = np.empty(5)
+    blk_lb = np.empty(bmax.size)
+    blk_id = np.empty(bmax.size, dtype=np.int64)
+    cell = np.empty(12 + 17)
     for k in range(lat.shape[0]):
         ax, ay, az = C_bn[k, 0, 2], C_bn[k, 1, 2], C_bn[k, 2, 2]
         nrm = np.sqrt(ax * ax + ay * ay + az * az)
@@ -1065,29 +734,9 @@ def _ra_batch(
             valid[k] = False
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
-        _ra_one(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            h_min,
-            h_max,
-            cell_m,
-            lat[k],
-            lon[k],
-            h[k],
-            ax / nrm,
-            ay / nrm,
-            az / nrm,
-            cosb,
-            sinb,
-            max_range,
-            bs,
-            bmax,
-            bmin,
-            g_max,
-            out,
+        _ra_bnb(
+            heights, lat0, lon0, dlat, dlon, h_min, h_max, cell_m, lat[k], lon[k], h[k], ax / nrm, ay / nrm,
+            az / nrm, cosb, sinb, max_range, bs, bmax, bmin, blk_lb, blk_id, cell, out,
         )
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
@@ -1820,7 +1469,6 @@ def radar_altimeter_return(
         float(half_beamwidth_rad),
         float(max_range_m),
         *dem.block_bounds(BLOCK_POSTS),
-        _block_slopes(dem),
         valid,
         rng,
         la,

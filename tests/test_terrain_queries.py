@@ -564,3 +564,40 @@ def test_radar_altimeter_edge_minimum_next_to_the_start_on_jacksboro(dems, agl_m
     got = queries.radar_altimeter_return(dem, *st, np.radians(20.0))
     edge = bf_radar_altimeter_boundary(dem, *st, np.radians(20.0), 8000.0)
     assert got.range_m[0] == pytest.approx(edge[0], abs=0.05), (got.range_m[0], edge[0])
+
+
+def test_cell_min_matches_dense_search_on_twisted_patches():
+    """queries._cell_min (exact closest in-cone point of one bilinear patch) against a dense (u, v) grid on
+    random 90 m patches with strong twist, seen from 1-3 km under cones that cut through the patch."""
+    rng = np.random.default_rng(7)
+    uu, vv = np.meshgrid(np.linspace(0.0, 1.0, 801), np.linspace(0.0, 1.0, 801))
+    n_cut = 0
+    for _ in range(40):
+        a_vec = np.array([rng.uniform(-300, 300), rng.uniform(-300, 300), rng.uniform(1000, 3000)])
+        b_vec = np.array([0.0, 90.0, rng.uniform(-40, 40)])
+        c_vec = np.array([90.0, 0.0, rng.uniform(-40, 40)])
+        d_vec = np.array([0.0, 0.0, rng.uniform(-60, 60)])
+        cell = np.concatenate([a_vec, b_vec, c_vec, d_vec, np.zeros(17)])
+        pts = (a_vec + uu[..., None] * b_vec + vv[..., None] * c_vec + (uu * vv)[..., None] * d_vec)
+        r = np.linalg.norm(pts, axis=-1)
+        # the cone edge (half beam 3-20 deg) passes near a random point of the patch
+        target = pts[rng.integers(0, 801), rng.integers(0, 801)]
+        half_beam = rng.uniform(0.05, 0.35)
+        t_hat = target / np.linalg.norm(target)
+        p_hat = np.cross(t_hat, rng.normal(size=3))
+        p_hat /= np.linalg.norm(p_hat)
+        tilt = half_beam + rng.uniform(-0.01, 0.01)
+        axis = np.cos(tilt) * t_hat + np.sin(tilt) * p_hat
+        inside = pts @ axis >= np.cos(half_beam) * r
+        d2, u, v = queries._cell_min(cell, *axis, np.cos(half_beam) ** 2, queries.N_SAMP)
+        if not inside.any():
+            continue
+        n_cut += int(not inside.all())
+        brute = r[inside].min()
+        got = np.sqrt(d2)
+        p = a_vec + u * b_vec + v * c_vec + u * v * d_vec
+        assert 0.0 <= u <= 1.0 and 0.0 <= v <= 1.0
+        assert np.isclose(np.linalg.norm(p), got, atol=1e-6)
+        assert p @ axis >= np.cos(half_beam) * got - 1e-6  # in the cone
+        assert got <= brute + 1e-6 and brute - got < 0.15, (got, brute)
+    assert n_cut > 10
