@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -189,3 +189,14 @@ class MappingConfig:
         if mapping.pop("noise_free", False):
             return config_from_mapping(cls, mapping, cls.noise_free())
         return config_from_mapping(cls, mapping)
+
+
+class TimeGridState(NamedTuple):
+    """State of a sensor whose errors are white (no memory): only the index of its last sample on the
+    absolute time grid, so chunked sampling continues the grid."""
+
+    last_k: int | None
+
+    @classmethod
+    def initial(cls, config, rng) -> TimeGridState:
+        return cls(None)

@@ -22,7 +22,7 @@ Noise: sigma_R = 3.5 m, sigma_theta = 0.1 deg (seed 002 Table 1); rate 50 Hz (se
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -33,6 +33,7 @@ from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
+    TimeGridState,
     antenna_positions,
     check_nonneg,
     check_positive,
@@ -87,13 +88,7 @@ class IraConfig(MappingConfig):
         return replace(cls(range_noise_m=0.0, look_angle_noise_deg=0.0), **overrides)
 
 
-
-class IraState(NamedTuple):
-    last_k: int | None
-
-    @classmethod
-    def initial(cls, config: IraConfig, rng: np.random.Generator) -> IraState:
-        return cls(None)
+IraState = TimeGridState   # white errors only: the sample grid is all it carries
 
 
 def look_angle_from_ranges(r_m: np.ndarray, r_left_m: np.ndarray, r_right_m: np.ndarray, l1_m: float,

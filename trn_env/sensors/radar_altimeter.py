@@ -10,7 +10,7 @@ sigma = noise_const_m + noise_fraction * range (default 0.6 m + 2 %, the thesis'
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -21,6 +21,7 @@ from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
+    TimeGridState,
     antenna_positions,
     check_nonneg,
     check_positive,
@@ -59,13 +60,7 @@ class RadarAltimeterConfig(MappingConfig):
         return replace(cls(noise_const_m=0.0, noise_fraction=0.0), **overrides)
 
 
-
-class RadarAltimeterState(NamedTuple):
-    last_k: int | None
-
-    @classmethod
-    def initial(cls, config: RadarAltimeterConfig, rng: np.random.Generator) -> RadarAltimeterState:
-        return cls(None)
+RadarAltimeterState = TimeGridState   # white errors only: the sample grid is all it carries
 
 
 @njit(cache=True)
