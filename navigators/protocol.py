@@ -11,10 +11,13 @@ definite is skipped, counted in `Health`, and reported in `Health.events` for th
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+
+from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 from .frames import SensorFrames
 
@@ -55,6 +58,20 @@ class Estimate:
     health: Health = field(default_factory=Health)
     # navigator-specific outputs (e.g. a TERCOM fix and its quality)
     extra: dict = field(default_factory=dict)
+
+    def extrapolated(self, t_s: float) -> Estimate:
+        """This estimate dead-reckoned to t_s with its own velocity (position only; attitude, velocity,
+        covariance and health are shared, not copied). What a consumer of a navigator's output does between
+        updates: the closed loop's guidance flies on it between the navigator's updates. The small offset
+        goes through the meridian and prime-vertical radii (seed 000 eq 2)."""
+        dt = float(t_s) - self.t_s
+        v = self.v_ned_mps
+        lat, h = self.lat_rad, self.h_m
+        r_n = float(meridian_radius_m(lat)) + h
+        r_e = float(prime_vertical_radius_m(lat)) + h
+        return Estimate(float(t_s), lat + float(v[0]) * dt / r_n,
+                        self.lon_rad + float(v[1]) * dt / (r_e * math.cos(lat)), h - float(v[2]) * dt, v,
+                        self.roll_rad, self.pitch_rad, self.yaw_rad, self.covariance, self.health, self.extra)
 
     @property
     def sigma_ned_m(self) -> np.ndarray:

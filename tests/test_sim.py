@@ -107,8 +107,8 @@ def test_short_run_log_and_summary(short_run):
     assert res.termination == "time_limit"
     assert res.jsbsim_steps == 2000
     n = a["t_s"].shape[0]
-    assert n == 201                                  # t = 0 and every 0.1 s tick
-    assert np.allclose(np.diff(a["t_s"]), 0.1)
+    assert n == 21                                   # t = 0 and every 1 s navigator update
+    assert np.allclose(np.diff(a["t_s"]), 1.0)
     assert np.allclose(a["est_t_s"], a["t_s"], atol=0.011)
     # errors recomputed independently through ECEF
     d = ned_vector_between(a["true_lat_rad"], a["true_lon_rad"], a["true_h_msl_m"], a["est_lat_rad"],
@@ -209,7 +209,7 @@ def test_diverged_on_covariance_and_on_nan():
     data = _short(30.0)
     data["limits"] = {"max_horizontal_sigma_m": 20.0}      # below the initial 30 m per axis
     res = ClosedLoop(validate(data, source="test")).run()
-    assert res.termination == "diverged" and res.sim_time_s == pytest.approx(0.1)
+    assert res.termination == "diverged" and res.sim_time_s == pytest.approx(1.0)   # the first update
 
     loop = ClosedLoop(validate(_short(30.0), source="test"))
     real_update = loop.navigator.update
@@ -225,7 +225,7 @@ def test_diverged_on_covariance_and_on_nan():
 
     loop.navigator.update = nan_after_5
     res = loop.run()
-    assert res.termination == "diverged" and res.sim_time_s == pytest.approx(0.5)
+    assert res.termination == "diverged" and res.sim_time_s == pytest.approx(5.0)   # the fifth update
 
 
 def test_map_error_model_and_refined_world():
@@ -247,3 +247,42 @@ def test_map_error_model_and_refined_world():
     with pytest.raises(Exception) as exc:
         validate(data, source="test")
     assert any(p.startswith("route.waypoints[1]:") and "region_deg" in p for p in exc.value.problems)
+
+
+def test_guidance_runs_at_its_rate_on_the_estimate_dead_reckoned_between_updates():
+    """Guidance is asked at 10 Hz; the navigator updates at 1 Hz; in between the guidance gets the last
+    navigator estimate moved by its own velocity (checked through ECEF: the offset of the commanded position
+    from the navigator's estimate equals v_ned * dt to millimetres)."""
+    calls = []
+    targets = components.track_agl_targets(0.2, 1500.0, 85.0)
+
+    def commander(est, t_s):
+        calls.append((t_s, est))
+        return targets
+
+    loop = ClosedLoop(validate(_short(3.0), source="test"), commander=commander)
+    updates = [loop.estimate]
+    while loop.tick() is None:
+        updates.append(loop.estimate)
+    times = np.array([t for t, _ in calls])
+    assert np.allclose(np.diff(times), 0.1, atol=1e-9) and times[-1] == pytest.approx(2.9)   # none at the end
+    for t_s, est in calls:
+        base = [u for u in updates if u.t_s <= t_s + 1e-9][-1]
+        dt = t_s - base.t_s
+        assert est.t_s == pytest.approx(t_s) and 0.0 <= dt < 1.0 - 1e-9
+        d = ned_vector_between(np.array([base.lat_rad]), np.array([base.lon_rad]), np.array([base.h_m]),
+                               np.array([est.lat_rad]), np.array([est.lon_rad]), np.array([est.h_m]))[0]
+        np.testing.assert_allclose(d, np.asarray(base.v_ned_mps) * dt, atol=2e-3)
+        if dt == 0.0:
+            assert est is base                                  # at an update: the navigator's own estimate
+
+
+def test_navigator_rate_must_divide_the_guidance_rate():
+    data = _short(3.0)
+    data["navigator"]["rate_hz"] = 3.0
+    with pytest.raises(Exception, match="navigator.rate_hz"):
+        validate(data, source="test")
+    data["navigator"]["rate_hz"] = 2.0
+    data["guidance"] = {"log_rate_hz": 5.0}
+    with pytest.raises(Exception, match="guidance.log_rate_hz"):
+        validate(data, source="test")

@@ -8,10 +8,12 @@ each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
 - closed_loop_jsbsim_reference_steps_per_s: a bare `fdm.run()` loop of the same aircraft, trimmed at the
   same initial condition, timed just before and just after the closed loop (the faster is kept);
 - closed_loop_ratio: their ratio (target >= 0.5);
-- closed_loop_ms_per_tick_by_stage: where a guidance tick's wall time goes (flight core, sensors,
-  navigator - TERCOM fixes amortised, closed_loop_tercom_fixes of them fall in the timed window - the rest
-  of the loop: termination checks, logging, guidance), beside closed_loop_ms_per_tick and the bare
-  JSBSim time for the same steps (closed_loop_bare_jsbsim_ms_per_tick). Everything runs single-threaded.
+- closed_loop_ms_per_tick_by_stage: where a loop tick's wall time goes - one navigator update, with
+  closed_loop_guidance_ticks_per_tick guidance ticks inside it - (flight core, sensors, navigator - TERCOM
+  fixes amortised, closed_loop_tercom_fixes of them fall in the timed window - guidance between updates,
+  the rest of the loop: termination checks, logging, guidance after the update), beside
+  closed_loop_ms_per_tick and the bare JSBSim time for the same steps (closed_loop_bare_jsbsim_ms_per_tick).
+  Everything runs single-threaded.
 - env_sim_seconds_per_wall_second: simulated seconds per wall second of the gymnasium env (default
   scenario, random actions, resets included).
 """
@@ -92,6 +94,7 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default", sim_s:
         "closed_loop_navigator": sc.navigator_name,
         "closed_loop_sim_seconds": steps * loop.dt_s,
         "closed_loop_steps_per_tick": loop.steps_per_tick,
+        "closed_loop_guidance_ticks_per_tick": loop.guidance_ticks_per_tick,
         "closed_loop_ms_per_tick": 1e3 * wall / max(ticks, 1),
         "closed_loop_bare_jsbsim_ms_per_tick": 1e3 * loop.steps_per_tick / bare if bare > 0 else math.nan,
         "closed_loop_ms_per_tick_by_stage": {k: round(1e3 * (v - stage0[k]) / max(ticks, 1), 4)

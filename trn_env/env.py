@@ -28,7 +28,8 @@ class TerrainNavEnv(gym.Env):
     scenario) and must reach a goal; guidance flies the agent's heading and height-above-ground
     commands on the navigator's *estimate*, so a route over featureless terrain lets the navigation
     error grow while a route over rough terrain keeps it small. Every `step` flies `decision_interval_s`
-    seconds of the full closed loop (flight 100 Hz, sensors, navigator, autopilot at 10 Hz).
+    seconds of the full closed loop (flight 100 Hz, sensors, navigator updates at the scenario's
+    `navigator.rate_hz`, 1 Hz by default, guidance targets at 10 Hz), rounded to whole navigator updates.
 
     ## Action Space
     `Box(-1, 1, shape=(2,), dtype=float32)`, each a fraction of what the aircraft can do in one step:
@@ -123,7 +124,7 @@ class TerrainNavEnv(gym.Env):
         sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
         self.scenario = sc
         d = sc.data
-        rate_hz = float(d["guidance"]["rate_hz"])
+        rate_hz = float(d["navigator"]["rate_hz"])      # one loop tick = one navigator update
         self.ticks_per_decision = max(1, int(round(decision_interval_s * rate_hz)))
         self.decision_interval_s = self.ticks_per_decision / rate_hz
         self.max_episode_s = float(max_episode_s)

@@ -261,11 +261,13 @@ def _std_atmosphere(lat_rad, lon_rad, h_m):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _convert_raw(raw, n, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain_elevation_m, delta_T_K,
+def _convert_raw(raw, n, ncol, row_wind, row_terrain_m, first_step, dt_s, delta_T_K,
                  p_sl_pa, s, vb, c):  # pragma: no cover - compiled
     """The first n steps of recorded JSBSim values (flat float64 buffer, ncol per step) -> SI fields written
     into the preallocated scalar block s (_S_ROWS, n), vector block vb (_V_ROWS, 3, n) and C_bn c (n, 3, 3),
-    in one pass. Returns the index of the first non-finite raw value, or -1. No Python objects."""
+    in one pass. row_wind (n, 3): the steady wind written for each step (used when the total wind is not
+    recorded); row_terrain_m (n,): the terrain elevation JSBSim had at each step. Returns the index of the
+    first non-finite raw value, or -1. No Python objects."""
     bad = -1
     for k in range(n * ncol):
         if not np.isfinite(raw[k]):
@@ -278,7 +280,7 @@ def _convert_raw(raw, n, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain
         s[_S_LAT, i] = lat
         s[_S_LON, i] = lon
         s[_S_H, i] = h
-        s[_S_AGL, i] = h - terrain_elevation_m
+        s[_S_AGL, i] = h - row_terrain_m[i]
         for k in range(3):
             vb[_V_V, k, i] = raw[o + 3 + k] * M_PER_FT
             vb[_V_WIB, k, i] = raw[o + 9 + k]
@@ -286,9 +288,8 @@ def _convert_raw(raw, n, ncol, wind_n, wind_e, wind_d, first_step, dt_s, terrain
             for k in range(3):
                 vb[_V_WIND, k, i] = raw[o + 16 + k] * M_PER_FT
         else:
-            vb[_V_WIND, 0, i] = wind_n
-            vb[_V_WIND, 1, i] = wind_e
-            vb[_V_WIND, 2, i] = wind_d
+            for k in range(3):
+                vb[_V_WIND, k, i] = row_wind[i, k]
         ph, th, ps = raw[o + 6], raw[o + 7], raw[o + 8]
         if ps > np.pi:
             ps -= 2.0 * np.pi          # JSBSim gives [0, 2 pi); ours is (-pi, pi]
@@ -406,6 +407,9 @@ class Flight:
         self._steady_wind_mps = np.zeros(3)
         self._steady_wind_t = (0.0, 0.0, 0.0)
         self._raw = np.empty(0)
+        self._row_wind = np.empty((0, 3))     # per pending step: the steady wind written (m/s NED)
+        self._row_terrain_m = np.empty(0)     # per pending step: JSBSim's terrain elevation (m)
+        self._pending = 0                     # steps recorded since the last take()
         self._steps = 0
         self._gust_index = 0
         self._targets: AutopilotTargets | None = None
@@ -533,6 +537,7 @@ class Flight:
         """Replace the wind configuration (steady layers take effect at the next advance)."""
         if not isinstance(wind, WindConfig):
             raise ValueError(f"wind must be a WindConfig, got {type(wind).__name__}")
+        self._no_pending("set_wind")
         self.wind = wind
         self._written_wind = None
         self._gust_index = 0
@@ -547,8 +552,14 @@ class Flight:
         """Change the day's atmosphere in flight (JSBSim's air and the truth's p/T from the next step)."""
         if not isinstance(atmosphere, Atmosphere):
             raise ValueError(f"atmosphere must be an Atmosphere, got {type(atmosphere).__name__}")
+        self._no_pending("set_atmosphere")
         atmosphere.apply(self.fdm)
         self.atmosphere = atmosphere
+
+    def _no_pending(self, what: str) -> None:
+        # the recorded-but-unconverted steps would be converted with the new settings
+        if self._pending:
+            raise RuntimeError(f"Flight.{what}: take() the {self._pending} recorded steps first")
 
     def _write_steady_wind(self, h_m: float) -> None:
         w_ned = self.wind.steady_wind_ned_tuple(h_m)
@@ -575,25 +586,56 @@ class Flight:
 
     def advance(self, n_steps: int) -> TruthChunk:
         """Run n_steps JSBSim steps; return their truth (one row per step, SI). Raises FlightDiverged if
-        the state turns NaN. The steady wind is set for the current altitude first; gusts start on time."""
+        the state turns NaN. The steady wind is set for the current altitude first; gusts start on time.
+        Equivalent to record(n_steps) then take()."""
+        self.record(n_steps)
+        return self.take()
+
+    def record(self, n_steps: int) -> None:
+        """Run n_steps JSBSim steps and keep their raw state, unconverted, for the next take(): the closed
+        loop records every guidance tick and converts once per navigator update. Targets and the terrain
+        elevation may change between records; each step's truth uses the values it was flown with."""
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
         if self._wind_varies:
             self._write_steady_wind(self._last_h_m)
         ncol = self._ncol
+        p = self._pending
+        need = p + n_steps
+        if len(self._row_terrain_m) < need:     # grow the reused buffers (kept across takes)
+            cap = max(need, 2 * len(self._row_terrain_m), 128)
+            raw = np.empty(cap * ncol)
+            raw[:p * ncol] = self._raw[:p * ncol]
+            wind = np.empty((cap, 3))
+            wind[:p] = self._row_wind[:p]
+            terr = np.empty(cap)
+            terr[:p] = self._row_terrain_m[:p]
+            self._raw, self._row_wind, self._row_terrain_m = raw, wind, terr
         buf = self._raw
-        if len(buf) < n_steps * ncol:       # the raw buffer is reused: the kernel copies out of it
-            buf = self._raw = np.empty(n_steps * ncol)
         if self._gust_index < self._n_gusts:
-            self._record_with_gusts(int(n_steps), buf)
+            self._record_with_gusts(int(n_steps), buf, p)
         else:
-            self._recorder(n_steps, self._run, buf, 0, self._getters)
-        first_step = self._steps + 1
+            self._recorder(n_steps, self._run, buf, 8 * p * ncol, self._getters)
+        self._row_wind[p:need] = self._steady_wind_mps
+        self._row_terrain_m[p:need] = self._terrain_elevation_m
+        self._pending = need
         self._steps += n_steps
-        self._last_h_m = float(buf[(n_steps - 1) * ncol + 2]) * M_PER_FT
-        return self._convert(buf, first_step, n_steps)
+        self._last_h_m = float(buf[(need - 1) * ncol + 2]) * M_PER_FT
 
-    def _record_with_gusts(self, n_steps: int, buf: np.ndarray) -> None:
+    @property
+    def pending_steps(self) -> int:
+        """Steps recorded since the last take()."""
+        return self._pending
+
+    def take(self) -> TruthChunk:
+        """Truth of every step recorded since the last take() (one row per step, SI; ValueError if none)."""
+        n = self._pending
+        if n < 1:
+            raise ValueError("Flight.take: no steps recorded since the last take()")
+        self._pending = 0
+        return self._convert(self._raw, self._steps - n + 1, n, self._row_wind, self._row_terrain_m)
+
+    def _record_with_gusts(self, n_steps: int, buf: np.ndarray, first_row: int) -> None:
         gusts = self.wind.gusts
         done = 0
         while done < n_steps:
@@ -606,7 +648,7 @@ class Flight:
                     self._gust_index += 1
                     continue
                 seg = min(seg, until)
-            self._recorder(seg, self._run, buf, done * 8 * self._ncol, self._getters)
+            self._recorder(seg, self._run, buf, (first_row + done) * 8 * self._ncol, self._getters)
             done += seg
 
     def _select_recorder(self) -> None:
@@ -617,7 +659,8 @@ class Flight:
         self._getters = self._all_getters[:self._ncol]
         self._recorder = _record_state_wind if self._read_wind else _record_state
 
-    def _convert(self, raw: np.ndarray, first_step: int, n_steps: int | None = None) -> TruthChunk:
+    def _convert(self, raw: np.ndarray, first_step: int, n_steps: int | None = None,
+                 row_wind: np.ndarray | None = None, row_terrain_m: np.ndarray | None = None) -> TruthChunk:
         """The recorded raw buffer -> TruthChunk: one numba pass into three preallocated blocks (scalar fields
         are rows of one block, vector fields (n, 3) views of another, C_bn its own array); the per-field views
         are built on the chunk's first field access (TruthChunk.from_blocks)."""
@@ -626,9 +669,12 @@ class Flight:
         s = np.empty((_S_ROWS, n))
         vb = np.empty((_V_ROWS, 3, n))
         c_bn = np.empty((n, 3, 3))
-        w = self._steady_wind_t
+        if row_wind is None:
+            row_wind = np.empty((n, 3))
+            row_wind[:] = self._steady_wind_t
+            row_terrain_m = np.full(n, self._terrain_elevation_m)
         atm = self.atmosphere
-        bad = _convert_raw(raw, n, ncol, w[0], w[1], w[2], first_step, self.dt_s, self._terrain_elevation_m,
+        bad = _convert_raw(raw, n, ncol, row_wind, row_terrain_m, first_step, self.dt_s,
                            atm.delta_T_K, atm.p_sl_pa, s, vb, c_bn)
         if bad >= 0:
             row, col = divmod(bad, ncol)

@@ -42,7 +42,7 @@ DEFAULT_INITIAL_ERRORS: dict[str, list[float]] = {
 DEFAULT_SEED = 0
 DEFAULT_DURATION_S = 600.0
 DEFAULT_GUIDANCE_RATE_HZ = 10.0
-DEFAULT_LOG_RATE_HZ = 10.0
+DEFAULT_NAVIGATOR_RATE_HZ = 1.0   # navigator updates (sensor frames handed over, estimate published)
 DEFAULT_MAX_HORIZONTAL_SIGMA_M = 5000.0
 
 
@@ -227,9 +227,10 @@ def _fill_defaults(data: dict) -> dict:
     d.setdefault("gnss", {})
     d["gnss"].setdefault("outages", [])
     d["navigator"].setdefault("settings", {})
+    d["navigator"].setdefault("rate_hz", DEFAULT_NAVIGATOR_RATE_HZ)
     d.setdefault("guidance", {})
     d["guidance"].setdefault("rate_hz", DEFAULT_GUIDANCE_RATE_HZ)
-    d["guidance"].setdefault("log_rate_hz", DEFAULT_LOG_RATE_HZ)
+    d["guidance"].setdefault("log_rate_hz", d["navigator"]["rate_hz"])   # rows are logged at updates
     d.setdefault("limits", {})
     d["limits"].setdefault("max_horizontal_sigma_m", DEFAULT_MAX_HORIZONTAL_SIGMA_M)
     return d
@@ -305,12 +306,23 @@ def _wind_problems(d: dict) -> list[str]:
     return problems
 
 
+def _whole(x: float) -> bool:
+    return abs(x - round(x)) <= 1e-6 and round(x) >= 1
+
+
 def _rate_problems(d: dict) -> list[str]:
-    steps = 1.0 / (d["guidance"]["rate_hz"] * d["aircraft"]["dt_s"])
-    if abs(steps - round(steps)) > 1e-6:
-        return [f"guidance.rate_hz: {d['guidance']['rate_hz']} Hz is not a whole number of "
-                f"JSBSim steps of aircraft.dt_s = {d['aircraft']['dt_s']} s"]
-    return []
+    g, nav, log = d["guidance"]["rate_hz"], d["navigator"]["rate_hz"], d["guidance"]["log_rate_hz"]
+    problems = []
+    if not _whole(1.0 / (g * d["aircraft"]["dt_s"])):
+        problems.append(f"guidance.rate_hz: {g} Hz is not a whole number of "
+                        f"JSBSim steps of aircraft.dt_s = {d['aircraft']['dt_s']} s")
+    if not _whole(g / nav):
+        problems.append(f"navigator.rate_hz: {nav} Hz must divide guidance.rate_hz = {g} Hz (a whole number "
+                        "of guidance ticks per navigator update)")
+    if not _whole(nav / log):
+        problems.append(f"guidance.log_rate_hz: {log} Hz must divide navigator.rate_hz = {nav} Hz (rows are "
+                        "logged at navigator updates)")
+    return problems
 
 
 def _aircraft_problems(d: dict) -> list[str]:

@@ -1,17 +1,26 @@
 """The multi-rate closed loop: flight -> sensors -> navigator -> guidance -> flight.
 
-One guidance tick (10 Hz by default) is:
+One loop tick is one navigator update (1 Hz by default, scenario `[navigator] rate_hz`), made of guidance
+ticks (10 Hz by default, `[guidance] rate_hz`):
 
-    chunk  = flight.advance(steps_per_tick)          JSBSim at 100 Hz, truth for the tick
-    frames = sensors.sample(chunk)                   every sensor at its own rate inside the tick
-    frames.gnss kept only while GNSS is available    (scenario [gnss] outages)
-    est    = navigator.update(frames)                the navigator never sees truth
-    targets = guidance.command(est, t)               guidance flies the route on the ESTIMATE
-    flight.set_targets(targets); flight.set_terrain_elevation(map height under the estimate)
+    for each guidance tick of the update interval:
+        flight.record(steps_per_guidance_tick)         JSBSim at 100 Hz, raw truth kept unconverted
+        targets = guidance.command(est.extrapolated(t)) guidance flies the route on the navigator's ESTIMATE,
+                                                       dead-reckoned with its own velocity since its update
+    chunk  = flight.take()                             truth of the whole interval, converted once
+    frames = sensors.sample(chunk)                     every sensor at its own rate inside the interval
+    frames.gnss kept only while GNSS is available      (scenario [gnss] outages)
+    est    = navigator.update(frames)                  the navigator never sees truth
+    targets = guidance.command(est, t); flight.set_terrain_elevation(map height under the estimate)
+
+Sensors and the navigator work on the interval's chunk in one call each, so their fixed per-call costs are
+paid once per update, not once per guidance tick (`trn-env bench` shows the split). Every sample keeps its
+own timestamp: an IMU sample at 100 Hz is processed at its time whatever the update rate.
 
 A run ends with `completed` (route flown), `terrain_collision` (true height above the true terrain < 0 at
 any JSBSim step), `off_map` (truth outside the true DEM), `diverged` (estimate not finite, horizontal
-sigma above the scenario limit, or navigator health 'diverged'), or `time_limit`.
+sigma above the scenario limit, or navigator health 'diverged'), or `time_limit`. Termination is judged on
+every step of an update interval at its end; route completion and the time limit end the interval early.
 
 Randomness: the scenario seed -> numpy SeedSequence -> one Generator per component (flight/turbulence,
 sensors, map errors, initial estimate errors, navigator), so one seed gives the same run bit for bit.
@@ -227,8 +236,12 @@ class ClosedLoop:
             dems = components.build_terrain(d, scenario.extras, self.rngs["map"])
         self.world_dem, self.map_dem = dems
         self.dt_s = float(d["aircraft"]["dt_s"])
-        self.steps_per_tick = int(round(1.0 / (d["guidance"]["rate_hz"] * self.dt_s)))
-        self.log_every = max(1, int(round(d["guidance"]["rate_hz"] / d["guidance"]["log_rate_hz"])))
+        nav_rate_hz = float(d["navigator"]["rate_hz"])
+        # JSBSim steps per guidance tick, guidance ticks per navigator update (validated whole numbers)
+        self.steps_per_guidance_tick = int(round(1.0 / (d["guidance"]["rate_hz"] * self.dt_s)))
+        self.guidance_ticks_per_tick = int(round(d["guidance"]["rate_hz"] / nav_rate_hz))
+        self.steps_per_tick = self.steps_per_guidance_tick * self.guidance_ticks_per_tick
+        self.log_every = max(1, int(round(nav_rate_hz / d["guidance"]["log_rate_hz"])))
         self.duration_s = float(scenario.duration_s)
         self.outages = list(d["gnss"]["outages"])
         self.max_sigma_h_m = float(d["limits"]["max_horizontal_sigma_m"])
@@ -251,8 +264,9 @@ class ClosedLoop:
         self.n_ticks = 0
         self.termination: str | None = None
         self.log = SimLog()
-        # wall time spent per stage of tick() (flight core, sensors, navigator, the rest of the loop)
-        self.stage_s = {"flight": 0.0, "sensors": 0.0, "navigator": 0.0, "loop": 0.0}
+        # wall time spent per stage of tick(): flight core (recording and conversion), sensors, navigator,
+        # guidance between navigator updates, the rest (termination checks, logging, guidance after update)
+        self.stage_s = {"flight": 0.0, "sensors": 0.0, "navigator": 0.0, "guidance": 0.0, "loop": 0.0}
         self._last_targets = None
         self._log_tick(truth0, 0, self.estimate)
         self.command_now(self.estimate)
@@ -276,12 +290,27 @@ class ClosedLoop:
         return self.guidance is not None and components.guidance_complete(self.guidance)
 
     def tick(self) -> str | None:
-        """Advance one guidance tick; returns the termination reason once the run has ended."""
+        """Advance one navigator update interval (its guidance ticks included); returns the termination
+        reason once the run has ended."""
         if self.termination is not None:
             raise RuntimeError(f"the run has already ended ({self.termination})")
         clock = time.perf_counter
+        flight = self.flight
+        record, n_steps = flight.record, self.steps_per_guidance_tick
+        last = self.guidance_ticks_per_tick - 1
+        t_flight = t_guidance = 0.0
+        for j in range(last + 1):
+            t0 = clock()
+            record(n_steps)
+            t1 = clock()
+            t_flight += t1 - t0
+            self.t_s = flight.t_s
+            if j == last or self._time_up() or self.route_complete():
+                break
+            self.command_now(self.estimate.extrapolated(self.t_s))
+            t_guidance += clock() - t1
         t0 = clock()
-        chunk = self.flight.advance(self.steps_per_tick)
+        chunk = flight.take()
         t1 = clock()
         self.jsbsim_steps += len(chunk)
         frames = self.sensors.sample(chunk, self.world_dem)
@@ -290,7 +319,6 @@ class ClosedLoop:
         est = self.navigator.update(frames)
         t3 = clock()
         self.estimate = est
-        self.t_s = float(chunk.t_s[-1])
         self.last_truth = chunk
         self.n_ticks += 1
         if self.log_sensors:
@@ -306,13 +334,17 @@ class ClosedLoop:
             self.termination = reason
             self.log.events.append((self.t_s, "sim", f"termination: {reason}"))
         st = self.stage_s
-        st["flight"] += t1 - t0
+        st["flight"] += t_flight + (t1 - t0)
         st["sensors"] += t2 - t1
         st["navigator"] += t3 - t2
+        st["guidance"] += t_guidance
         st["loop"] += clock() - t3
         if self.progress is not None:
             self.progress(self.t_s, self.duration_s)
         return reason
+
+    def _time_up(self) -> bool:
+        return self.t_s >= self.duration_s - 0.5 * self.dt_s
 
     def _check_end(self, chunk: TruthChunk, est: Estimate) -> str | None:
         agl_min, n_nan = components.min_height_above_terrain(self.world_dem, chunk.lat_rad, chunk.lon_rad,
@@ -326,7 +358,7 @@ class ClosedLoop:
             return "diverged"
         if self.route_complete():
             return "completed"
-        if self.t_s >= self.duration_s - 0.5 * self.dt_s:
+        if self._time_up():
             return "time_limit"
         return None
 

@@ -2,18 +2,23 @@
 
     python -m trn_env.sensors.bench          # prints one JSON object
 
-The flight core (trn_env.flight.Flight.advance) records `n_chunks` chunks of `chunk_steps` JSBSim steps
-(100 Hz) over the bundled real DEM; then a SensorSuite with every sensor at its default rate (IMU 100 Hz,
-IRA 50 Hz, radar altimeter 20 Hz, baro/air data/heading 10 Hz, GNSS 1 Hz) samples the same chunks. Both
-are timed in this process, best of `repeats`; `sensor_time_fraction` = sensor time / flight time (target
-<= 0.25). The figure is repeated for 10-step chunks (a 10 Hz closed-loop tick), where fixed per-call costs
-weigh more. Numba kernels are compiled (or loaded from cache) before timing.
+The default scenario's flight (the King Air ~1,500 m above the refined 30 m Jacksboro world, light
+turbulence) is recorded by the flight core (trn_env.flight.Flight.advance) in `n_chunks` chunks of
+`chunk_steps` JSBSim steps (100 Hz); then sensor suites sample the same chunks over the same world DEM:
+
+- `sensor_time_fraction`: the default scenario's sensors (IMU 100 Hz, IRA 50 Hz, barometer and air data
+  10 Hz, GNSS 1 Hz) - the set the closed loop runs - over the flight-core time (target <= 0.25);
+- `sensor_time_fraction_all_sensors`: every sensor model at its default rate (the radar altimeter at 20 Hz
+  and the heading sensor added);
+- `sensor_ms_per_chunk_by_sensor`: each sensor alone.
+
+Everything is timed in this process, best of `repeats`, single-threaded; numba kernels are compiled (or
+loaded from the cache) before timing.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import time
 
 import numpy as np
@@ -38,44 +43,47 @@ def _sense(config, chunks, dem, seed=0) -> float:
     return time.perf_counter() - t0
 
 
-def benchmark(n_chunks: int = 50, chunk_steps: int = 100, repeats: int = 3, dem=None,
-              sensors: dict | None = None) -> dict:
-    """Figures (seconds per chunk and their ratio) for `chunk_steps`-step chunks and for 10-step chunks."""
-    import terrain
-    from trn_env.flight import Flight, InitialCondition
+def benchmark(n_chunks: int = 30, chunk_steps: int = 100, repeats: int = 3,
+              scenario: str = "default") -> dict:
+    """Seconds per chunk of the flight core and of the sensor suites, and their ratios."""
+    from trn_env import components
+    from trn_env.scenario import load_scenario
+    from trn_env.sim import spawn_rngs
 
-    dem = dem if dem is not None else terrain.load("jacksboro")
-    sensors = dict(ALL_SENSORS if sensors is None else sensors)
-    lat, lon = dem.center_rad
-    ground = float(np.nanmax(dem.heights_m))
+    sc = load_scenario(scenario)
+    d = sc.data
+    rngs = spawn_rngs(sc.seed)
+    world, _ = components.build_terrain(d, sc.extras, rngs["map"])
+    scenario_sensors = components.sensor_configs(d)
+    warm = components.build_flight(d, world, np.random.default_rng(0)).advance(20)
+    for cfg in (scenario_sensors, ALL_SENSORS):       # compile / load every kernel once
+        SensorSuite.from_config(cfg, 0).sample(warm, world)
 
-    def new_flight():
-        ic = InitialCondition(lat_rad=lat, lon_rad=lon, h_msl_m=ground + 700.0, tas_mps=100.0,
-                              heading_rad=math.radians(30.0))
-        return Flight(ic, terrain_elevation_m=float(dem.height(lat, lon)))
+    flight_s, chunks = [], None
+    for _ in range(repeats):
+        f_s, chunks = _record(components.build_flight(d, world, np.random.default_rng(0)), n_chunks,
+                              chunk_steps)
+        flight_s.append(f_s)
+    fl = min(flight_s) / n_chunks
 
-    # compile / load every kernel once
-    warm = new_flight().advance(20)
-    SensorSuite.from_config(sensors, 0).sample(warm, dem)
+    def per_chunk(cfg) -> float:
+        return min(_sense(cfg, chunks, world) for _ in range(repeats)) / n_chunks
 
-    out: dict = {}
-    for steps, count, suffix in ((chunk_steps, n_chunks, ""), (10, n_chunks * chunk_steps // 10, "_chunk10")):
-        flight_s, sensor_s, per = [], [], {}
-        for _ in range(repeats):
-            f_s, chunks = _record(new_flight(), count, steps)
-            flight_s.append(f_s)
-            sensor_s.append(_sense(sensors, chunks, dem))
-        for name in sensors:
-            if sensors[name]:
-                per[name] = min(_sense({name: sensors[name]}, chunks, dem) for _ in range(repeats)) / count
-        fl, se = min(flight_s) / count, min(sensor_s) / count
-        out[f"flight_ms_per_chunk{suffix}"] = round(fl * 1e3, 4)
-        out[f"sensor_ms_per_chunk{suffix}"] = round(se * 1e3, 4)
-        out[f"sensor_time_fraction{suffix}"] = round(se / fl, 3)
-        out[f"sensor_ms_per_chunk_by_sensor{suffix}"] = {k: round(v * 1e3, 4) for k, v in per.items()}
-    out["sensor_chunk_steps"] = chunk_steps
-    out["sensor_n_chunks"] = n_chunks
-    return out
+    default_s = per_chunk(scenario_sensors)
+    all_s = per_chunk(ALL_SENSORS)
+    by_sensor = {name: round(per_chunk({name: True}) * 1e3, 4) for name in SENSOR_NAMES}
+    return {
+        "flight_ms_per_chunk": round(fl * 1e3, 4),
+        "sensor_ms_per_chunk": round(default_s * 1e3, 4),
+        "sensor_time_fraction": round(default_s / fl, 3),
+        "sensor_set": sorted(scenario_sensors),
+        "sensor_ms_per_chunk_all_sensors": round(all_s * 1e3, 4),
+        "sensor_time_fraction_all_sensors": round(all_s / fl, 3),
+        "sensor_ms_per_chunk_by_sensor": by_sensor,
+        "sensor_chunk_steps": chunk_steps,
+        "sensor_n_chunks": n_chunks,
+        "sensor_scenario": scenario,
+    }
 
 
 def main() -> None:
