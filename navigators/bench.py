@@ -6,10 +6,11 @@ import time
 
 import numpy as np
 
-from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn
+import terrain
+from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
 
 from .ins import StrapdownIns, gravity_ned
-from .tercom import correlate
+from .tercom import _mad_surface_separable, correlate, mad_surface
 
 
 def _best(fn, repeats: int) -> float:
@@ -21,11 +22,31 @@ def _best(fn, repeats: int) -> float:
     return best
 
 
+def _default_fix_inputs(n_samples: int, half_cells: int) -> tuple:
+    """mad_surface arguments of a fix like the default scenario's: the bundled jacksboro DEM, n_samples
+    IRA samples along a 4 km straight leg across its middle, 5 m cells, bias removed."""
+    dem = terrain.load("jacksboro")
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    lat_min, lat_max, lon_min, lon_max = dem.bounds
+    lat_c = 0.5 * (lat_min + lat_max)
+    r_ns = meridian_radius_m(lat_c)
+    r_ew = prime_vertical_radius_m(lat_c) * np.cos(lat_c)
+    s_m = np.linspace(-2000.0, 2000.0, n_samples)
+    lat_k = lat_c + s_m * np.cos(0.5) / r_ns
+    lon_k = 0.5 * (lon_min + lon_max) + s_m * np.sin(0.5) / r_ew
+    h_meas = dem.height(lat_k, lon_k) + 3.0 + np.random.default_rng(1).normal(0.0, 2.0, n_samples)
+    return (heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_meas,
+            5.0 / r_ns, 5.0 / r_ew, half_cells, True)
+
+
 def benchmark(
     n_imu: int = 100_000, half_cells: int = 50, n_tercom_samples: int = 2000, repeats: int = 3
 ) -> dict:
     """ins_steps_per_s (strapdown mechanisation, numba), tercom_fix_s (one 101 x 101 MAD fix of
-    n_tercom_samples samples) and tercom_lookups_per_s (bilinear lookups inside the MAD kernel)."""
+    n_tercom_samples samples) and tercom_lookups_per_s (bilinear lookups inside the MAD kernel);
+    tercom_fix_ms: one default-scenario-like MAD surface (jacksboro, 2000 samples, 101 x 101 cells, bias
+    removed), beside tercom_fix_ms_previous (the previous separable kernel, still the void path, on the
+    same inputs) and their ratio tercom_fix_speedup."""
     lat = np.radians(36.8)
     C = euler_to_C_bn(0.0, 0.0, 0.3)
     g = gravity_ned(lat, 3000.0, 1)
@@ -56,10 +77,18 @@ def benchmark(
     run_fix()
     t_fix = _best(run_fix, repeats)
     cells = (2 * half_cells + 1) ** 2
+    args = _default_fix_inputs(n_tercom_samples, half_cells)
+    mad_surface(*args)
+    _mad_surface_separable(*args)
+    t_new = _best(lambda: mad_surface(*args), repeats)
+    t_prev = _best(lambda: _mad_surface_separable(*args), repeats)
     return {
         "ins_steps_per_s": n_imu / t_ins,
         "tercom_fix_s": t_fix,
         "tercom_lookups_per_s": cells * n_tercom_samples / t_fix,
+        "tercom_fix_ms": 1e3 * t_new,
+        "tercom_fix_ms_previous": 1e3 * t_prev,
+        "tercom_fix_speedup": t_prev / t_new,
     }
 
 

@@ -24,6 +24,8 @@ from numba import njit
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from terrain.kernels import _EDGE, bilinear
 
+_CHUNK = 8  # samples whose tables _mad_surface_void_free builds at once (their rows stay in L1)
+
 
 @njit(cache=True, error_model="numpy")
 def mad_surface_reference(
@@ -95,14 +97,11 @@ def _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, span_lat, sp
 
 
 @njit(cache=True, error_model="numpy")
-def mad_surface(
+def _mad_surface_separable(
     heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
 ):
-    """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
-    lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad).
-    remove_bias: subtract each cell's mean difference first (bias-insensitive variant, not eq 1/2).
-
-    Same numbers as mad_surface_reference (one bilinear lookup per cell and sample), computed separably:
+    """mad_surface's general path (any voids): same numbers as mad_surface_reference (one bilinear lookup
+    per cell and sample), computed separably:
     for each sample the bilinear's along-longitude interpolation (its `a`/`b` terms) is done once per DEM
     row and east shift, then each cell needs one interpolation along latitude - the same operations in the
     same order, so the surface is bit-identical. Points that the bilinear would retry at a void edge go
@@ -207,6 +206,210 @@ def mad_surface(
             v = acc[a, b] / m
             out[a, b] = v if (row_ok[a] and col_ok[b] and np.isfinite(v)) else np.inf
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _axis_fractions(x0, offsets, n, origin, spacing, n_posts, idx, frac, ok):
+    """_axis_cells without branches (so LLVM vectorises it): grid cell index (uint32) and fraction of
+    x0 + offsets[c], c < n, as terrain.kernels.bilinear computes them. floor = int() wherever the index is
+    not clamped (f >= 0), and both clamp to 0 on [-_EDGE, 0): same index and same fraction bits."""
+    hi = n_posts - 1 + _EDGE
+    top = np.float64(n_posts - 2)
+    for c in range(n):
+        f = ((x0 + offsets[c]) - origin) / spacing
+        o = (f >= -_EDGE) & (f <= hi)
+        fi = min(max(np.floor(f), 0.0), top) if o else 0.0
+        ok[c] = o
+        frac[c] = f - fi
+        idx[c] = np.uint32(np.int32(fi))  # via int32: packed double->int32 conversion vectorises
+
+
+@njit(cache=True, error_model="numpy")
+def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, nb, span,
+                  ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok):
+    """Per sample k0 + kk (kk < kc): the along-longitude interpolation of every DEM row the north shifts
+    touch, g[kk, rr, b] = bilinear's a/b term for east shift b (flat, row stride nb), its row-to-row
+    difference dg (bilinear's b - a), and per north shift a the flat offset of its row (row_off), fraction
+    u (row_u) and validity (row_in). row_ok / col_ok are and-ed with this sample's validity."""
+    n_lat, n_lon = heights.shape
+    unb = np.uint64(nb)
+    one = np.uint32(1)
+    for kk in range(kc):
+        k = k0 + kk
+        rin = row_in[kk]
+        _axis_fractions(lat_k[k], lat_off, n, lat0, dlat, n_lat, ri, row_u[kk], rin)
+        _axis_fractions(lon_k[k], lon_off, nb, lon0, dlon, n_lon, cj, cv, cok)
+        i_lo = np.uint32(n_lat)
+        i_hi = np.uint32(0)
+        any_in = False
+        for a in range(n):
+            o = rin[a]
+            i_lo = min(i_lo, ri[a] if o else np.uint32(n_lat))
+            i_hi = max(i_hi, ri[a] if o else np.uint32(0))
+            any_in |= o
+            row_ok[a] &= o
+        for b in range(n):
+            col_ok[b] &= cok[b]
+        if not any_in:
+            i_lo = np.uint32(0)
+            i_hi = np.uint32(0)
+        nr = np.uint64(i_hi - i_lo) + np.uint64(2)  # rows i_lo .. i_hi + 1
+        if nr > np.uint64(span):
+            raise ValueError("mad_surface: north shifts span more DEM rows than the table holds")
+        g0 = np.uint64(kk * span)
+        base = g0 - np.uint64(i_lo)  # wraps for rows outside the map; row_in is False there
+        for a in range(n):
+            row_off[kk, a] = (base + np.uint64(ri[a])) * unb
+        for rr in range(nr):
+            hr = heights[np.uint64(i_lo) + rr]
+            go = (g0 + rr) * unb
+            for b in range(nb):
+                j = cj[b]
+                h0 = hr[j]
+                g[go + np.uint64(b)] = h0 + cv[b] * (hr[j + one] - h0)  # bilinear's a = h00 + v (h01 - h00)
+        for rr in range(nr - np.uint64(1)):
+            go = (g0 + rr) * unb
+            g1 = go + unb
+            for b in range(nb):
+                ub = np.uint64(b)
+                dg[go + ub] = g[g1 + ub] - g[go + ub]  # bilinear's (b - a)
+
+
+@njit(cache=True, error_model="numpy")
+def _mad_surface_void_free(
+    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
+):
+    """mad_surface when no lookup can touch a void. Samples in chunks of _CHUNK: the chunk's tables
+    (_chunk_tables), then per north shift a, four samples at a time in one branch-free loop over the
+    (padded) east shifts, so each cell's sum stays in a register across the four and LLVM vectorises
+    across cells. Per cell the operations and their order over k are those of mad_surface_reference."""
+    K = _CHUNK
+    n = 2 * half + 1
+    nb = (n + 7) // 8 * 8  # east shifts padded to whole vectors; the padding is computed and dropped
+    m = lat_k.shape[0]
+    span = int(np.ceil((n - 1) * abs(dlat_cell) / dlat)) + 4
+    acc = np.zeros(n * nb)
+    mean = np.zeros(n * nb)
+    ri = np.empty(n, np.uint32)
+    row_off = np.empty((K, n), np.uint64)
+    row_u = np.empty((K, n))
+    row_in = np.empty((K, n), np.bool_)
+    g = np.empty(K * span * nb)
+    dg = np.empty(K * span * nb)
+    cj = np.empty(nb, np.uint32)
+    cv = np.empty(nb)
+    cok = np.empty(nb, np.bool_)
+    row_ok = np.ones(n, np.bool_)
+    col_ok = np.ones(n, np.bool_)
+    lat_off = np.empty(n)
+    lon_off = np.empty(nb)
+    for c in range(n):
+        lat_off[c] = (c - half) * dlat_cell  # the reference's dla, dlo
+    for c in range(nb):
+        lon_off[c] = (c - half) * dlon_cell
+    unb = np.uint64(nb)
+    for pss in range(2 if remove_bias else 1):
+        for k0 in range(0, m, K):
+            kc = min(K, m - k0)
+            _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, nb,
+                          span, ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok)
+            for a in range(n):
+                ao = np.uint64(a) * unb
+                kk = 0
+                while (kk + 4 <= kc and row_in[kk, a] and row_in[kk + 1, a] and row_in[kk + 2, a]
+                       and row_in[kk + 3, a]):
+                    o0 = row_off[kk, a]
+                    o1 = row_off[kk + 1, a]
+                    o2 = row_off[kk + 2, a]
+                    o3 = row_off[kk + 3, a]
+                    u0 = row_u[kk, a]
+                    u1 = row_u[kk + 1, a]
+                    u2 = row_u[kk + 2, a]
+                    u3 = row_u[kk + 3, a]
+                    h0 = h_meas_k[k0 + kk]
+                    h1 = h_meas_k[k0 + kk + 1]
+                    h2 = h_meas_k[k0 + kk + 2]
+                    h3 = h_meas_k[k0 + kk + 3]
+                    # hdb = x + u (y - x): bilinear's r = a + u (b - a); d = h_meas - hdb
+                    if not remove_bias:
+                        for b in range(nb):
+                            ub = np.uint64(b)
+                            s = acc[ao + ub]
+                            s += abs(h0 - (g[o0 + ub] + u0 * dg[o0 + ub]))
+                            s += abs(h1 - (g[o1 + ub] + u1 * dg[o1 + ub]))
+                            s += abs(h2 - (g[o2 + ub] + u2 * dg[o2 + ub]))
+                            s += abs(h3 - (g[o3 + ub] + u3 * dg[o3 + ub]))
+                            acc[ao + ub] = s
+                    elif pss == 0:
+                        for b in range(nb):
+                            ub = np.uint64(b)
+                            s = acc[ao + ub]
+                            s += h0 - (g[o0 + ub] + u0 * dg[o0 + ub])
+                            s += h1 - (g[o1 + ub] + u1 * dg[o1 + ub])
+                            s += h2 - (g[o2 + ub] + u2 * dg[o2 + ub])
+                            s += h3 - (g[o3 + ub] + u3 * dg[o3 + ub])
+                            acc[ao + ub] = s
+                    else:
+                        for b in range(nb):
+                            ub = np.uint64(b)
+                            s = acc[ao + ub]
+                            mu = mean[ao + ub]
+                            s += abs((h0 - (g[o0 + ub] + u0 * dg[o0 + ub])) - mu)
+                            s += abs((h1 - (g[o1 + ub] + u1 * dg[o1 + ub])) - mu)
+                            s += abs((h2 - (g[o2 + ub] + u2 * dg[o2 + ub])) - mu)
+                            s += abs((h3 - (g[o3 + ub] + u3 * dg[o3 + ub])) - mu)
+                            acc[ao + ub] = s
+                    kk += 4
+                while kk < kc:  # the chunk's tail, or a sample whose shift a is off the map
+                    if row_in[kk, a]:
+                        o0 = row_off[kk, a]
+                        u0 = row_u[kk, a]
+                        h0 = h_meas_k[k0 + kk]
+                        if not remove_bias:
+                            for b in range(nb):
+                                ub = np.uint64(b)
+                                acc[ao + ub] += abs(h0 - (g[o0 + ub] + u0 * dg[o0 + ub]))
+                        elif pss == 0:
+                            for b in range(nb):
+                                ub = np.uint64(b)
+                                acc[ao + ub] += h0 - (g[o0 + ub] + u0 * dg[o0 + ub])
+                        else:
+                            for b in range(nb):
+                                ub = np.uint64(b)
+                                acc[ao + ub] += abs((h0 - (g[o0 + ub] + u0 * dg[o0 + ub])) - mean[ao + ub])
+                    kk += 1
+        if remove_bias and pss == 0:
+            for q in range(n * nb):
+                mean[q] = acc[q] / m  # the reference's mean = s / m
+                acc[q] = 0.0
+    out = np.empty((n, n))
+    for a in range(n):
+        for b in range(n):
+            v = acc[a * nb + b] / m
+            out[a, b] = v if (row_ok[a] and col_ok[b] and np.isfinite(v)) else np.inf
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def mad_surface(
+    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
+):
+    """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
+    lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad).
+    remove_bias: subtract each cell's mean difference first (bias-insensitive variant, not eq 1/2).
+
+    Bit-identical to mad_surface_reference. When the DEM posts around the track +- the shifts hold no
+    void (the common case) it runs _mad_surface_void_free, else the separable _mad_surface_separable."""
+    if lat_k.shape[0] == 0:
+        return _mad_surface_separable(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
+                                      dlon_cell, half, remove_bias)
+    void_free = _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, half * abs(dlat_cell),
+                                 half * abs(dlon_cell))
+    if void_free:
+        return _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
+                                      dlon_cell, half, remove_bias)
+    return _mad_surface_separable(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
+                                  dlon_cell, half, remove_bias)
 
 
 @dataclass

@@ -7,7 +7,7 @@ import terrain
 from navigators import _ekf_kernels as kern
 from navigators.ins import quat_from_C_bn, quat_to_dcm
 from navigators.ira_geometry import closest_point_ned
-from navigators.tercom import mad_surface, mad_surface_reference
+from navigators.tercom import _block_void_free, mad_surface, mad_surface_reference
 from terrain.geodesy import (
     OMEGA_EARTH_RPS,
     euler_to_C_bn,
@@ -55,6 +55,81 @@ def test_mad_surface_is_bit_identical_to_per_lookup_reference(dem, remove_bias, 
     assert np.array_equal(fast, ref)
     if where != "inside":
         assert np.isinf(ref).any() and np.isfinite(ref).any()   # the case really straddles the edge / void
+
+
+def _takes_void_free_path(heights, lat0, lon0, dlat, dlon, lat, lon, d_lat, d_lon, half):
+    return _block_void_free(heights, lat0, lon0, dlat, dlon, lat, lon, half * abs(d_lat), half * abs(d_lon))
+
+
+def _fast_and_reference(*args):
+    return mad_surface(*args), mad_surface_reference(*args)
+
+
+@pytest.mark.parametrize("remove_bias", [False, True])
+@pytest.mark.parametrize(("half", "m"), [(0, 3), (3, 1), (3, 9), (12, 37), (20, 8)])
+def test_mad_surface_void_free_path_any_size_matches_reference(dem, remove_bias, half, m):
+    # reference-matrix sizes that are and are not whole vectors (2 half + 1 = 1, 7, 25, 41), batch sizes
+    # that leave chunk and 4-sample tails (1, 3, 8, 9, 37), on real terrain without voids
+    rng = np.random.default_rng(11 + half + m)
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    lat_min, lat_max, lon_min, lon_max = dem.bounds
+    mid = (0.5 * (lat_min + lat_max), 0.5 * (lon_min + lon_max))
+    lat, lon, hm, d_lat, d_lon = _batch(dem, rng, m, mid[0], mid[1], 900.0)
+    assert _takes_void_free_path(heights, lat0, lon0, dlat, dlon, lat, lon, d_lat, d_lon, half)
+    grid = (heights, lat0, lon0, dlat, dlon)
+    fast, ref = _fast_and_reference(*grid, lat, lon, hm, d_lat, d_lon, half, remove_bias)
+    assert fast.shape == (2 * half + 1, 2 * half + 1)
+    assert np.isfinite(ref).all()
+    assert np.array_equal(fast, ref)
+
+
+@pytest.mark.parametrize("remove_bias", [False, True])
+@pytest.mark.parametrize(
+    "case", ["negative_steps", "one_sample_off_map", "void_away_from_track", "north_edge"]
+)
+def test_mad_surface_void_free_path_edge_cases_match_reference(dem, remove_bias, case):
+    rng = np.random.default_rng(5)
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    lat_min, lat_max, lon_min, lon_max = dem.bounds
+    mid = (0.5 * (lat_min + lat_max), 0.5 * (lon_min + lon_max))
+    lat, lon, hm, d_lat, d_lon = _batch(dem, rng, 23, mid[0], mid[1], 1200.0)
+    half = 10
+    if case == "negative_steps":  # shifts run south / west with the index
+        d_lat, d_lon = -d_lat, -d_lon
+    elif case == "one_sample_off_map":  # sample 6 is far outside: every cell invalid
+        lat = lat.copy()
+        lat[6] = lat_max + 0.01
+    elif case == "void_away_from_track":  # a void 5 km from the track does not force the general path
+        heights = heights.copy()
+        i_void = int(round((mid[0] + 5000.0 / 6.37e6 - lat0) / dlat))
+        heights[i_void, int(round((mid[1] - lon0) / dlon))] = np.nan
+    else:  # north-east corner: rows and columns partly off the map, sample by sample
+        ne = (lat_max - 40.0 / 6.37e6, lon_max - 40.0 / 5.1e6)
+        lat, lon, hm, d_lat, d_lon = _batch(dem, rng, 23, ne[0], ne[1], 30.0)
+    assert _takes_void_free_path(heights, lat0, lon0, dlat, dlon, lat, lon, d_lat, d_lon, half)
+    grid = (heights, lat0, lon0, dlat, dlon)
+    fast, ref = _fast_and_reference(*grid, lat, lon, hm, d_lat, d_lon, half, remove_bias)
+    assert np.array_equal(fast, ref)
+    if case == "one_sample_off_map":
+        assert np.isinf(ref).all()
+    elif case == "north_edge":
+        assert np.isinf(ref).any() and np.isfinite(ref).any()
+    else:
+        assert np.isfinite(ref).all()
+
+
+def test_mad_surface_void_next_to_track_takes_general_path(dem):
+    # the bit-identity test's "void" case must exercise the void-tolerant path, the others the fast one
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    lat_min, lat_max, lon_min, lon_max = dem.bounds
+    mid = (0.5 * (lat_min + lat_max), 0.5 * (lon_min + lon_max))
+    heights = heights.copy()
+    i = int(round((mid[0] - lat0) / dlat))
+    j = int(round((mid[1] - lon0) / dlon))
+    heights[i, j] = np.nan
+    lat, lon, hm, d_lat, d_lon = _batch(dem, np.random.default_rng(7), 40, lat0 + i * dlat + 150.0 / 6.37e6,
+                                        lon0 + j * dlon, 30.0)
+    assert not _takes_void_free_path(heights, lat0, lon0, dlat, dlon, lat, lon, d_lat, d_lon, 12)
 
 
 def _predict_reference(P, Q, t_imu, f_b, hist, accel_bias, t_ekf0, dt, n_steps, tau):

@@ -1,7 +1,7 @@
 """`trn-env bench`: throughput figures from one run, each beside its reference measured in the same run.
 
-Collects the component benchmarks that exist (trn_env.bench_flight, terrain.bench, trn_env.sensors.bench:
-each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
+Collects the component benchmarks (trn_env.bench_flight, terrain.bench, trn_env.sensors.bench,
+navigators.bench: each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
 
 - closed_loop_steps_per_s: JSBSim steps per wall second of the full default-scenario loop (flight,
   sensors, navigator, guidance, termination checks, logging);
@@ -131,7 +131,7 @@ def env_benchmark(quick: bool = False, n_steps: int | None = None, decision_inte
 def run_all(quick: bool = False) -> dict:
     """Every figure, as one flat dict (the JSON `trn-env bench` prints)."""
     out: dict = {}
-    for module in ("trn_env.bench_flight", "terrain.bench", "trn_env.sensors.bench"):
+    for module in ("trn_env.bench_flight", "terrain.bench", "trn_env.sensors.bench", "navigators.bench"):
         out.update(_component(module, quick))
     for name, fn in (("closed_loop", closed_loop_benchmark), ("env", env_benchmark)):
         try:
