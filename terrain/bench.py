@@ -8,6 +8,10 @@ Figures (one thread; numba kernels compiled before timing):
   *_5km_agl                     the same two queries with the sample at 5 km AGL
   *_refined_10m                 the same two queries (1500 m AGL) on a 10 m world refined from the DEM
                                 (terrain.refine.refine, central 12 x 12 km; refined_10m_posts gives its size)
+  ira_queries_per_s_default_world  IRA queries (1500 m AGL, 45 deg window, 10 km) on the whole DEM refined to
+                                30 m, as the default scenario's true world (refined_30m_posts: its size)
+  ira_50_queries_us_default_world  one ira_return call of 50 such queries (one second of IRA at 50 Hz), us
+  ira_call_overhead_us          the fixed cost of an ira_return call (one query without a valid height), us
 """
 
 from __future__ import annotations
@@ -81,6 +85,24 @@ def _query_rates(dem, n, half_beamwidth_rad, half_window_rad, repeats, agl_m):
     return ira, ra
 
 
+def _ira_world_figures(world: Dem, n: int, half_window_rad: float, repeats: int):
+    """(IRA queries/s, us per call of 50 queries, us per call of one query without a valid height) on
+    `world` at 1500 m AGL, 10 km maximum range."""
+    qlat, qlon, qh, qv, qC = flight_sample(world, n, seed=3, agl_m=1500.0)
+
+    def call(sl, h=None):
+        return lambda: queries.ira_return(
+            world, qlat[sl], qlon[sl], qh[sl] if h is None else h, qv[sl], qC[sl], half_window_rad, 10000.0
+        )
+
+    call(slice(0, 4))()
+    rate = _best_rate(call(slice(None)), n, repeats)
+    per_50 = min(1.0 / _best_rate(call(slice(k, k + 50)), 1, repeats) for k in range(0, min(n, 500) - 49, 50))
+    void_h = np.full(1, np.nan)
+    overhead = 1.0 / _best_rate(call(slice(0, 1), void_h), 1, 20 * repeats)
+    return rate, per_50 * 1e6, overhead * 1e6
+
+
 def benchmark(
     dem: Dem | None = None,
     n_lookups: int = 2_000_000,
@@ -120,6 +142,8 @@ def benchmark(
                                                     lon_c + half_lon))
     n_fine = max(n_queries // 4, 100)
     ira10, ra10 = _query_rates(fine, n_fine, half_beamwidth_rad, half_window_rad, repeats, 1500.0)
+    world = refine.refine(dem, 30.0, seed=0)
+    ira_world, us50, overhead = _ira_world_figures(world, n_fine, half_window_rad, repeats)
     return {
         "terrain_dem": dem.name,
         "bilinear_lookups_per_s": float(nb),
@@ -131,6 +155,10 @@ def benchmark(
         "ira_queries_per_s_refined_10m": float(ira10),
         "radar_altimeter_queries_per_s_refined_10m": float(ra10),
         "refined_10m_posts": int(fine.heights_m.size),
+        "ira_queries_per_s_default_world": float(ira_world),
+        "ira_50_queries_us_default_world": float(us50),
+        "ira_call_overhead_us": float(overhead),
+        "refined_30m_posts": int(world.heights_m.size),
     }
 
 

@@ -27,10 +27,14 @@ bounding sphere misses the cone are pruned. Each surviving cell, in order of bou
 (_cell_min): in the antenna's NED frame the cell is a bilinear patch A + u B + v C + u v D; each row v is a
 segment whose in-cone part is one interval (the cone is convex), so min over u is a clamped projection and
 the cell minimum is a 1-D minimisation over v (samples, edge points, golden section).
-IRA search: a coarse scan (samples one post apart along the zero-Doppler curve) pruned by the lower bound
-range >= sqrt(horizontal^2 + (h_a - h_max)^2), then branch and bound over the intervals between coarse
-samples with Lipschitz / curvature bounds from per-block slopes and per-cell twists (see _ira_one). Ranges
-agree with a dense brute-force search to a few cm.
+IRA search: a coarse scan (samples a whole number of posts, about COARSE_STEP_M, apart along the
+zero-Doppler curve, alternating sides outward from s = 0) pruned by the lower bound range >=
+sqrt(horizontal^2 + (h_a - h_max)^2), then branch and bound over the intervals between coarse samples with
+Lipschitz / curvature bounds from per-cell (or per-block) slopes, per-cell twists and the slope jumps at
+grid lines (see _ira_one, _ira_interval_lb); each curve point is a Newton solve in the bilinear cell
+(_zd_point). Per-DEM tables (block maxima and slopes, height range) are cached on the Dem and the scratch
+space is reused between calls, so a call costs a few microseconds on top of its queries. Ranges agree
+with a dense brute-force search to a few mm; each query is independent of the others in its batch.
 """
 
 from __future__ import annotations
@@ -47,6 +51,8 @@ from terrain.kernels import bilinear
 _INF = np.inf
 _PRUNED = 1e301  # IRA coarse sample skipped by the block bound (it and its intervals cannot beat the best)
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
+IRA_BLOCK_POSTS = 8  # block size of the IRA's height and slope bounds
+COARSE_STEP_M = 45.0  # about the IRA's coarse sample spacing along the zero-Doppler curve (m)
 N_SAMP = 6  # rows sampled per cell by the altimeter's exact cell solver (_cell_min), at most 16
 
 
@@ -748,50 +754,79 @@ def _ra_batch(
 # ----------------------------------------------------------------------------------------- IRA
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _zd_point(
-    heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, sv, t_guess, tol
+    heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, qc, sv, t_guess,
+    tol,
 ):
     """Terrain point on the zero-Doppler plane at across-track nominal coordinate sv (m).
 
     Nominal horizontal coordinates (north, east) = sv * w_h + t * u_h, w_h = right-perpendicular of the
-    horizontal velocity direction u_h; t solves v_hat . NED(point) = 0 by the secant method.
+    horizontal velocity direction u_h; t solves P(t) = v_hat . NED(point) = 0 by Newton steps with the
+    slope dP/dt = |v_h| - v_d dh/dt from the bilinear cell's gradient, kept inside the bracket of the root
+    once one is known (bisection when a step leaves it). qc: _ira_one's per-query constants.
     Returns (t, x, y, z, dphi, dlam, hp) or t = NaN."""
-    mh = m + ha
-    nhc = (n + ha) * c
+    n_lat, n_lon = heights.shape
     wx = -uhy
     wy = uhx
-    t0 = t_guess
-    t1 = t_guess + 1.0
-    p0 = 0.0
+    imh = qc[8]
+    inhc = qc[9]
+    # grid coordinates are affine in t: fi = fi0 + t dfi, fj = fj0 + t dfj
+    fi0 = qc[0] + sv * qc[1]
+    fj0 = qc[3] + sv * qc[4]
+    dfi = qc[2]
+    dfj = qc[5]
+    t_lo = -np.inf
+    t_hi = np.inf
+    tt = t_guess
     x = y = z = dphi = dlam = hp = np.nan
-    for it in range(30):
-        tt = t0 if it == 0 else t1
+    for _it in range(40):
         north = sv * wx + tt * uhx
         east = sv * wy + tt * uhy
-        dphi = north / mh
-        dlam = east / nhc
-        hp = bilinear(heights, lat0, lon0, dlat, dlon, lat + dphi, lon + dlam)
+        dphi = north * imh
+        dlam = east * inhc
+        # bilinear height and its t-derivative (terrain.kernels.bilinear's cell choice and formula)
+        fi = fi0 + tt * dfi
+        fj = fj0 + tt * dfj
+        if not (fi >= -1e-9 and fj >= -1e-9 and fi <= n_lat - 1 + 1e-9 and fj <= n_lon - 1 + 1e-9):
+            return np.nan, x, y, z, dphi, dlam, np.nan
+        i = min(max(int(fi), 0), n_lat - 2)
+        j = min(max(int(fj), 0), n_lon - 2)
+        u = fi - i
+        v = fj - j
+        h00 = heights[i, j]
+        h01 = heights[i, j + 1]
+        h10 = heights[i + 1, j]
+        h11 = heights[i + 1, j + 1]
+        ea = h01 - h00
+        eb = h11 - h10
+        ha_ = h00 + v * ea
+        hb_ = h10 + v * eb
+        hp = ha_ + u * (hb_ - ha_)
         if hp != hp:
-            return np.nan, x, y, z, dphi, dlam, hp
+            hp = bilinear(heights, lat0, lon0, dlat, dlon, lat + dphi, lon + dlam)
+            if hp != hp:
+                return np.nan, x, y, z, dphi, dlam, hp
         x, y, z = _ned(dphi, dlam, hp, ha, s, c, m, n, dm)
         p = vx * x + vy * y + vz * z
         if abs(p) < tol:
             return tt, x, y, z, dphi, dlam, hp
-        if it == 0:
-            p0 = p
-            # Newton-like first step: dP/dt ~ |v_h|
-            t1 = t0 - p / vh
-            continue
-        denom = p - p0
-        if denom == 0.0:
-            t_new = t1 - p / vh
+        if p > 0.0:
+            t_hi = min(t_hi, tt)
         else:
-            t_new = t1 - p * (t1 - t0) / denom
-        # safeguard: limit the step
-        lim = 4.0 * (abs(t1 - t0) + 1.0)
-        if abs(t_new - t1) > lim:
-            t_new = t1 + lim * np.sign(t_new - t1)
-        t0, p0 = t1, p
-        t1 = t_new
+            t_lo = max(t_lo, tt)
+        dh_dt = (hb_ - ha_) * dfi + (ea + u * (eb - ea)) * dfj
+        slope = vh - vz * dh_dt
+        if not (slope > 0.1 * vh):
+            slope = vh
+        t_new = tt - p / slope
+        lim = 200.0
+        if abs(t_new - tt) > lim:
+            t_new = tt + lim * np.sign(t_new - tt)
+        if not (t_new > t_lo and t_new < t_hi):
+            if t_lo > -np.inf and t_hi < np.inf:
+                t_new = 0.5 * (t_lo + t_hi)
+                if t_hi - t_lo < 1e-9:
+                    return tt, x, y, z, dphi, dlam, hp
+        tt = t_new
     return np.nan, x, y, z, dphi, dlam, hp
 
 
@@ -817,6 +852,7 @@ def _ira_eval(
     uhy,
     vh,
     C,
+    qc,
     sin_w,
     max_range,
     sv,
@@ -845,6 +881,7 @@ def _ira_eval(
         uhx,
         uhy,
         vh,
+        qc,
         sv,
         t_guess,
         tol,
@@ -858,28 +895,6 @@ def _ira_eval(
     if r > max_range or bz <= 0.0 or abs(by) > sin_w * r:
         return _INF, t, r, z
     return r, t, r, z
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _region_max(bs, bmax, n_lat, n_lon, lat0, lon0, dlat, dlon, lat, lon, mh, nhc, n_a, n_b, e_a, e_b):
-    """Upper bound of the terrain height over the NED rectangle [n_a, n_b] x [e_a, e_b] (-inf: no terrain)."""
-    i_a = int(np.floor((lat + n_a / mh - lat0) / dlat))
-    i_b = int(np.ceil((lat + n_b / mh - lat0) / dlat))
-    j_a = int(np.floor((lon + e_a / nhc - lon0) / dlon))
-    j_b = int(np.ceil((lon + e_b / nhc - lon0) / dlon))
-    if i_b < 0 or j_b < 0 or i_a > n_lat - 1 or j_a > n_lon - 1:
-        return -_INF
-    nbi, nbj = bmax.shape
-    bi_a = min(max(i_a, 0) // bs, nbi - 1)
-    bi_b = min(min(i_b, n_lat - 1) // bs, nbi - 1)
-    bj_a = min(max(j_a, 0) // bs, nbj - 1)
-    bj_b = min(min(j_b, n_lon - 1) // bs, nbj - 1)
-    hi = -_INF
-    for bi in range(bi_a, bi_b + 1):
-        for bj in range(bj_a, bj_b + 1):
-            if bmax[bi, bj] > hi:
-                hi = bmax[bi, bj]
-    return hi
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -905,6 +920,211 @@ def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
+def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
+    stack[row, 0] = a
+    stack[row, 1] = fa
+    stack[row, 2] = ta
+    stack[row, 3] = ra
+    stack[row, 4] = za
+    stack[row, 5] = b
+    stack[row, 6] = fb
+    stack[row, 7] = tb
+    stack[row, 8] = rb
+    stack[row, 9] = zb
+    stack[row, 10] = lb
+    stack[row, 11] = split
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _ira_region_max(tab, n_lat, n_lon, qc, n_a, n_b, e_a, e_b):
+    """Largest IRA_BLOCK_POSTS-block value of tab (block max heights or slopes) over the NED rectangle
+    [n_a, n_b] x [e_a, e_b] (m from the antenna; qc: _ira_one's per-query constants); -inf: off the grid."""
+    i_a = int(np.floor(qc[0] + n_a * qc[6]))
+    i_b = int(np.ceil(qc[0] + n_b * qc[6]))
+    j_a = int(np.floor(qc[3] + e_a * qc[7]))
+    j_b = int(np.ceil(qc[3] + e_b * qc[7]))
+    if i_b < 0 or j_b < 0 or i_a > n_lat - 1 or j_a > n_lon - 1:
+        return -_INF
+    nbi, nbj = tab.shape
+    bi_a = min(max(i_a, 0) // IRA_BLOCK_POSTS, nbi - 1)
+    bi_b = min(min(i_b, n_lat - 1) // IRA_BLOCK_POSTS, nbi - 1)
+    bj_a = min(max(j_a, 0) // IRA_BLOCK_POSTS, nbj - 1)
+    bj_b = min(min(j_b, n_lon - 1) // IRA_BLOCK_POSTS, nbj - 1)
+    hi = -_INF
+    for bi in range(bi_a, bi_b + 1):
+        for bj in range(bj_a, bj_b + 1):
+            if tab[bi, bj] > hi:
+                hi = tab[bi, bj]
+    return hi
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb, rb, zb):
+    """(lower bound of the in-window range f over the curve piece s in [a, b], split point) from the end
+    samples (f, t, r, z at a and b; see _ira_eval); qc: _ira_one's per-query constants. Intervals with
+    w < 1e-4 m (or < 5 cm next to a point without terrain) get +inf: they are not searched further. A bound
+    already >= best_tol from the global slope (cheap test) is returned as is.
+
+    One-cell pieces (both ends in one bilinear cell: the surface is smooth between them) use the cell's own
+    slope and twist: f >= the chord minus K (s - a)(b - s) / 2 with K >= |r''|, minimised over [a, b].
+    Other pieces get the Lipschitz bound (f_a + f_b - L w) / 2 with L from the slopes of the cells (or
+    blocks) they can cross; when that region is small (<= 16 cells) also the curvature bound with the
+    cells' largest slope and twist, lowered by w / 4 times the largest upward jumps of r' at the grid lines
+    inside it (f is piecewise smooth: f - bound is concave with zero ends). They split where the straight
+    chord first crosses a grid line, so that the pieces become smooth."""
+    n_lat = heights.shape[0]
+    n_lon = heights.shape[1]
+    w = b - a
+    split = 0.5 * (a + b)
+    if w < 1e-4:
+        return _INF, split
+    gam = qc[13]
+    g_glob = qc[14]
+    if ra == _INF or rb == _INF:
+        # an end without terrain/point: unknown geometry there, bisect until the interval is tiny
+        if w < 0.05:
+            return _INF, split
+        return min(fa, fb) - (1.0 + g_glob) * 2.0 * w, split
+    if fa < _INF and fb < _INF:
+        # cheap test first: |r'| <= |P'| <= qc[15] (global slope) everywhere
+        lb0 = 0.5 * (fa + fb - qc[15] * w)
+        if lb0 >= best_tol:
+            return lb0, split
+    uhx = qc[11]
+    uhy = qc[12]
+    # grid coordinates of the two ends (exact: _zd_point's north/east -> lat/lon map)
+    fia = qc[0] + a * qc[1] + ta * qc[2]
+    fja = qc[3] + a * qc[4] + ta * qc[5]
+    fib = qc[0] + b * qc[1] + tb * qc[2]
+    fjb = qc[3] + b * qc[4] + tb * qc[5]
+    cia = min(max(int(np.floor(fia)), 0), n_lat - 2)
+    cja = min(max(int(np.floor(fja)), 0), n_lon - 2)
+    cib = min(max(int(np.floor(fib)), 0), n_lat - 2)
+    cjb = min(max(int(np.floor(fjb)), 0), n_lon - 2)
+    one_cell = cia == cib and cja == cjb
+    h_ne = 0.0
+    kinks = False  # multi-cell piece with cell-level bounds: curvature plus kink bound available
+    jump_n = 0.0  # sums over the grid lines the piece can cross of the largest jump in dh/dn, dh/de
+    jump_e = 0.0
+    if one_cell:
+        # smooth piece inside one bilinear cell: the cell's own slope and twist bound r' and r''
+        h00 = heights[cia, cja]
+        h01 = heights[cia, cja + 1]
+        h10 = heights[cia + 1, cja]
+        h11 = heights[cia + 1, cja + 1]
+        gu = max(abs(h10 - h00), abs(h11 - h01)) * qc[6]
+        gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
+        g = np.sqrt(gu * gu + gv * gv)
+        h_ne = abs(h00 - h01 - h10 + h11) * (qc[6] * qc[7])
+    else:
+        # slope bound over the region the curve segment can cross
+        tt = ta if ta == ta else tb
+        t_lo = min(ta, tb) if (ta == ta and tb == tb) else tt
+        t_hi = max(ta, tb) if (ta == ta and tb == tb) else tt
+        t_lo -= 0.2 * w + 1.0
+        t_hi += 0.2 * w + 1.0
+        na = -a * uhy
+        nb = -b * uhy
+        ea = a * uhx
+        eb = b * uhx
+        n_lo = min(na, nb) + min(t_lo * uhx, t_hi * uhx) - 1.0
+        n_hi = max(na, nb) + max(t_lo * uhx, t_hi * uhx) + 1.0
+        e_lo = min(ea, eb) + min(t_lo * uhy, t_hi * uhy) - 1.0
+        e_hi = max(ea, eb) + max(t_lo * uhy, t_hi * uhy) + 1.0
+        # the cells' own slopes when the region is small (tighter than the block slopes), else the blocks'
+        i_a = int(np.floor(qc[0] + n_lo * qc[6]))
+        i_b = int(np.ceil(qc[0] + n_hi * qc[6]))
+        j_a = int(np.floor(qc[3] + e_lo * qc[7]))
+        j_b = int(np.ceil(qc[3] + e_hi * qc[7]))
+        inside = i_a >= 0 and j_a >= 0 and i_b <= n_lat - 1 and j_b <= n_lon - 1
+        if inside and (i_b - i_a) * (j_b - j_a) <= 16:
+            g = 0.0
+            for ci in range(i_a, i_b):
+                for cj in range(j_a, j_b):
+                    h00 = heights[ci, cj]
+                    h01 = heights[ci, cj + 1]
+                    h10 = heights[ci + 1, cj]
+                    h11 = heights[ci + 1, cj + 1]
+                    gu = max(abs(h10 - h00), abs(h11 - h01)) * qc[6]
+                    gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
+                    gc = gu * gu + gv * gv
+                    tw = abs(h00 - h01 - h10 + h11)
+                    if tw > h_ne:
+                        h_ne = tw
+                    if gc > g:
+                        g = gc
+                    elif not (gc == gc):
+                        g = np.nan
+                        break
+                if not (g == g):
+                    break
+            h_ne *= qc[6] * qc[7]
+            # kinks: across a row (column) grid line only dh/dn (dh/de) jumps, by the second difference of
+            # the heights across the line interpolated between two posts; lines strictly inside the region
+            for li in range(i_a + 1, i_b):
+                mx = 0.0
+                for lj in range(j_a, j_b + 1):
+                    d2 = abs(heights[li + 1, lj] - 2.0 * heights[li, lj] + heights[li - 1, lj])
+                    if d2 > mx:
+                        mx = d2
+                jump_n += mx
+            for lj in range(j_a + 1, j_b):
+                mx = 0.0
+                for li in range(i_a, i_b + 1):
+                    d2 = abs(heights[li, lj + 1] - 2.0 * heights[li, lj] + heights[li, lj - 1])
+                    if d2 > mx:
+                        mx = d2
+                jump_e += mx
+            jump_n *= qc[6]
+            jump_e *= qc[7]
+            kinks = g == g
+            g = np.sqrt(g)
+        else:
+            g = _ira_region_max(bslope, n_lat, n_lon, qc, n_lo, n_hi, e_lo, e_hi)
+        # split where the straight chord first crosses a grid line: the pieces are smooth
+        lam = 2.0
+        if cia != cib:
+            li = cia + 1.0 if fib > fia else float(cia)
+            lam = min(lam, (li - fia) / (fib - fia))
+        if cja != cjb:
+            lj = cja + 1.0 if fjb > fja else float(cja)
+            lam = min(lam, (lj - fja) / (fjb - fja))
+        if lam * w > 1e-3 and (1.0 - lam) * w > 1e-3:
+            split = a + lam * w
+    if not (g >= 0.0):
+        g = g_glob
+    den = 1.0 - gam * g
+    if den < 0.1:
+        den = 0.1
+    zp = g / den + max(abs(a), abs(b)) / 6.3e6
+    tp = gam * zp
+    lip = _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, 1.02)
+    if not (fa < _INF and fb < _INF):
+        return min(fa, fb) - lip * w, split
+    lb = 0.5 * (fa + fb - lip * w)
+    if one_cell or kinks:
+        # |r''| <= |P'|^2 / r + |P''| with |z''| <= (|h_ss| + 1/R) / (1 - gamma g)
+        p1sq = 1.0 + tp * tp + zp * zp
+        r_lo = max(min(ra, rb) - np.sqrt(p1sq) * w, 0.05 * min(ra, rb))
+        # h_ss = 2 h_ne x'_n x'_e on the bilinear cell, x' = w_h + t' u_h
+        xnxe = (abs(uhy) + tp * abs(uhx)) * (abs(uhx) + tp * abs(uhy))
+        zpp = (2.0 * h_ne * xnxe + 1.0 / 6.3e6) / den
+        kk = 1.05 * (p1sq / r_lo + (1.0 + gam) * zpp)
+        # f(a + u) >= fa + (fb - fa) u / w - kk u (w - u) / 2, minimised over u in [0, w]
+        u = 0.5 * w - (fb - fa) / (kk * w) if kk > 0.0 else (0.0 if fa <= fb else w)
+        u = min(max(u, 0.0), w)
+        q2 = fa + (fb - fa) * u / w - 0.5 * kk * u * (w - u)
+        if kinks:
+            # a kink where r' jumps up by J lowers the bound by at most J G(s, kink) <= J w / 4 (G: Green's
+            # function of d^2/ds^2 on [a, b]); |jump of r'| <= |jump of P'| = sqrt(1 + gamma^2) |jump of z'|
+            # with |jump of z'| <= (|jump of h_w| + gamma |z'| |jump of h_u|) / (1 - gamma g)
+            jz = (jump_n * (abs(uhy) + tp * abs(uhx)) + jump_e * (abs(uhx) + tp * abs(uhy))) / den
+            q2 -= 0.25 * w * 1.05 * np.sqrt(1.0 + gam * gam) * jz
+        lb = max(lb, q2)
+    return lb, split
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
 def _ira_one(
     heights,
     lat0,
@@ -927,21 +1147,22 @@ def _ira_one(
     buf_r,
     buf_z,
     stack,
-    bs,
     bmax,
     bslope,
     g_glob,
     out,
+    qc,
 ):
     """Closest in-window zero-Doppler terrain point; writes (valid, range, lat, lon, h) into out[0:5].
 
-    1) coarse march along the curve one post apart, outward from the across-track coordinate s = 0, stopping
-       where no farther point can beat the best and skipping samples whose neighbourhood (+-1 post) lies in
-       blocks too low to beat it; 2) branch and bound over the intervals between samples: the range is
-       Lipschitz in s with a constant from the blocks' maximum slopes (_ira_lipschitz), so an interval with
-       (f_a + f_b - L w) / 2 >= best - tol cannot hold a closer point and is dropped, the others are
-       bisected (split where the chord crosses a grid line, so that the pieces are smooth and the bound
-       from the cell's slope and twist on r'' applies: min(f_a, f_b) - K w^2 / 8)."""
+    1) coarse march along the curve (step: a whole number of posts), outward from the across-track
+       coordinate s = 0 on both sides in turn, stopping where no farther point can beat the best and
+       skipping samples whose neighbourhood (+-1 step) lies in blocks too low to beat it; 2) branch and
+       bound over the intervals between samples (_ira_interval_lb): an interval whose lower bound is >=
+       best - tol cannot hold a closer point and is dropped, the others are bisected (split where the chord
+       crosses a grid line, so that the pieces are smooth and the bound from the cell's slope and twist on
+       r'' applies); 3) polish of the location by three-point steps. qc (>= 16): scratch for the per-query
+       constants. Uses nothing from other queries, so a batch gives the same bits as single queries."""
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
@@ -962,8 +1183,29 @@ def _ira_one(
     n_lat = heights.shape[0]
     n_lon = heights.shape[1]
     d_top = ha - h_max
-    step = cell_m
+    # coarse step: a whole number of posts near COARSE_STEP_M (measured fastest on 23 m and 75 m grids)
+    step = cell_m * max(1.0, np.floor(COARSE_STEP_M / cell_m + 0.5))
     gam = abs(vz) / vh
+    # per-query constants of the bounds: grid coordinates fi = qc0 + s qc1 + t qc2, fj = qc3 + s qc4 + t qc5
+    # of the nominal point (s, t); qc6, qc7: posts per metre north / east; qc11, qc12: u_h; qc13: gamma;
+    # qc14: largest block slope; qc15: |P'| bound from it
+    qc[0] = (lat - lat0) / dlat
+    qc[1] = -uhy / (mh * dlat)
+    qc[2] = uhx / (mh * dlat)
+    qc[3] = (lon - lon0) / dlon
+    qc[4] = uhx / (nhc * dlon)
+    qc[5] = uhy / (nhc * dlon)
+    qc[6] = 1.0 / (mh * dlat)
+    qc[7] = 1.0 / (nhc * dlon)
+    qc[8] = 1.0 / mh
+    qc[9] = 1.0 / nhc
+    qc[11] = uhx
+    qc[12] = uhy
+    qc[13] = gam
+    qc[14] = g_glob
+    den_g = max(1.0 - gam * g_glob, 0.1)
+    zp_g = g_glob / den_g + max_range / 6.3e6
+    qc[15] = np.sqrt(1.0 + (gam * zp_g) ** 2 + zp_g * zp_g) * 1.02
     n_max = buf_s.shape[0]
     half = n_max // 2
     best = _INF
@@ -974,26 +1216,45 @@ def _ira_one(
         t0 = -(vz / vh) * (ha - hp0)
     lo_q = half
     hi_q = half
-    # 1) coarse march outward from s = 0 in both directions (buffer index half + k <-> s = k * step)
-    for direction in (1, -1):
-        t_prev = t0
-        misses = 0
-        k = 0 if direction == 1 else 1
-        while True:
+    # 1) coarse march outward from s = 0, alternating sides so that the best range found so far (which
+    #    limits both marches) improves early (buffer index half + k <-> s = k * step)
+    t_prev_p = t0
+    t_prev_m = t0
+    misses_p = 0
+    misses_m = 0
+    active_p = True
+    active_m = True
+    k = 0
+    tz = -(vz / vh)
+    while active_p or active_m:
+        for direction in (1, -1):
+            if direction == 1:
+                if not active_p:
+                    continue
+                t_prev = t_prev_p
+            else:
+                if not active_m or k == 0:
+                    continue
+                t_prev = t_prev_m
             q = half + direction * k
-            if q < 1 or q >= n_max - 1:
-                break
+            stop = q < 1 or q >= n_max - 1
             sv = (q - half) * step
             horiz_lb = (abs(sv) - step) * 0.998 - 2.0  # covers the neighbouring intervals too
             if horiz_lb > max_range:
-                break
+                stop = True
             if (
                 best < _INF
                 and d_top > 0.0
                 and horiz_lb > 0.0
                 and horiz_lb * horiz_lb + d_top * d_top > best * best
             ):
-                break
+                stop = True
+            if stop:
+                if direction == 1:
+                    active_p = False
+                else:
+                    active_m = False
+                continue
             if q < lo_q:
                 lo_q = q
             if q > hi_q:
@@ -1001,7 +1262,6 @@ def _ira_one(
             if best < _INF and horiz_lb > 0.0:
                 # skip the sample when the blocks its terrain point (and the intervals on either side) can
                 # lie in are too low to beat the best
-                tz = -(vz / vh)
                 t_a = tz * (ha - h_max - 5.0)
                 t_b = tz * (ha - h_min + 5.0 + sv * sv / 6.3e6)
                 t_lo = min(t_a, t_b) - 5.0 - 0.01 * abs(sv)
@@ -1010,22 +1270,8 @@ def _ira_one(
                 nb = -sv * uhy + t_hi * uhx
                 ea = sv * uhx + t_lo * uhy
                 eb = sv * uhx + t_hi * uhy
-                hb = _region_max(
-                    bs,
-                    bmax,
-                    n_lat,
-                    n_lon,
-                    lat0,
-                    lon0,
-                    dlat,
-                    dlon,
-                    lat,
-                    lon,
-                    mh,
-                    nhc,
-                    min(na, nb) - step,
-                    max(na, nb) + step,
-                    min(ea, eb) - step,
+                hb = _ira_region_max(
+                    bmax, n_lat, n_lon, qc, min(na, nb) - step, max(na, nb) + step, min(ea, eb) - step,
                     max(ea, eb) + step,
                 )
                 dv = ha - hb
@@ -1035,11 +1281,10 @@ def _ira_one(
                     buf_t[q] = np.nan
                     buf_r[q] = _INF
                     buf_z[q] = np.nan
-                    k += 1
                     continue
             f, t, r, z = _ira_eval(
                 heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-                sin_w, max_range, sv, t_prev, 1e-3,
+                qc, sin_w, max_range, sv, t_prev, 1e-3,
             )
             buf_s[q] = sv
             buf_f[q] = f
@@ -1047,15 +1292,23 @@ def _ira_one(
             buf_r[q] = r
             buf_z[q] = z
             if t == t and r < _INF:
-                t_prev = t
-                misses = 0
+                if direction == 1:
+                    t_prev_p = t
+                    misses_p = 0
+                else:
+                    t_prev_m = t
+                    misses_m = 0
+            elif direction == 1:
+                misses_p += 1
+                if misses_p > 3:
+                    active_p = False
             else:
-                misses += 1
-                if misses > 3:
-                    break
+                misses_m += 1
+                if misses_m > 3:
+                    active_m = False
             if f < best:
                 best = f
-            k += 1
+        k += 1
     if best == _INF:
         return
     best_s = np.nan
@@ -1065,7 +1318,8 @@ def _ira_one(
             best_s = buf_s[q]
             best_t = buf_t[q]
             break
-    # 2) branch and bound over the intervals between coarse samples
+    # 2) branch and bound over the intervals between coarse samples; every stacked interval carries its
+    #    lower bound (column 10) and split point (column 11), computed once when it is pushed
     tol = 5e-3  # m: an interval must promise at least this much improvement to be searched
     n_st = 0
     cap = stack.shape[0]
@@ -1076,27 +1330,26 @@ def _ira_one(
             continue
         if buf_r[q] == _INF and buf_r[q + 1] == _INF:
             continue
-        if n_st < cap:
-            # insertion by key min(f_a, f_b), descending, so the most promising interval is popped first
-            key = min(fa, fb)
-            row = n_st
-            while row > 0 and min(stack[row - 1, 1], stack[row - 1, 6]) < key:
-                stack[row, :] = stack[row - 1, :]
-                row -= 1
-            stack[row, 0] = buf_s[q]
-            stack[row, 1] = fa
-            stack[row, 2] = buf_t[q]
-            stack[row, 3] = buf_r[q]
-            stack[row, 4] = buf_z[q]
-            stack[row, 5] = buf_s[q + 1]
-            stack[row, 6] = fb
-            stack[row, 7] = buf_t[q + 1]
-            stack[row, 8] = buf_r[q + 1]
-            stack[row, 9] = buf_z[q + 1]
-            n_st += 1
+        lb, split = _ira_interval_lb(
+            heights, bslope, qc, best - tol, buf_s[q], fa, buf_t[q], buf_r[q], buf_z[q], buf_s[q + 1], fb,
+            buf_t[q + 1], buf_r[q + 1], buf_z[q + 1],
+        )
+        if lb >= best - tol or n_st >= cap:
+            continue
+        # insertion by lower bound, descending, so the most promising interval is popped first
+        row = n_st
+        while row > 0 and stack[row - 1, 10] < lb:
+            for col in range(12):
+                stack[row, col] = stack[row - 1, col]
+            row -= 1
+        _ira_push(stack, row, buf_s[q], fa, buf_t[q], buf_r[q], buf_z[q], buf_s[q + 1], fb, buf_t[q + 1],
+                  buf_r[q + 1], buf_z[q + 1], lb, split)
+        n_st += 1
     n_eval = 0
     while n_st > 0 and n_eval < 20000:
         n_st -= 1
+        if stack[n_st, 10] >= best - tol:
+            continue
         a = stack[n_st, 0]
         fa = stack[n_st, 1]
         ta = stack[n_st, 2]
@@ -1107,96 +1360,16 @@ def _ira_one(
         tb = stack[n_st, 7]
         rb = stack[n_st, 8]
         zb = stack[n_st, 9]
-        w = b - a
-        split = 0.5 * (a + b)
-        if ra == _INF or rb == _INF:
-            # an end without terrain/point: unknown geometry there, bisect until the interval is tiny
-            if w < 0.05:
-                continue
-            lb = min(fa, fb) - (1.0 + g_glob) * 2.0 * w
+        mid = stack[n_st, 11]
+        if ta == ta and tb == tb:
+            tg = ta + (tb - ta) * (mid - a) / (b - a)  # linear interpolation: Newton starts close
         else:
-            # grid coordinates of the two ends (exact: _zd_point's north/east -> lat/lon map)
-            fia = (lat + (-a * uhy + ta * uhx) / mh - lat0) / dlat
-            fja = (lon + (a * uhx + ta * uhy) / nhc - lon0) / dlon
-            fib = (lat + (-b * uhy + tb * uhx) / mh - lat0) / dlat
-            fjb = (lon + (b * uhx + tb * uhy) / nhc - lon0) / dlon
-            cia = min(max(int(np.floor(fia)), 0), n_lat - 2)
-            cja = min(max(int(np.floor(fja)), 0), n_lon - 2)
-            cib = min(max(int(np.floor(fib)), 0), n_lat - 2)
-            cjb = min(max(int(np.floor(fjb)), 0), n_lon - 2)
-            one_cell = cia == cib and cja == cjb
-            if one_cell:
-                # smooth piece inside one bilinear cell: the cell's own slope and twist bound r' and r''
-                h00 = heights[cia, cja]
-                h01 = heights[cia, cja + 1]
-                h10 = heights[cia + 1, cja]
-                h11 = heights[cia + 1, cja + 1]
-                dn_c = dlat * mh
-                de_c = dlon * nhc
-                gu = max(abs(h10 - h00), abs(h11 - h01)) / dn_c
-                gv = max(abs(h01 - h00), abs(h11 - h10)) / de_c
-                g = np.sqrt(gu * gu + gv * gv)
-                h_ne = abs(h00 - h01 - h10 + h11) / (dn_c * de_c)
-            else:
-                # slope bound over the region the curve segment can cross
-                tt = ta if ta == ta else tb
-                t_lo = min(ta, tb) if (ta == ta and tb == tb) else tt
-                t_hi = max(ta, tb) if (ta == ta and tb == tb) else tt
-                t_lo -= 0.2 * w + 1.0
-                t_hi += 0.2 * w + 1.0
-                na = -a * uhy
-                nb = -b * uhy
-                ea = a * uhx
-                eb = b * uhx
-                n_lo = min(na, nb) + min(t_lo * uhx, t_hi * uhx) - 1.0
-                n_hi = max(na, nb) + max(t_lo * uhx, t_hi * uhx) + 1.0
-                e_lo = min(ea, eb) + min(t_lo * uhy, t_hi * uhy) - 1.0
-                e_hi = max(ea, eb) + max(t_lo * uhy, t_hi * uhy) + 1.0
-                g = _region_max(
-                    bs, bslope, n_lat, n_lon, lat0, lon0, dlat, dlon, lat, lon, mh, nhc, n_lo, n_hi, e_lo,
-                    e_hi,
-                )
-                h_ne = 0.0
-                # split where the straight chord first crosses a grid line: the pieces are smooth
-                lam = 2.0
-                if cia != cib:
-                    li = cia + 1.0 if fib > fia else float(cia)
-                    lam = min(lam, (li - fia) / (fib - fia))
-                if cja != cjb:
-                    lj = cja + 1.0 if fjb > fja else float(cja)
-                    lam = min(lam, (lj - fja) / (fjb - fja))
-                if lam * w > 1e-3 and (1.0 - lam) * w > 1e-3:
-                    split = a + lam * w
-            if not (g >= 0.0):
-                g = g_glob
-            den = 1.0 - gam * g
-            if den < 0.1:
-                den = 0.1
-            zp = g / den + max(abs(a), abs(b)) / 6.3e6
-            tp = gam * zp
-            lip = _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, 1.02)
-            if fa < _INF and fb < _INF:
-                lb = 0.5 * (fa + fb - lip * w)
-                if one_cell:
-                    # |r''| <= |P'|^2 / r + |P''| with |z''| <= (|h_ss| + 1/R) / (1 - gamma g)
-                    p1sq = 1.0 + tp * tp + zp * zp
-                    r_lo = max(min(ra, rb) - np.sqrt(p1sq) * w, 0.05 * min(ra, rb))
-                    # h_ss = 2 h_ne x'_n x'_e on the bilinear cell, x' = w_h + t' u_h
-                    xnxe = (abs(uhy) + tp * abs(uhx)) * (abs(uhx) + tp * abs(uhy))
-                    zpp = (2.0 * h_ne * xnxe + 1.0 / 6.3e6) / den
-                    kk = 1.05 * (p1sq / r_lo + (1.0 + gam) * zpp)
-                    lb = max(lb, min(fa, fb) - 0.125 * kk * w * w)
-            else:
-                lb = min(fa, fb) - lip * w
-        if lb >= best - tol or w < 1e-4:
-            continue
-        mid = split
-        tg = ta if ta == ta else tb
+            tg = ta if ta == ta else tb
         if tg != tg:
             tg = best_t if best_t == best_t else t0
         fm, tm, rm, zm = _ira_eval(
             heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-            sin_w, max_range, mid, tg, 1e-3,
+            qc, sin_w, max_range, mid, tg, 1e-3,
         )
         n_eval += 1
         if fm < best:
@@ -1205,50 +1378,35 @@ def _ira_one(
             best_t = tm
         if n_st + 2 > cap:
             continue
+        lb_l, sp_l = _ira_interval_lb(heights, bslope, qc, best - tol, a, fa, ta, ra, za, mid, fm, tm, rm, zm)
+        lb_r, sp_r = _ira_interval_lb(heights, bslope, qc, best - tol, mid, fm, tm, rm, zm, b, fb, tb, rb, zb)
         # push the less promising half first so the more promising one is searched first
-        first_left = fa <= fb
+        left_first = lb_l >= lb_r
         for side in range(2):
-            left = (side == 1) == first_left
-            row = n_st
-            if left:
-                stack[row, 0] = a
-                stack[row, 1] = fa
-                stack[row, 2] = ta
-                stack[row, 3] = ra
-                stack[row, 4] = za
-                stack[row, 5] = mid
-                stack[row, 6] = fm
-                stack[row, 7] = tm
-                stack[row, 8] = rm
-                stack[row, 9] = zm
-            else:
-                stack[row, 0] = mid
-                stack[row, 1] = fm
-                stack[row, 2] = tm
-                stack[row, 3] = rm
-                stack[row, 4] = zm
-                stack[row, 5] = b
-                stack[row, 6] = fb
-                stack[row, 7] = tb
-                stack[row, 8] = rb
-                stack[row, 9] = zb
-            n_st += 1
+            left = (side == 0) == left_first
+            if left and lb_l < best - tol:
+                _ira_push(stack, n_st, a, fa, ta, ra, za, mid, fm, tm, rm, zm, lb_l, sp_l)
+                n_st += 1
+            elif not left and lb_r < best - tol:
+                _ira_push(stack, n_st, mid, fm, tm, rm, zm, b, fb, tb, rb, zb, lb_r, sp_r)
+                n_st += 1
     # 3) polish the location (the bound stops at tol in range, which on a flat minimum leaves metres of
-    #    slack in position): three-point steps with a parabolic jump, h = 1 m, 0.1 m, 0.01 m
+    #    slack in position): three-point steps with a parabolic jump, h = 0.5 m then 0.05 m (the jump
+    #    from the 0.05 m stencil puts a smooth minimum within millimetres)
     centre = best_s
     tc = best_t
     fc = best
     h_p = 0.5
     for _it in range(12):
-        if h_p < 5e-3:
+        if h_p < 4e-2:
             break
         fm, tm, _, _ = _ira_eval(
             heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-            sin_w, max_range, centre - h_p, tc, 1e-4,
+            qc, sin_w, max_range, centre - h_p, tc, 1e-4,
         )
         fp, tp_, _, _ = _ira_eval(
             heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-            sin_w, max_range, centre + h_p, tc, 1e-4,
+            qc, sin_w, max_range, centre + h_p, tc, 1e-4,
         )
         if fm < fc and fm <= fp:
             centre, fc, tc = centre - h_p, fm, tm
@@ -1261,14 +1419,14 @@ def _ira_one(
             x_v = centre + 0.5 * h_p * (fm - fp) / den
             fx, tx, _, _ = _ira_eval(
                 heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-                sin_w, max_range, x_v, tc, 1e-4,
+                qc, sin_w, max_range, x_v, tc, 1e-4,
             )
             if fx < fc:
                 centre, fc, tc = x_v, fx, tx
         h_p *= 0.1
     t, x, y, z, dphi, dlam, hp = _zd_point(
-        heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, centre, tc,
-        1e-6,
+        heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, qc, centre,
+        tc, 1e-6,
     )
     if t != t:
         return
@@ -1294,28 +1452,30 @@ def _ira_batch(
     C_bn,
     half_window,
     max_range,
-    bs,
     bmax,
-    bmin,
     bslope,
+    h_min,
+    h_max,
+    g_glob,
+    work,
+    stack,
     valid,
     rng,
     lat_out,
     lon_out,
     h_out,
 ):
-    h_min = _finite_range(bmin)[0]
-    h_max = _finite_range(bmax)[1]
+    """IRA queries k = 0..n-1 (see ira_return); h_min, h_max, g_glob: the DEM's finite height range and
+    largest block slope; work (6, >= n_max) and stack (>= 64, 12): scratch space, contents irrelevant."""
     sin_w = np.sin(half_window)
-    g_glob = _finite_range(bslope)[1]
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
-    buf_s = np.empty(n_max)
-    buf_f = np.empty(n_max)
-    buf_t = np.empty(n_max)
-    buf_r = np.empty(n_max)
-    buf_z = np.empty(n_max)
-    stack = np.empty((4096, 10))
-    out = np.empty(5)
+    buf_s = work[0, :n_max]
+    buf_f = work[1, :n_max]
+    buf_t = work[2, :n_max]
+    buf_r = work[3, :n_max]
+    buf_z = work[4, :n_max]
+    out = work[5, :5]
+    qc = work[5, 8:24]
     for k in range(lat.shape[0]):
         if h[k] != h[k] or lat[k] != lat[k] or lon[k] != lon[k]:
             valid[k] = False
@@ -1343,11 +1503,11 @@ def _ira_batch(
             buf_r,
             buf_z,
             stack,
-            bs,
             bmax,
             bslope,
             g_glob,
             out,
+            qc,
         )
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
@@ -1357,7 +1517,21 @@ def _ira_batch(
 
 
 # ----------------------------------------------------------------------------------------- public API
+def _is_f8_vector(a, n=None) -> bool:
+    return (
+        type(a) is np.ndarray
+        and a.dtype == np.float64
+        and a.ndim == 1
+        and a.flags.c_contiguous
+        and (n is None or a.shape[0] == n)
+    )
+
+
 def _positions(lat_rad, lon_rad, h_m):
+    if _is_f8_vector(lat_rad) and _is_f8_vector(lon_rad, lat_rad.shape[0]) and _is_f8_vector(
+        h_m, lat_rad.shape[0]
+    ):
+        return lat_rad, lon_rad, h_m  # fast path: what the general path below would return
     lat = np.atleast_1d(np.asarray(lat_rad, dtype=np.float64))
     lon = np.atleast_1d(np.asarray(lon_rad, dtype=np.float64))
     h = np.atleast_1d(np.asarray(h_m, dtype=np.float64))
@@ -1368,6 +1542,13 @@ def _positions(lat_rad, lon_rad, h_m):
 
 
 def _stack(name, arr, n, shape):
+    if (
+        type(arr) is np.ndarray
+        and arr.dtype == np.float64
+        and arr.shape == (n,) + shape
+        and arr.flags.c_contiguous
+    ):
+        return arr  # fast path: what the general path below would return
     a = np.asarray(arr, dtype=np.float64)
     if a.shape == shape:
         a = np.broadcast_to(a, (n,) + shape)
@@ -1387,20 +1568,44 @@ def _height_range(dem) -> tuple[float, float]:
     return float(bmin.min()), float(bmax.max())
 
 
-def _block_slopes(dem) -> np.ndarray:
-    """Per-block maximum slope (terrain.kernels.block_slopes, BLOCK_POSTS blocks), cached on the Dem next
-    to its height bounds (keyed by the heights array, which is read-only once queries have run)."""
-    cached = getattr(dem, "_query_block_slopes", None)
-    if cached is not None and cached[0] is dem.heights_m:
-        return cached[1]
+def _block_slopes(dem, block: int = BLOCK_POSTS) -> np.ndarray:
+    """Per-block maximum slope (terrain.kernels.block_slopes) of `block`-post blocks."""
     b = dem.bounds
     lat_far = max(abs(b[0]), abs(b[1]))
     lat_near = 0.0 if b[0] <= 0.0 <= b[1] else min(abs(b[0]), abs(b[1]))
     dn = dem.dlat_rad * geodesy.meridian_radius_m(lat_near)  # shortest rows
     de = dem.dlon_rad * geodesy.prime_vertical_radius_m(lat_far) * np.cos(lat_far)  # narrowest columns
-    slopes = kernels.block_slopes(dem.heights_m, BLOCK_POSTS, float(dn), float(de))
-    dem._query_block_slopes = (dem.heights_m, slopes)
-    return slopes
+    return kernels.block_slopes(dem.heights_m, block, float(dn), float(de))
+
+
+def _ira_tables(dem):
+    """(block max heights, block slopes, finite h_min, finite h_max, largest block slope, cell_m) for the
+    IRA search (IRA_BLOCK_POSTS-post blocks), cached on the Dem (keyed by the heights array, read-only once
+    queries have run)."""
+    cached = getattr(dem, "_query_ira_tables", None)
+    if cached is not None and cached[0] is dem.heights_m:
+        return cached[1]
+    bmax, bmin = kernels.block_bounds(dem.heights_m, IRA_BLOCK_POSTS)
+    bslope = _block_slopes(dem, IRA_BLOCK_POSTS)
+    h_min = _finite_range(bmin)[0]
+    h_max = _finite_range(bmax)[1]
+    g_glob = _finite_range(bslope)[1]
+    tables = (bmax, bslope, float(h_min), float(h_max), float(g_glob), _cell_m(dem))
+    dem._query_ira_tables = (dem.heights_m, tables)
+    return tables
+
+
+_IRA_WORK: dict = {}
+
+
+def _ira_workspace(n_max: int):
+    """Scratch arrays of the IRA search (reused between calls: _ira_batch overwrites what it reads)."""
+    work = _IRA_WORK.get("work")
+    if work is None or work.shape[1] < n_max:
+        work = np.empty((6, max(n_max, 64)))
+        _IRA_WORK["work"] = work
+        _IRA_WORK["stack"] = np.empty((4096, 12))
+    return work, _IRA_WORK["stack"]
 
 
 def _cell_m(dem) -> float:
@@ -1493,13 +1698,15 @@ def ira_return(
     C = _stack("C_bn", C_bn, n, (3, 3))
     valid, rng, la, lo, hh = _outputs(n)
     heights, lat0, lon0, dlat, dlon = dem.grid
+    bmax, bslope, h_min, h_max, g_glob, cell_m = _ira_tables(dem)
+    work, stack = _ira_workspace(2 * int(np.ceil(float(max_range_m) / cell_m)) + 9)
     _ira_batch(
         heights,
         lat0,
         lon0,
         dlat,
         dlon,
-        _cell_m(dem),
+        cell_m,
         lat,
         lon,
         h,
@@ -1507,8 +1714,13 @@ def ira_return(
         C,
         float(half_window_rad),
         float(max_range_m),
-        *dem.block_bounds(BLOCK_POSTS),
-        _block_slopes(dem),
+        bmax,
+        bslope,
+        h_min,
+        h_max,
+        g_glob,
+        work,
+        stack,
         valid,
         rng,
         la,
