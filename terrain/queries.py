@@ -719,19 +719,21 @@ def _ra_batch(
     bs,
     bmax,
     bmin,
+    h_min,
+    h_max,
+    blk_lb,
+    blk_id,
     valid,
     rng,
     lat_out,
     lon_out,
     h_out,
 ):
-    h_min = _finite_range(bmin)[0]
-    h_max = _finite_range(bmax)[1]
+    """The radar-altimeter query of every antenna state; h_min/h_max: the DEM's finite height range,
+    blk_lb (bmax.size,) and blk_id (bmax.size,) int64: scratch space (overwritten before it is read)."""
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
     out = np.empty(5)
-    blk_lb = np.empty(bmax.size)
-    blk_id = np.empty(bmax.size, dtype=np.int64)
     cell = np.empty(12 + 17)
     for k in range(lat.shape[0]):
         ax, ay, az = C_bn[k, 0, 2], C_bn[k, 1, 2], C_bn[k, 2, 2]
@@ -1598,6 +1600,30 @@ def _ira_tables(dem):
 _IRA_WORK: dict = {}
 
 
+def _ra_tables(dem):
+    """(block size, block max heights, block min heights, finite h_min, finite h_max, cell_m) for the
+    radar-altimeter search, cached on the Dem like _ira_tables."""
+    cached = getattr(dem, "_query_ra_tables", None)
+    if cached is not None and cached[0] is dem.heights_m:
+        return cached[1]
+    bs, bmax, bmin = dem.block_bounds(BLOCK_POSTS)
+    tables = (bs, bmax, bmin, float(_finite_range(bmin)[0]), float(_finite_range(bmax)[1]), _cell_m(dem))
+    dem._query_ra_tables = (dem.heights_m, tables)
+    return tables
+
+
+_RA_WORK: dict = {}
+
+
+def _ra_workspace(n_blocks: int):
+    """Scratch arrays of the radar-altimeter search (reused between calls: _ra_bnb writes before it reads)."""
+    if _RA_WORK.get("n", -1) < n_blocks:
+        _RA_WORK["n"] = n_blocks
+        _RA_WORK["lb"] = np.empty(n_blocks)
+        _RA_WORK["id"] = np.empty(n_blocks, dtype=np.int64)
+    return _RA_WORK["lb"], _RA_WORK["id"]
+
+
 def _ira_workspace(n_max: int):
     """Scratch arrays of the IRA search (reused between calls: _ira_batch overwrites what it reads)."""
     work = _IRA_WORK.get("work")
@@ -1660,20 +1686,26 @@ def radar_altimeter_return(
     C = _stack("C_bn", C_bn, lat.shape[0], (3, 3))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
     heights, lat0, lon0, dlat, dlon = dem.grid
+    bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(dem)
     _ra_batch(
         heights,
         lat0,
         lon0,
         dlat,
         dlon,
-        _cell_m(dem),
+        cell_m,
         lat,
         lon,
         h,
         C,
         float(half_beamwidth_rad),
         float(max_range_m),
-        *dem.block_bounds(BLOCK_POSTS),
+        bs,
+        bmax,
+        bmin,
+        h_min,
+        h_max,
+        *_ra_workspace(bmax.size),
         valid,
         rng,
         la,
