@@ -7,6 +7,7 @@ ticks (10 Hz by default, `[guidance] rate_hz`):
         flight.record(steps_per_guidance_tick)         JSBSim at 100 Hz, raw truth kept unconverted
         targets = guidance.command(est.extrapolated(t)) guidance flies the route on the navigator's ESTIMATE,
                                                        dead-reckoned with its own velocity since its update
+                                                       (asked for at the interval's start: _plan_guidance)
     chunk  = flight.take()                             truth of the whole interval, converted once
     frames = sensors.sample(chunk)                     every sensor at its own rate inside the interval
     frames.gnss kept only while GNSS is available      (scenario [gnss] outages)
@@ -275,16 +276,37 @@ class ClosedLoop:
     def command_now(self, est: Estimate) -> None:
         """Targets for `est` from the guidance (or commander) written to the flight now, with the map height
         under the estimate for the autopilot's height-above-ground hold."""
+        self._apply(*self._command(est, self.t_s))
+
+    def _command(self, est: Estimate, t_s: float) -> tuple[object, float]:
+        """(autopilot targets, map height under the estimate) from the guidance (or commander)."""
         if self.commander is not None:
-            targets = self.commander(est, self.t_s)
+            targets = self.commander(est, t_s)
         else:
-            targets = self.guidance.command(est, self.t_s)
+            targets = self.guidance.command(est, t_s)
+        return targets, components.map_height(self.map_dem, est.lat_rad, est.lon_rad)
+
+    def _apply(self, targets, h_ground: float) -> None:
         if targets != self._last_targets:        # unchanged targets need no property writes
             self.flight.set_targets(targets)
             self._last_targets = targets
-        h_ground = components.map_height(self.map_dem, est.lat_rad, est.lon_rad)
         if math.isfinite(h_ground):
             self.flight.set_terrain_elevation(h_ground)
+
+    def _plan_guidance(self) -> list[tuple[object, float]]:
+        """The commands of the guidance ticks inside the coming update interval, in order: after each
+        guidance tick's steps, the targets for the estimate dead-reckoned to that time. They depend on
+        nothing the interval's flight produces, so they are asked for here, in one go (the same calls, in
+        the same order, as asking between the steps - and cheaper: the Python between JSBSim steps stays
+        small). The plan stops where the time limit falls or the route is complete."""
+        plan = []
+        steps0, n, dt = self.flight.steps, self.steps_per_guidance_tick, self.dt_s
+        for j in range(1, self.guidance_ticks_per_tick):
+            t_j = (steps0 + j * n) * dt
+            if t_j >= self.duration_s - 0.5 * dt or self.route_complete():
+                break
+            plan.append(self._command(self.estimate.extrapolated(t_j), t_j))
+        return plan
 
     def route_complete(self) -> bool:
         return self.guidance is not None and components.guidance_complete(self.guidance)
@@ -296,19 +318,17 @@ class ClosedLoop:
             raise RuntimeError(f"the run has already ended ({self.termination})")
         clock = time.perf_counter
         flight = self.flight
-        record, n_steps = flight.record, self.steps_per_guidance_tick
-        last = self.guidance_ticks_per_tick - 1
-        t_flight = t_guidance = 0.0
-        for j in range(last + 1):
-            t0 = clock()
+        record, n_steps, apply = flight.record, self.steps_per_guidance_tick, self._apply
+        t0 = clock()
+        plan = self._plan_guidance()
+        t1 = clock()
+        t_guidance = t1 - t0
+        for targets, h_ground in plan:
             record(n_steps)
-            t1 = clock()
-            t_flight += t1 - t0
-            self.t_s = flight.t_s
-            if j == last or self._time_up() or self.route_complete():
-                break
-            self.command_now(self.estimate.extrapolated(self.t_s))
-            t_guidance += clock() - t1
+            apply(targets, h_ground)
+        record(n_steps)
+        self.t_s = flight.t_s
+        t_flight = clock() - t1
         t0 = clock()
         chunk = flight.take()
         t1 = clock()
