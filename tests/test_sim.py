@@ -12,7 +12,7 @@ from _ecef import ned_between as ned_vector_between
 from navigators.frames import GnssFrame, SensorFrames
 from navigators.protocol import Estimate
 from trn_env import components
-from trn_env.scenario import read_scenario_file, validate
+from trn_env.scenario import ScenarioError, read_scenario_file, validate
 from trn_env.sim import (
     ClosedLoop,
     _gate_gnss,
@@ -280,9 +280,9 @@ def test_guidance_runs_at_its_rate_on_the_estimate_dead_reckoned_between_updates
 def test_navigator_rate_must_divide_the_guidance_rate():
     data = _short(3.0)
     data["navigator"]["rate_hz"] = 3.0
-    with pytest.raises(Exception, match="navigator.rate_hz"):
+    with pytest.raises(ScenarioError, match="navigator.rate_hz"):
         validate(data, source="test")
     data["navigator"]["rate_hz"] = 2.0
     data["guidance"] = {"log_rate_hz": 5.0}
-    with pytest.raises(Exception, match="guidance.log_rate_hz"):
+    with pytest.raises(ScenarioError, match="guidance.log_rate_hz"):
         validate(data, source="test")
