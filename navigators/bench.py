@@ -10,7 +10,7 @@ import terrain
 from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
 
 from .ins import StrapdownIns, gravity_ned
-from .tercom import _mad_surface_separable, correlate, mad_surface
+from .tercom import TERCOM_THREADS, _mad_surface_separable, correlate, mad_surface
 
 
 def _best(fn, repeats: int) -> float:
@@ -81,12 +81,15 @@ def benchmark(
     mad_surface(*args)
     _mad_surface_separable(*args)
     t_new = _best(lambda: mad_surface(*args), repeats)
+    t_one = _best(lambda: mad_surface(*args, threads=1), repeats)
     t_prev = _best(lambda: _mad_surface_separable(*args), repeats)
     return {
         "ins_steps_per_s": n_imu / t_ins,
         "tercom_fix_s": t_fix,
         "tercom_lookups_per_s": cells * n_tercom_samples / t_fix,
         "tercom_fix_ms": 1e3 * t_new,
+        "tercom_fix_threads": TERCOM_THREADS,
+        "tercom_fix_ms_one_thread": 1e3 * t_one,
         "tercom_fix_ms_previous": 1e3 * t_prev,
         "tercom_fix_speedup": t_prev / t_new,
     }

@@ -16,6 +16,8 @@ map (NaN lookups) are invalid (MAD = inf).
 
 from __future__ import annotations
 
+import os
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +27,10 @@ from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from terrain.kernels import _EDGE, bilinear
 
 _CHUNK = 8  # samples whose tables _mad_surface_void_free builds at once (their rows stay in L1)
+# Threads of one MAD surface: a fix is a burst of work (~10 ms for the default scenario's), and in the
+# pipelined closed loop the other core waits for it (trn_env/nav_stage.py), so it is split in two.
+TERCOM_THREADS = min(2, os.cpu_count() or 1)
+PARALLEL_MIN_LOOKUPS = 2_000_000   # below this a thread's start-up (~0.1 ms) is not worth it
 
 
 @njit(cache=True, error_model="numpy")
@@ -225,12 +231,13 @@ def _axis_fractions(x0, offsets, n, origin, spacing, n_posts, idx, frac, ok):
 
 
 @njit(cache=True, error_model="numpy")
-def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, nb, span,
+def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b, nb, span,
                   ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok):
     """Per sample k0 + kk (kk < kc): the along-longitude interpolation of every DEM row the north shifts
     touch, g[kk, rr, b] = bilinear's a/b term for east shift b (flat, row stride nb), its row-to-row
     difference dg (bilinear's b - a), and per north shift a the flat offset of its row (row_off), fraction
-    u (row_u) and validity (row_in). row_ok / col_ok are and-ed with this sample's validity."""
+    u (row_u) and validity (row_in); n north shifts (lat_off), n_b east shifts padded to nb (lon_off).
+    row_ok / col_ok are and-ed with this sample's validity."""
     n_lat, n_lon = heights.shape
     unb = np.uint64(nb)
     one = np.uint32(1)
@@ -248,7 +255,7 @@ def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off
             i_hi = max(i_hi, ri[a] if o else np.uint32(0))
             any_in |= o
             row_ok[a] &= o
-        for b in range(n):
+        for b in range(n_b):
             col_ok[b] &= cok[b]
         if not any_in:
             i_lo = np.uint32(0)
@@ -275,19 +282,20 @@ def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off
                 dg[go + ub] = g[g1 + ub] - g[go + ub]  # bilinear's (b - a)
 
 
-@njit(cache=True, error_model="numpy")
-def _mad_surface_void_free(
-    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
-):
-    """mad_surface when no lookup can touch a void. Samples in chunks of _CHUNK: the chunk's tables
-    (_chunk_tables), then per north shift a, four samples at a time in one branch-free loop over the
-    (padded) east shifts, so each cell's sum stays in a register across the four and LLVM vectorises
-    across cells. Per cell the operations and their order over k are those of mad_surface_reference."""
+@njit(cache=True, error_model="numpy", nogil=True)
+def _mad_rows_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, lat_off, lon_off, n_b,
+                        remove_bias, out):
+    """Rows of the MAD surface when no lookup can touch a void: out[a, b] for the north shifts lat_off[a]
+    (rad) and east shifts lon_off[b], b < n_b (lon_off padded to a multiple of 8). Samples in chunks of
+    _CHUNK: the chunk's tables (_chunk_tables), then per north shift a, four samples at a time in one
+    branch-free loop over the (padded) east shifts, so each cell's sum stays in a register across the four
+    and LLVM vectorises across cells. Per cell the operations and their order over k are those of
+    mad_surface_reference, so any split of the rows gives the same bits. Releases the GIL."""
     K = _CHUNK
-    n = 2 * half + 1
-    nb = (n + 7) // 8 * 8  # east shifts padded to whole vectors; the padding is computed and dropped
+    n = lat_off.shape[0]
+    nb = lon_off.shape[0]
     m = lat_k.shape[0]
-    span = int(np.ceil((n - 1) * abs(dlat_cell) / dlat)) + 4
+    span = int(np.ceil(abs(lat_off[n - 1] - lat_off[0]) / dlat)) + 5
     acc = np.zeros(n * nb)
     mean = np.zeros(n * nb)
     ri = np.empty(n, np.uint32)
@@ -300,19 +308,13 @@ def _mad_surface_void_free(
     cv = np.empty(nb)
     cok = np.empty(nb, np.bool_)
     row_ok = np.ones(n, np.bool_)
-    col_ok = np.ones(n, np.bool_)
-    lat_off = np.empty(n)
-    lon_off = np.empty(nb)
-    for c in range(n):
-        lat_off[c] = (c - half) * dlat_cell  # the reference's dla, dlo
-    for c in range(nb):
-        lon_off[c] = (c - half) * dlon_cell
+    col_ok = np.ones(n_b, np.bool_)
     unb = np.uint64(nb)
     for pss in range(2 if remove_bias else 1):
         for k0 in range(0, m, K):
             kc = min(K, m - k0)
-            _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, nb,
-                          span, ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok)
+            _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b,
+                          nb, span, ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok)
             for a in range(n):
                 ao = np.uint64(a) * unb
                 kk = 0
@@ -382,32 +384,69 @@ def _mad_surface_void_free(
             for q in range(n * nb):
                 mean[q] = acc[q] / m  # the reference's mean = s / m
                 acc[q] = 0.0
-    out = np.empty((n, n))
     for a in range(n):
-        for b in range(n):
+        for b in range(n_b):
             v = acc[a * nb + b] / m
             out[a, b] = v if (row_ok[a] and col_ok[b] and np.isfinite(v)) else np.inf
+
+
+def _shift_offsets(half: int, dlat_cell: float, dlon_cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """North shifts (c - half) dlat_cell, c < 2 half + 1, and east shifts padded to whole vectors of 8 (the
+    padding is computed and dropped), as mad_surface_reference forms them (its dla, dlo)."""
+    n = 2 * half + 1
+    nb = (n + 7) // 8 * 8
+    lat_off = np.array([(c - half) * dlat_cell for c in range(n)])
+    lon_off = np.array([(c - half) * dlon_cell for c in range(nb)])
+    return lat_off, lon_off
+
+
+def _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell,
+                           half, remove_bias, threads: int = 1):
+    """mad_surface when no lookup can touch a void: _mad_rows_void_free over all north shifts, split into
+    `threads` bands of rows computed at the same time (the kernel releases the GIL; same bits either way)."""
+    n = 2 * half + 1
+    lat_off, lon_off = _shift_offsets(half, dlat_cell, dlon_cell)
+    out = np.empty((n, n))
+    args = (heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k)
+    bands = np.linspace(0, n, max(1, min(int(threads), n // 8)) + 1).astype(int)
+    if len(bands) == 2:
+        _mad_rows_void_free(*args, lat_off, lon_off, n, remove_bias, out)
+        return out
+    # threads made per call (not a pool): a pool's threads would not survive the closed loop's fork
+    workers = [threading.Thread(target=_mad_rows_void_free,
+                                args=(*args, lat_off[a0:a1], lon_off, n, remove_bias, out[a0:a1]))
+               for a0, a1 in zip(bands[1:-1], bands[2:], strict=True)]
+    for w in workers:
+        w.start()
+    _mad_rows_void_free(*args, lat_off[:bands[1]], lon_off, n, remove_bias, out[:bands[1]])
+    for w in workers:
+        w.join()
     return out
 
 
-@njit(cache=True, error_model="numpy")
 def mad_surface(
-    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
+    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias,
+    threads: int | None = None,
 ):
     """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
     lat_k/lon_k already include the closest-point offsets; shifts are j*dlat_cell, i*dlon_cell (rad).
     remove_bias: subtract each cell's mean difference first (bias-insensitive variant, not eq 1/2).
 
     Bit-identical to mad_surface_reference. When the DEM posts around the track +- the shifts hold no
-    void (the common case) it runs _mad_surface_void_free, else the separable _mad_surface_separable."""
+    void (the common case) it runs _mad_surface_void_free, on `threads` threads (default: TERCOM_THREADS
+    for a surface of more than PARALLEL_MIN_LOOKUPS lookups, else 1), else the separable
+    _mad_surface_separable."""
     if lat_k.shape[0] == 0:
         return _mad_surface_separable(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
                                       dlon_cell, half, remove_bias)
     void_free = _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, half * abs(dlat_cell),
                                  half * abs(dlon_cell))
     if void_free:
+        if threads is None:
+            lookups = lat_k.shape[0] * (2 * half + 1) ** 2
+            threads = TERCOM_THREADS if lookups > PARALLEL_MIN_LOOKUPS else 1
         return _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
-                                      dlon_cell, half, remove_bias)
+                                      dlon_cell, half, remove_bias, threads)
     return _mad_surface_separable(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
                                   dlon_cell, half, remove_bias)
 

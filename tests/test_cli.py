@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
 import shutil
 import subprocess
 import sys
@@ -110,6 +111,18 @@ def test_interrupted_flight_writes_nothing(tmp_path, monkeypatch, capsys):
     assert code == 130 and count["n"] == 8
     assert not out.exists() and not list(tmp_path.glob(".run.partial-*"))
     assert "interrupted" in capsys.readouterr().err
+    assert not multiprocessing.active_children()          # the pipelined stage's worker was stopped
+
+
+def test_fly_without_the_pipeline_gives_the_same_summary(flown, tmp_path):
+    code, out = _fly(tmp_path, "--seed", "3", "--no-pipeline")
+    assert code == 0
+    a = json.loads((flown[1] / "summary.json").read_text())
+    b = json.loads((out / "summary.json").read_text())
+    assert b["pipelined"] is False and a["pipelined"] is (sys.platform != "win32")
+    for k in ("horizontal_error_rms_m", "horizontal_error_final_m", "vertical_error_rms_m", "termination",
+              "jsbsim_steps"):
+        assert a[k] == b[k], k
 
 
 def test_interrupted_while_writing_leaves_no_summary(tmp_path, monkeypatch):

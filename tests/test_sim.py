@@ -12,11 +12,11 @@ from _ecef import ned_between as ned_vector_between
 from navigators.frames import GnssFrame, SensorFrames
 from navigators.protocol import Estimate
 from trn_env import components
+from trn_env.nav_stage import gate_gnss as _gate_gnss
+from trn_env.nav_stage import gnss_available_mask
 from trn_env.scenario import ScenarioError, read_scenario_file, validate
 from trn_env.sim import (
     ClosedLoop,
-    _gate_gnss,
-    gnss_available_mask,
     perturbed_estimate,
     spawn_rngs,
 )
@@ -249,10 +249,12 @@ def test_map_error_model_and_refined_world():
     assert any(p.startswith("route.waypoints[1]:") and "region_deg" in p for p in exc.value.problems)
 
 
-def test_guidance_runs_at_its_rate_on_the_estimate_dead_reckoned_between_updates():
-    """Guidance is asked at 10 Hz; the navigator updates at 1 Hz; in between the guidance gets the last
-    navigator estimate moved by its own velocity (checked through ECEF: the offset of the commanded position
-    from the navigator's estimate equals v_ned * dt to millimetres)."""
+@pytest.mark.parametrize("latency", [0, 1])
+def test_guidance_runs_at_its_rate_on_the_estimate_dead_reckoned_between_updates(latency):
+    """Guidance is asked at 10 Hz; the navigator updates at 1 Hz; in between the guidance gets the navigator
+    estimate `latency` updates before the interval's start (the first estimate before that) moved by its own
+    velocity (checked through ECEF: the offset of the commanded position from that estimate equals
+    v_ned * dt to millimetres)."""
     calls = []
     targets = components.track_agl_targets(0.2, 1500.0, 85.0)
 
@@ -260,19 +262,26 @@ def test_guidance_runs_at_its_rate_on_the_estimate_dead_reckoned_between_updates
         calls.append((t_s, est))
         return targets
 
-    loop = ClosedLoop(validate(_short(3.0), source="test"), commander=commander)
+    data = _short(4.0)
+    data["navigator"]["latency_updates"] = latency
+    loop = ClosedLoop(validate(data, source="test"), commander=commander)
     updates = [loop.estimate]
     while loop.tick() is None:
+        loop.sync()                                   # every update's estimate, as soon as it exists
         updates.append(loop.estimate)
     times = np.array([t for t, _ in calls])
-    assert np.allclose(np.diff(times), 0.1, atol=1e-9) and times[-1] == pytest.approx(2.9)   # none at the end
+    assert np.allclose(np.diff(times), 0.1, atol=1e-9) and times[-1] == pytest.approx(3.9)   # none at the end
+    assert [u.t_s for u in updates] == pytest.approx([0.0, 1.0, 2.0, 3.0])
     for t_s, est in calls:
-        base = [u for u in updates if u.t_s <= t_s + 1e-9][-1]
+        start = math.floor(t_s + 1e-9)                # the update interval [start, start + 1) the call is in
+        base = updates[max(start - latency, 0)]
         dt = t_s - base.t_s
-        assert est.t_s == pytest.approx(t_s) and 0.0 <= dt < 1.0 - 1e-9
+        assert est.t_s == pytest.approx(t_s) and 0.0 <= dt < 1.0 + latency - 1e-9
         d = ned_vector_between(np.array([base.lat_rad]), np.array([base.lon_rad]), np.array([base.h_m]),
                                np.array([est.lat_rad]), np.array([est.lon_rad]), np.array([est.h_m]))[0]
-        np.testing.assert_allclose(d, np.asarray(base.v_ned_mps) * dt, atol=2e-3)
+        # the small-offset radii leave the Earth's curvature out: d^2 / 2R below the local level (3 mm at 2 s)
+        curvature_m = float(np.dot(d, d)) / (2 * 6.36e6)
+        np.testing.assert_allclose(d, np.asarray(base.v_ned_mps) * dt, atol=2e-3 + curvature_m)
         if dt == 0.0:
             assert est is base                                  # at an update: the navigator's own estimate
 
@@ -285,4 +294,8 @@ def test_navigator_rate_must_divide_the_guidance_rate():
     data["navigator"]["rate_hz"] = 2.0
     data["guidance"] = {"log_rate_hz": 5.0}
     with pytest.raises(ScenarioError, match="guidance.log_rate_hz"):
+        validate(data, source="test")
+    data = _short(3.0)
+    data["navigator"]["latency_updates"] = 2
+    with pytest.raises(ScenarioError, match="latency_updates"):
         validate(data, source="test")

@@ -57,50 +57,63 @@ def bare_jsbsim_steps_per_s(fdm, n_steps: int) -> float:
 
 def closed_loop_benchmark(quick: bool = False, scenario: str = "default", sim_s: float | None = None) -> dict:
     """Full closed loop of `scenario` (sim_s seconds after a 10 s warm-up) vs a bare JSBSim loop at the same
-    initial condition."""
+    initial condition: pipelined as `trn-env fly` runs it (the closed_loop_* keys), then inline in one
+    process (closed_loop_*_inline), both in this run."""
+    out = _closed_loop_figures(quick, scenario, sim_s, pipeline=True)
+    inline = _closed_loop_figures(quick, scenario, sim_s, pipeline=False)
+    for key in ("closed_loop_steps_per_s", "closed_loop_ratio", "closed_loop_ms_per_tick",
+                "closed_loop_ms_per_tick_by_stage"):
+        out[key + "_inline"] = inline[key]
+    return out
+
+
+def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeline: bool) -> dict:
     from .scenario import load_scenario
     from .sim import ClosedLoop
 
     sim_s = sim_s or (40.0 if quick else 120.0)
     sc = load_scenario(scenario, duration_s=sim_s + 20.0)
-    loop = ClosedLoop(sc, log_sensors=True)
-    # bare reference: a second flight at the same (trimmed) initial condition, run() only
-    from . import components
-    ref_flight = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
-    n_ref = int(round(sim_s / loop.dt_s))
-    # warm-up (numba dispatch, first sensor and navigator calls), not timed
-    for _ in range(int(round(10.0 / (loop.steps_per_tick * loop.dt_s)))):
-        loop.tick()
-    bare_before = bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref)
-    steps0 = loop.jsbsim_steps
-    fixes0 = len(getattr(loop.navigator, "fixes", ()))
-    stage0 = dict(loop.stage_s)
-    t0 = time.perf_counter()
-    while loop.termination is None and (loop.jsbsim_steps - steps0) < n_ref:
-        loop.tick()
-    wall = time.perf_counter() - t0
-    # the faster of two bare timings (before and after), so machine-load drift cannot flatter the ratio
-    bare = max(bare_before, bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref))
-    steps = loop.jsbsim_steps - steps0
-    n_fixes = len(getattr(loop.navigator, "fixes", ())) - fixes0
-    ticks = steps // loop.steps_per_tick
-    cl = steps / wall if wall > 0 else math.nan
-    return {
-        "closed_loop_steps_per_s": cl,
-        "closed_loop_jsbsim_reference_steps_per_s": bare,
-        "closed_loop_ratio": cl / bare if bare > 0 else math.nan,
-        "closed_loop_realtime_factor": steps * loop.dt_s / wall if wall > 0 else math.nan,
-        "closed_loop_scenario": scenario,
-        "closed_loop_navigator": sc.navigator_name,
-        "closed_loop_sim_seconds": steps * loop.dt_s,
-        "closed_loop_steps_per_tick": loop.steps_per_tick,
-        "closed_loop_guidance_ticks_per_tick": loop.guidance_ticks_per_tick,
-        "closed_loop_ms_per_tick": 1e3 * wall / max(ticks, 1),
-        "closed_loop_bare_jsbsim_ms_per_tick": 1e3 * loop.steps_per_tick / bare if bare > 0 else math.nan,
-        "closed_loop_ms_per_tick_by_stage": {k: round(1e3 * (v - stage0[k]) / max(ticks, 1), 4)
-                                             for k, v in loop.stage_s.items()},
-        "closed_loop_tercom_fixes": n_fixes,
-    }
+    with ClosedLoop(sc, log_sensors=True, pipeline=pipeline) as loop:
+        # bare reference: a second flight at the same (trimmed) initial condition, run() only
+        from . import components
+        ref_flight = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
+        n_ref = int(round(sim_s / loop.dt_s))
+        # warm-up (numba dispatch, first sensor and navigator calls), not timed
+        for _ in range(int(round(10.0 / (loop.steps_per_tick * loop.dt_s)))):
+            loop.tick()
+        bare_before = bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref)
+        loop.sync()
+        steps0 = loop.jsbsim_steps
+        fixes0 = loop.navigator_fixes
+        stage0 = dict(loop.stage_s)
+        t0 = time.perf_counter()
+        while loop.termination is None and (loop.jsbsim_steps - steps0) < n_ref:
+            loop.tick()
+        loop.sync()
+        wall = time.perf_counter() - t0
+        # the faster of two bare timings (before and after), so machine-load drift cannot flatter the ratio
+        bare = max(bare_before, bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref))
+        steps = loop.jsbsim_steps - steps0
+        n_fixes = loop.navigator_fixes - fixes0
+        ticks = steps // loop.steps_per_tick
+        cl = steps / wall if wall > 0 else math.nan
+        return {
+            "closed_loop_steps_per_s": cl,
+            "closed_loop_jsbsim_reference_steps_per_s": bare,
+            "closed_loop_ratio": cl / bare if bare > 0 else math.nan,
+            "closed_loop_realtime_factor": steps * loop.dt_s / wall if wall > 0 else math.nan,
+            "closed_loop_pipelined": loop.pipelined,
+            "closed_loop_scenario": scenario,
+            "closed_loop_navigator": sc.navigator_name,
+            "closed_loop_sim_seconds": steps * loop.dt_s,
+            "closed_loop_steps_per_tick": loop.steps_per_tick,
+            "closed_loop_guidance_ticks_per_tick": loop.guidance_ticks_per_tick,
+            "closed_loop_ms_per_tick": 1e3 * wall / max(ticks, 1),
+            "closed_loop_bare_jsbsim_ms_per_tick": 1e3 * loop.steps_per_tick / bare if bare > 0 else math.nan,
+            "closed_loop_ms_per_tick_by_stage": {k: round(1e3 * (v - stage0[k]) / max(ticks, 1), 4)
+                                                 for k, v in loop.stage_s.items()},
+            "closed_loop_tercom_fixes": n_fixes,
+        }
 
 
 def env_benchmark(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:

@@ -30,6 +30,9 @@ def _parser() -> argparse.ArgumentParser:
     fly.add_argument("--duration", type=float, default=None, help="override the time limit, seconds")
     fly.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     fly.add_argument("--quiet", action="store_true", help="no progress bar")
+    fly.add_argument("--no-pipeline", action="store_true",
+                     help="run the sensors and the navigator in this process, not beside the flight in a "
+                          "second one (same results, slower)")
     sub.add_parser("scenarios", help="list the built-in scenarios")
     val = sub.add_parser("validate", help="check a scenario file and list every problem")
     val.add_argument("scenario")
@@ -118,8 +121,9 @@ def cmd_fly(args) -> int:
     def progress(t_s: float, _total: float) -> None:
         bar.update(max(0.0, round(t_s, 1) - bar.n))
 
+    loop = None
     try:
-        loop = ClosedLoop(scenario, progress=progress)
+        loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline)
         wall0 = time.perf_counter()
         while loop.termination is None:
             loop.tick()
@@ -128,6 +132,9 @@ def cmd_fly(args) -> int:
         bar.close()
         print("interrupted: nothing written", file=sys.stderr)
         return 130
+    finally:
+        if loop is not None:
+            loop.close()
     bar.close()
     plot = None if args.no_plots else _plotter(result)
     try:

@@ -265,7 +265,7 @@ class TerrainNavEnv(gym.Env):
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m + a[1], self.agl_min_m, self.agl_max_m))
         lat, lon, h = self._truth_now()
         d_before = math.hypot(*self._offset_to_goal(lat, lon, h))
-        self._loop.command_now(self._loop.estimate)      # new targets take effect now
+        self._loop.command_now()                         # new targets take effect now
         reason = None
         for _ in range(self.ticks_per_decision):
             reason = self._loop.tick()
@@ -276,6 +276,8 @@ class TerrainNavEnv(gym.Env):
                 reason = "time_limit"
             if reason is not None:
                 break
+        if self._loop.termination is None and self._loop.sync() is not None:
+            reason = self._loop.termination           # the estimate at the decision time diverged
         self._true_track.append((lat, lon))
         self._est_track.append((self._loop.estimate.lat_rad, self._loop.estimate.lon_rad))
         info = self._info(reason)

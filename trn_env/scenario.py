@@ -43,6 +43,7 @@ DEFAULT_SEED = 0
 DEFAULT_DURATION_S = 600.0
 DEFAULT_GUIDANCE_RATE_HZ = 10.0
 DEFAULT_NAVIGATOR_RATE_HZ = 1.0   # navigator updates (sensor frames handed over, estimate published)
+DEFAULT_NAVIGATOR_LATENCY_UPDATES = 1   # guidance flies on the previous update's estimate (sim.py)
 DEFAULT_MAX_HORIZONTAL_SIGMA_M = 5000.0
 
 
@@ -228,6 +229,7 @@ def _fill_defaults(data: dict) -> dict:
     d["gnss"].setdefault("outages", [])
     d["navigator"].setdefault("settings", {})
     d["navigator"].setdefault("rate_hz", DEFAULT_NAVIGATOR_RATE_HZ)
+    d["navigator"].setdefault("latency_updates", DEFAULT_NAVIGATOR_LATENCY_UPDATES)
     d.setdefault("guidance", {})
     d["guidance"].setdefault("rate_hz", DEFAULT_GUIDANCE_RATE_HZ)
     d["guidance"].setdefault("log_rate_hz", d["navigator"]["rate_hz"])   # rows are logged at updates

@@ -1,30 +1,36 @@
 """The multi-rate closed loop: flight -> sensors -> navigator -> guidance -> flight.
 
-One loop tick is one navigator update (1 Hz by default, scenario `[navigator] rate_hz`), made of guidance
-ticks (10 Hz by default, `[guidance] rate_hz`):
+One loop tick is one navigator update interval (1 Hz by default, scenario `[navigator] rate_hz`), made of
+guidance ticks (10 Hz by default, `[guidance] rate_hz`):
 
     for each guidance tick of the update interval:
-        flight.record(steps_per_guidance_tick)         JSBSim at 100 Hz, raw truth kept unconverted
-        targets = guidance.command(est.extrapolated(t)) guidance flies the route on the navigator's ESTIMATE,
-                                                       dead-reckoned with its own velocity since its update
-                                                       (asked for at the interval's start: _plan_guidance)
-    chunk  = flight.take()                             truth of the whole interval, converted once
-    frames = sensors.sample(chunk)                     every sensor at its own rate inside the interval
-    frames.gnss kept only while GNSS is available      (scenario [gnss] outages)
-    est    = navigator.update(frames)                  the navigator never sees truth
-    targets = guidance.command(est, t); flight.set_terrain_elevation(map height under the estimate)
+        flight.record(steps_per_guidance_tick)          JSBSim at 100 Hz, raw truth kept unconverted
+        targets = guidance.command(g.extrapolated(t))   guidance flies on the navigator's ESTIMATE g,
+                                                        dead-reckoned with its own velocity
+                                                        (asked for at the interval's start: _plan_guidance)
+    chunk = flight.take()                               truth of the whole interval, converted once
+    stage.submit(chunk)                                 sensors sample it (each at its own rate), GNSS is
+                                                        gated by the scenario's outages, the navigator
+                                                        updates - it never sees truth (nav_stage.py)
+    est = stage.collect()                               the estimate for the interval's end
 
-Sensors and the navigator work on the interval's chunk in one call each, so their fixed per-call costs are
-paid once per update, not once per guidance tick (`trn-env bench` shows the split). Every sample keeps its
-own timestamp: an IMU sample at 100 Hz is processed at its time whatever the update rate.
+With `[navigator] latency_updates = 1` (default) g for interval k is the estimate for the end of interval
+k - 1, so the stage's work on interval k - 1 can run in a second process while interval k is flown
+(`ClosedLoop(..., pipeline=True)`: the estimate is collected after the flight, inside the next tick); with
+0 it is the estimate of the interval just flown. Sensors and the navigator work on the interval's chunk in
+one call each, so their fixed per-call costs are paid once per update, not once per guidance tick (`trn-env
+bench` shows the split). Every sample keeps its own timestamp: an IMU sample at 100 Hz is processed at its
+time whatever the update rate.
 
 A run ends with `completed` (route flown), `terrain_collision` (true height above the true terrain < 0 at
 any JSBSim step), `off_map` (truth outside the true DEM), `diverged` (estimate not finite, horizontal
 sigma above the scenario limit, or navigator health 'diverged'), or `time_limit`. Termination is judged on
-every step of an update interval at its end; route completion and the time limit end the interval early.
+every step of an update interval at its end (the truth first, then that interval's estimate); route
+completion and the time limit end the interval early.
 
 Randomness: the scenario seed -> numpy SeedSequence -> one Generator per component (flight/turbulence,
-sensors, map errors, initial estimate errors, navigator), so one seed gives the same run bit for bit.
+sensors, map errors, initial estimate errors, navigator), so one seed gives the same run bit for bit,
+pipelined or not.
 """
 
 from __future__ import annotations
@@ -41,6 +47,8 @@ from navigators.protocol import Estimate, Health
 from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
 
 from . import components
+from .flight import FlightDiverged
+from .nav_stage import InlineNavStage, ProcessNavStage, fork_available, gnss_available_mask
 from .scenario import Scenario, load_scenario
 from .truth import TruthChunk
 
@@ -88,35 +96,6 @@ def perturbed_estimate(truth: TruthChunk, i: int, sigmas: dict[str, list[float]]
         covariance=cov,
         health=Health(),
     )
-
-
-def gnss_available_mask(t_s: np.ndarray, outages: list[dict]) -> np.ndarray:
-    """True where GNSS fixes reach the navigator: outside every [start_s, end_s) outage."""
-    ok = np.ones(np.shape(t_s), bool)
-    for o in outages:
-        end = o.get("end_s", math.inf)
-        ok &= ~((t_s >= o["start_s"]) & (t_s < end))
-    return ok
-
-
-def _gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
-    g = frames.gnss
-    if g is None or not outages or g.t_s.shape[0] == 0:
-        return frames
-    t_first, t_last = float(g.t_s[0]), float(g.t_s[-1])
-    if all(t_last < o["start_s"] or t_first >= o.get("end_s", math.inf) for o in outages):
-        return frames                                   # no outage touches this frame
-    if any(t_first >= o["start_s"] and t_last < o.get("end_s", math.inf) for o in outages):
-        frames.gnss = None                              # the whole frame is inside one outage
-        return frames
-    keep = gnss_available_mask(g.t_s, outages)
-    if keep.all():
-        return frames
-    if not keep.any():
-        frames.gnss = None
-        return frames
-    frames.gnss = type(g)(**{k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in vars(g).items()})
-    return frames
 
 
 _TRUTH_LOGGED = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps",
@@ -221,14 +200,24 @@ Commander = Callable[[Estimate, float], object]
 
 
 class ClosedLoop:
-    """One closed-loop flight of a validated scenario, advanced one guidance tick at a time.
+    """One closed-loop flight of a validated scenario, advanced one navigator update interval at a time.
 
     `commander(estimate, t_s) -> AutopilotTargets` replaces the scenario's route guidance (the gymnasium
-    env uses this); `dems=(world, map)` reuses already-built terrain.
+    env uses this); `dems=(world, map)` reuses already-built terrain. `pipeline=True` runs the sensors and
+    the navigator in a second process while the loop flies the next interval (nav_stage.ProcessNavStage);
+    it needs `navigator.latency_updates = 1` and a platform with fork (else the loop runs inline:
+    `self.pipelined` says which). The results are the same bit for bit either way. Close a pipelined loop
+    when done with it (`run()` does; `close()` or `with ClosedLoop(...) as loop:` otherwise).
+
+    Latency (scenario `[navigator] latency_updates`): guidance flies interval k on the estimate at the end
+    of interval k - 1 - latency, dead-reckoned (with latency 1 the estimate of interval k - 1 is still being
+    computed while interval k is flown). `self.estimate` is the newest estimate collected; `sync()` waits
+    for the one in progress so that it matches `self.t_s`.
     """
 
     def __init__(self, scenario: Scenario, *, commander: Commander | None = None, dems=None,
-                 log_sensors: bool = True, progress: Callable[[float, float], None] | None = None):
+                 log_sensors: bool = True, progress: Callable[[float, float], None] | None = None,
+                 pipeline: bool = False):
         self.scenario = scenario
         d = scenario.data
         self.seeds = spawn_seeds(scenario.seed)
@@ -238,6 +227,7 @@ class ClosedLoop:
         self.world_dem, self.map_dem = dems
         self.dt_s = float(d["aircraft"]["dt_s"])
         nav_rate_hz = float(d["navigator"]["rate_hz"])
+        self.latency_updates = int(d["navigator"].get("latency_updates", 1))
         # JSBSim steps per guidance tick, guidance ticks per navigator update (validated whole numbers)
         self.steps_per_guidance_tick = int(round(1.0 / (d["guidance"]["rate_hz"] * self.dt_s)))
         self.guidance_ticks_per_tick = int(round(d["guidance"]["rate_hz"] / nav_rate_hz))
@@ -251,31 +241,67 @@ class ClosedLoop:
         self.progress = progress
 
         self.flight = components.build_flight(d, self.world_dem, self.rngs["flight"])
-        self.sensors = components.build_sensors(d, self.seeds["sensors"])
-        self.navigator = components.build_navigator(d, self.map_dem, self.rngs["navigator"])
+        sensors = components.build_sensors(d, self.seeds["sensors"])
+        navigator = components.build_navigator(d, self.map_dem, self.rngs["navigator"])
         self.guidance = components.build_guidance(d, self.map_dem) if commander is None else None
         self.commander = commander
 
         truth0 = self.flight.snapshot()
         self.estimate = perturbed_estimate(truth0, 0, d["initial_errors"], self.rngs["initial_errors"])
-        self.navigator.reset(self.estimate)
+        navigator.reset(self.estimate)
+        self.guidance_estimate = self.estimate       # the estimate guidance flies on (dead-reckoned)
         self.t_s = float(truth0.t_s[0])
         self.last_truth = truth0
         self.jsbsim_steps = 0
         self.n_ticks = 0
+        self.navigator_fixes = 0
         self.termination: str | None = None
         self.log = SimLog()
-        # wall time spent per stage of tick(): flight core (recording and conversion), sensors, navigator,
-        # guidance between navigator updates, the rest (termination checks, logging, guidance after update)
-        self.stage_s = {"flight": 0.0, "sensors": 0.0, "navigator": 0.0, "guidance": 0.0, "loop": 0.0}
+        # wall time per stage: flight core (recording and conversion), sensors, navigator, guidance between
+        # navigator updates, waiting for a pipelined stage's output, the rest (termination checks, logging,
+        # guidance after an update). Pipelined, the sensors and navigator times are the worker's.
+        self.stage_s = {"flight": 0.0, "sensors": 0.0, "navigator": 0.0, "guidance": 0.0, "wait": 0.0,
+                        "loop": 0.0}
         self._last_targets = None
+        self._inflight: tuple[TruthChunk, int] | None = None   # submitted, not yet collected
         self._log_tick(truth0, 0, self.estimate)
-        self.command_now(self.estimate)
+        self.command_now()
+
+        inline = InlineNavStage(sensors, navigator, self.world_dem, self.outages, log_sensors)
+        self.pipelined = bool(pipeline and self.latency_updates >= 1 and fork_available())
+        # forked last, so the worker starts from exactly this state
+        self._stage = ProcessNavStage(inline) if self.pipelined else inline
+        # the sensors and navigator objects in use (None when they live in the worker process)
+        self.sensors = None if self.pipelined else sensors
+        self.navigator = None if self.pipelined else navigator
+
+    def close(self) -> None:
+        """Stop the pipelined stage's worker process (idempotent; a no-op inline). An ended run has its
+        sensor frames in the log by then; a run closed midway keeps only those already fetched."""
+        self._stage.close()
+
+    def _fetch_frames(self) -> None:
+        """Move the stage's logged sensor frames into the log (nothing in progress may be pending)."""
+        if self._stage.busy:
+            return
+        for frames in self._stage.logged_frames():
+            self.log.add_frames(frames)
+
+    def __enter__(self) -> ClosedLoop:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     # ------------------------------------------------------------------------------------------ loop
-    def command_now(self, est: Estimate) -> None:
-        """Targets for `est` from the guidance (or commander) written to the flight now, with the map height
-        under the estimate for the autopilot's height-above-ground hold."""
+    def command_now(self, est: Estimate | None = None) -> None:
+        """Targets from the guidance (or commander) written to the flight now, for `est` or by default the
+        guidance estimate dead-reckoned to now, with the map height under it for the autopilot's
+        height-above-ground hold."""
+        if est is None:
+            est = self.guidance_estimate
+            if est.t_s != self.t_s:
+                est = est.extrapolated(self.t_s)
         self._apply(*self._command(est, self.t_s))
 
     def _command(self, est: Estimate, t_s: float) -> tuple[object, float]:
@@ -295,17 +321,18 @@ class ClosedLoop:
 
     def _plan_guidance(self) -> list[tuple[object, float]]:
         """The commands of the guidance ticks inside the coming update interval, in order: after each
-        guidance tick's steps, the targets for the estimate dead-reckoned to that time. They depend on
-        nothing the interval's flight produces, so they are asked for here, in one go (the same calls, in
+        guidance tick's steps, the targets for the guidance estimate dead-reckoned to that time. They depend
+        on nothing the interval's flight produces, so they are asked for here, in one go (the same calls, in
         the same order, as asking between the steps - and cheaper: the Python between JSBSim steps stays
         small). The plan stops where the time limit falls or the route is complete."""
         plan = []
         steps0, n, dt = self.flight.steps, self.steps_per_guidance_tick, self.dt_s
+        est = self.guidance_estimate
         for j in range(1, self.guidance_ticks_per_tick):
             t_j = (steps0 + j * n) * dt
             if t_j >= self.duration_s - 0.5 * dt or self.route_complete():
                 break
-            plan.append(self._command(self.estimate.extrapolated(t_j), t_j))
+            plan.append(self._command(est.extrapolated(t_j), t_j))
         return plan
 
     def route_complete(self) -> bool:
@@ -313,7 +340,12 @@ class ClosedLoop:
 
     def tick(self) -> str | None:
         """Advance one navigator update interval (its guidance ticks included); returns the termination
-        reason once the run has ended."""
+        reason once the run has ended.
+
+        The interval's truth goes to the estimation stage; with latency 1 its estimate is collected during
+        the next tick, after that interval is flown (pipelined, the worker computes it meanwhile). Should
+        that estimate have diverged, the run ends at its time and the interval flown since is dropped
+        (never logged or counted), so a pipelined and an inline run end the same way."""
         if self.termination is not None:
             raise RuntimeError(f"the run has already ended ({self.termination})")
         clock = time.perf_counter
@@ -322,51 +354,95 @@ class ClosedLoop:
         t0 = clock()
         plan = self._plan_guidance()
         t1 = clock()
-        t_guidance = t1 - t0
-        for targets, h_ground in plan:
+        try:
+            for targets, h_ground in plan:
+                record(n_steps)
+                apply(targets, h_ground)
             record(n_steps)
-            apply(targets, h_ground)
-        record(n_steps)
-        self.t_s = flight.t_s
-        t_flight = clock() - t1
-        t0 = clock()
-        chunk = flight.take()
-        t1 = clock()
-        self.jsbsim_steps += len(chunk)
-        frames = self.sensors.sample(chunk, self.world_dem)
-        frames = _gate_gnss(frames, self.outages)
+            chunk = flight.take()
+        except FlightDiverged:
+            if self._inflight is not None and self._collect(final=False) is not None:
+                return self._end("diverged")      # the estimate had ended the run before this interval
+            raise
         t2 = clock()
-        est = self.navigator.update(frames)
+        self.stage_s["guidance"] += t1 - t0
+        self.stage_s["flight"] += t2 - t1
+        if self._inflight is not None and self._collect(final=False) is not None:
+            return self._end("diverged")
         t3 = clock()
-        self.estimate = est
+        self.t_s = flight.t_s
+        self.jsbsim_steps += len(chunk)
         self.last_truth = chunk
         self.n_ticks += 1
-        if self.log_sensors:
-            self.log.add_frames(frames)
-        for t_ev, msg in est.health.events:
-            self.log.events.append((t_ev, "navigator", msg))
-        reason = self._check_end(chunk, est)
-        if reason is not None or self.n_ticks % self.log_every == 0:
-            self._log_tick(chunk, len(chunk) - 1, est)
+        t4 = clock()
+        self._stage.submit(chunk)                 # inline, the work is done here: counted by _collect
+        if not self._stage.pipelined:
+            t3 += clock() - t4
+        self._inflight = (chunk, self.n_ticks)
+        reason = self._truth_reason(chunk)
+        if reason is not None or self.route_complete() or self._time_up() or self.latency_updates == 0:
+            final = reason is not None or self.route_complete() or self._time_up()
+            t4 = clock()
+            diverged = self._collect(final=final)
+            t3 += clock() - t4                    # counted as wait, sensors and navigator by _collect
+            if reason is None:
+                reason = diverged or ("completed" if self.route_complete() else
+                                      "time_limit" if self._time_up() else None)
         if reason is None:
-            self.command_now(est)
+            self.guidance_estimate = self.estimate
+            self.command_now()
         else:
-            self.termination = reason
-            self.log.events.append((self.t_s, "sim", f"termination: {reason}"))
-        st = self.stage_s
-        st["flight"] += t_flight + (t1 - t0)
-        st["sensors"] += t2 - t1
-        st["navigator"] += t3 - t2
-        st["guidance"] += t_guidance
-        st["loop"] += clock() - t3
+            self._end(reason)
+        self.stage_s["loop"] += clock() - t3
         if self.progress is not None:
             self.progress(self.t_s, self.duration_s)
+        return reason
+
+    def sync(self) -> str | None:
+        """Wait for the estimate in progress, if any, so that `self.estimate` is the estimate at `self.t_s`;
+        returns the termination reason if it ended the run (diverged)."""
+        if self.termination is None and self._inflight is not None and self._collect(final=False):
+            self._end("diverged")
+        return self.termination
+
+    def _collect(self, final: bool) -> str | None:
+        """Take the submitted interval's estimate from the stage: becomes self.estimate, its frames and
+        health events are logged, its row too (on the log's rate, or when `final` or diverged); returns
+        'diverged' if it ended the run."""
+        chunk, tick_no = self._inflight
+        t0 = time.perf_counter()
+        out = self._stage.collect()
+        st = self.stage_s
+        st["wait"] += time.perf_counter() - t0
+        st["sensors"] += out.sensors_s
+        st["navigator"] += out.navigator_s
+        self._inflight = None
+        est = out.estimate
+        self.estimate = est
+        self.navigator_fixes = out.navigator_fixes
+        for t_ev, msg in est.health.events:
+            self.log.events.append((t_ev, "navigator", msg))
+        diverged = self._diverged(chunk, est)
+        if final or diverged or tick_no % self.log_every == 0:
+            self._log_tick(chunk, len(chunk) - 1, est)
+        return "diverged" if diverged else None
+
+    def _end(self, reason: str) -> str:
+        if self._inflight is not None:          # (not reached: every ending collects first)
+            self._collect(final=True)
+        if self.last_truth is not None and len(self.last_truth):
+            self.t_s = float(self.last_truth.t_s[-1])
+        self.termination = reason
+        self.log.events.append((self.t_s, "sim", f"termination: {reason}"))
+        self._fetch_frames()
+        self.close()
         return reason
 
     def _time_up(self) -> bool:
         return self.t_s >= self.duration_s - 0.5 * self.dt_s
 
-    def _check_end(self, chunk: TruthChunk, est: Estimate) -> str | None:
+    def _truth_reason(self, chunk: TruthChunk) -> str | None:
+        """off_map or terrain_collision if any step of the chunk was."""
         agl_min, n_nan = components.min_height_above_terrain(self.world_dem, chunk.lat_rad, chunk.lon_rad,
                                                              chunk.h_msl_m)
         if n_nan:   # a step off the grid or over a void (then the other steps are judged)
@@ -374,12 +450,6 @@ class ClosedLoop:
                 return "off_map"
         if agl_min < 0.0:
             return "terrain_collision"
-        if self._diverged(chunk, est):
-            return "diverged"
-        if self.route_complete():
-            return "completed"
-        if self._time_up():
-            return "time_limit"
         return None
 
     def _diverged(self, chunk: TruthChunk, est: Estimate) -> bool:
@@ -410,18 +480,26 @@ class ClosedLoop:
         self.log.add_tick(truth, i, est)
 
     def run(self) -> RunResult:
-        """Fly until a termination; returns the result with its log and summary."""
+        """Fly until a termination; returns the result with its log and summary (closes the loop)."""
         wall0 = time.perf_counter()
-        while self.termination is None:
-            self.tick()
+        try:
+            while self.termination is None:
+                self.tick()
+        finally:
+            self.close()
         wall = time.perf_counter() - wall0
         return self.result(wall)
 
     def result(self, wall_time_s: float) -> RunResult:
+        self.sync()
+        if self.termination is None:
+            self._fetch_frames()
         arrays = self.log.arrays(self.world_dem, self.outages)
         summary = summarise(self.scenario, self.termination or "time_limit", arrays, wall_time_s,
                             self.jsbsim_steps, self.estimate)
         summary["wall_time_by_stage_s"] = {k: round(v, 4) for k, v in self.stage_s.items()}
+        summary["pipelined"] = self.pipelined
+        summary["navigator_latency_updates"] = self.latency_updates
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
                          self.jsbsim_steps, arrays, list(self.log.events), summary, self.world_dem)
 
@@ -475,7 +553,8 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
     }
 
 
-def run_scenario(name_or_path="default", *, progress=None, **overrides) -> RunResult:
-    """Load, validate and fly a scenario (overrides: seed=, duration_s=, navigator=)."""
+def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:
+    """Load, validate and fly a scenario (overrides: seed=, duration_s=, navigator=); pipelined where it
+    can be (ClosedLoop's `pipeline`), with the same results either way."""
     scenario = load_scenario(name_or_path, **overrides)
-    return ClosedLoop(scenario, progress=progress).run()
+    return ClosedLoop(scenario, progress=progress, pipeline=pipeline).run()

@@ -116,7 +116,7 @@ class _BlockTruthChunk(TruthChunk):
 
     def _build_views(self) -> dict:
         d = self.__dict__
-        scalars, vectors, c_bn = d.pop("_blocks")
+        scalars, vectors, c_bn = d["_blocks"]
         (t_s, lat_rad, lon_rad, h_msl_m, roll_rad, pitch_rad, yaw_rad, tas_mps, alpha_rad, beta_rad,
          p_static_pa, T_static_K, h_agl_m) = scalars
         v_ned_mps, omega_ib_b_rps, omega_eb_b_rps, f_b_mps2, wind_ned_mps = vectors.transpose(0, 2, 1)
@@ -126,6 +126,18 @@ class _BlockTruthChunk(TruthChunk):
                  tas_mps=tas_mps, alpha_rad=alpha_rad, beta_rad=beta_rad, p_static_pa=p_static_pa,
                  T_static_K=T_static_K, wind_ned_mps=wind_ned_mps, h_agl_m=h_agl_m)
         return d
+
+    def __reduce__(self):
+        """Pickled as its three blocks (the views share their memory, so edits made through them are kept),
+        or field by field when it was built from field values."""
+        blocks = self.__dict__.get("_blocks")
+        if blocks is not None:
+            return (TruthChunk.from_blocks, blocks)
+        return (_from_fields, ({f.name: getattr(self, f.name) for f in fields(self)},))
+
+
+def _from_fields(values: dict) -> TruthChunk:
+    return TruthChunk(**values)
 
 
 for _name in TRUTH_FIELDS:

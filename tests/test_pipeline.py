@@ -1,0 +1,112 @@
+"""The pipelined closed loop: sensors and navigator in a forked worker process, same results as inline."""
+
+from __future__ import annotations
+
+import copy
+import multiprocessing
+
+import numpy as np
+import pytest
+
+from trn_env import components
+from trn_env.nav_stage import fork_available
+from trn_env.scenario import read_scenario_file, validate
+from trn_env.sim import ClosedLoop
+
+pytestmark = pytest.mark.skipif(not fork_available(), reason="needs the fork start method")
+
+
+def _scenario(duration_s: float, navigator: str = "ins_tercom", **limits):
+    data, _ = read_scenario_file("default")
+    data = copy.deepcopy(data)
+    data["duration_s"] = duration_s
+    data["navigator"]["name"] = navigator
+    if navigator != "ins_tercom":
+        data["navigator"]["settings"] = {}
+    data.setdefault("limits", {}).update(limits)
+    return validate(data, source="test")
+
+
+def _fly(sc, pipeline: bool):
+    loop = ClosedLoop(sc, pipeline=pipeline)
+    assert loop.pipelined is pipeline
+    return loop.run()
+
+
+def _assert_same_run(a, b):
+    assert a.termination == b.termination
+    assert a.jsbsim_steps == b.jsbsim_steps
+    assert a.events == b.events
+    assert a.arrays.keys() == b.arrays.keys()
+    for k in a.arrays:
+        assert np.array_equal(a.arrays[k], b.arrays[k], equal_nan=True), k
+    for k, v in a.summary.items():
+        if k not in ("wall_time_s", "realtime_factor", "closed_loop_steps_per_s", "wall_time_by_stage_s",
+                     "pipelined"):
+            assert v == b.summary[k] or (v != v and b.summary[k] != b.summary[k]), k
+
+
+def test_pipelined_run_equals_the_inline_run_bit_for_bit():
+    """45 s of the default scenario (a TERCOM fix at 40 s): every logged array, event and summary figure."""
+    sc = _scenario(45.0)
+    inline, piped = _fly(sc, False), _fly(sc, True)
+    assert piped.summary["pipelined"] and not inline.summary["pipelined"]
+    assert any("TERCOM fix" in msg for _, _, msg in piped.events)
+    assert piped.arrays["sensor_ira_range_m"].shape[0] == 45 * 50      # the worker's frames reach the log
+    _assert_same_run(inline, piped)
+    assert not multiprocessing.active_children()                     # run() stopped the worker
+
+
+def test_divergence_found_a_tick_late_ends_the_run_at_the_estimate_time():
+    """A pipelined loop learns of a diverged estimate after it has flown the next interval; it ends at the
+    estimate's time and drops that interval, exactly as the inline loop does."""
+    sc = _scenario(30.0, navigator="ins", max_horizontal_sigma_m=14.0)  # free-inertial sigma grows past it
+    inline, piped = _fly(sc, False), _fly(sc, True)
+    assert inline.termination == "diverged"
+    t_end = inline.arrays["t_s"][-1]
+    assert t_end < 29.0 and inline.jsbsim_steps == round(t_end / 0.01)
+    assert inline.events[-1] == (pytest.approx(t_end), "sim", "termination: diverged")
+    _assert_same_run(inline, piped)
+
+
+def test_a_worker_exception_is_raised_by_tick_and_the_worker_stops(monkeypatch):
+    real = components.build_navigator
+
+    class Failing:
+        def __init__(self, nav):
+            self.nav = nav
+            self.name = nav.name
+
+        def reset(self, initial):
+            self.nav.reset(initial)
+
+        def update(self, frames):
+            if frames.t_end_s > 3.0:
+                raise ValueError("navigator failed at t > 3 s")
+            return self.nav.update(frames)
+
+    monkeypatch.setattr(components, "build_navigator", lambda *a, **k: Failing(real(*a, **k)))
+    loop = ClosedLoop(_scenario(10.0, navigator="ins"), pipeline=True)
+    assert loop.pipelined
+    with pytest.raises(ValueError, match="navigator failed at t > 3 s"):
+        while loop.tick() is None:
+            pass
+    loop.close()
+    assert not multiprocessing.active_children()
+
+
+def test_a_killed_worker_gives_a_clear_error():
+    loop = ClosedLoop(_scenario(10.0, navigator="ins"), pipeline=True)
+    loop.tick()
+    loop._stage._process.kill()
+    with pytest.raises(RuntimeError, match="worker process ended unexpectedly"):
+        for _ in range(3):
+            loop.tick()
+    loop.close()
+
+
+def test_without_latency_the_loop_runs_inline():
+    sc = _scenario(3.0, navigator="ins")
+    sc.data["navigator"]["latency_updates"] = 0
+    with ClosedLoop(sc, pipeline=True) as loop:
+        assert not loop.pipelined and loop.navigator is not None

@@ -1,0 +1,224 @@
+"""The closed loop's estimation stage: sensors, then the navigator, over one update interval of truth.
+
+The loop submits each interval's truth chunk and later collects the navigator's estimate for its end:
+
+    stage.submit(chunk)          the sensors sample the chunk, GNSS is gated, the navigator updates
+    out = stage.collect()        NavOutput: the estimate, the frames (for the log), the stage's timings
+
+`InlineNavStage` does the work inside `submit`. `ProcessNavStage` does it in a second process forked from the
+loop's, so it runs while the loop flies the next interval; the loop collects before it submits again. The
+worker is a fork of the same objects (sensor generators, navigator state, DEMs) and they are used in the
+same order, so both stages give the same estimates bit for bit; which one runs is a matter of speed only.
+The worker ignores Ctrl-C (the loop's process handles it and closes the stage), exits when the loop's end
+of the pipe closes, and sends back any exception it meets, to be raised by `collect`.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import signal
+import time
+import traceback
+from dataclasses import dataclass
+
+import numpy as np
+
+from navigators.frames import SensorFrames
+from navigators.protocol import Estimate
+
+from .truth import TruthChunk
+
+
+def gnss_available_mask(t_s: np.ndarray, outages: list[dict]) -> np.ndarray:
+    """True where GNSS fixes reach the navigator: outside every [start_s, end_s) outage."""
+    ok = np.ones(np.shape(t_s), bool)
+    for o in outages:
+        end = o.get("end_s", math.inf)
+        ok &= ~((t_s >= o["start_s"]) & (t_s < end))
+    return ok
+
+
+def gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
+    """The frames with the GNSS fixes inside an outage removed (frames.gnss None if none is left)."""
+    g = frames.gnss
+    if g is None or not outages or g.t_s.shape[0] == 0:
+        return frames
+    t_first, t_last = float(g.t_s[0]), float(g.t_s[-1])
+    if all(t_last < o["start_s"] or t_first >= o.get("end_s", math.inf) for o in outages):
+        return frames                                   # no outage touches this frame
+    if any(t_first >= o["start_s"] and t_last < o.get("end_s", math.inf) for o in outages):
+        frames.gnss = None                              # the whole frame is inside one outage
+        return frames
+    keep = gnss_available_mask(g.t_s, outages)
+    if keep.all():
+        return frames
+    if not keep.any():
+        frames.gnss = None
+        return frames
+    frames.gnss = type(g)(**{k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in vars(g).items()})
+    return frames
+
+
+@dataclass
+class NavOutput:
+    """One update's result: the estimate at the interval's end, wall seconds spent in the sensors and in the
+    navigator, and the navigator's TERCOM fix count so far."""
+
+    estimate: Estimate
+    sensors_s: float
+    navigator_s: float
+    navigator_fixes: int
+
+
+class InlineNavStage:
+    """The stage run in the caller's process: `submit` does the work, `collect` hands it over. With
+    log_sensors the frames are kept here until `logged_frames()` (pipelined, that spares the loop their
+    transfer every update)."""
+
+    pipelined = False
+
+    def __init__(self, sensors, navigator, world_dem, outages: list[dict], log_sensors: bool):
+        self.sensors = sensors
+        self.navigator = navigator
+        self.world_dem = world_dem
+        self.outages = list(outages)
+        self.log_sensors = bool(log_sensors)
+        self._out: NavOutput | None = None
+        self._frames: list[SensorFrames] = []
+
+    def process(self, chunk: TruthChunk) -> NavOutput:
+        clock = time.perf_counter
+        t0 = clock()
+        frames = gate_gnss(self.sensors.sample(chunk, self.world_dem), self.outages)
+        t1 = clock()
+        est = self.navigator.update(frames)
+        t2 = clock()
+        if self.log_sensors:
+            self._frames.append(frames)
+        return NavOutput(est, t1 - t0, t2 - t1, len(getattr(self.navigator, "fixes", ())))
+
+    def logged_frames(self) -> list[SensorFrames]:
+        """The frames of every update so far not yet handed over, in order (empty unless log_sensors)."""
+        frames, self._frames = self._frames, []
+        return frames
+
+    @property
+    def busy(self) -> bool:
+        """True between a submit and its collect."""
+        return self._out is not None
+
+    def submit(self, chunk: TruthChunk) -> None:
+        if self._out is not None:
+            raise RuntimeError("InlineNavStage.submit: the previous output was not collected")
+        self._out = self.process(chunk)
+
+    def collect(self) -> NavOutput:
+        if self._out is None:
+            raise RuntimeError("InlineNavStage.collect: nothing submitted")
+        out, self._out = self._out, None
+        return out
+
+    def close(self) -> None:
+        self._out = None
+
+
+def fork_available() -> bool:
+    """A worker process can be forked here: the platform has fork and this process may have children
+    (gymnasium's AsyncVectorEnv runs environments in daemonic processes, which may not)."""
+    return ("fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
+
+
+def _serve(conn, parent_end, stage: InlineNavStage) -> None:
+    """The worker's loop: a chunk in, a NavOutput (or the exception met) out; None or EOF ends it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent_end.close()
+    while True:
+        try:
+            chunk = conn.recv()
+        except (EOFError, OSError):
+            return
+        if chunk is None:
+            return
+        try:
+            if isinstance(chunk, str):            # "frames": the logged frames, requested once at the end
+                reply = ("ok", stage.logged_frames())
+            else:
+                reply = ("ok", stage.process(chunk))
+        except BaseException as exc:          # sent back whole; raised again by collect()
+            reply = ("error", exc, traceback.format_exc())
+        try:
+            conn.send(reply)
+        except Exception as exc:              # an exception or output that does not pickle
+            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}"), traceback.format_exc()))
+
+
+class ProcessNavStage:
+    """The stage in a forked worker process (see the module docstring). Close it when done (the loop does)."""
+
+    pipelined = True
+
+    def __init__(self, inline: InlineNavStage):
+        if not fork_available():
+            raise RuntimeError("ProcessNavStage needs the fork start method in a non-daemonic process")
+        ctx = multiprocessing.get_context("fork")
+        self._conn, child_end = ctx.Pipe(duplex=True)
+        self._process = ctx.Process(target=_serve, args=(child_end, self._conn, inline), daemon=True,
+                                    name="trn-env-nav-stage")
+        self._process.start()
+        child_end.close()
+        self._busy = False
+
+    @property
+    def busy(self) -> bool:
+        return self._busy
+
+    def submit(self, chunk: TruthChunk) -> None:
+        if self._busy:
+            raise RuntimeError("ProcessNavStage.submit: the previous output was not collected")
+        self._conn.send(chunk)
+        self._busy = True
+
+    def collect(self) -> NavOutput:
+        if not self._busy:
+            raise RuntimeError("ProcessNavStage.collect: nothing submitted")
+        try:
+            reply = self._conn.recv()
+        except (EOFError, OSError):
+            self._process.join(1.0)
+            raise RuntimeError(f"the navigator's worker process ended unexpectedly (exit code "
+                               f"{self._process.exitcode})") from None
+        self._busy = False
+        if reply[0] == "ok":
+            return reply[1]
+        exc, tb = reply[1], reply[2]
+        raise exc from RuntimeError(f"raised in the navigator's worker process:\n{tb}")
+
+    def logged_frames(self) -> list[SensorFrames]:
+        """The worker's logged frames not yet handed over (collect first; none once closed)."""
+        if self._process is None:
+            return []
+        self.submit("frames")
+        return self.collect()
+
+    def close(self) -> None:
+        """Stop the worker (idempotent)."""
+        if self._process is None:
+            return
+        try:
+            self._conn.send(None)
+        except (OSError, ValueError):
+            pass
+        self._conn.close()
+        self._process.join(2.0)
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join(2.0)
+        self._process = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
