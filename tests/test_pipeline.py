@@ -110,3 +110,31 @@ def test_without_latency_the_loop_runs_inline():
     sc.data["navigator"]["latency_updates"] = 0
     with ClosedLoop(sc, pipeline=True) as loop:
         assert not loop.pipelined and loop.navigator is not None
+
+
+def test_a_nan_estimate_ends_both_runs_at_its_time(monkeypatch):
+    """The stage makes no guidance plan on a NaN estimate (the run ends on it): inline and pipelined end at
+    the fifth update with the same log."""
+    from navigators.protocol import Estimate
+
+    real = components.build_navigator
+
+    class NanAfter5:
+        def __init__(self, nav):
+            self.nav, self.name = nav, nav.name
+
+        def reset(self, initial):
+            self.nav.reset(initial)
+
+        def update(self, frames):
+            est = self.nav.update(frames)
+            if frames.t_end_s > 4.5:
+                return Estimate(est.t_s, float("nan"), est.lon_rad, est.h_m, est.v_ned_mps, est.roll_rad,
+                                est.pitch_rad, est.yaw_rad, est.covariance, est.health)
+            return est
+
+    monkeypatch.setattr(components, "build_navigator", lambda *a, **k: NanAfter5(real(*a, **k)))
+    sc = _scenario(20.0, navigator="ins")
+    inline, piped = _fly(sc, False), _fly(sc, True)
+    assert inline.termination == "diverged" and inline.sim_time_s == pytest.approx(5.0)
+    _assert_same_run(inline, piped)

@@ -2,8 +2,9 @@
 
 The loop submits each interval's truth chunk and later collects the navigator's estimate for its end:
 
-    stage.submit(chunk)          the sensors sample the chunk, GNSS is gated, the navigator updates
-    out = stage.collect()        NavOutput: the estimate, the frames (for the log), the stage's timings
+    stage.submit(chunk, steps0)  the sensors sample the chunk, GNSS is gated, the navigator updates, and
+                                 (given a planner) guidance plans the interval starting at step steps0
+    out = stage.collect()        NavOutput: the estimate, the plan, the stage's timings
 
 `InlineNavStage` does the work inside `submit`. `ProcessNavStage` does it in a second process forked from the
 loop's, so it runs while the loop flies the next interval; the loop collects before it submits again. The
@@ -27,6 +28,7 @@ import numpy as np
 from navigators.frames import SensorFrames
 from navigators.protocol import Estimate
 
+from .interval_plan import IntervalPlan, IntervalPlanner
 from .truth import TruthChunk
 
 
@@ -62,12 +64,15 @@ def gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
 
 @dataclass
 class NavOutput:
-    """One update's result: the estimate at the interval's end, wall seconds spent in the sensors and in the
-    navigator, and the navigator's TERCOM fix count so far."""
+    """One update's result: the estimate at the interval's end, the guidance plan made on it (None without a
+    planner), wall seconds spent in the sensors, the navigator and the planning, and the navigator's TERCOM
+    fix count so far."""
 
     estimate: Estimate
+    plan: IntervalPlan | None
     sensors_s: float
     navigator_s: float
+    guidance_s: float
     navigator_fixes: int
 
 
@@ -78,16 +83,18 @@ class InlineNavStage:
 
     pipelined = False
 
-    def __init__(self, sensors, navigator, world_dem, outages: list[dict], log_sensors: bool):
+    def __init__(self, sensors, navigator, world_dem, outages: list[dict], log_sensors: bool,
+                 planner: IntervalPlanner | None = None):
         self.sensors = sensors
         self.navigator = navigator
+        self.planner = planner
         self.world_dem = world_dem
         self.outages = list(outages)
         self.log_sensors = bool(log_sensors)
         self._out: NavOutput | None = None
         self._frames: list[SensorFrames] = []
 
-    def process(self, chunk: TruthChunk) -> NavOutput:
+    def process(self, chunk: TruthChunk, plan_steps0: int | None = None) -> NavOutput:
         clock = time.perf_counter
         t0 = clock()
         frames = gate_gnss(self.sensors.sample(chunk, self.world_dem), self.outages)
@@ -96,7 +103,11 @@ class InlineNavStage:
         t2 = clock()
         if self.log_sensors:
             self._frames.append(frames)
-        return NavOutput(est, t1 - t0, t2 - t1, len(getattr(self.navigator, "fixes", ())))
+        plan = None
+        finite = math.isfinite(est.lat_rad) and math.isfinite(est.lon_rad) and math.isfinite(est.h_m)
+        if self.planner is not None and plan_steps0 is not None and finite:   # (else the run ends on it)
+            plan = self.planner.plan(est, plan_steps0)
+        return NavOutput(est, plan, t1 - t0, t2 - t1, clock() - t2, len(getattr(self.navigator, "fixes", ())))
 
     def logged_frames(self) -> list[SensorFrames]:
         """The frames of every update so far not yet handed over, in order (empty unless log_sensors)."""
@@ -108,10 +119,10 @@ class InlineNavStage:
         """True between a submit and its collect."""
         return self._out is not None
 
-    def submit(self, chunk: TruthChunk) -> None:
+    def submit(self, chunk: TruthChunk, plan_steps0: int | None = None) -> None:
         if self._out is not None:
             raise RuntimeError("InlineNavStage.submit: the previous output was not collected")
-        self._out = self.process(chunk)
+        self._out = self.process(chunk, plan_steps0)
 
     def collect(self) -> NavOutput:
         if self._out is None:
@@ -136,16 +147,16 @@ def _serve(conn, parent_end, stage: InlineNavStage) -> None:
     parent_end.close()
     while True:
         try:
-            chunk = conn.recv()
+            msg = conn.recv()
         except (EOFError, OSError):
             return
-        if chunk is None:
+        if msg is None:
             return
         try:
-            if isinstance(chunk, str):            # "frames": the logged frames, requested once at the end
+            if msg == "frames":                   # the logged frames, requested once at the end
                 reply = ("ok", stage.logged_frames())
             else:
-                reply = ("ok", stage.process(chunk))
+                reply = ("ok", stage.process(*msg))
         except BaseException as exc:          # sent back whole; raised again by collect()
             reply = ("error", exc, traceback.format_exc())
         try:
@@ -174,10 +185,13 @@ class ProcessNavStage:
     def busy(self) -> bool:
         return self._busy
 
-    def submit(self, chunk: TruthChunk) -> None:
+    def submit(self, chunk: TruthChunk, plan_steps0: int | None = None) -> None:
+        self._send((chunk, plan_steps0))
+
+    def _send(self, msg) -> None:
         if self._busy:
             raise RuntimeError("ProcessNavStage.submit: the previous output was not collected")
-        self._conn.send(chunk)
+        self._conn.send(msg)
         self._busy = True
 
     def collect(self) -> NavOutput:
@@ -199,7 +213,7 @@ class ProcessNavStage:
         """The worker's logged frames not yet handed over (collect first; none once closed)."""
         if self._process is None:
             return []
-        self.submit("frames")
+        self._send("frames")
         return self.collect()
 
     def close(self) -> None:

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -48,6 +49,7 @@ from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_verti
 
 from . import components
 from .flight import FlightDiverged
+from .interval_plan import IntervalPlan, IntervalPlanner
 from .nav_stage import InlineNavStage, ProcessNavStage, fork_available, gnss_available_mask
 from .scenario import Scenario, load_scenario
 from .truth import TruthChunk
@@ -243,8 +245,20 @@ class ClosedLoop:
         self.flight = components.build_flight(d, self.world_dem, self.rngs["flight"])
         sensors = components.build_sensors(d, self.seeds["sensors"])
         navigator = components.build_navigator(d, self.map_dem, self.rngs["navigator"])
-        self.guidance = components.build_guidance(d, self.map_dem) if commander is None else None
         self.commander = commander
+        if commander is None:
+            guidance = components.build_guidance(d, self.map_dem)
+            command, complete = guidance.command, (lambda: components.guidance_complete(guidance))
+        else:
+            guidance, command, complete = None, commander, (lambda: False)
+        self.guidance = guidance
+        self.planner = IntervalPlanner(command, complete, self.map_dem, self.steps_per_guidance_tick,
+                                       self.guidance_ticks_per_tick, self.dt_s, self.duration_s)
+        # The route's guidance plans each interval right after the estimate it flies on, in the estimation
+        # stage (so, pipelined, in the second process); a commander (the env, whose actions change between
+        # ticks) is asked at each interval's start.
+        self._plans: deque[IntervalPlan] | None = deque() if commander is None else None
+        self._complete = False          # the route was complete after the commands of the interval flown
 
         truth0 = self.flight.snapshot()
         self.estimate = perturbed_estimate(truth0, 0, d["initial_errors"], self.rngs["initial_errors"])
@@ -265,15 +279,24 @@ class ClosedLoop:
         self._last_targets = None
         self._inflight: tuple[TruthChunk, int] | None = None   # submitted, not yet collected
         self._log_tick(truth0, 0, self.estimate)
-        self.command_now()
+        if self._plans is not None:
+            # the first 1 + latency intervals fly on the initial estimate
+            for k in range(1 + self.latency_updates):
+                self._plans.append(self.planner.plan(self.estimate, k * self.steps_per_tick))
+            self._apply(*self._plans[0].commands[0])
+        else:
+            self.command_now()
 
-        inline = InlineNavStage(sensors, navigator, self.world_dem, self.outages, log_sensors)
+        inline = InlineNavStage(sensors, navigator, self.world_dem, self.outages, log_sensors,
+                                self.planner if self._plans is not None else None)
         self.pipelined = bool(pipeline and self.latency_updates >= 1 and fork_available())
         # forked last, so the worker starts from exactly this state
         self._stage = ProcessNavStage(inline) if self.pipelined else inline
-        # the sensors and navigator objects in use (None when they live in the worker process)
+        # the sensors, navigator and guidance objects in use (None when they live in the worker process)
         self.sensors = None if self.pipelined else sensors
         self.navigator = None if self.pipelined else navigator
+        if self.pipelined:
+            self.guidance = None
 
     def close(self) -> None:
         """Stop the pipelined stage's worker process (idempotent; a no-op inline). An ended run has its
@@ -295,22 +318,13 @@ class ClosedLoop:
 
     # ------------------------------------------------------------------------------------------ loop
     def command_now(self, est: Estimate | None = None) -> None:
-        """Targets from the guidance (or commander) written to the flight now, for `est` or by default the
-        guidance estimate dead-reckoned to now, with the map height under it for the autopilot's
-        height-above-ground hold."""
-        if est is None:
-            est = self.guidance_estimate
-            if est.t_s != self.t_s:
-                est = est.extrapolated(self.t_s)
-        self._apply(*self._command(est, self.t_s))
-
-    def _command(self, est: Estimate, t_s: float) -> tuple[object, float]:
-        """(autopilot targets, map height under the estimate) from the guidance (or commander)."""
-        if self.commander is not None:
-            targets = self.commander(est, t_s)
-        else:
-            targets = self.guidance.command(est, t_s)
-        return targets, components.map_height(self.map_dem, est.lat_rad, est.lon_rad)
+        """Targets from the commander written to the flight now, for `est` or by default the guidance
+        estimate dead-reckoned to now, with the map height under it for the autopilot's height-above-ground
+        hold (the env calls this when its action changes). A loop flying the scenario's route takes its
+        targets from the interval plans instead."""
+        if self._plans is not None:
+            raise RuntimeError("command_now: this loop flies its route's interval plans (no commander)")
+        self._apply(*self.planner.command_at(self.guidance_estimate if est is None else est, self.t_s))
 
     def _apply(self, targets, h_ground: float) -> None:
         if targets != self._last_targets:        # unchanged targets need no property writes
@@ -320,23 +334,21 @@ class ClosedLoop:
             self.flight.set_terrain_elevation(h_ground)
 
     def _plan_guidance(self) -> list[tuple[object, float]]:
-        """The commands of the guidance ticks inside the coming update interval, in order: after each
-        guidance tick's steps, the targets for the guidance estimate dead-reckoned to that time. They depend
-        on nothing the interval's flight produces, so they are asked for here, in one go (the same calls, in
-        the same order, as asking between the steps - and cheaper: the Python between JSBSim steps stays
-        small). The plan stops where the time limit falls or the route is complete."""
-        plan = []
-        steps0, n, dt = self.flight.steps, self.steps_per_guidance_tick, self.dt_s
-        est = self.guidance_estimate
-        for j in range(1, self.guidance_ticks_per_tick):
-            t_j = (steps0 + j * n) * dt
-            if t_j >= self.duration_s - 0.5 * dt or self.route_complete():
-                break
-            plan.append(self._command(est.extrapolated(t_j), t_j))
-        return plan
+        """The commands of the guidance ticks inside the coming update interval after its first (written
+        when the previous interval ended), in order: after each guidance tick's steps, the targets for the
+        guidance estimate dead-reckoned to that time. They depend on nothing the interval's flight produces,
+        so they are asked for before it (interval_plan.py): for the route, by the estimation stage when the
+        estimate was made; for a commander, here."""
+        if self._plans is not None:
+            plan = self._plans.popleft()
+        else:
+            plan = self.planner.plan(self.guidance_estimate, self.flight.steps, first_tick=1)
+        self._complete = plan.complete
+        return plan.commands[1:] if self._plans is not None else plan.commands
 
     def route_complete(self) -> bool:
-        return self.guidance is not None and components.guidance_complete(self.guidance)
+        """The route's guidance was done after the commands of the interval last flown."""
+        return self._complete
 
     def tick(self) -> str | None:
         """Advance one navigator update interval (its guidance ticks included); returns the termination
@@ -375,7 +387,8 @@ class ClosedLoop:
         self.last_truth = chunk
         self.n_ticks += 1
         t4 = clock()
-        self._stage.submit(chunk)                 # inline, the work is done here: counted by _collect
+        plan_steps0 = self.flight.steps + self.latency_updates * self.steps_per_tick
+        self._stage.submit(chunk, plan_steps0)    # inline, the work is done here: counted by _collect
         if not self._stage.pipelined:
             t3 += clock() - t4
         self._inflight = (chunk, self.n_ticks)
@@ -390,7 +403,10 @@ class ClosedLoop:
                                       "time_limit" if self._time_up() else None)
         if reason is None:
             self.guidance_estimate = self.estimate
-            self.command_now()
+            if self._plans is not None:
+                self._apply(*self._plans[0].commands[0])
+            else:
+                self.command_now()
         else:
             self._end(reason)
         self.stage_s["loop"] += clock() - t3
@@ -416,6 +432,9 @@ class ClosedLoop:
         st["wait"] += time.perf_counter() - t0
         st["sensors"] += out.sensors_s
         st["navigator"] += out.navigator_s
+        st["guidance"] += out.guidance_s
+        if out.plan is not None:
+            self._plans.append(out.plan)
         self._inflight = None
         est = out.estimate
         self.estimate = est
