@@ -114,22 +114,25 @@ def cmd_fly(args) -> int:
 
     out_dir = args.out or default_out_dir(scenario.name)
     console = Console()
-    bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
-               disable=args.quiet, mininterval=0.5,
-               bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+    bar = None
 
     def progress(t_s: float, _total: float) -> None:
         bar.update(max(0.0, round(t_s, 1) - bar.n))
 
     loop = None
     try:
+        # the loop (and its worker process, forked from this one) before the progress bar's thread
         loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline)
+        bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
+                   disable=args.quiet, mininterval=0.5,
+                   bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
         wall0 = time.perf_counter()
         while loop.termination is None:
             loop.tick()
         result = loop.result(time.perf_counter() - wall0)
     except KeyboardInterrupt:
-        bar.close()
+        if bar is not None:
+            bar.close()
         print("interrupted: nothing written", file=sys.stderr)
         return 130
     finally:
