@@ -61,13 +61,18 @@ def closed_loop_benchmark(quick: bool = False, scenario: str = "default", sim_s:
     process (closed_loop_*_inline), both in this run."""
     out = _closed_loop_figures(quick, scenario, sim_s, pipeline=True)
     inline = _closed_loop_figures(quick, scenario, sim_s, pipeline=False)
-    for key in ("closed_loop_steps_per_s", "closed_loop_ratio", "closed_loop_ms_per_tick",
-                "closed_loop_ms_per_tick_by_stage"):
+    for key in ("closed_loop_steps_per_s", "closed_loop_ratio", "closed_loop_ratio_by_segment",
+                "closed_loop_ms_per_tick", "closed_loop_ms_per_tick_by_stage"):
         out[key + "_inline"] = inline[key]
     return out
 
 
-def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeline: bool) -> dict:
+def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeline: bool,
+                         segments: int = 3) -> dict:
+    """sim_s seconds of the loop in `segments` equal segments, each right after a bare JSBSim run of the same
+    number of steps: the ratio is the median of the segments' ratios, so a slow spell of the machine (other
+    processes) spoils one segment, not the figure. With the default 120 s, each 40 s segment holds one
+    TERCOM fix of the default scenario."""
     from .scenario import load_scenario
     from .sim import ClosedLoop
 
@@ -78,22 +83,28 @@ def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeli
         # bare reference: a second flight at the same (trimmed) initial condition, run() only
         from . import components
         ref_flight = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
-        n_ref = int(round(sim_s / loop.dt_s))
         # warm-up (numba dispatch, first sensor, navigator and fix calls), not timed
         for _ in range(int(round(warm_s / (loop.steps_per_tick * loop.dt_s)))):
             loop.tick()
-        bare_before = bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref)
         loop.sync()
+        seg_steps = int(round(sim_s / segments / loop.dt_s))
         steps0 = loop.jsbsim_steps
         fixes0 = loop.navigator_fixes
         stage0 = dict(loop.stage_s)
-        t0 = time.perf_counter()
-        while loop.termination is None and (loop.jsbsim_steps - steps0) < n_ref:
-            loop.tick()
-        loop.sync()
-        wall = time.perf_counter() - t0
-        # the faster of two bare timings (before and after), so machine-load drift cannot flatter the ratio
-        bare = max(bare_before, bare_jsbsim_steps_per_s(ref_flight.fdm, n_ref))
+        wall = bare_wall = 0.0
+        ratios = []
+        for _ in range(segments):
+            bare_s = seg_steps / bare_jsbsim_steps_per_s(ref_flight.fdm, seg_steps)
+            s0 = loop.jsbsim_steps
+            t0 = time.perf_counter()
+            while loop.termination is None and (loop.jsbsim_steps - s0) < seg_steps:
+                loop.tick()
+            loop.sync()
+            loop_s = time.perf_counter() - t0
+            ratios.append(bare_s / loop_s * (loop.jsbsim_steps - s0) / seg_steps)
+            wall += loop_s
+            bare_wall += bare_s
+        bare = segments * seg_steps / bare_wall
         steps = loop.jsbsim_steps - steps0
         n_fixes = loop.navigator_fixes - fixes0
         ticks = steps // loop.steps_per_tick
@@ -101,7 +112,8 @@ def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeli
         return {
             "closed_loop_steps_per_s": cl,
             "closed_loop_jsbsim_reference_steps_per_s": bare,
-            "closed_loop_ratio": cl / bare if bare > 0 else math.nan,
+            "closed_loop_ratio": float(np.median(ratios)),
+            "closed_loop_ratio_by_segment": [round(r, 3) for r in ratios],
             "closed_loop_realtime_factor": steps * loop.dt_s / wall if wall > 0 else math.nan,
             "closed_loop_pipelined": loop.pipelined,
             "closed_loop_scenario": scenario,

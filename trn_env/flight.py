@@ -180,6 +180,14 @@ class AutopilotTargets:
                           engage=engage)
         return t
 
+    def __reduce__(self):
+        # plain numbers, the modes found again by value: the closed loop's second process sends ten targets
+        # per update, and an enum's constructor is slow to unpickle
+        return (_targets_from_values, (int(self.lateral_mode), self.heading_cmd_rad, self.track_cmd_rad,
+                                       self.bank_limit_rad, int(self.vertical_mode), self.altitude_cmd_m,
+                                       self.agl_cmd_m, self.vs_cmd_mps, int(self.speed_mode),
+                                       self.tas_cmd_mps, self.engage))
+
     def property_values(self) -> tuple[float, ...]:
         """The ap/* values in AP_PROPERTIES order."""
         return (float(self.lateral_mode), float(self.heading_cmd_rad), float(self.track_cmd_rad),
@@ -214,6 +222,16 @@ AP_PROPERTIES = ("ap/lateral-mode", "ap/heading-cmd-rad", "ap/track-cmd-rad", "a
 # wind this module wrote. Pressure and temperature are not read: they are the flight's atmosphere (the model
 # JSBSim flies in, trn_env.atmosphere.static_p_T) evaluated at each row's own position (tests check it against
 # atmosphere/P-psf, T-R).
+_MODES_BY_VALUE = tuple({int(m): m for m in enum} for enum in (LateralMode, VerticalMode, SpeedMode))
+
+
+def _targets_from_values(lateral, heading, track, bank, vertical, altitude, agl, vs, speed, tas, engage):
+    """AutopilotTargets.__reduce__'s inverse."""
+    lat_modes, vert_modes, speed_modes = _MODES_BY_VALUE
+    return AutopilotTargets.trusted(lat_modes[lateral], heading, track, bank, vert_modes[vertical], altitude,
+                                    agl, vs, speed_modes[speed], tas, engage)
+
+
 _RECORDED = (
     "position/lat-geod-rad",                 # 0
     "position/long-gc-rad",                  # 1

@@ -29,7 +29,7 @@ from navigators.frames import SensorFrames
 from navigators.protocol import Estimate
 
 from .interval_plan import IntervalPlan, IntervalPlanner
-from .truth import TruthChunk
+from .truth import TruthChunk, chunk_from_buffer, chunk_to_buffer
 
 
 def gnss_available_mask(t_s: np.ndarray, outages: list[dict]) -> np.ndarray:
@@ -141,22 +141,27 @@ def fork_available() -> bool:
             and not multiprocessing.current_process().daemon)
 
 
+_QUIT, _FRAMES = b"Q", b"F"     # the worker's one-byte requests; anything longer is a truth chunk
+
+
 def _serve(conn, parent_end, stage: InlineNavStage) -> None:
-    """The worker's loop: a chunk in, a NavOutput (or the exception met) out; None or EOF ends it."""
+    """The worker's loop: a chunk in (truth.chunk_to_buffer, tagged with the plan's first step or -1), a
+    NavOutput (or the exception met) out; _QUIT or EOF ends it, _FRAMES asks for the logged frames."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent_end.close()
     while True:
         try:
-            msg = conn.recv()
+            msg = conn.recv_bytes()
         except (EOFError, OSError):
             return
-        if msg is None:
+        if msg == _QUIT:
             return
         try:
-            if msg == "frames":                   # the logged frames, requested once at the end
+            if msg == _FRAMES:                    # requested once at the end
                 reply = ("ok", stage.logged_frames())
             else:
-                reply = ("ok", stage.process(*msg))
+                chunk, plan_steps0 = chunk_from_buffer(bytearray(msg))   # (a private, writable copy)
+                reply = ("ok", stage.process(chunk, plan_steps0 if plan_steps0 >= 0 else None))
         except BaseException as exc:          # sent back whole; raised again by collect()
             reply = ("error", exc, traceback.format_exc())
         try:
@@ -186,12 +191,12 @@ class ProcessNavStage:
         return self._busy
 
     def submit(self, chunk: TruthChunk, plan_steps0: int | None = None) -> None:
-        self._send((chunk, plan_steps0))
+        self._send(chunk_to_buffer(chunk, -1 if plan_steps0 is None else int(plan_steps0)))
 
     def _send(self, msg) -> None:
         if self._busy:
             raise RuntimeError("ProcessNavStage.submit: the previous output was not collected")
-        self._conn.send(msg)
+        self._conn.send_bytes(msg)
         self._busy = True
 
     def collect(self) -> NavOutput:
@@ -213,7 +218,7 @@ class ProcessNavStage:
         """The worker's logged frames not yet handed over (collect first; none once closed)."""
         if self._process is None:
             return []
-        self._send("frames")
+        self._send(_FRAMES)
         return self.collect()
 
     def close(self) -> None:
@@ -221,7 +226,7 @@ class ProcessNavStage:
         if self._process is None:
             return
         try:
-            self._conn.send(None)
+            self._conn.send_bytes(_QUIT)
         except (OSError, ValueError):
             pass
         self._conn.close()
