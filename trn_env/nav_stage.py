@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import signal
+import sys
 import time
 import traceback
 from dataclasses import dataclass
@@ -135,9 +136,10 @@ class InlineNavStage:
 
 
 def fork_available() -> bool:
-    """A worker process can be forked here: the platform has fork and this process may have children
-    (gymnasium's AsyncVectorEnv runs environments in daemonic processes, which may not)."""
-    return ("fork" in multiprocessing.get_all_start_methods()
+    """A worker process can be forked here: Linux (macOS has fork, but its system libraries are not safe to
+    use after it) and a process that may have children (gymnasium's AsyncVectorEnv runs environments in
+    daemonic processes, which may not)."""
+    return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
             and not multiprocessing.current_process().daemon)
 
 
