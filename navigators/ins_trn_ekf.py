@@ -155,7 +155,9 @@ class InsTrnNavigator:
         self._height_initialised = False
         self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
         self.health = Health()
-        self.batch = TercomBatch()
+        # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
+        self.batch = TercomBatch(None if aiding is None or dem is None else
+                                 (self.half_cells, self.cell_m, self.remove_bias, self.dem))
         self.fixes: list[TercomFix] = []
         self._t_ekf = np.nan
         self._t_batch0 = np.nan
@@ -498,6 +500,7 @@ class InsTrnNavigator:
 
     def _fix(self, t_s: float) -> None:
         s = self.batch.samples
+        acc = self.batch.accumulator
         self.batch.clear()
         nxt = self._t_batch0 + self.fix_period_s
         self._t_batch0 = nxt if t_s - nxt < self.fix_period_s else t_s
@@ -515,6 +518,8 @@ class InsTrnNavigator:
             half=self.half_cells,
             cell_m=self.cell_m,
             remove_bias=self.remove_bias,
+            lat_ref_rad=None if acc is None else acc.lat_ref_rad,
+            accumulator=acc,
         )
         self.fixes.append(fix)
         if not fix.valid:

@@ -283,21 +283,20 @@ def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _mad_rows_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, lat_off, lon_off, n_b,
-                        remove_bias, out):
-    """Rows of the MAD surface when no lookup can touch a void: out[a, b] for the north shifts lat_off[a]
-    (rad) and east shifts lon_off[b], b < n_b (lon_off padded to a multiple of 8). Samples in chunks of
-    _CHUNK: the chunk's tables (_chunk_tables), then per north shift a, four samples at a time in one
-    branch-free loop over the (padded) east shifts, so each cell's sum stays in a register across the four
-    and LLVM vectorises across cells. Per cell the operations and their order over k are those of
-    mad_surface_reference, so any split of the rows gives the same bits. Releases the GIL."""
+def _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, k_begin, k_end, lat_off, lon_off,
+                   n_b, mode, mean_in, acc_io, row_ok, col_ok):
+    """One pass of the MAD surface's rows over samples k_begin <= k < k_end, added to acc (flat, row stride
+    len(lon_off)): mode 0 adds |d|, mode 1 adds d, mode 2 adds |d - mean| (d = h_meas - map height at the
+    sample shifted by (lat_off[a], lon_off[b]), b < n_b; lon_off padded to a multiple of 8). row_ok / col_ok
+    are and-ed with the samples' validity. Samples in chunks of _CHUNK: the chunk's tables (_chunk_tables),
+    then per north shift a, four samples at a time in one branch-free loop over the (padded) east shifts, so
+    each cell's sum stays in a register across the four and LLVM vectorises across cells. Per cell the
+    operations and their order over k are those of mad_surface_reference, so any split of the rows or of
+    the samples (in order) gives the same bits. Releases the GIL."""
     K = _CHUNK
     n = lat_off.shape[0]
     nb = lon_off.shape[0]
-    m = lat_k.shape[0]
     span = int(np.ceil(abs(lat_off[n - 1] - lat_off[0]) / dlat)) + 5
-    acc = np.zeros(n * nb)
-    mean = np.zeros(n * nb)
     ri = np.empty(n, np.uint32)
     row_off = np.empty((K, n), np.uint64)
     row_u = np.empty((K, n))
@@ -307,87 +306,121 @@ def _mad_rows_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k,
     cj = np.empty(nb, np.uint32)
     cv = np.empty(nb)
     cok = np.empty(nb, np.bool_)
-    row_ok = np.ones(n, np.bool_)
-    col_ok = np.ones(n_b, np.bool_)
+    # the sums in arrays of this function's own, so LLVM knows they alias nothing else and vectorises
+    acc = np.zeros(n * nb)
+    mean = np.zeros(n * nb)
+    for q in range(n * nb):
+        acc[q] = acc_io[q]
+        mean[q] = mean_in[q]
     unb = np.uint64(nb)
-    for pss in range(2 if remove_bias else 1):
-        for k0 in range(0, m, K):
-            kc = min(K, m - k0)
-            _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b,
-                          nb, span, ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok)
-            for a in range(n):
-                ao = np.uint64(a) * unb
-                kk = 0
-                while (kk + 4 <= kc and row_in[kk, a] and row_in[kk + 1, a] and row_in[kk + 2, a]
-                       and row_in[kk + 3, a]):
+    for k0 in range(k_begin, k_end, K):
+        kc = min(K, k_end - k0)
+        _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b,
+                      nb, span, ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok)
+        for a in range(n):
+            ao = np.uint64(a) * unb
+            kk = 0
+            while (kk + 4 <= kc and row_in[kk, a] and row_in[kk + 1, a] and row_in[kk + 2, a]
+                   and row_in[kk + 3, a]):
+                o0 = row_off[kk, a]
+                o1 = row_off[kk + 1, a]
+                o2 = row_off[kk + 2, a]
+                o3 = row_off[kk + 3, a]
+                u0 = row_u[kk, a]
+                u1 = row_u[kk + 1, a]
+                u2 = row_u[kk + 2, a]
+                u3 = row_u[kk + 3, a]
+                h0 = h_meas_k[k0 + kk]
+                h1 = h_meas_k[k0 + kk + 1]
+                h2 = h_meas_k[k0 + kk + 2]
+                h3 = h_meas_k[k0 + kk + 3]
+                # hdb = x + u (y - x): bilinear's r = a + u (b - a); d = h_meas - hdb
+                if mode == 0:
+                    for b in range(nb):
+                        ub = np.uint64(b)
+                        s = acc[ao + ub]
+                        s += abs(h0 - (g[o0 + ub] + u0 * dg[o0 + ub]))
+                        s += abs(h1 - (g[o1 + ub] + u1 * dg[o1 + ub]))
+                        s += abs(h2 - (g[o2 + ub] + u2 * dg[o2 + ub]))
+                        s += abs(h3 - (g[o3 + ub] + u3 * dg[o3 + ub]))
+                        acc[ao + ub] = s
+                elif mode == 1:
+                    for b in range(nb):
+                        ub = np.uint64(b)
+                        s = acc[ao + ub]
+                        s += h0 - (g[o0 + ub] + u0 * dg[o0 + ub])
+                        s += h1 - (g[o1 + ub] + u1 * dg[o1 + ub])
+                        s += h2 - (g[o2 + ub] + u2 * dg[o2 + ub])
+                        s += h3 - (g[o3 + ub] + u3 * dg[o3 + ub])
+                        acc[ao + ub] = s
+                else:
+                    for b in range(nb):
+                        ub = np.uint64(b)
+                        s = acc[ao + ub]
+                        mu = mean[ao + ub]
+                        s += abs((h0 - (g[o0 + ub] + u0 * dg[o0 + ub])) - mu)
+                        s += abs((h1 - (g[o1 + ub] + u1 * dg[o1 + ub])) - mu)
+                        s += abs((h2 - (g[o2 + ub] + u2 * dg[o2 + ub])) - mu)
+                        s += abs((h3 - (g[o3 + ub] + u3 * dg[o3 + ub])) - mu)
+                        acc[ao + ub] = s
+                kk += 4
+            while kk < kc:  # the chunk's tail, or a sample whose shift a is off the map
+                if row_in[kk, a]:
                     o0 = row_off[kk, a]
-                    o1 = row_off[kk + 1, a]
-                    o2 = row_off[kk + 2, a]
-                    o3 = row_off[kk + 3, a]
                     u0 = row_u[kk, a]
-                    u1 = row_u[kk + 1, a]
-                    u2 = row_u[kk + 2, a]
-                    u3 = row_u[kk + 3, a]
                     h0 = h_meas_k[k0 + kk]
-                    h1 = h_meas_k[k0 + kk + 1]
-                    h2 = h_meas_k[k0 + kk + 2]
-                    h3 = h_meas_k[k0 + kk + 3]
-                    # hdb = x + u (y - x): bilinear's r = a + u (b - a); d = h_meas - hdb
-                    if not remove_bias:
+                    if mode == 0:
                         for b in range(nb):
                             ub = np.uint64(b)
-                            s = acc[ao + ub]
-                            s += abs(h0 - (g[o0 + ub] + u0 * dg[o0 + ub]))
-                            s += abs(h1 - (g[o1 + ub] + u1 * dg[o1 + ub]))
-                            s += abs(h2 - (g[o2 + ub] + u2 * dg[o2 + ub]))
-                            s += abs(h3 - (g[o3 + ub] + u3 * dg[o3 + ub]))
-                            acc[ao + ub] = s
-                    elif pss == 0:
+                            acc[ao + ub] += abs(h0 - (g[o0 + ub] + u0 * dg[o0 + ub]))
+                    elif mode == 1:
                         for b in range(nb):
                             ub = np.uint64(b)
-                            s = acc[ao + ub]
-                            s += h0 - (g[o0 + ub] + u0 * dg[o0 + ub])
-                            s += h1 - (g[o1 + ub] + u1 * dg[o1 + ub])
-                            s += h2 - (g[o2 + ub] + u2 * dg[o2 + ub])
-                            s += h3 - (g[o3 + ub] + u3 * dg[o3 + ub])
-                            acc[ao + ub] = s
+                            acc[ao + ub] += h0 - (g[o0 + ub] + u0 * dg[o0 + ub])
                     else:
                         for b in range(nb):
                             ub = np.uint64(b)
-                            s = acc[ao + ub]
-                            mu = mean[ao + ub]
-                            s += abs((h0 - (g[o0 + ub] + u0 * dg[o0 + ub])) - mu)
-                            s += abs((h1 - (g[o1 + ub] + u1 * dg[o1 + ub])) - mu)
-                            s += abs((h2 - (g[o2 + ub] + u2 * dg[o2 + ub])) - mu)
-                            s += abs((h3 - (g[o3 + ub] + u3 * dg[o3 + ub])) - mu)
-                            acc[ao + ub] = s
-                    kk += 4
-                while kk < kc:  # the chunk's tail, or a sample whose shift a is off the map
-                    if row_in[kk, a]:
-                        o0 = row_off[kk, a]
-                        u0 = row_u[kk, a]
-                        h0 = h_meas_k[k0 + kk]
-                        if not remove_bias:
-                            for b in range(nb):
-                                ub = np.uint64(b)
-                                acc[ao + ub] += abs(h0 - (g[o0 + ub] + u0 * dg[o0 + ub]))
-                        elif pss == 0:
-                            for b in range(nb):
-                                ub = np.uint64(b)
-                                acc[ao + ub] += h0 - (g[o0 + ub] + u0 * dg[o0 + ub])
-                        else:
-                            for b in range(nb):
-                                ub = np.uint64(b)
-                                acc[ao + ub] += abs((h0 - (g[o0 + ub] + u0 * dg[o0 + ub])) - mean[ao + ub])
-                    kk += 1
-        if remove_bias and pss == 0:
-            for q in range(n * nb):
-                mean[q] = acc[q] / m  # the reference's mean = s / m
-                acc[q] = 0.0
-    for a in range(n):
+                            acc[ao + ub] += abs((h0 - (g[o0 + ub] + u0 * dg[o0 + ub])) - mean[ao + ub])
+                kk += 1
+    for q in range(n * nb):
+        acc_io[q] = acc[q]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _mad_rows_finish(acc, m, n_b, row_ok, col_ok, out):
+    """out[a, b] = acc / m, or inf where a sample fell off the map at that shift."""
+    nb = acc.shape[0] // out.shape[0]
+    for a in range(out.shape[0]):
         for b in range(n_b):
             v = acc[a * nb + b] / m
             out[a, b] = v if (row_ok[a] and col_ok[b] and np.isfinite(v)) else np.inf
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _mad_rows_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, lat_off, lon_off, n_b,
+                        remove_bias, out):
+    """Rows of the MAD surface when no lookup can touch a void: out[a, b] for the north shifts lat_off[a]
+    (rad) and east shifts lon_off[b], b < n_b: the passes of _mad_rows_pass over every sample (with
+    remove_bias: the sum of d, each cell's mean = sum / m, then the sum of |d - mean|). Releases the GIL."""
+    n = lat_off.shape[0]
+    nb = lon_off.shape[0]
+    m = lat_k.shape[0]
+    acc = np.zeros(n * nb)
+    mean = np.zeros(n * nb)
+    row_ok = np.ones(n, np.bool_)
+    col_ok = np.ones(n_b, np.bool_)
+    if remove_bias:
+        _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
+                       1, mean, acc, row_ok, col_ok)
+        for q in range(n * nb):
+            mean[q] = acc[q] / m  # the reference's mean = s / m
+            acc[q] = 0.0
+        _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
+                       2, mean, acc, row_ok, col_ok)
+    else:
+        _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
+                       0, mean, acc, row_ok, col_ok)
+    _mad_rows_finish(acc, m, n_b, row_ok, col_ok, out)
 
 
 def _shift_offsets(half: int, dlat_cell: float, dlon_cell: float) -> tuple[np.ndarray, np.ndarray]:
@@ -499,6 +532,8 @@ def correlate(
     cell_m: float = 5.0,
     exclusion_cells: int = 4,
     remove_bias: bool = False,
+    lat_ref_rad: float | None = None,
+    accumulator: MadAccumulator | None = None,
 ) -> TercomFix:
     """Batch MAD fix from M samples (seed 000 eqs 1-2).
 
@@ -507,7 +542,9 @@ def correlate(
     |p_alt| for the IRA); dn_rel_m, de_rel_m: horizontal closest-point offsets (M,) for the IRA (None: 0).
     Non-finite samples are dropped. half: reference matrix is (2 half + 1)^2 cells of cell_m metres.
     remove_bias: correlate after removing each cell's mean height difference (insensitive to a baro bias;
-    seed 000 uses plain MAD, the default).
+    seed 000 uses plain MAD, the default). lat_ref_rad: latitude of the radii that turn metres into
+    radians (default: the samples' mean). accumulator: a MadAccumulator fed these same samples (with
+    lat_ref_rad = its own): its surface is used instead of computing one here.
     """
     if hasattr(grid, "grid"):
         grid = grid.grid
@@ -537,14 +574,26 @@ def correlate(
             cell_m,
         )
     lat, lon, hm, dn, de = lat[ok], lon[ok], hm[ok], dn[ok], de[ok]
-    lat_c = float(np.mean(lat))
+    lat_c = float(np.mean(lat)) if lat_ref_rad is None else float(lat_ref_rad)
     r_ns = meridian_radius_m(lat_c)
     r_ew = prime_vertical_radius_m(lat_c) * np.cos(lat_c)
     lat_k = lat + dn / r_ns  # seed 000 eq 2: p_lat = p_n / R_ns
     lon_k = lon + de / r_ew  #                p_lon = p_e / R_ew
     d_lat_cell = cell_m / r_ns
     d_lon_cell = cell_m / r_ew
-    surf = mad_surface(
+    if accumulator is not None:
+        if (accumulator.n_samples != lat.size or accumulator.lat_ref_rad != lat_c or accumulator.half != half
+                or accumulator.cell_m != cell_m or accumulator.remove_bias != bool(remove_bias)):
+            raise ValueError("correlate: the accumulator was not fed these samples with these settings")
+        surf = accumulator.surface()
+    else:
+        surf = _surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, hm, d_lat_cell, d_lon_cell, half,
+                        remove_bias)
+    return _fix_from_surface(t_s, surf, lat.size, half, cell_m, r_ns, r_ew, exclusion_cells)
+
+
+def _surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, hm, d_lat_cell, d_lon_cell, half, remove_bias):
+    return mad_surface(
         heights,
         float(lat0),
         float(lon0),
@@ -558,6 +607,11 @@ def correlate(
         half,
         bool(remove_bias),
     )
+
+
+def _fix_from_surface(t_s, surf, n_samples, half, cell_m, r_ns, r_ew, exclusion_cells) -> TercomFix:
+    """The fix of a MAD surface: its smallest cell, the quality and edge tests (correlate's second half)."""
+    n = 2 * half + 1
     if not np.isfinite(surf).any():
         return TercomFix(
             t_s,
@@ -570,7 +624,7 @@ def correlate(
             np.nan,
             np.nan,
             False,
-            int(lat.size),
+            int(n_samples),
             surf,
             cell_m,
         )
@@ -604,20 +658,128 @@ def correlate(
         best,
         quality,
         on_edge,
-        int(lat.size),
+        int(n_samples),
         surf,
         cell_m,
     )
 
 
-class TercomBatch:
-    """Accumulates (t, INS lat/lon, measured terrain height, closest-point offsets) between fixes."""
+class MadAccumulator:
+    """A batch's MAD surface built while its samples come in (seed 000 eqs 1-2), so that little is left for
+    the fix: the sum of |d| (plain MAD: nothing is left) or of d (remove_bias: the first of two passes; the
+    second needs each cell's mean) is added as each group of samples arrives, in sample order. The surface is
+    bit for bit mad_surface's on the same samples with the same radii, which here come from lat_ref_rad (the
+    batch's first sample: known at its start) where correlate() by default takes the batch's mean latitude,
+    a relative difference of about 1e-6 in the 5 m cells over a 5 km batch. Non-finite samples are dropped as
+    correlate() drops them; samples whose shifts could touch a DEM void make it fall back to computing the
+    whole surface at the fix."""
 
-    def __init__(self):
+    def __init__(self, grid, half: int, cell_m: float, remove_bias: bool, lat_ref_rad: float):
+        if hasattr(grid, "grid"):
+            grid = grid.grid
+        self.grid = tuple(grid)
+        self.half, self.cell_m, self.remove_bias = int(half), float(cell_m), bool(remove_bias)
+        self.lat_ref_rad = float(lat_ref_rad)
+        self.r_ns = meridian_radius_m(self.lat_ref_rad)
+        self.r_ew = prime_vertical_radius_m(self.lat_ref_rad) * np.cos(self.lat_ref_rad)
+        self.dlat_cell = self.cell_m / self.r_ns
+        self.dlon_cell = self.cell_m / self.r_ew
+        n = 2 * self.half + 1
+        self.lat_off, self.lon_off = _shift_offsets(self.half, self.dlat_cell, self.dlon_cell)
+        self._acc = np.zeros(n * self.lon_off.shape[0])
+        self._row_ok = np.ones(n, np.bool_)
+        self._col_ok = np.ones(n, np.bool_)
+        self._parts: list[np.ndarray] = []     # rows lat_k, lon_k, h_meas
+        self.void_free = True
+
+    @property
+    def n_samples(self) -> int:
+        return int(sum(p.shape[1] for p in self._parts))
+
+    def add(self, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m) -> None:
+        lat, lon, hm, dn, de = (np.asarray(x, float)
+                                for x in (lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m))
+        ok = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(hm) & np.isfinite(dn) & np.isfinite(de)
+        if not ok.any():
+            return
+        part = np.stack([lat[ok] + dn[ok] / self.r_ns, lon[ok] + de[ok] / self.r_ew, hm[ok]])  # seed 000 eq 2
+        self._parts.append(part)
+        if not self.void_free:
+            return
+        heights, lat0, lon0, dlat, dlon = self.grid
+        lat_k, lon_k, h_k = (np.ascontiguousarray(r) for r in part)
+        if not _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k,
+                                self.half * abs(self.dlat_cell), self.half * abs(self.dlon_cell)):
+            self.void_free = False
+            return
+        _mad_rows_pass(heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_k, 0,
+                       lat_k.shape[0], self.lat_off, self.lon_off, 2 * self.half + 1,
+                       1 if self.remove_bias else 0, self._acc, self._acc, self._row_ok, self._col_ok)
+
+    def surface(self, threads: int | None = None) -> np.ndarray:
+        """The MAD surface of every sample added (rows north shifts, columns east shifts), as mad_surface."""
+        n = 2 * self.half + 1
+        heights, lat0, lon0, dlat, dlon = self.grid
+        samples = np.concatenate(self._parts, axis=1) if self._parts else np.zeros((3, 0))
+        lat_k, lon_k, h_k = (np.ascontiguousarray(r) for r in samples)
+        m = lat_k.shape[0]
+        if not self.void_free or m == 0:
+            return mad_surface(heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_k,
+                               self.dlat_cell, self.dlon_cell, self.half, self.remove_bias, threads)
+        out = np.empty((n, n))
+        if not self.remove_bias:
+            _mad_rows_finish(self._acc, m, n, self._row_ok, self._col_ok, out)
+            return out
+        nb = self.lon_off.shape[0]
+        mean = self._acc / m                    # the reference's mean = s / m, per cell
+        acc = np.zeros_like(mean)
+        if threads is None:
+            threads = TERCOM_THREADS if m * n * n > PARALLEL_MIN_LOOKUPS else 1
+        bands = np.linspace(0, n, max(1, min(int(threads), n // 8)) + 1).astype(int)
+        row_ok = self._row_ok.copy()
+        col_oks = [self._col_ok.copy() for _ in range(len(bands) - 1)]
+        args = (heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_k, 0, m)
+
+        def band(i: int) -> None:
+            a0, a1 = bands[i], bands[i + 1]
+            _mad_rows_pass(*args, self.lat_off[a0:a1], self.lon_off, n, 2, mean[a0 * nb:a1 * nb],
+                           acc[a0 * nb:a1 * nb], row_ok[a0:a1], col_oks[i])
+
+        workers = [threading.Thread(target=band, args=(i,)) for i in range(1, len(bands) - 1)]
+        for w in workers:
+            w.start()
+        band(0)
+        for w in workers:
+            w.join()
+        col_ok = np.logical_and.reduce(col_oks) if col_oks else self._col_ok
+        _mad_rows_finish(acc, m, n, row_ok, col_ok, out)
+        return out
+
+
+class TercomBatch:
+    """Accumulates (t, INS lat/lon, measured terrain height, closest-point offsets) between fixes.
+
+    accumulate: None, or (half, cell_m, remove_bias, grid) of the fix to come: a MadAccumulator (radii at
+    the batch's first finite sample) is then fed each group of samples as it is added (`accumulator`)."""
+
+    def __init__(self, accumulate: tuple | None = None):
+        self.accumulate = accumulate
         self.clear()
 
     def clear(self) -> None:
         self._parts: list[np.ndarray] = []
+        self.accumulator: MadAccumulator | None = None
+
+    def _feed(self, rows: np.ndarray) -> None:
+        if self.accumulate is None or rows.shape[0] == 0:
+            return
+        if self.accumulator is None:
+            ok = np.isfinite(rows[:, 1:6]).all(axis=1)    # the first sample correlate() keeps
+            if not ok.any():
+                return
+            half, cell_m, remove_bias, grid = self.accumulate
+            self.accumulator = MadAccumulator(grid, half, cell_m, remove_bias, float(rows[np.argmax(ok), 1]))
+        self.accumulator.add(rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4], rows[:, 5])
 
     def add(self, t_s, lat_rad, lon_rad, h_meas_m, dn_rel_m=None, de_rel_m=None) -> None:
         t = np.atleast_1d(np.asarray(t_s, float))
@@ -631,6 +793,7 @@ class TercomBatch:
             z if de_rel_m is None else de_rel_m,
         ]
         self._parts.append(np.stack([np.broadcast_to(np.asarray(c, float), t.shape) for c in cols], 1))
+        self._feed(self._parts[-1])
 
     def add_rows(self, rows: np.ndarray) -> None:
         """Append an (n, 6) float array of rows (t, lat, lon, h_meas, dn_rel, de_rel), taken as is."""
@@ -638,6 +801,7 @@ class TercomBatch:
         if rows.ndim != 2 or rows.shape[1] != 6:
             raise ValueError(f"rows must be an (n, 6) array, got shape {rows.shape}")
         self._parts.append(rows)
+        self._feed(rows)
 
     @property
     def samples(self) -> np.ndarray:
@@ -648,7 +812,10 @@ class TercomBatch:
         return int(sum(p.shape[0] for p in self._parts))
 
     def shift(self, dlat_rad: float, dlon_rad: float) -> None:
-        """Move every stored INS position (after the INS was corrected by a filter update)."""
+        """Move every stored INS position (after the INS was corrected by a filter update); the accumulated
+        surface no longer fits them and is dropped (the fix computes it from the samples)."""
         for p in self._parts:
             p[:, 1] += dlat_rad
             p[:, 2] += dlon_rad
+        self.accumulator = None
+        self.accumulate = None

@@ -304,3 +304,55 @@ def test_fused_and_fast_paths_match_general_path(sim_frames, decimation):
         assert navs[0].health.skipped == navs[other].health.skipped
     assert navs[0].health.skipped.get("altimeter_no_return", 0) > 0
     assert navs[0].health.skipped.get("baro_invalid", 0) == 1
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("remove_bias", [False, True])
+@pytest.mark.parametrize("where", ["inside", "south_edge", "void"])
+def test_accumulated_surface_is_bit_identical_to_the_reference(dem, remove_bias, where, threads):
+    """The batch's surface summed group by group as samples come (uneven groups, NaN samples dropped, one
+    sample off the map's edge or a void near the track) equals the per-lookup reference on the same samples
+    with the same radii, and correlate() with the accumulator gives the fix correlate() computes itself."""
+    from navigators.tercom import MadAccumulator, correlate
+
+    rng = np.random.default_rng(13)
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    lat_min, lat_max, lon_min, lon_max = dem.bounds
+    mid = (0.5 * (lat_min + lat_max), 0.5 * (lon_min + lon_max))
+    grid = dem.grid
+    if where == "inside":
+        lat, lon, hm, _, _ = _batch(dem, rng, 61, mid[0], mid[1], 1500.0)
+    elif where == "south_edge":
+        lat, lon, hm, _, _ = _batch(dem, rng, 61, lat_min + 60.0 / 6.37e6, mid[1], 30.0)
+    else:
+        heights = heights.copy()
+        i = int(round((mid[0] - lat0) / dlat))
+        j = int(round((mid[1] - lon0) / dlon))
+        heights[i, j] = np.nan
+        grid = (heights, lat0, lon0, dlat, dlon)
+        lat, lon, hm, _, _ = _batch(dem, rng, 61, lat0 + i * dlat + 150.0 / 6.37e6, lon0 + j * dlon, 30.0)
+    spread = 300.0 if where == "inside" else 20.0           # closest-point offsets (IRA), m
+    dn = rng.uniform(-spread, spread, lat.size)
+    de = rng.uniform(-spread, spread, lat.size)
+    hm[[4, 30]] = np.nan                                     # dropped, as correlate() drops them
+    half = 12
+    acc = MadAccumulator(grid, half, 5.0, remove_bias, float(lat[0]))
+    for a, b in ((0, 1), (1, 9), (9, 10), (10, 33), (33, 61)):
+        acc.add(lat[a:b], lon[a:b], hm[a:b], dn[a:b], de[a:b])
+    ok = np.isfinite(hm)
+    lat_k = lat[ok] + dn[ok] / acc.r_ns
+    lon_k = lon[ok] + de[ok] / acc.r_ew
+    ref = mad_surface_reference(grid[0], lat0, lon0, dlat, dlon, lat_k, lon_k, hm[ok], acc.dlat_cell,
+                                acc.dlon_cell, half, remove_bias)
+    assert acc.void_free is (where != "void")                # the void makes it fall back
+    surf = acc.surface(threads=threads)
+    assert np.array_equal(surf, ref)
+    if where != "inside":
+        assert np.isinf(ref).any() and np.isfinite(ref).any()
+    own = correlate(grid, 1.0, lat, lon, hm, dn, de, half=half, remove_bias=remove_bias, lat_ref_rad=lat[0])
+    given = correlate(grid, 1.0, lat, lon, hm, dn, de, half=half, remove_bias=remove_bias, lat_ref_rad=lat[0],
+                      accumulator=acc)
+    assert np.array_equal(own.surface_m, given.surface_m) and (own.dn_m, own.de_m) == (given.dn_m, given.de_m)
+    with pytest.raises(ValueError, match="accumulator"):
+        correlate(grid, 1.0, lat[:-1], lon[:-1], hm[:-1], dn[:-1], de[:-1], half=half,
+                  remove_bias=remove_bias, lat_ref_rad=lat[0], accumulator=acc)
