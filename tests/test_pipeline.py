@@ -138,3 +138,16 @@ def test_a_nan_estimate_ends_both_runs_at_its_time(monkeypatch):
     inline, piped = _fly(sc, False), _fly(sc, True)
     assert inline.termination == "diverged" and inline.sim_time_s == pytest.approx(5.0)
     _assert_same_run(inline, piped)
+
+
+def test_a_worker_that_cannot_start_leaves_the_loop_inline(monkeypatch):
+    import trn_env.sim as sim
+
+    def no_process(inline):
+        raise OSError("fork: resource temporarily unavailable")
+
+    monkeypatch.setattr(sim, "ProcessNavStage", no_process)
+    with pytest.warns(RuntimeWarning, match="running inline"):
+        loop = ClosedLoop(_scenario(3.0, navigator="ins"), pipeline=True)
+    assert not loop.pipelined and loop.navigator is not None
+    assert loop.run().termination == "time_limit"

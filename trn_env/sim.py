@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -290,8 +291,14 @@ class ClosedLoop:
         inline = InlineNavStage(sensors, navigator, self.world_dem, self.outages, log_sensors,
                                 self.planner if self._plans is not None else None)
         self.pipelined = bool(pipeline and self.latency_updates >= 1 and fork_available())
-        # forked last, so the worker starts from exactly this state
-        self._stage = ProcessNavStage(inline) if self.pipelined else inline
+        self._stage = inline
+        if self.pipelined:
+            try:        # forked last, so the worker starts from exactly this state
+                self._stage = ProcessNavStage(inline)
+            except OSError as err:              # no process to be had: the same run, in this one
+                warnings.warn(f"ClosedLoop: running inline, the worker process failed to start ({err})",
+                              RuntimeWarning, stacklevel=2)
+                self.pipelined = False
         # the sensors, navigator and guidance objects in use (None when they live in the worker process)
         self.sensors = None if self.pipelined else sensors
         self.navigator = None if self.pipelined else navigator
