@@ -433,6 +433,20 @@ def _shift_offsets(half: int, dlat_cell: float, dlon_cell: float) -> tuple[np.nd
     return lat_off, lon_off
 
 
+def _in_bands(n_rows: int, threads: int, band) -> None:
+    """band(a0, a1, i) over `threads` bands of rows [a0, a1) (at least 8 rows each), all at the same time:
+    band i > 0 on threads made for this call (not a pool: a pool's threads would not survive the closed
+    loop's fork), band 0 on this one. The bands' kernels release the GIL."""
+    bands = np.linspace(0, n_rows, max(1, min(int(threads), n_rows // 8)) + 1).astype(int)
+    workers = [threading.Thread(target=band, args=(int(bands[i]), int(bands[i + 1]), i))
+               for i in range(1, len(bands) - 1)]
+    for w in workers:
+        w.start()
+    band(int(bands[0]), int(bands[1]), 0)
+    for w in workers:
+        w.join()
+
+
 def _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell,
                            half, remove_bias, threads: int = 1):
     """mad_surface when no lookup can touch a void: _mad_rows_void_free over all north shifts, split into
@@ -441,19 +455,11 @@ def _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas
     lat_off, lon_off = _shift_offsets(half, dlat_cell, dlon_cell)
     out = np.empty((n, n))
     args = (heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k)
-    bands = np.linspace(0, n, max(1, min(int(threads), n // 8)) + 1).astype(int)
-    if len(bands) == 2:
-        _mad_rows_void_free(*args, lat_off, lon_off, n, remove_bias, out)
-        return out
-    # threads made per call (not a pool): a pool's threads would not survive the closed loop's fork
-    workers = [threading.Thread(target=_mad_rows_void_free,
-                                args=(*args, lat_off[a0:a1], lon_off, n, remove_bias, out[a0:a1]))
-               for a0, a1 in zip(bands[1:-1], bands[2:], strict=True)]
-    for w in workers:
-        w.start()
-    _mad_rows_void_free(*args, lat_off[:bands[1]], lon_off, n, remove_bias, out[:bands[1]])
-    for w in workers:
-        w.join()
+
+    def band(a0: int, a1: int, _i: int) -> None:
+        _mad_rows_void_free(*args, lat_off[a0:a1], lon_off, n, remove_bias, out[a0:a1])
+
+    _in_bands(n, threads, band)
     return out
 
 
@@ -735,23 +741,16 @@ class MadAccumulator:
         acc = np.zeros_like(mean)
         if threads is None:
             threads = TERCOM_THREADS if m * n * n > PARALLEL_MIN_LOOKUPS else 1
-        bands = np.linspace(0, n, max(1, min(int(threads), n // 8)) + 1).astype(int)
         row_ok = self._row_ok.copy()
-        col_oks = [self._col_ok.copy() for _ in range(len(bands) - 1)]
+        col_oks = [self._col_ok.copy() for _ in range(max(1, int(threads)))]   # per band: no shared writes
         args = (heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_k, 0, m)
 
-        def band(i: int) -> None:
-            a0, a1 = bands[i], bands[i + 1]
+        def band(a0: int, a1: int, i: int) -> None:
             _mad_rows_pass(*args, self.lat_off[a0:a1], self.lon_off, n, 2, mean[a0 * nb:a1 * nb],
                            acc[a0 * nb:a1 * nb], row_ok[a0:a1], col_oks[i])
 
-        workers = [threading.Thread(target=band, args=(i,)) for i in range(1, len(bands) - 1)]
-        for w in workers:
-            w.start()
-        band(0)
-        for w in workers:
-            w.join()
-        col_ok = np.logical_and.reduce(col_oks) if col_oks else self._col_ok
+        _in_bands(n, threads, band)
+        col_ok = np.logical_and.reduce(col_oks)
         _mad_rows_finish(acc, m, n, row_ok, col_ok, out)
         return out
 
