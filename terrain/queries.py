@@ -1061,21 +1061,25 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
                 if not (g == g):
                     break
             h_ne *= qc[6] * qc[7]
-            # kinks: across a row (column) grid line only dh/dn (dh/de) jumps, by the second difference of
-            # the heights across the line interpolated between two posts; lines strictly inside the region
+            # kinks: across a row (column) grid line only dh/dn (dh/de) jumps, by the second difference d2
+            # of the heights across the line interpolated between two posts; lines strictly inside the
+            # region. Only ridge creases (d2 < 0) count: with t = -(v_d / |v_h|) z on the plane, crossing
+            # the line changes z' by -d2 |dfi/ds| / (1 + gamma dh/du) (dfi/ds: posts per metre of s), and
+            # r' by (z / r)(1 + gamma^2) times that, so a valley crease (d2 > 0) only bends r' down, which
+            # keeps f - bound concave.
             for li in range(i_a + 1, i_b):
                 mx = 0.0
                 for lj in range(j_a, j_b + 1):
-                    d2 = abs(heights[li + 1, lj] - 2.0 * heights[li, lj] + heights[li - 1, lj])
-                    if d2 > mx:
-                        mx = d2
+                    ridge = 2.0 * heights[li, lj] - heights[li + 1, lj] - heights[li - 1, lj]
+                    if ridge > mx:
+                        mx = ridge
                 jump_n += mx
             for lj in range(j_a + 1, j_b):
                 mx = 0.0
                 for li in range(i_a, i_b + 1):
-                    d2 = abs(heights[li, lj + 1] - 2.0 * heights[li, lj] + heights[li, lj - 1])
-                    if d2 > mx:
-                        mx = d2
+                    ridge = 2.0 * heights[li, lj] - heights[li, lj + 1] - heights[li, lj - 1]
+                    if ridge > mx:
+                        mx = ridge
                 jump_e += mx
             jump_n *= qc[6]
             jump_e *= qc[7]
@@ -1119,7 +1123,8 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
         if kinks:
             # a kink where r' jumps up by J lowers the bound by at most J G(s, kink) <= J w / 4 (G: Green's
             # function of d^2/ds^2 on [a, b]); |jump of r'| <= |jump of P'| = sqrt(1 + gamma^2) |jump of z'|
-            # with |jump of z'| <= (|jump of h_w| + gamma |z'| |jump of h_u|) / (1 - gamma g)
+            # with |jump of z'| <= (|jump of h_w| + gamma |z'| |jump of h_u|) / (1 - gamma g); kinks where r'
+            # jumps down (valley creases, see above) cannot lower it
             jz = (jump_n * (abs(uhy) + tp * abs(uhx)) + jump_e * (abs(uhx) + tp * abs(uhy))) / den
             q2 -= 0.25 * w * 1.05 * np.sqrt(1.0 + gam * gam) * jz
         lb = max(lb, q2)
