@@ -660,3 +660,30 @@ def test_ira_batch_equals_single_queries_bit_for_bit(world30):
     rev = queries.ira_return(world30, lat[::-1], lon[::-1], h[::-1], v[::-1], C[::-1], half_window, 10000.0)
     for f in fields:
         np.testing.assert_array_equal(getattr(rev, f)[::-1], getattr(whole, f), err_msg=f)
+
+
+def test_ira_finds_a_ridge_crease_between_coarse_samples():
+    """The closest point sits on a one-row ridge crease that the coarse samples straddle on its flanks, with a
+    decoy plateau elsewhere closer than the flank samples. Only the kink term of the interval bound (a ridge
+    makes the range's slope jump up) keeps the flank interval from being dropped against the decoy."""
+    n = 200
+    d = np.radians(1.0 / 3600.0)
+    ridge_row = 100
+    heights = np.full((n, n), 300.0)
+    heights[ridge_row, :] = 360.0                      # tent 60 m high, one post wide
+    heights[ridge_row + 6:ridge_row + 13, :] = 351.0   # decoy plateau ~160 m north of the antenna
+    dem = Dem(heights, np.radians(33.0) - 0.5 * n * d, np.radians(-98.5) - 0.5 * n * d, d, d, name="ridge")
+    # flying east, the zero-Doppler curve runs north-south; the antenna 0.84 post north of the ridge puts
+    # the coarse samples (1.68 posts apart) on both flanks at 0.84 post from the crease
+    lat = dem.lat0_rad + (ridge_row + 0.84) * d
+    lon = dem.lon0_rad + 100.3 * d
+    h = 1300.0
+    v = np.array([0.0, 100.0, 0.0])
+    C = geodesy.euler_to_C_bn(0.0, 0.0, np.radians(90.0))
+    got = queries.ira_return(dem, lat, lon, h, v, C, HALF_WINDOW, 12000.0)
+    assert got.valid[0]
+    fi = (got.lat_rad[0] - dem.lat0_rad) / d
+    assert fi == pytest.approx(ridge_row, abs=0.02)
+    ref = bf_ira(dem, lat, lon, h, v, C, HALF_WINDOW, 12000.0, s_half_m=got.range_m[0] + 10.0, coarse_m=2.0)
+    assert got.range_m[0] == pytest.approx(ref[0], abs=0.05)
+    assert got.h_m[0] == pytest.approx(360.0, abs=0.5)
