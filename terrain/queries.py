@@ -69,7 +69,7 @@ class TerrainReturn:
 
 
 # ----------------------------------------------------------------------------------------- local frame
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _consts(lat):
     s = np.sin(lat)
     c = np.cos(lat)
@@ -80,7 +80,7 @@ def _consts(lat):
     return s, c, m, n, dm
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _ned(dphi, dlam, hp, ha, s, c, m, n, dm):
     """NED (m) of the point (lat_a + dphi, lon_a + dlam, hp) from the antenna at height ha."""
     mh = m + ha
@@ -754,7 +754,7 @@ def _ra_batch(
 
 
 # ----------------------------------------------------------------------------------------- IRA
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _zd_point(
     heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, qc, sv, t_guess,
     tol,
@@ -832,7 +832,7 @@ def _zd_point(
     return np.nan, x, y, z, dphi, dlam, hp
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _ira_eval(
     heights,
     lat0,
@@ -899,7 +899,7 @@ def _ira_eval(
     return r, t, r, z
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
     """Upper bound of |dr/ds| on the zero-Doppler curve for s in [a, b] (r = range, s = across-track m).
 
@@ -921,7 +921,7 @@ def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
     return min((s_max + t_max * tp + z_max * zp) / r_min, l_crude) * g_pad
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
     stack[row, 0] = a
     stack[row, 1] = fa
@@ -937,7 +937,7 @@ def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
     stack[row, 11] = split
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _ira_region_max(tab, n_lat, n_lon, qc, n_a, n_b, e_a, e_b):
     """Largest IRA_BLOCK_POSTS-block value of tab (block max heights or slopes) over the NED rectangle
     [n_a, n_b] x [e_a, e_b] (m from the antenna; qc: _ira_one's per-query constants); -inf: off the grid."""
@@ -960,7 +960,7 @@ def _ira_region_max(tab, n_lat, n_lon, qc, n_a, n_b, e_a, e_b):
     return hi
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb, rb, zb):
     """(lower bound of the in-window range f over the curve piece s in [a, b], split point) from the end
     samples (f, t, r, z at a and b; see _ira_eval); qc: _ira_one's per-query constants. Intervals with
@@ -1407,29 +1407,39 @@ def _ira_one(
     for _it in range(12):
         if h_p < 4e-2:
             break
-        fm, tm, _, _ = _ira_eval(
-            heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-            qc, sin_w, max_range, centre - h_p, tc, 1e-4,
-        )
-        fp, tp_, _, _ = _ira_eval(
-            heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-            qc, sin_w, max_range, centre + h_p, tc, 1e-4,
-        )
-        if fm < fc and fm <= fp:
-            centre, fc, tc = centre - h_p, fm, tm
-            continue
-        if fp < fc:
-            centre, fc, tc = centre + h_p, fp, tp_
-            continue
-        den = fm - 2.0 * fc + fp
-        if den > 0.0 and den < _INF:
-            x_v = centre + 0.5 * h_p * (fm - fp) / den
-            fx, tx, _, _ = _ira_eval(
+        # trials: 0 = centre - h_p, 1 = centre + h_p, 2 = the parabola's vertex (one _ira_eval call site)
+        fm = tm = fp = tp_ = 0.0
+        moved = False
+        for trial in range(3):
+            if trial == 0:
+                sv_t = centre - h_p
+            elif trial == 1:
+                sv_t = centre + h_p
+            else:
+                if fm < fc and fm <= fp:
+                    centre, fc, tc = centre - h_p, fm, tm
+                    moved = True
+                    break
+                if fp < fc:
+                    centre, fc, tc = centre + h_p, fp, tp_
+                    moved = True
+                    break
+                den = fm - 2.0 * fc + fp
+                if not (den > 0.0 and den < _INF):
+                    break
+                sv_t = centre + 0.5 * h_p * (fm - fp) / den
+            f_t, t_t, _, _ = _ira_eval(
                 heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-                qc, sin_w, max_range, x_v, tc, 1e-4,
+                qc, sin_w, max_range, sv_t, tc, 1e-4,
             )
-            if fx < fc:
-                centre, fc, tc = x_v, fx, tx
+            if trial == 0:
+                fm, tm = f_t, t_t
+            elif trial == 1:
+                fp, tp_ = f_t, t_t
+            elif f_t < fc:
+                centre, fc, tc = sv_t, f_t, t_t
+        if moved:
+            continue
         h_p *= 0.1
     t, x, y, z, dphi, dlam, hp = _zd_point(
         heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, qc, centre,
