@@ -35,6 +35,9 @@ grid lines (see _ira_one, _ira_interval_lb); each curve point is a Newton solve 
 (_zd_point). Per-DEM tables (block maxima and slopes, height range) are cached on the Dem and the scratch
 space is reused between calls, so a call costs a few microseconds on top of its queries. Ranges agree
 with a dense brute-force search to a few mm; each query is independent of the others in its batch.
+The IRA search's per-sample helpers (_zd_point, _ira_eval, _ira_interval_lb and what they call) carry numba's
+inline="always": a query makes ~40 evaluations and ~47 bound calls, and inlining them into _ira_one cut a
+query from ~11 to ~8 us on the default flight (same bits), for ~20 s more compilation on first use (cached).
 """
 
 from __future__ import annotations
