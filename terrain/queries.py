@@ -27,17 +27,19 @@ bounding sphere misses the cone are pruned. Each surviving cell, in order of bou
 (_cell_min): in the antenna's NED frame the cell is a bilinear patch A + u B + v C + u v D; each row v is a
 segment whose in-cone part is one interval (the cone is convex), so min over u is a clamped projection and
 the cell minimum is a 1-D minimisation over v (samples, edge points, golden section).
-IRA search: a coarse scan (samples a whole number of posts, about COARSE_STEP_M, apart along the
-zero-Doppler curve, alternating sides outward from s = 0) pruned by the lower bound range >=
-sqrt(horizontal^2 + (h_a - h_max)^2), then branch and bound over the intervals between coarse samples with
-Lipschitz / curvature bounds from per-cell (or per-block) slopes, per-cell twists and the slope jumps at
-grid lines (see _ira_one, _ira_interval_lb); each curve point is a Newton solve in the bilinear cell
-(_zd_point). Per-DEM tables (block maxima and slopes, height range) are cached on the Dem and the scratch
-space is reused between calls, so a call costs a few microseconds on top of its queries. Ranges agree
-with a dense brute-force search to a few mm; each query is independent of the others in its batch.
+IRA search: coarse intervals (a whole number of posts, about COARSE_STEP_M, long along the zero-Doppler
+curve) are bounded below by range >= sqrt(horizontal^2 + (h_a - h_box)^2), h_box the highest terrain of the
+2 x 2-cell blocks the curve piece can lie in; in order of that bound, while it can still beat the best,
+their end samples are evaluated and they enter a branch and bound with Lipschitz / curvature bounds from
+per-cell (or per-block) slopes, per-cell twists and the slope jumps at grid lines - for a piece between
+two adjacent cells at its one crossing, weighted by where that crossing can lie (see _ira_one,
+_ira_interval_lb); each curve point is a Newton solve in the bilinear cell (_zd_point). Per-DEM tables
+(block maxima and slopes, height range) are cached on the Dem and the scratch space is reused between
+calls, so a call costs a few microseconds on top of its queries. Ranges agree with a dense brute-force
+search to a few mm; each query is independent of the others in its batch.
 The IRA search's per-sample helpers (_zd_point, _ira_eval, _ira_interval_lb and what they call) carry numba's
-inline="always": a query makes ~40 evaluations and ~47 bound calls, and inlining them into _ira_one cut a
-query from ~11 to ~8 us on the default flight (same bits), for ~20 s more compilation on first use (cached).
+inline="always": a query makes ~25 evaluations and ~25 bound calls, and inlining them into _ira_one cut a
+query by a quarter (same bits), for ~20 s more compilation on first use (cached).
 """
 
 from __future__ import annotations
@@ -52,9 +54,9 @@ from terrain.geodesy import WGS84_A_M, WGS84_E2
 from terrain.kernels import bilinear
 
 _INF = np.inf
-_PRUNED = 1e301  # IRA coarse sample skipped by the block bound (it and its intervals cannot beat the best)
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
-IRA_BLOCK_POSTS = 8  # block size of the IRA's height and slope bounds
+IRA_BLOCK_POSTS = 8  # block size of the IRA's slope bounds for large curve pieces
+IRA_HEIGHT_BLOCK_CELLS = 2  # cells per block side of the IRA's height bound (2: fastest of 1-4)
 COARSE_STEP_M = 45.0  # about the IRA's coarse sample spacing along the zero-Doppler curve (m)
 N_SAMP = 6  # rows sampled per cell by the altimeter's exact cell solver (_cell_min), at most 16
 
@@ -941,23 +943,18 @@ def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _ira_region_max(tab, n_lat, n_lon, qc, n_a, n_b, e_a, e_b):
-    """Largest IRA_BLOCK_POSTS-block value of tab (block max heights or slopes) over the NED rectangle
-    [n_a, n_b] x [e_a, e_b] (m from the antenna; qc: _ira_one's per-query constants); -inf: off the grid."""
-    i_a = int(np.floor(qc[0] + n_a * qc[6]))
-    i_b = int(np.ceil(qc[0] + n_b * qc[6]))
-    j_a = int(np.floor(qc[3] + e_a * qc[7]))
-    j_b = int(np.ceil(qc[3] + e_b * qc[7]))
-    if i_b < 0 or j_b < 0 or i_a > n_lat - 1 or j_a > n_lon - 1:
-        return -_INF
-    nbi, nbj = tab.shape
-    bi_a = min(max(i_a, 0) // IRA_BLOCK_POSTS, nbi - 1)
-    bi_b = min(min(i_b, n_lat - 1) // IRA_BLOCK_POSTS, nbi - 1)
-    bj_a = min(max(j_a, 0) // IRA_BLOCK_POSTS, nbj - 1)
-    bj_b = min(min(j_b, n_lon - 1) // IRA_BLOCK_POSTS, nbj - 1)
+def _ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi):
+    """Largest value of tab (one value per block x block cells, layout of terrain.kernels.block_bounds) over
+    the cells meeting the box [fi_lo, fi_hi] x [fj_lo, fj_hi] in post coordinates; -inf off the grid."""
+    c_ia = max(int(np.floor(fi_lo)), 0)
+    c_ib = min(int(np.ceil(fi_hi)) - 1, n_lat - 2)
+    c_ja = max(int(np.floor(fj_lo)), 0)
+    c_jb = min(int(np.ceil(fj_hi)) - 1, n_lon - 2)
     hi = -_INF
-    for bi in range(bi_a, bi_b + 1):
-        for bj in range(bj_a, bj_b + 1):
+    if c_ia > c_ib or c_ja > c_jb:
+        return hi
+    for bi in range(c_ia // block, c_ib // block + 1):
+        for bj in range(c_ja // block, c_jb // block + 1):
             if tab[bi, bj] > hi:
                 hi = tab[bi, bj]
     return hi
@@ -975,8 +972,12 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
     Other pieces get the Lipschitz bound (f_a + f_b - L w) / 2 with L from the slopes of the cells (or
     blocks) they can cross; when that region is small (<= 16 cells) also the curvature bound with the
     cells' largest slope and twist, lowered by w / 4 times the largest upward jumps of r' at the grid lines
-    inside it (f is piecewise smooth: f - bound is concave with zero ends). They split where the straight
-    chord first crosses a grid line, so that the pieces become smooth."""
+    inside it (f is piecewise smooth: f - bound is concave with zero ends). Pieces whose ends lie in two
+    adjacent cells use those two cells only, and when the curve's grid coordinate across their shared line
+    is monotone (so it crosses it once, at a distance from a known from that coordinate's rate) the jump's
+    weight is Green's function there, G(s_k, s_k) = (s_k - a)(b - s_k) / w, instead of w / 4: a split next
+    to a grid line leaves a sliver that costs almost nothing. They split where the straight chord first
+    crosses a grid line, so that the pieces become smooth."""
     n_lat = heights.shape[0]
     n_lon = heights.shape[1]
     w = b - a
@@ -1007,8 +1008,12 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
     cib = min(max(int(np.floor(fib)), 0), n_lat - 2)
     cjb = min(max(int(np.floor(fjb)), 0), n_lon - 2)
     one_cell = cia == cib and cja == cjb
+    # one grid line between the ends (adjacent cells): two smooth pieces meeting at one kink
+    one_line = (cia == cib and abs(cja - cjb) == 1) or (cja == cjb and abs(cia - cib) == 1)
     h_ne = 0.0
     kinks = False  # multi-cell piece with cell-level bounds: curvature plus kink bound available
+    line_kink = False  # two-cell piece: one kink, line_d posts from end a across the shared line
+    line_d = line_rate = line_rate_t = 0.0  # posts; posts per metre of s and of t across that line
     jump_n = 0.0  # sums over the grid lines the piece can cross of the largest jump in dh/dn, dh/de
     jump_e = 0.0
     if one_cell:
@@ -1021,6 +1026,43 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
         gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
         g = np.sqrt(gu * gu + gv * gv)
         h_ne = abs(h00 - h01 - h10 + h11) * (qc[6] * qc[7])
+    elif one_line:
+        # the two cells' slopes and twists, and the ridge jump of the slope across their shared grid line
+        # (posts l - 1..l + 1 exist: 1 <= l <= n - 2 for the line l between two cells)
+        g = 0.0
+        for ci in range(min(cia, cib), max(cia, cib) + 1):
+            for cj in range(min(cja, cjb), max(cja, cjb) + 1):
+                h00 = heights[ci, cj]
+                h01 = heights[ci, cj + 1]
+                h10 = heights[ci + 1, cj]
+                h11 = heights[ci + 1, cj + 1]
+                gu = max(abs(h10 - h00), abs(h11 - h01)) * qc[6]
+                gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
+                gc = gu * gu + gv * gv
+                tw = abs(h00 - h01 - h10 + h11)
+                if not (gc <= g):
+                    g = gc
+                if not (tw <= h_ne):
+                    h_ne = tw
+        h_ne *= qc[6] * qc[7]
+        if cia != cib:
+            l_row = max(cia, cib)
+            r0 = 2.0 * heights[l_row, cja] - heights[l_row + 1, cja] - heights[l_row - 1, cja]
+            r1 = 2.0 * heights[l_row, cja + 1] - heights[l_row + 1, cja + 1] - heights[l_row - 1, cja + 1]
+            jump_n = max(max(r0, r1), 0.0) * qc[6]
+            line_d = abs(l_row - fia)
+            line_rate = abs(qc[1])
+            line_rate_t = abs(qc[2])
+        else:
+            l_col = max(cja, cjb)
+            r0 = 2.0 * heights[cia, l_col] - heights[cia, l_col + 1] - heights[cia, l_col - 1]
+            r1 = 2.0 * heights[cia + 1, l_col] - heights[cia + 1, l_col + 1] - heights[cia + 1, l_col - 1]
+            jump_e = max(max(r0, r1), 0.0) * qc[7]
+            line_d = abs(l_col - fja)
+            line_rate = abs(qc[4])
+            line_rate_t = abs(qc[5])
+        line_kink = g == g and h_ne == h_ne and jump_n == jump_n and jump_e == jump_e
+        g = np.sqrt(g)
     else:
         # slope bound over the region the curve segment can cross
         tt = ta if ta == ta else tb
@@ -1089,7 +1131,11 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
             kinks = g == g
             g = np.sqrt(g)
         else:
-            g = _ira_region_max(bslope, n_lat, n_lon, qc, n_lo, n_hi, e_lo, e_hi)
+            g = _ira_box_max(
+                bslope, IRA_BLOCK_POSTS, n_lat, n_lon, qc[0] + n_lo * qc[6], qc[0] + n_hi * qc[6],
+                qc[3] + e_lo * qc[7], qc[3] + e_hi * qc[7],
+            )
+    if not one_cell:
         # split where the straight chord first crosses a grid line: the pieces are smooth
         lam = 2.0
         if cia != cib:
@@ -1111,6 +1157,17 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
     if not (fa < _INF and fb < _INF):
         return min(fa, fb) - lip * w, split
     lb = 0.5 * (fa + fb - lip * w)
+    kink_w = 0.25 * w
+    if line_kink:
+        # the curve crosses the line once when its grid coordinate across the line is monotone in s; the
+        # kink then lies d / rate from end a, rate within |d fi/ds| +- tp |d fi/dt|: Green weight there
+        r_lo_ = line_rate - 1.05 * tp * line_rate_t
+        if r_lo_ > 0.0:
+            x_lo = min(line_d / (line_rate + 1.05 * tp * line_rate_t), w)
+            x_hi = min(line_d / r_lo_, w)
+            xg = min(max(0.5 * w, x_lo), x_hi)
+            kink_w = xg * (w - xg) / w
+            kinks = True
     if one_cell or kinks:
         # |r''| <= |P'|^2 / r + |P''| with |z''| <= (|h_ss| + 1/R) / (1 - gamma g)
         p1sq = 1.0 + tp * tp + zp * zp
@@ -1129,7 +1186,7 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
             # with |jump of z'| <= (|jump of h_w| + gamma |z'| |jump of h_u|) / (1 - gamma g); kinks where r'
             # jumps down (valley creases, see above) cannot lower it
             jz = (jump_n * (abs(uhy) + tp * abs(uhx)) + jump_e * (abs(uhx) + tp * abs(uhy))) / den
-            q2 -= 0.25 * w * 1.05 * np.sqrt(1.0 + gam * gam) * jz
+            q2 -= kink_w * 1.05 * np.sqrt(1.0 + gam * gam) * jz
         lb = max(lb, q2)
     return lb, split
 
@@ -1157,22 +1214,26 @@ def _ira_one(
     buf_r,
     buf_z,
     stack,
-    bmax,
+    hmax_blocks,
     bslope,
     g_glob,
     out,
     qc,
+    buf_h,
+    buf_q,
 ):
     """Closest in-window zero-Doppler terrain point; writes (valid, range, lat, lon, h) into out[0:5].
 
-    1) coarse march along the curve (step: a whole number of posts), outward from the across-track
-       coordinate s = 0 on both sides in turn, stopping where no farther point can beat the best and
-       skipping samples whose neighbourhood (+-1 step) lies in blocks too low to beat it; 2) branch and
-       bound over the intervals between samples (_ira_interval_lb): an interval whose lower bound is >=
-       best - tol cannot hold a closer point and is dropped, the others are bisected (split where the chord
-       crosses a grid line, so that the pieces are smooth and the bound from the cell's slope and twist on
-       r'' applies); 3) polish of the location by three-point steps. qc (>= 16): scratch for the per-query
-       constants. Uses nothing from other queries, so a batch gives the same bits as single queries."""
+    1) coarse intervals [s_q, s_q + step] along the curve (step: a whole number of posts; s: across-track
+       coordinate), out to where the horizontal distance alone loses to the point at s = 0, each bounded
+       below by its horizontal distance and the highest terrain of the 2 x 2-cell blocks its curve piece
+       can lie in; in order of that bound, while it can beat the best, an interval's end samples are
+       evaluated and its own bound (_ira_interval_lb) decides whether it joins 2) the branch and bound: an
+       interval whose lower bound is >= best - tol cannot hold a closer point and is dropped, the others are
+       bisected (split where the chord crosses a grid line, so that the pieces are smooth or meet at one
+       kink, and the bound from the cells' slope and twist on r'' applies); 3) polish of the location by
+       three-point steps. qc (>= 16): scratch for the per-query constants; buf_*: per-sample scratch.
+       Uses nothing from other queries, so a batch gives the same bits as single queries."""
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
@@ -1218,125 +1279,159 @@ def _ira_one(
     qc[15] = np.sqrt(1.0 + (gam * zp_g) ** 2 + zp_g * zp_g) * 1.02
     n_max = buf_s.shape[0]
     half = n_max // 2
-    best = _INF
-    # the buffers are written for every visited sample, and the visited samples are contiguous: lo_q..hi_q
     t0 = 0.0
     hp0 = bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
     if hp0 == hp0:
         t0 = -(vz / vh) * (ha - hp0)
-    lo_q = half
-    hi_q = half
-    # 1) coarse march outward from s = 0, alternating sides so that the best range found so far (which
-    #    limits both marches) improves early (buffer index half + k <-> s = k * step)
-    t_prev_p = t0
-    t_prev_m = t0
-    misses_p = 0
-    misses_m = 0
-    active_p = True
-    active_m = True
-    k = 0
-    tz = -(vz / vh)
-    while active_p or active_m:
-        for direction in (1, -1):
-            if direction == 1:
-                if not active_p:
-                    continue
-                t_prev = t_prev_p
-            else:
-                if not active_m or k == 0:
-                    continue
-                t_prev = t_prev_m
-            q = half + direction * k
-            stop = q < 1 or q >= n_max - 1
-            sv = (q - half) * step
-            horiz_lb = (abs(sv) - step) * 0.998 - 2.0  # covers the neighbouring intervals too
-            if horiz_lb > max_range:
-                stop = True
-            if (
-                best < _INF
-                and d_top > 0.0
-                and horiz_lb > 0.0
-                and horiz_lb * horiz_lb + d_top * d_top > best * best
-            ):
-                stop = True
-            if stop:
-                if direction == 1:
-                    active_p = False
-                else:
-                    active_m = False
-                continue
-            if q < lo_q:
-                lo_q = q
-            if q > hi_q:
-                hi_q = q
-            if best < _INF and horiz_lb > 0.0:
-                # skip the sample when the blocks its terrain point (and the intervals on either side) can
-                # lie in are too low to beat the best
-                t_a = tz * (ha - h_max - 5.0)
-                t_b = tz * (ha - h_min + 5.0 + sv * sv / 6.3e6)
-                t_lo = min(t_a, t_b) - 5.0 - 0.01 * abs(sv)
-                t_hi = max(t_a, t_b) + 5.0 + 0.01 * abs(sv)
-                na = -sv * uhy + t_lo * uhx
-                nb = -sv * uhy + t_hi * uhx
-                ea = sv * uhx + t_lo * uhy
-                eb = sv * uhx + t_hi * uhy
-                hb = _ira_region_max(
-                    bmax, n_lat, n_lon, qc, min(na, nb) - step, max(na, nb) + step, min(ea, eb) - step,
-                    max(ea, eb) + step,
-                )
-                dv = ha - hb
-                if dv > 0.0 and horiz_lb * horiz_lb + dv * dv > best * best:
-                    buf_s[q] = sv
-                    buf_f[q] = _PRUNED
-                    buf_t[q] = np.nan
-                    buf_r[q] = _INF
-                    buf_z[q] = np.nan
-                    continue
-            f, t, r, z = _ira_eval(
-                heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
-                qc, sin_w, max_range, sv, t_prev, 1e-3,
-            )
-            buf_s[q] = sv
-            buf_f[q] = f
-            buf_t[q] = t
-            buf_r[q] = r
-            buf_z[q] = z
-            if t == t and r < _INF:
-                if direction == 1:
-                    t_prev_p = t
-                    misses_p = 0
-                else:
-                    t_prev_m = t
-                    misses_m = 0
-            elif direction == 1:
-                misses_p += 1
-                if misses_p > 3:
-                    active_p = False
-            else:
-                misses_m += 1
-                if misses_m > 3:
-                    active_m = False
-            if f < best:
-                best = f
-        k += 1
-    if best == _INF:
-        return
-    best_s = np.nan
-    best_t = np.nan
-    for q in range(lo_q, hi_q + 1):
-        if buf_f[q] == best:
-            best_s = buf_s[q]
-            best_t = buf_t[q]
-            break
-    # 2) branch and bound over the intervals between coarse samples; every stacked interval carries its
-    #    lower bound (column 10) and split point (column 11), computed once when it is pushed
+    # 1) coarse samples s_q = (q - half) step (buffer index q), evaluated when an interval needs them
+    #    (buf_f NaN until then); the sample at s = 0 first, for a first best
     tol = 5e-3  # m: an interval must promise at least this much improvement to be searched
+    tz = -(vz / vh)
+    buf_s[half] = 0.0
+    f, t, r, z = _ira_eval(
+        heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+        qc, sin_w, max_range, 0.0, t0, 1e-3,
+    )
+    buf_f[half] = f
+    buf_t[half] = t
+    buf_r[half] = r
+    buf_z[half] = z
+    best = f
+    best_s = 0.0
+    best_t = t
+    # nadir outside the look-angle window (steep bank): a second first sample, where the window's edge
+    # nearest the vertical (or, if that is the vertical, the boresight: body down axis) meets the nadir
+    # terrain height; only the speed depends on it
+    q_seed = -1
+    f_seed = t_seed = r_seed = z_seed = np.nan
+    if best == _INF:
+        phi_b = np.arctan2(C[0, 2] * (-uhy) + C[1, 2] * uhx, C[2, 2])  # boresight from the vertical, across
+        phi_w = 0.95 * np.arcsin(sin_w)
+        phi = min(max(0.0, phi_b - phi_w), phi_b + phi_w)
+        if phi == 0.0:
+            phi = phi_b
+        if abs(phi) < 1.4:
+            drop = ha - (hp0 if hp0 == hp0 else 0.5 * (h_min + h_max))
+            s_seed = max(drop, 0.0) * np.tan(phi)
+            q_seed = min(max(half + int(np.floor(s_seed / step + 0.5)), 1), n_max - 2)
+            f_seed, t_seed, r_seed, z_seed = _ira_eval(
+                heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+                qc, sin_w, max_range, (q_seed - half) * step, t0, 1e-3,
+            )
+            if f_seed < best:
+                best = f_seed
+                best_s = (q_seed - half) * step
+                best_t = t_seed
+    # intervals q_a..q_b - 1: beyond them the horizontal distance alone, with the DEM's highest post, loses
+    q_a = half
+    q_b = half
+    for side in range(2):
+        for k in range(n_max):
+            q = half + k if side == 0 else half - k - 1
+            if q < 1 or q >= n_max - 2:
+                break
+            horiz_lb = k * step * 0.998 - 2.0
+            if horiz_lb > max_range:
+                break
+            if best < _INF and d_top > 0.0 and horiz_lb > 0.0 and (
+                horiz_lb * horiz_lb + d_top * d_top > best * best
+            ):
+                break
+            if side == 0:
+                q_b = q + 1
+            else:
+                q_a = q
+    for q in range(q_a, q_b + 1):
+        buf_s[q] = (q - half) * step
+        if q != half:
+            buf_f[q] = np.nan
+            buf_t[q] = np.nan
+    if q_a <= q_seed <= q_b and q_seed != half:
+        buf_f[q_seed] = f_seed
+        buf_t[q_seed] = t_seed
+        buf_r[q_seed] = r_seed
+        buf_z[q_seed] = z_seed
+    # height bound of each interval: its curve piece has t = -(v_d / |v_h|) z (+ < 5 m + 1 % of |s|) with z
+    # between the drops to h_max and to h_min (+ the Earth's curvature), so it lies in the grid box of
+    # s in [s_q, s_q+1] x that t range (+- 1 m), t range taken at the extent's largest |s| (one box shape,
+    # shifted by s); the range is >= sqrt(horizontal^2 + (h_a - box max)^2). Candidates (buf_q) are then
+    # sorted by bound (buf_h), ascending.
+    n_c = 0
+    s_ext = max(abs(buf_s[q_a]), abs(buf_s[q_b]))
+    t_a = tz * (ha - h_max - 5.0)
+    t_b = tz * (ha - h_min + 5.0 + s_ext * s_ext / 6.3e6)
+    t_lo = min(t_a, t_b) - 5.0 - 0.01 * s_ext
+    t_hi = max(t_a, t_b) + 5.0 + 0.01 * s_ext
+    bi_lo = qc[0] + min(0.0, step * qc[1]) + min(t_lo * qc[2], t_hi * qc[2]) - abs(qc[6])
+    bi_hi = qc[0] + max(0.0, step * qc[1]) + max(t_lo * qc[2], t_hi * qc[2]) + abs(qc[6])
+    bj_lo = qc[3] + min(0.0, step * qc[4]) + min(t_lo * qc[5], t_hi * qc[5]) - abs(qc[7])
+    bj_hi = qc[3] + max(0.0, step * qc[4]) + max(t_lo * qc[5], t_hi * qc[5]) + abs(qc[7])
+    cut = best - tol
+    cut2 = cut * cut if cut > 0.0 else -1.0
+    for q in range(q_a, q_b):
+        sa = buf_s[q]
+        sb = buf_s[q + 1]
+        s_near = 0.0 if (sa < 0.0 and sb > 0.0) else min(abs(sa), abs(sb))
+        horiz = max(s_near * 0.998 - 2.0, 0.0)
+        if horiz > max_range:
+            continue
+        hb = _ira_box_max(hmax_blocks, IRA_HEIGHT_BLOCK_CELLS, n_lat, n_lon, bi_lo + sa * qc[1],
+                          bi_hi + sa * qc[1], bj_lo + sa * qc[4], bj_hi + sa * qc[4])
+        if hb == -_INF:
+            continue
+        dv = max(ha - hb, 0.0)
+        lb2 = horiz * horiz + dv * dv
+        if best < _INF and lb2 >= cut2:
+            continue
+        buf_h[n_c] = np.sqrt(lb2)
+        buf_q[n_c] = q
+        n_c += 1
+    if n_c <= 64:
+        for ci in range(1, n_c):  # insertion sort: the usual few tens of candidates
+            lbh = buf_h[ci]
+            q = buf_q[ci]
+            row = ci
+            while row > 0 and buf_h[row - 1] > lbh:
+                buf_h[row] = buf_h[row - 1]
+                buf_q[row] = buf_q[row - 1]
+                row -= 1
+            buf_h[row] = lbh
+            buf_q[row] = q
+    else:  # no first best (nothing at s = 0 nor at the boresight): hundreds of candidates
+        order = np.argsort(buf_h[:n_c], kind="mergesort")
+        sorted_h = buf_h[:n_c][order]
+        sorted_q = buf_q[:n_c][order]
+        buf_h[:n_c] = sorted_h
+        buf_q[:n_c] = sorted_q
     n_st = 0
     cap = stack.shape[0]
-    for q in range(lo_q, hi_q):
+    for ci in range(n_c):
+        if buf_h[ci] >= best - tol:
+            break
+        q = int(buf_q[ci])
+        for e in range(q, q + 2):
+            if buf_f[e] == buf_f[e]:
+                continue
+            tg = t0
+            if e > q_a and buf_f[e - 1] == buf_f[e - 1] and buf_t[e - 1] == buf_t[e - 1]:
+                tg = buf_t[e - 1]
+            elif e < q_b and buf_f[e + 1] == buf_f[e + 1] and buf_t[e + 1] == buf_t[e + 1]:
+                tg = buf_t[e + 1]
+            f, t, r, z = _ira_eval(
+                heights, lat0, lon0, dlat, dlon, lat, lon, ha, s, c, m, n, dm, vx, vy, vz, uhx, uhy, vh, C,
+                qc, sin_w, max_range, buf_s[e], tg, 1e-3,
+            )
+            buf_f[e] = f
+            buf_t[e] = t
+            buf_r[e] = r
+            buf_z[e] = z
+            if f < best:
+                best = f
+                best_s = buf_s[e]
+                best_t = t
         fa = buf_f[q]
         fb = buf_f[q + 1]
-        if fa == _PRUNED or fb == _PRUNED or (fa == _INF and fb == _INF):
+        if fa == _INF and fb == _INF:
             continue
         if buf_r[q] == _INF and buf_r[q + 1] == _INF:
             continue
@@ -1355,6 +1450,8 @@ def _ira_one(
         _ira_push(stack, row, buf_s[q], fa, buf_t[q], buf_r[q], buf_z[q], buf_s[q + 1], fb, buf_t[q + 1],
                   buf_r[q + 1], buf_z[q + 1], lb, split)
         n_st += 1
+    if best == _INF:
+        return
     n_eval = 0
     while n_st > 0 and n_eval < 20000:
         n_st -= 1
@@ -1472,7 +1569,7 @@ def _ira_batch(
     C_bn,
     half_window,
     max_range,
-    bmax,
+    hmax_blocks,
     bslope,
     h_min,
     h_max,
@@ -1485,8 +1582,8 @@ def _ira_batch(
     lon_out,
     h_out,
 ):
-    """IRA queries k = 0..n-1 (see ira_return); h_min, h_max, g_glob: the DEM's finite height range and
-    largest block slope; work (6, >= n_max) and stack (>= 64, 12): scratch space, contents irrelevant."""
+    """IRA queries k = 0..n-1 (see ira_return); hmax_blocks, bslope, h_min, h_max, g_glob: see _ira_tables;
+    work (8, >= n_max) and stack (>= 64, 12): scratch space, contents irrelevant."""
     sin_w = np.sin(half_window)
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
     buf_s = work[0, :n_max]
@@ -1496,6 +1593,8 @@ def _ira_batch(
     buf_z = work[4, :n_max]
     out = work[5, :5]
     qc = work[5, 8:24]
+    buf_h = work[6, :n_max]
+    buf_q = work[7, :n_max]
     for k in range(lat.shape[0]):
         if h[k] != h[k] or lat[k] != lat[k] or lon[k] != lon[k]:
             valid[k] = False
@@ -1523,11 +1622,13 @@ def _ira_batch(
             buf_r,
             buf_z,
             stack,
-            bmax,
+            hmax_blocks,
             bslope,
             g_glob,
             out,
             qc,
+            buf_h,
+            buf_q,
         )
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
@@ -1599,18 +1700,18 @@ def _block_slopes(dem, block: int = BLOCK_POSTS) -> np.ndarray:
 
 
 def _ira_tables(dem):
-    """(block max heights, block slopes, finite h_min, finite h_max, largest block slope, cell_m) for the
-    IRA search (IRA_BLOCK_POSTS-post blocks), cached on the Dem (keyed by the heights array, read-only once
-    queries have run)."""
+    """(max heights of IRA_HEIGHT_BLOCK_CELLS-cell blocks, slopes of IRA_BLOCK_POSTS-post blocks, finite
+    h_min, finite h_max, largest block slope, cell_m) for the IRA search, cached on the Dem (keyed by the
+    heights array, read-only once queries have run)."""
     cached = getattr(dem, "_query_ira_tables", None)
     if cached is not None and cached[0] is dem.heights_m:
         return cached[1]
-    bmax, bmin = kernels.block_bounds(dem.heights_m, IRA_BLOCK_POSTS)
+    hmax_blocks, hmin_blocks = kernels.block_bounds(dem.heights_m, IRA_HEIGHT_BLOCK_CELLS)
     bslope = _block_slopes(dem, IRA_BLOCK_POSTS)
-    h_min = _finite_range(bmin)[0]
-    h_max = _finite_range(bmax)[1]
+    h_min = _finite_range(hmin_blocks)[0]
+    h_max = _finite_range(hmax_blocks)[1]
     g_glob = _finite_range(bslope)[1]
-    tables = (bmax, bslope, float(h_min), float(h_max), float(g_glob), _cell_m(dem))
+    tables = (hmax_blocks, bslope, float(h_min), float(h_max), float(g_glob), _cell_m(dem))
     dem._query_ira_tables = (dem.heights_m, tables)
     return tables
 
@@ -1646,7 +1747,7 @@ def _ira_workspace(n_max: int):
     """Scratch arrays of the IRA search (reused between calls: _ira_batch overwrites what it reads)."""
     work = _IRA_WORK.get("work")
     if work is None or work.shape[1] < n_max:
-        work = np.empty((6, max(n_max, 64)))
+        work = np.empty((8, max(n_max, 64)))
         _IRA_WORK["work"] = work
         _IRA_WORK["stack"] = np.empty((4096, 12))
     return work, _IRA_WORK["stack"]
@@ -1748,7 +1849,7 @@ def ira_return(
     C = _stack("C_bn", C_bn, n, (3, 3))
     valid, rng, la, lo, hh = _outputs(n)
     heights, lat0, lon0, dlat, dlon = dem.grid
-    bmax, bslope, h_min, h_max, g_glob, cell_m = _ira_tables(dem)
+    hmax_blocks, bslope, h_min, h_max, g_glob, cell_m = _ira_tables(dem)
     work, stack = _ira_workspace(2 * int(np.ceil(float(max_range_m) / cell_m)) + 9)
     _ira_batch(
         heights,
@@ -1764,7 +1865,7 @@ def ira_return(
         C,
         float(half_window_rad),
         float(max_range_m),
-        bmax,
+        hmax_blocks,
         bslope,
         h_min,
         h_max,

@@ -687,3 +687,42 @@ def test_ira_finds_a_ridge_crease_between_coarse_samples():
     ref = bf_ira(dem, lat, lon, h, v, C, HALF_WINDOW, 12000.0, s_half_m=got.range_m[0] + 10.0, coarse_m=2.0)
     assert got.range_m[0] == pytest.approx(ref[0], abs=0.05)
     assert got.h_m[0] == pytest.approx(360.0, abs=0.5)
+
+
+@pytest.mark.parametrize("block", [1, 2, 3, 8])
+def test_ira_box_max_bounds_the_surface_in_the_box(block):
+    """The IRA's per-interval height bound reads block maxima over a box of post coordinates: it must be at
+    least the bilinear surface's highest point in the box (dense numpy sampling, voids skipped) and at most
+    the highest post of the blocks that the box meets; -inf for a box off the grid."""
+    from terrain import kernels
+
+    rng = np.random.default_rng(block)
+    heights = rng.normal(300.0, 40.0, (37, 45))
+    heights[10:13, 20:22] = np.nan  # a void
+    n_lat, n_lon = heights.shape
+    tab = kernels.block_bounds(heights, block)[0]
+    for _ in range(300):
+        fi_lo, fj_lo = rng.uniform(-4.0, n_lat + 2.0), rng.uniform(-4.0, n_lon + 2.0)
+        fi_hi, fj_hi = fi_lo + rng.uniform(0.0, 6.0), fj_lo + rng.uniform(0.0, 6.0)
+        got = queries._ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi)
+        i_lo, i_hi = max(fi_lo, 0.0), min(fi_hi, n_lat - 1.0)
+        j_lo, j_hi = max(fj_lo, 0.0), min(fj_hi, n_lon - 1.0)
+        if i_lo > i_hi or j_lo > j_hi:
+            assert got == -np.inf
+            continue
+        fi, fj = np.meshgrid(np.linspace(i_lo, i_hi, 31), np.linspace(j_lo, j_hi, 31), indexing="ij")
+        i = np.clip(np.floor(fi).astype(int), 0, n_lat - 2)
+        j = np.clip(np.floor(fj).astype(int), 0, n_lon - 2)
+        u, v = fi - i, fj - j
+        surf = ((1 - u) * (1 - v) * heights[i, j] + (1 - u) * v * heights[i, j + 1]
+                + u * (1 - v) * heights[i + 1, j] + u * v * heights[i + 1, j + 1])
+        if np.isfinite(surf).any():
+            assert got >= np.nanmax(surf) - 1e-9
+        # the posts of every block that a cell meeting the box belongs to
+        ci = np.arange(n_lat - 1)
+        cj = np.arange(n_lon - 1)
+        bi = np.unique(ci[(ci <= fi_hi) & (ci + 1 >= fi_lo)] // block)
+        bj = np.unique(cj[(cj <= fj_hi) & (cj + 1 >= fj_lo)] // block)
+        posts = heights[bi.min() * block:min(bi.max() * block + block, n_lat - 1) + 1,
+                        bj.min() * block:min(bj.max() * block + block, n_lon - 1) + 1]
+        assert got <= np.nanmax(posts)
