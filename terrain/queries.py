@@ -961,6 +961,19 @@ def _ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _ira_cell_slope_twist(heights, ci, cj, qc):
+    """(bound of the squared gradient (m/m)^2, |twist| h00 - h01 - h10 + h11 (m)) of the bilinear cell
+    (ci, cj); qc6, qc7: posts per metre north / east. NaN next to a void."""
+    h00 = heights[ci, cj]
+    h01 = heights[ci, cj + 1]
+    h10 = heights[ci + 1, cj]
+    h11 = heights[ci + 1, cj + 1]
+    gu = max(abs(h10 - h00), abs(h11 - h01)) * qc[6]
+    gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
+    return gu * gu + gv * gv, abs(h00 - h01 - h10 + h11)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb, rb, zb):
     """(lower bound of the in-window range f over the curve piece s in [a, b], split point) from the end
     samples (f, t, r, z at a and b; see _ira_eval); qc: _ira_one's per-query constants. Intervals with
@@ -1018,28 +1031,16 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
     jump_e = 0.0
     if one_cell:
         # smooth piece inside one bilinear cell: the cell's own slope and twist bound r' and r''
-        h00 = heights[cia, cja]
-        h01 = heights[cia, cja + 1]
-        h10 = heights[cia + 1, cja]
-        h11 = heights[cia + 1, cja + 1]
-        gu = max(abs(h10 - h00), abs(h11 - h01)) * qc[6]
-        gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
-        g = np.sqrt(gu * gu + gv * gv)
-        h_ne = abs(h00 - h01 - h10 + h11) * (qc[6] * qc[7])
+        g2, tw = _ira_cell_slope_twist(heights, cia, cja, qc)
+        g = np.sqrt(g2)
+        h_ne = tw * (qc[6] * qc[7])
     elif one_line:
         # the two cells' slopes and twists, and the ridge jump of the slope across their shared grid line
         # (posts l - 1..l + 1 exist: 1 <= l <= n - 2 for the line l between two cells)
         g = 0.0
         for ci in range(min(cia, cib), max(cia, cib) + 1):
             for cj in range(min(cja, cjb), max(cja, cjb) + 1):
-                h00 = heights[ci, cj]
-                h01 = heights[ci, cj + 1]
-                h10 = heights[ci + 1, cj]
-                h11 = heights[ci + 1, cj + 1]
-                gu = max(abs(h10 - h00), abs(h11 - h01)) * qc[6]
-                gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
-                gc = gu * gu + gv * gv
-                tw = abs(h00 - h01 - h10 + h11)
+                gc, tw = _ira_cell_slope_twist(heights, ci, cj, qc)
                 if not (gc <= g):
                     g = gc
                 if not (tw <= h_ne):
@@ -1088,14 +1089,7 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
             g = 0.0
             for ci in range(i_a, i_b):
                 for cj in range(j_a, j_b):
-                    h00 = heights[ci, cj]
-                    h01 = heights[ci, cj + 1]
-                    h10 = heights[ci + 1, cj]
-                    h11 = heights[ci + 1, cj + 1]
-                    gu = max(abs(h10 - h00), abs(h11 - h01)) * qc[6]
-                    gv = max(abs(h01 - h00), abs(h11 - h10)) * qc[7]
-                    gc = gu * gu + gv * gv
-                    tw = abs(h00 - h01 - h10 + h11)
+                    gc, tw = _ira_cell_slope_twist(heights, ci, cj, qc)
                     if tw > h_ne:
                         h_ne = tw
                     if gc > g:
