@@ -295,6 +295,21 @@ def test_ira_noise_rate_chunking():
     np.testing.assert_array_equal(np.concatenate(parts), one.range_m[:500])
 
 
+def test_ira_chunks_on_rough_terrain_search_as_one_call():
+    # each search starts from the previous return (IraState carries it across chunks): chunked sampling
+    # gives the one-call bits, and the carried point is the last return
+    dem, truth = rough_dem(2), _crosswind_truth()
+    cfg = IraConfig()
+    one, end = sample_ira(truth, dem, np.random.default_rng(3), cfg)
+    rng, state, parts = np.random.default_rng(3), None, []
+    for c in chunks_of(truth, [3, 1, 60, 1, 77]):
+        f, state = sample_ira(c, dem, rng, cfg, state)
+        parts.append(f)
+    for name in ("t_s", "range_m", "look_angle_rad", "valid"):
+        np.testing.assert_array_equal(np.concatenate([getattr(f, name) for f in parts]), getattr(one, name))
+    assert state == end and np.isfinite(end.last_return_rad).all()
+
+
 @pytest.mark.parametrize("field, value", [("baseline_left_m", 0.0), ("baseline_right_m", -0.2),
                                           ("half_window_deg", 0.0), ("half_window_deg", 90.0),
                                           ("range_noise_m", -1.0), ("look_angle_noise_deg", -0.1),

@@ -662,6 +662,64 @@ def test_ira_batch_equals_single_queries_bit_for_bit(world30):
         np.testing.assert_array_equal(getattr(rev, f)[::-1], getattr(whole, f), err_msg=f)
 
 
+def _world30_track(dem, n, seed):
+    """n antenna states 2 m apart (50 Hz at 100 m/s) along one straight track of a _world30_states state."""
+    lat, lon, h, v, C = _world30_states(dem, 1, seed)
+    t_s = np.arange(n) * 0.02
+    lat_k, lon_k = dem.offset_to_latlon(lat[0], lon[0], v[0, 0] * t_s, v[0, 1] * t_s)
+    return lat_k, lon_k, h[0] - v[0, 2] * t_s, np.repeat(v, n, axis=0), np.repeat(C, n, axis=0)
+
+
+def test_ira_warm_start_agrees_with_independent_searches(world30):
+    """A warm start (first hint: nothing, the true return, or a point 1.1 km away; then each previous return)
+    changes where the search starts, not what it finds: the same validity and ranges within the 5 mm
+    tolerance. A chain cut in two calls, the second started from the first's last return, is the same
+    chain bit for bit."""
+    lat, lon, h, v, C = _world30_track(world30, 60, seed=13)
+    hw = np.radians(45.0)
+    alone = queries.ira_return(world30, lat, lon, h, v, C, hw, 10000.0)
+    assert alone.valid.all()
+    far = world30.offset_to_latlon(lat[0], lon[0], 900.0, -700.0)
+    for warm in ((np.nan, np.nan), (alone.lat_rad[0], alone.lon_rad[0]), far):
+        got = queries.ira_return(world30, lat, lon, h, v, C, hw, 10000.0, warm_start=warm)
+        np.testing.assert_array_equal(got.valid, alone.valid)
+        np.testing.assert_allclose(got.range_m, alone.range_m, atol=5e-3, rtol=0.0)
+    whole = queries.ira_return(world30, lat, lon, h, v, C, hw, 10000.0, warm_start=far)
+    a, b = slice(0, 23), slice(23, 60)
+    first = queries.ira_return(world30, lat[a], lon[a], h[a], v[a], C[a], hw, 10000.0, warm_start=far)
+    rest = queries.ira_return(world30, lat[b], lon[b], h[b], v[b], C[b], hw, 10000.0,
+                              warm_start=(first.lat_rad[-1], first.lon_rad[-1]))
+    for f in ("valid", "range_m", "lat_rad", "lon_rad", "h_m"):
+        joined = np.concatenate([getattr(first, f), getattr(rest, f)])
+        np.testing.assert_array_equal(joined, getattr(whole, f), err_msg=f)
+
+
+def test_ira_warm_start_decides_between_two_equally_close_points():
+    """Two identical north-south ridges 10 posts either side of an antenna flying north: their crests are
+    equally close (an exactly symmetric grid: power-of-two post spacing). The search keeps the point it
+    starts from unless another is closer by more than its tolerance, so the hinted crest is returned."""
+    n = 120
+    d = 2.0 ** -20  # rad: exact multiples, so the two crests are mirror images in floating point
+    heights = np.full((n, n), 300.0)
+    heights[:, 50] = heights[:, 70] = 360.0
+    dem = Dem(heights, 0.575 - 60 * d, -1.72 - 60 * d, d, d, name="twin ridges")
+    lat, lon, h = dem.lat0_rad + 60.5 * d, dem.lon0_rad + 60 * d, 1300.0
+    v, C = np.array([100.0, 0.0, 0.0]), geodesy.euler_to_C_bn(0.0, 0.0, 0.0)
+    for col in (50, 70):
+        got = queries.ira_return(dem, lat, lon, h, v, C, HALF_WINDOW, 12000.0,
+                                 warm_start=(lat, dem.lon0_rad + col * d))
+        assert got.valid[0] and got.h_m[0] == pytest.approx(360.0, abs=1e-3)
+        assert (got.lon_rad[0] - dem.lon0_rad) / d == pytest.approx(col, abs=1e-3)
+
+
+@pytest.mark.parametrize("warm_start", ["north", (0.5,), (0.5, -1.7, 0.0), ("a", "b")])
+def test_ira_warm_start_rejects_anything_but_a_point(warm_start):
+    dem = Dem(np.full((50, 50), 100.0), 0.575, -1.72, 1e-5, 1e-5)
+    with pytest.raises(ValueError, match="warm_start"):
+        queries.ira_return(dem, 0.5752, -1.7198, 1000.0, np.array([100.0, 0, 0]), np.eye(3), HALF_WINDOW,
+                           warm_start=warm_start)
+
+
 def test_ira_finds_a_ridge_crease_between_coarse_samples():
     """The closest point sits on a one-row ridge crease that the coarse samples straddle on its flanks, with a
     decoy plateau elsewhere closer than the flank samples. Only the kink term of the interval bound (a ridge

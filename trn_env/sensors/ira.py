@@ -17,12 +17,16 @@ Either way theta is the angle between the line of sight and the body x-z plane, 
 referenced while the zero-Doppler line is velocity referenced (the point of seed 000).
 
 Noise: sigma_R = 3.5 m, sigma_theta = 0.1 deg (seed 002 Table 1); rate 50 Hz (seed 000 Table 2).
+
+Search: each sample's closest-point search starts from the previous sample's return (carried in IraState
+across chunks), which cuts the search by about a twentieth on the default flight; the returns agree with
+independent searches to the search's 5 mm range tolerance.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -33,7 +37,6 @@ from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
-    TimeGridState,
     antenna_positions,
     check_nonneg,
     check_positive,
@@ -88,7 +91,29 @@ class IraConfig(MappingConfig):
         return replace(cls(range_noise_m=0.0, look_angle_noise_deg=0.0), **overrides)
 
 
-IraState = TimeGridState   # white errors only: the sample grid is all it carries
+class IraState(NamedTuple):
+    """Carried between chunks: the sample grid index, and the last valid return (lat, lon rad; NaN before the
+    first), where the next sample's search starts (terrain.queries.ira_return's warm_start). The errors are
+    white; carrying the return makes a flight sampled in chunks search exactly as in one call."""
+
+    last_k: int | None
+    last_return_rad: tuple[float, float] = (np.nan, np.nan)
+
+    @classmethod
+    def initial(cls, config: IraConfig, rng: np.random.Generator) -> IraState:
+        return cls(None)
+
+
+def _last_valid_return(ret, previous: tuple[float, float]) -> tuple[float, float]:
+    """(lat, lon) of the last valid point of a TerrainReturn, else `previous`."""
+    valid = ret.valid
+    k = valid.shape[0] - 1
+    if k < 0 or not valid[k]:
+        hits = np.flatnonzero(valid)
+        if hits.shape[0] == 0:
+            return previous
+        k = int(hits[-1])
+    return float(ret.lat_rad[k]), float(ret.lon_rad[k])
 
 
 def look_angle_from_ranges(r_m: np.ndarray, r_left_m: np.ndarray, r_right_m: np.ndarray, l1_m: float,
@@ -167,16 +192,18 @@ def sample_ira(truth: TruthChunk, terrain, rng: np.random.Generator, config: Ira
     w = rng.standard_normal((idx.shape[0], 2))
     if idx.shape[0] == 0:
         return trusted_frame(IraFrame, t_s=EMPTY_F, range_m=EMPTY_F, look_angle_rad=EMPTY_F,
-                             valid=EMPTY_B), IraState(last_k)
+                             valid=EMPTY_B), IraState(last_k, state.last_return_rad)
     t, lat, lon, h, C_bn, v_ned = _gather(idx, truth.t_s, truth.lat_rad, truth.lon_rad, truth.h_msl_m,
                                           truth.C_bn, truth.v_ned_mps)
     if config._has_lever_arm:
         lat, lon, h = antenna_positions(lat, lon, h, C_bn, config.lever_arm_b_m)
-    ret = queries.ira_return(terrain, lat, lon, h, v_ned, C_bn, config._half_window_rad, config.max_range_m)
+    ret = queries.ira_return(terrain, lat, lon, h, v_ned, C_bn, config._half_window_rad, config.max_range_m,
+                             warm_start=state.last_return_rad)
     r, theta, valid = _ira_kernel(lat, lon, h, ret.valid, ret.lat_rad, ret.lon_rad, ret.h_m, C_bn,
                                   config.baseline_left_m, config.baseline_right_m, config._method_index,
                                   config.max_range_m, w, config.range_noise_m, config._look_angle_noise_rad)
-    return trusted_frame(IraFrame, t_s=t, range_m=r, look_angle_rad=theta, valid=valid), IraState(last_k)
+    state = IraState(last_k, _last_valid_return(ret, state.last_return_rad))
+    return trusted_frame(IraFrame, t_s=t, range_m=r, look_angle_rad=theta, valid=valid), state
 
 
 __all__ = ["IraConfig", "IraState", "look_angle_from_ranges", "sample_ira"]
