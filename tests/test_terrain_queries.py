@@ -712,7 +712,7 @@ def test_ira_warm_start_decides_between_two_equally_close_points():
         assert (got.lon_rad[0] - dem.lon0_rad) / d == pytest.approx(col, abs=1e-3)
 
 
-@pytest.mark.parametrize("warm_start", ["north", (0.5,), (0.5, -1.7, 0.0), ("a", "b")])
+@pytest.mark.parametrize("warm_start", ["north", (0.5,), (0.5, -1.7, 0.0), ("a", "b"), (np.inf, -1.7)])
 def test_ira_warm_start_rejects_anything_but_a_point(warm_start):
     dem = Dem(np.full((50, 50), 100.0), 0.575, -1.72, 1e-5, 1e-5)
     with pytest.raises(ValueError, match="warm_start"):
