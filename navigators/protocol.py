@@ -17,9 +17,18 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from navigators.frames import SensorFrames
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-from .frames import SensorFrames
+# Estimate.extra keys that every terrain-aided navigator fills after each terrain measurement update, so the
+# integrity monitors and the metrics read them the same way whatever the navigator (absent: no update yet).
+EXTRA_INNOVATION = "innovation"            # np.ndarray (m, rad): measurement minus prediction, last update
+EXTRA_INNOVATION_COV = "innovation_cov"    # np.ndarray: its covariance S (m x m)
+EXTRA_NIS = "nis"                          # float: innovation' S^-1 innovation (chi-square with nis_dof dof)
+EXTRA_NIS_DOF = "nis_dof"                  # int: degrees of freedom of nis
+EXTRA_LOG_LIKELIHOOD = "log_likelihood"    # float: log p(measurement | past), natural log
+EXTRA_ESS = "ess"                          # float: particle filters' effective sample size before resampling
+EXTRA_MEASUREMENT_TIME = "measurement_t_s"  # float: time of the update these keys describe
 
 
 @dataclass

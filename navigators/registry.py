@@ -1,19 +1,27 @@
 """Navigator registry: `create(name, **settings)` and `available()`.
 
-"ins"          strapdown INS + barometer, no terrain aiding (navigators.ins_trn_ekf.InsTrnNavigator)
+"ins"          strapdown INS + barometer, no terrain aiding (navigators.filters.InsTrnNavigator)
 "ins_tercom"   INS + batch TERCOM (IRA by default, aiding="radar_altimeter" for eq 1) + 13-state EKF;
                needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
+
+Every navigator validates its settings in its constructor and raises `ValueError` naming the setting.
+A navigator that draws random numbers (particle filters) is registered with `takes_rng=True` and gets the
+scenario's `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its
+run bit for bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-from .ins_trn_ekf import InsTrnNavigator
+import numpy as np
 
-_FACTORIES: dict[str, Callable[..., object]] = {
-    "ins": lambda **kw: InsTrnNavigator(aiding=None, **kw),
-    "ins_tercom": lambda **kw: InsTrnNavigator(**{"aiding": "ira", **kw}),
+from navigators.filters.ins_trn_ekf import InsTrnNavigator
+
+# name -> (factory, takes_rng)
+_FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
+    "ins": (lambda **kw: InsTrnNavigator(aiding=None, **kw), False),
+    "ins_tercom": (lambda **kw: InsTrnNavigator(**{"aiding": "ira", **kw}), False),
 }
 
 
@@ -22,16 +30,20 @@ def available() -> list[str]:
     return sorted(_FACTORIES)
 
 
-def create(name: str, **settings):
-    """A new navigator by name with its settings (keyword arguments of its class)."""
+def create(name: str, rng: np.random.Generator | None = None, **settings):
+    """A new navigator by name with its settings (keyword arguments of its class); `rng` reaches only the
+    navigators registered with takes_rng=True."""
     if name not in _FACTORIES:
         raise ValueError(f"unknown navigator {name!r}; available: {available()}")
+    factory, takes_rng = _FACTORIES[name]
+    if takes_rng:
+        settings["rng"] = rng
     try:
-        return _FACTORIES[name](**settings)
+        return factory(**settings)
     except TypeError as exc:
         raise ValueError(f"navigator {name!r}: bad settings {sorted(settings)}: {exc}") from exc
 
 
-def register(name: str, factory: Callable[..., object]) -> None:
-    """Add a navigator factory (later issues' navigators register here)."""
-    _FACTORIES[name] = factory
+def register(name: str, factory: Callable[..., object], takes_rng: bool = False) -> None:
+    """Add a navigator factory (a class or a callable taking the settings as keyword arguments)."""
+    _FACTORIES[name] = (factory, takes_rng)

@@ -2,7 +2,7 @@
 
     python scripts/fly_route.py [--wind-from-deg 270] [--wind-mps 15] [--turbulence light] [--seed 1]
 
-A thin example of the flight core (trn_env.flight), wind (trn_env.wind) and guidance (trn_env.guidance);
+A thin example of the flight core (trn_env.flight), wind and guidance (trn_env.guidance);
 the closed loop with sensors and navigators is `trn-env fly`.
 """
 
@@ -15,10 +15,10 @@ import time
 import numpy as np
 
 from terrain.geodesy import ned_offset_to_latlon
-from trn_env.flight import Flight, InitialCondition
-from trn_env.guidance import Guidance, Route, Waypoint, position_from_truth
-from trn_env.truth import TruthChunk
-from trn_env.wind import Turbulence, WindConfig
+from trn_env.flight.core import Flight, InitialCondition
+from trn_env.flight.truth import TruthChunk
+from trn_env.flight.wind import Turbulence, WindConfig
+from trn_env.guidance.route_following import Guidance, Route, Waypoint, position_from_truth
 
 
 def main() -> None:

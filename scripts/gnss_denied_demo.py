@@ -2,7 +2,7 @@
 
     python scripts/gnss_denied_demo.py --minutes 20 --grade tactical --out out/gnss_denied
 
-The King Air (trn_env.flight) flies a square circuit over the jacksboro DEM; GNSS is lost at t = 0 (the
+The King Air (trn_env.flight.core) flies a square circuit over the jacksboro DEM; GNSS is lost at t = 0 (the
 navigators start from a GNSS-quality estimate, 3 m / 0.05 m/s, and never see GNSS again). The same sensor
 frames (IMU of the chosen grade, baro, IRA) feed the "ins" and "ins_tercom" navigators; the horizontal
 errors against the truth go into one plot and a summary.json.
@@ -21,15 +21,15 @@ import numpy as np
 
 import terrain
 from navigators import registry
+from navigators.filters.ins_trn_ekf import initial_covariance
 from navigators.frames import SensorFrames
-from navigators.ins_trn_ekf import initial_covariance
 from navigators.protocol import Estimate
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from trn_env.flight import AutopilotTargets, Flight, InitialCondition, LateralMode, VerticalMode
+from trn_env.flight.core import AutopilotTargets, Flight, InitialCondition, LateralMode, VerticalMode
+from trn_env.flight.truth import TruthChunk
+from trn_env.flight.wind import WindConfig
 from trn_env.sensors.imu import ImuConfig
 from trn_env.sensors.suite import SensorSuite
-from trn_env.truth import TruthChunk
-from trn_env.wind import WindConfig
 
 
 def slice_frames(fr: SensorFrames, t0: float, t1: float) -> SensorFrames:

@@ -26,16 +26,23 @@ import numpy as np
 
 import terrain
 from navigators import registry
+from navigators.filters.ins_trn_ekf import initial_covariance
 from navigators.frames import SensorFrames
-from navigators.ins_trn_ekf import initial_covariance
-from navigators.ira_geometry import closest_point_ned, effective_look_angle
+from navigators.measurements.ira_closest_point import closest_point_ned, effective_look_angle
 from navigators.protocol import Estimate
 from terrain.dem import Dem
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from trn_env.flight import AutopilotTargets, Flight, InitialCondition, LateralMode, TrimError, VerticalMode
+from trn_env.flight.core import (
+    AutopilotTargets,
+    Flight,
+    InitialCondition,
+    LateralMode,
+    TrimError,
+    VerticalMode,
+)
+from trn_env.flight.truth import TruthChunk
+from trn_env.flight.wind import WindConfig
 from trn_env.sensors.suite import SensorSuite
-from trn_env.truth import TruthChunk
-from trn_env.wind import WindConfig
 
 CASES = {1: 0.0, 2: 5.0, 3: 10.0, 4: 15.0}  # Table 3: all data, dp > 5, 10, 15 m
 

@@ -7,7 +7,7 @@ import math
 import jsbsim
 import numpy as np
 
-from trn_env.aircraft_data import new_fdm
+from trn_env.flight.aircraft_data import new_fdm
 
 FT_PER_M = 1.0 / 0.3048
 KT_PER_MPS = 1.0 / 0.514444

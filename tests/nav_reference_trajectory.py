@@ -1,5 +1,5 @@
 """An exact manoeuvring reference trajectory and its perfect IMU data, computed in ECEF (independent of the
-NED mechanisation in navigators.ins): f = r'' + 2 W x r' + W x (W x r) - G_J2(r), w_ib = w_eb + C_eb W."""
+NED mechanisation, navigators.inertial): f = r'' + 2 W x r' + W x (W x r) - G_J2(r), w_ib = w_eb + C_eb W."""
 
 import numpy as np
 

@@ -36,7 +36,7 @@ from jsbsim_helpers import (
     start_in_flight,
 )
 
-from trn_env.aircraft_data import available_aircraft, new_fdm
+from trn_env.flight.aircraft_data import available_aircraft, new_fdm
 
 ELEVATOR_MIN_RAD = -0.349  # 20 deg trailing edge up
 ELEVATOR_MAX_RAD = 0.244  # 14 deg trailing edge down

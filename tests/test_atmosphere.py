@@ -11,11 +11,11 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from trn_env import components
-from trn_env.aircraft_data import new_fdm
-from trn_env.atmosphere import Atmosphere, static_p_T
-from trn_env.flight import Flight, InitialCondition
-from trn_env.scenario import ScenarioError, read_scenario_file, validate
+import trn_env.scenario.build as components
+from trn_env.flight.aircraft_data import new_fdm
+from trn_env.flight.atmosphere import Atmosphere, static_p_T
+from trn_env.flight.core import Flight, InitialCondition
+from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
 from trn_env.sensors.baro import BaroConfig, sample_baro
 
 LAT0, LON0 = math.radians(33.2), math.radians(-98.2)

@@ -14,10 +14,11 @@ import pandas as pd
 import pytest
 from _ecef import ned_between as ned_vector_between
 
-from trn_env import cli, output
-from trn_env.nav_stage import fork_available
-from trn_env.scenario import builtin_names
-from trn_env.sim import ClosedLoop
+from trn_env import cli
+from trn_env.output import run_folder as output
+from trn_env.scenario.loading import builtin_names
+from trn_env.sim.closed_loop import ClosedLoop
+from trn_env.sim.nav_stage import fork_available
 
 SCEN = Path(__file__).parent / "scenarios"
 DESIGN_FIELDS = ("scenario", "seed", "navigator", "sim_time_s", "wall_time_s", "realtime_factor",
@@ -128,7 +129,7 @@ def test_fly_without_the_pipeline_gives_the_same_summary(flown, tmp_path):
 
 def test_interrupted_while_writing_leaves_no_summary(tmp_path, monkeypatch):
     """Ctrl-C after log.npz and timeline.csv are written (inside the plots) leaves no run directory."""
-    from trn_env import plots
+    from trn_env.output import plots
 
     def boom(*a, **k):
         raise KeyboardInterrupt
@@ -168,7 +169,7 @@ def test_validate_command(capsys, tmp_path):
 
 
 def test_bench_closed_loop_and_env_figures():
-    from trn_env import bench
+    from trn_env.bench import runner as bench
     cl = bench.closed_loop_benchmark(sim_s=3.0)
     assert cl["closed_loop_steps_per_s"] > 0 and cl["closed_loop_jsbsim_reference_steps_per_s"] > 0
     segments = cl["closed_loop_ratio_by_segment"]
@@ -185,7 +186,7 @@ def test_bench_closed_loop_and_env_figures():
 def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsys):
     import types
 
-    from trn_env import bench
+    from trn_env.bench import runner as bench
     good = types.ModuleType("fake_good")
     good.benchmark = lambda quick=False: {"jsbsim_steps_per_s": 1.0, "quick_seen": quick}
     bad = types.ModuleType("fake_bad")
@@ -194,14 +195,14 @@ def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsy
         raise RuntimeError("broken component")
 
     bad.benchmark = explode
-    monkeypatch.setitem(sys.modules, "trn_env.bench_flight", good)
+    monkeypatch.setitem(sys.modules, "trn_env.bench.flight", good)
     monkeypatch.setitem(sys.modules, "terrain.bench", bad)
-    monkeypatch.setitem(sys.modules, "trn_env.sensors.bench", types.ModuleType("fake_none"))
+    monkeypatch.setitem(sys.modules, "trn_env.bench.sensors", types.ModuleType("fake_none"))
     monkeypatch.setattr(bench, "closed_loop_benchmark", lambda quick: {"closed_loop_ratio": 0.25})
     monkeypatch.setattr(bench, "env_benchmark", lambda quick: {"env_sim_seconds_per_wall_second": 9.0})
     assert cli.main(["bench", "--quick"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["jsbsim_steps_per_s"] == 1.0 and out["quick_seen"] is True
     assert "broken component" in out["terrain.bench.error"]
-    assert out["trn_env.sensors.bench.error"] == "no benchmark() function"
+    assert out["trn_env.bench.sensors.error"] == "no benchmark() function"
     assert out["closed_loop_ratio"] == 0.25 and out["env_sim_seconds_per_wall_second"] == 9.0

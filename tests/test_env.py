@@ -12,7 +12,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 
 import trn_env  # noqa: F401 - registers the env id
-from trn_env.env import TerrainNavEnv
+from trn_env.env.terrain_nav import TerrainNavEnv
 
 # cheap episodes: 1 s decisions, 12 s of flight, INS-only navigator
 SMALL = dict(decision_interval_s=1.0, max_episode_s=12.0, navigator="ins")
@@ -135,8 +135,8 @@ def test_collision_penalty_and_termination():
     """Level at 800 m MSL toward a 996 m summit 2.8 km north: terminated with the collision penalty."""
     import copy
 
-    from trn_env.flight import AutopilotTargets, LateralMode, VerticalMode
-    from trn_env.scenario import load_scenario, validate
+    from trn_env.flight.core import AutopilotTargets, LateralMode, VerticalMode
+    from trn_env.scenario.loading import load_scenario, validate
 
     sc = load_scenario("default", navigator="ins")
     data = copy.deepcopy(sc.data)

@@ -17,9 +17,9 @@ from terrain.geodesy import (
     meridian_radius_m,
     prime_vertical_radius_m,
 )
-from trn_env.aircraft_data import new_fdm
-from trn_env.bench_flight import benchmark
-from trn_env.flight import (
+from trn_env.bench.flight import benchmark
+from trn_env.flight.aircraft_data import new_fdm
+from trn_env.flight.core import (
     AutopilotTargets,
     Flight,
     FlightDiverged,
@@ -29,8 +29,8 @@ from trn_env.flight import (
     VerticalMode,
     _std_atmosphere,
 )
-from trn_env.truth import TRUTH_FIELDS
-from trn_env.wind import Turbulence, WindConfig
+from trn_env.flight.truth import TRUTH_FIELDS
+from trn_env.flight.wind import Turbulence, WindConfig
 
 LAT0, LON0 = math.radians(33.2), math.radians(-98.2)
 TAS_MPS = 75.0
@@ -291,7 +291,7 @@ def test_chunks_are_independent_block_views_equal_to_jsbsim_each_step():
     concatenate, dataclasses.replace)."""
     import dataclasses
 
-    from trn_env.truth import TruthChunk
+    from trn_env.flight.truth import TruthChunk
     f = Flight(_ic())
     rows = []
     chunks = []
@@ -324,7 +324,7 @@ def test_chunks_are_independent_block_views_equal_to_jsbsim_each_step():
 def test_gusts_split_the_recording_without_losing_rows():
     """A gust starting mid-chunk splits the recording loop into segments written at offsets of one buffer:
     the rows stay contiguous in time and the gust shows in the recorded total wind from its start."""
-    from trn_env.wind import CosineGust
+    from trn_env.flight.wind import CosineGust
     wind = WindConfig(gusts=[CosineGust(start_time_s=0.155, magnitude_mps=8.0, startup_s=0.2, steady_s=1.0,
                                         end_s=0.2, direction=(0.0, 1.0, 0.0), frame="ned")])
     f = Flight(_ic(), wind=wind)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from terrain.geodesy import ecef_to_lla, lla_to_ecef, ned_offset_to_latlon
-from trn_env.flight import Flight, InitialCondition, LateralMode, VerticalMode
-from trn_env.guidance import Guidance, PositionEstimate, Route, Waypoint, position_from_truth
-from trn_env.wind import WindConfig
+from trn_env.flight.core import Flight, InitialCondition, LateralMode, VerticalMode
+from trn_env.flight.wind import WindConfig
+from trn_env.guidance.route_following import Guidance, PositionEstimate, Route, Waypoint, position_from_truth
 
 LAT0, LON0 = math.radians(33.2), math.radians(-98.2)
 TAS_MPS = 75.0

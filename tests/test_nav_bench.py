@@ -1,8 +1,8 @@
-"""navigators.bench returns finite throughput figures (sizes reduced)."""
+"""trn_env.bench.navigators returns finite throughput figures (sizes reduced)."""
 
 import numpy as np
 
-from navigators.bench import benchmark
+from trn_env.bench.navigators import benchmark
 
 
 def test_benchmark_figures():

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import terrain
-from navigators import _ekf_kernels as kern
-from navigators.ins import quat_from_C_bn, quat_to_dcm
-from navigators.ira_geometry import closest_point_ned
-from navigators.tercom import _block_void_free, mad_surface, mad_surface_reference
+from navigators.filters import _ekf_kernels as kern
+from navigators.inertial.strapdown import quat_from_C_bn, quat_to_dcm
+from navigators.measurements.ira_closest_point import closest_point_ned
+from navigators.tercom.mad import _block_void_free, mad_surface, mad_surface_reference
 from terrain.geodesy import (
     OMEGA_EARTH_RPS,
     euler_to_C_bn,
@@ -258,9 +258,9 @@ def test_baro_prepare_masks_and_converts():
 def sim_frames():
     """45 s of the default scenario's sensor frames (one TERCOM fix), with some IRA no-returns and a NaN
     baro sample injected, and the sim's initial estimate."""
-    from trn_env.nav_stage import gate_gnss as _gate_gnss
-    from trn_env.scenario import load_scenario
-    from trn_env.sim import ClosedLoop
+    from trn_env.scenario.loading import load_scenario
+    from trn_env.sim.closed_loop import ClosedLoop
+    from trn_env.sim.nav_stage import gate_gnss as _gate_gnss
 
     loop = ClosedLoop(load_scenario("default", duration_s=60.0), log_sensors=False)
     rng = np.random.default_rng(11)
@@ -313,7 +313,7 @@ def test_accumulated_surface_is_bit_identical_to_the_reference(dem, remove_bias,
     """The batch's surface summed group by group as samples come (uneven groups, NaN samples dropped, one
     sample off the map's edge or a void near the track) equals the per-lookup reference on the same samples
     with the same radii, and correlate() with the accumulator gives the fix correlate() computes itself."""
-    from navigators.tercom import MadAccumulator, correlate
+    from navigators.tercom.mad import MadAccumulator, correlate
 
     rng = np.random.default_rng(13)
     heights, lat0, lon0, dlat, dlon = dem.grid

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from navigators.ins import StrapdownIns, gravity_ned
+from navigators.inertial.strapdown import StrapdownIns, gravity_ned
 from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m
 
 sys.path.insert(0, str(Path(__file__).parent))

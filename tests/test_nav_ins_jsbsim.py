@@ -1,16 +1,16 @@
 """The strapdown INS with perfect IMU data follows a 10-minute manoeuvring JSBSim flight within 1 m.
 
-Needs the flight core (trn_env.flight); navigators themselves never import trn_env."""
+Needs the flight core (trn_env.flight.core); navigators themselves never import trn_env."""
 
 import math
 
 import numpy as np
 import pytest
 
-from navigators.ins import StrapdownIns
+from navigators.inertial.strapdown import StrapdownIns
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-flight_mod = pytest.importorskip("trn_env.flight")
+flight_mod = pytest.importorskip("trn_env.flight.core")
 
 FT = 0.3048
 PLAN = [

@@ -1,6 +1,6 @@
 """The INS/TERCOM navigators on synthetic sensor frames (no simulator): a straight flight over the real
 jacksboro DEM with perfect IMU data, an initial position error, and terrain measurements generated here by
-ray-casting the map (independent of navigators.ira_geometry)."""
+ray-casting the map (independent of navigators.measurements.ira_closest_point)."""
 
 import sys
 from pathlib import Path
@@ -10,8 +10,8 @@ import pytest
 
 import terrain
 from navigators import registry
+from navigators.filters.ins_trn_ekf import initial_covariance
 from navigators.frames import BaroFrame, ImuFrame, IraFrame, RadarAltimeterFrame, SensorFrames
-from navigators.ins_trn_ekf import initial_covariance
 from navigators.protocol import Estimate, Navigator
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 

@@ -3,7 +3,11 @@
 import numpy as np
 import pytest
 
-from navigators.ira_geometry import closest_point_ned, effective_look_angle, horizontal_difference_estimate_m
+from navigators.measurements.ira_closest_point import (
+    closest_point_ned,
+    effective_look_angle,
+    horizontal_difference_estimate_m,
+)
 from terrain.geodesy import euler_to_C_bn
 
 

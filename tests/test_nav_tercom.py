@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import terrain
-from navigators.tercom import TercomBatch, correlate
+from navigators.tercom.mad import TercomBatch, correlate
 from terrain.dem import Dem
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 

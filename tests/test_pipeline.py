@@ -8,10 +8,10 @@ import multiprocessing
 import numpy as np
 import pytest
 
-from trn_env import components
-from trn_env.nav_stage import fork_available
-from trn_env.scenario import read_scenario_file, validate
-from trn_env.sim import ClosedLoop
+import trn_env.scenario.build as components
+from trn_env.scenario.loading import read_scenario_file, validate
+from trn_env.sim.closed_loop import ClosedLoop
+from trn_env.sim.nav_stage import fork_available
 
 pytestmark = pytest.mark.skipif(not fork_available(), reason="needs the fork start method")
 
@@ -141,7 +141,7 @@ def test_a_nan_estimate_ends_both_runs_at_its_time(monkeypatch):
 
 
 def test_a_worker_that_cannot_start_leaves_the_loop_inline(monkeypatch):
-    import trn_env.sim as sim
+    import trn_env.sim.closed_loop as sim
 
     def no_process(inline):
         raise OSError("fork: resource temporarily unavailable")

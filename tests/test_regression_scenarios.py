@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from navigators.ira_geometry import closest_point_ned
+from navigators.measurements.ira_closest_point import closest_point_ned
 from terrain import queries
-from trn_env.scenario import load_scenario
-from trn_env.sim import ClosedLoop
+from trn_env.scenario.loading import load_scenario
+from trn_env.sim.closed_loop import ClosedLoop
 
 SCEN = Path(__file__).parent / "scenarios"
 FIX_PERIOD_S = 40.0          # ins_trn_ekf default (seed 000 Table 2: position fix every 40 s)

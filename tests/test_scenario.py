@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import tomllib
 
-from trn_env.scenario import (
+from trn_env.scenario.loading import (
     ScenarioError,
     builtin_names,
     list_scenarios,

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import sample_steps
-from trn_env.truth import TruthChunk
 
 G_ISA = 9.80665
 

@@ -99,7 +99,7 @@ def test_bad_suite_config(dem, truth):
 
 def test_real_flight_over_real_dem(dem):
     """A short JSBSim flight (trn_env.flight) sampled noise-free: readings match the truth they came from."""
-    flight_mod = pytest.importorskip("trn_env.flight")
+    flight_mod = pytest.importorskip("trn_env.flight.core")
     lat, lon = dem.center_rad
     h0 = float(np.nanmax(dem.heights_m)) + 800.0
     ic = flight_mod.InitialCondition(lat_rad=lat, lon_rad=lon, h_msl_m=h0, tas_mps=100.0,

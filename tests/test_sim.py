@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 from _ecef import ned_between as ned_vector_between
 
+import trn_env.scenario.build as components
 from navigators.frames import GnssFrame, SensorFrames
 from navigators.protocol import Estimate
-from trn_env import components
-from trn_env.nav_stage import gate_gnss as _gate_gnss
-from trn_env.nav_stage import gnss_available_mask
-from trn_env.scenario import ScenarioError, read_scenario_file, validate
-from trn_env.sim import (
+from trn_env.flight.truth import TruthChunk
+from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
+from trn_env.sim.closed_loop import (
     ClosedLoop,
     perturbed_estimate,
     spawn_rngs,
 )
-from trn_env.truth import TruthChunk
+from trn_env.sim.nav_stage import gate_gnss as _gate_gnss
+from trn_env.sim.nav_stage import gnss_available_mask
 
 
 def _data(**changes) -> dict:
@@ -171,7 +171,7 @@ def test_terrain_collision_termination():
     data["route"]["waypoints"][1]["h_msl_m"] = 1200.0
     # hold 800 m: the commander keeps the MSL altitude, flying north
     sc = validate(data, source="test")
-    from trn_env.flight import AutopilotTargets, LateralMode, VerticalMode
+    from trn_env.flight.core import AutopilotTargets, LateralMode, VerticalMode
     loop = ClosedLoop(sc, commander=lambda est, t: AutopilotTargets(
         lateral_mode=LateralMode.TRACK, track_cmd_rad=0.0, vertical_mode=VerticalMode.ALTITUDE_MSL,
         altitude_cmd_m=800.0, tas_cmd_mps=85.0))

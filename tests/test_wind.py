@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from trn_env.flight import AutopilotTargets, Flight, InitialCondition, LateralMode
-from trn_env.wind import CosineGust, Turbulence, WindConfig, WindLayer
+from trn_env.flight.core import AutopilotTargets, Flight, InitialCondition, LateralMode
+from trn_env.flight.wind import CosineGust, Turbulence, WindConfig, WindLayer
 
 LAT0, LON0 = math.radians(33.2), math.radians(-98.2)
 TAS_MPS = 75.0

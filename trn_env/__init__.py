@@ -13,7 +13,7 @@ def _register_envs() -> None:
     except ImportError:  # pragma: no cover - gymnasium is a declared dependency
         return
     if "trn_env/TerrainNav-v0" not in gymnasium.registry:
-        gymnasium.register(id="trn_env/TerrainNav-v0", entry_point="trn_env.env:TerrainNavEnv")
+        gymnasium.register(id="trn_env/TerrainNav-v0", entry_point="trn_env.env.terrain_nav:TerrainNavEnv")
 
 
 _register_envs()

@@ -48,7 +48,7 @@ def _print_problems(err) -> None:
 
 
 def cmd_scenarios() -> int:
-    from .scenario import list_scenarios
+    from trn_env.scenario.loading import list_scenarios
     rows = list_scenarios()
     width = max(len(n) for n, _ in rows) if rows else 0
     for name, desc in rows:
@@ -57,7 +57,7 @@ def cmd_scenarios() -> int:
 
 
 def cmd_validate(args) -> int:
-    from .scenario import ScenarioError, load_scenario
+    from trn_env.scenario.loading import ScenarioError, load_scenario
     try:
         sc = load_scenario(args.scenario)
     except ScenarioError as err:
@@ -97,7 +97,7 @@ def _summary_table(summary: dict, out_dir: Path):
 
 
 def cmd_fly(args) -> int:
-    from .scenario import ScenarioError, load_scenario
+    from trn_env.scenario.loading import ScenarioError, load_scenario
     try:
         scenario = load_scenario(args.scenario, seed=args.seed, navigator=args.navigator,
                                  duration_s=args.duration)
@@ -109,8 +109,8 @@ def cmd_fly(args) -> int:
     from rich.console import Console
     from tqdm import tqdm
 
-    from .output import default_out_dir, write_run
-    from .sim import ClosedLoop
+    from trn_env.output.run_folder import default_out_dir, write_run
+    from trn_env.sim.closed_loop import ClosedLoop
 
     out_dir = args.out or default_out_dir(scenario.name)
     console = Console()
@@ -150,7 +150,7 @@ def cmd_fly(args) -> int:
 
 
 def _plotter(result):
-    from . import plots
+    import trn_env.output.plots as plots
 
     def plot(tmp: Path) -> list[str]:
         sc = result.scenario
@@ -164,7 +164,7 @@ def _plotter(result):
 
 
 def cmd_bench(args) -> int:
-    from .bench import run_all
+    from trn_env.bench.runner import run_all
     print(json.dumps(run_all(quick=args.quick), indent=2))
     return 0
 

@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit
 
 from navigators.frames import AirDataFrame
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -23,7 +24,6 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
-from trn_env.truth import TruthChunk
 
 
 @dataclass(frozen=True)

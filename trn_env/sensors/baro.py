@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 
 from navigators.frames import BaroFrame
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import (
     MappingConfig,
     check_nonneg,
@@ -24,7 +25,6 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
-from trn_env.truth import TruthChunk
 
 ISA_P0_PA = 101325.0
 ISA_T0_K = 288.15

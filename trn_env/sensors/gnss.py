@@ -15,6 +15,7 @@ from numba import njit
 
 from navigators.frames import GnssFrame
 from terrain.geodesy import WGS84_A_M, WGS84_E2
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -27,7 +28,6 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
-from trn_env.truth import TruthChunk
 
 
 def _check_outages(value) -> tuple[tuple[float, float], ...]:

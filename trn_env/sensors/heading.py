@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from navigators.frames import HeadingFrame
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -25,7 +26,6 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
-from trn_env.truth import TruthChunk
 
 
 @dataclass(frozen=True)

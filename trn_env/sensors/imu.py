@@ -37,6 +37,7 @@ import numpy as np
 from numba import njit
 
 from navigators.frames import ImuFrame
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import (
     check_nonneg,
     check_positive,
@@ -45,7 +46,6 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
-from trn_env.truth import TruthChunk
 
 G0_MPS2 = 9.80665
 UG_MPS2 = 1e-6 * G0_MPS2

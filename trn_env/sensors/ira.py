@@ -33,6 +33,7 @@ from numba import njit
 
 from navigators.frames import IraFrame
 from terrain import queries
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -46,7 +47,6 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
-from trn_env.truth import TruthChunk
 
 LOOK_ANGLE_METHODS = ("range_difference", "exact")
 

@@ -17,6 +17,7 @@ from numba import njit
 
 from navigators.frames import RadarAltimeterFrame
 from terrain import queries
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -30,7 +31,6 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
-from trn_env.truth import TruthChunk
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from navigators.frames import SensorFrames
+from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.air_data import AirDataConfig, sample_air_data
 from trn_env.sensors.baro import BaroConfig, sample_baro
 from trn_env.sensors.gnss import GnssConfig, sample_gnss
@@ -24,7 +25,6 @@ from trn_env.sensors.heading import HeadingConfig, sample_heading
 from trn_env.sensors.imu import ImuConfig, sample_imu
 from trn_env.sensors.ira import IraConfig, sample_ira
 from trn_env.sensors.radar_altimeter import RadarAltimeterConfig, sample_radar_altimeter
-from trn_env.truth import TruthChunk
 
 
 @dataclass(frozen=True)

@@ -10,14 +10,14 @@ Error state (13, computed minus true, feedback form - corrected into the INS and
 
 Propagation at 50 Hz (seed 000 Table 2) with the psi-angle error model: d(dr) = dv;
 d(dv) = f^n x psi + C_bn b_a - (2 w_ie + w_en) x dv + dg (dg = -g/R dr_h, +2g/R dr_d; the vertical is the
-baro-damped channel of navigators.ins); d(psi) = -w_in x psi - C_bn [0, 0, b_gz]. Measurement: the TERCOM
+baro-damped channel of navigators.inertial); d(psi) = -w_in x psi - C_bn [0, 0, b_gz]. Measurement: the TERCOM
 fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (Table 2), chi-square gated.
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS.
 
 Built on filterpy.kalman.KalmanFilter: its state and covariance hold the filter, the TERCOM fix goes
 through its (Joseph-form) update; the 50 Hz covariance propagation P = Phi P Phi^T + Q (filterpy's predict
-algebra with our Phi/Q) and the IRA batch collection run in numba kernels (navigators._ekf_kernels), one
+algebra with our Phi/Q) and the IRA batch collection run in numba kernels (filters._ekf_kernels), one
 call per segment, for speed.
 """
 
@@ -29,12 +29,12 @@ import math
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from . import _ekf_kernels as kern
-from .frames import SensorFrames
-from .ins import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
-from .ira_geometry import FORMULAS, closest_point_ned
-from .protocol import Estimate, Health
-from .tercom import TercomBatch, TercomFix, correlate
+import navigators.filters._ekf_kernels as kern
+from navigators.frames import SensorFrames
+from navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
+from navigators.measurements.ira_closest_point import FORMULAS, closest_point_ned
+from navigators.protocol import Estimate, Health
+from navigators.tercom.mad import TercomBatch, TercomFix, correlate
 
 G0 = 9.80665
 N_ERR = 13
@@ -71,7 +71,7 @@ class InsTrnNavigator:
     does not estimate it (the IRA/TERCOM fixes are horizontal), so the height error follows the baro's bias
     and the reported down-position variance adds baro_bias_sigma_m^2 (without it the baro loop's variance
     collapses to a metre while the true height error is the baro bias).
-    Speed: a frame with no fix due inside it runs as one numba call (navigators._ekf_kernels.fused_segment);
+    Speed: a frame with no fix due inside it runs as one numba call (_ekf_kernels.fused_segment);
     set the attribute `fused = False` for the step-by-step path (the same numbers, to round-off).
     """
 
@@ -238,7 +238,7 @@ class InsTrnNavigator:
                 and float(t[-1]) < self._t_batch0 + self.fix_period_s - 1e-9)
 
     def _fused_segment(self, frames: SensorFrames, t: np.ndarray) -> None:
-        """_segment(frames, 0, n) as one numba call (navigators._ekf_kernels.fused_segment)."""
+        """_segment(frames, 0, n) as one numba call (navigators.filters._ekf_kernels.fused_segment)."""
         imu = frames.imu
         n = t.shape[0]
         ins = self.ins
@@ -364,7 +364,7 @@ class InsTrnNavigator:
 
     def _predict_to(self, t_end: float, t_imu: np.ndarray, f_b: np.ndarray, hist: np.ndarray) -> None:
         """Propagate the error covariance in steps of 1/ekf_rate_hz up to t_end along the INS history
-        (navigators._ekf_kernels.predict_covariance: F, Phi = I + F dt + (F dt)^2/2, P = Phi P Phi^T + Q)."""
+        (_ekf_kernels.predict_covariance: F, Phi = I + F dt + (F dt)^2/2, P = Phi P Phi^T + Q)."""
         if not np.isfinite(self._t_ekf):
             self._t_ekf = t_end
         n_steps = int(np.floor((t_end - self._t_ekf) / self.dt_ekf + 1e-9))

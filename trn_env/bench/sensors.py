@@ -1,6 +1,6 @@
 """Sensor-generation cost beside the flight core's recording cost for the same truth chunks.
 
-    python -m trn_env.sensors.bench          # prints one JSON object
+    python -m trn_env.bench.sensors          # prints one JSON object
 
 The default scenario's flight (the King Air ~1,500 m above the refined 30 m Jacksboro world, light
 turbulence) is recorded by the flight core (trn_env.flight.Flight.advance) in `n_chunks` chunks of
@@ -46,9 +46,9 @@ def _sense(config, chunks, dem, seed=0) -> float:
 def benchmark(n_chunks: int = 30, chunk_steps: int = 100, repeats: int = 3,
               scenario: str = "default") -> dict:
     """Seconds per chunk of the flight core and of the sensor suites, and their ratios."""
-    from trn_env import components
-    from trn_env.scenario import load_scenario
-    from trn_env.sim import spawn_rngs
+    import trn_env.scenario.build as components
+    from trn_env.scenario.loading import load_scenario
+    from trn_env.sim.closed_loop import spawn_rngs
 
     sc = load_scenario(scenario)
     d = sc.data

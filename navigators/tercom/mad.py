@@ -7,7 +7,7 @@ Measured terrain heights along the INS track are compared with the map shifted o
 
 - plain radar altimeter (eq 1): h_meas,k = h_baro,k - RA range, p_k = 0 (terrain assumed straight below);
 - IRA (eq 2): h_meas,k = h_baro,k - |p_k,alt|, (p_k,lat, p_k,lon) = (p_n / R_ns, p_e / R_ew) from the
-  closest-point relative position (navigators.ira_geometry).
+  closest-point relative position (navigators.measurements.ira_closest_point).
 
 The cell with the smallest MAD is the fix: the INS position plus (j dn, i de) metres is the matched
 position. The surface and a quality figure come with each fix. Cells for which any sample falls off the
@@ -28,7 +28,7 @@ from terrain.kernels import _EDGE, bilinear
 
 _CHUNK = 8  # samples whose tables _mad_surface_void_free builds at once (their rows stay in L1)
 # Threads of one MAD surface: a fix is a burst of work (~10 ms for the default scenario's), and in the
-# pipelined closed loop the other core waits for it (trn_env/nav_stage.py), so it is split in two.
+# pipelined closed loop the other core waits for it (trn_env/sim/nav_stage.py), so it is split in two.
 TERCOM_THREADS = min(2, os.cpu_count() or 1)
 PARALLEL_MIN_LOOKUPS = 2_000_000   # below this a thread's start-up (~0.1 ms) is not worth it
 

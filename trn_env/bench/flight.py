@@ -1,6 +1,6 @@
 """Flight-core throughput beside its same-run reference (bare JSBSim run() loop, same aircraft and step).
 
-    python -m trn_env.bench_flight            # prints one JSON object
+    python -m trn_env.bench.flight            # prints one JSON object
 
 Both loops run in this process, on one trimmed aircraft in level cruise with the autopilot engaged,
 alternating in blocks; each figure is its fastest block (see `benchmark`).
@@ -12,8 +12,8 @@ import json
 import math
 import time
 
-from trn_env.components import quiet_stdout
-from trn_env.flight import Flight, InitialCondition
+from trn_env.flight.core import Flight, InitialCondition
+from trn_env.scenario.build import quiet_stdout
 
 
 def _default_ic() -> InitialCondition:

@@ -40,20 +40,19 @@ import time
 import warnings
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from navigators.frames import SensorFrames
+import trn_env.scenario.build as components
 from navigators.protocol import Estimate, Health
 from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
-
-from . import components
-from .flight import FlightDiverged
-from .interval_plan import IntervalPlan, IntervalPlanner
-from .nav_stage import InlineNavStage, ProcessNavStage, fork_available, gnss_available_mask
-from .scenario import Scenario, load_scenario
-from .truth import TruthChunk
+from trn_env.flight.core import FlightDiverged
+from trn_env.flight.truth import TruthChunk
+from trn_env.scenario.loading import Scenario, load_scenario
+from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
+from trn_env.sim.log import SimLog
+from trn_env.sim.nav_stage import InlineNavStage, ProcessNavStage, fork_available
 
 TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "time_limit")
 
@@ -99,91 +98,6 @@ def perturbed_estimate(truth: TruthChunk, i: int, sigmas: dict[str, list[float]]
         covariance=cov,
         health=Health(),
     )
-
-
-_TRUTH_LOGGED = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps",
-                 "alpha_rad", "beta_rad", "wind_ned_mps")
-# columns of SimLog.truth_rows: t_s, then _TRUTH_LOGGED with the vectors' three components
-_TRUTH_ROW = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "v_n", "v_e", "v_d", "roll_rad", "pitch_rad", "yaw_rad",
-              "tas_mps", "alpha_rad", "beta_rad", "wind_n", "wind_e", "wind_d")
-
-
-@dataclass
-class SimLog:
-    """In-memory log: per-tick truth rows and estimates, full-rate sensor readings, events.
-
-    The per-tick work is appending tuples of the truth row's and the estimate's numbers (the truth chunk
-    itself is not kept, so its memory is reused); arrays are assembled once, in `arrays()`.
-    """
-
-    truth_rows: list[tuple] = field(default_factory=list)
-    est_rows: list[tuple] = field(default_factory=list)
-    frames: list[SensorFrames] = field(default_factory=list)
-    events: list[tuple[float, str, str]] = field(default_factory=list)
-
-    def add_tick(self, truth: TruthChunk, i: int, est: Estimate) -> None:
-        v, w = truth.v_ned_mps, truth.wind_ned_mps
-        # row values in _TRUTH_ROW order
-        self.truth_rows.append((truth.t_s[i], truth.lat_rad[i], truth.lon_rad[i], truth.h_msl_m[i],
-                                v[i, 0], v[i, 1], v[i, 2], truth.roll_rad[i], truth.pitch_rad[i],
-                                truth.yaw_rad[i], truth.tas_mps[i], truth.alpha_rad[i], truth.beta_rad[i],
-                                w[i, 0], w[i, 1], w[i, 2]))
-        self.est_rows.append((float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
-                              np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
-                              float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
-                              bool(est.health.ok)))
-
-    def add_frames(self, frames: SensorFrames) -> None:
-        self.frames.append(frames)
-
-    def sensor_arrays(self) -> dict[str, np.ndarray]:
-        """sensor_<sensor>_<field>: every logged frame's arrays, concatenated per sensor and field."""
-        parts: dict[str, list] = {}
-        for frames in self.frames:
-            for name in ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading"):
-                fr = getattr(frames, name)
-                if fr is None:
-                    continue
-                for k, v in vars(fr).items():
-                    if isinstance(v, np.ndarray):
-                        parts.setdefault(f"sensor_{name}_{k}", []).append(v)
-        return {k: np.concatenate(v) for k, v in parts.items()}
-
-    def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
-        """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
-        position), gnss_available, nav_ok, and sensor_<sensor>_<field> at the sensors' own rates."""
-        out: dict[str, np.ndarray] = {}
-        rows = np.array(self.truth_rows, float).reshape(-1, len(_TRUTH_ROW))
-        out["t_s"] = rows[:, 0].copy()
-        col = 1
-        for name in _TRUTH_LOGGED:
-            width = 3 if name in ("v_ned_mps", "wind_ned_mps") else 1
-            out[f"true_{name}"] = rows[:, col:col + width].copy() if width == 3 else rows[:, col].copy()
-            col += width
-        h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
-        out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
-        cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 10
-        names = ("est_t_s", "est_lat_rad", "est_lon_rad", "est_h_m", "est_v_ned_mps", "est_roll_rad",
-                 "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok")
-        for name, col in zip(names, cols, strict=True):
-            out[name] = np.array(col)
-        out["est_cov_diag"] = np.diagonal(out["est_cov"], axis1=1, axis2=2).copy()
-        out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
-                                       out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])
-        out["gnss_available"] = gnss_available_mask(out["t_s"], outages)
-        out.update(self.sensor_arrays())
-        return out
-
-
-def error_ned_m(lat_rad, lon_rad, h_m, est_lat_rad, est_lon_rad, est_h_m) -> np.ndarray:
-    """Estimate minus truth, NED metres at the true position (seed 000 eq 2 small-offset radii)."""
-    lat = np.asarray(lat_rad, float)
-    r_n = np.array([meridian_radius_m(x) for x in lat]) + h_m
-    r_e = np.array([prime_vertical_radius_m(x) for x in lat]) + h_m
-    dn = (np.asarray(est_lat_rad) - lat) * r_n
-    de = (np.asarray(est_lon_rad) - np.asarray(lon_rad)) * r_e * np.cos(lat)
-    dd = -(np.asarray(est_h_m) - np.asarray(h_m))
-    return np.stack([dn, de, dd], axis=-1).reshape(-1, 3)
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """`trn-env bench`: throughput figures from one run, each beside its reference measured in the same run.
 
-Collects the component benchmarks (trn_env.bench_flight, terrain.bench, trn_env.sensors.bench,
-navigators.bench: each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
+Collects the component benchmarks (trn_env.bench.flight, terrain.bench, trn_env.bench.sensors,
+trn_env.bench.navigators: each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
 
 - closed_loop_steps_per_s: JSBSim steps per wall second of the full default-scenario loop (flight,
   sensors, navigator, guidance, termination checks, logging);
@@ -73,15 +73,15 @@ def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeli
     number of steps: the ratio is the median of the segments' ratios, so a slow spell of the machine (other
     processes) spoils one segment, not the figure. With the default 120 s, each 40 s segment holds one
     TERCOM fix of the default scenario."""
-    from .scenario import load_scenario
-    from .sim import ClosedLoop
+    from trn_env.scenario.loading import load_scenario
+    from trn_env.sim.closed_loop import ClosedLoop
 
     sim_s = sim_s or (40.0 if quick else 120.0)
     warm_s = 45.0       # past the first TERCOM fix (40 s), whose first call loads its kernels
     sc = load_scenario(scenario, duration_s=warm_s + sim_s + 20.0)
     with ClosedLoop(sc, log_sensors=True, pipeline=pipeline) as loop:
         # bare reference: a second flight at the same (trimmed) initial condition, run() only
-        from . import components
+        import trn_env.scenario.build as components
         ref_flight = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
         # warm-up (numba dispatch, first sensor, navigator and fix calls), not timed
         for _ in range(int(round(warm_s / (loop.steps_per_tick * loop.dt_s)))):
@@ -132,7 +132,7 @@ def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeli
 def env_benchmark(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
     """Simulated seconds per wall second of TerrainNav-v0 (default scenario) under random actions, resets
     included."""
-    from .env import TerrainNavEnv
+    from trn_env.env.terrain_nav import TerrainNavEnv
 
     env = TerrainNavEnv("default", decision_interval_s=decision_interval_s,
                         max_episode_s=60.0 if quick else 120.0)
@@ -157,7 +157,8 @@ def env_benchmark(quick: bool = False, n_steps: int | None = None, decision_inte
 def run_all(quick: bool = False) -> dict:
     """Every figure, as one flat dict (the JSON `trn-env bench` prints)."""
     out: dict = {}
-    for module in ("trn_env.bench_flight", "terrain.bench", "trn_env.sensors.bench", "navigators.bench"):
+    for module in ("trn_env.bench.flight", "terrain.bench", "trn_env.bench.sensors",
+                   "trn_env.bench.navigators"):
         out.update(_component(module, quick))
     for name, fn in (("closed_loop", closed_loop_benchmark), ("env", env_benchmark)):
         try:

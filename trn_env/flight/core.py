@@ -22,7 +22,7 @@ Timing. Row k holds the state after the k-th step, t_s = k * dt_s from the start
 integrates first and then evaluates every model at the new state, so all fields of a row describe the same
 instant: f_b_mps2 is the specific force at that state (what an ideal accelerometer senses), TAS, alpha and
 beta follow from the row's velocity, attitude and wind, and p/T are the flight's atmosphere (JSBSim's
-standard atmosphere with the day's temperature offset and sea-level pressure, trn_env.atmosphere) at the
+standard atmosphere with the day's temperature offset and sea-level pressure, flight.atmosphere) at the
 row's altitude. The IMU is at the centre of gravity: f_b = (total non-gravitational force) / mass, FRD.
 """
 
@@ -38,10 +38,10 @@ import numpy as np
 from numba import njit
 
 from terrain.geodesy import OMEGA_EARTH_RPS
-from trn_env.aircraft_data import new_fdm
-from trn_env.atmosphere import JSBSIM_P_SL_PA, Atmosphere, static_p_T
-from trn_env.truth import SCALAR_FIELDS, VECTOR_FIELDS, TruthChunk
-from trn_env.wind import FT_PER_M, WindConfig
+from trn_env.flight.aircraft_data import new_fdm
+from trn_env.flight.atmosphere import JSBSIM_P_SL_PA, Atmosphere, static_p_T
+from trn_env.flight.truth import SCALAR_FIELDS, VECTOR_FIELDS, TruthChunk
+from trn_env.flight.wind import FT_PER_M, WindConfig
 
 M_PER_FT = 0.3048
 PSF_TO_PA = 47.88025898033584
@@ -220,7 +220,7 @@ AP_PROPERTIES = ("ap/lateral-mode", "ap/heading-cmd-rad", "ap/track-cmd-rad", "a
 # Properties copied every step, in buffer-column order (JSBSim units; converted after the loop). The three
 # total-wind columns are read only when turbulence or gusts are configured; otherwise the wind is the steady
 # wind this module wrote. Pressure and temperature are not read: they are the flight's atmosphere (the model
-# JSBSim flies in, trn_env.atmosphere.static_p_T) evaluated at each row's own position (tests check it against
+# JSBSim flies in, atmosphere.static_p_T) evaluated at each row's own position (tests check it against
 # atmosphere/P-psf, T-R).
 _MODES_BY_VALUE = tuple({int(m): m for m in enum} for enum in (LateralMode, VerticalMode, SpeedMode))
 
@@ -381,7 +381,7 @@ class Flight:
     WindConfig (default calm); seed: JSBSim's random seed (turbulence), same seed -> identical truth;
     terrain_elevation_m: terrain height under the aircraft at the start (WGS84, m); targets: autopilot
     targets to engage after trim (default: hold the trimmed track, altitude and TAS); atmosphere: the day's
-    trn_env.atmosphere.Atmosphere (temperature offset, sea-level pressure; default standard), set in JSBSim
+    trn_env.flight.Atmosphere (temperature offset, sea-level pressure; default standard), set in JSBSim
     before the trim and used for the truth's p_static_pa / T_static_K.
     """
 

@@ -28,9 +28,8 @@ import numpy as np
 
 from navigators.frames import SensorFrames
 from navigators.protocol import Estimate
-
-from .interval_plan import IntervalPlan, IntervalPlanner
-from .truth import TruthChunk, chunk_from_buffer, chunk_to_buffer
+from trn_env.flight.truth import TruthChunk, chunk_from_buffer, chunk_to_buffer
+from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 
 
 def gnss_available_mask(t_s: np.ndarray, outages: list[dict]) -> np.ndarray:

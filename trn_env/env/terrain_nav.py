@@ -10,11 +10,10 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
+import trn_env.scenario.build as components
 from terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
-
-from . import components
-from .scenario import Scenario, load_scenario
-from .sim import ClosedLoop, spawn_rngs
+from trn_env.scenario.loading import Scenario, load_scenario
+from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
 
 G0_MPS2 = 9.80665
 N_TERRAIN_FEATURES = 6
@@ -296,7 +295,7 @@ class TerrainNavEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from . import plots
+        import trn_env.output.plots as plots
         return plots.render_tracks_rgb(self._dems[0], self._true_track, self._est_track,
                                        (self.goal_lat_rad, self.goal_lon_rad), cache=self)
 

@@ -127,8 +127,8 @@ def map_height(dem, lat_rad: float, lon_rad: float) -> float:
 # ------------------------------------------------------------------------------------------ flight, wind
 
 def build_wind(d: dict):
-    """trn_env.wind.WindConfig from the scenario's [wind] table."""
-    from .wind import CosineGust, Turbulence, WindConfig
+    """trn_env.flight.wind.WindConfig from the scenario's [wind] table."""
+    from trn_env.flight.wind import CosineGust, Turbulence, WindConfig
     w = d["wind"]
     layers = [(lay["altitude_m"], lay["direction_from_deg"], lay["speed_mps"]) for lay in w["layers"]]
     t = dict(w.get("turbulence") or {})
@@ -144,8 +144,8 @@ def build_wind(d: dict):
 
 
 def build_atmosphere(d: dict):
-    """trn_env.atmosphere.Atmosphere of the scenario's optional [atmosphere] table (absent: standard)."""
-    from .atmosphere import Atmosphere
+    """trn_env.flight.Atmosphere of the scenario's optional [atmosphere] table (absent: standard)."""
+    from trn_env.flight.atmosphere import Atmosphere
     return Atmosphere.from_mapping(d.get("atmosphere"))
 
 
@@ -180,7 +180,7 @@ def quiet_stdout():
 
 def build_flight(d: dict, world, rng: np.random.Generator):
     """trn_env.flight.Flight at the scenario's initial condition, trimmed, with its wind and a JSBSim seed."""
-    from .flight import Flight
+    from trn_env.flight.core import Flight
     init = d["initial"]
     lat, lon = math.radians(init["lat_deg"]), math.radians(init["lon_deg"])
     ic = _initial_condition(d, world)
@@ -200,12 +200,12 @@ def sensor_configs(d: dict) -> dict:
 
 def build_sensors(d: dict, seed: np.random.SeedSequence):
     """trn_env.sensors.suite.SensorSuite of the scenario's sensors, one random stream per sensor."""
-    from .sensors.suite import SensorSuite
+    from trn_env.sensors.suite import SensorSuite
     return SensorSuite.from_config(sensor_configs(d), seed)
 
 
 def _sensor_problems(d: dict) -> list[str]:
-    from .sensors import suite
+    from trn_env.sensors import suite
     problems = []
     for name, cfg in d["sensors"].items():
         try:
@@ -218,11 +218,12 @@ def _sensor_problems(d: dict) -> list[str]:
 # -------------------------------------------------------------------------------------------- navigator
 
 def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
-    """navigators.registry.create(name, dem=<the navigator's map>, **settings)."""
+    """navigators.registry.create(name, dem=<the navigator's map>, rng=<the scenario's navigator stream>,
+    **settings); the rng reaches only navigators that draw random numbers."""
     from navigators import registry
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
-    return registry.create(d["navigator"]["name"], **settings)
+    return registry.create(d["navigator"]["name"], rng=rng, **settings)
 
 
 # ------------------------------------------------------------------------------------ component checks
@@ -275,7 +276,7 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
 
 
 def _initial_condition(d: dict, world):
-    from .flight import InitialCondition
+    from trn_env.flight.core import InitialCondition
     init = d["initial"]
     return InitialCondition(lat_rad=math.radians(init["lat_deg"]), lon_rad=math.radians(init["lon_deg"]),
                             h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
@@ -286,7 +287,7 @@ def _initial_condition(d: dict, world):
 
 def track_agl_targets(track_rad: float, agl_m: float, tas_mps: float):
     """Autopilot targets: hold a ground track, a height above ground and a true airspeed."""
-    from .flight import AutopilotTargets, LateralMode, SpeedMode, VerticalMode
+    from trn_env.flight.core import AutopilotTargets, LateralMode, SpeedMode, VerticalMode
     return AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=float(track_rad),
                             heading_cmd_rad=float(track_rad), vertical_mode=VerticalMode.HEIGHT_AGL,
                             agl_cmd_m=float(agl_m), speed_mode=SpeedMode.TAS, tas_cmd_mps=float(tas_mps))
@@ -294,7 +295,7 @@ def track_agl_targets(track_rad: float, agl_m: float, tas_mps: float):
 
 def build_route(d: dict):
     """trn_env.guidance.Route of the scenario's waypoints (h_msl_m -> alt_ref msl, h_agl_m -> agl)."""
-    from .guidance import Route, Waypoint
+    from trn_env.guidance.route_following import Route, Waypoint
     wps = []
     for w in d["route"]["waypoints"]:
         ref, alt = ("agl", w["h_agl_m"]) if "h_agl_m" in w else ("msl", w["h_msl_m"])
@@ -304,7 +305,7 @@ def build_route(d: dict):
 
 def build_guidance(d: dict, map_dem=None):
     """trn_env.guidance.Guidance flying the scenario's route at route.tas_mps (route.settings: kwargs)."""
-    from .guidance import Guidance
+    from trn_env.guidance.route_following import Guidance
     return Guidance(build_route(d), tas_mps=float(d["route"]["tas_mps"]), **d["route"]["settings"])
 
 

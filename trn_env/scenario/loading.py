@@ -1,7 +1,7 @@
 """Scenario files: load a TOML scenario, validate it completely, and list the built-in ones.
 
 A scenario is a TOML file holding everything one closed-loop run needs (see
-trn_env/scenarios/schema.json and the built-in files beside it). `load_scenario` checks it in two passes
+trn_env/scenario/schema.json and the built-in files in builtin/). `load_scenario` checks it in two passes
 before any flight starts and reports EVERY problem, each prefixed with the field's path
 (e.g. ``route.waypoints[2].lat_deg: 95 is greater than the maximum of 90``):
 
@@ -82,11 +82,11 @@ class Scenario:
 # ----------------------------------------------------------------------------------------------- files
 
 def _builtin_dir():
-    return resources.files("trn_env.scenarios")
+    return resources.files("trn_env.scenario.builtin")
 
 
 def builtin_names() -> list[str]:
-    """Names of the scenarios shipped with the package (the TOML files in trn_env/scenarios/)."""
+    """Names of the scenarios shipped with the package (the TOML files in trn_env/scenario/builtin/)."""
     return sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".toml"))
 
 
@@ -105,8 +105,8 @@ def list_scenarios() -> list[tuple[str, str]]:
 
 @lru_cache(maxsize=1)
 def schema() -> dict:
-    """The scenario JSON schema (trn_env/scenarios/schema.json)."""
-    return json.loads((_builtin_dir() / "schema.json").read_text(encoding="utf-8"))
+    """The scenario JSON schema (trn_env/scenario/schema.json)."""
+    return json.loads((Path(__file__).with_name("schema.json")).read_text(encoding="utf-8"))
 
 
 def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
@@ -328,7 +328,7 @@ def _rate_problems(d: dict) -> list[str]:
 
 
 def _aircraft_problems(d: dict) -> list[str]:
-    from .aircraft_data import available_aircraft
+    from trn_env.flight.aircraft_data import available_aircraft
     try:
         known = available_aircraft()
     except FileNotFoundError as exc:
@@ -415,7 +415,7 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]
 def _component_problems(d: dict, extras: dict, known: list[str], tolerant: bool) -> list[str]:
     """Hand each component its settings; whatever it rejects becomes a problem at that field. Components
     whose fields already have a problem are not built (no duplicate or follow-on messages)."""
-    from . import components
+    import trn_env.scenario.build as components
     return components.check(d, extras, known, tolerant)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from . import components
+import trn_env.scenario.build as components
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""Numba kernels of the INS/TRN error-state filter's per-tick work (navigators.ins_trn_ekf).
+"""Numba kernels of the INS/TRN error-state filter's per-tick work (navigators.filters.ins_trn_ekf).
 
 - `predict_covariance`: the 13-state psi-angle error model's covariance propagation over all the EKF
   steps of one segment in one call (F at each step, Phi = I + F dt + (F dt)^2 / 2, P = Phi P Phi^T + Q -
@@ -6,7 +6,7 @@
 - `is_positive_definite`: Cholesky test of the symmetrised matrix (what numpy.linalg.cholesky accepts);
 - `collect_ira`: the IRA samples of one segment turned into TERCOM batch rows (INS state at each sample,
   baro reference height, closest point by the "conventional" or "proposed" formula of
-  navigators.ira_geometry - seed 000 eqs 9-13 and 14-36 - and eq 2's measured terrain height).
+  navigators.measurements - seed 000 eqs 9-13 and 14-36 - and eq 2's measured terrain height).
 
 Arrays only, no Python objects; every kernel is @njit(cache=True).
 """
@@ -18,9 +18,8 @@ import math
 import numpy as np
 from numba import njit
 
+from navigators.inertial.strapdown import propagate_chunk, quat_to_dcm
 from terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
-
-from .ins import propagate_chunk, quat_to_dcm
 
 N_ERR = 13
 G0 = 9.80665
@@ -56,14 +55,14 @@ def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b
 
     Step s uses the IMU sample at searchsorted(t_imu, t_ekf0 + s dt) (clipped) and its INS state row of
     `hist` (ins_state if that row is not finite), the specific force f_b minus the accelerometer bias
-    estimate (last_f_b if the sample is not finite). Error model in navigators.ins_trn_ekf's docstring.
+    estimate (last_f_b if the sample is not finite). Error model in ins_trn_ekf's docstring.
     """
     n = t_imu.shape[0]
     F = np.zeros((N_ERR, N_ERR))
     F[0, 3] = 1.0
     F[1, 4] = 1.0
     F[2, 5] = 1.0
-    F[2, 2] = -3.0 / tau  # baro loop on the vertical channel (navigators.ins)
+    F[2, 2] = -3.0 / tau  # baro loop on the vertical channel (navigators.inertial.strapdown)
     Phi = np.empty((N_ERR, N_ERR))
     T = np.empty((N_ERR, N_ERR))
     U = np.empty((N_ERR, N_ERR))
@@ -169,7 +168,7 @@ def _wrap(x):
 
 @njit(cache=True)
 def closest_point_one(R, theta, v0, v1, v2, C, formula, out):
-    """p (NED, m) from the antenna to the IRA closest point for one sample (navigators.ira_geometry:
+    """p (NED, m) from the antenna to the IRA closest point for one sample (navigators.measurements:
     formula 0 = conventional, seed 000 eqs 9-13; 1 = proposed, eqs 14-36). NaN when no solution."""
     alpha = math.atan2(-v2, math.hypot(v0, v1))  # eq 9
     beta = math.atan2(v1, v0)  # eq 10 (atan2 form)
@@ -300,7 +299,7 @@ def fused_segment(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, 
                   geopotential, baro_usable, h_baro_geo, accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model,
                   interval_samples, hist, P, Q, last_f_b, t_ekf0, dt_ekf, collect, ts, rng_m, theta,
                   ira_valid, decimation, formula, rows):
-    """One whole frame of navigators.ins_trn_ekf's segment work in one call (no fix inside the frame):
+    """One whole frame of navigators.filters.ins_trn_ekf's segment work in one call (no fix inside the frame):
     baro_prepare, ins.propagate_chunk, last_good_row, predict_covariance, is_positive_definite and (when
     collect) collect_ira - the same kernels, in the same order, as the step-by-step path.
 

@@ -14,7 +14,7 @@ import jsbsim
 
 def aircraft_root() -> Path:
     """Folder holding one sub-folder per aircraft (e.g. kingair/kingair.xml)."""
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parent.parent   # the trn_env package folder
     for root in (here / "aircraft", here.parent / "aircraft"):   # installed package, then source checkout
         if root.is_dir() and any(root.glob("*/*.xml")):
             return root
