@@ -12,11 +12,11 @@ import math
 import pytest
 
 from trn_env import cli
-from trn_env.flight.aircraft_data import KG_PER_LB
 from trn_env.flight.core import Flight, InitialCondition
 from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
 from trn_env.sim.closed_loop import TERMINATIONS, ClosedLoop
 
+KG_PER_LB = 0.45359237
 CAPACITY_KG = 2 * 582.0        # kingair.xml: two 582 kg wing tank groups (1,454 L of Jet-A)
 # Bounds on how long fuel lasts, from the engine file alone: both PT6As at most at 550 shp x 1.3 (the top of
 # EnginePowerVC) and 0.63 lb/shp/h, at least at flight idle (Willans intercept 0.2 x 347 lb/h each, x 0.5
