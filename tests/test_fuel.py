@@ -145,3 +145,23 @@ def test_without_constant_fuel_the_same_flight_runs_dry():
         assert reason == "fuel_exhausted" and math.isclose(loop.flight.fuel_kg, 0.0, abs_tol=1e-9)
     finally:
         loop.close()
+
+
+def test_env_episode_ends_terminated_when_the_fuel_runs_out():
+    """TerrainNav-v0 on 2 kg of fuel: the episode is terminated (not truncated) with info termination
+    fuel_exhausted, well inside max_episode_s."""
+    import numpy as np
+
+    from trn_env.env.terrain_nav import TerrainNavEnv
+    e = TerrainNavEnv(validate(_data(600.0, fuel_kg=2.0), source="dry"), decision_interval_s=5.0,
+                      max_episode_s=300.0, navigator="ins")
+    try:
+        e.reset(seed=0)
+        term = trunc = False
+        info: dict = {}
+        while not (term or trunc):
+            _, _, term, trunc, info = e.step(np.zeros(2, np.float32))
+        assert term and not trunc and info["termination"] == "fuel_exhausted"
+        assert info["t_s"] < 2.0 / MIN_BURN_KGPS + 5.0
+    finally:
+        e.close()
