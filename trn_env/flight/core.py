@@ -507,6 +507,9 @@ class Flight:
     def _set_fuel(self, ic: InitialCondition) -> None:
         """Fill every fuel tank to the same fraction of its capacity (from the aircraft file)."""
         capacity_kg = sum(self._tanks.values())
+        if capacity_kg <= 0.0:
+            raise ValueError(f"InitialCondition.fuel_kg/fuel_fraction: {self.aircraft!r} has no fuel tank "
+                             "with a capacity in its aircraft file")
         if ic.fuel_kg is not None:
             if ic.fuel_kg > capacity_kg * (1.0 + 1e-9):
                 raise ValueError(f"InitialCondition.fuel_kg: {ic.fuel_kg} kg is more than the fuel tanks of "
