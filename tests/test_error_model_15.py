@@ -98,7 +98,7 @@ def test_schuler_period_84_minutes():
     # Schuler modulated by Foucault: frequencies w_s +- Omega sin L, and the 24-h (sidereal) mode
     w = np.sort(2 * np.pi / (periods * 60.0))
     w_s = 2 * np.pi / (expected * 60.0)
-    assert abs(0.5 * (w[1] + w[2]) - w_s) < 1e-3 * w_s, periods
+    assert abs(0.5 * (w[1] + w[2]) - w_s) < 5e-3 * w_s, periods  # Earth-rate couplings: 0.3 %
     assert abs(0.5 * (w[2] - w[1]) - OMEGA_EARTH_RPS * math.sin(LAT0)) < 0.02 * OMEGA_EARTH_RPS, periods
     assert abs(w[0] - OMEGA_EARTH_RPS) < 0.01 * OMEGA_EARTH_RPS
 
