@@ -1,0 +1,296 @@
+"""Seed 002's IRA measurement model for many position hypotheses of one epoch (eqs 23-26), batched in numba.
+
+For hypothesis i (antenna at lat_i, lon_i, h_i) and the epoch's INS velocity v and attitude C_bn (shared by
+all hypotheses: in the RBPF velocity and attitude are the Kalman part, entering through eqs 24-25):
+
+- eq 23, range: R_i = min over the zero-Doppler line (ZDL: terrain points P with v . (P - A_i) = 0) of
+  |P - A_i|, restricted to the sensor's look window |theta| <= half_window and to points below the antenna
+  (z_b > 0), as trn_env.sensors.ira / terrain.queries.ira_return define the return. Distances use the
+  second-order expansion of the WGS84 position about the antenna (terrain.queries' local frame), which
+  equals the ECEF distance of eq 23 to < 1 cm within 10 km.
+- eq 26, look angle: theta_i = atan(y_b / sqrt(x_b^2 + z_b^2)) (= asin(y_b / R)) of the closest point in
+  body axes.
+- eq 24, range sensitivity to velocity (step-wise): [dR/dtheta_zdl, dR/dpsi_zdl] (the range gradient when
+  the ZDL is tilted in elevation theta_zdl or turned in azimuth psi_zdl, the new closest point searched near
+  the old one: central differences over +-d_ang) times the ZDL angles' sensitivity to velocity. Departure:
+  eq 24 prints that second factor as [[0, 0, -|v_h|], [-1/v_e, 1/v_n, 0]], which is not the Jacobian of any
+  angle of v (its units differ); we use the Jacobian of theta_zdl = atan2(-v_d, |v_h|),
+  psi_zdl = atan2(v_e, v_n) (tests/test_ira_seed002.py checks the product against finite differences of
+  the exact search).
+- eq 25, look-angle sensitivity to attitude: [z_b, 0, -x_b] / sqrt(x_b^2 + z_b^2) in body axes (the
+  attitude error as a body-axis rotation); rotated to NED by C_bn for the NED attitude error of eq 17.
+
+Search per hypothesis: a coarse scan of the ZDL in across-track steps ds_m from the nadir outwards, each side
+stopped once the lower bound sqrt(s^2 + (h_a - h_max)^2) exceeds the best range (h_max: the highest terrain
+near the cloud), then golden-section refinement around the best sample. Each ZDL point is a Newton solve of
+the plane condition along track in the bilinear cell. Checked against the exact branch-and-bound search
+terrain.queries.ira_return.
+
+Measurement Jacobian rows for the RBPF's linear state (dv, eps, ...), with errors computed minus true:
+the true range is R(v_ins - dv), so H_R,v = -dR/dv; C_true = (I + [eps x]) C_ins, so H_theta,eps =
++C_bn (eq 25's body vector).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from terrain.kernels import bilinear_with_gradient
+from terrain.queries import _consts, _ned
+
+_GOLD = 0.6180339887498949
+OUT_R, OUT_THETA, OUT_XB, OUT_YB, OUT_ZB, OUT_DR_DTH, OUT_DR_DPSI, OUT_S, OUT_VALID = range(9)
+N_OUT = 9
+
+
+@njit(cache=True)
+def _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+             vx, vy, vz, un, ue, C, sin_w, max_range, sv, t_guess):
+    """Terrain point on the plane v . p = 0 at across-track coordinate sv (m): returns (f, t, x, y, z) with f
+    the range if it lies in the look window (else inf; no point: t NaN)."""
+    wn = -ue
+    we = un
+    vh = np.sqrt(vx * vx + vy * vy)
+    t = t_guess
+    x = y = z = np.nan
+    for _ in range(12):
+        north = t * un + sv * wn
+        east = t * ue + sv * we
+        dphi = north * imh
+        dlam = east * inhc
+        hp, gl, go = bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, lat + dphi, lon + dlam)
+        if hp != hp:
+            return np.inf, np.nan, x, y, z
+        x, y, z = _ned(dphi, dlam, hp, ha, s_, c_, m, n, dm)
+        g = vx * x + vy * y + vz * z
+        if abs(g) < 1e-4:
+            break
+        dh_dt = gl * un * imh + go * ue * inhc
+        slope = vh - vz * dh_dt
+        if slope < 0.1 * vh:
+            slope = vh
+        step = g / slope
+        if step > 200.0:
+            step = 200.0
+        elif step < -200.0:
+            step = -200.0
+        t -= step
+    r = np.sqrt(x * x + y * y + z * z)
+    by = C[0, 1] * x + C[1, 1] * y + C[2, 1] * z
+    bz = C[0, 2] * x + C[1, 2] * y + C[2, 2] * z
+    if r > max_range or bz <= 0.0 or abs(by) > sin_w * r:
+        return np.inf, t, x, y, z
+    return r, t, x, y, z
+
+
+@njit(cache=True)
+def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+            vx, vy, vz, un, ue, C, sin_w, max_range, a, b, t_guess, iters):
+    """Golden-section minimum of the in-window range over s in [a, b]: (f, s, t, x, y, z)."""
+    c1 = b - _GOLD * (b - a)
+    c2 = a + _GOLD * (b - a)
+    f1, t1, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+                               vx, vy, vz, un, ue, C, sin_w, max_range, c1, t_guess)
+    f2, t2, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+                               vx, vy, vz, un, ue, C, sin_w, max_range, c2, t_guess)
+    tg = t_guess
+    for _ in range(iters):
+        if f1 <= f2:
+            b = c2
+            c2 = c1
+            f2 = f1
+            c1 = b - _GOLD * (b - a)
+            if t1 == t1:
+                tg = t1
+            f1, t1, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
+                                       inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c1, tg)
+        else:
+            a = c1
+            c1 = c2
+            f1 = f2
+            c2 = a + _GOLD * (b - a)
+            if t2 == t2:
+                tg = t2
+            f2, t2, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
+                                       inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c2, tg)
+    sm = 0.5 * (a + b)
+    f, t, x, y, z = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+                             vx, vy, vz, un, ue, C, sin_w, max_range, sm, tg)
+    return f, sm, t, x, y, z
+
+
+@njit(cache=True)
+def _direction(elev, azim):
+    ce = np.cos(elev)
+    return ce * np.cos(azim), ce * np.sin(azim), -np.sin(elev), np.cos(azim), np.sin(azim)
+
+
+@njit(cache=True)
+def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
+              n_golden, out):
+    """Seed 002 eqs 23-26 for hypotheses k (antenna lat[k], lon[k] rad, h[k] m), the epoch's v_ned (3,) and
+    C_bn (3, 3). out (n, N_OUT): R, theta, x_b, y_b, z_b, dR/dtheta_zdl, dR/dpsi_zdl (m/rad), s* (m across
+    track), valid (1/0). d_ang <= 0 skips the eq 24 differences."""
+    vhs = np.sqrt(v_ned[0] ** 2 + v_ned[1] ** 2)
+    elev = np.arctan2(-v_ned[2], vhs)
+    azim = np.arctan2(v_ned[1], v_ned[0])
+    vx, vy, vz, un, ue = _direction(elev, azim)
+    for k in range(lat.shape[0]):
+        for j in range(N_OUT):
+            out[k, j] = np.nan
+        out[k, OUT_VALID] = 0.0
+        la = lat[k]
+        lo = lon[k]
+        ha = h[k]
+        if not (la == la and lo == lo and ha == ha):
+            continue
+        s_, c_, m, n, dm = _consts(la)
+        imh = 1.0 / (m + ha)
+        inhc = 1.0 / ((n + ha) * c_)
+        dz_min = ha - h_max
+        if dz_min < 0.0:
+            dz_min = 0.0
+        best = np.inf
+        s_best = 0.0
+        t_best = 0.0
+        for side in range(2):
+            sgn = 1.0 if side == 0 else -1.0
+            tg = 0.0
+            i = 0 if side == 0 else 1
+            while True:
+                sv = sgn * i * ds_m
+                if sv * sv + dz_min * dz_min > best * best or abs(sv) > max_range:
+                    break
+                f, t, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh,
+                                         inhc, vx, vy, vz, un, ue, C, sin_w, max_range, sv, tg)
+                if t == t:
+                    tg = t
+                if f < best:
+                    best = f
+                    s_best = sv
+                    t_best = t
+                i += 1
+        if not best < np.inf:
+            continue
+        f, sm, t, x, y, z = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
+                                    vx, vy, vz, un, ue, C, sin_w, max_range, s_best - ds_m, s_best + ds_m,
+                                    t_best, n_golden)
+        if not f < best:  # refinement left the window (a window-edge minimum): keep the coarse sample
+            f, t, x, y, z = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
+                                     vx, vy, vz, un, ue, C, sin_w, max_range, s_best, t_best)
+            sm = s_best
+        bx = C[0, 0] * x + C[1, 0] * y + C[2, 0] * z
+        by = C[0, 1] * x + C[1, 1] * y + C[2, 1] * z
+        bz = C[0, 2] * x + C[1, 2] * y + C[2, 2] * z
+        out[k, OUT_R] = f
+        out[k, OUT_THETA] = np.arctan(by / np.sqrt(bx * bx + bz * bz))   # eq 26
+        out[k, OUT_XB] = bx
+        out[k, OUT_YB] = by
+        out[k, OUT_ZB] = bz
+        out[k, OUT_S] = sm
+        out[k, OUT_VALID] = 1.0
+        if d_ang > 0.0:
+            # eq 24's first factor: the range when the ZDL is tilted / turned, searched near the closest point
+            dr = np.zeros(2)
+            for q in range(2):
+                fp = np.empty(2)
+                for sgn_i in range(2):
+                    sg = d_ang if sgn_i == 0 else -d_ang
+                    if q == 0:
+                        wx, wy, wz, wun, wue = _direction(elev + sg, azim)
+                    else:
+                        wx, wy, wz, wun, wue = _direction(elev, azim + sg)
+                    fq, _, _, _, _, _ = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm,
+                                                imh, inhc, wx, wy, wz, wun, wue, C, sin_w, max_range,
+                                                sm - ds_m, sm + ds_m, t, n_golden)
+                    fp[sgn_i] = fq
+                dr[q] = (fp[0] - fp[1]) / (2.0 * d_ang)
+            out[k, OUT_DR_DTH] = dr[0]
+            out[k, OUT_DR_DPSI] = dr[1]
+
+
+@njit(cache=True)
+def zdl_angle_jacobian(v_ned):
+    """d(theta_zdl, psi_zdl) / d(v_n, v_e, v_d) (2 x 3, rad per m/s): theta_zdl = atan2(-v_d, |v_h|) (the
+    ZDL plane's tilt), psi_zdl = atan2(v_e, v_n) (its azimuth). Eq 24's second factor (see the module
+    docstring for the departure from the printed matrix)."""
+    vn, ve, vd = v_ned[0], v_ned[1], v_ned[2]
+    vh2 = vn * vn + ve * ve
+    vh = np.sqrt(vh2)
+    v2 = vh2 + vd * vd
+    J = np.zeros((2, 3))
+    J[0, 0] = vd * vn / (vh * v2)
+    J[0, 1] = vd * ve / (vh * v2)
+    J[0, 2] = -vh / v2
+    J[1, 0] = -ve / vh2
+    J[1, 1] = vn / vh2
+    return J
+
+
+@njit(cache=True)
+def measurement_rows(out, v_ned, C, H):
+    """H (n, 2, 6): the rows of eqs 24-25 for each hypothesis over [dv_n, dv_e, dv_d, eps_n, eps_e, eps_d]
+    (errors computed minus true; see the module docstring). Invalid hypotheses get zeros."""
+    J = zdl_angle_jacobian(v_ned)
+    for k in range(out.shape[0]):
+        for a in range(2):
+            for b in range(6):
+                H[k, a, b] = 0.0
+        if out[k, OUT_VALID] < 0.5:
+            continue
+        d1 = out[k, OUT_DR_DTH]
+        d2 = out[k, OUT_DR_DPSI]
+        if d1 == d1 and d2 == d2:
+            for b in range(3):
+                H[k, 0, b] = -(d1 * J[0, b] + d2 * J[1, b])          # eq 24, with dv = v_ins - v_true
+        bx = out[k, OUT_XB]
+        bz = out[k, OUT_ZB]
+        rho = np.sqrt(bx * bx + bz * bz)
+        gb0 = bz / rho                                                # eq 25 (body axes)
+        gb2 = -bx / rho
+        for a in range(3):
+            H[k, 1, 3 + a] = C[a, 0] * gb0 + C[a, 2] * gb2            # to NED: C_bn g_b
+
+
+def cloud_height_max(dem, lat_rad: np.ndarray, lon_rad: np.ndarray, margin_m: float) -> float:
+    """Highest post of the DEM within margin_m of the hypotheses' bounding box (the search's bound)."""
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    r = 6.371e6
+    dla = margin_m / r
+    dlo = margin_m / (r * np.cos(float(np.nanmean(lat_rad))))
+    i0 = max(int(np.floor((np.nanmin(lat_rad) - dla - lat0) / dlat)), 0)
+    i1 = min(int(np.ceil((np.nanmax(lat_rad) + dla - lat0) / dlat)) + 1, heights.shape[0])
+    j0 = max(int(np.floor((np.nanmin(lon_rad) - dlo - lon0) / dlon)), 0)
+    j1 = min(int(np.ceil((np.nanmax(lon_rad) + dlo - lon0) / dlon)) + 1, heights.shape[1])
+    if i1 <= i0 or j1 <= j0:
+        return float(np.nanmax(heights))
+    block = heights[i0:i1, j0:j1]
+    return float(np.nanmax(block)) if np.isfinite(block).any() else float(np.nanmax(heights))
+
+
+def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float = np.radians(45.0),
+                max_range_m: float = 10000.0, ds_m: float = 30.0, d_ang_rad: float = 1e-3,
+                n_golden: int = 24) -> np.ndarray:
+    """eqs 23-26 for hypotheses (arrays lat, lon rad, h m) sharing v_ned (3,) and C_bn (3, 3); returns
+    zdl_batch's (n, N_OUT) array (see OUT_*)."""
+    lat = np.ascontiguousarray(lat_rad, float).ravel()
+    lon = np.ascontiguousarray(lon_rad, float).ravel()
+    h = np.ascontiguousarray(h_m, float).ravel()
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    out = np.empty((lat.shape[0], N_OUT))
+    # every closest point lies within its range of the antenna, and the range is at most the range to the ZDL
+    # point under the antenna (~AGL / cos(gamma)): bound the terrain over that margin (with 50 % spare)
+    h_nadir = dem.height(lat, lon)
+    agl = np.nanmax(h - h_nadir) if np.isfinite(h_nadir).any() else np.nan
+    margin = float(min(max_range_m, 1.5 * agl + 200.0)) if np.isfinite(agl) and agl > 0 else float(max_range_m)
+    h_max = cloud_height_max(dem, lat, lon, margin)
+    zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, np.ascontiguousarray(v_ned, float),
+              np.ascontiguousarray(C_bn, float), float(np.sin(half_window_rad)), float(max_range_m), h_max,
+              float(ds_m), float(d_ang_rad), int(n_golden), out)
+    return out
+
+
+__all__ = ["N_OUT", "OUT_DR_DPSI", "OUT_DR_DTH", "OUT_R", "OUT_S", "OUT_THETA", "OUT_VALID", "OUT_XB",
+           "OUT_YB", "OUT_ZB", "cloud_height_max", "measurement_rows", "predict_ira", "zdl_angle_jacobian",
+           "zdl_batch"]
