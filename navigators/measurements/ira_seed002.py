@@ -22,7 +22,8 @@ all hypotheses: in the RBPF velocity and attitude are the Kalman part, entering 
 
 Search per hypothesis: a coarse scan of the ZDL in across-track steps ds_m from the nadir outwards, each side
 stopped once the lower bound sqrt(s^2 + (h_a - h_max)^2) exceeds the best range (h_max: the highest terrain
-near the cloud), then golden-section refinement around the best sample. Each ZDL point is a Newton solve of
+near the cloud), samples skipped whose across-track strip bin (strip_bounds: the highest post near it, one
+table per epoch shared by the cloud) cannot beat the best, then golden-section refinement around the best sample. Each ZDL point is a Newton solve of
 the plane condition along track in the bilinear cell. Checked against the exact branch-and-bound search
 terrain.queries.ira_return.
 
@@ -87,13 +88,18 @@ def _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, im
 @njit(cache=True)
 def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
             vx, vy, vz, un, ue, C, sin_w, max_range, a, b, t_guess, iters):
-    """Golden-section minimum of the in-window range over s in [a, b]: (f, s, t, x, y, z)."""
+    """Golden-section minimum of the in-window range over s in [a, b]: (f, s, t, x, y, z) of the lowest
+    point evaluated (a minimum on the look window's edge is approached from inside)."""
     c1 = b - _GOLD * (b - a)
     c2 = a + _GOLD * (b - a)
-    f1, t1, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
-                               vx, vy, vz, un, ue, C, sin_w, max_range, c1, t_guess)
-    f2, t2, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
-                               vx, vy, vz, un, ue, C, sin_w, max_range, c2, t_guess)
+    f1, t1, x1, y1, z1 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+                                  vx, vy, vz, un, ue, C, sin_w, max_range, c1, t_guess)
+    f2, t2, x2, y2, z2 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+                                  vx, vy, vz, un, ue, C, sin_w, max_range, c2, t_guess)
+    if f1 <= f2:
+        fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
+    else:
+        fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
     tg = t_guess
     for _ in range(iters):
         if f1 <= f2:
@@ -103,8 +109,10 @@ def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh
             c1 = b - _GOLD * (b - a)
             if t1 == t1:
                 tg = t1
-            f1, t1, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
-                                       inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c1, tg)
+            f1, t1, x1, y1, z1 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
+                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c1, tg)
+            if f1 < fb:
+                fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
         else:
             a = c1
             c1 = c2
@@ -112,12 +120,11 @@ def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh
             c2 = a + _GOLD * (b - a)
             if t2 == t2:
                 tg = t2
-            f2, t2, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
-                                       inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c2, tg)
-    sm = 0.5 * (a + b)
-    f, t, x, y, z = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
-                             vx, vy, vz, un, ue, C, sin_w, max_range, sm, tg)
-    return f, sm, t, x, y, z
+            f2, t2, x2, y2, z2 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
+                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c2, tg)
+            if f2 < fb:
+                fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
+    return fb, sb, tb, xb, yb, zb
 
 
 @njit(cache=True)
@@ -128,7 +135,7 @@ def _direction(elev, azim):
 
 @njit(cache=True)
 def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
-              n_golden, out):
+              n_golden, lat_c, lon_c, s_lo, bin_hmax, out):
     """Seed 002 eqs 23-26 for hypotheses k (antenna lat[k], lon[k] rad, h[k] m), the epoch's v_ned (3,) and
     C_bn (3, 3). out (n, N_OUT): R, theta, x_b, y_b, z_b, dR/dtheta_zdl, dR/dpsi_zdl (m/rad), s* (m across
     track), valid (1/0). d_ang <= 0 skips the eq 24 differences."""
@@ -136,6 +143,8 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
     elev = np.arctan2(-v_ned[2], vhs)
     azim = np.arctan2(v_ned[1], v_ned[0])
     vx, vy, vz, un, ue = _direction(elev, azim)
+    nb = bin_hmax.shape[0]
+    sc, cc, mc, nc, _ = _consts(lat_c)
     for k in range(lat.shape[0]):
         for j in range(N_OUT):
             out[k, j] = np.nan
@@ -154,6 +163,11 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
         best = np.inf
         s_best = 0.0
         t_best = 0.0
+        best2 = np.inf
+        s_best2 = 0.0
+        t_best2 = 0.0
+        # across-track offset of this antenna from the cloud centre (the strip bins' origin)
+        sig = (la - lat_c) * (mc + ha) * (-ue) + (lo - lon_c) * (nc + ha) * cc * un
         for side in range(2):
             sgn = 1.0 if side == 0 else -1.0
             tg = 0.0
@@ -162,20 +176,42 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
                 sv = sgn * i * ds_m
                 if sv * sv + dz_min * dz_min > best * best or abs(sv) > max_range:
                     break
+                if nb > 0 and best < np.inf:  # the strip's terrain bound: skip samples that cannot win
+                    ib = int(np.floor((sv + sig - s_lo) / ds_m))
+                    if 0 <= ib < nb:
+                        dzb = ha - bin_hmax[ib]
+                        if dzb > 0.0 and sv * sv + dzb * dzb > best * best:
+                            i += 1
+                            continue
                 f, t, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh,
                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, sv, tg)
                 if t == t:
                     tg = t
                 if f < best:
+                    if abs(sv - s_best) > 1.5 * ds_m:  # the old best becomes the runner-up basin
+                        best2 = best
+                        s_best2 = s_best
+                        t_best2 = t_best
                     best = f
                     s_best = sv
                     t_best = t
+                elif f < best2 and abs(sv - s_best) > 1.5 * ds_m:
+                    best2 = f
+                    s_best2 = sv
+                    t_best2 = t
                 i += 1
         if not best < np.inf:
             continue
         f, sm, t, x, y, z = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
                                     vx, vy, vz, un, ue, C, sin_w, max_range, s_best - ds_m, s_best + ds_m,
                                     t_best, n_golden)
+        if best2 < best + 0.3 * ds_m:  # a second basin nearly as low: refine it too, keep the lower
+            f2, sm2, t2, x2, y2, z2 = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh,
+                                              inhc, vx, vy, vz, un, ue, C, sin_w, max_range, s_best2 - ds_m,
+                                              s_best2 + ds_m, t_best2, n_golden)
+            if f2 < f:
+                f, sm, t, x, y, z = f2, sm2, t2, x2, y2, z2
+                best, s_best, t_best = best2, s_best2, t_best2
         if not f < best:  # refinement left the window (a window-edge minimum): keep the coarse sample
             f, t, x, y, z = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
                                      vx, vy, vz, un, ue, C, sin_w, max_range, s_best, t_best)
@@ -203,11 +239,47 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
                         wx, wy, wz, wun, wue = _direction(elev, azim + sg)
                     fq, _, _, _, _, _ = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm,
                                                 imh, inhc, wx, wy, wz, wun, wue, C, sin_w, max_range,
-                                                sm - ds_m, sm + ds_m, t, n_golden)
+                                                sm - 10.0, sm + 10.0, t, 14)
                     fp[sgn_i] = fq
                 dr[q] = (fp[0] - fp[1]) / (2.0 * d_ang)
             out[k, OUT_DR_DTH] = dr[0]
             out[k, OUT_DR_DPSI] = dr[1]
+
+
+@njit(cache=True)
+def strip_bounds(heights, lat0, lon0, dlat, dlon, lat_c, lon_c, h_c, un, ue, s_lo, ds, nb, s_half, t_half):
+    """Highest terrain post near each across-track bin [s_lo + b ds, s_lo + (b + 1) ds) of the strip
+    |along-track| <= t_half around the cloud centre's ZDL direction (u = (un, ue) along, w = (-ue, un)
+    across). Every bilinear height in a cell is at most its highest corner post, so dilating each post by the
+    cell diagonal makes the bins upper bounds of the terrain (-inf: no post)."""
+    out = np.full(nb, -np.inf)
+    s_, c_, m, n, _ = _consts(lat_c)
+    dn = (m + h_c) * dlat
+    de = (n + h_c) * c_ * dlon
+    diag = np.sqrt(dn * dn + de * de)
+    ext = s_half + t_half + diag
+    n_lat, n_lon = heights.shape
+    i0 = max(int(np.floor((lat_c - ext / (m + h_c) - lat0) / dlat)), 0)
+    i1 = min(int(np.ceil((lat_c + ext / (m + h_c) - lat0) / dlat)) + 1, n_lat)
+    j0 = max(int(np.floor((lon_c - ext / ((n + h_c) * c_) - lon0) / dlon)), 0)
+    j1 = min(int(np.ceil((lon_c + ext / ((n + h_c) * c_) - lon0) / dlon)) + 1, n_lon)
+    for i in range(i0, i1):
+        north = (lat0 + i * dlat - lat_c) * (m + h_c)
+        for j in range(j0, j1):
+            hp = heights[i, j]
+            if hp != hp:
+                continue
+            east = (lon0 + j * dlon - lon_c) * (n + h_c) * c_
+            t = north * un + east * ue
+            if abs(t) > t_half + diag:
+                continue
+            sv = -north * ue + east * un
+            b0 = int(np.floor((sv - diag - s_lo) / ds))
+            b1 = int(np.floor((sv + diag - s_lo) / ds))
+            for b in range(max(b0, 0), min(b1, nb - 1) + 1):
+                if hp > out[b]:
+                    out[b] = hp
+    return out
 
 
 @njit(cache=True)
@@ -270,8 +342,8 @@ def cloud_height_max(dem, lat_rad: np.ndarray, lon_rad: np.ndarray, margin_m: fl
 
 
 def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float = np.radians(45.0),
-                max_range_m: float = 10000.0, ds_m: float = 30.0, d_ang_rad: float = 1e-3,
-                n_golden: int = 24) -> np.ndarray:
+                max_range_m: float = 10000.0, ds_m: float = 45.0, d_ang_rad: float = 1e-3,
+                n_golden: int = 20) -> np.ndarray:
     """eqs 23-26 for hypotheses (arrays lat, lon rad, h m) sharing v_ned (3,) and C_bn (3, 3); returns
     zdl_batch's (n, N_OUT) array (see OUT_*)."""
     lat = np.ascontiguousarray(lat_rad, float).ravel()
@@ -285,9 +357,28 @@ def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float 
     agl = np.nanmax(h - h_nadir) if np.isfinite(h_nadir).any() else np.nan
     margin = float(min(max_range_m, 1.5 * agl + 200.0)) if np.isfinite(agl) and agl > 0 else float(max_range_m)
     h_max = cloud_height_max(dem, lat, lon, margin)
-    zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, np.ascontiguousarray(v_ned, float),
-              np.ascontiguousarray(C_bn, float), float(np.sin(half_window_rad)), float(max_range_m), h_max,
-              float(ds_m), float(d_ang_rad), int(n_golden), out)
+    v = np.ascontiguousarray(v_ned, float)
+    ok = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
+    bins = np.zeros(0)
+    lat_c = lon_c = s_lo = 0.0
+    vh = float(np.hypot(v[0], v[1]))
+    if ok.any() and vh > 0 and np.isfinite(margin):
+        lat_c, lon_c, h_c = float(np.mean(lat[ok])), float(np.mean(lon[ok])), float(np.mean(h[ok]))
+        un, ue = v[0] / vh, v[1] / vh
+        r_e = 6.371e6
+        north = (lat[ok] - lat_c) * r_e
+        east = (lon[ok] - lon_c) * r_e * np.cos(lat_c)
+        spread_t = float(np.max(np.abs(north * un + east * ue)))
+        spread_s = float(np.max(np.abs(-north * ue + east * un)))
+        s_half = margin + spread_s + ds_m
+        t_half = spread_t + margin * abs(v[2]) / vh + 50.0
+        s_lo = -s_half
+        nb = int(np.ceil(2.0 * s_half / ds_m)) + 1
+        bins = strip_bounds(heights, lat0, lon0, dlat, dlon, lat_c, lon_c, h_c, un, ue, s_lo, float(ds_m), nb,
+                            s_half, t_half)
+    zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v, np.ascontiguousarray(C_bn, float),
+              float(np.sin(half_window_rad)), float(max_range_m), h_max, float(ds_m), float(d_ang_rad),
+              int(n_golden), lat_c, lon_c, s_lo, bins, out)
     return out
 
 
