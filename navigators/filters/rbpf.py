@@ -1,0 +1,466 @@
+"""IRA-aided Rao-Blackwellized (marginalized) particle filter of seed 002 (`rbpf`).
+
+Structure (seed 002 sections II-III): a strapdown INS (navigators.inertial, 50 Hz error-model steps) and the
+15-state INS error model of eqs 16-22 (navigators.inertial.error_model_15). The position error is the
+particles' nonlinear part x^n (here in metres north, east, up: eq 17's dL, dlambda scaled by the radii);
+velocity error, attitude error and the accelerometer and gyro bias errors (12 states) are each particle's
+Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
+
+- time update over the interval since the last epoch, eqs 5-8 and 13-15, with the error model's transition
+  Phi multiplied up along the INS history and Table 1's process noise per epoch (Q^n, Q^l diagonal);
+- IRA measurement update at the IRA sample of the epoch: each particle's predicted range (eq 23, the
+  minimum over the zero-Doppler line of the INS velocity) and look angle (eq 26) from its position, and the
+  step-wise linearisation in velocity (eq 24) and attitude (eq 25) as its H
+  (navigators.measurements.ira_seed002); weights by eq 9's predictive density, Kalman update eqs 10-12;
+- GNSS, while SensorFrames.gnss has valid fixes: position updates the weights (a measurement of x^n), the
+  velocity each particle's Kalman part; TRN carries on alone when GNSS is denied;
+- systematic resampling when the effective sample size falls below ess_threshold * N;
+- feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
+  subtracted from every particle, so the error model stays linear about a good INS.
+
+Estimate: the corrected INS; covariance: the mixture's 9 x 9 (position from the cloud, the rest from the
+Kalman parts, cross terms included) at the last epoch. Estimate.extra after an IRA update: the fixed keys of
+navigators.protocol (innovation and its covariance from the mixture's predictive moments, NIS with 2 dof,
+log-likelihood log sum w p(y | particle), ESS before resampling).
+
+Defaults are seed 002 Table 1: 1,000 particles, sigma_R 3.5 m, sigma_theta 0.1 deg, initial position sigma
+(50, 50, 20) m, velocity (1/sqrt 2, 1/sqrt 2, 0.5) m/s, attitude 0.1 deg, accelerometer bias 1e-4 m/s^2;
+process noise per epoch: position 0.5 m, velocity 1e-4 m/s, attitude 1e-6 rad, biases 1e-7. Table 1's u2
+row lists five numbers for twelve states; we read them as (horizontal velocity, vertical velocity,
+attitude, accelerometer bias, gyro bias). Table 1 gives no gyro bias prior; ours is gyro_bias_sigma_rps.
+No barometer (seed 002: IMU and IRA only), so the INS vertical channel is free and the filter estimates it.
+
+At run time it never raises: a NaN or invalid IRA sample is skipped, particles whose hypothesis has no
+return (off the map) get zero weight; if every weight vanishes the cloud is re-initialised around the INS
+with the prior spread; each is counted in Health (status "degraded") with an event.
+Randomness: only from `rng` (the scenario's navigator stream), so one seed fixes a run bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import navigators.filters._rbpf_kernels as kern
+from navigators.frames import SensorFrames
+from navigators.inertial.error_model_15 import transition_over_history
+from navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from navigators.measurements import ira_seed002 as ira_model
+from navigators.protocol import (
+    EXTRA_ESS,
+    EXTRA_INNOVATION,
+    EXTRA_INNOVATION_COV,
+    EXTRA_LOG_LIKELIHOOD,
+    EXTRA_MEASUREMENT_TIME,
+    EXTRA_NIS,
+    EXTRA_NIS_DOF,
+    Estimate,
+    Health,
+)
+from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+MAX_PARTICLES = 200_000       # 12 x 12 covariance per particle: 230 MB at this count
+_BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
+
+
+def _positive(name: str, value, allow_zero: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a number, got {value!r}") from exc
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
+    return v
+
+
+def _triple(name: str, value, allow_zero: bool = True) -> np.ndarray:
+    arr = np.asarray(value, float).ravel()
+    if arr.shape != (3,):
+        raise ValueError(f"{name} must have three entries, got {value!r}")
+    for i, v in enumerate(arr):
+        _positive(f"{name}[{i}]", v, allow_zero)
+    return arr
+
+
+class RaoBlackwellizedPF:
+    """Seed 002's IRA-aided RBPF; see the module docstring. Settings (SI, 1 sigma):
+
+    dem: the navigator's map (terrain.Dem or a name for terrain.load), required. rng: numpy Generator
+    (None: default_rng(0)). n_particles; ess_threshold in (0, 1]; trn_rate_hz; error_model_rate_hz (the
+    error model's step, 50 Hz); range_sigma_m, look_angle_sigma_deg; half_window_deg, max_range_m (the IRA's
+    look window, as the sensor's); init_pos_sigma_m (N, E, up), init_vel_sigma_mps, init_att_sigma_deg,
+    accel_bias_sigma_mps2, gyro_bias_sigma_rps; q_pos_m (3), q_vel_mps (horizontal, vertical),
+    q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (horizontal, vertical),
+    gnss_vel_sigma_mps; imu_samples ("interval" | "instant"); gravity_gradient (error model, see
+    error_model_15).
+    """
+
+    def __init__(
+        self,
+        dem=None,
+        rng: np.random.Generator | None = None,
+        n_particles: int = 1000,
+        ess_threshold: float = 0.5,
+        trn_rate_hz: float = 1.0,
+        error_model_rate_hz: float = 50.0,
+        range_sigma_m: float = 3.5,
+        look_angle_sigma_deg: float = 0.1,
+        half_window_deg: float = 45.0,
+        max_range_m: float = 10000.0,
+        init_pos_sigma_m=(50.0, 50.0, 20.0),
+        init_vel_sigma_mps=(1 / math.sqrt(2), 1 / math.sqrt(2), 0.5),
+        init_att_sigma_deg=(0.1, 0.1, 0.1),
+        accel_bias_sigma_mps2: float = 1e-4,
+        gyro_bias_sigma_rps: float = 1e-6,
+        q_pos_m=(0.5, 0.5, 0.5),
+        q_vel_mps=(1e-4, 1e-4),
+        q_att_rad: float = 1e-6,
+        q_accel_bias_mps2: float = 1e-7,
+        q_gyro_bias_rps: float = 1e-7,
+        gnss_pos_sigma_m=(2.0, 4.0),
+        gnss_vel_sigma_mps: float = 0.1,
+        imu_samples: str = "interval",
+        gravity_gradient: bool = True,
+        name: str = "rbpf",
+    ):
+        if dem is None:
+            raise ValueError("dem: the RBPF needs the navigator's terrain map")
+        if isinstance(dem, str):
+            import terrain
+
+            dem = terrain.load(dem)
+        if not hasattr(dem, "grid"):
+            raise ValueError(f"dem must be a terrain.Dem or a map name, got {type(dem).__name__}")
+        if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)):
+            raise ValueError(f"n_particles must be an integer, got {n_particles!r}")
+        if not 2 <= int(n_particles) <= MAX_PARTICLES:
+            raise ValueError(f"n_particles must lie in [2, {MAX_PARTICLES}] "
+                             f"({_BYTES_PER_PARTICLE} bytes each), got {n_particles}")
+        e = _positive("ess_threshold", ess_threshold)
+        if not 0.0 < e <= 1.0:
+            raise ValueError(f"ess_threshold must lie in (0, 1], got {ess_threshold!r}")
+        if imu_samples not in ("interval", "instant"):
+            raise ValueError(f"imu_samples must be 'interval' or 'instant', got {imu_samples!r}")
+        hw = _positive("half_window_deg", half_window_deg)
+        if not hw < 90.0:
+            raise ValueError(f"half_window_deg must lie in (0, 90), got {half_window_deg!r}")
+        if rng is not None and not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
+        self.name = name
+        self.dem = dem
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.n = int(n_particles)
+        self.ess_threshold = e
+        self.trn_period_s = 1.0 / _positive("trn_rate_hz", trn_rate_hz)
+        self.dt_err = 1.0 / _positive("error_model_rate_hz", error_model_rate_hz)
+        self.r_var = np.array([_positive("range_sigma_m", range_sigma_m) ** 2,
+                               math.radians(_positive("look_angle_sigma_deg", look_angle_sigma_deg)) ** 2])
+        self.half_window_rad = math.radians(hw)
+        self.max_range_m = _positive("max_range_m", max_range_m)
+        self.init_pos_sigma = _triple("init_pos_sigma_m", init_pos_sigma_m, False)
+        sv = _triple("init_vel_sigma_mps", init_vel_sigma_mps)
+        sa = np.radians(_triple("init_att_sigma_deg", init_att_sigma_deg))
+        sba = _positive("accel_bias_sigma_mps2", accel_bias_sigma_mps2, True)
+        sbg = _positive("gyro_bias_sigma_rps", gyro_bias_sigma_rps, True)
+        self.P0 = np.diag(np.r_[sv, sa, [sba] * 3, [sbg] * 3] ** 2)
+        self.qn_var = _triple("q_pos_m", q_pos_m, False) ** 2
+        qv = np.asarray(q_vel_mps, float).ravel()
+        if qv.shape != (2,):
+            raise ValueError(f"q_vel_mps must have two entries (horizontal, vertical), got {q_vel_mps!r}")
+        for i, v in enumerate(qv):
+            _positive(f"q_vel_mps[{i}]", v, True)
+        self.ql_var = np.r_[qv[0], qv[0], qv[1], [_positive("q_att_rad", q_att_rad, True)] * 3,
+                            [_positive("q_accel_bias_mps2", q_accel_bias_mps2, True)] * 3,
+                            [_positive("q_gyro_bias_rps", q_gyro_bias_rps, True)] * 3] ** 2
+        gp = np.asarray(gnss_pos_sigma_m, float).ravel()
+        if gp.shape != (2,):
+            raise ValueError(f"gnss_pos_sigma_m must have two entries (horizontal, vertical), got {gnss_pos_sigma_m!r}")
+        for i, v in enumerate(gp):
+            _positive(f"gnss_pos_sigma_m[{i}]", v)
+        self.gnss_pos_var = np.array([gp[0], gp[0], gp[1]]) ** 2
+        self.gnss_vel_var = np.full(3, _positive("gnss_vel_sigma_mps", gnss_vel_sigma_mps)) ** 2
+        self.gravity_gradient = bool(gravity_gradient)
+        self.ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=imu_samples)
+        self.health = Health()
+        self._reset_done = False
+
+    # ------------------------------------------------------------------ protocol
+    def reset(self, initial: Estimate) -> None:
+        self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
+                       initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
+        self._init_cloud()
+        self.health = Health(status="acquiring", ok=True)
+        self._t_next = float(initial.t_s) + self.trn_period_s
+        self._t_gnss_next = float(initial.t_s)
+        self._Phi = np.eye(15)
+        self._last_row = None          # INS row and specific force carried into the next chunk
+        self._extra: dict = {}
+        self._cov9 = self._covariance9()
+        self.epochs = 0
+        self.resamples = 0
+        self._reset_done = True
+
+    def _init_cloud(self) -> None:
+        n = self.n
+        self.xn = self.rng.standard_normal((n, 3)) * self.init_pos_sigma
+        self.xl = np.zeros((n, 12))
+        self.P = np.broadcast_to(self.P0, (n, 12, 12)).copy()
+        self.logw = np.full(n, -math.log(n))
+
+    def update(self, frames: SensorFrames) -> Estimate:
+        if not self._reset_done:
+            raise RuntimeError("RaoBlackwellizedPF.update before reset")
+        self.health.events = []
+        imu = frames.imu
+        if imu is None or imu.t_s.shape[0] == 0:
+            self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
+            return self.estimate()
+        t = np.asarray(imu.t_s, float)
+        f_b = np.asarray(imu.f_b_mps2, float)
+        w_b = np.asarray(imu.omega_ib_b_rps, float)
+        ok = np.asarray(imu.valid, bool)
+        epochs = self._epochs_in(frames, t)
+        a = 0
+        n = t.shape[0]
+        for t_ep, y_ira, gnss in epochs:
+            b = int(np.searchsorted(t, t_ep, side="right"))
+            if b > a:
+                self._propagate(t[a:b], f_b[a:b], w_b[a:b], ok[a:b])
+                a = b
+            self._epoch(t_ep, y_ira, gnss)
+        if a < n:
+            self._propagate(t[a:], f_b[a:], w_b[a:], ok[a:])
+        return self.estimate()
+
+    # ------------------------------------------------------------------ internals
+    def _epochs_in(self, frames: SensorFrames, t: np.ndarray) -> list:
+        """(time, (R, theta) or None, gnss tuple or None) of the TRN epochs falling in this frame: the
+        first valid IRA sample at or after each due time (GNSS: the fix nearest it, while available)."""
+        out = []
+        ira = frames.ira
+        t_last = float(t[-1])
+        gn = frames.gnss
+        if gn is not None and gn.t_s.shape[0]:
+            gv = np.asarray(gn.valid, bool) & np.all(np.isfinite(gn.v_ned_mps), axis=1) & np.isfinite(gn.lat_rad)
+        else:
+            gv = None
+        if ira is not None and ira.t_s.shape[0]:
+            ts = np.asarray(ira.t_s, float)
+            good = np.asarray(ira.valid, bool) & np.isfinite(ira.range_m) & np.isfinite(ira.look_angle_rad)
+            n_bad = int((~good).sum())
+            if n_bad:
+                self.health.skip(float(ts[0]), "ira_invalid", f"{n_bad} IRA samples invalid or NaN")
+                self.health.skipped["ira_invalid"] += n_bad - 1
+            i = 0
+            while True:
+                i = int(np.searchsorted(ts, self._t_next - 1e-9, side="left"))
+                while i < ts.shape[0] and not good[i]:
+                    i += 1
+                if i >= ts.shape[0] or ts[i] > t_last + 1e-9:
+                    break
+                te = float(ts[i])
+                g = self._gnss_at(gn, gv, te)
+                out.append((te, (float(ira.range_m[i]), float(ira.look_angle_rad[i])), g))
+                self._t_next = te + self.trn_period_s
+        elif gv is not None and gv.any():  # no IRA: GNSS epochs alone at the TRN rate
+            ts = np.asarray(gn.t_s, float)
+            for i in np.flatnonzero(gv):
+                te = float(ts[i])
+                if te + 1e-9 >= self._t_next and te <= t_last + 1e-9:
+                    out.append((te, None, self._gnss_at(gn, gv, te)))
+                    self._t_next = te + self.trn_period_s
+        return out
+
+    @staticmethod
+    def _gnss_at(gn, gv, te):
+        if gv is None or not gv.any():
+            return None
+        ts = np.asarray(gn.t_s, float)
+        idx = np.flatnonzero(gv)
+        j = idx[np.argmin(np.abs(ts[idx] - te))]
+        if abs(ts[j] - te) > 0.5:
+            return None
+        return (float(ts[j]), float(gn.lat_rad[j]), float(gn.lon_rad[j]), float(gn.h_m[j]),
+                np.asarray(gn.v_ned_mps[j], float).copy())
+
+    def _propagate(self, t, f_b, w_b, ok) -> None:
+        bad0 = self.ins.bad_imu_samples
+        hist = self.ins.propagate(t, f_b, w_b, ok)
+        if self.ins.bad_imu_samples > bad0:
+            self.health.skip(float(t[0]), "imu_invalid",
+                             f"{self.ins.bad_imu_samples - bad0} IMU samples invalid (held previous)")
+        # error-model transition over this stretch at the error model's rate (eq 16 discretised)
+        stride = max(int(round(self.dt_err / max(float(np.median(np.diff(t))) if t.shape[0] > 1 else
+                                                  self.dt_err, 1e-6))), 1)
+        fb = np.where(np.isfinite(f_b), f_b, 0.0)
+        rows = np.arange(0, t.shape[0], stride)
+        if rows.shape[0]:
+            dt = stride * (float(t[1] - t[0]) if t.shape[0] > 1 else self.dt_err)
+            Phi = transition_over_history(hist[rows], fb[rows], self.ins.accel_bias_b, 0, rows.shape[0], dt,
+                                          self.gravity_gradient)
+            if np.all(np.isfinite(Phi)):
+                self._Phi = Phi @ self._Phi
+
+    def _metric_scale(self) -> np.ndarray:
+        lat, h = self.ins.state[0], self.ins.state[2]
+        return np.array([meridian_radius_m(lat) + h, (prime_vertical_radius_m(lat) + h) * math.cos(lat), 1.0])
+
+    def _ins_at(self, te: float):
+        """INS position at te (the last INS sample time may trail te by < 1 IMU step: dead-reckoned)."""
+        st = self.ins.state
+        dt = te - self.ins.t_s
+        sc = self._metric_scale()
+        v = st[3:6]
+        return (st[0] + v[0] * dt / sc[0], st[1] + v[1] * dt / sc[1], st[2] - v[2] * dt, v.copy(),
+                quat_to_dcm(st[6:10]))
+
+    def _epoch(self, te: float, y_ira, gnss) -> None:
+        self.epochs += 1
+        # ---- time update (eqs 5-8, 13-15) in metric position units
+        T = np.ones(15)
+        T[:3] = self._metric_scale()
+        Phi = self._Phi * T[:, None] / T[None, :]
+        self._Phi = np.eye(15)
+        w = self.rng.standard_normal((self.n, 3))
+        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var, self.ql_var, w)
+        if nbad:
+            self.health.skip(te, "time_update_not_pd", f"{nbad} particles: N not positive definite")
+        logw_prev = self.logw.copy()
+        updated = False
+        ll = np.empty(self.n)
+        lat, lon, h, v, C = self._ins_at(te)
+        sc = self._metric_scale()
+        if y_ira is not None:
+            updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
+        if gnss is not None:
+            self._gnss_update(te, gnss, lat, lon, h, v, sc, ll)
+            updated = True
+        if updated:
+            self._normalise_resample(te, logw_prev)
+        self._feedback()
+        self._cov9 = self._covariance9()
+        if updated and self.health.status == "acquiring":
+            sig = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0))
+            if sig < 30.0:
+                self.health.status = "ok"
+
+    def _ira_update(self, te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll) -> bool:
+        lat_i = lat - self.xn[:, 0] / sc[0]
+        lon_i = lon - self.xn[:, 1] / sc[1]
+        h_i = h - self.xn[:, 2]
+        out = ira_model.predict_ira(self.dem, lat_i, lon_i, h_i, v, C, self.half_window_rad, self.max_range_m)
+        Hs = np.zeros((self.n, 2, 6))
+        ira_model.measurement_rows(out, v, C, Hs)
+        H = np.zeros((self.n, 2, 12))
+        H[:, :, :6] = Hs
+        ok = out[:, ira_model.OUT_VALID] > 0.5
+        if not ok.any():
+            self.health.skip(te, "ira_no_hypothesis", "IRA update skipped: no particle has a return (off map?)")
+            self.health.status, self.health.ok = "degraded", True
+            return False
+        pred = np.stack([out[:, ira_model.OUT_R], out[:, ira_model.OUT_THETA]], axis=1)
+        e = np.where(ok[:, None], np.array(y_ira)[None, :] - pred, 0.0)
+        # innovation moments of the mixture (before the update): the fixed Estimate.extra keys
+        wp = np.exp(logw_prev - logw_prev.max())
+        wp = np.where(ok, wp, 0.0)
+        wp /= wp.sum()
+        yhat = pred + np.einsum("kaj,kj->ka", H, self.xl)
+        S_i = np.einsum("kaj,kjl,kbl->kab", H, self.P, H) + np.diag(self.r_var)[None]
+        ybar = (wp[:, None] * np.where(ok[:, None], yhat, 0.0)).sum(0)
+        d = np.where(ok[:, None], yhat - ybar, 0.0)
+        S = (wp[:, None, None] * (np.where(ok[:, None, None], S_i, 0.0) + d[:, :, None] * d[:, None, :])).sum(0)
+        nu = np.array(y_ira) - ybar
+        n_bad = kern.linear_update(self.xl, self.P, H, e, self.r_var, self.logw, ok, ll)
+        if n_bad:
+            self.health.skipped["ira_particle_no_return"] = self.health.skipped.get("ira_particle_no_return", 0) + n_bad
+        m = np.max(logw_prev)
+        lse_prev = m + math.log(np.sum(np.exp(logw_prev - m)))
+        fin = np.isfinite(self.logw)
+        if fin.any():
+            mm = np.max(self.logw[fin])
+            lse = mm + math.log(np.sum(np.exp(self.logw[fin] - mm)))
+        else:
+            lse = -np.inf
+        try:
+            nis = float(nu @ np.linalg.solve(S, nu))
+        except np.linalg.LinAlgError:
+            nis = float("nan")
+        self._extra = {EXTRA_INNOVATION: nu, EXTRA_INNOVATION_COV: S, EXTRA_NIS: nis, EXTRA_NIS_DOF: 2,
+                       EXTRA_LOG_LIKELIHOOD: float(lse - lse_prev), EXTRA_MEASUREMENT_TIME: te}
+        return True
+
+    def _gnss_update(self, te, gnss, lat, lon, h, v, sc, ll) -> None:
+        _, glat, glon, gh, gv = gnss
+        y = np.array([(lat - glat) * sc[0], (lon - glon) * sc[1], h - gh])
+        kern.position_loglik(self.xn, y, self.gnss_pos_var, self.logw, ll)
+        H = np.zeros((self.n, 3, 12))
+        H[:, 0, 0] = H[:, 1, 1] = H[:, 2, 2] = 1.0
+        e = np.broadcast_to(v - gv, (self.n, 3)).copy()
+        kern.linear_update(self.xl, self.P, H, e, self.gnss_vel_var, self.logw, np.ones(self.n, bool), ll)
+
+    def _normalise_resample(self, te, logw_prev) -> None:
+        fin = np.isfinite(self.logw)
+        if not fin.any():
+            self.health.skip(te, "weights_underflow", "all particle weights vanished: cloud re-initialised")
+            self.health.status, self.health.ok = "degraded", True
+            self._init_cloud()
+            self.xn += 0.0
+            self._extra[EXTRA_ESS] = 0.0
+            return
+        m = np.max(self.logw[fin])
+        w = np.where(fin, np.exp(self.logw - m), 0.0)
+        w /= w.sum()
+        ess = 1.0 / float(np.sum(w * w))
+        self._extra[EXTRA_ESS] = ess
+        if ess < self.ess_threshold * self.n:
+            idx = kern.systematic_resample(w, float(self.rng.random()))
+            self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
+            self.logw = np.full(self.n, -math.log(self.n))
+            self.resamples += 1
+        else:
+            self.logw = np.log(np.where(w > 0, w, 1e-300))
+
+    def _weights(self) -> np.ndarray:
+        m = np.max(self.logw)
+        w = np.exp(self.logw - m)
+        return w / w.sum()
+
+    def _feedback(self) -> None:
+        """Correct the INS by the weighted mean error and subtract it from the particles (an exact change of
+        the linearisation point of the error model)."""
+        w = self._weights()
+        mu, _ = kern.moments(self.xn, self.xl, self.P, w)
+        if not np.all(np.isfinite(mu)):
+            return
+        self.ins.correct(np.array([mu[0], mu[1], -mu[2]]), mu[3:6], mu[6:9])
+        self.ins.accel_bias_b -= mu[9:12]
+        self.ins.gyro_bias_b -= mu[12:15]
+        kern.shift(self.xn, self.xl, mu)
+
+    def _covariance9(self) -> np.ndarray:
+        w = self._weights()
+        _, C15 = kern.moments(self.xn, self.xl, self.P, w)
+        C = C15[:9, :9].copy()
+        s = np.ones(9)
+        s[2] = -1.0           # up -> down
+        return C * s[:, None] * s[None, :]
+
+    # ------------------------------------------------------------------ output
+    def estimate(self) -> Estimate:
+        st = self.ins.state
+        roll, pitch, yaw = euler_from_C_bn(quat_to_dcm(st[6:10]))
+        if not np.all(np.isfinite(st)):
+            self.health.ok, self.health.status = False, "diverged"
+        extra = dict(self._extra)
+        extra.update(accel_bias_b_mps2=self.ins.accel_bias_b.copy(), gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
+                     accel_bias_sigma_mps2=np.sqrt(np.einsum("k,kii->i", self._weights(), self.P[:, 6:9, 6:9])),
+                     position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
+        health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
+                        events=list(self.health.events))
+        return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
+                        v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
+                        covariance=self._cov9.copy(), health=health, extra=extra)
+
+
+__all__ = ["MAX_PARTICLES", "RaoBlackwellizedPF"]
