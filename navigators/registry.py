@@ -3,6 +3,8 @@
 "ins"          strapdown INS + barometer, no terrain aiding (navigators.filters.InsTrnNavigator)
 "ins_tercom"   INS + batch TERCOM (IRA by default, aiding="radar_altimeter" for eq 1) + 13-state EKF;
                needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
+"rbpf"         seed 002's IRA-aided Rao-Blackwellized particle filter (navigators.filters.rbpf); needs dem=,
+               takes rng=
 
 Every navigator validates its settings in its constructor and raises `ValueError` naming the setting.
 A navigator that draws random numbers (particle filters) is registered with `takes_rng=True` and gets the
@@ -47,3 +49,12 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
 def register(name: str, factory: Callable[..., object], takes_rng: bool = False) -> None:
     """Add a navigator factory (a class or a callable taking the settings as keyword arguments)."""
     _FACTORIES[name] = (factory, takes_rng)
+
+
+def _rbpf(**settings):
+    from navigators.filters.rbpf import RaoBlackwellizedPF
+
+    return RaoBlackwellizedPF(**settings)
+
+
+register("rbpf", _rbpf, takes_rng=True)

@@ -60,6 +60,8 @@ from navigators.protocol import (
 )
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
+OUTLIER_SIGMA = 10.0          # an IRA sample farther than this from every particle's prediction is rejected
+REINIT_AFTER_REJECTS = 3      # consecutive rejections that re-initialise the cloud around the INS
 MAX_PARTICLES = 200_000       # 12 x 12 covariance per particle: 230 MB at this count
 _BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
 
@@ -122,6 +124,7 @@ class RaoBlackwellizedPF:
         gnss_vel_sigma_mps: float = 0.1,
         imu_samples: str = "interval",
         gravity_gradient: bool = True,
+        acquisition_spread_m: float = 10.0,
         name: str = "rbpf",
     ):
         if dem is None:
@@ -181,7 +184,10 @@ class RaoBlackwellizedPF:
         self.gnss_pos_var = np.array([gp[0], gp[0], gp[1]]) ** 2
         self.gnss_vel_var = np.full(3, _positive("gnss_vel_sigma_mps", gnss_vel_sigma_mps)) ** 2
         self.gravity_gradient = bool(gravity_gradient)
+        self.acquisition_spread_m = _positive("acquisition_spread_m", acquisition_spread_m, True)
         self.ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=imu_samples)
+        # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
+        self._ll_floor = -0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(self.r_var)) * 1e4) - math.log(2 * math.pi)
         self.health = Health()
         self._reset_done = False
 
@@ -197,6 +203,7 @@ class RaoBlackwellizedPF:
         self._last_row = None          # INS row and specific force carried into the next chunk
         self._extra: dict = {}
         self._cov9 = self._covariance9()
+        self._n_rejected = 0
         self.epochs = 0
         self.resamples = 0
         self._reset_done = True
@@ -366,12 +373,28 @@ class RaoBlackwellizedPF:
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
         yhat = pred + np.einsum("kaj,kj->ka", H, self.xl)
-        S_i = np.einsum("kaj,kjl,kbl->kab", H, self.P, H) + np.diag(self.r_var)[None]
+        S_i = np.einsum("kaj,kjl,kbl->kab", H, self.P, H) + np.diag(self._r_var_now())[None]
         ybar = (wp[:, None] * np.where(ok[:, None], yhat, 0.0)).sum(0)
         d = np.where(ok[:, None], yhat - ybar, 0.0)
         S = (wp[:, None, None] * (np.where(ok[:, None, None], S_i, 0.0) + d[:, :, None] * d[:, None, :])).sum(0)
         nu = np.array(y_ira) - ybar
-        n_bad = kern.linear_update(self.xl, self.P, H, e, self.r_var, self.logw, ok, ll)
+        saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
+        n_bad = kern.linear_update(self.xl, self.P, H, e, self._r_var_now(), self.logw, ok, ll)
+        fin_ll = ll[np.isfinite(ll)]
+        # no particle within OUTLIER_SIGMA of the measurement: in linear weights every one underflows
+        if fin_ll.size == 0 or fin_ll.max() < self._ll_floor:
+            self.xl, self.P, self.logw = saved
+            self._n_rejected += 1
+            if self._n_rejected >= REINIT_AFTER_REJECTS:
+                self.health.skip(te, "weights_underflow",
+                                 f"{self._n_rejected} IRA samples unexplained by every particle: cloud re-initialised")
+                self._init_cloud()
+                self._n_rejected = 0
+            else:
+                self.health.skip(te, "ira_outlier", "IRA sample unexplained by every particle: skipped")
+            self.health.status, self.health.ok = "degraded", True
+            return False
+        self._n_rejected = 0
         if n_bad:
             self.health.skipped["ira_particle_no_return"] = self.health.skipped.get("ira_particle_no_return", 0) + n_bad
         m = np.max(logw_prev)
@@ -389,6 +412,17 @@ class RaoBlackwellizedPF:
         self._extra = {EXTRA_INNOVATION: nu, EXTRA_INNOVATION_COV: S, EXTRA_NIS: nis, EXTRA_NIS_DOF: 2,
                        EXTRA_LOG_LIKELIHOOD: float(lse - lse_prev), EXTRA_MEASUREMENT_TIME: te}
         return True
+
+    def _r_var_now(self) -> np.ndarray:
+        """IRA measurement variances; while the cloud's horizontal spread exceeds acquisition_spread_m they
+        are inflated by (spread / acquisition_spread_m)^2 (at most 100x): tempering against the collapse of
+        1,000 particles spread over 50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb
+        their position's look-angle mismatch as attitude error (our addition; 0 disables it)."""
+        if self.acquisition_spread_m <= 0.0:
+            return self.r_var
+        spread = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0))
+        f = min(max((spread / self.acquisition_spread_m) ** 2, 1.0), 100.0)
+        return self.r_var * f
 
     def _gnss_update(self, te, gnss, lat, lon, h, v, sc, ll) -> None:
         _, glat, glon, gh, gv = gnss

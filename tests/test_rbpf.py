@@ -1,0 +1,161 @@
+"""The RBPF (navigators.filters.rbpf, seed 002): its Kalman part is exact on a linear-Gaussian problem,
+bad settings raise naming the setting, one navigator stream fixes a run bit for bit, bad data never
+crashes it."""
+
+import math
+
+import numpy as np
+import pytest
+
+import terrain
+from navigators import registry
+from navigators.filters import _rbpf_kernels as kern
+from navigators.filters.rbpf import RaoBlackwellizedPF
+from navigators.frames import ImuFrame, IraFrame, SensorFrames
+from navigators.protocol import EXTRA_ESS, EXTRA_INNOVATION, EXTRA_LOG_LIKELIHOOD, EXTRA_NIS, EXTRA_NIS_DOF
+
+
+def test_linear_part_is_the_exact_conditional_kalman_filter():
+    """Linear-Gaussian model: x_{k+1} = Phi x_k + w (x = [x^n (3), x^l (12)]), y_k = c + Hn x^n_k + Hl x^l_k + e
+    (a planar terrain: the range is linear in position). Given one particle's trajectory x^n_{0:T} and
+    y_{1:T}, its (x^l, P) from the kernels must equal p(x^l_T | x^n_{0:T}, y_{1:T}) computed by conditioning
+    the joint Gaussian of all noises directly (no Kalman recursion)."""
+    rng = np.random.default_rng(11)
+    n_steps, m = 6, 2
+    Phi = np.eye(15) + 0.05 * rng.standard_normal((15, 15))
+    qn = rng.uniform(0.5, 2.0, 3)
+    ql = rng.uniform(0.01, 0.1, 12)
+    P0 = np.diag(rng.uniform(0.5, 1.5, 12))
+    Hn = rng.standard_normal((n_steps, m, 3))
+    Hl = rng.standard_normal((n_steps, m, 12))
+    r = np.array([0.3, 0.2])
+    c = rng.standard_normal((n_steps, m))
+    xn0 = rng.standard_normal(3)
+    # simulate the truth
+    x = np.r_[xn0, rng.standard_normal(12) @ np.sqrt(P0)]
+    y = np.empty((n_steps, m))
+    # the particle filter's draws (eq 5): one particle, noises w
+    w = rng.standard_normal((n_steps, 3))
+    xn = xn0[None].copy()
+    xl = np.zeros((1, 12))
+    P = P0[None].copy()
+    traj = [xn0.copy()]
+    logw = np.zeros(1)
+    ll = np.zeros(1)
+    for k in range(n_steps):
+        kern.time_update(xn, xl, P, Phi, qn, ql, w[k:k + 1])
+        traj.append(xn[0].copy())
+        x = Phi @ x + np.r_[rng.standard_normal(3) * np.sqrt(qn), rng.standard_normal(12) * np.sqrt(ql)]
+        y[k] = c[k] + Hn[k] @ x[:3] + Hl[k] @ x[3:] + rng.standard_normal(m) * np.sqrt(r)
+        e = (y[k] - c[k] - Hn[k] @ xn[0])[None]
+        kern.linear_update(xl, P, Hl[k][None], e, r, logw, np.ones(1, bool), ll)
+    # joint Gaussian: Z = [xl0 (12), w_0..w_{T-1} (15 each), e_1..e_T (m each)], zero mean, independent
+    nz = 12 + 15 * n_steps + m * n_steps
+    cov_z = np.diag(np.r_[np.diag(P0), np.tile(np.r_[qn, ql], n_steps), np.tile(r, n_steps)])
+    a = np.r_[xn0, np.zeros(12)]           # x_k = a_k + M_k Z
+    M = np.zeros((15, nz))
+    M[3:, :12] = np.eye(12)
+    obs_rows, obs_vals = [], []
+    for k in range(n_steps):
+        a = Phi @ a
+        M = Phi @ M
+        M[:, 12 + 15 * k:12 + 15 * (k + 1)] += np.eye(15)
+        for i in range(3):                       # observed x^n_{k+1}
+            obs_rows.append((a[i], M[i]))
+            obs_vals.append(traj[k + 1][i])
+        Hk = np.hstack([Hn[k], Hl[k]])
+        ey = np.zeros((m, nz))
+        ey[:, 12 + 15 * n_steps + m * k:12 + 15 * n_steps + m * (k + 1)] = np.eye(m)
+        for i in range(m):                       # observed y_{k+1}
+            obs_rows.append((c[k][i] + Hk[i] @ a, Hk[i] @ M + ey[i]))
+            obs_vals.append(y[k, i])
+    oa = np.array([r_[0] for r_ in obs_rows])
+    OM = np.array([r_[1] for r_ in obs_rows])
+    ov = np.array(obs_vals)
+    tgt_a, TM = a[3:], M[3:]
+    S = OM @ cov_z @ OM.T
+    G = TM @ cov_z @ OM.T @ np.linalg.inv(S)
+    mean = tgt_a + G @ (ov - oa)
+    cov = TM @ cov_z @ TM.T - G @ OM @ cov_z @ TM.T
+    assert np.allclose(xl[0], mean, rtol=0, atol=1e-9 * max(1.0, np.abs(mean).max())), np.abs(xl[0] - mean).max()
+    assert np.allclose(P[0], cov, rtol=0, atol=1e-9), np.abs(P[0] - cov).max()
+
+
+@pytest.fixture(scope="module")
+def dem():
+    return terrain.load("jacksboro")
+
+
+@pytest.mark.parametrize("setting,value", [
+    ("n_particles", 0), ("n_particles", 10**9), ("n_particles", 2.5), ("ess_threshold", 0.0),
+    ("ess_threshold", 1.5), ("range_sigma_m", -1.0), ("look_angle_sigma_deg", float("nan")),
+    ("q_pos_m", (0.5, -0.5, 0.5)), ("trn_rate_hz", 0.0), ("half_window_deg", 95.0),
+    ("init_pos_sigma_m", (50.0, 50.0)), ("gnss_vel_sigma_mps", float("inf")),
+])
+def test_bad_settings_raise_naming_the_setting(dem, setting, value):
+    with pytest.raises(ValueError, match=setting):
+        RaoBlackwellizedPF(dem=dem, **{setting: value})
+
+
+def test_no_map_raises():
+    with pytest.raises(ValueError, match="dem"):
+        registry.create("rbpf")
+
+
+def _frames(t0, n_s, rng_m=2000.0, theta=0.0, valid=True):
+    t = t0 + np.arange(1, int(n_s * 100) + 1) * 0.01
+    f = np.tile([0.0, 0.0, -9.79], (t.size, 1))
+    imu = ImuFrame(t, f, np.zeros((t.size, 3)), np.ones(t.size, bool))
+    ti = t[1::2]
+    ira = IraFrame(ti, np.full(ti.size, rng_m), np.full(ti.size, theta), np.full(ti.size, valid))
+    return SensorFrames(t0, t[-1], imu=imu, ira=ira)
+
+
+def _initial(dem):
+    from navigators.protocol import Estimate
+
+    lat, lon = dem.center_rad
+    return Estimate(0.0, lat, lon, 2500.0, np.array([228.0, 75.0, 0.0]), 0.0, 0.0, math.radians(18.1575),
+                    np.eye(9))
+
+
+def test_bad_data_never_crashes(dem):
+    nav = registry.create("rbpf", dem=dem, rng=np.random.default_rng(1), n_particles=200)
+    nav.reset(_initial(dem))
+    est = nav.update(_frames(0.0, 2.0, rng_m=np.nan, valid=True))        # NaN measurements: skipped
+    assert est.health.skipped.get("ira_invalid", 0) > 0
+    est = nav.update(_frames(2.0, 4.0, rng_m=50000.0))                   # impossible range: weights vanish
+    assert est.health.status == "degraded" and "weights_underflow" in est.health.skipped
+    assert np.isfinite(est.lat_rad) and np.all(np.isfinite(est.covariance))
+    far = _initial(dem)
+    far.lat_rad += 0.2                                                    # off the map: no hypothesis
+    nav.reset(far)
+    est = nav.update(_frames(0.0, 2.0))
+    assert "ira_no_hypothesis" in est.health.skipped and est.health.status == "degraded"
+
+
+def test_extra_keys_and_one_stream_fixes_the_run(dem):
+    from navigators.measurements.ira_seed002 import predict_ira
+    from terrain.geodesy import euler_to_C_bn
+
+    e0 = _initial(dem)
+    r0 = predict_ira(dem, [e0.lat_rad], [e0.lon_rad], [e0.h_m], e0.v_ned_mps,
+                     euler_to_C_bn(0.0, 0.0, e0.yaw_rad))[0, 0]
+
+    def run(seed):
+        nav = registry.create("rbpf", dem=dem, rng=np.random.default_rng(seed), n_particles=300)
+        nav.reset(_initial(dem))
+        ests = [nav.update(_frames(float(k), 1.0, rng_m=r0 + 3.0 * k, theta=0.001)) for k in range(4)]
+        return nav, ests
+
+    nav_a, a = run(7)
+    _, b = run(7)
+    _, c = run(8)
+    for ea, eb in zip(a, b, strict=True):
+        assert ea.lat_rad == eb.lat_rad and np.array_equal(ea.covariance, eb.covariance)
+    assert a[-1].lat_rad != c[-1].lat_rad
+    ex = a[-1].extra
+    assert ex[EXTRA_NIS_DOF] == 2 and ex[EXTRA_INNOVATION].shape == (2,)
+    assert np.isfinite(ex[EXTRA_NIS]) and np.isfinite(ex[EXTRA_LOG_LIKELIHOOD])
+    assert 1.0 <= ex[EXTRA_ESS] <= 300.0
+    assert nav_a.epochs == 4
