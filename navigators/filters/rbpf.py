@@ -92,7 +92,8 @@ class RaoBlackwellizedPF:
     (None: default_rng(0)). n_particles; ess_threshold in (0, 1]; trn_rate_hz; error_model_rate_hz (the
     error model's step, 50 Hz); range_sigma_m, look_angle_sigma_deg; half_window_deg, max_range_m (the IRA's
     look window, as the sensor's); init_pos_sigma_m (N, E, up), init_vel_sigma_mps, init_att_sigma_deg,
-    accel_bias_sigma_mps2, gyro_bias_sigma_rps; q_pos_m (3), q_vel_mps (horizontal, vertical),
+    accel_bias_sigma_mps2, gyro_bias_sigma_rps; map_sigma_m (the map's vertical error, added to the range
+    variance); acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
     q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (horizontal, vertical),
     gnss_vel_sigma_mps; imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15).
@@ -125,6 +126,7 @@ class RaoBlackwellizedPF:
         imu_samples: str = "interval",
         gravity_gradient: bool = True,
         acquisition_spread_m: float = 10.0,
+        map_sigma_m: float = 0.0,
         name: str = "rbpf",
     ):
         if dem is None:
@@ -157,7 +159,10 @@ class RaoBlackwellizedPF:
         self.ess_threshold = e
         self.trn_period_s = 1.0 / _positive("trn_rate_hz", trn_rate_hz)
         self.dt_err = 1.0 / _positive("error_model_rate_hz", error_model_rate_hz)
-        self.r_var = np.array([_positive("range_sigma_m", range_sigma_m) ** 2,
+        # the map's vertical error (its error class, as the scenario's map error model states it) enters the
+        # range as measurement noise the filter knows about
+        self.r_var = np.array([_positive("range_sigma_m", range_sigma_m) ** 2
+                               + _positive("map_sigma_m", map_sigma_m, True) ** 2,
                                math.radians(_positive("look_angle_sigma_deg", look_angle_sigma_deg)) ** 2])
         self.half_window_rad = math.radians(hw)
         self.max_range_m = _positive("max_range_m", max_range_m)
