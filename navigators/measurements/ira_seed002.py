@@ -12,7 +12,7 @@ all hypotheses: in the RBPF velocity and attitude are the Kalman part, entering 
   body axes.
 - eq 24, range sensitivity to velocity (step-wise): [dR/dtheta_zdl, dR/dpsi_zdl] (the range gradient when
   the ZDL is tilted in elevation theta_zdl or turned in azimuth psi_zdl, the new closest point searched near
-  the old one: central differences over +-d_ang) times the ZDL angles' sensitivity to velocity. Departure:
+  the old one: its first-order limit by the envelope theorem, see zdl_batch) times the ZDL angles' sensitivity to velocity. Departure:
   eq 24 prints that second factor as [[0, 0, -|v_h|], [-1/v_e, 1/v_n, 0]], which is not the Jacobian of any
   angle of v (its units differ); we use the Jacobian of theta_zdl = atan2(-v_d, |v_h|),
   psi_zdl = atan2(v_e, v_n) (tests/test_ira_seed002.py checks the product against finite differences of
@@ -227,23 +227,29 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
         out[k, OUT_S] = sm
         out[k, OUT_VALID] = 1.0
         if d_ang > 0.0:
-            # eq 24's first factor: the range when the ZDL is tilted / turned, searched near the closest point
-            dr = np.zeros(2)
-            for q in range(2):
-                fp = np.empty(2)
-                for sgn_i in range(2):
-                    sg = d_ang if sgn_i == 0 else -d_ang
-                    if q == 0:
-                        wx, wy, wz, wun, wue = _direction(elev + sg, azim)
-                    else:
-                        wx, wy, wz, wun, wue = _direction(elev, azim + sg)
-                    fq, _, _, _, _, _ = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm,
-                                                imh, inhc, wx, wy, wz, wun, wue, C, sin_w, max_range,
-                                                sm - 10.0, sm + 10.0, t, 14)
-                    fp[sgn_i] = fq
-                dr[q] = (fp[0] - fp[1]) / (2.0 * d_ang)
-            out[k, OUT_DR_DTH] = dr[0]
-            out[k, OUT_DR_DPSI] = dr[1]
+            # eq 24's first factor, dR/d(theta_zdl, psi_zdl) with the new closest point near the old one: the
+            # envelope theorem on min |P| s.t. v.P = 0 over the terrain surface, dR/da = -mu (dv/da . P*),
+            # mu the Lagrange multiplier from the gradients of |P| and v.P along the terrain's tangent plane
+            # (the limit of re-searching a tilted / turned ZDL near P*; tests check it against that)
+            _, gl, go = bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, la + x * imh, lo + y * inhc)
+            hn = gl * imh
+            he = go * inhc
+            # tangent vectors of the surface (n, e, ha - h(n, e)) in NED: T1 = (1, 0, -hn), T2 = (0, 1, -he)
+            a1 = (x - z * hn) / f
+            a2 = (y - z * he) / f
+            b1 = vx - vz * hn
+            b2 = vy - vz * he
+            bb = b1 * b1 + b2 * b2
+            if bb > 0.0 and hn == hn and he == he:
+                mu = (a1 * b1 + a2 * b2) / bb
+                se = np.sin(elev)
+                ce = np.cos(elev)
+                sa = np.sin(azim)
+                ca = np.cos(azim)
+                dg_de = -se * ca * x - se * sa * y - ce * z
+                dg_da = -ce * sa * x + ce * ca * y
+                out[k, OUT_DR_DTH] = -mu * dg_de
+                out[k, OUT_DR_DPSI] = -mu * dg_da
 
 
 @njit(cache=True)
@@ -343,7 +349,7 @@ def cloud_height_max(dem, lat_rad: np.ndarray, lon_rad: np.ndarray, margin_m: fl
 
 def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float = np.radians(45.0),
                 max_range_m: float = 10000.0, ds_m: float = 45.0, d_ang_rad: float = 1e-3,
-                n_golden: int = 20) -> np.ndarray:
+                n_golden: int = 13) -> np.ndarray:
     """eqs 23-26 for hypotheses (arrays lat, lon rad, h m) sharing v_ned (3,) and C_bn (3, 3); returns
     zdl_batch's (n, N_OUT) array (see OUT_*)."""
     lat = np.ascontiguousarray(lat_rad, float).ravel()
