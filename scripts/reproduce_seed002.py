@@ -155,8 +155,11 @@ def summarise(t, e, s):
     pos = math.sqrt(np.mean(np.sum(e[sel, :3] ** 2, axis=1)))
     vel = math.sqrt(np.mean(np.sum(e[sel, 3:6] ** 2, axis=1)))
     att = math.degrees(math.sqrt(np.mean(np.sum(e[sel, 6:9] ** 2, axis=1))))
+    tilt = math.degrees(math.sqrt(np.mean(np.sum(e[sel, 6:8] ** 2, axis=1))))
+    head = math.degrees(math.sqrt(np.mean(e[sel, 8] ** 2)))
     inside = float(np.mean(np.abs(e[sel]) <= 3 * s[sel] + 1e-12))
-    return {"pos3d_rms_m": pos, "vel_rms_mps": vel, "att_rms_deg": att, "inside_3sigma": inside}
+    return {"pos3d_rms_m": pos, "vel_rms_mps": vel, "att_rms_deg": att, "tilt_rms_deg": tilt,
+            "heading_rms_deg": head, "inside_3sigma": inside}
 
 
 def plot(t, e, s, path: Path, title: str) -> None:
@@ -186,19 +189,24 @@ def plot(t, e, s, path: Path, title: str) -> None:
 
 
 def run_jsbsim(duration_s: float, seed: int, out: Path) -> dict:
-    """The same filter on the King Air in the JSBSim closed loop (default scenario, --navigator rbpf)."""
+    """The same filter on the King Air in the JSBSim closed loop at its own speeds (85 m/s, 1,500 m AGL):
+    the default scenario with --navigator rbpf (3" map against the 30 m fractal world) and
+    tests/scenarios/rbpf_short.toml (map = world)."""
+    import json
     import subprocess
 
-    cmd = [sys.executable, "-m", "trn_env.cli", "fly", "--navigator", "rbpf", "--seed", str(seed),
-           "--duration", str(duration_s), "--out", str(out / "jsbsim_rbpf")]
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    print(r.stdout[-2000:])
-    if r.returncode:
-        print(r.stderr[-2000:])
-    import json
-
-    p = out / "jsbsim_rbpf" / "summary.json"
-    return json.loads(p.read_text()) if p.exists() else {}
+    res = {}
+    root = Path(__file__).resolve().parent.parent
+    for label, scen in (("default_3in_map", "default"),
+                        ("map_world", str(root / "tests" / "scenarios" / "rbpf_short.toml"))):
+        cmd = [sys.executable, "-m", "trn_env.cli", "fly", scen, "--navigator", "rbpf", "--seed", str(seed),
+               "--duration", str(duration_s), "--out", str(out / f"jsbsim_{label}"), "--quiet"]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode:
+            print(r.stderr[-2000:])
+        p = out / f"jsbsim_{label}" / "summary.json"
+        res[label] = json.loads(p.read_text()) if p.exists() else {}
+    return res
 
 
 def main(argv=None) -> int:
@@ -227,26 +235,31 @@ def main(argv=None) -> int:
             m.update(filter=name, run=run, seed=seed, wall_s=wall, sim_s=float(t[-1]))
             rows.append(m)
             print(f"{name:5s} run {run} seed {seed}: pos3d {m['pos3d_rms_m']:.2f} m  vel {m['vel_rms_mps']:.3f} "
-                  f"m/s  att {m['att_rms_deg']:.4f} deg  inside3s {m['inside_3sigma']:.2f}  "
+                  f"m/s  att {m['att_rms_deg']:.4f} deg (tilt {m['tilt_rms_deg']:.3f}, heading "
+                  f"{m['heading_rms_deg']:.3f})  inside3s {m['inside_3sigma']:.2f}  "
                   f"({m['sim_s'] / wall:.0f}x real time)", flush=True)
             if run == 0:
                 plot(t, e, s, a.out / f"fig3_{name}.png", f"seed 002 Fig. 3 analogue: {name}, Jacksboro, "
                      f"240 m/s, 2500 m, {a.particles} particles")
     print()
     print(f"RMS after {CONVERGED_AFTER_S:.0f} s, mean over {a.runs} runs (map = world)")
-    print(f"{'filter':8s} {'pos3d m':>9s} {'vel m/s':>9s} {'att deg':>9s} {'in 3sig':>8s}")
+    print(f"{'filter':8s} {'pos3d m':>9s} {'vel m/s':>9s} {'att deg':>9s} {'tilt deg':>9s} {'head deg':>9s} "
+          f"{'in 3sig':>8s}")
     for name in ("rbpf", "pf15"):
         rs = [r for r in rows if r["filter"] == name]
         if rs:
             print(f"{name:8s} {np.mean([r['pos3d_rms_m'] for r in rs]):9.2f} "
                   f"{np.mean([r['vel_rms_mps'] for r in rs]):9.3f} {np.mean([r['att_rms_deg'] for r in rs]):9.4f} "
+                  f"{np.mean([r['tilt_rms_deg'] for r in rs]):9.4f} {np.mean([r['heading_rms_deg'] for r in rs]):9.4f} "
                   f"{np.mean([r['inside_3sigma'] for r in rs]):8.2f}")
     print("targets: RBPF pos3d <= 10 m, vel <= 0.5 m/s, att <= 0.1 deg; the plain PF worse")
     if a.jsbsim:
-        summ = run_jsbsim(min(a.duration, 120.0), a.seed, a.out)
-        if summ:
-            print(f"JSBSim King Air, rbpf closed loop: horizontal RMS {summ.get('horizontal_error_rms_m')} m, "
-                  f"vertical RMS {summ.get('vertical_error_rms_m')} m, termination {summ.get('termination')}")
+        for label, summ in run_jsbsim(min(a.duration, 120.0), a.seed, a.out).items():
+            print(f"JSBSim King Air ({label}), rbpf closed loop: horizontal RMS "
+                  f"{summ.get('horizontal_error_rms_m', float('nan')):.1f} m, final "
+                  f"{summ.get('horizontal_error_final_m', float('nan')):.1f} m, vertical RMS "
+                  f"{summ.get('vertical_error_rms_m', float('nan')):.1f} m, {summ.get('realtime_factor', 0):.0f}x "
+                  f"real time, termination {summ.get('termination')}")
     return 0
 
 

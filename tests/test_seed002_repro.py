@@ -1,0 +1,47 @@
+"""Seed 002's claim, cheaper fixed-seed version of scripts/reproduce_seed002.py: on the kinematic 240 m/s,
+2,500 m level flight over Jacksboro (map = world, IMU + IRA only, Table 1 initial errors), the RBPF with
+1,000 particles reaches 3-D position RMS <= 10 m and velocity RMS <= 0.5 m/s after convergence, and a plain
+bootstrap PF with the same particles and model does worse. (Attitude: see the README; the 0.1 deg target is
+not met on this straight flight, where heading is unobservable.)"""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import terrain
+
+_SPEC = importlib.util.spec_from_file_location(
+    "reproduce_seed002", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed002.py")
+repro = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(repro)
+
+DURATION_S = 70.0
+SEED = 2020
+
+
+@pytest.fixture(scope="module")
+def results():
+    dem = terrain.load("jacksboro")
+    out = {}
+    for name, make in (("rbpf", lambda: repro.RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(SEED),
+                                                                 imu_samples="instant")),
+                       ("pf15", lambda: repro.BootstrapPF15(dem, np.random.default_rng(SEED)))):
+        kin = repro.kinematic_truth(DURATION_S, dem)
+        t, e, s, _ = repro.run_open_loop(make(), kin, dem, DURATION_S, SEED)
+        out[name] = repro.summarise(t, e, s)
+    return out
+
+
+def test_rbpf_meets_seed002_position_and_velocity(results):
+    r = results["rbpf"]
+    # measured (seed 2020, 70 s): see the README table; bounds are the seed's targets
+    assert r["pos3d_rms_m"] <= 10.0, r
+    assert r["vel_rms_mps"] <= 0.5, r
+    assert r["tilt_rms_deg"] <= 0.3, r
+
+
+def test_plain_pf_does_worse(results):
+    assert results["pf15"]["pos3d_rms_m"] > 2.0 * results["rbpf"]["pos3d_rms_m"], results
+    assert results["pf15"]["vel_rms_mps"] > results["rbpf"]["vel_rms_mps"], results
