@@ -27,8 +27,6 @@ import terrain
 from navigators.filters import _rbpf_kernels as kern
 from navigators.filters.rbpf import RaoBlackwellizedPF
 from navigators.frames import SensorFrames
-from navigators.inertial.strapdown import quat_to_dcm
-from navigators.measurements import ira_seed002 as ira_model
 from navigators.protocol import Estimate
 from terrain.geodesy import euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
 from trn_env.flight.kinematic import KinematicTruth, Segment
@@ -234,7 +232,8 @@ def main(argv=None) -> int:
             m = summarise(t, e, s)
             m.update(filter=name, run=run, seed=seed, wall_s=wall, sim_s=float(t[-1]))
             rows.append(m)
-            print(f"{name:5s} run {run} seed {seed}: pos3d {m['pos3d_rms_m']:.2f} m  vel {m['vel_rms_mps']:.3f} "
+            print(f"{name:5s} run {run} seed {seed}: pos3d {m['pos3d_rms_m']:.2f} m  "
+                  f"vel {m['vel_rms_mps']:.3f} "
                   f"m/s  att {m['att_rms_deg']:.4f} deg (tilt {m['tilt_rms_deg']:.3f}, heading "
                   f"{m['heading_rms_deg']:.3f})  inside3s {m['inside_3sigma']:.2f}  "
                   f"({m['sim_s'] / wall:.0f}x real time)", flush=True)
@@ -249,8 +248,10 @@ def main(argv=None) -> int:
         rs = [r for r in rows if r["filter"] == name]
         if rs:
             print(f"{name:8s} {np.mean([r['pos3d_rms_m'] for r in rs]):9.2f} "
-                  f"{np.mean([r['vel_rms_mps'] for r in rs]):9.3f} {np.mean([r['att_rms_deg'] for r in rs]):9.4f} "
-                  f"{np.mean([r['tilt_rms_deg'] for r in rs]):9.4f} {np.mean([r['heading_rms_deg'] for r in rs]):9.4f} "
+                  f"{np.mean([r['vel_rms_mps'] for r in rs]):9.3f} "
+                  f"{np.mean([r['att_rms_deg'] for r in rs]):9.4f} "
+                  f"{np.mean([r['tilt_rms_deg'] for r in rs]):9.4f} "
+                  f"{np.mean([r['heading_rms_deg'] for r in rs]):9.4f} "
                   f"{np.mean([r['inside_3sigma'] for r in rs]):8.2f}")
     print("targets: RBPF pos3d <= 10 m, vel <= 0.5 m/s, att <= 0.1 deg; the plain PF worse")
     if a.jsbsim:
@@ -258,7 +259,8 @@ def main(argv=None) -> int:
             print(f"JSBSim King Air ({label}), rbpf closed loop: horizontal RMS "
                   f"{summ.get('horizontal_error_rms_m', float('nan')):.1f} m, final "
                   f"{summ.get('horizontal_error_final_m', float('nan')):.1f} m, vertical RMS "
-                  f"{summ.get('vertical_error_rms_m', float('nan')):.1f} m, {summ.get('realtime_factor', 0):.0f}x "
+                  f"{summ.get('vertical_error_rms_m', float('nan')):.1f} m, "
+                  f"{summ.get('realtime_factor', 0):.0f}x "
                   f"real time, termination {summ.get('termination')}")
     return 0
 

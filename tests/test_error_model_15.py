@@ -17,7 +17,10 @@ V0 = np.array([228.0, 75.0, 0.0])
 DT = 0.02
 
 
-def _imu(n, yaw=math.atan2(75.0, 228.0)):
+YAW0 = math.atan2(75.0, 228.0)
+
+
+def _imu(n, yaw=YAW0):
     """Samples of a level flight: f_b holding the INS level against gravity and Coriolis, rates following
     the Earth and transport rates (an exact truth is not needed: both INS runs share the samples)."""
     C = euler_to_C_bn(0.0, 0.0, yaw)

@@ -16,7 +16,8 @@ from navigators.protocol import EXTRA_ESS, EXTRA_INNOVATION, EXTRA_LOG_LIKELIHOO
 
 
 def test_linear_part_is_the_exact_conditional_kalman_filter():
-    """Linear-Gaussian model: x_{k+1} = Phi x_k + w (x = [x^n (3), x^l (12)]), y_k = c + Hn x^n_k + Hl x^l_k + e
+    """Linear-Gaussian model: x_{k+1} = Phi x_k + w (x = [x^n (3), x^l (12)]),
+    y_k = c + Hn x^n_k + Hl x^l_k + e
     (a planar terrain: the range is linear in position). Given one particle's trajectory x^n_{0:T} and
     y_{1:T}, its (x^l, P) from the kernels must equal p(x^l_T | x^n_{0:T}, y_{1:T}) computed by conditioning
     the joint Gaussian of all noises directly (no Kalman recursion)."""
@@ -77,7 +78,8 @@ def test_linear_part_is_the_exact_conditional_kalman_filter():
     G = TM @ cov_z @ OM.T @ np.linalg.inv(S)
     mean = tgt_a + G @ (ov - oa)
     cov = TM @ cov_z @ TM.T - G @ OM @ cov_z @ TM.T
-    assert np.allclose(xl[0], mean, rtol=0, atol=1e-9 * max(1.0, np.abs(mean).max())), np.abs(xl[0] - mean).max()
+    tol = 1e-9 * max(1.0, np.abs(mean).max())
+    assert np.allclose(xl[0], mean, rtol=0, atol=tol), np.abs(xl[0] - mean).max()
     assert np.allclose(P[0], cov, rtol=0, atol=1e-9), np.abs(P[0] - cov).max()
 
 

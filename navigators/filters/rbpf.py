@@ -112,7 +112,7 @@ class RaoBlackwellizedPF:
         half_window_deg: float = 45.0,
         max_range_m: float = 10000.0,
         init_pos_sigma_m=(50.0, 50.0, 20.0),
-        init_vel_sigma_mps=(1 / math.sqrt(2), 1 / math.sqrt(2), 0.5),
+        init_vel_sigma_mps=(0.7071067811865476, 0.7071067811865476, 0.5),   # Table 1: 1/sqrt(2)
         init_att_sigma_deg=(0.1, 0.1, 0.1),
         accel_bias_sigma_mps2: float = 1e-4,
         gyro_bias_sigma_rps: float = 1e-6,
@@ -183,7 +183,8 @@ class RaoBlackwellizedPF:
                             [_positive("q_gyro_bias_rps", q_gyro_bias_rps, True)] * 3] ** 2
         gp = np.asarray(gnss_pos_sigma_m, float).ravel()
         if gp.shape != (2,):
-            raise ValueError(f"gnss_pos_sigma_m must have two entries (horizontal, vertical), got {gnss_pos_sigma_m!r}")
+            raise ValueError("gnss_pos_sigma_m must have two entries (horizontal, vertical), "
+                             f"got {gnss_pos_sigma_m!r}")
         for i, v in enumerate(gp):
             _positive(f"gnss_pos_sigma_m[{i}]", v)
         self.gnss_pos_var = np.array([gp[0], gp[0], gp[1]]) ** 2
@@ -192,7 +193,8 @@ class RaoBlackwellizedPF:
         self.acquisition_spread_m = _positive("acquisition_spread_m", acquisition_spread_m, True)
         self.ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=imu_samples)
         # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
-        self._ll_floor = -0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(self.r_var)) * 1e4) - math.log(2 * math.pi)
+        self._ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(self.r_var)) * 1e4)
+                          - math.log(2 * math.pi))
         self.health = Health()
         self._reset_done = False
 
@@ -254,7 +256,8 @@ class RaoBlackwellizedPF:
         t_last = float(t[-1])
         gn = frames.gnss
         if gn is not None and gn.t_s.shape[0]:
-            gv = np.asarray(gn.valid, bool) & np.all(np.isfinite(gn.v_ned_mps), axis=1) & np.isfinite(gn.lat_rad)
+            gv = (np.asarray(gn.valid, bool) & np.all(np.isfinite(gn.v_ned_mps), axis=1)
+                  & np.isfinite(gn.lat_rad))
         else:
             gv = None
         if ira is not None and ira.t_s.shape[0]:
@@ -335,7 +338,8 @@ class RaoBlackwellizedPF:
         Phi = self._Phi * T[:, None] / T[None, :]
         self._Phi = np.eye(15)
         w = self.rng.standard_normal((self.n, 3))
-        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var, self.ql_var, w)
+        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var, self.ql_var,
+                                w)
         if nbad:
             self.health.skip(te, "time_update_not_pd", f"{nbad} particles: N not positive definite")
         logw_prev = self.logw.copy()
@@ -368,7 +372,8 @@ class RaoBlackwellizedPF:
         H[:, :, :6] = Hs
         ok = out[:, ira_model.OUT_VALID] > 0.5
         if not ok.any():
-            self.health.skip(te, "ira_no_hypothesis", "IRA update skipped: no particle has a return (off map?)")
+            self.health.skip(te, "ira_no_hypothesis",
+                             "IRA update skipped: no particle has a return (off map?)")
             self.health.status, self.health.ok = "degraded", True
             return False
         pred = np.stack([out[:, ira_model.OUT_R], out[:, ira_model.OUT_THETA]], axis=1)
@@ -381,7 +386,8 @@ class RaoBlackwellizedPF:
         S_i = np.einsum("kaj,kjl,kbl->kab", H, self.P, H) + np.diag(self._r_var_now())[None]
         ybar = (wp[:, None] * np.where(ok[:, None], yhat, 0.0)).sum(0)
         d = np.where(ok[:, None], yhat - ybar, 0.0)
-        S = (wp[:, None, None] * (np.where(ok[:, None, None], S_i, 0.0) + d[:, :, None] * d[:, None, :])).sum(0)
+        S_ok = np.where(ok[:, None, None], S_i, 0.0)
+        S = (wp[:, None, None] * (S_ok + d[:, :, None] * d[:, None, :])).sum(0)
         nu = np.array(y_ira) - ybar
         saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
         n_bad = kern.linear_update(self.xl, self.P, H, e, self._r_var_now(), self.logw, ok, ll)
@@ -392,7 +398,8 @@ class RaoBlackwellizedPF:
             self._n_rejected += 1
             if self._n_rejected >= REINIT_AFTER_REJECTS:
                 self.health.skip(te, "weights_underflow",
-                                 f"{self._n_rejected} IRA samples unexplained by every particle: cloud re-initialised")
+                                 f"{self._n_rejected} IRA samples unexplained by every particle: "
+                                 "cloud re-initialised")
                 self._init_cloud()
                 self._n_rejected = 0
             else:
@@ -401,7 +408,8 @@ class RaoBlackwellizedPF:
             return False
         self._n_rejected = 0
         if n_bad:
-            self.health.skipped["ira_particle_no_return"] = self.health.skipped.get("ira_particle_no_return", 0) + n_bad
+            sk = self.health.skipped
+            sk["ira_particle_no_return"] = sk.get("ira_particle_no_return", 0) + n_bad
         m = np.max(logw_prev)
         lse_prev = m + math.log(np.sum(np.exp(logw_prev - m)))
         fin = np.isfinite(self.logw)
@@ -492,8 +500,10 @@ class RaoBlackwellizedPF:
         if not np.all(np.isfinite(st)):
             self.health.ok, self.health.status = False, "diverged"
         extra = dict(self._extra)
-        extra.update(accel_bias_b_mps2=self.ins.accel_bias_b.copy(), gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
-                     accel_bias_sigma_mps2=np.sqrt(np.einsum("k,kii->i", self._weights(), self.P[:, 6:9, 6:9])),
+        sig_ba = np.sqrt(np.einsum("k,kii->i", self._weights(), self.P[:, 6:9, 6:9]))
+        extra.update(accel_bias_b_mps2=self.ins.accel_bias_b.copy(),
+                     gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
+                     accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
                         events=list(self.health.events))

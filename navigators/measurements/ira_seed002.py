@@ -12,7 +12,8 @@ all hypotheses: in the RBPF velocity and attitude are the Kalman part, entering 
   body axes.
 - eq 24, range sensitivity to velocity (step-wise): [dR/dtheta_zdl, dR/dpsi_zdl] (the range gradient when
   the ZDL is tilted in elevation theta_zdl or turned in azimuth psi_zdl, the new closest point searched near
-  the old one: its first-order limit by the envelope theorem, see zdl_batch) times the ZDL angles' sensitivity to velocity. Departure:
+  the old one: its first-order limit by the envelope theorem, see zdl_batch) times the ZDL angles'
+  sensitivity to velocity. Departure:
   eq 24 prints that second factor as [[0, 0, -|v_h|], [-1/v_e, 1/v_n, 0]], which is not the Jacobian of any
   angle of v (its units differ); we use the Jacobian of theta_zdl = atan2(-v_d, |v_h|),
   psi_zdl = atan2(v_e, v_n) (tests/test_ira_seed002.py checks the product against finite differences of
@@ -23,7 +24,8 @@ all hypotheses: in the RBPF velocity and attitude are the Kalman part, entering 
 Search per hypothesis: a coarse scan of the ZDL in across-track steps ds_m from the nadir outwards, each side
 stopped once the lower bound sqrt(s^2 + (h_a - h_max)^2) exceeds the best range (h_max: the highest terrain
 near the cloud), samples skipped whose across-track strip bin (strip_bounds: the highest post near it, one
-table per epoch shared by the cloud) cannot beat the best, then golden-section refinement around the best sample. Each ZDL point is a Newton solve of
+table per epoch shared by the cloud) cannot beat the best, then golden-section refinement around the best
+sample (and a runner-up basin nearly as low). Each ZDL point is a Newton solve of
 the plane condition along track in the bilinear cell. Checked against the exact branch-and-bound search
 terrain.queries.ira_return.
 
@@ -109,8 +111,8 @@ def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh
             c1 = b - _GOLD * (b - a)
             if t1 == t1:
                 tg = t1
-            f1, t1, x1, y1, z1 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
-                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c1, tg)
+            f1, t1, x1, y1, z1 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm,
+                                          imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c1, tg)
             if f1 < fb:
                 fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
         else:
@@ -120,8 +122,8 @@ def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh
             c2 = a + _GOLD * (b - a)
             if t2 == t2:
                 tg = t2
-            f2, t2, x2, y2, z2 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh,
-                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c2, tg)
+            f2, t2, x2, y2, z2 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm,
+                                          imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c2, tg)
             if f2 < fb:
                 fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
     return fb, sb, tb, xb, yb, zb
@@ -206,9 +208,9 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
                                     vx, vy, vz, un, ue, C, sin_w, max_range, s_best - ds_m, s_best + ds_m,
                                     t_best, n_golden)
         if best2 < best + 0.3 * ds_m:  # a second basin nearly as low: refine it too, keep the lower
-            f2, sm2, t2, x2, y2, z2 = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh,
-                                              inhc, vx, vy, vz, un, ue, C, sin_w, max_range, s_best2 - ds_m,
-                                              s_best2 + ds_m, t_best2, n_golden)
+            f2, sm2, t2, x2, y2, z2 = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm,
+                                              imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range,
+                                              s_best2 - ds_m, s_best2 + ds_m, t_best2, n_golden)
             if f2 < f:
                 f, sm, t, x, y, z = f2, sm2, t2, x2, y2, z2
                 best, s_best, t_best = best2, s_best2, t_best2
@@ -361,7 +363,9 @@ def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float 
     # point under the antenna (~AGL / cos(gamma)): bound the terrain over that margin (with 50 % spare)
     h_nadir = dem.height(lat, lon)
     agl = np.nanmax(h - h_nadir) if np.isfinite(h_nadir).any() else np.nan
-    margin = float(min(max_range_m, 1.5 * agl + 200.0)) if np.isfinite(agl) and agl > 0 else float(max_range_m)
+    margin = float(max_range_m)
+    if np.isfinite(agl) and agl > 0:
+        margin = float(min(max_range_m, 1.5 * agl + 200.0))
     h_max = cloud_height_max(dem, lat, lon, margin)
     v = np.ascontiguousarray(v_ned, float)
     ok = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
