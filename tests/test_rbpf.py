@@ -161,3 +161,31 @@ def test_extra_keys_and_one_stream_fixes_the_run(dem):
     assert np.isfinite(ex[EXTRA_NIS]) and np.isfinite(ex[EXTRA_LOG_LIKELIHOOD])
     assert 1.0 <= ex[EXTRA_ESS] <= 300.0
     assert nav_a.epochs == 4
+
+
+def test_gnss_fusion_pulls_the_estimate_and_trn_carries_on_without_it(dem):
+    """GNSS fixes 60 m north of the INS start: the estimate moves to them within a few fixes (weights on the
+    position), its velocity to the fixes' velocity (the Kalman parts); with the fixes gone it keeps running."""
+    from navigators.frames import GnssFrame
+    from terrain.geodesy import meridian_radius_m
+
+    nav = registry.create("rbpf", dem=dem, rng=np.random.default_rng(2), n_particles=500)
+    e0 = _initial(dem)
+    nav.reset(e0)
+    r = meridian_radius_m(e0.lat_rad) + e0.h_m
+    for k in range(6):
+        fr = _frames(float(k), 1.0)
+        fr.ira = None
+        t = np.array([k + 1.0])
+        lat_true = e0.lat_rad + 60.0 / r + 228.0 * (k + 1.0) / r
+        lon_true = e0.lon_rad + 75.0 * (k + 1.0) / (r * math.cos(e0.lat_rad))
+        fr.gnss = GnssFrame(t, np.array([lat_true]), np.array([lon_true]), np.array([2500.0]),
+                            np.array([[228.0, 75.0, 0.0]]), np.array([True]))
+        est = nav.update(fr)
+    dn = (est.lat_rad - lat_true) * r
+    assert abs(dn) < 10.0, dn                   # from 60 m off to within GNSS noise
+    assert est.sigma_ned_m[0] < 10.0
+    fr = _frames(6.0, 2.0)
+    fr.ira = None
+    est2 = nav.update(fr)                       # denied: no crash, INS carries on
+    assert np.isfinite(est2.lat_rad) and est2.t_s > est.t_s

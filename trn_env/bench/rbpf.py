@@ -86,10 +86,10 @@ def _epoch_cost(n_particles: int, n_epochs: int) -> tuple[float, float]:
 
 
 def benchmark(quick: bool = False) -> dict:
-    warm, sim = (5.0, 15.0) if quick else (10.0, 40.0)
+    warm, sim = (3.0, 8.0) if quick else (10.0, 40.0)
     rbpf_rate, bare = _loop_rate("rbpf", warm, sim)
     ekf_rate, bare2 = _loop_rate("ins_tercom", warm, sim)
-    ms, peak = _epoch_cost(1000, 5 if quick else 20)
+    ms, peak = _epoch_cost(1000, 3 if quick else 20)
     return {
         "rbpf_sim_s_per_wall_s": rbpf_rate,
         "ekf_sim_s_per_wall_s": ekf_rate,
