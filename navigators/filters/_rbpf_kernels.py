@@ -349,3 +349,42 @@ def shift(xn, xl, mu):
             xn[k, i] -= mu[i]
         for i in range(NL):
             xl[k, i] -= mu[3 + i]
+
+
+@njit(cache=True)
+def predictive_moments(H, xl, P, r_var, pred, ok, wp):
+    """Mean (m,) and covariance (m, m) of the mixture's predictive density of y (eq 9 summed over the
+    particles with weights wp): each particle N(pred + H xl, H P H^T + R)."""
+    n = H.shape[0]
+    m = H.shape[1]
+    yh = np.zeros((n, m))
+    ybar = np.zeros(m)
+    S = np.zeros((m, m))
+    for k in range(n):
+        if not ok[k]:
+            continue
+        for a in range(m):
+            s = pred[k, a]
+            for j in range(NL):
+                s += H[k, a, j] * xl[k, j]
+            yh[k, a] = s
+            ybar[a] += wp[k] * s
+    PHt = np.empty((NL, m))
+    for k in range(n):
+        if not ok[k] or wp[k] == 0.0:
+            continue
+        for i in range(NL):
+            for a in range(m):
+                s = 0.0
+                for j in range(NL):
+                    s += P[k, i, j] * H[k, a, j]
+                PHt[i, a] = s
+        for a in range(m):
+            for b in range(m):
+                s = 0.0
+                for j in range(NL):
+                    s += H[k, a, j] * PHt[j, b]
+                if a == b:
+                    s += r_var[a]
+                S[a, b] += wp[k] * (s + (yh[k, a] - ybar[a]) * (yh[k, b] - ybar[b]))
+    return ybar, S

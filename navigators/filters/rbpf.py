@@ -382,12 +382,8 @@ class RaoBlackwellizedPF:
         wp = np.exp(logw_prev - logw_prev.max())
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
-        yhat = pred + np.einsum("kaj,kj->ka", H, self.xl)
-        S_i = np.einsum("kaj,kjl,kbl->kab", H, self.P, H) + np.diag(self._r_var_now())[None]
-        ybar = (wp[:, None] * np.where(ok[:, None], yhat, 0.0)).sum(0)
-        d = np.where(ok[:, None], yhat - ybar, 0.0)
-        S_ok = np.where(ok[:, None, None], S_i, 0.0)
-        S = (wp[:, None, None] * (S_ok + d[:, :, None] * d[:, None, :])).sum(0)
+        pred_ok = np.where(ok[:, None], pred, 0.0)
+        ybar, S = kern.predictive_moments(H, self.xl, self.P, self._r_var_now(), pred_ok, ok, wp)
         nu = np.array(y_ira) - ybar
         saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
         n_bad = kern.linear_update(self.xl, self.P, H, e, self._r_var_now(), self.logw, ok, ll)
