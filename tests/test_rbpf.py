@@ -164,8 +164,8 @@ def test_extra_keys_and_one_stream_fixes_the_run(dem):
 
 
 def test_gnss_fusion_pulls_the_estimate_and_trn_carries_on_without_it(dem):
-    """GNSS fixes 60 m north of the INS start: the estimate moves to them within a few fixes (weights on the
-    position), its velocity to the fixes' velocity (the Kalman parts); with the fixes gone it keeps running."""
+    """GNSS fixes 60 m north of the INS start: the estimate moves to them within a few fixes (weights on
+    the position; the velocity goes to the Kalman parts); with the fixes gone it keeps running."""
     from navigators.frames import GnssFrame
     from terrain.geodesy import meridian_radius_m
 
