@@ -199,6 +199,7 @@ def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsy
     monkeypatch.setitem(sys.modules, "trn_env.bench.flight", good)
     monkeypatch.setitem(sys.modules, "terrain.bench", bad)
     monkeypatch.setitem(sys.modules, "trn_env.bench.sensors", types.ModuleType("fake_none"))
+    monkeypatch.setitem(sys.modules, "trn_env.bench.rbpf", good)   # its real flights cost ~20 s
     monkeypatch.setattr(bench, "closed_loop_benchmark", lambda quick: {"closed_loop_ratio": 0.25})
     monkeypatch.setattr(bench, "env_benchmark", lambda quick: {"env_sim_seconds_per_wall_second": 9.0})
     assert cli.main(["bench", "--quick"]) == 0
