@@ -278,7 +278,7 @@ class RaoBlackwellizedPF:
                 g = self._gnss_at(gn, gv, te)
                 out.append((te, (float(ira.range_m[i]), float(ira.look_angle_rad[i])), g))
                 self._t_next = te + self.trn_period_s
-        elif gv is not None and gv.any():  # no IRA: GNSS epochs alone at the TRN rate
+        if not out and gv is not None and gv.any():  # no usable IRA sample: GNSS epochs alone
             ts = np.asarray(gn.t_s, float)
             for i in np.flatnonzero(gv):
                 te = float(ts[i])
