@@ -49,6 +49,7 @@ from navigators.protocol import Estimate, Health
 from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
 from trn_env.flight.core import FlightDiverged
 from trn_env.flight.truth import TruthChunk
+from trn_env.output.metrics import MetricSettings, navigation_metrics
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 from trn_env.sim.log import SimLog
@@ -450,8 +451,9 @@ def _rms(x: np.ndarray) -> float:
 
 
 def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wall_time_s: float,
-              jsbsim_steps: int, final: Estimate) -> dict:
-    """summary.json contents (DESIGN.md fields first, then extras)."""
+              jsbsim_steps: int, final: Estimate, metric_settings: MetricSettings | None = None) -> dict:
+    """summary.json contents (DESIGN.md fields first, then extras, then every navigation metric of
+    trn_env.output.metrics, the same figures a campaign row holds)."""
     t = a["t_s"]
     err = a["err_ned_m"]
     e_h = np.hypot(err[:, 0], err[:, 1])
@@ -490,7 +492,7 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "navigator_skipped": dict(final.health.skipped),
         "scenario_source": scenario.source,
         "duration_limit_s": scenario.duration_s,
-    }
+    } | navigation_metrics(a, metric_settings)
 
 
 def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:
