@@ -202,8 +202,10 @@ def cmd_bench(args) -> int:
 def cmd_campaign(args) -> int:
     from trn_env.campaign import CampaignError, load_campaign, make_backend, run_campaign
     from trn_env.campaign.baseline import read_baseline
+    from trn_env.campaign.ray_backend import BackendError
     try:
         backend = make_backend(args.backend, args.workers, args.address)
+        backend.preflight()      # Ray importable, its address reachable: before the (slower) validation
         baseline = read_baseline(args.check) if args.check is not None else None
         campaign = load_campaign(args.file)
     except CampaignError as err:
@@ -217,7 +219,6 @@ def cmd_campaign(args) -> int:
     from rich.console import Console
 
     from trn_env.campaign.driver import default_out_dir
-    from trn_env.campaign.ray_backend import BackendError
     out_dir = args.out or default_out_dir(campaign.name)
     console = Console(width=max(Console().width, 150))     # the summary table is wide
     try:
@@ -242,8 +243,9 @@ def _campaign_outcome(campaign, out_dir: Path, stats: dict, baseline, args, cons
     from trn_env.campaign.stats import summary_table
     df = read_rows(out_dir)
     console.print(summary_table(df, f"campaign {campaign.name}: {len(df)} run(s) -> {out_dir}"))
+    rate = f"{stats['runs_per_minute']:.1f} runs/min" if stats["flown"] else "nothing to fly"
     console.print(f"{stats['flown']} flown ({stats['failed']} failed), {stats['already_done']} already done; "
-                  f"{stats['runs_per_minute']:.1f} runs/min on {stats['backend']}")
+                  f"{rate} on {stats['backend']}")
     status = 0
     if args.write_baseline is not None:
         write_baseline(args.write_baseline, make_baseline(df, campaign.name, campaign.hash))

@@ -38,6 +38,9 @@ class LocalBackend:
         self.workers = workers or default_workers()
         self.max_attempts = int(max_attempts)
 
+    def preflight(self) -> None:
+        """Nothing to check before the campaign starts."""
+
     def __enter__(self) -> LocalBackend:
         return self
 

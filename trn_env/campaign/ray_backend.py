@@ -76,14 +76,18 @@ class RayBackend:
         self._started = False
         self.ray = None
 
-    def __enter__(self) -> RayBackend:
-        """Import Ray, probe the address, connect (or start a local instance)."""
-        ray = import_ray()
-        self.ray = ray
-        if ray.is_initialized():       # the caller's session (e.g. a test's or a notebook's)
-            return self
+    def preflight(self) -> None:
+        """The checks that need no connection: Ray importable, the address reachable (BackendError)."""
+        self.ray = import_ray()
         if self.address:
             probe_address(self.address, self.connect_timeout_s)
+
+    def __enter__(self) -> RayBackend:
+        """Import Ray, probe the address, connect (or start a local instance)."""
+        self.preflight()
+        ray = self.ray
+        if ray.is_initialized():       # the caller's session (e.g. a test's or a notebook's)
+            return self
         kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "ignore_reinit_error": True}
         if self.address:
             ray.init(address=self.address, **kw)
