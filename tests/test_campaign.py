@@ -265,3 +265,29 @@ def test_sweeps_expand_by_dotted_path_as_a_grid(tmp_path):
     assert all(v.data["wind"]["layers"][1]["speed_mps"] == 9.0 for v in c.variants)
     assert all(v.data["navigator"]["settings"]["gyro_bias_rps"] == pytest.approx(4.84813681109536e-06)
                for v in c.variants)
+
+
+def _dies(task, dems=None):
+    """fly_run, except that the worker process dies flying seed 0 on its first attempt, and seed 1 always."""
+    import os
+
+    from trn_env.campaign.runs import fly_run
+    if task.seed_index == 0 and task.attempt == 1:
+        os._exit(3)
+    if task.seed_index == 1:
+        os._exit(3)
+    return fly_run(task, dems)
+
+
+def test_local_pool_retries_a_dead_worker_and_records_a_run_that_always_kills_it(tmp_path, monkeypatch):
+    import trn_env.campaign.local as local
+    from trn_env.campaign import run_campaign
+    monkeypatch.setattr(local, "fly_run", _dies)
+    camp = load_campaign(_campaign(tmp_path, "seeds = 3\n"))
+    stats = run_campaign(camp, tmp_path / "out", backend=local.LocalBackend(2, max_attempts=2),
+                         progress=False)
+    assert stats["flown"] == 3
+    df = read_rows(tmp_path / "out").set_index("seed_index")
+    assert df.loc[0, "termination"] == "time_limit" and df.loc[0, "attempts"] >= 2    # retried, then flown
+    assert df.loc[1, "termination"] == "error" and "worker process died" in df.loc[1, "error"]
+    assert df.loc[2, "termination"] == "time_limit"

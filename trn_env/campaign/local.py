@@ -4,8 +4,8 @@ Workers are forked on Linux (they inherit the campaign's DEMs and the parent's c
 and spawned elsewhere (they receive the DEMs once through the pool initializer). At most 2 x workers runs
 are in flight, so a long campaign's tasks are made as they are needed and the driver holds only the rows
 not yet written. A worker process that dies (killed, out of memory) breaks the pool: the pool is rebuilt
-and the runs that were in flight are flown again, up to `max_attempts` times each; a run that raises is
-not retried (its row carries the error).
+and the runs that were in flight are flown again one at a time (so a death is pinned on the run that
+caused it), each up to `max_attempts` times; a run that raises is not retried (its row carries the error).
 """
 
 from __future__ import annotations
@@ -59,20 +59,24 @@ class LocalBackend:
     def run(self, tasks: Iterable[RunTask], dems: dict[str, Any],
             on_result: Callable[[dict, bytes | None], None]) -> None:
         it = iter(tasks)
-        retry: deque[RunTask] = deque()
         window = 2 * self.workers
         pool = self._pool(dems)
         inflight: dict = {}
+        suspects: deque[RunTask] = deque()   # in flight when a worker died: flown again one at a time
         exhausted = False
         try:
             while True:
-                while len(inflight) < window:
-                    if retry:
-                        task = retry.popleft()
-                    elif exhausted or (task := next(it, None)) is None:
-                        exhausted = True
-                        break
-                    inflight[pool.submit(fly_run, task)] = task
+                if suspects:
+                    if not inflight:
+                        task = suspects.popleft()
+                        inflight[pool.submit(fly_run, task)] = task
+                else:
+                    while len(inflight) < window and not exhausted:
+                        task = next(it, None)
+                        if task is None:
+                            exhausted = True
+                            break
+                        inflight[pool.submit(fly_run, task)] = task
                 if not inflight:
                     break
                 done, _ = wait(inflight, return_when=FIRST_COMPLETED)
@@ -83,23 +87,27 @@ class LocalBackend:
                         row, log = fut.result()
                     except BrokenProcessPool:
                         broken = True
-                        self._again(task, retry, on_result)
+                        self._again(task, suspects, on_result, alone=not inflight and len(done) == 1)
                         continue
                     on_result(row, log)
                 if broken:         # every run still in flight went down with the pool
                     for fut, task in list(inflight.items()):
-                        if fut.done() and not fut.exception():
+                        if fut.done() and fut.exception() is None:
                             on_result(*fut.result())
                         else:
-                            self._again(task, retry, on_result)
+                            self._again(task, suspects, on_result, alone=False)
                     inflight.clear()
                     pool.shutdown(wait=False, cancel_futures=True)
                     pool = self._pool(dems)
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
 
-    def _again(self, task: RunTask, retry: deque, on_result) -> None:
-        if task.attempt < self.max_attempts:
-            retry.append(retry_task(task))
+    def _again(self, task: RunTask, suspects: deque, on_result, alone: bool) -> None:
+        """A run lost with a dead worker: counted as an attempt only if it was flying alone (then it is
+        the one that killed the worker); flown again alone until it passes or dies max_attempts times."""
+        if not alone:
+            suspects.append(task)
+        elif task.attempt < self.max_attempts:
+            suspects.append(retry_task(task))
         else:
             on_result(died_row(task, f"worker process died on each of {task.attempt} attempts"), None)
