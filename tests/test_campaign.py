@@ -291,3 +291,15 @@ def test_local_pool_retries_a_dead_worker_and_records_a_run_that_always_kills_it
     assert df.loc[0, "termination"] == "time_limit" and df.loc[0, "attempts"] >= 2    # retried, then flown
     assert df.loc[1, "termination"] == "error" and "worker process died" in df.loc[1, "error"]
     assert df.loc[2, "termination"] == "time_limit"
+
+
+def test_keep_logs_writes_each_runs_full_log_beside_its_row(tmp_path):
+    from trn_env.campaign import run_campaign
+    from trn_env.campaign.local import LocalBackend
+    camp = load_campaign(_campaign(tmp_path, "seeds = 1\nkeep_logs = true\n"))
+    assert run_campaign(camp, tmp_path / "out", backend=LocalBackend(1), progress=False)["flown"] == 1
+    row = read_rows(tmp_path / "out").iloc[0]
+    log = np.load(tmp_path / "out" / "logs" / f"{row['run_id']}.npz")
+    assert "sensor_imu_t_s" in log and np.array_equal(log["t_s"], row["series_t_s"])
+    err = log["err_ned_m"]
+    assert np.array_equal(np.hypot(err[:, 0], err[:, 1]), row["series_err_h_m"])
