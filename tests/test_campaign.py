@@ -303,3 +303,19 @@ def test_keep_logs_writes_each_runs_full_log_beside_its_row(tmp_path):
     assert "sensor_imu_t_s" in log and np.array_equal(log["t_s"], row["series_t_s"])
     err = log["err_ned_m"]
     assert np.array_equal(np.hypot(err[:, 0], err[:, 1]), row["series_err_h_m"])
+
+
+def test_a_swept_campaign_has_sweep_columns_and_a_metric_versus_sweep_plot(tmp_path):
+    from trn_env.campaign import run_campaign
+    from trn_env.campaign.local import LocalBackend
+    from trn_env.campaign.report import write_report
+    camp = load_campaign(_campaign(tmp_path, 'seeds = 1\n[[sweeps]]\npath = "wind.layers.0.speed_mps"\n'
+                                             'values = [0.0, 15.0]\n'))
+    run_campaign(camp, tmp_path / "out", backend=LocalBackend(2), progress=False)
+    df = read_rows(tmp_path / "out")
+    assert sorted(df["sweep.wind.layers.0.speed_mps"]) == [0.0, 15.0]
+    assert [json.loads(s) for s in df.sort_values("sweep.wind.layers.0.speed_mps")["sweep_json"]] == \
+        [{"wind.layers.0.speed_mps": 0.0}, {"wind.layers.0.speed_mps": 15.0}]
+    rep = write_report(tmp_path / "out")
+    assert (rep / "sweep_wind_layers_0_speed_mps.png").stat().st_size > 10_000
+    assert (rep / "report.html").read_text().count("data:image/png;base64,") == 3
