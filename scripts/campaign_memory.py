@@ -60,7 +60,7 @@ def main() -> None:
         out[f"after_{args.runs}_peak_rss_mib"] = _status_mib("VmHWM")
         out[f"after_{args.runs}_rss_mib"] = _status_mib("VmRSS")
         out["runs_per_minute"] = stats["runs_per_minute"]
-        out["driver_ms_per_row"] = 1e3 * stats["driver_row_s"] / max(stats["flown"], 1)
+        out["driver_cpu_ms_per_row"] = 1e3 * stats["driver_row_cpu_s"] / max(stats["flown"], 1)
         out["failed"] = stats["failed"]
         out["rows_folder_mib"] = sum(f.stat().st_size for f in (Path(d) / "out" / "runs").iterdir()) / 2**20
     print(json.dumps(out, indent=2))
