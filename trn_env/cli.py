@@ -113,6 +113,8 @@ def _summary_table(summary: dict, out_dir: Path):
         ("final 1-sigma horizontal", f"{summary['horizontal_sigma_final_m']:.1f} m"),
         ("within 3 sigma (N and E)", f"{100 * summary['fraction_within_3sigma']:.0f} %"),
         ("min true height above ground", f"{summary['min_true_agl_m']:.0f} m"),
+        ("fuel remaining", f"{summary['fuel_remaining_kg']:.1f} kg"
+                           + (" (held constant)" if summary["constant_fuel"] else "")),
         ("navigator status", summary["navigator_status"]),
     ]
     for k, v in rows:
