@@ -8,6 +8,9 @@ pool over every core) and on a local Ray instance - runs per minute and parallel
   warm-up round (a Ray worker is a fresh process that imports the packages and loads the numba caches once;
   campaign_ray_warmup_s is that round), and its ratio to the local pool (target >= 0.8). Starting Ray
   takes 10-15 s here, so `quick` leaves Ray out (campaign_ray.skipped).
+- campaign_local_mean_run_wall_s, campaign_ray_mean_run_wall_s: a run's wall time inside its worker (the
+  flight alone; beside campaign_run_wall_s, the serial one, they show how much the workers slowed each
+  other down and how much of a backend's wall time is hand-over);
 - campaign_load_average_1min: the machine's load when the measurement started (the efficiency is only
   meaningful on an otherwise idle machine: other processes take the cores the pool counts on).
 
@@ -63,6 +66,7 @@ def benchmark(quick: bool = False) -> dict:
     out["campaign_local_runs_per_min"] = 60.0 * n_runs / t_local
     out["campaign_local_parallel_efficiency"] = (t_serial / t_local) / workers
     out["campaign_local_same_results"] = _same(serial, rows)
+    out["campaign_local_mean_run_wall_s"] = _mean_wall(rows)
 
     if quick:
         out["campaign_ray.skipped"] = "quick: starting Ray alone takes 10-15 s (run trn-env bench)"
@@ -91,7 +95,13 @@ def benchmark(quick: bool = False) -> dict:
     out["campaign_ray_vs_local"] = t_local / t_ray
     out["campaign_ray_parallel_efficiency"] = (t_serial / t_ray) / workers
     out["campaign_ray_same_results"] = _same(serial, ray_rows)
+    out["campaign_ray_mean_run_wall_s"] = _mean_wall(ray_rows)
     return out
+
+
+def _mean_wall(rows: list[dict]) -> float:
+    """Mean wall time of a run inside its worker (the flight alone, without the backend's hand-over)."""
+    return sum(r["wall_time_s"] for r in rows) / len(rows)
 
 
 def _same(a: list[dict], b: list[dict]) -> bool:
