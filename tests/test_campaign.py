@@ -319,3 +319,18 @@ def test_a_swept_campaign_has_sweep_columns_and_a_metric_versus_sweep_plot(tmp_p
     rep = write_report(tmp_path / "out")
     assert (rep / "sweep_wind_layers_0_speed_mps.png").stat().st_size > 10_000
     assert (rep / "report.html").read_text().count("data:image/png;base64,") == 3
+
+
+def test_report_and_check_refuse_bad_folders_and_baselines(tmp_path, capsys):
+    assert cli.main(["report", str(tmp_path)]) == 2
+    assert "not a campaign folder" in capsys.readouterr().err
+    assert cli.main(["report", str(tmp_path / "nowhere")]) == 2
+    assert "no such folder" in capsys.readouterr().err
+    out = tmp_path / "out"
+    assert cli.main(["campaign", str(CI), "--out", str(out), "--check", str(tmp_path / "none.json")]) == 2
+    assert "no such baseline file" in capsys.readouterr().err and not out.exists()
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"groups": {"ins | -": {"anees.p50": {"value": 3.0, "rel_tol": -1}}}}))
+    assert cli.main(["campaign", str(CI), "--out", str(out), "--check", str(bad)]) == 2
+    assert "groups.ins | -.anees.p50.rel_tol: must be a finite number >= 0" in capsys.readouterr().err
+    assert not out.exists()
