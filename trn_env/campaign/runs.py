@@ -8,6 +8,7 @@ gives the same bits as `trn-env fly` pipelined or not (trn_env.sim.closed_loop).
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import io
 import json
@@ -108,7 +109,7 @@ def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, by
 
     row = _base_row(task)
     table = _DEMS if dems is None else dems
-    data = dict(task.data)
+    data = copy.deepcopy(task.data)      # the run's own: tasks of one variant share their data
     data["seed"] = int(task.seed)
     row["scenario_hash"] = scenario_hash(data)
     extras: dict[str, Any] = {}
