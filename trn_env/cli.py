@@ -112,6 +112,10 @@ def _summary_table(summary: dict, out_dir: Path):
         ("vertical error RMS", f"{summary['vertical_error_rms_m']:.1f} m"),
         ("final 1-sigma horizontal", f"{summary['horizontal_sigma_final_m']:.1f} m"),
         ("within 3 sigma (N and E)", f"{100 * summary['fraction_within_3sigma']:.0f} %"),
+        ("horizontal CEP50 / CEP95", f"{summary['horizontal_error_cep50_m']:.1f} / "
+                                     f"{summary['horizontal_error_cep95_m']:.1f} m"),
+        ("ANEES, position (3 = consistent)", f"{summary['anees']:.2f}"),
+        ("track lost", "yes" if summary["track_lost"] else "no"),
         ("min true height above ground", f"{summary['min_true_agl_m']:.0f} m"),
         ("fuel remaining", f"{summary['fuel_remaining_kg']:.1f} kg"
                            + (" (held constant)" if summary["constant_fuel"] else "")),
