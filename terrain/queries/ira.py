@@ -27,9 +27,13 @@ call costs a few microseconds on top of its queries.
 Kernel arguments: besides shared's grid and cv tuples, the per-query velocity terms travel as one tuple
 vel = (v_hat north, east, down, u_h north, east, |v_hat_h|) (u_h: the horizontal unit velocity), and the
 bounds' per-query constants in the scratch vector qc (see _ira_one).
+
 The search's per-sample helpers (_zd_point, _ira_eval, _ira_interval_lb and what they call) carry numba's
 inline="always": a query makes ~25 evaluations and ~25 bound calls, and inlining them into _ira_one cut a
-query by a quarter (same bits), for ~20 s more compilation on first use (cached).
+query by a quarter (same bits). Each call site is one more copy to compile, so the branch and bound bounds
+both halves of an interval from one call site (cold compile of the IRA: 63 -> 52 CPU s). Dropping the inlining
+was measured (issue 21): all of it 15 s of compilation instead of ~55 s but +20-27 % per query; only
+_ira_interval_lb +10 %, its helpers too +16 %, only _zd_point/_ira_eval +19-23 %: so it stays.
 """
 
 from __future__ import annotations
@@ -535,10 +539,7 @@ def _ira_one(
     tol = 5e-3  # m: an interval must promise at least this much improvement to be searched
     tz = -(vz / vh)
     buf_s[half] = 0.0
-    f, t, r, z = _ira_eval(
-        heights, grid, lat, lon, ha, cv, vel, C,
-        qc, sin_w, max_range, 0.0, t0, 1e-3,
-    )
+    f, t, r, z = _ira_eval(heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, 0.0, t0, 1e-3)
     buf_f[half] = f
     buf_t[half] = t
     buf_r[half] = r
@@ -562,8 +563,8 @@ def _ira_one(
             s_seed = max(drop, 0.0) * np.tan(phi)
             q_seed = min(max(half + int(np.floor(s_seed / step + 0.5)), 1), n_max - 2)
             f_seed, t_seed, r_seed, z_seed = _ira_eval(
-                heights, grid, lat, lon, ha, cv, vel, C,
-                qc, sin_w, max_range, (q_seed - half) * step, t0, 1e-3,
+                heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, (q_seed - half) * step, t0,
+                1e-3,
             )
             if f_seed < best:
                 best = f_seed
@@ -575,8 +576,8 @@ def _ira_one(
         east_h = (hint_lon - lon) * nhc
         s_hint = east_h * uhx - north_h * uhy
         f_h, t_h, _, _ = _ira_eval(
-            heights, grid, lat, lon, ha, cv, vel, C,
-            qc, sin_w, max_range, s_hint, north_h * uhx + east_h * uhy, 1e-3,
+            heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, s_hint,
+            north_h * uhx + east_h * uhy, 1e-3,
         )
         if f_h < best:
             best = f_h
@@ -690,8 +691,7 @@ def _ira_one(
             elif e < q_b and buf_f[e + 1] == buf_f[e + 1] and buf_t[e + 1] == buf_t[e + 1]:
                 tg = buf_t[e + 1]
             f, t, r, z = _ira_eval(
-                heights, grid, lat, lon, ha, cv, vel, C,
-                qc, sin_w, max_range, buf_s[e], tg, 1e-3,
+                heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, buf_s[e], tg, 1e-3,
             )
             buf_f[e] = f
             buf_t[e] = t
@@ -747,8 +747,7 @@ def _ira_one(
         if tg != tg:
             tg = best_t if best_t == best_t else t0
         fm, tm, rm, zm = _ira_eval(
-            heights, grid, lat, lon, ha, cv, vel, C,
-            qc, sin_w, max_range, mid, tg, 1e-3,
+            heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, mid, tg, 1e-3,
         )
         n_eval += 1
         if fm < best:
@@ -757,8 +756,21 @@ def _ira_one(
             best_t = tm
         if n_st + 2 > cap:
             continue
-        lb_l, sp_l = _ira_interval_lb(heights, bslope, qc, best - tol, a, fa, ta, ra, za, mid, fm, tm, rm, zm)
-        lb_r, sp_r = _ira_interval_lb(heights, bslope, qc, best - tol, mid, fm, tm, rm, zm, b, fb, tb, rb, zb)
+        # the two halves' bounds from one call site: _ira_interval_lb is inlined, and each call site is one
+        # more copy of it to compile (~10 s each on first use)
+        lb_l = sp_l = lb_r = sp_r = 0.0
+        for side in range(2):
+            if side == 0:
+                p0, f0, t0_, r0, z0, p1, f1, t1, r1, z1 = a, fa, ta, ra, za, mid, fm, tm, rm, zm
+            else:
+                p0, f0, t0_, r0, z0, p1, f1, t1, r1, z1 = mid, fm, tm, rm, zm, b, fb, tb, rb, zb
+            lb_h, sp_h = _ira_interval_lb(
+                heights, bslope, qc, best - tol, p0, f0, t0_, r0, z0, p1, f1, t1, r1, z1
+            )
+            if side == 0:
+                lb_l, sp_l = lb_h, sp_h
+            else:
+                lb_r, sp_r = lb_h, sp_h
         # push the less promising half first so the more promising one is searched first
         left_first = lb_l >= lb_r
         for side in range(2):
@@ -801,8 +813,7 @@ def _ira_one(
                     break
                 sv_t = centre + 0.5 * h_p * (fm - fp) / den
             f_t, t_t, _, _ = _ira_eval(
-                heights, grid, lat, lon, ha, cv, vel, C,
-                qc, sin_w, max_range, sv_t, tc, 1e-4,
+                heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv_t, tc, 1e-4,
             )
             if trial == 0:
                 fm, tm = f_t, t_t
@@ -813,10 +824,7 @@ def _ira_one(
         if moved:
             continue
         h_p *= 0.1
-    t, x, y, z, dphi, dlam, hp = _zd_point(
-        heights, grid, lat, lon, ha, cv, vel, qc, centre,
-        tc, 1e-6,
-    )
+    t, x, y, z, dphi, dlam, hp = _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, centre, tc, 1e-6)
     if t != t:
         return
     out[0] = 1.0
