@@ -360,12 +360,27 @@ class ClosedLoop:
         est = out.estimate
         self.estimate = est
         self.navigator_fixes = out.navigator_fixes
+        self._log_gnss_outages(chunk)
         for t_ev, msg in est.health.events:
             self.log.events.append((t_ev, "navigator", msg))
         diverged = self._diverged(chunk, est)
         if final or diverged or tick_no % self.log_every == 0:
             self._log_tick(chunk, len(chunk) - 1, est)
         return "diverged" if diverged else None
+
+    def _log_gnss_outages(self, chunk: TruthChunk) -> None:
+        """Events for the scenario's GNSS outage edges (gnss.outages) that fall inside the chunk's time."""
+        if not self.outages or not len(chunk):
+            return
+        t0, t1 = float(chunk.t_s[0]) - 0.5 * self.dt_s, float(chunk.t_s[-1]) + 0.5 * self.dt_s
+        for i, o in enumerate(self.outages):
+            if t0 <= o["start_s"] < t1:
+                self.log.events.append((float(o["start_s"]), "gnss",
+                                        f"GNSS outage begins (gnss.outages[{i}]): no fixes reach the "
+                                        "navigator"))
+            if t0 <= o.get("end_s", math.inf) < t1:
+                self.log.events.append((float(o["end_s"]), "gnss", f"GNSS outage ends (gnss.outages[{i}]):"
+                                        " fixes reach the navigator again"))
 
     def _end(self, reason: str) -> str:
         if self._inflight is not None:          # (not reached: every ending collects first)
