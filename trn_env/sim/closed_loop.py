@@ -22,7 +22,9 @@ one call each, so their fixed per-call costs are paid once per update, not once 
 bench` shows the split). Every sample keeps its own timestamp: an IMU sample at 100 Hz is processed at its
 time whatever the update rate.
 
-A run ends with `completed` (route flown), `terrain_collision` (true height above the true terrain < 0 at
+A run ends with `completed` (route flown, the aircraft at the last waypoint's height), `route_not_followed`
+(the route's guidance is done but the aircraft is not at the last waypoint's height: summary.json says
+what happened), `terrain_collision` (true height above the true terrain < 0 at
 any JSBSim step), `off_map` (truth outside the true DEM), `diverged` (estimate not finite, horizontal
 sigma above the scenario limit, or navigator health 'diverged'), or `time_limit`. Termination is judged on
 every step of an update interval at its end (the truth first, then that interval's estimate); route
@@ -54,7 +56,11 @@ from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 from trn_env.sim.log import SimLog
 from trn_env.sim.nav_stage import InlineNavStage, ProcessNavStage, fork_available
 
-TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "time_limit")
+TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "time_limit", "route_not_followed")
+# `completed` needs the aircraft at the last waypoint's height within this (m; MSL or above the true terrain,
+# as the waypoint gives it): a height-above-ground hold over the map meets the true terrain's detail and the
+# autopilot's lag (the default flight: 1,250-1,700 m true AGL for 1,500 m commanded)
+ROUTE_ALTITUDE_TOLERANCE_M = 300.0
 
 # Order of the child seeds spawned from the scenario seed; append only (changing it changes every run).
 RNG_STREAMS = ("flight", "sensors", "map", "initial_errors", "navigator")
@@ -185,6 +191,7 @@ class ClosedLoop:
         self.n_ticks = 0
         self.navigator_fixes = 0
         self.termination: str | None = None
+        self.route_miss: str | None = None      # why the route was not followed (route_not_followed)
         self.log = SimLog()
         # wall time per stage: flight core (recording and conversion), sensors, navigator, guidance between
         # navigator updates, waiting for a pipelined stage's output, the rest (termination checks, logging,
@@ -320,7 +327,7 @@ class ClosedLoop:
             diverged = self._collect(final=final)
             t3 += clock() - t4                    # counted as wait, sensors and navigator by _collect
             if reason is None:
-                reason = diverged or ("completed" if self.route_complete() else
+                reason = diverged or (self._completion(chunk) if self.route_complete() else
                                       "time_limit" if self._time_up() else None)
         if reason is None:
             self.guidance_estimate = self.estimate
@@ -393,6 +400,27 @@ class ClosedLoop:
         self.close()
         return reason
 
+    def _completion(self, chunk: TruthChunk) -> str:
+        """`completed`, or `route_not_followed` (with an event saying why) when the guidance has flown the
+        route but the aircraft is not at the last waypoint's height (it could not climb or descend to it)."""
+        if self.commander is not None:
+            return "completed"
+        wp = self.scenario.data["route"]["waypoints"][-1]
+        lat, lon, h = float(chunk.lat_rad[-1]), float(chunk.lon_rad[-1]), float(chunk.h_msl_m[-1])
+        if "h_agl_m" in wp:
+            ground = float(self.world_dem.height(lat, lon))
+            have, want, ref = h - ground, float(wp["h_agl_m"]), "above ground"
+        else:
+            have, want, ref = h, float(wp["h_msl_m"]), "MSL"
+        if math.isfinite(have) and abs(have - want) > ROUTE_ALTITUDE_TOLERANCE_M:
+            n = len(self.scenario.data["route"]["waypoints"])
+            self.route_miss = (f"the route ended with the aircraft at {have:.0f} m {ref}, the last waypoint "
+                               f"(route.waypoints[{n - 1}]) asks for {want:.0f} m: it could not follow the "
+                               f"route's heights (tolerance {ROUTE_ALTITUDE_TOLERANCE_M:.0f} m)")
+            self.log.events.append((float(chunk.t_s[-1]), "sim", self.route_miss))
+            return "route_not_followed"
+        return "completed"
+
     def _time_up(self) -> bool:
         return self.t_s >= self.duration_s - 0.5 * self.dt_s
 
@@ -454,6 +482,8 @@ class ClosedLoop:
                             self.jsbsim_steps, self.estimate)
         summary["wall_time_by_stage_s"] = {k: round(v, 4) for k, v in self.stage_s.items()}
         summary["pipelined"] = self.pipelined
+        if self.route_miss is not None:
+            summary["route_not_followed"] = self.route_miss
         summary["navigator_latency_updates"] = self.latency_updates
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
                          self.jsbsim_steps, arrays, list(self.log.events), summary, self.world_dem)
