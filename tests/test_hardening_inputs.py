@@ -169,8 +169,8 @@ def test_cli_directory_as_scenario(tmp_path, capsys):
 def test_cli_subprocess_nan_exit_2_no_traceback(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(SHORT.replace("duration_s = 150.0", "duration_s = inf"))
-    r = subprocess.run([sys.executable, "-m", "trn_env.cli", "validate", str(p)], capture_output=True, text=True,
-                       cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "trn_env.cli", "validate", str(p)], capture_output=True,
+                       text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
     assert r.returncode == 2 and "duration_s" in r.stderr and "Traceback" not in r.stderr
 
 

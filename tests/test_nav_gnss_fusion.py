@@ -68,17 +68,22 @@ def _frames(fl, a, b, with_gnss):
     gnss = GnssFrame(gt[up], fl["g_lat"][sel][up], fl["g_lon"][sel][up], fl["h"][fl["k"][sel]][up],
                      fl["g_v"][sel][up], np.ones(int(up.sum()), bool)) if up.any() else None
     return SensorFrames(t[0], t[-1] + 0.01, imu=ImuFrame(t, fl["f_b"][a:b], fl["w"][a:b], ones),
-                        baro=BaroFrame(t[::5], 6356766.0 * fl["h"][a:b][::5] / (6356766.0 + fl["h"][a:b][::5]),
-                                       ones[::5]),
+                        baro=BaroFrame(t[::5], _geopotential(fl["h"][a:b][::5]), ones[::5]),
                         gnss=gnss)
+
+
+def _geopotential(h_m):
+    """A perfect ISA baro reports geopotential height (US 1976 radius 6356766 m)."""
+    return 6356766.0 * h_m / (6356766.0 + h_m)
 
 
 def _run(fl, with_gnss, **settings):
     nav = registry.create("ins", **settings)
     r_n = meridian_radius_m(fl["lat"][0]) + H
     r_e = (prime_vertical_radius_m(fl["lat"][0]) + H) * np.cos(fl["lat"][0])
-    nav.reset(Estimate(0.0, fl["lat"][0] + 60.0 / r_n, fl["lon"][0] - 45.0 / r_e, fl["h"][0], fl["v"][0].copy(),
-                       fl["eu"][0][0], fl["eu"][1][0], fl["eu"][2][0], initial_covariance()))
+    nav.reset(Estimate(0.0, fl["lat"][0] + 60.0 / r_n, fl["lon"][0] - 45.0 / r_e, fl["h"][0],
+                       fl["v"][0].copy(), fl["eu"][0][0], fl["eu"][1][0], fl["eu"][2][0],
+                       initial_covariance()))
     rows, events = [], []
     for a in range(0, fl["t"].size, 100):
         b = min(a + 100, fl["t"].size)
@@ -111,7 +116,7 @@ def test_gnss_aided_beats_ins_alone_and_raw_gnss(flight):
     g_t = flight["t"][flight["k"]]
     raw_rms = np.sqrt(np.mean(flight["g_err"][(g_t >= 20.0) & (g_t < T_LOSS)] ** 2))
     assert np.sqrt(np.mean(aided[win, 1] ** 2)) < raw_rms
-    # the sigma says so too: at the GNSS level (the correlated-error floor, 1.5 m per axis), not the 42 m start
+    # the sigma says so too: the GNSS level (the correlated-error floor, 1.5 m per axis), not the 42 m start
     assert np.all(aided[win, 2] < 3.0) and np.all(aided[win, 2] >= np.hypot(1.5, 1.5) - 1e-6)
 
 
