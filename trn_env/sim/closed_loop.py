@@ -485,8 +485,9 @@ class ClosedLoop:
         if self.route_miss is not None:
             summary["route_not_followed"] = self.route_miss
         summary["navigator_latency_updates"] = self.latency_updates
+        events = sorted(self.log.events, key=lambda ev: ev[0])   # (stable: same-time events keep their order)
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
-                         self.jsbsim_steps, arrays, list(self.log.events), summary, self.world_dem)
+                         self.jsbsim_steps, arrays, events, summary, self.world_dem)
 
 
 def _rms(x: np.ndarray) -> float:
