@@ -224,3 +224,16 @@ def test_interp_one_matches_numpy():
     xs = np.concatenate([rng.uniform(xp[0] - 2, xp[-1] + 2, 500), xp, [np.nan]])
     got = np.array([interp_one(x, xp, fp) for x in xs])
     assert np.array_equal(got, np.interp(xs, xp, fp), equal_nan=True)
+
+
+def test_perfectly_known_start_is_accepted_negative_variance_refused():
+    """Zero initial sigmas (a legal scenario) used to crash the EKF's reset; a negative eigenvalue is refused."""
+    from navigators.filters.ins_trn_ekf import initial_covariance
+    from navigators.protocol import Estimate
+    nav = registry.create("ins")
+    nav.reset(Estimate(0.0, 0.6, -1.4, 1000.0, np.zeros(3), 0.0, 0.0, 0.0, np.zeros((9, 9))))
+    assert np.all(np.isfinite(nav.estimate().covariance))
+    bad = initial_covariance()
+    bad[0, 0] = -1.0
+    with pytest.raises(ValueError, match="semi-definite"):
+        nav.reset(Estimate(0.0, 0.6, -1.4, 1000.0, np.zeros(3), 0.0, 0.0, 0.0, bad))

@@ -169,6 +169,9 @@ def cmd_fly(args) -> int:
         except TrimError as exc:
             print(f"error: scenario {scenario.source}: initial: {exc} (nothing written)", file=sys.stderr)
             return 2
+        except ValueError as exc:         # a component refusing what the validation let through
+            print(f"error: scenario {scenario.source}: {exc} (nothing written)", file=sys.stderr)
+            return 2
         if not args.quiet:
             print(f"ready after {warm_s:.1f} s", file=sys.stderr, flush=True)
         bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",

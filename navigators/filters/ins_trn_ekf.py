@@ -255,8 +255,16 @@ class InsTrnNavigator:
         )
         P = np.zeros((N_ERR, N_ERR))
         cov = np.asarray(initial.covariance, float)
-        if cov.shape != (9, 9) or not _is_pd(cov):
-            raise ValueError("initial.covariance must be a positive definite 9 x 9 matrix")
+        if cov.shape != (9, 9) or not np.all(np.isfinite(cov)):
+            raise ValueError("initial.covariance must be a finite 9 x 9 matrix")
+        if not _is_pd(cov):
+            # a perfectly known start (zero sigmas) is positive semi-definite: floor its eigenvalues so the
+            # filter's algebra stays defined; a negative eigenvalue is an error
+            w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+            if w.min() < -1e-9 * max(1.0, float(np.abs(w).max())):
+                raise ValueError("initial.covariance must be positive semi-definite (it has a negative "
+                                 f"eigenvalue {w.min():.3g})")
+            cov = (V * np.maximum(w, 1e-10)) @ V.T
         P[:9, :9] = cov
         P[9:12, 9:12] = np.eye(3) * self.sig_ba**2
         P[12, 12] = self.sig_bg**2

@@ -300,8 +300,9 @@ def _attribute(d: dict, path: str, exc: Exception) -> str:
                   "h_msl_m": "h_msl_m" if "h_msl_m" in d["initial"] else "h_agl_m"}
         if name in fields:
             return f"initial.{fields[name]}: {msg}"
-        if "unexpected keyword argument" in msg:
-            return f"aircraft.settings: {msg}"
+        m = re.search(r"unexpected keyword argument '(\w+)'", msg)
+        if m:
+            return f"aircraft.settings.{m.group(1)}: unknown setting ({msg})"
         return f"initial: {msg}"
     return f"{path}: {msg}"
 
