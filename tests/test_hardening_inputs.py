@@ -227,7 +227,7 @@ def test_interp_one_matches_numpy():
 
 
 def test_perfectly_known_start_is_accepted_negative_variance_refused():
-    """Zero initial sigmas (a legal scenario) used to crash the EKF reset; a negative eigenvalue is refused."""
+    """Zero initial sigmas (legal) used to crash the EKF reset; a negative eigenvalue is refused."""
     from navigators.filters.ins_trn_ekf import initial_covariance
     from navigators.protocol import Estimate
     nav = registry.create("ins")
