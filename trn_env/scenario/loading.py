@@ -15,6 +15,12 @@ before any flight starts and reports EVERY problem, each prefixed with the field
    navigator's map, the navigator name known, the component settings accepted by their components.
 
 Problems are raised together as one `ScenarioError` whose `.problems` is the list of messages.
+
+Why a schema plus a generic pass rather than a typed model of the whole file: the schema already states
+every field's type and range in one place that several components extend at once; the finite-number walk
+closes the NaN/infinity class for every present and future numeric field (free-form settings tables
+included) without restating them, and each component validates its own settings in its constructor, so
+`registry.create` and the Python API get the same checks as a scenario file.
 """
 
 from __future__ import annotations
