@@ -83,6 +83,8 @@ def _summary_table(summary: dict, out_dir: Path):
         ("real-time factor", f"{summary['realtime_factor']:.1f} x"),
         ("distance flown", f"{summary['distance_flown_m'] / 1000:.1f} km"),
         ("GNSS-denied time", f"{summary['gnss_denied_time_s']:.0f} s"),
+        ("horizontal error / 1-sigma at GNSS loss", f"{summary['horizontal_error_at_gnss_loss_m']:.1f} m / "
+                                                    f"{summary['horizontal_sigma_at_gnss_loss_m']:.1f} m"),
         ("horizontal error RMS", f"{summary['horizontal_error_rms_m']:.1f} m"),
         ("horizontal error final", f"{summary['horizontal_error_final_m']:.1f} m"),
         ("horizontal error max", f"{summary['horizontal_error_max_m']:.1f} m"),

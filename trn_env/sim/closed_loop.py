@@ -495,6 +495,12 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
 
 
+def _at_loss(x: np.ndarray, denied: np.ndarray) -> float:
+    """x at the last row with GNSS before the first row without it (NaN without such a hand-over)."""
+    up = np.flatnonzero(~denied[:-1] & denied[1:])
+    return float(x[up[0]]) if up.size else float("nan")
+
+
 def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wall_time_s: float,
               jsbsim_steps: int, final: Estimate) -> dict:
     """summary.json contents (DESIGN.md fields first, then extras)."""
@@ -528,6 +534,9 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "horizontal_sigma_final_m": float(sig_h[-1]) if sig_h.size else float("nan"),
         "fraction_within_3sigma": float(np.mean(within3)) if within3.size else float("nan"),
         "gnss_denied_time_s": float(np.sum(denied[1:]) * np.median(np.diff(t))) if t.size > 1 else 0.0,
+        # the hand-over: the last logged row with GNSS before its first loss (NaN if GNSS never was lost)
+        "horizontal_error_at_gnss_loss_m": _at_loss(e_h, denied),
+        "horizontal_sigma_at_gnss_loss_m": _at_loss(sig_h, denied),
         "distance_flown_m": float(np.sum(step)),
         "min_true_agl_m": float(np.nanmin(a["true_h_agl_m"])) if t.size else float("nan"),
         "jsbsim_steps": int(jsbsim_steps),
