@@ -69,6 +69,11 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def _at_loss(summary: dict) -> str:
+    e, s = summary["horizontal_error_at_gnss_loss_m"], summary["horizontal_sigma_at_gnss_loss_m"]
+    return f"{e:.1f} m / {s:.1f} m" if e == e else "no GNSS loss"
+
+
 def _summary_table(summary: dict, out_dir: Path):
     from rich.table import Table
     table = Table(title=f"trn-env fly: {summary['scenario']}  ->  {out_dir}", show_header=True)
@@ -83,8 +88,7 @@ def _summary_table(summary: dict, out_dir: Path):
         ("real-time factor", f"{summary['realtime_factor']:.1f} x"),
         ("distance flown", f"{summary['distance_flown_m'] / 1000:.1f} km"),
         ("GNSS-denied time", f"{summary['gnss_denied_time_s']:.0f} s"),
-        ("horizontal error / 1-sigma at GNSS loss", f"{summary['horizontal_error_at_gnss_loss_m']:.1f} m / "
-                                                    f"{summary['horizontal_sigma_at_gnss_loss_m']:.1f} m"),
+        ("horizontal error / 1-sigma at GNSS loss", _at_loss(summary)),
         ("horizontal error RMS", f"{summary['horizontal_error_rms_m']:.1f} m"),
         ("horizontal error final", f"{summary['horizontal_error_final_m']:.1f} m"),
         ("horizontal error max", f"{summary['horizontal_error_max_m']:.1f} m"),
