@@ -28,6 +28,9 @@ def load(name_or_path, fill_voids: bool = False) -> Dem:
     """Load a DEM by bundled name, "synthetic:<preset>" or file path (see the module docstring)."""
     from terrain import loaders
 
+    if not isinstance(name_or_path, (str, Path)) and not hasattr(name_or_path, "__fspath__"):
+        raise ValueError(f"terrain.load: give a DEM name (e.g. 'jacksboro', 'synthetic:rolling') or a file "
+                         f"path, got {name_or_path!r}")
     if isinstance(name_or_path, str):
         key = name_or_path.strip()
         if key.lower() in ("jacksboro", "jacksboro_fault", "default"):

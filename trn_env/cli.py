@@ -9,7 +9,7 @@
     trn-env report DIR [--out DIR]
 
 Exit status: 0 success, 1 regression gate failed (`campaign --check`), 2 invalid input (every problem
-printed, nothing written), 130 interrupted.
+printed, nothing written), 130 interrupted (Ctrl-C at any point: a one-line message, no traceback).
 """
 
 from __future__ import annotations
@@ -92,6 +92,11 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def _at_loss(summary: dict) -> str:
+    e, s = summary["horizontal_error_at_gnss_loss_m"], summary["horizontal_sigma_at_gnss_loss_m"]
+    return f"{e:.1f} m / {s:.1f} m" if e == e else "no GNSS loss"
+
+
 def _summary_table(summary: dict, out_dir: Path):
     from rich.table import Table
     table = Table(title=f"trn-env fly: {summary['scenario']}  ->  {out_dir}", show_header=True)
@@ -102,10 +107,11 @@ def _summary_table(summary: dict, out_dir: Path):
         ("navigator", summary["navigator"]),
         ("seed", str(summary["seed"])),
         ("simulated time", f"{summary['sim_time_s']:.1f} s"),
-        ("wall time", f"{summary['wall_time_s']:.1f} s"),
+        ("wall time (flight)", f"{summary['wall_time_s']:.1f} s"),
         ("real-time factor", f"{summary['realtime_factor']:.1f} x"),
         ("distance flown", f"{summary['distance_flown_m'] / 1000:.1f} km"),
         ("GNSS-denied time", f"{summary['gnss_denied_time_s']:.0f} s"),
+        ("horizontal error / 1-sigma at GNSS loss", _at_loss(summary)),
         ("horizontal error RMS", f"{summary['horizontal_error_rms_m']:.1f} m"),
         ("horizontal error final", f"{summary['horizontal_error_final_m']:.1f} m"),
         ("horizontal error max", f"{summary['horizontal_error_max_m']:.1f} m"),
@@ -121,9 +127,32 @@ def _summary_table(summary: dict, out_dir: Path):
                            + (" (held constant)" if summary["constant_fuel"] else "")),
         ("navigator status", summary["navigator_status"]),
     ]
+    if "warm_up_wall_time_s" in summary:
+        rows.insert(5, ("kernels ready (compile / cache load)", f"{summary['warm_up_wall_time_s']:.1f} s"))
+    if summary.get("route_not_followed"):
+        rows.insert(1, ("what happened", summary["route_not_followed"]))
     for k, v in rows:
         table.add_row(k, v)
     return table
+
+
+def out_dir_problem(out: Path) -> str | None:
+    """Why the run folder `out` could not be written (checked before flying, nothing created), or None."""
+    import os
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: exists and is not a directory"
+    if out.is_dir():
+        return None if os.access(out, os.W_OK | os.X_OK) else f"--out {out}: the folder is not writable"
+    parent = out.absolute().parent
+    while not parent.exists():
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"--out {out}: cannot create it, {parent} is not a directory"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"--out {out}: cannot create it, {parent} is not writable"
+    return None
 
 
 def cmd_fly(args) -> int:
@@ -140,6 +169,11 @@ def cmd_fly(args) -> int:
     except ScenarioError as err:
         _print_problems(err)
         return 2
+    if args.out is not None:
+        problem = out_dir_problem(args.out)
+        if problem is not None:
+            print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
+            return 2
     import time
 
     from rich.console import Console
@@ -155,10 +189,32 @@ def cmd_fly(args) -> int:
     def progress(t_s: float, _total: float) -> None:
         bar.update(max(0.0, round(t_s, 1) - bar.n))
 
+    from trn_env.flight.core import TrimError
+    from trn_env.scenario.build import build_terrain
+    from trn_env.sim.closed_loop import spawn_rngs
+    from trn_env.sim.warm_up import warm_up
+
     loop = None
     try:
-        # the loop (and its worker process, forked from this one) before the progress bar's thread
-        loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline)
+        # the terrain once (the same map stream as the loop's own), the kernels compiled (first run) or
+        # loaded from numba's cache before the flight, so neither stalls the progress bar nor counts in the
+        # real-time factor; then the loop (and its worker process, forked from this one) before the bar
+        if not args.quiet:
+            print(f"preparing {scenario.name}: terrain, then the numba kernels it uses (compiled on the "
+                  "first run only, one to two minutes on 2 cores; cached afterwards) ...", file=sys.stderr,
+                  flush=True)
+        dems = build_terrain(scenario.data, scenario.extras, spawn_rngs(scenario.seed)["map"])
+        try:
+            warm_s = warm_up(scenario, dems)
+            loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline, dems=dems)
+        except TrimError as exc:
+            print(f"error: scenario {scenario.source}: initial: {exc} (nothing written)", file=sys.stderr)
+            return 2
+        except ValueError as exc:         # a component refusing what the validation let through
+            print(f"error: scenario {scenario.source}: {exc} (nothing written)", file=sys.stderr)
+            return 2
+        if not args.quiet:
+            print(f"ready after {warm_s:.1f} s", file=sys.stderr, flush=True)
         bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
                    disable=args.quiet, mininterval=0.5,
                    bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
@@ -166,6 +222,10 @@ def cmd_fly(args) -> int:
         while loop.termination is None:
             loop.tick()
         result = loop.result(time.perf_counter() - wall0)
+        result.summary["warm_up_wall_time_s"] = warm_s
+        if loop.termination != "time_limit":       # the run ended before the limit: the bar ends full
+            bar.total = bar.n
+            bar.refresh()
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
@@ -286,20 +346,24 @@ def cmd_report(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    if args.command == "scenarios":
-        return cmd_scenarios()
-    if args.command == "validate":
-        return cmd_validate(args)
-    if args.command == "fly":
-        return cmd_fly(args)
-    if args.command == "bench":
-        return cmd_bench(args)
-    if args.command == "campaign":
-        return cmd_campaign(args)
-    if args.command == "report":
-        return cmd_report(args)
-    return 2
+    try:
+        args = _parser().parse_args(argv)
+        if args.command == "scenarios":
+            return cmd_scenarios()
+        if args.command == "validate":
+            return cmd_validate(args)
+        if args.command == "fly":
+            return cmd_fly(args)
+        if args.command == "bench":
+            return cmd_bench(args)
+        if args.command == "campaign":
+            return cmd_campaign(args)
+        if args.command == "report":
+            return cmd_report(args)
+        return 2
+    except KeyboardInterrupt:       # during the imports, the scenario's loading, a benchmark
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
