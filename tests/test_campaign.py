@@ -126,7 +126,7 @@ def test_resume_flies_only_the_missing_run(flown, tmp_path):
 def test_resume_refuses_a_folder_of_another_campaign(flown, tmp_path, capsys):
     other = tmp_path / "other.toml"
     other.write_text(CI.read_text().replace("root_seed = 16", "root_seed = 17")
-                     .replace('"../scenarios/', f'"{HERE}/scenarios/'))
+                     .replace('"ci_denied_short.toml"', f'"{HERE}/campaigns/ci_denied_short.toml"'))
     listing = sorted(p.name for p in (flown / "runs").iterdir())
     assert cli.main(["campaign", str(other), "--out", str(flown), "--resume", "--quiet"]) == 2
     err = capsys.readouterr().err
@@ -169,7 +169,7 @@ def test_ray_backend_gives_the_same_runs_as_the_local_pool(flown, ray_session, t
     sub = tmp_path / "ins_only.toml"
     sub.write_text(CI.read_text().replace('navigators = ["ins", { name = "ins_tercom", settings = '
                                           '{ remove_bias = true } }]', 'navigators = ["ins"]')
-                   .replace('"../scenarios/', f'"{HERE}/scenarios/'))
+                   .replace('"ci_denied_short.toml"', f'"{HERE}/campaigns/ci_denied_short.toml"'))
     camp = load_campaign(sub)
     assert camp.n_runs == 2
     stats = run_campaign(camp, tmp_path / "ray", backend=RayBackend(), progress=False)
