@@ -81,6 +81,7 @@ from navigators.protocol import (
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 _TAIL_S = 3.0          # seconds of each sensor's samples carried into the next frame (sample look-ups)
+_TURN_RATE_WINDOW_S = 3.0   # compass heading rate for the coordinated-turn roll: LSQ slope over 3 s
 
 
 class _Tail:
@@ -101,6 +102,16 @@ class _Tail:
         self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])
         keep = self.t >= self.t[-1] - _TAIL_S
         self.t, self.v, self.ok = self.t[keep], self.v[keep], self.ok[keep]
+
+    def rate(self, t_s: float, col: int, window_s: float) -> float:
+        """Least-squares slope (per s) of column col over the valid samples in [t_s - window_s, t_s]."""
+        m = self.ok & (self.t <= t_s + 1e-9) & (self.t >= t_s - window_s) & np.isfinite(self.v[:, col])
+        if m.sum() < 3:
+            return math.nan
+        x = self.t[m] - self.t[m].mean()
+        y = self.v[m, col]
+        den = float((x * x).sum())
+        return float((x * (y - y.mean())).sum() / den) if den > 0 else math.nan
 
     def at(self, t_query, col: int, max_gap_s: float):
         return sample_at(np.atleast_1d(np.asarray(t_query, float)), self.t, self.v[:, col], self.ok, max_gap_s)
@@ -131,6 +142,7 @@ class AcqTrackNavigator:
         self.sigma_floor_m = float(cfg.position_sigma_floor_m or 0.5 * self.map_resolution_m)
         self._cost = COSTS[cfg.correlation]
         self._interp = INTERPOLATIONS[cfg.interpolation]
+        self._disc = tracking.DISCRIMINATORS[cfg.discriminator]
         self._n_min = max(3, int(math.ceil(cfg.min_valid_fraction * cfg.transect_samples)))
         self._speed_set = np.array(cfg.speed_spacings_mps)
         self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
@@ -158,6 +170,10 @@ class AcqTrackNavigator:
                 need += [("imu", "aiding = true with aiding_source = 'ins' needs the IMU")]
         return need
 
+    def required_duration_s(self) -> float:
+        """Flight time one full transect takes (s): a scenario shorter than this gives no transect."""
+        return self.config.transect_duration_s
+
     # ------------------------------------------------------------------ protocol
     def _reset_state(self) -> None:
         self.lock_state = "filling"
@@ -183,6 +199,7 @@ class AcqTrackNavigator:
         self.bad_epochs = 0
         self.need_acquisition = False
         self.acq_wait = 0
+        self._deferred = False
         self.acquisitions = 0
         self.acquisition_s = math.nan
         self.last_innovation = None
@@ -240,9 +257,16 @@ class AcqTrackNavigator:
             tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
         if frames.air_data is not None:
             tl["air"].extend(frames.air_data.t_s, [frames.air_data.tas_mps], frames.air_data.valid)
-        if frames.heading is not None:
-            tl["hdg"].extend(frames.heading.t_s, [np.unwrap(frames.heading.heading_rad)]
-                             if frames.heading.t_s.size else [frames.heading.heading_rad], frames.heading.valid)
+        hd = frames.heading
+        if hd is not None and hd.t_s.size:
+            h = np.asarray(hd.heading_rad, float)
+            ok = hd.valid & np.isfinite(h)
+            if ok.any():          # continuous heading across frames (for the turn rate)
+                h = h.copy()
+                prev = tl["hdg"].v[-1, 0] if tl["hdg"].t.size else h[ok][0]
+                hu = np.unwrap(np.concatenate([[prev], h[ok]]))[1:]
+                h[ok] = hu
+            tl["hdg"].extend(hd.t_s, [h], ok)
         g = frames.gnss
         if g is not None and g.t_s.size:
             tl["gnss"].extend(g.t_s, [g.lat_rad, g.lon_rad, g.h_m, g.v_ned_mps[:, 0], g.v_ned_mps[:, 1]], g.valid)
@@ -297,11 +321,12 @@ class AcqTrackNavigator:
         m_v = m_psi = 0.0
         if cfg.aiding and cfg.aiding_source == "air_data":
             a, oka = tl["air"].at(t_k, 0, 1.0)
-            h, okh = tl["hdg"].at([t_k, t_k - T], 0, 1.5 * T)
+            h, okh = tl["hdg"].at(t_k, 0, 1.5 * T)
             tas = float(a[0]) if oka[0] else math.nan
             hdg = float(wrap_rad(h[0])) if okh[0] else math.nan
-            if okh[0] and okh[1] and math.isfinite(tas):
-                roll = coordinated_turn_roll_rad(tas, float(h[0] - h[1]) / T)
+            rate = tl["hdg"].rate(t_k, 0, _TURN_RATE_WINDOW_S)
+            if math.isfinite(rate) and math.isfinite(tas):
+                roll = coordinated_turn_roll_rad(tas, rate)
             if not (math.isfinite(tas) and math.isfinite(hdg)):
                 self.health.skip(t_k, "aiding_missing", "acq_track: air data or compass missing; aiding held")
                 last = self.transect.samples[-1] if len(self.transect) else None
@@ -395,6 +420,10 @@ class AcqTrackNavigator:
                 return
             snr_pred = self._predicted_snr()
             if not snr_pred >= cfg.snr_min_db:       # integrity prediction: no search over flat terrain
+                if not self._deferred:
+                    self.health.events.append((s.t_s, f"acq_track: predicted terrain SNR {snr_pred:.1f} dB < "
+                                                      f"{cfg.snr_min_db:g} dB: acquisition deferred"))
+                self._deferred = True
                 self.snr_db = snr_pred
                 self._set_lock(self.lock_state if self.lock_state == "lost" else "acquiring", s.t_s,
                                "lost" if self.need_acquisition else "acquiring",
@@ -402,6 +431,7 @@ class AcqTrackNavigator:
                                "deferred")
                 self._finish(s)
                 return
+            self._deferred = False
             if not self._acquire(s):
                 self.acq_wait = cfg.transect_samples - 1        # retry with the next transect
                 self._finish(s)
@@ -454,7 +484,12 @@ class AcqTrackNavigator:
         else:
             sv, sp = cfg.unaided_speed_sigma_mps, math.radians(cfg.unaided_heading_sigma_deg)
         G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
-        self.P = self.P + G @ np.diag([(T * sv) ** 2, (v * T * sp) ** 2]) @ G.T
+        # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
+        p_tc = G.T @ self.P @ G
+        s_al, s_cr = math.sqrt(max(p_tc[0, 0], 0.0)), math.sqrt(max(p_tc[1, 1], 0.0))
+        d_al, d_cr = T * sv, v * T * sp
+        q = np.diag([2.0 * s_al * d_al + d_al ** 2, 2.0 * s_cr * d_cr + d_cr ** 2])
+        self.P = self.P + G @ q @ G.T
 
     def _arrays(self):
         t, d, valid, dt, m_v, m_psi, rng = self.transect.arrays()
@@ -495,6 +530,8 @@ class AcqTrackNavigator:
         self.acquisition_s = time.perf_counter() - w0
         self.acquisitions += 1
         if not res.distinct:
+            self.health.events.append((s.t_s, f"acq_track: acquisition failed: {res.reason} "
+                                              f"({res.n_hypotheses} cells, {self.acquisition_s:.2f} s)"))
             self._set_lock("acquiring", s.t_s, "lost" if self.need_acquisition else "acquiring",
                            f"acquisition: {res.reason}; retry with the next transect")
             return False
@@ -538,12 +575,13 @@ class AcqTrackNavigator:
         shape = tracking.analyse_v(offs, vals)
         spacing, _ = tracking.choose_spacing(offs, vals, shape, sset, cfg.symmetry_ratio_max)
         x, it1, lock1, _ = tracking.early_late_loop(*args, b_v, b_psi, *tail, which, spacing, thr1,
-                                                    cfg.break_iteration)
+                                                    cfg.break_iteration, self._disc)
         its = [int(it1), 0]
         locked = bool(lock1)
         if cfg.bias_mitigation == "ncs":
             bv2, bp2 = (x, b_psi) if which == 0 else (b_v, x)
-            x2, it2, lock2, _ = tracking.early_late_loop(*args, bv2, bp2, *tail, which, s2, thr2, cfg.break_iteration)
+            x2, it2, lock2, _ = tracking.early_late_loop(*args, bv2, bp2, *tail, which, s2, thr2, cfg.break_iteration,
+                                                      self._disc)
             its[1] = int(it2)
             if np.isfinite(x2):
                 x = x2

@@ -30,6 +30,7 @@ from navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
 AIDING_SOURCES = ("air_data", "ins")
 LOOP_ORDERS = ("speed_first", "heading_first")
 BIAS_MITIGATIONS = ("ncs", "none")
+DISCRIMINATOR_NAMES = ("thesis", "v_fit")
 
 
 def _finite(name: str, value, lo: float | None = None, hi: float | None = None, strict_lo: bool = False):
@@ -70,7 +71,7 @@ class AcqTrackConfig:
     aiding: bool = True                   # chapter 4's aided loops (False: constant speed and heading)
     aiding_source: str = "air_data"       # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
     wind_estimation: bool = True          # wind triangle, predicted through heading changes
-    wind_gain: float = 0.05               # per transect sample, first-order low-pass of the wind estimate
+    wind_gain: float = 0.01               # per tracked sample, low-pass of the wind estimate (GNSS: 0.2)
     loop_order: str = "speed_first"
     speed_spacings_mps: tuple = (0.48, 0.96, 1.44, 1.92, 2.4)
     speed_threshold_mps: float = 0.005
@@ -81,6 +82,7 @@ class AcqTrackConfig:
     heading_narrow_spacing_deg: float = 0.5
     heading_narrow_threshold_deg: float = 0.003
     break_iteration: int = 101
+    discriminator: str = "thesis"         # "thesis": s (E - L) / (E + L); "v_fit": floor removed (tracking.py)
     bias_mitigation: str = "ncs"          # "ncs": fixed narrow 2nd stage; "none": 1st stage only
     scf_offset_cells: float = 2.0         # f: the SCF/HCF reach f R_db at the transect's far end
     scf_points: int = 10                  # correlation-function points on each side of the prompt
@@ -123,7 +125,7 @@ class AcqTrackConfig:
         _finite("sample_period_s", self.sample_period_s, 0.0, strict_lo=True)
         for name, options in (("correlation", tuple(COSTS)), ("interpolation", tuple(INTERPOLATIONS)),
                               ("aiding_source", AIDING_SOURCES), ("loop_order", LOOP_ORDERS),
-                              ("bias_mitigation", BIAS_MITIGATIONS)):
+                              ("bias_mitigation", BIAS_MITIGATIONS), ("discriminator", DISCRIMINATOR_NAMES)):
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
         for name in ("remove_bias", "aiding", "wind_estimation", "roll_compensation", "baro_geopotential"):

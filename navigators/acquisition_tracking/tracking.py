@@ -6,6 +6,10 @@ reference b_v in m/s or the heading reference b_psi in rad). Discriminator (spec
     eps = s (H_E - H_L) / (H_E + H_L),    x <- x + eps
 
 (H: the costs, lower is better; early worse than late means the minimum lies toward higher x, so x grows.)
+Its gain is a s / (H_min + a s) for a V of slope a over a cost floor H_min (the noise), so over noisy
+profiles it creeps and the threshold stops it short of the minimum. The optional "v_fit" discriminator
+eps = (s / 2)(H_E - H_L) / (max(H_E, H_L) - H_P) subtracts the floor through the prompt and is exact on a
+V within +-s (our addition, setting `discriminator`).
 The loop iterates within one epoch; it is in lock when consecutive estimates differ by less than its
 threshold (|eps| < threshold, in the loop's own unit - m/s or deg: our reading of the thesis' unitless
 thresholds, spec section 8), and it breaks at the 101st iteration (at most 100 discriminator updates) out
@@ -27,10 +31,15 @@ from numba import njit
 
 from navigators.acquisition_tracking.correlation import replica_cost
 
+DISC_THESIS = 0     # eps = s (H_E - H_L) / (H_E + H_L)   (spec section 4)
+DISC_V_FIT = 1      # eps = (s / 2) (H_E - H_L) / (max(H_E, H_L) - H_P)
+DISCRIMINATORS = {"thesis": DISC_THESIS, "v_fit": DISC_V_FIT}
+
 
 @njit(cache=True)
 def early_late_loop(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-                    d, valid, cost, remove_bias, interp, n_min, which, spacing, threshold, break_iteration):
+                    d, valid, cost, remove_bias, interp, n_min, which, spacing, threshold, break_iteration,
+                    discriminator):
     """Run one loop stage. Returns (x, iterations, locked, H_prompt); x is b_v (which 0) or b_psi (1).
 
     A replica off the map (inf cost on early or late) ends the stage out of lock with x unchanged since
@@ -58,8 +67,19 @@ def early_late_loop(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_ps
                               dlon_w, h_w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False, np.inf
-        den = he + hl
-        eps = spacing * (he - hl) / den if den > 0.0 else 0.0
+        if discriminator == DISC_THESIS:
+            den = he + hl
+            eps = spacing * (he - hl) / den if den > 0.0 else 0.0
+        else:      # V-fit: the prompt removes the cost floor; exact on a V within +-spacing
+            hp = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi,
+                              x if which == 0 else b_v, x if which == 1 else b_psi, r_n, r_e_cos, d, valid,
+                              cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w)
+            den = max(he, hl) - hp
+            eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
+            if eps > spacing:
+                eps = spacing
+            elif eps < -spacing:
+                eps = -spacing
         x += eps
         if abs(eps) < threshold:
             bv = x if which == 0 else b_v
@@ -101,19 +121,25 @@ class VShape:
     slope_right: float
 
 
-def analyse_v(offsets: np.ndarray, values: np.ndarray, min_points: int = 2) -> VShape:
-    """V-shape analysis of a correlation function sampled at increasing offsets."""
+def analyse_v(offsets: np.ndarray, values: np.ndarray, min_points: int = 2, tolerance: float = 0.05) -> VShape:
+    """V-shape analysis of a correlation function sampled at increasing offsets: each side extends while
+    the function stays above the minimum and drops by no more than `tolerance` x its range from one point
+    to the next outward (noise wiggles); a V needs min_points on both sides."""
     ok = np.isfinite(values)
     if ok.sum() < 3:
         return VShape(False, 0.0, 0.0, np.inf, 0.0, 0.0)
     vals = np.where(ok, values, np.inf)
     k = int(np.argmin(vals))
     n = vals.size
+    fin = vals[np.isfinite(vals)]
+    tol = tolerance * float(fin.max() - fin.min())   # a wiggle this small does not end the V's side
     left = k
-    while left > 0 and np.isfinite(vals[left - 1]) and vals[left - 1] > vals[left]:
+    while left > 0 and np.isfinite(vals[left - 1]) and vals[left - 1] > vals[left] - tol \
+            and vals[left - 1] > vals[k]:
         left -= 1
     right = k
-    while right < n - 1 and np.isfinite(vals[right + 1]) and vals[right + 1] > vals[right]:
+    while right < n - 1 and np.isfinite(vals[right + 1]) and vals[right + 1] > vals[right] - tol \
+            and vals[right + 1] > vals[k]:
         right += 1
     step = float(offsets[1] - offsets[0])
     wl, wr = k - left, right - k
