@@ -19,11 +19,12 @@ the output velocity to the frame's end. The transect's start for the next epoch 
 Health.status state machine (documented in Health): acquiring -> ok <-> degraded -> lost -> acquiring ...;
 each transition's reason is an event.
 
-Covariance (north, east): per epoch it grows by the along-track (T sigma_v)^2 and cross-track
-(V T sigma_psi)^2 of what the loops cannot see - the aiding's sigmas while not in lock; while in lock the
-terrain match bounds it by its information along and across the track (the replica's squared map slopes over
-the a-priori noise, shared among the N epochs that reuse each sample) plus a floor of half a map post, so a
-ridge along the track leaves the cross-track sigma growing. Vertical: the barometer's bias.
+Covariance (north, east): per epoch the along-track sigma grows by T sigma_v and the cross-track by
+V T sigma_psi (linearly: the aiding's errors are biases over a transect) - the aiding's sigmas while not in
+lock, the loops' while in lock; in lock the terrain match bounds each direction by
+lock_covariance_scale^2 x (a-priori noise^2 x N / the replica's squared map slopes in that direction + the
+transect span x the loop's sigma, squared + half a map post, squared), so a ridge along the track leaves the
+cross-track sigma growing. A bound, not a fused measurement: consecutive epochs share N - 1 samples. Vertical: the barometer's bias.
 
 Estimate.extra, besides the fixed protocol keys (innovation = the epoch's change of [b_v (m/s), b_psi (rad)],
 its covariance, NIS with 2 dof, measurement time):
@@ -656,12 +657,21 @@ class AcqTrackNavigator:
         i_al, i_cr = along_cross_information(heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v,
                                              m_psi, b_v, b_psi, r_n, r_e, valid, psi)
         N = cfg.transect_samples
-        var_al = (sig0 ** 2 * N / i_al if i_al > 0 else 1e12) + self.sigma_floor_m ** 2
-        var_cr = (sig0 ** 2 * N / i_cr if i_cr > 0 else 1e12) + self.sigma_floor_m ** 2
+        span_s = cfg.transect_duration_s
+        v_mean = max(float(np.mean(m_v)) + b_v, 1.0)
+        k2 = cfg.lock_covariance_scale ** 2
+        var_al = k2 * ((sig0 ** 2 * N / i_al if i_al > 0 else 1e12) + (span_s * sv[0]) ** 2
+                       + self.sigma_floor_m ** 2)
+        var_cr = k2 * ((sig0 ** 2 * N / i_cr if i_cr > 0 else 1e12) + (v_mean * span_s * sv[1]) ** 2
+                       + self.sigma_floor_m ** 2)
+        # in lock the match bounds each direction (consecutive epochs share N - 1 samples: a bound, not a
+        # fresh measurement to fuse every epoch)
         G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
-        R = G @ np.diag([var_al, var_cr]) @ G.T
-        Pi = np.linalg.inv(self.P) + np.linalg.inv(R)
-        self.P = np.linalg.inv(Pi)
+        p_tc = G.T @ self.P @ G
+        s_al = math.sqrt(min(max(p_tc[0, 0], 0.0), var_al))
+        s_cr = math.sqrt(min(max(p_tc[1, 1], 0.0), var_cr))
+        rho = p_tc[0, 1] / math.sqrt(p_tc[0, 0] * p_tc[1, 1]) if p_tc[0, 0] > 0 and p_tc[1, 1] > 0 else 0.0
+        self.P = G @ np.array([[s_al ** 2, rho * s_al * s_cr], [rho * s_al * s_cr, s_cr ** 2]]) @ G.T
         self._set_lock("tracking", s.t_s, "ok", "in lock")
 
     @staticmethod

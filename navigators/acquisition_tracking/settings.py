@@ -115,6 +115,7 @@ class AcqTrackConfig:
     unaided_heading_sigma_deg: float = 5.0
     gnss_sigma_m: float = 3.0
     position_sigma_floor_m: float | None = None   # None: half the map's post spacing
+    lock_covariance_scale: float = 2.0    # calibration of the in-lock position bound (navigator.py)
     baro_geopotential: bool = True
     baro_bias_sigma_m: float = 10.0
 
@@ -143,7 +144,7 @@ class AcqTrackConfig:
                      "beamwidth_deg", "false_lock_sigma_factor", "max_speed_bias_mps", "max_heading_bias_deg",
                      "output_average_speed_tol_mps", "output_average_heading_tol_deg", "gnss_sigma_m",
                      "aiding_speed_sigma_mps", "aiding_heading_sigma_deg", "unaided_speed_sigma_mps",
-                     "unaided_heading_sigma_deg"):
+                     "unaided_heading_sigma_deg", "lock_covariance_scale"):
             _finite(name, getattr(self, name), 0.0, strict_lo=True)
         for name, bin_name in (("acquisition_speed_half_mps", "acquisition_speed_bin_mps"),
                                ("acquisition_heading_half_deg", "acquisition_heading_bin_deg"),
