@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from navigators.acquisition_tracking.correlation import _map_height, profile_cost, replica_offsets
+from navigators.acquisition_tracking.correlation import INTERP_BILINEAR, _map_height, profile_cost, replica_offsets
 
 
 @njit(cache=True)
@@ -29,20 +29,50 @@ def search_kernel(heights, lat0, lon0, dlat, dlon, lat_c, lon_c, dn_grid, de_gri
     """out[i, j, a, b] = cost of the replica starting dn_grid[i] north, de_grid[j] east of (lat_c, lon_c)
     with references bv_grid[a] (m/s) and bpsi_grid[b] (rad)."""
     n = dt.shape[0]
+    n_lat, n_lon = heights.shape
     dlat_w = np.empty(n)
     dlon_w = np.empty(n)
+    fi_w = np.empty(n)
+    fj_w = np.empty(n)
     h_w = np.empty(n)
     for a in range(bv_grid.shape[0]):
         for b in range(bpsi_grid.shape[0]):
             replica_offsets(dt, m_v, m_psi, bv_grid[a], bpsi_grid[b], r_n, r_e_cos, dlat_w, dlon_w)
+            for k in range(n):              # offsets in grid-index units, once per (speed, heading)
+                fi_w[k] = dlat_w[k] / dlat
+                fj_w[k] = dlon_w[k] / dlon
             for i in range(dn_grid.shape[0]):
                 lat_s = lat_c + dn_grid[i] / r_n
+                fi_s = (lat_s - lat0) / dlat
                 for j in range(de_grid.shape[0]):
                     lon_s = lon_c + de_grid[j] / r_e_cos
-                    for k in range(n):
-                        h_w[k] = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k],
-                                             lon_s + dlon_w[k], interp)
+                    if interp == INTERP_BILINEAR:
+                        fj_s = (lon_s - lon0) / dlon
+                        for k in range(n):
+                            h_w[k] = _bilinear_index(heights, n_lat, n_lon, fi_s + fi_w[k], fj_s + fj_w[k])
+                    else:
+                        for k in range(n):
+                            h_w[k] = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k],
+                                                 lon_s + dlon_w[k], interp)
                     out[i, j, a, b] = profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+
+
+@njit(cache=True)
+def _bilinear_index(heights, n_lat, n_lon, fi, fj):
+    """Bilinear height at fractional grid indices (terrain.kernels.bilinear's arithmetic without its
+    lat/lon division; NaN outside the grid or next to a void - the sample then drops out)."""
+    if not (fi >= -1e-9 and fj >= -1e-9 and fi <= n_lat - 1 + 1e-9 and fj <= n_lon - 1 + 1e-9):
+        return np.nan
+    i = min(max(int(fi), 0), n_lat - 2)
+    j = min(max(int(fj), 0), n_lon - 2)
+    u = fi - i
+    v = fj - j
+    h00 = heights[i, j]
+    h01 = heights[i, j + 1]
+    a = h00 + v * (h01 - h00)
+    h10 = heights[i + 1, j]
+    b = h10 + v * (heights[i + 1, j + 1] - h10)
+    return a + u * (b - a)
 
 
 @dataclass
