@@ -138,6 +138,10 @@ class AcqTrackNavigator:
         self.dem = dem
         self.name = name
         self._grid = dem.grid
+        self._footprint = None
+        if cfg.replica_model == "footprint":
+            from navigators.acquisition_tracking.footprint import FootprintMaps
+            self._footprint = FootprintMaps(dem, cfg.beamwidth_deg)
         sn, se = dem.spacing_m
         self.map_resolution_m = float(0.5 * (sn + se))
         self.sigma_floor_m = float(cfg.position_sigma_floor_m or 0.5 * self.map_resolution_m)
@@ -180,6 +184,7 @@ class AcqTrackNavigator:
         self.lock_state = "filling"
         self.b_v = 0.0
         self.b_psi = 0.0
+        self.b_mean = (0.0, 0.0)
         self.p0 = (math.nan, math.nan)
         self.pos = (math.nan, math.nan)
         self.t_pos = math.nan
@@ -460,6 +465,7 @@ class AcqTrackNavigator:
             k = 0.2
             self.b_v += k * (g_speed - s.m_v - self.b_v)
             self.b_psi += k * float(wrap_rad(g_track - s.m_psi - self.b_psi))
+            self.b_mean = (self.b_v, self.b_psi)
         first = tr.samples[0]
         if math.isfinite(first.gnss_lat):
             self.p0 = (first.gnss_lat, first.gnss_lon)
@@ -496,6 +502,14 @@ class AcqTrackNavigator:
         t, d, valid, dt, m_v, m_psi, rng = self.transect.arrays()
         r_n, r_e = self._radii(self.p0[0], self.h_m)
         return t, d, valid, dt, m_v, m_psi, rng, r_n, r_e
+
+    def _track_grid(self, rng: np.ndarray):
+        """The map grid the loops correlate with: the plain map, or its footprint dilation at the transect's
+        median range (replica_model)."""
+        if self._footprint is None:
+            return self._grid
+        ok = np.isfinite(rng)
+        return self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
 
     def _predicted_snr(self) -> float:
         """Terrain SNR (dB) of the map along the dead-reckoned transect against the a-priori noise alone."""
@@ -552,7 +566,7 @@ class AcqTrackNavigator:
         """Adaptivity block + both stages of one loop: (x, [it1, it2], locked, VShape, spacing)."""
         cfg = self.config
         t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
-        heights, lat0, lon0, dlat, dlon = self._grid
+        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
         N, Ts = cfg.transect_samples, cfg.sample_period_s
         f_r = cfg.scf_offset_cells * self.map_resolution_m
         if which == 0:       # spec section 2: speed eps_max = f R_db / (N t)
@@ -617,7 +631,7 @@ class AcqTrackNavigator:
         self.spacing = (spacing[0], spacing[1])
         self.v_shape = bool(shapes[0].v_shape and shapes[1].v_shape)
         # integrity at the new prompt
-        heights, lat0, lon0, dlat, dlon = self._grid
+        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
         n = dt.size
         h_p = np.empty(n)
         replica_heights(heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, b_v, b_psi,
@@ -628,8 +642,7 @@ class AcqTrackNavigator:
         self.false_lock = false_lock(res_sigma, sig0, cfg.false_lock_sigma_factor, b_v, b_psi, cfg.aiding,
                                      cfg.max_speed_bias_mps, math.radians(cfg.max_heading_bias_deg))
         reasons = []
-        if not (locks[0] and locks[1]):
-            reasons.append("loop did not lock (101-iteration break)")
+        converged = bool(locks[0] and locks[1])
         if not self.v_shape:
             reasons.append("no V-shape around the correlation minimum")
         if not self.snr_db >= cfg.snr_min_db:
@@ -641,6 +654,9 @@ class AcqTrackNavigator:
             self._out_of_lock(s, "; ".join(reasons))
             return
         innov = np.array([b_v - b_v0, float(wrap_rad(b_psi - b_psi0))])
+        if cfg.aiding:     # the aided reference is a slow bias: move it part of the way (reference_gain)
+            g = cfg.reference_gain
+            b_v, b_psi = b_v0 + g * innov[0], b_psi0 + g * innov[1]
         self.b_v, self.b_psi = b_v, b_psi
         # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
         n_ok = max(int(valid.sum()), 1)
@@ -652,6 +668,8 @@ class AcqTrackNavigator:
                      sv[1] ** 2 + math.radians(cfg.aiding_heading_sigma_deg) ** 2 / cfg.transect_samples])
         self.last_innovation = (s.t_s, innov, S)
         self.bad_epochs = 0
+        k = 1.0 / max(cfg.transect_samples, 1)      # the references' running mean over about a transect
+        self.b_mean = (self.b_mean[0] + k * (b_v - self.b_mean[0]), self.b_mean[1] + k * (b_psi - self.b_mean[1]))
         # terrain-match bound on the position (information along / across the track, shared by N epochs)
         psi = self._aided_track(s)
         i_al, i_cr = along_cross_information(heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v,
@@ -672,7 +690,10 @@ class AcqTrackNavigator:
         s_cr = math.sqrt(min(max(p_tc[1, 1], 0.0), var_cr))
         rho = p_tc[0, 1] / math.sqrt(p_tc[0, 0] * p_tc[1, 1]) if p_tc[0, 0] > 0 and p_tc[1, 1] > 0 else 0.0
         self.P = G @ np.array([[s_al ** 2, rho * s_al * s_cr], [rho * s_al * s_cr, s_cr ** 2]]) @ G.T
-        self._set_lock("tracking", s.t_s, "ok", "in lock")
+        if converged:
+            self._set_lock("tracking", s.t_s, "ok", "in lock")
+        else:       # the V is there but a loop hit the 101-iteration break: estimate kept, flagged
+            self._set_lock("tracking", s.t_s, "degraded", "a loop did not converge (101-iteration break)")
 
     @staticmethod
     def _loop_sigma(shape, cost_noise: float, narrow: float) -> float:
@@ -686,6 +707,8 @@ class AcqTrackNavigator:
         self.sigma_v = cfg.aiding_speed_sigma_mps if cfg.aiding else cfg.unaided_speed_sigma_mps
         self.sigma_psi = math.radians(cfg.aiding_heading_sigma_deg if cfg.aiding else cfg.unaided_heading_sigma_deg)
         if self.bad_epochs >= cfg.lost_after_epochs:
+            if cfg.aiding and self.lock_state != "lost":   # dead-reckon on the references' long-term mean
+                self.b_v, self.b_psi = self.b_mean
             self.need_acquisition = True
             self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")
         else:

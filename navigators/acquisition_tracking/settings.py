@@ -67,9 +67,11 @@ class AcqTrackConfig:
     correlation: str = "mad"              # "mad" | "pearson"
     remove_bias: bool = True              # MAD of the mean-removed difference (baro / map vertical bias)
     interpolation: str = "bilinear"       # "bilinear" | "bicubic" map heights at replica samples
+    replica_model: str = "plumb"          # "plumb" | "footprint": the map as the pulse altimeter sees it
     min_valid_fraction: float = 0.6       # of the N samples needed to correlate
     aiding: bool = True                   # chapter 4's aided loops (False: constant speed and heading)
     aiding_source: str = "air_data"       # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
+    reference_gain: float = 1.0           # aided: fraction of each epoch's loop correction taken into b
     wind_estimation: bool = True          # wind triangle, predicted through heading changes
     wind_gain: float = 0.01               # per tracked sample, low-pass of the wind estimate (GNSS: 0.2)
     loop_order: str = "speed_first"
@@ -126,7 +128,8 @@ class AcqTrackConfig:
         _finite("sample_period_s", self.sample_period_s, 0.0, strict_lo=True)
         for name, options in (("correlation", tuple(COSTS)), ("interpolation", tuple(INTERPOLATIONS)),
                               ("aiding_source", AIDING_SOURCES), ("loop_order", LOOP_ORDERS),
-                              ("bias_mitigation", BIAS_MITIGATIONS), ("discriminator", DISCRIMINATOR_NAMES)):
+                              ("bias_mitigation", BIAS_MITIGATIONS), ("discriminator", DISCRIMINATOR_NAMES),
+                              ("replica_model", ("plumb", "footprint"))):
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
         for name in ("remove_bias", "aiding", "wind_estimation", "roll_compensation", "baro_geopotential"):
@@ -134,6 +137,7 @@ class AcqTrackConfig:
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         _finite("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0, strict_lo=True)
         _finite("wind_gain", self.wind_gain, 0.0, 1.0)
+        _finite("reference_gain", self.reference_gain, 0.0, 1.0, strict_lo=True)
         object.__setattr__(self, "speed_spacings_mps", _spacing_set("speed_spacings_mps", self.speed_spacings_mps))
         object.__setattr__(self, "heading_spacings_deg",
                            _spacing_set("heading_spacings_deg", self.heading_spacings_deg))
