@@ -44,7 +44,7 @@ LEGS_LON = (-84.39, -84.34, -84.29, -84.24)
 LAT_S, LAT_N = 36.465, 36.715
 AGL_M = 600.0
 TAS_MPS = 80.0
-IRS_SIGMAS = {"aiding_speed_sigma_mps": 0.3, "aiding_heading_sigma_deg": 0.2}   # ours: an IRS's velocity
+IRS_SIGMAS = {"aiding_speed_sigma_mps": 0.3, "aiding_heading_sigma_deg": 0.2}  # ours: an IRS's velocity
 
 
 class Recorder:
@@ -76,19 +76,34 @@ def _scenario(duration_s: float, seed: int, waypoints=None, map_errors: bool = T
             waypoints += [{"lat_deg": la, "lon_deg": lon, "h_agl_m": AGL_M} for la in lats]
     data["route"] = {"tas_mps": TAS_MPS, "waypoints": waypoints}
     w0, w1 = waypoints[0], waypoints[1]
-    data["initial"] = {"lat_deg": w0["lat_deg"], "lon_deg": w0["lon_deg"], "h_agl_m": AGL_M, "tas_mps": TAS_MPS,
-                       "heading_deg": math.degrees(math.atan2(
-                           (w1["lon_deg"] - w0["lon_deg"]) * math.cos(math.radians(w0["lat_deg"])),
-                           w1["lat_deg"] - w0["lat_deg"])) % 360.0}
-    data["gnss"] = {"outages": []}               # guidance flies on GNSS; the replays deny it after 10 s
+    data["initial"] = {
+        "lat_deg": w0["lat_deg"],
+        "lon_deg": w0["lon_deg"],
+        "h_agl_m": AGL_M,
+        "tas_mps": TAS_MPS,
+        "heading_deg": math.degrees(
+            math.atan2(
+                (w1["lon_deg"] - w0["lon_deg"]) * math.cos(math.radians(w0["lat_deg"])),
+                w1["lat_deg"] - w0["lat_deg"],
+            )
+        )
+        % 360.0,
+    }
+    data["gnss"] = {"outages": []}  # guidance flies on GNSS; the replays deny it after 10 s
     data["sensors"].pop("ira", None)
     data["navigator"] = {"name": "acq_track", "rate_hz": 1.0, "settings": {"transect_samples": 25}}
-    if map_errors:     # SRTM-class: 20 m CE90 (sigma 9.3 m per axis), 16 m LE90 (sigma 9.7 m)
+    if map_errors:  # SRTM-class: 20 m CE90 (sigma 9.3 m per axis), 16 m LE90 (sigma 9.7 m)
         rng = np.random.default_rng(seed + 1000)
         sh = rng.normal(0.0, 20.0 / 2.1460, 2)
-        data["terrain"]["map"] = {"dem": "jacksboro", "error_model": {
-            "random_sigma_m": 16.0 / 1.6449, "correlation_length_m": 500.0,
-            "shift_n_m": float(sh[0]), "shift_e_m": float(sh[1])}}
+        data["terrain"]["map"] = {
+            "dem": "jacksboro",
+            "error_model": {
+                "random_sigma_m": 16.0 / 1.6449,
+                "correlation_length_m": 500.0,
+                "shift_n_m": float(sh[0]),
+                "shift_e_m": float(sh[1]),
+            },
+        }
     return data
 
 
@@ -100,8 +115,19 @@ def fly(data: dict, commander=None, dems=None):
     loop._stage.navigator = rec
     res = loop.run()
     a = res.arrays
-    truth = {k: a[k] for k in ("t_s", "true_lat_rad", "true_lon_rad", "true_h_msl_m", "true_v_ned_mps",
-                               "true_roll_rad", "true_pitch_rad", "true_yaw_rad")}
+    truth = {
+        k: a[k]
+        for k in (
+            "t_s",
+            "true_lat_rad",
+            "true_lon_rad",
+            "true_h_msl_m",
+            "true_v_ned_mps",
+            "true_roll_rad",
+            "true_pitch_rad",
+            "true_yaw_rad",
+        )
+    }
     return rec.frames, truth, loop
 
 
@@ -110,11 +136,22 @@ def replay(frames, truth, dem, name: str, t_deny_s: float = 10.0, **settings):
     nav = registry.create(name, dem=dem, **settings)
     t = truth["t_s"]
     from navigators.protocol import Estimate
-    cov = np.diag([30.0 ** 2, 30.0 ** 2, 15.0 ** 2, 0.01, 0.01, 0.01, 2.5e-9, 2.5e-9, 1e-6])
+
+    cov = np.diag([30.0**2, 30.0**2, 15.0**2, 0.01, 0.01, 0.01, 2.5e-9, 2.5e-9, 1e-6])
     v0 = truth["true_v_ned_mps"][0]
-    nav.reset(Estimate(float(t[0]), float(truth["true_lat_rad"][0]), float(truth["true_lon_rad"][0]),
-                       float(truth["true_h_msl_m"][0]), np.asarray(v0, float), float(truth["true_roll_rad"][0]),
-                       float(truth["true_pitch_rad"][0]), float(truth["true_yaw_rad"][0]), cov))
+    nav.reset(
+        Estimate(
+            float(t[0]),
+            float(truth["true_lat_rad"][0]),
+            float(truth["true_lon_rad"][0]),
+            float(truth["true_h_msl_m"][0]),
+            np.asarray(v0, float),
+            float(truth["true_roll_rad"][0]),
+            float(truth["true_pitch_rad"][0]),
+            float(truth["true_yaw_rad"][0]),
+            cov,
+        )
+    )
     rows = []
     for fr in frames:
         fr = copy.copy(fr)
@@ -122,25 +159,52 @@ def replay(frames, truth, dem, name: str, t_deny_s: float = 10.0, **settings):
             fr.gnss = None
         est = nav.update(fr)
         k = int(np.argmin(np.abs(t - est.t_s)))
-        dn, de = latlon_to_ned_offset(truth["true_lat_rad"][k], truth["true_lon_rad"][k], truth["true_h_msl_m"][k],
-                                      est.lat_rad, est.lon_rad)
+        dn, de = latlon_to_ned_offset(
+            truth["true_lat_rad"][k],
+            truth["true_lon_rad"][k],
+            truth["true_h_msl_m"][k],
+            est.lat_rad,
+            est.lon_rad,
+        )
         vt = truth["true_v_ned_mps"][k]
         x = est.extra
-        rows.append((est.t_s, math.hypot(dn, de), math.sqrt(est.covariance[0, 0] + est.covariance[1, 1]),
-                     float(est.health.ok), x.get("snr_db", math.nan), x.get("tracked_speed_mps", math.nan),
-                     math.hypot(vt[0], vt[1]), float(x.get("lock_state") == "tracking")))
+        rows.append(
+            (
+                est.t_s,
+                math.hypot(dn, de),
+                math.sqrt(est.covariance[0, 0] + est.covariance[1, 1]),
+                float(est.health.ok),
+                x.get("snr_db", math.nan),
+                x.get("tracked_speed_mps", math.nan),
+                math.hypot(vt[0], vt[1]),
+                float(x.get("lock_state") == "tracking"),
+            )
+        )
     r = np.array(rows)
-    return {"t_s": r[:, 0], "err_m": r[:, 1], "sigma_m": r[:, 2], "ok": r[:, 3], "snr_db": r[:, 4],
-            "speed_mps": r[:, 5], "true_speed_mps": r[:, 6], "tracking": r[:, 7]}
+    return {
+        "t_s": r[:, 0],
+        "err_m": r[:, 1],
+        "sigma_m": r[:, 2],
+        "ok": r[:, 3],
+        "snr_db": r[:, 4],
+        "speed_mps": r[:, 5],
+        "true_speed_mps": r[:, 6],
+        "tracking": r[:, 7],
+    }
 
 
 def _stats(run: dict, t_from: float = 10.0) -> dict:
     m = run["t_s"] >= t_from
     e = run["err_m"][m]
     within = run["err_m"][m] <= 3.0 * run["sigma_m"][m]
-    return {"rms_m": float(np.sqrt(np.mean(e ** 2))), "max_m": float(e.max()), "final_m": float(e[-1]),
-            "in_lock_fraction": float(np.mean(run["tracking"][m])), "within_3sigma": float(np.mean(within)),
-            "drift_last_third_m": float(np.mean(e[-len(e) // 3:]) - np.mean(e[len(e) // 3: 2 * len(e) // 3]))}
+    return {
+        "rms_m": float(np.sqrt(np.mean(e**2))),
+        "max_m": float(e.max()),
+        "final_m": float(e[-1]),
+        "in_lock_fraction": float(np.mean(run["tracking"][m])),
+        "within_3sigma": float(np.mean(within)),
+        "drift_last_third_m": float(np.mean(e[-len(e) // 3 :]) - np.mean(e[len(e) // 3 : 2 * len(e) // 3])),
+    }
 
 
 def _finite(x):
@@ -173,14 +237,18 @@ def main(argv=None) -> int:
         "irs_only (ins, free inertial)": replay(frames, truth, dem, "ins"),
         "aided N=25": replay(frames, truth, dem, "acq_track", transect_samples=25, **irs),
         "aided N=50": replay(frames, truth, dem, "acq_track", transect_samples=50, **irs),
-        "aided N=25, no roll compensation": replay(frames, truth, dem, "acq_track", transect_samples=25,
-                                                   roll_compensation=False, **irs),
-        "aided N=50, no roll compensation": replay(frames, truth, dem, "acq_track", transect_samples=50,
-                                                   roll_compensation=False, **irs),
-        "aided N=50, plumb replicas": replay(frames, truth, dem, "acq_track", transect_samples=50,
-                                             **dict(irs, replica_model="plumb")),
-        "air data + compass N=50": replay(frames, truth, dem, "acq_track", transect_samples=50,
-                                          replica_model="footprint"),
+        "aided N=25, no roll compensation": replay(
+            frames, truth, dem, "acq_track", transect_samples=25, roll_compensation=False, **irs
+        ),
+        "aided N=50, no roll compensation": replay(
+            frames, truth, dem, "acq_track", transect_samples=50, roll_compensation=False, **irs
+        ),
+        "aided N=50, plumb replicas": replay(
+            frames, truth, dem, "acq_track", transect_samples=50, **dict(irs, replica_model="plumb")
+        ),
+        "air data + compass N=50": replay(
+            frames, truth, dem, "acq_track", transect_samples=50, replica_model="footprint"
+        ),
     }
     roll_deg = np.degrees(np.abs(truth["true_roll_rad"]))
     results["main_flight"] = {k: _stats(v) for k, v in runs.items()}
@@ -192,7 +260,10 @@ def main(argv=None) -> int:
 
     # 2. speed ramp (straight, 70 -> 100 m/s): unaided vs aided speed loop
     lon = -84.30
-    wps = [{"lat_deg": LAT_S, "lon_deg": lon, "h_agl_m": AGL_M}, {"lat_deg": LAT_N, "lon_deg": lon, "h_agl_m": AGL_M}]
+    wps = [
+        {"lat_deg": LAT_S, "lon_deg": lon, "h_agl_m": AGL_M},
+        {"lat_deg": LAT_N, "lon_deg": lon, "h_agl_m": AGL_M},
+    ]
     rdata = _scenario(args.ramp_duration, args.seed, waypoints=wps)
     rdata["initial"]["tas_mps"] = 70.0
     ramp_t0 = 60.0
@@ -202,14 +273,18 @@ def main(argv=None) -> int:
         return components.track_agl_targets(0.0, AGL_M, tas)
 
     rframes, rtruth, rloop = fly(rdata, commander=ramp_commander)
-    rruns = {"unaided N=25": replay(rframes, rtruth, rloop.map_dem, "acq_track", aiding=False,
-                                    replica_model="footprint"),
-             "aided N=25": replay(rframes, rtruth, rloop.map_dem, "acq_track", transect_samples=25, **irs)}
+    rruns = {
+        "unaided N=25": replay(
+            rframes, rtruth, rloop.map_dem, "acq_track", aiding=False, replica_model="footprint"
+        ),
+        "aided N=25": replay(rframes, rtruth, rloop.map_dem, "acq_track", transect_samples=25, **irs),
+    }
     results["speed_ramp"] = {k: _stats(v) for k, v in rruns.items()}
     un = rruns["unaided N=25"]
     lost = un["t_s"][(un["t_s"] > ramp_t0) & (un["ok"] < 0.5)]
     results["speed_ramp_unaided_first_out_of_lock_s_after_ramp_start"] = (
-        float(lost[0] - ramp_t0) if lost.size else None)
+        float(lost[0] - ramp_t0) if lost.size else None
+    )
 
     # 3. flat terrain: SNR < 5 dB, out of lock instead of a wrong position
     base = terrain.load("jacksboro")
@@ -222,7 +297,9 @@ def main(argv=None) -> int:
         "snr_db_median": float(np.nanmedian(frun["snr_db"][m])),
         "fraction_reported_ok": float(np.mean(frun["ok"][m])),
         "fraction_tracking": float(np.mean(frun["tracking"][m])),
-        "error_final_m": float(frun["err_m"][-1]), "sigma_final_m": float(frun["sigma_m"][-1])}
+        "error_final_m": float(frun["err_m"][-1]),
+        "sigma_final_m": float(frun["sigma_m"][-1]),
+    }
     results["wall_time_s"] = time.perf_counter() - wall0
 
     # table
@@ -230,25 +307,39 @@ def main(argv=None) -> int:
     print(f"{'variant':38s} {'RMS m':>8s} {'max m':>8s} {'final m':>8s} {'in lock':>8s} {'<=3sig':>7s}")
     for section in ("main_flight", "speed_ramp"):
         for k, s in results[section].items():
-            print(f"{section[:5] + ': ' + k:38s} {s['rms_m']:8.1f} {s['max_m']:8.1f} {s['final_m']:8.1f} "
-                  f"{s['in_lock_fraction']:8.2f} {s['within_3sigma']:7.2f}")
+            print(
+                f"{section[:5] + ': ' + k:38s} {s['rms_m']:8.1f} {s['max_m']:8.1f} {s['final_m']:8.1f} "
+                f"{s['in_lock_fraction']:8.2f} {s['within_3sigma']:7.2f}"
+            )
     for n in (25, 50):
-        print(f"roll compensation gain N={n}: {100 * results[f'roll_compensation_gain_N{n}']:+.0f} % "
-              f"(|roll| > 8.5 deg for {100 * results['main_flight_roll_over_half_beam_fraction']:.0f} % of the flight)")
-    print(f"unaided speed loop first out of lock {results['speed_ramp_unaided_first_out_of_lock_s_after_ramp_start']}"
-          " s after the ramp starts")
+        print(
+            f"roll compensation gain N={n}: {100 * results[f'roll_compensation_gain_N{n}']:+.0f} % "
+            f"(|roll| > 8.5 deg for {100 * results['main_flight_roll_over_half_beam_fraction']:.0f} % "
+            "of the flight)"
+        )
+    print(
+        "unaided speed loop first out of lock "
+        f"{results['speed_ramp_unaided_first_out_of_lock_s_after_ramp_start']}"
+        " s after the ramp starts"
+    )
     print("flat terrain:", json.dumps(_finite({k: round(v, 2) for k, v in results["flat_terrain"].items()})))
     (args.out / "results.json").write_text(json.dumps(_finite(results), indent=1))
 
     if not args.no_plots:
         import matplotlib
+
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+
         fig, ax = plt.subplots(2, 2, figsize=(13, 8))
         for k, v in runs.items():
             ax[0, 0].plot(v["t_s"], v["err_m"], label=k)
-        ax[0, 0].set(xlabel="t (s)", ylabel="horizontal error (m)", yscale="log",
-                     title="main flight: IRS-only drift vs aided tracker")
+        ax[0, 0].set(
+            xlabel="t (s)",
+            ylabel="horizontal error (m)",
+            yscale="log",
+            title="main flight: IRS-only drift vs aided tracker",
+        )
         ax[0, 0].legend(fontsize=7)
         for k, v in rruns.items():
             ax[0, 1].plot(v["t_s"], v["speed_mps"] - v["true_speed_mps"], label=f"{k} tracked - true")

@@ -7,7 +7,14 @@ import math
 
 import numpy as np
 
-from navigators.frames import AirDataFrame, BaroFrame, GnssFrame, HeadingFrame, RadarAltimeterFrame, SensorFrames
+from navigators.frames import (
+    AirDataFrame,
+    BaroFrame,
+    GnssFrame,
+    HeadingFrame,
+    RadarAltimeterFrame,
+    SensorFrames,
+)
 from navigators.protocol import Estimate
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
@@ -46,15 +53,24 @@ def frames_for(dem, traj, h_msl_m, t0, t1, tas_fn=None, hdg_fn=None, gnss=False,
     hb = np.full(ts.size, R0 * h_msl_m / (R0 + h_msl_m))
     tas = v[sel] if tas_fn is None else np.array([tas_fn(x) for x in ts])
     hdg = psi[sel] if hdg_fn is None else np.array([hdg_fn(x) for x in ts])
-    fr = SensorFrames(t_start_s=t0, t_end_s=t1,
-                      radar_altimeter=RadarAltimeterFrame(ts, np.where(ok, rng, np.nan), ok),
-                      baro=BaroFrame(ts, hb, np.ones(ts.size, bool)),
-                      air_data=AirDataFrame(ts, tas, np.zeros(ts.size), np.zeros(ts.size), np.ones(ts.size, bool)),
-                      heading=HeadingFrame(ts, np.arctan2(np.sin(hdg), np.cos(hdg)), np.ones(ts.size, bool)))
+    fr = SensorFrames(
+        t_start_s=t0,
+        t_end_s=t1,
+        radar_altimeter=RadarAltimeterFrame(ts, np.where(ok, rng, np.nan), ok),
+        baro=BaroFrame(ts, hb, np.ones(ts.size, bool)),
+        air_data=AirDataFrame(ts, tas, np.zeros(ts.size), np.zeros(ts.size), np.ones(ts.size, bool)),
+        heading=HeadingFrame(ts, np.arctan2(np.sin(hdg), np.cos(hdg)), np.ones(ts.size, bool)),
+    )
     if gnss:
         vn, ve = v[sel] * np.cos(psi[sel]), v[sel] * np.sin(psi[sel])
-        fr.gnss = GnssFrame(ts, lat[sel], lon[sel], np.full(ts.size, h_msl_m),
-                            np.column_stack([vn, ve, np.zeros(ts.size)]), np.ones(ts.size, bool))
+        fr.gnss = GnssFrame(
+            ts,
+            lat[sel],
+            lon[sel],
+            np.full(ts.size, h_msl_m),
+            np.column_stack([vn, ve, np.zeros(ts.size)]),
+            np.ones(ts.size, bool),
+        )
     return fr
 
 
@@ -63,9 +79,18 @@ def initial_estimate(traj, h_msl_m, sigma_m=30.0, dn_m=0.0, de_m=0.0, dv_mps=0.0
     r_n = meridian_radius_m(lat[0]) + h_msl_m
     r_e = (prime_vertical_radius_m(lat[0]) + h_msl_m) * math.cos(lat[0])
     sp, tr = v[0] + dv_mps, psi[0] + dpsi_rad
-    cov = np.diag([sigma_m ** 2, sigma_m ** 2, 100.0, 1, 1, 1, 1e-4, 1e-4, 1e-4])
-    return Estimate(0.0, lat[0] + dn_m / r_n, lon[0] + de_m / r_e, h_msl_m,
-                    np.array([sp * math.cos(tr), sp * math.sin(tr), 0.0]), 0.0, 0.0, tr, cov)
+    cov = np.diag([sigma_m**2, sigma_m**2, 100.0, 1, 1, 1, 1e-4, 1e-4, 1e-4])
+    return Estimate(
+        0.0,
+        lat[0] + dn_m / r_n,
+        lon[0] + de_m / r_e,
+        h_msl_m,
+        np.array([sp * math.cos(tr), sp * math.sin(tr), 0.0]),
+        0.0,
+        0.0,
+        tr,
+        cov,
+    )
 
 
 def fly(nav, dem, traj, h_msl_m, t_end_s, **kw):

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from trn_env import cli
-from trn_env.sim.closed_loop import ClosedLoop
 from trn_env.scenario.loading import ScenarioError, load_scenario, read_scenario_file, validate
+from trn_env.sim.closed_loop import ClosedLoop
 
 SCEN = Path(__file__).parent / "scenarios"
 SHORT = SCEN / "acq_track_short.toml"
@@ -45,13 +45,15 @@ def test_acq_track_short_bounds_beside_ins_tercom(acq):
     rms = float(np.sqrt(np.mean(e[after] ** 2)))
     assert rms < 250.0 and e.max() < 500.0
     assert acq.summary["fraction_within_3sigma"] > 0.6
-    assert np.mean(a["nav_ok"][after]) > 0.5           # in lock most of the time
+    assert np.mean(a["nav_ok"][after]) > 0.5  # in lock most of the time
     nav_events = [m for _, src, m in acq.events if src == "navigator"]
     assert any("-> ok: in lock" in m for m in nav_events)
     ekf = _fly("ins_tercom")
     e2 = _h_err(ekf)
-    print(f"\nacq_track RMS {rms:.1f} m (max {e.max():.1f}, final {e[-1]:.1f}); ins_tercom RMS "
-          f"{np.sqrt(np.mean(e2[after] ** 2)):.1f} m (max {e2.max():.1f}, final {e2[-1]:.1f})")
+    print(
+        f"\nacq_track RMS {rms:.1f} m (max {e.max():.1f}, final {e[-1]:.1f}); ins_tercom RMS "
+        f"{np.sqrt(np.mean(e2[after] ** 2)):.1f} m (max {e2.max():.1f}, final {e2[-1]:.1f})"
+    )
     assert np.all(np.isfinite(e2))
 
 
@@ -59,8 +61,8 @@ def test_sigma_grows_while_denied_before_lock_and_is_bounded_in_lock(acq):
     a = acq.arrays
     sig = np.sqrt(a["est_cov_diag"][:, 0] + a["est_cov_diag"][:, 1])
     t = a["t_s"]
-    assert sig[(t > 2) & (t < 9)].max() < 10.0                   # GNSS: its sigma
-    assert sig[(t > 12) & (t < 24)].min() > sig[(t > 2) & (t < 9)].max()   # filling on the aiding: grows
+    assert sig[(t > 2) & (t < 9)].max() < 10.0  # GNSS: its sigma
+    assert sig[(t > 12) & (t < 24)].min() > sig[(t > 2) & (t < 9)].max()  # filling on the aiding: grows
     assert np.all(np.isfinite(sig)) and sig.max() < 5000.0
 
 
@@ -73,7 +75,7 @@ def test_missing_sensors_refused_before_the_flight(tmp_path, capsys):
     del data["sensors"]["air_data"]
     with pytest.raises(ScenarioError, match="sensors.air_data.*aiding"):
         validate(data)
-    data["navigator"]["settings"]["aiding"] = False            # unaided: no air data needed
+    data["navigator"]["settings"]["aiding"] = False  # unaided: no air data needed
     assert validate(data).navigator_name == "acq_track"
     # the CLI: exit 2, the setting named, nothing written
     text = SHORT.read_text().replace("[sensors.heading]\n", "")
@@ -94,8 +96,9 @@ def test_cli_fly_navigator_acq_track(tmp_path, capsys):
     out = tmp_path / "run"
     assert cli.main(["fly", "acq_track", "--out", str(out), "--quiet", "--duration", "40"]) == 2
     assert "navigator.settings.transect_samples" in "".join(capsys.readouterr())
-    code = cli.main(["fly", "acq_track", "--navigator", "acq_track", "--out", str(out), "--quiet",
-                     "--duration", "60"])
+    code = cli.main(
+        ["fly", "acq_track", "--navigator", "acq_track", "--out", str(out), "--quiet", "--duration", "60"]
+    )
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["navigator"] == "acq_track" and summary["termination"] == "time_limit"
@@ -103,8 +106,13 @@ def test_cli_fly_navigator_acq_track(tmp_path, capsys):
 
 
 def test_env_runs_acq_track():
-    e = gym.make("trn_env/TerrainNav-v0", scenario=str(SHORT), navigator="acq_track", decision_interval_s=5.0,
-                 max_episode_s=40.0)
+    e = gym.make(
+        "trn_env/TerrainNav-v0",
+        scenario=str(SHORT),
+        navigator="acq_track",
+        decision_interval_s=5.0,
+        max_episode_s=40.0,
+    )
     obs, info = e.reset(seed=0)
     assert e.observation_space.contains(obs)
     done = False

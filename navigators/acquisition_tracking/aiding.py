@@ -50,13 +50,15 @@ class WindEstimator:
         self.w_ne[:] = 0.0
         self.n_updates = 0
 
-    def update(self, ground_ne: np.ndarray, tas_mps: float, heading_rad: float, gain: float | None = None) -> None:
+    def update(
+        self, ground_ne: np.ndarray, tas_mps: float, heading_rad: float, gain: float | None = None
+    ) -> None:
         if not (np.all(np.isfinite(ground_ne)) and math.isfinite(tas_mps) and math.isfinite(heading_rad)):
             return
         w_meas = np.asarray(ground_ne, float) - ground_vector(tas_mps, heading_rad)
         k = self.gain if gain is None else float(gain)
         if self.n_updates == 0:
-            k = 1.0                      # the first triangle sets the estimate
+            k = 1.0  # the first triangle sets the estimate
         self.w_ne += k * (w_meas - self.w_ne)
         self.n_updates += 1
 
@@ -70,8 +72,9 @@ def coordinated_turn_roll_rad(tas_mps: float, heading_rate_rps: float, g_mps2: f
     return float(math.atan2(tas_mps * heading_rate_rps, g_mps2))
 
 
-def sample_at(t_query: np.ndarray, t: np.ndarray, values: np.ndarray, valid: np.ndarray,
-              max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+def sample_at(
+    t_query: np.ndarray, t: np.ndarray, values: np.ndarray, valid: np.ndarray, max_gap_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Values at t_query from the newest valid sample at or before each time (within max_gap_s); (values,
     found mask). t must be increasing."""
     ok = valid & np.isfinite(values)

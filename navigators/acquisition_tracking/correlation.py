@@ -1,7 +1,8 @@
 """Replica profiles from the map and their correlation with the measured profile (seed 001 ch. 3; spec 1-2).
 
 Replica sample positions (spec section 1, [INF] in the thesis): p_0 = the transect's start point and
-p_i = p_{i-1} + v_i t_i (sin psi_i, cos psi_i) (east, north), with v_i = m_v[i] + b_v and psi_i = m_psi[i] + b_psi:
+p_i = p_{i-1} + v_i t_i (sin psi_i, cos psi_i) (east, north), with v_i = m_v[i] + b_v and
+psi_i = m_psi[i] + b_psi:
 `m_v`, `m_psi` are the per-sample aiding values (zero without aiding) and `b_v`, `b_psi` the one unknown
 reference the loops track (the thesis' V_ref / psi_ref; unaided, b is the speed and heading themselves).
 The step from sample i-1 to i uses the mean of the two samples' speeds and headings (trapezoid). The
@@ -107,8 +108,26 @@ def profile_cost(d, valid, h, cost, remove_bias, n_min):
 
 
 @njit(cache=True)
-def replica_heights(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-                    interp, dlat_w, dlon_w, h_out):
+def replica_heights(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat_s,
+    lon_s,
+    dt,
+    m_v,
+    m_psi,
+    b_v,
+    b_psi,
+    r_n,
+    r_e_cos,
+    interp,
+    dlat_w,
+    dlon_w,
+    h_out,
+):
     """Map heights (m) of the replica from start (lat_s, lon_s) with references (b_v, b_psi) into h_out."""
     replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
     for i in range(dt.shape[0]):
@@ -116,17 +135,81 @@ def replica_heights(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_ps
 
 
 @njit(cache=True)
-def replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-                 d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w):
+def replica_cost(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat_s,
+    lon_s,
+    dt,
+    m_v,
+    m_psi,
+    b_v,
+    b_psi,
+    r_n,
+    r_e_cos,
+    d,
+    valid,
+    cost,
+    remove_bias,
+    interp,
+    n_min,
+    dlat_w,
+    dlon_w,
+    h_w,
+):
     """Cost of one replica (work arrays dlat_w, dlon_w, h_w of length N are overwritten)."""
-    replica_heights(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-                    interp, dlat_w, dlon_w, h_w)
+    replica_heights(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        lat_s,
+        lon_s,
+        dt,
+        m_v,
+        m_psi,
+        b_v,
+        b_psi,
+        r_n,
+        r_e_cos,
+        interp,
+        dlat_w,
+        dlon_w,
+        h_w,
+    )
     return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
 
 
 @njit(cache=True)
-def correlation_function(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n,
-                         r_e_cos, d, valid, cost, remove_bias, interp, n_min, which, offsets, out):
+def correlation_function(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat_s,
+    lon_s,
+    dt,
+    m_v,
+    m_psi,
+    b_v,
+    b_psi,
+    r_n,
+    r_e_cos,
+    d,
+    valid,
+    cost,
+    remove_bias,
+    interp,
+    n_min,
+    which,
+    offsets,
+    out,
+):
     """The SCF (which = 0: offsets added to b_v, m/s) or HCF (which = 1: offsets added to b_psi, rad) of
     the replica at (b_v, b_psi): out[k] = cost at offsets[k] (spec section 2)."""
     n = dt.shape[0]
@@ -136,13 +219,37 @@ def correlation_function(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v,
     for k in range(offsets.shape[0]):
         bv = b_v + offsets[k] if which == 0 else b_v
         bp = b_psi + offsets[k] if which == 1 else b_psi
-        out[k] = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, bv, bp, r_n,
-                              r_e_cos, d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w)
+        out[k] = replica_cost(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            lat_s,
+            lon_s,
+            dt,
+            m_v,
+            m_psi,
+            bv,
+            bp,
+            r_n,
+            r_e_cos,
+            d,
+            valid,
+            cost,
+            remove_bias,
+            interp,
+            n_min,
+            dlat_w,
+            dlon_w,
+            h_w,
+        )
 
 
 @njit(cache=True)
-def along_cross_information(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n,
-                            r_e_cos, valid, track_rad):
+def along_cross_information(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, valid, track_rad
+):
     """(sum of squared along-track, cross-track map slopes) over the replica's valid samples (bilinear
     gradient; 1/m^2 x m^2 = dimensionless): the terrain information a match has in each direction."""
     n = dt.shape[0]
@@ -156,12 +263,13 @@ def along_cross_information(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m
     for i in range(n):
         if not valid[i]:
             continue
-        _, g_lat, g_lon = bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[i],
-                                                 lon_s + dlon_w[i])
+        _, g_lat, g_lon = bilinear_with_gradient(
+            heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[i], lon_s + dlon_w[i]
+        )
         if g_lat != g_lat or g_lon != g_lon:
             continue
-        g_n = g_lat / r_n          # dh/dnorth (m/m)
-        g_e = g_lon / r_e_cos      # dh/deast
+        g_n = g_lat / r_n  # dh/dnorth (m/m)
+        g_e = g_lon / r_e_cos  # dh/deast
         a = g_n * ca + g_e * sa
         c = -g_n * sa + g_e * ca
         s_al += a * a
@@ -171,8 +279,18 @@ def along_cross_information(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m
 
 # --------------------------------------------------------------------------------------- references
 
-def replica_positions_reference(lat_s: float, lon_s: float, dt: np.ndarray, m_v: np.ndarray, m_psi: np.ndarray,
-                                b_v: float, b_psi: float, r_n: float, r_e_cos: float):
+
+def replica_positions_reference(
+    lat_s: float,
+    lon_s: float,
+    dt: np.ndarray,
+    m_v: np.ndarray,
+    m_psi: np.ndarray,
+    b_v: float,
+    b_psi: float,
+    r_n: float,
+    r_e_cos: float,
+):
     """(lat, lon) arrays of the replica samples (numpy twin of replica_offsets)."""
     v = 0.5 * (m_v[:-1] + m_v[1:]) + b_v
     dpsi = np.arctan2(np.sin(m_psi[1:] - m_psi[:-1]), np.cos(m_psi[1:] - m_psi[:-1]))
@@ -183,8 +301,14 @@ def replica_positions_reference(lat_s: float, lon_s: float, dt: np.ndarray, m_v:
     return lat_s + dn / r_n, lon_s + de / r_e_cos
 
 
-def profile_cost_reference(d: np.ndarray, valid: np.ndarray, h: np.ndarray, cost: str = "mad",
-                           remove_bias: bool = True, n_min: int = 1) -> float:
+def profile_cost_reference(
+    d: np.ndarray,
+    valid: np.ndarray,
+    h: np.ndarray,
+    cost: str = "mad",
+    remove_bias: bool = True,
+    n_min: int = 1,
+) -> float:
     """numpy twin of profile_cost (cost 'mad' or 'pearson')."""
     ok = valid & np.isfinite(h)
     if ok.sum() < max(n_min, 1):

@@ -44,13 +44,14 @@ class FootprintMaps:
             if ki < 1 and kj < 1:
                 self._cache[band] = heights
             else:
-                ii, jj = np.mgrid[-ki:ki + 1, -kj:kj + 1]
+                ii, jj = np.mgrid[-ki : ki + 1, -kj : kj + 1]
                 rho2 = (ii * self.dn_m) ** 2 + (jj * self.de_m) ** 2
                 inside = rho2 <= r * r
                 structure = np.where(inside, -rho2 / (2.0 * a), -np.inf)
                 h = np.where(np.isfinite(heights), heights, -1e9)
-                dil = ndimage.grey_dilation(h, footprint=inside, structure=np.where(inside, structure, 0.0),
-                                            mode="nearest")
+                dil = ndimage.grey_dilation(
+                    h, footprint=inside, structure=np.where(inside, structure, 0.0), mode="nearest"
+                )
                 dil = np.where(np.isfinite(heights), dil, np.nan)
                 self._cache[band] = np.ascontiguousarray(dil)
         return self._cache[band], lat0, lon0, dlat, dlon

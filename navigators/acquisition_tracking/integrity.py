@@ -24,11 +24,12 @@ import numpy as np
 def a_priori_sigma_m(range_m: float, ra_const_m: float, ra_fraction: float, map_sigma_m: float) -> float:
     """1-sigma measured-minus-map height noise (m) from the radar-altimeter and map error models."""
     r = range_m if math.isfinite(range_m) else 0.0
-    return math.sqrt((ra_const_m + ra_fraction * r) ** 2 + map_sigma_m ** 2)
+    return math.sqrt((ra_const_m + ra_fraction * r) ** 2 + map_sigma_m**2)
 
 
-def terrain_snr_db(h_prompt: np.ndarray, d: np.ndarray, valid: np.ndarray, sigma_prior_m: float,
-                   remove_bias: bool = True) -> tuple[float, float]:
+def terrain_snr_db(
+    h_prompt: np.ndarray, d: np.ndarray, valid: np.ndarray, sigma_prior_m: float, remove_bias: bool = True
+) -> tuple[float, float]:
     """(terrain SNR in dB, residual sigma in m) of the prompt replica heights h_prompt against the measured
     heights d (valid samples with a finite map height; SNR -inf without two of them)."""
     ok = valid & np.isfinite(h_prompt) & np.isfinite(d)
@@ -39,21 +40,30 @@ def terrain_snr_db(h_prompt: np.ndarray, d: np.ndarray, valid: np.ndarray, sigma
     if remove_bias:
         r = r - r.mean()
     res_var = float(np.mean(r * r))
-    noise_var = max(res_var, sigma_prior_m ** 2, 1e-12)
+    noise_var = max(res_var, sigma_prior_m**2, 1e-12)
     var_h = float(np.var(h))
     snr = 10.0 * math.log10(var_h / noise_var) if var_h > 0 else -math.inf
     return snr, math.sqrt(res_var)
 
 
-def false_lock(residual_sigma_m: float, sigma_prior_m: float, factor: float, b_v: float, b_psi_rad: float,
-               aided: bool, max_speed_bias_mps: float, max_heading_bias_rad: float) -> str:
+def false_lock(
+    residual_sigma_m: float,
+    sigma_prior_m: float,
+    factor: float,
+    b_v: float,
+    b_psi_rad: float,
+    aided: bool,
+    max_speed_bias_mps: float,
+    max_heading_bias_rad: float,
+) -> str:
     """'' when the lock is plausible, else the reason it is a false lock."""
     if math.isfinite(residual_sigma_m) and residual_sigma_m > factor * max(sigma_prior_m, 1e-9):
         return f"residual {residual_sigma_m:.1f} m > {factor:g} x a-priori {sigma_prior_m:.1f} m"
     if aided and abs(b_v) > max_speed_bias_mps:
         return f"speed reference {b_v:+.1f} m/s beyond +-{max_speed_bias_mps:g}"
     if aided and abs(b_psi_rad) > max_heading_bias_rad:
-        return f"heading reference {math.degrees(b_psi_rad):+.1f} deg beyond +-{math.degrees(max_heading_bias_rad):g}"
+        lim = math.degrees(max_heading_bias_rad)
+        return f"heading reference {math.degrees(b_psi_rad):+.1f} deg beyond +-{lim:g}"
     return ""
 
 

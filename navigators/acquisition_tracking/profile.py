@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-R0_GEOPOTENTIAL_M = 6356766.0   # US Standard Atmosphere 1976 Earth radius for geopotential height
+R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 
 
 def geometric_height_m(h_geopotential_m):

@@ -14,8 +14,11 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
   a pulse altimeter returns the shortest range in its cone, which over level ground is the cone's edge
   once the tilt exceeds half the beam. Roll and pitch come from the INS (aiding_source "ins") or, with air
   data, from the coordinated-turn relation roll = atan(V psi_dot / g) (pitch 0).
-- acquisition grid: +-10 m/s in 1 m/s, +-10 deg in 1 deg, +-500 m in 50 m (21 x 21 x 441 cells); distinct when the minimum
-  is below acquisition_distinct_ratio (0.8) times the best cost farther than acquisition_exclusion_m.
+- acquisition grid: +-10 m/s in 1 m/s, +-10 deg in 1 deg, +-500 m in 50 m (21 x 21 x 441 cells);
+  distinct when the minimum is below acquisition_distinct_ratio (0.8) times the best cost farther than
+  acquisition_exclusion_m.
+- lock: a loop that hits the 101-iteration break flags the epoch 'degraded' but keeps its estimate; out of
+  lock (V-shape flag, SNR < snr_min_db, false lock) lost_after_epochs times in a row is 'lost'.
 """
 
 from __future__ import annotations
@@ -34,8 +37,11 @@ DISCRIMINATOR_NAMES = ("thesis", "v_fit")
 
 
 def _finite(name: str, value, lo: float | None = None, hi: float | None = None, strict_lo: bool = False):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(value)):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(float(value))
+    ):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     v = float(value)
     if lo is not None and (v <= lo if strict_lo else v < lo):
@@ -62,18 +68,18 @@ def _spacing_set(name: str, value) -> tuple[float, ...]:
 class AcqTrackConfig:
     """Settings (units in the names). See the module docstring for the choices of spec section 8."""
 
-    transect_samples: int = 25            # N (thesis: 25, also 50; useful 15-40)
-    sample_period_s: float = 1.0          # t between transect samples
-    correlation: str = "mad"              # "mad" | "pearson"
-    remove_bias: bool = True              # MAD of the mean-removed difference (baro / map vertical bias)
-    interpolation: str = "bilinear"       # "bilinear" | "bicubic" map heights at replica samples
-    replica_model: str = "plumb"          # "plumb" | "footprint": the map as the pulse altimeter sees it
-    min_valid_fraction: float = 0.6       # of the N samples needed to correlate
-    aiding: bool = True                   # chapter 4's aided loops (False: constant speed and heading)
-    aiding_source: str = "air_data"       # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
-    reference_gain: float = 1.0           # aided: fraction of each epoch's loop correction taken into b
-    wind_estimation: bool = True          # wind triangle, predicted through heading changes
-    wind_gain: float = 0.01               # per tracked sample, low-pass of the wind estimate (GNSS: 0.2)
+    transect_samples: int = 25  # N (thesis: 25, also 50; useful 15-40)
+    sample_period_s: float = 1.0  # t between transect samples
+    correlation: str = "mad"  # "mad" | "pearson"
+    remove_bias: bool = True  # MAD of the mean-removed difference (baro / map vertical bias)
+    interpolation: str = "bilinear"  # "bilinear" | "bicubic" map heights at replica samples
+    replica_model: str = "plumb"  # "plumb" | "footprint": the map as the pulse altimeter sees it
+    min_valid_fraction: float = 0.6  # of the N samples needed to correlate
+    aiding: bool = True  # chapter 4's aided loops (False: constant speed and heading)
+    aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
+    reference_gain: float = 1.0  # aided: fraction of each epoch's loop correction taken into b
+    wind_estimation: bool = True  # wind triangle, predicted through heading changes
+    wind_gain: float = 0.01  # per tracked sample, low-pass of the wind estimate (GNSS: 0.2)
     loop_order: str = "speed_first"
     speed_spacings_mps: tuple = (0.48, 0.96, 1.44, 1.92, 2.4)
     speed_threshold_mps: float = 0.005
@@ -84,10 +90,10 @@ class AcqTrackConfig:
     heading_narrow_spacing_deg: float = 0.5
     heading_narrow_threshold_deg: float = 0.003
     break_iteration: int = 101
-    discriminator: str = "thesis"         # "thesis": s (E - L) / (E + L); "v_fit": floor removed (tracking.py)
-    bias_mitigation: str = "ncs"          # "ncs": fixed narrow 2nd stage; "none": 1st stage only
-    scf_offset_cells: float = 2.0         # f: the SCF/HCF reach f R_db at the transect's far end
-    scf_points: int = 10                  # correlation-function points on each side of the prompt
+    discriminator: str = "thesis"  # "thesis": s (E - L) / (E + L); "v_fit": floor removed (tracking.py)
+    bias_mitigation: str = "ncs"  # "ncs": fixed narrow 2nd stage; "none": 1st stage only
+    scf_offset_cells: float = 2.0  # f: the SCF/HCF reach f R_db at the transect's far end
+    scf_points: int = 10  # correlation-function points on each side of the prompt
     symmetry_ratio_max: float = 2.0
     acquisition_speed_half_mps: float = 10.0
     acquisition_speed_bin_mps: float = 1.0
@@ -99,25 +105,25 @@ class AcqTrackConfig:
     acquisition_exclusion_m: float = 200.0
     acquire_above_sigma_m: float = 100.0  # transect start sigma above which tracking needs an acquisition
     snr_min_db: float = 5.0
-    map_sigma_m: float = 5.0              # map height error (1 sigma) in the a-priori noise
-    ra_noise_const_m: float = 0.6         # radar-altimeter noise model (1 sigma = const + fraction * R)
+    map_sigma_m: float = 5.0  # map height error (1 sigma) in the a-priori noise
+    ra_noise_const_m: float = 0.6  # radar-altimeter noise model (1 sigma = const + fraction * R)
     ra_noise_fraction: float = 0.02
     false_lock_sigma_factor: float = 3.0  # residual sigma above this times the a-priori sigma: false lock
-    max_speed_bias_mps: float = 15.0      # aided: |b_v| beyond this is a false lock (wind + sensor bias)
+    max_speed_bias_mps: float = 15.0  # aided: |b_v| beyond this is a false lock (wind + sensor bias)
     max_heading_bias_deg: float = 15.0
-    lost_after_epochs: int = 3            # consecutive out-of-lock epochs before "lost" (re-acquire)
+    lost_after_epochs: int = 3  # consecutive out-of-lock epochs before "lost" (re-acquire)
     output_average_length: int | None = None
     output_average_speed_tol_mps: float = 0.5
     output_average_heading_tol_deg: float = 0.5
     roll_compensation: bool = True
     beamwidth_deg: float = 17.0
-    aiding_speed_sigma_mps: float = 1.5   # dead reckoning on the aiding alone (air data + wind estimate)
+    aiding_speed_sigma_mps: float = 1.5  # dead reckoning on the aiding alone (air data + wind estimate)
     aiding_heading_sigma_deg: float = 1.0
     unaided_speed_sigma_mps: float = 5.0
     unaided_heading_sigma_deg: float = 5.0
     gnss_sigma_m: float = 3.0
-    position_sigma_floor_m: float | None = None   # None: half the map's post spacing
-    lock_covariance_scale: float = 2.0    # calibration of the in-lock position bound (navigator.py)
+    position_sigma_floor_m: float | None = None  # None: half the map's post spacing
+    lock_covariance_scale: float = 2.0  # calibration of the in-lock position bound (navigator.py)
     baro_geopotential: bool = True
     baro_bias_sigma_m: float = 10.0
 
@@ -126,10 +132,15 @@ class AcqTrackConfig:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 5 <= int(n) <= 500:
             raise ValueError(f"transect_samples must be a whole number in [5, 500], got {n!r}")
         _finite("sample_period_s", self.sample_period_s, 0.0, strict_lo=True)
-        for name, options in (("correlation", tuple(COSTS)), ("interpolation", tuple(INTERPOLATIONS)),
-                              ("aiding_source", AIDING_SOURCES), ("loop_order", LOOP_ORDERS),
-                              ("bias_mitigation", BIAS_MITIGATIONS), ("discriminator", DISCRIMINATOR_NAMES),
-                              ("replica_model", ("plumb", "footprint"))):
+        for name, options in (
+            ("correlation", tuple(COSTS)),
+            ("interpolation", tuple(INTERPOLATIONS)),
+            ("aiding_source", AIDING_SOURCES),
+            ("loop_order", LOOP_ORDERS),
+            ("bias_mitigation", BIAS_MITIGATIONS),
+            ("discriminator", DISCRIMINATOR_NAMES),
+            ("replica_model", ("plumb", "footprint")),
+        ):
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
         for name in ("remove_bias", "aiding", "wind_estimation", "roll_compensation", "baro_geopotential"):
@@ -138,31 +149,64 @@ class AcqTrackConfig:
         _finite("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0, strict_lo=True)
         _finite("wind_gain", self.wind_gain, 0.0, 1.0)
         _finite("reference_gain", self.reference_gain, 0.0, 1.0, strict_lo=True)
-        object.__setattr__(self, "speed_spacings_mps", _spacing_set("speed_spacings_mps", self.speed_spacings_mps))
-        object.__setattr__(self, "heading_spacings_deg",
-                           _spacing_set("heading_spacings_deg", self.heading_spacings_deg))
-        for name in ("speed_threshold_mps", "speed_narrow_spacing_mps", "speed_narrow_threshold_mps",
-                     "heading_threshold_deg", "heading_narrow_spacing_deg", "heading_narrow_threshold_deg",
-                     "scf_offset_cells", "symmetry_ratio_max", "acquisition_speed_bin_mps",
-                     "acquisition_heading_bin_deg", "acquisition_position_bin_m", "acquisition_distinct_ratio",
-                     "beamwidth_deg", "false_lock_sigma_factor", "max_speed_bias_mps", "max_heading_bias_deg",
-                     "output_average_speed_tol_mps", "output_average_heading_tol_deg", "gnss_sigma_m",
-                     "aiding_speed_sigma_mps", "aiding_heading_sigma_deg", "unaided_speed_sigma_mps",
-                     "unaided_heading_sigma_deg", "lock_covariance_scale"):
+        object.__setattr__(
+            self, "speed_spacings_mps", _spacing_set("speed_spacings_mps", self.speed_spacings_mps)
+        )
+        object.__setattr__(
+            self, "heading_spacings_deg", _spacing_set("heading_spacings_deg", self.heading_spacings_deg)
+        )
+        for name in (
+            "speed_threshold_mps",
+            "speed_narrow_spacing_mps",
+            "speed_narrow_threshold_mps",
+            "heading_threshold_deg",
+            "heading_narrow_spacing_deg",
+            "heading_narrow_threshold_deg",
+            "scf_offset_cells",
+            "symmetry_ratio_max",
+            "acquisition_speed_bin_mps",
+            "acquisition_heading_bin_deg",
+            "acquisition_position_bin_m",
+            "acquisition_distinct_ratio",
+            "beamwidth_deg",
+            "false_lock_sigma_factor",
+            "max_speed_bias_mps",
+            "max_heading_bias_deg",
+            "output_average_speed_tol_mps",
+            "output_average_heading_tol_deg",
+            "gnss_sigma_m",
+            "aiding_speed_sigma_mps",
+            "aiding_heading_sigma_deg",
+            "unaided_speed_sigma_mps",
+            "unaided_heading_sigma_deg",
+            "lock_covariance_scale",
+        ):
             _finite(name, getattr(self, name), 0.0, strict_lo=True)
-        for name, bin_name in (("acquisition_speed_half_mps", "acquisition_speed_bin_mps"),
-                               ("acquisition_heading_half_deg", "acquisition_heading_bin_deg"),
-                               ("acquisition_position_half_m", "acquisition_position_bin_m")):
+        for name, bin_name in (
+            ("acquisition_speed_half_mps", "acquisition_speed_bin_mps"),
+            ("acquisition_heading_half_deg", "acquisition_heading_bin_deg"),
+            ("acquisition_position_half_m", "acquisition_position_bin_m"),
+        ):
             half = _finite(name, getattr(self, name), 0.0, strict_lo=True)
             if getattr(self, bin_name) > 2.0 * half:
-                raise ValueError(f"{name}: the interval +-{half:g} is empty at {bin_name} = "
-                                 f"{getattr(self, bin_name):g} (fewer than two bins)")
-        for name in ("acquisition_exclusion_m", "acquire_above_sigma_m", "map_sigma_m", "ra_noise_const_m",
-                     "ra_noise_fraction", "baro_bias_sigma_m"):
+                raise ValueError(
+                    f"{name}: the interval +-{half:g} is empty at {bin_name} = "
+                    f"{getattr(self, bin_name):g} (fewer than two bins)"
+                )
+        for name in (
+            "acquisition_exclusion_m",
+            "acquire_above_sigma_m",
+            "map_sigma_m",
+            "ra_noise_const_m",
+            "ra_noise_fraction",
+            "baro_bias_sigma_m",
+        ):
             _finite(name, getattr(self, name), 0.0)
         _finite("snr_min_db", self.snr_min_db)
         if self.symmetry_ratio_max < 1.0:
-            raise ValueError(f"symmetry_ratio_max must be >= 1 (a ratio of slopes), got {self.symmetry_ratio_max!r}")
+            raise ValueError(
+                f"symmetry_ratio_max must be >= 1 (a ratio of slopes), got {self.symmetry_ratio_max!r}"
+            )
         if self.beamwidth_deg >= 90.0:
             raise ValueError(f"beamwidth_deg must lie in (0, 90) deg, got {self.beamwidth_deg!r}")
         for name, lo in (("break_iteration", 2), ("scf_points", 2), ("lost_after_epochs", 1)):

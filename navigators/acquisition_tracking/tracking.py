@@ -31,15 +31,39 @@ from numba import njit
 
 from navigators.acquisition_tracking.correlation import replica_cost
 
-DISC_THESIS = 0     # eps = s (H_E - H_L) / (H_E + H_L)   (spec section 4)
-DISC_V_FIT = 1      # eps = (s / 2) (H_E - H_L) / (max(H_E, H_L) - H_P)
+DISC_THESIS = 0  # eps = s (H_E - H_L) / (H_E + H_L)   (spec section 4)
+DISC_V_FIT = 1  # eps = (s / 2) (H_E - H_L) / (max(H_E, H_L) - H_P)
 DISCRIMINATORS = {"thesis": DISC_THESIS, "v_fit": DISC_V_FIT}
 
 
 @njit(cache=True)
-def early_late_loop(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-                    d, valid, cost, remove_bias, interp, n_min, which, spacing, threshold, break_iteration,
-                    discriminator):
+def early_late_loop(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat_s,
+    lon_s,
+    dt,
+    m_v,
+    m_psi,
+    b_v,
+    b_psi,
+    r_n,
+    r_e_cos,
+    d,
+    valid,
+    cost,
+    remove_bias,
+    interp,
+    n_min,
+    which,
+    spacing,
+    threshold,
+    break_iteration,
+    discriminator,
+):
     """Run one loop stage. Returns (x, iterations, locked, H_prompt); x is b_v (which 0) or b_psi (1).
 
     A replica off the map (inf cost on early or late) ends the stage out of lock with x unchanged since
@@ -52,28 +76,138 @@ def early_late_loop(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_ps
     it = 1
     while it < break_iteration:
         if which == 0:
-            he = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, x - spacing,
-                              b_psi, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w,
-                              h_w)
-            hl = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, x + spacing,
-                              b_psi, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w,
-                              h_w)
+            he = replica_cost(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat_s,
+                lon_s,
+                dt,
+                m_v,
+                m_psi,
+                x - spacing,
+                b_psi,
+                r_n,
+                r_e_cos,
+                d,
+                valid,
+                cost,
+                remove_bias,
+                interp,
+                n_min,
+                dlat_w,
+                dlon_w,
+                h_w,
+            )
+            hl = replica_cost(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat_s,
+                lon_s,
+                dt,
+                m_v,
+                m_psi,
+                x + spacing,
+                b_psi,
+                r_n,
+                r_e_cos,
+                d,
+                valid,
+                cost,
+                remove_bias,
+                interp,
+                n_min,
+                dlat_w,
+                dlon_w,
+                h_w,
+            )
         else:
-            he = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v,
-                              x - spacing, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, dlat_w,
-                              dlon_w, h_w)
-            hl = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v,
-                              x + spacing, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, dlat_w,
-                              dlon_w, h_w)
+            he = replica_cost(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat_s,
+                lon_s,
+                dt,
+                m_v,
+                m_psi,
+                b_v,
+                x - spacing,
+                r_n,
+                r_e_cos,
+                d,
+                valid,
+                cost,
+                remove_bias,
+                interp,
+                n_min,
+                dlat_w,
+                dlon_w,
+                h_w,
+            )
+            hl = replica_cost(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat_s,
+                lon_s,
+                dt,
+                m_v,
+                m_psi,
+                b_v,
+                x + spacing,
+                r_n,
+                r_e_cos,
+                d,
+                valid,
+                cost,
+                remove_bias,
+                interp,
+                n_min,
+                dlat_w,
+                dlon_w,
+                h_w,
+            )
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False, np.inf
         if discriminator == DISC_THESIS:
             den = he + hl
             eps = spacing * (he - hl) / den if den > 0.0 else 0.0
-        else:      # V-fit: the prompt removes the cost floor; exact on a V within +-spacing
-            hp = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi,
-                              x if which == 0 else b_v, x if which == 1 else b_psi, r_n, r_e_cos, d, valid,
-                              cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w)
+        else:  # V-fit: the prompt removes the cost floor; exact on a V within +-spacing
+            hp = replica_cost(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat_s,
+                lon_s,
+                dt,
+                m_v,
+                m_psi,
+                x if which == 0 else b_v,
+                x if which == 1 else b_psi,
+                r_n,
+                r_e_cos,
+                d,
+                valid,
+                cost,
+                remove_bias,
+                interp,
+                n_min,
+                dlat_w,
+                dlon_w,
+                h_w,
+            )
             den = max(he, hl) - hp
             eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
             if eps > spacing:
@@ -84,8 +218,31 @@ def early_late_loop(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_ps
         if abs(eps) < threshold:
             bv = x if which == 0 else b_v
             bp = x if which == 1 else b_psi
-            hp = replica_cost(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, bv, bp, r_n,
-                              r_e_cos, d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w)
+            hp = replica_cost(
+                heights,
+                lat0,
+                lon0,
+                dlat,
+                dlon,
+                lat_s,
+                lon_s,
+                dt,
+                m_v,
+                m_psi,
+                bv,
+                bp,
+                r_n,
+                r_e_cos,
+                d,
+                valid,
+                cost,
+                remove_bias,
+                interp,
+                n_min,
+                dlat_w,
+                dlon_w,
+                h_w,
+            )
             return x, it, True, hp
         it += 1
     return x, it, False, np.nan
@@ -121,7 +278,9 @@ class VShape:
     slope_right: float
 
 
-def analyse_v(offsets: np.ndarray, values: np.ndarray, min_points: int = 2, tolerance: float = 0.05) -> VShape:
+def analyse_v(
+    offsets: np.ndarray, values: np.ndarray, min_points: int = 2, tolerance: float = 0.05
+) -> VShape:
     """V-shape analysis of a correlation function sampled at increasing offsets: each side extends while
     the function stays above the minimum and drops by no more than `tolerance` x its range from one point
     to the next outward (noise wiggles); a V needs min_points on both sides."""
@@ -132,20 +291,28 @@ def analyse_v(offsets: np.ndarray, values: np.ndarray, min_points: int = 2, tole
     k = int(np.argmin(vals))
     n = vals.size
     fin = vals[np.isfinite(vals)]
-    tol = tolerance * float(fin.max() - fin.min())   # a wiggle this small does not end the V's side
+    tol = tolerance * float(fin.max() - fin.min())  # a wiggle this small does not end the V's side
     left = k
-    while left > 0 and np.isfinite(vals[left - 1]) and vals[left - 1] > vals[left] - tol \
-            and vals[left - 1] > vals[k]:
+    while (
+        left > 0
+        and np.isfinite(vals[left - 1])
+        and vals[left - 1] > vals[left] - tol
+        and vals[left - 1] > vals[k]
+    ):
         left -= 1
     right = k
-    while right < n - 1 and np.isfinite(vals[right + 1]) and vals[right + 1] > vals[right] - tol \
-            and vals[right + 1] > vals[k]:
+    while (
+        right < n - 1
+        and np.isfinite(vals[right + 1])
+        and vals[right + 1] > vals[right] - tol
+        and vals[right + 1] > vals[k]
+    ):
         right += 1
     step = float(offsets[1] - offsets[0])
     wl, wr = k - left, right - k
     v = wl >= min_points and wr >= min_points
-    sl = _slope(offsets[left:k + 1], vals[left:k + 1]) if wl >= 1 else 0.0
-    sr = _slope(offsets[k:right + 1], vals[k:right + 1]) if wr >= 1 else 0.0
+    sl = _slope(offsets[left : k + 1], vals[left : k + 1]) if wl >= 1 else 0.0
+    sr = _slope(offsets[k : right + 1], vals[k : right + 1]) if wr >= 1 else 0.0
     return VShape(bool(v), float(min(wl, wr) * step), float(offsets[k]), float(vals[k]), sl, sr)
 
 
@@ -171,8 +338,9 @@ def symmetry_ratio(offsets: np.ndarray, values: np.ndarray, centre: float, spaci
     return hi / lo if lo > 0 else np.inf
 
 
-def choose_spacing(offsets: np.ndarray, values: np.ndarray, shape: VShape, spacings: np.ndarray,
-                   symmetry_max: float) -> tuple[float, float]:
+def choose_spacing(
+    offsets: np.ndarray, values: np.ndarray, shape: VShape, spacings: np.ndarray, symmetry_max: float
+) -> tuple[float, float]:
     """(spacing, symmetry ratio at it): the widest of `spacings` within the V's bandwidth whose symmetry
     ratio is at most symmetry_max; the narrowest within the bandwidth when none passes; the narrowest of
     all when none is within it."""

@@ -47,8 +47,12 @@ def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
         steps = loop.jsbsim_steps - s0
         nav_s = loop.stage_s["navigator"] - nav0
     sim = steps * loop.dt_s
-    return {"steps_per_s": steps / wall, "bare": bare, "nav_ms_per_sim_s": 1e3 * nav_s / max(sim, 1e-9),
-            "sim_s": sim}
+    return {
+        "steps_per_s": steps / wall,
+        "bare": bare,
+        "nav_ms_per_sim_s": 1e3 * nav_s / max(sim, 1e-9),
+        "sim_s": sim,
+    }
 
 
 def _acquisition_figures(repeats: int = 3) -> dict:
@@ -66,17 +70,39 @@ def _acquisition_figures(repeats: int = 3) -> dict:
     dt = np.full(n, cfg.sample_period_s)
     dt[0] = 0.0
     zeros = np.zeros(n)
-    la, lo = correlation.replica_positions_reference(lat, lon, dt, zeros, zeros, 81.3, math.radians(33.7), r_n,
-                                                     r_e)
+    la, lo = correlation.replica_positions_reference(
+        lat, lon, dt, zeros, zeros, 81.3, math.radians(33.7), r_n, r_e
+    )
     d = np.asarray(dem.height(la, lo), float)
-    kw = dict(position_half_m=cfg.acquisition_position_half_m, position_bin_m=cfg.acquisition_position_bin_m,
-              speed_half_mps=cfg.acquisition_speed_half_mps, speed_bin_mps=cfg.acquisition_speed_bin_mps,
-              heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
-              heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg), cost=0, remove_bias=True, interp=0,
-              n_min=15, distinct_ratio=cfg.acquisition_distinct_ratio, exclusion_m=cfg.acquisition_exclusion_m)
-    args = (dem.grid, lat + 320.0 / r_n, lon - 410.0 / r_e, dt, zeros, zeros, 88.7, math.radians(27.4), r_n, r_e,
-            d, np.ones(n, bool))
-    res = acquisition.serial_search(*args, **kw)         # compiled / loaded from the cache
+    kw = dict(
+        position_half_m=cfg.acquisition_position_half_m,
+        position_bin_m=cfg.acquisition_position_bin_m,
+        speed_half_mps=cfg.acquisition_speed_half_mps,
+        speed_bin_mps=cfg.acquisition_speed_bin_mps,
+        heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
+        heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
+        cost=0,
+        remove_bias=True,
+        interp=0,
+        n_min=15,
+        distinct_ratio=cfg.acquisition_distinct_ratio,
+        exclusion_m=cfg.acquisition_exclusion_m,
+    )
+    args = (
+        dem.grid,
+        lat + 320.0 / r_n,
+        lon - 410.0 / r_e,
+        dt,
+        zeros,
+        zeros,
+        88.7,
+        math.radians(27.4),
+        r_n,
+        r_e,
+        d,
+        np.ones(n, bool),
+    )
+    res = acquisition.serial_search(*args, **kw)  # compiled / loaded from the cache
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -94,10 +120,14 @@ def _acquisition_figures(repeats: int = 3) -> dict:
     t0 = time.perf_counter()
     kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, qla, qlo, out)
     t_bl = time.perf_counter() - t0
-    return {"acq_track_acquisition_s": t_acq, "acq_track_acquisition_cells": res.n_hypotheses,
-            "acq_track_acquisition_samples": n, "acq_track_acquisition_distinct": bool(res.distinct),
-            "acq_track_acquisition_lookups_per_s": lookups / t_acq,
-            "bilinear_batch_lookups_per_s_same_run": m / t_bl}
+    return {
+        "acq_track_acquisition_s": t_acq,
+        "acq_track_acquisition_cells": res.n_hypotheses,
+        "acq_track_acquisition_samples": n,
+        "acq_track_acquisition_distinct": bool(res.distinct),
+        "acq_track_acquisition_lookups_per_s": lookups / t_acq,
+        "bilinear_batch_lookups_per_s_same_run": m / t_bl,
+    }
 
 
 def benchmark(quick: bool = False) -> dict:
@@ -106,20 +136,23 @@ def benchmark(quick: bool = False) -> dict:
     out = _acquisition_figures()
     acq = _loop_figures("acq_track", 45.0, sim_s)
     ekf = _loop_figures("ins_tercom", 45.0, sim_s)
-    out.update({
-        "acq_track_closed_loop_steps_per_s": acq["steps_per_s"],
-        "ins_tercom_closed_loop_steps_per_s": ekf["steps_per_s"],
-        "acq_track_jsbsim_reference_steps_per_s": max(acq["bare"], ekf["bare"]),
-        "acq_track_closed_loop_ratio": acq["steps_per_s"] / max(acq["bare"], ekf["bare"]),
-        "acq_track_vs_ins_tercom_speed": acq["steps_per_s"] / ekf["steps_per_s"],
-        "acq_track_navigator_ms_per_sim_s": acq["nav_ms_per_sim_s"],
-        "ins_tercom_navigator_ms_per_sim_s": ekf["nav_ms_per_sim_s"],
-        "acq_track_bench_sim_s": acq["sim_s"],
-    })
+    out.update(
+        {
+            "acq_track_closed_loop_steps_per_s": acq["steps_per_s"],
+            "ins_tercom_closed_loop_steps_per_s": ekf["steps_per_s"],
+            "acq_track_jsbsim_reference_steps_per_s": max(acq["bare"], ekf["bare"]),
+            "acq_track_closed_loop_ratio": acq["steps_per_s"] / max(acq["bare"], ekf["bare"]),
+            "acq_track_vs_ins_tercom_speed": acq["steps_per_s"] / ekf["steps_per_s"],
+            "acq_track_navigator_ms_per_sim_s": acq["nav_ms_per_sim_s"],
+            "ins_tercom_navigator_ms_per_sim_s": ekf["nav_ms_per_sim_s"],
+            "acq_track_bench_sim_s": acq["sim_s"],
+        }
+    )
     return out
 
 
 if __name__ == "__main__":
     import json
     import sys
+
     print(json.dumps(benchmark(quick="--quick" in sys.argv), indent=1))

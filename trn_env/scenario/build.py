@@ -247,9 +247,9 @@ def navigator_sensor_problems(d: dict, navigator) -> list[str]:
                 "table" for sensor, why in need() if sensor not in fitted]
     dur = getattr(navigator, "required_duration_s", None)
     if dur is not None and dur() > float(d["duration_s"]):
-        problems.append(f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, more "
-                        f"than the scenario's duration_s = {d['duration_s']:g} s (more samples than the route "
-                        "provides)")
+        problems.append(f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, "
+                        f"more than the scenario's duration_s = {d['duration_s']:g} s (more samples than the "
+                        "route provides)")
     return problems
 
 
