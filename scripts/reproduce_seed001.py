@@ -286,7 +286,8 @@ def main(argv=None) -> int:
         results["speed_ramp"][k]["in_lock_before_ramp"] = float(np.mean(v["tracking"][before]))
         results["speed_ramp"][k]["in_lock_during_ramp"] = float(np.mean(v["tracking"][during]))
         err = np.abs(v["speed_mps"] - v["true_speed_mps"])
-        results["speed_ramp"][k]["speed_error_rms_during_ramp_mps"] = float(np.sqrt(np.mean(err[during] ** 2)))
+        rms = float(np.sqrt(np.mean(err[during] ** 2)))
+        results["speed_ramp"][k]["speed_error_rms_during_ramp_mps"] = rms
 
     # 3. flat terrain: SNR < 5 dB, out of lock instead of a wrong position
     base = terrain.load("jacksboro")
