@@ -77,28 +77,24 @@ def test_missing_sensors_refused_before_the_flight(tmp_path, capsys):
         validate(data)
     data["navigator"]["settings"]["aiding"] = False  # unaided: no air data needed
     assert validate(data).navigator_name == "acq_track"
-    # the CLI: exit 2, the setting named, nothing written
-    text = SHORT.read_text().replace("[sensors.heading]\n", "")
-    bad = tmp_path / "no_compass.toml"
-    bad.write_text(text)
+    # the CLI: the default scenario has no radar altimeter, so --navigator acq_track is refused there
     out = tmp_path / "run"
-    assert cli.main(["fly", str(bad), "--out", str(out), "--quiet"]) == 2
-    cap = capsys.readouterr()
-    assert "sensors.heading" in cap.err + cap.out
-    assert not out.exists()
-    # the default scenario has no radar altimeter: --navigator acq_track is refused there
     assert cli.main(["fly", "default", "--navigator", "acq_track", "--out", str(out), "--quiet"]) == 2
+    cap = capsys.readouterr()
+    assert "sensors.radar_altimeter" in cap.err + cap.out
     assert not out.exists()
 
 
 def test_cli_fly_navigator_acq_track(tmp_path, capsys):
-    """The built-in scenario (N = 50: a 49 s transect) flown for 60 s; 40 s is refused before the flight."""
+    """`trn-env fly --navigator acq_track` (the short scenario, 30 s); the built-in `acq_track` validates,
+    and its N = 50 (a 49 s transect) refuses a 40 s flight before it starts."""
+    assert cli.main(["validate", "acq_track"]) == 0
     out = tmp_path / "run"
     assert cli.main(["fly", "acq_track", "--out", str(out), "--quiet", "--duration", "40"]) == 2
     assert "navigator.settings.transect_samples" in "".join(capsys.readouterr())
-    code = cli.main(
-        ["fly", "acq_track", "--navigator", "acq_track", "--out", str(out), "--quiet", "--duration", "60"]
-    )
+    assert not out.exists()
+    code = cli.main(["fly", str(SHORT), "--navigator", "acq_track", "--out", str(out), "--quiet",
+                     "--duration", "30"])
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["navigator"] == "acq_track" and summary["termination"] == "time_limit"

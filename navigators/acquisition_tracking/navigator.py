@@ -881,8 +881,13 @@ class AcqTrackNavigator:
             cfg.aiding_heading_sigma_deg if cfg.aiding else cfg.unaided_heading_sigma_deg
         )
         if self.bad_epochs >= cfg.lost_after_epochs:
-            if cfg.aiding and self.lock_state != "lost":  # dead-reckon on the references' long-term mean
-                self.b_v, self.b_psi = self.b_mean
+            if cfg.aiding and self.lock_state != "lost":
+                # dead-reckon on the aiding: its own prediction (an INS's velocity, or air data + the wind
+                # estimate) when it has one, else the references' running mean over the lock
+                wind_known = cfg.aiding_source == "air_data" and cfg.wind_estimation \
+                    and self.wind.n_updates > 0
+                prior = cfg.aiding_source == "ins" or wind_known
+                self.b_v, self.b_psi = (0.0, 0.0) if prior else self.b_mean
             self.need_acquisition = True
             self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")
         else:

@@ -15,7 +15,7 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
   once the tilt exceeds half the beam. Roll and pitch come from the INS (aiding_source "ins") or, with air
   data, from the coordinated-turn relation roll = atan(V psi_dot / g) (pitch 0).
 - acquisition grid: +-10 m/s in 1 m/s, +-10 deg in 1 deg, +-500 m in 50 m (21 x 21 x 441 cells);
-  distinct when the minimum is below acquisition_distinct_ratio (0.8) times the best cost farther than
+  distinct when the minimum is below acquisition_distinct_ratio (0.9) times the best cost farther than
   acquisition_exclusion_m.
 - lock: a loop that hits the 101-iteration break flags the epoch 'degraded' but keeps its estimate; out of
   lock (V-shape flag, SNR < snr_min_db, false lock) lost_after_epochs times in a row is 'lost'.
@@ -101,7 +101,7 @@ class AcqTrackConfig:
     acquisition_heading_bin_deg: float = 1.0
     acquisition_position_half_m: float = 500.0
     acquisition_position_bin_m: float = 50.0
-    acquisition_distinct_ratio: float = 0.8
+    acquisition_distinct_ratio: float = 0.9
     acquisition_exclusion_m: float = 200.0
     acquire_above_sigma_m: float = 100.0  # transect start sigma above which tracking needs an acquisition
     snr_min_db: float = 5.0
@@ -111,7 +111,7 @@ class AcqTrackConfig:
     false_lock_sigma_factor: float = 3.0  # residual sigma above this times the a-priori sigma: false lock
     max_speed_bias_mps: float = 15.0  # aided: |b_v| beyond this is a false lock (wind + sensor bias)
     max_heading_bias_deg: float = 15.0
-    lost_after_epochs: int = 3  # consecutive out-of-lock epochs before "lost" (re-acquire)
+    lost_after_epochs: int = 5  # consecutive out-of-lock epochs before "lost" (re-acquire)
     output_average_length: int | None = None
     output_average_speed_tol_mps: float = 0.5
     output_average_heading_tol_deg: float = 0.5
