@@ -224,6 +224,7 @@ class AcqTrackNavigator:
         self.need_acquisition = False
         self.acq_wait = 0
         self._deferred = False
+        self._anchored = False
         self.acquisitions = 0
         self.acquisition_s = math.nan
         self.last_innovation = None
@@ -463,8 +464,11 @@ class AcqTrackNavigator:
             self._set_lock("filling", s.t_s, "acquiring", "transect filling")
             self._finish(s)
             return
+        # a transect placed by GNSS goes straight to tracking; otherwise a large sigma asks for a search
         acq_due = self.need_acquisition or (
-            self.lock_state in ("filling", "acquiring") and self._sigma_h() > cfg.acquire_above_sigma_m
+            self.lock_state in ("filling", "acquiring")
+            and not self._anchored
+            and self._sigma_h() > cfg.acquire_above_sigma_m
         )
         if acq_due:
             if self.acq_wait > 0:
@@ -536,6 +540,7 @@ class AcqTrackNavigator:
         self.bad_epochs = 0
         self.need_acquisition = False
         self.out_speed, self.out_track = self.average.push(g_speed, g_track)
+        self._anchored = True
         self._set_lock("gnss", s.t_s, "ok", "GNSS available")
 
     def _propagate_cov(self, s: Sample) -> None:
@@ -889,6 +894,7 @@ class AcqTrackNavigator:
                 prior = cfg.aiding_source == "ins" or wind_known
                 self.b_v, self.b_psi = (0.0, 0.0) if prior else self.b_mean
             self.need_acquisition = True
+            self._anchored = False
             self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")
         else:
             self._set_lock("out_of_lock", s.t_s, "degraded", reason)
