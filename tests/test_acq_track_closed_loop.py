@@ -86,11 +86,11 @@ def test_missing_sensors_refused_before_the_flight(tmp_path, capsys):
 
 
 def test_cli_fly_navigator_acq_track(tmp_path, capsys):
-    """`trn-env fly --navigator acq_track` (the short scenario, 30 s); the built-in `acq_track` validates,
-    and its N = 50 (a 49 s transect) refuses a 40 s flight before it starts."""
+    """`trn-env fly --navigator acq_track` (the short scenario, 30 s); the built-in `acq_track` validates;
+    a flight shorter than one transect (N = 25: 24 s) is refused before it starts."""
     assert cli.main(["validate", "acq_track"]) == 0
     out = tmp_path / "run"
-    assert cli.main(["fly", "acq_track", "--out", str(out), "--quiet", "--duration", "40"]) == 2
+    assert cli.main(["fly", str(SHORT), "--out", str(out), "--quiet", "--duration", "20"]) == 2
     assert "navigator.settings.transect_samples" in "".join(capsys.readouterr())
     assert not out.exists()
     code = cli.main(["fly", str(SHORT), "--navigator", "acq_track", "--out", str(out), "--quiet",
