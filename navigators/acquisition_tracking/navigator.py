@@ -120,6 +120,17 @@ class _Tail:
         den = float((x * x).sum())
         return float((x * (y - y.mean())).sum() / den) if den > 0 else math.nan
 
+    def row(self, t_s: float, max_gap_s: float) -> tuple[np.ndarray | None, bool]:
+        """(all columns of the newest valid sample at or before t_s within max_gap_s, found)."""
+        if self.t.size == 0:
+            return None, False
+        k = int(np.searchsorted(self.t, t_s + 1e-9, side="right")) - 1
+        while k >= 0 and not self.ok[k]:
+            k -= 1
+        if k < 0 or t_s - self.t[k] > max_gap_s:
+            return None, False
+        return self.v[k], True
+
     def at(self, t_query, col: int, max_gap_s: float):
         return sample_at(
             np.atleast_1d(np.asarray(t_query, float)), self.t, self.v[:, col], self.ok, max_gap_s
@@ -223,6 +234,7 @@ class AcqTrackNavigator:
         self.bad_epochs = 0
         self.need_acquisition = False
         self.acq_wait = 0
+        self.acq_failures = 0
         self._deferred = False
         self._anchored = False
         self.acquisitions = 0
@@ -358,8 +370,8 @@ class AcqTrackNavigator:
             j = int(np.searchsorted(ra.t_s, t_k - 1e-6))
             if j < ra.t_s.size and ra.t_s[j] < t_k + 0.5 * T:
                 r_m = float(ra.range_m[j]) if bool(ra.valid[j]) else math.nan
-        hb, okb = tl["baro"].at(t_k, 0, 0.5)
-        h_baro = float(hb[0]) if okb[0] else math.nan
+        hb, okb = tl["baro"].row(t_k, 0.5)
+        h_baro = float(hb[0]) if okb else math.nan
         if math.isfinite(h_baro):
             self.h_m = h_baro
         # aiding values at the sample
@@ -367,10 +379,10 @@ class AcqTrackNavigator:
         roll = pitch = 0.0
         m_v = m_psi = 0.0
         if cfg.aiding and cfg.aiding_source == "air_data":
-            a, oka = tl["air"].at(t_k, 0, 1.0)
-            h, okh = tl["hdg"].at(t_k, 0, 1.5 * T)
-            tas = float(a[0]) if oka[0] else math.nan
-            hdg = float(wrap_rad(h[0])) if okh[0] else math.nan
+            a, oka = tl["air"].row(t_k, 1.0)
+            h, okh = tl["hdg"].row(t_k, 1.5 * T)
+            tas = float(a[0]) if oka else math.nan
+            hdg = float(wrap_rad(h[0])) if okh else math.nan
             rate = tl["hdg"].rate(t_k, 0, _TURN_RATE_WINDOW_S)
             if math.isfinite(rate) and math.isfinite(tas):
                 roll = coordinated_turn_roll_rad(tas, rate)
@@ -382,9 +394,9 @@ class AcqTrackNavigator:
                 self.yaw = hdg
                 m_v, m_psi = self.wind.predict(tas, hdg) if cfg.wind_estimation else (tas, hdg)
         elif cfg.aiding:
-            vals = [tl["ins"].at(t_k, c, 0.5) for c in range(4)]
-            if all(v[1][0] for v in vals):
-                vn, ve, roll, pitch = (float(v[0][0]) for v in vals)
+            row, found = tl["ins"].row(t_k, 0.5)
+            if found and np.all(np.isfinite(row[:4])):
+                vn, ve, roll, pitch = (float(x) for x in row[:4])
                 m_v, m_psi = speed_track(np.array([vn, ve]))
             else:
                 self.health.skip(t_k, "aiding_missing", "acq_track: INS velocity missing; aiding held")
@@ -408,10 +420,10 @@ class AcqTrackNavigator:
         agl = float(plumb_height_m(r_m, roll, pitch, cfg.beamwidth_deg)) if cfg.roll_compensation else r_m
         d = h_baro - agl if valid else math.nan
         # GNSS at the sample
-        g = [tl["gnss"].at(t_k, c, 0.6) for c in range(5)]
-        have_gnss = bool(g[0][1][0])
-        glat, glon = (float(g[0][0][0]), float(g[1][0][0])) if have_gnss else (math.nan, math.nan)
-        gv = (float(g[3][0][0]), float(g[4][0][0])) if have_gnss else (math.nan, math.nan)
+        g, have_gnss = tl["gnss"].row(t_k, 0.6)
+        have_gnss = bool(have_gnss and np.all(np.isfinite(g)))
+        glat, glon = (float(g[0]), float(g[1])) if have_gnss else (math.nan, math.nan)
+        gv = (float(g[3]), float(g[4])) if have_gnss else (math.nan, math.nan)
         s = Sample(t_k, d, bool(valid), r_m, float(m_v), float(m_psi), tas, hdg, glat, glon, gv, roll)
         self._epoch(s, have_gnss)
 
@@ -497,7 +509,9 @@ class AcqTrackNavigator:
                 return
             self._deferred = False
             if not self._acquire(s):
-                self.acq_wait = cfg.transect_samples - 1  # retry with the next transect
+                # retry with the next transect, backing off to every 4th after repeated failures
+                self.acq_failures += 1
+                self.acq_wait = (cfg.transect_samples - 1) * min(2 ** (self.acq_failures - 1), 4)
                 self._finish(s)
                 return
         self._track(s)
@@ -664,6 +678,7 @@ class AcqTrackNavigator:
         b = cfg.acquisition_position_bin_m
         self.P = np.eye(2) * (b * b + self.sigma_floor_m**2)
         self.need_acquisition = False
+        self.acq_failures = 0
         self.bad_epochs = 0
         self.health.events.append(
             (
