@@ -239,6 +239,7 @@ class AcqTrackNavigator:
         self._anchored = False
         self.acquisitions = 0
         self.acquisition_s = math.nan
+        self.acquisition_total_s = 0.0
         self.last_innovation = None
         self.t_epoch = math.nan
         self.next_k = None
@@ -657,6 +658,7 @@ class AcqTrackNavigator:
             exclusion_m=cfg.acquisition_exclusion_m,
         )
         self.acquisition_s = time.perf_counter() - w0
+        self.acquisition_total_s += self.acquisition_s
         self.acquisitions += 1
         if not res.distinct:
             self.health.events.append(
