@@ -448,3 +448,23 @@ def test_bad_samples_drop_out_never_crash(dem):
     ests2, _ = fly(nav2, dem, traj2, H_MSL, 80)
     assert all(math.isfinite(e.lat_rad) for e in ests2)
     assert ests2[-1].health.status in ("lost", "degraded") and not ests2[-1].health.ok
+
+
+def test_same_frames_same_estimates_bit_for_bit(dem):
+    """No randomness and no wall time in the output: two navigators on the same frames agree exactly
+    (acquisition included)."""
+    traj = trajectory(dem, LAT0, LON0, H_MSL, lambda t: 81.0, lambda t: math.radians(33.0), 50.0)
+    runs = []
+    for _ in range(2):
+        nav = AcqTrackNavigator(dem=dem, aiding=False)
+        nav.reset(initial_estimate(traj, H_MSL, sigma_m=300.0, dn_m=200.0, dv_mps=3.0))
+        ests, _ = fly(nav, dem, traj, H_MSL, 40)
+        runs.append(ests)
+    assert any("acquired" in m for e in runs[0] for _, m in e.health.events)
+    for a, b in zip(*runs, strict=True):
+        assert (a.lat_rad, a.lon_rad, a.h_m) == (b.lat_rad, b.lon_rad, b.h_m)
+        assert np.array_equal(a.covariance, b.covariance)
+        assert a.health.events == b.health.events
+        assert a.extra["snr_db"] == b.extra["snr_db"] or (
+            math.isnan(a.extra["snr_db"]) and math.isnan(b.extra["snr_db"])
+        )

@@ -39,7 +39,8 @@ its covariance, NIS with 2 dof, measurement time):
     false_lock          '' or the reason of a false-lock detection
     loop_iterations     iterations of [speed 1st, speed 2nd, heading 1st, heading 2nd]
     wind_ne_mps         the wind estimate (north, east)
-    acquisitions        number of serial searches run; acquisition_s: wall time of the last one
+    acquisitions        number of serial searches run (their wall time: attributes acquisition_s, _total_s;
+                        not in the estimate, which one seed fixes bit for bit)
 """
 
 from __future__ import annotations
@@ -665,7 +666,7 @@ class AcqTrackNavigator:
                 (
                     s.t_s,
                     f"acq_track: acquisition failed: {res.reason} "
-                    f"({res.n_hypotheses} cells, {self.acquisition_s:.2f} s)",
+                    f"({res.n_hypotheses} cells)",
                 )
             )
             self._set_lock(
@@ -687,7 +688,7 @@ class AcqTrackNavigator:
                 s.t_s,
                 f"acq_track: acquired dn={res.dn_m:+.0f} m de={res.de_m:+.0f} m "
                 f"b_v={res.b_v:+.2f} m/s b_psi={math.degrees(res.b_psi_rad):+.2f} deg "
-                f"({res.n_hypotheses} cells, {self.acquisition_s:.2f} s)",
+                f"({res.n_hypotheses} cells)",
             )
         )
         self.lock_state = "tracking"
@@ -998,7 +999,6 @@ class AcqTrackNavigator:
             "loop_iterations": list(self.iterations),
             "wind_ne_mps": self.wind.w_ne.copy(),
             "acquisitions": int(self.acquisitions),
-            "acquisition_s": float(self.acquisition_s),
         }
         if self.last_innovation is not None:
             te, innov, S = self.last_innovation
