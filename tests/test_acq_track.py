@@ -468,3 +468,44 @@ def test_same_frames_same_estimates_bit_for_bit(dem):
         assert a.extra["snr_db"] == b.extra["snr_db"] or (
             math.isnan(a.extra["snr_db"]) and math.isnan(b.extra["snr_db"])
         )
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"loop_order": "heading_first"},
+        {"correlation": "pearson"},
+        {"interpolation": "bicubic"},
+        {"bias_mitigation": "none"},
+        {"discriminator": "v_fit"},
+        {"transect_samples": 15, "remove_bias": False},
+    ],
+)
+def test_named_choices_all_track(dem, settings):
+    """Every choice the thesis leaves open is a working setting: noise-free constant flight, in lock,
+    within 50 m at the end."""
+    nav, ests, truth = _run(dem, lambda t: 80.0, lambda t: math.radians(30.0), 60, **settings)
+    last = ests[-1]
+    assert last.extra["lock_state"] == "tracking"
+    assert horizontal_error_m(last, truth[-1, 0], truth[-1, 1]) < 50.0
+
+
+def test_footprint_dilation_by_hand(dem):
+    """One 100 m peak on a flat map: the footprint map at a post rho from it holds
+    max(flat, peak - rho^2 / (2 a)) inside the beam's radius a tan(8.5 deg), the flat height outside."""
+    from navigators.acquisition_tracking.footprint import FootprintMaps
+
+    h = np.full_like(dem.heights_m, 200.0)
+    i0, j0 = 200, 200
+    h[i0, j0] = 300.0
+    fm = FootprintMaps(dem.with_heights(h, name="spike"), 17.0)
+    a = 1200.0
+    heights = fm.grid(a)[0]
+    dn, de = (float(x) for x in dem.spacing_m)
+    r = a * math.tan(math.radians(8.5))
+    for di, dj in ((0, 0), (0, 1), (1, 0), (1, 1), (0, 2), (2, 2)):
+        rho = math.hypot(di * dn, dj * de)
+        want = max(200.0, 300.0 - rho**2 / (2 * a)) if rho <= r else 200.0
+        assert heights[i0 + di, j0 + dj] == pytest.approx(want)
+    assert fm.grid(a)[0] is heights  # cached per 50 m band
+    assert fm.grid(float("nan"))[0] is fm.dem.heights_m
