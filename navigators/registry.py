@@ -1,6 +1,8 @@
 """Navigator registry: `create(name, **settings)` and `available()`.
 
 "ins"          strapdown INS + barometer, no terrain aiding (navigators.filters.InsTrnNavigator)
+"acq_track"    the GPS-inspired acquisition-and-tracking TRN of seed 001
+               (navigators.acquisition_tracking.AcqTrackNavigator; settings: AcqTrackConfig's fields)
 "ins_tercom"   INS + batch TERCOM (IRA by default, aiding="radar_altimeter" for eq 1) + 13-state EKF;
                needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
 
@@ -16,12 +18,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from navigators.acquisition_tracking import AcqTrackNavigator
 from navigators.filters.ins_trn_ekf import InsTrnNavigator
 
 # name -> (factory, takes_rng)
 _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
     "ins": (lambda **kw: InsTrnNavigator(aiding=None, **kw), False),
     "ins_tercom": (lambda **kw: InsTrnNavigator(**{"aiding": "ira", **kw}), False),
+    "acq_track": (AcqTrackNavigator, False),
 }
 
 

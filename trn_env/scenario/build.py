@@ -226,6 +226,33 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     return registry.create(d["navigator"]["name"], rng=rng, **settings)
 
 
+def _navigator_requirements(d: dict, the_map) -> list[str]:
+    try:
+        navigator = build_navigator(d, the_map)
+    except (ValueError, TypeError):
+        return []          # the navigator.settings check reports it
+    return navigator_sensor_problems(d, navigator)
+
+
+def navigator_sensor_problems(d: dict, navigator) -> list[str]:
+    """The sensors a navigator's settings need (its `required_sensors()`, if it has one) that the scenario
+    does not fit, each as 'sensors.<name>: ...', and a transect longer than the flight (its
+    `required_duration_s()`): refused before the flight."""
+    need = getattr(navigator, "required_sensors", None)
+    if need is None:
+        return []
+    fitted = {n for n, cfg in d["sensors"].items() if cfg is not None and cfg is not False}
+    name = d["navigator"]["name"]
+    problems = [f"sensors.{sensor}: navigator {name!r} needs this sensor ({why}); add a [sensors.{sensor}] "
+                "table" for sensor, why in need() if sensor not in fitted]
+    dur = getattr(navigator, "required_duration_s", None)
+    if dur is not None and dur() > float(d["duration_s"]):
+        problems.append(f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, "
+                        f"more than the scenario's duration_s = {d['duration_s']:g} s (more samples than the "
+                        "route provides)")
+    return problems
+
+
 # ------------------------------------------------------------------------------------ component checks
 
 def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool = False) -> list[str]:
@@ -258,6 +285,8 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
                        lambda: refine_dem(world, refinement, np.random.default_rng(0))))
     if the_map is not None and not blocked("navigator", "terrain"):
         checks.append(("navigator.settings", lambda: build_navigator(d, the_map)))
+        if not blocked("sensors"):
+            checks.append(("", lambda: _navigator_requirements(d, the_map)))
     if world is not None and not blocked("initial", "aircraft", "terrain.world"):
         checks.append(("initial", lambda: _initial_condition(d, world)))
     if not blocked("route"):
