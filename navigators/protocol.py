@@ -33,7 +33,11 @@ EXTRA_MEASUREMENT_TIME = "measurement_t_s"  # float: time of the update these ke
 
 @dataclass
 class Health:
-    """Navigator health: ok is False when the estimate should not be trusted (diverged, lost lock)."""
+    """Navigator health: ok is False when the estimate should not be trusted (diverged, lost lock).
+
+    status words: "ok", "acquiring", "degraded", "diverged", and "lost" (the acquisition-and-tracking
+    TRN: out of lock for several epochs in a row, dead-reckoning on its aiding until a new acquisition;
+    its state machine is acquiring -> ok <-> degraded -> lost -> acquiring, each transition an event)."""
 
     ok: bool = True
     status: str = "ok"                                   # short word: ok, acquiring, degraded, diverged, ...

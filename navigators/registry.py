@@ -1,6 +1,8 @@
 """Navigator registry: `create(name, **settings)` and `available()`.
 
 "ins"          strapdown INS + barometer, no terrain aiding (navigators.filters.InsTrnNavigator)
+"acq_track"    the GPS-inspired acquisition-and-tracking TRN of seed 001
+               (navigators.acquisition_tracking.AcqTrackNavigator; settings: AcqTrackConfig's fields)
 "ins_tercom"   INS + batch TERCOM (IRA by default, aiding="radar_altimeter" for eq 1) + 13-state EKF;
                needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
 "rbpf"         seed 002's IRA-aided Rao-Blackwellized particle filter (navigators.filters.rbpf); needs dem=,
@@ -18,12 +20,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from navigators.acquisition_tracking import AcqTrackNavigator
 from navigators.filters.ins_trn_ekf import InsTrnNavigator
 
 # name -> (factory, takes_rng)
 _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
     "ins": (lambda **kw: InsTrnNavigator(aiding=None, **kw), False),
     "ins_tercom": (lambda **kw: InsTrnNavigator(**{"aiding": "ira", **kw}), False),
+    "acq_track": (AcqTrackNavigator, False),
 }
 
 
@@ -43,6 +47,10 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
     try:
         return factory(**settings)
     except TypeError as exc:
+        import re
+        m = re.search(r"unexpected keyword argument '(\w+)'", str(exc))
+        if m:
+            raise ValueError(f"navigator {name!r}: bad settings: unknown setting '{m.group(1)}'") from exc
         raise ValueError(f"navigator {name!r}: bad settings {sorted(settings)}: {exc}") from exc
 
 

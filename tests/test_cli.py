@@ -62,7 +62,7 @@ def test_fly_writes_summary_log_and_plots(flown):
     table = pd.read_csv(out / "timeline.csv")
     assert list(table.columns) == output.TIMELINE_COLUMNS
     assert len(table) == log["t_s"].shape[0] == 16           # t = 0 and each 1 s navigator update
-    assert np.allclose(table["err_h_m"], e_h, atol=0.05)
+    assert np.allclose(table["err_horizontal_m"], e_h, atol=0.05)
     assert np.allclose(table["true_lat_deg"], np.degrees(log["true_lat_rad"]))
     for png in ("track.png", "errors.png"):
         data = (out / png).read_bytes()

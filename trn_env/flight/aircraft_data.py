@@ -26,6 +26,15 @@ def aircraft_root() -> Path:
     raise FileNotFoundError(f"trn-env aircraft data not found next to {here}: reinstall (pip install .)")
 
 
+# Published service ceilings (m MSL) of the aircraft the data models: King Air C90-class 30,000 ft (POH).
+SERVICE_CEILING_M = {"kingair": 9144.0}
+
+
+def service_ceiling_m(aircraft: str) -> float | None:
+    """The aircraft's service ceiling in m MSL (None when not known)."""
+    return SERVICE_CEILING_M.get(aircraft)
+
+
 def available_aircraft() -> list[str]:
     root = aircraft_root()
     return sorted(p.name for p in root.iterdir() if (p / f"{p.name}.xml").is_file())

@@ -226,6 +226,33 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     return registry.create(d["navigator"]["name"], rng=rng, **settings)
 
 
+def _navigator_requirements(d: dict, the_map) -> list[str]:
+    try:
+        navigator = build_navigator(d, the_map)
+    except (ValueError, TypeError):
+        return []          # the navigator.settings check reports it
+    return navigator_sensor_problems(d, navigator)
+
+
+def navigator_sensor_problems(d: dict, navigator) -> list[str]:
+    """The sensors a navigator's settings need (its `required_sensors()`, if it has one) that the scenario
+    does not fit, each as 'sensors.<name>: ...', and a transect longer than the flight (its
+    `required_duration_s()`): refused before the flight."""
+    need = getattr(navigator, "required_sensors", None)
+    if need is None:
+        return []
+    fitted = {n for n, cfg in d["sensors"].items() if cfg is not None and cfg is not False}
+    name = d["navigator"]["name"]
+    problems = [f"sensors.{sensor}: navigator {name!r} needs this sensor ({why}); add a [sensors.{sensor}] "
+                "table" for sensor, why in need() if sensor not in fitted]
+    dur = getattr(navigator, "required_duration_s", None)
+    if dur is not None and dur() > float(d["duration_s"]):
+        problems.append(f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, "
+                        f"more than the scenario's duration_s = {d['duration_s']:g} s (more samples than the "
+                        "route provides)")
+    return problems
+
+
 # ------------------------------------------------------------------------------------ component checks
 
 def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool = False) -> list[str]:
@@ -258,8 +285,10 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
                        lambda: refine_dem(world, refinement, np.random.default_rng(0))))
     if the_map is not None and not blocked("navigator", "terrain"):
         checks.append(("navigator.settings", lambda: build_navigator(d, the_map)))
+        if not blocked("sensors"):
+            checks.append(("", lambda: _navigator_requirements(d, the_map)))
     if world is not None and not blocked("initial", "aircraft", "terrain.world"):
-        checks.append(("aircraft.settings", lambda: _initial_condition(d, world)))
+        checks.append(("initial", lambda: _initial_condition(d, world)))
     if not blocked("route"):
         checks.append(("route", lambda: build_guidance(d, the_map)))
     problems: list[str] = []
@@ -268,11 +297,43 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
             out = fn()
             if path == "":
                 problems += out
-        except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as exc:
             if tolerant and not isinstance(exc, ValueError):
                 continue
-            problems.append(f"{path}: {exc}")
+            problems.append(_attribute(d, path, exc))
     return problems
+
+
+def _attribute(d: dict, path: str, exc: Exception) -> str:
+    """'field.path: message' for a component's rejection, at the setting the message names when it names
+    one: navigator.settings.<name>, aircraft.settings.<name>, or initial.<field> (a component's message
+    starts with, or quotes, the setting's name)."""
+    import re
+    msg = str(exc)
+    if path == "navigator.settings":
+        keys = list(d["navigator"]["settings"])
+        m = re.search(r"unknown setting '(\w+)'", msg)
+        if m:
+            return f"navigator.settings.{m.group(1)}: {msg}"
+        for key in sorted(keys, key=len, reverse=True):
+            if re.match(rf"(\w+\.)?{re.escape(key)}\b", msg):
+                return f"navigator.settings.{key}: {msg}"
+        return f"navigator.settings: {msg}"
+    if path == "initial":
+        m = re.match(r"InitialCondition\.(\w+)", msg)
+        name = m.group(1) if m else None
+        if name in d["aircraft"]["settings"]:
+            return f"aircraft.settings.{name}: {msg}"
+        fields = {"lat_rad": "lat_deg", "lon_rad": "lon_deg", "heading_rad": "heading_deg",
+                  "tas_mps": "tas_mps",
+                  "h_msl_m": "h_msl_m" if "h_msl_m" in d["initial"] else "h_agl_m"}
+        if name in fields:
+            return f"initial.{fields[name]}: {msg}"
+        m = re.search(r"unexpected keyword argument '(\w+)'", msg)
+        if m:
+            return f"aircraft.settings.{m.group(1)}: unknown setting ({msg})"
+        return f"initial: {msg}"
+    return f"{path}: {msg}"
 
 
 def _initial_condition(d: dict, world):

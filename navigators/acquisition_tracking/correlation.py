@@ -1,0 +1,322 @@
+"""Replica profiles from the map and their correlation with the measured profile (seed 001 ch. 3; spec 1-2).
+
+Replica sample positions (spec section 1, [INF] in the thesis): p_0 = the transect's start point and
+p_i = p_{i-1} + v_i t_i (sin psi_i, cos psi_i) (east, north), with v_i = m_v[i] + b_v and
+psi_i = m_psi[i] + b_psi:
+`m_v`, `m_psi` are the per-sample aiding values (zero without aiding) and `b_v`, `b_psi` the one unknown
+reference the loops track (the thesis' V_ref / psi_ref; unaided, b is the speed and heading themselves).
+The step from sample i-1 to i uses the mean of the two samples' speeds and headings (trapezoid). The
+north/east steps go to latitude/longitude through the meridian and prime-vertical radii at the transect's
+start (seed 000 eq 2; over a 2-4 km transect the radii change by < 1 m of position).
+
+Costs (lower is better, so one minimiser serves both): MAD C = sum |d_i - h_i| / N (spec section 2, the
+thesis' choice), optionally of the mean-removed difference (remove_bias: the barometer's and the map's
+vertical biases then do not raise the minimum), and Pearson as 1 - r. A replica sample off the map (NaN
+height) or a measured sample that dropped out is left out of the sums; fewer than n_min samples left gives
+inf (no correlation).
+
+Every kernel has a plain numpy `*_reference` twin (tests check they agree).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from terrain.kernels import bicubic, bilinear, bilinear_with_gradient
+
+COST_MAD = 0
+COST_PEARSON = 1
+COSTS = {"mad": COST_MAD, "pearson": COST_PEARSON}
+INTERP_BILINEAR = 0
+INTERP_BICUBIC = 1
+INTERPOLATIONS = {"bilinear": INTERP_BILINEAR, "bicubic": INTERP_BICUBIC}
+
+
+@njit(cache=True)
+def _wrap(a):
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+@njit(cache=True)
+def replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_out, dlon_out):
+    """Latitude/longitude offsets (rad) of every replica sample from the transect start (sample 0).
+
+    dt[i] (s): time from sample i-1 to i (dt[0] unused); r_n, r_e_cos: meridian radius + h and (prime
+    vertical radius + h) cos(lat) at the start (m)."""
+    n = dt.shape[0]
+    dlat_out[0] = 0.0
+    dlon_out[0] = 0.0
+    dn = 0.0
+    de = 0.0
+    for i in range(1, n):
+        v = 0.5 * (m_v[i - 1] + m_v[i]) + b_v
+        psi = m_psi[i - 1] + 0.5 * _wrap(m_psi[i] - m_psi[i - 1]) + b_psi
+        ds = v * dt[i]
+        dn += ds * math.cos(psi)
+        de += ds * math.sin(psi)
+        dlat_out[i] = dn / r_n
+        dlon_out[i] = de / r_e_cos
+    return dn, de
+
+
+@njit(cache=True)
+def _map_height(heights, lat0, lon0, dlat, dlon, lat, lon, interp):
+    if interp == INTERP_BICUBIC:
+        return bicubic(heights, lat0, lon0, dlat, dlon, lat, lon)
+    return bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
+
+
+@njit(cache=True)
+def profile_cost(d, valid, h, cost, remove_bias, n_min):
+    """Cost of measured heights d against map heights h over the samples valid and with finite h."""
+    n = d.shape[0]
+    m = 0
+    sd = 0.0
+    sh = 0.0
+    for i in range(n):
+        if valid[i] and h[i] == h[i]:
+            m += 1
+            sd += d[i]
+            sh += h[i]
+    if m < n_min or m == 0:
+        return np.inf
+    md = sd / m
+    mh = sh / m
+    if cost == COST_PEARSON:
+        sxy = 0.0
+        sxx = 0.0
+        syy = 0.0
+        for i in range(n):
+            if valid[i] and h[i] == h[i]:
+                a = d[i] - md
+                b = h[i] - mh
+                sxy += a * b
+                sxx += a * a
+                syy += b * b
+        if sxx <= 0.0 or syy <= 0.0:
+            return 1.0
+        return 1.0 - sxy / math.sqrt(sxx * syy)
+    off = (md - mh) if remove_bias else 0.0
+    acc = 0.0
+    for i in range(n):
+        if valid[i] and h[i] == h[i]:
+            acc += abs(d[i] - h[i] - off)
+    return acc / m
+
+
+@njit(cache=True)
+def replica_heights(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat_s,
+    lon_s,
+    dt,
+    m_v,
+    m_psi,
+    b_v,
+    b_psi,
+    r_n,
+    r_e_cos,
+    interp,
+    dlat_w,
+    dlon_w,
+    h_out,
+):
+    """Map heights (m) of the replica from start (lat_s, lon_s) with references (b_v, b_psi) into h_out."""
+    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
+    for i in range(dt.shape[0]):
+        h_out[i] = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[i], lon_s + dlon_w[i], interp)
+
+
+@njit(cache=True)
+def replica_cost(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat_s,
+    lon_s,
+    dt,
+    m_v,
+    m_psi,
+    b_v,
+    b_psi,
+    r_n,
+    r_e_cos,
+    d,
+    valid,
+    cost,
+    remove_bias,
+    interp,
+    n_min,
+    dlat_w,
+    dlon_w,
+    h_w,
+):
+    """Cost of one replica (work arrays dlat_w, dlon_w, h_w of length N are overwritten)."""
+    replica_heights(
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        lat_s,
+        lon_s,
+        dt,
+        m_v,
+        m_psi,
+        b_v,
+        b_psi,
+        r_n,
+        r_e_cos,
+        interp,
+        dlat_w,
+        dlon_w,
+        h_w,
+    )
+    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+
+
+@njit(cache=True)
+def correlation_function(
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    lat_s,
+    lon_s,
+    dt,
+    m_v,
+    m_psi,
+    b_v,
+    b_psi,
+    r_n,
+    r_e_cos,
+    d,
+    valid,
+    cost,
+    remove_bias,
+    interp,
+    n_min,
+    which,
+    offsets,
+    out,
+):
+    """The SCF (which = 0: offsets added to b_v, m/s) or HCF (which = 1: offsets added to b_psi, rad) of
+    the replica at (b_v, b_psi): out[k] = cost at offsets[k] (spec section 2)."""
+    n = dt.shape[0]
+    dlat_w = np.empty(n)
+    dlon_w = np.empty(n)
+    h_w = np.empty(n)
+    for k in range(offsets.shape[0]):
+        bv = b_v + offsets[k] if which == 0 else b_v
+        bp = b_psi + offsets[k] if which == 1 else b_psi
+        out[k] = replica_cost(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            lat_s,
+            lon_s,
+            dt,
+            m_v,
+            m_psi,
+            bv,
+            bp,
+            r_n,
+            r_e_cos,
+            d,
+            valid,
+            cost,
+            remove_bias,
+            interp,
+            n_min,
+            dlat_w,
+            dlon_w,
+            h_w,
+        )
+
+
+@njit(cache=True)
+def along_cross_information(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, valid, track_rad
+):
+    """(sum of squared along-track, cross-track map slopes) over the replica's valid samples (bilinear
+    gradient; 1/m^2 x m^2 = dimensionless): the terrain information a match has in each direction."""
+    n = dt.shape[0]
+    dlat_w = np.empty(n)
+    dlon_w = np.empty(n)
+    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
+    ca = math.cos(track_rad)
+    sa = math.sin(track_rad)
+    s_al = 0.0
+    s_cr = 0.0
+    for i in range(n):
+        if not valid[i]:
+            continue
+        _, g_lat, g_lon = bilinear_with_gradient(
+            heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[i], lon_s + dlon_w[i]
+        )
+        if g_lat != g_lat or g_lon != g_lon:
+            continue
+        g_n = g_lat / r_n  # dh/dnorth (m/m)
+        g_e = g_lon / r_e_cos  # dh/deast
+        a = g_n * ca + g_e * sa
+        c = -g_n * sa + g_e * ca
+        s_al += a * a
+        s_cr += c * c
+    return s_al, s_cr
+
+
+# --------------------------------------------------------------------------------------- references
+
+
+def replica_positions_reference(
+    lat_s: float,
+    lon_s: float,
+    dt: np.ndarray,
+    m_v: np.ndarray,
+    m_psi: np.ndarray,
+    b_v: float,
+    b_psi: float,
+    r_n: float,
+    r_e_cos: float,
+):
+    """(lat, lon) arrays of the replica samples (numpy twin of replica_offsets)."""
+    v = 0.5 * (m_v[:-1] + m_v[1:]) + b_v
+    dpsi = np.arctan2(np.sin(m_psi[1:] - m_psi[:-1]), np.cos(m_psi[1:] - m_psi[:-1]))
+    psi = m_psi[:-1] + 0.5 * dpsi + b_psi
+    ds = v * dt[1:]
+    dn = np.concatenate([[0.0], np.cumsum(ds * np.cos(psi))])
+    de = np.concatenate([[0.0], np.cumsum(ds * np.sin(psi))])
+    return lat_s + dn / r_n, lon_s + de / r_e_cos
+
+
+def profile_cost_reference(
+    d: np.ndarray,
+    valid: np.ndarray,
+    h: np.ndarray,
+    cost: str = "mad",
+    remove_bias: bool = True,
+    n_min: int = 1,
+) -> float:
+    """numpy twin of profile_cost (cost 'mad' or 'pearson')."""
+    ok = valid & np.isfinite(h)
+    if ok.sum() < max(n_min, 1):
+        return np.inf
+    x, y = d[ok], h[ok]
+    if cost == "pearson":
+        a, b = x - x.mean(), y - y.mean()
+        den = math.sqrt(float((a * a).sum() * (b * b).sum()))
+        return 1.0 if den <= 0 else 1.0 - float((a * b).sum()) / den
+    off = (x.mean() - y.mean()) if remove_bias else 0.0
+    return float(np.mean(np.abs(x - y - off)))

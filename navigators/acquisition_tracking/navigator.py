@@ -1,0 +1,1034 @@
+"""AcqTrackNavigator: the GPS-inspired acquisition-and-tracking TRN behind the Navigator protocol (seed 001).
+
+Each new transect sample (one per sample_period_s) is one epoch:
+
+    GNSS at the sample   -> the sample's position is the fix; the references b_v, b_psi and the wind are
+                            calibrated from the GNSS velocity ("gnss" lock state); no terrain work.
+    transect filling     -> dead reckoning on the aiding ("acquiring").
+    acquisition due      -> serial search (acquisition.py) around the dead-reckoned transect start; a
+                            distinct minimum starts tracking, none retries with the next transect.
+    tracking             -> speed 1st, speed 2nd, heading 1st, heading 2nd early-late loops (tracking.py),
+                            then integrity (integrity.py): in lock with V-shapes, SNR >= 5 dB and no false
+                            lock -> "ok"; out of lock the references are kept from the last good epoch and
+                            the status is "degraded"; lost_after_epochs such epochs in a row -> "lost",
+                            which asks for a new acquisition.
+
+Position: the replica's newest sample (transect start + the tracked speed and heading), dead-reckoned with
+the output velocity to the frame's end. The transect's start for the next epoch is its second sample.
+
+Health.status state machine (documented in Health): acquiring -> ok <-> degraded -> lost -> acquiring ...;
+each transition's reason is an event.
+
+Covariance (north, east): per epoch the along-track sigma grows by T sigma_v and the cross-track by
+V T sigma_psi (linearly: the aiding's errors are biases over a transect) - the aiding's sigmas while not in
+lock, the loops' while in lock; in lock the terrain match bounds each direction by
+lock_covariance_scale^2 x (a-priori noise^2 x N / the replica's squared map slopes in that direction + the
+transect span x the loop's sigma, squared + half a map post, squared), so a ridge along the track leaves the
+cross-track sigma growing. A bound, not a fused measurement: consecutive epochs share N - 1 samples.
+Vertical: the barometer's bias.
+
+Estimate.extra, besides the fixed protocol keys (innovation = the epoch's change of [b_v (m/s), b_psi (rad)],
+its covariance, NIS with 2 dof, measurement time):
+    lock_state          "gnss" | "filling" | "acquiring" | "tracking" | "out_of_lock" | "lost"
+    snr_db              terrain SNR of the prompt profile (dB; NaN before the first epoch)
+    tracked_speed_mps   output (moving-averaged) ground speed
+    tracked_track_deg   output ground track (deg, clockwise from north)
+    speed_spacing_mps   first-stage speed spacing in use (the adaptivity block's choice)
+    heading_spacing_deg first-stage heading spacing in use
+    v_shape             both SCF and HCF V-shaped at the last epoch
+    false_lock          '' or the reason of a false-lock detection
+    loop_iterations     iterations of [speed 1st, speed 2nd, heading 1st, heading 2nd]
+    wind_ne_mps         the wind estimate (north, east)
+    acquisitions        number of serial searches run (their wall time: attributes acquisition_s, _total_s;
+                        not in the estimate, which one seed fixes bit for bit)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from navigators.acquisition_tracking import acquisition, tracking
+from navigators.acquisition_tracking.aiding import (
+    WindEstimator,
+    coordinated_turn_roll_rad,
+    ground_vector,
+    sample_at,
+    speed_track,
+    wrap_rad,
+)
+from navigators.acquisition_tracking.correlation import (
+    COSTS,
+    INTERPOLATIONS,
+    along_cross_information,
+    correlation_function,
+    replica_heights,
+    replica_offsets,
+)
+from navigators.acquisition_tracking.integrity import (
+    OutputAverage,
+    a_priori_sigma_m,
+    false_lock,
+    terrain_snr_db,
+)
+from navigators.acquisition_tracking.profile import Sample, Transect, geometric_height_m, plumb_height_m
+from navigators.acquisition_tracking.settings import AcqTrackConfig
+from navigators.frames import SensorFrames
+from navigators.protocol import (
+    EXTRA_INNOVATION,
+    EXTRA_INNOVATION_COV,
+    EXTRA_LOG_LIKELIHOOD,
+    EXTRA_MEASUREMENT_TIME,
+    EXTRA_NIS,
+    EXTRA_NIS_DOF,
+    Estimate,
+    Health,
+)
+from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+_TAIL_S = 3.0  # seconds of each sensor's samples carried into the next frame (sample look-ups)
+_TURN_RATE_WINDOW_S = 3.0  # compass heading rate for the coordinated-turn roll: LSQ slope over 3 s
+
+
+class _Tail:
+    """A sensor's recent samples (t, columns..., valid), carried across frames."""
+
+    def __init__(self, n_cols: int):
+        self.t = np.zeros(0)
+        self.v = np.zeros((0, n_cols))
+        self.ok = np.zeros(0, bool)
+
+    def extend(self, t, cols, ok) -> None:
+        t = np.asarray(t, float)
+        if t.size == 0:
+            return
+        v = np.column_stack([np.asarray(c, float) for c in cols])
+        self.t = np.concatenate([self.t, t])
+        self.v = np.concatenate([self.v, v])
+        self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])
+        keep = self.t >= self.t[-1] - _TAIL_S
+        self.t, self.v, self.ok = self.t[keep], self.v[keep], self.ok[keep]
+
+    def rate(self, t_s: float, col: int, window_s: float) -> float:
+        """Least-squares slope (per s) of column col over the valid samples in [t_s - window_s, t_s]."""
+        m = self.ok & (self.t <= t_s + 1e-9) & (self.t >= t_s - window_s) & np.isfinite(self.v[:, col])
+        if m.sum() < 3:
+            return math.nan
+        x = self.t[m] - self.t[m].mean()
+        y = self.v[m, col]
+        den = float((x * x).sum())
+        return float((x * (y - y.mean())).sum() / den) if den > 0 else math.nan
+
+    def row(self, t_s: float, max_gap_s: float) -> tuple[np.ndarray | None, bool]:
+        """(all columns of the newest valid sample at or before t_s within max_gap_s, found)."""
+        if self.t.size == 0:
+            return None, False
+        k = int(np.searchsorted(self.t, t_s + 1e-9, side="right")) - 1
+        while k >= 0 and not self.ok[k]:
+            k -= 1
+        if k < 0 or t_s - self.t[k] > max_gap_s:
+            return None, False
+        return self.v[k], True
+
+    def at(self, t_query, col: int, max_gap_s: float):
+        return sample_at(
+            np.atleast_1d(np.asarray(t_query, float)), self.t, self.v[:, col], self.ok, max_gap_s
+        )
+
+
+class AcqTrackNavigator:
+    """Acquisition-and-tracking TRN (seed 001); settings are AcqTrackConfig's fields (see settings.py).
+
+    dem: the navigator's map (terrain.Dem, or a name/path for terrain.load). `required_sensors()` lists the
+    sensors its settings need (the scenario check refuses a scenario without them before the flight).
+    """
+
+    def __init__(self, dem=None, name: str = "acq_track", **settings):
+        unknown = sorted(set(settings) - set(AcqTrackConfig.names()))
+        if unknown:
+            raise ValueError(f"unknown acq_track setting(s) {unknown}; known: {list(AcqTrackConfig.names())}")
+        self.config = cfg = AcqTrackConfig(**settings)
+        if dem is None:
+            raise ValueError("dem: the navigator's terrain map is required")
+        if isinstance(dem, str):
+            import terrain
+
+            dem = terrain.load(dem)
+        self.dem = dem
+        self.name = name
+        self._grid = dem.grid
+        self._footprint = None
+        if cfg.replica_model == "footprint":
+            from navigators.acquisition_tracking.footprint import FootprintMaps
+
+            self._footprint = FootprintMaps(dem, cfg.beamwidth_deg)
+        sn, se = dem.spacing_m
+        self.map_resolution_m = float(0.5 * (sn + se))
+        self.sigma_floor_m = float(cfg.position_sigma_floor_m or 0.5 * self.map_resolution_m)
+        self._cost = COSTS[cfg.correlation]
+        self._interp = INTERPOLATIONS[cfg.interpolation]
+        self._disc = tracking.DISCRIMINATORS[cfg.discriminator]
+        self._n_min = max(3, int(math.ceil(cfg.min_valid_fraction * cfg.transect_samples)))
+        self._speed_set = np.array(cfg.speed_spacings_mps)
+        self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
+        self.wind = WindEstimator(cfg.wind_gain)
+        self.average = OutputAverage(
+            cfg.average_length,
+            cfg.output_average_speed_tol_mps,
+            math.radians(cfg.output_average_heading_tol_deg),
+        )
+        self.transect = Transect(cfg.transect_samples)
+        self.ins = None
+        if cfg.aiding and cfg.aiding_source == "ins":
+            from navigators.inertial.strapdown import StrapdownIns
+
+            self.ins = StrapdownIns("j2", 30.0, "interval")
+        self.health = Health(status="acquiring")
+        self._reset_state()
+
+    # ------------------------------------------------------------------ requirements
+    def required_sensors(self) -> list[tuple[str, str]]:
+        """(sensor name, why) of every sensor these settings need."""
+        need = [
+            ("radar_altimeter", "the terrain profile is barometric height - radar-altimeter range"),
+            ("baro", "the terrain profile is barometric height - radar-altimeter range"),
+        ]
+        if self.config.aiding:
+            if self.config.aiding_source == "air_data":
+                need += [
+                    ("air_data", "aiding = true with aiding_source = 'air_data' needs the true airspeed"),
+                    ("heading", "aiding = true with aiding_source = 'air_data' needs the compass heading"),
+                ]
+            else:
+                need += [("imu", "aiding = true with aiding_source = 'ins' needs the IMU")]
+        return need
+
+    def required_duration_s(self) -> float:
+        """Flight time one full transect takes (s): a scenario shorter than this gives no transect."""
+        return self.config.transect_duration_s
+
+    # ------------------------------------------------------------------ protocol
+    def _reset_state(self) -> None:
+        self.lock_state = "filling"
+        self.b_v = 0.0
+        self.b_psi = 0.0
+        self.b_mean = (0.0, 0.0)
+        self.p0 = (math.nan, math.nan)
+        self.pos = (math.nan, math.nan)
+        self.t_pos = math.nan
+        self.P = np.eye(2) * 1e4
+        self.sigma_v = self.config.aiding_speed_sigma_mps
+        self.sigma_psi = math.radians(self.config.aiding_heading_sigma_deg)
+        self.out_speed = 0.0
+        self.out_track = 0.0
+        self.h_m = math.nan
+        self.roll = 0.0
+        self.pitch = 0.0
+        self.yaw = 0.0
+        self.snr_db = math.nan
+        self.v_shape = False
+        self.false_lock = ""
+        self.iterations = [0, 0, 0, 0]
+        self.spacing = (float(self._speed_set.max()), float(self._heading_set.max()))
+        self.bad_epochs = 0
+        self.need_acquisition = False
+        self.acq_wait = 0
+        self.acq_failures = 0
+        self._deferred = False
+        self._anchored = False
+        self.acquisitions = 0
+        self.acquisition_s = math.nan
+        self.acquisition_total_s = 0.0
+        self.last_innovation = None
+        self.t_epoch = math.nan
+        self.next_k = None
+        self._tails = {
+            k: _Tail(n) for k, n in (("baro", 1), ("ra", 1), ("air", 1), ("hdg", 1), ("gnss", 5), ("ins", 5))
+        }
+        self.transect.clear()
+        self.average.reset()
+        self.wind.reset()
+
+    def reset(self, initial: Estimate) -> None:
+        self._reset_state()
+        cfg = self.config
+        v = np.asarray(initial.v_ned_mps, float)
+        speed, track = speed_track(v[:2])
+        self.t0 = float(initial.t_s)
+        self.pos = (float(initial.lat_rad), float(initial.lon_rad))
+        self.t_pos = float(initial.t_s)
+        self.h_m = float(initial.h_m)
+        self.yaw = float(initial.yaw_rad)
+        cov = np.asarray(initial.covariance, float)
+        if cov.shape != (9, 9) or not np.all(np.isfinite(cov)):
+            raise ValueError("initial.covariance must be a finite 9 x 9 matrix")
+        self.P = 0.5 * (cov[:2, :2] + cov[:2, :2].T)
+        self.out_speed, self.out_track = speed, track
+        self._v0 = (speed, track)
+        if not cfg.aiding:
+            self.b_v, self.b_psi = speed, track
+        if self.ins is not None:
+            self.ins.reset(
+                initial.t_s,
+                initial.lat_rad,
+                initial.lon_rad,
+                initial.h_m,
+                v,
+                initial.roll_rad,
+                initial.pitch_rad,
+                initial.yaw_rad,
+            )
+        self.health = Health(status="acquiring")
+        self.next_k = int(math.ceil(float(initial.t_s) / cfg.sample_period_s - 1e-9))
+
+    def update(self, frames: SensorFrames) -> Estimate:
+        self.health.events = []
+        try:
+            self._ingest(frames)
+            self._samples(frames)
+        except (FloatingPointError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
+            self.health.skip(frames.t_end_s, "numerical", f"acq_track: epoch skipped ({exc})")
+        return self.estimate(frames.t_end_s)
+
+    # ------------------------------------------------------------------ sensor intake
+    def _ingest(self, frames: SensorFrames) -> None:
+        tl = self._tails
+        if frames.baro is not None:
+            hb = np.asarray(frames.baro.h_baro_m, float)
+            if self.config.baro_geopotential:
+                hb = geometric_height_m(hb)
+            tl["baro"].extend(frames.baro.t_s, [hb], frames.baro.valid)
+        ra = frames.radar_altimeter
+        if ra is not None:
+            tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
+        if frames.air_data is not None:
+            tl["air"].extend(frames.air_data.t_s, [frames.air_data.tas_mps], frames.air_data.valid)
+        hd = frames.heading
+        if hd is not None and hd.t_s.size:
+            h = np.asarray(hd.heading_rad, float)
+            ok = hd.valid & np.isfinite(h)
+            if ok.any():  # continuous heading across frames (for the turn rate)
+                h = h.copy()
+                prev = tl["hdg"].v[-1, 0] if tl["hdg"].t.size else h[ok][0]
+                hu = np.unwrap(np.concatenate([[prev], h[ok]]))[1:]
+                h[ok] = hu
+            tl["hdg"].extend(hd.t_s, [h], ok)
+        g = frames.gnss
+        if g is not None and g.t_s.size:
+            tl["gnss"].extend(
+                g.t_s, [g.lat_rad, g.lon_rad, g.h_m, g.v_ned_mps[:, 0], g.v_ned_mps[:, 1]], g.valid
+            )
+        if self.ins is not None and frames.imu is not None and frames.imu.t_s.size:
+            if g is not None and g.t_s.size and g.valid.any():  # GNSS resets the INS position and velocity
+                j = int(np.nonzero(g.valid)[0][-1])
+                if abs(float(g.t_s[j]) - self.ins.t_s) < 1.0:
+                    self.ins.state[0:3] = (g.lat_rad[j], g.lon_rad[j], g.h_m[j])
+                    self.ins.state[3:6] = g.v_ned_mps[j]
+            b = frames.baro
+            hist = self.ins.propagate(
+                frames.imu.t_s,
+                frames.imu.f_b_mps2,
+                frames.imu.omega_ib_b_rps,
+                frames.imu.valid,
+                None if b is None else b.t_s,
+                None if b is None else b.h_baro_m,
+                None if b is None else b.valid,
+            )
+            from navigators.inertial.strapdown import euler_from_C_bn, quat_to_dcm
+
+            ok = np.all(np.isfinite(hist), axis=1)
+            step = max(1, hist.shape[0] // 50)  # attitude at <= 50 points per frame is plenty at 1 s
+            idx = np.arange(0, hist.shape[0], step)
+            rp = np.array(
+                [euler_from_C_bn(quat_to_dcm(hist[i, 6:10]))[:2] if ok[i] else (np.nan, np.nan) for i in idx]
+            ).reshape(-1, 2)
+            tl["ins"].extend(
+                frames.imu.t_s[idx],
+                [hist[idx, 3], hist[idx, 4], rp[:, 0], rp[:, 1], np.zeros(idx.size)],
+                ok[idx],
+            )
+
+    def _samples(self, frames: SensorFrames) -> None:
+        cfg = self.config
+        T = cfg.sample_period_s
+        if self.next_k is None:
+            self.next_k = int(math.ceil(frames.t_start_s / T - 1e-9))
+        ra = frames.radar_altimeter
+        if ra is None:
+            self.health.skip(frames.t_start_s, "no_radar_altimeter", "acq_track: no radar-altimeter frame")
+        while self.next_k * T < frames.t_end_s - 1e-9:
+            t_k = self.next_k * T
+            self.next_k += 1
+            self._add_sample(t_k, ra)
+
+    def _add_sample(self, t_k: float, ra) -> None:
+        cfg = self.config
+        tl = self._tails
+        T = cfg.sample_period_s
+        r_m = math.nan
+        if ra is not None and ra.t_s.size:
+            j = int(np.searchsorted(ra.t_s, t_k - 1e-6))
+            if j < ra.t_s.size and ra.t_s[j] < t_k + 0.5 * T:
+                r_m = float(ra.range_m[j]) if bool(ra.valid[j]) else math.nan
+        hb, okb = tl["baro"].row(t_k, 0.5)
+        h_baro = float(hb[0]) if okb else math.nan
+        if math.isfinite(h_baro):
+            self.h_m = h_baro
+        # aiding values at the sample
+        tas = hdg = math.nan
+        roll = pitch = 0.0
+        m_v = m_psi = 0.0
+        if cfg.aiding and cfg.aiding_source == "air_data":
+            a, oka = tl["air"].row(t_k, 1.0)
+            h, okh = tl["hdg"].row(t_k, 1.5 * T)
+            tas = float(a[0]) if oka else math.nan
+            hdg = float(wrap_rad(h[0])) if okh else math.nan
+            rate = tl["hdg"].rate(t_k, 0, _TURN_RATE_WINDOW_S)
+            if math.isfinite(rate) and math.isfinite(tas):
+                roll = coordinated_turn_roll_rad(tas, rate)
+            if not (math.isfinite(tas) and math.isfinite(hdg)):
+                self.health.skip(t_k, "aiding_missing", "acq_track: air data or compass missing; aiding held")
+                last = self.transect.samples[-1] if len(self.transect) else None
+                m_v, m_psi = (last.m_v, last.m_psi) if last is not None else self._v0
+            else:
+                self.yaw = hdg
+                m_v, m_psi = self.wind.predict(tas, hdg) if cfg.wind_estimation else (tas, hdg)
+        elif cfg.aiding:
+            row, found = tl["ins"].row(t_k, 0.5)
+            if found and np.all(np.isfinite(row[:4])):
+                vn, ve, roll, pitch = (float(x) for x in row[:4])
+                m_v, m_psi = speed_track(np.array([vn, ve]))
+            else:
+                self.health.skip(t_k, "aiding_missing", "acq_track: INS velocity missing; aiding held")
+                last = self.transect.samples[-1] if len(self.transect) else None
+                m_v, m_psi = (last.m_v, last.m_psi) if last is not None else self._v0
+        self.roll, self.pitch = roll, pitch
+        # measured terrain height; a no-return / NaN / missing baro drops out
+        valid = math.isfinite(r_m) and math.isfinite(h_baro)
+        if not math.isfinite(r_m):
+            self.health.skip(
+                t_k,
+                "radar_no_return",
+                f"acq_track: no radar-altimeter return at {t_k:.1f} s (sample drops out of the transect)",
+            )
+        elif not math.isfinite(h_baro):
+            self.health.skip(
+                t_k,
+                "baro_missing",
+                f"acq_track: no barometric height at {t_k:.1f} s (sample drops out of the transect)",
+            )
+        agl = float(plumb_height_m(r_m, roll, pitch, cfg.beamwidth_deg)) if cfg.roll_compensation else r_m
+        d = h_baro - agl if valid else math.nan
+        # GNSS at the sample
+        g, have_gnss = tl["gnss"].row(t_k, 0.6)
+        have_gnss = bool(have_gnss and np.all(np.isfinite(g)))
+        glat, glon = (float(g[0]), float(g[1])) if have_gnss else (math.nan, math.nan)
+        gv = (float(g[3]), float(g[4])) if have_gnss else (math.nan, math.nan)
+        s = Sample(t_k, d, bool(valid), r_m, float(m_v), float(m_psi), tas, hdg, glat, glon, gv, roll)
+        self._epoch(s, have_gnss)
+
+    # ------------------------------------------------------------------ epochs
+    def _radii(self, lat: float, h: float) -> tuple[float, float]:
+        h = h if math.isfinite(h) else 0.0
+        return float(meridian_radius_m(lat)) + h, (float(prime_vertical_radius_m(lat)) + h) * math.cos(lat)
+
+    def _offsets(self, dt, m_v, m_psi, b_v, b_psi, lat):
+        r_n, r_e = self._radii(lat, self.h_m)
+        dla = np.empty(dt.size)
+        dlo = np.empty(dt.size)
+        replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e, dla, dlo)
+        return dla, dlo
+
+    def _set_status(self, t: float, status: str, reason: str) -> None:
+        if status != self.health.status:
+            self.health.events.append((t, f"acq_track: {self.health.status} -> {status}: {reason}"))
+            self.health.status = status
+        self.health.ok = status in ("ok", "degraded") or (
+            status == "acquiring" and self._sigma_h() < self.config.acquire_above_sigma_m
+        )
+
+    def _sigma_h(self) -> float:
+        return math.sqrt(max(self.P[0, 0] + self.P[1, 1], 0.0))
+
+    def _epoch(self, s: Sample, have_gnss: bool) -> None:
+        cfg = self.config
+        tr = self.transect
+        prev = tr.samples[-1] if len(tr) else None
+        # the start point for this epoch: drop the oldest sample when full
+        if tr.full:
+            _, _, _, dt, m_v, m_psi, _ = tr.arrays()
+            dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
+            self.p0 = (self.p0[0] + dla[1], self.p0[1] + dlo[1])
+        tr.append(s)
+        if len(tr) == 1:
+            lat, lon = self.pos
+            if prev is None and math.isfinite(self.t_pos):  # dead-reckon the reset position to t_k
+                dtp = s.t_s - self.t_pos
+                v = ground_vector(self._aided_speed(s), self._aided_track(s))
+                r_n, r_e = self._radii(lat, self.h_m)
+                lat, lon = lat + v[0] * dtp / r_n, lon + v[1] * dtp / r_e
+            self.p0 = (lat, lon)
+        if have_gnss:
+            self._gnss_epoch(s)
+            return
+        self._propagate_cov(s)
+        if not tr.full:
+            self._set_lock("filling", s.t_s, "acquiring", "transect filling")
+            self._finish(s)
+            return
+        # a transect placed by GNSS goes straight to tracking; otherwise a large sigma asks for a search
+        acq_due = self.need_acquisition or (
+            self.lock_state in ("filling", "acquiring")
+            and not self._anchored
+            and self._sigma_h() > cfg.acquire_above_sigma_m
+        )
+        if acq_due:
+            if self.acq_wait > 0:
+                self.acq_wait -= 1
+                self._finish(s)
+                return
+            snr_pred = self._predicted_snr()
+            if not snr_pred >= cfg.snr_min_db:  # integrity prediction: no search over flat terrain
+                if not self._deferred:
+                    self.health.events.append(
+                        (
+                            s.t_s,
+                            f"acq_track: predicted terrain SNR {snr_pred:.1f} dB < "
+                            f"{cfg.snr_min_db:g} dB: acquisition deferred",
+                        )
+                    )
+                self._deferred = True
+                self.snr_db = snr_pred
+                self._set_lock(
+                    self.lock_state if self.lock_state == "lost" else "acquiring",
+                    s.t_s,
+                    "lost" if self.need_acquisition else "acquiring",
+                    f"predicted terrain SNR {snr_pred:.1f} dB < {cfg.snr_min_db:g} dB: acquisition deferred",
+                )
+                self._finish(s)
+                return
+            self._deferred = False
+            if not self._acquire(s):
+                # retry with the next transect, backing off to every 4th after repeated failures
+                self.acq_failures += 1
+                self.acq_wait = (cfg.transect_samples - 1) * min(2 ** (self.acq_failures - 1), 4)
+                self._finish(s)
+                return
+        self._track(s)
+        self._finish(s)
+
+    def _aided_speed(self, s: Sample) -> float:
+        return s.m_v + self.b_v
+
+    def _aided_track(self, s: Sample) -> float:
+        return s.m_psi + self.b_psi
+
+    def _set_lock(self, lock: str, t: float, status: str, reason: str) -> None:
+        self.lock_state = lock
+        self._set_status(t, status, reason)
+
+    def _gnss_epoch(self, s: Sample) -> None:
+        cfg = self.config
+        tr = self.transect
+        g_speed, g_track = speed_track(np.array(s.gnss_v_ne))
+        if (
+            cfg.aiding
+            and cfg.aiding_source == "air_data"
+            and cfg.wind_estimation
+            and math.isfinite(s.tas_mps)
+        ):
+            self.wind.update(np.array(s.gnss_v_ne), s.tas_mps, s.heading_rad, gain=max(cfg.wind_gain, 0.2))
+        if math.isfinite(g_speed) and g_speed > 1.0:
+            k = 0.2
+            self.b_v += k * (g_speed - s.m_v - self.b_v)
+            self.b_psi += k * float(wrap_rad(g_track - s.m_psi - self.b_psi))
+            self.b_mean = (self.b_v, self.b_psi)
+        first = tr.samples[0]
+        if math.isfinite(first.gnss_lat):
+            self.p0 = (first.gnss_lat, first.gnss_lon)
+        self.pos = (s.gnss_lat, s.gnss_lon)
+        self.t_pos = s.t_s
+        self.P = np.eye(2) * cfg.gnss_sigma_m**2
+        self.sigma_v = 0.1
+        self.sigma_psi = math.radians(0.2)
+        self.bad_epochs = 0
+        self.need_acquisition = False
+        self.out_speed, self.out_track = self.average.push(g_speed, g_track)
+        self._anchored = True
+        self._set_lock("gnss", s.t_s, "ok", "GNSS available")
+
+    def _propagate_cov(self, s: Sample) -> None:
+        cfg = self.config
+        T = cfg.sample_period_s
+        v = max(self._aided_speed(s), 0.0)
+        psi = self._aided_track(s)
+        if self.lock_state == "tracking":
+            sv, sp = self.sigma_v, self.sigma_psi
+        elif cfg.aiding:
+            sv, sp = cfg.aiding_speed_sigma_mps, math.radians(cfg.aiding_heading_sigma_deg)
+        else:
+            sv, sp = cfg.unaided_speed_sigma_mps, math.radians(cfg.unaided_heading_sigma_deg)
+        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
+        # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
+        p_tc = G.T @ self.P @ G
+        s_al, s_cr = math.sqrt(max(p_tc[0, 0], 0.0)), math.sqrt(max(p_tc[1, 1], 0.0))
+        d_al, d_cr = T * sv, v * T * sp
+        q = np.diag([2.0 * s_al * d_al + d_al**2, 2.0 * s_cr * d_cr + d_cr**2])
+        self.P = self.P + G @ q @ G.T
+
+    def _arrays(self):
+        t, d, valid, dt, m_v, m_psi, rng = self.transect.arrays()
+        r_n, r_e = self._radii(self.p0[0], self.h_m)
+        return t, d, valid, dt, m_v, m_psi, rng, r_n, r_e
+
+    def _track_grid(self, rng: np.ndarray):
+        """The map grid the loops correlate with: the plain map, or its footprint dilation at the transect's
+        median range (replica_model)."""
+        if self._footprint is None:
+            return self._grid
+        ok = np.isfinite(rng)
+        return self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
+
+    def _predicted_snr(self) -> float:
+        """Terrain SNR (dB) of the map along the dead-reckoned transect against the a-priori noise alone."""
+        cfg = self.config
+        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = self._arrays()
+        heights, lat0, lon0, dlat, dlon = self._grid
+        n = dt.size
+        h_p = np.empty(n)
+        replica_heights(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            self.p0[0],
+            self.p0[1],
+            dt,
+            m_v,
+            m_psi,
+            self.b_v,
+            self.b_psi,
+            r_n,
+            r_e,
+            self._interp,
+            np.empty(n),
+            np.empty(n),
+            h_p,
+        )
+        ok = valid & np.isfinite(h_p)
+        if ok.sum() < self._n_min:
+            return -math.inf
+        r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
+        sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
+        var_h = float(np.var(h_p[ok]))
+        return 10.0 * math.log10(var_h / sig0**2) if var_h > 0 else -math.inf
+
+    def _acquire(self, s: Sample) -> bool:
+        cfg = self.config
+        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = self._arrays()
+        sig = self._sigma_h()
+        half = min(max(cfg.acquisition_position_half_m, 3.0 * sig), 2.0 * cfg.acquisition_position_half_m)
+        w0 = time.perf_counter()
+        res = acquisition.serial_search(
+            self._grid,
+            self.p0[0],
+            self.p0[1],
+            dt,
+            m_v,
+            m_psi,
+            self.b_v,
+            self.b_psi,
+            r_n,
+            r_e,
+            d,
+            valid,
+            position_half_m=half,
+            position_bin_m=cfg.acquisition_position_bin_m,
+            speed_half_mps=cfg.acquisition_speed_half_mps,
+            speed_bin_mps=cfg.acquisition_speed_bin_mps,
+            heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
+            heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
+            cost=self._cost,
+            remove_bias=cfg.remove_bias,
+            interp=self._interp,
+            n_min=self._n_min,
+            distinct_ratio=cfg.acquisition_distinct_ratio,
+            exclusion_m=cfg.acquisition_exclusion_m,
+        )
+        self.acquisition_s = time.perf_counter() - w0
+        self.acquisition_total_s += self.acquisition_s
+        self.acquisitions += 1
+        if not res.distinct:
+            self.health.events.append(
+                (
+                    s.t_s,
+                    f"acq_track: acquisition failed: {res.reason} "
+                    f"({res.n_hypotheses} cells)",
+                )
+            )
+            self._set_lock(
+                "acquiring",
+                s.t_s,
+                "lost" if self.need_acquisition else "acquiring",
+                f"acquisition: {res.reason}; retry with the next transect",
+            )
+            return False
+        self.p0 = (self.p0[0] + res.dn_m / r_n, self.p0[1] + res.de_m / r_e)
+        self.b_v, self.b_psi = res.b_v, res.b_psi_rad
+        b = cfg.acquisition_position_bin_m
+        self.P = np.eye(2) * (b * b + self.sigma_floor_m**2)
+        self.need_acquisition = False
+        self.acq_failures = 0
+        self.bad_epochs = 0
+        self.health.events.append(
+            (
+                s.t_s,
+                f"acq_track: acquired dn={res.dn_m:+.0f} m de={res.de_m:+.0f} m "
+                f"b_v={res.b_v:+.2f} m/s b_psi={math.degrees(res.b_psi_rad):+.2f} deg "
+                f"({res.n_hypotheses} cells)",
+            )
+        )
+        self.lock_state = "tracking"
+        return True
+
+    def _loop(self, which: int, arrays, b_v: float, b_psi: float):
+        """Adaptivity block + both stages of one loop: (x, [it1, it2], locked, VShape, spacing)."""
+        cfg = self.config
+        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
+        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
+        N, Ts = cfg.transect_samples, cfg.sample_period_s
+        f_r = cfg.scf_offset_cells * self.map_resolution_m
+        if which == 0:  # spec section 2: speed eps_max = f R_db / (N t)
+            reach = f_r / (N * Ts)
+            sset, thr1 = self._speed_set, cfg.speed_threshold_mps
+            s2, thr2 = cfg.speed_narrow_spacing_mps, cfg.speed_narrow_threshold_mps
+            x0 = b_v
+        else:  # 2 sin(eps / 2) v t N = f R_db
+            v = max(float(np.mean(m_v)) + b_v, 1.0)
+            reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * Ts * N)))
+            sset, thr1 = self._heading_set, math.radians(cfg.heading_threshold_deg)
+            s2, thr2 = (
+                math.radians(cfg.heading_narrow_spacing_deg),
+                math.radians(cfg.heading_narrow_threshold_deg),
+            )
+            x0 = b_psi
+        reach = max(reach, float(sset.max()))
+        K = cfg.scf_points
+        offs = np.linspace(-reach, reach, 2 * K + 1)
+        vals = np.empty(offs.size)
+        args = (heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi)
+        tail = (r_n, r_e, d, valid, self._cost, cfg.remove_bias, self._interp, self._n_min)
+        correlation_function(*args, b_v, b_psi, *tail, which, offs, vals)
+        shape = tracking.analyse_v(offs, vals)
+        spacing, _ = tracking.choose_spacing(offs, vals, shape, sset, cfg.symmetry_ratio_max)
+        x, it1, lock1, _ = tracking.early_late_loop(
+            *args, b_v, b_psi, *tail, which, spacing, thr1, cfg.break_iteration, self._disc
+        )
+        its = [int(it1), 0]
+        locked = bool(lock1)
+        if cfg.bias_mitigation == "ncs":
+            bv2, bp2 = (x, b_psi) if which == 0 else (b_v, x)
+            x2, it2, lock2, _ = tracking.early_late_loop(
+                *args, bv2, bp2, *tail, which, s2, thr2, cfg.break_iteration, self._disc
+            )
+            its[1] = int(it2)
+            if np.isfinite(x2):
+                x = x2
+            locked = locked and bool(lock2)
+        if not np.isfinite(x):
+            x, locked = x0, False
+        return float(x), its, locked, shape, spacing
+
+    def _track(self, s: Sample) -> None:
+        cfg = self.config
+        arrays = self._arrays()
+        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
+        if int(valid.sum()) < self._n_min:
+            self.health.skip(
+                s.t_s,
+                "transect_too_few_samples",
+                f"acq_track: {int(valid.sum())} valid samples of {valid.size}; loops skipped",
+            )
+            self._out_of_lock(s, "too few valid samples")
+            return
+        b_v0, b_psi0 = self.b_v, self.b_psi
+        order = (0, 1) if cfg.loop_order == "speed_first" else (1, 0)
+        b_v, b_psi = b_v0, b_psi0
+        its = [0, 0, 0, 0]
+        locks, shapes, spacing = {}, {}, [0.0, 0.0]
+        for which in order:
+            x, it, locked, shape, sp = self._loop(which, arrays, b_v, b_psi)
+            if which == 0:
+                b_v = x
+            else:
+                b_psi = float(wrap_rad(x)) if not cfg.aiding else x
+            its[2 * which : 2 * which + 2] = it
+            locks[which], shapes[which], spacing[which] = locked, shape, sp
+        self.iterations = its
+        self.spacing = (spacing[0], spacing[1])
+        self.v_shape = bool(shapes[0].v_shape and shapes[1].v_shape)
+        # integrity at the new prompt
+        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
+        n = dt.size
+        h_p = np.empty(n)
+        replica_heights(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            self.p0[0],
+            self.p0[1],
+            dt,
+            m_v,
+            m_psi,
+            b_v,
+            b_psi,
+            r_n,
+            r_e,
+            self._interp,
+            np.empty(n),
+            np.empty(n),
+            h_p,
+        )
+        r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
+        sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
+        self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
+        self.false_lock = false_lock(
+            res_sigma,
+            sig0,
+            cfg.false_lock_sigma_factor,
+            b_v,
+            b_psi,
+            cfg.aiding,
+            cfg.max_speed_bias_mps,
+            math.radians(cfg.max_heading_bias_deg),
+        )
+        reasons = []
+        converged = bool(locks[0] and locks[1])
+        if not self.v_shape:
+            reasons.append("no V-shape around the correlation minimum")
+        if not self.snr_db >= cfg.snr_min_db:
+            reasons.append(f"terrain SNR {self.snr_db:.1f} dB < {cfg.snr_min_db:g} dB")
+        if self.false_lock:
+            reasons.append(f"false lock: {self.false_lock}")
+        self.t_epoch = s.t_s
+        if reasons:
+            self._out_of_lock(s, "; ".join(reasons))
+            return
+        innov = np.array([b_v - b_v0, float(wrap_rad(b_psi - b_psi0))])
+        if cfg.aiding:  # the aided reference is a slow bias: move it part of the way (reference_gain)
+            g = cfg.reference_gain
+            b_v, b_psi = b_v0 + g * innov[0], b_psi0 + g * innov[1]
+        self.b_v, self.b_psi = b_v, b_psi
+        # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
+        n_ok = max(int(valid.sum()), 1)
+        cost_noise = sig0 * math.sqrt((1.0 - 2.0 / math.pi) / n_ok)
+        sv = [
+            self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
+            self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
+        ]
+        self.sigma_v, self.sigma_psi = sv
+        S = np.diag(
+            [
+                sv[0] ** 2 + (cfg.aiding_speed_sigma_mps**2) / cfg.transect_samples,
+                sv[1] ** 2 + math.radians(cfg.aiding_heading_sigma_deg) ** 2 / cfg.transect_samples,
+            ]
+        )
+        self.last_innovation = (s.t_s, innov, S)
+        self.bad_epochs = 0
+        k = 1.0 / max(cfg.transect_samples, 1)  # the references' running mean over about a transect
+        self.b_mean = (
+            self.b_mean[0] + k * (b_v - self.b_mean[0]),
+            self.b_mean[1] + k * (b_psi - self.b_mean[1]),
+        )
+        # terrain-match bound on the position (information along / across the track, shared by N epochs)
+        psi = self._aided_track(s)
+        i_al, i_cr = along_cross_information(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            self.p0[0],
+            self.p0[1],
+            dt,
+            m_v,
+            m_psi,
+            b_v,
+            b_psi,
+            r_n,
+            r_e,
+            valid,
+            psi,
+        )
+        N = cfg.transect_samples
+        span_s = cfg.transect_duration_s
+        v_mean = max(float(np.mean(m_v)) + b_v, 1.0)
+        k2 = cfg.lock_covariance_scale**2
+        var_al = k2 * (
+            (sig0**2 * N / i_al if i_al > 0 else 1e12) + (span_s * sv[0]) ** 2 + self.sigma_floor_m**2
+        )
+        var_cr = k2 * (
+            (sig0**2 * N / i_cr if i_cr > 0 else 1e12)
+            + (v_mean * span_s * sv[1]) ** 2
+            + self.sigma_floor_m**2
+        )
+        # in lock the match bounds each direction (consecutive epochs share N - 1 samples: a bound, not a
+        # fresh measurement to fuse every epoch)
+        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
+        p_tc = G.T @ self.P @ G
+        s_al = math.sqrt(min(max(p_tc[0, 0], 0.0), var_al))
+        s_cr = math.sqrt(min(max(p_tc[1, 1], 0.0), var_cr))
+        rho = p_tc[0, 1] / math.sqrt(p_tc[0, 0] * p_tc[1, 1]) if p_tc[0, 0] > 0 and p_tc[1, 1] > 0 else 0.0
+        self.P = G @ np.array([[s_al**2, rho * s_al * s_cr], [rho * s_al * s_cr, s_cr**2]]) @ G.T
+        if converged:
+            self._set_lock("tracking", s.t_s, "ok", "in lock")
+        else:  # the V is there but a loop hit the 101-iteration break: estimate kept, flagged
+            self._set_lock("tracking", s.t_s, "degraded", "a loop did not converge (101-iteration break)")
+
+    @staticmethod
+    def _loop_sigma(shape, cost_noise: float, narrow: float) -> float:
+        slope = min(abs(shape.slope_left), abs(shape.slope_right))
+        res = cost_noise / slope if slope > 0 else np.inf
+        return float(math.sqrt(min(res, 10.0 * narrow) ** 2 + (narrow / math.sqrt(12.0)) ** 2))
+
+    def _out_of_lock(self, s: Sample, reason: str) -> None:
+        cfg = self.config
+        self.bad_epochs += 1
+        self.sigma_v = cfg.aiding_speed_sigma_mps if cfg.aiding else cfg.unaided_speed_sigma_mps
+        self.sigma_psi = math.radians(
+            cfg.aiding_heading_sigma_deg if cfg.aiding else cfg.unaided_heading_sigma_deg
+        )
+        if self.bad_epochs >= cfg.lost_after_epochs:
+            if cfg.aiding and self.lock_state != "lost":
+                # dead-reckon on the aiding: its own prediction (an INS's velocity, or air data + the wind
+                # estimate) when it has one, else the references' running mean over the lock
+                wind_known = cfg.aiding_source == "air_data" and cfg.wind_estimation \
+                    and self.wind.n_updates > 0
+                prior = cfg.aiding_source == "ins" or wind_known
+                self.b_v, self.b_psi = (0.0, 0.0) if prior else self.b_mean
+            self.need_acquisition = True
+            self._anchored = False
+            self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")
+        else:
+            self._set_lock("out_of_lock", s.t_s, "degraded", reason)
+
+    def _finish(self, s: Sample) -> None:
+        """Newest position from the replica; output speed/track through the moving average."""
+        _, _, _, dt, m_v, m_psi, _ = self.transect.arrays()
+        dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
+        self.pos = (self.p0[0] + dla[-1], self.p0[1] + dlo[-1])
+        self.t_pos = s.t_s
+        v, psi = self._aided_speed(s), self._aided_track(s)
+        if self.lock_state == "tracking":
+            if self.config.aiding:  # average the references: the aiding carries ramps without lag
+                ab_v, ab_psi = self.average.push(self.b_v, self.b_psi)
+                self.out_speed, self.out_track = s.m_v + ab_v, float(wrap_rad(s.m_psi + ab_psi))
+            else:
+                self.out_speed, self.out_track = self.average.push(v, psi)
+            if (
+                self.config.aiding
+                and self.config.aiding_source == "air_data"
+                and self.config.wind_estimation
+                and math.isfinite(s.tas_mps)
+            ):
+                self.wind.update(ground_vector(v, psi), s.tas_mps, s.heading_rad)
+                # the references keep the ground vector the loops found (the wind took over part of it)
+                m_v2, m_psi2 = self.wind.predict(s.tas_mps, s.heading_rad)
+                self.b_v += s.m_v - m_v2
+                self.b_psi += float(wrap_rad(s.m_psi - m_psi2))
+                tr = self.transect.samples
+                tr[-1] = Sample(
+                    s.t_s,
+                    s.d_m,
+                    s.valid,
+                    s.range_m,
+                    m_v2,
+                    m_psi2,
+                    s.tas_mps,
+                    s.heading_rad,
+                    s.gnss_lat,
+                    s.gnss_lon,
+                    s.gnss_v_ne,
+                    s.roll_rad,
+                )
+        else:
+            self.average.reset()
+            self.out_speed, self.out_track = v, float(wrap_rad(psi))
+
+    # ------------------------------------------------------------------ output
+    def estimate(self, t_s: float | None = None) -> Estimate:
+        cfg = self.config
+        t = float(self.t_pos if t_s is None else t_s)
+        lat, lon = self.pos
+        v_ne = ground_vector(self.out_speed, self.out_track)
+        dtp = t - self.t_pos if math.isfinite(self.t_pos) else 0.0
+        if math.isfinite(lat) and dtp != 0.0:
+            r_n, r_e = self._radii(lat, self.h_m)
+            lat, lon = lat + v_ne[0] * dtp / r_n, lon + v_ne[1] * dtp / r_e
+        C = np.zeros((9, 9))
+        P = self.P.copy()
+        if dtp > 0:  # the extrapolation's own growth (aiding-grade)
+            psi = self.out_track
+            G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
+            P = (
+                P
+                + G @ np.diag([(dtp * self.sigma_v) ** 2, (self.out_speed * dtp * self.sigma_psi) ** 2]) @ G.T
+            )
+        C[:2, :2] = P
+        C[2, 2] = cfg.baro_bias_sigma_m**2 + 4.0
+        psi = self.out_track
+        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
+        C[3:5, 3:5] = G @ np.diag([self.sigma_v**2, (self.out_speed * self.sigma_psi) ** 2]) @ G.T
+        C[5, 5] = 1.0
+        C[6, 6] = C[7, 7] = math.radians(3.0) ** 2
+        C[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
+        extra = {
+            "lock_state": self.lock_state,
+            "snr_db": float(self.snr_db),
+            "tracked_speed_mps": float(self.out_speed),
+            "tracked_track_deg": float(math.degrees(self.out_track)),
+            "speed_spacing_mps": float(self.spacing[0]),
+            "heading_spacing_deg": float(math.degrees(self.spacing[1])),
+            "v_shape": bool(self.v_shape),
+            "false_lock": self.false_lock,
+            "loop_iterations": list(self.iterations),
+            "wind_ne_mps": self.wind.w_ne.copy(),
+            "acquisitions": int(self.acquisitions),
+        }
+        if self.last_innovation is not None:
+            te, innov, S = self.last_innovation
+            nis = float(innov @ np.linalg.solve(S, innov))
+            extra.update(
+                {
+                    EXTRA_INNOVATION: innov.copy(),
+                    EXTRA_INNOVATION_COV: S.copy(),
+                    EXTRA_NIS: nis,
+                    EXTRA_NIS_DOF: 2,
+                    EXTRA_MEASUREMENT_TIME: float(te),
+                    EXTRA_LOG_LIKELIHOOD: float(-0.5 * (nis + math.log(np.linalg.det(2 * math.pi * S)))),
+                }
+            )
+        h = Health(
+            ok=self.health.ok,
+            status=self.health.status,
+            skipped=dict(self.health.skipped),
+            events=list(self.health.events),
+        )
+        return Estimate(
+            t_s=t,
+            lat_rad=float(lat),
+            lon_rad=float(lon),
+            h_m=float(self.h_m),
+            v_ned_mps=np.array([v_ne[0], v_ne[1], 0.0]),
+            roll_rad=float(self.roll),
+            pitch_rad=float(self.pitch),
+            yaw_rad=float(self.yaw),
+            covariance=C,
+            health=h,
+            extra=extra,
+        )

@@ -1,0 +1,169 @@
+"""Benchmark of the acquisition-and-tracking TRN (seed 001) for `trn-env bench`, figures beside same-run
+references:
+
+- acq_track_closed_loop_steps_per_s / ins_tercom_closed_loop_steps_per_s: JSBSim steps per wall second of
+  the built-in `acq_track` scenario's closed loop (inline, one process; N = 25) with each navigator over the
+  same timed window (after a 45 s warm-up: the transect is full and one TERCOM fix has run), beside
+  acq_track_jsbsim_reference_steps_per_s (a bare run() loop at the same initial condition, timed right
+  before); acq_track_vs_ins_tercom_speed (>= 1: the loop with acq_track is at least as fast);
+- acq_track_navigator_ms_per_sim_s / ins_tercom_navigator_ms_per_sim_s: the navigator's own work per
+  simulated second; acq_track_navigator_ms_per_sim_s_without_acquisitions: the tracking alone (the
+  serial searches after a loss of lock, acq_track_acquisitions_in_window of them, taken out);
+- acq_track_acquisition_s: one serial search over the full default uncertainty (+-500 m in 50 m, +-10 m/s
+  in 1 m/s, +-10 deg in 1 deg: 194,481 cells x N = 25 samples; target <= 1 s), median of 3, beside
+  acq_track_acquisition_lookups_per_s and the same number of plain bilinear lookups
+  (bilinear_batch_lookups_per_s_same_run).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+
+def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
+    from trn_env.bench.runner import bare_jsbsim_steps_per_s
+    from trn_env.scenario import build as components
+    from trn_env.scenario.loading import load_scenario, validate
+    from trn_env.sim.closed_loop import ClosedLoop
+
+    sc = load_scenario("acq_track", navigator=navigator, duration_s=warm_s + sim_s + 5.0)
+    if navigator == "acq_track":
+        data = dict(sc.data)
+        data["navigator"] = dict(data["navigator"], settings={"transect_samples": 25})
+        sc = validate(data, source=sc.source)
+    with ClosedLoop(sc, log_sensors=False, pipeline=False) as loop:
+        ref = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
+        while loop.termination is None and loop.t_s < warm_s - 1e-6:
+            loop.tick()
+        steps_timed = int(round(sim_s / loop.dt_s))
+        bare = bare_jsbsim_steps_per_s(ref.fdm, steps_timed)
+        s0, nav0 = loop.jsbsim_steps, loop.stage_s["navigator"]
+        nav = loop.navigator
+        acq0 = (getattr(nav, "acquisition_total_s", 0.0), getattr(nav, "acquisitions", 0))
+        t0 = time.perf_counter()
+        while loop.termination is None and loop.jsbsim_steps - s0 < steps_timed:
+            loop.tick()
+        wall = time.perf_counter() - t0
+        steps = loop.jsbsim_steps - s0
+        nav_s = loop.stage_s["navigator"] - nav0
+        acq_s = getattr(nav, "acquisition_total_s", 0.0) - acq0[0]
+        n_acq = getattr(nav, "acquisitions", 0) - acq0[1]
+    sim = steps * loop.dt_s
+    return {
+        "steps_per_s": steps / wall,
+        "bare": bare,
+        "nav_ms_per_sim_s": 1e3 * nav_s / max(sim, 1e-9),
+        "sim_s": sim,
+        "acq_s": acq_s,
+        "n_acq": n_acq,
+    }
+
+
+def _acquisition_figures(repeats: int = 3) -> dict:
+    import terrain
+    from navigators.acquisition_tracking import AcqTrackConfig, acquisition, correlation
+    from terrain import kernels
+    from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+    cfg = AcqTrackConfig()
+    dem = terrain.load("jacksboro")
+    n = cfg.transect_samples
+    lat, lon, h = math.radians(36.50), math.radians(-84.30), 1400.0
+    r_n = meridian_radius_m(lat) + h
+    r_e = (prime_vertical_radius_m(lat) + h) * math.cos(lat)
+    dt = np.full(n, cfg.sample_period_s)
+    dt[0] = 0.0
+    zeros = np.zeros(n)
+    la, lo = correlation.replica_positions_reference(
+        lat, lon, dt, zeros, zeros, 81.3, math.radians(33.7), r_n, r_e
+    )
+    d = np.asarray(dem.height(la, lo), float)
+    kw = dict(
+        position_half_m=cfg.acquisition_position_half_m,
+        position_bin_m=cfg.acquisition_position_bin_m,
+        speed_half_mps=cfg.acquisition_speed_half_mps,
+        speed_bin_mps=cfg.acquisition_speed_bin_mps,
+        heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
+        heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
+        cost=0,
+        remove_bias=True,
+        interp=0,
+        n_min=15,
+        distinct_ratio=cfg.acquisition_distinct_ratio,
+        exclusion_m=cfg.acquisition_exclusion_m,
+    )
+    args = (
+        dem.grid,
+        lat + 320.0 / r_n,
+        lon - 410.0 / r_e,
+        dt,
+        zeros,
+        zeros,
+        88.7,
+        math.radians(27.4),
+        r_n,
+        r_e,
+        d,
+        np.ones(n, bool),
+    )
+    res = acquisition.serial_search(*args, **kw)  # compiled / loaded from the cache
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        res = acquisition.serial_search(*args, **kw)
+        times.append(time.perf_counter() - t0)
+    t_acq = float(np.median(times))
+    lookups = res.n_hypotheses * n
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    m = min(lookups, 2_000_000)
+    rng = np.random.default_rng(0)
+    qla = lat + (rng.random(m) - 0.5) * 0.01
+    qlo = lon + (rng.random(m) - 0.5) * 0.01
+    out = np.empty(m)
+    kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, qla, qlo, out)
+    t0 = time.perf_counter()
+    kernels.bilinear_batch(heights, lat0, lon0, dlat, dlon, qla, qlo, out)
+    t_bl = time.perf_counter() - t0
+    return {
+        "acq_track_acquisition_s": t_acq,
+        "acq_track_acquisition_cells": res.n_hypotheses,
+        "acq_track_acquisition_samples": n,
+        "acq_track_acquisition_distinct": bool(res.distinct),
+        "acq_track_acquisition_lookups_per_s": lookups / t_acq,
+        "bilinear_batch_lookups_per_s_same_run": m / t_bl,
+    }
+
+
+def benchmark(quick: bool = False) -> dict:
+    """The figures listed in the module docstring (quick: a 30 s timed window, about 15 s of wall time)."""
+    sim_s = 30.0 if quick else 120.0
+    out = _acquisition_figures()
+    acq = _loop_figures("acq_track", 45.0, sim_s)
+    ekf = _loop_figures("ins_tercom", 45.0, sim_s)
+    out.update(
+        {
+            "acq_track_closed_loop_steps_per_s": acq["steps_per_s"],
+            "ins_tercom_closed_loop_steps_per_s": ekf["steps_per_s"],
+            "acq_track_jsbsim_reference_steps_per_s": max(acq["bare"], ekf["bare"]),
+            "acq_track_closed_loop_ratio": acq["steps_per_s"] / max(acq["bare"], ekf["bare"]),
+            "acq_track_vs_ins_tercom_speed": acq["steps_per_s"] / ekf["steps_per_s"],
+            "acq_track_navigator_ms_per_sim_s": acq["nav_ms_per_sim_s"],
+            "ins_tercom_navigator_ms_per_sim_s": ekf["nav_ms_per_sim_s"],
+            "acq_track_bench_sim_s": acq["sim_s"],
+            "acq_track_acquisitions_in_window": acq["n_acq"],
+            "acq_track_navigator_ms_per_sim_s_without_acquisitions": 1e3
+            * (acq["nav_ms_per_sim_s"] * acq["sim_s"] / 1e3 - acq["acq_s"])
+            / acq["sim_s"],
+        }
+    )
+    return out
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+
+    print(json.dumps(benchmark(quick="--quick" in sys.argv), indent=1))
