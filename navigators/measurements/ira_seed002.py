@@ -40,9 +40,34 @@ import numpy as np
 from numba import njit
 
 from terrain.kernels import bilinear_with_gradient
-from terrain.queries import _consts, _ned
+from terrain.geodesy import WGS84_A_M, WGS84_E2
 
 _GOLD = 0.6180339887498949
+
+
+@njit(cache=True)
+def _consts(lat):
+    """(sin, cos of lat, meridian radius M, prime-vertical radius N, dM/dlat) at the antenna (m)."""
+    s = np.sin(lat)
+    c = np.cos(lat)
+    w = 1.0 - WGS84_E2 * s * s
+    m = WGS84_A_M * (1.0 - WGS84_E2) / (w * np.sqrt(w))
+    n = WGS84_A_M / np.sqrt(w)
+    dm = 3.0 * m * WGS84_E2 * s * c / w
+    return s, c, m, n, dm
+
+
+@njit(cache=True)
+def _ned(dphi, dlam, hp, ha, s, c, m, n, dm):
+    """NED (m) of the point (lat_a + dphi, lon_a + dlam, hp) from the antenna at height ha: the
+    second-order expansion of the WGS84 position terrain.queries uses (its module docstring; the first-order
+    terms are seed 000 eq 2), within 1 cm of the ECEF difference inside 10 km."""
+    mh = m + ha
+    nh = n + ha
+    x = (m + hp) * dphi + 0.5 * nh * s * c * dlam * dlam + 0.5 * dm * dphi * dphi
+    y = (n + hp) * c * dlam - mh * s * dphi * dlam
+    z = (ha - hp) + 0.5 * mh * dphi * dphi + 0.5 * nh * c * c * dlam * dlam
+    return x, y, z
 OUT_R, OUT_THETA, OUT_XB, OUT_YB, OUT_ZB, OUT_DR_DTH, OUT_DR_DPSI, OUT_S, OUT_VALID = range(9)
 N_OUT = 9
 
