@@ -39,8 +39,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from terrain.kernels import bilinear_with_gradient
 from terrain.geodesy import WGS84_A_M, WGS84_E2
+from terrain.kernels import bilinear_with_gradient
 
 _GOLD = 0.6180339887498949
 
