@@ -72,7 +72,7 @@ class InsRiddenFilter:
 
     name = "terrain_filter"
 
-    def __init__(self, dem=None, aiding: str = "ira", measurement_rate_hz: float = 2.0,
+    def __init__(self, dem=None, aiding: str = "ira", measurement_rate_hz: float = 1.0,
                  ira_formula: str = "proposed", ira_range_sigma_m: float = 3.5,
                  ira_look_angle_sigma_deg: float = 0.1, ra_sigma_m: float = 2.0, ra_half_beam_deg: float = 10.0,
                  ra_cone_rings: int = 2, map_sigma_m: float = 0.0, map_bias_sigma_m: float = 0.0,

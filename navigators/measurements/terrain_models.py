@@ -57,6 +57,7 @@ def ira_points_batch(range_m, theta_rad, C_bn, v_ned, dpsi, dv_ne, code, out):
     sth = math.sin(theta_rad)
     roll = math.atan2(C_bn[2, 1], C_bn[2, 2])  # a turn about the down axis leaves the roll unchanged
     ref = theta_rad - roll
+    cr, sr = math.cos(ref), math.sin(ref)
     n_bad = 0
     for k in range(m):
         ps = dpsi[k] if dpsi.shape[0] > 1 else dpsi[0]
@@ -64,13 +65,18 @@ def ira_points_batch(range_m, theta_rad, C_bn, v_ned, dpsi, dv_ne, code, out):
         vn = v_ned[0] + dv_ne[kv, 0]
         ve = v_ned[1] + dv_ne[kv, 1]
         vd = v_ned[2]
-        alpha = math.atan2(-vd, math.sqrt(vn * vn + ve * ve))  # eq 9
-        beta = math.atan2(ve, vn)  # eq 10 (atan2 form)
-        sa, ca, sb, cb = math.sin(alpha), math.cos(alpha), math.sin(beta), math.cos(beta)
+        vh = math.sqrt(vn * vn + ve * ve)
+        vv = math.sqrt(vh * vh + vd * vd)
+        if not (vh > 0.0):
+            out[k, 0] = out[k, 1] = out[k, 2] = np.nan
+            n_bad += 1
+            continue
+        # eqs 9, 10, 12 without the angles: sin/cos of alpha (up positive) and beta (track)
+        sa, ca, sb, cb = -vd / vv, vh / vv, ve / vh, vn / vh
         s1n, s1e, s1d = sa * cb, sa * sb, ca  # eq 12 in NED
         s2n, s2e = -sb, cb
         if code == 0:
-            ang = ref  # eq 13 with the project's sign (theta - roll)
+            c, s = cr, sr  # eq 13 with the project's sign (theta - roll)
         else:
             cp, sp = math.cos(ps), math.sin(ps)
             # body right axis of the hypothesis: Rz(dpsi) C_bn[:, 1]
@@ -84,14 +90,20 @@ def ira_points_batch(range_m, theta_rad, C_bn, v_ned, dpsi, dv_ne, code, out):
                 out[k, 0] = out[k, 1] = out[k, 2] = np.nan
                 n_bad += 1
                 continue
-            asn = math.asin(sth / rho)  # eqs 32, 34
-            eta = math.atan2(t1, t2)  # eq 33
-            xa = asn - eta  # eq 35
-            xb = math.pi - asn - eta
-            da = abs(math.atan2(math.sin(xa - ref), math.cos(xa - ref)))
-            db = abs(math.atan2(math.sin(xb - ref), math.cos(xb - ref)))
-            ang = xa if da <= db else xb
-        c, s = math.cos(ang), math.sin(ang)
+            # eqs 32-35: sin(eta + xi) = sin(theta) / rho with sin eta = t1 / rho, cos eta = t2 / rho; the two
+            # solutions xi_a = asin(.) - eta and xi_b = pi - asin(.) - eta by their sines and cosines
+            u = sth / rho
+            cu = math.sqrt(max(1.0 - u * u, 0.0))
+            se, ce = t1 / rho, t2 / rho
+            ca_ = cu * ce + u * se
+            sa_ = u * ce - cu * se
+            cb_ = -(cu * ce - u * se)
+            sb_ = u * ce + cu * se
+            # the branch nearest the conventional angle: the larger cos(xi - ref)
+            if ca_ * cr + sa_ * sr >= cb_ * cr + sb_ * sr:
+                c, s = ca_, sa_
+            else:
+                c, s = cb_, sb_
         out[k, 0] = range_m * (c * s1n + s * s2n)  # eq 36 (eq 13 for the conventional angle)
         out[k, 1] = range_m * (c * s1e + s * s2e)
         out[k, 2] = range_m * (c * s1d)
