@@ -295,8 +295,17 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
         except (ValueError, TypeError, KeyError, AttributeError) as exc:
             if tolerant and not isinstance(exc, ValueError):
                 continue
-            problems.append(f"{path}: {exc}")
+            problems.append(f"{_setting_path(d, path, exc)}: {exc}")
     return problems
+
+
+def _setting_path(d: dict, path: str, exc: Exception) -> str:
+    """navigator.settings.<name> when the navigator's message starts with one of the scenario's settings."""
+    if path == "navigator.settings":
+        first = str(exc).split(" ", 1)[0].strip(":,")
+        if first in d["navigator"].get("settings", {}):
+            return f"{path}.{first}"
+    return path
 
 
 def _initial_condition(d: dict, world):
