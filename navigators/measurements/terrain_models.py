@@ -131,6 +131,36 @@ def map_heights_at_offsets(heights, lat0, lon0, dlat, dlon, lat_ref, lon_ref, r_
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
+def _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay, az, ux, uy, uz,
+              wx, wy, wz, ang, ph, cosb):
+    """Distance (m) to the map along the cone direction at angle ang from the axis, azimuth ph (inf if the
+    line of sight misses the map or leaves the cone)."""
+    ca, sa = math.cos(ang), math.sin(ang)
+    cph, sph = math.cos(ph), math.sin(ph)
+    dx = ca * ax + sa * (cph * ux + sph * wx)
+    dy = ca * ay + sa * (cph * uy + sph * wy)
+    dz = ca * az + sa * (cph * uz + sph * wz)
+    if dz <= 1e-3:
+        return np.inf
+    t = agl / dz
+    for _ in range(4):   # fixed point: where this line of sight meets the terrain
+        hp = bilinear(heights, lat0, lon0, dlat, dlon, lat_k + t * dx / r_lat_m, lon_k + t * dy / r_lon_m)
+        if hp != hp:
+            return np.inf
+        t = (ha - hp) / dz
+    if not (t > 0.0):
+        return np.inf
+    hp = bilinear(heights, lat0, lon0, dlat, dlon, lat_k + t * dx / r_lat_m, lon_k + t * dy / r_lon_m)
+    if hp != hp:
+        return np.inf
+    px, py, pz = t * dx, t * dy, ha - hp
+    d = math.sqrt(px * px + py * py + pz * pz)
+    if d > 0.0 and (px * ax + py * ay + pz * az) >= cosb * d - 1e-9:
+        return d
+    return np.inf
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
 def ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat_ref, lon_ref, r_lat_m, r_lon_m, h_ant_m,
                    dn_m, de_m, dh_m, C_bn, dpsi, half_beam_rad, n_rings, n_az, out):
     """Predicted radar-altimeter range (m) for every hypothesis k: the shortest distance from the antenna
@@ -138,10 +168,11 @@ def ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat_ref, lon_ref, r_lat_m, r
     inside the cone of half-angle half_beam_rad around the body down axis Rz(dpsi[k]) C_bn[:, 2] (dpsi
     length m or 1).
 
-    The cone's footprint is sampled on n_rings rings of n_az points (plus its axis) placed where the cone's
-    generatrices meet a flat ground at the axis hit's height; each sample's terrain point counts when its
-    line of sight lies inside the cone. n_rings = 0: only the axis ray (and the nadir when it is inside the
-    cone). NaN where no sample is in the cone or the map has no height. Returns the NaN count."""
+    The cone is sampled by lines of sight on n_rings rings of n_az directions (plus its axis and, when it
+    lies inside the cone, the vertical), each traced to the map by a fixed-point iteration; around the
+    shortest, three rounds of a 3 x 3 pattern of half the previous steps refine it (the minimum of a
+    banked beam sits on the cone's edge, between samples). n_rings = 0: the axis and the vertical only.
+    NaN where no line of sight finds the map. Returns the NaN count."""
     m = dn_m.shape[0]
     cosb = math.cos(half_beam_rad)
     n_nan = 0
@@ -173,35 +204,33 @@ def ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat_ref, lon_ref, r_lat_m, r
         wx = ay * uz - az * uy
         wy = az * ux - ax * uz
         wz = ax * uy - ay * ux
+        step_a = half_beam_rad / max(n_rings, 1)
+        step_p = 2.0 * math.pi / n_az
+        best_a, best_p = 0.0, 0.0
         for r in range(n_rings + 1):
-            ang = half_beam_rad * r / max(n_rings, 1)
-            ca, sa = math.cos(ang), math.sin(ang)
+            ang = step_a * r
             n_a = 1 if r == 0 else n_az
             for q in range(n_a):
-                ph = 2.0 * math.pi * q / n_a
-                dx = ca * ax + sa * (math.cos(ph) * ux + math.sin(ph) * wx)
-                dy = ca * ay + sa * (math.cos(ph) * uy + math.sin(ph) * wy)
-                dz = ca * az + sa * (math.cos(ph) * uz + math.sin(ph) * wz)
-                if dz <= 1e-3:
-                    continue
-                # two fixed-point passes: where this line of sight meets the terrain
-                t = agl / dz
-                for _ in range(3):
-                    hp = bilinear(heights, lat0, lon0, dlat, dlon, lat_k + t * dx / r_lat_m,
-                                  lon_k + t * dy / r_lon_m)
-                    if hp != hp:
-                        break
-                    t = (ha - hp) / dz
-                if not (t > 0.0):
-                    continue
-                hp = bilinear(heights, lat0, lon0, dlat, dlon, lat_k + t * dx / r_lat_m,
-                              lon_k + t * dy / r_lon_m)
-                if hp != hp:
-                    continue
-                px, py, pz = t * dx, t * dy, ha - hp
-                d = math.sqrt(px * px + py * py + pz * pz)
-                if d > 0.0 and (px * ax + py * ay + pz * az) >= cosb * d - 1e-9 and d < best:
-                    best = d
+                ph = step_p * q
+                d = _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay,
+                              az, ux, uy, uz, wx, wy, wz, ang, ph, cosb)
+                if d < best:
+                    best, best_a, best_p = d, ang, ph
+        if n_rings > 0 and best < np.inf:
+            for _ in range(3):
+                step_a *= 0.5
+                step_p *= 0.5
+                a0, p0 = best_a, best_p
+                for ia in range(-1, 2):
+                    ang = min(max(a0 + ia * step_a, 0.0), half_beam_rad)
+                    for ip in range(-1, 2):
+                        if ia == 0 and ip == 0:
+                            continue
+                        ph = p0 + ip * step_p
+                        d = _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl,
+                                      ax, ay, az, ux, uy, uz, wx, wy, wz, ang, ph, cosb)
+                        if d < best:
+                            best, best_a, best_p = d, ang, ph
         if best < np.inf:
             out[k] = best
         else:
