@@ -194,35 +194,56 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def convolve_separable(logw, n, kern, work, floor):
-    """logw (n * n, rows north) <- log of the density convolved with kern along both axes (zero outside
-    the grid), renormalised to a maximum of 0 and floored. work: scratch of n * n."""
+def convolve_separable(logw, bias, n, kern, work, floor):
+    """The prediction's convolution of a Rao-Blackwellised grid: the density w = exp(logw) (n * n, rows
+    north) convolved with kern along both axes (zero outside the grid), and the per-cell vertical offset
+    carried with its mass - the new cell's mean is the kernel-weighted mean of its sources' means,
+    conv(w b) / conv(w) - with the sources' spread of means, conv(w b^2) / conv(w) - mean^2, returned as
+    its posterior-weighted average (the caller adds it to the shared variance). logw is renormalised to a
+    maximum of 0 and floored. work: scratch (6, n * n)."""
     L = kern.shape[0]
     h = L // 2
-    for k in range(n * n):
-        work[k] = math.exp(logw[k]) if logw[k] > floor else 0.0
-    for i in range(n):          # along east (j), into logw as linear values
-        for j in range(n):
-            acc = 0.0
-            for q in range(L):
-                jj = j + q - h
-                if 0 <= jj < n:
-                    acc += kern[q] * work[i * n + jj]
-            logw[i * n + j] = acc
-    for i in range(n):          # along north (i), into work
-        for j in range(n):
-            acc = 0.0
-            for q in range(L):
-                ii = i + q - h
-                if 0 <= ii < n:
-                    acc += kern[q] * logw[ii * n + j]
-            work[i * n + j] = acc
+    m = n * n
+    for k in range(m):
+        w = math.exp(logw[k]) if logw[k] > floor else 0.0
+        work[0, k] = w
+        work[1, k] = w * bias[k]
+        work[2, k] = w * bias[k] * bias[k]
+    for a in range(3):          # along east (j), into rows 3..5
+        for i in range(n):
+            for j in range(n):
+                acc = 0.0
+                for q in range(L):
+                    jj = j + q - h
+                    if 0 <= jj < n:
+                        acc += kern[q] * work[a, i * n + jj]
+                work[3 + a, i * n + j] = acc
+    for a in range(3):          # along north (i), back into rows 0..2
+        for i in range(n):
+            for j in range(n):
+                acc = 0.0
+                for q in range(L):
+                    ii = i + q - h
+                    if 0 <= ii < n:
+                        acc += kern[q] * work[3 + a, ii * n + j]
+                work[a, i * n + j] = acc
     mx = -np.inf
-    for k in range(n * n):
-        v = math.log(work[k]) if work[k] > 1e-300 else -np.inf
+    s = sv = 0.0
+    for k in range(m):
+        w = work[0, k]
+        if w > 1e-300:
+            b = work[1, k] / w
+            var = work[2, k] / w - b * b
+            bias[k] = b
+            s += w
+            sv += w * (var if var > 0.0 else 0.0)
+            v = math.log(w)
+        else:
+            v = -np.inf
         logw[k] = v
         if v > mx:
             mx = v
-    for k in range(n * n):
+    for k in range(m):
         v = logw[k] - mx
         logw[k] = v if v > floor else floor
+    return sv / s if s > 0.0 else 0.0

@@ -11,7 +11,9 @@ nothing per cell but one multiply-add.
   plus process noise, the INS's horizontal position error growth, as a separable convolution whose kernel
   has exactly the accumulated variance (a three-tap kernel [p, 1 - 2p, p], p = q / (2 d^2), while the noise
   is below the spacing, a normalised sampled Gaussian above it; in the spirit of the Lagrangian grid
-  filters, it is applied just before each measurement update).
+  filters, it is applied before a measurement update once it reaches half a cell^2). The per-cell vertical
+  offsets move with their mass: a cell's new mean is the mean of its sources' means, and the spread of those
+  means goes into the shared variance (_pmf_kernels.convolve_separable).
 - Terrain update: one IRA (or radar-altimeter) sample: its closest point p from the INS attitude and
   velocity (seed 000 eqs 14-36, shared by all cells: the PMF does not carry attitude or velocity
   hypotheses), one map lookup per cell, the heavy-tailed likelihood (measurements.robust_ll_one) with
@@ -52,7 +54,7 @@ from navigators.measurements.terrain_models import (
 )
 
 LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
-BYTES_PER_CELL = 8 * 10     # float64 arrays held or made per cell in an update
+BYTES_PER_CELL = 8 * 16     # float64 arrays held or made per cell in an update
 
 
 def _kernel_1d(var_cells: float) -> np.ndarray:
@@ -128,7 +130,7 @@ class PointMassFilter(InsRiddenFilter):
         lw = -0.5 * (Pi[0, 0] * x * x + 2 * Pi[0, 1] * x * y + Pi[1, 1] * y * y)
         self.logw = lw - lw.max()
         self.bias = np.zeros(self.n * self.n)
-        self._work = np.empty(self.n * self.n)
+        self._work = np.empty((6, self.n * self.n))
         self.P_b = self.bias_prior_var()
         self._q_pending = 0.0
         self._moments_cache = None
@@ -148,10 +150,9 @@ class PointMassFilter(InsRiddenFilter):
         if var_cells < 0.5:
             return   # keep accumulating (the reported covariance includes it) until it is half a cell^2
         k = _kernel_1d(var_cells)
-        kern.convolve_separable(self.logw, self.n, k, self._work, LOG_FLOOR)
-        if self._moments_cache is not None:   # the mean stays; the variance grows by what was applied
-            mn, me, c, mb, vb = self._moments_cache
-            self._moments_cache = (mn, me, c + np.eye(2) * self._q_pending, mb, vb)
+        spread = kern.convolve_separable(self.logw, self.bias, self.n, k, self._work, LOG_FLOOR)
+        self.P_b += spread
+        self._moments_cache = None
         self._q_pending = 0.0
 
     def _weights(self) -> np.ndarray:

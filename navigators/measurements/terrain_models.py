@@ -297,7 +297,7 @@ def robust_log_likelihood_reference(residual_m, var_m2, outlier_prob, log_outlie
     """robust_log_likelihood in numpy (logaddexp of the two mixture terms)."""
     r = np.asarray(residual_m, float)
     s = np.broadcast_to(np.asarray(var_m2, float), r.shape)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         a = np.log1p(-outlier_prob) - 0.5 * (r * r / s + np.log(s) + LOG_2PI)
         le = np.log(outlier_prob) + log_outlier_density
-    return np.where(np.isnan(r), le, np.logaddexp(a, le))
+        return np.where(np.isnan(r), le, np.logaddexp(a, le))
