@@ -113,12 +113,14 @@ def bias_update(bias, resid, gain):
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn, de, pn, pe, h_meas, S, gain,
-                    lg, le, floor, logw, bias, out):
+                    lg, le, floor, logw, bias, gam, out):
     """One IRA terrain update of the whole grid, fused (one map lookup per cell): the predicted terrain
     height map(cell + p) + bias, the heavy-tailed log-likelihood (measurements.robust_ll_one inlined with its constants hoisted, variance S),
-    logw += ll (renormalised to a maximum of 0, floored), bias += gain * residual; and the moments.
+    logw += ll (renormalised to a maximum of 0, floored), bias += gamma gain residual with gamma the
+    probability that the sample is an inlier under that cell (so an outlier return does not drag the vertical
+    offsets: gam (n * n) receives it); and the moments. out[12]: the posterior mean of gamma.
 
-    logw must hold log-densities with maximum 0 on entry (the filter keeps it so). out (12,): log p(z |
+    logw must hold log-densities with maximum 0 on entry (the filter keeps it so). out (13,): log p(z |
     past), prior mean and variance of the predicted height (over all cells; off-map cells count as 0 -
     negligible when few), number of cells off the map, the posterior's maximum before renormalising (-inf:
     every cell underflowed - logw and bias are then garbage: the caller restores them), then
@@ -137,22 +139,28 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
         if h != h:
             n_nan += 1
             v = lw + le
+            gam[k] = 0.0
         else:
             pred = h + bias[k]
             sp += w0 * pred
             spp += w0 * pred * pred
             r = h_meas - pred
-            bias[k] += gain * r
             a = c0 - inv2s * r * r      # robust_ll_one, with the constants hoisted
             d = a - le
             if le == -np.inf or d > 36.0:     # log1p(exp(-36)) < 3e-16: the Gaussian term alone
                 v = lw + a
+                g = 1.0
             elif d < -36.0:                   # the outlier term alone
                 v = lw + le
+                g = 0.0
             elif d > 0.0:
                 v = lw + a + math.log1p(math.exp(-d))
+                g = math.exp(lw + a - v)
             else:
                 v = lw + le + math.log1p(math.exp(d))
+                g = math.exp(lw + a - v)
+            bias[k] += g * gain * r
+            gam[k] = g
         logw[k] = v
         if v > mx:
             mx = v
@@ -161,7 +169,7 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
     if not (mx > -np.inf) or mx != mx:
         out[0] = -np.inf
         return
-    s1 = sn = se = sb = snn = sne = see = sbb = 0.0
+    s1 = sn = se = sb = snn = sne = see = sbb = sg = 0.0
     for k in range(m):
         v = logw[k] - mx
         if v < floor:
@@ -180,6 +188,7 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
             sne += w * x * y
             see += w * y * y
             sbb += w * b * b
+            sg += w * gam[k]
     mn, me, mb = sn / s1, se / s1, sb / s1
     out[0] = (mx + math.log(s1)) - math.log(s0)
     out[1] = sp / s0
@@ -191,6 +200,7 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
     out[9] = max(see / s1 - me * me, 0.0)
     out[10] = mb
     out[11] = max(sbb / s1 - mb * mb, 0.0)
+    out[12] = sg / s1
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

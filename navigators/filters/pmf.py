@@ -102,7 +102,7 @@ class PointMassFilter(InsRiddenFilter):
         self._zero1 = np.zeros(1)
         self._zero12 = np.zeros((1, 2))
         self._moments_cache = None
-        self._out = np.empty(12)
+        self._out = np.empty(13)
         self._lg = math.log1p(-self.outlier_prob)
         self._le = math.log(self.outlier_prob) + self.log_outlier_density if self.outlier_prob > 0 else -np.inf
 
@@ -204,7 +204,7 @@ class PointMassFilter(InsRiddenFilter):
             o = self._out
             kern.ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn_flat,
                                  self.de_flat, float(p[0]), float(p[1]), h_meas, S, self.P_b / S,
-                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, o)
+                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, self._work[0], o)
             n_nan = int(o[3])
             if n_nan == m or not np.isfinite(o[4]):
                 self.logw, self.bias = saved
@@ -216,7 +216,7 @@ class PointMassFilter(InsRiddenFilter):
             self._n_underflow = 0
             log_lik, pred_mean, pred_var = float(o[0]), float(o[1]), float(o[2])
             c = np.array([[o[7], o[8]], [o[8], o[9]]]) + np.eye(2) * self.spacing ** 2 / 12.0
-            self.P_b *= (1.0 - self.P_b / S)
+            self.P_b *= (1.0 - float(o[12]) * self.P_b / S)   # as much as the sample is believed an inlier
             self._moments_cache = (float(o[5]), float(o[6]), c, float(o[10]), self.P_b + float(o[11]))
         else:
             var = self.ra_variance()
@@ -234,11 +234,14 @@ class PointMassFilter(InsRiddenFilter):
             ll = np.empty(m)
             robust_log_likelihood(resid, np.array([S]), self.outlier_prob, self.log_outlier_density, ll)
             pred_mean, pred_var = kern.predicted_moments(self.logw, pred)
+            with np.errstate(invalid="ignore", over="ignore"):
+                gauss = self._lg - 0.5 * (resid * resid / S + math.log(S) + math.log(2 * math.pi))
+                gam = np.where(np.isfinite(resid), np.exp(np.minimum(gauss - ll, 0.0)), 0.0)
             log_lik = self._apply_loglik(t_s, ll, "altimeter update")
             if log_lik is None:
                 return
-            kern.bias_update(self.bias, resid, self.P_b / S)
-            self.P_b *= (1.0 - self.P_b / S)
+            kern.bias_update(self.bias, gam * resid, self.P_b / S)
+            self.P_b *= (1.0 - float(self._weights() @ gam) * self.P_b / S)
             self._moments_cache = None
         self._set_update_extra(t_s, [h_meas - pred_mean], [[pred_var + S]], log_lik)
         if n_nan:

@@ -200,7 +200,7 @@ class InsRiddenFilter:
                 hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
             nbad = int((~vb).sum())
             if nbad:
-                self.health.skip(float(tb[0]), "baro_invalid", f"{nbad} baro samples invalid")
+                self._count_skip(float(tb[0]), "baro_invalid", nbad, f"{nbad} baro samples invalid")
             if not self._height_initialised and vb.any():
                 self.ins.state[2] = float(hb[np.argmax(vb)])
                 self._height_initialised = True
@@ -208,7 +208,7 @@ class InsRiddenFilter:
         hist = self.ins.propagate(t_imu, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid, tb, hb, vb)
         nbad = self.ins.bad_imu_samples - bad0
         if nbad:
-            self.health.skip(float(t_imu[0]), "imu_invalid", f"{nbad} IMU samples invalid (held previous)")
+            self._count_skip(float(t_imu[0]), "imu_invalid", nbad, f"{nbad} IMU samples invalid (held previous)")
         return hist
 
     def _events(self, frames: SensorFrames, t_imu: np.ndarray) -> list:
@@ -238,7 +238,7 @@ class InsRiddenFilter:
                 t_next = t_s + dt_meas
         self._t_next_meas = t_next
         if n_bad:
-            self.health.skip(frames.t_start_s, "terrain_sample_invalid",
+            self._count_skip(frames.t_start_s, "terrain_sample_invalid", n_bad,
                              f"{n_bad} altimeter samples invalid or without a return (skipped)")
         g = frames.gnss
         if g is not None and g.t_s.shape[0]:
@@ -315,6 +315,11 @@ class InsRiddenFilter:
         self.extra[EXTRA_NIS_DOF] = int(innov.shape[0])
         self.extra[EXTRA_LOG_LIKELIHOOD] = float(log_lik)
         self.extra[EXTRA_MEASUREMENT_TIME] = float(t_s)
+
+    def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
+        """n samples skipped for `reason` (Health.skipped counts samples; one event says so)."""
+        self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)
+        self.health.events.append((float(t_s), message))
 
     def _degrade(self, t_s: float, reason: str, message: str) -> None:
         self.health.skip(t_s, reason, message)
