@@ -153,12 +153,14 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
             elif d < -36.0:                   # the outlier term alone
                 v = lw + le
                 g = 0.0
-            elif d > 0.0:
-                v = lw + a + math.log1p(math.exp(-d))
-                g = math.exp(lw + a - v)
-            else:
-                v = lw + le + math.log1p(math.exp(d))
-                g = math.exp(lw + a - v)
+            else:                             # ll = max(a, le) + log1p(e), gamma = exp(a - ll)
+                e = math.exp(-abs(d))
+                if d > 0.0:
+                    v = lw + a + math.log1p(e)
+                    g = 1.0 / (1.0 + e)
+                else:
+                    v = lw + le + math.log1p(e)
+                    g = e / (1.0 + e)
             bias[k] += g * gain * r
             gam[k] = g
         logw[k] = v
