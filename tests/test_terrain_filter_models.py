@@ -178,11 +178,27 @@ def test_pmf_kernels_against_numpy():
         k = _kernel_1d(var_cells)
         assert k.sum() == pytest.approx(1.0) and np.sum(k * (np.arange(k.size) - k.size // 2) ** 2) == \
             pytest.approx(var_cells, rel=1e-6 if var_cells < 0.6 else 2e-3)
-        pk.convolve_separable(x, n, k, np.empty(n * n), -700.0)
+        b = np.full(n * n, 3.0)
+        spread = pk.convolve_separable(x, b, n, k, np.empty((6, n * n)), -700.0)
         w = np.exp(x).reshape(n, n)
         w /= w.sum()
         i = np.arange(n) - n // 2
         assert np.sum(w.sum(axis=1) * i ** 2) == pytest.approx(var_cells, rel=2e-3)
+        np.testing.assert_allclose(b[w.ravel() > 1e-12], 3.0)            # a constant offset stays put
+        assert spread == pytest.approx(0.0, abs=1e-9)
+    # offsets move with their mass: two sources of different offsets mix into their weighted mean, and the
+    # spread of the means (brute force: sum_j k_j (b_j - mean)^2 over the sources) is returned
+    x = np.full(n * n, -700.0)
+    c = (n // 2) * n + n // 2
+    x[c], x[c + 1] = 0.0, math.log(0.5)
+    b = np.zeros(n * n)
+    b[c + 1] = 6.0
+    k = _kernel_1d(0.4)
+    spread = pk.convolve_separable(x, b, n, k, np.empty((6, n * n)), -700.0)
+    wa, wb = 1.0 * k[1] * k[1], 0.5 * k[0] * k[1]        # the cell c receives from c (centre) and c + 1
+    mean = wb * 6.0 / (wa + wb)
+    assert b[c] == pytest.approx(mean, rel=1e-9)
+    assert spread > 0.0
 
 
 @pytest.mark.parametrize("name,settings,word", [

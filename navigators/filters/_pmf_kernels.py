@@ -115,7 +115,8 @@ def bias_update(bias, resid, gain):
 def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn, de, pn, pe, h_meas, S, gain,
                     lg, le, floor, logw, bias, gam, out):
     """One IRA terrain update of the whole grid, fused (one map lookup per cell): the predicted terrain
-    height map(cell + p) + bias, the heavy-tailed log-likelihood (measurements.robust_ll_one inlined with its constants hoisted, variance S),
+    height map(cell + p) + bias, the heavy-tailed log-likelihood (measurements.robust_ll_one inlined, its
+    constants hoisted; variance S),
     logw += ll (renormalised to a maximum of 0, floored), bias += gamma gain residual with gamma the
     probability that the sample is an inlier under that cell (so an outlier return does not drag the vertical
     offsets: gam (n * n) receives it); and the moments. out[12]: the posterior mean of gamma.

@@ -28,8 +28,6 @@ Nothing is kept per step: the cloud is a fixed set of arrays of M rows.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from navigators.filters._pf_kernels import propagate_particles
@@ -59,7 +57,8 @@ class ParticleFilter(InsRiddenFilter):
 
     name = "pf"
 
-    def __init__(self, dem=None, n_particles: int = 10_000, ess_threshold: float = 0.5, roughening: float = 0.1,
+    def __init__(self, dem=None, n_particles: int = 10_000, ess_threshold: float = 0.5,
+                 roughening: float = 0.1,
                  position_noise_m_per_sqrt_s: float = 0.5, velocity_noise_mps_per_sqrt_s: float = 0.01,
                  heading_noise_rad_per_sqrt_s: float = 2e-5, max_memory_mb: float = 2048.0,
                  rng: np.random.Generator | None = None, **settings):
@@ -68,7 +67,8 @@ class ParticleFilter(InsRiddenFilter):
         mem = check_positive("max_memory_mb", max_memory_mb)
         need_mb = float(n_particles) * BYTES_PER_PARTICLE / 2**20
         if need_mb > mem:
-            raise ValueError(f"n_particles {n_particles} needs about {need_mb:.0f} MB, more than max_memory_mb "
+            raise ValueError(f"n_particles {n_particles} needs about {need_mb:.0f} MB, more than "
+                             f"max_memory_mb "
                              f"{mem:g}")
         try:
             thr = float(ess_threshold)
@@ -216,7 +216,8 @@ class ParticleFilter(InsRiddenFilter):
             var = self.ira_variance(range_m, P[:, 2], np.hypot(pn, pe))
             var = np.where(np.isfinite(var), var, self.ira_range_sigma_m ** 2 + 1.0)
         else:
-            n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h, self.dn, self.de,
+            n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h, self.dn,
+                                   self.de,
                                    self.b, C, self.dpsi, self.ra_half_beam_rad, self.ra_cone_rings, 12,
                                    self._hmap)
             resid = self._hmap - range_m      # predicted minus measured range = measured - predicted height
@@ -240,7 +241,8 @@ class ParticleFilter(InsRiddenFilter):
         self.extra[EXTRA_ESS] = ess
         self.extra["pf_resampled"] = self.n_resampled
         if n_nan:
-            self.health.skip(t_s, "particles_off_map", f"{n_nan} particles off the map (outlier density only)")
+            self._count_skip(t_s, "particles_off_map", n_nan,
+                             f"{n_nan} particles off the map (outlier density only)")
         if self.health.status == "degraded":
             self.health.status = "acquiring"
 

@@ -80,7 +80,8 @@ class PointMassFilter(InsRiddenFilter):
 
     name = "pmf"
 
-    def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0, spacing_max_m: float = 100.0,
+    def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
+                 spacing_max_m: float = 100.0,
                  span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 1.5,
                  max_memory_mb: float = 2048.0, **settings):
         if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
@@ -104,7 +105,8 @@ class PointMassFilter(InsRiddenFilter):
         self._moments_cache = None
         self._out = np.empty(13)
         self._lg = math.log1p(-self.outlier_prob)
-        self._le = math.log(self.outlier_prob) + self.log_outlier_density if self.outlier_prob > 0 else -np.inf
+        self._le = (math.log(self.outlier_prob) + self.log_outlier_density if self.outlier_prob > 0
+                    else -np.inf)
 
     # ------------------------------------------------------------------------------------ belief
     def _set_geometry(self, centre_n: float, centre_e: float, spacing: float) -> None:
@@ -273,7 +275,8 @@ class PointMassFilter(InsRiddenFilter):
         sig = math.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 1e-12))
         d_des = min(max(2.0 * self.span_sigmas * sig / (self.n - 1), self.spacing_min_m), self.spacing_max_m)
         d_new = min(max(d_des, 0.5 * self.spacing), 2.0 * self.spacing)
-        far = max(abs(mean[0] - self.centre_n), abs(mean[1] - self.centre_e)) > (self.n - 1) * self.spacing / 8
+        off = max(abs(mean[0] - self.centre_n), abs(mean[1] - self.centre_e))
+        far = off > (self.n - 1) * self.spacing / 8
         if not far and 0.8 <= d_new / self.spacing <= 1.25:
             return
         old_lw = self.logw.reshape(self.n, self.n)

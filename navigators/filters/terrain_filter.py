@@ -74,9 +74,11 @@ class InsRiddenFilter:
 
     def __init__(self, dem=None, aiding: str = "ira", measurement_rate_hz: float = 1.0,
                  ira_formula: str = "proposed", ira_range_sigma_m: float = 3.5,
-                 ira_look_angle_sigma_deg: float = 0.1, ra_sigma_m: float = 2.0, ra_half_beam_deg: float = 10.0,
+                 ira_look_angle_sigma_deg: float = 0.1, ra_sigma_m: float = 2.0,
+                 ra_half_beam_deg: float = 10.0,
                  ra_cone_rings: int = 2, map_sigma_m: float = 0.0, map_bias_sigma_m: float = 0.0,
-                 terrain_model_sigma_m: float = 4.0, outlier_prob: float = 0.02, outlier_width_m: float = 500.0,
+                 terrain_model_sigma_m: float = 4.0, outlier_prob: float = 0.02,
+                 outlier_width_m: float = 500.0,
                  gnss_sigma_m: float = 2.0, gnss_vertical_sigma_m: float = 4.0,
                  gnss_velocity_sigma_mps: float = 0.05, baro_bias_sigma_m: float = 10.0,
                  vertical_noise_m_per_sqrt_s: float = 0.05, converged_sigma_m: float = 50.0,
@@ -138,7 +140,8 @@ class InsRiddenFilter:
         self._t_next_meas = -np.inf
         self._height_initialised = False
         self._t_belief = np.nan
-        self._p_vel = np.zeros(3)   # INS velocity error variance (m/s)^2 of the states a filter does not carry
+        # INS velocity / attitude error variances of the states a filter does not carry
+        self._p_vel = np.zeros(3)
         self._p_att = np.zeros(3)
         self._p_vel0 = np.zeros(3)
         self._p_att0 = np.zeros(3)
@@ -208,7 +211,8 @@ class InsRiddenFilter:
         hist = self.ins.propagate(t_imu, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid, tb, hb, vb)
         nbad = self.ins.bad_imu_samples - bad0
         if nbad:
-            self._count_skip(float(t_imu[0]), "imu_invalid", nbad, f"{nbad} IMU samples invalid (held previous)")
+            self._count_skip(float(t_imu[0]), "imu_invalid", nbad,
+                             f"{nbad} IMU samples invalid (held previous)")
         return hist
 
     def _events(self, frames: SensorFrames, t_imu: np.ndarray) -> list:
@@ -339,7 +343,8 @@ class InsRiddenFilter:
     def estimate(self) -> Estimate:
         """INS + the belief's mean offset; covariance: the belief's block and the INS error model's rest."""
         st = self.ins.state
-        mean, cov_b = self._moments()   # mean over [dn, de, b, dvn, dve, dpsi]; cov_b 6 x 6 (NaN: not carried)
+        # mean over [dn, de, b, dvn, dve, dpsi]; cov_b 6 x 6 (NaN: not carried)
+        mean, cov_b = self._moments()
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
         C = quat_to_dcm(st[6:10])

@@ -131,7 +131,8 @@ def map_heights_at_offsets(heights, lat0, lon0, dlat, dlon, lat_ref, lon_ref, r_
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay, az, ux, uy, uz,
+def _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay, az, ux, uy,
+              uz,
               wx, wy, wz, ang, ph, cosb):
     """Distance (m) to the map along the cone direction at angle ang from the axis, azimuth ph (inf if the
     line of sight misses the map or leaves the cone)."""
@@ -212,7 +213,8 @@ def ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat_ref, lon_ref, r_lat_m, r
             n_a = 1 if r == 0 else n_az
             for q in range(n_a):
                 ph = step_p * q
-                d = _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay,
+                d = _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax,
+                              ay,
                               az, ux, uy, uz, wx, wy, wz, ang, ph, cosb)
                 if d < best:
                     best, best_a, best_p = d, ang, ph
@@ -227,7 +229,8 @@ def ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat_ref, lon_ref, r_lat_m, r
                         if ia == 0 and ip == 0:
                             continue
                         ph = p0 + ip * step_p
-                        d = _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl,
+                        d = _cone_ray(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, r_lat_m, r_lon_m, ha,
+                                      agl,
                                       ax, ay, az, ux, uy, uz, wx, wy, wz, ang, ph, cosb)
                         if d < best:
                             best, best_a, best_p = d, ang, ph

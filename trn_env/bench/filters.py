@@ -23,7 +23,8 @@ import numpy as np
 NAVIGATORS = {"pmf": {"grid_size": 200}, "pf": {"n_particles": 10_000}, "ins_tercom": {"remove_bias": True}}
 
 
-def _loop_rate(name: str, settings: dict, warm_s: float, sim_s: float, dems=None) -> tuple[float, float, tuple]:
+def _loop_rate(name: str, settings: dict, warm_s: float, sim_s: float,
+               dems=None) -> tuple[float, float, tuple]:
     from trn_env.bench.runner import bare_jsbsim_steps_per_s
     from trn_env.scenario import build as components
     from trn_env.scenario.loading import load_scenario
