@@ -28,6 +28,8 @@ Nothing is kept per step: the cloud is a fixed set of arrays of M rows.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from navigators.filters._pf_kernels import propagate_particles
@@ -213,8 +215,11 @@ class ParticleFilter(InsRiddenFilter):
             n_nan = map_heights_at_offsets(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn,
                                            self.de, pn, pe, self._hmap)
             resid = (h - self.b - P[:, 2]) - self._hmap        # seed 000 eq 2 under each particle
-            var = self.ira_variance(range_m, P[:, 2], np.hypot(pn, pe))
-            var = np.where(np.isfinite(var), var, self.ira_range_sigma_m ** 2 + 1.0)
+            # one variance for the cloud, at its mean closest point: the particles' points differ by metres
+            # at ranges of km, which changes sigma_R (p_d / R) and sigma_theta |p_h| by < 1e-3 relative
+            k0 = int(np.argmax(self.logw))
+            p0 = P[k0] if np.all(np.isfinite(P[k0])) else np.nanmean(P, axis=0)
+            var = np.array([float(self.ira_variance(range_m, p0[2], math.hypot(p0[0], p0[1])))])
         else:
             n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h, self.dn,
                                    self.de,
