@@ -23,7 +23,8 @@ from trn_env.sim.nav_stage import fork_available
 SCEN = Path(__file__).parent / "scenarios"
 DESIGN_FIELDS = ("scenario", "seed", "navigator", "sim_time_s", "wall_time_s", "realtime_factor",
                  "horizontal_error_rms_m", "horizontal_error_final_m", "vertical_error_rms_m", "termination")
-TERMINATIONS = {"completed", "terrain_collision", "off_map", "diverged", "time_limit"}
+TERMINATIONS = {"completed", "terrain_collision", "off_map", "diverged", "fuel_exhausted", "engine_failure",
+                "time_limit"}
 
 
 def _fly(tmp_path, *extra) -> tuple[int, Path]:

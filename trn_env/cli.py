@@ -4,8 +4,12 @@
     trn-env scenarios
     trn-env validate SCENARIO
     trn-env bench [--quick]
+    trn-env campaign FILE [--out DIR] [--workers N] [--backend local|ray] [--address ADDR] [--resume]
+                     [--check BASELINE.json] [--write-baseline BASELINE.json]
+    trn-env report DIR [--out DIR]
 
-Exit status: 0 success, 2 invalid scenario (every problem printed, nothing written), 130 interrupted.
+Exit status: 0 success, 1 regression gate failed (`campaign --check`), 2 invalid input (every problem
+printed, nothing written), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ def _parser() -> argparse.ArgumentParser:
     fly.add_argument("--navigator", default=None, help="override the navigator (e.g. ins, ins_tercom)")
     fly.add_argument("--duration", type=float, default=None, help="override the time limit, seconds")
     fly.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    fly.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                     help="set a scenario field by dotted path, VALUE a TOML literal (repeatable; applied "
+                          "after --seed/--duration/--navigator, as a campaign's sweeps are)")
     fly.add_argument("--quiet", action="store_true", help="no progress bar")
     fly.add_argument("--no-pipeline", action="store_true",
                      help="run the sensors and the navigator in this process, not beside the flight in a "
@@ -38,6 +45,23 @@ def _parser() -> argparse.ArgumentParser:
     val.add_argument("scenario")
     bench = sub.add_parser("bench", help="print throughput figures as one JSON object")
     bench.add_argument("--quick", action="store_true", help="shorter measurements (less precise)")
+    camp = sub.add_parser("campaign", help="fly a Monte Carlo campaign (seeds x navigators x sweeps)")
+    camp.add_argument("file", type=Path, help="campaign TOML file")
+    camp.add_argument("--out", type=Path, default=None,
+                      help="output folder (default campaigns/<name>-<time>)")
+    camp.add_argument("--workers", type=int, default=None, help="worker processes / Ray CPUs (default: all)")
+    camp.add_argument("--backend", choices=("local", "ray"), default="local")
+    camp.add_argument("--address", default=None,
+                      help="Ray cluster address (HOST:PORT, ray://HOST:PORT, auto)")
+    camp.add_argument("--resume", action="store_true", help="fly only the runs missing from --out")
+    camp.add_argument("--check", type=Path, default=None, metavar="BASELINE",
+                      help="compare with a baseline: exit 1 if a figure is worse than its tolerance")
+    camp.add_argument("--write-baseline", type=Path, default=None, metavar="BASELINE",
+                      help="write the campaign's figures as a baseline")
+    camp.add_argument("--quiet", action="store_true", help="no progress bar")
+    rep = sub.add_parser("report", help="summary table and plots of a campaign folder (PNGs + report.html)")
+    rep.add_argument("dir", type=Path, help="campaign output folder")
+    rep.add_argument("--out", type=Path, default=None, help="report folder (default DIR/report)")
     return p
 
 
@@ -88,7 +112,13 @@ def _summary_table(summary: dict, out_dir: Path):
         ("vertical error RMS", f"{summary['vertical_error_rms_m']:.1f} m"),
         ("final 1-sigma horizontal", f"{summary['horizontal_sigma_final_m']:.1f} m"),
         ("within 3 sigma (N and E)", f"{100 * summary['fraction_within_3sigma']:.0f} %"),
+        ("horizontal CEP50 / CEP95", f"{summary['horizontal_error_cep50_m']:.1f} / "
+                                     f"{summary['horizontal_error_cep95_m']:.1f} m"),
+        ("ANEES, position (3 = consistent)", f"{summary['anees']:.2f}"),
+        ("track lost", "yes" if summary["track_lost"] else "no"),
         ("min true height above ground", f"{summary['min_true_agl_m']:.0f} m"),
+        ("fuel remaining", f"{summary['fuel_remaining_kg']:.1f} kg"
+                           + (" (held constant)" if summary["constant_fuel"] else "")),
         ("navigator status", summary["navigator_status"]),
     ]
     for k, v in rows:
@@ -97,10 +127,16 @@ def _summary_table(summary: dict, out_dir: Path):
 
 
 def cmd_fly(args) -> int:
-    from trn_env.scenario.loading import ScenarioError, load_scenario
+    from trn_env.scenario.loading import ScenarioError
+    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
     try:
-        scenario = load_scenario(args.scenario, seed=args.seed, navigator=args.navigator,
-                                 duration_s=args.duration)
+        sets = [parse_assignment(s) for s in args.set]
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        scenario = load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
+                                      duration_s=args.duration)
     except ScenarioError as err:
         _print_problems(err)
         return 2
@@ -169,6 +205,86 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_campaign(args) -> int:
+    from trn_env.campaign import CampaignError, load_campaign, make_backend, run_campaign
+    from trn_env.campaign.baseline import read_baseline
+    from trn_env.campaign.ray_backend import BackendError
+    try:
+        backend = make_backend(args.backend, args.workers, args.address)
+        backend.preflight()      # Ray importable, its address reachable: before the (slower) validation
+        baseline = read_baseline(args.check) if args.check is not None else None
+        campaign = load_campaign(args.file)
+    except CampaignError as err:
+        print(f"error: campaign {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
+        for prob in err.problems:
+            print(f"  - {prob}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    from rich.console import Console
+
+    from trn_env.campaign.driver import default_out_dir
+    out_dir = args.out or default_out_dir(campaign.name)
+    console = Console(width=max(Console().width, 150))     # the summary table is wide
+    try:
+        stats = run_campaign(campaign, out_dir, backend=backend, resume=args.resume, progress=not args.quiet)
+    except CampaignError as err:
+        for prob in err.problems:
+            print(f"error: {prob}", file=sys.stderr)
+        return 2
+    except BackendError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"interrupted: the finished runs' rows are in {out_dir}/runs (continue with --resume)",
+              file=sys.stderr)
+        return 130
+    return _campaign_outcome(campaign, out_dir, stats, baseline, args, console)
+
+
+def _campaign_outcome(campaign, out_dir: Path, stats: dict, baseline, args, console) -> int:
+    from trn_env.campaign.baseline import compare, comparison_table, make_baseline, write_baseline
+    from trn_env.campaign.rows import read_rows
+    from trn_env.campaign.stats import summary_table
+    df = read_rows(out_dir)
+    console.print(summary_table(df, f"campaign {campaign.name}: {len(df)} run(s) -> {out_dir}"))
+    rate = f"{stats['runs_per_minute']:.1f} runs/min" if stats["flown"] else "nothing to fly"
+    console.print(f"{stats['flown']} flown ({stats['failed']} failed), {stats['already_done']} already done; "
+                  f"{rate} on {stats['backend']}")
+    status = 0
+    if args.write_baseline is not None:
+        write_baseline(args.write_baseline, make_baseline(df, campaign.name, campaign.hash))
+        console.print(f"baseline written: {args.write_baseline}")
+    if baseline is not None:
+        comps = compare(df, baseline)
+        console.print(comparison_table(comps, f"regression gate against {args.check}"))
+        worse = [c for c in comps if c.verdict in ("worse", "missing")]
+        better = [c for c in comps if c.verdict == "better"]
+        for c in better:
+            print(f"warning: {c.group} {c.figure} is much better than the baseline ({c.value:.4g} vs "
+                  f"{c.baseline:.4g}); refresh it on purpose with --write-baseline", file=sys.stderr)
+        if worse:
+            for c in worse:
+                print(f"regression: {c.group} {c.figure}: {c.value:.4g} vs baseline {c.baseline:.4g} "
+                      f"(band ±{c.limit:.3g}): {c.verdict}", file=sys.stderr)
+            status = 1
+        else:
+            console.print(f"regression gate passed ({len(comps)} figure(s), {len(better)} much better)")
+    return status
+
+
+def cmd_report(args) -> int:
+    from trn_env.campaign.report import write_report
+    try:
+        out = write_report(args.dir, args.out)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"report written: {out / 'report.html'}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "scenarios":
@@ -179,6 +295,10 @@ def main(argv: list[str] | None = None) -> int:
         return cmd_fly(args)
     if args.command == "bench":
         return cmd_bench(args)
+    if args.command == "campaign":
+        return cmd_campaign(args)
+    if args.command == "report":
+        return cmd_report(args)
     return 2
 
 

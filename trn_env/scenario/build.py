@@ -207,7 +207,7 @@ def build_flight(d: dict, world, rng: np.random.Generator):
     with quiet_stdout():
         return Flight(ic, aircraft=d["aircraft"]["name"], dt_s=float(d["aircraft"]["dt_s"]),
                       wind=build_wind(d), seed=seed, terrain_elevation_m=map_height(world, lat, lon),
-                      atmosphere=build_atmosphere(d))
+                      atmosphere=build_atmosphere(d), constant_fuel=bool(d["aircraft"]["constant_fuel"]))
 
 
 # ----------------------------------------------------------------------------------------------- sensors
@@ -313,7 +313,13 @@ def _initial_condition(d: dict, world):
     init = d["initial"]
     return InitialCondition(lat_rad=math.radians(init["lat_deg"]), lon_rad=math.radians(init["lon_deg"]),
                             h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
-                            heading_rad=math.radians(init["heading_deg"]), **d["aircraft"]["settings"])
+                            heading_rad=math.radians(init["heading_deg"]), **_fuel_kw(d),
+                            **d["aircraft"]["settings"])
+
+
+def _fuel_kw(d: dict) -> dict:
+    fuel_kg = d["aircraft"].get("fuel_kg")
+    return {} if fuel_kg is None else {"fuel_kg": float(fuel_kg)}
 
 
 # --------------------------------------------------------------------------------------------- guidance

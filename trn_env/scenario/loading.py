@@ -213,6 +213,7 @@ def _fill_defaults(data: dict) -> dict:
     d["aircraft"].setdefault("name", "kingair")
     d["aircraft"].setdefault("dt_s", 0.01)
     d["aircraft"].setdefault("settings", {})
+    d["aircraft"].setdefault("constant_fuel", False)
     errs = d.setdefault("initial_errors", {})
     for k, v in DEFAULT_INITIAL_ERRORS.items():
         errs.setdefault(k, list(v))
@@ -336,6 +337,25 @@ def _aircraft_problems(d: dict) -> list[str]:
     if d["aircraft"]["name"] not in known:
         return [f"aircraft.name: unknown aircraft {d['aircraft']['name']!r} "
                 f"(available: {', '.join(known) or 'none'})"]
+    return _fuel_problems(d)
+
+
+def _fuel_problems(d: dict) -> list[str]:
+    """aircraft.fuel_kg finite, > 0 and within the aircraft's tank capacity; not given twice."""
+    from trn_env.flight.aircraft_data import fuel_tanks_kg
+    fuel_kg = d["aircraft"].get("fuel_kg")
+    if fuel_kg is None or isinstance(fuel_kg, bool) or not isinstance(fuel_kg, int | float):
+        return []   # absent (the aircraft file's load), or a type error the schema reports
+    capacity_kg = sum(fuel_tanks_kg(d["aircraft"]["name"]).values())
+    if not math.isfinite(fuel_kg) or fuel_kg <= 0.0:
+        return [f"aircraft.fuel_kg: must be a finite number > 0 kg, got {fuel_kg}"]
+    if fuel_kg > capacity_kg * (1.0 + 1e-9):
+        return [f"aircraft.fuel_kg: {fuel_kg} kg is more than the fuel tanks of {d['aircraft']['name']!r} "
+                f"hold ({capacity_kg:.1f} kg)"]
+    settings = d["aircraft"]["settings"]
+    if isinstance(settings, dict) and ({"fuel_kg", "fuel_fraction"} & set(settings)):
+        return ["aircraft.fuel_kg: give the fuel load once (aircraft.fuel_kg or aircraft.settings."
+                f"{'fuel_kg' if 'fuel_kg' in settings else 'fuel_fraction'}, not both)"]
     return []
 
 

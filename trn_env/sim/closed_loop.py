@@ -24,9 +24,12 @@ time whatever the update rate.
 
 A run ends with `completed` (route flown), `terrain_collision` (true height above the true terrain < 0 at
 any JSBSim step), `off_map` (truth outside the true DEM), `diverged` (estimate not finite, horizontal
-sigma above the scenario limit, or navigator health 'diverged'), or `time_limit`. Termination is judged on
-every step of an update interval at its end (the truth first, then that interval's estimate); route
-completion and the time limit end the interval early.
+sigma above the scenario limit, or navigator health 'diverged'), `fuel_exhausted` (an engine stopped with
+its fuel tank empty: JSBSim starves it), `engine_failure` (an engine stopped with fuel on board, e.g. cut
+off), or `time_limit`. Termination is judged on every step of an update interval at its end (the truth
+first - collision, map, engines - then that interval's estimate); route completion and the time limit end
+the interval early. An engine stop ends the run at once rather than gliding on to a `terrain_collision`
+that would hide its cause (`aircraft.constant_fuel = true` keeps the tanks full for long flights).
 
 Randomness: the scenario seed -> numpy SeedSequence -> one Generator per component (flight/turbulence,
 sensors, map errors, initial estimate errors, navigator), so one seed gives the same run bit for bit,
@@ -49,12 +52,14 @@ from navigators.protocol import Estimate, Health
 from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
 from trn_env.flight.core import FlightDiverged
 from trn_env.flight.truth import TruthChunk
+from trn_env.output.metrics import MetricSettings, navigation_metrics
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 from trn_env.sim.log import SimLog
 from trn_env.sim.nav_stage import InlineNavStage, ProcessNavStage, fork_available
 
-TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "time_limit")
+TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "fuel_exhausted", "engine_failure",
+                "time_limit")
 
 # Order of the child seeds spawned from the scenario seed; append only (changing it changes every run).
 RNG_STREAMS = ("flight", "sensors", "map", "initial_errors", "navigator")
@@ -382,7 +387,8 @@ class ClosedLoop:
         return self.t_s >= self.duration_s - 0.5 * self.dt_s
 
     def _truth_reason(self, chunk: TruthChunk) -> str | None:
-        """off_map or terrain_collision if any step of the chunk was."""
+        """off_map or terrain_collision if any step of the chunk was; else fuel_exhausted or engine_failure
+        if an engine is stopped at its end (the stop is logged as an event)."""
         agl_min, n_nan = components.min_height_above_terrain(self.world_dem, chunk.lat_rad, chunk.lon_rad,
                                                              chunk.h_msl_m)
         if n_nan:   # a step off the grid or over a void (then the other steps are judged)
@@ -390,6 +396,10 @@ class ClosedLoop:
                 return "off_map"
         if agl_min < 0.0:
             return "terrain_collision"
+        stop = self.flight.engine_stop()
+        if stop is not None:
+            self.log.events.append((float(chunk.t_s[-1]), "flight", stop[1]))
+            return stop[0]
         return None
 
     def _diverged(self, chunk: TruthChunk, est: Estimate) -> bool:
@@ -440,6 +450,8 @@ class ClosedLoop:
         summary["wall_time_by_stage_s"] = {k: round(v, 4) for k, v in self.stage_s.items()}
         summary["pipelined"] = self.pipelined
         summary["navigator_latency_updates"] = self.latency_updates
+        summary["fuel_remaining_kg"] = round(self.flight.fuel_kg, 3)
+        summary["constant_fuel"] = self.flight.constant_fuel
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
                          self.jsbsim_steps, arrays, list(self.log.events), summary, self.world_dem)
 
@@ -450,8 +462,9 @@ def _rms(x: np.ndarray) -> float:
 
 
 def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wall_time_s: float,
-              jsbsim_steps: int, final: Estimate) -> dict:
-    """summary.json contents (DESIGN.md fields first, then extras)."""
+              jsbsim_steps: int, final: Estimate, metric_settings: MetricSettings | None = None) -> dict:
+    """summary.json contents (DESIGN.md fields first, then extras, then every navigation metric of
+    trn_env.output.metrics, the same figures a campaign row holds)."""
     t = a["t_s"]
     err = a["err_ned_m"]
     e_h = np.hypot(err[:, 0], err[:, 1])
@@ -490,7 +503,7 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "navigator_skipped": dict(final.health.skipped),
         "scenario_source": scenario.source,
         "duration_limit_s": scenario.duration_s,
-    }
+    } | navigation_metrics(a, metric_settings)
 
 
 def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:
