@@ -17,8 +17,8 @@ Experiments (each prints a JSON block; --only NAME runs one):
   measurement variance, the PMF's random-walk process noise; recursive J <- (J^-1 + Q)^-1 + g g' / s^2),
   and terrain.metrics.terrain_information's window CRLB along the track for the same noise.
 - "crosswind": a 20 m/s crosswind flight (crosswind_5km: 5,600 m MSL, seed 000's case), map = world (the
-  high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs 14-36) vs the conventional (eqs 9-13) closest point:
-  horizontal RMS of each and their ratio.
+  high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs
+  14-36) vs the conventional (eqs 9-13) closest point: horizontal RMS of each and their ratio.
 - "rate": PMF with terrain samples at 1 Hz (the default) vs 2 Hz and 5 Hz: horizontal RMS (the accuracy
   cost of the lower rate the speed figures use).
 """
