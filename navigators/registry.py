@@ -7,6 +7,8 @@
                needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
 "rbpf"         seed 002's IRA-aided Rao-Blackwellized particle filter (navigators.filters.rbpf); needs dem=,
                takes rng=
+"pmf"          point-mass filter over the INS horizontal position error (navigators.filters.pmf); dem=
+"pf"           SIR particle filter over the INS error state (navigators.filters.pf); dem=, rng=
 
 Every navigator validates its settings in its constructor and raises `ValueError` naming the setting.
 A navigator that draws random numbers (particle filters) is registered with `takes_rng=True` and gets the
@@ -22,13 +24,21 @@ import numpy as np
 
 from navigators.acquisition_tracking import AcqTrackNavigator
 from navigators.filters.ins_trn_ekf import InsTrnNavigator
+from navigators.filters.pf import ParticleFilter
+from navigators.filters.pmf import PointMassFilter
 
 # name -> (factory, takes_rng)
 _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
     "ins": (lambda **kw: InsTrnNavigator(aiding=None, **kw), False),
     "ins_tercom": (lambda **kw: InsTrnNavigator(**{"aiding": "ira", **kw}), False),
     "acq_track": (AcqTrackNavigator, False),
+    "pmf": (PointMassFilter, False),
+    "pf": (ParticleFilter, True),
 }
+
+# navigators that take the map's error as measurement noise: trn_env's build_navigator fills their
+# map_sigma_m / map_bias_sigma_m from the scenario's map error model when the settings do not give them
+MAP_NOISE_AWARE: set[str] = {"pmf", "pf"}
 
 
 def available() -> list[str]:

@@ -2,8 +2,19 @@
 
 ira_closest_point  seed 000's closest-point formulas: (R, theta) + attitude + velocity -> the IRA return's
                    position relative to the antenna (eqs 3-13)
+terrain_models     the same over many hypotheses of one epoch (numba), map heights at hypothesis offsets,
+                   the radar altimeter's shortest in-cone return, the heavy-tailed terrain likelihood
 """
 
 from navigators.measurements.ira_closest_point import FORMULAS, closest_point_ned, effective_look_angle
+from navigators.measurements.terrain_models import (
+    IRA_FORMULA_CODES,
+    ira_points_batch,
+    map_heights_at_offsets,
+    ra_cone_ranges,
+    radii_m,
+    robust_log_likelihood,
+)
 
-__all__ = ["FORMULAS", "closest_point_ned", "effective_look_angle"]
+__all__ = ["FORMULAS", "IRA_FORMULA_CODES", "closest_point_ned", "effective_look_angle", "ira_points_batch",
+           "map_heights_at_offsets", "ra_cone_ranges", "radii_m", "robust_log_likelihood"]

@@ -72,6 +72,25 @@ def map_error_model(settings: dict, rng: np.random.Generator):
     return replace(model, **kw)
 
 
+def map_noise_settings(settings: dict | None) -> dict:
+    """{map_sigma_m, map_bias_sigma_m} a navigator should assume for the scenario's map error model (1 sigma,
+    m): its accuracy class's vertical sigma split by bias_fraction (terrain.map_error.model_for_class), or
+    the explicit random_sigma_m and |bias_m|; zeros without an error model."""
+    from terrain import map_error
+    s = dict(settings or {})
+    random_m, bias_m = 0.0, 0.0
+    preset = s.get("preset")
+    if preset is not None and str(preset).strip().lower() in map_error.ACCURACY_CLASSES:
+        sig_v = map_error.ACCURACY_CLASSES[str(preset).strip().lower()].sigma_v_m
+        bf = float(s.get("bias_fraction", 0.5))
+        random_m, bias_m = sig_v * math.sqrt(max(1.0 - bf, 0.0)), sig_v * math.sqrt(max(bf, 0.0))
+    if "random_sigma_m" in s:
+        random_m = float(s["random_sigma_m"])
+    if "bias_m" in s:
+        bias_m = abs(float(s["bias_m"]))
+    return {"map_sigma_m": random_m, "map_bias_sigma_m": bias_m}
+
+
 def apply_map_errors(dem, settings: dict, rng: np.random.Generator):
     """The navigator's map = `dem` with the scenario's map error model applied (terrain.map_error.apply)."""
     from terrain import map_error
@@ -219,10 +238,15 @@ def _sensor_problems(d: dict) -> list[str]:
 
 def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     """navigators.registry.create(name, dem=<the navigator's map>, rng=<the scenario's navigator stream>,
-    **settings); the rng reaches only navigators that draw random numbers."""
+    **settings); the rng reaches only navigators that draw random numbers. Navigators in
+    registry.MAP_NOISE_AWARE also get map_sigma_m / map_bias_sigma_m from the map error model
+    (map_noise_settings) unless the settings give them."""
     from navigators import registry
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
+    if d["navigator"]["name"] in getattr(registry, "MAP_NOISE_AWARE", ()):
+        for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
+            settings.setdefault(key, val)
     return registry.create(d["navigator"]["name"], rng=rng, **settings)
 
 

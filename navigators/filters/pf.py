@@ -1,0 +1,278 @@
+"""Particle filter (`pf`): bootstrap / SIR over the INS error state, riding on the INS.
+
+Particle state (M particles, contiguous arrays): horizontal position offset dn, de (true minus INS, m),
+vertical offset b (INS height minus true: baro and map bias, m), horizontal velocity offset dv (m/s) and
+heading offset dpsi (rad). The INS itself is never corrected; the estimate is INS + the weighted mean.
+
+- Propagation (navigators.filters._pf_kernels.propagate_particles): the INS error dynamics between
+  measurement epochs - position from velocity, velocity from the heading error turning the specific force
+  and the Schuler term - plus process noise drawn from the filter's Generator.
+- Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
+  or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira_points_batch), one map lookup
+  per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
+  altimeter: the shortest in-cone return under the particle's heading (ra_cone_ranges). Log-weights,
+  normalised by their maximum; log p(z | past) by logsumexp.
+- Resampling: systematic (navigators.filters.resampling) when the effective sample size falls below
+  ess_threshold * M, then roughening (Gordon et al. 1993): every state gets N(0, (roughening * E_d *
+  M^(-1/d))^2) with E_d the particles' span in that state, d = 6, against sample impoverishment.
+- GNSS: position, height and horizontal velocity likelihoods on the particles, vertical velocity into the INS.
+- Robustness: a NaN sample is skipped; when every particle's likelihood underflows (possible only with
+  outlier_prob = 0, or a cloud entirely off the map) the update is skipped and Health says "degraded";
+  ten in a row re-draw the cloud around its mean with the initial spread.
+
+Estimate.extra: the fixed update keys of navigators.protocol, including "ess" (before resampling), and
+"pf_resampled" (resamplings so far). Randomness: `rng` (numpy Generator; trn_env passes the scenario's
+`navigator` stream), so a scenario seed fixes the run bit for bit; rng=None uses default_rng(0).
+Nothing is kept per step: the cloud is a fixed set of arrays of M rows.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from navigators.filters._pf_kernels import propagate_particles
+from navigators.filters.resampling import systematic_kernel
+from navigators.filters.terrain_filter import InsRiddenFilter, check_positive
+from navigators.inertial.strapdown import quat_to_dcm
+from navigators.measurements.terrain_models import (
+    ira_points_batch,
+    map_heights_at_offsets,
+    ra_cone_ranges,
+    radii_m,
+    robust_log_likelihood,
+)
+from navigators.protocol import EXTRA_ESS
+
+BYTES_PER_PARTICLE = 8 * 30
+N_STATE = 6
+
+
+class ParticleFilter(InsRiddenFilter):
+    """SIR particle filter over the INS error state (see the module docstring).
+
+    Settings (besides InsRiddenFilter's): n_particles (default 10,000), ess_threshold (in (0, 1]: resample
+    when ESS < ess_threshold * n_particles), roughening (>= 0, Gordon's K), position_noise_m_per_sqrt_s,
+    velocity_noise_mps_per_sqrt_s, heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng.
+    """
+
+    name = "pf"
+
+    def __init__(self, dem=None, n_particles: int = 10_000, ess_threshold: float = 0.5,
+                 roughening: float = 0.1,
+                 position_noise_m_per_sqrt_s: float = 0.9, velocity_noise_mps_per_sqrt_s: float = 0.01,
+                 heading_noise_rad_per_sqrt_s: float = 2e-5, max_memory_mb: float = 2048.0,
+                 rng: np.random.Generator | None = None, **settings):
+        if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)) or n_particles < 2:
+            raise ValueError(f"n_particles must be an integer >= 2, got {n_particles!r}")
+        mem = check_positive("max_memory_mb", max_memory_mb)
+        need_mb = float(n_particles) * BYTES_PER_PARTICLE / 2**20
+        if need_mb > mem:
+            raise ValueError(f"n_particles {n_particles} needs about {need_mb:.0f} MB, more than "
+                             f"max_memory_mb "
+                             f"{mem:g}")
+        try:
+            thr = float(ess_threshold)
+        except (TypeError, ValueError):
+            raise ValueError(f"ess_threshold must be a number in (0, 1], got {ess_threshold!r}") from None
+        if not (0.0 < thr <= 1.0):
+            raise ValueError(f"ess_threshold must be in (0, 1], got {ess_threshold!r}")
+        self.ess_threshold = thr
+        self.roughening = check_positive("roughening", roughening, True)
+        self.s_pos = check_positive("position_noise_m_per_sqrt_s", position_noise_m_per_sqrt_s, True)
+        self.s_vel = check_positive("velocity_noise_mps_per_sqrt_s", velocity_noise_mps_per_sqrt_s, True)
+        self.s_psi = check_positive("heading_noise_rad_per_sqrt_s", heading_noise_rad_per_sqrt_s, True)
+        if rng is not None and not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
+        super().__init__(dem=dem, **settings)
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.M = int(n_particles)
+        M = self.M
+        self.dn = np.zeros(M)
+        self.de = np.zeros(M)
+        self.b = np.zeros(M)
+        self.dv = np.zeros((M, 2))
+        self.dpsi = np.zeros(M)
+        self.logw = np.zeros(M)
+        self._P = np.empty((M, 3))
+        self._hmap = np.empty(M)
+        self._ll = np.empty(M)
+        self._idx = np.empty(M, np.int64)
+        self._init_cov = np.eye(9)
+        self._moments_cache = None
+        self.n_resampled = 0
+        self._v_prev = None
+
+    # ------------------------------------------------------------------------------------ belief
+    def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
+        self._init_cov = np.array(cov9, float)
+        M = self.M
+        z = self.rng.standard_normal((M, N_STATE))
+        c = np.zeros((N_STATE, N_STATE))
+        c[:2, :2] = cov9[:2, :2]
+        c[2, 2] = self.bias_prior_var()
+        c[3:5, 3:5] = cov9[3:5, 3:5]
+        c[5, 5] = cov9[8, 8]
+        w, V = np.linalg.eigh(0.5 * (c + c.T))
+        x = z @ (V * np.sqrt(np.clip(w, 0.0, None))).T
+        if mean is not None:
+            x += mean
+        self.dn[:] = x[:, 0]
+        self.de[:] = x[:, 1]
+        self.b[:] = x[:, 2]
+        self.dv[:] = x[:, 3:5]
+        self.dpsi[:] = x[:, 5]
+        self.logw[:] = 0.0
+        self._moments_cache = None
+        self._n_underflow = 0
+        self._v_prev = None
+
+    def _predict_to(self, t_s: float, st: np.ndarray | None = None) -> None:
+        dt = t_s - self._t_belief
+        if st is not None:
+            v = np.array(st[3:5], float)
+            f_n = f_e = 0.0
+            if self._v_prev is not None and dt > 1e-6:
+                f_n, f_e = (v - self._v_prev) / dt   # horizontal specific force ~ INS acceleration
+            self._v_prev = v
+        else:
+            f_n = f_e = 0.0
+        if dt <= 0.0:
+            return
+        lat = float(st[0]) if st is not None else 0.6
+        g_over_r = 9.81 / float(radii_m(lat, 0.0)[0])
+        z = self.rng.standard_normal((self.M, N_STATE))
+        propagate_particles(self.dn, self.de, self.b, self.dv, self.dpsi, dt, float(f_n), float(f_e),
+                            g_over_r, self.s_pos, self.s_vel, self.s_psi, self.vertical_noise, z)
+        self._t_belief = t_s
+        self._moments_cache = None
+
+    def _weights(self) -> np.ndarray:
+        w = np.exp(self.logw - self.logw.max())
+        return w / w.sum()
+
+    def _apply_loglik(self, t_s: float, ll: np.ndarray, what: str) -> tuple[float, float] | None:
+        """logw += ll, ESS, resampling; (log p(z | past), ESS before resampling) or None if skipped."""
+        new = self.logw + ll
+        mx = new.max()
+        if not np.isfinite(mx):
+            self._n_underflow += 1
+            self._degrade(t_s, "likelihood_underflow", f"{what}: every particle's likelihood underflowed "
+                          f"(update skipped, {self._n_underflow} in a row)")
+            if self._n_underflow >= 10:
+                mean, _ = self._moments()
+                self._init_belief(self._init_cov, np.nan_to_num(mean))
+                self._degrade(t_s, "reinitialised", "particles re-drawn around the mean after repeated "
+                              "underflows")
+            return None
+        w0 = self._weights()
+        lm = ll.max()
+        log_lik = float(lm + np.log(np.sum(w0 * np.exp(ll - lm))))
+        self.logw = new - mx
+        w = np.exp(self.logw)
+        w /= w.sum()
+        ess = float(1.0 / np.sum(w * w))
+        self._n_underflow = 0
+        self._moments_cache = None
+        if ess < self.ess_threshold * self.M:
+            self._resample(w)
+        return log_lik, ess
+
+    def _resample(self, w: np.ndarray) -> None:
+        systematic_kernel(w, float(self.rng.random()), self._idx)
+        i = self._idx
+        self.dn = self.dn[i]
+        self.de = self.de[i]
+        self.b = self.b[i]
+        self.dv = np.ascontiguousarray(self.dv[i])
+        self.dpsi = self.dpsi[i]
+        self.logw[:] = 0.0
+        self.n_resampled += 1
+        if self.roughening > 0.0:
+            scale = self.roughening * self.M ** (-1.0 / N_STATE)
+            z = self.rng.standard_normal((self.M, N_STATE))
+            for k, a in enumerate((self.dn, self.de, self.b, self.dv[:, 0], self.dv[:, 1], self.dpsi)):
+                a += scale * (a.max() - a.min()) * z[:, k]
+        self._moments_cache = None
+
+    # ------------------------------------------------------------------------------------ updates
+    def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
+        lat, lon, h = float(st[0]), float(st[1]), float(st[2])
+        r_lat, r_lon = radii_m(lat, h)
+        heights, lat0, lon0, dlat, dlon = self.grid
+        C = quat_to_dcm(st[6:10])
+        M = self.M
+        if kind == "ira":
+            nb = ira_points_batch(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self.dpsi, self.dv,
+                                  self.ira_code, self._P)
+            if nb == M:
+                self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
+                return
+            P = self._P
+            pn = np.ascontiguousarray(P[:, 0])
+            pe = np.ascontiguousarray(P[:, 1])
+            n_nan = map_heights_at_offsets(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn,
+                                           self.de, pn, pe, self._hmap)
+            resid = (h - self.b - P[:, 2]) - self._hmap        # seed 000 eq 2 under each particle
+            # one variance for the cloud, at its mean closest point: the particles' points differ by metres
+            # at ranges of km, which changes sigma_R (p_d / R) and sigma_theta |p_h| by < 1e-3 relative
+            k0 = int(np.argmax(self.logw))
+            p0 = P[k0] if np.all(np.isfinite(P[k0])) else np.nanmean(P, axis=0)
+            var = np.array([float(self.ira_variance(range_m, p0[2], math.hypot(p0[0], p0[1])))])
+        else:
+            n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h, self.dn,
+                                   self.de,
+                                   self.b, C, self.dpsi, self.ra_half_beam_rad, self.ra_cone_rings, 12,
+                                   self._hmap)
+            resid = self._hmap - range_m      # predicted minus measured range = measured - predicted height
+            var = np.array([self.ra_variance()])
+        if n_nan == M:
+            self._degrade(t_s, "cloud_off_map", f"{kind} update skipped: every particle is off the map")
+            return
+        robust_log_likelihood(resid, np.ascontiguousarray(var), self.outlier_prob, self.log_outlier_density,
+                              self._ll)
+        w0 = self._weights()
+        ok = np.isfinite(resid)
+        wm = w0[ok].sum()
+        innov = float(np.sum(w0[ok] * resid[ok]) / wm)
+        var_b = np.broadcast_to(var, resid.shape)
+        S = float(np.sum(w0[ok] * ((resid[ok] - innov) ** 2 + var_b[ok])) / wm)
+        out = self._apply_loglik(t_s, self._ll, f"{kind} update")
+        if out is None:
+            return
+        log_lik, ess = out
+        self._set_update_extra(t_s, [innov], [[S]], log_lik)
+        self.extra[EXTRA_ESS] = ess
+        self.extra["pf_resampled"] = self.n_resampled
+        if n_nan:
+            self._count_skip(t_s, "particles_off_map", n_nan,
+                             f"{n_nan} particles off the map (outlier density only)")
+        if self.health.status == "degraded":
+            self.health.status = "acquiring"
+
+    def _gnss_update(self, t_s, st, payload) -> None:
+        lat, lon, h, v = payload
+        gn, ge = self.gnss_offset_m(st, lat, lon)
+        s2 = self.gnss_sigma_m ** 2
+        sv2 = self.gnss_vertical_sigma_m ** 2
+        ll = -0.5 * ((gn - self.dn) ** 2 + (ge - self.de) ** 2) / s2
+        ll -= 0.5 * ((float(st[2]) - h) - self.b) ** 2 / sv2
+        if np.all(np.isfinite(v)):
+            r2 = self.gnss_velocity_sigma_mps ** 2
+            ll -= 0.5 * ((v[0] - st[3] - self.dv[:, 0]) ** 2 + (v[1] - st[4] - self.dv[:, 1]) ** 2) / r2
+            self._gnss_velocity_ins(v, carried=(0, 1))
+        if self._apply_loglik(t_s, ll, "GNSS update") is not None and self.health.status == "degraded":
+            self.health.status = "acquiring"
+
+    # ------------------------------------------------------------------------------------ output
+    def _moments(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._moments_cache is None:
+            w = self._weights()
+            X = np.stack([self.dn, self.de, self.b, self.dv[:, 0], self.dv[:, 1], self.dpsi])
+            mean = X @ w
+            D = X - mean[:, None]
+            cov = (D * w) @ D.T
+            self._moments_cache = (mean, cov)
+        mean, cov = self._moments_cache
+        return mean.copy(), cov.copy()

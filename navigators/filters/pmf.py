@@ -1,0 +1,320 @@
+"""Point-mass filter (`pmf`): a grid over the INS's horizontal position error, riding on the INS.
+
+Belief: log-densities on an n x n grid of north/east offsets (true minus INS position, m) centred at
+(centre_n, centre_e) with spacing d (m), and in every cell the Gaussian of the vertical offset b (INS height
+minus true: the baro's and the map's vertical bias) given that cell - its mean per cell, its variance
+shared (the measurements are the same for all cells, so the Kalman gain is): a Rao-Blackwellised vertical
+channel instead of a third grid axis, so a baro or map bias does not pull the horizontal fix and costs
+nothing per cell but one multiply-add.
+
+- Prediction: the grid rides on the INS (the offsets need no displacement: the INS carries the aircraft),
+  plus process noise, the INS's horizontal position error growth, as a separable convolution whose kernel
+  has exactly the accumulated variance (a three-tap kernel [p, 1 - 2p, p], p = q / (2 d^2), while the noise
+  is below the spacing, a normalised sampled Gaussian above it; in the spirit of the Lagrangian grid
+  filters, it is applied before a measurement update once it reaches half a cell^2). The per-cell vertical
+  offsets move with their mass: a cell's new mean is the mean of its sources' means, and the spread of those
+  means goes into the shared variance (_pmf_kernels.convolve_separable).
+- Terrain update: one IRA (or radar-altimeter) sample: its closest point p from the INS attitude and
+  velocity (seed 000 eqs 14-36, shared by all cells: the PMF does not carry attitude or velocity
+  hypotheses), one map lookup per cell, the heavy-tailed likelihood (measurements.robust_ll_one) with
+  variance S = P_b + sensor + map noise and the per-cell bias update, fused in one numba pass over the
+  cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through measurements.ra_cone_ranges).
+- GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its velocity into
+  the INS (the PMF carries no velocity state).
+- Re-gridding after an update, from the posterior's spread: the half-span follows span_sigmas times its
+  largest standard deviation (spacing within [spacing_min_m, spacing_max_m], at most halved or doubled at
+  a time), the centre follows the mean once it is n/8 cells away; log-densities and biases are
+  interpolated (bilinear) onto the new grid. So the grid starts wide, shrinks as it converges and grows
+  again where the terrain is flat.
+
+Outputs: mean and covariance of the grid (position block, + d^2/12 per axis for the cells' width), the
+vertical from the bias, velocity and attitude from the INS error model (terrain_filter); Estimate.extra:
+the fixed update keys (navigators.protocol) and "multimodality" (density of the second-highest local
+maximum of the grid over the highest: 0 for one mode, 1 for two equal ones) and "pmf_modes" (local maxima
+above 1 % of the peak), "pmf_spacing_m", "pmf_grid_n".
+
+Default IRA model: "proposed" (seed 000's); measured against "conventional" in scripts/filter_statistics.py.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+import navigators.filters._pmf_kernels as kern
+from navigators.filters.terrain_filter import InsRiddenFilter, check_positive
+from navigators.inertial.strapdown import quat_to_dcm
+from navigators.measurements.terrain_models import (
+    ira_points_batch,
+    ra_cone_ranges,
+    radii_m,
+    robust_log_likelihood,
+)
+
+LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
+BYTES_PER_CELL = 8 * 16     # float64 arrays held or made per cell in an update
+
+
+def _kernel_1d(var_cells: float) -> np.ndarray:
+    """Normalised 1-D kernel whose variance is var_cells (in cells^2)."""
+    if var_cells <= 2.0 / 3.0:
+        p = 0.5 * var_cells
+        return np.array([p, 1.0 - 2.0 * p, p])
+    s = math.sqrt(var_cells)
+    half = int(math.ceil(4.0 * s))
+    x = np.arange(-half, half + 1, dtype=float)
+    k = np.exp(-0.5 * x * x / var_cells)
+    return k / k.sum()
+
+
+class PointMassFilter(InsRiddenFilter):
+    """Point-mass filter over the INS horizontal position error (see the module docstring).
+
+    Settings (besides InsRiddenFilter's): grid_size n (cells per side, default 200), spacing_min_m,
+    spacing_max_m (bounds of the cell spacing), span_sigmas (grid half-span in posterior sigmas),
+    position_noise_m_per_sqrt_s (process noise: horizontal position random walk of the INS error),
+    max_memory_mb (refuses a grid larger than that), measurement_rate_hz (terrain samples per second).
+    """
+
+    name = "pmf"
+
+    def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
+                 spacing_max_m: float = 100.0,
+                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 1.1,
+                 max_memory_mb: float = 2048.0, **settings):
+        if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
+            raise ValueError(f"grid_size must be an integer >= 3, got {grid_size!r}")
+        mem = check_positive("max_memory_mb", max_memory_mb)
+        need_mb = float(grid_size) ** 2 * BYTES_PER_CELL / 2**20
+        if need_mb > mem:
+            raise ValueError(f"grid_size {grid_size} needs about {need_mb:.0f} MB, more than max_memory_mb "
+                             f"{mem:g}")
+        self.spacing_min_m = check_positive("spacing_min_m", spacing_min_m)
+        self.spacing_max_m = check_positive("spacing_max_m", spacing_max_m)
+        if self.spacing_max_m < self.spacing_min_m:
+            raise ValueError(f"spacing_max_m ({spacing_max_m}) must be >= spacing_min_m ({spacing_min_m})")
+        self.span_sigmas = check_positive("span_sigmas", span_sigmas)
+        self.position_noise = check_positive("position_noise_m_per_sqrt_s", position_noise_m_per_sqrt_s, True)
+        super().__init__(dem=dem, **settings)
+        self.n = int(grid_size)
+        self._ira_p = np.empty((1, 3))
+        self._zero1 = np.zeros(1)
+        self._zero12 = np.zeros((1, 2))
+        self._moments_cache = None
+        self._out = np.empty(13)
+        self._lg = math.log1p(-self.outlier_prob)
+        self._le = (math.log(self.outlier_prob) + self.log_outlier_density if self.outlier_prob > 0
+                    else -np.inf)
+
+    # ------------------------------------------------------------------------------------ belief
+    def _set_geometry(self, centre_n: float, centre_e: float, spacing: float) -> None:
+        n = self.n
+        self.centre_n, self.centre_e, self.spacing = float(centre_n), float(centre_e), float(spacing)
+        ax = (np.arange(n) - 0.5 * (n - 1)) * spacing
+        self.axis_n = centre_n + ax
+        self.axis_e = centre_e + ax
+        self.dn_flat = np.ascontiguousarray(np.repeat(self.axis_n, n))
+        self.de_flat = np.ascontiguousarray(np.tile(self.axis_e, n))
+
+    def _init_belief(self, cov9: np.ndarray, mean_ne=(0.0, 0.0)) -> None:
+        P = np.array(cov9[:2, :2], float)
+        sig = math.sqrt(max(np.linalg.eigvalsh(P).max(), 1e-6))
+        d = min(max(2.0 * self.span_sigmas * sig / (self.n - 1), self.spacing_min_m), self.spacing_max_m)
+        self._set_geometry(mean_ne[0], mean_ne[1], d)
+        try:
+            Pi = np.linalg.inv(P + np.eye(2) * 1e-6)
+        except np.linalg.LinAlgError:
+            Pi = np.eye(2) / sig**2
+        x = self.dn_flat - mean_ne[0]
+        y = self.de_flat - mean_ne[1]
+        lw = -0.5 * (Pi[0, 0] * x * x + 2 * Pi[0, 1] * x * y + Pi[1, 1] * y * y)
+        self.logw = lw - lw.max()
+        self.bias = np.zeros(self.n * self.n)
+        self._work = np.empty((6, self.n * self.n))
+        self.P_b = self.bias_prior_var()
+        self._q_pending = 0.0
+        self._moments_cache = None
+        self._n_underflow = 0
+
+    def _predict_to(self, t_s: float, st: np.ndarray | None = None) -> None:
+        dt = t_s - self._t_belief
+        if dt > 0.0:
+            self._q_pending += self.position_noise ** 2 * dt
+            self.P_b += self.vertical_noise ** 2 * dt
+            self._t_belief = t_s
+            self._moments_cache = None
+
+    def _apply_process_noise(self) -> None:
+        """The accumulated process noise as a separable convolution (exact variance)."""
+        var_cells = self._q_pending / self.spacing ** 2
+        if var_cells < 0.5:
+            return   # keep accumulating (the reported covariance includes it) until it is half a cell^2
+        k = _kernel_1d(var_cells)
+        spread = kern.convolve_separable(self.logw, self.bias, self.n, k, self._work, LOG_FLOOR)
+        self.P_b += spread
+        self._moments_cache = None
+        self._q_pending = 0.0
+
+    def _weights(self) -> np.ndarray:
+        w = np.exp(self.logw - self.logw.max())
+        return w / w.sum()
+
+    def _apply_loglik(self, t_s: float, ll: np.ndarray, what: str) -> float | None:
+        """logw += ll; returns log p(z | past) or None (skipped: every cell underflowed)."""
+        log_lik, mx = kern.apply_log_likelihood(self.logw, ll, LOG_FLOOR)
+        if not np.isfinite(mx):
+            self._underflow(t_s, what)
+            return None
+        self._n_underflow = 0
+        self._moments_cache = None
+        return float(log_lik)
+
+    def _underflow(self, t_s: float, what: str) -> None:
+        self._n_underflow += 1
+        self._degrade(t_s, "likelihood_underflow", f"{what}: every cell's likelihood underflowed "
+                      f"(update skipped, {self._n_underflow} in a row)")
+        if self._n_underflow >= 10:
+            self._reinitialise(t_s)
+
+    def _reinitialise(self, t_s: float) -> None:
+        mean, cov = self._moments()
+        c9 = np.zeros((9, 9))
+        c9[:2, :2] = np.eye(2) * max(1000.0**2, cov[0, 0], cov[1, 1])
+        self._init_belief(c9, (float(mean[0]), float(mean[1])))
+        self._degrade(t_s, "reinitialised", "grid re-initialised wide (1 km) after repeated underflows")
+
+    # ------------------------------------------------------------------------------------ updates
+    def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
+        self._apply_process_noise()
+        lat, lon, h = float(st[0]), float(st[1]), float(st[2])
+        r_lat, r_lon = radii_m(lat, h)
+        heights, lat0, lon0, dlat, dlon = self.grid
+        m = self.n * self.n
+        C = quat_to_dcm(st[6:10])
+        if kind == "ira":
+            nb = ira_points_batch(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self._zero1,
+                                  self._zero12, self.ira_code, self._ira_p)
+            if nb:
+                self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
+                return
+            p = self._ira_p[0]
+            h_meas = h - p[2]          # seed 000 eq 2
+            S = self.P_b + float(self.ira_variance(range_m, p[2], math.hypot(p[0], p[1])))
+            saved = (self.logw.copy(), self.bias.copy())
+            o = self._out
+            kern.ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn_flat,
+                                 self.de_flat, float(p[0]), float(p[1]), h_meas, S, self.P_b / S,
+                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, self._work[0], o)
+            n_nan = int(o[3])
+            if n_nan == m or not np.isfinite(o[4]):
+                self.logw, self.bias = saved
+                if n_nan == m:
+                    self._degrade(t_s, "grid_off_map", "IRA update skipped: the whole grid is off the map")
+                else:
+                    self._underflow(t_s, "IRA update")
+                return
+            self._n_underflow = 0
+            log_lik, pred_mean, pred_var = float(o[0]), float(o[1]), float(o[2])
+            c = np.array([[o[7], o[8]], [o[8], o[9]]]) + np.eye(2) * self.spacing ** 2 / 12.0
+            self.P_b *= (1.0 - float(o[12]) * self.P_b / S)   # as much as the sample is believed an inlier
+            self._moments_cache = (float(o[5]), float(o[6]), c, float(o[10]), self.P_b + float(o[11]))
+        else:
+            var = self.ra_variance()
+            rng_pred = np.empty(m)
+            n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h,
+                                   self.dn_flat, self.de_flat, self.bias, C, self._zero1,
+                                   self.ra_half_beam_rad, self.ra_cone_rings, 12, rng_pred)
+            if n_nan == m:
+                self._degrade(t_s, "grid_off_map", "altimeter update skipped: the whole grid is off the map")
+                return
+            h_meas = h - range_m       # seed 000 eq 1: terrain height below the aircraft
+            pred = h - rng_pred        # terrain height that hypothesis predicts (bias included)
+            resid = h_meas - pred
+            S = self.P_b + var
+            ll = np.empty(m)
+            robust_log_likelihood(resid, np.array([S]), self.outlier_prob, self.log_outlier_density, ll)
+            pred_mean, pred_var = kern.predicted_moments(self.logw, pred)
+            with np.errstate(invalid="ignore", over="ignore"):
+                gauss = self._lg - 0.5 * (resid * resid / S + math.log(S) + math.log(2 * math.pi))
+                gam = np.where(np.isfinite(resid), np.exp(np.minimum(gauss - ll, 0.0)), 0.0)
+            log_lik = self._apply_loglik(t_s, ll, "altimeter update")
+            if log_lik is None:
+                return
+            kern.bias_update(self.bias, gam * resid, self.P_b / S)
+            self.P_b *= (1.0 - float(self._weights() @ gam) * self.P_b / S)
+            self._moments_cache = None
+        self._set_update_extra(t_s, [h_meas - pred_mean], [[pred_var + S]], log_lik)
+        if n_nan:
+            self.health.skip(t_s, "cells_off_map", f"{n_nan} grid cells off the map (outlier density only)")
+        if self.health.status == "degraded":
+            self.health.status = "acquiring"
+        self._regrid()
+
+    def _gnss_update(self, t_s, st, payload) -> None:
+        lat, lon, h, v = payload
+        self._apply_process_noise()
+        gn, ge = self.gnss_offset_m(st, lat, lon)
+        s2 = self.gnss_sigma_m ** 2
+        ll = -0.5 * ((gn - self.dn_flat) ** 2 + (ge - self.de_flat) ** 2) / s2 - math.log(2 * math.pi * s2)
+        if self._apply_loglik(t_s, ll, "GNSS update") is None:
+            return
+        z_b = float(st[2]) - h      # INS minus GNSS height = b + noise
+        S = self.P_b + self.gnss_vertical_sigma_m ** 2
+        K = self.P_b / S
+        self.bias += K * (z_b - self.bias)
+        self.P_b *= (1.0 - K)
+        self._gnss_velocity_ins(v, carried=())
+        if self.health.status == "degraded":
+            self.health.status = "acquiring"
+        self._regrid()
+
+    def _regrid(self) -> None:
+        mean, cov = self._moments()
+        sig = math.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 1e-12))
+        d_des = min(max(2.0 * self.span_sigmas * sig / (self.n - 1), self.spacing_min_m), self.spacing_max_m)
+        d_new = min(max(d_des, 0.5 * self.spacing), 2.0 * self.spacing)
+        off = max(abs(mean[0] - self.centre_n), abs(mean[1] - self.centre_e))
+        far = off > (self.n - 1) * self.spacing / 8
+        if not far and 0.8 <= d_new / self.spacing <= 1.25:
+            return
+        old_lw = self.logw.reshape(self.n, self.n)
+        old_b = self.bias.reshape(self.n, self.n)
+        c_old = 0.5 * (self.n - 1)
+        cn_old, ce_old, d_old = self.centre_n, self.centre_e, self.spacing
+        self._set_geometry(float(mean[0]), float(mean[1]), d_new)
+        fi = (self.axis_n - cn_old) / d_old + c_old
+        fj = (self.axis_e - ce_old) / d_old + c_old
+        FI, FJ = np.meshgrid(fi, fj, indexing="ij")
+        lw = ndimage.map_coordinates(old_lw, [FI, FJ], order=1, mode="constant", cval=LOG_FLOOR)
+        b = ndimage.map_coordinates(old_b, [FI, FJ], order=1, mode="nearest")
+        lw = lw.ravel()
+        self.logw = np.maximum(lw - lw.max(), LOG_FLOOR)
+        self.bias = np.ascontiguousarray(b.ravel())
+        self._moments_cache = None
+
+    # ------------------------------------------------------------------------------------ output
+    def _moments(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._moments_cache is None:
+            o = np.empty(7)
+            kern.grid_moments(self.logw, self.dn_flat, self.de_flat, self.bias, o)
+            c = np.array([[o[2], o[3]], [o[3], o[4]]]) + np.eye(2) * self.spacing ** 2 / 12.0
+            self._moments_cache = (o[0], o[1], c, o[5], self.P_b + o[6])
+        mn, me, c, mb, vb = self._moments_cache
+        mean = np.array([mn, me, mb, np.nan, np.nan, np.nan])
+        cov = np.full((6, 6), np.nan)
+        cov[:2, :2] = c + np.eye(2) * self._q_pending
+        cov[2, :2] = cov[:2, 2] = 0.0
+        cov[2, 2] = vb
+        return mean, cov
+
+    def _after_frame(self, t_end: float) -> None:
+        super()._after_frame(t_end)
+        d = self.logw.reshape(self.n, self.n)
+        peaks = (d == ndimage.maximum_filter(d, size=3, mode="constant", cval=-np.inf)) & (d > math.log(0.01))
+        vals = np.sort(d[peaks])[::-1]
+        self.extra["pmf_modes"] = int(vals.size)
+        self.extra["multimodality"] = float(math.exp(vals[1] - vals[0])) if vals.size > 1 else 0.0
+        self.extra["pmf_spacing_m"] = self.spacing
+        self.extra["pmf_grid_n"] = self.n

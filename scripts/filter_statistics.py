@@ -1,0 +1,301 @@
+"""Monte Carlo statistics of the point-mass (`pmf`) and particle (`pf`) filters on the default scenario.
+
+One JSBSim flight of the default scenario is flown once (navigator "ins", so the truth follows the route);
+its truth chunks are kept and every run regenerates the real sensor suite's noise (trn_env.sensors, a new
+seed per run) and the initial estimate's error, then runs the navigators open-loop on those frames (guidance
+does not react to the estimate: the truth is the same flight for every run). GNSS is denied from t = 0.
+
+    PYTHONPATH=$PWD python scripts/filter_statistics.py [--runs 100] [--duration 180] [--out DIR]
+
+Experiments (each prints a JSON block; --only NAME runs one):
+- "convergence": 1 km (1 sigma) initial position error; fraction of runs within 50 m at the end (3 min of
+  flight) for pmf, pf and ins_tercom (INS + batch TERCOM + EKF), with a 95 % Clopper-Pearson interval.
+- "nees": the horizontal position NEES e' P^-1 e averaged over the runs (ANEES) at every update after
+  t_converged_s, against the 95 % chi-square bounds for 2 x runs degrees of freedom (divided by runs).
+- "crlb": horizontal RMS over the converged runs and t >= t_converged_s against the posterior Cramer-Rao
+  bound of the same measurements (map gradients at each IRA sample's true footprint, the filter's
+  measurement variance, the PMF's random-walk process noise; recursive J <- (J^-1 + Q)^-1 + g g' / s^2),
+  and terrain.metrics.terrain_information's window CRLB along the track for the same noise.
+- "crosswind": a 20 m/s crosswind flight (crosswind_5km: 5,600 m MSL, seed 000's case), map = world (the
+  high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs
+  14-36) vs the conventional (eqs 9-13) closest point: horizontal RMS of each and their ratio.
+- "rate": PMF with terrain samples at 1 Hz (the default) vs 2 Hz and 5 Hz: horizontal RMS (the accuracy
+  cost of the lower rate the speed figures use).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import trn_env.scenario.build as components  # noqa: E402
+from navigators import registry  # noqa: E402
+from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
+from trn_env.scenario.loading import load_scenario  # noqa: E402
+from trn_env.sim.closed_loop import ClosedLoop, perturbed_estimate  # noqa: E402
+from trn_env.sim.nav_stage import gate_gnss  # noqa: E402
+
+CONVERGED_M = 50.0
+
+
+def record_flight(scenario: str = "default", duration_s: float = 180.0, wind_mps: float | None = None,
+                  seed: int = 0):
+    """(scenario data, truth chunks, world DEM, map DEM, truth at t = 0) of one closed-loop flight flown on
+    the free INS."""
+    sc = load_scenario(scenario, navigator="ins", duration_s=duration_s + 2.0, seed=seed)
+    if wind_mps is not None:
+        sc.data["wind"]["layers"] = [
+            {"altitude_m": 0.0, "direction_from_deg": 270.0, "speed_mps": wind_mps},
+            {"altitude_m": 6000.0, "direction_from_deg": 270.0, "speed_mps": wind_mps}]
+        sc.data["wind"]["turbulence"] = {"model": "none"}
+    chunks = []
+    with ClosedLoop(sc, pipeline=False, log_sensors=False) as loop:
+        truth0 = copy.deepcopy(loop.last_truth)
+        real = loop.sensors.sample
+
+        def spy(chunk, dem):
+            chunks.append(copy.deepcopy(chunk))
+            return real(chunk, dem)
+
+        loop.sensors.sample = spy
+        while loop.termination is None and loop.t_s < duration_s:
+            loop.tick()
+        loop.sync()
+        return sc.data, chunks, loop.world_dem, loop.map_dem, truth0
+
+
+def sensor_frames(d: dict, chunks, world, seed: int, outages=({"start_s": 0.0},)):
+    """The real sensor suite's frames of every chunk, with a run's own noise seed; GNSS gated."""
+    suite = components.build_sensors(d, np.random.SeedSequence([seed, 17]))
+    return [gate_gnss(suite.sample(c, world), list(outages)) for c in chunks]
+
+
+def initial_estimate(d: dict, truth0, seed: int, sigma_h_m: float):
+    sig = dict(d["initial_errors"])
+    sig["position_ned_m"] = [sigma_h_m, sigma_h_m, sig["position_ned_m"][2]]
+    return perturbed_estimate(truth0, 0, sig, np.random.default_rng([seed, 23]))
+
+
+def run_navigator(name: str, settings: dict, initial, frames, chunks, map_dem, seed: int) -> dict:
+    """Errors (estimate minus truth, N/E m), covariance diagonals and timing of one navigator run."""
+    nav = registry.create(name, dem=map_dem, rng=np.random.default_rng([seed, 29]), **settings)
+    nav.reset(initial)
+    t, err, cov = [], [], []
+    wall = 0.0
+    for fr, ch in zip(frames, chunks, strict=True):
+        w0 = time.perf_counter()
+        est = nav.update(fr)
+        wall += time.perf_counter() - w0
+        i = len(ch.t_s) - 1
+        lat, lon = float(ch.lat_rad[i]), float(ch.lon_rad[i])
+        r_n = meridian_radius_m(lat) + float(ch.h_msl_m[i])
+        r_e = (prime_vertical_radius_m(lat) + float(ch.h_msl_m[i])) * math.cos(lat)
+        t.append(est.t_s)
+        err.append(((est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e))
+        cov.append(est.covariance[:2, :2].copy())
+    return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "wall_s": wall}
+
+
+def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
+    a = 1.0 - conf
+    lo = stats.beta.ppf(a / 2, k, n - k + 1) if k > 0 else 0.0
+    hi = stats.beta.ppf(1 - a / 2, k + 1, n - k) if k < n else 1.0
+    return float(lo), float(hi)
+
+
+def monte_carlo(runs: int, duration_s: float, sigma_h_m: float, names: dict, seed0: int = 1000,
+                flight=None, map_world: bool = False, log=print) -> dict:
+    """{label: [run results]} of `runs` runs of each navigator in names {label: (name, settings)}."""
+    d, chunks, world, the_map, truth0 = flight or record_flight(duration_s=duration_s)
+    the_map = world if map_world else the_map
+    out = {k: [] for k in names}
+    for r in range(runs):
+        seed = seed0 + r
+        frames = sensor_frames(d, chunks, world, seed)
+        init = initial_estimate(d, truth0, seed, sigma_h_m)
+        for label, (name, settings) in names.items():
+            out[label].append(run_navigator(name, settings, init, frames, chunks, the_map, seed))
+        if log and (r + 1) % max(1, runs // 10) == 0:
+            fin = {k: round(float(np.hypot(*v[-1]["err"][-1])), 1) for k, v in out.items()}
+            log(f"  run {r + 1}/{runs}: final errors {fin}")
+    return out
+
+
+def convergence_figures(res: dict, duration_s: float) -> dict:
+    out = {}
+    for label, runs in res.items():
+        fin = np.array([np.hypot(*r["err"][-1]) for r in runs])
+        k, n = int(np.sum(fin < CONVERGED_M)), len(runs)
+        t_conv = []
+        for r in runs:
+            e = np.hypot(r["err"][:, 0], r["err"][:, 1])
+            # first time after which the error stays below 50 m
+            above = np.nonzero(e >= CONVERGED_M)[0]
+            t_conv.append(r["t"][above[-1] + 1] if above.size and above[-1] + 1 < e.size
+                          else (r["t"][0] if not above.size else math.inf))
+        out[label] = {"runs": n, "within_50m_at_end": k, "fraction": k / n,
+                      "fraction_95ci": clopper_pearson(k, n),
+                      "median_final_error_m": float(np.median(fin)),
+                      "median_time_to_stay_within_50m_s": float(np.median(t_conv)),
+                      "wall_s_per_run": float(np.mean([r["wall_s"] for r in runs])),
+                      "sim_s_per_wall_s": duration_s / float(np.mean([r["wall_s"] for r in runs]))}
+    return out
+
+
+def nees_figures(res: dict, t_from_s: float) -> dict:
+    out = {}
+    for label, runs in res.items():
+        good = [r for r in runs if np.hypot(*r["err"][-1]) < CONVERGED_M]
+        n = len(good)
+        if n < 2:
+            out[label] = {"runs": n}
+            continue
+        t = good[0]["t"]
+        sel = t >= t_from_s
+        nees = np.array([np.einsum("ti,tij,tj->t", r["err"][sel], np.linalg.inv(r["cov"][sel]), r["err"][sel])
+                         for r in good])
+        anees = nees.mean(axis=0)
+        lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * n) / n
+        out[label] = {"runs": n, "t_from_s": t_from_s, "anees_mean": float(anees.mean()),
+                      "bounds_95": [float(lo), float(hi)],
+                      "fraction_of_epochs_inside": float(np.mean((anees >= lo) & (anees <= hi))),
+                      "anees_time_average_bounds_95": [float(x) for x in
+                                                       stats.chi2.ppf([0.025, 0.975], 2 * n * sel.sum())
+                                                       / (n * sel.sum())]}
+    return out
+
+
+def pcrb_horizontal(d: dict, chunks, the_map, sigma_z_m: float, q_m2ps: float, rate_hz: float,
+                    p0_m: float = 1000.0) -> tuple[np.ndarray, np.ndarray]:
+    """(t, sqrt(trace J^-1)) of the posterior CRLB of the horizontal position: random walk q (m^2/s), one
+    height measurement of variance sigma_z^2 per 1/rate_hz s at the true IRA footprint (nadir + the true
+    closest point, seed 000's geometry), with the map's gradient there (terrain.Dem.gradient)."""
+    from terrain import queries
+    cfg = d["sensors"]["ira"]
+    half = math.radians(float(cfg.get("half_window_deg", 45.0)))
+    ts, lat, lon, h, v, C = [], [], [], [], [], []
+    t_next = -np.inf
+    for ch in chunks:
+        for i in range(len(ch.t_s)):
+            if ch.t_s[i] >= t_next:
+                t_next = ch.t_s[i] + 1.0 / rate_hz
+                ts.append(ch.t_s[i])
+                lat.append(ch.lat_rad[i])
+                lon.append(ch.lon_rad[i])
+                h.append(ch.h_msl_m[i])
+                v.append(ch.v_ned_mps[i])
+                C.append(ch.C_bn[i])
+    ret = queries.ira_return(the_map, np.array(lat), np.array(lon), np.array(h), np.array(v), np.array(C),
+                             half)
+    gn, ge = the_map.gradient(ret.lat_rad, ret.lon_rad)     # m/m north and east
+    J = np.eye(2) / p0_m**2
+    out = []
+    dt = 1.0 / rate_hz
+    for k in range(len(ts)):
+        J = np.linalg.inv(np.linalg.inv(J) + np.eye(2) * q_m2ps * dt)
+        if np.isfinite(gn[k]) and np.isfinite(ge[k]):
+            g = np.array([gn[k], ge[k]])
+            J = J + np.outer(g, g) / sigma_z_m**2
+        out.append(math.sqrt(np.trace(np.linalg.inv(J))))
+    return np.array(ts), np.array(out)
+
+
+def crlb_figures(res: dict, flight, t_from_s: float) -> dict:
+    from navigators.filters.pmf import PointMassFilter
+    from terrain import metrics
+    d, chunks, world, the_map, _ = flight
+    nav = PointMassFilter(the_map, grid_size=3)
+    sigma_z = math.sqrt(nav.ira_range_sigma_m**2 + nav.terrain_model_sigma_m**2 + nav.map_sigma_m**2)
+    t_b, bound = pcrb_horizontal(d, chunks, the_map, sigma_z, nav.position_noise**2, nav.measurement_rate_hz)
+    out = {"sigma_z_m": sigma_z, "t_from_s": t_from_s}
+    sel_b = t_b >= t_from_s
+    out["pcrb_rms_m"] = float(np.sqrt(np.mean(bound[sel_b] ** 2)))
+    info = metrics.terrain_information(the_map, sigma_z, 2000.0)
+    crlb_map = the_map.with_heights(np.nan_to_num(np.asarray(info.crlb_sigma_h_m, float), nan=1e4,
+                                                  posinf=1e4))
+    lat = np.concatenate([c.lat_rad for c in chunks])
+    lon = np.concatenate([c.lon_rad for c in chunks])
+    out["terrain_metrics_window_crlb_m_median_along_track"] = float(np.median(crlb_map.height(lat, lon)))
+    for label, runs in res.items():
+        good = [r for r in runs if np.hypot(*r["err"][-1]) < CONVERGED_M]
+        if not good:
+            continue
+        sel = good[0]["t"] >= t_from_s
+        e2 = np.concatenate([np.sum(r["err"][sel] ** 2, axis=1) for r in good])
+        rms = float(np.sqrt(np.mean(e2)))
+        out[label] = {"runs": len(good), "horizontal_rms_m": rms, "ratio_to_pcrb": rms / out["pcrb_rms_m"]}
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--duration", type=float, default=180.0)
+    ap.add_argument("--sigma", type=float, default=1000.0,
+                    help="initial horizontal error, 1 sigma per axis (m)")
+    ap.add_argument("--ekf-runs", type=int, default=20)
+    ap.add_argument("--crosswind-runs", type=int, default=10)
+    ap.add_argument("--crosswind-scenario", default="crosswind_5km",
+                    help="flight of the crosswind comparison (default: seed 000's 5,600 m MSL case)")
+    ap.add_argument("--only", default=None, choices=["convergence", "crosswind", "rate"])
+    ap.add_argument("--out", default=None, help="write the figures as JSON here")
+    args = ap.parse_args(argv)
+    figures = {}
+    t0 = time.time()
+    if args.only in (None, "convergence"):
+        print(f"recording the default flight ({args.duration:.0f} s) ...", flush=True)
+        flight = record_flight(duration_s=args.duration)
+        names = {"pmf": ("pmf", {}), "pf": ("pf", {})}
+        res = monte_carlo(args.runs, args.duration, args.sigma, names, flight=flight)
+        ekf = monte_carlo(args.ekf_runs, args.duration, args.sigma,
+                          {"ins_tercom": ("ins_tercom", {"remove_bias": True})}, flight=flight) \
+            if args.ekf_runs else {}
+        figures["convergence"] = convergence_figures({**res, **ekf}, args.duration)
+        print(json.dumps({"convergence": figures["convergence"]}, indent=1), flush=True)
+        figures["nees"] = nees_figures(res, 60.0)
+        print(json.dumps({"nees": figures["nees"]}, indent=1), flush=True)
+        figures["crlb"] = crlb_figures(res, flight, 60.0)
+        print(json.dumps({"crlb": figures["crlb"]}, indent=1), flush=True)
+    if args.only in (None, "rate"):
+        flight = record_flight(duration_s=120.0)
+        names = {f"pmf_{r:g}hz": ("pmf", {"measurement_rate_hz": r}) for r in (1.0, 2.0, 5.0)}
+        res = monte_carlo(args.crosswind_runs, 120.0, 30.0, names, flight=flight, seed0=3000)
+        figures["rate"] = {k: {"horizontal_rms_m_t_ge_30s": float(np.sqrt(np.mean(np.concatenate(
+            [np.sum(r["err"][r["t"] >= 30.0] ** 2, axis=1) for r in v])))),
+            "sim_s_per_wall_s": 120.0 / float(np.mean([r["wall_s"] for r in v]))} for k, v in res.items()}
+        print(json.dumps({"rate": figures["rate"]}, indent=1), flush=True)
+    if args.only in (None, "crosswind"):
+        flight = record_flight(args.crosswind_scenario, duration_s=120.0, wind_mps=20.0)
+        names = {"pf_proposed": ("pf", {"ira_formula": "proposed", "terrain_model_sigma_m": 1.0}),
+                 "pf_conventional": ("pf", {"ira_formula": "conventional", "terrain_model_sigma_m": 1.0})}
+        res = monte_carlo(args.crosswind_runs, 120.0, 30.0, names, flight=flight, map_world=True, seed0=2000)
+        cw = {}
+        for k, v in res.items():
+            e2 = np.concatenate([np.sum(r["err"][r["t"] >= 30.0] ** 2, axis=1) for r in v])
+            cw[k] = {"runs": len(v), "horizontal_rms_m_t_ge_30s": float(np.sqrt(np.mean(e2)))}
+        cw["ratio_conventional_over_proposed"] = (cw["pf_conventional"]["horizontal_rms_m_t_ge_30s"]
+                                                  / cw["pf_proposed"]["horizontal_rms_m_t_ge_30s"])
+        v = flight[1]
+        crab = [math.degrees(math.atan2(c.v_ned_mps[-1, 1], c.v_ned_mps[-1, 0]) - c.yaw_rad[-1])
+                for c in v[30:]]
+        cw["median_crab_deg"] = float(np.median(np.abs(crab)))
+        figures["crosswind"] = cw
+        print(json.dumps({"crosswind": cw}, indent=1), flush=True)
+    figures["wall_s"] = time.time() - t0
+    if args.out:
+        Path(args.out).write_text(json.dumps(figures, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
