@@ -1,0 +1,63 @@
+"""Navigator integrity figures of a run (estimate vs truth): how long the navigator declared itself
+healthy, and how much of that time its true error lay outside its own 3 sigma (misleading information).
+
+Pure functions of logged arrays, so summary.json and offline studies share them. (trn_env/output/metrics.py
+carries the campaign metrics; these two are meant to join them there.)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+HEALTHY_STATUSES = ("ok",)
+
+
+def integrity_metrics(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarray, status: np.ndarray,
+                      k_sigma: float = 3.0) -> dict:
+    """fraction_healthy: time share of rows whose Health.status is "ok"; misleading_information_fraction:
+    share of that healthy time with the north or east error outside k_sigma times its own sigma;
+    misleading_information_time_s: that time in seconds. Row i holds for t[i] - t[i-1] (row 0: nothing)."""
+    t = np.asarray(t_s, float)
+    if t.size < 2:
+        return {"fraction_healthy": None, "misleading_information_fraction": None,
+                "misleading_information_time_s": 0.0}
+    w = np.diff(t, prepend=t[0])
+    healthy = np.isin(np.asarray(status).astype(str), HEALTHY_STATUSES)
+    sig = np.sqrt(np.clip(np.asarray(cov_diag, float)[:, :2], 0.0, None))
+    err = np.asarray(err_ned_m, float)[:, :2]
+    outside = np.any(~(np.abs(err) <= k_sigma * sig), axis=1)
+    total = float(w.sum())
+    t_healthy = float(w[healthy].sum())
+    t_mi = float(w[healthy & outside].sum())
+    return {
+        "fraction_healthy": t_healthy / total if total > 0 else None,
+        "misleading_information_fraction": t_mi / t_healthy if t_healthy > 0 else None,
+        "misleading_information_time_s": t_mi,
+    }
+
+
+def first_time(t_s: np.ndarray, mask: np.ndarray) -> float | None:
+    """The first time where mask is True (None if never)."""
+    m = np.asarray(mask, bool)
+    return float(np.asarray(t_s)[np.argmax(m)]) if m.any() else None
+
+
+def flag_before_error(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarray, status: np.ndarray,
+                      t_from_s: float = 0.0, k_sigma: float = 3.0) -> dict:
+    """For a navigator meeting a fault at t_from_s: the first time after it that the navigator flagged
+    itself (status not "ok"), the first time its error left k_sigma sigma, and whether the flag came first
+    (or the error never left: True; neither: None)."""
+    t = np.asarray(t_s, float)
+    after = t >= t_from_s
+    sig = np.sqrt(np.clip(np.asarray(cov_diag, float)[:, :2], 0.0, None))
+    outside = np.any(~(np.abs(np.asarray(err_ned_m, float)[:, :2]) <= k_sigma * sig), axis=1)
+    flagged = ~np.isin(np.asarray(status).astype(str), HEALTHY_STATUSES)
+    t_flag = first_time(t, after & flagged)
+    t_err = first_time(t, after & outside)
+    if t_err is None:
+        first = True
+    elif t_flag is None:
+        first = False
+    else:
+        first = t_flag <= t_err
+    return {"t_flag_s": t_flag, "t_error_outside_s": t_err, "flag_first": first}
