@@ -53,6 +53,7 @@ from navigators.frames import SensorFrames
 from navigators.protocol import Estimate
 from terrain.geodesy import WGS84_A_M, WGS84_E2
 from terrain.kernels import bilinear
+from terrain.queries import _ra_batch, _ra_tables, _ra_workspace
 
 SOURCE_GNSS = 0
 SOURCE_NAVIGATOR = 1
@@ -203,22 +204,33 @@ class DemMonitorConfig:
         return chi2_threshold(self.false_alarm_probability, int(self.n_window))
 
 
-@dataclass
 class MonitorOutput:
-    """One update's monitor epochs (arrays of equal length, possibly empty): time (s), absolute disparity
-    p (m, eq 2), successive disparity s (m, eq 3), sigma (m), the statistic (eq 4 or 5; NaN until the
-    window holds N epochs), its threshold, alarm, and the height source (SOURCE_GNSS / SOURCE_NAVIGATOR).
-    `events`: (t_s, message) of alarms raised and cleared."""
+    """One update's monitor epochs (possibly none): `rows` (m, 7) = time (s), absolute disparity p (m, eq 2),
+    successive disparity s (m, eq 3), sigma (m), the statistic (eq 4 or 5; NaN until the window holds N
+    epochs), alarm (0/1), height source (SOURCE_GNSS / SOURCE_NAVIGATOR); the columns are also attributes.
+    `threshold`; `events`: (t_s, message) of alarms raised and cleared."""
 
-    t_s: np.ndarray
-    disparity_m: np.ndarray
-    successive_m: np.ndarray
-    sigma_m: np.ndarray
-    statistic: np.ndarray
-    threshold: float
-    alarm: np.ndarray
-    source: np.ndarray
-    events: list
+    __slots__ = ("rows", "threshold", "events")
+    COLUMNS = ("t_s", "disparity_m", "successive_m", "sigma_m", "statistic", "alarm", "source")
+
+    def __init__(self, rows: np.ndarray, threshold: float, events: list):
+        self.rows = rows
+        self.threshold = threshold
+        self.events = events
+
+    def __getstate__(self):
+        return self.rows, self.threshold, self.events
+
+    def __setstate__(self, state):
+        self.rows, self.threshold, self.events = state
+
+    t_s = property(lambda self: self.rows[:, 0])
+    disparity_m = property(lambda self: self.rows[:, 1])
+    successive_m = property(lambda self: self.rows[:, 2])
+    sigma_m = property(lambda self: self.rows[:, 3])
+    statistic = property(lambda self: self.rows[:, 4])
+    alarm = property(lambda self: self.rows[:, 5] > 0.5)
+    source = property(lambda self: self.rows[:, 6].astype(np.int8))
 
     @property
     def source_names(self) -> list[str]:
@@ -233,7 +245,7 @@ def _radii(lat):
 
 
 @njit(cache=True)
-def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, vn_g, ve_g, vd_g, ok_g, est, heights, lat0, lon0,
+def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
                   dlat, dlon, cfg, state, out):
     """Pick the frame's monitor epochs (one valid radar-altimeter sample per period) and their positions:
     rows [t, lat, lon, h, measured range, nadir map height, height-source variance, source] into `out`;
@@ -265,7 +277,7 @@ def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, vn_g, ve_g, vd_g, ok
         if best >= 0:
             dt = t - t_g[best]
             lat, lon, h = lat_g[best], lon_g[best], h_g[best]
-            vn, ve, vd = vn_g[best], ve_g[best], vd_g[best]
+            vn, ve, vd = v_g[best, 0], v_g[best, 1], v_g[best, 2]
             var_pos = cfg[6] * cfg[6]
             src = 0
         else:
@@ -311,7 +323,7 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, out):
     """Eqs 1-5 over the epochs `rows` (_epoch_kernel's); r_map: the map's predicted radar-altimeter range
     at each epoch (beam model "cone") or an empty array (nadir: eq 2's map height under the position).
     Writes [t, p, s, sigma, T, alarm, source] into `out`.
-    state: [next epoch time, count, ring position, last p, kf x, kf P]; ring (N, 2): p^2/sigma^2, x^2/P."""
+    state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 2): p^2/sigma^2, x^2/P."""
     n_win = int(cfg[0])
     sig_map2 = cfg[3] * cfg[3]
     kalman = cfg[8] > 0.5
@@ -361,6 +373,8 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, out):
         out[m, 3] = math.sqrt(var)
         out[m, 4] = tot
         out[m, 5] = 1.0 if tot > thr else 0.0
+        if out[m, 5] > 0.0:
+            state[6] = 1.0                             # an alarm epoch in this update
         out[m, 6] = rows[i, 7]
         m += 1
     return m
@@ -404,8 +418,58 @@ def kalman_terms(p, var, q_ratio):
     return out
 
 
+@njit(cache=True)
+def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
+                   dlat, dlon, cfg, state, ring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max, blk_lb,
+                   blk_id):
+    """One monitor update in one call: the epochs (_epoch_kernel), with the beam model the map's own
+    radar-altimeter return at each (terrain.queries' exact cone search, the body down axis of the estimate's
+    roll/pitch/yaw in cfg[11:14]), then the statistic (_statistic_kernel). Returns the rows written."""
+    m = _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0,
+                      lon0, dlat, dlon, cfg, state, rows)
+    if m == 0:
+        return 0
+    if not cone:
+        return _statistic_kernel(rows[:m], rows[:0, 0], cfg, state, ring, out)
+    cr, sr = math.cos(est[11]), math.sin(est[11])
+    cp, sp = math.cos(est[12]), math.sin(est[12])
+    cy, sy = math.cos(est[13]), math.sin(est[13])
+    C = np.empty((m, 3, 3))
+    lat = np.empty(m)
+    lon = np.empty(m)
+    h = np.empty(m)
+    for i in range(m):
+        lat[i] = rows[i, 1]
+        lon[i] = rows[i, 2]
+        h[i] = rows[i, 3] - cfg[2]
+        # body-to-NED DCM, yaw-pitch-roll (only its third column, the beam axis, is used by the search)
+        C[i, 0, 0] = cp * cy
+        C[i, 0, 1] = sr * sp * cy - cr * sy
+        C[i, 0, 2] = cr * sp * cy + sr * sy
+        C[i, 1, 0] = cp * sy
+        C[i, 1, 1] = sr * sp * sy + cr * cy
+        C[i, 1, 2] = cr * sp * sy - sr * cy
+        C[i, 2, 0] = -sp
+        C[i, 2, 1] = sr * cp
+        C[i, 2, 2] = cr * cp
+    valid = np.zeros(m, np.bool_)
+    rng = np.empty(m)
+    la = np.empty(m)
+    lo = np.empty(m)
+    hh = np.empty(m)
+    _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax, bmin, h_min,
+              h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
+    for i in range(m):
+        if not valid[i]:
+            rng[i] = np.nan
+    return _statistic_kernel(rows[:m], rng, cfg, state, ring, out)
+
+
 _EMPTY = np.zeros(0)
 _EMPTY_B = np.zeros(0, np.bool_)
+_EMPTY3 = np.zeros((0, 3))
+_EMPTY_I = np.zeros(0, np.int64)
+_NO_TABLES = (1, np.zeros((1, 1)), np.zeros((1, 1)), 0.0, 0.0, 1.0)
 
 
 class DemIntegrityMonitor:
@@ -414,6 +478,7 @@ class DemIntegrityMonitor:
     skipped without it) and uses frames.gnss while fixes are there."""
 
     name = "dem_integrity"
+    _NONE = np.zeros((0, 7))
 
     def __init__(self, dem=None, **settings):
         if dem is None:
@@ -428,52 +493,56 @@ class DemIntegrityMonitor:
         self._cfg = np.array([c.n_window, c.sample_period_s, c.lever_arm_m, c.map_sigma_m,
                               c.radar_altimeter_noise_const_m, c.radar_altimeter_noise_fraction,
                               c.gnss_vertical_sigma_m, c.gnss_max_age_s, 1.0 if c.variant == "kalman" else 0.0,
-                              c.kf_process_ratio, self.threshold], float)
-        self._est = np.zeros(11)
+                              c.kf_process_ratio, self.threshold, 0.0, 0.0, 0.0,
+                              math.radians(c.beam_half_angle_deg), c.max_range_m], float)
+        self._est = np.zeros(14)
         self._rows = np.empty((64, 8))
         self._out = np.empty((64, 7))
         self._half_beam = math.radians(c.beam_half_angle_deg)
         self.reset()
 
     def reset(self) -> None:
-        self._state = np.array([-np.inf, 0.0, 0.0, np.nan, 0.0, 1.0])
+        self._state = np.array([-np.inf, 0.0, 0.0, np.nan, 0.0, 1.0, 0.0])
         self._ring = np.zeros((int(self.config.n_window), 2))
         self._alarm = False
 
     def update(self, frames: SensorFrames, estimate: Estimate) -> MonitorOutput:
         ra = frames.radar_altimeter
         if ra is None or ra.t_s.shape[0] == 0:
-            return self._empty()
+            return MonitorOutput(self._NONE, self.threshold, [])
         g = frames.gnss
         if g is not None and g.t_s.shape[0]:
-            gv = g.v_ned_mps
-            gargs = (g.t_s, g.lat_rad, g.lon_rad, g.h_m, gv[:, 0], gv[:, 1], gv[:, 2], g.valid)
+            gargs = (g.t_s, g.lat_rad, g.lon_rad, g.h_m, g.v_ned_mps, g.valid)
         else:
-            gargs = (_EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY_B)
+            gargs = (_EMPTY, _EMPTY, _EMPTY, _EMPTY, _EMPTY3, _EMPTY_B)
         e = self._est
         c = estimate.covariance
         v = estimate.v_ned_mps
         e[0], e[1], e[2], e[3] = estimate.t_s, estimate.lat_rad, estimate.lon_rad, estimate.h_m
         e[4], e[5], e[6] = v[0], v[1], v[2]
         e[7], e[8], e[9], e[10] = c[0, 0], c[0, 1], c[1, 1], c[2, 2]
+        e[11], e[12], e[13] = estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad
         n = ra.t_s.shape[0]
         if self._out.shape[0] < n:
             self._out = np.empty((n, 7))
             self._rows = np.empty((n, 8))
         heights, lat0, lon0, dlat, dlon = self.dem.grid
-        m = _epoch_kernel(ra.t_s, ra.range_m, ra.valid, *gargs, e, heights, lat0, lon0, dlat, dlon,
-                          self._cfg, self._state, self._rows)
+        cone = self._half_beam > 0.0
+        if cone:        # the map's search tables (cached on the Dem, rebuilt when its heights change)
+            bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(self.dem)
+            lb, ids = _ra_workspace(bmax.size)
+        else:
+            bs, bmax, bmin, h_min, h_max, cell_m = _NO_TABLES
+            lb, ids = _EMPTY, _EMPTY_I
+        m = _update_kernel(ra.t_s, ra.range_m, ra.valid, *gargs, e, heights, lat0, lon0, dlat, dlon, self._cfg,
+                           self._state, self._ring, self._rows, self._out, cone, cell_m, bs, bmax, bmin, h_min,
+                           h_max, lb, ids)
         if m == 0:
-            return self._empty()
-        epochs = self._rows[:m]
-        r_map = _EMPTY
-        if self._half_beam > 0.0:
-            r_map = self._map_ranges(epochs, estimate)
-        m = _statistic_kernel(epochs, r_map, self._cfg, self._state, self._ring, self._out)
-        rows = self._out[:m]
-        alarm = rows[:, 5] > 0.5
+            return MonitorOutput(self._NONE, self.threshold, [])
+        rows = self._out[:m].copy()
         events = []
-        if m and (alarm.any() or self._alarm):
+        if self._alarm or self._state[6] > 0.0:       # an alarm was on or came on in this update
+            alarm = rows[:, 5] > 0.5
             flips = np.flatnonzero(np.diff(np.r_[self._alarm, alarm].astype(np.int8)))
             for k in flips:
                 t_k = float(rows[k, 0])
@@ -483,32 +552,18 @@ class DemIntegrityMonitor:
                 else:
                     events.append((t_k, f"DEM integrity alarm cleared: T={rows[k, 4]:.1f}"))
             self._alarm = bool(alarm[-1])
-        return MonitorOutput(rows[:, 0].copy(), rows[:, 1].copy(), rows[:, 2].copy(), rows[:, 3].copy(),
-                             rows[:, 4].copy(), self.threshold, alarm, rows[:, 6].astype(np.int8), events)
-
-    def _map_ranges(self, epochs: np.ndarray, estimate: Estimate) -> np.ndarray:
-        """The map's radar-altimeter range at each epoch's position (shortest range inside the beam cone
-        around the body down axis of the estimate's attitude; terrain.queries, exact); NaN: no return."""
-        from terrain import queries
-        from terrain.geodesy import euler_to_C_bn
-        C = euler_to_C_bn(estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad)
-        ret = queries.radar_altimeter_return(self.dem, epochs[:, 1], epochs[:, 2],
-                                             epochs[:, 3] - self.config.lever_arm_m, C,
-                                             self._half_beam, self.config.max_range_m)
-        return np.where(ret.valid, ret.range_m, np.nan)
-
-    def _empty(self) -> MonitorOutput:
-        z = np.zeros(0)
-        return MonitorOutput(z, z, z, z, z, self.threshold, np.zeros(0, bool), np.zeros(0, np.int8), [])
+            self._state[6] = 0.0
+        return MonitorOutput(rows, self.threshold, events)
 
 
 def concatenate(outputs: list[MonitorOutput]) -> dict[str, np.ndarray]:
     """Arrays of a run's monitor outputs, concatenated: t_s, disparity_m, successive_m, sigma_m, statistic,
-    threshold, alarm, source."""
-    keys = ("t_s", "disparity_m", "successive_m", "sigma_m", "statistic", "alarm", "source")
-    out = {k: (np.concatenate([getattr(o, k) for o in outputs]) if outputs else np.zeros(0)) for k in keys}
-    thr = outputs[0].threshold if outputs else float("nan")
-    out["threshold"] = np.full(out["t_s"].shape, thr)
+    alarm (bool), source (int8), threshold."""
+    rows = np.concatenate([o.rows for o in outputs]) if outputs else np.zeros((0, 7))
+    out = {k: rows[:, i].copy() for i, k in enumerate(MonitorOutput.COLUMNS)}
+    out["alarm"] = out["alarm"] > 0.5
+    out["source"] = out["source"].astype(np.int8)
+    out["threshold"] = np.full(rows.shape[0], outputs[0].threshold if outputs else np.nan)
     return out
 
 
