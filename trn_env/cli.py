@@ -158,7 +158,11 @@ def _plotter(result):
         title = f"{sc.name} / {sc.navigator_name} / seed {sc.seed}: {result.termination}"
         plots.plot_track(tmp / "track.png", result.world_dem, result.arrays, title=title, waypoints_deg=wps)
         plots.plot_errors(tmp / "errors.png", result.arrays, title=title)
-        return ["track.png", "errors.png"]
+        files = ["track.png", "errors.png"]
+        for name in sorted(result.summary.get("monitors", {})):      # seed 003-style statistic plots
+            plots.plot_integrity(tmp / f"{name}.png", result.arrays, name, title=title)
+            files.append(f"{name}.png")
+        return files
 
     return plot
 

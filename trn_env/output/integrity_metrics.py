@@ -10,19 +10,29 @@ from __future__ import annotations
 import numpy as np
 
 HEALTHY_STATUSES = ("ok",)
+# the log's nav_status_code values (trn_env.sim.log.NAV_STATUS_CODES): 0 is "ok"
+HEALTHY_CODE = 0
+
+
+def _healthy(status: np.ndarray) -> np.ndarray:
+    """Healthy rows from Health.status words or the log's nav_status_code integers."""
+    st = np.asarray(status)
+    if st.dtype.kind in "iu":
+        return st == HEALTHY_CODE
+    return np.isin(st.astype(str), HEALTHY_STATUSES)
 
 
 def integrity_metrics(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarray, status: np.ndarray,
                       k_sigma: float = 3.0) -> dict:
-    """fraction_healthy: time share of rows whose Health.status is "ok"; misleading_information_fraction:
-    share of that healthy time with the north or east error outside k_sigma times its own sigma;
+    """fraction_healthy: time share of rows whose Health.status is "ok"; status: Health.status words or
+    the log's nav_status_code; misleading_information_fraction: share of that healthy time with the north or east error outside k_sigma times its own sigma;
     misleading_information_time_s: that time in seconds. Row i holds for t[i] - t[i-1] (row 0: nothing)."""
     t = np.asarray(t_s, float)
     if t.size < 2:
         return {"fraction_healthy": None, "misleading_information_fraction": None,
                 "misleading_information_time_s": 0.0}
     w = np.diff(t, prepend=t[0])
-    healthy = np.isin(np.asarray(status).astype(str), HEALTHY_STATUSES)
+    healthy = _healthy(status)
     sig = np.sqrt(np.clip(np.asarray(cov_diag, float)[:, :2], 0.0, None))
     err = np.asarray(err_ned_m, float)[:, :2]
     outside = np.any(~(np.abs(err) <= k_sigma * sig), axis=1)
@@ -51,7 +61,7 @@ def flag_before_error(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarr
     after = t >= t_from_s
     sig = np.sqrt(np.clip(np.asarray(cov_diag, float)[:, :2], 0.0, None))
     outside = np.any(~(np.abs(np.asarray(err_ned_m, float)[:, :2]) <= k_sigma * sig), axis=1)
-    flagged = ~np.isin(np.asarray(status).astype(str), HEALTHY_STATUSES)
+    flagged = ~_healthy(status)
     t_flag = first_time(t, after & flagged)
     t_err = first_time(t, after & outside)
     if t_err is None:

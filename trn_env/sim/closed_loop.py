@@ -465,9 +465,6 @@ class ClosedLoop:
                 arrays.update({f"monitor_{name}_{k}": v for k, v in mon.items()})
                 summary["monitors"][name] = alarm_summary(mon)
         summary["map_faults"] = list(self.scenario.extras.get("map_faults", []))
-        from trn_env.output.integrity_metrics import integrity_metrics
-        summary.update(integrity_metrics(arrays["t_s"], arrays["err_ned_m"], arrays["est_cov_diag"],
-                                         arrays["nav_status"]))
         summary["wall_time_by_stage_s"] = {k: round(v, 4) for k, v in self.stage_s.items()}
         summary["pipelined"] = self.pipelined
         summary["navigator_latency_updates"] = self.latency_updates
@@ -494,7 +491,7 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
     step = np.hypot(np.diff(a["true_lat_rad"]) * 6.371e6,
                     np.diff(a["true_lon_rad"]) * 6.371e6 * np.cos(a["true_lat_rad"][:-1]))
     within3 = (np.abs(err[:, 0]) <= 3 * sig[:, 0]) & (np.abs(err[:, 1]) <= 3 * sig[:, 1])
-    return {
+    out = {
         "scenario": scenario.name,
         "seed": scenario.seed,
         "navigator": scenario.navigator_name,
@@ -522,6 +519,10 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "scenario_source": scenario.source,
         "duration_limit_s": scenario.duration_s,
     }
+    if "nav_status_code" in a:   # fraction healthy, misleading information (trn_env.output.integrity_metrics)
+        from trn_env.output.integrity_metrics import integrity_metrics
+        out.update(integrity_metrics(t, err, a["est_cov_diag"], a["nav_status_code"]))
+    return out
 
 
 def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:

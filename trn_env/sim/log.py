@@ -21,6 +21,10 @@ _TRUTH_ROW = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "v_n", "v_e", "v_d", "roll
               "tas_mps", "alpha_rad", "beta_rad", "wind_n", "wind_e", "wind_d")
 
 
+# nav_status_code in the arrays: the index of the estimate's Health.status here (len: any other word)
+NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost")
+
+
 @dataclass
 class SimLog:
     """In-memory log: per-tick truth rows and estimates, full-rate sensor readings, events.
@@ -80,6 +84,9 @@ class SimLog:
                  "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok", "nav_status")
         for name, col in zip(names, cols, strict=True):
             out[name] = np.array(col)
+        status = out.pop("nav_status")
+        out["nav_status_code"] = np.array([NAV_STATUS_CODES.index(x) if x in NAV_STATUS_CODES
+                                           else len(NAV_STATUS_CODES) for x in status], np.int8)
         out["est_cov_diag"] = np.diagonal(out["est_cov"], axis1=1, axis2=2).copy()
         out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
                                        out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])
