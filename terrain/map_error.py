@@ -259,8 +259,8 @@ class MapFault:
 
     def describe(self) -> dict:
         """The fault as plain data (for summary.json)."""
-        out = {k: getattr(self, k) for k in ("kind", "center_lat_deg", "center_lon_deg", "size_n_m", "size_e_m",
-                                             "start_s")}
+        keys = ("kind", "center_lat_deg", "center_lon_deg", "size_n_m", "size_e_m", "start_s")
+        out = {k: getattr(self, k) for k in keys}
         if self.kind in ("bias", "ramp", "spike"):
             out["bias_m"] = self.bias_m
         if self.kind == "ramp":
@@ -296,8 +296,9 @@ def _region_index(dem: Dem, fault: MapFault):
     j0 = int(np.ceil((lon_c - half_lon - dem.lon0_rad) / dem.dlon_rad - 1e-9))
     j1 = int(np.floor((lon_c + half_lon - dem.lon0_rad) / dem.dlon_rad + 1e-9))
     if i1 < i0 or j1 < j0:
+        dn, de = dem.spacing_m
         raise ValueError(f"size_n_m, size_e_m: the fault region {fault.size_n_m} x {fault.size_e_m} m holds "
-                         f"no post of the map (post spacing {dem.spacing_m[0]:.0f} x {dem.spacing_m[1]:.0f} m)")
+                         f"no post of the map (post spacing {dn:.0f} x {de:.0f} m)")
     rows, cols = slice(i0, i1 + 1), slice(j0, j1 + 1)
     north = ((dem.lat0_rad + np.arange(i0, i1 + 1) * dem.dlat_rad) - lat_c)[:, None] * r_n
     east = ((dem.lon0_rad + np.arange(j0, j1 + 1) * dem.dlon_rad) - lon_c)[None, :] * r_e

@@ -1,5 +1,5 @@
-"""The DEM integrity monitor and the navigator's integrity in closed loop (tests/scenarios/integrity_short.toml:
-100 s over a 60 m map bias patch that appears at 30 s): the alarm comes after the aircraft reaches the patch
+"""The DEM integrity monitor and the navigator's integrity in closed loop
+(tests/scenarios/integrity_short.toml: 100 s over a 60 m map bias patch that appears at 30 s): the alarm comes after the aircraft reaches the patch
 and within 50 epochs of it, never before; no alarm without the fault; the pipelined and inline loops agree
 bit for bit; the EKF's innovation keys are consistent; summary.json carries the figures."""
 
@@ -39,8 +39,8 @@ def _entry_time(sc, res) -> float:
     a = res.arrays
     inside = []
     for lat, lon in zip(a["true_lat_rad"], a["true_lon_rad"], strict=True):
-        dn, de = latlon_to_ned_offset(math.radians(f["center_lat_deg"]), math.radians(f["center_lon_deg"]), 0.0,
-                                      lat, lon)
+        lat_c, lon_c = math.radians(f["center_lat_deg"]), math.radians(f["center_lon_deg"])
+        dn, de = latlon_to_ned_offset(lat_c, lon_c, 0.0, lat, lon)
         inside.append(abs(dn) <= f["size_n_m"] / 2 and abs(de) <= f["size_e_m"] / 2)
     inside = np.array(inside) & (a["t_s"] >= f["start_s"])
     assert inside.any()

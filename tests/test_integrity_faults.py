@@ -138,7 +138,8 @@ def test_scenario_with_faults_and_monitor_validates():
     ({"monitors.dem_integrity.sigma_m": -2.0}, "monitors.dem_integrity.sigma_m"),
     ({"monitors.dem_integrity.threshold": 0.0}, "monitors.dem_integrity.threshold"),
     ({"monitors.dem_integrity.threshold": None,
-      "monitors.dem_integrity.false_alarm_probability": 1.5}, "monitors.dem_integrity.false_alarm_probability"),
+      "monitors.dem_integrity.false_alarm_probability": 1.5},
+     "monitors.dem_integrity.false_alarm_probability"),
     ({"sensors.radar_altimeter": None}, "monitors.dem_integrity: needs a radar altimeter"),
 ])
 def test_bad_scenario_names_the_field(changes, field):

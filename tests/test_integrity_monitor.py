@@ -46,7 +46,8 @@ def _flight(dem: Dem, n_s: int, rate_hz: float, noise_m: float, seed: int, agl_m
         ra = RadarAltimeterFrame(t, r, np.ones(t.size, bool))
         est = Estimate(float(t[-1]), float(lat[-1]), lon0, float(h[-1]), np.array([80.0, 0.0, 0.0]), 0.0, 0.0,
                        0.0, np.eye(9))
-        frames.append((SensorFrames(float(k), float(k + 1), radar_altimeter=ra, gnss=g), est, t, lat, lon, h, r))
+        fr = SensorFrames(float(k), float(k + 1), radar_altimeter=ra, gnss=g)
+        frames.append((fr, est, t, lat, lon, h, r))
     return frames
 
 
@@ -164,8 +165,8 @@ def test_60m_bias_detected_within_50_samples():
 
 
 def test_beam_model_matches_the_maps_own_cone_return():
-    """With beam_half_angle_deg the disparity of a range equal to the map's exact cone return (terrain.queries,
-    the estimate's attitude) is zero, and the nadir model sees the beam's shortening as a positive bias."""
+    """With beam_half_angle_deg the disparity of a range equal to the map's exact cone return
+    (terrain.queries, the estimate's attitude) is zero, and the nadir model sees the beam's shortening as a positive bias."""
     dem = _rough_dem(2)
     roll, pitch, yaw = 0.03, -0.02, 0.4
     C = euler_to_C_bn(roll, pitch, yaw)
@@ -190,7 +191,7 @@ def test_navigator_source_when_gnss_is_denied():
     out = mon.update(frames, est)
     assert out.source_names == ["navigator"]
     # the estimate is at t[-1]; the epoch at t[0] is its dead-reckoned position there
-    assert out.disparity_m[0] == pytest.approx(h[-1] - 80.0 * 0.0 - r[0] - dem.height(lat[0], lon[0]), abs=0.5)
+    assert out.disparity_m[0] == pytest.approx(h[-1] - r[0] - dem.height(lat[0], lon[0]), abs=0.5)
     assert out.sigma_m[0] > math.sqrt(100.0 + 64.0) - 1e-9
 
 

@@ -623,7 +623,8 @@ class InsTrnNavigator:
         else:
             self.health.status = "ok"
             self._set_search(self.nominal_half_cells)
-            self.health.events.append((t_s, f"recovery ended: TERCOM search back to +-{self.half_cells} cells"))
+            self.health.events.append(
+                (t_s, f"recovery ended: TERCOM search back to +-{self.half_cells} cells"))
 
     def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
         self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)

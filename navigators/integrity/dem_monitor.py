@@ -186,7 +186,8 @@ class DemMonitorConfig:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(settings) - known)
         if unknown:
-            raise ValueError(f"{unknown[0]}: unknown setting of dem_integrity (known: {', '.join(sorted(known))})")
+            raise ValueError(f"{unknown[0]}: unknown setting of dem_integrity "
+                             f"(known: {', '.join(sorted(known))})")
         return cls(**settings)
 
     @property
@@ -323,7 +324,8 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, out):
     """Eqs 1-5 over the epochs `rows` (_epoch_kernel's); r_map: the map's predicted radar-altimeter range
     at each epoch (beam model "cone") or an empty array (nadir: eq 2's map height under the position).
     Writes [t, p, s, sigma, T, alarm, source] into `out`.
-    state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 2): p^2/sigma^2, x^2/P."""
+    state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 2): the terms
+    p^2/sigma^2 and x^2/P."""
     n_win = int(cfg[0])
     sig_map2 = cfg[3] * cfg[3]
     kalman = cfg[8] > 0.5
@@ -420,8 +422,8 @@ def kalman_terms(p, var, q_ratio):
 
 @njit(cache=True)
 def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
-                   dlat, dlon, cfg, state, ring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max, blk_lb,
-                   blk_id):
+                   dlat, dlon, cfg, state, ring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max,
+                   blk_lb, blk_id):
     """One monitor update in one call: the epochs (_epoch_kernel), with the beam model the map's own
     radar-altimeter return at each (terrain.queries' exact cone search, the body down axis of the estimate's
     roll/pitch/yaw in cfg[11:14]), then the statistic (_statistic_kernel). Returns the rows written."""
@@ -457,8 +459,8 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     la = np.empty(m)
     lo = np.empty(m)
     hh = np.empty(m)
-    _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax, bmin, h_min,
-              h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
+    _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax, bmin,
+              h_min, h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan
@@ -492,7 +494,8 @@ class DemIntegrityMonitor:
         self.threshold = c.effective_threshold
         self._cfg = np.array([c.n_window, c.sample_period_s, c.lever_arm_m, c.map_sigma_m,
                               c.radar_altimeter_noise_const_m, c.radar_altimeter_noise_fraction,
-                              c.gnss_vertical_sigma_m, c.gnss_max_age_s, 1.0 if c.variant == "kalman" else 0.0,
+                              c.gnss_vertical_sigma_m, c.gnss_max_age_s,
+                              1.0 if c.variant == "kalman" else 0.0,
                               c.kf_process_ratio, self.threshold, 0.0, 0.0, 0.0,
                               math.radians(c.beam_half_angle_deg), c.max_range_m], float)
         self._est = np.zeros(14)
@@ -534,9 +537,9 @@ class DemIntegrityMonitor:
         else:
             bs, bmax, bmin, h_min, h_max, cell_m = _NO_TABLES
             lb, ids = _EMPTY, _EMPTY_I
-        m = _update_kernel(ra.t_s, ra.range_m, ra.valid, *gargs, e, heights, lat0, lon0, dlat, dlon, self._cfg,
-                           self._state, self._ring, self._rows, self._out, cone, cell_m, bs, bmax, bmin, h_min,
-                           h_max, lb, ids)
+        m = _update_kernel(ra.t_s, ra.range_m, ra.valid, *gargs, e, heights, lat0, lon0, dlat, dlon,
+                           self._cfg, self._state, self._ring, self._rows, self._out, cone, cell_m, bs, bmax,
+                           bmin, h_min, h_max, lb, ids)
         if m == 0:
             return MonitorOutput(self._NONE, self.threshold, [])
         rows = self._out[:m].copy()

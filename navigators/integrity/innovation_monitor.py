@@ -70,7 +70,8 @@ class InnovationMonitor:
         """(lower, upper) chi-square quantiles at alpha/2 and 1 - alpha/2 for `dof` degrees of freedom."""
         if dof not in self._bands:
             from scipy.stats import chi2
-            self._bands[dof] = (float(chi2.ppf(0.5 * self.alpha, dof)), float(chi2.isf(0.5 * self.alpha, dof)))
+            a = 0.5 * self.alpha
+            self._bands[dof] = (float(chi2.ppf(a, dof)), float(chi2.isf(a, dof)))
         return self._bands[dof]
 
     def add(self, t_s: float, nis: float, dof: int) -> Verdict:

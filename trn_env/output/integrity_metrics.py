@@ -25,7 +25,8 @@ def _healthy(status: np.ndarray) -> np.ndarray:
 def integrity_metrics(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarray, status: np.ndarray,
                       k_sigma: float = 3.0) -> dict:
     """fraction_healthy: time share of rows whose Health.status is "ok"; status: Health.status words or
-    the log's nav_status_code; misleading_information_fraction: share of that healthy time with the north or east error outside k_sigma times its own sigma;
+    the log's nav_status_code; misleading_information_fraction: share of that healthy time with the north
+    or east error outside k_sigma times its own sigma;
     misleading_information_time_s: that time in seconds. Row i holds for t[i] - t[i-1] (row 0: nothing)."""
     t = np.asarray(t_s, float)
     if t.size < 2:

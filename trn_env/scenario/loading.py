@@ -305,13 +305,14 @@ def _integrity_problems(d: dict) -> list[str]:
     """Map faults that appear after the flight's end; monitors without the sensor they need."""
     problems = []
     for i, f in enumerate(d["terrain"]["map"]["faults"]):
-        if isinstance(f, dict) and isinstance(f.get("start_s"), (int, float)) and f["start_s"] >= d["duration_s"]:
-            problems.append(f"terrain.map.faults[{i}].start_s: {f['start_s']} s is not before the scenario's end "
+        t = f.get("start_s") if isinstance(f, dict) else None
+        if isinstance(t, (int, float)) and t >= d["duration_s"]:
+            problems.append(f"terrain.map.faults[{i}].start_s: {t} s is not before the scenario's end "
                             f"(duration_s = {d['duration_s']} s)")
     mons = d["monitors"]
     if isinstance(mons, dict) and "dem_integrity" in mons and "radar_altimeter" not in d["sensors"]:
-        problems.append("monitors.dem_integrity: needs a radar altimeter (add a [sensors.radar_altimeter] table); "
-                        "seed 003 eq 1 synthesises the terrain height from it")
+        problems.append("monitors.dem_integrity: needs a radar altimeter (add a [sensors.radar_altimeter] "
+                        "table); seed 003 eq 1 synthesises the terrain height from it")
     return problems
 
 

@@ -112,7 +112,8 @@ class InlineNavStage:
             from terrain.map_error import set_heights
             t_fault, heights = self.map_schedule.pop(0)
             set_heights(self.map_dem, heights)
-            events.append((float(t_fault), "map", f"map fault appears in the navigator's map at {t_fault:g} s"))
+            events.append((float(t_fault), "map",
+                           f"map fault appears in the navigator's map at {t_fault:g} s"))
         t0 = clock()
         frames = gate_gnss(self.sensors.sample(chunk, self.world_dem), self.outages)
         t1 = clock()
