@@ -1,7 +1,8 @@
 """The DEM integrity monitor and the navigator's integrity in closed loop
-(tests/scenarios/integrity_short.toml: 100 s over a 60 m map bias patch that appears at 30 s): the alarm comes after the aircraft reaches the patch
-and within 50 epochs of it, never before; no alarm without the fault; the pipelined and inline loops agree
-bit for bit; the EKF's innovation keys are consistent; summary.json carries the figures."""
+(tests/scenarios/integrity_short.toml: 100 s over a 60 m map bias patch that appears at 30 s): the alarm
+comes after the aircraft reaches the patch and within 50 epochs of it, never before; no alarm without the
+fault; the pipelined and inline loops agree bit for bit; the EKF's innovation keys are consistent;
+summary.json carries the figures."""
 
 from __future__ import annotations
 

@@ -166,7 +166,8 @@ def test_60m_bias_detected_within_50_samples():
 
 def test_beam_model_matches_the_maps_own_cone_return():
     """With beam_half_angle_deg the disparity of a range equal to the map's exact cone return
-    (terrain.queries, the estimate's attitude) is zero, and the nadir model sees the beam's shortening as a positive bias."""
+    (terrain.queries, the estimate's attitude) is zero, and the nadir model sees the beam's shortening as a
+    positive bias."""
     dem = _rough_dem(2)
     roll, pitch, yaw = 0.03, -0.02, 0.4
     C = euler_to_C_bn(roll, pitch, yaw)
