@@ -19,7 +19,10 @@ from navigators.protocol import (
     EXTRA_NIS,
     EXTRA_NIS_DOF,
 )
+from navigators.integrity.dem_monitor import replay_log
+from navigators.registry import create_monitor
 from terrain.geodesy import latlon_to_ned_offset
+from trn_env.scenario.build import monitor_settings
 from trn_env.scenario.loading import load_scenario, read_scenario_file, validate
 from trn_env.sim.closed_loop import ClosedLoop
 
@@ -73,10 +76,17 @@ def test_no_alarm_without_the_fault_and_pipelined_equals_inline(faulted):
     assert np.nanmax(clean.arrays["monitor_dem_integrity_statistic"]) < 96.0
     assert clean.summary["map_faults"] == []
     sc, res = faulted
-    inline = ClosedLoop(sc, pipeline=False).run()
+    loop = ClosedLoop(sc, pipeline=False)
+    inline = loop.run()
     for k, v in res.arrays.items():
         if k.startswith("monitor_"):
             assert np.array_equal(v, inline.arrays[k], equal_nan=True), k
+    # the monitor on the run's log (as on a real flight's), with the map as it is after the fault appeared
+    mon = create_monitor("dem_integrity", dem=loop.map_dem, **monitor_settings(sc.data, "dem_integrity"))
+    replay = replay_log(mon, inline.arrays)
+    after = replay["t_s"] >= sc.data["terrain"]["map"]["faults"][0]["start_s"]
+    np.testing.assert_array_equal(replay["disparity_m"][after],
+                                  inline.arrays["monitor_dem_integrity_disparity_m"][after])
 
 
 def test_ekf_reports_its_innovation_under_the_protocol_keys():

@@ -587,3 +587,41 @@ def alarm_summary(arrays: dict[str, np.ndarray]) -> dict:
         "fraction_source_gnss": float(np.mean(src == SOURCE_GNSS)) if src.size else None,
         "fraction_source_navigator": float(np.mean(src == SOURCE_NAVIGATOR)) if src.size else None,
     }
+
+
+def replay_log(monitor: DemIntegrityMonitor, log: dict, period_s: float = 1.0) -> dict[str, np.ndarray]:
+    """Run a monitor over a recorded flight: `log` holds arrays named as trn_env's log.npz
+    (sensor_radar_altimeter_{t_s, range_m, valid}, sensor_gnss_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, valid}
+    if GNSS was recorded, and the estimates est_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, roll_rad, pitch_rad,
+    yaw_rad, cov}). The samples are handed over in intervals (a, b] of period_s (the closed loop's update
+    intervals at its default 1 Hz), each with the first estimate at or after b; returns `concatenate` of the outputs."""
+    from navigators.frames import GnssFrame, RadarAltimeterFrame
+    from navigators.protocol import Health
+    monitor.reset()
+    t_ra = np.asarray(log["sensor_radar_altimeter_t_s"], float)
+    has_g = "sensor_gnss_t_s" in log
+    t_g = np.asarray(log["sensor_gnss_t_s"], float) if has_g else np.zeros(0)
+    t_est = np.asarray(log["est_t_s"], float)
+    outs = []
+    t0 = (math.ceil(t_ra[0] / period_s) - 1.0) * period_s if t_ra.size else 0.0
+    edges = np.arange(t0, t_ra[-1] + period_s, period_s) if t_ra.size else np.zeros(0)
+    for a, b in zip(edges[:-1], edges[1:], strict=True):    # intervals (a, b], as the closed loop's
+        ka = np.searchsorted(t_ra, a, "right")
+        kb = np.searchsorted(t_ra, b, "right")
+        if kb == ka:
+            continue
+        ra = RadarAltimeterFrame(t_ra[ka:kb], np.asarray(log["sensor_radar_altimeter_range_m"])[ka:kb],
+                                 np.asarray(log["sensor_radar_altimeter_valid"])[ka:kb])
+        g = None
+        if has_g:
+            ga, gb = np.searchsorted(t_g, a, "right"), np.searchsorted(t_g, b, "right")
+            if gb > ga:
+                g = GnssFrame(*(np.asarray(log[f"sensor_gnss_{k}"])[ga:gb]
+                                for k in ("t_s", "lat_rad", "lon_rad", "h_m", "v_ned_mps", "valid")))
+        i = min(int(np.searchsorted(t_est, b - 1e-9, "left")), t_est.size - 1)
+        est = Estimate(float(t_est[i]), float(log["est_lat_rad"][i]), float(log["est_lon_rad"][i]),
+                       float(log["est_h_m"][i]), np.asarray(log["est_v_ned_mps"][i], float),
+                       float(log["est_roll_rad"][i]), float(log["est_pitch_rad"][i]), float(log["est_yaw_rad"][i]),
+                       np.asarray(log["est_cov"][i], float), Health())
+        outs.append(monitor.update(SensorFrames(float(a), float(b), radar_altimeter=ra, gnss=g), est))
+    return concatenate(outs)
