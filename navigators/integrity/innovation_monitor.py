@@ -33,6 +33,9 @@ from collections import deque
 from dataclasses import dataclass
 
 
+_BANDS: dict[tuple[float, int], tuple[float, float]] = {}   # (alpha, dof) -> band, shared
+
+
 @dataclass(frozen=True)
 class Verdict:
     """The test after one added NIS: the window's statistic and band, and whether it flags the navigator."""
@@ -60,7 +63,6 @@ class InnovationMonitor:
         self.two_sided = bool(two_sided)
         self._items: deque[tuple[float, int]] = deque(maxlen=self.window)
         self.degraded = False
-        self._bands: dict[int, tuple[float, float]] = {}
 
     def reset(self) -> None:
         self._items.clear()
@@ -68,11 +70,12 @@ class InnovationMonitor:
 
     def band(self, dof: int) -> tuple[float, float]:
         """(lower, upper) chi-square quantiles at alpha/2 and 1 - alpha/2 for `dof` degrees of freedom."""
-        if dof not in self._bands:
+        key = (self.alpha, dof)
+        if key not in _BANDS:
             from scipy.stats import chi2
             a = 0.5 * self.alpha
-            self._bands[dof] = (float(chi2.ppf(a, dof)), float(chi2.isf(a, dof)))
-        return self._bands[dof]
+            _BANDS[key] = (float(chi2.ppf(a, dof)), float(chi2.isf(a, dof)))
+        return _BANDS[key]
 
     def add(self, t_s: float, nis: float, dof: int) -> Verdict:
         """Add one update's NIS (a non-finite NIS counts as infinitely large: the update failed)."""
