@@ -53,7 +53,8 @@ def test_large_nis_flags_and_clears():
 
 
 def test_ekf_degrades_recovers_and_returns():
-    nav = InsTrnNavigator(aiding="ira", dem=terrain.load("jacksboro"), integrity_window=2, recovery_sigma_m=80.0)
+    nav = InsTrnNavigator(aiding="ira", dem=terrain.load("jacksboro"), integrity_window=2,
+                          recovery_sigma_m=80.0)
     nav.reset(Estimate(0.0, np.radians(36.5), np.radians(-84.3), 1500.0, np.array([80.0, 0.0, 0.0]), 0.0, 0.0,
                        0.0, initial_covariance()))
     p0 = nav.kf.P[:2, :2].copy()

@@ -594,7 +594,8 @@ def replay_log(monitor: DemIntegrityMonitor, log: dict, period_s: float = 1.0) -
     (sensor_radar_altimeter_{t_s, range_m, valid}, sensor_gnss_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, valid}
     if GNSS was recorded, and the estimates est_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, roll_rad, pitch_rad,
     yaw_rad, cov}). The samples are handed over in intervals (a, b] of period_s (the closed loop's update
-    intervals at its default 1 Hz), each with the first estimate at or after b; returns `concatenate` of the outputs."""
+    intervals at its default 1 Hz), each with the first estimate at or after b; returns `concatenate` of
+    the outputs."""
     from navigators.frames import GnssFrame, RadarAltimeterFrame
     from navigators.protocol import Health
     monitor.reset()
@@ -621,7 +622,8 @@ def replay_log(monitor: DemIntegrityMonitor, log: dict, period_s: float = 1.0) -
         i = min(int(np.searchsorted(t_est, b - 1e-9, "left")), t_est.size - 1)
         est = Estimate(float(t_est[i]), float(log["est_lat_rad"][i]), float(log["est_lon_rad"][i]),
                        float(log["est_h_m"][i]), np.asarray(log["est_v_ned_mps"][i], float),
-                       float(log["est_roll_rad"][i]), float(log["est_pitch_rad"][i]), float(log["est_yaw_rad"][i]),
+                       float(log["est_roll_rad"][i]), float(log["est_pitch_rad"][i]),
+                       float(log["est_yaw_rad"][i]),
                        np.asarray(log["est_cov"][i], float), Health())
         outs.append(monitor.update(SensorFrames(float(a), float(b), radar_altimeter=ra, gnss=g), est))
     return concatenate(outs)

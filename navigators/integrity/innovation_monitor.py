@@ -32,7 +32,6 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-
 _BANDS: dict[tuple[float, int], tuple[float, float]] = {}   # (alpha, dof) -> band, shared
 
 
