@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from navigators.integrity.dem_monitor import replay_log
 from navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
@@ -19,7 +20,6 @@ from navigators.protocol import (
     EXTRA_NIS,
     EXTRA_NIS_DOF,
 )
-from navigators.integrity.dem_monitor import replay_log
 from navigators.registry import create_monitor
 from terrain.geodesy import latlon_to_ned_offset
 from trn_env.scenario.build import monitor_settings
