@@ -145,8 +145,12 @@ PATCH = {"center_lat_deg": 36.5650, "center_lon_deg": -84.3555, "size_n_m": 4000
 DURATION_S = 140.0
 
 
+DEFAULT_ROUTE = [(36.490, -84.370), (36.640, -84.340), (36.640, -84.200), (36.520, -84.160)]
+
+
 def _scenario(seed: int, faults: list[dict], refine: bool = True, monitor: dict | None = None,
-              outage: bool = False, duration_s: float = DURATION_S, navigator: dict | None = None):
+              outage: bool = False, duration_s: float = DURATION_S, navigator: dict | None = None,
+              route: list | None = None):
     from trn_env.scenario.loading import read_scenario_file, validate
     data, _ = read_scenario_file(BASE)
     data["seed"] = seed
@@ -159,6 +163,8 @@ def _scenario(seed: int, faults: list[dict], refine: bool = True, monitor: dict 
         data["gnss"] = {"outages": [{"start_s": 10.0}]}
     if navigator:
         data["navigator"]["settings"].update(navigator)
+    if route:
+        data["route"]["waypoints"] = [{"lat_deg": a, "lon_deg": b, "h_agl_m": 600.0} for a, b in route]
     return validate(data, source="integrity_statistics")
 
 
@@ -231,20 +237,25 @@ def closed_loop(seeds: int) -> dict:
 
 
 def stale_patch(seeds: int) -> dict:
-    """GNSS denied from 10 s; the route's map region from 40 s of flight on taken from 5 km away."""
+    """GNSS denied from 10 s; the default scenario's route (600 m above ground), the map along its second
+    (eastbound) leg taken from 5 km south: entered after about 210 s of flight (five TERCOM fixes after the
+    start: the navigator is "ok" by then), left about 120 s later (three fixes inside)."""
     from trn_env.output.integrity_metrics import flag_before_error
-    fault = {"kind": "stale", "center_lat_deg": 36.5700, "center_lon_deg": -84.3540, "size_n_m": 12000.0,
-             "size_e_m": 3000.0, "source_offset_n_m": 0.0, "source_offset_e_m": 5000.0}
+    fault = {"kind": "stale", "center_lat_deg": 36.6400, "center_lon_deg": -84.2750, "size_n_m": 3000.0,
+             "size_e_m": 10000.0, "source_offset_n_m": -5000.0, "source_offset_e_m": 0.0}
     res = []
     t0 = time.perf_counter()
     for s in range(seeds):
-        sc = _scenario(300 + s, [fault], outage=True, duration_s=240.0)
+        sc = _scenario(300 + s, [fault], outage=True, duration_s=360.0, route=DEFAULT_ROUTE)
         _, r = _fly(sc)
         a = r.arrays
         t_in = _entry_time(a, fault) or 0.0
         f = flag_before_error(a["t_s"], a["err_ned_m"], a["est_cov_diag"], a["nav_status_code"],
                               t_from_s=t_in)
+        healthy_at_entry = bool(a["nav_status_code"][np.searchsorted(a["t_s"], t_in)] == 0)
         f.update(t_entry_s=t_in, mi_time_s=r.summary["misleading_information_time_s"],
+                 healthy_at_entry=healthy_at_entry,
+                 t_dem_alarm_s=r.summary["monitors"]["dem_integrity"]["first_alarm_t_s"],
                  fraction_healthy=r.summary["fraction_healthy"], termination=r.termination,
                  h_err_max_m=r.summary["horizontal_error_max_m"],
                  recoveries=sum("recovery:" in msg for _, _, msg in r.events))
@@ -252,7 +263,10 @@ def stale_patch(seeds: int) -> dict:
     first = [x["flag_first"] for x in res]
     flagged = [x["t_flag_s"] is not None for x in res]
     left = [x["t_error_outside_s"] is not None for x in res]
+    dem_first = [x["t_dem_alarm_s"] is not None and (x["t_error_outside_s"] is None
+                                                     or x["t_dem_alarm_s"] <= x["t_error_outside_s"]) for x in res]
     return {"flights": seeds, "fraction_flag_first": float(np.mean(first)),
+            "fraction_dem_alarm_before_error": float(np.mean(dem_first)),
             "fraction_flagged": float(np.mean(flagged)), "fraction_error_left_3sigma": float(np.mean(left)),
             "misleading_information_time_s_mean": float(np.mean([x["mi_time_s"] for x in res])),
             "misleading_information_time_s_max": float(np.max([x["mi_time_s"] for x in res])),
@@ -264,10 +278,17 @@ def main(argv=None) -> int:
     ap.add_argument("--tests", type=int, default=1_000_000, help="vectorised fault-free tests (default 1e6)")
     ap.add_argument("--seeds", type=int, default=5, help="closed-loop flights per fault case")
     ap.add_argument("--vectorised-only", action="store_true")
+    ap.add_argument("--stale-only", action="store_true", help="only part 4 (the navigator's own flag)")
     ap.add_argument("--json", default=None, help="write the figures to this file")
     args = ap.parse_args(argv)
-    out = {"vectorised": vectorised(args.tests)}
-    print(json.dumps(out["vectorised"], indent=1), flush=True)
+    out = {}
+    if args.stale_only:
+        out["stale_patch"] = stale_patch(max(args.seeds * 2, 6))
+        print(json.dumps(out["stale_patch"], indent=1), flush=True)
+        args.vectorised_only = True
+    else:
+        out["vectorised"] = vectorised(args.tests)
+        print(json.dumps(out["vectorised"], indent=1), flush=True)
     if not args.vectorised_only:
         out["closed_loop"] = closed_loop(args.seeds)
         print(json.dumps(out["closed_loop"], indent=1), flush=True)

@@ -84,7 +84,8 @@ class InsTrnNavigator:
     Integrity: every TERCOM fix that reaches the chi-square gate (accepted or gated) puts its innovation,
     S, NIS (2 dof), log-likelihood and time under the navigators.protocol EXTRA_* keys, and feeds an
     InnovationMonitor (integrity_window fixes, band probability integrity_alpha). While the NIS sum is above
-    its band the status is "degraded" and the filter recovers: on entering that state the horizontal
+    its band the status is "degraded" and the filter recovers (a fix whose best match lies on the edge of
+    the search window counts as an infinite NIS): on entering that state the horizontal
     position covariance is inflated by recovery_sigma_m^2 and the TERCOM search widens to
     recovery_half_cells from the next batch on (both logged); back in band, the search returns to
     half_cells and the status to "ok".
@@ -559,6 +560,8 @@ class InsTrnNavigator:
         self.fixes.append(fix)
         if not fix.valid:
             self._count_skip(t_s, f"tercom_{fix.reason}", 1, f"TERCOM fix rejected: {fix.reason}")
+            if fix.reason == "edge":      # the best match lies beyond the search window: a failed test
+                self._integrity_test(t_s, math.inf, 2)
             return
         z = -np.array([[fix.dn_m], [fix.de_m]])  # INS minus matched position
         H = np.zeros((2, N_ERR))
@@ -606,7 +609,11 @@ class InsTrnNavigator:
             EXTRA_LOG_LIKELIHOOD: float(-0.5 * (d2 + logdet)) if sign > 0 else float("nan"),
             EXTRA_MEASUREMENT_TIME: float(t_s),
         }
-        verdict = self.integrity.add(t_s, d2, 2)
+        self._integrity_test(t_s, d2, 2)
+
+    def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
+        """Feed the innovation test; on entering "degraded" recover (covariance inflation, wider search)."""
+        verdict = self.integrity.add(t_s, nis, dof)
         if not verdict.changed:
             return
         self.health.events.append((t_s, verdict.message))

@@ -10,8 +10,17 @@ from __future__ import annotations
 import numpy as np
 
 HEALTHY_STATUSES = ("ok",)
+FLAG_STATUSES = ("degraded", "diverged", "lost")      # the navigator says it should not be trusted
 # the log's nav_status_code values (trn_env.sim.log.NAV_STATUS_CODES): 0 is "ok"
 HEALTHY_CODE = 0
+
+
+def _flagged(status: np.ndarray) -> np.ndarray:
+    """Rows whose status is one of FLAG_STATUSES (words or the log's nav_status_code)."""
+    st = np.asarray(status)
+    if st.dtype.kind in "iu":
+        return np.isin(st, [2, 3, 5])          # trn_env.sim.log.NAV_STATUS_CODES indexes of FLAG_STATUSES
+    return np.isin(st.astype(str), FLAG_STATUSES)
 
 
 def _healthy(status: np.ndarray) -> np.ndarray:
@@ -56,13 +65,13 @@ def first_time(t_s: np.ndarray, mask: np.ndarray) -> float | None:
 def flag_before_error(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarray, status: np.ndarray,
                       t_from_s: float = 0.0, k_sigma: float = 3.0) -> dict:
     """For a navigator meeting a fault at t_from_s: the first time after it that the navigator flagged
-    itself (status not "ok"), the first time its error left k_sigma sigma, and whether the flag came first
+    itself (status "degraded", "diverged" or "lost"), the first time its error left k_sigma sigma, and whether the flag came first
     (or the error never left: True; neither: None)."""
     t = np.asarray(t_s, float)
     after = t >= t_from_s
     sig = np.sqrt(np.clip(np.asarray(cov_diag, float)[:, :2], 0.0, None))
     outside = np.any(~(np.abs(np.asarray(err_ned_m, float)[:, :2]) <= k_sigma * sig), axis=1)
-    flagged = ~_healthy(status)
+    flagged = _flagged(status)
     t_flag = first_time(t, after & flagged)
     t_err = first_time(t, after & outside)
     if t_err is None:
