@@ -263,8 +263,9 @@ def stale_patch(seeds: int) -> dict:
     first = [x["flag_first"] for x in res]
     flagged = [x["t_flag_s"] is not None for x in res]
     left = [x["t_error_outside_s"] is not None for x in res]
-    dem_first = [x["t_dem_alarm_s"] is not None and (x["t_error_outside_s"] is None
-                                                     or x["t_dem_alarm_s"] <= x["t_error_outside_s"]) for x in res]
+    dem_first = [x["t_dem_alarm_s"] is not None
+                 and (x["t_error_outside_s"] is None or x["t_dem_alarm_s"] <= x["t_error_outside_s"])
+                 for x in res]
     return {"flights": seeds, "fraction_flag_first": float(np.mean(first)),
             "fraction_dem_alarm_before_error": float(np.mean(dem_first)),
             "fraction_flagged": float(np.mean(flagged)), "fraction_error_left_3sigma": float(np.mean(left)),
