@@ -65,8 +65,8 @@ def first_time(t_s: np.ndarray, mask: np.ndarray) -> float | None:
 def flag_before_error(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarray, status: np.ndarray,
                       t_from_s: float = 0.0, k_sigma: float = 3.0) -> dict:
     """For a navigator meeting a fault at t_from_s: the first time after it that the navigator flagged
-    itself (status "degraded", "diverged" or "lost"), the first time its error left k_sigma sigma, and whether the flag came first
-    (or the error never left: True; neither: None)."""
+    itself (status "degraded", "diverged" or "lost"), the first time its error left k_sigma sigma, and
+    whether the flag came first (True too if the error never left; False if it left unflagged)."""
     t = np.asarray(t_s, float)
     after = t >= t_from_s
     sig = np.sqrt(np.clip(np.asarray(cov_diag, float)[:, :2], 0.0, None))
