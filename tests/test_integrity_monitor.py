@@ -211,3 +211,19 @@ def test_navigator_source_when_gnss_is_denied():
 def test_bad_settings_name_the_field(settings, field):
     with pytest.raises(ValueError, match=field):
         create_monitor("dem_integrity", dem=terrain.load("jacksboro"), **settings)
+
+
+def test_bad_data_is_skipped_not_raised():
+    """A NaN estimate (GNSS denied) or NaN ranges skip epochs; later epochs are unharmed."""
+    dem = _rough_dem()
+    mon = create_monitor("dem_integrity", dem=dem, n_window=3, sigma_m=10.0)
+    flight = _flight(dem, 6, 10.0, 1.0, 3)
+    frames, est, *_ = flight[0]
+    frames.gnss = None
+    est.covariance = np.full((9, 9), np.nan)
+    assert mon.update(frames, est).rows.shape[0] == 0
+    frames, est, *_ = flight[1]
+    frames.radar_altimeter.range_m[:] = np.nan
+    assert mon.update(frames, est).rows.shape[0] == 0
+    outs = [mon.update(f, e) for f, e, *_ in flight[2:]]
+    assert np.isfinite(outs[-1].statistic).all()

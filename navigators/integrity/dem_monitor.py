@@ -345,6 +345,8 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, out):
         p = h_synt - h_db                              # eq 2
         sig_ra = cfg[4] + cfg[5] * r
         var = sig_map2 + sig_ra * sig_ra + rows[i, 6]
+        if not (p == p and var == var and var < np.inf):
+            continue                                   # a non-finite estimate: the epoch is skipped
         s = p - state[3] if state[1] > 0 else np.nan   # eq 3
         state[3] = p
         # eq 5's scalar filter of the disparity (random walk, q = q_ratio * sigma^2 per epoch), started at
