@@ -91,6 +91,10 @@ def _summary_table(summary: dict, out_dir: Path):
         ("min true height above ground", f"{summary['min_true_agl_m']:.0f} m"),
         ("navigator status", summary["navigator_status"]),
     ]
+    for name, mon in sorted(summary.get("monitors", {}).items()):
+        first = mon.get("first_alarm_t_s")
+        when = f" (first at {first:.0f} s)" if first is not None else ""
+        rows.append((f"{name} alarms", f"{mon['alarm_count']}{when}"))
     for k, v in rows:
         table.add_row(k, v)
     return table
