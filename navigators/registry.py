@@ -45,6 +45,10 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
     try:
         return factory(**settings)
     except TypeError as exc:
+        import re
+        m = re.search(r"unexpected keyword argument '(\w+)'", str(exc))
+        if m:
+            raise ValueError(f"navigator {name!r}: bad settings: unknown setting '{m.group(1)}'") from exc
         raise ValueError(f"navigator {name!r}: bad settings {sorted(settings)}: {exc}") from exc
 
 

@@ -5,9 +5,11 @@
     "synthetic:<preset>"   a seeded synthetic terrain (presets in terrain.synthetic.PRESETS)
     a path                 .tif/.tiff, .hgt, .dt0/.dt1/.dt2 (rasterio) or .npz (terrain.loaders)
 
-Modules: dem (Dem), kernels (numba interpolation), loaders, queries (ray cast, radar-altimeter and IRA
-closest points), synthetic (spectral terrain), refine (world finer than the map), map_error (the navigator's
-map), spectrum (PSD), metrics (roughness, slope, ACF, terrain information), bench (throughput).
+Modules: dem (Dem), kernels (numba interpolation), loaders, queries (package: queries.raycast,
+queries.radar_altimeter, queries.ira - the ray cast and the radar-altimeter and IRA closest points, one search
+per module - and queries.shared, their curvature frame, per-DEM tables and scratch space), synthetic
+(spectral terrain), refine (world finer than the map), map_error (the navigator's map), spectrum (PSD),
+metrics (roughness, slope, ACF, terrain information), bench (throughput).
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ def load(name_or_path, fill_voids: bool = False) -> Dem:
     """Load a DEM by bundled name, "synthetic:<preset>" or file path (see the module docstring)."""
     from terrain import loaders
 
+    if not isinstance(name_or_path, (str, Path)) and not hasattr(name_or_path, "__fspath__"):
+        raise ValueError(f"terrain.load: give a DEM name (e.g. 'jacksboro', 'synthetic:rolling') or a file "
+                         f"path, got {name_or_path!r}")
     if isinstance(name_or_path, str):
         key = name_or_path.strip()
         if key.lower() in ("jacksboro", "jacksboro_fault", "default"):

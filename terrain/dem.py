@@ -17,6 +17,14 @@ from terrain import geodesy, kernels
 _METHODS = ("bilinear", "bicubic")
 
 
+def _coords(name: str, value) -> np.ndarray:
+    """float64 array of a coordinate argument; ValueError naming it if it is not numeric (None, text)."""
+    raw = np.asarray(value)
+    if raw.dtype.kind not in "biuf":      # None, text, objects (np.asarray(None, float) would be NaN)
+        raise ValueError(f"Dem: {name} must be a number or an array of numbers (radians), got {value!r}")
+    return raw.astype(np.float64, copy=False)
+
+
 @dataclass
 class Dem:
     """Geodetic elevation grid; see the module docstring for the layout. Angles in radians, heights in m."""
@@ -51,6 +59,9 @@ class Dem:
             )
         if not np.isfinite(h).any():
             raise ValueError(f"Dem {self.name!r}: every post is a void (NaN)")
+        if np.isinf(h).any():
+            raise ValueError(f"Dem {self.name!r}: heights_m holds {int(np.isinf(h).sum())} infinite posts "
+                             "(a void is NaN; a height must be finite)")
         self.heights_m = h
         self._pyramid = None
 
@@ -133,9 +144,7 @@ class Dem:
         """Height (m above MSL) at (lat, lon) radians; scalars or arrays; NaN off-grid or over voids."""
         if method not in _METHODS:
             raise ValueError(f"Dem.height: method must be one of {_METHODS}, got {method!r}")
-        lat, lon = np.broadcast_arrays(
-            np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64)
-        )
+        lat, lon = np.broadcast_arrays(_coords("lat_rad", lat_rad), _coords("lon_rad", lon_rad))
         flat_lat = np.ascontiguousarray(lat).ravel()
         flat_lon = np.ascontiguousarray(lon).ravel()
         out = np.empty(flat_lat.shape[0])

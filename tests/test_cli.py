@@ -23,7 +23,8 @@ from trn_env.sim.nav_stage import fork_available
 SCEN = Path(__file__).parent / "scenarios"
 DESIGN_FIELDS = ("scenario", "seed", "navigator", "sim_time_s", "wall_time_s", "realtime_factor",
                  "horizontal_error_rms_m", "horizontal_error_final_m", "vertical_error_rms_m", "termination")
-TERMINATIONS = {"completed", "terrain_collision", "off_map", "diverged", "time_limit"}
+TERMINATIONS = {"completed", "terrain_collision", "off_map", "diverged", "fuel_exhausted", "engine_failure",
+                "time_limit"}
 
 
 def _fly(tmp_path, *extra) -> tuple[int, Path]:
@@ -61,7 +62,7 @@ def test_fly_writes_summary_log_and_plots(flown):
     table = pd.read_csv(out / "timeline.csv")
     assert list(table.columns) == output.TIMELINE_COLUMNS
     assert len(table) == log["t_s"].shape[0] == 16           # t = 0 and each 1 s navigator update
-    assert np.allclose(table["err_h_m"], e_h, atol=0.05)
+    assert np.allclose(table["err_horizontal_m"], e_h, atol=0.05)
     assert np.allclose(table["true_lat_deg"], np.degrees(log["true_lat_rad"]))
     for png in ("track.png", "errors.png"):
         data = (out / png).read_bytes()

@@ -65,7 +65,8 @@ def test_alarm_after_reaching_the_fault_and_within_50_epochs(faulted):
     assert any(src == "map" for _, src, _ in res.events)
     assert res.summary["map_faults"][0]["kind"] == "bias" and res.summary["map_faults"][0]["bias_m"] == 60.0
     assert 0.0 <= res.summary["fraction_healthy"] <= 1.0
-    assert res.summary["misleading_information_time_s"] >= 0.0
+    assert 0.0 <= res.summary["status_ok_fraction"] <= res.summary["fraction_healthy"]
+    assert res.summary["status_ok_misleading_time_s"] >= 0.0
 
 
 def test_no_alarm_without_the_fault_and_pipelined_equals_inline(faulted):

@@ -60,7 +60,7 @@ def test_ekf_degrades_recovers_and_returns():
     p0 = nav.kf.P[:2, :2].copy()
     S = np.eye(2) * 200.0
     nav._record_innovation(40.0, np.array([[150.0], [0.0]]), S, 150.0**2 / 200.0)
-    assert nav.health.status == "degraded"
+    assert nav.health.status == "degraded" and not nav.health.ok
     np.testing.assert_allclose(nav.kf.P[:2, :2], p0 + 80.0**2 * np.eye(2))
     assert nav.half_cells == 2 * nav.nominal_half_cells
     assert nav.batch.accumulate[0] == nav.half_cells
@@ -79,9 +79,9 @@ def test_integrity_metrics_by_hand():
     cov = np.tile([100.0, 100.0, 1.0], (6, 1))              # 3 sigma = 30 m
     status = np.array(["ok", "ok", "ok", "degraded", "ok", "ok"])
     m = integrity_metrics(t, err, cov, status)
-    assert m["fraction_healthy"] == pytest.approx(4 / 5)     # rows 1, 2, 4, 5 hold 1 s each
-    assert m["misleading_information_time_s"] == pytest.approx(2.0)      # rows 2 and 5
-    assert m["misleading_information_fraction"] == pytest.approx(2 / 4)
+    assert m["status_ok_fraction"] == pytest.approx(4 / 5)     # rows 1, 2, 4, 5 hold 1 s each
+    assert m["status_ok_misleading_time_s"] == pytest.approx(2.0)      # rows 2 and 5
+    assert m["status_ok_misleading_fraction"] == pytest.approx(2 / 4)
     f = flag_before_error(t, err, cov, status, t_from_s=3.0)
     assert f == {"t_flag_s": 3.0, "t_error_outside_s": 3.0, "flag_first": True}
     f = flag_before_error(t, err, cov, np.array(["ok"] * 6), t_from_s=1.0)

@@ -16,9 +16,12 @@ from trn_env.sim.nav_stage import fork_available
 pytestmark = pytest.mark.skipif(not fork_available(), reason="needs the fork start method")
 
 
-def _scenario(duration_s: float, navigator: str = "ins_tercom", **limits):
+def _scenario(duration_s: float, navigator: str = "ins_tercom", gnss_denied_from_s: float | None = None,
+              **limits):
     data, _ = read_scenario_file("default")
     data = copy.deepcopy(data)
+    if gnss_denied_from_s is not None:
+        data["gnss"] = {"outages": [{"start_s": gnss_denied_from_s}]}
     data["duration_s"] = duration_s
     data["navigator"]["name"] = navigator
     if navigator != "ins_tercom":
@@ -47,12 +50,13 @@ def _assert_same_run(a, b):
 
 
 def test_pipelined_run_equals_the_inline_run_bit_for_bit():
-    """45 s of the default scenario (a TERCOM fix at 40 s): every logged array, event and summary figure."""
-    sc = _scenario(45.0)
+    """55 s of the default scenario (GNSS fused for 10 s, a TERCOM fix at 49 s): every logged array, event and
+    summary figure."""
+    sc = _scenario(55.0)
     inline, piped = _fly(sc, False), _fly(sc, True)
     assert piped.summary["pipelined"] and not inline.summary["pipelined"]
     assert any("TERCOM fix" in msg for _, _, msg in piped.events)
-    assert piped.arrays["sensor_ira_range_m"].shape[0] == 45 * 50      # the worker's frames reach the log
+    assert piped.arrays["sensor_ira_range_m"].shape[0] == 55 * 50      # the worker's frames reach the log
     _assert_same_run(inline, piped)
     assert not multiprocessing.active_children()                     # run() stopped the worker
 
@@ -60,7 +64,8 @@ def test_pipelined_run_equals_the_inline_run_bit_for_bit():
 def test_divergence_found_a_tick_late_ends_the_run_at_the_estimate_time():
     """A pipelined loop learns of a diverged estimate after it has flown the next interval; it ends at the
     estimate's time and drops that interval, exactly as the inline loop does."""
-    sc = _scenario(30.0, navigator="ins", max_horizontal_sigma_m=14.0)  # free-inertial sigma grows past it
+    sc = _scenario(30.0, navigator="ins", max_horizontal_sigma_m=14.0,   # free-inertial sigma grows past it
+                   gnss_denied_from_s=0.0)
     inline, piped = _fly(sc, False), _fly(sc, True)
     assert inline.termination == "diverged"
     t_end = inline.arrays["t_s"][-1]

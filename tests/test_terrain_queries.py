@@ -11,7 +11,7 @@ from terrain import geodesy, queries, synthetic
 from terrain.dem import Dem
 
 # ---------------------------------------------------------------------------------------------------------
-# Independent brute force (kept apart from terrain/queries.py on purpose): exact WGS84 ECEF conversions in
+# Independent brute force (kept apart from terrain/queries/ on purpose): exact WGS84 ECEF conversions in
 # numpy, numpy bilinear interpolation, dense sampling instead of the product's coarse-to-fine search.
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563

@@ -16,4 +16,15 @@ def _register_envs() -> None:
         gymnasium.register(id="trn_env/TerrainNav-v0", entry_point="trn_env.env.terrain_nav:TerrainNavEnv")
 
 
-_register_envs()
+try:
+    _register_envs()
+except KeyboardInterrupt:
+    import os as _os
+    import sys as _sys
+
+    # Ctrl-C while the `trn-env` command starts (this import runs before its main()): no traceback
+    if _os.path.basename(_sys.argv[0] or "") in ("trn-env", "-m", "cli.py"):
+        _sys.stderr.write("interrupted: nothing written\n")
+        _sys.stderr.flush()
+        _os._exit(130)
+    raise

@@ -4,8 +4,12 @@
     trn-env scenarios
     trn-env validate SCENARIO
     trn-env bench [--quick]
+    trn-env campaign FILE [--out DIR] [--workers N] [--backend local|ray] [--address ADDR] [--resume]
+                     [--check BASELINE.json] [--write-baseline BASELINE.json]
+    trn-env report DIR [--out DIR]
 
-Exit status: 0 success, 2 invalid scenario (every problem printed, nothing written), 130 interrupted.
+Exit status: 0 success, 1 regression gate failed (`campaign --check`), 2 invalid input (every problem
+printed, nothing written), 130 interrupted (Ctrl-C at any point: a one-line message, no traceback).
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ def _parser() -> argparse.ArgumentParser:
     fly.add_argument("--navigator", default=None, help="override the navigator (e.g. ins, ins_tercom)")
     fly.add_argument("--duration", type=float, default=None, help="override the time limit, seconds")
     fly.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    fly.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                     help="set a scenario field by dotted path, VALUE a TOML literal (repeatable; applied "
+                          "after --seed/--duration/--navigator, as a campaign's sweeps are)")
     fly.add_argument("--quiet", action="store_true", help="no progress bar")
     fly.add_argument("--no-pipeline", action="store_true",
                      help="run the sensors and the navigator in this process, not beside the flight in a "
@@ -38,6 +45,23 @@ def _parser() -> argparse.ArgumentParser:
     val.add_argument("scenario")
     bench = sub.add_parser("bench", help="print throughput figures as one JSON object")
     bench.add_argument("--quick", action="store_true", help="shorter measurements (less precise)")
+    camp = sub.add_parser("campaign", help="fly a Monte Carlo campaign (seeds x navigators x sweeps)")
+    camp.add_argument("file", type=Path, help="campaign TOML file")
+    camp.add_argument("--out", type=Path, default=None,
+                      help="output folder (default campaigns/<name>-<time>)")
+    camp.add_argument("--workers", type=int, default=None, help="worker processes / Ray CPUs (default: all)")
+    camp.add_argument("--backend", choices=("local", "ray"), default="local")
+    camp.add_argument("--address", default=None,
+                      help="Ray cluster address (HOST:PORT, ray://HOST:PORT, auto)")
+    camp.add_argument("--resume", action="store_true", help="fly only the runs missing from --out")
+    camp.add_argument("--check", type=Path, default=None, metavar="BASELINE",
+                      help="compare with a baseline: exit 1 if a figure is worse than its tolerance")
+    camp.add_argument("--write-baseline", type=Path, default=None, metavar="BASELINE",
+                      help="write the campaign's figures as a baseline")
+    camp.add_argument("--quiet", action="store_true", help="no progress bar")
+    rep = sub.add_parser("report", help="summary table and plots of a campaign folder (PNGs + report.html)")
+    rep.add_argument("dir", type=Path, help="campaign output folder")
+    rep.add_argument("--out", type=Path, default=None, help="report folder (default DIR/report)")
     return p
 
 
@@ -68,6 +92,11 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def _at_loss(summary: dict) -> str:
+    e, s = summary["horizontal_error_at_gnss_loss_m"], summary["horizontal_sigma_at_gnss_loss_m"]
+    return f"{e:.1f} m / {s:.1f} m" if e == e else "no GNSS loss"
+
+
 def _summary_table(summary: dict, out_dir: Path):
     from rich.table import Table
     table = Table(title=f"trn-env fly: {summary['scenario']}  ->  {out_dir}", show_header=True)
@@ -78,19 +107,30 @@ def _summary_table(summary: dict, out_dir: Path):
         ("navigator", summary["navigator"]),
         ("seed", str(summary["seed"])),
         ("simulated time", f"{summary['sim_time_s']:.1f} s"),
-        ("wall time", f"{summary['wall_time_s']:.1f} s"),
+        ("wall time (flight)", f"{summary['wall_time_s']:.1f} s"),
         ("real-time factor", f"{summary['realtime_factor']:.1f} x"),
         ("distance flown", f"{summary['distance_flown_m'] / 1000:.1f} km"),
         ("GNSS-denied time", f"{summary['gnss_denied_time_s']:.0f} s"),
+        ("horizontal error / 1-sigma at GNSS loss", _at_loss(summary)),
         ("horizontal error RMS", f"{summary['horizontal_error_rms_m']:.1f} m"),
         ("horizontal error final", f"{summary['horizontal_error_final_m']:.1f} m"),
         ("horizontal error max", f"{summary['horizontal_error_max_m']:.1f} m"),
         ("vertical error RMS", f"{summary['vertical_error_rms_m']:.1f} m"),
         ("final 1-sigma horizontal", f"{summary['horizontal_sigma_final_m']:.1f} m"),
         ("within 3 sigma (N and E)", f"{100 * summary['fraction_within_3sigma']:.0f} %"),
+        ("horizontal CEP50 / CEP95", f"{summary['horizontal_error_cep50_m']:.1f} / "
+                                     f"{summary['horizontal_error_cep95_m']:.1f} m"),
+        ("ANEES, position (3 = consistent)", f"{summary['anees']:.2f}"),
+        ("track lost", "yes" if summary["track_lost"] else "no"),
         ("min true height above ground", f"{summary['min_true_agl_m']:.0f} m"),
+        ("fuel remaining", f"{summary['fuel_remaining_kg']:.1f} kg"
+                           + (" (held constant)" if summary["constant_fuel"] else "")),
         ("navigator status", summary["navigator_status"]),
     ]
+    if "warm_up_wall_time_s" in summary:
+        rows.insert(5, ("kernels ready (compile / cache load)", f"{summary['warm_up_wall_time_s']:.1f} s"))
+    if summary.get("route_not_followed"):
+        rows.insert(1, ("what happened", summary["route_not_followed"]))
     for name, mon in sorted(summary.get("monitors", {}).items()):
         first = mon.get("first_alarm_t_s")
         when = f" (first at {first:.0f} s)" if first is not None else ""
@@ -100,14 +140,44 @@ def _summary_table(summary: dict, out_dir: Path):
     return table
 
 
+def out_dir_problem(out: Path) -> str | None:
+    """Why the run folder `out` could not be written (checked before flying, nothing created), or None."""
+    import os
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: exists and is not a directory"
+    if out.is_dir():
+        return None if os.access(out, os.W_OK | os.X_OK) else f"--out {out}: the folder is not writable"
+    parent = out.absolute().parent
+    while not parent.exists():
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"--out {out}: cannot create it, {parent} is not a directory"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"--out {out}: cannot create it, {parent} is not writable"
+    return None
+
+
 def cmd_fly(args) -> int:
-    from trn_env.scenario.loading import ScenarioError, load_scenario
+    from trn_env.scenario.loading import ScenarioError
+    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
     try:
-        scenario = load_scenario(args.scenario, seed=args.seed, navigator=args.navigator,
-                                 duration_s=args.duration)
+        sets = [parse_assignment(s) for s in args.set]
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        scenario = load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
+                                      duration_s=args.duration)
     except ScenarioError as err:
         _print_problems(err)
         return 2
+    if args.out is not None:
+        problem = out_dir_problem(args.out)
+        if problem is not None:
+            print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
+            return 2
     import time
 
     from rich.console import Console
@@ -123,10 +193,32 @@ def cmd_fly(args) -> int:
     def progress(t_s: float, _total: float) -> None:
         bar.update(max(0.0, round(t_s, 1) - bar.n))
 
+    from trn_env.flight.core import TrimError
+    from trn_env.scenario.build import build_terrain
+    from trn_env.sim.closed_loop import spawn_rngs
+    from trn_env.sim.warm_up import warm_up
+
     loop = None
     try:
-        # the loop (and its worker process, forked from this one) before the progress bar's thread
-        loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline)
+        # the terrain once (the same map stream as the loop's own), the kernels compiled (first run) or
+        # loaded from numba's cache before the flight, so neither stalls the progress bar nor counts in the
+        # real-time factor; then the loop (and its worker process, forked from this one) before the bar
+        if not args.quiet:
+            print(f"preparing {scenario.name}: terrain, then the numba kernels it uses (compiled on the "
+                  "first run only, one to two minutes on 2 cores; cached afterwards) ...", file=sys.stderr,
+                  flush=True)
+        dems = build_terrain(scenario.data, scenario.extras, spawn_rngs(scenario.seed)["map"])
+        try:
+            warm_s = warm_up(scenario, dems)
+            loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline, dems=dems)
+        except TrimError as exc:
+            print(f"error: scenario {scenario.source}: initial: {exc} (nothing written)", file=sys.stderr)
+            return 2
+        except ValueError as exc:         # a component refusing what the validation let through
+            print(f"error: scenario {scenario.source}: {exc} (nothing written)", file=sys.stderr)
+            return 2
+        if not args.quiet:
+            print(f"ready after {warm_s:.1f} s", file=sys.stderr, flush=True)
         bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
                    disable=args.quiet, mininterval=0.5,
                    bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
@@ -134,6 +226,10 @@ def cmd_fly(args) -> int:
         while loop.termination is None:
             loop.tick()
         result = loop.result(time.perf_counter() - wall0)
+        result.summary["warm_up_wall_time_s"] = warm_s
+        if loop.termination != "time_limit":       # the run ended before the limit: the bar ends full
+            bar.total = bar.n
+            bar.refresh()
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
@@ -177,17 +273,105 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_campaign(args) -> int:
+    from trn_env.campaign import CampaignError, load_campaign, make_backend, run_campaign
+    from trn_env.campaign.baseline import read_baseline
+    from trn_env.campaign.ray_backend import BackendError
+    try:
+        backend = make_backend(args.backend, args.workers, args.address)
+        backend.preflight()      # Ray importable, its address reachable: before the (slower) validation
+        baseline = read_baseline(args.check) if args.check is not None else None
+        campaign = load_campaign(args.file)
+    except CampaignError as err:
+        print(f"error: campaign {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
+        for prob in err.problems:
+            print(f"  - {prob}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    from rich.console import Console
+
+    from trn_env.campaign.driver import default_out_dir
+    out_dir = args.out or default_out_dir(campaign.name)
+    console = Console(width=max(Console().width, 150))     # the summary table is wide
+    try:
+        stats = run_campaign(campaign, out_dir, backend=backend, resume=args.resume, progress=not args.quiet)
+    except CampaignError as err:
+        for prob in err.problems:
+            print(f"error: {prob}", file=sys.stderr)
+        return 2
+    except BackendError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"interrupted: the finished runs' rows are in {out_dir}/runs (continue with --resume)",
+              file=sys.stderr)
+        return 130
+    return _campaign_outcome(campaign, out_dir, stats, baseline, args, console)
+
+
+def _campaign_outcome(campaign, out_dir: Path, stats: dict, baseline, args, console) -> int:
+    from trn_env.campaign.baseline import compare, comparison_table, make_baseline, write_baseline
+    from trn_env.campaign.rows import read_rows
+    from trn_env.campaign.stats import summary_table
+    df = read_rows(out_dir)
+    console.print(summary_table(df, f"campaign {campaign.name}: {len(df)} run(s) -> {out_dir}"))
+    rate = f"{stats['runs_per_minute']:.1f} runs/min" if stats["flown"] else "nothing to fly"
+    console.print(f"{stats['flown']} flown ({stats['failed']} failed), {stats['already_done']} already done; "
+                  f"{rate} on {stats['backend']}")
+    status = 0
+    if args.write_baseline is not None:
+        write_baseline(args.write_baseline, make_baseline(df, campaign.name, campaign.hash))
+        console.print(f"baseline written: {args.write_baseline}")
+    if baseline is not None:
+        comps = compare(df, baseline)
+        console.print(comparison_table(comps, f"regression gate against {args.check}"))
+        worse = [c for c in comps if c.verdict in ("worse", "missing")]
+        better = [c for c in comps if c.verdict == "better"]
+        for c in better:
+            print(f"warning: {c.group} {c.figure} is much better than the baseline ({c.value:.4g} vs "
+                  f"{c.baseline:.4g}); refresh it on purpose with --write-baseline", file=sys.stderr)
+        if worse:
+            for c in worse:
+                print(f"regression: {c.group} {c.figure}: {c.value:.4g} vs baseline {c.baseline:.4g} "
+                      f"(band ±{c.limit:.3g}): {c.verdict}", file=sys.stderr)
+            status = 1
+        else:
+            console.print(f"regression gate passed ({len(comps)} figure(s), {len(better)} much better)")
+    return status
+
+
+def cmd_report(args) -> int:
+    from trn_env.campaign.report import write_report
+    try:
+        out = write_report(args.dir, args.out)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"report written: {out / 'report.html'}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    if args.command == "scenarios":
-        return cmd_scenarios()
-    if args.command == "validate":
-        return cmd_validate(args)
-    if args.command == "fly":
-        return cmd_fly(args)
-    if args.command == "bench":
-        return cmd_bench(args)
-    return 2
+    try:
+        args = _parser().parse_args(argv)
+        if args.command == "scenarios":
+            return cmd_scenarios()
+        if args.command == "validate":
+            return cmd_validate(args)
+        if args.command == "fly":
+            return cmd_fly(args)
+        if args.command == "bench":
+            return cmd_bench(args)
+        if args.command == "campaign":
+            return cmd_campaign(args)
+        if args.command == "report":
+            return cmd_report(args)
+        return 2
+    except KeyboardInterrupt:       # during the imports, the scenario's loading, a benchmark
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -37,6 +37,29 @@ def _radii(lat, h):
 
 
 @njit(cache=True)
+def interp_one(x, xp, fp):
+    """np.interp(x, xp, fp) for one float x and increasing xp (numpy's formula and edge rules, so the same
+    bits); numba's generic np.interp costs several seconds of compile time that this does not."""
+    n = xp.shape[0]
+    if x != x:
+        return np.nan
+    if x <= xp[0]:
+        return fp[0]
+    if x >= xp[n - 1]:
+        return fp[n - 1]
+    j = np.searchsorted(xp, x, side="right") - 1
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if r != r:
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        if r != r and fp[j] == fp[j + 1]:
+            r = fp[j]
+    return r
+
+
+@njit(cache=True)
 def _set_skew(F, r0, c0, v0, v1, v2, sign):
     F[r0, c0] = 0.0
     F[r0, c0 + 1] = -sign * v2
@@ -242,7 +265,7 @@ def collect_ira(t0, t1, t_imu, hist, ts, rng_m, theta, valid, decimation, tb, hb
         if not good:
             continue
         if have_baro:
-            h_ref = np.interp(t, tb, hb)
+            h_ref = interp_one(t, tb, hb)
             if geopotential:
                 h_ref = R0_GEOPOTENTIAL_M * h_ref / (R0_GEOPOTENTIAL_M - h_ref)
         else:

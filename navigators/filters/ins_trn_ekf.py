@@ -15,6 +15,17 @@ fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (T
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS.
 
+GNSS (loosely coupled, every valid fix of SensorFrames.gnss, at its own time): z = INS - GNSS, north and
+east position (m) and NED velocity (m/s), H selects states 0, 1, 3, 4, 5, R = diag(gnss_sigma_h_m^2 x 2,
+gnss_sigma_v_mps^2 x 3), chi-square gated (5 dof). The vertical position stays the baro channel's (the
+filter does not estimate the baro bias). The receiver's position error is time-correlated (minutes), which
+the 13 states do not model: averaging 1 Hz fixes as if white would shrink the horizontal sigma far below
+the true error, so after each GNSS update the north/east variances are held at or above
+gnss_correlated_sigma_m^2 (a congruence D P D, so P stays positive definite). While GNSS updates arrive
+the TERCOM batch restarts at each one (a batch must be collected with one rigid INS error); the first TERCOM
+fix falls due fix_period_s after the last GNSS fix. GNSS loss (no valid fix for gnss_timeout_s) and
+recovery are reported as events.
+
 Built on filterpy.kalman.KalmanFilter: its state and covariance hold the filter, the TERCOM fix goes
 through its (Joseph-form) update; the 50 Hz covariance propagation P = Phi P Phi^T + Q (filterpy's predict
 algebra with our Phi/Q) and the IRA batch collection run in numba kernels (filters._ekf_kernels), one
@@ -45,13 +56,33 @@ from navigators.protocol import (
     Health,
 )
 from navigators.tercom.mad import TercomBatch, TercomFix, correlate
+from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 G0 = 9.80665
 N_ERR = 13
 CHI2_2DOF_99_99 = 18.42
+CHI2_5DOF_99_99 = 25.74
+_GNSS_STATES = (0, 1, 3, 4, 5)      # north, east position; NED velocity
 R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 _EMPTY = np.zeros(0)
 _EMPTY_BOOL = np.zeros(0, np.bool_)
+
+
+def _check_number(key: str, val, positive: bool) -> None:
+    """A finite real number (> 0 with positive, else >= 0); ValueError naming the setting."""
+    if isinstance(val, (bool, np.bool_)) or not isinstance(val, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{key} must be a number, got {val!r}")
+    if not (math.isfinite(val) and (val > 0 if positive else val >= 0)):
+        raise ValueError(f"{key} must be a finite number {'> 0' if positive else '>= 0'}, got {val!r}")
+
+
+def _check_count(key: str, val) -> None:
+    """A whole number >= 1; ValueError naming the setting."""
+    ok = isinstance(val, (int, np.integer)) and not isinstance(val, (bool, np.bool_))
+    if isinstance(val, (float, np.floating)) and math.isfinite(val) and val == int(val):
+        ok = True
+    if not ok or val < 1:
+        raise ValueError(f"{key} must be a whole number >= 1, got {val!r}")
 
 
 def _is_pd(P: np.ndarray) -> bool:
@@ -81,16 +112,21 @@ class InsTrnNavigator:
     does not estimate it (the IRA/TERCOM fixes are horizontal), so the height error follows the baro's bias
     and the reported down-position variance adds baro_bias_sigma_m^2 (without it the baro loop's variance
     collapses to a metre while the true height error is the baro bias).
+    GNSS (see the module docstring): gnss_sigma_h_m (1 sigma per north/east axis), gnss_sigma_v_mps (per
+    NED velocity axis), gnss_correlated_sigma_m (floor of the north/east sigma after a GNSS update: the
+    receiver's slowly wandering error), gnss_gate_chi2 (5 dof), gnss_timeout_s (no valid fix for this long
+    = GNSS lost, reported as an event); use_gnss=False ignores SensorFrames.gnss.
     Integrity: every TERCOM fix that reaches the chi-square gate (accepted or gated) puts its innovation,
     S, NIS (2 dof), log-likelihood and time under the navigators.protocol EXTRA_* keys, and feeds an
     InnovationMonitor (integrity_window fixes, band probability integrity_alpha). While the NIS sum is above
-    its band the status is "degraded" and the filter recovers (a fix whose best match lies on the edge of
-    the search window counts as an infinite NIS): on entering that state the horizontal
+    its band the status is "degraded" (Health.ok False) and the filter recovers (a fix whose best match lies
+    on the edge of the search window counts as an infinite NIS): on entering that state the horizontal
     position covariance is inflated by recovery_sigma_m^2 and the TERCOM search widens to
     recovery_half_cells from the next batch on (both logged); back in band, the search returns to
     half_cells and the status to "ok".
-    Speed: a frame with no fix due inside it runs as one numba call (_ekf_kernels.fused_segment);
-    set the attribute `fused = False` for the step-by-step path (the same numbers, to round-off).
+    Speed: a frame with no fix due inside it and no GNSS fix runs as one numba call
+    (_ekf_kernels.fused_segment); set the attribute `fused = False` for the step-by-step path (the same
+    numbers, to round-off).
     """
 
     def __init__(
@@ -119,6 +155,12 @@ class InsTrnNavigator:
         remove_bias: bool = False,
         init_height_from_baro: bool = True,
         baro_bias_sigma_m: float = 10.0,
+        use_gnss: bool = True,
+        gnss_sigma_h_m: float = 2.0,
+        gnss_sigma_v_mps: float = 0.1,
+        gnss_correlated_sigma_m: float = 1.5,
+        gnss_gate_chi2: float = CHI2_5DOF_99_99,
+        gnss_timeout_s: float = 2.5,
         integrity_window: int = 3,
         integrity_alpha: float = 0.01,
         recovery_half_cells: int | None = None,
@@ -131,24 +173,42 @@ class InsTrnNavigator:
             raise ValueError(f"formula must be one of {FORMULAS}, got {formula!r}")
         if dp_reference_formula not in FORMULAS:
             raise ValueError(f"dp_reference_formula must be one of {FORMULAS}, got {dp_reference_formula!r}")
-        for key, val in (
-            ("fix_period_s", fix_period_s),
-            ("cell_m", cell_m),
-            ("fix_sigma_m", fix_sigma_m),
-            ("ekf_rate_hz", ekf_rate_hz),
-            ("tau_baro_s", tau_baro_s),
-        ):
-            if not (np.isfinite(val) and val > 0):
-                raise ValueError(f"{key} must be a positive number, got {val}")
-        if int(half_cells) < 1 or int(ira_decimation) < 1:
-            raise ValueError("half_cells and ira_decimation must be >= 1")
+        if gravity_model not in GRAVITY_MODELS:
+            raise ValueError(f"gravity_model must be one of {sorted(GRAVITY_MODELS)}, got {gravity_model!r}")
+        if imu_samples not in ("interval", "instant"):
+            raise ValueError(f"imu_samples must be 'interval' or 'instant', got {imu_samples!r}")
+        for key, val in (("fix_period_s", fix_period_s), ("cell_m", cell_m), ("fix_sigma_m", fix_sigma_m),
+                         ("ekf_rate_hz", ekf_rate_hz), ("tau_baro_s", tau_baro_s), ("gate_chi2", gate_chi2),
+                         ("gnss_sigma_h_m", gnss_sigma_h_m), ("gnss_sigma_v_mps", gnss_sigma_v_mps),
+                         ("gnss_gate_chi2", gnss_gate_chi2), ("gnss_timeout_s", gnss_timeout_s)):
+            _check_number(key, val, positive=True)
+        for key, val in (("accel_bias_mps2", accel_bias_mps2),
+                         ("accel_noise_mps2_rthz", accel_noise_mps2_rthz),
+                         ("gyro_bias_rps", gyro_bias_rps), ("gyro_noise_rps_rthz", gyro_noise_rps_rthz),
+                         ("dp_min_m", dp_min_m), ("baro_bias_sigma_m", baro_bias_sigma_m),
+                         ("gnss_correlated_sigma_m", gnss_correlated_sigma_m)):
+            _check_number(key, val, positive=False)
+        for key, val in (("half_cells", half_cells), ("ira_decimation", ira_decimation),
+                         ("min_samples", min_samples)):
+            _check_count(key, val)
+        for key, val in (("baro_geopotential", baro_geopotential), ("remove_bias", remove_bias),
+                         ("init_height_from_baro", init_height_from_baro), ("use_gnss", use_gnss)):
+            if not isinstance(val, (bool, np.bool_)):
+                raise ValueError(f"{key} must be true or false, got {val!r}")
+        if name is not None and not (isinstance(name, str) and name):
+            raise ValueError(f"name must be a non-empty string, got {name!r}")
+        if dem is not None and not isinstance(dem, str) and not hasattr(dem, "grid"):
+            raise ValueError(f"dem must be a terrain.Dem or a DEM name or file path, got {dem!r}")
         if aiding is not None:
             if dem is None:
                 raise ValueError("dem: the navigator's terrain map is required when aiding is set")
             if isinstance(dem, str):
                 import terrain
 
-                dem = terrain.load(dem)
+                try:
+                    dem = terrain.load(dem)
+                except (OSError, ValueError) as exc:
+                    raise ValueError(f"dem: cannot load the navigator's map {dem!r}: {exc}") from exc
         self.name = name or ("ins" if aiding is None else "ins_tercom")
         self.aiding = aiding
         self.dem = dem
@@ -171,9 +231,15 @@ class InsTrnNavigator:
         self.baro_geopotential = bool(baro_geopotential)
         self.remove_bias = bool(remove_bias)
         self.init_height_from_baro = bool(init_height_from_baro)
-        if not (math.isfinite(baro_bias_sigma_m) and baro_bias_sigma_m >= 0.0):
-            raise ValueError(f"baro_bias_sigma_m must be a finite number >= 0, got {baro_bias_sigma_m!r}")
         self.baro_bias_sigma_m = float(baro_bias_sigma_m)
+        self.use_gnss = bool(use_gnss)
+        self.gnss_sigma_h_m = float(gnss_sigma_h_m)
+        self.gnss_sigma_v_mps = float(gnss_sigma_v_mps)
+        self.gnss_correlated_sigma_m = float(gnss_correlated_sigma_m)
+        self.gnss_gate_chi2 = float(gnss_gate_chi2)
+        self.gnss_timeout_s = float(gnss_timeout_s)
+        self._t_gnss = -math.inf        # time of the last GNSS fix used
+        self._gnss_up = False           # GNSS fixes arriving (loss reported once gnss_timeout_s passes)
         self._height_initialised = False
         self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
         rh = 2 * self.half_cells if recovery_half_cells is None else recovery_half_cells
@@ -205,6 +271,11 @@ class InsTrnNavigator:
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
+        values = [initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.roll_rad,
+                  initial.pitch_rad, initial.yaw_rad, *np.ravel(np.asarray(initial.v_ned_mps, float))]
+        if len(values) != 10 or not all(math.isfinite(float(v)) for v in values):
+            raise ValueError("initial: the initial estimate's time, position, velocity (3) and attitude must "
+                             "be finite numbers")
         self.ins.reset(
             initial.t_s,
             initial.lat_rad,
@@ -217,8 +288,16 @@ class InsTrnNavigator:
         )
         P = np.zeros((N_ERR, N_ERR))
         cov = np.asarray(initial.covariance, float)
-        if cov.shape != (9, 9) or not _is_pd(cov):
-            raise ValueError("initial.covariance must be a positive definite 9 x 9 matrix")
+        if cov.shape != (9, 9) or not np.all(np.isfinite(cov)):
+            raise ValueError("initial.covariance must be a finite 9 x 9 matrix")
+        if not _is_pd(cov):
+            # a perfectly known start (zero sigmas) is positive semi-definite: floor its eigenvalues so the
+            # filter's algebra stays defined; a negative eigenvalue is an error
+            w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+            if w.min() < -1e-9 * max(1.0, float(np.abs(w).max())):
+                raise ValueError("initial.covariance must be positive semi-definite (it has a negative "
+                                 f"eigenvalue {w.min():.3g})")
+            cov = (V * np.maximum(w, 1e-10)) @ V.T
         P[:9, :9] = cov
         P[9:12, 9:12] = np.eye(3) * self.sig_ba**2
         P[12, 12] = self.sig_bg**2
@@ -234,6 +313,8 @@ class InsTrnNavigator:
         self._t_ekf = float(initial.t_s)
         self._t_batch0 = float(initial.t_s)
         self._height_initialised = False
+        self._t_gnss = -math.inf
+        self._gnss_up = False
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
@@ -244,21 +325,112 @@ class InsTrnNavigator:
             return self.estimate()
         t = np.asarray(imu.t_s, float)
         n = t.size
-        if self._fused_ok(frames, t):
-            self._fused_segment(frames, t)
-            return self.estimate()
+        gnss = self._gnss_fixes(frames)
+        if gnss is None:
+            self._gnss_check_loss(float(t[-1]))
+            if self._fused_ok(frames, t):
+                self._fused_segment(frames, t)
+                return self.estimate()
+        t_g = gnss[0] if gnss is not None else _EMPTY
+        g = 0
         a = 0
-        while a < n:  # split the chunk at fix times so that fixes are applied when they fall due
-            if self.aiding is None:
+        while a < n:  # split the chunk at fix and GNSS times so that each is applied when it falls due
+            t_cut = math.inf if self.aiding is None else self._t_batch0 + self.fix_period_s
+            if g < t_g.shape[0]:
+                t_cut = min(t_cut, float(t_g[g]))
+            if math.isinf(t_cut):
                 b = n
             else:
-                t_fix = self._t_batch0 + self.fix_period_s
-                b = min(max(int(np.searchsorted(t, t_fix, side="left")) + 1, a + 1), n)
+                b = min(max(int(np.searchsorted(t, t_cut, side="left")) + 1, a + 1), n)
             self._segment(frames, a, b)
             if self.aiding is not None and t[b - 1] >= self._t_batch0 + self.fix_period_s - 1e-9:
                 self._fix(float(t[b - 1]))
+            while g < t_g.shape[0] and (t_g[g] <= t[b - 1] + 1e-9 or b == n):
+                self._gnss_update(gnss, g)
+                g += 1
             a = b
         return self.estimate()
+
+    # ------------------------------------------------------------------ GNSS
+    def _gnss_fixes(self, frames: SensorFrames):
+        """(t, lat, lon, v_ned) of the frame's valid GNSS fixes in time order, or None."""
+        gf = frames.gnss
+        if not self.use_gnss or gf is None or gf.t_s.shape[0] == 0:
+            return None
+        v = np.asarray(gf.v_ned_mps, float).reshape(-1, 3)
+        ok = (np.asarray(gf.valid, bool) & np.isfinite(gf.t_s) & np.isfinite(gf.lat_rad)
+              & np.isfinite(gf.lon_rad) & np.all(np.isfinite(v), axis=1))
+        nbad = int(ok.shape[0] - ok.sum())
+        if nbad:
+            self._count_skip(float(frames.t_start_s), "gnss_invalid", nbad, f"{nbad} GNSS fixes invalid")
+        if not ok.any():
+            return None
+        order = np.argsort(gf.t_s[ok], kind="stable")
+        return (np.asarray(gf.t_s, float)[ok][order], np.asarray(gf.lat_rad, float)[ok][order],
+                np.asarray(gf.lon_rad, float)[ok][order], v[ok][order])
+
+    def _gnss_check_loss(self, t_now: float) -> None:
+        if self._gnss_up and t_now - self._t_gnss > self.gnss_timeout_s:
+            self._gnss_up = False
+            on = "the INS and TRN" if self.aiding is not None else "the INS alone"
+            self.health.events.append(
+                (self._t_gnss, f"GNSS lost: no valid fix after t = {self._t_gnss:.2f} s (navigating on "
+                               f"{on})"))
+            if self.aiding is None:
+                self.health.status = "free_inertial"
+
+    def _gnss_update(self, gnss, i: int) -> None:
+        """Loosely coupled GNSS update with fix i (module docstring)."""
+        t_g, lat_g, lon_g, v_g = gnss[0][i], gnss[1][i], gnss[2][i], gnss[3][i]
+        st = self.ins.state
+        lat, lon, h = float(st[0]), float(st[1]), float(st[2])
+        z = np.empty((5, 1))
+        z[0, 0] = (lat - lat_g) * (meridian_radius_m(lat) + h)     # INS minus GNSS, north (m)
+        z[1, 0] = (lon - lon_g) * (prime_vertical_radius_m(lat) + h) * math.cos(lat)
+        z[2:, 0] = st[3:6] - v_g
+        H = np.zeros((5, N_ERR))
+        for r, c in enumerate(_GNSS_STATES):
+            H[r, c] = 1.0
+        Rm = np.diag([self.gnss_sigma_h_m**2] * 2 + [self.gnss_sigma_v_mps**2] * 3)
+        S = H @ self.kf.P @ H.T + Rm
+        try:
+            d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])
+        except np.linalg.LinAlgError:
+            d2 = math.nan
+        if not math.isfinite(d2) or d2 > self.gnss_gate_chi2:
+            self._count_skip(t_g, "gnss_gated", 1, f"GNSS fix failed the chi-square gate ({d2:.1f})")
+            return
+        saved = copy.deepcopy((self.kf.x, self.kf.P))
+        self.kf.update(z, R=Rm, H=H)
+        dx = self.kf.x.ravel()
+        P = self.kf.P
+        floor2 = self.gnss_correlated_sigma_m**2
+        if floor2 > 0.0 and np.all(np.isfinite(P)):
+            d = np.ones(N_ERR)
+            for k in (0, 1):
+                if 0.0 < P[k, k] < floor2:
+                    d[k] = math.sqrt(floor2 / P[k, k])
+            P = self.kf.P = P * d[:, None] * d[None, :]
+        if not (_is_pd(P) and np.all(np.isfinite(dx))):
+            self.kf.x, self.kf.P = saved
+            self._count_skip(t_g, "covariance_not_pd", 1,
+                             "GNSS fix skipped: covariance not positive definite")
+            return
+        self.ins.correct(dx[0:3], dx[3:6], dx[6:9])
+        self.ins.accel_bias_b += dx[9:12]
+        self.ins.gyro_bias_b[2] += dx[12]
+        self.kf.x[:] = 0.0
+        self._P_good[:] = self.kf.P
+        if not self._gnss_up:
+            self.health.events.append((float(t_g), "GNSS fixes used" if self._t_gnss == -math.inf else
+                                       f"GNSS recovered: fixes used again after {t_g - self._t_gnss:.1f} s"))
+        self._gnss_up = True
+        self._t_gnss = float(t_g)
+        if self.aiding is not None:    # a TERCOM batch is collected with one rigid INS error: restart it
+            self.batch.clear()
+            self._t_batch0 = float(t_g)
+        self.health.ok = True
+        self.health.status = "ok"
 
     # ------------------------------------------------------------------ internals
     def _fused_ok(self, frames: SensorFrames, t: np.ndarray) -> bool:
@@ -586,8 +758,7 @@ class InsTrnNavigator:
         self.ins.gyro_bias_b[2] += dx[12]
         self.kf.x[:] = 0.0
         if not self.integrity.degraded:
-            self.health.status = "ok"
-        self.health.ok = True
+            self.health.ok, self.health.status = True, "ok"
         self.health.events.append(
             (t_s, f"TERCOM fix dn={fix.dn_m:.1f} m de={fix.de_m:.1f} m q={fix.quality:.2f}")
         )
@@ -618,7 +789,7 @@ class InsTrnNavigator:
             return
         self.health.events.append((t_s, verdict.message))
         if verdict.degraded:
-            self.health.status = "degraded"
+            self.health.ok, self.health.status = False, "degraded"
             P = self.kf.P
             P[0, 0] += self.recovery_sigma_m**2
             P[1, 1] += self.recovery_sigma_m**2
@@ -628,7 +799,7 @@ class InsTrnNavigator:
                                             f"({self.recovery_sigma_m:.0f} m)^2, TERCOM search widened to "
                                             f"+-{self.half_cells} cells"))
         else:
-            self.health.status = "ok"
+            self.health.ok, self.health.status = True, "ok"
             self._set_search(self.nominal_half_cells)
             self.health.events.append(
                 (t_s, f"recovery ended: TERCOM search back to +-{self.half_cells} cells"))
@@ -649,7 +820,7 @@ class InsTrnNavigator:
         elif self.aiding is not None and sig_h > 2000.0:
             self.health.ok, self.health.status = False, "degraded"
         elif self.integrity.degraded:
-            self.health.status = "degraded"
+            self.health.ok, self.health.status = False, "degraded"
         extra = {
             "accel_bias_b_mps2": self.ins.accel_bias_b.copy(),
             "gyro_bias_z_rps": float(self.ins.gyro_bias_b[2]),

@@ -53,7 +53,8 @@ from navigators.frames import SensorFrames
 from navigators.protocol import Estimate
 from terrain.geodesy import WGS84_A_M, WGS84_E2
 from terrain.kernels import bilinear
-from terrain.queries import _ra_batch, _ra_tables, _ra_workspace
+from terrain.queries.radar_altimeter import _ra_batch
+from terrain.queries.shared import _ra_tables, _ra_workspace
 
 SOURCE_GNSS = 0
 SOURCE_NAVIGATOR = 1

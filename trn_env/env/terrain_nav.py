@@ -79,13 +79,15 @@ class TerrainNavEnv(gym.Env):
 
     ## Episode End
     Terminated: the true position within `goal_radius_m` of the goal, terrain collision (true height above
-    the true terrain < 0), off the map, or the navigator diverged. Truncated: `max_episode_s` of flight.
+    the true terrain < 0), off the map, the navigator diverged, or an engine stopped (fuel exhausted or
+    engine failure; the scenario's `aircraft.constant_fuel = true` keeps the tanks full for long episodes).
+    Truncated: `max_episode_s` of flight.
     `step` after the end without `reset` raises `gymnasium.error.ResetNeeded`.
 
     ## Info
     `t_s`, `true_error_ned_m` (estimate minus truth), `true_horizontal_error_m`, `true_distance_to_goal_m`,
     `sigma_ned_m`, `nav_ok`, `nav_status`, `termination` (None while running; else `goal`,
-    `terrain_collision`, `off_map`, `diverged` or `time_limit`).
+    `terrain_collision`, `off_map`, `diverged`, `fuel_exhausted`, `engine_failure` or `time_limit`).
 
     ## Arguments
     `gymnasium.make("trn_env/TerrainNav-v0", scenario="default", render_mode=None, decision_interval_s=5.0,
@@ -286,7 +288,8 @@ class TerrainNavEnv(gym.Env):
             reward += self.goal_bonus
         if reason == "terrain_collision":
             reward -= self.collision_penalty
-        terminated = reason in ("goal", "terrain_collision", "off_map", "diverged")
+        terminated = reason in ("goal", "terrain_collision", "off_map", "diverged", "fuel_exhausted",
+                                "engine_failure")
         truncated = reason == "time_limit"
         if terminated or truncated:
             self._needs_reset = True

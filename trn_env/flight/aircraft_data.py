@@ -7,9 +7,14 @@ repository folder.
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
+from functools import lru_cache
 from pathlib import Path
 
 import jsbsim
+
+KG_PER_LB = 0.45359237
+_KG_PER_UNIT = {"LBS": KG_PER_LB, "KG": 1.0}   # the mass units JSBSim accepts for a tank's capacity
 
 
 def aircraft_root() -> Path:
@@ -19,6 +24,15 @@ def aircraft_root() -> Path:
         if root.is_dir() and any(root.glob("*/*.xml")):
             return root
     raise FileNotFoundError(f"trn-env aircraft data not found next to {here}: reinstall (pip install .)")
+
+
+# Published service ceilings (m MSL) of the aircraft the data models: King Air C90-class 30,000 ft (POH).
+SERVICE_CEILING_M = {"kingair": 9144.0}
+
+
+def service_ceiling_m(aircraft: str) -> float | None:
+    """The aircraft's service ceiling in m MSL (None when not known)."""
+    return SERVICE_CEILING_M.get(aircraft)
 
 
 def available_aircraft() -> list[str]:
@@ -41,3 +55,31 @@ def new_fdm(aircraft: str = "kingair", dt_s: float = 0.01) -> jsbsim.FGFDMExec:
         raise RuntimeError(f"JSBSim could not load aircraft {aircraft!r} from {root / aircraft}")
     fdm.set_dt(dt_s)
     return fdm
+
+
+@lru_cache(maxsize=8)
+def _fuel_tanks_kg(aircraft: str) -> tuple[tuple[int, float], ...]:
+    known = available_aircraft()
+    if aircraft not in known:
+        raise ValueError(f"unknown aircraft {aircraft!r}; available: {', '.join(known) or 'none'}")
+    root = ET.parse(aircraft_root() / aircraft / f"{aircraft}.xml").getroot()
+    out = []
+    for index, tank in enumerate(root.iter("tank")):   # JSBSim numbers every tank, fuel or oxidizer
+        if tank.get("type", "").upper() != "FUEL":
+            continue
+        cap = tank.find("capacity")
+        if cap is None or cap.text is None:
+            out.append((index, 0.0))   # JSBSim's default: a tank with no capacity holds nothing
+            continue
+        unit = cap.get("unit", "LBS").upper()
+        if unit not in _KG_PER_UNIT:
+            raise ValueError(f"{aircraft}.xml: tank capacity unit {unit!r} (expected LBS or KG)")
+        out.append((index, float(cap.text) * _KG_PER_UNIT[unit]))
+    return tuple(out)
+
+
+def fuel_tanks_kg(aircraft: str = "kingair") -> dict[int, float]:
+    """{JSBSim tank index: capacity (kg)} of every FUEL tank of `aircraft`, read from its XML file
+    (`<propulsion><tank type="FUEL"><capacity unit=...>`, JSBSim's default unit LBS). ValueError for an
+    unknown aircraft or a capacity unit JSBSim does not take."""
+    return dict(_fuel_tanks_kg(aircraft))

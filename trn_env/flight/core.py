@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 
 from terrain.geodesy import OMEGA_EARTH_RPS
-from trn_env.flight.aircraft_data import new_fdm
+from trn_env.flight.aircraft_data import KG_PER_LB, fuel_tanks_kg, new_fdm
 from trn_env.flight.atmosphere import JSBSIM_P_SL_PA, Atmosphere, static_p_T
 from trn_env.flight.truth import SCALAR_FIELDS, VECTOR_FIELDS, TruthChunk
 from trn_env.flight.wind import FT_PER_M, WindConfig
@@ -92,8 +92,10 @@ def _check_finite(owner: str, name: str, value) -> float:
 @dataclass(frozen=True)
 class InitialCondition:
     """Where and how the flight starts (SI). heading_rad is the true heading; flaps is normalised 0..1;
-    fuel_fraction scales every tank to that fraction of its capacity (None = as in the aircraft file);
-    gamma_rad is the initial flight-path angle (0 = level)."""
+    fuel_fraction scales every tank to that fraction of its capacity; fuel_kg is the total fuel on board
+    (kg, > 0, shared between the tanks in proportion to their capacity; at most their total capacity, which
+    Flight checks); give at most one of the two (None and None = the tanks as in the aircraft file, full for
+    the King Air); gamma_rad is the initial flight-path angle (0 = level)."""
 
     lat_rad: float
     lon_rad: float
@@ -103,11 +105,12 @@ class InitialCondition:
     flaps: float = 0.0
     fuel_fraction: float | None = None
     gamma_rad: float = 0.0
+    fuel_kg: float | None = None
 
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
-            if v is None and f.name == "fuel_fraction":
+            if v is None and f.name in ("fuel_fraction", "fuel_kg"):
                 continue
             _check_finite("InitialCondition", f.name, v)
         if not -math.pi / 2 <= self.lat_rad <= math.pi / 2:
@@ -120,6 +123,10 @@ class InitialCondition:
             raise ValueError(f"InitialCondition.flaps must be within 0..1, got {self.flaps}")
         if self.fuel_fraction is not None and not 0.0 <= self.fuel_fraction <= 1.0:
             raise ValueError(f"InitialCondition.fuel_fraction must be within 0..1, got {self.fuel_fraction}")
+        if self.fuel_kg is not None and not self.fuel_kg > 0.0:
+            raise ValueError(f"InitialCondition.fuel_kg must be > 0 (no fuel, no flight), got {self.fuel_kg}")
+        if self.fuel_kg is not None and self.fuel_fraction is not None:
+            raise ValueError("InitialCondition.fuel_kg: give fuel_kg or fuel_fraction, not both")
         if abs(self.gamma_rad) > math.radians(30.0):
             raise ValueError(f"InitialCondition.gamma_rad must be within +-30 deg, got {self.gamma_rad}")
 
@@ -382,12 +389,16 @@ class Flight:
     terrain_elevation_m: terrain height under the aircraft at the start (WGS84, m); targets: autopilot
     targets to engage after trim (default: hold the trimmed track, altitude and TAS); atmosphere: the day's
     trn_env.flight.Atmosphere (temperature offset, sea-level pressure; default standard), set in JSBSim
-    before the trim and used for the truth's p_static_pa / T_static_K.
+    before the trim and used for the truth's p_static_pa / T_static_K; constant_fuel: keep the tanks'
+    contents fixed for the whole flight (JSBSim's own `propulsion/fuel_freeze`: the engines run, no fuel is
+    drawn, so the mass stays that of the start) - for soak and campaign flights longer than the fuel lasts.
+    A flight whose engines stop (fuel exhausted, or cut off) flies on as a glider; `engine_stop()` says so.
     """
 
     def __init__(self, ic: InitialCondition, *, aircraft: str = "kingair", dt_s: float = 0.01,
                  wind: WindConfig | None = None, seed: int = 0, terrain_elevation_m: float = 0.0,
-                 targets: AutopilotTargets | None = None, atmosphere: Atmosphere | None = None):
+                 targets: AutopilotTargets | None = None, atmosphere: Atmosphere | None = None,
+                 constant_fuel: bool = False):
         if not isinstance(ic, InitialCondition):
             raise ValueError(f"ic must be an InitialCondition, got {type(ic).__name__}")
         dt_s = _check_finite("Flight", "dt_s", dt_s)
@@ -405,8 +416,11 @@ class Flight:
             atmosphere = Atmosphere()
         if not isinstance(atmosphere, Atmosphere):
             raise ValueError(f"atmosphere must be an Atmosphere, got {type(atmosphere).__name__}")
+        if not isinstance(constant_fuel, bool):
+            raise ValueError(f"Flight.constant_fuel must be True or False, got {constant_fuel!r}")
         self.ic = ic
         self.aircraft = aircraft
+        self.constant_fuel = constant_fuel
         self.dt_s = dt_s
         self.wind = wind
         self.seed = int(seed)
@@ -437,8 +451,17 @@ class Flight:
         fdm["simulation/randomseed"] = float(self.seed % 2**31)
         self.atmosphere = atmosphere
         atmosphere.apply(fdm)
+        self._tanks = fuel_tanks_kg(aircraft)
         self._apply_ic(ic, terrain_elevation_m)
         self._trim()
+        self._tank_getters = tuple(self._node(f"propulsion/tank[{i}]/contents-lbs").get_double_value
+                                   for i in self._tanks)
+        n_engines = 0
+        while pm.hasNode(f"propulsion/engine[{n_engines}]/set-running"):
+            n_engines += 1
+        self._running_getters = tuple(self._node(f"propulsion/engine[{i}]/set-running").get_double_value
+                                      for i in range(n_engines))
+        fdm["propulsion/fuel_freeze"] = 1.0 if constant_fuel else 0.0
         self._add_wind_to_trim()
         wind.apply_turbulence(fdm)
         self._write_steady_wind(ic.h_msl_m)
@@ -473,24 +496,50 @@ class Flight:
         fdm["ic/vd-fps"] = -ic.tas_mps * math.sin(ic.gamma_rad) * FT_PER_M
         fdm["fcs/flap-cmd-norm"] = ic.flaps
         fdm["gear/gear-cmd-norm"] = 0.0
-        if ic.fuel_fraction is not None:
-            self._set_fuel(ic.fuel_fraction)
+        if ic.fuel_fraction is not None or ic.fuel_kg is not None:
+            self._set_fuel(ic)
         if not fdm.run_ic():
             raise TrimError(f"JSBSim rejected the initial condition {ic}")
         fdm["gear/gear-pos-norm"] = 0.0
         fdm["propulsion/set-running"] = -1
         self._terrain_setter(terrain_elevation_m * FT_PER_M)
 
-    def _set_fuel(self, fraction: float) -> None:
-        pm = self.fdm.get_property_manager()
-        i = 0
-        while (contents := pm.get_node(f"propulsion/tank[{i}]/contents-lbs")) is not None:
-            pct = pm.get_node(f"propulsion/tank[{i}]/pct-full").get_double_value()
-            if pct <= 0.0:
-                raise ValueError(f"InitialCondition.fuel_fraction: tank {i} of {self.aircraft!r} is empty in "
-                                 "the aircraft file, so its capacity is unknown")
-            contents.set_double_value(fraction * contents.get_double_value() / (pct / 100.0))
-            i += 1
+    def _set_fuel(self, ic: InitialCondition) -> None:
+        """Fill every fuel tank to the same fraction of its capacity (from the aircraft file)."""
+        capacity_kg = sum(self._tanks.values())
+        if capacity_kg <= 0.0:
+            raise ValueError(f"InitialCondition.fuel_kg/fuel_fraction: {self.aircraft!r} has no fuel tank "
+                             "with a capacity in its aircraft file")
+        if ic.fuel_kg is not None:
+            if ic.fuel_kg > capacity_kg * (1.0 + 1e-9):
+                raise ValueError(f"InitialCondition.fuel_kg: {ic.fuel_kg} kg is more than the fuel tanks of "
+                                 f"{self.aircraft!r} hold ({capacity_kg:.1f} kg)")
+            fraction = ic.fuel_kg / capacity_kg
+        else:
+            fraction = float(ic.fuel_fraction)
+        for i, cap_kg in self._tanks.items():
+            self._node(f"propulsion/tank[{i}]/contents-lbs").set_double_value(fraction * cap_kg / KG_PER_LB)
+
+    @property
+    def fuel_kg(self) -> float:
+        """Fuel on board now (kg, all fuel tanks)."""
+        return sum(g() for g in self._tank_getters) * KG_PER_LB
+
+    def engine_stop(self) -> tuple[str, str] | None:
+        """(reason, message) if an engine is not running, else None: reason `fuel_exhausted` when a fuel
+        tank is empty (JSBSim starves the engine it feeds), `engine_failure` otherwise (e.g. cut off).
+        Cheap (a few property reads): the closed loop asks once per update interval."""
+        stopped = [i for i, running in enumerate(self._running_getters) if running() < 0.5]
+        if not stopped:
+            return None
+        empty = [i for i, g in zip(self._tanks, self._tank_getters, strict=True) if g() <= 0.0]
+        engines = ", ".join(str(i) for i in stopped)
+        if empty:
+            tanks = ", ".join(str(i) for i in empty)
+            return "fuel_exhausted", (f"engine {engines} stopped at t = {self.t_s:.1f} s: fuel tank {tanks} "
+                                      f"empty ({self.fuel_kg:.1f} kg left on board)")
+        return "engine_failure", (f"engine {engines} stopped at t = {self.t_s:.1f} s with "
+                                  f"{self.fuel_kg:.1f} kg of fuel on board")
 
     def _trim(self) -> None:
         ic, fdm = self.ic, self.fdm

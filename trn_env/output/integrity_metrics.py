@@ -1,8 +1,10 @@
-"""Navigator integrity figures of a run (estimate vs truth): how long the navigator declared itself
-healthy, and how much of that time its true error lay outside its own 3 sigma (misleading information).
+"""Navigator integrity figures of a run from its Health.status words (estimate vs truth): how long the
+navigator said "ok", and how much of that time its true error lay outside its own 3 sigma (misleading
+information); and, for a navigator meeting a fault, whether its flag came before its error left 3 sigma.
 
-Pure functions of logged arrays, so summary.json and offline studies share them. (trn_env/output/metrics.py
-carries the campaign metrics; these two are meant to join them there.)
+Pure functions of logged arrays, so summary.json and offline studies share them. trn_env/output/metrics.py
+carries the campaign metrics from Health.ok (fraction_healthy, misleading_information_time_s); these
+status-based figures are named apart (status_ok_*) and are meant to join them there.
 """
 
 from __future__ import annotations
@@ -33,14 +35,14 @@ def _healthy(status: np.ndarray) -> np.ndarray:
 
 def integrity_metrics(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarray, status: np.ndarray,
                       k_sigma: float = 3.0) -> dict:
-    """fraction_healthy: time share of rows whose Health.status is "ok"; status: Health.status words or
-    the log's nav_status_code; misleading_information_fraction: share of that healthy time with the north
-    or east error outside k_sigma times its own sigma;
-    misleading_information_time_s: that time in seconds. Row i holds for t[i] - t[i-1] (row 0: nothing)."""
+    """status_ok_fraction: time share of rows whose Health.status is "ok" (status: Health.status words or
+    the log's nav_status_code); status_ok_misleading_fraction: share of that time with the north or east
+    error outside k_sigma times its own sigma; status_ok_misleading_time_s: that time in seconds. Row i
+    holds for t[i] - t[i-1] (row 0: nothing)."""
     t = np.asarray(t_s, float)
     if t.size < 2:
-        return {"fraction_healthy": None, "misleading_information_fraction": None,
-                "misleading_information_time_s": 0.0}
+        return {"status_ok_fraction": None, "status_ok_misleading_fraction": None,
+                "status_ok_misleading_time_s": 0.0}
     w = np.diff(t, prepend=t[0])
     healthy = _healthy(status)
     sig = np.sqrt(np.clip(np.asarray(cov_diag, float)[:, :2], 0.0, None))
@@ -50,9 +52,9 @@ def integrity_metrics(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarr
     t_healthy = float(w[healthy].sum())
     t_mi = float(w[healthy & outside].sum())
     return {
-        "fraction_healthy": t_healthy / total if total > 0 else None,
-        "misleading_information_fraction": t_mi / t_healthy if t_healthy > 0 else None,
-        "misleading_information_time_s": t_mi,
+        "status_ok_fraction": t_healthy / total if total > 0 else None,
+        "status_ok_misleading_fraction": t_mi / t_healthy if t_healthy > 0 else None,
+        "status_ok_misleading_time_s": t_mi,
     }
 
 

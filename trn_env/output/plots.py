@@ -1,8 +1,9 @@
 """The plots a navigation engineer looks at first, drawn with matplotlib's Agg backend.
 
-- track.png: true and estimated tracks over a hillshade of the true terrain;
+- track.png: true and estimated tracks over a hillshade of the true terrain, a scale bar, and the estimate
+  with its error magnified (true position + k x error) so that a 10 m error is visible at map scale;
 - errors.png: north, east, horizontal and vertical navigation error against time with the filter's
-  +-3 sigma bounds, GNSS outages shaded.
+  +-3 sigma bounds (horizontal: 3 hypot(sigma_N, sigma_E)), GNSS outages shaded.
 """
 
 from __future__ import annotations
@@ -53,6 +54,21 @@ def plot_track(path: Path, dem, arrays: dict[str, np.ndarray], title: str = "",
             lw=1.6, label="true track")
     ax.plot(np.degrees(arrays["est_lon_rad"]), np.degrees(arrays["est_lat_rad"]), "--", color="red",
             lw=1.2, label="estimated track")
+    # at map scale the two tracks overlap: draw the estimate again with its error magnified k times
+    e_n = np.asarray(arrays["err_ned_m"][:, 0], float)
+    e_e = np.asarray(arrays["err_ned_m"][:, 1], float)
+    e_max = float(np.nanmax(np.hypot(e_n, e_e))) if e_n.size and np.isfinite(e_n).any() else 0.0
+    extent_m = math.radians(lat1 - lat0) * 6.371e6
+    if e_max > 0.0:
+        k = _nice(0.05 * extent_m / e_max)
+        if k > 1.5:
+            lat_t = np.asarray(arrays["true_lat_rad"], float)
+            lon_t = np.asarray(arrays["true_lon_rad"], float)
+            lat_m = lat_t + k * e_n / 6.371e6
+            lon_m = lon_t + k * e_e / (6.371e6 * np.cos(lat_t))
+            ax.plot(np.degrees(lon_m), np.degrees(lat_m), "-", color="magenta", lw=0.9,
+                    label=f"estimate with its error x{k:g} (max {e_max:.0f} m)")
+    _scale_bar(ax, lon0, lon1, lat0, lat1, lat_mid)
     if waypoints_deg:
         wl = np.array(waypoints_deg)
         ax.plot(wl[:, 1], wl[:, 0], "o:", color="blue", ms=5, lw=0.8, label="route")
@@ -66,6 +82,24 @@ def plot_track(path: Path, dem, arrays: dict[str, np.ndarray], title: str = "",
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def _nice(x: float) -> float:
+    """The largest of 1, 2, 5 x 10^n not above x (x > 0)."""
+    p = 10.0 ** math.floor(math.log10(x))
+    return max(m * p for m in (1.0, 2.0, 5.0) if m * p <= x)
+
+
+def _scale_bar(ax, lon0, lon1, lat0, lat1, lat_mid) -> None:
+    """A scale bar of a round length (about a fifth of the map's width) at the lower left."""
+    width_m = math.radians(lon1 - lon0) * 6.371e6 * math.cos(lat_mid)
+    length_m = _nice(0.2 * width_m)
+    dlon = math.degrees(length_m / (6.371e6 * math.cos(lat_mid)))
+    x0 = lon0 + 0.05 * (lon1 - lon0)
+    y0 = lat0 + 0.05 * (lat1 - lat0)
+    ax.plot([x0, x0 + dlon], [y0, y0], "-", color="black", lw=3, solid_capstyle="butt")
+    label = f"{length_m / 1000:g} km" if length_m >= 1000 else f"{length_m:g} m"
+    ax.text(x0 + 0.5 * dlon, y0 + 0.012 * (lat1 - lat0), label, ha="center", va="bottom", fontsize=8)
 
 
 def _shade_outages(ax, t: np.ndarray, available: np.ndarray) -> None:
@@ -85,24 +119,25 @@ def plot_errors(path: Path, arrays: dict[str, np.ndarray], title: str = "") -> N
     sig = np.sqrt(np.clip(arrays["est_cov_diag"][:, :3], 0.0, None))
     fig, axes = plt.subplots(4, 1, figsize=(9, 9), dpi=110, sharex=True)
     panels = [
-        ("north error (m)", err[:, 0], 3 * sig[:, 0], True),
-        ("east error (m)", err[:, 1], 3 * sig[:, 1], True),
-        ("horizontal error (m)", np.hypot(err[:, 0], err[:, 1]), 3 * np.hypot(sig[:, 0], sig[:, 1]), False),
-        ("vertical error, est - true (m)", -err[:, 2], 3 * sig[:, 2], True),
+        ("north error (m)", err[:, 0], 3 * sig[:, 0], True, "+-3 sigma_N"),
+        ("east error (m)", err[:, 1], 3 * sig[:, 1], True, "+-3 sigma_E"),
+        ("horizontal error (m)", np.hypot(err[:, 0], err[:, 1]), 3 * np.hypot(sig[:, 0], sig[:, 1]), False,
+         "3 hypot(sigma_N, sigma_E)"),
+        ("vertical error, est - true (m)", -err[:, 2], 3 * sig[:, 2], True, "+-3 sigma_D"),
     ]
-    for ax, (label, e, s3, symmetric) in zip(axes, panels, strict=True):
+    for ax, (label, e, s3, symmetric, bound) in zip(axes, panels, strict=True):
         _shade_outages(ax, t, arrays["gnss_available"])
         ax.plot(t, e, color="C0", lw=1.0, label="error")
-        ax.plot(t, s3, color="C3", lw=0.8, ls="--", label="+3 sigma")
+        ax.plot(t, s3, color="C3", lw=0.8, ls="--", label=bound)
         if symmetric:
-            ax.plot(t, -s3, color="C3", lw=0.8, ls="--", label="-3 sigma")
+            ax.plot(t, -s3, color="C3", lw=0.8, ls="--")
+        ax.legend(loc="upper right", fontsize=7)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         finite = np.concatenate([np.abs(e[np.isfinite(e)]), s3[np.isfinite(s3)]])
         if finite.size:
             lim = 1.15 * min(float(np.max(finite)), 1e5) + 1.0
             ax.set_ylim(-lim if symmetric else 0.0, lim)
-    axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time (s); grey = GNSS not used")
     fig.suptitle(title or "navigation error")
     fig.tight_layout()

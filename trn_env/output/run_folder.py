@@ -3,7 +3,9 @@
 Everything is written atomically: the files go into a temporary directory next to the target, and only
 when all of them are complete is that directory renamed onto the target (or, if the target already holds
 files, each file is moved in with os.replace, summary.json last). A Ctrl-C or a kill therefore leaves
-either a complete run directory or no summary.json at all - never a half-written file.
+either a complete run directory or no summary.json at all - never a half-written file. The temporary
+directory is named `.NAME.partial-<pid>-<random>`; a run that was killed while writing leaves one behind,
+and the next run writing into the same parent folder removes every such leftover whose process is gone.
 """
 
 from __future__ import annotations
@@ -23,8 +25,8 @@ import numpy as np
 # The columns of timeline.csv (a subset of the log arrays, one row per logged tick).
 TIMELINE_COLUMNS = [
     "t_s", "true_lat_deg", "true_lon_deg", "true_h_msl_m", "true_h_agl_m", "true_yaw_deg", "tas_mps",
-    "est_lat_deg", "est_lon_deg", "est_h_m", "est_yaw_deg",
-    "err_n_m", "err_e_m", "err_d_m", "err_h_m", "sigma_n_m", "sigma_e_m", "sigma_d_m",
+    "est_lat_deg", "est_lon_deg", "est_h_msl_m", "est_yaw_deg",
+    "err_n_m", "err_e_m", "err_d_m", "err_horizontal_m", "sigma_n_m", "sigma_e_m", "sigma_d_m",
     "gnss_available", "nav_ok",
 ]
 
@@ -86,12 +88,12 @@ def timeline_table(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         "tas_mps": a["true_tas_mps"],
         "est_lat_deg": np.degrees(a["est_lat_rad"]),
         "est_lon_deg": np.degrees(a["est_lon_rad"]),
-        "est_h_m": a["est_h_m"],
+        "est_h_msl_m": a["est_h_m"],
         "est_yaw_deg": np.degrees(a["est_yaw_rad"]),
         "err_n_m": a["err_ned_m"][:, 0],
         "err_e_m": a["err_ned_m"][:, 1],
         "err_d_m": a["err_ned_m"][:, 2],
-        "err_h_m": np.hypot(a["err_ned_m"][:, 0], a["err_ned_m"][:, 1]),
+        "err_horizontal_m": np.hypot(a["err_ned_m"][:, 0], a["err_ned_m"][:, 1]),
         "sigma_n_m": sig[:, 0],
         "sigma_e_m": sig[:, 1],
         "sigma_d_m": sig[:, 2],
@@ -118,6 +120,48 @@ def write_events_csv(path: Path, events: list[tuple[float, str, str]]) -> None:
             w.writerow([repr(float(t)), src, msg])
 
 
+PARTIAL_MARK = ".partial-"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:          # someone else's live process
+        return True
+    return True
+
+
+def clean_partial_leftovers(parent: Path, stale_after_s: float = 3600.0) -> list[Path]:
+    """Remove the temporary folders (`.NAME.partial-<pid>-*`) that killed runs left in `parent`: those
+    whose process no longer runs, and (older layout, no pid) those untouched for stale_after_s."""
+    import time
+    removed = []
+    try:
+        entries = list(Path(parent).iterdir())
+    except OSError:
+        return removed
+    now = time.time()
+    for p in entries:
+        name = p.name
+        if not (name.startswith(".") and PARTIAL_MARK in name) or not p.is_dir() or p.is_symlink():
+            continue
+        tail = name.rsplit(PARTIAL_MARK, 1)[1]
+        head = tail.split("-", 1)[0]
+        try:
+            if head.isdigit() and "-" in tail:
+                stale = not _pid_alive(int(head))
+            else:
+                stale = now - p.stat().st_mtime > stale_after_s
+        except OSError:
+            continue
+        if stale:
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
+
+
 def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
               events: list[tuple[float, str, str]] | None = None,
               plot: Callable[[Path], list[str]] | None = None) -> Path:
@@ -128,7 +172,8 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
     out_dir = Path(out_dir)
     parent = out_dir.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=parent))
+    clean_partial_leftovers(parent)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}{PARTIAL_MARK}{os.getpid()}-", dir=parent))
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)          # mkdtemp makes it private; the run directory should not be

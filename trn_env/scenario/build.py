@@ -227,7 +227,7 @@ def build_flight(d: dict, world, rng: np.random.Generator):
     with quiet_stdout():
         return Flight(ic, aircraft=d["aircraft"]["name"], dt_s=float(d["aircraft"]["dt_s"]),
                       wind=build_wind(d), seed=seed, terrain_elevation_m=map_height(world, lat, lon),
-                      atmosphere=build_atmosphere(d))
+                      atmosphere=build_atmosphere(d), constant_fuel=bool(d["aircraft"]["constant_fuel"]))
 
 
 # ----------------------------------------------------------------------------------------------- sensors
@@ -347,7 +347,7 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
     if the_map is not None and not blocked("navigator", "terrain"):
         checks.append(("navigator.settings", lambda: build_navigator(d, the_map)))
     if world is not None and not blocked("initial", "aircraft", "terrain.world"):
-        checks.append(("aircraft.settings", lambda: _initial_condition(d, world)))
+        checks.append(("initial", lambda: _initial_condition(d, world)))
     if not blocked("route"):
         checks.append(("route", lambda: build_guidance(d, the_map)))
     problems: list[str] = []
@@ -356,11 +356,43 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
             out = fn()
             if path == "":
                 problems += out
-        except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as exc:
             if tolerant and not isinstance(exc, ValueError):
                 continue
-            problems.append(f"{path}: {exc}")
+            problems.append(_attribute(d, path, exc))
     return problems
+
+
+def _attribute(d: dict, path: str, exc: Exception) -> str:
+    """'field.path: message' for a component's rejection, at the setting the message names when it names
+    one: navigator.settings.<name>, aircraft.settings.<name>, or initial.<field> (a component's message
+    starts with, or quotes, the setting's name)."""
+    import re
+    msg = str(exc)
+    if path == "navigator.settings":
+        keys = list(d["navigator"]["settings"])
+        m = re.search(r"unknown setting '(\w+)'", msg)
+        if m:
+            return f"navigator.settings.{m.group(1)}: {msg}"
+        for key in sorted(keys, key=len, reverse=True):
+            if re.match(rf"(\w+\.)?{re.escape(key)}\b", msg):
+                return f"navigator.settings.{key}: {msg}"
+        return f"navigator.settings: {msg}"
+    if path == "initial":
+        m = re.match(r"InitialCondition\.(\w+)", msg)
+        name = m.group(1) if m else None
+        if name in d["aircraft"]["settings"]:
+            return f"aircraft.settings.{name}: {msg}"
+        fields = {"lat_rad": "lat_deg", "lon_rad": "lon_deg", "heading_rad": "heading_deg",
+                  "tas_mps": "tas_mps",
+                  "h_msl_m": "h_msl_m" if "h_msl_m" in d["initial"] else "h_agl_m"}
+        if name in fields:
+            return f"initial.{fields[name]}: {msg}"
+        m = re.search(r"unexpected keyword argument '(\w+)'", msg)
+        if m:
+            return f"aircraft.settings.{m.group(1)}: unknown setting ({msg})"
+        return f"initial: {msg}"
+    return f"{path}: {msg}"
 
 
 def _initial_condition(d: dict, world):
@@ -368,7 +400,13 @@ def _initial_condition(d: dict, world):
     init = d["initial"]
     return InitialCondition(lat_rad=math.radians(init["lat_deg"]), lon_rad=math.radians(init["lon_deg"]),
                             h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
-                            heading_rad=math.radians(init["heading_deg"]), **d["aircraft"]["settings"])
+                            heading_rad=math.radians(init["heading_deg"]), **_fuel_kw(d),
+                            **d["aircraft"]["settings"])
+
+
+def _fuel_kw(d: dict) -> dict:
+    fuel_kg = d["aircraft"].get("fuel_kg")
+    return {} if fuel_kg is None else {"fuel_kg": float(fuel_kg)}
 
 
 # --------------------------------------------------------------------------------------------- guidance

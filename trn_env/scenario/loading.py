@@ -5,12 +5,22 @@ trn_env/scenario/schema.json and the built-in files in builtin/). `load_scenario
 before any flight starts and reports EVERY problem, each prefixed with the field's path
 (e.g. ``route.waypoints[2].lat_deg: 95 is greater than the maximum of 90``):
 
+0. every number in the file finite: NaN and infinity are refused at their field path wherever they stand
+   (free-form settings tables included), unless the schema marks the field `"x-allow-nonfinite": true`
+   and says what they mean there (no field does today) - a JSON-schema minimum or maximum is false for
+   NaN, so the schema alone lets it through;
 1. the JSON schema (types, ranges, required keys, unknown keys);
 2. semantic checks that need the data: exactly one altitude per waypoint, GNSS outages ordered, the
    DEM files readable, the initial position and every waypoint inside the true terrain and the
    navigator's map, the navigator name known, the component settings accepted by their components.
 
 Problems are raised together as one `ScenarioError` whose `.problems` is the list of messages.
+
+Why a schema plus a generic pass rather than a typed model of the whole file: the schema already states
+every field's type and range in one place that several components extend at once; the finite-number walk
+closes the NaN/infinity class for every present and future numeric field (free-form settings tables
+included) without restating them, and each component validates its own settings in its constructor, so
+`registry.create` and the Python API get the same checks as a scenario file.
 """
 
 from __future__ import annotations
@@ -118,6 +128,9 @@ def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
         text = res.read_text(encoding="utf-8")
     else:
         source = str(text_path)
+        if text_path.is_dir():
+            raise ScenarioError(source, ["file: is a directory, not a scenario file (give a .toml file or a "
+                                         f"built-in name: {', '.join(builtin_names())})"])
         if not text_path.is_file():
             known = ", ".join(builtin_names())
             raise ScenarioError(source, [f"file: no such scenario file or built-in name "
@@ -171,6 +184,50 @@ def field_path(parts) -> str:
     return out or "(top level)"
 
 
+def _schema_child(node: dict | None, key) -> dict | None:
+    """The schema node of `key` (a property name or a list index) below `node`; None if unconstrained."""
+    if not isinstance(node, dict):
+        return None
+    ref = node.get("$ref")
+    if isinstance(ref, str) and ref.startswith("#/$defs/"):
+        node = schema().get("$defs", {}).get(ref.split("/")[-1], {})
+    if isinstance(key, int):
+        items = node.get("items")
+        return items if isinstance(items, dict) else None
+    child = node.get("properties", {}).get(key)
+    if child is None and isinstance(node.get("additionalProperties"), dict):
+        child = node["additionalProperties"]
+    return child
+
+
+def nonfinite_problems(data, path: tuple = (), node: dict | None = None) -> list[str]:
+    """Every NaN or infinite number in the parsed scenario as 'field.path: message' (free-form tables such as
+    navigator.settings included); a field whose schema says `"x-allow-nonfinite": true` is exempt."""
+    if not path:
+        node = schema()
+    if isinstance(node, dict) and node.get("x-allow-nonfinite"):
+        return []
+    if isinstance(data, dict):
+        out = []
+        for k, v in data.items():
+            out += nonfinite_problems(v, path + (k,), _schema_child(node, k))
+        return out
+    if isinstance(data, (list, tuple)):
+        out = []
+        for i, v in enumerate(data):
+            out += nonfinite_problems(v, path + (i,), _schema_child(node, i))
+        return out
+    if isinstance(data, float) or type(data).__module__ == "numpy" and hasattr(data, "dtype"):
+        try:
+            bad = not math.isfinite(float(data))
+        except (TypeError, ValueError):
+            return []
+        if bad:
+            return [f"{field_path(path)}: {data!r} is not allowed here (NaN and infinity are refused: give a "
+                    "finite number)"]
+    return []
+
+
 def schema_problems(data: dict) -> list[str]:
     """Every JSON-schema violation, as 'field.path: message', in document order."""
     validator = jsonschema.Draft202012Validator(schema())
@@ -213,6 +270,7 @@ def _fill_defaults(data: dict) -> dict:
     d["aircraft"].setdefault("name", "kingair")
     d["aircraft"].setdefault("dt_s", 0.01)
     d["aircraft"].setdefault("settings", {})
+    d["aircraft"].setdefault("constant_fuel", False)
     errs = d.setdefault("initial_errors", {})
     for k, v in DEFAULT_INITIAL_ERRORS.items():
         errs.setdefault(k, list(v))
@@ -259,11 +317,12 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
     tolerant = bool(prior)
     problems: list[str] = []
     checks = [_altitude_problems, _gnss_problems, _wind_problems, _rate_problems, _aircraft_problems,
-              _navigator_problems, _integrity_problems, lambda dd: _terrain_problems(dd, base_dir, extras)]
+              _navigator_problems, _integrity_problems, lambda dd: _terrain_problems(dd, base_dir, extras),
+              lambda dd: _ceiling_problems(dd, extras)]
     for check in checks:
         try:
             problems += check(d)
-        except (KeyError, TypeError, ValueError, AttributeError, IndexError):
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError):
             if not tolerant:
                 raise
     if check_components:
@@ -353,6 +412,25 @@ def _aircraft_problems(d: dict) -> list[str]:
     if d["aircraft"]["name"] not in known:
         return [f"aircraft.name: unknown aircraft {d['aircraft']['name']!r} "
                 f"(available: {', '.join(known) or 'none'})"]
+    return _fuel_problems(d)
+
+
+def _fuel_problems(d: dict) -> list[str]:
+    """aircraft.fuel_kg finite, > 0 and within the aircraft's tank capacity; not given twice."""
+    from trn_env.flight.aircraft_data import fuel_tanks_kg
+    fuel_kg = d["aircraft"].get("fuel_kg")
+    if fuel_kg is None or isinstance(fuel_kg, bool) or not isinstance(fuel_kg, int | float):
+        return []   # absent (the aircraft file's load), or a type error the schema reports
+    capacity_kg = sum(fuel_tanks_kg(d["aircraft"]["name"]).values())
+    if not math.isfinite(fuel_kg) or fuel_kg <= 0.0:
+        return [f"aircraft.fuel_kg: must be a finite number > 0 kg, got {fuel_kg}"]
+    if fuel_kg > capacity_kg * (1.0 + 1e-9):
+        return [f"aircraft.fuel_kg: {fuel_kg} kg is more than the fuel tanks of {d['aircraft']['name']!r} "
+                f"hold ({capacity_kg:.1f} kg)"]
+    settings = d["aircraft"]["settings"]
+    if isinstance(settings, dict) and ({"fuel_kg", "fuel_fraction"} & set(settings)):
+        return ["aircraft.fuel_kg: give the fuel load once (aircraft.fuel_kg or aircraft.settings."
+                f"{'fuel_kg' if 'fuel_kg' in settings else 'fuel_fraction'}, not both)"]
     return []
 
 
@@ -429,6 +507,32 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]
     return problems
 
 
+def _ceiling_problems(d: dict, extras: dict) -> list[str]:
+    """The initial height and every waypoint at or below the aircraft's service ceiling (above it the
+    aircraft cannot trim or cannot climb to the route: refused before the flight). A height above ground is
+    taken over the true terrain there."""
+    from trn_env.flight.aircraft_data import service_ceiling_m
+    ceiling = service_ceiling_m(d["aircraft"]["name"])
+    if ceiling is None:
+        return []
+    world = extras.get("world_dem_raw")
+    problems = []
+    for path, obj in _places(d):
+        if "h_msl_m" in obj:
+            key, h = "h_msl_m", float(obj["h_msl_m"])
+        elif "h_agl_m" in obj and world is not None:
+            ground = float(world.height(math.radians(obj["lat_deg"]), math.radians(obj["lon_deg"])))
+            if not math.isfinite(ground):
+                continue
+            key, h = "h_agl_m", float(obj["h_agl_m"]) + ground
+        else:
+            continue
+        if h > ceiling:
+            problems.append(f"{path}.{key}: {h:.0f} m MSL is above the {d['aircraft']['name']}'s service "
+                            f"ceiling ({ceiling:.0f} m): it cannot fly there")
+    return problems
+
+
 def _component_problems(d: dict, extras: dict, known: list[str], tolerant: bool) -> list[str]:
     """Hand each component its settings; whatever it rejects becomes a problem at that field. Components
     whose fields already have a problem are not built (no duplicate or follow-on messages)."""
@@ -439,7 +543,9 @@ def _component_problems(d: dict, extras: dict, known: list[str], tolerant: bool)
 def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None,
              check_components: bool = True) -> Scenario:
     """Validate a parsed scenario (schema, then semantics); raise ScenarioError listing every problem."""
-    problems = schema_problems(data)
+    problems = nonfinite_problems(data)
+    bad_paths = tuple(p.split(": ", 1)[0] for p in problems)
+    problems += [p for p in schema_problems(data) if not p.split(": ", 1)[0].startswith(bad_paths or ("\0",))]
     extras: dict = {}
     try:
         d = _fill_defaults(data)

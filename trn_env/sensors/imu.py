@@ -234,13 +234,13 @@ def _imu_kernel(idx, f_b, om_b, w, params, dynamic):
         if q_a > 0.0:          # integrating quantiser: the remainder carries to the next sample
             for a in range(3):
                 inc = f[i, a] * dt + d[6 + a]
-                q = np.round(inc / q_a) * q_a
+                q = np.rint(inc / q_a) * q_a   # (rint: np.round's half-to-even, far cheaper to compile)
                 d[6 + a] = inc - q
                 f[i, a] = q / dt
         if q_g > 0.0:
             for a in range(3):
                 inc = om[i, a] * dt + d[9 + a]
-                q = np.round(inc / q_g) * q_g
+                q = np.rint(inc / q_g) * q_g
                 d[9 + a] = inc - q
                 om[i, a] = q / dt
     return f, om, valid, d

@@ -22,11 +22,16 @@ one call each, so their fixed per-call costs are paid once per update, not once 
 bench` shows the split). Every sample keeps its own timestamp: an IMU sample at 100 Hz is processed at its
 time whatever the update rate.
 
-A run ends with `completed` (route flown), `terrain_collision` (true height above the true terrain < 0 at
+A run ends with `completed` (route flown, the aircraft at the last waypoint's height), `route_not_followed`
+(the route's guidance is done but the aircraft is not at the last waypoint's height: summary.json says
+what happened), `terrain_collision` (true height above the true terrain < 0 at
 any JSBSim step), `off_map` (truth outside the true DEM), `diverged` (estimate not finite, horizontal
-sigma above the scenario limit, or navigator health 'diverged'), or `time_limit`. Termination is judged on
-every step of an update interval at its end (the truth first, then that interval's estimate); route
-completion and the time limit end the interval early.
+sigma above the scenario limit, or navigator health 'diverged'), `fuel_exhausted` (an engine stopped with
+its fuel tank empty: JSBSim starves it), `engine_failure` (an engine stopped with fuel on board, e.g. cut
+off), or `time_limit`. Termination is judged on every step of an update interval at its end (the truth
+first - collision, map, engines - then that interval's estimate); route completion and the time limit end
+the interval early. An engine stop ends the run at once rather than gliding on to a `terrain_collision`
+that would hide its cause (`aircraft.constant_fuel = true` keeps the tanks full for long flights).
 
 Randomness: the scenario seed -> numpy SeedSequence -> one Generator per component (flight/turbulence,
 sensors, map errors, initial estimate errors, navigator), so one seed gives the same run bit for bit,
@@ -49,12 +54,18 @@ from navigators.protocol import Estimate, Health
 from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
 from trn_env.flight.core import FlightDiverged
 from trn_env.flight.truth import TruthChunk
+from trn_env.output.metrics import MetricSettings, navigation_metrics
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 from trn_env.sim.log import SimLog
 from trn_env.sim.nav_stage import InlineNavStage, ProcessNavStage, fork_available
 
-TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "time_limit")
+TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "fuel_exhausted", "engine_failure",
+                "time_limit", "route_not_followed")
+# `completed` needs the aircraft at the last waypoint's height within this (m; MSL or above the true terrain,
+# as the waypoint gives it): a height-above-ground hold over the map meets the true terrain's detail and the
+# autopilot's lag (the default flight: 1,250-1,700 m true AGL for 1,500 m commanded)
+ROUTE_ALTITUDE_TOLERANCE_M = 300.0
 
 # Order of the child seeds spawned from the scenario seed; append only (changing it changes every run).
 RNG_STREAMS = ("flight", "sensors", "map", "initial_errors", "navigator")
@@ -187,6 +198,7 @@ class ClosedLoop:
         self.n_ticks = 0
         self.navigator_fixes = 0
         self.termination: str | None = None
+        self.route_miss: str | None = None      # why the route was not followed (route_not_followed)
         self.log = SimLog()
         # wall time per stage: flight core (recording and conversion), sensors, navigator, guidance between
         # navigator updates, waiting for a pipelined stage's output, the rest (termination checks, logging,
@@ -334,7 +346,7 @@ class ClosedLoop:
             diverged = self._collect(final=final)
             t3 += clock() - t4                    # counted as wait, sensors and navigator by _collect
             if reason is None:
-                reason = diverged or ("completed" if self.route_complete() else
+                reason = diverged or (self._completion(chunk) if self.route_complete() else
                                       "time_limit" if self._time_up() else None)
         if reason is None:
             self.guidance_estimate = self.estimate
@@ -374,6 +386,7 @@ class ClosedLoop:
         est = out.estimate
         self.estimate = est
         self.navigator_fixes = out.navigator_fixes
+        self._log_gnss_outages(chunk)
         for t_ev, msg in est.health.events:
             self.log.events.append((t_ev, "navigator", msg))
         st["monitors"] += out.monitor_s
@@ -387,6 +400,20 @@ class ClosedLoop:
             self._log_tick(chunk, len(chunk) - 1, est)
         return "diverged" if diverged else None
 
+    def _log_gnss_outages(self, chunk: TruthChunk) -> None:
+        """Events for the scenario's GNSS outage edges (gnss.outages) that fall inside the chunk's time."""
+        if not self.outages or not len(chunk):
+            return
+        t0, t1 = float(chunk.t_s[0]) - 0.5 * self.dt_s, float(chunk.t_s[-1]) + 0.5 * self.dt_s
+        for i, o in enumerate(self.outages):
+            if t0 <= o["start_s"] < t1:
+                self.log.events.append((float(o["start_s"]), "gnss",
+                                        f"GNSS outage begins (gnss.outages[{i}]): no fixes reach the "
+                                        "navigator"))
+            if t0 <= o.get("end_s", math.inf) < t1:
+                self.log.events.append((float(o["end_s"]), "gnss", f"GNSS outage ends (gnss.outages[{i}]):"
+                                        " fixes reach the navigator again"))
+
     def _end(self, reason: str) -> str:
         if self._inflight is not None:          # (not reached: every ending collects first)
             self._collect(final=True)
@@ -398,11 +425,33 @@ class ClosedLoop:
         self.close()
         return reason
 
+    def _completion(self, chunk: TruthChunk) -> str:
+        """`completed`, or `route_not_followed` (with an event saying why) when the guidance has flown the
+        route but the aircraft is not at the last waypoint's height (it could not climb or descend to it)."""
+        if self.commander is not None:
+            return "completed"
+        wp = self.scenario.data["route"]["waypoints"][-1]
+        lat, lon, h = float(chunk.lat_rad[-1]), float(chunk.lon_rad[-1]), float(chunk.h_msl_m[-1])
+        if "h_agl_m" in wp:
+            ground = float(self.world_dem.height(lat, lon))
+            have, want, ref = h - ground, float(wp["h_agl_m"]), "above ground"
+        else:
+            have, want, ref = h, float(wp["h_msl_m"]), "MSL"
+        if math.isfinite(have) and abs(have - want) > ROUTE_ALTITUDE_TOLERANCE_M:
+            n = len(self.scenario.data["route"]["waypoints"])
+            self.route_miss = (f"the route ended with the aircraft at {have:.0f} m {ref}, the last waypoint "
+                               f"(route.waypoints[{n - 1}]) asks for {want:.0f} m: it could not follow the "
+                               f"route's heights (tolerance {ROUTE_ALTITUDE_TOLERANCE_M:.0f} m)")
+            self.log.events.append((float(chunk.t_s[-1]), "sim", self.route_miss))
+            return "route_not_followed"
+        return "completed"
+
     def _time_up(self) -> bool:
         return self.t_s >= self.duration_s - 0.5 * self.dt_s
 
     def _truth_reason(self, chunk: TruthChunk) -> str | None:
-        """off_map or terrain_collision if any step of the chunk was."""
+        """off_map or terrain_collision if any step of the chunk was; else fuel_exhausted or engine_failure
+        if an engine is stopped at its end (the stop is logged as an event)."""
         agl_min, n_nan = components.min_height_above_terrain(self.world_dem, chunk.lat_rad, chunk.lon_rad,
                                                              chunk.h_msl_m)
         if n_nan:   # a step off the grid or over a void (then the other steps are judged)
@@ -410,6 +459,10 @@ class ClosedLoop:
                 return "off_map"
         if agl_min < 0.0:
             return "terrain_collision"
+        stop = self.flight.engine_stop()
+        if stop is not None:
+            self.log.events.append((float(chunk.t_s[-1]), "flight", stop[1]))
+            return stop[0]
         return None
 
     def _diverged(self, chunk: TruthChunk, est: Estimate) -> bool:
@@ -467,9 +520,14 @@ class ClosedLoop:
         summary["map_faults"] = list(self.scenario.extras.get("map_faults", []))
         summary["wall_time_by_stage_s"] = {k: round(v, 4) for k, v in self.stage_s.items()}
         summary["pipelined"] = self.pipelined
+        if self.route_miss is not None:
+            summary["route_not_followed"] = self.route_miss
         summary["navigator_latency_updates"] = self.latency_updates
+        summary["fuel_remaining_kg"] = round(self.flight.fuel_kg, 3)
+        summary["constant_fuel"] = self.flight.constant_fuel
+        events = sorted(self.log.events, key=lambda ev: ev[0])   # (stable: same-time events keep their order)
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
-                         self.jsbsim_steps, arrays, list(self.log.events), summary, self.world_dem)
+                         self.jsbsim_steps, arrays, events, summary, self.world_dem)
 
 
 def _rms(x: np.ndarray) -> float:
@@ -477,9 +535,16 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
 
 
+def _at_loss(x: np.ndarray, denied: np.ndarray) -> float:
+    """x at the last row with GNSS before the first row without it (NaN without such a hand-over)."""
+    up = np.flatnonzero(~denied[:-1] & denied[1:])
+    return float(x[up[0]]) if up.size else float("nan")
+
+
 def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wall_time_s: float,
-              jsbsim_steps: int, final: Estimate) -> dict:
-    """summary.json contents (DESIGN.md fields first, then extras)."""
+              jsbsim_steps: int, final: Estimate, metric_settings: MetricSettings | None = None) -> dict:
+    """summary.json contents (DESIGN.md fields first, then extras, then every navigation metric of
+    trn_env.output.metrics, the same figures a campaign row holds)."""
     t = a["t_s"]
     err = a["err_ned_m"]
     e_h = np.hypot(err[:, 0], err[:, 1])
@@ -510,6 +575,9 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "horizontal_sigma_final_m": float(sig_h[-1]) if sig_h.size else float("nan"),
         "fraction_within_3sigma": float(np.mean(within3)) if within3.size else float("nan"),
         "gnss_denied_time_s": float(np.sum(denied[1:]) * np.median(np.diff(t))) if t.size > 1 else 0.0,
+        # the hand-over: the last logged row with GNSS before its first loss (NaN if GNSS never was lost)
+        "horizontal_error_at_gnss_loss_m": _at_loss(e_h, denied),
+        "horizontal_sigma_at_gnss_loss_m": _at_loss(sig_h, denied),
         "distance_flown_m": float(np.sum(step)),
         "min_true_agl_m": float(np.nanmin(a["true_h_agl_m"])) if t.size else float("nan"),
         "jsbsim_steps": int(jsbsim_steps),
@@ -518,8 +586,8 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "navigator_skipped": dict(final.health.skipped),
         "scenario_source": scenario.source,
         "duration_limit_s": scenario.duration_s,
-    }
-    if "nav_status_code" in a:   # fraction healthy, misleading information (trn_env.output.integrity_metrics)
+    } | navigation_metrics(a, metric_settings)
+    if "nav_status_code" in a:   # status-based integrity figures (trn_env.output.integrity_metrics)
         from trn_env.output.integrity_metrics import integrity_metrics
         out.update(integrity_metrics(t, err, a["est_cov_diag"], a["nav_status_code"]))
     return out

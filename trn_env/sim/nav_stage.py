@@ -195,8 +195,13 @@ def _serve(conn, parent_end, stage: InlineNavStage) -> None:
             reply = ("error", exc, traceback.format_exc())
         try:
             conn.send(reply)
+        except (BrokenPipeError, ConnectionError, EOFError, OSError):
+            return                            # the loop stopped (Ctrl-C, a closed run): nobody to tell
         except Exception as exc:              # an exception or output that does not pickle
-            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}"), traceback.format_exc()))
+            try:
+                conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}"), traceback.format_exc()))
+            except (BrokenPipeError, ConnectionError, EOFError, OSError):
+                return
 
 
 class ProcessNavStage:

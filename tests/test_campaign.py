@@ -1,0 +1,336 @@
+"""Campaigns: the project's regression gate (tests/campaigns/ci_small.toml, real short flights on the local
+pool), replay of a run alone, --resume, rows, report, Ray giving the same per-run results, bad input."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+import shlex
+import shutil
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trn_env import cli
+from trn_env.campaign import load_campaign
+from trn_env.campaign.rows import read_rows
+from trn_env.output.metrics import METRIC_KEYS
+
+HERE = Path(__file__).resolve().parent
+CI = HERE / "campaigns" / "ci_small.toml"
+BASELINE = HERE / "campaigns" / "ci_small_baseline.json"
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory):
+    """ci_small flown once on the local pool (2 workers): its folder."""
+    out = tmp_path_factory.mktemp("ci") / "ci_small"
+    assert cli.main(["campaign", str(CI), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    return out
+
+
+def test_rows_one_per_run_with_seeds_shared_across_navigators(flown):
+    df = read_rows(flown)
+    assert len(df) == 4 and sorted(df["run_id"]) == ["v000-s0000", "v000-s0001", "v001-s0000", "v001-s0001"]
+    assert (df["termination"] == "time_limit").all() and df["error"].isna().all()
+    assert set(df["navigator"]) == {"ins", "ins_tercom"}
+    # seeds from the root seed through SeedSequence, computed here independently
+    expect = [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1))
+              for c in np.random.SeedSequence(16).spawn(2)]
+    for si in (0, 1):
+        assert set(df.loc[df["seed_index"] == si, "seed"]) == {expect[si]}
+    for k in METRIC_KEYS + ("scenario_hash", "jsbsim_version", "trn_env_version", "wall_time_s"):
+        assert k in df
+    assert df["sim_time_s"].between(44.0, 46.0).all()
+    # one Parquet file per run, no temporary files left
+    names = sorted(p.name for p in (flown / "runs").iterdir())
+    assert names == [f"{r}.parquet" for r in sorted(df["run_id"])]
+    # the TERCOM fix at 40 s pulls the final error below the INS's (both runs of each seed fly the same
+    # turbulence and sensor noise: the comparison is paired)
+    for si in (0, 1):
+        s = df[df["seed_index"] == si].set_index("navigator")
+        final = s["horizontal_error_final_m"]
+        assert final["ins_tercom"] < 0.6 * final["ins"]
+
+
+def test_regression_gate_passes_against_the_committed_baseline(flown, capsys):
+    # every run is there already: --resume flies nothing and checks the rows flown by this test session
+    assert cli.main(["campaign", str(CI), "--out", str(flown), "--resume", "--quiet",
+                     "--check", str(BASELINE)]) == 0
+    assert "regression gate passed" in capsys.readouterr().out
+
+
+def _edited_baseline(tmp_path, factor):
+    data = json.loads(BASELINE.read_text())
+    data["groups"]["ins_tercom | -"]["horizontal_error_rms_m.p50"]["value"] *= factor
+    p = tmp_path / "baseline.json"
+    p.write_text(json.dumps(data))
+    return p
+
+
+def test_regression_gate_fails_on_a_worse_figure_and_warns_on_a_much_better_one(flown, tmp_path, capsys):
+    # baseline halved: today's figure is twice it, beyond the 20 % + 2 m band -> exit 1
+    worse = _edited_baseline(tmp_path, 0.5)
+    assert cli.main(["campaign", str(CI), "--out", str(flown), "--resume", "--quiet",
+                     "--check", str(worse)]) == 1
+    err = capsys.readouterr().err
+    assert "regression: ins_tercom | - horizontal_error_rms_m.p50" in err
+    # baseline doubled: today's figure is much better -> a warning, exit 0
+    better = _edited_baseline(tmp_path, 2.0)
+    assert cli.main(["campaign", str(CI), "--out", str(flown), "--resume", "--quiet",
+                     "--check", str(better)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: ins_tercom | - horizontal_error_rms_m.p50 is much better" in err
+    assert "regression:" not in err
+
+
+def test_a_run_replays_alone_bit_for_bit_with_trn_env_fly(flown, tmp_path):
+    df = read_rows(flown)
+    row = df[df["run_id"] == "v001-s0001"].iloc[0]
+    argv = shlex.split(row["replay_command"])
+    assert argv[:2] == ["trn-env", "fly"] and "--set" in argv     # the navigator settings go by --set
+    out = tmp_path / "replay"
+    assert cli.main(argv[1:] + ["--out", str(out), "--no-plots", "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for k in METRIC_KEYS:      # summary.json carries the same metrics, equal to the last bit
+        v = summary[k]
+        assert (v is None and not np.isfinite(row[k])) or v == row[k], k
+    log = np.load(out / "log.npz")
+    err = log["err_ned_m"]
+    assert np.array_equal(log["t_s"], row["series_t_s"])
+    assert np.array_equal(np.hypot(err[:, 0], err[:, 1]), row["series_err_h_m"])
+    assert np.array_equal(-err[:, 2], row["series_err_v_m"])
+
+
+def test_resume_flies_only_the_missing_run(flown, tmp_path):
+    folder = tmp_path / "copy"
+    shutil.copytree(flown, folder)
+    before = read_rows(folder)
+    (folder / "runs" / "v000-s0001.parquet").unlink()
+    kept = {p.name: p.stat().st_mtime_ns for p in (folder / "runs").iterdir()}
+    assert cli.main(["campaign", str(CI), "--out", str(folder), "--resume", "--quiet", "--workers", "1"]) == 0
+    for name, mtime in kept.items():
+        assert (folder / "runs" / name).stat().st_mtime_ns == mtime      # untouched
+    after = read_rows(folder)
+    r0 = before[before["run_id"] == "v000-s0001"].iloc[0]
+    r1 = after[after["run_id"] == "v000-s0001"].iloc[0]
+    for k in ("horizontal_error_rms_m", "anees", "horizontal_error_final_m", "scenario_hash"):
+        assert r1[k] == r0[k]               # the same run, another process: the same bits
+    assert np.array_equal(r1["series_err_h_m"], r0["series_err_h_m"])
+
+
+def test_resume_refuses_a_folder_of_another_campaign(flown, tmp_path, capsys):
+    other = tmp_path / "other.toml"
+    other.write_text(CI.read_text().replace("root_seed = 16", "root_seed = 17")
+                     .replace('"../scenarios/', f'"{HERE}/scenarios/'))
+    listing = sorted(p.name for p in (flown / "runs").iterdir())
+    assert cli.main(["campaign", str(other), "--out", str(flown), "--resume", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "different campaign file" in err and "Traceback" not in err
+    assert sorted(p.name for p in (flown / "runs").iterdir()) == listing
+    # and without --resume an existing campaign folder is refused too
+    assert cli.main(["campaign", str(CI), "--out", str(flown), "--quiet"]) == 2
+    assert "--resume" in capsys.readouterr().err
+
+
+def test_report_pngs_and_self_contained_html(flown, tmp_path):
+    assert cli.main(["report", str(flown), "--out", str(tmp_path / "rep")]) == 0
+    rep = tmp_path / "rep"
+    pngs = sorted(p.name for p in rep.glob("*.png"))
+    assert pngs == ["cdf_horizontal_error.png", "envelope_horizontal_error.png"]
+    page = (rep / "report.html").read_text()
+    blobs = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)
+    assert len(blobs) == 2
+    for b, name in zip(blobs, pngs, strict=True):
+        assert base64.b64decode(b) == (rep / name).read_bytes()
+    assert "ins_tercom | -" in page and "<img" in page and "src='http" not in page
+    stats = json.loads((rep / "summary.json").read_text())
+    assert stats["ins | -"]["runs"] == 2
+
+
+# ------------------------------------------------------------------------------------------- Ray
+
+@pytest.fixture(scope="module")
+def ray_session():
+    ray = pytest.importorskip("ray", reason="the ray extra is installed in CI (pip install -e .[ray])")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield ray
+    ray.shutdown()
+
+
+def test_ray_backend_gives_the_same_runs_as_the_local_pool(flown, ray_session, tmp_path):
+    """ci_small's INS runs again, as Ray tasks on a 2-CPU local instance: rows equal to the local pool's."""
+    from trn_env.campaign import run_campaign
+    from trn_env.campaign.ray_backend import RayBackend
+    sub = tmp_path / "ins_only.toml"
+    sub.write_text(CI.read_text().replace('navigators = ["ins", { name = "ins_tercom", settings = '
+                                          '{ remove_bias = true } }]', 'navigators = ["ins"]')
+                   .replace('"../scenarios/', f'"{HERE}/scenarios/'))
+    camp = load_campaign(sub)
+    assert camp.n_runs == 2
+    stats = run_campaign(camp, tmp_path / "ray", backend=RayBackend(), progress=False)
+    assert stats["flown"] == 2 and stats["failed"] == 0 and stats["backend"].startswith("Ray")
+    ray_rows = read_rows(tmp_path / "ray").set_index("seed")
+    local = read_rows(flown)
+    local = local[local["navigator"] == "ins"].set_index("seed")
+    assert sorted(ray_rows.index) == sorted(local.index)
+    for seed in local.index:
+        a, b = ray_rows.loc[seed], local.loc[seed]
+        assert a["scenario_hash"] == b["scenario_hash"]
+        for k in METRIC_KEYS:
+            assert (a[k] == b[k]) or (not np.isfinite(a[k]) and not np.isfinite(b[k])), k
+        assert np.array_equal(a["series_err_h_m"], b["series_err_h_m"])
+
+
+def test_ray_missing_gives_the_install_command(monkeypatch, tmp_path, capsys):
+    import builtins
+    real_import = builtins.__import__
+
+    def no_ray(name, *args, **kwargs):
+        if name == "ray" or name.startswith("ray."):
+            raise ImportError("No module named 'ray'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_ray)
+    out = tmp_path / "out"
+    assert cli.main(["campaign", str(CI), "--backend", "ray", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert 'pip install "trn-env[ray]"' in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_unreachable_ray_address_fails_within_seconds(tmp_path, capsys):
+    with socket.socket() as s:          # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "out"
+    t0 = time.monotonic()
+    rc = cli.main(["campaign", str(CI), "--backend", "ray", "--address", f"127.0.0.1:{port}",
+                   "--out", str(out), "--quiet"])
+    assert rc == 2 and time.monotonic() - t0 < 10.0     # refused before validation; the probe is 3 s at most
+    err = capsys.readouterr().err
+    assert f"no Ray cluster reachable at 127.0.0.1:{port}" in err
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------------------------------ bad input
+
+def _campaign(tmp_path, body: str) -> Path:
+    p = tmp_path / "c.toml"
+    p.write_text(f'scenarios = ["{HERE}/scenarios/ins_only_short.toml"]\nduration_s = 5.0\n' + body)
+    return p
+
+
+@pytest.mark.parametrize(("body", "expect"), [
+    ('seeds = 2\n[[sweeps]]\npath = "wind.layerz.0.speed_mps"\nvalues = [1.0]\n',
+     "sweeps[0].values[0] (wind.layerz.0.speed_mps = 1.0): wind.layerz: unknown key"),
+    ('seeds = 2\n[[sweeps]]\npath = "wind.layers.5.speed_mps"\nvalues = [1.0]\n',
+     "sweeps[0].values[0] (wind.layers.5.speed_mps = 1.0): wind.layers.5.speed_mps: index 5 is out of range"),
+    ('seeds = 2\n[[sweeps]]\npath = "wind.layers.0.speed_mps"\nvalues = [3.0, "fast"]\n',
+     "sweeps[0].values[1] (wind.layers.0.speed_mps = 'fast'): wind.layers[0].speed_mps: 'fast' is not of "
+     "type"),
+    ('seeds = 0\n', "seeds: 0 seeds: give at least one seed"),
+    ('seeds = []\n', "seeds: [] is neither"),
+    ('seeds = 1\nnavigators = ["no_such_nav"]\n',
+     "navigators[0] (no_such_nav): navigator.name: unknown navigator"),
+    ('seeds = 1\n[[sweeps]]\npath = "navigator.settings.no_such_setting"\nvalues = [1.0]\n',
+     "sweeps[0].values[0] (navigator.settings.no_such_setting = 1.0): navigator.settings"),
+    ('seeds = 1\nsweep = []\n', "sweep: unknown key"),
+    ('seeds = 1\n[[sweeps]]\npath = "x"\nvalues = [1]\ngrid = { start = 0, stop = 1, num = 2 }\n',
+     "sweeps[0]: give exactly one of values or grid"),
+])
+def test_bad_campaign_files_exit_2_naming_the_field(tmp_path, capsys, body, expect):
+    out = tmp_path / "out"
+    assert cli.main(["campaign", str(_campaign(tmp_path, body)), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert expect in err, err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_sweeps_expand_by_dotted_path_as_a_grid(tmp_path):
+    p = _campaign(tmp_path, 'seeds = [3, 4]\nnavigators = ["ins"]\n'
+                            '[[sweeps]]\npath = "wind.layers.0.speed_mps"\nvalues = [2.0, 6.0]\n'
+                            '[[sweeps]]\npath = "navigator.settings.accel_bias_mps2"\n'
+                            'grid = { start = 0.001, stop = 0.003, num = 3 }\n')
+    c = load_campaign(p)
+    assert c.seeds == [3, 4] and len(c.variants) == 6 and c.n_runs == 12
+    got = {(v.data["wind"]["layers"][0]["speed_mps"], v.data["navigator"]["settings"]["accel_bias_mps2"])
+           for v in c.variants}
+    assert got == {(s, b) for s in (2.0, 6.0) for b in (0.001, 0.002, 0.003)}
+    # the other wind layer and the file's other settings are untouched
+    assert all(v.data["wind"]["layers"][1]["speed_mps"] == 9.0 for v in c.variants)
+    assert all(v.data["navigator"]["settings"]["gyro_bias_rps"] == pytest.approx(4.84813681109536e-06)
+               for v in c.variants)
+
+
+def _dies(task, dems=None):
+    """fly_run, except that the worker process dies flying seed 0 on its first attempt, and seed 1 always."""
+    import os
+
+    from trn_env.campaign.runs import fly_run
+    if task.seed_index == 0 and task.attempt == 1:
+        os._exit(3)
+    if task.seed_index == 1:
+        os._exit(3)
+    return fly_run(task, dems)
+
+
+def test_local_pool_retries_a_dead_worker_and_records_a_run_that_always_kills_it(tmp_path, monkeypatch):
+    import trn_env.campaign.local as local
+    from trn_env.campaign import run_campaign
+    monkeypatch.setattr(local, "fly_run", _dies)
+    camp = load_campaign(_campaign(tmp_path, "seeds = 3\n"))
+    stats = run_campaign(camp, tmp_path / "out", backend=local.LocalBackend(2, max_attempts=2),
+                         progress=False)
+    assert stats["flown"] == 3
+    df = read_rows(tmp_path / "out").set_index("seed_index")
+    assert df.loc[0, "termination"] == "time_limit" and df.loc[0, "attempts"] >= 2    # retried, then flown
+    assert df.loc[1, "termination"] == "error" and "worker process died" in df.loc[1, "error"]
+    assert df.loc[2, "termination"] == "time_limit"
+
+
+def test_keep_logs_writes_each_runs_full_log_beside_its_row(tmp_path):
+    from trn_env.campaign import run_campaign
+    from trn_env.campaign.local import LocalBackend
+    camp = load_campaign(_campaign(tmp_path, "seeds = 1\nkeep_logs = true\n"))
+    assert run_campaign(camp, tmp_path / "out", backend=LocalBackend(1), progress=False)["flown"] == 1
+    row = read_rows(tmp_path / "out").iloc[0]
+    log = np.load(tmp_path / "out" / "logs" / f"{row['run_id']}.npz")
+    assert "sensor_imu_t_s" in log and np.array_equal(log["t_s"], row["series_t_s"])
+    err = log["err_ned_m"]
+    assert np.array_equal(np.hypot(err[:, 0], err[:, 1]), row["series_err_h_m"])
+
+
+def test_a_swept_campaign_has_sweep_columns_and_a_metric_versus_sweep_plot(tmp_path):
+    from trn_env.campaign import run_campaign
+    from trn_env.campaign.local import LocalBackend
+    from trn_env.campaign.report import write_report
+    camp = load_campaign(_campaign(tmp_path, 'seeds = 1\n[[sweeps]]\npath = "wind.layers.0.speed_mps"\n'
+                                             'values = [0.0, 15.0]\n'))
+    run_campaign(camp, tmp_path / "out", backend=LocalBackend(2), progress=False)
+    df = read_rows(tmp_path / "out")
+    assert sorted(df["sweep.wind.layers.0.speed_mps"]) == [0.0, 15.0]
+    assert [json.loads(s) for s in df.sort_values("sweep.wind.layers.0.speed_mps")["sweep_json"]] == \
+        [{"wind.layers.0.speed_mps": 0.0}, {"wind.layers.0.speed_mps": 15.0}]
+    rep = write_report(tmp_path / "out")
+    assert (rep / "sweep_wind_layers_0_speed_mps.png").stat().st_size > 10_000
+    assert (rep / "report.html").read_text().count("data:image/png;base64,") == 3
+
+
+def test_report_and_check_refuse_bad_folders_and_baselines(tmp_path, capsys):
+    assert cli.main(["report", str(tmp_path)]) == 2
+    assert "not a campaign folder" in capsys.readouterr().err
+    assert cli.main(["report", str(tmp_path / "nowhere")]) == 2
+    assert "no such folder" in capsys.readouterr().err
+    out = tmp_path / "out"
+    assert cli.main(["campaign", str(CI), "--out", str(out), "--check", str(tmp_path / "none.json")]) == 2
+    assert "no such baseline file" in capsys.readouterr().err and not out.exists()
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"groups": {"ins | -": {"anees.p50": {"value": 3.0, "rel_tol": -1}}}}))
+    assert cli.main(["campaign", str(CI), "--out", str(out), "--check", str(bad)]) == 2
+    assert "groups.ins | -.anees.p50.rel_tol: must be a finite number >= 0" in capsys.readouterr().err
+    assert not out.exists()

@@ -1,0 +1,239 @@
+"""Bad input refused before anything flies (issue 21 section 3) and the small things a user meets (section 5).
+
+Every refusal: a problem naming the field (or file), and from the command line exit 2, no traceback,
+nothing written.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import terrain
+from navigators import registry
+from trn_env import cli
+from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
+
+SCEN = Path(__file__).parent / "scenarios"
+SHORT = (SCEN / "default_short.toml").read_text()
+ROOT = Path(__file__).resolve().parent.parent
+DEM = terrain.load("jacksboro")
+
+
+def _data() -> dict:
+    """default_short without its 30 m world refinement (validation builds it: slow, and beside the point)."""
+    data, _ = read_scenario_file(SCEN / "default_short.toml")
+    data = copy.deepcopy(data)
+    data["terrain"]["world"].pop("refinement", None)
+    return data
+
+
+def _problems(data: dict) -> list[str]:
+    with pytest.raises(ScenarioError) as exc:
+        validate(data, source="test")
+    return exc.value.problems
+
+
+def _set(data: dict, path: str, value):
+    *head, last = path.split(".")
+    node = data
+    for key in head:
+        node = node[int(key)] if isinstance(node, list) else node.setdefault(key, {})
+    if isinstance(node, list):
+        node[int(last)] = value
+    else:
+        node[last] = value
+    return data
+
+
+@pytest.mark.parametrize("path,field", [
+    ("duration_s", "duration_s"),                                   # flew with no limit
+    ("gnss.outages.0.start_s", "gnss.outages[0].start_s"),          # dropped the outage
+    ("limits.max_horizontal_sigma_m", "limits.max_horizontal_sigma_m"),   # turned divergence off
+    ("guidance.rate_hz", "guidance.rate_hz"),                       # crashed validate itself
+    ("initial.tas_mps", "initial.tas_mps"),                         # was reported as aircraft.settings
+    ("initial_errors.position_ned_m.0", "initial_errors.position_ned_m[0]"),   # crashed in reset
+    ("navigator.settings.fix_sigma_m", "navigator.settings.fix_sigma_m"),
+    ("sensors.imu.gyro_bias_rps", "sensors.imu.gyro_bias_rps"),
+    ("route.waypoints.1.lat_deg", "route.waypoints[1].lat_deg"),
+])
+def test_nan_and_infinity_refused_at_their_field(path, field):
+    for value in (math.nan, math.inf, -math.inf):
+        data = _data()
+        if path.startswith("initial_errors"):
+            data["initial_errors"] = {"position_ned_m": [30.0, 30.0, 15.0]}
+        probs = _problems(_set(data, path, value))
+        assert any(p.startswith(f"{field}:") for p in probs), (value, probs)
+        assert not any(p.startswith("aircraft.settings") for p in probs), probs
+
+
+def test_zero_step_is_reported_not_a_crash():
+    probs = _problems(_set(_data(), "aircraft.dt_s", 0.0))
+    assert any(p.startswith("aircraft.dt_s:") for p in probs), probs
+    probs = _problems(_set(_data(), "navigator.rate_hz", 0.0))
+    assert any(p.startswith("navigator.rate_hz:") for p in probs), probs
+
+
+BAD_SETTINGS = [
+    ("accel_noise_mps2_rthz", -1e-4), ("gyro_noise_rps_rthz", math.nan), ("accel_bias_mps2", math.inf),
+    ("gate_chi2", -3.0), ("min_samples", -5), ("half_cells", 0), ("fix_period_s", 0.0),
+    ("dem", 5), ("dem", "/no/such/map.tif"), ("remove_bias", "yes"), ("gnss_sigma_h_m", -1.0),
+    ("gnss_gate_chi2", math.nan), ("ira_decimation", 2.5),
+]
+
+
+@pytest.mark.parametrize("name,value", BAD_SETTINGS)
+def test_navigator_settings_range_checked(name, value):
+    kw = {} if name == "dem" else {"dem": DEM}
+    with pytest.raises(ValueError, match=name):
+        registry.create("ins_tercom", **kw, **{name: value})
+    data = _data()
+    data["navigator"]["settings"][name] = value
+    probs = _problems(data)
+    assert any(p.startswith(f"navigator.settings.{name}:") for p in probs), probs
+
+
+def test_unknown_navigator_setting_named():
+    data = _data()
+    data["navigator"]["settings"]["colour"] = "red"
+    assert any(p.startswith("navigator.settings.colour:") for p in _problems(data))
+
+
+def test_above_service_ceiling_refused_naming_the_field():
+    data = _data()
+    data["initial"] = {"lat_deg": 36.49, "lon_deg": -84.37, "h_msl_m": 9500.0, "tas_mps": 85.0,
+                       "heading_deg": 8.0}
+    probs = _problems(data)
+    assert any(p.startswith("initial.h_msl_m:") and "ceiling" in p for p in probs), probs
+    data = _data()
+    data["route"]["waypoints"][1] = {"lat_deg": 36.553, "lon_deg": -84.357, "h_agl_m": 8900.0}  # + ~400 m
+    probs = _problems(data)
+    assert any(p.startswith("route.waypoints[1].h_agl_m:") and "ceiling" in p for p in probs), probs
+
+
+def test_initial_estimate_nan_refused_by_the_navigator():
+    from navigators.filters.ins_trn_ekf import initial_covariance
+    from navigators.protocol import Estimate
+    nav = registry.create("ins")
+    with pytest.raises(ValueError, match="initial"):
+        nav.reset(Estimate(0.0, 0.6, -1.4, math.nan, np.zeros(3), 0.0, 0.0, 0.0, initial_covariance()))
+
+
+# ------------------------------------------------------------------------------------- command line
+
+def _cli(tmp_path, *args, scenario_text: str | None = None, scenario: str | None = None, capsys=None):
+    if scenario is None:
+        p = tmp_path / "s.toml"
+        p.write_text(scenario_text if scenario_text is not None else SHORT)
+        scenario = str(p)
+    code = cli.main(["fly", scenario, "--quiet", "--no-plots", *args])
+    err = capsys.readouterr().err if capsys is not None else ""
+    return code, err
+
+
+@pytest.mark.parametrize("old,new,field", [
+    ("duration_s = 150.0", "duration_s = nan", "duration_s"),
+    ("outages = [{ start_s = 10.0 }]", "outages = [{ start_s = nan }]", "gnss.outages[0].start_s"),
+    ("[aircraft]", "", ""),     # placeholder replaced below
+])
+def test_cli_refuses_with_exit_2_nothing_written(tmp_path, capsys, old, new, field):
+    text = SHORT.replace(old, new) if old != "[aircraft]" else SHORT + "\n[aircraft]\ndt_s = 0.0\n"
+    field = field or "aircraft.dt_s"
+    out = tmp_path / "out"
+    code, err = _cli(tmp_path, "--out", str(out), scenario_text=text, capsys=capsys)
+    assert code == 2 and field in err and "Traceback" not in err
+    assert not out.exists() and not list(tmp_path.glob(".out*"))
+
+
+def test_cli_out_checked_before_flying(tmp_path, capsys):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    for out in (a_file, a_file / "sub" / "run"):
+        code, err = _cli(tmp_path, "--out", str(out), capsys=capsys)
+        assert code == 2 and "--out" in err and "nothing flown" in err
+    assert a_file.read_text() == "x"
+
+
+def test_cli_directory_as_scenario(tmp_path, capsys):
+    code, err = _cli(tmp_path, "--out", str(tmp_path / "o"), scenario=str(tmp_path), capsys=capsys)
+    assert code == 2 and "is a directory" in err and "no such" not in err
+
+
+def test_cli_subprocess_nan_exit_2_no_traceback(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(SHORT.replace("duration_s = 150.0", "duration_s = inf"))
+    r = subprocess.run([sys.executable, "-m", "trn_env.cli", "validate", str(p)], capture_output=True,
+                       text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    assert r.returncode == 2 and "duration_s" in r.stderr and "Traceback" not in r.stderr
+
+
+# ------------------------------------------------------------------------------------- section 5
+
+def test_dem_and_load_input_errors():
+    h = DEM.heights_m.copy()
+    h[3, 4] = np.inf
+    with pytest.raises(ValueError, match="infinite"):
+        terrain.Dem(h, DEM.lat0_rad, DEM.lon0_rad, DEM.dlat_rad, DEM.dlon_rad)
+    with pytest.raises(ValueError, match="lat_rad"):
+        DEM.height(None, None)
+    with pytest.raises(ValueError, match="DEM name"):
+        terrain.load(None)
+    assert math.isfinite(DEM.height(*DEM.center_rad))
+
+
+def test_route_the_aircraft_cannot_climb_to_is_not_completed():
+    """The 7 km leg ends at 8,500 m MSL (below the ceiling) from 1,800 m: ~6.7 km of climb in ~80 s is
+    beyond the King Air (sea-level climb ~10 m/s), so the route's guidance finishes with the aircraft far
+    below: route_not_followed, and the summary says what happened."""
+    from trn_env.sim.closed_loop import ClosedLoop
+    data = _data()
+    data["navigator"] = {"name": "ins"}
+    data["route"]["waypoints"][1] = {"lat_deg": 36.553, "lon_deg": -84.357, "h_msl_m": 8500.0}
+    res = ClosedLoop(validate(data, source="test")).run()
+    assert res.termination == "route_not_followed"
+    assert "8500 m" in res.summary["route_not_followed"] and "route.waypoints[1]" in res.summary[
+        "route_not_followed"]
+    assert any(src == "sim" and "could not follow" in msg for _, src, msg in res.events)
+
+
+def test_timeline_columns_say_what_they_are():
+    from trn_env.output.run_folder import TIMELINE_COLUMNS
+    assert "est_h_msl_m" in TIMELINE_COLUMNS and "err_horizontal_m" in TIMELINE_COLUMNS
+    assert "est_h_m" not in TIMELINE_COLUMNS and "err_h_m" not in TIMELINE_COLUMNS
+
+
+def test_plot_helpers():
+    from trn_env.output import plots
+    assert [plots._nice(x) for x in (0.7, 3.0, 7.4, 19.0, 6800.0)] == [0.5, 2.0, 5.0, 10.0, 5000.0]
+    src = Path(plots.__file__).read_text()
+    assert "3 hypot(sigma_N, sigma_E)" in src and "_scale_bar(ax" in src
+
+
+def test_interp_one_matches_numpy():
+    from navigators.filters._ekf_kernels import interp_one
+    rng = np.random.default_rng(1)
+    xp = np.cumsum(rng.uniform(0.1, 1.0, 50))
+    fp = rng.standard_normal(50)
+    xs = np.concatenate([rng.uniform(xp[0] - 2, xp[-1] + 2, 500), xp, [np.nan]])
+    got = np.array([interp_one(x, xp, fp) for x in xs])
+    assert np.array_equal(got, np.interp(xs, xp, fp), equal_nan=True)
+
+
+def test_perfectly_known_start_is_accepted_negative_variance_refused():
+    """Zero initial sigmas (legal) used to crash the EKF reset; a negative eigenvalue is refused."""
+    from navigators.filters.ins_trn_ekf import initial_covariance
+    from navigators.protocol import Estimate
+    nav = registry.create("ins")
+    nav.reset(Estimate(0.0, 0.6, -1.4, 1000.0, np.zeros(3), 0.0, 0.0, 0.0, np.zeros((9, 9))))
+    assert np.all(np.isfinite(nav.estimate().covariance))
+    bad = initial_covariance()
+    bad[0, 0] = -1.0
+    with pytest.raises(ValueError, match="semi-definite"):
+        nav.reset(Estimate(0.0, 0.6, -1.4, 1000.0, np.zeros(3), 0.0, 0.0, 0.0, bad))

@@ -1,0 +1,131 @@
+"""Interrupts and kills (issue 21 section 4), with real processes and signals.
+
+Ctrl-C is sent as a terminal sends it: SIGINT to the whole process group (the command and its
+estimation worker)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from trn_env.output import run_folder
+
+ROOT = Path(__file__).resolve().parent.parent
+SCEN = Path(__file__).parent / "scenarios"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX signals and fork")
+
+
+def _start(args, tmp_path):
+    return subprocess.Popen([sys.executable, "-m", "trn_env.cli", *args], cwd=tmp_path, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def _ctrl_c(proc) -> tuple[int, str]:
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    return proc.returncode, err
+
+
+def test_ctrl_c_during_start_up(tmp_path):
+    """SIGINT while the command imports and loads the scenario: one line, exit 130, no traceback."""
+    proc = _start(["fly", str(SCEN / "default_short.toml"), "--out", str(tmp_path / "run")], tmp_path)
+    time.sleep(0.8)
+    code, err = _ctrl_c(proc)
+    assert code == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    assert "interrupted" in err and len(err.strip().splitlines()) <= 3, err
+    assert not (tmp_path / "run").exists()
+
+
+def test_ctrl_c_mid_flight_no_worker_traceback(tmp_path):
+    """SIGINT while the pipelined flight runs: exit 130, 'nothing written', and no BrokenPipeError from
+    the estimation worker (it used to send on the closed pipe, and again from its error handler)."""
+    proc = _start(["fly", "default", "--out", str(tmp_path / "run")], tmp_path)   # ~5 s of flight
+    err_head = ""
+    t0 = time.time()
+    while time.time() - t0 < 120:          # until the flight has started
+        line = proc.stderr.readline()
+        err_head += line
+        if line.startswith("ready after") or not line:
+            break
+    time.sleep(1.0)
+    code, err = _ctrl_c(proc)
+    err = err_head + err
+    assert code == 130, err
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
+    assert "nothing written" in err
+    assert not (tmp_path / "run").exists()
+
+
+_CLOSE_WHILE_BUSY = """
+import sys, time
+from trn_env.scenario.loading import load_scenario
+from trn_env.sim.closed_loop import ClosedLoop
+sc = load_scenario(sys.argv[1], duration_s=30.0)
+sc.data["terrain"]["world"].pop("refinement", None)
+for _ in range(2):
+    loop = ClosedLoop(sc, pipeline=True)
+    assert loop.pipelined
+    for _ in range(3):
+        loop.tick()                 # the last interval's chunk is with the worker now
+    loop.close()                    # as Ctrl-C does: the worker's reply meets a closed pipe
+    time.sleep(0.3)
+print("closed", flush=True)
+"""
+
+
+def test_worker_quiet_when_the_loop_closes_while_it_works(tmp_path):
+    r = subprocess.run([sys.executable, "-c", _CLOSE_WHILE_BUSY, str(SCEN / "default_short.toml")], env=ENV,
+                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "closed" in r.stdout, r.stderr
+    assert "Traceback" not in r.stderr and "BrokenPipeError" not in r.stderr, r.stderr
+
+
+_ARRAYS = """
+import numpy as np
+n = 2
+ARRAYS = {k: np.zeros(n) for k in ("t_s", "true_lat_rad", "true_lon_rad", "true_h_msl_m", "true_h_agl_m",
+                                   "true_yaw_rad", "true_tas_mps", "est_lat_rad", "est_lon_rad", "est_h_m",
+                                   "est_yaw_rad", "gnss_available", "nav_ok")}
+ARRAYS["err_ned_m"] = np.zeros((n, 3))
+ARRAYS["est_cov_diag"] = np.ones((n, 9))
+"""
+_KILL_WHILE_WRITING = _ARRAYS + """
+import sys, time
+from trn_env.output.run_folder import write_run
+def plot(tmp):
+    print("writing", flush=True)
+    time.sleep(60)
+    return []
+write_run(sys.argv[1], {"a": 1}, ARRAYS, [], plot=plot)
+"""
+
+
+def test_kill_while_writing_leftover_cleaned_by_next_run(tmp_path):
+    runs = tmp_path / "runs"
+    proc = subprocess.Popen([sys.executable, "-c", _KILL_WHILE_WRITING, str(runs / "r1")], env=ENV,
+                            cwd=tmp_path, stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "writing"
+    proc.kill()
+    proc.wait(timeout=30)
+    left = list(runs.glob(".r1.partial-*"))
+    assert len(left) == 1 and not (runs / "r1").exists()         # what a kill leaves behind
+    live = runs / f".r0.partial-{os.getpid()}-abcd"              # a run still writing: kept
+    live.mkdir()
+    old = runs / ".r2.partial-xyz"                                # older layout, no pid: removed once stale
+    old.mkdir()
+    os.utime(old, (time.time() - 7200, time.time() - 7200))
+    ns: dict = {}
+    exec(_ARRAYS, ns)
+    run_folder.write_run(runs / "r3", {"a": 1}, ns["ARRAYS"], [])    # the next run, any name
+    assert (runs / "r3" / "summary.json").exists()
+    assert not left[0].exists() and not old.exists() and live.exists()
+    assert sorted(p.name for p in runs.iterdir()) == sorted([live.name, "r3"])

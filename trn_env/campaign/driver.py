@@ -1,0 +1,137 @@
+"""Run a validated campaign on a backend: prepare the output folder, make the run tasks, write each row as
+it arrives, show progress.
+
+Order (so that bad input leaves nothing behind): the campaign file is validated (spec.load_campaign), the
+output folder checked (a folder of another campaign is refused; an existing one needs `resume`), the
+backend started (Ray imported and connected); only then is the manifest written and the first run flown.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict
+from pathlib import Path
+
+from trn_env.campaign.rows import done_run_ids, read_manifest, write_log, write_manifest, write_row
+from trn_env.campaign.runs import RunTask
+from trn_env.campaign.spec import Campaign, CampaignError, replay_argv
+
+
+def default_out_dir(name: str) -> Path:
+    stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    return Path("campaigns") / f"{name}-{stamp}"
+
+
+def check_out_dir(campaign: Campaign, out_dir: Path, resume: bool) -> set[str]:
+    """Run ids already done in `out_dir` (empty for a new folder); CampaignError if the folder is refused."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise CampaignError(campaign.source, [f"--out {out_dir}: exists and is not a folder"])
+    try:
+        manifest = read_manifest(out_dir) if out_dir.is_dir() else None
+    except ValueError as exc:
+        raise CampaignError(campaign.source, [f"--out: {exc}"]) from None
+    if manifest is None:
+        if out_dir.is_dir() and any(out_dir.iterdir()):
+            raise CampaignError(campaign.source, [f"--out {out_dir}: folder is not empty and holds no "
+                                                  "campaign (campaign.json); choose another folder"])
+        if resume and not out_dir.is_dir():
+            raise CampaignError(campaign.source, [f"--resume: {out_dir} does not exist (nothing to resume)"])
+        return set()
+    if manifest.get("campaign_hash") != campaign.hash:
+        raise CampaignError(campaign.source, [
+            f"--resume: {out_dir} holds campaign {manifest.get('campaign')!r} from "
+            f"{manifest.get('source')} (hash {str(manifest.get('campaign_hash'))[:12]}), "
+            f"but {campaign.source} "
+            f"hashes {campaign.hash[:12]}: a different campaign file (or one of its scenario files changed); "
+            "refusing to mix their runs - use another --out"])
+    if not resume:
+        raise CampaignError(campaign.source, [f"--out {out_dir}: already holds this campaign; pass --resume "
+                                              "to fly the missing runs, or choose another folder"])
+    return done_run_ids(out_dir)
+
+
+def tasks(campaign: Campaign, skip: set[str]) -> Iterator[RunTask]:
+    """The campaign's runs not in `skip`, seed-major (a partial campaign has every variant at the same
+    seeds), made lazily."""
+    import shlex
+    settings = asdict(campaign.metric_settings)
+    index = 0
+    for si, seed in enumerate(campaign.seeds):
+        for v in campaign.variants:
+            run_id = campaign.run_id(v.index, si)
+            if run_id not in skip:
+                yield RunTask(
+                    campaign=campaign.name, campaign_hash=campaign.hash, run_id=run_id, run_index=index,
+                    variant_index=v.index, seed_index=si, seed=int(seed), scenario_name=v.scenario_name,
+                    scenario_source=v.scenario_source, navigator_label=v.navigator.label, sweep=dict(v.sweep),
+                    data=v.data, dem_keys=v.dem_keys, metric_settings=settings, keep_logs=campaign.keep_logs,
+                    replay_command=shlex.join(replay_argv(v, int(seed))))
+            index += 1
+
+
+def make_backend(name: str, workers: int | None = None, address: str | None = None):
+    if name == "local":
+        if address:
+            raise ValueError("--address: only with --backend ray")
+        from trn_env.campaign.local import LocalBackend
+        return LocalBackend(workers)
+    if name == "ray":
+        from trn_env.campaign.ray_backend import RayBackend
+        return RayBackend(address=address, workers=workers)
+    raise ValueError(f"--backend: unknown backend {name!r} (local or ray)")
+
+
+def run_campaign(campaign: Campaign, out_dir: Path, *, backend=None, resume: bool = False,
+                 progress: bool = True, on_row: Callable[[dict], None] | None = None) -> dict:
+    """Fly the campaign's missing runs into `out_dir`; returns counts and timing (`driver_row_cpu_s`: the
+    driver's CPU time writing rows). `backend`: a backend object (default: the local pool on every core)."""
+    out_dir = Path(out_dir)
+    done = check_out_dir(campaign, out_dir, resume)
+    if backend is None:
+        backend = make_backend("local")
+    todo = campaign.n_runs - len(done & {campaign.run_id(v.index, s) for v in campaign.variants
+                                         for s in range(len(campaign.seeds))})
+    with backend:
+        write_manifest(out_dir, {
+            "campaign": campaign.name, "campaign_hash": campaign.hash, "source": campaign.source,
+            "description": campaign.description, "n_runs": campaign.n_runs, "seeds": campaign.seeds,
+            "sweep_paths": campaign.sweep_paths, "navigators": sorted({v.navigator.label
+                                                                       for v in campaign.variants}),
+            "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        }, campaign.text)
+        stats = {"runs": campaign.n_runs, "already_done": campaign.n_runs - todo, "flown": 0, "failed": 0,
+                 "backend": backend.describe(), "driver_row_cpu_s": 0.0}
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=todo, unit="run", desc=f"campaign {campaign.name}", mininterval=0.5)
+        t0 = time.perf_counter()
+
+        def on_result(row: dict, log_bytes: bytes | None) -> None:
+            t_row = time.thread_time()
+            if log_bytes is not None:
+                write_log(out_dir, row["run_id"], log_bytes)
+            write_row(out_dir, row)          # the row last: its file means the run is complete
+            stats["flown"] += 1
+            stats["failed"] += row["termination"] == "error"
+            stats["driver_row_cpu_s"] += time.thread_time() - t_row
+            if bar is not None:
+                minutes = (time.perf_counter() - t0) / 60.0
+                bar.set_postfix(failed=stats["failed"], rpm=f"{stats['flown'] / max(minutes, 1e-9):.1f}",
+                                refresh=False)
+                bar.update(1)
+            if on_row is not None:
+                on_row(row)
+
+        try:
+            if todo:
+                backend.run(tasks(campaign, done), campaign.extra.get("dems", {}), on_result)
+        finally:
+            if bar is not None:
+                bar.close()
+        stats["wall_time_s"] = time.perf_counter() - t0
+        stats["runs_per_minute"] = 60.0 * stats["flown"] / stats["wall_time_s"] if stats["flown"] else 0.0
+    return stats

@@ -1,0 +1,392 @@
+"""Campaign files: the TOML format, its validation (every problem by field path), and the runs it expands to.
+
+    name = "ci_small"
+    description = "INS against INS + TERCOM, 2 seeds"
+    root_seed = 16                       # seeds drawn from it through numpy SeedSequence ...
+    seeds = 2                            # ... this many; or a list of scenario seeds, [0, 1, 7]
+    scenarios = ["../scenarios/default_short.toml"]   # paths (relative to this file) or built-in names
+    duration_s = 40.0                    # optional: every scenario's time limit
+    navigators = ["ins", { name = "ins_tercom", label = "tercom", settings = { remove_bias = true } }]
+    keep_logs = false                    # also keep each run's full time-series log (logs/<run>.npz)
+
+    [metrics]                            # optional: trn_env.output.metrics.MetricSettings
+    converge_threshold_m = 50.0
+
+    [[sweeps]]                           # any scenario field by its dotted path; all sweeps as a grid
+    path = "wind.layers.0.speed_mps"
+    values = [5.0, 10.0]                 # or grid = { start = 0.0, stop = 10.0, num = 3 }
+
+Without `navigators` each scenario flies its own. A variant is one (scenario, navigator, sweep point); every
+variant flies every seed, and seed i is the same number in every variant (common random numbers: two
+navigators meet the same turbulence and sensor noise). Each variant is validated as a scenario before any
+flight, so a bad sweep path or value is reported at `sweeps[j]` with the scenario's own message.
+
+Replay: the run's scenario is the scenario file with, in order, the seed, `duration_s` and the navigator
+name overridden, then `navigator.settings` and each sweep value set by dotted path - exactly what
+`trn-env fly SCENARIO --seed S --duration D --navigator N --set PATH=VALUE ...` does (the row's
+`replay_command`), so the replay gives the same bits.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+import math
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import numpy as np
+
+from trn_env.output.metrics import MetricSettings
+from trn_env.scenario.loading import (
+    ScenarioError,
+    apply_overrides,
+    builtin_names,
+    field_path,
+    read_scenario_file,
+    validate,
+)
+from trn_env.scenario.overrides import apply_fields, toml_value
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+_NUMBER = {"type": "number"}
+SCHEMA: dict = {
+    "type": "object",
+    "additionalProperties": False,
+    "required": ["scenarios", "seeds"],
+    "properties": {
+        "name": {"type": "string", "minLength": 1, "pattern": "^[A-Za-z0-9_.-]+$"},
+        "description": {"type": "string"},
+        "root_seed": {"type": "integer", "minimum": 0},
+        "seeds": {"oneOf": [
+            {"type": "integer", "minimum": 1, "description": "a count of seeds drawn from root_seed"},
+            {"type": "array", "minItems": 1, "uniqueItems": True,
+             "items": {"type": "integer", "minimum": 0}, "description": "a list of scenario seeds"},
+        ]},
+        "scenarios": {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1}},
+        "duration_s": {"type": "number", "exclusiveMinimum": 0},
+        "navigators": {"type": "array", "minItems": 1, "items": {"oneOf": [
+            {"type": "string", "minLength": 1},
+            {"type": "object", "additionalProperties": False, "required": ["name"],
+             "properties": {"name": {"type": "string", "minLength": 1},
+                            "label": {"type": "string", "minLength": 1},
+                            "settings": {"type": "object"}}},
+        ]}},
+        "keep_logs": {"type": "boolean"},
+        "metrics": {"type": "object", "additionalProperties": False,
+                    "properties": {k: _NUMBER for k in MetricSettings.__dataclass_fields__}},
+        "sweeps": {"type": "array", "items": {
+            "type": "object", "additionalProperties": False, "required": ["path"],
+            "properties": {
+                "path": {"type": "string", "pattern": r"^[A-Za-z0-9_]+(\.[A-Za-z0-9_]+)*$"},
+                "values": {"type": "array", "minItems": 1},
+                "grid": {"type": "object", "additionalProperties": False,
+                         "required": ["start", "stop", "num"],
+                         "properties": {"start": _NUMBER, "stop": _NUMBER,
+                                        "num": {"type": "integer", "minimum": 1}}},
+            },
+            "oneOf": [{"required": ["values"]}, {"required": ["grid"]}],
+        }},
+    },
+}
+
+
+class CampaignError(ValueError):
+    """A campaign file that cannot be run; `.problems` lists every problem, each starting with its field."""
+
+    def __init__(self, source: str, problems: list[str]):
+        self.source = source
+        self.problems = list(problems)
+        lines = "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(f"campaign {source}: {len(self.problems)} problem(s)\n{lines}")
+
+
+@dataclass(frozen=True)
+class NavigatorChoice:
+    label: str
+    name: str | None              # None: the scenario's own navigator
+    settings: dict | None         # None: the scenario's own settings (only with name None)
+
+
+@dataclass
+class Variant:
+    """One (scenario, navigator, sweep point), validated; flies every seed of the campaign."""
+
+    index: int
+    scenario_ref: str             # as written in the campaign file
+    scenario_source: str          # the path or built-in name `trn-env fly` takes
+    navigator: NavigatorChoice
+    sweep: dict[str, Any]         # dotted path -> value
+    data: dict                    # the validated scenario data (defaults filled), seed not yet set
+    scenario_name: str
+    assignments: list[tuple[str, Any]]
+    overrides: dict[str, Any]
+    dem_keys: tuple[str | None, str | None] = (None, None)
+    dems: tuple[Any, Any] = (None, None)
+
+
+@dataclass
+class Campaign:
+    name: str
+    source: str
+    description: str
+    hash: str                     # sha256 of the campaign file and the scenario files it names
+    text: str
+    seeds: list[int]
+    variants: list[Variant]
+    sweep_paths: list[str]
+    keep_logs: bool
+    metric_settings: MetricSettings
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.seeds) * len(self.variants)
+
+    def run_id(self, variant_index: int, seed_index: int) -> str:
+        return f"v{variant_index:03d}-s{seed_index:04d}"
+
+
+def draw_seeds(root_seed: int, n: int) -> list[int]:
+    """n scenario seeds (63-bit, so they fit an int64 column) from one root seed via SeedSequence.spawn."""
+    return [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1))
+            for c in np.random.SeedSequence(int(root_seed)).spawn(int(n))]
+
+
+def grid_values(g: dict) -> list[float]:
+    return [float(x) for x in np.linspace(float(g["start"]), float(g["stop"]), int(g["num"]))]
+
+
+def _schema_problems(data: dict) -> list[str]:
+    v = jsonschema.Draft202012Validator(SCHEMA)
+    out = []
+    for err in sorted(v.iter_errors(data), key=lambda e: [str(p) for p in e.absolute_path]):
+        path = list(err.absolute_path)
+        if err.validator == "additionalProperties" and isinstance(err.instance, dict):
+            allowed = sorted(err.schema.get("properties", {}))
+            for key in sorted(set(err.instance) - set(allowed)):
+                out.append(f"{field_path(path + [key])}: unknown key (allowed here: {', '.join(allowed)})")
+            continue
+        if err.validator == "required":
+            missing = err.message.split("'")[1] if "'" in err.message else err.message
+            out.append(f"{field_path(path + [missing])}: required key is missing")
+            continue
+        if err.validator == "oneOf" and path and path[0] == "seeds":
+            if isinstance(err.instance, int) and not isinstance(err.instance, bool) and err.instance < 1:
+                out.append(f"seeds: {err.instance} seeds: give at least one seed (a count >= 1 or a list)")
+            else:
+                out.append(f"seeds: {err.instance!r} is neither a seed count >= 1 nor a list of distinct "
+                           "seeds >= 0")
+            continue
+        if err.validator == "oneOf" and len(path) == 2 and path[0] == "sweeps":
+            out.append(f"{field_path(path)}: give exactly one of values or grid")
+            continue
+        if err.validator == "oneOf" and err.context:
+            alts = sorted({sub.message for sub in err.context if not sub.relative_path})
+            out.append(f"{field_path(path)}: {' / '.join(alts)}")
+            continue
+        out.append(f"{field_path(path)}: {err.message}")
+    return out
+
+
+def _scenario_path(ref: str, base: Path) -> str:
+    p = Path(ref)
+    if ref in builtin_names() and not p.suffix:
+        return ref
+    return str((base / p).resolve()) if not p.is_absolute() else str(p)
+
+
+def _dotted(problem_path: str) -> str:
+    """'wind.layers[0].speed_mps' -> 'wind.layers.0.speed_mps'."""
+    return re.sub(r"\[(\d+)\]", r".\1", problem_path)
+
+
+def _attribute(problem: str, sweep_at: dict[str, str], nav_at: str, scen_at: str) -> str:
+    """Prefix a scenario problem with the campaign field that caused it."""
+    field_ = _dotted(problem.split(":", 1)[0])
+    for path, where in sweep_at.items():
+        if field_ == path or field_.startswith(path + ".") or path.startswith(field_ + "."):
+            return f"{where}: {problem}"
+    if field_.startswith("navigator"):
+        return f"{nav_at}: {problem}"
+    return f"{scen_at}: {problem}"
+
+
+def _normalise(value: Any) -> Any:
+    """A sweep value as a TOML file would give it (floats stay floats, ints ints)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def campaign_hash(text: bytes, scenario_files: list[Path]) -> str:
+    h = hashlib.sha256()
+    h.update(text)
+    for p in scenario_files:
+        h.update(b"\0" + str(p.name).encode() + b"\0")
+        h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Read and validate a campaign file and every variant it expands to. Raises CampaignError."""
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise CampaignError(source, ["file: no such campaign file"])
+    try:
+        raw = path.read_bytes()
+        text = raw.decode("utf-8")
+        data = tomllib.loads(text)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CampaignError(source, [f"file: cannot read: {exc}"]) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CampaignError(source, [f"file: not valid TOML: {exc}"]) from None
+    problems = _schema_problems(data)
+    if problems:
+        raise CampaignError(source, problems)
+    base = path.resolve().parent
+    name = data.get("name", path.stem)
+    try:
+        metric_settings = MetricSettings(**data.get("metrics", {}))
+    except ValueError as exc:
+        problems.append(str(exc))
+        metric_settings = MetricSettings()
+
+    seeds = list(data["seeds"]) if isinstance(data["seeds"], list) else draw_seeds(data.get("root_seed", 0),
+                                                                                   data["seeds"])
+    navs: list[NavigatorChoice] = []
+    for n in data.get("navigators", []):
+        if isinstance(n, str):
+            navs.append(NavigatorChoice(n, n, {}))
+        else:
+            navs.append(NavigatorChoice(n.get("label", n["name"]), n["name"], dict(n.get("settings", {}))))
+    labels = [n.label for n in navs]
+    for i, lab in enumerate(labels):
+        if labels.index(lab) != i:
+            problems.append(f"navigators[{i}]: label {lab!r} is used twice (give each a distinct label)")
+    sweeps = data.get("sweeps", [])
+    sweep_paths = [s["path"] for s in sweeps]
+    for j, p in enumerate(sweep_paths):
+        if sweep_paths.index(p) != j:
+            problems.append(f"sweeps[{j}].path: {p!r} is swept twice")
+        if p == "seed" or p == "navigator.name":
+            problems.append(f"sweeps[{j}].path: {p!r} has its own campaign key (seeds / navigators)")
+    sweep_values = [[_normalise(v) for v in (s["values"] if "values" in s else grid_values(s["grid"]))]
+                    for s in sweeps]
+
+    scen_files: list[Path] = []
+    scen_raw: list[tuple[str, str, dict | None]] = []
+    for i, ref in enumerate(data["scenarios"]):
+        src = _scenario_path(ref, base)
+        try:
+            d, _ = read_scenario_file(src)
+            if Path(src).is_file():
+                scen_files.append(Path(src))
+            scen_raw.append((ref, src, d))
+        except ScenarioError as err:
+            problems += [f"scenarios[{i}] ({ref}): {p}" for p in err.problems]
+            scen_raw.append((ref, src, None))
+    if problems:
+        raise CampaignError(source, problems)
+
+    variants: list[Variant] = []
+    seen: set[str] = set()
+    dem_cache: dict[str, Any] = {}
+    combos = list(itertools.product(*[list(enumerate(v)) for v in sweep_values]))
+    for si, (ref, src, raw_data) in enumerate(scen_raw):
+        for ni, nav in enumerate(navs or [None]):
+            for combo in combos:
+                sweep = {sweep_paths[j]: v for j, (_k, v) in enumerate(combo)}
+                sweep_at = {sweep_paths[j]: f"sweeps[{j}].values[{k}] ({sweep_paths[j]} = {v!r})"
+                            for j, (k, v) in enumerate(combo)}
+                overrides: dict[str, Any] = {}
+                if "duration_s" in data:
+                    overrides["duration_s"] = float(data["duration_s"])
+                assignments: list[tuple[str, Any]] = []
+                if nav is not None:
+                    overrides["navigator"] = nav.name
+                    if nav.settings:
+                        assignments.append(("navigator.settings", copy.deepcopy(nav.settings)))
+                assignments += list(sweep.items())
+                d = apply_overrides(raw_data, **overrides)
+                nav_at = f"navigators[{ni}] ({nav.label})" if nav is not None else f"scenarios[{si}] ({ref})"
+                scen_at = f"scenarios[{si}] ({ref})"
+                try:
+                    d = apply_fields(d, assignments)
+                except ValueError as exc:
+                    msg = str(exc)
+                    bad = next((w for p, w in sweep_at.items() if msg.startswith(p + ":")), scen_at)
+                    problems.append(f"{bad}: {msg}")
+                    continue
+                bdir = Path(src).resolve().parent if Path(src).is_file() else None
+                try:
+                    sc = validate(d, source=src, base_dir=bdir)
+                except ScenarioError as err:
+                    for p in err.problems:
+                        msg = _attribute(p, sweep_at, nav_at, scen_at)
+                        if msg not in seen:
+                            seen.add(msg)
+                            problems.append(msg)
+                    continue
+                label = nav.label if nav is not None else sc.navigator_name
+                choice = nav if nav is not None else NavigatorChoice(label, None, None)
+                world_key = _dem_key(sc.data, "world")
+                map_key = _dem_key(sc.data, "map")
+                for key, raw_dem in ((world_key, sc.extras.get("world_dem_raw")),
+                                     (map_key, sc.extras.get("map_dem_raw"))):
+                    if key is not None and raw_dem is not None:
+                        dem_cache.setdefault(key, raw_dem)
+                variants.append(Variant(
+                    index=len(variants), scenario_ref=ref, scenario_source=src, navigator=choice,
+                    sweep=sweep, data=sc.data, scenario_name=sc.name, assignments=assignments,
+                    overrides=overrides, dem_keys=(world_key, map_key)))
+    if problems:
+        raise CampaignError(source, problems)
+    for v in variants:
+        v.dems = (dem_cache.get(v.dem_keys[0]) if v.dem_keys[0] else None,
+                  dem_cache.get(v.dem_keys[1]) if v.dem_keys[1] else None)
+    return Campaign(name=name, source=source, description=data.get("description", ""),
+                    hash=campaign_hash(raw, scen_files), text=text, seeds=seeds, variants=variants,
+                    sweep_paths=sweep_paths, keep_logs=bool(data.get("keep_logs", False)),
+                    metric_settings=metric_settings, extra={"dems": dem_cache})
+
+
+def _dem_key(d: dict, which: str) -> str | None:
+    """Key of the raw (unrefined, error-free) DEM a variant loads: its spec and void filling."""
+    cfg = d["terrain"][which]
+    if which == "map" and cfg.get("dem", "world") == "world":
+        return None
+    fill = bool(cfg.get("fill_voids", d["terrain"]["world"].get("fill_voids", False)))
+    return json.dumps([str(cfg["dem"]), fill])
+
+
+def replay_argv(variant: Variant, seed: int) -> list[str]:
+    """`trn-env fly` arguments that fly one run of the campaign alone, bit for bit."""
+    argv = ["trn-env", "fly", variant.scenario_source, "--seed", str(seed)]
+    if "duration_s" in variant.overrides:
+        argv += ["--duration", repr(variant.overrides["duration_s"])]
+    if variant.overrides.get("navigator") is not None:
+        argv += ["--navigator", variant.overrides["navigator"]]
+    for path, value in variant.assignments:
+        argv += ["--set", f"{path}={toml_value(value)}"]
+    return argv
+
+
+def sweep_label(sweep: dict[str, Any]) -> str:
+    """'wind.layers.0.speed_mps=5.0, ...' or '-' with no sweep."""
+    return ", ".join(f"{p}={v!r}" if not isinstance(v, str) else f"{p}={v}" for p, v in sweep.items()) or "-"
+
+
+def is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(float(v))
