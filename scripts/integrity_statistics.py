@@ -280,6 +280,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=5, help="closed-loop flights per fault case")
     ap.add_argument("--vectorised-only", action="store_true")
     ap.add_argument("--stale-only", action="store_true", help="only part 4 (the navigator's own flag)")
+    ap.add_argument("--skip-vectorised", action="store_true", help="parts 3 and 4 only")
     ap.add_argument("--json", default=None, help="write the figures to this file")
     args = ap.parse_args(argv)
     out = {}
@@ -287,7 +288,7 @@ def main(argv=None) -> int:
         out["stale_patch"] = stale_patch(max(args.seeds * 2, 6))
         print(json.dumps(out["stale_patch"], indent=1), flush=True)
         args.vectorised_only = True
-    else:
+    elif not args.skip_vectorised:
         out["vectorised"] = vectorised(args.tests)
         print(json.dumps(out["vectorised"], indent=1), flush=True)
     if not args.vectorised_only:
