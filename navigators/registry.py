@@ -10,6 +10,10 @@
 "pmf"          point-mass filter over the INS horizontal position error (navigators.filters.pmf); dem=
 "pf"           SIR particle filter over the INS error state (navigators.filters.pf); dem=, rng=
 
+Monitors run beside a navigator on the same frames and its estimate (`create_monitor(name, **settings)`,
+`available_monitors()`): "dem_integrity" is the terrain-database integrity monitor of seed 003
+(navigators.integrity.dem_monitor; needs dem=, the navigator's map).
+
 Every navigator validates its settings in its constructor and raises `ValueError` naming the setting.
 A navigator that draws random numbers (particle filters) is registered with `takes_rng=True` and gets the
 scenario's `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its
@@ -76,3 +80,33 @@ def _rbpf(**settings):
 
 
 register("rbpf", _rbpf, takes_rng=True)
+
+
+# ------------------------------------------------------------------------------------------ monitors
+
+def _dem_integrity(**kw):
+    from navigators.integrity.dem_monitor import DemIntegrityMonitor
+    return DemIntegrityMonitor(**kw)
+
+
+_MONITORS: dict[str, Callable[..., object]] = {"dem_integrity": _dem_integrity}
+
+
+def available_monitors() -> list[str]:
+    """Names accepted by create_monitor()."""
+    return sorted(_MONITORS)
+
+
+def create_monitor(name: str, **settings):
+    """A new monitor by name (it runs beside a navigator: `monitor.update(frames, estimate)`)."""
+    if name not in _MONITORS:
+        raise ValueError(f"unknown monitor {name!r}; available: {available_monitors()}")
+    try:
+        return _MONITORS[name](**settings)
+    except TypeError as exc:
+        raise ValueError(f"monitor {name!r}: bad settings {sorted(settings)}: {exc}") from exc
+
+
+def register_monitor(name: str, factory: Callable[..., object]) -> None:
+    """Add a monitor factory (keyword settings; `dem=` is the navigator's map)."""
+    _MONITORS[name] = factory

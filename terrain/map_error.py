@@ -206,3 +206,164 @@ def make_map(dem: Dem, accuracy: str | MapErrorModel, seed: int | np.random.Gene
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     model = model_for_class(accuracy, rng) if isinstance(accuracy, str) else accuracy
     return apply(dem, model, rng, name=f"{dem.name}[{accuracy if isinstance(accuracy, str) else 'map'}]")
+
+
+# ------------------------------------------------------------------------------------------ map faults
+
+FAULT_KINDS = ("bias", "ramp", "spike", "shift", "stale")
+
+
+@dataclass(frozen=True)
+class MapFault:
+    """A regional fault of the navigator's map (the world stays true), in a rectangle of size_n_m x size_e_m
+    centred on (center_lat_deg, center_lon_deg), present from start_s (None: from the start).
+
+    kind "bias":  heights + bias_m inside the region (seed 003's vertical bias error);
+    kind "ramp":  heights + bias_m * u, u rising from 0 to 1 across the region along direction_deg
+                  (clockwise from north);
+    kind "spike": a tower/spike: heights + bias_m at the centre falling linearly to 0 at radius
+                  min(size) / 2;
+    kind "shift": the region's heights taken from shift_n_m, shift_e_m away (a feature at p appears at
+                  p + shift inside the region);
+    kind "stale": the region taken from different terrain: from `source_dem` (a terrain.Dem at the same
+                  coordinates) or, without one, from the same map source_offset_n_m, source_offset_e_m away.
+    """
+
+    kind: str
+    center_lat_deg: float
+    center_lon_deg: float
+    size_n_m: float
+    size_e_m: float
+    start_s: float | None = None
+    bias_m: float = 0.0
+    direction_deg: float = 0.0
+    shift_n_m: float = 0.0
+    shift_e_m: float = 0.0
+    source_offset_n_m: float = 5000.0
+    source_offset_e_m: float = 0.0
+    source_dem: object = None
+
+    def __post_init__(self):
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"kind: must be one of {FAULT_KINDS}, got {self.kind!r}")
+        for name in ("center_lat_deg", "center_lon_deg", "size_n_m", "size_e_m", "bias_m", "direction_deg",
+                     "shift_n_m", "shift_e_m", "source_offset_n_m", "source_offset_e_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float, np.floating, np.integer)) and np.isfinite(v)):
+                raise ValueError(f"{name}: must be a finite number, got {v!r}")
+        for name in ("size_n_m", "size_e_m"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name}: the fault region's size must be > 0 m, got {getattr(self, name)}")
+        if self.start_s is not None and not (np.isfinite(self.start_s) and self.start_s >= 0.0):
+            raise ValueError(f"start_s: must be a finite time >= 0 s, got {self.start_s!r}")
+
+    def describe(self) -> dict:
+        """The fault as plain data (for summary.json)."""
+        keys = ("kind", "center_lat_deg", "center_lon_deg", "size_n_m", "size_e_m", "start_s")
+        out = {k: getattr(self, k) for k in keys}
+        if self.kind in ("bias", "ramp", "spike"):
+            out["bias_m"] = self.bias_m
+        if self.kind == "ramp":
+            out["direction_deg"] = self.direction_deg
+        if self.kind == "shift":
+            out.update(shift_n_m=self.shift_n_m, shift_e_m=self.shift_e_m)
+        if self.kind == "stale":
+            if self.source_dem is not None:
+                out["source_dem"] = getattr(self.source_dem, "name", "dem")
+            else:
+                out.update(source_offset_n_m=self.source_offset_n_m, source_offset_e_m=self.source_offset_e_m)
+        return out
+
+
+def _region_index(dem: Dem, fault: MapFault):
+    """(rows slice, cols slice, north offsets (n_i, 1), east offsets (1, n_j)) of the posts in the fault's
+    region; ValueError naming the field when the region is not inside the map."""
+    lat_c, lon_c = np.radians(fault.center_lat_deg), np.radians(fault.center_lon_deg)
+    r_n = geodesy.meridian_radius_m(lat_c)
+    r_e = geodesy.prime_vertical_radius_m(lat_c) * np.cos(lat_c)
+    half_lat = 0.5 * fault.size_n_m / r_n
+    half_lon = 0.5 * fault.size_e_m / r_e
+    b = dem.bounds
+    if not (b[0] <= lat_c - half_lat and lat_c + half_lat <= b[1] and b[2] <= lon_c - half_lon
+            and lon_c + half_lon <= b[3]):
+        raise ValueError(
+            f"center_lat_deg, center_lon_deg: the fault region ({fault.center_lat_deg:.5f}, "
+            f"{fault.center_lon_deg:.5f}) deg, {fault.size_n_m:.0f} x {fault.size_e_m:.0f} m, is not inside "
+            f"the map {dem.name!r} (lat {np.degrees(b[0]):.4f}..{np.degrees(b[1]):.4f}, lon "
+            f"{np.degrees(b[2]):.4f}..{np.degrees(b[3]):.4f} deg)")
+    i0 = int(np.ceil((lat_c - half_lat - dem.lat0_rad) / dem.dlat_rad - 1e-9))
+    i1 = int(np.floor((lat_c + half_lat - dem.lat0_rad) / dem.dlat_rad + 1e-9))
+    j0 = int(np.ceil((lon_c - half_lon - dem.lon0_rad) / dem.dlon_rad - 1e-9))
+    j1 = int(np.floor((lon_c + half_lon - dem.lon0_rad) / dem.dlon_rad + 1e-9))
+    if i1 < i0 or j1 < j0:
+        dn, de = dem.spacing_m
+        raise ValueError(f"size_n_m, size_e_m: the fault region {fault.size_n_m} x {fault.size_e_m} m holds "
+                         f"no post of the map (post spacing {dn:.0f} x {de:.0f} m)")
+    rows, cols = slice(i0, i1 + 1), slice(j0, j1 + 1)
+    north = ((dem.lat0_rad + np.arange(i0, i1 + 1) * dem.dlat_rad) - lat_c)[:, None] * r_n
+    east = ((dem.lon0_rad + np.arange(j0, j1 + 1) * dem.dlon_rad) - lon_c)[None, :] * r_e
+    return rows, cols, north, east, r_n, r_e
+
+
+def check_fault(dem: Dem, fault: MapFault) -> None:
+    """Raise ValueError (naming the field) if `fault` cannot be applied to `dem`."""
+    _region_index(dem, fault)
+
+
+def apply_fault(heights_m: np.ndarray, dem: Dem, fault: MapFault) -> None:
+    """Apply `fault` in place to heights_m (an array on dem's grid)."""
+    rows, cols, north, east, r_n, r_e = _region_index(dem, fault)
+    h = heights_m[rows, cols]
+    if fault.kind == "bias":
+        h += fault.bias_m
+    elif fault.kind == "ramp":
+        d = np.radians(fault.direction_deg)
+        along = north * np.cos(d) + east * np.sin(d)
+        half = 0.5 * (abs(fault.size_n_m * np.cos(d)) + abs(fault.size_e_m * np.sin(d)))
+        h += fault.bias_m * np.clip((along + half) / (2.0 * half), 0.0, 1.0)
+    elif fault.kind == "spike":
+        radius = 0.5 * min(fault.size_n_m, fault.size_e_m)
+        h += fault.bias_m * np.clip(1.0 - np.hypot(north, east) / radius, 0.0, None)
+    else:
+        la = (dem.lat0_rad + np.arange(rows.start, rows.stop) * dem.dlat_rad)[:, None] + 0.0 * east
+        lo = (dem.lon0_rad + np.arange(cols.start, cols.stop) * dem.dlon_rad)[None, :] + 0.0 * north
+        if fault.kind == "shift":
+            src, dn, de = dem, -fault.shift_n_m, -fault.shift_e_m
+        elif fault.source_dem is not None:
+            src, dn, de = fault.source_dem, 0.0, 0.0
+        else:
+            src, dn, de = dem, fault.source_offset_n_m, fault.source_offset_e_m
+        new = src.height(la + dn / r_n, lo + de / r_e, method="bilinear")
+        if not np.isfinite(new).all():
+            field = "shift_n_m, shift_e_m" if fault.kind == "shift" else (
+                "source_dem" if fault.source_dem is not None else "source_offset_n_m, source_offset_e_m")
+            raise ValueError(f"{field}: the {fault.kind} fault's source terrain is off the map (or void) for "
+                             f"part of the region")
+        h[...] = new
+    heights_m[rows, cols] = h
+
+
+def fault_schedule(dem: Dem, faults: list[MapFault]) -> list[tuple[float, np.ndarray]]:
+    """[(t_from_s, heights)]: the map's heights from each time on, in time order; the first entry (t = -inf)
+    holds the faults present from the start (or dem's own heights). Faults at the same time apply in list
+    order; a stale/shift fault reads the map as it was before the faults."""
+    times = sorted({-np.inf if f.start_s is None else float(f.start_s) for f in faults} | {-np.inf})
+    out = []
+    for t in times:
+        h = dem.heights_m.copy()
+        for f in faults:
+            if (-np.inf if f.start_s is None else f.start_s) <= t:
+                apply_fault(h, dem, f)
+        out.append((t, h))
+    return out
+
+
+def set_heights(dem: Dem, heights_m: np.ndarray) -> None:
+    """Swap a Dem's heights for another array of the same shape (a time-dependent map's change at its fault
+    time). Every holder of the Dem sees the new heights; the query tables cached on it are keyed by the
+    array and so rebuilt, the block bounds are dropped. Kernels keep reading `dem.grid` as before."""
+    h = np.ascontiguousarray(heights_m, dtype=np.float64)
+    if h.shape != dem.heights_m.shape:
+        raise ValueError(f"set_heights: shape {h.shape} differs from the Dem's {dem.heights_m.shape}")
+    dem.heights_m = h
+    dem._pyramid = None

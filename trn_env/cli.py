@@ -131,6 +131,10 @@ def _summary_table(summary: dict, out_dir: Path):
         rows.insert(5, ("kernels ready (compile / cache load)", f"{summary['warm_up_wall_time_s']:.1f} s"))
     if summary.get("route_not_followed"):
         rows.insert(1, ("what happened", summary["route_not_followed"]))
+    for name, mon in sorted(summary.get("monitors", {}).items()):
+        first = mon.get("first_alarm_t_s")
+        when = f" (first at {first:.0f} s)" if first is not None else ""
+        rows.append((f"{name} alarms", f"{mon['alarm_count']}{when}"))
     for k, v in rows:
         table.add_row(k, v)
     return table
@@ -254,7 +258,11 @@ def _plotter(result):
         title = f"{sc.name} / {sc.navigator_name} / seed {sc.seed}: {result.termination}"
         plots.plot_track(tmp / "track.png", result.world_dem, result.arrays, title=title, waypoints_deg=wps)
         plots.plot_errors(tmp / "errors.png", result.arrays, title=title)
-        return ["track.png", "errors.png"]
+        files = ["track.png", "errors.png"]
+        for name in sorted(result.summary.get("monitors", {})):      # seed 003-style statistic plots
+            plots.plot_integrity(tmp / f"{name}.png", result.arrays, name, title=title)
+            files.append(f"{name}.png")
+        return files
 
     return plot
 

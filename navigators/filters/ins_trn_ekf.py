@@ -43,8 +43,18 @@ from filterpy.kalman import KalmanFilter
 import navigators.filters._ekf_kernels as kern
 from navigators.frames import SensorFrames
 from navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
+from navigators.integrity.innovation_monitor import InnovationMonitor
 from navigators.measurements.ira_closest_point import FORMULAS, closest_point_ned
-from navigators.protocol import Estimate, Health
+from navigators.protocol import (
+    EXTRA_INNOVATION,
+    EXTRA_INNOVATION_COV,
+    EXTRA_LOG_LIKELIHOOD,
+    EXTRA_MEASUREMENT_TIME,
+    EXTRA_NIS,
+    EXTRA_NIS_DOF,
+    Estimate,
+    Health,
+)
 from navigators.tercom.mad import TercomBatch, TercomFix, correlate
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
@@ -106,6 +116,14 @@ class InsTrnNavigator:
     NED velocity axis), gnss_correlated_sigma_m (floor of the north/east sigma after a GNSS update: the
     receiver's slowly wandering error), gnss_gate_chi2 (5 dof), gnss_timeout_s (no valid fix for this long
     = GNSS lost, reported as an event); use_gnss=False ignores SensorFrames.gnss.
+    Integrity: every TERCOM fix that reaches the chi-square gate (accepted or gated) puts its innovation,
+    S, NIS (2 dof), log-likelihood and time under the navigators.protocol EXTRA_* keys, and feeds an
+    InnovationMonitor (integrity_window fixes, band probability integrity_alpha). While the NIS sum is above
+    its band the status is "degraded" (Health.ok False) and the filter recovers (a fix whose best match lies
+    on the edge of the search window counts as an infinite NIS): on entering that state the horizontal
+    position covariance is inflated by recovery_sigma_m^2 and the TERCOM search widens to
+    recovery_half_cells from the next batch on (both logged); back in band, the search returns to
+    half_cells and the status to "ok".
     Speed: a frame with no fix due inside it and no GNSS fix runs as one numba call
     (_ekf_kernels.fused_segment); set the attribute `fused = False` for the step-by-step path (the same
     numbers, to round-off).
@@ -143,6 +161,10 @@ class InsTrnNavigator:
         gnss_correlated_sigma_m: float = 1.5,
         gnss_gate_chi2: float = CHI2_5DOF_99_99,
         gnss_timeout_s: float = 2.5,
+        integrity_window: int = 3,
+        integrity_alpha: float = 0.01,
+        recovery_half_cells: int | None = None,
+        recovery_sigma_m: float = 100.0,
         name: str | None = None,
     ):
         if aiding not in (None, "ira", "radar_altimeter"):
@@ -219,6 +241,17 @@ class InsTrnNavigator:
         self._t_gnss = -math.inf        # time of the last GNSS fix used
         self._gnss_up = False           # GNSS fixes arriving (loss reported once gnss_timeout_s passes)
         self._height_initialised = False
+        self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
+        rh = 2 * self.half_cells if recovery_half_cells is None else recovery_half_cells
+        if isinstance(rh, bool) or not isinstance(rh, (int, np.integer)) or rh < self.half_cells:
+            raise ValueError(f"recovery_half_cells must be an integer >= half_cells ({self.half_cells}), "
+                             f"got {recovery_half_cells!r}")
+        self.recovery_half_cells = int(rh)
+        self.nominal_half_cells = self.half_cells
+        if not (math.isfinite(recovery_sigma_m) and recovery_sigma_m >= 0.0):
+            raise ValueError(f"recovery_sigma_m must be a finite number >= 0, got {recovery_sigma_m!r}")
+        self.recovery_sigma_m = float(recovery_sigma_m)
+        self._update_extra: dict = {}
         self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
         self.health = Health()
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
@@ -274,6 +307,9 @@ class InsTrnNavigator:
         self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
         self.batch.clear()
         self.fixes = []
+        self.integrity.reset()
+        self._set_search(self.nominal_half_cells)
+        self._update_extra = {}
         self._t_ekf = float(initial.t_s)
         self._t_batch0 = float(initial.t_s)
         self._height_initialised = False
@@ -696,6 +732,8 @@ class InsTrnNavigator:
         self.fixes.append(fix)
         if not fix.valid:
             self._count_skip(t_s, f"tercom_{fix.reason}", 1, f"TERCOM fix rejected: {fix.reason}")
+            if fix.reason == "edge":      # the best match lies beyond the search window: a failed test
+                self._integrity_test(t_s, math.inf, 2)
             return
         z = -np.array([[fix.dn_m], [fix.de_m]])  # INS minus matched position
         H = np.zeros((2, N_ERR))
@@ -703,7 +741,9 @@ class InsTrnNavigator:
         Rm = np.eye(2) * self.fix_sigma_m**2
         S = H @ self.kf.P @ H.T + Rm
         d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])
-        if not np.isfinite(d2) or d2 > self.gate_chi2:
+        gated = not np.isfinite(d2) or d2 > self.gate_chi2
+        self._record_innovation(t_s, z, S, d2)
+        if gated:
             self._count_skip(t_s, "tercom_gated", 1, f"TERCOM fix failed the chi-square gate ({d2:.1f})")
             return
         saved = copy.deepcopy((self.kf.x, self.kf.P))
@@ -717,11 +757,52 @@ class InsTrnNavigator:
         self.ins.accel_bias_b += dx[9:12]
         self.ins.gyro_bias_b[2] += dx[12]
         self.kf.x[:] = 0.0
-        self.health.status = "ok"
-        self.health.ok = True
+        if not self.integrity.degraded:
+            self.health.ok, self.health.status = True, "ok"
         self.health.events.append(
             (t_s, f"TERCOM fix dn={fix.dn_m:.1f} m de={fix.de_m:.1f} m q={fix.quality:.2f}")
         )
+
+    def _set_search(self, half_cells: int) -> None:
+        """TERCOM search half-width (cells) of the batches started from now on."""
+        self.half_cells = int(half_cells)
+        if self.batch.accumulate is not None:
+            self.batch.accumulate = (self.half_cells, self.cell_m, self.remove_bias, self.dem)
+
+    def _record_innovation(self, t_s: float, z: np.ndarray, S: np.ndarray, d2: float) -> None:
+        """The fix's innovation under the protocol's EXTRA_* keys; the innovation test and its recovery."""
+        sign, logdet = np.linalg.slogdet(2.0 * np.pi * S)
+        self._update_extra = {
+            EXTRA_INNOVATION: z.ravel().copy(),
+            EXTRA_INNOVATION_COV: S.copy(),
+            EXTRA_NIS: d2,
+            EXTRA_NIS_DOF: 2,
+            EXTRA_LOG_LIKELIHOOD: float(-0.5 * (d2 + logdet)) if sign > 0 else float("nan"),
+            EXTRA_MEASUREMENT_TIME: float(t_s),
+        }
+        self._integrity_test(t_s, d2, 2)
+
+    def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
+        """Feed the innovation test; on entering "degraded" recover (covariance inflation, wider search)."""
+        verdict = self.integrity.add(t_s, nis, dof)
+        if not verdict.changed:
+            return
+        self.health.events.append((t_s, verdict.message))
+        if verdict.degraded:
+            self.health.ok, self.health.status = False, "degraded"
+            P = self.kf.P
+            P[0, 0] += self.recovery_sigma_m**2
+            P[1, 1] += self.recovery_sigma_m**2
+            self._P_good[:] = P
+            self._set_search(self.recovery_half_cells)
+            self.health.events.append((t_s, f"recovery: horizontal covariance inflated by "
+                                            f"({self.recovery_sigma_m:.0f} m)^2, TERCOM search widened to "
+                                            f"+-{self.half_cells} cells"))
+        else:
+            self.health.ok, self.health.status = True, "ok"
+            self._set_search(self.nominal_half_cells)
+            self.health.events.append(
+                (t_s, f"recovery ended: TERCOM search back to +-{self.half_cells} cells"))
 
     def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
         self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)
@@ -738,6 +819,8 @@ class InsTrnNavigator:
             self.health.ok, self.health.status = False, "diverged"
         elif self.aiding is not None and sig_h > 2000.0:
             self.health.ok, self.health.status = False, "degraded"
+        elif self.integrity.degraded:
+            self.health.ok, self.health.status = False, "degraded"
         extra = {
             "accel_bias_b_mps2": self.ins.accel_bias_b.copy(),
             "gyro_bias_z_rps": float(self.ins.gyro_bias_b[2]),
@@ -751,6 +834,7 @@ class InsTrnNavigator:
                 last_fix_quality=f.quality,
                 last_fix_valid=f.valid,
             )
+        extra.update(self._update_extra)
         health = Health(
             ok=self.health.ok,
             status=self.health.status,

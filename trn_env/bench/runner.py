@@ -159,7 +159,7 @@ def run_all(quick: bool = False) -> dict:
     out: dict = {}
     for module in ("trn_env.bench.flight", "terrain.bench", "trn_env.bench.sensors",
                    "trn_env.bench.navigators", "trn_env.bench.campaign", "trn_env.bench.acq_track",
-                   "trn_env.bench.rbpf", "trn_env.bench.filters"):
+                   "trn_env.bench.rbpf", "trn_env.bench.filters", "trn_env.bench.integrity"):
         out.update(_component(module, quick))
     for name, fn in (("closed_loop", closed_loop_benchmark), ("env", env_benchmark)):
         try:

@@ -180,3 +180,41 @@ def render_tracks_rgb(dem, true_track, est_track, goal_rad, cache=None, size_px:
     img = np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
     plt.close(fig)
     return img
+
+
+def plot_integrity(path: Path, arrays: dict[str, np.ndarray], name: str = "dem_integrity",
+                   title: str = "") -> None:
+    """A monitor's test statistic against its threshold over time (as seed 003's Figs 3-4), alarms shaded,
+    and the absolute disparities it sums (coloured by height source: GNSS or the navigator)."""
+    plt = _pyplot()
+    k = f"monitor_{name}_"
+    t = arrays[k + "t_s"]
+    stat, thr, alarm = arrays[k + "statistic"], arrays[k + "threshold"], arrays[k + "alarm"].astype(bool)
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6.5), dpi=110, sharex=True)
+    ax = axes[0]
+    ax.plot(t, stat, color="C0", lw=1.1, label="test statistic T")
+    ax.plot(t, thr, color="C3", lw=1.0, ls="--", label="threshold")
+    if alarm.any():
+        edges = np.flatnonzero(np.diff(np.r_[0, alarm.astype(int), 0]))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            ax.axvspan(t[a], t[b - 1], color="C3", alpha=0.12, zorder=0)
+    ax.set_ylabel("T (eq 4/5)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    ax = axes[1]
+    src = arrays[k + "source"]
+    for code, label, color in ((0, "GNSS height", "C0"), (1, "navigator height", "C1")):
+        m = src == code
+        if m.any():
+            ax.plot(t[m], arrays[k + "disparity_m"][m], ".", ms=2.5, color=color, label=f"disparity, {label}")
+    sig = arrays[k + "sigma_m"]
+    ax.plot(t, sig, color="0.4", lw=0.8, ls=":", label="+-sigma")
+    ax.plot(t, -sig, color="0.4", lw=0.8, ls=":")
+    ax.set_ylabel("absolute disparity p (m)")
+    ax.set_xlabel("time (s); red = integrity alarm")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    fig.suptitle(title or f"{name}: test statistic against its threshold")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -40,9 +40,48 @@ def build_terrain(d: dict, extras: dict, rng: np.random.Generator):
         base = extras.get("map_dem_raw") or _load_dem(mcfg["dem"], bool(mcfg.get("fill_voids", False)))
     err = mcfg.get("error_model")
     the_map = apply_map_errors(base, err, rng) if err else base
+    faults = map_faults(d)
+    extras["map_faults"] = [f.describe() for f in faults]
+    extras["map_fault_schedule"] = []
+    if faults:
+        from terrain.map_error import fault_schedule
+        schedule = fault_schedule(the_map, faults)
+        the_map = the_map.with_heights(schedule[0][1], name=f"{the_map.name}[faults]")   # never the world
+        extras["map_fault_schedule"] = schedule[1:]
+        extras["map_fault_heights0"] = schedule[0][1]
     extras["world_dem"] = world
     extras["map_dem"] = the_map
     return world, the_map
+
+
+def map_faults(d: dict) -> list:
+    """terrain.map_error.MapFault of each [[terrain.map.faults]] entry (source_dem loaded)."""
+    from terrain.map_error import MapFault
+    out = []
+    for f in d["terrain"]["map"].get("faults", []):
+        kw = dict(f)
+        if "source_dem" in kw:
+            kw["source_dem"] = _load_dem(kw["source_dem"], True)
+        out.append(MapFault(**kw))
+    return out
+
+
+def _fault_problems(d: dict, the_map) -> list[str]:
+    from terrain.map_error import MapFault, check_fault
+    problems = []
+    for i, f in enumerate(d["terrain"]["map"].get("faults", [])):
+        try:
+            kw = dict(f)
+            if "source_dem" in kw:
+                kw["source_dem"] = _load_dem(kw["source_dem"], True)
+            fault = MapFault(**kw)
+            check_fault(the_map, fault)
+            if fault.kind in ("shift", "stale"):
+                from terrain.map_error import apply_fault
+                apply_fault(the_map.heights_m.copy(), the_map, fault)
+        except Exception as exc:  # noqa: BLE001 - a loader's or the fault's rejection is a problem here
+            problems.append(f"terrain.map.faults[{i}]: {exc}")
+    return problems
 
 
 def refine_dem(dem, settings: dict, rng: np.random.Generator):
@@ -277,6 +316,51 @@ def navigator_sensor_problems(d: dict, navigator) -> list[str]:
     return problems
 
 
+# -------------------------------------------------------------------------------------------- monitors
+
+def monitor_settings(d: dict, name: str) -> dict:
+    """A monitor's settings: the scenario's [monitors.<name>] table, with the sensor figures it needs
+    filled from the scenario's sensors where not given (dem_integrity: the radar altimeter's noise and
+    lever arm, the GNSS vertical sigma)."""
+    settings = dict(d["monitors"][name])
+    if name == "dem_integrity":
+        from trn_env.sensors import suite
+        ra = d["sensors"].get("radar_altimeter")
+        if ra is not None:
+            cfg = suite._make_config("radar_altimeter", True if ra == {} else dict(ra))
+            settings.setdefault("radar_altimeter_noise_const_m", float(cfg.noise_const_m))
+            settings.setdefault("radar_altimeter_noise_fraction", float(cfg.noise_fraction))
+            settings.setdefault("lever_arm_m", float(cfg.lever_arm_b_m[2]))   # FRD z: below the GNSS antenna
+            settings.setdefault("beam_half_angle_deg", 0.5 * float(cfg.beamwidth_deg))
+            settings.setdefault("max_range_m", float(cfg.max_range_m))
+        gn = d["sensors"].get("gnss")
+        if gn is not None:
+            cfg = suite._make_config("gnss", True if gn == {} else dict(gn))
+            settings.setdefault("gnss_vertical_sigma_m", float(math.hypot(cfg.vertical_noise_m,
+                                                                           cfg.vertical_drift_m)))
+    return settings
+
+
+def build_monitors(d: dict, map_dem) -> dict:
+    """{name: monitor} of the scenario's [monitors.*] tables, each on the navigator's map."""
+    from navigators import registry
+    return {name: registry.create_monitor(name, dem=map_dem, **monitor_settings(d, name))
+            for name in sorted(d.get("monitors", {}))}
+
+
+def _monitor_problems(d: dict, map_dem) -> list[str]:
+    from navigators import registry
+    problems = []
+    for name in sorted(d.get("monitors", {})):
+        if name == "dem_integrity" and "radar_altimeter" not in d["sensors"]:
+            continue                              # reported by the loader's integrity check
+        try:
+            registry.create_monitor(name, dem=map_dem, **monitor_settings(d, name))
+        except (ValueError, TypeError) as exc:
+            problems.append(f"monitors.{name}.{exc}")
+    return problems
+
+
 # ------------------------------------------------------------------------------------ component checks
 
 def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool = False) -> list[str]:
@@ -307,6 +391,10 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
     if refinement and world is not None and not blocked("terrain.world"):
         checks.append(("terrain.world.refinement",
                        lambda: refine_dem(world, refinement, np.random.default_rng(0))))
+    if the_map is not None and d["terrain"]["map"].get("faults") and not blocked("terrain.map"):
+        checks.append(("", lambda: _fault_problems(d, the_map)))
+    if the_map is not None and d.get("monitors") and not blocked("monitors", "sensors"):
+        checks.append(("", lambda: _monitor_problems(d, the_map)))
     if the_map is not None and not blocked("navigator", "terrain"):
         checks.append(("navigator.settings", lambda: build_navigator(d, the_map)))
         if not blocked("sensors"):

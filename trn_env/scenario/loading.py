@@ -282,6 +282,8 @@ def _fill_defaults(data: dict) -> dict:
     d["wind"].setdefault("gusts", [])
     d["terrain"].setdefault("map", {})
     d["terrain"]["map"].setdefault("dem", "world")
+    d["terrain"]["map"].setdefault("faults", [])
+    d.setdefault("monitors", {})
     d["terrain"]["world"].setdefault("fill_voids", False)
     d.setdefault("gnss", {})
     d["gnss"].setdefault("outages", [])
@@ -315,7 +317,7 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
     tolerant = bool(prior)
     problems: list[str] = []
     checks = [_altitude_problems, _gnss_problems, _wind_problems, _rate_problems, _aircraft_problems,
-              _navigator_problems, lambda dd: _terrain_problems(dd, base_dir, extras),
+              _navigator_problems, _integrity_problems, lambda dd: _terrain_problems(dd, base_dir, extras),
               lambda dd: _ceiling_problems(dd, extras)]
     for check in checks:
         try:
@@ -355,6 +357,21 @@ def _gnss_problems(d: dict) -> list[str]:
         if "end_s" in o and o["end_s"] <= o["start_s"]:
             problems.append(f"gnss.outages[{i}].end_s: must be after start_s "
                             f"({o['end_s']} <= {o['start_s']})")
+    return problems
+
+
+def _integrity_problems(d: dict) -> list[str]:
+    """Map faults that appear after the flight's end; monitors without the sensor they need."""
+    problems = []
+    for i, f in enumerate(d["terrain"]["map"]["faults"]):
+        t = f.get("start_s") if isinstance(f, dict) else None
+        if isinstance(t, (int, float)) and t >= d["duration_s"]:
+            problems.append(f"terrain.map.faults[{i}].start_s: {t} s is not before the scenario's end "
+                            f"(duration_s = {d['duration_s']} s)")
+    mons = d["monitors"]
+    if isinstance(mons, dict) and "dem_integrity" in mons and "radar_altimeter" not in d["sensors"]:
+        problems.append("monitors.dem_integrity: needs a radar altimeter (add a [sensors.radar_altimeter] "
+                        "table); seed 003 eq 1 synthesises the terrain height from it")
     return problems
 
 

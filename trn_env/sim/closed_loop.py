@@ -171,6 +171,8 @@ class ClosedLoop:
         self.flight = components.build_flight(d, self.world_dem, self.rngs["flight"])
         sensors = components.build_sensors(d, self.seeds["sensors"])
         navigator = components.build_navigator(d, self.map_dem, self.rngs["navigator"])
+        monitors = components.build_monitors(d, self.map_dem)
+        self.monitor_outputs: dict[str, list] = {name: [] for name in monitors}
         self.commander = commander
         if commander is None:
             guidance = components.build_guidance(d, self.map_dem)
@@ -202,7 +204,7 @@ class ClosedLoop:
         # navigator updates, waiting for a pipelined stage's output, the rest (termination checks, logging,
         # guidance after an update). Pipelined, the sensors and navigator times are the worker's.
         self.stage_s = {"flight": 0.0, "sensors": 0.0, "navigator": 0.0, "guidance": 0.0, "wait": 0.0,
-                        "loop": 0.0}
+                        "loop": 0.0, "monitors": 0.0}
         self._last_targets = None
         self._inflight: tuple[TruthChunk, int] | None = None   # submitted, not yet collected
         self._log_tick(truth0, 0, self.estimate)
@@ -215,7 +217,9 @@ class ClosedLoop:
             self.command_now()
 
         inline = InlineNavStage(sensors, navigator, self.world_dem, self.outages, log_sensors,
-                                self.planner if self._plans is not None else None)
+                                self.planner if self._plans is not None else None, monitors=monitors,
+                                map_dem=self.map_dem,
+                                map_schedule=self._map_schedule(scenario))
         self.pipelined = bool(pipeline and self.latency_updates >= 1 and fork_available())
         self._stage = inline
         if self.pipelined:
@@ -230,6 +234,16 @@ class ClosedLoop:
         self.navigator = None if self.pipelined else navigator
         if self.pipelined:
             self.guidance = None
+
+    def _map_schedule(self, scenario: Scenario) -> list:
+        """The time-dependent map's changes, when the map is the one built for this scenario (its
+        faults-from-start heights restored first: the env reuses the map from episode to episode)."""
+        schedule = scenario.extras.get("map_fault_schedule") or []
+        if not schedule or self.map_dem is not scenario.extras.get("map_dem"):
+            return []
+        from terrain.map_error import set_heights
+        set_heights(self.map_dem, scenario.extras["map_fault_heights0"])
+        return schedule
 
     def close(self) -> None:
         """Stop the pipelined stage's worker process (idempotent; a no-op inline). An ended run has its
@@ -375,6 +389,12 @@ class ClosedLoop:
         self._log_gnss_outages(chunk)
         for t_ev, msg in est.health.events:
             self.log.events.append((t_ev, "navigator", msg))
+        st["monitors"] += out.monitor_s
+        if out.events:
+            self.log.events.extend(out.events)
+        if out.monitors:
+            for name, mo in out.monitors.items():
+                self.monitor_outputs[name].append(mo)
         diverged = self._diverged(chunk, est)
         if final or diverged or tick_no % self.log_every == 0:
             self._log_tick(chunk, len(chunk) - 1, est)
@@ -490,6 +510,14 @@ class ClosedLoop:
         arrays = self.log.arrays(self.world_dem, self.outages)
         summary = summarise(self.scenario, self.termination or "time_limit", arrays, wall_time_s,
                             self.jsbsim_steps, self.estimate)
+        from navigators.integrity.dem_monitor import alarm_summary, concatenate
+        if self.monitor_outputs:
+            summary["monitors"] = {}
+            for name, outs in self.monitor_outputs.items():
+                mon = concatenate(outs)
+                arrays.update({f"monitor_{name}_{k}": v for k, v in mon.items()})
+                summary["monitors"][name] = alarm_summary(mon)
+        summary["map_faults"] = list(self.scenario.extras.get("map_faults", []))
         summary["wall_time_by_stage_s"] = {k: round(v, 4) for k, v in self.stage_s.items()}
         summary["pipelined"] = self.pipelined
         if self.route_miss is not None:
@@ -528,7 +556,7 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
     step = np.hypot(np.diff(a["true_lat_rad"]) * 6.371e6,
                     np.diff(a["true_lon_rad"]) * 6.371e6 * np.cos(a["true_lat_rad"][:-1]))
     within3 = (np.abs(err[:, 0]) <= 3 * sig[:, 0]) & (np.abs(err[:, 1]) <= 3 * sig[:, 1])
-    return {
+    out = {
         "scenario": scenario.name,
         "seed": scenario.seed,
         "navigator": scenario.navigator_name,
@@ -559,6 +587,10 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "scenario_source": scenario.source,
         "duration_limit_s": scenario.duration_s,
     } | navigation_metrics(a, metric_settings)
+    if "nav_status_code" in a:   # status-based integrity figures (trn_env.output.integrity_metrics)
+        from trn_env.output.integrity_metrics import integrity_metrics
+        out.update(integrity_metrics(t, err, a["est_cov_diag"], a["nav_status_code"]))
+    return out
 
 
 def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:

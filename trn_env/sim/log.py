@@ -21,6 +21,10 @@ _TRUTH_ROW = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "v_n", "v_e", "v_d", "roll
               "tas_mps", "alpha_rad", "beta_rad", "wind_n", "wind_e", "wind_d")
 
 
+# nav_status_code in the arrays: the index of the estimate's Health.status here (len: any other word)
+NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost")
+
+
 @dataclass
 class SimLog:
     """In-memory log: per-tick truth rows and estimates, full-rate sensor readings, events.
@@ -44,7 +48,7 @@ class SimLog:
         self.est_rows.append((float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
                               np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
                               float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
-                              bool(est.health.ok)))
+                              bool(est.health.ok), str(est.health.status)))
 
     def add_frames(self, frames: SensorFrames) -> None:
         self.frames.append(frames)
@@ -75,11 +79,14 @@ class SimLog:
             col += width
         h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
         out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
-        cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 10
+        cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 11
         names = ("est_t_s", "est_lat_rad", "est_lon_rad", "est_h_m", "est_v_ned_mps", "est_roll_rad",
-                 "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok")
+                 "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok", "nav_status")
         for name, col in zip(names, cols, strict=True):
             out[name] = np.array(col)
+        status = out.pop("nav_status")
+        out["nav_status_code"] = np.array([NAV_STATUS_CODES.index(x) if x in NAV_STATUS_CODES
+                                           else len(NAV_STATUS_CODES) for x in status], np.int8)
         out["est_cov_diag"] = np.diagonal(out["est_cov"], axis1=1, axis2=2).copy()
         out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
                                        out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])

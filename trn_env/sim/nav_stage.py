@@ -74,6 +74,9 @@ class NavOutput:
     navigator_s: float
     guidance_s: float
     navigator_fixes: int
+    monitors: dict | None = None       # monitor name -> its output for this interval
+    events: list | None = None         # (t_s, source, message) of the stage: monitor alarms, map changes
+    monitor_s: float = 0.0             # wall seconds in the monitors
 
 
 class InlineNavStage:
@@ -84,7 +87,15 @@ class InlineNavStage:
     pipelined = False
 
     def __init__(self, sensors, navigator, world_dem, outages: list[dict], log_sensors: bool,
-                 planner: IntervalPlanner | None = None):
+                 planner: IntervalPlanner | None = None, monitors: dict | None = None, map_dem=None,
+                 map_schedule: list | None = None):
+        """monitors: {name: monitor} run after the navigator on the same frames and its estimate;
+        map_schedule: [(t_from_s, heights)] of a time-dependent navigator's map `map_dem`: the heights are
+        swapped in (terrain.map_error.set_heights) before the first update interval that reaches t_from_s,
+        in this process, so the navigator, the monitors and the route's guidance all meet them."""
+        self.monitors = dict(monitors or {})
+        self.map_dem = map_dem
+        self.map_schedule = list(map_schedule or [])
         self.sensors = sensors
         self.navigator = navigator
         self.planner = planner
@@ -96,10 +107,26 @@ class InlineNavStage:
 
     def process(self, chunk: TruthChunk, plan_steps0: int | None = None) -> NavOutput:
         clock = time.perf_counter
+        events = []
+        while self.map_schedule and self.map_schedule[0][0] <= float(chunk.t_s[-1]):
+            from terrain.map_error import set_heights
+            t_fault, heights = self.map_schedule.pop(0)
+            set_heights(self.map_dem, heights)
+            events.append((float(t_fault), "map",
+                           f"map fault appears in the navigator's map at {t_fault:g} s"))
         t0 = clock()
         frames = gate_gnss(self.sensors.sample(chunk, self.world_dem), self.outages)
         t1 = clock()
         est = self.navigator.update(frames)
+        t2 = clock()
+        mon_out = None
+        if self.monitors:
+            mon_out = {}
+            for name, mon in self.monitors.items():
+                out = mon.update(frames, est)
+                mon_out[name] = out
+                events += [(t_ev, name, msg) for t_ev, msg in out.events]
+        t_mon = clock() - t2
         t2 = clock()
         if self.log_sensors:
             self._frames.append(frames)
@@ -107,7 +134,8 @@ class InlineNavStage:
         finite = math.isfinite(est.lat_rad) and math.isfinite(est.lon_rad) and math.isfinite(est.h_m)
         if self.planner is not None and plan_steps0 is not None and finite:   # (else the run ends on it)
             plan = self.planner.plan(est, plan_steps0)
-        return NavOutput(est, plan, t1 - t0, t2 - t1, clock() - t2, len(getattr(self.navigator, "fixes", ())))
+        return NavOutput(est, plan, t1 - t0, t2 - t1, clock() - t2, len(getattr(self.navigator, "fixes", ())),
+                         mon_out, events, t_mon)
 
     def logged_frames(self) -> list[SensorFrames]:
         """The frames of every update so far not yet handed over, in order (empty unless log_sensors)."""

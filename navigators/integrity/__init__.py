@@ -1,0 +1,9 @@
+"""Integrity monitoring beside and inside the navigators.
+
+dem_monitor          `DemIntegrityMonitor`: the terrain-database integrity monitor of seed 003 (eqs 1-5)
+innovation_monitor   `InnovationMonitor`: sliding-window normalised innovation statistic for any navigator
+"""
+
+from navigators.integrity.dem_monitor import DemIntegrityMonitor, DemMonitorConfig, MonitorOutput
+
+__all__ = ["DemIntegrityMonitor", "DemMonitorConfig", "MonitorOutput"]

@@ -1,0 +1,74 @@
+"""The DEM integrity monitor's cost beside the closed loop it runs in (`trn-env bench`).
+
+The default scenario with a radar altimeter fitted and `[monitors.dem_integrity]` (seed 003's monitor, the
+beam model on: one exact cone query on the map per epoch) flies a warm-up, then a timed stretch, pipelined as
+`trn-env fly` runs it and inline in one process. Figures: the monitor's wall time per navigator update and per
+loop update, and their ratio `integrity_monitor_time_fraction` (target < 0.01), each from the same run.
+"""
+
+from __future__ import annotations
+
+import time
+
+WARM_S = 45.0
+
+
+def _loop_figures(sim_s: float, pipeline: bool, segments: int = 3) -> dict:
+    from trn_env.scenario.loading import read_scenario_file, validate
+    from trn_env.sim.closed_loop import ClosedLoop
+
+    data, _ = read_scenario_file("default")
+    data["sensors"]["radar_altimeter"] = {}
+    data["monitors"] = {"dem_integrity": {}}
+    data["duration_s"] = WARM_S + sim_s + 20.0
+    sc = validate(data, source="bench.integrity")
+    fractions, walls, mons, navs, updates = [], 0.0, 0.0, 0.0, 0
+    with ClosedLoop(sc, log_sensors=False, pipeline=pipeline) as loop:
+        while loop.t_s < WARM_S - 1e-9:
+            loop.tick()
+        loop.sync()
+        for k in range(segments):       # the median segment: a slow spell of the machine spoils one
+            st0 = dict(loop.stage_s)
+            n0 = loop.n_ticks
+            t0 = time.perf_counter()
+            while loop.termination is None and loop.t_s < WARM_S + (k + 1) * sim_s / segments - 1e-9:
+                loop.tick()
+            loop.sync()
+            wall = time.perf_counter() - t0
+            mon = loop.stage_s["monitors"] - st0["monitors"]
+            fractions.append(mon / wall)
+            walls += wall
+            mons += mon
+            navs += loop.stage_s["navigator"] - st0["navigator"]
+            updates += loop.n_ticks - n0
+    return {"loop_ms_per_update": 1e3 * walls / updates, "monitor_ms_per_update": 1e3 * mons / updates,
+            "navigator_ms_per_update": 1e3 * navs / updates,
+            "fraction": float(sorted(fractions)[len(fractions) // 2]),
+            "fractions": [round(f, 5) for f in fractions], "updates": updates, "pipelined": loop.pipelined}
+
+
+def benchmark(quick: bool = False) -> dict:
+    """integrity_monitor_time_fraction: the monitor's time / the closed loop's wall time (pipelined, as
+    `trn-env fly`; the median of three segments), beside the loop's and the navigator's ms per update;
+    the same inline (one process)."""
+    sim_s = 40.0 if quick else 120.0
+    piped = _loop_figures(sim_s, True)
+    inline = _loop_figures(sim_s, False)
+    return {
+        "integrity_monitor_time_fraction": piped["fraction"],
+        "integrity_monitor_time_fraction_by_segment": piped["fractions"],
+        "integrity_monitor_ms_per_update": piped["monitor_ms_per_update"],
+        "integrity_loop_ms_per_update": piped["loop_ms_per_update"],
+        "integrity_navigator_ms_per_update": piped["navigator_ms_per_update"],
+        "integrity_loop_pipelined": piped["pipelined"],
+        "integrity_monitor_time_fraction_inline": inline["fraction"],
+        "integrity_monitor_ms_per_update_inline": inline["monitor_ms_per_update"],
+        "integrity_loop_ms_per_update_inline": inline["loop_ms_per_update"],
+        "integrity_updates_timed": piped["updates"],
+    }
+
+
+if __name__ == "__main__":
+    import json
+
+    print(json.dumps(benchmark(quick=True), indent=1))
