@@ -1,7 +1,7 @@
 """Terrain-information route planner: from the navigator's MAP only, trade flight distance against the
 expected navigation error at the goal.
 
-    planner = TerrainInformationPlanner(map_dem, PlannerConfig(weight=2.0, max_featureless_m=6000.0))
+    planner = TerrainInformationPlanner(map_dem, PlannerConfig(weight=1.0, max_featureless_m=6000.0))
     route = planner.plan(start_lat_rad, start_lon_rad, goal_lat_rad, goal_lon_rad)
     route.waypoints_deg          [(lat_deg, lon_deg, h_agl_m), ...] from the start to the goal
     route.as_route()             a trn_env.guidance.Route (AGL waypoints) for Guidance
@@ -61,7 +61,7 @@ class RouteNotFoundError(ValueError):
 class PlannerConfig:
     """Planner settings (units in the names). See the module docstring for what each does."""
 
-    weight: float = 2.0
+    weight: float = 1.0
     cell_m: float = 500.0
     agl_m: float = 600.0
     max_featureless_m: float | None = None
@@ -207,12 +207,12 @@ def edge_featureless(u, i, j, di, dj):
 
 
 @njit(cache=True)
-def astar_kernel(u, height, blocked, cell_n_m, cell_e_m, moves, weight, n_bins, bin_m, climb_max,
+def astar_kernel(u, height, blocked, cell_n_m, cell_e_m, moves, weight, bounded, n_bins, bin_m, climb_max,
                  si, sj, gi, gj):
     """A* over states (cell, featureless-stretch bin); returns (cost, path as (n, 2) cells; empty if none).
 
-    n_bins = 1: no featureless bound. Else a state's bin is round(stretch / bin_m) and a featureless edge
-    that would take it to n_bins or beyond is not allowed."""
+    bounded False: no featureless bound (n_bins 1). Else a state's bin is round(stretch / bin_m) and a
+    featureless edge that would take it to n_bins or beyond is not allowed."""
     ni, nj = u.shape
     n_states = ni * nj * n_bins
     g = np.full(n_states, np.inf)
@@ -250,7 +250,7 @@ def astar_kernel(u, height, blocked, cell_n_m, cell_e_m, moves, weight, n_bins, 
                 continue
             ue = edge_featureless(u, i, j, di, dj)
             nb = 0
-            if n_bins > 1 and ue > FEATURELESS_EDGE:
+            if bounded and ue > FEATURELESS_EDGE:
                 nb = int(round(b * 1.0 + lengths[m] / bin_m))
                 if nb >= n_bins:
                     continue
@@ -448,7 +448,8 @@ class TerrainInformationPlanner:
             n_bins = int(math.floor(c.max_featureless_m / self._bin_m)) + 1
         climb = -1.0 if c.climb_gradient_max is None else float(c.climb_gradient_max)
         cost, path = astar_kernel(self.grid.featureless, self._height, self.blocked, self.grid.cell_n_m,
-                                  self.grid.cell_e_m, MOVES, float(c.weight), n_bins, self._bin_m, climb,
+                                  self.grid.cell_e_m, MOVES, float(c.weight), c.max_featureless_m is not None, n_bins,
+                                  self._bin_m, climb,
                                   si, sj, gi, gj)
         if len(path) == 0:
             bound = "" if c.max_featureless_m is None else \
