@@ -45,7 +45,8 @@ PRESETS = {
     "mountainous": TerrainPreset(
         rms_height_m=300.0, correlation_length_m=4000.0, hurst=0.7, mean_height_m=1500.0
     ),
-    # rolling hills (rms 60 m) with a flat basin of radius 0.2 x 30 km = 6 km in the middle (relief 0.5 %: 0.3 m rms)
+    # rolling hills (rms 60 m) with a flat basin of radius 0.2 x 30 km = 6 km in the middle
+    # (relief 0.5 %: 0.3 m rms)
     "basin": TerrainPreset(rms_height_m=60.0, correlation_length_m=1500.0, hurst=0.8, mean_height_m=300.0,
                            basin_radius_fraction=0.2),
 }

@@ -47,17 +47,19 @@ def test_sb3_check_env_without_warnings():
 
     e = TerrainNavEnv(**SMALL)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")        # any warning of sb3's checker fails the test
+        warnings.simplefilter("error")  # any warning of sb3's checker fails the test
         check_env(e, warn=True, skip_render_check=True)
     e.close()
 
 
 def test_record_video_writes_frames(tmp_path):
     pytest.importorskip("moviepy", reason="the video extra (moviepy) is not installed")
-    e = gym.wrappers.RecordVideo(gym.make("trn_env/TerrainNav-v0", render_mode="rgb_array",
-                                          **{**SMALL, "max_episode_s": 6.0}),
-                                 video_folder=str(tmp_path), episode_trigger=lambda k: True,
-                                 disable_logger=True)
+    e = gym.wrappers.RecordVideo(
+        gym.make("trn_env/TerrainNav-v0", render_mode="rgb_array", **{**SMALL, "max_episode_s": 6.0}),
+        video_folder=str(tmp_path),
+        episode_trigger=lambda k: True,
+        disable_logger=True,
+    )
     e.reset(seed=0)
     done = False
     while not done:
@@ -73,17 +75,25 @@ def test_ppo_trains_over_a_two_env_subproc_vec_env():
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
-    torch.set_num_threads(1)            # the two env workers have the cores
+    torch.set_num_threads(1)  # the two env workers have the cores
     make = partial(TerrainNavEnv, **{**SMALL, "max_episode_s": 30.0})
-    venv = SubprocVecEnv([make, make], start_method="forkserver")   # workers re-create the env
-    model = PPO("MlpPolicy", venv, n_steps=256, batch_size=256, n_epochs=2, seed=0, device="cpu",
-                policy_kwargs=dict(net_arch=[16]))
+    venv = SubprocVecEnv([make, make], start_method="forkserver")  # workers re-create the env
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=256,
+        batch_size=256,
+        n_epochs=2,
+        seed=0,
+        device="cpu",
+        policy_kwargs=dict(net_arch=[16]),
+    )
     before = torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach().clone()
     model.learn(total_timesteps=1536)
     after = torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach()
     venv.close()
     assert model.num_timesteps == 1536
-    assert model._n_updates == 3 * 2                # 3 rollouts of 2 x 256 steps, 2 epochs each
+    assert model._n_updates == 3 * 2  # 3 rollouts of 2 x 256 steps, 2 epochs each
     assert not torch.allclose(before, after)
 
 
@@ -94,7 +104,7 @@ def test_pickles_and_closes_twice():
     e2 = pickle.loads(pickle.dumps(e))
     e2.reset(seed=4)
     b = [e2.step(np.array([0.3, 0.1], np.float32))[0] for _ in range(2)]
-    assert np.array_equal(a, b)            # the re-created env flies the same episode
+    assert np.array_equal(a, b)  # the re-created env flies the same episode
     for env in (e, e2):
         env.close()
         env.close()
@@ -109,7 +119,7 @@ def _rss_mb() -> float:
 def test_memory_flat_over_resets():
     """300 resets here (1,000 in the README's figure, same check): the RSS after a warm-up stays flat."""
     e = TerrainNavEnv(**SMALL)
-    for k in range(60):                     # warm-up: allocator pools, numba dispatch
+    for k in range(60):  # warm-up: allocator pools, numba dispatch
         e.reset(seed=k)
     rss0 = _rss_mb()
     for k in range(240):
@@ -122,8 +132,13 @@ def test_memory_flat_over_resets():
 
 
 def test_arrival_task_counts_the_true_miss():
-    e = TerrainNavEnv(scenario="basin_route", navigator="ins", decision_interval_s=5.0, max_episode_s=120.0,
-                      goal_radius_m=500.0)
+    e = TerrainNavEnv(
+        scenario="basin_route",
+        navigator="ins",
+        decision_interval_s=5.0,
+        max_episode_s=120.0,
+        goal_radius_m=500.0,
+    )
     pol = StraightLinePolicy(e, agl_m=600.0)
     obs, info0 = e.reset(seed=1, options={"start_deg": NEAR_START, "goal_deg": NEAR_GOAL})
     assert info0["start_deg"] == NEAR_START and info0["goal_deg"] == pytest.approx(NEAR_GOAL)
@@ -148,8 +163,11 @@ def test_arrival_task_counts_the_true_miss():
     # over the episode: the time cost is the flight time, the progress term telescopes on the estimate
     assert totals["time"] == pytest.approx(-e.time_cost_per_s * info["t_s"], rel=1e-9)
     assert totals["progress"] == pytest.approx(
-        e.progress_weight * (info0["estimated_distance_to_goal_m"] - info["estimated_distance_to_goal_m"]) / 1e3,
-        rel=1e-9)
+        e.progress_weight
+        * (info0["estimated_distance_to_goal_m"] - info["estimated_distance_to_goal_m"])
+        / 1e3,
+        rel=1e-9,
+    )
     assert totals["collision"] == totals["failure"] == 0.0
     assert 2_000.0 < info["distance_flown_m"] < 4_500.0
     e.close()
@@ -164,12 +182,15 @@ def test_goal_sampling_avoids_held_out_goals():
         _, info = e.reset(seed=k)
         goals.append(info["goal_deg"])
     g = np.array(goals)
-    assert np.all((g[:, 0] >= region[0]) & (g[:, 0] <= region[1]) & (g[:, 1] >= region[2]) & (g[:, 1] <= region[3]))
+    assert np.all(
+        (g[:, 0] >= region[0]) & (g[:, 0] <= region[1]) & (g[:, 1] >= region[2]) & (g[:, 1] <= region[3])
+    )
     assert len({tuple(x) for x in goals}) == 25
     for lat, lon in goals:
         for hl, ho in e.held_out_goals_deg:
-            dn, de, _ = ned_between(math.radians(lat), math.radians(lon), 0.0, math.radians(hl),
-                                    math.radians(ho), 0.0)[0]
+            dn, de, _ = ned_between(
+                math.radians(lat), math.radians(lon), 0.0, math.radians(hl), math.radians(ho), 0.0
+            )[0]
             assert math.hypot(dn, de) >= 2500.0
     _, info = e.reset(seed=0, options={"goal_deg": e.held_out_goals_deg[2]})
     assert info["goal_deg"] == pytest.approx(e.held_out_goals_deg[2])
@@ -180,23 +201,29 @@ def test_planner_policy_goes_round_the_basin():
     e = TerrainNavEnv(scenario="basin_route", navigator="ins", decision_interval_s=5.0, max_episode_s=60.0)
     straight, planner = StraightLinePolicy(e), PlannerPolicy(e)
     obs, _ = e.reset(seed=0)
-    assert abs(straight(obs)[0]) < 0.05                      # the goal is dead ahead
+    assert abs(straight(obs)[0]) < 0.05  # the goal is dead ahead
     a = planner(obs)
-    assert a[0] < -0.5                                        # turns left, to the basin's west rim
+    assert a[0] < -0.5  # turns left, to the basin's west rim
     assert planner.route.featureless_m < 500.0 and planner.n_plans == 1
     obs, *_ = e.step(a)
     planner(obs)
-    assert planner.n_plans == 2                               # replans at each decision step
+    assert planner.n_plans == 2  # replans at each decision step
     a, _ = planner.predict(np.stack([obs, obs]))
     assert a.shape == (2, 2) and a.dtype == np.float32
     e.close()
 
 
 def test_bad_options_name_the_option():
-    for kw, name in ((dict(max_episode_s="60"), "max_episode_s"), (dict(goal_radius_m=-1.0), "goal_radius_m"),
-                     (dict(reward_mode="fast"), "reward_mode"), (dict(miss_weight=float("nan")), "miss_weight"),
-                     (dict(goal_region_deg=(1, 2)), "goal_region_deg"), (dict(log_sensors=1), "log_sensors"),
-                     (dict(goal_deg=(10.0, 10.0)), "goal_deg"), (dict(navigator=3), "navigator")):
+    for kw, name in (
+        (dict(max_episode_s="60"), "max_episode_s"),
+        (dict(goal_radius_m=-1.0), "goal_radius_m"),
+        (dict(reward_mode="fast"), "reward_mode"),
+        (dict(miss_weight=float("nan")), "miss_weight"),
+        (dict(goal_region_deg=(1, 2)), "goal_region_deg"),
+        (dict(log_sensors=1), "log_sensors"),
+        (dict(goal_deg=(10.0, 10.0)), "goal_deg"),
+        (dict(navigator=3), "navigator"),
+    ):
         with pytest.raises(ValueError, match=name):
             TerrainNavEnv(**{**SMALL, **kw})
     e = TerrainNavEnv(**SMALL)

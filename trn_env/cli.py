@@ -41,7 +41,8 @@ def _parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="print throughput figures as one JSON object")
     bench.add_argument("--quick", action="store_true", help="shorter measurements (less precise)")
     plan = sub.add_parser("plan", help="plan a route from the scenario's start to a goal over the terrain "
-                                       "information of the navigator's map; write its [route] table and a plot")
+                                       "information of the navigator's map; write its [route] table and a "
+                                       "plot")
     plan.add_argument("scenario", help="built-in name or TOML path (its start, map and airspeed are used)")
     plan.add_argument("--goal", nargs=2, type=float, required=True, metavar=("LAT", "LON"),
                       help="goal latitude and longitude, degrees")
@@ -219,7 +220,8 @@ def cmd_plan(args) -> int:
         return 2
     out = args.out
     plot_path = args.plot or out.with_suffix(".png")
-    header = (f"route for scenario {scenario.name!r} from ({d['initial']['lat_deg']}, {d['initial']['lon_deg']}) "
+    header = (f"route for scenario {scenario.name!r} from ({d['initial']['lat_deg']}, "
+              f"{d['initial']['lon_deg']}) "
               f"to ({args.goal[0]}, {args.goal[1]}) deg\n"
               f"trn-env plan {args.scenario} --goal {args.goal[0]} {args.goal[1]} --weight {args.weight:g}"
               + (f" --max-featureless {args.max_featureless:g}" if args.max_featureless else ""))
@@ -231,8 +233,9 @@ def cmd_plan(args) -> int:
     plot_route(plot_path, planner, {f"planned (weight {args.weight:g})": route, "straight": straight},
                title=f"{scenario.name}: route over the map's terrain information")
     print(f"{out}: {len(route.waypoints_deg)} waypoints, {route.length_m / 1000:.2f} km "
-          f"(straight {route.straight_length_m / 1000:.2f} km, +{100 * route.extra_distance_fraction:.1f} %), "
-          f"featureless {route.featureless_m / 1000:.2f} km (straight {straight.featureless_m / 1000:.2f} km), "
+          f"(straight {route.straight_length_m / 1000:.2f} km, "
+          f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "
+          f"(straight {straight.featureless_m / 1000:.2f} km), "
           f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
     return 0
 

@@ -30,6 +30,7 @@ def _bare_jsbsim_sim_s_per_wall_s(n_steps: int) -> float:
     """Simulated seconds per wall second of a bare run() loop of the default scenario's aircraft."""
     import trn_env.scenario.build as components
     from trn_env.scenario.loading import load_scenario
+
     sc = load_scenario("default")
     world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
     fl = components.build_flight(sc.data, world, np.random.default_rng(0))
@@ -43,8 +44,9 @@ def _bare_jsbsim_sim_s_per_wall_s(n_steps: int) -> float:
 def env_figures(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
     from trn_env.env.terrain_nav import TerrainNavEnv
 
-    env = TerrainNavEnv("default", decision_interval_s=decision_interval_s,
-                        max_episode_s=60.0 if quick else 120.0)
+    env = TerrainNavEnv(
+        "default", decision_interval_s=decision_interval_s, max_episode_s=60.0 if quick else 120.0
+    )
     env.action_space.seed(0)
     n_steps = n_steps or (12 if quick else 40)
     ref_steps = 5000 if quick else 20000
@@ -62,20 +64,26 @@ def env_figures(quick: bool = False, n_steps: int | None = None, decision_interv
     env.close()
     ref = max(ref0, _bare_jsbsim_sim_s_per_wall_s(ref_steps))
     fig = sim_s / wall if wall > 0 else math.nan
-    return {"env_sim_seconds_per_wall_second": fig,
-            "env_jsbsim_reference_sim_seconds_per_wall_second": ref,
-            "env_ratio": fig / ref,
-            "env_decision_interval_s": env.decision_interval_s, "env_steps_measured": n_steps,
-            "env_sim_seconds_measured": sim_s}
+    return {
+        "env_sim_seconds_per_wall_second": fig,
+        "env_jsbsim_reference_sim_seconds_per_wall_second": ref,
+        "env_ratio": fig / ref,
+        "env_decision_interval_s": env.decision_interval_s,
+        "env_steps_measured": n_steps,
+        "env_sim_seconds_measured": sim_s,
+    }
 
 
 def subproc_figures(quick: bool = False, n_steps: int | None = None) -> dict:
     from trn_env.env.terrain_nav import TerrainNavEnv
-    make = partial(TerrainNavEnv, scenario="basin_route", decision_interval_s=1.0, max_episode_s=60.0,
-                   navigator="ins")
+
+    make = partial(
+        TerrainNavEnv, scenario="basin_route", decision_interval_s=1.0, max_episode_s=60.0, navigator="ins"
+    )
     n_steps = n_steps or (100 if quick else 400)
     try:
         from stable_baselines3.common.vec_env import SubprocVecEnv
+
         venv = SubprocVecEnv([make, make], start_method="forkserver")
         kind = "stable_baselines3.SubprocVecEnv"
 
@@ -87,6 +95,7 @@ def subproc_figures(quick: bool = False, n_steps: int | None = None) -> dict:
             venv.step(a)
     except ImportError:
         import gymnasium as gym
+
         venv = gym.vector.AsyncVectorEnv([make, make])
         kind = "gymnasium.AsyncVectorEnv"
 
@@ -95,10 +104,11 @@ def subproc_figures(quick: bool = False, n_steps: int | None = None) -> dict:
 
         def step(a):
             venv.step(a)
+
     try:
         reset()
         rng = np.random.default_rng(0)
-        for _ in range(10):                      # warm-up: worker imports and numba caches
+        for _ in range(10):  # warm-up: worker imports and numba caches
             step(rng.uniform(-1, 1, (2, 2)).astype(np.float32))
         ref0 = _bare_jsbsim_sim_s_per_wall_s(5000 if quick else 20000)
         t0 = time.perf_counter()
@@ -109,16 +119,21 @@ def subproc_figures(quick: bool = False, n_steps: int | None = None) -> dict:
         venv.close()
     ref = max(ref0, _bare_jsbsim_sim_s_per_wall_s(5000 if quick else 20000))
     steps_per_s = 2 * n_steps / wall
-    return {"subproc_vec_env_steps_per_s": steps_per_s,
-            "subproc_vec_env_sim_seconds_per_wall_second": steps_per_s * 1.0,
-            "subproc_vec_env_jsbsim_reference_sim_seconds_per_wall_second": ref,
-            "subproc_vec_env_ratio": steps_per_s * 1.0 / ref,
-            "subproc_vec_env_kind": kind, "subproc_vec_env_n_envs": 2, "subproc_vec_env_decision_interval_s": 1.0}
+    return {
+        "subproc_vec_env_steps_per_s": steps_per_s,
+        "subproc_vec_env_sim_seconds_per_wall_second": steps_per_s * 1.0,
+        "subproc_vec_env_jsbsim_reference_sim_seconds_per_wall_second": ref,
+        "subproc_vec_env_ratio": steps_per_s * 1.0 / ref,
+        "subproc_vec_env_kind": kind,
+        "subproc_vec_env_n_envs": 2,
+        "subproc_vec_env_decision_interval_s": 1.0,
+    }
 
 
 def planner_figures(quick: bool = False) -> dict:
     import terrain
     from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner
+
     dem = terrain.load("jacksboro")
     la0, la1, lo0, lo1 = dem.bounds
     s = (la0 + 0.025 * (la1 - la0), lo0 + 0.03 * (lo1 - lo0))
@@ -127,15 +142,19 @@ def planner_figures(quick: bool = False) -> dict:
     t0 = time.perf_counter()
     planner = TerrainInformationPlanner(dem, cfg)
     t_map = time.perf_counter() - t0
-    planner.plan(*s, *g)                         # numba compile / cache load, not timed
+    planner.plan(*s, *g)  # numba compile / cache load, not timed
     times = []
     for _ in range(1 if quick else 5):
         t0 = time.perf_counter()
         r = planner.plan(*s, *g)
         times.append(time.perf_counter() - t0)
-    return {"planner_40km_route_s": float(np.median(times)), "planner_cost_map_s": t_map,
-            "planner_route_straight_km": r.straight_length_m / 1000.0, "planner_route_km": r.length_m / 1000.0,
-            "planner_grid_cells": int(np.prod(planner.grid.shape))}
+    return {
+        "planner_40km_route_s": float(np.median(times)),
+        "planner_cost_map_s": t_map,
+        "planner_route_straight_km": r.straight_length_m / 1000.0,
+        "planner_route_km": r.length_m / 1000.0,
+        "planner_grid_cells": int(np.prod(planner.grid.shape)),
+    }
 
 
 def benchmark(quick: bool = False) -> dict:

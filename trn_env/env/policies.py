@@ -2,7 +2,7 @@
 
     policy = PlannerPolicy(env, PlannerConfig(weight=2.0))
     obs, info = env.reset(seed=0); policy.reset()
-    action = policy(obs)                       # or policy.predict(obs) -> (action, None), as stable-baselines3
+    action = policy(obs)              # or policy.predict(obs) -> (action, None), as stable-baselines3
 
 Both act on the observation only (the estimate's offset from the goal, the commanded track and height
 above ground) plus what the aircraft carries: the goal, the navigator's MAP (`env.map_dem`, never the
@@ -34,7 +34,9 @@ class _Policy:
 
     def __init__(self, env, agl_m: float | None):
         self.env = _unwrapped(env)
-        if agl_m is not None and (not isinstance(agl_m, (int, float)) or not math.isfinite(agl_m) or agl_m <= 0):
+        if agl_m is not None and (
+            not isinstance(agl_m, (int, float)) or not math.isfinite(agl_m) or agl_m <= 0
+        ):
             raise ValueError(f"agl_m must be a finite number > 0 or None, got {agl_m!r}")
         self.agl_m = None if agl_m is None else float(agl_m)
 
@@ -82,8 +84,14 @@ class PlannerPolicy(_Policy):
     of the estimate; the height above ground is the planner's `agl_m`. Falls back to the straight line
     when no route is found from where the estimate is (e.g. near the map's edge)."""
 
-    def __init__(self, env, config: PlannerConfig | None = None, replan_every: int = 1,
-                 lookahead_m: float = 2500.0, planner: TerrainInformationPlanner | None = None):
+    def __init__(
+        self,
+        env,
+        config: PlannerConfig | None = None,
+        replan_every: int = 1,
+        lookahead_m: float = 2500.0,
+        planner: TerrainInformationPlanner | None = None,
+    ):
         e = _unwrapped(env)
         self.config = config if config is not None else PlannerConfig(tas_mps=e.tas_mps)
         super().__init__(env, self.config.agl_m)
@@ -109,7 +117,7 @@ class PlannerPolicy(_Policy):
         try:
             self.route = self.planner.plan(lat, lon, e.goal_lat_rad, e.goal_lon_rad)
             self.n_plans += 1
-        except ValueError:            # off the planning grid / no route from here: fly straight
+        except ValueError:  # off the planning grid / no route from here: fly straight
             self.route = None
 
     def _carrot(self, lat: float, lon: float) -> tuple[float, float] | None:

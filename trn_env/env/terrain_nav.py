@@ -164,9 +164,10 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  start_region_deg: tuple[float, float, float, float] | None = None,
                  held_out_goals_deg=None, held_out_radius_m: float = 2000.0,
                  min_goal_distance_m: float = 5000.0):
-        EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator, goal_deg,
-                          goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
-                          failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m, agl_max_m,
+        EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
+                          goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
+                          failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
+                          agl_max_m,
                           climb_rate_max_mps, turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m,
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m)
@@ -178,13 +179,15 @@ class TerrainNavEnv(gym.Env, EzPickle):
             raise ValueError(f"scenario must be a built-in name, a TOML path or a Scenario, got "
                              f"{type(scenario).__name__}")
         if navigator is not None and not isinstance(navigator, str):
-            raise ValueError(f"navigator must be a registered navigator name (str) or None, got {navigator!r}")
+            raise ValueError(f"navigator must be a registered navigator name (str) or None, "
+                             f"got {navigator!r}")
         for name, v in (("decision_interval_s", decision_interval_s), ("max_episode_s", max_episode_s),
                         ("goal_radius_m", goal_radius_m), ("climb_rate_max_mps", climb_rate_max_mps),
                         ("turn_rate_max_dps", turn_rate_max_dps), ("info_offset_m", info_offset_m),
                         ("info_sigma_m", info_sigma_m), ("info_window_m", info_window_m),
                         ("agl_min_m", agl_min_m), ("agl_max_m", agl_max_m),
-                        ("held_out_radius_m", held_out_radius_m), ("min_goal_distance_m", min_goal_distance_m)):
+                        ("held_out_radius_m", held_out_radius_m),
+                        ("min_goal_distance_m", min_goal_distance_m)):
             _check_number(name, v, positive=True)
         for name, v in (("error_weight", error_weight), ("goal_bonus", goal_bonus),
                         ("collision_penalty", collision_penalty), ("failure_penalty", failure_penalty),
@@ -238,7 +241,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
             held_out_goals_deg = [(la0 + fa * (la1 - la0), lo0 + fo * (lo1 - lo0))
                                   for fa, fo in ((0.25, 0.25), (0.25, 0.75), (0.5, 0.5), (0.75, 0.25),
                                                  (0.75, 0.75))]
-        self.held_out_goals_deg = [self._check_point("held_out_goals_deg", g) for g in (held_out_goals_deg or [])]
+        self.held_out_goals_deg = [self._check_point("held_out_goals_deg", g)
+                                   for g in (held_out_goals_deg or [])]
         wp_last = d["route"]["waypoints"][-1]
         g = goal_deg if goal_deg is not None else (wp_last["lat_deg"], wp_last["lon_deg"])
         g = self._check_point("goal_deg", g)
@@ -275,7 +279,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
         try:
             la0, la1, lo0, lo1 = (float(x) for x in r)
         except (TypeError, ValueError):
-            raise ValueError(f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, got {r!r}") from None
+            raise ValueError(f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, "
+                             f"got {r!r}") from None
         if not (la0 < la1 and lo0 < lo1):
             raise ValueError(f"{name} needs lat_min < lat_max and lon_min < lon_max, got {r!r}")
         for p in ((la0, lo0), (la0, lo1), (la1, lo0), (la1, lo1)):
@@ -503,7 +508,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                      "goal": self.goal_bonus if reason == "goal" else 0.0,
                      "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0}
             return terms
-        terms = {"progress": self.progress_weight * (d_est_before - info["estimated_distance_to_goal_m"]) / 1000.0,
+        d_est = info["estimated_distance_to_goal_m"]
+        terms = {"progress": self.progress_weight * (d_est_before - d_est) / 1000.0,
                  "time": -self.time_cost_per_s * dt_s, "arrival": 0.0, "miss": 0.0,
                  "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0,
                  "failure": -self.failure_penalty if reason in ("off_map", "diverged") else 0.0}
@@ -531,7 +537,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
 
 
 def _check_number(name: str, v, positive: bool) -> None:
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
+    number = isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
+    if not number or not math.isfinite(v):
         raise ValueError(f"{name} must be a finite number, got {v!r} ({type(v).__name__})")
     if positive and v <= 0:
         raise ValueError(f"{name} must be > 0, got {v!r}")

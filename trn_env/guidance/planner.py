@@ -48,9 +48,28 @@ from trn_env.guidance.route_following import Route, Waypoint
 
 G_MPS2 = 9.80665
 # 16-connected moves (di, dj): the 8 neighbours and the 8 knight moves (headings every ~22.5 deg)
-MOVES = np.array([(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1),
-                  (1, 2), (2, 1), (-1, 2), (-2, 1), (1, -2), (2, -1), (-1, -2), (-2, -1)], dtype=np.int64)
-FEATURELESS_EDGE = 0.5         # an edge with u_edge above this is featureless (extends the stretch)
+MOVES = np.array(
+    [
+        (1, 0),
+        (-1, 0),
+        (0, 1),
+        (0, -1),
+        (1, 1),
+        (1, -1),
+        (-1, 1),
+        (-1, -1),
+        (1, 2),
+        (2, 1),
+        (-1, 2),
+        (-2, 1),
+        (1, -2),
+        (2, -1),
+        (-1, -2),
+        (-2, -1),
+    ],
+    dtype=np.int64,
+)
+FEATURELESS_EDGE = 0.5  # an edge with u_edge above this is featureless (extends the stretch)
 
 
 class RouteNotFoundError(ValueError):
@@ -79,10 +98,15 @@ class PlannerConfig:
         def num(name, v, lo, lo_ok=True, none_ok=False):
             if v is None and none_ok:
                 return
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
-                    or not math.isfinite(v) or (v < lo if lo_ok else v <= lo):
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float, np.floating, np.integer))
+                or not math.isfinite(v)
+                or (v < lo if lo_ok else v <= lo)
+            ):
                 rel = ">=" if lo_ok else ">"
                 raise ValueError(f"PlannerConfig.{name} must be a finite number {rel} {lo:g}, got {v!r}")
+
         num("weight", self.weight, 0.0)
         num("cell_m", self.cell_m, 0.0, lo_ok=False)
         num("agl_m", self.agl_m, 0.0, lo_ok=False)
@@ -92,10 +116,14 @@ class PlannerConfig:
         if self.bank_limit_deg > 60.0:
             raise ValueError(f"PlannerConfig.bank_limit_deg must be <= 60, got {self.bank_limit_deg}")
         num("climb_gradient_max", self.climb_gradient_max, 0.0, lo_ok=False, none_ok=True)
-        if isinstance(self.edge_margin_cells, bool) or not isinstance(self.edge_margin_cells, (int, np.integer)) \
-                or self.edge_margin_cells < 0:
-            raise ValueError(f"PlannerConfig.edge_margin_cells must be an integer >= 0, "
-                             f"got {self.edge_margin_cells!r}")
+        if (
+            isinstance(self.edge_margin_cells, bool)
+            or not isinstance(self.edge_margin_cells, (int, np.integer))
+            or self.edge_margin_cells < 0
+        ):
+            raise ValueError(
+                f"PlannerConfig.edge_margin_cells must be an integer >= 0, got {self.edge_margin_cells!r}"
+            )
         num("turn_cost_tolerance", self.turn_cost_tolerance, 0.0)
         num("sigma_m", self.sigma_m, 0.0, lo_ok=False)
         num("window_m", self.window_m, 0.0, lo_ok=False)
@@ -105,7 +133,7 @@ class PlannerConfig:
     @property
     def turn_radius_m(self) -> float:
         """Ground-track turn radius at TAS in calm air, planned at 0.8 of the bank limit (as Guidance)."""
-        return self.tas_mps ** 2 / (G_MPS2 * math.tan(0.8 * math.radians(self.bank_limit_deg)))
+        return self.tas_mps**2 / (G_MPS2 * math.tan(0.8 * math.radians(self.bank_limit_deg)))
 
 
 @dataclass
@@ -118,7 +146,7 @@ class PlannedRoute:
     straight_length_m: float
     featureless_m: float
     longest_featureless_m: float
-    final_featureless_m: float          # featureless distance flown since the last informative sample
+    final_featureless_m: float  # featureless distance flown since the last informative sample
     cost: float
     weight: float
     grid_path: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2), np.int64))
@@ -132,17 +160,23 @@ class PlannedRoute:
 
     def route_table(self, tas_mps: float) -> dict:
         """The scenario file's [route] table (dict) flying this route at tas_mps."""
-        return {"tas_mps": float(tas_mps),
-                "waypoints": [{"lat_deg": la, "lon_deg": lo, "h_agl_m": h} for la, lo, h in self.waypoints_deg]}
+        return {
+            "tas_mps": float(tas_mps),
+            "waypoints": [{"lat_deg": la, "lon_deg": lo, "h_agl_m": h} for la, lo, h in self.waypoints_deg],
+        }
 
     def toml(self, tas_mps: float, header: str = "") -> str:
         """A TOML document with the [route] table (scenario files accept it) and the planner's figures."""
         lines = [f"# {ln}" for ln in header.splitlines()] if header else []
-        lines += [f"# planned by trn_env.guidance.planner: weight {self.weight:g}, length {self.length_m:.0f} m "
-                  f"(straight {self.straight_length_m:.0f} m, +{100 * self.extra_distance_fraction:.1f} %), "
-                  f"featureless {self.featureless_m:.0f} m, longest featureless stretch "
-                  f"{self.longest_featureless_m:.0f} m, final {self.final_featureless_m:.0f} m",
-                  "[route]", f"tas_mps = {float(tas_mps):.1f}", "waypoints = ["]
+        lines += [
+            f"# planned by trn_env.guidance.planner: weight {self.weight:g}, length {self.length_m:.0f} m "
+            f"(straight {self.straight_length_m:.0f} m, +{100 * self.extra_distance_fraction:.1f} %), "
+            f"featureless {self.featureless_m:.0f} m, longest featureless stretch "
+            f"{self.longest_featureless_m:.0f} m, final {self.final_featureless_m:.0f} m",
+            "[route]",
+            f"tas_mps = {float(tas_mps):.1f}",
+            "waypoints = [",
+        ]
         for la, lo, h in self.waypoints_deg:
             lines.append(f"    {{ lat_deg = {la:.6f}, lon_deg = {lo:.6f}, h_agl_m = {h:.1f} }},")
         lines.append("]")
@@ -150,6 +184,7 @@ class PlannedRoute:
 
 
 # ------------------------------------------------------------------------------------------ kernels
+
 
 @njit(cache=True)
 def _heap_push(keys, vals, n, key, val):
@@ -207,8 +242,9 @@ def edge_featureless(u, i, j, di, dj):
 
 
 @njit(cache=True)
-def astar_kernel(u, height, blocked, cell_n_m, cell_e_m, moves, weight, bounded, n_bins, bin_m, climb_max,
-                 si, sj, gi, gj):
+def astar_kernel(
+    u, height, blocked, cell_n_m, cell_e_m, moves, weight, bounded, n_bins, bin_m, climb_max, si, sj, gi, gj
+):
     """A* over states (cell, featureless-stretch bin); returns (cost, path as (n, 2) cells; empty if none).
 
     bounded False: no featureless bound (n_bins 1). Else a state's bin is round(stretch / bin_m) and a
@@ -296,6 +332,7 @@ def _featureless_runs(ds, feat):
 
 # ------------------------------------------------------------------------------------------ planner
 
+
 class TerrainInformationPlanner:
     """Plans routes on one map (the cost map is built once, in the constructor). See the module docstring."""
 
@@ -305,8 +342,9 @@ class TerrainInformationPlanner:
             raise ValueError(f"config must be a PlannerConfig, got {type(self.config).__name__}")
         c = self.config
         self.map_dem = map_dem
-        self.grid: InformationGrid = information_grid(map_dem, c.cell_m, c.sigma_m, c.window_m,
-                                                      c.informative_crlb_m, c.featureless_crlb_m)
+        self.grid: InformationGrid = information_grid(
+            map_dem, c.cell_m, c.sigma_m, c.window_m, c.informative_crlb_m, c.featureless_crlb_m
+        )
         ni, nj = self.grid.shape
         k = c.edge_margin_cells
         self.blocked = np.zeros((ni, nj), np.bool_)
@@ -327,13 +365,17 @@ class TerrainInformationPlanner:
         deg = (math.degrees(lat_rad), math.degrees(lon_rad))
         if not self.map_dem.contains(lat_rad, lon_rad):
             b = np.degrees(self.map_dem.bounds)
-            raise ValueError(f"{name} ({deg[0]:.5f}, {deg[1]:.5f}) deg is off the map {self.map_dem.name!r} "
-                             f"(lat {b[0]:.4f}..{b[1]:.4f}, lon {b[2]:.4f}..{b[3]:.4f} deg)")
+            raise ValueError(
+                f"{name} ({deg[0]:.5f}, {deg[1]:.5f}) deg is off the map {self.map_dem.name!r} "
+                f"(lat {b[0]:.4f}..{b[1]:.4f}, lon {b[2]:.4f}..{b[3]:.4f} deg)"
+            )
         i, j = self.grid.cell_of(lat_rad, lon_rad)
         if not self.grid.contains_cell(i, j) or self.blocked[i, j]:
-            raise ValueError(f"{name} ({deg[0]:.5f}, {deg[1]:.5f}) deg is within "
-                             f"{self.config.edge_margin_cells} planning cells ({self.config.cell_m:g} m) of "
-                             f"the map's edge (or over a void)")
+            raise ValueError(
+                f"{name} ({deg[0]:.5f}, {deg[1]:.5f}) deg is within "
+                f"{self.config.edge_margin_cells} planning cells ({self.config.cell_m:g} m) of "
+                f"the map's edge (or over a void)"
+            )
         return i, j
 
     def _samples(self, lats: np.ndarray, lons: np.ndarray):
@@ -357,9 +399,13 @@ class TerrainInformationPlanner:
         ds, u = self._samples(lats, lons)
         feat = u > FEATURELESS_EDGE
         longest, run = _featureless_runs(ds, feat)
-        return {"length_m": float(ds.sum()), "featureless_m": float(ds[feat].sum()),
-                "longest_featureless_m": float(longest), "final_featureless_m": float(run),
-                "cost": float(np.sum(ds * (1.0 + self.config.weight * u)))}
+        return {
+            "length_m": float(ds.sum()),
+            "featureless_m": float(ds[feat].sum()),
+            "longest_featureless_m": float(longest),
+            "final_featureless_m": float(run),
+            "cost": float(np.sum(ds * (1.0 + self.config.weight * u))),
+        }
 
     def _segment_ok(self, la0, lo0, la1, lo1, budget: float) -> bool:
         """A straight shortcut is allowed: J no larger than `budget`, featureless bound kept, not blocked."""
@@ -386,7 +432,9 @@ class TerrainInformationPlanner:
 
     def _string_pull(self, lats, lons):
         """Greedy shortcuts along the grid path (each keeps J and the bounds, see _segment_ok)."""
-        seg_cost = np.array([self.evaluate(lats[k:k + 2], lons[k:k + 2])["cost"] for k in range(len(lats) - 1)])
+        seg_cost = np.array(
+            [self.evaluate(lats[k : k + 2], lons[k : k + 2])["cost"] for k in range(len(lats) - 1)]
+        )
         cum = np.concatenate([[0.0], np.cumsum(seg_cost)])
         keep = [0]
         a = 0
@@ -396,7 +444,7 @@ class TerrainInformationPlanner:
             for c in range(a + 2, len(lats)):
                 if not self._segment_ok(lats[a], lons[a], lats[c], lons[c], cum[c] - cum[a]):
                     break
-                if bound is not None:       # a stretch may run on across waypoints: judge the whole route
+                if bound is not None:  # a stretch may run on across waypoints: judge the whole route
                     idx = keep + list(range(c, len(lats)))
                     if self.evaluate(lats[idx], lons[idx])["longest_featureless_m"] > bound:
                         break
@@ -417,8 +465,12 @@ class TerrainInformationPlanner:
             for k in range(1, len(lats) - 1):
                 n0, e0 = latlon_to_ned_offset(lats[k - 1], lons[k - 1], 0.0, lats[k], lons[k])
                 n1, e1 = latlon_to_ned_offset(lats[k], lons[k], 0.0, lats[k + 1], lons[k + 1])
-                dchi = abs(math.atan2(math.sin(math.atan2(e1, n1) - math.atan2(e0, n0)),
-                                      math.cos(math.atan2(e1, n1) - math.atan2(e0, n0))))
+                dchi = abs(
+                    math.atan2(
+                        math.sin(math.atan2(e1, n1) - math.atan2(e0, n0)),
+                        math.cos(math.atan2(e1, n1) - math.atan2(e0, n0)),
+                    )
+                )
                 need = R * math.tan(min(dchi, math.radians(170.0)) / 2.0)
                 if need <= 0.5 * min(math.hypot(n0, e0), math.hypot(n1, e1)):
                     continue
@@ -436,8 +488,9 @@ class TerrainInformationPlanner:
         return lats, lons
 
     # ------------------------------------------------------------------------------------ plan
-    def plan(self, start_lat_rad: float, start_lon_rad: float, goal_lat_rad: float,
-             goal_lon_rad: float) -> PlannedRoute:
+    def plan(
+        self, start_lat_rad: float, start_lon_rad: float, goal_lat_rad: float, goal_lon_rad: float
+    ) -> PlannedRoute:
         """The route of least J from the start to the goal (see the module docstring)."""
         c = self.config
         si, sj = self.check_endpoint("start", start_lat_rad, start_lon_rad)
@@ -447,18 +500,36 @@ class TerrainInformationPlanner:
         else:
             n_bins = int(math.floor(c.max_featureless_m / self._bin_m)) + 1
         climb = -1.0 if c.climb_gradient_max is None else float(c.climb_gradient_max)
-        cost, path = astar_kernel(self.grid.featureless, self._height, self.blocked, self.grid.cell_n_m,
-                                  self.grid.cell_e_m, MOVES, float(c.weight), c.max_featureless_m is not None, n_bins,
-                                  self._bin_m, climb,
-                                  si, sj, gi, gj)
+        cost, path = astar_kernel(
+            self.grid.featureless,
+            self._height,
+            self.blocked,
+            self.grid.cell_n_m,
+            self.grid.cell_e_m,
+            MOVES,
+            float(c.weight),
+            c.max_featureless_m is not None,
+            n_bins,
+            self._bin_m,
+            climb,
+            si,
+            sj,
+            gi,
+            gj,
+        )
         if len(path) == 0:
-            bound = "" if c.max_featureless_m is None else \
-                f" with no featureless stretch over {c.max_featureless_m:g} m"
+            bound = (
+                ""
+                if c.max_featureless_m is None
+                else f" with no featureless stretch over {c.max_featureless_m:g} m"
+            )
             climb_s = "" if c.climb_gradient_max is None else f", climb gradient <= {c.climb_gradient_max:g}"
-            raise RouteNotFoundError(f"no route found from ({math.degrees(start_lat_rad):.5f}, "
-                                     f"{math.degrees(start_lon_rad):.5f}) to ({math.degrees(goal_lat_rad):.5f}, "
-                                     f"{math.degrees(goal_lon_rad):.5f}) deg{bound}{climb_s} on the map "
-                                     f"{self.map_dem.name!r}")
+            raise RouteNotFoundError(
+                f"no route found from ({math.degrees(start_lat_rad):.5f}, "
+                f"{math.degrees(start_lon_rad):.5f}) to ({math.degrees(goal_lat_rad):.5f}, "
+                f"{math.degrees(goal_lon_rad):.5f}) deg{bound}{climb_s} on the map "
+                f"{self.map_dem.name!r}"
+            )
         la, lo = self.grid.latlon_of(path[:, 0], path[:, 1])
         la, lo = np.array(la, float), np.array(lo, float)
         la[0], lo[0], la[-1], lo[-1] = start_lat_rad, start_lon_rad, goal_lat_rad, goal_lon_rad
@@ -467,15 +538,26 @@ class TerrainInformationPlanner:
             la, lo = self._thin_turns(la, lo)
         ev = self.evaluate(la, lo)
         dn, de = latlon_to_ned_offset(start_lat_rad, start_lon_rad, 0.0, goal_lat_rad, goal_lon_rad)
-        wps = [(math.degrees(a), math.degrees(b), float(c.agl_m)) for a, b in zip(la, lo)]
-        return PlannedRoute(wps, ev["length_m"], math.hypot(dn, de), ev["featureless_m"],
-                            ev["longest_featureless_m"], ev["final_featureless_m"], ev["cost"], float(c.weight),
-                            grid_path=path)
+        wps = [(math.degrees(a), math.degrees(b), float(c.agl_m)) for a, b in zip(la, lo, strict=False)]
+        return PlannedRoute(
+            wps,
+            ev["length_m"],
+            math.hypot(dn, de),
+            ev["featureless_m"],
+            ev["longest_featureless_m"],
+            ev["final_featureless_m"],
+            ev["cost"],
+            float(c.weight),
+            grid_path=path,
+        )
 
 
-def plot_route(path, planner: TerrainInformationPlanner, routes: dict[str, PlannedRoute], title: str = "") -> None:
+def plot_route(
+    path, planner: TerrainInformationPlanner, routes: dict[str, PlannedRoute], title: str = ""
+) -> None:
     """PNG of routes over the planner's information map (log10 CRLB of the cells; featureless bright)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -485,14 +567,27 @@ def plot_route(path, planner: TerrainInformationPlanner, routes: dict[str, Plann
     lon = np.degrees(g.lon0_rad + np.array([-0.5, nj - 0.5]) * g.dlon_rad)
     fig, ax = plt.subplots(figsize=(7.5, 6.5))
     crlb = np.log10(np.clip(np.where(np.isfinite(g.crlb_m), g.crlb_m, 1e4), 0.1, 1e4))
-    im = ax.imshow(crlb, origin="lower", extent=(lon[0], lon[1], lat[0], lat[1]), cmap="magma_r",
-                   aspect="auto", vmin=0.0, vmax=max(3.0, float(np.nanmax(crlb))))
+    im = ax.imshow(
+        crlb,
+        origin="lower",
+        extent=(lon[0], lon[1], lat[0], lat[1]),
+        cmap="magma_r",
+        aspect="auto",
+        vmin=0.0,
+        vmax=max(3.0, float(np.nanmax(crlb))),
+    )
     fig.colorbar(im, ax=ax, label="log10 position CRLB of the map's terrain (m)")
     colours = ["tab:cyan", "tab:green", "tab:blue", "white"]
     for k, (name, r) in enumerate(routes.items()):
         w = np.array(r.waypoints_deg)
-        ax.plot(w[:, 1], w[:, 0], "-o", ms=3, color=colours[k % len(colours)],
-                label=f"{name}: {r.length_m / 1000:.1f} km, featureless {r.featureless_m / 1000:.1f} km")
+        ax.plot(
+            w[:, 1],
+            w[:, 0],
+            "-o",
+            ms=3,
+            color=colours[k % len(colours)],
+            label=f"{name}: {r.length_m / 1000:.1f} km, featureless {r.featureless_m / 1000:.1f} km",
+        )
     if routes:
         w = np.array(next(iter(routes.values())).waypoints_deg)
         ax.plot(w[0, 1], w[0, 0], "k^", ms=9, label="start")
