@@ -59,6 +59,7 @@ TERRAINS = {
 }
 ENV_COMMON = dict(decision_interval_s=5.0, max_episode_s=480.0, goal_radius_m=500.0)
 POLICIES = ("straight", "planner", "ppo")
+PLANNER = {"weight": 3.0, "informative_crlb_m": 5.0}     # set from the command line (run_episode's tasks)
 
 _cache: dict = {}
 
@@ -113,7 +114,8 @@ def _policy(terrain_key: str, name: str, env, model_path: str | None):
     if name == "straight":
         pol = StraightLinePolicy(env, agl_m=agl)
     elif name == "planner":
-        pol = PlannerPolicy(env, PlannerConfig(weight=1.0, agl_m=agl, tas_mps=env.tas_mps))
+        pol = PlannerPolicy(env, PlannerConfig(weight=PLANNER["weight"], agl_m=agl, tas_mps=env.tas_mps,
+                                               informative_crlb_m=PLANNER["informative_crlb_m"]))
     else:
         import torch
         from stable_baselines3 import PPO
@@ -127,7 +129,8 @@ def _policy(terrain_key: str, name: str, env, model_path: str | None):
 
 def run_episode(task: tuple) -> dict:
     """One evaluation episode (runs in a pool worker; envs and policies cached per process)."""
-    terrain_key, name, goal, seed, model_path = task
+    terrain_key, name, goal, seed, model_path, planner = task
+    PLANNER.update(planner)
     env = _cache.get(terrain_key)
     if env is None:
         env = _cache[terrain_key] = make_env(terrain_key)
@@ -280,44 +283,45 @@ def main(argv=None) -> int:
     )
     p.add_argument("--seeds", type=int, default=4, help="episode seeds per held-out goal (default 4)")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    p.add_argument("--planner-weight", type=float, default=PLANNER["weight"],
+                   help="the planner's weight (extra cost of a featureless metre)")
+    p.add_argument("--planner-informative-crlb", type=float, default=PLANNER["informative_crlb_m"],
+                   help="CRLB (m) at or below which the planner counts terrain as informative")
     p.add_argument("--out", type=Path, default=Path("out/route_bench"))
     a = p.parse_args(argv)
+    PLANNER.update(weight=a.planner_weight, informative_crlb_m=a.planner_informative_crlb)
     if a.train_steps < 0 or a.seeds < 1 or a.workers < 1:
         print("error: --train-steps >= 0, --seeds >= 1, --workers >= 1", file=sys.stderr)
         return 2
     a.out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    models: dict = {}
-    for t in a.terrains:
-        models[t] = str(train(t, a.train_steps, a.out)) if a.train_steps > 0 else None
-    tasks = []
-    for t in a.terrains:
-        goals = make_env(t).held_out_goals_deg
-        for g in goals:
+    rows: list[dict] = []
+    for t in a.terrains:                 # train, evaluate and write one terrain at a time
+        model = str(train(t, a.train_steps, a.out)) if a.train_steps > 0 else None
+        tasks = []
+        for g in make_env(t).held_out_goals_deg:
             for seed in range(1000, 1000 + a.seeds):
                 for name in POLICIES:
-                    if name == "ppo" and models[t] is None:
+                    if name == "ppo" and model is None:
                         continue
-                    tasks.append((t, name, tuple(g), seed, models[t]))
-    print(f"[eval] {len(tasks)} episodes on {a.workers} workers", flush=True)
-    t0 = time.perf_counter()
-    with ProcessPoolExecutor(a.workers, mp_context=get_context("forkserver")) as pool:
-        rows = list(pool.map(run_episode, tasks, chunksize=1))
-    print(f"[eval] {time.perf_counter() - t0:.0f} s", flush=True)
-    summary = summarise(rows)
-    summary["_run"] = {
-        "train_steps": a.train_steps,
-        "seeds_per_goal": a.seeds,
-        "workers": a.workers,
-        "wall_s": time.perf_counter() - t_start,
-        "env": ENV_COMMON,
-        "terrains": {t: TERRAINS[t] for t in a.terrains},
-    }
-    (a.out / "episodes.json").write_text(json.dumps(rows, indent=1))
-    (a.out / "summary.json").write_text(json.dumps(summary, indent=2))
-    tab = table({k: v for k, v in summary.items() if not k.startswith("_")})
-    (a.out / "table.md").write_text(tab)
-    plot(a.out / "route_benchmark.png", rows, {k: v for k, v in summary.items() if not k.startswith("_")})
+                    tasks.append((t, name, tuple(g), seed, model, dict(PLANNER)))
+        print(f"[eval] {t}: {len(tasks)} episodes on {a.workers} workers", flush=True)
+        t0 = time.perf_counter()
+        with ProcessPoolExecutor(a.workers, mp_context=get_context("forkserver")) as pool:
+            rows += list(pool.map(run_episode, tasks, chunksize=1))
+        print(f"[eval] {t}: {time.perf_counter() - t0:.0f} s", flush=True)
+        summary = summarise(rows)
+        summary["_run"] = {"planner": dict(PLANNER), "train_steps": a.train_steps, "seeds_per_goal": a.seeds,
+                           "workers": a.workers,
+                           "wall_s": time.perf_counter() - t_start, "env": ENV_COMMON,
+                           "terrains": {k: TERRAINS[k] for k in a.terrains},
+                           "held_out_goals_deg": {k: make_env(k).held_out_goals_deg for k in a.terrains}}
+        (a.out / "episodes.json").write_text(json.dumps(rows, indent=1))
+        (a.out / "summary.json").write_text(json.dumps(summary, indent=2))
+        per = {k: v for k, v in summary.items() if not k.startswith("_")}
+        tab = table(per)
+        (a.out / "table.md").write_text(tab)
+        plot(a.out / "route_benchmark.png", rows, per)
     print(tab)
     print(f"total {time.perf_counter() - t_start:.0f} s; {a.out}")
     return 0

@@ -46,8 +46,8 @@ def _parser() -> argparse.ArgumentParser:
     plan.add_argument("scenario", help="built-in name or TOML path (its start, map and airspeed are used)")
     plan.add_argument("--goal", nargs=2, type=float, required=True, metavar=("LAT", "LON"),
                       help="goal latitude and longitude, degrees")
-    plan.add_argument("--weight", type=float, default=1.0,
-                      help="extra cost of a featureless metre (0 = shortest route; default 1)")
+    plan.add_argument("--weight", type=float, default=3.0,
+                      help="extra cost of a featureless metre (0 = shortest route; default 3)")
     plan.add_argument("--max-featureless", type=float, default=None, metavar="M",
                       help="no featureless stretch longer than M metres")
     plan.add_argument("--agl", type=float, default=600.0, help="height above ground of the waypoints, m")

@@ -111,7 +111,7 @@ def information_grid(
     cell_m: float = 500.0,
     sigma_m: float = 5.0,
     window_m: float = 2000.0,
-    informative_crlb_m: float = 10.0,
+    informative_crlb_m: float = 5.0,
     featureless_crlb_m: float = 50.0,
 ) -> InformationGrid:
     """The cost map of the module docstring over whole blocks of map posts (about cell_m on a side)."""

@@ -1,7 +1,7 @@
 """Terrain-information route planner: from the navigator's MAP only, trade flight distance against the
 expected navigation error at the goal.
 
-    planner = TerrainInformationPlanner(map_dem, PlannerConfig(weight=1.0, max_featureless_m=6000.0))
+    planner = TerrainInformationPlanner(map_dem, PlannerConfig(weight=3.0, max_featureless_m=6000.0))
     route = planner.plan(start_lat_rad, start_lon_rad, goal_lat_rad, goal_lon_rad)
     route.waypoints_deg          [(lat_deg, lon_deg, h_agl_m), ...] from the start to the goal
     route.as_route()             a trn_env.guidance.Route (AGL waypoints) for Guidance
@@ -80,7 +80,7 @@ class RouteNotFoundError(ValueError):
 class PlannerConfig:
     """Planner settings (units in the names). See the module docstring for what each does."""
 
-    weight: float = 1.0
+    weight: float = 3.0
     cell_m: float = 500.0
     agl_m: float = 600.0
     max_featureless_m: float | None = None
@@ -91,7 +91,7 @@ class PlannerConfig:
     turn_cost_tolerance: float = 0.02
     sigma_m: float = 5.0
     window_m: float = 2000.0
-    informative_crlb_m: float = 10.0
+    informative_crlb_m: float = 5.0
     featureless_crlb_m: float = 50.0
 
     def __post_init__(self):
