@@ -444,7 +444,10 @@ class TerrainInformationPlanner:
             for c in range(a + 2, len(lats)):
                 if not self._segment_ok(lats[a], lons[a], lats[c], lons[c], cum[c] - cum[a]):
                     break
-                if bound is not None:  # a stretch may run on across waypoints: judge the whole route
+                # a featureless stretch may run on across waypoints: judge the whole route (a shortcut with
+                # no featureless sample only breaks stretches, so it cannot lengthen one)
+                seg = self.evaluate(lats[[a, c]], lons[[a, c]]) if bound is not None else None
+                if seg is not None and seg["featureless_m"] > 0.0:
                     idx = keep + list(range(c, len(lats)))
                     if self.evaluate(lats[idx], lons[idx])["longest_featureless_m"] > bound:
                         break
