@@ -117,18 +117,19 @@ def _rss_mb() -> float:
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/statm"), reason="needs /proc (Linux) to read the RSS")
 def test_memory_flat_over_resets():
-    """300 resets here (1,000 in the README's figure, same check): the RSS after a warm-up stays flat."""
+    """200 resets here (1,000 for the README's figure, the same check): the RSS after a warm-up stays flat
+    (keeping every reset's flight alive, ~0.4 MB each as measured, would show as ~64 MB)."""
     e = TerrainNavEnv(**SMALL)
-    for k in range(60):  # warm-up: allocator pools, numba dispatch
+    for k in range(40):  # warm-up: allocator pools, numba dispatch
         e.reset(seed=k)
     rss0 = _rss_mb()
-    for k in range(240):
+    for k in range(160):
         e.reset(seed=k)
         if k % 40 == 0:
             e.step(np.zeros(2, np.float32))
     growth = _rss_mb() - rss0
     e.close()
-    assert growth < 15.0, f"RSS grew {growth:.1f} MB over 240 resets"
+    assert growth < 10.0, f"RSS grew {growth:.1f} MB over 160 resets"
 
 
 def test_arrival_task_counts_the_true_miss():
