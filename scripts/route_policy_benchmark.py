@@ -226,7 +226,7 @@ def table(summary: dict) -> str:
         red = per.get("planner_vs_straight_mean_error_reduction")
         if red is not None:
             lines.append(
-                f"| {terrain_key} | planner vs straight | | | {100 * red:+.0f} % less mean error | | | | |"
+                f"| {terrain_key} | planner vs straight | | | {100 * red:.0f} % less mean error | | | | |"
             )
     return "\n".join(lines) + "\n"
 
