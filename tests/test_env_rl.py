@@ -56,7 +56,7 @@ def test_record_video_writes_frames(tmp_path):
     pytest.importorskip("moviepy", reason="the video extra (moviepy) is not installed")
     e = gym.wrappers.RecordVideo(
         gym.make("trn_env/TerrainNav-v0", render_mode="rgb_array", **{**SMALL, "max_episode_s": 6.0}),
-        video_folder=str(tmp_path),
+        video_folder=str(tmp_path / "videos"),
         episode_trigger=lambda k: True,
         disable_logger=True,
     )
@@ -66,7 +66,7 @@ def test_record_video_writes_frames(tmp_path):
         _, _, term, trunc, _ = e.step(np.array([1.0, 0.0], np.float32))
         done = term or trunc
     e.close()
-    videos = list(tmp_path.glob("*.mp4"))
+    videos = list((tmp_path / "videos").glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 1000
 
 
