@@ -8,6 +8,12 @@ so it is smooth-random below the correlation length L and fractal (Hurst exponen
 3 - H, radial PSD slope -2(H + 1) at k >> 1/L) above it; heights are scaled to the requested RMS. White
 Gaussian noise from a seeded numpy Generator is shaped in the Fourier domain (the result is periodic over
 the grid).
+
+A preset with `basin_radius_fraction > 0` ("basin") has a flat basin: the relief is multiplied by a taper
+that is `basin_relief_fraction` inside a disc around the grid's centre (radius = that fraction of the
+smaller grid side) and rises to 1 over `basin_edge_fraction` of the side outside it, so a route from the
+south edge to the north edge crosses a featureless stretch (a terrain-referenced navigator drifts there)
+unless it goes round the basin over rough terrain (the route planner's test terrain).
 """
 
 from __future__ import annotations
@@ -28,6 +34,9 @@ class TerrainPreset:
     correlation_length_m: float
     hurst: float
     mean_height_m: float
+    basin_radius_fraction: float = 0.0
+    basin_edge_fraction: float = 0.05
+    basin_relief_fraction: float = 0.005
 
 
 PRESETS = {
@@ -36,7 +45,24 @@ PRESETS = {
     "mountainous": TerrainPreset(
         rms_height_m=300.0, correlation_length_m=4000.0, hurst=0.7, mean_height_m=1500.0
     ),
+    # rolling hills (rms 60 m) with a flat basin of radius 0.2 x 30 km = 6 km in the middle
+    # (relief 0.5 %: 0.3 m rms)
+    "basin": TerrainPreset(rms_height_m=60.0, correlation_length_m=1500.0, hurst=0.8, mean_height_m=300.0,
+                           basin_radius_fraction=0.2),
 }
+
+
+def basin_taper(shape, radius_fraction: float, edge_fraction: float, relief_fraction: float) -> np.ndarray:
+    """Relief multiplier (shape) of a flat basin around the grid centre (see the module docstring):
+    relief_fraction inside the disc, a raised-cosine rise to 1 over edge_fraction of the smaller side."""
+    n_y, n_x = shape
+    side = min(n_y, n_x)
+    y = np.arange(n_y)[:, None] - 0.5 * (n_y - 1)
+    x = np.arange(n_x)[None, :] - 0.5 * (n_x - 1)
+    r = np.hypot(y, x) / side
+    t = np.clip((r - radius_fraction) / max(edge_fraction, 1e-9), 0.0, 1.0)
+    rise = 0.5 - 0.5 * np.cos(np.pi * t)
+    return relief_fraction + (1.0 - relief_fraction) * rise
 
 
 def psd_field(
@@ -99,12 +125,13 @@ def from_preset(
     spacing_m: float = 90.0,
     **grid,
 ) -> Dem:
-    """Synthetic DEM from a named preset ('flat', 'rolling', 'mountainous'); 30 x 30 km at 90 m by default."""
+    """Synthetic DEM from a named preset ('flat', 'rolling', 'mountainous', 'basin'); 30 x 30 km at 90 m by
+    default."""
     key = preset.strip().lower()
     if key not in PRESETS:
         raise ValueError(f"unknown synthetic terrain preset {preset!r}; choose from {sorted(PRESETS)}")
     p = PRESETS[key]
-    return generate(
+    dem = generate(
         n_lat,
         n_lon,
         spacing_m,
@@ -116,3 +143,8 @@ def from_preset(
         name=f"synthetic:{key}",
         **grid,
     )
+    if p.basin_radius_fraction <= 0.0:
+        return dem
+    taper = basin_taper(dem.heights_m.shape, p.basin_radius_fraction, p.basin_edge_fraction,
+                        p.basin_relief_fraction)
+    return dem.with_heights(p.mean_height_m + (dem.heights_m - p.mean_height_m) * taper, name=dem.name)

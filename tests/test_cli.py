@@ -179,7 +179,8 @@ def test_bench_closed_loop_and_env_figures():
     assert min(segments) - 1e-3 <= overall <= max(segments) + 1e-3     # per-segment ratios of the same run
     assert cl["closed_loop_sim_seconds"] == pytest.approx(3.0)
     assert cl["closed_loop_pipelined"] is fork_available() and cl["closed_loop_ratio_inline"] > 0
-    env = bench.env_benchmark(n_steps=3, decision_interval_s=1.0)
+    from trn_env.bench import env as env_bench
+    env = env_bench.env_figures(n_steps=3, decision_interval_s=1.0)
     assert env["env_sim_seconds_measured"] == pytest.approx(3.0)
     assert env["env_sim_seconds_per_wall_second"] > 0
 
@@ -201,7 +202,9 @@ def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsy
     monkeypatch.setitem(sys.modules, "trn_env.bench.sensors", types.ModuleType("fake_none"))
     monkeypatch.setitem(sys.modules, "trn_env.bench.rbpf", good)   # its real flights cost ~20 s
     monkeypatch.setattr(bench, "closed_loop_benchmark", lambda quick: {"closed_loop_ratio": 0.25})
-    monkeypatch.setattr(bench, "env_benchmark", lambda quick: {"env_sim_seconds_per_wall_second": 9.0})
+    env_mod = types.ModuleType("fake_env")
+    env_mod.benchmark = lambda quick=False: {"env_sim_seconds_per_wall_second": 9.0}
+    monkeypatch.setitem(sys.modules, "trn_env.bench.env", env_mod)
     assert cli.main(["bench", "--quick"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["jsbsim_steps_per_s"] == 1.0 and out["quick_seen"] is True

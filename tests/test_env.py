@@ -105,7 +105,8 @@ def test_step_before_reset_and_after_end_raise():
     e.close()
 
 
-def test_observation_and_reward_match_independent_computation(env):
+def test_observation_and_reward_match_independent_computation():
+    env = TerrainNavEnv("default", reward_mode="progress", **SMALL)     # the v0 reward, kept as an option
     obs0, info0 = env.reset(seed=5)
     est = env._loop.estimate
     goal = ned_vector_between(est.lat_rad, est.lon_rad, est.h_m, env.goal_lat_rad, env.goal_lon_rad,
@@ -129,6 +130,8 @@ def test_observation_and_reward_match_independent_computation(env):
     assert info1["true_horizontal_error_m"] == pytest.approx(math.hypot(e_true[0], e_true[1]), abs=0.05)
     assert info1["termination"] is None and not term and not trunc
     assert info1["t_s"] == pytest.approx(1.0)
+    assert sum(info1["reward_terms"].values()) == pytest.approx(r, rel=1e-12)
+    env.close()
 
 
 def test_collision_penalty_and_termination():

@@ -61,6 +61,8 @@ def _stage(module: str) -> str | None:
     parts = module.split(".")
     if parts[0] != "trn_env" or len(parts) < 2:
         return None
+    if parts[1] == "policies":          # trn_env/policies.py re-exports the env stage's policies
+        return "env"
     return parts[1] if parts[1] in STAGE_RANK else None
 
 

@@ -7,6 +7,7 @@
     trn-env campaign FILE [--out DIR] [--workers N] [--backend local|ray] [--address ADDR] [--resume]
                      [--check BASELINE.json] [--write-baseline BASELINE.json]
     trn-env report DIR [--out DIR]
+    trn-env plan SCENARIO --goal LAT LON [--weight W] [--max-featureless M] [--agl M] --out route.toml
 
 Exit status: 0 success, 1 regression gate failed (`campaign --check`), 2 invalid input (every problem
 printed, nothing written), 130 interrupted (Ctrl-C at any point: a one-line message, no traceback).
@@ -62,6 +63,21 @@ def _parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="summary table and plots of a campaign folder (PNGs + report.html)")
     rep.add_argument("dir", type=Path, help="campaign output folder")
     rep.add_argument("--out", type=Path, default=None, help="report folder (default DIR/report)")
+    plan = sub.add_parser("plan", help="plan a route from the scenario's start to a goal over the terrain "
+                                       "information of the navigator's map; write its [route] table and a "
+                                       "plot")
+    plan.add_argument("scenario", help="built-in name or TOML path (its start, map and airspeed are used)")
+    plan.add_argument("--goal", nargs=2, type=float, required=True, metavar=("LAT", "LON"),
+                      help="goal latitude and longitude, degrees")
+    plan.add_argument("--weight", type=float, default=3.0,
+                      help="extra cost of a featureless metre (0 = shortest route; default 3)")
+    plan.add_argument("--max-featureless", type=float, default=None, metavar="M",
+                      help="no featureless stretch longer than M metres")
+    plan.add_argument("--agl", type=float, default=600.0, help="height above ground of the waypoints, m")
+    plan.add_argument("--cell", type=float, default=500.0, help="planning cell size, m")
+    plan.add_argument("--out", type=Path, required=True, help="route TOML to write")
+    plan.add_argument("--plot", type=Path, default=None,
+                      help="PNG of the route over the information map (default: OUT with .png)")
     return p
 
 
@@ -353,6 +369,60 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_plan(args) -> int:
+    import math
+    import os
+
+    from trn_env.scenario.loading import ScenarioError, load_scenario
+    try:
+        scenario = load_scenario(args.scenario)
+    except ScenarioError as err:
+        _print_problems(err)
+        return 2
+    import trn_env.scenario.build as components
+    from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner, plot_route
+    from trn_env.sim.closed_loop import spawn_rngs
+    d = scenario.data
+    try:
+        if not all(math.isfinite(v) for v in args.goal):
+            raise ValueError(f"--goal must be finite latitude and longitude, got {args.goal}")
+        config = PlannerConfig(weight=args.weight, max_featureless_m=args.max_featureless, agl_m=args.agl,
+                               cell_m=args.cell, tas_mps=float(d["route"]["tas_mps"]))
+        _, the_map = components.build_terrain(d, scenario.extras, spawn_rngs(scenario.seed)["map"])
+        planner = TerrainInformationPlanner(the_map, config)
+        s_lat, s_lon = math.radians(d["initial"]["lat_deg"]), math.radians(d["initial"]["lon_deg"])
+        g_lat, g_lon = math.radians(args.goal[0]), math.radians(args.goal[1])
+        route = planner.plan(s_lat, s_lon, g_lat, g_lon)
+        straight = TerrainInformationPlanner(the_map, PlannerConfig(weight=0.0, cell_m=args.cell,
+                                                                   agl_m=args.agl)).plan(s_lat, s_lon, g_lat,
+                                                                                         g_lon)
+    except ValueError as err:
+        msg = str(err).replace("PlannerConfig.weight", "--weight").replace(
+            "PlannerConfig.max_featureless_m", "--max-featureless").replace("PlannerConfig.agl_m", "--agl")
+        print(f"error: {msg}", file=sys.stderr)
+        return 2
+    out = args.out
+    plot_path = args.plot or out.with_suffix(".png")
+    header = (f"route for scenario {scenario.name!r} from ({d['initial']['lat_deg']}, "
+              f"{d['initial']['lon_deg']}) "
+              f"to ({args.goal[0]}, {args.goal[1]}) deg\n"
+              f"trn-env plan {args.scenario} --goal {args.goal[0]} {args.goal[1]} --weight {args.weight:g}"
+              + (f" --max-featureless {args.max_featureless:g}" if args.max_featureless else ""))
+    text = route.toml(float(d["route"]["tas_mps"]), header=header)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, out)                          # never a partial or empty file
+    plot_route(plot_path, planner, {f"planned (weight {args.weight:g})": route, "straight": straight},
+               title=f"{scenario.name}: route over the map's terrain information")
+    print(f"{out}: {len(route.waypoints_deg)} waypoints, {route.length_m / 1000:.2f} km "
+          f"(straight {route.straight_length_m / 1000:.2f} km, "
+          f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "
+          f"(straight {straight.featureless_m / 1000:.2f} km), "
+          f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
@@ -368,6 +438,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_campaign(args)
         if args.command == "report":
             return cmd_report(args)
+        if args.command == "plan":
+            return cmd_plan(args)
         return 2
     except KeyboardInterrupt:       # during the imports, the scenario's loading, a benchmark
         print("interrupted: nothing written", file=sys.stderr)

@@ -1,7 +1,8 @@
 """`trn-env bench`: throughput figures from one run, each beside its reference measured in the same run.
 
 Collects the component benchmarks (trn_env.bench.flight, terrain.bench, trn_env.bench.sensors,
-trn_env.bench.navigators: each a `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
+trn_env.bench.navigators, trn_env.bench.env - the env, a 2-env SubprocVecEnv and the route planner: each a
+`benchmark(...) -> dict`) and adds the closed-loop figures measured here:
 
 - closed_loop_steps_per_s: JSBSim steps per wall second of the full default-scenario loop (flight,
   sensors, navigator, guidance, termination checks, logging);
@@ -14,8 +15,6 @@ trn_env.bench.navigators: each a `benchmark(...) -> dict`) and adds the closed-l
   the rest of the loop: termination checks, logging, guidance after the update), beside
   closed_loop_ms_per_tick and the bare JSBSim time for the same steps (closed_loop_bare_jsbsim_ms_per_tick).
   Everything runs single-threaded.
-- env_sim_seconds_per_wall_second: simulated seconds per wall second of the gymnasium env (default
-  scenario, random actions, resets included).
 """
 
 from __future__ import annotations
@@ -129,39 +128,15 @@ def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeli
         }
 
 
-def env_benchmark(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
-    """Simulated seconds per wall second of TerrainNav-v0 (default scenario) under random actions, resets
-    included."""
-    from trn_env.env.terrain_nav import TerrainNavEnv
-
-    env = TerrainNavEnv("default", decision_interval_s=decision_interval_s,
-                        max_episode_s=60.0 if quick else 120.0)
-    env.action_space.seed(0)
-    n_steps = n_steps or (12 if quick else 40)
-    t0 = time.perf_counter()
-    env.reset(seed=0)
-    sim_s = 0.0
-    for _ in range(n_steps):
-        t_before = env._loop.t_s
-        _, _, term, trunc, _ = env.step(env.action_space.sample())
-        sim_s += env._loop.t_s - t_before
-        if term or trunc:
-            env.reset()
-    wall = time.perf_counter() - t0
-    env.close()
-    return {"env_sim_seconds_per_wall_second": sim_s / wall if wall > 0 else math.nan,
-            "env_decision_interval_s": env.decision_interval_s, "env_steps_measured": n_steps,
-            "env_sim_seconds_measured": sim_s}
-
-
 def run_all(quick: bool = False) -> dict:
     """Every figure, as one flat dict (the JSON `trn-env bench` prints)."""
     out: dict = {}
     for module in ("trn_env.bench.flight", "terrain.bench", "trn_env.bench.sensors",
                    "trn_env.bench.navigators", "trn_env.bench.campaign", "trn_env.bench.acq_track",
-                   "trn_env.bench.rbpf", "trn_env.bench.filters", "trn_env.bench.integrity"):
+                   "trn_env.bench.rbpf", "trn_env.bench.filters", "trn_env.bench.integrity",
+                   "trn_env.bench.env"):
         out.update(_component(module, quick))
-    for name, fn in (("closed_loop", closed_loop_benchmark), ("env", env_benchmark)):
+    for name, fn in (("closed_loop", closed_loop_benchmark),):
         try:
             out.update(fn(quick))
         except Exception as exc:  # noqa: BLE001

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any
 
@@ -9,6 +10,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
+from gymnasium.utils import EzPickle
+from gymnasium.vector import AutoresetMode
 
 import trn_env.scenario.build as components
 from terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
@@ -17,18 +20,27 @@ from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
 
 G0_MPS2 = 9.80665
 N_TERRAIN_FEATURES = 6
+REWARD_MODES = ("arrival", "progress")
+
+# Observation bounds per element (the clip applied to every observation), see the class docstring's table.
+OBS_LOW = np.array([-300.0, -300.0, 0.0, -1.0, -1.0, 0.0, -10.0, 0.0, 0.0, 0.0, 0.0,
+                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
+OBS_HIGH = np.array([300.0, 300.0, 450.0, 1.0, 1.0, 5.0, 20.0, 10.0, 8.0, 8.0, 8.0,
+                     4.1, 4.1, 4.1, 4.1, 4.1, 4.1, 1.0, 1.0], np.float32)
 
 
-class TerrainNavEnv(gym.Env):
+class TerrainNavEnv(gym.Env, EzPickle):
     """Fly to a goal over real terrain while a terrain-referenced navigator keeps the position estimate.
 
     ## Description
     The aircraft (JSBSim King Air) starts at the scenario's initial state with GNSS lost (per the
-    scenario) and must reach a goal; guidance flies the agent's heading and height-above-ground
-    commands on the navigator's *estimate*, so a route over featureless terrain lets the navigation
-    error grow while a route over rough terrain keeps it small. Every `step` flies `decision_interval_s`
-    seconds of the full closed loop (flight 100 Hz, sensors, navigator updates at the scenario's
-    `navigator.rate_hz`, 1 Hz by default, guidance targets at 10 Hz), rounded to whole navigator updates.
+    scenario) and must reach a goal; guidance flies the agent's track and height-above-ground commands on
+    the navigator's *estimate* (the height-above-ground hold flies on the estimate and the map), so a route
+    over featureless terrain lets the navigation error grow while a route over rough terrain keeps it
+    small, and flying low over rough terrain helps the TRN but risks the terrain when the estimate is
+    wrong. Every `step` flies `decision_interval_s` seconds of the full closed loop (flight 100 Hz,
+    sensors, navigator updates at the scenario's `navigator.rate_hz`, 1 Hz by default, guidance targets
+    at 10 Hz), rounded to whole navigator updates. Any registered navigator name works (`navigator=`).
 
     ## Action Space
     `Box(-1, 1, shape=(2,), dtype=float32)`, each a fraction of what the aircraft can do in one step:
@@ -41,25 +53,25 @@ class TerrainNavEnv(gym.Env):
     The limits are the aircraft's: `dpsi_max = min(turn_rate_max_dps * decision_interval_s, 60 deg)` (the
     rate-one turn, 3 deg/s, by default) and `dagl_max = climb_rate_max_mps * decision_interval_s`
     (`env.action_limits` holds both). The commanded height above ground is kept in
-    `[agl_min_m, agl_max_m]`. An action outside the space (or not finite) raises `ValueError` naming the
-    bound it breaks.
+    `[agl_min_m, agl_max_m]`. An action of the wrong shape, not finite, or outside the space raises
+    `ValueError` naming what it breaks.
 
     ## Observation Space
-    `Box(float32)` of shape `(19,)`, everything from what the aircraft knows (the navigator's estimate
-    and its map), never truth:
+    `Box(OBS_LOW, OBS_HIGH, dtype=float32)` of shape `(19,)` (every observation is clipped to it),
+    everything from what the aircraft knows (the navigator's estimate and its map), never truth:
 
-    | index | observation | unit |
-    |-------|-------------|------|
-    | 0, 1 | goal minus estimated position, north and east | km |
-    | 2 | estimated distance to the goal | km |
-    | 3, 4 | sin and cos of the commanded ground track | - |
-    | 5 | estimated ground speed / 100 | (100 m/s) |
-    | 6 | estimated height above the map terrain | km |
-    | 7 | commanded height above ground | km |
-    | 8, 9, 10 | log10(1 + sigma) of the estimate, north, east, down (sigma in m) | - |
-    | 11-16 | terrain information of the map around the estimate (below) | - |
-    | 17 | fraction of the episode time used | - |
-    | 18 | navigator health ok (1) or not (0) | - |
+    | index | observation | unit | min | max |
+    |-------|-------------|------|-----|-----|
+    | 0, 1 | goal minus estimated position, north and east | km | -300 | 300 |
+    | 2 | estimated distance to the goal | km | 0 | 450 |
+    | 3, 4 | sin and cos of the commanded ground track | - | -1 | 1 |
+    | 5 | estimated ground speed / 100 | (100 m/s) | 0 | 5 |
+    | 6 | estimated height above the map terrain | km | -10 | 20 |
+    | 7 | commanded height above ground | km | 0 | 10 |
+    | 8, 9, 10 | log10(1 + sigma) of the estimate, north, east, down (sigma in m) | - | 0 | 8 |
+    | 11-16 | terrain information of the map around the estimate (below) | - | 0 | 4.1 |
+    | 17 | fraction of the episode time used | - | 0 | 1 |
+    | 18 | navigator health ok (1) or not (0) | - | 0 | 1 |
 
     Terrain information (11-16) is log10(1 + CRLB) of the horizontal position a TRN could reach from the
     navigator's MAP (`terrain.metrics.terrain_information`: Fisher information of altimeter heights with
@@ -68,55 +80,124 @@ class TerrainNavEnv(gym.Env):
     right of the commanded track: low values mark where a route would let the TRN fix well.
 
     ## Rewards
-    Each step: `progress_km - error_weight * true_horizontal_error_km`, where progress is the decrease
-    of the TRUE distance to the goal; `+ goal_bonus` on reaching the goal, `- collision_penalty` on
-    terrain collision.
+    `reward_mode="arrival"` (default; the task of a GNSS-denied aircraft). Each step:
+    `progress_weight * (decrease of the ESTIMATED distance to the goal, km) - time_cost_per_s * dt`
+    (the progress term is a potential on the aircraft's own estimate: over an episode that arrives it adds
+    up to the same amount for every route, so it guides learning without favouring a route; the time
+    term is the fuel/time cost). On arrival: `+ goal_bonus - miss_weight * true_miss_km`. The true miss is
+    where the aircraft ends up when it flies the last `goal_radius_m` on its estimate: the true position
+    plus (goal - estimated position), whose distance from the goal is the TRUE horizontal navigation error
+    at arrival. `- collision_penalty` on terrain collision, `- failure_penalty` off the map, when the
+    navigator diverged or when an engine stopped.
+
+    `reward_mode="progress"` (the v0 reward before arrival mode; kept for comparison): each step
+    `progress_km - error_weight * true_horizontal_error_km`, progress the decrease of the TRUE distance to
+    the goal; `+ goal_bonus` when the TRUE position reaches the goal, `- collision_penalty` on collision.
+
+    The terms reach `info["reward_terms"]` (a dict whose values add up to the reward).
 
     ## Starting State
-    The scenario's initial state; the navigator starts from the truth plus the scenario's initial errors
-    (seed 000 Table 2), drawn from the episode seed. The commanded track starts at the bearing to the goal
-    and the commanded height above ground at the scenario's.
+    The scenario's initial state, or a start drawn per episode uniformly (in latitude and longitude) from
+    `start_region_deg`; the navigator starts from the truth plus the scenario's initial errors (seed 000
+    Table 2), drawn from the episode seed. The goal: `goal_deg`, or drawn per episode from
+    `goal_region_deg` at least `min_goal_distance_m` from the start and outside `held_out_radius_m` of every
+    held-out goal. `reset(options={"goal_deg": (lat, lon), "start_deg": (lat, lon)})` sets either for one
+    episode (evaluation on the held-out goals). The commanded track starts at the bearing to the goal and
+    the commanded height above ground at the scenario's.
+
+    Held-out goals (`env.held_out_goals_deg`): `held_out_goals_deg` if given; else, with a goal region
+    `(lat_min, lat_max, lon_min, lon_max)`, the five points at fractions (0.25, 0.25), (0.25, 0.75),
+    (0.5, 0.5), (0.75, 0.25), (0.75, 0.75) of its latitude and longitude spans. Training goals never fall
+    within `held_out_radius_m` of them.
 
     ## Episode End
-    Terminated: the true position within `goal_radius_m` of the goal, terrain collision (true height above
-    the true terrain < 0), off the map, the navigator diverged, or an engine stopped (fuel exhausted or
-    engine failure; the scenario's `aircraft.constant_fuel = true` keeps the tanks full for long episodes).
-    Truncated: `max_episode_s` of flight.
-    `step` after the end without `reset` raises `gymnasium.error.ResetNeeded`.
+    Terminated: arrival (mode "arrival": the ESTIMATED position within `goal_radius_m` of the goal;
+    `termination = "arrived"`; mode "progress": the TRUE position within `goal_radius_m`, "goal"), terrain
+    collision (true height above the true terrain < 0), off the map, the navigator diverged, or an engine
+    stopped (fuel exhausted or engine failure; the scenario's `aircraft.constant_fuel = true` keeps the tanks
+    full for long episodes). Truncated: `max_episode_s` of flight. `step` after the end without `reset`
+    raises `gymnasium.error.ResetNeeded`.
 
     ## Info
     `t_s`, `true_error_ned_m` (estimate minus truth), `true_horizontal_error_m`, `true_distance_to_goal_m`,
-    `sigma_ned_m`, `nav_ok`, `nav_status`, `termination` (None while running; else `goal`,
-    `terrain_collision`, `off_map`, `diverged`, `fuel_exhausted`, `engine_failure` or `time_limit`).
+    `estimated_distance_to_goal_m`, `sigma_ned_m`, `nav_ok`, `nav_status`, `goal_deg`, `start_deg`,
+    `distance_flown_m` (true, since the reset), `termination` (None while running; else `arrived`, `goal`,
+    `terrain_collision`, `off_map`, `diverged`, `fuel_exhausted`, `engine_failure` or `time_limit`),
+    `reward_terms`; at arrival `true_miss_m`.
+
+    ## Vector envs, pickling
+    `metadata["autoreset_mode"]` is `AutoresetMode.NEXT_STEP` (the step after an episode's end returns the
+    reset observation), `render_fps` the decision rate (1 / decision_interval_s). The env pickles by its
+    constructor arguments (`gymnasium.utils.EzPickle`): an unpickled env is a new one that needs `reset`.
+    `close()` may be called any number of times.
 
     ## Arguments
     `gymnasium.make("trn_env/TerrainNav-v0", scenario="default", render_mode=None, decision_interval_s=5.0,
-    max_episode_s=300.0, navigator=None, goal_deg=None, goal_radius_m=1000.0, error_weight=1.0,
-    goal_bonus=10.0, collision_penalty=100.0, agl_min_m=300.0, agl_max_m=3000.0, climb_rate_max_mps=5.0,
+    max_episode_s=300.0, navigator=None, goal_deg=None, goal_radius_m=1000.0, reward_mode="arrival",
+    error_weight=1.0, goal_bonus=10.0, collision_penalty=100.0, failure_penalty=100.0, miss_weight=20.0,
+    time_cost_per_s=0.01, progress_weight=1.0, agl_min_m=300.0, agl_max_m=3000.0, climb_rate_max_mps=5.0,
     turn_rate_max_dps=3.0, info_offset_m=3000.0, info_sigma_m=5.0, info_window_m=2000.0,
-    log_sensors=False)`.
+    log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
+    held_out_radius_m=2000.0, min_goal_distance_m=5000.0)`.
     `scenario` is a built-in name, a TOML path or a `Scenario`; `goal_deg=(lat, lon)` defaults to the
     route's last waypoint. The terrain (and the map's error draw) is built once per env from the
     scenario seed; each episode's flight, sensor and navigator randomness comes from the reset seed.
-    `render_mode="rgb_array"` returns the map with the true (black) and estimated (red) tracks.
+    `render_mode="rgb_array"` returns the map with the true (black) and estimated (red) tracks, (480, 480, 3)
+    uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
+
+    ## Version History
+    - v0 (arrival mode): episodes end when the estimate arrives; the true miss at arrival counts; goal
+      and start sampling per episode; per-element observation bounds; reward terms in info.
+    - v0 (first): the "progress" reward and termination on the true position.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 0.2, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, scenario: str | Scenario = "default", render_mode: str | None = None,
                  decision_interval_s: float = 5.0, max_episode_s: float = 300.0, navigator: str | None = None,
                  goal_deg: tuple[float, float] | None = None, goal_radius_m: float = 1000.0,
-                 error_weight: float = 1.0, goal_bonus: float = 10.0, collision_penalty: float = 100.0,
+                 reward_mode: str = "arrival", error_weight: float = 1.0, goal_bonus: float = 10.0,
+                 collision_penalty: float = 100.0, failure_penalty: float = 100.0, miss_weight: float = 20.0,
+                 time_cost_per_s: float = 0.01, progress_weight: float = 1.0,
                  agl_min_m: float = 300.0, agl_max_m: float = 3000.0, climb_rate_max_mps: float = 5.0,
                  turn_rate_max_dps: float = 3.0, info_offset_m: float = 3000.0, info_sigma_m: float = 5.0,
-                 info_window_m: float = 2000.0, log_sensors: bool = False):
+                 info_window_m: float = 2000.0, log_sensors: bool = False,
+                 goal_region_deg: tuple[float, float, float, float] | None = None,
+                 start_region_deg: tuple[float, float, float, float] | None = None,
+                 held_out_goals_deg=None, held_out_radius_m: float = 2000.0,
+                 min_goal_distance_m: float = 5000.0):
+        EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
+                          goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
+                          failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
+                          agl_max_m,
+                          climb_rate_max_mps, turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m,
+                          log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
+                          held_out_radius_m, min_goal_distance_m)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if reward_mode not in REWARD_MODES:
+            raise ValueError(f"reward_mode must be one of {REWARD_MODES}, got {reward_mode!r}")
+        if not isinstance(scenario, (str, Scenario)):
+            raise ValueError(f"scenario must be a built-in name, a TOML path or a Scenario, got "
+                             f"{type(scenario).__name__}")
+        if navigator is not None and not isinstance(navigator, str):
+            raise ValueError(f"navigator must be a registered navigator name (str) or None, "
+                             f"got {navigator!r}")
         for name, v in (("decision_interval_s", decision_interval_s), ("max_episode_s", max_episode_s),
                         ("goal_radius_m", goal_radius_m), ("climb_rate_max_mps", climb_rate_max_mps),
-                        ("turn_rate_max_dps", turn_rate_max_dps)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+                        ("turn_rate_max_dps", turn_rate_max_dps), ("info_offset_m", info_offset_m),
+                        ("info_sigma_m", info_sigma_m), ("info_window_m", info_window_m),
+                        ("agl_min_m", agl_min_m), ("agl_max_m", agl_max_m),
+                        ("held_out_radius_m", held_out_radius_m),
+                        ("min_goal_distance_m", min_goal_distance_m)):
+            _check_number(name, v, positive=True)
+        for name, v in (("error_weight", error_weight), ("goal_bonus", goal_bonus),
+                        ("collision_penalty", collision_penalty), ("failure_penalty", failure_penalty),
+                        ("miss_weight", miss_weight), ("time_cost_per_s", time_cost_per_s),
+                        ("progress_weight", progress_weight)):
+            _check_number(name, v, positive=False)
+        if not isinstance(log_sensors, bool):
+            raise ValueError(f"log_sensors must be a bool, got {log_sensors!r}")
         if not 0 < agl_min_m < agl_max_m:
             raise ValueError(f"need 0 < agl_min_m < agl_max_m, got {agl_min_m}, {agl_max_m}")
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, navigator=navigator)
@@ -128,30 +209,49 @@ class TerrainNavEnv(gym.Env):
         rate_hz = float(d["navigator"]["rate_hz"])      # one loop tick = one navigator update
         self.ticks_per_decision = max(1, int(round(decision_interval_s * rate_hz)))
         self.decision_interval_s = self.ticks_per_decision / rate_hz
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.decision_interval_s}
         self.max_episode_s = float(max_episode_s)
         self.render_mode = render_mode
+        self.reward_mode = reward_mode
         self.error_weight = float(error_weight)
         self.goal_bonus = float(goal_bonus)
         self.collision_penalty = float(collision_penalty)
+        self.failure_penalty = float(failure_penalty)
+        self.miss_weight = float(miss_weight)
+        self.time_cost_per_s = float(time_cost_per_s)
+        self.progress_weight = float(progress_weight)
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
         self.tas_mps = float(d["route"]["tas_mps"])
         self.info_offset_m = float(info_offset_m)
         self.log_sensors = bool(log_sensors)
-        wp_last = d["route"]["waypoints"][-1]
-        g = goal_deg if goal_deg is not None else (wp_last["lat_deg"], wp_last["lon_deg"])
-        self.goal_lat_rad, self.goal_lon_rad = math.radians(g[0]), math.radians(g[1])
+        self.held_out_radius_m = float(held_out_radius_m)
+        self.min_goal_distance_m = float(min_goal_distance_m)
 
         dpsi = min(math.radians(turn_rate_max_dps) * self.decision_interval_s, math.pi / 3)
         dagl = climb_rate_max_mps * self.decision_interval_s
         self.action_limits = np.array([dpsi, dagl])          # rad, m per decision step
         self.action_space = spaces.Box(low=-1.0, high=1.0, shape=(2,), dtype=np.float32)
-        self.observation_space = spaces.Box(low=-1e4, high=1e4, shape=(19,), dtype=np.float32)
+        self.observation_space = spaces.Box(low=OBS_LOW, high=OBS_HIGH, dtype=np.float32)
 
         self._dems = components.build_terrain(d, sc.extras, spawn_rngs(sc.seed)["map"])
         self._info_map = components.terrain_information_map(self._dems[1], info_sigma_m, info_window_m)
-        if not self._dems[0].contains(self.goal_lat_rad, self.goal_lon_rad):
-            raise ValueError(f"goal_deg {g} is outside the terrain")
+        self.goal_region_deg = self._check_region("goal_region_deg", goal_region_deg)
+        self.start_region_deg = self._check_region("start_region_deg", start_region_deg)
+        if held_out_goals_deg is None and self.goal_region_deg is not None:
+            la0, la1, lo0, lo1 = self.goal_region_deg
+            held_out_goals_deg = [(la0 + fa * (la1 - la0), lo0 + fo * (lo1 - lo0))
+                                  for fa, fo in ((0.25, 0.25), (0.25, 0.75), (0.5, 0.5), (0.75, 0.25),
+                                                 (0.75, 0.75))]
+        self.held_out_goals_deg = [self._check_point("held_out_goals_deg", g)
+                                   for g in (held_out_goals_deg or [])]
+        wp_last = d["route"]["waypoints"][-1]
+        g = goal_deg if goal_deg is not None else (wp_last["lat_deg"], wp_last["lon_deg"])
+        g = self._check_point("goal_deg", g)
+        self._fixed_goal_deg = g
+        self.goal_lat_rad, self.goal_lon_rad = math.radians(g[0]), math.radians(g[1])
+        init = d["initial"]
+        self.start_deg = (float(init["lat_deg"]), float(init["lon_deg"]))
         self._loop: ClosedLoop | None = None
         self._needs_reset = True
         self._track_cmd_rad = 0.0
@@ -159,8 +259,46 @@ class TerrainNavEnv(gym.Env):
         self._true_track: list[tuple[float, float]] = []
         self._est_track: list[tuple[float, float]] = []
         self._background = None
+        self._distance_flown_m = 0.0
+
+    # ---------------------------------------------------------------------------------------- checks
+    def _check_point(self, name: str, p) -> tuple[float, float]:
+        try:
+            lat, lon = (float(x) for x in p)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a (lat_deg, lon_deg) pair of numbers, got {p!r}") from None
+        if not (math.isfinite(lat) and math.isfinite(lon)):
+            raise ValueError(f"{name} must be finite, got {p!r}")
+        for k, dem in enumerate(self._dems):
+            if not dem.contains(math.radians(lat), math.radians(lon)):
+                which = ("terrain", "navigator's map")[k]
+                raise ValueError(f"{name} {(lat, lon)} is outside the {which} {dem.name!r}")
+        return lat, lon
+
+    def _check_region(self, name: str, r):
+        if r is None:
+            return None
+        try:
+            la0, la1, lo0, lo1 = (float(x) for x in r)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, "
+                             f"got {r!r}") from None
+        if not (la0 < la1 and lo0 < lo1):
+            raise ValueError(f"{name} needs lat_min < lat_max and lon_min < lon_max, got {r!r}")
+        for p in ((la0, lo0), (la0, lo1), (la1, lo0), (la1, lo1)):
+            self._check_point(f"{name} corner", p)
+        return la0, la1, lo0, lo1
 
     # ---------------------------------------------------------------------------------------- helpers
+    @property
+    def map_dem(self):
+        """The navigator's map (what planners and policies may read; never the world)."""
+        return self._dems[1]
+
+    @property
+    def goal_deg(self) -> tuple[float, float]:
+        return math.degrees(self.goal_lat_rad), math.degrees(self.goal_lon_rad)
+
     def _commander(self, est, t_s):
         return components.track_agl_targets(self._track_cmd_rad, self._agl_cmd_m, self.tas_mps)
 
@@ -171,6 +309,10 @@ class TerrainNavEnv(gym.Env):
         r1 = np.array(lla_to_ecef(self.goal_lat_rad, self.goal_lon_rad, h))
         d_ned = C_en(lat, lon).T @ (r1 - r0)
         return float(d_ned[0]), float(d_ned[1])
+
+    def _estimated_distance_m(self) -> float:
+        est = self._loop.estimate
+        return math.hypot(*self._offset_to_goal(est.lat_rad, est.lon_rad, est.h_m))
 
     def _obs(self) -> np.ndarray:
         loop = self._loop
@@ -186,13 +328,13 @@ class TerrainNavEnv(gym.Env):
             math.sin(self._track_cmd_rad), math.cos(self._track_cmd_rad),
             float(np.hypot(est.v_ned_mps[0], est.v_ned_mps[1])) / 100.0,
             agl_est / 1000.0, self._agl_cmd_m / 1000.0,
-            *np.log10(1.0 + sig),
+            *np.log10(1.0 + np.clip(sig, 0.0, 1e300)),
             *np.log10(1.0 + np.clip(info, 0.0, None)),
             loop.t_s / self.max_episode_s,
             1.0 if est.health.ok else 0.0,
         ], dtype=np.float64)
         obs = np.nan_to_num(obs, nan=0.0, posinf=1e4, neginf=-1e4)
-        return np.clip(obs, -1e4, 1e4).astype(np.float32)
+        return np.clip(obs, OBS_LOW, OBS_HIGH).astype(np.float32)
 
     def _truth_now(self):
         tr = self._loop.last_truth
@@ -209,24 +351,76 @@ class TerrainNavEnv(gym.Env):
             "true_error_ned_m": err,
             "true_horizontal_error_m": float(math.hypot(dn, de)),
             "true_distance_to_goal_m": float(math.hypot(gn, ge)),
+            "estimated_distance_to_goal_m": self._estimated_distance_m(),
             "sigma_ned_m": est.sigma_ned_m.copy(),
             "nav_ok": bool(est.health.ok),
             "nav_status": str(est.health.status),
+            "goal_deg": self.goal_deg,
+            "start_deg": self.start_deg,
+            "distance_flown_m": float(self._distance_flown_m),
             "termination": termination,
         }
+
+    def _draw_region(self, region) -> tuple[float, float]:
+        la0, la1, lo0, lo1 = region
+        return float(self.np_random.uniform(la0, la1)), float(self.np_random.uniform(lo0, lo1))
+
+    def _far_from_held_out(self, p) -> bool:
+        lat, lon = math.radians(p[0]), math.radians(p[1])
+        for g in self.held_out_goals_deg:
+            dn, de = latlon_to_ned_offset(lat, lon, 0.0, math.radians(g[0]), math.radians(g[1]))
+            if math.hypot(dn, de) < self.held_out_radius_m:
+                return False
+        return True
+
+    def _episode_endpoints(self, options: dict) -> tuple[tuple[float, float], tuple[float, float]]:
+        init = self.scenario.data["initial"]
+        if "start_deg" in options:
+            start = self._check_point("options['start_deg']", options["start_deg"])
+        elif self.start_region_deg is not None:
+            start = self._draw_region(self.start_region_deg)
+        else:
+            start = (float(init["lat_deg"]), float(init["lon_deg"]))
+        if "goal_deg" in options:
+            return start, self._check_point("options['goal_deg']", options["goal_deg"])
+        if self.goal_region_deg is None:
+            return start, self._fixed_goal_deg
+        s_lat, s_lon = math.radians(start[0]), math.radians(start[1])
+        for _ in range(1000):
+            g = self._draw_region(self.goal_region_deg)
+            dn, de = latlon_to_ned_offset(s_lat, s_lon, 0.0, math.radians(g[0]), math.radians(g[1]))
+            if math.hypot(dn, de) >= self.min_goal_distance_m and self._far_from_held_out(g):
+                return start, g
+        raise ValueError("goal_region_deg: no goal found in 1000 draws at least min_goal_distance_m from the "
+                         "start and outside held_out_radius_m of the held-out goals")
 
     # ------------------------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        if options is not None and not isinstance(options, dict):
+            raise ValueError(f"options must be a dict or None, got {type(options).__name__}")
+        options = options or {}
+        unknown = set(options) - {"goal_deg", "start_deg"}
+        if unknown:
+            raise ValueError(f"reset options: unknown keys {sorted(unknown)}; known: goal_deg, start_deg")
+        if self._loop is not None:
+            self._loop.close()
+        start, goal = self._episode_endpoints(options)
+        self.goal_lat_rad, self.goal_lon_rad = math.radians(goal[0]), math.radians(goal[1])
+        self.start_deg = start
         ep_seed = int(self.np_random.integers(0, 2**31 - 1))
         sc = self.scenario
-        sc = Scenario(name=sc.name, source=sc.source, data=sc.data, description=sc.description, seed=ep_seed,
-                      duration_s=sc.duration_s, extras=sc.extras)
-        d = sc.data
-        init = d["initial"]
-        lat0, lon0 = math.radians(init["lat_deg"]), math.radians(init["lon_deg"])
+        data = sc.data
+        lat0, lon0 = math.radians(start[0]), math.radians(start[1])
         gn, ge = self._offset_to_goal(lat0, lon0)
         self._track_cmd_rad = math.atan2(ge, gn)
+        if start != (float(data["initial"]["lat_deg"]), float(data["initial"]["lon_deg"])):
+            data = dict(data)
+            data["initial"] = dict(copy.deepcopy(sc.data["initial"]), lat_deg=start[0], lon_deg=start[1],
+                                   heading_deg=math.degrees(self._track_cmd_rad) % 360.0)
+        sc = Scenario(name=sc.name, source=sc.source, data=data, description=sc.description, seed=ep_seed,
+                      duration_s=sc.duration_s, extras=sc.extras)
+        init = data["initial"]
         if "h_agl_m" in init:
             self._agl_cmd_m = float(init["h_agl_m"])
         else:
@@ -234,13 +428,18 @@ class TerrainNavEnv(gym.Env):
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m, self.agl_min_m, self.agl_max_m))
         self._loop = ClosedLoop(sc, commander=self._commander, dems=self._dems, log_sensors=self.log_sensors)
         self._needs_reset = False
+        self._distance_flown_m = 0.0
         lat, lon, _ = self._truth_now()
         self._true_track = [(lat, lon)]
         self._est_track = [(self._loop.estimate.lat_rad, self._loop.estimate.lon_rad)]
         return self._obs(), self._info(None)
 
     def _check_action(self, action) -> np.ndarray:
-        a = np.asarray(action, dtype=np.float64)
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"action must be an array of 2 numbers (track change, AGL change), got "
+                             f"{action!r}") from None
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape} (track change, AGL change), "
                              f"got shape {a.shape}")
@@ -266,13 +465,25 @@ class TerrainNavEnv(gym.Env):
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m + a[1], self.agl_min_m, self.agl_max_m))
         lat, lon, h = self._truth_now()
         d_before = math.hypot(*self._offset_to_goal(lat, lon, h))
+        d_est_before = self._estimated_distance_m()
+        t_before = self._loop.t_s
         self._loop.command_now()                         # new targets take effect now
         reason = None
+        arrival = self.reward_mode == "arrival"
         for _ in range(self.ticks_per_decision):
             reason = self._loop.tick()
-            lat, lon, h = self._truth_now()
-            if reason is None and math.hypot(*self._offset_to_goal(lat, lon, h)) <= self.goal_radius_m:
-                reason = "goal"
+            lat1, lon1, h1 = self._truth_now()
+            dn, de = latlon_to_ned_offset(lat, lon, h, lat1, lon1)
+            self._distance_flown_m += math.hypot(dn, de)
+            lat, lon, h = lat1, lon1, h1
+            if reason is None:
+                if arrival:
+                    if self._estimated_distance_m() <= self.goal_radius_m:
+                        self._loop.sync()                # the estimate at this time decides
+                        reason = self._loop.termination or (
+                            "arrived" if self._estimated_distance_m() <= self.goal_radius_m else None)
+                elif math.hypot(*self._offset_to_goal(lat, lon, h)) <= self.goal_radius_m:
+                    reason = "goal"
             if reason is None and self._loop.t_s >= self.max_episode_s - 1e-6:
                 reason = "time_limit"
             if reason is not None:
@@ -282,18 +493,37 @@ class TerrainNavEnv(gym.Env):
         self._true_track.append((lat, lon))
         self._est_track.append((self._loop.estimate.lat_rad, self._loop.estimate.lon_rad))
         info = self._info(reason)
-        d_after = info["true_distance_to_goal_m"]
-        reward = (d_before - d_after) / 1000.0 - self.error_weight * info["true_horizontal_error_m"] / 1000.0
-        if reason == "goal":
-            reward += self.goal_bonus
-        if reason == "terrain_collision":
-            reward -= self.collision_penalty
-        terminated = reason in ("goal", "terrain_collision", "off_map", "diverged", "fuel_exhausted",
-                                "engine_failure")
+        terms = self._reward_terms(info, reason, d_before, d_est_before, self._loop.t_s - t_before)
+        info["reward_terms"] = terms
+        reward = float(sum(terms.values()))
+        terminated = reason in ("arrived", "goal", "terrain_collision", "off_map", "diverged",
+                                "fuel_exhausted", "engine_failure")
         truncated = reason == "time_limit"
         if terminated or truncated:
             self._needs_reset = True
-        return self._obs(), float(reward), bool(terminated), bool(truncated), info
+        return self._obs(), reward, bool(terminated), bool(truncated), info
+
+    def _reward_terms(self, info: dict, reason: str | None, d_before: float, d_est_before: float,
+                      dt_s: float) -> dict[str, float]:
+        if self.reward_mode == "progress":
+            terms = {"progress": (d_before - info["true_distance_to_goal_m"]) / 1000.0,
+                     "error": -self.error_weight * info["true_horizontal_error_m"] / 1000.0,
+                     "goal": self.goal_bonus if reason == "goal" else 0.0,
+                     "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0}
+            return terms
+        d_est = info["estimated_distance_to_goal_m"]
+        terms = {"progress": self.progress_weight * (d_est_before - d_est) / 1000.0,
+                 "time": -self.time_cost_per_s * dt_s, "arrival": 0.0, "miss": 0.0,
+                 "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0,
+                 "failure": -self.failure_penalty if reason in ("off_map", "diverged", "fuel_exhausted",
+                                                               "engine_failure") else 0.0}
+        if reason == "arrived":
+            # flying the last goal_radius_m on the estimate ends at truth + (goal - estimate): its miss is
+            # the true horizontal navigation error
+            info["true_miss_m"] = info["true_horizontal_error_m"]
+            terms["arrival"] = self.goal_bonus
+            terms["miss"] = -self.miss_weight * info["true_miss_m"] / 1000.0
+        return terms
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -303,4 +533,18 @@ class TerrainNavEnv(gym.Env):
                                        (self.goal_lat_rad, self.goal_lon_rad), cache=self)
 
     def close(self):
-        self._loop = None
+        """Release the episode's flight (safe to call any number of times)."""
+        loop, self._loop = self._loop, None
+        if loop is not None:
+            loop.close()
+        self._needs_reset = True
+
+
+def _check_number(name: str, v, positive: bool) -> None:
+    number = isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
+    if not number or not math.isfinite(v):
+        raise ValueError(f"{name} must be a finite number, got {v!r} ({type(v).__name__})")
+    if positive and v <= 0:
+        raise ValueError(f"{name} must be > 0, got {v!r}")
+    if not positive and v < 0:
+        raise ValueError(f"{name} must be >= 0, got {v!r}")

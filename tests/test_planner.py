@@ -1,0 +1,247 @@
+"""The terrain-information planner: its A* against scipy's Dijkstra on independently built graphs, the
+featureless bound, routes on the basin terrain and the real DEM, the route TOML in a scenario, bad input,
+and `trn-env plan`."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+import terrain
+from terrain import metrics
+from trn_env.guidance.planner import (
+    MOVES,
+    PlannerConfig,
+    RouteNotFoundError,
+    TerrainInformationPlanner,
+    astar_kernel,
+)
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+def _edge_u(u, i, j, di, dj):
+    """Mean featureless factor of the cells an edge touches (written here from the planner's docstring:
+    both ends; for a knight move also the two cells beside its midpoint)."""
+    cells = [(i, j), (i + di, j + dj)]
+    if abs(di) == 2:
+        cells += [(i + di // 2, j), (i + di // 2, j + dj)]
+    elif abs(dj) == 2:
+        cells += [(i, j + dj // 2), (i + di, j + dj // 2)]
+    return float(np.mean([u[a, b] for a, b in cells]))
+
+
+def _moves():
+    m8 = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
+    knights = [(a * p, b * q) for a, b in ((1, 2), (2, 1)) for p in (1, -1) for q in (1, -1)]
+    return m8 + knights
+
+
+def _scipy_cost(u, cn, ce, w, start, goal, bound_bins=None, bin_m=None):
+    """Least cost by scipy's Dijkstra on a graph built here: nodes = cells (or cells x featureless bins)."""
+    ni, nj = u.shape
+    nb = 1 if bound_bins is None else bound_bins
+    rows, cols, vals = [], [], []
+    for i in range(ni):
+        for j in range(nj):
+            for di, dj in _moves():
+                ii, jj = i + di, j + dj
+                if not (0 <= ii < ni and 0 <= jj < nj):
+                    continue
+                L = math.hypot(di * cn, dj * ce)
+                ue = _edge_u(u, i, j, di, dj)
+                for b in range(nb):
+                    if bound_bins is not None and ue > 0.5:
+                        b2 = int(round(b + L / bin_m))
+                        if b2 >= nb:
+                            continue
+                    else:
+                        b2 = 0
+                    rows.append((i * nj + j) * nb + b)
+                    cols.append((ii * nj + jj) * nb + b2)
+                    vals.append(L * (1.0 + w * ue))
+    n = ni * nj * nb
+    g = coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()
+    d = dijkstra(g, indices=(start[0] * nj + start[1]) * nb)
+    return float(np.min(d[(goal[0] * nj + goal[1]) * nb : (goal[0] * nj + goal[1]) * nb + nb]))
+
+
+def test_moves_are_the_16_connected_set():
+    assert sorted(map(tuple, MOVES.tolist())) == sorted(_moves())
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_astar_matches_scipy_dijkstra(seed):
+    rng = np.random.default_rng(seed)
+    u = (rng.random((14, 11)) > 0.6).astype(float) * rng.random((14, 11))
+    h = np.zeros_like(u)
+    blocked = np.zeros(u.shape, np.bool_)
+    for w in (0.0, 1.5, 6.0):
+        cost, path = astar_kernel(u, h, blocked, 480.0, 530.0, MOVES, w, False, 1, 240.0, -1.0, 1, 2, 12, 9)
+        assert cost == pytest.approx(_scipy_cost(u, 480.0, 530.0, w, (1, 2), (12, 9)), rel=1e-9)
+        assert tuple(path[0]) == (1, 2) and tuple(path[-1]) == (12, 9)
+        # the path's own cost adds up to the reported cost
+        c = sum(
+            math.hypot((b[0] - a[0]) * 480.0, (b[1] - a[1]) * 530.0)
+            * (1 + w * _edge_u(u, a[0], a[1], b[0] - a[0], b[1] - a[1]))
+            for a, b in zip(path[:-1], path[1:], strict=False)
+        )
+        assert c == pytest.approx(cost, rel=1e-9)
+
+
+def test_featureless_bound_matches_the_augmented_graph():
+    """A featureless band across the grid with one informative gap far to the side: the bound forces the
+    detour; the least cost equals scipy's Dijkstra on the (cell, bin) graph built in the test."""
+    u = np.zeros((16, 12))
+    u[6:10, :] = 1.0
+    u[6:10, 0] = 0.0  # the gap
+    h = np.zeros_like(u)
+    blocked = np.zeros(u.shape, np.bool_)
+    bin_m = 250.0
+    for max_m in (600.0, 1200.0, 5000.0):
+        nb = int(math.floor(max_m / bin_m)) + 1
+        cost, path = astar_kernel(u, h, blocked, 500.0, 500.0, MOVES, 0.0, True, nb, bin_m, -1.0, 1, 8, 14, 8)
+        ref = _scipy_cost(u, 500.0, 500.0, 0.0, (1, 8), (14, 8), bound_bins=nb, bin_m=bin_m)
+        assert cost == pytest.approx(ref, rel=1e-9)
+        # the stretch over featureless edges along the returned path respects the bound
+        run = longest = 0.0
+        for a, b in zip(path[:-1], path[1:], strict=False):
+            d = b - a
+            L = math.hypot(d[0] * 500.0, d[1] * 500.0)
+            run = run + L if _edge_u(u, a[0], a[1], d[0], d[1]) > 0.5 else 0.0
+            longest = max(longest, run)
+        assert longest <= max_m + 0.5 * bin_m
+    straight, _ = astar_kernel(u, h, blocked, 500.0, 500.0, MOVES, 0.0, False, 1, bin_m, -1.0, 1, 8, 14, 8)
+    assert straight == pytest.approx(13 * 500.0)
+    assert cost == pytest.approx(straight)  # 5 km allows crossing the 2 km band straight
+
+
+@pytest.fixture(scope="module")
+def basin():
+    return terrain.load("synthetic:basin")
+
+
+def _start_goal(dem, fs=(0.1, 0.5), fg=(0.8, 0.5)):
+    la0, la1, lo0, lo1 = dem.bounds
+    return (
+        la0 + fs[0] * (la1 - la0),
+        lo0 + fs[1] * (lo1 - lo0),
+        la0 + fg[0] * (la1 - la0),
+        lo0 + fg[1] * (lo1 - lo0),
+    )
+
+
+def _independent_featureless_run_m(dem, route, crlb_bad_m=30.0, n_per_leg=200):
+    """Longest stretch (m) of a route whose points have a CRLB (terrain.metrics on the DEM posts, nearest
+    post) above crlb_bad_m: computed from the DEM, not from the planner's grid."""
+    crlb = metrics.terrain_information(dem, 5.0, 2000.0).crlb_sigma_h_m
+    w = np.radians(np.array(route.waypoints_deg)[:, :2])
+    run = longest = 0.0
+    for (a0, b0), (a1, b1) in zip(w[:-1], w[1:], strict=False):
+        la, lo = np.linspace(a0, a1, n_per_leg), np.linspace(b0, b1, n_per_leg)
+        i = np.clip(np.round((la - dem.lat0_rad) / dem.dlat_rad).astype(int), 0, dem.n_lat - 1)
+        j = np.clip(np.round((lo - dem.lon0_rad) / dem.dlon_rad).astype(int), 0, dem.n_lon - 1)
+        seg_m = math.hypot((a1 - a0) * 6.37e6, (b1 - b0) * 6.37e6 * math.cos(a0))
+        for bad in ~(crlb[i, j] <= crlb_bad_m):
+            run = run + seg_m / n_per_leg if bad else 0.0
+            longest = max(longest, run)
+    return longest
+
+
+def test_basin_routes_trade_distance_for_information(basin):
+    s_lat, s_lon, g_lat, g_lon = _start_goal(basin)
+    straight = TerrainInformationPlanner(basin, PlannerConfig(weight=0.0)).plan(s_lat, s_lon, g_lat, g_lon)
+    assert straight.length_m == pytest.approx(straight.straight_length_m, rel=0.01)
+    assert len(straight.waypoints_deg) == 2
+    assert _independent_featureless_run_m(basin, straight) > 9000.0  # it crosses the 12 km basin
+    planned = TerrainInformationPlanner(basin, PlannerConfig(weight=1.0)).plan(s_lat, s_lon, g_lat, g_lon)
+    assert planned.featureless_m < 500.0 and planned.extra_distance_fraction < 0.25
+    assert _independent_featureless_run_m(basin, planned) < 1500.0
+    bounded = TerrainInformationPlanner(basin, PlannerConfig(weight=0.0, max_featureless_m=2000.0)).plan(
+        s_lat, s_lon, g_lat, g_lon
+    )
+    assert bounded.longest_featureless_m <= 2000.0
+    assert straight.length_m < bounded.length_m < planned.length_m * 1.02
+    # the waypoints are the start and the goal at the ends, at the planner's height above ground
+    assert bounded.waypoints_deg[0][:2] == pytest.approx((math.degrees(s_lat), math.degrees(s_lon)))
+    assert bounded.waypoints_deg[-1][:2] == pytest.approx((math.degrees(g_lat), math.degrees(g_lon)))
+    assert all(h == 600.0 for *_, h in bounded.waypoints_deg)
+    # no fillet needs more than half of an adjacent leg, or the waypoint could not be removed cheaply
+    route = planned.as_route()
+    assert route.n_legs == len(planned.waypoints_deg) - 1
+
+
+def test_route_toml_is_accepted_by_a_scenario(basin, tmp_path):
+    from trn_env.scenario.loading import load_scenario, validate
+
+    s_lat, s_lon, g_lat, g_lon = _start_goal(basin, fs=(0.1, 0.5))
+    sc = load_scenario("basin_route")
+    s_lat, s_lon = math.radians(sc.data["initial"]["lat_deg"]), math.radians(sc.data["initial"]["lon_deg"])
+    r = TerrainInformationPlanner(basin).plan(s_lat, s_lon, g_lat, g_lon)
+    table = tomllib.loads(r.toml(85.0))["route"]
+    data = dict(sc.data)
+    data["route"] = table
+    checked = validate(data, source="planned")
+    assert len(checked.data["route"]["waypoints"]) == len(r.waypoints_deg)
+
+
+def test_forty_km_route_on_the_bundled_dem():
+    dem = terrain.load("jacksboro")
+    s_lat, s_lon, g_lat, g_lon = _start_goal(dem, fs=(0.025, 0.03), fg=(0.97, 0.965))
+    r = TerrainInformationPlanner(
+        dem, PlannerConfig(weight=1.0, max_featureless_m=3000.0, edge_margin_cells=1)
+    ).plan(s_lat, s_lon, g_lat, g_lon)
+    assert r.straight_length_m > 40_000.0
+    assert r.length_m >= r.straight_length_m * (1 - 1e-6)
+
+
+def test_bad_input(basin):
+    for kw, field in (
+        (dict(weight=-1.0), "weight"),
+        (dict(weight=float("nan")), "weight"),
+        (dict(max_featureless_m=0.0), "max_featureless_m"),
+        (dict(cell_m=-5.0), "cell_m"),
+        (dict(agl_m="600"), "agl_m"),
+        (dict(bank_limit_deg=80.0), "bank_limit_deg"),
+    ):
+        with pytest.raises(ValueError, match=field):
+            PlannerConfig(**kw)
+    p = TerrainInformationPlanner(basin)
+    s_lat, s_lon, g_lat, g_lon = _start_goal(basin)
+    with pytest.raises(ValueError, match="goal .* off the map"):
+        p.plan(s_lat, s_lon, g_lat + 0.01, g_lon)
+    with pytest.raises(ValueError, match="start .* edge"):
+        p.plan(basin.lat0_rad + 1e-6, s_lon, g_lat, g_lon)
+    c_lat, c_lon, _, _ = _start_goal(basin, fs=(0.5, 0.5))
+    with pytest.raises(RouteNotFoundError, match="no route found .* 1000 m"):
+        TerrainInformationPlanner(basin, PlannerConfig(max_featureless_m=1000.0)).plan(
+            s_lat, s_lon, c_lat, c_lon
+        )
+
+
+def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
+    from trn_env.cli import main
+
+    out = tmp_path / "route.toml"
+    assert (
+        main(["plan", "basin_route", "--goal", "36.716", "-84.1325", "--weight", "1", "--out", str(out)]) == 0
+    )
+    route = tomllib.loads(out.read_text())["route"]
+    assert len(route["waypoints"]) >= 3 and (tmp_path / "route.png").stat().st_size > 10_000
+    bad = tmp_path / "bad.toml"
+    for args, msg in (
+        (["--goal", "37.9", "-84.13"], "off the map"),
+        (["--goal", "36.716", "-84.1325", "--weight", "-2"], "--weight"),
+        (["--goal", "36.64", "-84.1325", "--max-featureless", "500"], "no route found"),
+    ):
+        assert main(["plan", "basin_route", *args, "--out", str(bad)]) == 2
+        assert msg in capsys.readouterr().err
+        assert not bad.exists()

@@ -1,0 +1,168 @@
+"""Env and planner throughput, each beside bare JSBSim measured in the same run.
+
+    python -m trn_env.bench.env [--quick]     # prints one JSON object
+
+- env_sim_seconds_per_wall_second: simulated seconds per wall second of TerrainNav-v0 (default scenario,
+  random actions, resets included), beside env_jsbsim_reference_sim_seconds_per_wall_second (a bare
+  `fdm.run()` loop of the same aircraft and step, timed right before and after; the faster is kept) and
+  their ratio env_ratio;
+- subproc_vec_env_steps_per_s: env steps per wall second of a 2-env stable-baselines3 SubprocVecEnv
+  (falls back to gymnasium's AsyncVectorEnv when sb3 is not installed: subproc_vec_env_kind says which),
+  basin_route scenario, 1 s decisions, INS navigator; subproc_vec_env_sim_seconds_per_wall_second (both envs
+  together) beside the same bare-JSBSim reference (one process: the machine has 2 cores);
+- planner_40km_route_s: one `TerrainInformationPlanner.plan` of a corner-to-corner route on the bundled DEM
+  (straight distance planner_route_straight_km >= 40 km; numba compiled beforehand), beside the cost-map
+  build (planner_cost_map_s, done once per map).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from functools import partial
+
+import numpy as np
+
+
+def _bare_jsbsim_sim_s_per_wall_s(n_steps: int) -> float:
+    """Simulated seconds per wall second of a bare run() loop of the default scenario's aircraft."""
+    import trn_env.scenario.build as components
+    from trn_env.scenario.loading import load_scenario
+
+    sc = load_scenario("default")
+    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
+    fl = components.build_flight(sc.data, world, np.random.default_rng(0))
+    run = fl.fdm.run
+    t0 = time.perf_counter()
+    for _ in range(n_steps):
+        run()
+    return n_steps * float(sc.data["aircraft"]["dt_s"]) / (time.perf_counter() - t0)
+
+
+def env_figures(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
+    from trn_env.env.terrain_nav import TerrainNavEnv
+
+    env = TerrainNavEnv(
+        "default", decision_interval_s=decision_interval_s, max_episode_s=60.0 if quick else 120.0
+    )
+    env.action_space.seed(0)
+    n_steps = n_steps or (12 if quick else 40)
+    ref_steps = 5000 if quick else 20000
+    ref0 = _bare_jsbsim_sim_s_per_wall_s(ref_steps)
+    t0 = time.perf_counter()
+    env.reset(seed=0)
+    sim_s = 0.0
+    for _ in range(n_steps):
+        t_before = env._loop.t_s
+        _, _, term, trunc, _ = env.step(env.action_space.sample())
+        sim_s += env._loop.t_s - t_before
+        if term or trunc:
+            env.reset()
+    wall = time.perf_counter() - t0
+    env.close()
+    ref = max(ref0, _bare_jsbsim_sim_s_per_wall_s(ref_steps))
+    fig = sim_s / wall if wall > 0 else math.nan
+    return {
+        "env_sim_seconds_per_wall_second": fig,
+        "env_jsbsim_reference_sim_seconds_per_wall_second": ref,
+        "env_ratio": fig / ref,
+        "env_decision_interval_s": env.decision_interval_s,
+        "env_steps_measured": n_steps,
+        "env_sim_seconds_measured": sim_s,
+    }
+
+
+def subproc_figures(quick: bool = False, n_steps: int | None = None) -> dict:
+    from trn_env.env.terrain_nav import TerrainNavEnv
+
+    make = partial(
+        TerrainNavEnv, scenario="basin_route", decision_interval_s=1.0, max_episode_s=60.0, navigator="ins"
+    )
+    n_steps = n_steps or (100 if quick else 400)
+    try:
+        from stable_baselines3.common.vec_env import SubprocVecEnv
+
+        venv = SubprocVecEnv([make, make], start_method="forkserver")
+        kind = "stable_baselines3.SubprocVecEnv"
+
+        def reset():
+            venv.seed(0)
+            return venv.reset()
+
+        def step(a):
+            venv.step(a)
+    except ImportError:
+        import gymnasium as gym
+
+        venv = gym.vector.AsyncVectorEnv([make, make])
+        kind = "gymnasium.AsyncVectorEnv"
+
+        def reset():
+            return venv.reset(seed=0)
+
+        def step(a):
+            venv.step(a)
+
+    try:
+        reset()
+        rng = np.random.default_rng(0)
+        for _ in range(10):  # warm-up: worker imports and numba caches
+            step(rng.uniform(-1, 1, (2, 2)).astype(np.float32))
+        ref0 = _bare_jsbsim_sim_s_per_wall_s(5000 if quick else 20000)
+        t0 = time.perf_counter()
+        for _ in range(n_steps):
+            step(rng.uniform(-1, 1, (2, 2)).astype(np.float32))
+        wall = time.perf_counter() - t0
+    finally:
+        venv.close()
+    ref = max(ref0, _bare_jsbsim_sim_s_per_wall_s(5000 if quick else 20000))
+    steps_per_s = 2 * n_steps / wall
+    return {
+        "subproc_vec_env_steps_per_s": steps_per_s,
+        "subproc_vec_env_sim_seconds_per_wall_second": steps_per_s * 1.0,
+        "subproc_vec_env_jsbsim_reference_sim_seconds_per_wall_second": ref,
+        "subproc_vec_env_ratio": steps_per_s * 1.0 / ref,
+        "subproc_vec_env_kind": kind,
+        "subproc_vec_env_n_envs": 2,
+        "subproc_vec_env_decision_interval_s": 1.0,
+    }
+
+
+def planner_figures(quick: bool = False) -> dict:
+    import terrain
+    from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner
+
+    dem = terrain.load("jacksboro")
+    la0, la1, lo0, lo1 = dem.bounds
+    s = (la0 + 0.025 * (la1 - la0), lo0 + 0.03 * (lo1 - lo0))
+    g = (la0 + 0.97 * (la1 - la0), lo0 + 0.965 * (lo1 - lo0))
+    cfg = PlannerConfig(weight=1.0, max_featureless_m=3000.0, edge_margin_cells=1)
+    t0 = time.perf_counter()
+    planner = TerrainInformationPlanner(dem, cfg)
+    t_map = time.perf_counter() - t0
+    planner.plan(*s, *g)  # numba compile / cache load, not timed
+    times = []
+    for _ in range(1 if quick else 5):
+        t0 = time.perf_counter()
+        r = planner.plan(*s, *g)
+        times.append(time.perf_counter() - t0)
+    return {
+        "planner_40km_route_s": float(np.median(times)),
+        "planner_cost_map_s": t_map,
+        "planner_route_straight_km": r.straight_length_m / 1000.0,
+        "planner_route_km": r.length_m / 1000.0,
+        "planner_grid_cells": int(np.prod(planner.grid.shape)),
+    }
+
+
+def benchmark(quick: bool = False) -> dict:
+    out = {}
+    for fn in (env_figures, subproc_figures, planner_figures):
+        out.update(fn(quick))
+    return out
+
+
+if __name__ == "__main__":
+    print(json.dumps(benchmark(quick="--quick" in sys.argv[1:]), indent=2))

@@ -1,0 +1,604 @@
+"""Terrain-information route planner: from the navigator's MAP only, trade flight distance against the
+expected navigation error at the goal.
+
+    planner = TerrainInformationPlanner(map_dem, PlannerConfig(weight=3.0, max_featureless_m=6000.0))
+    route = planner.plan(start_lat_rad, start_lon_rad, goal_lat_rad, goal_lon_rad)
+    route.waypoints_deg          [(lat_deg, lon_deg, h_agl_m), ...] from the start to the goal
+    route.as_route()             a trn_env.guidance.Route (AGL waypoints) for Guidance
+    route.toml()                 a [route] table that scenario files accept
+
+Why: a terrain-referenced navigator fixes over rough, distinctive terrain and drifts (INS error growth) over
+featureless terrain, so the expected error at the goal grows with the featureless distance flown, most of
+all the featureless stretch just before the goal (seed 001's remark on terrain SNR and re-routing). The
+planner minimises, over 16-connected paths on the cost map of `trn_env.guidance.cost_map` (cells of
+`cell_m`, CRLB of the map's terrain information),
+
+    J = sum over edges of length_m * (1 + weight * u_edge)
+
+with u_edge the mean featureless factor (0 informative .. 1 featureless) of the cells the edge touches:
+`weight` is the one knob (0: the shortest path; W: a featureless metre costs 1 + W metres). Optionally no
+featureless stretch (consecutive edges with u_edge > 0.5) may exceed `max_featureless_m`: the search then
+runs on states (cell, featureless distance so far in half-cell bins), so the constraint is exact on the grid.
+The search is A* (straight-line heuristic, admissible since every edge costs at least its length) in a numba
+kernel. The grid path is then string-pulled (a shortcut is taken when its J along the straight line is no
+larger and it keeps the featureless bound) and thinned for the turn radius: a waypoint whose fillet
+(Beard & McLain 2012 ch. 11: turn anticipation R tan(|dchi| / 2), R = V^2 / (g tan(0.8 bank_limit)))
+needs more than half of an adjacent leg is removed when that keeps the bound and costs at most
+`turn_cost_tolerance` more J. The route keeps `edge_margin_cells` away from the map's edge. Heights: every
+waypoint is `agl_m` above the ground (guidance's height-above-ground hold, flown on the estimate and the map);
+with `climb_gradient_max` set, an edge is excluded when the map (cell mean heights) rises faster than that
+along it (the hold could not follow it at the aircraft's climb rate; None: no limit).
+
+`RouteNotFoundError` (a ValueError) when no path meets the constraints; bad settings raise ValueError
+naming the setting.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from terrain.dem import Dem
+from terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
+from trn_env.guidance.cost_map import InformationGrid, information_grid
+from trn_env.guidance.route_following import Route, Waypoint
+
+G_MPS2 = 9.80665
+# 16-connected moves (di, dj): the 8 neighbours and the 8 knight moves (headings every ~22.5 deg)
+MOVES = np.array(
+    [
+        (1, 0),
+        (-1, 0),
+        (0, 1),
+        (0, -1),
+        (1, 1),
+        (1, -1),
+        (-1, 1),
+        (-1, -1),
+        (1, 2),
+        (2, 1),
+        (-1, 2),
+        (-2, 1),
+        (1, -2),
+        (2, -1),
+        (-1, -2),
+        (-2, -1),
+    ],
+    dtype=np.int64,
+)
+FEATURELESS_EDGE = 0.5  # an edge with u_edge above this is featureless (extends the stretch)
+
+
+class RouteNotFoundError(ValueError):
+    """No route meets the planner's constraints (featureless bound, climb limit, map edge margin)."""
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings (units in the names). See the module docstring for what each does."""
+
+    weight: float = 3.0
+    cell_m: float = 500.0
+    agl_m: float = 600.0
+    max_featureless_m: float | None = None
+    tas_mps: float = 85.0
+    bank_limit_deg: float = 25.0
+    climb_gradient_max: float | None = None
+    edge_margin_cells: int = 2
+    turn_cost_tolerance: float = 0.02
+    sigma_m: float = 5.0
+    window_m: float = 2000.0
+    informative_crlb_m: float = 5.0
+    featureless_crlb_m: float = 50.0
+
+    def __post_init__(self):
+        def num(name, v, lo, lo_ok=True, none_ok=False):
+            if v is None and none_ok:
+                return
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float, np.floating, np.integer))
+                or not math.isfinite(v)
+                or (v < lo if lo_ok else v <= lo)
+            ):
+                rel = ">=" if lo_ok else ">"
+                raise ValueError(f"PlannerConfig.{name} must be a finite number {rel} {lo:g}, got {v!r}")
+
+        num("weight", self.weight, 0.0)
+        num("cell_m", self.cell_m, 0.0, lo_ok=False)
+        num("agl_m", self.agl_m, 0.0, lo_ok=False)
+        num("max_featureless_m", self.max_featureless_m, 0.0, lo_ok=False, none_ok=True)
+        num("tas_mps", self.tas_mps, 0.0, lo_ok=False)
+        num("bank_limit_deg", self.bank_limit_deg, 0.0, lo_ok=False)
+        if self.bank_limit_deg > 60.0:
+            raise ValueError(f"PlannerConfig.bank_limit_deg must be <= 60, got {self.bank_limit_deg}")
+        num("climb_gradient_max", self.climb_gradient_max, 0.0, lo_ok=False, none_ok=True)
+        if (
+            isinstance(self.edge_margin_cells, bool)
+            or not isinstance(self.edge_margin_cells, (int, np.integer))
+            or self.edge_margin_cells < 0
+        ):
+            raise ValueError(
+                f"PlannerConfig.edge_margin_cells must be an integer >= 0, got {self.edge_margin_cells!r}"
+            )
+        num("turn_cost_tolerance", self.turn_cost_tolerance, 0.0)
+        num("sigma_m", self.sigma_m, 0.0, lo_ok=False)
+        num("window_m", self.window_m, 0.0, lo_ok=False)
+        num("informative_crlb_m", self.informative_crlb_m, 0.0, lo_ok=False)
+        num("featureless_crlb_m", self.featureless_crlb_m, 0.0, lo_ok=False)
+
+    @property
+    def turn_radius_m(self) -> float:
+        """Ground-track turn radius at TAS in calm air, planned at 0.8 of the bank limit (as Guidance)."""
+        return self.tas_mps**2 / (G_MPS2 * math.tan(0.8 * math.radians(self.bank_limit_deg)))
+
+
+@dataclass
+class PlannedRoute:
+    """A planned route: waypoints (lat_deg, lon_deg, h_agl_m) from the start to the goal, and its figures
+    measured along the legs on the cost map (sampled every quarter cell)."""
+
+    waypoints_deg: list[tuple[float, float, float]]
+    length_m: float
+    straight_length_m: float
+    featureless_m: float
+    longest_featureless_m: float
+    final_featureless_m: float  # featureless distance flown since the last informative sample
+    cost: float
+    weight: float
+    grid_path: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 2), np.int64))
+
+    @property
+    def extra_distance_fraction(self) -> float:
+        return self.length_m / self.straight_length_m - 1.0 if self.straight_length_m > 0 else 0.0
+
+    def as_route(self) -> Route:
+        return Route([Waypoint.from_deg(la, lo, h, "agl") for la, lo, h in self.waypoints_deg])
+
+    def route_table(self, tas_mps: float) -> dict:
+        """The scenario file's [route] table (dict) flying this route at tas_mps."""
+        return {
+            "tas_mps": float(tas_mps),
+            "waypoints": [{"lat_deg": la, "lon_deg": lo, "h_agl_m": h} for la, lo, h in self.waypoints_deg],
+        }
+
+    def toml(self, tas_mps: float, header: str = "") -> str:
+        """A TOML document with the [route] table (scenario files accept it) and the planner's figures."""
+        lines = [f"# {ln}" for ln in header.splitlines()] if header else []
+        lines += [
+            f"# planned by trn_env.guidance.planner: weight {self.weight:g}, length {self.length_m:.0f} m "
+            f"(straight {self.straight_length_m:.0f} m, +{100 * self.extra_distance_fraction:.1f} %), "
+            f"featureless {self.featureless_m:.0f} m, longest featureless stretch "
+            f"{self.longest_featureless_m:.0f} m, final {self.final_featureless_m:.0f} m",
+            "[route]",
+            f"tas_mps = {float(tas_mps):.1f}",
+            "waypoints = [",
+        ]
+        for la, lo, h in self.waypoints_deg:
+            lines.append(f"    {{ lat_deg = {la:.6f}, lon_deg = {lo:.6f}, h_agl_m = {h:.1f} }},")
+        lines.append("]")
+        return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------------------------------ kernels
+
+
+@njit(cache=True)
+def _heap_push(keys, vals, n, key, val):
+    i = n
+    keys[i] = key
+    vals[i] = val
+    while i > 0:
+        p = (i - 1) >> 1
+        if keys[p] <= keys[i]:
+            break
+        keys[p], keys[i] = keys[i], keys[p]
+        vals[p], vals[i] = vals[i], vals[p]
+        i = p
+    return n + 1
+
+
+@njit(cache=True)
+def _heap_pop(keys, vals, n):
+    key, val = keys[0], vals[0]
+    n -= 1
+    keys[0] = keys[n]
+    vals[0] = vals[n]
+    i = 0
+    while True:
+        a = 2 * i + 1
+        if a >= n:
+            break
+        b = a + 1
+        c = b if (b < n and keys[b] < keys[a]) else a
+        if keys[i] <= keys[c]:
+            break
+        keys[c], keys[i] = keys[i], keys[c]
+        vals[c], vals[i] = vals[i], vals[c]
+        i = c
+    return key, val, n
+
+
+@njit(cache=True)
+def edge_featureless(u, i, j, di, dj):
+    """Mean featureless factor of the cells an edge (i, j) -> (i + di, j + dj) touches: its two ends and,
+    for a knight move, the two cells beside its midpoint."""
+    s = u[i, j] + u[i + di, j + dj]
+    n = 2.0
+    if abs(di) == 2 or abs(dj) == 2:
+        hi, hj = di // 2 if abs(di) == 2 else 0, dj // 2 if abs(dj) == 2 else 0
+        ai, aj = i + hi, j + hj
+        bi, bj = i + di - hi, j + dj - hj
+        if abs(di) == 1:
+            ai, bi = i, i + di
+        if abs(dj) == 1:
+            aj, bj = j, j + dj
+        s += u[ai, aj] + u[bi, bj]
+        n = 4.0
+    return s / n
+
+
+@njit(cache=True)
+def astar_kernel(
+    u, height, blocked, cell_n_m, cell_e_m, moves, weight, bounded, n_bins, bin_m, climb_max, si, sj, gi, gj
+):
+    """A* over states (cell, featureless-stretch bin); returns (cost, path as (n, 2) cells; empty if none).
+
+    bounded False: no featureless bound (n_bins 1). Else a state's bin is round(stretch / bin_m) and a
+    featureless edge that would take it to n_bins or beyond is not allowed."""
+    ni, nj = u.shape
+    n_states = ni * nj * n_bins
+    g = np.full(n_states, np.inf)
+    parent = np.full(n_states, -1, np.int64)
+    done = np.zeros(n_states, np.bool_)
+    cap = n_states * moves.shape[0] + 1
+    keys = np.empty(cap)
+    vals = np.empty(cap, np.int64)
+    lengths = np.empty(moves.shape[0])
+    for m in range(moves.shape[0]):
+        lengths[m] = math.hypot(moves[m, 0] * cell_n_m, moves[m, 1] * cell_e_m)
+    s0 = (si * nj + sj) * n_bins
+    g[s0] = 0.0
+    h0 = 0.999 * math.hypot((gi - si) * cell_n_m, (gj - sj) * cell_e_m)
+    n = _heap_push(keys, vals, 0, h0, s0)
+    goal_state = -1
+    while n > 0:
+        _, s, n = _heap_pop(keys, vals, n)
+        if done[s]:
+            continue
+        done[s] = True
+        cell = s // n_bins
+        b = s - cell * n_bins
+        i = cell // nj
+        j = cell - i * nj
+        if i == gi and j == gj:
+            goal_state = s
+            break
+        for m in range(moves.shape[0]):
+            di, dj = moves[m, 0], moves[m, 1]
+            ii, jj = i + di, j + dj
+            if ii < 0 or ii >= ni or jj < 0 or jj >= nj or blocked[ii, jj]:
+                continue
+            if climb_max > 0.0 and (height[ii, jj] - height[i, j]) > climb_max * lengths[m]:
+                continue
+            ue = edge_featureless(u, i, j, di, dj)
+            nb = 0
+            if bounded and ue > FEATURELESS_EDGE:
+                nb = int(round(b * 1.0 + lengths[m] / bin_m))
+                if nb >= n_bins:
+                    continue
+            t = (ii * nj + jj) * n_bins + nb
+            if done[t]:
+                continue
+            gt = g[s] + lengths[m] * (1.0 + weight * ue)
+            if gt < g[t]:
+                g[t] = gt
+                parent[t] = s
+                ht = 0.999 * math.hypot((gi - ii) * cell_n_m, (gj - jj) * cell_e_m)
+                n = _heap_push(keys, vals, n, gt + ht, t)
+    if goal_state < 0:
+        return np.inf, np.zeros((0, 2), np.int64)
+    count = 0
+    s = goal_state
+    while s >= 0:
+        count += 1
+        s = parent[s]
+    path = np.empty((count, 2), np.int64)
+    s = goal_state
+    k = count - 1
+    while s >= 0:
+        cell = s // n_bins
+        path[k, 0] = cell // nj
+        path[k, 1] = cell - (cell // nj) * nj
+        k -= 1
+        s = parent[s]
+    return g[goal_state], path
+
+
+@njit(cache=True)
+def _featureless_runs(ds, feat):
+    """(longest, final) featureless stretch (m) of samples with lengths ds and featureless flags feat."""
+    run = 0.0
+    longest = 0.0
+    for k in range(ds.shape[0]):
+        run = run + ds[k] if feat[k] else 0.0
+        if run > longest:
+            longest = run
+    return longest, run
+
+
+# ------------------------------------------------------------------------------------------ planner
+
+
+class TerrainInformationPlanner:
+    """Plans routes on one map (the cost map is built once, in the constructor). See the module docstring."""
+
+    def __init__(self, map_dem: Dem, config: PlannerConfig | None = None):
+        self.config = config if config is not None else PlannerConfig()
+        if not isinstance(self.config, PlannerConfig):
+            raise ValueError(f"config must be a PlannerConfig, got {type(self.config).__name__}")
+        c = self.config
+        self.map_dem = map_dem
+        self.grid: InformationGrid = information_grid(
+            map_dem, c.cell_m, c.sigma_m, c.window_m, c.informative_crlb_m, c.featureless_crlb_m
+        )
+        ni, nj = self.grid.shape
+        k = c.edge_margin_cells
+        self.blocked = np.zeros((ni, nj), np.bool_)
+        if k:
+            self.blocked[:k, :] = self.blocked[-k:, :] = True
+            self.blocked[:, :k] = self.blocked[:, -k:] = True
+        self.blocked |= ~np.isfinite(self.grid.height_m)
+        self._height = np.where(np.isfinite(self.grid.height_m), self.grid.height_m, 0.0)
+        self._bin_m = 0.5 * min(self.grid.cell_n_m, self.grid.cell_e_m)
+
+    # ------------------------------------------------------------------------- checks and geometry
+    def check_endpoint(self, name: str, lat_rad: float, lon_rad: float) -> tuple[int, int]:
+        """The planning cell of a start or goal; ValueError naming it when it is off the map or too near the
+        map's edge."""
+        for v in (lat_rad, lon_rad):
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
+                raise ValueError(f"{name} must be finite latitude/longitude, got {lat_rad!r}, {lon_rad!r}")
+        deg = (math.degrees(lat_rad), math.degrees(lon_rad))
+        if not self.map_dem.contains(lat_rad, lon_rad):
+            b = np.degrees(self.map_dem.bounds)
+            raise ValueError(
+                f"{name} ({deg[0]:.5f}, {deg[1]:.5f}) deg is off the map {self.map_dem.name!r} "
+                f"(lat {b[0]:.4f}..{b[1]:.4f}, lon {b[2]:.4f}..{b[3]:.4f} deg)"
+            )
+        i, j = self.grid.cell_of(lat_rad, lon_rad)
+        if not self.grid.contains_cell(i, j) or self.blocked[i, j]:
+            raise ValueError(
+                f"{name} ({deg[0]:.5f}, {deg[1]:.5f}) deg is within "
+                f"{self.config.edge_margin_cells} planning cells ({self.config.cell_m:g} m) of "
+                f"the map's edge (or over a void)"
+            )
+        return i, j
+
+    def _samples(self, lats: np.ndarray, lons: np.ndarray):
+        """(step lengths (m), featureless factor) of samples every quarter cell along the legs."""
+        step_m = 0.25 * min(self.grid.cell_n_m, self.grid.cell_e_m)
+        ds_all, u_all = [], []
+        for k in range(len(lats) - 1):
+            dn, de = latlon_to_ned_offset(lats[k], lons[k], 0.0, lats[k + 1], lons[k + 1])
+            d = math.hypot(dn, de)
+            n = max(1, int(math.ceil(d / step_m)))
+            f = (np.arange(n) + 0.5) / n
+            la, lo = ned_offset_to_latlon(lats[k], lons[k], 0.0, f * dn, f * de)
+            ds_all.append(np.full(n, d / n))
+            u_all.append(self.grid.featureless_at(la, lo))
+        return np.concatenate(ds_all), np.concatenate(u_all)
+
+    def evaluate(self, lats_rad, lons_rad) -> dict:
+        """Figures of a polyline (rad arrays) on the cost map: length_m, featureless_m, longest and final
+        featureless stretch (m), cost J (sampled every quarter cell)."""
+        lats, lons = np.asarray(lats_rad, float), np.asarray(lons_rad, float)
+        ds, u = self._samples(lats, lons)
+        feat = u > FEATURELESS_EDGE
+        longest, run = _featureless_runs(ds, feat)
+        return {
+            "length_m": float(ds.sum()),
+            "featureless_m": float(ds[feat].sum()),
+            "longest_featureless_m": float(longest),
+            "final_featureless_m": float(run),
+            "cost": float(np.sum(ds * (1.0 + self.config.weight * u))),
+        }
+
+    def _segment_ok(self, la0, lo0, la1, lo1, budget: float) -> bool:
+        """A straight shortcut is allowed: J no larger than `budget`, featureless bound kept, not blocked."""
+        ev = self.evaluate([la0, la1], [lo0, lo1])
+        if ev["cost"] > budget * (1.0 + 1e-9):
+            return False
+        c = self.config
+        if c.max_featureless_m is not None and ev["longest_featureless_m"] > c.max_featureless_m:
+            return False
+        n = max(2, int(math.ceil(ev["length_m"] / (0.25 * min(self.grid.cell_n_m, self.grid.cell_e_m)))))
+        dn, de = latlon_to_ned_offset(la0, lo0, 0.0, la1, lo1)
+        f = np.linspace(0.0, 1.0, n)
+        la, lo = ned_offset_to_latlon(la0, lo0, 0.0, f * dn, f * de)
+        i = np.floor((la - self.grid.lat0_rad) / self.grid.dlat_rad + 0.5).astype(int)
+        j = np.floor((lo - self.grid.lon0_rad) / self.grid.dlon_rad + 0.5).astype(int)
+        ni, nj = self.grid.shape
+        if np.any((i < 0) | (i >= ni) | (j < 0) | (j >= nj)) or np.any(self.blocked[i, j]):
+            return False
+        if c.climb_gradient_max is not None:
+            h = self._height[i, j]
+            if np.any(np.diff(h) > c.climb_gradient_max * ev["length_m"] / (n - 1) * 1.5):
+                return False
+        return True
+
+    def _string_pull(self, lats, lons):
+        """Greedy shortcuts along the grid path (each keeps J and the bounds, see _segment_ok)."""
+        seg_cost = np.array(
+            [self.evaluate(lats[k : k + 2], lons[k : k + 2])["cost"] for k in range(len(lats) - 1)]
+        )
+        cum = np.concatenate([[0.0], np.cumsum(seg_cost)])
+        keep = [0]
+        a = 0
+        bound = self.config.max_featureless_m
+        while a < len(lats) - 1:
+            b = a + 1
+            for c in range(a + 2, len(lats)):
+                if not self._segment_ok(lats[a], lons[a], lats[c], lons[c], cum[c] - cum[a]):
+                    break
+                # a featureless stretch may run on across waypoints: judge the whole route (a shortcut with
+                # no featureless sample only breaks stretches, so it cannot lengthen one)
+                seg = self.evaluate(lats[[a, c]], lons[[a, c]]) if bound is not None else None
+                if seg is not None and seg["featureless_m"] > 0.0:
+                    idx = keep + list(range(c, len(lats)))
+                    if self.evaluate(lats[idx], lons[idx])["longest_featureless_m"] > bound:
+                        break
+                b = c
+            keep.append(b)
+            a = b
+        return lats[keep], lons[keep]
+
+    def _thin_turns(self, lats, lons):
+        """Remove waypoints whose fillet does not fit half of an adjacent leg (see the module docstring)."""
+        c = self.config
+        R = c.turn_radius_m
+        base = self.evaluate(lats, lons)
+        limit = base["cost"] * (1.0 + c.turn_cost_tolerance)
+        changed = True
+        while changed and len(lats) > 2:
+            changed = False
+            for k in range(1, len(lats) - 1):
+                n0, e0 = latlon_to_ned_offset(lats[k - 1], lons[k - 1], 0.0, lats[k], lons[k])
+                n1, e1 = latlon_to_ned_offset(lats[k], lons[k], 0.0, lats[k + 1], lons[k + 1])
+                dchi = abs(
+                    math.atan2(
+                        math.sin(math.atan2(e1, n1) - math.atan2(e0, n0)),
+                        math.cos(math.atan2(e1, n1) - math.atan2(e0, n0)),
+                    )
+                )
+                need = R * math.tan(min(dchi, math.radians(170.0)) / 2.0)
+                if need <= 0.5 * min(math.hypot(n0, e0), math.hypot(n1, e1)):
+                    continue
+                la2, lo2 = np.delete(lats, k), np.delete(lons, k)
+                ev = self.evaluate(la2, lo2)
+                if ev["cost"] > limit:
+                    continue
+                if c.max_featureless_m is not None and ev["longest_featureless_m"] > c.max_featureless_m:
+                    continue
+                if not self._segment_ok(la2[k - 1], lo2[k - 1], la2[k], lo2[k], np.inf):
+                    continue
+                lats, lons = la2, lo2
+                changed = True
+                break
+        return lats, lons
+
+    # ------------------------------------------------------------------------------------ plan
+    def plan(
+        self, start_lat_rad: float, start_lon_rad: float, goal_lat_rad: float, goal_lon_rad: float
+    ) -> PlannedRoute:
+        """The route of least J from the start to the goal (see the module docstring)."""
+        c = self.config
+        si, sj = self.check_endpoint("start", start_lat_rad, start_lon_rad)
+        gi, gj = self.check_endpoint("goal", goal_lat_rad, goal_lon_rad)
+        if c.max_featureless_m is None:
+            n_bins = 1
+        else:
+            n_bins = int(math.floor(c.max_featureless_m / self._bin_m)) + 1
+        climb = -1.0 if c.climb_gradient_max is None else float(c.climb_gradient_max)
+        cost, path = astar_kernel(
+            self.grid.featureless,
+            self._height,
+            self.blocked,
+            self.grid.cell_n_m,
+            self.grid.cell_e_m,
+            MOVES,
+            float(c.weight),
+            c.max_featureless_m is not None,
+            n_bins,
+            self._bin_m,
+            climb,
+            si,
+            sj,
+            gi,
+            gj,
+        )
+        if len(path) == 0:
+            bound = (
+                ""
+                if c.max_featureless_m is None
+                else f" with no featureless stretch over {c.max_featureless_m:g} m"
+            )
+            climb_s = "" if c.climb_gradient_max is None else f", climb gradient <= {c.climb_gradient_max:g}"
+            raise RouteNotFoundError(
+                f"no route found from ({math.degrees(start_lat_rad):.5f}, "
+                f"{math.degrees(start_lon_rad):.5f}) to ({math.degrees(goal_lat_rad):.5f}, "
+                f"{math.degrees(goal_lon_rad):.5f}) deg{bound}{climb_s} on the map "
+                f"{self.map_dem.name!r}"
+            )
+        la, lo = self.grid.latlon_of(path[:, 0], path[:, 1])
+        la, lo = np.array(la, float), np.array(lo, float)
+        la[0], lo[0], la[-1], lo[-1] = start_lat_rad, start_lon_rad, goal_lat_rad, goal_lon_rad
+        if len(la) > 2:
+            la, lo = self._string_pull(la, lo)
+            la, lo = self._thin_turns(la, lo)
+        ev = self.evaluate(la, lo)
+        dn, de = latlon_to_ned_offset(start_lat_rad, start_lon_rad, 0.0, goal_lat_rad, goal_lon_rad)
+        wps = [(math.degrees(a), math.degrees(b), float(c.agl_m)) for a, b in zip(la, lo, strict=False)]
+        return PlannedRoute(
+            wps,
+            ev["length_m"],
+            math.hypot(dn, de),
+            ev["featureless_m"],
+            ev["longest_featureless_m"],
+            ev["final_featureless_m"],
+            ev["cost"],
+            float(c.weight),
+            grid_path=path,
+        )
+
+
+def plot_route(
+    path, planner: TerrainInformationPlanner, routes: dict[str, PlannedRoute], title: str = ""
+) -> None:
+    """PNG of routes over the planner's information map (log10 CRLB of the cells; featureless bright)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    g = planner.grid
+    ni, nj = g.shape
+    lat = np.degrees(g.lat0_rad + np.array([-0.5, ni - 0.5]) * g.dlat_rad)
+    lon = np.degrees(g.lon0_rad + np.array([-0.5, nj - 0.5]) * g.dlon_rad)
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    crlb = np.log10(np.clip(np.where(np.isfinite(g.crlb_m), g.crlb_m, 1e4), 0.1, 1e4))
+    im = ax.imshow(
+        crlb,
+        origin="lower",
+        extent=(lon[0], lon[1], lat[0], lat[1]),
+        cmap="magma_r",
+        aspect="auto",
+        vmin=0.0,
+        vmax=max(3.0, float(np.nanmax(crlb))),
+    )
+    fig.colorbar(im, ax=ax, label="log10 position CRLB of the map's terrain (m)")
+    colours = ["tab:cyan", "tab:green", "tab:blue", "white"]
+    for k, (name, r) in enumerate(routes.items()):
+        w = np.array(r.waypoints_deg)
+        ax.plot(
+            w[:, 1],
+            w[:, 0],
+            "-o",
+            ms=3,
+            color=colours[k % len(colours)],
+            label=f"{name}: {r.length_m / 1000:.1f} km, featureless {r.featureless_m / 1000:.1f} km",
+        )
+    if routes:
+        w = np.array(next(iter(routes.values())).waypoints_deg)
+        ax.plot(w[0, 1], w[0, 0], "k^", ms=9, label="start")
+        ax.plot(w[-1, 1], w[-1, 0], "k*", ms=12, label="goal")
+    ax.set_xlabel("longitude (deg)")
+    ax.set_ylabel("latitude (deg)")
+    ax.set_title(title or "planned route over the terrain information of the map")
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
