@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from acq_track_helpers import fly, frames_for, horizontal_error_m, initial_estimate, trajectory
 
 import terrain
 from navigators import registry
@@ -24,7 +25,6 @@ from navigators.acquisition_tracking.integrity import OutputAverage, terrain_snr
 from navigators.acquisition_tracking.profile import plumb_height_m
 from navigators.protocol import EXTRA_INNOVATION, EXTRA_MEASUREMENT_TIME, EXTRA_NIS
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from tests.acq_track_helpers import fly, frames_for, horizontal_error_m, initial_estimate, trajectory
 
 LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
 H_MSL = 1400.0

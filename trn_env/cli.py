@@ -4,6 +4,7 @@
     trn-env scenarios
     trn-env validate SCENARIO
     trn-env bench [--quick]
+    trn-env precompile [--workers N]
     trn-env campaign FILE [--out DIR] [--workers N] [--backend local|ray] [--address ADDR] [--resume]
                      [--check BASELINE.json] [--write-baseline BASELINE.json]
     trn-env report DIR [--out DIR]
@@ -44,6 +45,9 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("scenarios", help="list the built-in scenarios")
     val = sub.add_parser("validate", help="check a scenario file and list every problem")
     val.add_argument("scenario")
+    pre = sub.add_parser("precompile", help="compile the numba kernels of every built-in navigator once, "
+                                            "on all cores (after an install; later runs load the cache)")
+    pre.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     bench = sub.add_parser("bench", help="print throughput figures as one JSON object")
     bench.add_argument("--quick", action="store_true", help="shorter measurements (less precise)")
     camp = sub.add_parser("campaign", help="fly a Monte Carlo campaign (seeds x navigators x sweeps)")
@@ -283,6 +287,13 @@ def _plotter(result):
     return plot
 
 
+def cmd_precompile(args) -> int:
+    from trn_env.sim.precompile import precompile
+    wall_s = precompile(workers=args.workers, report=lambda line: print(line, file=sys.stderr, flush=True))
+    print(f"kernels compiled and cached in {wall_s:.1f} s", file=sys.stderr)
+    return 0
+
+
 def cmd_bench(args) -> int:
     from trn_env.bench.runner import run_all
     print(json.dumps(run_all(quick=args.quick), indent=2))
@@ -434,6 +445,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_fly(args)
         if args.command == "bench":
             return cmd_bench(args)
+        if args.command == "precompile":
+            return cmd_precompile(args)
         if args.command == "campaign":
             return cmd_campaign(args)
         if args.command == "report":
