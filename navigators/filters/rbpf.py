@@ -34,11 +34,11 @@ At run time it never raises: a NaN or invalid IRA sample is skipped, particles w
 return (off the map) get zero weight; if every weight vanishes the cloud is re-initialised around the INS
 with the prior spread; each is counted in Health (status "degraded") with an event.
 Integrity (navigators.integrity.InnovationMonitor): each IRA update's NIS (2 dof; a sample every particle
-rejects counts as infinite) enters a window of integrity_window updates; when the sum leaves its chi-square
-band (probability integrity_alpha) Health says "degraded" (ok False) and the particles' positions are
-re-spread (resampled, then N(0, recovery_sigma_m^2) added horizontally), both logged; a whole window still
-out of band after a re-spread re-spreads again, twice as wide (up to 8 x); back in band the status is
-"acquiring" until the cloud's spread is below 30 m again ("ok").
+rejects counts as infinite; capped as terrain_filter.capped_nis) enters a window of integrity_window
+updates; when the sum leaves its chi-square band (probability integrity_alpha) Health says "degraded" (ok
+False) and the particles' positions are re-spread (resampled, then N(0, recovery_sigma_m^2) added
+horizontally), both logged; a whole window still out of band after a re-spread re-spreads again, twice as
+wide (up to 8 x); back in band the status is "acquiring" until the cloud's spread is below 30 m ("ok").
 Randomness: only from `rng` (the scenario's navigator stream), so one seed fixes a run bit for bit.
 """
 
@@ -49,6 +49,7 @@ import math
 import numpy as np
 
 import navigators.filters._rbpf_kernels as kern
+from navigators.filters.terrain_filter import capped_nis
 from navigators.frames import SensorFrames
 from navigators.inertial.error_model_15 import transition_over_history
 from navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
@@ -446,7 +447,7 @@ class RaoBlackwellizedPF:
 
     def _integrity_test(self, te: float, nis: float, dof: int) -> None:
         """Feed the innovation test; on entering "degraded" re-spread the particles' positions (logged)."""
-        verdict = self.integrity.add(te, nis, dof)
+        verdict = self.integrity.add(te, capped_nis(self.integrity, nis, dof), dof)
         self._integrity_extra = verdict.extra()
         if verdict.changed:
             self.health.events.append((float(te), verdict.message))

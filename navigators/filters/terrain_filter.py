@@ -43,6 +43,14 @@ AIDING = ("ira", "radar_altimeter", "both")
 MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^3 x recovery_sigma_m
 
 
+def capped_nis(monitor: InnovationMonitor, nis: float, dof: int) -> float:
+    """The NIS an update adds to the innovation test: at most (just above) its one-update 1 - alpha/2
+    chi-square quantile. The heavy-tailed likelihood takes one bad sample without harm, so one alone must not
+    flag the filter; two such in a window do, and so does a run of them (a bias, a shifted map)."""
+    hi = monitor.band(dof)[1] * (1.0 + 1e-6)
+    return min(float(nis), hi) if math.isfinite(float(nis)) else hi
+
+
 def check_positive(name: str, value, allow_zero: bool = False) -> float:
     """float(value), or ValueError naming the setting if it is not a finite positive (or >= 0) number."""
     try:
@@ -74,12 +82,13 @@ class InsRiddenFilter:
     above it. Vertical channel: gravity_model, tau_baro_s, imu_samples, baro_geopotential as in
     navigators.filters.InsTrnNavigator; the INS height starts at the first baro height.
     Integrity (navigators.integrity.InnovationMonitor): every terrain update's NIS (an update every cell or
-    particle rejects counts as infinite) goes into a sliding window of integrity_window updates; when its
-    sum leaves the chi-square band of probability integrity_alpha, Health says "degraded" (ok False) and
-    the filter recovers (`_recover`: the belief is re-spread around its mean with recovery_sigma_m added to
-    the horizontal 1-sigma, at least the initial spread), each step an event; if a whole window after a
-    re-spread is still out of band it re-spreads again, twice as wide (up to 8 x recovery_sigma_m); back in
-    band, the status follows the belief's spread again ("acquiring", then "ok").
+    particle rejects counts as infinite; each enters capped, see `capped_nis`) goes into a sliding window of
+    integrity_window updates; when its sum leaves the chi-square band of probability integrity_alpha,
+    Health says "degraded" (ok False) and the filter recovers (`_recover`: the belief is re-spread around
+    its mean with recovery_sigma_m added to the horizontal 1-sigma, at least the initial spread), each step
+    an event; if a whole window after a re-spread is still out of band it re-spreads again, twice as wide
+    (up to 8 x recovery_sigma_m); back in band, the status follows the belief's spread again
+    ("acquiring", then "ok").
     """
 
     name = "terrain_filter"
@@ -345,7 +354,7 @@ class InsRiddenFilter:
 
     def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
         """Feed the innovation test; on entering "degraded" re-spread the belief (`_recover`), logged."""
-        verdict = self.integrity.add(t_s, nis, dof)
+        verdict = self.integrity.add(t_s, capped_nis(self.integrity, nis, dof), dof)
         self.extra.update(verdict.extra())
         if verdict.changed:
             self.health.events.append((float(t_s), verdict.message))
