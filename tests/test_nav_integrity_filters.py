@@ -179,3 +179,41 @@ def test_integrity_settings_are_validated(dem, name):
         registry.create(name, dem=dem, integrity_alpha=float("nan"), **kw)
     with pytest.raises(ValueError, match="recovery_sigma_m"):
         registry.create(name, dem=dem, recovery_sigma_m=-1.0, **kw)
+
+
+def test_acq_track_reports_the_windowed_statistic_and_flags_consistently(dem):
+    """acq_track in lock (the flight of tests/test_acq_track.py): the windowed statistic is the sum of the
+    last WINDOW in-lock NIS values (summed here by hand, each read once per new measurement time), its band
+    scipy's, and an in-lock epoch is "degraded" exactly when the sum is above the band."""
+    from navigators.acquisition_tracking import AcqTrackNavigator
+    from tests.acq_track_helpers import fly, initial_estimate, trajectory
+
+    lat0, lon0, h = math.radians(36.50), math.radians(-84.30), 1400.0
+    traj = trajectory(dem, lat0, lon0, h, lambda t: 81.0, lambda t: math.radians(33.0), 80.0)
+    nav = AcqTrackNavigator(dem=dem, aiding=False, integrity_window=WINDOW)
+    nav.reset(initial_estimate(traj, h, sigma_m=300.0, dn_m=300.0, de_m=-400.0, dv_mps=7.0,
+                               dpsi_rad=math.radians(-6.0)))
+    ests, _ = fly(nav, dem, traj, h, 60)
+    nis, ts, checked = [], [], 0
+    dt = nav.config.sample_period_s
+    for e in ests:
+        te = e.extra.get("measurement_t_s")
+        if te is None or (ts and te == ts[-1]):
+            continue
+        ts.append(te)
+        nis.append(e.extra[EXTRA_NIS])
+        # only where the last WINDOW in-lock epochs are consecutive and each was seen in its own frame
+        if len(ts) < WINDOW or not np.allclose(np.diff(ts[-WINDOW:]), dt):
+            continue
+        assert e.extra[EXTRA_INTEGRITY_STATISTIC] == pytest.approx(sum(nis[-WINDOW:]))
+        _band_is_chi_square(e)
+        if e.extra["lock_state"] == "tracking":
+            above = e.extra[EXTRA_INTEGRITY_STATISTIC] > e.extra[EXTRA_INTEGRITY_BAND][1]
+            assert (e.health.status == "degraded") == above
+        checked += 1
+    assert checked >= 10
+    with pytest.raises(ValueError, match="integrity_window"):
+        AcqTrackNavigator(dem=dem, integrity_window=0)
+    with pytest.raises(ValueError, match="integrity_alpha"):
+        AcqTrackNavigator(dem=dem, integrity_alpha=1.5)
+
