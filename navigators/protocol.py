@@ -29,6 +29,10 @@ EXTRA_NIS_DOF = "nis_dof"                  # int: degrees of freedom of nis
 EXTRA_LOG_LIKELIHOOD = "log_likelihood"    # float: log p(measurement | past), natural log
 EXTRA_ESS = "ess"                          # float: particle filters' effective sample size before resampling
 EXTRA_MEASUREMENT_TIME = "measurement_t_s"  # float: time of the update these keys describe
+# the navigator self-integrity test (navigators.integrity.InnovationMonitor) after its latest update:
+EXTRA_INTEGRITY_STATISTIC = "integrity_statistic"  # float: sum of the window's NIS values
+EXTRA_INTEGRITY_DOF = "integrity_dof"              # int: its chi-square degrees of freedom
+EXTRA_INTEGRITY_BAND = "integrity_band"            # (lower, upper): its chi-square band at integrity_alpha
 
 
 @dataclass

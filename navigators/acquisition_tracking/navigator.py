@@ -17,7 +17,11 @@ Position: the replica's newest sample (transect start + the tracked speed and he
 the output velocity to the frame's end. The transect's start for the next epoch is its second sample.
 
 Health.status state machine (documented in Health): acquiring -> ok <-> degraded -> lost -> acquiring ...;
-each transition's reason is an event.
+each transition's reason is an event. In lock, each epoch's NIS (the references' change against S, 2 dof)
+also feeds an InnovationMonitor (integrity_window epochs, band probability integrity_alpha); while its sum
+is above the band a tracking epoch is "degraded" instead of "ok" (its recovery is the re-acquisition the
+lock detection already asks for: out of lock lost_after_epochs epochs in a row). Overlapping transects
+share N - 1 samples, so successive NIS values are correlated and the band is a loose guide here.
 
 Covariance (north, east): per epoch the along-track sigma grows by T sigma_v and the cross-track by
 V T sigma_psi (linearly: the aiding's errors are biases over a transect) - the aiding's sigmas while not in
@@ -76,6 +80,7 @@ from navigators.acquisition_tracking.integrity import (
 from navigators.acquisition_tracking.profile import Sample, Transect, geometric_height_m, plumb_height_m
 from navigators.acquisition_tracking.settings import AcqTrackConfig
 from navigators.frames import SensorFrames
+from navigators.integrity.innovation_monitor import InnovationMonitor
 from navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
@@ -150,6 +155,7 @@ class AcqTrackNavigator:
         if unknown:
             raise ValueError(f"unknown acq_track setting(s) {unknown}; known: {list(AcqTrackConfig.names())}")
         self.config = cfg = AcqTrackConfig(**settings)
+        self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
         if dem is None:
             raise ValueError("dem: the navigator's terrain map is required")
         if isinstance(dem, str):
@@ -242,6 +248,8 @@ class AcqTrackNavigator:
         self.acquisition_s = math.nan
         self.acquisition_total_s = 0.0
         self.last_innovation = None
+        self.integrity.reset()
+        self._integrity_extra: dict = {}
         self.t_epoch = math.nan
         self.next_k = None
         self._tails = {
@@ -839,6 +847,10 @@ class AcqTrackNavigator:
             ]
         )
         self.last_innovation = (s.t_s, innov, S)
+        verdict = self.integrity.add(s.t_s, float(innov @ np.linalg.solve(S, innov)), 2)
+        self._integrity_extra = verdict.extra()
+        if verdict.changed:
+            self.health.events.append((s.t_s, f"acq_track: {verdict.message}"))
         self.bad_epochs = 0
         k = 1.0 / max(cfg.transect_samples, 1)  # the references' running mean over about a transect
         self.b_mean = (
@@ -885,7 +897,9 @@ class AcqTrackNavigator:
         s_cr = math.sqrt(min(max(p_tc[1, 1], 0.0), var_cr))
         rho = p_tc[0, 1] / math.sqrt(p_tc[0, 0] * p_tc[1, 1]) if p_tc[0, 0] > 0 and p_tc[1, 1] > 0 else 0.0
         self.P = G @ np.array([[s_al**2, rho * s_al * s_cr], [rho * s_al * s_cr, s_cr**2]]) @ G.T
-        if converged:
+        if converged and self.integrity.degraded:  # in lock, but the references jump: flagged
+            self._set_lock("tracking", s.t_s, "degraded", "in lock, innovation test above its band")
+        elif converged:
             self._set_lock("tracking", s.t_s, "ok", "in lock")
         else:  # the V is there but a loop hit the 101-iteration break: estimate kept, flagged
             self._set_lock("tracking", s.t_s, "degraded", "a loop did not converge (101-iteration break)")
@@ -1013,6 +1027,7 @@ class AcqTrackNavigator:
                     EXTRA_LOG_LIKELIHOOD: float(-0.5 * (nis + math.log(np.linalg.det(2 * math.pi * S)))),
                 }
             )
+        extra.update(self._integrity_extra)
         h = Health(
             ok=self.health.ok,
             status=self.health.status,

@@ -126,6 +126,8 @@ class AcqTrackConfig:
     lock_covariance_scale: float = 2.0  # calibration of the in-lock position bound (navigator.py)
     baro_geopotential: bool = True
     baro_bias_sigma_m: float = 10.0
+    integrity_window: int = 3  # in-lock epochs in the innovation test's window (InnovationMonitor)
+    integrity_alpha: float = 0.01  # probability outside its chi-square band
 
     def __post_init__(self):
         n = self.transect_samples

@@ -242,6 +242,7 @@ class InsTrnNavigator:
         self._gnss_up = False           # GNSS fixes arriving (loss reported once gnss_timeout_s passes)
         self._height_initialised = False
         self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
+        self._integrity_extra: dict = {}
         rh = 2 * self.half_cells if recovery_half_cells is None else recovery_half_cells
         if isinstance(rh, bool) or not isinstance(rh, (int, np.integer)) or rh < self.half_cells:
             raise ValueError(f"recovery_half_cells must be an integer >= half_cells ({self.half_cells}), "
@@ -308,6 +309,7 @@ class InsTrnNavigator:
         self.batch.clear()
         self.fixes = []
         self.integrity.reset()
+        self._integrity_extra = {}
         self._set_search(self.nominal_half_cells)
         self._update_extra = {}
         self._t_ekf = float(initial.t_s)
@@ -785,6 +787,7 @@ class InsTrnNavigator:
     def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
         """Feed the innovation test; on entering "degraded" recover (covariance inflation, wider search)."""
         verdict = self.integrity.add(t_s, nis, dof)
+        self._integrity_extra = verdict.extra()
         if not verdict.changed:
             return
         self.health.events.append((t_s, verdict.message))
@@ -835,6 +838,7 @@ class InsTrnNavigator:
                 last_fix_valid=f.valid,
             )
         extra.update(self._update_extra)
+        extra.update(self._integrity_extra)
         health = Health(
             ok=self.health.ok,
             status=self.health.status,

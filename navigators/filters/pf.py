@@ -240,6 +240,7 @@ class ParticleFilter(InsRiddenFilter):
         S = float(np.sum(w0[ok] * ((resid[ok] - innov) ** 2 + var_b[ok])) / wm)
         out = self._apply_loglik(t_s, self._ll, f"{kind} update")
         if out is None:
+            self._integrity_test(t_s, math.inf, 1)
             return
         log_lik, ess = out
         self._set_update_extra(t_s, [innov], [[S]], log_lik)
@@ -248,7 +249,7 @@ class ParticleFilter(InsRiddenFilter):
         if n_nan:
             self._count_skip(t_s, "particles_off_map", n_nan,
                              f"{n_nan} particles off the map (outlier density only)")
-        if self.health.status == "degraded":
+        if self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
 
     def _gnss_update(self, t_s, st, payload) -> None:
@@ -262,8 +263,18 @@ class ParticleFilter(InsRiddenFilter):
             r2 = self.gnss_velocity_sigma_mps ** 2
             ll -= 0.5 * ((v[0] - st[3] - self.dv[:, 0]) ** 2 + (v[1] - st[4] - self.dv[:, 1]) ** 2) / r2
             self._gnss_velocity_ins(v, carried=(0, 1))
-        if self._apply_loglik(t_s, ll, "GNSS update") is not None and self.health.status == "degraded":
+        if (self._apply_loglik(t_s, ll, "GNSS update") is not None and self.health.status == "degraded"
+                and not self.integrity.degraded):
             self.health.status = "acquiring"
+
+    def _recover(self, t_s: float) -> str:
+        """The cloud re-drawn around its mean with the widened horizontal covariance (initial otherwise)."""
+        mean, c9 = self._recovery_cov9()
+        init = self._init_cov
+        self._init_belief(c9, mean)
+        self._init_cov = init          # the underflow re-initialisation keeps the initial spread
+        return (f"{self.M} particles re-drawn around the mean, horizontal 1-sigma "
+                f"{math.sqrt(0.5 * np.trace(c9[:2, :2])):.0f} m")
 
     # ------------------------------------------------------------------------------------ output
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:

@@ -214,6 +214,7 @@ class PointMassFilter(InsRiddenFilter):
                     self._degrade(t_s, "grid_off_map", "IRA update skipped: the whole grid is off the map")
                 else:
                     self._underflow(t_s, "IRA update")
+                    self._integrity_test(t_s, math.inf, 1)
                 return
             self._n_underflow = 0
             log_lik, pred_mean, pred_var = float(o[0]), float(o[1]), float(o[2])
@@ -241,6 +242,7 @@ class PointMassFilter(InsRiddenFilter):
                 gam = np.where(np.isfinite(resid), np.exp(np.minimum(gauss - ll, 0.0)), 0.0)
             log_lik = self._apply_loglik(t_s, ll, "altimeter update")
             if log_lik is None:
+                self._integrity_test(t_s, math.inf, 1)
                 return
             kern.bias_update(self.bias, gam * resid, self.P_b / S)
             self.P_b *= (1.0 - float(self._weights() @ gam) * self.P_b / S)
@@ -248,7 +250,7 @@ class PointMassFilter(InsRiddenFilter):
         self._set_update_extra(t_s, [h_meas - pred_mean], [[pred_var + S]], log_lik)
         if n_nan:
             self.health.skip(t_s, "cells_off_map", f"{n_nan} grid cells off the map (outlier density only)")
-        if self.health.status == "degraded":
+        if self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
         self._regrid()
 
@@ -266,7 +268,7 @@ class PointMassFilter(InsRiddenFilter):
         self.bias += K * (z_b - self.bias)
         self.P_b *= (1.0 - K)
         self._gnss_velocity_ins(v, carried=())
-        if self.health.status == "degraded":
+        if self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
         self._regrid()
 
@@ -293,6 +295,14 @@ class PointMassFilter(InsRiddenFilter):
         self.logw = np.maximum(lw - lw.max(), LOG_FLOOR)
         self.bias = np.ascontiguousarray(b.ravel())
         self._moments_cache = None
+
+    def _recover(self, t_s: float) -> str:
+        """The grid re-spread around its mean (spacing from the widened spread; the vertical offset kept)."""
+        mean, c9 = self._recovery_cov9()
+        self._init_belief(c9, (float(mean[0]), float(mean[1])))
+        self.bias[:] = mean[2]
+        return (f"grid re-spread around its mean, 1-sigma {math.sqrt(0.5 * np.trace(c9[:2, :2])):.0f} m, "
+                f"spacing {self.spacing:.1f} m")
 
     # ------------------------------------------------------------------------------------ output
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:

@@ -33,6 +33,12 @@ No barometer (seed 002: IMU and IRA only), so the INS vertical channel is free a
 At run time it never raises: a NaN or invalid IRA sample is skipped, particles whose hypothesis has no
 return (off the map) get zero weight; if every weight vanishes the cloud is re-initialised around the INS
 with the prior spread; each is counted in Health (status "degraded") with an event.
+Integrity (navigators.integrity.InnovationMonitor): each IRA update's NIS (2 dof; a sample every particle
+rejects counts as infinite; capped as terrain_filter.capped_nis) enters a window of integrity_window
+updates; when the sum leaves its chi-square band (probability integrity_alpha) Health says "degraded" (ok
+False) and the particles' positions are re-spread (resampled, then N(0, recovery_sigma_m^2) added
+horizontally), both logged; a whole window still out of band after a re-spread re-spreads again, twice as
+wide (up to 8 x); back in band the status is "acquiring" until the cloud's spread is below 30 m ("ok").
 Randomness: only from `rng` (the scenario's navigator stream), so one seed fixes a run bit for bit.
 """
 
@@ -43,9 +49,11 @@ import math
 import numpy as np
 
 import navigators.filters._rbpf_kernels as kern
+from navigators.filters.terrain_filter import capped_nis
 from navigators.frames import SensorFrames
 from navigators.inertial.error_model_15 import transition_over_history
 from navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from navigators.integrity.innovation_monitor import InnovationMonitor
 from navigators.measurements import ira_seed002 as ira_model
 from navigators.protocol import (
     EXTRA_ESS,
@@ -96,7 +104,8 @@ class RaoBlackwellizedPF:
     variance); acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
     q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (horizontal, vertical),
     gnss_vel_sigma_mps; imu_samples ("interval" | "instant"); gravity_gradient (error model, see
-    error_model_15).
+    error_model_15); integrity_window, integrity_alpha, recovery_sigma_m (the innovation test and its
+    recovery, see the module docstring).
     """
 
     def __init__(
@@ -127,6 +136,9 @@ class RaoBlackwellizedPF:
         gravity_gradient: bool = True,
         acquisition_spread_m: float = 10.0,
         map_sigma_m: float = 0.0,
+        integrity_window: int = 3,
+        integrity_alpha: float = 0.01,
+        recovery_sigma_m: float = 100.0,
         name: str = "rbpf",
     ):
         if dem is None:
@@ -192,6 +204,9 @@ class RaoBlackwellizedPF:
         self.gravity_gradient = bool(gravity_gradient)
         self.acquisition_spread_m = _positive("acquisition_spread_m", acquisition_spread_m, True)
         self.ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=imu_samples)
+        self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
+        self.recovery_sigma_m = _positive("recovery_sigma_m", recovery_sigma_m, True)
+        self.recoveries = 0
         # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
         self._ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(self.r_var)) * 1e4)
                           - math.log(2 * math.pi))
@@ -204,6 +219,9 @@ class RaoBlackwellizedPF:
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._init_cloud()
         self.health = Health(status="acquiring", ok=True)
+        self.integrity.reset()
+        self.recoveries = self._streak = self._since_recovery = 0
+        self._integrity_extra: dict = {}
         self._t_next = float(initial.t_s) + self.trn_period_s
         self._t_gnss_next = float(initial.t_s)
         self._Phi = np.eye(15)
@@ -356,7 +374,9 @@ class RaoBlackwellizedPF:
             self._normalise_resample(te, logw_prev)
         self._feedback()
         self._cov9 = self._covariance9()
-        if updated and self.health.status == "acquiring":
+        if self.integrity.degraded:
+            self.health.status, self.health.ok = "degraded", False
+        elif updated and self.health.status == "acquiring":
             sig = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0))
             if sig < 30.0:
                 self.health.status = "ok"
@@ -375,6 +395,7 @@ class RaoBlackwellizedPF:
             self.health.skip(te, "ira_no_hypothesis",
                              "IRA update skipped: no particle has a return (off map?)")
             self.health.status, self.health.ok = "degraded", True
+            self._integrity_test(te, math.inf, 2)
             return False
         pred = np.stack([out[:, ira_model.OUT_R], out[:, ira_model.OUT_THETA]], axis=1)
         e = np.where(ok[:, None], np.array(y_ira)[None, :] - pred, 0.0)
@@ -401,6 +422,7 @@ class RaoBlackwellizedPF:
             else:
                 self.health.skip(te, "ira_outlier", "IRA sample unexplained by every particle: skipped")
             self.health.status, self.health.ok = "degraded", True
+            self._integrity_test(te, math.inf, 2)
             return False
         self._n_rejected = 0
         if n_bad:
@@ -420,7 +442,39 @@ class RaoBlackwellizedPF:
             nis = float("nan")
         self._extra = {EXTRA_INNOVATION: nu, EXTRA_INNOVATION_COV: S, EXTRA_NIS: nis, EXTRA_NIS_DOF: 2,
                        EXTRA_LOG_LIKELIHOOD: float(lse - lse_prev), EXTRA_MEASUREMENT_TIME: te}
+        self._integrity_test(te, nis, 2)
         return True
+
+    def _integrity_test(self, te: float, nis: float, dof: int) -> None:
+        """Feed the innovation test; on entering "degraded" re-spread the particles' positions (logged)."""
+        verdict = self.integrity.add(te, capped_nis(self.integrity, nis, dof), dof)
+        self._integrity_extra = verdict.extra()
+        if verdict.changed:
+            self.health.events.append((float(te), verdict.message))
+        if verdict.degraded:
+            self.health.status, self.health.ok = "degraded", False
+            self._since_recovery += 1
+            # again, twice as wide, when a whole window after the last re-spread is still out of band
+            if verdict.changed or self._since_recovery >= self.integrity.window:
+                self._since_recovery = 0
+                self._streak = min(self._streak + 1, 4)
+                self.recoveries += 1
+                self._respread(te)
+        elif verdict.changed:
+            self._streak = 0
+            self.health.status, self.health.ok = "acquiring", True
+
+    def _respread(self, te: float) -> None:
+        """Resample by weight, then N(0, recovery_sigma_m^2) on every particle's horizontal position."""
+        w = self._weights()
+        idx = kern.systematic_resample(w, float(self.rng.random()))
+        self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
+        sig = self.recovery_sigma_m * 2.0 ** (self._streak - 1)
+        self.xn[:, :2] += self.rng.standard_normal((self.n, 2)) * sig
+        self.logw = np.full(self.n, -math.log(self.n))
+        self._cov9 = self._covariance9()
+        self.health.events.append((float(te), f"recovery: {self.n} particles re-spread, horizontal 1-sigma "
+                                               f"+{sig:.0f} m"))
 
     def _r_var_now(self) -> np.ndarray:
         """IRA measurement variances; while the cloud's horizontal spread exceeds acquisition_spread_m they
@@ -496,6 +550,7 @@ class RaoBlackwellizedPF:
         if not np.all(np.isfinite(st)):
             self.health.ok, self.health.status = False, "diverged"
         extra = dict(self._extra)
+        extra.update(self._integrity_extra)
         sig_ba = np.sqrt(np.einsum("k,kii->i", self._weights(), self.P[:, 6:9, 6:9]))
         extra.update(accel_bias_b_mps2=self.ins.accel_bias_b.copy(),
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),

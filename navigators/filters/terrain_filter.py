@@ -24,6 +24,7 @@ import numpy as np
 
 from navigators.frames import SensorFrames
 from navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, euler_from_C_bn, quat_to_dcm
+from navigators.integrity.innovation_monitor import InnovationMonitor
 from navigators.measurements.terrain_models import IRA_FORMULA_CODES, radii_m
 from navigators.protocol import (
     EXTRA_INNOVATION,
@@ -39,6 +40,15 @@ from navigators.protocol import (
 R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 G0 = 9.80665
 AIDING = ("ira", "radar_altimeter", "both")
+MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^3 x recovery_sigma_m
+
+
+def capped_nis(monitor: InnovationMonitor, nis: float, dof: int) -> float:
+    """The NIS an update adds to the innovation test: at most (just above) its one-update 1 - alpha/2
+    chi-square quantile. The heavy-tailed likelihood takes one bad sample without harm, so one alone must not
+    flag the filter; two such in a window do, and so does a run of them (a bias, a shifted map)."""
+    hi = monitor.band(dof)[1] * (1.0 + 1e-6)
+    return min(float(nis), hi) if math.isfinite(float(nis)) else hi
 
 
 def check_positive(name: str, value, allow_zero: bool = False) -> float:
@@ -71,6 +81,14 @@ class InsRiddenFilter:
     of the baro height's bias. converged_sigma_m: Health says "acquiring" while the horizontal 1-sigma is
     above it. Vertical channel: gravity_model, tau_baro_s, imu_samples, baro_geopotential as in
     navigators.filters.InsTrnNavigator; the INS height starts at the first baro height.
+    Integrity (navigators.integrity.InnovationMonitor): every terrain update's NIS (an update every cell or
+    particle rejects counts as infinite; each enters capped, see `capped_nis`) goes into a sliding window of
+    integrity_window updates; when its sum leaves the chi-square band of probability integrity_alpha,
+    Health says "degraded" (ok False) and the filter recovers (`_recover`: the belief is re-spread around
+    its mean with recovery_sigma_m added to the horizontal 1-sigma, at least the initial spread), each step
+    an event; if a whole window after a re-spread is still out of band it re-spreads again, twice as wide
+    (up to 8 x recovery_sigma_m); back in band, the status follows the belief's spread again
+    ("acquiring", then "ok").
     """
 
     name = "terrain_filter"
@@ -87,7 +105,8 @@ class InsRiddenFilter:
                  vertical_noise_m_per_sqrt_s: float = 0.05, converged_sigma_m: float = 50.0,
                  accel_noise_mps2_rthz: float = 10e-6 * G0 * 10.0, gyro_noise_rps_rthz: float = 1e-6,
                  gravity_model: str = "j2", tau_baro_s: float = 30.0, imu_samples: str = "interval",
-                 baro_geopotential: bool = True, name: str | None = None):
+                 baro_geopotential: bool = True, integrity_window: int = 3, integrity_alpha: float = 0.01,
+                 recovery_sigma_m: float = 100.0, name: str | None = None):
         if dem is None:
             raise ValueError("dem: the navigator's terrain map is required")
         if isinstance(dem, str):
@@ -135,6 +154,12 @@ class InsRiddenFilter:
             raise ValueError(f"gravity_model must be one of {list(GRAVITY_MODELS)}, got {gravity_model!r}")
         self.ins = StrapdownIns(gravity_model, check_positive("tau_baro_s", tau_baro_s), imu_samples)
         self.baro_geopotential = bool(baro_geopotential)
+        self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
+        self.recovery_sigma_m = check_positive("recovery_sigma_m", recovery_sigma_m, True)
+        self.recoveries = 0
+        self._streak = 0
+        self._since_recovery = 0
+        self._init_cov9 = np.eye(9)
         if name is not None:
             self.name = str(name)
         self.grid = dem.grid
@@ -168,6 +193,9 @@ class InsRiddenFilter:
         self._p_vel = self._p_vel0.copy()
         self._p_att = self._p_att0.copy()
         self._n_underflow = 0
+        self.integrity.reset()
+        self.recoveries = self._streak = self._since_recovery = 0
+        self._init_cov9 = cov.copy()
         self._init_belief(cov)
 
     def update(self, frames: SensorFrames) -> Estimate:
@@ -322,6 +350,41 @@ class InsRiddenFilter:
         self.extra[EXTRA_NIS_DOF] = int(innov.shape[0])
         self.extra[EXTRA_LOG_LIKELIHOOD] = float(log_lik)
         self.extra[EXTRA_MEASUREMENT_TIME] = float(t_s)
+        self._integrity_test(t_s, nis, int(innov.shape[0]))
+
+    def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
+        """Feed the innovation test; on entering "degraded" re-spread the belief (`_recover`), logged."""
+        verdict = self.integrity.add(t_s, capped_nis(self.integrity, nis, dof), dof)
+        self.extra.update(verdict.extra())
+        if verdict.changed:
+            self.health.events.append((float(t_s), verdict.message))
+        if verdict.degraded:
+            self.health.ok, self.health.status = False, "degraded"
+            self._since_recovery += 1
+            # again (wider) when a whole window of updates after the last re-spread is still out of band: the
+            # belief may have settled where the bad data put it
+            if verdict.changed or self._since_recovery >= self.integrity.window:
+                self._since_recovery = 0
+                self._streak = min(self._streak + 1, MAX_RECOVERY_DOUBLINGS)
+                self.recoveries += 1
+                self.health.events.append((float(t_s), "recovery: " + self._recover(t_s)))
+        elif verdict.changed:
+            self._streak = 0
+            self.health.ok, self.health.status = True, "acquiring"
+
+    def _recovery_sigma_now_m(self) -> float:
+        """recovery_sigma_m, doubled for each re-spread in a row that did not bring the test back in band."""
+        return self.recovery_sigma_m * 2.0 ** max(self._streak - 1, 0)
+
+    def _recovery_cov9(self) -> tuple[np.ndarray, np.ndarray]:
+        """(mean over [dn, de, b, dvn, dve, dpsi], 9 x 9 covariance) to re-spread the belief with: the
+        horizontal block is the belief's plus recovery_sigma_m^2, at least the initial one."""
+        mean, cov = self._moments()
+        c9 = self._init_cov9.copy()
+        ch = np.nan_to_num(cov[:2, :2]) + np.eye(2) * self._recovery_sigma_now_m() ** 2
+        if np.trace(ch) > np.trace(c9[:2, :2]):
+            c9[:2, :2] = ch
+        return np.nan_to_num(mean), c9
 
     def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
         """n samples skipped for `reason` (Health.skipped counts samples; one event says so)."""
@@ -338,6 +401,8 @@ class InsRiddenFilter:
         sig_h = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0))
         if not (np.all(np.isfinite(mean[:3])) and math.isfinite(sig_h)):
             self.health.ok, self.health.status = False, "diverged"
+        elif self.integrity.degraded:
+            self.health.ok, self.health.status = False, "degraded"
         elif self.health.status != "degraded":
             self.health.ok = True
             self.health.status = "ok" if sig_h <= self.converged_sigma_m * math.sqrt(2.0) else "acquiring"
@@ -389,4 +454,8 @@ class InsRiddenFilter:
         raise NotImplementedError
 
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _recover(self, t_s: float) -> str:
+        """Re-spread the belief after the innovation test failed; returns what was done (for the log)."""
         raise NotImplementedError

@@ -32,6 +32,8 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+from navigators.protocol import EXTRA_INTEGRITY_BAND, EXTRA_INTEGRITY_DOF, EXTRA_INTEGRITY_STATISTIC
+
 _BANDS: dict[tuple[float, int], tuple[float, float]] = {}   # (alpha, dof) -> band, shared
 
 
@@ -47,6 +49,11 @@ class Verdict:
     degraded: bool
     changed: bool
     message: str
+
+    def extra(self) -> dict:
+        """The windowed statistic and its band under the navigators.protocol EXTRA_INTEGRITY_* keys."""
+        return {EXTRA_INTEGRITY_STATISTIC: self.statistic, EXTRA_INTEGRITY_DOF: self.dof,
+                EXTRA_INTEGRITY_BAND: (self.lower, self.upper)}
 
 
 class InnovationMonitor:
