@@ -18,6 +18,8 @@ def pytest_configure(config):
         return
     if config.getoption("collectonly", False):
         return
-    # a separate process, so that this one (which may fork xdist workers) imports no numba kernels
-    subprocess.run([sys.executable, "-m", "trn_env.cli", "precompile"], check=False,
-                   stdout=subprocess.DEVNULL)
+    # a separate process, so that this one (which may fork xdist workers) imports no numba kernels; run
+    # from tests/ so that it imports trn_env from where the tests do (the installed package, not the
+    # checkout's source tree: `python -m` from the repository's root would put the source first)
+    code = "from trn_env.cli import main; raise SystemExit(main(['precompile']))"
+    subprocess.run([sys.executable, "-c", code], check=False, stdout=subprocess.DEVNULL, cwd=os.path.dirname(os.path.abspath(__file__)))
