@@ -22,4 +22,5 @@ def pytest_configure(config):
     # from tests/ so that it imports trn_env from where the tests do (the installed package, not the
     # checkout's source tree: `python -m` from the repository's root would put the source first)
     code = "from trn_env.cli import main; raise SystemExit(main(['precompile']))"
-    subprocess.run([sys.executable, "-c", code], check=False, stdout=subprocess.DEVNULL, cwd=os.path.dirname(os.path.abspath(__file__)))
+    subprocess.run([sys.executable, "-c", code], check=False, stdout=subprocess.DEVNULL,
+                   cwd=os.path.dirname(os.path.abspath(__file__)))
