@@ -185,8 +185,9 @@ def test_acq_track_reports_the_windowed_statistic_and_flags_consistently(dem):
     """acq_track in lock (the flight of tests/test_acq_track.py): the windowed statistic is the sum of the
     last WINDOW in-lock NIS values (summed here by hand, each read once per new measurement time), its band
     scipy's, and an in-lock epoch is "degraded" exactly when the sum is above the band."""
+    from acq_track_helpers import fly, initial_estimate, trajectory
+
     from navigators.acquisition_tracking import AcqTrackNavigator
-    from tests.acq_track_helpers import fly, initial_estimate, trajectory
 
     lat0, lon0, h = math.radians(36.50), math.radians(-84.30), 1400.0
     traj = trajectory(dem, lat0, lon0, h, lambda t: 81.0, lambda t: math.radians(33.0), 80.0)
