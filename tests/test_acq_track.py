@@ -387,7 +387,7 @@ def test_snr_moving_average_and_roll_compensation():
         ({"speed_narrow_spacing_mps": 0.0}, "speed_narrow_spacing_mps"),
         ({"acquisition_speed_half_mps": 0.0}, "acquisition_speed_half_mps"),
         ({"acquisition_heading_half_deg": 0.2}, "acquisition_heading_half_deg"),
-        ({"correlation": "msd"}, "correlation"),
+        ({"correlation": "ssd"}, "correlation"),
         ({"aiding_source": "doppler"}, "aiding_source"),
         ({"symmetry_ratio_max": 0.5}, "symmetry_ratio_max"),
         ({"break_iteration": 1}, "break_iteration"),

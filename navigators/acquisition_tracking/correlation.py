@@ -11,7 +11,15 @@ start (seed 000 eq 2; over a 2-4 km transect the radii change by < 1 m of positi
 
 Costs (lower is better, so one minimiser serves both): MAD C = sum |d_i - h_i| / N (spec section 2, the
 thesis' choice), optionally of the mean-removed difference (remove_bias: the barometer's and the map's
-vertical biases then do not raise the minimum), and Pearson as 1 - r. A replica sample off the map (NaN
+vertical biases then do not raise the minimum), Pearson as 1 - r, and MSD C = sum (d_i - h_i - o)^2 / N
+with o = mean(d - h) under remove_bias, else 0.
+MSD is the thesis' eq (3.4), which is garbled in print: its text says the squared differences are averaged
+and "the standard deviation of the differences is added to reduce the effect of the systematic errors".
+Our reading (spec section 8): removing the mean difference is what takes a systematic (vertical) error
+out, so with remove_bias the MSD is the variance of the differences (1/N), without it the plain TERCOM
+mean squared difference. It is a parabola around the minimum, not a V: the tracking loops correlate with
+its square root (the RMS difference, V-shaped; loop_kernel.py), since the early-late discriminator (3.5)
+on a parabola maps x -> -x and never locks. A replica sample off the map (NaN
 height) or a measured sample that dropped out is left out of the sums; fewer than n_min samples left gives
 inf (no correlation).
 
@@ -29,7 +37,8 @@ from terrain.kernels import bicubic, bilinear, bilinear_with_gradient
 
 COST_MAD = 0
 COST_PEARSON = 1
-COSTS = {"mad": COST_MAD, "pearson": COST_PEARSON}
+COST_MSD = 2
+COSTS = {"mad": COST_MAD, "pearson": COST_PEARSON, "msd": COST_MSD}
 INTERP_BILINEAR = 0
 INTERP_BICUBIC = 1
 INTERPOLATIONS = {"bilinear": INTERP_BILINEAR, "bicubic": INTERP_BICUBIC}
@@ -101,6 +110,12 @@ def profile_cost(d, valid, h, cost, remove_bias, n_min):
         return 1.0 - sxy / math.sqrt(sxx * syy)
     off = (md - mh) if remove_bias else 0.0
     acc = 0.0
+    if cost == COST_MSD:  # eq (3.4), our reading (module docstring)
+        for i in range(n):
+            if valid[i] and h[i] == h[i]:
+                r = d[i] - h[i] - off
+                acc += r * r
+        return acc / m
     for i in range(n):
         if valid[i] and h[i] == h[i]:
             acc += abs(d[i] - h[i] - off)
@@ -309,7 +324,7 @@ def profile_cost_reference(
     remove_bias: bool = True,
     n_min: int = 1,
 ) -> float:
-    """numpy twin of profile_cost (cost 'mad' or 'pearson')."""
+    """numpy twin of profile_cost (cost 'mad', 'pearson' or 'msd')."""
     ok = valid & np.isfinite(h)
     if ok.sum() < max(n_min, 1):
         return np.inf
@@ -319,4 +334,6 @@ def profile_cost_reference(
         den = math.sqrt(float((a * a).sum() * (b * b).sum()))
         return 1.0 if den <= 0 else 1.0 - float((a * b).sum()) / den
     off = (x.mean() - y.mean()) if remove_bias else 0.0
+    if cost == "msd":
+        return float(np.mean((x - y - off) ** 2))
     return float(np.mean(np.abs(x - y - off)))

@@ -54,7 +54,7 @@ import time
 
 import numpy as np
 
-from navigators.acquisition_tracking import acquisition, tracking
+from navigators.acquisition_tracking import acquisition, loop_kernel, tracking
 from navigators.acquisition_tracking.aiding import (
     WindEstimator,
     coordinated_turn_roll_rad,
@@ -67,7 +67,6 @@ from navigators.acquisition_tracking.correlation import (
     COSTS,
     INTERPOLATIONS,
     along_cross_information,
-    correlation_function,
     replica_heights,
     replica_offsets,
 )
@@ -713,7 +712,6 @@ class AcqTrackNavigator:
             reach = f_r / (N * Ts)
             sset, thr1 = self._speed_set, cfg.speed_threshold_mps
             s2, thr2 = cfg.speed_narrow_spacing_mps, cfg.speed_narrow_threshold_mps
-            x0 = b_v
         else:  # 2 sin(eps / 2) v t N = f R_db
             v = max(float(np.mean(m_v)) + b_v, 1.0)
             reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * Ts * N)))
@@ -722,33 +720,16 @@ class AcqTrackNavigator:
                 math.radians(cfg.heading_narrow_spacing_deg),
                 math.radians(cfg.heading_narrow_threshold_deg),
             )
-            x0 = b_psi
         reach = max(reach, float(sset.max()))
-        K = cfg.scf_points
-        offs = np.linspace(-reach, reach, 2 * K + 1)
-        vals = np.empty(offs.size)
-        args = (heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi)
-        tail = (r_n, r_e, d, valid, self._cost, cfg.remove_bias, self._interp, self._n_min)
-        correlation_function(*args, b_v, b_psi, *tail, which, offs, vals)
-        shape = tracking.analyse_v(offs, vals)
-        spacing, _ = tracking.choose_spacing(offs, vals, shape, sset, cfg.symmetry_ratio_max)
-        x, it1, lock1, _ = tracking.early_late_loop(
-            *args, b_v, b_psi, *tail, which, spacing, thr1, cfg.break_iteration, self._disc
-        )
-        its = [int(it1), 0]
-        locked = bool(lock1)
-        if cfg.bias_mitigation == "ncs":
-            bv2, bp2 = (x, b_psi) if which == 0 else (b_v, x)
-            x2, it2, lock2, _ = tracking.early_late_loop(
-                *args, bv2, bp2, *tail, which, s2, thr2, cfg.break_iteration, self._disc
-            )
-            its[1] = int(it2)
-            if np.isfinite(x2):
-                x = x2
-            locked = locked and bool(lock2)
-        if not np.isfinite(x):
-            x, locked = x0, False
-        return float(x), its, locked, shape, spacing
+        # adaptivity block, both stages and the bias mitigation in one numba call (loop_kernel.py)
+        return loop_kernel.run_loop(
+            (heights, lat0, lon0, dlat, dlon), self.p0[0], self.p0[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e,
+            d, valid, cost=self._cost, remove_bias=cfg.remove_bias, interp=self._interp, n_min=self._n_min,
+            which=which, reach=reach, n_side=cfg.scf_points, spacings_desc=np.sort(sset)[::-1].copy(),
+            symmetry_max=cfg.symmetry_ratio_max, threshold_1=thr1, spacing_2=s2, threshold_2=thr2,
+            break_iteration=cfg.break_iteration, discriminator=self._disc,
+            mitigation=loop_kernel.MITIGATIONS[cfg.bias_mitigation],
+        )  # fmt: skip
 
     def _track(self, s: Sample) -> None:
         cfg = self.config

@@ -9,7 +9,12 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
 - loop_order = "speed_first": speed 1st, speed 2nd, heading 1st, heading 2nd ("heading_first" swaps).
 - output_average_length (None: ceil(N / 2), the thesis' minimum) and the agreement limits
   output_average_speed_tol_mps / output_average_heading_tol_deg under which the moving average runs.
-- MSD is not offered; the costs are MAD (remove_bias: mean-removed) and Pearson (1 - r).
+- costs: MAD (remove_bias: mean-removed), Pearson (1 - r) and MSD (eq 3.4, garbled in print; our reading
+  in correlation.py: the mean squared difference, of the mean-removed difference under remove_bias; the
+  loops correlate with its square root).
+- bias_mitigation (thesis 3.5.2.2): "ncs" (default, the thesis' choice: a fixed narrow second stage),
+  "els" (NCS, then the four-correlator early-late slope refinement, eq 3.7; loop_kernel.py) or "none"
+  (the first, adaptive stage only).
 - roll_compensation: plumb height = R cos(max(0, tilt - beamwidth/2)) (tilt = acos(cos roll cos pitch)):
   a pulse altimeter returns the shortest range in its cone, which over level ground is the cone's edge
   once the tilt exceeds half the beam. Roll and pitch come from the INS (aiding_source "ins") or, with air
@@ -32,7 +37,7 @@ from navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
 
 AIDING_SOURCES = ("air_data", "ins")
 LOOP_ORDERS = ("speed_first", "heading_first")
-BIAS_MITIGATIONS = ("ncs", "none")
+BIAS_MITIGATIONS = ("ncs", "els", "none")
 DISCRIMINATOR_NAMES = ("thesis", "v_fit")
 
 
@@ -70,7 +75,7 @@ class AcqTrackConfig:
 
     transect_samples: int = 25  # N (thesis: 25, also 50; useful 15-40)
     sample_period_s: float = 1.0  # t between transect samples
-    correlation: str = "mad"  # "mad" | "pearson"
+    correlation: str = "mad"  # "mad" | "pearson" | "msd"
     remove_bias: bool = True  # MAD of the mean-removed difference (baro / map vertical bias)
     interpolation: str = "bilinear"  # "bilinear" | "bicubic" map heights at replica samples
     replica_model: str = "plumb"  # "plumb" | "footprint": the map as the pulse altimeter sees it
@@ -91,7 +96,7 @@ class AcqTrackConfig:
     heading_narrow_threshold_deg: float = 0.003
     break_iteration: int = 101
     discriminator: str = "thesis"  # "thesis": s (E - L) / (E + L); "v_fit": floor removed (tracking.py)
-    bias_mitigation: str = "ncs"  # "ncs": fixed narrow 2nd stage; "none": 1st stage only
+    bias_mitigation: str = "ncs"  # "ncs": fixed narrow 2nd stage; "els": + ELS; "none": 1st stage only
     scf_offset_cells: float = 2.0  # f: the SCF/HCF reach f R_db at the transect's far end
     scf_points: int = 10  # correlation-function points on each side of the prompt
     symmetry_ratio_max: float = 2.0

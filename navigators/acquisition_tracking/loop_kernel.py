@@ -1,0 +1,417 @@
+"""One tracking loop's epoch in one numba call: adaptivity block, stages, bias mitigation (seed 001 ch. 3).
+
+`loop_epoch` does for one loop (speed or heading) what tracking.py's pieces do in Python, without leaving
+compiled code: the SCF/HCF at 2K + 1 offsets around the prompt (spec section 2), the V-shape analysis
+(bandwidth, minimum, side slopes; tracking.analyse_v), the spacing choice by bandwidth and symmetry ratio
+(tracking.choose_spacing), the first early-late stage at that spacing, then the bias mitigation:
+
+- "none": the first stage only (the plain early-late discriminator, eq 3.5);
+- "ncs": narrow correlator spacing, a second stage at the fixed narrow spacing (thesis 3.5.2.2, eq 3.6);
+- "els": NCS, then the early-late slope technique as a refinement (thesis 3.5.2.2, eq 3.7; the thesis:
+  "ELS tends to be more useful as a refinement method ... can be applied in combination with NCS").
+
+ELS with four correlators K1 < K2 < prompt < K3 < K4 (costs y1..y4, lower is better): the slope a1 through
+K1, K2 (early side) and a2 through K3, K4 (late side); the two lines meet at
+
+    x* = (y4 - y1 + a1 x1 - a2 x4) / (a1 - a2)
+
+and the prompt's tracking error is T = x_P - x*; with x1 = x_P - s/2, x4 = x_P + s/2 this is the thesis'
+eq (3.7), T = ((y1 - y4) + s (a1 + a2) / 2) / (a1 - a2). The prompt moves by -T until |T| is below the
+narrow stage's threshold (or the 101-iteration break). Placement (thesis 3.5.2.2 "Implementation", its Sp2
+option): the inner correlator of each side starts one narrow spacing S from the prompt; when its cost is
+below the prompt's (the minimum lies beyond it) it steps outward by S while the cost keeps falling, and the
+first position past the fall is the lower limit (thesis fig. 3.18b). The outer correlator sits at the
+largest distance, half the V's bandwidth (at least S beyond the inner one). An epoch whose slopes do not
+form a V (a1 >= 0 or a2 <= 0), whose intersection falls outside [x1, x4] (the thesis saw outliers), or
+that does not converge keeps the NCS estimate.
+
+MSD (correlation.py) is a parabola at its minimum; the loops correlate with its square root (the RMS
+difference, V-shaped), since discriminator (3.5) on a parabola maps x -> -x and never locks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from navigators.acquisition_tracking.correlation import COST_MSD, replica_cost
+from navigators.acquisition_tracking.tracking import DISC_THESIS, VShape
+
+MITIGATION_NONE = 0
+MITIGATION_NCS = 1
+MITIGATION_ELS = 2
+MITIGATIONS = {"none": MITIGATION_NONE, "ncs": MITIGATION_NCS, "els": MITIGATION_ELS}
+
+
+@njit(cache=True)
+def _cost_x(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, x, dlat_w, dlon_w, h_w,
+):  # fmt: skip
+    """Tracking cost of the replica with the loop's quantity at x (b_v for which 0, b_psi for 1)."""
+    bv = x if which == 0 else b_v
+    bp = x if which == 1 else b_psi
+    c = replica_cost(
+        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, bv, bp, r_n, r_e_cos,
+        d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w,
+    )  # fmt: skip
+    if cost == COST_MSD:
+        return math.sqrt(c)
+    return c
+
+
+@njit(cache=True)
+def _stage(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold, break_iteration,
+    discriminator, dlat_w, dlon_w, h_w,
+):  # fmt: skip
+    """One early-late stage from x0 (tracking.early_late_loop's arithmetic): (x, iterations, locked)."""
+    x = x0
+    it = 1
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos)
+    while it < break_iteration:
+        he = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x - spacing, dlat_w, dlon_w, h_w)
+        hl = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x + spacing, dlat_w, dlon_w, h_w)
+        if not (np.isfinite(he) and np.isfinite(hl)):
+            return x, it, False
+        if discriminator == DISC_THESIS:  # eq (3.5)
+            den = he + hl
+            eps = spacing * (he - hl) / den if den > 0.0 else 0.0
+        else:  # V-fit (tracking.py): the prompt removes the cost floor
+            hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, dlat_w, dlon_w, h_w)
+            den = max(he, hl) - hp
+            eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
+            if eps > spacing:
+                eps = spacing
+            elif eps < -spacing:
+                eps = -spacing
+        x += eps
+        if abs(eps) < threshold:
+            return x, it, True
+        it += 1
+    return x, it, False
+
+
+@njit(cache=True)
+def els_intersection(x1, y1, x2, y2, x3, y3, x4, y4):
+    """(x*, a1, a2): where the line through (x1, y1), (x2, y2) meets the line through (x3, y3), (x4, y4)
+    (thesis eq 3.7 in absolute coordinates; NaN when the lines are parallel)."""
+    a1 = (y2 - y1) / (x2 - x1)
+    a2 = (y4 - y3) / (x4 - x3)
+    if a1 == a2:
+        return np.nan, a1, a2
+    return (y4 - y1 + a1 * x1 - a2 * x4) / (a1 - a2), a1, a2
+
+
+@njit(cache=True)
+def _els_step(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, x, step, outer, max_steps, dlat_w, dlon_w, h_w,
+):  # fmt: skip
+    """The prompt's tracking error T = x - x* from four correlators placed around x (module docstring);
+    (T, ok)."""
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos)
+    hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, dlat_w, dlon_w, h_w)
+    inner = np.empty(2)
+    for side in range(2):  # 0: early (x - ...), 1: late (x + ...)
+        sgn = -1.0 if side == 0 else 1.0
+        xi = x + sgn * step
+        e = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, xi, dlat_w, dlon_w, h_w)
+        j = 1
+        if e < hp:  # the minimum lies beyond this correlator: step outward while the cost falls
+            while j < max_steps:
+                e2 = _cost_x(
+                    *g, d, valid, cost, remove_bias, interp, n_min, which, x + sgn * (j + 1) * step,
+                    dlat_w, dlon_w, h_w,
+                )  # fmt: skip
+                j += 1
+                if not (e2 < e):
+                    break
+                e = e2
+        inner[side] = j * step
+    x2 = x - inner[0]
+    x3 = x + inner[1]
+    x1 = x - max(outer, inner[0] + step)
+    x4 = x + max(outer, inner[1] + step)
+    y1 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x1, dlat_w, dlon_w, h_w)
+    y2 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x2, dlat_w, dlon_w, h_w)
+    y3 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x3, dlat_w, dlon_w, h_w)
+    y4 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x4, dlat_w, dlon_w, h_w)
+    if not (np.isfinite(y1) and np.isfinite(y2) and np.isfinite(y3) and np.isfinite(y4)):
+        return 0.0, False
+    xs, a1, a2 = els_intersection(x1, y1, x2, y2, x3, y3, x4, y4)
+    if not (a1 < 0.0 and a2 > 0.0 and xs >= x1 and xs <= x4):
+        return 0.0, False
+    return x - xs, True
+
+
+@njit(cache=True)
+def _slope(x, y, lo, hi):
+    """Least-squares slope of y[lo:hi] over x[lo:hi] (tracking._slope)."""
+    m = hi - lo
+    if m < 2:
+        return 0.0
+    xm = 0.0
+    ym = 0.0
+    for i in range(lo, hi):
+        xm += x[i]
+        ym += y[i]
+    xm /= m
+    ym /= m
+    sxx = 0.0
+    sxy = 0.0
+    for i in range(lo, hi):
+        a = x[i] - xm
+        sxx += a * a
+        sxy += a * (y[i] - ym)
+    return sxy / sxx if sxx > 0.0 else 0.0
+
+
+@njit(cache=True)
+def analyse_v_kernel(offsets, values, min_points, tolerance):
+    """tracking.analyse_v in numba: (v_shape, bandwidth, min_offset, min_cost, slope_left, slope_right)."""
+    n = values.shape[0]
+    vals = np.empty(n)
+    n_ok = 0
+    vmin = np.inf
+    vmax = -np.inf
+    k = 0
+    for i in range(n):
+        if np.isfinite(values[i]):
+            vals[i] = values[i]
+            n_ok += 1
+            vmax = max(vmax, values[i])
+            if values[i] < vmin:
+                vmin = values[i]
+                k = i
+        else:
+            vals[i] = np.inf
+    if n_ok < 3:
+        return False, 0.0, 0.0, np.inf, 0.0, 0.0
+    tol = tolerance * (vmax - vmin)
+    left = k
+    while (
+        left > 0
+        and np.isfinite(vals[left - 1])
+        and vals[left - 1] > vals[left] - tol
+        and vals[left - 1] > vals[k]
+    ):
+        left -= 1
+    right = k
+    while (
+        right < n - 1
+        and np.isfinite(vals[right + 1])
+        and vals[right + 1] > vals[right] - tol
+        and vals[right + 1] > vals[k]
+    ):
+        right += 1
+    step = offsets[1] - offsets[0]
+    wl = k - left
+    wr = right - k
+    sl = _slope(offsets, vals, left, k + 1) if wl >= 1 else 0.0
+    sr = _slope(offsets, vals, k, right + 1) if wr >= 1 else 0.0
+    return wl >= min_points and wr >= min_points, min(wl, wr) * step, offsets[k], vals[k], sl, sr
+
+
+@njit(cache=True)
+def _side_slope(offsets, values, lo_x, hi_x):
+    """(|least-squares slope|, points) of the finite values with lo_x <= offset <= hi_x."""
+    m = 0
+    xm = 0.0
+    ym = 0.0
+    for i in range(offsets.shape[0]):
+        if np.isfinite(values[i]) and offsets[i] >= lo_x and offsets[i] <= hi_x:
+            m += 1
+            xm += offsets[i]
+            ym += values[i]
+    if m < 2:
+        return 0.0, m
+    xm /= m
+    ym /= m
+    sxx = 0.0
+    sxy = 0.0
+    for i in range(offsets.shape[0]):
+        if np.isfinite(values[i]) and offsets[i] >= lo_x and offsets[i] <= hi_x:
+            a = offsets[i] - xm
+            sxx += a * a
+            sxy += a * (values[i] - ym)
+    return (abs(sxy / sxx) if sxx > 0.0 else 0.0), m
+
+
+@njit(cache=True)
+def symmetry_ratio_kernel(offsets, values, centre, spacing):
+    """tracking.symmetry_ratio in numba."""
+    a1, m1 = _side_slope(offsets, values, centre - spacing - 1e-12, centre + 1e-12)
+    a2, m2 = _side_slope(offsets, values, centre - 1e-12, centre + spacing + 1e-12)
+    if m1 < 2 or m2 < 2:
+        return np.inf
+    lo = min(a1, a2)
+    hi = max(a1, a2)
+    return hi / lo if lo > 0.0 else np.inf
+
+
+@njit(cache=True)
+def choose_spacing_kernel(offsets, values, bandwidth, min_offset, spacings_desc, symmetry_max):
+    """tracking.choose_spacing in numba (spacings_desc sorted from widest to narrowest)."""
+    last = -1.0
+    ratio = np.inf
+    for s in spacings_desc:
+        if s <= bandwidth + 1e-12:
+            last = s
+            ratio = symmetry_ratio_kernel(offsets, values, min_offset, s)
+            if ratio <= symmetry_max:
+                return s, ratio
+    if last < 0.0:
+        return spacings_desc[spacings_desc.shape[0] - 1], np.inf
+    return last, ratio
+
+
+@njit(cache=True)
+def loop_epoch(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, reach, n_side, spacings_desc, symmetry_max,
+    threshold_1, spacing_2, threshold_2, break_iteration, discriminator, mitigation,
+):  # fmt: skip
+    """One loop's epoch (module docstring). Returns (x, it_1, it_2, it_els, locked, v_shape, bandwidth,
+    min_offset, min_cost, slope_left, slope_right, spacing_1, els_applied)."""
+    n = dt.shape[0]
+    dlat_w = np.empty(n)
+    dlon_w = np.empty(n)
+    h_w = np.empty(n)
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos)
+    x0 = b_v if which == 0 else b_psi
+    offs = np.linspace(-reach, reach, 2 * n_side + 1)
+    vals = np.empty(offs.shape[0])
+    for k in range(offs.shape[0]):  # the SCF / HCF (spec section 2)
+        vals[k] = _cost_x(
+            *g, d, valid, cost, remove_bias, interp, n_min, which, x0 + offs[k], dlat_w, dlon_w, h_w
+        )
+    v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
+    spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
+    x, it1, locked = _stage(
+        *g, d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold_1, break_iteration,
+        discriminator, dlat_w, dlon_w, h_w,
+    )  # fmt: skip
+    it2 = 0
+    it_els = 0
+    els_applied = False
+    if mitigation != MITIGATION_NONE:
+        x2, it2, lock2 = _stage(
+            *g, d, valid, cost, remove_bias, interp, n_min, which, x, spacing_2, threshold_2,
+            break_iteration, discriminator, dlat_w, dlon_w, h_w,
+        )  # fmt: skip
+        if np.isfinite(x2):
+            x = x2
+        locked = locked and lock2
+    if mitigation == MITIGATION_ELS:
+        xe = x
+        outer = 0.5 * bw
+        max_steps = max(int(math.ceil(reach / spacing_2)), 2)
+        it = 1
+        while it < break_iteration:
+            t_err, ok = _els_step(
+                *g, d, valid, cost, remove_bias, interp, n_min, which, xe, spacing_2, outer, max_steps,
+                dlat_w, dlon_w, h_w,
+            )  # fmt: skip
+            if not ok:
+                break
+            xe -= t_err
+            if abs(t_err) < threshold_2:
+                els_applied = True
+                break
+            it += 1
+        it_els = it
+        if els_applied:
+            x = xe
+    if not np.isfinite(x):
+        x = x0
+        locked = False
+    return x, it1, it2, it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, spacing, els_applied
+
+
+def run_loop(
+    grid,
+    lat_s: float,
+    lon_s: float,
+    dt: np.ndarray,
+    m_v: np.ndarray,
+    m_psi: np.ndarray,
+    b_v: float,
+    b_psi: float,
+    r_n: float,
+    r_e_cos: float,
+    d: np.ndarray,
+    valid: np.ndarray,
+    *,
+    cost: int,
+    remove_bias: bool,
+    interp: int,
+    n_min: int,
+    which: int,
+    reach: float,
+    n_side: int,
+    spacings_desc: np.ndarray,
+    symmetry_max: float,
+    threshold_1: float,
+    spacing_2: float,
+    threshold_2: float,
+    break_iteration: int,
+    discriminator: int,
+    mitigation: int,
+):
+    """loop_epoch with the navigator's return shape: (x, [it_1, it_2], locked, VShape, spacing_1).
+
+    Units: which 0 - x, reach, spacings, thresholds in m/s; which 1 - in rad."""
+    heights, lat0, lon0, dlat, dlon = grid
+    r = loop_epoch(
+        heights, lat0, lon0, dlat, dlon, float(lat_s), float(lon_s), dt, m_v, m_psi, float(b_v),
+        float(b_psi), float(r_n), float(r_e_cos), d, valid, int(cost), bool(remove_bias), int(interp),
+        int(n_min), int(which), float(reach), int(n_side), spacings_desc, float(symmetry_max),
+        float(threshold_1), float(spacing_2), float(threshold_2), int(break_iteration), int(discriminator),
+        int(mitigation),
+    )  # fmt: skip
+    x, it1, it2, _it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, spacing, _els = r
+    shape = VShape(bool(v_shape), float(bw), float(m_off), float(m_cost), float(sl), float(sr))
+    return float(x), [int(it1), int(it2)], bool(locked), shape, float(spacing)
+
+
+# --------------------------------------------------------------------------------------- references
+
+
+def els_reference(cost_fn, x: float, step: float, outer: float, threshold: float, break_iteration: int = 101,
+                  max_steps: int = 50):  # fmt: skip
+    """Plain-Python twin of the ELS refinement on any cost function of x: (x, iterations, applied)."""
+    xe = x
+    it = 1
+    while it < break_iteration:
+        hp = cost_fn(xe)
+        inner = []
+        for sgn in (-1.0, 1.0):
+            e = cost_fn(xe + sgn * step)
+            j = 1
+            if e < hp:
+                while j < max_steps:
+                    e2 = cost_fn(xe + sgn * (j + 1) * step)
+                    j += 1
+                    if not e2 < e:
+                        break
+                    e = e2
+            inner.append(j * step)
+        x1, x2 = xe - max(outer, inner[0] + step), xe - inner[0]
+        x3, x4 = xe + inner[1], xe + max(outer, inner[1] + step)
+        y1, y2, y3, y4 = (cost_fn(z) for z in (x1, x2, x3, x4))
+        a1, a2 = (y2 - y1) / (x2 - x1), (y4 - y3) / (x4 - x3)
+        if not (a1 < 0 < a2):
+            return x, it, False
+        xs = (y4 - y1 + a1 * x1 - a2 * x4) / (a1 - a2)
+        if not x1 <= xs <= x4:
+            return x, it, False
+        t_err = xe - xs
+        xe -= t_err
+        if abs(t_err) < threshold:
+            return xe, it, True
+        it += 1
+    return x, it, False
