@@ -21,6 +21,8 @@ import numpy as np
 from numba import njit
 
 from navigators.acquisition_tracking.correlation import (
+    COST_MAD,
+    COST_PEARSON,
     INTERP_BILINEAR,
     _map_height,
     profile_cost,
@@ -87,6 +89,101 @@ def search_kernel(
 
 
 @njit(cache=True)
+def bounded_search_kernel(
+    heights, lat0, lon0, dlat, dlon, lat_c, lon_c, dn_grid, de_grid, dt, m_v, m_psi, bv_grid, bpsi_grid,
+    a_order, b_order, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, distinct_ratio, out,
+):  # fmt: skip
+    """search_kernel with early abandonment; the search's outcome (best cell, its cost, distinct or not)
+    is the exhaustive one.
+
+    A cell is abandoned once a lower bound of its cost exceeds tau = best so far / min(distinct_ratio, 1);
+    out then holds that bound (> tau) instead of the cost. Bounds over the valid samples met so far (nv
+    valid samples in all, and the cost divides by at most nv): plain MAD / MSD - the partial sum; with the
+    mean removed (remove_bias) - disjoint pairs, since |r_a - c| + |r_b - c| >= |r_a - r_b| and
+    (r_a - c)^2 + (r_b - c)^2 >= (r_a - r_b)^2 / 2 for any offset c. Pearson has no bound (no abandonment).
+    Why exact: the best cell's cost never exceeds tau, and a far cell that could make the minimum not
+    distinct (cost <= best / distinct_ratio) has its bound below tau too, so both are computed exactly;
+    every abandoned cell costs more than the final tau, which is all the decision needs of it.
+    a_order / b_order: the order the speed / heading hypotheses are visited (centre first, so tau falls
+    early)."""
+    n = dt.shape[0]
+    n_lat, n_lon = heights.shape
+    dlat_w = np.empty(n)
+    dlon_w = np.empty(n)
+    fi_w = np.empty(n)
+    fj_w = np.empty(n)
+    h_w = np.empty(n)
+    nv = 0
+    for k in range(n):
+        if valid[k]:
+            nv += 1
+    scale = min(distinct_ratio, 1.0)
+    bounded = cost != COST_PEARSON and nv > 0
+    # samples in the order 0, n2, 1, n2 + 1, ...: a pair spans half the transect, so a wrong replica's
+    # slowly varying misfit still separates the pair and the bound grows fast
+    n2 = (n + 1) // 2
+    perm = np.empty(n, np.int64)
+    for k in range(n):
+        perm[k] = k // 2 if k % 2 == 0 else n2 + k // 2
+    best = np.inf
+    for ia in range(a_order.shape[0]):
+        a = a_order[ia]
+        for ib in range(b_order.shape[0]):
+            b = b_order[ib]
+            replica_offsets(dt, m_v, m_psi, bv_grid[a], bpsi_grid[b], r_n, r_e_cos, dlat_w, dlon_w)
+            for k in range(n):
+                fi_w[k] = dlat_w[k] / dlat
+                fj_w[k] = dlon_w[k] / dlon
+            for i in range(dn_grid.shape[0]):
+                lat_s = lat_c + dn_grid[i] / r_n
+                fi_s = (lat_s - lat0) / dlat
+                for j in range(de_grid.shape[0]):
+                    lon_s = lon_c + de_grid[j] / r_e_cos
+                    fj_s = (lon_s - lon0) / dlon
+                    lim = best / scale * nv if bounded else np.inf
+                    lb = 0.0
+                    pend = 0.0
+                    have = False
+                    abandoned = False
+                    for kk in range(n):
+                        k = perm[kk]
+                        if interp == INTERP_BILINEAR:
+                            h = _bilinear_index(heights, n_lat, n_lon, fi_s + fi_w[k], fj_s + fj_w[k])
+                        else:
+                            h = _map_height(
+                                heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k], lon_s + dlon_w[k], interp
+                            )
+                        h_w[k] = h
+                        if bounded and valid[k] and h == h:
+                            r = d[k] - h
+                            if remove_bias:
+                                if have:
+                                    q = r - pend
+                                    lb += abs(q) if cost == COST_MAD else 0.5 * q * q
+                                    have = False
+                                else:
+                                    pend = r
+                                    have = True
+                            else:
+                                lb += abs(r) if cost == COST_MAD else r * r
+                            if lb > lim:
+                                abandoned = True
+                                break
+                    if abandoned:
+                        out[i, j, a, b] = lb / nv
+                        continue
+                    c = profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+                    out[i, j, a, b] = c
+                    if c < best:
+                        best = c
+
+
+def centre_out(m: int) -> np.ndarray:
+    """Indices 0..m-1 ordered by distance from the centre index (the prior first)."""
+    return np.argsort(np.abs(np.arange(m) - m // 2), kind="stable").astype(np.int64)
+
+
+@njit(cache=True)
 def _bilinear_index(heights, n_lat, n_lon, fi, fj):
     """Bilinear height at fractional grid indices (terrain.kernels.bilinear's arithmetic without its
     lat/lon division; NaN outside the grid or next to a void - the sample then drops out)."""
@@ -108,7 +205,9 @@ def _bilinear_index(heights, n_lat, n_lon, fi, fj):
 class AcquisitionResult:
     """Outcome of one serial search. dn_m/de_m: best start offset from the searched centre; b_v, b_psi_rad:
     the best references; cost: its correlation cost; second_cost: the best cost outside the exclusion
-    radius; distinct: cost < distinct_ratio * second_cost; n_hypotheses: cells correlated."""
+    radius (when distinct, possibly only a lower bound above cost / distinct_ratio: the search abandons
+    cells that cannot matter, bounded_search_kernel); distinct: cost < distinct_ratio * second_cost;
+    n_hypotheses: cells correlated."""
 
     distinct: bool
     dn_m: float
@@ -161,31 +260,13 @@ def serial_search(
     bv = b_v0 + hypothesis_grid(speed_half_mps, speed_bin_mps)
     bp = b_psi0 + hypothesis_grid(heading_half_rad, heading_bin_rad)
     out = np.empty((dn.size, de.size, bv.size, bp.size))
-    search_kernel(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
-        float(lat_c),
-        float(lon_c),
-        dn,
-        de,
-        np.ascontiguousarray(dt, float),
-        np.ascontiguousarray(m_v, float),
-        np.ascontiguousarray(m_psi, float),
-        bv,
-        bp,
-        float(r_n),
-        float(r_e_cos),
-        np.ascontiguousarray(d, float),
-        np.ascontiguousarray(valid, np.bool_),
-        int(cost),
-        bool(remove_bias),
-        int(interp),
-        int(n_min),
-        out,
-    )
+    bounded_search_kernel(
+        heights, lat0, lon0, dlat, dlon, float(lat_c), float(lon_c), dn, de,
+        np.ascontiguousarray(dt, float), np.ascontiguousarray(m_v, float), np.ascontiguousarray(m_psi, float),
+        bv, bp, centre_out(bv.size), centre_out(bp.size), float(r_n), float(r_e_cos),
+        np.ascontiguousarray(d, float), np.ascontiguousarray(valid, np.bool_), int(cost), bool(remove_bias),
+        int(interp), int(n_min), float(distinct_ratio), out,
+    )  # fmt: skip
     return _decide(out, dn, de, bv, bp, distinct_ratio, exclusion_m)
 
 

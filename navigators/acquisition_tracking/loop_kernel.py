@@ -36,7 +36,7 @@ import math
 import numpy as np
 from numba import njit
 
-from navigators.acquisition_tracking.correlation import COST_MSD, replica_cost
+from navigators.acquisition_tracking.correlation import COST_MSD, _map_height, profile_cost
 from navigators.acquisition_tracking.tracking import DISC_THESIS, VShape
 
 MITIGATION_NONE = 0
@@ -46,16 +46,65 @@ MITIGATIONS = {"none": MITIGATION_NONE, "ncs": MITIGATION_NCS, "els": MITIGATION
 
 
 @njit(cache=True)
+def replica_basis(dt, m_v, m_psi, basis):
+    """Cumulative sums that make every replica of one transect a closed form in (b_v, b_psi).
+
+    With step k's aiding speed vbar_k and heading base_k (correlation.replica_offsets' trapezoid) and
+    ds_k = (vbar_k + b_v) dt_k: sum ds cos(base + b_psi) = cos b_psi Cn - sin b_psi Sn and
+    sum ds sin(base + b_psi) = sin b_psi Cn + cos b_psi Sn, where Cn = P + b_v Q, Sn = R + b_v S and
+    basis rows P, Q, R, S = cumsum(vbar dt cos base), cumsum(dt cos base), cumsum(vbar dt sin base),
+    cumsum(dt sin base). So a replica costs one sine and one cosine instead of five per sample."""
+    n = dt.shape[0]
+    p = 0.0
+    q = 0.0
+    r = 0.0
+    s = 0.0
+    basis[0, 0] = basis[1, 0] = basis[2, 0] = basis[3, 0] = 0.0
+    for i in range(1, n):
+        v = 0.5 * (m_v[i - 1] + m_v[i])
+        dpsi = m_psi[i] - m_psi[i - 1]
+        base = m_psi[i - 1] + 0.5 * math.atan2(math.sin(dpsi), math.cos(dpsi))
+        c = math.cos(base) * dt[i]
+        sn = math.sin(base) * dt[i]
+        p += v * c
+        q += c
+        r += v * sn
+        s += sn
+        basis[0, i] = p
+        basis[1, i] = q
+        basis[2, i] = r
+        basis[3, i] = s
+
+
+@njit(cache=True)
+def basis_cost(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, h_w,
+):  # fmt: skip
+    """Cost of the replica (b_v, b_psi) from a replica_basis (correlation.replica_cost's value)."""
+    cb = math.cos(b_psi)
+    sb = math.sin(b_psi)
+    for i in range(basis.shape[1]):
+        cn = basis[0, i] + b_v * basis[1, i]
+        sn = basis[2, i] + b_v * basis[3, i]
+        h_w[i] = _map_height(
+            heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
+            lon_s + (sb * cn + cb * sn) / r_e_cos, interp,
+        )  # fmt: skip
+    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+
+
+@njit(cache=True)
 def _cost_x(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x, dlat_w, dlon_w, h_w,
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, x, h_w,
 ):  # fmt: skip
     """Tracking cost of the replica with the loop's quantity at x (b_v for which 0, b_psi for 1)."""
     bv = x if which == 0 else b_v
     bp = x if which == 1 else b_psi
-    c = replica_cost(
-        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, bv, bp, r_n, r_e_cos,
-        d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w,
+    c = basis_cost(
+        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, bv, bp, r_n, r_e_cos,
+        d, valid, cost, remove_bias, interp, n_min, h_w,
     )  # fmt: skip
     if cost == COST_MSD:
         return math.sqrt(c)
@@ -64,24 +113,24 @@ def _cost_x(
 
 @njit(cache=True)
 def _stage(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
     d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold, break_iteration,
-    discriminator, dlat_w, dlon_w, h_w,
+    discriminator, h_w,
 ):  # fmt: skip
     """One early-late stage from x0 (tracking.early_late_loop's arithmetic): (x, iterations, locked)."""
     x = x0
     it = 1
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos)
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
     while it < break_iteration:
-        he = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x - spacing, dlat_w, dlon_w, h_w)
-        hl = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x + spacing, dlat_w, dlon_w, h_w)
+        he = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x - spacing, h_w)
+        hl = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x + spacing, h_w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
         if discriminator == DISC_THESIS:  # eq (3.5)
             den = he + hl
             eps = spacing * (he - hl) / den if den > 0.0 else 0.0
         else:  # V-fit (tracking.py): the prompt removes the cost floor
-            hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, dlat_w, dlon_w, h_w)
+            hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, h_w)
             den = max(he, hl) - hp
             eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
             if eps > spacing:
@@ -108,24 +157,24 @@ def els_intersection(x1, y1, x2, y2, x3, y3, x4, y4):
 
 @njit(cache=True)
 def _els_step(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x, step, outer, max_steps, dlat_w, dlon_w, h_w,
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, x, step, outer, max_steps, h_w,
 ):  # fmt: skip
     """The prompt's tracking error T = x - x* from four correlators placed around x (module docstring);
     (T, ok)."""
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos)
-    hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, dlat_w, dlon_w, h_w)
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
+    hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, h_w)
     inner = np.empty(2)
     for side in range(2):  # 0: early (x - ...), 1: late (x + ...)
         sgn = -1.0 if side == 0 else 1.0
         xi = x + sgn * step
-        e = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, xi, dlat_w, dlon_w, h_w)
+        e = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, xi, h_w)
         j = 1
         if e < hp:  # the minimum lies beyond this correlator: step outward while the cost falls
             while j < max_steps:
                 e2 = _cost_x(
                     *g, d, valid, cost, remove_bias, interp, n_min, which, x + sgn * (j + 1) * step,
-                    dlat_w, dlon_w, h_w,
+                    h_w,
                 )  # fmt: skip
                 j += 1
                 if not (e2 < e):
@@ -136,10 +185,10 @@ def _els_step(
     x3 = x + inner[1]
     x1 = x - max(outer, inner[0] + step)
     x4 = x + max(outer, inner[1] + step)
-    y1 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x1, dlat_w, dlon_w, h_w)
-    y2 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x2, dlat_w, dlon_w, h_w)
-    y3 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x3, dlat_w, dlon_w, h_w)
-    y4 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x4, dlat_w, dlon_w, h_w)
+    y1 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x1, h_w)
+    y2 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x2, h_w)
+    y3 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x3, h_w)
+    y4 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x4, h_w)
     if not (np.isfinite(y1) and np.isfinite(y2) and np.isfinite(y3) and np.isfinite(y4)):
         return 0.0, False
     xs, a1, a2 = els_intersection(x1, y1, x2, y2, x3, y3, x4, y4)
@@ -278,22 +327,22 @@ def loop_epoch(
     """One loop's epoch (module docstring). Returns (x, it_1, it_2, it_els, locked, v_shape, bandwidth,
     min_offset, min_cost, slope_left, slope_right, spacing_1, els_applied)."""
     n = dt.shape[0]
-    dlat_w = np.empty(n)
-    dlon_w = np.empty(n)
     h_w = np.empty(n)
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos)
+    basis = np.empty((4, n))
+    replica_basis(dt, m_v, m_psi, basis)
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
     x0 = b_v if which == 0 else b_psi
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
     vals = np.empty(offs.shape[0])
     for k in range(offs.shape[0]):  # the SCF / HCF (spec section 2)
         vals[k] = _cost_x(
-            *g, d, valid, cost, remove_bias, interp, n_min, which, x0 + offs[k], dlat_w, dlon_w, h_w
+            *g, d, valid, cost, remove_bias, interp, n_min, which, x0 + offs[k], h_w
         )
     v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
     spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
     x, it1, locked = _stage(
         *g, d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold_1, break_iteration,
-        discriminator, dlat_w, dlon_w, h_w,
+        discriminator, h_w,
     )  # fmt: skip
     it2 = 0
     it_els = 0
@@ -301,7 +350,7 @@ def loop_epoch(
     if mitigation != MITIGATION_NONE:
         x2, it2, lock2 = _stage(
             *g, d, valid, cost, remove_bias, interp, n_min, which, x, spacing_2, threshold_2,
-            break_iteration, discriminator, dlat_w, dlon_w, h_w,
+            break_iteration, discriminator, h_w,
         )  # fmt: skip
         if np.isfinite(x2):
             x = x2
@@ -314,7 +363,7 @@ def loop_epoch(
         while it < break_iteration:
             t_err, ok = _els_step(
                 *g, d, valid, cost, remove_bias, interp, n_min, which, xe, spacing_2, outer, max_steps,
-                dlat_w, dlon_w, h_w,
+                h_w,
             )  # fmt: skip
             if not ok:
                 break
