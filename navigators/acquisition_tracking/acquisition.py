@@ -4,7 +4,9 @@ For each speed hypothesis and each heading hypothesis the replica's offsets from
 (correlation.replica_offsets), then every start position of the square search area around the estimate is
 correlated with the measured profile (one numba kernel over the whole hypothesis grid). The number of
 combinations is (U_v / bin_v + 1)(U_psi / bin_psi + 1)(positions), as in the thesis. The best cell starts
-tracking.
+tracking. The kernel (bounded_search_kernel) abandons a cell as soon as a lower bound of its cost shows it
+can matter neither as the best cell nor against the distinctness test, so the outcome is the exhaustive
+search's (search_kernel, kept as its reference) at a fraction of the map lookups.
 
 Distinct minimum (the thesis gives no test; our choice, spec section 8): for each start position the best
 cost over speed and heading forms a position surface; the acquisition is accepted when its minimum is below
@@ -91,7 +93,7 @@ def search_kernel(
 @njit(cache=True)
 def bounded_search_kernel(
     heights, lat0, lon0, dlat, dlon, lat_c, lon_c, dn_grid, de_grid, dt, m_v, m_psi, bv_grid, bpsi_grid,
-    a_order, b_order, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, distinct_ratio, out,
+    a_order, b_order, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, distinct_ratio, best0, out,
 ):  # fmt: skip
     """search_kernel with early abandonment; the search's outcome (best cell, its cost, distinct or not)
     is the exhaustive one.
@@ -105,7 +107,8 @@ def bounded_search_kernel(
     distinct (cost <= best / distinct_ratio) has its bound below tau too, so both are computed exactly;
     every abandoned cell costs more than the final tau, which is all the decision needs of it.
     a_order / b_order: the order the speed / heading hypotheses are visited (centre first, so tau falls
-    early)."""
+    early). out is indexed [speed, heading, north, east] (written in the loops' order; serial_search
+    hands _decide its transpose)."""
     n = dt.shape[0]
     n_lat, n_lon = heights.shape
     dlat_w = np.empty(n)
@@ -125,7 +128,7 @@ def bounded_search_kernel(
     perm = np.empty(n, np.int64)
     for k in range(n):
         perm[k] = k // 2 if k % 2 == 0 else n2 + k // 2
-    best = np.inf
+    best = best0
     for ia in range(a_order.shape[0]):
         a = a_order[ia]
         for ib in range(b_order.shape[0]):
@@ -170,10 +173,10 @@ def bounded_search_kernel(
                                 abandoned = True
                                 break
                     if abandoned:
-                        out[i, j, a, b] = lb / nv
+                        out[a, b, i, j] = lb / nv
                         continue
                     c = profile_cost(d, valid, h_w, cost, remove_bias, n_min)
-                    out[i, j, a, b] = c
+                    out[a, b, i, j] = c
                     if c < best:
                         best = c
 
@@ -259,14 +262,15 @@ def serial_search(
     de = dn.copy()
     bv = b_v0 + hypothesis_grid(speed_half_mps, speed_bin_mps)
     bp = b_psi0 + hypothesis_grid(heading_half_rad, heading_bin_rad)
-    out = np.empty((dn.size, de.size, bv.size, bp.size))
+    out_abij = np.empty((bv.size, bp.size, dn.size, de.size))
     bounded_search_kernel(
         heights, lat0, lon0, dlat, dlon, float(lat_c), float(lon_c), dn, de,
         np.ascontiguousarray(dt, float), np.ascontiguousarray(m_v, float), np.ascontiguousarray(m_psi, float),
         bv, bp, centre_out(bv.size), centre_out(bp.size), float(r_n), float(r_e_cos),
         np.ascontiguousarray(d, float), np.ascontiguousarray(valid, np.bool_), int(cost), bool(remove_bias),
-        int(interp), int(n_min), float(distinct_ratio), out,
+        int(interp), int(n_min), float(distinct_ratio), np.inf, out_abij,
     )  # fmt: skip
+    out = out_abij.transpose(2, 3, 0, 1)
     return _decide(out, dn, de, bv, bp, distinct_ratio, exclusion_m)
 
 
