@@ -54,12 +54,49 @@ class Sample:
     roll_rad: float
 
 
+class _Samples(deque):
+    """A bounded deque that counts its changes (Transect.arrays caches its arrays by the count)."""
+
+    def __init__(self, maxlen: int):
+        super().__init__(maxlen=maxlen)
+        self.version = 0
+
+    def __reduce__(self):
+        return (_restore_samples, (self.maxlen, list(self), self.version))
+
+    def append(self, x) -> None:
+        super().append(x)
+        self.version += 1
+
+    def __setitem__(self, i, x) -> None:
+        super().__setitem__(i, x)
+        self.version += 1
+
+    def clear(self) -> None:
+        super().clear()
+        self.version += 1
+
+    def _changed(self, *_a, **_k):
+        raise TypeError("Transect.samples: only append, item assignment and clear are supported")
+
+    appendleft = extend = extendleft = insert = pop = popleft = remove = rotate = __delitem__ = _changed
+
+
+def _restore_samples(maxlen: int, items: list, version: int) -> _Samples:
+    s = _Samples(maxlen)
+    for x in items:
+        deque.append(s, x)
+    s.version = version
+    return s
+
+
 class Transect:
     """The sliding window of the newest N samples (append the newest, drop the oldest)."""
 
     def __init__(self, n: int):
         self.n = int(n)
-        self.samples: deque[Sample] = deque(maxlen=self.n)
+        self.samples: deque[Sample] = _Samples(self.n)
+        self._cache = (-1, None)
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -75,14 +112,23 @@ class Transect:
         self.samples.append(s)
 
     def arrays(self):
-        """(t, d, valid, dt, m_v, m_psi, range) as arrays (dt[0] = 0)."""
+        """(t, d, valid, dt, m_v, m_psi, range) as arrays (dt[0] = 0). Cached until the samples change:
+        callers must not write into them."""
         s = self.samples
-        t = np.array([x.t_s for x in s])
-        d = np.array([x.d_m for x in s])
-        valid = np.array([x.valid for x in s], dtype=np.bool_)
+        if self._cache[0] == s.version:
+            return self._cache[1]
+        cols = np.array([(x.t_s, x.d_m, x.m_v, x.m_psi, x.range_m, x.valid) for x in s], float).reshape(-1, 6)
+        t = np.ascontiguousarray(cols[:, 0])
         dt = np.zeros(t.size)
         dt[1:] = np.diff(t)
-        m_v = np.array([x.m_v for x in s])
-        m_psi = np.array([x.m_psi for x in s])
-        rng = np.array([x.range_m for x in s])
-        return t, d, valid, dt, m_v, m_psi, rng
+        out = (
+            t,
+            np.ascontiguousarray(cols[:, 1]),
+            cols[:, 5] != 0.0,
+            dt,
+            np.ascontiguousarray(cols[:, 2]),
+            np.ascontiguousarray(cols[:, 3]),
+            np.ascontiguousarray(cols[:, 4]),
+        )
+        self._cache = (s.version, out)
+        return out
