@@ -116,6 +116,8 @@ def bounded_search_kernel(
     fi_w = np.empty(n)
     fj_w = np.empty(n)
     h_w = np.empty(n)
+    row_w = np.empty(n, np.int64)
+    u_w = np.empty(n)
     nv = 0
     for k in range(n):
         if valid[k]:
@@ -134,15 +136,29 @@ def bounded_search_kernel(
         for ib in range(b_order.shape[0]):
             b = b_order[ib]
             replica_offsets(dt, m_v, m_psi, bv_grid[a], bpsi_grid[b], r_n, r_e_cos, dlat_w, dlon_w)
+            fi_lo = fj_lo = np.inf
+            fi_hi = fj_hi = -np.inf
             for k in range(n):
                 fi_w[k] = dlat_w[k] / dlat
                 fj_w[k] = dlon_w[k] / dlon
+                fi_lo = min(fi_lo, fi_w[k])
+                fi_hi = max(fi_hi, fi_w[k])
+                fj_lo = min(fj_lo, fj_w[k])
+                fj_hi = max(fj_hi, fj_w[k])
             for i in range(dn_grid.shape[0]):
                 lat_s = lat_c + dn_grid[i] / r_n
                 fi_s = (lat_s - lat0) / dlat
+                # the whole replica's rows inside the grid: row index and weight once per sample
+                rows_in = interp == INTERP_BILINEAR and fi_s + fi_lo >= 0.0 and fi_s + fi_hi < n_lat - 1
+                if rows_in:
+                    for k in range(n):
+                        f = fi_s + fi_w[k]
+                        row_w[k] = int(f)
+                        u_w[k] = f - row_w[k]
                 for j in range(de_grid.shape[0]):
                     lon_s = lon_c + de_grid[j] / r_e_cos
                     fj_s = (lon_s - lon0) / dlon
+                    inside = rows_in and fj_s + fj_lo >= 0.0 and fj_s + fj_hi < n_lon - 1
                     lim = best / scale * nv if bounded else np.inf
                     lb = 0.0
                     pend = 0.0
@@ -150,7 +166,17 @@ def bounded_search_kernel(
                     abandoned = False
                     for kk in range(n):
                         k = perm[kk]
-                        if interp == INTERP_BILINEAR:
+                        if inside:  # _bilinear_index's arithmetic without its range checks
+                            f = fj_s + fj_w[k]
+                            jj = int(f)
+                            v = f - jj
+                            ii = row_w[k]
+                            h00 = heights[ii, jj]
+                            h10 = heights[ii + 1, jj]
+                            ha = h00 + v * (heights[ii, jj + 1] - h00)
+                            hb = h10 + v * (heights[ii + 1, jj + 1] - h10)
+                            h = ha + u_w[k] * (hb - ha)
+                        elif interp == INTERP_BILINEAR:
                             h = _bilinear_index(heights, n_lat, n_lon, fi_s + fi_w[k], fj_s + fj_w[k])
                         else:
                             h = _map_height(
