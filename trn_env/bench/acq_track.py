@@ -13,8 +13,10 @@ references:
   serial searches after a loss of lock, acq_track_acquisitions_in_window of them, taken out);
 - acq_track_acquisition_s: one serial search over the full default uncertainty (+-500 m in 50 m, +-10 m/s
   in 1 m/s, +-10 deg in 1 deg: 194,481 cells x N = 25 samples; target <= 1 s), median of 3, beside
-  acq_track_acquisition_lookups_per_s and the same number of plain bilinear lookups
-  (bilinear_batch_lookups_per_s_same_run).
+  acq_track_acquisition_lookups_per_s (cells x N over the time: the bounded search skips most of them),
+  the same number of plain bilinear lookups (bilinear_batch_lookups_per_s_same_run) and the exhaustive
+  kernel on the same grid (acq_track_acquisition_exhaustive_s_same_run, and the ratio
+  acq_track_acquisition_speedup_vs_exhaustive).
 """
 
 from __future__ import annotations
@@ -122,6 +124,22 @@ def _acquisition_figures(repeats: int = 3) -> dict:
     t_acq = float(np.median(times))
     lookups = res.n_hypotheses * n
     heights, lat0, lon0, dlat, dlon = dem.grid
+    # the exhaustive kernel on the same grid (every cell, every sample): the bounded search's reference
+    dn = acquisition.hypothesis_grid(cfg.acquisition_position_half_m, cfg.acquisition_position_bin_m)
+    bv = 88.7 + acquisition.hypothesis_grid(cfg.acquisition_speed_half_mps, cfg.acquisition_speed_bin_mps)
+    bp = math.radians(27.4) + acquisition.hypothesis_grid(
+        math.radians(cfg.acquisition_heading_half_deg), math.radians(cfg.acquisition_heading_bin_deg)
+    )
+    full = np.empty((dn.size, dn.size, bv.size, bp.size))
+    ex_args = (heights, lat0, lon0, dlat, dlon, args[1], args[2], dn, dn.copy(), dt, zeros, zeros, bv, bp)
+    ex_tail = (r_n, r_e, d, np.ones(n, bool), 0, True, 0, 15, full)
+    acquisition.search_kernel(*ex_args, *ex_tail)
+    ex_times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        acquisition.search_kernel(*ex_args, *ex_tail)
+        ex_times.append(time.perf_counter() - t0)
+    t_ex = float(np.median(ex_times))
     m = min(lookups, 2_000_000)
     rng = np.random.default_rng(0)
     qla = lat + (rng.random(m) - 0.5) * 0.01
@@ -137,6 +155,8 @@ def _acquisition_figures(repeats: int = 3) -> dict:
         "acq_track_acquisition_samples": n,
         "acq_track_acquisition_distinct": bool(res.distinct),
         "acq_track_acquisition_lookups_per_s": lookups / t_acq,
+        "acq_track_acquisition_exhaustive_s_same_run": t_ex,
+        "acq_track_acquisition_speedup_vs_exhaustive": t_ex / t_acq,
         "bilinear_batch_lookups_per_s_same_run": m / t_bl,
     }
 
