@@ -3,7 +3,8 @@ references:
 
 - acq_track_closed_loop_steps_per_s / ins_tercom_closed_loop_steps_per_s: JSBSim steps per wall second of
   the built-in `acq_track` scenario's closed loop (inline, one process; N = 25) with each navigator over the
-  same timed window (after a 45 s warm-up: the transect is full and one TERCOM fix has run), beside
+  same timed window (after a 45 s warm-up: the transect is full and one TERCOM fix has run), each
+  navigator's window flown twice in the order acq_track, ins_tercom, ins_tercom, acq_track (pooled), beside
   acq_track_jsbsim_reference_steps_per_s (a bare run() loop at the same initial condition, timed right
   before); acq_track_vs_ins_tercom_speed (>= 1: the loop with acq_track is at least as fast) and
   acq_track_vs_ins_tercom_speed_cpu, the same ratio in steps per CPU second of the process (on a machine
@@ -59,7 +60,9 @@ def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
     sim = steps * loop.dt_s
     return {
         "steps_per_s": steps / wall,
-        "cpu_steps_per_s": steps / max(cpu, 1e-9),
+        "steps": steps,
+        "wall_s": wall,
+        "cpu_s": cpu,
         "bare": bare,
         "nav_ms_per_sim_s": 1e3 * nav_s / max(sim, 1e-9),
         "sim_s": sim,
@@ -161,12 +164,30 @@ def _acquisition_figures(repeats: int = 3) -> dict:
     }
 
 
+def _pooled(figs: list[dict]) -> dict:
+    """Figures of repeated windows of one navigator: rates from the summed steps and times."""
+    sim = sum(f["sim_s"] for f in figs)
+    steps = sum(f["steps"] for f in figs)
+    return {
+        "steps_per_s": steps / sum(f["wall_s"] for f in figs),
+        "cpu_steps_per_s": steps / max(sum(f["cpu_s"] for f in figs), 1e-9),
+        "bare": max(f["bare"] for f in figs),
+        "nav_ms_per_sim_s": sum(f["nav_ms_per_sim_s"] * f["sim_s"] for f in figs) / sim,
+        "sim_s": sim,
+        "acq_s": sum(f["acq_s"] for f in figs),
+        "n_acq": sum(f["n_acq"] for f in figs),
+    }
+
+
 def benchmark(quick: bool = False) -> dict:
-    """The figures listed in the module docstring (quick: a 30 s timed window, about 15 s of wall time)."""
+    """The figures listed in the module docstring (quick: 30 s timed windows, about 20 s of wall time)."""
     sim_s = 30.0 if quick else 120.0
     out = _acquisition_figures()
-    acq = _loop_figures("acq_track", 45.0, sim_s)
-    ekf = _loop_figures("ins_tercom", 45.0, sim_s)
+    # A B B A: a load that drifts over the run weighs on both navigators alike
+    runs = {"acq_track": [], "ins_tercom": []}
+    for name in ("acq_track", "ins_tercom", "ins_tercom", "acq_track"):
+        runs[name].append(_loop_figures(name, 45.0, sim_s))
+    acq, ekf = (_pooled(runs[k]) for k in ("acq_track", "ins_tercom"))
     out.update(
         {
             "acq_track_closed_loop_steps_per_s": acq["steps_per_s"],
@@ -177,7 +198,7 @@ def benchmark(quick: bool = False) -> dict:
             "acq_track_vs_ins_tercom_speed_cpu": acq["cpu_steps_per_s"] / ekf["cpu_steps_per_s"],
             "acq_track_navigator_ms_per_sim_s": acq["nav_ms_per_sim_s"],
             "ins_tercom_navigator_ms_per_sim_s": ekf["nav_ms_per_sim_s"],
-            "acq_track_bench_sim_s": acq["sim_s"],
+            "acq_track_bench_sim_s": acq["sim_s"],  # both windows together
             "acq_track_acquisitions_in_window": acq["n_acq"],
             "acq_track_navigator_ms_per_sim_s_without_acquisitions": 1e3
             * (acq["nav_ms_per_sim_s"] * acq["sim_s"] / 1e3 - acq["acq_s"])
