@@ -17,6 +17,7 @@ import trn_env.scenario.build as components
 from navigators.inertial.strapdown import StrapdownIns
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env import cli
+from trn_env.flight.truth import TruthChunk
 from trn_env.scenario.loading import read_scenario_file, validate
 from trn_env.sensors.imu import ImuConfig, sample_imu
 
@@ -76,11 +77,10 @@ def test_ins_follows_the_scenario_kinematic_truth():
         chunks.append(flight.take())
     t_s = np.concatenate([c.t_s for c in chunks])
     assert np.allclose(np.diff(t_s), 0.01) and t_s[-1] == pytest.approx(150.0)
-    from trn_env.flight.truth import TruthChunk
     tr = TruthChunk.concatenate(chunks)
     # the wind: v = 240 m/s along the heading + 20 m/s toward the east, at every row
-    air = 240.0 * np.stack([np.cos(tr.pitch_rad) * np.cos(tr.yaw_rad), np.cos(tr.pitch_rad) * np.sin(tr.yaw_rad),
-                            -np.sin(tr.pitch_rad)], axis=1)
+    cp = np.cos(tr.pitch_rad)
+    air = 240.0 * np.stack([cp * np.cos(tr.yaw_rad), cp * np.sin(tr.yaw_rad), -np.sin(tr.pitch_rad)], axis=1)
     assert np.allclose(tr.v_ned_mps - air, [0.0, 20.0, 0.0], atol=1e-6)
     assert math.degrees(math.atan2(tr.v_ned_mps[0, 1], tr.v_ned_mps[0, 0])) == pytest.approx(
         math.degrees(math.atan2(20.0, 240.0)), abs=1e-6)          # crab in the first straight leg
@@ -108,8 +108,8 @@ BAD = [
     ("speed_mps = 240.0", "speed_mps = 15.0", "truth.speed_mps"),          # slower than the 20 m/s wind
     ('{ kind = "straight", duration_s = 120.0 }', '{ kind = "turn", duration_s = 120.0 }',
      "truth.segments[0].bank_deg"),
-    ('{ kind = "straight", duration_s = 120.0 }', '{ kind = "straight", duration_s = 10.0, transition_s = 20.0 }',
-     "truth.segments[0].transition_s"),
+    ('{ kind = "straight", duration_s = 120.0 }',
+     '{ kind = "straight", duration_s = 10.0, transition_s = 20.0 }', "truth.segments[0].transition_s"),
     ('{ kind = "straight", duration_s = 120.0 }', '{ kind = "loop", duration_s = 120.0 }',
      "truth.segments[0].kind"),
     ('{ kind = "straight", duration_s = 120.0 }', '{ kind = "straight", duration_s = nan }',

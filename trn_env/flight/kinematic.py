@@ -4,11 +4,12 @@ For conditions beyond the King Air (seed 002's 240 m/s at 2,500 m) the truth com
 instead of JSBSim, and fills the same `TruthChunk`, so the same sensors (trn_env.sensors) and navigators run
 on it.
 
-Profile. Constant true airspeed V along the body x axis (alpha = beta = 0) and a constant wind w (NED, default
-none): the ground velocity is v = v_air + w, so in a crosswind the heading psi differs from the ground track by
-the crab angle asin(w_cross / V) (`heading_for_track`). Each segment holds a bank angle phi (a coordinated turn: psi_dot = g0 tan(phi) / (V cos(gamma)))
-and a flight-path angle gamma (a climb or descent); at its start both move from the previous segment's values
-by a raised cosine over `transition_s`, so rates and accelerations are continuous. Attitude: roll phi,
+Profile. Constant true airspeed V along the body x axis (alpha = beta = 0) and a constant wind w (NED,
+default none): the ground velocity is v = v_air + w, so in a crosswind the heading psi differs from the
+ground track by the crab angle asin(w_cross / V) (`heading_for_track`). Each segment holds a bank angle phi
+(a coordinated turn: psi_dot = g0 tan(phi) / (V cos(gamma))) and a flight-path angle gamma (a climb or
+descent); at its start both move from the previous segment's values by a raised cosine over
+`transition_s`, so rates and accelerations are continuous. Attitude: roll phi,
 pitch gamma, yaw psi (3-2-1 Euler). With the wind constant, v_dot = d(v_air)/dt.
 
 Consistency with the INS (navigators.inertial.strapdown, the same WGS84 radii, Earth rate and J2 gravity):
@@ -109,8 +110,8 @@ class KinematicTruth:
     without wind); heading_rad: initial heading (the track without wind); segments: Segment or mappings;
     rate_hz: truth rate; terrain: optional terrain.Dem for h_agl_m (NaN without); wind_ned_mps: constant
     wind (m/s NED, toward), its magnitude below speed_mps; atmosphere: the day's trn_env.flight.Atmosphere
-    for the static pressure and temperature (standard by default). After the last segment the profile holds its last
-    values.
+    for the static pressure and temperature (standard by default). After the last segment the profile holds
+    its last values.
     """
 
     def __init__(self, lat0_rad: float, lon0_rad: float, h0_m: float, speed_mps: float, heading_rad: float,
