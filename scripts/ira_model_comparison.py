@@ -13,7 +13,8 @@ Conditions (a kinematic truth, [truth] source = "kinematic", so the geometry is 
 level flight at `--height` MSL (default 5,600 m, seed 000's 5 km case, ~5 km above the terrain), 80 m/s true
 airspeed, a 20 m/s wind from the west crossing the northbound track (crab asin(20/80) = 14.5 deg), 120 s
 over the Jacksboro DEM refined to `--spacing` m posts with fractal detail (terrain.refine), map = world (a
-high-resolution map with no map error, as the published comparison's; stated, not the bundled 3" map).
+high-resolution map with no map error, as the published comparison's; stated, not the bundled 3" map;
+`--map jacksboro` flies against the 3" map instead).
 Sensors: navigation-grade IMU, barometer, IRA at 50 Hz with sigma_R `--range-sigma`, sigma_theta
 `--look-sigma`; no GNSS. Navigator: `pf` (10,000 particles), terrain samples at `--rate` Hz, its noise
 model told the IRA's sigmas, terrain_model_sigma_m `--model-sigma` (map = world: no unresolved terrain).
@@ -57,13 +58,15 @@ AIRSPEED_MPS, WIND_MPS, WIND_FROM_DEG = 80.0, 20.0, 270.0
 
 def scenario(height_m: float = 5600.0, spacing_m: float = 30.0, range_sigma_m: float = 1.0,
              look_sigma_deg: float = 0.02, rate_hz: float = 5.0, model_sigma_m: float = 0.5,
-             duration_s: float = 120.0, formula: str = "proposed", seed: int = 0) -> dict:
-    """The comparison's scenario as data (validated by the caller): kinematic crosswind flight, map = world."""
+             duration_s: float = 120.0, formula: str = "proposed", seed: int = 0,
+             n_particles: int = 10_000, ira_rate_hz: float = 50.0, map_dem: str = "world") -> dict:
+    """The comparison's scenario (data, validated by the caller): kinematic crosswind flight, map = world."""
     wind = wind_ned_from(WIND_MPS, WIND_FROM_DEG)
     heading = math.degrees(heading_for_track(0.0, AIRSPEED_MPS, wind))
     end_lat = LAT0_DEG + duration_s * 1.05 * AIRSPEED_MPS / 111_000.0
     return {
-        "name": "ira_crosswind", "description": "IRA models in a 20 m/s crosswind (scripts/ira_model_comparison)",
+        "name": "ira_crosswind",
+        "description": "IRA models in a 20 m/s crosswind (scripts/ira_model_comparison.py)",
         "seed": seed, "duration_s": duration_s,
         "truth": {"source": "kinematic", "speed_mps": AIRSPEED_MPS,
                   "segments": [{"kind": "straight", "duration_s": duration_s}]},
@@ -73,11 +76,13 @@ def scenario(height_m: float = 5600.0, spacing_m: float = 30.0, range_sigma_m: f
                                 {"lat_deg": end_lat, "lon_deg": LON0_DEG, "h_msl_m": height_m}]},
         "wind": {"layers": [{"altitude_m": 0.0, "direction_from_deg": WIND_FROM_DEG, "speed_mps": WIND_MPS}]},
         "terrain": {"world": {"dem": "jacksboro", "refinement": {"spacing_m": spacing_m}},
-                    "map": {"dem": "world"}},
+                    "map": {"dem": map_dem}},
         "sensors": {"imu": {"grade": "navigation", "sampling": "instant"}, "baro": {},
-                    "ira": {"range_noise_m": range_sigma_m, "look_angle_noise_deg": look_sigma_deg}},
+                    "ira": {"range_noise_m": range_sigma_m, "look_angle_noise_deg": look_sigma_deg,
+                            "rate_hz": ira_rate_hz}},
         "navigator": {"name": "pf", "settings": {
             "ira_formula": formula, "measurement_rate_hz": rate_hz, "imu_samples": "instant",
+            "n_particles": n_particles,
             "ira_range_sigma_m": range_sigma_m, "ira_look_angle_sigma_deg": look_sigma_deg,
             "terrain_model_sigma_m": model_sigma_m}},
     }
@@ -138,12 +143,13 @@ def run_pf(sc, the_map, frames, chunks, initial, seed: int) -> np.ndarray:
     return np.array(err)
 
 
-def compare(runs: int = 10, seed0: int = 500, log=print, **conditions) -> dict:
-    """Horizontal RMS (t >= 30 s, all runs) of the PF with each model on the same frames, and their ratio."""
+def compare(runs: int = 10, seed0: int = 500, log=print, t_from_s: float = T_FROM_S, **conditions) -> dict:
+    """Horizontal RMS (t >= t_from_s, all runs) of the PF with each model on the same frames, their ratio,
+    and the closest-point geometry (`geometry`). conditions: `scenario`'s keywords."""
     base = scenario(**conditions)
     sc, world, the_map, chunks, truth0 = record(base)
     t = np.array([float(c.t_s[-1]) for c in chunks])
-    sel = t >= T_FROM_S
+    sel = t >= t_from_s
     scs = {f: validate(scenario(**conditions, formula=f), source=f"ira_crosswind_{f}")
            for f in ("proposed", "conventional")}
     e2 = {f: [] for f in scs}
@@ -163,7 +169,7 @@ def compare(runs: int = 10, seed0: int = 500, log=print, **conditions) -> dict:
             log(f"  run {r + 1}/{runs}: proposed {per_run['proposed'][-1]:.2f} m, "
                 f"conventional {per_run['conventional'][-1]:.2f} m")
     out = {"conditions": {**{k: v for k, v in conditions.items()}, "runs": runs,
-                          "airspeed_mps": AIRSPEED_MPS, "crosswind_mps": WIND_MPS, "t_from_s": T_FROM_S},
+                          "airspeed_mps": AIRSPEED_MPS, "crosswind_mps": WIND_MPS, "t_from_s": t_from_s},
            "geometry": geometry(world, chunks, IraConfig.from_mapping(sc.data["sensors"]["ira"])),
            "wall_s": time.time() - wall}
     for f in scs:
@@ -185,17 +191,21 @@ def main(argv=None) -> int:
     ap.add_argument("--spacing", type=float, default=30.0, help="world = map post spacing (m)")
     ap.add_argument("--height", type=float, default=5600.0, help="flight height (m MSL)")
     ap.add_argument("--model-sigma", type=float, default=0.5, help="PF terrain_model_sigma_m (m)")
+    ap.add_argument("--map", default="world",
+                    help='the navigator\'s map: "world" (default) or a DEM name, e.g. "jacksboro" (the 3" DEM '
+                         'without the world\'s fractal detail)')
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--seed", type=int, default=500)
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
     res = compare(a.runs, a.seed, height_m=a.height, spacing_m=a.spacing, range_sigma_m=a.range_sigma,
                   look_sigma_deg=a.look_sigma, rate_hz=a.rate, model_sigma_m=a.model_sigma,
-                  duration_s=a.duration)
+                  duration_s=a.duration, map_dem=a.map)
     print(json.dumps(res, indent=1))
     print(f"PF horizontal RMS (t >= {T_FROM_S:.0f} s, {a.runs} runs): proposed "
-          f"{res['proposed']['horizontal_rms_m']:.2f} m, conventional {res['conventional']['horizontal_rms_m']:.2f}"
-          f" m, ratio {res['ratio_conventional_over_proposed']:.2f} (conventional worse in "
+          f"{res['proposed']['horizontal_rms_m']:.2f} m, conventional "
+          f"{res['conventional']['horizontal_rms_m']:.2f} m, ratio "
+          f"{res['ratio_conventional_over_proposed']:.2f} (conventional worse in "
           f"{res['runs_conventional_worse']}/{a.runs} runs)")
     if a.out:
         a.out.write_text(json.dumps(res, indent=1))
