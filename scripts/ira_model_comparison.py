@@ -192,8 +192,8 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=float, default=5600.0, help="flight height (m MSL)")
     ap.add_argument("--model-sigma", type=float, default=0.5, help="PF terrain_model_sigma_m (m)")
     ap.add_argument("--map", default="world",
-                    help='the navigator\'s map: "world" (default) or a DEM name, e.g. "jacksboro" (the 3" DEM '
-                         'without the world\'s fractal detail)')
+                    help='the navigator\'s map: "world" (default) or a DEM name, e.g. "jacksboro" '
+                         '(the 3" DEM without the world\'s fractal detail)')
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--seed", type=int, default=500)
     ap.add_argument("--out", type=Path, default=None)
