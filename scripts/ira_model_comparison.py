@@ -11,10 +11,11 @@ is: 3 % of the across-track offset at c = 14 deg (seed 000 eq 40).
 
 Conditions (a kinematic truth, [truth] source = "kinematic", so the geometry is exactly what is stated;
 `--truth jsbsim` flies the King Air at 85 m/s instead, crab 13.6 deg): level flight at `--height` MSL
-(default 5,600 m, seed 000's 5 km case, ~5 km above the terrain), 80 m/s true airspeed, a 20 m/s wind from the west crossing the northbound track (crab asin(20/80) = 14.5 deg),
-120 s over the Jacksboro DEM refined to `--spacing` m posts with fractal detail (terrain.refine), map = world (a
-high-resolution map with no map error, as the published comparison's; stated, not the bundled 3" map;
-`--map jacksboro` flies against the 3" map instead).
+(default 5,600 m, seed 000's 5 km case, ~5 km above the terrain), 80 m/s true airspeed, a 20 m/s wind from
+the west crossing the northbound track (crab asin(20/80) = 14.5 deg), 120 s over the Jacksboro DEM refined
+to `--spacing` m posts with fractal detail (terrain.refine), map = world (a high-resolution map with no map
+error, as the published comparison's; stated, not the bundled 3" map; `--map jacksboro` flies against the
+3" map instead).
 Sensors: navigation-grade IMU, barometer, IRA at 50 Hz with sigma_R `--range-sigma`, sigma_theta
 `--look-sigma`; no GNSS. Navigator: `pf` (10,000 particles), terrain samples at `--rate` Hz, its noise
 model told the IRA's sigmas, terrain_model_sigma_m `--model-sigma` (map = world: no unresolved terrain).
