@@ -1,14 +1,18 @@
 """Seed 002 reproduction: the IRA-aided RBPF (navigators.filters.rbpf) under Table 1's conditions.
 
-Kinematic truth (trn_env.flight.kinematic): level flight at 2,500 m, 240 m/s, heading 18.1575 deg (Table 1),
-over the bundled Jacksboro DEM (3"; the paper's Korean site is not available), map = world. Sensors: IMU
-(navigation grade, accelerometer bias 1e-4 m/s^2 = Table 1's prior, instantaneous samples) and IRA
-(sigma_R 3.5 m, sigma_theta 0.1 deg) only. Initial INS errors drawn from Table 1's initial distribution.
-Compared with a plain bootstrap PF over the same 15-state model and particle count (`BootstrapPF15` below:
-all 15 states as particles, the same error model, process noise and IRA likelihood). Also runs the RBPF in
-the JSBSim closed loop (King Air at its own speeds) with `--jsbsim`.
+The conditions are the built-in scenario `seed002` (trn_env/scenario/builtin/seed002.toml): a kinematic truth
+([truth] source = "kinematic", trn_env.flight.kinematic) of level flight at 2,500 m, 240 m/s, heading
+18.1575 deg (Table 1), over the bundled Jacksboro DEM (3"; the paper's Korean site is not available),
+map = world. Sensors: IMU (navigation grade, accelerometer bias 1e-4 m/s^2 = Table 1's prior, instantaneous
+samples) and IRA (sigma_R 3.5 m, sigma_theta 0.1 deg) only. This script takes the truth, the sensor settings
+and the map from that scenario and runs the filters open loop on its frames, so that it can draw Table 1's
+full initial distribution (attitude included) and compare with a plain bootstrap PF over the same 15-state
+model and particle count (`BootstrapPF15` below: all 15 states as particles, the same error model, process
+noise and IRA likelihood). `--fly` also flies the RBPF through the scenario itself (`trn-env fly seed002`,
+the closed loop), and `--jsbsim` runs it in the JSBSim closed loop (King Air at its own speeds).
 
-    PYTHONPATH=$PWD python scripts/reproduce_seed002.py [--runs 3] [--duration 120] [--jsbsim] [--out DIR]
+    PYTHONPATH=$PWD python scripts/reproduce_seed002.py [--runs 3] [--duration 120] [--fly] [--jsbsim]
+        [--out DIR]
 
 Prints a table (RMS after convergence, per filter) and writes Figure-3-style plots (errors with +-3 sigma).
 """
@@ -24,30 +28,48 @@ from pathlib import Path
 import numpy as np
 
 import terrain
+import trn_env.scenario.build as components
 from navigators.filters import _rbpf_kernels as kern
 from navigators.filters.rbpf import RaoBlackwellizedPF
 from navigators.frames import SensorFrames
 from navigators.protocol import Estimate
 from terrain.geodesy import euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
-from trn_env.flight.kinematic import KinematicTruth, Segment
+from trn_env.flight.kinematic import KinematicTruth
+from trn_env.scenario.loading import load_scenario
 from trn_env.sensors.imu import ImuConfig, sample_imu
 from trn_env.sensors.ira import IraConfig, sample_ira
 
-LAT0_DEG, LON0_DEG = 36.462, -84.36     # south-west of the Jacksboro DEM, flying NNE across it
-H0_M, SPEED_MPS, HEADING_DEG = 2500.0, 240.0, 18.1575
+SCENARIO = "seed002"
 CONVERGED_AFTER_S = 30.0
+TABLE1_SIGMAS = (np.array([50.0, 50.0, 20.0]), np.array([1 / math.sqrt(2), 1 / math.sqrt(2), 0.5]),
+                 np.radians([0.1, 0.1, 0.1]))
+
+
+def scenario_data(duration_s: float) -> dict:
+    """The seed002 scenario's data (defaults filled) for a flight of duration_s; its initial errors are
+    Table 1's (checked: the draws below use these sigmas)."""
+    d = load_scenario(SCENARIO, duration_s=duration_s).data
+    e = d["initial_errors"]
+    got = (e["position_ned_m"], e["velocity_ned_mps"], np.asarray(e["attitude_mrad"]) * 1e-3)
+    assert all(np.allclose(a, b, rtol=1e-4) for a, b in zip(got, TABLE1_SIGMAS, strict=True)), got
+    return d
 
 
 def table1_initial_errors(rng: np.random.Generator) -> np.ndarray:
     """A draw of Table 1's initial distribution: position (N, E, up) m, velocity NED m/s, attitude rad."""
-    return np.r_[rng.normal(0, [50.0, 50.0, 20.0]), rng.normal(0, [1 / math.sqrt(2), 1 / math.sqrt(2), 0.5]),
-                 rng.normal(0, np.radians([0.1, 0.1, 0.1]))]
+    pos, vel, att = TABLE1_SIGMAS
+    return np.r_[rng.normal(0, pos), rng.normal(0, vel), rng.normal(0, att)]
 
 
 def kinematic_truth(duration_s: float, dem) -> KinematicTruth:
-    return KinematicTruth(math.radians(LAT0_DEG), math.radians(LON0_DEG), H0_M, SPEED_MPS,
-                          math.radians(HEADING_DEG), [Segment("straight", duration_s)], rate_hz=100.0,
-                          terrain=dem)
+    """The seed002 scenario's kinematic truth (trn_env.scenario.build.build_kinematic_truth) over `dem`."""
+    return components.build_kinematic_truth(scenario_data(duration_s), dem)
+
+
+def sensor_configs(d: dict) -> tuple[ImuConfig, IraConfig]:
+    """The scenario's IMU and IRA settings."""
+    cfg = components.sensor_configs(d)
+    return ImuConfig.from_mapping(cfg["imu"]), IraConfig.from_mapping(cfg["ira"])
 
 
 def initial_estimate(truth, err) -> Estimate:
@@ -79,8 +101,7 @@ def run_open_loop(nav, kin: KinematicTruth, dem, duration_s: float, seed: int, c
     wall seconds)."""
     ss = np.random.SeedSequence(seed)
     r_imu, r_ira, r_init = (np.random.default_rng(s) for s in ss.spawn(3))
-    imu_cfg = ImuConfig(accel_bias_mps2=1e-4, sampling="instant")
-    ira_cfg = IraConfig()
+    imu_cfg, ira_cfg = sensor_configs(scenario_data(duration_s))
     n_chunk = int(round(chunk_s * 100.0))
     first = kin.advance(n_chunk)
     nav.reset(initial_estimate(first, table1_initial_errors(r_init)))
@@ -186,6 +207,13 @@ def plot(t, e, s, path: Path, title: str) -> None:
     plt.close(fig)
 
 
+def fly_scenario(duration_s: float, seed: int) -> dict:
+    """summary.json figures of the RBPF flying the seed002 scenario itself (trn_env.sim.run_scenario, the
+    path `trn-env fly seed002` takes: the scenario's sensors, its navigator stream, the closed loop)."""
+    from trn_env.sim.closed_loop import run_scenario
+    return run_scenario(SCENARIO, duration_s=duration_s, seed=seed).summary
+
+
 def run_jsbsim(duration_s: float, seed: int, out: Path) -> dict:
     """The same filter on the King Air in the JSBSim closed loop at its own speeds (85 m/s, 1,500 m AGL):
     the default scenario with --navigator rbpf (3" map against the 30 m fractal world) and
@@ -215,6 +243,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=2018)
     ap.add_argument("--out", type=Path, default=Path("out/seed002"))
     ap.add_argument("--jsbsim", action="store_true", help="also fly the RBPF on the King Air (JSBSim)")
+    ap.add_argument("--fly", action="store_true",
+                    help="also fly the RBPF through the seed002 scenario (trn-env fly's closed loop)")
     ap.add_argument("--no-pf", action="store_true", help="skip the plain-PF comparison")
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
@@ -254,6 +284,14 @@ def main(argv=None) -> int:
                   f"{np.mean([r['heading_rms_deg'] for r in rs]):9.4f} "
                   f"{np.mean([r['inside_3sigma'] for r in rs]):8.2f}")
     print("targets: RBPF pos3d <= 10 m, vel <= 0.5 m/s, att <= 0.1 deg; the plain PF worse")
+    if a.fly:
+        for run in range(a.runs):
+            summ = fly_scenario(a.duration, a.seed + run)
+            print(f"trn-env fly {SCENARIO} --seed {a.seed + run} --duration {a.duration:g} (rbpf, closed "
+                  f"loop, initial errors of [initial_errors]): horizontal RMS "
+                  f"{summ['horizontal_error_rms_m']:.1f} m, final {summ['horizontal_error_final_m']:.1f} m, "
+                  f"vertical RMS "
+                  f"{summ['vertical_error_rms_m']:.1f} m, termination {summ['termination']}", flush=True)
     if a.jsbsim:
         for label, summ in run_jsbsim(min(a.duration, 120.0), a.seed, a.out).items():
             print(f"JSBSim King Air ({label}), rbpf closed loop: horizontal RMS "

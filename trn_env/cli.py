@@ -143,8 +143,8 @@ def _summary_table(summary: dict, out_dir: Path):
         ("ANEES, position (3 = consistent)", f"{summary['anees']:.2f}"),
         ("track lost", "yes" if summary["track_lost"] else "no"),
         ("min true height above ground", f"{summary['min_true_agl_m']:.0f} m"),
-        ("fuel remaining", f"{summary['fuel_remaining_kg']:.1f} kg"
-                           + (" (held constant)" if summary["constant_fuel"] else "")),
+        ("fuel remaining", "n/a (kinematic truth)" if summary.get("truth_source") == "kinematic" else
+         f"{summary['fuel_remaining_kg']:.1f} kg" + (" (held constant)" if summary["constant_fuel"] else "")),
         ("navigator status", summary["navigator_status"]),
     ]
     if "warm_up_wall_time_s" in summary:

@@ -4,11 +4,13 @@ For conditions beyond the King Air (seed 002's 240 m/s at 2,500 m) the truth com
 instead of JSBSim, and fills the same `TruthChunk`, so the same sensors (trn_env.sensors) and navigators run
 on it.
 
-Profile. Constant true airspeed V (no wind, so ground speed = V, alpha = beta = 0, the body x axis along the
-velocity). Each segment holds a bank angle phi (a coordinated turn: psi_dot = g0 tan(phi) / (V cos(gamma)))
-and a flight-path angle gamma (a climb or descent); at its start both move from the previous segment's values
-by a raised cosine over `transition_s`, so rates and accelerations are continuous. Attitude: roll phi,
-pitch gamma, yaw psi (3-2-1 Euler).
+Profile. Constant true airspeed V along the body x axis (alpha = beta = 0) and a constant wind w (NED,
+default none): the ground velocity is v = v_air + w, so in a crosswind the heading psi differs from the
+ground track by the crab angle asin(w_cross / V) (`heading_for_track`). Each segment holds a bank angle phi
+(a coordinated turn: psi_dot = g0 tan(phi) / (V cos(gamma))) and a flight-path angle gamma (a climb or
+descent); at its start both move from the previous segment's values by a raised cosine over
+`transition_s`, so rates and accelerations are continuous. Attitude: roll phi,
+pitch gamma, yaw psi (3-2-1 Euler). With the wind constant, v_dot = d(v_air)/dt.
 
 Consistency with the INS (navigators.inertial.strapdown, the same WGS84 radii, Earth rate and J2 gravity):
     f^n = v_dot + (2 w_ie + w_en) x v - g^n(lat, h)      f_b = C_bn^T f^n
@@ -18,6 +20,10 @@ with v_dot, the Euler rates and their ingredients analytic; heading and position
 Samples are instantaneous values at the output times: sample an IMU on it with `sampling="instant"` and run
 the INS with `imu_samples="instant"` (tests/test_kinematic_truth.py: a noise-free IMU, the INS follows it
 to centimetres over minutes).
+
+`KinematicFlight` wraps a profile in the interface the closed loop uses of trn_env.flight.Flight (snapshot,
+record/take, targets, fuel), so a scenario's `[truth] source = "kinematic"` flies the same sensors and
+navigators (trn_env.scenario.build.build_flight). Guidance runs but cannot steer a prescribed profile.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ import numpy as np
 
 from navigators.inertial.strapdown import gravity_ned
 from terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
-from trn_env.flight.atmosphere import static_p_T
+from trn_env.flight.atmosphere import Atmosphere, static_p_T
 from trn_env.flight.truth import TruthChunk
 
 G0_MPS2 = 9.80665
@@ -100,19 +106,31 @@ def _radii(lat, h):
 class KinematicTruth:
     """Truth chunks of a prescribed profile (see the module docstring).
 
-    lat0_rad, lon0_rad, h0_m: start (geodetic, height above MSL); speed_mps: true airspeed (= ground speed);
-    heading_rad: initial track; segments: Segment or mappings; rate_hz: truth rate; terrain: optional
-    terrain.Dem for h_agl_m (NaN without). After the last segment the profile holds its last values.
+    lat0_rad, lon0_rad, h0_m: start (geodetic, height above MSL); speed_mps: true airspeed (the ground speed
+    without wind); heading_rad: initial heading (the track without wind); segments: Segment or mappings;
+    rate_hz: truth rate; terrain: optional terrain.Dem for h_agl_m (NaN without); wind_ned_mps: constant
+    wind (m/s NED, toward), its magnitude below speed_mps; atmosphere: the day's trn_env.flight.Atmosphere
+    for the static pressure and temperature (standard by default). After the last segment the profile holds
+    its last values.
     """
 
     def __init__(self, lat0_rad: float, lon0_rad: float, h0_m: float, speed_mps: float, heading_rad: float,
-                 segments, rate_hz: float = 100.0, terrain=None, substeps: int = 8):
+                 segments, rate_hz: float = 100.0, terrain=None, substeps: int = 8,
+                 wind_ned_mps=(0.0, 0.0, 0.0), atmosphere: Atmosphere | None = None):
         for name, v in (("lat0_rad", lat0_rad), ("lon0_rad", lon0_rad), ("h0_m", h0_m),
                         ("speed_mps", speed_mps), ("heading_rad", heading_rad), ("rate_hz", rate_hz)):
             if not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ValueError(f"kinematic truth: {name} must be a finite number, got {v!r}")
         if not speed_mps > 1.0:
             raise ValueError(f"kinematic truth: speed_mps must exceed 1 m/s, got {speed_mps}")
+        wind = np.asarray(wind_ned_mps, dtype=float)
+        if wind.shape != (3,) or not np.all(np.isfinite(wind)):
+            raise ValueError(f"kinematic truth: wind_ned_mps must be 3 finite numbers, got {wind_ned_mps!r}")
+        if not np.linalg.norm(wind) < speed_mps:
+            raise ValueError(f"kinematic truth: the wind ({np.linalg.norm(wind):g} m/s) must be slower than "
+                             f"speed_mps ({speed_mps:g})")
+        self.wind_ned_mps = wind
+        self.atmosphere = atmosphere if atmosphere is not None else Atmosphere()
         if not rate_hz > 0:
             raise ValueError(f"kinematic truth: rate_hz must be positive, got {rate_hz}")
         if not abs(lat0_rad) < math.radians(85.0):
@@ -141,8 +159,10 @@ class KinematicTruth:
         return phi, dphi, gam, dgam, dpsi
 
     def _v_ned(self, psi, gam):
+        """Ground velocity: the air velocity along the body x axis plus the wind."""
         V = self.speed_mps
-        return np.stack([V * np.cos(gam) * np.cos(psi), V * np.cos(gam) * np.sin(psi), -V * np.sin(gam)], -1)
+        return np.stack([V * np.cos(gam) * np.cos(psi), V * np.cos(gam) * np.sin(psi), -V * np.sin(gam)],
+                        -1) + self.wind_ned_mps
 
     def advance(self, n: int) -> TruthChunk:
         """The next n truth rows (the first call starts at t = 0)."""
@@ -222,8 +242,10 @@ class KinematicTruth:
         chunk.alpha_rad[:] = 0.0
         chunk.beta_rad[:] = 0.0
         for i in range(n):
-            chunk.p_static_pa[i], chunk.T_static_K[i] = static_p_T(lat[i], lon[i], h[i], 0.0, 101325.0)
-        chunk.wind_ned_mps[:] = 0.0
+            chunk.p_static_pa[i], chunk.T_static_K[i] = static_p_T(lat[i], lon[i], h[i],
+                                                                    self.atmosphere.delta_T_K,
+                                                                    self.atmosphere.p_sl_pa)
+        chunk.wind_ned_mps[:] = self.wind_ned_mps
         if self.terrain is not None:
             chunk.h_agl_m[:] = h - self.terrain.height(lat, lon)
         return chunk
@@ -235,4 +257,96 @@ class KinematicTruth:
         return self.advance(n)
 
 
-__all__ = ["SEGMENT_KINDS", "KinematicTruth", "Segment"]
+def wind_ned_from(speed_mps: float, from_deg: float) -> np.ndarray:
+    """Horizontal wind (m/s NED, the direction it blows toward) of a wind `speed_mps` FROM `from_deg`."""
+    a = math.radians(from_deg)
+    return np.array([-speed_mps * math.cos(a), -speed_mps * math.sin(a), 0.0])
+
+
+def heading_for_track(track_rad: float, speed_mps: float, wind_ned_mps) -> float:
+    """Heading (rad) whose air velocity speed_mps plus the horizontal wind points along track_rad (level
+    flight): heading = track - asin(w_cross / V), w_cross the wind's component to the right of the track."""
+    w = np.asarray(wind_ned_mps, float)
+    cross = -w[0] * math.sin(track_rad) + w[1] * math.cos(track_rad)
+    if not abs(cross) < speed_mps:
+        raise ValueError(f"a crosswind of {cross:g} m/s cannot be held at {speed_mps:g} m/s")
+    return track_rad - math.asin(cross / speed_mps)
+
+
+class KinematicFlight:
+    """A KinematicTruth behind the part of trn_env.flight.Flight's interface the closed loop uses.
+
+    Steps are the profile's rows (dt_s = 1 / its rate); snapshot() is the state at t = 0 before any step.
+    Targets and the terrain elevation are accepted and kept but change nothing (the motion is prescribed);
+    there is no engine or fuel (fuel_kg NaN, constant_fuel True). Past the profile's end it holds its last
+    bank and flight-path angle."""
+
+    constant_fuel = True
+
+    def __init__(self, truth: KinematicTruth):
+        self.truth = truth
+        self.dt_s = truth.dt_s
+        self._steps = 0
+        self._pending: list[TruthChunk] = []
+        self._n_pending = 0
+        self._last = truth.advance(1)
+        self._targets = None
+        self._terrain_elevation_m = math.nan
+
+    @property
+    def t_s(self) -> float:
+        return self._steps * self.dt_s
+
+    @property
+    def steps(self) -> int:
+        return self._steps
+
+    @property
+    def fuel_kg(self) -> float:
+        return math.nan
+
+    @property
+    def pending_steps(self) -> int:
+        return self._n_pending
+
+    @property
+    def targets(self):
+        return self._targets
+
+    def set_targets(self, targets) -> None:
+        self._targets = targets
+
+    def set_terrain_elevation(self, h_m: float) -> None:
+        self._terrain_elevation_m = float(h_m)
+
+    def engine_stop(self) -> None:
+        return None
+
+    def snapshot(self) -> TruthChunk:
+        """The current state as a one-row TruthChunk."""
+        return self._last.slice(len(self._last) - 1, len(self._last)).copy()
+
+    def record(self, n_steps: int) -> None:
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        chunk = self.truth.advance(int(n_steps))
+        self._pending.append(chunk)
+        self._n_pending += len(chunk)
+        self._steps += len(chunk)
+        self._last = chunk
+
+    def take(self) -> TruthChunk:
+        if not self._n_pending:
+            raise ValueError("KinematicFlight.take: no steps recorded since the last take()")
+        out = self._pending[0] if len(self._pending) == 1 else TruthChunk.concatenate(self._pending)
+        self._pending = []
+        self._n_pending = 0
+        return out
+
+    def advance(self, n_steps: int) -> TruthChunk:
+        self.record(n_steps)
+        return self.take()
+
+
+__all__ = ["SEGMENT_KINDS", "KinematicFlight", "KinematicTruth", "Segment", "heading_for_track",
+           "wind_ned_from"]

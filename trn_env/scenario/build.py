@@ -236,8 +236,71 @@ def quiet_stdout():
         os.close(devnull)
 
 
+def is_kinematic(d: dict) -> bool:
+    """The scenario's truth is the prescribed motion profile ([truth] source = "kinematic")."""
+    return (d.get("truth") or {}).get("source", "jsbsim") == "kinematic"
+
+
+def build_kinematic_truth(d: dict, world):
+    """trn_env.flight.kinematic.KinematicTruth of a kinematic scenario: [initial]'s position, height and
+    heading, [truth]'s speed (default initial.tas_mps) and segments, [wind]'s steady wind at the initial
+    height (held constant), [atmosphere], one row per aircraft.dt_s."""
+    from trn_env.flight.kinematic import KinematicTruth, Segment
+    init, t = d["initial"], d["truth"]
+    segments = []
+    for i, m in enumerate(t.get("segments") or []):
+        try:
+            segments.append(Segment.from_mapping(dict(m)))
+        except ValueError as exc:
+            raise ValueError(f"segments[{i}]: {exc}") from None
+    if not segments:
+        raise ValueError("segments: a kinematic truth needs at least one segment")
+    h0 = initial_h_msl_m(d, world)
+    return KinematicTruth(math.radians(init["lat_deg"]), math.radians(init["lon_deg"]), h0,
+                          float(t.get("speed_mps", init["tas_mps"])), math.radians(init["heading_deg"]),
+                          segments, rate_hz=1.0 / float(d["aircraft"]["dt_s"]), terrain=world,
+                          wind_ned_mps=build_wind(d).steady_wind_ned_mps(h0), atmosphere=build_atmosphere(d))
+
+
+def _truth_problems(d: dict, world) -> list[str]:
+    """[truth] fields against the source: a kinematic profile that cannot be built, or one asked to fly
+    turbulence or gusts (it holds one steady wind); kinematic-only fields on a JSBSim truth."""
+    import re
+    t = d.get("truth") or {}
+    if not is_kinematic(d):
+        return [f"truth.{k}: only used with truth.source = \"kinematic\" (the source is "
+                f"{t.get('source', 'jsbsim')!r})" for k in ("speed_mps", "segments") if k in t]
+    problems = []
+    w = d["wind"]
+    if (w.get("turbulence") or {}).get("model", "none") != "none":
+        problems.append("wind.turbulence: the kinematic truth holds a steady wind; turbulence needs "
+                        "truth.source = \"jsbsim\" (set wind.turbulence.model = \"none\")")
+    if w.get("gusts"):
+        problems.append("wind.gusts: the kinematic truth holds a steady wind; gusts need "
+                        "truth.source = \"jsbsim\"")
+    try:
+        build_kinematic_truth(d, world)
+    except ValueError as exc:
+        msg = str(exc)
+        m = re.match(r"segments\[(\d+)\]: Segment\.(\w+)", msg)
+        if m:
+            problems.append(f"truth.segments[{m.group(1)}].{m.group(2)}: {msg.split(': ', 1)[1]}")
+        elif msg.startswith("segments"):
+            problems.append(f"truth.{msg}")
+        elif "speed_mps" in msg or "wind" in msg:
+            problems.append(f"truth.speed_mps: {msg}")
+        else:
+            problems.append(f"truth: {msg}")
+    return problems
+
+
 def build_flight(d: dict, world, rng: np.random.Generator):
-    """trn_env.flight.Flight at the scenario's initial condition, trimmed, with its wind and a JSBSim seed."""
+    """trn_env.flight.Flight at the scenario's initial condition, trimmed, with its wind and a JSBSim seed;
+    for [truth] source = "kinematic" a trn_env.flight.kinematic.KinematicFlight of the prescribed profile
+    (rng unused)."""
+    if is_kinematic(d):
+        from trn_env.flight.kinematic import KinematicFlight
+        return KinematicFlight(build_kinematic_truth(d, world))
     from trn_env.flight.core import Flight
     init = d["initial"]
     lat, lon = math.radians(init["lat_deg"]), math.radians(init["lon_deg"])
@@ -399,8 +462,11 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
         checks.append(("navigator.settings", lambda: build_navigator(d, the_map)))
         if not blocked("sensors"):
             checks.append(("", lambda: _navigator_requirements(d, the_map)))
-    if world is not None and not blocked("initial", "aircraft", "terrain.world"):
+    if world is not None and not blocked("initial", "aircraft", "terrain.world") and not is_kinematic(d):
         checks.append(("initial", lambda: _initial_condition(d, world)))
+    if world is not None and not blocked("initial", "truth", "wind", "atmosphere", "terrain.world",
+                                         "aircraft.dt_s"):
+        checks.append(("", lambda: _truth_problems(d, world)))
     if not blocked("route"):
         checks.append(("route", lambda: build_guidance(d, the_map)))
     problems: list[str] = []

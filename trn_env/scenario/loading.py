@@ -271,6 +271,9 @@ def _fill_defaults(data: dict) -> dict:
     d["aircraft"].setdefault("dt_s", 0.01)
     d["aircraft"].setdefault("settings", {})
     d["aircraft"].setdefault("constant_fuel", False)
+    if not isinstance(d.get("truth"), dict):
+        d["truth"] = {}
+    d["truth"].setdefault("source", "jsbsim")
     errs = d.setdefault("initial_errors", {})
     for k, v in DEFAULT_INITIAL_ERRORS.items():
         errs.setdefault(k, list(v))
@@ -512,6 +515,8 @@ def _ceiling_problems(d: dict, extras: dict) -> list[str]:
     aircraft cannot trim or cannot climb to the route: refused before the flight). A height above ground is
     taken over the true terrain there."""
     from trn_env.flight.aircraft_data import service_ceiling_m
+    if d["truth"]["source"] == "kinematic":
+        return []   # a prescribed profile, no aircraft to trim or climb
     ceiling = service_ceiling_m(d["aircraft"]["name"])
     if ceiling is None:
         return []
