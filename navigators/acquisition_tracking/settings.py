@@ -78,6 +78,8 @@ class AcqTrackConfig:
     aiding: bool = True  # chapter 4's aided loops (False: constant speed and heading)
     aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
     reference_gain: float = 1.0  # aided: fraction of each epoch's loop correction taken into b
+    aiding_interval_mean: bool = True  # air data: the air vector's mean over each sample interval
+    air_vector_sideslip: bool = True  # air data: the air vector points along heading + sideslip
     wind_estimation: bool = True  # wind triangle, predicted through heading changes
     wind_gain: float = 0.01  # per tracked sample, low-pass of the wind estimate (GNSS: 0.2)
     loop_order: str = "speed_first"
@@ -90,6 +92,11 @@ class AcqTrackConfig:
     heading_narrow_spacing_deg: float = 0.5
     heading_narrow_threshold_deg: float = 0.003
     break_iteration: int = 101
+    position_loops: bool = True  # start-point loops along / across the track (ours; tracking.py)
+    position_spacings_cells: tuple = (0.25, 0.5, 0.75, 1.0, 1.25)  # 1st stage, x the map resolution
+    position_threshold_m: float = 0.5
+    position_narrow_spacing_cells: float = 0.125  # 2nd stage (bias_mitigation "ncs")
+    position_narrow_threshold_m: float = 0.2
     discriminator: str = "thesis"  # "thesis": s (E - L) / (E + L); "v_fit": floor removed (tracking.py)
     bias_mitigation: str = "ncs"  # "ncs": fixed narrow 2nd stage; "none": 1st stage only
     scf_offset_cells: float = 2.0  # f: the SCF/HCF reach f R_db at the transect's far end
@@ -123,7 +130,9 @@ class AcqTrackConfig:
     unaided_heading_sigma_deg: float = 5.0
     gnss_sigma_m: float = 3.0
     position_sigma_floor_m: float | None = None  # None: half the map's post spacing
-    lock_covariance_scale: float = 2.0  # calibration of the in-lock position bound (navigator.py)
+    fix_sigma_scale: float = 1.0  # calibration of the centroid fix's sigma (navigator.py; NIS check)
+    fix_overlap: float | None = None  # epochs sharing one fix's information (None: N / 2)
+    aiding_walk_m_per_sqrt_s: float | None = None  # dead-reckoning random walk (None: by aiding_source)
     baro_geopotential: bool = True
     baro_bias_sigma_m: float = 10.0
     integrity_window: int = 3  # in-lock epochs in the innovation test's window (InnovationMonitor)
@@ -145,12 +154,26 @@ class AcqTrackConfig:
         ):
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
-        for name in ("remove_bias", "aiding", "wind_estimation", "roll_compensation", "baro_geopotential"):
+        for name in (
+            "remove_bias",
+            "aiding",
+            "wind_estimation",
+            "roll_compensation",
+            "baro_geopotential",
+            "aiding_interval_mean",
+            "air_vector_sideslip",
+            "position_loops",
+        ):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         _finite("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0, strict_lo=True)
         _finite("wind_gain", self.wind_gain, 0.0, 1.0)
         _finite("reference_gain", self.reference_gain, 0.0, 1.0, strict_lo=True)
+        object.__setattr__(
+            self,
+            "position_spacings_cells",
+            _spacing_set("position_spacings_cells", self.position_spacings_cells),
+        )
         object.__setattr__(
             self, "speed_spacings_mps", _spacing_set("speed_spacings_mps", self.speed_spacings_mps)
         )
@@ -164,6 +187,9 @@ class AcqTrackConfig:
             "heading_threshold_deg",
             "heading_narrow_spacing_deg",
             "heading_narrow_threshold_deg",
+            "position_threshold_m",
+            "position_narrow_spacing_cells",
+            "position_narrow_threshold_m",
             "scf_offset_cells",
             "symmetry_ratio_max",
             "acquisition_speed_bin_mps",
@@ -181,7 +207,7 @@ class AcqTrackConfig:
             "aiding_heading_sigma_deg",
             "unaided_speed_sigma_mps",
             "unaided_heading_sigma_deg",
-            "lock_covariance_scale",
+            "fix_sigma_scale",
         ):
             _finite(name, getattr(self, name), 0.0, strict_lo=True)
         for name, bin_name in (
@@ -218,6 +244,10 @@ class AcqTrackConfig:
         L = self.output_average_length
         if L is not None and (isinstance(L, bool) or not isinstance(L, (int, np.integer)) or int(L) < 1):
             raise ValueError(f"output_average_length must be a whole number >= 1 or null, got {L!r}")
+        if self.fix_overlap is not None:
+            _finite("fix_overlap", self.fix_overlap, 1.0)
+        if self.aiding_walk_m_per_sqrt_s is not None:
+            _finite("aiding_walk_m_per_sqrt_s", self.aiding_walk_m_per_sqrt_s, 0.0)
         if self.position_sigma_floor_m is not None:
             _finite("position_sigma_floor_m", self.position_sigma_floor_m, 0.0, strict_lo=True)
 
