@@ -93,13 +93,9 @@ from navigators.protocol import (
 )
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-_DEFAULT_WALK = {"air_data": 9.0, "ins": 0.7, "unaided": 9.0}
 _TAIL_S = 3.0  # seconds of each sensor's samples carried into the next frame (sample look-ups)
 _TURN_RATE_WINDOW_S = 3.0  # compass heading rate for the coordinated-turn roll: LSQ slope over 3 s
 _MAD_VARIANCE_FACTOR = math.pi / 2.0
-# aiding_walk_m_per_sqrt_s by default: the dead reckoning's random walk besides the references' bias. Air data
-# (JSBSim's light turbulence: the gusts move the ground vector by ~2 m/s per axis, correlated over ~10 s and
-# invisible to air data): 2 m/s x sqrt(2 x 10 s); an INS's velocity: ~0.05 m/s x sqrt(2 x 100 s).  # an L1 (MAD) fit's variance over least squares' for Gaussian noise
 
 
 class _Tail:
@@ -186,8 +182,6 @@ class AcqTrackNavigator:
             cfg.fix_overlap if cfg.fix_overlap is not None else 0.5 * cfg.transect_samples
         )
         walk = cfg.aiding_walk_m_per_sqrt_s
-        if walk is None:
-            walk = _DEFAULT_WALK[cfg.aiding_source] if cfg.aiding else _DEFAULT_WALK["unaided"]
         self._walk2 = float(walk) ** 2
         self._speed_set = np.array(cfg.speed_spacings_mps)
         self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
@@ -328,7 +322,8 @@ class AcqTrackNavigator:
             tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
         if frames.air_data is not None:
             ad = frames.air_data
-            beta = np.asarray(ad.beta_rad, float) if self.config.air_vector_sideslip else np.zeros(ad.t_s.size)
+            n_ad = ad.t_s.size
+            beta = np.asarray(ad.beta_rad, float) if self.config.air_vector_sideslip else np.zeros(n_ad)
             tl["air"].extend(ad.t_s, [ad.tas_mps, beta], ad.valid & np.isfinite(beta))
         hd = frames.heading
         if hd is not None and hd.t_s.size:
@@ -594,9 +589,11 @@ class AcqTrackNavigator:
             self.b_v += k * (g_speed - s.m_v - self.b_v)
             self.b_psi += k * float(wrap_rad(g_track - s.m_psi - self.b_psi))
             self.b_mean = (self.b_v, self.b_psi)
-        first = tr.samples[0]
-        if math.isfinite(first.gnss_lat):
-            self.p0 = (first.gnss_lat, first.gnss_lon)
+        # the transect's start from this sample's fix back along the references (its first sample may have
+        # had no fix, e.g. before the first GNSS epoch, and kept the initial estimate's error)
+        _, _, _, dt, m_v, m_psi, _ = tr.arrays()
+        dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, s.gnss_lat)
+        self.p0 = (s.gnss_lat - dla[-1], s.gnss_lon - dlo[-1])
         self.pos = (s.gnss_lat, s.gnss_lon)
         self.t_pos = s.t_s
         self.P = np.eye(2) * cfg.gnss_sigma_m**2
@@ -1017,12 +1014,9 @@ class AcqTrackNavigator:
         )
         if self.bad_epochs >= cfg.lost_after_epochs:
             if cfg.aiding and self.lock_state != "lost":
-                # dead-reckon on the aiding: its own prediction (an INS's velocity, or air data + the wind
-                # estimate) when it has one, else the references' running mean over the lock
-                wind_known = cfg.aiding_source == "air_data" and cfg.wind_estimation \
-                    and self.wind.n_updates > 0
-                prior = cfg.aiding_source == "ins" or wind_known
-                self.b_v, self.b_psi = (0.0, 0.0) if prior else self.b_mean
+                # dead-reckon on the aiding with the references' running mean over the lock: they carry the
+                # sensor biases and the wind's data bias the loops learned (zeroing them drops that)
+                self.b_v, self.b_psi = self.b_mean
             self.need_acquisition = True
             self._anchored = False
             self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")

@@ -31,6 +31,21 @@ import numpy as np
 from navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
 
 AIDING_SOURCES = ("air_data", "ins")
+# Defaults that depend on aiding_source (a setting given as null / None takes these):
+# - aiding_speed_sigma_mps / aiding_heading_sigma_deg: the aiding's error over a transect besides what the
+#   references absorb - air data in JSBSim's light turbulence (the gusts move the ground vector by ~2 m/s per
+#   axis, invisible to air data) 1.5 m/s / 1 deg; an IRS's (strapdown INS) velocity 0.3 m/s / 0.2 deg.
+# - aiding_walk_m_per_sqrt_s: the dead reckoning's random walk on top (position variance per second): air
+#   data 2 m/s x sqrt(2 x 10 s correlation) ~ 9; an INS 2 (its slow velocity drift, which the slow
+#   references follow late; calibrated so the centroid fix's NIS averages 2 on the built-in flight).
+# - reference_gain: the aided references are slow biases; the fraction of each epoch's loop change taken
+#   (an exponential average over ~2 / gain epochs): air data 0.1, an INS's slower drift 0.02.
+SOURCE_DEFAULTS = {
+    "aiding_speed_sigma_mps": {"air_data": 1.5, "ins": 0.3},
+    "aiding_heading_sigma_deg": {"air_data": 1.0, "ins": 0.2},
+    "aiding_walk_m_per_sqrt_s": {"air_data": 9.0, "ins": 2.0},
+    "reference_gain": {"air_data": 0.1, "ins": 0.02},
+}
 LOOP_ORDERS = ("speed_first", "heading_first")
 BIAS_MITIGATIONS = ("ncs", "none")
 DISCRIMINATOR_NAMES = ("thesis", "v_fit")
@@ -77,7 +92,7 @@ class AcqTrackConfig:
     min_valid_fraction: float = 0.6  # of the N samples needed to correlate
     aiding: bool = True  # chapter 4's aided loops (False: constant speed and heading)
     aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
-    reference_gain: float = 1.0  # aided: fraction of each epoch's loop correction taken into b
+    reference_gain: float | None = None  # aided: fraction of each epoch's loop correction taken into b
     aiding_interval_mean: bool = True  # air data: the air vector's mean over each sample interval
     air_vector_sideslip: bool = True  # air data: the air vector points along heading + sideslip
     wind_estimation: bool = True  # wind triangle, predicted through heading changes
@@ -124,21 +139,25 @@ class AcqTrackConfig:
     output_average_heading_tol_deg: float = 0.5
     roll_compensation: bool = True
     beamwidth_deg: float = 17.0
-    aiding_speed_sigma_mps: float = 1.5  # dead reckoning on the aiding alone (air data + wind estimate)
-    aiding_heading_sigma_deg: float = 1.0
+    aiding_speed_sigma_mps: float | None = None  # dead reckoning on the aiding alone (None: by source)
+    aiding_heading_sigma_deg: float | None = None
     unaided_speed_sigma_mps: float = 5.0
     unaided_heading_sigma_deg: float = 5.0
     gnss_sigma_m: float = 3.0
     position_sigma_floor_m: float | None = None  # None: half the map's post spacing
-    fix_sigma_scale: float = 1.0  # calibration of the centroid fix's sigma (navigator.py; NIS check)
+    fix_sigma_scale: float = 1.25  # calibration of the centroid fix's sigma (navigator.py; NIS check)
     fix_overlap: float | None = None  # epochs sharing one fix's information (None: N / 2)
-    aiding_walk_m_per_sqrt_s: float | None = None  # dead-reckoning random walk (None: by aiding_source)
+    aiding_walk_m_per_sqrt_s: float | None = None  # dead-reckoning random walk (None: by source)
     baro_geopotential: bool = True
     baro_bias_sigma_m: float = 10.0
     integrity_window: int = 3  # in-lock epochs in the innovation test's window (InnovationMonitor)
     integrity_alpha: float = 0.01  # probability outside its chi-square band
 
     def __post_init__(self):
+        src = self.aiding_source if self.aiding_source in AIDING_SOURCES else "air_data"
+        for name, by_source in SOURCE_DEFAULTS.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, by_source[src])
         n = self.transect_samples
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 5 <= int(n) <= 500:
             raise ValueError(f"transect_samples must be a whole number in [5, 500], got {n!r}")
@@ -246,8 +265,7 @@ class AcqTrackConfig:
             raise ValueError(f"output_average_length must be a whole number >= 1 or null, got {L!r}")
         if self.fix_overlap is not None:
             _finite("fix_overlap", self.fix_overlap, 1.0)
-        if self.aiding_walk_m_per_sqrt_s is not None:
-            _finite("aiding_walk_m_per_sqrt_s", self.aiding_walk_m_per_sqrt_s, 0.0)
+        _finite("aiding_walk_m_per_sqrt_s", self.aiding_walk_m_per_sqrt_s, 0.0)
         if self.position_sigma_floor_m is not None:
             _finite("position_sigma_floor_m", self.position_sigma_floor_m, 0.0, strict_lo=True)
 
