@@ -847,16 +847,22 @@ class AcqTrackNavigator:
         b_v, b_psi = b_v0, b_psi0
         its = [0, 0, 0, 0]
         locks, shapes, spacing = {}, {}, [0.0, 0.0]
-        # start-point loops first, at the (slow) references: the whole-replica shift is the position fix;
-        # the speed and heading loops then stretch and turn the shifted replica
+        # Aided: start-point loops first, at the (slow) references: the whole-replica shift is the position
+        # fix, and the speed and heading loops then stretch and turn the shifted replica. Unaided the speed
+        # and heading are the loops' own fast estimates, so they go first and the shift follows them.
         p_s = self.p0
-        if cfg.position_loops:
+
+        def shift_loops(p_s, b_v, b_psi):
             psi_c = float(np.mean(m_psi)) + b_psi if cfg.aiding else b_psi
             u = ((math.cos(psi_c), math.sin(psi_c)), (-math.sin(psi_c), math.cos(psi_c)))
             for j in (0, 1):
                 x, locked, shape = self._shift_loop(u[j][0], u[j][1], arrays, b_v, b_psi, p_s)
                 p_s = (p_s[0] + x * u[j][0] / r_n, p_s[1] + x * u[j][1] / r_e)
                 locks[2 + j], shapes[2 + j] = locked, shape
+            return p_s
+
+        if cfg.position_loops and cfg.aiding:
+            p_s = shift_loops(p_s, b_v, b_psi)
         for which in order:
             x, it, locked, shape, sp = self._loop(which, arrays, b_v, b_psi, p_s)
             if which == 0:
@@ -865,6 +871,8 @@ class AcqTrackNavigator:
                 b_psi = float(wrap_rad(x)) if not cfg.aiding else x
             its[2 * which : 2 * which + 2] = it
             locks[which], shapes[which], spacing[which] = locked, shape, sp
+        if cfg.position_loops and not cfg.aiding:
+            p_s = shift_loops(p_s, b_v, b_psi)
         self.iterations = its
         self.spacing = (spacing[0], spacing[1])
         self.v_shape = bool(all(sh.v_shape for sh in shapes.values()))

@@ -358,10 +358,10 @@ def choose_spacing(
 
 # ------------------------------------------------------------------------------ start-point (position) loops
 # Our addition (the thesis dead-reckons the transect start; spec section 0), the GPS receiver's code loop
-# beside its carrier loop: the speed and heading loops stretch and turn the replica about its start point, so they
-# cannot move it as a whole. Two more early-late loops shift the whole replica along and across the track
-# (x in metres along the unit vector (u_n, u_e)) with the same discriminator; that shift is the correlation's
-# position fix (navigator.py fuses it).
+# beside its carrier loop: the speed and heading loops stretch and turn the replica about its start point,
+# so they cannot move it as a whole. Two more early-late loops shift the whole replica along and across
+# the track (x in metres along the unit vector (u_n, u_e)) with the same discriminator; that shift is the
+# correlation's position fix (navigator.py fuses it).
 
 
 @njit(cache=True)
