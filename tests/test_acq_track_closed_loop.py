@@ -73,6 +73,11 @@ def test_missing_sensors_refused_before_the_flight(tmp_path, capsys):
     with pytest.raises(ScenarioError, match="sensors.radar_altimeter"):
         validate(data)
     data, _ = read_scenario_file(SHORT)
+    del data["sensors"]["imu"]
+    with pytest.raises(ScenarioError, match="sensors.imu.*aiding"):
+        validate(data)
+    data, _ = read_scenario_file(SHORT)
+    data["navigator"]["settings"]["aiding_source"] = "air_data"
     del data["sensors"]["air_data"]
     with pytest.raises(ScenarioError, match="sensors.air_data.*aiding"):
         validate(data)
