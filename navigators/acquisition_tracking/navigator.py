@@ -247,6 +247,7 @@ class AcqTrackNavigator:
         self.iterations = [0, 0, 0, 0]
         self.spacing = (float(self._speed_set.max()), float(self._heading_set.max()))
         self.bad_epochs = 0
+        self.pull_in = 0
         self.need_acquisition = False
         self.acq_wait = 0
         self.acq_failures = 0
@@ -733,6 +734,7 @@ class AcqTrackNavigator:
         self.need_acquisition = False
         self.acq_failures = 0
         self.bad_epochs = 0
+        self.pull_in = cfg.transect_samples
         self.health.events.append(
             (
                 s.t_s,
@@ -960,9 +962,12 @@ class AcqTrackNavigator:
         dc = K @ r_ne
         self._dbg = (c, r_ne.copy(), R.copy(), K.copy(), nis, i_al, i_cr, sig_res)
         c_new = (self.p0[0] + dla_p[c] + dc[0] / r_n, self.p0[1] + dlo_p[c] + dc[1] / r_e)
-        if cfg.aiding:  # the aided reference is a slow bias: move it part of the way (reference_gain)
-            g = cfg.reference_gain
+        g = 1.0
+        if cfg.aiding:  # the aided reference is a slow bias: move it part of the way (reference_gain), but
+            # take the loops' values whole for a transect after an acquisition (pull-in: its bins are coarse)
+            g = 1.0 if self.pull_in > 0 else cfg.reference_gain
             b_v, b_psi = b_v0 + g * innov[0], b_psi0 + g * innov[1]
+        self.pull_in = max(self.pull_in - 1, 0)
         self.b_v, self.b_psi = b_v, b_psi
         dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0])
         self.p0 = (c_new[0] - dla_n[c], c_new[1] - dlo_n[c])
@@ -973,8 +978,7 @@ class AcqTrackNavigator:
             self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
             self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
         ]
-        if cfg.aiding:  # the references are an exponential average of the loops' values (gain g)
-            g = cfg.reference_gain
+        if g < 1.0:  # the references are an exponential average of the loops' values (gain g)
             sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]
         self.sigma_v, self.sigma_psi = sv
         self.last_innovation = (s.t_s, r_ne, S)
