@@ -955,6 +955,10 @@ class AcqTrackNavigator:
         R = R + np.eye(2) * (self.map_resolution_m**2 / 12.0)  # the map's quantisation of the fix
         S = self.Pc + R
         nis = float(r_ne @ np.linalg.solve(S, r_ne))
+        if nis > cfg.fix_gate_nis:  # innovation gate: a fix this far from the prediction is a false lock
+            self.last_innovation = (s.t_s, r_ne, S)
+            self._out_of_lock(s, f"fix innovation NIS {nis:.1f} > gate {cfg.fix_gate_nis:g}")
+            return
         # consecutive transects share N - 1 samples: each epoch's fix brings 1/overlap of new information
         K = self.Pc @ np.linalg.inv(self.Pc + self._fix_overlap * R)
         IK = np.eye(2) - K
@@ -1028,7 +1032,9 @@ class AcqTrackNavigator:
             if cfg.aiding and self.lock_state != "lost":
                 # dead-reckon on the aiding with the references' running mean over the lock: they carry the
                 # sensor biases and the wind's data bias the loops learned (zeroing them drops that)
-                self.b_v, self.b_psi = self.b_mean
+                lim_v, lim_p = cfg.max_speed_bias_mps, math.radians(cfg.max_heading_bias_deg)
+                self.b_v = float(np.clip(self.b_mean[0], -lim_v, lim_v))
+                self.b_psi = float(np.clip(self.b_mean[1], -lim_p, lim_p))
             self.need_acquisition = True
             self._anchored = False
             self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")

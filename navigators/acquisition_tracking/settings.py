@@ -40,11 +40,16 @@ AIDING_SOURCES = ("air_data", "ins")
 #   references follow late; calibrated so the centroid fix's NIS averages 2 on the built-in flight).
 # - reference_gain: the aided references are slow biases; the fraction of each epoch's loop change taken
 #   (an exponential average over ~2 / gain epochs): air data 0.1, an INS's slower drift 0.02.
+# - max_speed_bias_mps / max_heading_bias_deg: a reference beyond is a false lock: air data 15 m/s / 15 deg
+#   (wind + sensor bias); an INS 6 m/s / 3 deg (an intermediate-grade IRS's Schuler velocity error, 0.5 mg /
+#   1.24e-3 rad/s = 4 m/s, with a margin).
 SOURCE_DEFAULTS = {
     "aiding_speed_sigma_mps": {"air_data": 1.5, "ins": 0.3},
     "aiding_heading_sigma_deg": {"air_data": 1.0, "ins": 0.2},
     "aiding_walk_m_per_sqrt_s": {"air_data": 9.0, "ins": 2.0},
     "reference_gain": {"air_data": 0.1, "ins": 0.02},
+    "max_speed_bias_mps": {"air_data": 15.0, "ins": 6.0},
+    "max_heading_bias_deg": {"air_data": 15.0, "ins": 3.0},
 }
 LOOP_ORDERS = ("speed_first", "heading_first")
 BIAS_MITIGATIONS = ("ncs", "none")
@@ -131,8 +136,8 @@ class AcqTrackConfig:
     ra_noise_const_m: float = 0.6  # radar-altimeter noise model (1 sigma = const + fraction * R)
     ra_noise_fraction: float = 0.02
     false_lock_sigma_factor: float = 3.0  # residual sigma above this times the a-priori sigma: false lock
-    max_speed_bias_mps: float = 15.0  # aided: |b_v| beyond this is a false lock (wind + sensor bias)
-    max_heading_bias_deg: float = 15.0
+    max_speed_bias_mps: float | None = None  # aided: |b_v| beyond is a false lock (None: by source)
+    max_heading_bias_deg: float | None = None
     lost_after_epochs: int = 5  # consecutive out-of-lock epochs before "lost" (re-acquire)
     output_average_length: int | None = None
     output_average_speed_tol_mps: float = 0.5
@@ -146,6 +151,7 @@ class AcqTrackConfig:
     gnss_sigma_m: float = 3.0
     position_sigma_floor_m: float | None = None  # None: half the map's post spacing
     fix_sigma_scale: float = 1.25  # calibration of the centroid fix's sigma (navigator.py; NIS check)
+    fix_gate_nis: float = 13.8  # a fix with NIS (2 dof) above this is rejected as a false lock (p = 0.001)
     fix_overlap: float | None = None  # epochs sharing one fix's information (None: N / 2)
     aiding_walk_m_per_sqrt_s: float | None = None  # dead-reckoning random walk (None: by source)
     baro_geopotential: bool = True
@@ -227,6 +233,7 @@ class AcqTrackConfig:
             "unaided_speed_sigma_mps",
             "unaided_heading_sigma_deg",
             "fix_sigma_scale",
+            "fix_gate_nis",
         ):
             _finite(name, getattr(self, name), 0.0, strict_lo=True)
         for name, bin_name in (
