@@ -7,32 +7,37 @@ Each new transect sample (one per sample_period_s) is one epoch:
     transect filling     -> dead reckoning on the aiding ("acquiring").
     acquisition due      -> serial search (acquisition.py) around the dead-reckoned transect start; a
                             distinct minimum starts tracking, none retries with the next transect.
-    tracking             -> speed 1st, speed 2nd, heading 1st, heading 2nd early-late loops (tracking.py),
-                            then integrity (integrity.py): in lock with V-shapes, SNR >= 5 dB and no false
-                            lock -> "ok"; out of lock the references are kept from the last good epoch and
-                            the status is "degraded"; lost_after_epochs such epochs in a row -> "lost",
-                            which asks for a new acquisition.
+    tracking             -> aided: start-point loops along and across the track at the (slow) references,
+                            then speed 1st, speed 2nd, heading 1st, heading 2nd early-late loops
+                            (tracking.py; unaided the start-point loops come last), then integrity
+                            (integrity.py): in lock with V-shapes, SNR >= 5 dB and no false lock; the
+                            fit's transect centroid is the position fix, weighed by a 2-state Kalman filter
+                            against the dead-reckoned centroid (an NIS above fix_gate_nis is a false lock);
+                            the references take reference_gain of the loops' change; "ok". Out of lock the
+                            references are kept and the status is "degraded"; lost_after_epochs such epochs
+                            in a row -> "lost", which asks for a new acquisition when the dead-reckoned
+                            sigma exceeds acquire_above_sigma_m (below it the loops re-lock).
 
-Position: the replica's newest sample (transect start + the tracked speed and heading), dead-reckoned with
-the output velocity to the frame's end. The transect's start for the next epoch is its second sample.
+Position: the replica's newest sample (the start point, which follows from the filtered centroid and the
+references, + the aided speed and track), dead-reckoned with the output velocity to the frame's end. The
+transect's start for the next epoch is its second sample.
 
 Health.status state machine (documented in Health): acquiring -> ok <-> degraded -> lost -> acquiring ...;
-each transition's reason is an event. In lock, each epoch's NIS (the references' change against S, 2 dof)
-also feeds an InnovationMonitor (integrity_window epochs, band probability integrity_alpha); while its sum
-is above the band a tracking epoch is "degraded" instead of "ok" (its recovery is the re-acquisition the
-lock detection already asks for: out of lock lost_after_epochs epochs in a row). Overlapping transects
-share N - 1 samples, so successive NIS values are correlated and the band is a loose guide here.
+each transition's reason is an event. In lock, each epoch's NIS (the centroid fix minus its prediction,
+north/east m, against S = P_pred + R, 2 dof) also feeds an InnovationMonitor (integrity_window epochs, band
+probability integrity_alpha); while its sum is above the band a tracking epoch is "degraded" instead of
+"ok" (its recovery is the re-acquisition the lock detection already asks for). Overlapping transects share
+N - 1 samples, so successive NIS values are correlated.
 
-Covariance (north, east): per epoch the along-track sigma grows by T sigma_v and the cross-track by
-V T sigma_psi (linearly: the aiding's errors are biases over a transect) - the aiding's sigmas while not in
-lock, the loops' while in lock; in lock the terrain match bounds each direction by
-lock_covariance_scale^2 x (a-priori noise^2 x N / the replica's squared map slopes in that direction + the
-transect span x the loop's sigma, squared + half a map post, squared), so a ridge along the track leaves the
-cross-track sigma growing. A bound, not a fused measurement: consecutive epochs share N - 1 samples.
-Vertical: the barometer's bias.
+Covariance (north, east): the centroid filter's Pc grows per epoch by the references' sigma over one sample
+(T sigma_v along, V T sigma_psi across) plus the aiding's random walk (aiding_walk_m_per_sqrt_s^2 T), and in
+lock is updated by the fix with R = fix_sigma_scale^2 (pi/2) sigma_res^2 / (the replica's squared map slopes
+along / across) + a map post^2 / 12, its gain counting fix_overlap (N / 2) epochs per fix. The output is Pc
+plus dead reckoning from the centroid to the newest sample; out of lock it grows linearly on the aiding's
+sigmas. Vertical: the barometer's bias.
 
-Estimate.extra, besides the fixed protocol keys (innovation = the epoch's change of [b_v (m/s), b_psi (rad)],
-its covariance, NIS with 2 dof, measurement time):
+Estimate.extra, besides the fixed protocol keys (innovation = the centroid fix minus its prediction, north
+and east in m, its covariance S, NIS with 2 dof, measurement time):
     lock_state          "gnss" | "filling" | "acquiring" | "tracking" | "out_of_lock" | "lost"
     snr_db              terrain SNR of the prompt profile (dB; NaN before the first epoch)
     tracked_speed_mps   output (moving-averaged) ground speed
