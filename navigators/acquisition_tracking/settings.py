@@ -17,6 +17,10 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
 - acquisition grid: +-10 m/s in 1 m/s, +-10 deg in 1 deg, +-500 m in 50 m (21 x 21 x 441 cells);
   distinct when the minimum is below acquisition_distinct_ratio (0.9) times the best cost farther than
   acquisition_exclusion_m.
+- start-point loops (ours, position_* settings): the whole replica shifted along / across the track by two
+  more early-late loops; the fit's transect centroid is the position fix, fused by a 2-state Kalman filter
+  (fix_sigma_scale, fix_overlap, fix_gate_nis; navigator.py). Defaults that depend on aiding_source are in
+  SOURCE_DEFAULTS below.
 - lock: a loop that hits the 101-iteration break flags the epoch 'degraded' but keeps its estimate; out of
   lock (V-shape flag, SNR < snr_min_db, false lock) lost_after_epochs times in a row is 'lost'.
 """
