@@ -44,7 +44,23 @@ LEGS_LON = (-84.39, -84.34, -84.29, -84.24)
 LAT_S, LAT_N = 36.465, 36.715
 AGL_M = 600.0
 TAS_MPS = 80.0
-IRS_SIGMAS = {"aiding_speed_sigma_mps": 0.3, "aiding_heading_sigma_deg": 0.2}  # ours: an IRS's velocity
+WEAVE_KM = 3.0  # S-turns along each leg: a waypoint every 3 km, alternately WEAVE_OFFSET_DEG east / west
+WEAVE_OFFSET_DEG = 0.006  # of longitude (~540 m): track changes of ~+-20 deg, banks of 15-25 deg
+# IRS grade (ours, from the thesis' own figure): its IRS-only dead reckoning drifts almost 3 km in 1,050 s,
+# which the appendix's intermediate grade gives (0.1-1 mg, 0.1 deg/h); we take 0.5 mg and 0.1 deg/h.
+IRS_IMU = {
+    "grade": "navigation",
+    "accel_bias_mps2": 0.5e-3 * 9.80665,
+    "gyro_bias_rps": math.radians(0.1) / 3600.0,
+}
+# the tracker's aiding model for that IRS: a faster-drifting velocity than the navigator's navigation-grade
+# defaults (aiding_source "ins"): the references follow it faster and the dead reckoning walks more
+IRS_SETTINGS = {
+    "aiding_speed_sigma_mps": 0.5,
+    "aiding_heading_sigma_deg": 0.3,
+    "reference_gain": 0.05,
+    "aiding_walk_m_per_sqrt_s": 3.0,
+}
 
 
 class Recorder:
@@ -71,9 +87,14 @@ def _scenario(duration_s: float, seed: int, waypoints=None, map_errors: bool = T
     data["duration_s"] = duration_s
     if waypoints is None:
         waypoints = []
+        n_weave = max(int((LAT_N - LAT_S) * 111.0 / WEAVE_KM), 1)
         for k, lon in enumerate(LEGS_LON):
-            lats = (LAT_S, LAT_N) if k % 2 == 0 else (LAT_N, LAT_S)
-            waypoints += [{"lat_deg": la, "lon_deg": lon, "h_agl_m": AGL_M} for la in lats]
+            lats = np.linspace(LAT_S, LAT_N, n_weave + 1)
+            if k % 2:
+                lats = lats[::-1]
+            for j, la in enumerate(lats):
+                off = 0.0 if j in (0, n_weave) else WEAVE_OFFSET_DEG * (1 if j % 2 else -1)
+                waypoints.append({"lat_deg": float(la), "lon_deg": lon + off, "h_agl_m": AGL_M})
     data["route"] = {"tas_mps": TAS_MPS, "waypoints": waypoints}
     w0, w1 = waypoints[0], waypoints[1]
     data["initial"] = {
@@ -91,6 +112,7 @@ def _scenario(duration_s: float, seed: int, waypoints=None, map_errors: bool = T
     }
     data["gnss"] = {"outages": []}  # guidance flies on GNSS; the replays deny it after 10 s
     data["sensors"].pop("ira", None)
+    data["sensors"]["imu"] = dict(IRS_IMU)
     data["navigator"] = {"name": "acq_track", "rate_hz": 1.0, "settings": {"transect_samples": 25}}
     if map_errors:  # SRTM-class: 20 m CE90 (sigma 9.3 m per axis), 16 m LE90 (sigma 9.7 m)
         rng = np.random.default_rng(seed + 1000)
@@ -221,42 +243,59 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=Path("out/seed001"))
     ap.add_argument("--duration", type=float, default=1050.0, help="main flight, s (thesis: 1,050 samples)")
     ap.add_argument("--ramp-duration", type=float, default=300.0)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the first main flight, the ramp and flat")
+    ap.add_argument("--seeds", type=int, default=3, help="main flights (seeds seed, seed + 1, ...)")
     ap.add_argument("--no-plots", action="store_true")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
     results: dict = {}
 
-    # 1. the main flight, replayed by every variant
-    data = _scenario(args.duration, args.seed)
-    frames, truth, loop = fly(data)
-    dem = loop.map_dem
-    irs = dict(aiding_source="ins", replica_model="footprint", **IRS_SIGMAS)
-    runs = {
-        "irs_only (ins, free inertial)": replay(frames, truth, dem, "ins"),
-        "aided N=25": replay(frames, truth, dem, "acq_track", transect_samples=25, **irs),
-        "aided N=50": replay(frames, truth, dem, "acq_track", transect_samples=50, **irs),
-        "aided N=25, no roll compensation": replay(
-            frames, truth, dem, "acq_track", transect_samples=25, roll_compensation=False, **irs
-        ),
-        "aided N=50, no roll compensation": replay(
-            frames, truth, dem, "acq_track", transect_samples=50, roll_compensation=False, **irs
-        ),
-        "aided N=50, plumb replicas": replay(
-            frames, truth, dem, "acq_track", transect_samples=50, **dict(irs, replica_model="plumb")
-        ),
-        "air data + compass N=50": replay(
-            frames, truth, dem, "acq_track", transect_samples=50, replica_model="footprint"
-        ),
+    # 1. the main flight (one per seed), replayed by every variant
+    irs = dict(aiding_source="ins", replica_model="footprint", **IRS_SETTINGS)
+    no_roll = {"roll_compensation": False}
+    variants = {
+        "irs_only (ins, free inertial)": ("ins", {}),
+        "aided N=25": ("acq_track", dict(irs, transect_samples=25)),
+        "aided N=50": ("acq_track", dict(irs, transect_samples=50)),
+        "aided N=25, no roll compensation": ("acq_track", dict(irs, transect_samples=25, **no_roll)),
+        "aided N=50, no roll compensation": ("acq_track", dict(irs, transect_samples=50, **no_roll)),
+        "air data + compass N=25": ("acq_track", dict(transect_samples=25, replica_model="footprint")),
     }
-    roll_deg = np.degrees(np.abs(truth["true_roll_rad"]))
-    results["main_flight"] = {k: _stats(v) for k, v in runs.items()}
-    results["main_flight_roll_over_half_beam_fraction"] = float(np.mean(roll_deg > 8.5))
+    per_seed = []
+    runs = None
+    for sd in range(args.seed, args.seed + args.seeds):
+        frames, truth, loop = fly(_scenario(args.duration, sd))
+        seed_runs = {k: replay(frames, truth, loop.map_dem, nav, **kw) for k, (nav, kw) in variants.items()}
+        roll_deg = np.degrees(np.abs(truth["true_roll_rad"]))
+        st = {k: _stats(v) for k, v in seed_runs.items()}
+        st["roll_over_half_beam_fraction"] = float(np.mean(roll_deg > 8.5))
+        for n in (25, 50):
+            on = st[f"aided N={n}"]["rms_m"]
+            off = st[f"aided N={n}, no roll compensation"]["rms_m"]
+            st[f"roll_compensation_gain_N{n}"] = (off - on) / off
+        per_seed.append(st)
+        if runs is None:
+            runs, truth0 = seed_runs, truth
+        print(f"main flight seed {sd} done ({time.perf_counter() - wall0:.0f} s)", flush=True)
+    results["main_flight"] = per_seed[0]
+    results["main_flight_per_seed"] = per_seed
+    agg = {}
+    for k in variants:
+        for f in ("rms_m", "final_m", "max_m", "in_lock_fraction"):
+            x = np.array([p[k][f] for p in per_seed])
+            agg[f"{k}: {f}"] = {"mean": float(x.mean()), "std": float(x.std(ddof=1)) if x.size > 1 else 0.0}
     for n in (25, 50):
-        on = results["main_flight"][f"aided N={n}"]["rms_m"]
-        off = results["main_flight"][f"aided N={n}, no roll compensation"]["rms_m"]
-        results[f"roll_compensation_gain_N{n}"] = (off - on) / off
+        g = np.array([p[f"roll_compensation_gain_N{n}"] for p in per_seed])
+        agg[f"roll_compensation_gain_N{n}"] = {
+            "mean": float(g.mean()),
+            "std": float(g.std(ddof=1)) if g.size > 1 else 0.0,
+            "min": float(g.min()),
+            "max": float(g.max()),
+            "per_seed": g.tolist(),
+        }
+    results["main_flight_over_seeds"] = agg
+    truth = truth0
 
     # 2. speed ramp (straight, 70 -> 100 m/s): unaided vs aided speed loop
     lon = -84.30
@@ -306,19 +345,28 @@ def main(argv=None) -> int:
     results["wall_time_s"] = time.perf_counter() - wall0
 
     # table
-    print(f"seed 001 reproduction: {args.duration:.0f} s main flight, seed {args.seed}")
-    print(f"{'variant':38s} {'RMS m':>8s} {'max m':>8s} {'final m':>8s} {'in lock':>8s} {'<=3sig':>7s}")
+    last = args.seed + args.seeds - 1
+    print(f"seed 001 reproduction: {args.duration:.0f} s main flights, seeds {args.seed}..{last}")
+    print(f"{'variant':44s} {'RMS m':>8s} {'max m':>8s} {'final m':>8s} {'in lock':>8s} {'<=3sig':>7s}")
     for section in ("main_flight", "speed_ramp"):
-        for k, s in results[section].items():
+        for k, s_ in results[section].items():
+            if not isinstance(s_, dict):
+                continue
             print(
-                f"{section[:5] + ': ' + k:38s} {s['rms_m']:8.1f} {s['max_m']:8.1f} {s['final_m']:8.1f} "
-                f"{s['in_lock_fraction']:8.2f} {s['within_3sigma']:7.2f}"
+                f"{section[:5] + ': ' + k:44s} {s_['rms_m']:8.1f} {s_['max_m']:8.1f} {s_['final_m']:8.1f} "
+                f"{s_['in_lock_fraction']:8.2f} {s_['within_3sigma']:7.2f}"
             )
+    print("over the seeds (mean +- std):")
+    for k in variants:
+        a_ = [agg[f"{k}: {f}"] for f in ("rms_m", "final_m", "max_m")]
+        print(f"  {k:42s} RMS {a_[0]['mean']:7.1f} +- {a_[0]['std']:5.1f}  final {a_[1]['mean']:7.1f} "
+              f"+- {a_[1]['std']:5.1f}  max {a_[2]['mean']:7.1f} +- {a_[2]['std']:5.1f}")
     for n in (25, 50):
+        g = agg[f"roll_compensation_gain_N{n}"]
         print(
-            f"roll compensation gain N={n}: {100 * results[f'roll_compensation_gain_N{n}']:+.0f} % "
-            f"(|roll| > 8.5 deg for {100 * results['main_flight_roll_over_half_beam_fraction']:.0f} % "
-            "of the flight)"
+            f"roll compensation gain N={n}: {100 * g['mean']:+.0f} % +- {100 * g['std']:.0f} % over "
+            f"{args.seeds} seeds (per seed {', '.join(f'{100 * x:+.0f}' for x in g['per_seed'])} %; "
+            f"|roll| > 8.5 deg for {100 * per_seed[0]['roll_over_half_beam_fraction']:.0f} % of the flight)"
         )
     for k, v in results["speed_ramp"].items():
         print(f"speed ramp, {k}: in lock {100 * v['in_lock_before_ramp']:.0f} % before the ramp, "

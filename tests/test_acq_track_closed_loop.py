@@ -36,17 +36,18 @@ def acq():
 
 
 def test_acq_track_short_bounds_beside_ins_tercom(acq):
-    """GNSS lost at 10 s, 100 s of terrain tracking. Measured (seed 0): acq_track 85 m RMS after 30 s, 174 m
-    max, 90 % of epochs within 3 sigma, health ok 70 % of the epochs after 30 s (seed 1: 97 m, 167 m, 81 %,
-    100 %); INS + TERCOM on the same flight 19 m RMS."""
+    """GNSS lost at 10 s, 100 s of terrain tracking, INS-aided, N = 25. Measured (seeds 0 / 1): acq_track
+    16.0 / 20.6 m RMS after 30 s, max 31.2 / 73.7 m (the initial error before GNSS), final 27.4 / 28.3 m,
+    100 % of epochs within 3 sigma and health ok after 30 s; INS + TERCOM on the same flight (seed 0) 19.3 m
+    RMS. (Last session's design, air data, no start-point loops: 85 / 97 m RMS, 174 / 167 m max.)"""
     a = acq.arrays
     assert acq.termination in ("time_limit", "completed")
     e = _h_err(acq)
     after = a["t_s"] >= 30.0
     rms = float(np.sqrt(np.mean(e[after] ** 2)))
-    assert rms < 250.0 and e.max() < 500.0
-    assert acq.summary["fraction_within_3sigma"] > 0.6
-    assert np.mean(a["nav_ok"][after]) > 0.5  # in lock most of the time
+    assert rms < 40.0 and e.max() < 120.0 and e[-1] < 60.0
+    assert acq.summary["fraction_within_3sigma"] > 0.85
+    assert np.mean(a["nav_ok"][after]) > 0.8  # in lock most of the time
     nav_events = [m for _, src, m in acq.events if src == "navigator"]
     assert any("-> ok: in lock" in m for m in nav_events)
     ekf = _fly("ins_tercom")
@@ -73,6 +74,11 @@ def test_missing_sensors_refused_before_the_flight(tmp_path, capsys):
     with pytest.raises(ScenarioError, match="sensors.radar_altimeter"):
         validate(data)
     data, _ = read_scenario_file(SHORT)
+    del data["sensors"]["imu"]
+    with pytest.raises(ScenarioError, match="sensors.imu.*aiding"):
+        validate(data)
+    data, _ = read_scenario_file(SHORT)
+    data["navigator"]["settings"]["aiding_source"] = "air_data"
     del data["sensors"]["air_data"]
     with pytest.raises(ScenarioError, match="sensors.air_data.*aiding"):
         validate(data)

@@ -7,32 +7,37 @@ Each new transect sample (one per sample_period_s) is one epoch:
     transect filling     -> dead reckoning on the aiding ("acquiring").
     acquisition due      -> serial search (acquisition.py) around the dead-reckoned transect start; a
                             distinct minimum starts tracking, none retries with the next transect.
-    tracking             -> speed 1st, speed 2nd, heading 1st, heading 2nd early-late loops (tracking.py),
-                            then integrity (integrity.py): in lock with V-shapes, SNR >= 5 dB and no false
-                            lock -> "ok"; out of lock the references are kept from the last good epoch and
-                            the status is "degraded"; lost_after_epochs such epochs in a row -> "lost",
-                            which asks for a new acquisition.
+    tracking             -> aided: start-point loops along and across the track at the (slow) references,
+                            then speed 1st, speed 2nd, heading 1st, heading 2nd early-late loops
+                            (tracking.py; unaided the start-point loops come last), then integrity
+                            (integrity.py): in lock with V-shapes, SNR >= 5 dB and no false lock; the
+                            fit's transect centroid is the position fix, weighed by a 2-state Kalman filter
+                            against the dead-reckoned centroid (an NIS above fix_gate_nis is a false lock);
+                            the references take reference_gain of the loops' change; "ok". Out of lock the
+                            references are kept and the status is "degraded"; lost_after_epochs such epochs
+                            in a row -> "lost", which asks for a new acquisition when the dead-reckoned
+                            sigma exceeds acquire_above_sigma_m (below it the loops re-lock).
 
-Position: the replica's newest sample (transect start + the tracked speed and heading), dead-reckoned with
-the output velocity to the frame's end. The transect's start for the next epoch is its second sample.
+Position: the replica's newest sample (the start point, which follows from the filtered centroid and the
+references, + the aided speed and track), dead-reckoned with the output velocity to the frame's end. The
+transect's start for the next epoch is its second sample.
 
 Health.status state machine (documented in Health): acquiring -> ok <-> degraded -> lost -> acquiring ...;
-each transition's reason is an event. In lock, each epoch's NIS (the references' change against S, 2 dof)
-also feeds an InnovationMonitor (integrity_window epochs, band probability integrity_alpha); while its sum
-is above the band a tracking epoch is "degraded" instead of "ok" (its recovery is the re-acquisition the
-lock detection already asks for: out of lock lost_after_epochs epochs in a row). Overlapping transects
-share N - 1 samples, so successive NIS values are correlated and the band is a loose guide here.
+each transition's reason is an event. In lock, each epoch's NIS (the centroid fix minus its prediction,
+north/east m, against S = P_pred + R, 2 dof) also feeds an InnovationMonitor (integrity_window epochs, band
+probability integrity_alpha); while its sum is above the band a tracking epoch is "degraded" instead of
+"ok" (its recovery is the re-acquisition the lock detection already asks for). Overlapping transects share
+N - 1 samples, so successive NIS values are correlated.
 
-Covariance (north, east): per epoch the along-track sigma grows by T sigma_v and the cross-track by
-V T sigma_psi (linearly: the aiding's errors are biases over a transect) - the aiding's sigmas while not in
-lock, the loops' while in lock; in lock the terrain match bounds each direction by
-lock_covariance_scale^2 x (a-priori noise^2 x N / the replica's squared map slopes in that direction + the
-transect span x the loop's sigma, squared + half a map post, squared), so a ridge along the track leaves the
-cross-track sigma growing. A bound, not a fused measurement: consecutive epochs share N - 1 samples.
-Vertical: the barometer's bias.
+Covariance (north, east): the centroid filter's Pc grows per epoch by the references' sigma over one sample
+(T sigma_v along, V T sigma_psi across) plus the aiding's random walk (aiding_walk_m_per_sqrt_s^2 T), and in
+lock is updated by the fix with R = fix_sigma_scale^2 (pi/2) sigma_res^2 / (the replica's squared map slopes
+along / across) + a map post^2 / 12, its gain counting fix_overlap (N / 2) epochs per fix. The output is Pc
+plus dead reckoning from the centroid to the newest sample; out of lock it grows linearly on the aiding's
+sigmas. Vertical: the barometer's bias.
 
-Estimate.extra, besides the fixed protocol keys (innovation = the epoch's change of [b_v (m/s), b_psi (rad)],
-its covariance, NIS with 2 dof, measurement time):
+Estimate.extra, besides the fixed protocol keys (innovation = the centroid fix minus its prediction, north
+and east in m, its covariance S, NIS with 2 dof, measurement time):
     lock_state          "gnss" | "filling" | "acquiring" | "tracking" | "out_of_lock" | "lost"
     snr_db              terrain SNR of the prompt profile (dB; NaN before the first epoch)
     tracked_speed_mps   output (moving-averaged) ground speed
@@ -94,6 +99,7 @@ from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 _TAIL_S = 3.0  # seconds of each sensor's samples carried into the next frame (sample look-ups)
 _TURN_RATE_WINDOW_S = 3.0  # compass heading rate for the coordinated-turn roll: LSQ slope over 3 s
+_MAD_VARIANCE_FACTOR = math.pi / 2.0
 
 
 class _Tail:
@@ -176,8 +182,14 @@ class AcqTrackNavigator:
         self._interp = INTERPOLATIONS[cfg.interpolation]
         self._disc = tracking.DISCRIMINATORS[cfg.discriminator]
         self._n_min = max(3, int(math.ceil(cfg.min_valid_fraction * cfg.transect_samples)))
+        self._fix_overlap = float(
+            cfg.fix_overlap if cfg.fix_overlap is not None else 0.5 * cfg.transect_samples
+        )
+        walk = cfg.aiding_walk_m_per_sqrt_s
+        self._walk2 = float(walk) ** 2
         self._speed_set = np.array(cfg.speed_spacings_mps)
         self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
+        self._position_set = np.array(cfg.position_spacings_cells) * self.map_resolution_m
         self.wind = WindEstimator(cfg.wind_gain)
         self.average = OutputAverage(
             cfg.average_length,
@@ -224,6 +236,7 @@ class AcqTrackNavigator:
         self.pos = (math.nan, math.nan)
         self.t_pos = math.nan
         self.P = np.eye(2) * 1e4
+        self.Pc = self.P.copy()
         self.sigma_v = self.config.aiding_speed_sigma_mps
         self.sigma_psi = math.radians(self.config.aiding_heading_sigma_deg)
         self.out_speed = 0.0
@@ -238,6 +251,7 @@ class AcqTrackNavigator:
         self.iterations = [0, 0, 0, 0]
         self.spacing = (float(self._speed_set.max()), float(self._heading_set.max()))
         self.bad_epochs = 0
+        self.pull_in = 0
         self.need_acquisition = False
         self.acq_wait = 0
         self.acq_failures = 0
@@ -252,7 +266,7 @@ class AcqTrackNavigator:
         self.t_epoch = math.nan
         self.next_k = None
         self._tails = {
-            k: _Tail(n) for k, n in (("baro", 1), ("ra", 1), ("air", 1), ("hdg", 1), ("gnss", 5), ("ins", 5))
+            k: _Tail(n) for k, n in (("baro", 1), ("ra", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
         }
         self.transect.clear()
         self.average.reset()
@@ -272,6 +286,7 @@ class AcqTrackNavigator:
         if cov.shape != (9, 9) or not np.all(np.isfinite(cov)):
             raise ValueError("initial.covariance must be a finite 9 x 9 matrix")
         self.P = 0.5 * (cov[:2, :2] + cov[:2, :2].T)
+        self.Pc = self.P.copy()
         self.out_speed, self.out_track = speed, track
         self._v0 = (speed, track)
         if not cfg.aiding:
@@ -311,7 +326,10 @@ class AcqTrackNavigator:
         if ra is not None:
             tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
         if frames.air_data is not None:
-            tl["air"].extend(frames.air_data.t_s, [frames.air_data.tas_mps], frames.air_data.valid)
+            ad = frames.air_data
+            n_ad = ad.t_s.size
+            beta = np.asarray(ad.beta_rad, float) if self.config.air_vector_sideslip else np.zeros(n_ad)
+            tl["air"].extend(ad.t_s, [ad.tas_mps, beta], ad.valid & np.isfinite(beta))
         hd = frames.heading
         if hd is not None and hd.t_s.size:
             h = np.asarray(hd.heading_rad, float)
@@ -392,6 +410,9 @@ class AcqTrackNavigator:
             h, okh = tl["hdg"].row(t_k, 1.5 * T)
             tas = float(a[0]) if oka else math.nan
             hdg = float(wrap_rad(h[0])) if okh else math.nan
+            if oka and okh:
+                self.yaw = hdg
+                tas, hdg = self._air_vector(t_k)
             rate = tl["hdg"].rate(t_k, 0, _TURN_RATE_WINDOW_S)
             if math.isfinite(rate) and math.isfinite(tas):
                 roll = coordinated_turn_roll_rad(tas, rate)
@@ -400,7 +421,6 @@ class AcqTrackNavigator:
                 last = self.transect.samples[-1] if len(self.transect) else None
                 m_v, m_psi = (last.m_v, last.m_psi) if last is not None else self._v0
             else:
-                self.yaw = hdg
                 m_v, m_psi = self.wind.predict(tas, hdg) if cfg.wind_estimation else (tas, hdg)
         elif cfg.aiding:
             row, found = tl["ins"].row(t_k, 0.5)
@@ -435,6 +455,27 @@ class AcqTrackNavigator:
         gv = (float(g[3]), float(g[4])) if have_gnss else (math.nan, math.nan)
         s = Sample(t_k, d, bool(valid), r_m, float(m_v), float(m_psi), tas, hdg, glat, glon, gv, roll)
         self._epoch(s, have_gnss)
+
+    def _air_vector(self, t_k: float) -> tuple[float, float]:
+        """(speed, direction) of the air vector over the sample interval (t_k - T, t_k]: the mean of
+        tas (cos, sin)(heading + sideslip) over the air-data samples in it (settings aiding_interval_mean,
+        air_vector_sideslip). The displacement between two samples is the integral of the velocity over the
+        interval, and the mean also averages the gusts the ground track does not follow; the sideslip turns
+        the compass heading into the air vector's direction (in a gust the aircraft weathercocks)."""
+        cfg = self.config
+        air, hdg = self._tails["air"], self._tails["hdg"]
+        lo = t_k - cfg.sample_period_s if cfg.aiding_interval_mean else t_k - 1e-6
+        m = air.ok & (air.t > lo + 1e-9) & (air.t <= t_k + 1e-9)
+        h, found = hdg.at(air.t[m], 0, 1.5 * cfg.sample_period_s)
+        ok = found & np.isfinite(air.v[m, 0])
+        if not ok.any():  # no air-data sample in the interval: the newest one (found by the caller)
+            row, _ = air.row(t_k, 1.0)
+            hr, _ = hdg.row(t_k, 1.5 * cfg.sample_period_s)
+            return float(row[0]), float(wrap_rad(hr[0] + row[1]))
+        d = h[ok] + air.v[m, 1][ok]
+        vn = float(np.mean(air.v[m, 0][ok] * np.cos(d)))
+        ve = float(np.mean(air.v[m, 0][ok] * np.sin(d)))
+        return speed_track(np.array([vn, ve]))
 
     # ------------------------------------------------------------------ epochs
     def _radii(self, lat: float, h: float) -> tuple[float, float]:
@@ -486,11 +527,12 @@ class AcqTrackNavigator:
             self._finish(s)
             return
         # a transect placed by GNSS goes straight to tracking; otherwise a large sigma asks for a search
-        acq_due = self.need_acquisition or (
-            self.lock_state in ("filling", "acquiring")
-            and not self._anchored
-            and self._sigma_h() > cfg.acquire_above_sigma_m
-        )
+        # a serial search only when the dead-reckoned start is too uncertain for the loops' pull-in range:
+        # after a loss of lock with a small sigma the loops re-lock from the dead-reckoned state (the
+        # integrity checks decide), so a low-SNR stretch does not leave the tracker searching to the end
+        acq_due = (
+            self.need_acquisition or (self.lock_state in ("filling", "acquiring") and not self._anchored)
+        ) and self._sigma_h() > cfg.acquire_above_sigma_m
         if acq_due:
             if self.acq_wait > 0:
                 self.acq_wait -= 1
@@ -552,12 +594,15 @@ class AcqTrackNavigator:
             self.b_v += k * (g_speed - s.m_v - self.b_v)
             self.b_psi += k * float(wrap_rad(g_track - s.m_psi - self.b_psi))
             self.b_mean = (self.b_v, self.b_psi)
-        first = tr.samples[0]
-        if math.isfinite(first.gnss_lat):
-            self.p0 = (first.gnss_lat, first.gnss_lon)
+        # the transect's start from this sample's fix back along the references (its first sample may have
+        # had no fix, e.g. before the first GNSS epoch, and kept the initial estimate's error)
+        _, _, _, dt, m_v, m_psi, _ = tr.arrays()
+        dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, s.gnss_lat)
+        self.p0 = (s.gnss_lat - dla[-1], s.gnss_lon - dlo[-1])
         self.pos = (s.gnss_lat, s.gnss_lon)
         self.t_pos = s.t_s
         self.P = np.eye(2) * cfg.gnss_sigma_m**2
+        self.Pc = self.P.copy()
         self.sigma_v = 0.1
         self.sigma_psi = math.radians(0.2)
         self.bad_epochs = 0
@@ -583,7 +628,9 @@ class AcqTrackNavigator:
         s_al, s_cr = math.sqrt(max(p_tc[0, 0], 0.0)), math.sqrt(max(p_tc[1, 1], 0.0))
         d_al, d_cr = T * sv, v * T * sp
         q = np.diag([2.0 * s_al * d_al + d_al**2, 2.0 * s_cr * d_cr + d_cr**2])
-        self.P = self.P + G @ q @ G.T
+        self.P = self.P + G @ q @ G.T + np.eye(2) * self._walk2 * T
+        # the transect centroid's filter: one sample of dead reckoning on the references and the aiding
+        self.Pc = self.Pc + G @ np.diag([d_al**2, d_cr**2]) @ G.T + np.eye(2) * self._walk2 * T
 
     def _arrays(self):
         t, d, valid, dt, m_v, m_psi, rng = self.transect.arrays()
@@ -687,9 +734,11 @@ class AcqTrackNavigator:
         self.b_v, self.b_psi = res.b_v, res.b_psi_rad
         b = cfg.acquisition_position_bin_m
         self.P = np.eye(2) * (b * b + self.sigma_floor_m**2)
+        self.Pc = self.P.copy()
         self.need_acquisition = False
         self.acq_failures = 0
         self.bad_epochs = 0
+        self.pull_in = cfg.transect_samples
         self.health.events.append(
             (
                 s.t_s,
@@ -701,7 +750,7 @@ class AcqTrackNavigator:
         self.lock_state = "tracking"
         return True
 
-    def _loop(self, which: int, arrays, b_v: float, b_psi: float):
+    def _loop(self, which: int, arrays, b_v: float, b_psi: float, p0=None):
         """Adaptivity block + both stages of one loop: (x, [it1, it2], locked, VShape, spacing)."""
         cfg = self.config
         t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
@@ -721,15 +770,53 @@ class AcqTrackNavigator:
                 math.radians(cfg.heading_narrow_threshold_deg),
             )
         reach = max(reach, float(sset.max()))
+        p0 = self.p0 if p0 is None else p0
         # adaptivity block, both stages and the bias mitigation in one numba call (loop_kernel.py)
         return loop_kernel.run_loop(
-            (heights, lat0, lon0, dlat, dlon), self.p0[0], self.p0[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e,
+            (heights, lat0, lon0, dlat, dlon), p0[0], p0[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e,
             d, valid, cost=self._cost, remove_bias=cfg.remove_bias, interp=self._interp, n_min=self._n_min,
             which=which, reach=reach, n_side=cfg.scf_points, spacings_desc=np.sort(sset)[::-1].copy(),
             symmetry_max=cfg.symmetry_ratio_max, threshold_1=thr1, spacing_2=s2, threshold_2=thr2,
             break_iteration=cfg.break_iteration, discriminator=self._disc,
             mitigation=loop_kernel.MITIGATIONS[cfg.bias_mitigation],
         )  # fmt: skip
+
+    def _shift_loop(self, u_n: float, u_e: float, arrays, b_v: float, b_psi: float, p0):
+        """Adaptivity block + both stages of a start-point loop along (u_n, u_e) from start p0:
+        (shift m, locked, VShape)."""
+        cfg = self.config
+        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
+        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
+        res = self.map_resolution_m
+        sset = self._position_set
+        reach = max(cfg.scf_offset_cells * res, float(sset.max()))
+        offs = np.linspace(-reach, reach, 2 * cfg.scf_points + 1)
+        vals = np.empty(offs.size)
+        args = (heights, lat0, lon0, dlat, dlon, p0[0], p0[1], dt, m_v, m_psi, b_v, b_psi)
+        tail = (r_n, r_e, d, valid, self._cost, cfg.remove_bias, self._interp, self._n_min, u_n, u_e)
+        tracking.shift_correlation_function(*args, *tail, offs, vals)
+        shape = tracking.analyse_v(offs, vals)
+        spacing, _ = tracking.choose_spacing(offs, vals, shape, sset, cfg.symmetry_ratio_max)
+        x, _, locked, _ = tracking.early_late_shift_loop(
+            *args, *tail, 0.0, spacing, cfg.position_threshold_m, cfg.break_iteration, self._disc
+        )
+        locked = bool(locked)
+        if cfg.bias_mitigation == "ncs":
+            x2, _, lock2, _ = tracking.early_late_shift_loop(
+                *args,
+                *tail,
+                x,
+                cfg.position_narrow_spacing_cells * res,
+                cfg.position_narrow_threshold_m,
+                cfg.break_iteration,
+                self._disc,
+            )
+            if np.isfinite(x2):
+                x = x2
+            locked = locked and bool(lock2)
+        if not np.isfinite(x) or abs(x) > reach:  # off the map, or beyond the function's reach: no shift
+            x, locked = 0.0, False
+        return float(x), locked, shape
 
     def _track(self, s: Sample) -> None:
         cfg = self.config
@@ -748,17 +835,35 @@ class AcqTrackNavigator:
         b_v, b_psi = b_v0, b_psi0
         its = [0, 0, 0, 0]
         locks, shapes, spacing = {}, {}, [0.0, 0.0]
+        # Aided: start-point loops first, at the (slow) references: the whole-replica shift is the position
+        # fix, and the speed and heading loops then stretch and turn the shifted replica. Unaided the speed
+        # and heading are the loops' own fast estimates, so they go first and the shift follows them.
+        p_s = self.p0
+
+        def shift_loops(p_s, b_v, b_psi):
+            psi_c = float(np.mean(m_psi)) + b_psi if cfg.aiding else b_psi
+            u = ((math.cos(psi_c), math.sin(psi_c)), (-math.sin(psi_c), math.cos(psi_c)))
+            for j in (0, 1):
+                x, locked, shape = self._shift_loop(u[j][0], u[j][1], arrays, b_v, b_psi, p_s)
+                p_s = (p_s[0] + x * u[j][0] / r_n, p_s[1] + x * u[j][1] / r_e)
+                locks[2 + j], shapes[2 + j] = locked, shape
+            return p_s
+
+        if cfg.position_loops and cfg.aiding:
+            p_s = shift_loops(p_s, b_v, b_psi)
         for which in order:
-            x, it, locked, shape, sp = self._loop(which, arrays, b_v, b_psi)
+            x, it, locked, shape, sp = self._loop(which, arrays, b_v, b_psi, p_s)
             if which == 0:
                 b_v = x
             else:
                 b_psi = float(wrap_rad(x)) if not cfg.aiding else x
             its[2 * which : 2 * which + 2] = it
             locks[which], shapes[which], spacing[which] = locked, shape, sp
+        if cfg.position_loops and not cfg.aiding:
+            p_s = shift_loops(p_s, b_v, b_psi)
         self.iterations = its
         self.spacing = (spacing[0], spacing[1])
-        self.v_shape = bool(shapes[0].v_shape and shapes[1].v_shape)
+        self.v_shape = bool(all(sh.v_shape for sh in shapes.values()))
         # integrity at the new prompt
         heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
         n = dt.size
@@ -769,8 +874,8 @@ class AcqTrackNavigator:
             lon0,
             dlat,
             dlon,
-            self.p0[0],
-            self.p0[1],
+            p_s[0],
+            p_s[1],
             dt,
             m_v,
             m_psi,
@@ -809,10 +914,53 @@ class AcqTrackNavigator:
             self._out_of_lock(s, "; ".join(reasons))
             return
         innov = np.array([b_v - b_v0, float(wrap_rad(b_psi - b_psi0))])
-        if cfg.aiding:  # the aided reference is a slow bias: move it part of the way (reference_gain)
-            g = cfg.reference_gain
+        # The fit pins the transect's centroid best: shift and stretch are uncorrelated about it, while its
+        # far end carries the loops' speed / heading noise times half a transect. So the centroid the fit
+        # found is the correlation's position fix; a 2-state Kalman filter (north, east of the centroid)
+        # weighs it against the dead-reckoned centroid, the references move only part of the way
+        # (reference_gain: the aided reference is a slow bias), and the start point follows from both, so the
+        # fix is fed back into the start point and the output.
+        c = self._centroid_index(valid)
+        dla_f, dlo_f = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0])
+        dla_p, dlo_p = self._offsets(dt, m_v, m_psi, b_v0, b_psi0, self.p0[0])
+        r_ne = np.array(
+            [
+                (p_s[0] - self.p0[0] + dla_f[c] - dla_p[c]) * r_n,
+                (p_s[1] - self.p0[1] + dlo_f[c] - dlo_p[c]) * r_e,
+            ]
+        )
+        # the fix's covariance: the terrain information along / across the track at the fit
+        psi = self._aided_track(s)
+        i_al, i_cr = along_cross_information(
+            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, valid, psi,
+        )
+        sig_res = max(res_sigma if math.isfinite(res_sigma) else 0.0, sig0)
+        k2 = cfg.fix_sigma_scale**2 * _MAD_VARIANCE_FACTOR * sig_res**2
+        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
+        R = G @ np.diag([k2 / max(i_al, 1e-12), k2 / max(i_cr, 1e-12)]) @ G.T
+        R = R + np.eye(2) * (self.map_resolution_m**2 / 12.0)  # the map's quantisation of the fix
+        S = self.Pc + R
+        nis = float(r_ne @ np.linalg.solve(S, r_ne))
+        if nis > cfg.fix_gate_nis:  # innovation gate: a fix this far from the prediction is a false lock
+            self.last_innovation = (s.t_s, r_ne, S)
+            self._out_of_lock(s, f"fix innovation NIS {nis:.1f} > gate {cfg.fix_gate_nis:g}")
+            return
+        # consecutive transects share N - 1 samples: each epoch's fix brings 1/overlap of new information
+        K = self.Pc @ np.linalg.inv(self.Pc + self._fix_overlap * R)
+        IK = np.eye(2) - K
+        self.Pc = IK @ self.Pc @ IK.T + self._fix_overlap * (K @ R @ K.T)
+        dc = K @ r_ne
+        self._dbg = (c, r_ne.copy(), R.copy(), K.copy(), nis, i_al, i_cr, sig_res)
+        c_new = (self.p0[0] + dla_p[c] + dc[0] / r_n, self.p0[1] + dlo_p[c] + dc[1] / r_e)
+        g = 1.0
+        if cfg.aiding:  # the aided reference is a slow bias: move it part of the way (reference_gain), but
+            # take the loops' values whole for a transect after an acquisition (pull-in: its bins are coarse)
+            g = 1.0 if self.pull_in > 0 else cfg.reference_gain
             b_v, b_psi = b_v0 + g * innov[0], b_psi0 + g * innov[1]
+        self.pull_in = max(self.pull_in - 1, 0)
         self.b_v, self.b_psi = b_v, b_psi
+        dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0])
+        self.p0 = (c_new[0] - dla_n[c], c_new[1] - dlo_n[c])
         # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
         n_ok = max(int(valid.sum()), 1)
         cost_noise = sig0 * math.sqrt((1.0 - 2.0 / math.pi) / n_ok)
@@ -820,15 +968,11 @@ class AcqTrackNavigator:
             self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
             self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
         ]
+        if g < 1.0:  # the references are an exponential average of the loops' values (gain g)
+            sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]
         self.sigma_v, self.sigma_psi = sv
-        S = np.diag(
-            [
-                sv[0] ** 2 + (cfg.aiding_speed_sigma_mps**2) / cfg.transect_samples,
-                sv[1] ** 2 + math.radians(cfg.aiding_heading_sigma_deg) ** 2 / cfg.transect_samples,
-            ]
-        )
-        self.last_innovation = (s.t_s, innov, S)
-        verdict = self.integrity.add(s.t_s, float(innov @ np.linalg.solve(S, innov)), 2)
+        self.last_innovation = (s.t_s, r_ne, S)
+        verdict = self.integrity.add(s.t_s, nis, 2)
         self._integrity_extra = verdict.extra()
         if verdict.changed:
             self.health.events.append((s.t_s, f"acq_track: {verdict.message}"))
@@ -838,52 +982,24 @@ class AcqTrackNavigator:
             self.b_mean[0] + k * (b_v - self.b_mean[0]),
             self.b_mean[1] + k * (b_psi - self.b_mean[1]),
         )
-        # terrain-match bound on the position (information along / across the track, shared by N epochs)
-        psi = self._aided_track(s)
-        i_al, i_cr = along_cross_information(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            self.p0[0],
-            self.p0[1],
-            dt,
-            m_v,
-            m_psi,
-            b_v,
-            b_psi,
-            r_n,
-            r_e,
-            valid,
-            psi,
-        )
-        N = cfg.transect_samples
-        span_s = cfg.transect_duration_s
+        # the newest sample's covariance: the centroid's, plus dead reckoning over the rest of the transect
+        lever_s = float(t[-1] - t[c])
         v_mean = max(float(np.mean(m_v)) + b_v, 1.0)
-        k2 = cfg.lock_covariance_scale**2
-        var_al = k2 * (
-            (sig0**2 * N / i_al if i_al > 0 else 1e12) + (span_s * sv[0]) ** 2 + self.sigma_floor_m**2
-        )
-        var_cr = k2 * (
-            (sig0**2 * N / i_cr if i_cr > 0 else 1e12)
-            + (v_mean * span_s * sv[1]) ** 2
-            + self.sigma_floor_m**2
-        )
-        # in lock the match bounds each direction (consecutive epochs share N - 1 samples: a bound, not a
-        # fresh measurement to fuse every epoch)
-        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
-        p_tc = G.T @ self.P @ G
-        s_al = math.sqrt(min(max(p_tc[0, 0], 0.0), var_al))
-        s_cr = math.sqrt(min(max(p_tc[1, 1], 0.0), var_cr))
-        rho = p_tc[0, 1] / math.sqrt(p_tc[0, 0] * p_tc[1, 1]) if p_tc[0, 0] > 0 and p_tc[1, 1] > 0 else 0.0
-        self.P = G @ np.array([[s_al**2, rho * s_al * s_cr], [rho * s_al * s_cr, s_cr**2]]) @ G.T
+        self.P = self.Pc + G @ np.diag(
+            [(lever_s * sv[0]) ** 2, (v_mean * lever_s * sv[1]) ** 2]
+        ) @ G.T + np.eye(2) * self._walk2 * lever_s
         if converged and self.integrity.degraded:  # in lock, but the references jump: flagged
             self._set_lock("tracking", s.t_s, "degraded", "in lock, innovation test above its band")
         elif converged:
             self._set_lock("tracking", s.t_s, "ok", "in lock")
         else:  # the V is there but a loop hit the 101-iteration break: estimate kept, flagged
             self._set_lock("tracking", s.t_s, "degraded", "a loop did not converge (101-iteration break)")
+
+    @staticmethod
+    def _centroid_index(valid: np.ndarray) -> int:
+        """The sample nearest the mean index of the valid samples (the fit's pivot)."""
+        idx = np.nonzero(valid)[0]
+        return int(round(float(idx.mean()))) if idx.size else (valid.size - 1) // 2
 
     @staticmethod
     def _loop_sigma(shape, cost_noise: float, narrow: float) -> float:
@@ -900,12 +1016,11 @@ class AcqTrackNavigator:
         )
         if self.bad_epochs >= cfg.lost_after_epochs:
             if cfg.aiding and self.lock_state != "lost":
-                # dead-reckon on the aiding: its own prediction (an INS's velocity, or air data + the wind
-                # estimate) when it has one, else the references' running mean over the lock
-                wind_known = cfg.aiding_source == "air_data" and cfg.wind_estimation \
-                    and self.wind.n_updates > 0
-                prior = cfg.aiding_source == "ins" or wind_known
-                self.b_v, self.b_psi = (0.0, 0.0) if prior else self.b_mean
+                # dead-reckon on the aiding with the references' running mean over the lock: they carry the
+                # sensor biases and the wind's data bias the loops learned (zeroing them drops that)
+                lim_v, lim_p = cfg.max_speed_bias_mps, math.radians(cfg.max_heading_bias_deg)
+                self.b_v = float(np.clip(self.b_mean[0], -lim_v, lim_v))
+                self.b_psi = float(np.clip(self.b_mean[1], -lim_p, lim_p))
             self.need_acquisition = True
             self._anchored = False
             self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")

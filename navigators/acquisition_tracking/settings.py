@@ -22,6 +22,10 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
 - acquisition grid: +-10 m/s in 1 m/s, +-10 deg in 1 deg, +-500 m in 50 m (21 x 21 x 441 cells);
   distinct when the minimum is below acquisition_distinct_ratio (0.9) times the best cost farther than
   acquisition_exclusion_m.
+- start-point loops (ours, position_* settings): the whole replica shifted along / across the track by two
+  more early-late loops; the fit's transect centroid is the position fix, fused by a 2-state Kalman filter
+  (fix_sigma_scale, fix_overlap, fix_gate_nis; navigator.py). Defaults that depend on aiding_source are in
+  SOURCE_DEFAULTS below.
 - lock: a loop that hits the 101-iteration break flags the epoch 'degraded' but keeps its estimate; out of
   lock (V-shape flag, SNR < snr_min_db, false lock) lost_after_epochs times in a row is 'lost'.
 """
@@ -36,6 +40,26 @@ import numpy as np
 from navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
 
 AIDING_SOURCES = ("air_data", "ins")
+# Defaults that depend on aiding_source (a setting given as null / None takes these):
+# - aiding_speed_sigma_mps / aiding_heading_sigma_deg: the aiding's error over a transect besides what the
+#   references absorb - air data in JSBSim's light turbulence (the gusts move the ground vector by ~2 m/s per
+#   axis, invisible to air data) 1.5 m/s / 1 deg; an IRS's (strapdown INS) velocity 0.3 m/s / 0.2 deg.
+# - aiding_walk_m_per_sqrt_s: the dead reckoning's random walk on top (position variance per second): air
+#   data 2 m/s x sqrt(2 x 10 s correlation) ~ 9; an INS 2 (its slow velocity drift, which the slow
+#   references follow late; calibrated so the centroid fix's NIS averages 2 on the built-in flight).
+# - reference_gain: the aided references are slow biases; the fraction of each epoch's loop change taken
+#   (an exponential average over ~2 / gain epochs): air data 0.1, an INS's slower drift 0.02.
+# - max_speed_bias_mps / max_heading_bias_deg: a reference beyond is a false lock: air data 15 m/s / 15 deg
+#   (wind + sensor bias); an INS 6 m/s / 3 deg (an intermediate-grade IRS's Schuler velocity error, 0.5 mg /
+#   1.24e-3 rad/s = 4 m/s, with a margin).
+SOURCE_DEFAULTS = {
+    "aiding_speed_sigma_mps": {"air_data": 1.5, "ins": 0.3},
+    "aiding_heading_sigma_deg": {"air_data": 1.0, "ins": 0.2},
+    "aiding_walk_m_per_sqrt_s": {"air_data": 9.0, "ins": 2.0},
+    "reference_gain": {"air_data": 0.1, "ins": 0.02},
+    "max_speed_bias_mps": {"air_data": 15.0, "ins": 6.0},
+    "max_heading_bias_deg": {"air_data": 15.0, "ins": 3.0},
+}
 LOOP_ORDERS = ("speed_first", "heading_first")
 BIAS_MITIGATIONS = ("ncs", "els", "none")
 DISCRIMINATOR_NAMES = ("thesis", "v_fit")
@@ -82,7 +106,9 @@ class AcqTrackConfig:
     min_valid_fraction: float = 0.6  # of the N samples needed to correlate
     aiding: bool = True  # chapter 4's aided loops (False: constant speed and heading)
     aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
-    reference_gain: float = 1.0  # aided: fraction of each epoch's loop correction taken into b
+    reference_gain: float | None = None  # aided: fraction of each epoch's loop correction taken into b
+    aiding_interval_mean: bool = True  # air data: the air vector's mean over each sample interval
+    air_vector_sideslip: bool = True  # air data: the air vector points along heading + sideslip
     wind_estimation: bool = True  # wind triangle, predicted through heading changes
     wind_gain: float = 0.01  # per tracked sample, low-pass of the wind estimate (GNSS: 0.2)
     loop_order: str = "speed_first"
@@ -95,6 +121,11 @@ class AcqTrackConfig:
     heading_narrow_spacing_deg: float = 0.5
     heading_narrow_threshold_deg: float = 0.003
     break_iteration: int = 101
+    position_loops: bool = True  # start-point loops along / across the track (ours; tracking.py)
+    position_spacings_cells: tuple = (0.25, 0.5, 0.75, 1.0, 1.25)  # 1st stage, x the map resolution
+    position_threshold_m: float = 0.5
+    position_narrow_spacing_cells: float = 0.125  # 2nd stage (bias_mitigation "ncs")
+    position_narrow_threshold_m: float = 0.2
     discriminator: str = "thesis"  # "thesis": s (E - L) / (E + L); "v_fit": floor removed (tracking.py)
     bias_mitigation: str = "ncs"  # "ncs": fixed narrow 2nd stage; "els": + ELS; "none": 1st stage only
     scf_offset_cells: float = 2.0  # f: the SCF/HCF reach f R_db at the transect's far end
@@ -114,27 +145,34 @@ class AcqTrackConfig:
     ra_noise_const_m: float = 0.6  # radar-altimeter noise model (1 sigma = const + fraction * R)
     ra_noise_fraction: float = 0.02
     false_lock_sigma_factor: float = 3.0  # residual sigma above this times the a-priori sigma: false lock
-    max_speed_bias_mps: float = 15.0  # aided: |b_v| beyond this is a false lock (wind + sensor bias)
-    max_heading_bias_deg: float = 15.0
+    max_speed_bias_mps: float | None = None  # aided: |b_v| beyond is a false lock (None: by source)
+    max_heading_bias_deg: float | None = None
     lost_after_epochs: int = 5  # consecutive out-of-lock epochs before "lost" (re-acquire)
     output_average_length: int | None = None
     output_average_speed_tol_mps: float = 0.5
     output_average_heading_tol_deg: float = 0.5
     roll_compensation: bool = True
     beamwidth_deg: float = 17.0
-    aiding_speed_sigma_mps: float = 1.5  # dead reckoning on the aiding alone (air data + wind estimate)
-    aiding_heading_sigma_deg: float = 1.0
+    aiding_speed_sigma_mps: float | None = None  # dead reckoning on the aiding alone (None: by source)
+    aiding_heading_sigma_deg: float | None = None
     unaided_speed_sigma_mps: float = 5.0
     unaided_heading_sigma_deg: float = 5.0
     gnss_sigma_m: float = 3.0
     position_sigma_floor_m: float | None = None  # None: half the map's post spacing
-    lock_covariance_scale: float = 2.0  # calibration of the in-lock position bound (navigator.py)
+    fix_sigma_scale: float = 1.25  # calibration of the centroid fix's sigma (navigator.py; NIS check)
+    fix_gate_nis: float = 13.8  # a fix with NIS (2 dof) above this is rejected as a false lock (p = 0.001)
+    fix_overlap: float | None = None  # epochs sharing one fix's information (None: N / 2)
+    aiding_walk_m_per_sqrt_s: float | None = None  # dead-reckoning random walk (None: by source)
     baro_geopotential: bool = True
     baro_bias_sigma_m: float = 10.0
     integrity_window: int = 3  # in-lock epochs in the innovation test's window (InnovationMonitor)
     integrity_alpha: float = 0.01  # probability outside its chi-square band
 
     def __post_init__(self):
+        src = self.aiding_source if self.aiding_source in AIDING_SOURCES else "air_data"
+        for name, by_source in SOURCE_DEFAULTS.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, by_source[src])
         n = self.transect_samples
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 5 <= int(n) <= 500:
             raise ValueError(f"transect_samples must be a whole number in [5, 500], got {n!r}")
@@ -150,12 +188,26 @@ class AcqTrackConfig:
         ):
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
-        for name in ("remove_bias", "aiding", "wind_estimation", "roll_compensation", "baro_geopotential"):
+        for name in (
+            "remove_bias",
+            "aiding",
+            "wind_estimation",
+            "roll_compensation",
+            "baro_geopotential",
+            "aiding_interval_mean",
+            "air_vector_sideslip",
+            "position_loops",
+        ):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         _finite("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0, strict_lo=True)
         _finite("wind_gain", self.wind_gain, 0.0, 1.0)
         _finite("reference_gain", self.reference_gain, 0.0, 1.0, strict_lo=True)
+        object.__setattr__(
+            self,
+            "position_spacings_cells",
+            _spacing_set("position_spacings_cells", self.position_spacings_cells),
+        )
         object.__setattr__(
             self, "speed_spacings_mps", _spacing_set("speed_spacings_mps", self.speed_spacings_mps)
         )
@@ -169,6 +221,9 @@ class AcqTrackConfig:
             "heading_threshold_deg",
             "heading_narrow_spacing_deg",
             "heading_narrow_threshold_deg",
+            "position_threshold_m",
+            "position_narrow_spacing_cells",
+            "position_narrow_threshold_m",
             "scf_offset_cells",
             "symmetry_ratio_max",
             "acquisition_speed_bin_mps",
@@ -186,7 +241,8 @@ class AcqTrackConfig:
             "aiding_heading_sigma_deg",
             "unaided_speed_sigma_mps",
             "unaided_heading_sigma_deg",
-            "lock_covariance_scale",
+            "fix_sigma_scale",
+            "fix_gate_nis",
         ):
             _finite(name, getattr(self, name), 0.0, strict_lo=True)
         for name, bin_name in (
@@ -223,6 +279,9 @@ class AcqTrackConfig:
         L = self.output_average_length
         if L is not None and (isinstance(L, bool) or not isinstance(L, (int, np.integer)) or int(L) < 1):
             raise ValueError(f"output_average_length must be a whole number >= 1 or null, got {L!r}")
+        if self.fix_overlap is not None:
+            _finite("fix_overlap", self.fix_overlap, 1.0)
+        _finite("aiding_walk_m_per_sqrt_s", self.aiding_walk_m_per_sqrt_s, 0.0)
         if self.position_sigma_floor_m is not None:
             _finite("position_sigma_floor_m", self.position_sigma_floor_m, 0.0, strict_lo=True)
 

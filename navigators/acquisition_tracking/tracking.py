@@ -354,3 +354,88 @@ def choose_spacing(
         if ratio <= symmetry_max:
             return float(s), float(ratio)
     return float(inside[-1]), float(ratio)
+
+
+# ------------------------------------------------------------------------------ start-point (position) loops
+# Our addition (the thesis dead-reckons the transect start; spec section 0), the GPS receiver's code loop
+# beside its carrier loop: the speed and heading loops stretch and turn the replica about its start point,
+# so they cannot move it as a whole. Two more early-late loops shift the whole replica along and across
+# the track (x in metres along the unit vector (u_n, u_e)) with the same discriminator; that shift is the
+# correlation's position fix (navigator.py fuses it).
+
+
+@njit(cache=True)
+def _shift_cost(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
+    cost, remove_bias, interp, n_min, u_n, u_e, x, dlat_w, dlon_w, h_w,
+):
+    return replica_cost(
+        heights, lat0, lon0, dlat, dlon, lat_s + x * u_n / r_n, lon_s + x * u_e / r_e_cos, dt, m_v, m_psi,
+        b_v, b_psi, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, dlat_w, dlon_w, h_w,
+    )
+
+
+@njit(cache=True)
+def shift_correlation_function(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
+    cost, remove_bias, interp, n_min, u_n, u_e, offsets, out,
+):
+    """out[k] = cost of the replica with its start moved offsets[k] metres along (u_n, u_e)."""
+    n = dt.shape[0]
+    dlat_w = np.empty(n)
+    dlon_w = np.empty(n)
+    h_w = np.empty(n)
+    for k in range(offsets.shape[0]):
+        out[k] = _shift_cost(
+            heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
+            valid, cost, remove_bias, interp, n_min, u_n, u_e, offsets[k], dlat_w, dlon_w, h_w,
+        )
+
+
+@njit(cache=True)
+def early_late_shift_loop(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
+    cost, remove_bias, interp, n_min, u_n, u_e, x0, spacing, threshold, break_iteration, discriminator,
+):
+    """One stage of a start-point loop from shift x0 (m): (x, iterations, locked, H_prompt), as
+    early_late_loop (same discriminators, lock on |eps| < threshold, break at break_iteration)."""
+    n = dt.shape[0]
+    dlat_w = np.empty(n)
+    dlon_w = np.empty(n)
+    h_w = np.empty(n)
+    x = x0
+    it = 1
+    while it < break_iteration:
+        he = _shift_cost(
+            heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
+            valid, cost, remove_bias, interp, n_min, u_n, u_e, x - spacing, dlat_w, dlon_w, h_w,
+        )
+        hl = _shift_cost(
+            heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
+            valid, cost, remove_bias, interp, n_min, u_n, u_e, x + spacing, dlat_w, dlon_w, h_w,
+        )
+        if not (np.isfinite(he) and np.isfinite(hl)):
+            return x, it, False, np.inf
+        if discriminator == DISC_THESIS:
+            den = he + hl
+            eps = spacing * (he - hl) / den if den > 0.0 else 0.0
+        else:
+            hp = _shift_cost(
+                heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
+                valid, cost, remove_bias, interp, n_min, u_n, u_e, x, dlat_w, dlon_w, h_w,
+            )
+            den = max(he, hl) - hp
+            eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
+            if eps > spacing:
+                eps = spacing
+            elif eps < -spacing:
+                eps = -spacing
+        x += eps
+        if abs(eps) < threshold:
+            hp = _shift_cost(
+                heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
+                valid, cost, remove_bias, interp, n_min, u_n, u_e, x, dlat_w, dlon_w, h_w,
+            )
+            return x, it, True, hp
+        it += 1
+    return x, it, False, np.nan
