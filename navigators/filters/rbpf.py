@@ -342,12 +342,12 @@ class RaoBlackwellizedPF:
             self.health.skip(float(t[0]), "imu_invalid",
                              f"{self.ins.bad_imu_samples - bad0} IMU samples invalid (held previous)")
         # error-model transition over this stretch at the error model's rate (eq 16 discretised)
-        stride = max(int(round(self.dt_err / max(float(np.median(np.diff(t))) if t.shape[0] > 1 else
-                                                  self.dt_err, 1e-6))), 1)
+        dt_imu = (float(t[-1] - t[0]) / (t.shape[0] - 1)) if t.shape[0] > 1 else self.dt_err
+        stride = max(int(round(self.dt_err / max(dt_imu, 1e-6))), 1)
         fb = np.where(np.isfinite(f_b), f_b, 0.0)
         rows = np.arange(0, t.shape[0], stride)
         if rows.shape[0]:
-            dt = stride * (float(t[1] - t[0]) if t.shape[0] > 1 else self.dt_err)
+            dt = t.shape[0] * dt_imu / rows.shape[0]     # the stretch's n IMU intervals over the rows
             Phi = transition_over_history(hist[rows], fb[rows], self.ins.accel_bias_b, 0, rows.shape[0], dt,
                                           self.gravity_gradient)
             if np.all(np.isfinite(Phi)):
