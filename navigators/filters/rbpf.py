@@ -405,16 +405,7 @@ class RaoBlackwellizedPF:
         lat_i = lat - self.xn[:, 0] / sc[0]
         lon_i = lon - self.xn[:, 1] / sc[1]
         h_i = h - self.xn[:, 2]
-        # refine each closest point to a tenth of the look angle's noise across track (golden-section steps
-        # over the +-45 m bracket): 13 steps on a map that is the world (0.1 deg at 2.5 km: 0.4 m), 6 on the
-        # 3" map, whose look angle carries ~2 deg of map noise
-        r_guess = self._last_range_m
-        if not r_guess > 0:
-            r_guess = max(h - float(self.dem.height(lat, lon)), 1.0)
-        tol_m = max(0.1 * r_guess * math.sqrt(self._r_var_now(r_guess)[1]), 0.05)
-        n_golden = int(min(max(math.ceil(math.log(tol_m / 90.0) / math.log(0.618034)), 4), 13))
-        out = ira_model.predict_ira(self.dem, lat_i, lon_i, h_i, v, C, self.half_window_rad, self.max_range_m,
-                                    n_golden=n_golden)
+        out = ira_model.predict_ira(self.dem, lat_i, lon_i, h_i, v, C, self.half_window_rad, self.max_range_m)
         Hs = np.zeros((self.n, 2, 6))
         ira_model.measurement_rows(out, v, C, Hs)
         H = np.zeros((self.n, 2, 12))
