@@ -179,3 +179,29 @@ def test_rbpf_not_overconfident_on_a_coarse_map():
     lo, hi = chi2.ppf(0.005, 2 * n) / n, chi2.ppf(0.995, 2 * n) / n
     assert lo <= np.mean(nees) <= hi, (np.mean(nees), lo, hi, n)
     assert max(rms) < 20.0, rms
+
+
+@pytest.mark.parametrize("setting,value", [
+    ("terrain_model_sigma_m", "coarse"), ("terrain_model_sigma_m", -1.0), ("map_bias_sigma_m", float("nan")),
+    ("gnss_pos_bias_sigma_m", (1.0, -1.0)), ("gnss_pos_bias_sigma_m", (1.0,)),
+])
+def test_new_bad_settings_raise_naming_the_setting(dem, setting, value):
+    with pytest.raises(ValueError, match=setting):
+        RaoBlackwellizedPF(dem=dem, **{setting: value})
+
+
+def test_scenario_gives_the_map_error_and_map_is_world():
+    """build_navigator: the 3" map gets the interpolation sigma from its spectrum (auto), map = world gets
+    none, and an accuracy class's error reaches map_sigma_m / map_bias_sigma_m."""
+    from trn_env.scenario.build import build_navigator
+    from trn_env.scenario.loading import load_scenario
+
+    d = load_scenario("default", navigator="rbpf").data
+    nav = build_navigator(d, terrain.load("jacksboro"))
+    assert 2.0 < nav.terrain_model_sigma_m < 4.0 and nav.map_sigma_m == 0.0
+    d["terrain"]["map"] = {"dem": "world", "error_model": {"preset": "srtm"}}
+    nav = build_navigator(d, terrain.load("jacksboro"))
+    sig_v = 16.0 / 1.6449
+    assert nav.terrain_model_sigma_m == 0.0
+    assert nav.map_sigma_m == pytest.approx(sig_v * math.sqrt(0.5))
+    assert nav.map_bias_sigma_m == pytest.approx(sig_v * math.sqrt(0.5))
