@@ -217,7 +217,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=Path("out/seed002"))
     ap.add_argument("--jsbsim", action="store_true", help="also fly the RBPF on the King Air (JSBSim)")
     ap.add_argument("--no-pf", action="store_true", help="skip the plain-PF comparison")
+    ap.add_argument("--recovery", action="store_true",
+                    help="RBPF with its innovation test's re-spreads (issue 19; seed 002's filter has none)")
     a = ap.parse_args(argv)
+    alpha = 0.01 if a.recovery else 1e-12     # 1e-12: the test never flags
     a.out.mkdir(parents=True, exist_ok=True)
     dem = terrain.load("jacksboro")
     rows = []
@@ -226,7 +229,8 @@ def main(argv=None) -> int:
         # map = world: no interpolation error for the filter to model (terrain_model_sigma_m=0)
         filters = [("rbpf", lambda s: RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(s),
                                                           n_particles=a.particles, imu_samples="instant",
-                                                          terrain_model_sigma_m=0.0))]
+                                                          terrain_model_sigma_m=0.0,
+                                                          integrity_alpha=alpha))]
         if not a.no_pf:
             filters.append(("pf15", lambda s: BootstrapPF15(dem, np.random.default_rng(s), a.particles)))
         for name, make in filters:
