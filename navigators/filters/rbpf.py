@@ -12,8 +12,12 @@ Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   minimum over the zero-Doppler line of the INS velocity) and look angle (eq 26) from its position, and the
   step-wise linearisation in velocity (eq 24) and attitude (eq 25) as its H
   (navigators.measurements.ira_seed002); weights by eq 9's predictive density, Kalman update eqs 10-12;
-- GNSS, while SensorFrames.gnss has valid fixes: position updates the weights (a measurement of x^n), the
-  velocity each particle's Kalman part; TRN carries on alone when GNSS is denied;
+- GNSS, while SensorFrames.gnss has valid fixes: position moves the cloud onto the Kalman posterior of its
+  moments (a square-root update, _gnss_update: weighting 1,000 particles by a 2 m fix would keep about one),
+  the velocity updates each particle's Kalman part; TRN carries on alone when GNSS is denied;
+- map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
+  map_bias_sigma_m, from the scenario's map error model) and the terrain a coarse map cannot hold between
+  its posts (terrain_model_sigma_m, "auto": from the map's spectrum; 0 when the map is the world);
 - systematic resampling when the effective sample size falls below ess_threshold * N;
 - feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
   subtracted from every particle, so the error model stays linear about a good INS.
@@ -100,10 +104,11 @@ class RaoBlackwellizedPF:
     (None: default_rng(0)). n_particles; ess_threshold in (0, 1]; trn_rate_hz; error_model_rate_hz (the
     error model's step, 50 Hz); range_sigma_m, look_angle_sigma_deg; half_window_deg, max_range_m (the IRA's
     look window, as the sensor's); init_pos_sigma_m (N, E, up), init_vel_sigma_mps, init_att_sigma_deg,
-    accel_bias_sigma_mps2, gyro_bias_sigma_rps; map_sigma_m (the map's vertical error, added to the range
-    variance); acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
-    q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (horizontal, vertical),
-    gnss_vel_sigma_mps; imu_samples ("interval" | "instant"); gravity_gradient (error model, see
+    accel_bias_sigma_mps2, gyro_bias_sigma_rps; map_sigma_m, map_bias_sigma_m (the map's random and bias
+    vertical error, m), terrain_model_sigma_m ("auto" or m: the map's interpolation error), see
+    _r_var_now; acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
+    q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (white, horizontal,
+    vertical), gnss_pos_bias_sigma_m (the receiver's drift: a floor on the fused position), gnss_vel_sigma_mps; imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m (the innovation test and its
     recovery, see the module docstring).
     """
