@@ -108,7 +108,9 @@ class RaoBlackwellizedPF:
     vertical error, m), terrain_model_sigma_m ("auto" or m: the map's interpolation error), see
     _r_var_now; acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
     q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (white, horizontal,
-    vertical), gnss_pos_bias_sigma_m (the receiver's drift: a floor on the fused position), gnss_vel_sigma_mps; imu_samples ("interval" | "instant"); gravity_gradient (error model, see
+    vertical), gnss_pos_bias_sigma_m (the receiver's drift: a floor on the fused position),
+    gnss_vel_sigma_mps;
+    imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m (the innovation test and its
     recovery, see the module docstring).
     """
