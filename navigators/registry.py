@@ -42,7 +42,10 @@ _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
 
 # navigators that take the map's error as measurement noise: trn_env's build_navigator fills their
 # map_sigma_m / map_bias_sigma_m from the scenario's map error model when the settings do not give them
-MAP_NOISE_AWARE: set[str] = {"pmf", "pf"}
+MAP_NOISE_AWARE: set[str] = {"pmf", "pf", "rbpf"}
+# navigators that model the interpolation error of a coarse map (terrain_model_sigma_m, default "auto": from
+# the map's spectrum): build_navigator gives them 0 when the scenario's map is the world itself
+MAP_IS_WORLD_AWARE: set[str] = {"rbpf"}
 
 
 def available() -> list[str]:

@@ -136,7 +136,8 @@ class BootstrapPF15:
     12 linear states are then point values moved by the error model plus sampled process noise."""
 
     def __init__(self, dem, rng, n_particles=1000, imu_samples="instant"):
-        self.inner = RaoBlackwellizedPF(dem=dem, rng=rng, n_particles=n_particles, imu_samples=imu_samples)
+        self.inner = RaoBlackwellizedPF(dem=dem, rng=rng, n_particles=n_particles, imu_samples=imu_samples,
+                                        terrain_model_sigma_m=0.0)      # map = world
         self.name = "pf15"
         self._orig_time_update = None
 
@@ -246,14 +247,20 @@ def main(argv=None) -> int:
     ap.add_argument("--fly", action="store_true",
                     help="also fly the RBPF through the seed002 scenario (trn-env fly's closed loop)")
     ap.add_argument("--no-pf", action="store_true", help="skip the plain-PF comparison")
+    ap.add_argument("--recovery", action="store_true",
+                    help="RBPF with its innovation test's re-spreads (issue 19; seed 002's filter has none)")
     a = ap.parse_args(argv)
+    alpha = 0.01 if a.recovery else 1e-12     # 1e-12: the test never flags
     a.out.mkdir(parents=True, exist_ok=True)
     dem = terrain.load("jacksboro")
     rows = []
     for run in range(a.runs):
         seed = a.seed + run
+        # map = world: no interpolation error for the filter to model (terrain_model_sigma_m=0)
         filters = [("rbpf", lambda s: RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(s),
-                                                          n_particles=a.particles, imu_samples="instant"))]
+                                                          n_particles=a.particles, imu_samples="instant",
+                                                          terrain_model_sigma_m=0.0,
+                                                          integrity_alpha=alpha))]
         if not a.no_pf:
             filters.append(("pf15", lambda s: BootstrapPF15(dem, np.random.default_rng(s), a.particles)))
         for name, make in filters:

@@ -104,7 +104,7 @@ def _horizontal_error_m(est, truth) -> float:
 NAVS = {
     "pmf": (True, dict(grid_size=50, baro_geopotential=False)),
     "pf": (True, dict(n_particles=1500, baro_geopotential=False)),
-    "rbpf": (False, dict(n_particles=1000)),
+    "rbpf": (False, dict(n_particles=1000, terrain_model_sigma_m=0.0)),   # map = world
 }
 
 

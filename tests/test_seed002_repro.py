@@ -26,7 +26,8 @@ def results():
     dem = terrain.load("jacksboro")
     out = {}
     for name, make in (("rbpf", lambda: repro.RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(SEED),
-                                                                 imu_samples="instant")),
+                                                                 imu_samples="instant",
+                                                                 terrain_model_sigma_m=0.0)),
                        ("pf15", lambda: repro.BootstrapPF15(dem, np.random.default_rng(SEED)))):
         kin = repro.kinematic_truth(DURATION_S, dem)
         t, e, s, _ = repro.run_open_loop(make(), kin, dem, DURATION_S, SEED)

@@ -76,6 +76,15 @@ def time_update(xn, xl, P, Phi, qn_var, ql_var, w):
     xn_new = np.empty(3)
     mean_n = np.empty(3)
     xl_new = np.empty(NL)
+    # rows of D that are unit rows (the bias states of eq 18 are constant): D P and D P D^T copy them
+    ident = np.zeros(NL, np.bool_)
+    for i in range(NL):
+        unit = True
+        for m in range(NL):
+            if Phi[3 + i, 3 + m] != (1.0 if m == i else 0.0):
+                unit = False
+                break
+        ident[i] = unit
     for k in range(npart):
         Pk = P[k]
         # PB = P B^T
@@ -123,12 +132,17 @@ def time_update(xn, xl, P, Phi, qn_var, ql_var, w):
         # eq 14: L = D P B^T N^-1
         _inv3(Nm, Ni)
         for i in range(NL):
+            if ident[i]:
+                for j in range(NL):
+                    DP[i, j] = Pk[i, j]
+                for j in range(3):
+                    DPB[i, j] = PB[i, j]
+                continue
             for j in range(NL):
                 s = 0.0
                 for m in range(NL):
                     s += Phi[3 + i, 3 + m] * Pk[m, j]
                 DP[i, j] = s
-        for i in range(NL):
             for j in range(3):
                 s = 0.0
                 for m in range(NL):
@@ -157,9 +171,12 @@ def time_update(xn, xl, P, Phi, qn_var, ql_var, w):
                 LN[i, j] = Lg[i, 0] * Nm[0, j] + Lg[i, 1] * Nm[1, j] + Lg[i, 2] * Nm[2, j]
         for i in range(NL):
             for j in range(i, NL):
-                s = 0.0
-                for m in range(NL):
-                    s += DP[i, m] * Phi[3 + j, 3 + m]
+                if ident[j]:
+                    s = DP[i, j]
+                else:
+                    s = 0.0
+                    for m in range(NL):
+                        s += DP[i, m] * Phi[3 + j, 3 + m]
                 s -= LN[i, 0] * Lg[j, 0] + LN[i, 1] * Lg[j, 1] + LN[i, 2] * Lg[j, 2]
                 if i == j:
                     s += ql_var[i]

@@ -12,8 +12,12 @@ Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   minimum over the zero-Doppler line of the INS velocity) and look angle (eq 26) from its position, and the
   step-wise linearisation in velocity (eq 24) and attitude (eq 25) as its H
   (navigators.measurements.ira_seed002); weights by eq 9's predictive density, Kalman update eqs 10-12;
-- GNSS, while SensorFrames.gnss has valid fixes: position updates the weights (a measurement of x^n), the
-  velocity each particle's Kalman part; TRN carries on alone when GNSS is denied;
+- GNSS, while SensorFrames.gnss has valid fixes: position moves the cloud onto the Kalman posterior of its
+  moments (a square-root update, _gnss_update: weighting 1,000 particles by a 2 m fix would keep about one),
+  the velocity updates each particle's Kalman part; TRN carries on alone when GNSS is denied;
+- map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
+  map_bias_sigma_m, from the scenario's map error model) and the terrain a coarse map cannot hold between
+  its posts (terrain_model_sigma_m, "auto": from the map's spectrum; 0 when the map is the world);
 - systematic resampling when the effective sample size falls below ess_threshold * N;
 - feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
   subtracted from every particle, so the error model stays linear about a good INS.
@@ -100,10 +104,13 @@ class RaoBlackwellizedPF:
     (None: default_rng(0)). n_particles; ess_threshold in (0, 1]; trn_rate_hz; error_model_rate_hz (the
     error model's step, 50 Hz); range_sigma_m, look_angle_sigma_deg; half_window_deg, max_range_m (the IRA's
     look window, as the sensor's); init_pos_sigma_m (N, E, up), init_vel_sigma_mps, init_att_sigma_deg,
-    accel_bias_sigma_mps2, gyro_bias_sigma_rps; map_sigma_m (the map's vertical error, added to the range
-    variance); acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
-    q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (horizontal, vertical),
-    gnss_vel_sigma_mps; imu_samples ("interval" | "instant"); gravity_gradient (error model, see
+    accel_bias_sigma_mps2, gyro_bias_sigma_rps; map_sigma_m, map_bias_sigma_m (the map's random and bias
+    vertical error, m), terrain_model_sigma_m ("auto" or m: the map's interpolation error), see
+    _r_var_now; acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
+    q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (white, horizontal,
+    vertical), gnss_pos_bias_sigma_m (the receiver's drift: a floor on the fused position),
+    gnss_vel_sigma_mps;
+    imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m (the innovation test and its
     recovery, see the module docstring).
     """
@@ -130,12 +137,15 @@ class RaoBlackwellizedPF:
         q_att_rad: float = 1e-6,
         q_accel_bias_mps2: float = 1e-7,
         q_gyro_bias_rps: float = 1e-7,
-        gnss_pos_sigma_m=(2.0, 4.0),
+        gnss_pos_sigma_m=(1.0, 2.0),
+        gnss_pos_bias_sigma_m=(1.5, 3.0),
         gnss_vel_sigma_mps: float = 0.1,
         imu_samples: str = "interval",
         gravity_gradient: bool = True,
         acquisition_spread_m: float = 10.0,
         map_sigma_m: float = 0.0,
+        map_bias_sigma_m: float = 0.0,
+        terrain_model_sigma_m="auto",
         integrity_window: int = 3,
         integrity_alpha: float = 0.01,
         recovery_sigma_m: float = 100.0,
@@ -171,11 +181,21 @@ class RaoBlackwellizedPF:
         self.ess_threshold = e
         self.trn_period_s = 1.0 / _positive("trn_rate_hz", trn_rate_hz)
         self.dt_err = 1.0 / _positive("error_model_rate_hz", error_model_rate_hz)
-        # the map's vertical error (its error class, as the scenario's map error model states it) enters the
-        # range as measurement noise the filter knows about
-        self.r_var = np.array([_positive("range_sigma_m", range_sigma_m) ** 2
-                               + _positive("map_sigma_m", map_sigma_m, True) ** 2,
+        # the sensor's own noise; the map's errors are added per epoch (_r_var_now, map_noise_variances)
+        self.r_var = np.array([_positive("range_sigma_m", range_sigma_m) ** 2,
                                math.radians(_positive("look_angle_sigma_deg", look_angle_sigma_deg)) ** 2])
+        # the map's vertical error (its error class, as the scenario's map error model states it) and the
+        # terrain the map cannot hold between its posts (interpolation error): measurement noise the filter
+        # knows about (ira_seed002.map_noise_variances)
+        self.map_sigma_m = _positive("map_sigma_m", map_sigma_m, True)
+        self.map_bias_sigma_m = _positive("map_bias_sigma_m", map_bias_sigma_m, True)
+        if isinstance(terrain_model_sigma_m, str):
+            if terrain_model_sigma_m != "auto":
+                raise ValueError("terrain_model_sigma_m must be 'auto' or a number >= 0 (m), "
+                                 f"got {terrain_model_sigma_m!r}")
+            self.terrain_model_sigma_m = ira_model.interpolation_sigma_m(dem)
+        else:
+            self.terrain_model_sigma_m = _positive("terrain_model_sigma_m", terrain_model_sigma_m, True)
         self.half_window_rad = math.radians(hw)
         self.max_range_m = _positive("max_range_m", max_range_m)
         self.init_pos_sigma = _triple("init_pos_sigma_m", init_pos_sigma_m, False)
@@ -200,6 +220,13 @@ class RaoBlackwellizedPF:
         for i, v in enumerate(gp):
             _positive(f"gnss_pos_sigma_m[{i}]", v)
         self.gnss_pos_var = np.array([gp[0], gp[0], gp[1]]) ** 2
+        gb = np.asarray(gnss_pos_bias_sigma_m, float).ravel()
+        if gb.shape != (2,):
+            raise ValueError("gnss_pos_bias_sigma_m must have two entries (horizontal, vertical), "
+                             f"got {gnss_pos_bias_sigma_m!r}")
+        for i, v in enumerate(gb):
+            _positive(f"gnss_pos_bias_sigma_m[{i}]", v, True)
+        self.gnss_bias_var = np.array([gb[0], gb[0], gb[1]]) ** 2
         self.gnss_vel_var = np.full(3, _positive("gnss_vel_sigma_mps", gnss_vel_sigma_mps)) ** 2
         self.gravity_gradient = bool(gravity_gradient)
         self.acquisition_spread_m = _positive("acquisition_spread_m", acquisition_spread_m, True)
@@ -208,8 +235,6 @@ class RaoBlackwellizedPF:
         self.recovery_sigma_m = _positive("recovery_sigma_m", recovery_sigma_m, True)
         self.recoveries = 0
         # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
-        self._ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(self.r_var)) * 1e4)
-                          - math.log(2 * math.pi))
         self.health = Health()
         self._reset_done = False
 
@@ -229,6 +254,7 @@ class RaoBlackwellizedPF:
         self._extra: dict = {}
         self._cov9 = self._covariance9()
         self._n_rejected = 0
+        self._last_range_m = -1.0
         self.epochs = 0
         self.resamples = 0
         self._reset_done = True
@@ -324,12 +350,12 @@ class RaoBlackwellizedPF:
             self.health.skip(float(t[0]), "imu_invalid",
                              f"{self.ins.bad_imu_samples - bad0} IMU samples invalid (held previous)")
         # error-model transition over this stretch at the error model's rate (eq 16 discretised)
-        stride = max(int(round(self.dt_err / max(float(np.median(np.diff(t))) if t.shape[0] > 1 else
-                                                  self.dt_err, 1e-6))), 1)
+        dt_imu = (float(t[-1] - t[0]) / (t.shape[0] - 1)) if t.shape[0] > 1 else self.dt_err
+        stride = max(int(round(self.dt_err / max(dt_imu, 1e-6))), 1)
         fb = np.where(np.isfinite(f_b), f_b, 0.0)
         rows = np.arange(0, t.shape[0], stride)
         if rows.shape[0]:
-            dt = stride * (float(t[1] - t[0]) if t.shape[0] > 1 else self.dt_err)
+            dt = t.shape[0] * dt_imu / rows.shape[0]     # the stretch's n IMU intervals over the rows
             Phi = transition_over_history(hist[rows], fb[rows], self.ins.accel_bias_b, 0, rows.shape[0], dt,
                                           self.gravity_gradient)
             if np.all(np.isfinite(Phi)):
@@ -366,6 +392,7 @@ class RaoBlackwellizedPF:
         lat, lon, h, v, C = self._ins_at(te)
         sc = self._metric_scale()
         if y_ira is not None:
+            self._gnss_now = gnss is not None
             updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
         if gnss is not None:
             self._gnss_update(te, gnss, lat, lon, h, v, sc, ll)
@@ -404,13 +431,18 @@ class RaoBlackwellizedPF:
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
         pred_ok = np.where(ok[:, None], pred, 0.0)
-        ybar, S = kern.predictive_moments(H, self.xl, self.P, self._r_var_now(), pred_ok, ok, wp)
+        self._last_range_m = float(np.sum(wp * pred_ok[:, 0]))
+        r_var = self._r_var_now(self._last_range_m)
+        ybar, S = kern.predictive_moments(H, self.xl, self.P, r_var, pred_ok, ok, wp)
         nu = np.array(y_ira) - ybar
         saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
-        n_bad = kern.linear_update(self.xl, self.P, H, e, self._r_var_now(), self.logw, ok, ll)
+        n_bad = kern.linear_update(self.xl, self.P, H, e, r_var, self.logw, ok, ll)
         fin_ll = ll[np.isfinite(ll)]
+        # log N at OUTLIER_SIGMA for the variances inflated at most 100x (2 dof): the rejection floor
+        ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(r_var)) * 1e4)
+                    - math.log(2 * math.pi))
         # no particle within OUTLIER_SIGMA of the measurement: in linear weights every one underflows
-        if fin_ll.size == 0 or fin_ll.max() < self._ll_floor:
+        if fin_ll.size == 0 or fin_ll.max() < ll_floor:
             self.xl, self.P, self.logw = saved
             self._n_rejected += 1
             if self._n_rejected >= REINIT_AFTER_REJECTS:
@@ -476,25 +508,67 @@ class RaoBlackwellizedPF:
         self.health.events.append((float(te), f"recovery: {self.n} particles re-spread, horizontal 1-sigma "
                                                f"+{sig:.0f} m"))
 
-    def _r_var_now(self) -> np.ndarray:
-        """IRA measurement variances; while the cloud's horizontal spread exceeds acquisition_spread_m they
-        are inflated by (spread / acquisition_spread_m)^2 (at most 100x): tempering against the collapse of
-        1,000 particles spread over 50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb
-        their position's look-angle mismatch as attitude error (our addition; 0 disables it)."""
+    def _r_var_now(self, range_m: float) -> np.ndarray:
+        """IRA measurement variances (range m^2, look angle rad^2) at a slant range range_m: the sensor's,
+        plus the map's errors (ira_seed002.map_noise_variances: map_sigma_m, terrain_model_sigma_m, and
+        map_bias_sigma_m while GNSS pins the height, which then cannot absorb a map bias). While the
+        cloud's horizontal spread exceeds acquisition_spread_m they are inflated by
+        (spread / acquisition_spread_m)^2 (at most 100x): tempering against the collapse of 1,000 particles
+        spread over 50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb their position's
+        look-angle mismatch as attitude error (our addition; 0 disables it)."""
+        bias = self.map_bias_sigma_m if getattr(self, "_gnss_now", False) else 0.0
+        r = self.r_var + ira_model.map_noise_variances(math.hypot(self.map_sigma_m, bias),
+                                                       self.terrain_model_sigma_m, range_m)
         if self.acquisition_spread_m <= 0.0:
-            return self.r_var
+            return r
         spread = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0))
         f = min(max((spread / self.acquisition_spread_m) ** 2, 1.0), 100.0)
-        return self.r_var * f
+        return r * f
 
     def _gnss_update(self, te, gnss, lat, lon, h, v, sc, ll) -> None:
+        """GNSS position: a linear-Gaussian measurement of x^n. Weighting the cloud by it cannot represent a
+        2 m fix on a 50 m cloud (about one particle in 1,000 lies in the posterior's 1-sigma box), so the
+        cloud is moved instead: the weighted mean m and covariance Pc are fused with the fix by a Kalman
+        update (m', P') and every particle is mapped x -> m' + L' L^-1 (x - m) (L, L' Cholesky factors of Pc,
+        P'), keeping its weight: the weighted cloud then has exactly the posterior's first two moments, its
+        shape otherwise kept (an ensemble square-root update). The receiver's error has a white part
+        (gnss_pos_sigma_m) and a slowly drifting one (gnss_pos_bias_sigma_m, constant over a fix's
+        neighbours): the update uses their sum and P' is kept above the drift's variance, so ten fixes do not
+        claim to beat the receiver's own bias. GNSS velocity: each particle's Kalman update (eqs 9-12)."""
         _, glat, glon, gh, gv = gnss
         y = np.array([(lat - glat) * sc[0], (lon - glon) * sc[1], h - gh])
-        kern.position_loglik(self.xn, y, self.gnss_pos_var, self.logw, ll)
+        self._gnss_cloud_update(y)
         H = np.zeros((self.n, 3, 12))
         H[:, 0, 0] = H[:, 1, 1] = H[:, 2, 2] = 1.0
         e = np.broadcast_to(v - gv, (self.n, 3)).copy()
         kern.linear_update(self.xl, self.P, H, e, self.gnss_vel_var, self.logw, np.ones(self.n, bool), ll)
+
+    def _gnss_cloud_update(self, y: np.ndarray) -> None:
+        w = self._weights()
+        m = w @ self.xn
+        d = self.xn - m
+        Pc = (d * w[:, None]).T @ d
+        Rg = np.diag(self.gnss_pos_var + self.gnss_bias_var)
+        try:
+            L = np.linalg.cholesky(Pc + 1e-9 * np.eye(3))
+            K = Pc @ np.linalg.inv(Pc + Rg)
+        except np.linalg.LinAlgError:
+            return
+        m_new = m + K @ (y - m)
+        P_new = (np.eye(3) - K) @ Pc
+        P_new = 0.5 * (P_new + P_new.T)
+        # the receiver's drift is common to consecutive fixes: no position better than it
+        # (never wider than the cloud before the fix)
+        floor = np.sqrt(np.minimum(self.gnss_bias_var, np.diag(Pc)))
+        sd = np.sqrt(np.clip(np.diag(P_new), 1e-12, None))
+        f = np.maximum(floor / sd, 1.0)
+        P_new = P_new * f[:, None] * f[None, :]
+        try:
+            L_new = np.linalg.cholesky(P_new + 1e-9 * np.eye(3))
+        except np.linalg.LinAlgError:
+            return
+        A = L_new @ np.linalg.inv(L)
+        self.xn = m_new + d @ A.T
 
     def _normalise_resample(self, te, logw_prev) -> None:
         fin = np.isfinite(self.logw)

@@ -349,6 +349,9 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     if d["navigator"]["name"] in getattr(registry, "MAP_NOISE_AWARE", ()):
         for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
             settings.setdefault(key, val)
+    if (d["navigator"]["name"] in getattr(registry, "MAP_IS_WORLD_AWARE", ())
+            and d["terrain"]["map"].get("dem", "world") == "world"):
+        settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
     return registry.create(d["navigator"]["name"], rng=rng, **settings)
 
 
