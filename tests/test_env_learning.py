@@ -46,8 +46,9 @@ def test_bearing_action_turns_and_climbs_toward_its_targets_at_the_aircrafts_lim
     dpsi, dagl = env.action_limits
     assert dpsi == pytest.approx(math.radians(3.0)) and dagl == pytest.approx(5.0)
     track0, agl0 = env._track_cmd_rad, env._agl_cmd_m
-    bearing, _ = _goal_bearing_and_distance(env)
+    bearing, d_goal = _goal_bearing_and_distance(env)
     env.step(np.array([0.5, -1.0], np.float32))       # 45 deg right of the goal, down to agl_min_m
+    assert env._bearing_offset_limit_rad(d_goal) == pytest.approx(math.pi / 2)   # far: the full 90 deg
     want = bearing + math.radians(45.0)
     d = math.atan2(math.sin(want - track0), math.cos(want - track0))
     assert env._track_cmd_rad == pytest.approx(track0 + float(np.clip(d, -dpsi, dpsi)), abs=1e-9)
@@ -58,6 +59,12 @@ def test_bearing_action_turns_and_climbs_toward_its_targets_at_the_aircrafts_lim
     off = math.atan2(math.sin(track1 - bearing), math.cos(track1 - bearing)) / (math.pi / 2)
     env.step(np.array([off, -1.0], np.float32))
     assert env._track_cmd_rad == pytest.approx(track1, abs=1e-6)
+    # near the goal the offset is what the turn rate can hold: v sin(phi) / d = omega
+    omega = dpsi / env.decision_interval_s
+    for d in (300.0, 500.0, 1000.0):
+        phi = env._bearing_offset_limit_rad(d)
+        assert env.tas_mps * math.sin(phi) / d == pytest.approx(omega, rel=1e-9)
+    assert math.degrees(env._bearing_offset_limit_rad(500.0)) == pytest.approx(17.9, abs=0.5)
     with pytest.raises(ValueError, match="action_mode"):
         TerrainNavEnv(**SMALL, action_mode="heading")
     with pytest.raises(ValueError, match="bearing_offset_max_deg"):
