@@ -14,8 +14,10 @@ goal region, scenario basin_route - and the bundled real DEM, scenario default):
    SubprocVecEnv (default 2); saves the trained model to OUT/ppo_<terrain>.zip, the same network before
    training to OUT/ppo_<terrain>_untrained.zip, and the training episodes to OUT/train_<terrain>.json;
 2. evaluates the straight-line policy, the planner policy (trn_env.policies.PlannerPolicy, replanning from
-   the estimate at every decision step), the trained policy, the untrained network and uniformly random
-   actions on the same held-out goals (the env's documented set) and the same episode seeds, as an episode
+   the estimate at every decision step), the trained policy (deterministic: the mean action), the
+   untrained network acting as at the start of training (samples of its action distribution; its mean
+   action, 0, is the straight line) and uniformly random actions on the same held-out goals (the env's
+   documented set) and the same episode seeds, as an episode
    campaign (trn_env.campaign.episodes: one Parquet row per episode in OUT/episodes_<terrain>/, on the
    campaign backends - the local pool on every core, or Ray);
 3. writes OUT/summary.json and OUT/table.md (per terrain and policy: success rate, mean and 95th
@@ -145,7 +147,7 @@ def policy_specs(terrain_key: str, models: tuple[Path, Path] | None) -> list[dic
            {"label": "planner", "kind": "planner", "agl_m": agl, "config": dict(PLANNER)}]
     if models is not None:
         out += [{"label": "ppo", "kind": "sb3", "model": str(models[0])},
-                {"label": "ppo_untrained", "kind": "sb3", "model": str(models[1])}]
+                {"label": "ppo_untrained", "kind": "sb3", "model": str(models[1]), "deterministic": False}]
     out.append({"label": "random", "kind": "random"})
     return out
 

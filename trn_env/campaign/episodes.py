@@ -21,9 +21,10 @@ navigation error). The env is built once per worker process from its arguments (
 come from the scenario seed), and each episode's randomness from the reset seed, so an episode's row is the
 same bits whichever worker flies it and in whatever order (`fly_episode` on a fresh process gives it too).
 Policy kinds: "straight" (`StraightLinePolicy`), "planner" (`PlannerPolicy` with a `PlannerConfig` from
-"config"), "sb3" (a saved stable-baselines3 model, deterministic actions; the `rl` extra), "random"
-(uniform actions drawn from a generator seeded by the episode seed). The campaign hash covers the spec and
-the bytes of every model file, so `resume` refuses a folder made with another model.
+"config"), "sb3" (a saved stable-baselines3 model, deterministic actions, or with `"deterministic": false`
+samples of its action distribution from torch's generator seeded by the episode seed; the `rl` extra),
+"random" (uniform actions drawn from a generator seeded by the episode seed). The campaign hash covers the
+spec and the bytes of every model file, so `resume` refuses a folder made with another model.
 """
 
 from __future__ import annotations
@@ -125,7 +126,8 @@ def _check_policy(i: int, p: Any) -> dict:
     if not isinstance(p, dict):
         raise CampaignError("episode campaign", [f"{at}: must be a table with label and kind, got {p!r}"])
     problems = []
-    unknown = set(p) - {"label", "kind", "agl_m", "config", "model", "replan_every", "lookahead_m"}
+    unknown = set(p) - {"label", "kind", "agl_m", "config", "model", "replan_every", "lookahead_m",
+                        "deterministic"}
     if unknown:
         problems.append(f"{at}: unknown keys {sorted(unknown)}")
     if not isinstance(p.get("label"), str) or not p.get("label"):
@@ -136,6 +138,8 @@ def _check_policy(i: int, p: Any) -> dict:
         model = p.get("model")
         if not isinstance(model, str) or not Path(model).is_file():
             problems.append(f"{at}.model: a saved stable-baselines3 model file is required, got {model!r}")
+    if not isinstance(p.get("deterministic", True), bool):
+        problems.append(f"{at}.deterministic: true or false, got {p.get('deterministic')!r}")
     if problems:
         raise CampaignError("episode campaign", problems)
     out = copy.deepcopy(p)
@@ -242,6 +246,21 @@ class RandomPolicy:
         return self.rng.uniform(lo, hi).astype(np.float32), None
 
 
+class SampledPolicy:
+    """A stable-baselines3 model acting by samples of its action distribution (as during training), from
+    torch's generator seeded per episode."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def seed(self, seed: int) -> None:
+        import torch
+        torch.manual_seed(int(seed))
+
+    def predict(self, obs, state=None, episode_start=None, deterministic: bool = False):
+        return self.model.predict(obs, deterministic=False)
+
+
 def make_policy(spec: dict, env):
     """A policy object with `predict(obs, deterministic=True) -> (action, state)` from a policy table."""
     kind = spec["kind"]
@@ -259,7 +278,8 @@ def make_policy(spec: dict, env):
         import torch
         from stable_baselines3 import PPO
         torch.set_num_threads(1)         # the pool has a process per core already
-        return PPO.load(spec["model"], device="cpu")
+        model = PPO.load(spec["model"], device="cpu")
+        return model if spec.get("deterministic", True) else SampledPolicy(model)
     if kind == "random":
         return RandomPolicy(env)
     raise ValueError(f"policy kind must be one of {POLICY_KINDS}, got {kind!r}")
@@ -350,5 +370,5 @@ def died_episode_row(task: EpisodeTask, why: str) -> dict:
     return row
 
 
-__all__ = ["EpisodeCampaign", "EpisodeTask", "PolicyVariant", "RandomPolicy", "episode_campaign",
-           "fly_episode", "make_policy", "run_episode"]
+__all__ = ["EpisodeCampaign", "EpisodeTask", "PolicyVariant", "RandomPolicy", "SampledPolicy",
+           "episode_campaign", "fly_episode", "make_policy", "run_episode"]
