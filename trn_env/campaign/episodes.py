@@ -319,7 +319,7 @@ def run_episode(env, policy, seed: int, goal_deg) -> dict:
     obs, info0 = env.reset(seed=int(seed), options={"goal_deg": tuple(goal_deg)})
     if hasattr(policy, "reset"):
         policy.reset()
-    if hasattr(policy, "seed"):
+    if isinstance(policy, (RandomPolicy, SampledPolicy)):   # (an sb3 model's `seed` is its int seed)
         policy.seed(int(seed))
     ret, done, info, steps = 0.0, False, info0, 0
     while not done:
