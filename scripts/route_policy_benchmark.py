@@ -1,24 +1,42 @@
 """Route policies for TRN side by side: straight line, terrain-information planner, and a trained PPO policy.
 
     python scripts/route_policy_benchmark.py --out out/route_bench            # defaults (2 cores: < 1 h)
-    python scripts/route_policy_benchmark.py --train-steps 60000 --seeds 10   # longer, more seeds
+    python scripts/route_policy_benchmark.py --train-steps 100000 --seeds 10  # longer, more seeds
     python scripts/route_policy_benchmark.py --terrains basin --train-steps 0 # no PPO (straight vs planner)
+    python scripts/route_policy_benchmark.py --backend ray                    # evaluation on Ray
 
 For each terrain (the synthetic "basin" - rolling hills with a flat basin between the start region and the
 goal region, scenario basin_route - and the bundled real DEM, scenario default):
 
 1. trains PPO (stable-baselines3, the `rl` extra) in TerrainNav-v0's arrival task (the episode ends when the
    ESTIMATE says it has arrived; the TRUE miss counts) with the start and the goal drawn per episode from
-   the terrain's regions (never within held_out_radius_m of a held-out goal), on a 2-env SubprocVecEnv;
-   saves it to OUT/ppo_<terrain>.zip;
+   the terrain's regions (never within held_out_radius_m of a held-out goal), on an `--envs`-env
+   SubprocVecEnv (default 2); saves the trained model to OUT/ppo_<terrain>.zip, the same network before
+   training to OUT/ppo_<terrain>_untrained.zip, and the training episodes to OUT/train_<terrain>.json;
 2. evaluates the straight-line policy, the planner policy (trn_env.policies.PlannerPolicy, replanning from
-   the estimate at every decision step) and the trained policy on the same held-out goals (the env's
-   documented set) and the same episode seeds, episodes spread over a local process pool
-   (concurrent.futures; the campaign machinery is not on main yet);
-3. writes OUT/episodes.json (one row per episode), OUT/summary.json and OUT/table.md (per terrain and
-   policy: success rate, mean and 95th percentile TRUE horizontal error at the goal over the arrived
-   episodes, mean extra distance flown against the straight line, collisions, mean return) and
-   OUT/route_benchmark.png.
+   the estimate at every decision step), the trained policy (deterministic: the mean action), the
+   untrained network acting as at the start of training (samples of its action distribution; its mean
+   action, 0, is the straight line) and uniformly random actions on the same held-out goals (the env's
+   documented set) and the same episode seeds, as an episode
+   campaign (trn_env.campaign.episodes: one Parquet row per episode in OUT/episodes_<terrain>/, on the
+   campaign backends - the local pool on every core, or Ray);
+3. writes OUT/summary.json and OUT/table.md (per terrain and policy: success rate, mean and 95th
+   percentile TRUE horizontal error at the goal over the arrived episodes, mean extra distance flown against
+   the straight line, collisions, mean return) and OUT/route_benchmark.png (errors, error against extra
+   distance, and the training curve).
+
+The learning setup (why the defaults learn; measured in the README's route-planning section): the env's
+`action_mode="bearing"` (the desired track relative to the goal's bearing from the estimate, +-90 deg, and
+the desired height above ground, each reached at the aircraft's turn and climb limits - so an action of 0
+flies the straight line and exploration varies the route around it instead of a random walk of track
+changes that leaves the map); the normalised goal observations (19-21) mapped with the other elements to
+[-1, 1] by the observation bounds (trn_env.env.sb3_features.BoundsScaledExtractor); the potential-based
+progress term on the estimated distance (`shaping_gamma` 1: the undiscounted returns compared here stay
+route-neutral; `shaping_gamma = 0.99` would be Ng et al.'s exact form for PPO's discount); and a failure
+penalty of 20 (leaving the map costs twice the arrival bonus; at 100 the rare failures swamp the return's
+scale); PPO with n_steps 256 per env, batch 128, 10 epochs, gamma 0.99, ent_coef 0, log_std_init -1.2 (an
+action std of 0.3, +-27 deg about the goal bearing: with 0.6 the exploration noise alone made a third of
+the training episodes run out of time and the arrival rate did not rise in 5,600 steps).
 """
 
 from __future__ import annotations
@@ -27,10 +45,9 @@ import argparse
 import json
 import math
 import os
+import shutil
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -57,123 +74,109 @@ TERRAINS = {
         ),
     ),
 }
-ENV_COMMON = dict(decision_interval_s=5.0, max_episode_s=480.0, goal_radius_m=500.0)
-POLICIES = ("straight", "planner", "ppo")
-PLANNER = {"weight": 3.0, "informative_crlb_m": 5.0}     # set from the command line (run_episode's tasks)
+GAMMA = 0.99
+ENV_COMMON = dict(decision_interval_s=5.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="bearing",
+                  failure_penalty=20.0)
+PPO_SETTINGS = dict(n_steps=256, batch_size=128, n_epochs=10, gamma=GAMMA, gae_lambda=0.95,
+                    learning_rate=3e-4, ent_coef=0.0, clip_range=0.2)
+POLICY_NET = dict(net_arch=[64, 64], log_std_init=-1.2)
+POLICIES = ("straight", "planner", "ppo", "ppo_untrained", "random")
+PLANNER = {"weight": 3.0, "informative_crlb_m": 5.0}     # set from the command line
 
-_cache: dict = {}
+
+def env_spec(terrain_key: str) -> dict:
+    """TerrainNavEnv arguments of a terrain (JSON types: what the episode campaign carries)."""
+    t = TERRAINS[terrain_key]
+    return json.loads(json.dumps({"scenario": t["scenario"], **ENV_COMMON, **t["env"]}))
 
 
 def make_env(terrain_key: str):
     from trn_env.env.terrain_nav import TerrainNavEnv
 
-    t = TERRAINS[terrain_key]
-    return TerrainNavEnv(t["scenario"], **ENV_COMMON, **t["env"])
+    return TerrainNavEnv(**env_spec(terrain_key))
 
 
-def train(terrain_key: str, steps: int, out: Path, seed: int = 0) -> Path:
+def train(terrain_key: str, steps: int, out: Path, seed: int = 0, n_envs: int = 2) -> tuple[Path, Path]:
+    """Train PPO; returns (trained model, untrained model) paths. Training episodes -> OUT/train_<t>.json."""
     from functools import partial
 
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import SubprocVecEnv
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
+
+    from trn_env.env.sb3_features import BoundsScaledExtractor
+
+    class Episodes(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.rows: list[dict] = []
+
+        def _on_step(self) -> bool:
+            for inf in self.locals["infos"]:
+                if "episode" in inf:
+                    ep = inf["episode"]
+                    self.rows.append({"timesteps": int(self.num_timesteps), "return": float(ep["r"]),
+                                      "length": int(ep["l"]), "termination": inf.get("termination")})
+            return True
 
     torch.set_num_threads(1)
-    venv = SubprocVecEnv([partial(make_env, terrain_key)] * 2, start_method="forkserver")
+    venv = VecMonitor(SubprocVecEnv([partial(make_env, terrain_key)] * n_envs, start_method="forkserver"),
+                      info_keywords=("termination",))
     venv.seed(seed)
-    model = PPO(
-        "MlpPolicy",
-        venv,
-        n_steps=256,
-        batch_size=128,
-        n_epochs=5,
-        gamma=0.99,
-        learning_rate=3e-4,
-        seed=seed,
-        device="cpu",
-        policy_kwargs=dict(net_arch=[64, 64]),
-        verbose=0,
-    )
+    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **PPO_SETTINGS,
+                policy_kwargs=dict(features_extractor_class=BoundsScaledExtractor, **POLICY_NET))
+    untrained = out / f"ppo_{terrain_key}_untrained.zip"
+    model.save(untrained)
+    cb = Episodes()
     t0 = time.perf_counter()
-    model.learn(total_timesteps=steps)
+    model.learn(total_timesteps=steps, callback=cb)
+    wall = time.perf_counter() - t0
     venv.close()
     path = out / f"ppo_{terrain_key}.zip"
     model.save(path)
-    print(f"[train] {terrain_key}: {steps} steps in {time.perf_counter() - t0:.0f} s -> {path}", flush=True)
-    return path
+    (out / f"train_{terrain_key}.json").write_text(json.dumps(
+        {"steps": steps, "n_envs": n_envs, "wall_s": wall, "ppo": PPO_SETTINGS, "policy": POLICY_NET,
+         "episodes": cb.rows}, indent=1))
+    print(f"[train] {terrain_key}: {steps} steps in {wall:.0f} s ({steps / wall:.1f} steps/s) -> {path}",
+          flush=True)
+    return path, untrained
 
 
-def _policy(terrain_key: str, name: str, env, model_path: str | None):
-    from trn_env.guidance.planner import PlannerConfig
-    from trn_env.policies import PlannerPolicy, StraightLinePolicy
-
+def policy_specs(terrain_key: str, models: tuple[Path, Path] | None) -> list[dict]:
     agl = TERRAINS[terrain_key]["agl_m"]
-    key = (terrain_key, name)
-    if key in _cache:
-        return _cache[key]
-    if name == "straight":
-        pol = StraightLinePolicy(env, agl_m=agl)
-    elif name == "planner":
-        pol = PlannerPolicy(env, PlannerConfig(weight=PLANNER["weight"], agl_m=agl, tas_mps=env.tas_mps,
-                                               informative_crlb_m=PLANNER["informative_crlb_m"]))
-    else:
-        import torch
-        from stable_baselines3 import PPO
-
-        torch.set_num_threads(1)
-        model = PPO.load(model_path, device="cpu")
-        pol = model
-    _cache[key] = pol
-    return pol
+    out = [{"label": "straight", "kind": "straight", "agl_m": agl},
+           {"label": "planner", "kind": "planner", "agl_m": agl, "config": dict(PLANNER)}]
+    if models is not None:
+        out += [{"label": "ppo", "kind": "sb3", "model": str(models[0])},
+                {"label": "ppo_untrained", "kind": "sb3", "model": str(models[1]), "deterministic": False}]
+    out.append({"label": "random", "kind": "random"})
+    return out
 
 
-def run_episode(task: tuple) -> dict:
-    """One evaluation episode (runs in a pool worker; envs and policies cached per process)."""
-    terrain_key, name, goal, seed, model_path, planner = task
-    PLANNER.update(planner)
-    env = _cache.get(terrain_key)
-    if env is None:
-        env = _cache[terrain_key] = make_env(terrain_key)
-    pol = _policy(terrain_key, name, env, model_path)
-    t0 = time.perf_counter()
-    obs, info0 = env.reset(seed=seed, options={"goal_deg": goal})
-    if hasattr(pol, "reset"):
-        pol.reset()
-    ret, done, info = 0.0, False, info0
-    collisions = 0
-    while not done:
-        action, _ = pol.predict(obs, deterministic=True)
-        obs, r, term, trunc, info = env.step(np.asarray(action, np.float32))
-        ret += r
-        done = term or trunc
-    from terrain.geodesy import latlon_to_ned_offset
+def evaluate(terrain_key: str, models, seeds: list[int], out_dir: Path, backend) -> list[dict]:
+    """The evaluation episodes as an episode campaign; its rows (dicts), one per episode."""
+    from trn_env.campaign import run_campaign
+    from trn_env.campaign.episodes import episode_campaign
+    from trn_env.campaign.rows import read_rows
 
-    s, g = info0["start_deg"], info0["goal_deg"]
-    dn, de = latlon_to_ned_offset(
-        math.radians(s[0]), math.radians(s[1]), 0.0, math.radians(g[0]), math.radians(g[1])
-    )
-    straight_m = math.hypot(dn, de)
-    collisions = int(info["termination"] == "terrain_collision")
-    return {
-        "terrain": terrain_key,
-        "policy": name,
-        "goal_deg": list(goal),
-        "seed": seed,
-        "start_deg": list(s),
-        "termination": info["termination"],
-        "arrived": info["termination"] == "arrived",
-        "true_miss_m": info.get("true_miss_m"),
-        "final_true_error_m": info["true_horizontal_error_m"],
-        "distance_flown_m": info["distance_flown_m"],
-        "straight_distance_m": straight_m,
-        "extra_distance_fraction": info["distance_flown_m"]
-        / max(straight_m - ENV_COMMON["goal_radius_m"], 1.0)
-        - 1.0,
-        "collision": collisions,
-        "return": ret,
-        "t_s": info["t_s"],
-        "wall_s": time.perf_counter() - t0,
-    }
+    campaign = episode_campaign({"name": f"route_bench_{terrain_key}", "env": env_spec(terrain_key),
+                                 "policies": policy_specs(terrain_key, models), "goals_deg": "held_out",
+                                 "seeds": seeds})
+    if out_dir.exists():
+        shutil.rmtree(out_dir)
+    stats = run_campaign(campaign, out_dir, backend=backend, progress=False)
+    rows = read_rows(out_dir).to_dict("records")
+    for r in rows:
+        r["terrain"] = terrain_key
+        if isinstance(r.get("true_miss_m"), float) and math.isnan(r["true_miss_m"]):
+            r["true_miss_m"] = None
+    errors = [r for r in rows if r["termination"] == "error"]
+    if errors:
+        raise RuntimeError(f"{len(errors)} evaluation episode(s) failed, e.g. {errors[0]['error']}")
+    print(f"[eval] {terrain_key}: {stats['flown']} episodes in {stats['wall_time_s']:.0f} s "
+          f"({stats['backend']}) -> {out_dir}", flush=True)
+    return rows
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -231,20 +234,22 @@ def table(summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot(path: Path, rows: list[dict], summary: dict) -> None:
+def plot(path: Path, rows: list[dict], summary: dict, training: dict) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     terrains = list(summary)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
-    colours = {"straight": "tab:gray", "planner": "tab:green", "ppo": "tab:blue"}
-    width = 0.25
-    for k, name in enumerate(POLICIES):
+    fig, axes = plt.subplots(1, 3, figsize=(17, 4.8))
+    colours = {"straight": "tab:gray", "planner": "tab:green", "ppo": "tab:blue",
+               "ppo_untrained": "tab:purple", "random": "tab:red"}
+    names = [n for n in POLICIES if any(n in summary[t] for t in terrains)]
+    width = 0.8 / max(1, len(names))
+    for k, name in enumerate(names):
         means = [summary[t].get(name, {}).get("mean_true_error_at_goal_m", math.nan) for t in terrains]
         p95 = [summary[t].get(name, {}).get("p95_true_error_at_goal_m", math.nan) for t in terrains]
-        x = np.arange(len(terrains)) + (k - 1) * width
+        x = np.arange(len(terrains)) + (k - (len(names) - 1) / 2) * width
         axes[0].bar(x, means, width, color=colours[name], label=f"{name} mean")
         axes[0].plot(x, p95, "v", color="black", ms=7, label="p95" if k == 0 else None)
     axes[0].set_xticks(np.arange(len(terrains)), terrains)
@@ -253,36 +258,47 @@ def plot(path: Path, rows: list[dict], summary: dict) -> None:
     axes[0].set_title("navigation error when the estimate arrives")
     for r in rows:
         if r["arrived"]:
-            axes[1].plot(
-                100 * r["extra_distance_fraction"],
-                r["true_miss_m"],
-                "o" if r["terrain"] == terrains[0] else "s",
-                color=colours[r["policy"]],
-                alpha=0.6,
-                ms=5,
-            )
-    for name, c in colours.items():
-        axes[1].plot([], [], "o", color=c, label=name)
+            axes[1].plot(100 * r["extra_distance_fraction"], r["true_miss_m"],
+                         "o" if r["terrain"] == terrains[0] else "s", color=colours[r["policy"]],
+                         alpha=0.6, ms=5)
+    for name in names:
+        axes[1].plot([], [], "o", color=colours[name], label=name)
     axes[1].set_xlabel("extra distance flown vs the straight line (%)")
     axes[1].set_ylabel("true error at the goal (m)")
     axes[1].set_title(f"per episode (o {terrains[0]}" + (f", s {terrains[1]})" if len(terrains) > 1 else ")"))
     axes[1].legend(fontsize=8)
+    for t, tr in training.items():
+        eps = tr["episodes"]
+        if not eps:
+            continue
+        x = np.array([e["timesteps"] for e in eps])
+        arrived = np.array([e["termination"] == "arrived" for e in eps], float)
+        k = max(1, min(20, len(eps) // 5))
+        kern = np.ones(k) / k
+        axes[2].plot(x[k - 1:], 100 * np.convolve(arrived, kern, "valid"), label=f"{t}: arrived (%)")
+        axes[2].plot(x[k - 1:], np.convolve([e["return"] for e in eps], kern, "valid"), "--",
+                     label=f"{t}: return")
+    axes[2].set_xlabel("PPO env steps")
+    axes[2].set_title("training episodes (running mean of 20; stochastic policy)")
+    axes[2].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 def main(argv=None) -> int:
+    from trn_env.campaign import make_backend
+
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--terrains", nargs="+", default=list(TERRAINS), choices=list(TERRAINS))
-    p.add_argument(
-        "--train-steps",
-        type=int,
-        default=12288,
-        help="PPO env steps per terrain (0: no PPO); default 12288 (~15 min per terrain on 2 cores)",
-    )
+    p.add_argument("--train-steps", type=int, default=12288,
+                   help="PPO env steps per terrain (0: no PPO); default 12288 (~15 min per terrain on 2 "
+                        "cores); more: e.g. 100000 (~2 h per terrain)")
+    p.add_argument("--envs", type=int, default=2, help="training envs (SubprocVecEnv workers; default 2)")
     p.add_argument("--seeds", type=int, default=4, help="episode seeds per held-out goal (default 4)")
-    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    p.add_argument("--workers", type=int, default=None, help="evaluation workers (default: every core)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="campaign backend of the evaluation (default local)")
     p.add_argument("--planner-weight", type=float, default=PLANNER["weight"],
                    help="the planner's weight (extra cost of a featureless metre)")
     p.add_argument("--planner-informative-crlb", type=float, default=PLANNER["informative_crlb_m"],
@@ -290,38 +306,36 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=Path("out/route_bench"))
     a = p.parse_args(argv)
     PLANNER.update(weight=a.planner_weight, informative_crlb_m=a.planner_informative_crlb)
-    if a.train_steps < 0 or a.seeds < 1 or a.workers < 1:
-        print("error: --train-steps >= 0, --seeds >= 1, --workers >= 1", file=sys.stderr)
+    if a.train_steps < 0 or a.seeds < 1 or (a.workers is not None and a.workers < 1) or a.envs < 1:
+        print("error: --train-steps >= 0, --seeds >= 1, --workers >= 1, --envs >= 1", file=sys.stderr)
         return 2
     a.out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     rows: list[dict] = []
+    training: dict = {}
+    seeds = list(range(1000, 1000 + a.seeds))
+    timing: dict = {}
     for t in a.terrains:                 # train, evaluate and write one terrain at a time
-        model = str(train(t, a.train_steps, a.out)) if a.train_steps > 0 else None
-        tasks = []
-        for g in make_env(t).held_out_goals_deg:
-            for seed in range(1000, 1000 + a.seeds):
-                for name in POLICIES:
-                    if name == "ppo" and model is None:
-                        continue
-                    tasks.append((t, name, tuple(g), seed, model, dict(PLANNER)))
-        print(f"[eval] {t}: {len(tasks)} episodes on {a.workers} workers", flush=True)
         t0 = time.perf_counter()
-        with ProcessPoolExecutor(a.workers, mp_context=get_context("forkserver")) as pool:
-            rows += list(pool.map(run_episode, tasks, chunksize=1))
-        print(f"[eval] {t}: {time.perf_counter() - t0:.0f} s", flush=True)
+        models = train(t, a.train_steps, a.out, n_envs=a.envs) if a.train_steps > 0 else None
+        timing[f"{t}_train_s"] = time.perf_counter() - t0
+        if models is not None:
+            training[t] = json.loads((a.out / f"train_{t}.json").read_text())
+        t0 = time.perf_counter()
+        rows += evaluate(t, models, seeds, a.out / f"episodes_{t}", make_backend(a.backend, a.workers))
+        timing[f"{t}_eval_s"] = time.perf_counter() - t0
         summary = summarise(rows)
-        summary["_run"] = {"planner": dict(PLANNER), "train_steps": a.train_steps, "seeds_per_goal": a.seeds,
-                           "workers": a.workers,
-                           "wall_s": time.perf_counter() - t_start, "env": ENV_COMMON,
+        summary["_run"] = {"planner": dict(PLANNER), "train_steps": a.train_steps, "seeds": seeds,
+                           "envs": a.envs, "backend": a.backend, "workers": a.workers or os.cpu_count(),
+                           "wall_s": time.perf_counter() - t_start, "timing_s": timing, "env": ENV_COMMON,
+                           "ppo": PPO_SETTINGS, "policy_net": POLICY_NET,
                            "terrains": {k: TERRAINS[k] for k in a.terrains},
                            "held_out_goals_deg": {k: make_env(k).held_out_goals_deg for k in a.terrains}}
-        (a.out / "episodes.json").write_text(json.dumps(rows, indent=1))
-        (a.out / "summary.json").write_text(json.dumps(summary, indent=2))
+        (a.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
         per = {k: v for k, v in summary.items() if not k.startswith("_")}
         tab = table(per)
         (a.out / "table.md").write_text(tab)
-        plot(a.out / "route_benchmark.png", rows, per)
+        plot(a.out / "route_benchmark.png", rows, per, training)
     print(tab)
     print(f"total {time.perf_counter() - t_start:.0f} s; {a.out}")
     return 0

@@ -1,4 +1,5 @@
-"""scripts/route_policy_benchmark.py: one real evaluation episode; its summary statistics against numpy."""
+"""scripts/route_policy_benchmark.py: one real evaluation episode in its env; its summary statistics against
+numpy."""
 
 from __future__ import annotations
 
@@ -21,8 +22,14 @@ def bench():
 
 def test_one_episode_and_the_summary(bench):
     # a goal 6-9 km north of the start region, on the hills west of the basin: a short arrival
-    row = bench.run_episode(("basin", "straight", (36.60, -84.14), 7, None, dict(bench.PLANNER)))
-    assert row["policy"] == "straight" and row["termination"] == "arrived" and row["arrived"]
+    from trn_env.campaign.episodes import make_policy, run_episode
+
+    env = bench.make_env("basin")
+    assert env.action_mode == "bearing" and env.failure_penalty == 20.0
+    row = run_episode(env, make_policy({"kind": "straight", "agl_m": 600.0}, env), 7, (36.60, -84.14))
+    env.close()
+    row.update(policy="straight", terrain="basin")
+    assert row["termination"] == "arrived" and row["arrived"]
     assert 0.0 <= row["true_miss_m"] < 300.0
     assert -0.05 < row["extra_distance_fraction"] < 0.1          # the straight line, minus the arrival radius
     rng = np.random.default_rng(0)

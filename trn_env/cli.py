@@ -8,7 +8,8 @@
     trn-env campaign FILE [--out DIR] [--workers N] [--backend local|ray] [--address ADDR] [--resume]
                      [--check BASELINE.json] [--write-baseline BASELINE.json]
     trn-env report DIR [--out DIR]
-    trn-env plan SCENARIO --goal LAT LON [--weight W] [--max-featureless M] [--agl M] --out route.toml
+    trn-env plan SCENARIO --goal LAT LON [--weight W] [--max-featureless M] [--agl M] [--climb-rate M/S |
+                 --no-climb-limit] --out route.toml
 
 Exit status: 0 success, 1 regression gate failed (`campaign --check`), 2 invalid input (every problem
 printed, nothing written), 130 interrupted (Ctrl-C at any point: a one-line message, no traceback).
@@ -79,6 +80,10 @@ def _parser() -> argparse.ArgumentParser:
                       help="no featureless stretch longer than M metres")
     plan.add_argument("--agl", type=float, default=600.0, help="height above ground of the waypoints, m")
     plan.add_argument("--cell", type=float, default=500.0, help="planning cell size, m")
+    plan.add_argument("--climb-rate", type=float, default=5.0, metavar="M/S",
+                      help="climb rate the route's ground profile must allow at the route's airspeed "
+                           "(default 5 m/s, a margin under the King Air's; see --no-climb-limit)")
+    plan.add_argument("--no-climb-limit", action="store_true", help="plan without the climb limit")
     plan.add_argument("--out", type=Path, required=True, help="route TOML to write")
     plan.add_argument("--plot", type=Path, default=None,
                       help="PNG of the route over the information map (default: OUT with .png)")
@@ -398,18 +403,20 @@ def cmd_plan(args) -> int:
         if not all(math.isfinite(v) for v in args.goal):
             raise ValueError(f"--goal must be finite latitude and longitude, got {args.goal}")
         config = PlannerConfig(weight=args.weight, max_featureless_m=args.max_featureless, agl_m=args.agl,
-                               cell_m=args.cell, tas_mps=float(d["route"]["tas_mps"]))
+                               cell_m=args.cell, tas_mps=float(d["route"]["tas_mps"]),
+                               climb_rate_mps=None if args.no_climb_limit else args.climb_rate)
         _, the_map = components.build_terrain(d, scenario.extras, spawn_rngs(scenario.seed)["map"])
         planner = TerrainInformationPlanner(the_map, config)
         s_lat, s_lon = math.radians(d["initial"]["lat_deg"]), math.radians(d["initial"]["lon_deg"])
         g_lat, g_lon = math.radians(args.goal[0]), math.radians(args.goal[1])
         route = planner.plan(s_lat, s_lon, g_lat, g_lon)
-        straight = TerrainInformationPlanner(the_map, PlannerConfig(weight=0.0, cell_m=args.cell,
-                                                                   agl_m=args.agl)).plan(s_lat, s_lon, g_lat,
-                                                                                         g_lon)
+        straight = TerrainInformationPlanner(the_map, PlannerConfig(
+            weight=0.0, cell_m=args.cell, agl_m=args.agl, climb_rate_mps=None)).plan(s_lat, s_lon, g_lat,
+                                                                                      g_lon)
     except ValueError as err:
         msg = str(err).replace("PlannerConfig.weight", "--weight").replace(
-            "PlannerConfig.max_featureless_m", "--max-featureless").replace("PlannerConfig.agl_m", "--agl")
+            "PlannerConfig.max_featureless_m", "--max-featureless").replace(
+            "PlannerConfig.agl_m", "--agl").replace("PlannerConfig.climb_rate_mps", "--climb-rate")
         print(f"error: {msg}", file=sys.stderr)
         return 2
     out = args.out

@@ -11,8 +11,13 @@
   basin_route scenario, 1 s decisions, INS navigator; subproc_vec_env_sim_seconds_per_wall_second (both envs
   together) beside the same bare-JSBSim reference (one process: the machine has 2 cores);
 - planner_40km_route_s: one `TerrainInformationPlanner.plan` of a corner-to-corner route on the bundled DEM
-  (straight distance planner_route_straight_km >= 40 km; numba compiled beforehand), beside the cost-map
-  build (planner_cost_map_s, done once per map).
+  (straight distance planner_route_straight_km >= 40 km; numba compiled beforehand; the climb limit on,
+  planner_climb_gradient; the whole plan: search, string pulling, turn thinning), beside the cost-map build
+  (planner_cost_map_s, done once per map); the search alone (planner_astar_s, the numba A* kernel) beside
+  a same-run reference, scipy's compiled Dijkstra (`scipy.sparse.csgraph.dijkstra`, from the start state to
+  every state) over the same (cell, featureless bin) graph with the same costs and climb-excluded edges
+  (planner_reference_scipy_dijkstra_s; graph built beforehand, not timed) and their ratio
+  planner_astar_ratio_to_scipy_dijkstra.
 """
 
 from __future__ import annotations
@@ -130,6 +135,60 @@ def subproc_figures(quick: bool = False, n_steps: int | None = None) -> dict:
     }
 
 
+def _search_times_s(planner, s, g, repeats: int) -> tuple[float, float]:
+    """Best wall times of (the planner's A* kernel alone, scipy's Dijkstra from the start state) over the
+    same graph: states (cell, featureless-stretch bin), 16-connected moves, the same edge costs, blocked
+    cells and climb-excluded edges; the scipy graph is built with numpy beforehand (not timed)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from trn_env.guidance.planner import FEATURELESS_EDGE, MOVES, astar_kernel, edge_featureless
+
+    grid, c = planner.grid, planner.config
+    u, h, blocked = grid.featureless, planner._height, planner.blocked
+    ni, nj = u.shape
+    gamma = c.climb_gradient
+    bin_m = planner._bin_m
+    nb = 1 if c.max_featureless_m is None else int(math.floor(c.max_featureless_m / bin_m)) + 1
+    rows, cols, vals = [], [], []
+    ii, jj = np.meshgrid(np.arange(ni), np.arange(nj), indexing="ij")
+    for di, dj in MOVES:
+        i0, j0 = ii.ravel(), jj.ravel()
+        i1, j1 = i0 + di, j0 + dj
+        ok = (i1 >= 0) & (i1 < ni) & (j1 >= 0) & (j1 < nj)
+        i0, j0, i1, j1 = i0[ok], j0[ok], i1[ok], j1[ok]
+        ok = ~blocked[i1, j1]
+        length = math.hypot(di * grid.cell_n_m, dj * grid.cell_e_m)
+        if gamma is not None:
+            ok &= (h[i1, j1] - h[i0, j0]) <= gamma * length
+        i0, j0, i1, j1 = i0[ok], j0[ok], i1[ok], j1[ok]
+        ue = np.array([edge_featureless(u, a, b, int(di), int(dj)) for a, b in zip(i0, j0, strict=True)])
+        feat = (ue > FEATURELESS_EDGE) & (nb > 1)
+        for b in range(nb):
+            b2 = np.where(feat, np.round(b + length / bin_m).astype(np.int64), 0)
+            keep = b2 < nb
+            rows.append((i0[keep] * nj + j0[keep]) * nb + b)
+            cols.append((i1[keep] * nj + j1[keep]) * nb + b2[keep])
+            vals.append(length * (1.0 + c.weight * ue[keep]))
+    n = ni * nj * nb
+    graph = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(n, n)).tocsr()
+    si, sj = grid.cell_of(*s)
+    gi, gj = grid.cell_of(*g)
+    args = (u, h, blocked, grid.cell_n_m, grid.cell_e_m, MOVES, float(c.weight), nb > 1, nb, bin_m,
+            -1.0 if gamma is None else float(gamma), si, sj, gi, gj)
+    astar_kernel(*args)                 # compiled / cache loaded, not timed
+    t_astar = t_ref = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        astar_kernel(*args)
+        t_astar = min(t_astar, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        dijkstra(graph, indices=(si * nj + sj) * nb)
+        t_ref = min(t_ref, time.perf_counter() - t0)
+    return t_astar, t_ref
+
+
 def planner_figures(quick: bool = False) -> dict:
     import terrain
     from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner
@@ -148,8 +207,13 @@ def planner_figures(quick: bool = False) -> dict:
         t0 = time.perf_counter()
         r = planner.plan(*s, *g)
         times.append(time.perf_counter() - t0)
+    astar_s, ref_s = _search_times_s(planner, s, g, repeats=1 if quick else 3)
     return {
         "planner_40km_route_s": float(np.median(times)),
+        "planner_astar_s": astar_s,
+        "planner_reference_scipy_dijkstra_s": ref_s,
+        "planner_astar_ratio_to_scipy_dijkstra": astar_s / ref_s,
+        "planner_climb_gradient": cfg.climb_gradient,
         "planner_cost_map_s": t_map,
         "planner_route_straight_km": r.straight_length_m / 1000.0,
         "planner_route_km": r.length_m / 1000.0,

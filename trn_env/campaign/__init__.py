@@ -2,6 +2,7 @@
 
 spec          campaign files: format, validation (every problem by field path), the runs they expand to
 runs          one run: its task and the worker function that flies it into a row
+episodes      env episodes of a policy over goals and seeds as campaign runs (one row per episode)
 rows          the output folder: manifest, one Parquet row file per run (atomic), logs
 local         the local backend (a process pool over the machine's cores)
 ray_backend   the Ray backend (a local instance or a cluster; Ray imported only there)

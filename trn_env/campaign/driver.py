@@ -128,7 +128,9 @@ def run_campaign(campaign: Campaign, out_dir: Path, *, backend=None, resume: boo
 
         try:
             if todo:
-                backend.run(tasks(campaign, done), campaign.extra.get("dems", {}), on_result)
+                # a campaign kind with its own runs (trn_env.campaign.episodes) makes its own tasks
+                todo_tasks = campaign.tasks(done) if hasattr(campaign, "tasks") else tasks(campaign, done)
+                backend.run(todo_tasks, campaign.extra.get("dems", {}), on_result)
         finally:
             if bar is not None:
                 bar.close()

@@ -103,7 +103,11 @@ def _base_row(task: RunTask) -> dict:
 
 def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, bytes | None]:
     """Fly one run; returns (row, the compressed log.npz bytes if the campaign keeps logs). Never raises
-    on the run's own failure: the row carries termination 'error' and the message."""
+    on the run's own failure: the row carries termination 'error' and the message. An env-episode task
+    (`trn_env.campaign.episodes.EpisodeTask`, kind "episode") flies its episode instead."""
+    if getattr(task, "kind", "flight") == "episode":
+        from trn_env.campaign.episodes import fly_episode
+        return fly_episode(task, dems)
     from trn_env.scenario.loading import Scenario
     from trn_env.sim.closed_loop import ClosedLoop
 
@@ -153,6 +157,9 @@ def retry_task(task: RunTask) -> RunTask:
 
 def died_row(task: RunTask, why: str) -> dict:
     """The row of a run whose worker process died on every attempt."""
+    if getattr(task, "kind", "flight") == "episode":
+        from trn_env.campaign.episodes import died_episode_row
+        return died_episode_row(task, why)
     row = _base_row(task)
     data = dict(task.data)
     data["seed"] = int(task.seed)

@@ -12,7 +12,8 @@ of km, well inside what the policies steer by).
 
 A policy turns a desired ground track into the action: the track change, as a fraction of the turn limit
 of one step (clipped to [-1, 1]), and the height-above-ground change toward its height, as a fraction of
-the climb limit.
+the climb limit (the env's `action_mode="turn"`); or, with `action_mode="bearing"`, the desired track
+relative to the goal's bearing and the desired height above ground, each scaled to [-1, 1].
 """
 
 from __future__ import annotations
@@ -50,7 +51,15 @@ class _Policy:
         return ned_offset_to_latlon(e.goal_lat_rad, e.goal_lon_rad, 0.0, -dn, -de)
 
     def action_for(self, obs, track_rad: float, agl_m: float | None) -> np.ndarray:
-        lim = self.env.action_limits
+        e = self.env
+        if getattr(e, "action_mode", "turn") == "bearing":
+            bearing = math.atan2(float(obs[1]), float(obs[0]))
+            d = math.atan2(math.sin(track_rad - bearing), math.cos(track_rad - bearing))
+            a0 = float(np.clip(d / e.bearing_offset_max_rad, -1.0, 1.0))
+            h = float(obs[7]) * 1000.0 if agl_m is None else agl_m
+            a1 = float(np.clip(2.0 * (h - e.agl_min_m) / (e.agl_max_m - e.agl_min_m) - 1.0, -1.0, 1.0))
+            return np.array([a0, a1], np.float32)
+        lim = e.action_limits
         track_now = math.atan2(float(obs[3]), float(obs[4]))
         d = math.atan2(math.sin(track_rad - track_now), math.cos(track_rad - track_now))
         a0 = float(np.clip(d / lim[0], -1.0, 1.0))

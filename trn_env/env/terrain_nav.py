@@ -21,12 +21,14 @@ from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
 G0_MPS2 = 9.80665
 N_TERRAIN_FEATURES = 6
 REWARD_MODES = ("arrival", "progress")
+ACTION_MODES = ("turn", "bearing")
 
 # Observation bounds per element (the clip applied to every observation), see the class docstring's table.
 OBS_LOW = np.array([-300.0, -300.0, 0.0, -1.0, -1.0, 0.0, -10.0, 0.0, 0.0, 0.0, 0.0,
-                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
+                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -1.0, 0.0], np.float32)
 OBS_HIGH = np.array([300.0, 300.0, 450.0, 1.0, 1.0, 5.0, 20.0, 10.0, 8.0, 8.0, 8.0,
-                     4.1, 4.1, 4.1, 4.1, 4.1, 4.1, 1.0, 1.0], np.float32)
+                     4.1, 4.1, 4.1, 4.1, 4.1, 4.1, 1.0, 1.0, 1.0, 1.0, 2.0], np.float32)
+N_OBS = OBS_LOW.size
 
 
 class TerrainNavEnv(gym.Env, EzPickle):
@@ -50,6 +52,19 @@ class TerrainNavEnv(gym.Env, EzPickle):
     | 0 | change of the commanded ground track (positive = clockwise / right) | `dpsi_max` rad |
     | 1 | change of the commanded height above ground (positive = up) | `dagl_max` m |
 
+    That is `action_mode="turn"` (default). `action_mode="bearing"` (a coarser action, easier to learn):
+
+    | index | action (target) | scaled to |
+    |-------|-----------------|-----------|
+    | 0 | desired ground track - goal's bearing from the ESTIMATE (+ = right) | `bearing_offset_max_deg` |
+    | 1 | desired height above ground, `agl_min_m` (-1) .. `agl_max_m` (+1) | - |
+
+    the commanded track and height then move toward these targets by at most `dpsi_max` and `dagl_max` in
+    the step (0 flies the straight line to the goal from where the estimate is). Near the goal the offset
+    is cut to what the aircraft can hold, asin(d omega / v) at estimated distance d, turn rate omega and
+    airspeed v (at 3 deg/s and 85 m/s: 90 deg beyond 1.6 km, 18 deg at 500 m), so that it can still
+    capture the arrival circle instead of orbiting the goal.
+
     The limits are the aircraft's: `dpsi_max = min(turn_rate_max_dps * decision_interval_s, 60 deg)` (the
     rate-one turn, 3 deg/s, by default) and `dagl_max = climb_rate_max_mps * decision_interval_s`
     (`env.action_limits` holds both). The commanded height above ground is kept in
@@ -57,7 +72,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     `ValueError` naming what it breaks.
 
     ## Observation Space
-    `Box(OBS_LOW, OBS_HIGH, dtype=float32)` of shape `(19,)` (every observation is clipped to it),
+    `Box(OBS_LOW, OBS_HIGH, dtype=float32)` of shape `(22,)` (every observation is clipped to it),
     everything from what the aircraft knows (the navigator's estimate and its map), never truth:
 
     | index | observation | unit | min | max |
@@ -72,6 +87,12 @@ class TerrainNavEnv(gym.Env, EzPickle):
     | 11-16 | terrain information of the map around the estimate (below) | - | 0 | 4.1 |
     | 17 | fraction of the episode time used | - | 0 | 1 |
     | 18 | navigator health ok (1) or not (0) | - | 0 | 1 |
+    | 19, 20 | sin, cos of (goal's bearing from the estimate - commanded track; + = right) | - | -1 | 1 |
+    | 21 | estimated distance to the goal / the estimated distance at the reset | - | 0 | 2 |
+
+    Elements 19-21 are the goal relative to the ESTIMATE in normalised form (what a policy steers by
+    without having to combine 0, 1 and 3, 4 itself); `trn_env.env.sb3_features.BoundsScaledExtractor`
+    maps every element to [-1, 1] by these bounds for a learner.
 
     Terrain information (11-16) is log10(1 + CRLB) of the horizontal position a TRN could reach from the
     navigator's MAP (`terrain.metrics.terrain_information`: Fisher information of altimeter heights with
@@ -81,12 +102,18 @@ class TerrainNavEnv(gym.Env, EzPickle):
 
     ## Rewards
     `reward_mode="arrival"` (default; the task of a GNSS-denied aircraft). Each step:
-    `progress_weight * (decrease of the ESTIMATED distance to the goal, km) - time_cost_per_s * dt`
-    (the progress term is a potential on the aircraft's own estimate: over an episode that arrives it adds
-    up to the same amount for every route, so it guides learning without favouring a route; the time
-    term is the fuel/time cost). On arrival: `+ goal_bonus - miss_weight * true_miss_km`. The true miss is
-    where the aircraft ends up when it flies the last `goal_radius_m` on its estimate: the true position
-    plus (goal - estimated position), whose distance from the goal is the TRUE horizontal navigation error
+    `progress_weight * (d_est_before - shaping_gamma * d_est_after) / 1 km - time_cost_per_s * dt`, d_est
+    the ESTIMATED distance to the goal. The progress term is potential-based shaping (Ng, Harada & Russell
+    1999, F = gamma Phi(s') - Phi(s) with Phi = -progress_weight d_est / 1 km), on the aircraft's own
+    estimate: with `shaping_gamma = 1` (default) it adds up, over an episode that arrives, to the same
+    amount for every route, so it guides learning without favouring a route; set `shaping_gamma` to the
+    learner's discount (e.g. 0.99) for the form whose optimal policy of the discounted task is exactly that
+    of the unshaped one (the undiscounted return then grows by progress_weight (1 - gamma) d_est per step
+    spent far away, so returns compared undiscounted stay route-neutral only with 1); `progress_weight = 0`
+    switches shaping off. The time term is the fuel/time cost. On arrival:
+    `+ goal_bonus - miss_weight * true_miss_km`. The true miss is where the aircraft ends up when it flies
+    the last `goal_radius_m` on its estimate: the true position plus (goal - estimated position), whose
+    distance from the goal is the TRUE horizontal navigation error
     at arrival. `- collision_penalty` on terrain collision, `- failure_penalty` off the map, when the
     navigator diverged or when an engine stopped.
 
@@ -138,7 +165,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     time_cost_per_s=0.01, progress_weight=1.0, agl_min_m=300.0, agl_max_m=3000.0, climb_rate_max_mps=5.0,
     turn_rate_max_dps=3.0, info_offset_m=3000.0, info_sigma_m=5.0, info_window_m=2000.0,
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
-    held_out_radius_m=2000.0, min_goal_distance_m=5000.0)`.
+    held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
+    bearing_offset_max_deg=90.0)`.
     `scenario` is a built-in name, a TOML path or a `Scenario`; `goal_deg=(lat, lon)` defaults to the
     route's last waypoint. The terrain (and the map's error draw) is built once per env from the
     scenario seed; each episode's flight, sensor and navigator randomness comes from the reset seed.
@@ -146,6 +174,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (normalised goal): observation elements 19-21 (goal bearing and distance relative to the
+      estimate, normalised); `shaping_gamma`; `action_mode="bearing"`.
     - v0 (arrival mode): episodes end when the estimate arrives; the true miss at arrival counts; goal
       and start sampling per episode; per-element observation bounds; reward terms in info.
     - v0 (first): the "progress" reward and termination on the true position.
@@ -165,14 +195,16 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  goal_region_deg: tuple[float, float, float, float] | None = None,
                  start_region_deg: tuple[float, float, float, float] | None = None,
                  held_out_goals_deg=None, held_out_radius_m: float = 2000.0,
-                 min_goal_distance_m: float = 5000.0):
+                 min_goal_distance_m: float = 5000.0, shaping_gamma: float = 1.0,
+                 action_mode: str = "turn", bearing_offset_max_deg: float = 90.0):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
                           agl_max_m,
                           climb_rate_max_mps, turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m,
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
-                          held_out_radius_m, min_goal_distance_m)
+                          held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
+                          bearing_offset_max_deg)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -196,6 +228,14 @@ class TerrainNavEnv(gym.Env, EzPickle):
                         ("miss_weight", miss_weight), ("time_cost_per_s", time_cost_per_s),
                         ("progress_weight", progress_weight)):
             _check_number(name, v, positive=False)
+        if action_mode not in ACTION_MODES:
+            raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
+        _check_number("bearing_offset_max_deg", bearing_offset_max_deg, positive=True)
+        if bearing_offset_max_deg > 180.0:
+            raise ValueError(f"bearing_offset_max_deg must be in (0, 180], got {bearing_offset_max_deg!r}")
+        _check_number("shaping_gamma", shaping_gamma, positive=True)
+        if shaping_gamma > 1.0:
+            raise ValueError(f"shaping_gamma must be in (0, 1], got {shaping_gamma!r}")
         if not isinstance(log_sensors, bool):
             raise ValueError(f"log_sensors must be a bool, got {log_sensors!r}")
         if not 0 < agl_min_m < agl_max_m:
@@ -220,6 +260,9 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self.miss_weight = float(miss_weight)
         self.time_cost_per_s = float(time_cost_per_s)
         self.progress_weight = float(progress_weight)
+        self.shaping_gamma = float(shaping_gamma)
+        self.action_mode = action_mode
+        self.bearing_offset_max_rad = math.radians(float(bearing_offset_max_deg))
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
         self.tas_mps = float(d["route"]["tas_mps"])
@@ -260,6 +303,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._est_track: list[tuple[float, float]] = []
         self._background = None
         self._distance_flown_m = 0.0
+        self._d_est_start_m = 1.0
 
     # ---------------------------------------------------------------------------------------- checks
     def _check_point(self, name: str, p) -> tuple[float, float]:
@@ -323,8 +367,10 @@ class TerrainNavEnv(gym.Env, EzPickle):
         agl_est = est.h_m - h_ground if math.isfinite(h_ground) else 0.0
         info = components.sample_information(self._info_map, self._dems[1], est.lat_rad, est.lon_rad,
                                              self._track_cmd_rad, self.info_offset_m)
+        d_m = math.hypot(dn, de)
+        rel = math.atan2(de, dn) - self._track_cmd_rad
         obs = np.array([
-            dn / 1000.0, de / 1000.0, math.hypot(dn, de) / 1000.0,
+            dn / 1000.0, de / 1000.0, d_m / 1000.0,
             math.sin(self._track_cmd_rad), math.cos(self._track_cmd_rad),
             float(np.hypot(est.v_ned_mps[0], est.v_ned_mps[1])) / 100.0,
             agl_est / 1000.0, self._agl_cmd_m / 1000.0,
@@ -332,6 +378,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
             *np.log10(1.0 + np.clip(info, 0.0, None)),
             loop.t_s / self.max_episode_s,
             1.0 if est.health.ok else 0.0,
+            math.sin(rel), math.cos(rel), d_m / max(self._d_est_start_m, 1.0),
         ], dtype=np.float64)
         obs = np.nan_to_num(obs, nan=0.0, posinf=1e4, neginf=-1e4)
         return np.clip(obs, OBS_LOW, OBS_HIGH).astype(np.float32)
@@ -429,6 +476,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._loop = ClosedLoop(sc, commander=self._commander, dems=self._dems, log_sensors=self.log_sensors)
         self._needs_reset = False
         self._distance_flown_m = 0.0
+        self._d_est_start_m = self._estimated_distance_m()
         lat, lon, _ = self._truth_now()
         self._true_track = [(lat, lon)]
         self._est_track = [(self._loop.estimate.lat_rad, self._loop.estimate.lon_rad)]
@@ -453,16 +501,36 @@ class TerrainNavEnv(gym.Env, EzPickle):
             if a[i] < lo[i] - tol[i] or a[i] > hi[i] + tol[i]:
                 raise ValueError(f"action[{i}] {names[i]} = {a[i]:.6g} is outside the action space "
                                  f"[{lo[i]:.6g}, {hi[i]:.6g}]")
-        return np.clip(a, lo, hi) * self.action_limits
+        return np.clip(a, lo, hi)
+
+    def _bearing_offset_limit_rad(self, d_m: float) -> float:
+        """Largest offset from the goal's bearing that the aircraft can hold at distance d_m: flying at an
+        offset phi turns the bearing at v sin(phi) / d, which the turn rate must keep up with."""
+        omega = self.action_limits[0] / self.decision_interval_s
+        return min(self.bearing_offset_max_rad, math.asin(min(1.0, d_m * omega / self.tas_mps)))
+
+    def _apply_action(self, a: np.ndarray) -> None:
+        """The action (in [-1, 1]) -> new commanded track and height above ground (see Action Space)."""
+        dpsi, dagl = self.action_limits
+        if self.action_mode == "turn":
+            track = self._track_cmd_rad + a[0] * dpsi
+            agl = self._agl_cmd_m + a[1] * dagl
+        else:                                  # "bearing": toward targets, at the aircraft's limits
+            est = self._loop.estimate
+            dn, de = self._offset_to_goal(est.lat_rad, est.lon_rad, est.h_m)
+            want = math.atan2(de, dn) + a[0] * self._bearing_offset_limit_rad(math.hypot(dn, de))
+            d = math.atan2(math.sin(want - self._track_cmd_rad), math.cos(want - self._track_cmd_rad))
+            track = self._track_cmd_rad + float(np.clip(d, -dpsi, dpsi))
+            agl_want = self.agl_min_m + 0.5 * (a[1] + 1.0) * (self.agl_max_m - self.agl_min_m)
+            agl = self._agl_cmd_m + float(np.clip(agl_want - self._agl_cmd_m, -dagl, dagl))
+        self._track_cmd_rad = math.atan2(math.sin(track), math.cos(track))
+        self._agl_cmd_m = float(np.clip(agl, self.agl_min_m, self.agl_max_m))
 
     def step(self, action):
         if self._loop is None or self._needs_reset:
             raise ResetNeeded("Cannot call env.step() before calling env.reset() (the episode has ended or "
                               "never started)")
-        a = self._check_action(action)
-        track = self._track_cmd_rad + a[0]
-        self._track_cmd_rad = math.atan2(math.sin(track), math.cos(track))
-        self._agl_cmd_m = float(np.clip(self._agl_cmd_m + a[1], self.agl_min_m, self.agl_max_m))
+        self._apply_action(self._check_action(action))
         lat, lon, h = self._truth_now()
         d_before = math.hypot(*self._offset_to_goal(lat, lon, h))
         d_est_before = self._estimated_distance_m()
@@ -512,7 +580,9 @@ class TerrainNavEnv(gym.Env, EzPickle):
                      "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0}
             return terms
         d_est = info["estimated_distance_to_goal_m"]
-        terms = {"progress": self.progress_weight * (d_est_before - d_est) / 1000.0,
+        # potential-based shaping (Ng, Harada & Russell 1999): F = gamma * Phi(s') - Phi(s) with
+        # Phi = -progress_weight * estimated distance (km)
+        terms = {"progress": self.progress_weight * (d_est_before - self.shaping_gamma * d_est) / 1000.0,
                  "time": -self.time_cost_per_s * dt_s, "arrival": 0.0, "miss": 0.0,
                  "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0,
                  "failure": -self.failure_penalty if reason in ("off_map", "diverged", "fuel_exhausted",

@@ -25,9 +25,13 @@ larger and it keeps the featureless bound) and thinned for the turn radius: a wa
 (Beard & McLain 2012 ch. 11: turn anticipation R tan(|dchi| / 2), R = V^2 / (g tan(0.8 bank_limit)))
 needs more than half of an adjacent leg is removed when that keeps the bound and costs at most
 `turn_cost_tolerance` more J. The route keeps `edge_margin_cells` away from the map's edge. Heights: every
-waypoint is `agl_m` above the ground (guidance's height-above-ground hold, flown on the estimate and the map);
-with `climb_gradient_max` set, an edge is excluded when the map (cell mean heights) rises faster than that
-along it (the hold could not follow it at the aircraft's climb rate; None: no limit).
+waypoint is `agl_m` above the ground (guidance's height-above-ground hold, flown on the estimate and the map).
+Climb: an edge is excluded when the map (cell mean heights) rises faster along it than the aircraft's climb
+gradient (the hold could not follow it), and a string-pulled shortcut when the map sampled along it does;
+the gradient is `climb_gradient_max` if given, else `climb_rate_mps / tas_mps` (on by default: 5 m/s, a
+margin under the King Air's 9.9 m/s sea-level best rate of climb at MTOW - C90 POH, checked in
+tests/test_aircraft_performance.py - and its autopilot's 7.5 m/s climb limit; at 85 m/s a gradient of
+0.059). `climb_rate_mps=None` (and no `climb_gradient_max`) plans without a climb limit.
 
 `RouteNotFoundError` (a ValueError) when no path meets the constraints; bad settings raise ValueError
 naming the setting.
@@ -87,6 +91,7 @@ class PlannerConfig:
     tas_mps: float = 85.0
     bank_limit_deg: float = 25.0
     climb_gradient_max: float | None = None
+    climb_rate_mps: float | None = 5.0
     edge_margin_cells: int = 2
     turn_cost_tolerance: float = 0.02
     sigma_m: float = 5.0
@@ -116,6 +121,7 @@ class PlannerConfig:
         if self.bank_limit_deg > 60.0:
             raise ValueError(f"PlannerConfig.bank_limit_deg must be <= 60, got {self.bank_limit_deg}")
         num("climb_gradient_max", self.climb_gradient_max, 0.0, lo_ok=False, none_ok=True)
+        num("climb_rate_mps", self.climb_rate_mps, 0.0, lo_ok=False, none_ok=True)
         if (
             isinstance(self.edge_margin_cells, bool)
             or not isinstance(self.edge_margin_cells, (int, np.integer))
@@ -129,6 +135,15 @@ class PlannerConfig:
         num("window_m", self.window_m, 0.0, lo_ok=False)
         num("informative_crlb_m", self.informative_crlb_m, 0.0, lo_ok=False)
         num("featureless_crlb_m", self.featureless_crlb_m, 0.0, lo_ok=False)
+
+    @property
+    def climb_gradient(self) -> float | None:
+        """The climb gradient (rise / ground distance) routes must keep to; None: no climb limit."""
+        if self.climb_gradient_max is not None:
+            return float(self.climb_gradient_max)
+        if self.climb_rate_mps is not None:
+            return float(self.climb_rate_mps) / float(self.tas_mps)
+        return None
 
     @property
     def turn_radius_m(self) -> float:
@@ -424,11 +439,23 @@ class TerrainInformationPlanner:
         ni, nj = self.grid.shape
         if np.any((i < 0) | (i >= ni) | (j < 0) | (j >= nj)) or np.any(self.blocked[i, j]):
             return False
-        if c.climb_gradient_max is not None:
-            h = self._height[i, j]
-            if np.any(np.diff(h) > c.climb_gradient_max * ev["length_m"] / (n - 1) * 1.5):
-                return False
+        gamma = c.climb_gradient
+        if gamma is not None and not self._climb_ok(la, lo, ev["length_m"] / (n - 1), gamma):
+            return False
         return True
+
+    def _climb_ok(self, la, lo, step_m: float, gamma: float) -> bool:
+        """The map, sampled at (la, lo) every step_m and averaged over a planning cell as the search's cell
+        heights are, never rises faster than gamma along the samples."""
+        h = np.asarray(self.map_dem.height(la, lo), float)
+        h = np.where(np.isfinite(h), h, 0.0)
+        k = max(1, int(round(min(self.grid.cell_n_m, self.grid.cell_e_m) / max(step_m, 1e-9))))
+        if h.size > k:
+            c = np.concatenate([[0.0], np.cumsum(h)])
+            h = (c[k:] - c[:-k]) / k             # running mean over one cell
+        if h.size < 2:
+            return True
+        return bool(np.all(np.diff(h) <= gamma * step_m + 1.0))
 
     def _string_pull(self, lats, lons):
         """Greedy shortcuts along the grid path (each keeps J and the bounds, see _segment_ok)."""
@@ -502,7 +529,7 @@ class TerrainInformationPlanner:
             n_bins = 1
         else:
             n_bins = int(math.floor(c.max_featureless_m / self._bin_m)) + 1
-        climb = -1.0 if c.climb_gradient_max is None else float(c.climb_gradient_max)
+        climb = -1.0 if c.climb_gradient is None else float(c.climb_gradient)
         cost, path = astar_kernel(
             self.grid.featureless,
             self._height,
@@ -526,7 +553,7 @@ class TerrainInformationPlanner:
                 if c.max_featureless_m is None
                 else f" with no featureless stretch over {c.max_featureless_m:g} m"
             )
-            climb_s = "" if c.climb_gradient_max is None else f", climb gradient <= {c.climb_gradient_max:g}"
+            climb_s = "" if c.climb_gradient is None else f", climb gradient <= {c.climb_gradient:.3g}"
             raise RouteNotFoundError(
                 f"no route found from ({math.degrees(start_lat_rad):.5f}, "
                 f"{math.degrees(start_lon_rad):.5f}) to ({math.degrees(goal_lat_rad):.5f}, "
