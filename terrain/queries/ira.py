@@ -61,7 +61,7 @@ COARSE_STEP_M = 45.0  # about the IRA's coarse sample spacing along the zero-Dop
 _NO_WARM_START = np.zeros(0)  # _ira_batch's "no hints"
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
     """Terrain point on the zero-Doppler plane at across-track nominal coordinate sv (m).
 
@@ -138,7 +138,7 @@ def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
     return np.nan, x, y, z, dphi, dlam, hp
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_eval(heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv, t_guess, tol):
     """(f, t, r, z) at across-track coordinate sv: f = range if the point is inside the look-angle window
     (else inf), t its along-track coordinate, r the raw range (inf: no point), z its NED down (m)."""
@@ -154,7 +154,7 @@ def _ira_eval(heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv,
     return r, t, r, z
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
     """Upper bound of |dr/ds| on the zero-Doppler curve for s in [a, b] (r = range, s = across-track m).
 
@@ -176,7 +176,7 @@ def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
     return min((s_max + t_max * tp + z_max * zp) / r_min, l_crude) * g_pad
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
     stack[row, 0] = a
     stack[row, 1] = fa
@@ -192,7 +192,7 @@ def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
     stack[row, 11] = split
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi):
     """Largest value of tab (one value per block x block cells, layout of terrain.kernels.block_bounds) over
     the cells meeting the box [fi_lo, fi_hi] x [fj_lo, fj_hi] in post coordinates; -inf off the grid."""
@@ -210,7 +210,7 @@ def _ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi):
     return hi
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_cell_slope_twist(heights, ci, cj, qc):
     """(bound of the squared gradient (m/m)^2, |twist| h00 - h01 - h10 + h11 (m)) of the bilinear cell
     (ci, cj); qc6, qc7: posts per metre north / east. NaN next to a void."""
@@ -223,7 +223,7 @@ def _ira_cell_slope_twist(heights, ci, cj, qc):
     return gu * gu + gv * gv, abs(h00 - h01 - h10 + h11)
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb, rb, zb):
     """(lower bound of the in-window range f over the curve piece s in [a, b], split point) from the end
     samples (f, t, r, z at a and b; see _ira_eval); qc: _ira_one's per-query constants. Intervals with

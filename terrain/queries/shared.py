@@ -58,7 +58,7 @@ class TerrainReturn:
     h_m: np.ndarray
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _consts(lat):
     """Curvature constants cv = (sin, cos of the latitude, meridian radius M, prime-vertical radius N,
     dM/dphi) (m) of the expansion in the module docstring, at the antenna latitude lat (rad)."""
@@ -71,7 +71,7 @@ def _consts(lat):
     return s, c, m, n, dm
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ned(dphi, dlam, hp, ha, cv):
     """NED (m) of the point (lat_a + dphi, lon_a + dlam, hp) from the antenna at height ha; cv: _consts."""
     s, c, m, n, dm = cv
