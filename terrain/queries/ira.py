@@ -195,7 +195,9 @@ def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
 @njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi):
     """Largest value of tab (one value per block x block cells, layout of terrain.kernels.block_bounds) over
-    the cells meeting the box [fi_lo, fi_hi] x [fj_lo, fj_hi] in post coordinates; -inf off the grid."""
+    the cells meeting the box [fi_lo, fi_hi] x [fj_lo, fj_hi] in post coordinates; -inf off the grid.
+    Callers pass block as np.int64(CONSTANT): a bare integer constant is a literal type to numba, one more
+    specialisation per value."""
     c_ia = max(int(np.floor(fi_lo)), 0)
     c_ib = min(int(np.ceil(fi_hi)) - 1, n_lat - 2)
     c_ja = max(int(np.floor(fj_lo)), 0)
@@ -376,7 +378,7 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
             g = np.sqrt(g)
         else:
             g = _ira_box_max(
-                bslope, IRA_BLOCK_POSTS, n_lat, n_lon, qc[0] + n_lo * qc[6], qc[0] + n_hi * qc[6],
+                bslope, np.int64(IRA_BLOCK_POSTS), n_lat, n_lon, qc[0] + n_lo * qc[6], qc[0] + n_hi * qc[6],
                 qc[3] + e_lo * qc[7], qc[3] + e_hi * qc[7],
             )
     if not one_cell:
@@ -433,6 +435,29 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
             q2 -= kink_w * 1.05 * np.sqrt(1.0 + gam * gam) * jz
         lb = max(lb, q2)
     return lb, split
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _sort_candidates(buf_h, buf_q, n):
+    """Sort buf_h[:n] ascending, buf_q[:n] along, by the key (h, q), in place (Shell sort).
+
+    buf_q holds distinct, increasing indices on entry, so this order is the one a stable sort by h gives
+    (numpy's mergesort argsort, which it replaced: compiling that took a second of the first run)."""
+    gap = 1
+    while 3 * gap + 1 < n:
+        gap = 3 * gap + 1  # Knuth's gaps 1, 4, 13, 40, ...
+    while gap > 0:
+        for i in range(gap, n):
+            h = buf_h[i]
+            q = buf_q[i]
+            j = i
+            while j >= gap and (buf_h[j - gap] > h or (buf_h[j - gap] == h and buf_q[j - gap] > q)):
+                buf_h[j] = buf_h[j - gap]
+                buf_q[j] = buf_q[j - gap]
+                j -= gap
+            buf_h[j] = h
+            buf_q[j] = q
+        gap //= 3
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -648,7 +673,7 @@ def _ira_one(
         horiz = max(s_near * 0.998 - 2.0, 0.0)
         if horiz > max_range:
             continue
-        hb = _ira_box_max(hmax_blocks, IRA_HEIGHT_BLOCK_CELLS, n_lat, n_lon, bi_lo + sa * qc[1],
+        hb = _ira_box_max(hmax_blocks, np.int64(IRA_HEIGHT_BLOCK_CELLS), n_lat, n_lon, bi_lo + sa * qc[1],
                           bi_hi + sa * qc[1], bj_lo + sa * qc[4], bj_hi + sa * qc[4])
         if hb == -_INF:
             continue
@@ -671,11 +696,7 @@ def _ira_one(
             buf_h[row] = lbh
             buf_q[row] = q
     else:  # no first best (nothing at s = 0 nor at the boresight): hundreds of candidates
-        order = np.argsort(buf_h[:n_c], kind="mergesort")
-        sorted_h = buf_h[:n_c][order]
-        sorted_q = buf_q[:n_c][order]
-        buf_h[:n_c] = sorted_h
-        buf_q[:n_c] = sorted_q
+        _sort_candidates(buf_h, buf_q, n_c)
     n_st = 0
     cap = stack.shape[0]
     for ci in range(n_c):
