@@ -28,12 +28,13 @@ Kernel arguments: besides shared's grid and cv tuples, the per-query velocity te
 vel = (v_hat north, east, down, u_h north, east, |v_hat_h|) (u_h: the horizontal unit velocity), and the
 bounds' per-query constants in the scratch vector qc (see _ira_one).
 
-The search's per-sample helpers (_zd_point, _ira_eval, _ira_interval_lb and what they call) carry numba's
-inline="always": a query makes ~25 evaluations and ~25 bound calls, and inlining them into _ira_one cut a
-query by a quarter (same bits). Each call site is one more copy to compile, so the branch and bound bounds
-both halves of an interval from one call site (cold compile of the IRA: 63 -> 52 CPU s). Dropping the inlining
-was measured (issue 21): all of it 15 s of compilation instead of ~55 s but +20-27 % per query; only
-_ira_interval_lb +10 %, its helpers too +16 %, only _zd_point/_ira_eval +19-23 %: so it stays.
+The search's per-sample helpers (_zd_point, _ira_eval, _ira_interval_lb and what they call) are inlined
+into _ira_one by LLVM (numba's forceinline=True: the LLVM alwaysinline attribute), not by numba
+(inline="always"): a query makes ~25 evaluations and ~25 bound calls, and as calls they cost 8 % per query
+(same-process A/B, issue 21). Numba's inlining re-types and re-lowers each call site's copy of the helper;
+LLVM's copies the compiled helper, with the same bits and the same per-query speed, so the cold compile of
+the IRA went from ~40 CPU s (numba inlining) to ~12. The branch and bound still bounds both halves of an
+interval from one call site: each call site is one more copy.
 """
 
 from __future__ import annotations
