@@ -119,9 +119,10 @@ def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b
         F[3, 0] = -g_over_r
         F[4, 1] = -g_over_r
         F[5, 2] = 2.0 * g_over_r - 3.0 / tau**2
-        _set_skew(F, 3, 3, 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2, -1.0)
-        _set_skew(F, 3, 6, fn0, fn1, fn2, 1.0)
-        _set_skew(F, 6, 6, wie0 + wen0, wen1, wie2 + wen2, -1.0)
+        # np.int64: bare integer constants are numba literal types, one specialisation per value
+        _set_skew(F, np.int64(3), np.int64(3), 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2, -1.0)
+        _set_skew(F, np.int64(3), np.int64(6), fn0, fn1, fn2, 1.0)
+        _set_skew(F, np.int64(6), np.int64(6), wie0 + wen0, wen1, wie2 + wen2, -1.0)
         for i in range(3):
             for j in range(3):
                 F[3 + i, 9 + j] = C[i, j]

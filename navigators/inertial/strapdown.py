@@ -223,8 +223,9 @@ def propagate_chunk(
             jb += 1
         if np.isnan(prev_imu[0]):
             prev_imu[0] = t_imu[k]
-            prev_imu[1:4] = f1
-            prev_imu[4:7] = w1
+            for i in range(3):  # element loops, not slice assignments: those compile a shape-error path
+                prev_imu[1 + i] = f1[i]
+                prev_imu[4 + i] = w1[i]
             for j in range(N_STATE):
                 out[k, j] = state[j]
             continue
@@ -275,11 +276,13 @@ def propagate_chunk(
         state[0] = lat + dt * v_avg[0] / rn
         state[1] = lon + dt * v_avg[1] / (re * np.cos(lat_m))
         state[2] = h + dt * (-v_avg[2] + h_corr)
-        state[3:6] = v1
-        state[6:10] = q1
+        for i in range(3):
+            state[3 + i] = v1[i]
+            prev_imu[1 + i] = f1[i]
+            prev_imu[4 + i] = w1[i]
+        for i in range(4):
+            state[6 + i] = q1[i]
         prev_imu[0] = t_imu[k]
-        prev_imu[1:4] = f1
-        prev_imu[4:7] = w1
         for j in range(N_STATE):
             out[k, j] = state[j]
     return bad

@@ -28,12 +28,13 @@ Kernel arguments: besides shared's grid and cv tuples, the per-query velocity te
 vel = (v_hat north, east, down, u_h north, east, |v_hat_h|) (u_h: the horizontal unit velocity), and the
 bounds' per-query constants in the scratch vector qc (see _ira_one).
 
-The search's per-sample helpers (_zd_point, _ira_eval, _ira_interval_lb and what they call) carry numba's
-inline="always": a query makes ~25 evaluations and ~25 bound calls, and inlining them into _ira_one cut a
-query by a quarter (same bits). Each call site is one more copy to compile, so the branch and bound bounds
-both halves of an interval from one call site (cold compile of the IRA: 63 -> 52 CPU s). Dropping the inlining
-was measured (issue 21): all of it 15 s of compilation instead of ~55 s but +20-27 % per query; only
-_ira_interval_lb +10 %, its helpers too +16 %, only _zd_point/_ira_eval +19-23 %: so it stays.
+The search's per-sample helpers (_zd_point, _ira_eval, _ira_interval_lb and what they call) are inlined
+into _ira_one by LLVM (numba's forceinline=True: the LLVM alwaysinline attribute), not by numba
+(inline="always"): a query makes ~25 evaluations and ~25 bound calls, and as calls they cost 8 % per query
+(same-process A/B, issue 21). Numba's inlining re-types and re-lowers each call site's copy of the helper;
+LLVM's copies the compiled helper, with the same bits and the same per-query speed, so the cold compile of
+the IRA went from ~40 CPU s (numba inlining) to ~12. The branch and bound still bounds both halves of an
+interval from one call site: each call site is one more copy.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ COARSE_STEP_M = 45.0  # about the IRA's coarse sample spacing along the zero-Dop
 _NO_WARM_START = np.zeros(0)  # _ira_batch's "no hints"
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
     """Terrain point on the zero-Doppler plane at across-track nominal coordinate sv (m).
 
@@ -138,7 +139,7 @@ def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
     return np.nan, x, y, z, dphi, dlam, hp
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_eval(heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv, t_guess, tol):
     """(f, t, r, z) at across-track coordinate sv: f = range if the point is inside the look-angle window
     (else inf), t its along-track coordinate, r the raw range (inf: no point), z its NED down (m)."""
@@ -154,7 +155,7 @@ def _ira_eval(heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv,
     return r, t, r, z
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
     """Upper bound of |dr/ds| on the zero-Doppler curve for s in [a, b] (r = range, s = across-track m).
 
@@ -176,7 +177,7 @@ def _ira_lipschitz(a, b, ta, tb, za, zb, ra, rb, tp, zp, g_pad):
     return min((s_max + t_max * tp + z_max * zp) / r_min, l_crude) * g_pad
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
     stack[row, 0] = a
     stack[row, 1] = fa
@@ -192,10 +193,12 @@ def _ira_push(stack, row, a, fa, ta, ra, za, b, fb, tb, rb, zb, lb, split):
     stack[row, 11] = split
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi):
     """Largest value of tab (one value per block x block cells, layout of terrain.kernels.block_bounds) over
-    the cells meeting the box [fi_lo, fi_hi] x [fj_lo, fj_hi] in post coordinates; -inf off the grid."""
+    the cells meeting the box [fi_lo, fi_hi] x [fj_lo, fj_hi] in post coordinates; -inf off the grid.
+    Callers pass block as np.int64(CONSTANT): a bare integer constant is a literal type to numba, one more
+    specialisation per value."""
     c_ia = max(int(np.floor(fi_lo)), 0)
     c_ib = min(int(np.ceil(fi_hi)) - 1, n_lat - 2)
     c_ja = max(int(np.floor(fj_lo)), 0)
@@ -210,7 +213,7 @@ def _ira_box_max(tab, block, n_lat, n_lon, fi_lo, fi_hi, fj_lo, fj_hi):
     return hi
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_cell_slope_twist(heights, ci, cj, qc):
     """(bound of the squared gradient (m/m)^2, |twist| h00 - h01 - h10 + h11 (m)) of the bilinear cell
     (ci, cj); qc6, qc7: posts per metre north / east. NaN next to a void."""
@@ -223,7 +226,7 @@ def _ira_cell_slope_twist(heights, ci, cj, qc):
     return gu * gu + gv * gv, abs(h00 - h01 - h10 + h11)
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb, rb, zb):
     """(lower bound of the in-window range f over the curve piece s in [a, b], split point) from the end
     samples (f, t, r, z at a and b; see _ira_eval); qc: _ira_one's per-query constants. Intervals with
@@ -376,7 +379,7 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
             g = np.sqrt(g)
         else:
             g = _ira_box_max(
-                bslope, IRA_BLOCK_POSTS, n_lat, n_lon, qc[0] + n_lo * qc[6], qc[0] + n_hi * qc[6],
+                bslope, np.int64(IRA_BLOCK_POSTS), n_lat, n_lon, qc[0] + n_lo * qc[6], qc[0] + n_hi * qc[6],
                 qc[3] + e_lo * qc[7], qc[3] + e_hi * qc[7],
             )
     if not one_cell:
@@ -433,6 +436,29 @@ def _ira_interval_lb(heights, bslope, qc, best_tol, a, fa, ta, ra, za, b, fb, tb
             q2 -= kink_w * 1.05 * np.sqrt(1.0 + gam * gam) * jz
         lb = max(lb, q2)
     return lb, split
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _sort_candidates(buf_h, buf_q, n):
+    """Sort buf_h[:n] ascending, buf_q[:n] along, by the key (h, q), in place (Shell sort).
+
+    buf_q holds distinct, increasing indices on entry, so this order is the one a stable sort by h gives
+    (numpy's mergesort argsort, which it replaced: compiling that took a second of the first run)."""
+    gap = 1
+    while 3 * gap + 1 < n:
+        gap = 3 * gap + 1  # Knuth's gaps 1, 4, 13, 40, ...
+    while gap > 0:
+        for i in range(gap, n):
+            h = buf_h[i]
+            q = buf_q[i]
+            j = i
+            while j >= gap and (buf_h[j - gap] > h or (buf_h[j - gap] == h and buf_q[j - gap] > q)):
+                buf_h[j] = buf_h[j - gap]
+                buf_q[j] = buf_q[j - gap]
+                j -= gap
+            buf_h[j] = h
+            buf_q[j] = q
+        gap //= 3
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -648,7 +674,7 @@ def _ira_one(
         horiz = max(s_near * 0.998 - 2.0, 0.0)
         if horiz > max_range:
             continue
-        hb = _ira_box_max(hmax_blocks, IRA_HEIGHT_BLOCK_CELLS, n_lat, n_lon, bi_lo + sa * qc[1],
+        hb = _ira_box_max(hmax_blocks, np.int64(IRA_HEIGHT_BLOCK_CELLS), n_lat, n_lon, bi_lo + sa * qc[1],
                           bi_hi + sa * qc[1], bj_lo + sa * qc[4], bj_hi + sa * qc[4])
         if hb == -_INF:
             continue
@@ -671,11 +697,7 @@ def _ira_one(
             buf_h[row] = lbh
             buf_q[row] = q
     else:  # no first best (nothing at s = 0 nor at the boresight): hundreds of candidates
-        order = np.argsort(buf_h[:n_c], kind="mergesort")
-        sorted_h = buf_h[:n_c][order]
-        sorted_q = buf_q[:n_c][order]
-        buf_h[:n_c] = sorted_h
-        buf_q[:n_c] = sorted_q
+        _sort_candidates(buf_h, buf_q, n_c)
     n_st = 0
     cap = stack.shape[0]
     for ci in range(n_c):

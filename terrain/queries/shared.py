@@ -58,7 +58,7 @@ class TerrainReturn:
     h_m: np.ndarray
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _consts(lat):
     """Curvature constants cv = (sin, cos of the latitude, meridian radius M, prime-vertical radius N,
     dM/dphi) (m) of the expansion in the module docstring, at the antenna latitude lat (rad)."""
@@ -71,7 +71,7 @@ def _consts(lat):
     return s, c, m, n, dm
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _ned(dphi, dlam, hp, ha, cv):
     """NED (m) of the point (lat_a + dphi, lon_a + dlam, hp) from the antenna at height ha; cv: _consts."""
     s, c, m, n, dm = cv
@@ -107,15 +107,17 @@ def _geo_of_ned(x, y, z, ha, cv):
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _finite_range(heights):
-    """(lowest, highest) finite value of heights ((inf, -inf) when none is finite)."""
+    """(lowest, highest) finite value of the 2-D array heights ((inf, -inf) when none is finite)."""
     lo = np.inf
     hi = -np.inf
-    for v in heights.ravel():
-        if v == v:
-            if v < lo:
-                lo = v
-            if v > hi:
-                hi = v
+    for i in range(heights.shape[0]):  # 2-D loops: ravel() alone took most of this kernel's compile
+        for j in range(heights.shape[1]):
+            v = heights[i, j]
+            if v == v:
+                if v < lo:
+                    lo = v
+                if v > hi:
+                    hi = v
     return lo, hi
 
 
