@@ -32,13 +32,12 @@ import math
 
 import numpy as np
 
-from navigators.filters._pf_kernels import propagate_particles
+from navigators.filters._pf_kernels import map_heights_interp, propagate_particles
 from navigators.filters.resampling import systematic_kernel
 from navigators.filters.terrain_filter import InsRiddenFilter, check_positive
 from navigators.inertial.strapdown import quat_to_dcm
 from navigators.measurements.terrain_models import (
     ira_points_batch,
-    map_heights_at_offsets,
     ra_cone_ranges,
     radii_m,
     robust_log_likelihood,
@@ -212,8 +211,8 @@ class ParticleFilter(InsRiddenFilter):
             P = self._P
             pn = np.ascontiguousarray(P[:, 0])
             pe = np.ascontiguousarray(P[:, 1])
-            n_nan = map_heights_at_offsets(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn,
-                                           self.de, pn, pe, self._hmap)
+            n_nan = map_heights_interp(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn,
+                                       self.de, pn, pe, self.map_cubic, self._hmap)
             resid = (h - self.b - P[:, 2]) - self._hmap        # seed 000 eq 2 under each particle
             # one variance for the cloud, at its mean closest point: the particles' points differ by metres
             # at ranges of km, which changes sigma_R (p_d / R) and sigma_theta |p_h| by < 1e-3 relative

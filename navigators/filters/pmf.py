@@ -206,7 +206,8 @@ class PointMassFilter(InsRiddenFilter):
             o = self._out
             kern.ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn_flat,
                                  self.de_flat, float(p[0]), float(p[1]), h_meas, S, self.P_b / S,
-                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, self._work[0], o)
+                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, self._work[0], o,
+                                 self.map_cubic)
             n_nan = int(o[3])
             if n_nan == m or not np.isfinite(o[4]):
                 self.logw, self.bias = saved
