@@ -103,7 +103,7 @@ class InsRiddenFilter:
                  ira_look_angle_sigma_deg: float = 0.1, ra_sigma_m: float = 2.0,
                  ra_half_beam_deg: float = 10.0,
                  ra_cone_rings: int = 2, map_sigma_m: float = 0.0, map_bias_sigma_m: float = 0.0,
-                 terrain_model_sigma_m: float = 4.0, map_interpolation: str = "bicubic",
+                 terrain_model_sigma_m: float = 3.0, map_interpolation: str = "bicubic",
                  outlier_prob: float = 0.02,
                  outlier_width_m: float = 500.0,
                  gnss_sigma_m: float = 2.0, gnss_vertical_sigma_m: float = 4.0,
@@ -111,7 +111,7 @@ class InsRiddenFilter:
                  vertical_noise_m_per_sqrt_s: float = 0.05, converged_sigma_m: float = 50.0,
                  accel_noise_mps2_rthz: float = 10e-6 * G0 * 10.0, gyro_noise_rps_rthz: float = 1e-6,
                  gravity_model: str = "j2", tau_baro_s: float = 30.0, imu_samples: str = "interval",
-                 baro_geopotential: bool = True, integrity_window: int = 3, integrity_alpha: float = 0.01,
+                 baro_geopotential: bool = True, integrity_window: int = 3, integrity_alpha: float = 1e-4,
                  recovery_sigma_m: float = 100.0, name: str | None = None):
         if dem is None:
             raise ValueError("dem: the navigator's terrain map is required")
