@@ -59,8 +59,8 @@ class ParticleFilter(InsRiddenFilter):
     name = "pf"
 
     def __init__(self, dem=None, n_particles: int = 10_000, ess_threshold: float = 0.5,
-                 roughening: float = 0.1,
-                 position_noise_m_per_sqrt_s: float = 0.9, velocity_noise_mps_per_sqrt_s: float = 0.01,
+                 roughening: float = 0.05,
+                 position_noise_m_per_sqrt_s: float = 0.5, velocity_noise_mps_per_sqrt_s: float = 0.01,
                  heading_noise_rad_per_sqrt_s: float = 2e-5, max_memory_mb: float = 2048.0,
                  rng: np.random.Generator | None = None, **settings):
         if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)) or n_particles < 2:

@@ -82,7 +82,7 @@ class PointMassFilter(InsRiddenFilter):
 
     def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
                  spacing_max_m: float = 100.0,
-                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 1.1,
+                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 0.9,
                  max_memory_mb: float = 2048.0, **settings):
         if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
             raise ValueError(f"grid_size must be an integer >= 3, got {grid_size!r}")
