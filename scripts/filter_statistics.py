@@ -2,20 +2,23 @@
 
 One JSBSim flight of the default scenario is flown once (navigator "ins", so the truth follows the route);
 its truth chunks are kept and every run regenerates the real sensor suite's noise (trn_env.sensors, a new
-seed per run) and the initial estimate's error, then runs the navigators open-loop on those frames (guidance
-does not react to the estimate: the truth is the same flight for every run). GNSS is denied from t = 0.
+seed per run), the initial estimate's error and the world's fractal detail (the terrain the 3" map does not
+hold: the scenario's [terrain.world] refinement drawn again with the run's seed; --world-detail fixed keeps
+the recorded one), then runs the navigators open-loop on those frames (guidance does not react to the
+estimate: the truth is the same flight for every run). GNSS is denied from t = 0.
 
     PYTHONPATH=$PWD python scripts/filter_statistics.py [--runs 100] [--duration 180] [--out DIR]
 
 Experiments (each prints a JSON block; --only NAME runs one):
 - "convergence": 1 km (1 sigma) initial position error; fraction of runs within 50 m at the end (3 min of
   flight) for pmf, pf and ins_tercom (INS + batch TERCOM + EKF), with a 95 % Clopper-Pearson interval.
-- "nees": the horizontal position NEES e' P^-1 e averaged over the runs (ANEES) at every update after
-  t_converged_s, against the 95 % chi-square bounds for 2 x runs degrees of freedom (divided by runs).
-- "crlb": horizontal RMS over the converged runs and t >= t_converged_s against the posterior Cramer-Rao
-  bound of the same measurements (map gradients at each IRA sample's true footprint, the filter's
-  measurement variance, the PMF's random-walk process noise; recursive J <- (J^-1 + Q)^-1 + g g' / s^2),
-  and terrain.metrics.terrain_information's window CRLB along the track for the same noise.
+- "nees": the horizontal position NEES e' P^-1 e averaged over the converged runs (ANEES) at every update
+  after t_converged_s, against the 95 % chi-square interval for 2 x runs degrees of freedom (divided by
+  runs); the fraction of epochs inside and its binomial least value (nees_figures); the runs' common error.
+- "crlb": horizontal RMS over the converged runs and t >= t_converged_s against terrain.metrics.track_crlb
+  of the IRA samples the filter takes (map gradients at their true closest points, prior 1 km, the filter's
+  position random walk), with the filter's measurement variance and with the actual one (the IRA's noise +
+  the measured world-minus-map RMS); and terrain.metrics.terrain_information's window CRLB along the track.
 - "crosswind": a 20 m/s crosswind flight (crosswind_5km: 5,600 m MSL, seed 000's case), map = world (the
   high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs
   14-36) vs the conventional (eqs 9-13) closest point: horizontal RMS of each and their ratio.
@@ -103,7 +106,8 @@ def run_navigator(name: str, settings: dict, initial, frames, chunks, map_dem, s
         t.append(est.t_s)
         err.append(((est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e))
         cov.append(est.covariance[:2, :2].copy())
-    return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "wall_s": wall}
+    return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "wall_s": wall,
+            "recoveries": int(getattr(nav, "recoveries", 0))}
 
 
 def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
@@ -113,18 +117,34 @@ def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
+def run_world(d: dict, world, seed: int, world_detail: str):
+    """The true terrain of one run: the recorded flight's world ("fixed"), or the scenario's raw world DEM
+    refined again with the run's own fractal detail ("redraw": the detail the map does not hold is the
+    map error the filters model as random, so the runs must not share one draw of it)."""
+    refinement = d["terrain"]["world"].get("refinement")
+    if world_detail == "fixed" or not refinement:
+        return world
+    import terrain
+    raw = terrain.load(d["terrain"]["world"]["dem"], fill_voids=bool(d["terrain"]["world"].get("fill_voids")))
+    return components.refine_dem(raw, refinement, np.random.default_rng([seed, 31]))
+
+
 def monte_carlo(runs: int, duration_s: float, sigma_h_m: float, names: dict, seed0: int = 1000,
-                flight=None, map_world: bool = False, log=print) -> dict:
-    """{label: [run results]} of `runs` runs of each navigator in names {label: (name, settings)}."""
+                flight=None, map_world: bool = False, log=print, world_detail: str = "redraw") -> dict:
+    """{label: [run results]} of `runs` runs of each navigator in names {label: (name, settings)}; the world
+    detail per run as `run_world` says (with map_world the map is the recorded world, so it stays fixed)."""
     d, chunks, world, the_map, truth0 = flight or record_flight(duration_s=duration_s)
     the_map = world if map_world else the_map
     out = {k: [] for k in names}
     for r in range(runs):
         seed = seed0 + r
-        frames = sensor_frames(d, chunks, world, seed)
+        w = world if map_world else run_world(d, world, seed, world_detail)
+        frames = sensor_frames(d, chunks, w, seed)
         init = initial_estimate(d, truth0, seed, sigma_h_m)
         for label, (name, settings) in names.items():
-            out[label].append(run_navigator(name, settings, init, frames, chunks, the_map, seed))
+            run = run_navigator(name, settings, init, frames, chunks, the_map, seed)
+            run["name"], run["sigma0_m"] = name, sigma_h_m
+            out[label].append(run)
         if log and (r + 1) % max(1, runs // 10) == 0:
             fin = {k: round(float(np.hypot(*v[-1]["err"][-1])), 1) for k, v in out.items()}
             log(f"  run {r + 1}/{runs}: final errors {fin}")
@@ -153,6 +173,12 @@ def convergence_figures(res: dict, duration_s: float) -> dict:
 
 
 def nees_figures(res: dict, t_from_s: float) -> dict:
+    """Per-epoch ANEES (the horizontal NEES e' P^-1 e averaged over the converged runs) after t_from_s
+    against its 95 % chi-square interval chi2.ppf([0.025, 0.975], 2 n) / n, the fraction of epochs inside
+    it, and the least fraction a consistent filter shows with 97.5 % probability: binom.ppf(0.025, E, 0.95)
+    / E over the E epochs (as if independent; neighbouring epochs are correlated, so the spread is wider).
+    "common_error": RMS over the epochs of the runs' mean error, against sqrt(mean trace P / n), what it is
+    when the runs' errors are independent (larger: the runs share an error - one world, one flight)."""
     out = {}
     for label, runs in res.items():
         good = [r for r in runs if np.hypot(*r["err"][-1]) < CONVERGED_M]
@@ -162,78 +188,107 @@ def nees_figures(res: dict, t_from_s: float) -> dict:
             continue
         t = good[0]["t"]
         sel = t >= t_from_s
-        nees = np.array([np.einsum("ti,tij,tj->t", r["err"][sel], np.linalg.inv(r["cov"][sel]), r["err"][sel])
-                         for r in good])
+        E = np.array([r["err"][sel] for r in good])
+        P = np.array([r["cov"][sel] for r in good])
+        nees = np.einsum("rti,rtij,rtj->rt", E, np.linalg.inv(P), E)
         anees = nees.mean(axis=0)
         lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * n) / n
-        out[label] = {"runs": n, "t_from_s": t_from_s, "anees_mean": float(anees.mean()),
+        n_ep = int(sel.sum())
+        inside = (anees >= lo) & (anees <= hi)
+        m = E.mean(axis=0)
+        out[label] = {"runs": n, "t_from_s": t_from_s, "epochs": n_ep, "anees_mean": float(anees.mean()),
                       "bounds_95": [float(lo), float(hi)],
-                      "fraction_of_epochs_inside": float(np.mean((anees >= lo) & (anees <= hi))),
+                      "fraction_of_epochs_inside": float(np.mean(inside)),
+                      "fraction_below": float(np.mean(anees < lo)),
+                      "fraction_above": float(np.mean(anees > hi)),
+                      "binomial_least_fraction_inside": float(stats.binom.ppf(0.025, n_ep, 0.95) / n_ep),
                       "anees_time_average_bounds_95": [float(x) for x in
-                                                       stats.chi2.ppf([0.025, 0.975], 2 * n * sel.sum())
-                                                       / (n * sel.sum())]}
+                                                       stats.chi2.ppf([0.025, 0.975], 2 * n * n_ep)
+                                                       / (n * n_ep)],
+                      "common_error_rms_m": float(np.sqrt(np.mean(np.sum(m * m, axis=1)))),
+                      "common_error_if_independent_m": float(np.sqrt(np.mean(np.trace(P, axis1=2, axis2=3))
+                                                                     / n)),
+                      "horizontal_rms_m": float(np.sqrt(np.mean(np.sum(E * E, axis=2)))),
+                      "recoveries_per_run": float(np.mean([r.get("recoveries", 0) for r in runs]))}
     return out
 
 
-def pcrb_horizontal(d: dict, chunks, the_map, sigma_z_m: float, q_m2ps: float, rate_hz: float,
-                    p0_m: float = 1000.0) -> tuple[np.ndarray, np.ndarray]:
-    """(t, sqrt(trace J^-1)) of the posterior CRLB of the horizontal position: random walk q (m^2/s), one
-    height measurement of variance sigma_z^2 per 1/rate_hz s at the true IRA footprint (nadir + the true
-    closest point, seed 000's geometry), with the map's gradient there (terrain.Dem.gradient)."""
+def ira_track(d: dict, chunks, world, rate_hz: float):
+    """(t, aircraft lat, lon, h, true closest-point lat, lon, h) of the IRA samples a filter at rate_hz takes
+    (the first of each 1/rate_hz s), closest points on the true terrain (terrain.queries.ira_return)."""
     from terrain import queries
     cfg = d["sensors"]["ira"]
     half = math.radians(float(cfg.get("half_window_deg", 45.0)))
-    ts, lat, lon, h, v, C = [], [], [], [], [], []
+    dt_ira = 1.0 / float(cfg.get("rate_hz", 50.0))
+    rows = []
     t_next = -np.inf
+    t_ira = -np.inf
     for ch in chunks:
         for i in range(len(ch.t_s)):
-            if ch.t_s[i] >= t_next:
-                t_next = ch.t_s[i] + 1.0 / rate_hz
-                ts.append(ch.t_s[i])
-                lat.append(ch.lat_rad[i])
-                lon.append(ch.lon_rad[i])
-                h.append(ch.h_msl_m[i])
-                v.append(ch.v_ned_mps[i])
-                C.append(ch.C_bn[i])
-    ret = queries.ira_return(the_map, np.array(lat), np.array(lon), np.array(h), np.array(v), np.array(C),
-                             half)
-    gn, ge = the_map.gradient(ret.lat_rad, ret.lon_rad)     # m/m north and east
-    J = np.eye(2) / p0_m**2
-    out = []
-    dt = 1.0 / rate_hz
-    for k in range(len(ts)):
-        J = np.linalg.inv(np.linalg.inv(J) + np.eye(2) * q_m2ps * dt)
-        if np.isfinite(gn[k]) and np.isfinite(ge[k]):
-            g = np.array([gn[k], ge[k]])
-            J = J + np.outer(g, g) / sigma_z_m**2
-        out.append(math.sqrt(np.trace(np.linalg.inv(J))))
-    return np.array(ts), np.array(out)
+            if ch.t_s[i] >= t_ira + dt_ira - 1e-9:
+                t_ira = ch.t_s[i]
+                if ch.t_s[i] >= t_next - 1e-9:
+                    t_next = ch.t_s[i] + 1.0 / rate_hz
+                    rows.append((ch, i))
+    col = [np.array([getattr(c, f)[i] for c, i in rows]) for f in ("t_s", "lat_rad", "lon_rad", "h_msl_m",
+                                                                   "v_ned_mps", "C_bn")]
+    ret = queries.ira_return(world, col[1], col[2], col[3], col[4], col[5], half)
+    return col[0], col[1], col[2], col[3], ret.lat_rad, ret.lon_rad, ret.h_m
 
 
-def crlb_figures(res: dict, flight, t_from_s: float) -> dict:
-    from navigators.filters.pmf import PointMassFilter
+def crlb_figures(res: dict, flight, t_from_s: float, settings: dict | None = None) -> dict:
+    """Horizontal RMS of the converged runs after t_from_s against terrain.metrics.track_crlb of the IRA
+    samples the filter takes, at their true closest points, with (a) the filter's own measurement variance
+    (its sensor, map and terrain-model noise) and (b) the actual one: the sensor's noise plus the measured
+    variance of world minus map at those points; both with the filter's prior (the initial 1 sigma) and its
+    position random walk as the process noise. Also terrain.metrics.terrain_information's window CRLB (every
+    post of a 2 km window measured) along the track, for comparison."""
     from terrain import metrics
     d, chunks, world, the_map, _ = flight
-    nav = PointMassFilter(the_map, grid_size=3)
-    sigma_z = math.sqrt(nav.ira_range_sigma_m**2 + nav.terrain_model_sigma_m**2 + nav.map_sigma_m**2)
-    t_b, bound = pcrb_horizontal(d, chunks, the_map, sigma_z, nav.position_noise**2, nav.measurement_rate_hz)
-    out = {"sigma_z_m": sigma_z, "t_from_s": t_from_s}
-    sel_b = t_b >= t_from_s
-    out["pcrb_rms_m"] = float(np.sqrt(np.mean(bound[sel_b] ** 2)))
-    info = metrics.terrain_information(the_map, sigma_z, 2000.0)
-    crlb_map = the_map.with_heights(np.nan_to_num(np.asarray(info.crlb_sigma_h_m, float), nan=1e4,
-                                                  posinf=1e4))
-    lat = np.concatenate([c.lat_rad for c in chunks])
-    lon = np.concatenate([c.lon_rad for c in chunks])
-    out["terrain_metrics_window_crlb_m_median_along_track"] = float(np.median(crlb_map.height(lat, lon)))
+    settings = settings or {}
+    out = {"t_from_s": t_from_s}
     for label, runs in res.items():
+        name = runs[0].get("name", label)
+        kw_nav = dict(settings.get(label) or {})
+        if name == "pf":
+            kw_nav["rng"] = np.random.default_rng(0)
+        nav = registry.create(name, dem=the_map, **kw_nav)
+        t, lat, lon, h, plat, plon, ph = ira_track(d, chunks, world, nav.measurement_rate_hz)
+        r_n = meridian_radius_m(lat) + h
+        r_e = (prime_vertical_radius_m(lat) + h) * np.cos(lat)
+        p_n, p_e, p_d = (plat - lat) * r_n, (plon - lon) * r_e, h - ph
+        rng_m = np.sqrt(p_n**2 + p_e**2 + p_d**2)
+        var_filter = nav.ira_variance(rng_m, p_d, np.hypot(p_n, p_e))
+        var_sensor = (nav.ira_range_sigma_m * p_d / rng_m) ** 2 + (nav.ira_look_angle_sigma_rad
+                                                                   * np.hypot(p_n, p_e)) ** 2
+        map_err = world.height(plat, plon) - the_map.height(plat, plon, method=nav.map_interpolation)
+        map_sigma = float(np.nanstd(map_err))
+        q = (nav.position_noise if name == "pmf" else nav.s_pos) ** 2
+        p0 = float(runs[0].get("sigma0_m", 1000.0))
+        kw = dict(t_s=t, prior_sigma_m=p0, process_noise_m2_per_s=q, method=nav.map_interpolation)
+        b_filter = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_filter), **kw).rms_m(t_from_s)
+        b_actual = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_sensor), map_sigma_m=map_sigma,
+                                      **kw).rms_m(t_from_s)
         good = [r for r in runs if np.hypot(*r["err"][-1]) < CONVERGED_M]
         if not good:
             continue
         sel = good[0]["t"] >= t_from_s
         e2 = np.concatenate([np.sum(r["err"][sel] ** 2, axis=1) for r in good])
         rms = float(np.sqrt(np.mean(e2)))
-        out[label] = {"runs": len(good), "horizontal_rms_m": rms, "ratio_to_pcrb": rms / out["pcrb_rms_m"]}
+        out[label] = {"runs": len(good), "horizontal_rms_m": rms, "process_noise_m2_per_s": q,
+                      "filter_sigma_z_m_median": float(np.median(np.sqrt(var_filter))),
+                      "world_minus_map_sigma_m": map_sigma,
+                      "track_crlb_filter_noise_m": b_filter,
+                      "ratio_to_track_crlb_filter_noise": rms / b_filter,
+                      "track_crlb_actual_noise_m": b_actual,
+                      "ratio_to_track_crlb_actual_noise": rms / b_actual}
+        if "terrain_metrics_window_crlb_m_median_along_track" not in out:
+            sz = float(np.median(np.sqrt(var_filter)))
+            info = metrics.terrain_information(the_map, sz, 2000.0)
+            crlb_map = the_map.with_heights(np.nan_to_num(np.asarray(info.crlb_sigma_h_m, float), nan=1e4,
+                                                          posinf=1e4))
+            out["terrain_metrics_window_crlb_m_median_along_track"] = float(
+                np.median(crlb_map.height(lat, lon)))
     return out
 
 
@@ -248,6 +303,8 @@ def main(argv=None) -> int:
     ap.add_argument("--crosswind-scenario", default="crosswind_5km",
                     help="flight of the crosswind comparison (default: seed 000's 5,600 m MSL case)")
     ap.add_argument("--only", default=None, choices=["convergence", "crosswind", "rate"])
+    ap.add_argument("--world-detail", default="redraw", choices=["redraw", "fixed"],
+                    help="the world's fractal detail drawn per run (default) or the recorded flight's")
     ap.add_argument("--out", default=None, help="write the figures as JSON here")
     args = ap.parse_args(argv)
     figures = {}
@@ -256,9 +313,11 @@ def main(argv=None) -> int:
         print(f"recording the default flight ({args.duration:.0f} s) ...", flush=True)
         flight = record_flight(duration_s=args.duration)
         names = {"pmf": ("pmf", {}), "pf": ("pf", {})}
-        res = monte_carlo(args.runs, args.duration, args.sigma, names, flight=flight)
+        res = monte_carlo(args.runs, args.duration, args.sigma, names, flight=flight,
+                          world_detail=args.world_detail)
         ekf = monte_carlo(args.ekf_runs, args.duration, args.sigma,
-                          {"ins_tercom": ("ins_tercom", {"remove_bias": True})}, flight=flight) \
+                          {"ins_tercom": ("ins_tercom", {"remove_bias": True})}, flight=flight,
+                          world_detail=args.world_detail) \
             if args.ekf_runs else {}
         figures["convergence"] = convergence_figures({**res, **ekf}, args.duration)
         print(json.dumps({"convergence": figures["convergence"]}, indent=1), flush=True)

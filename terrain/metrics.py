@@ -8,10 +8,17 @@
 - `terrain_information(dem, sigma_m, window_m)`: expected Fisher information of horizontal position from
   altimeter height measurements (noise sigma) at every post of a window: I = sum(grad h grad h^T) / sigma^2
   (2 x 2, north/east), and the CRLB horizontal standard deviation sqrt(trace(I^-1)) (inf where singular).
+  It assumes every post of the window is measured.
+- `track_crlb(dem, lat, lon, sigma_m, ...)`: the posterior (Bayesian) Cramer-Rao bound of the horizontal
+  position for the measurements actually taken along a track: the terrain gradient at each measured point,
+  the sensor and map noise, a Gaussian prior and a random-walk process noise between the epochs
+  (Tichavsky, Muravchik and Nehorai 1998, IEEE Trans. Signal Processing 46(5): the recursion
+  J_k = D22 - D21 (J_(k-1) + D11)^-1 D12 with F = I).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -157,3 +164,100 @@ def terrain_information(dem: Dem, sigma_m: float, window_m: float) -> TerrainInf
     var_n[nan] = np.nan
     var_e[nan] = np.nan
     return TerrainInformation(i_nn, i_ne, i_ee, np.sqrt(var_n + var_e), np.sqrt(var_n), np.sqrt(var_e))
+
+
+@dataclass
+class TrackCrlb:
+    """Posterior CRLB of the horizontal position (north, east) along a measurement track.
+
+    t_s (n,) s: the epochs; information (n, 2, 2) 1/m^2: J_k after measurement k; covariance_m2 (n, 2, 2)
+    m^2: its inverse, the bound on the error covariance; sigma_h_m (n,) m: sqrt(trace J_k^-1) (inf where J_k
+    is singular); gradient (n, 2) m/m: terrain slope north / east at the measured point (NaN: off the map,
+    the measurement adds nothing); sigma_z_m (n,) m: the measurement noise used (sensor and map)."""
+
+    t_s: np.ndarray
+    information: np.ndarray
+    covariance_m2: np.ndarray
+    sigma_h_m: np.ndarray
+    gradient: np.ndarray
+    sigma_z_m: np.ndarray
+
+    def rms_m(self, t_from_s: float = -math.inf) -> float:
+        """sqrt(mean(sigma_h^2)) over the epochs at or after t_from_s (m): the RMS horizontal error the
+        bound allows there."""
+        sel = self.t_s >= t_from_s
+        if not sel.any():
+            raise ValueError(f"TrackCrlb.rms_m: no epoch at or after t_from_s={t_from_s}")
+        return float(np.sqrt(np.mean(self.sigma_h_m[sel] ** 2)))
+
+
+def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: float | None = None,
+               process_noise_m2_per_s: float = 0.0, map_sigma_m: float = 0.0,
+               method: str = "bicubic") -> TrackCrlb:
+    """Posterior Cramer-Rao bound of the horizontal position from terrain-height measurements along a track.
+
+    Model (north, east; m): the position error is a random walk x_k = x_(k-1) + w_k, w_k ~ N(0, q dt_k I)
+    with q = process_noise_m2_per_s (m^2/s) and dt_k = t_k - t_(k-1) (s), prior x_0 ~ N(0, prior_sigma_m^2 I)
+    (None: no prior information); at epoch k one height z_k = h(p_k + x_k) + v_k is measured at the point
+    (lat_rad[k], lon_rad[k]) (rad; e.g. the IRA's closest point or the altimeter's footprint), with
+    v_k ~ N(0, sigma_m[k]^2 + map_sigma_m^2) (m; sigma_m scalar or one per epoch: the sensor's noise on the
+    measured height, map_sigma_m the map's random error). h is the map `dem` read with `method` ("bicubic"
+    or "bilinear", as the filter reads it); its gradient g_k (m/m) at the measured point gives the
+    measurement's Fisher information g_k g_k^T / var_k (1/m^2).
+
+    Recursion (Tichavsky et al. 1998, J_k = D22 - D21 (J_(k-1) + D11)^-1 D12, which for F = I and additive
+    Gaussian noise is, by the matrix inversion lemma): J_0 = I / prior_sigma^2,
+    J_k = (J_(k-1)^-1 + Q_k)^-1 + g_k g_k^T / var_k, the first epoch taking no process noise. The expectation
+    over the state of the information is evaluated at the true track (the usual approximation when the
+    errors are small against the terrain's correlation length). Returns a TrackCrlb (units there); its
+    covariance_m2 bounds the error covariance of any estimator of the position error from these
+    measurements under this model, and equals a Kalman filter's covariance when the terrain is a plane.
+    """
+    lat = np.atleast_1d(np.asarray(lat_rad, float))
+    lon = np.atleast_1d(np.asarray(lon_rad, float))
+    n = lat.shape[0]
+    if lat.ndim != 1 or lon.shape != lat.shape or n == 0:
+        raise ValueError("track_crlb: lat_rad and lon_rad must be 1-D arrays of the same non-zero length")
+    sig = np.broadcast_to(np.asarray(sigma_m, float), (n,)).astype(float)
+    if not np.all(np.isfinite(sig)) or np.any(sig < 0.0):
+        raise ValueError("track_crlb: sigma_m must be finite and >= 0 (scalar or one per epoch)")
+    if not (math.isfinite(map_sigma_m) and map_sigma_m >= 0.0):
+        raise ValueError(f"track_crlb: map_sigma_m must be finite and >= 0, got {map_sigma_m}")
+    var = sig**2 + map_sigma_m**2
+    if np.any(var <= 0.0):
+        raise ValueError("track_crlb: sigma_m^2 + map_sigma_m^2 must be > 0 at every epoch")
+    if not (math.isfinite(process_noise_m2_per_s) and process_noise_m2_per_s >= 0.0):
+        raise ValueError(f"track_crlb: process_noise_m2_per_s must be finite and >= 0, got "
+                         f"{process_noise_m2_per_s}")
+    t = np.arange(n, dtype=float) if t_s is None else np.atleast_1d(np.asarray(t_s, float))
+    if t.shape != (n,) or not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0.0):
+        raise ValueError("track_crlb: t_s must be finite, non-decreasing, one per epoch")
+    if prior_sigma_m is None:
+        J = np.zeros((2, 2))
+    else:
+        if not (math.isfinite(prior_sigma_m) and prior_sigma_m > 0.0):
+            raise ValueError(f"track_crlb: prior_sigma_m must be finite and > 0 (or None), got "
+                             f"{prior_sigma_m}")
+        J = np.eye(2) / prior_sigma_m**2
+    gn, ge = dem.gradient(lat, lon, method=method)
+    g = np.stack([np.atleast_1d(gn), np.atleast_1d(ge)], axis=1)
+    info = np.empty((n, 2, 2))
+    cov = np.empty((n, 2, 2))
+    sig_h = np.empty(n)
+    eye = np.eye(2)
+    for k in range(n):
+        if k > 0 and process_noise_m2_per_s > 0.0:
+            Q = eye * process_noise_m2_per_s * (t[k] - t[k - 1])
+            J = J @ np.linalg.inv(eye + Q @ J)       # = (J^-1 + Q)^-1, also for a singular J
+            J = 0.5 * (J + J.T)
+        if np.all(np.isfinite(g[k])):
+            J = J + np.outer(g[k], g[k]) / var[k]
+        info[k] = J
+        det = J[0, 0] * J[1, 1] - J[0, 1] ** 2
+        if det > 1e-12 * max(J[0, 0] * J[1, 1], 1e-300):
+            cov[k] = np.array([[J[1, 1], -J[0, 1]], [-J[0, 1], J[0, 0]]]) / det
+            sig_h[k] = math.sqrt(cov[k, 0, 0] + cov[k, 1, 1])
+        else:
+            cov[k] = np.inf
+            sig_h[k] = math.inf
+    return TrackCrlb(t, info, cov, sig_h, g, np.sqrt(var))

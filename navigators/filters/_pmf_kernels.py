@@ -8,7 +8,7 @@ import numpy as np
 from numba import njit
 
 from navigators.measurements.terrain_models import LOG_2PI
-from terrain.kernels import bilinear
+from terrain.kernels import bicubic, bilinear
 
 NEGLIGIBLE = -60.0   # log-weight below which a cell's weight (< 1e-26) is left out of sums of weights
 
@@ -113,10 +113,10 @@ def bias_update(bias, resid, gain):
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn, de, pn, pe, h_meas, S, gain,
-                    lg, le, floor, logw, bias, gam, out):
+                    lg, le, floor, logw, bias, gam, out, cubic):
     """One IRA terrain update of the whole grid, fused (one map lookup per cell): the predicted terrain
-    height map(cell + p) + bias, the heavy-tailed log-likelihood (measurements.robust_ll_one inlined, its
-    constants hoisted; variance S),
+    height map(cell + p) + bias (the map bicubic if cubic, else bilinear: terrain.kernels), the heavy-tailed
+    log-likelihood (measurements.robust_ll_one inlined, its constants hoisted; variance S),
     logw += ll (renormalised to a maximum of 0, floored), bias += gamma gain residual with gamma the
     probability that the sample is an inlier under that cell (so an outlier return does not drag the vertical
     offsets: gam (n * n) receives it); and the moments. out[12]: the posterior mean of gamma.
@@ -133,7 +133,10 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
     c0 = lg - 0.5 * (math.log(S) + LOG_2PI)
     inv2s = 0.5 / S
     for k in range(m):
-        h = bilinear(heights, lat0, lon0, dlat, dlon, lat + (dn[k] + pn) / r_lat, lon + (de[k] + pe) / r_lon)
+        la = lat + (dn[k] + pn) / r_lat
+        lo = lon + (de[k] + pe) / r_lon
+        h = bicubic(heights, lat0, lon0, dlat, dlon, la, lo) if cubic else bilinear(heights, lat0, lon0, dlat,
+                                                                                     dlon, la, lo)
         lw = logw[k]
         w0 = math.exp(lw) if lw > NEGLIGIBLE else 0.0
         s0 += w0

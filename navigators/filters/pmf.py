@@ -74,7 +74,9 @@ class PointMassFilter(InsRiddenFilter):
 
     Settings (besides InsRiddenFilter's): grid_size n (cells per side, default 200), spacing_min_m,
     spacing_max_m (bounds of the cell spacing), span_sigmas (grid half-span in posterior sigmas),
-    position_noise_m_per_sqrt_s (process noise: horizontal position random walk of the INS error),
+    position_noise_m_per_sqrt_s (process noise: horizontal position random walk of the INS error, default
+    1.0: over 100 runs from 1 km the ANEES is 1.82 with it, 1.62 with 1.1 and 2.09 with 0.9, against 2; 0.9
+    cost 0.6 m on the default flight; scripts/filter_statistics.py "nees"),
     max_memory_mb (refuses a grid larger than that), measurement_rate_hz (terrain samples per second).
     """
 
@@ -82,7 +84,7 @@ class PointMassFilter(InsRiddenFilter):
 
     def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
                  spacing_max_m: float = 100.0,
-                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 1.1,
+                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 1.0,
                  max_memory_mb: float = 2048.0, **settings):
         if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
             raise ValueError(f"grid_size must be an integer >= 3, got {grid_size!r}")
@@ -206,7 +208,8 @@ class PointMassFilter(InsRiddenFilter):
             o = self._out
             kern.ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn_flat,
                                  self.de_flat, float(p[0]), float(p[1]), h_meas, S, self.P_b / S,
-                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, self._work[0], o)
+                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, self._work[0], o,
+                                 self.map_cubic)
             n_nan = int(o[3])
             if n_nan == m or not np.isfinite(o[4]):
                 self.logw, self.bias = saved
