@@ -62,8 +62,10 @@ import numpy as np
 from navigators.acquisition_tracking import acquisition, loop_kernel, tracking
 from navigators.acquisition_tracking.aiding import (
     WindEstimator,
+    air_vector_sum,
     coordinated_turn_roll_rad,
     ground_vector,
+    lsq_rate,
     sample_at,
     speed_track,
     wrap_rad,
@@ -139,22 +141,23 @@ class _Tail:
         t = np.asarray(t, float)
         if t.size == 0:
             return
-        v = np.column_stack([np.asarray(c, float) for c in cols])
-        self.t = np.concatenate([self.t, t])
-        self.v = np.concatenate([self.v, v])
-        self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])
-        keep = self.t >= self.t[-1] - _TAIL_S
-        self.t, self.v, self.ok = self.t[keep], self.v[keep], self.ok[keep]
+        v = np.empty((t.size, len(cols)))
+        for j, c in enumerate(cols):
+            v[:, j] = c
+        # sensor times increase: the samples within _TAIL_S of the newest are a suffix (a slice, no mask)
+        if self.t.size:
+            t_all = np.concatenate([self.t, t])
+            k = int(np.searchsorted(t_all, t_all[-1] - _TAIL_S, side="left"))
+            self.t = t_all[k:]
+            self.v = np.concatenate([self.v, v])[k:]
+            self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])[k:]
+        else:
+            k = int(np.searchsorted(t, t[-1] - _TAIL_S, side="left"))
+            self.t, self.v, self.ok = t[k:].copy(), v[k:], np.array(ok, bool)[k:]
 
     def rate(self, t_s: float, col: int, window_s: float) -> float:
         """Least-squares slope (per s) of column col over the valid samples in [t_s - window_s, t_s]."""
-        m = self.ok & (self.t <= t_s + 1e-9) & (self.t >= t_s - window_s) & np.isfinite(self.v[:, col])
-        if m.sum() < 3:
-            return math.nan
-        x = self.t[m] - self.t[m].mean()
-        y = self.v[m, col]
-        den = float((x * x).sum())
-        return float((x * (y - y.mean())).sum() / den) if den > 0 else math.nan
+        return float(lsq_rate(self.t, np.ascontiguousarray(self.v[:, col]), self.ok, t_s, window_s))
 
     def row(self, t_s: float, max_gap_s: float) -> tuple[np.ndarray | None, bool]:
         """(all columns of the newest valid sample at or before t_s within max_gap_s, found)."""
@@ -497,17 +500,15 @@ class AcqTrackNavigator:
         cfg = self.config
         air, hdg = self._tails["air"], self._tails["hdg"]
         lo = t_k - cfg.sample_period_s if cfg.aiding_interval_mean else t_k - 1e-6
-        m = air.ok & (air.t > lo + 1e-9) & (air.t <= t_k + 1e-9)
-        h, found = hdg.at(air.t[m], 0, 1.5 * cfg.sample_period_s)
-        ok = found & np.isfinite(air.v[m, 0])
-        if not ok.any():  # no air-data sample in the interval: the newest one (found by the caller)
+        sn, se, m = air_vector_sum(
+            air.t, np.ascontiguousarray(air.v[:, 0]), np.ascontiguousarray(air.v[:, 1]), air.ok, hdg.t,
+            np.ascontiguousarray(hdg.v[:, 0]), hdg.ok, lo, t_k, 1.5 * cfg.sample_period_s,
+        )  # fmt: skip
+        if m == 0:  # no air-data sample in the interval: the newest one (found by the caller)
             row, _ = air.row(t_k, 1.0)
             hr, _ = hdg.row(t_k, 1.5 * cfg.sample_period_s)
             return float(row[0]), float(wrap_rad(hr[0] + row[1]))
-        d = h[ok] + air.v[m, 1][ok]
-        vn = float(np.mean(air.v[m, 0][ok] * np.cos(d)))
-        ve = float(np.mean(air.v[m, 0][ok] * np.sin(d)))
-        return speed_track(np.array([vn, ve]))
+        return speed_track(np.array([sn / m, se / m]))
 
     # ------------------------------------------------------------------ epochs
     def _radii(self, lat: float, h: float) -> tuple[float, float]:
