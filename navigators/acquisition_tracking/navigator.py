@@ -129,6 +129,16 @@ def _quad2(x: np.ndarray, m: np.ndarray) -> float:
     return float(x @ (_inv2(m) @ x))
 
 
+def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Roll and pitch (rad) of body -> NED quaternions [w, x, y, z] (rows): strapdown.euler_from_C_bn of
+    quat_to_dcm, the third row of C_bn only, on all rows at once (it ran per row in Python each frame)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    c20 = 2.0 * (x * z - w * y)
+    c21 = 2.0 * (y * z + w * x)
+    c22 = w * w - x * x - y * y + z * z
+    return np.arctan2(c21, c22), -np.arcsin(np.clip(c20, -1.0, 1.0))
+
+
 class _Tail:
     """A sensor's recent samples (t, columns..., valid), carried across frames."""
 
@@ -396,17 +406,15 @@ class AcqTrackNavigator:
                 None if b is None else b.h_baro_m,
                 None if b is None else b.valid,
             )
-            from navigators.inertial.strapdown import euler_from_C_bn, quat_to_dcm
-
             ok = np.all(np.isfinite(hist), axis=1)
             step = max(1, hist.shape[0] // 50)  # attitude at <= 50 points per frame is plenty at 1 s
             idx = np.arange(0, hist.shape[0], step)
-            rp = np.array(
-                [euler_from_C_bn(quat_to_dcm(hist[i, 6:10]))[:2] if ok[i] else (np.nan, np.nan) for i in idx]
-            ).reshape(-1, 2)
+            roll, pitch = _roll_pitch(hist[idx, 6:10])
+            roll[~ok[idx]] = np.nan
+            pitch[~ok[idx]] = np.nan
             tl["ins"].extend(
                 frames.imu.t_s[idx],
-                [hist[idx, 3], hist[idx, 4], rp[:, 0], rp[:, 1], np.zeros(idx.size)],
+                [hist[idx, 3], hist[idx, 4], roll, pitch, np.zeros(idx.size)],
                 ok[idx],
             )
 
@@ -678,8 +686,13 @@ class AcqTrackNavigator:
         median range (replica_model)."""
         if self._footprint is None:
             return self._grid
+        key = getattr(self, "_track_grid_key", None)
+        if key is not None and key[0] is rng:  # the same transect (its arrays are cached): the same grid
+            return key[1]
         ok = np.isfinite(rng)
-        return self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
+        grid = self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
+        self._track_grid_key = (rng, grid)
+        return grid
 
     def _predicted_snr(self) -> float:
         """Terrain SNR (dB) of the map along the dead-reckoned transect against the a-priori noise alone."""

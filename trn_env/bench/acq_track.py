@@ -37,7 +37,9 @@ def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
     sc = load_scenario("acq_track", navigator=navigator, duration_s=warm_s + sim_s + 5.0)
     if navigator == "acq_track":
         data = dict(sc.data)
-        data["navigator"] = dict(data["navigator"], settings={"transect_samples": 25})
+        # N = 25 on top of the scenario's own settings (footprint replicas, INS aiding): the built-in flight
+        settings = dict(data["navigator"].get("settings") or {}, transect_samples=25)
+        data["navigator"] = dict(data["navigator"], settings=settings)
         sc = validate(data, source=sc.source)
     with ClosedLoop(sc, log_sensors=False, pipeline=False) as loop:
         ref = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
