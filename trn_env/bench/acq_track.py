@@ -2,8 +2,9 @@
 references:
 
 - acq_track_closed_loop_steps_per_s / ins_tercom_closed_loop_steps_per_s: JSBSim steps per wall second of
-  the built-in `acq_track` scenario's closed loop (inline, one process; N = 25) with each navigator over the
-  same timed window (after a 45 s warm-up: the transect is full and one TERCOM fix has run), each
+  the built-in `acq_track` scenario's closed loop (inline, one process; its navigator settings with N = 25)
+  with each navigator over the same timed window (after a 45 s warm-up: the transect is full and one TERCOM
+  fix has run), each
   navigator's window flown twice in the order acq_track, ins_tercom, ins_tercom, acq_track (pooled), beside
   acq_track_jsbsim_reference_steps_per_s (a bare run() loop at the same initial condition, timed right
   before); acq_track_vs_ins_tercom_speed (>= 1: the loop with acq_track is at least as fast) and
