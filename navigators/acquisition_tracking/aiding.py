@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 
 def wrap_rad(a):
@@ -35,6 +36,61 @@ def ground_vector(speed_mps: float, track_rad: float) -> np.ndarray:
 def speed_track(v_ne: np.ndarray) -> tuple[float, float]:
     """(speed, track) of a (north, east) velocity."""
     return float(math.hypot(v_ne[0], v_ne[1])), float(math.atan2(v_ne[1], v_ne[0]))
+
+
+@njit(cache=True)
+def air_vector_sum(air_t, tas, beta, air_ok, hdg_t, hdg, hdg_ok, lo_s, hi_s, max_gap_s):
+    """(sum tas cos(h + beta), sum tas sin(h + beta), count) over the valid air-data samples with
+    lo_s < t <= hi_s (1e-9 s tolerance) and a finite tas, h the newest valid finite heading at or before
+    each sample's time within max_gap_s (sample_at's rule; samples without one are left out). Both time
+    arrays increasing. One pass instead of a dozen array operations per transect sample."""
+    sn = 0.0
+    se = 0.0
+    m = 0
+    j = -1  # newest heading index with hdg_t <= the air sample's time + 1e-9
+    k = -1  # newest valid finite heading index so far
+    nh = hdg_t.shape[0]
+    for i in range(air_t.shape[0]):
+        ta = air_t[i]
+        if not (air_ok[i] and ta > lo_s + 1e-9 and ta <= hi_s + 1e-9):
+            continue
+        while j + 1 < nh and hdg_t[j + 1] <= ta + 1e-9:
+            j += 1
+            if hdg_ok[j] and np.isfinite(hdg[j]):
+                k = j
+        if k < 0 or ta - hdg_t[k] > max_gap_s or not np.isfinite(tas[i]):
+            continue
+        d = hdg[k] + beta[i]
+        sn += tas[i] * math.cos(d)
+        se += tas[i] * math.sin(d)
+        m += 1
+    return sn, se, m
+
+
+@njit(cache=True)
+def lsq_rate(t, v, ok, t_s, window_s):
+    """Least-squares slope (per s) of v over the valid finite samples with t_s - window_s <= t <= t_s
+    (1e-9 s tolerance at t_s); NaN with fewer than 3 of them."""
+    m = 0
+    tm = 0.0
+    vm = 0.0
+    for i in range(t.shape[0]):
+        if ok[i] and t[i] <= t_s + 1e-9 and t[i] >= t_s - window_s and np.isfinite(v[i]):
+            m += 1
+            tm += t[i]
+            vm += v[i]
+    if m < 3:
+        return np.nan
+    tm /= m
+    vm /= m
+    num = 0.0
+    den = 0.0
+    for i in range(t.shape[0]):
+        if ok[i] and t[i] <= t_s + 1e-9 and t[i] >= t_s - window_s and np.isfinite(v[i]):
+            x = t[i] - tm
+            den += x * x
+            num += x * (v[i] - vm)
+    return num / den if den > 0.0 else np.nan
 
 
 class WindEstimator:

@@ -19,6 +19,7 @@ import math
 from collections import deque
 
 import numpy as np
+from numba import njit
 
 
 def a_priori_sigma_m(range_m: float, ra_const_m: float, ra_fraction: float, map_sigma_m: float) -> float:
@@ -32,17 +33,40 @@ def terrain_snr_db(
 ) -> tuple[float, float]:
     """(terrain SNR in dB, residual sigma in m) of the prompt replica heights h_prompt against the measured
     heights d (valid samples with a finite map height; SNR -inf without two of them)."""
-    ok = valid & np.isfinite(h_prompt) & np.isfinite(d)
-    if ok.sum() < 2:
-        return -math.inf, math.nan
-    h = h_prompt[ok]
-    r = d[ok] - h
-    if remove_bias:
-        r = r - r.mean()
-    res_var = float(np.mean(r * r))
-    noise_var = max(res_var, sigma_prior_m**2, 1e-12)
-    var_h = float(np.var(h))
-    snr = 10.0 * math.log10(var_h / noise_var) if var_h > 0 else -math.inf
+    snr, res_sigma = _snr_kernel(
+        np.ascontiguousarray(h_prompt, dtype=np.float64), np.ascontiguousarray(d, dtype=np.float64),
+        np.ascontiguousarray(valid, dtype=np.bool_), float(sigma_prior_m), bool(remove_bias),
+    )  # fmt: skip
+    return float(snr), float(res_sigma)
+
+
+@njit(cache=True)
+def _snr_kernel(h, d, valid, sigma_prior_m, remove_bias):
+    """terrain_snr_db's arithmetic in one pass set (it runs once per epoch on N samples)."""
+    m = 0
+    hm = 0.0
+    rm = 0.0
+    for i in range(h.shape[0]):
+        if valid[i] and np.isfinite(h[i]) and np.isfinite(d[i]):
+            m += 1
+            hm += h[i]
+            rm += d[i] - h[i]
+    if m < 2:
+        return -np.inf, np.nan
+    hm /= m
+    rm = rm / m if remove_bias else 0.0
+    var_h = 0.0
+    res_var = 0.0
+    for i in range(h.shape[0]):
+        if valid[i] and np.isfinite(h[i]) and np.isfinite(d[i]):
+            dh = h[i] - hm
+            var_h += dh * dh
+            r = d[i] - h[i] - rm
+            res_var += r * r
+    var_h /= m
+    res_var /= m
+    noise_var = max(res_var, sigma_prior_m * sigma_prior_m, 1e-12)
+    snr = 10.0 * math.log10(var_h / noise_var) if var_h > 0.0 else -np.inf
     return snr, math.sqrt(res_var)
 
 
@@ -91,7 +115,8 @@ class OutputAverage:
             if abs(speed_mps - v0) > self.speed_tol or dp > self.heading_tol:
                 self._buf.clear()
         self._buf.append((float(speed_mps), float(track_rad)))
-        v = float(np.mean([b[0] for b in self._buf]))
-        s = float(np.mean([math.sin(b[1]) for b in self._buf]))
-        c = float(np.mean([math.cos(b[1]) for b in self._buf]))
+        n = len(self._buf)
+        v = sum(b[0] for b in self._buf) / n
+        s = sum(math.sin(b[1]) for b in self._buf) / n
+        c = sum(math.cos(b[1]) for b in self._buf) / n
         return v, math.atan2(s, c)

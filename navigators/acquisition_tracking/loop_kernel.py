@@ -36,7 +36,7 @@ import math
 import numpy as np
 from numba import njit
 
-from navigators.acquisition_tracking.correlation import COST_MSD, _map_height, profile_cost
+from navigators.acquisition_tracking.correlation import COST_MSD, _map_height, profile_cost, replica_offsets
 from navigators.acquisition_tracking.tracking import DISC_THESIS, VShape
 
 MITIGATION_NONE = 0
@@ -379,6 +379,90 @@ def loop_epoch(
         x = x0
         locked = False
     return x, it1, it2, it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, spacing, els_applied
+
+
+@njit(cache=True)
+def _shift_cost_pre(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
+    u_n, u_e, r_n, r_e_cos, x, h_w,
+):  # fmt: skip
+    """tracking._shift_cost with the replica's offsets dla, dlo (rad) computed once: the shift moves the
+    start only, so the offsets (references fixed) are the same for every x; the same arithmetic
+    (start + x u / r, then + offset), so the same cost to the bit."""
+    ls = lat_s + x * u_n / r_n
+    lo = lon_s + x * u_e / r_e_cos
+    for i in range(dla.shape[0]):
+        h_w[i] = _map_height(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i], interp)
+    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+
+
+@njit(cache=True)
+def _shift_stage(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
+    u_n, u_e, r_n, r_e_cos, x0, spacing, threshold, break_iteration, discriminator, h_w,
+):  # fmt: skip
+    """tracking.early_late_shift_loop's arithmetic on _shift_cost_pre: (x, iterations, locked)."""
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
+         u_n, u_e, r_n, r_e_cos)  # fmt: skip
+    x = x0
+    it = 1
+    while it < break_iteration:
+        he = _shift_cost_pre(*g, x - spacing, h_w)
+        hl = _shift_cost_pre(*g, x + spacing, h_w)
+        if not (np.isfinite(he) and np.isfinite(hl)):
+            return x, it, False
+        if discriminator == DISC_THESIS:
+            den = he + hl
+            eps = spacing * (he - hl) / den if den > 0.0 else 0.0
+        else:
+            hp = _shift_cost_pre(*g, x, h_w)
+            den = max(he, hl) - hp
+            eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
+            if eps > spacing:
+                eps = spacing
+            elif eps < -spacing:
+                eps = -spacing
+        x += eps
+        if abs(eps) < threshold:
+            return x, it, True
+        it += 1
+    return x, it, False
+
+
+@njit(cache=True)
+def shift_loop_epoch(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
+    cost, remove_bias, interp, n_min, u_n, u_e, reach, n_side, spacings_desc, symmetry_max, threshold_1,
+    spacing_2, threshold_2, break_iteration, discriminator, narrow,
+):  # fmt: skip
+    """One start-point loop's epoch along (u_n, u_e) (tracking.shift_correlation_function,
+    analyse_v, choose_spacing and early_late_shift_loop in one call): the shift correlation function at
+    2 n_side + 1 offsets in [-reach, reach] m, its V-shape, the spacing choice, the first stage from 0 and
+    (narrow) the second stage at spacing_2. Returns (x m, locked, v_shape, bandwidth, min_offset, min_cost,
+    slope_left, slope_right); x = 0, unlocked when the loop ran off the map or beyond the function's reach."""
+    n = dt.shape[0]
+    dla = np.empty(n)
+    dlo = np.empty(n)
+    h_w = np.empty(n)
+    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dla, dlo)
+    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
+         u_n, u_e, r_n, r_e_cos)  # fmt: skip
+    offs = np.linspace(-reach, reach, 2 * n_side + 1)
+    vals = np.empty(offs.shape[0])
+    for k in range(offs.shape[0]):
+        vals[k] = _shift_cost_pre(*g, offs[k], h_w)
+    v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
+    spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
+    x, _, locked = _shift_stage(*g, 0.0, spacing, threshold_1, break_iteration, discriminator, h_w)
+    if narrow:
+        x2, _, lock2 = _shift_stage(*g, x, spacing_2, threshold_2, break_iteration, discriminator, h_w)
+        if np.isfinite(x2):
+            x = x2
+        locked = locked and lock2
+    if not np.isfinite(x) or abs(x) > reach:
+        x = 0.0
+        locked = False
+    return x, locked, v_shape, bw, m_off, m_cost, sl, sr
 
 
 def run_loop(

@@ -62,8 +62,10 @@ import numpy as np
 from navigators.acquisition_tracking import acquisition, loop_kernel, tracking
 from navigators.acquisition_tracking.aiding import (
     WindEstimator,
+    air_vector_sum,
     coordinated_turn_roll_rad,
     ground_vector,
+    lsq_rate,
     sample_at,
     speed_track,
     wrap_rad,
@@ -102,6 +104,41 @@ _TURN_RATE_WINDOW_S = 3.0  # compass heading rate for the coordinated-turn roll:
 _MAD_VARIANCE_FACTOR = math.pi / 2.0
 
 
+# closed forms of the 2 x 2 (north, east) covariance algebra: np.linalg on a 2 x 2 costs more in its Python
+# call than the arithmetic (once per epoch per operation, it was a visible part of an epoch)
+def _rot_diag(psi: float, a: float, b: float) -> np.ndarray:
+    """G diag(a, b) G^T, G the rotation from (along, across) track psi (rad) to (north, east)."""
+    c, s = math.cos(psi), math.sin(psi)
+    cs = c * s * (a - b)
+    return np.array([[c * c * a + s * s * b, cs], [cs, s * s * a + c * c * b]])
+
+
+def _det2(m: np.ndarray) -> float:
+    return float(m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0])
+
+
+def _inv2(m: np.ndarray) -> np.ndarray:
+    det = _det2(m)
+    if det == 0.0:  # as np.linalg: singular raises, NaN propagates
+        raise np.linalg.LinAlgError("singular 2 x 2 matrix")
+    return np.array([[m[1, 1], -m[0, 1]], [-m[1, 0], m[0, 0]]]) / det
+
+
+def _quad2(x: np.ndarray, m: np.ndarray) -> float:
+    """x^T m^-1 x of a 2-vector and a 2 x 2 matrix."""
+    return float(x @ (_inv2(m) @ x))
+
+
+def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Roll and pitch (rad) of body -> NED quaternions [w, x, y, z] (rows): strapdown.euler_from_C_bn of
+    quat_to_dcm, the third row of C_bn only, on all rows at once (it ran per row in Python each frame)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    c20 = 2.0 * (x * z - w * y)
+    c21 = 2.0 * (y * z + w * x)
+    c22 = w * w - x * x - y * y + z * z
+    return np.arctan2(c21, c22), -np.arcsin(np.clip(c20, -1.0, 1.0))
+
+
 class _Tail:
     """A sensor's recent samples (t, columns..., valid), carried across frames."""
 
@@ -114,22 +151,23 @@ class _Tail:
         t = np.asarray(t, float)
         if t.size == 0:
             return
-        v = np.column_stack([np.asarray(c, float) for c in cols])
-        self.t = np.concatenate([self.t, t])
-        self.v = np.concatenate([self.v, v])
-        self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])
-        keep = self.t >= self.t[-1] - _TAIL_S
-        self.t, self.v, self.ok = self.t[keep], self.v[keep], self.ok[keep]
+        v = np.empty((t.size, len(cols)))
+        for j, c in enumerate(cols):
+            v[:, j] = c
+        # sensor times increase: the samples within _TAIL_S of the newest are a suffix (a slice, no mask)
+        if self.t.size:
+            t_all = np.concatenate([self.t, t])
+            k = int(np.searchsorted(t_all, t_all[-1] - _TAIL_S, side="left"))
+            self.t = t_all[k:]
+            self.v = np.concatenate([self.v, v])[k:]
+            self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])[k:]
+        else:
+            k = int(np.searchsorted(t, t[-1] - _TAIL_S, side="left"))
+            self.t, self.v, self.ok = t[k:].copy(), v[k:], np.array(ok, bool)[k:]
 
     def rate(self, t_s: float, col: int, window_s: float) -> float:
         """Least-squares slope (per s) of column col over the valid samples in [t_s - window_s, t_s]."""
-        m = self.ok & (self.t <= t_s + 1e-9) & (self.t >= t_s - window_s) & np.isfinite(self.v[:, col])
-        if m.sum() < 3:
-            return math.nan
-        x = self.t[m] - self.t[m].mean()
-        y = self.v[m, col]
-        den = float((x * x).sum())
-        return float((x * (y - y.mean())).sum() / den) if den > 0 else math.nan
+        return float(lsq_rate(self.t, np.ascontiguousarray(self.v[:, col]), self.ok, t_s, window_s))
 
     def row(self, t_s: float, max_gap_s: float) -> tuple[np.ndarray | None, bool]:
         """(all columns of the newest valid sample at or before t_s within max_gap_s, found)."""
@@ -190,6 +228,13 @@ class AcqTrackNavigator:
         self._speed_set = np.array(cfg.speed_spacings_mps)
         self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
         self._position_set = np.array(cfg.position_spacings_cells) * self.map_resolution_m
+        # the loops' spacing sets widest first, and the start-point loops' reach (m), fixed by the settings
+        self._speed_desc = np.sort(self._speed_set)[::-1].copy()
+        self._heading_desc = np.sort(self._heading_set)[::-1].copy()
+        self._position_desc = np.sort(self._position_set)[::-1].copy()
+        self._position_reach = float(
+            max(cfg.scf_offset_cells * self.map_resolution_m, float(self._position_set.max()))
+        )
         self.wind = WindEstimator(cfg.wind_gain)
         self.average = OutputAverage(
             cfg.average_length,
@@ -361,17 +406,15 @@ class AcqTrackNavigator:
                 None if b is None else b.h_baro_m,
                 None if b is None else b.valid,
             )
-            from navigators.inertial.strapdown import euler_from_C_bn, quat_to_dcm
-
             ok = np.all(np.isfinite(hist), axis=1)
             step = max(1, hist.shape[0] // 50)  # attitude at <= 50 points per frame is plenty at 1 s
             idx = np.arange(0, hist.shape[0], step)
-            rp = np.array(
-                [euler_from_C_bn(quat_to_dcm(hist[i, 6:10]))[:2] if ok[i] else (np.nan, np.nan) for i in idx]
-            ).reshape(-1, 2)
+            roll, pitch = _roll_pitch(hist[idx, 6:10])
+            roll[~ok[idx]] = np.nan
+            pitch[~ok[idx]] = np.nan
             tl["ins"].extend(
                 frames.imu.t_s[idx],
-                [hist[idx, 3], hist[idx, 4], rp[:, 0], rp[:, 1], np.zeros(idx.size)],
+                [hist[idx, 3], hist[idx, 4], roll, pitch, np.zeros(idx.size)],
                 ok[idx],
             )
 
@@ -465,17 +508,15 @@ class AcqTrackNavigator:
         cfg = self.config
         air, hdg = self._tails["air"], self._tails["hdg"]
         lo = t_k - cfg.sample_period_s if cfg.aiding_interval_mean else t_k - 1e-6
-        m = air.ok & (air.t > lo + 1e-9) & (air.t <= t_k + 1e-9)
-        h, found = hdg.at(air.t[m], 0, 1.5 * cfg.sample_period_s)
-        ok = found & np.isfinite(air.v[m, 0])
-        if not ok.any():  # no air-data sample in the interval: the newest one (found by the caller)
+        sn, se, m = air_vector_sum(
+            air.t, np.ascontiguousarray(air.v[:, 0]), np.ascontiguousarray(air.v[:, 1]), air.ok, hdg.t,
+            np.ascontiguousarray(hdg.v[:, 0]), hdg.ok, lo, t_k, 1.5 * cfg.sample_period_s,
+        )  # fmt: skip
+        if m == 0:  # no air-data sample in the interval: the newest one (found by the caller)
             row, _ = air.row(t_k, 1.0)
             hr, _ = hdg.row(t_k, 1.5 * cfg.sample_period_s)
             return float(row[0]), float(wrap_rad(hr[0] + row[1]))
-        d = h[ok] + air.v[m, 1][ok]
-        vn = float(np.mean(air.v[m, 0][ok] * np.cos(d)))
-        ve = float(np.mean(air.v[m, 0][ok] * np.sin(d)))
-        return speed_track(np.array([vn, ve]))
+        return speed_track(np.array([sn / m, se / m]))
 
     # ------------------------------------------------------------------ epochs
     def _radii(self, lat: float, h: float) -> tuple[float, float]:
@@ -622,15 +663,18 @@ class AcqTrackNavigator:
             sv, sp = cfg.aiding_speed_sigma_mps, math.radians(cfg.aiding_heading_sigma_deg)
         else:
             sv, sp = cfg.unaided_speed_sigma_mps, math.radians(cfg.unaided_heading_sigma_deg)
-        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
         # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
-        p_tc = G.T @ self.P @ G
-        s_al, s_cr = math.sqrt(max(p_tc[0, 0], 0.0)), math.sqrt(max(p_tc[1, 1], 0.0))
+        c, sn = math.cos(psi), math.sin(psi)
+        P = self.P
+        p01 = float(P[0, 1] + P[1, 0])
+        p_al = c * c * P[0, 0] + c * sn * p01 + sn * sn * P[1, 1]  # (G^T P G) diagonal
+        p_cr = sn * sn * P[0, 0] - c * sn * p01 + c * c * P[1, 1]
+        s_al, s_cr = math.sqrt(max(p_al, 0.0)), math.sqrt(max(p_cr, 0.0))
         d_al, d_cr = T * sv, v * T * sp
-        q = np.diag([2.0 * s_al * d_al + d_al**2, 2.0 * s_cr * d_cr + d_cr**2])
-        self.P = self.P + G @ q @ G.T + np.eye(2) * self._walk2 * T
+        walk = self._walk2 * T
+        self.P = P + _rot_diag(psi, 2.0 * s_al * d_al + d_al**2 + walk, 2.0 * s_cr * d_cr + d_cr**2 + walk)
         # the transect centroid's filter: one sample of dead reckoning on the references and the aiding
-        self.Pc = self.Pc + G @ np.diag([d_al**2, d_cr**2]) @ G.T + np.eye(2) * self._walk2 * T
+        self.Pc = self.Pc + _rot_diag(psi, d_al**2 + walk, d_cr**2 + walk)
 
     def _arrays(self):
         t, d, valid, dt, m_v, m_psi, rng = self.transect.arrays()
@@ -642,8 +686,13 @@ class AcqTrackNavigator:
         median range (replica_model)."""
         if self._footprint is None:
             return self._grid
+        key = getattr(self, "_track_grid_key", None)
+        if key is not None and key[0] is rng:  # the same transect (its arrays are cached): the same grid
+            return key[1]
         ok = np.isfinite(rng)
-        return self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
+        grid = self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
+        self._track_grid_key = (rng, grid)
+        return grid
 
     def _predicted_snr(self) -> float:
         """Terrain SNR (dB) of the map along the dead-reckoned transect against the a-priori noise alone."""
@@ -775,7 +824,8 @@ class AcqTrackNavigator:
         return loop_kernel.run_loop(
             (heights, lat0, lon0, dlat, dlon), p0[0], p0[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e,
             d, valid, cost=self._cost, remove_bias=cfg.remove_bias, interp=self._interp, n_min=self._n_min,
-            which=which, reach=reach, n_side=cfg.scf_points, spacings_desc=np.sort(sset)[::-1].copy(),
+            which=which, reach=reach, n_side=cfg.scf_points,
+            spacings_desc=self._speed_desc if which == 0 else self._heading_desc,
             symmetry_max=cfg.symmetry_ratio_max, threshold_1=thr1, spacing_2=s2, threshold_2=thr2,
             break_iteration=cfg.break_iteration, discriminator=self._disc,
             mitigation=loop_kernel.MITIGATIONS[cfg.bias_mitigation],
@@ -783,40 +833,22 @@ class AcqTrackNavigator:
 
     def _shift_loop(self, u_n: float, u_e: float, arrays, b_v: float, b_psi: float, p0):
         """Adaptivity block + both stages of a start-point loop along (u_n, u_e) from start p0:
-        (shift m, locked, VShape)."""
+        (shift m, locked, VShape); one numba call (loop_kernel.shift_loop_epoch)."""
         cfg = self.config
         t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
         heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
         res = self.map_resolution_m
-        sset = self._position_set
-        reach = max(cfg.scf_offset_cells * res, float(sset.max()))
-        offs = np.linspace(-reach, reach, 2 * cfg.scf_points + 1)
-        vals = np.empty(offs.size)
-        args = (heights, lat0, lon0, dlat, dlon, p0[0], p0[1], dt, m_v, m_psi, b_v, b_psi)
-        tail = (r_n, r_e, d, valid, self._cost, cfg.remove_bias, self._interp, self._n_min, u_n, u_e)
-        tracking.shift_correlation_function(*args, *tail, offs, vals)
-        shape = tracking.analyse_v(offs, vals)
-        spacing, _ = tracking.choose_spacing(offs, vals, shape, sset, cfg.symmetry_ratio_max)
-        x, _, locked, _ = tracking.early_late_shift_loop(
-            *args, *tail, 0.0, spacing, cfg.position_threshold_m, cfg.break_iteration, self._disc
-        )
-        locked = bool(locked)
-        if cfg.bias_mitigation == "ncs":
-            x2, _, lock2, _ = tracking.early_late_shift_loop(
-                *args,
-                *tail,
-                x,
-                cfg.position_narrow_spacing_cells * res,
-                cfg.position_narrow_threshold_m,
-                cfg.break_iteration,
-                self._disc,
-            )
-            if np.isfinite(x2):
-                x = x2
-            locked = locked and bool(lock2)
-        if not np.isfinite(x) or abs(x) > reach:  # off the map, or beyond the function's reach: no shift
-            x, locked = 0.0, False
-        return float(x), locked, shape
+        r = loop_kernel.shift_loop_epoch(
+            heights, lat0, lon0, dlat, dlon, float(p0[0]), float(p0[1]), dt, m_v, m_psi, float(b_v),
+            float(b_psi), float(r_n), float(r_e), d, valid, self._cost, bool(cfg.remove_bias), self._interp,
+            self._n_min, float(u_n), float(u_e), self._position_reach, int(cfg.scf_points),
+            self._position_desc, float(cfg.symmetry_ratio_max), float(cfg.position_threshold_m),
+            float(cfg.position_narrow_spacing_cells * res), float(cfg.position_narrow_threshold_m),
+            int(cfg.break_iteration), self._disc, cfg.bias_mitigation == "ncs",
+        )  # fmt: skip
+        x, locked, v_shape, bw, m_off, m_cost, sl, sr = r
+        shape = tracking.VShape(bool(v_shape), float(bw), float(m_off), float(m_cost), float(sl), float(sr))
+        return float(x), bool(locked), shape
 
     def _track(self, s: Sample) -> None:
         cfg = self.config
@@ -936,17 +968,16 @@ class AcqTrackNavigator:
         )
         sig_res = max(res_sigma if math.isfinite(res_sigma) else 0.0, sig0)
         k2 = cfg.fix_sigma_scale**2 * _MAD_VARIANCE_FACTOR * sig_res**2
-        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
-        R = G @ np.diag([k2 / max(i_al, 1e-12), k2 / max(i_cr, 1e-12)]) @ G.T
-        R = R + np.eye(2) * (self.map_resolution_m**2 / 12.0)  # the map's quantisation of the fix
+        q_map = self.map_resolution_m**2 / 12.0  # the map's quantisation of the fix
+        R = _rot_diag(psi, k2 / max(i_al, 1e-12) + q_map, k2 / max(i_cr, 1e-12) + q_map)
         S = self.Pc + R
-        nis = float(r_ne @ np.linalg.solve(S, r_ne))
+        nis = _quad2(r_ne, S)
         if nis > cfg.fix_gate_nis:  # innovation gate: a fix this far from the prediction is a false lock
             self.last_innovation = (s.t_s, r_ne, S)
             self._out_of_lock(s, f"fix innovation NIS {nis:.1f} > gate {cfg.fix_gate_nis:g}")
             return
         # consecutive transects share N - 1 samples: each epoch's fix brings 1/overlap of new information
-        K = self.Pc @ np.linalg.inv(self.Pc + self._fix_overlap * R)
+        K = self.Pc @ _inv2(self.Pc + self._fix_overlap * R)
         IK = np.eye(2) - K
         self.Pc = IK @ self.Pc @ IK.T + self._fix_overlap * (K @ R @ K.T)
         dc = K @ r_ne
@@ -985,9 +1016,10 @@ class AcqTrackNavigator:
         # the newest sample's covariance: the centroid's, plus dead reckoning over the rest of the transect
         lever_s = float(t[-1] - t[c])
         v_mean = max(float(np.mean(m_v)) + b_v, 1.0)
-        self.P = self.Pc + G @ np.diag(
-            [(lever_s * sv[0]) ** 2, (v_mean * lever_s * sv[1]) ** 2]
-        ) @ G.T + np.eye(2) * self._walk2 * lever_s
+        walk = self._walk2 * lever_s
+        self.P = self.Pc + _rot_diag(
+            psi, (lever_s * sv[0]) ** 2 + walk, (v_mean * lever_s * sv[1]) ** 2 + walk
+        )
         if converged and self.integrity.degraded:  # in lock, but the references jump: flagged
             self._set_lock("tracking", s.t_s, "degraded", "in lock, innovation test above its band")
         elif converged:
@@ -1083,17 +1115,12 @@ class AcqTrackNavigator:
         C = np.zeros((9, 9))
         P = self.P.copy()
         if dtp > 0:  # the extrapolation's own growth (aiding-grade)
-            psi = self.out_track
-            G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
-            P = (
-                P
-                + G @ np.diag([(dtp * self.sigma_v) ** 2, (self.out_speed * dtp * self.sigma_psi) ** 2]) @ G.T
+            P = P + _rot_diag(
+                self.out_track, (dtp * self.sigma_v) ** 2, (self.out_speed * dtp * self.sigma_psi) ** 2
             )
         C[:2, :2] = P
         C[2, 2] = cfg.baro_bias_sigma_m**2 + 4.0
-        psi = self.out_track
-        G = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
-        C[3:5, 3:5] = G @ np.diag([self.sigma_v**2, (self.out_speed * self.sigma_psi) ** 2]) @ G.T
+        C[3:5, 3:5] = _rot_diag(self.out_track, self.sigma_v**2, (self.out_speed * self.sigma_psi) ** 2)
         C[5, 5] = 1.0
         C[6, 6] = C[7, 7] = math.radians(3.0) ** 2
         C[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
@@ -1112,7 +1139,7 @@ class AcqTrackNavigator:
         }
         if self.last_innovation is not None:
             te, innov, S = self.last_innovation
-            nis = float(innov @ np.linalg.solve(S, innov))
+            nis = _quad2(innov, S)
             extra.update(
                 {
                     EXTRA_INNOVATION: innov.copy(),
@@ -1120,7 +1147,7 @@ class AcqTrackNavigator:
                     EXTRA_NIS: nis,
                     EXTRA_NIS_DOF: 2,
                     EXTRA_MEASUREMENT_TIME: float(te),
-                    EXTRA_LOG_LIKELIHOOD: float(-0.5 * (nis + math.log(np.linalg.det(2 * math.pi * S)))),
+                    EXTRA_LOG_LIKELIHOOD: float(-0.5 * (nis + math.log((2 * math.pi) ** 2 * _det2(S)))),
                 }
             )
         extra.update(self._integrity_extra)

@@ -2,8 +2,9 @@
 references:
 
 - acq_track_closed_loop_steps_per_s / ins_tercom_closed_loop_steps_per_s: JSBSim steps per wall second of
-  the built-in `acq_track` scenario's closed loop (inline, one process; N = 25) with each navigator over the
-  same timed window (after a 45 s warm-up: the transect is full and one TERCOM fix has run), each
+  the built-in `acq_track` scenario's closed loop (inline, one process; its navigator settings with N = 25)
+  with each navigator over the same timed window (after a 45 s warm-up: the transect is full and one TERCOM
+  fix has run), each
   navigator's window flown twice in the order acq_track, ins_tercom, ins_tercom, acq_track (pooled), beside
   acq_track_jsbsim_reference_steps_per_s (a bare run() loop at the same initial condition, timed right
   before); acq_track_vs_ins_tercom_speed (>= 1: the loop with acq_track is at least as fast) and
@@ -37,7 +38,9 @@ def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
     sc = load_scenario("acq_track", navigator=navigator, duration_s=warm_s + sim_s + 5.0)
     if navigator == "acq_track":
         data = dict(sc.data)
-        data["navigator"] = dict(data["navigator"], settings={"transect_samples": 25})
+        # N = 25 on top of the scenario's own settings (footprint replicas, INS aiding): the built-in flight
+        settings = dict(data["navigator"].get("settings") or {}, transect_samples=25)
+        data["navigator"] = dict(data["navigator"], settings=settings)
         sc = validate(data, source=sc.source)
     with ClosedLoop(sc, log_sensors=False, pipeline=False) as loop:
         ref = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
