@@ -981,7 +981,6 @@ class AcqTrackNavigator:
         IK = np.eye(2) - K
         self.Pc = IK @ self.Pc @ IK.T + self._fix_overlap * (K @ R @ K.T)
         dc = K @ r_ne
-        self._dbg = (c, r_ne.copy(), R.copy(), K.copy(), nis, i_al, i_cr, sig_res)
         c_new = (self.p0[0] + dla_p[c] + dc[0] / r_n, self.p0[1] + dlo_p[c] + dc[1] / r_e)
         g = 1.0
         if cfg.aiding:  # the aided reference is a slow bias: move it part of the way (reference_gain), but
