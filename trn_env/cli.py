@@ -230,7 +230,7 @@ def cmd_fly(args) -> int:
         # real-time factor; then the loop (and its worker process, forked from this one) before the bar
         if not args.quiet:
             print(f"preparing {scenario.name}: terrain, then the numba kernels it uses (compiled on the "
-                  "first run only, about a minute on a 2-core machine; cached afterwards) ...",
+                  "first run only, about half a minute on an idle 2-core machine; cached afterwards) ...",
                   file=sys.stderr, flush=True)
         dems = build_terrain(scenario.data, scenario.extras, spawn_rngs(scenario.seed)["map"])
         try:
