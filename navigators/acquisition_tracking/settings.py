@@ -59,7 +59,9 @@ SOURCE_DEFAULTS = {
     "reference_gain": {"air_data": 0.1, "ins": 0.02},
     "max_speed_bias_mps": {"air_data": 15.0, "ins": 6.0},
     "max_heading_bias_deg": {"air_data": 15.0, "ins": 3.0},
+    "reference_frame": {"air_data": "speed_track", "ins": "ne"},
 }
+REFERENCE_FRAMES = ("speed_track", "ne")
 LOOP_ORDERS = ("speed_first", "heading_first")
 BIAS_MITIGATIONS = ("ncs", "els", "none")
 DISCRIMINATOR_NAMES = ("thesis", "v_fit")
@@ -107,6 +109,8 @@ class AcqTrackConfig:
     aiding: bool = True  # chapter 4's aided loops (False: constant speed and heading)
     aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
     reference_gain: float | None = None  # aided: fraction of each epoch's loop correction taken into b
+    reference_frame: str | None = None  # aided: "speed_track" (b_v, b_psi) | "ne" (a north/east bias)
+    aiding_bias_walk_mps_per_sqrt_s: float = 0.03  # "ne": the velocity bias' random walk
     aiding_interval_mean: bool = True  # air data: the air vector's mean over each sample interval
     air_vector_sideslip: bool = True  # air data: the air vector points along heading + sideslip
     wind_estimation: bool = True  # wind triangle, predicted through heading changes
@@ -185,6 +189,7 @@ class AcqTrackConfig:
             ("bias_mitigation", BIAS_MITIGATIONS),
             ("discriminator", DISCRIMINATOR_NAMES),
             ("replica_model", ("plumb", "footprint")),
+            ("reference_frame", REFERENCE_FRAMES),
         ):
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
@@ -282,6 +287,7 @@ class AcqTrackConfig:
         if self.fix_overlap is not None:
             _finite("fix_overlap", self.fix_overlap, 1.0)
         _finite("aiding_walk_m_per_sqrt_s", self.aiding_walk_m_per_sqrt_s, 0.0)
+        _finite("aiding_bias_walk_mps_per_sqrt_s", self.aiding_bias_walk_mps_per_sqrt_s, 0.0)
         if self.position_sigma_floor_m is not None:
             _finite("position_sigma_floor_m", self.position_sigma_floor_m, 0.0, strict_lo=True)
 
