@@ -231,7 +231,7 @@ def test_els_reduces_the_early_late_bias_on_a_skewed_terrain_correlation(dem):
             out = loop_kernel.loop_epoch(
                 heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dts, z, z, 80.0 + start, track, r_n, r_e, d,
                 np.ones(n, bool), 0, True, 0, 15, 0, 7.36 / 2.0, 10, SPEED_SET, 2.0, 0.005, 0.24, 0.002, 101,
-                0, loop_kernel.MITIGATIONS[name],
+                0, loop_kernel.MITIGATIONS[name], z, z,
             )  # fmt: skip
             errs[name].append(abs(out[0] - x_bf))
     assert n_cases >= 12

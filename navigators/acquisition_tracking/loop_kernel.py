@@ -36,7 +36,8 @@ import math
 import numpy as np
 from numba import njit
 
-from navigators.acquisition_tracking.correlation import COST_MSD, _map_height, profile_cost, replica_offsets
+from navigators.acquisition_tracking.beam import replica_points
+from navigators.acquisition_tracking.correlation import COST_MSD, _map_height, profile_cost
 from navigators.acquisition_tracking.tracking import DISC_THESIS, VShape
 
 MITIGATION_NONE = 0
@@ -322,14 +323,19 @@ def choose_spacing_kernel(offsets, values, bandwidth, min_offset, spacings_desc,
 def loop_epoch(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
     d, valid, cost, remove_bias, interp, n_min, which, reach, n_side, spacings_desc, symmetry_max,
-    threshold_1, spacing_2, threshold_2, break_iteration, discriminator, mitigation,
+    threshold_1, spacing_2, threshold_2, break_iteration, discriminator, mitigation, o_n, o_e,
 ):  # fmt: skip
     """One loop's epoch (module docstring). Returns (x, it_1, it_2, it_els, locked, v_shape, bandwidth,
-    min_offset, min_cost, slope_left, slope_right, spacing_1, els_applied)."""
+    min_offset, min_cost, slope_left, slope_right, spacing_1, els_applied). o_n, o_e: the beam offsets
+    of the samples' map points (m, replica frame; beam.py), added to the basis' P and R rows so that they
+    turn with b_psi."""
     n = dt.shape[0]
     h_w = np.empty(n)
     basis = np.empty((4, n))
     replica_basis(dt, m_v, m_psi, basis)
+    for i in range(n):
+        basis[0, i] += o_n[i]
+        basis[2, i] += o_e[i]
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
     x0 = b_v if which == 0 else b_psi
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
@@ -433,18 +439,19 @@ def _shift_stage(
 def shift_loop_epoch(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
     cost, remove_bias, interp, n_min, u_n, u_e, reach, n_side, spacings_desc, symmetry_max, threshold_1,
-    spacing_2, threshold_2, break_iteration, discriminator, narrow,
+    spacing_2, threshold_2, break_iteration, discriminator, narrow, o_n, o_e,
 ):  # fmt: skip
     """One start-point loop's epoch along (u_n, u_e) (tracking.shift_correlation_function,
     analyse_v, choose_spacing and early_late_shift_loop in one call): the shift correlation function at
     2 n_side + 1 offsets in [-reach, reach] m, its V-shape, the spacing choice, the first stage from 0 and
     (narrow) the second stage at spacing_2. Returns (x m, locked, v_shape, bandwidth, min_offset, min_cost,
-    slope_left, slope_right); x = 0, unlocked when the loop ran off the map or beyond the function's reach."""
+    slope_left, slope_right); x = 0, unlocked when the loop ran off the map or beyond the function's reach.
+    o_n, o_e: the samples' beam offsets (m, replica frame; beam.py)."""
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
     h_w = np.empty(n)
-    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dla, dlo)
+    replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
          u_n, u_e, r_n, r_e_cos)  # fmt: skip
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
@@ -494,17 +501,22 @@ def run_loop(
     break_iteration: int,
     discriminator: int,
     mitigation: int,
+    beam_n: np.ndarray | None = None,
+    beam_e: np.ndarray | None = None,
 ):
     """loop_epoch with the navigator's return shape: (x, [it_1, it_2], locked, VShape, spacing_1).
 
-    Units: which 0 - x, reach, spacings, thresholds in m/s; which 1 - in rad."""
+    Units: which 0 - x, reach, spacings, thresholds in m/s; which 1 - in rad. beam_n, beam_e: the beam
+    offsets (m, replica frame; None: zero)."""
     heights, lat0, lon0, dlat, dlon = grid
+    if beam_n is None or beam_e is None:
+        beam_n = beam_e = np.zeros(dt.shape[0])
     r = loop_epoch(
         heights, lat0, lon0, dlat, dlon, float(lat_s), float(lon_s), dt, m_v, m_psi, float(b_v),
         float(b_psi), float(r_n), float(r_e_cos), d, valid, int(cost), bool(remove_bias), int(interp),
         int(n_min), int(which), float(reach), int(n_side), spacings_desc, float(symmetry_max),
         float(threshold_1), float(spacing_2), float(threshold_2), int(break_iteration), int(discriminator),
-        int(mitigation),
+        int(mitigation), beam_n, beam_e,
     )  # fmt: skip
     x, it1, it2, _it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, spacing, _els = r
     shape = VShape(bool(v_shape), float(bw), float(m_off), float(m_cost), float(sl), float(sr))

@@ -56,10 +56,11 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 
 import numpy as np
 
-from navigators.acquisition_tracking import acquisition, loop_kernel, tracking
+from navigators.acquisition_tracking import acquisition, beam, loop_kernel, tracking
 from navigators.acquisition_tracking.aiding import (
     WindEstimator,
     air_vector_sum,
@@ -73,7 +74,6 @@ from navigators.acquisition_tracking.aiding import (
 from navigators.acquisition_tracking.correlation import (
     COSTS,
     INTERPOLATIONS,
-    along_cross_information,
     replica_heights,
     replica_offsets,
 )
@@ -209,6 +209,7 @@ class AcqTrackNavigator:
         self.name = name
         self._grid = dem.grid
         self._footprint = None
+        self._return_model = cfg.replica_model == "return"
         if cfg.replica_model == "footprint":
             from navigators.acquisition_tracking.footprint import FootprintMaps
 
@@ -282,6 +283,7 @@ class AcqTrackNavigator:
         self.b_mean = (0.0, 0.0)
         self.e_ne = np.zeros(2)  # reference_frame "ne": the aiding's north/east velocity bias (m/s)
         self.e_mean = np.zeros(2)
+        self._gnss_epochs = 0
         self._aid_key = None
         self.p0 = (math.nan, math.nan)
         self.pos = (math.nan, math.nan)
@@ -323,6 +325,10 @@ class AcqTrackNavigator:
             k: _Tail(n) for k, n in (("baro", 1), ("ra", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
         }
         self.transect.clear()
+        self._offs: deque = deque(maxlen=self.config.transect_samples)  # beam offsets (north, east m)
+        self._pending_offset = (0.0, 0.0)
+        self._beam_rot = None
+        self._beam_cache = None
         self.average.reset()
         self.wind.reset()
 
@@ -422,9 +428,14 @@ class AcqTrackNavigator:
             roll, pitch = _roll_pitch(hist[idx, 6:10])
             roll[~ok[idx]] = np.nan
             pitch[~ok[idx]] = np.nan
+            qq = hist[idx, 6:10]  # yaw: atan2(C_bn[1, 0], C_bn[0, 0]) (beam.py's predicted return)
+            yaw_i = np.arctan2(
+                2.0 * (qq[:, 1] * qq[:, 2] + qq[:, 0] * qq[:, 3]),
+                qq[:, 0] ** 2 + qq[:, 1] ** 2 - qq[:, 2] ** 2 - qq[:, 3] ** 2,
+            )
             tl["ins"].extend(
                 frames.imu.t_s[idx],
-                [hist[idx, 3], hist[idx, 4], roll, pitch, np.zeros(idx.size)],
+                [hist[idx, 3], hist[idx, 4], roll, pitch, yaw_i],
                 ok[idx],
             )
 
@@ -457,6 +468,7 @@ class AcqTrackNavigator:
         # aiding values at the sample
         tas = hdg = math.nan
         roll = pitch = 0.0
+        yaw = self.yaw
         m_v = m_psi = 0.0
         if cfg.aiding and cfg.aiding_source == "air_data":
             a, oka = tl["air"].row(t_k, 1.0)
@@ -474,11 +486,15 @@ class AcqTrackNavigator:
                 last = self.transect.samples[-1] if len(self.transect) else None
                 m_v, m_psi = (last.m_v, last.m_psi) if last is not None else self._v0
             else:
-                m_v, m_psi = self.wind.predict(tas, hdg) if cfg.wind_estimation else (tas, hdg)
+                # "ne": the air vector itself, the wind is e_ne; else the wind estimator's prediction
+                m_v, m_psi = (
+                    self.wind.predict(tas, hdg) if cfg.wind_estimation and not self._ne_frame else (tas, hdg)
+                )
         elif cfg.aiding:
             row, found = tl["ins"].row(t_k, 0.5)
             if found and np.all(np.isfinite(row[:4])):
                 vn, ve, roll, pitch = (float(x) for x in row[:4])
+                yaw = float(row[4]) if math.isfinite(row[4]) else yaw
                 m_v, m_psi = speed_track(np.array([vn, ve]))
             else:
                 self.health.skip(t_k, "aiding_missing", "acq_track: INS velocity missing; aiding held")
@@ -501,6 +517,11 @@ class AcqTrackNavigator:
             )
         agl = float(plumb_height_m(r_m, roll, pitch, cfg.beamwidth_deg)) if cfg.roll_compensation else r_m
         d = h_baro - agl if valid else math.nan
+        self._pending_offset = (0.0, 0.0)
+        if valid and self._return_model:  # the ray of the predicted shortest return (beam.py)
+            if cfg.aiding and cfg.aiding_source == "air_data" and math.isfinite(hdg):
+                yaw = hdg
+            d, self._pending_offset = self._return_height(t_k, r_m, h_baro, m_v, m_psi, roll, pitch, yaw, d)
         # GNSS at the sample
         g, have_gnss = tl["gnss"].row(t_k, 0.6)
         have_gnss = bool(have_gnss and np.all(np.isfinite(g)))
@@ -508,6 +529,44 @@ class AcqTrackNavigator:
         gv = (float(g[3]), float(g[4])) if have_gnss else (math.nan, math.nan)
         s = Sample(t_k, d, bool(valid), r_m, float(m_v), float(m_psi), tas, hdg, glat, glon, gv, roll)
         self._epoch(s, have_gnss)
+
+    def _return_height(self, t_k, r_m, h_baro, m_v, m_psi, roll, pitch, yaw, d_fallback):
+        """(measured terrain height m, beam offset (north, east) m) of a range r_m by the predicted return's
+        ray (beam.py) at the dead-reckoned position of t_k; the fallback height and no offset when there is
+        no position yet or the prediction has no return."""
+        cfg = self.config
+        lat, lon = self.pos
+        if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(yaw)):
+            return d_fallback, (0.0, 0.0)
+        r_n, r_e = self._radii(lat, h_baro)
+        if math.isfinite(self.t_pos) and cfg.aiding:  # one step of dead reckoning on this sample's aiding
+            v_ne = ground_vector(m_v, m_psi) + (self.e_ne if self._ne_frame else 0.0)
+            v, psi = speed_track(v_ne)
+            v_ne = ground_vector(v + self.b_v, psi + self.b_psi)
+            dtp = t_k - self.t_pos
+            lat, lon = lat + v_ne[0] * dtp / r_n, lon + v_ne[1] * dtp / r_e
+        if not cfg.roll_compensation:
+            roll = pitch = 0.0
+        ray = beam.predicted_ray(self.dem, lat, lon, h_baro, roll, pitch, yaw, cfg.beamwidth_deg, r_n, r_e)
+        if ray is None:
+            return d_fallback, (0.0, 0.0)
+        theta, u_n, u_e = ray
+        rho = r_m * math.sin(theta)
+        return h_baro - r_m * math.cos(theta), (rho * u_n, rho * u_e)
+
+    def _beam_arrays(self, b_psi: float) -> tuple[np.ndarray, np.ndarray]:
+        """The transect's beam offsets (m) in the replica frame of heading reference b_psi."""
+        n = len(self.transect)
+        if not self._return_model or len(self._offs) != n:
+            z = np.zeros(n)
+            return z, z
+        key = (self.transect.samples.version, b_psi)
+        if self._beam_cache is not None and self._beam_cache[0] == key:
+            return self._beam_cache[1]
+        o = np.array(self._offs, float).reshape(-1, 2)
+        out = beam.rotate_offsets(o[:, 0], o[:, 1], -b_psi)
+        self._beam_cache = (key, out)
+        return out
 
     def _air_vector(self, t_k: float) -> tuple[float, float]:
         """(speed, direction) of the air vector over the sample interval (t_k - T, t_k]: the mean of
@@ -561,6 +620,7 @@ class AcqTrackNavigator:
             dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
             self.p0 = (self.p0[0] + dla[1], self.p0[1] + dlo[1])
         tr.append(s)
+        self._offs.append(self._pending_offset)
         if len(tr) == 1:
             lat, lon = self.pos
             if prev is None and math.isfinite(self.t_pos):  # dead-reckon the reset position to t_k
@@ -637,7 +697,6 @@ class AcqTrackNavigator:
 
     def _gnss_epoch(self, s: Sample) -> None:
         cfg = self.config
-        tr = self.transect
         g_speed, g_track = speed_track(np.array(s.gnss_v_ne))
         if (
             cfg.aiding
@@ -647,8 +706,11 @@ class AcqTrackNavigator:
         ):
             self.wind.update(np.array(s.gnss_v_ne), s.tas_mps, s.heading_rad, gain=max(cfg.wind_gain, 0.2))
         if math.isfinite(g_speed) and g_speed > 1.0 and self._ne_frame:
-            self.e_ne = self.e_ne + 0.2 * (np.array(s.gnss_v_ne) - ground_vector(s.m_v, s.m_psi) - self.e_ne)
+            # the triangle GNSS velocity - aiding vector (the wind with air data); the first one sets it
+            k = 0.2 if self._gnss_epochs else 1.0
+            self.e_ne = self.e_ne + k * (np.array(s.gnss_v_ne) - ground_vector(s.m_v, s.m_psi) - self.e_ne)
             self.e_mean = self.e_ne.copy()
+            self._gnss_epochs += 1
         elif math.isfinite(g_speed) and g_speed > 1.0:
             k = 0.2
             self.b_v += k * (g_speed - s.m_v - self.b_v)
@@ -663,7 +725,9 @@ class AcqTrackNavigator:
         self.t_pos = s.t_s
         self.P = np.eye(2) * cfg.gnss_sigma_m**2
         self.Pc = self.P.copy()
-        self._set_centroid_cov(self.Pc, bias_sigma_mps=0.1)
+        # e_ne's sigma after the GNSS triangles: the aiding's per-sample noise through the gain-0.2 low-pass
+        # (steady-state variance k / (2 - k) of the noise's); an INS is reset by GNSS, air data carries gusts
+        self._set_centroid_cov(self.Pc, bias_sigma_mps=cfg.aiding_speed_sigma_mps * math.sqrt(0.2 / 1.8))
         self.sigma_v = 0.1
         self.sigma_psi = math.radians(0.2)
         self.bad_epochs = 0
@@ -922,6 +986,7 @@ class AcqTrackNavigator:
             symmetry_max=cfg.symmetry_ratio_max, threshold_1=thr1, spacing_2=s2, threshold_2=thr2,
             break_iteration=cfg.break_iteration, discriminator=self._disc,
             mitigation=loop_kernel.MITIGATIONS[cfg.bias_mitigation],
+            beam_n=self._beam_rot[0], beam_e=self._beam_rot[1],
         )  # fmt: skip
 
     def _shift_loop(self, u_n: float, u_e: float, arrays, b_v: float, b_psi: float, p0):
@@ -937,7 +1002,8 @@ class AcqTrackNavigator:
             self._n_min, float(u_n), float(u_e), self._position_reach, int(cfg.scf_points),
             self._position_desc, float(cfg.symmetry_ratio_max), float(cfg.position_threshold_m),
             float(cfg.position_narrow_spacing_cells * res), float(cfg.position_narrow_threshold_m),
-            int(cfg.break_iteration), self._disc, cfg.bias_mitigation == "ncs",
+            int(cfg.break_iteration), self._disc, cfg.bias_mitigation == "ncs", self._beam_rot[0],
+            self._beam_rot[1],
         )  # fmt: skip
         x, locked, v_shape, bw, m_off, m_cost, sl, sr = r
         shape = tracking.VShape(bool(v_shape), float(bw), float(m_off), float(m_cost), float(sl), float(sr))
@@ -956,6 +1022,7 @@ class AcqTrackNavigator:
             self._out_of_lock(s, "too few valid samples")
             return
         b_v0, b_psi0 = self.b_v, self.b_psi
+        self._beam_rot = o_n, o_e = self._beam_arrays(b_psi0)
         order = (0, 1) if cfg.loop_order == "speed_first" else (1, 0)
         b_v, b_psi = b_v0, b_psi0
         its = [0, 0, 0, 0]
@@ -993,26 +1060,10 @@ class AcqTrackNavigator:
         heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
         n = dt.size
         h_p = np.empty(n)
-        replica_heights(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            p_s[0],
-            p_s[1],
-            dt,
-            m_v,
-            m_psi,
-            b_v,
-            b_psi,
-            r_n,
-            r_e,
-            self._interp,
-            np.empty(n),
-            np.empty(n),
-            h_p,
-        )
+        beam.replica_heights_at(
+            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e,
+            self._interp, h_p,
+        )  # fmt: skip
         r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
@@ -1060,8 +1111,9 @@ class AcqTrackNavigator:
         )
         # the fix's covariance: the terrain information along / across the track at the fit
         psi = self._aided_track(s)
-        i_al, i_cr = along_cross_information(
-            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, valid, psi,
+        i_al, i_cr = beam.information_at(
+            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e,
+            valid, psi,
         )
         sig_res = max(res_sigma if math.isfinite(res_sigma) else 0.0, sig0)
         k2 = cfg.fix_sigma_scale**2 * _MAD_VARIANCE_FACTOR * sig_res**2
@@ -1205,6 +1257,7 @@ class AcqTrackNavigator:
                 self.config.aiding
                 and self.config.aiding_source == "air_data"
                 and self.config.wind_estimation
+                and not self._ne_frame
                 and math.isfinite(s.tas_mps)
             ):
                 self.wind.update(ground_vector(v, psi), s.tas_mps, s.heading_rad)
@@ -1263,7 +1316,9 @@ class AcqTrackNavigator:
             "v_shape": bool(self.v_shape),
             "false_lock": self.false_lock,
             "loop_iterations": list(self.iterations),
-            "wind_ne_mps": self.wind.w_ne.copy(),
+            "wind_ne_mps": self.e_ne.copy()
+            if self._ne_frame and self.config.aiding_source == "air_data"
+            else self.wind.w_ne.copy(),
             "acquisitions": int(self.acquisitions),
         }
         if self.last_innovation is not None:

@@ -59,7 +59,8 @@ SOURCE_DEFAULTS = {
     "reference_gain": {"air_data": 0.1, "ins": 0.02},
     "max_speed_bias_mps": {"air_data": 15.0, "ins": 6.0},
     "max_heading_bias_deg": {"air_data": 15.0, "ins": 3.0},
-    "reference_frame": {"air_data": "speed_track", "ins": "ne"},
+    "reference_frame": {"air_data": "ne", "ins": "ne"},
+    "aiding_bias_walk_mps_per_sqrt_s": {"air_data": 0.05, "ins": 0.03},
 }
 REFERENCE_FRAMES = ("speed_track", "ne")
 LOOP_ORDERS = ("speed_first", "heading_first")
@@ -110,7 +111,7 @@ class AcqTrackConfig:
     aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
     reference_gain: float | None = None  # aided: fraction of each epoch's loop correction taken into b
     reference_frame: str | None = None  # aided: "speed_track" (b_v, b_psi) | "ne" (a north/east bias)
-    aiding_bias_walk_mps_per_sqrt_s: float = 0.03  # "ne": the velocity bias' random walk
+    aiding_bias_walk_mps_per_sqrt_s: float | None = None  # "ne": the velocity bias' walk (None: by source)
     aiding_interval_mean: bool = True  # air data: the air vector's mean over each sample interval
     air_vector_sideslip: bool = True  # air data: the air vector points along heading + sideslip
     wind_estimation: bool = True  # wind triangle, predicted through heading changes
@@ -188,7 +189,7 @@ class AcqTrackConfig:
             ("loop_order", LOOP_ORDERS),
             ("bias_mitigation", BIAS_MITIGATIONS),
             ("discriminator", DISCRIMINATOR_NAMES),
-            ("replica_model", ("plumb", "footprint")),
+            ("replica_model", ("plumb", "footprint", "return")),
             ("reference_frame", REFERENCE_FRAMES),
         ):
             if getattr(self, name) not in options:
