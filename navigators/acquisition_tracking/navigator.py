@@ -348,6 +348,9 @@ class AcqTrackNavigator:
         self.P = 0.5 * (cov[:2, :2] + cov[:2, :2].T)
         self.Pc = self.P.copy()
         self._set_centroid_cov(self.Pc)
+        # the velocity bias' prior: the aiding's sigma, or the initial velocity's if larger
+        v_cov = 0.5 * (cov[3:5, 3:5] + cov[3:5, 3:5].T)
+        self.X[2:, 2:] = np.maximum(np.eye(2) * self._bias_sigma0**2, v_cov)
         self.out_speed, self.out_track = speed, track
         self._v0 = (speed, track)
         if not cfg.aiding:
@@ -933,6 +936,32 @@ class AcqTrackNavigator:
                 f"acquisition: {res.reason}; retry with the next transect",
             )
             return False
+        if self._ne_frame:  # the acquired velocity against the filter's velocity bias: a false acquisition
+            # (a side minimum over weak terrain) moves it far beyond its sigma; R: one bin as 1 sigma
+            dv_ne = self._ne_change(res.b_v - self.b_v, res.b_psi_rad - self.b_psi, m_v, m_psi)
+            psi_c = float(np.mean(m_psi))
+            v_c = max(float(np.mean(m_v)), 1.0)
+            R_acq = _rot_diag(
+                psi_c,
+                cfg.acquisition_speed_bin_mps**2,
+                (v_c * math.radians(cfg.acquisition_heading_bin_deg)) ** 2,
+            )
+            nis_v = _quad2(dv_ne, self.X[2:, 2:] + R_acq)
+            if nis_v > cfg.fix_gate_nis:
+                self.health.events.append(
+                    (
+                        s.t_s,
+                        f"acq_track: acquisition rejected: its velocity change {math.hypot(*dv_ne):.1f} m/s "
+                        f"has NIS {nis_v:.1f} > gate {cfg.fix_gate_nis:g} against the velocity bias' sigma",
+                    )
+                )
+                self._set_lock(
+                    "acquiring",
+                    s.t_s,
+                    "lost" if self.need_acquisition else "acquiring",
+                    "acquisition: implausible velocity; retry with the next transect",
+                )
+                return False
         self.p0 = (self.p0[0] + res.dn_m / r_n, self.p0[1] + res.de_m / r_e)
         self.b_v, self.b_psi = res.b_v, res.b_psi_rad
         if self._ne_frame:  # the acquired speed / track references as the north/east bias
