@@ -295,6 +295,7 @@ def test_aided_loops_follow_ramps_with_a_biased_air_data(dem):
         tas_fn=lambda t: v(t) - 3.0,
         hdg_fn=lambda t: p(t) - math.radians(2.0),
         wind_estimation=False,
+        reference_frame="speed_track",  # a constant speed / heading sensor bias: the thesis' reference
     )
     tail = range(45, 110)
     dv = np.array([ests[k].extra["tracked_speed_mps"] - truth[k, 2] for k in tail])
@@ -327,6 +328,7 @@ def test_speed_step_recovers_in_about_one_transect(dem):
         tas_fn=lambda t: 80.0 + (3.0 if t >= 50.0 else 0.0),
         wind_estimation=False,
         reference_gain=1.0,
+        reference_frame="speed_track",  # the thesis' loop (the "ne" frame is a filter, settings.py)
     )
     dv = np.array([e.extra["tracked_speed_mps"] - 80.0 for e in ests])
     assert abs(dv[48]) < 0.5 and dv[52] > 1.0  # the step reaches the output
