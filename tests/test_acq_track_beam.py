@@ -1,4 +1,4 @@
-"""The "return" replica model (beam.py) and the north/east reference frame (reference_frame "ne") of acq_track.
+"""acq_track's "return" replica model (beam.py) and its north/east reference frame (reference_frame "ne").
 
 Checked against independent computations: the shortest in-cone range over a flat map by the cone geometry,
 the replica points by numpy, the loops' basis form against the direct replica, and the NE bias filter
@@ -49,7 +49,8 @@ def test_predicted_ray_over_flat_ground_is_the_cone_edge(dem, roll_deg, yaw_deg)
     expect = max(abs(roll_deg) - 8.5, 0.0)
     assert math.degrees(theta) == pytest.approx(expect, abs=0.3)
     if expect > 0:
-        side = math.radians(yaw_deg) - math.copysign(math.pi / 2, roll_deg)  # left of the heading for roll > 0
+        # left of the heading for a right roll
+        side = math.radians(yaw_deg) - math.copysign(math.pi / 2, roll_deg)
         assert u_n == pytest.approx(math.cos(side), abs=0.02)
         assert u_e == pytest.approx(math.sin(side), abs=0.02)
     # the measured height by the ray: the slant range of that edge gives the ground's height back
