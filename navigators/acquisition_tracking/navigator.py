@@ -370,13 +370,15 @@ class AcqTrackNavigator:
         ra = frames.radar_altimeter
         if ra is not None:
             tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
-        if frames.air_data is not None:
+        # air data and compass enter only the air-data aiding (_add_sample, _air_vector): not kept otherwise
+        air_aiding = self.config.aiding and self.config.aiding_source == "air_data"
+        if air_aiding and frames.air_data is not None:
             ad = frames.air_data
             n_ad = ad.t_s.size
             beta = np.asarray(ad.beta_rad, float) if self.config.air_vector_sideslip else np.zeros(n_ad)
             tl["air"].extend(ad.t_s, [ad.tas_mps, beta], ad.valid & np.isfinite(beta))
         hd = frames.heading
-        if hd is not None and hd.t_s.size:
+        if air_aiding and hd is not None and hd.t_s.size:
             h = np.asarray(hd.heading_rad, float)
             ok = hd.valid & np.isfinite(h)
             if ok.any():  # continuous heading across frames (for the turn rate)
