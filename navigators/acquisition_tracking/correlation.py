@@ -90,6 +90,14 @@ def profile_cost(d, valid, h, cost, remove_bias, n_min):
             m += 1
             sd += d[i]
             sh += h[i]
+    return cost_from_sums(d, valid, h, m, sd, sh, cost, remove_bias, n_min)
+
+
+@njit(cache=True)
+def cost_from_sums(d, valid, h, m, sd, sh, cost, remove_bias, n_min):
+    """profile_cost given its first pass: m samples valid with finite h, sd = their sum of d, sh of h (a
+    caller that makes h can sum as it goes: the same sums in the same order, so the same cost to the bit)."""
+    n = d.shape[0]
     if m < n_min or m == 0:
         return np.inf
     md = sd / m

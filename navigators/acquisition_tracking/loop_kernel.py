@@ -36,8 +36,15 @@ import math
 import numpy as np
 from numba import njit
 
-from navigators.acquisition_tracking.correlation import COST_MSD, _map_height, profile_cost, replica_offsets
+from navigators.acquisition_tracking.correlation import (
+    COST_MSD,
+    INTERP_BILINEAR,
+    _map_height,
+    cost_from_sums,
+    replica_offsets,
+)
 from navigators.acquisition_tracking.tracking import DISC_THESIS, VShape
+from terrain.kernels import bicubic, bilinear
 
 MITIGATION_NONE = 0
 MITIGATION_NCS = 1
@@ -84,14 +91,37 @@ def basis_cost(
     """Cost of the replica (b_v, b_psi) from a replica_basis (correlation.replica_cost's value)."""
     cb = math.cos(b_psi)
     sb = math.sin(b_psi)
-    for i in range(basis.shape[1]):
-        cn = basis[0, i] + b_v * basis[1, i]
-        sn = basis[2, i] + b_v * basis[3, i]
-        h_w[i] = _map_height(
-            heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
-            lon_s + (sb * cn + cb * sn) / r_e_cos, interp,
-        )  # fmt: skip
-    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+    m = 0
+    sd = 0.0
+    sh = 0.0
+    # profile_cost's first pass summed as the heights are made; the interpolation chosen outside the loop
+    if interp == INTERP_BILINEAR:
+        for i in range(basis.shape[1]):
+            cn = basis[0, i] + b_v * basis[1, i]
+            sn = basis[2, i] + b_v * basis[3, i]
+            h = bilinear(
+                heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
+                lon_s + (sb * cn + cb * sn) / r_e_cos,
+            )  # fmt: skip
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    else:
+        for i in range(basis.shape[1]):
+            cn = basis[0, i] + b_v * basis[1, i]
+            sn = basis[2, i] + b_v * basis[3, i]
+            h = bicubic(
+                heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
+                lon_s + (sb * cn + cb * sn) / r_e_cos,
+            )  # fmt: skip
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    return cost_from_sums(d, valid, h_w, m, sd, sh, cost, remove_bias, n_min)
 
 
 @njit(cache=True)
@@ -391,9 +421,26 @@ def _shift_cost_pre(
     (start + x u / r, then + offset), so the same cost to the bit."""
     ls = lat_s + x * u_n / r_n
     lo = lon_s + x * u_e / r_e_cos
-    for i in range(dla.shape[0]):
-        h_w[i] = _map_height(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i], interp)
-    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+    m = 0
+    sd = 0.0
+    sh = 0.0
+    if interp == INTERP_BILINEAR:  # as basis_cost: the first pass summed as the heights are made
+        for i in range(dla.shape[0]):
+            h = bilinear(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i])
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    else:
+        for i in range(dla.shape[0]):
+            h = bicubic(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i])
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    return cost_from_sums(d, valid, h_w, m, sd, sh, cost, remove_bias, n_min)
 
 
 @njit(cache=True)
@@ -463,6 +510,106 @@ def shift_loop_epoch(
         x = 0.0
         locked = False
     return x, locked, v_shape, bw, m_off, m_cost, sl, sr
+
+
+@njit(cache=True)
+def _put_shape(out, k, v_shape, bw, m_off, m_cost, sl, sr):
+    out[k, 0] = 1.0 if v_shape else 0.0
+    out[k, 1] = bw
+    out[k, 2] = m_off
+    out[k, 3] = m_cost
+    out[k, 4] = sl
+    out[k, 5] = sr
+
+
+@njit(cache=True)
+def track_loops(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
+    cost, remove_bias, interp, n_min, aided, position_loops, speed_first, mean_m_v, mean_m_psi,
+    n_side, symmetry_max, break_iteration, discriminator, mitigation, f_r, sample_period_s,
+    speed_reach, speed_desc, speed_threshold_1, speed_spacing_2, speed_threshold_2,
+    heading_desc, heading_threshold_1, heading_spacing_2, heading_threshold_2,
+    position_reach, position_desc, position_threshold_1, position_spacing_2, position_threshold_2,
+    out_its, out_locked, out_ran, out_shapes, out_h_prompt,
+):  # fmt: skip
+    """All of one tracking epoch's loops in one call (navigator.py's order): aided, the start-point loops
+    along and across the track at the references, then the speed and heading loops (loop_epoch; speed first
+    unless speed_first is False); unaided the loops first and the start-point loops after them. Then the
+    prompt replica's map heights into out_h_prompt.
+
+    mean_m_v, mean_m_psi: the transect's mean aiding speed (m/s) and heading (rad); f_r: the correlation
+    functions' reach at the far end (m). Loop k (0 speed, 1 heading, 2 along, 3 across): out_its[2k: 2k + 2]
+    the two stages' iterations (speed and heading), out_locked[k], out_ran[k], out_shapes[k] = (v_shape,
+    bandwidth, min_offset, min_cost, slope_left, slope_right). Returns (b_v, b_psi, lat_p, lon_p, speed
+    spacing, heading spacing): the references and start point the loops found."""
+    n = dt.shape[0]
+    for k in range(4):
+        out_ran[k] = False
+        out_locked[k] = False
+        out_its[k] = 0
+    lat_p = lat_s
+    lon_p = lon_s
+    sp_v = 0.0
+    sp_psi = 0.0
+    for phase in range(3):  # 0: start-point loops (aided), 1: speed and heading, 2: start-point (unaided)
+        if phase == 1:
+            for j in range(2):
+                which = 0 if (j == 0) == speed_first else 1
+                if which == 0:
+                    reach = speed_reach
+                    r = loop_epoch(
+                        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
+                        r_e_cos, d, valid, cost, remove_bias, interp, n_min, 0, reach, n_side, speed_desc,
+                        symmetry_max, speed_threshold_1, speed_spacing_2, speed_threshold_2, break_iteration,
+                        discriminator, mitigation,
+                    )  # fmt: skip
+                    b_v = r[0]
+                    sp_v = r[11]
+                else:  # spec section 2: 2 sin(eps / 2) v t N = f R_db
+                    v = max(mean_m_v + b_v, 1.0)
+                    reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * sample_period_s * n)))
+                    reach = max(reach, heading_desc[0])
+                    r = loop_epoch(
+                        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
+                        r_e_cos, d, valid, cost, remove_bias, interp, n_min, 1, reach, n_side, heading_desc,
+                        symmetry_max, heading_threshold_1, heading_spacing_2, heading_threshold_2,
+                        break_iteration, discriminator, mitigation,
+                    )  # fmt: skip
+                    b_psi = r[0] if aided else math.atan2(math.sin(r[0]), math.cos(r[0]))
+                    sp_psi = r[11]
+                _x, it1, it2, _it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, _sp, _els = r
+                out_its[2 * which] = it1
+                out_its[2 * which + 1] = it2
+                out_locked[which] = locked
+                out_ran[which] = True
+                _put_shape(out_shapes, which, v_shape, bw, m_off, m_cost, sl, sr)
+            continue
+        if not position_loops or (phase == 0) != aided:
+            continue
+        psi_c = mean_m_psi + b_psi if aided else b_psi
+        c = math.cos(psi_c)
+        sn = math.sin(psi_c)
+        for j in range(2):
+            u_n = c if j == 0 else -sn
+            u_e = sn if j == 0 else c
+            r2 = shift_loop_epoch(
+                heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
+                valid, cost, remove_bias, interp, n_min, u_n, u_e, position_reach, n_side, position_desc,
+                symmetry_max, position_threshold_1, position_spacing_2, position_threshold_2,
+                break_iteration, discriminator, mitigation == MITIGATION_NCS,
+            )  # fmt: skip
+            x, locked, v_shape, bw, m_off, m_cost, sl, sr = r2
+            lat_p = lat_p + x * u_n / r_n
+            lon_p = lon_p + x * u_e / r_e_cos
+            out_locked[2 + j] = locked
+            out_ran[2 + j] = True
+            _put_shape(out_shapes, 2 + j, v_shape, bw, m_off, m_cost, sl, sr)
+    dla = np.empty(n)
+    dlo = np.empty(n)
+    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dla, dlo)
+    for i in range(n):
+        out_h_prompt[i] = _map_height(heights, lat0, lon0, dlat, dlon, lat_p + dla[i], lon_p + dlo[i], interp)
+    return b_v, b_psi, lat_p, lon_p, sp_v, sp_psi
 
 
 def run_loop(

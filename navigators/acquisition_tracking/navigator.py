@@ -235,6 +235,25 @@ class AcqTrackNavigator:
         self._position_reach = float(
             max(cfg.scf_offset_cells * self.map_resolution_m, float(self._position_set.max()))
         )
+        # loop_kernel.track_loops' settings (fixed by the config) and its preallocated outputs
+        f_r = cfg.scf_offset_cells * self.map_resolution_m
+        self._loop_args = (
+            self._cost, bool(cfg.remove_bias), self._interp, self._n_min, bool(cfg.aiding),
+            bool(cfg.position_loops), cfg.loop_order == "speed_first",
+        )  # fmt: skip
+        self._loop_settings = (
+            int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), self._disc,
+            loop_kernel.MITIGATIONS[cfg.bias_mitigation], float(f_r), float(cfg.sample_period_s),
+            max(f_r / (cfg.transect_samples * cfg.sample_period_s), float(self._speed_set.max())),
+            self._speed_desc, float(cfg.speed_threshold_mps), float(cfg.speed_narrow_spacing_mps),
+            float(cfg.speed_narrow_threshold_mps), self._heading_desc,
+            math.radians(cfg.heading_threshold_deg), math.radians(cfg.heading_narrow_spacing_deg),
+            math.radians(cfg.heading_narrow_threshold_deg),
+            self._position_reach, self._position_desc, float(cfg.position_threshold_m),
+            float(cfg.position_narrow_spacing_cells * self.map_resolution_m),
+            float(cfg.position_narrow_threshold_m),
+        )  # fmt: skip
+        self._loop_out = (np.zeros(4, np.int64), np.zeros(4, bool), np.zeros(4, bool), np.zeros((4, 6)))
         self.wind = WindEstimator(cfg.wind_gain)
         self.average = OutputAverage(
             cfg.average_length,
@@ -801,57 +820,6 @@ class AcqTrackNavigator:
         self.lock_state = "tracking"
         return True
 
-    def _loop(self, which: int, arrays, b_v: float, b_psi: float, p0=None):
-        """Adaptivity block + both stages of one loop: (x, [it1, it2], locked, VShape, spacing)."""
-        cfg = self.config
-        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
-        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
-        N, Ts = cfg.transect_samples, cfg.sample_period_s
-        f_r = cfg.scf_offset_cells * self.map_resolution_m
-        if which == 0:  # spec section 2: speed eps_max = f R_db / (N t)
-            reach = f_r / (N * Ts)
-            sset, thr1 = self._speed_set, cfg.speed_threshold_mps
-            s2, thr2 = cfg.speed_narrow_spacing_mps, cfg.speed_narrow_threshold_mps
-        else:  # 2 sin(eps / 2) v t N = f R_db
-            v = max(float(np.mean(m_v)) + b_v, 1.0)
-            reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * Ts * N)))
-            sset, thr1 = self._heading_set, math.radians(cfg.heading_threshold_deg)
-            s2, thr2 = (
-                math.radians(cfg.heading_narrow_spacing_deg),
-                math.radians(cfg.heading_narrow_threshold_deg),
-            )
-        reach = max(reach, float(sset.max()))
-        p0 = self.p0 if p0 is None else p0
-        # adaptivity block, both stages and the bias mitigation in one numba call (loop_kernel.py)
-        return loop_kernel.run_loop(
-            (heights, lat0, lon0, dlat, dlon), p0[0], p0[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e,
-            d, valid, cost=self._cost, remove_bias=cfg.remove_bias, interp=self._interp, n_min=self._n_min,
-            which=which, reach=reach, n_side=cfg.scf_points,
-            spacings_desc=self._speed_desc if which == 0 else self._heading_desc,
-            symmetry_max=cfg.symmetry_ratio_max, threshold_1=thr1, spacing_2=s2, threshold_2=thr2,
-            break_iteration=cfg.break_iteration, discriminator=self._disc,
-            mitigation=loop_kernel.MITIGATIONS[cfg.bias_mitigation],
-        )  # fmt: skip
-
-    def _shift_loop(self, u_n: float, u_e: float, arrays, b_v: float, b_psi: float, p0):
-        """Adaptivity block + both stages of a start-point loop along (u_n, u_e) from start p0:
-        (shift m, locked, VShape); one numba call (loop_kernel.shift_loop_epoch)."""
-        cfg = self.config
-        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
-        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
-        res = self.map_resolution_m
-        r = loop_kernel.shift_loop_epoch(
-            heights, lat0, lon0, dlat, dlon, float(p0[0]), float(p0[1]), dt, m_v, m_psi, float(b_v),
-            float(b_psi), float(r_n), float(r_e), d, valid, self._cost, bool(cfg.remove_bias), self._interp,
-            self._n_min, float(u_n), float(u_e), self._position_reach, int(cfg.scf_points),
-            self._position_desc, float(cfg.symmetry_ratio_max), float(cfg.position_threshold_m),
-            float(cfg.position_narrow_spacing_cells * res), float(cfg.position_narrow_threshold_m),
-            int(cfg.break_iteration), self._disc, cfg.bias_mitigation == "ncs",
-        )  # fmt: skip
-        x, locked, v_shape, bw, m_off, m_cost, sl, sr = r
-        shape = tracking.VShape(bool(v_shape), float(bw), float(m_off), float(m_cost), float(sl), float(sr))
-        return float(x), bool(locked), shape
-
     def _track(self, s: Sample) -> None:
         cfg = self.config
         arrays = self._arrays()
@@ -865,63 +833,24 @@ class AcqTrackNavigator:
             self._out_of_lock(s, "too few valid samples")
             return
         b_v0, b_psi0 = self.b_v, self.b_psi
-        order = (0, 1) if cfg.loop_order == "speed_first" else (1, 0)
-        b_v, b_psi = b_v0, b_psi0
-        its = [0, 0, 0, 0]
-        locks, shapes, spacing = {}, {}, [0.0, 0.0]
         # Aided: start-point loops first, at the (slow) references: the whole-replica shift is the position
         # fix, and the speed and heading loops then stretch and turn the shifted replica. Unaided the speed
-        # and heading are the loops' own fast estimates, so they go first and the shift follows them.
-        p_s = self.p0
-
-        def shift_loops(p_s, b_v, b_psi):
-            psi_c = float(np.mean(m_psi)) + b_psi if cfg.aiding else b_psi
-            u = ((math.cos(psi_c), math.sin(psi_c)), (-math.sin(psi_c), math.cos(psi_c)))
-            for j in (0, 1):
-                x, locked, shape = self._shift_loop(u[j][0], u[j][1], arrays, b_v, b_psi, p_s)
-                p_s = (p_s[0] + x * u[j][0] / r_n, p_s[1] + x * u[j][1] / r_e)
-                locks[2 + j], shapes[2 + j] = locked, shape
-            return p_s
-
-        if cfg.position_loops and cfg.aiding:
-            p_s = shift_loops(p_s, b_v, b_psi)
-        for which in order:
-            x, it, locked, shape, sp = self._loop(which, arrays, b_v, b_psi, p_s)
-            if which == 0:
-                b_v = x
-            else:
-                b_psi = float(wrap_rad(x)) if not cfg.aiding else x
-            its[2 * which : 2 * which + 2] = it
-            locks[which], shapes[which], spacing[which] = locked, shape, sp
-        if cfg.position_loops and not cfg.aiding:
-            p_s = shift_loops(p_s, b_v, b_psi)
-        self.iterations = its
-        self.spacing = (spacing[0], spacing[1])
-        self.v_shape = bool(all(sh.v_shape for sh in shapes.values()))
-        # integrity at the new prompt
+        # and heading are the loops' own fast estimates, so they go first and the shift follows them. All of
+        # it (adaptivity blocks, both stages, bias mitigation) and the prompt's map heights in one numba call.
         heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
-        n = dt.size
-        h_p = np.empty(n)
-        replica_heights(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            p_s[0],
-            p_s[1],
-            dt,
-            m_v,
-            m_psi,
-            b_v,
-            b_psi,
-            r_n,
-            r_e,
-            self._interp,
-            np.empty(n),
-            np.empty(n),
-            h_p,
-        )
+        h_p = np.empty(dt.size)
+        its, locks, ran, shp = self._loop_out
+        b_v, b_psi, lat_p, lon_p, sp_v, sp_psi = loop_kernel.track_loops(
+            heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, b_v0, b_psi0, r_n, r_e,
+            d, valid, *self._loop_args, float(np.mean(m_v)), float(np.mean(m_psi)), *self._loop_settings,
+            its, locks, ran, shp, h_p,
+        )  # fmt: skip
+        p_s = (lat_p, lon_p)
+        self.iterations = [int(its[0]), int(its[1]), int(its[2]), int(its[3])]
+        self.spacing = (sp_v, sp_psi)
+        self.v_shape = bool(np.all(shp[ran, 0] != 0.0))
+        shapes = {k: tracking.VShape(bool(shp[k, 0]), *(float(x) for x in shp[k, 1:])) for k in (0, 1)}
+        locks = [bool(x) for x in locks]
         r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
