@@ -129,6 +129,25 @@ def _quad2(x: np.ndarray, m: np.ndarray) -> float:
     return float(x @ (_inv2(m) @ x))
 
 
+def _median(x: np.ndarray) -> float:
+    """np.median of a 1-D array without NaN by a sort (the same value: the middle element, or the mean of the
+    two middle ones as (a + b) / 2); np.median's Python layers cost more than the sort of N samples."""
+    x = np.sort(x)
+    m = x.size // 2
+    return float(x[m]) if x.size % 2 else float((x[m - 1] + x[m]) / 2.0)
+
+
+def _nanmean(x: np.ndarray) -> float:
+    """np.nanmean of a 1-D array (NaN when it has no finite value), without its Python layers when no
+    element is NaN (then it is sum / count, as np.nanmean computes it)."""
+    nan = np.isnan(x)
+    if not nan.any():
+        return float(x.sum()) / x.size
+    if nan.all():
+        return math.nan
+    return float(np.where(nan, 0.0, x).sum()) / int(x.size - nan.sum())
+
+
 def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Roll and pitch (rad) of body -> NED quaternions [w, x, y, z] (rows): strapdown.euler_from_C_bn of
     quat_to_dcm, the third row of C_bn only, on all rows at once (it ran per row in Python each frame)."""
@@ -544,8 +563,9 @@ class AcqTrackNavigator:
         h = h if math.isfinite(h) else 0.0
         return float(meridian_radius_m(lat)) + h, (float(prime_vertical_radius_m(lat)) + h) * math.cos(lat)
 
-    def _offsets(self, dt, m_v, m_psi, b_v, b_psi, lat):
-        r_n, r_e = self._radii(lat, self.h_m)
+    def _offsets(self, dt, m_v, m_psi, b_v, b_psi, lat, radii=None):
+        """Replica offsets (rad) from the start at latitude lat; radii: its (r_n, r_e) when known."""
+        r_n, r_e = self._radii(lat, self.h_m) if radii is None else radii
         dla = np.empty(dt.size)
         dlo = np.empty(dt.size)
         replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e, dla, dlo)
@@ -711,7 +731,7 @@ class AcqTrackNavigator:
         if key is not None and key[0] is rng:  # the same transect (its arrays are cached): the same grid
             return key[1]
         ok = np.isfinite(rng)
-        grid = self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
+        grid = self._footprint.grid(_median(rng[ok]) if ok.any() else math.nan)
         self._track_grid_key = (rng, grid)
         return grid
 
@@ -745,7 +765,7 @@ class AcqTrackNavigator:
         ok = valid & np.isfinite(h_p)
         if ok.sum() < self._n_min:
             return -math.inf
-        r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
+        r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         var_h = float(np.var(h_p[ok]))
         return 10.0 * math.log10(var_h / sig0**2) if var_h > 0 else -math.inf
@@ -851,7 +871,7 @@ class AcqTrackNavigator:
         self.v_shape = bool(np.all(shp[ran, 0] != 0.0))
         shapes = {k: tracking.VShape(bool(shp[k, 0]), *(float(x) for x in shp[k, 1:])) for k in (0, 1)}
         locks = [bool(x) for x in locks]
-        r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
+        r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
         self.false_lock = false_lock(
@@ -884,8 +904,8 @@ class AcqTrackNavigator:
         # (reference_gain: the aided reference is a slow bias), and the start point follows from both, so the
         # fix is fed back into the start point and the output.
         c = self._centroid_index(valid)
-        dla_f, dlo_f = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0])
-        dla_p, dlo_p = self._offsets(dt, m_v, m_psi, b_v0, b_psi0, self.p0[0])
+        dla_f, dlo_f = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0], (r_n, r_e))
+        dla_p, dlo_p = self._offsets(dt, m_v, m_psi, b_v0, b_psi0, self.p0[0], (r_n, r_e))
         r_ne = np.array(
             [
                 (p_s[0] - self.p0[0] + dla_f[c] - dla_p[c]) * r_n,
@@ -920,7 +940,7 @@ class AcqTrackNavigator:
             b_v, b_psi = b_v0 + g * innov[0], b_psi0 + g * innov[1]
         self.pull_in = max(self.pull_in - 1, 0)
         self.b_v, self.b_psi = b_v, b_psi
-        dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0])
+        dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0], (r_n, r_e))
         self.p0 = (c_new[0] - dla_n[c], c_new[1] - dlo_n[c])
         # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
         n_ok = max(int(valid.sum()), 1)
