@@ -29,6 +29,11 @@ def geometric_height_m(h_geopotential_m):
 
 def plumb_height_m(range_m, roll_rad, pitch_rad, beamwidth_deg: float):
     """Plumb-bob height of a pulse altimeter's shortest range R at the given attitude (level ground)."""
+    if isinstance(roll_rad, float) and isinstance(pitch_rad, float):
+        # one sample (the navigator's case), tilted well inside the half beam: excess 0, R cos 0 = R exactly
+        # (the margin keeps the test off the boundary the numpy expression below decides)
+        if math.cos(roll_rad) * math.cos(pitch_rad) > math.cos(math.radians(0.5 * beamwidth_deg)) + 1e-9:
+            return range_m
     tilt = np.arccos(np.clip(np.cos(roll_rad) * np.cos(pitch_rad), -1.0, 1.0))
     excess = np.maximum(tilt - 0.5 * math.radians(beamwidth_deg), 0.0)
     return range_m * np.cos(excess)
