@@ -27,11 +27,18 @@ def dilate(heights, di, dj, s, out):
     repeat outward; a void (NaN) post counts as _VOID_M), NaN where heights[i, j] is void. Heights in m;
     di, dj: post offsets of the footprint; s: its structure (m, <= 0)."""
     n_i, n_j = heights.shape
-    h = np.empty((n_i, n_j))
+    voids = False
     for i in range(n_i):
         for j in range(n_j):
-            x = heights[i, j]
-            h[i, j] = x if np.isfinite(x) else _VOID_M
+            if not np.isfinite(heights[i, j]):
+                voids = True
+    h = heights
+    if voids:
+        h = np.empty((n_i, n_j))
+        for i in range(n_i):
+            for j in range(n_j):
+                x = heights[i, j]
+                h[i, j] = x if np.isfinite(x) else _VOID_M
     out[:, :] = -np.inf
     for k in range(di.shape[0]):  # one footprint post at a time over whole rows (vectorises)
         sk = s[k]
@@ -52,10 +59,11 @@ def dilate(heights, di, dj, s, out):
                 v = src[min(max(j + dk, 0), n_j - 1)] + sk
                 if v > row[j]:
                     row[j] = v
-    for i in range(n_i):
-        for j in range(n_j):
-            if not np.isfinite(heights[i, j]):
-                out[i, j] = np.nan
+    if voids:
+        for i in range(n_i):
+            for j in range(n_j):
+                if not np.isfinite(heights[i, j]):
+                    out[i, j] = np.nan
 
 
 class FootprintMaps:
