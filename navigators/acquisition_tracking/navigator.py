@@ -159,30 +159,41 @@ def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Tail:
-    """A sensor's recent samples (t, columns..., valid), carried across frames."""
+    """A sensor's recent samples (t, columns..., valid), carried across frames: the samples within _TAIL_S
+    of the newest, kept in buffers that a frame's samples are written into (t, v, ok are views of them)."""
 
     def __init__(self, n_cols: int):
-        self.t = np.zeros(0)
-        self.v = np.zeros((0, n_cols))
-        self.ok = np.zeros(0, bool)
+        self._t = np.zeros(64)
+        self._v = np.zeros((64, n_cols))
+        self._ok = np.zeros(64, bool)
+        self._lo = self._hi = 0
+        self._views()
+
+    def _views(self) -> None:
+        lo, hi = self._lo, self._hi
+        self.t, self.v, self.ok = self._t[lo:hi], self._v[lo:hi], self._ok[lo:hi]
 
     def extend(self, t, cols, ok) -> None:
         t = np.asarray(t, float)
-        if t.size == 0:
+        n = t.size
+        if n == 0:
             return
-        v = np.empty((t.size, len(cols)))
+        live = self._hi - self._lo
+        if self._hi + n > self._t.size:  # move the live samples to the front, growing the buffers if needed
+            cap = max(self._t.size, 2 * (live + n))
+            bt, bv, bo = np.zeros(cap), np.zeros((cap, self._v.shape[1])), np.zeros(cap, bool)
+            bt[:live], bv[:live], bo[:live] = self.t, self.v, self.ok
+            self._t, self._v, self._ok = bt, bv, bo
+            self._lo, self._hi = 0, live
+        hi = self._hi
+        self._t[hi : hi + n] = t
         for j, c in enumerate(cols):
-            v[:, j] = c
-        # sensor times increase: the samples within _TAIL_S of the newest are a suffix (a slice, no mask)
-        if self.t.size:
-            t_all = np.concatenate([self.t, t])
-            k = int(np.searchsorted(t_all, t_all[-1] - _TAIL_S, side="left"))
-            self.t = t_all[k:]
-            self.v = np.concatenate([self.v, v])[k:]
-            self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])[k:]
-        else:
-            k = int(np.searchsorted(t, t[-1] - _TAIL_S, side="left"))
-            self.t, self.v, self.ok = t[k:].copy(), v[k:], np.array(ok, bool)[k:]
+            self._v[hi : hi + n, j] = c
+        self._ok[hi : hi + n] = ok
+        self._hi = hi + n
+        # sensor times increase: the samples within _TAIL_S of the newest are a suffix
+        self._lo += int(np.searchsorted(self._t[self._lo : self._hi], t[-1] - _TAIL_S, side="left"))
+        self._views()
 
     def rate(self, t_s: float, col: int, window_s: float) -> float:
         """Least-squares slope (per s) of column col over the valid samples in [t_s - window_s, t_s]."""
