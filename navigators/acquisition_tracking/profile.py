@@ -60,21 +60,32 @@ class Sample:
 
 
 class _Samples(deque):
-    """A bounded deque that counts its changes (Transect.arrays caches its arrays by the count)."""
+    """A bounded deque that counts its changes (Transect.arrays caches its arrays by the count) and keeps
+    the numeric fields of its samples as columns (t, d, m_v, m_psi, range, valid; oldest first)."""
 
     def __init__(self, maxlen: int):
         super().__init__(maxlen=maxlen)
         self.version = 0
+        self.cols = np.zeros((6, maxlen))
 
     def __reduce__(self):
         return (_restore_samples, (self.maxlen, list(self), self.version))
 
+    def _put(self, k: int, x) -> None:
+        c = self.cols
+        c[0, k], c[1, k], c[2, k], c[3, k], c[4, k] = x.t_s, x.d_m, x.m_v, x.m_psi, x.range_m
+        c[5, k] = 1.0 if x.valid else 0.0
+
     def append(self, x) -> None:
+        if len(self) == self.maxlen:  # the oldest drops out
+            self.cols[:, :-1] = self.cols[:, 1:]
         super().append(x)
+        self._put(len(self) - 1, x)
         self.version += 1
 
     def __setitem__(self, i, x) -> None:
         super().__setitem__(i, x)
+        self._put(i % len(self), x)
         self.version += 1
 
     def clear(self) -> None:
@@ -90,7 +101,7 @@ class _Samples(deque):
 def _restore_samples(maxlen: int, items: list, version: int) -> _Samples:
     s = _Samples(maxlen)
     for x in items:
-        deque.append(s, x)
+        s.append(x)
     s.version = version
     return s
 
@@ -122,18 +133,10 @@ class Transect:
         s = self.samples
         if self._cache[0] == s.version:
             return self._cache[1]
-        cols = np.array([(x.t_s, x.d_m, x.m_v, x.m_psi, x.range_m, x.valid) for x in s], float).reshape(-1, 6)
-        t = np.ascontiguousarray(cols[:, 0])
+        cols = s.cols[:, : len(s)].copy()  # the samples' columns (copied: the buffer moves on)
+        t = cols[0]
         dt = np.zeros(t.size)
-        dt[1:] = np.diff(t)
-        out = (
-            t,
-            np.ascontiguousarray(cols[:, 1]),
-            cols[:, 5] != 0.0,
-            dt,
-            np.ascontiguousarray(cols[:, 2]),
-            np.ascontiguousarray(cols[:, 3]),
-            np.ascontiguousarray(cols[:, 4]),
-        )
+        dt[1:] = t[1:] - t[:-1]
+        out = (t, cols[1], cols[5] != 0.0, dt, cols[2], cols[3], cols[4])
         self._cache = (s.version, out)
         return out
