@@ -137,6 +137,11 @@ def _median(x: np.ndarray) -> float:
     return float(x[m]) if x.size % 2 else float((x[m - 1] + x[m]) / 2.0)
 
 
+def _mean(x: np.ndarray) -> float:
+    """np.mean of a 1-D array as it computes it (sum / count) without its Python layers."""
+    return float(x.sum()) / x.size
+
+
 def _nanmean(x: np.ndarray) -> float:
     """np.nanmean of a 1-D array (NaN when it has no finite value), without its Python layers when no
     element is NaN (then it is sum / count, as np.nanmean computes it)."""
@@ -873,7 +878,7 @@ class AcqTrackNavigator:
         its, locks, ran, shp = self._loop_out
         b_v, b_psi, lat_p, lon_p, sp_v, sp_psi = loop_kernel.track_loops(
             heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, b_v0, b_psi0, r_n, r_e,
-            d, valid, *self._loop_args, float(np.mean(m_v)), float(np.mean(m_psi)), *self._loop_settings,
+            d, valid, *self._loop_args, _mean(m_v), _mean(m_psi), *self._loop_settings,
             its, locks, ran, shp, h_p,
         )  # fmt: skip
         p_s = (lat_p, lon_p)
@@ -976,7 +981,7 @@ class AcqTrackNavigator:
         )
         # the newest sample's covariance: the centroid's, plus dead reckoning over the rest of the transect
         lever_s = float(t[-1] - t[c])
-        v_mean = max(float(np.mean(m_v)) + b_v, 1.0)
+        v_mean = max(_mean(m_v) + b_v, 1.0)
         walk = self._walk2 * lever_s
         self.P = self.Pc + _rot_diag(
             psi, (lever_s * sv[0]) ** 2 + walk, (v_mean * lever_s * sv[1]) ** 2 + walk
@@ -992,7 +997,7 @@ class AcqTrackNavigator:
     def _centroid_index(valid: np.ndarray) -> int:
         """The sample nearest the mean index of the valid samples (the fit's pivot)."""
         idx = np.nonzero(valid)[0]
-        return int(round(float(idx.mean()))) if idx.size else (valid.size - 1) // 2
+        return int(round(_mean(idx))) if idx.size else (valid.size - 1) // 2
 
     @staticmethod
     def _loop_sigma(shape, cost_noise: float, narrow: float) -> float:
