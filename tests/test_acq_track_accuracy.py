@@ -17,7 +17,7 @@ from acq_track_helpers import fly, horizontal_error_m, initial_estimate, traject
 from scipy.stats import chi2
 
 import terrain
-from navigators.acquisition_tracking import AcqTrackNavigator, correlation, tracking
+from navigators.acquisition_tracking import AcqTrackNavigator, correlation, loop_kernel, tracking
 from navigators.protocol import EXTRA_MEASUREMENT_TIME, EXTRA_NIS, EXTRA_NIS_DOF
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env.scenario.loading import read_scenario_file, validate
@@ -55,7 +55,7 @@ def test_shift_loop_finds_the_start_offset_of_a_brute_force_search(dem):
     offs = np.linspace(-120.0, 120.0, 481)
     vals = np.empty(offs.size)
     common = (lat_s, lon_s, dts, zeros, zeros, 80.0, track, r_n, r_e, d, valid, 0, True, 0, 5)
-    tracking.shift_correlation_function(*grid, *common, u_al[0], u_al[1], offs, vals)
+    loop_kernel.shift_correlation_function(*grid, *common, u_al[0], u_al[1], offs, vals)
     h = np.empty(n)
     ref = np.empty(offs.size)
     for k, x in enumerate(offs):
@@ -66,13 +66,13 @@ def test_shift_loop_finds_the_start_offset_of_a_brute_force_search(dem):
         ref[k] = correlation.profile_cost_reference(d, valid, h, "mad", True, 5)
     np.testing.assert_allclose(vals, ref, rtol=0, atol=1e-9)
     x_bf = offs[int(np.argmin(ref))]
-    x, _, locked, _ = tracking.early_late_shift_loop(
-        *grid, *common, u_al[0], u_al[1], 0.0, 40.0, 0.5, 101, tracking.DISC_THESIS
-    )
-    x2, _, locked2, _ = tracking.early_late_shift_loop(
-        *grid, *common, u_al[0], u_al[1], x, 10.0, 0.2, 101, tracking.DISC_THESIS
-    )
-    assert locked and locked2
+    # the navigator's start-point loop: +-166 m function, 1st stage at the adaptive spacing, 2nd at 10.4 m
+    res = float(np.mean(dem.spacing_m))
+    x2, locked, v_shape, *_ = loop_kernel.shift_loop_epoch(
+        *grid, *common, u_al[0], u_al[1], 2.0 * res, 10, np.array([1.25, 1.0, 0.75, 0.5, 0.25]) * res, 2.0,
+        0.5, 0.125 * res, 0.2, 101, tracking.DISC_THESIS, True, np.zeros(dts.size), np.zeros(dts.size),
+    )  # fmt: skip
+    assert locked and v_shape
     assert abs(x2 - x_bf) < 3.0  # on the brute-force minimum (the cross offset raises it, not moves it)
     assert abs(x_bf - 37.0) < 15.0
 

@@ -1,8 +1,9 @@
-"""acq_track: MSD (eq 3.4), the fused loop kernel, ELS bias mitigation (eq 3.7), the bounded serial search.
+"""acq_track: MSD (eq 3.4), the loop kernel, ELS bias mitigation (eq 3.7), the bounded serial search.
 
 Every check is against an independent computation: numpy brute force (replica positions from the numpy
 twin, terrain.kernels.bilinear_batch, the cost written out in the test), an analytic V, the thesis' formula
-written out, or the exhaustive search kernel. Data: noise-free profiles over the bundled Jacksboro DEM."""
+or discriminator (3.5) written out, or the exhaustive search kernel. Data: noise-free profiles over the
+bundled Jacksboro DEM."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pytest
 from acq_track_helpers import fly, horizontal_error_m, initial_estimate, trajectory
 
 import terrain
-from navigators.acquisition_tracking import AcqTrackNavigator, acquisition, correlation, loop_kernel, tracking
+from navigators.acquisition_tracking import AcqTrackNavigator, acquisition, correlation, loop_kernel
 from navigators.acquisition_tracking.footprint import FootprintMaps
 from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from terrain.kernels import bilinear_batch
@@ -86,11 +87,11 @@ def test_msd_matches_brute_force_and_its_minimum_is_the_true_offset(dem):
     assert np.all(np.delete(scf, int(np.argmin(scf))) > 1e-3)
     got = np.empty(speeds.size)
     heights, lat0, lon0, dlat, dlon = dem.grid
-    correlation.correlation_function(
+    loop_kernel.correlation_function(
         heights, lat0, lon0, dlat, dlon, LAT0, LON0, dts, z, z, 80.0, math.radians(30.0), r_n, r_e, d,
         np.ones(n, bool), correlation.COST_MSD, True, 0, 5, 0, speeds - 80.0, got,
     )  # fmt: skip
-    np.testing.assert_allclose(got, scf, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got**2, scf, rtol=1e-9, atol=1e-9)  # the loops see MSD's square root
     # and the serial search with MSD recovers truth within one bin from +-10 m/s, +-10 deg, +-500 m
     v_true, psi_true = 81.3, math.radians(33.7)
     d2 = _bf_heights(dem.grid, LAT0, LON0, dts, v_true, psi_true, r_n, r_e)
@@ -120,14 +121,27 @@ def test_navigator_tracks_with_msd(dem):
 # ------------------------------------------------------------------------------------- loop kernel
 
 
-def test_loop_kernel_matches_the_python_pieces(dem):
-    """loop_epoch (ncs) = correlation_function + analyse_v + choose_spacing + two early_late_loop stages."""
+def _early_late_by_hand(cost, x, s, threshold, break_iteration=101):
+    """Discriminator (3.5) written out: x += s (H_E - H_L) / (H_E + H_L) until |eps| < threshold, at most
+    break_iteration - 1 updates: (x, iterations, locked)."""
+    for it in range(1, break_iteration):
+        he, hl = cost(x - s), cost(x + s)
+        eps = s * (he - hl) / (he + hl)
+        x += eps
+        if abs(eps) < threshold:
+            return x, it, True
+    return x, break_iteration, False
+
+
+def test_loop_kernel_matches_brute_force_and_the_discriminator_by_hand(dem):
+    """loop_epoch (ncs) against independent computations: its SCF/HCF minimum is the brute-force one
+    (numpy replica positions, the batch bilinear kernel, the cost written out), its spacing lies within the
+    V's bandwidth, and both stages land where discriminator (3.5) by hand on the brute-force cost does."""
     rng = np.random.default_rng(5)
-    heights, lat0, lon0, dlat, dlon = dem.grid
     n = 25
     dts, _ = _transect(n)
     for trial in range(6):
-        lat_s, lon_s = LAT0 + 0.002 * trial, LON0 - 0.0015 * trial
+        lat_s, lon_s = LAT0 + 0.0006 * trial, LON0 + 0.0005 * trial  # on the map (3.8 km, 2.5 km apart)
         r_n, r_e = _radii(lat_s)
         m_v = 80.0 + 0.5 * rng.standard_normal(n)
         m_psi = math.radians(30.0 + 20 * trial) + 0.01 * rng.standard_normal(n)
@@ -141,27 +155,59 @@ def test_loop_kernel_matches_the_python_pieces(dem):
              math.radians(0.003)),
         ):  # fmt: skip
             b_v, b_psi = (1.1 + 0.8, 0.02) if which == 0 else (1.1, 0.02 + math.radians(1.5))
-            x, its, locked, shape, sp = loop_kernel.run_loop(
-                dem.grid, lat_s, lon_s, dts, m_v, m_psi, b_v, b_psi, r_n, r_e, d, valid, cost=0,
-                remove_bias=True, interp=0, n_min=15, which=which, reach=reach, n_side=10,
-                spacings_desc=sset, symmetry_max=2.0, threshold_1=thr1, spacing_2=s2, threshold_2=thr2,
-                break_iteration=101, discriminator=0, mitigation=loop_kernel.MITIGATION_NCS,
+
+            def cost(x, which=which, b_v=b_v, b_psi=b_psi, tr=(lat_s, lon_s, m_v, m_psi, r_n, r_e, d)):
+                la_s, lo_s, mv, mp, rn, re, dd = tr
+                bv, bp = (x, b_psi) if which == 0 else (b_v, x)
+                la2, lo2 = correlation.replica_positions_reference(la_s, lo_s, dts, mv, mp, bv, bp, rn, re)
+                h = np.empty(n)
+                bilinear_batch(*dem.grid, la2, lo2, h)
+                return correlation.profile_cost_reference(dd, np.ones(n, bool), h, "mad", True, 15)
+
+            out = loop_kernel.loop_epoch(
+                *dem.grid, lat_s, lon_s, dts, m_v, m_psi, b_v, b_psi, r_n, r_e, d, valid, 0, True, 0, 15,
+                which, reach, 10, sset, 2.0, thr1, s2, thr2, 101, 0, loop_kernel.MITIGATION_NCS, np.zeros(n),
+                np.zeros(n),
             )  # fmt: skip
+            x, it1, it2, _, locked, v_shape, bw, m_off, m_cost, _, _, sp, _ = out
+            x0 = b_v if which == 0 else b_psi
             offs = np.linspace(-reach, reach, 21)
-            vals = np.empty(21)
-            args = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dts, m_v, m_psi)
-            tail = (r_n, r_e, d, valid, 0, True, 0, 15)
-            correlation.correlation_function(*args, b_v, b_psi, *tail, which, offs, vals)
-            ref_shape = tracking.analyse_v(offs, vals)
-            ref_sp, _ = tracking.choose_spacing(offs, vals, ref_shape, sset, 2.0)
-            x1, it1, l1, _ = tracking.early_late_loop(*args, b_v, b_psi, *tail, which, ref_sp, thr1, 101, 0)
-            bv2, bp2 = (x1, b_psi) if which == 0 else (b_v, x1)
-            x2, it2, l2, _ = tracking.early_late_loop(*args, bv2, bp2, *tail, which, s2, thr2, 101, 0)
-            assert sp == ref_sp and shape.v_shape == ref_shape.v_shape
-            assert shape.bandwidth == pytest.approx(ref_shape.bandwidth, rel=1e-9)
-            assert shape.slope_left == pytest.approx(ref_shape.slope_left, rel=1e-6)
-            assert its == [it1, it2] and locked == (l1 and l2)
-            assert x == pytest.approx(x2, abs=1e-7)
+            bf = np.array([cost(x0 + o) for o in offs])
+            assert np.isfinite(bf).all()
+            assert m_off == pytest.approx(offs[int(np.argmin(bf))], abs=1e-12)
+            assert m_cost == pytest.approx(bf.min(), rel=1e-9)
+            assert sp in sset and (sp <= bw + 1e-12 or sp == sset.min())
+            x1, ref1, l1 = _early_late_by_hand(cost, x0, sp, thr1)
+            x2, ref2, l2 = _early_late_by_hand(cost, x1, s2, thr2)
+            assert abs(it1 - ref1) <= 1 and abs(it2 - ref2) <= 1 and locked == (l1 and l2)
+            assert x == pytest.approx(x2, abs=5 * thr2)
+    # the 101-iteration break: a threshold no step meets stops the stage at break_iteration, out of lock
+    out = loop_kernel.loop_epoch(
+        *dem.grid, lat_s, lon_s, dts, m_v, m_psi, 1.9, 0.02, r_n, r_e, d, valid, 0, True, 0, 15, 0, 3.68, 10,
+        SPEED_SET, 2.0, 0.0, 0.24, 0.002, 7, 0, loop_kernel.MITIGATION_NONE, np.zeros(dts.size),
+        np.zeros(dts.size),
+    )  # fmt: skip
+    assert out[1] == 7 and not out[4]
+
+
+def test_v_analysis_and_spacing_choice_on_an_analytic_v():
+    """A V with slopes -2 and +4 and its minimum at 0.6, sampled at 21 points over +-3: the analysis finds
+    the minimum, the slopes and the bandwidth (the narrower side: 12 points of 0.3 on the right less...)
+    by hand; the symmetry ratio over +-0.9 is 4 / 2; a monotone function has no V."""
+    offs = np.linspace(-3, 3, 21)
+    vals = 1.0 + np.where(offs < 0.6, 2.0 * (0.6 - offs), 4.0 * (offs - 0.6))
+    v_shape, bw, m_off, m_cost, sl, sr = loop_kernel.analyse_v_kernel(offs, vals, 2, 0.05)
+    assert v_shape and m_off == pytest.approx(0.6) and m_cost == pytest.approx(1.0)
+    assert sl == pytest.approx(-2.0) and sr == pytest.approx(4.0)
+    assert bw == pytest.approx(2.4)  # 8 points of 0.3 to the right edge, 12 to the left: the narrower
+    assert loop_kernel.symmetry_ratio_kernel(offs, vals, 0.6, 0.9) == pytest.approx(2.0)
+    # the widest spacing within the bandwidth whose ratio passes: every ratio here is 2, so with a limit of
+    # 2 the widest within 2.4 (2.0) is chosen, with a limit of 1.5 none passes and the narrowest inside
+    spacings = np.array([3.0, 2.0, 1.0, 0.5])
+    assert loop_kernel.choose_spacing_kernel(offs, vals, bw, m_off, spacings, 2.0)[0] == 2.0
+    assert loop_kernel.choose_spacing_kernel(offs, vals, bw, m_off, spacings, 1.5)[0] == 0.5
+    assert loop_kernel.choose_spacing_kernel(offs, vals, 0.1, m_off, spacings, 2.0)[0] == 0.5
+    assert not loop_kernel.analyse_v_kernel(offs, offs.copy(), 2, 0.05)[0]  # monotone: no V
 
 
 # ---------------------------------------------------------------------------------------------- ELS
@@ -187,10 +233,14 @@ def test_els_intersection_is_the_thesis_formula_and_exact_on_an_asymmetric_v():
     def cost(x):
         return 2.0 + (1.0 * (apex - x) if x < apex else 3.0 * (x - apex))
 
-    x_el, _, lock = tracking.early_late_reference(cost, 1.2, s, 1e-7)
+    x_el, _, lock = _early_late_by_hand(cost, 1.2, s, 1e-7)
     assert lock and x_el - apex == pytest.approx(-s / 2, abs=1e-5)
-    x_els, _, applied = loop_kernel.els_reference(cost, x_el, 0.24, 1.0, 1e-7)
-    assert applied and abs(x_els - apex) < 1e-9
+    # ELS's four correlators, two on each side of the minimum: the lines through each pair meet at the apex,
+    # so its tracking error T = prompt - apex removes the early-late bias in one step
+    x1, x2, x3, x4 = x_el - 1.0, x_el + 0.24, x_el + 0.72, x_el + 1.2
+    assert x2 < apex < x3
+    xs, a1, a2 = loop_kernel.els_intersection(x1, cost(x1), x2, cost(x2), x3, cost(x3), x4, cost(x4))
+    assert a1 == pytest.approx(-1.0) and a2 == pytest.approx(3.0) and abs(xs - apex) < 1e-12
 
 
 def test_els_reduces_the_early_late_bias_on_a_skewed_terrain_correlation(dem):

@@ -23,7 +23,7 @@ on a parabola maps x -> -x and never locks. A replica sample off the map (NaN
 height) or a measured sample that dropped out is left out of the sums; fewer than n_min samples left gives
 inf (no correlation).
 
-Every kernel has a plain numpy `*_reference` twin (tests check they agree).
+The replica positions and the costs have plain numpy `*_reference` twins: the tests' brute force.
 """
 
 from __future__ import annotations
@@ -90,6 +90,14 @@ def profile_cost(d, valid, h, cost, remove_bias, n_min):
             m += 1
             sd += d[i]
             sh += h[i]
+    return cost_from_sums(d, valid, h, m, sd, sh, cost, remove_bias, n_min)
+
+
+@njit(cache=True)
+def cost_from_sums(d, valid, h, m, sd, sh, cost, remove_bias, n_min):
+    """profile_cost given its first pass: m samples valid with finite h, sd = their sum of d, sh of h (a
+    caller that makes h can sum as it goes: the same sums in the same order, so the same cost to the bit)."""
+    n = d.shape[0]
     if m < n_min or m == 0:
         return np.inf
     md = sd / m
@@ -147,118 +155,6 @@ def replica_heights(
     replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
     for i in range(dt.shape[0]):
         h_out[i] = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[i], lon_s + dlon_w[i], interp)
-
-
-@njit(cache=True)
-def replica_cost(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
-    lat_s,
-    lon_s,
-    dt,
-    m_v,
-    m_psi,
-    b_v,
-    b_psi,
-    r_n,
-    r_e_cos,
-    d,
-    valid,
-    cost,
-    remove_bias,
-    interp,
-    n_min,
-    dlat_w,
-    dlon_w,
-    h_w,
-):
-    """Cost of one replica (work arrays dlat_w, dlon_w, h_w of length N are overwritten)."""
-    replica_heights(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
-        lat_s,
-        lon_s,
-        dt,
-        m_v,
-        m_psi,
-        b_v,
-        b_psi,
-        r_n,
-        r_e_cos,
-        interp,
-        dlat_w,
-        dlon_w,
-        h_w,
-    )
-    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
-
-
-@njit(cache=True)
-def correlation_function(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
-    lat_s,
-    lon_s,
-    dt,
-    m_v,
-    m_psi,
-    b_v,
-    b_psi,
-    r_n,
-    r_e_cos,
-    d,
-    valid,
-    cost,
-    remove_bias,
-    interp,
-    n_min,
-    which,
-    offsets,
-    out,
-):
-    """The SCF (which = 0: offsets added to b_v, m/s) or HCF (which = 1: offsets added to b_psi, rad) of
-    the replica at (b_v, b_psi): out[k] = cost at offsets[k] (spec section 2)."""
-    n = dt.shape[0]
-    dlat_w = np.empty(n)
-    dlon_w = np.empty(n)
-    h_w = np.empty(n)
-    for k in range(offsets.shape[0]):
-        bv = b_v + offsets[k] if which == 0 else b_v
-        bp = b_psi + offsets[k] if which == 1 else b_psi
-        out[k] = replica_cost(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            lat_s,
-            lon_s,
-            dt,
-            m_v,
-            m_psi,
-            bv,
-            bp,
-            r_n,
-            r_e_cos,
-            d,
-            valid,
-            cost,
-            remove_bias,
-            interp,
-            n_min,
-            dlat_w,
-            dlon_w,
-            h_w,
-        )
 
 
 @njit(cache=True)

@@ -1,9 +1,9 @@
 """One tracking loop's epoch in one numba call: adaptivity block, stages, bias mitigation (seed 001 ch. 3).
 
-`loop_epoch` does for one loop (speed or heading) what tracking.py's pieces do in Python, without leaving
-compiled code: the SCF/HCF at 2K + 1 offsets around the prompt (spec section 2), the V-shape analysis
-(bandwidth, minimum, side slopes; tracking.analyse_v), the spacing choice by bandwidth and symmetry ratio
-(tracking.choose_spacing), the first early-late stage at that spacing, then the bias mitigation:
+`loop_epoch` runs one loop (speed or heading; tracking.py describes them) without leaving compiled code: the
+SCF/HCF at 2K + 1 offsets around the prompt (spec section 2, `correlation_function`), the V-shape analysis
+(bandwidth, minimum, side slopes; `analyse_v_kernel`), the spacing choice by bandwidth and symmetry ratio
+(`choose_spacing_kernel`), the first early-late stage at that spacing, then the bias mitigation:
 
 - "none": the first stage only (the plain early-late discriminator, eq 3.5);
 - "ncs": narrow correlator spacing, a second stage at the fixed narrow spacing (thesis 3.5.2.2, eq 3.6);
@@ -36,9 +36,15 @@ import math
 import numpy as np
 from numba import njit
 
-from navigators.acquisition_tracking.beam import replica_points
-from navigators.acquisition_tracking.correlation import COST_MSD, _map_height, profile_cost
-from navigators.acquisition_tracking.tracking import DISC_THESIS, VShape
+from navigators.acquisition_tracking.beam import replica_heights_at, replica_points
+from navigators.acquisition_tracking.correlation import (
+    COST_MSD,
+    INTERP_BILINEAR,
+    cost_from_sums,
+    replica_offsets,
+)
+from navigators.acquisition_tracking.tracking import DISC_THESIS
+from terrain.kernels import bicubic, bilinear
 
 MITIGATION_NONE = 0
 MITIGATION_NCS = 1
@@ -85,14 +91,37 @@ def basis_cost(
     """Cost of the replica (b_v, b_psi) from a replica_basis (correlation.replica_cost's value)."""
     cb = math.cos(b_psi)
     sb = math.sin(b_psi)
-    for i in range(basis.shape[1]):
-        cn = basis[0, i] + b_v * basis[1, i]
-        sn = basis[2, i] + b_v * basis[3, i]
-        h_w[i] = _map_height(
-            heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
-            lon_s + (sb * cn + cb * sn) / r_e_cos, interp,
-        )  # fmt: skip
-    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+    m = 0
+    sd = 0.0
+    sh = 0.0
+    # profile_cost's first pass summed as the heights are made; the interpolation chosen outside the loop
+    if interp == INTERP_BILINEAR:
+        for i in range(basis.shape[1]):
+            cn = basis[0, i] + b_v * basis[1, i]
+            sn = basis[2, i] + b_v * basis[3, i]
+            h = bilinear(
+                heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
+                lon_s + (sb * cn + cb * sn) / r_e_cos,
+            )  # fmt: skip
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    else:
+        for i in range(basis.shape[1]):
+            cn = basis[0, i] + b_v * basis[1, i]
+            sn = basis[2, i] + b_v * basis[3, i]
+            h = bicubic(
+                heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
+                lon_s + (sb * cn + cb * sn) / r_e_cos,
+            )  # fmt: skip
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    return cost_from_sums(d, valid, h_w, m, sd, sh, cost, remove_bias, n_min)
 
 
 @njit(cache=True)
@@ -113,12 +142,44 @@ def _cost_x(
 
 
 @njit(cache=True)
+def _scf(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, h_w,
+):  # fmt: skip
+    """out[k] = the loops' cost (_cost_x) with the loop's quantity at x0 + offsets[k]."""
+    for k in range(offsets.shape[0]):
+        out[k] = _cost_x(
+            heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
+            d, valid, cost, remove_bias, interp, n_min, which, x0 + offsets[k], h_w,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def correlation_function(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
+    d, valid, cost, remove_bias, interp, n_min, which, offsets, out,
+):  # fmt: skip
+    """The SCF (which = 0: offsets added to b_v, m/s) or HCF (which = 1: offsets added to b_psi, rad) of
+    the replica at (b_v, b_psi), as the loops see it: out[k] = the cost at offsets[k] (spec section 2; MSD
+    as its square root, module docstring)."""
+    n = dt.shape[0]
+    basis = np.empty((4, n))
+    replica_basis(dt, m_v, m_psi, basis)
+    x0 = b_v if which == 0 else b_psi
+    _scf(
+        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
+        d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, np.empty(n),
+    )  # fmt: skip
+
+
+@njit(cache=True)
 def _stage(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
     d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold, break_iteration,
     discriminator, h_w,
 ):  # fmt: skip
-    """One early-late stage from x0 (tracking.early_late_loop's arithmetic): (x, iterations, locked)."""
+    """One early-late stage from x0 (discriminator eq 3.5, or v_fit; tracking.py): (x, iterations, locked).
+    A replica off the map (inf cost early or late) ends the stage out of lock at the last finite x."""
     x = x0
     it = 1
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
@@ -200,7 +261,7 @@ def _els_step(
 
 @njit(cache=True)
 def _slope(x, y, lo, hi):
-    """Least-squares slope of y[lo:hi] over x[lo:hi] (tracking._slope)."""
+    """Least-squares slope of y[lo:hi] over x[lo:hi]."""
     m = hi - lo
     if m < 2:
         return 0.0
@@ -222,7 +283,10 @@ def _slope(x, y, lo, hi):
 
 @njit(cache=True)
 def analyse_v_kernel(offsets, values, min_points, tolerance):
-    """tracking.analyse_v in numba: (v_shape, bandwidth, min_offset, min_cost, slope_left, slope_right)."""
+    """V-shape analysis of a correlation function sampled at increasing offsets (tracking.VShape's fields:
+    (v_shape, bandwidth, min_offset, min_cost, slope_left, slope_right)): each side extends while the
+    function stays above the minimum and drops by no more than `tolerance` x its range from one point to
+    the next outward (noise wiggles); a V needs min_points on both sides."""
     n = values.shape[0]
     vals = np.empty(n)
     n_ok = 0
@@ -293,7 +357,8 @@ def _side_slope(offsets, values, lo_x, hi_x):
 
 @njit(cache=True)
 def symmetry_ratio_kernel(offsets, values, centre, spacing):
-    """tracking.symmetry_ratio in numba."""
+    """Larger over smaller absolute least-squares slope of the two sides within +-spacing of `centre`
+    (1 = symmetric; inf when a side is flat or has fewer than two points)."""
     a1, m1 = _side_slope(offsets, values, centre - spacing - 1e-12, centre + 1e-12)
     a2, m2 = _side_slope(offsets, values, centre - 1e-12, centre + spacing + 1e-12)
     if m1 < 2 or m2 < 2:
@@ -305,7 +370,9 @@ def symmetry_ratio_kernel(offsets, values, centre, spacing):
 
 @njit(cache=True)
 def choose_spacing_kernel(offsets, values, bandwidth, min_offset, spacings_desc, symmetry_max):
-    """tracking.choose_spacing in numba (spacings_desc sorted from widest to narrowest)."""
+    """(spacing, symmetry ratio at it): the widest of spacings_desc (sorted widest first) within the V's
+    bandwidth whose symmetry ratio is at most symmetry_max; the narrowest within the bandwidth when none
+    passes; the narrowest of all when none is within it."""
     last = -1.0
     ratio = np.inf
     for s in spacings_desc:
@@ -340,10 +407,7 @@ def loop_epoch(
     x0 = b_v if which == 0 else b_psi
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
     vals = np.empty(offs.shape[0])
-    for k in range(offs.shape[0]):  # the SCF / HCF (spec section 2)
-        vals[k] = _cost_x(
-            *g, d, valid, cost, remove_bias, interp, n_min, which, x0 + offs[k], h_w
-        )
+    _scf(*g, d, valid, cost, remove_bias, interp, n_min, which, x0, offs, vals, h_w)
     v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
     spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
     x, it1, locked = _stage(
@@ -392,14 +456,60 @@ def _shift_cost_pre(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
     u_n, u_e, r_n, r_e_cos, x, h_w,
 ):  # fmt: skip
-    """tracking._shift_cost with the replica's offsets dla, dlo (rad) computed once: the shift moves the
-    start only, so the offsets (references fixed) are the same for every x; the same arithmetic
-    (start + x u / r, then + offset), so the same cost to the bit."""
+    """Cost of the replica with its start moved x metres along (u_n, u_e), from the replica's offsets
+    dla, dlo (rad) computed once: the shift moves the start only, so the offsets (references fixed) are the
+    same for every x."""
     ls = lat_s + x * u_n / r_n
     lo = lon_s + x * u_e / r_e_cos
-    for i in range(dla.shape[0]):
-        h_w[i] = _map_height(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i], interp)
-    return profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+    m = 0
+    sd = 0.0
+    sh = 0.0
+    if interp == INTERP_BILINEAR:  # as basis_cost: the first pass summed as the heights are made
+        for i in range(dla.shape[0]):
+            h = bilinear(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i])
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    else:
+        for i in range(dla.shape[0]):
+            h = bicubic(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i])
+            h_w[i] = h
+            if valid[i] and h == h:
+                m += 1
+                sd += d[i]
+                sh += h
+    return cost_from_sums(d, valid, h_w, m, sd, sh, cost, remove_bias, n_min)
+
+
+@njit(cache=True)
+def _shift_function(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
+    u_n, u_e, r_n, r_e_cos, offsets, out, h_w,
+):  # fmt: skip
+    for k in range(offsets.shape[0]):
+        out[k] = _shift_cost_pre(
+            heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp,
+            n_min, u_n, u_e, r_n, r_e_cos, offsets[k], h_w,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def shift_correlation_function(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
+    cost, remove_bias, interp, n_min, u_n, u_e, offsets, out,
+):  # fmt: skip
+    """out[k] = cost of the replica (b_v, b_psi) with its start moved offsets[k] metres along (u_n, u_e)
+    (the start-point loops' correlation function)."""
+    n = dt.shape[0]
+    dla = np.empty(n)
+    dlo = np.empty(n)
+    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dla, dlo)
+    _shift_function(
+        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
+        u_n, u_e, r_n, r_e_cos, offsets, out, np.empty(n),
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -407,7 +517,7 @@ def _shift_stage(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
     u_n, u_e, r_n, r_e_cos, x0, spacing, threshold, break_iteration, discriminator, h_w,
 ):  # fmt: skip
-    """tracking.early_late_shift_loop's arithmetic on _shift_cost_pre: (x, iterations, locked)."""
+    """One stage of a start-point loop from shift x0 (m), as _stage: (x, iterations, locked)."""
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
          u_n, u_e, r_n, r_e_cos)  # fmt: skip
     x = x0
@@ -441,8 +551,7 @@ def shift_loop_epoch(
     cost, remove_bias, interp, n_min, u_n, u_e, reach, n_side, spacings_desc, symmetry_max, threshold_1,
     spacing_2, threshold_2, break_iteration, discriminator, narrow, o_n, o_e,
 ):  # fmt: skip
-    """One start-point loop's epoch along (u_n, u_e) (tracking.shift_correlation_function,
-    analyse_v, choose_spacing and early_late_shift_loop in one call): the shift correlation function at
+    """One start-point loop's epoch along (u_n, u_e) in one call: the shift correlation function at
     2 n_side + 1 offsets in [-reach, reach] m, its V-shape, the spacing choice, the first stage from 0 and
     (narrow) the second stage at spacing_2. Returns (x m, locked, v_shape, bandwidth, min_offset, min_cost,
     slope_left, slope_right); x = 0, unlocked when the loop ran off the map or beyond the function's reach.
@@ -456,8 +565,7 @@ def shift_loop_epoch(
          u_n, u_e, r_n, r_e_cos)  # fmt: skip
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
     vals = np.empty(offs.shape[0])
-    for k in range(offs.shape[0]):
-        vals[k] = _shift_cost_pre(*g, offs[k], h_w)
+    _shift_function(*g, offs, vals, h_w)
     v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
     spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
     x, _, locked = _shift_stage(*g, 0.0, spacing, threshold_1, break_iteration, discriminator, h_w)
@@ -472,91 +580,101 @@ def shift_loop_epoch(
     return x, locked, v_shape, bw, m_off, m_cost, sl, sr
 
 
-def run_loop(
-    grid,
-    lat_s: float,
-    lon_s: float,
-    dt: np.ndarray,
-    m_v: np.ndarray,
-    m_psi: np.ndarray,
-    b_v: float,
-    b_psi: float,
-    r_n: float,
-    r_e_cos: float,
-    d: np.ndarray,
-    valid: np.ndarray,
-    *,
-    cost: int,
-    remove_bias: bool,
-    interp: int,
-    n_min: int,
-    which: int,
-    reach: float,
-    n_side: int,
-    spacings_desc: np.ndarray,
-    symmetry_max: float,
-    threshold_1: float,
-    spacing_2: float,
-    threshold_2: float,
-    break_iteration: int,
-    discriminator: int,
-    mitigation: int,
-    beam_n: np.ndarray | None = None,
-    beam_e: np.ndarray | None = None,
-):
-    """loop_epoch with the navigator's return shape: (x, [it_1, it_2], locked, VShape, spacing_1).
+@njit(cache=True)
+def _put_shape(out, k, v_shape, bw, m_off, m_cost, sl, sr):
+    out[k, 0] = 1.0 if v_shape else 0.0
+    out[k, 1] = bw
+    out[k, 2] = m_off
+    out[k, 3] = m_cost
+    out[k, 4] = sl
+    out[k, 5] = sr
 
-    Units: which 0 - x, reach, spacings, thresholds in m/s; which 1 - in rad. beam_n, beam_e: the beam
-    offsets (m, replica frame; None: zero)."""
-    heights, lat0, lon0, dlat, dlon = grid
-    if beam_n is None or beam_e is None:
-        beam_n = beam_e = np.zeros(dt.shape[0])
-    r = loop_epoch(
-        heights, lat0, lon0, dlat, dlon, float(lat_s), float(lon_s), dt, m_v, m_psi, float(b_v),
-        float(b_psi), float(r_n), float(r_e_cos), d, valid, int(cost), bool(remove_bias), int(interp),
-        int(n_min), int(which), float(reach), int(n_side), spacings_desc, float(symmetry_max),
-        float(threshold_1), float(spacing_2), float(threshold_2), int(break_iteration), int(discriminator),
-        int(mitigation), beam_n, beam_e,
+
+@njit(cache=True)
+def track_loops(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
+    cost, remove_bias, interp, n_min, aided, position_loops, speed_first, mean_m_v, mean_m_psi,
+    n_side, symmetry_max, break_iteration, discriminator, mitigation, f_r, sample_period_s,
+    speed_reach, speed_desc, speed_threshold_1, speed_spacing_2, speed_threshold_2,
+    heading_desc, heading_threshold_1, heading_spacing_2, heading_threshold_2,
+    position_reach, position_desc, position_threshold_1, position_spacing_2, position_threshold_2,
+    out_its, out_locked, out_ran, out_shapes, out_h_prompt, o_n, o_e,
+):  # fmt: skip
+    """All of one tracking epoch's loops in one call (navigator.py's order): aided, the start-point loops
+    along and across the track at the references, then the speed and heading loops (loop_epoch; speed first
+    unless speed_first is False); unaided the loops first and the start-point loops after them. Then the
+    prompt replica's map heights into out_h_prompt. o_n, o_e: the samples' beam offsets (m, replica frame;
+    beam.py), in every replica and the prompt.
+
+    mean_m_v, mean_m_psi: the transect's mean aiding speed (m/s) and heading (rad); f_r: the correlation
+    functions' reach at the far end (m). Loop k (0 speed, 1 heading, 2 along, 3 across): out_its[2k: 2k + 2]
+    the two stages' iterations (speed and heading), out_locked[k], out_ran[k], out_shapes[k] = (v_shape,
+    bandwidth, min_offset, min_cost, slope_left, slope_right). Returns (b_v, b_psi, lat_p, lon_p, speed
+    spacing, heading spacing): the references and start point the loops found."""
+    n = dt.shape[0]
+    for k in range(4):
+        out_ran[k] = False
+        out_locked[k] = False
+        out_its[k] = 0
+    lat_p = lat_s
+    lon_p = lon_s
+    sp_v = 0.0
+    sp_psi = 0.0
+    for phase in range(3):  # 0: start-point loops (aided), 1: speed and heading, 2: start-point (unaided)
+        if phase == 1:
+            for j in range(2):
+                which = 0 if (j == 0) == speed_first else 1
+                if which == 0:
+                    reach = speed_reach
+                    r = loop_epoch(
+                        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
+                        r_e_cos, d, valid, cost, remove_bias, interp, n_min, 0, reach, n_side, speed_desc,
+                        symmetry_max, speed_threshold_1, speed_spacing_2, speed_threshold_2, break_iteration,
+                        discriminator, mitigation, o_n, o_e,
+                    )  # fmt: skip
+                    b_v = r[0]
+                    sp_v = r[11]
+                else:  # spec section 2: 2 sin(eps / 2) v t N = f R_db
+                    v = max(mean_m_v + b_v, 1.0)
+                    reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * sample_period_s * n)))
+                    reach = max(reach, heading_desc[0])
+                    r = loop_epoch(
+                        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
+                        r_e_cos, d, valid, cost, remove_bias, interp, n_min, 1, reach, n_side, heading_desc,
+                        symmetry_max, heading_threshold_1, heading_spacing_2, heading_threshold_2,
+                        break_iteration, discriminator, mitigation, o_n, o_e,
+                    )  # fmt: skip
+                    b_psi = r[0] if aided else math.atan2(math.sin(r[0]), math.cos(r[0]))
+                    sp_psi = r[11]
+                _x, it1, it2, _it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, _sp, _els = r
+                out_its[2 * which] = it1
+                out_its[2 * which + 1] = it2
+                out_locked[which] = locked
+                out_ran[which] = True
+                _put_shape(out_shapes, which, v_shape, bw, m_off, m_cost, sl, sr)
+            continue
+        if not position_loops or (phase == 0) != aided:
+            continue
+        psi_c = mean_m_psi + b_psi if aided else b_psi
+        c = math.cos(psi_c)
+        sn = math.sin(psi_c)
+        for j in range(2):
+            u_n = c if j == 0 else -sn
+            u_e = sn if j == 0 else c
+            r2 = shift_loop_epoch(
+                heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
+                valid, cost, remove_bias, interp, n_min, u_n, u_e, position_reach, n_side, position_desc,
+                symmetry_max, position_threshold_1, position_spacing_2, position_threshold_2,
+                break_iteration, discriminator, mitigation == MITIGATION_NCS, o_n, o_e,
+            )  # fmt: skip
+            x, locked, v_shape, bw, m_off, m_cost, sl, sr = r2
+            lat_p = lat_p + x * u_n / r_n
+            lon_p = lon_p + x * u_e / r_e_cos
+            out_locked[2 + j] = locked
+            out_ran[2 + j] = True
+            _put_shape(out_shapes, 2 + j, v_shape, bw, m_off, m_cost, sl, sr)
+    replica_heights_at(
+        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e,
+        interp, out_h_prompt,
     )  # fmt: skip
-    x, it1, it2, _it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, spacing, _els = r
-    shape = VShape(bool(v_shape), float(bw), float(m_off), float(m_cost), float(sl), float(sr))
-    return float(x), [int(it1), int(it2)], bool(locked), shape, float(spacing)
-
-
-# --------------------------------------------------------------------------------------- references
-
-
-def els_reference(cost_fn, x: float, step: float, outer: float, threshold: float, break_iteration: int = 101,
-                  max_steps: int = 50):  # fmt: skip
-    """Plain-Python twin of the ELS refinement on any cost function of x: (x, iterations, applied)."""
-    xe = x
-    it = 1
-    while it < break_iteration:
-        hp = cost_fn(xe)
-        inner = []
-        for sgn in (-1.0, 1.0):
-            e = cost_fn(xe + sgn * step)
-            j = 1
-            if e < hp:
-                while j < max_steps:
-                    e2 = cost_fn(xe + sgn * (j + 1) * step)
-                    j += 1
-                    if not e2 < e:
-                        break
-                    e = e2
-            inner.append(j * step)
-        x1, x2 = xe - max(outer, inner[0] + step), xe - inner[0]
-        x3, x4 = xe + inner[1], xe + max(outer, inner[1] + step)
-        y1, y2, y3, y4 = (cost_fn(z) for z in (x1, x2, x3, x4))
-        a1, a2 = (y2 - y1) / (x2 - x1), (y4 - y3) / (x4 - x3)
-        if not (a1 < 0 < a2):
-            return x, it, False
-        xs = (y4 - y1 + a1 * x1 - a2 * x4) / (a1 - a2)
-        if not x1 <= xs <= x4:
-            return x, it, False
-        t_err = xe - xs
-        xe -= t_err
-        if abs(t_err) < threshold:
-            return xe, it, True
-        it += 1
-    return x, it, False
+    return b_v, b_psi, lat_p, lon_p, sp_v, sp_psi

@@ -129,6 +129,30 @@ def _quad2(x: np.ndarray, m: np.ndarray) -> float:
     return float(x @ (_inv2(m) @ x))
 
 
+def _median(x: np.ndarray) -> float:
+    """np.median of a 1-D array without NaN by a sort (the same value: the middle element, or the mean of the
+    two middle ones as (a + b) / 2); np.median's Python layers cost more than the sort of N samples."""
+    x = np.sort(x)
+    m = x.size // 2
+    return float(x[m]) if x.size % 2 else float((x[m - 1] + x[m]) / 2.0)
+
+
+def _mean(x: np.ndarray) -> float:
+    """np.mean of a 1-D array as it computes it (sum / count) without its Python layers."""
+    return float(x.sum()) / x.size
+
+
+def _nanmean(x: np.ndarray) -> float:
+    """np.nanmean of a 1-D array (NaN when it has no finite value), without its Python layers when no
+    element is NaN (then it is sum / count, as np.nanmean computes it)."""
+    nan = np.isnan(x)
+    if not nan.any():
+        return float(x.sum()) / x.size
+    if nan.all():
+        return math.nan
+    return float(np.where(nan, 0.0, x).sum()) / int(x.size - nan.sum())
+
+
 def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Roll and pitch (rad) of body -> NED quaternions [w, x, y, z] (rows): strapdown.euler_from_C_bn of
     quat_to_dcm, the third row of C_bn only, on all rows at once (it ran per row in Python each frame)."""
@@ -140,30 +164,41 @@ def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Tail:
-    """A sensor's recent samples (t, columns..., valid), carried across frames."""
+    """A sensor's recent samples (t, columns..., valid), carried across frames: the samples within _TAIL_S
+    of the newest, kept in buffers that a frame's samples are written into (t, v, ok are views of them)."""
 
     def __init__(self, n_cols: int):
-        self.t = np.zeros(0)
-        self.v = np.zeros((0, n_cols))
-        self.ok = np.zeros(0, bool)
+        self._t = np.zeros(64)
+        self._v = np.zeros((64, n_cols))
+        self._ok = np.zeros(64, bool)
+        self._lo = self._hi = 0
+        self._views()
+
+    def _views(self) -> None:
+        lo, hi = self._lo, self._hi
+        self.t, self.v, self.ok = self._t[lo:hi], self._v[lo:hi], self._ok[lo:hi]
 
     def extend(self, t, cols, ok) -> None:
         t = np.asarray(t, float)
-        if t.size == 0:
+        n = t.size
+        if n == 0:
             return
-        v = np.empty((t.size, len(cols)))
+        live = self._hi - self._lo
+        if self._hi + n > self._t.size:  # move the live samples to the front, growing the buffers if needed
+            cap = max(self._t.size, 2 * (live + n))
+            bt, bv, bo = np.zeros(cap), np.zeros((cap, self._v.shape[1])), np.zeros(cap, bool)
+            bt[:live], bv[:live], bo[:live] = self.t, self.v, self.ok
+            self._t, self._v, self._ok = bt, bv, bo
+            self._lo, self._hi = 0, live
+        hi = self._hi
+        self._t[hi : hi + n] = t
         for j, c in enumerate(cols):
-            v[:, j] = c
-        # sensor times increase: the samples within _TAIL_S of the newest are a suffix (a slice, no mask)
-        if self.t.size:
-            t_all = np.concatenate([self.t, t])
-            k = int(np.searchsorted(t_all, t_all[-1] - _TAIL_S, side="left"))
-            self.t = t_all[k:]
-            self.v = np.concatenate([self.v, v])[k:]
-            self.ok = np.concatenate([self.ok, np.asarray(ok, bool)])[k:]
-        else:
-            k = int(np.searchsorted(t, t[-1] - _TAIL_S, side="left"))
-            self.t, self.v, self.ok = t[k:].copy(), v[k:], np.array(ok, bool)[k:]
+            self._v[hi : hi + n, j] = c
+        self._ok[hi : hi + n] = ok
+        self._hi = hi + n
+        # sensor times increase: the samples within _TAIL_S of the newest are a suffix
+        self._lo += int(np.searchsorted(self._t[self._lo : self._hi], t[-1] - _TAIL_S, side="left"))
+        self._views()
 
     def rate(self, t_s: float, col: int, window_s: float) -> float:
         """Least-squares slope (per s) of column col over the valid samples in [t_s - window_s, t_s]."""
@@ -236,6 +271,25 @@ class AcqTrackNavigator:
         self._position_reach = float(
             max(cfg.scf_offset_cells * self.map_resolution_m, float(self._position_set.max()))
         )
+        # loop_kernel.track_loops' settings (fixed by the config) and its preallocated outputs
+        f_r = cfg.scf_offset_cells * self.map_resolution_m
+        self._loop_args = (
+            self._cost, bool(cfg.remove_bias), self._interp, self._n_min, bool(cfg.aiding),
+            bool(cfg.position_loops), cfg.loop_order == "speed_first",
+        )  # fmt: skip
+        self._loop_settings = (
+            int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), self._disc,
+            loop_kernel.MITIGATIONS[cfg.bias_mitigation], float(f_r), float(cfg.sample_period_s),
+            max(f_r / (cfg.transect_samples * cfg.sample_period_s), float(self._speed_set.max())),
+            self._speed_desc, float(cfg.speed_threshold_mps), float(cfg.speed_narrow_spacing_mps),
+            float(cfg.speed_narrow_threshold_mps), self._heading_desc,
+            math.radians(cfg.heading_threshold_deg), math.radians(cfg.heading_narrow_spacing_deg),
+            math.radians(cfg.heading_narrow_threshold_deg),
+            self._position_reach, self._position_desc, float(cfg.position_threshold_m),
+            float(cfg.position_narrow_spacing_cells * self.map_resolution_m),
+            float(cfg.position_narrow_threshold_m),
+        )  # fmt: skip
+        self._loop_out = (np.zeros(4, np.int64), np.zeros(4, bool), np.zeros(4, bool), np.zeros((4, 6)))
         self.wind = WindEstimator(cfg.wind_gain)
         self.average = OutputAverage(
             cfg.average_length,
@@ -389,13 +443,15 @@ class AcqTrackNavigator:
         ra = frames.radar_altimeter
         if ra is not None:
             tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
-        if frames.air_data is not None:
+        # air data and compass enter only the air-data aiding (_add_sample, _air_vector): not kept otherwise
+        air_aiding = self.config.aiding and self.config.aiding_source == "air_data"
+        if air_aiding and frames.air_data is not None:
             ad = frames.air_data
             n_ad = ad.t_s.size
             beta = np.asarray(ad.beta_rad, float) if self.config.air_vector_sideslip else np.zeros(n_ad)
             tl["air"].extend(ad.t_s, [ad.tas_mps, beta], ad.valid & np.isfinite(beta))
         hd = frames.heading
-        if hd is not None and hd.t_s.size:
+        if air_aiding and hd is not None and hd.t_s.size:
             h = np.asarray(hd.heading_rad, float)
             ok = hd.valid & np.isfinite(h)
             if ok.any():  # continuous heading across frames (for the turn rate)
@@ -595,8 +651,9 @@ class AcqTrackNavigator:
         h = h if math.isfinite(h) else 0.0
         return float(meridian_radius_m(lat)) + h, (float(prime_vertical_radius_m(lat)) + h) * math.cos(lat)
 
-    def _offsets(self, dt, m_v, m_psi, b_v, b_psi, lat):
-        r_n, r_e = self._radii(lat, self.h_m)
+    def _offsets(self, dt, m_v, m_psi, b_v, b_psi, lat, radii=None):
+        """Replica offsets (rad) from the start at latitude lat; radii: its (r_n, r_e) when known."""
+        r_n, r_e = self._radii(lat, self.h_m) if radii is None else radii
         dla = np.empty(dt.size)
         dlo = np.empty(dt.size)
         replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e, dla, dlo)
@@ -847,7 +904,7 @@ class AcqTrackNavigator:
         if key is not None and key[0] is rng:  # the same transect (its arrays are cached): the same grid
             return key[1]
         ok = np.isfinite(rng)
-        grid = self._footprint.grid(float(np.median(rng[ok])) if ok.any() else math.nan)
+        grid = self._footprint.grid(_median(rng[ok]) if ok.any() else math.nan)
         self._track_grid_key = (rng, grid)
         return grid
 
@@ -881,7 +938,7 @@ class AcqTrackNavigator:
         ok = valid & np.isfinite(h_p)
         if ok.sum() < self._n_min:
             return -math.inf
-        r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
+        r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         var_h = float(np.var(h_p[ok]))
         return 10.0 * math.log10(var_h / sig0**2) if var_h > 0 else -math.inf
@@ -985,59 +1042,6 @@ class AcqTrackNavigator:
         self.lock_state = "tracking"
         return True
 
-    def _loop(self, which: int, arrays, b_v: float, b_psi: float, p0=None):
-        """Adaptivity block + both stages of one loop: (x, [it1, it2], locked, VShape, spacing)."""
-        cfg = self.config
-        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
-        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
-        N, Ts = cfg.transect_samples, cfg.sample_period_s
-        f_r = cfg.scf_offset_cells * self.map_resolution_m
-        if which == 0:  # spec section 2: speed eps_max = f R_db / (N t)
-            reach = f_r / (N * Ts)
-            sset, thr1 = self._speed_set, cfg.speed_threshold_mps
-            s2, thr2 = cfg.speed_narrow_spacing_mps, cfg.speed_narrow_threshold_mps
-        else:  # 2 sin(eps / 2) v t N = f R_db
-            v = max(float(np.mean(m_v)) + b_v, 1.0)
-            reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * Ts * N)))
-            sset, thr1 = self._heading_set, math.radians(cfg.heading_threshold_deg)
-            s2, thr2 = (
-                math.radians(cfg.heading_narrow_spacing_deg),
-                math.radians(cfg.heading_narrow_threshold_deg),
-            )
-        reach = max(reach, float(sset.max()))
-        p0 = self.p0 if p0 is None else p0
-        # adaptivity block, both stages and the bias mitigation in one numba call (loop_kernel.py)
-        return loop_kernel.run_loop(
-            (heights, lat0, lon0, dlat, dlon), p0[0], p0[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e,
-            d, valid, cost=self._cost, remove_bias=cfg.remove_bias, interp=self._interp, n_min=self._n_min,
-            which=which, reach=reach, n_side=cfg.scf_points,
-            spacings_desc=self._speed_desc if which == 0 else self._heading_desc,
-            symmetry_max=cfg.symmetry_ratio_max, threshold_1=thr1, spacing_2=s2, threshold_2=thr2,
-            break_iteration=cfg.break_iteration, discriminator=self._disc,
-            mitigation=loop_kernel.MITIGATIONS[cfg.bias_mitigation],
-            beam_n=self._beam_rot[0], beam_e=self._beam_rot[1],
-        )  # fmt: skip
-
-    def _shift_loop(self, u_n: float, u_e: float, arrays, b_v: float, b_psi: float, p0):
-        """Adaptivity block + both stages of a start-point loop along (u_n, u_e) from start p0:
-        (shift m, locked, VShape); one numba call (loop_kernel.shift_loop_epoch)."""
-        cfg = self.config
-        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
-        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
-        res = self.map_resolution_m
-        r = loop_kernel.shift_loop_epoch(
-            heights, lat0, lon0, dlat, dlon, float(p0[0]), float(p0[1]), dt, m_v, m_psi, float(b_v),
-            float(b_psi), float(r_n), float(r_e), d, valid, self._cost, bool(cfg.remove_bias), self._interp,
-            self._n_min, float(u_n), float(u_e), self._position_reach, int(cfg.scf_points),
-            self._position_desc, float(cfg.symmetry_ratio_max), float(cfg.position_threshold_m),
-            float(cfg.position_narrow_spacing_cells * res), float(cfg.position_narrow_threshold_m),
-            int(cfg.break_iteration), self._disc, cfg.bias_mitigation == "ncs", self._beam_rot[0],
-            self._beam_rot[1],
-        )  # fmt: skip
-        x, locked, v_shape, bw, m_off, m_cost, sl, sr = r
-        shape = tracking.VShape(bool(v_shape), float(bw), float(m_off), float(m_cost), float(sl), float(sr))
-        return float(x), bool(locked), shape
-
     def _track(self, s: Sample) -> None:
         cfg = self.config
         arrays = self._arrays()
@@ -1051,49 +1055,26 @@ class AcqTrackNavigator:
             self._out_of_lock(s, "too few valid samples")
             return
         b_v0, b_psi0 = self.b_v, self.b_psi
-        self._beam_rot = o_n, o_e = self._beam_arrays(b_psi0)
-        order = (0, 1) if cfg.loop_order == "speed_first" else (1, 0)
-        b_v, b_psi = b_v0, b_psi0
-        its = [0, 0, 0, 0]
-        locks, shapes, spacing = {}, {}, [0.0, 0.0]
+        o_n, o_e = self._beam_arrays(b_psi0)
         # Aided: start-point loops first, at the (slow) references: the whole-replica shift is the position
         # fix, and the speed and heading loops then stretch and turn the shifted replica. Unaided the speed
-        # and heading are the loops' own fast estimates, so they go first and the shift follows them.
-        p_s = self.p0
-
-        def shift_loops(p_s, b_v, b_psi):
-            psi_c = float(np.mean(m_psi)) + b_psi if cfg.aiding else b_psi
-            u = ((math.cos(psi_c), math.sin(psi_c)), (-math.sin(psi_c), math.cos(psi_c)))
-            for j in (0, 1):
-                x, locked, shape = self._shift_loop(u[j][0], u[j][1], arrays, b_v, b_psi, p_s)
-                p_s = (p_s[0] + x * u[j][0] / r_n, p_s[1] + x * u[j][1] / r_e)
-                locks[2 + j], shapes[2 + j] = locked, shape
-            return p_s
-
-        if cfg.position_loops and cfg.aiding:
-            p_s = shift_loops(p_s, b_v, b_psi)
-        for which in order:
-            x, it, locked, shape, sp = self._loop(which, arrays, b_v, b_psi, p_s)
-            if which == 0:
-                b_v = x
-            else:
-                b_psi = float(wrap_rad(x)) if not cfg.aiding else x
-            its[2 * which : 2 * which + 2] = it
-            locks[which], shapes[which], spacing[which] = locked, shape, sp
-        if cfg.position_loops and not cfg.aiding:
-            p_s = shift_loops(p_s, b_v, b_psi)
-        self.iterations = its
-        self.spacing = (spacing[0], spacing[1])
-        self.v_shape = bool(all(sh.v_shape for sh in shapes.values()))
-        # integrity at the new prompt
+        # and heading are the loops' own fast estimates, so they go first and the shift follows them. All of
+        # it (adaptivity blocks, both stages, bias mitigation) and the prompt's map heights in one numba call.
         heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
-        n = dt.size
-        h_p = np.empty(n)
-        beam.replica_heights_at(
-            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e,
-            self._interp, h_p,
+        h_p = np.empty(dt.size)
+        its, locks, ran, shp = self._loop_out
+        b_v, b_psi, lat_p, lon_p, sp_v, sp_psi = loop_kernel.track_loops(
+            heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, b_v0, b_psi0, r_n, r_e,
+            d, valid, *self._loop_args, _mean(m_v), _mean(m_psi), *self._loop_settings,
+            its, locks, ran, shp, h_p, o_n, o_e,
         )  # fmt: skip
-        r_mean = float(np.nanmean(rng)) if np.isfinite(rng).any() else math.nan
+        p_s = (lat_p, lon_p)
+        self.iterations = [int(its[0]), int(its[1]), int(its[2]), int(its[3])]
+        self.spacing = (sp_v, sp_psi)
+        self.v_shape = bool(np.all(shp[ran, 0] != 0.0))
+        shapes = {k: tracking.VShape(bool(shp[k, 0]), *(float(x) for x in shp[k, 1:])) for k in (0, 1)}
+        locks = [bool(x) for x in locks]
+        r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
         fl_v, fl_psi = b_v, b_psi
@@ -1130,8 +1111,8 @@ class AcqTrackNavigator:
         # (reference_gain: the aided reference is a slow bias), and the start point follows from both, so the
         # fix is fed back into the start point and the output.
         c = self._centroid_index(valid)
-        dla_f, dlo_f = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0])
-        dla_p, dlo_p = self._offsets(dt, m_v, m_psi, b_v0, b_psi0, self.p0[0])
+        dla_f, dlo_f = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0], (r_n, r_e))
+        dla_p, dlo_p = self._offsets(dt, m_v, m_psi, b_v0, b_psi0, self.p0[0], (r_n, r_e))
         r_ne = np.array(
             [
                 (p_s[0] - self.p0[0] + dla_f[c] - dla_p[c]) * r_n,
@@ -1183,7 +1164,7 @@ class AcqTrackNavigator:
             self.b_v = self.b_psi = 0.0
             _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
             b_v = b_psi = 0.0
-        dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0])
+        dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0], (r_n, r_e))
         self.p0 = (c_new[0] - dla_n[c], c_new[1] - dlo_n[c])
         # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
         n_ok = max(int(valid.sum()), 1)
@@ -1216,7 +1197,7 @@ class AcqTrackNavigator:
         )
         # the newest sample's covariance: the centroid's, plus dead reckoning over the rest of the transect
         lever_s = float(t[-1] - t[c])
-        v_mean = max(float(np.mean(m_v)) + b_v, 1.0)
+        v_mean = max(_mean(m_v) + b_v, 1.0)
         walk = self._walk2 * lever_s
         if self._ne_frame:
             self.P = self._ne_output_cov(lever_s)
@@ -1235,7 +1216,7 @@ class AcqTrackNavigator:
     def _centroid_index(valid: np.ndarray) -> int:
         """The sample nearest the mean index of the valid samples (the fit's pivot)."""
         idx = np.nonzero(valid)[0]
-        return int(round(float(idx.mean()))) if idx.size else (valid.size - 1) // 2
+        return int(round(_mean(idx))) if idx.size else (valid.size - 1) // 2
 
     @staticmethod
     def _loop_sigma(shape, cost_noise: float, narrow: float) -> float:

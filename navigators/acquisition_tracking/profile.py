@@ -29,6 +29,11 @@ def geometric_height_m(h_geopotential_m):
 
 def plumb_height_m(range_m, roll_rad, pitch_rad, beamwidth_deg: float):
     """Plumb-bob height of a pulse altimeter's shortest range R at the given attitude (level ground)."""
+    if isinstance(roll_rad, float) and isinstance(pitch_rad, float):
+        # one sample (the navigator's case), tilted well inside the half beam: excess 0, R cos 0 = R exactly
+        # (the margin keeps the test off the boundary the numpy expression below decides)
+        if math.cos(roll_rad) * math.cos(pitch_rad) > math.cos(math.radians(0.5 * beamwidth_deg)) + 1e-9:
+            return range_m
     tilt = np.arccos(np.clip(np.cos(roll_rad) * np.cos(pitch_rad), -1.0, 1.0))
     excess = np.maximum(tilt - 0.5 * math.radians(beamwidth_deg), 0.0)
     return range_m * np.cos(excess)
@@ -55,21 +60,32 @@ class Sample:
 
 
 class _Samples(deque):
-    """A bounded deque that counts its changes (Transect.arrays caches its arrays by the count)."""
+    """A bounded deque that counts its changes (Transect.arrays caches its arrays by the count) and keeps
+    the numeric fields of its samples as columns (t, d, m_v, m_psi, range, valid; oldest first)."""
 
     def __init__(self, maxlen: int):
         super().__init__(maxlen=maxlen)
         self.version = 0
+        self.cols = np.zeros((6, maxlen))
 
     def __reduce__(self):
         return (_restore_samples, (self.maxlen, list(self), self.version))
 
+    def _put(self, k: int, x) -> None:
+        c = self.cols
+        c[0, k], c[1, k], c[2, k], c[3, k], c[4, k] = x.t_s, x.d_m, x.m_v, x.m_psi, x.range_m
+        c[5, k] = 1.0 if x.valid else 0.0
+
     def append(self, x) -> None:
+        if len(self) == self.maxlen:  # the oldest drops out
+            self.cols[:, :-1] = self.cols[:, 1:]
         super().append(x)
+        self._put(len(self) - 1, x)
         self.version += 1
 
     def __setitem__(self, i, x) -> None:
         super().__setitem__(i, x)
+        self._put(i % len(self), x)
         self.version += 1
 
     def clear(self) -> None:
@@ -85,7 +101,7 @@ class _Samples(deque):
 def _restore_samples(maxlen: int, items: list, version: int) -> _Samples:
     s = _Samples(maxlen)
     for x in items:
-        deque.append(s, x)
+        s.append(x)
     s.version = version
     return s
 
@@ -117,18 +133,10 @@ class Transect:
         s = self.samples
         if self._cache[0] == s.version:
             return self._cache[1]
-        cols = np.array([(x.t_s, x.d_m, x.m_v, x.m_psi, x.range_m, x.valid) for x in s], float).reshape(-1, 6)
-        t = np.ascontiguousarray(cols[:, 0])
+        cols = s.cols[:, : len(s)].copy()  # the samples' columns (copied: the buffer moves on)
+        t = cols[0]
         dt = np.zeros(t.size)
-        dt[1:] = np.diff(t)
-        out = (
-            t,
-            np.ascontiguousarray(cols[:, 1]),
-            cols[:, 5] != 0.0,
-            dt,
-            np.ascontiguousarray(cols[:, 2]),
-            np.ascontiguousarray(cols[:, 3]),
-            np.ascontiguousarray(cols[:, 4]),
-        )
+        dt[1:] = t[1:] - t[:-1]
+        out = (t, cols[1], cols[5] != 0.0, dt, cols[2], cols[3], cols[4])
         self._cache = (s.version, out)
         return out
