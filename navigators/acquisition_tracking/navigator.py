@@ -36,6 +36,14 @@ along / across) + a map post^2 / 12, its gain counting fix_overlap (N / 2) epoch
 plus dead reckoning from the centroid to the newest sample; out of lock it grows linearly on the aiding's
 sigmas. Vertical: the barometer's bias.
 
+reference_frame "ne" (the default): the aiding of every transect sample is corrected by one north/east
+velocity bias e_ne (_aid_arrays; an INS's velocity error, or the wind with air data), the loops run around
+b = 0, and the centroid filter has four states (centroid north/east, e_ne north/east): the fix updates
+both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s, the output is the centroid plus the lever to the
+newest sample, and out of lock the dead-reckoned sigma grows on e_ne's. replica_model "return": each
+sample's measured height and map point come from the ray of its predicted shortest return (beam.py;
+_return_height), and the loops get the samples' offsets.
+
 Estimate.extra, besides the fixed protocol keys (innovation = the centroid fix minus its prediction, north
 and east in m, its covariance S, NIS with 2 dof, measurement time):
     lock_state          "gnss" | "filling" | "acquiring" | "tracking" | "out_of_lock" | "lost"
