@@ -97,10 +97,10 @@ def test_replica_points_and_the_basis_form_agree_with_numpy(dem):
         loop_kernel.replica_basis(dt, m_v, m_psi, basis)
         basis[0] += o_n
         basis[2] += o_e
-        h_w = np.empty(n)
+        w = np.empty((3, n))
         c_basis = loop_kernel.basis_cost(
             heights, lat0, lon0, dlat, dlon, LAT0, LON0, basis, b_v, b_psi, r_n, r_e, d, valid, 0, True,
-            INTERP_BILINEAR, 5, h_w,
+            INTERP_BILINEAR, 5, w,
         )  # fmt: skip
         h_p = np.empty(n)
         beam.replica_heights_at(

@@ -39,12 +39,11 @@ from numba import njit
 from navigators.acquisition_tracking.beam import replica_heights_at, replica_points
 from navigators.acquisition_tracking.correlation import (
     COST_MSD,
-    INTERP_BILINEAR,
-    cost_from_sums,
+    map_heights,
+    profile_cost,
     replica_offsets,
 )
 from navigators.acquisition_tracking.tracking import DISC_THESIS
-from terrain.kernels import bicubic, bilinear
 
 MITIGATION_NONE = 0
 MITIGATION_NCS = 1
@@ -86,55 +85,32 @@ def replica_basis(dt, m_v, m_psi, basis):
 @njit(cache=True)
 def basis_cost(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, h_w,
+    d, valid, cost, remove_bias, interp, n_min, w,
 ):  # fmt: skip
-    """Cost of the replica (b_v, b_psi) from a replica_basis (correlation.replica_cost's value)."""
+    """Cost of the replica (b_v, b_psi) from a replica_basis; w: (3, N) work rows (lat, lon, map height)."""
     cb = math.cos(b_psi)
     sb = math.sin(b_psi)
-    m = 0
-    sd = 0.0
-    sh = 0.0
-    # profile_cost's first pass summed as the heights are made; the interpolation chosen outside the loop
-    if interp == INTERP_BILINEAR:
-        for i in range(basis.shape[1]):
-            cn = basis[0, i] + b_v * basis[1, i]
-            sn = basis[2, i] + b_v * basis[3, i]
-            h = bilinear(
-                heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
-                lon_s + (sb * cn + cb * sn) / r_e_cos,
-            )  # fmt: skip
-            h_w[i] = h
-            if valid[i] and h == h:
-                m += 1
-                sd += d[i]
-                sh += h
-    else:
-        for i in range(basis.shape[1]):
-            cn = basis[0, i] + b_v * basis[1, i]
-            sn = basis[2, i] + b_v * basis[3, i]
-            h = bicubic(
-                heights, lat0, lon0, dlat, dlon, lat_s + (cb * cn - sb * sn) / r_n,
-                lon_s + (sb * cn + cb * sn) / r_e_cos,
-            )  # fmt: skip
-            h_w[i] = h
-            if valid[i] and h == h:
-                m += 1
-                sd += d[i]
-                sh += h
-    return cost_from_sums(d, valid, h_w, m, sd, sh, cost, remove_bias, n_min)
+    la, lo, h = w[0], w[1], w[2]
+    for i in range(basis.shape[1]):
+        cn = basis[0, i] + b_v * basis[1, i]
+        sn = basis[2, i] + b_v * basis[3, i]
+        la[i] = lat_s + (cb * cn - sb * sn) / r_n
+        lo[i] = lon_s + (sb * cn + cb * sn) / r_e_cos
+    map_heights(heights, lat0, lon0, dlat, dlon, la, lo, interp, h)
+    return profile_cost(d, valid, h, cost, remove_bias, n_min)
 
 
 @njit(cache=True)
 def _cost_x(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x, h_w,
+    d, valid, cost, remove_bias, interp, n_min, which, x, w,
 ):  # fmt: skip
     """Tracking cost of the replica with the loop's quantity at x (b_v for which 0, b_psi for 1)."""
     bv = x if which == 0 else b_v
     bp = x if which == 1 else b_psi
     c = basis_cost(
         heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, bv, bp, r_n, r_e_cos,
-        d, valid, cost, remove_bias, interp, n_min, h_w,
+        d, valid, cost, remove_bias, interp, n_min, w,
     )  # fmt: skip
     if cost == COST_MSD:
         return math.sqrt(c)
@@ -144,13 +120,13 @@ def _cost_x(
 @njit(cache=True)
 def _scf(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, h_w,
+    d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, w,
 ):  # fmt: skip
     """out[k] = the loops' cost (_cost_x) with the loop's quantity at x0 + offsets[k]."""
     for k in range(offsets.shape[0]):
         out[k] = _cost_x(
             heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-            d, valid, cost, remove_bias, interp, n_min, which, x0 + offsets[k], h_w,
+            d, valid, cost, remove_bias, interp, n_min, which, x0 + offsets[k], w,
         )  # fmt: skip
 
 
@@ -168,7 +144,7 @@ def correlation_function(
     x0 = b_v if which == 0 else b_psi
     _scf(
         heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-        d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, np.empty(n),
+        d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, np.empty((3, n)),
     )  # fmt: skip
 
 
@@ -176,7 +152,7 @@ def correlation_function(
 def _stage(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
     d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold, break_iteration,
-    discriminator, h_w,
+    discriminator, w,
 ):  # fmt: skip
     """One early-late stage from x0 (discriminator eq 3.5, or v_fit; tracking.py): (x, iterations, locked).
     A replica off the map (inf cost early or late) ends the stage out of lock at the last finite x."""
@@ -184,15 +160,15 @@ def _stage(
     it = 1
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
     while it < break_iteration:
-        he = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x - spacing, h_w)
-        hl = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x + spacing, h_w)
+        he = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x - spacing, w)
+        hl = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x + spacing, w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
         if discriminator == DISC_THESIS:  # eq (3.5)
             den = he + hl
             eps = spacing * (he - hl) / den if den > 0.0 else 0.0
         else:  # V-fit (tracking.py): the prompt removes the cost floor
-            hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, h_w)
+            hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, w)
             den = max(he, hl) - hp
             eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
             if eps > spacing:
@@ -220,23 +196,23 @@ def els_intersection(x1, y1, x2, y2, x3, y3, x4, y4):
 @njit(cache=True)
 def _els_step(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x, step, outer, max_steps, h_w,
+    d, valid, cost, remove_bias, interp, n_min, which, x, step, outer, max_steps, w,
 ):  # fmt: skip
     """The prompt's tracking error T = x - x* from four correlators placed around x (module docstring);
     (T, ok)."""
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
-    hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, h_w)
+    hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, w)
     inner = np.empty(2)
     for side in range(2):  # 0: early (x - ...), 1: late (x + ...)
         sgn = -1.0 if side == 0 else 1.0
         xi = x + sgn * step
-        e = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, xi, h_w)
+        e = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, xi, w)
         j = 1
         if e < hp:  # the minimum lies beyond this correlator: step outward while the cost falls
             while j < max_steps:
                 e2 = _cost_x(
                     *g, d, valid, cost, remove_bias, interp, n_min, which, x + sgn * (j + 1) * step,
-                    h_w,
+                    w,
                 )  # fmt: skip
                 j += 1
                 if not (e2 < e):
@@ -247,10 +223,10 @@ def _els_step(
     x3 = x + inner[1]
     x1 = x - max(outer, inner[0] + step)
     x4 = x + max(outer, inner[1] + step)
-    y1 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x1, h_w)
-    y2 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x2, h_w)
-    y3 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x3, h_w)
-    y4 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x4, h_w)
+    y1 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x1, w)
+    y2 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x2, w)
+    y3 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x3, w)
+    y4 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x4, w)
     if not (np.isfinite(y1) and np.isfinite(y2) and np.isfinite(y3) and np.isfinite(y4)):
         return 0.0, False
     xs, a1, a2 = els_intersection(x1, y1, x2, y2, x3, y3, x4, y4)
@@ -397,7 +373,7 @@ def loop_epoch(
     of the samples' map points (m, replica frame; beam.py), added to the basis' P and R rows so that they
     turn with b_psi."""
     n = dt.shape[0]
-    h_w = np.empty(n)
+    w = np.empty((3, n))
     basis = np.empty((4, n))
     replica_basis(dt, m_v, m_psi, basis)
     for i in range(n):
@@ -407,12 +383,12 @@ def loop_epoch(
     x0 = b_v if which == 0 else b_psi
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
     vals = np.empty(offs.shape[0])
-    _scf(*g, d, valid, cost, remove_bias, interp, n_min, which, x0, offs, vals, h_w)
+    _scf(*g, d, valid, cost, remove_bias, interp, n_min, which, x0, offs, vals, w)
     v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
     spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
     x, it1, locked = _stage(
         *g, d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold_1, break_iteration,
-        discriminator, h_w,
+        discriminator, w,
     )  # fmt: skip
     it2 = 0
     it_els = 0
@@ -420,7 +396,7 @@ def loop_epoch(
     if mitigation != MITIGATION_NONE:
         x2, it2, lock2 = _stage(
             *g, d, valid, cost, remove_bias, interp, n_min, which, x, spacing_2, threshold_2,
-            break_iteration, discriminator, h_w,
+            break_iteration, discriminator, w,
         )  # fmt: skip
         if np.isfinite(x2):
             x = x2
@@ -433,7 +409,7 @@ def loop_epoch(
         while it < break_iteration:
             t_err, ok = _els_step(
                 *g, d, valid, cost, remove_bias, interp, n_min, which, xe, spacing_2, outer, max_steps,
-                h_w,
+                w,
             )  # fmt: skip
             if not ok:
                 break
@@ -454,44 +430,30 @@ def loop_epoch(
 @njit(cache=True)
 def _shift_cost_pre(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-    u_n, u_e, r_n, r_e_cos, x, h_w,
+    u_n, u_e, r_n, r_e_cos, x, w,
 ):  # fmt: skip
     """Cost of the replica with its start moved x metres along (u_n, u_e), from the replica's offsets
     dla, dlo (rad) computed once: the shift moves the start only, so the offsets (references fixed) are the
     same for every x."""
     ls = lat_s + x * u_n / r_n
-    lo = lon_s + x * u_e / r_e_cos
-    m = 0
-    sd = 0.0
-    sh = 0.0
-    if interp == INTERP_BILINEAR:  # as basis_cost: the first pass summed as the heights are made
-        for i in range(dla.shape[0]):
-            h = bilinear(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i])
-            h_w[i] = h
-            if valid[i] and h == h:
-                m += 1
-                sd += d[i]
-                sh += h
-    else:
-        for i in range(dla.shape[0]):
-            h = bicubic(heights, lat0, lon0, dlat, dlon, ls + dla[i], lo + dlo[i])
-            h_w[i] = h
-            if valid[i] and h == h:
-                m += 1
-                sd += d[i]
-                sh += h
-    return cost_from_sums(d, valid, h_w, m, sd, sh, cost, remove_bias, n_min)
+    lo_s = lon_s + x * u_e / r_e_cos
+    la, lo, h = w[0], w[1], w[2]
+    for i in range(dla.shape[0]):
+        la[i] = ls + dla[i]
+        lo[i] = lo_s + dlo[i]
+    map_heights(heights, lat0, lon0, dlat, dlon, la, lo, interp, h)
+    return profile_cost(d, valid, h, cost, remove_bias, n_min)
 
 
 @njit(cache=True)
 def _shift_function(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-    u_n, u_e, r_n, r_e_cos, offsets, out, h_w,
+    u_n, u_e, r_n, r_e_cos, offsets, out, w,
 ):  # fmt: skip
     for k in range(offsets.shape[0]):
         out[k] = _shift_cost_pre(
             heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp,
-            n_min, u_n, u_e, r_n, r_e_cos, offsets[k], h_w,
+            n_min, u_n, u_e, r_n, r_e_cos, offsets[k], w,
         )  # fmt: skip
 
 
@@ -508,14 +470,14 @@ def shift_correlation_function(
     replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dla, dlo)
     _shift_function(
         heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-        u_n, u_e, r_n, r_e_cos, offsets, out, np.empty(n),
+        u_n, u_e, r_n, r_e_cos, offsets, out, np.empty((3, n)),
     )  # fmt: skip
 
 
 @njit(cache=True)
 def _shift_stage(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-    u_n, u_e, r_n, r_e_cos, x0, spacing, threshold, break_iteration, discriminator, h_w,
+    u_n, u_e, r_n, r_e_cos, x0, spacing, threshold, break_iteration, discriminator, w,
 ):  # fmt: skip
     """One stage of a start-point loop from shift x0 (m), as _stage: (x, iterations, locked)."""
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
@@ -523,15 +485,15 @@ def _shift_stage(
     x = x0
     it = 1
     while it < break_iteration:
-        he = _shift_cost_pre(*g, x - spacing, h_w)
-        hl = _shift_cost_pre(*g, x + spacing, h_w)
+        he = _shift_cost_pre(*g, x - spacing, w)
+        hl = _shift_cost_pre(*g, x + spacing, w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
         if discriminator == DISC_THESIS:
             den = he + hl
             eps = spacing * (he - hl) / den if den > 0.0 else 0.0
         else:
-            hp = _shift_cost_pre(*g, x, h_w)
+            hp = _shift_cost_pre(*g, x, w)
             den = max(he, hl) - hp
             eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
             if eps > spacing:
@@ -559,18 +521,18 @@ def shift_loop_epoch(
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
-    h_w = np.empty(n)
+    w = np.empty((3, n))
     replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
          u_n, u_e, r_n, r_e_cos)  # fmt: skip
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
     vals = np.empty(offs.shape[0])
-    _shift_function(*g, offs, vals, h_w)
+    _shift_function(*g, offs, vals, w)
     v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
     spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
-    x, _, locked = _shift_stage(*g, 0.0, spacing, threshold_1, break_iteration, discriminator, h_w)
+    x, _, locked = _shift_stage(*g, 0.0, spacing, threshold_1, break_iteration, discriminator, w)
     if narrow:
-        x2, _, lock2 = _shift_stage(*g, x, spacing_2, threshold_2, break_iteration, discriminator, h_w)
+        x2, _, lock2 = _shift_stage(*g, x, spacing_2, threshold_2, break_iteration, discriminator, w)
         if np.isfinite(x2):
             x = x2
         locked = locked and lock2

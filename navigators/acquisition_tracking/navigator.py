@@ -489,22 +489,18 @@ class AcqTrackNavigator:
                 None if b is None else b.h_baro_m,
                 None if b is None else b.valid,
             )
-            ok = np.all(np.isfinite(hist), axis=1)
             step = max(1, hist.shape[0] // 50)  # attitude at <= 50 points per frame is plenty at 1 s
-            idx = np.arange(0, hist.shape[0], step)
-            roll, pitch = _roll_pitch(hist[idx, 6:10])
-            roll[~ok[idx]] = np.nan
-            pitch[~ok[idx]] = np.nan
-            qq = hist[idx, 6:10]  # yaw: atan2(C_bn[1, 0], C_bn[0, 0]) (beam.py's predicted return)
+            rows = hist[::step]
+            ok = np.isfinite(rows).all(axis=1)
+            roll, pitch = _roll_pitch(rows[:, 6:10])
+            roll[~ok] = np.nan
+            pitch[~ok] = np.nan
+            qq = rows[:, 6:10]  # yaw: atan2(C_bn[1, 0], C_bn[0, 0]) (beam.py's predicted return)
             yaw_i = np.arctan2(
                 2.0 * (qq[:, 1] * qq[:, 2] + qq[:, 0] * qq[:, 3]),
                 qq[:, 0] ** 2 + qq[:, 1] ** 2 - qq[:, 2] ** 2 - qq[:, 3] ** 2,
             )
-            tl["ins"].extend(
-                frames.imu.t_s[idx],
-                [hist[idx, 3], hist[idx, 4], roll, pitch, yaw_i],
-                ok[idx],
-            )
+            tl["ins"].extend(frames.imu.t_s[::step], [rows[:, 3], rows[:, 4], roll, pitch, yaw_i], ok)
 
     def _samples(self, frames: SensorFrames) -> None:
         cfg = self.config
