@@ -166,7 +166,8 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
               n_golden, lat_c, lon_c, s_lo, bin_hmax, out):
     """Seed 002 eqs 23-26 for hypotheses k (antenna lat[k], lon[k] rad, h[k] m), the epoch's v_ned (3,) and
     C_bn (3, 3). out (n, N_OUT): R, theta, x_b, y_b, z_b, dR/dtheta_zdl, dR/dpsi_zdl (m/rad), s* (m across
-    track), valid (1/0), and the runner-up basin's coarse range and look angle (NaN: none in the window).
+    track), valid (1/0), and the range and look angle of the coarse scan's best sample farther than 1.5 ds_m
+    across track from the minimum (another basin or a flat minimum's far side; NaN: none in the window).
     d_ang <= 0 skips the eq 24 differences."""
     vhs = np.sqrt(v_ned[0] ** 2 + v_ned[1] ** 2)
     elev = np.arctan2(-v_ned[2], vhs)
@@ -245,8 +246,8 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
             f, t, x, y, z = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
                                      vx, vy, vz, un, ue, C, sin_w, max_range, s_best, t_best)
             sm = s_best
-        # the other basin's coarse sample (range, look angle): how close the zero-Doppler line's second
-        # local minimum comes to the first, i.e. how near the closest point is to jumping
+        # the coarse scan's best sample farther than 1.5 ds_m across track from the minimum (range, look
+        # angle): another basin, or the far side of a flat one - how near the closest point is to jumping
         if abs(sm - s_best2) < 1.5 * ds_m and best2 < np.inf:
             so, to = s_best, t_best
         else:
