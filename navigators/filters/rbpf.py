@@ -26,13 +26,13 @@ Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   term): on the seed002 straight leg the attitude NEES was 30 and the velocity error 2-4 sigma; with
   5,000 during acquisition it is as with 5,000 throughout (3-D position 3.2 m against 5.6 m);
 - IRA samples eqs 24-25 cannot describe (our addition): a return on the look window's edge
-  (window_edge_margin_deg: the window, not the terrain, fixed the point; in a 40-deg bank ~20 % of
+  (window_edge_margin_deg: the window, not the terrain, fixed the point; in a 45-deg bank 29 % of
   samples) is skipped; when a point of the zero-Doppler line 68 m or more across track from the closest
   one (another basin, or the far side of a flat minimum) lies within ambiguity_gap_m of its range for
   particles holding ambiguity_weight of the cloud, the closest point can jump (a few tenths of m/s of
   velocity error tilt the line enough) and theta with it by degrees, so the update uses the range alone
   (continuous across the jump). On the default route this was the cause of the
-  overconfidence on long stretches (pooled NEES 4.0 -> 1.9, scripts/rbpf_consistency.py);
+  overconfidence on long stretches (pooled NEES 4.0 -> 1.9 on seeds 0-2, 2.45 on 0-5: rbpf_consistency.py);
 - feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
   subtracted from every particle, so the error model stays linear about a good INS.
 
