@@ -157,9 +157,10 @@ def test_extra_keys_and_one_stream_fixes_the_run(dem):
         assert ea.lat_rad == eb.lat_rad and np.array_equal(ea.covariance, eb.covariance)
     assert a[-1].lat_rad != c[-1].lat_rad
     ex = a[-1].extra
-    assert ex[EXTRA_NIS_DOF] == 2 and ex[EXTRA_INNOVATION].shape == (2,)
+    # 2 dof, or range only (1) when the closest point is about to jump basins (rbpf: ambiguity_gap_m)
+    assert ex[EXTRA_NIS_DOF] in (1, 2) and ex[EXTRA_INNOVATION].shape == (ex[EXTRA_NIS_DOF],)
     assert np.isfinite(ex[EXTRA_NIS]) and np.isfinite(ex[EXTRA_LOG_LIKELIHOOD])
-    assert 1.0 <= ex[EXTRA_ESS] <= 300.0
+    assert 1.0 <= ex[EXTRA_ESS] <= nav_a.n_acquisition      # 5,000 while acquiring, then 300
     assert nav_a.epochs == 4
 
 

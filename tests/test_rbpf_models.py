@@ -184,6 +184,9 @@ def test_rbpf_not_overconfident_on_a_coarse_map():
 @pytest.mark.parametrize("setting,value", [
     ("terrain_model_sigma_m", "coarse"), ("terrain_model_sigma_m", -1.0), ("map_bias_sigma_m", float("nan")),
     ("gnss_pos_bias_sigma_m", (1.0, -1.0)), ("gnss_pos_bias_sigma_m", (1.0,)),
+    ("acquisition_particles", 10), ("acquisition_particles", 2.5), ("acquisition_particles", 10**7),
+    ("window_edge_margin_deg", 50.0), ("window_edge_margin_deg", float("nan")),
+    ("ambiguity_gap_m", -1.0), ("ambiguity_weight", 1.5),
 ])
 def test_new_bad_settings_raise_naming_the_setting(dem, setting, value):
     with pytest.raises(ValueError, match=setting):

@@ -19,6 +19,20 @@ Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   map_bias_sigma_m, from the scenario's map error model) and the terrain a coarse map cannot hold between
   its posts (terrain_model_sigma_m, "auto": from the map's spectrum; 0 when the map is the world);
 - systematic resampling when the effective sample size falls below ess_threshold * N;
+- acquisition (our addition): the cloud starts with acquisition_particles (5,000) and is resampled down to
+  n_particles (Table 1's 1,000) once its horizontal spread is below acquisition_spread_m. 1,000 particles
+  over Table 1's 50 x 50 x 20 m prior keep a few survivors after the first sharp updates, whose Kalman parts
+  then carry one sampled position path's information about velocity and attitude (eq 6's L(z - F^n x^l)
+  term): on the seed002 straight leg the attitude NEES was 30 and the velocity error 2-4 sigma; with
+  5,000 during acquisition it is as with 5,000 throughout (3-D position 3.2 m against 5.6 m);
+- IRA samples eqs 24-25 cannot describe (our addition): a return on the look window's edge
+  (window_edge_margin_deg: the window, not the terrain, fixed the point; in a 45-deg bank 29 % of
+  samples) is skipped; when a point of the zero-Doppler line 68 m or more across track from the closest
+  one (another basin, or the far side of a flat minimum) lies within ambiguity_gap_m of its range for
+  particles holding ambiguity_weight of the cloud, the closest point can jump (a few tenths of m/s of
+  velocity error tilt the line enough) and theta with it by degrees, so the update uses the range alone
+  (continuous across the jump). On the default route this was the cause of the
+  overconfidence on long stretches (pooled NEES 4.0 -> 1.9 on seeds 0-2, 2.45 on 0-5: rbpf_consistency.py);
 - feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
   subtracted from every particle, so the error model stays linear about a good INS.
 
@@ -103,13 +117,18 @@ class RaoBlackwellizedPF:
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. rng: numpy Generator
     (None: default_rng(0)). n_particles; ess_threshold in (0, 1]; trn_rate_hz; error_model_rate_hz (the
     error model's step, 50 Hz); range_sigma_m, look_angle_sigma_deg; half_window_deg, max_range_m (the IRA's
-    look window, as the sensor's); init_pos_sigma_m (N, E, up), init_vel_sigma_mps, init_att_sigma_deg,
+    look window, as the sensor's); window_edge_margin_deg (an IRA sample whose look angle lies within this of
+    the window's edge is skipped: eqs 24-25 describe an interior minimum); init_pos_sigma_m (N, E, up),
+    init_vel_sigma_mps, init_att_sigma_deg,
     accel_bias_sigma_mps2, gyro_bias_sigma_rps; map_sigma_m, map_bias_sigma_m (the map's random and bias
     vertical error, m), terrain_model_sigma_m ("auto" or m: the map's interpolation error), see
     _r_var_now; acquisition_spread_m (see _r_var_now); q_pos_m (3), q_vel_mps (horizontal, vertical),
     q_att_rad, q_accel_bias_mps2, q_gyro_bias_rps (per TRN epoch); gnss_pos_sigma_m (white, horizontal,
     vertical), gnss_pos_bias_sigma_m (the receiver's drift: a floor on the fused position),
     gnss_vel_sigma_mps;
+    acquisition_particles (0: off; see the module docstring); theta_velocity_rows (add the look angle's
+    sensitivity to velocity, left out of eq 23, by central differences at the cloud's mean, see
+    _theta_velocity_row); ambiguity_gap_m, ambiguity_weight (range-only updates, module docstring);
     imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m (the innovation test and its
     recovery, see the module docstring).
@@ -120,12 +139,17 @@ class RaoBlackwellizedPF:
         dem=None,
         rng: np.random.Generator | None = None,
         n_particles: int = 1000,
+        acquisition_particles: int = 5000,
         ess_threshold: float = 0.5,
         trn_rate_hz: float = 1.0,
         error_model_rate_hz: float = 50.0,
         range_sigma_m: float = 3.5,
         look_angle_sigma_deg: float = 0.1,
         half_window_deg: float = 45.0,
+        window_edge_margin_deg: float = 1.0,
+        theta_velocity_rows: bool = True,
+        ambiguity_gap_m: float = 3.0,
+        ambiguity_weight: float = 0.5,
         max_range_m: float = 10000.0,
         init_pos_sigma_m=(50.0, 50.0, 20.0),
         init_vel_sigma_mps=(0.7071067811865476, 0.7071067811865476, 0.5),   # Table 1: 1/sqrt(2)
@@ -177,7 +201,15 @@ class RaoBlackwellizedPF:
         self.name = name
         self.dem = dem
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.n = int(n_particles)
+        self.n_particles = int(n_particles)
+        na = acquisition_particles
+        if isinstance(na, bool) or not isinstance(na, (int, np.integer)):
+            raise ValueError(f"acquisition_particles must be an integer, got {acquisition_particles!r}")
+        if not (na == 0 or self.n_particles <= int(na) <= MAX_PARTICLES):
+            raise ValueError(f"acquisition_particles must be 0 (off) or in [n_particles, {MAX_PARTICLES}], "
+                             f"got {acquisition_particles}")
+        self.n_acquisition = max(int(acquisition_particles), self.n_particles)
+        self.n = self.n_particles          # the cloud's current size
         self.ess_threshold = e
         self.trn_period_s = 1.0 / _positive("trn_rate_hz", trn_rate_hz)
         self.dt_err = 1.0 / _positive("error_model_rate_hz", error_model_rate_hz)
@@ -197,6 +229,17 @@ class RaoBlackwellizedPF:
         else:
             self.terrain_model_sigma_m = _positive("terrain_model_sigma_m", terrain_model_sigma_m, True)
         self.half_window_rad = math.radians(hw)
+        em = _positive("window_edge_margin_deg", window_edge_margin_deg, True)
+        if not em < hw:
+            raise ValueError("window_edge_margin_deg must lie in [0, half_window_deg), "
+                             f"got {window_edge_margin_deg!r}")
+        self.edge_margin_rad = math.radians(em)
+        self.theta_velocity_rows = bool(theta_velocity_rows)
+        self.ambiguity_gap_m = _positive("ambiguity_gap_m", ambiguity_gap_m, True)
+        aw = _positive("ambiguity_weight", ambiguity_weight, True)
+        if not aw <= 1.0:
+            raise ValueError(f"ambiguity_weight must lie in [0, 1], got {ambiguity_weight!r}")
+        self.ambiguity_weight = aw
         self.max_range_m = _positive("max_range_m", max_range_m)
         self.init_pos_sigma = _triple("init_pos_sigma_m", init_pos_sigma_m, False)
         sv = _triple("init_vel_sigma_mps", init_vel_sigma_mps)
@@ -260,7 +303,7 @@ class RaoBlackwellizedPF:
         self._reset_done = True
 
     def _init_cloud(self) -> None:
-        n = self.n
+        n = self.n = self.n_acquisition
         self.xn = self.rng.standard_normal((n, 3)) * self.init_pos_sigma
         self.xl = np.zeros((n, 12))
         self.P = np.broadcast_to(self.P0, (n, 12, 12)).copy()
@@ -399,6 +442,7 @@ class RaoBlackwellizedPF:
             updated = True
         if updated:
             self._normalise_resample(te, logw_prev)
+            self._handover()
         self._feedback()
         self._cov9 = self._covariance9()
         if self.integrity.degraded:
@@ -409,12 +453,21 @@ class RaoBlackwellizedPF:
                 self.health.status = "ok"
 
     def _ira_update(self, te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll) -> bool:
+        if abs(y_ira[1]) > self.half_window_rad - self.edge_margin_rad:
+            # the return sits on the look window's edge: the window, not the terrain's minimum, fixed the
+            # point, so its range depends on roll and its look angle is the window's - eqs 24-25 (an
+            # interior minimum on the zero-Doppler line) do not describe it
+            sk = self.health.skipped
+            sk["ira_window_edge"] = sk.get("ira_window_edge", 0) + 1
+            return False
         lat_i = lat - self.xn[:, 0] / sc[0]
         lon_i = lon - self.xn[:, 1] / sc[1]
         h_i = h - self.xn[:, 2]
         out = ira_model.predict_ira(self.dem, lat_i, lon_i, h_i, v, C, self.half_window_rad, self.max_range_m)
         Hs = np.zeros((self.n, 2, 6))
         ira_model.measurement_rows(out, v, C, Hs)
+        if self.theta_velocity_rows:
+            Hs[:, 1, :3] = self._theta_velocity_row(out, lat_i, lon_i, h_i, v, C)
         H = np.zeros((self.n, 2, 12))
         H[:, :, :6] = Hs
         ok = out[:, ira_model.OUT_VALID] > 0.5
@@ -424,23 +477,38 @@ class RaoBlackwellizedPF:
             self.health.status, self.health.ok = "degraded", True
             self._integrity_test(te, math.inf, 2)
             return False
-        pred = np.stack([out[:, ira_model.OUT_R], out[:, ira_model.OUT_THETA]], axis=1)
-        e = np.where(ok[:, None], np.array(y_ira)[None, :] - pred, 0.0)
+        # a point of the zero-Doppler line more than 1.5 scan steps (68 m) across track from the closest
+        # one, in another basin or on the far side of a flat minimum, within ambiguity_gap_m of its range:
+        # the closest point can jump there (a velocity error of a few tenths of m/s tilts the line enough),
+        # and theta with it by degrees - what eqs 24-25 cannot linearise (the range, a minimum, stays
+        # continuous). When such particles carry ambiguity_weight of the cloud, the range alone.
+        wq = np.exp(self.logw - np.max(self.logw))
+        wq = np.where(ok, wq, 0.0)
+        gap = out[:, ira_model.OUT_R2] - out[:, ira_model.OUT_R]
+        near = ok & np.isfinite(gap) & (gap < self.ambiguity_gap_m)
+        dims = 1 if float(wq[near].sum()) > self.ambiguity_weight * float(wq.sum()) else 2
+        if dims == 1:
+            sk = self.health.skipped
+            sk["ira_theta_ambiguous"] = sk.get("ira_theta_ambiguous", 0) + 1
+        y = np.array(y_ira)[:dims]
+        pred = np.stack([out[:, ira_model.OUT_R], out[:, ira_model.OUT_THETA]], axis=1)[:, :dims]
+        H = np.ascontiguousarray(H[:, :dims, :])
+        e = np.where(ok[:, None], y[None, :] - pred, 0.0)
         # innovation moments of the mixture (before the update): the fixed Estimate.extra keys
         wp = np.exp(logw_prev - logw_prev.max())
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
-        pred_ok = np.where(ok[:, None], pred, 0.0)
+        pred_ok = np.ascontiguousarray(np.where(ok[:, None], pred, 0.0))
         self._last_range_m = float(np.sum(wp * pred_ok[:, 0]))
-        r_var = self._r_var_now(self._last_range_m)
+        r_var = np.ascontiguousarray(self._r_var_now(self._last_range_m)[:dims])
         ybar, S = kern.predictive_moments(H, self.xl, self.P, r_var, pred_ok, ok, wp)
-        nu = np.array(y_ira) - ybar
+        nu = y - ybar
         saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
         n_bad = kern.linear_update(self.xl, self.P, H, e, r_var, self.logw, ok, ll)
         fin_ll = ll[np.isfinite(ll)]
-        # log N at OUTLIER_SIGMA for the variances inflated at most 100x (2 dof): the rejection floor
-        ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(r_var)) * 1e4)
-                    - math.log(2 * math.pi))
+        # log N at OUTLIER_SIGMA for the variances inflated at most 100x: the rejection floor
+        ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(r_var)) * 100.0 ** dims)
+                    - 0.5 * dims * math.log(2 * math.pi))
         # no particle within OUTLIER_SIGMA of the measurement: in linear weights every one underflows
         if fin_ll.size == 0 or fin_ll.max() < ll_floor:
             self.xl, self.P, self.logw = saved
@@ -454,7 +522,7 @@ class RaoBlackwellizedPF:
             else:
                 self.health.skip(te, "ira_outlier", "IRA sample unexplained by every particle: skipped")
             self.health.status, self.health.ok = "degraded", True
-            self._integrity_test(te, math.inf, 2)
+            self._integrity_test(te, math.inf, dims)
             return False
         self._n_rejected = 0
         if n_bad:
@@ -472,10 +540,34 @@ class RaoBlackwellizedPF:
             nis = float(nu @ np.linalg.solve(S, nu))
         except np.linalg.LinAlgError:
             nis = float("nan")
-        self._extra = {EXTRA_INNOVATION: nu, EXTRA_INNOVATION_COV: S, EXTRA_NIS: nis, EXTRA_NIS_DOF: 2,
+        self._extra = {EXTRA_INNOVATION: nu, EXTRA_INNOVATION_COV: S, EXTRA_NIS: nis, EXTRA_NIS_DOF: dims,
                        EXTRA_LOG_LIKELIHOOD: float(lse - lse_prev), EXTRA_MEASUREMENT_TIME: te}
-        self._integrity_test(te, nis, 2)
+        self._integrity_test(te, nis, dims)
         return True
+
+    def _theta_velocity_row(self, out, lat_i, lon_i, h_i, v, C) -> np.ndarray:
+        """Look-angle sensitivity to the velocity error (1 x 3, rad per m/s), which eq 23's look-angle row
+        leaves out: a velocity error tilts and turns the zero-Doppler line (the shift eq 24 applies to the
+        range), and the closest point moves along the terrain, so theta moves too (on the seed002 flight
+        ~0.1 deg per m/s of vertical velocity, up to 0.5). Central differences of eqs 23/26 (the exact
+        search) at the cloud's weighted-mean position, shared by the particles; H = -dtheta/dv (errors
+        computed minus true, as eq 24's range row)."""
+        ok = out[:, ira_model.OUT_VALID] > 0.5
+        w = np.where(ok, np.exp(self.logw - np.max(self.logw)), 0.0)
+        if not w.sum() > 0:
+            return np.zeros(3)
+        w /= w.sum()
+        la, lo, hh = (np.array([float(w @ np.where(ok, x, 0.0))]) for x in (lat_i, lon_i, h_i))
+        row = np.zeros(3)
+        dv = 0.2
+        for j in range(3):
+            d = np.zeros(3)
+            d[j] = dv
+            a = ira_model.predict_ira(self.dem, la, lo, hh, v + d, C, self.half_window_rad, self.max_range_m)
+            b = ira_model.predict_ira(self.dem, la, lo, hh, v - d, C, self.half_window_rad, self.max_range_m)
+            if a[0, ira_model.OUT_VALID] > 0.5 and b[0, ira_model.OUT_VALID] > 0.5:
+                row[j] = -(a[0, ira_model.OUT_THETA] - b[0, ira_model.OUT_THETA]) / (2 * dv)
+        return row
 
     def _integrity_test(self, te: float, nis: float, dof: int) -> None:
         """Feed the innovation test; on entering "degraded" re-spread the particles' positions (logged)."""
@@ -591,6 +683,21 @@ class RaoBlackwellizedPF:
             self.resamples += 1
         else:
             self.logw = np.log(np.where(w > 0, w, 1e-300))
+
+    def _handover(self) -> None:
+        """Acquisition over: the cloud of acquisition_particles is resampled (systematic, by weight) down to
+        n_particles once its horizontal spread is below acquisition_spread_m (see the class docstring)."""
+        if self.n <= self.n_particles:
+            return
+        c = kern.moments(self.xn, self.xl, self.P, self._weights())[1]
+        if math.sqrt(max(c[0, 0] + c[1, 1], 0.0)) >= max(self.acquisition_spread_m, 1e-9):
+            return
+        cw = np.cumsum(self._weights())
+        u = (float(self.rng.random()) + np.arange(self.n_particles)) / self.n_particles
+        idx = np.minimum(np.searchsorted(cw, u * cw[-1], side="left"), self.n - 1).astype(np.int64)
+        self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
+        self.n = self.n_particles
+        self.logw = np.full(self.n, -math.log(self.n))
 
     def _weights(self) -> np.ndarray:
         m = np.max(self.logw)

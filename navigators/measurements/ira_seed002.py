@@ -68,8 +68,9 @@ def _ned(dphi, dlam, hp, ha, s, c, m, n, dm):
     y = (n + hp) * c * dlam - mh * s * dphi * dlam
     z = (ha - hp) + 0.5 * mh * dphi * dphi + 0.5 * nh * c * c * dlam * dlam
     return x, y, z
-OUT_R, OUT_THETA, OUT_XB, OUT_YB, OUT_ZB, OUT_DR_DTH, OUT_DR_DPSI, OUT_S, OUT_VALID = range(9)
-N_OUT = 9
+(OUT_R, OUT_THETA, OUT_XB, OUT_YB, OUT_ZB, OUT_DR_DTH, OUT_DR_DPSI, OUT_S, OUT_VALID, OUT_R2,
+ OUT_THETA2) = range(11)
+N_OUT = 11
 
 
 @njit(cache=True)
@@ -165,7 +166,9 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
               n_golden, lat_c, lon_c, s_lo, bin_hmax, out):
     """Seed 002 eqs 23-26 for hypotheses k (antenna lat[k], lon[k] rad, h[k] m), the epoch's v_ned (3,) and
     C_bn (3, 3). out (n, N_OUT): R, theta, x_b, y_b, z_b, dR/dtheta_zdl, dR/dpsi_zdl (m/rad), s* (m across
-    track), valid (1/0). d_ang <= 0 skips the eq 24 differences."""
+    track), valid (1/0), and the range and look angle of the coarse scan's best sample farther than 1.5 ds_m
+    across track from the minimum (another basin or a flat minimum's far side; NaN: none in the window).
+    d_ang <= 0 skips the eq 24 differences."""
     vhs = np.sqrt(v_ned[0] ** 2 + v_ned[1] ** 2)
     elev = np.arctan2(-v_ned[2], vhs)
     azim = np.arctan2(v_ned[1], v_ned[0])
@@ -243,6 +246,19 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
             f, t, x, y, z = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
                                      vx, vy, vz, un, ue, C, sin_w, max_range, s_best, t_best)
             sm = s_best
+        # the coarse scan's best sample farther than 1.5 ds_m across track from the minimum (range, look
+        # angle): another basin, or the far side of a flat one - how near the closest point is to jumping
+        if abs(sm - s_best2) < 1.5 * ds_m and best2 < np.inf:
+            so, to = s_best, t_best
+        else:
+            so, to = s_best2, t_best2
+        if best2 < np.inf:
+            fo, _, xo, yo, zo = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh,
+                                         inhc, vx, vy, vz, un, ue, C, sin_w, max_range, so, to)
+            if fo < np.inf:
+                byo = C[0, 1] * xo + C[1, 1] * yo + C[2, 1] * zo
+                out[k, OUT_R2] = fo
+                out[k, OUT_THETA2] = np.arcsin(min(max(byo / fo, -1.0), 1.0))
         bx = C[0, 0] * x + C[1, 0] * y + C[2, 0] * z
         by = C[0, 1] * x + C[1, 1] * y + C[2, 1] * z
         bz = C[0, 2] * x + C[1, 2] * y + C[2, 2] * z
@@ -463,6 +479,7 @@ def map_noise_variances(map_sigma_m: float, terrain_model_sigma_m: float, range_
     return np.array([var_h, np.sqrt(var_h) / range_m])
 
 
-__all__ = ["N_OUT", "OUT_DR_DPSI", "OUT_DR_DTH", "OUT_R", "OUT_S", "OUT_THETA", "OUT_VALID", "OUT_XB",
+__all__ = ["N_OUT", "OUT_DR_DPSI", "OUT_DR_DTH", "OUT_R", "OUT_R2", "OUT_S", "OUT_THETA", "OUT_THETA2",
+           "OUT_VALID", "OUT_XB",
            "OUT_YB", "OUT_ZB", "cloud_height_max", "interpolation_sigma_m", "map_noise_variances",
            "measurement_rows", "predict_ira", "zdl_angle_jacobian", "zdl_batch"]
