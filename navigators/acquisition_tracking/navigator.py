@@ -572,8 +572,13 @@ class AcqTrackNavigator:
 
     # ------------------------------------------------------------------ epochs
     def _radii(self, lat: float, h: float) -> tuple[float, float]:
+        key = (lat, h)
+        if getattr(self, "_radii_key", None) == key:  # an epoch asks several times for the same start
+            return self._radii_val
         h = h if math.isfinite(h) else 0.0
-        return float(meridian_radius_m(lat)) + h, (float(prime_vertical_radius_m(lat)) + h) * math.cos(lat)
+        r = float(meridian_radius_m(lat)) + h, (float(prime_vertical_radius_m(lat)) + h) * math.cos(lat)
+        self._radii_key, self._radii_val = key, r
+        return r
 
     def _offsets(self, dt, m_v, m_psi, b_v, b_psi, lat, radii=None):
         """Replica offsets (rad) from the start at latitude lat; radii: its (r_n, r_e) when known."""
@@ -881,7 +886,7 @@ class AcqTrackNavigator:
         self.iterations = [int(its[0]), int(its[1]), int(its[2]), int(its[3])]
         self.spacing = (sp_v, sp_psi)
         self.v_shape = bool(np.all(shp[ran, 0] != 0.0))
-        shapes = {k: tracking.VShape(bool(shp[k, 0]), *(float(x) for x in shp[k, 1:])) for k in (0, 1)}
+        shapes = {k: tracking.VShape(bool(shp[k, 0]), *shp[k, 1:].tolist()) for k in (0, 1)}
         locks = [bool(x) for x in locks]
         r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
