@@ -7,7 +7,8 @@ Set-up (the thesis' where it says, ours marked): the King Air (JSBSim) stands in
 80 m/s, 1,050 s of flight sampled at 1 s (~84 km; a lawnmower of north-south legs over the bundled real
 Jacksboro DEM, ours), 600 m above the ground (ours; the thesis gives no height), a pulse radar altimeter with
 a 17 deg beam returning the shortest range in its cone (trn_env.sensors.radar_altimeter; the replicas model
-it: replica_model = "footprint", one variant with plumb replicas), IRS-grade speed and
+it: replica_model = "return", the replica samples the map where the predicted shortest return lies;
+navigators/acquisition_tracking/beam.py), IRS-grade speed and
 heading aiding (aiding_source = "ins": a navigation-grade strapdown INS's velocity; GNSS resets it until
 10 s, then it is denied), a map with SRTM-class errors (the real 3" DEM as the navigator's map with a
 horizontal shift of 20 m CE90 and a correlated vertical error of 16 m LE90, while the world carries 30 m
@@ -32,6 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import t as student_t
 
 import terrain
 from navigators import registry
@@ -60,6 +62,10 @@ IRS_SETTINGS = {
     "aiding_heading_sigma_deg": 0.3,
     "reference_gain": 0.05,
     "aiding_walk_m_per_sqrt_s": 3.0,
+    # the IRS's velocity error is a north/east vector (reference_frame "ne", the default with INS aiding)
+    # that its 0.5 mg accelerometer bias ramps at up to 0.005 m/s^2: a random walk of 0.1 m/s/sqrt(s)
+    # covers 0.5 m/s in 25 s
+    "aiding_bias_walk_mps_per_sqrt_s": 0.1,
 }
 
 
@@ -218,6 +224,8 @@ def replay(frames, truth, dem, name: str, t_deny_s: float = 10.0, **settings):
 def _stats(run: dict, t_from: float = 10.0) -> dict:
     m = run["t_s"] >= t_from
     e = run["err_m"][m]
+    dist_km = np.concatenate([[0.0], np.cumsum(0.5 * (run["true_speed_mps"][1:] + run["true_speed_mps"][:-1])
+                                               * np.diff(run["t_s"]))]) / 1000.0
     within = run["err_m"][m] <= 3.0 * run["sigma_m"][m]
     return {
         "rms_m": float(np.sqrt(np.mean(e**2))),
@@ -226,6 +234,8 @@ def _stats(run: dict, t_from: float = 10.0) -> dict:
         "in_lock_fraction": float(np.mean(run["tracking"][m])),
         "within_3sigma": float(np.mean(within)),
         "drift_last_third_m": float(np.mean(e[-len(e) // 3 :]) - np.mean(e[len(e) // 3 : 2 * len(e) // 3])),
+        # the error's least-squares slope against the distance flown (m per km): ~0 without drift
+        "error_slope_m_per_km": float(np.polyfit(dist_km[m], e, 1)[0]) if m.sum() > 2 else math.nan,
     }
 
 
@@ -246,13 +256,14 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="seed of the first main flight, the ramp and flat")
     ap.add_argument("--seeds", type=int, default=3, help="main flights (seeds seed, seed + 1, ...)")
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--replica-model", default="return", choices=("return", "footprint", "plumb"))
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
     results: dict = {}
 
     # 1. the main flight (one per seed), replayed by every variant
-    irs = dict(aiding_source="ins", replica_model="footprint", **IRS_SETTINGS)
+    irs = dict(aiding_source="ins", replica_model=args.replica_model, **IRS_SETTINGS)
     no_roll = {"roll_compensation": False}
     variants = {
         "irs_only (ins, free inertial)": ("ins", {}),
@@ -260,7 +271,7 @@ def main(argv=None) -> int:
         "aided N=50": ("acq_track", dict(irs, transect_samples=50)),
         "aided N=25, no roll compensation": ("acq_track", dict(irs, transect_samples=25, **no_roll)),
         "aided N=50, no roll compensation": ("acq_track", dict(irs, transect_samples=50, **no_roll)),
-        "air data + compass N=25": ("acq_track", dict(transect_samples=25, replica_model="footprint")),
+        "air data + compass N=25": ("acq_track", dict(transect_samples=25, replica_model=args.replica_model)),
     }
     per_seed = []
     runs = None
@@ -282,14 +293,19 @@ def main(argv=None) -> int:
     results["main_flight_per_seed"] = per_seed
     agg = {}
     for k in variants:
-        for f in ("rms_m", "final_m", "max_m", "in_lock_fraction"):
+        for f in ("rms_m", "final_m", "max_m", "in_lock_fraction", "within_3sigma", "drift_last_third_m",
+                  "error_slope_m_per_km"):
             x = np.array([p[k][f] for p in per_seed])
             agg[f"{k}: {f}"] = {"mean": float(x.mean()), "std": float(x.std(ddof=1)) if x.size > 1 else 0.0}
     for n in (25, 50):
+        # paired over the seeds (the same flights with and without): mean gain and its 95 % t interval
         g = np.array([p[f"roll_compensation_gain_N{n}"] for p in per_seed])
+        sd = float(g.std(ddof=1)) if g.size > 1 else 0.0
+        half = float(student_t.ppf(0.975, g.size - 1)) * sd / math.sqrt(g.size) if g.size > 1 else math.nan
         agg[f"roll_compensation_gain_N{n}"] = {
             "mean": float(g.mean()),
-            "std": float(g.std(ddof=1)) if g.size > 1 else 0.0,
+            "std": sd,
+            "ci95": [float(g.mean()) - half, float(g.mean()) + half],
             "min": float(g.min()),
             "max": float(g.max()),
             "per_seed": g.tolist(),
@@ -359,13 +375,17 @@ def main(argv=None) -> int:
     print("over the seeds (mean +- std):")
     for k in variants:
         a_ = [agg[f"{k}: {f}"] for f in ("rms_m", "final_m", "max_m")]
+        lk, w3 = agg[f"{k}: in_lock_fraction"], agg[f"{k}: within_3sigma"]
         print(f"  {k:42s} RMS {a_[0]['mean']:7.1f} +- {a_[0]['std']:5.1f}  final {a_[1]['mean']:7.1f} "
-              f"+- {a_[1]['std']:5.1f}  max {a_[2]['mean']:7.1f} +- {a_[2]['std']:5.1f}")
+              f"+- {a_[1]['std']:5.1f}  max {a_[2]['mean']:7.1f} +- {a_[2]['std']:5.1f}  in lock "
+              f"{lk['mean']:.2f} +- {lk['std']:.2f}  <=3sig {w3['mean']:.2f}  slope "
+              f"{agg[f'{k}: error_slope_m_per_km']['mean']:+.2f} m/km")
     for n in (25, 50):
         g = agg[f"roll_compensation_gain_N{n}"]
         print(
-            f"roll compensation gain N={n}: {100 * g['mean']:+.0f} % +- {100 * g['std']:.0f} % over "
-            f"{args.seeds} seeds (per seed {', '.join(f'{100 * x:+.0f}' for x in g['per_seed'])} %; "
+            f"roll compensation gain N={n}: {100 * g['mean']:+.0f} % (95 % CI {100 * g['ci95'][0]:+.0f} .. "
+            f"{100 * g['ci95'][1]:+.0f} %), std {100 * g['std']:.0f} % over {args.seeds} seeds (per seed "
+            f"{', '.join(f'{100 * x:+.0f}' for x in g['per_seed'])} %; "
             f"|roll| > 8.5 deg for {100 * per_seed[0]['roll_over_half_beam_fraction']:.0f} % of the flight)"
         )
     for k, v in results["speed_ramp"].items():

@@ -233,7 +233,7 @@ def test_early_late_stage_is_the_discriminator_by_hand(dem):
     out = loop_kernel.loop_epoch(
         *dem.grid, LAT0, LON0, dts, zeros, zeros, 81.5, math.radians(30.0), r_n, r_e, d, valid, 0, True, 0, 5,
         0, 3.68, 10, np.array([2.4, 1.92, 1.44, 0.96, 0.48]), 2.0, 0.005, 0.24, 0.002, 101,
-        tracking.DISC_THESIS, loop_kernel.MITIGATION_NONE,
+        tracking.DISC_THESIS, loop_kernel.MITIGATION_NONE, zeros, zeros,
     )  # fmt: skip
     x, it, locked, s = out[0], out[1], out[4], out[11]
     xr, itr, lockr = 81.5, 101, False
@@ -270,6 +270,7 @@ def test_aided_loops_follow_ramps_with_a_biased_air_data(dem):
         tas_fn=lambda t: v(t) - 3.0,
         hdg_fn=lambda t: p(t) - math.radians(2.0),
         wind_estimation=False,
+        reference_frame="speed_track",  # a constant speed / heading sensor bias: the thesis' reference
     )
     tail = range(45, 110)
     dv = np.array([ests[k].extra["tracked_speed_mps"] - truth[k, 2] for k in tail])
@@ -302,6 +303,7 @@ def test_speed_step_recovers_in_about_one_transect(dem):
         tas_fn=lambda t: 80.0 + (3.0 if t >= 50.0 else 0.0),
         wind_estimation=False,
         reference_gain=1.0,
+        reference_frame="speed_track",  # the thesis' loop (the "ne" frame is a filter, settings.py)
     )
     dv = np.array([e.extra["tracked_speed_mps"] - 80.0 for e in ests])
     assert abs(dv[48]) < 0.5 and dv[52] > 1.0  # the step reaches the output

@@ -70,23 +70,26 @@ def test_shift_loop_finds_the_start_offset_of_a_brute_force_search(dem):
     res = float(np.mean(dem.spacing_m))
     x2, locked, v_shape, *_ = loop_kernel.shift_loop_epoch(
         *grid, *common, u_al[0], u_al[1], 2.0 * res, 10, np.array([1.25, 1.0, 0.75, 0.5, 0.25]) * res, 2.0,
-        0.5, 0.125 * res, 0.2, 101, tracking.DISC_THESIS, True,
+        0.5, 0.125 * res, 0.2, 101, tracking.DISC_THESIS, True, np.zeros(dts.size), np.zeros(dts.size),
     )  # fmt: skip
     assert locked and v_shape
     assert abs(x2 - x_bf) < 3.0  # on the brute-force minimum (the cross offset raises it, not moves it)
     assert abs(x_bf - 37.0) < 15.0
 
 
-def test_noise_free_start_error_is_removed(dem):
+@pytest.mark.parametrize("frame, median_m, max_m", [("speed_track", 12.0, 20.0), ("ne", 20.0, 30.0)])
+def test_noise_free_start_error_is_removed(dem, frame, median_m, max_m):
     """Air data aiding (perfect, no wind) started 85 m off: the fix (start-point loops, centroid filter) is
-    fed back into the position output; dead reckoning alone would keep the 85 m."""
+    fed back into the position output; dead reckoning alone would keep the 85 m. The "ne" frame's filter
+    also gives part of the start error to its velocity bias at first (its prior is the aiding's 1.5 m/s),
+    so it removes it more slowly: median 15.5 m over 70-100 s against 6-10 m (measured)."""
     traj = trajectory(dem, LAT0, LON0, H_MSL, lambda t: 80.0, lambda t: math.radians(30.0), 101.0)
-    nav = AcqTrackNavigator(dem=dem)
+    nav = AcqTrackNavigator(dem=dem, reference_frame=frame)
     nav.reset(initial_estimate(traj, H_MSL, sigma_m=30.0, dn_m=60.0, de_m=-60.0))
     ests, truth = fly(nav, dem, traj, H_MSL, 100)
     err = np.array([horizontal_error_m(e, truth[k, 0], truth[k, 1]) for k, e in enumerate(ests)])
     assert err[10] > 80.0  # filling: dead reckoning on the aiding keeps the initial error
-    assert np.median(err[70:]) < 12.0 and err[70:].max() < 20.0
+    assert np.median(err[70:]) < median_m and err[70:].max() < max_m, (np.median(err[70:]), err[70:].max())
     assert ests[-1].extra["lock_state"] == "tracking"
 
 
@@ -151,10 +154,11 @@ def test_short_flight_innovations_and_covariance_are_honest(short_flight):
 
 def test_short_flight_fix_beats_dead_reckoned_start(short_flight):
     """The same flight without the start-point loops (the previous design: only speed and heading tracked,
-    the transect start dead-reckoned) is less accurate after GNSS is lost: 21.1 against 16.0 m RMS (seed 0)
-    on this 110 s flight; on the built-in 475 s flight 90 against 22-32 m (README)."""
-    res, _, _ = short_flight
-    off, _, _ = _fly_short(position_loops=False)
+    the transect start dead-reckoned) is less accurate after GNSS is lost (session 2: 21.1 against 16.0 m
+    RMS, seed 0, footprint replicas). Compared in that design's speed_track reference frame: the "ne" frame's
+    filter estimates the velocity bias from the fixes either way."""
+    res, _, _ = _fly_short(reference_frame="speed_track")
+    off, _, _ = _fly_short(position_loops=False, reference_frame="speed_track")
     t = res.arrays["t_s"]
 
     def rms(r):

@@ -166,7 +166,8 @@ def test_loop_kernel_matches_brute_force_and_the_discriminator_by_hand(dem):
 
             out = loop_kernel.loop_epoch(
                 *dem.grid, lat_s, lon_s, dts, m_v, m_psi, b_v, b_psi, r_n, r_e, d, valid, 0, True, 0, 15,
-                which, reach, 10, sset, 2.0, thr1, s2, thr2, 101, 0, loop_kernel.MITIGATION_NCS,
+                which, reach, 10, sset, 2.0, thr1, s2, thr2, 101, 0, loop_kernel.MITIGATION_NCS, np.zeros(n),
+                np.zeros(n),
             )  # fmt: skip
             x, it1, it2, _, locked, v_shape, bw, m_off, m_cost, _, _, sp, _ = out
             x0 = b_v if which == 0 else b_psi
@@ -183,7 +184,8 @@ def test_loop_kernel_matches_brute_force_and_the_discriminator_by_hand(dem):
     # the 101-iteration break: a threshold no step meets stops the stage at break_iteration, out of lock
     out = loop_kernel.loop_epoch(
         *dem.grid, lat_s, lon_s, dts, m_v, m_psi, 1.9, 0.02, r_n, r_e, d, valid, 0, True, 0, 15, 0, 3.68, 10,
-        SPEED_SET, 2.0, 0.0, 0.24, 0.002, 7, 0, loop_kernel.MITIGATION_NONE,
+        SPEED_SET, 2.0, 0.0, 0.24, 0.002, 7, 0, loop_kernel.MITIGATION_NONE, np.zeros(dts.size),
+        np.zeros(dts.size),
     )  # fmt: skip
     assert out[1] == 7 and not out[4]
 
@@ -279,7 +281,7 @@ def test_els_reduces_the_early_late_bias_on_a_skewed_terrain_correlation(dem):
             out = loop_kernel.loop_epoch(
                 heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dts, z, z, 80.0 + start, track, r_n, r_e, d,
                 np.ones(n, bool), 0, True, 0, 15, 0, 7.36 / 2.0, 10, SPEED_SET, 2.0, 0.005, 0.24, 0.002, 101,
-                0, loop_kernel.MITIGATIONS[name],
+                0, loop_kernel.MITIGATIONS[name], z, z,
             )  # fmt: skip
             errs[name].append(abs(out[0] - x_bf))
     assert n_cases >= 12

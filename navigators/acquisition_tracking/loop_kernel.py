@@ -36,11 +36,11 @@ import math
 import numpy as np
 from numba import njit
 
+from navigators.acquisition_tracking.beam import replica_heights_at, replica_points
 from navigators.acquisition_tracking.correlation import (
     COST_MSD,
     map_heights,
     profile_cost,
-    replica_heights,
     replica_offsets,
 )
 from navigators.acquisition_tracking.tracking import DISC_THESIS
@@ -374,14 +374,19 @@ def choose_spacing_kernel(offsets, values, bandwidth, min_offset, spacings_desc,
 def loop_epoch(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
     d, valid, cost, remove_bias, interp, n_min, which, reach, n_side, spacings_desc, symmetry_max,
-    threshold_1, spacing_2, threshold_2, break_iteration, discriminator, mitigation,
+    threshold_1, spacing_2, threshold_2, break_iteration, discriminator, mitigation, o_n, o_e,
 ):  # fmt: skip
     """One loop's epoch (module docstring). Returns (x, it_1, it_2, it_els, locked, v_shape, bandwidth,
-    min_offset, min_cost, slope_left, slope_right, spacing_1, els_applied)."""
+    min_offset, min_cost, slope_left, slope_right, spacing_1, els_applied). o_n, o_e: the beam offsets
+    of the samples' map points (m, replica frame; beam.py), added to the basis' P and R rows so that they
+    turn with b_psi."""
     n = dt.shape[0]
     w = np.empty((3, n))
     basis = np.empty((4, n))
     replica_basis(dt, m_v, m_psi, basis)
+    for i in range(n):
+        basis[0, i] += o_n[i]
+        basis[2, i] += o_e[i]
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
     x0 = b_v if which == 0 else b_psi
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
@@ -505,17 +510,18 @@ def _shift_stage(
 def shift_loop_epoch(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
     cost, remove_bias, interp, n_min, u_n, u_e, reach, n_side, spacings_desc, symmetry_max, threshold_1,
-    spacing_2, threshold_2, break_iteration, discriminator, narrow,
+    spacing_2, threshold_2, break_iteration, discriminator, narrow, o_n, o_e,
 ):  # fmt: skip
     """One start-point loop's epoch along (u_n, u_e) in one call: the shift correlation function at
     2 n_side + 1 offsets in [-reach, reach] m, its V-shape, the spacing choice, the first stage from 0 and
     (narrow) the second stage at spacing_2. Returns (x m, locked, v_shape, bandwidth, min_offset, min_cost,
-    slope_left, slope_right); x = 0, unlocked when the loop ran off the map or beyond the function's reach."""
+    slope_left, slope_right); x = 0, unlocked when the loop ran off the map or beyond the function's reach.
+    o_n, o_e: the samples' beam offsets (m, replica frame; beam.py)."""
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
     w = np.empty((3, n))
-    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dla, dlo)
+    replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
     g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
          u_n, u_e, r_n, r_e_cos)  # fmt: skip
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
@@ -553,12 +559,13 @@ def track_loops(
     speed_reach, speed_desc, speed_threshold_1, speed_spacing_2, speed_threshold_2,
     heading_desc, heading_threshold_1, heading_spacing_2, heading_threshold_2,
     position_reach, position_desc, position_threshold_1, position_spacing_2, position_threshold_2,
-    out_its, out_locked, out_ran, out_shapes, out_h_prompt,
+    out_its, out_locked, out_ran, out_shapes, out_h_prompt, o_n, o_e,
 ):  # fmt: skip
     """All of one tracking epoch's loops in one call (navigator.py's order): aided, the start-point loops
     along and across the track at the references, then the speed and heading loops (loop_epoch; speed first
     unless speed_first is False); unaided the loops first and the start-point loops after them. Then the
-    prompt replica's map heights into out_h_prompt.
+    prompt replica's map heights into out_h_prompt. o_n, o_e: the samples' beam offsets (m, replica frame;
+    beam.py), in every replica and the prompt.
 
     mean_m_v, mean_m_psi: the transect's mean aiding speed (m/s) and heading (rad); f_r: the correlation
     functions' reach at the far end (m). Loop k (0 speed, 1 heading, 2 along, 3 across): out_its[2k: 2k + 2]
@@ -584,7 +591,7 @@ def track_loops(
                         heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
                         r_e_cos, d, valid, cost, remove_bias, interp, n_min, 0, reach, n_side, speed_desc,
                         symmetry_max, speed_threshold_1, speed_spacing_2, speed_threshold_2, break_iteration,
-                        discriminator, mitigation,
+                        discriminator, mitigation, o_n, o_e,
                     )  # fmt: skip
                     b_v = r[0]
                     sp_v = r[11]
@@ -596,7 +603,7 @@ def track_loops(
                         heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
                         r_e_cos, d, valid, cost, remove_bias, interp, n_min, 1, reach, n_side, heading_desc,
                         symmetry_max, heading_threshold_1, heading_spacing_2, heading_threshold_2,
-                        break_iteration, discriminator, mitigation,
+                        break_iteration, discriminator, mitigation, o_n, o_e,
                     )  # fmt: skip
                     b_psi = r[0] if aided else math.atan2(math.sin(r[0]), math.cos(r[0]))
                     sp_psi = r[11]
@@ -619,7 +626,7 @@ def track_loops(
                 heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
                 valid, cost, remove_bias, interp, n_min, u_n, u_e, position_reach, n_side, position_desc,
                 symmetry_max, position_threshold_1, position_spacing_2, position_threshold_2,
-                break_iteration, discriminator, mitigation == MITIGATION_NCS,
+                break_iteration, discriminator, mitigation == MITIGATION_NCS, o_n, o_e,
             )  # fmt: skip
             x, locked, v_shape, bw, m_off, m_cost, sl, sr = r2
             lat_p = lat_p + x * u_n / r_n
@@ -627,8 +634,8 @@ def track_loops(
             out_locked[2 + j] = locked
             out_ran[2 + j] = True
             _put_shape(out_shapes, 2 + j, v_shape, bw, m_off, m_cost, sl, sr)
-    replica_heights(
-        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, interp,
-        np.empty(n), np.empty(n), out_h_prompt,
+    replica_heights_at(
+        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e,
+        interp, out_h_prompt,
     )  # fmt: skip
     return b_v, b_psi, lat_p, lon_p, sp_v, sp_psi

@@ -36,6 +36,14 @@ along / across) + a map post^2 / 12, its gain counting fix_overlap (N / 2) epoch
 plus dead reckoning from the centroid to the newest sample; out of lock it grows linearly on the aiding's
 sigmas. Vertical: the barometer's bias.
 
+reference_frame "ne" (the default): the aiding of every transect sample is corrected by one north/east
+velocity bias e_ne (_aid_arrays; an INS's velocity error, or the wind with air data), the loops run around
+b = 0, and the centroid filter has four states (centroid north/east, e_ne north/east): the fix updates
+both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s, the output is the centroid plus the lever to the
+newest sample, and out of lock the dead-reckoned sigma grows on e_ne's. replica_model "return": each
+sample's measured height and map point come from the ray of its predicted shortest return (beam.py;
+_return_height), and the loops get the samples' offsets.
+
 Estimate.extra, besides the fixed protocol keys (innovation = the centroid fix minus its prediction, north
 and east in m, its covariance S, NIS with 2 dof, measurement time):
     lock_state          "gnss" | "filling" | "acquiring" | "tracking" | "out_of_lock" | "lost"
@@ -56,10 +64,11 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 
 import numpy as np
 
-from navigators.acquisition_tracking import acquisition, loop_kernel, tracking
+from navigators.acquisition_tracking import acquisition, beam, loop_kernel, tracking
 from navigators.acquisition_tracking.aiding import (
     WindEstimator,
     air_vector_sum,
@@ -73,7 +82,6 @@ from navigators.acquisition_tracking.aiding import (
 from navigators.acquisition_tracking.correlation import (
     COSTS,
     INTERPOLATIONS,
-    along_cross_information,
     replica_heights,
     replica_offsets,
 )
@@ -244,6 +252,7 @@ class AcqTrackNavigator:
         self.name = name
         self._grid = dem.grid
         self._footprint = None
+        self._return_model = cfg.replica_model == "return"
         if cfg.replica_model == "footprint":
             from navigators.acquisition_tracking.footprint import FootprintMaps
 
@@ -296,6 +305,9 @@ class AcqTrackNavigator:
             math.radians(cfg.output_average_heading_tol_deg),
         )
         self.transect = Transect(cfg.transect_samples)
+        self._ne_frame = bool(cfg.aiding and cfg.reference_frame == "ne")
+        self._bias_sigma0 = float(cfg.aiding_speed_sigma_mps)
+        self._bias_walk2 = float(cfg.aiding_bias_walk_mps_per_sqrt_s) ** 2
         self.ins = None
         if cfg.aiding and cfg.aiding_source == "ins":
             from navigators.inertial.strapdown import StrapdownIns
@@ -331,11 +343,18 @@ class AcqTrackNavigator:
         self.b_v = 0.0
         self.b_psi = 0.0
         self.b_mean = (0.0, 0.0)
+        self.e_ne = np.zeros(2)  # reference_frame "ne": the aiding's north/east velocity bias (m/s)
+        self.e_mean = np.zeros(2)
+        self._gnss_epochs = 0
+        self._aid_key = None
         self.p0 = (math.nan, math.nan)
         self.pos = (math.nan, math.nan)
         self.t_pos = math.nan
         self.P = np.eye(2) * 1e4
         self.Pc = self.P.copy()
+        self.X = np.zeros((4, 4))  # reference_frame "ne": covariance of (centroid n, e m; e_ne n, e m/s)
+        self.X[:2, :2] = self.Pc
+        self.X[2:, 2:] = np.eye(2) * self._bias_sigma0**2
         self.sigma_v = self.config.aiding_speed_sigma_mps
         self.sigma_psi = math.radians(self.config.aiding_heading_sigma_deg)
         self.out_speed = 0.0
@@ -368,6 +387,10 @@ class AcqTrackNavigator:
             k: _Tail(n) for k, n in (("baro", 1), ("ra", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
         }
         self.transect.clear()
+        self._offs: deque = deque(maxlen=self.config.transect_samples)  # beam offsets (north, east m)
+        self._pending_offset = (0.0, 0.0)
+        self._beam_rot = None
+        self._beam_cache = None
         self.average.reset()
         self.wind.reset()
 
@@ -386,6 +409,10 @@ class AcqTrackNavigator:
             raise ValueError("initial.covariance must be a finite 9 x 9 matrix")
         self.P = 0.5 * (cov[:2, :2] + cov[:2, :2].T)
         self.Pc = self.P.copy()
+        self._set_centroid_cov(self.Pc)
+        # the velocity bias' prior: the aiding's sigma, or the initial velocity's if larger
+        v_cov = 0.5 * (cov[3:5, 3:5] + cov[3:5, 3:5].T)
+        self.X[2:, 2:] = np.maximum(np.eye(2) * self._bias_sigma0**2, v_cov)
         self.out_speed, self.out_track = speed, track
         self._v0 = (speed, track)
         if not cfg.aiding:
@@ -468,7 +495,12 @@ class AcqTrackNavigator:
             roll, pitch = _roll_pitch(rows[:, 6:10])
             roll[~ok] = np.nan
             pitch[~ok] = np.nan
-            tl["ins"].extend(frames.imu.t_s[::step], [rows[:, 3], rows[:, 4], roll, pitch, 0.0], ok)
+            qq = rows[:, 6:10]  # yaw: atan2(C_bn[1, 0], C_bn[0, 0]) (beam.py's predicted return)
+            yaw_i = np.arctan2(
+                2.0 * (qq[:, 1] * qq[:, 2] + qq[:, 0] * qq[:, 3]),
+                qq[:, 0] ** 2 + qq[:, 1] ** 2 - qq[:, 2] ** 2 - qq[:, 3] ** 2,
+            )
+            tl["ins"].extend(frames.imu.t_s[::step], [rows[:, 3], rows[:, 4], roll, pitch, yaw_i], ok)
 
     def _samples(self, frames: SensorFrames) -> None:
         cfg = self.config
@@ -499,6 +531,7 @@ class AcqTrackNavigator:
         # aiding values at the sample
         tas = hdg = math.nan
         roll = pitch = 0.0
+        yaw = self.yaw
         m_v = m_psi = 0.0
         if cfg.aiding and cfg.aiding_source == "air_data":
             a, oka = tl["air"].row(t_k, 1.0)
@@ -516,11 +549,15 @@ class AcqTrackNavigator:
                 last = self.transect.samples[-1] if len(self.transect) else None
                 m_v, m_psi = (last.m_v, last.m_psi) if last is not None else self._v0
             else:
-                m_v, m_psi = self.wind.predict(tas, hdg) if cfg.wind_estimation else (tas, hdg)
+                # "ne": the air vector itself, the wind is e_ne; else the wind estimator's prediction
+                m_v, m_psi = (
+                    self.wind.predict(tas, hdg) if cfg.wind_estimation and not self._ne_frame else (tas, hdg)
+                )
         elif cfg.aiding:
             row, found = tl["ins"].row(t_k, 0.5)
             if found and np.all(np.isfinite(row[:4])):
                 vn, ve, roll, pitch = (float(x) for x in row[:4])
+                yaw = float(row[4]) if math.isfinite(row[4]) else yaw
                 m_v, m_psi = speed_track(np.array([vn, ve]))
             else:
                 self.health.skip(t_k, "aiding_missing", "acq_track: INS velocity missing; aiding held")
@@ -543,6 +580,11 @@ class AcqTrackNavigator:
             )
         agl = float(plumb_height_m(r_m, roll, pitch, cfg.beamwidth_deg)) if cfg.roll_compensation else r_m
         d = h_baro - agl if valid else math.nan
+        self._pending_offset = (0.0, 0.0)
+        if valid and self._return_model:  # the ray of the predicted shortest return (beam.py)
+            if cfg.aiding and cfg.aiding_source == "air_data" and math.isfinite(hdg):
+                yaw = hdg
+            d, self._pending_offset = self._return_height(t_k, r_m, h_baro, m_v, m_psi, roll, pitch, yaw, d)
         # GNSS at the sample
         g, have_gnss = tl["gnss"].row(t_k, 0.6)
         have_gnss = bool(have_gnss and np.all(np.isfinite(g)))
@@ -550,6 +592,44 @@ class AcqTrackNavigator:
         gv = (float(g[3]), float(g[4])) if have_gnss else (math.nan, math.nan)
         s = Sample(t_k, d, bool(valid), r_m, float(m_v), float(m_psi), tas, hdg, glat, glon, gv, roll)
         self._epoch(s, have_gnss)
+
+    def _return_height(self, t_k, r_m, h_baro, m_v, m_psi, roll, pitch, yaw, d_fallback):
+        """(measured terrain height m, beam offset (north, east) m) of a range r_m by the predicted return's
+        ray (beam.py) at the dead-reckoned position of t_k; the fallback height and no offset when there is
+        no position yet or the prediction has no return."""
+        cfg = self.config
+        lat, lon = self.pos
+        if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(yaw)):
+            return d_fallback, (0.0, 0.0)
+        r_n, r_e = self._radii(lat, h_baro)
+        if math.isfinite(self.t_pos) and cfg.aiding:  # one step of dead reckoning on this sample's aiding
+            v_ne = ground_vector(m_v, m_psi) + (self.e_ne if self._ne_frame else 0.0)
+            v, psi = speed_track(v_ne)
+            v_ne = ground_vector(v + self.b_v, psi + self.b_psi)
+            dtp = t_k - self.t_pos
+            lat, lon = lat + v_ne[0] * dtp / r_n, lon + v_ne[1] * dtp / r_e
+        if not cfg.roll_compensation:
+            roll = pitch = 0.0
+        ray = beam.predicted_ray(self.dem, lat, lon, h_baro, roll, pitch, yaw, cfg.beamwidth_deg, r_n, r_e)
+        if ray is None:
+            return d_fallback, (0.0, 0.0)
+        theta, u_n, u_e = ray
+        rho = r_m * math.sin(theta)
+        return h_baro - r_m * math.cos(theta), (rho * u_n, rho * u_e)
+
+    def _beam_arrays(self, b_psi: float) -> tuple[np.ndarray, np.ndarray]:
+        """The transect's beam offsets (m) in the replica frame of heading reference b_psi."""
+        n = len(self.transect)
+        if not self._return_model or len(self._offs) != n:
+            z = np.zeros(n)
+            return z, z
+        key = (self.transect.samples.version, b_psi)
+        if self._beam_cache is not None and self._beam_cache[0] == key:
+            return self._beam_cache[1]
+        o = np.array(self._offs, float).reshape(-1, 2)
+        out = beam.rotate_offsets(o[:, 0], o[:, 1], -b_psi)
+        self._beam_cache = (key, out)
+        return out
 
     def _air_vector(self, t_k: float) -> tuple[float, float]:
         """(speed, direction) of the air vector over the sample interval (t_k - T, t_k]: the mean of
@@ -605,10 +685,11 @@ class AcqTrackNavigator:
         prev = tr.samples[-1] if len(tr) else None
         # the start point for this epoch: drop the oldest sample when full
         if tr.full:
-            _, _, _, dt, m_v, m_psi, _ = tr.arrays()
+            _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
             dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
             self.p0 = (self.p0[0] + dla[1], self.p0[1] + dlo[1])
         tr.append(s)
+        self._offs.append(self._pending_offset)
         if len(tr) == 1:
             lat, lon = self.pos
             if prev is None and math.isfinite(self.t_pos):  # dead-reckon the reset position to t_k
@@ -667,11 +748,17 @@ class AcqTrackNavigator:
         self._track(s)
         self._finish(s)
 
+    def _corrected(self, s: Sample) -> tuple[float, float]:
+        """The sample's aiding (speed, track) corrected by e_ne (reference_frame "ne"), else as measured."""
+        if not self._ne_frame:
+            return s.m_v, s.m_psi
+        return speed_track(ground_vector(s.m_v, s.m_psi) + self.e_ne)
+
     def _aided_speed(self, s: Sample) -> float:
-        return s.m_v + self.b_v
+        return self._corrected(s)[0] + self.b_v
 
     def _aided_track(self, s: Sample) -> float:
-        return s.m_psi + self.b_psi
+        return self._corrected(s)[1] + self.b_psi
 
     def _set_lock(self, lock: str, t: float, status: str, reason: str) -> None:
         self.lock_state = lock
@@ -679,7 +766,6 @@ class AcqTrackNavigator:
 
     def _gnss_epoch(self, s: Sample) -> None:
         cfg = self.config
-        tr = self.transect
         g_speed, g_track = speed_track(np.array(s.gnss_v_ne))
         if (
             cfg.aiding
@@ -688,20 +774,29 @@ class AcqTrackNavigator:
             and math.isfinite(s.tas_mps)
         ):
             self.wind.update(np.array(s.gnss_v_ne), s.tas_mps, s.heading_rad, gain=max(cfg.wind_gain, 0.2))
-        if math.isfinite(g_speed) and g_speed > 1.0:
+        if math.isfinite(g_speed) and g_speed > 1.0 and self._ne_frame:
+            # the triangle GNSS velocity - aiding vector (the wind with air data); the first one sets it
+            k = 0.2 if self._gnss_epochs else 1.0
+            self.e_ne = self.e_ne + k * (np.array(s.gnss_v_ne) - ground_vector(s.m_v, s.m_psi) - self.e_ne)
+            self.e_mean = self.e_ne.copy()
+            self._gnss_epochs += 1
+        elif math.isfinite(g_speed) and g_speed > 1.0:
             k = 0.2
             self.b_v += k * (g_speed - s.m_v - self.b_v)
             self.b_psi += k * float(wrap_rad(g_track - s.m_psi - self.b_psi))
             self.b_mean = (self.b_v, self.b_psi)
         # the transect's start from this sample's fix back along the references (its first sample may have
         # had no fix, e.g. before the first GNSS epoch, and kept the initial estimate's error)
-        _, _, _, dt, m_v, m_psi, _ = tr.arrays()
+        _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
         dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, s.gnss_lat)
         self.p0 = (s.gnss_lat - dla[-1], s.gnss_lon - dlo[-1])
         self.pos = (s.gnss_lat, s.gnss_lon)
         self.t_pos = s.t_s
         self.P = np.eye(2) * cfg.gnss_sigma_m**2
         self.Pc = self.P.copy()
+        # e_ne's sigma after the GNSS triangles: the aiding's per-sample noise through the gain-0.2 low-pass
+        # (steady-state variance k / (2 - k) of the noise's); an INS is reset by GNSS, air data carries gusts
+        self._set_centroid_cov(self.Pc, bias_sigma_mps=cfg.aiding_speed_sigma_mps * math.sqrt(0.2 / 1.8))
         self.sigma_v = 0.1
         self.sigma_psi = math.radians(0.2)
         self.bad_epochs = 0
@@ -731,11 +826,81 @@ class AcqTrackNavigator:
         d_al, d_cr = T * sv, v * T * sp
         walk = self._walk2 * T
         self.P = P + _rot_diag(psi, 2.0 * s_al * d_al + d_al**2 + walk, 2.0 * s_cr * d_cr + d_cr**2 + walk)
+        if self._ne_frame:  # the centroid moves one sample on the aiding + e_ne; e_ne's error walks
+            X = self.X
+            X[:2, :] += T * X[2:, :]
+            X[:, :2] += T * X[:, 2:]
+            X[0, 0] += walk
+            X[1, 1] += walk
+            X[2, 2] += self._bias_walk2 * T
+            X[3, 3] += self._bias_walk2 * T
+            self.Pc = X[:2, :2].copy()
+            if self.lock_state == "tracking":  # the output: the centroid + the lever to the newest sample
+                self.P = self._ne_output_cov(0.5 * cfg.transect_duration_s)
+            else:  # out of lock the output is dead-reckoned from the last in-lock newest sample
+                self.P = P + _rot_diag(psi, walk, walk) + self._ne_growth(P, T)
+            return
         # the transect centroid's filter: one sample of dead reckoning on the references and the aiding
         self.Pc = self.Pc + _rot_diag(psi, d_al**2 + walk, d_cr**2 + walk)
 
+    def _aid_arrays(self):
+        """The transect's arrays with the aiding per sample corrected by the north/east bias e_ne
+        (reference_frame "ne"; cached until the samples or e_ne change), else transect.arrays()."""
+        arr = self.transect.arrays()
+        if not self._ne_frame:
+            return arr
+        key = (arr, float(self.e_ne[0]), float(self.e_ne[1]))
+        if self._aid_key is not None and self._aid_key[0] is arr and self._aid_key[1:3] == key[1:]:
+            return self._aid_key[3]
+        t, d, valid, dt, m_v, m_psi, rng = arr
+        vn = m_v * np.cos(m_psi) + key[1]
+        ve = m_v * np.sin(m_psi) + key[2]
+        out = (t, d, valid, dt, np.hypot(vn, ve), np.arctan2(ve, vn), rng)
+        self._aid_key = (arr, key[1], key[2], out)
+        return out
+
+    def _set_centroid_cov(self, Pc: np.ndarray, bias_sigma_mps: float | None = None) -> None:
+        """Centroid covariance (reference_frame "ne"); the velocity bias' block kept (or set to
+        bias_sigma_mps), their correlation cleared."""
+        self.X[:2, :2] = Pc
+        self.X[:2, 2:] = 0.0
+        self.X[2:, :2] = 0.0
+        if bias_sigma_mps is not None:
+            self.X[2:, 2:] = np.eye(2) * bias_sigma_mps**2
+
+    def _ne_output_cov(self, lever_s: float) -> np.ndarray:
+        """Covariance (north, east m^2) of the point lever_s seconds of dead reckoning past the centroid."""
+        X = self.X
+        P = X[:2, :2] + lever_s * (X[:2, 2:] + X[2:, :2]) + lever_s**2 * X[2:, 2:]
+        return P + np.eye(2) * self._walk2 * lever_s
+
+    def _ne_growth(self, P: np.ndarray, T: float) -> np.ndarray:
+        """One step's growth of a dead-reckoned point's covariance P on the velocity bias' sigma: sigma
+        grows linearly by T sigma_e (the bias is constant over the step; bounds the correlation)."""
+        Xe = self.X[2:, 2:]
+        s_p = math.sqrt(max(P[0, 0] + P[1, 1], 0.0))
+        s_e = math.sqrt(max(Xe[0, 0] + Xe[1, 1], 0.0))
+        if s_e <= 0:
+            return np.zeros((2, 2))
+        return (2.0 * s_p * T / s_e + T * T) * Xe
+
+    @staticmethod
+    def _ne_change(b_v: float, b_psi: float, m_v: np.ndarray, m_psi: np.ndarray) -> np.ndarray:
+        """North/east velocity change (m/s) equivalent to references (b_v, b_psi) on top of the aiding
+        (m_v, m_psi): the mean over the samples of (m_v + b_v) u(m_psi + b_psi) - m_v u(m_psi)."""
+        vn = (m_v + b_v) * np.cos(m_psi + b_psi) - m_v * np.cos(m_psi)
+        ve = (m_v + b_v) * np.sin(m_psi + b_psi) - m_v * np.sin(m_psi)
+        return np.array([float(np.mean(vn)), float(np.mean(ve))])
+
+    def _fold_references(self, b_v: float, b_psi: float, m_v: np.ndarray, m_psi: np.ndarray) -> None:
+        """reference_frame "ne": move the loops' speed / track references (b_v, b_psi on top of the
+        corrected aiding m_v, m_psi) into the north/east bias e_ne and zero them: the least-squares constant
+        velocity vector of b_v along and v b_psi across each sample's track."""
+        self.e_ne = self.e_ne + self._ne_change(b_v, b_psi, m_v, m_psi)
+        self.b_v = self.b_psi = 0.0
+
     def _arrays(self):
-        t, d, valid, dt, m_v, m_psi, rng = self.transect.arrays()
+        t, d, valid, dt, m_v, m_psi, rng = self._aid_arrays()
         r_n, r_e = self._radii(self.p0[0], self.h_m)
         return t, d, valid, dt, m_v, m_psi, rng, r_n, r_e
 
@@ -837,11 +1002,40 @@ class AcqTrackNavigator:
                 f"acquisition: {res.reason}; retry with the next transect",
             )
             return False
+        if self._ne_frame:  # the acquired velocity against the filter's velocity bias: a false acquisition
+            # (a side minimum over weak terrain) moves it far beyond its sigma; R: one bin as 1 sigma
+            dv_ne = self._ne_change(res.b_v - self.b_v, res.b_psi_rad - self.b_psi, m_v, m_psi)
+            psi_c = float(np.mean(m_psi))
+            v_c = max(float(np.mean(m_v)), 1.0)
+            R_acq = _rot_diag(
+                psi_c,
+                cfg.acquisition_speed_bin_mps**2,
+                (v_c * math.radians(cfg.acquisition_heading_bin_deg)) ** 2,
+            )
+            nis_v = _quad2(dv_ne, self.X[2:, 2:] + R_acq)
+            if nis_v > cfg.fix_gate_nis:
+                self.health.events.append(
+                    (
+                        s.t_s,
+                        f"acq_track: acquisition rejected: its velocity change {math.hypot(*dv_ne):.1f} m/s "
+                        f"has NIS {nis_v:.1f} > gate {cfg.fix_gate_nis:g} against the velocity bias' sigma",
+                    )
+                )
+                self._set_lock(
+                    "acquiring",
+                    s.t_s,
+                    "lost" if self.need_acquisition else "acquiring",
+                    "acquisition: implausible velocity; retry with the next transect",
+                )
+                return False
         self.p0 = (self.p0[0] + res.dn_m / r_n, self.p0[1] + res.de_m / r_e)
         self.b_v, self.b_psi = res.b_v, res.b_psi_rad
+        if self._ne_frame:  # the acquired speed / track references as the north/east bias
+            self._fold_references(res.b_v, res.b_psi_rad, m_v, m_psi)
         b = cfg.acquisition_position_bin_m
         self.P = np.eye(2) * (b * b + self.sigma_floor_m**2)
         self.Pc = self.P.copy()
+        self._set_centroid_cov(self.Pc)
         self.need_acquisition = False
         self.acq_failures = 0
         self.bad_epochs = 0
@@ -870,6 +1064,7 @@ class AcqTrackNavigator:
             self._out_of_lock(s, "too few valid samples")
             return
         b_v0, b_psi0 = self.b_v, self.b_psi
+        o_n, o_e = self._beam_arrays(b_psi0)
         # Aided: start-point loops first, at the (slow) references: the whole-replica shift is the position
         # fix, and the speed and heading loops then stretch and turn the shifted replica. Unaided the speed
         # and heading are the loops' own fast estimates, so they go first and the shift follows them. All of
@@ -880,7 +1075,7 @@ class AcqTrackNavigator:
         b_v, b_psi, lat_p, lon_p, sp_v, sp_psi = loop_kernel.track_loops(
             heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, b_v0, b_psi0, r_n, r_e,
             d, valid, *self._loop_args, _mean(m_v), _mean(m_psi), *self._loop_settings,
-            its, locks, ran, shp, h_p,
+            its, locks, ran, shp, h_p, o_n, o_e,
         )  # fmt: skip
         p_s = (lat_p, lon_p)
         self.iterations = [int(its[0]), int(its[1]), int(its[2]), int(its[3])]
@@ -891,12 +1086,16 @@ class AcqTrackNavigator:
         r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
+        fl_v, fl_psi = b_v, b_psi
+        if self._ne_frame:  # the plausible bias is the north/east vector's length (the loops' part on top)
+            e_try = self.e_ne + self._ne_change(b_v, b_psi, m_v, m_psi)
+            fl_v, fl_psi = float(math.hypot(e_try[0], e_try[1])), 0.0
         self.false_lock = false_lock(
             res_sigma,
             sig0,
             cfg.false_lock_sigma_factor,
-            b_v,
-            b_psi,
+            fl_v,
+            fl_psi,
             cfg.aiding,
             cfg.max_speed_bias_mps,
             math.radians(cfg.max_heading_bias_deg),
@@ -931,8 +1130,9 @@ class AcqTrackNavigator:
         )
         # the fix's covariance: the terrain information along / across the track at the fit
         psi = self._aided_track(s)
-        i_al, i_cr = along_cross_information(
-            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, valid, psi,
+        i_al, i_cr = beam.information_at(
+            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e,
+            valid, psi,
         )
         sig_res = max(res_sigma if math.isfinite(res_sigma) else 0.0, sig0)
         k2 = cfg.fix_sigma_scale**2 * _MAD_VARIANCE_FACTOR * sig_res**2
@@ -945,10 +1145,21 @@ class AcqTrackNavigator:
             self._out_of_lock(s, f"fix innovation NIS {nis:.1f} > gate {cfg.fix_gate_nis:g}")
             return
         # consecutive transects share N - 1 samples: each epoch's fix brings 1/overlap of new information
-        K = self.Pc @ _inv2(self.Pc + self._fix_overlap * R)
-        IK = np.eye(2) - K
-        self.Pc = IK @ self.Pc @ IK.T + self._fix_overlap * (K @ R @ K.T)
-        dc = K @ r_ne
+        if self._ne_frame:  # the 4-state filter: the fix corrects the centroid and the velocity bias
+            X = self.X
+            Ro = self._fix_overlap * R
+            Kx = X[:, :2] @ _inv2(X[:2, :2] + Ro)
+            IK = np.eye(4)
+            IK[:, :2] -= Kx
+            self.X = IK @ X @ IK.T + Kx @ Ro @ Kx.T
+            dx = Kx @ r_ne
+            dc = dx[:2]
+            self.Pc = self.X[:2, :2].copy()
+        else:
+            K = self.Pc @ _inv2(self.Pc + self._fix_overlap * R)
+            IK = np.eye(2) - K
+            self.Pc = IK @ self.Pc @ IK.T + self._fix_overlap * (K @ R @ K.T)
+            dc = K @ r_ne
         c_new = (self.p0[0] + dla_p[c] + dc[0] / r_n, self.p0[1] + dlo_p[c] + dc[1] / r_e)
         g = 1.0
         if cfg.aiding:  # the aided reference is a slow bias: move it part of the way (reference_gain), but
@@ -957,6 +1168,11 @@ class AcqTrackNavigator:
             b_v, b_psi = b_v0 + g * innov[0], b_psi0 + g * innov[1]
         self.pull_in = max(self.pull_in - 1, 0)
         self.b_v, self.b_psi = b_v, b_psi
+        if self._ne_frame:  # the fix's velocity part moves e_ne; the start point follows below
+            self.e_ne = self.e_ne + dx[2:]
+            self.b_v = self.b_psi = 0.0
+            _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
+            b_v = b_psi = 0.0
         dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0], (r_n, r_e))
         self.p0 = (c_new[0] - dla_n[c], c_new[1] - dlo_n[c])
         # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
@@ -966,7 +1182,14 @@ class AcqTrackNavigator:
             self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
             self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
         ]
-        if g < 1.0:  # the references are an exponential average of the loops' values (gain g)
+        if self._ne_frame:  # the references' sigma is e_ne's, along / across the track
+            Xe = self.X[2:, 2:]
+            c_, s_ = math.cos(psi), math.sin(psi)
+            s_al = c_ * c_ * Xe[0, 0] + 2 * c_ * s_ * Xe[0, 1] + s_ * s_ * Xe[1, 1]
+            s_cr = s_ * s_ * Xe[0, 0] - 2 * c_ * s_ * Xe[0, 1] + c_ * c_ * Xe[1, 1]
+            v_ref = max(float(np.mean(m_v)), 1.0)
+            sv = [math.sqrt(max(s_al, 0.0)), math.sqrt(max(s_cr, 0.0)) / v_ref]
+        elif g < 1.0:  # the references are an exponential average of the loops' values (gain g)
             sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]
         self.sigma_v, self.sigma_psi = sv
         self.last_innovation = (s.t_s, r_ne, S)
@@ -976,6 +1199,7 @@ class AcqTrackNavigator:
             self.health.events.append((s.t_s, f"acq_track: {verdict.message}"))
         self.bad_epochs = 0
         k = 1.0 / max(cfg.transect_samples, 1)  # the references' running mean over about a transect
+        self.e_mean = self.e_mean + k * (self.e_ne - self.e_mean)
         self.b_mean = (
             self.b_mean[0] + k * (b_v - self.b_mean[0]),
             self.b_mean[1] + k * (b_psi - self.b_mean[1]),
@@ -984,9 +1208,12 @@ class AcqTrackNavigator:
         lever_s = float(t[-1] - t[c])
         v_mean = max(_mean(m_v) + b_v, 1.0)
         walk = self._walk2 * lever_s
-        self.P = self.Pc + _rot_diag(
-            psi, (lever_s * sv[0]) ** 2 + walk, (v_mean * lever_s * sv[1]) ** 2 + walk
-        )
+        if self._ne_frame:
+            self.P = self._ne_output_cov(lever_s)
+        else:
+            self.P = self.Pc + _rot_diag(
+                psi, (lever_s * sv[0]) ** 2 + walk, (v_mean * lever_s * sv[1]) ** 2 + walk
+            )
         if converged and self.integrity.degraded:  # in lock, but the references jump: flagged
             self._set_lock("tracking", s.t_s, "degraded", "in lock, innovation test above its band")
         elif converged:
@@ -1020,6 +1247,8 @@ class AcqTrackNavigator:
                 lim_v, lim_p = cfg.max_speed_bias_mps, math.radians(cfg.max_heading_bias_deg)
                 self.b_v = float(np.clip(self.b_mean[0], -lim_v, lim_v))
                 self.b_psi = float(np.clip(self.b_mean[1], -lim_p, lim_p))
+                if self._ne_frame:  # the filter's e_ne is kept (it is not a loop value)
+                    self.b_v = self.b_psi = 0.0
             self.need_acquisition = True
             self._anchored = False
             self._set_lock("lost", s.t_s, "lost", f"out of lock {self.bad_epochs} epochs: {reason}")
@@ -1028,14 +1257,18 @@ class AcqTrackNavigator:
 
     def _finish(self, s: Sample) -> None:
         """Newest position from the replica; output speed/track through the moving average."""
-        _, _, _, dt, m_v, m_psi, _ = self.transect.arrays()
+        _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
         dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
         self.pos = (self.p0[0] + dla[-1], self.p0[1] + dlo[-1])
         self.t_pos = s.t_s
         v, psi = self._aided_speed(s), self._aided_track(s)
         if self.lock_state == "tracking":
             if self.config.aiding:  # average the references: the aiding carries ramps without lag
-                ab_v, ab_psi = self.average.push(self.b_v, self.b_psi)
+                ref_v, ref_psi = self.b_v, self.b_psi
+                if self._ne_frame:  # the NE bias as the newest sample's speed / track reference
+                    cv, cp = self._corrected(s)
+                    ref_v, ref_psi = cv - s.m_v + self.b_v, float(wrap_rad(cp - s.m_psi)) + self.b_psi
+                ab_v, ab_psi = self.average.push(ref_v, ref_psi)
                 self.out_speed, self.out_track = s.m_v + ab_v, float(wrap_rad(s.m_psi + ab_psi))
             else:
                 self.out_speed, self.out_track = self.average.push(v, psi)
@@ -1043,6 +1276,7 @@ class AcqTrackNavigator:
                 self.config.aiding
                 and self.config.aiding_source == "air_data"
                 and self.config.wind_estimation
+                and not self._ne_frame
                 and math.isfinite(s.tas_mps)
             ):
                 self.wind.update(ground_vector(v, psi), s.tas_mps, s.heading_rad)
@@ -1101,7 +1335,9 @@ class AcqTrackNavigator:
             "v_shape": bool(self.v_shape),
             "false_lock": self.false_lock,
             "loop_iterations": list(self.iterations),
-            "wind_ne_mps": self.wind.w_ne.copy(),
+            "wind_ne_mps": self.e_ne.copy()
+            if self._ne_frame and self.config.aiding_source == "air_data"
+            else self.wind.w_ne.copy(),
             "acquisitions": int(self.acquisitions),
         }
         if self.last_innovation is not None:

@@ -28,6 +28,16 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
   SOURCE_DEFAULTS below.
 - lock: a loop that hits the 101-iteration break flags the epoch 'degraded' but keeps its estimate; out of
   lock (V-shape flag, SNR < snr_min_db, false lock) lost_after_epochs times in a row is 'lost'.
+- reference_frame (session 3): "ne" (default for both sources) keeps the aiding's error as one north/east
+  velocity bias e_ne (an INS's velocity error; with air data the wind), estimated with the transect
+  centroid by a 4-state filter from the position fixes, its random walk aiding_bias_walk_mps_per_sqrt_s
+  (INS 0.03, air data 0.05); an acquisition whose velocity change has an NIS above fix_gate_nis against
+  e_ne's sigma is rejected. "speed_track" is the thesis' one reference per loop (b_v, b_psi), which a
+  north/east error turns into a ramp in every turn (navigator.py).
+- replica_model "return" (session 3, the built-in scenario's): the roll correction formula of spec
+  section 8 read as a ray: the measured height uses the off-nadir angle of the return predicted on the map
+  at the navigator's position and attitude, and the replica samples the map where that return lies
+  (beam.py). "footprint" and "plumb" keep the point below the aircraft.
 """
 
 from __future__ import annotations
@@ -52,6 +62,9 @@ AIDING_SOURCES = ("air_data", "ins")
 # - max_speed_bias_mps / max_heading_bias_deg: a reference beyond is a false lock: air data 15 m/s / 15 deg
 #   (wind + sensor bias); an INS 6 m/s / 3 deg (an intermediate-grade IRS's Schuler velocity error, 0.5 mg /
 #   1.24e-3 rad/s = 4 m/s, with a margin).
+# - reference_frame: "ne" for both (an INS's velocity error and the wind are north/east vectors).
+# - aiding_bias_walk_mps_per_sqrt_s: e_ne's walk; an INS's Schuler error drifts slowly (0.03), the wind's
+#   apparent part with the slow gusts faster (0.05).
 SOURCE_DEFAULTS = {
     "aiding_speed_sigma_mps": {"air_data": 1.5, "ins": 0.3},
     "aiding_heading_sigma_deg": {"air_data": 1.0, "ins": 0.2},
@@ -59,7 +72,10 @@ SOURCE_DEFAULTS = {
     "reference_gain": {"air_data": 0.1, "ins": 0.02},
     "max_speed_bias_mps": {"air_data": 15.0, "ins": 6.0},
     "max_heading_bias_deg": {"air_data": 15.0, "ins": 3.0},
+    "reference_frame": {"air_data": "ne", "ins": "ne"},
+    "aiding_bias_walk_mps_per_sqrt_s": {"air_data": 0.05, "ins": 0.03},
 }
+REFERENCE_FRAMES = ("speed_track", "ne")
 LOOP_ORDERS = ("speed_first", "heading_first")
 BIAS_MITIGATIONS = ("ncs", "els", "none")
 DISCRIMINATOR_NAMES = ("thesis", "v_fit")
@@ -107,6 +123,8 @@ class AcqTrackConfig:
     aiding: bool = True  # chapter 4's aided loops (False: constant speed and heading)
     aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
     reference_gain: float | None = None  # aided: fraction of each epoch's loop correction taken into b
+    reference_frame: str | None = None  # aided: "speed_track" (b_v, b_psi) | "ne" (a north/east bias)
+    aiding_bias_walk_mps_per_sqrt_s: float | None = None  # "ne": the velocity bias' walk (None: by source)
     aiding_interval_mean: bool = True  # air data: the air vector's mean over each sample interval
     air_vector_sideslip: bool = True  # air data: the air vector points along heading + sideslip
     wind_estimation: bool = True  # wind triangle, predicted through heading changes
@@ -184,7 +202,8 @@ class AcqTrackConfig:
             ("loop_order", LOOP_ORDERS),
             ("bias_mitigation", BIAS_MITIGATIONS),
             ("discriminator", DISCRIMINATOR_NAMES),
-            ("replica_model", ("plumb", "footprint")),
+            ("replica_model", ("plumb", "footprint", "return")),
+            ("reference_frame", REFERENCE_FRAMES),
         ):
             if getattr(self, name) not in options:
                 raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
@@ -282,6 +301,7 @@ class AcqTrackConfig:
         if self.fix_overlap is not None:
             _finite("fix_overlap", self.fix_overlap, 1.0)
         _finite("aiding_walk_m_per_sqrt_s", self.aiding_walk_m_per_sqrt_s, 0.0)
+        _finite("aiding_bias_walk_mps_per_sqrt_s", self.aiding_bias_walk_mps_per_sqrt_s, 0.0)
         if self.position_sigma_floor_m is not None:
             _finite("position_sigma_floor_m", self.position_sigma_floor_m, 0.0, strict_lo=True)
 

@@ -1,0 +1,134 @@
+"""Where the pulse radar altimeter's shortest return lies: the "return" replica model (seed 001 ch. 4-5).
+
+A pulse altimeter returns the shortest range in its beam (thesis 4.2.4, fig. 4.18): in a bank the beam's
+bore sight leaves the vertical, and the return comes from a point displaced across the track (at 600 m above
+ground, a 25 deg bank and a 17 deg beam, about 180 m to the outside of the turn, and over rough terrain
+wherever a slope is nearest). The thesis' roll correction (5.2.4) scales the range back to a plumb height
+once the roll exceeds half the beam; it still assigns that height to the point below the aircraft, the wrong
+one. Our reading (spec section 8, "roll correction formula"): per sample, the navigator predicts the return
+on its own map at its dead-reckoned position and its attitude (terrain.queries.radar_altimeter_return, the
+shortest in-cone range), and takes from the prediction the ray's direction only:
+
+    off-nadir angle  theta = atan2(|q - p|, h - h_q),   measured terrain height  d = h_baro - R cos(theta),
+    horizontal offset  o = R sin(theta) (q - p) / |q - p|   (north, east m),
+
+with R the measured range, p the aircraft's horizontal position and q the predicted return point. The
+replica then samples the plain map at each sample's position + o (its offsets rotate with the replica's
+heading). Over level ground and a tilt beyond half the beam this is the thesis' correction, R cos(tilt -
+beam / 2), moved to the point it belongs to; inside the half beam over rough ground it is the footprint
+effect (replica_model "footprint" models that by a grey dilation at the point below the aircraft). The ray
+direction barely depends on the position error: on the reproduction's flight the measured-minus-replica
+height residual is 13-14 m RMS at the true position and with 30 m of position error, 13-15 m with 60 m,
+against 17-20 m for the footprint dilation at the point below the aircraft (scratch study on seed 0,
+README). Without roll_compensation the prediction uses a level attitude (roll = pitch = 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from navigators.acquisition_tracking.correlation import _map_height, replica_offsets
+from terrain.geodesy import euler_to_C_bn
+from terrain.kernels import bilinear_with_gradient
+from terrain.queries.radar_altimeter import radar_altimeter_return
+
+
+def predicted_ray(
+    dem,
+    lat_rad: float,
+    lon_rad: float,
+    h_m: float,
+    roll_rad: float,
+    pitch_rad: float,
+    yaw_rad: float,
+    beamwidth_deg: float,
+    r_n: float,
+    r_e_cos: float,
+    max_range_m: float = 8000.0,
+) -> tuple[float, float, float] | None:
+    """(off-nadir angle rad, unit north, unit east) of the shortest in-beam return predicted on `dem` for
+    an antenna at (lat, lon rad, h m) with the attitude (rad); None when the prediction has no return.
+    r_n, r_e_cos: meridian radius + h and (prime vertical radius + h) cos(lat) (m)."""
+    C = euler_to_C_bn(roll_rad, pitch_rad, yaw_rad)
+    ret = radar_altimeter_return(
+        dem, np.array([lat_rad]), np.array([lon_rad]), np.array([h_m]), C[None],
+        math.radians(0.5 * beamwidth_deg), max_range_m,
+    )  # fmt: skip
+    if not bool(ret.valid[0]):
+        return None
+    dn = (float(ret.lat_rad[0]) - lat_rad) * r_n
+    de = (float(ret.lon_rad[0]) - lon_rad) * r_e_cos
+    rho = math.hypot(dn, de)
+    theta = math.atan2(rho, h_m - float(ret.h_m[0]))
+    if rho <= 1e-9:
+        return theta, 0.0, 0.0
+    return theta, dn / rho, de / rho
+
+
+def rotate_offsets(o_n: np.ndarray, o_e: np.ndarray, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets turned by angle_rad (clockwise from north, as a heading): world offsets into the replica's
+    frame at heading reference b_psi use angle -b_psi (the kernels turn them back by their b_psi)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.ascontiguousarray(c * o_n - s * o_e), np.ascontiguousarray(s * o_n + c * o_e)
+
+
+@njit(cache=True)
+def replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dlat_out, dlon_out):
+    """Latitude/longitude offsets (rad) from the transect start of every replica sample's map point: the
+    replica position (correlation.replica_offsets) + the beam offset (o_n, o_e m in the replica frame,
+    turned by b_psi)."""
+    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_out, dlon_out)
+    c = math.cos(b_psi)
+    s = math.sin(b_psi)
+    for i in range(dt.shape[0]):
+        dlat_out[i] += (c * o_n[i] - s * o_e[i]) / r_n
+        dlon_out[i] += (s * o_n[i] + c * o_e[i]) / r_e_cos
+
+
+@njit(cache=True)
+def replica_heights_at(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e,
+    interp, h_out,
+):  # fmt: skip
+    """correlation.replica_heights with the beam offsets: map heights (m) at the replica's map points."""
+    n = dt.shape[0]
+    dla = np.empty(n)
+    dlo = np.empty(n)
+    replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
+    for i in range(n):
+        h_out[i] = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dla[i], lon_s + dlo[i], interp)
+
+
+@njit(cache=True)
+def information_at(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e,
+    valid, track_rad,
+):  # fmt: skip
+    """correlation.along_cross_information at the replica's map points (beam offsets included): the sums
+    of the squared along-track and cross-track map slopes over the valid samples (dimensionless)."""
+    n = dt.shape[0]
+    dla = np.empty(n)
+    dlo = np.empty(n)
+    replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
+    ca = math.cos(track_rad)
+    sa = math.sin(track_rad)
+    s_al = 0.0
+    s_cr = 0.0
+    for i in range(n):
+        if not valid[i]:
+            continue
+        _, g_lat, g_lon = bilinear_with_gradient(
+            heights, lat0, lon0, dlat, dlon, lat_s + dla[i], lon_s + dlo[i]
+        )
+        if g_lat != g_lat or g_lon != g_lon:
+            continue
+        g_n = g_lat / r_n
+        g_e = g_lon / r_e_cos
+        a = g_n * ca + g_e * sa
+        c = -g_n * sa + g_e * ca
+        s_al += a * a
+        s_cr += c * c
+    return s_al, s_cr
