@@ -69,3 +69,16 @@ def test_footprint_dilation_brute_force_at_edges(dem):
                     best = max(best, q - rho2 / (2.0 * a))
         assert got[i, j] == pytest.approx(best, abs=1e-9)
     assert np.isnan(got[3, 4])
+
+
+def test_footprint_cache_keeps_the_most_recently_used_bands(dem):
+    from navigators.acquisition_tracking.footprint import MAX_BANDS
+
+    fm = FootprintMaps(dem, 17.0)
+    bands = list(range(10, 10 + MAX_BANDS))
+    first = {b: fm.grid(b * BAND_M)[0] for b in bands}
+    assert fm.grid(bands[0] * BAND_M)[0] is first[bands[0]]  # used again: now the most recent
+    fm.grid((bands[-1] + 1) * BAND_M)[0]  # one band more: the least recently used (bands[1]) goes
+    assert len(fm._cache) == MAX_BANDS and bands[1] not in fm._cache and bands[0] in fm._cache
+    again = fm.grid(bands[1] * BAND_M)[0]
+    assert again is not first[bands[1]] and np.array_equal(again, first[bands[1]])

@@ -6,18 +6,20 @@ With replica_model = "footprint" the replicas are taken from the map's grey dila
 at the transect's height above ground a: h_fp(p) = max over |q - p| <= a tan(beam / 2) of
 h(q) - |q - p|^2 / (2 a) (the shortest range to a point q at horizontal distance rho and depth a is about
 a + rho^2 / (2 a), so the return comes from the point maximising h - rho^2 / (2 a)). The dilated maps are
-made once per 50 m band of height above ground and cached (`dilate`, a numba kernel over the grid: edge
-posts repeat outward, a void post neither contributes nor is filled).
+made once per 50 m band of height above ground and cached, the MAX_BANDS most recently used (`dilate`, a
+numba kernel over the grid: edge posts repeat outward, a void post neither contributes nor is filled).
 """
 
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 
 import numpy as np
 from numba import njit
 
 BAND_M = 50.0
+MAX_BANDS = 16  # maps kept (least recently used dropped): a map's size each, 1.1 MB for the bundled DEM
 _VOID_M = -1e9  # a void post's height inside the dilation: never the maximum next to a valid post
 
 
@@ -73,7 +75,7 @@ class FootprintMaps:
         self.dem = dem
         self.tan_half = math.tan(math.radians(0.5 * beamwidth_deg))
         self.dn_m, self.de_m = (float(x) for x in dem.spacing_m)
-        self._cache: dict[int, np.ndarray] = {}
+        self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
 
     def footprint(self, a_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(di, dj, structure m) of the posts within the beam's footprint at a height above ground a_m."""
@@ -97,7 +99,11 @@ class FootprintMaps:
         band = int(round(agl_m / BAND_M))
         if band < 1:
             return self.dem.grid
-        if band not in self._cache:
+        if band in self._cache:
+            self._cache.move_to_end(band)
+        else:
+            if len(self._cache) >= MAX_BANDS:
+                self._cache.popitem(last=False)
             a = band * BAND_M
             r = a * self.tan_half
             if int(r // self.dn_m) < 1 and int(r // self.de_m) < 1:

@@ -149,6 +149,21 @@ def correlation_function(
 
 
 @njit(cache=True)
+def _eps(he, hl, hp, spacing, discriminator):
+    """The early-late discriminator's step from the early, late and prompt costs (tracking.py)."""
+    if discriminator == DISC_THESIS:  # eq (3.5)
+        den = he + hl
+        return spacing * (he - hl) / den if den > 0.0 else 0.0
+    den = max(he, hl) - hp  # V-fit: the prompt removes the cost floor; at most one spacing
+    eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
+    if eps > spacing:
+        return spacing
+    if eps < -spacing:
+        return -spacing
+    return eps
+
+
+@njit(cache=True)
 def _stage(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
     d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold, break_iteration,
@@ -164,17 +179,10 @@ def _stage(
         hl = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x + spacing, w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
-        if discriminator == DISC_THESIS:  # eq (3.5)
-            den = he + hl
-            eps = spacing * (he - hl) / den if den > 0.0 else 0.0
-        else:  # V-fit (tracking.py): the prompt removes the cost floor
-            hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, w)
-            den = max(he, hl) - hp
-            eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
-            if eps > spacing:
-                eps = spacing
-            elif eps < -spacing:
-                eps = -spacing
+        hp = 0.0 if discriminator == DISC_THESIS else _cost_x(
+            *g, d, valid, cost, remove_bias, interp, n_min, which, x, w
+        )  # fmt: skip
+        eps = _eps(he, hl, hp, spacing, discriminator)
         x += eps
         if abs(eps) < threshold:
             return x, it, True
@@ -489,17 +497,8 @@ def _shift_stage(
         hl = _shift_cost_pre(*g, x + spacing, w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
-        if discriminator == DISC_THESIS:
-            den = he + hl
-            eps = spacing * (he - hl) / den if den > 0.0 else 0.0
-        else:
-            hp = _shift_cost_pre(*g, x, w)
-            den = max(he, hl) - hp
-            eps = 0.5 * spacing * (he - hl) / den if den > 0.0 else 0.0
-            if eps > spacing:
-                eps = spacing
-            elif eps < -spacing:
-                eps = -spacing
+        hp = 0.0 if discriminator == DISC_THESIS else _shift_cost_pre(*g, x, w)
+        eps = _eps(he, hl, hp, spacing, discriminator)
         x += eps
         if abs(eps) < threshold:
             return x, it, True

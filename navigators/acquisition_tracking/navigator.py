@@ -652,8 +652,13 @@ class AcqTrackNavigator:
 
     # ------------------------------------------------------------------ epochs
     def _radii(self, lat: float, h: float) -> tuple[float, float]:
+        key = (lat, h)
+        if getattr(self, "_radii_key", None) == key:  # an epoch asks several times for the same start
+            return self._radii_val
         h = h if math.isfinite(h) else 0.0
-        return float(meridian_radius_m(lat)) + h, (float(prime_vertical_radius_m(lat)) + h) * math.cos(lat)
+        r = float(meridian_radius_m(lat)) + h, (float(prime_vertical_radius_m(lat)) + h) * math.cos(lat)
+        self._radii_key, self._radii_val = key, r
+        return r
 
     def _offsets(self, dt, m_v, m_psi, b_v, b_psi, lat, radii=None):
         """Replica offsets (rad) from the start at latitude lat; radii: its (r_n, r_e) when known."""
@@ -885,7 +890,7 @@ class AcqTrackNavigator:
         (m_v, m_psi): the mean over the samples of (m_v + b_v) u(m_psi + b_psi) - m_v u(m_psi)."""
         vn = (m_v + b_v) * np.cos(m_psi + b_psi) - m_v * np.cos(m_psi)
         ve = (m_v + b_v) * np.sin(m_psi + b_psi) - m_v * np.sin(m_psi)
-        return np.array([float(np.mean(vn)), float(np.mean(ve))])
+        return np.array([_mean(vn), _mean(ve)])
 
     def _fold_references(self, b_v: float, b_psi: float, m_v: np.ndarray, m_psi: np.ndarray) -> None:
         """reference_frame "ne": move the loops' speed / track references (b_v, b_psi on top of the
@@ -1000,8 +1005,8 @@ class AcqTrackNavigator:
         if self._ne_frame:  # the acquired velocity against the filter's velocity bias: a false acquisition
             # (a side minimum over weak terrain) moves it far beyond its sigma; R: one bin as 1 sigma
             dv_ne = self._ne_change(res.b_v - self.b_v, res.b_psi_rad - self.b_psi, m_v, m_psi)
-            psi_c = float(np.mean(m_psi))
-            v_c = max(float(np.mean(m_v)), 1.0)
+            psi_c = _mean(m_psi)
+            v_c = max(_mean(m_v), 1.0)
             R_acq = _rot_diag(
                 psi_c,
                 cfg.acquisition_speed_bin_mps**2,
@@ -1076,7 +1081,7 @@ class AcqTrackNavigator:
         self.iterations = [int(its[0]), int(its[1]), int(its[2]), int(its[3])]
         self.spacing = (sp_v, sp_psi)
         self.v_shape = bool(np.all(shp[ran, 0] != 0.0))
-        shapes = {k: tracking.VShape(bool(shp[k, 0]), *(float(x) for x in shp[k, 1:])) for k in (0, 1)}
+        shapes = {k: tracking.VShape(bool(shp[k, 0]), *shp[k, 1:].tolist()) for k in (0, 1)}
         locks = [bool(x) for x in locks]
         r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
@@ -1182,7 +1187,7 @@ class AcqTrackNavigator:
             c_, s_ = math.cos(psi), math.sin(psi)
             s_al = c_ * c_ * Xe[0, 0] + 2 * c_ * s_ * Xe[0, 1] + s_ * s_ * Xe[1, 1]
             s_cr = s_ * s_ * Xe[0, 0] - 2 * c_ * s_ * Xe[0, 1] + c_ * c_ * Xe[1, 1]
-            v_ref = max(float(np.mean(m_v)), 1.0)
+            v_ref = max(_mean(m_v), 1.0)
             sv = [math.sqrt(max(s_al, 0.0)), math.sqrt(max(s_cr, 0.0)) / v_ref]
         elif g < 1.0:  # the references are an exponential average of the loops' values (gain g)
             sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]

@@ -13,6 +13,12 @@ references:
 - acq_track_navigator_ms_per_sim_s / ins_tercom_navigator_ms_per_sim_s: the navigator's own work per
   simulated second; acq_track_navigator_ms_per_sim_s_without_acquisitions: the tracking alone (the
   serial searches after a loss of lock, acq_track_acquisitions_in_window of them, taken out);
+- acq_track_navigator_replay_ms_per_update / ins_tercom_navigator_replay_ms_per_update: each navigator's
+  work per update on the frames of one timed window recorded again (a second closed loop of the same seed,
+  bit for bit the same run) and replayed from a copy of its state 9 times, each frame's fastest replay in
+  thread CPU time summed; acq_track_vs_ins_tercom_navigator_replay (>= 1: acq_track costs no more). The
+  least load-dependent figure here (pre-emption and slowed frames drop out), but cache-warm: the closed
+  loop's own figures run higher;
 - acq_track_acquisition_s: one serial search over the full default uncertainty (+-500 m in 50 m, +-10 m/s
   in 1 m/s, +-10 deg in 1 deg: 194,481 cells x N = 25 samples; target <= 1 s), median of 3, beside
   acq_track_acquisition_lookups_per_s (cells x N over the time: the bounded search skips most of them),
@@ -29,7 +35,49 @@ import time
 import numpy as np
 
 
-def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
+def _replay_ms(nav0, frames: list, repeats: int = 9) -> float:
+    """The navigator's work per update (ms) on recorded frames from a copy of its state: the sum over the
+    frames of each frame's fastest of `repeats` replays (time.thread_time: a replay pre-empted by another
+    job, or a frame it slowed, does not count; cache-warm, so below the closed loop's figure)."""
+    import copy
+
+    best = np.full(len(frames), np.inf)
+    for _ in range(repeats + 1):  # the first replay warms up
+        nav = copy.deepcopy(nav0)
+        for k, f in enumerate(frames):
+            t0 = time.thread_time()
+            nav.update(f)
+            best[k] = min(best[k], time.thread_time() - t0)
+    return 1e3 * float(best.sum()) / max(len(frames), 1)
+
+
+def _recorded_window(sc, warm_s: float, steps: int):
+    """(the navigator's state at warm_s, the sensor frames it gets over the next `steps` JSBSim steps) of a
+    closed loop of scenario sc (inline: the same run as the timed one, bit for bit)."""
+    import copy
+
+    from trn_env.sim.closed_loop import ClosedLoop
+
+    frames: list = []
+    with ClosedLoop(sc, log_sensors=False, pipeline=False) as loop:
+        nav = loop.navigator
+        while loop.termination is None and loop.t_s < warm_s - 1e-6:
+            loop.tick()
+        state = copy.deepcopy(nav)
+        update = nav.update
+
+        def keep(f):
+            frames.append(copy.deepcopy(f))
+            return update(f)
+
+        nav.update = keep
+        s0 = loop.jsbsim_steps
+        while loop.termination is None and loop.jsbsim_steps - s0 < steps:
+            loop.tick()
+    return state, frames
+
+
+def _loop_figures(navigator: str, warm_s: float, sim_s: float, record: bool = False) -> dict:
     from trn_env.bench.runner import bare_jsbsim_steps_per_s
     from trn_env.scenario import build as components
     from trn_env.scenario.loading import load_scenario, validate
@@ -60,6 +108,9 @@ def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
         nav_s = loop.stage_s["navigator"] - nav0
         acq_s = getattr(nav, "acquisition_total_s", 0.0) - acq0[0]
         n_acq = getattr(nav, "acquisitions", 0) - acq0[1]
+    replay_ms = math.nan
+    if record:  # the window's frames again (the same run, outside the timing) for the replay figure
+        replay_ms = _replay_ms(*_recorded_window(sc, warm_s, steps_timed))
     sim = steps * loop.dt_s
     return {
         "steps_per_s": steps / wall,
@@ -71,6 +122,7 @@ def _loop_figures(navigator: str, warm_s: float, sim_s: float) -> dict:
         "sim_s": sim,
         "acq_s": acq_s,
         "n_acq": n_acq,
+        "replay_ms": replay_ms,
     }
 
 
@@ -188,9 +240,10 @@ def benchmark(quick: bool = False) -> dict:
     out = _acquisition_figures()
     # A B B A: a load that drifts over the run weighs on both navigators alike
     runs = {"acq_track": [], "ins_tercom": []}
-    for name in ("acq_track", "ins_tercom", "ins_tercom", "acq_track"):
-        runs[name].append(_loop_figures(name, 45.0, sim_s))
+    for i, name in enumerate(("acq_track", "ins_tercom", "ins_tercom", "acq_track")):
+        runs[name].append(_loop_figures(name, 45.0, sim_s, record=i in (1, 3)))
     acq, ekf = (_pooled(runs[k]) for k in ("acq_track", "ins_tercom"))
+    rep_acq, rep_ekf = runs["acq_track"][1]["replay_ms"], runs["ins_tercom"][0]["replay_ms"]
     out.update(
         {
             "acq_track_closed_loop_steps_per_s": acq["steps_per_s"],
@@ -201,6 +254,9 @@ def benchmark(quick: bool = False) -> dict:
             "acq_track_vs_ins_tercom_speed_cpu": acq["cpu_steps_per_s"] / ekf["cpu_steps_per_s"],
             "acq_track_navigator_ms_per_sim_s": acq["nav_ms_per_sim_s"],
             "ins_tercom_navigator_ms_per_sim_s": ekf["nav_ms_per_sim_s"],
+            "acq_track_navigator_replay_ms_per_update": rep_acq,
+            "ins_tercom_navigator_replay_ms_per_update": rep_ekf,
+            "acq_track_vs_ins_tercom_navigator_replay": rep_ekf / rep_acq,
             "acq_track_bench_sim_s": acq["sim_s"],  # both windows together
             "acq_track_acquisitions_in_window": acq["n_acq"],
             "acq_track_navigator_ms_per_sim_s_without_acquisitions": 1e3
