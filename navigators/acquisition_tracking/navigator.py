@@ -1013,12 +1013,14 @@ class AcqTrackNavigator:
                 (v_c * math.radians(cfg.acquisition_heading_bin_deg)) ** 2,
             )
             nis_v = _quad2(dv_ne, self.X[2:, 2:] + R_acq)
-            if nis_v > cfg.fix_gate_nis:
+            e_acq = self.e_ne + dv_ne
+            if nis_v > cfg.fix_gate_nis or math.hypot(e_acq[0], e_acq[1]) > cfg.max_speed_bias_mps:
                 self.health.events.append(
                     (
                         s.t_s,
                         f"acq_track: acquisition rejected: its velocity change {math.hypot(*dv_ne):.1f} m/s "
-                        f"has NIS {nis_v:.1f} > gate {cfg.fix_gate_nis:g} against the velocity bias' sigma",
+                        f"has NIS {nis_v:.1f} (gate {cfg.fix_gate_nis:g}) against the velocity bias' sigma, "
+                        f"bias {math.hypot(*e_acq):.1f} m/s (limit {cfg.max_speed_bias_mps:g})",
                     )
                 )
                 self._set_lock(
@@ -1149,10 +1151,16 @@ class AcqTrackNavigator:
             X = self.X
             Ro = self._fix_overlap * R
             Kx = X[:, :2] @ _inv2(X[:2, :2] + Ro)
+            dx = Kx @ r_ne
+            e_new = self.e_ne + dx[2:]
+            if math.hypot(e_new[0], e_new[1]) > cfg.max_speed_bias_mps:  # beyond the plausible bias
+                self.last_innovation = (s.t_s, r_ne, S)
+                lim = cfg.max_speed_bias_mps
+                self._out_of_lock(s, f"false lock: velocity bias {math.hypot(*e_new):.1f} m/s beyond {lim:g}")
+                return
             IK = np.eye(4)
             IK[:, :2] -= Kx
             self.X = IK @ X @ IK.T + Kx @ Ro @ Kx.T
-            dx = Kx @ r_ne
             dc = dx[:2]
             self.Pc = self.X[:2, :2].copy()
         else:
