@@ -85,6 +85,7 @@ class PointMassFilter(InsRiddenFilter):
     def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
                  spacing_max_m: float = 100.0,
                  span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 1.0,
+                 velocity_noise_mps_per_sqrt_s: float = 0.01,
                  max_memory_mb: float = 2048.0, **settings):
         if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
             raise ValueError(f"grid_size must be an integer >= 3, got {grid_size!r}")
@@ -99,6 +100,8 @@ class PointMassFilter(InsRiddenFilter):
             raise ValueError(f"spacing_max_m ({spacing_max_m}) must be >= spacing_min_m ({spacing_min_m})")
         self.span_sigmas = check_positive("span_sigmas", span_sigmas)
         self.position_noise = check_positive("position_noise_m_per_sqrt_s", position_noise_m_per_sqrt_s, True)
+        self.velocity_noise = check_positive("velocity_noise_mps_per_sqrt_s", velocity_noise_mps_per_sqrt_s,
+                                             True)
         super().__init__(dem=dem, **settings)
         self.n = int(grid_size)
         self._ira_p = np.empty((1, 3))
@@ -120,7 +123,18 @@ class PointMassFilter(InsRiddenFilter):
         self.dn_flat = np.ascontiguousarray(np.repeat(self.axis_n, n))
         self.de_flat = np.ascontiguousarray(np.tile(self.axis_e, n))
 
-    def _init_belief(self, cov9: np.ndarray, mean_ne=(0.0, 0.0)) -> None:
+    def _init_belief(self, cov9: np.ndarray, mean_ne=(0.0, 0.0), velocity=None) -> None:
+        """The grid from cov9's horizontal block around mean_ne; the velocity offset's Gaussian from cov9
+        (zero mean), or `velocity` = (mean (2,), covariance (2, 2)) kept from before (a re-spread)."""
+        # C_vz: covariance of the velocity offset with z = (dn, de, b)
+        self.C_vz = np.zeros((2, 3))
+        if velocity is None:
+            self.v_mean = np.zeros(2)
+            self.C_vv = np.array(cov9[3:5, 3:5], float)
+            self.C_vz[:, :2] = np.array(cov9[3:5, 0:2], float)
+        else:
+            self.v_mean = np.array(velocity[0], float)
+            self.C_vv = np.array(velocity[1], float)
         P = np.array(cov9[:2, :2], float)
         sig = math.sqrt(max(np.linalg.eigvalsh(P).max(), 1e-6))
         d = min(max(2.0 * self.span_sigmas * sig / (self.n - 1), self.spacing_min_m), self.spacing_max_m)
@@ -136,28 +150,66 @@ class PointMassFilter(InsRiddenFilter):
         self.bias = np.zeros(self.n * self.n)
         self._work = np.empty((6, self.n * self.n))
         self.P_b = self.bias_prior_var()
-        self._q_pending = 0.0
+        self._q_pending = np.zeros((2, 2))
         self._moments_cache = None
         self._n_underflow = 0
 
     def _predict_to(self, t_s: float, st: np.ndarray | None = None) -> None:
+        """x' = x + v dt + w: the grid moves by the velocity offset's mean (its cells are offsets: exact),
+        the rest of the position growth, 2 sym(C_xv) dt + C_vv dt^2 + q dt, is pending process noise;
+        v' = v + random walk."""
         dt = t_s - self._t_belief
         if dt > 0.0:
-            self._q_pending += self.position_noise ** 2 * dt
+            shift = self.v_mean * dt
+            if shift[0] != 0.0 or shift[1] != 0.0:
+                self._set_geometry(self.centre_n + shift[0], self.centre_e + shift[1], self.spacing)
+            C_vx = self.C_vz[:, :2]
+            self._q_pending += ((C_vx + C_vx.T) * dt + self.C_vv * dt * dt
+                                + np.eye(2) * self.position_noise ** 2 * dt)
+            self.C_vz[:, :2] = C_vx + self.C_vv * dt
+            self.C_vv = self.C_vv + np.eye(2) * self.velocity_noise ** 2 * dt
             self.P_b += self.vertical_noise ** 2 * dt
             self._t_belief = t_s
             self._moments_cache = None
 
     def _apply_process_noise(self) -> None:
-        """The accumulated process noise as a separable convolution (exact variance)."""
-        var_cells = self._q_pending / self.spacing ** 2
-        if var_cells < 0.5:
+        """The accumulated process noise as a separable convolution (its diagonal: exact variance per axis;
+        the north-east covariance of the pending noise, small against the grid's own, is dropped)."""
+        var_cells = np.clip(np.diag(self._q_pending), 0.0, None) / self.spacing ** 2
+        if var_cells.max() < 0.5:
             return   # keep accumulating (the reported covariance includes it) until it is half a cell^2
-        k = _kernel_1d(var_cells)
-        spread = kern.convolve_separable(self.logw, self.bias, self.n, k, self._work, LOG_FLOOR)
+        spread = kern.convolve_separable(self.logw, self.bias, self.n, _kernel_1d(var_cells[0]),
+                                         _kernel_1d(var_cells[1]), self._work, LOG_FLOOR)
         self.P_b += spread
         self._moments_cache = None
-        self._q_pending = 0.0
+        self._q_pending = np.zeros((2, 2))
+
+    def _velocity_from_position(self, prior: tuple, post: tuple) -> None:
+        """The velocity offset after an update of the grid (terrain or GNSS position and height): p(v | z),
+        z = (dn, de, b), is the prior's Gaussian regression v = v_mean + G (z - z_mean), G = C_vz C_zz^-1,
+        which a measurement of z alone leaves unchanged, so the grid's posterior moments carry it over:
+        v_mean += G (z+ - z-), C_vv += G (C_zz+ - C_zz-) G', C_vz = G C_zz+ (exact for a Gaussian z)."""
+        (m0, c0), (m1, c1) = prior, post
+        if not (np.all(np.isfinite(c0)) and np.all(np.isfinite(c1))):
+            return
+        try:
+            G = np.linalg.solve(c0, self.C_vz.T).T
+        except np.linalg.LinAlgError:
+            return
+        self.v_mean = self.v_mean + G @ (m1 - m0)
+        C_vv = self.C_vv + G @ (c1 - c0) @ G.T
+        self.C_vv = 0.5 * (C_vv + C_vv.T)
+        self.C_vz = G @ c1
+        self._moments_cache = None
+
+    def _position_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and covariance of z = (dn, de, b) over the grid (b: the cells' means and P_b)."""
+        mean, cov = self._moments()
+        c = cov[:3, :3].copy()
+        xb = np.empty(2)
+        kern.grid_cross_moments(self.logw, self.dn_flat, self.de_flat, self.bias, xb)
+        c[2, :2] = c[:2, 2] = xb
+        return mean[:3].copy(), c
 
     def _weights(self) -> np.ndarray:
         w = np.exp(self.logw - self.logw.max())
@@ -184,12 +236,13 @@ class PointMassFilter(InsRiddenFilter):
         mean, cov = self._moments()
         c9 = np.zeros((9, 9))
         c9[:2, :2] = np.eye(2) * max(1000.0**2, cov[0, 0], cov[1, 1])
-        self._init_belief(c9, (float(mean[0]), float(mean[1])))
+        self._init_belief(c9, (float(mean[0]), float(mean[1])), velocity=(self.v_mean, self.C_vv))
         self._degrade(t_s, "reinitialised", "grid re-initialised wide (1 km) after repeated underflows")
 
     # ------------------------------------------------------------------------------------ updates
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
         self._apply_process_noise()
+        prior = self._position_moments()
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
         heights, lat0, lon0, dlat, dlon = self.grid
@@ -250,6 +303,7 @@ class PointMassFilter(InsRiddenFilter):
             kern.bias_update(self.bias, gam * resid, self.P_b / S)
             self.P_b *= (1.0 - float(self._weights() @ gam) * self.P_b / S)
             self._moments_cache = None
+        self._velocity_from_position(prior, self._position_moments())
         self._set_update_extra(t_s, [h_meas - pred_mean], [[pred_var + S]], log_lik)
         if n_nan:
             self.health.skip(t_s, "cells_off_map", f"{n_nan} grid cells off the map (outlier density only)")
@@ -260,6 +314,7 @@ class PointMassFilter(InsRiddenFilter):
     def _gnss_update(self, t_s, st, payload) -> None:
         lat, lon, h, v = payload
         self._apply_process_noise()
+        prior = self._position_moments()
         gn, ge = self.gnss_offset_m(st, lat, lon)
         s2 = self.gnss_sigma_m ** 2
         ll = -0.5 * ((gn - self.dn_flat) ** 2 + (ge - self.de_flat) ** 2) / s2 - math.log(2 * math.pi * s2)
@@ -270,10 +325,32 @@ class PointMassFilter(InsRiddenFilter):
         K = self.P_b / S
         self.bias += K * (z_b - self.bias)
         self.P_b *= (1.0 - K)
-        self._gnss_velocity_ins(v, carried=())
+        self._moments_cache = None
+        self._velocity_from_position(prior, self._position_moments())
+        self._gnss_velocity(st, v)
+        self._gnss_velocity_ins(v, carried=(0, 1))
         if self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
         self._regrid()
+
+    def _gnss_velocity(self, st: np.ndarray, v_gnss: np.ndarray) -> None:
+        """GNSS horizontal velocity into the velocity offset (Kalman update, z = v_GNSS - v_INS); its
+        position part moves the grid by C_xv S^-1 (z - v_mean) (the grid's spread is not narrowed by it:
+        conservative, C_xv S^-1 C_vx is at most centimetres^2 next to the GNSS position fix's)."""
+        if not np.all(np.isfinite(v_gnss[:2])):
+            return
+        z = np.asarray(v_gnss[:2], float) - np.asarray(st[3:5], float)
+        S = self.C_vv + np.eye(2) * self.gnss_velocity_sigma_mps ** 2
+        r = np.linalg.solve(S, z - self.v_mean)
+        dx = self.C_vz[:, :2].T @ r
+        self.v_mean = self.v_mean + self.C_vv @ r
+        Si = np.linalg.inv(S)
+        self.C_vz = self.C_vz - self.C_vv @ Si @ self.C_vz
+        self.C_vv = self.C_vv - self.C_vv @ Si @ self.C_vv
+        self.C_vv = 0.5 * (self.C_vv + self.C_vv.T)
+        if np.all(np.isfinite(dx)):
+            self._set_geometry(self.centre_n + dx[0], self.centre_e + dx[1], self.spacing)
+        self._moments_cache = None
 
     def _regrid(self) -> None:
         mean, cov = self._moments()
@@ -302,7 +379,7 @@ class PointMassFilter(InsRiddenFilter):
     def _recover(self, t_s: float) -> str:
         """The grid re-spread around its mean (spacing from the widened spread; the vertical offset kept)."""
         mean, c9 = self._recovery_cov9()
-        self._init_belief(c9, (float(mean[0]), float(mean[1])))
+        self._init_belief(c9, (float(mean[0]), float(mean[1])), velocity=(self.v_mean, self.C_vv))
         self.bias[:] = mean[2]
         return (f"grid re-spread around its mean, 1-sigma {math.sqrt(0.5 * np.trace(c9[:2, :2])):.0f} m, "
                 f"spacing {self.spacing:.1f} m")
@@ -315,11 +392,14 @@ class PointMassFilter(InsRiddenFilter):
             c = np.array([[o[2], o[3]], [o[3], o[4]]]) + np.eye(2) * self.spacing ** 2 / 12.0
             self._moments_cache = (o[0], o[1], c, o[5], self.P_b + o[6])
         mn, me, c, mb, vb = self._moments_cache
-        mean = np.array([mn, me, mb, np.nan, np.nan, np.nan])
+        mean = np.array([mn, me, mb, self.v_mean[0], self.v_mean[1], np.nan])
         cov = np.full((6, 6), np.nan)
-        cov[:2, :2] = c + np.eye(2) * self._q_pending
+        cov[:2, :2] = c + self._q_pending
         cov[2, :2] = cov[:2, 2] = 0.0
         cov[2, 2] = vb
+        cov[3:5, 3:5] = self.C_vv
+        cov[3:5, 0:3] = self.C_vz
+        cov[0:3, 3:5] = self.C_vz.T
         return mean, cov
 
     def _after_frame(self, t_end: float) -> None:
