@@ -7,8 +7,19 @@ shared (the measurements are the same for all cells, so the Kalman gain is): a R
 channel instead of a third grid axis, so a baro or map bias does not pull the horizontal fix and costs
 nothing per cell but one multiply-add.
 
-- Prediction: the grid rides on the INS (the offsets need no displacement: the INS carries the aircraft),
-  plus process noise, the INS's horizontal position error growth, as a separable convolution whose kernel
+- Horizontal velocity offset v (true minus INS, m/s): a Gaussian (mean, covariance, and its covariance
+  with the grid's position and vertical offset) outside the grid. The INS's horizontal error is a ramp: on
+  the default flight its second differences show a constant acceleration of ~7.5e-4 m/s^2 per axis and no
+  white part (< 1e-3 m at 1 s; scripts/filter_statistics.py), so v is carried (initial sigma from the
+  initial estimate, a random walk for the acceleration) instead of a large position random walk standing
+  in for it - with the random walk alone the reported covariance was too large on informative terrain and
+  too small where the terrain is flat (per-epoch NEES inside its band in 69 % of the epochs). A terrain or
+  GNSS update leaves p(v | dn, de, b) unchanged, so v follows the grid's posterior moments by the Gaussian
+  regression (`_velocity_from_position`, exact for a Gaussian belief: tests/test_terrain_filter_linear.py
+  against a 5-state Kalman filter).
+- Prediction: the grid rides on the INS and moves by the velocity offset's mean (its cells are offsets:
+  an exact shift), plus process noise - the rest of the position growth, 2 C_xv dt + C_vv dt^2 + q dt -
+  as a separable convolution whose kernel
   has exactly the accumulated variance (a three-tap kernel [p, 1 - 2p, p], p = q / (2 d^2), while the noise
   is below the spacing, a normalised sampled Gaussian above it; in the spirit of the Lagrangian grid
   filters, it is applied before a measurement update once it reaches half a cell^2). The per-cell vertical
@@ -19,8 +30,8 @@ nothing per cell but one multiply-add.
   hypotheses), one map lookup per cell, the heavy-tailed likelihood (measurements.robust_ll_one) with
   variance S = P_b + sensor + map noise and the per-cell bias update, fused in one numba pass over the
   cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through measurements.ra_cone_ranges).
-- GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its velocity into
-  the INS (the PMF carries no velocity state).
+- GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its horizontal
+  velocity into the velocity offset (its vertical velocity into the INS).
 - Re-gridding after an update, from the posterior's spread: the half-span follows span_sigmas times its
   largest standard deviation (spacing within [spacing_min_m, spacing_max_m], at most halved or doubled at
   a time), the centre follows the mean once it is n/8 cells away; log-densities and biases are
@@ -75,8 +86,11 @@ class PointMassFilter(InsRiddenFilter):
     Settings (besides InsRiddenFilter's): grid_size n (cells per side, default 200), spacing_min_m,
     spacing_max_m (bounds of the cell spacing), span_sigmas (grid half-span in posterior sigmas),
     position_noise_m_per_sqrt_s (process noise: horizontal position random walk of the INS error, default
-    1.0: over 100 runs from 1 km the ANEES is 1.82 with it, 1.62 with 1.1 and 2.09 with 0.9, against 2; 0.9
-    cost 0.6 m on the default flight; scripts/filter_statistics.py "nees"),
+    0.1: the INS error's second differences on the default flight have no white part above 1e-3 m at 1 s,
+    so this is a floor, not a model of the drift - the velocity offset carries that; 1.0, the default
+    before the velocity offset, stood in for the drift), velocity_noise_mps_per_sqrt_s (random walk of
+    the velocity offset, default 0.01: the measured constant acceleration of the INS error, 7.5e-4 m/s^2,
+    grows the velocity error as a t, i.e. a random walk of a sqrt(t) = 0.01 m/s/sqrt(s) over 3 minutes),
     max_memory_mb (refuses a grid larger than that), measurement_rate_hz (terrain samples per second).
     """
 
@@ -84,7 +98,7 @@ class PointMassFilter(InsRiddenFilter):
 
     def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
                  spacing_max_m: float = 100.0,
-                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 1.0,
+                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 0.1,
                  velocity_noise_mps_per_sqrt_s: float = 0.01,
                  max_memory_mb: float = 2048.0, **settings):
         if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
