@@ -1,8 +1,12 @@
 """Particle filter (`pf`): bootstrap / SIR over the INS error state, riding on the INS.
 
 Particle state (M particles, contiguous arrays): horizontal position offset dn, de (true minus INS, m),
-vertical offset b (INS height minus true: baro and map bias, m), horizontal velocity offset dv (m/s) and
-heading offset dpsi (rad). The INS itself is never corrected; the estimate is INS + the weighted mean.
+horizontal velocity offset dv (m/s) and heading offset dpsi (rad), and the vertical offset b (INS height
+minus true: baro and map bias, m) Rao-Blackwellised as in the PMF: each particle carries b's mean, the
+variance P_b is shared (the measurements are the same for all particles, so is the gain), and each terrain
+sample's likelihood has variance S + P_b. Sampled, b took most of each update's weight spread (it is
+measured by every sample), so the cloud degenerated faster. The INS itself is never corrected; the estimate
+is INS + the weighted mean.
 
 - Propagation (navigators.filters._pf_kernels.propagate_particles): the INS error dynamics between
   measurement epochs - position from velocity, velocity from the heading error turning the specific force
@@ -13,8 +17,10 @@ heading offset dpsi (rad). The INS itself is never corrected; the estimate is IN
   altimeter: the shortest in-cone return under the particle's heading (ra_cone_ranges). Log-weights,
   normalised by their maximum; log p(z | past) by logsumexp.
 - Resampling: systematic (navigators.filters.resampling) when the effective sample size falls below
-  ess_threshold * M, then roughening (Gordon et al. 1993): every state gets N(0, (roughening * E_d *
-  M^(-1/d))^2) with E_d the particles' span in that state, d = 6, against sample impoverishment.
+  ess_threshold * M, then a kernel jitter against sample impoverishment at Gordon et al.'s (1993) roughening
+  scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
+  jitter keeps the cloud's mean and covariance (`_regularise`); Gordon's jitter adds its variance at each
+  resampling, a process noise the INS error does not have.
 - GNSS: position, height and horizontal velocity likelihoods on the particles, vertical velocity into the INS.
 - Robustness: a NaN sample is skipped; when every particle's likelihood underflows (possible only with
   outlier_prob = 0, or a cloud entirely off the map) the update is skipped and Health says "degraded";
@@ -63,9 +69,9 @@ class ParticleFilter(InsRiddenFilter):
     """SIR particle filter over the INS error state (see the module docstring).
 
     Settings (besides InsRiddenFilter's): n_particles (default 10,000), ess_threshold (in (0, 1]: resample
-    when ESS < ess_threshold * n_particles), roughening (>= 0, Gordon's K; default 0.1: 0.05 with a position
-    noise of 0.5 brought the NEES of 30 runs to 1.8, but over 100 runs from 1 km some clouds impoverished
-    and the RMS doubled), position_noise_m_per_sqrt_s (default 0.9),
+    when ESS < ess_threshold * n_particles), roughening (>= 0, Gordon's K setting the jitter's scale, see
+    the module docstring; default 0.1; at 0.02 clouds impoverished: NEES 4.9-6.8 over 40 runs),
+    position_noise_m_per_sqrt_s (default 0.9),
     velocity_noise_mps_per_sqrt_s, heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng.
     """
 

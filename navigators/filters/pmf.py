@@ -393,7 +393,10 @@ class PointMassFilter(InsRiddenFilter):
     def _recover(self, t_s: float) -> str:
         """The grid re-spread around its mean (spacing from the widened spread; the vertical offset kept)."""
         mean, c9 = self._recovery_cov9()
-        self._init_belief(c9, (float(mean[0]), float(mean[1])), velocity=(self.v_mean, self.C_vv))
+        # the velocity offset learnt from the data the test rejected is suspect too: its spread widened by
+        # the initial one (the mean kept)
+        self._init_belief(c9, (float(mean[0]), float(mean[1])),
+                          velocity=(self.v_mean, self.C_vv + self._init_cov9[3:5, 3:5]))
         self.bias[:] = mean[2]
         return (f"grid re-spread around its mean, 1-sigma {math.sqrt(0.5 * np.trace(c9[:2, :2])):.0f} m, "
                 f"spacing {self.spacing:.1f} m")
