@@ -39,7 +39,8 @@ nothing per cell but one multiply-add.
   again where the terrain is flat.
 
 Outputs: mean and covariance of the grid (position block, + d^2/12 per axis for the cells' width), the
-vertical from the bias, velocity and attitude from the INS error model (terrain_filter); Estimate.extra:
+vertical from the bias, the horizontal velocity from the velocity offset, the rest from the INS error
+model (terrain_filter); Estimate.extra:
 the fixed update keys (navigators.protocol) and "multimodality" (density of the second-highest local
 maximum of the grid over the highest: 0 for one mode, 1 for two equal ones) and "pmf_modes" (local maxima
 above 1 % of the peak), "pmf_spacing_m", "pmf_grid_n".
