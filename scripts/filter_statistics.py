@@ -17,7 +17,8 @@ Experiments (each prints a JSON block; --only NAME runs one):
   runs); the fraction of epochs inside and its binomial least value (nees_figures); the runs' common error.
 - "crlb": horizontal RMS over the converged runs and t >= t_converged_s against terrain.metrics.track_crlb
   of the IRA samples the filter takes (map gradients at their true closest points, prior 1 km, the filter's
-  position random walk), with the filter's measurement variance and with the actual one (the IRA's noise +
+  position random walk and velocity offset: initial sigma from the scenario, the filter's velocity random
+  walk), with the filter's measurement variance and with the actual one (the IRA's noise +
   the measured world-minus-map RMS); and terrain.metrics.terrain_information's window CRLB along the track.
 - "crosswind": a 20 m/s crosswind flight (crosswind_5km: 5,600 m MSL, seed 000's case), map = world (the
   high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs
@@ -264,8 +265,13 @@ def crlb_figures(res: dict, flight, t_from_s: float, settings: dict | None = Non
         map_err = world.height(plat, plon) - the_map.height(plat, plon, method=nav.map_interpolation)
         map_sigma = float(np.nanstd(map_err))
         q = (nav.position_noise if name == "pmf" else nav.s_pos) ** 2
+        s_v = nav.velocity_noise if name == "pmf" else nav.s_vel
         p0 = float(runs[0].get("sigma0_m", 1000.0))
-        kw = dict(t_s=t, prior_sigma_m=p0, process_noise_m2_per_s=q, method=nav.map_interpolation)
+        # both filters carry the INS's velocity offset (its error is a ramp): the bound does too, with the
+        # scenario's initial velocity sigma and the filter's velocity random walk
+        sv0 = float(d["initial_errors"]["velocity_ned_mps"][0])
+        kw = dict(t_s=t, prior_sigma_m=p0, process_noise_m2_per_s=q, method=nav.map_interpolation,
+                  velocity_prior_sigma_mps=sv0, velocity_noise_mps_per_sqrt_s=s_v)
         b_filter = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_filter), **kw).rms_m(t_from_s)
         b_actual = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_sensor), map_sigma_m=map_sigma,
                                       **kw).rms_m(t_from_s)

@@ -193,7 +193,8 @@ class TrackCrlb:
 
 def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: float | None = None,
                process_noise_m2_per_s: float = 0.0, map_sigma_m: float = 0.0,
-               method: str = "bicubic") -> TrackCrlb:
+               method: str = "bicubic", velocity_prior_sigma_mps: float = 0.0,
+               velocity_noise_mps_per_sqrt_s: float = 0.0) -> TrackCrlb:
     """Posterior Cramer-Rao bound of the horizontal position from terrain-height measurements along a track.
 
     Model (north, east; m): the position error is a random walk x_k = x_(k-1) + w_k, w_k ~ N(0, q dt_k I)
@@ -212,6 +213,11 @@ def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: flo
     errors are small against the terrain's correlation length). Returns a TrackCrlb (units there); its
     covariance_m2 bounds the error covariance of any estimator of the position error from these
     measurements under this model, and equals a Kalman filter's covariance when the terrain is a plane.
+
+    velocity_prior_sigma_mps > 0 adds an unknown velocity offset v (N(0, sigma^2 I) at the first epoch, a
+    random walk of velocity_noise_mps_per_sqrt_s): x_k = x_(k-1) + v dt_k + w_k (an INS whose error is a
+    ramp); the recursion then runs on (x, v) as J_k = (F J_(k-1)^-1 F' + Q_k)^-1 + H' H / var_k (needs a
+    prior) and the returned information and covariance are the position's marginal ones.
     """
     lat = np.atleast_1d(np.asarray(lat_rad, float))
     lon = np.atleast_1d(np.asarray(lon_rad, float))
@@ -239,6 +245,15 @@ def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: flo
             raise ValueError(f"track_crlb: prior_sigma_m must be finite and > 0 (or None), got "
                              f"{prior_sigma_m}")
         J = np.eye(2) / prior_sigma_m**2
+    if velocity_prior_sigma_mps > 0.0:
+        if prior_sigma_m is None:
+            raise ValueError("track_crlb: a velocity offset needs prior_sigma_m")
+        if not (math.isfinite(velocity_prior_sigma_mps) and math.isfinite(velocity_noise_mps_per_sqrt_s)
+                and velocity_noise_mps_per_sqrt_s >= 0.0):
+            raise ValueError("track_crlb: velocity_prior_sigma_mps and velocity_noise_mps_per_sqrt_s must be "
+                             "finite and >= 0")
+        return _track_crlb_velocity(dem, lat, lon, var, t, prior_sigma_m, process_noise_m2_per_s,
+                                    velocity_prior_sigma_mps, velocity_noise_mps_per_sqrt_s, method)
     gn, ge = dem.gradient(lat, lon, method=method)
     g = np.stack([np.atleast_1d(gn), np.atleast_1d(ge)], axis=1)
     info = np.empty((n, 2, 2))
@@ -260,4 +275,31 @@ def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: flo
         else:
             cov[k] = np.inf
             sig_h[k] = math.inf
+    return TrackCrlb(t, info, cov, sig_h, g, np.sqrt(var))
+
+
+def _track_crlb_velocity(dem, lat, lon, var, t, prior_sigma_m, q, sigma_v, s_v, method) -> TrackCrlb:
+    """track_crlb with the velocity offset (see there): the 4-state linear-Gaussian recursion in covariance
+    form, P_k = ((F P_(k-1) F' + Q_k)^-1 + H' H / var_k)^-1."""
+    n = lat.shape[0]
+    gn, ge = dem.gradient(lat, lon, method=method)
+    g = np.stack([np.atleast_1d(gn), np.atleast_1d(ge)], axis=1)
+    P = np.diag([prior_sigma_m**2, prior_sigma_m**2, sigma_v**2, sigma_v**2])
+    info = np.empty((n, 2, 2))
+    cov = np.empty((n, 2, 2))
+    sig_h = np.empty(n)
+    for k in range(n):
+        if k > 0:
+            dt = t[k] - t[k - 1]
+            F = np.eye(4)
+            F[0, 2] = F[1, 3] = dt
+            P = F @ P @ F.T + np.diag([q * dt, q * dt, s_v**2 * dt, s_v**2 * dt])
+        if np.all(np.isfinite(g[k])):
+            h = np.array([g[k, 0], g[k, 1], 0.0, 0.0])
+            ph = P @ h
+            P = P - np.outer(ph, ph) / (var[k] + h @ ph)
+        P = 0.5 * (P + P.T)
+        cov[k] = P[:2, :2]
+        info[k] = np.linalg.inv(P[:2, :2])
+        sig_h[k] = math.sqrt(P[0, 0] + P[1, 1])
     return TrackCrlb(t, info, cov, sig_h, g, np.sqrt(var))

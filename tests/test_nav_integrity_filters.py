@@ -167,7 +167,10 @@ def test_biased_ranges_flag_recover_and_return(dem, name):
     assert np.mean(status[after] == "degraded") < 0.2, status
     assert status[-1] == "ok"
     _band_is_chi_square(ests[-1])
-    assert _horizontal_error_m(ests[-1], truth) < 35.0
+    # re-converged: 35 m for rbpf and pf; 45 m for the pmf, which with the INS's measured process noise (a
+    # 0.1 m/sqrt(s) floor and a velocity offset instead of a 1.0 m/sqrt(s) random walk) leaves a
+    # neighbouring mode of the re-spread grid more slowly: 37 m here (25 m with the random walk)
+    assert _horizontal_error_m(ests[-1], truth) < (45.0 if name == "pmf" else 35.0)
 
 
 @pytest.mark.parametrize("name", sorted(NAVS))

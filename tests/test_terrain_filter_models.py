@@ -179,7 +179,7 @@ def test_pmf_kernels_against_numpy():
         assert k.sum() == pytest.approx(1.0) and np.sum(k * (np.arange(k.size) - k.size // 2) ** 2) == \
             pytest.approx(var_cells, rel=1e-6 if var_cells < 0.6 else 2e-3)
         b = np.full(n * n, 3.0)
-        spread = pk.convolve_separable(x, b, n, k, np.empty((6, n * n)), -700.0)
+        spread = pk.convolve_separable(x, b, n, k, k, np.empty((6, n * n)), -700.0)
         w = np.exp(x).reshape(n, n)
         w /= w.sum()
         i = np.arange(n) - n // 2
@@ -194,7 +194,7 @@ def test_pmf_kernels_against_numpy():
     b = np.zeros(n * n)
     b[c + 1] = 6.0
     k = _kernel_1d(0.4)
-    spread = pk.convolve_separable(x, b, n, k, np.empty((6, n * n)), -700.0)
+    spread = pk.convolve_separable(x, b, n, k, k, np.empty((6, n * n)), -700.0)
     wa, wb = 1.0 * k[1] * k[1], 0.5 * k[0] * k[1]        # the cell c receives from c (centre) and c + 1
     mean = wb * 6.0 / (wa + wb)
     assert b[c] == pytest.approx(mean, rel=1e-9)

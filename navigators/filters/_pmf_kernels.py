@@ -50,6 +50,30 @@ def grid_moments(logw, dn, de, bias, out):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
+def grid_cross_moments(logw, dn, de, bias, out):
+    """Weighted covariance of the vertical offset's per-cell mean with the position over the grid (weights
+    exp(logw - max), normalised) into out (2,): sum w (dn - mean)(b - mean b), the same with de (m^2)."""
+    m = logw.shape[0]
+    mx = -np.inf
+    for k in range(m):
+        if logw[k] > mx:
+            mx = logw[k]
+    s = sn = se = sb = snb = seb = 0.0
+    for k in range(m):
+        v = logw[k] - mx
+        if v > NEGLIGIBLE:
+            w = math.exp(v)
+            s += w
+            sn += w * dn[k]
+            se += w * de[k]
+            sb += w * bias[k]
+            snb += w * dn[k] * bias[k]
+            seb += w * de[k] * bias[k]
+    out[0] = snb / s - sn * sb / (s * s)
+    out[1] = seb / s - se * sb / (s * s)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
 def apply_log_likelihood(logw, ll, floor):
     """logw += ll, renormalised so that its maximum is 0 and floored at `floor`; returns (log sum_k w_k
     exp(ll_k) with w the normalised prior weights, i.e. log p(z | past); the new maximum before
@@ -210,21 +234,22 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def convolve_separable(logw, bias, n, kern, work, floor):
+def convolve_separable(logw, bias, n, kern_n, kern_e, work, floor):
     """The prediction's convolution of a Rao-Blackwellised grid: the density w = exp(logw) (n * n, rows
-    north) convolved with kern along both axes (zero outside the grid), and the per-cell vertical offset
+    north) convolved with kern_e along east and kern_n along north (odd lengths, zero outside the grid), and
+    the per-cell vertical offset
     carried with its mass - the new cell's mean is the kernel-weighted mean of its sources' means,
     conv(w b) / conv(w) - with the sources' spread of means, conv(w b^2) / conv(w) - mean^2, returned as
     its posterior-weighted average (the caller adds it to the shared variance). logw is renormalised to a
     maximum of 0 and floored. work: scratch (6, n * n)."""
-    L = kern.shape[0]
-    h = L // 2
     m = n * n
     for k in range(m):
         w = math.exp(logw[k]) if logw[k] > floor else 0.0
         work[0, k] = w
         work[1, k] = w * bias[k]
         work[2, k] = w * bias[k] * bias[k]
+    L = kern_e.shape[0]
+    h = L // 2
     for a in range(3):          # along east (j), into rows 3..5
         for i in range(n):
             for j in range(n):
@@ -232,8 +257,10 @@ def convolve_separable(logw, bias, n, kern, work, floor):
                 for q in range(L):
                     jj = j + q - h
                     if 0 <= jj < n:
-                        acc += kern[q] * work[a, i * n + jj]
+                        acc += kern_e[q] * work[a, i * n + jj]
                 work[3 + a, i * n + j] = acc
+    L = kern_n.shape[0]
+    h = L // 2
     for a in range(3):          # along north (i), back into rows 0..2
         for i in range(n):
             for j in range(n):
@@ -241,7 +268,7 @@ def convolve_separable(logw, bias, n, kern, work, floor):
                 for q in range(L):
                     ii = i + q - h
                     if 0 <= ii < n:
-                        acc += kern[q] * work[3 + a, ii * n + j]
+                        acc += kern_n[q] * work[3 + a, ii * n + j]
                 work[a, i * n + j] = acc
     mx = -np.inf
     s = sv = 0.0

@@ -82,14 +82,16 @@ class InsRiddenFilter:
     fractal detail) differs from the bicubic map by 2.3 m RMS, and the measured terrain height at the true
     position scatters by 3.9-4.5 m about the map with the IRA's 3.5 m range noise in it, so 2.5-3 m is
     honest (4 m, the earlier default, left the NEES at 1.6 against 2). vertical_noise_m_per_sqrt_s: random
-    walk of the vertical offset b, default 0.5: the baro-slaved INS height wanders by +-2 m over a minute
+    walk of the vertical offset b, default 0.3: the baro-slaved INS height wanders by +-2 m over a minute
     (baro lag and the loop's dynamics in climbs), the same in every run over the same flight; with 0.05 b
     could not follow, and on a cross slope the height error became a cross-track error of ~3 m shared by
-    all runs, which kept the per-epoch NEES out of its bounds. map_interpolation: "bicubic"
-    (default: Catmull-Rom, terrain.kernels.bicubic, a C1 surface through the posts) or "bilinear": how the
-    IRA update reads the map between its posts. On the default flight the two differ by 1.5 m RMS, an
-    error that is the same in every run over the same ground, which the white terrain_model_sigma_m cannot
-    describe.
+    all runs. Measured on the default flight (10 runs, the INS height minus the truth): its increments'
+    variance grows by 0.10 m^2/s over lags of 10-30 s (the filters' memory; 0.013 m^2 at 1 s: a smooth
+    wander), so sqrt(0.1) = 0.3; 0.5 made b (and through it the position) looser than it is.
+    map_interpolation: "bicubic" (default: Catmull-Rom, terrain.kernels.bicubic, a C1 surface through
+    the posts) or "bilinear": how the IRA update reads the map between its posts. On the default flight
+    the two differ by 1.5 m RMS, an error that is the same in every run over the same ground, which the
+    white terrain_model_sigma_m cannot describe.
     outlier_prob, outlier_width_m: the heavy tail of the likelihood.
     gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise. baro_bias_sigma_m: prior
     of the baro height's bias. converged_sigma_m: Health says "acquiring" while the horizontal 1-sigma is
@@ -119,7 +121,7 @@ class InsRiddenFilter:
                  outlier_width_m: float = 500.0,
                  gnss_sigma_m: float = 2.0, gnss_vertical_sigma_m: float = 4.0,
                  gnss_velocity_sigma_mps: float = 0.05, baro_bias_sigma_m: float = 10.0,
-                 vertical_noise_m_per_sqrt_s: float = 0.5, converged_sigma_m: float = 50.0,
+                 vertical_noise_m_per_sqrt_s: float = 0.3, converged_sigma_m: float = 50.0,
                  accel_noise_mps2_rthz: float = 10e-6 * G0 * 10.0, gyro_noise_rps_rthz: float = 1e-6,
                  gravity_model: str = "j2", tau_baro_s: float = 30.0, imu_samples: str = "interval",
                  baro_geopotential: bool = True, integrity_window: int = 3, integrity_alpha: float = 1e-4,

@@ -187,7 +187,9 @@ def propagate_chunk(
     """Advance the INS over IMU samples t_imu[k] (k = 0..n-1).
 
     state (10,): lat, lon, h, vn, ve, vd, q_bn (w, x, y, z); updated in place.
-    prev_imu (7,): t, f_b (3), w_b (3) of the previous sample (t NaN: none yet); updated in place.
+    prev_imu (7,): t, f_b (3), w_b (3) of the previous sample; updated in place. After a reset it holds the
+    reset time with NaN samples, so the first sample's step starts at the state's own time (t NaN as well:
+    no time yet, the first sample only sets it).
     baro_state (3,): last baro time, last baro height (NaN: none), vertical accel correction; in place.
     accel_bias_b, gyro_bias_b (3,): subtracted from the samples.
     interval_samples: True if each sample is the mean over the step ending at its time (JSBSim's f_b).
@@ -209,7 +211,7 @@ def propagate_chunk(
                 ok = False
         if not ok:
             bad += 1
-            if np.isnan(prev_imu[0]):
+            if np.isnan(prev_imu[1]):   # no good sample yet to hold
                 for j in range(N_STATE):
                     out[k, j] = state[j]
                 continue
@@ -230,16 +232,22 @@ def propagate_chunk(
                 out[k, j] = state[j]
             continue
         dt = t_imu[k] - prev_imu[0]
-        if interval_samples:  # sample k is the mean over (t_{k-1}, t_k]: use it alone for the step
+        if dt <= 0.0:
+            if np.isnan(prev_imu[1]):   # a first sample at the reset time: the left end of the next step
+                for i in range(3):
+                    prev_imu[1 + i] = f1[i]
+                    prev_imu[4 + i] = w1[i]
+            for j in range(N_STATE):
+                out[k, j] = state[j]
+            continue
+        if interval_samples or np.isnan(prev_imu[1]):
+            # sample k is the mean over (t_{k-1}, t_k] ("interval"), or the first step after the reset time
+            # has no left-end sample ("instant"): use sample k alone for the step
             f0 = f1
             w0 = w1
         else:  # instantaneous samples: trapezoid of the two ends
             f0 = prev_imu[1:4]
             w0 = prev_imu[4:7]
-        if dt <= 0.0:
-            for j in range(N_STATE):
-                out[k, j] = state[j]
-            continue
         lat, lon, h = state[0], state[1], state[2]
         v0 = state[3:6].copy()
         q = state[6:10].copy()
@@ -365,7 +373,11 @@ class StrapdownIns:
         self.state[:3] = (lat_rad, lon_rad, h_m)
         self.state[3:6] = np.asarray(v_ned_mps, float)
         self.state[6:] = quat_from_C_bn(euler_to_C_bn(roll_rad, pitch_rad, yaw_rad))
+        # the state is at t_s: the first IMU sample's step runs from t_s (an "interval" sample at t_s + dt is
+        # the mean over (t_s, t_s + dt]); starting the clock at the first sample instead lagged the INS by
+        # one IMU interval (0.8 m along track at 80 m/s and 100 Hz, the same in every run)
         self.prev_imu[:] = np.nan
+        self.prev_imu[0] = float(t_s)
         self.baro_state[:] = (np.nan, np.nan, 0.0)
         self.accel_bias_b[:] = 0.0
         self.gyro_bias_b[:] = 0.0
