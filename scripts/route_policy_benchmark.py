@@ -58,6 +58,7 @@ TERRAINS = {
         scenario="basin_route",
         agl_m=600.0,
         env=dict(
+            agl_min_m=300.0, agl_max_m=900.0,      # action 0 holds 600 m, the straight line's height
             start_region_deg=(36.515, 36.54, -84.16, -84.105),
             goal_region_deg=(36.70, 36.735, -84.20, -84.065),
             held_out_radius_m=1500.0,
@@ -68,6 +69,7 @@ TERRAINS = {
         scenario="default",
         agl_m=1000.0,
         env=dict(
+            agl_min_m=500.0, agl_max_m=1500.0,
             start_region_deg=(36.47, 36.50, -84.39, -84.35),
             goal_region_deg=(36.64, 36.70, -84.22, -84.12),
             held_out_radius_m=1500.0,
@@ -75,11 +77,11 @@ TERRAINS = {
     ),
 }
 GAMMA = 0.99
-ENV_COMMON = dict(decision_interval_s=5.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="bearing",
-                  failure_penalty=20.0)
-PPO_SETTINGS = dict(n_steps=256, batch_size=128, n_epochs=10, gamma=GAMMA, gae_lambda=0.95,
+ENV_COMMON = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="pursuit",
+                  bearing_offset_max_deg=45.0, failure_penalty=20.0, sigma_shaping_weight=0.0)
+PPO_SETTINGS = dict(n_steps=128, batch_size=64, n_epochs=10, gamma=GAMMA, gae_lambda=0.95,
                     learning_rate=3e-4, ent_coef=0.0, clip_range=0.2)
-POLICY_NET = dict(net_arch=[64, 64], log_std_init=-1.2)
+POLICY_NET = dict(net_arch=[64, 64], log_std_init=-0.7)
 POLICIES = ("straight", "planner", "ppo", "ppo_untrained", "random")
 PLANNER = {"weight": 3.0, "informative_crlb_m": 5.0}     # set from the command line
 

@@ -25,7 +25,7 @@ def test_one_episode_and_the_summary(bench):
     from trn_env.campaign.episodes import make_policy, run_episode
 
     env = bench.make_env("basin")
-    assert env.action_mode == "bearing" and env.failure_penalty == 20.0
+    assert env.action_mode == "pursuit" and env.failure_penalty == 20.0
     row = run_episode(env, make_policy({"kind": "straight", "agl_m": 600.0}, env), 7, (36.60, -84.14))
     env.close()
     row.update(policy="straight", terrain="basin")
