@@ -92,10 +92,29 @@ def env_spec(terrain_key: str) -> dict:
     return json.loads(json.dumps({"scenario": t["scenario"], **ENV_COMMON, **t["env"]}))
 
 
-def make_env(terrain_key: str):
+def make_env(terrain_key: str, spec: dict | None = None):
+    """The terrain's env; `spec` (env_spec's, made in the parent) so that worker processes, which import this
+    module afresh, build exactly the parent's env."""
     from trn_env.env.terrain_nav import TerrainNavEnv
 
-    return TerrainNavEnv(**env_spec(terrain_key))
+    return TerrainNavEnv(**(spec if spec is not None else env_spec(terrain_key)))
+
+
+def cpu_s() -> float:
+    """CPU seconds of this process and its waited-for descendants (the evaluation's forked pool)."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def proc_cpu_s(pid: int) -> float:
+    """CPU seconds of a live process and its waited-for children (Linux /proc; NaN elsewhere)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return sum(int(x) for x in fields[11:15]) / os.sysconf("SC_CLK_TCK")     # utime stime cutime cstime
+    except (OSError, ValueError, IndexError):
+        return math.nan
 
 
 def train(terrain_key: str, steps: int, out: Path, seed: int = 0, n_envs: int = 2) -> tuple[Path, Path]:
@@ -123,25 +142,29 @@ def train(terrain_key: str, steps: int, out: Path, seed: int = 0, n_envs: int = 
             return True
 
     torch.set_num_threads(1)
-    venv = VecMonitor(SubprocVecEnv([partial(make_env, terrain_key)] * n_envs, start_method="forkserver"),
-                      info_keywords=("termination",))
+    fns = [partial(make_env, terrain_key, env_spec(terrain_key))] * n_envs
+    venv = VecMonitor(SubprocVecEnv(fns, start_method="forkserver"), info_keywords=("termination",))
     venv.seed(seed)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **PPO_SETTINGS,
                 policy_kwargs=dict(features_extractor_class=BoundsScaledExtractor, **POLICY_NET))
     untrained = out / f"ppo_{terrain_key}_untrained.zip"
     model.save(untrained)
     cb = Episodes()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_s()
+    workers = [proc.pid for proc in venv.venv.processes]
+    w0 = sum(proc_cpu_s(pid) for pid in workers)
     model.learn(total_timesteps=steps, callback=cb)
     wall = time.perf_counter() - t0
+    train_cpu = cpu_s() - c0 + sum(proc_cpu_s(pid) for pid in workers) - w0      # learner + env workers
     venv.close()
     path = out / f"ppo_{terrain_key}.zip"
     model.save(path)
     (out / f"train_{terrain_key}.json").write_text(json.dumps(
-        {"steps": steps, "n_envs": n_envs, "wall_s": wall, "ppo": PPO_SETTINGS, "policy": POLICY_NET,
+        {"steps": steps, "n_envs": n_envs, "wall_s": wall, "cpu_s": train_cpu, "env": env_spec(terrain_key),
+         "ppo": PPO_SETTINGS, "policy": POLICY_NET,
          "episodes": cb.rows}, indent=1))
-    print(f"[train] {terrain_key}: {steps} steps in {wall:.0f} s ({steps / wall:.1f} steps/s) -> {path}",
-          flush=True)
+    print(f"[train] {terrain_key}: {steps} steps in {wall:.0f} s wall, {train_cpu:.0f} s CPU "
+          f"({steps / wall:.1f} steps/s) -> {path}", flush=True)
     return path, untrained
 
 
@@ -181,6 +204,31 @@ def evaluate(terrain_key: str, models, seeds: list[int], out_dir: Path, backend)
     return rows
 
 
+PAIRS = (("ppo", "straight"), ("ppo", "ppo_untrained"), ("planner", "straight"))
+
+
+def paired(rows: list[dict], a: str, b: str) -> dict | None:
+    """Paired comparison of policies a and b over the episodes both flew to arrival with the same goal and
+    seed (common random numbers): the mean of (miss_a - miss_b) with its 95 % confidence interval
+    (Student t over the pairs) and the two-sided sign test's p-value (binomial, ties dropped)."""
+    from scipy import stats
+
+    key = lambda r: (round(r["goal_lat_deg"], 9), round(r["goal_lon_deg"], 9), int(r["seed"]))   # noqa: E731
+    rows = [r for r in rows if all(k in r for k in ("goal_lat_deg", "goal_lon_deg", "seed"))]
+    ra = {key(r): r for r in rows if r["policy"] == a and r["arrived"]}
+    rb = {key(r): r for r in rows if r["policy"] == b and r["arrived"]}
+    both = sorted(set(ra) & set(rb))
+    if len(both) < 2:
+        return None
+    d = np.array([ra[k]["true_miss_m"] - rb[k]["true_miss_m"] for k in both], float)
+    half = float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
+    wins, losses = int(np.sum(d < 0)), int(np.sum(d > 0))
+    p_sign = float(stats.binomtest(wins, wins + losses, 0.5).pvalue) if wins + losses else 1.0
+    return {"pairs": int(d.size), "mean_difference_m": float(d.mean()),
+            "ci95_m": [float(d.mean() - half), float(d.mean() + half)], "a_better": wins, "b_better": losses,
+            "sign_test_p": p_sign}
+
+
 def summarise(rows: list[dict]) -> dict:
     out: dict = {}
     for r in rows:
@@ -203,6 +251,15 @@ def summarise(rows: list[dict]) -> dict:
                     k: sum(r["termination"] == k for r in rs) for k in {r["termination"] for r in rs}
                 },
             }
+        for a, b in PAIRS:
+            cmp = paired(per_rows := [r for r in rows if r["terrain"] == terrain_key], a, b)
+            if cmp is not None:
+                summary[terrain_key][f"{a}_vs_{b}"] = cmp
+        arrived = [r for r in per_rows if r["arrived"]]
+        if len(arrived) > 2:             # do returns rank episodes by their navigation quality?
+            from scipy import stats
+            rho = stats.spearmanr([r["return"] for r in arrived], [r["true_miss_m"] for r in arrived])
+            summary[terrain_key]["return_vs_miss_spearman"] = float(rho.statistic)
         s, p = summary[terrain_key].get("straight"), summary[terrain_key].get("planner")
         if s and p and s["mean_true_error_at_goal_m"] > 0:
             summary[terrain_key]["planner_vs_straight_mean_error_reduction"] = (
@@ -233,6 +290,20 @@ def table(summary: dict) -> str:
             lines.append(
                 f"| {terrain_key} | planner vs straight | | | {100 * red:.0f} % less mean error | | | | |"
             )
+    lines += ["", "| terrain | paired (same goal and seed) | pairs | mean difference of the error (m) | "
+              "95 % CI (m) | first better / second better | sign test p |", "|---|---|---|---|---|---|---|"]
+    for terrain_key, per in summary.items():
+        for a, b in PAIRS:
+            c = per.get(f"{a}_vs_{b}")
+            if c:
+                lo, hi = c["ci95_m"]
+                lines.append(f"| {terrain_key} | {a} - {b} | {c['pairs']} | {c['mean_difference_m']:+.1f} | "
+                             f"[{lo:+.1f}, {hi:+.1f}] | {c['a_better']} / {c['b_better']} | "
+                             f"{c['sign_test_p']:.2g} |")
+    for terrain_key, per in summary.items():
+        if "return_vs_miss_spearman" in per:
+            lines.append(f"\n{terrain_key}: Spearman correlation of the episode return and the true error at "
+                         f"the goal (arrived episodes): {per['return_vs_miss_spearman']:+.2f}")
     return "\n".join(lines) + "\n"
 
 
@@ -306,6 +377,9 @@ def main(argv=None) -> int:
     p.add_argument("--planner-informative-crlb", type=float, default=PLANNER["informative_crlb_m"],
                    help="CRLB (m) at or below which the planner counts terrain as informative")
     p.add_argument("--out", type=Path, default=Path("out/route_bench"))
+    p.add_argument("--reuse-models", action="store_true",
+                   help="evaluate the models already in OUT (ppo_<terrain>.zip, ppo_<terrain>_untrained.zip, "
+                        "train_<terrain>.json from an earlier run of this script) instead of training")
     a = p.parse_args(argv)
     PLANNER.update(weight=a.planner_weight, informative_crlb_m=a.planner_informative_crlb)
     if a.train_steps < 0 or a.seeds < 1 or (a.workers is not None and a.workers < 1) or a.envs < 1:
@@ -319,13 +393,23 @@ def main(argv=None) -> int:
     timing: dict = {}
     for t in a.terrains:                 # train, evaluate and write one terrain at a time
         t0 = time.perf_counter()
-        models = train(t, a.train_steps, a.out, n_envs=a.envs) if a.train_steps > 0 else None
-        timing[f"{t}_train_s"] = time.perf_counter() - t0
+        saved = (a.out / f"ppo_{t}.zip", a.out / f"ppo_{t}_untrained.zip")
+        if a.reuse_models and a.train_steps > 0:
+            if not all(f.exists() for f in (*saved, a.out / f"train_{t}.json")):
+                print(f"error: --reuse-models: no trained models for {t} in {a.out}", file=sys.stderr)
+                return 2
+            models = saved
+            print(f"[train] {t}: reusing {saved[0]}", flush=True)
+        else:
+            models = train(t, a.train_steps, a.out, n_envs=a.envs) if a.train_steps > 0 else None
         if models is not None:
             training[t] = json.loads((a.out / f"train_{t}.json").read_text())
-        t0 = time.perf_counter()
+            timing[f"{t}_train_s"] = training[t]["wall_s"]
+            timing[f"{t}_train_cpu_s"] = training[t].get("cpu_s")
+        t0, c0 = time.perf_counter(), cpu_s()
         rows += evaluate(t, models, seeds, a.out / f"episodes_{t}", make_backend(a.backend, a.workers))
         timing[f"{t}_eval_s"] = time.perf_counter() - t0
+        timing[f"{t}_eval_cpu_s"] = cpu_s() - c0
         summary = summarise(rows)
         summary["_run"] = {"planner": dict(PLANNER), "train_steps": a.train_steps, "seeds": seeds,
                            "envs": a.envs, "backend": a.backend, "workers": a.workers or os.cpu_count(),
