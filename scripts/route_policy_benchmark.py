@@ -25,18 +25,22 @@ goal region, scenario basin_route - and the bundled real DEM, scenario default):
    the straight line, collisions, mean return) and OUT/route_benchmark.png (errors, error against extra
    distance, and the training curve).
 
-The learning setup (why the defaults learn; measured in the README's route-planning section): the env's
-`action_mode="bearing"` (the desired track relative to the goal's bearing from the estimate, +-90 deg, and
-the desired height above ground, each reached at the aircraft's turn and climb limits - so an action of 0
-flies the straight line and exploration varies the route around it instead of a random walk of track
-changes that leaves the map); the normalised goal observations (19-21) mapped with the other elements to
-[-1, 1] by the observation bounds (trn_env.env.sb3_features.BoundsScaledExtractor); the potential-based
-progress term on the estimated distance (`shaping_gamma` 1: the undiscounted returns compared here stay
-route-neutral; `shaping_gamma = 0.99` would be Ng et al.'s exact form for PPO's discount); and a failure
-penalty of 20 (leaving the map costs twice the arrival bonus; at 100 the rare failures swamp the return's
-scale); PPO with n_steps 256 per env, batch 128, 10 epochs, gamma 0.99, ent_coef 0, log_std_init -1.2 (an
-action std of 0.3, +-27 deg about the goal bearing: with 0.6 the exploration noise alone made a third of
-the training episodes run out of time and the arrival rate did not rise in 5,600 steps).
+The learning setup (documented in TerrainNavEnv's docstring; measured in the README's route-planning
+section). Coarse decisions: `action_mode="pursuit"` with `decision_interval_s` 30 (an action is an offset
+from the goal's bearing, HELD from the estimate at every guidance tick, so a constant action flies a log
+spiral into the goal; +-45 deg, `bearing_offset_max_deg`, at most +41 % distance; and a height above ground
+in [agl_min_m, agl_max_m], whose middle is the straight line's height): an episode is ~8-12 decisions of
+which way round, so the credit for the miss at the goal reaches the decisions that caused it. Observations
+the choice needs: the route information (observation 22-31: the map's CRLB along the 5 constant-offset
+routes from the estimate to the goal, MAP only), which lets one network generalise over goals drawn per
+episode instead of memorising routes; every element mapped to [-1, 1] by its bounds
+(trn_env.env.sb3_features.BoundsScaledExtractor). Rewards: the arrival task's (progress potential with
+`shaping_gamma` 1, time cost, +10 at arrival - 20 per km of TRUE miss, failure penalty 20);
+`sigma_shaping_weight` (the potential on the navigator's reported sigma) is available and 0 here (see the
+README for the comparison). PPO: n_steps 128 per env x 2 envs (~28 episodes per update), batch 64, 10
+epochs, gamma 0.99, GAE lambda 0.95, learning rate 3e-4, ent_coef 0, log_std_init -0.7 (an action std of
+0.5: +-22 deg about the straight line, which explores both ways round the basin), net 64-64.
+Untrained and trained networks share the same initial weights (seed 0).
 """
 
 from __future__ import annotations
@@ -80,8 +84,8 @@ GAMMA = 0.99
 ENV_COMMON = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="pursuit",
                   bearing_offset_max_deg=45.0, failure_penalty=20.0, sigma_shaping_weight=0.0)
 PPO_SETTINGS = dict(n_steps=128, batch_size=64, n_epochs=10, gamma=GAMMA, gae_lambda=0.95,
-                    learning_rate=3e-4, ent_coef=0.0, clip_range=0.2)
-POLICY_NET = dict(net_arch=[64, 64], log_std_init=-0.7)
+                    learning_rate=1e-3, ent_coef=0.0, clip_range=0.2, use_sde=True, sde_sample_freq=8)
+POLICY_NET = dict(net_arch=[64, 64], log_std_init=-2.0)
 POLICIES = ("straight", "planner", "ppo", "ppo_untrained", "random")
 PLANNER = {"weight": 3.0, "informative_crlb_m": 5.0}     # set from the command line
 
@@ -364,9 +368,9 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--terrains", nargs="+", default=list(TERRAINS), choices=list(TERRAINS))
-    p.add_argument("--train-steps", type=int, default=12288,
-                   help="PPO env steps per terrain (0: no PPO); default 12288 (~15 min per terrain on 2 "
-                        "cores); more: e.g. 100000 (~2 h per terrain)")
+    p.add_argument("--train-steps", type=int, default=4096,
+                   help="PPO env steps (30 s decisions) per terrain (0: no PPO); default 4096 (~450 "
+                        "episodes); longer: e.g. 20000 (see the README for the CPU time per step)")
     p.add_argument("--envs", type=int, default=2, help="training envs (SubprocVecEnv workers; default 2)")
     p.add_argument("--seeds", type=int, default=4, help="episode seeds per held-out goal (default 4)")
     p.add_argument("--workers", type=int, default=None, help="evaluation workers (default: every core)")
