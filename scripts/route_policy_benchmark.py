@@ -292,7 +292,8 @@ def table(summary: dict) -> str:
         red = per.get("planner_vs_straight_mean_error_reduction")
         if red is not None:
             lines.append(
-                f"| {terrain_key} | planner vs straight | | | {100 * red:.0f} % less mean error | | | | |"
+                f"| {terrain_key} | planner vs straight | | | {100 * abs(red):.0f} % "
+                f"{'less' if red >= 0 else 'more'} mean error | | | | |"
             )
     lines += ["", "| terrain | paired (same goal and seed) | pairs | mean difference of the error (m) | "
               "95 % CI (m) | first better / second better | sign test p |", "|---|---|---|---|---|---|---|"]
