@@ -25,18 +25,22 @@ goal region, scenario basin_route - and the bundled real DEM, scenario default):
    the straight line, collisions, mean return) and OUT/route_benchmark.png (errors, error against extra
    distance, and the training curve).
 
-The learning setup (why the defaults learn; measured in the README's route-planning section): the env's
-`action_mode="bearing"` (the desired track relative to the goal's bearing from the estimate, +-90 deg, and
-the desired height above ground, each reached at the aircraft's turn and climb limits - so an action of 0
-flies the straight line and exploration varies the route around it instead of a random walk of track
-changes that leaves the map); the normalised goal observations (19-21) mapped with the other elements to
-[-1, 1] by the observation bounds (trn_env.env.sb3_features.BoundsScaledExtractor); the potential-based
-progress term on the estimated distance (`shaping_gamma` 1: the undiscounted returns compared here stay
-route-neutral; `shaping_gamma = 0.99` would be Ng et al.'s exact form for PPO's discount); and a failure
-penalty of 20 (leaving the map costs twice the arrival bonus; at 100 the rare failures swamp the return's
-scale); PPO with n_steps 256 per env, batch 128, 10 epochs, gamma 0.99, ent_coef 0, log_std_init -1.2 (an
-action std of 0.3, +-27 deg about the goal bearing: with 0.6 the exploration noise alone made a third of
-the training episodes run out of time and the arrival rate did not rise in 5,600 steps).
+The learning setup (documented in TerrainNavEnv's docstring; measured in the README's route-planning
+section). Coarse decisions: `action_mode="pursuit"` with `decision_interval_s` 30 (an action is an offset
+from the goal's bearing, HELD from the estimate at every guidance tick, so a constant action flies a log
+spiral into the goal; +-45 deg, `bearing_offset_max_deg`, at most +41 % distance; and a height above ground
+in [agl_min_m, agl_max_m], whose middle is the straight line's height): an episode is ~8-12 decisions of
+which way round, so the credit for the miss at the goal reaches the decisions that caused it. Observations
+the choice needs: the route information (observation 22-31: the map's CRLB along the 5 constant-offset
+routes from the estimate to the goal, MAP only), which lets one network generalise over goals drawn per
+episode instead of memorising routes; every element mapped to [-1, 1] by its bounds
+(trn_env.env.sb3_features.BoundsScaledExtractor). Rewards: the arrival task's (progress potential with
+`shaping_gamma` 1, time cost, +10 at arrival - 20 per km of TRUE miss, failure penalty 20);
+`sigma_shaping_weight` (the potential on the navigator's reported sigma) is available and 0 here (see the
+README for the comparison). PPO: n_steps 128 per env x 2 envs (~28 episodes per update), batch 64, 10
+epochs, gamma 0.99, GAE lambda 0.95, learning rate 3e-4, ent_coef 0, log_std_init -0.7 (an action std of
+0.5: +-22 deg about the straight line, which explores both ways round the basin), net 64-64.
+Untrained and trained networks share the same initial weights (seed 0).
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ TERRAINS = {
         scenario="basin_route",
         agl_m=600.0,
         env=dict(
+            agl_min_m=300.0, agl_max_m=900.0,      # action 0 holds 600 m, the straight line's height
             start_region_deg=(36.515, 36.54, -84.16, -84.105),
             goal_region_deg=(36.70, 36.735, -84.20, -84.065),
             held_out_radius_m=1500.0,
@@ -68,6 +73,7 @@ TERRAINS = {
         scenario="default",
         agl_m=1000.0,
         env=dict(
+            agl_min_m=500.0, agl_max_m=1500.0,
             start_region_deg=(36.47, 36.50, -84.39, -84.35),
             goal_region_deg=(36.64, 36.70, -84.22, -84.12),
             held_out_radius_m=1500.0,
@@ -75,11 +81,11 @@ TERRAINS = {
     ),
 }
 GAMMA = 0.99
-ENV_COMMON = dict(decision_interval_s=5.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="bearing",
-                  failure_penalty=20.0)
-PPO_SETTINGS = dict(n_steps=256, batch_size=128, n_epochs=10, gamma=GAMMA, gae_lambda=0.95,
-                    learning_rate=3e-4, ent_coef=0.0, clip_range=0.2)
-POLICY_NET = dict(net_arch=[64, 64], log_std_init=-1.2)
+ENV_COMMON = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="pursuit",
+                  bearing_offset_max_deg=45.0, failure_penalty=20.0, sigma_shaping_weight=0.0)
+PPO_SETTINGS = dict(n_steps=128, batch_size=64, n_epochs=10, gamma=GAMMA, gae_lambda=0.95,
+                    learning_rate=1e-3, ent_coef=0.0, clip_range=0.2, use_sde=True, sde_sample_freq=8)
+POLICY_NET = dict(net_arch=[64, 64], log_std_init=-2.0)
 POLICIES = ("straight", "planner", "ppo", "ppo_untrained", "random")
 PLANNER = {"weight": 3.0, "informative_crlb_m": 5.0}     # set from the command line
 
@@ -90,10 +96,29 @@ def env_spec(terrain_key: str) -> dict:
     return json.loads(json.dumps({"scenario": t["scenario"], **ENV_COMMON, **t["env"]}))
 
 
-def make_env(terrain_key: str):
+def make_env(terrain_key: str, spec: dict | None = None):
+    """The terrain's env; `spec` (env_spec's, made in the parent) so that worker processes, which import this
+    module afresh, build exactly the parent's env."""
     from trn_env.env.terrain_nav import TerrainNavEnv
 
-    return TerrainNavEnv(**env_spec(terrain_key))
+    return TerrainNavEnv(**(spec if spec is not None else env_spec(terrain_key)))
+
+
+def cpu_s() -> float:
+    """CPU seconds of this process and its waited-for descendants (the evaluation's forked pool)."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def proc_cpu_s(pid: int) -> float:
+    """CPU seconds of a live process and its waited-for children (Linux /proc; NaN elsewhere)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return sum(int(x) for x in fields[11:15]) / os.sysconf("SC_CLK_TCK")     # utime stime cutime cstime
+    except (OSError, ValueError, IndexError):
+        return math.nan
 
 
 def train(terrain_key: str, steps: int, out: Path, seed: int = 0, n_envs: int = 2) -> tuple[Path, Path]:
@@ -121,25 +146,29 @@ def train(terrain_key: str, steps: int, out: Path, seed: int = 0, n_envs: int = 
             return True
 
     torch.set_num_threads(1)
-    venv = VecMonitor(SubprocVecEnv([partial(make_env, terrain_key)] * n_envs, start_method="forkserver"),
-                      info_keywords=("termination",))
+    fns = [partial(make_env, terrain_key, env_spec(terrain_key))] * n_envs
+    venv = VecMonitor(SubprocVecEnv(fns, start_method="forkserver"), info_keywords=("termination",))
     venv.seed(seed)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **PPO_SETTINGS,
                 policy_kwargs=dict(features_extractor_class=BoundsScaledExtractor, **POLICY_NET))
     untrained = out / f"ppo_{terrain_key}_untrained.zip"
     model.save(untrained)
     cb = Episodes()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_s()
+    workers = [proc.pid for proc in venv.venv.processes]
+    w0 = sum(proc_cpu_s(pid) for pid in workers)
     model.learn(total_timesteps=steps, callback=cb)
     wall = time.perf_counter() - t0
+    train_cpu = cpu_s() - c0 + sum(proc_cpu_s(pid) for pid in workers) - w0      # learner + env workers
     venv.close()
     path = out / f"ppo_{terrain_key}.zip"
     model.save(path)
     (out / f"train_{terrain_key}.json").write_text(json.dumps(
-        {"steps": steps, "n_envs": n_envs, "wall_s": wall, "ppo": PPO_SETTINGS, "policy": POLICY_NET,
+        {"steps": steps, "n_envs": n_envs, "wall_s": wall, "cpu_s": train_cpu, "env": env_spec(terrain_key),
+         "ppo": PPO_SETTINGS, "policy": POLICY_NET,
          "episodes": cb.rows}, indent=1))
-    print(f"[train] {terrain_key}: {steps} steps in {wall:.0f} s ({steps / wall:.1f} steps/s) -> {path}",
-          flush=True)
+    print(f"[train] {terrain_key}: {steps} steps in {wall:.0f} s wall, {train_cpu:.0f} s CPU "
+          f"({steps / wall:.1f} steps/s) -> {path}", flush=True)
     return path, untrained
 
 
@@ -179,6 +208,31 @@ def evaluate(terrain_key: str, models, seeds: list[int], out_dir: Path, backend)
     return rows
 
 
+PAIRS = (("ppo", "straight"), ("ppo", "ppo_untrained"), ("planner", "straight"))
+
+
+def paired(rows: list[dict], a: str, b: str) -> dict | None:
+    """Paired comparison of policies a and b over the episodes both flew to arrival with the same goal and
+    seed (common random numbers): the mean of (miss_a - miss_b) with its 95 % confidence interval
+    (Student t over the pairs) and the two-sided sign test's p-value (binomial, ties dropped)."""
+    from scipy import stats
+
+    key = lambda r: (round(r["goal_lat_deg"], 9), round(r["goal_lon_deg"], 9), int(r["seed"]))   # noqa: E731
+    rows = [r for r in rows if all(k in r for k in ("goal_lat_deg", "goal_lon_deg", "seed"))]
+    ra = {key(r): r for r in rows if r["policy"] == a and r["arrived"]}
+    rb = {key(r): r for r in rows if r["policy"] == b and r["arrived"]}
+    both = sorted(set(ra) & set(rb))
+    if len(both) < 2:
+        return None
+    d = np.array([ra[k]["true_miss_m"] - rb[k]["true_miss_m"] for k in both], float)
+    half = float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
+    wins, losses = int(np.sum(d < 0)), int(np.sum(d > 0))
+    p_sign = float(stats.binomtest(wins, wins + losses, 0.5).pvalue) if wins + losses else 1.0
+    return {"pairs": int(d.size), "mean_difference_m": float(d.mean()),
+            "ci95_m": [float(d.mean() - half), float(d.mean() + half)], "a_better": wins, "b_better": losses,
+            "sign_test_p": p_sign}
+
+
 def summarise(rows: list[dict]) -> dict:
     out: dict = {}
     for r in rows:
@@ -201,6 +255,15 @@ def summarise(rows: list[dict]) -> dict:
                     k: sum(r["termination"] == k for r in rs) for k in {r["termination"] for r in rs}
                 },
             }
+        for a, b in PAIRS:
+            cmp = paired(per_rows := [r for r in rows if r["terrain"] == terrain_key], a, b)
+            if cmp is not None:
+                summary[terrain_key][f"{a}_vs_{b}"] = cmp
+        arrived = [r for r in per_rows if r["arrived"]]
+        if len(arrived) > 2:             # do returns rank episodes by their navigation quality?
+            from scipy import stats
+            rho = stats.spearmanr([r["return"] for r in arrived], [r["true_miss_m"] for r in arrived])
+            summary[terrain_key]["return_vs_miss_spearman"] = float(rho.statistic)
         s, p = summary[terrain_key].get("straight"), summary[terrain_key].get("planner")
         if s and p and s["mean_true_error_at_goal_m"] > 0:
             summary[terrain_key]["planner_vs_straight_mean_error_reduction"] = (
@@ -229,8 +292,23 @@ def table(summary: dict) -> str:
         red = per.get("planner_vs_straight_mean_error_reduction")
         if red is not None:
             lines.append(
-                f"| {terrain_key} | planner vs straight | | | {100 * red:.0f} % less mean error | | | | |"
+                f"| {terrain_key} | planner vs straight | | | {100 * abs(red):.0f} % "
+                f"{'less' if red >= 0 else 'more'} mean error | | | | |"
             )
+    lines += ["", "| terrain | paired (same goal and seed) | pairs | mean difference of the error (m) | "
+              "95 % CI (m) | first better / second better | sign test p |", "|---|---|---|---|---|---|---|"]
+    for terrain_key, per in summary.items():
+        for a, b in PAIRS:
+            c = per.get(f"{a}_vs_{b}")
+            if c:
+                lo, hi = c["ci95_m"]
+                lines.append(f"| {terrain_key} | {a} - {b} | {c['pairs']} | {c['mean_difference_m']:+.1f} | "
+                             f"[{lo:+.1f}, {hi:+.1f}] | {c['a_better']} / {c['b_better']} | "
+                             f"{c['sign_test_p']:.2g} |")
+    for terrain_key, per in summary.items():
+        if "return_vs_miss_spearman" in per:
+            lines.append(f"\n{terrain_key}: Spearman correlation of the episode return and the true error at "
+                         f"the goal (arrived episodes): {per['return_vs_miss_spearman']:+.2f}")
     return "\n".join(lines) + "\n"
 
 
@@ -291,9 +369,9 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--terrains", nargs="+", default=list(TERRAINS), choices=list(TERRAINS))
-    p.add_argument("--train-steps", type=int, default=12288,
-                   help="PPO env steps per terrain (0: no PPO); default 12288 (~15 min per terrain on 2 "
-                        "cores); more: e.g. 100000 (~2 h per terrain)")
+    p.add_argument("--train-steps", type=int, default=4096,
+                   help="PPO env steps (30 s decisions) per terrain (0: no PPO); default 4096 (~450 "
+                        "episodes); longer: e.g. 20000 (see the README for the CPU time per step)")
     p.add_argument("--envs", type=int, default=2, help="training envs (SubprocVecEnv workers; default 2)")
     p.add_argument("--seeds", type=int, default=4, help="episode seeds per held-out goal (default 4)")
     p.add_argument("--workers", type=int, default=None, help="evaluation workers (default: every core)")
@@ -304,6 +382,9 @@ def main(argv=None) -> int:
     p.add_argument("--planner-informative-crlb", type=float, default=PLANNER["informative_crlb_m"],
                    help="CRLB (m) at or below which the planner counts terrain as informative")
     p.add_argument("--out", type=Path, default=Path("out/route_bench"))
+    p.add_argument("--reuse-models", action="store_true",
+                   help="evaluate the models already in OUT (ppo_<terrain>.zip, ppo_<terrain>_untrained.zip, "
+                        "train_<terrain>.json from an earlier run of this script) instead of training")
     a = p.parse_args(argv)
     PLANNER.update(weight=a.planner_weight, informative_crlb_m=a.planner_informative_crlb)
     if a.train_steps < 0 or a.seeds < 1 or (a.workers is not None and a.workers < 1) or a.envs < 1:
@@ -317,13 +398,23 @@ def main(argv=None) -> int:
     timing: dict = {}
     for t in a.terrains:                 # train, evaluate and write one terrain at a time
         t0 = time.perf_counter()
-        models = train(t, a.train_steps, a.out, n_envs=a.envs) if a.train_steps > 0 else None
-        timing[f"{t}_train_s"] = time.perf_counter() - t0
+        saved = (a.out / f"ppo_{t}.zip", a.out / f"ppo_{t}_untrained.zip")
+        if a.reuse_models and a.train_steps > 0:
+            if not all(f.exists() for f in (*saved, a.out / f"train_{t}.json")):
+                print(f"error: --reuse-models: no trained models for {t} in {a.out}", file=sys.stderr)
+                return 2
+            models = saved
+            print(f"[train] {t}: reusing {saved[0]}", flush=True)
+        else:
+            models = train(t, a.train_steps, a.out, n_envs=a.envs) if a.train_steps > 0 else None
         if models is not None:
             training[t] = json.loads((a.out / f"train_{t}.json").read_text())
-        t0 = time.perf_counter()
+            timing[f"{t}_train_s"] = training[t]["wall_s"]
+            timing[f"{t}_train_cpu_s"] = training[t].get("cpu_s")
+        t0, c0 = time.perf_counter(), cpu_s()
         rows += evaluate(t, models, seeds, a.out / f"episodes_{t}", make_backend(a.backend, a.workers))
         timing[f"{t}_eval_s"] = time.perf_counter() - t0
+        timing[f"{t}_eval_cpu_s"] = cpu_s() - c0
         summary = summarise(rows)
         summary["_run"] = {"planner": dict(PLANNER), "train_steps": a.train_steps, "seeds": seeds,
                            "envs": a.envs, "backend": a.backend, "workers": a.workers or os.cpu_count(),

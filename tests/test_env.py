@@ -50,7 +50,7 @@ def test_spaces_and_aircraft_limits(env):
     env.step(np.array([0.5, -1.0], np.float32))
     assert env._track_cmd_rad - track0 == pytest.approx(math.radians(1.5))
     assert env._agl_cmd_m - agl0 == pytest.approx(-5.0)
-    assert env.observation_space.shape == (22,)
+    assert env.observation_space.shape == (32,)
 
 
 def test_identical_seeds_identical_episodes():
@@ -185,7 +185,7 @@ def test_random_policy_through_async_vector_env():
     venv = gym.vector.AsyncVectorEnv([lambda: gym.make("trn_env/TerrainNav-v0", **SMALL)] * n_envs)
     rng = np.random.default_rng(0)
     obs, _ = venv.reset(seed=[0, 1])
-    assert obs.shape == (n_envs, 22)
+    assert obs.shape == (n_envs, 32)
     low, high = venv.single_action_space.low, venv.single_action_space.high
     assert np.all(low == -1.0) and np.all(high == 1.0)
     episodes = 0
@@ -195,7 +195,7 @@ def test_random_policy_through_async_vector_env():
         obs, rewards, terms, truncs, infos = venv.step(actions)
         dones = terms | truncs
         episodes += int(dones.sum())
-        assert obs.shape == (n_envs, 22) and np.all(np.isfinite(obs)) and np.all(np.isfinite(rewards))
+        assert obs.shape == (n_envs, 32) and np.all(np.isfinite(obs)) and np.all(np.isfinite(rewards))
     venv.close()
     # 12-step episodes plus the autoreset step: about 200 / 13 episodes per env
     assert episodes >= 2 * (total_steps // 13) - 2

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from _ecef import ned_between
 
-from trn_env.env.terrain_nav import OBS_HIGH, OBS_LOW, TerrainNavEnv
+from trn_env.env.terrain_nav import N_OBS, OBS_HIGH, OBS_LOW, TerrainNavEnv
 from trn_env.policies import StraightLinePolicy
 
 SMALL = dict(scenario="basin_route", decision_interval_s=1.0, max_episode_s=12.0, navigator="ins")
@@ -26,7 +26,7 @@ def test_normalised_goal_observations_match_the_estimate():
     env = TerrainNavEnv(**SMALL, goal_deg=(36.60, -84.20))
     obs, _ = env.reset(seed=1)
     bearing, d0 = _goal_bearing_and_distance(env)
-    assert obs.shape == (22,) and OBS_LOW.size == OBS_HIGH.size == 22
+    assert obs.shape == (N_OBS,) and OBS_LOW.size == OBS_HIGH.size == N_OBS == 32
     rel = bearing - env._track_cmd_rad
     assert obs[19] == pytest.approx(math.sin(rel), abs=1e-5)
     assert obs[20] == pytest.approx(math.cos(rel), abs=1e-5)
@@ -115,8 +115,8 @@ def test_bounds_scaled_extractor_maps_the_bounds_to_plus_minus_one():
     env = TerrainNavEnv(**SMALL)
     ext = BoundsScaledExtractor(env.observation_space)
     lo, hi = torch.as_tensor(OBS_LOW), torch.as_tensor(OBS_HIGH)
-    assert torch.allclose(ext(lo[None]), -torch.ones(1, 22), atol=1e-6)
-    assert torch.allclose(ext(hi[None]), torch.ones(1, 22), atol=1e-6)
+    assert torch.allclose(ext(lo[None]), -torch.ones(1, N_OBS), atol=1e-6)
+    assert torch.allclose(ext(hi[None]), torch.ones(1, N_OBS), atol=1e-6)
     mid = (lo + hi) / 2
-    assert torch.allclose(ext(mid[None]), torch.zeros(1, 22), atol=1e-6)
+    assert torch.allclose(ext(mid[None]), torch.zeros(1, N_OBS), atol=1e-6)
     env.close()

@@ -29,7 +29,7 @@ def test_make_vec_sync_and_async_and_metadata():
     for mode in ("sync", "async"):
         venv = gym.make_vec("trn_env/TerrainNav-v0", num_envs=2, vectorization_mode=mode, **SMALL)
         obs, _ = venv.reset(seed=3)
-        assert obs.shape == (2, 22) and obs.dtype == np.float32
+        assert obs.shape == (2, 32) and obs.dtype == np.float32
         obs, r, term, trunc, _ = venv.step(np.zeros((2, 2), np.float32))
         assert np.all(np.isfinite(r)) and venv.observation_space.contains(obs)
         assert venv.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP

@@ -25,7 +25,7 @@ def test_one_episode_and_the_summary(bench):
     from trn_env.campaign.episodes import make_policy, run_episode
 
     env = bench.make_env("basin")
-    assert env.action_mode == "bearing" and env.failure_penalty == 20.0
+    assert env.action_mode == "pursuit" and env.failure_penalty == 20.0
     row = run_episode(env, make_policy({"kind": "straight", "agl_m": 600.0}, env), 7, (36.60, -84.14))
     env.close()
     row.update(policy="straight", terrain="basin")
@@ -54,3 +54,29 @@ def test_one_episode_and_the_summary(bench):
     red = 1 - s["planner"]["mean_true_error_at_goal_m"] / s["straight"]["mean_true_error_at_goal_m"]
     assert s["planner_vs_straight_mean_error_reduction"] == pytest.approx(red)
     assert "| basin | planner |" in bench.table({"basin": s})
+
+
+def test_paired_comparison_against_a_hand_computation(bench):
+    import math
+
+    rng = np.random.default_rng(1)
+    rows, diffs = [], []
+    for k in range(12):
+        base = float(rng.uniform(100, 500))
+        d = float(rng.normal(-60.0, 80.0))
+        diffs.append(d)
+        for name, miss in (("ppo", base + d), ("straight", base)):
+            rows.append(dict(policy=name, arrived=True, true_miss_m=miss, goal_lat_deg=36.7 + 0.01 * (k % 3),
+                             goal_lon_deg=-84.1, seed=1000 + k // 3))
+    rows.append(dict(policy="ppo", arrived=False, true_miss_m=None, goal_lat_deg=36.9, goal_lon_deg=-84.1,
+                     seed=1))                                     # unpaired: left out
+    c = bench.paired(rows, "ppo", "straight")
+    d = np.array(diffs)
+    assert c["pairs"] == 12 and c["mean_difference_m"] == pytest.approx(d.mean())
+    t975_11 = 2.200985                                  # Student t, 11 degrees of freedom, 97.5 % (tables)
+    half = t975_11 * d.std(ddof=1) / math.sqrt(12)
+    assert c["ci95_m"] == pytest.approx([d.mean() - half, d.mean() + half], rel=1e-5)
+    w = int((d < 0).sum())
+    n = 12
+    tail = sum(math.comb(n, i) for i in range(0, min(w, n - w) + 1)) / 2**n
+    assert c["a_better"] == w and c["sign_test_p"] == pytest.approx(min(1.0, 2 * tail))

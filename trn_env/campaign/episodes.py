@@ -256,8 +256,16 @@ class SampledPolicy:
     def seed(self, seed: int) -> None:
         import torch
         torch.manual_seed(int(seed))
+        self._steps = 0
 
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = False):
+        # gSDE (use_sde): draw the exploration matrix at the episode's start and every sde_sample_freq
+        # steps, as PPO's rollouts do, from the generator seeded above
+        if getattr(self.model, "use_sde", False):
+            freq = int(getattr(self.model, "sde_sample_freq", -1))
+            if getattr(self, "_steps", 0) == 0 or (freq > 0 and self._steps % freq == 0):
+                self.model.policy.reset_noise()
+            self._steps = getattr(self, "_steps", 0) + 1
         return self.model.predict(obs, deterministic=False)
 
 

@@ -13,7 +13,8 @@ of km, well inside what the policies steer by).
 A policy turns a desired ground track into the action: the track change, as a fraction of the turn limit
 of one step (clipped to [-1, 1]), and the height-above-ground change toward its height, as a fraction of
 the climb limit (the env's `action_mode="turn"`); or, with `action_mode="bearing"`, the desired track
-relative to the goal's bearing and the desired height above ground, each scaled to [-1, 1].
+relative to the goal's bearing and the desired height above ground, each scaled to [-1, 1] (the same action
+with `action_mode="pursuit"`, where the env holds that offset from the goal's bearing through the step).
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ class _Policy:
 
     def action_for(self, obs, track_rad: float, agl_m: float | None) -> np.ndarray:
         e = self.env
-        if getattr(e, "action_mode", "turn") == "bearing":
+        if getattr(e, "action_mode", "turn") in ("bearing", "pursuit"):
             bearing = math.atan2(float(obs[1]), float(obs[0]))
             d = math.atan2(math.sin(track_rad - bearing), math.cos(track_rad - bearing))
             a0 = float(np.clip(d / e.bearing_offset_max_rad, -1.0, 1.0))

@@ -15,19 +15,27 @@ from gymnasium.vector import AutoresetMode
 
 import trn_env.scenario.build as components
 from terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
+from trn_env.env.route_info import route_information
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
 
 G0_MPS2 = 9.80665
 N_TERRAIN_FEATURES = 6
 REWARD_MODES = ("arrival", "progress")
-ACTION_MODES = ("turn", "bearing")
+ACTION_MODES = ("turn", "bearing", "pursuit")
+# candidate routes of the route-information observation: constant offsets from the goal's bearing, as
+# fractions of bearing_offset_max_deg (the pursuit action that flies each)
+ROUTE_OFFSET_FRACTIONS = (-1.0, -0.5, 0.0, 0.5, 1.0)
+N_ROUTES = len(ROUTE_OFFSET_FRACTIONS)
+ROUTE_FEATURELESS_MAX_KM = 50.0
 
 # Observation bounds per element (the clip applied to every observation), see the class docstring's table.
 OBS_LOW = np.array([-300.0, -300.0, 0.0, -1.0, -1.0, 0.0, -10.0, 0.0, 0.0, 0.0, 0.0,
-                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -1.0, 0.0], np.float32)
+                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -1.0, 0.0]
+                   + [0.0] * (2 * N_ROUTES), np.float32)
 OBS_HIGH = np.array([300.0, 300.0, 450.0, 1.0, 1.0, 5.0, 20.0, 10.0, 8.0, 8.0, 8.0,
-                     4.1, 4.1, 4.1, 4.1, 4.1, 4.1, 1.0, 1.0, 1.0, 1.0, 2.0], np.float32)
+                     4.1, 4.1, 4.1, 4.1, 4.1, 4.1, 1.0, 1.0, 1.0, 1.0, 2.0]
+                    + [4.1] * N_ROUTES + [ROUTE_FEATURELESS_MAX_KM] * N_ROUTES, np.float32)
 N_OBS = OBS_LOW.size
 
 
@@ -65,6 +73,16 @@ class TerrainNavEnv(gym.Env, EzPickle):
     airspeed v (at 3 deg/s and 85 m/s: 90 deg beyond 1.6 km, 18 deg at 500 m), so that it can still
     capture the arrival circle instead of orbiting the goal.
 
+    `action_mode="pursuit"` (the coarsest: a whole route family per action): the same two targets, but the
+    offset is HELD relative to the goal's bearing from the estimate at every guidance tick (10 Hz), not
+    only at the decision: the commanded track is `bearing(estimate -> goal) + a0 * limit(d)` (limit as
+    above, from the estimate's distance d at that tick) all through the step, so a constant action flies a
+    logarithmic spiral into the goal, d / cos(offset) long (+41 % at 45 deg), and the aircraft's autopilot
+    turns to it at its bank limit; the height above ground moves toward its target by at most `dagl_max`
+    per step as in "bearing". With a long `decision_interval_s` (30 s: ~8 decisions over a 20 km route) an
+    episode is a few coarse choices of which way round, which makes the credit assignment easy. Action 0
+    is the straight line.
+
     The limits are the aircraft's: `dpsi_max = min(turn_rate_max_dps * decision_interval_s, 60 deg)` (the
     rate-one turn, 3 deg/s, by default) and `dagl_max = climb_rate_max_mps * decision_interval_s`
     (`env.action_limits` holds both). The commanded height above ground is kept in
@@ -72,7 +90,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     `ValueError` naming what it breaks.
 
     ## Observation Space
-    `Box(OBS_LOW, OBS_HIGH, dtype=float32)` of shape `(22,)` (every observation is clipped to it),
+    `Box(OBS_LOW, OBS_HIGH, dtype=float32)` of shape `(32,)` (every observation is clipped to it),
     everything from what the aircraft knows (the navigator's estimate and its map), never truth:
 
     | index | observation | unit | min | max |
@@ -89,6 +107,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     | 18 | navigator health ok (1) or not (0) | - | 0 | 1 |
     | 19, 20 | sin, cos of (goal's bearing from the estimate - commanded track; + = right) | - | -1 | 1 |
     | 21 | estimated distance to the goal / the estimated distance at the reset | - | 0 | 2 |
+    | 22-26 | mean log10(1 + CRLB) along 5 candidate routes to the goal (below) | - | 0 | 4.1 |
+    | 27-31 | longest featureless stretch along the same 5 routes (below) | km | 0 | 50 |
 
     Elements 19-21 are the goal relative to the ESTIMATE in normalised form (what a policy steers by
     without having to combine 0, 1 and 3, 4 itself); `trn_env.env.sb3_features.BoundsScaledExtractor`
@@ -100,6 +120,14 @@ class TerrainNavEnv(gym.Env, EzPickle):
     the map), sampled at the estimate and `info_offset_m` away ahead, ahead-left, ahead-right, left and
     right of the commanded track: low values mark where a route would let the TRN fix well.
 
+    Route information (22-31, `trn_env.env.route_info`, from the MAP only): the 5 candidate routes are the
+    constant-offset pursuit paths from the estimate to the goal at offsets (-1, -0.5, 0, 0.5, 1) x
+    `bearing_offset_max_deg` from the goal's bearing (the routes that the pursuit actions -1 .. 1 fly),
+    each marched in ~24 steps; 22-26 is the mean of log10(1 + CRLB) over each path, 27-31 its longest run
+    of points with CRLB > `informative_crlb_m` (the longest stretch the navigator would dead-reckon on it;
+    clipped at 50 km). They tell a policy, for any goal, which way
+    round keeps the TRN fixing, so it can generalise across goals instead of memorising routes.
+
     ## Rewards
     `reward_mode="arrival"` (default; the task of a GNSS-denied aircraft). Each step:
     `progress_weight * (d_est_before - shaping_gamma * d_est_after) / 1 km - time_cost_per_s * dt`, d_est
@@ -110,7 +138,15 @@ class TerrainNavEnv(gym.Env, EzPickle):
     learner's discount (e.g. 0.99) for the form whose optimal policy of the discounted task is exactly that
     of the unshaped one (the undiscounted return then grows by progress_weight (1 - gamma) d_est per step
     spent far away, so returns compared undiscounted stay route-neutral only with 1); `progress_weight = 0`
-    switches shaping off. The time term is the fuel/time cost. On arrival:
+    switches shaping off. Navigation-quality shaping (`sigma_shaping_weight` w, default 0): a second
+    potential Phi_sigma = -w * sigma_h / 1 km on the navigator's REPORTED horizontal position sigma
+    (sigma_h = sqrt(sigma_n^2 + sigma_e^2), the square root of the trace of the horizontal covariance),
+    term `sigma = shaping_gamma * Phi_sigma(s') - Phi_sigma(s)`, with Phi_sigma = 0 at every episode end
+    (Ng et al.'s terminal condition): it charges the growth of the navigator's uncertainty at the step
+    where it happens (over a featureless stretch) and pays back the last step's sigma at the end, so over
+    any episode it adds up to w * sigma_h(start) / 1 km, the same for every route: a dense signal of
+    navigation quality that leaves the undiscounted return, and (at shaping_gamma = the learner's
+    discount) the optimal policy, unchanged. The time term is the fuel/time cost. On arrival:
     `+ goal_bonus - miss_weight * true_miss_km`. The true miss is where the aircraft ends up when it flies
     the last `goal_radius_m` on its estimate: the true position plus (goal - estimated position), whose
     distance from the goal is the TRUE horizontal navigation error
@@ -166,7 +202,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     turn_rate_max_dps=3.0, info_offset_m=3000.0, info_sigma_m=5.0, info_window_m=2000.0,
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
-    bearing_offset_max_deg=90.0)`.
+    bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0)`.
     `scenario` is a built-in name, a TOML path or a `Scenario`; `goal_deg=(lat, lon)` defaults to the
     route's last waypoint. The terrain (and the map's error draw) is built once per env from the
     scenario seed; each episode's flight, sensor and navigator randomness comes from the reset seed.
@@ -174,6 +210,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (coarse decisions): `action_mode="pursuit"`; route-information observations 22-31 (the
+      observation grows from 22 to 32 elements); `sigma_shaping_weight`.
     - v0 (normalised goal): observation elements 19-21 (goal bearing and distance relative to the
       estimate, normalised); `shaping_gamma`; `action_mode="bearing"`.
     - v0 (arrival mode): episodes end when the estimate arrives; the true miss at arrival counts; goal
@@ -196,7 +234,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  start_region_deg: tuple[float, float, float, float] | None = None,
                  held_out_goals_deg=None, held_out_radius_m: float = 2000.0,
                  min_goal_distance_m: float = 5000.0, shaping_gamma: float = 1.0,
-                 action_mode: str = "turn", bearing_offset_max_deg: float = 90.0):
+                 action_mode: str = "turn", bearing_offset_max_deg: float = 90.0,
+                 sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -204,7 +243,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           climb_rate_max_mps, turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m,
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
-                          bearing_offset_max_deg)
+                          bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -221,12 +260,13 @@ class TerrainNavEnv(gym.Env, EzPickle):
                         ("info_sigma_m", info_sigma_m), ("info_window_m", info_window_m),
                         ("agl_min_m", agl_min_m), ("agl_max_m", agl_max_m),
                         ("held_out_radius_m", held_out_radius_m),
-                        ("min_goal_distance_m", min_goal_distance_m)):
+                        ("min_goal_distance_m", min_goal_distance_m),
+                        ("informative_crlb_m", informative_crlb_m)):
             _check_number(name, v, positive=True)
         for name, v in (("error_weight", error_weight), ("goal_bonus", goal_bonus),
                         ("collision_penalty", collision_penalty), ("failure_penalty", failure_penalty),
                         ("miss_weight", miss_weight), ("time_cost_per_s", time_cost_per_s),
-                        ("progress_weight", progress_weight)):
+                        ("progress_weight", progress_weight), ("sigma_shaping_weight", sigma_shaping_weight)):
             _check_number(name, v, positive=False)
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
@@ -261,8 +301,11 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self.time_cost_per_s = float(time_cost_per_s)
         self.progress_weight = float(progress_weight)
         self.shaping_gamma = float(shaping_gamma)
+        self.sigma_shaping_weight = float(sigma_shaping_weight)
+        self.informative_crlb_m = float(informative_crlb_m)
         self.action_mode = action_mode
         self.bearing_offset_max_rad = math.radians(float(bearing_offset_max_deg))
+        self._route_offsets_rad = np.array(ROUTE_OFFSET_FRACTIONS) * self.bearing_offset_max_rad
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
         self.tas_mps = float(d["route"]["tas_mps"])
@@ -304,6 +347,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._background = None
         self._distance_flown_m = 0.0
         self._d_est_start_m = 1.0
+        self._offset_frac = 0.0          # pursuit mode: the held offset, a fraction of the offset limit
 
     # ---------------------------------------------------------------------------------------- checks
     def _check_point(self, name: str, p) -> tuple[float, float]:
@@ -344,6 +388,11 @@ class TerrainNavEnv(gym.Env, EzPickle):
         return math.degrees(self.goal_lat_rad), math.degrees(self.goal_lon_rad)
 
     def _commander(self, est, t_s):
+        if self.action_mode == "pursuit":         # the offset held from the goal's bearing at every tick
+            dn, de = self._offset_to_goal(est.lat_rad, est.lon_rad, est.h_m)
+            limit = self._bearing_offset_limit_rad(math.hypot(dn, de))
+            track = math.atan2(de, dn) + self._offset_frac * limit
+            self._track_cmd_rad = math.atan2(math.sin(track), math.cos(track))
         return components.track_agl_targets(self._track_cmd_rad, self._agl_cmd_m, self.tas_mps)
 
     def _offset_to_goal(self, lat, lon, h=0.0) -> tuple[float, float]:
@@ -379,9 +428,24 @@ class TerrainNavEnv(gym.Env, EzPickle):
             loop.t_s / self.max_episode_s,
             1.0 if est.health.ok else 0.0,
             math.sin(rel), math.cos(rel), d_m / max(self._d_est_start_m, 1.0),
+            *self._route_information(est, dn, de),
         ], dtype=np.float64)
         obs = np.nan_to_num(obs, nan=0.0, posinf=1e4, neginf=-1e4)
         return np.clip(obs, OBS_LOW, OBS_HIGH).astype(np.float32)
+
+    def _route_information(self, est, dn: float, de: float) -> np.ndarray:
+        """Observation elements 22-31 (see the class docstring): the map's information along the candidate
+        pursuit routes from the estimate to the goal."""
+        omega = self.action_limits[0] / self.decision_interval_s
+        mean, featureless = route_information(
+            self._info_map, est.lat_rad, est.lon_rad, dn, de, self._route_offsets_rad, self.goal_radius_m,
+            omega, self.tas_mps, self.informative_crlb_m)
+        return np.concatenate([mean, np.minimum(featureless, ROUTE_FEATURELESS_MAX_KM)])
+
+    def _sigma_h_m(self) -> float:
+        sig = self._loop.estimate.sigma_ned_m
+        s = math.hypot(float(sig[0]), float(sig[1]))
+        return s if math.isfinite(s) else 0.0
 
     def _truth_now(self):
         tr = self._loop.last_truth
@@ -473,6 +537,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         else:
             self._agl_cmd_m = float(init["h_msl_m"]) - components.map_height(self._dems[1], lat0, lon0)
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m, self.agl_min_m, self.agl_max_m))
+        self._offset_frac = 0.0
         self._loop = ClosedLoop(sc, commander=self._commander, dems=self._dems, log_sensors=self.log_sensors)
         self._needs_reset = False
         self._distance_flown_m = 0.0
@@ -515,6 +580,11 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if self.action_mode == "turn":
             track = self._track_cmd_rad + a[0] * dpsi
             agl = self._agl_cmd_m + a[1] * dagl
+        elif self.action_mode == "pursuit":    # the commander holds the offset; height as in "bearing"
+            self._offset_frac = float(a[0])
+            track = self._track_cmd_rad
+            agl_want = self.agl_min_m + 0.5 * (a[1] + 1.0) * (self.agl_max_m - self.agl_min_m)
+            agl = self._agl_cmd_m + float(np.clip(agl_want - self._agl_cmd_m, -dagl, dagl))
         else:                                  # "bearing": toward targets, at the aircraft's limits
             est = self._loop.estimate
             dn, de = self._offset_to_goal(est.lat_rad, est.lon_rad, est.h_m)
@@ -534,6 +604,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         lat, lon, h = self._truth_now()
         d_before = math.hypot(*self._offset_to_goal(lat, lon, h))
         d_est_before = self._estimated_distance_m()
+        sigma_before = self._sigma_h_m()
         t_before = self._loop.t_s
         self._loop.command_now()                         # new targets take effect now
         reason = None
@@ -561,7 +632,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._true_track.append((lat, lon))
         self._est_track.append((self._loop.estimate.lat_rad, self._loop.estimate.lon_rad))
         info = self._info(reason)
-        terms = self._reward_terms(info, reason, d_before, d_est_before, self._loop.t_s - t_before)
+        terms = self._reward_terms(info, reason, d_before, d_est_before, self._loop.t_s - t_before,
+                                   sigma_before)
         info["reward_terms"] = terms
         reward = float(sum(terms.values()))
         terminated = reason in ("arrived", "goal", "terrain_collision", "off_map", "diverged",
@@ -572,7 +644,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         return self._obs(), reward, bool(terminated), bool(truncated), info
 
     def _reward_terms(self, info: dict, reason: str | None, d_before: float, d_est_before: float,
-                      dt_s: float) -> dict[str, float]:
+                      dt_s: float, sigma_before_m: float = 0.0) -> dict[str, float]:
         if self.reward_mode == "progress":
             terms = {"progress": (d_before - info["true_distance_to_goal_m"]) / 1000.0,
                      "error": -self.error_weight * info["true_horizontal_error_m"] / 1000.0,
@@ -587,6 +659,12 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0,
                  "failure": -self.failure_penalty if reason in ("off_map", "diverged", "fuel_exhausted",
                                                                "engine_failure") else 0.0}
+        if self.sigma_shaping_weight > 0.0:
+            # potential-based shaping on the reported horizontal sigma (Ng, Harada & Russell 1999), with
+            # Phi = 0 at the episode's end (any end) so that an episode's terms sum to w * sigma_h(start)
+            w = self.sigma_shaping_weight / 1000.0
+            phi_after = 0.0 if reason is not None else -w * self._sigma_h_m()
+            terms["sigma"] = self.shaping_gamma * phi_after + w * sigma_before_m
         if reason == "arrived":
             # flying the last goal_radius_m on the estimate ends at truth + (goal - estimate): its miss is
             # the true horizontal navigation error
