@@ -68,7 +68,7 @@ from collections import deque
 
 import numpy as np
 
-from navigators.acquisition_tracking import acquisition, beam, loop_kernel, tracking
+from navigators.acquisition_tracking import acquisition, beam, filter_kernels, loop_kernel, tracking
 from navigators.acquisition_tracking.aiding import (
     WindEstimator,
     air_vector_sum,
@@ -159,16 +159,6 @@ def _nanmean(x: np.ndarray) -> float:
     if nan.all():
         return math.nan
     return float(np.where(nan, 0.0, x).sum()) / int(x.size - nan.sum())
-
-
-def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Roll and pitch (rad) of body -> NED quaternions [w, x, y, z] (rows): strapdown.euler_from_C_bn of
-    quat_to_dcm, the third row of C_bn only, on all rows at once (it ran per row in Python each frame)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    c20 = 2.0 * (x * z - w * y)
-    c21 = 2.0 * (y * z + w * x)
-    c22 = w * w - x * x - y * y + z * z
-    return np.arctan2(c21, c22), -np.arcsin(np.clip(c20, -1.0, 1.0))
 
 
 class _Tail:
@@ -490,17 +480,10 @@ class AcqTrackNavigator:
                 None if b is None else b.valid,
             )
             step = max(1, hist.shape[0] // 50)  # attitude at <= 50 points per frame is plenty at 1 s
-            rows = hist[::step]
-            ok = np.isfinite(rows).all(axis=1)
-            roll, pitch = _roll_pitch(rows[:, 6:10])
-            roll[~ok] = np.nan
-            pitch[~ok] = np.nan
-            qq = rows[:, 6:10]  # yaw: atan2(C_bn[1, 0], C_bn[0, 0]) (beam.py's predicted return)
-            yaw_i = np.arctan2(
-                2.0 * (qq[:, 1] * qq[:, 2] + qq[:, 0] * qq[:, 3]),
-                qq[:, 0] ** 2 + qq[:, 1] ** 2 - qq[:, 2] ** 2 - qq[:, 3] ** 2,
-            )
-            tl["ins"].extend(frames.imu.t_s[::step], [rows[:, 3], rows[:, 4], roll, pitch, yaw_i], ok)
+            # (v_n, v_e, roll, pitch, yaw, finite) of every step-th row in one call (filter_kernels.ins_rows)
+            rows = np.empty(((hist.shape[0] + step - 1) // step, 6))
+            filter_kernels.ins_rows(hist, step, rows)
+            tl["ins"].extend(frames.imu.t_s[::step], rows[:, :5].T, rows[:, 5] != 0.0)
 
     def _samples(self, frames: SensorFrames) -> None:
         cfg = self.config
@@ -853,9 +836,9 @@ class AcqTrackNavigator:
         if self._aid_key is not None and self._aid_key[0] is arr and self._aid_key[1:3] == key[1:]:
             return self._aid_key[3]
         t, d, valid, dt, m_v, m_psi, rng = arr
-        vn = m_v * np.cos(m_psi) + key[1]
-        ve = m_v * np.sin(m_psi) + key[2]
-        out = (t, d, valid, dt, np.hypot(vn, ve), np.arctan2(ve, vn), rng)
+        v_c, psi_c = np.empty(m_v.size), np.empty(m_v.size)
+        filter_kernels.corrected_aiding(m_v, m_psi, key[1], key[2], v_c, psi_c)
+        out = (t, d, valid, dt, v_c, psi_c, rng)
         self._aid_key = (arr, key[1], key[2], out)
         return out
 
@@ -888,9 +871,7 @@ class AcqTrackNavigator:
     def _ne_change(b_v: float, b_psi: float, m_v: np.ndarray, m_psi: np.ndarray) -> np.ndarray:
         """North/east velocity change (m/s) equivalent to references (b_v, b_psi) on top of the aiding
         (m_v, m_psi): the mean over the samples of (m_v + b_v) u(m_psi + b_psi) - m_v u(m_psi)."""
-        vn = (m_v + b_v) * np.cos(m_psi + b_psi) - m_v * np.cos(m_psi)
-        ve = (m_v + b_v) * np.sin(m_psi + b_psi) - m_v * np.sin(m_psi)
-        return np.array([_mean(vn), _mean(ve)])
+        return np.array(filter_kernels.ne_change(b_v, b_psi, m_v, m_psi))
 
     def _fold_references(self, b_v: float, b_psi: float, m_v: np.ndarray, m_psi: np.ndarray) -> None:
         """reference_frame "ne": move the loops' speed / track references (b_v, b_psi on top of the
@@ -1148,19 +1129,17 @@ class AcqTrackNavigator:
             return
         # consecutive transects share N - 1 samples: each epoch's fix brings 1/overlap of new information
         if self._ne_frame:  # the 4-state filter: the fix corrects the centroid and the velocity bias
-            X = self.X
             Ro = self._fix_overlap * R
-            Kx = X[:, :2] @ _inv2(X[:2, :2] + Ro)
-            dx = Kx @ r_ne
+            X_new, dx = np.empty((4, 4)), np.empty(4)
+            if not filter_kernels.ne_fix_gain(self.X, Ro, float(r_ne[0]), float(r_ne[1]), X_new, dx):
+                raise np.linalg.LinAlgError("singular 2 x 2 matrix")
             e_new = self.e_ne + dx[2:]
             if math.hypot(e_new[0], e_new[1]) > cfg.max_speed_bias_mps:  # beyond the plausible bias
                 self.last_innovation = (s.t_s, r_ne, S)
                 lim = cfg.max_speed_bias_mps
                 self._out_of_lock(s, f"false lock: velocity bias {math.hypot(*e_new):.1f} m/s beyond {lim:g}")
                 return
-            IK = np.eye(4)
-            IK[:, :2] -= Kx
-            self.X = IK @ X @ IK.T + Kx @ Ro @ Kx.T
+            self.X = X_new
             dc = dx[:2]
             self.Pc = self.X[:2, :2].copy()
         else:
