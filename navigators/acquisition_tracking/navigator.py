@@ -134,7 +134,12 @@ def _inv2(m: np.ndarray) -> np.ndarray:
 
 def _quad2(x: np.ndarray, m: np.ndarray) -> float:
     """x^T m^-1 x of a 2-vector and a 2 x 2 matrix."""
-    return float(x @ (_inv2(m) @ x))
+    a, b, c, d = float(m[0, 0]), float(m[0, 1]), float(m[1, 0]), float(m[1, 1])
+    det = a * d - b * c
+    if det == 0.0:  # as np.linalg: singular raises, NaN propagates
+        raise np.linalg.LinAlgError("singular 2 x 2 matrix")
+    x0, x1 = float(x[0]), float(x[1])
+    return (x0 * (d * x0 - b * x1) + x1 * (a * x1 - c * x0)) / det
 
 
 def _median(x: np.ndarray) -> float:
@@ -190,12 +195,15 @@ class _Tail:
             self._lo, self._hi = 0, live
         hi = self._hi
         self._t[hi : hi + n] = t
-        for j, c in enumerate(cols):
-            self._v[hi : hi + n, j] = c
+        if isinstance(cols, np.ndarray):  # (n_cols, n) at once
+            self._v[hi : hi + n] = cols.T
+        else:
+            for j, c in enumerate(cols):
+                self._v[hi : hi + n, j] = c
         self._ok[hi : hi + n] = ok
         self._hi = hi + n
         # sensor times increase: the samples within _TAIL_S of the newest are a suffix
-        self._lo += int(np.searchsorted(self._t[self._lo : self._hi], t[-1] - _TAIL_S, side="left"))
+        self._lo += int(self._t[self._lo : self._hi].searchsorted(t[-1] - _TAIL_S, side="left"))
         self._views()
 
     def rate(self, t_s: float, col: int, window_s: float) -> float:
@@ -206,7 +214,7 @@ class _Tail:
         """(all columns of the newest valid sample at or before t_s within max_gap_s, found)."""
         if self.t.size == 0:
             return None, False
-        k = int(np.searchsorted(self.t, t_s + 1e-9, side="right")) - 1
+        k = int(self.t.searchsorted(t_s + 1e-9, side="right")) - 1
         while k >= 0 and not self.ok[k]:
             k -= 1
         if k < 0 or t_s - self.t[k] > max_gap_s:
@@ -374,7 +382,7 @@ class AcqTrackNavigator:
         self.t_epoch = math.nan
         self.next_k = None
         self._tails = {
-            k: _Tail(n) for k, n in (("baro", 1), ("ra", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
+            k: _Tail(n) for k, n in (("baro", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
         }
         self.transect.clear()
         self._offs: deque = deque(maxlen=self.config.transect_samples)  # beam offsets (north, east m)
@@ -438,9 +446,7 @@ class AcqTrackNavigator:
             if self.config.baro_geopotential:
                 hb = geometric_height_m(hb)
             tl["baro"].extend(frames.baro.t_s, [hb], frames.baro.valid)
-        ra = frames.radar_altimeter
-        if ra is not None:
-            tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
+        # the radar altimeter is read from the frame itself (_add_sample): no tail
         # air data and compass enter only the air-data aiding (_add_sample, _air_vector): not kept otherwise
         air_aiding = self.config.aiding and self.config.aiding_source == "air_data"
         if air_aiding and frames.air_data is not None:
@@ -853,9 +859,14 @@ class AcqTrackNavigator:
 
     def _ne_output_cov(self, lever_s: float) -> np.ndarray:
         """Covariance (north, east m^2) of the point lever_s seconds of dead reckoning past the centroid."""
-        X = self.X
-        P = X[:2, :2] + lever_s * (X[:2, 2:] + X[2:, :2]) + lever_s**2 * X[2:, 2:]
-        return P + np.eye(2) * self._walk2 * lever_s
+        X = self.X.tolist()  # plain floats: numpy on 2 x 2 blocks costs more in its calls than the sums
+        L2, w = lever_s**2, self._walk2 * lever_s
+        p = [
+            [X[i][j] + lever_s * (X[i][j + 2] + X[i + 2][j]) + L2 * X[i + 2][j + 2] + (w if i == j else 0.0)
+             for j in (0, 1)]
+            for i in (0, 1)
+        ]  # fmt: skip
+        return np.array(p)
 
     def _ne_growth(self, P: np.ndarray, T: float) -> np.ndarray:
         """One step's growth of a dead-reckoned point's covariance P on the velocity bias' sigma: sigma
