@@ -58,6 +58,23 @@ def ne_fix_gain(X, Ro, r_n, r_e, X_out, dx_out):  # pragma: no cover - numba
 
 
 @njit(cache=True)
+def ne_predict(X, T, walk_m2, bias_walk_m2ps2):  # pragma: no cover - numba
+    """One sample (T s) of the 4-state filter's prediction in place: X <- F X F^T + Q with F = [[I, T I],
+    [0, I]] (the centroid moves on the velocity bias), Q = diag(walk, walk, bias walk, bias walk); the rows,
+    then the columns, as the numpy slices X[:2] += T X[2:], X[:, :2] += T X[:, 2:] did."""
+    for i in range(2):
+        for j in range(4):
+            X[i, j] += T * X[i + 2, j]
+    for i in range(4):
+        for j in range(2):
+            X[i, j] += T * X[i, j + 2]
+    X[0, 0] += walk_m2
+    X[1, 1] += walk_m2
+    X[2, 2] += bias_walk_m2ps2
+    X[3, 3] += bias_walk_m2ps2
+
+
+@njit(cache=True)
 def ne_change(b_v, b_psi, m_v, m_psi):  # pragma: no cover - numba
     """(north, east) mean over the samples of (m_v + b_v) u(m_psi + b_psi) - m_v u(m_psi) (m/s)."""
     sn = 0.0

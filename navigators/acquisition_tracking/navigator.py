@@ -64,7 +64,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
 
 import numpy as np
 
@@ -164,6 +163,28 @@ def _nanmean(x: np.ndarray) -> float:
     if nan.all():
         return math.nan
     return float(np.where(nan, 0.0, x).sum()) / int(x.size - nan.sum())
+
+
+class _Offsets:
+    """The transect's beam offsets (north, east m) as the rows of a buffer, oldest first, with a bounded
+    deque's semantics (when full the oldest drops out); rows() is a view (callers copy what they keep)."""
+
+    def __init__(self, n: int):
+        self._rows = np.zeros((n, 2))
+        self._n = 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    def append(self, offset) -> None:
+        if self._n == self._rows.shape[0]:
+            self._rows[:-1] = self._rows[1:]
+        else:
+            self._n += 1
+        self._rows[self._n - 1] = offset
+
+    def rows(self) -> np.ndarray:
+        return self._rows[: self._n]
 
 
 class _Tail:
@@ -311,6 +332,12 @@ class AcqTrackNavigator:
             from navigators.inertial.strapdown import StrapdownIns
 
             self.ins = StrapdownIns("j2", 30.0, "interval")
+        # estimate()'s covariance entries that are constant (baro bias, vertical speed, attitude)
+        self._C0 = np.zeros((9, 9))
+        self._C0[2, 2] = cfg.baro_bias_sigma_m**2 + 4.0
+        self._C0[5, 5] = 1.0
+        self._C0[6, 6] = self._C0[7, 7] = math.radians(3.0) ** 2
+        self._C0[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
         self.health = Health(status="acquiring")
         self._reset_state()
 
@@ -385,7 +412,7 @@ class AcqTrackNavigator:
             k: _Tail(n) for k, n in (("baro", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
         }
         self.transect.clear()
-        self._offs: deque = deque(maxlen=self.config.transect_samples)  # beam offsets (north, east m)
+        self._offs = _Offsets(self.config.transect_samples)  # beam offsets (north, east m)
         self._pending_offset = (0.0, 0.0)
         self._beam_rot = None
         self._beam_cache = None
@@ -615,7 +642,7 @@ class AcqTrackNavigator:
         key = (self.transect.samples.version, b_psi)
         if self._beam_cache is not None and self._beam_cache[0] == key:
             return self._beam_cache[1]
-        o = np.array(self._offs, float).reshape(-1, 2)
+        o = self._offs.rows()
         out = beam.rotate_offsets(o[:, 0], o[:, 1], -b_psi)
         self._beam_cache = (key, out)
         return out
@@ -741,7 +768,11 @@ class AcqTrackNavigator:
         """The sample's aiding (speed, track) corrected by e_ne (reference_frame "ne"), else as measured."""
         if not self._ne_frame:
             return s.m_v, s.m_psi
-        return speed_track(ground_vector(s.m_v, s.m_psi) + self.e_ne)
+        # speed_track(ground_vector(m_v, m_psi) + e_ne) in plain floats (the same operations)
+        e_n, e_e = self.e_ne.tolist()
+        vn = s.m_v * math.cos(s.m_psi) + e_n
+        ve = s.m_v * math.sin(s.m_psi) + e_e
+        return math.hypot(vn, ve), math.atan2(ve, vn)
 
     def _aided_speed(self, s: Sample) -> float:
         return self._corrected(s)[0] + self.b_v
@@ -797,38 +828,34 @@ class AcqTrackNavigator:
     def _propagate_cov(self, s: Sample) -> None:
         cfg = self.config
         T = cfg.sample_period_s
-        v = max(self._aided_speed(s), 0.0)
-        psi = self._aided_track(s)
+        cv, cp = self._corrected(s)  # _aided_speed / _aided_track in one
+        v = max(cv + self.b_v, 0.0)
+        psi = cp + self.b_psi
         if self.lock_state == "tracking":
             sv, sp = self.sigma_v, self.sigma_psi
         elif cfg.aiding:
             sv, sp = cfg.aiding_speed_sigma_mps, math.radians(cfg.aiding_heading_sigma_deg)
         else:
             sv, sp = cfg.unaided_speed_sigma_mps, math.radians(cfg.unaided_heading_sigma_deg)
-        # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
-        c, sn = math.cos(psi), math.sin(psi)
-        P = self.P
-        p01 = float(P[0, 1] + P[1, 0])
-        p_al = c * c * P[0, 0] + c * sn * p01 + sn * sn * P[1, 1]  # (G^T P G) diagonal
-        p_cr = sn * sn * P[0, 0] - c * sn * p01 + c * c * P[1, 1]
-        s_al, s_cr = math.sqrt(max(p_al, 0.0)), math.sqrt(max(p_cr, 0.0))
-        d_al, d_cr = T * sv, v * T * sp
         walk = self._walk2 * T
-        self.P = P + _rot_diag(psi, 2.0 * s_al * d_al + d_al**2 + walk, 2.0 * s_cr * d_cr + d_cr**2 + walk)
+        P = self.P
         if self._ne_frame:  # the centroid moves one sample on the aiding + e_ne; e_ne's error walks
             X = self.X
-            X[:2, :] += T * X[2:, :]
-            X[:, :2] += T * X[:, 2:]
-            X[0, 0] += walk
-            X[1, 1] += walk
-            X[2, 2] += self._bias_walk2 * T
-            X[3, 3] += self._bias_walk2 * T
+            filter_kernels.ne_predict(X, T, walk, self._bias_walk2 * T)
             self.Pc = X[:2, :2].copy()
             if self.lock_state == "tracking":  # the output: the centroid + the lever to the newest sample
                 self.P = self._ne_output_cov(0.5 * cfg.transect_duration_s)
             else:  # out of lock the output is dead-reckoned from the last in-lock newest sample
                 self.P = P + _rot_diag(psi, walk, walk) + self._ne_growth(P, T)
             return
+        # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
+        c, sn = math.cos(psi), math.sin(psi)
+        p01 = float(P[0, 1] + P[1, 0])
+        p_al = c * c * P[0, 0] + c * sn * p01 + sn * sn * P[1, 1]  # (G^T P G) diagonal
+        p_cr = sn * sn * P[0, 0] - c * sn * p01 + c * c * P[1, 1]
+        s_al, s_cr = math.sqrt(max(p_al, 0.0)), math.sqrt(max(p_cr, 0.0))
+        d_al, d_cr = T * sv, v * T * sp
+        self.P = P + _rot_diag(psi, 2.0 * s_al * d_al + d_al**2 + walk, 2.0 * s_cr * d_cr + d_cr**2 + walk)
         # the transect centroid's filter: one sample of dead reckoning on the references and the aiding
         self.Pc = self.Pc + _rot_diag(psi, d_al**2 + walk, d_cr**2 + walk)
 
@@ -1072,11 +1099,13 @@ class AcqTrackNavigator:
             its, locks, ran, shp, h_p, o_n, o_e,
         )  # fmt: skip
         p_s = (lat_p, lon_p)
-        self.iterations = [int(its[0]), int(its[1]), int(its[2]), int(its[3])]
+        # the kernel's small outputs as Python lists: per-element numpy indexing costs more than tolist
+        self.iterations = its.tolist()
         self.spacing = (sp_v, sp_psi)
-        self.v_shape = bool(np.all(shp[ran, 0] != 0.0))
-        shapes = {k: tracking.VShape(bool(shp[k, 0]), *shp[k, 1:].tolist()) for k in (0, 1)}
-        locks = [bool(x) for x in locks]
+        shp_rows = shp.tolist()
+        self.v_shape = all(row[0] != 0.0 for row, r in zip(shp_rows, ran.tolist(), strict=True) if r)
+        shapes = {k: tracking.VShape(bool(shp_rows[k][0]), *shp_rows[k][1:]) for k in (0, 1)}
+        locks = locks.tolist()
         r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
@@ -1181,10 +1210,10 @@ class AcqTrackNavigator:
             self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
         ]
         if self._ne_frame:  # the references' sigma is e_ne's, along / across the track
-            Xe = self.X[2:, 2:]
+            (xe00, xe01), (_, xe11) = self.X[2:, 2:].tolist()
             c_, s_ = math.cos(psi), math.sin(psi)
-            s_al = c_ * c_ * Xe[0, 0] + 2 * c_ * s_ * Xe[0, 1] + s_ * s_ * Xe[1, 1]
-            s_cr = s_ * s_ * Xe[0, 0] - 2 * c_ * s_ * Xe[0, 1] + c_ * c_ * Xe[1, 1]
+            s_al = c_ * c_ * xe00 + 2 * c_ * s_ * xe01 + s_ * s_ * xe11
+            s_cr = s_ * s_ * xe00 - 2 * c_ * s_ * xe01 + c_ * c_ * xe11
             v_ref = max(_mean(m_v), 1.0)
             sv = [math.sqrt(max(s_al, 0.0)), math.sqrt(max(s_cr, 0.0)) / v_ref]
         elif g < 1.0:  # the references are an exponential average of the loops' values (gain g)
@@ -1259,12 +1288,12 @@ class AcqTrackNavigator:
         dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
         self.pos = (self.p0[0] + dla[-1], self.p0[1] + dlo[-1])
         self.t_pos = s.t_s
-        v, psi = self._aided_speed(s), self._aided_track(s)
+        cv, cp = self._corrected(s)
+        v, psi = cv + self.b_v, cp + self.b_psi  # _aided_speed, _aided_track
         if self.lock_state == "tracking":
             if self.config.aiding:  # average the references: the aiding carries ramps without lag
                 ref_v, ref_psi = self.b_v, self.b_psi
                 if self._ne_frame:  # the NE bias as the newest sample's speed / track reference
-                    cv, cp = self._corrected(s)
                     ref_v, ref_psi = cv - s.m_v + self.b_v, float(wrap_rad(cp - s.m_psi)) + self.b_psi
                 ab_v, ab_psi = self.average.push(ref_v, ref_psi)
                 self.out_speed, self.out_track = s.m_v + ab_v, float(wrap_rad(s.m_psi + ab_psi))
@@ -1303,7 +1332,6 @@ class AcqTrackNavigator:
 
     # ------------------------------------------------------------------ output
     def estimate(self, t_s: float | None = None) -> Estimate:
-        cfg = self.config
         t = float(self.t_pos if t_s is None else t_s)
         lat, lon = self.pos
         v_ne = ground_vector(self.out_speed, self.out_track)
@@ -1311,18 +1339,14 @@ class AcqTrackNavigator:
         if math.isfinite(lat) and dtp != 0.0:
             r_n, r_e = self._radii(lat, self.h_m)
             lat, lon = lat + v_ne[0] * dtp / r_n, lon + v_ne[1] * dtp / r_e
-        C = np.zeros((9, 9))
-        P = self.P.copy()
+        C = self._C0.copy()  # the constant diagonal entries (vertical, attitude) set in the constructor
+        P = self.P
         if dtp > 0:  # the extrapolation's own growth (aiding-grade)
             P = P + _rot_diag(
                 self.out_track, (dtp * self.sigma_v) ** 2, (self.out_speed * dtp * self.sigma_psi) ** 2
             )
         C[:2, :2] = P
-        C[2, 2] = cfg.baro_bias_sigma_m**2 + 4.0
         C[3:5, 3:5] = _rot_diag(self.out_track, self.sigma_v**2, (self.out_speed * self.sigma_psi) ** 2)
-        C[5, 5] = 1.0
-        C[6, 6] = C[7, 7] = math.radians(3.0) ** 2
-        C[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
         extra = {
             "lock_state": self.lock_state,
             "snr_db": float(self.snr_db),
