@@ -1076,11 +1076,12 @@ class AcqTrackNavigator:
         cfg = self.config
         arrays = self._arrays()
         t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
-        if int(valid.sum()) < self._n_min:
+        n_valid = int(valid.sum())
+        if n_valid < self._n_min:
             self.health.skip(
                 s.t_s,
                 "transect_too_few_samples",
-                f"acq_track: {int(valid.sum())} valid samples of {valid.size}; loops skipped",
+                f"acq_track: {n_valid} valid samples of {valid.size}; loops skipped",
             )
             self._out_of_lock(s, "too few valid samples")
             return
@@ -1203,21 +1204,23 @@ class AcqTrackNavigator:
         dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0], (r_n, r_e))
         self.p0 = (c_new[0] - dla_n[c], c_new[1] - dlo_n[c])
         # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
-        n_ok = max(int(valid.sum()), 1)
+        n_ok = max(n_valid, 1)
         cost_noise = sig0 * math.sqrt((1.0 - 2.0 / math.pi) / n_ok)
-        sv = [
-            self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
-            self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
-        ]
+        mv_mean = _mean(m_v)  # the (corrected) aiding speed over the transect, used twice below
         if self._ne_frame:  # the references' sigma is e_ne's, along / across the track
             (xe00, xe01), (_, xe11) = self.X[2:, 2:].tolist()
             c_, s_ = math.cos(psi), math.sin(psi)
             s_al = c_ * c_ * xe00 + 2 * c_ * s_ * xe01 + s_ * s_ * xe11
             s_cr = s_ * s_ * xe00 - 2 * c_ * s_ * xe01 + c_ * c_ * xe11
-            v_ref = max(_mean(m_v), 1.0)
+            v_ref = max(mv_mean, 1.0)
             sv = [math.sqrt(max(s_al, 0.0)), math.sqrt(max(s_cr, 0.0)) / v_ref]
-        elif g < 1.0:  # the references are an exponential average of the loops' values (gain g)
-            sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]
+        else:
+            sv = [
+                self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
+                self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
+            ]
+            if g < 1.0:  # the references are an exponential average of the loops' values (gain g)
+                sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]
         self.sigma_v, self.sigma_psi = sv
         self.last_innovation = (s.t_s, r_ne, S)
         verdict = self.integrity.add(s.t_s, nis, 2)
@@ -1233,7 +1236,7 @@ class AcqTrackNavigator:
         )
         # the newest sample's covariance: the centroid's, plus dead reckoning over the rest of the transect
         lever_s = float(t[-1] - t[c])
-        v_mean = max(_mean(m_v) + b_v, 1.0)
+        v_mean = max(mv_mean + b_v, 1.0)
         walk = self._walk2 * lever_s
         if self._ne_frame:
             self.P = self._ne_output_cov(lever_s)
