@@ -31,9 +31,29 @@ import numpy as np
 from numba import njit
 
 from navigators.acquisition_tracking.correlation import _map_height, replica_offsets
-from terrain.geodesy import euler_to_C_bn
 from terrain.kernels import bilinear_with_gradient
-from terrain.queries.radar_altimeter import radar_altimeter_return
+from terrain.queries.radar_altimeter import _ra_batch
+from terrain.queries.shared import _ra_tables, _ra_workspace
+
+
+def _ray_work(dem) -> dict:
+    """predicted_ray's buffers and the map's search tables (terrain.queries' _ra_tables), kept on the Dem."""
+    work = getattr(dem, "_acq_track_ray_work", None)
+    if work is not None and work["heights"] is dem.heights_m:
+        return work
+    heights, lat0, lon0, dlat, dlon = dem.grid
+    bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(dem)
+    work = {
+        "heights": dem.heights_m,
+        "grid": (heights, lat0, lon0, dlat, dlon, cell_m),
+        "tables": (bs, bmax, bmin, h_min, h_max),
+        "pos": np.zeros((3, 1)),
+        "C": np.zeros((1, 3, 3)),
+        "valid": np.zeros(1, bool),
+        "out": (np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1)),
+    }
+    dem._acq_track_ray_work = work
+    return work
 
 
 def predicted_ray(
@@ -52,17 +72,29 @@ def predicted_ray(
     """(off-nadir angle rad, unit north, unit east) of the shortest in-beam return predicted on `dem` for
     an antenna at (lat, lon rad, h m) with the attitude (rad); None when the prediction has no return.
     r_n, r_e_cos: meridian radius + h and (prime vertical radius + h) cos(lat) (m)."""
-    C = euler_to_C_bn(roll_rad, pitch_rad, yaw_rad)
-    ret = radar_altimeter_return(
-        dem, np.array([lat_rad]), np.array([lon_rad]), np.array([h_m]), C[None],
-        math.radians(0.5 * beamwidth_deg), max_range_m,
+    # terrain.queries.radar_altimeter_return's kernel on one antenna, called directly with buffers kept
+    # between calls: its argument checks and array set-up cost more than its search (once per sample);
+    # the kernel reads only the body down axis, C_bn[:, 2] of euler_to_C_bn
+    work = _ray_work(dem)
+    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
+    cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
+    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
+    pos, C, outs = work["pos"], work["C"], work["out"]
+    pos[0, 0], pos[1, 0], pos[2, 0] = lat_rad, lon_rad, h_m
+    C[0, 0, 2] = cr * sp * cy + sr * sy
+    C[0, 1, 2] = cr * sp * sy - sr * cy
+    C[0, 2, 2] = cr * cp
+    _ra_batch(
+        *work["grid"], pos[0], pos[1], pos[2], C, math.radians(0.5 * beamwidth_deg), float(max_range_m),
+        *work["tables"], *_ra_workspace(work["tables"][1].size), work["valid"], *outs,
     )  # fmt: skip
-    if not bool(ret.valid[0]):
+    if not bool(work["valid"][0]):
         return None
-    dn = (float(ret.lat_rad[0]) - lat_rad) * r_n
-    de = (float(ret.lon_rad[0]) - lon_rad) * r_e_cos
+    ret_lat, ret_lon, ret_h = float(outs[1][0]), float(outs[2][0]), float(outs[3][0])
+    dn = (ret_lat - lat_rad) * r_n
+    de = (ret_lon - lon_rad) * r_e_cos
     rho = math.hypot(dn, de)
-    theta = math.atan2(rho, h_m - float(ret.h_m[0]))
+    theta = math.atan2(rho, h_m - ret_h)
     if rho <= 1e-9:
         return theta, 0.0, 0.0
     return theta, dn / rho, de / rho

@@ -64,11 +64,10 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
 
 import numpy as np
 
-from navigators.acquisition_tracking import acquisition, beam, loop_kernel, tracking
+from navigators.acquisition_tracking import acquisition, beam, filter_kernels, loop_kernel, tracking
 from navigators.acquisition_tracking.aiding import (
     WindEstimator,
     air_vector_sum,
@@ -134,7 +133,12 @@ def _inv2(m: np.ndarray) -> np.ndarray:
 
 def _quad2(x: np.ndarray, m: np.ndarray) -> float:
     """x^T m^-1 x of a 2-vector and a 2 x 2 matrix."""
-    return float(x @ (_inv2(m) @ x))
+    a, b, c, d = float(m[0, 0]), float(m[0, 1]), float(m[1, 0]), float(m[1, 1])
+    det = a * d - b * c
+    if det == 0.0:  # as np.linalg: singular raises, NaN propagates
+        raise np.linalg.LinAlgError("singular 2 x 2 matrix")
+    x0, x1 = float(x[0]), float(x[1])
+    return (x0 * (d * x0 - b * x1) + x1 * (a * x1 - c * x0)) / det
 
 
 def _median(x: np.ndarray) -> float:
@@ -161,14 +165,26 @@ def _nanmean(x: np.ndarray) -> float:
     return float(np.where(nan, 0.0, x).sum()) / int(x.size - nan.sum())
 
 
-def _roll_pitch(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Roll and pitch (rad) of body -> NED quaternions [w, x, y, z] (rows): strapdown.euler_from_C_bn of
-    quat_to_dcm, the third row of C_bn only, on all rows at once (it ran per row in Python each frame)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    c20 = 2.0 * (x * z - w * y)
-    c21 = 2.0 * (y * z + w * x)
-    c22 = w * w - x * x - y * y + z * z
-    return np.arctan2(c21, c22), -np.arcsin(np.clip(c20, -1.0, 1.0))
+class _Offsets:
+    """The transect's beam offsets (north, east m) as the rows of a buffer, oldest first, with a bounded
+    deque's semantics (when full the oldest drops out); rows() is a view (callers copy what they keep)."""
+
+    def __init__(self, n: int):
+        self._rows = np.zeros((n, 2))
+        self._n = 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    def append(self, offset) -> None:
+        if self._n == self._rows.shape[0]:
+            self._rows[:-1] = self._rows[1:]
+        else:
+            self._n += 1
+        self._rows[self._n - 1] = offset
+
+    def rows(self) -> np.ndarray:
+        return self._rows[: self._n]
 
 
 class _Tail:
@@ -200,12 +216,15 @@ class _Tail:
             self._lo, self._hi = 0, live
         hi = self._hi
         self._t[hi : hi + n] = t
-        for j, c in enumerate(cols):
-            self._v[hi : hi + n, j] = c
+        if isinstance(cols, np.ndarray):  # (n_cols, n) at once
+            self._v[hi : hi + n] = cols.T
+        else:
+            for j, c in enumerate(cols):
+                self._v[hi : hi + n, j] = c
         self._ok[hi : hi + n] = ok
         self._hi = hi + n
         # sensor times increase: the samples within _TAIL_S of the newest are a suffix
-        self._lo += int(np.searchsorted(self._t[self._lo : self._hi], t[-1] - _TAIL_S, side="left"))
+        self._lo += int(self._t[self._lo : self._hi].searchsorted(t[-1] - _TAIL_S, side="left"))
         self._views()
 
     def rate(self, t_s: float, col: int, window_s: float) -> float:
@@ -216,7 +235,7 @@ class _Tail:
         """(all columns of the newest valid sample at or before t_s within max_gap_s, found)."""
         if self.t.size == 0:
             return None, False
-        k = int(np.searchsorted(self.t, t_s + 1e-9, side="right")) - 1
+        k = int(self.t.searchsorted(t_s + 1e-9, side="right")) - 1
         while k >= 0 and not self.ok[k]:
             k -= 1
         if k < 0 or t_s - self.t[k] > max_gap_s:
@@ -313,6 +332,12 @@ class AcqTrackNavigator:
             from navigators.inertial.strapdown import StrapdownIns
 
             self.ins = StrapdownIns("j2", 30.0, "interval")
+        # estimate()'s covariance entries that are constant (baro bias, vertical speed, attitude)
+        self._C0 = np.zeros((9, 9))
+        self._C0[2, 2] = cfg.baro_bias_sigma_m**2 + 4.0
+        self._C0[5, 5] = 1.0
+        self._C0[6, 6] = self._C0[7, 7] = math.radians(3.0) ** 2
+        self._C0[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
         self.health = Health(status="acquiring")
         self._reset_state()
 
@@ -384,10 +409,10 @@ class AcqTrackNavigator:
         self.t_epoch = math.nan
         self.next_k = None
         self._tails = {
-            k: _Tail(n) for k, n in (("baro", 1), ("ra", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
+            k: _Tail(n) for k, n in (("baro", 1), ("air", 2), ("hdg", 1), ("gnss", 5), ("ins", 5))
         }
         self.transect.clear()
-        self._offs: deque = deque(maxlen=self.config.transect_samples)  # beam offsets (north, east m)
+        self._offs = _Offsets(self.config.transect_samples)  # beam offsets (north, east m)
         self._pending_offset = (0.0, 0.0)
         self._beam_rot = None
         self._beam_cache = None
@@ -448,9 +473,7 @@ class AcqTrackNavigator:
             if self.config.baro_geopotential:
                 hb = geometric_height_m(hb)
             tl["baro"].extend(frames.baro.t_s, [hb], frames.baro.valid)
-        ra = frames.radar_altimeter
-        if ra is not None:
-            tl["ra"].extend(ra.t_s, [ra.range_m], ra.valid & np.isfinite(ra.range_m) & (ra.range_m > 0))
+        # the radar altimeter is read from the frame itself (_add_sample): no tail
         # air data and compass enter only the air-data aiding (_add_sample, _air_vector): not kept otherwise
         air_aiding = self.config.aiding and self.config.aiding_source == "air_data"
         if air_aiding and frames.air_data is not None:
@@ -490,17 +513,10 @@ class AcqTrackNavigator:
                 None if b is None else b.valid,
             )
             step = max(1, hist.shape[0] // 50)  # attitude at <= 50 points per frame is plenty at 1 s
-            rows = hist[::step]
-            ok = np.isfinite(rows).all(axis=1)
-            roll, pitch = _roll_pitch(rows[:, 6:10])
-            roll[~ok] = np.nan
-            pitch[~ok] = np.nan
-            qq = rows[:, 6:10]  # yaw: atan2(C_bn[1, 0], C_bn[0, 0]) (beam.py's predicted return)
-            yaw_i = np.arctan2(
-                2.0 * (qq[:, 1] * qq[:, 2] + qq[:, 0] * qq[:, 3]),
-                qq[:, 0] ** 2 + qq[:, 1] ** 2 - qq[:, 2] ** 2 - qq[:, 3] ** 2,
-            )
-            tl["ins"].extend(frames.imu.t_s[::step], [rows[:, 3], rows[:, 4], roll, pitch, yaw_i], ok)
+            # (v_n, v_e, roll, pitch, yaw, finite) of every step-th row in one call (filter_kernels.ins_rows)
+            rows = np.empty(((hist.shape[0] + step - 1) // step, 6))
+            filter_kernels.ins_rows(hist, step, rows)
+            tl["ins"].extend(frames.imu.t_s[::step], rows[:, :5].T, rows[:, 5] != 0.0)
 
     def _samples(self, frames: SensorFrames) -> None:
         cfg = self.config
@@ -626,7 +642,7 @@ class AcqTrackNavigator:
         key = (self.transect.samples.version, b_psi)
         if self._beam_cache is not None and self._beam_cache[0] == key:
             return self._beam_cache[1]
-        o = np.array(self._offs, float).reshape(-1, 2)
+        o = self._offs.rows()
         out = beam.rotate_offsets(o[:, 0], o[:, 1], -b_psi)
         self._beam_cache = (key, out)
         return out
@@ -752,7 +768,11 @@ class AcqTrackNavigator:
         """The sample's aiding (speed, track) corrected by e_ne (reference_frame "ne"), else as measured."""
         if not self._ne_frame:
             return s.m_v, s.m_psi
-        return speed_track(ground_vector(s.m_v, s.m_psi) + self.e_ne)
+        # speed_track(ground_vector(m_v, m_psi) + e_ne) in plain floats (the same operations)
+        e_n, e_e = self.e_ne.tolist()
+        vn = s.m_v * math.cos(s.m_psi) + e_n
+        ve = s.m_v * math.sin(s.m_psi) + e_e
+        return math.hypot(vn, ve), math.atan2(ve, vn)
 
     def _aided_speed(self, s: Sample) -> float:
         return self._corrected(s)[0] + self.b_v
@@ -808,38 +828,34 @@ class AcqTrackNavigator:
     def _propagate_cov(self, s: Sample) -> None:
         cfg = self.config
         T = cfg.sample_period_s
-        v = max(self._aided_speed(s), 0.0)
-        psi = self._aided_track(s)
+        cv, cp = self._corrected(s)  # _aided_speed / _aided_track in one
+        v = max(cv + self.b_v, 0.0)
+        psi = cp + self.b_psi
         if self.lock_state == "tracking":
             sv, sp = self.sigma_v, self.sigma_psi
         elif cfg.aiding:
             sv, sp = cfg.aiding_speed_sigma_mps, math.radians(cfg.aiding_heading_sigma_deg)
         else:
             sv, sp = cfg.unaided_speed_sigma_mps, math.radians(cfg.unaided_heading_sigma_deg)
-        # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
-        c, sn = math.cos(psi), math.sin(psi)
-        P = self.P
-        p01 = float(P[0, 1] + P[1, 0])
-        p_al = c * c * P[0, 0] + c * sn * p01 + sn * sn * P[1, 1]  # (G^T P G) diagonal
-        p_cr = sn * sn * P[0, 0] - c * sn * p01 + c * c * P[1, 1]
-        s_al, s_cr = math.sqrt(max(p_al, 0.0)), math.sqrt(max(p_cr, 0.0))
-        d_al, d_cr = T * sv, v * T * sp
         walk = self._walk2 * T
-        self.P = P + _rot_diag(psi, 2.0 * s_al * d_al + d_al**2 + walk, 2.0 * s_cr * d_cr + d_cr**2 + walk)
+        P = self.P
         if self._ne_frame:  # the centroid moves one sample on the aiding + e_ne; e_ne's error walks
             X = self.X
-            X[:2, :] += T * X[2:, :]
-            X[:, :2] += T * X[:, 2:]
-            X[0, 0] += walk
-            X[1, 1] += walk
-            X[2, 2] += self._bias_walk2 * T
-            X[3, 3] += self._bias_walk2 * T
+            filter_kernels.ne_predict(X, T, walk, self._bias_walk2 * T)
             self.Pc = X[:2, :2].copy()
             if self.lock_state == "tracking":  # the output: the centroid + the lever to the newest sample
                 self.P = self._ne_output_cov(0.5 * cfg.transect_duration_s)
             else:  # out of lock the output is dead-reckoned from the last in-lock newest sample
                 self.P = P + _rot_diag(psi, walk, walk) + self._ne_growth(P, T)
             return
+        # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
+        c, sn = math.cos(psi), math.sin(psi)
+        p01 = float(P[0, 1] + P[1, 0])
+        p_al = c * c * P[0, 0] + c * sn * p01 + sn * sn * P[1, 1]  # (G^T P G) diagonal
+        p_cr = sn * sn * P[0, 0] - c * sn * p01 + c * c * P[1, 1]
+        s_al, s_cr = math.sqrt(max(p_al, 0.0)), math.sqrt(max(p_cr, 0.0))
+        d_al, d_cr = T * sv, v * T * sp
+        self.P = P + _rot_diag(psi, 2.0 * s_al * d_al + d_al**2 + walk, 2.0 * s_cr * d_cr + d_cr**2 + walk)
         # the transect centroid's filter: one sample of dead reckoning on the references and the aiding
         self.Pc = self.Pc + _rot_diag(psi, d_al**2 + walk, d_cr**2 + walk)
 
@@ -853,9 +869,9 @@ class AcqTrackNavigator:
         if self._aid_key is not None and self._aid_key[0] is arr and self._aid_key[1:3] == key[1:]:
             return self._aid_key[3]
         t, d, valid, dt, m_v, m_psi, rng = arr
-        vn = m_v * np.cos(m_psi) + key[1]
-        ve = m_v * np.sin(m_psi) + key[2]
-        out = (t, d, valid, dt, np.hypot(vn, ve), np.arctan2(ve, vn), rng)
+        v_c, psi_c = np.empty(m_v.size), np.empty(m_v.size)
+        filter_kernels.corrected_aiding(m_v, m_psi, key[1], key[2], v_c, psi_c)
+        out = (t, d, valid, dt, v_c, psi_c, rng)
         self._aid_key = (arr, key[1], key[2], out)
         return out
 
@@ -870,9 +886,14 @@ class AcqTrackNavigator:
 
     def _ne_output_cov(self, lever_s: float) -> np.ndarray:
         """Covariance (north, east m^2) of the point lever_s seconds of dead reckoning past the centroid."""
-        X = self.X
-        P = X[:2, :2] + lever_s * (X[:2, 2:] + X[2:, :2]) + lever_s**2 * X[2:, 2:]
-        return P + np.eye(2) * self._walk2 * lever_s
+        X = self.X.tolist()  # plain floats: numpy on 2 x 2 blocks costs more in its calls than the sums
+        L2, w = lever_s**2, self._walk2 * lever_s
+        p = [
+            [X[i][j] + lever_s * (X[i][j + 2] + X[i + 2][j]) + L2 * X[i + 2][j + 2] + (w if i == j else 0.0)
+             for j in (0, 1)]
+            for i in (0, 1)
+        ]  # fmt: skip
+        return np.array(p)
 
     def _ne_growth(self, P: np.ndarray, T: float) -> np.ndarray:
         """One step's growth of a dead-reckoned point's covariance P on the velocity bias' sigma: sigma
@@ -888,9 +909,7 @@ class AcqTrackNavigator:
     def _ne_change(b_v: float, b_psi: float, m_v: np.ndarray, m_psi: np.ndarray) -> np.ndarray:
         """North/east velocity change (m/s) equivalent to references (b_v, b_psi) on top of the aiding
         (m_v, m_psi): the mean over the samples of (m_v + b_v) u(m_psi + b_psi) - m_v u(m_psi)."""
-        vn = (m_v + b_v) * np.cos(m_psi + b_psi) - m_v * np.cos(m_psi)
-        ve = (m_v + b_v) * np.sin(m_psi + b_psi) - m_v * np.sin(m_psi)
-        return np.array([_mean(vn), _mean(ve)])
+        return np.array(filter_kernels.ne_change(b_v, b_psi, m_v, m_psi))
 
     def _fold_references(self, b_v: float, b_psi: float, m_v: np.ndarray, m_psi: np.ndarray) -> None:
         """reference_frame "ne": move the loops' speed / track references (b_v, b_psi on top of the
@@ -1057,11 +1076,12 @@ class AcqTrackNavigator:
         cfg = self.config
         arrays = self._arrays()
         t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = arrays
-        if int(valid.sum()) < self._n_min:
+        n_valid = int(valid.sum())
+        if n_valid < self._n_min:
             self.health.skip(
                 s.t_s,
                 "transect_too_few_samples",
-                f"acq_track: {int(valid.sum())} valid samples of {valid.size}; loops skipped",
+                f"acq_track: {n_valid} valid samples of {valid.size}; loops skipped",
             )
             self._out_of_lock(s, "too few valid samples")
             return
@@ -1080,11 +1100,13 @@ class AcqTrackNavigator:
             its, locks, ran, shp, h_p, o_n, o_e,
         )  # fmt: skip
         p_s = (lat_p, lon_p)
-        self.iterations = [int(its[0]), int(its[1]), int(its[2]), int(its[3])]
+        # the kernel's small outputs as Python lists: per-element numpy indexing costs more than tolist
+        self.iterations = its.tolist()
         self.spacing = (sp_v, sp_psi)
-        self.v_shape = bool(np.all(shp[ran, 0] != 0.0))
-        shapes = {k: tracking.VShape(bool(shp[k, 0]), *shp[k, 1:].tolist()) for k in (0, 1)}
-        locks = [bool(x) for x in locks]
+        shp_rows = shp.tolist()
+        self.v_shape = all(row[0] != 0.0 for row, r in zip(shp_rows, ran.tolist(), strict=True) if r)
+        shapes = {k: tracking.VShape(bool(shp_rows[k][0]), *shp_rows[k][1:]) for k in (0, 1)}
+        locks = locks.tolist()
         r_mean = _nanmean(rng)
         sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
         self.snr_db, res_sigma = terrain_snr_db(h_p, d, valid, sig0, cfg.remove_bias)
@@ -1148,19 +1170,17 @@ class AcqTrackNavigator:
             return
         # consecutive transects share N - 1 samples: each epoch's fix brings 1/overlap of new information
         if self._ne_frame:  # the 4-state filter: the fix corrects the centroid and the velocity bias
-            X = self.X
             Ro = self._fix_overlap * R
-            Kx = X[:, :2] @ _inv2(X[:2, :2] + Ro)
-            dx = Kx @ r_ne
+            X_new, dx = np.empty((4, 4)), np.empty(4)
+            if not filter_kernels.ne_fix_gain(self.X, Ro, float(r_ne[0]), float(r_ne[1]), X_new, dx):
+                raise np.linalg.LinAlgError("singular 2 x 2 matrix")
             e_new = self.e_ne + dx[2:]
             if math.hypot(e_new[0], e_new[1]) > cfg.max_speed_bias_mps:  # beyond the plausible bias
                 self.last_innovation = (s.t_s, r_ne, S)
                 lim = cfg.max_speed_bias_mps
                 self._out_of_lock(s, f"false lock: velocity bias {math.hypot(*e_new):.1f} m/s beyond {lim:g}")
                 return
-            IK = np.eye(4)
-            IK[:, :2] -= Kx
-            self.X = IK @ X @ IK.T + Kx @ Ro @ Kx.T
+            self.X = X_new
             dc = dx[:2]
             self.Pc = self.X[:2, :2].copy()
         else:
@@ -1184,21 +1204,23 @@ class AcqTrackNavigator:
         dla_n, dlo_n = self._offsets(dt, m_v, m_psi, b_v, b_psi, self.p0[0], (r_n, r_e))
         self.p0 = (c_new[0] - dla_n[c], c_new[1] - dlo_n[c])
         # loop sigmas: the V's slopes against the cost noise (sigma sqrt((1 - 2/pi)/N), MAD of Gaussians)
-        n_ok = max(int(valid.sum()), 1)
+        n_ok = max(n_valid, 1)
         cost_noise = sig0 * math.sqrt((1.0 - 2.0 / math.pi) / n_ok)
-        sv = [
-            self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
-            self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
-        ]
+        mv_mean = _mean(m_v)  # the (corrected) aiding speed over the transect, used twice below
         if self._ne_frame:  # the references' sigma is e_ne's, along / across the track
-            Xe = self.X[2:, 2:]
+            (xe00, xe01), (_, xe11) = self.X[2:, 2:].tolist()
             c_, s_ = math.cos(psi), math.sin(psi)
-            s_al = c_ * c_ * Xe[0, 0] + 2 * c_ * s_ * Xe[0, 1] + s_ * s_ * Xe[1, 1]
-            s_cr = s_ * s_ * Xe[0, 0] - 2 * c_ * s_ * Xe[0, 1] + c_ * c_ * Xe[1, 1]
-            v_ref = max(_mean(m_v), 1.0)
+            s_al = c_ * c_ * xe00 + 2 * c_ * s_ * xe01 + s_ * s_ * xe11
+            s_cr = s_ * s_ * xe00 - 2 * c_ * s_ * xe01 + c_ * c_ * xe11
+            v_ref = max(mv_mean, 1.0)
             sv = [math.sqrt(max(s_al, 0.0)), math.sqrt(max(s_cr, 0.0)) / v_ref]
-        elif g < 1.0:  # the references are an exponential average of the loops' values (gain g)
-            sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]
+        else:
+            sv = [
+                self._loop_sigma(shapes[0], cost_noise, cfg.speed_narrow_spacing_mps),
+                self._loop_sigma(shapes[1], cost_noise, math.radians(cfg.heading_narrow_spacing_deg)),
+            ]
+            if g < 1.0:  # the references are an exponential average of the loops' values (gain g)
+                sv = [x * math.sqrt(g / (2.0 - g)) for x in sv]
         self.sigma_v, self.sigma_psi = sv
         self.last_innovation = (s.t_s, r_ne, S)
         verdict = self.integrity.add(s.t_s, nis, 2)
@@ -1214,7 +1236,7 @@ class AcqTrackNavigator:
         )
         # the newest sample's covariance: the centroid's, plus dead reckoning over the rest of the transect
         lever_s = float(t[-1] - t[c])
-        v_mean = max(_mean(m_v) + b_v, 1.0)
+        v_mean = max(mv_mean + b_v, 1.0)
         walk = self._walk2 * lever_s
         if self._ne_frame:
             self.P = self._ne_output_cov(lever_s)
@@ -1269,12 +1291,12 @@ class AcqTrackNavigator:
         dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
         self.pos = (self.p0[0] + dla[-1], self.p0[1] + dlo[-1])
         self.t_pos = s.t_s
-        v, psi = self._aided_speed(s), self._aided_track(s)
+        cv, cp = self._corrected(s)
+        v, psi = cv + self.b_v, cp + self.b_psi  # _aided_speed, _aided_track
         if self.lock_state == "tracking":
             if self.config.aiding:  # average the references: the aiding carries ramps without lag
                 ref_v, ref_psi = self.b_v, self.b_psi
                 if self._ne_frame:  # the NE bias as the newest sample's speed / track reference
-                    cv, cp = self._corrected(s)
                     ref_v, ref_psi = cv - s.m_v + self.b_v, float(wrap_rad(cp - s.m_psi)) + self.b_psi
                 ab_v, ab_psi = self.average.push(ref_v, ref_psi)
                 self.out_speed, self.out_track = s.m_v + ab_v, float(wrap_rad(s.m_psi + ab_psi))
@@ -1313,7 +1335,6 @@ class AcqTrackNavigator:
 
     # ------------------------------------------------------------------ output
     def estimate(self, t_s: float | None = None) -> Estimate:
-        cfg = self.config
         t = float(self.t_pos if t_s is None else t_s)
         lat, lon = self.pos
         v_ne = ground_vector(self.out_speed, self.out_track)
@@ -1321,18 +1342,14 @@ class AcqTrackNavigator:
         if math.isfinite(lat) and dtp != 0.0:
             r_n, r_e = self._radii(lat, self.h_m)
             lat, lon = lat + v_ne[0] * dtp / r_n, lon + v_ne[1] * dtp / r_e
-        C = np.zeros((9, 9))
-        P = self.P.copy()
+        C = self._C0.copy()  # the constant diagonal entries (vertical, attitude) set in the constructor
+        P = self.P
         if dtp > 0:  # the extrapolation's own growth (aiding-grade)
             P = P + _rot_diag(
                 self.out_track, (dtp * self.sigma_v) ** 2, (self.out_speed * dtp * self.sigma_psi) ** 2
             )
         C[:2, :2] = P
-        C[2, 2] = cfg.baro_bias_sigma_m**2 + 4.0
         C[3:5, 3:5] = _rot_diag(self.out_track, self.sigma_v**2, (self.out_speed * self.sigma_psi) ** 2)
-        C[5, 5] = 1.0
-        C[6, 6] = C[7, 7] = math.radians(3.0) ** 2
-        C[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
         extra = {
             "lock_state": self.lock_state,
             "snr_db": float(self.snr_db),
