@@ -71,15 +71,18 @@ class ParticleFilter(InsRiddenFilter):
     Settings (besides InsRiddenFilter's): n_particles (default 10,000), ess_threshold (in (0, 1]: resample
     when ESS < ess_threshold * n_particles), roughening (>= 0, Gordon's K setting the jitter's scale, see
     the module docstring; default 0.1; at 0.02 clouds impoverished: NEES 4.9-6.8 over 40 runs),
-    position_noise_m_per_sqrt_s (default 0.9),
-    velocity_noise_mps_per_sqrt_s, heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng.
+    position_noise_m_per_sqrt_s (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s
+    (default 0.02: the particles' velocity offsets need the diversity, learnt only through the weights and
+    resampling; with 0.01 a 0.9 position walk stood in, and 100 runs of scripts/filter_statistics.py had 69 %
+    of the epochs' ANEES in band against 100 % now), heading_noise_rad_per_sqrt_s (process noise),
+    max_memory_mb, rng.
     """
 
     name = "pf"
 
     def __init__(self, dem=None, n_particles: int = 10_000, ess_threshold: float = 0.5,
                  roughening: float = 0.1,
-                 position_noise_m_per_sqrt_s: float = 0.9, velocity_noise_mps_per_sqrt_s: float = 0.01,
+                 position_noise_m_per_sqrt_s: float = 0.1, velocity_noise_mps_per_sqrt_s: float = 0.02,
                  heading_noise_rad_per_sqrt_s: float = 2e-5, max_memory_mb: float = 2048.0,
                  rng: np.random.Generator | None = None, **settings):
         if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)) or n_particles < 2:
