@@ -3,7 +3,7 @@ measurements they took (terrain.metrics.track_crlb, computed here from the true 
 gradients there, the IRA's noise plus the map's actual error there, and the filters' prior). The process noise
 of the bound is the INS's: the flight starts with the true velocity and attitude, so the INS error grows only
 from the navigation IMU's bias and noise (< 1 m over the minute) and the bound takes none; with the filters'
-own random walk (pmf 1.1, pf 0.9 m/sqrt(s)) it is larger (checked).
+own process noise (position 0.1 m/sqrt(s) and a velocity offset, both filters) it is larger.
 
 The truth is a kinematic level flight (trn_env.flight.kinematic) at 85 m/s, ~1,500 m above the rough start of
 the default route (2 km roughness ~100 m, the 90th percentile of the Jacksboro DEM); the world is the 3"
