@@ -369,8 +369,8 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--terrains", nargs="+", default=list(TERRAINS), choices=list(TERRAINS))
-    p.add_argument("--train-steps", type=int, default=4096,
-                   help="PPO env steps (30 s decisions) per terrain (0: no PPO); default 4096 (~450 "
+    p.add_argument("--train-steps", type=int, default=12288,
+                   help="PPO env steps (30 s decisions) per terrain (0: no PPO); default 12288 (~1,200 "
                         "episodes); longer: e.g. 20000 (see the README for the CPU time per step)")
     p.add_argument("--envs", type=int, default=2, help="training envs (SubprocVecEnv workers; default 2)")
     p.add_argument("--seeds", type=int, default=4, help="episode seeds per held-out goal (default 4)")
