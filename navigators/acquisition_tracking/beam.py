@@ -30,8 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from navigators.acquisition_tracking.correlation import _map_height, replica_offsets
-from terrain.kernels import bilinear_with_gradient
+from navigators.acquisition_tracking.correlation import _map_height, replica_offsets, slope_sums
 from terrain.queries.radar_altimeter import _ra_batch
 from terrain.queries.shared import _ra_tables, _ra_workspace
 
@@ -145,22 +144,4 @@ def information_at(
     dla = np.empty(n)
     dlo = np.empty(n)
     replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
-    ca = math.cos(track_rad)
-    sa = math.sin(track_rad)
-    s_al = 0.0
-    s_cr = 0.0
-    for i in range(n):
-        if not valid[i]:
-            continue
-        _, g_lat, g_lon = bilinear_with_gradient(
-            heights, lat0, lon0, dlat, dlon, lat_s + dla[i], lon_s + dlo[i]
-        )
-        if g_lat != g_lat or g_lon != g_lon:
-            continue
-        g_n = g_lat / r_n
-        g_e = g_lon / r_e_cos
-        a = g_n * ca + g_e * sa
-        c = -g_n * sa + g_e * ca
-        s_al += a * a
-        s_cr += c * c
-    return s_al, s_cr
+    return slope_sums(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, valid, r_n, r_e_cos, track_rad)

@@ -162,24 +162,18 @@ def replica_heights(
 
 
 @njit(cache=True)
-def along_cross_information(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, valid, track_rad
-):
-    """(sum of squared along-track, cross-track map slopes) over the replica's valid samples (bilinear
-    gradient; 1/m^2 x m^2 = dimensionless): the terrain information a match has in each direction."""
-    n = dt.shape[0]
-    dlat_w = np.empty(n)
-    dlon_w = np.empty(n)
-    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
+def slope_sums(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, valid, r_n, r_e_cos, track_rad):
+    """(sum of squared along-track, cross-track map slopes) at the points (lat_s + dla, lon_s + dlo) of the
+    valid samples (bilinear gradient; dimensionless)."""
     ca = math.cos(track_rad)
     sa = math.sin(track_rad)
     s_al = 0.0
     s_cr = 0.0
-    for i in range(n):
+    for i in range(dla.shape[0]):
         if not valid[i]:
             continue
         _, g_lat, g_lon = bilinear_with_gradient(
-            heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[i], lon_s + dlon_w[i]
+            heights, lat0, lon0, dlat, dlon, lat_s + dla[i], lon_s + dlo[i]
         )
         if g_lat != g_lat or g_lon != g_lon:
             continue
@@ -190,6 +184,21 @@ def along_cross_information(
         s_al += a * a
         s_cr += c * c
     return s_al, s_cr
+
+
+@njit(cache=True)
+def along_cross_information(
+    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, valid, track_rad
+):
+    """(sum of squared along-track, cross-track map slopes) over the replica's valid samples (bilinear
+    gradient; 1/m^2 x m^2 = dimensionless): the terrain information a match has in each direction."""
+    n = dt.shape[0]
+    dlat_w = np.empty(n)
+    dlon_w = np.empty(n)
+    replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
+    return slope_sums(
+        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dlat_w, dlon_w, valid, r_n, r_e_cos, track_rad
+    )
 
 
 # --------------------------------------------------------------------------------------- references
