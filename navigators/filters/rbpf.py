@@ -147,9 +147,12 @@ class RaoBlackwellizedPF:
         look_angle_sigma_deg: float = 0.1,
         half_window_deg: float = 45.0,
         window_edge_margin_deg: float = 1.0,
+        window_edge_range: bool = True,
         theta_velocity_rows: bool = True,
         ambiguity_gap_m: float = 3.0,
         ambiguity_weight: float = 0.5,
+        theta_linearity_sigmas: float = 3.0,
+        theta_collapse_ess: float = 0.01,
         max_range_m: float = 10000.0,
         init_pos_sigma_m=(50.0, 50.0, 20.0),
         init_vel_sigma_mps=(0.7071067811865476, 0.7071067811865476, 0.5),   # Table 1: 1/sqrt(2)
@@ -234,12 +237,18 @@ class RaoBlackwellizedPF:
             raise ValueError("window_edge_margin_deg must lie in [0, half_window_deg), "
                              f"got {window_edge_margin_deg!r}")
         self.edge_margin_rad = math.radians(em)
+        self.window_edge_range = bool(window_edge_range)
         self.theta_velocity_rows = bool(theta_velocity_rows)
         self.ambiguity_gap_m = _positive("ambiguity_gap_m", ambiguity_gap_m, True)
         aw = _positive("ambiguity_weight", ambiguity_weight, True)
         if not aw <= 1.0:
             raise ValueError(f"ambiguity_weight must lie in [0, 1], got {ambiguity_weight!r}")
         self.ambiguity_weight = aw
+        self.theta_linearity_sigmas = _positive("theta_linearity_sigmas", theta_linearity_sigmas, True)
+        ce = _positive("theta_collapse_ess", theta_collapse_ess, True)
+        if not ce < 1.0:
+            raise ValueError(f"theta_collapse_ess must lie in [0, 1), got {theta_collapse_ess!r}")
+        self.theta_collapse_ess = ce
         self.max_range_m = _positive("max_range_m", max_range_m)
         self.init_pos_sigma = _triple("init_pos_sigma_m", init_pos_sigma_m, False)
         sv = _triple("init_vel_sigma_mps", init_vel_sigma_mps)
@@ -453,7 +462,8 @@ class RaoBlackwellizedPF:
                 self.health.status = "ok"
 
     def _ira_update(self, te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll) -> bool:
-        if abs(y_ira[1]) > self.half_window_rad - self.edge_margin_rad:
+        edge = abs(y_ira[1]) > self.half_window_rad - self.edge_margin_rad
+        if edge and not self.window_edge_range:
             # the return sits on the look window's edge: the window, not the terrain's minimum, fixed the
             # point, so its range depends on roll and its look angle is the window's - eqs 24-25 (an
             # interior minimum on the zero-Doppler line) do not describe it
@@ -466,8 +476,13 @@ class RaoBlackwellizedPF:
         out = ira_model.predict_ira(self.dem, lat_i, lon_i, h_i, v, C, self.half_window_rad, self.max_range_m)
         Hs = np.zeros((self.n, 2, 6))
         ira_model.measurement_rows(out, v, C, Hs)
-        if self.theta_velocity_rows:
-            Hs[:, 1, :3] = self._theta_velocity_row(out, lat_i, lon_i, h_i, v, C)
+        theta_curv = 0.0
+        if edge:
+            # on the window's edge (see window_edge_range): the range alone, its velocity and attitude rows
+            # by differences, as eqs 24-25 describe an interior minimum only
+            Hs[:, 0, :] = self._edge_range_row(out, lat_i, lon_i, h_i, v, C)
+        elif self.theta_velocity_rows:
+            Hs[:, 1, :3], theta_curv = self._theta_velocity_row(out, lat_i, lon_i, h_i, v, C)
         H = np.zeros((self.n, 2, 12))
         H[:, :, :6] = Hs
         ok = out[:, ira_model.OUT_VALID] > 0.5
@@ -487,24 +502,49 @@ class RaoBlackwellizedPF:
         gap = out[:, ira_model.OUT_R2] - out[:, ira_model.OUT_R]
         near = ok & np.isfinite(gap) & (gap < self.ambiguity_gap_m)
         dims = 1 if float(wq[near].sum()) > self.ambiguity_weight * float(wq.sum()) else 2
-        if dims == 1:
-            sk = self.health.skipped
-            sk["ira_theta_ambiguous"] = sk.get("ira_theta_ambiguous", 0) + 1
-        y = np.array(y_ira)[:dims]
-        pred = np.stack([out[:, ira_model.OUT_R], out[:, ira_model.OUT_THETA]], axis=1)[:, :dims]
-        H = np.ascontiguousarray(H[:, :dims, :])
-        e = np.where(ok[:, None], y[None, :] - pred, 0.0)
-        # innovation moments of the mixture (before the update): the fixed Estimate.extra keys
         wp = np.exp(logw_prev - logw_prev.max())
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
-        pred_ok = np.ascontiguousarray(np.where(ok[:, None], pred, 0.0))
-        self._last_range_m = float(np.sum(wp * pred_ok[:, 0]))
-        r_var = np.ascontiguousarray(self._r_var_now(self._last_range_m)[:dims])
-        ybar, S = kern.predictive_moments(H, self.xl, self.P, r_var, pred_ok, ok, wp)
-        nu = y - ybar
+        # the look angle's variance as this update uses it (tempered while acquiring): the yardstick of
+        # the theta-velocity row's linearity (_theta_velocity_row)
+        theta_var = self._r_var_now(float(np.sum(wp * np.where(ok, out[:, ira_model.OUT_R], 0.0))))[1]
+        sk = self.health.skipped
+        if edge:
+            dims = 1
+            sk["ira_window_edge"] = sk.get("ira_window_edge", 0) + 1
+        elif dims == 1:
+            sk["ira_theta_ambiguous"] = sk.get("ira_theta_ambiguous", 0) + 1
+        elif self.theta_linearity_sigmas > 0.0 and not theta_curv < self.theta_linearity_sigmas * math.sqrt(
+                theta_var):
+            dims = 1
+            sk["ira_theta_nonlinear"] = sk.get("ira_theta_nonlinear", 0) + 1
+        H_full = H
         saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
-        n_bad = kern.linear_update(self.xl, self.P, H, e, r_var, self.logw, ok, ll)
+        # the collapse guard below is for a converged cloud (no acquisition tempering): while acquiring, a
+        # look angle that selects a few particles is the bootstrap's normal work
+        converged = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0)) <= self.acquisition_spread_m
+        while True:
+            y = np.array(y_ira)[:dims]
+            pred = np.stack([out[:, ira_model.OUT_R], out[:, ira_model.OUT_THETA]], axis=1)[:, :dims]
+            H = np.ascontiguousarray(H_full[:, :dims, :])
+            e = np.where(ok[:, None], y[None, :] - pred, 0.0)
+            # innovation moments of the mixture (before the update): the fixed Estimate.extra keys
+            pred_ok = np.ascontiguousarray(np.where(ok[:, None], pred, 0.0))
+            self._last_range_m = float(np.sum(wp * pred_ok[:, 0]))
+            r_var = np.ascontiguousarray(self._r_var_now(self._last_range_m)[:dims])
+            ybar, S = kern.predictive_moments(H, self.xl, self.P, r_var, pred_ok, ok, wp)
+            nu = y - ybar
+            n_bad = kern.linear_update(self.xl, self.P, H, e, r_var, self.logw, ok, ll)
+            if (dims == 1 or self.theta_collapse_ess <= 0.0 or not converged
+                    or self._ess(self.logw) >= self.theta_collapse_ess * self.n):
+                break
+            # the look angle alone would leave (nearly) one particle: theta is then a function of position
+            # sharper than the cloud can sample (a flat minimum, or the closest point at a bilinear cell's
+            # kink, where it jumps): its information cannot be represented, and taking it collapses every
+            # Kalman part onto one ancestor's. The range alone instead.
+            self.xl, self.P, self.logw = (a.copy() for a in saved)
+            dims = 1
+            sk["ira_theta_collapse"] = sk.get("ira_theta_collapse", 0) + 1
         fin_ll = ll[np.isfinite(ll)]
         # log N at OUTLIER_SIGMA for the variances inflated at most 100x: the rejection floor
         ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(r_var)) * 100.0 ** dims)
@@ -545,29 +585,83 @@ class RaoBlackwellizedPF:
         self._integrity_test(te, nis, dims)
         return True
 
-    def _theta_velocity_row(self, out, lat_i, lon_i, h_i, v, C) -> np.ndarray:
+    def _edge_range_row(self, out, lat_i, lon_i, h_i, v, C) -> np.ndarray:
+        """Range sensitivity (1 x 6: dv_ned m/s, eps_ned rad) of a return on the look window's edge, where the
+        window's boundary ray, not the terrain's minimum, fixes the point: eq 24's envelope argument does
+        not hold there (the range moves with the ray, so with roll), so central differences of eq 23 (the
+        exact constrained search) at the cloud's weighted-mean position, shared by the particles. Errors
+        computed minus true: R_true = R(v - dv, (I + [eps x]) C), so H_v = -dR/dv, H_eps = +dR/deps."""
+        ok = out[:, ira_model.OUT_VALID] > 0.5
+        w = np.where(ok, np.exp(self.logw - np.max(self.logw)), 0.0)
+        row = np.zeros(6)
+        if not w.sum() > 0:
+            return row
+        w /= w.sum()
+        la, lo, hh = (np.array([float(w @ np.where(ok, x, 0.0))]) for x in (lat_i, lon_i, h_i))
+        hw, rmax = self.half_window_rad, self.max_range_m
+        dv, de = 0.2, 2e-3     # de: eq 23's search resolves ~5 mm; R is smooth in the ray angle
+
+        def rng_at(vv, CC):
+            r = ira_model.predict_ira(self.dem, la, lo, hh, vv, CC, hw, rmax)
+            return r[0, ira_model.OUT_R] if r[0, ira_model.OUT_VALID] > 0.5 else math.nan
+
+        for j in range(3):
+            d = np.zeros(3)
+            d[j] = dv
+            row[j] = -(rng_at(v + d, C) - rng_at(v - d, C)) / (2 * dv)
+            e = np.zeros(3)
+            e[j] = de
+            Ep = np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
+            row[3 + j] = (rng_at(v, (np.eye(3) + Ep) @ C) - rng_at(v, (np.eye(3) - Ep) @ C)) / (2 * de)
+        return np.where(np.isfinite(row), row, 0.0)
+
+    def _theta_velocity_row(self, out, lat_i, lon_i, h_i, v, C) -> tuple[np.ndarray, float]:
         """Look-angle sensitivity to the velocity error (1 x 3, rad per m/s), which eq 23's look-angle row
         leaves out: a velocity error tilts and turns the zero-Doppler line (the shift eq 24 applies to the
         range), and the closest point moves along the terrain, so theta moves too (on the seed002 flight
         ~0.1 deg per m/s of vertical velocity, up to 0.5). Central differences of eqs 23/26 (the exact
         search) at the cloud's weighted-mean position, shared by the particles; H = -dtheta/dv (errors
-        computed minus true, as eq 24's range row)."""
+        computed minus true, as eq 24's range row).
+
+        Also how far theta departs from that line over the cloud's velocity spread: the second difference's
+        term, 0.5 sum_j |theta''_jj| sigma_vj^2 (rad; inf when a perturbed search has no return), which
+        _ira_update compares with theta_linearity_sigmas look-angle sigmas (a flat minimum, or a closest
+        point at a bilinear cell's kink, jumps under a small tilt of the line; a Kalman update through this
+        row would then read the jump as velocity information)."""
         ok = out[:, ira_model.OUT_VALID] > 0.5
         w = np.where(ok, np.exp(self.logw - np.max(self.logw)), 0.0)
         if not w.sum() > 0:
-            return np.zeros(3)
+            return np.zeros(3), math.inf
         w /= w.sum()
         la, lo, hh = (np.array([float(w @ np.where(ok, x, 0.0))]) for x in (lat_i, lon_i, h_i))
         row = np.zeros(3)
         dv = 0.2
+        hw, rmax = self.half_window_rad, self.max_range_m
+        c = ira_model.predict_ira(self.dem, la, lo, hh, v, C, hw, rmax)
+        linear = bool(c[0, ira_model.OUT_VALID] > 0.5)
+        sig_v2 = np.clip(np.diag(self._cov9)[3:6], 0.0, None)
+        curv = 0.0
         for j in range(3):
             d = np.zeros(3)
             d[j] = dv
-            a = ira_model.predict_ira(self.dem, la, lo, hh, v + d, C, self.half_window_rad, self.max_range_m)
-            b = ira_model.predict_ira(self.dem, la, lo, hh, v - d, C, self.half_window_rad, self.max_range_m)
+            a = ira_model.predict_ira(self.dem, la, lo, hh, v + d, C, hw, rmax)
+            b = ira_model.predict_ira(self.dem, la, lo, hh, v - d, C, hw, rmax)
             if a[0, ira_model.OUT_VALID] > 0.5 and b[0, ira_model.OUT_VALID] > 0.5:
-                row[j] = -(a[0, ira_model.OUT_THETA] - b[0, ira_model.OUT_THETA]) / (2 * dv)
-        return row
+                ta, tb = a[0, ira_model.OUT_THETA], b[0, ira_model.OUT_THETA]
+                row[j] = -(ta - tb) / (2 * dv)
+                if linear:
+                    curv += 0.5 * abs(ta - 2.0 * c[0, ira_model.OUT_THETA] + tb) / dv**2 * sig_v2[j]
+            else:
+                linear = False
+        return row, (curv if linear else math.inf)
+
+    @staticmethod
+    def _ess(logw: np.ndarray) -> float:
+        fin = np.isfinite(logw)
+        if not fin.any():
+            return 0.0
+        w = np.exp(logw[fin] - np.max(logw[fin]))
+        return float(w.sum() ** 2 / np.sum(w * w))
 
     def _integrity_test(self, te: float, nis: float, dof: int) -> None:
         """Feed the innovation test; on entering "degraded" re-spread the particles' positions (logged)."""

@@ -1,0 +1,155 @@
+"""The RBPF's IRA samples that eqs 24-25 do not describe (navigators.filters.rbpf):
+
+- a return on the look window's edge updates on the range alone, with velocity and attitude rows by
+  differences (`_edge_range_row`): checked against central differences of the exact branch-and-bound search
+  terrain.queries.ira_return (an independent implementation of the return) on the seed002 turning flight;
+- a look angle that would leave (nearly) one particle (`theta_collapse_ess`) is dropped for the range: on
+  seed 2047 of the reproduction at 48 s (wings level in a roll reversal) the look-angle update left 4 of
+  1,000 particles and a singular horizontal covariance; with the guard the cloud keeps its spread;
+- the look angle's linearity in velocity (`theta_linearity_sigmas`) against a dense evaluation of eq 26
+  along the velocity perturbation."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import terrain
+from navigators.filters.rbpf import RaoBlackwellizedPF
+from navigators.measurements import ira_seed002 as ira_model
+from navigators.protocol import EXTRA_ESS
+from terrain.queries import ira_return
+
+_SPEC = importlib.util.spec_from_file_location(
+    "reproduce_seed002", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed002.py")
+repro = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(repro)
+
+
+@pytest.fixture(scope="module")
+def dem():
+    return terrain.load("jacksboro")
+
+
+@pytest.fixture(scope="module")
+def truth(dem):
+    return repro.kinematic_truth(70.0, dem, "turns").truth(70.0)
+
+
+def _skew(e):
+    return np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
+
+
+def _one_particle_filter(dem):
+    nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(0), n_particles=2, acquisition_particles=0)
+    nav.logw = np.zeros(2)
+    return nav
+
+
+def test_edge_range_rows_match_the_exact_search(dem, truth):
+    nav = _one_particle_filter(dem)
+    hw = nav.half_window_rad
+    edge_ks = []
+    for k in range(0, len(truth), 50):
+        out = ira_model.predict_ira(dem, truth.lat_rad[k:k + 1], truth.lon_rad[k:k + 1],
+                                    truth.h_msl_m[k:k + 1], truth.v_ned_mps[k], truth.C_bn[k], hw)
+        if out[0, ira_model.OUT_VALID] > 0.5 and abs(out[0, ira_model.OUT_THETA]) > hw - nav.edge_margin_rad:
+            edge_ks.append(k)
+    assert len(edge_ks) >= 3, "the turning flight should put some returns on the window's edge"
+    for k in edge_ks[:: max(len(edge_ks) // 4, 1)][:4]:
+        lat, lon, h = (np.full(2, x[k]) for x in (truth.lat_rad, truth.lon_rad, truth.h_msl_m))
+        v, C = truth.v_ned_mps[k], truth.C_bn[k]
+        out = ira_model.predict_ira(dem, lat, lon, h, v, C, hw)
+        row = nav._edge_range_row(out, lat, lon, h, v, C)
+
+        def exact(vv, CC, k=k, v=v):
+            r = ira_return(dem, truth.lat_rad[k:k + 1], truth.lon_rad[k:k + 1], truth.h_msl_m[k:k + 1],
+                           np.asarray(vv, float)[None, :], np.asarray(CC, float)[None, :, :], hw)
+            return float(r.range_m[0])
+
+        ref = np.zeros(6)
+        dv, de = 0.2, 2e-3
+        for j in range(3):
+            d = np.zeros(3)
+            d[j] = dv
+            ref[j] = -(exact(v + d, C) - exact(v - d, C)) / (2 * dv)
+            e = np.zeros(3)
+            e[j] = de
+            Ep = _skew(e)
+            ref[3 + j] = (exact(v, (np.eye(3) + Ep) @ C) - exact(v, (np.eye(3) - Ep) @ C)) / (2 * de)
+        # the exact search's tolerance is 5 mm in range: over +-0.2 m/s that is 0.0125 m per m/s, over
+        # +-2e-3 rad 1.3 m per rad; the attitude rows are ~R tan(gamma), gamma the edge ray's angle from
+        # the terrain's normal (tens to hundreds of m per rad)
+        assert np.allclose(row[:3], ref[:3], atol=0.03), (k, row, ref)
+        assert np.allclose(row[3:], ref[3:], rtol=0.05, atol=3.0), (k, row, ref)
+        assert np.max(np.abs(row[3:])) > 10.0, (k, row)     # on the edge the range moves with the ray
+
+
+def test_theta_collapse_guard_keeps_the_cloud(dem):
+    """Seed 2047 of the reproduction, 50 s: at 47.99 s the look angle would leave a handful of particles."""
+    seed, duration, t_event = 2047, 50.0, 47.99
+    res = {}
+    for label, ess in (("guard", 0.01), ("off", 0.0)):
+        nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(seed), imu_samples="instant",
+                                 terrain_model_sigma_m=0.0, integrity_alpha=1e-12, theta_collapse_ess=ess,
+                                 **repro.FILTER_SETTINGS)
+        seen = {}
+        update = nav.update
+
+        def recording_update(frames, update=update, seen=seen, nav=nav):
+            est = update(frames)
+            if abs(est.t_s - t_event) < 0.015:
+                seen["ess"] = est.extra[EXTRA_ESS]
+                seen["eig_min_m2"] = float(np.linalg.eigvalsh(est.covariance[:2, :2])[0])
+            return est
+
+        nav.update = recording_update
+        repro.run_open_loop(nav, repro.kinematic_truth(duration, dem, "turns"), dem, duration, seed)
+        res[label] = seen | {"collapses": nav.health.skipped.get("ira_theta_collapse", 0)}
+    assert res["off"]["ess"] < 10.0 and res["off"]["collapses"] == 0, res   # measured 3.9 of 1,000
+    assert res["guard"]["ess"] > 100.0 and res["guard"]["collapses"] >= 1, res  # measured 885
+    assert res["guard"]["eig_min_m2"] > 1.0, res                             # measured 6.8-7.7 m^2
+
+
+def test_theta_linearity_flag_against_dense_evaluation(dem, truth):
+    """Where the curvature figure says linear, eq 26 along the velocity perturbation deviates from the
+    central difference's line by less than a few theta_linearity_sigmas look-angle sigmas over the cloud's
+    spread; where it says not, by a good part of it (a dense 41-point evaluation of the same search, not the
+    filter's 3 points)."""
+    nav = _one_particle_filter(dem)
+    sig_v = 0.3
+    nav._cov9 = np.diag([1.0, 1.0, 1.0, sig_v**2, sig_v**2, sig_v**2, 1e-6, 1e-6, 1e-6])
+    hw = nav.half_window_rad
+    lim = nav.theta_linearity_sigmas * math.sqrt(nav.r_var[1])
+    seen = {True: 0, False: 0}
+    for k in range(0, len(truth), 25):
+        lat, lon, h = (np.full(2, x[k]) for x in (truth.lat_rad, truth.lon_rad, truth.h_msl_m))
+        v, C = truth.v_ned_mps[k], truth.C_bn[k]
+        out = ira_model.predict_ira(dem, lat, lon, h, v, C, hw)
+        if out[0, ira_model.OUT_VALID] < 0.5 or abs(out[0, ira_model.OUT_THETA]) > hw - nav.edge_margin_rad:
+            continue
+        row, curv = nav._theta_velocity_row(out, lat, lon, h, v, C)
+        linear = curv < lim          # as _ira_update decides it (untempered: a converged cloud)
+        th0 = out[0, ira_model.OUT_THETA]
+        dev = 0.0
+        for j in range(3):
+            s = np.linspace(-sig_v, sig_v, 41)
+            th = np.array([ira_model.predict_ira(dem, lat[:1], lon[:1], h[:1], v + np.eye(3)[j] * x, C, hw)[
+                0, ira_model.OUT_THETA] for x in s])
+            dev += float(np.max(np.abs(th - (th0 - row[j] * s))))     # row = -dtheta/dv
+        seen[linear] += 1
+        if linear:
+            assert dev < 3.0 * lim, (k, dev, lim)
+        else:
+            assert dev > 0.3 * lim, (k, dev, lim)
+    assert seen[True] >= 5, seen
+
+
+def test_settings_are_validated(dem):
+    for name, bad in (("theta_linearity_sigmas", -1.0), ("theta_linearity_sigmas", float("nan")),
+                      ("theta_collapse_ess", 1.0), ("theta_collapse_ess", -0.1)):
+        with pytest.raises(ValueError, match=name):
+            RaoBlackwellizedPF(dem=dem, **{name: bad})
+
