@@ -173,11 +173,56 @@ def convergence_figures(res: dict, duration_s: float) -> dict:
     return out
 
 
+DECORRELATED_ACF = 0.1   # autocorrelation below which NEES epochs count as independent samples
+
+
+def nees_autocorrelation(nees: np.ndarray) -> np.ndarray:
+    """Autocorrelation over lags 0 .. epochs - 2 of the runs' NEES series (runs x epochs) about the per-epoch
+    ANEES, pooled over the runs (lag k from runs x (epochs - k) pairs): what is left once the time profile
+    all runs share is taken out, i.e. the correlation that sets how many independent samples the pooled
+    ANEES averages."""
+    x = nees - nees.mean(axis=0, keepdims=True)
+    v = float(np.mean(x * x))
+    n_ep = x.shape[1]
+    return np.array([np.mean(x[:, :n_ep - k] * x[:, k:]) / v for k in range(n_ep - 1)])
+
+
+def pooled_nees_figures(nees: np.ndarray, dof: int = 2) -> dict:
+    """The pooled ANEES (all runs x epochs) and its 95 % bounds three ways: (a) chi2(dof R E) / (R E) as if
+    all R x E samples were independent (too narrow: epochs 1 s apart are strongly correlated); (b) thinned to
+    every k-th epoch, k the first lag at which the NEES autocorrelation (nees_autocorrelation) falls below
+    DECORRELATED_ACF, chi2 bounds for the R x ceil(E / k) samples left; (c) a t interval of the runs' time
+    averages (the runs are independent whatever the epochs' correlation). Also the integrated autocorrelation
+    time tau = 1 + 2 sum rho (lags up to the first non-positive rho) and R E / tau."""
+    runs, n_ep = nees.shape
+    acf = nees_autocorrelation(nees)
+    below = np.nonzero(acf < DECORRELATED_ACF)[0]
+    k = int(below[0]) if below.size else n_ep
+    thin = nees[:, ::k]
+    n_thin = thin.size
+    nonpos = np.nonzero(acf <= 0.0)[0]
+    tau = 1.0 + 2.0 * float(np.sum(acf[1:nonpos[0] if nonpos.size else acf.size]))
+    n_all = runs * n_ep
+    ta = nees.mean(axis=1)
+    half = float(stats.t.ppf(0.975, runs - 1) * ta.std(ddof=1) / math.sqrt(runs))
+    return {"anees_pooled": float(nees.mean()),
+            "bounds_95_independent_epochs": [float(x) for x in stats.chi2.ppf([0.025, 0.975], dof * n_all)
+                                             / n_all],
+            "autocorrelation_lags_0_10_20_30_40_60": [float(acf[i]) for i in (0, 10, 20, 30, 40, 60)
+                                                      if i < acf.size],
+            "thinning_epochs": k, "thinned_samples": int(n_thin), "anees_thinned": float(thin.mean()),
+            "bounds_95_thinned": [float(x) for x in stats.chi2.ppf([0.025, 0.975], dof * n_thin) / n_thin],
+            "integrated_autocorrelation_epochs": tau, "effective_samples": n_all / tau,
+            "runs_time_average_t_interval_95": [float(ta.mean() - half), float(ta.mean() + half)]}
+
+
 def nees_figures(res: dict, t_from_s: float) -> dict:
     """Per-epoch ANEES (the horizontal NEES e' P^-1 e averaged over the converged runs) after t_from_s
     against its 95 % chi-square interval chi2.ppf([0.025, 0.975], 2 n) / n, the fraction of epochs inside
     it, and the least fraction a consistent filter shows with 97.5 % probability: binom.ppf(0.025, E, 0.95)
     / E over the E epochs (as if independent; neighbouring epochs are correlated, so the spread is wider).
+    "pooled": the ANEES over all epochs and runs with its bounds (pooled_nees_figures: as if independent,
+    thinned to decorrelated epochs, and the runs' t interval).
     "common_error": RMS over the epochs of the runs' mean error, against sqrt(mean trace P / n), what it is
     when the runs' errors are independent (larger: the runs share an error - one world, one flight)."""
     out = {}
@@ -197,15 +242,15 @@ def nees_figures(res: dict, t_from_s: float) -> dict:
         n_ep = int(sel.sum())
         inside = (anees >= lo) & (anees <= hi)
         m = E.mean(axis=0)
+        axis_nees = E ** 2 / np.diagonal(P, axis1=2, axis2=3)
         out[label] = {"runs": n, "t_from_s": t_from_s, "epochs": n_ep, "anees_mean": float(anees.mean()),
                       "bounds_95": [float(lo), float(hi)],
                       "fraction_of_epochs_inside": float(np.mean(inside)),
                       "fraction_below": float(np.mean(anees < lo)),
                       "fraction_above": float(np.mean(anees > hi)),
                       "binomial_least_fraction_inside": float(stats.binom.ppf(0.025, n_ep, 0.95) / n_ep),
-                      "anees_time_average_bounds_95": [float(x) for x in
-                                                       stats.chi2.ppf([0.025, 0.975], 2 * n * n_ep)
-                                                       / (n * n_ep)],
+                      "pooled": pooled_nees_figures(nees),
+                      "nees_per_axis_north_east": [float(x) for x in axis_nees.mean(axis=(0, 1))],
                       "common_error_rms_m": float(np.sqrt(np.mean(np.sum(m * m, axis=1)))),
                       "common_error_if_independent_m": float(np.sqrt(np.mean(np.trace(P, axis1=2, axis2=3))
                                                                      / n)),
