@@ -14,12 +14,16 @@ Experiments (each prints a JSON block; --only NAME runs one):
   flight) for pmf, pf and ins_tercom (INS + batch TERCOM + EKF), with a 95 % Clopper-Pearson interval.
 - "nees": the horizontal position NEES e' P^-1 e averaged over the converged runs (ANEES) at every update
   after t_converged_s, against the 95 % chi-square interval for 2 x runs degrees of freedom (divided by
-  runs); the fraction of epochs inside and its binomial least value (nees_figures); the runs' common error.
+  runs); the fraction of epochs inside and its binomial least value (nees_figures); the runs' common error;
+  the pooled ANEES (all epochs of all runs) with bounds as if the epochs were independent, thinned to
+  decorrelated epochs (the lag where the measured NEES autocorrelation falls below 0.1) and the runs'
+  t interval (pooled_nees_figures).
 - "crlb": horizontal RMS over the converged runs and t >= t_converged_s against terrain.metrics.track_crlb
   of the IRA samples the filter takes (map gradients at their true closest points, prior 1 km, the filter's
   position random walk and velocity offset: initial sigma from the scenario, the filter's velocity random
-  walk), with the filter's measurement variance and with the actual one (the IRA's noise +
-  the measured world-minus-map RMS); and terrain.metrics.terrain_information's window CRLB along the track.
+  walk; for the pmf also its constant acceleration offset, acceleration_sigma_mps2), with the filter's
+  measurement variance and with the actual one (the IRA's noise + the measured world-minus-map RMS); and
+  terrain.metrics.terrain_information's window CRLB along the track.
 - "crosswind": a 20 m/s crosswind flight (crosswind_5km: 5,600 m MSL, seed 000's case), map = world (the
   high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs
   14-36) vs the conventional (eqs 9-13) closest point: horizontal RMS of each and their ratio.
@@ -315,8 +319,10 @@ def crlb_figures(res: dict, flight, t_from_s: float, settings: dict | None = Non
         # both filters carry the INS's velocity offset (its error is a ramp): the bound does too, with the
         # scenario's initial velocity sigma and the filter's velocity random walk
         sv0 = float(d["initial_errors"]["velocity_ned_mps"][0])
+        # the pmf also carries the INS error's constant acceleration (tilt, accelerometer bias): its bound too
         kw = dict(t_s=t, prior_sigma_m=p0, process_noise_m2_per_s=q, method=nav.map_interpolation,
-                  velocity_prior_sigma_mps=sv0, velocity_noise_mps_per_sqrt_s=s_v)
+                  velocity_prior_sigma_mps=sv0, velocity_noise_mps_per_sqrt_s=s_v,
+                  acceleration_prior_sigma_mps2=getattr(nav, "acceleration_sigma", 0.0))
         b_filter = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_filter), **kw).rms_m(t_from_s)
         b_actual = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_sensor), map_sigma_m=map_sigma,
                                       **kw).rms_m(t_from_s)
