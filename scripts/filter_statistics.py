@@ -21,9 +21,9 @@ Experiments (each prints a JSON block; --only NAME runs one):
 - "crlb": horizontal RMS over the converged runs and t >= t_converged_s against terrain.metrics.track_crlb
   of the IRA samples the filter takes (map gradients at their true closest points, prior 1 km, the filter's
   position random walk and velocity offset: initial sigma from the scenario, the filter's velocity random
-  walk; for the pmf also its constant acceleration offset, acceleration_sigma_mps2), with the filter's
-  measurement variance and with the actual one (the IRA's noise + the measured world-minus-map RMS); and
-  terrain.metrics.terrain_information's window CRLB along the track.
+  walk; for the pmf also its acceleration offset: g x the initial tilt and accel_bias_sigma_mps2), with
+  the filter's measurement variance and with the actual one (the IRA's noise + the measured world-minus-map
+  RMS); and terrain.metrics.terrain_information's window CRLB along the track.
 - "crosswind": a 20 m/s crosswind flight (crosswind_5km: 5,600 m MSL, seed 000's case), map = world (the
   high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs
   14-36) vs the conventional (eqs 9-13) closest point: horizontal RMS of each and their ratio.
@@ -319,10 +319,15 @@ def crlb_figures(res: dict, flight, t_from_s: float, settings: dict | None = Non
         # both filters carry the INS's velocity offset (its error is a ramp): the bound does too, with the
         # scenario's initial velocity sigma and the filter's velocity random walk
         sv0 = float(d["initial_errors"]["velocity_ned_mps"][0])
-        # the pmf also carries the INS error's constant acceleration (tilt, accelerometer bias): its bound too
+        # the pmf also carries the INS error's acceleration (initial tilt times g and the accelerometer bias,
+        # constant in NED on this straight flight): its bound too
+        s_a = 0.0
+        if name == "pmf":
+            tilt_rad = 1e-3 * float(d["initial_errors"]["attitude_mrad"][0])
+            s_a = math.hypot(9.80665 * tilt_rad, nav.accel_bias_sigma)
         kw = dict(t_s=t, prior_sigma_m=p0, process_noise_m2_per_s=q, method=nav.map_interpolation,
                   velocity_prior_sigma_mps=sv0, velocity_noise_mps_per_sqrt_s=s_v,
-                  acceleration_prior_sigma_mps2=getattr(nav, "acceleration_sigma", 0.0))
+                  acceleration_prior_sigma_mps2=s_a)
         b_filter = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_filter), **kw).rms_m(t_from_s)
         b_actual = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_sensor), map_sigma_m=map_sigma,
                                       **kw).rms_m(t_from_s)

@@ -6,7 +6,7 @@ Synthetic planar terrain h = h0 + g_n n + g_e e; level flight north with the IRA
 measured terrain height h_INS - R = g_n dn + g_e de + b + h0 + noise is linear in the state (horizontal
 offset dn, de and vertical offset b). The outlier weight is 0 (pure Gaussian likelihood); the sensor noise
 is the IRA's 3.5 m. Process noise: the PMF's horizontal random walk, its velocity random walk and constant
-acceleration offset (a 7-state Kalman filter); the PF's velocity random walk
+tilt, accelerometer bias and heading offsets (a 10-state Kalman filter); the PF's velocity random walk
 integrated into position (its trapezoid: Q of a discretised white-acceleration model).
 """
 
@@ -80,19 +80,21 @@ COMMON = dict(outlier_prob=0.0, terrain_model_sigma_m=0.0, map_sigma_m=0.0, ira_
 def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     dem = planar_dem()
     q = 1.0
-    s_a = 0.01      # large enough that the acceleration offset moves the position by metres in 25 s
+    s_a = 0.01      # large enough that the accelerometer bias moves the position by metres in 25 s
     nav = PointMassFilter(dem, grid_size=301, spacing_min_m=0.2, span_sigmas=4.5,
-                          position_noise_m_per_sqrt_s=q, acceleration_sigma_mps2=s_a, **COMMON)
+                          position_noise_m_per_sqrt_s=q, accel_bias_sigma_mps2=s_a, **COMMON)
     nav.reset(initial(40.0))
-    # state [dn, de, b, dvn, dve, dan, dae]: the PMF carries the horizontal velocity and acceleration offsets
-    # as a Gaussian regressed on the grid's position (x' = x + v dt + a dt^2 / 2, v' = v + a dt; v a random
-    # walk, a constant)
+    # state [dn, de, b, dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error]: the PMF
+    # carries the INS's horizontal velocity error model as a Gaussian regressed on the grid's position
+    # (x' = x + v dt + a dt^2 / 2, v' = v + a dt + eps J, a = t + R b; level flight north at constant
+    # velocity: R = I, J = 0; v a random walk, the rest constant)
     s_v = nav.velocity_noise
-    P0 = np.diag([40.0**2, 40.0**2, 3.0**2, 0.01, 0.01, s_a**2, s_a**2])
-    F = np.eye(7)
-    F[0, 3] = F[1, 4] = F[3, 5] = F[4, 6] = 1.0
-    F[0, 5] = F[1, 6] = 0.5
-    k = kf(7, P0, F, np.diag([q**2, q**2, 0.0, s_v**2, s_v**2, 0.0, 0.0]))
+    s_t2 = 9.80665**2 * 1e-8                          # g^2 times initial()'s roll/pitch variance
+    P0 = np.diag([40.0**2, 40.0**2, 3.0**2, 0.01, 0.01, s_t2, s_t2, s_a**2, s_a**2, 1e-6])
+    F = np.eye(10)
+    F[0, 3] = F[1, 4] = F[3, 5] = F[4, 6] = F[3, 7] = F[4, 8] = 1.0
+    F[0, 5] = F[1, 6] = F[0, 7] = F[1, 8] = 0.5
+    k = kf(10, P0, F, np.diag([q**2, q**2, 0.0, s_v**2, s_v**2, 0.0, 0.0, 0.0, 0.0, 0.0]))
     x_true = np.array([25.0, -30.0, 4.0])
     ranges = measurements(25, 7, x_true)
     st = ins_state()
@@ -121,11 +123,11 @@ def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     # the pending noise's north-east term, which the separable convolution drops)
     scale = np.sqrt(np.outer(np.diag(Pk)[0:2], np.diag(Pk)[3:5]))
     assert np.all(np.abs(cov[0:2, 3:5] - Pk[0:2, 3:5]) < 0.003 * scale), (cov[0:2, 3:5], Pk[0:2, 3:5])
-    # the acceleration offset (not in the Estimate): its mean, variance and covariance with the position
-    assert np.all(np.abs(nav.u_mean[2:] - xk[5:7]) < 0.02 * sig[5:7]), (nav.u_mean, xk[5:7])
-    np.testing.assert_allclose(np.diag(nav.C_uu)[2:], np.diag(Pk)[5:7], rtol=0.01)
-    scale = np.sqrt(np.outer(np.diag(Pk)[5:7], np.diag(Pk)[0:2]))
-    assert np.all(np.abs(nav.C_uz[2:, :2] - Pk[5:7, 0:2]) < 0.003 * scale), (nav.C_uz[2:, :2], Pk[5:7, 0:2])
+    # the acceleration and heading offsets (not in the Estimate): means, variances, covariance with position
+    assert np.all(np.abs(nav.u_mean[2:] - xk[5:10]) < 0.02 * sig[5:10]), (nav.u_mean, xk[5:10])
+    np.testing.assert_allclose(np.diag(nav.C_uu)[2:], np.diag(Pk)[5:10], rtol=0.01)
+    scale = np.sqrt(np.outer(np.diag(Pk)[5:10], np.diag(Pk)[0:2]))
+    assert np.all(np.abs(nav.C_uz[2:, :2] - Pk[5:10, 0:2]) < 0.003 * scale), (nav.C_uz[2:, :2], Pk[5:10, 0:2])
     # the one informative combination u . x = g . (dn, de) + b, known to ~1 m: a filter assuming 4.5 m of
     # noise instead of 3.5 m misses its mean by 0.12 sigma, so 0.03 sigma catches a wrong likelihood
     u = np.array([G_N, G_E, 1.0])

@@ -206,6 +206,7 @@ def test_pmf_kernels_against_numpy():
     ("pmf", {"grid_size": 100_000}, "grid_size"),
     ("pmf", {"spacing_min_m": -1.0}, "spacing_min_m"),
     ("pmf", {"position_noise_m_per_sqrt_s": -0.1}, "position_noise_m_per_sqrt_s"),
+    ("pmf", {"accel_bias_sigma_mps2": float("nan")}, "accel_bias_sigma_mps2"),
     ("pmf", {"measurement_rate_hz": float("nan")}, "measurement_rate_hz"),
     ("pf", {"n_particles": 0}, "n_particles"),
     ("pf", {"n_particles": 10**10}, "n_particles"),

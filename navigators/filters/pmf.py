@@ -7,25 +7,32 @@ shared (the measurements are the same for all cells, so the Kalman gain is): a R
 channel instead of a third grid axis, so a baro or map bias does not pull the horizontal fix and costs
 nothing per cell but one multiply-add.
 
-- Horizontal velocity and acceleration offsets u = (v, a) (true minus INS, m/s and m/s^2): a Gaussian
-  (mean, covariance, and its covariance with the grid's position and vertical offset) outside the grid.
-  The INS's horizontal error is a ramp bending into a parabola: on the default flight (30 runs, free INS)
-  the variance across runs of its velocity error's increments over a lag tau is q tau + s_a^2 tau^2 with
-  q = 1e-6 m^2/s^3 (1e-6 at 1 s) and s_a = 6.2e-4 (north) and 7.5e-4 m/s^2 (east) - a constant of each run
-  (the 0.05 mrad initial tilt times g and the 50 ug accelerometer bias, 6.9e-4 in quadrature), no random
-  walk of a (the increments grow as tau^2 from 10 s to 100 s). So v is carried (initial sigma from the
-  initial estimate, the velocity random walk q) and a as a constant (acceleration_sigma_mps2). Before,
-  a 0.01 m/s/sqrt(s) random walk of v stood in for a: at the filter's memory of 10-60 s it is 10-20 times
-  the measured increments, so the velocity's and along-track position's covariances were too large
-  (velocity NEES 1.55 of 2, along-track position 0.85 of 1; ANEES 1.85, 100 runs); with the random walk
-  lowered to 0.003 alone the velocity cannot follow the run's acceleration over 3 minutes (ANEES 2.34, 69 %
-  of the epochs inside). Before that, a 1.0 m/sqrt(s) position random walk stood in for v (per-epoch NEES
-  inside its band in 69 % of the epochs). A terrain or GNSS update leaves p(u | dn, de, b) unchanged, so u
-  follows the grid's posterior moments by the Gaussian regression (`_velocity_from_position`, exact for a
-  Gaussian belief: tests/test_terrain_filter_linear.py against a 7-state Kalman filter).
-- Prediction: the grid rides on the INS and moves by the mean of v dt + a dt^2 / 2 (its cells are
+- The INS's horizontal velocity error model u = (v, t, b, eps) (true minus INS; m/s, m/s^2, rad): the
+  velocity offset v, the acceleration of the initial tilt t (g times the tilt, constant in NED), the
+  accelerometer bias b (constant in the body frame, so R b in NED turns with the heading, R the INS's
+  body-to-NED matrix's horizontal block) and the heading error eps (INS yaw minus true yaw, which turns
+  every velocity change the INS integrates: v gains eps (dv_e, -dv_n)); a Gaussian (mean, covariance, and
+  its covariance with the grid's position and vertical offset) outside the grid. Measured on the default
+  flight (30 runs, free INS, 3 min straight): the variance across runs of the velocity error's
+  increments over a lag tau is q tau + s_a^2 tau^2 with q = 1e-6 m^2/s^3 (its 1 s figure) and s_a =
+  6.2e-4 (north), 7.5e-4 m/s^2 (east) - a constant of each run (the initial 0.05 mrad tilt times g and
+  the 50 ug accelerometer bias, 6.9e-4 in quadrature), no random walk of the acceleration (the
+  increments grow as tau^2 from 10 s to 100 s). Before, a 0.01 m/s/sqrt(s) random walk of v stood in for
+  all this: at the filter's memory of 10-60 s it is 10-20 times the measured increments, so the velocity's
+  and the along-track position's covariances were too large (velocity NEES 1.55 of 2, along-track
+  position 0.85 of 1; ANEES 1.85, 100 runs); a constant NED acceleration alone fixed the 3 min straight
+  flight (ANEES 2.06) but not the turns of the 8 min default flight (5.4 m RMS against 4.8 m: the bias
+  turns with the aircraft, and a 1 mrad heading error turns a 90 degree turn's 120 m/s velocity change
+  into 0.12 m/s of velocity error); with the lowered random walk and no acceleration v cannot follow the
+  run's acceleration (ANEES 2.34, 69 % of the epochs inside). Priors: v, t and eps from the initial
+  estimate's velocity, roll/pitch and yaw variances, b from accel_bias_sigma_mps2. A terrain or GNSS
+  update leaves p(u | dn, de, b) unchanged, so u follows the grid's posterior moments by the Gaussian
+  regression (`_velocity_from_position`, exact for a Gaussian belief: tests/test_terrain_filter_linear.py
+  against a 10-state Kalman filter).
+- Prediction: the grid rides on the INS and moves by the mean of v dt + (t + R b) dt^2 / 2 (its cells are
   offsets: an exact shift), plus process noise - the rest of the position growth,
-  2 sym(B C_ux) + B C_uu B' + q dt with B = [I dt, I dt^2 / 2] - as a separable convolution whose kernel
+  2 sym(B C_ux) + B C_uu B' + q dt with B = [I dt, I dt^2 / 2, R dt^2 / 2, 0] - as a separable
+  convolution whose kernel
   has exactly the accumulated variance (a three-tap kernel [p, 1 - 2p, p], p = q / (2 d^2), while the noise
   is below the spacing, a normalised sampled Gaussian above it; in the spirit of the Lagrangian grid
   filters), applied before every measurement update. The per-cell vertical offsets move with their mass: a
@@ -45,8 +52,8 @@ nothing per cell but one multiply-add.
   again where the terrain is flat.
 
 Outputs: mean and covariance of the grid (position block, + d^2/12 per axis for the cells' width), the
-vertical from the bias, the horizontal velocity from the velocity offset (the acceleration offset is not
-in the Estimate), the rest from the INS error
+vertical from the bias, the horizontal velocity from the velocity offset (the tilt, bias and heading
+offsets are not in the Estimate: the yaw is the INS's), the rest from the INS error
 model (terrain_filter); Estimate.extra:
 the fixed update keys (navigators.protocol) and "multimodality" (density of the second-highest local
 maximum of the grid over the highest: 0 for one mode, 1 for two equal ones) and "pmf_modes" (local maxima
@@ -72,6 +79,8 @@ from navigators.measurements.terrain_models import (
     robust_log_likelihood,
 )
 
+G0 = 9.80665
+N_U = 7                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error)
 LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
 BYTES_PER_CELL = 8 * 16     # float64 arrays held or made per cell in an update
 
@@ -98,10 +107,10 @@ class PointMassFilter(InsRiddenFilter):
     so this is a floor, not a model of the drift - the velocity and acceleration offsets carry that; 1.0,
     the default before the velocity offset, stood in for the drift), velocity_noise_mps_per_sqrt_s
     (random walk of the velocity offset, default 0.001: the white part of the INS velocity error's
-    increments on the default flight, 1e-6 m^2/s^2 per s), acceleration_sigma_mps2 (1 sigma per axis of
-    the INS error's horizontal acceleration, constant over a run, default 7e-4: measured 6.2e-4 north,
-    7.5e-4 east; 0 drops the state), max_memory_mb (refuses a grid larger than that), measurement_rate_hz
-    (terrain samples per second).
+    increments on the default flight, 1e-6 m^2/s^2 per s), accel_bias_sigma_mps2 (1 sigma per body axis
+    of the accelerometers' turn-on bias, default 50 ug: the scenario IMU's navigation grade, seed 000
+    Table 2; the tilt and heading errors' priors come from the initial estimate), max_memory_mb
+    (refuses a grid larger than that), measurement_rate_hz (terrain samples per second).
     """
 
     name = "pmf"
@@ -109,7 +118,7 @@ class PointMassFilter(InsRiddenFilter):
     def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
                  spacing_max_m: float = 100.0,
                  span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 0.1,
-                 velocity_noise_mps_per_sqrt_s: float = 0.001, acceleration_sigma_mps2: float = 7e-4,
+                 velocity_noise_mps_per_sqrt_s: float = 0.001, accel_bias_sigma_mps2: float = 50e-6 * 9.80665,
                  max_memory_mb: float = 2048.0, **settings):
         if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
             raise ValueError(f"grid_size must be an integer >= 3, got {grid_size!r}")
@@ -126,7 +135,7 @@ class PointMassFilter(InsRiddenFilter):
         self.position_noise = check_positive("position_noise_m_per_sqrt_s", position_noise_m_per_sqrt_s, True)
         self.velocity_noise = check_positive("velocity_noise_mps_per_sqrt_s", velocity_noise_mps_per_sqrt_s,
                                              True)
-        self.acceleration_sigma = check_positive("acceleration_sigma_mps2", acceleration_sigma_mps2, True)
+        self.accel_bias_sigma = check_positive("accel_bias_sigma_mps2", accel_bias_sigma_mps2, True)
         super().__init__(dem=dem, **settings)
         self.n = int(grid_size)
         self._ira_p = np.empty((1, 3))
@@ -149,20 +158,25 @@ class PointMassFilter(InsRiddenFilter):
         self.de_flat = np.ascontiguousarray(np.tile(self.axis_e, n))
 
     def _u_prior_cov(self, cov9: np.ndarray) -> np.ndarray:
-        """Prior covariance of u = (dvn, dve, dan, dae): the velocity block of cov9, acceleration_sigma^2."""
-        c = np.zeros((4, 4))
+        """Prior covariance of u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading
+        error): the velocity block of cov9; g^2 times its mean roll/pitch variance; accel_bias_sigma^2;
+        its yaw variance."""
+        c = np.zeros((N_U, N_U))
         c[:2, :2] = np.array(cov9[3:5, 3:5], float)
-        c[2, 2] = c[3, 3] = self.acceleration_sigma ** 2
+        c[2, 2] = c[3, 3] = G0 ** 2 * 0.5 * (float(cov9[6, 6]) + float(cov9[7, 7]))
+        c[4, 4] = c[5, 5] = self.accel_bias_sigma ** 2
+        c[6, 6] = float(cov9[8, 8])
         return c
 
     def _init_belief(self, cov9: np.ndarray, mean_ne=(0.0, 0.0), velocity=None) -> None:
         """The grid from cov9's horizontal block around mean_ne; the velocity and acceleration offsets'
         Gaussian u from cov9 and acceleration_sigma_mps2 (zero mean), or `velocity` = (mean (4,),
         covariance (4, 4)) kept from before (a re-spread)."""
-        # C_uz: covariance of u = (dvn, dve, dan, dae) with z = (dn, de, b)
-        self.C_uz = np.zeros((4, 3))
+        # C_uz: covariance of u (see _u_prior_cov) with z = (dn, de, b)
+        self.C_uz = np.zeros((N_U, 3))
         if velocity is None:
-            self.u_mean = np.zeros(4)
+            self._v_ins_prev = None
+            self.u_mean = np.zeros(N_U)
             self.C_uu = self._u_prior_cov(cov9)
             self.C_uz[:2, :2] = np.array(cov9[3:5, 0:2], float)
         else:
@@ -188,15 +202,30 @@ class PointMassFilter(InsRiddenFilter):
         self._n_underflow = 0
 
     def _predict_to(self, t_s: float, st: np.ndarray | None = None) -> None:
-        """x' = x + B u + w with B = [I dt, I dt^2 / 2] (u = velocity and acceleration offsets): the grid
-        moves by B's mean (its cells are offsets: exact), the rest of the position growth,
-        2 sym(B C_ux) + B C_uu B' + q dt, is pending process noise; u' = F u, F = [[I, I dt], [0, I]], plus
-        the velocity's random walk (the acceleration is a constant of the run)."""
+        """The INS horizontal error model over dt (u = (v, t, b, eps), see the module docstring): with
+        a = t + R b the acceleration offset (R: the INS's body-to-NED matrix's horizontal block),
+        x' = x + v dt + a dt^2 / 2 + w, v' = v + a dt + eps J + random walk, J = (dv_e, -dv_n) the INS
+        velocity change over the step (a heading error eps = INS yaw - true yaw turns it); t, b, eps
+        constant. The grid moves by the mean of x' - x (its cells are offsets: exact), the rest of the
+        position growth, 2 sym(B C_ux) + B C_uu B' + q dt, is pending process noise."""
         dt = t_s - self._t_belief
         if dt > 0.0:
-            B = np.hstack([np.eye(2) * dt, np.eye(2) * (0.5 * dt * dt)])
-            F = np.eye(4)
-            F[0, 2] = F[1, 3] = dt
+            R = np.eye(2)
+            J = np.zeros(2)
+            if st is not None and np.all(np.isfinite(st[3:10])):
+                R = quat_to_dcm(st[6:10])[:2, :2]
+                v_ins = np.array(st[3:5], float)
+                if self._v_ins_prev is not None:
+                    J = np.array([v_ins[1] - self._v_ins_prev[1], self._v_ins_prev[0] - v_ins[0]])
+                self._v_ins_prev = v_ins
+            B = np.zeros((2, N_U))
+            B[:, 0:2] = np.eye(2) * dt
+            B[:, 2:4] = np.eye(2) * (0.5 * dt * dt)
+            B[:, 4:6] = R * (0.5 * dt * dt)
+            F = np.eye(N_U)
+            F[0:2, 2:4] = np.eye(2) * dt
+            F[0:2, 4:6] = R * dt
+            F[0:2, 6] = J
             shift = B @ self.u_mean
             if shift[0] != 0.0 or shift[1] != 0.0:
                 self._set_geometry(self.centre_n + shift[0], self.centre_e + shift[1], self.spacing)
