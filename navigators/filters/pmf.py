@@ -245,17 +245,30 @@ class PointMassFilter(InsRiddenFilter):
             self._moments_cache = None
 
     def _apply_process_noise(self) -> None:
-        """The accumulated process noise as a separable convolution before every update (its diagonal:
-        exact variance per axis; the north-east covariance of the pending noise, small against the grid's
-        own, is dropped). Before every update, not once it reaches some fraction of a cell: noise held back
-        is added after the update instead of before it, so the update does not narrow it and the reported
+        """The accumulated process noise as a convolution of exact covariance before every update: a
+        separable pass for the diagonal less the north-east covariance's size, a pass along the grid's
+        diagonal for the covariance (the heading error couples the north and east velocity errors: dropping
+        it missed a Kalman filter's mean by 0.09 sigma in a turn with a 10 mrad heading sigma,
+        tests/test_terrain_filter_linear.py). Before every update, not once it reaches some fraction of a
+        cell: noise held back is added after the update instead of before it, so the update does not narrow
+        it and the reported
         covariance is too large (on the default flight the pending noise held back until half a cell^2
         averaged 0.9 m^2 along-track against a 14 m^2 posterior: ANEES 1.85 -> 1.90, 100 runs)."""
-        var_cells = np.clip(np.diag(self._q_pending), 0.0, None) / self.spacing ** 2
-        if var_cells.max() <= 0.0:
+        q = self._q_pending / self.spacing ** 2
+        # Q = diag(q_nn - |c|, q_ee - |c|) + |c| [[1, sign c], [sign c, 1]]: the north-east covariance c as a
+        # pass along the grid's diagonal (as much of it as the diagonal leaves room for)
+        c = float(np.clip(q[0, 1], -min(max(q[0, 0], 0.0), max(q[1, 1], 0.0)),
+                          min(max(q[0, 0], 0.0), max(q[1, 1], 0.0))))
+        var_cells = np.clip(np.diag(q) - abs(c), 0.0, None)
+        if var_cells.max() <= 0.0 and c == 0.0:
             return
-        spread = kern.convolve_separable(self.logw, self.bias, self.n, _kernel_1d(var_cells[0]),
-                                         _kernel_1d(var_cells[1]), self._work, LOG_FLOOR)
+        spread = 0.0
+        if var_cells.max() > 0.0:
+            spread += kern.convolve_separable(self.logw, self.bias, self.n, _kernel_1d(var_cells[0]),
+                                              _kernel_1d(var_cells[1]), self._work, LOG_FLOOR)
+        if abs(c) > 1e-6:
+            spread += kern.convolve_diagonal(self.logw, self.bias, self.n, _kernel_1d(abs(c)),
+                                             1 if c > 0.0 else -1, self._work, LOG_FLOOR)
         self.P_b += spread
         self._moments_cache = None
         self._q_pending = np.zeros((2, 2))
