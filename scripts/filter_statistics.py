@@ -14,15 +14,22 @@ Experiments (each prints a JSON block; --only NAME runs one):
   flight) for pmf, pf and ins_tercom (INS + batch TERCOM + EKF), with a 95 % Clopper-Pearson interval.
 - "nees": the horizontal position NEES e' P^-1 e averaged over the converged runs (ANEES) at every update
   after t_converged_s, against the 95 % chi-square interval for 2 x runs degrees of freedom (divided by
-  runs); the fraction of epochs inside and its binomial least value (nees_figures); the runs' common error.
+  runs); the fraction of epochs inside and its binomial least value (nees_figures); the runs' common error;
+  the pooled ANEES (all epochs of all runs) with bounds as if the epochs were independent, thinned to
+  decorrelated epochs (the lag where the measured NEES autocorrelation falls below 0.1) and the runs'
+  t interval (pooled_nees_figures).
 - "crlb": horizontal RMS over the converged runs and t >= t_converged_s against terrain.metrics.track_crlb
   of the IRA samples the filter takes (map gradients at their true closest points, prior 1 km, the filter's
   position random walk and velocity offset: initial sigma from the scenario, the filter's velocity random
-  walk), with the filter's measurement variance and with the actual one (the IRA's noise +
-  the measured world-minus-map RMS); and terrain.metrics.terrain_information's window CRLB along the track.
+  walk; for the pmf also its acceleration offset: g x the initial tilt and accel_bias_sigma_mps2), with
+  the filter's measurement variance and with the actual one (the IRA's noise + the measured world-minus-map
+  RMS); and terrain.metrics.terrain_information's window CRLB along the track.
 - "crosswind": a 20 m/s crosswind flight (crosswind_5km: 5,600 m MSL, seed 000's case), map = world (the
   high-resolution 30 m truth, as the published comparison's map), PF with the proposed (seed 000 eqs
   14-36) vs the conventional (eqs 9-13) closest point: horizontal RMS of each and their ratio.
+- "turning" (only with --only turning): the PMF's NEES on the whole default flight (468 s, its two 80-90
+  degree turns), 30 m initial error, --turning-runs runs from seed 4000 (the INS error model's heading-
+  dependent part: the accelerometer bias turning with the aircraft, the heading error).
 - "rate": PMF with terrain samples at 1 Hz (the default) vs 2 Hz and 5 Hz: horizontal RMS (the accuracy
   cost of the lower rate the speed figures use).
 """
@@ -173,11 +180,56 @@ def convergence_figures(res: dict, duration_s: float) -> dict:
     return out
 
 
+DECORRELATED_ACF = 0.1   # autocorrelation below which NEES epochs count as independent samples
+
+
+def nees_autocorrelation(nees: np.ndarray) -> np.ndarray:
+    """Autocorrelation over lags 0 .. epochs - 2 of the runs' NEES series (runs x epochs) about the per-epoch
+    ANEES, pooled over the runs (lag k from runs x (epochs - k) pairs): what is left once the time profile
+    all runs share is taken out, i.e. the correlation that sets how many independent samples the pooled
+    ANEES averages."""
+    x = nees - nees.mean(axis=0, keepdims=True)
+    v = float(np.mean(x * x))
+    n_ep = x.shape[1]
+    return np.array([np.mean(x[:, :n_ep - k] * x[:, k:]) / v for k in range(n_ep - 1)])
+
+
+def pooled_nees_figures(nees: np.ndarray, dof: int = 2) -> dict:
+    """The pooled ANEES (all runs x epochs) and its 95 % bounds three ways: (a) chi2(dof R E) / (R E) as if
+    all R x E samples were independent (too narrow: epochs 1 s apart are strongly correlated); (b) thinned to
+    every k-th epoch, k the first lag at which the NEES autocorrelation (nees_autocorrelation) falls below
+    DECORRELATED_ACF, chi2 bounds for the R x ceil(E / k) samples left; (c) a t interval of the runs' time
+    averages (the runs are independent whatever the epochs' correlation). Also the integrated autocorrelation
+    time tau = 1 + 2 sum rho (lags up to the first non-positive rho) and R E / tau."""
+    runs, n_ep = nees.shape
+    acf = nees_autocorrelation(nees)
+    below = np.nonzero(acf < DECORRELATED_ACF)[0]
+    k = int(below[0]) if below.size else n_ep
+    thin = nees[:, ::k]
+    n_thin = thin.size
+    nonpos = np.nonzero(acf <= 0.0)[0]
+    tau = 1.0 + 2.0 * float(np.sum(acf[1:nonpos[0] if nonpos.size else acf.size]))
+    n_all = runs * n_ep
+    ta = nees.mean(axis=1)
+    half = float(stats.t.ppf(0.975, runs - 1) * ta.std(ddof=1) / math.sqrt(runs))
+    return {"anees_pooled": float(nees.mean()),
+            "bounds_95_independent_epochs": [float(x) for x in stats.chi2.ppf([0.025, 0.975], dof * n_all)
+                                             / n_all],
+            "autocorrelation_lags_0_10_20_30_40_60": [float(acf[i]) for i in (0, 10, 20, 30, 40, 60)
+                                                      if i < acf.size],
+            "thinning_epochs": k, "thinned_samples": int(n_thin), "anees_thinned": float(thin.mean()),
+            "bounds_95_thinned": [float(x) for x in stats.chi2.ppf([0.025, 0.975], dof * n_thin) / n_thin],
+            "integrated_autocorrelation_epochs": tau, "effective_samples": n_all / tau,
+            "runs_time_average_t_interval_95": [float(ta.mean() - half), float(ta.mean() + half)]}
+
+
 def nees_figures(res: dict, t_from_s: float) -> dict:
     """Per-epoch ANEES (the horizontal NEES e' P^-1 e averaged over the converged runs) after t_from_s
     against its 95 % chi-square interval chi2.ppf([0.025, 0.975], 2 n) / n, the fraction of epochs inside
     it, and the least fraction a consistent filter shows with 97.5 % probability: binom.ppf(0.025, E, 0.95)
     / E over the E epochs (as if independent; neighbouring epochs are correlated, so the spread is wider).
+    "pooled": the ANEES over all epochs and runs with its bounds (pooled_nees_figures: as if independent,
+    thinned to decorrelated epochs, and the runs' t interval).
     "common_error": RMS over the epochs of the runs' mean error, against sqrt(mean trace P / n), what it is
     when the runs' errors are independent (larger: the runs share an error - one world, one flight)."""
     out = {}
@@ -197,15 +249,15 @@ def nees_figures(res: dict, t_from_s: float) -> dict:
         n_ep = int(sel.sum())
         inside = (anees >= lo) & (anees <= hi)
         m = E.mean(axis=0)
+        axis_nees = E ** 2 / np.diagonal(P, axis1=2, axis2=3)
         out[label] = {"runs": n, "t_from_s": t_from_s, "epochs": n_ep, "anees_mean": float(anees.mean()),
                       "bounds_95": [float(lo), float(hi)],
                       "fraction_of_epochs_inside": float(np.mean(inside)),
                       "fraction_below": float(np.mean(anees < lo)),
                       "fraction_above": float(np.mean(anees > hi)),
                       "binomial_least_fraction_inside": float(stats.binom.ppf(0.025, n_ep, 0.95) / n_ep),
-                      "anees_time_average_bounds_95": [float(x) for x in
-                                                       stats.chi2.ppf([0.025, 0.975], 2 * n * n_ep)
-                                                       / (n * n_ep)],
+                      "pooled": pooled_nees_figures(nees),
+                      "nees_per_axis_north_east": [float(x) for x in axis_nees.mean(axis=(0, 1))],
                       "common_error_rms_m": float(np.sqrt(np.mean(np.sum(m * m, axis=1)))),
                       "common_error_if_independent_m": float(np.sqrt(np.mean(np.trace(P, axis1=2, axis2=3))
                                                                      / n)),
@@ -270,8 +322,15 @@ def crlb_figures(res: dict, flight, t_from_s: float, settings: dict | None = Non
         # both filters carry the INS's velocity offset (its error is a ramp): the bound does too, with the
         # scenario's initial velocity sigma and the filter's velocity random walk
         sv0 = float(d["initial_errors"]["velocity_ned_mps"][0])
+        # the pmf also carries the INS error's acceleration (initial tilt times g and the accelerometer bias,
+        # constant in NED on this straight flight): its bound too
+        s_a = 0.0
+        if name == "pmf":
+            tilt_rad = 1e-3 * float(d["initial_errors"]["attitude_mrad"][0])
+            s_a = math.hypot(9.80665 * tilt_rad, nav.accel_bias_sigma)
         kw = dict(t_s=t, prior_sigma_m=p0, process_noise_m2_per_s=q, method=nav.map_interpolation,
-                  velocity_prior_sigma_mps=sv0, velocity_noise_mps_per_sqrt_s=s_v)
+                  velocity_prior_sigma_mps=sv0, velocity_noise_mps_per_sqrt_s=s_v,
+                  acceleration_prior_sigma_mps2=s_a)
         b_filter = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_filter), **kw).rms_m(t_from_s)
         b_actual = metrics.track_crlb(the_map, plat, plon, np.sqrt(var_sensor), map_sigma_m=map_sigma,
                                       **kw).rms_m(t_from_s)
@@ -308,7 +367,8 @@ def main(argv=None) -> int:
     ap.add_argument("--crosswind-runs", type=int, default=10)
     ap.add_argument("--crosswind-scenario", default="crosswind_5km",
                     help="flight of the crosswind comparison (default: seed 000's 5,600 m MSL case)")
-    ap.add_argument("--only", default=None, choices=["convergence", "crosswind", "rate"])
+    ap.add_argument("--only", default=None, choices=["convergence", "crosswind", "rate", "turning"])
+    ap.add_argument("--turning-runs", type=int, default=30)
     ap.add_argument("--world-detail", default="redraw", choices=["redraw", "fixed"],
                     help="the world's fractal detail drawn per run (default) or the recorded flight's")
     ap.add_argument("--out", default=None, help="write the figures as JSON here")
@@ -331,6 +391,12 @@ def main(argv=None) -> int:
         print(json.dumps({"nees": figures["nees"]}, indent=1), flush=True)
         figures["crlb"] = crlb_figures(res, flight, 60.0)
         print(json.dumps({"crlb": figures["crlb"]}, indent=1), flush=True)
+    if args.only == "turning":
+        flight = record_flight(duration_s=468.0)
+        res = monte_carlo(args.turning_runs, 468.0, 30.0, {"pmf": ("pmf", {})}, flight=flight, seed0=4000,
+                          world_detail=args.world_detail)
+        figures["turning"] = nees_figures(res, 60.0)
+        print(json.dumps({"turning": figures["turning"]}, indent=1), flush=True)
     if args.only in (None, "rate"):
         flight = record_flight(duration_s=120.0)
         names = {f"pmf_{r:g}hz": ("pmf", {"measurement_rate_hz": r}) for r in (1.0, 2.0, 5.0)}

@@ -194,7 +194,8 @@ class TrackCrlb:
 def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: float | None = None,
                process_noise_m2_per_s: float = 0.0, map_sigma_m: float = 0.0,
                method: str = "bicubic", velocity_prior_sigma_mps: float = 0.0,
-               velocity_noise_mps_per_sqrt_s: float = 0.0) -> TrackCrlb:
+               velocity_noise_mps_per_sqrt_s: float = 0.0,
+               acceleration_prior_sigma_mps2: float = 0.0) -> TrackCrlb:
     """Posterior Cramer-Rao bound of the horizontal position from terrain-height measurements along a track.
 
     Model (north, east; m): the position error is a random walk x_k = x_(k-1) + w_k, w_k ~ N(0, q dt_k I)
@@ -218,6 +219,9 @@ def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: flo
     random walk of velocity_noise_mps_per_sqrt_s): x_k = x_(k-1) + v dt_k + w_k (an INS whose error is a
     ramp); the recursion then runs on (x, v) as J_k = (F J_(k-1)^-1 F' + Q_k)^-1 + H' H / var_k (needs a
     prior) and the returned information and covariance are the position's marginal ones.
+    acceleration_prior_sigma_mps2 > 0 (with a velocity offset) adds a constant unknown acceleration a
+    (N(0, sigma^2 I): the INS error's tilt and accelerometer bias): x_k = x_(k-1) + v dt_k + a dt_k^2 / 2
+    + w_k, v_k = v_(k-1) + a dt_k + w_v.
     """
     lat = np.atleast_1d(np.asarray(lat_rad, float))
     lon = np.atleast_1d(np.asarray(lon_rad, float))
@@ -252,8 +256,15 @@ def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: flo
                 and velocity_noise_mps_per_sqrt_s >= 0.0):
             raise ValueError("track_crlb: velocity_prior_sigma_mps and velocity_noise_mps_per_sqrt_s must be "
                              "finite and >= 0")
+        if not (math.isfinite(acceleration_prior_sigma_mps2) and acceleration_prior_sigma_mps2 >= 0.0):
+            raise ValueError(f"track_crlb: acceleration_prior_sigma_mps2 must be finite and >= 0, got "
+                             f"{acceleration_prior_sigma_mps2}")
         return _track_crlb_velocity(dem, lat, lon, var, t, prior_sigma_m, process_noise_m2_per_s,
-                                    velocity_prior_sigma_mps, velocity_noise_mps_per_sqrt_s, method)
+                                    velocity_prior_sigma_mps, velocity_noise_mps_per_sqrt_s, method,
+                                    acceleration_prior_sigma_mps2)
+    if acceleration_prior_sigma_mps2 != 0.0:
+        raise ValueError("track_crlb: an acceleration offset needs a velocity offset "
+                         "(velocity_prior_sigma_mps > 0)")
     gn, ge = dem.gradient(lat, lon, method=method)
     g = np.stack([np.atleast_1d(gn), np.atleast_1d(ge)], axis=1)
     info = np.empty((n, 2, 2))
@@ -278,24 +289,31 @@ def track_crlb(dem: Dem, lat_rad, lon_rad, sigma_m, t_s=None, prior_sigma_m: flo
     return TrackCrlb(t, info, cov, sig_h, g, np.sqrt(var))
 
 
-def _track_crlb_velocity(dem, lat, lon, var, t, prior_sigma_m, q, sigma_v, s_v, method) -> TrackCrlb:
-    """track_crlb with the velocity offset (see there): the 4-state linear-Gaussian recursion in covariance
-    form, P_k = ((F P_(k-1) F' + Q_k)^-1 + H' H / var_k)^-1."""
+def _track_crlb_velocity(dem, lat, lon, var, t, prior_sigma_m, q, sigma_v, s_v, method,
+                         sigma_a: float = 0.0) -> TrackCrlb:
+    """track_crlb with the velocity offset, and the acceleration offset if sigma_a > 0 (see there): the
+    4- (6-) state linear-Gaussian recursion in covariance form, P_k = ((F P_(k-1) F' + Q_k)^-1
+    + H' H / var_k)^-1."""
     n = lat.shape[0]
     gn, ge = dem.gradient(lat, lon, method=method)
     g = np.stack([np.atleast_1d(gn), np.atleast_1d(ge)], axis=1)
-    P = np.diag([prior_sigma_m**2, prior_sigma_m**2, sigma_v**2, sigma_v**2])
+    m = 6 if sigma_a > 0.0 else 4
+    P = np.diag([prior_sigma_m**2, prior_sigma_m**2, sigma_v**2, sigma_v**2, sigma_a**2, sigma_a**2][:m])
     info = np.empty((n, 2, 2))
     cov = np.empty((n, 2, 2))
     sig_h = np.empty(n)
     for k in range(n):
         if k > 0:
             dt = t[k] - t[k - 1]
-            F = np.eye(4)
+            F = np.eye(m)
             F[0, 2] = F[1, 3] = dt
-            P = F @ P @ F.T + np.diag([q * dt, q * dt, s_v**2 * dt, s_v**2 * dt])
+            if m == 6:
+                F[0, 4] = F[1, 5] = 0.5 * dt * dt
+                F[2, 4] = F[3, 5] = dt
+            P = F @ P @ F.T + np.diag([q * dt, q * dt, s_v**2 * dt, s_v**2 * dt, 0.0, 0.0][:m])
         if np.all(np.isfinite(g[k])):
-            h = np.array([g[k, 0], g[k, 1], 0.0, 0.0])
+            h = np.zeros(m)
+            h[:2] = g[k]
             ph = P @ h
             P = P - np.outer(ph, ph) / (var[k] + h @ ph)
         P = 0.5 * (P + P.T)

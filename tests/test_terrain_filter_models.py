@@ -206,6 +206,7 @@ def test_pmf_kernels_against_numpy():
     ("pmf", {"grid_size": 100_000}, "grid_size"),
     ("pmf", {"spacing_min_m": -1.0}, "spacing_min_m"),
     ("pmf", {"position_noise_m_per_sqrt_s": -0.1}, "position_noise_m_per_sqrt_s"),
+    ("pmf", {"accel_bias_sigma_mps2": float("nan")}, "accel_bias_sigma_mps2"),
     ("pmf", {"measurement_rate_hz": float("nan")}, "measurement_rate_hz"),
     ("pf", {"n_particles": 0}, "n_particles"),
     ("pf", {"n_particles": 10**10}, "n_particles"),
@@ -224,3 +225,26 @@ def test_bad_settings_raise_value_error_naming_the_setting(dem, name, settings, 
 def test_no_map_is_refused(name):
     with pytest.raises(ValueError, match="dem"):
         registry.create(name, dem=None)
+
+
+@pytest.mark.parametrize("sign", [1, -1])
+def test_pmf_diagonal_convolution_adds_the_north_east_covariance(sign):
+    """_pmf_kernels.convolve_diagonal on a point mass: the grid's covariance grows by var [[1, s], [s, 1]]
+    (brute-force moments with numpy), the mass and a constant vertical offset stay put."""
+    from navigators.filters.pmf import _kernel_1d
+    n = 41
+    x = np.full(n * n, -700.0)
+    x[(n // 2) * n + n // 2] = 0.0
+    for var_cells in (0.3, 2.5):
+        lw = x.copy()
+        b = np.full(n * n, 3.0)
+        spread = pk.convolve_diagonal(lw, b, n, _kernel_1d(var_cells), sign, np.empty((6, n * n)), -700.0)
+        w = np.exp(lw).reshape(n, n)
+        w /= w.sum()
+        i = (np.arange(n) - n // 2)[:, None]
+        j = (np.arange(n) - n // 2)[None, :]
+        assert np.sum(w * i * i) == pytest.approx(var_cells, rel=2e-3)
+        assert np.sum(w * j * j) == pytest.approx(var_cells, rel=2e-3)
+        assert np.sum(w * i * j) == pytest.approx(sign * var_cells, rel=2e-3)
+        np.testing.assert_allclose(b[w.ravel() > 1e-12], 3.0)
+        assert spread == pytest.approx(0.0, abs=1e-9)

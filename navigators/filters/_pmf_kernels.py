@@ -290,3 +290,51 @@ def convolve_separable(logw, bias, n, kern_n, kern_e, work, floor):
         v = logw[k] - mx
         logw[k] = v if v > floor else floor
     return sv / s if s > 0.0 else 0.0
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def convolve_diagonal(logw, bias, n, kern, sign, work, floor):
+    """One 1-D convolution of the Rao-Blackwellised grid along its diagonal (sign +1: cell (i, j) from
+    (i + s, j + s), north and east together; -1: from (i + s, j - s)), kernel kern (odd length, zero outside
+    the grid): a noise whose north and east parts are the same draw (sign +1) or opposite ones (-1), i.e. a
+    covariance var [[1, sign], [sign, 1]] with var the kernel's variance in cells^2 - the north-east term of
+    the process noise the separable convolution cannot carry. Offsets carried with their mass and the
+    spread returned as convolve_separable does; logw renormalised and floored. work: scratch (6, n * n)."""
+    m = n * n
+    for k in range(m):
+        w = math.exp(logw[k]) if logw[k] > floor else 0.0
+        work[0, k] = w
+        work[1, k] = w * bias[k]
+        work[2, k] = w * bias[k] * bias[k]
+    L = kern.shape[0]
+    h = L // 2
+    for a in range(3):
+        for i in range(n):
+            for j in range(n):
+                acc = 0.0
+                for q in range(L):
+                    ii = i + q - h
+                    jj = j + sign * (q - h)
+                    if 0 <= ii < n and 0 <= jj < n:
+                        acc += kern[q] * work[a, ii * n + jj]
+                work[3 + a, i * n + j] = acc
+    mx = -np.inf
+    s = sv = 0.0
+    for k in range(m):
+        w = work[3, k]
+        if w > 1e-300:
+            b = work[4, k] / w
+            var = work[5, k] / w - b * b
+            bias[k] = b
+            s += w
+            sv += w * (var if var > 0.0 else 0.0)
+            v = math.log(w)
+        else:
+            v = -np.inf
+        logw[k] = v
+        if v > mx:
+            mx = v
+    for k in range(m):
+        v = logw[k] - mx
+        logw[k] = v if v > floor else floor
+    return sv / s if s > 0.0 else 0.0
