@@ -25,14 +25,19 @@ Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   then carry one sampled position path's information about velocity and attitude (eq 6's L(z - F^n x^l)
   term): on the seed002 straight leg the attitude NEES was 30 and the velocity error 2-4 sigma; with
   5,000 during acquisition it is as with 5,000 throughout (3-D position 3.2 m against 5.6 m);
-- IRA samples eqs 24-25 cannot describe (our addition): a return on the look window's edge
-  (window_edge_margin_deg: the window, not the terrain, fixed the point; in a 45-deg bank 29 % of
-  samples) is skipped; when a point of the zero-Doppler line 68 m or more across track from the closest
-  one (another basin, or the far side of a flat minimum) lies within ambiguity_gap_m of its range for
-  particles holding ambiguity_weight of the cloud, the closest point can jump (a few tenths of m/s of
+- IRA samples eqs 24-25 cannot describe (our additions): a return on the look window's edge
+  (window_edge_margin_deg: the window's boundary ray, not the terrain's minimum, fixed the point; in a 45-deg
+  bank 29 % of samples) updates on the range alone, its velocity and attitude rows by differences of eq 23
+  (window_edge_range; False skips it); when a point of the zero-Doppler line 68 m or more across track from
+  the closest one (another basin, or the far side of a flat minimum) lies within ambiguity_gap_m of its range
+  for particles holding ambiguity_weight of the cloud, the closest point can jump (a few tenths of m/s of
   velocity error tilt the line enough) and theta with it by degrees, so the update uses the range alone
-  (continuous across the jump). On the default route this was the cause of the
-  overconfidence on long stretches (pooled NEES 4.0 -> 1.9 on seeds 0-2, 2.45 on 0-5: rbpf_consistency.py);
+  (continuous across the jump); on the default route this was the cause of the overconfidence on long
+  stretches (pooled NEES 4.0 -> 1.9 on seeds 0-2, rbpf_consistency.py). The range alone too where theta is
+  not linear in the velocity over the cloud's velocity spread (theta_linearity_sigmas, _theta_velocity_row),
+  and where, on a converged cloud, the look angle would leave fewer than theta_collapse_ess * N effective
+  particles (theta then varies with position faster than the cloud samples it: at wings level in a roll
+  reversal on the seed002 flight it left 4 of 1,000, and every Kalman part one ancestor's);
 - feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
   subtracted from every particle, so the error model stays linear about a good INS.
 
@@ -118,7 +123,12 @@ class RaoBlackwellizedPF:
     (None: default_rng(0)). n_particles; ess_threshold in (0, 1]; trn_rate_hz; error_model_rate_hz (the
     error model's step, 50 Hz); range_sigma_m, look_angle_sigma_deg; half_window_deg, max_range_m (the IRA's
     look window, as the sensor's); window_edge_margin_deg (an IRA sample whose look angle lies within this of
-    the window's edge is skipped: eqs 24-25 describe an interior minimum); init_pos_sigma_m (N, E, up),
+    the window's edge is not an interior minimum, which eqs 24-25 describe), window_edge_range (True: such a
+    sample updates on its range, rows by differences, _edge_range_row; False: skipped);
+    theta_linearity_sigmas (the range alone when theta's departure from its velocity row over the cloud's
+    velocity spread exceeds this many look-angle sigmas; 0: off), theta_collapse_ess in [0, 1) (the range
+    alone when the look angle would leave fewer effective particles than this fraction of a converged cloud;
+    0: off); init_pos_sigma_m (N, E, up),
     init_vel_sigma_mps, init_att_sigma_deg,
     accel_bias_sigma_mps2, gyro_bias_sigma_rps; map_sigma_m, map_bias_sigma_m (the map's random and bias
     vertical error, m), terrain_model_sigma_m ("auto" or m: the map's interpolation error), see
