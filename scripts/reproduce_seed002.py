@@ -484,7 +484,7 @@ def main(argv=None) -> int:
         for prof in sorted({a.profile, "straight"}):
             tr = kinematic_truth(a.duration, dem, prof).truth(a.duration)
             b = bound_summary(information_bound(tr, dem, settings=settings))
-            print(f"Cramer-Rao bound ({prof}, linearised eqs 16-25 about the truth, the filter's prior/Q/R), RMS "
+            print(f"Cramer-Rao bound ({prof}, linearised eqs 16-25 about the truth, filter's prior/Q/R), RMS "
                   f"after {CONVERGED_AFTER_S:.0f} s: attitude 3-D {b['att3d_deg']:.4f} deg (roll "
                   f"{b['roll_deg']:.4f}, pitch {b['pitch_deg']:.4f}, heading {b['heading_deg']:.4f}); "
                   "heading "

@@ -1,8 +1,8 @@
 """Seed 002's claim, cheaper fixed-seed version of scripts/reproduce_seed002.py: on the kinematic 240 m/s,
 2,500 m level flight over Jacksboro (map = world, IMU + IRA only, Table 1 initial errors), the RBPF with
 1,000 particles reaches 3-D position RMS <= 10 m and velocity RMS <= 0.5 m/s after convergence, and a plain
-bootstrap PF with the same particles and model does worse; on the script's default profile (level flight with
-level turns, where heading is observable: tests/test_rbpf_crb.py) and its filter settings (FILTER_SETTINGS)."""
+bootstrap PF with the same particles and model does worse; on the script's default profile (level flight
+with level turns, where heading is observable: tests/test_rbpf_crb.py) and its settings (FILTER_SETTINGS)."""
 
 import importlib.util
 from pathlib import Path
