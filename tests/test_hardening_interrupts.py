@@ -133,3 +133,27 @@ def test_kill_while_writing_leftover_cleaned_by_next_run(tmp_path):
     assert (runs / "r3" / "summary.json").exists()
     assert not left[0].exists() and not old.exists() and live.exists()
     assert sorted(p.name for p in runs.iterdir()) == sorted([live.name, "r3"])
+
+
+def test_ctrl_c_inside_a_numba_dispatcher_is_an_interrupt(monkeypatch, capsys):
+    """Ctrl-C while numba unpickles a cached kernel reaches Python as a SystemError caused by the
+    KeyboardInterrupt (seen on CI in test_ctrl_c_during_start_up): still exit 130 and one line."""
+    import trn_env.cli as cli
+
+    def interrupted_in_numba(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError("CPUDispatcher(<function bicubic_batch>) returned a result with an exception "
+                              "set") from exc
+
+    monkeypatch.setattr(cli, "cmd_scenarios", lambda: interrupted_in_numba(None))
+    assert cli.main(["scenarios"]) == 130
+    assert capsys.readouterr().err.strip() == "interrupted: nothing written"
+
+    def other_system_error():
+        raise SystemError("a real bug")
+
+    monkeypatch.setattr(cli, "cmd_scenarios", other_system_error)
+    with pytest.raises(SystemError, match="a real bug"):
+        cli.main(["scenarios"])

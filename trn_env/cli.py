@@ -464,6 +464,23 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:       # during the imports, the scenario's loading, a benchmark
         print("interrupted: nothing written", file=sys.stderr)
         return 130
+    except SystemError as exc:
+        # Ctrl-C inside a numba dispatcher (e.g. while it unpickles a cached kernel) surfaces as "returned a
+        # result with an exception set", caused by the KeyboardInterrupt
+        if not _caused_by_interrupt(exc):
+            raise
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 if __name__ == "__main__":
