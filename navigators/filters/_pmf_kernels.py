@@ -234,6 +234,42 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
+def _pack_moments(logw, bias, work, m, floor):
+    """Rows 0..2 of work: the grid's mass w = exp(logw), w b and w b^2 (b the per-cell vertical offset)."""
+    for k in range(m):
+        w = math.exp(logw[k]) if logw[k] > floor else 0.0
+        work[0, k] = w
+        work[1, k] = w * bias[k]
+        work[2, k] = w * bias[k] * bias[k]
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _unpack_moments(logw, bias, work, row, m, floor):
+    """Back from convolved rows row..row+2 (w, w b, w b^2): logw (renormalised to a maximum of 0, floored),
+    the cells' offsets, and the mass-weighted spread of the sources' offsets (returned)."""
+    mx = -np.inf
+    s = sv = 0.0
+    for k in range(m):
+        w = work[row, k]
+        if w > 1e-300:
+            b = work[row + 1, k] / w
+            var = work[row + 2, k] / w - b * b
+            bias[k] = b
+            s += w
+            sv += w * (var if var > 0.0 else 0.0)
+            v = math.log(w)
+        else:
+            v = -np.inf
+        logw[k] = v
+        if v > mx:
+            mx = v
+    for k in range(m):
+        v = logw[k] - mx
+        logw[k] = v if v > floor else floor
+    return sv / s if s > 0.0 else 0.0
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
 def convolve_separable(logw, bias, n, kern_n, kern_e, work, floor):
     """The prediction's convolution of a Rao-Blackwellised grid: the density w = exp(logw) (n * n, rows
     north) convolved with kern_e along east and kern_n along north (odd lengths, zero outside the grid), and
@@ -243,11 +279,7 @@ def convolve_separable(logw, bias, n, kern_n, kern_e, work, floor):
     its posterior-weighted average (the caller adds it to the shared variance). logw is renormalised to a
     maximum of 0 and floored. work: scratch (6, n * n)."""
     m = n * n
-    for k in range(m):
-        w = math.exp(logw[k]) if logw[k] > floor else 0.0
-        work[0, k] = w
-        work[1, k] = w * bias[k]
-        work[2, k] = w * bias[k] * bias[k]
+    _pack_moments(logw, bias, work, m, floor)
     L = kern_e.shape[0]
     h = L // 2
     for a in range(3):          # along east (j), into rows 3..5
@@ -270,26 +302,7 @@ def convolve_separable(logw, bias, n, kern_n, kern_e, work, floor):
                     if 0 <= ii < n:
                         acc += kern_n[q] * work[3 + a, ii * n + j]
                 work[a, i * n + j] = acc
-    mx = -np.inf
-    s = sv = 0.0
-    for k in range(m):
-        w = work[0, k]
-        if w > 1e-300:
-            b = work[1, k] / w
-            var = work[2, k] / w - b * b
-            bias[k] = b
-            s += w
-            sv += w * (var if var > 0.0 else 0.0)
-            v = math.log(w)
-        else:
-            v = -np.inf
-        logw[k] = v
-        if v > mx:
-            mx = v
-    for k in range(m):
-        v = logw[k] - mx
-        logw[k] = v if v > floor else floor
-    return sv / s if s > 0.0 else 0.0
+    return _unpack_moments(logw, bias, work, 0, m, floor)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -301,11 +314,7 @@ def convolve_diagonal(logw, bias, n, kern, sign, work, floor):
     the process noise the separable convolution cannot carry. Offsets carried with their mass and the
     spread returned as convolve_separable does; logw renormalised and floored. work: scratch (6, n * n)."""
     m = n * n
-    for k in range(m):
-        w = math.exp(logw[k]) if logw[k] > floor else 0.0
-        work[0, k] = w
-        work[1, k] = w * bias[k]
-        work[2, k] = w * bias[k] * bias[k]
+    _pack_moments(logw, bias, work, m, floor)
     L = kern.shape[0]
     h = L // 2
     for a in range(3):
@@ -318,23 +327,4 @@ def convolve_diagonal(logw, bias, n, kern, sign, work, floor):
                     if 0 <= ii < n and 0 <= jj < n:
                         acc += kern[q] * work[a, ii * n + jj]
                 work[3 + a, i * n + j] = acc
-    mx = -np.inf
-    s = sv = 0.0
-    for k in range(m):
-        w = work[3, k]
-        if w > 1e-300:
-            b = work[4, k] / w
-            var = work[5, k] / w - b * b
-            bias[k] = b
-            s += w
-            sv += w * (var if var > 0.0 else 0.0)
-            v = math.log(w)
-        else:
-            v = -np.inf
-        logw[k] = v
-        if v > mx:
-            mx = v
-    for k in range(m):
-        v = logw[k] - mx
-        logw[k] = v if v > floor else floor
-    return sv / s if s > 0.0 else 0.0
+    return _unpack_moments(logw, bias, work, 3, m, floor)
