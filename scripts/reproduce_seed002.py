@@ -40,7 +40,7 @@ import numpy as np
 import terrain
 import trn_env.scenario.build as components
 from navigators.filters import _rbpf_kernels as kern
-from navigators.filters.rbpf import RaoBlackwellizedPF
+from navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
 from navigators.frames import SensorFrames
 from navigators.protocol import Estimate
 from terrain.geodesy import euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
@@ -118,7 +118,7 @@ def initial_estimate(truth, err) -> Estimate:
     pitch = -math.asin(C_c[2, 0])
     yaw = math.atan2(C_c[1, 0], C_c[0, 0])
     return Estimate(float(truth.t_s[0]), lat + err[0] / rn, truth.lon_rad[0] + err[1] / re, h + err[2],
-                    truth.v_ned_mps[0] + err[3:6], roll, pitch, yaw, np.eye(9))
+                    truth.v_ned_mps[0] + err[3:6], roll, pitch, yaw, table1_covariance())
 
 
 def errors(est: Estimate, truth, k: int) -> np.ndarray:

@@ -10,7 +10,7 @@ import pytest
 import terrain
 from navigators import registry
 from navigators.filters import _rbpf_kernels as kern
-from navigators.filters.rbpf import RaoBlackwellizedPF
+from navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
 from navigators.frames import ImuFrame, IraFrame, SensorFrames
 from navigators.protocol import EXTRA_ESS, EXTRA_INNOVATION, EXTRA_LOG_LIKELIHOOD, EXTRA_NIS, EXTRA_NIS_DOF
 
@@ -118,7 +118,7 @@ def _initial(dem):
 
     lat, lon = dem.center_rad
     return Estimate(0.0, lat, lon, 2500.0, np.array([228.0, 75.0, 0.0]), 0.0, 0.0, math.radians(18.1575),
-                    np.eye(9))
+                    table1_covariance())
 
 
 def test_bad_data_never_crashes(dem):

@@ -77,7 +77,8 @@ def test_filter_uses_range_alone_while_the_closest_point_can_jump(h_right, dof):
     dem, east, prof = _dem(300.0, h_right)
     o = _predict(dem)
     nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(0), n_particles=200, acquisition_particles=0,
-                             init_pos_sigma_m=(2.0, 2.0, 1.0), imu_samples="instant")
+                             init_pos_sigma_m=(2.0, 2.0, 1.0), imu_samples="instant",
+                             prior_from_initial=False)
     nav.reset(Estimate(0.0, LAT0, LON0, H_ANT, np.array([240.0, 0.0, 0.0]), 0.0, 0.0, 0.0, np.eye(9)))
     est = nav.update(_frames(0.0, float(o[m.OUT_R]), float(o[m.OUT_THETA])))
     assert est.extra[EXTRA_NIS_DOF] == dof

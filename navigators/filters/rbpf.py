@@ -70,6 +70,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.special import erfc as _erfc
 
 import navigators.filters._rbpf_kernels as kern
 from navigators.filters.terrain_filter import capped_nis
@@ -114,6 +115,14 @@ def _triple(name: str, value, allow_zero: bool = True) -> np.ndarray:
     for i, v in enumerate(arr):
         _positive(f"{name}[{i}]", v, allow_zero)
     return arr
+
+
+def table1_covariance() -> np.ndarray:
+    """Seed 002 Table 1's initial distribution as a 9 x 9 covariance (NED position m, velocity m/s, attitude
+    rad; diagonal): position (50, 50, 20) m, velocity (1/sqrt 2, 1/sqrt 2, 0.5) m/s, attitude 0.1 deg - the
+    RBPF's init_* defaults, for an Estimate that states them (prior_from_initial)."""
+    return np.diag(np.r_[50.0, 50.0, 20.0, 1 / math.sqrt(2), 1 / math.sqrt(2), 0.5,
+                         np.radians([0.1, 0.1, 0.1])] ** 2)
 
 
 class RaoBlackwellizedPF:
@@ -161,6 +170,8 @@ class RaoBlackwellizedPF:
         theta_velocity_rows: bool = True,
         ambiguity_gap_m: float = 3.0,
         ambiguity_weight: float = 0.5,
+        ambiguity_probability: float = 0.05,
+        prior_from_initial: bool = True,
         theta_linearity_sigmas: float = 3.0,
         theta_collapse_ess: float = 0.01,
         max_range_m: float = 10000.0,
@@ -254,6 +265,11 @@ class RaoBlackwellizedPF:
         if not aw <= 1.0:
             raise ValueError(f"ambiguity_weight must lie in [0, 1], got {ambiguity_weight!r}")
         self.ambiguity_weight = aw
+        ap = _positive("ambiguity_probability", ambiguity_probability, True)
+        if not ap <= 1.0:
+            raise ValueError(f"ambiguity_probability must lie in [0, 1], got {ambiguity_probability!r}")
+        self.ambiguity_probability = ap
+        self.prior_from_initial = bool(prior_from_initial)
         self.theta_linearity_sigmas = _positive("theta_linearity_sigmas", theta_linearity_sigmas, True)
         ce = _positive("theta_collapse_ess", theta_collapse_ess, True)
         if not ce < 1.0:
@@ -265,7 +281,9 @@ class RaoBlackwellizedPF:
         sa = np.radians(_triple("init_att_sigma_deg", init_att_sigma_deg))
         sba = _positive("accel_bias_sigma_mps2", accel_bias_sigma_mps2, True)
         sbg = _positive("gyro_bias_sigma_rps", gyro_bias_sigma_rps, True)
-        self.P0 = np.diag(np.r_[sv, sa, [sba] * 3, [sbg] * 3] ** 2)
+        self.P0_settings = np.diag(np.r_[sv, sa, [sba] * 3, [sbg] * 3] ** 2)
+        self.P0 = self.P0_settings.copy()
+        self.init_pos_sigma_settings = self.init_pos_sigma.copy()
         self.qn_var = _triple("q_pos_m", q_pos_m, False) ** 2
         qv = np.asarray(q_vel_mps, float).ravel()
         if qv.shape != (2,):
@@ -304,6 +322,7 @@ class RaoBlackwellizedPF:
     def reset(self, initial: Estimate) -> None:
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
+        self._set_prior(initial)
         self._init_cloud()
         self.health = Health(status="acquiring", ok=True)
         self.integrity.reset()
@@ -320,6 +339,42 @@ class RaoBlackwellizedPF:
         self.epochs = 0
         self.resamples = 0
         self._reset_done = True
+
+    def _set_prior(self, initial: Estimate) -> None:
+        """The cloud's and the Kalman parts' initial spread. prior_from_initial (default) and a 9 x 9
+        initial.covariance (NED position m, velocity m/s, attitude rad, as every navigator's reset reads it):
+        position sigmas from its diagonal (floored at 0.1 m), P0's velocity-attitude block from it (cross
+        terms kept), the bias priors from the settings - as the EKF, PMF and PF start. Otherwise (or without
+        a covariance) Table 1's priors, the init_* settings. On the default route the scenario's initial
+        errors are 0.05 mrad of tilt and 0.1 m/s, against Table 1's 1.75 mrad and 0.71 m/s: starting from
+        Table 1 there leaves the filter's velocity and attitude sigmas several times its errors."""
+        self.init_pos_sigma = self.init_pos_sigma_settings.copy()
+        self.P0 = self.P0_settings.copy()
+        cov = getattr(initial, "covariance", None)
+        if not self.prior_from_initial or cov is None:
+            return
+        c = np.asarray(cov, float)
+        if c.shape != (9, 9):
+            raise ValueError(f"initial.covariance must be 9 x 9 (position, velocity, attitude), not {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError("initial.covariance must be finite (prior_from_initial)")
+        if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12):
+            raise ValueError("initial.covariance must be symmetric (prior_from_initial)")
+        w_min = float(np.linalg.eigvalsh(c).min())
+        if w_min < -1e-9 * max(1.0, float(np.abs(c).max())):
+            raise ValueError("initial.covariance must be positive semi-definite (it has a negative "
+                             f"eigenvalue {w_min:.3g})")
+        d = np.diag(c)
+        if np.any(np.sqrt(d[6:9]) > 0.1):
+            raise ValueError("initial.covariance: attitude sigma above 0.1 rad, outside the error model's "
+                             "small-angle range (prior_from_initial; set prior_from_initial=false and "
+                             "init_att_sigma_deg instead)")
+        self.init_pos_sigma = np.maximum(np.sqrt(d[:3]), 0.1)
+        blk = c[3:9, 3:9].copy()
+        blk[np.diag_indices(6)] = np.maximum(np.diag(blk), 1e-12)
+        P0 = self.P0_settings.copy()
+        P0[:6, :6] = blk          # the Kalman parts' velocity and attitude are NED, as initial's
+        self.P0 = P0
 
     def _init_cloud(self) -> None:
         n = self.n = self.n_acquisition
@@ -512,6 +567,11 @@ class RaoBlackwellizedPF:
         gap = out[:, ira_model.OUT_R2] - out[:, ira_model.OUT_R]
         near = ok & np.isfinite(gap) & (gap < self.ambiguity_gap_m)
         dims = 1 if float(wq[near].sum()) > self.ambiguity_weight * float(wq.sum()) else 2
+        # the same jump made by the map: its height errors move the two minima's ranges independently, so
+        # the map's closest point lies in the runner-up's basin where the world's does not with probability
+        # Phi(-gap / (sqrt 2 sigma_h)); above ambiguity_probability, the range alone
+        if dims == 2 and self._basin_jump_probability(gap, ok, wq) > self.ambiguity_probability:
+            dims = 1
         wp = np.exp(logw_prev - logw_prev.max())
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
@@ -664,6 +724,25 @@ class RaoBlackwellizedPF:
             else:
                 linear = False
         return row, (curv if linear else math.inf)
+
+    def _basin_jump_probability(self, gap: np.ndarray, ok: np.ndarray, w: np.ndarray) -> float:
+        """Probability, weighted over the cloud, that the map's closest point on the zero-Doppler line lies
+        in another basin than the world's: per particle, the map's height errors (sigma_h = hypot(map_sigma_m,
+        terrain_model_sigma_m), independent between two basins 68 m or more apart, each seen near the
+        vertical so a height error is a range error) change the runner-up's range margin gap by
+        N(0, 2 sigma_h^2), which closes it with probability Phi(-gap / (sqrt 2 sigma_h)) =
+        erfc(gap / (2 sigma_h)) / 2. Such a jump moves theta by degrees (13 deg at t = 399 s on the
+        default route's seed 0, map gap 2.0 m), which eqs 25-26 would read as attitude and position. 0 for a
+        map that is the world (sigma_h = 0) or when no particle has a runner-up (gap inf)."""
+        sigma_h = math.hypot(self.map_sigma_m, self.terrain_model_sigma_m)
+        if not sigma_h > 0.0:
+            return 0.0
+        use = ok & np.isfinite(gap)
+        tot = float(w[ok].sum())
+        if not tot > 0.0 or not use.any():
+            return 0.0
+        p = 0.5 * _erfc(np.maximum(gap[use], 0.0) / (2.0 * sigma_h))
+        return float(np.sum(w[use] * p)) / tot
 
     @staticmethod
     def _ess(logw: np.ndarray) -> float:
@@ -848,4 +927,4 @@ class RaoBlackwellizedPF:
                         covariance=self._cov9.copy(), health=health, extra=extra)
 
 
-__all__ = ["MAX_PARTICLES", "RaoBlackwellizedPF"]
+__all__ = ["MAX_PARTICLES", "RaoBlackwellizedPF", "table1_covariance"]

@@ -48,7 +48,7 @@ def _epoch_cost(n_particles: int, n_epochs: int) -> tuple[float, float]:
     import math
 
     import terrain
-    from navigators.filters.rbpf import RaoBlackwellizedPF
+    from navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
     from navigators.frames import SensorFrames
     from navigators.protocol import Estimate
     from trn_env.flight.kinematic import KinematicTruth, Segment
@@ -68,7 +68,7 @@ def _epoch_cost(n_particles: int, n_epochs: int) -> tuple[float, float]:
         frames.append(SensorFrames(float(c.t_s[0]), float(c.t_s[-1]) + 0.01, imu=imu, ira=ira))
     c0 = chunks[0]
     init = Estimate(0.0, c0.lat_rad[0], c0.lon_rad[0], c0.h_msl_m[0], c0.v_ned_mps[0], 0.0, 0.0,
-                    c0.yaw_rad[0], np.eye(9))
+                    c0.yaw_rad[0], table1_covariance())
     # map = world; 1,000 particles from the start (the acquisition's 5,000 last only until the cloud is
     # below 10 m: the closed-loop figure includes them)
     nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(1), n_particles=n_particles,
