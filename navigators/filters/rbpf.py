@@ -355,7 +355,8 @@ class RaoBlackwellizedPF:
             return
         c = np.asarray(cov, float)
         if c.shape != (9, 9):
-            raise ValueError(f"initial.covariance must be 9 x 9 (position, velocity, attitude), not {c.shape}")
+            raise ValueError(f"initial.covariance must be 9 x 9 (position, velocity, attitude),"
+                             f" not {c.shape}")
         if not np.all(np.isfinite(c)):
             raise ValueError("initial.covariance must be finite (prior_from_initial)")
         if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12):
