@@ -29,12 +29,14 @@ CONVERGED_AFTER_S = 15.0
 
 
 def one_run(args) -> dict:
-    seed, duration_s, alpha, settings = args
+    seed, duration_s, alpha, settings, map_is_world = args
     from trn_env.scenario.loading import load_scenario, validate
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("default", duration_s=duration_s, seed=seed, navigator="rbpf")
     sc.data["navigator"]["settings"] = {"integrity_alpha": alpha, **settings}
+    if map_is_world:
+        sc.data["terrain"]["map"] = {"dem": "world"}
     res = ClosedLoop(validate(sc.data, source="default"), pipeline=False).run()
     a = res.arrays
     e, cov, t = a["err_ned_m"], a["est_cov"], a["t_s"]
@@ -103,11 +105,13 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=600.0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--alphas", type=float, nargs="+", default=[0.01, 1e-12])
+    ap.add_argument("--map-is-world", action="store_true",
+                    help="the navigator's map is the 30 m world itself (no map error to model)")
     ap.add_argument("--set", dest="settings", action="append", default=[],
                     help="navigator setting KEY=VALUE (Python literal), repeatable")
     a = ap.parse_args(argv)
     settings = dict(_setting(s) for s in a.settings)
-    jobs = [(s, a.duration, alpha, settings) for alpha in a.alphas for s in a.seeds]
+    jobs = [(s, a.duration, alpha, settings, a.map_is_world) for alpha in a.alphas for s in a.seeds]
     with ProcessPoolExecutor(a.workers) as pool:
         rows = list(pool.map(one_run, jobs))
     for alpha in a.alphas:

@@ -338,14 +338,34 @@ def _sensor_problems(d: dict) -> list[str]:
 
 # -------------------------------------------------------------------------------------------- navigator
 
+def imu_bias_settings(imu: dict | None) -> dict:
+    """{accel_bias_sigma_mps2, gyro_bias_sigma_rps} a navigator should assume for the scenario's IMU (1 sigma
+    per axis): the root sum square of the turn-on bias and the bias instability of its grade and overrides
+    (trn_env.sensors.imu.ImuConfig); empty without an IMU or for a table that does not validate (the
+    sensors check reports that)."""
+    from trn_env.sensors.imu import ImuConfig
+    if imu is None or imu is False:
+        return {}
+    try:
+        cfg = ImuConfig.from_mapping(dict(imu))
+    except (ValueError, TypeError):
+        return {}
+    return {"accel_bias_sigma_mps2": math.hypot(cfg.accel_bias_mps2, cfg.accel_bias_instability_mps2),
+            "gyro_bias_sigma_rps": math.hypot(cfg.gyro_bias_rps, cfg.gyro_bias_instability_rps)}
+
+
 def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     """navigators.registry.create(name, dem=<the navigator's map>, rng=<the scenario's navigator stream>,
     **settings); the rng reaches only navigators that draw random numbers. Navigators in
     registry.MAP_NOISE_AWARE also get map_sigma_m / map_bias_sigma_m from the map error model
-    (map_noise_settings) unless the settings give them."""
+    (map_noise_settings), those in registry.IMU_AWARE their bias priors from the IMU (imu_bias_settings),
+    unless the settings give them."""
     from navigators import registry
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
+    if d["navigator"]["name"] in getattr(registry, "IMU_AWARE", ()):
+        for key, val in imu_bias_settings(d["sensors"].get("imu")).items():
+            settings.setdefault(key, val)
     if d["navigator"]["name"] in getattr(registry, "MAP_NOISE_AWARE", ()):
         for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
             settings.setdefault(key, val)
