@@ -12,7 +12,14 @@ from navigators import registry
 from navigators.filters import _rbpf_kernels as kern
 from navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
 from navigators.frames import ImuFrame, IraFrame, SensorFrames
-from navigators.protocol import EXTRA_ESS, EXTRA_INNOVATION, EXTRA_LOG_LIKELIHOOD, EXTRA_NIS, EXTRA_NIS_DOF
+from navigators.protocol import (
+    EXTRA_ESS,
+    EXTRA_INNOVATION,
+    EXTRA_LOG_LIKELIHOOD,
+    EXTRA_NIS,
+    EXTRA_NIS_DOF,
+    Estimate,
+)
 
 
 def test_linear_part_is_the_exact_conditional_kalman_filter():
@@ -190,3 +197,53 @@ def test_gnss_fusion_pulls_the_estimate_and_trn_carries_on_without_it(dem):
     fr.ira = None
     est2 = nav.update(fr)                       # denied: no crash, INS carries on
     assert np.isfinite(est2.lat_rad) and est2.t_s > est.t_s
+
+
+def test_prior_comes_from_the_initial_covariance(dem):
+    """prior_from_initial (default): the cloud's position spread and the Kalman parts' velocity-attitude
+    block are initial.covariance's (the cloud's sample sigmas within 5 % over 5,000 particles: 1 % standard
+    error), the bias priors the settings'; prior_from_initial=False: Table 1's (the init_* settings)."""
+    lat, lon = dem.center_rad
+    cov = np.diag([30.0**2, 20.0**2, 15.0**2, 0.1**2, 0.2**2, 0.3**2, 5e-5**2, 6e-5**2, 1e-3**2])
+    cov[3, 4] = cov[4, 3] = 0.5 * 0.1 * 0.2
+    init = Estimate(0.0, lat, lon, 2500.0, np.array([228.0, 75.0, 0.0]), 0.0, 0.0, 0.3, cov)
+    nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(2), gyro_bias_sigma_rps=2.4e-8)
+    nav.reset(init)
+    assert nav.n == 5000
+    assert np.allclose(nav.xn.std(axis=0), [30.0, 20.0, 15.0], rtol=0.05)
+    assert np.array_equal(nav.P[0, :6, :6], cov[3:9, 3:9])
+    assert np.allclose(np.diag(nav.P[0])[6:], [1e-4**2] * 3 + [2.4e-8**2] * 3)
+    # a start known exactly (zero sigmas) stays defined: floors of 0.1 m and 1e-12
+    nav.reset(Estimate(0.0, lat, lon, 2500.0, np.array([228.0, 75.0, 0.0]), 0.0, 0.0, 0.3, np.zeros((9, 9))))
+    assert np.allclose(nav.xn.std(axis=0), 0.1, rtol=0.05) and np.all(np.diag(nav.P[0]) > 0)
+    table1 = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(2), prior_from_initial=False)
+    table1.reset(init)
+    assert np.allclose(table1.xn.std(axis=0), [50.0, 50.0, 20.0], rtol=0.05)
+    assert np.allclose(np.diag(table1.P[0])[:6], np.diag(table1_covariance())[3:9])
+
+
+@pytest.mark.parametrize("bad,match", [
+    (np.full((9, 9), np.nan), "finite"),
+    (np.eye(9), "attitude sigma above 0.1 rad"),
+    (np.diag([1.0] * 6 + [1e-6] * 3) - 2.0 * np.eye(9)[0:1].T @ np.eye(9)[0:1], "positive semi-definite"),
+    (np.eye(6), "9 x 9"),
+])
+def test_bad_initial_covariance_raises_naming_it(dem, bad, match):
+    lat, lon = dem.center_rad
+    nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(2), n_particles=100, acquisition_particles=0)
+    with pytest.raises(ValueError, match=match) as exc:
+        nav.reset(Estimate(0.0, lat, lon, 2500.0, np.array([228.0, 75.0, 0.0]), 0.0, 0.0, 0.3, bad))
+    assert "initial.covariance" in str(exc.value)
+
+
+def test_cli_refuses_an_attitude_prior_beyond_small_angles(tmp_path, capsys):
+    """A scenario whose initial attitude errors the 15-state model cannot take: exit 2, the field named,
+    nothing written."""
+    from trn_env import cli
+
+    out = tmp_path / "never"
+    code = cli.main(["fly", "--navigator", "rbpf", "--duration", "3", "--no-plots", "--quiet",
+                     "--out", str(out), "--set", "initial_errors.attitude_mrad=[200, 200, 200]"])
+    assert code == 2
+    assert "initial_errors.attitude_mrad" in capsys.readouterr().err
+    assert not out.exists()

@@ -207,10 +207,26 @@ def test_look_angle_map_noise_matches_map_against_world(map_and_world, map_world
     assert 0.5 < s_r / m_r < 2.0, (s_r, m_r)
 
 
+def _horizontal_nees(res, after_s: float, every: int) -> list[float]:
+    a = res.arrays
+    e, cov, t = a["err_ned_m"], a["est_cov"], a["t_s"]
+    return [float(e[k, :2] @ np.linalg.solve(cov[k, :2, :2], e[k, :2]))
+            for k in np.flatnonzero(t >= after_s)[::every]]
+
+
+def _chi2_mean_bounds(n: int, dof: int, p: float) -> tuple[float, float]:
+    """Two-sided probability-p bounds on the mean of n independent chi2(dof) samples."""
+    return chi2.ppf((1 - p) / 2, dof * n) / n, chi2.ppf((1 + p) / 2, dof * n) / n
+
+
 def test_rbpf_not_overconfident_on_a_coarse_map():
     """The 3" map against the 30 m world (default_short's leg, GNSS for 10 s then denied, 80 s): over 3
-    seeds the horizontal NEES at every 10th epoch after 15 s (errors decorrelated over ~10 s) averages
-    inside the 99 % chi-square bounds for that many 2-dof samples (computed here), and the RMS stays small."""
+    seeds the horizontal NEES at every 10th epoch after 15 s (errors decorrelated over ~10 s) stays below the
+    upper 99 % chi-square bound for that many 2-dof samples (computed here), and the RMS stays small. One-
+    sided: with the map's errors as noise the filter is conservative here (measured 0.68; the map-noise model
+    overstates the map-vs-world spread, test_look_angle_map_noise_matches_map_against_world: range 0.73x,
+    look angle 0.66x); the failure this guards against is overconfidence (NEES 2.3-4.4 before the basin-jump
+    test, README "RBPF")."""
     from pathlib import Path
 
     from trn_env.scenario.loading import load_scenario, validate
@@ -222,15 +238,39 @@ def test_rbpf_not_overconfident_on_a_coarse_map():
         sc = load_scenario(scen, duration_s=80.0, seed=seed)
         sc.data["terrain"]["map"] = {"dem": "jacksboro"}       # the 3" map as published
         res = ClosedLoop(validate(sc.data, source=str(scen))).run()
-        a = res.arrays
-        e, cov, t = a["err_ned_m"], a["est_cov"], a["t_s"]
-        for k in np.flatnonzero(t >= 15.0)[::10]:
-            nees.append(float(e[k, :2] @ np.linalg.solve(cov[k, :2, :2], e[k, :2])))
+        nees += _horizontal_nees(res, 15.0, 10)
         rms.append(res.summary["horizontal_error_rms_m"])
     n = len(nees)
-    lo, hi = chi2.ppf(0.005, 2 * n) / n, chi2.ppf(0.995, 2 * n) / n
-    assert lo <= np.mean(nees) <= hi, (np.mean(nees), lo, hi, n)
+    hi = _chi2_mean_bounds(n, 2, 0.98)[1]                    # one-sided 99 %
+    assert 0.2 < np.mean(nees) <= hi, (np.mean(nees), hi, n)
     assert max(rms) < 20.0, rms
+
+
+def test_rbpf_consistent_when_the_map_is_the_world():
+    """Issue 17's consistency criterion where the filter's measurement model is the truth's (map = the 30 m
+    world, so no map error to model): the default route in JSBSim, GNSS for 10 s then denied, 8 seeds x
+    240 s, bias priors from the scenario's navigation-grade IMU. The horizontal NEES at every 15th epoch
+    after 15 s (the runs' NEES autocorrelation falls below 0.1 at 12-16 s here, scripts/rbpf_consistency.py
+    --map-is-world) averages inside the two-sided 99 % chi-square bounds for that many 2-dof samples
+    (measured 1.91 in [1.57, 2.48]); 20 seeds x 470 s: README "RBPF"."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(2) as pool:
+        runs = list(pool.map(_default_route_map_is_world, range(8)))
+    nees = [x for r in runs for x in r[0]]
+    lo, hi = _chi2_mean_bounds(len(nees), 2, 0.99)
+    assert lo <= np.mean(nees) <= hi, (np.mean(nees), lo, hi, len(nees), [np.mean(r[0]) for r in runs])
+    assert max(r[1] for r in runs) < 10.0, [r[1] for r in runs]
+
+
+def _default_route_map_is_world(seed: int) -> tuple[list[float], float]:
+    from trn_env.scenario.loading import load_scenario, validate
+    from trn_env.sim.closed_loop import ClosedLoop
+
+    sc = load_scenario("default", duration_s=240.0, seed=seed, navigator="rbpf")
+    sc.data["terrain"]["map"] = {"dem": "world"}
+    res = ClosedLoop(validate(sc.data, source="default"), pipeline=False).run()
+    return _horizontal_nees(res, 15.0, 15), res.summary["horizontal_error_rms_m"]
 
 
 @pytest.mark.parametrize("setting,value", [
@@ -238,7 +278,8 @@ def test_rbpf_not_overconfident_on_a_coarse_map():
     ("gnss_pos_bias_sigma_m", (1.0, -1.0)), ("gnss_pos_bias_sigma_m", (1.0,)),
     ("acquisition_particles", 10), ("acquisition_particles", 2.5), ("acquisition_particles", 10**7),
     ("window_edge_margin_deg", 50.0), ("window_edge_margin_deg", float("nan")),
-    ("ambiguity_gap_m", -1.0), ("ambiguity_weight", 1.5),
+    ("ambiguity_gap_m", -1.0), ("ambiguity_weight", 1.5), ("ambiguity_probability", 1.5),
+    ("ambiguity_probability", float("nan")),
 ])
 def test_new_bad_settings_raise_naming_the_setting(dem, setting, value):
     with pytest.raises(ValueError, match=setting):

@@ -367,9 +367,10 @@ class RaoBlackwellizedPF:
                              f"eigenvalue {w_min:.3g})")
         d = np.diag(c)
         if np.any(np.sqrt(d[6:9]) > 0.1):
-            raise ValueError("initial.covariance: attitude sigma above 0.1 rad, outside the error model's "
-                             "small-angle range (prior_from_initial; set prior_from_initial=false and "
-                             "init_att_sigma_deg instead)")
+            raise ValueError("initial.covariance (a scenario's initial_errors.attitude_mrad): attitude sigma "
+                             "above 0.1 rad (100 mrad), outside the error model's small-angle range "
+                             "(prior_from_initial; set prior_from_initial=false and init_att_sigma_deg "
+                             "instead)")
         self.init_pos_sigma = np.maximum(np.sqrt(d[:3]), 0.1)
         blk = c[3:9, 3:9].copy()
         blk[np.diag_indices(6)] = np.maximum(np.diag(blk), 1e-12)
