@@ -3,7 +3,10 @@ denied): accuracy and consistency over Monte Carlo seeds, with the innovation te
 default, integrity_alpha 0.01) and/or off (integrity_alpha 1e-12).
 
     PYTHONPATH=$PWD python scripts/rbpf_consistency.py [--seeds 0 1 2] [--duration 600] [--workers 2]
-        [--alphas 0.01 1e-12] [--set n_particles=2000 ...]
+        [--alphas 0.01 1e-12] [--set n_particles=2000 ...] [--map-is-world]
+
+--map-is-world gives the navigator the 30 m world itself as its map (no map error: the filter's
+measurement model is then the truth's; issue 17's consistency criterion holds there, README "RBPF").
 
 Per run: horizontal RMS, final and max error, re-spreads, time-averaged horizontal NEES (2 dof) after 15 s.
 Over the seeds (issue 17's criterion: the Monte-Carlo-averaged NEES after convergence inside its 95 %

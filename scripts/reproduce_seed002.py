@@ -477,7 +477,10 @@ def main(argv=None) -> int:
                     help="RBPF with its innovation test's re-spreads (issue 19; seed 002's filter has none)")
     a = ap.parse_args(argv)
     alpha = 0.01 if a.recovery else 1e-12     # 1e-12: the test never flags
-    settings = {**FILTER_SETTINGS, **(TABLE1_NOISE if a.table1_noise else {})}
+    # the bias priors from the scenario's IMU (as the seed002 scenario's build_navigator gives them):
+    # Table 1's accelerometer bias 1e-4 m/s^2; Table 1 has no gyro bias, the IMU's is 0.005 deg/h
+    imu_priors = components.imu_bias_settings(scenario_data(a.duration, a.profile)["sensors"]["imu"])
+    settings = {**imu_priors, **FILTER_SETTINGS, **(TABLE1_NOISE if a.table1_noise else {})}
     a.out.mkdir(parents=True, exist_ok=True)
     dem = terrain.load("jacksboro")
     if not a.no_bound:

@@ -33,7 +33,10 @@ Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   for particles holding ambiguity_weight of the cloud, the closest point can jump (a few tenths of m/s of
   velocity error tilt the line enough) and theta with it by degrees, so the update uses the range alone
   (continuous across the jump); on the default route this was the cause of the overconfidence on long
-  stretches (pooled NEES 4.0 -> 1.9 on seeds 0-2, rbpf_consistency.py). The range alone too where theta is
+  stretches (pooled NEES 4.0 -> 1.9 on seeds 0-2, rbpf_consistency.py). The same jump made by the map
+  (its height errors close the runner-up's gap: _basin_jump_probability, above ambiguity_probability) uses
+  the range alone too: on a coarse map these jumps (13 deg at 2 m gap) were the overconfident episodes of
+  the default route. The range alone too where theta is
   not linear in the velocity over the cloud's velocity spread (theta_linearity_sigmas, _theta_velocity_row),
   and where, on a converged cloud, the look angle would leave fewer than theta_collapse_ess * N effective
   particles (theta then varies with position faster than the cloud samples it: at wings level in a roll
@@ -46,11 +49,15 @@ Kalman parts, cross terms included) at the last epoch. Estimate.extra after an I
 navigators.protocol (innovation and its covariance from the mixture's predictive moments, NIS with 2 dof,
 log-likelihood log sum w p(y | particle), ESS before resampling).
 
-Defaults are seed 002 Table 1: 1,000 particles, sigma_R 3.5 m, sigma_theta 0.1 deg, initial position sigma
+Prior: initial.covariance (prior_from_initial, default), as the EKF, PMF and PF start; otherwise, and for the
+bias states always, the settings. Defaults are seed 002 Table 1 (table1_covariance() states its initial
+distribution for an Estimate): 1,000 particles, sigma_R 3.5 m, sigma_theta 0.1 deg, initial position sigma
 (50, 50, 20) m, velocity (1/sqrt 2, 1/sqrt 2, 0.5) m/s, attitude 0.1 deg, accelerometer bias 1e-4 m/s^2;
 process noise per epoch: position 0.5 m, velocity 1e-4 m/s, attitude 1e-6 rad, biases 1e-7. Table 1's u2
 row lists five numbers for twelve states; we read them as (horizontal velocity, vertical velocity,
 attitude, accelerometer bias, gyro bias). Table 1 gives no gyro bias prior; ours is gyro_bias_sigma_rps.
+In a scenario both bias priors come from its IMU (registry.IMU_AWARE: trn_env's build_navigator gives the
+turn-on bias and bias instability of the IMU's grade; 50 ug and 0.005 deg/h for the navigation grade).
 No barometer (seed 002: IMU and IRA only), so the INS vertical channel is free and the filter estimates it.
 
 At run time it never raises: a NaN or invalid IRA sample is skipped, particles whose hypothesis has no
@@ -148,6 +155,9 @@ class RaoBlackwellizedPF:
     acquisition_particles (0: off; see the module docstring); theta_velocity_rows (add the look angle's
     sensitivity to velocity, left out of eq 23, by central differences at the cloud's mean, see
     _theta_velocity_row); ambiguity_gap_m, ambiguity_weight (range-only updates, module docstring);
+    ambiguity_probability in [0, 1] (the range alone when the map's errors would move the closest point to
+    another basin with more than this probability, _basin_jump_probability; 0.05); prior_from_initial (the
+    cloud's and Kalman parts' prior from reset's initial.covariance, _set_prior; False: the init_* settings);
     imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m (the innovation test and its
     recovery, see the module docstring).
