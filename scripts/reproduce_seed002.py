@@ -216,7 +216,7 @@ def information_bound(truth, dem, epoch_s: float = 1.0, process_noise: str = "ta
         out = ira_model.predict_ira(dem, np.array([truth.lat_rad[k] + dn / sc[0]]),
                                     np.array([truth.lon_rad[k] + de / sc[1]]),
                                     np.array([truth.h_msl_m[k] + du]), truth.v_ned_mps[k] + np.asarray(dv),
-                                    (np.eye(3) + E) @ truth.C_bn[k], hw, rmax)
+                                    (np.eye(3) + E) @ truth.C_bn[k], hw, rmax, ds_m=ref.search_step_m)
         return out
 
     def rows(k):

@@ -185,6 +185,7 @@ class RaoBlackwellizedPF:
         theta_linearity_sigmas: float = 3.0,
         theta_collapse_ess: float = 0.01,
         max_range_m: float = 10000.0,
+        search_step_m="auto",
         init_pos_sigma_m=(50.0, 50.0, 20.0),
         init_vel_sigma_mps=(0.7071067811865476, 0.7071067811865476, 0.5),   # Table 1: 1/sqrt(2)
         init_att_sigma_deg=(0.1, 0.1, 0.1),
@@ -286,6 +287,12 @@ class RaoBlackwellizedPF:
             raise ValueError(f"theta_collapse_ess must lie in [0, 1), got {theta_collapse_ess!r}")
         self.theta_collapse_ess = ce
         self.max_range_m = _positive("max_range_m", max_range_m)
+        if isinstance(search_step_m, str):
+            if search_step_m != "auto":
+                raise ValueError(f"search_step_m must be 'auto' or a number > 0 (m), got {search_step_m!r}")
+            self.search_step_m = ira_model.search_step_for(dem)
+        else:
+            self.search_step_m = _positive("search_step_m", search_step_m)
         self.init_pos_sigma = _triple("init_pos_sigma_m", init_pos_sigma_m, False)
         sv = _triple("init_vel_sigma_mps", init_vel_sigma_mps)
         sa = np.radians(_triple("init_att_sigma_deg", init_att_sigma_deg))
@@ -550,7 +557,7 @@ class RaoBlackwellizedPF:
         lat_i = lat - self.xn[:, 0] / sc[0]
         lon_i = lon - self.xn[:, 1] / sc[1]
         h_i = h - self.xn[:, 2]
-        out = ira_model.predict_ira(self.dem, lat_i, lon_i, h_i, v, C, self.half_window_rad, self.max_range_m)
+        out = self._predict(lat_i, lon_i, h_i, v, C)
         Hs = np.zeros((self.n, 2, 6))
         ira_model.measurement_rows(out, v, C, Hs)
         theta_curv = 0.0
@@ -667,6 +674,12 @@ class RaoBlackwellizedPF:
         self._integrity_test(te, nis, dims)
         return True
 
+    def _predict(self, lat, lon, h, v, C) -> np.ndarray:
+        """eqs 23-26 on the map for hypotheses (lat, lon rad, h m): ira_seed002.predict_ira with the sensor's
+        look window and this filter's coarse-scan step (search_step_m)."""
+        return ira_model.predict_ira(self.dem, lat, lon, h, v, C, self.half_window_rad, self.max_range_m,
+                                     ds_m=self.search_step_m)
+
     def _edge_range_row(self, out, lat_i, lon_i, h_i, v, C) -> np.ndarray:
         """Range sensitivity (1 x 6: dv_ned m/s, eps_ned rad) of a return on the look window's edge, where the
         window's boundary ray, not the terrain's minimum, fixes the point: eq 24's envelope argument does
@@ -680,11 +693,10 @@ class RaoBlackwellizedPF:
             return row
         w /= w.sum()
         la, lo, hh = (np.array([float(w @ np.where(ok, x, 0.0))]) for x in (lat_i, lon_i, h_i))
-        hw, rmax = self.half_window_rad, self.max_range_m
         dv, de = 0.2, 2e-3     # de: eq 23's search resolves ~5 mm; R is smooth in the ray angle
 
         def rng_at(vv, CC):
-            r = ira_model.predict_ira(self.dem, la, lo, hh, vv, CC, hw, rmax)
+            r = self._predict(la, lo, hh, vv, CC)
             return r[0, ira_model.OUT_R] if r[0, ira_model.OUT_VALID] > 0.5 else math.nan
 
         for j in range(3):
@@ -718,16 +730,15 @@ class RaoBlackwellizedPF:
         la, lo, hh = (np.array([float(w @ np.where(ok, x, 0.0))]) for x in (lat_i, lon_i, h_i))
         row = np.zeros(3)
         dv = 0.2
-        hw, rmax = self.half_window_rad, self.max_range_m
-        c = ira_model.predict_ira(self.dem, la, lo, hh, v, C, hw, rmax)
+        c = self._predict(la, lo, hh, v, C)
         linear = bool(c[0, ira_model.OUT_VALID] > 0.5)
         sig_v2 = np.clip(np.diag(self._cov9)[3:6], 0.0, None)
         curv = 0.0
         for j in range(3):
             d = np.zeros(3)
             d[j] = dv
-            a = ira_model.predict_ira(self.dem, la, lo, hh, v + d, C, hw, rmax)
-            b = ira_model.predict_ira(self.dem, la, lo, hh, v - d, C, hw, rmax)
+            a = self._predict(la, lo, hh, v + d, C)
+            b = self._predict(la, lo, hh, v - d, C)
             if a[0, ira_model.OUT_VALID] > 0.5 and b[0, ira_model.OUT_VALID] > 0.5:
                 ta, tb = a[0, ira_model.OUT_THETA], b[0, ira_model.OUT_THETA]
                 row[j] = -(ta - tb) / (2 * dv)
