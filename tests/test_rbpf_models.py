@@ -281,7 +281,7 @@ def _default_route_map_is_world(seed: int) -> tuple[list[float], float]:
     ("acquisition_particles", 10), ("acquisition_particles", 2.5), ("acquisition_particles", 10**7),
     ("window_edge_margin_deg", 50.0), ("window_edge_margin_deg", float("nan")),
     ("ambiguity_gap_m", -1.0), ("ambiguity_weight", 1.5), ("ambiguity_probability", 1.5),
-    ("ambiguity_probability", float("nan")),
+    ("ambiguity_probability", float("nan")), ("search_step_m", "fine"), ("search_step_m", 0.0),
 ])
 def test_new_bad_settings_raise_naming_the_setting(dem, setting, value):
     with pytest.raises(ValueError, match=setting):

@@ -138,7 +138,9 @@ class RaoBlackwellizedPF:
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. rng: numpy Generator
     (None: default_rng(0)). n_particles; ess_threshold in (0, 1]; trn_rate_hz; error_model_rate_hz (the
     error model's step, 50 Hz); range_sigma_m, look_angle_sigma_deg; half_window_deg, max_range_m (the IRA's
-    look window, as the sensor's); window_edge_margin_deg (an IRA sample whose look angle lies within this of
+    look window, as the sensor's); search_step_m ("auto" or m: eq 23's coarse-scan step along the
+    zero-Doppler line, ira_seed002.search_step_for: 45 m, finer on maps with posts under 72 m);
+    window_edge_margin_deg (an IRA sample whose look angle lies within this of
     the window's edge is not an interior minimum, which eqs 24-25 describe), window_edge_range (True: such a
     sample updates on its range, rows by differences, _edge_range_row; False: skipped);
     theta_linearity_sigmas (the range alone when theta's departure from its velocity row over the cloud's
