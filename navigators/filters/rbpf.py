@@ -62,11 +62,11 @@ Without a barometer the vertical velocity is seen only through the range: the po
 and, through eq 24, the tilt of the zero-Doppler plane, which moves the closest point along track by
 R dv_d / V (1.8 m per 0.1 m/s at 1,500 m and 85 m/s), so along-track position and vertical velocity
 trade in the measurement. At Table 1's 1e-4 the Kalman parts held the vertical velocity 6x tighter than
-its error (squared normalised error 24-39 with map = world), and runs whose vertical velocity locked
-wrong carried an along-track error under a too-small sigma (horizontal NEES 5-10 over whole runs); at
-1e-2 it is 1.3-2.0, those runs are gone and the horizontal RMS is 3.3 -> 2.9 m. The horizontal position's
-0.5 m then left the filter conservative (NEES 1.4 of 2); 0.35 gives 1.6-1.7, and below 0.3 the runs
-that lock return. seed002's 240 m/s flight keeps its own 1.0 m (reproduce_seed002.FILTER_SETTINGS).
+its error (squared normalised error 24-39 with map = world), and a run's vertical-velocity error came with
+an along-track error under a too-small sigma (whole runs averaging horizontal NEES 7); at 1e-2 it is
+1.3-2.0, the worst run averages 3.7 and the horizontal RMS is 3.3 -> 2.9 m (seeds 20-39). The horizontal
+position's 0.5 m then left the filter conservative (NEES 1.4 of 2); 0.35 gives 1.6-1.7, and below 0.3
+runs averaging 5-9 return. seed002's 240 m/s flight keeps its own 1.0 m (reproduce_seed002.FILTER_SETTINGS).
 In a scenario both bias priors come from its IMU (registry.IMU_AWARE: trn_env's build_navigator gives the
 turn-on bias and bias instability of the IMU's grade; 50 ug and 0.005 deg/h for the navigation grade).
 No barometer (seed 002: IMU and IRA only), so the INS vertical channel is free and the filter estimates it.
