@@ -305,6 +305,34 @@ def test_scenario_gives_the_map_error_and_map_is_world():
     assert nav.map_bias_sigma_m == pytest.approx(sig_v * math.sqrt(0.5))
 
 
+def test_scenario_gives_the_imu_bias_model():
+    """build_navigator (registry.IMU_AWARE): the bias priors are the RSS of the IMU's turn-on bias and
+    instability, and the biases' process noise per epoch is the instability's first-order Gauss-Markov drive
+    over the filter's epoch, sigma sqrt(1 - exp(-2 T / tau)): zero for the navigation grade (constant
+    biases; Table 1's 1e-7 random walk made the gyro bias's sigma 70x the IMU's in 300 s), and for the
+    tactical grade (0.1 mg / 0.3 deg/h, tau 300 s) at 1 Hz and at 0.5 Hz."""
+    from trn_env.scenario.build import build_navigator
+    from trn_env.scenario.loading import load_scenario
+
+    dem = terrain.load("jacksboro")
+    d = load_scenario("default", navigator="rbpf").data
+    nav = build_navigator(d, dem)
+    ug, deg_h = 9.80665e-6, math.radians(1.0) / 3600.0
+    assert nav.ql_var[6:12] == pytest.approx(np.zeros(6), abs=0.0)
+    assert np.sqrt(nav.P0[6, 6]) == pytest.approx(50.0 * ug) and np.sqrt(nav.P0[9, 9]) == pytest.approx(
+        0.005 * deg_h)
+    for rate_hz in (1.0, 0.5):
+        d["sensors"]["imu"] = {"grade": "tactical"}
+        d["navigator"]["settings"] = {"trn_rate_hz": rate_hz}
+        nav = build_navigator(d, dem)
+        T = 1.0 / rate_hz
+        q_a = 100.0 * ug * math.sqrt(1.0 - math.exp(-2.0 * T / 300.0))
+        q_g = 0.3 * deg_h * math.sqrt(1.0 - math.exp(-2.0 * T / 300.0))
+        assert np.sqrt(nav.ql_var[6:9]) == pytest.approx([q_a] * 3, rel=1e-9)
+        assert np.sqrt(nav.ql_var[9:12]) == pytest.approx([q_g] * 3, rel=1e-9)
+        assert np.sqrt(nav.P0[9, 9]) == pytest.approx(math.hypot(1.0, 0.3) * deg_h)
+
+
 def _exact_look_angle(dem, lat, lon, h, v, C) -> float:
     """theta of the exact closest-point search (terrain.queries.ira_return, what the IRA sensor measures):
     asin(y_b . p / R), p the antenna-to-point vector in NED through ECEF."""

@@ -338,11 +338,13 @@ def _sensor_problems(d: dict) -> list[str]:
 
 # -------------------------------------------------------------------------------------------- navigator
 
-def imu_bias_settings(imu: dict | None) -> dict:
-    """{accel_bias_sigma_mps2, gyro_bias_sigma_rps} a navigator should assume for the scenario's IMU (1 sigma
-    per axis): the root sum square of the turn-on bias and the bias instability of its grade and overrides
-    (trn_env.sensors.imu.ImuConfig); empty without an IMU or for a table that does not validate (the
-    sensors check reports that)."""
+def imu_bias_settings(imu: dict | None, epoch_s: float = 1.0) -> dict:
+    """The bias model a navigator should assume for the scenario's IMU (1 sigma per axis, its grade and
+    overrides, trn_env.sensors.imu.ImuConfig): accel_bias_sigma_mps2 and gyro_bias_sigma_rps, the root sum
+    square of the turn-on bias and the bias instability; q_accel_bias_mps2 and q_gyro_bias_rps, the
+    instability's Gauss-Markov drive over one filter epoch of epoch_s seconds, sigma sqrt(1 - exp(-2 epoch_s
+    / tau)) (0 for the navigation grade, whose biases are constant over a run). Empty without an IMU or for
+    a table that does not validate (the sensors check reports that)."""
     from trn_env.sensors.imu import ImuConfig
     if imu is None or imu is False:
         return {}
@@ -350,21 +352,38 @@ def imu_bias_settings(imu: dict | None) -> dict:
         cfg = ImuConfig.from_mapping(dict(imu))
     except (ValueError, TypeError):
         return {}
+
+    def drive(sigma: float, tau_s: float) -> float:
+        return float(sigma * math.sqrt(-math.expm1(-2.0 * epoch_s / tau_s)))
+
     return {"accel_bias_sigma_mps2": math.hypot(cfg.accel_bias_mps2, cfg.accel_bias_instability_mps2),
-            "gyro_bias_sigma_rps": math.hypot(cfg.gyro_bias_rps, cfg.gyro_bias_instability_rps)}
+            "gyro_bias_sigma_rps": math.hypot(cfg.gyro_bias_rps, cfg.gyro_bias_instability_rps),
+            "q_accel_bias_mps2": drive(cfg.accel_bias_instability_mps2, cfg.accel_bias_tau_s),
+            "q_gyro_bias_rps": drive(cfg.gyro_bias_instability_rps, cfg.gyro_bias_tau_s)}
+
+
+def _epoch_s(settings: dict) -> float:
+    """A navigator's update interval from its trn_rate_hz setting (1 s if absent or not a positive number:
+    the navigator's own check then reports a bad one)."""
+    try:
+        rate = float(settings.get("trn_rate_hz", 1.0))
+    except (TypeError, ValueError):
+        return 1.0
+    return 1.0 / rate if math.isfinite(rate) and rate > 0 else 1.0
 
 
 def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     """navigators.registry.create(name, dem=<the navigator's map>, rng=<the scenario's navigator stream>,
     **settings); the rng reaches only navigators that draw random numbers. Navigators in
     registry.MAP_NOISE_AWARE also get map_sigma_m / map_bias_sigma_m from the map error model
-    (map_noise_settings), those in registry.IMU_AWARE their bias priors from the IMU (imu_bias_settings),
+    (map_noise_settings), those in registry.IMU_AWARE their bias priors and bias process noise from the IMU
+    (imu_bias_settings),
     unless the settings give them."""
     from navigators import registry
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
     if d["navigator"]["name"] in getattr(registry, "IMU_AWARE", ()):
-        for key, val in imu_bias_settings(d["sensors"].get("imu")).items():
+        for key, val in imu_bias_settings(d["sensors"].get("imu"), _epoch_s(settings)).items():
             settings.setdefault(key, val)
     if d["navigator"]["name"] in getattr(registry, "MAP_NOISE_AWARE", ()):
         for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
