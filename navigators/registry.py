@@ -46,8 +46,10 @@ MAP_NOISE_AWARE: set[str] = {"pmf", "pf", "rbpf"}
 # navigators that model the interpolation error of a coarse map (terrain_model_sigma_m, default "auto": from
 # the map's spectrum): build_navigator gives them 0 when the scenario's map is the world itself
 MAP_IS_WORLD_AWARE: set[str] = {"rbpf"}
-# navigators whose bias priors (accel_bias_sigma_mps2, gyro_bias_sigma_rps) build_navigator fills from the
-# scenario's IMU error model (its turn-on bias and bias instability) when the settings do not give them
+# navigators whose bias priors (accel_bias_sigma_mps2, gyro_bias_sigma_rps) and bias process noise
+# (q_accel_bias_mps2, q_gyro_bias_rps per epoch) build_navigator fills from the scenario's IMU error model
+# (its turn-on bias and bias instability, trn_env.scenario.build.imu_bias_settings) when the settings do not
+# give them
 IMU_AWARE: set[str] = {"rbpf"}
 
 

@@ -223,7 +223,7 @@ def test_rbpf_not_overconfident_on_a_coarse_map():
     """The 3" map against the 30 m world (default_short's leg, GNSS for 10 s then denied, 80 s): over 3
     seeds the horizontal NEES at every 10th epoch after 15 s (errors decorrelated over ~10 s) stays below the
     upper 99 % chi-square bound for that many 2-dof samples (computed here), and the RMS stays small. One-
-    sided: with the map's errors as noise the filter is conservative here (measured 0.92; the map-noise model
+    sided: with the map's errors as noise the filter is conservative here (measured 0.93; the map-noise model
     overstates the map-vs-world spread, test_look_angle_map_noise_matches_map_against_world: range 0.73x,
     look angle 0.66x); the failure this guards against is overconfidence (NEES 2.3-4.4 before the basin-jump
     test, README "RBPF")."""

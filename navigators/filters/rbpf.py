@@ -68,7 +68,9 @@ an along-track error under a too-small sigma (whole runs averaging horizontal NE
 position's 0.5 m then left the filter conservative (NEES 1.4 of 2); 0.35 gives 1.6-1.7, and below 0.3
 runs averaging 5-9 return. seed002's 240 m/s flight keeps its own 1.0 m (reproduce_seed002.FILTER_SETTINGS).
 In a scenario both bias priors come from its IMU (registry.IMU_AWARE: trn_env's build_navigator gives the
-turn-on bias and bias instability of the IMU's grade; 50 ug and 0.005 deg/h for the navigation grade).
+turn-on bias and bias instability of the IMU's grade; 50 ug and 0.005 deg/h for the navigation grade), and
+so does the biases' process noise (the instability's Gauss-Markov drive per epoch: 0 for the navigation
+grade, where Table 1's 1e-7 per epoch took the tilt's sigma from 50 to 125 urad in 300 s).
 No barometer (seed 002: IMU and IRA only), so the INS vertical channel is free and the filter estimates it.
 
 At run time it never raises: a NaN or invalid IRA sample is skipped, particles whose hypothesis has no
