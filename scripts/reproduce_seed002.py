@@ -72,7 +72,7 @@ PROFILES = {
 #   4.5; at 1.0 they are 2.5 and 1.3, and the RMS is lower too (--table1-noise runs Table 1's 0.5).
 FILTER_SETTINGS = {"acquisition_spread_m": 5.0, "q_pos_m": (1.0, 1.0, 1.0)}
 # Table 1's process noise where the filter's defaults depart from it (rbpf module docstring: horizontal
-# position 0.35 m and vertical velocity 1e-2 m/s per epoch, measured on the King Air route)
+# position 0.25 m and vertical velocity 1e-2 m/s per epoch, measured on the King Air route)
 # and the bias random walks Table 1 gives (1e-7 per epoch), where the scenario's IMU, whose biases are
 # constant over a run, gives the filter 0 (trn_env.scenario.build.imu_bias_settings)
 TABLE1_NOISE = {"q_pos_m": (0.5, 0.5, 0.5), "q_vel_mps": (1e-4, 1e-4), "q_accel_bias_mps2": 1e-7,

@@ -247,3 +247,38 @@ def test_cli_refuses_an_attitude_prior_beyond_small_angles(tmp_path, capsys):
     assert code == 2
     assert "initial_errors.attitude_mrad" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("reset_kalman", [True, False])
+def test_recovery_resets_the_kalman_parts_velocity_and_attitude(dem, reset_kalman):
+    """A re-spread (the innovation test failed) widens the positions by recovery_sigma_m; with
+    recovery_reset_kalman every particle's velocity-attitude covariance becomes the prior's plus the cloud's
+    mixture covariance at that moment (computed here with numpy over the resampled cloud), its cross
+    terms with the biases zero; without it the Kalman parts are only resampled."""
+    lat, lon = dem.center_rad
+    cov = np.diag([1.0, 1.0, 1.0, 0.1**2, 0.2**2, 0.3**2, 5e-5**2, 6e-5**2, 1e-3**2])
+    init = Estimate(0.0, lat, lon, 2500.0, np.array([228.0, 75.0, 0.0]), 0.0, 0.0, 0.3, cov)
+    nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(4), n_particles=400, acquisition_particles=0,
+                             recovery_sigma_m=25.0, recovery_reset_kalman=reset_kalman)
+    nav.reset(init)
+    rng = np.random.default_rng(9)
+    nav.P[:, :12, :12] *= 1e-4                       # an overconfident cloud
+    nav.P[:, 0, 9] = nav.P[:, 9, 0] = 1e-12          # a velocity-bias cross term
+    nav.xl[:] = rng.standard_normal((nav.n, 12)) * 1e-3
+    nav.logw = np.log(rng.uniform(0.5, 1.5, nav.n))
+    nav._cov9 = nav._covariance9()
+    p_small = nav.P[0, :6, :6].copy()
+    nav._streak = 1                                  # the first re-spread of a streak: recovery_sigma_m
+    nav._respread(1.0)
+    if reset_kalman:
+        d = nav.xl[:, :6] - nav.xl[:, :6].mean(axis=0)
+        expected = d.T @ d / nav.n + p_small + nav.P0[:6, :6]
+        assert np.allclose(nav.P[:, :6, :6], expected, rtol=1e-9, atol=1e-15)
+        assert np.all(nav.P[:, :6, 6:] == 0.0) and np.all(nav.P[:, 6:, :6] == 0.0)
+        assert np.all(np.linalg.eigvalsh(nav.P[0, :6, :6] - nav.P0[:6, :6]) > -1e-15)
+    else:
+        assert np.all(nav.P[:, :6, :6] <= 1e-4 * nav.P0[:6, :6].max() + 1e-18)
+    # positions (1 m before): resampled, then N(0, 25^2) horizontally (sample sigma of 400: 3.5 % error)
+    assert np.all(np.abs(nav.xn[:, :2].std(axis=0) / np.hypot(25.0, 1.0) - 1.0) < 0.12)
+    assert nav.xn[:, 2].std() < 1.2
+    assert any("re-spread" in m for _, m in nav.health.events)

@@ -223,7 +223,8 @@ def test_rbpf_not_overconfident_on_a_coarse_map():
     """The 3" map against the 30 m world (default_short's leg, GNSS for 10 s then denied, 80 s): over 3
     seeds the horizontal NEES at every 10th epoch after 15 s (errors decorrelated over ~10 s) stays below the
     upper 99 % chi-square bound for that many 2-dof samples (computed here), and the RMS stays small. One-
-    sided: with the map's errors as noise the filter is conservative here (measured 0.93; the map-noise model
+    sided: with the map's errors as noise the filter is conservative here (measured 1.15, session 9; 0.93
+    before; the map-noise model
     overstates the map-vs-world spread, test_look_angle_map_noise_matches_map_against_world: range 0.73x,
     look angle 0.66x); the failure this guards against is overconfidence (NEES 2.3-4.4 before the basin-jump
     test, README "RBPF")."""
@@ -250,9 +251,11 @@ def test_rbpf_consistent_when_the_map_is_the_world():
     """Where the filter's measurement model is the truth's (map = the ~24 m world, no map error to model):
     the default route in JSBSim, GNSS for 10 s then denied, 8 seeds x 240 s, bias priors from the scenario's
     navigation-grade IMU. The horizontal NEES at every 15th epoch after 15 s (the runs' NEES autocorrelation
-    falls below 0.1 at ~15 s here, scripts/rbpf_consistency.py --map-is-world) lies inside the two-sided 99 %
-    chi-square bounds for that many 2-dof samples. Measured 1.70 against [1.57, 2.48]; with Table 1's
-    vertical-velocity and position process noise (before session 7) 1.38, conservative, and over the whole
+    falls below 0.1 at ~15 s here, scripts/rbpf_consistency.py --map-is-world) lies inside the two-sided 95 %
+    chi-square bounds for that many 2-dof samples (issue 17's criterion). Measured 2.13 against [1.67, 2.36]
+    (session 9's defaults: horizontal q_pos 0.25, integrity_alpha 1e-4; session 7: 1.70, inside the 99 %
+    bounds [1.57, 2.48] then tested, not the 95 %); with Table 1's vertical-velocity and position process
+    noise (before session 7) 1.38, conservative, and over the whole
     route heavy-tailed (runs' NEES up to 10, README "RBPF"). Before the map-spacing search step
     (search_step_for) seed 7 alone averaged 9.5 over the route."""
     from concurrent.futures import ProcessPoolExecutor
@@ -260,7 +263,7 @@ def test_rbpf_consistent_when_the_map_is_the_world():
     with ProcessPoolExecutor(2) as pool:
         runs = list(pool.map(_default_route_map_is_world, range(8)))
     nees = [x for r in runs for x in r[0]]
-    lo, hi = _chi2_mean_bounds(len(nees), 2, 0.99)
+    lo, hi = _chi2_mean_bounds(len(nees), 2, 0.95)
     assert lo <= np.mean(nees) <= hi, (np.mean(nees), lo, hi, len(nees), [np.mean(r[0]) for r in runs])
     assert max(r[1] for r in runs) < 10.0, [r[1] for r in runs]
 

@@ -57,7 +57,7 @@ process noise per epoch: position 0.5 m, velocity 1e-4 m/s, attitude 1e-6 rad, b
 row lists five numbers for twelve states; we read them as (horizontal velocity, vertical velocity,
 attitude, accelerometer bias, gyro bias). Table 1 gives no gyro bias prior; ours is gyro_bias_sigma_rps.
 Two process-noise defaults depart from Table 1 (measured on the default King Air route, 40 seeds, README
-"RBPF"): vertical velocity 1e-2 m/s per epoch (q_vel_mps[1]) and horizontal position 0.35 m (q_pos_m[:2]).
+"RBPF"): vertical velocity 1e-2 m/s per epoch (q_vel_mps[1]) and horizontal position 0.25 m (q_pos_m[:2]).
 Without a barometer the vertical velocity is seen only through the range: the position the range pins
 and, through eq 24, the tilt of the zero-Doppler plane, which moves the closest point along track by
 R dv_d / V (1.8 m per 0.1 m/s at 1,500 m and 85 m/s), so along-track position and vertical velocity
@@ -65,8 +65,10 @@ trade in the measurement. At Table 1's 1e-4 the Kalman parts held the vertical v
 its error (squared normalised error 24-39 with map = world), and a run's vertical-velocity error came with
 an along-track error under a too-small sigma (whole runs averaging horizontal NEES 7); at 1e-2 it is
 1.3-2.0, the worst run averages 3.7 and the horizontal RMS is 3.3 -> 2.9 m (seeds 20-39). The horizontal
-position's 0.5 m then left the filter conservative (NEES 1.4 of 2); 0.35 gives 1.6-1.7, and below 0.3
-runs averaging 5-9 return. seed002's 240 m/s flight keeps its own 1.0 m (reproduce_seed002.FILTER_SETTINGS).
+position's 0.5 m then left the filter conservative (NEES 1.4 of 2), and with the recovery of session 9
+(below) 0.25 gives 2.02 (seeds 0-19; 0.35 with a 30 m re-spread: 1.67, 0.20: 2.30). Before it, below 0.3
+runs averaging 5-16 returned: the fictitious position noise was covering for the false alarms' re-spreads,
+not for the model. seed002's 240 m/s flight keeps its own 1.0 m (reproduce_seed002.FILTER_SETTINGS).
 In a scenario both bias priors come from its IMU (registry.IMU_AWARE: trn_env's build_navigator gives the
 turn-on bias and bias instability of the IMU's grade; 50 ug and 0.005 deg/h for the navigation grade), and
 so does the biases' process noise (the instability's Gauss-Markov drive per epoch: 0 for the navigation
@@ -82,6 +84,16 @@ updates; when the sum leaves its chi-square band (probability integrity_alpha) H
 False) and the particles' positions are re-spread (resampled, then N(0, recovery_sigma_m^2) added
 horizontally), both logged; a whole window still out of band after a re-spread re-spreads again, twice as
 wide (up to 8 x); back in band the status is "acquiring" until the cloud's spread is below 30 m ("ok").
+With recovery_reset_kalman (default) a re-spread also gives every particle's velocity-attitude block the
+prior's covariance plus the cloud's mixture covariance (cross terms with the biases zeroed): the test says
+the whole belief is overconfident, and re-converging 1,000 particles from a wide spread keeps the Kalman
+parts of a few ancestors, whose heading and velocity sigmas had fallen to 0.005 deg and 0.01 m/s against
+errors of 0.1 deg and 0.1-0.3 m/s (seed 0, noise-free IMU, map = world). integrity_alpha is 1e-4 as for
+the pmf and pf (session 9; was 0.01): at 0.01 the test raised about one false alarm per run on the default
+route, and a 100 m re-spread of a cloud 3 m off was how the overconfident runs (averaging NEES 5-16)
+began; a lost filter's NIS is far outside either band (a 120 m range bias flags at its first or second
+sample, tests/test_nav_integrity_filters.py). A 30 m recovery_sigma_m did as well against the false alarms
+but left 3 of 5 such faulted flights 145-160 m off (README "RBPF").
 Randomness: only from `rng` (the scenario's navigator stream), so one seed fixes a run bit for bit.
 """
 
@@ -174,8 +186,8 @@ class RaoBlackwellizedPF:
     another basin with more than this probability, _basin_jump_probability; 0.05); prior_from_initial (the
     cloud's and Kalman parts' prior from reset's initial.covariance, _set_prior; False: the init_* settings);
     imu_samples ("interval" | "instant"); gravity_gradient (error model, see
-    error_model_15); integrity_window, integrity_alpha, recovery_sigma_m (the innovation test and its
-    recovery, see the module docstring).
+    error_model_15); integrity_window, integrity_alpha, recovery_sigma_m, recovery_reset_kalman (the
+    innovation test and its recovery, see the module docstring).
     """
 
     def __init__(
@@ -206,7 +218,7 @@ class RaoBlackwellizedPF:
         init_att_sigma_deg=(0.1, 0.1, 0.1),
         accel_bias_sigma_mps2: float = 1e-4,
         gyro_bias_sigma_rps: float = 1e-6,
-        q_pos_m=(0.35, 0.35, 0.5),
+        q_pos_m=(0.25, 0.25, 0.5),
         q_vel_mps=(1e-4, 1e-2),
         q_att_rad: float = 1e-6,
         q_accel_bias_mps2: float = 1e-7,
@@ -221,8 +233,9 @@ class RaoBlackwellizedPF:
         map_bias_sigma_m: float = 0.0,
         terrain_model_sigma_m="auto",
         integrity_window: int = 3,
-        integrity_alpha: float = 0.01,
+        integrity_alpha: float = 1e-4,
         recovery_sigma_m: float = 100.0,
+        recovery_reset_kalman: bool = True,
         name: str = "rbpf",
     ):
         if dem is None:
@@ -346,6 +359,7 @@ class RaoBlackwellizedPF:
         self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
         self.recovery_sigma_m = _positive("recovery_sigma_m", recovery_sigma_m, True)
         self.recoveries = 0
+        self.recovery_reset_kalman = bool(recovery_reset_kalman)
         # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
         self.health = Health()
         self._reset_done = False
@@ -816,6 +830,14 @@ class RaoBlackwellizedPF:
         self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
         sig = self.recovery_sigma_m * 2.0 ** (self._streak - 1)
         self.xn[:, :2] += self.rng.standard_normal((self.n, 2)) * sig
+        if self.recovery_reset_kalman:
+            # the Kalman parts' velocity and attitude share the position's failed test: back to the prior
+            # spread (plus the cloud's), so the cloud re-converges without inheriting their overconfidence
+            c = kern.moments(self.xn, self.xl, self.P, np.full(self.n, 1.0 / self.n))[1][3:9, 3:9]
+            blk = c + self.P0[:6, :6]
+            self.P[:, :6, :6] = blk
+            self.P[:, :6, 6:] = 0.0
+            self.P[:, 6:, :6] = 0.0
         self.logw = np.full(self.n, -math.log(self.n))
         self._cov9 = self._covariance9()
         self.health.events.append((float(te), f"recovery: {self.n} particles re-spread, horizontal 1-sigma "
