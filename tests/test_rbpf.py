@@ -100,6 +100,7 @@ def dem():
     ("ess_threshold", 1.5), ("range_sigma_m", -1.0), ("look_angle_sigma_deg", float("nan")),
     ("q_pos_m", (0.5, -0.5, 0.5)), ("trn_rate_hz", 0.0), ("half_window_deg", 95.0),
     ("init_pos_sigma_m", (50.0, 50.0)), ("gnss_vel_sigma_mps", float("inf")),
+    ("recovery_reset_kalman", "false"),
 ])
 def test_bad_settings_raise_naming_the_setting(dem, setting, value):
     with pytest.raises(ValueError, match=setting):

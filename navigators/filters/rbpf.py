@@ -66,7 +66,7 @@ its error (squared normalised error 24-39 with map = world), and a run's vertica
 an along-track error under a too-small sigma (whole runs averaging horizontal NEES 7); at 1e-2 it is
 1.3-2.0, the worst run averages 3.7 and the horizontal RMS is 3.3 -> 2.9 m (seeds 20-39). The horizontal
 position's 0.5 m then left the filter conservative (NEES 1.4 of 2), and with the recovery of session 9
-(below) 0.25 gives 2.02 (seeds 0-19; 0.35 with a 30 m re-spread: 1.67, 0.20: 2.30). Before it, below 0.3
+(below) 0.25 gives 2.02 (seeds 0-19; 0.35: 1.57, 0.20: 2.24, same alpha). Before it, below 0.3
 runs averaging 5-16 returned: the fictitious position noise was covering for the false alarms' re-spreads,
 not for the model. seed002's 240 m/s flight keeps its own 1.0 m (reproduce_seed002.FILTER_SETTINGS).
 In a scenario both bias priors come from its IMU (registry.IMU_AWARE: trn_env's build_navigator gives the
@@ -359,6 +359,8 @@ class RaoBlackwellizedPF:
         self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
         self.recovery_sigma_m = _positive("recovery_sigma_m", recovery_sigma_m, True)
         self.recoveries = 0
+        if not isinstance(recovery_reset_kalman, (bool, np.bool_)):
+            raise ValueError(f"recovery_reset_kalman must be true or false, got {recovery_reset_kalman!r}")
         self.recovery_reset_kalman = bool(recovery_reset_kalman)
         # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
         self.health = Health()
