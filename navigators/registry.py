@@ -44,7 +44,8 @@ _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
 # map_sigma_m / map_bias_sigma_m from the scenario's map error model when the settings do not give them
 MAP_NOISE_AWARE: set[str] = {"pmf", "pf", "rbpf"}
 # navigators that model the interpolation error of a coarse map (terrain_model_sigma_m, default "auto": from
-# the map's spectrum): build_navigator gives them 0 when the scenario's map is the world itself
+# the map's spectrum): build_navigator gives them 0 when the scenario's map is the world itself, else
+# terrain_detail_spacing_m (the calibration's finest terrain) from the world's refinement spacing
 MAP_IS_WORLD_AWARE: set[str] = {"rbpf"}
 # navigators whose bias priors (accel_bias_sigma_mps2, gyro_bias_sigma_rps) and bias process noise
 # (q_accel_bias_mps2, q_gyro_bias_rps per epoch) build_navigator fills from the scenario's IMU error model

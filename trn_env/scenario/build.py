@@ -377,8 +377,8 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     **settings); the rng reaches only navigators that draw random numbers. Navigators in
     registry.MAP_NOISE_AWARE also get map_sigma_m / map_bias_sigma_m from the map error model
     (map_noise_settings), those in registry.IMU_AWARE their bias priors and bias process noise from the IMU
-    (imu_bias_settings),
-    unless the settings give them."""
+    (imu_bias_settings), those in registry.MAP_IS_WORLD_AWARE terrain_model_sigma_m = 0 when the map is the
+    world, else terrain_detail_spacing_m from the world's refinement, unless the settings give them."""
     from navigators import registry
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
@@ -391,6 +391,12 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     if (d["navigator"]["name"] in getattr(registry, "MAP_IS_WORLD_AWARE", ())
             and d["terrain"]["map"].get("dem", "world") == "world"):
         settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
+    elif d["navigator"]["name"] in getattr(registry, "MAP_IS_WORLD_AWARE", ()):
+        refinement = d["terrain"]["world"].get("refinement") or {}
+        spacing = refinement.get("spacing_m")
+        # the finest terrain below the map's posts is the world's (where it is finer than the posts)
+        if spacing is not None and 5.0 <= float(spacing) < min(getattr(map_dem, "spacing_m", (0.0,))):
+            settings.setdefault("terrain_detail_spacing_m", float(spacing))
     return registry.create(d["navigator"]["name"], rng=rng, **settings)
 
 
