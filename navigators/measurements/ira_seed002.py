@@ -495,7 +495,8 @@ def _map_key(dem) -> tuple:
 
 
 def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n_states: int = 1000,
-                          realisations: int = 3, ambiguity_probability: float = 0.05) -> tuple[float, float]:
+                          realisations: int = 3, ambiguity_probability: float = 0.05,
+                          gate_sigmas: float = 0.0, theta_sensor_var: float = 0.0) -> tuple[float, float]:
     """(range factor, look-angle factor) calibrating map_noise_variances' flat-ground model for the terrain
     a map cannot hold between its posts (interpolation_sigma_m): each the measured variance over the model's.
     The map's error class is simulated, not the world: terrain.refine continues the map's own spectrum below
@@ -504,13 +505,16 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n
     filter's, search_step_for) at n_states random states per realisation, agl_m above the map (random
     heading, 85 m/s, small bank), inside the square's inner 60 %. The look angle's leaves out the states
     whose basin-jump probability (as the RBPF's _basin_jump_probability) exceeds ambiguity_probability:
-    the filter uses the range alone there. Range: var(R_refined - R_map) / sigma_h^2 (a constant offset is
-    the vertical state's); look angle: mean((theta_refined - theta_map)^2 3 R) / sigma_h. The flat-ground
-    band is an upper bound: the closest point is the minimum of a rough R(s), nearer the band's middle. On
-    the 3" Jacksboro map with 30 m detail (~24 m posts): 0.78 and 0.72 (README "RBPF"). (1, 1) when the
-    map is too smooth (sigma_h 0) or too small to refine. Cached per map content; 2-4 s for the default."""
+    the filter uses the range alone there, and, with gate_sigmas > 0, those beyond that many sigmas of the
+    calibrated look-angle variance plus theta_sensor_var (rad^2), iterated to a fixed point (the RBPF's
+    theta_gate_sigmas: the heavy tail goes to the range alone there too). Range: var(R_refined - R_map) /
+    sigma_h^2 (a constant offset is the vertical state's); look angle: mean((theta_refined - theta_map)^2 3 R)
+    / sigma_h. The flat-ground band is an upper bound: the closest point is the minimum of a rough R(s),
+    nearer the band's middle. On the 3" Jacksboro map with 30 m detail (~24 m posts): 0.78 and 0.72 (README
+    "RBPF"). (1, 1) when the map is too smooth (sigma_h 0) or too small to refine. Cached per map content; 2-4
+    s for the default."""
     key = (_map_key(dem), float(detail_spacing_m), float(agl_m), int(n_states), int(realisations),
-           float(ambiguity_probability))
+           float(ambiguity_probability), float(gate_sigmas), float(theta_sensor_var))
     hit = _CALIBRATION_CACHE.get(key)
     if hit is not None:
         return hit
@@ -524,7 +528,7 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n
     half_lon = min(0.5 * (lo1 - lo0), 8000.0 / (6.371e6 * np.cos(lat_c)))
     region = (lat_c - half_lat, lat_c + half_lat, lon_c - half_lon, lon_c + half_lon)
     step_map = search_step_for(dem)
-    var_r, th2_r3 = [], []
+    var_r, th2, rng_th = [], [], []
     for seed in range(int(realisations)) if sigma_h > 0.0 else ():
         try:
             detail = refine(dem, spacing_m=float(detail_spacing_m), seed=seed, region=region)
@@ -548,12 +552,22 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n
             gap = b[OUT_R2] - b[OUT_R]
             p_jump = 0.5 * math.erfc(max(gap, 0.0) / (2.0 * sigma_h)) if np.isfinite(gap) else 0.0
             if p_jump <= ambiguity_probability:
-                th2_r3.append((a[OUT_THETA] - b[OUT_THETA]) ** 2 * 3.0 * b[OUT_R])
+                th2.append((a[OUT_THETA] - b[OUT_THETA]) ** 2)
+                rng_th.append(b[OUT_R])
         if len(d_r) >= 50:
             var_r.append(float(np.var(d_r)))
     out = (1.0, 1.0)
-    if var_r and len(th2_r3) >= 50:
-        f_r, f_th = float(np.mean(var_r)) / sigma_h ** 2, float(np.mean(th2_r3)) / sigma_h
+    if var_r and len(th2) >= 50:
+        th2, rng_th = np.asarray(th2), np.asarray(rng_th)
+        z2 = th2 * 3.0 * rng_th / sigma_h          # each sample's f_theta
+        f_th = float(np.mean(z2))
+        for _ in range(20 if gate_sigmas > 0.0 else 0):
+            keep = th2 <= gate_sigmas ** 2 * (f_th * sigma_h / (3.0 * rng_th) + float(theta_sensor_var))
+            f_new = float(np.mean(z2[keep]))
+            if f_new == f_th:
+                break
+            f_th = f_new
+        f_r = float(np.mean(var_r)) / sigma_h ** 2
         if np.isfinite(f_r) and np.isfinite(f_th) and f_r > 0.0 and f_th > 0.0:
             out = (f_r, f_th)
     _CALIBRATION_CACHE[key] = out
