@@ -262,13 +262,13 @@ def _chi2_mean_bounds(n: int, dof: int, p: float) -> tuple[float, float]:
 
 
 def test_rbpf_not_overconfident_on_a_coarse_map():
-    """The 3" map against the 30 m world (default_short's leg, GNSS for 10 s then denied, 80 s): over 3
-    seeds the horizontal NEES at every 10th epoch after 15 s (errors decorrelated over ~10 s) stays below the
+    """The 3" map against the 30 m world (default_short's leg, GNSS for 10 s then denied, 80 s): over 3 seeds
+    the horizontal NEES at every 10th epoch after 15 s (errors decorrelated over ~10 s) stays below the
     upper 99 % chi-square bound for that many 2-dof samples (computed here), and the RMS stays small. One-
-    sided: with the map's errors as noise the filter is conservative here (measured 1.13 with the calibrated
-    map-noise model and the look-angle gate, session 10; 1.15 with the flat-ground one, session 9; 0.93 before), and over the whole
-    route 1.89 over 60 seeds (README "RBPF"); the failure this guards against is overconfidence (NEES
-    2.3-4.4 before the basin-jump test)."""
+    sided: with the map's errors as noise the filter is conservative here (measured 1.13 with the
+    calibrated map-noise model and the look-angle gate, session 10; 1.15 with the flat-ground one, session
+    9; 0.93 before), and over the whole route 1.89 over 60 seeds (README "RBPF"); the failure this guards
+    against is overconfidence (NEES 2.3-4.4 before the basin-jump test)."""
     from pathlib import Path
 
     from trn_env.scenario.loading import load_scenario, validate
