@@ -8,8 +8,8 @@
   measured between the 3" map and a 30 m refinement of it, and the calibrated range and look-angle
   variances (map_noise_calibration, on other refinements) against their errors measured between the two
   maps at random states;
-- on a 3" map against the 30 m world, GNSS then denied, the RBPF's horizontal NEES stays inside a
-  chi-square bound computed here (it is not overconfident).
+- on a 3" map against the 30 m world, GNSS then denied, the RBPF's horizontal NEES lies inside the
+  two-sided 95 % chi-square bounds computed here, as with map = world.
 """
 
 import math
@@ -261,31 +261,31 @@ def _chi2_mean_bounds(n: int, dof: int, p: float) -> tuple[float, float]:
     return chi2.ppf((1 - p) / 2, dof * n) / n, chi2.ppf((1 + p) / 2, dof * n) / n
 
 
-def test_rbpf_not_overconfident_on_a_coarse_map():
-    """The 3" map against the 30 m world (default_short's leg, GNSS for 10 s then denied, 80 s): over 3 seeds
-    the horizontal NEES at every 10th epoch after 15 s (errors decorrelated over ~10 s) stays below the
-    upper 99 % chi-square bound for that many 2-dof samples (computed here), and the RMS stays small. One-
-    sided: with the map's errors as noise the filter is conservative here (measured 1.13 with the
-    calibrated map-noise model and the look-angle gate, session 10; 1.15 with the flat-ground one, session
-    9; 0.93 before), and over the whole route 1.89 over 60 seeds (README "RBPF"); the failure this guards
-    against is overconfidence (NEES 2.3-4.4 before the basin-jump test)."""
-    from pathlib import Path
+def test_rbpf_consistent_on_the_coarse_map():
+    """The default route as built in (the 3" map against the 30 m world, GNSS for 10 s then denied), 8 seeds
+    x 240 s: the horizontal NEES at every 45th epoch after 15 s (the runs' NEES autocorrelation falls below
+    0.1 at 43-58 s on this map, scripts/rbpf_consistency.py) lies inside the two-sided 95 % chi-square
+    bounds for that many 2-dof samples (issue 17's criterion). Measured 2.13 against [1.47, 2.60] (every
+    15th epoch: 2.06 against [1.67, 2.36]), session 10's calibrated map noise and look-angle gate; with the
+    flat-ground map noise (session 9) the filter was conservative here, 1.71 over 60 seeds of the whole
+    route (now 1.89, README "RBPF"), and before the basin-jump test overconfident (2.3-4.4)."""
+    from concurrent.futures import ProcessPoolExecutor
 
+    with ProcessPoolExecutor(2) as pool:
+        runs = list(pool.map(_default_route_coarse_map, range(8)))
+    nees = [x for r in runs for x in r[0]]
+    lo, hi = _chi2_mean_bounds(len(nees), 2, 0.95)
+    assert lo <= np.mean(nees) <= hi, (np.mean(nees), lo, hi, len(nees), [np.mean(r[0]) for r in runs])
+    assert max(r[1] for r in runs) < 12.0, [r[1] for r in runs]
+
+
+def _default_route_coarse_map(seed: int) -> tuple[list[float], float]:
     from trn_env.scenario.loading import load_scenario, validate
     from trn_env.sim.closed_loop import ClosedLoop
 
-    scen = Path(__file__).parent / "scenarios" / "rbpf_short.toml"
-    nees, rms = [], []
-    for seed in (0, 1, 2):
-        sc = load_scenario(scen, duration_s=80.0, seed=seed)
-        sc.data["terrain"]["map"] = {"dem": "jacksboro"}       # the 3" map as published
-        res = ClosedLoop(validate(sc.data, source=str(scen))).run()
-        nees += _horizontal_nees(res, 15.0, 10)
-        rms.append(res.summary["horizontal_error_rms_m"])
-    n = len(nees)
-    hi = _chi2_mean_bounds(n, 2, 0.98)[1]                    # one-sided 99 %
-    assert 0.2 < np.mean(nees) <= hi, (np.mean(nees), hi, n)
-    assert max(rms) < 20.0, rms
+    sc = load_scenario("default", duration_s=240.0, seed=seed, navigator="rbpf")
+    res = ClosedLoop(validate(sc.data, source="default"), pipeline=False).run()
+    return _horizontal_nees(res, 15.0, 45), res.summary["horizontal_error_rms_m"]
 
 
 def test_rbpf_consistent_when_the_map_is_the_world():
