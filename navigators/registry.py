@@ -25,11 +25,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-
-from navigators.acquisition_tracking import AcqTrackNavigator
-from navigators.filters.ins_trn_ekf import InsTrnNavigator
-from navigators.filters.pf import ParticleFilter
-from navigators.filters.pmf import PointMassFilter
+from trn_env.navigators.acquisition_tracking import AcqTrackNavigator
+from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
+from trn_env.navigators.filters.pf import ParticleFilter
+from trn_env.navigators.filters.pmf import PointMassFilter
 
 # name -> (factory, takes_rng)
 _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
@@ -83,7 +82,7 @@ def register(name: str, factory: Callable[..., object], takes_rng: bool = False)
 
 
 def _rbpf(**settings):
-    from navigators.filters.rbpf import RaoBlackwellizedPF
+    from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
 
     return RaoBlackwellizedPF(**settings)
 
@@ -94,7 +93,7 @@ register("rbpf", _rbpf, takes_rng=True)
 # ------------------------------------------------------------------------------------------ monitors
 
 def _dem_integrity(**kw):
-    from navigators.integrity.dem_monitor import DemIntegrityMonitor
+    from trn_env.navigators.integrity.dem_monitor import DemIntegrityMonitor
     return DemIntegrityMonitor(**kw)
 
 

@@ -49,9 +49,10 @@ from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from trn_env.navigators import registry  # noqa: E402
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
+
 import trn_env.scenario.build as components  # noqa: E402
-from navigators import registry  # noqa: E402
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
 from trn_env.scenario.loading import load_scenario  # noqa: E402
 from trn_env.sim.closed_loop import ClosedLoop, perturbed_estimate  # noqa: E402
 from trn_env.sim.nav_stage import gate_gnss  # noqa: E402
@@ -132,7 +133,7 @@ def run_world(d: dict, world, seed: int, world_detail: str):
     refinement = d["terrain"]["world"].get("refinement")
     if world_detail == "fixed" or not refinement:
         return world
-    import terrain
+    from trn_env import terrain
     raw = terrain.load(d["terrain"]["world"]["dem"], fill_voids=bool(d["terrain"]["world"].get("fill_voids")))
     return components.refine_dem(raw, refinement, np.random.default_rng([seed, 31]))
 
@@ -269,7 +270,7 @@ def nees_figures(res: dict, t_from_s: float) -> dict:
 def ira_track(d: dict, chunks, world, rate_hz: float):
     """(t, aircraft lat, lon, h, true closest-point lat, lon, h) of the IRA samples a filter at rate_hz takes
     (the first of each 1/rate_hz s), closest points on the true terrain (terrain.queries.ira_return)."""
-    from terrain import queries
+    from trn_env.terrain import queries
     cfg = d["sensors"]["ira"]
     half = math.radians(float(cfg.get("half_window_deg", 45.0)))
     dt_ira = 1.0 / float(cfg.get("rate_hz", 50.0))
@@ -296,7 +297,7 @@ def crlb_figures(res: dict, flight, t_from_s: float, settings: dict | None = Non
     variance of world minus map at those points; both with the filter's prior (the initial 1 sigma) and its
     position random walk as the process noise. Also terrain.metrics.terrain_information's window CRLB (every
     post of a 2 km window measured) along the track, for comparison."""
-    from terrain import metrics
+    from trn_env.terrain import metrics
     d, chunks, world, the_map, _ = flight
     settings = settings or {}
     out = {"t_from_s": t_from_s}

@@ -13,8 +13,8 @@ import math
 import time
 
 import numpy as np
+from trn_env.terrain.geodesy import ned_offset_to_latlon
 
-from terrain.geodesy import ned_offset_to_latlon
 from trn_env.flight.core import Flight, InitialCondition
 from trn_env.flight.truth import TruthChunk
 from trn_env.flight.wind import Turbulence, WindConfig

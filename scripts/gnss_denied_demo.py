@@ -18,13 +18,13 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from trn_env.navigators import registry
+from trn_env.navigators.filters.ins_trn_ekf import initial_covariance
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-import terrain
-from navigators import registry
-from navigators.filters.ins_trn_ekf import initial_covariance
-from navigators.frames import SensorFrames
-from navigators.protocol import Estimate
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env import terrain
 from trn_env.flight.core import AutopilotTargets, Flight, InitialCondition, LateralMode, VerticalMode
 from trn_env.flight.truth import TruthChunk
 from trn_env.flight.wind import WindConfig

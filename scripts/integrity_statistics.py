@@ -30,8 +30,7 @@ import time
 
 import numpy as np
 from scipy.stats import beta, chi2
-
-from navigators.integrity import dem_monitor as dm
+from trn_env.navigators.integrity import dem_monitor as dm
 
 N_WIN = 50
 THRESHOLD = 96.0
@@ -46,7 +45,7 @@ def _upper95(k: int, n: int) -> float:
 def _map_sigma_m() -> float:
     """The DTED-1 class's vertical sigma in terrain.map_error (LE90 30 m / 1.6449 = 18.24 m): the map error
     drawn here, while the monitor assumes seed 003's measured disparity sigma of 18.9 m."""
-    from terrain.map_error import ACCURACY_CLASSES
+    from trn_env.terrain.map_error import ACCURACY_CLASSES
     return float(ACCURACY_CLASSES["dted1"].sigma_v_m)
 
 
@@ -169,7 +168,7 @@ def _scenario(seed: int, faults: list[dict], refine: bool = True, monitor: dict 
 
 
 def _entry_time(arrays, fault: dict) -> float | None:
-    from terrain.geodesy import latlon_to_ned_offset
+    from trn_env.terrain.geodesy import latlon_to_ned_offset
     lat_c, lon_c = math.radians(fault["center_lat_deg"]), math.radians(fault["center_lon_deg"])
     for t, lat, lon in zip(arrays["t_s"], arrays["true_lat_rad"], arrays["true_lon_rad"], strict=True):
         dn, de = latlon_to_ned_offset(lat_c, lon_c, 0.0, lat, lon)
@@ -185,7 +184,8 @@ def _fly(sc):
 
 
 def closed_loop(seeds: int) -> dict:
-    from navigators.registry import create_monitor
+    from trn_env.navigators.registry import create_monitor
+
     from trn_env.scenario.build import monitor_settings
     out: dict = {"seeds": seeds}
     t0 = time.perf_counter()

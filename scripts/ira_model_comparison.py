@@ -44,10 +44,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from trn_env.navigators import registry  # noqa: E402
+from trn_env.navigators.measurements.ira_closest_point import closest_point_ned  # noqa: E402
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
+
 import trn_env.scenario.build as components  # noqa: E402
-from navigators import registry  # noqa: E402
-from navigators.measurements.ira_closest_point import closest_point_ned  # noqa: E402
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
 from trn_env.flight.kinematic import heading_for_track, wind_ned_from  # noqa: E402
 from trn_env.scenario.loading import validate  # noqa: E402
 from trn_env.sensors.ira import IraConfig, sample_ira  # noqa: E402

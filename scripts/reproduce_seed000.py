@@ -23,15 +23,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from trn_env.navigators import registry
+from trn_env.navigators.filters.ins_trn_ekf import initial_covariance
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.measurements.ira_closest_point import closest_point_ned, effective_look_angle
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-import terrain
-from navigators import registry
-from navigators.filters.ins_trn_ekf import initial_covariance
-from navigators.frames import SensorFrames
-from navigators.measurements.ira_closest_point import closest_point_ned, effective_look_angle
-from navigators.protocol import Estimate
-from terrain.dem import Dem
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env import terrain
 from trn_env.flight.core import (
     AutopilotTargets,
     Flight,
@@ -52,7 +52,7 @@ def refined_dem(
 ) -> Dem:
     """The base DEM resampled (bicubic) to spacing_m over a square of +-half_m around (lat_c, lon_c), plus a
     zero-mean fractal detail of detail_rms_m (terrain.synthetic.psd_field, correlation length 200 m)."""
-    from terrain.synthetic import psd_field
+    from trn_env.terrain.synthetic import psd_field
 
     r_n = meridian_radius_m(lat_c)
     r_e = prime_vertical_radius_m(lat_c) * math.cos(lat_c)

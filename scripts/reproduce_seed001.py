@@ -34,10 +34,10 @@ from pathlib import Path
 
 import numpy as np
 from scipy.stats import t as student_t
+from trn_env.navigators import registry
+from trn_env.terrain.geodesy import latlon_to_ned_offset
 
-import terrain
-from navigators import registry
-from terrain.geodesy import latlon_to_ned_offset
+from trn_env import terrain
 from trn_env.scenario import build as components
 from trn_env.scenario.loading import read_scenario_file, validate
 from trn_env.sim.closed_loop import ClosedLoop
@@ -163,7 +163,7 @@ def replay(frames, truth, dem, name: str, t_deny_s: float = 10.0, **settings):
     """Run navigator `name` on the frames with GNSS removed from t_deny_s on; per-update arrays."""
     nav = registry.create(name, dem=dem, **settings)
     t = truth["t_s"]
-    from navigators.protocol import Estimate
+    from trn_env.navigators.protocol import Estimate
 
     cov = np.diag([30.0**2, 30.0**2, 15.0**2, 0.01, 0.01, 0.01, 2.5e-9, 2.5e-9, 1e-6])
     v0 = truth["true_v_ned_mps"][0]

@@ -36,14 +36,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from trn_env.navigators.filters import _rbpf_kernels as kern
+from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.geodesy import euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
 
-import terrain
 import trn_env.scenario.build as components
-from navigators.filters import _rbpf_kernels as kern
-from navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
-from navigators.frames import SensorFrames
-from navigators.protocol import Estimate
-from terrain.geodesy import euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
+from trn_env import terrain
 from trn_env.flight.kinematic import KinematicTruth
 from trn_env.scenario.loading import load_scenario
 from trn_env.sensors.imu import ImuConfig, sample_imu
@@ -191,9 +191,9 @@ def information_bound(truth, dem, epoch_s: float = 1.0, process_noise: str = "ta
     information plus the observability Gramian sum Phi(t,0)^T H^T R^-1 H Phi(t,0), mapped to t (it must
     equal the recursion with Q = 0). Returns t (n,), sigma (n, 15) of the posterior (position m, velocity
     m/s, attitude rad, ...), and with batch_check sigma_batch, sigma_q0."""
-    from navigators.filters.rbpf import RaoBlackwellizedPF
-    from navigators.inertial.error_model_15 import step_transition, system_matrix
-    from navigators.measurements import ira_seed002 as ira_model
+    from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
+    from trn_env.navigators.inertial.error_model_15 import step_transition, system_matrix
+    from trn_env.navigators.measurements import ira_seed002 as ira_model
 
     ref = RaoBlackwellizedPF(dem=dem, **{"terrain_model_sigma_m": 0.0, **(settings or {})})  # P0, Q, R
     P0 = np.zeros((15, 15))

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from terrain.dem import Dem
-from terrain.loaders import DemLoadError
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.loaders import DemLoadError
 
 BUNDLED = ("jacksboro",)
 
@@ -26,7 +26,7 @@ __all__ = ["Dem", "DemLoadError", "load", "BUNDLED"]
 
 def load(name_or_path, fill_voids: bool = False) -> Dem:
     """Load a DEM by bundled name, "synthetic:<preset>" or file path (see the module docstring)."""
-    from terrain import loaders
+    from trn_env.terrain import loaders
 
     if not isinstance(name_or_path, (str, Path)) and not hasattr(name_or_path, "__fspath__"):
         raise ValueError(f"terrain.load: give a DEM name (e.g. 'jacksboro', 'synthetic:rolling') or a file "
@@ -36,7 +36,7 @@ def load(name_or_path, fill_voids: bool = False) -> Dem:
         if key.lower() in ("jacksboro", "jacksboro_fault", "default"):
             return loaders.load_jacksboro(fill_voids)
         if key.lower().startswith("synthetic:"):
-            from terrain import synthetic
+            from trn_env.terrain import synthetic
 
             return synthetic.from_preset(key.split(":", 1)[1])
     return loaders.load_path(Path(name_or_path), fill_voids)

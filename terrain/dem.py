@@ -11,8 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from terrain import geodesy, kernels
+from trn_env.terrain import geodesy, kernels
 
 _METHODS = ("bilinear", "bicubic")
 

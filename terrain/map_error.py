@@ -21,9 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
-
-from terrain import geodesy, kernels
-from terrain.dem import Dem
+from trn_env.terrain import geodesy, kernels
+from trn_env.terrain.dem import Dem
 
 CE90_PER_SIGMA = 2.1460  # circular normal: P(r < 2.146 sigma) = 0.90
 LE90_PER_SIGMA = 1.6449  # normal: P(|z| < 1.6449 sigma) = 0.90

@@ -23,9 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
-
-from terrain import geodesy
-from terrain.dem import Dem
+from trn_env.terrain import geodesy
+from trn_env.terrain.dem import Dem
 
 
 def _window_posts(dem: Dem, window_m: float) -> tuple[int, int]:

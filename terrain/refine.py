@@ -15,9 +15,8 @@ Memory: one float64 array of the refined grid plus FFT work space (~4 x that); 3
 from __future__ import annotations
 
 import numpy as np
-
-from terrain import geodesy, kernels, spectrum
-from terrain.dem import Dem
+from trn_env.terrain import geodesy, kernels, spectrum
+from trn_env.terrain.dem import Dem
 
 
 def fit_dem_spectrum(dem: Dem, band=(0.1, 0.5)):
@@ -25,7 +24,7 @@ def fit_dem_spectrum(dem: Dem, band=(0.1, 0.5)):
     dn, de = dem.spacing_m
     z = dem.heights_m
     if not np.isfinite(z).all():
-        from terrain.loaders import fill_voids
+        from trn_env.terrain.loaders import fill_voids
 
         z = fill_voids(z, dem.name)
     f, p = spectrum.radial_psd(z, dn, de)

@@ -21,9 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from terrain import geodesy
-from terrain.dem import Dem
+from trn_env.terrain import geodesy
+from trn_env.terrain.dem import Dem
 
 
 @dataclass(frozen=True)

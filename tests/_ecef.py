@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-
-from terrain.geodesy import C_en, lla_to_ecef
+from trn_env.terrain.geodesy import C_en, lla_to_ecef
 
 
 def ned_between(lat0, lon0, h0, lat1, lon1, h1) -> np.ndarray:

@@ -6,8 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from navigators.frames import (
+from trn_env.navigators.frames import (
     AirDataFrame,
     BaroFrame,
     GnssFrame,
@@ -15,8 +14,8 @@ from navigators.frames import (
     RadarAltimeterFrame,
     SensorFrames,
 )
-from navigators.protocol import Estimate
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 R0 = 6356766.0
 

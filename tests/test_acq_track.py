@@ -11,10 +11,8 @@ import math
 import numpy as np
 import pytest
 from acq_track_helpers import fly, frames_for, horizontal_error_m, initial_estimate, trajectory
-
-import terrain
-from navigators import registry
-from navigators.acquisition_tracking import (
+from trn_env.navigators import registry
+from trn_env.navigators.acquisition_tracking import (
     AcqTrackConfig,
     AcqTrackNavigator,
     acquisition,
@@ -22,10 +20,12 @@ from navigators.acquisition_tracking import (
     loop_kernel,
     tracking,
 )
-from navigators.acquisition_tracking.integrity import OutputAverage, terrain_snr_db
-from navigators.acquisition_tracking.profile import plumb_height_m
-from navigators.protocol import EXTRA_INNOVATION, EXTRA_MEASUREMENT_TIME, EXTRA_NIS
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.navigators.acquisition_tracking.integrity import OutputAverage, terrain_snr_db
+from trn_env.navigators.acquisition_tracking.profile import plumb_height_m
+from trn_env.navigators.protocol import EXTRA_INNOVATION, EXTRA_MEASUREMENT_TIME, EXTRA_NIS
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+from trn_env import terrain
 
 LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
 H_MSL = 1400.0
@@ -477,7 +477,7 @@ def test_named_choices_all_track(dem, settings):
 def test_footprint_dilation_by_hand(dem):
     """One 100 m peak on a flat map: the footprint map at a post rho from it holds
     max(flat, peak - rho^2 / (2 a)) inside the beam's radius a tan(8.5 deg), the flat height outside."""
-    from navigators.acquisition_tracking.footprint import FootprintMaps
+    from trn_env.navigators.acquisition_tracking.footprint import FootprintMaps
 
     h = np.full_like(dem.heights_m, 200.0)
     i0, j0 = 200, 200

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from acq_track_helpers import fly, horizontal_error_m, initial_estimate, trajectory
 from scipy.stats import chi2
+from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, correlation, loop_kernel, tracking
+from trn_env.navigators.protocol import EXTRA_MEASUREMENT_TIME, EXTRA_NIS, EXTRA_NIS_DOF
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-import terrain
-from navigators.acquisition_tracking import AcqTrackNavigator, correlation, loop_kernel, tracking
-from navigators.protocol import EXTRA_MEASUREMENT_TIME, EXTRA_NIS, EXTRA_NIS_DOF
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env import terrain
 from trn_env.scenario.loading import read_scenario_file, validate
 from trn_env.sim.closed_loop import ClosedLoop
 

@@ -12,15 +12,15 @@ import math
 import numpy as np
 import pytest
 from acq_track_helpers import frames_for, horizontal_error_m, initial_estimate, trajectory
-
-import terrain
-from navigators.acquisition_tracking import AcqTrackNavigator, beam, loop_kernel
-from navigators.acquisition_tracking.correlation import (
+from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, beam, loop_kernel
+from trn_env.navigators.acquisition_tracking.correlation import (
     INTERP_BILINEAR,
     profile_cost,
     replica_positions_reference,
 )
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+from trn_env import terrain
 
 LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
 H_MSL = 1400.0

@@ -3,8 +3,7 @@
 import math
 
 import numpy as np
-
-from navigators.acquisition_tracking import filter_kernels as fk
+from trn_env.navigators.acquisition_tracking import filter_kernels as fk
 
 
 def _spd(rng, n):

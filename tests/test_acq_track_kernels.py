@@ -12,12 +12,12 @@ import math
 import numpy as np
 import pytest
 from acq_track_helpers import fly, horizontal_error_m, initial_estimate, trajectory
+from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, acquisition, correlation, loop_kernel
+from trn_env.navigators.acquisition_tracking.footprint import FootprintMaps
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.terrain.kernels import bilinear_batch
 
-import terrain
-from navigators.acquisition_tracking import AcqTrackNavigator, acquisition, correlation, loop_kernel
-from navigators.acquisition_tracking.footprint import FootprintMaps
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from terrain.kernels import bilinear_batch
+from trn_env import terrain
 
 LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
 H_MSL = 1400.0

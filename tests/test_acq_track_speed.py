@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 from scipy import ndimage
+from trn_env.navigators.acquisition_tracking.footprint import BAND_M, FootprintMaps
 
-import terrain
-from navigators.acquisition_tracking.footprint import BAND_M, FootprintMaps
+from trn_env import terrain
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +72,7 @@ def test_footprint_dilation_brute_force_at_edges(dem):
 
 
 def test_footprint_cache_keeps_the_most_recently_used_bands(dem):
-    from navigators.acquisition_tracking.footprint import MAX_BANDS
+    from trn_env.navigators.acquisition_tracking.footprint import MAX_BANDS
 
     fm = FootprintMaps(dem, 17.0)
     bands = list(range(10, 10 + MAX_BANDS))

@@ -198,7 +198,7 @@ def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsy
 
     bad.benchmark = explode
     monkeypatch.setitem(sys.modules, "trn_env.bench.flight", good)
-    monkeypatch.setitem(sys.modules, "terrain.bench", bad)
+    monkeypatch.setitem(sys.modules, "trn_env.terrain.bench", bad)
     monkeypatch.setitem(sys.modules, "trn_env.bench.sensors", types.ModuleType("fake_none"))
     monkeypatch.setitem(sys.modules, "trn_env.bench.rbpf", good)   # its real flights cost ~20 s
     monkeypatch.setattr(bench, "closed_loop_benchmark", lambda quick: {"closed_loop_ratio": 0.25})
@@ -208,6 +208,6 @@ def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsy
     assert cli.main(["bench", "--quick"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["jsbsim_steps_per_s"] == 1.0 and out["quick_seen"] is True
-    assert "broken component" in out["terrain.bench.error"]
+    assert "broken component" in out["trn_env.terrain.bench.error"]
     assert out["trn_env.bench.sensors.error"] == "no benchmark() function"
     assert out["closed_loop_ratio"] == 0.25 and out["env_sim_seconds_per_wall_second"] == 9.0

@@ -41,8 +41,7 @@ def test_integer_constants_do_not_multiply_specialisations():
     # uncached copy of the caller is typed here, so its callee's signatures are filled in even when the
     # cache holds predict_covariance itself.
     from numba import njit
-
-    from navigators.filters import _ekf_kernels
+    from trn_env.navigators.filters import _ekf_kernels
 
     fresh = njit(cache=False)(_ekf_kernels.predict_covariance.py_func)
     P = np.eye(13)

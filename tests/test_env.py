@@ -114,7 +114,7 @@ def test_observation_and_reward_match_independent_computation():
     assert np.allclose(obs0[:2], goal[:2] / 1000.0, atol=1e-5)       # km (float32)
     assert np.allclose(obs0[8:11], np.log10(1.0 + est.sigma_ned_m), rtol=1e-5)
     # terrain information at the estimate: the CRLB of terrain.metrics on the navigator's map
-    from terrain import metrics
+    from trn_env.terrain import metrics
     the_map = env._dems[1]
     crlb = metrics.terrain_information(the_map, 5.0, 2000.0).crlb_sigma_h_m
     here = the_map.with_heights(np.minimum(np.nan_to_num(crlb, nan=1e4, posinf=1e4), 1e4)).height(

@@ -34,7 +34,7 @@ def test_pursuit_path_is_the_log_spiral():
 
 
 def test_route_information_against_a_scalar_march_and_map_reads():
-    from terrain.geodesy import ned_offset_to_latlon
+    from trn_env.terrain.geodesy import ned_offset_to_latlon
 
     env = TerrainNavEnv(**SMALL)
     obs, _ = env.reset(seed=0, options={"start_deg": (36.527, -84.1325), "goal_deg": (36.7175, -84.1325)})

@@ -3,14 +3,13 @@
 import math
 
 import numpy as np
-
-from navigators.inertial.error_model_15 import (
+from trn_env.navigators.inertial.error_model_15 import (
     noise_input_matrix,
     system_matrix,
     transition_over_history,
 )
-from navigators.inertial.strapdown import StrapdownIns, gravity_ned, quat_to_dcm
-from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
+from trn_env.navigators.inertial.strapdown import StrapdownIns, gravity_ned, quat_to_dcm
+from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
 
 LAT0, LON0, H0 = math.radians(36.6), math.radians(-84.2), 2500.0
 V0 = np.array([228.0, 75.0, 0.0])

@@ -7,8 +7,7 @@ import math
 
 import numpy as np
 import pytest
-
-from terrain.geodesy import (
+from trn_env.terrain.geodesy import (
     OMEGA_EARTH_RPS,
     WGS84_A_M,
     WGS84_E2,
@@ -17,6 +16,7 @@ from terrain.geodesy import (
     meridian_radius_m,
     prime_vertical_radius_m,
 )
+
 from trn_env.bench.flight import benchmark
 from trn_env.flight.aircraft_data import new_fdm
 from trn_env.flight.core import (

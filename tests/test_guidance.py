@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.terrain.geodesy import ecef_to_lla, lla_to_ecef, ned_offset_to_latlon
 
-from terrain.geodesy import ecef_to_lla, lla_to_ecef, ned_offset_to_latlon
 from trn_env.flight.core import Flight, InitialCondition, LateralMode, VerticalMode
 from trn_env.flight.wind import WindConfig
 from trn_env.guidance.route_following import Guidance, PositionEstimate, Route, Waypoint, position_from_truth
@@ -201,7 +201,7 @@ def _brute_force_signed_distances(lat_a, lon_a, lat_b, lon_b, lats, lons) -> np.
 
 
 def _latlon_to_ecef_vec(lat, lon, h=0.0) -> np.ndarray:
-    from terrain.geodesy import WGS84_A_M, WGS84_E2
+    from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
     n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
     return np.stack([(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon),
                      (n * (1.0 - WGS84_E2) + h) * np.sin(lat)], axis=-1)

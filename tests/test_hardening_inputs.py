@@ -15,10 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from trn_env.navigators import registry
 
-import terrain
-from navigators import registry
-from trn_env import cli
+from trn_env import cli, terrain
 from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
 
 SCEN = Path(__file__).parent / "scenarios"
@@ -119,8 +118,8 @@ def test_above_service_ceiling_refused_naming_the_field():
 
 
 def test_initial_estimate_nan_refused_by_the_navigator():
-    from navigators.filters.ins_trn_ekf import initial_covariance
-    from navigators.protocol import Estimate
+    from trn_env.navigators.filters.ins_trn_ekf import initial_covariance
+    from trn_env.navigators.protocol import Estimate
     nav = registry.create("ins")
     with pytest.raises(ValueError, match="initial"):
         nav.reset(Estimate(0.0, 0.6, -1.4, math.nan, np.zeros(3), 0.0, 0.0, 0.0, initial_covariance()))
@@ -217,7 +216,7 @@ def test_plot_helpers():
 
 
 def test_interp_one_matches_numpy():
-    from navigators.filters._ekf_kernels import interp_one
+    from trn_env.navigators.filters._ekf_kernels import interp_one
     rng = np.random.default_rng(1)
     xp = np.cumsum(rng.uniform(0.1, 1.0, 50))
     fp = rng.standard_normal(50)
@@ -228,8 +227,8 @@ def test_interp_one_matches_numpy():
 
 def test_perfectly_known_start_is_accepted_negative_variance_refused():
     """Zero initial sigmas (legal) used to crash the EKF reset; a negative eigenvalue is refused."""
-    from navigators.filters.ins_trn_ekf import initial_covariance
-    from navigators.protocol import Estimate
+    from trn_env.navigators.filters.ins_trn_ekf import initial_covariance
+    from trn_env.navigators.protocol import Estimate
     nav = registry.create("ins")
     nav.reset(Estimate(0.0, 0.6, -1.4, 1000.0, np.zeros(3), 0.0, 0.0, 0.0, np.zeros((9, 9))))
     assert np.all(np.isfinite(nav.estimate().covariance))

@@ -10,9 +10,8 @@ import math
 
 import numpy as np
 import pytest
-
-from navigators.integrity.dem_monitor import replay_log
-from navigators.protocol import (
+from trn_env.navigators.integrity.dem_monitor import replay_log
+from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -20,8 +19,9 @@ from navigators.protocol import (
     EXTRA_NIS,
     EXTRA_NIS_DOF,
 )
-from navigators.registry import create_monitor
-from terrain.geodesy import latlon_to_ned_offset
+from trn_env.navigators.registry import create_monitor
+from trn_env.terrain.geodesy import latlon_to_ned_offset
+
 from trn_env.scenario.build import monitor_settings
 from trn_env.scenario.loading import load_scenario, read_scenario_file, validate
 from trn_env.sim.closed_loop import ClosedLoop

@@ -7,12 +7,12 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.terrain import queries
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import euler_to_C_bn
+from trn_env.terrain.map_error import MapFault, apply_fault, fault_schedule, set_heights
 
-import terrain
-from terrain import queries
-from terrain.dem import Dem
-from terrain.geodesy import euler_to_C_bn
-from terrain.map_error import MapFault, apply_fault, fault_schedule, set_heights
+from trn_env import terrain
 from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
 
 CENTER = (36.55, -84.25)

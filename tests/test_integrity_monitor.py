@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 from scipy.stats import binom, chi2
+from trn_env.navigators.frames import GnssFrame, RadarAltimeterFrame, SensorFrames
+from trn_env.navigators.integrity import dem_monitor as dm
+from trn_env.navigators.protocol import Estimate
+from trn_env.navigators.registry import available_monitors, create_monitor
+from trn_env.terrain import queries
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import euler_to_C_bn, meridian_radius_m
 
-import terrain
-from navigators.frames import GnssFrame, RadarAltimeterFrame, SensorFrames
-from navigators.integrity import dem_monitor as dm
-from navigators.protocol import Estimate
-from navigators.registry import available_monitors, create_monitor
-from terrain import queries
-from terrain.dem import Dem
-from terrain.geodesy import euler_to_C_bn, meridian_radius_m
+from trn_env import terrain
 
 
 def _rough_dem(seed: int = 0) -> Dem:

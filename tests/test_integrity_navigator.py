@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.stats import binom, chi2
+from trn_env.navigators.filters import InsTrnNavigator, initial_covariance
+from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
+from trn_env.navigators.protocol import Estimate
 
-import terrain
-from navigators.filters import InsTrnNavigator, initial_covariance
-from navigators.integrity.innovation_monitor import InnovationMonitor
-from navigators.protocol import Estimate
+from trn_env import terrain
 from trn_env.output.integrity_metrics import flag_before_error, integrity_metrics
 
 

@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.navigators.measurements import ira_seed002 as m
+from trn_env.terrain import queries
+from trn_env.terrain.geodesy import euler_to_C_bn
 
-import terrain
-from navigators.measurements import ira_seed002 as m
-from terrain import queries
-from terrain.geodesy import euler_to_C_bn
+from trn_env import terrain
 
 HW = math.radians(45.0)
 

@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.navigators.inertial.strapdown import StrapdownIns
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-from navigators.inertial.strapdown import StrapdownIns
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env.flight.kinematic import KinematicTruth, Segment
 from trn_env.sensors.imu import ImuConfig, sample_imu
 

@@ -31,15 +31,29 @@ def _modules() -> list[Path]:
 
 
 def _module_name(path: Path) -> str:
+    """The module's name as the source folders give it (terrain/dem.py -> terrain.dem)."""
     parts = list(path.relative_to(ROOT).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
 
 
+def _installed_name(module: str) -> str:
+    """terrain/ and navigators/ install as trn_env.terrain and trn_env.navigators."""
+    return f"trn_env.{module}" if module.split(".")[0] in ("terrain", "navigators") else module
+
+
+def _folder_name(module: str) -> str:
+    """The inverse of _installed_name: trn_env.terrain.dem -> terrain.dem (the rank of its source folder)."""
+    parts = module.split(".")
+    if len(parts) >= 2 and parts[0] == "trn_env" and parts[1] in ("terrain", "navigators"):
+        return ".".join(parts[1:])
+    return module
+
+
 def _imports(path: Path) -> list[tuple[int, str]]:
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    pkg = _module_name(path).split(".")
+    pkg = _installed_name(_module_name(path)).split(".")
     if path.name != "__init__.py":
         pkg = pkg[:-1]
     out = []
@@ -54,6 +68,7 @@ def _imports(path: Path) -> list[tuple[int, str]]:
                 mod = node.module or ""
             # `from trn_env import sim` imports the stage trn_env.sim
             out += [(node.lineno, f"{mod}.{a.name}") for a in node.names]
+    out = [(n, _folder_name(m)) for n, m in out]
     return [(n, m) for n, m in out if m.split(".")[0] in TOP]
 
 
@@ -110,21 +125,35 @@ def test_the_walker_sees_a_backward_import(tmp_path, monkeypatch):
 def test_every_package_folder_is_listed_for_the_wheel():
     config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
     listed = set(config["packages"])
-    on_disk = {_module_name(p.parent / "__init__.py") for top in TOP for p in (ROOT / top).rglob("*.py")
-               if "__pycache__" not in p.parts}
+    on_disk = {_installed_name(_module_name(p.parent / "__init__.py")) for top in TOP
+               for p in (ROOT / top).rglob("*.py") if "__pycache__" not in p.parts}
     missing = sorted(on_disk - listed)
     assert not missing, f"package folders with Python files not in pyproject.toml packages: {missing}"
     for pkg in on_disk:
-        assert (ROOT / pkg.replace(".", "/") / "__init__.py").is_file(), f"{pkg} has no __init__.py"
+        folder = _folder_name(pkg).replace(".", "/")
+        assert (ROOT / folder / "__init__.py").is_file(), f"{pkg} has no __init__.py"
 
 
 @pytest.mark.parametrize("name", ["trn_env.sim.run_scenario", "trn_env.sim.ClosedLoop",
                                   "trn_env.flight.Flight", "trn_env.flight.InitialCondition",
                                   "trn_env.sensors.suite.SensorSuite",
                                   "trn_env.guidance.Guidance", "trn_env.scenario.load_scenario",
-                                  "trn_env.env.TerrainNavEnv", "terrain.load", "navigators.registry.create"])
+                                  "trn_env.env.TerrainNavEnv", "trn_env.terrain.load",
+                                  "trn_env.navigators.registry.create"])
 def test_public_names_keep_working(name):
     import importlib
 
     module, attr = name.rsplit(".", 1)
     assert callable(getattr(importlib.import_module(module), attr))
+
+
+def test_nothing_installs_under_a_generic_top_level_name():
+    """The wheel installs only the project's namespace at the top level (PyPI has an unrelated `terrain`)."""
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    tops = {p.split(".")[0] for p in config["packages"]}
+    assert tops == {"trn_env"}, tops
+    for generic in ("terrain", "navigators"):
+        import importlib.util
+
+        spec = importlib.util.find_spec(generic)
+        assert spec is None or "trn_env" not in str(spec.origin), f"{generic} still importable from trn-env"

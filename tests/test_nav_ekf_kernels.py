@@ -2,18 +2,18 @@
 
 import numpy as np
 import pytest
-
-import terrain
-from navigators.filters import _ekf_kernels as kern
-from navigators.inertial.strapdown import quat_from_C_bn, quat_to_dcm
-from navigators.measurements.ira_closest_point import closest_point_ned
-from navigators.tercom.mad import _block_void_free, mad_surface, mad_surface_reference
-from terrain.geodesy import (
+from trn_env.navigators.filters import _ekf_kernels as kern
+from trn_env.navigators.inertial.strapdown import quat_from_C_bn, quat_to_dcm
+from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
+from trn_env.navigators.tercom.mad import _block_void_free, mad_surface, mad_surface_reference
+from trn_env.terrain.geodesy import (
     OMEGA_EARTH_RPS,
     euler_to_C_bn,
     meridian_radius_m,
     prime_vertical_radius_m,
 )
+
+from trn_env import terrain
 
 
 @pytest.fixture(scope="module")
@@ -281,7 +281,7 @@ def sim_frames():
 @pytest.mark.parametrize("decimation", [1, 3])
 def test_fused_and_fast_paths_match_general_path(sim_frames, decimation):
     """Fused one-call frames, the step-by-step kernels and the numpy IRA collection give the same run."""
-    from navigators import registry
+    from trn_env.navigators import registry
 
     dem, e0, frames = sim_frames
     navs = [registry.create("ins_tercom", dem=dem, ira_decimation=decimation) for _ in range(3)]
@@ -313,7 +313,7 @@ def test_accumulated_surface_is_bit_identical_to_the_reference(dem, remove_bias,
     """The batch's surface summed group by group as samples come (uneven groups, NaN samples dropped, one
     sample off the map's edge or a void near the track) equals the per-lookup reference on the same samples
     with the same radii, and correlate() with the accumulator gives the fix correlate() computes itself."""
-    from navigators.tercom.mad import MadAccumulator, correlate
+    from trn_env.navigators.tercom.mad import MadAccumulator, correlate
 
     rng = np.random.default_rng(13)
     heights, lat0, lon0, dlat, dlon = dem.grid

@@ -11,12 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from navigators import registry
-from navigators.filters.ins_trn_ekf import initial_covariance
-from navigators.frames import BaroFrame, GnssFrame, ImuFrame, SensorFrames
-from navigators.protocol import Estimate
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.navigators import registry
+from trn_env.navigators.filters.ins_trn_ekf import initial_covariance
+from trn_env.navigators.frames import BaroFrame, GnssFrame, ImuFrame, SensorFrames
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 sys.path.insert(0, str(Path(__file__).parent))
 from nav_reference_trajectory import imu_and_truth  # noqa: E402

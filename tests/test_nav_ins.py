@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from navigators.inertial.strapdown import StrapdownIns, gravity_ned
-from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m
+from trn_env.navigators.inertial.strapdown import StrapdownIns, gravity_ned
+from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m
 
 sys.path.insert(0, str(Path(__file__).parent))
 from nav_reference_trajectory import imu_and_truth  # noqa: E402

@@ -6,9 +6,8 @@ import math
 
 import numpy as np
 import pytest
-
-from navigators.inertial.strapdown import StrapdownIns
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.navigators.inertial.strapdown import StrapdownIns
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 flight_mod = pytest.importorskip("trn_env.flight.core")
 

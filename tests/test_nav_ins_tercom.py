@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from trn_env.navigators import registry
+from trn_env.navigators.filters.ins_trn_ekf import initial_covariance
+from trn_env.navigators.frames import BaroFrame, ImuFrame, IraFrame, RadarAltimeterFrame, SensorFrames
+from trn_env.navigators.protocol import Estimate, Navigator
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-import terrain
-from navigators import registry
-from navigators.filters.ins_trn_ekf import initial_covariance
-from navigators.frames import BaroFrame, ImuFrame, IraFrame, RadarAltimeterFrame, SensorFrames
-from navigators.protocol import Estimate, Navigator
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env import terrain
 
 sys.path.insert(0, str(Path(__file__).parent))
 from nav_reference_trajectory import C_bn, imu_and_truth  # noqa: E402
@@ -171,7 +171,7 @@ def test_bad_input_is_skipped_and_reported(flight):
 
 def test_window_leaving_the_map_is_skipped(flight):
     """A navigator whose map is a small piece of the DEM: fixes off that map are rejected, never applied."""
-    from terrain.dem import Dem
+    from trn_env.terrain.dem import Dem
 
     h, lat0, lon0, dlat, dlon = DEM.grid
     small = Dem(h[:40, :40], lat0, lon0, dlat, dlon, "corner")

@@ -16,19 +16,19 @@ import math
 import numpy as np
 import pytest
 from scipy.stats import chi2
-
-import terrain
-from navigators import registry
-from navigators.frames import BaroFrame, ImuFrame, IraFrame, SensorFrames
-from navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
-from navigators.protocol import (
+from trn_env.navigators import registry
+from trn_env.navigators.frames import BaroFrame, ImuFrame, IraFrame, SensorFrames
+from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.protocol import (
     EXTRA_INTEGRITY_BAND,
     EXTRA_INTEGRITY_DOF,
     EXTRA_INTEGRITY_STATISTIC,
     EXTRA_NIS,
     Estimate,
 )
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+from trn_env import terrain
 from trn_env.flight.truth import TruthChunk
 from trn_env.sensors.ira import IraConfig, sample_ira
 
@@ -193,8 +193,7 @@ def test_acq_track_reports_the_windowed_statistic_and_flags_consistently(dem):
     last WINDOW in-lock NIS values (summed here by hand, each read once per new measurement time), its band
     scipy's, and an in-lock epoch is "degraded" exactly when the sum is above the band."""
     from acq_track_helpers import fly, initial_estimate, trajectory
-
-    from navigators.acquisition_tracking import AcqTrackNavigator
+    from trn_env.navigators.acquisition_tracking import AcqTrackNavigator
 
     lat0, lon0, h = math.radians(36.50), math.radians(-84.30), 1400.0
     traj = trajectory(dem, lat0, lon0, h, lambda t: 81.0, lambda t: math.radians(33.0), 80.0)

@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
-
-from navigators.measurements.ira_closest_point import (
+from trn_env.navigators.measurements.ira_closest_point import (
     closest_point_ned,
     effective_look_angle,
     horizontal_difference_estimate_m,
 )
-from terrain.geodesy import euler_to_C_bn
+from trn_env.terrain.geodesy import euler_to_C_bn
 
 
 def _scene(n, rng, wind_mps, bank_max_deg=25.0):

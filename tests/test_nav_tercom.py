@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
+from trn_env.navigators.tercom.mad import TercomBatch, correlate
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-import terrain
-from navigators.tercom.mad import TercomBatch, correlate
-from terrain.dem import Dem
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env import terrain
 
 
 def _synthetic_dem(seed=0):

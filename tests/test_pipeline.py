@@ -120,7 +120,7 @@ def test_without_latency_the_loop_runs_inline():
 def test_a_nan_estimate_ends_both_runs_at_its_time(monkeypatch):
     """The stage makes no guidance plan on a NaN estimate (the run ends on it): inline and pipelined end at
     the fifth update with the same log."""
-    from navigators.protocol import Estimate
+    from trn_env.navigators.protocol import Estimate
 
     real = components.build_navigator
 

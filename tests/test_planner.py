@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
+from trn_env.terrain import metrics
 
-import terrain
-from terrain import metrics
+from trn_env import terrain
 from trn_env.guidance.planner import (
     MOVES,
     PlannerConfig,

@@ -8,9 +8,9 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
 
-from terrain.dem import Dem
-from terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
 from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner
 
 LAT0, LON0 = math.radians(36.4), math.radians(-84.3)

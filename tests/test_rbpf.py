@@ -6,13 +6,11 @@ import math
 
 import numpy as np
 import pytest
-
-import terrain
-from navigators import registry
-from navigators.filters import _rbpf_kernels as kern
-from navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
-from navigators.frames import ImuFrame, IraFrame, SensorFrames
-from navigators.protocol import (
+from trn_env.navigators import registry
+from trn_env.navigators.filters import _rbpf_kernels as kern
+from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
+from trn_env.navigators.frames import ImuFrame, IraFrame, SensorFrames
+from trn_env.navigators.protocol import (
     EXTRA_ESS,
     EXTRA_INNOVATION,
     EXTRA_LOG_LIKELIHOOD,
@@ -20,6 +18,8 @@ from navigators.protocol import (
     EXTRA_NIS_DOF,
     Estimate,
 )
+
+from trn_env import terrain
 
 
 def test_linear_part_is_the_exact_conditional_kalman_filter():
@@ -122,7 +122,7 @@ def _frames(t0, n_s, rng_m=2000.0, theta=0.0, valid=True):
 
 
 def _initial(dem):
-    from navigators.protocol import Estimate
+    from trn_env.navigators.protocol import Estimate
 
     lat, lon = dem.center_rad
     return Estimate(0.0, lat, lon, 2500.0, np.array([228.0, 75.0, 0.0]), 0.0, 0.0, math.radians(18.1575),
@@ -145,8 +145,8 @@ def test_bad_data_never_crashes(dem):
 
 
 def test_extra_keys_and_one_stream_fixes_the_run(dem):
-    from navigators.measurements.ira_seed002 import predict_ira
-    from terrain.geodesy import euler_to_C_bn
+    from trn_env.navigators.measurements.ira_seed002 import predict_ira
+    from trn_env.terrain.geodesy import euler_to_C_bn
 
     e0 = _initial(dem)
     r0 = predict_ira(dem, [e0.lat_rad], [e0.lon_rad], [e0.h_m], e0.v_ned_mps,
@@ -175,8 +175,8 @@ def test_extra_keys_and_one_stream_fixes_the_run(dem):
 def test_gnss_fusion_pulls_the_estimate_and_trn_carries_on_without_it(dem):
     """GNSS fixes 60 m north of the INS start: the estimate moves to them within a few fixes (weights on
     the position; the velocity goes to the Kalman parts); with the fixes gone it keeps running."""
-    from navigators.frames import GnssFrame
-    from terrain.geodesy import meridian_radius_m
+    from trn_env.navigators.frames import GnssFrame
+    from trn_env.terrain.geodesy import meridian_radius_m
 
     nav = registry.create("rbpf", dem=dem, rng=np.random.default_rng(2), n_particles=500)
     e0 = _initial(dem)

@@ -9,13 +9,12 @@ import math
 
 import numpy as np
 import pytest
-
-from navigators.filters.rbpf import RaoBlackwellizedPF
-from navigators.frames import ImuFrame, IraFrame, SensorFrames
-from navigators.measurements import ira_seed002 as m
-from navigators.protocol import EXTRA_NIS_DOF, Estimate
-from terrain.dem import Dem
-from terrain.geodesy import prime_vertical_radius_m
+from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
+from trn_env.navigators.frames import ImuFrame, IraFrame, SensorFrames
+from trn_env.navigators.measurements import ira_seed002 as m
+from trn_env.navigators.protocol import EXTRA_NIS_DOF, Estimate
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import prime_vertical_radius_m
 
 LAT0, LON0, H_ANT = math.radians(36.5), math.radians(-84.3), 2500.0
 RIDGE_OFFSET_M, RIDGE_WIDTH_M = 600.0, 150.0

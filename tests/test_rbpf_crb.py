@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import terrain
+from trn_env import terrain
 
 _SPEC = importlib.util.spec_from_file_location(
     "reproduce_seed002", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed002.py")

@@ -17,12 +17,12 @@ import math
 import numpy as np
 import pytest
 from scipy.stats import chi2
+from trn_env.navigators.filters import _rbpf_kernels as kern
+from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
+from trn_env.navigators.measurements import ira_seed002 as ira_model
+from trn_env.terrain.geodesy import euler_to_C_bn
 
-import terrain
-from navigators.filters import _rbpf_kernels as kern
-from navigators.filters.rbpf import RaoBlackwellizedPF
-from navigators.measurements import ira_seed002 as ira_model
-from terrain.geodesy import euler_to_C_bn
+from trn_env import terrain
 
 
 @pytest.fixture(scope="module")
@@ -104,7 +104,7 @@ def test_gnss_position_moves_the_cloud_to_the_kalman_posterior(dem):
 
 @pytest.fixture(scope="module")
 def map_and_world(dem):
-    from terrain.refine import refine
+    from trn_env.terrain.refine import refine
 
     lat0, lon0 = math.radians(36.50), math.radians(-84.36)
     region = (lat0, lat0 + 0.09 / 57.2958, lon0, lon0 + 0.11 / 57.2958)
@@ -382,8 +382,8 @@ def test_scenario_gives_the_imu_bias_model():
 def _exact_look_angle(dem, lat, lon, h, v, C) -> float:
     """theta of the exact closest-point search (terrain.queries.ira_return, what the IRA sensor measures):
     asin(y_b . p / R), p the antenna-to-point vector in NED through ECEF."""
-    from terrain import queries
-    from terrain.geodesy import C_en, lla_to_ecef
+    from trn_env.terrain import queries
+    from trn_env.terrain.geodesy import C_en, lla_to_ecef
 
     ret = queries.ira_return(dem, [lat], [lon], [h], v[None, :], C[None], math.radians(45.0), 10000.0)
     if not ret.valid[0]:

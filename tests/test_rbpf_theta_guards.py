@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
+from trn_env.navigators.measurements import ira_seed002 as ira_model
+from trn_env.navigators.protocol import EXTRA_ESS
+from trn_env.terrain.queries import ira_return
 
-import terrain
-from navigators.filters.rbpf import RaoBlackwellizedPF
-from navigators.measurements import ira_seed002 as ira_model
-from navigators.protocol import EXTRA_ESS
-from terrain.queries import ira_return
+from trn_env import terrain
 
 _SPEC = importlib.util.spec_from_file_location(
     "reproduce_seed002", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed002.py")

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
+from trn_env.terrain import queries
 
-from navigators.measurements.ira_closest_point import closest_point_ned
-from terrain import queries
 from trn_env.scenario.loading import load_scenario
 from trn_env.sim.closed_loop import ClosedLoop
 

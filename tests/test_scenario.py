@@ -181,7 +181,7 @@ def test_bad_toml_and_missing_file(tmp_path):
 def test_relative_dem_path_resolved_against_scenario_file(tmp_path):
     import numpy as np
 
-    import terrain
+    from trn_env import terrain
     dem = terrain.load("jacksboro")
     np.savez(tmp_path / "copy.npz", heights_m=dem.heights_m, lat0_deg=math.degrees(dem.lat0_rad),
              lon0_deg=math.degrees(dem.lon0_rad), dlat_deg=math.degrees(dem.dlat_rad),

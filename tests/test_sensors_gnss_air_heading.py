@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_sensors_common import chunks_of, straight_truth
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env.sensors.air_data import AirDataConfig, sample_air_data
 from trn_env.sensors.gnss import GnssConfig, sample_gnss
 from trn_env.sensors.heading import HeadingConfig, sample_heading

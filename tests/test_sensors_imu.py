@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_sensors_common import chunks_of, normal_gravity_mps2, straight_truth
+from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn
 
-from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn
 from trn_env.sensors.imu import IMU_GRADES, ImuConfig, sample_imu
 
 

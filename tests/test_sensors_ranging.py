@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 from test_sensors_common import chunks_of, straight_truth
+from trn_env.terrain.dem import Dem
 
-from terrain.dem import Dem
 from trn_env.sensors.ira import IraConfig, look_angle_from_ranges, sample_ira
 from trn_env.sensors.radar_altimeter import RadarAltimeterConfig, sample_radar_altimeter
 
@@ -202,7 +202,7 @@ def _crosswind_truth():
 
 def test_ira_r_theta_reconstruct_the_returned_closest_point():
     # the sensor's (R, theta) fed back through the exact geometry land on the terrain query's closest point
-    from terrain import queries
+    from trn_env.terrain import queries
 
     dem, truth = rough_dem(2), _crosswind_truth()
     frame, _ = sample_ira(truth, dem, np.random.default_rng(0), IraConfig.noise_free(half_window_deg=50.0))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from test_sensors_common import chunks_of, straight_truth
 
-import terrain
+from trn_env import terrain
 from trn_env.sensors.baro import isa_pressure_altitude_m
 from trn_env.sensors.imu import ImuConfig
 from trn_env.sensors.suite import SENSOR_NAMES, SensorSuite

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 from _ecef import ned_between as ned_vector_between
+from trn_env.navigators.frames import GnssFrame, SensorFrames
+from trn_env.navigators.protocol import Estimate
 
 import trn_env.scenario.build as components
-from navigators.frames import GnssFrame, SensorFrames
-from navigators.protocol import Estimate
 from trn_env.flight.truth import TruthChunk
 from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
 from trn_env.sim.closed_loop import (

@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
+from trn_env.terrain import geodesy, kernels
+from trn_env.terrain.dem import Dem
 
-import terrain
-from terrain import geodesy, kernels
-from terrain.dem import Dem
+from trn_env import terrain
 
 
 def _plane_dem(a=3.0, b=-2.0, c=500.0, n=40):

@@ -17,14 +17,14 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.navigators import registry
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain import metrics, queries
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.terrain.refine import refine
 
-import terrain
-from navigators import registry
-from navigators.frames import SensorFrames
-from navigators.protocol import Estimate
-from terrain import metrics, queries
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from terrain.refine import refine
+from trn_env import terrain
 from trn_env.flight.kinematic import KinematicTruth, Segment
 from trn_env.sensors.baro import BaroConfig, sample_baro
 from trn_env.sensors.imu import ImuConfig, sample_imu

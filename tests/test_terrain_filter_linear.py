@@ -16,14 +16,13 @@ import math
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
-
-from navigators.filters.pf import ParticleFilter
-from navigators.filters.pmf import PointMassFilter
-from navigators.inertial.strapdown import quat_from_C_bn
-from navigators.measurements.terrain_models import radii_m
-from navigators.protocol import Estimate
-from terrain.dem import Dem
-from terrain.geodesy import euler_to_C_bn
+from trn_env.navigators.filters.pf import ParticleFilter
+from trn_env.navigators.filters.pmf import PointMassFilter
+from trn_env.navigators.inertial.strapdown import quat_from_C_bn
+from trn_env.navigators.measurements.terrain_models import radii_m
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import euler_to_C_bn
 
 LAT0, LON0, H_ANT = 0.63, -1.47, 2000.0
 G_N, G_E, H0 = 0.25, -0.15, 400.0

@@ -8,18 +8,16 @@ import math
 
 import numpy as np
 import pytest
-
-import terrain
-from navigators import registry
-from navigators.filters import _pmf_kernels as pk
-from navigators.filters.pmf import _kernel_1d
-from navigators.filters.resampling import (
+from trn_env.navigators import registry
+from trn_env.navigators.filters import _pmf_kernels as pk
+from trn_env.navigators.filters.pmf import _kernel_1d
+from trn_env.navigators.filters.resampling import (
     effective_sample_size,
     systematic_indices,
     systematic_indices_reference,
     systematic_kernel,
 )
-from navigators.measurements.terrain_models import (
+from trn_env.navigators.measurements.terrain_models import (
     IRA_FORMULA_CODES,
     ira_points_batch,
     ira_points_reference,
@@ -29,8 +27,10 @@ from navigators.measurements.terrain_models import (
     robust_log_likelihood,
     robust_log_likelihood_reference,
 )
-from terrain import queries
-from terrain.geodesy import euler_to_C_bn
+from trn_env.terrain import queries
+from trn_env.terrain.geodesy import euler_to_C_bn
+
+from trn_env import terrain
 
 
 @pytest.fixture(scope="module")
@@ -231,7 +231,7 @@ def test_no_map_is_refused(name):
 def test_pmf_diagonal_convolution_adds_the_north_east_covariance(sign):
     """_pmf_kernels.convolve_diagonal on a point mass: the grid's covariance grows by var [[1, s], [s, 1]]
     (brute-force moments with numpy), the mass and a constant vertical offset stay put."""
-    from navigators.filters.pmf import _kernel_1d
+    from trn_env.navigators.filters.pmf import _kernel_1d
     n = 41
     x = np.full(n * n, -700.0)
     x[(n // 2) * n + n // 2] = 0.0

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from trn_env.navigators import registry
+from trn_env.navigators.frames import SensorFrames
+from trn_env.terrain import map_error
 
 import trn_env.scenario.build as components
-from navigators import registry
-from navigators.frames import SensorFrames
-from terrain import map_error
 from trn_env.scenario.loading import ScenarioError, load_scenario
 from trn_env.sim.closed_loop import ClosedLoop
 

@@ -5,10 +5,10 @@ import pytest
 import rasterio
 import rasterio.shutil
 from rasterio.transform import Affine
+from trn_env.terrain import loaders
+from trn_env.terrain.dem import Dem
 
-import terrain
-from terrain import loaders
-from terrain.dem import Dem
+from trn_env import terrain
 
 
 def from_origin(west, north, xsize, ysize):

@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
+from trn_env.terrain import bench, geodesy, metrics
+from trn_env.terrain.dem import Dem
 
-import terrain
-from terrain import bench, geodesy, metrics
-from terrain.dem import Dem
+from trn_env import terrain
 
 
 def _metric_grid(h, spacing_m=30.0, lat0_deg=36.5):

@@ -5,10 +5,10 @@ import warnings
 
 import numpy as np
 import pytest
+from trn_env.terrain import geodesy, queries, synthetic
+from trn_env.terrain.dem import Dem
 
-import terrain
-from terrain import geodesy, queries, synthetic
-from terrain.dem import Dem
+from trn_env import terrain
 
 # ---------------------------------------------------------------------------------------------------------
 # Independent brute force (kept apart from terrain/queries/ on purpose): exact WGS84 ECEF conversions in
@@ -410,7 +410,7 @@ def test_batch_equals_single_queries(dems):
 
 def test_queries_on_a_refined_10m_world_match_brute_force(dems):
     """The block-bound pruning also holds on a fine (10 m) refined world with synthetic detail."""
-    from terrain import refine
+    from trn_env.terrain import refine
 
     coarse = dems["jacksboro"]
     lat_c, lon_c = coarse.center_rad
@@ -560,7 +560,7 @@ RA_EDGE_STATES = [(1500.0, 7841), (5000.0, 4893)]
 
 @pytest.mark.parametrize("agl_m, index", RA_EDGE_STATES)
 def test_radar_altimeter_edge_minimum_next_to_the_start_on_jacksboro(dems, agl_m, index):
-    from terrain.bench import flight_sample
+    from trn_env.terrain.bench import flight_sample
 
     dem = dems["jacksboro"]
     lat, lon, h, _, C = flight_sample(dem, 20000, agl_m=agl_m)
@@ -612,7 +612,7 @@ def test_cell_min_matches_dense_search_on_twisted_patches():
 # crabbed, climbing): exact against the dense 1-D scan, and independent of how the queries are batched.
 @pytest.fixture(scope="module")
 def world30(dems):
-    from terrain import refine
+    from trn_env.terrain import refine
 
     coarse = dems["jacksboro"]
     lat_c, lon_c = coarse.center_rad
@@ -621,7 +621,7 @@ def world30(dems):
 
 
 def _world30_states(dem, n, seed):
-    from terrain.bench import flight_sample
+    from trn_env.terrain.bench import flight_sample
 
     return flight_sample(dem, n, seed=seed, agl_m=1500.0)
 
@@ -752,7 +752,7 @@ def test_ira_box_max_bounds_the_surface_in_the_box(block):
     """The IRA's per-interval height bound reads block maxima over a box of post coordinates: it must be at
     least the bilinear surface's highest point in the box (dense numpy sampling, voids skipped) and at most
     the highest post of the blocks that the box meets; -inf for a box off the grid."""
-    from terrain import kernels
+    from trn_env.terrain import kernels
 
     rng = np.random.default_rng(block)
     heights = rng.normal(300.0, 40.0, (37, 45))

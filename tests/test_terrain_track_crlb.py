@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.terrain import geodesy, metrics
+from trn_env.terrain.dem import Dem
 
-import terrain
-from terrain import geodesy, metrics
-from terrain.dem import Dem
+from trn_env import terrain
 
 LAT0 = math.radians(36.5)
 LON0 = math.radians(-84.3)

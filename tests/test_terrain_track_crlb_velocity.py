@@ -7,8 +7,7 @@ import math
 import numpy as np
 from filterpy.kalman import KalmanFilter
 from test_terrain_filter_linear import G_E, G_N, LAT0, LON0, planar_dem
-
-from terrain import metrics
+from trn_env.terrain import metrics
 
 
 def test_velocity_bound_equals_the_kalman_filter_on_a_plane():

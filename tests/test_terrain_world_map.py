@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from trn_env.terrain import map_error, refine, spectrum, synthetic
 
-import terrain
-from terrain import map_error, refine, spectrum, synthetic
+from trn_env import terrain
 
 
 def test_synthetic_statistics_and_seeding():

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _ecef import ned_between
+from trn_env.navigators.inertial.strapdown import StrapdownIns
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 import trn_env.scenario.build as components
-from navigators.inertial.strapdown import StrapdownIns
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env import cli
 from trn_env.flight.truth import TruthChunk
 from trn_env.scenario.loading import read_scenario_file, validate

@@ -21,8 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-
-from navigators.acquisition_tracking.correlation import (
+from trn_env.navigators.acquisition_tracking.correlation import (
     COST_MAD,
     COST_PEARSON,
     INTERP_BILINEAR,
@@ -356,11 +355,11 @@ def serial_search_reference(
     exclusion_m=200.0,
 ) -> AcquisitionResult:
     """Brute-force numpy twin of serial_search (bilinear; for tests on small grids)."""
-    from navigators.acquisition_tracking.correlation import (
+    from trn_env.navigators.acquisition_tracking.correlation import (
         profile_cost_reference,
         replica_positions_reference,
     )
-    from terrain.kernels import bilinear_batch
+    from trn_env.terrain.kernels import bilinear_batch
 
     heights, lat0, lon0, dlat, dlon = grid
     dn = hypothesis_grid(position_half_m, position_bin_m)

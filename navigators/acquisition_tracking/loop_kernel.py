@@ -35,15 +35,14 @@ import math
 
 import numpy as np
 from numba import njit
-
-from navigators.acquisition_tracking.beam import replica_heights_at, replica_points
-from navigators.acquisition_tracking.correlation import (
+from trn_env.navigators.acquisition_tracking.beam import replica_heights_at, replica_points
+from trn_env.navigators.acquisition_tracking.correlation import (
     COST_MSD,
     map_heights,
     profile_cost,
     replica_offsets,
 )
-from navigators.acquisition_tracking.tracking import DISC_THESIS
+from trn_env.navigators.acquisition_tracking.tracking import DISC_THESIS
 
 MITIGATION_NONE = 0
 MITIGATION_NCS = 1

@@ -66,9 +66,8 @@ import math
 import time
 
 import numpy as np
-
-from navigators.acquisition_tracking import acquisition, beam, filter_kernels, loop_kernel, tracking
-from navigators.acquisition_tracking.aiding import (
+from trn_env.navigators.acquisition_tracking import acquisition, beam, filter_kernels, loop_kernel, tracking
+from trn_env.navigators.acquisition_tracking.aiding import (
     WindEstimator,
     air_vector_sum,
     coordinated_turn_roll_rad,
@@ -78,23 +77,28 @@ from navigators.acquisition_tracking.aiding import (
     speed_track,
     wrap_rad,
 )
-from navigators.acquisition_tracking.correlation import (
+from trn_env.navigators.acquisition_tracking.correlation import (
     COSTS,
     INTERPOLATIONS,
     replica_heights,
     replica_offsets,
 )
-from navigators.acquisition_tracking.integrity import (
+from trn_env.navigators.acquisition_tracking.integrity import (
     OutputAverage,
     a_priori_sigma_m,
     false_lock,
     terrain_snr_db,
 )
-from navigators.acquisition_tracking.profile import Sample, Transect, geometric_height_m, plumb_height_m
-from navigators.acquisition_tracking.settings import AcqTrackConfig
-from navigators.frames import SensorFrames
-from navigators.integrity.innovation_monitor import InnovationMonitor
-from navigators.protocol import (
+from trn_env.navigators.acquisition_tracking.profile import (
+    Sample,
+    Transect,
+    geometric_height_m,
+    plumb_height_m,
+)
+from trn_env.navigators.acquisition_tracking.settings import AcqTrackConfig
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
+from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -104,7 +108,7 @@ from navigators.protocol import (
     Estimate,
     Health,
 )
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 _TAIL_S = 3.0  # seconds of each sensor's samples carried into the next frame (sample look-ups)
 _TURN_RATE_WINDOW_S = 3.0  # compass heading rate for the coordinated-turn roll: LSQ slope over 3 s
@@ -264,7 +268,7 @@ class AcqTrackNavigator:
         if dem is None:
             raise ValueError("dem: the navigator's terrain map is required")
         if isinstance(dem, str):
-            import terrain
+            from trn_env import terrain
 
             dem = terrain.load(dem)
         self.dem = dem
@@ -273,7 +277,7 @@ class AcqTrackNavigator:
         self._footprint = None
         self._return_model = cfg.replica_model == "return"
         if cfg.replica_model == "footprint":
-            from navigators.acquisition_tracking.footprint import FootprintMaps
+            from trn_env.navigators.acquisition_tracking.footprint import FootprintMaps
 
             self._footprint = FootprintMaps(dem, cfg.beamwidth_deg)
         sn, se = dem.spacing_m
@@ -329,7 +333,7 @@ class AcqTrackNavigator:
         self._bias_walk2 = float(cfg.aiding_bias_walk_mps_per_sqrt_s) ** 2
         self.ins = None
         if cfg.aiding and cfg.aiding_source == "ins":
-            from navigators.inertial.strapdown import StrapdownIns
+            from trn_env.navigators.inertial.strapdown import StrapdownIns
 
             self.ins = StrapdownIns("j2", 30.0, "interval")
         # estimate()'s covariance entries that are constant (baro bias, vertical speed, attitude)

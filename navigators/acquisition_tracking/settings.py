@@ -46,8 +46,7 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
-
-from navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
+from trn_env.navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
 
 AIDING_SOURCES = ("air_data", "ins")
 # Defaults that depend on aiding_source (a setting given as null / None takes these):

@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 from numba import njit
-
-from terrain.kernels import bicubic, bilinear
+from trn_env.terrain.kernels import bicubic, bilinear
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

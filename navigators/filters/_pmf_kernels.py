@@ -6,9 +6,8 @@ import math
 
 import numpy as np
 from numba import njit
-
-from navigators.measurements.terrain_models import LOG_2PI
-from terrain.kernels import bicubic, bilinear
+from trn_env.navigators.measurements.terrain_models import LOG_2PI
+from trn_env.terrain.kernels import bicubic, bilinear
 
 NEGLIGIBLE = -60.0   # log-weight below which a cell's weight (< 1e-26) is left out of sums of weights
 

@@ -38,14 +38,13 @@ import copy
 import math
 
 import numpy as np
+import trn_env.navigators.filters._ekf_kernels as kern
 from filterpy.kalman import KalmanFilter
-
-import navigators.filters._ekf_kernels as kern
-from navigators.frames import SensorFrames
-from navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
-from navigators.integrity.innovation_monitor import InnovationMonitor
-from navigators.measurements.ira_closest_point import FORMULAS, closest_point_ned
-from navigators.protocol import (
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
+from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
+from trn_env.navigators.measurements.ira_closest_point import FORMULAS, closest_point_ned
+from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -55,8 +54,8 @@ from navigators.protocol import (
     Estimate,
     Health,
 )
-from navigators.tercom.mad import TercomBatch, TercomFix, correlate
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.navigators.tercom.mad import TercomBatch, TercomFix, correlate
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 G0 = 9.80665
 N_ERR = 13
@@ -203,7 +202,7 @@ class InsTrnNavigator:
             if dem is None:
                 raise ValueError("dem: the navigator's terrain map is required when aiding is set")
             if isinstance(dem, str):
-                import terrain
+                from trn_env import terrain
 
                 try:
                     dem = terrain.load(dem)

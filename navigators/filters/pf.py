@@ -37,18 +37,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from navigators.filters._pf_kernels import map_heights_interp, propagate_particles
-from navigators.filters.resampling import systematic_kernel
-from navigators.filters.terrain_filter import InsRiddenFilter, check_positive
-from navigators.inertial.strapdown import quat_to_dcm
-from navigators.measurements.terrain_models import (
+from trn_env.navigators.filters._pf_kernels import map_heights_interp, propagate_particles
+from trn_env.navigators.filters.resampling import systematic_kernel
+from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
+from trn_env.navigators.inertial.strapdown import quat_to_dcm
+from trn_env.navigators.measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
     radii_m,
     robust_log_likelihood,
 )
-from navigators.protocol import EXTRA_ESS
+from trn_env.navigators.protocol import EXTRA_ESS
 
 BYTES_PER_PARTICLE = 8 * 30
 N_STATE = 6

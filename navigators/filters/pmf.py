@@ -67,12 +67,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import trn_env.navigators.filters._pmf_kernels as kern
 from scipy import ndimage
-
-import navigators.filters._pmf_kernels as kern
-from navigators.filters.terrain_filter import InsRiddenFilter, check_positive
-from navigators.inertial.strapdown import quat_to_dcm
-from navigators.measurements.terrain_models import (
+from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
+from trn_env.navigators.inertial.strapdown import quat_to_dcm
+from trn_env.navigators.measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
     radii_m,

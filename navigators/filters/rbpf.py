@@ -108,16 +108,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import trn_env.navigators.filters._rbpf_kernels as kern
 from scipy.special import erfc as _erfc
-
-import navigators.filters._rbpf_kernels as kern
-from navigators.filters.terrain_filter import capped_nis
-from navigators.frames import SensorFrames
-from navigators.inertial.error_model_15 import transition_over_history
-from navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
-from navigators.integrity.innovation_monitor import InnovationMonitor
-from navigators.measurements import ira_seed002 as ira_model
-from navigators.protocol import (
+from trn_env.navigators.filters.terrain_filter import capped_nis
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.inertial.error_model_15 import transition_over_history
+from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
+from trn_env.navigators.measurements import ira_seed002 as ira_model
+from trn_env.navigators.protocol import (
     EXTRA_ESS,
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
@@ -128,7 +127,7 @@ from navigators.protocol import (
     Estimate,
     Health,
 )
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 OUTLIER_SIGMA = 10.0          # an IRA sample farther than this from every particle's prediction is rejected
 REINIT_AFTER_REJECTS = 3      # consecutive rejections that re-initialise the cloud around the INS
@@ -254,7 +253,7 @@ class RaoBlackwellizedPF:
         if dem is None:
             raise ValueError("dem: the RBPF needs the navigator's terrain map")
         if isinstance(dem, str):
-            import terrain
+            from trn_env import terrain
 
             dem = terrain.load(dem)
         if not hasattr(dem, "grid"):

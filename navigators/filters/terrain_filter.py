@@ -21,12 +21,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from navigators.frames import SensorFrames
-from navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, euler_from_C_bn, quat_to_dcm
-from navigators.integrity.innovation_monitor import InnovationMonitor
-from navigators.measurements.terrain_models import IRA_FORMULA_CODES, radii_m
-from navigators.protocol import (
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
+from trn_env.navigators.measurements.terrain_models import IRA_FORMULA_CODES, radii_m
+from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -129,7 +128,7 @@ class InsRiddenFilter:
         if dem is None:
             raise ValueError("dem: the navigator's terrain map is required")
         if isinstance(dem, str):
-            import terrain
+            from trn_env import terrain
             dem = terrain.load(dem)
         if not hasattr(dem, "grid"):
             raise ValueError(f"dem must be a terrain.Dem or a map name, got {type(dem).__name__}")

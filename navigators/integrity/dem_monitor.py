@@ -48,13 +48,12 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from numba import njit
-
-from navigators.frames import SensorFrames
-from navigators.protocol import Estimate
-from terrain.geodesy import WGS84_A_M, WGS84_E2
-from terrain.kernels import bilinear
-from terrain.queries.radar_altimeter import _ra_batch
-from terrain.queries.shared import _ra_tables, _ra_workspace
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
+from trn_env.terrain.kernels import bilinear
+from trn_env.terrain.queries.radar_altimeter import _ra_batch
+from trn_env.terrain.queries.shared import _ra_tables, _ra_workspace
 
 SOURCE_GNSS = 0
 SOURCE_NAVIGATOR = 1
@@ -70,7 +69,7 @@ VARIANTS = ("plain", "kalman")
 def class_sigma_m(map_class: str) -> float:
     """Disparity sigma (m) of a map error class: seed 003's 18.9 m for DTED-1, else LE90 / 1.6449 of
     terrain.map_error.ACCURACY_CLASSES."""
-    from terrain.map_error import ACCURACY_CLASSES
+    from trn_env.terrain.map_error import ACCURACY_CLASSES
     key = str(map_class).strip().lower()
     if key == "dted1":
         return DTED1_DISPARITY_SIGMA_M
@@ -489,7 +488,7 @@ class DemIntegrityMonitor:
         if dem is None:
             raise ValueError("dem: the navigator's terrain map is required by the DEM integrity monitor")
         if isinstance(dem, str):
-            import terrain
+            from trn_env import terrain
             dem = terrain.load(dem)
         self.config = DemMonitorConfig.from_mapping(settings)
         self.dem = dem
@@ -599,8 +598,8 @@ def replay_log(monitor: DemIntegrityMonitor, log: dict, period_s: float = 1.0) -
     yaw_rad, cov}). The samples are handed over in intervals (a, b] of period_s (the closed loop's update
     intervals at its default 1 Hz), each with the first estimate at or after b; returns `concatenate` of
     the outputs."""
-    from navigators.frames import GnssFrame, RadarAltimeterFrame
-    from navigators.protocol import Health
+    from trn_env.navigators.frames import GnssFrame, RadarAltimeterFrame
+    from trn_env.navigators.protocol import Health
     monitor.reset()
     t_ra = np.asarray(log["sensor_radar_altimeter_t_s"], float)
     has_g = "sensor_gnss_t_s" in log

@@ -32,8 +32,7 @@ Departures from the printed equations (documented, deliberate):
 from __future__ import annotations
 
 import numpy as np
-
-from terrain.geodesy import euler_to_C_bn
+from trn_env.terrain.geodesy import euler_to_C_bn
 
 FORMULAS = ("simple", "attitude", "conventional", "proposed")
 

@@ -3,7 +3,7 @@
 mad  `TercomBatch`, `TercomFix`, `correlate`, `mad_surface`, `MadAccumulator`, `TERCOM_THREADS`
 """
 
-from navigators.tercom.mad import (
+from trn_env.navigators.tercom.mad import (
     TERCOM_THREADS,
     MadAccumulator,
     TercomBatch,

@@ -41,9 +41,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-from terrain.kernels import bilinear
-from terrain.queries.shared import (
+from trn_env.terrain.kernels import bilinear
+from trn_env.terrain.queries.shared import (
     _INF,
     IRA_BLOCK_POSTS,
     IRA_HEIGHT_BLOCK_CELLS,

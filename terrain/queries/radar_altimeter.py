@@ -19,10 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-from terrain.kernels import bilinear
-from terrain.queries.raycast import _ray_hit
-from terrain.queries.shared import (
+from trn_env.terrain.kernels import bilinear
+from trn_env.terrain.queries.raycast import _ray_hit
+from trn_env.terrain.queries.shared import (
     _INF,
     TerrainReturn,
     _check_positive,

@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-from terrain.kernels import bilinear
-from terrain.queries.shared import (
+from trn_env.terrain.kernels import bilinear
+from trn_env.terrain.queries.shared import (
     TerrainReturn,
     _cell_m,
     _check_positive,

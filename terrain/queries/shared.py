@@ -33,9 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-
-from terrain import geodesy, kernels
-from terrain.geodesy import WGS84_A_M, WGS84_E2
+from trn_env.terrain import geodesy, kernels
+from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
 
 _INF = np.inf
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches

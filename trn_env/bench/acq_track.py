@@ -131,10 +131,10 @@ def _loop_figures(navigator: str, warm_s: float, sim_s: float, record: bool = Fa
 
 
 def _acquisition_figures(repeats: int = 3) -> dict:
-    import terrain
-    from navigators.acquisition_tracking import AcqTrackConfig, acquisition, correlation
-    from terrain import kernels
-    from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+    from trn_env import terrain
+    from trn_env.navigators.acquisition_tracking import AcqTrackConfig, acquisition, correlation
+    from trn_env.terrain import kernels
+    from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
     cfg = AcqTrackConfig()
     dem = terrain.load("jacksboro")

@@ -190,7 +190,7 @@ def _search_times_s(planner, s, g, repeats: int) -> tuple[float, float]:
 
 
 def planner_figures(quick: bool = False) -> dict:
-    import terrain
+    from trn_env import terrain
     from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner
 
     dem = terrain.load("jacksboro")

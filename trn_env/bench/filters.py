@@ -51,7 +51,7 @@ def _loop_rate(name: str, settings: dict, warm_s: float, sim_s: float,
 
 def _memory(name: str, settings: dict, dems, n_frames: int = 40) -> dict:
     """Peak and held allocations (MB) of the navigator over n_frames of the default loop's frames."""
-    from navigators import registry
+    from trn_env.navigators import registry
     from trn_env.scenario.loading import load_scenario
     from trn_env.sim.closed_loop import ClosedLoop
 

@@ -6,10 +6,10 @@ import time
 
 import numpy as np
 
-import terrain
-from navigators.inertial.strapdown import StrapdownIns, gravity_ned
-from navigators.tercom.mad import TERCOM_THREADS, _mad_surface_separable, correlate, mad_surface
-from terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
+from trn_env import terrain
+from trn_env.navigators.inertial.strapdown import StrapdownIns, gravity_ned
+from trn_env.navigators.tercom.mad import TERCOM_THREADS, _mad_surface_separable, correlate, mad_surface
+from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, euler_to_C_bn, meridian_radius_m, prime_vertical_radius_m
 
 
 def _best(fn, repeats: int) -> float:

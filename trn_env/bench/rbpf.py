@@ -47,11 +47,11 @@ def _epoch_cost(n_particles: int, n_epochs: int) -> tuple[float, float]:
     """(ms per epoch, peak traced MB) of the filter alone on a kinematic 240 m/s flight over Jacksboro."""
     import math
 
-    import terrain
-    from navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
-    from navigators.frames import SensorFrames
-    from navigators.protocol import Estimate
+    from trn_env import terrain
     from trn_env.flight.kinematic import KinematicTruth, Segment
+    from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF, table1_covariance
+    from trn_env.navigators.frames import SensorFrames
+    from trn_env.navigators.protocol import Estimate
     from trn_env.sensors.imu import ImuConfig, sample_imu
     from trn_env.sensors.ira import IraConfig, sample_ira
 

@@ -1,6 +1,6 @@
 """`trn-env bench`: throughput figures from one run, each beside its reference measured in the same run.
 
-Collects the component benchmarks (trn_env.bench.flight, terrain.bench, trn_env.bench.sensors,
+Collects the component benchmarks (trn_env.bench.flight, trn_env.terrain.bench, trn_env.bench.sensors,
 trn_env.bench.navigators, trn_env.bench.env - the env, a 2-env SubprocVecEnv and the route planner: each a
 `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
 
@@ -131,7 +131,7 @@ def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeli
 def run_all(quick: bool = False) -> dict:
     """Every figure, as one flat dict (the JSON `trn-env bench` prints)."""
     out: dict = {}
-    for module in ("trn_env.bench.flight", "terrain.bench", "trn_env.bench.sensors",
+    for module in ("trn_env.bench.flight", "trn_env.terrain.bench", "trn_env.bench.sensors",
                    "trn_env.bench.navigators", "trn_env.bench.campaign", "trn_env.bench.acq_track",
                    "trn_env.bench.rbpf", "trn_env.bench.filters", "trn_env.bench.integrity",
                    "trn_env.bench.env"):

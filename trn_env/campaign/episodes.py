@@ -322,7 +322,7 @@ def _base_row(task: EpisodeTask) -> dict:
 def run_episode(env, policy, seed: int, goal_deg) -> dict:
     """Fly one episode of `policy` on `env` from `reset(seed=seed, options={"goal_deg": goal_deg})`; its
     figures (the campaign row's episode columns)."""
-    from terrain.geodesy import latlon_to_ned_offset
+    from trn_env.terrain.geodesy import latlon_to_ned_offset
 
     obs, info0 = env.reset(seed=int(seed), options={"goal_deg": tuple(goal_deg)})
     if hasattr(policy, "reset"):

@@ -23,8 +23,8 @@ import math
 
 import numpy as np
 
-from terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
 from trn_env.guidance.planner import PlannedRoute, PlannerConfig, TerrainInformationPlanner
+from trn_env.terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
 
 
 def _unwrapped(env):

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 import trn_env.scenario.build as components
-from terrain.geodesy import ned_offset_to_latlon
+from trn_env.terrain.geodesy import ned_offset_to_latlon
 
 
 def pursuit_paths_ne(dn_m: float, de_m: float, offsets_rad: np.ndarray, goal_radius_m: float,

@@ -14,10 +14,10 @@ from gymnasium.utils import EzPickle
 from gymnasium.vector import AutoresetMode
 
 import trn_env.scenario.build as components
-from terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
 from trn_env.env.route_info import route_information
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
+from trn_env.terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
 
 G0_MPS2 = 9.80665
 N_TERRAIN_FEATURES = 6

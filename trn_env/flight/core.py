@@ -37,11 +37,11 @@ import jsbsim
 import numpy as np
 from numba import njit
 
-from terrain.geodesy import OMEGA_EARTH_RPS
 from trn_env.flight.aircraft_data import KG_PER_LB, fuel_tanks_kg, new_fdm
 from trn_env.flight.atmosphere import JSBSIM_P_SL_PA, Atmosphere, static_p_T
 from trn_env.flight.truth import SCALAR_FIELDS, VECTOR_FIELDS, TruthChunk
 from trn_env.flight.wind import FT_PER_M, WindConfig
+from trn_env.terrain.geodesy import OMEGA_EARTH_RPS
 
 M_PER_FT = 0.3048
 PSF_TO_PA = 47.88025898033584

@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from navigators.inertial.strapdown import gravity_ned
-from terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
 from trn_env.flight.atmosphere import Atmosphere, static_p_T
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.inertial.strapdown import gravity_ned
+from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
 
 G0_MPS2 = 9.80665
 SEGMENT_KINDS = ("straight", "turn", "climb")

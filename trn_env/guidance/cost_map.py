@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrain import geodesy, metrics
-from terrain.dem import Dem
+from trn_env.terrain import geodesy, metrics
+from trn_env.terrain.dem import Dem
 
 
 def _positive(name: str, v) -> float:

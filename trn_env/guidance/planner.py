@@ -45,10 +45,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from terrain.dem import Dem
-from terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
 from trn_env.guidance.cost_map import InformationGrid, information_grid
 from trn_env.guidance.route_following import Route, Waypoint
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
 
 G_MPS2 = 9.80665
 # 16-connected moves (di, dj): the 8 neighbours and the 8 knight moves (headings every ~22.5 deg)

@@ -41,9 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrain.geodesy import WGS84_A_M, WGS84_E2, C_en, lla_to_ecef, ned_offset_to_latlon
 from trn_env.flight.core import AutopilotTargets, LateralMode, SpeedMode, VerticalMode
 from trn_env.flight.truth import TruthChunk
+from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2, C_en, lla_to_ecef, ned_offset_to_latlon
 
 G_MPS2 = 9.80665
 

@@ -15,7 +15,7 @@ import sys
 import numpy as np
 from numba import njit
 
-from terrain.kernels import bilinear
+from trn_env.terrain.kernels import bilinear
 
 SENSOR_KEYS = ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading")
 
@@ -23,7 +23,7 @@ SENSOR_KEYS = ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "hea
 # ----------------------------------------------------------------------------------------------- terrain
 
 def _load_dem(value: str, fill_voids: bool):
-    import terrain
+    from trn_env import terrain
     return terrain.load(value, fill_voids=fill_voids)
 
 
@@ -44,7 +44,7 @@ def build_terrain(d: dict, extras: dict, rng: np.random.Generator):
     extras["map_faults"] = [f.describe() for f in faults]
     extras["map_fault_schedule"] = []
     if faults:
-        from terrain.map_error import fault_schedule
+        from trn_env.terrain.map_error import fault_schedule
         schedule = fault_schedule(the_map, faults)
         the_map = the_map.with_heights(schedule[0][1], name=f"{the_map.name}[faults]")   # never the world
         extras["map_fault_schedule"] = schedule[1:]
@@ -56,7 +56,7 @@ def build_terrain(d: dict, extras: dict, rng: np.random.Generator):
 
 def map_faults(d: dict) -> list:
     """terrain.map_error.MapFault of each [[terrain.map.faults]] entry (source_dem loaded)."""
-    from terrain.map_error import MapFault
+    from trn_env.terrain.map_error import MapFault
     out = []
     for f in d["terrain"]["map"].get("faults", []):
         kw = dict(f)
@@ -67,7 +67,7 @@ def map_faults(d: dict) -> list:
 
 
 def _fault_problems(d: dict, the_map) -> list[str]:
-    from terrain.map_error import MapFault, check_fault
+    from trn_env.terrain.map_error import MapFault, check_fault
     problems = []
     for i, f in enumerate(d["terrain"]["map"].get("faults", [])):
         try:
@@ -77,7 +77,7 @@ def _fault_problems(d: dict, the_map) -> list[str]:
             fault = MapFault(**kw)
             check_fault(the_map, fault)
             if fault.kind in ("shift", "stale"):
-                from terrain.map_error import apply_fault
+                from trn_env.terrain.map_error import apply_fault
                 apply_fault(the_map.heights_m.copy(), the_map, fault)
         except Exception as exc:  # noqa: BLE001 - a loader's or the fault's rejection is a problem here
             problems.append(f"terrain.map.faults[{i}]: {exc}")
@@ -86,7 +86,7 @@ def _fault_problems(d: dict, the_map) -> list[str]:
 
 def refine_dem(dem, settings: dict, rng: np.random.Generator):
     """The true terrain with synthetic sub-grid detail (terrain.refine.refine; region_deg in degrees)."""
-    from terrain.refine import refine
+    from trn_env.terrain.refine import refine
     kw = dict(settings)
     if "region_deg" in kw:
         kw["region"] = tuple(math.radians(x) for x in kw.pop("region_deg"))
@@ -98,7 +98,7 @@ def map_error_model(settings: dict, rng: np.random.Generator):
     from `rng` (with bias_fraction / correlation_length_m), then any explicit fields override it."""
     from dataclasses import replace
 
-    from terrain import map_error
+    from trn_env.terrain import map_error
     kw = dict(settings)
     preset = kw.pop("preset", None)
     if preset is None:
@@ -115,7 +115,7 @@ def map_noise_settings(settings: dict | None) -> dict:
     """{map_sigma_m, map_bias_sigma_m} a navigator should assume for the scenario's map error model (1 sigma,
     m): its accuracy class's vertical sigma split by bias_fraction (terrain.map_error.model_for_class), or
     the explicit random_sigma_m and |bias_m|; zeros without an error model."""
-    from terrain import map_error
+    from trn_env.terrain import map_error
     s = dict(settings or {})
     random_m, bias_m = 0.0, 0.0
     preset = s.get("preset")
@@ -132,7 +132,7 @@ def map_noise_settings(settings: dict | None) -> dict:
 
 def apply_map_errors(dem, settings: dict, rng: np.random.Generator):
     """The navigator's map = `dem` with the scenario's map error model applied (terrain.map_error.apply)."""
-    from terrain import map_error
+    from trn_env.terrain import map_error
     model = map_error_model(settings, rng)
     return map_error.apply(dem, model, rng, name=f"{dem.name}[map]")
 
@@ -141,7 +141,7 @@ def world_height(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:
     """Terrain height (m MSL) at 1-D arrays of positions; NaN off the grid or over voids (bilinear).
 
     Calls the terrain package's numba batch kernel directly (this runs every guidance tick)."""
-    from terrain import kernels
+    from trn_env.terrain import kernels
     lat = np.ascontiguousarray(lat_rad, dtype=np.float64).ravel()
     lon = np.ascontiguousarray(lon_rad, dtype=np.float64).ravel()
     out = np.empty(lat.shape[0])
@@ -177,7 +177,7 @@ def world_contains(dem, lat_rad: np.ndarray, lon_rad: np.ndarray) -> np.ndarray:
 
 def map_height(dem, lat_rad: float, lon_rad: float) -> float:
     """Map height (m MSL) at one position; NaN off the map (bilinear, the terrain package's numba kernel)."""
-    from terrain import kernels
+    from trn_env.terrain import kernels
     heights, lat0, lon0, dlat, dlon = dem.grid
     return float(kernels.bilinear(heights, lat0, lon0, dlat, dlon, float(lat_rad), float(lon_rad)))
 
@@ -379,7 +379,7 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     (map_noise_settings), those in registry.IMU_AWARE their bias priors and bias process noise from the IMU
     (imu_bias_settings), those in registry.MAP_IS_WORLD_AWARE terrain_model_sigma_m = 0 when the map is the
     world, else terrain_detail_spacing_m from the world's refinement, unless the settings give them."""
-    from navigators import registry
+    from trn_env.navigators import registry
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
     if d["navigator"]["name"] in getattr(registry, "IMU_AWARE", ()):
@@ -454,13 +454,13 @@ def monitor_settings(d: dict, name: str) -> dict:
 
 def build_monitors(d: dict, map_dem) -> dict:
     """{name: monitor} of the scenario's [monitors.*] tables, each on the navigator's map."""
-    from navigators import registry
+    from trn_env.navigators import registry
     return {name: registry.create_monitor(name, dem=map_dem, **monitor_settings(d, name))
             for name in sorted(d.get("monitors", {}))}
 
 
 def _monitor_problems(d: dict, map_dem) -> list[str]:
-    from navigators import registry
+    from trn_env.navigators import registry
     problems = []
     for name in sorted(d.get("monitors", {})):
         if name == "dem_integrity" and "radar_altimeter" not in d["sensors"]:
@@ -620,7 +620,7 @@ def terrain_information_map(dem, sigma_m: float = 5.0, window_m: float = 2000.0)
     """The map's terrain information as a Dem whose heights_m hold the horizontal position CRLB (m):
     terrain.metrics.terrain_information (Fisher information of altimeter heights with noise sigma_m over a
     window_m square) -> sqrt(trace(I^-1)); flat terrain (singular I) and voids -> NO_INFORMATION_SIGMA_M."""
-    from terrain import metrics
+    from trn_env.terrain import metrics
     info = metrics.terrain_information(dem, sigma_m, window_m)
     crlb = np.asarray(info.crlb_sigma_h_m, float)
     crlb = np.where(np.isfinite(crlb), np.minimum(crlb, NO_INFORMATION_SIGMA_M), NO_INFORMATION_SIGMA_M)
@@ -631,7 +631,7 @@ def sample_information(info_map, dem, lat_rad: float, lon_rad: float, track_rad:
                        offset_m: float) -> np.ndarray:
     """Position CRLB (m) from `info_map` at the estimate and offset_m away at INFO_BEARINGS_RAD from the
     track; NO_INFORMATION_SIGMA_M off the map."""
-    from terrain.geodesy import ned_offset_to_latlon
+    from trn_env.terrain.geodesy import ned_offset_to_latlon
     lats = np.empty(len(INFO_BEARINGS_RAD))
     lons = np.empty(len(INFO_BEARINGS_RAD))
     for k, b in enumerate(INFO_BEARINGS_RAD):

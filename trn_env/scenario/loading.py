@@ -439,7 +439,7 @@ def _fuel_problems(d: dict) -> list[str]:
 
 def _navigator_problems(d: dict) -> list[str]:
     try:
-        from navigators import registry
+        from trn_env.navigators import registry
     except ImportError as exc:
         return [f"navigator.name: navigators.registry is not available ({exc})"]
     names = _registry_names(registry)
@@ -462,7 +462,7 @@ def _registry_names(registry) -> list[str] | None:
 
 
 def _load_dem(value: str, fill_voids: bool):
-    import terrain
+    from trn_env import terrain
     return terrain.load(value, fill_voids=fill_voids)
 
 

@@ -12,8 +12,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from navigators.frames import AirDataFrame
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import AirDataFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,

@@ -16,8 +16,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from navigators.frames import BaroFrame
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import BaroFrame
 from trn_env.sensors.common import (
     MappingConfig,
     check_nonneg,

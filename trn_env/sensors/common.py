@@ -20,7 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from terrain.geodesy import C_en, ecef_to_lla, lla_to_ecef
+from trn_env.terrain.geodesy import C_en, ecef_to_lla, lla_to_ecef
 
 _GRID_EPS = 1e-6   # tolerance, in grid periods, for "on the grid" (t_s is a float multiple of the step)
 

@@ -13,9 +13,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from navigators.frames import GnssFrame
-from terrain.geodesy import WGS84_A_M, WGS84_E2
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import GnssFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -28,6 +27,7 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
+from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
 
 
 def _check_outages(value) -> tuple[tuple[float, float], ...]:

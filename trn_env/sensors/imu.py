@@ -36,8 +36,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from navigators.frames import ImuFrame
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import ImuFrame
 from trn_env.sensors.common import (
     check_nonneg,
     check_positive,

@@ -31,9 +31,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from navigators.frames import IraFrame
-from terrain import queries
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import IraFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -47,6 +46,7 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
+from trn_env.terrain import queries
 
 LOOK_ANGLE_METHODS = ("range_difference", "exact")
 

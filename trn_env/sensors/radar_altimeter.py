@@ -15,9 +15,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from navigators.frames import RadarAltimeterFrame
-from terrain import queries
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import RadarAltimeterFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
@@ -31,6 +30,7 @@ from trn_env.sensors.common import (
     sample_steps,
     trusted_frame,
 )
+from trn_env.terrain import queries
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from navigators.frames import SensorFrames
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import SensorFrames
 from trn_env.sensors.air_data import AirDataConfig, sample_air_data
 from trn_env.sensors.baro import BaroConfig, sample_baro
 from trn_env.sensors.gnss import GnssConfig, sample_gnss

@@ -50,15 +50,15 @@ from dataclasses import dataclass
 import numpy as np
 
 import trn_env.scenario.build as components
-from navigators.protocol import Estimate, Health
-from terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
 from trn_env.flight.core import FlightDiverged
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.protocol import Estimate, Health
 from trn_env.output.metrics import MetricSettings, navigation_metrics
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 from trn_env.sim.log import SimLog
 from trn_env.sim.nav_stage import InlineNavStage, ProcessNavStage, fork_available
+from trn_env.terrain.geodesy import latlon_to_ned_offset, meridian_radius_m, prime_vertical_radius_m
 
 TERMINATIONS = ("completed", "terrain_collision", "off_map", "diverged", "fuel_exhausted", "engine_failure",
                 "time_limit", "route_not_followed")
@@ -241,7 +241,7 @@ class ClosedLoop:
         schedule = scenario.extras.get("map_fault_schedule") or []
         if not schedule or self.map_dem is not scenario.extras.get("map_dem"):
             return []
-        from terrain.map_error import set_heights
+        from trn_env.terrain.map_error import set_heights
         set_heights(self.map_dem, scenario.extras["map_fault_heights0"])
         return schedule
 
@@ -510,7 +510,7 @@ class ClosedLoop:
         arrays = self.log.arrays(self.world_dem, self.outages)
         summary = summarise(self.scenario, self.termination or "time_limit", arrays, wall_time_s,
                             self.jsbsim_steps, self.estimate)
-        from navigators.integrity.dem_monitor import alarm_summary, concatenate
+        from trn_env.navigators.integrity.dem_monitor import alarm_summary, concatenate
         if self.monitor_outputs:
             summary["monitors"] = {}
             for name, outs in self.monitor_outputs.items():

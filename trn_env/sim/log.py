@@ -8,11 +8,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import trn_env.scenario.build as components
-from navigators.frames import SensorFrames
-from navigators.protocol import Estimate
-from terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.protocol import Estimate
 from trn_env.sim.nav_stage import gnss_available_mask
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 _TRUTH_LOGGED = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps",
                  "alpha_rad", "beta_rad", "wind_ned_mps")

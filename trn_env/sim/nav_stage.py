@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navigators.frames import SensorFrames
-from navigators.protocol import Estimate
 from trn_env.flight.truth import TruthChunk, chunk_from_buffer, chunk_to_buffer
+from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.protocol import Estimate
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 
 
@@ -109,7 +109,7 @@ class InlineNavStage:
         clock = time.perf_counter
         events = []
         while self.map_schedule and self.map_schedule[0][0] <= float(chunk.t_s[-1]):
-            from terrain.map_error import set_heights
+            from trn_env.terrain.map_error import set_heights
             t_fault, heights = self.map_schedule.pop(0)
             set_heights(self.map_dem, heights)
             events.append((float(t_fault), "map",

@@ -49,10 +49,17 @@ def warm_up_scenario(scenario: Scenario) -> Scenario:
 
 def warm_navigator(scenario: Scenario, map_dem) -> None:
     """Run warm_up_scenario(scenario)'s navigator over three synthetic 1 s frames (its kernels compile)."""
-    from navigators.frames import BaroFrame, GnssFrame, ImuFrame, IraFrame, RadarAltimeterFrame, SensorFrames
-    from navigators.protocol import Estimate
-    from terrain.geodesy import meridian_radius_m
+    from trn_env.navigators.frames import (
+        BaroFrame,
+        GnssFrame,
+        ImuFrame,
+        IraFrame,
+        RadarAltimeterFrame,
+        SensorFrames,
+    )
+    from trn_env.navigators.protocol import Estimate
     from trn_env.scenario import build
+    from trn_env.terrain.geodesy import meridian_radius_m
     d = warm_up_scenario(scenario).data
     nav = build.build_navigator(d, map_dem, np.random.default_rng(0))
     lat = math.radians(d["initial"]["lat_deg"])
