@@ -1,4 +1,4 @@
-"""Sphinx configuration of the trn-env documentation (build: `python -m sphinx -W --keep-going docs docs/_build`)."""
+"""Sphinx configuration of the trn-env docs (`python -m sphinx -W -b html docs docs/_build/html`)."""
 
 from __future__ import annotations
 

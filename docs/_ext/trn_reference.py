@@ -61,8 +61,9 @@ def _sub_help(parser: argparse.ArgumentParser) -> dict[str, str]:
 def cli_markdown() -> str:
     parser = cli_parser()
     out = ["# Command line (`trn-env`)", "",
-           "Generated from the argument parser of `trn_env.cli`. Every command exits 0 on success, 2 on bad "
-           "input (one line naming the field or file, nothing written), 130 on Ctrl-C and 143 on SIGTERM.", ""]
+           "Generated from the argument parser of `trn_env.cli`. Every command exits 0 on success, 2 on "
+           "bad input (one line naming the field or file, nothing written), 130 on Ctrl-C and 143 on "
+           "SIGTERM.", ""]
     top = [a for a in parser._actions if a.option_strings and a.dest != "help"]
     if top:
         out += ["## Global options", "", "| option | meaning |", "|---|---|"]
@@ -266,11 +267,13 @@ def settings_markdown() -> str:
 def outputs_markdown() -> str:
     from trn_env.output.fields import CAMPAIGN_ROW_FIELDS, SUMMARY_FIELDS
     out = ["# Outputs: `summary.json` and campaign rows", "",
-           "Generated from `trn_env.output.fields`; a test checks that every key a real run writes is listed.",
+           "Generated from `trn_env.output.fields`; a test checks that every key a real run writes is "
+           "listed.",
            "", "## `summary.json`", "", "| field | unit | meaning |", "|---|---|---|"]
     out += [f"| `{k}` | {f.unit} | {_cell(f.meaning)} |" for k, f in SUMMARY_FIELDS.items()]
     out += ["", "## Campaign rows (`rows/*.parquet`)", "",
-            "One Parquet row per run; a name ending in `.` or `_` stands for every column with that prefix.", "",
+            "One Parquet row per run; a name ending in `.` or `_` stands for every column with that "
+            "prefix.", "",
             "| column | unit | meaning |", "|---|---|---|"]
     out += [f"| `{k}` | {f.unit} | {_cell(f.meaning)} |" for k, f in CAMPAIGN_ROW_FIELDS.items()]
     return "\n".join(out) + "\n"

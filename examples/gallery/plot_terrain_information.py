@@ -11,9 +11,9 @@ there. The route planner (``trn-env plan``) and the env's observation use the sa
 # %%
 import matplotlib.pyplot as plt
 import numpy as np
+from trn_env.terrain.metrics import terrain_information
 
 from trn_env import terrain
-from trn_env.terrain.metrics import terrain_information
 
 dem = terrain.load("jacksboro")
 print(dem)
@@ -29,7 +29,8 @@ extent = [np.degrees(dem.lon0_rad), np.degrees(dem.lon0_rad + (n_lon - 1) * dem.
 im0 = ax0.imshow(dem.heights_m, origin="lower", extent=extent, cmap="terrain", aspect="auto")
 fig.colorbar(im0, ax=ax0, label="height above MSL (m)")
 ax0.set_title("Jacksboro DEM")
-im1 = ax1.imshow(np.clip(info.crlb_sigma_h_m, 0, 50), origin="lower", extent=extent, cmap="magma_r", aspect="auto")
+bound_m = np.clip(info.crlb_sigma_h_m, 0, 50)
+im1 = ax1.imshow(bound_m, origin="lower", extent=extent, cmap="magma_r", aspect="auto")
 fig.colorbar(im1, ax=ax1, label="position CRLB (m), clipped at 50")
 ax1.set_title("horizontal position bound, 2 km window")
 for ax in (ax0, ax1):

@@ -58,8 +58,8 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "horizontal_sigma_final_m": Field("m", "the navigator's horizontal sigma hypot(sigma_n, sigma_e) at the "
                                            "last row"),
     "gnss_denied_time_s": Field("s", "time flown without GNSS"),
-    "horizontal_error_at_gnss_loss_m": Field("m", "horizontal error at the last row with GNSS before its first "
-                                                  "loss (the hand-over; NaN if GNSS was never lost)"),
+    "horizontal_error_at_gnss_loss_m": Field("m", "horizontal error at the last row with GNSS before its "
+                                                  "first loss (the hand-over; NaN if GNSS was never lost)"),
     "horizontal_sigma_at_gnss_loss_m": Field("m", "horizontal sigma at the same row"),
     "distance_flown_m": Field("m", "true ground distance flown"),
     "min_true_agl_m": Field("m", "lowest true height above the world's terrain"),
