@@ -70,10 +70,10 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "scenario_source": Field("", "where the scenario came from (built-in or the file's path)"),
     "duration_limit_s": Field("s", "the scenario's time limit"),
     "warm_up_wall_time_s": Field("s", "wall time until the numba kernels were ready (compile or cache load)"),
-    "monitors": Field("", "per monitor (e.g. dem_integrity): its alarm summary (alarms, first alarm time, ...)"),
+    "monitors": Field("", "per monitor (e.g. dem_integrity): its alarm summary (alarms, first alarm, ...)"),
     "map_faults": Field("", "the map faults the scenario placed (kind, region, start)"),
-    "wall_time_by_stage_s": Field("s", "wall time spent in each stage of the loop (flight, sensors, navigator, "
-                                       "guidance, ...)"),
+    "wall_time_by_stage_s": Field("s", "wall time spent in each stage of the loop (flight, sensors, "
+                                       "navigator, guidance, ...)"),
     "pipelined": Field("flag", "whether sensors and navigator ran in a second process beside the flight"),
     "route_not_followed": Field("", "with termination route_not_followed: what the aircraft could not do"),
     "navigator_latency_updates": Field("", "navigator updates the estimate lags the flight by (pipelining)"),
