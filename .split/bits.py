@@ -13,4 +13,7 @@ for name in sys.argv[1:]:
     for k in sorted(res.arrays):
         v = np.ascontiguousarray(res.arrays[k])
         h.update(k.encode()); h.update(v.tobytes() if v.dtype != object else repr(v.tolist()).encode())
-    print(name, res.termination, h.hexdigest()[:16], flush=True)
+    e = res.arrays["err_ned_m"]
+    eh = np.hypot(e[:, 0], e[:, 1])
+    print(name, res.termination, h.hexdigest()[:16], "rms_h %.4f final_h %.4f max_h %.4f" % (
+        float(np.sqrt(np.mean(eh ** 2))), float(eh[-1]), float(eh.max())), flush=True)

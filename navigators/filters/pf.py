@@ -16,7 +16,7 @@ is INS + the weighted mean.
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
   altimeter: the shortest in-cone return under the particle's heading (ra_cone_ranges). Log-weights,
   normalised by their maximum; log p(z | past) by logsumexp.
-- Resampling: systematic (navigators.filters.resampling) when the effective sample size falls below
+- Resampling: systematic (navigators.core.resampling) when the effective sample size falls below
   ess_threshold * M, then a kernel jitter against sample impoverishment at Gordon et al.'s (1993) roughening
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
   jitter keeps the cloud's mean and covariance (`_regularise`); Gordon's jitter adds its variance at each
@@ -38,8 +38,8 @@ import math
 
 import numpy as np
 from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, equivalent_walk_density, rss
+from trn_env.navigators.core.resampling import systematic_kernel
 from trn_env.navigators.filters._pf_kernels import map_heights_interp, propagate_particles
-from trn_env.navigators.filters.resampling import systematic_kernel
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
 from trn_env.navigators.measurements.terrain_models import (

@@ -12,19 +12,12 @@ nothing per cell but one multiply-add.
   accelerometer bias b (constant in the body frame, so R b in NED turns with the heading, R the INS's
   body-to-NED matrix's horizontal block) and the heading error eps (INS yaw minus true yaw, which turns
   every velocity change the INS integrates: v gains eps (dv_e, -dv_n)); a Gaussian (mean, covariance, and
-  its covariance with the grid's position and vertical offset) outside the grid. Measured on the default
-  flight (30 runs, free INS, 3 min straight): the variance across runs of the velocity error's
-  increments over a lag tau is q tau + s_a^2 tau^2 with q = 1e-6 m^2/s^3 (its 1 s figure) and s_a =
-  6.2e-4 (north), 7.5e-4 m/s^2 (east) - a constant of each run (the initial 0.05 mrad tilt times g and
-  the 50 ug accelerometer bias, 6.9e-4 in quadrature), no random walk of the acceleration (the
-  increments grow as tau^2 from 10 s to 100 s). Before, a 0.01 m/s/sqrt(s) random walk of v stood in for
-  all this: at the filter's memory of 10-60 s it is 10-20 times the measured increments, so the velocity's
-  and the along-track position's covariances were too large (velocity NEES 1.55 of 2, along-track
-  position 0.85 of 1; ANEES 1.85, 100 runs); a constant NED acceleration alone fixed the 3 min straight
-  flight (ANEES 2.06) but not the turns of the 8 min default flight (5.4 m RMS against 4.8 m: the bias
-  turns with the aircraft, and a 1 mrad heading error turns a 90 degree turn's 120 m/s velocity change
-  into 0.12 m/s of velocity error); with the lowered random walk and no acceleration v cannot follow the
-  run's acceleration (ANEES 2.34, 69 % of the epochs inside). Priors: v, t and eps from the initial
+  its covariance with the grid's position and vertical offset) outside the grid. Its process noise and
+  b's prior come from the IMU's specification (apply_imu_spec, navigators.core.imu_spec): the tilt
+  acceleration's growth from the horizontal gyro biases, the heading's from the z gyro bias, the
+  accelerometer instability's drive on b, and per rad turned the gyro misalignment and scale factor; the
+  velocity's random walk is a floor (velocity_noise_mps_per_sqrt_s; the measurements that chose this
+  model: docs/validation/navigators.md). Priors: v, t and eps from the initial
   estimate's velocity, roll/pitch and yaw variances, b from accel_bias_sigma_mps2. A terrain or GNSS
   update leaves p(u | dn, de, b) unchanged, so u follows the grid's posterior moments by the Gaussian
   regression (`_velocity_from_position`, exact for a Gaussian belief: tests/test_terrain_filter_linear.py
