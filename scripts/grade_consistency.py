@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import pickle
 import sys
 import time
 from pathlib import Path
@@ -41,13 +42,25 @@ import trn_env.scenario.build as components  # noqa: E402
 INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
 
 
-def run_one(d: dict, name: str, grade: str, seed: int, flight, world_detail: str = "redraw") -> dict:
-    _d, chunks, world, the_map, truth0 = flight
-    dd = {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
-          "navigator": {"name": name, "settings": {} if name != "ins_tercom" else {"remove_bias": True}}}
+def scenario_for(d: dict, name: str, grade: str) -> dict:
+    """The default scenario's data with the grade's IMU and the navigator (its settings as the default's)."""
+    settings = {"remove_bias": True} if name == "ins_tercom" else {}
+    return {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
+            "navigator": {"name": name, "settings": settings}}
+
+
+def run_seed(d: dict, names: list[str], grade: str, seed: int, flight, world_detail: str = "redraw") -> dict:
+    """{navigator: run} of every navigator on one seed's sensor frames (the grade's IMU)."""
+    _, chunks, world, the_map, truth0 = flight
+    dd = scenario_for(d, names[0], grade)
     w = fs.run_world(dd, world, seed, world_detail)
     frames = fs.sensor_frames(dd, chunks, w, seed)
     init = fs.initial_estimate(dd, truth0, seed, float(dd["initial_errors"]["position_ned_m"][0]))
+    return {name: run_one(scenario_for(d, name, grade), frames, chunks, the_map, init, seed)
+            for name in names}
+
+
+def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
     nav = components.build_navigator(dd, the_map, np.random.default_rng([seed, 29]))
     nav.reset(init)
     t, err, cov, status = [], [], [], []
@@ -95,16 +108,31 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--from-s", type=float, default=15.0)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--flight-cache", default=None,
+                    help="pickle of the recorded flight: read if it exists (same duration), else written")
     a = ap.parse_args(argv)
-    flight = fs.record_flight(duration_s=a.duration)
+    cache = Path(a.flight_cache) if a.flight_cache else None
+    if cache is not None and cache.exists():
+        duration_s, flight = pickle.loads(cache.read_bytes())
+        if duration_s != a.duration:
+            raise SystemExit(f"{cache}: recorded for {duration_s} s, not {a.duration} s")
+    else:
+        flight = fs.record_flight(duration_s=a.duration)
+        if cache is not None:
+            cache.write_bytes(pickle.dumps((a.duration, flight)))
     d = flight[0]
     result = {"duration_s": a.duration, "seeds": a.seeds, "seed0": a.seed0, "from_s": a.from_s, "figures": {}}
     for grade in a.grades:
+        runs = {name: [] for name in a.navigators}
+        for s in range(a.seeds):
+            for name, run in run_seed(d, a.navigators, grade, a.seed0 + s, flight).items():
+                runs[name].append(run)
         for name in a.navigators:
-            runs = [run_one(d, name, grade, a.seed0 + s, flight) for s in range(a.seeds)]
-            f = figures(runs, a.from_s)
+            f = figures(runs[name], a.from_s)
             result["figures"][f"{name}/{grade}"] = f
             print(json.dumps({f"{name}/{grade}": f}), flush=True)
+        if a.out:
+            Path(a.out).write_text(json.dumps(result, indent=1))
     if a.out:
         Path(a.out).write_text(json.dumps(result, indent=1))
     return 0

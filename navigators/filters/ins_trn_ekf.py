@@ -295,6 +295,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         P[12, 12] = self.sig_bg**2
         self.kf.x = np.zeros((N_ERR, 1))
         self.kf.P = P
+        self._yaw_prev = math.nan
         self._P_good = P.copy()
         self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
         self.batch.clear()

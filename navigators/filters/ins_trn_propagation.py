@@ -12,9 +12,12 @@ A mixin of InsTrnNavigator (ins_trn_ekf.py), which owns the state these methods 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
-from trn_env.navigators.core.error_states import N_EKF13
+from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, N_EKF13, PSID, PSIE, PSIN, VEL
+from trn_env.navigators.core.imu_spec import ImuSpec, equivalent_walk_density
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, quat_to_dcm
 from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
@@ -22,6 +25,11 @@ from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
 R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 _EMPTY = np.zeros(0)
 _EMPTY_BOOL = np.zeros(0, np.bool_)
+# the memory over which the error sources the 13 states do not carry (the x / y gyro biases) are matched by
+# an equivalent random walk of the tilt (navigators.core.imu_spec): a GNSS-denied stretch of a flight
+EKF_MEMORY_S = 300.0
+# a turn of this angle builds the full scale-factor / misalignment error (the per-step share of a 90 deg turn)
+TURN_REFERENCE_RAD = 0.5 * math.pi
 
 
 class InsTrnPropagation:
@@ -106,6 +114,7 @@ class InsTrnPropagation:
             self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
         if m:
             self.batch.add_rows(self._rows[:m].copy())
+        self._turn_noise()
 
     def _baro(self, frames: SensorFrames):
         """(t, geometric height, usable mask, all usable) of the frame's baro samples, computed once per
@@ -155,15 +164,61 @@ class InsTrnPropagation:
         self._predict_to(float(t_seg[-1]), t_seg, f_seg, hist)
         if self.aiding is not None:
             self._collect(frames, t_seg, hist)
+        self._turn_noise()
 
     def _process_noise(self, dt: float) -> np.ndarray:
         Q = np.zeros((N_EKF13, N_EKF13))
-        Q[3:6, 3:6] = np.eye(3) * self.q_acc * dt
+        Q[VEL, VEL] = np.eye(3) * self.q_acc * dt
         Q[6:9, 6:9] = np.eye(3) * self.q_gyr * dt
-        Q[9:12, 9:12] = np.eye(3) * (0.01 * self.sig_ba) ** 2 * dt / 3600.0
-        Q[12, 12] = (0.01 * self.sig_bg) ** 2 * dt / 3600.0
+        Q[ACC_BIAS, ACC_BIAS] = np.eye(3) * max((0.01 * self.sig_ba) ** 2 / 3600.0, self._q_ba_walk) * dt
+        Q[BGZ, BGZ] = max((0.01 * self.sig_bg) ** 2 / 3600.0, self._q_bg_walk) * dt
+        if self._q_tilt > 0.0:  # the x / y gyro biases the states do not carry (apply_imu_spec)
+            Q[PSIN, PSIN] += self._q_tilt * dt
+            Q[PSIE, PSIE] += self._q_tilt * dt
         Q[2, 2] = 0.01 * dt  # baro noise entering through the loop
         return Q
+
+    # ------------------------------------------------------------------ IMU specification
+    _q_tilt = 0.0  # (rad^2/s) tilt random walk standing in for the x / y gyro biases
+    _q_ba_walk = 0.0  # (m^2/s^5) accelerometer-bias random walk (its instability's Gauss-Markov drive)
+    _q_bg_walk = 0.0  # (rad^2/s^3) z-gyro-bias random walk
+    _turn_tilt2 = 0.0  # tilt variance per rad turned (gyro misalignment)
+    _turn_heading2 = 0.0  # heading variance per rad turned (gyro scale factor)
+    _yaw_prev = math.nan
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """Take the error model from the IMU's specification (navigators.core.imu_spec), each figure a floor
+        over the tuned setting: accelerometer-bias prior sig_ba = the body-fixed horizontal specific-force
+        error (bias, instability, misalignment x g); z-gyro-bias prior the gyro bias and instability; velocity
+        and attitude noise the noise densities; the biases' random walks their instabilities' Gauss-Markov
+        drives (2 sigma^2 / tau); the x / y gyro biases (not states) as a tilt random walk matching them at
+        EKF_MEMORY_S; per turn the gyro misalignment (tilt) and scale factor (heading) times the angle."""
+        self.sig_ba = max(self.sig_ba, spec.body_accel_sigma_mps2)
+        self.sig_bg = max(self.sig_bg, spec.gyro_bias_sigma_rps)
+        self.q_acc = max(self.q_acc, spec.accel_noise_density_mps2_rthz**2)
+        self.q_gyr = max(self.q_gyr, spec.gyro_noise_density_rps_rthz**2)
+        self._q_tilt = equivalent_walk_density(spec.gyro_bias_sigma_rps, EKF_MEMORY_S) ** 2
+        self._q_ba_walk = 2.0 * spec.accel_bias_instability_mps2**2 / spec.accel_bias_tau_s
+        self._q_bg_walk = 2.0 * spec.gyro_bias_instability_rps**2 / spec.gyro_bias_tau_s
+        self._turn_tilt2 = spec.turn_tilt_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
+        self._turn_heading2 = spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
+        self._Q = None
+
+    def _turn_noise(self) -> None:
+        """Attitude variance the frame's turn builds through the gyro misalignment and scale factor: per rad
+        turned, TURN_REFERENCE_RAD times their squares (a 90 deg turn gets the whole error's variance)."""
+        if self._turn_tilt2 == 0.0 and self._turn_heading2 == 0.0:
+            return
+        q = self.ins.state[6:10]
+        yaw = math.atan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
+        if math.isfinite(self._yaw_prev) and math.isfinite(yaw):
+            turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
+            P = self.kf.P
+            P[PSIN, PSIN] += self._turn_tilt2 * turn
+            P[PSIE, PSIE] += self._turn_tilt2 * turn
+            P[PSID, PSID] += self._turn_heading2 * turn
+            self._P_good[:] = P
+        self._yaw_prev = yaw
 
     def _predict_to(self, t_end: float, t_imu: np.ndarray, f_b: np.ndarray, hist: np.ndarray) -> None:
         """Propagate the error covariance in steps of 1/ekf_rate_hz up to t_end along the INS history

@@ -2,51 +2,33 @@
 
 Structure (seed 002 sections II-III): a strapdown INS (navigators.inertial, 50 Hz error-model steps) and the
 15-state INS error model of eqs 16-22 (navigators.inertial.error_model_15). The position error is the
-particles' nonlinear part x^n (here in metres north, east, up: eq 17's dL, dlambda scaled by the radii);
-velocity error, attitude error and the accelerometer and gyro bias errors (12 states) are each particle's
-Kalman filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
+particles' nonlinear part x^n (metres north, east, up: eq 17's dL, dlambda scaled by the radii); velocity
+error, attitude error and the accelerometer and gyro bias errors (12 states) are each particle's Kalman
+filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
 
 - time update over the interval since the last epoch, eqs 5-8 and 13-15, with the error model's transition
-  Phi multiplied up along the INS history and Table 1's process noise per epoch (Q^n, Q^l diagonal);
-- IRA measurement update at the IRA sample of the epoch: each particle's predicted range (eq 23, the
-  minimum over the zero-Doppler line of the INS velocity) and look angle (eq 26) from its position, and the
-  step-wise linearisation in velocity (eq 24) and attitude (eq 25) as its H
-  (navigators.measurements.ira_seed002); weights by eq 9's predictive density, Kalman update eqs 10-12;
-- GNSS, while SensorFrames.gnss has valid fixes: position moves the cloud onto the Kalman posterior of its
-  moments (a square-root update, _gnss_update: weighting 1,000 particles by a 2 m fix would keep about one),
-  the velocity updates each particle's Kalman part; TRN carries on alone when GNSS is denied;
+  Phi multiplied up along the INS history and the process noise per epoch (Q^n, Q^l diagonal);
+- IRA measurement update (rbpf_ira_update.py): each particle's predicted range (eq 23, the minimum over
+  the zero-Doppler line of the INS velocity) and look angle (eq 26), the step-wise linearisation in
+  velocity (eq 24) and attitude (eq 25) as its H (navigators.measurements.ira_seed002); weights by eq 9's
+  predictive density, Kalman update eqs 10-12. The look angle is dropped (the range alone) where eqs 24-25
+  do not describe the sample: a return on the look window's edge (its range rows by differences of eq 23),
+  a closest point that can jump to another basin of the zero-Doppler line (by the velocity's tilt of the
+  line, within ambiguity_gap_m for ambiguity_weight of the cloud, or by the map's height errors, above
+  ambiguity_probability), a look-angle innovation beyond theta_gate_sigmas of the mixture's predictive
+  spread on a converged cloud with status "ok" (the map's look-angle error is heavy-tailed), a look angle
+  not linear in the velocity over the cloud's velocity spread (theta_linearity_sigmas), or one that would
+  leave fewer than theta_collapse_ess * N effective particles on a converged cloud;
 - map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
-  map_bias_sigma_m, from the scenario's map error model) and the terrain a coarse map cannot hold between
-  its posts (terrain_model_sigma_m, "auto": from the map's spectrum; 0 when the map is the world), whose
-  flat-ground range and look-angle variances are calibrated on the map's own error class
-  (map_noise_model "calibrated": ira_seed002.map_noise_calibration, refinements of the map down to
-  terrain_detail_spacing_m; the flat-ground model overstated them, NEES 1.71 on the default route's 3" map
-  over 60 seeds, 1.89 calibrated with the look-angle gate below, README "RBPF");
+  map_bias_sigma_m) and the terrain a coarse map cannot hold between its posts (terrain_model_sigma_m,
+  "auto": from the map's spectrum; 0 when the map is the world), calibrated on the map's own error class
+  (map_noise_model "calibrated": ira_seed002.map_noise_calibration);
+- GNSS, while SensorFrames.gnss has valid fixes (rbpf_cloud.py): position moves the cloud onto the Kalman
+  posterior of its moments (a square-root update), the velocity updates each particle's Kalman part;
 - systematic resampling when the effective sample size falls below ess_threshold * N;
-- acquisition (our addition): the cloud starts with acquisition_particles (5,000) and is resampled down to
-  n_particles (Table 1's 1,000) once its horizontal spread is below acquisition_spread_m. 1,000 particles
-  over Table 1's 50 x 50 x 20 m prior keep a few survivors after the first sharp updates, whose Kalman parts
-  then carry one sampled position path's information about velocity and attitude (eq 6's L(z - F^n x^l)
-  term): on the seed002 straight leg the attitude NEES was 30 and the velocity error 2-4 sigma; with
-  5,000 during acquisition it is as with 5,000 throughout (3-D position 3.2 m against 5.6 m);
-- IRA samples eqs 24-25 cannot describe (our additions): a return on the look window's edge
-  (window_edge_margin_deg: the window's boundary ray, not the terrain's minimum, fixed the point; in a 45-deg
-  bank 29 % of samples) updates on the range alone, its velocity and attitude rows by differences of eq 23
-  (window_edge_range; False skips it); when a point of the zero-Doppler line 68 m or more across track from
-  the closest one (another basin, or the far side of a flat minimum) lies within ambiguity_gap_m of its range
-  for particles holding ambiguity_weight of the cloud, the closest point can jump (a few tenths of m/s of
-  velocity error tilt the line enough) and theta with it by degrees, so the update uses the range alone
-  (continuous across the jump); on the default route this was the cause of the overconfidence on long
-  stretches (pooled NEES 4.0 -> 1.9 on seeds 0-2, rbpf_consistency.py). The same jump made by the map
-  (its height errors close the runner-up's gap: _basin_jump_probability, above ambiguity_probability) uses
-  the range alone too: on a coarse map these jumps (13 deg at 2 m gap) were the overconfident episodes of
-  the default route. The range alone where the look angle's innovation exceeds theta_gate_sigmas (3) of the
-  mixture's predictive spread on a converged cloud with status "ok" (the map's look-angle error is
-  heavy-tailed; map_noise_calibration trims the same tail). The range alone too where theta is
-  not linear in the velocity over the cloud's velocity spread (theta_linearity_sigmas, _theta_velocity_row),
-  and where, on a converged cloud, the look angle would leave fewer than theta_collapse_ess * N effective
-  particles (theta then varies with position faster than the cloud samples it: at wings level in a roll
-  reversal on the seed002 flight it left 4 of 1,000, and every Kalman part one ancestor's);
+- acquisition (our addition): the cloud starts with acquisition_particles and is resampled down to
+  n_particles (Table 1's 1,000) once its horizontal spread is below acquisition_spread_m, so the Kalman parts
+  after the first sharp updates do not all descend from a few survivors;
 - feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
   subtracted from every particle, so the error model stays linear about a good INS.
 
@@ -55,31 +37,18 @@ Kalman parts, cross terms included) at the last epoch. Estimate.extra after an I
 navigators.protocol (innovation and its covariance from the mixture's predictive moments, NIS with 2 dof,
 log-likelihood log sum w p(y | particle), ESS before resampling).
 
-Prior: initial.covariance (prior_from_initial, default), as the EKF, PMF and PF start; otherwise, and for the
-bias states always, the settings. Defaults are seed 002 Table 1 (table1_covariance() states its initial
-distribution for an Estimate): 1,000 particles, sigma_R 3.5 m, sigma_theta 0.1 deg, initial position sigma
-(50, 50, 20) m, velocity (1/sqrt 2, 1/sqrt 2, 0.5) m/s, attitude 0.1 deg, accelerometer bias 1e-4 m/s^2;
-process noise per epoch: position 0.5 m, velocity 1e-4 m/s, attitude 1e-6 rad, biases 1e-7. Table 1's u2
-row lists five numbers for twelve states; we read them as (horizontal velocity, vertical velocity,
-attitude, accelerometer bias, gyro bias). Table 1 gives no gyro bias prior; ours is gyro_bias_sigma_rps.
-Two process-noise defaults depart from Table 1 (measured on the default King Air route, 40 seeds, README
-"RBPF"): vertical velocity 1e-2 m/s per epoch (q_vel_mps[1]) and horizontal position 0.25 m (q_pos_m[:2]).
-Without a barometer the vertical velocity is seen only through the range: the position the range pins
-and, through eq 24, the tilt of the zero-Doppler plane, which moves the closest point along track by
-R dv_d / V (1.8 m per 0.1 m/s at 1,500 m and 85 m/s), so along-track position and vertical velocity
-trade in the measurement. At Table 1's 1e-4 the Kalman parts held the vertical velocity 6x tighter than
-its error (squared normalised error 24-39 with map = world), and a run's vertical-velocity error came with
-an along-track error under a too-small sigma (whole runs averaging horizontal NEES 7); at 1e-2 it is
-1.3-2.0, the worst run averages 3.7 and the horizontal RMS is 3.3 -> 2.9 m (seeds 20-39). The horizontal
-position's 0.5 m then left the filter conservative (NEES 1.4 of 2), and with the recovery of session 9
-(below) 0.25 gives 2.02 (seeds 0-19; 0.35: 1.57, 0.20: 2.24, same alpha). Before it, below 0.3
-runs averaging 5-16 returned: the fictitious position noise was covering for the false alarms' re-spreads,
-not for the model. seed002's 240 m/s flight keeps its own 1.0 m (reproduce_seed002.FILTER_SETTINGS).
-In a scenario both bias priors come from its IMU (registry.IMU_AWARE: trn_env's build_navigator gives the
-turn-on bias and bias instability of the IMU's grade; 50 ug and 0.005 deg/h for the navigation grade), and
-so does the biases' process noise (the instability's Gauss-Markov drive per epoch: 0 for the navigation
-grade, where Table 1's 1e-7 per epoch took the tilt's sigma from 50 to 125 urad in 300 s).
-No barometer (seed 002: IMU and IRA only), so the INS vertical channel is free and the filter estimates it.
+Prior: initial.covariance (prior_from_initial, default); otherwise, and for the bias states always, the
+settings. Defaults are seed 002 Table 1 (table1_covariance() states its initial distribution for an
+Estimate). Table 1's u2 row lists five numbers for twelve states; we read them as (horizontal velocity,
+vertical velocity, attitude, accelerometer bias, gyro bias); Table 1 gives no gyro bias prior (ours:
+gyro_bias_sigma_rps). Two process-noise defaults depart from Table 1, vertical velocity (q_vel_mps[1]) and
+horizontal position (q_pos_m[:2]): without a barometer the vertical velocity is seen only through the
+range and the tilt of the zero-Doppler plane (eq 24), which moves the closest point along track by
+R dv_d / V, so along-track position and vertical velocity trade in the measurement. In a scenario the
+bias priors and the biases' process noise come from the IMU's specification (trn_env's build_navigator:
+navigators.core.imu_spec, the turn-on bias and instability of the grade; the instability's Gauss-Markov
+drive per epoch). No barometer (seed 002: IMU and IRA only): the INS vertical channel is free and the filter
+estimates it. The measured history of these choices: docs/validation/navigators.md.
 
 At run time it never raises: a NaN or invalid IRA sample is skipped, particles whose hypothesis has no
 return (off the map) get zero weight; if every weight vanishes the cloud is re-initialised around the INS
@@ -92,14 +61,7 @@ horizontally), both logged; a whole window still out of band after a re-spread r
 wide (up to 8 x); back in band the status is "acquiring" until the cloud's spread is below 30 m ("ok").
 With recovery_reset_kalman (default) a re-spread also gives every particle's velocity-attitude block the
 prior's covariance plus the cloud's mixture covariance (cross terms with the biases zeroed): the test says
-the whole belief is overconfident, and re-converging 1,000 particles from a wide spread keeps the Kalman
-parts of a few ancestors, whose heading and velocity sigmas had fallen to 0.005 deg and 0.01 m/s against
-errors of 0.1 deg and 0.1-0.3 m/s (seed 0, noise-free IMU, map = world). integrity_alpha is 1e-4 as for
-the pmf and pf (session 9; was 0.01): at 0.01 the test raised about one false alarm per run on the default
-route, and a 100 m re-spread of a cloud 3 m off was how the overconfident runs (averaging NEES 5-16)
-began; a lost filter's NIS is far outside either band (a 120 m range bias flags at its first or second
-sample, tests/test_nav_integrity_filters.py). A 30 m recovery_sigma_m did as well against the false alarms
-but left 3 of 5 such faulted flights 145-160 m off (README "RBPF").
+the whole belief is overconfident.
 Randomness: only from `rng` (the scenario's navigator stream), so one seed fixes a run bit for bit.
 """
 

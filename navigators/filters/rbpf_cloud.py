@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._rbpf_kernels as kern
+from trn_env.navigators.core.resampling import systematic_indices_u0
 from trn_env.navigators.filters.terrain_filter import capped_nis
 from trn_env.navigators.protocol import (
     EXTRA_ESS,
@@ -52,7 +53,7 @@ class RbpfCloud:
     def _respread(self, te: float) -> None:
         """Resample by weight, then N(0, recovery_sigma_m^2) on every particle's horizontal position."""
         w = self._weights()
-        idx = kern.systematic_resample(w, float(self.rng.random()))
+        idx = systematic_indices_u0(w, float(self.rng.random()))
         self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
         sig = self.recovery_sigma_m * 2.0 ** (self._streak - 1)
         self.xn[:, :2] += self.rng.standard_normal((self.n, 2)) * sig
@@ -129,7 +130,7 @@ class RbpfCloud:
         ess = 1.0 / float(np.sum(w * w))
         self._extra[EXTRA_ESS] = ess
         if ess < self.ess_threshold * self.n:
-            idx = kern.systematic_resample(w, float(self.rng.random()))
+            idx = systematic_indices_u0(w, float(self.rng.random()))
             self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
             self.logw = np.full(self.n, -math.log(self.n))
             self.resamples += 1
