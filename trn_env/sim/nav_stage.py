@@ -88,8 +88,9 @@ class InlineNavStage:
 
     def __init__(self, sensors, navigator, world_dem, outages: list[dict], log_sensors: bool,
                  planner: IntervalPlanner | None = None, monitors: dict | None = None, map_dem=None,
-                 map_schedule: list | None = None):
-        """monitors: {name: monitor} run after the navigator on the same frames and its estimate;
+                 map_schedule: list | None = None, frame_sink=None):
+        """frame_sink: an object whose `write_frames(frames)` takes each interval's frames instead of the
+        in-memory list (a trn_env.logs LogWriter; `finish_frames` closes it); monitors: {name: monitor} run after the navigator on the same frames and its estimate;
         map_schedule: [(t_from_s, heights)] of a time-dependent navigator's map `map_dem`: the heights are
         swapped in (terrain.map_error.set_heights) before the first update interval that reaches t_from_s,
         in this process, so the navigator, the monitors and the route's guidance all meet them."""
@@ -104,6 +105,7 @@ class InlineNavStage:
         self.log_sensors = bool(log_sensors)
         self._out: NavOutput | None = None
         self._frames: list[SensorFrames] = []
+        self.frame_sink = frame_sink
 
     def process(self, chunk: TruthChunk, plan_steps0: int | None = None) -> NavOutput:
         clock = time.perf_counter
@@ -128,7 +130,9 @@ class InlineNavStage:
                 events += [(t_ev, name, msg) for t_ev, msg in out.events]
         t_mon = clock() - t2
         t2 = clock()
-        if self.log_sensors:
+        if self.frame_sink is not None:
+            self.frame_sink.write_frames(frames)
+        elif self.log_sensors:
             self._frames.append(frames)
         plan = None
         finite = math.isfinite(est.lat_rad) and math.isfinite(est.lon_rad) and math.isfinite(est.h_m)
@@ -141,6 +145,10 @@ class InlineNavStage:
         """The frames of every update so far not yet handed over, in order (empty unless log_sensors)."""
         frames, self._frames = self._frames, []
         return frames
+
+    def finish_frames(self) -> dict:
+        """Close the frame sink's tables (rows per table; {} without a sink)."""
+        return self.frame_sink.close_frames() if self.frame_sink is not None else {}
 
     @property
     def busy(self) -> bool:
@@ -170,7 +178,7 @@ def fork_available() -> bool:
             and not multiprocessing.current_process().daemon)
 
 
-_QUIT, _FRAMES = b"Q", b"F"     # the worker's one-byte requests; anything longer is a truth chunk
+_QUIT, _FRAMES, _FINISH = b"Q", b"F", b"E"   # the worker's one-byte requests; longer: a truth chunk
 
 
 def _serve(conn, parent_end, stage: InlineNavStage) -> None:
@@ -188,6 +196,8 @@ def _serve(conn, parent_end, stage: InlineNavStage) -> None:
         try:
             if msg == _FRAMES:                    # requested once at the end
                 reply = ("ok", stage.logged_frames())
+            elif msg == _FINISH:                  # the frame sink's tables closed, once at the end
+                reply = ("ok", stage.finish_frames())
             else:
                 chunk, plan_steps0 = chunk_from_buffer(bytearray(msg))   # (a private, writable copy)
                 reply = ("ok", stage.process(chunk, plan_steps0 if plan_steps0 >= 0 else None))
@@ -253,6 +263,13 @@ class ProcessNavStage:
         if self._process is None:
             return []
         self._send(_FRAMES)
+        return self.collect()
+
+    def finish_frames(self) -> dict:
+        """Close the worker's frame sink (collect first); {} once closed."""
+        if self._process is None:
+            return {}
+        self._send(_FINISH)
         return self.collect()
 
     def close(self) -> None:
