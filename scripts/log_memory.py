@@ -114,7 +114,8 @@ def main() -> None:
     at = {h: max((s[4] for s in samples if s[1] <= h * 3600.0), default=float("nan"))
           for h in (0.25, 1, 2, 5, 10) if h <= args.hours}
     print(f"{'in-memory' if args.in_memory else 'streamed'} {args.hours:g} h: termination {res.termination}, "
-          f"sim {res.sim_time_s:.0f} s, wall {time.perf_counter() - t0:.0f} s; peak RSS parent {peak_p:.0f} MB, "
+          f"sim {res.sim_time_s:.0f} s, wall {time.perf_counter() - t0:.0f} s; "
+          f"peak RSS parent {peak_p:.0f} MB, "
           f"worker {peak_c:.0f} MB; peak PSS of both {peak_sum:.0f} MB; peak PSS up to sim hour: "
           + ", ".join(f"{h:g} h {v:.0f} MB" for h, v in at.items()))
 

@@ -54,7 +54,8 @@ def geoid_offset_m(metadata: dict, where: str = "metadata.json") -> float:
     if datum["reference"] == "msl":
         return 0.0
     if "geoid_model" in datum and "geoid_offset_m" not in datum:
-        raise LogError(f"{where}: height_datum.geoid_model {datum['geoid_model']!r}: geoid models by name are "
+        raise LogError(f"{where}: height_datum.geoid_model {datum['geoid_model']!r}: "
+                       "geoid models by name are "
                        "not supported (no geoid grid ships with trn-env); give geoid_offset_m, the geoid "
                        "height above the ellipsoid over the log's area, in metres")
     n = datum.get("geoid_offset_m")
@@ -172,9 +173,11 @@ class SensorLog:
             cov = np.array(ie["covariance"], float).reshape(9, 9)
             return Estimate(float(ie["t_s"]), float(ie["lat_rad"]), float(ie["lon_rad"]),
                             float(ie["h_m"]) - self.geoid_offset_m, np.array(ie["v_ned_mps"], float),
-                            float(ie["roll_rad"]), float(ie["pitch_rad"]), float(ie["yaw_rad"]), cov, Health())
+                            float(ie["roll_rad"]), float(ie["pitch_rad"]), float(ie["yaw_rad"]), cov,
+                            Health())
         except (KeyError, TypeError, ValueError) as exc:
-            raise LogError(f"log {self.path}: {METADATA_FILE}: initial_estimate is malformed ({exc})") from exc
+            raise LogError(f"log {self.path}: {METADATA_FILE}: initial_estimate is malformed "
+                           f"({exc})") from exc
 
 
 def _frame(s: str, cols: dict | None, i0: int, i1: int):
@@ -213,7 +216,8 @@ def read_metadata(path: Path) -> dict:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise LogError(f"log {mfile}: corrupt or truncated ({exc})") from exc
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
-        raise LogError(f"log {mfile}: not a {FORMAT_NAME} (format = {meta.get('format') if isinstance(meta, dict) else None!r})")
+        got = meta.get("format") if isinstance(meta, dict) else None
+        raise LogError(f"log {mfile}: not a {FORMAT_NAME} (format = {got!r})")
     v = meta.get("format_version")
     if not isinstance(v, int) or isinstance(v, bool) or v < 1:
         raise LogError(f"log {mfile}: format_version must be a positive whole number, got {v!r}")
@@ -222,8 +226,10 @@ def read_metadata(path: Path) -> dict:
                        f"{FORMAT_VERSION}); upgrade trn-env to read it")
     if meta.get("complete") is not True:
         raise LogError(f"log {mfile}: the recording did not finish (complete is not true): truncated log")
-    if not isinstance(meta.get("tables"), dict) or "frames" not in meta["tables"]:
-        raise LogError(f"log {mfile}: tables must list the frames table and each table's row count")
+    tables = meta.get("tables")
+    if not isinstance(tables, dict) or ("frames" not in tables and any(s in tables for s in SENSORS)):
+        raise LogError(f"log {mfile}: tables must list each table's row count, the frames table among them "
+                       "when the log holds sensor tables")
     return meta
 
 
@@ -234,7 +240,7 @@ def read_log(path: Path | str, *, check: bool = True) -> SensorLog:
     log = SensorLog(path, meta)
     if "imu" in log.sensors and meta.get("imu_sample") not in IMU_SAMPLE_CONVENTIONS:
         raise LogError(f"log {path / METADATA_FILE}: imu_sample is not stated: one of "
-                       f"{', '.join(IMU_SAMPLE_CONVENTIONS)} (module trn_env.logs.format says what each means)")
+                       f"{', '.join(IMU_SAMPLE_CONVENTIONS)} (docs/guide/logs.md says what each means)")
     for name, rows in meta["tables"].items():
         f = path / f"{name}.parquet"
         if not f.is_file():
@@ -259,13 +265,16 @@ def _required(log: SensorLog, name: str, cols: list[str]) -> None:
 
 def _check_contents(log: SensorLog) -> None:
     n_frames = log.n_frames
+    if not log.has("frames"):
+        return
     _required(log, "frames", ["frame", "t_start_s", "t_end_s"] + [f"{s}_present" for s in SENSORS])
     t0, t1 = log.column("frames", "t_start_s"), log.column("frames", "t_end_s")
     _check_column("frames", "t_start_s", t0, None)
     _check_column("frames", "t_end_s", t1, None)
     if np.any(t1 < t0) or np.any(t0[1:] < t1[:-1]) or np.any(np.diff(log.column("frames", "frame")) != 1):
         raise LogError(f"log table {log.path / 'frames.parquet'}: frames must follow each other in time "
-                       "(frame k+1 starting at or after frame k ends, t_end_s >= t_start_s, frame = 0, 1, ...)")
+                       "(frame k+1 starting at or after frame k ends, t_end_s >= t_start_s, frame = 0, 1, "
+                       "...)")
     for s in log.sensors:
         imu_inc = s == "imu" and log.metadata.get("imu_sample") == "increment"
         cols = [c for c, _, _, _ in SENSOR_COLUMNS[s]]

@@ -116,7 +116,8 @@ def _initial(log: SensorLog, d: dict) -> Estimate:
 
     class _Row:   # the attributes perturbed_estimate reads, one row
         t_s = np.array([row["t_s"]])
-        lat_rad, lon_rad, h_msl_m = np.array([row["lat_rad"]]), np.array([row["lon_rad"]]), np.array([row["h_m"]])
+        lat_rad, lon_rad = np.array([row["lat_rad"]]), np.array([row["lon_rad"]])
+        h_msl_m = np.array([row["h_m"]])
         v_ned_mps = np.array([[row["v_n_mps"], row["v_e_mps"], row["v_d_mps"]]])
         roll_rad, pitch_rad, yaw_rad = np.array([row["roll_rad"]]), np.array([row["pitch_rad"]]), np.array(
             [row["yaw_rad"]])
@@ -164,7 +165,8 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
             from trn_env.terrain.map_error import set_heights
             t_fault, heights = schedule.pop(0)
             set_heights(the_map, heights)
-            events.append((float(t_fault), "map", f"map fault appears in the navigator's map at {t_fault:g} s"))
+            events.append((float(t_fault), "map",
+                           f"map fault appears in the navigator's map at {t_fault:g} s"))
         est = nav.update(frames)
         for t_ev, msg in est.health.events:
             events.append((t_ev, "navigator", msg))
@@ -280,3 +282,42 @@ def _gnss_mask(log: SensorLog, t_s: np.ndarray) -> np.ndarray:
     gap = float(np.median(np.diff(tg))) * 1.5 + 1e-9 if tg.size > 1 else 1.0
     i = np.searchsorted(tg, t_s, side="right") - 1
     return (i >= 0) & (t_s - tg[np.clip(i, 0, None)] <= max(gap, 1.0 + 1e-9))
+
+
+def write_result_log(writer, res: ReplayResult) -> Path:
+    """A replay's estimates (and the truth paired with them) as a log's estimates/truth/events tables
+    (no frames: the sensor data stay in the replayed log, named in the metadata); returns the committed
+    folder."""
+    a = res.arrays
+    n = a["est_t_s"].shape[0]
+    nan = np.full(n, np.nan)
+
+    def col(key, i=None):
+        v = a.get(key)
+        if v is None:
+            return nan
+        return v[:, i] if i is not None else v
+
+    truth = np.column_stack([a.get("t_s", a["est_t_s"]), col("true_lat_rad"), col("true_lon_rad"),
+                             col("true_h_msl_m"), col("true_v_ned_mps", 0), col("true_v_ned_mps", 1),
+                             col("true_v_ned_mps", 2), col("true_roll_rad"), col("true_pitch_rad"),
+                             col("true_yaw_rad"), col("true_tas_mps"), col("true_alpha_rad"),
+                             col("true_beta_rad"), col("true_wind_ned_mps", 0), col("true_wind_ned_mps", 1),
+                             col("true_wind_ned_mps", 2)])
+    v = a["est_v_ned_mps"]
+    est = {"t_s": a["est_t_s"], "lat_rad": a["est_lat_rad"], "lon_rad": a["est_lon_rad"], "h_m": a["est_h_m"],
+           "v_n_mps": v[:, 0].copy(), "v_e_mps": v[:, 1].copy(), "v_d_mps": v[:, 2].copy(),
+           "roll_rad": a["est_roll_rad"], "pitch_rad": a["est_pitch_rad"], "yaw_rad": a["est_yaw_rad"]}
+    est |= {f"cov_{i}_{j}": a["est_cov"][:, i, j].copy() for i in range(9) for j in range(9)}
+    est |= {"nav_ok": a["nav_ok"], "nav_status_code": a["nav_status_code"]}
+    if not res.has_truth:
+        truth[:, 0] = a["est_t_s"]
+    writer.write_ticks(truth, est)
+    writer.write_events(res.events)
+    import trn_env
+    return writer.commit({"source": "trn-env replay", "trn_env_version": trn_env.__version__,
+                          "replay_of": str(res.summary.get("replay_of")), "navigator": {
+                              "name": res.scenario.navigator_name,
+                              "settings": res.scenario.data["navigator"].get("settings", {})},
+                          "height_datum": {"reference": "msl"}, "truth_in_log": res.has_truth,
+                          "termination": res.termination})

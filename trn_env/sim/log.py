@@ -76,7 +76,8 @@ class SimLog:
         est = {name: np.array(cols[i], float) for i, name in enumerate(("t_s", "lat_rad", "lon_rad", "h_m"))}
         v = np.array(cols[4], float).reshape(n, 3)
         est |= {"v_n_mps": v[:, 0].copy(), "v_e_mps": v[:, 1].copy(), "v_d_mps": v[:, 2].copy()}
-        est |= {name: np.array(cols[5 + i], float) for i, name in enumerate(("roll_rad", "pitch_rad", "yaw_rad"))}
+        for i, name in enumerate(("roll_rad", "pitch_rad", "yaw_rad")):
+            est[name] = np.array(cols[5 + i], float)
         cov = np.array(cols[8], float).reshape(n, 9, 9)
         est |= {f"cov_{i}_{j}": cov[:, i, j].copy() for i in range(9) for j in range(9)}
         est["nav_ok"] = np.array(cols[9], bool)

@@ -62,6 +62,12 @@ def gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
     return frames
 
 
+def _fix_count(navigator) -> int:
+    """The navigator's TERCOM fixes so far (`n_fixes`, else the length of its `fixes`)."""
+    n = getattr(navigator, "n_fixes", None)
+    return int(n) if n is not None else len(getattr(navigator, "fixes", ()))
+
+
 @dataclass
 class NavOutput:
     """One update's result: the estimate at the interval's end, the guidance plan made on it (None without a
@@ -90,7 +96,8 @@ class InlineNavStage:
                  planner: IntervalPlanner | None = None, monitors: dict | None = None, map_dem=None,
                  map_schedule: list | None = None, frame_sink=None):
         """frame_sink: an object whose `write_frames(frames)` takes each interval's frames instead of the
-        in-memory list (a trn_env.logs LogWriter; `finish_frames` closes it); monitors: {name: monitor} run after the navigator on the same frames and its estimate;
+        in-memory list (a trn_env.logs LogWriter; `finish_frames` closes it); monitors: {name: monitor}
+        run after the navigator on the same frames and its estimate;
         map_schedule: [(t_from_s, heights)] of a time-dependent navigator's map `map_dem`: the heights are
         swapped in (terrain.map_error.set_heights) before the first update interval that reaches t_from_s,
         in this process, so the navigator, the monitors and the route's guidance all meet them."""
@@ -138,7 +145,7 @@ class InlineNavStage:
         finite = math.isfinite(est.lat_rad) and math.isfinite(est.lon_rad) and math.isfinite(est.h_m)
         if self.planner is not None and plan_steps0 is not None and finite:   # (else the run ends on it)
             plan = self.planner.plan(est, plan_steps0)
-        return NavOutput(est, plan, t1 - t0, t2 - t1, clock() - t2, len(getattr(self.navigator, "fixes", ())),
+        return NavOutput(est, plan, t1 - t0, t2 - t1, clock() - t2, _fix_count(self.navigator),
                          mon_out, events, t_mon)
 
     def logged_frames(self) -> list[SensorFrames]:
