@@ -6,6 +6,10 @@ the log's map, with the log's seed's `navigator` random stream, reset to the log
 fed the frames in order. For a log made by `trn-env record` with its own navigator and settings that is
 exactly the closed loop's sequence of calls, so the estimates equal the flight's bit for bit.
 
+The ranging sensors' measurements reach the navigator transferred from their antennas to the IMU's point
+with the log's lever arms (navigators.measurements.lever_arm), as in the closed loop; monitors get them
+as logged.
+
 The run's arrays (the keys of trn_env.sim.SimLog.arrays) pair each estimate with the truth at its time:
 exactly at the logged truth rows when the truth has a row at every estimate time (a recorded log: the
 closed loop's log rate), else the truth linearly interpolated to the estimate times inside its span.
@@ -160,6 +164,9 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
     termination = "completed"
     wall0 = time.perf_counter()
     n = log.n_frames
+    from trn_env.navigators.measurements.lever_arm import compensate_frames, has_lever_arms
+    arms = log.metadata.get("lever_arms_m") or {}
+    arms = arms if has_lever_arms(arms) else None
     for k, frames in enumerate(log.frames()):
         while schedule and schedule[0][0] <= frames.t_end_s:
             from trn_env.terrain.map_error import set_heights
@@ -167,7 +174,7 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
             set_heights(the_map, heights)
             events.append((float(t_fault), "map",
                            f"map fault appears in the navigator's map at {t_fault:g} s"))
-        est = nav.update(frames)
+        est = nav.update(compensate_frames(frames, arms) if arms is not None else frames)
         for t_ev, msg in est.health.events:
             events.append((t_ev, "navigator", msg))
         for name, mon in mons.items():

@@ -31,6 +31,7 @@ from trn_env.logs.format import (
     ESTIMATE_COLUMNS,
     FORMAT_NAME,
     FORMAT_VERSION,
+    IMU_INCREMENT_COLUMNS,
     METADATA_FILE,
     SENSOR_COLUMNS,
     SENSORS,
@@ -123,8 +124,17 @@ def _schema(float_cols, *, frame: bool = False, valid: bool = False, extra=()) -
     return pa.schema(fields)
 
 
-def sensor_schema(sensor: str) -> pa.Schema:
-    return _schema(["t_s"] + [c for c, _, _, _ in SENSOR_COLUMNS[sensor]], frame=True, valid=True)
+def _stored_names(sensor: str, increment: bool) -> list[str]:
+    """The value columns as stored: the IMU's increment columns under imu_sample = "increment"."""
+    cols = [c for c, _, _, _ in SENSOR_COLUMNS[sensor]]
+    if sensor == "imu" and increment:
+        by_rate = {rate: inc for inc, rate, _ in IMU_INCREMENT_COLUMNS}
+        cols = [by_rate[c] for c in cols]
+    return cols
+
+
+def sensor_schema(sensor: str, increment: bool = False) -> pa.Schema:
+    return _schema(["t_s"] + _stored_names(sensor, increment), frame=True, valid=True)
 
 
 FRAMES_SCHEMA = pa.schema([pa.field("frame", pa.int64()), pa.field("t_start_s", pa.float64()),
@@ -137,11 +147,13 @@ EVENTS_SCHEMA = pa.schema([pa.field("t_s", pa.float64()), pa.field("source", pa.
                            pa.field("message", pa.string())])
 
 
-def frame_columns(sensor: str, fr, k: int) -> dict[str, np.ndarray]:
-    """A frame's sensor arrays as the table's columns (frame index k)."""
+def frame_columns(sensor: str, fr, k: int, increment: bool = False) -> dict[str, np.ndarray]:
+    """A frame's sensor arrays as the table's columns (frame index k; `increment`: the IMU frame's arrays
+    hold increments, stored under the increment columns' names)."""
     n = fr.t_s.shape[0]
     cols = {"frame": np.full(n, k, np.int64), "t_s": np.asarray(fr.t_s, np.float64)}
-    for col, fld, comp, _ in SENSOR_COLUMNS[sensor]:
+    names = _stored_names(sensor, increment)
+    for (_, fld, comp, _), col in zip(SENSOR_COLUMNS[sensor], names, strict=True):
         v = np.asarray(getattr(fr, fld), np.float64)
         cols[col] = np.ascontiguousarray(v[:, comp] if comp is not None else v)
     cols["valid"] = np.asarray(fr.valid, bool)
@@ -189,7 +201,9 @@ class LogWriter:
             fr = getattr(frames, s)
             row[f"{s}_present"] = np.array([fr is not None])
             if fr is not None and fr.t_s.shape[0]:
-                self._table(self._frames_tables, s, sensor_schema(s)).append(frame_columns(s, fr, k))
+                inc = s == "imu" and self.metadata.get("imu_sample") == "increment"
+                table = self._table(self._frames_tables, s, sensor_schema(s, inc))
+                table.append(frame_columns(s, fr, k, inc))
         self._table(self._frames_tables, "frames", FRAMES_SCHEMA).append(row)
         self.n_frames += 1
 
@@ -206,7 +220,8 @@ class LogWriter:
         if truth_rows.shape[0]:
             self._table(self._tick_tables, "truth", TRUTH_SCHEMA).append(
                 {c: np.ascontiguousarray(truth_rows[:, i]) for i, c in enumerate(TRUTH_ROW_COLUMNS)})
-            self._table(self._tick_tables, "estimates", ESTIMATES_SCHEMA).append(est)
+            if est is not None:
+                self._table(self._tick_tables, "estimates", ESTIMATES_SCHEMA).append(est)
 
     def read_ticks(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Every tick written so far, read back (closes the tick tables)."""

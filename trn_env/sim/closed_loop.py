@@ -223,7 +223,8 @@ class ClosedLoop:
         inline = InlineNavStage(sensors, navigator, self.world_dem, self.outages, log_sensors,
                                 self.planner if self._plans is not None else None, monitors=monitors,
                                 map_dem=self.map_dem,
-                                map_schedule=self._map_schedule(scenario), frame_sink=log_sink)
+                                map_schedule=self._map_schedule(scenario), frame_sink=log_sink,
+                                lever_arms=components.sensor_lever_arms(d))
         self.pipelined = bool(pipeline and self.latency_updates >= 1 and fork_available())
         self._stage = inline
         if self.pipelined:

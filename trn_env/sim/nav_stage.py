@@ -94,10 +94,12 @@ class InlineNavStage:
 
     def __init__(self, sensors, navigator, world_dem, outages: list[dict], log_sensors: bool,
                  planner: IntervalPlanner | None = None, monitors: dict | None = None, map_dem=None,
-                 map_schedule: list | None = None, frame_sink=None):
-        """frame_sink: an object whose `write_frames(frames)` takes each interval's frames instead of the
-        in-memory list (a trn_env.logs LogWriter; `finish_frames` closes it); monitors: {name: monitor}
-        run after the navigator on the same frames and its estimate;
+                 map_schedule: list | None = None, frame_sink=None, lever_arms: dict | None = None):
+        """lever_arms: {sensor: body-FRD offset from the IMU, m}: the navigator gets the ranging sensors'
+        measurements transferred to the IMU's point (navigators.measurements.lever_arm; the monitors and
+        the log get them as measured); frame_sink: an object whose `write_frames(frames)` takes each
+        interval's frames instead of the in-memory list (a trn_env.logs LogWriter; `finish_frames` closes
+        it); monitors: {name: monitor} run after the navigator on the same frames and its estimate;
         map_schedule: [(t_from_s, heights)] of a time-dependent navigator's map `map_dem`: the heights are
         swapped in (terrain.map_error.set_heights) before the first update interval that reaches t_from_s,
         in this process, so the navigator, the monitors and the route's guidance all meet them."""
@@ -113,6 +115,8 @@ class InlineNavStage:
         self._out: NavOutput | None = None
         self._frames: list[SensorFrames] = []
         self.frame_sink = frame_sink
+        from trn_env.navigators.measurements.lever_arm import has_lever_arms
+        self.lever_arms = dict(lever_arms) if has_lever_arms(lever_arms) else None
 
     def process(self, chunk: TruthChunk, plan_steps0: int | None = None) -> NavOutput:
         clock = time.perf_counter
@@ -126,7 +130,11 @@ class InlineNavStage:
         t0 = clock()
         frames = gate_gnss(self.sensors.sample(chunk, self.world_dem), self.outages)
         t1 = clock()
-        est = self.navigator.update(frames)
+        if self.lever_arms is not None:
+            from trn_env.navigators.measurements.lever_arm import compensate_frames
+            est = self.navigator.update(compensate_frames(frames, self.lever_arms))
+        else:
+            est = self.navigator.update(frames)
         t2 = clock()
         mon_out = None
         if self.monitors:
