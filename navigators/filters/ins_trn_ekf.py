@@ -42,6 +42,7 @@ import trn_env.navigators.filters._ekf_kernels as kern
 from filterpy.kalman import KalmanFilter
 from trn_env.navigators.core.error_states import N_EKF13
 from trn_env.navigators.core.linalg import is_positive_definite
+from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
 from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
 from trn_env.navigators.frames import SensorFrames
@@ -301,6 +302,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.batch.clear()
         self.fixes = []
         self.integrity.reset()
+        self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m, repeat=False, cap_nis=False)
         self._integrity_extra = {}
         self._set_search(self.nominal_half_cells)
         self._update_extra = {}
@@ -422,22 +424,25 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self._integrity_test(t_s, d2, 2)
 
     def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
-        """Feed the innovation test; on entering "degraded" recover (covariance inflation, wider search)."""
-        verdict = self.integrity.add(t_s, nis, dof)
+        """Feed the innovation test through the shared recovery policy (navigators.core.recovery, once per
+        entry into "degraded", uncapped NIS); on a recovery inflate the covariance and widen the search."""
+        decision = self._recovery.add(t_s, nis, dof)
+        verdict = decision.verdict
         self._integrity_extra = verdict.extra()
         if not verdict.changed:
             return
         self.health.events.append((t_s, verdict.message))
         if verdict.degraded:
             self.health.ok, self.health.status = False, "degraded"
-            P = self.kf.P
-            P[0, 0] += self.recovery_sigma_m**2
-            P[1, 1] += self.recovery_sigma_m**2
-            self._P_good[:] = P
-            self._set_search(self.recovery_half_cells)
-            self.health.events.append((t_s, f"recovery: horizontal covariance inflated by "
-                                            f"({self.recovery_sigma_m:.0f} m)^2, TERCOM search widened to "
-                                            f"+-{self.half_cells} cells"))
+            if decision.recover:
+                P = self.kf.P
+                P[0, 0] += decision.sigma_m**2
+                P[1, 1] += decision.sigma_m**2
+                self._P_good[:] = P
+                self._set_search(self.recovery_half_cells)
+                self.health.events.append((t_s, f"recovery: horizontal covariance inflated by "
+                                                f"({decision.sigma_m:.0f} m)^2, TERCOM search widened to "
+                                                f"+-{self.half_cells} cells"))
         else:
             self.health.ok, self.health.status = True, "ok"
             self._set_search(self.nominal_half_cells)

@@ -54,7 +54,7 @@ At run time it never raises: a NaN or invalid IRA sample is skipped, particles w
 return (off the map) get zero weight; if every weight vanishes the cloud is re-initialised around the INS
 with the prior spread; each is counted in Health (status "degraded") with an event.
 Integrity (navigators.integrity.InnovationMonitor): each IRA update's NIS (2 dof; a sample every particle
-rejects counts as infinite; capped as terrain_filter.capped_nis) enters a window of integrity_window
+rejects counts as infinite; capped as navigators.core.recovery.capped_nis) enters a window of integrity_window
 updates; when the sum leaves its chi-square band (probability integrity_alpha) Health says "degraded" (ok
 False) and the particles' positions are re-spread (resampled, then N(0, recovery_sigma_m^2) added
 horizontally), both logged; a whole window still out of band after a re-spread re-spreads again, twice as
@@ -71,6 +71,7 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._rbpf_kernels as kern
+from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.rbpf_cloud import RbpfCloud
 from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
 from trn_env.navigators.frames import SensorFrames
@@ -357,7 +358,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         self._init_cloud()
         self.health = Health(status="acquiring", ok=True)
         self.integrity.reset()
-        self.recoveries = self._streak = self._since_recovery = 0
+        self.recoveries = 0
+        self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m)
         self._integrity_extra: dict = {}
         self._t_next = float(initial.t_s) + self.trn_period_s
         self._t_gnss_next = float(initial.t_s)
