@@ -68,6 +68,8 @@ def test_scenario_reference_lists_every_schema_field_with_a_meaning():
 
     missing = sorted({n for n in names(schema) if not re.search(rf"[.`]{re.escape(n)}` \|", page)})
     assert missing == [], missing
+    undescribed = [row["path"] for row in fields if not row["description"]]
+    assert undescribed == [], f"schema fields without a description: {undescribed}"
 
 
 def test_settings_reference_lists_every_navigator_and_monitor_setting():

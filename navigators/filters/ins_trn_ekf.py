@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections import deque
 
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
@@ -60,6 +61,8 @@ from trn_env.navigators.protocol import (
     Health,
 )
 from trn_env.navigators.tercom.mad import TercomBatch, TercomFix, correlate
+
+FIX_HISTORY = 256     # TERCOM fixes kept in `fixes` (the newest)
 
 G0 = 9.80665
 N_ERR = N_EKF13
@@ -250,7 +253,10 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
         self.batch = TercomBatch(None if aiding is None or dem is None else
                                  (self.half_cells, self.cell_m, self.remove_bias, self.dem))
-        self.fixes: list[TercomFix] = []
+        # the latest FIX_HISTORY fixes (each holds its correlation surface: a flight-long list grew without
+        # bound); n_fixes counts them all
+        self.fixes: deque[TercomFix] = deque(maxlen=FIX_HISTORY)
+        self.n_fixes = 0
         self._t_ekf = np.nan
         self._t_batch0 = np.nan
         self._last_f_b = np.array([0.0, 0.0, -G0])
@@ -300,7 +306,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self._P_good = P.copy()
         self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
         self.batch.clear()
-        self.fixes = []
+        self.fixes = deque(maxlen=FIX_HISTORY)
+        self.n_fixes = 0
         self.integrity.reset()
         self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m, repeat=False, cap_nis=False)
         self._integrity_extra = {}
@@ -371,6 +378,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             accumulator=acc,
         )
         self.fixes.append(fix)
+        self.n_fixes += 1
         if not fix.valid:
             self._count_skip(t_s, f"tercom_{fix.reason}", 1, f"TERCOM fix rejected: {fix.reason}")
             if fix.reason == "edge":      # the best match lies beyond the search window: a failed test

@@ -70,6 +70,21 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "scenario_source": Field("", "where the scenario came from (built-in or the file's path)"),
     "duration_limit_s": Field("s", "the scenario's time limit"),
     "warm_up_wall_time_s": Field("s", "wall time until the numba kernels were ready (compile or cache load)"),
+    "monitors": Field("", "per monitor (e.g. dem_integrity): its alarm summary (alarms, first alarm, ...)"),
+    "map_faults": Field("", "the map faults the scenario placed (kind, region, start)"),
+    "wall_time_by_stage_s": Field("s", "wall time spent in each stage of the loop (flight, sensors, "
+                                       "navigator, guidance, ...)"),
+    "pipelined": Field("flag", "whether sensors and navigator ran in a second process beside the flight"),
+    "route_not_followed": Field("", "with termination route_not_followed: what the aircraft could not do"),
+    "navigator_latency_updates": Field("", "navigator updates the estimate lags the flight by (pipelining)"),
+    "fuel_remaining_kg": Field("kg", "fuel on board at the end"),
+    "constant_fuel": Field("flag", "whether the fuel (and the mass) was held constant"),
+    "truth_source": Field("", "where the true motion came from: jsbsim or kinematic"),
+    "files": Field("", "the files written to the run folder"),
+    "status_ok_fraction": Field("", "time share of rows whose health status is 'ok'"),
+    "status_ok_misleading_fraction": Field("", "share of the 'ok' time with the north or east error outside "
+                                               "k sigma"),
+    "status_ok_misleading_time_s": Field("s", "that time in seconds"),
 } | METRIC_FIELDS
 
 CAMPAIGN_ROW_FIELDS: dict[str, Field] = {

@@ -319,6 +319,19 @@ def sensor_configs(d: dict) -> dict:
     return {name: dict(cfg) for name, cfg in d["sensors"].items()}
 
 
+def sensor_lever_arms(d: dict) -> dict:
+    """{sensor: lever_arm_b_m} of the scenario's ranging sensors (radar altimeter, IRA), body FRD m."""
+    from trn_env.sensors import suite
+    arms = {}
+    for name in ("radar_altimeter", "ira"):
+        value = d["sensors"].get(name)
+        if value is None or value is False:
+            continue
+        cfg = suite._make_config(name, True if value == {} else value)
+        arms[name] = [float(x) for x in cfg.lever_arm_b_m]
+    return arms
+
+
 def build_sensors(d: dict, seed: np.random.SeedSequence):
     """trn_env.sensors.suite.SensorSuite of the scenario's sensors, one random stream per sensor."""
     from trn_env.sensors.suite import SensorSuite
