@@ -95,6 +95,7 @@ from trn_env.navigators.acquisition_tracking.profile import (
 )
 from trn_env.navigators.acquisition_tracking.settings import AcqTrackConfig
 from trn_env.navigators.acquisition_tracking.tracking_step import TrackingStep
+from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.protocol import (
@@ -122,12 +123,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             raise ValueError(f"unknown acq_track setting(s) {unknown}; known: {list(AcqTrackConfig.names())}")
         self.config = cfg = AcqTrackConfig(**settings)
         self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
-        if dem is None:
-            raise ValueError("dem: the navigator's terrain map is required")
-        if isinstance(dem, str):
-            from trn_env import terrain
-
-            dem = terrain.load(dem)
+        dem = load_map(dem, "acq_track")
         self.dem = dem
         self.name = name
         self._grid = dem.grid

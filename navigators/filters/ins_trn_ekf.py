@@ -43,6 +43,7 @@ import trn_env.navigators.filters._ekf_kernels as kern
 from filterpy.kalman import KalmanFilter
 from trn_env.navigators.core.error_states import N_EKF13
 from trn_env.navigators.core.linalg import is_positive_definite
+from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
 from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
@@ -195,15 +196,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         if dem is not None and not isinstance(dem, str) and not hasattr(dem, "grid"):
             raise ValueError(f"dem must be a terrain.Dem or a DEM name or file path, got {dem!r}")
         if aiding is not None:
-            if dem is None:
-                raise ValueError("dem: the navigator's terrain map is required when aiding is set")
-            if isinstance(dem, str):
-                from trn_env import terrain
-
-                try:
-                    dem = terrain.load(dem)
-                except (OSError, ValueError) as exc:
-                    raise ValueError(f"dem: cannot load the navigator's map {dem!r}: {exc}") from exc
+            dem = load_map(dem, "ins_tercom (aiding is set)")
         self.name = name or ("ins" if aiding is None else "ins_tercom")
         self.aiding = aiding
         self.dem = dem
@@ -494,6 +487,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             status=self.health.status,
             skipped=dict(self.health.skipped),
             events=list(self.health.events),
+            consistency_warning=self._consistency_warning,
         )
         return Estimate(
             t_s=self.ins.t_s,

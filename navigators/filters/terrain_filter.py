@@ -21,10 +21,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, euler_from_C_bn, quat_to_dcm
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
+from trn_env.navigators.measurements.baro import geometric_height_m
 from trn_env.navigators.measurements.terrain_models import IRA_FORMULA_CODES, radii_m
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
@@ -37,7 +39,6 @@ from trn_env.navigators.protocol import (
     Health,
 )
 
-R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 G0 = 9.80665
 AIDING = ("ira", "radar_altimeter", "both")
 MAP_INTERPOLATION = ("bicubic", "bilinear")
@@ -56,6 +57,8 @@ def check_positive(name: str, value, allow_zero: bool = False) -> float:
 
 
 class InsRiddenFilter:
+    _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
+
     """Base of the terrain filters (see the module docstring). Settings common to both (SI, 1 sigma):
 
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. aiding: "ira" (default),
@@ -118,13 +121,7 @@ class InsRiddenFilter:
                  gravity_model: str = "j2", tau_baro_s: float = 30.0, imu_samples: str = "interval",
                  baro_geopotential: bool = True, integrity_window: int = 3, integrity_alpha: float = 1e-4,
                  recovery_sigma_m: float = 100.0, name: str | None = None):
-        if dem is None:
-            raise ValueError("dem: the navigator's terrain map is required")
-        if isinstance(dem, str):
-            from trn_env import terrain
-            dem = terrain.load(dem)
-        if not hasattr(dem, "grid"):
-            raise ValueError(f"dem must be a terrain.Dem or a map name, got {type(dem).__name__}")
+        dem = load_map(dem, "the terrain filter")
         if aiding not in AIDING:
             raise ValueError(f"aiding must be one of {AIDING}, got {aiding!r}")
         if ira_formula not in IRA_FORMULA_CODES:
@@ -249,7 +246,7 @@ class InsRiddenFilter:
             hb = np.asarray(baro.h_baro_m, float)
             vb = np.asarray(baro.valid, bool) & np.isfinite(hb)
             if self.baro_geopotential:
-                hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
+                hb = geometric_height_m(hb)
             nbad = int((~vb).sum())
             if nbad:
                 self._count_skip(float(tb[0]), "baro_invalid", nbad, f"{nbad} baro samples invalid")
@@ -449,7 +446,7 @@ class InsRiddenFilter:
             yaw = math.atan2(math.sin(yaw + mean[5]), math.cos(yaw + mean[5]))
         b = float(mean[2]) if np.isfinite(mean[2]) else 0.0
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
-                        events=list(self.health.events))
+                        events=list(self.health.events), consistency_warning=self._consistency_warning)
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
                         health=health, extra=dict(self.extra))
