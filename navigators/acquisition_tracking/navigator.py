@@ -157,11 +157,9 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         )
         # loop_kernel.track_loops' settings (fixed by the config) and its preallocated outputs
         f_r = cfg.scf_offset_cells * self.map_resolution_m
-        self._loop_args = (
+        self._loop_settings = loop_kernel.LoopSettings(
             self._cost, bool(cfg.remove_bias), self._interp, self._n_min, bool(cfg.aiding),
             bool(cfg.position_loops), cfg.loop_order == "speed_first",
-        )  # fmt: skip
-        self._loop_settings = (
             int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), self._disc,
             loop_kernel.MITIGATIONS[cfg.bias_mitigation], float(f_r), float(cfg.sample_period_s),
             max(f_r / (cfg.transect_samples * cfg.sample_period_s), float(self._speed_set.max())),

@@ -41,7 +41,7 @@ from collections import deque
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
 from filterpy.kalman import KalmanFilter
-from trn_env.navigators.core.error_states import N_EKF13
+from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, N_EKF13
 from trn_env.navigators.core.linalg import is_positive_definite
 from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
@@ -291,8 +291,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
                                  f"eigenvalue {w.min():.3g})")
             cov = (V * np.maximum(w, 1e-10)) @ V.T
         P[:9, :9] = cov
-        P[9:12, 9:12] = np.eye(3) * self.sig_ba**2
-        P[12, 12] = self.sig_bg**2
+        P[ACC_BIAS, ACC_BIAS] = np.eye(3) * self.sig_ba**2
+        P[BGZ, BGZ] = self.sig_bg**2
         self.kf.x = np.zeros((N_ERR, 1))
         self.kf.P = P
         self._yaw_prev = math.nan
@@ -395,9 +395,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             self.kf.x, self.kf.P = saved
             self._count_skip(t_s, "covariance_not_pd", 1, "fix skipped: covariance not positive definite")
             return
-        self.ins.correct(dx[0:3], dx[3:6], dx[6:9])
-        self.ins.accel_bias_b += dx[9:12]
-        self.ins.gyro_bias_b[2] += dx[12]
+        self._feed_back(dx)
         self.kf.x[:] = 0.0
         if not self.integrity.degraded:
             self.health.ok, self.health.status = True, "ok"
