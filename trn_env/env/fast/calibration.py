@@ -50,6 +50,19 @@ REFERENCE_ROUTES = (
 # the small set the default test suite flies
 QUICK_ROUTES = ("basin_straight", "jacksboro_sw_ne")
 
+# The full JSBSim loop's true error at the goal on the quick routes, seeds 0..n-1, recorded with
+# `python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out out/fast_calibration_32`
+# (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies both.
+FULL_LOOP_REFERENCE = {
+    "basin_straight": {"mean_m": 296.8, "p90_m": 532.9, "n": 12},
+    "jacksboro_sw_ne": {"mean_m": 7.2, "p90_m": 11.3, "n": 12},
+}
+# routes where the fast tier misses the 25 % (docs/validation/fast_tier.md says by how much and why)
+KNOWN_MISSES = {
+    "basin_round": "the full loop's INS + TERCOM loses its fixes on the 45 deg spiral (status 'degraded', "
+                   "errors of hundreds of m) in most seeds; the fast tier's does not",
+}
+
 ENV_SETTINGS = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="pursuit",
                     bearing_offset_max_deg=45.0, failure_penalty=20.0)
 
@@ -128,5 +141,5 @@ def compare(full: dict, fast: dict) -> dict:
             "p90_rel": q["p90_m"] / f["p90_m"] - 1.0}
 
 
-__all__ = ["ENV_SETTINGS", "QUICK_ROUTES", "REFERENCE_ROUTES", "ReferenceRoute", "compare", "env_kwargs",
+__all__ = ["ENV_SETTINGS", "FULL_LOOP_REFERENCE", "KNOWN_MISSES", "QUICK_ROUTES", "REFERENCE_ROUTES", "ReferenceRoute", "compare", "env_kwargs",
            "fly_fast", "fly_full", "route_by_name", "summary"]

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit, prange
 
 from trn_env.env.fast import navigator as nv
@@ -184,7 +183,8 @@ def fly_decision(X, state, active, n_sub, prof_meas, prof_lat, prof_lon, world, 
             X[i, GUST_E] = turb_a * X[i, GUST_E] + turb_b * g_e
             # ---- navigator
             w_n, w_e = frng.normal_pair(state, i)
-            nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e)
+            f_turn = G0_MPS2 * math.tan(X[i, BANK])         # centripetal specific force, right of the heading
+            nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
             X[i, T] += dt
             nv.covariance_step(X, i, dt, nav[nv.NP_Q_V], nav[nv.NP_Q_A])
             t = X[i, T]

@@ -7,7 +7,9 @@ sets the horizontal error at the goal:
 - INS error (estimate minus truth), north and east independently: position error p, velocity error v,
   acceleration error a = b_a + g0 (psi0 + b_g t) - c (accelerometer turn-on bias b_a, initial tilt psi0,
   tilt rate from the gyro bias b_g, drawn per episode from the IMU grade; c the filter's fed-back
-  compensation) plus the accelerometer's white noise (velocity random walk). Schuler feedback is left out
+  compensation), plus the heading error's share, psi_z x f (the horizontal specific force, the centripetal
+  acceleration of a turn, rotated by the heading error psi_z = psi_z0 + b_gz t, which the filter does not
+  estimate), plus the accelerometer's white noise (velocity random walk). Schuler feedback is left out
   (its 84 min period is long against an episode). The vertical channel is the barometer's: a constant height
   error per episode.
 - GNSS while available (the scenario's outage start): a position update at 1 Hz with its horizontal sigma.
@@ -40,6 +42,7 @@ from trn_env.env.fast.state import (
     BARO,
     BG_E,
     BG_N,
+    BG_Z,
     CA_E,
     CA_N,
     EP_E,
@@ -57,6 +60,7 @@ from trn_env.env.fast.state import (
     REJECTS,
     TILT_E,
     TILT_N,
+    YAW0,
     T,
 )
 from trn_env.terrain import kernels
@@ -102,12 +106,14 @@ def navigator_params(name: str, settings: dict, imu: dict, gnss_until_s: float, 
 
 
 @njit(cache=True)
-def ins_step(X, i, dt, noise_n, noise_e):
+def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e):
     """Propagate aircraft i's INS error (truth) by dt seconds; noise_n, noise_e are the step's velocity
-    random-walk increments (m/s) from the white accelerometer noise, drawn by the caller."""
+    random-walk increments (m/s) from the white accelerometer noise, drawn by the caller; f_n, f_e the
+    horizontal specific force (m/s^2) the heading error rotates."""
     t = X[i, T]
-    a_n = X[i, BA_N] + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t) - X[i, CA_N]
-    a_e = X[i, BA_E] + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t) - X[i, CA_E]
+    yaw = X[i, YAW0] + X[i, BG_Z] * t
+    a_n = X[i, BA_N] + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t) - X[i, CA_N] - yaw * f_e
+    a_e = X[i, BA_E] + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t) - X[i, CA_E] + yaw * f_n
     X[i, EP_N] += X[i, EV_N] * dt + 0.5 * a_n * dt * dt
     X[i, EP_E] += X[i, EV_E] * dt + 0.5 * a_e * dt * dt
     X[i, EV_N] += a_n * dt + noise_n
@@ -246,7 +252,7 @@ def tercom_fix(X, i, prof_meas, prof_lat, prof_lon, heights, lat0, lon0, dlat, d
 
 
 @njit(cache=True)
-def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma):
+def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw):
     """Episode draws of aircraft i's navigation errors and inertial error sources, and the filter's prior."""
     X[i, EP_N] = sig_pos * frng.normal(state, i)
     X[i, EP_E] = sig_pos * frng.normal(state, i)
@@ -259,6 +265,8 @@ def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_si
     X[i, BG_N] = bg * frng.normal(state, i)
     X[i, BG_E] = bg * frng.normal(state, i)
     X[i, BARO] = baro_sigma * frng.normal(state, i)
+    X[i, YAW0] = sig_yaw * frng.normal(state, i)
+    X[i, BG_Z] = bg * frng.normal(state, i)
     X[i, CA_N] = 0.0
     X[i, CA_E] = 0.0
     X[i, P00] = sig_pos * sig_pos

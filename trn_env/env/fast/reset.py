@@ -22,8 +22,9 @@ from trn_env.env.fast import state as S
 from trn_env.env.fast.dynamics import radii_m
 from trn_env.terrain import kernels
 
-# init parameter vector: sig_pos, sig_vel, sig_tilt, accel bias, gyro bias, baro sigma, agl_min, agl_max
-IP_SIG_POS, IP_SIG_VEL, IP_SIG_TILT, IP_BA, IP_BG, IP_BARO, IP_AGL_MIN, IP_AGL_MAX = range(8)
+# init parameter vector: sig_pos, sig_vel, sig_tilt, accel bias, gyro bias, baro sigma, agl_min, agl_max,
+# sig_yaw
+IP_SIG_POS, IP_SIG_VEL, IP_SIG_TILT, IP_BA, IP_BG, IP_BARO, IP_AGL_MIN, IP_AGL_MAX, IP_SIG_YAW = range(9)
 
 
 @njit(cache=True)
@@ -90,6 +91,6 @@ def reset_aircraft(X, state, mask, start_rad, goal_rad, regions, held, held_r, m
             agl = h_agl_init
         X[i, S.AGL_CMD] = min(ip[IP_AGL_MAX], max(ip[IP_AGL_MIN], agl))
         nv.draw_initial_errors(X, i, state, ip[IP_SIG_POS], ip[IP_SIG_VEL], ip[IP_SIG_TILT], ip[IP_BA],
-                               ip[IP_BG], ip[IP_BARO])
+                               ip[IP_BG], ip[IP_BARO], ip[IP_SIG_YAW])
         X[i, S.NEXT_SAMPLE_T] = 1.0
     return status

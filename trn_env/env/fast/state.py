@@ -23,7 +23,9 @@ TRK_CMD, AGL_CMD, OFFSET_FRAC = range(30, 33)
 T_LAST_FIX, N_PROF, REJECTS, N_FIXES, NEXT_SAMPLE_T = range(33, 38)
 # episode
 GOAL_LAT, GOAL_LON, D_EST_START, END, START_LAT, START_LON = range(38, 44)
-N_STATE = 44
+# heading error (truth, rad) at the start and its drift rate (the z gyro's bias, rad/s)
+YAW0, BG_Z = 44, 45
+N_STATE = 46
 
 # END codes (0 = running); names in END_NAMES
 END_NAMES = ("", "arrived", "terrain_collision", "off_map", "time_limit", "goal", "diverged")

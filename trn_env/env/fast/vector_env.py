@@ -87,6 +87,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
                  bearing_offset_max_deg: float = 90.0, sigma_shaping_weight: float = 0.0,
                  informative_crlb_m: float = 5.0):
         n = _check_num_envs(num_envs, decision_interval_s)
+        _check_memory(n, 42)           # before any per-aircraft array (the default 40 s TERCOM profile)
         if render_mode is not None:
             raise ValueError(f"render_mode must be None (TerrainNavFast-v0 does not render), got {render_mode!r}")
         if reward_mode not in task.REWARD_MODES:
@@ -220,7 +221,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self._init_params = np.array([
             float(np.hypot(pos[0], pos[1]) / math.sqrt(2.0)), float(np.hypot(vel[0], vel[1]) / math.sqrt(2.0)),
             float(np.hypot(att[0], att[1]) / math.sqrt(2.0)) * 1e-3, float(imu["accel_bias_mps2"]),
-            float(imu["gyro_bias_rps"]), BARO_SIGMA_M, self.agl_min_m, self.agl_max_m])
+            float(imu["gyro_bias_rps"]), BARO_SIGMA_M, self.agl_min_m, self.agl_max_m, float(att[2]) * 1e-3])
         op = np.zeros(ob.N_OBS_PARAMS)
         op[ob.OP_INFO_OFFSET] = float(info_offset_m)
         op[ob.OP_MAX_EP] = self.max_episode_s
