@@ -87,11 +87,12 @@ def _metric(result: dict, key: str, default=math.nan):
 
 
 def train(config, iterations: int, checkpoint_dir: str | Path | None = None, checkpoint_every: int = 10,
-          progress=None) -> tuple[Any, list[dict]]:
+          progress=None, max_wall_s: float | None = None) -> tuple[Any, list[dict]]:
     """Build the algorithm from `config` (or take an Algorithm already built) and run `iterations` training
     iterations; a checkpoint
     (`Algorithm.save_to_path`) every `checkpoint_every` iterations and at the end into checkpoint_dir/iter_N
-    (checkpoint_dir/final at the end). Returns (algorithm, history rows). progress(row) is called per row."""
+    (checkpoint_dir/final at the end; the end is `iterations`, or the first iteration that ends after
+    max_wall_s of wall time). Returns (algorithm, history rows). progress(row) is called per row."""
     if not isinstance(iterations, int) or iterations < 1:
         raise ValueError(f"iterations must be a whole number >= 1, got {iterations!r}")
     algo = config if hasattr(config, "train") else config.build_algo()
@@ -108,8 +109,11 @@ def train(config, iterations: int, checkpoint_dir: str | Path | None = None, che
         history.append(row)
         if progress is not None:
             progress(row)
-        if ckpt is not None and (it % max(1, checkpoint_every) == 0 or it == iterations):
-            algo.save_to_path(str((ckpt / ("final" if it == iterations else f"iter_{it}")).resolve()))
+        last = it == iterations or (max_wall_s is not None and row["wall_s"] >= max_wall_s)
+        if ckpt is not None and (it % max(1, checkpoint_every) == 0 or last):
+            algo.save_to_path(str((ckpt / ("final" if last else f"iter_{it}")).resolve()))
+        if last:
+            break
     return algo, history
 
 
