@@ -101,7 +101,7 @@ def test_ppo_trains_a_few_iterations_on_a_local_two_cpu_ray(tmp_path):
         assert (tmp_path / "ckpt" / "iter_1").is_dir() and (tmp_path / "ckpt" / "final").is_dir()
         restored = module_from_checkpoint(tmp_path / "ckpt" / "final").state_dict()
         trained = module.state_dict()
-        assert set(restored) == set(trained)
+        assert trained and set(trained) <= set(restored)   # the acting part (restored: + value function)
         for k, v in trained.items():
             assert torch.equal(restored[k], v), k
         goal = tuple(env_kwargs("basin")["goal_region_deg"][::2])
