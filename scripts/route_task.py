@@ -154,7 +154,7 @@ def main(argv=None) -> int:
     if args.address:
         ray.init(address=args.address, include_dashboard=False, log_to_driver=False)
     else:
-        ray.init(num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False)
+        ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False)
     try:
         if args.command in ("train", "all"):
             train(args, kw)

@@ -84,7 +84,7 @@ def main(argv=None) -> int:
     if args.address:
         ray.init(address=args.address, include_dashboard=False)
     else:
-        ray.init(num_cpus=args.num_cpus, include_dashboard=False)
+        ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False)
     args.out.mkdir(parents=True, exist_ok=True)
     try:
         if args.evaluate_only is not None:

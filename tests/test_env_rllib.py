@@ -84,7 +84,7 @@ def test_ppo_trains_a_few_iterations_on_a_local_two_cpu_ray(tmp_path):
 
     kw = env_kwargs("basin")
     kw["max_episode_s"] = 90.0          # 3 decisions of 30 s: episodes end (time limit) within an iteration
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)   # never another's
     try:
         cfg = ppo_config("full", kw, num_env_runners=1, hidden=(8,), train_batch_size=12, minibatch_size=6,
                          num_epochs=2, lr=1e-3)

@@ -32,6 +32,10 @@ from trn_env.env.rllib import (
     rllib_env_settings,
 )
 
+# how long an iteration waits for its EnvRunners' samples (s): a JSBSim runner on a loaded machine can take
+# minutes for a batch, and RLlib's default (60 s) would train on whatever arrived
+SAMPLE_TIMEOUT_S = 3600.0
+
 
 def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: int = 1,
                num_envs_per_env_runner: int = 1, hidden: tuple[int, ...] = (64, 64),
@@ -66,7 +70,7 @@ def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: i
         .environment(names[tier], env_config=dict(env_config))
         .env_runners(num_env_runners=int(num_env_runners),
                      num_envs_per_env_runner=int(num_envs_per_env_runner), num_cpus_per_env_runner=1,
-                     create_local_env_runner=int(num_env_runners) == 0,
+                     create_local_env_runner=int(num_env_runners) == 0, sample_timeout_s=SAMPLE_TIMEOUT_S,
                      **rllib_env_settings(tier))
         .learners(num_learners=0)
         .training(train_batch_size_per_learner=int(train_batch_size), minibatch_size=int(minibatch_size),
