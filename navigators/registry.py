@@ -15,6 +15,8 @@ Monitors run beside a navigator on the same frames and its estimate (`create_mon
 (navigators.integrity.dem_monitor; needs dem=, the navigator's map).
 
 Every navigator validates its settings in its constructor and raises `ValueError` naming the setting.
+`integrity_risk` (per epoch, in (0, 1), default 1e-3) is taken here for every navigator: the risk its
+published horizontal protection level is computed for (navigators.integrity.protection_level).
 A navigator that draws random numbers (particle filters) is registered with `takes_rng=True` and gets the
 scenario's `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its
 run bit for bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
@@ -29,6 +31,7 @@ from trn_env.navigators.acquisition_tracking import AcqTrackNavigator
 from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
 from trn_env.navigators.filters.pf import ParticleFilter
 from trn_env.navigators.filters.pmf import PointMassFilter
+from trn_env.navigators.integrity.protection_level import DEFAULT_INTEGRITY_RISK, check_integrity_risk
 
 # name -> (factory, takes_rng)
 _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
@@ -66,8 +69,13 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
     factory, takes_rng = _FACTORIES[name]
     if takes_rng:
         settings["rng"] = rng
+    # every navigator's published protection level is for this per-epoch risk (protection_level)
+    risk = check_integrity_risk(settings.pop("integrity_risk", DEFAULT_INTEGRITY_RISK))
     try:
-        return factory(**settings)
+        nav = factory(**settings)
+        if hasattr(nav, "integrity_risk"):
+            nav.integrity_risk = risk
+        return nav
     except TypeError as exc:
         import re
         m = re.search(r"unexpected keyword argument '(\w+)'", str(exc))

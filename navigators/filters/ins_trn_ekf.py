@@ -42,6 +42,7 @@ import trn_env.navigators.filters._ekf_kernels as kern
 from filterpy.kalman import KalmanFilter
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements.ira_closest_point import FORMULAS, closest_point_ned
 from trn_env.navigators.protocol import (
@@ -127,6 +128,8 @@ class InsTrnNavigator:
     (_ekf_kernels.fused_segment); set the attribute `fused = False` for the step-by-step path (the same
     numbers, to round-off).
     """
+
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
 
     def __init__(
         self,
@@ -252,6 +255,7 @@ class InsTrnNavigator:
             raise ValueError(f"recovery_sigma_m must be a finite number >= 0, got {recovery_sigma_m!r}")
         self.recovery_sigma_m = float(recovery_sigma_m)
         self._update_extra: dict = {}
+        self._fault_allowance_m = 0.0       # the last accepted TERCOM fix's (protection_level)
         self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
         self.health = Health()
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
@@ -311,6 +315,7 @@ class InsTrnNavigator:
         self._integrity_extra = {}
         self._set_search(self.nominal_half_cells)
         self._update_extra = {}
+        self._fault_allowance_m = 0.0
         self._t_ekf = float(initial.t_s)
         self._t_batch0 = float(initial.t_s)
         self._height_initialised = False
@@ -747,6 +752,7 @@ class InsTrnNavigator:
         if gated:
             self._count_skip(t_s, "tercom_gated", 1, f"TERCOM fix failed the chi-square gate ({d2:.1f})")
             return
+        self._fault_allowance_m = pl.fault_allowance_m(self.kf.P[:2, :2], S, self.gate_chi2)
         saved = copy.deepcopy((self.kf.x, self.kf.P))
         self.kf.update(z, R=Rm, H=H)
         dx = self.kf.x.ravel()
@@ -838,6 +844,9 @@ class InsTrnNavigator:
             )
         extra.update(self._update_extra)
         extra.update(self._integrity_extra)
+        # HPL: the Gaussian bound of P plus the last accepted fix's fault allowance (protection_level)
+        pl.publish(extra, pl.gaussian_hpl(P[:2, :2], self.integrity_risk) + self._fault_allowance_m,
+                   self.integrity_risk)
         health = Health(
             ok=self.health.ok,
             status=self.health.status,

@@ -10,6 +10,7 @@ import numpy as np
 import trn_env.scenario.build as components
 from trn_env.flight.truth import TruthChunk
 from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.integrity.protection_level import EXTRA_PROTECTION_LEVEL
 from trn_env.navigators.protocol import Estimate
 from trn_env.sim.nav_stage import gnss_available_mask
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
@@ -48,7 +49,8 @@ class SimLog:
         self.est_rows.append((float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
                               np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
                               float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
-                              bool(est.health.ok), str(est.health.status)))
+                              bool(est.health.ok), str(est.health.status),
+                              float(est.extra.get(EXTRA_PROTECTION_LEVEL, np.nan))))
 
     def add_frames(self, frames: SensorFrames) -> None:
         self.frames.append(frames)
@@ -68,7 +70,8 @@ class SimLog:
 
     def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
-        position), gnss_available, nav_ok, and sensor_<sensor>_<field> at the sensors' own rates."""
+        position), gnss_available, nav_ok, est_hpl_m (the navigator's horizontal protection level, NaN where it
+        published none), and sensor_<sensor>_<field> at the sensors' own rates."""
         out: dict[str, np.ndarray] = {}
         rows = np.array(self.truth_rows, float).reshape(-1, len(_TRUTH_ROW))
         out["t_s"] = rows[:, 0].copy()
@@ -79,9 +82,9 @@ class SimLog:
             col += width
         h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
         out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
-        cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 11
+        cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 12
         names = ("est_t_s", "est_lat_rad", "est_lon_rad", "est_h_m", "est_v_ned_mps", "est_roll_rad",
-                 "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok", "nav_status")
+                 "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok", "nav_status", "est_hpl_m")
         for name, col in zip(names, cols, strict=True):
             out[name] = np.array(col)
         status = out.pop("nav_status")
