@@ -79,7 +79,8 @@ def stanford_plot(path: Path, df, alert_limit_m: float) -> bool:
     for ax, (nav, e, h) in zip(axes[0], navs, strict=True):
         top = max(float(np.percentile(np.r_[e, h], 99.9)) * 1.2, 1.5 * alert_limit_m)
         bins = np.linspace(0.0, top, 80)
-        hist = ax.hist2d(np.clip(e, 0, top), np.clip(h, 0, top), bins=[bins, bins], norm=LogNorm(), cmap="viridis")
+        hist = ax.hist2d(np.clip(e, 0, top), np.clip(h, 0, top), bins=[bins, bins], norm=LogNorm(),
+                         cmap="viridis")
         ax.plot([0, top], [0, top], "k-", lw=0.8)
         ax.axvline(alert_limit_m, color="r", lw=0.8, ls="--")
         ax.axhline(alert_limit_m, color="r", lw=0.8, ls="--")

@@ -70,8 +70,8 @@ class SimLog:
 
     def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
-        position), gnss_available, nav_ok, est_hpl_m (the navigator's horizontal protection level, NaN where it
-        published none), and sensor_<sensor>_<field> at the sensors' own rates."""
+        position), gnss_available, nav_ok, est_hpl_m (the navigator's horizontal protection level, NaN
+        where it published none), and sensor_<sensor>_<field> at the sensors' own rates."""
         out: dict[str, np.ndarray] = {}
         rows = np.array(self.truth_rows, float).reshape(-1, len(_TRUTH_ROW))
         out["t_s"] = rows[:, 0].copy()
