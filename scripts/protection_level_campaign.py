@@ -51,6 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="pl_campaign")
     args = ap.parse_args(argv)
     from trn_env.navigators.integrity.protection_level import check_alert_limit
+
     from trn_env.output.integrity_metrics import clopper_pearson_upper, protection_level_metrics
     al = check_alert_limit(args.alert_limit_m, "--alert-limit-m")
     out = Path(args.out)

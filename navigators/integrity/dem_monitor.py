@@ -29,9 +29,14 @@ sensor's specification) and the height source's variance (GNSS vertical sigma, o
 down variance and its horizontal covariance through the map's slope). With independent Gaussian
 disparities T is chi-square with N degrees of freedom, so the threshold may be given as a false-alarm
 probability instead: threshold = chi2.ppf(1 - P_fa, N) (96.0 for 1e-4 at N = 50, the paper's pair). The
-chi-square design needs independent disparities: choose `sample_period_s` so that consecutive epochs are
-further apart than the map error's correlation length (scripts/integrity_statistics.py measures what
-correlated errors do to the false-alarm rate).
+chi-square design needs independent disparities. A real map's error is correlated along the track: with
+`correlation_length_m` > 0 (the map error model's, terrain.map_error; the scenario fills it in) the plain
+variant tests the whitened statistic T_w = p' Sigma^-1 p of the window instead (Sigma from the model's
+correlation function at the epochs' own distances, its bias share `map_bias_fraction`, the white
+radar-altimeter and GNSS variances, and the navigator's position variance as common to the window when it
+is the height source: navigators.integrity.correlated_disparity). T_w is chi-square with N dof for any
+spacing, so the threshold and P_fa keep their chi-square design; the price is detection (a correlated map
+error and a bias look alike over a window): docs/validation/integrity.md measures both.
 
 Eq 5's x_hat values are correlated from epoch to epoch, so T_KF is not chi-square with N dof; given a
 false-alarm probability the "kalman" variant's threshold is the quantile of the moment-matched scaled
@@ -49,6 +54,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numba import njit
 from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.integrity.correlated_disparity import whitened_statistic
 from trn_env.navigators.protocol import Estimate
 from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
 from trn_env.terrain.kernels import bilinear
@@ -64,6 +70,7 @@ DEFAULT_THRESHOLD = 96.0  # seed 003 section III: "the statistic threshold is fo
 DTED1_DISPARITY_SIGMA_M = 18.9      # seed 003 section III: absolute disparities ~ N(0, 18.9^2), DTED-1
 DTED1_SUCCESSIVE_SIGMA_M = 13.0     # seed 003 section III: successive disparities ~ N(0, 13.0^2)
 VARIANTS = ("plain", "kalman")
+CORRELATION_CODES = {"exponential": 0, "gaussian": 1}   # whitened_statistic's func codes
 
 
 def class_sigma_m(map_class: str) -> float:
@@ -149,6 +156,9 @@ class DemMonitorConfig:
     kf_process_ratio: float = 0.01                 # eq 5 filter: random-walk variance per epoch / sigma^2
     beam_half_angle_deg: float = 0.0               # > 0: compare with the map's own return in this cone
     max_range_m: float = 5000.0
+    correlation_length_m: float = 0.0              # the map error's (m); 0: white, seed 003's eq 4 as is
+    correlation_function: str = "exponential"      # terrain.map_error.correlation
+    map_bias_fraction: float = 0.0                 # share of the map variance common to the whole window
 
     def __post_init__(self):
         n = self.n_window
@@ -180,6 +190,14 @@ class DemMonitorConfig:
         if not b < 90.0:
             raise ValueError(f"beam_half_angle_deg: must lie in [0, 90) deg, got {b!r}")
         _finite("max_range_m", self.max_range_m, positive=True)
+        from trn_env.terrain.map_error import check_correlation_length
+        check_correlation_length(self.correlation_length_m, allow_zero=True)
+        if self.correlation_function not in CORRELATION_CODES:
+            raise ValueError(f"correlation_function: must be one of {tuple(CORRELATION_CODES)}, got "
+                             f"{self.correlation_function!r}")
+        f = _finite("map_bias_fraction", self.map_bias_fraction)
+        if not 0.0 <= f <= 1.0:
+            raise ValueError(f"map_bias_fraction: must lie in [0, 1], got {self.map_bias_fraction!r}")
 
     @classmethod
     def from_mapping(cls, settings: dict) -> DemMonitorConfig:
@@ -320,18 +338,23 @@ def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heig
 
 
 @njit(cache=True)
-def _statistic_kernel(rows, r_map, cfg, state, ring, out):
+def _statistic_kernel(rows, r_map, cfg, state, ring, wring, out):
     """Eqs 1-5 over the epochs `rows` (_epoch_kernel's); r_map: the map's predicted radar-altimeter range
     at each epoch (beam model "cone") or an empty array (nadir: eq 2's map height under the position).
     Writes [t, p, s, sigma, T, alarm, source] into `out`.
     state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 2): the terms
-    p^2/sigma^2 and x^2/P."""
+    p^2/sigma^2 and x^2/P; wring (N, 5): p, lat, lon, white variance, common variance of each epoch for the
+    whitened statistic (cfg[16] > 0: correlated map error, correlated_disparity.whitened_statistic)."""
     n_win = int(cfg[0])
     sig_map2 = cfg[3] * cfg[3]
     kalman = cfg[8] > 0.5
     q_ratio = cfg[9]
     thr = cfg[10]
     cone = r_map.shape[0] > 0
+    corr_len = cfg[16]
+    whiten = corr_len > 0.0 and not kalman
+    sig_b2 = cfg[18] * sig_map2
+    sig_r2 = sig_map2 - sig_b2
     m = 0
     for i in range(rows.shape[0]):
         r = rows[i, 4]
@@ -363,11 +386,20 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, out):
         pos = int(state[2])
         ring[pos, 0] = p * p / var                     # eq 4 term
         ring[pos, 1] = state[4] * state[4] / state[5]  # eq 5 term
+        wring[pos, 0] = p
+        wring[pos, 1] = rows[i, 1]
+        wring[pos, 2] = rows[i, 2]
+        nav_src = rows[i, 7] > 0.5                     # the navigator's height: common to the window
+        wring[pos, 3] = sig_ra * sig_ra + (0.0 if nav_src else rows[i, 6])
+        wring[pos, 4] = rows[i, 6] if nav_src else 0.0
         state[2] = (pos + 1) % n_win
         state[1] += 1
         col = 1 if kalman else 0
         tot = np.nan
-        if state[1] >= n_win:
+        if state[1] >= n_win and whiten:               # p' Sigma^-1 p: chi2(N) under the map's model
+            tot = whitened_statistic(wring[:, 0], wring[:, 1], wring[:, 2], wring[:, 3], wring[:, 4],
+                                     int(state[2]), n_win, sig_r2, sig_b2, corr_len, int(cfg[17]))
+        elif state[1] >= n_win:
             tot = 0.0
             for k2 in range(n_win):
                 tot += ring[k2, col]
@@ -424,7 +456,7 @@ def kalman_terms(p, var, q_ratio):
 
 @njit(cache=True)
 def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
-                   dlat, dlon, cfg, state, ring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max,
+                   dlat, dlon, cfg, state, ring, wring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max,
                    blk_lb, blk_id):
     """One monitor update in one call: the epochs (_epoch_kernel), with the beam model the map's own
     radar-altimeter return at each (terrain.queries' exact cone search, the body down axis of the estimate's
@@ -434,7 +466,7 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     if m == 0:
         return 0
     if not cone:
-        return _statistic_kernel(rows[:m], rows[:0, 0], cfg, state, ring, out)
+        return _statistic_kernel(rows[:m], rows[:0, 0], cfg, state, ring, wring, out)
     cr, sr = math.cos(est[11]), math.sin(est[11])
     cp, sp = math.cos(est[12]), math.sin(est[12])
     cy, sy = math.cos(est[13]), math.sin(est[13])
@@ -466,7 +498,7 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan
-    return _statistic_kernel(rows[:m], rng, cfg, state, ring, out)
+    return _statistic_kernel(rows[:m], rng, cfg, state, ring, wring, out)
 
 
 _EMPTY = np.zeros(0)
@@ -491,6 +523,9 @@ class DemIntegrityMonitor:
             from trn_env import terrain
             dem = terrain.load(dem)
         self.config = DemMonitorConfig.from_mapping(settings)
+        if self.config.correlation_length_m > 0.0:
+            from trn_env.terrain.map_error import check_fits
+            check_fits(dem, self.config.correlation_length_m)
         self.dem = dem
         c = self.config
         self.threshold = c.effective_threshold
@@ -499,7 +534,9 @@ class DemIntegrityMonitor:
                               c.gnss_vertical_sigma_m, c.gnss_max_age_s,
                               1.0 if c.variant == "kalman" else 0.0,
                               c.kf_process_ratio, self.threshold, 0.0, 0.0, 0.0,
-                              math.radians(c.beam_half_angle_deg), c.max_range_m], float)
+                              math.radians(c.beam_half_angle_deg), c.max_range_m,
+                              c.correlation_length_m, CORRELATION_CODES[c.correlation_function],
+                              c.map_bias_fraction], float)
         self._est = np.zeros(14)
         self._rows = np.empty((64, 8))
         self._out = np.empty((64, 7))
@@ -509,6 +546,7 @@ class DemIntegrityMonitor:
     def reset(self) -> None:
         self._state = np.array([-np.inf, 0.0, 0.0, np.nan, 0.0, 1.0, 0.0])
         self._ring = np.zeros((int(self.config.n_window), 2))
+        self._wring = np.zeros((int(self.config.n_window), 5))
         self._alarm = False
 
     def update(self, frames: SensorFrames, estimate: Estimate) -> MonitorOutput:
@@ -540,8 +578,8 @@ class DemIntegrityMonitor:
             bs, bmax, bmin, h_min, h_max, cell_m = _NO_TABLES
             lb, ids = _EMPTY, _EMPTY_I
         m = _update_kernel(ra.t_s, ra.range_m, ra.valid, *gargs, e, heights, lat0, lon0, dlat, dlon,
-                           self._cfg, self._state, self._ring, self._rows, self._out, cone, cell_m, bs, bmax,
-                           bmin, h_min, h_max, lb, ids)
+                           self._cfg, self._state, self._ring, self._wring, self._rows, self._out, cone,
+                           cell_m, bs, bmax, bmin, h_min, h_max, lb, ids)
         if m == 0:
             return MonitorOutput(self._NONE, self.threshold, [])
         rows = self._out[:m].copy()
