@@ -261,6 +261,7 @@ class AcqTrackNavigator:
     """
 
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(self, dem=None, name: str = "acq_track", **settings):
         unknown = sorted(set(settings) - set(AcqTrackConfig.names()))
@@ -1386,7 +1387,7 @@ class AcqTrackNavigator:
                 }
             )
         extra.update(self._integrity_extra)
-        pl.publish(extra, pl.gaussian_hpl(P, self.integrity_risk), self.integrity_risk)   # protection_level
+        pl.publish(extra, pl.gaussian_hpl(P, pl.filter_risk(self)), self)   # protection_level
         h = Health(
             ok=self.health.ok,
             status=self.health.status,

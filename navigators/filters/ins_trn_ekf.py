@@ -130,6 +130,7 @@ class InsTrnNavigator:
     """
 
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(
         self,
@@ -845,8 +846,7 @@ class InsTrnNavigator:
         extra.update(self._update_extra)
         extra.update(self._integrity_extra)
         # HPL: the Gaussian bound of P plus the last accepted fix's fault allowance (protection_level)
-        pl.publish(extra, pl.gaussian_hpl(P[:2, :2], self.integrity_risk) + self._fault_allowance_m,
-                   self.integrity_risk)
+        pl.publish(extra, pl.gaussian_hpl(P[:2, :2], pl.filter_risk(self)) + self._fault_allowance_m, self)
         health = Health(
             ok=self.health.ok,
             status=self.health.status,

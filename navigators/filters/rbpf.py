@@ -201,6 +201,7 @@ class RaoBlackwellizedPF:
     """
 
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(
         self,
@@ -1041,8 +1042,8 @@ class RaoBlackwellizedPF:
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
-        risk = self.integrity_risk       # the cloud's mass radius (navigators.integrity.protection_level)
-        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), risk)
+        risk = pl.filter_risk(self)      # the cloud's mass radius (navigators.integrity.protection_level)
+        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), self)
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
                         events=list(self.health.events))
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),

@@ -111,6 +111,7 @@ class InsRiddenFilter:
 
     name = "terrain_filter"
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(self, dem=None, aiding: str = "ira", measurement_rate_hz: float = 1.0,
                  ira_formula: str = "proposed", ira_range_sigma_m: float = 3.5,
@@ -468,9 +469,9 @@ class InsRiddenFilter:
     def _with_protection_level(self, extra: dict) -> dict:
         """extra with the belief's HPL (navigators.integrity.protection_level: the mass radius of the points
         of `_pl_points` plus their pad) for the navigator's integrity_risk."""
-        risk = self.integrity_risk
+        risk = pl.filter_risk(self)
         dn, de, w, pad = self._pl_points(risk)
-        return pl.publish(extra, pl.particle_hpl(dn, de, w, risk, pad), risk)
+        return pl.publish(extra, pl.particle_hpl(dn, de, w, risk, pad), self)
 
     # ------------------------------------------------------------------------------------ subclass API
     def _init_belief(self, cov9: np.ndarray) -> None:

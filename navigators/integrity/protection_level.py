@@ -141,8 +141,37 @@ def particle_hpl(dn_m, de_m, w, risk: float, pad_m: float = 0.0) -> float:
     return float(r) + float(pad_m)
 
 
-def publish(extra: dict, hpl_m: float, risk: float) -> dict:
-    """Put the HPL and its risk into an Estimate.extra dict (returned for chaining)."""
-    extra[EXTRA_PROTECTION_LEVEL] = float(hpl_m)
-    extra[EXTRA_INTEGRITY_RISK] = float(risk)
+def configure(navigator, integrity_risk=DEFAULT_INTEGRITY_RISK, map_horizontal_sigma_m=0.0) -> None:
+    """Set a navigator's integrity_risk and map_horizontal_sigma_m (validated, ValueError naming the
+    setting); navigators.registry.create does it for every navigator."""
+    navigator.integrity_risk = check_integrity_risk(integrity_risk)
+    try:
+        sh = float(map_horizontal_sigma_m)
+    except (TypeError, ValueError):
+        sh = float("nan")
+    if not (math.isfinite(sh) and sh >= 0.0):
+        raise ValueError(f"map_horizontal_sigma_m: must be a finite sigma >= 0 m, got "
+                         f"{map_horizontal_sigma_m!r}")
+    navigator.map_horizontal_sigma_m = sh
+
+
+def filter_risk(navigator) -> float:
+    """The share of the navigator's integrity risk its filter's HPL is computed for: all of it, or half when
+    the map's horizontal error takes the other half (union bound, `publish`)."""
+    risk = float(getattr(navigator, "integrity_risk", DEFAULT_INTEGRITY_RISK))
+    return 0.5 * risk if getattr(navigator, "map_horizontal_sigma_m", 0.0) > 0.0 else risk
+
+
+def publish(extra: dict, filter_hpl_m: float, navigator) -> dict:
+    """Put the navigator's HPL and its risk into an Estimate.extra dict (returned): the filter's HPL
+    (computed at filter_risk) plus, when the map has a horizontal error of sigma map_horizontal_sigma_m per
+    axis (its accuracy class's CE90 / 2.146; a map shifted by s moves every terrain fix by s, and the
+    filter's belief cannot see it), the Gaussian bound of that error at the other half of the risk."""
+    risk = float(getattr(navigator, "integrity_risk", DEFAULT_INTEGRITY_RISK))
+    sh = float(getattr(navigator, "map_horizontal_sigma_m", 0.0))
+    hpl = float(filter_hpl_m)
+    if sh > 0.0:
+        hpl += gaussian_hpl(np.eye(2) * sh * sh, 0.5 * risk)
+    extra[EXTRA_PROTECTION_LEVEL] = hpl
+    extra[EXTRA_INTEGRITY_RISK] = risk
     return extra

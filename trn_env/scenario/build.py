@@ -378,13 +378,18 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     registry.MAP_NOISE_AWARE also get map_sigma_m / map_bias_sigma_m from the map error model
     (map_noise_settings), those in registry.IMU_AWARE their bias priors and bias process noise from the IMU
     (imu_bias_settings), those in registry.MAP_IS_WORLD_AWARE terrain_model_sigma_m = 0 when the map is the
-    world, else terrain_detail_spacing_m from the world's refinement, unless the settings give them."""
+    world, else terrain_detail_spacing_m from the world's refinement, unless the settings give them. Every
+    navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level covers it)."""
     from trn_env.navigators import registry
+    from trn_env.terrain import map_error
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
     if d["navigator"]["name"] in getattr(registry, "IMU_AWARE", ()):
         for key, val in imu_bias_settings(d["sensors"].get("imu"), _epoch_s(settings)).items():
             settings.setdefault(key, val)
+    preset = str((d["terrain"]["map"].get("error_model") or {}).get("preset", "")).strip().lower()
+    if preset in map_error.ACCURACY_CLASSES:   # the protection level covers the map's horizontal error
+        settings.setdefault("map_horizontal_sigma_m", map_error.ACCURACY_CLASSES[preset].sigma_h_m)
     if d["navigator"]["name"] in getattr(registry, "MAP_NOISE_AWARE", ()):
         for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
             settings.setdefault(key, val)
