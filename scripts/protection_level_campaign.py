@@ -4,7 +4,7 @@ MI rate against an alert limit, availability, and a Stanford diagram per navigat
     python scripts/protection_level_campaign.py --budget-s 3000 --out pl_campaign   # round-robin flights
 
 Each navigator flies its regression scenario (tests/scenarios/<nav>_short.toml; ins_tercom: default_short)
-lengthened to --duration-s, under two map conditions: "as_published" (the scenario's own map: the real 3"
+flown along the default scenario's route (~45 km, 600 m above ground; --duration-s at most), under two map conditions: "as_published" (the scenario's own map: the real 3"
 DEM against a world refined to 30 m) and "dted1_correlated" (that map plus the DTED-1 class's error model
 drawn per seed: bias, horizontal shift, correlated random vertical error). Flights go round-robin over
 navigators x conditions x seeds until the wall-time budget is spent; every epoch (logged row, 1 Hz) where
@@ -24,6 +24,8 @@ import numpy as np
 SCENARIOS = {"ins_tercom": "default_short", "pmf": "pmf_short", "pf": "pf_short", "rbpf": "rbpf_short",
              "acq_track": "acq_track_short"}
 CONDITIONS = ("as_published", "dted1_correlated")
+# the default scenario's route (600 m above ground, ~45 km): longer flights than the short scenarios' own
+ROUTE = [(36.490, -84.370), (36.640, -84.340), (36.640, -84.200), (36.520, -84.160)]
 
 
 def fly(nav: str, condition: str, seed: int, duration_s: float):
@@ -32,6 +34,7 @@ def fly(nav: str, condition: str, seed: int, duration_s: float):
     data, _ = read_scenario_file(f"tests/scenarios/{SCENARIOS[nav]}.toml")
     data["seed"] = seed
     data["duration_s"] = duration_s
+    data["route"]["waypoints"] = [{"lat_deg": a, "lon_deg": b, "h_agl_m": 600.0} for a, b in ROUTE]
     if condition == "dted1_correlated":
         data["terrain"]["map"]["dem"] = "jacksboro"
         data["terrain"]["map"]["error_model"] = {"preset": "dted1"}
@@ -45,7 +48,7 @@ def fly(nav: str, condition: str, seed: int, duration_s: float):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--budget-s", type=float, default=3000.0, help="wall-time budget (s)")
-    ap.add_argument("--duration-s", type=float, default=300.0, help="flight length (s)")
+    ap.add_argument("--duration-s", type=float, default=600.0, help="flight length limit (s)")
     ap.add_argument("--alert-limit-m", type=float, default=185.2)
     ap.add_argument("--navigators", default=",".join(SCENARIOS))
     ap.add_argument("--out", default="pl_campaign")

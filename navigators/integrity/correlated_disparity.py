@@ -5,11 +5,12 @@ quantile (96 for P_fa = 1e-4 at N = 50). That needs independent disparities. A r
 correlated along the track (terrain.map_error: covariance sigma^2 rho(d), rho exponential or Gaussian in
 the distance d between the epochs' positions), so the window's disparities p ~ N(0, Sigma) with
 
-    Sigma_ij = sigma_r^2 rho(d_ij) + sigma_b^2 + delta_ij w_i + sqrt(c_i c_j)
+    Sigma_ij = sigma_r^2 rho(d_ij) + sigma_b^2 + delta_ij w_i + c_ij
 
 (sigma_r: the map's random error, sigma_b: its bias part, common to the window; w_i: white variances of
-the epoch (radar-altimeter noise, GNSS height); c_i: the navigator's own position variance when it is the
-height source, slowly varying over a window and so counted as common to it). Eq 4's sum is then a
+the epoch (radar-altimeter noise, GNSS height); c_ij: the navigator's own position error when it is the
+height source, slowly varying over a window and so common to it: sqrt(P_dd,i P_dd,j) + g_i' P g_j with g
+the map's slope and P the horizontal covariance). Eq 4's sum is then a
 generalised chi-square (a weighted sum of chi2(1) with the eigenvalues of D^-1/2 Sigma D^-1/2) whose tail
 at 96 is far above 1e-4.
 
@@ -36,35 +37,43 @@ from numba import njit
 
 
 @njit(cache=True)
-def whitened_statistic(p, lat, lon, white_var, common_var, start, n, sig_r2, sig_b2, corr_len_m, func):
-    """p' Sigma^-1 p over the n epochs of ring buffers (oldest at index `start`, wrapping), Sigma as in the
-    module docstring; func 0: exponential, 1: Gaussian correlation. Positions in rad (lat, lon); distances
-    through the meridian / prime-vertical radii of WGS84 at the first epoch. NaN if Sigma is not positive
-    definite."""
-    m = p.shape[0]
+def whitened_statistic(ring, start, n, sig_r2, sig_b2, corr_len_m, func):
+    """p' Sigma^-1 p over the n epochs of a ring buffer (oldest at row `start`, wrapping), Sigma as in the
+    module docstring; func 0: exponential, 1: Gaussian correlation. ring columns: p (m), lat, lon (rad),
+    white variance (m^2), then the navigator's height-source terms (zero for GNSS epochs): its down variance
+    P_dd, the map's slope g_n, g_e and its horizontal covariance P_nn, P_ne, P_ee; their common part is
+    sqrt(P_dd,i P_dd,j) + g_i' (P_i + P_j) / 2 g_j (the navigator's error is nearly constant over a window,
+    the slope under it is not). Distances through the WGS84 meridian / prime-vertical radii at the first
+    epoch. NaN if Sigma is not positive definite."""
+    m = ring.shape[0]
     S = np.empty((n, n))
     v = np.empty(n)
     a_m = 6378137.0
     e2 = 6.69437999014e-3
-    s0 = math.sin(lat[start % m])
+    s0 = math.sin(ring[start % m, 1])
     w = 1.0 - e2 * s0 * s0
     rn = a_m * (1.0 - e2) / (w * math.sqrt(w))
-    re = a_m / math.sqrt(w) * math.cos(lat[start % m])
+    re = a_m / math.sqrt(w) * math.cos(ring[start % m, 1])
     for i in range(n):
         ii = (start + i) % m
-        v[i] = p[ii]
+        v[i] = ring[ii, 0]
         for j in range(i + 1):
             jj = (start + j) % m
-            d = math.hypot((lat[ii] - lat[jj]) * rn, (lon[ii] - lon[jj]) * re)
+            d = math.hypot((ring[ii, 1] - ring[jj, 1]) * rn, (ring[ii, 2] - ring[jj, 2]) * re)
             if corr_len_m <= 0.0:
                 rho = 1.0 if i == j else 0.0
             elif func == 0:
                 rho = math.exp(-d / corr_len_m)
             else:
                 rho = math.exp(-0.5 * (d / corr_len_m) ** 2)
-            c = sig_r2 * rho + sig_b2 + math.sqrt(common_var[ii] * common_var[jj])
+            pnn = 0.5 * (ring[ii, 7] + ring[jj, 7])
+            pne = 0.5 * (ring[ii, 8] + ring[jj, 8])
+            pee = 0.5 * (ring[ii, 9] + ring[jj, 9])
+            gi_n, gi_e, gj_n, gj_e = ring[ii, 5], ring[ii, 6], ring[jj, 5], ring[jj, 6]
+            c = (sig_r2 * rho + sig_b2 + math.sqrt(ring[ii, 4] * ring[jj, 4])
+                 + gi_n * (pnn * gj_n + pne * gj_e) + gi_e * (pne * gj_n + pee * gj_e))
             if i == j:
-                c += white_var[ii]
+                c += ring[ii, 3]
             S[i, j] = c
             S[j, i] = c
     # Cholesky and forward substitution in place (no LAPACK: the same result on every machine)

@@ -267,7 +267,8 @@ def _radii(lat):
 def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
                   dlat, dlon, cfg, state, out):
     """Pick the frame's monitor epochs (one valid radar-altimeter sample per period) and their positions:
-    rows [t, lat, lon, h, measured range, nadir map height, height-source variance, source] into `out`;
+    rows [t, lat, lon, h, measured range, nadir map height, height-source variance, source, map slope north,
+    east (navigator source only)] into `out`;
     returns their number. The position is the GNSS fix nearest in time (within cfg[7]) moved to the sample
     time with its velocity, else the navigator's estimate dead-reckoned to it.
 
@@ -324,6 +325,11 @@ def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heig
                                                                                   * math.cos(lat_t))
             if gn == gn and ge == ge:
                 var_pos += gn * gn * est[7] + 2.0 * gn * ge * est[8] + ge * ge * est[9]
+                out[m, 8] = gn
+                out[m, 9] = ge
+            else:
+                out[m, 8] = 0.0
+                out[m, 9] = 0.0
         out[m, 0] = t
         out[m, 1] = lat_t
         out[m, 2] = lon_t
@@ -332,19 +338,28 @@ def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heig
         out[m, 5] = h_map
         out[m, 6] = var_pos
         out[m, 7] = src
+        if src == 0:
+            out[m, 8] = 0.0
+            out[m, 9] = 0.0
         m += 1
         state[0] = (math.floor(t / period + 1e-9) + 1.0) * period
     return m
 
 
 @njit(cache=True)
-def _statistic_kernel(rows, r_map, cfg, state, ring, wring, out):
+def _est_terms(est):
+    """[P_dd, -, -, P_nn, P_ne, P_ee] of the navigator's estimate for the whitened statistic's ring."""
+    return np.array([est[10], 0.0, 0.0, est[7], est[8], est[9]])
+
+
+@njit(cache=True)
+def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
     """Eqs 1-5 over the epochs `rows` (_epoch_kernel's); r_map: the map's predicted radar-altimeter range
     at each epoch (beam model "cone") or an empty array (nadir: eq 2's map height under the position).
     Writes [t, p, s, sigma, T, alarm, source] into `out`.
     state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 2): the terms
-    p^2/sigma^2 and x^2/P; wring (N, 5): p, lat, lon, white variance, common variance of each epoch for the
-    whitened statistic (cfg[16] > 0: correlated map error, correlated_disparity.whitened_statistic)."""
+    p^2/sigma^2 and x^2/P; wring (N, 10): the ring of correlated_disparity.whitened_statistic (used when
+    cfg[16] > 0: a correlated map error); est_terms: the navigator's [P_dd, -, -, P_nn, P_ne, P_ee] for it."""
     n_win = int(cfg[0])
     sig_map2 = cfg[3] * cfg[3]
     kalman = cfg[8] > 0.5
@@ -391,14 +406,17 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, out):
         wring[pos, 2] = rows[i, 2]
         nav_src = rows[i, 7] > 0.5                     # the navigator's height: common to the window
         wring[pos, 3] = sig_ra * sig_ra + (0.0 if nav_src else rows[i, 6])
-        wring[pos, 4] = rows[i, 6] if nav_src else 0.0
+        for c9 in range(6):                            # P_dd, g_n, g_e, P_nn, P_ne, P_ee (navigator only)
+            wring[pos, 4 + c9] = est_terms[c9] if nav_src else 0.0
+        if nav_src:
+            wring[pos, 5] = rows[i, 8]                 # the map's slope under the epoch
+            wring[pos, 6] = rows[i, 9]
         state[2] = (pos + 1) % n_win
         state[1] += 1
         col = 1 if kalman else 0
         tot = np.nan
         if state[1] >= n_win and whiten:               # p' Sigma^-1 p: chi2(N) under the map's model
-            tot = whitened_statistic(wring[:, 0], wring[:, 1], wring[:, 2], wring[:, 3], wring[:, 4],
-                                     int(state[2]), n_win, sig_r2, sig_b2, corr_len, int(cfg[17]))
+            tot = whitened_statistic(wring, int(state[2]), n_win, sig_r2, sig_b2, corr_len, int(cfg[17]))
         elif state[1] >= n_win:
             tot = 0.0
             for k2 in range(n_win):
@@ -466,7 +484,7 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     if m == 0:
         return 0
     if not cone:
-        return _statistic_kernel(rows[:m], rows[:0, 0], cfg, state, ring, wring, out)
+        return _statistic_kernel(rows[:m], rows[:0, 0], cfg, state, ring, wring, _est_terms(est), out)
     cr, sr = math.cos(est[11]), math.sin(est[11])
     cp, sp = math.cos(est[12]), math.sin(est[12])
     cy, sy = math.cos(est[13]), math.sin(est[13])
@@ -498,7 +516,7 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan
-    return _statistic_kernel(rows[:m], rng, cfg, state, ring, wring, out)
+    return _statistic_kernel(rows[:m], rng, cfg, state, ring, wring, _est_terms(est), out)
 
 
 _EMPTY = np.zeros(0)
@@ -538,7 +556,7 @@ class DemIntegrityMonitor:
                               c.correlation_length_m, CORRELATION_CODES[c.correlation_function],
                               c.map_bias_fraction], float)
         self._est = np.zeros(14)
-        self._rows = np.empty((64, 8))
+        self._rows = np.empty((64, 10))
         self._out = np.empty((64, 7))
         self._half_beam = math.radians(c.beam_half_angle_deg)
         self.reset()
@@ -546,7 +564,7 @@ class DemIntegrityMonitor:
     def reset(self) -> None:
         self._state = np.array([-np.inf, 0.0, 0.0, np.nan, 0.0, 1.0, 0.0])
         self._ring = np.zeros((int(self.config.n_window), 2))
-        self._wring = np.zeros((int(self.config.n_window), 5))
+        self._wring = np.zeros((int(self.config.n_window), 10))
         self._alarm = False
 
     def update(self, frames: SensorFrames, estimate: Estimate) -> MonitorOutput:
@@ -568,7 +586,7 @@ class DemIntegrityMonitor:
         n = ra.t_s.shape[0]
         if self._out.shape[0] < n:
             self._out = np.empty((n, 7))
-            self._rows = np.empty((n, 8))
+            self._rows = np.empty((n, 10))
         heights, lat0, lon0, dlat, dlon = self.dem.grid
         cone = self._half_beam > 0.0
         if cone:        # the map's search tables (cached on the Dem, rebuilt when its heights change)
