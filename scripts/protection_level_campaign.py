@@ -4,7 +4,8 @@ MI rate against an alert limit, availability, and a Stanford diagram per navigat
     python scripts/protection_level_campaign.py --budget-s 3000 --out pl_campaign   # round-robin flights
 
 Each navigator flies its regression scenario (tests/scenarios/<nav>_short.toml; ins_tercom: default_short)
-flown along the default scenario's route (~45 km, 600 m above ground; --duration-s at most), under two map conditions: "as_published" (the scenario's own map: the real 3"
+along the default scenario's route (~45 km, 600 m above ground; --duration-s at most), under two map
+conditions: "as_published" (the scenario's own map: the real 3"
 DEM against a world refined to 30 m) and "dted1_correlated" (that map plus the DTED-1 class's error model
 drawn per seed: bias, horizontal shift, correlated random vertical error). Flights go round-robin over
 navigators x conditions x seeds until the wall-time budget is spent; every epoch (logged row, 1 Hz) where

@@ -39,15 +39,17 @@ spacing, so the threshold and P_fa keep their chi-square design; the price is de
 error and a bias look alike over a window): docs/validation/integrity.md measures both.
 
 Eq 5's x_hat values are correlated from epoch to epoch, so T_KF is not chi-square with N dof; given a
-false-alarm probability the "kalman" variant's threshold is the quantile of the moment-matched scaled
-chi-square g chi2(h) of T_KF under no fault (steady-state filter, constant sigma; Satterthwaite), and an
-explicit threshold (default 96, as in the paper) is used as it is.
+false-alarm probability the "kalman" variant's threshold is the exact quantile of T_KF's generalised
+chi-square under no fault (`kalman_threshold`), and an explicit threshold (default 96, as in the paper) is
+used as it is. docs/validation/integrity.md shows which readings of eq 5 were tried and that none
+reproduces the paper's claims.
 
 Source codes in the output: SOURCE_GNSS = 0 (GNSS fix within `gnss_max_age_s`), SOURCE_NAVIGATOR = 1.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields
 
@@ -113,13 +115,15 @@ def kalman_statistic_moments(n: int, process_ratio: float) -> tuple[float, float
     return n * v / p, var
 
 
+@functools.lru_cache(maxsize=32)
 def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: float) -> float:
-    """Threshold of T_KF for a false-alarm probability: the quantile of g chi2(h) matched to the mean and
-    variance of kalman_statistic_moments (g = var / (2 mean), h = 2 mean^2 / var)."""
-    from scipy.stats import chi2
-    mean, var = kalman_statistic_moments(n, process_ratio)
-    g, h = var / (2.0 * mean), 2.0 * mean * mean / var
-    return float(g * chi2.isf(false_alarm_probability, h))
+    """Threshold of T_KF (eq 5 as the monitor computes it) for a false-alarm probability: the exact quantile
+    of the generalised chi-square T_KF is under no fault with white disparities (its quadratic form from
+    correlated_disparity.kalman_reading("rw_posterior"), the filter in steady state; Imhof's integral takes
+    seconds, so it is cached)."""
+    from trn_env.navigators.integrity.correlated_disparity import gchi2_isf, kalman_reading
+    M = kalman_reading("rw_posterior", int(n), 150, float(process_ratio))
+    return gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))
 
 
 def _finite(name: str, value, positive: bool = False, nonneg: bool = False) -> float:
