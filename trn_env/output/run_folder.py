@@ -1,4 +1,8 @@
-"""Run outputs: summary.json, the time-series log (log.npz + timeline.csv), events, and plots.
+"""Run outputs: summary.json, the time-series log (log/ or log.npz, + timeline.csv), events, and plots.
+
+`trn-env fly` and `trn-env replay` hand over `log_dir`, a sensor log (trn_env.logs) already streamed to
+disk during the run: it is moved in as `log/` (Parquet tables, read with trn_env.logs.read_log or
+pandas.read_parquet) instead of writing `log.npz` from the arrays in memory.
 
 Everything is written atomically: the files go into a temporary directory next to the target, and only
 when all of them are complete is that directory renamed onto the target. A run folder holds one run only:
@@ -213,11 +217,12 @@ def target_problem(out_dir: Path | str, overwrite: bool = False) -> str | None:
 
 def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
               events: list[tuple[float, str, str]] | None = None,
-              plot: Callable[[Path], list[str]] | None = None, overwrite: bool = False,
-              extra_files: dict[str, str] | None = None) -> Path:
+              plot: Callable[[Path], list[str]] | None = None, log_dir: Path | None = None,
+              overwrite: bool = False, extra_files: dict[str, str] | None = None) -> Path:
     """Write a complete run directory atomically; returns the directory.
 
     `plot(tmp_dir)` may add figures; it returns their file names (listed in summary['files']).
+    `log_dir`: a finished log folder moved in as `log/` (then no log.npz is written).
     `extra_files`: name -> text of further files (e.g. the resolved scenario.toml). `overwrite`: replace a
     folder that holds a previous run as a whole (see the module docstring); without it a non-empty
     `out_dir` raises FileExistsError before anything is written.
@@ -234,11 +239,15 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)          # mkdtemp makes it private; the run directory should not be
     try:
-        files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
+        if log_dir is not None:
+            files = ["summary.json", "log", "timeline.csv", "events.csv"]
+            os.replace(log_dir, tmp / "log")
+        else:
+            files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
+            write_log_npz(tmp / "log.npz", arrays)
         for name, text in (extra_files or {}).items():
             (tmp / name).write_text(text, encoding="utf-8")
             files.append(name)
-        write_log_npz(tmp / "log.npz", arrays)
         write_timeline_csv(tmp / "timeline.csv", arrays)
         write_events_csv(tmp / "events.csv", events or [])
         if plot is not None:
