@@ -587,7 +587,7 @@ def cmd_campaign(args) -> int:
 
     from trn_env.campaign.driver import default_out_dir
     out_dir = args.out or default_out_dir(campaign.name)
-    console = Console(width=max(Console().width, 150))     # the summary table is wide
+    console = Console()
     try:
         stats = run_campaign(campaign, out_dir, backend=backend, resume=args.resume, progress=not args.quiet)
     except CampaignError as err:
