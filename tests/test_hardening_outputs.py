@@ -134,3 +134,16 @@ def test_sigterm_mid_flight_is_handled_like_ctrl_c(tmp_path):
     assert "Traceback" not in err and err.strip().splitlines()[-1] == "terminated: nothing written", err
     assert len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == []     # no run folder, no .run.partial-* left
+
+
+def test_goal_error_model_terms():
+    """Each term of the short-term INS error growth alone, against its closed form (per axis, x sqrt 2)."""
+    import math
+
+    from trn_env.guidance.goal_error import G_MPS2, expected_goal_error_m
+    t = 100.0
+    assert expected_goal_error_m(8500.0, 85.0, 1e-3, 0.0, 0.0, 0.0) == pytest.approx(math.sqrt(2) * 5.0)
+    assert expected_goal_error_m(8500.0, 85.0, 0.0, 1e-6, 0.0, 0.0) == pytest.approx(
+        math.sqrt(2) * G_MPS2 * 1e-6 * t ** 3 / 6)
+    assert expected_goal_error_m(0.0, 85.0, 1e-3, 1e-6, 5.0, 0.1) == pytest.approx(math.sqrt(2) * 5.0)
+    assert expected_goal_error_m(8500.0, 85.0, 1e-3, 1e-6) > expected_goal_error_m(4250.0, 85.0, 1e-3, 1e-6)

@@ -31,7 +31,8 @@ def _row(i: int, nav: str, sweep: dict, seed: int, termination: str = "time_limi
            "gnss_outages_json": json.dumps([{"start_s": 20.0, "end_s": 40.0}]),
            "horizontal_error_rms_m": float(np.sqrt(np.mean(err ** 2))), "horizontal_error_cep50_m": 11.0,
            "horizontal_error_cep95_m": 14.0, "horizontal_error_final_m": float(err[-1]),
-           "vertical_error_rms_m": 3.0, "anees": 2.8, "fraction_within_3sigma": 0.98, "time_to_converge_s": 5.0,
+           "vertical_error_rms_m": 3.0, "anees": 2.8, "fraction_within_3sigma": 0.98,
+           "time_to_converge_s": 5.0,
            "track_lost": False, "fraction_healthy": 1.0, "misleading_information_time_s": 0.0,
            "series_t_s": t.tolist(), "series_err_h_m": err.tolist()}
     row.update({f"sweep.{k}": v for k, v in sweep.items()})

@@ -700,7 +700,34 @@ def cmd_plan(args) -> int:
           f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "
           f"(straight {straight.featureless_m / 1000:.2f} km), "
           f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
+    print(_plan_reason(route, straight, d, config))
     return 0
+
+
+def _plan_reason(route, straight, d: dict, config) -> str:
+    """Why the planned route is longer than the straight line: each one's featureless flight, the expected
+    horizontal error at the end of its longest featureless stretch (where the navigator must find the
+    terrain again) and at the goal (trn_env.guidance.goal_error, with the scenario's IMU)."""
+    from trn_env.guidance.goal_error import expected_goal_error_m
+    from trn_env.scenario.build import imu_bias_settings
+    imu = imu_bias_settings((d.get("sensors") or {}).get("imu"))
+    b_a, b_g = imu.get("accel_bias_sigma_mps2", 0.0), imu.get("gyro_bias_sigma_rps", 0.0)
+    tas = float(d["route"]["tas_mps"])
+
+    def err(featureless_m: float) -> float:
+        return expected_goal_error_m(featureless_m, tas, b_a, b_g, sigma_fix_m=config.informative_crlb_m)
+
+    def describe(r) -> str:
+        return (f"{r.featureless_m / 1000:.1f} km of featureless terrain (longest stretch "
+                f"{r.longest_featureless_m / 1000:.1f} km: about {err(r.longest_featureless_m):.0f} m "
+                f"expected error at its end; last {r.final_featureless_m / 1000:.1f} km before the goal: "
+                f"about {err(r.final_featureless_m):.0f} m at the goal)")
+
+    model = "(INS drift over featureless flight with the scenario's IMU, trn_env.guidance.goal_error)"
+    if route.length_m <= straight.length_m * 1.001:
+        return f"why: the straight line is already the best route: {describe(straight)} {model}"
+    return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: the straight line crosses "
+            f"{describe(straight)}; the planned route {describe(route)} {model}")
 
 
 def main(argv: list[str] | None = None) -> int:
