@@ -87,7 +87,7 @@ def test_fly_rerun_into_existing_dir_refused_or_replaced_whole(flown, tmp_path, 
     assert cli.main([*args, "--overwrite"]) == 0
     summary = json.loads((target / "summary.json").read_text())
     assert summary["seed"] == 4 and summary["sim_time_s"] == pytest.approx(5.0)
-    assert np.load(target / "log.npz")["t_s"].shape[0] == 6
+    assert len(pd.read_csv(target / "timeline.csv")) == 6
     assert sorted(p.name for p in target.iterdir()) == sorted(summary["files"])
     assert not (target / "track.png").exists() and not (target / "stale.txt").exists()
     assert not list(tmp_path.glob(".run.partial-*"))
