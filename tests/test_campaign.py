@@ -141,7 +141,7 @@ def test_report_pngs_and_self_contained_html(flown, tmp_path):
     assert cli.main(["report", str(flown), "--out", str(tmp_path / "rep")]) == 0
     rep = tmp_path / "rep"
     pngs = sorted(p.name for p in rep.glob("*.png"))
-    assert pngs == ["cdf_horizontal_error.png", "envelope_horizontal_error.png"]
+    assert pngs == ["cdf_horizontal_error.png", "envelope_horizontal_error.png", "stanford.png"]
     page = (rep / "report.html").read_text()
     blobs = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)
     assert len(blobs) == 2
@@ -318,7 +318,7 @@ def test_a_swept_campaign_has_sweep_columns_and_a_metric_versus_sweep_plot(tmp_p
         [{"wind.layers.0.speed_mps": 0.0}, {"wind.layers.0.speed_mps": 15.0}]
     rep = write_report(tmp_path / "out")
     assert (rep / "sweep_wind_layers_0_speed_mps.png").stat().st_size > 10_000
-    assert (rep / "report.html").read_text().count("data:image/png;base64,") == 3
+    assert (rep / "report.html").read_text().count("data:image/png;base64,") == 4   # + Stanford diagrams
 
 
 def test_report_and_check_refuse_bad_folders_and_baselines(tmp_path, capsys):
