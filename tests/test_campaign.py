@@ -144,12 +144,13 @@ def test_report_pngs_and_self_contained_html(flown, tmp_path):
     assert pngs == ["cdf_horizontal_error.png", "envelope_horizontal_error.png", "stanford.png"]
     page = (rep / "report.html").read_text()
     blobs = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)
-    assert len(blobs) == 2
+    assert len(blobs) == 3
     for b, name in zip(blobs, pngs, strict=True):
         assert base64.b64decode(b) == (rep / name).read_bytes()
     assert "ins_tercom | -" in page and "<img" in page and "src='http" not in page
     stats = json.loads((rep / "summary.json").read_text())
     assert stats["ins | -"]["runs"] == 2
+    assert stats["ins | -"]["pl_epochs.sum"] > 0         # protection-level epochs pooled over the runs
 
 
 # ------------------------------------------------------------------------------------------- Ray
