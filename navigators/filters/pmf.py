@@ -62,7 +62,7 @@ import math
 import numpy as np
 import trn_env.navigators.filters._pmf_kernels as kern
 from scipy import ndimage
-from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, equivalent_walk_density
+from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
 from trn_env.navigators.integrity import protection_level as pl
@@ -164,6 +164,7 @@ class PointMassFilter(InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
+        self._consistency_warning = consistency_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
     def _set_geometry(self, centre_n: float, centre_e: float, spacing: float) -> None:

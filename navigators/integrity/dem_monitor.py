@@ -55,6 +55,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from numba import njit
+from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.integrity.correlated_disparity import whitened_statistic
 from trn_env.navigators.protocol import Estimate
@@ -539,11 +540,7 @@ class DemIntegrityMonitor:
     _NONE = np.zeros((0, 7))
 
     def __init__(self, dem=None, **settings):
-        if dem is None:
-            raise ValueError("dem: the navigator's terrain map is required by the DEM integrity monitor")
-        if isinstance(dem, str):
-            from trn_env import terrain
-            dem = terrain.load(dem)
+        dem = load_map(dem, "the DEM integrity monitor")
         self.config = DemMonitorConfig.from_mapping(settings)
         if self.config.correlation_length_m > 0.0:
             from trn_env.terrain.map_error import check_fits
