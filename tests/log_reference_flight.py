@@ -3,8 +3,8 @@ not by trn_env's sensor code, with WGS84 ellipsoid heights (a stated geoid offse
 
 Truth and perfect IMU from tests/nav_reference_trajectory.py (ECEF, J2 gravity). IMU: velocity and angle
 increments over each 0.01 s interval (Simpson's rule over the instantaneous specific force and rate at the
-interval's ends and middle) plus navigation-grade white noise and a constant bias. IRA: the closest terrain point
-on the zero-Doppler line (brute force over the plane's directions, 1 deg then 0.02 deg), from the IRA
+interval's ends and middle) plus navigation-grade white noise and a constant bias. IRA: the closest terrain
+point on the zero-Doppler line (brute force over the plane's directions, 1 deg then 0.02 deg), from the IRA
 antenna (lever arm r_ira from the IMU).
 Radar altimeter: the nadir range from its antenna (r_ra). Baro: geopotential height of the true MSL height
 (ISA pressure altitude in still ISA air) + a bias + noise. GNSS: ellipsoid heights, 1 Hz, first 30 s.
@@ -76,7 +76,8 @@ def flight(duration_s: float = 150.0, seed: int = 7) -> dict:
     dth = DT / 6.0 * (w_ib[0:-2:2] + 4.0 * w_ib[1:-1:2] + w_ib[2::2])
     vrw, arw = 9.81e-5, 1.45e-6                      # navigation grade densities (per sqrt s)
     dv += rng.standard_normal(dv.shape) * vrw * np.sqrt(DT) + rng.normal(0, 50e-6 * 9.80665, 3) * DT
-    dth += rng.standard_normal(dth.shape) * arw * np.sqrt(DT) + rng.normal(0, np.radians(0.005) / 3600, 3) * DT
+    dth += (rng.standard_normal(dth.shape) * arw * np.sqrt(DT)
+            + rng.normal(0, np.radians(0.005) / 3600, 3) * DT)
     imu = {"t_s": t[1:]} | {f"dv_{a}_mps": dv[:, i] for i, a in enumerate("xyz")} | {
         f"dtheta_{a}_rad": dth[:, i] for i, a in enumerate("xyz")}
     lat, lon, h, v = lat[even], lon[even], h[even], v[even]
@@ -115,9 +116,11 @@ def flight(duration_s: float = 150.0, seed: int = 7) -> dict:
             + rng.normal(0, 0.5, kb.size)}
     kg = np.arange(100, int(GNSS_UNTIL_S / DT) + 1, 100)
     gnss = {"t_s": t[kg], "lat_rad": lat[kg] + rng.normal(0, 1.0, kg.size) / meridian_radius_m(lat[kg]),
-            "lon_rad": lon[kg] + rng.normal(0, 1.0, kg.size) / (prime_vertical_radius_m(lat[kg]) * np.cos(lat[kg])),
+            "lon_rad": lon[kg] + rng.normal(0, 1.0, kg.size) / (prime_vertical_radius_m(lat[kg])
+                                                                 * np.cos(lat[kg])),
             "h_m": h[kg] + GEOID_N_M + rng.normal(0, 2.0, kg.size),
-            "v_n_mps": v[kg, 0] + rng.normal(0, 0.05, kg.size), "v_e_mps": v[kg, 1] + rng.normal(0, 0.05, kg.size),
+            "v_n_mps": v[kg, 0] + rng.normal(0, 0.05, kg.size),
+            "v_e_mps": v[kg, 1] + rng.normal(0, 0.05, kg.size),
             "v_d_mps": v[kg, 2] + rng.normal(0, 0.05, kg.size)}
     truth = {"t_s": t, "lat_rad": lat, "lon_rad": lon, "h_m": h + GEOID_N_M, "v_n_mps": v[:, 0],
              "v_e_mps": v[:, 1], "v_d_mps": v[:, 2], "roll_rad": roll, "pitch_rad": pitch, "yaw_rad": yaw}

@@ -183,7 +183,8 @@ class SensorLog:
         truth = self.truth()
         if truth is not None:
             out["t_s"] = truth["t_s"].to_numpy()
-            out["true_lat_rad"], out["true_lon_rad"] = truth["lat_rad"].to_numpy(), truth["lon_rad"].to_numpy()
+            out["true_lat_rad"] = truth["lat_rad"].to_numpy()
+            out["true_lon_rad"] = truth["lon_rad"].to_numpy()
             out["true_h_msl_m"] = truth["h_m"].to_numpy()
             out["true_v_ned_mps"] = truth[["v_n_mps", "v_e_mps", "v_d_mps"]].to_numpy()
             for c in ("roll_rad", "pitch_rad", "yaw_rad", "tas_mps", "alpha_rad", "beta_rad"):
