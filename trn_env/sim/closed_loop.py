@@ -602,7 +602,29 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
 
 
 def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:
-    """Load, validate and fly a scenario (overrides: seed=, duration_s=, navigator=); pipelined where it
-    can be (ClosedLoop's `pipeline`), with the same results either way."""
+    """Load, validate and fly a scenario in closed loop.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        A built-in scenario name or a TOML file's path.
+    progress : callable, optional
+        Called as ``progress(t_s, total_s)`` as the flight goes.
+    pipeline : bool
+        Run the sensors and the navigator in a second process one update behind the flight where the
+        scenario allows it; the results are the same bits either way.
+    **overrides
+        ``seed=``, ``duration_s=`` (s) and ``navigator=``, as ``load_scenario`` takes them.
+
+    Returns
+    -------
+    RunResult
+        ``.summary`` (the ``summary.json`` fields) and ``.arrays`` (the time-series log).
+
+    Raises
+    ------
+    ScenarioError
+        When the scenario is invalid (every problem, by field path), before anything flies.
+    """
     scenario = load_scenario(name_or_path, **overrides)
     return ClosedLoop(scenario, progress=progress, pipeline=pipeline).run()
