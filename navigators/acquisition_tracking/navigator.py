@@ -259,6 +259,8 @@ class AcqTrackNavigator:
     sensors its settings need (the scenario check refuses a scenario without them before the flight).
     """
 
+    settings_class = AcqTrackConfig          # what `trn-env navigators` lists as its settings
+
     def __init__(self, dem=None, name: str = "acq_track", **settings):
         unknown = sorted(set(settings) - set(AcqTrackConfig.names()))
         if unknown:

@@ -10,6 +10,12 @@ The address is probed with a plain TCP connect first, so an unreachable one fail
   comes back as its row (so it is never retried).
 - At most 2 x cluster CPUs tasks are in flight; rows are taken with `ray.wait` as they finish and handed
   to the driver, which writes them, so a large campaign never holds everything in the driver.
+- Plug-in navigators and monitors: an installed plug-in (an entry point of a package installed in the
+  workers' Python environment, as on a local instance that shares this interpreter) is found by the workers
+  as in the driver. A `package.module:Name` reference to a module that no installed distribution provides
+  is shipped with the tasks (`runtime_env={"py_modules": [...]}`, `plugin_runtime_env`). On a cluster whose
+  nodes lack an installed plug-in, start the cluster with it installed, or connect with your own
+  `runtime_env` (e.g. `ray.init(address=..., runtime_env={"pip": ["./my_plugin"]})` before the campaign).
 """
 
 from __future__ import annotations
@@ -56,6 +62,16 @@ def probe_address(address: str, timeout_s: float = 3.0) -> None:
     except OSError as exc:
         raise BackendError(f"--address {address}: no Ray cluster reachable at {host}:{port} ({exc}); "
                            "start one with `ray start --head` or check the address") from None
+
+
+def plugin_runtime_env() -> dict[str, Any] | None:
+    """Ray's runtime_env shipping the plug-in modules the driver resolved that no installed distribution
+    provides (navigators.registry.plugin_modules), or None when there are none."""
+    import sys
+
+    from trn_env.navigators.registry import plugin_modules
+    mods = [sys.modules[name] for name in plugin_modules()]
+    return {"py_modules": mods} if mods else None
 
 
 def _fly(task: RunTask, dems: dict[str, Any]) -> tuple[dict, bytes | None]:
@@ -112,7 +128,11 @@ class RayBackend:
         if ray is None:
             raise RuntimeError("RayBackend.run outside `with RayBackend(...)`")
         dems_ref = ray.put(dems)
-        remote = ray.remote(num_cpus=1, max_retries=self.max_retries, retry_exceptions=False)(_fly)
+        options: dict[str, Any] = {"num_cpus": 1, "max_retries": self.max_retries, "retry_exceptions": False}
+        runtime_env = plugin_runtime_env()
+        if runtime_env is not None:
+            options["runtime_env"] = runtime_env
+        remote = ray.remote(**options)(_fly)
         window = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
         it = iter(tasks)
         inflight: dict = {}
