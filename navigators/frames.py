@@ -139,3 +139,21 @@ class SensorFrames:
     air_data: AirDataFrame | None = None
     heading: HeadingFrame | None = None
     extra: dict = field(default_factory=dict)
+
+
+def imu_gap_s(t_s: np.ndarray, t_prev_s: float = float("nan"), factor: float = 1.5) -> float:
+    """Seconds of IMU data missing in a frame: the sum of the sample intervals longer than `factor` times
+    the frame's median interval, including the one from `t_prev_s` (the last sample before the frame; NaN:
+    none) to its first sample. A navigator counts a positive value in its Health ("imu_gap"): the INS
+    integrates across the gap in one long step."""
+    t = np.asarray(t_s, float)
+    if t.shape[0] == 0:
+        return 0.0
+    if np.isfinite(t_prev_s) and t_prev_s < t[0]:
+        t = np.concatenate(([float(t_prev_s)], t))
+    d = np.diff(t)
+    if d.shape[0] < 2:
+        return 0.0
+    nominal = float(np.median(d))
+    long = d[d > factor * nominal]
+    return float(np.sum(long - nominal)) if long.shape[0] else 0.0

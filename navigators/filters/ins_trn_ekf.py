@@ -40,7 +40,7 @@ import math
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
 from filterpy.kalman import KalmanFilter
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements.ira_closest_point import FORMULAS, closest_point_ned
@@ -323,9 +323,12 @@ class InsTrnNavigator:
         imu = frames.imu
         if imu is None or imu.t_s.size == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
-            return self.estimate()
+            return self.estimate().extrapolated(frames.t_end_s)
         t = np.asarray(imu.t_s, float)
         n = t.size
+        gap_s = imu_gap_s(t, self.ins.t_s)
+        if gap_s > 0.0:
+            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         gnss = self._gnss_fixes(frames)
         if gnss is None:
             self._gnss_check_loss(float(t[-1]))
