@@ -69,6 +69,9 @@ def summary_of(factory) -> str:
 
 def settings_of(factory) -> list[SettingDoc]:
     """The settings a navigator or monitor factory accepts (see the module docstring for where from)."""
+    declared = _declared_rows(factory)
+    if declared is not None:
+        return declared
     target = getattr(factory, "settings_class", None) if not inspect.isclass(factory) else factory
     target = target or factory
     fixed = set(getattr(factory, "fixed_settings", {}) or {})
@@ -86,6 +89,34 @@ def settings_of(factory) -> list[SettingDoc]:
         if s.name in overrides:
             s.default = repr(overrides[s.name])
         out.append(s)
+    return out
+
+
+def _declared_rows(factory) -> list[SettingDoc] | None:
+    """The rows of the declarative settings system (navigators.core.settings.settings_rows), when it is
+    present and knows the factory."""
+    try:
+        from trn_env.navigators.core import settings as core_settings
+    except ImportError:
+        return None
+    rows_of = getattr(core_settings, "settings_rows", None)
+    if rows_of is None:
+        return None
+    try:
+        rows = rows_of(getattr(factory, "settings_class", None) or factory)
+    except Exception:  # noqa: BLE001 - a factory it does not know: fall back to introspection
+        return None
+    if rows is None:
+        return None
+    fixed = set(getattr(factory, "fixed_settings", {}) or {})
+    out = []
+    for r in rows:
+        if r.get("name") in fixed:
+            continue
+        default = r.get("default")
+        out.append(SettingDoc(str(r.get("name")), _type_text(r.get("type", "")), str(r.get("unit") or "-"),
+                              "required" if default is None and r.get("required") else repr(default),
+                              str(r.get("doc") or r.get("meaning") or "")))
     return out
 
 

@@ -308,3 +308,15 @@ def plugin_modules() -> list[str]:
         if top not in provided and top in sys.modules and top not in out:
             out.append(top)
     return out
+
+
+def settings_class(name: str, kind: str = "navigator"):
+    """The class whose settings a navigator (or monitor) takes: its factory's `settings_class` when it
+    names one (a factory function, a class with a settings dataclass), else the factory itself."""
+    factory = resolve(name, kind).factory
+    return getattr(factory, "settings_class", None) or factory
+
+
+def monitor_settings_class(name: str):
+    """settings_class(name, "monitor")."""
+    return settings_class(name, "monitor")

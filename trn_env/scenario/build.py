@@ -319,6 +319,19 @@ def sensor_configs(d: dict) -> dict:
     return {name: dict(cfg) for name, cfg in d["sensors"].items()}
 
 
+def sensor_lever_arms(d: dict) -> dict:
+    """{sensor: lever_arm_b_m} of the scenario's ranging sensors (radar altimeter, IRA), body FRD m."""
+    from trn_env.sensors import suite
+    arms = {}
+    for name in ("radar_altimeter", "ira"):
+        value = d["sensors"].get(name)
+        if value is None or value is False:
+            continue
+        cfg = suite._make_config(name, True if value == {} else value)
+        arms[name] = [float(x) for x in cfg.lever_arm_b_m]
+    return arms
+
+
 def build_sensors(d: dict, seed: np.random.SeedSequence):
     """trn_env.sensors.suite.SensorSuite of the scenario's sensors, one random stream per sensor."""
     from trn_env.sensors.suite import SensorSuite
@@ -338,28 +351,35 @@ def _sensor_problems(d: dict) -> list[str]:
 
 # -------------------------------------------------------------------------------------------- navigator
 
-def imu_bias_settings(imu: dict | None, epoch_s: float = 1.0) -> dict:
-    """The bias model a navigator should assume for the scenario's IMU (1 sigma per axis, its grade and
-    overrides, trn_env.sensors.imu.ImuConfig): accel_bias_sigma_mps2 and gyro_bias_sigma_rps, the root sum
-    square of the turn-on bias and the bias instability; q_accel_bias_mps2 and q_gyro_bias_rps, the
-    instability's Gauss-Markov drive over one filter epoch of epoch_s seconds, sigma sqrt(1 - exp(-2 epoch_s
-    / tau)) (0 for the navigation grade, whose biases are constant over a run). Empty without an IMU or for
-    a table that does not validate (the sensors check reports that)."""
+def imu_spec(imu: dict | None):
+    """The scenario IMU's error specification as the navigators take it (navigators.core.imu_spec.ImuSpec,
+    from trn_env.sensors.imu.ImuConfig: its grade and overrides); None without an IMU or for a table that
+    does not validate (the sensors check reports that)."""
+    from trn_env.navigators.core.imu_spec import ImuSpec
     from trn_env.sensors.imu import ImuConfig
     if imu is None or imu is False:
-        return {}
+        return None
     try:
         cfg = ImuConfig.from_mapping(dict(imu))
     except (ValueError, TypeError):
+        return None
+    return ImuSpec.from_object(cfg)
+
+
+def imu_bias_settings(imu: dict | None, epoch_s: float = 1.0) -> dict:
+    """The bias model a navigator should assume for the scenario's IMU (1 sigma per axis, its grade and
+    overrides, imu_spec): accel_bias_sigma_mps2 and gyro_bias_sigma_rps, the root sum square of the turn-on
+    bias and the bias instability; q_accel_bias_mps2 and q_gyro_bias_rps, the instability's Gauss-Markov
+    drive over one filter epoch of epoch_s seconds, sigma sqrt(1 - exp(-2 epoch_s / tau)) (0 for the
+    navigation grade, whose biases are constant over a run). Empty without an IMU or for a table that does
+    not validate (the sensors check reports that)."""
+    spec = imu_spec(imu)
+    if spec is None:
         return {}
-
-    def drive(sigma: float, tau_s: float) -> float:
-        return float(sigma * math.sqrt(-math.expm1(-2.0 * epoch_s / tau_s)))
-
-    return {"accel_bias_sigma_mps2": math.hypot(cfg.accel_bias_mps2, cfg.accel_bias_instability_mps2),
-            "gyro_bias_sigma_rps": math.hypot(cfg.gyro_bias_rps, cfg.gyro_bias_instability_rps),
-            "q_accel_bias_mps2": drive(cfg.accel_bias_instability_mps2, cfg.accel_bias_tau_s),
-            "q_gyro_bias_rps": drive(cfg.gyro_bias_instability_rps, cfg.gyro_bias_tau_s)}
+    return {"accel_bias_sigma_mps2": spec.accel_bias_sigma_mps2,
+            "gyro_bias_sigma_rps": spec.gyro_bias_sigma_rps,
+            "q_accel_bias_mps2": spec.accel_bias_drive(epoch_s),
+            "q_gyro_bias_rps": spec.gyro_bias_drive(epoch_s)}
 
 
 def _epoch_s(settings: dict) -> float:
@@ -397,7 +417,12 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
         # the finest terrain below the map's posts is the world's (where it is finer than the posts)
         if spacing is not None and 5.0 <= float(spacing) < min(getattr(map_dem, "spacing_m", (0.0,))):
             settings.setdefault("terrain_detail_spacing_m", float(spacing))
-    return registry.create(d["navigator"]["name"], rng=rng, **settings)
+    navigator = registry.create(d["navigator"]["name"], rng=rng, **settings)
+    spec = imu_spec(d["sensors"].get("imu"))
+    if spec is not None and hasattr(navigator, "apply_imu_spec"):
+        # the navigator's INS error model from the IMU's specification (navigators.core.imu_spec)
+        navigator.apply_imu_spec(spec)
+    return navigator
 
 
 def _navigator_requirements(d: dict, the_map) -> list[str]:
