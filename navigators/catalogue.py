@@ -31,7 +31,8 @@ _UNIT_SUFFIXES = {
 }
 _SETTINGS_ATTRS = ("settings_class", "Settings", "config_class", "Config")
 _SKIP = {"self", "rng", "name"}
-_DEM_MEANING = "terrain map (terrain.Dem, or a name/path for terrain.load); a scenario gives the navigator's map"
+_DEM_MEANING = ("terrain map (terrain.Dem, or a name/path for terrain.load); a scenario gives the "
+                "navigator's map")
 
 
 @dataclass
@@ -233,7 +234,8 @@ def _prose_meaning(doc: str, name: str) -> str:
     """A setting's description in a prose docstring: the parenthesis or the `name: ...` clause after its
     first mention (up to the next ';' or sentence end), or ""."""
     text = " ".join(doc.split())
-    m = re.search(rf"(?<![\w.]){re.escape(name)}\b(?: \w+)?\s*(?:\((?P<p>[^()\[\]]*(?:\([^()]*\)[^()\[\]]*)*)\)"
+    m = re.search(rf"(?<![\w.]){re.escape(name)}\b(?: \w+)?\s*"
+                  rf"(?:\((?P<p>[^()\[\]]*(?:\([^()]*\)[^()\[\]]*)*)\)"
                   rf"|:\s*(?P<c>[^;]*?)(?:;|\.\s|\.$|$))", text)
     if not m:
         return ""

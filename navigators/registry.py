@@ -46,7 +46,8 @@ NAVIGATOR_GROUP = "trn_env.navigators"
 MONITOR_GROUP = "trn_env.monitors"
 _REFERENCE = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
 # what each kind must provide: method name -> how the message describes it
-_NEEDS = {"navigator": {"reset": "reset(initial: Estimate)", "update": "update(frames: SensorFrames) -> Estimate"},
+_NEEDS = {"navigator": {"reset": "reset(initial: Estimate)",
+                        "update": "update(frames: SensorFrames) -> Estimate"},
           "monitor": {"update": "update(frames: SensorFrames, estimate: Estimate) -> MonitorOutput"}}
 
 # navigators that take the map's error as measurement noise: trn_env's build_navigator fills their
@@ -127,7 +128,8 @@ def _names(kind: str) -> list[str]:
 
 
 def available() -> list[str]:
-    """Navigator names accepted by create() besides `module:Name` references: built-in, installed, registered."""
+    """Navigator names accepted by create() besides `module:Name` references: built-in, installed and
+    registered ones."""
     return _names("navigator")
 
 
@@ -248,7 +250,8 @@ def resolve(name: str, kind: str = "navigator") -> Plugin:
 
 def _load(name: str, kind: str, origin: str, ref: str, what: str, dist: str | None) -> Plugin:
     factory = _check_factory(load_reference(ref, what), what, kind)
-    return Plugin(name, kind, origin, factory, reference=ref, distribution=dist, takes_rng=_takes_rng(factory))
+    return Plugin(name, kind, origin, factory, reference=ref, distribution=dist,
+                  takes_rng=_takes_rng(factory))
 
 
 def _call(plugin: Plugin, settings: dict) -> object:
@@ -262,8 +265,8 @@ def _call(plugin: Plugin, settings: dict) -> object:
         raise ValueError(f"{plugin.kind} {plugin.name!r}: bad settings {sorted(settings)}: {exc}") from exc
     missing = lacks(obj, plugin.kind)
     if missing:
-        raise PluginError(f"{plugin.kind} {plugin.name!r}: its factory returned {_describe(obj)}, which is not "
-                          f"a {plugin.kind}: it lacks {', '.join(missing)}")
+        raise PluginError(f"{plugin.kind} {plugin.name!r}: its factory returned {_describe(obj)}, which is "
+                          f"not a {plugin.kind}: it lacks {', '.join(missing)}")
     return obj
 
 

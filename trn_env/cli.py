@@ -138,7 +138,8 @@ def cmd_navigators(args) -> int:
     be loaded is reported (exit 2) and the others are still listed."""
     from trn_env.navigators import catalogue, registry
     wanted = [(n, None) for n in args.names] or (
-        [(n, "navigator") for n in registry.available()] + [(n, "monitor") for n in registry.available_monitors()])
+        [(n, "navigator") for n in registry.available()]
+        + [(n, "monitor") for n in registry.available_monitors()])
     entries, errors = [], []
     for name, kind in wanted:
         plugin, err = None, None
@@ -167,7 +168,8 @@ def cmd_navigators(args) -> int:
         from rich.table import Table
         console = Console(width=max(Console().width, 140))
         for e in entries:
-            table = Table(title=f"{e['kind']} {e['name']}  [{e['origin']}]\n{e['summary']}", title_justify="left")
+            table = Table(title=f"{e['kind']} {e['name']}  [{e['origin']}]\n{e['summary']}",
+                          title_justify="left")
             for col in ("setting", "type", "unit", "default", "meaning"):
                 table.add_column(col, overflow="fold")
             for s in e["settings"]:

@@ -124,7 +124,8 @@ def recorded_flight(duration_s: float = 30.0, seed: int = 0, scenario: str = "de
         loop.close()
     rows = np.array(loop.log.truth_rows, float)
     truth = {"t_s": rows[1:, 0], "lat_rad": rows[1:, 1], "lon_rad": rows[1:, 2], "h_m": rows[1:, 3]}
-    rec = FlightRecord(list(loop.log.frames), initial, truth, sc.data, loop.map_dem, time.perf_counter() - wall0)
+    rec = FlightRecord(list(loop.log.frames), initial, truth, sc.data, loop.map_dem,
+                       time.perf_counter() - wall0)
     _FLIGHTS[key] = rec
     return rec
 
@@ -189,7 +190,8 @@ def _estimate_problems(est, frames: SensorFrames, prev_t: float | None) -> list[
     cov = np.asarray(est.covariance, float)
     if cov.shape != (9, 9):
         out.append(("covariance", f"covariance has shape {cov.shape}, not (9, 9)",
-                    "report the 9 x 9 block over [n, e, d, vn, ve, vd, roll, pitch, yaw] (Estimate docstring)"))
+                    "report the 9 x 9 block over [n, e, d, vn, ve, vd, roll, pitch, yaw] "
+                    "(Estimate docstring)"))
     elif not np.all(np.isfinite(cov)):
         out.append(("covariance", f"covariance at t = {est.t_s} s is not finite",
                     "guard the covariance update (Joseph form, symmetrise) and skip bad measurements"))
@@ -197,16 +199,20 @@ def _estimate_problems(est, frames: SensorFrames, prev_t: float | None) -> list[
         scale = max(float(np.max(np.abs(cov))), 1e-300)
         if np.max(np.abs(cov - cov.T)) > 1e-9 * scale:
             out.append(("covariance", f"covariance at t = {est.t_s} s is not symmetric "
-                        f"(max |P - P'| = {np.max(np.abs(cov - cov.T)):.3g})", "symmetrise: P = (P + P') / 2"))
+                        f"(max |P - P'| = {np.max(np.abs(cov - cov.T)):.3g})",
+                        "symmetrise: P = (P + P') / 2"))
         elif np.min(np.linalg.eigvalsh(cov)) < -1e-9 * scale:
             out.append(("covariance", f"covariance at t = {est.t_s} s is not positive semi-definite (min "
                         f"eigenvalue {np.min(np.linalg.eigvalsh(cov)):.3g})",
-                        "use the Joseph form of the update, or compute the covariance from particles' moments"))
-    last = [float(fr.t_s[-1]) for fr in (getattr(frames, s) for s in SENSORS) if fr is not None and fr.t_s.size]
+                        "use the Joseph form of the update, or compute the covariance from particles' "
+                        "moments"))
+    last = [float(fr.t_s[-1]) for fr in (getattr(frames, s) for s in SENSORS)
+            if fr is not None and fr.t_s.size]
     t_ok = {float(frames.t_end_s)} | ({max(last)} if last else set())
     if math.isfinite(est.t_s) and not any(abs(est.t_s - t) <= 1e-6 for t in t_ok):
         out.append(("contract", f"estimate time {est.t_s} s is neither the interval's end {frames.t_end_s} s "
-                    "nor its last sample's time", "return the estimate at frames.t_end_s (or the last sample)"))
+                    "nor its last sample's time",
+                    "return the estimate at frames.t_end_s (or the last sample)"))
     if prev_t is not None and not est.t_s > prev_t:
         out.append(("time", f"estimate time {est.t_s} s does not move forward (previous {prev_t} s)",
                     "advance the estimate to each interval's end, even when it holds no samples"))
@@ -225,7 +231,8 @@ def _build(factory_name: str, settings: dict, rec: FlightRecord, seed: int, kind
     return build.build_navigator(d, rec.map_dem, np.random.default_rng(seed))
 
 
-def _run(nav, rec: FlightRecord, frames: list[SensorFrames], initial: Estimate | None = None, kind="navigator",
+def _run(nav, rec: FlightRecord, frames: list[SensorFrames], initial: Estimate | None = None,
+         kind="navigator",
          beside: list | None = None) -> list:
     """The navigator's (or monitor's) outputs over `frames` after a reset to `initial`."""
     if kind == "monitor":
@@ -309,7 +316,8 @@ def check_navigator(name_or_factory: str | Callable[..., object], settings: dict
     if kind == "navigator" and not isinstance(getattr(nav, "name", None), str):
         missing.append("name (a str attribute)")
     if missing:
-        report.fail("protocol", f"the {kind} lacks {', '.join(missing)}", "implement navigators.protocol.Navigator")
+        report.fail("protocol", f"the {kind} lacks {', '.join(missing)}",
+                    "implement navigators.protocol.Navigator")
         return _finish(report, verbose, raise_on_failure)
     report.checks.append("protocol")
     beside = _ins_estimates(rec) if kind == "monitor" else None
@@ -384,7 +392,8 @@ def _check_monitor_outputs(report: CheckReport, outs: list) -> None:
     for out in outs:
         rows, events = getattr(out, "rows", None), getattr(out, "events", None)
         if not isinstance(rows, np.ndarray) or rows.ndim != 2 or not isinstance(events, list):
-            report.fail("contract", f"monitor update returned {type(out).__name__} without a 2-D `rows` array "
+            report.fail("contract", f"monitor update returned {type(out).__name__} without a 2-D `rows` "
+                        "array "
                         "and an `events` list", "return navigators.integrity.dem_monitor.MonitorOutput")
             return
     report.checks.append("monitor outputs")

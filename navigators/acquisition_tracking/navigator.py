@@ -95,7 +95,7 @@ from trn_env.navigators.acquisition_tracking.profile import (
 )
 from trn_env.navigators.acquisition_tracking.settings import AcqTrackConfig
 from trn_env.navigators.acquisition_tracking.tracking_step import TrackingStep
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, frame_defects
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
@@ -107,6 +107,9 @@ from trn_env.navigators.protocol import (
     Estimate,
     Health,
 )
+
+# the sensors whose NaN-but-valid samples and gaps update() counts in its Health
+_DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu", "gnss")
 
 
 class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingStep):
@@ -282,6 +285,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
 
     def reset(self, initial: Estimate) -> None:
         self._reset_state()
+        self._last_sample_t: dict[str, float] = {}       # frame_defects' memory: gaps across frames
         cfg = self.config
         v = np.asarray(initial.v_ned_mps, float)
         speed, track = speed_track(v[:2])
@@ -319,6 +323,8 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
+        for t_s, reason, message in frame_defects(frames, _DEFECT_SENSORS, self._last_sample_t):
+            self.health.skip(t_s, reason, message)
         try:
             self._ingest(frames)
             self._samples(frames)

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.error_model_15 import noise_input_matrix, transition_over_history
-from trn_env.navigators.inertial.strapdown import StrapdownIns, quat_to_dcm
+from trn_env.navigators.inertial.strapdown import StrapdownIns
 from trn_env.navigators.measurements.terrain_models import ra_cone_ranges
 from trn_env.navigators.protocol import Estimate, Health
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
@@ -66,7 +66,8 @@ def _setting(default, unit: str, doc: str, **kw):
 class SitanSettings:
     """Settings of the SITAN navigator (SI, 1 sigma unless stated)."""
 
-    measurement_rate_hz: float = _setting(5.0, "Hz", "radar-altimeter samples used per second (<= the sensor's)")
+    measurement_rate_hz: float = _setting(5.0, "Hz",
+                                          "radar-altimeter samples used per second (<= the sensor's)")
     error_model_rate_hz: float = _setting(25.0, "Hz", "rate the INS error transition is evaluated at")
     ra_noise_const_m: float = _setting(0.6, "m", "radar-altimeter noise, constant part")
     ra_noise_fraction: float = _setting(0.02, "-", "radar-altimeter noise, fraction of the range")
@@ -204,7 +205,8 @@ class SitanNavigator:
             if i0 < t.shape[0]:
                 self._propagate(t[i0:], f_b[i0:], w_b[i0:], ok[i0:])
         else:
-            self.health.skip(t_end, "no_imu", f"no IMU samples in the frame ({len(meas)} other samples unused)")
+            self.health.skip(t_end, "no_imu",
+                             f"no IMU samples in the frame ({len(meas)} other samples unused)")
         self._predict()
         return self._estimate(max(t_end, self.ins.t_s) if math.isfinite(self.ins.t_s) else t_end)
 
@@ -223,7 +225,8 @@ class SitanNavigator:
         dt = n * max(dt_imu, 1e-6) / rows.shape[0]
         good = np.all(np.isfinite(hist[rows]), axis=1)
         if good.all():
-            phi = transition_over_history(hist[rows], fb[rows], self.ins.accel_bias_b, 0, rows.shape[0], dt, True)
+            phi = transition_over_history(hist[rows], fb[rows], self.ins.accel_bias_b, 0, rows.shape[0], dt,
+                                          True)
             if np.all(np.isfinite(phi)):
                 self._phi = phi @ self._phi
         s = self.settings
@@ -357,7 +360,8 @@ class SitanNavigator:
         z = np.array([self.ins.state[2] - (h_baro - self._baro_bias)])
         # the height channel only: a pressure altitude's scale error in a non-standard atmosphere would
         # otherwise leak through the cross-covariances into tilt, accelerometer bias and position
-        self._kalman(z, H, np.array([[self.settings.baro_noise_m ** 2]]), t, None, [I_POS + 2, I_VEL + 2, I_BARO])
+        self._kalman(z, H, np.array([[self.settings.baro_noise_m ** 2]]), t, None,
+                     [I_POS + 2, I_VEL + 2, I_BARO])
 
     def _fuse_gnss(self, t: float, row) -> None:
         s = self.settings
