@@ -296,7 +296,7 @@ def check_navigator(name_or_factory: str | Callable[..., object], settings: dict
                 registry.resolve(name, "navigator")
             except ValueError:
                 kind = "monitor"
-        elif not callable(getattr(name_or_factory, "reset", None)):
+        elif _update_takes_estimate(name_or_factory):
             kind = "monitor"
     report = CheckReport(str(label), kind)
     try:
@@ -345,6 +345,17 @@ def check_navigator(name_or_factory: str | Callable[..., object], settings: dict
     if check_settings:
         _check_bad_settings(report, plugin, name, settings, rec, seed, kind)
     return _finish(report, verbose, raise_on_failure)
+
+
+def _update_takes_estimate(factory) -> bool:
+    """A class whose update() takes (frames, estimate): a monitor's signature."""
+    import inspect
+    update = getattr(factory, "update", None) if inspect.isclass(factory) else None
+    try:
+        params = [p for p in inspect.signature(update).parameters.values() if p.name != "self"]
+    except (TypeError, ValueError):
+        return False
+    return len(params) >= 2
 
 
 def _finish(report: CheckReport, verbose: bool, raise_on_failure: bool) -> CheckReport:

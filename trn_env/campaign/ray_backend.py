@@ -70,8 +70,12 @@ def plugin_runtime_env() -> dict[str, Any] | None:
     import sys
 
     from trn_env.navigators.registry import plugin_modules
-    mods = [sys.modules[name] for name in plugin_modules()]
-    return {"py_modules": mods} if mods else None
+    paths = []
+    for name in plugin_modules():
+        mod = sys.modules[name]
+        # a package's folder, or a single-file module's .py (Ray's per-task runtime_env takes paths)
+        paths.append(list(mod.__path__)[0] if hasattr(mod, "__path__") else mod.__file__)
+    return {"py_modules": paths} if paths else None
 
 
 def _fly(task: RunTask, dems: dict[str, Any]) -> tuple[dict, bytes | None]:
@@ -108,7 +112,9 @@ class RayBackend:
         if self.address:
             ray.init(address=self.address, **kw)
         else:
-            ray.init(num_cpus=self.workers, **kw)
+            # "local": a new instance even when a cluster started on this machine (`ray start`) is about,
+            # which a bare ray.init() would join (and then refuse num_cpus)
+            ray.init(address="local", num_cpus=self.workers, **kw)
         self._started = True
         return self
 
