@@ -13,9 +13,11 @@ The address is probed with a plain TCP connect first, so an unreachable one fail
 - Plug-in navigators and monitors: an installed plug-in (an entry point of a package installed in the
   workers' Python environment, as on a local instance that shares this interpreter) is found by the workers
   as in the driver. A `package.module:Name` reference to a module that no installed distribution provides
-  is shipped with the tasks (`runtime_env={"py_modules": [...]}`, `plugin_runtime_env`). On a cluster whose
-  nodes lack an installed plug-in, start the cluster with it installed, or connect with your own
-  `runtime_env` (e.g. `ray.init(address=..., runtime_env={"pip": ["./my_plugin"]})` before the campaign).
+  is shipped to the workers in the job's runtime environment (`ray.init(runtime_env={"py_modules": [...]})`,
+  `plugin_runtime_env`) when this backend connects or starts the instance; a session the caller initialised
+  keeps its own runtime_env (pass the module there). On a cluster whose nodes lack an installed plug-in,
+  install it on the nodes, or connect with your own runtime_env (e.g. `ray.init(address=...,
+  runtime_env={"pip": ["./my_plugin"]})`) before the campaign.
 """
 
 from __future__ import annotations
@@ -109,6 +111,9 @@ class RayBackend:
         if ray.is_initialized():       # the caller's session (e.g. a test's or a notebook's)
             return self
         kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "ignore_reinit_error": True}
+        runtime_env = plugin_runtime_env()      # the campaign's plug-ins were resolved when it was loaded
+        if runtime_env is not None:
+            kw["runtime_env"] = runtime_env
         if self.address:
             ray.init(address=self.address, **kw)
         else:
@@ -134,11 +139,7 @@ class RayBackend:
         if ray is None:
             raise RuntimeError("RayBackend.run outside `with RayBackend(...)`")
         dems_ref = ray.put(dems)
-        options: dict[str, Any] = {"num_cpus": 1, "max_retries": self.max_retries, "retry_exceptions": False}
-        runtime_env = plugin_runtime_env()
-        if runtime_env is not None:
-            options["runtime_env"] = runtime_env
-        remote = ray.remote(**options)(_fly)
+        remote = ray.remote(num_cpus=1, max_retries=self.max_retries, retry_exceptions=False)(_fly)
         window = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
         it = iter(tasks)
         inflight: dict = {}
