@@ -10,13 +10,17 @@ the filter is linear and tracks the INS drift continuously (no batch, no grid); 
 it needs an initial position within roughly the terrain's correlation length (GNSS before a denial gives
 it), where a grid filter (pmf) or a particle filter would acquire from kilometres.
 
-State (16; computed minus true, position in metres):
+State (17; computed minus true, position in metres):
 
     0-2   position error north, east, up (m)
     3-5   velocity error north, east, down (m/s)
     6-8   attitude error eps (rad; C_computed = (I - [eps x]) C_true)
     9-11  accelerometer bias error (m/s^2, body)    12-14  gyro bias error (rad/s, body)
     15    barometric height bias (m): h_baro = h_true + b + noise
+    16    terrain-clearance error (m): what the map and the cone model get wrong about the range over the
+          last few hundred metres (unresolved terrain, map error), a first-order Gauss-Markov process
+          (`clearance_sigma_m`, `clearance_tau_s`); without it the altimeter's many samples would be taken
+          as independent and the height and position sigmas would shrink below the true errors
 
 The INS is navigators.inertial.StrapdownIns (free vertical channel: the filter slaves it to the
 barometer and the altimeter), its error dynamics navigators.inertial.error_model_15 (seed 002 eqs 16-22)
@@ -53,8 +57,8 @@ from trn_env.navigators.measurements.terrain_models import ra_cone_ranges
 from trn_env.navigators.protocol import Estimate, Health
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-N_STATE = 16
-I_POS, I_VEL, I_ATT, I_BA, I_BG, I_BARO = 0, 3, 6, 9, 12, 15
+N_STATE = 17
+I_POS, I_VEL, I_ATT, I_BA, I_BG, I_BARO, I_CLR = 0, 3, 6, 9, 12, 15, 16
 UG_MPS2 = 9.80665e-6
 
 
@@ -73,7 +77,10 @@ class SitanSettings:
     ra_noise_fraction: float = _setting(0.02, "-", "radar-altimeter noise, fraction of the range")
     ra_half_beam_deg: float = _setting(8.5, "deg", "half beamwidth of the altimeter's cone")
     ra_cone_rings: int = _setting(2, "-", "rings sampling the cone (0: nadir ray only)")
-    map_sigma_m: float = _setting(5.0, "m", "map height error incl. terrain the map does not resolve")
+    map_sigma_m: float = _setting(3.0, "m", "white part of the map's height error")
+    clearance_sigma_m: float = _setting(5.0, "m", "correlated terrain-clearance error (map, unresolved "
+                                        "terrain): its 1 sigma")
+    clearance_tau_s: float = _setting(10.0, "s", "correlation time of the terrain-clearance error")
     slope_baseline_max_m: float = _setting(300.0, "m", "largest half-baseline of the slope differences")
     gate_sigmas: float = _setting(4.0, "-", "altimeter residuals beyond this many sigmas are rejected")
     baro_noise_m: float = _setting(0.5, "m", "barometric height noise")
@@ -104,7 +111,8 @@ class SitanSettings:
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{f.name}: must be a finite number >= 0, got {v!r}")
-        for name in ("measurement_rate_hz", "error_model_rate_hz", "gate_sigmas", "ra_half_beam_deg"):
+        for name in ("measurement_rate_hz", "error_model_rate_hz", "gate_sigmas", "ra_half_beam_deg",
+                     "clearance_tau_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         if self.ra_half_beam_deg >= 60:
@@ -151,6 +159,8 @@ class SitanNavigator:
         self._q_acc = np.zeros((N_STATE, N_STATE))
         self.epochs = 0
         self._baro_bias = 0.0
+        self._clr = 0.0
+        self._phi_clr = 1.0
         self.last_nis = math.nan
 
     @staticmethod
@@ -171,7 +181,10 @@ class SitanNavigator:
         P[9:12, 9:12] = np.eye(3) * s.accel_bias_sigma_mps2 ** 2
         P[12:15, 12:15] = np.eye(3) * s.gyro_bias_sigma_rps ** 2
         P[15, 15] = s.baro_bias_sigma_m ** 2
+        P[16, 16] = s.clearance_sigma_m ** 2
         self.P = P
+        self._clr = 0.0
+        self._phi_clr = 1.0
         self.health = Health()
         self._t_meas = -math.inf
         self._phi = np.eye(15)
@@ -237,6 +250,10 @@ class SitanNavigator:
         self._q_acc[0, 0] += s.position_walk_m_per_sqrt_s ** 2 * span
         self._q_acc[1, 1] += s.position_walk_m_per_sqrt_s ** 2 * span
         self._q_acc[15, 15] += s.baro_bias_walk_m_per_sqrt_s ** 2 * span
+        decay = math.exp(-span / s.clearance_tau_s)
+        self._phi_clr *= decay
+        self._clr *= decay
+        self._q_acc[16, 16] += s.clearance_sigma_m ** 2 * (1.0 - decay * decay)
 
     def _metric(self) -> np.ndarray:
         lat, h = self.ins.state[0], self.ins.state[2]
@@ -248,6 +265,8 @@ class SitanNavigator:
         T[:2] = self._metric()
         phi = np.eye(N_STATE)
         phi[:15, :15] = self._phi * T[:, None] / T[None, :]
+        phi[16, 16] = self._phi_clr
+        self._phi_clr = 1.0
         P = phi @ self.P @ phi.T + self._q_acc
         self.P = 0.5 * (P + P.T)
         self._phi = np.eye(15)
@@ -323,6 +342,7 @@ class SitanNavigator:
         self.ins.accel_bias_b -= dx[9:12]
         self.ins.gyro_bias_b -= dx[12:15]
         self._baro_bias -= dx[15]
+        self._clr -= dx[16]
 
     def _fuse_ra(self, t: float, r_meas: float) -> None:
         s = self.settings
@@ -348,10 +368,11 @@ class SitanNavigator:
         H[0, 0] = (out[1] - out[2]) / (2 * d)
         H[0, 1] = (out[3] - out[4]) / (2 * d)
         H[0, 2] = -(out[5] - out[6]) / (2 * dz)
+        H[0, 16] = 1.0                    # state 16 = estimated - true clearance error
         sig_r = s.ra_noise_const_m + s.ra_noise_fraction * r_meas
         R = np.array([[sig_r ** 2 + s.map_sigma_m ** 2]])
         self.epochs += 1
-        self._kalman(np.array([out[0] - r_meas]), H, R, t, s.gate_sigmas)
+        self._kalman(np.array([out[0] + self._clr - r_meas]), H, R, t, s.gate_sigmas)
 
     def _fuse_baro(self, t: float, h_baro: float) -> None:
         H = np.zeros((1, N_STATE))
