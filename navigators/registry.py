@@ -23,6 +23,10 @@ a monitor's with `update(frames, estimate)`. A factory with an `rng` parameter (
 scenario's `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes
 its run bit for bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
 
+`integrity_risk` (per epoch, in (0, 1), default 1e-3) and `map_horizontal_sigma_m` (the map's horizontal
+error per axis, m, default 0) are taken here for every navigator: the risk its published horizontal
+protection level is computed for and the map error it covers (navigators.integrity.protection_level).
+
 Every navigator validates its settings in its constructor and raises `ValueError` naming the setting. A
 plug-in that cannot be imported, or whose object is not a navigator, raises `PluginError` (a ValueError)
 naming the plug-in, the module and the error or what it lacks.
@@ -41,6 +45,7 @@ from importlib import metadata
 
 import numpy as np
 from trn_env.navigators.builtin import BUILTIN_MONITORS, BUILTIN_NAVIGATORS
+from trn_env.navigators.integrity.protection_level import configure
 
 NAVIGATOR_GROUP = "trn_env.navigators"
 MONITOR_GROUP = "trn_env.monitors"
@@ -274,9 +279,16 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
     """A new navigator by name or `module:Name` reference with its settings (keyword arguments of its
     factory); `rng` reaches only factories with an `rng` parameter (or registered with takes_rng=True)."""
     plugin = resolve(name, "navigator")
+    # every navigator's published protection level is for this per-epoch risk (protection_level)
+    pl_settings = {k: settings.pop(k) for k in ("integrity_risk", "map_horizontal_sigma_m") if k in settings}
+    probe = type("_Probe", (), {})()
+    configure(probe, **pl_settings)            # bad values fail before the navigator is built
     if plugin.takes_rng:
         settings["rng"] = rng
-    return _call(plugin, settings)
+    nav = _call(plugin, settings)
+    if hasattr(nav, "integrity_risk"):
+        configure(nav, **pl_settings)
+    return nav
 
 
 def create_monitor(name: str, **settings):
