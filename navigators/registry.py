@@ -310,6 +310,12 @@ def register_monitor(name: str, factory: Callable[..., object]) -> None:
     _CACHE.pop(("monitor", name), None)
 
 
+def unregister(name: str, kind: str = "navigator") -> None:
+    """Forget a name given to register() / register_monitor() (no-op for other names)."""
+    _REGISTERED[kind].pop(name, None)
+    _CACHE.pop((kind, name), None)
+
+
 def plugin_modules() -> list[str]:
     """Top-level modules of the plug-ins resolved so far in this process that no installed distribution
     provides (`module:Name` references to a module on sys.path only): what a Ray worker on another node or

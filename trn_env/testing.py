@@ -281,7 +281,17 @@ def check_navigator(name_or_factory: str | Callable[..., object], settings: dict
     -------
     CheckReport
     """
-    settings = dict(settings or {})
+    _TRACE.clear()
+    try:
+        return _check(name_or_factory, dict(settings or {}), kind, seed, duration_s, check_settings, verbose,
+                      raise_on_failure)
+    finally:
+        registry.unregister(_CHECK_NAME)
+        registry.unregister(_CHECK_NAME, "monitor")
+
+
+def _check(name_or_factory, settings: dict, kind: str | None, seed: int, duration_s: float,
+           check_settings: bool, verbose: bool, raise_on_failure: bool) -> CheckReport:
     label = name_or_factory if isinstance(name_or_factory, str) else getattr(name_or_factory, "__name__",
                                                                              repr(name_or_factory))
     name = name_or_factory
