@@ -142,7 +142,9 @@ def _constructor_settings(cls, docs: list[SettingDoc], seen: set[str]) -> None:
 
 
 def _docstrings(cls) -> str:
-    return "\n".join(filter(None, (inspect.getdoc(cls), inspect.getdoc(cls.__dict__.get("__init__")))))
+    init = cls.__dict__.get("__init__")
+    own = inspect.cleandoc(init.__doc__) if getattr(init, "__doc__", None) else None   # not object's
+    return "\n".join(filter(None, (inspect.getdoc(cls), own)))
 
 
 def _params(func, doc: str, docs: list[SettingDoc], seen: set[str]) -> bool:
@@ -221,7 +223,7 @@ def _numpydoc_params(doc: str) -> dict[str, str]:
     for i, ln in enumerate(body):
         if i + 1 < len(body) and body[i + 1].strip() and set(body[i + 1].strip()) == {"-"}:
             break                                   # the next section's title
-        m = re.match(r"^(\w+)\s*(:.*)?$", ln)
+        m = re.match(r"^\*{0,2}(\w+)\s*(:.*)?$", ln)
         if m and not ln.startswith(" "):
             current = m.group(1)
             out[current] = ""
