@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 import pytest
-
 from trn_env.navigators.builtin import ins as _ins
+
 from trn_env.testing import NavigatorCheckError, check_navigator, recorded_flight
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from sitan_support import ensure_sitan_installed
-
 from trn_env.navigators import registry
+
 from trn_env.sim.log import error_ned_m
 from trn_env.testing import _run, recorded_flight
 
