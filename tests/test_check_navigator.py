@@ -110,7 +110,8 @@ def test_checker_catches_unvalidated_settings():
     """Faulty accepts NaN and strings for `gain`: the checker names the setting."""
     report = check_navigator(Faulty, verbose=False)
     bad = [p for p in report.problems if p.check == "settings"]
-    assert bad and "gain=nan: accepted" in bad[0].message and "gain='not a number': accepted" in bad[0].message
+    assert bad and "gain=nan: accepted" in bad[0].message
+    assert "gain='not a number': accepted" in bad[0].message
     with pytest.raises(NavigatorCheckError, match="gain=nan"):
         check_navigator(Faulty, raise_on_failure=True, verbose=False)
 
