@@ -7,8 +7,6 @@ importlib.metadata finds its entry points exactly as those of a pip-installed pa
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 import textwrap
 from pathlib import Path
@@ -72,12 +70,13 @@ def plugin_dir(tmp_path_factory):
     registry.refresh()
 
 
-def _cli(args: list[str], plugin_dir: Path | None = None, cwd: Path | None = None):
-    env = dict(os.environ)
-    if plugin_dir is not None:
-        env["PYTHONPATH"] = os.pathsep.join([str(plugin_dir), env.get("PYTHONPATH", "")])
-    return subprocess.run([sys.executable, "-m", "trn_env.cli", *args], capture_output=True, text=True,
-                          env=env, cwd=cwd, timeout=600)
+def _cli(args: list[str], capsys):
+    """trn-env in this process (the plug-in folder is on sys.path): (exit status, stdout, stderr)."""
+    from trn_env import cli
+    capsys.readouterr()
+    code = cli.main(args)
+    out = capsys.readouterr()
+    return code, out.out, out.err
 
 
 # ------------------------------------------------------------------------------------------ registry
@@ -173,29 +172,29 @@ def test_scenario_accepts_plugins_and_reports_a_broken_one(plugin_dir):
     assert any(p.startswith("navigator.name:") and "boom" in p for p in err.value.problems)
 
 
-def test_cli_validate_and_fly_exit_2_on_a_broken_plugin(plugin_dir, tmp_path):
+def test_cli_validate_and_fly_exit_2_on_a_broken_plugin(plugin_dir, tmp_path, capsys):
     sc = tmp_path / "broken.toml"
     text = (ROOT / "tests/scenarios/ins_only_short.toml").read_text()
     sc.write_text(text.replace('[navigator]\nname = "ins"', '[navigator]\nname = "plug_broken"'))
     assert "plug_broken" in sc.read_text()
-    r = _cli(["validate", str(sc)], plugin_dir)
-    assert r.returncode == 2, (r.stdout, r.stderr)
-    assert "navigator.name" in r.stderr and "plugtest_broken" in r.stderr and "boom" in r.stderr
-    assert "Traceback" not in r.stderr
-    r = _cli(["fly", "default", "--navigator", "plug_broken", "--out", str(tmp_path / "r")], plugin_dir)
-    assert r.returncode == 2 and "boom" in r.stderr and "Traceback" not in r.stderr
-    r = _cli(["fly", "default", "--navigator", "plugtest_thing:Thing", "--out", str(tmp_path / "r")],
-             plugin_dir)
-    assert r.returncode == 2 and "lacks reset" in r.stderr and "Traceback" not in r.stderr
+    code, _, err = _cli(["validate", str(sc)], capsys)
+    assert code == 2, err
+    assert "navigator.name" in err and "plugtest_broken" in err and "boom" in err and "Traceback" not in err
+    out_dir = str(tmp_path / "r")
+    code, _, err = _cli(["fly", "default", "--navigator", "plug_broken", "--out", out_dir], capsys)
+    assert code == 2 and "boom" in err and "Traceback" not in err
+    code, _, err = _cli(["fly", "default", "--navigator", "plugtest_thing:Thing", "--out", out_dir], capsys)
+    assert code == 2 and "lacks reset" in err and "Traceback" not in err
     assert not (tmp_path / "r").exists()
 
 
-def test_cli_navigators_lists_builtins_and_plugins_with_settings(plugin_dir):
-    r = _cli(["navigators", "--json"], plugin_dir)
-    assert r.returncode == 2              # the broken plug-ins are reported ...
-    out = json.loads(r.stdout)
-    assert any("plugtest_broken" in e and "boom" in e for e in out["errors"])
-    by = {e["name"]: e for e in out["plugins"]}                 # ... and everything else is listed
+def test_cli_navigators_lists_builtins_and_plugins_with_settings(plugin_dir, capsys):
+    code, out, err = _cli(["navigators", "--json"], capsys)
+    assert code == 2                       # the broken plug-ins are reported ...
+    listing = json.loads(out)
+    assert any("plugtest_broken" in e and "boom" in e for e in listing["errors"])
+    assert "plugtest_broken" in err
+    by = {e["name"]: e for e in listing["plugins"]}                 # ... and everything else is listed
     for name in [*BUILTIN_NAVIGATORS, *BUILTIN_MONITORS, "plug_ins"]:
         assert name in by, name
     assert by["plug_ins"]["origin"].startswith("plug-in plugtest 0.1")
@@ -205,8 +204,8 @@ def test_cli_navigators_lists_builtins_and_plugins_with_settings(plugin_dir):
     acq = {s["name"] for s in by["acq_track"]["settings"]}
     assert {"transect_samples", "sample_period_s"} <= acq               # AcqTrackConfig's fields
     assert "aiding" not in {s["name"] for s in by["ins"]["settings"]}   # fixed by the "ins" factory
-    r = _cli(["navigators", "pmf", "dem_integrity"])
-    assert r.returncode == 0 and "spacing_min_m" in r.stdout and "n_window" in r.stdout
+    code, out, _ = _cli(["navigators", "pmf", "dem_integrity"], capsys)
+    assert code == 0 and "spacing_min_m" in out and "n_window" in out
 
 
 # ------------------------------------------------------------------------------------------ env
