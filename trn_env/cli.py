@@ -5,6 +5,7 @@
     trn-env record SCENARIO --out LOG [--seed N] [--navigator NAME] [--duration S] [--set PATH=VALUE]
     trn-env replay LOG [--navigator NAME] [--monitor NAME] [--map DEM] [--out DIR] [--no-plots]
     trn-env scenarios
+    trn-env navigators [NAME ...] [--json]
     trn-env validate SCENARIO
     trn-env bench [--quick] [--json]
     trn-env precompile [--workers N]
@@ -126,6 +127,11 @@ def _parser() -> argparse.ArgumentParser:
     rep_.add_argument("--out", type=Path, default=None, help="run folder (default runs/replay-<log>-<time>)")
     rep_.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     sub.add_parser("scenarios", help="list the built-in scenarios")
+    navs = sub.add_parser("navigators", help="list the built-in and installed navigators and monitors with "
+                                             "their settings (name, type, unit, default, meaning)")
+    navs.add_argument("names", nargs="*", metavar="NAME",
+                      help="only these (names or package.module:Name references; default: all)")
+    navs.add_argument("--json", action="store_true", help="one JSON object instead of tables")
     val = sub.add_parser("validate", help="check a scenario file and list every problem")
     val.add_argument("scenario")
     pre = sub.add_parser("precompile", help="compile the numba kernels of every built-in navigator once, "
@@ -187,6 +193,53 @@ def cmd_scenarios() -> int:
     for name, desc in rows:
         print(f"{name:<{width}}  {desc}")
     return 0
+
+
+def cmd_navigators(args) -> int:
+    """Every navigator and monitor (or the NAMEs given) with its origin and settings; a plug-in that cannot
+    be loaded is reported (exit 2) and the others are still listed."""
+    from trn_env.navigators import catalogue, registry
+    wanted = [(n, None) for n in args.names] or (
+        [(n, "navigator") for n in registry.available()]
+        + [(n, "monitor") for n in registry.available_monitors()])
+    entries, errors = [], []
+    for name, kind in wanted:
+        plugin, err = None, None
+        for k in ([kind] if kind else ["navigator", "monitor"]):
+            try:
+                plugin = registry.resolve(name, k)
+                break
+            except registry.PluginError as exc:
+                err = str(exc)
+                break
+            except ValueError as exc:
+                err = err or str(exc)
+        if plugin is None:
+            errors.append(err)
+            continue
+        origin = {"built-in": "built-in", "registered": "registered in this process",
+                  "reference": f"reference {plugin.reference}"}.get(
+            plugin.origin, f"plug-in {plugin.distribution or ''} ({plugin.reference})".replace("  ", " "))
+        entries.append({"name": name, "kind": plugin.kind, "origin": origin,
+                        "summary": catalogue.summary_of(plugin.factory),
+                        "settings": [s.as_dict() for s in catalogue.settings_of(plugin.factory)]})
+    if args.json:
+        print(json.dumps({"plugins": entries, "errors": errors}, indent=2))
+    else:
+        from rich.console import Console
+        from rich.table import Table
+        console = Console(width=max(Console().width, 140))
+        for e in entries:
+            table = Table(title=f"{e['kind']} {e['name']}  [{e['origin']}]\n{e['summary']}",
+                          title_justify="left")
+            for col in ("setting", "type", "unit", "default", "meaning"):
+                table.add_column(col, overflow="fold")
+            for s in e["settings"]:
+                table.add_row(s["name"], s["type"], s["unit"], s["default"], s["meaning"])
+            console.print(table)
+    for err in errors:
+        print(f"error: {err}", file=sys.stderr)
+    return 2 if errors else 0
 
 
 def cmd_validate(args) -> int:
@@ -739,6 +792,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_scenarios()
         if args.command == "validate":
             return cmd_validate(args)
+        if args.command == "navigators":
+            return cmd_navigators(args)
         if args.command == "fly":
             return cmd_fly(args)
         if args.command == "record":

@@ -46,7 +46,7 @@ from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
 from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
@@ -332,9 +332,12 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         imu = frames.imu
         if imu is None or imu.t_s.size == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
-            return self.estimate()
+            return self.estimate().extrapolated(frames.t_end_s)
         t = np.asarray(imu.t_s, float)
         n = t.size
+        gap_s = imu_gap_s(t, self.ins.t_s)
+        if gap_s > 0.0:
+            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         gnss = self._gnss_fixes(frames)
         if gnss is None:
             self._gnss_check_loss(float(t[-1]))

@@ -537,6 +537,7 @@ class DemIntegrityMonitor:
     skipped without it) and uses frames.gnss while fixes are there."""
 
     name = "dem_integrity"
+    settings_class = DemMonitorConfig        # what `trn-env navigators` lists as its settings
     _NONE = np.zeros((0, 7))
 
     def __init__(self, dem=None, **settings):
