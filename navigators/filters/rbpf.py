@@ -545,6 +545,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
             self._gnss_now = gnss is not None
             updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
         if gnss is not None:
+            if ll.shape[0] != self.n:       # the IRA update re-initialised the cloud (another size)
+                ll = np.empty(self.n)
             self._gnss_update(te, gnss, lat, lon, h, v, sc, ll)
             updated = True
         if updated:

@@ -116,7 +116,9 @@ def _initial(log: SensorLog, d: dict) -> Estimate:
     if truth is None:
         raise LogError(f"log {log.path}: states neither an initial_estimate nor truth to start from")
     t0 = float(log.column("frames", "t_start_s")[0])
-    i = int(np.clip(np.searchsorted(truth["t_s"].to_numpy(), t0), 0, len(truth) - 1))
+    # the last truth row before the first frame (the first IMU sample covers the interval ending at its
+    # time, so the estimate starts at or before it: the closed loop's t = 0 before samples from 0.01)
+    i = int(np.clip(np.searchsorted(truth["t_s"].to_numpy(), t0, side="left") - 1, 0, len(truth) - 1))
     row = truth.iloc[i]
 
     class _Row:   # the attributes perturbed_estimate reads, one row
