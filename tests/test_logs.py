@@ -88,7 +88,9 @@ def test_fly_writes_a_replayable_log_folder(tmp_path, capsys):
     assert cli.main(["fly", str(SCEN / "default_short.toml"), "--out", str(out), "--quiet", "--duration", "4",
                      "--no-plots"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert "log" in summary["files"] and not (out / "log.npz").exists()
+    assert "log" in summary["files"] and "log.npz" in summary["files"]
+    npz = np.load(out / "log.npz")          # the per-update arrays; the sensor arrays are in log/
+    assert "err_ned_m" in npz and not [k for k in npz.files if k.startswith("sensor_")]
     log = read_log(out / "log")
     assert log.n_frames == 4 and len(log.truth()) == 5            # t = 0 and each 1 s update
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]     # no partial folder left
