@@ -65,6 +65,10 @@ def _parser() -> argparse.ArgumentParser:
                       help="the navigator's map: a DEM path or bundled name (default: the log's map)")
     rep_.add_argument("--out", type=Path, default=None, help="run folder (default runs/replay-<log>-<time>)")
     rep_.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    rep_.add_argument("--seed", type=int, default=None,
+                      help="the navigator's random stream (default: the log's seed)")
+    rep_.add_argument("--set", action="append", default=[], metavar="navigator.settings.NAME=VALUE",
+                      help="a navigator setting, VALUE a TOML literal (repeatable)")
     sub.add_parser("scenarios", help="list the built-in scenarios")
     val = sub.add_parser("validate", help="check a scenario file and list every problem")
     val.add_argument("scenario")
@@ -383,8 +387,22 @@ def cmd_replay(args) -> int:
         if problem is not None:
             print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
             return 2
+    from trn_env.scenario.overrides import parse_assignment
+    settings = {}
+    for text in args.set:
+        try:
+            path, value = parse_assignment(text)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        if not path.startswith("navigator.settings.") or path.count(".") != 2:
+            print(f"error: --set {text!r}: replay sets navigator settings only "
+                  "(navigator.settings.NAME=VALUE)", file=sys.stderr)
+            return 2
+        settings[path.split(".", 2)[2]] = value
     try:
-        res = replay(args.log, args.navigator, monitors=args.monitor, map_path=args.map)
+        res = replay(args.log, args.navigator, settings=settings or None, monitors=args.monitor,
+                     map_path=args.map, seed=args.seed)
     except (LogError, ValueError) as exc:
         print(f"error: {exc} (nothing written)", file=sys.stderr)
         return 2
