@@ -319,6 +319,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tests", type=int, default=1_000_000, help="white false-alarm tests (1e6)")
     ap.add_argument("--tests-correlated", type=int, default=100_000, help="per correlation length (1e5)")
     ap.add_argument("--sequences", type=int, default=20_000, help="detection sequences per case")
+    ap.add_argument("--kalman-mc", type=int, default=200_000, help="Monte Carlo draws per eq 5 reading")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
@@ -336,7 +337,7 @@ def main(argv=None) -> int:
     if "denied" in parts:
         out["denied"] = part_denied(rng, args.tests_correlated, args.sequences // 4)
     if "kalman" in parts:
-        out["kalman"] = part_kalman(rng, 200_000)
+        out["kalman"] = part_kalman(rng, args.kalman_mc)
     out["seconds"] = time.perf_counter() - t0
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:

@@ -40,7 +40,6 @@ from collections import deque
 
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
-from filterpy.kalman import KalmanFilter
 from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, N_EKF13
 from trn_env.navigators.core.linalg import is_positive_definite
 from trn_env.navigators.core.maps import load_map
@@ -246,7 +245,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.recovery_sigma_m = float(recovery_sigma_m)
         self._update_extra: dict = {}
         self._fault_allowance_m = 0.0       # the last accepted TERCOM fix's (protection_level)
-        self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
+        self._kf = None                     # filterpy's KalmanFilter, made at first use (see kf)
         self.health = Health()
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
         self.batch = TercomBatch(None if aiding is None or dem is None else
@@ -267,6 +266,15 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.fused = True  # False: the step-by-step path (same numbers; kept for tests and fixes)
 
     # ------------------------------------------------------------------ protocol
+    @property
+    def kf(self):
+        """The filterpy KalmanFilter holding the error state and covariance. Made at first use: filterpy
+        imports scipy.stats (about a second), which checking a scenario's settings does not need."""
+        if self._kf is None:
+            from filterpy.kalman import KalmanFilter
+            self._kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
+        return self._kf
+
     def reset(self, initial: Estimate) -> None:
         values = [initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.roll_rad,
                   initial.pitch_rad, initial.yaw_rad, *np.ravel(np.asarray(initial.v_ned_mps, float))]
