@@ -100,6 +100,12 @@ def test_fly_writes_a_replayable_log_folder(tmp_path, capsys):
     assert s2["horizontal_error_rms_m"] == pytest.approx(summary["horizontal_error_rms_m"], rel=0, abs=0)
     assert pd.read_parquet(rep / "log" / "estimates.parquet").shape[0] == 5
     capsys.readouterr()
+    # trn-env record of the same flight writes the same log (the estimates to the last bit)
+    assert cli.main(["record", str(SCEN / "default_short.toml"), "--out", str(tmp_path / "rec"), "--quiet",
+                     "--duration", "4"]) == 0
+    assert "recorded" in capsys.readouterr().out
+    a, b = read_log(tmp_path / "rec").estimates(), log.estimates()
+    assert a.equals(b) and read_log(tmp_path / "rec").table("imu").equals(log.table("imu"))
 
 
 # ---------------------------------------------------------------------------------------------- bad input
