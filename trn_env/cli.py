@@ -301,7 +301,7 @@ def cmd_fly(args) -> int:
     from trn_env.sim.closed_loop import spawn_rngs
     from trn_env.sim.warm_up import warm_up
 
-    loop = writer = log_path = None
+    loop = writer = log_path = result = None
     try:
         # the terrain once (the same map stream as the loop's own), the kernels compiled (first run) or
         # loaded from numba's cache before the flight, so neither stalls the progress bar nor counts in the
@@ -341,12 +341,12 @@ def cmd_fly(args) -> int:
             bar.close()
         code, word = _interrupt_exit(exc)
         print(f"{word}: nothing written", file=sys.stderr)
-        if writer is not None:
-            writer.abort()
         return code
     finally:
         if loop is not None:
-            loop.close()
+            loop.close()              # (the worker stops writing frames before the log is removed)
+        if writer is not None and result is None:
+            writer.abort()
     bar.close()
     plot = None if args.no_plots else _plotter(result)
     from trn_env.scenario.resolved import resolved_toml
