@@ -63,7 +63,7 @@ from trn_env.navigators.protocol import (
 )
 from trn_env.navigators.tercom.mad import TercomBatch, TercomFix, correlate
 
-FIX_HISTORY = 256     # TERCOM fixes kept in `fixes` (the newest)
+FIX_HISTORY = 64      # TERCOM fixes kept in `fixes` (the newest)
 
 G0 = 9.80665
 N_ERR = N_EKF13
