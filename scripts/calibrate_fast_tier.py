@@ -4,7 +4,7 @@ seeds, per route, in both tiers, with the same navigator family (the scenario's 
 
     python scripts/calibrate_fast_tier.py --seeds 12 --out out/fast_calibration      # both tiers
     python scripts/calibrate_fast_tier.py --tier full --seeds 12 --out DIR            # only the full loop
-    python scripts/calibrate_fast_tier.py --tier fast --seeds 12 --out DIR            # fast tier vs saved full
+    python scripts/calibrate_fast_tier.py --tier fast --seeds 12 --out DIR            # fast vs saved full
 
 Writes DIR/full_<route>.json, DIR/fast_<route>.json (per-seed errors) and DIR/table.md; prints the table.
 The full-loop results are reused from DIR when present (--tier fast), so the fast tier can be re-run alone.
@@ -51,12 +51,17 @@ def main(argv=None) -> int:
         if fp.exists() and qp.exists():
             c = compare(json.loads(fp.read_text()), json.loads(qp.read_text()))
             rows.append((r, c))
-    lines = ["| route | kind | terrain | seeds | full mean / p90 (m) | fast mean / p90 (m) | mean diff | p90 diff |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| route | kind | terrain | seeds | full mean / p90 (m) | fast mean / p90 (m) | mean diff "
+        "| p90 diff |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r, c in rows:
-        lines.append(f"| {r.name} | {r.kind} | {r.scenario} | {c['full']['n']} | {c['full']['mean_m']:.1f} / "
-                     f"{c['full']['p90_m']:.1f} | {c['fast']['mean_m']:.1f} / {c['fast']['p90_m']:.1f} | "
-                     f"{100 * c['mean_rel']:+.0f} % | {100 * c['p90_rel']:+.0f} % |")
+        lines.append(
+            f"| {r.name} | {r.kind} | {r.scenario} | {c['full']['n']} | {c['full']['mean_m']:.1f} / "
+            f"{c['full']['p90_m']:.1f} | {c['fast']['mean_m']:.1f} / {c['fast']['p90_m']:.1f} | "
+            f"{100 * c['mean_rel']:+.0f} % | {100 * c['p90_rel']:+.0f} % |"
+        )
     table = "\n".join(lines)
     (args.out / "table.md").write_text(table + "\n")
     print(table)

@@ -16,14 +16,23 @@ from trn_env.env import task
 from trn_env.env.fast import calibration as cal
 from trn_env.env.fast.vector_env import TerrainNavFastVectorEnv
 
-BASIN = dict(scenario="basin_route", action_mode="pursuit", decision_interval_s=30.0, max_episode_s=480.0,
-             goal_radius_m=500.0, bearing_offset_max_deg=45.0, agl_min_m=300.0, agl_max_m=900.0)
+BASIN = dict(
+    scenario="basin_route",
+    action_mode="pursuit",
+    decision_interval_s=30.0,
+    max_episode_s=480.0,
+    goal_radius_m=500.0,
+    bearing_offset_max_deg=45.0,
+    agl_min_m=300.0,
+    agl_max_m=900.0,
+)
 
 
 @pytest.fixture(scope="module")
 def envs():
-    e = gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=4, vectorization_mode="vector_entry_point",
-                           **BASIN)
+    e = gymnasium.make_vec(
+        "trn_env/TerrainNavFast-v0", num_envs=4, vectorization_mode="vector_entry_point", **BASIN
+    )
     yield e
     e.close()
 
@@ -71,21 +80,23 @@ def _trajectory(num_envs: int, seeds: list[int], k: int, steps: int = 6) -> list
         a = rng.uniform(-1, 1, (num_envs, 2)).astype(np.float32)
         a[k] = (0.3, -0.2)
         obs, r, te, tr, info = e.step(a)
-        out.append((obs[k].copy(), float(r[k]), bool(te[k]), bool(tr[k]), float(info["true_horizontal_error_m"][k])))
+        out.append(
+            (obs[k].copy(), float(r[k]), bool(te[k]), bool(tr[k]), float(info["true_horizontal_error_m"][k]))
+        )
     e.close()
     return out
 
 
 def test_one_seed_one_episode_whatever_the_batch():
     a = _trajectory(3, [7, 8, 9], 1)
-    b = _trajectory(5, [1, 2, 3, 4, 8], 4)       # the same seed (8) at another place in a larger batch
+    b = _trajectory(5, [1, 2, 3, 4, 8], 4)  # the same seed (8) at another place in a larger batch
     assert len(a) == len(b)
     np.testing.assert_array_equal(a[0], b[0])
-    for x, y in zip(a[1:], b[1:]):
+    for x, y in zip(a[1:], b[1:], strict=True):
         np.testing.assert_array_equal(x[0], y[0])
         assert x[1:] == y[1:]
     c = _trajectory(3, [7, 10, 9], 1)
-    assert not np.array_equal(a[-1][0], c[-1][0])      # another seed, another episode
+    assert not np.array_equal(a[-1][0], c[-1][0])  # another seed, another episode
 
 
 def test_autoreset_next_step_and_episode_statistics():
@@ -95,17 +106,17 @@ def test_autoreset_next_step_and_episode_statistics():
     for _ in range(3):
         obs, r, te, tr, info = e.step(np.zeros((3, 2), np.float32))
         rewards += r
-    assert tr.all() and not te.any()                      # 90 s: the time limit
+    assert tr.all() and not te.any()  # 90 s: the time limit
     assert list(info["termination"]) == ["time_limit"] * 3
     assert info["_episode"].all()
     np.testing.assert_allclose(info["episode"]["r"], rewards, atol=1e-9)
     np.testing.assert_array_equal(info["episode"]["l"], [3, 3, 3])
-    obs, r, te, tr, info = e.step(np.ones((3, 2), np.float32))     # the autoreset step ignores actions
+    obs, r, te, tr, info = e.step(np.ones((3, 2), np.float32))  # the autoreset step ignores actions
     np.testing.assert_array_equal(r, 0.0)
     assert not te.any() and not tr.any()
     np.testing.assert_array_equal(info["t_s"], 0.0)
-    np.testing.assert_array_equal(obs[:, 17], 0.0)                 # the fraction of episode time used
-    np.testing.assert_allclose(obs[:, 21], 1.0, atol=1e-6)        # distance / distance at the reset
+    np.testing.assert_array_equal(obs[:, 17], 0.0)  # the fraction of episode time used
+    np.testing.assert_allclose(obs[:, 21], 1.0, atol=1e-6)  # distance / distance at the reset
     obs, r, te, tr, info = e.step(np.zeros((3, 2), np.float32))
     np.testing.assert_array_equal(info["t_s"], 30.0)
     e.close()
@@ -232,5 +243,5 @@ def test_bad_actions_and_calls(envs):
         envs.reset(options={"goal_deg": (10.0, 10.0)})
     with pytest.raises(ValueError, match="seed"):
         envs.reset(seed=[1, 2])
-    obs, _ = envs.reset(seed=0)          # still usable after the rejected calls
+    obs, _ = envs.reset(seed=0)  # still usable after the rejected calls
     assert np.all(np.isfinite(obs)) and not math.isnan(float(obs.sum()))

@@ -17,7 +17,8 @@ sets the horizontal error at the goal:
   profile of measured terrain heights (baro height minus radar height: true terrain + baro error + noise,
   1 Hz) along the INS-indicated track over `fix_period_s`, correlated with the MAP over +-half_cells x
   cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point, then
-  +-40 m at 20 m and +-10 m at the cell size on every point); the best offset is the fix, z = INS - matched position, noise fix_sigma_m, chi-square
+  +-40 m at 20 m and +-10 m at the cell size on every point); the best offset is the fix,
+  z = INS - matched position, noise fix_sigma_m, chi-square
   gated (2 dof) against the filter's covariance, as the full navigator does.
 - Kalman filter over (p, v, a) per axis with one shared covariance (the axes see the same dynamics and
   measurement noise): F the constant-acceleration transition, process noise from the IMU grade (velocity
@@ -66,25 +67,42 @@ from trn_env.env.fast.state import (
 from trn_env.terrain import kernels
 
 G0_MPS2 = 9.80665
-COARSE_STEP_M = 50.0       # TERCOM's first search stage: grid step over the whole window
-COARSE_STRIDE = 4          # ... on every 4th profile point (1 Hz profile: 4 s apart)
+COARSE_STEP_M = 50.0  # TERCOM's first search stage: grid step over the whole window
+COARSE_STRIDE = 4  # ... on every 4th profile point (1 Hz profile: 4 s apart)
 MODELLED_NAVIGATORS = ("ins", "ins_tercom")
 
 # navigator parameter vector (float64), built by navigator_params()
-(NP_TERCOM, NP_FIX_PERIOD, NP_HALF_WINDOW, NP_CELL, NP_FIX_SIGMA, NP_GATE, NP_REMOVE_BIAS, NP_PROFILE_NOISE,
- NP_Q_V, NP_Q_A, NP_GNSS_UNTIL, NP_GNSS_SIGMA, NP_UNHEALTHY, NP_MIN_SAMPLES) = range(14)
+(
+    NP_TERCOM,
+    NP_FIX_PERIOD,
+    NP_HALF_WINDOW,
+    NP_CELL,
+    NP_FIX_SIGMA,
+    NP_GATE,
+    NP_REMOVE_BIAS,
+    NP_PROFILE_NOISE,
+    NP_Q_V,
+    NP_Q_A,
+    NP_GNSS_UNTIL,
+    NP_GNSS_SIGMA,
+    NP_UNHEALTHY,
+    NP_MIN_SAMPLES,
+) = range(14)
 N_NAV_PARAMS = 14
 
 
-def navigator_params(name: str, settings: dict, imu: dict, gnss_until_s: float, ira_noise_m: float,
-                     ira_rate_hz: float) -> np.ndarray:
+def navigator_params(
+    name: str, settings: dict, imu: dict, gnss_until_s: float, ira_noise_m: float, ira_rate_hz: float
+) -> np.ndarray:
     """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
     navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
     fields), GNSS availability (s) and IRA noise (m) and rate (Hz): the 1 Hz profile sample is the mean of
     a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz)."""
     if name not in MODELLED_NAVIGATORS:
-        raise ValueError(f"navigator {name!r} is not modelled by the fast tier; it models: "
-                         f"{', '.join(MODELLED_NAVIGATORS)}")
+        raise ValueError(
+            f"navigator {name!r} is not modelled by the fast tier; it models: "
+            f"{', '.join(MODELLED_NAVIGATORS)}"
+        )
     p = np.zeros(N_NAV_PARAMS)
     p[NP_TERCOM] = 1.0 if name == "ins_tercom" else 0.0
     p[NP_FIX_PERIOD] = float(settings.get("fix_period_s", 40.0))
@@ -97,7 +115,8 @@ def navigator_params(name: str, settings: dict, imu: dict, gnss_until_s: float, 
     p[NP_Q_V] = float(imu["accel_noise_density_mps2_rthz"]) ** 2
     # the tilt-rate ramp g0 b_g t as a random walk of the acceleration error matching its variance at 100 s
     p[NP_Q_A] = (G0_MPS2 * float(imu["gyro_bias_rps"])) ** 2 * 100.0 + float(
-        imu.get("accel_bias_instability_mps2", 0.0)) ** 2 / max(float(imu.get("accel_bias_tau_s", 3600.0)), 1.0)
+        imu.get("accel_bias_instability_mps2", 0.0)
+    ) ** 2 / max(float(imu.get("accel_bias_tau_s", 3600.0)), 1.0)
     p[NP_GNSS_UNTIL] = float(gnss_until_s)
     p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
     p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
@@ -135,7 +154,7 @@ def covariance_step(X, i, dt, q_v, q_a):
     a20 = p02
     a21 = p12
     # F P F^T
-    X[i, P00] = a00 + dt * a01 + h * a02 + q_v * dt ** 3 / 3.0
+    X[i, P00] = a00 + dt * a01 + h * a02 + q_v * dt**3 / 3.0
     X[i, P01] = a10 + dt * a11 + h * a12 + q_v * dt * dt / 2.0
     X[i, P02] = a20 + dt * a21 + h * p22
     X[i, P11] = a11 + dt * a12 + q_v * dt
@@ -171,8 +190,9 @@ def position_update(X, i, z_n, z_e, r_var, gate_chi2):
 
 
 @njit(cache=True)
-def _profile_mad(meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, lon0, dlat, dlon, remove_bias,
-                 diff):
+def _profile_mad(
+    meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, lon0, dlat, dlon, remove_bias, diff
+):
     """Mean absolute difference of the profile (every stride-th of its n points) against the map shifted by
     (off_lat, off_lon) rad, with the mean difference removed when remove_bias; +inf when any point falls off
     the map."""
@@ -193,8 +213,23 @@ def _profile_mad(meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, l
 
 
 @njit(cache=True)
-def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_window_m, cell_m, remove_bias,
-                  m_per_rad_lat, m_per_rad_lon, diff):
+def tercom_offset(
+    meas,
+    plat,
+    plon,
+    n,
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    half_window_m,
+    cell_m,
+    remove_bias,
+    m_per_rad_lat,
+    m_per_rad_lon,
+    diff,
+):
     """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
     positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
     in 50 m steps on every COARSE_STRIDE-th profile point, then +-40 m in 20 m steps and +-10 m in cell_m
@@ -212,7 +247,7 @@ def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_win
         cn = best_n
         ce = best_e
         if stage > 0:
-            best = np.inf          # compare the fine stages on the whole profile
+            best = np.inf  # compare the fine stages on the whole profile
         for a in range(-k, k + 1):
             on = cn + a * step
             if abs(on) > half_window_m + 1e-9:
@@ -221,8 +256,22 @@ def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_win
                 oe = ce + b * step
                 if abs(oe) > half_window_m + 1e-9:
                     continue
-                mad = _profile_mad(meas, plat, plon, n, stride, on / m_per_rad_lat, oe / m_per_rad_lon, heights,
-                                   lat0, lon0, dlat, dlon, remove_bias, diff)
+                mad = _profile_mad(
+                    meas,
+                    plat,
+                    plon,
+                    n,
+                    stride,
+                    on / m_per_rad_lat,
+                    oe / m_per_rad_lon,
+                    heights,
+                    lat0,
+                    lon0,
+                    dlat,
+                    dlon,
+                    remove_bias,
+                    diff,
+                )
                 if mad < best:
                     best = mad
                     best_n = on
@@ -231,17 +280,45 @@ def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_win
 
 
 @njit(cache=True)
-def tercom_fix(X, i, prof_meas, prof_lat, prof_lon, heights, lat0, lon0, dlat, dlon, nav, m_per_rad_lat,
-               m_per_rad_lon, diff):
+def tercom_fix(
+    X,
+    i,
+    prof_meas,
+    prof_lat,
+    prof_lon,
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    nav,
+    m_per_rad_lat,
+    m_per_rad_lon,
+    diff,
+):
     """Aircraft i's TERCOM fix from its profile (rows of prof_*), fused by the Kalman filter; the profile is
     then restarted. Returns True when the fix was accepted."""
     n = int(X[i, N_PROF])
     X[i, N_PROF] = 0.0
     if n < nav[NP_MIN_SAMPLES]:
         return False
-    dn, de, mad = tercom_offset(prof_meas[i], prof_lat[i], prof_lon[i], n, heights, lat0, lon0, dlat, dlon,
-                                nav[NP_HALF_WINDOW], nav[NP_CELL], nav[NP_REMOVE_BIAS] > 0.5, m_per_rad_lat,
-                                m_per_rad_lon, diff)
+    dn, de, mad = tercom_offset(
+        prof_meas[i],
+        prof_lat[i],
+        prof_lon[i],
+        n,
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        nav[NP_HALF_WINDOW],
+        nav[NP_CELL],
+        nav[NP_REMOVE_BIAS] > 0.5,
+        m_per_rad_lat,
+        m_per_rad_lon,
+        diff,
+    )
     if not math.isfinite(mad):
         return False
     # the map matches where the INS path is shifted by (dn, de): truth = INS + offset, z = INS - matched
