@@ -245,3 +245,40 @@ def test_bad_actions_and_calls(envs):
         envs.reset(seed=[1, 2])
     obs, _ = envs.reset(seed=0)  # still usable after the rejected calls
     assert np.all(np.isfinite(obs)) and not math.isnan(float(obs.sum()))
+
+
+def test_information_observations_match_the_full_tiers_functions():
+    """Elements 11-16 and 22-31 of the fast tier's observation against TerrainNav-v0's own functions
+    (trn_env.scenario.build.sample_information, trn_env.env.route_info.route_information) evaluated at the
+    same estimate, commanded track and goal."""
+    import trn_env.scenario.build as components
+    from trn_env.env.fast import state as S
+    from trn_env.env.route_info import route_information
+
+    e = TerrainNavFastVectorEnv(num_envs=6, **BASIN)
+    obs, _ = e.reset(seed=5)
+    for _ in range(3):
+        obs, *_ = e.step(np.random.default_rng(2).uniform(-1, 1, (6, 2)).astype(np.float32))
+    u = e.unwrapped
+    lat_e, lon_e = u._est_latlon()
+    dn, de = u._goal_offset(lat_e, lon_e)
+    omega = u.action_limits[0] / u.decision_interval_s
+    for i in range(6):
+        trk = u._X[i, S.TRK_CMD]
+        info = components.sample_information(u._info_map, u._map, lat_e[i], lon_e[i], trk, 3000.0)
+        np.testing.assert_allclose(obs[i, 11:17], np.log10(1.0 + info), atol=0.02)
+        mean, featureless = route_information(
+            u._info_map,
+            lat_e[i],
+            lon_e[i],
+            dn[i],
+            de[i],
+            u._route_offsets,
+            u.goal_radius_m,
+            omega,
+            u.tas_mps,
+            5.0,
+        )
+        np.testing.assert_allclose(obs[i, 22:27], mean, atol=0.02)
+        np.testing.assert_allclose(obs[i, 27:32], np.minimum(featureless, 50.0), atol=0.3)
+    e.close()

@@ -15,7 +15,10 @@ actions from a fixed seed, autoresets included):
   aircraft, nothing else), in 30 s decisions per wall second: the most the full tier could give per core;
 - fast_env_agent_steps_per_cpu_s: the same steps per CPU second of the process (all threads), which on a
   machine shared with other work tells what the tier costs; fast_env_load_average_1min the machine's load
-  when measured (a 2-core machine is saturated at 2), fast_env_threads numba's thread count;
+  when measured (a 2-core machine is saturated at 2), fast_env_threads numba's thread count; the same
+  two figures with the kernels on one thread (fast_env_agent_steps_per_s_one_thread,
+  fast_env_agent_steps_per_cpu_s_one_thread: on a busy machine the one-thread CPU figure is the closest to
+  what one idle core gives);
 - fast_env_sim_seconds_per_wall_second: simulated aircraft-seconds per wall second of the fast tier;
 - fast_env_ms_per_vector_step: wall time of one step of all sub-envs (median run);
 - fast_env_build_s: constructing the vector env (terrain, information map) and its first reset.
@@ -105,9 +108,20 @@ def full_figures(n_steps: int) -> dict:
 
 
 def benchmark(quick: bool = False) -> dict:
+    import numba
+
     from trn_env.bench.env import _bare_jsbsim_sim_s_per_wall_s
 
-    out = fast_figures(num_envs=256, runs=3 if quick else 5, steps_per_run=10 if quick else 20)
+    runs, steps = (3, 10) if quick else (5, 20)
+    out = fast_figures(num_envs=256, runs=runs, steps_per_run=steps)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        one = fast_figures(num_envs=256, runs=runs, steps_per_run=steps)
+    finally:
+        numba.set_num_threads(threads)
+    out["fast_env_agent_steps_per_s_one_thread"] = one["fast_env_agent_steps_per_s"]
+    out["fast_env_agent_steps_per_cpu_s_one_thread"] = one["fast_env_agent_steps_per_cpu_s"]
     out.update(full_figures(6 if quick else 20))
     bare = _bare_jsbsim_sim_s_per_wall_s(5000 if quick else 20000)
     out["fast_env_bare_jsbsim_agent_steps_per_s"] = bare / SETTINGS["decision_interval_s"]

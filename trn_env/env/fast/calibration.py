@@ -85,13 +85,15 @@ QUICK_ROUTES = ("basin_straight", "jacksboro_sw_ne")
 # (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies
 # both.
 FULL_LOOP_REFERENCE = {
-    "basin_straight": {"mean_m": 296.8, "p90_m": 532.9, "n": 12},
-    "jacksboro_sw_ne": {"mean_m": 7.2, "p90_m": 11.3, "n": 12},
+    "basin_straight": {"mean_m": 317.9, "p90_m": 583.8, "n": 32},
+    "jacksboro_sw_ne": {"mean_m": 7.0, "p90_m": 10.9, "n": 32},
 }
 # routes where the fast tier misses the 25 % (docs/validation/fast_tier.md says by how much and why)
 KNOWN_MISSES = {
     "basin_round": "the full loop's INS + TERCOM loses its fixes on the 45 deg spiral (status 'degraded', "
-    "errors of hundreds of m) in most seeds; the fast tier's does not",
+    "errors of hundreds of m) in most seeds; the fast tier's does not (-95 % mean over 32 seeds)",
+    "basin_west": "over the basin's smooth synthetic hills the full loop's fixes leave larger errors than "
+    "the fast tier's (-31 % mean, -40 % p90 over 32 seeds); cause not identified",
 }
 
 ENV_SETTINGS = dict(

@@ -87,8 +87,10 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_GNSS_SIGMA,
     NP_UNHEALTHY,
     NP_MIN_SAMPLES,
-) = range(14)
-N_NAV_PARAMS = 14
+    NP_COARSE_STEP,
+    NP_COARSE_STRIDE,
+) = range(16)
+N_NAV_PARAMS = 16
 
 
 def navigator_params(
@@ -121,6 +123,8 @@ def navigator_params(
     p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
     p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
     p[NP_MIN_SAMPLES] = 5.0
+    p[NP_COARSE_STEP] = COARSE_STEP_M
+    p[NP_COARSE_STRIDE] = COARSE_STRIDE
     return p
 
 
@@ -229,19 +233,21 @@ def tercom_offset(
     m_per_rad_lat,
     m_per_rad_lon,
     diff,
+    coarse_step_m,
+    coarse_stride,
 ):
     """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
     positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
-    in 50 m steps on every COARSE_STRIDE-th profile point, then +-40 m in 20 m steps and +-10 m in cell_m
-    steps around the best on every point. Returns (dn, de, mad)."""
+    in coarse_step_m steps on every coarse_stride-th profile point, then +-40 m in 20 m steps and +-10 m in
+    cell_m steps around the best on every point. Returns (dn, de, mad)."""
     best_n = 0.0
     best_e = 0.0
     best = np.inf
-    steps = (COARSE_STEP_M, 20.0, cell_m)
+    steps = (coarse_step_m, 20.0, cell_m)
     spans = (half_window_m, 40.0, 10.0)
     for stage in range(3):
         step = steps[stage]
-        stride = COARSE_STRIDE if stage == 0 else 1
+        stride = coarse_stride if stage == 0 else 1
         span = min(spans[stage], half_window_m)
         k = int(span / step + 1e-9)
         cn = best_n
@@ -318,6 +324,8 @@ def tercom_fix(
         m_per_rad_lat,
         m_per_rad_lon,
         diff,
+        nav[NP_COARSE_STEP],
+        int(nav[NP_COARSE_STRIDE]),
     )
     if not math.isfinite(mad):
         return False

@@ -88,6 +88,9 @@ def observe(
     for k in range(n_routes):
         max_off = max(max_off, abs(route_offsets[k]))
     cap = int(math.ceil(ROUTE_POINTS / max(math.cos(max_off), 0.2))) + 2
+    sin_abs = np.abs(np.sin(route_offsets))
+    cos_off = np.cos(route_offsets)
+    sin_off = np.sin(route_offsets)
     no_info = op[OP_NO_INFO]
     for i in prange(X.shape[0]):
         if not mask[i]:
@@ -153,12 +156,22 @@ def observe(
                 dd = math.hypot(rn_, re_)
                 seg = 0.0
                 if dd > op[OP_GOAL_RADIUS]:
-                    lim = math.asin(min(1.0, dd * op[OP_OMEGA] / op[OP_TAS]))
-                    phi = min(lim, max(-lim, route_offsets[k]))
-                    brg = math.atan2(re_, rn_) + phi
+                    # the goal's bearing (ux, uy) turned by the offset, cut to asin(d omega / v) near the goal
+                    ux = rn_ / dd
+                    uy = re_ / dd
+                    x = dd * op[OP_OMEGA] / op[OP_TAS]
+                    if x >= sin_abs[k]:
+                        cphi = cos_off[k]
+                        sphi = sin_off[k]
+                    else:
+                        phi = math.copysign(math.asin(x), route_offsets[k])
+                        cphi = math.cos(phi)
+                        sphi = math.sin(phi)
                     seg = min(step, dd)
-                    pn += seg * math.cos(brg)
-                    pe += seg * math.sin(brg)
+                    pn += seg * (ux * cphi - uy * sphi)
+                    pe += seg * (uy * cphi + ux * sphi)
+                elif j > 0:
+                    break          # arrived: the remaining points repeat this one and change neither figure
                 c = _info_at(
                     info, i_lat0, i_lon0, i_dlat, i_dlon, lat_e + pn / m_lat, lon_e + pe / m_lon, no_info
                 )
