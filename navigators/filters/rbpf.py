@@ -54,7 +54,7 @@ At run time it never raises: a NaN or invalid IRA sample is skipped, particles w
 return (off the map) get zero weight; if every weight vanishes the cloud is re-initialised around the INS
 with the prior spread; each is counted in Health (status "degraded") with an event.
 Integrity (navigators.integrity.InnovationMonitor): each IRA update's NIS (2 dof; a sample every particle
-rejects counts as infinite; capped as terrain_filter.capped_nis) enters a window of integrity_window
+rejects counts as infinite; capped as navigators.core.recovery.capped_nis) enters a window of integrity_window
 updates; when the sum leaves its chi-square band (probability integrity_alpha) Health says "degraded" (ok
 False) and the particles' positions are re-spread (resampled, then N(0, recovery_sigma_m^2) added
 horizontally), both logged; a whole window still out of band after a re-spread re-spreads again, twice as
@@ -71,11 +71,14 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._rbpf_kernels as kern
+from trn_env.navigators.core.maps import load_map
+from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.rbpf_cloud import RbpfCloud
 from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.error_model_15 import transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements import ira_seed002 as ira_model
 from trn_env.navigators.protocol import (
@@ -152,6 +155,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
     innovation test and its recovery, see the module docstring).
     """
 
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
+
     def __init__(
         self,
         dem=None,
@@ -203,14 +209,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         recovery_reset_kalman: bool = True,
         name: str = "rbpf",
     ):
-        if dem is None:
-            raise ValueError("dem: the RBPF needs the navigator's terrain map")
-        if isinstance(dem, str):
-            from trn_env import terrain
-
-            dem = terrain.load(dem)
-        if not hasattr(dem, "grid"):
-            raise ValueError(f"dem must be a terrain.Dem or a map name, got {type(dem).__name__}")
+        dem = load_map(dem, "the RBPF")
         if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)):
             raise ValueError(f"n_particles must be an integer, got {n_particles!r}")
         if not 2 <= int(n_particles) <= MAX_PARTICLES:
@@ -357,7 +356,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         self._init_cloud()
         self.health = Health(status="acquiring", ok=True)
         self.integrity.reset()
-        self.recoveries = self._streak = self._since_recovery = 0
+        self.recoveries = 0
+        self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m)
         self._integrity_extra: dict = {}
         self._t_next = float(initial.t_s) + self.trn_period_s
         self._t_gnss_next = float(initial.t_s)
@@ -580,7 +580,10 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
+        risk = pl.filter_risk(self)      # the cloud's mass radius (navigators.integrity.protection_level)
+        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), self)
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
+                        consistency_warning=self._consistency_warning,
                         events=list(self.health.events))
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
                         v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
