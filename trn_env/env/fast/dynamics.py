@@ -228,7 +228,7 @@ def fly_decision(
             f_turn = G0_MPS2 * math.tan(X[i, BANK])  # centripetal specific force, right of the heading
             nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
             X[i, T] += dt
-            nv.covariance_step(X, i, dt, nav[nv.NP_Q_V], nav[nv.NP_Q_A])
+            nv.covariance_step(X, i, dt, nav[nv.NP_QF_V], nav[nv.NP_Q_A])
             t = X[i, T]
             h_world = kernels.bilinear(world, w_lat0, w_lon0, w_dlat, w_dlon, X[i, LAT], X[i, LON])
             if h_world != h_world:

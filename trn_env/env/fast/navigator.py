@@ -21,9 +21,10 @@ sets the horizontal error at the goal:
   z = INS - matched position, noise fix_sigma_m, chi-square
   gated (2 dof) against the filter's covariance, as the full navigator does.
 - Kalman filter over (p, v, a) per axis with one shared covariance (the axes see the same dynamics and
-  measurement noise): F the constant-acceleration transition, process noise from the IMU grade (velocity
-  random walk; the tilt-rate ramp as a random walk of a), feedback form (the estimated errors are removed
-  from the INS after each update).
+  measurement noise): F the constant-acceleration transition, process noise from the navigator's settings
+  as the full navigator's filter takes them (accel_noise_mps2_rthz: velocity random walk;
+  g0 x gyro_noise_rps_rthz: the random walk of a, through the tilt), feedback form (the estimated errors
+  are removed from the INS after each update).
 
 Health: a fix rejected by the gate counts; `nav_ok` is False after `unhealthy_rejects` rejections in a row
 (the full navigator's integrity monitor has more states; the fast tier never reports "diverged").
@@ -89,8 +90,9 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_MIN_SAMPLES,
     NP_COARSE_STEP,
     NP_COARSE_STRIDE,
-) = range(16)
-N_NAV_PARAMS = 16
+    NP_QF_V,
+) = range(17)
+N_NAV_PARAMS = 17
 
 
 def navigator_params(
@@ -114,11 +116,12 @@ def navigator_params(
     p[NP_GATE] = float(settings.get("gate_chi2", 18.42))
     p[NP_REMOVE_BIAS] = 1.0 if settings.get("remove_bias", False) else 0.0
     p[NP_PROFILE_NOISE] = ira_noise_m / math.sqrt(max(ira_rate_hz, 1.0))
+    # truth: the IMU's velocity random walk; the filter's process noise: the navigator's own settings, as
+    # the full navigator's filter takes them (velocity random walk, and the angle random walk that drives its
+    # tilt states, here g0 x that as the random walk of the acceleration error)
     p[NP_Q_V] = float(imu["accel_noise_density_mps2_rthz"]) ** 2
-    # the tilt-rate ramp g0 b_g t as a random walk of the acceleration error matching its variance at 100 s
-    p[NP_Q_A] = (G0_MPS2 * float(imu["gyro_bias_rps"])) ** 2 * 100.0 + float(
-        imu.get("accel_bias_instability_mps2", 0.0)
-    ) ** 2 / max(float(imu.get("accel_bias_tau_s", 3600.0)), 1.0)
+    p[NP_QF_V] = float(settings.get("accel_noise_mps2_rthz", 10e-6 * G0_MPS2)) ** 2
+    p[NP_Q_A] = (G0_MPS2 * float(settings.get("gyro_noise_rps_rthz", math.radians(0.005) / 60.0))) ** 2
     p[NP_GNSS_UNTIL] = float(gnss_until_s)
     p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
     p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
