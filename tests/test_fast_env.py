@@ -168,10 +168,11 @@ def test_navigation_error_grows_over_featureless_and_shrinks_with_terrain_fixes(
 
 @pytest.mark.parametrize("name", cal.QUICK_ROUTES)
 def test_calibrated_against_recorded_full_loop(name):
-    """The fast tier's true error at the goal (mean, 90th percentile over the same 32 seeds) within 25 % of
-    the full JSBSim loop's, recorded by scripts/calibrate_fast_tier.py (cal.FULL_LOOP_REFERENCE)."""
+    """The fast tier's true error at the goal (mean, 90th percentile over FAST_SEEDS seeds) within 25 % of
+    the full JSBSim loop's over 32 seeds, recorded by scripts/calibrate_fast_tier.py
+    (cal.FULL_LOOP_REFERENCE)."""
     ref = cal.FULL_LOOP_REFERENCE[name]
-    res = cal.summary(cal.fly_fast(cal.route_by_name(name), range(ref["n"]))["errors_m"])
+    res = cal.summary(cal.fly_fast(cal.route_by_name(name), range(cal.FAST_SEEDS))["errors_m"])
     assert abs(res["mean_m"] / ref["mean_m"] - 1.0) <= 0.25, (res, ref)
     assert abs(res["p90_m"] / ref["p90_m"] - 1.0) <= 0.25, (res, ref)
 
@@ -179,11 +180,12 @@ def test_calibrated_against_recorded_full_loop(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [r.name for r in cal.REFERENCE_ROUTES])
 def test_calibrated_against_full_loop_live(name):
-    """Both tiers flown now on every reference route, 12 seeds each."""
+    """Both tiers flown now on every reference route: the full loop over 32 seeds, the fast tier over
+    FAST_SEEDS."""
     if name in cal.KNOWN_MISSES:
         pytest.xfail(cal.KNOWN_MISSES[name])
     r = cal.route_by_name(name)
-    c = cal.compare(cal.fly_full(r, range(12)), cal.fly_fast(r, range(12)))
+    c = cal.compare(cal.fly_full(r, range(32)), cal.fly_fast(r, range(cal.FAST_SEEDS)))
     assert abs(c["mean_rel"]) <= 0.25 and abs(c["p90_rel"]) <= 0.25, c
 
 
@@ -280,5 +282,8 @@ def test_information_observations_match_the_full_tiers_functions():
             5.0,
         )
         np.testing.assert_allclose(obs[i, 22:27], mean, atol=0.02)
-        np.testing.assert_allclose(obs[i, 27:32], np.minimum(featureless, 50.0), atol=0.3)
+        # the longest featureless run counts whole steps of the march: a point within metres of the CRLB
+        # threshold (the two tiers' local frames differ by metres) may flip, changing a run by one step
+        step_km = max(200.0, math.hypot(dn[i], de[i]) / 24) / 1000.0
+        np.testing.assert_allclose(obs[i, 27:32], np.minimum(featureless, 50.0), atol=step_km + 0.05)
     e.close()

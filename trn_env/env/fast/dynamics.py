@@ -226,7 +226,19 @@ def fly_decision(
             # ---- navigator
             w_n, w_e = frng.normal_pair(state, i)
             f_turn = G0_MPS2 * math.tan(X[i, BANK])  # centripetal specific force, right of the heading
-            nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
+            b0, b1 = frng.normal_pair(state, i)
+            b2, b3 = frng.normal_pair(state, i)
+            nv.ins_step(
+                X,
+                i,
+                dt,
+                vrw * w_n,
+                vrw * w_e,
+                -f_turn * math.sin(psi1),
+                f_turn * math.cos(psi1),
+                nav,
+                (b0, b1, b2, b3),
+            )
             X[i, T] += dt
             nv.covariance_step(X, i, dt, nav[nv.NP_QF_V], nav[nv.NP_Q_A])
             t = X[i, T]

@@ -45,6 +45,10 @@ from trn_env.env.fast.state import (
     BG_E,
     BG_N,
     BG_Z,
+    BI_A_E,
+    BI_A_N,
+    BI_G_E,
+    BI_G_N,
     CA_E,
     CA_N,
     EP_E,
@@ -61,6 +65,8 @@ from trn_env.env.fast.state import (
     P22,
     REJECTS,
     TILT_E,
+    TILT_GM_E,
+    TILT_GM_N,
     TILT_N,
     YAW0,
     T,
@@ -91,8 +97,12 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_COARSE_STEP,
     NP_COARSE_STRIDE,
     NP_QF_V,
-) = range(17)
-N_NAV_PARAMS = 17
+    NP_BI_A,
+    NP_TAU_A,
+    NP_BI_G,
+    NP_TAU_G,
+) = range(21)
+N_NAV_PARAMS = 21
 
 
 def navigator_params(
@@ -122,6 +132,10 @@ def navigator_params(
     p[NP_Q_V] = float(imu["accel_noise_density_mps2_rthz"]) ** 2
     p[NP_QF_V] = float(settings.get("accel_noise_mps2_rthz", 10e-6 * G0_MPS2)) ** 2
     p[NP_Q_A] = (G0_MPS2 * float(settings.get("gyro_noise_rps_rthz", math.radians(0.005) / 60.0))) ** 2
+    p[NP_BI_A] = float(imu.get("accel_bias_instability_mps2", 0.0))
+    p[NP_TAU_A] = float(imu.get("accel_bias_tau_s", 3600.0))
+    p[NP_BI_G] = float(imu.get("gyro_bias_instability_rps", 0.0))
+    p[NP_TAU_G] = float(imu.get("gyro_bias_tau_s", 3600.0))
     p[NP_GNSS_UNTIL] = float(gnss_until_s)
     p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
     p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
@@ -132,14 +146,37 @@ def navigator_params(
 
 
 @njit(cache=True)
-def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e):
+def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e, nav, w):
     """Propagate aircraft i's INS error (truth) by dt seconds; noise_n, noise_e are the step's velocity
     random-walk increments (m/s) from the white accelerometer noise, drawn by the caller; f_n, f_e the
-    horizontal specific force (m/s^2) the heading error rotates."""
+    horizontal specific force (m/s^2) the heading error rotates; w four standard normals driving the bias
+    instabilities (first-order Gauss-Markov with the IMU grade's std and correlation time)."""
     t = X[i, T]
     yaw = X[i, YAW0] + X[i, BG_Z] * t
-    a_n = X[i, BA_N] + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t) - X[i, CA_N] - yaw * f_e
-    a_e = X[i, BA_E] + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t) - X[i, CA_E] + yaw * f_n
+    a_n = (
+        X[i, BA_N]
+        + X[i, BI_A_N]
+        + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t + X[i, TILT_GM_N])
+        - X[i, CA_N]
+        - yaw * f_e
+    )
+    a_e = (
+        X[i, BA_E]
+        + X[i, BI_A_E]
+        + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t + X[i, TILT_GM_E])
+        - X[i, CA_E]
+        + yaw * f_n
+    )
+    X[i, TILT_GM_N] += X[i, BI_G_N] * dt
+    X[i, TILT_GM_E] += X[i, BI_G_E] * dt
+    fa = math.exp(-dt / nav[NP_TAU_A])
+    fg = math.exp(-dt / nav[NP_TAU_G])
+    sa = nav[NP_BI_A] * math.sqrt(1.0 - fa * fa)
+    sg = nav[NP_BI_G] * math.sqrt(1.0 - fg * fg)
+    X[i, BI_A_N] = fa * X[i, BI_A_N] + sa * w[0]
+    X[i, BI_A_E] = fa * X[i, BI_A_E] + sa * w[1]
+    X[i, BI_G_N] = fg * X[i, BI_G_N] + sg * w[2]
+    X[i, BI_G_E] = fg * X[i, BI_G_E] + sg * w[3]
     X[i, EP_N] += X[i, EV_N] * dt + 0.5 * a_n * dt * dt
     X[i, EP_E] += X[i, EV_E] * dt + 0.5 * a_e * dt * dt
     X[i, EV_N] += a_n * dt + noise_n
@@ -355,6 +392,12 @@ def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_si
     X[i, BARO] = baro_sigma * frng.normal(state, i)
     X[i, YAW0] = sig_yaw * frng.normal(state, i)
     X[i, BG_Z] = bg * frng.normal(state, i)
+    X[i, BI_A_N] = 0.0
+    X[i, BI_A_E] = 0.0
+    X[i, BI_G_N] = 0.0
+    X[i, BI_G_E] = 0.0
+    X[i, TILT_GM_N] = 0.0
+    X[i, TILT_GM_E] = 0.0
     X[i, CA_N] = 0.0
     X[i, CA_E] = 0.0
     X[i, P00] = sig_pos * sig_pos

@@ -171,7 +171,7 @@ def observe(
                     pn += seg * (ux * cphi - uy * sphi)
                     pe += seg * (uy * cphi + ux * sphi)
                 elif j > 0:
-                    break          # arrived: the remaining points repeat this one and change neither figure
+                    break  # arrived: the remaining points repeat this one and change neither figure
                 c = _info_at(
                     info, i_lat0, i_lon0, i_dlat, i_dlon, lat_e + pn / m_lat, lon_e + pe / m_lon, no_info
                 )
