@@ -173,6 +173,7 @@ def fly_decision(
     turb_a = math.exp(-dt / fp[FP_TURB_TAU])
     turb_b = fp[FP_TURB_SIGMA] * math.sqrt(1.0 - turb_a * turb_a)
     vrw = math.sqrt(nav[nv.NP_Q_V] * dt)
+    sin_off_max = math.sin(min(fp[FP_OFFSET_MAX], 0.5 * math.pi))
     for i in prange(X.shape[0]):
         if not active[i] or X[i, END] != 0.0:
             continue
@@ -185,7 +186,8 @@ def fly_decision(
             gn, ge = offset_to_goal(X, i, lat_e, lon_e)
             if fp[FP_PURSUIT] > 0.5:
                 d = math.hypot(gn, ge)
-                lim = min(fp[FP_OFFSET_MAX], math.asin(min(1.0, d * fp[FP_OMEGA] / v)))
+                x = d * fp[FP_OMEGA] / v
+                lim = min(fp[FP_OFFSET_MAX], 0.5 * math.pi) if x >= sin_off_max else math.asin(x)
                 X[i, TRK_CMD] = _wrap(math.atan2(ge, gn) + X[i, OFFSET_FRAC] * lim)
             h_map_e = kernels.bilinear(mapg, m_lat0, m_lon0, m_dlat, m_dlon, lat_e, lon_e)
             if h_map_e != h_map_e:
@@ -226,19 +228,12 @@ def fly_decision(
             # ---- navigator
             w_n, w_e = frng.normal_pair(state, i)
             f_turn = G0_MPS2 * math.tan(X[i, BANK])  # centripetal specific force, right of the heading
-            b0, b1 = frng.normal_pair(state, i)
-            b2, b3 = frng.normal_pair(state, i)
-            nv.ins_step(
-                X,
-                i,
-                dt,
-                vrw * w_n,
-                vrw * w_e,
-                -f_turn * math.sin(psi1),
-                f_turn * math.cos(psi1),
-                nav,
-                (b0, b1, b2, b3),
-            )
+            nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
+            k_t = int(X[i, T] + 0.5)
+            if k_t % nv.BI_STEP_S == 0:
+                b0, b1 = frng.normal_pair(state, i)
+                b2, b3 = frng.normal_pair(state, i)
+                nv.bias_instability_step(X, i, float(nv.BI_STEP_S), nav, b0, b1, b2, b3)
             X[i, T] += dt
             nv.covariance_step(X, i, dt, nav[nv.NP_QF_V], nav[nv.NP_Q_A])
             t = X[i, T]

@@ -75,6 +75,7 @@ from trn_env.terrain import kernels
 
 G0_MPS2 = 9.80665
 COARSE_STEP_M = 50.0  # TERCOM's first search stage: grid step over the whole window
+BI_STEP_S = 10  # bias instabilities advance every 10 s
 COARSE_STRIDE = 4  # ... on every 4th profile point (1 Hz profile: 4 s apart)
 MODELLED_NAVIGATORS = ("ins", "ins_tercom")
 
@@ -146,11 +147,10 @@ def navigator_params(
 
 
 @njit(cache=True)
-def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e, nav, w):
+def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e):
     """Propagate aircraft i's INS error (truth) by dt seconds; noise_n, noise_e are the step's velocity
     random-walk increments (m/s) from the white accelerometer noise, drawn by the caller; f_n, f_e the
-    horizontal specific force (m/s^2) the heading error rotates; w four standard normals driving the bias
-    instabilities (first-order Gauss-Markov with the IMU grade's std and correlation time)."""
+    horizontal specific force (m/s^2) the heading error rotates."""
     t = X[i, T]
     yaw = X[i, YAW0] + X[i, BG_Z] * t
     a_n = (
@@ -167,20 +167,26 @@ def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e, nav, w):
         - X[i, CA_E]
         + yaw * f_n
     )
-    X[i, TILT_GM_N] += X[i, BI_G_N] * dt
-    X[i, TILT_GM_E] += X[i, BI_G_E] * dt
-    fa = math.exp(-dt / nav[NP_TAU_A])
-    fg = math.exp(-dt / nav[NP_TAU_G])
-    sa = nav[NP_BI_A] * math.sqrt(1.0 - fa * fa)
-    sg = nav[NP_BI_G] * math.sqrt(1.0 - fg * fg)
-    X[i, BI_A_N] = fa * X[i, BI_A_N] + sa * w[0]
-    X[i, BI_A_E] = fa * X[i, BI_A_E] + sa * w[1]
-    X[i, BI_G_N] = fg * X[i, BI_G_N] + sg * w[2]
-    X[i, BI_G_E] = fg * X[i, BI_G_E] + sg * w[3]
     X[i, EP_N] += X[i, EV_N] * dt + 0.5 * a_n * dt * dt
     X[i, EP_E] += X[i, EV_E] * dt + 0.5 * a_e * dt * dt
     X[i, EV_N] += a_n * dt + noise_n
     X[i, EV_E] += a_e * dt + noise_e
+    X[i, TILT_GM_N] += X[i, BI_G_N] * dt
+    X[i, TILT_GM_E] += X[i, BI_G_E] * dt
+
+
+@njit(cache=True)
+def bias_instability_step(X, i, dt, nav, w0, w1, w2, w3):
+    """Advance aircraft i's bias instabilities (first-order Gauss-Markov, exact over dt seconds, with the
+    IMU grade's std and correlation time) by dt; w0..w3 standard normals."""
+    fa = math.exp(-dt / nav[NP_TAU_A])
+    fg = math.exp(-dt / nav[NP_TAU_G])
+    sa = nav[NP_BI_A] * math.sqrt(1.0 - fa * fa)
+    sg = nav[NP_BI_G] * math.sqrt(1.0 - fg * fg)
+    X[i, BI_A_N] = fa * X[i, BI_A_N] + sa * w0
+    X[i, BI_A_E] = fa * X[i, BI_A_E] + sa * w1
+    X[i, BI_G_N] = fg * X[i, BI_G_N] + sg * w2
+    X[i, BI_G_E] = fg * X[i, BI_G_E] + sg * w3
 
 
 @njit(cache=True)
