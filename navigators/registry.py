@@ -15,6 +15,9 @@ Monitors run beside a navigator on the same frames and its estimate (`create_mon
 (navigators.integrity.dem_monitor; needs dem=, the navigator's map).
 
 Every navigator validates its settings in its constructor and raises `ValueError` naming the setting.
+`integrity_risk` (per epoch, in (0, 1), default 1e-3) and `map_horizontal_sigma_m` (the map's horizontal
+error per axis, m, default 0) are taken here for every navigator: the risk its published horizontal
+protection level is computed for and the map error it covers (navigators.integrity.protection_level).
 A navigator that draws random numbers (particle filters) is registered with `takes_rng=True` and gets the
 scenario's `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its
 run bit for bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
@@ -29,6 +32,7 @@ from trn_env.navigators.acquisition_tracking import AcqTrackNavigator
 from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
 from trn_env.navigators.filters.pf import ParticleFilter
 from trn_env.navigators.filters.pmf import PointMassFilter
+from trn_env.navigators.integrity.protection_level import configure
 
 # name -> (factory, takes_rng)
 _FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
@@ -66,8 +70,15 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
     factory, takes_rng = _FACTORIES[name]
     if takes_rng:
         settings["rng"] = rng
+    # every navigator's published protection level is for this per-epoch risk (protection_level)
+    pl_settings = {k: settings.pop(k) for k in ("integrity_risk", "map_horizontal_sigma_m") if k in settings}
+    probe = type("_Probe", (), {})()
+    configure(probe, **pl_settings)            # bad values fail before the navigator is built
     try:
-        return factory(**settings)
+        nav = factory(**settings)
+        if hasattr(nav, "integrity_risk"):
+            configure(nav, **pl_settings)
+        return nav
     except TypeError as exc:
         import re
         m = re.search(r"unexpected keyword argument '(\w+)'", str(exc))

@@ -97,6 +97,7 @@ from trn_env.navigators.acquisition_tracking.settings import AcqTrackConfig
 from trn_env.navigators.acquisition_tracking.tracking_step import TrackingStep
 from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
@@ -116,6 +117,9 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
     dem: the navigator's map (terrain.Dem, or a name/path for terrain.load). `required_sensors()` lists the
     sensors its settings need (the scenario check refuses a scenario without them before the flight).
     """
+
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(self, dem=None, name: str = "acq_track", **settings):
         unknown = sorted(set(settings) - set(AcqTrackConfig.names()))
@@ -500,6 +504,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
                 }
             )
         extra.update(self._integrity_extra)
+        pl.publish(extra, pl.gaussian_hpl(P, pl.filter_risk(self)), self)   # protection_level
         h = Health(
             ok=self.health.ok,
             status=self.health.status,

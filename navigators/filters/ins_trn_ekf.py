@@ -49,6 +49,7 @@ from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
 from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements.ira_closest_point import FORMULAS
 from trn_env.navigators.protocol import (
@@ -124,6 +125,9 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
     (_ekf_kernels.fused_segment); set the attribute `fused = False` for the step-by-step path (the same
     numbers, to round-off).
     """
+
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(
         self,
@@ -241,6 +245,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             raise ValueError(f"recovery_sigma_m must be a finite number >= 0, got {recovery_sigma_m!r}")
         self.recovery_sigma_m = float(recovery_sigma_m)
         self._update_extra: dict = {}
+        self._fault_allowance_m = 0.0       # the last accepted TERCOM fix's (protection_level)
         self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
         self.health = Health()
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
@@ -306,6 +311,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self._integrity_extra = {}
         self._set_search(self.nominal_half_cells)
         self._update_extra = {}
+        self._fault_allowance_m = 0.0
         self._t_ekf = float(initial.t_s)
         self._t_batch0 = float(initial.t_s)
         self._height_initialised = False
@@ -388,6 +394,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         if gated:
             self._count_skip(t_s, "tercom_gated", 1, f"TERCOM fix failed the chi-square gate ({d2:.1f})")
             return
+        self._fault_allowance_m = pl.fault_allowance_m(self.kf.P[:2, :2], S, self.gate_chi2)
         saved = copy.deepcopy((self.kf.x, self.kf.P))
         self.kf.update(z, R=Rm, H=H)
         dx = self.kf.x.ravel()
@@ -480,6 +487,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             )
         extra.update(self._update_extra)
         extra.update(self._integrity_extra)
+        # HPL: the Gaussian bound of P plus the last accepted fix's fault allowance (protection_level)
+        pl.publish(extra, pl.gaussian_hpl(P[:2, :2], pl.filter_risk(self)) + self._fault_allowance_m, self)
         health = Health(
             ok=self.health.ok,
             status=self.health.status,

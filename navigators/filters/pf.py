@@ -201,6 +201,10 @@ class ParticleFilter(InsRiddenFilter):
         w = np.exp(self.logw - self.logw.max())
         return w / w.sum()
 
+    def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """The particles' horizontal errors and weights (no pad)."""
+        return self.dn, self.de, self._weights(), 0.0
+
     def _apply_loglik_b(self, t_s: float, ll: np.ndarray, what: str, gam_resid: np.ndarray, gam: np.ndarray,
                         S: float) -> tuple[float, float] | None:
         """`_apply_loglik` of a measurement of the vertical offset (variance S including P_b): each

@@ -65,6 +65,7 @@ from scipy import ndimage
 from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
@@ -336,6 +337,12 @@ class PointMassFilter(InsRiddenFilter):
     def _weights(self) -> np.ndarray:
         w = np.exp(self.logw - self.logw.max())
         return w / w.sum()
+
+    def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """The cells' centres and masses; pad: a cell's half diagonal plus the Gaussian bound of the process
+        noise not yet convolved into the grid (navigators.integrity.protection_level)."""
+        pad = 0.5 * math.sqrt(2.0) * self.spacing + pl.gaussian_hpl(self._q_pending, risk)
+        return self.dn_flat, self.de_flat, np.exp(self.logw - self.logw.max()), pad
 
     def _apply_loglik(self, t_s: float, ll: np.ndarray, what: str) -> float | None:
         """logw += ll; returns log p(z | past) or None (skipped: every cell underflowed)."""

@@ -78,6 +78,7 @@ from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.error_model_15 import transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements import ira_seed002 as ira_model
 from trn_env.navigators.protocol import (
@@ -153,6 +154,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m, recovery_reset_kalman (the
     innovation test and its recovery, see the module docstring).
     """
+
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(
         self,
@@ -576,6 +580,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
+        risk = pl.filter_risk(self)      # the cloud's mass radius (navigators.integrity.protection_level)
+        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), self)
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
                         consistency_warning=self._consistency_warning,
                         events=list(self.health.events))

@@ -25,6 +25,7 @@ from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements.baro import geometric_height_m
 from trn_env.navigators.measurements.terrain_models import IRA_FORMULA_CODES, radii_m
@@ -105,6 +106,8 @@ class InsRiddenFilter:
     """
 
     name = "terrain_filter"
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(self, dem=None, aiding: str = "ira", measurement_rate_hz: float = 1.0,
                  ira_formula: str = "proposed", ira_range_sigma_m: float = 3.5,
@@ -449,7 +452,14 @@ class InsRiddenFilter:
                         events=list(self.health.events), consistency_warning=self._consistency_warning)
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
-                        health=health, extra=dict(self.extra))
+                        health=health, extra=self._with_protection_level(dict(self.extra)))
+
+    def _with_protection_level(self, extra: dict) -> dict:
+        """extra with the belief's HPL (navigators.integrity.protection_level: the mass radius of the points
+        of `_pl_points` plus their pad) for the navigator's integrity_risk."""
+        risk = pl.filter_risk(self)
+        dn, de, w, pad = self._pl_points(risk)
+        return pl.publish(extra, pl.particle_hpl(dn, de, w, risk, pad), self)
 
     # ------------------------------------------------------------------------------------ subclass API
     def _init_belief(self, cov9: np.ndarray) -> None:
@@ -465,6 +475,10 @@ class InsRiddenFilter:
         raise NotImplementedError
 
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(north, east, weights, pad_m) of the belief's horizontal points for the protection level."""
         raise NotImplementedError
 
     def _recover(self, t_s: float) -> str:

@@ -27,6 +27,7 @@ import numpy as np
 
 from trn_env.campaign.rows import read_manifest, read_rows
 from trn_env.campaign.stats import group_stats
+from trn_env.output.metrics import MetricSettings
 
 
 def _plt():
@@ -54,6 +55,44 @@ def cdf_plot(path: Path, df) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def stanford_plot(path: Path, df, alert_limit_m: float) -> bool:
+    """Stanford diagrams (navigators.integrity.protection_level): per navigator, the healthy epochs'
+    horizontal error against their horizontal protection level as a 2-D histogram (log colour), the
+    diagonal (misleading information below it) and the alert limit. False if no run has an HPL."""
+    if "series_hpl_m" not in df:
+        return False
+    navs = []
+    for nav, g in df.groupby("navigator", sort=True):
+        e = np.concatenate([np.asarray(x, float) for x in g["series_err_h_m"]] or [np.array([])])
+        h = np.concatenate([np.asarray(x, float) for x in g["series_hpl_m"]] or [np.array([])])
+        ok = np.concatenate([np.asarray(x, float) for x in g["series_nav_ok"]] or [np.array([])]) > 0.5
+        keep = ok & np.isfinite(e) & np.isfinite(h) if ok.size == e.size else np.isfinite(e) & np.isfinite(h)
+        if keep.any():
+            navs.append((nav, e[keep], h[keep]))
+    if not navs:
+        return False
+    plt = _plt()
+    from matplotlib.colors import LogNorm
+    fig, axes = plt.subplots(1, len(navs), figsize=(4.6 * len(navs), 4.4), squeeze=False)
+    for ax, (nav, e, h) in zip(axes[0], navs, strict=True):
+        top = max(float(np.percentile(np.r_[e, h], 99.9)) * 1.2, 1.5 * alert_limit_m)
+        bins = np.linspace(0.0, top, 80)
+        hist = ax.hist2d(np.clip(e, 0, top), np.clip(h, 0, top), bins=[bins, bins], norm=LogNorm(),
+                         cmap="viridis")
+        ax.plot([0, top], [0, top], "k-", lw=0.8)
+        ax.axvline(alert_limit_m, color="r", lw=0.8, ls="--")
+        ax.axhline(alert_limit_m, color="r", lw=0.8, ls="--")
+        mi = int(np.count_nonzero(e > h))
+        ax.set_title(f"{nav}: {e.size} epochs, {mi} MI", fontsize=9)
+        ax.set_xlabel("horizontal error (m)")
+        ax.set_ylabel("horizontal protection level (m)")
+        fig.colorbar(hist[3], ax=ax, label="epochs")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
 
 
 def envelope(series_t: list, series_v: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -173,6 +212,9 @@ def write_report(campaign_dir: Path | str, out_dir: Path | str | None = None) ->
                 ("Horizontal error versus time", "envelope_horizontal_error.png")]
         cdf_plot(tmp / pngs[0][1], df)
         envelope_plot(tmp / pngs[1][1], df)
+        al = float((manifest.get("metrics") or {}).get("alert_limit_m", MetricSettings().alert_limit_m))
+        if stanford_plot(tmp / "stanford.png", df, al):
+            pngs.append((f"Stanford diagrams (alert limit {al:g} m)", "stanford.png"))
         for p in manifest.get("sweep_paths", []):
             name = f"sweep_{p.replace('.', '_')}.png"
             if sweep_plot(tmp / name, df, p):

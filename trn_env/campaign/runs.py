@@ -24,7 +24,7 @@ import numpy as np
 
 from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
 
-SERIES_KEYS = ("t_s", "err_h_m", "err_v_m", "sigma_h_m")
+SERIES_KEYS = ("t_s", "err_h_m", "err_v_m", "sigma_h_m", "hpl_m", "nav_ok")
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,20 @@ def statistic(values: np.ndarray, stat: str) -> float:
     raise ValueError(f"unknown statistic {stat!r}")
 
 
+def pooled_protection_level(g) -> dict[str, float]:
+    """The protection-level epochs of a group's runs pooled: epochs, misleading epochs, the pooled
+    misleading-information rate with its one-sided 95 % Clopper-Pearson bound, hazardous epochs."""
+    from trn_env.output.integrity_metrics import clopper_pearson_upper
+    if "pl_epochs" not in g:
+        return {}
+    n = int(np.nansum(g["pl_epochs"].to_numpy(dtype=float)))
+    k = int(np.nansum(g["pl_misleading_epochs"].to_numpy(dtype=float)))
+    h = int(np.nansum(g["pl_hazardous_epochs"].to_numpy(dtype=float)))
+    return {"pl_epochs.sum": n, "pl_misleading_epochs.sum": k,
+            "pl_misleading_rate.pooled": k / n if n else float("nan"),
+            "pl_misleading_rate.pooled_upper95": clopper_pearson_upper(k, n), "pl_hazardous_epochs.sum": h}
+
+
 def group_stats(df, stats=TABLE_STATS) -> dict[str, dict[str, float]]:
     """{group key: {'column.stat': value, 'runs': n, 'errors': n, ...}} over the rows of each group."""
     out: dict[str, dict[str, float]] = {}
@@ -52,6 +66,7 @@ def group_stats(df, stats=TABLE_STATS) -> dict[str, dict[str, float]]:
         for col, stat in stats:
             vals = ok[col].to_numpy(dtype=float) if col in ok else np.array([])
             row[f"{col}.{stat}"] = statistic(vals, stat)
+        row.update(pooled_protection_level(ok))
         out[str(key)] = row
     return out
 

@@ -398,13 +398,18 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     registry.MAP_NOISE_AWARE also get map_sigma_m / map_bias_sigma_m from the map error model
     (map_noise_settings), those in registry.IMU_AWARE their bias priors and bias process noise from the IMU
     (imu_bias_settings), those in registry.MAP_IS_WORLD_AWARE terrain_model_sigma_m = 0 when the map is the
-    world, else terrain_detail_spacing_m from the world's refinement, unless the settings give them."""
+    world, else terrain_detail_spacing_m from the world's refinement, unless the settings give them. Every
+    navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level covers it)."""
     from trn_env.navigators import registry
+    from trn_env.terrain import map_error
     settings = dict(d["navigator"]["settings"])
     settings.setdefault("dem", map_dem)
     if d["navigator"]["name"] in getattr(registry, "IMU_AWARE", ()):
         for key, val in imu_bias_settings(d["sensors"].get("imu"), _epoch_s(settings)).items():
             settings.setdefault(key, val)
+    preset = str((d["terrain"]["map"].get("error_model") or {}).get("preset", "")).strip().lower()
+    if preset in map_error.ACCURACY_CLASSES:   # the protection level covers the map's horizontal error
+        settings.setdefault("map_horizontal_sigma_m", map_error.ACCURACY_CLASSES[preset].sigma_h_m)
     if d["navigator"]["name"] in getattr(registry, "MAP_NOISE_AWARE", ()):
         for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
             settings.setdefault(key, val)
@@ -454,6 +459,27 @@ def navigator_sensor_problems(d: dict, navigator) -> list[str]:
 
 # -------------------------------------------------------------------------------------------- monitors
 
+def monitor_map_settings(error_model: dict | None) -> dict:
+    """The DEM monitor's map model from the scenario's map error model (terrain.map_error): sigma_m (the
+    vertical sigma: random and bias parts together), map_bias_fraction, correlation_length_m and
+    correlation_function; empty without a random vertical error (the monitor keeps seed 003's model)."""
+    from trn_env.terrain import map_error
+    s = dict(error_model or {})
+    noise = map_noise_settings(s)
+    sig_r, sig_b = noise["map_sigma_m"], noise["map_bias_sigma_m"]
+    if not sig_r > 0.0:
+        return {}
+    preset = str(s.get("preset", "")).strip().lower()
+    cls = map_error.ACCURACY_CLASSES.get(preset)
+    length = s.get("correlation_length_m", cls.correlation_length_m if cls else
+                   map_error.MapErrorModel().correlation_length_m)
+    func = s.get("correlation_function",
+                 "exponential" if cls else map_error.MapErrorModel().correlation_function)
+    total = math.hypot(sig_r, sig_b)
+    return {"sigma_m": total, "map_bias_fraction": (sig_b / total) ** 2,
+            "correlation_length_m": float(length), "correlation_function": func}
+
+
 def monitor_settings(d: dict, name: str) -> dict:
     """A monitor's settings: the scenario's [monitors.<name>] table, with the sensor figures it needs
     filled from the scenario's sensors where not given (dem_integrity: the radar altimeter's noise and
@@ -469,6 +495,8 @@ def monitor_settings(d: dict, name: str) -> dict:
             settings.setdefault("lever_arm_m", float(cfg.lever_arm_b_m[2]))   # FRD z: below the GNSS antenna
             settings.setdefault("beam_half_angle_deg", 0.5 * float(cfg.beamwidth_deg))
             settings.setdefault("max_range_m", float(cfg.max_range_m))
+        for key, val in monitor_map_settings(d["terrain"]["map"].get("error_model")).items():
+            settings.setdefault(key, val)
         gn = d["sensors"].get("gnss")
         if gn is not None:
             cfg = suite._make_config("gnss", True if gn == {} else dict(gn))
