@@ -22,6 +22,7 @@ Per navigator and grade, over the epochs after --from-s (15 s):
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import math
 import pickle
@@ -42,9 +43,13 @@ import trn_env.scenario.build as components  # noqa: E402
 INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
 
 
+SETTINGS: dict = {}  # --set name=value: navigator settings on top of the defaults
+
+
 def scenario_for(d: dict, name: str, grade: str) -> dict:
     """The default scenario's data with the grade's IMU and the navigator (its settings as the default's)."""
     settings = {"remove_bias": True} if name == "ins_tercom" else {}
+    settings.update(SETTINGS.get(name, {}))
     return {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
             "navigator": {"name": name, "settings": settings}}
 
@@ -124,7 +129,13 @@ def main(argv=None) -> int:
                     help="pickle of the recorded flight: read if it exists (same duration), else written")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="pool the runs of these --out files (same duration) instead of running")
+    ap.add_argument("--set", dest="settings", action="append", default=[],
+                    help="navigator.setting=value (a Python literal), e.g. pmf.span_sigmas=6")
     a = ap.parse_args(argv)
+    for item in a.settings:
+        key, _, value = item.partition("=")
+        nav, _, setting = key.partition(".")
+        SETTINGS.setdefault(nav, {})[setting] = ast.literal_eval(value)
     if a.merge:
         pooled: dict = {}
         warn: dict = {}
