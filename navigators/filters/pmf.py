@@ -73,7 +73,7 @@ from trn_env.navigators.measurements.terrain_models import (
 )
 
 G0 = 9.80665
-PMF_MEMORY_S = 120.0        # the memory over which carried-as-constant error rates are matched (imu_spec)
+PMF_MEMORY_S = 240.0        # the memory over which carried-as-constant error rates are matched (imu_spec)
 TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
 N_U = 7                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error)
 LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
