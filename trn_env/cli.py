@@ -662,6 +662,8 @@ def cmd_campaign(args) -> int:
     from trn_env.campaign.driver import default_out_dir
     out_dir = args.out or default_out_dir(campaign.name)
     console = Console()
+    if not console.is_terminal:            # a pipe or a CI log: rich would assume 80 columns
+        console = Console(width=100)
     try:
         stats = run_campaign(campaign, out_dir, backend=backend, resume=args.resume, progress=not args.quiet)
     except CampaignError as err:
