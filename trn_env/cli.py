@@ -126,6 +126,12 @@ def _parser() -> argparse.ArgumentParser:
                       help="the navigator's map: a DEM path or bundled name (default: the log's map)")
     rep_.add_argument("--out", type=Path, default=None, help="run folder (default runs/replay-<log>-<time>)")
     rep_.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    rep_.add_argument("--overwrite", action="store_true",
+                      help="replace a run folder --out that holds a previous run, as a whole")
+    rep_.add_argument("--seed", type=int, default=None,
+                      help="the navigator's random stream (default: the log's seed)")
+    rep_.add_argument("--set", action="append", default=[], metavar="navigator.settings.NAME=VALUE",
+                      help="a navigator setting, VALUE a TOML literal (repeatable)")
     sub.add_parser("scenarios", help="list the built-in scenarios")
     navs = sub.add_parser("navigators", help="list the built-in and installed navigators and monitors with "
                                              "their settings (name, type, unit, default, meaning)")
@@ -348,7 +354,7 @@ def cmd_fly(args) -> int:
     from trn_env.sim.closed_loop import spawn_rngs
     from trn_env.sim.warm_up import warm_up
 
-    loop = writer = log_path = None
+    loop = writer = log_path = result = None
     try:
         # the terrain once (the same map stream as the loop's own), the kernels compiled (first run) or
         # loaded from numba's cache before the flight, so neither stalls the progress bar nor counts in the
@@ -388,12 +394,12 @@ def cmd_fly(args) -> int:
             bar.close()
         code, word = _interrupt_exit(exc)
         print(f"{word}: nothing written", file=sys.stderr)
-        if writer is not None:
-            writer.abort()
         return code
     finally:
         if loop is not None:
-            loop.close()
+            loop.close()              # (the worker stops writing frames before the log is removed)
+        if writer is not None and result is None:
+            writer.abort()
     bar.close()
     plot = None if args.no_plots else _plotter(result)
     from trn_env.scenario.resolved import resolved_toml
@@ -497,12 +503,26 @@ def cmd_replay(args) -> int:
     from trn_env.logs.replay import replay, write_result_log
     from trn_env.output.run_folder import default_out_dir, write_run
     if args.out is not None:
-        problem = out_dir_problem(args.out)
+        problem = out_dir_problem(args.out, args.overwrite)
         if problem is not None:
             print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
             return 2
+    from trn_env.scenario.overrides import parse_assignment
+    settings = {}
+    for text in args.set:
+        try:
+            path, value = parse_assignment(text)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        if not path.startswith("navigator.settings.") or path.count(".") != 2:
+            print(f"error: --set {text!r}: replay sets navigator settings only "
+                  "(navigator.settings.NAME=VALUE)", file=sys.stderr)
+            return 2
+        settings[path.split(".", 2)[2]] = value
     try:
-        res = replay(args.log, args.navigator, monitors=args.monitor, map_path=args.map)
+        res = replay(args.log, args.navigator, settings=settings or None, monitors=args.monitor,
+                     map_path=args.map, seed=args.seed)
     except (LogError, ValueError) as exc:
         print(f"error: {exc} (nothing written)", file=sys.stderr)
         return 2
@@ -517,7 +537,8 @@ def cmd_replay(args) -> int:
         writer = _log_writer(out_dir)
         log_path = write_result_log(writer, res)
         writer = None
-        write_run(out_dir, res.summary, arrays, res.events, plot=plot, log_dir=log_path)
+        write_run(out_dir, res.summary, arrays, res.events, plot=plot, log_dir=log_path,
+                  overwrite=args.overwrite)
     except KeyboardInterrupt:
         print("interrupted while writing: no summary written", file=sys.stderr)
         return 130
