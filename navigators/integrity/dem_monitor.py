@@ -548,6 +548,7 @@ class DemIntegrityMonitor:
     skipped without it) and uses frames.gnss while fixes are there."""
 
     name = "dem_integrity"
+    settings_class = DemMonitorConfig        # what `trn-env navigators` lists as its settings
     _NONE = np.zeros((0, 7))
 
     def __init__(self, dem=None, **settings):
@@ -660,7 +661,8 @@ def alarm_summary(arrays: dict[str, np.ndarray]) -> dict:
 
 
 def replay_log(monitor: DemIntegrityMonitor, log: dict, period_s: float = 1.0) -> dict[str, np.ndarray]:
-    """Run a monitor over a recorded flight: `log` holds arrays named as trn_env's log.npz
+    """Run a monitor over a recorded flight: `log` holds arrays named as a run's `result.arrays` (on disk:
+    trn_env.logs.read_log(run / "log").arrays(), the sensor log's tables under these names)
     (sensor_radar_altimeter_{t_s, range_m, valid}, sensor_gnss_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, valid}
     if GNSS was recorded, and the estimates est_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, roll_rad, pitch_rad,
     yaw_rad, cov}). The samples are handed over in intervals (a, b] of period_s (the closed loop's update
