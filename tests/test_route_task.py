@@ -82,6 +82,26 @@ def test_baselines_fly_the_held_out_goals_in_the_full_tier():
         rt.evaluate_full([{"kind": "teleport"}], "basin", [1000])
 
 
+def test_baselines_fly_the_same_goals_and_seeds_in_the_fast_tier():
+    import gymnasium as gym
+
+    if "trn_env/TerrainNavFast-v0" not in gym.registry:
+        pytest.skip("the fast tier is not installed")
+    pols = [{"label": "straight", "kind": "straight"}, {"label": "planner", "kind": "planner"},
+            {"label": "random", "kind": "random"}]
+    rows = rt.evaluate_fast(pols, "basin", [1000, 1001])
+    assert len(rows) == 3 * 5 * 2
+    assert {(r["goal_index"], r["seed"]) for r in rows if r["policy"] == "planner"} == \
+        {(g, s) for g in range(5) for s in (1000, 1001)}
+    s = rt.summarise(rows)
+    for lab in ("straight", "planner", "random"):
+        assert s["policies"][f"fast/{lab}"]["success"] > 0.5          # full-length episodes arrive
+    # the straight line flies (nearly) the straight distance; the random policy wanders further
+    assert abs(s["policies"]["fast/straight"]["extra_distance_mean"]) < 0.05
+    again = rt.evaluate_fast(pols[:1], "basin", [1000, 1001])             # one seed, one episode
+    assert [r["true_miss_m"] for r in again] == [r["true_miss_m"] for r in rows if r["policy"] == "straight"]
+
+
 @pytest.mark.slow
 def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     pytest.importorskip("ray.rllib")
@@ -91,13 +111,15 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     out = tmp_path / "rt"
     assert mod.main(["all", "--out", str(out), "--iterations", "1", "--seeds", "1", "--max-episode-s", "60",
                      "--train-batch-size", "8", "--minibatch-size", "4", "--epochs", "1",
-                     "--hidden", "8"]) == 0
+                     "--hidden", "8", "--envs-per-runner", "2"]) == 0
     for f in ("history.json", "learning_curve.png", "rows.json", "summary.json", "table.md"):
         assert (out / f).is_file(), f
     rows = json.loads((out / "rows.json").read_text())
     full = [r for r in rows if r["tier"] == "full"]
     assert {r["policy"] for r in full} == {"straight", "planner", "random", "ppo"}
     assert len(full) == 4 * 5
+    fast = [r for r in rows if r["tier"] == "fast"]
+    assert len(fast) == 4 * 5 and {r["policy"] for r in fast} == {r["policy"] for r in full}
     summary = json.loads((out / "summary.json").read_text())
     assert "target" in summary and "full/ppo" in summary["policies"]
     assert mod.main(["evaluate", "--out", str(tmp_path / "none")]) == 2          # no checkpoint: exit 2

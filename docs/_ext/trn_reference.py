@@ -351,10 +351,9 @@ def env_markdown() -> str:
     parts = []
     for env_id in sorted(i for i in gymnasium.registry if i.startswith("trn_env/")):
         spec = gymnasium.registry[env_id]
-        entry = spec.entry_point if isinstance(spec.entry_point, str) else (
-            f"{spec.entry_point.__module__}:{spec.entry_point.__qualname__}")
-        if entry is None:
-            entry = spec.vector_entry_point
+        entry = spec.entry_point if spec.entry_point is not None else spec.vector_entry_point
+        if not isinstance(entry, str):
+            entry = f"{entry.__module__}:{entry.__qualname__}"
         module, _, name = str(entry).partition(":")
         import importlib
         cls = getattr(importlib.import_module(module), name)

@@ -42,14 +42,13 @@ from collections import deque
 
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
-from filterpy.kalman import KalmanFilter
 from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from trn_env.navigators.core.linalg import is_positive_definite
 from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
 from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
@@ -66,7 +65,7 @@ from trn_env.navigators.protocol import (
 )
 from trn_env.navigators.tercom.mad import TercomBatch, TercomFix, correlate
 
-FIX_HISTORY = 256     # TERCOM fixes kept in `fixes` (the newest)
+FIX_HISTORY = 64      # TERCOM fixes kept in `fixes` (the newest)
 
 G0 = 9.80665
 N_ERR = N_EKF13
@@ -248,7 +247,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.recovery_sigma_m = float(recovery_sigma_m)
         self._update_extra: dict = {}
         self._fault_allowance_m = 0.0       # the last accepted TERCOM fix's (protection_level)
-        self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
+        self._kf = None                     # filterpy's KalmanFilter, made at first use (see kf)
         self.health = Health()
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
         self.batch = TercomBatch(None if aiding is None or dem is None else
@@ -269,6 +268,15 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.fused = True  # False: the step-by-step path (same numbers; kept for tests and fixes)
 
     # ------------------------------------------------------------------ protocol
+    @property
+    def kf(self):
+        """The filterpy KalmanFilter holding the error state and covariance. Made at first use: filterpy
+        imports scipy.stats (about a second), which checking a scenario's settings does not need."""
+        if self._kf is None:
+            from filterpy.kalman import KalmanFilter
+            self._kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
+        return self._kf
+
     def reset(self, initial: Estimate) -> None:
         values = [initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.roll_rad,
                   initial.pitch_rad, initial.yaw_rad, *np.ravel(np.asarray(initial.v_ned_mps, float))]
@@ -326,9 +334,12 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         imu = frames.imu
         if imu is None or imu.t_s.size == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
-            return self.estimate()
+            return self.estimate().extrapolated(frames.t_end_s)
         t = np.asarray(imu.t_s, float)
         n = t.size
+        gap_s = imu_gap_s(t, self.ins.t_s)
+        if gap_s > 0.0:
+            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         gnss = self._gnss_fixes(frames)
         if gnss is None:
             self._gnss_check_loss(float(t[-1]))

@@ -61,7 +61,6 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._pmf_kernels as kern
-from scipy import ndimage
 from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
@@ -500,6 +499,7 @@ class PointMassFilter(InsRiddenFilter):
         fi = (self.axis_n - cn_old) / d_old + c_old
         fj = (self.axis_e - ce_old) / d_old + c_old
         FI, FJ = np.meshgrid(fi, fj, indexing="ij")
+        from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
         lw = ndimage.map_coordinates(old_lw, [FI, FJ], order=1, mode="constant", cval=LOG_FLOOR)
         b = ndimage.map_coordinates(old_b, [FI, FJ], order=1, mode="nearest")
         lw = lw.ravel()
@@ -539,6 +539,7 @@ class PointMassFilter(InsRiddenFilter):
     def _after_frame(self, t_end: float) -> None:
         super()._after_frame(t_end)
         d = self.logw.reshape(self.n, self.n)
+        from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
         peaks = (d == ndimage.maximum_filter(d, size=3, mode="constant", cval=-np.inf)) & (d > math.log(0.01))
         vals = np.sort(d[peaks])[::-1]
         self.extra["pmf_modes"] = int(vals.size)

@@ -75,7 +75,7 @@ from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.rbpf_cloud import RbpfCloud
 from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.error_model_15 import transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from trn_env.navigators.integrity import protection_level as pl
@@ -423,8 +423,11 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         imu = frames.imu
         if imu is None or imu.t_s.shape[0] == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
-            return self.estimate()
+            return self.estimate().extrapolated(frames.t_end_s)
         t = np.asarray(imu.t_s, float)
+        gap_s = imu_gap_s(t, self.ins.t_s)
+        if gap_s > 0.0:
+            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         f_b = np.asarray(imu.f_b_mps2, float)
         w_b = np.asarray(imu.omega_ib_b_rps, float)
         ok = np.asarray(imu.valid, bool)
@@ -545,6 +548,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
             self._gnss_now = gnss is not None
             updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
         if gnss is not None:
+            if ll.shape[0] != self.n:       # the IRA update re-initialised the cloud (another size)
+                ll = np.empty(self.n)
             self._gnss_update(te, gnss, lat, lon, h, v, sc, ll)
             updated = True
         if updated:

@@ -87,6 +87,9 @@ def _base_row(task: RunTask) -> dict:
         "scenario_hash": "", "navigator": task.navigator_label,
         "navigator_name": str(task.data["navigator"]["name"]),
         "sweep_json": json.dumps(task.sweep, sort_keys=True), "replay_command": task.replay_command,
+        "navigator_settings_json": json.dumps(task.data["navigator"].get("settings", {}), sort_keys=True,
+                                              default=str),
+        "gnss_outages_json": json.dumps((task.data.get("gnss") or {}).get("outages", []), sort_keys=True),
         "termination": "error", "error": None, "attempts": task.attempt,
         "wall_time_s": float("nan"), "sim_time_s": float("nan"), "distance_flown_m": float("nan"),
         "jsbsim_steps": 0, "host": socket.gethostname(), "pid": os.getpid(),
@@ -108,6 +111,9 @@ def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, by
     if getattr(task, "kind", "flight") == "episode":
         from trn_env.campaign.episodes import fly_episode
         return fly_episode(task, dems)
+    if getattr(task, "kind", "flight") == "replay":       # a log campaign (trn_env.campaign.log_replay)
+        from trn_env.campaign.log_replay import replay_run
+        return replay_run(task)
     from trn_env.scenario.loading import Scenario
     from trn_env.sim.closed_loop import ClosedLoop
 

@@ -71,27 +71,66 @@ def group_stats(df, stats=TABLE_STATS) -> dict[str, dict[str, float]]:
     return out
 
 
+def short_names(paths: list[str]) -> dict[str, str]:
+    """A short column name per swept dotted path: its last part, or as many trailing parts as make the
+    names distinct (`wind.layers.0.speed_mps` -> `speed_mps`; two layers' speeds -> `0.speed_mps`, ...)."""
+    names = {}
+    for k in range(1, max((len(p.split(".")) for p in paths), default=1) + 1):
+        names = {p: ".".join(p.split(".")[-k:]) for p in paths}
+        if len(set(names.values())) == len(paths):
+            break
+    return names
+
+
+def _sweep_value(v) -> str:
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+# (header, unit, group_stats key) of the terminal table: what fits 100 columns beside two sweep columns
+TERMINAL_COLUMNS = (
+    ("h RMS p50", "m", "horizontal_error_rms_m.p50"), ("h RMS p90", "m", "horizontal_error_rms_m.p90"),
+    ("CEP95 p50", "m", "horizontal_error_cep95_m.p50"), ("final p50", "m", "horizontal_error_final_m.p50"),
+    ("ANEES p50", "", "anees.p50"),
+    ("in 3σ", "%", "fraction_within_3sigma.mean"), ("MI mean", "s", "misleading_information_time_s.mean"),
+)
+
+
 def summary_table(df, title: str):
-    """A rich Table: one line per navigator x sweep point."""
+    """A rich Table: one line per navigator x sweep point, each swept field in its own short column (the
+    caption maps the short names to the dotted paths and spells out the abbreviations); fits 100 columns
+    with two sweeps (the vertical error and the other figures are in the report)."""
+    from rich import box
     from rich.table import Table
     stats = group_stats(df)
-    t = Table(title=title)
-    t.add_column("navigator | sweep")
+    groups: dict[str, tuple[str, dict]] = {}
+    for nav, sj in zip(df["navigator"], df["sweep_json"], strict=True):
+        groups.setdefault(group_key(nav, sj), (str(nav), json.loads(sj) if sj else {}))
+    paths: list[str] = []
+    for _, sweep in groups.values():
+        paths += [p for p in sweep if p not in paths]
+    short = short_names(paths)
+    caption = ["h: horizontal; pNN: percentile over runs; CEP95: 95 % circular error; ANEES: "
+               "average normalised estimation error squared (3 = consistent); in 3σ: share of time inside "
+               "3 sigma; MI: misleading-information time; err: runs that failed"]
+    caption += [f"{short[p].replace('_', ' ')} = {p}" for p in paths if short[p] != p]
+    t = Table(title=title, caption="\n".join(caption), box=box.SIMPLE_HEAD, pad_edge=False,
+              padding=(0, 1), caption_justify="left")
+    t.add_column("navigator", no_wrap=True)
+    for p in paths:
+        t.add_column(short[p].replace("_", "\n"), justify="right", no_wrap=True)
     t.add_column("runs", justify="right")
     t.add_column("err", justify="right")
-    heads = [("h RMS mean", "horizontal_error_rms_m.mean"), ("h RMS p50", "horizontal_error_rms_m.p50"),
-             ("h RMS p90", "horizontal_error_rms_m.p90"), ("CEP50", "horizontal_error_cep50_m.p50"),
-             ("CEP95", "horizontal_error_cep95_m.p50"), ("final p50", "horizontal_error_final_m.p50"),
-             ("v RMS p50", "vertical_error_rms_m.p50"), ("ANEES p50", "anees.p50"),
-             ("in 3σ", "fraction_within_3sigma.mean"), ("lost", "track_lost.mean"),
-             ("MI s", "misleading_information_time_s.mean")]
-    for h, _ in heads:
-        t.add_column(h, justify="right")
+    for h, unit, _ in TERMINAL_COLUMNS:
+        t.add_column(h.replace(" ", "\n") + f"\n{unit}", justify="right", no_wrap=True)
     for key, row in stats.items():
-        cells = [key, str(row["runs"]), str(row["errors"])]
-        for h, k in heads:
+        nav, sweep = groups.get(key, (key, {}))
+        cells = [nav] + [_sweep_value(sweep[p]) if p in sweep else "-" for p in paths]
+        cells += [str(row["runs"]), str(row["errors"])]
+        for _, unit, k in TERMINAL_COLUMNS:
             v = row[k]
-            pct = h in ("in 3σ", "lost")
-            cells.append("-" if not np.isfinite(v) else (f"{100 * v:.0f} %" if pct else f"{v:.1f}"))
+            cells.append("-" if not np.isfinite(v) else (f"{100 * v:.0f}" if unit == "%" else
+                                                        f"{v:.2f}" if unit == "" else f"{v:.1f}"))
         t.add_row(*cells)
     return t

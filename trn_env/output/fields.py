@@ -41,6 +41,20 @@ METRIC_FIELDS: dict[str, Field] = {
     "fraction_healthy": Field("", "fraction of time the navigator reported itself healthy"),
     "misleading_information_time_s": Field("s", "time the navigator reported healthy while the error was "
                                                 "outside its 3 sigma"),
+    "pl_epochs": Field("", "logged rows where the navigator is healthy and publishes a horizontal protection "
+                           "level (HPL, navigators.integrity.protection_level)"),
+    "pl_misleading_epochs": Field("", "of those, rows with the horizontal error above the HPL (misleading "
+                                      "information)"),
+    "pl_misleading_rate": Field("", "pl_misleading_epochs / pl_epochs (per epoch; compare with the "
+                                    "integrity risk)"),
+    "pl_misleading_rate_upper95": Field("", "its one-sided 95 % Clopper-Pearson upper bound (rows counted as "
+                                            "independent)"),
+    "pl_hazardous_epochs": Field("", "healthy rows with the error above the alert limit while the HPL is not "
+                                     "(hazardously misleading)"),
+    "pl_hazardous_rate": Field("", "pl_hazardous_epochs / pl_epochs"),
+    "pl_availability": Field("", "share of all rows that are healthy with the HPL at most the alert limit "
+                                 "(metrics.alert_limit_m, default 185.2 m)"),
+    "hpl_median_m": Field("m", "median HPL over the healthy rows"),
 }
 
 SUMMARY_FIELDS: dict[str, Field] = {
@@ -81,6 +95,8 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "constant_fuel": Field("flag", "whether the fuel (and the mass) was held constant"),
     "truth_source": Field("", "where the true motion came from: jsbsim or kinematic"),
     "files": Field("", "the files written to the run folder"),
+    "trn_env_version": Field("", "the trn-env version that flew the run"),
+    "command_line": Field("", "the command as typed (shell-quoted); scenario.toml's header repeats it"),
     "status_ok_fraction": Field("", "time share of rows whose health status is 'ok'"),
     "status_ok_misleading_fraction": Field("", "share of the 'ok' time with the north or east error outside "
                                                "k sigma"),
@@ -103,6 +119,9 @@ CAMPAIGN_ROW_FIELDS: dict[str, Field] = {
     "sweep_json": Field("", "the run's sweep values as JSON (dotted path -> value)"),
     "sweep.": Field("", "one column per swept dotted path, holding the run's value"),
     "replay_command": Field("", "a `trn-env fly` command that flies this run alone"),
+    "navigator_settings_json": Field("", "the navigator's settings as flown, as JSON (shown in the report)"),
+    "gnss_outages_json": Field("", "the run's GNSS outage windows (gnss.outages) as JSON (the report shades "
+                                   "them)"),
     "error": Field("", "the error message of a run that failed (termination 'error'), else empty"),
     "attempts": Field("", "how many times the run was started (retries included)"),
     "host": Field("", "host name of the worker that flew the run"),
@@ -111,7 +130,8 @@ CAMPAIGN_ROW_FIELDS: dict[str, Field] = {
     "jsbsim_version": Field("", "JSBSim version of the worker"),
     "numpy_version": Field("", "numpy version of the worker"),
     "python_version": Field("", "Python version of the worker"),
-    "series_": Field("", "a time series of the run (t_s in s, err_h_m / err_v_m / sigma_h_m in m), as lists"),
+    "series_": Field("", "a time series of the run (t_s in s, err_h_m / err_v_m / sigma_h_m / hpl_m in m, "
+                         "nav_ok 0/1), as lists"),
 } | {k: SUMMARY_FIELDS[k] for k in ("termination", "wall_time_s", "sim_time_s", "distance_flown_m",
                                     "jsbsim_steps")} | METRIC_FIELDS
 

@@ -312,6 +312,21 @@ def build_flight(d: dict, world, rng: np.random.Generator):
                       atmosphere=build_atmosphere(d), constant_fuel=bool(d["aircraft"]["constant_fuel"]))
 
 
+def trim_problems(d: dict, world) -> list[str]:
+    """The flight's own trim at the initial condition (JSBSim, tens of milliseconds), so a start the flight
+    would refuse (an airspeed below stall, a height the aircraft cannot hold level) is a validation problem
+    before any flight. An initial condition that is itself invalid is reported by its own check."""
+    from trn_env.flight.core import TrimError
+    try:
+        build_flight(d, world, np.random.default_rng(0))
+    except TrimError as exc:
+        return [f"initial: {exc} (check initial.tas_mps against the aircraft's speed range and the initial "
+                "height)"]
+    except (ValueError, TypeError, KeyError):
+        return []
+    return []
+
+
 # ----------------------------------------------------------------------------------------------- sensors
 
 def sensor_configs(d: dict) -> dict:
@@ -565,6 +580,8 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
             checks.append(("", lambda: _navigator_requirements(d, the_map)))
     if world is not None and not blocked("initial", "aircraft", "terrain.world") and not is_kinematic(d):
         checks.append(("initial", lambda: _initial_condition(d, world)))
+        if not blocked("wind", "atmosphere"):
+            checks.append(("", lambda: trim_problems(d, world)))
     if world is not None and not blocked("initial", "truth", "wind", "atmosphere", "terrain.world",
                                          "aircraft.dt_s"):
         checks.append(("", lambda: _truth_problems(d, world)))

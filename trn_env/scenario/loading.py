@@ -376,12 +376,32 @@ def _altitude_problems(d: dict) -> list[str]:
     return problems
 
 
+def _window(o: dict) -> str:
+    return f"[{o['start_s']:g}, {o['end_s']:g}) s" if "end_s" in o else f"[{o['start_s']:g} s, end of flight)"
+
+
 def _gnss_problems(d: dict) -> list[str]:
+    """Each outage window [start_s, end_s) non-empty; the windows in time order and disjoint (touching is
+    fine), none after an open window (no end_s: GNSS never returns). Overlaps are refused rather than merged
+    so the file says what is flown."""
     problems = []
-    for i, o in enumerate(d["gnss"]["outages"]):
+    outages = d["gnss"]["outages"]
+    for i, o in enumerate(outages):
         if "end_s" in o and o["end_s"] <= o["start_s"]:
             problems.append(f"gnss.outages[{i}].end_s: must be after start_s "
                             f"({o['end_s']} <= {o['start_s']})")
+    for i in range(1, len(outages)):
+        prev, o = outages[i - 1], outages[i]
+        if o["start_s"] < prev["start_s"]:
+            problems.append(f"gnss.outages[{i}].start_s: the outages must be in time order ({_window(o)} "
+                            f"starts before gnss.outages[{i - 1}] {_window(prev)})")
+        elif "end_s" not in prev:
+            problems.append(f"gnss.outages[{i}]: {_window(o)} lies inside the open outage "
+                            f"gnss.outages[{i - 1}] {_window(prev)} (no end_s: GNSS never returns); "
+                            f"remove it or give gnss.outages[{i - 1}] an end_s")
+        elif o["start_s"] < prev["end_s"]:
+            problems.append(f"gnss.outages[{i}]: {_window(o)} overlaps gnss.outages[{i - 1}] "
+                            f"{_window(prev)}; give one window from the first start to the last end instead")
     return problems
 
 
@@ -460,27 +480,21 @@ def _fuel_problems(d: dict) -> list[str]:
 
 
 def _navigator_problems(d: dict) -> list[str]:
+    """navigator.name: a built-in, an installed plug-in (entry point) or an importable `module:Name`
+    reference to a navigator; monitors.<name> likewise for monitors (navigators.registry.resolve)."""
+    from trn_env.navigators import registry
+    problems = []
     try:
-        from trn_env.navigators import registry
-    except ImportError as exc:
-        return [f"navigator.name: navigators.registry is not available ({exc})"]
-    names = _registry_names(registry)
-    name = d["navigator"]["name"]
-    if names is not None and name not in names:
-        return [f"navigator.name: unknown navigator {name!r} (known: {', '.join(sorted(names))})"]
-    return []
-
-
-def _registry_names(registry) -> list[str] | None:
-    for attr in ("names", "available", "list_navigators"):
-        fn = getattr(registry, attr, None)
-        if callable(fn):
-            return list(fn())
-    for attr in ("NAVIGATORS", "REGISTRY", "_REGISTRY"):
-        table = getattr(registry, attr, None)
-        if isinstance(table, dict):
-            return list(table)
-    return None
+        registry.resolve(d["navigator"]["name"], "navigator")
+    except ValueError as exc:
+        problems.append(f"navigator.name: {exc}")
+    mons = d.get("monitors")
+    for name in sorted(mons) if isinstance(mons, dict) else ():
+        try:
+            registry.resolve(name, "monitor")
+        except ValueError as exc:
+            problems.append(f"monitors.{name}: {exc}")
+    return problems
 
 
 def _load_dem(value: str, fill_voids: bool):
