@@ -95,7 +95,7 @@ from trn_env.navigators.acquisition_tracking.profile import (
     geometric_height_m,
     plumb_height_m,
 )
-from trn_env.navigators.acquisition_tracking.settings import AcqTrackConfig
+from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES, AcqTrackConfig
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.protocol import (
@@ -259,11 +259,11 @@ class AcqTrackNavigator:
     sensors its settings need (the scenario check refuses a scenario without them before the flight).
     """
 
-    def __init__(self, dem=None, name: str = "acq_track", **settings):
-        unknown = sorted(set(settings) - set(AcqTrackConfig.names()))
-        if unknown:
-            raise ValueError(f"unknown acq_track setting(s) {unknown}; known: {list(AcqTrackConfig.names())}")
-        self.config = cfg = AcqTrackConfig(**settings)
+    capabilities = CAPABILITIES
+
+    def __init__(self, dem=None, settings: AcqTrackConfig | None = None, name: str = "acq_track",
+                 **overrides):
+        self.config = self.settings = cfg = AcqTrackConfig.build(settings, overrides)
         self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
         if dem is None:
             raise ValueError("dem: the navigator's terrain map is required")
@@ -348,19 +348,7 @@ class AcqTrackNavigator:
     # ------------------------------------------------------------------ requirements
     def required_sensors(self) -> list[tuple[str, str]]:
         """(sensor name, why) of every sensor these settings need."""
-        need = [
-            ("radar_altimeter", "the terrain profile is barometric height - radar-altimeter range"),
-            ("baro", "the terrain profile is barometric height - radar-altimeter range"),
-        ]
-        if self.config.aiding:
-            if self.config.aiding_source == "air_data":
-                need += [
-                    ("air_data", "aiding = true with aiding_source = 'air_data' needs the true airspeed"),
-                    ("heading", "aiding = true with aiding_source = 'air_data' needs the compass heading"),
-                ]
-            else:
-                need += [("imu", "aiding = true with aiding_source = 'ins' needs the IMU")]
-        return need
+        return list(self.config.sensor_needs().required.items())
 
     def required_duration_s(self) -> float:
         """Flight time one full transect takes (s): a scenario shorter than this gives no transect."""
