@@ -14,80 +14,172 @@ Monitors run beside a navigator on the same frames and its estimate (`create_mon
 `available_monitors()`): "dem_integrity" is the terrain-database integrity monitor of seed 003
 (navigators.integrity.dem_monitor; needs dem=, the navigator's map).
 
-Every navigator validates its settings in its constructor and raises `ValueError` naming the setting.
-A navigator that draws random numbers (particle filters) is registered with `takes_rng=True` and gets the
-scenario's `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its
-run bit for bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
+Each entry is a factory and its declared `Capabilities` (navigators.core.capabilities: its Settings class,
+whether it needs the map or takes an rng, uses the IMU's specification or the map's error model, the
+sensors it requires and those it can use). A built-in navigator is registered the same way a plug-in is;
+a class registered without `capabilities` gets its class attribute `capabilities`, else `Capabilities()`.
+
+Settings: every navigator and monitor with a Settings class validates them in its constructor and raises
+one `SettingsError` (a `ValueError`) naming every bad setting, unknown names refused against the list of
+known ones; `create` prefixes the navigator's name. For a plug-in without a Settings class the keyword
+arguments are checked against its factory's signature. A navigator that `takes_rng` gets the scenario's
+`navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its run bit for
+bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking import AcqTrackNavigator
-from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
-from trn_env.navigators.filters.pf import ParticleFilter
-from trn_env.navigators.filters.pmf import PointMassFilter
+from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES as ACQ_TRACK_CAPABILITIES
+from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
+from trn_env.navigators.core.settings import SettingsError, unknown_message
+from trn_env.navigators.filters.ins_trn_settings import (
+    INS_CAPABILITIES,
+    INS_TERCOM_CAPABILITIES,
+    InsTercomSettings,
+    InsTrnSettings,
+)
+from trn_env.navigators.filters.rbpf_settings import CAPABILITIES as RBPF_CAPABILITIES
+from trn_env.navigators.filters.terrain_filter_settings import PF_CAPABILITIES, PMF_CAPABILITIES
+from trn_env.navigators.integrity.dem_monitor_settings import CAPABILITIES as DEM_INTEGRITY_CAPABILITIES
 
-# name -> (factory, takes_rng)
-_FACTORIES: dict[str, tuple[Callable[..., object], bool]] = {
-    "ins": (lambda **kw: InsTrnNavigator(aiding=None, **kw), False),
-    "ins_tercom": (lambda **kw: InsTrnNavigator(**{"aiding": "ira", **kw}), False),
-    "acq_track": (AcqTrackNavigator, False),
-    "pmf": (PointMassFilter, False),
-    "pf": (ParticleFilter, True),
-}
 
-# navigators that take the map's error as measurement noise: trn_env's build_navigator fills their
-# map_sigma_m / map_bias_sigma_m from the scenario's map error model when the settings do not give them
-MAP_NOISE_AWARE: set[str] = {"pmf", "pf", "rbpf"}
-# navigators that model the interpolation error of a coarse map (terrain_model_sigma_m, default "auto": from
-# the map's spectrum): build_navigator gives them 0 when the scenario's map is the world itself, else
-# terrain_detail_spacing_m (the calibration's finest terrain) from the world's refinement spacing
-MAP_IS_WORLD_AWARE: set[str] = {"rbpf"}
-# navigators whose bias priors (accel_bias_sigma_mps2, gyro_bias_sigma_rps) and bias process noise
-# (q_accel_bias_mps2, q_gyro_bias_rps per epoch) build_navigator fills from the scenario's IMU error model
-# (its turn-on bias and bias instability, trn_env.scenario.build.imu_bias_settings) when the settings do not
-# give them
-IMU_AWARE: set[str] = {"rbpf"}
+@dataclass(frozen=True)
+class Entry:
+    """A registered navigator or monitor: its factory (keyword settings) and capabilities."""
 
+    factory: Callable[..., object]
+    capabilities: Capabilities
+
+
+_NAVIGATORS: dict[str, Entry] = {}
+_MONITORS: dict[str, Entry] = {}
+
+
+def _entry(table: dict[str, Entry], kind: str, name: str) -> Entry:
+    if name not in table:
+        raise ValueError(f"unknown {kind} {name!r}; available: {sorted(table)}")
+    return table[name]
+
+
+def _caps_of(factory, capabilities: Capabilities | None, takes_rng: bool) -> Capabilities:
+    if capabilities is not None:
+        return capabilities
+    caps = getattr(factory, "capabilities", None)
+    if isinstance(caps, Capabilities):
+        return caps
+    return Capabilities(takes_rng=takes_rng)
+
+
+def _call(kind: str, name: str, entry: Entry, kwargs: dict[str, Any]):
+    """factory(**kwargs) with the settings problems reported under the component's name."""
+    if entry.capabilities.settings is None:      # a plug-in taking free keyword arguments
+        try:
+            sig = inspect.signature(entry.factory)
+        except (TypeError, ValueError):
+            sig = None
+        if sig is not None and not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+            known = [p for p in sig.parameters if p not in ("rng", "dem")]
+            bad = [(k, unknown_message(k, known)) for k in kwargs if k not in sig.parameters]
+            if bad:
+                raise SettingsError(bad, owner=f"{kind} {name!r}")
+    try:
+        return entry.factory(**kwargs)
+    except SettingsError as exc:
+        raise SettingsError(exc.problems, owner=f"{kind} {name!r}") from None
+
+
+# ------------------------------------------------------------------------------------------ navigators
 
 def available() -> list[str]:
     """Names accepted by create()."""
-    return sorted(_FACTORIES)
+    return sorted(_NAVIGATORS)
+
+
+def capabilities(name: str) -> Capabilities:
+    """The declared capabilities of a registered navigator."""
+    return _entry(_NAVIGATORS, "navigator", name).capabilities
+
+
+def settings_class(name: str) -> type | None:
+    """The Settings class of a registered navigator (None for a plug-in without one)."""
+    return capabilities(name).settings
+
+
+def sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
+    """The sensors navigator `name` requires and can use with `settings` (a mapping; runtime arguments such
+    as dem= and rng= are ignored). Raises SettingsError for settings it refuses."""
+    caps = capabilities(name)
+    if caps.settings is None:
+        return caps.sensor_needs(None)
+    given = {k: v for k, v in (settings or {}).items() if k not in ("dem", "rng", "name")}
+    try:
+        return caps.sensor_needs(caps.settings.from_mapping(given))
+    except SettingsError as exc:
+        raise SettingsError(exc.problems, owner=f"navigator {name!r}") from None
 
 
 def create(name: str, rng: np.random.Generator | None = None, **settings):
     """A new navigator by name with its settings (keyword arguments of its class); `rng` reaches only the
-    navigators registered with takes_rng=True."""
-    if name not in _FACTORIES:
-        raise ValueError(f"unknown navigator {name!r}; available: {available()}")
-    factory, takes_rng = _FACTORIES[name]
-    if takes_rng:
-        settings["rng"] = rng
-    try:
-        return factory(**settings)
-    except TypeError as exc:
-        import re
-        m = re.search(r"unexpected keyword argument '(\w+)'", str(exc))
-        if m:
-            raise ValueError(f"navigator {name!r}: bad settings: unknown setting '{m.group(1)}'") from exc
-        raise ValueError(f"navigator {name!r}: bad settings {sorted(settings)}: {exc}") from exc
+    navigators whose capabilities say takes_rng. Bad settings: one SettingsError (ValueError) naming each."""
+    entry = _entry(_NAVIGATORS, "navigator", name)
+    kwargs = dict(settings)
+    if entry.capabilities.takes_rng:
+        kwargs["rng"] = rng
+    return _call("navigator", name, entry, kwargs)
 
 
-def register(name: str, factory: Callable[..., object], takes_rng: bool = False) -> None:
-    """Add a navigator factory (a class or a callable taking the settings as keyword arguments)."""
-    _FACTORIES[name] = (factory, takes_rng)
+def register(name: str, factory: Callable[..., object], takes_rng: bool = False,
+             capabilities: Capabilities | None = None) -> None:
+    """Add a navigator factory (a class or a callable taking the settings as keyword arguments) with its
+    capabilities (default: the factory's `capabilities` attribute, else `Capabilities(takes_rng=...)`)."""
+    _NAVIGATORS[name] = Entry(factory, _caps_of(factory, capabilities, takes_rng))
 
 
-def _rbpf(**settings):
+def _ins(dem=None, name: str | None = None, **kw):
+    from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
+    if kw.get("aiding") is not None:
+        raise SettingsError([("aiding", "the free-inertial 'ins' takes no terrain aiding (use "
+                                        "'ins_tercom')")])
+    return InsTrnNavigator(dem=dem, settings=InsTrnSettings.from_mapping(kw), name=name)
+
+
+def _ins_tercom(dem=None, name: str | None = None, **kw):
+    from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
+    return InsTrnNavigator(dem=dem, settings=InsTercomSettings.from_mapping(kw), name=name)
+
+
+def _acq_track(**kw):
+    from trn_env.navigators.acquisition_tracking import AcqTrackNavigator
+    return AcqTrackNavigator(**kw)
+
+
+def _pmf(**kw):
+    from trn_env.navigators.filters.pmf import PointMassFilter
+    return PointMassFilter(**kw)
+
+
+def _pf(**kw):
+    from trn_env.navigators.filters.pf import ParticleFilter
+    return ParticleFilter(**kw)
+
+
+def _rbpf(**kw):
     from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
+    return RaoBlackwellizedPF(**kw)
 
-    return RaoBlackwellizedPF(**settings)
 
-
-register("rbpf", _rbpf, takes_rng=True)
+register("ins", _ins, capabilities=INS_CAPABILITIES)
+register("ins_tercom", _ins_tercom, capabilities=INS_TERCOM_CAPABILITIES)
+register("acq_track", _acq_track, capabilities=ACQ_TRACK_CAPABILITIES)
+register("pmf", _pmf, capabilities=PMF_CAPABILITIES)
+register("pf", _pf, capabilities=PF_CAPABILITIES)
+register("rbpf", _rbpf, capabilities=RBPF_CAPABILITIES)
 
 
 # ------------------------------------------------------------------------------------------ monitors
@@ -97,24 +189,25 @@ def _dem_integrity(**kw):
     return DemIntegrityMonitor(**kw)
 
 
-_MONITORS: dict[str, Callable[..., object]] = {"dem_integrity": _dem_integrity}
-
-
 def available_monitors() -> list[str]:
     """Names accepted by create_monitor()."""
     return sorted(_MONITORS)
 
 
+def monitor_capabilities(name: str) -> Capabilities:
+    """The declared capabilities of a registered monitor."""
+    return _entry(_MONITORS, "monitor", name).capabilities
+
+
 def create_monitor(name: str, **settings):
     """A new monitor by name (it runs beside a navigator: `monitor.update(frames, estimate)`)."""
-    if name not in _MONITORS:
-        raise ValueError(f"unknown monitor {name!r}; available: {available_monitors()}")
-    try:
-        return _MONITORS[name](**settings)
-    except TypeError as exc:
-        raise ValueError(f"monitor {name!r}: bad settings {sorted(settings)}: {exc}") from exc
+    return _call("monitor", name, _entry(_MONITORS, "monitor", name), dict(settings))
 
 
-def register_monitor(name: str, factory: Callable[..., object]) -> None:
-    """Add a monitor factory (keyword settings; `dem=` is the navigator's map)."""
-    _MONITORS[name] = factory
+def register_monitor(name: str, factory: Callable[..., object],
+                     capabilities: Capabilities | None = None) -> None:
+    """Add a monitor factory (keyword settings; `dem=` is the navigator's map) with its capabilities."""
+    _MONITORS[name] = Entry(factory, _caps_of(factory, capabilities, False))
+
+
+register_monitor("dem_integrity", _dem_integrity, capabilities=DEM_INTEGRITY_CAPABILITIES)

@@ -105,7 +105,8 @@ def _kind_of(tp) -> tuple[str, bool]:
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         nullable = len(args) < len(typing.get_args(tp))
         kinds = {_kind_of(a)[0] for a in args}
-        kinds.discard("str") if len(kinds) > 1 else None   # float | str: a number with named strings
+        if len(kinds) > 1:
+            kinds.discard("str")      # float | str: a number that also takes named strings (`also`)
         return (kinds.pop() if len(kinds) == 1 else "any"), nullable
     if tp is bool:
         return "bool", False
@@ -116,7 +117,8 @@ def _kind_of(tp) -> tuple[str, bool]:
     if tp is str:
         return "str", False
     if origin is tuple or tp is tuple:
-        return "vector", False
+        nested = any(typing.get_origin(a) is tuple for a in typing.get_args(tp))
+        return ("any" if nested else "vector"), False
     return "any", False
 
 

@@ -326,11 +326,14 @@ def build_sensors(d: dict, seed: np.random.SeedSequence):
 
 
 def _sensor_problems(d: dict) -> list[str]:
+    from trn_env.navigators.core.settings import SettingsError
     from trn_env.sensors import suite
     problems = []
     for name, cfg in d["sensors"].items():
         try:
             suite._make_config(name, dict(cfg))
+        except SettingsError as exc:
+            problems += exc.at(f"sensors.{name}")
         except (ValueError, TypeError) as exc:
             problems.append(f"sensors.{name}: {exc}")
     return problems
