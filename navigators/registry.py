@@ -114,14 +114,17 @@ def settings_class(name: str) -> type | None:
 def sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
     """The sensors navigator `name` requires and can use with `settings` (a mapping; runtime arguments such
     as dem= and rng= are ignored). Raises SettingsError for settings it refuses."""
-    caps = capabilities(name)
+    return _needs("navigator", name, capabilities(name), settings)
+
+
+def _needs(kind: str, name: str, caps: Capabilities, settings: dict | None) -> SensorNeeds:
     if caps.settings is None:
         return caps.sensor_needs(None)
     given = {k: v for k, v in (settings or {}).items() if k not in ("dem", "rng", "name")}
     try:
         return caps.sensor_needs(caps.settings.from_mapping(given))
     except SettingsError as exc:
-        raise SettingsError(exc.problems, owner=f"navigator {name!r}") from None
+        raise SettingsError(exc.problems, owner=f"{kind} {name!r}") from None
 
 
 def create(name: str, rng: np.random.Generator | None = None, **settings):
@@ -197,6 +200,11 @@ def available_monitors() -> list[str]:
 def monitor_capabilities(name: str) -> Capabilities:
     """The declared capabilities of a registered monitor."""
     return _entry(_MONITORS, "monitor", name).capabilities
+
+
+def monitor_sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
+    """The sensors monitor `name` requires and can use with `settings` (see sensor_needs)."""
+    return _needs("monitor", name, monitor_capabilities(name), settings)
 
 
 def create_monitor(name: str, **settings):

@@ -115,8 +115,11 @@ def list_scenarios() -> list[tuple[str, str]]:
 
 @lru_cache(maxsize=1)
 def schema() -> dict:
-    """The scenario JSON schema (trn_env/scenario/schema.json)."""
-    return json.loads((Path(__file__).with_name("schema.json")).read_text(encoding="utf-8"))
+    """The scenario JSON schema: trn_env/scenario/schema.json with the sections generated from the
+    components' Settings classes (trn_env.scenario.schema_sections) in place."""
+    from trn_env.scenario.schema_sections import with_generated_sections
+    return with_generated_sections(json.loads((Path(__file__).with_name("schema.json")).read_text(
+        encoding="utf-8")))
 
 
 def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
@@ -320,8 +323,8 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
     tolerant = bool(prior)
     problems: list[str] = []
     checks = [_altitude_problems, _gnss_problems, _wind_problems, _rate_problems, _aircraft_problems,
-              _navigator_problems, _integrity_problems, lambda dd: _terrain_problems(dd, base_dir, extras),
-              lambda dd: _ceiling_problems(dd, extras)]
+              _navigator_problems, _integrity_problems, _sensor_need_problems,
+              lambda dd: _terrain_problems(dd, base_dir, extras), lambda dd: _ceiling_problems(dd, extras)]
     for check in checks:
         try:
             problems += check(d)
@@ -371,10 +374,39 @@ def _integrity_problems(d: dict) -> list[str]:
         if isinstance(t, (int, float)) and t >= d["duration_s"]:
             problems.append(f"terrain.map.faults[{i}].start_s: {t} s is not before the scenario's end "
                             f"(duration_s = {d['duration_s']} s)")
-    mons = d["monitors"]
-    if isinstance(mons, dict) and "dem_integrity" in mons and "radar_altimeter" not in d["sensors"]:
-        problems.append("monitors.dem_integrity: needs a radar altimeter (add a [sensors.radar_altimeter] "
-                        "table); seed 003 eq 1 synthesises the terrain height from it")
+    return problems
+
+
+def fitted_sensors(d: dict) -> set[str]:
+    """The sensors a scenario fits (its [sensors.*] tables that are not false or null)."""
+    sensors = d.get("sensors") if isinstance(d.get("sensors"), dict) else {}
+    return {n for n, cfg in sensors.items() if cfg is not None and cfg is not False}
+
+
+def _sensor_need_problems(d: dict) -> list[str]:
+    """Every sensor the navigator or a monitor requires (its declared capabilities, with its settings) that
+    the scenario does not fit, as 'sensors.<name>: ...': refused before anything runs. A component whose
+    settings are refused is left to the settings check."""
+    from trn_env.navigators import registry
+    from trn_env.navigators.core.settings import SettingsError
+    fitted = fitted_sensors(d)
+    problems = []
+    nav_settings = d["navigator"]["settings"] if isinstance(d["navigator"]["settings"], dict) else {}
+    users = [("navigator", d["navigator"]["name"], lambda n: registry.sensor_needs(n, nav_settings))]
+    mons = d["monitors"] if isinstance(d["monitors"], dict) else {}
+    for name in sorted(mons):
+        users.append(("monitor", name, lambda n: registry.monitor_sensor_needs(
+            n, mons[n] if isinstance(mons[n], dict) else {})))
+    for kind, name, needs_of in users:
+        try:
+            needs = needs_of(name)
+        except (SettingsError, ValueError, TypeError):
+            continue
+        for sensor, why in needs.required.items():
+            if sensor not in fitted:
+                where = "navigator.name" if kind == "navigator" else f"monitors.{name}"
+                problems.append(f"sensors.{sensor}: {kind} {name!r} needs this sensor ({why}); add a "
+                                f"[sensors.{sensor}] table or choose another {kind} ({where})")
     return problems
 
 
