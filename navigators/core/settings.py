@@ -34,6 +34,8 @@ import typing
 from dataclasses import dataclass, fields
 from typing import Any
 
+import numpy as np
+
 _META_KEY = "trn_env.setting"
 
 
@@ -166,7 +168,7 @@ def _unit(spec: SettingSpec) -> str:
 
 
 def _is_number(v) -> bool:
-    return isinstance(v, numbers.Real) and not isinstance(v, bool) and type(v).__name__ != "bool_"
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
 
 
 def _coerce(f: _Field, v: Any) -> tuple[Any, list[tuple[str, str]]]:
@@ -178,7 +180,7 @@ def _coerce(f: _Field, v: Any) -> tuple[Any, list[tuple[str, str]]]:
         return v, []
     got = f"got {v!r}"
     if f.kind == "bool":
-        if isinstance(v, bool) or type(v).__name__ == "bool_":
+        if isinstance(v, (bool, np.bool_)):
             return bool(v), []
         return v, [(f.name, f"must be true or false, {got}")]
     if f.kind == "str":
