@@ -1,4 +1,4 @@
-"""The one interface every navigator implements, and the estimate it returns.
+"""The one interface every navigator implements, and the estimate it returns::
 
     nav.reset(initial: Estimate)            # initial state and covariance
     est = nav.update(frames: SensorFrames)  # consume one interval of sensor data, return the estimate at

@@ -25,7 +25,26 @@ __all__ = ["Dem", "DemLoadError", "load", "BUNDLED"]
 
 
 def load(name_or_path, fill_voids: bool = False) -> Dem:
-    """Load a DEM by bundled name, "synthetic:<preset>" or file path (see the module docstring)."""
+    """Load a DEM by bundled name, ``"synthetic:<preset>"`` or file path (see the module docstring).
+
+    Parameters
+    ----------
+    name_or_path : str or path-like
+        ``"jacksboro"`` (the bundled real USGS 3" DEM), ``"synthetic:<preset>"``, or a GeoTIFF, DTED, SRTM
+        ``.hgt`` or NPZ file read with rasterio / numpy.
+    fill_voids : bool
+        Fill voids by interpolation instead of leaving them NaN.
+
+    Returns
+    -------
+    Dem
+        The geodetic grid; ``Dem.height(lat_rad, lon_rad)`` gives metres above MSL (NaN off the grid).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, a file that does not load, or a DEM without valid heights.
+    """
     from trn_env.terrain import loaders
 
     if not isinstance(name_or_path, (str, Path)) and not hasattr(name_or_path, "__fspath__"):

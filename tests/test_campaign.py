@@ -334,3 +334,11 @@ def test_report_and_check_refuse_bad_folders_and_baselines(tmp_path, capsys):
     assert cli.main(["campaign", str(CI), "--out", str(out), "--check", str(bad)]) == 2
     assert "groups.ins | -.anees.p50.rel_tol: must be a finite number >= 0" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_every_row_column_is_documented_in_the_outputs_reference(flown):
+    """The docs' campaign-row reference is generated from trn_env.output.fields: a column a run writes but
+    the table does not list would be missing from the docs."""
+    from trn_env.output.fields import CAMPAIGN_ROW_FIELDS, undocumented
+
+    assert undocumented(read_rows(flown).columns, CAMPAIGN_ROW_FIELDS) == []

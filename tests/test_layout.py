@@ -1,7 +1,7 @@
 """The package layout: no import runs backwards, and every package folder is listed for the wheel.
 
 Order (DESIGN.md "Layout"): trn_env -> navigators -> terrain; inside trn_env
-cli -> bench -> campaign -> env -> sim -> scenario -> (sensors, guidance) -> (flight, output).
+cli -> bench -> campaign -> env -> logs -> sim -> scenario -> (sensors, guidance) -> (flight, output).
 A module may import its own stage or a lower one; siblings on one level (sensors/guidance, flight/output)
 do not import each other. Every import is read from the source (ast), lazy ones inside functions included.
 """
@@ -22,8 +22,8 @@ else:  # pragma: no cover
 ROOT = Path(__file__).resolve().parent.parent
 TOP = ("trn_env", "navigators", "terrain")
 TOP_RANK = {"terrain": 0, "navigators": 1, "trn_env": 2}
-STAGE_RANK = {"flight": 0, "output": 0, "sensors": 1, "guidance": 1, "scenario": 2, "sim": 3, "env": 4,
-              "policies": 4, "campaign": 5, "bench": 6, "cli": 7}
+STAGE_RANK = {"flight": 0, "output": 0, "sensors": 1, "guidance": 1, "scenario": 2, "sim": 3, "logs": 4,
+              "env": 5, "policies": 5, "campaign": 6, "bench": 7, "cli": 8}
 
 
 def _modules() -> list[Path]:

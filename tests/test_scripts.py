@@ -9,10 +9,13 @@ from pathlib import Path
 import pytest
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "gallery"
 
 
 def _load(name: str):
     path = SCRIPTS / f"{name}.py"
+    if not path.is_file():
+        path = EXAMPLES / f"{name}.py"
     if not path.is_file():
         pytest.skip(f"{path} is not in this checkout")
     spec = importlib.util.spec_from_file_location(name, path)

@@ -9,14 +9,14 @@ import math
 import numpy as np
 import pytest
 from trn_env.navigators import registry
-from trn_env.navigators.filters import _pmf_kernels as pk
-from trn_env.navigators.filters.pmf import _kernel_1d
-from trn_env.navigators.filters.resampling import (
+from trn_env.navigators.core.resampling import (
     effective_sample_size,
     systematic_indices,
     systematic_indices_reference,
     systematic_kernel,
 )
+from trn_env.navigators.filters import _pmf_kernels as pk
+from trn_env.navigators.filters.pmf import _kernel_1d
 from trn_env.navigators.measurements.terrain_models import (
     IRA_FORMULA_CODES,
     ira_points_batch,

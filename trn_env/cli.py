@@ -1,6 +1,8 @@
 """The `trn-env` command line: fly a scenario, list scenarios, validate one, run the benchmarks.
 
     trn-env fly [SCENARIO] [--seed N] [--out DIR] [--navigator NAME] [--duration S] [--no-plots]
+    trn-env record SCENARIO --out LOG [--seed N] [--navigator NAME] [--duration S] [--set PATH=VALUE]
+    trn-env replay LOG [--navigator NAME] [--monitor NAME] [--map DEM] [--out DIR] [--no-plots]
     trn-env scenarios
     trn-env validate SCENARIO
     trn-env bench [--quick]
@@ -43,6 +45,26 @@ def _parser() -> argparse.ArgumentParser:
     fly.add_argument("--no-pipeline", action="store_true",
                      help="run the sensors and the navigator in this process, not beside the flight in a "
                           "second one (same results, slower)")
+    rec = sub.add_parser("record", help="fly a scenario in closed loop and write its sensor log (frames, "
+                                        "truth, metadata; docs/guide/logs.md)")
+    rec.add_argument("scenario", help="built-in name or TOML path")
+    rec.add_argument("--out", type=Path, required=True, help="the log folder to write (must not exist)")
+    rec.add_argument("--seed", type=int, default=None, help="override the scenario seed")
+    rec.add_argument("--navigator", default=None, help="override the navigator flown")
+    rec.add_argument("--duration", type=float, default=None, help="override the time limit, seconds")
+    rec.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                     help="set a scenario field by dotted path (as fly's --set)")
+    rec.add_argument("--quiet", action="store_true", help="no progress bar")
+    rep_ = sub.add_parser("replay", help="run a navigator open loop over a sensor log; write a run folder "
+                                         "as fly does (metrics when the log holds truth)")
+    rep_.add_argument("log", type=Path, help="a sensor-log folder (trn-env record, trn_env.logs.LogBuilder)")
+    rep_.add_argument("--navigator", default=None, help="navigator name (default: the log's)")
+    rep_.add_argument("--monitor", action="append", default=[], metavar="NAME",
+                      help="run this monitor beside the navigator (repeatable)")
+    rep_.add_argument("--map", default=None, metavar="DEM",
+                      help="the navigator's map: a DEM path or bundled name (default: the log's map)")
+    rep_.add_argument("--out", type=Path, default=None, help="run folder (default runs/replay-<log>-<time>)")
+    rep_.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     sub.add_parser("scenarios", help="list the built-in scenarios")
     val = sub.add_parser("validate", help="check a scenario file and list every problem")
     val.add_argument("scenario")
@@ -219,11 +241,12 @@ def cmd_fly(args) -> int:
         bar.update(max(0.0, round(t_s, 1) - bar.n))
 
     from trn_env.flight.core import TrimError
+    from trn_env.logs.record import recording_metadata
     from trn_env.scenario.build import build_terrain
     from trn_env.sim.closed_loop import spawn_rngs
     from trn_env.sim.warm_up import warm_up
 
-    loop = None
+    loop = writer = log_path = None
     try:
         # the terrain once (the same map stream as the loop's own), the kernels compiled (first run) or
         # loaded from numba's cache before the flight, so neither stalls the progress bar nor counts in the
@@ -235,7 +258,10 @@ def cmd_fly(args) -> int:
         dems = build_terrain(scenario.data, scenario.extras, spawn_rngs(scenario.seed)["map"])
         try:
             warm_s = warm_up(scenario, dems)
-            loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline, dems=dems)
+            writer = _log_writer(out_dir)
+            loop = ClosedLoop(scenario, progress=progress, pipeline=not args.no_pipeline, dems=dems,
+                              log_sink=writer)
+            writer.metadata = recording_metadata(scenario, loop.estimate)
         except TrimError as exc:
             print(f"error: scenario {scenario.source}: initial: {exc} (nothing written)", file=sys.stderr)
             return 2
@@ -259,6 +285,8 @@ def cmd_fly(args) -> int:
         if bar is not None:
             bar.close()
         print("interrupted: nothing written", file=sys.stderr)
+        if writer is not None:
+            writer.abort()
         return 130
     finally:
         if loop is not None:
@@ -266,12 +294,146 @@ def cmd_fly(args) -> int:
     bar.close()
     plot = None if args.no_plots else _plotter(result)
     try:
-        write_run(out_dir, result.summary, result.arrays, result.events, plot=plot)
+        writer.write_events(result.events)
+        log_path = writer.commit({"termination": result.termination, "recorded_summary": result.summary})
+        writer = None
+        write_run(out_dir, result.summary, result.arrays, result.events, plot=plot, log_dir=log_path)
     except KeyboardInterrupt:
         print("interrupted while writing: no summary written", file=sys.stderr)
         return 130
+    finally:
+        if writer is not None:
+            writer.abort()
+        if log_path is not None and log_path.exists():
+            import shutil
+            shutil.rmtree(log_path, ignore_errors=True)
     console.print(_summary_table(result.summary, out_dir))
     return 0
+
+
+def _log_writer(out_dir: Path):
+    """A LogWriter streaming a run's log into a hidden partial folder beside out_dir (moved in as log/)."""
+    import os
+
+    from trn_env.logs.writer import LogWriter
+    from trn_env.output.run_folder import PARTIAL_MARK
+    parent = Path(out_dir).absolute().parent
+    return LogWriter(parent / f".{Path(out_dir).name}{PARTIAL_MARK}{os.getpid()}-log", {})
+
+
+def cmd_record(args) -> int:
+    from trn_env.logs.format import LogError
+    from trn_env.scenario.loading import ScenarioError
+    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
+    try:
+        sets = [parse_assignment(s) for s in args.set]
+        scenario = load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
+                                      duration_s=args.duration)
+    except ScenarioError as err:
+        _print_problems(err)
+        return 2
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    out = args.out
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        print(f"error: --out {out}: exists and is not an empty folder (a log is written whole into a new "
+              "folder; nothing flown)", file=sys.stderr)
+        return 2
+    problem = out_dir_problem(out)
+    if problem is not None:
+        print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
+        return 2
+    from tqdm import tqdm
+
+    from trn_env.flight.core import TrimError
+    from trn_env.logs.record import record
+    bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"record {scenario.name}",
+               disable=args.quiet, mininterval=0.5,
+               bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+
+    def progress(t_s: float, _total: float) -> None:
+        bar.update(max(0.0, round(t_s, 1) - bar.n))
+
+    try:
+        result, path = record(scenario, out, progress=progress)
+    except KeyboardInterrupt:
+        bar.close()
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+    except (TrimError, ValueError, LogError) as exc:
+        bar.close()
+        print(f"error: scenario {scenario.source}: {exc} (nothing written)", file=sys.stderr)
+        return 2
+    bar.close()
+    from trn_env.logs import read_log
+    meta = read_log(path, check=False).metadata
+    tables = ", ".join(f"{k} {v}" for k, v in meta["tables"].items())
+    print(f"recorded {path}: {result.termination} after {result.sim_time_s:.1f} s, navigator "
+          f"{scenario.navigator_name}; rows: {tables}")
+    return 0
+
+
+def cmd_replay(args) -> int:
+    from trn_env.logs.format import LogError
+    from trn_env.logs.replay import replay, write_result_log
+    from trn_env.output.run_folder import default_out_dir, write_run
+    if args.out is not None:
+        problem = out_dir_problem(args.out)
+        if problem is not None:
+            print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
+            return 2
+    try:
+        res = replay(args.log, args.navigator, monitors=args.monitor, map_path=args.map)
+    except (LogError, ValueError) as exc:
+        print(f"error: {exc} (nothing written)", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+    out_dir = args.out or default_out_dir(f"replay-{Path(args.log).name}")
+    arrays = _with_truth_columns(res.arrays)
+    plot = None if (args.no_plots or not res.has_truth) else _plotter(res)
+    writer = log_path = None
+    try:
+        writer = _log_writer(out_dir)
+        log_path = write_result_log(writer, res)
+        writer = None
+        write_run(out_dir, res.summary, arrays, res.events, plot=plot, log_dir=log_path)
+    except KeyboardInterrupt:
+        print("interrupted while writing: no summary written", file=sys.stderr)
+        return 130
+    finally:
+        if writer is not None:
+            writer.abort()
+        if log_path is not None and log_path.exists():
+            import shutil
+            shutil.rmtree(log_path, ignore_errors=True)
+    s = res.summary
+    if res.has_truth:
+        print(f"replayed {args.log} with {s['navigator']}: {s['termination']}, horizontal RMS "
+              f"{s['horizontal_error_rms_m']:.1f} m, ANEES {s['anees']:.2f} -> {out_dir}")
+    else:
+        print(f"replayed {args.log} with {s['navigator']}: {s['termination']} (no truth in the log: no "
+              f"metrics) -> {out_dir}")
+    return 0
+
+
+def _with_truth_columns(arrays: dict) -> dict:
+    """A replay's arrays with NaN truth where the log holds none (timeline.csv's columns exist)."""
+    import numpy as np
+    if "err_ned_m" in arrays:
+        return arrays
+    a = dict(arrays)
+    n = a["est_t_s"].shape[0]
+    nan = np.full(n, np.nan)
+    a["t_s"] = a["est_t_s"]
+    for k in ("true_lat_rad", "true_lon_rad", "true_h_msl_m", "true_h_agl_m", "true_yaw_rad", "true_tas_mps"):
+        a[k] = nan
+    a["err_ned_m"] = np.full((n, 3), np.nan)
+    a["est_cov_diag"] = np.diagonal(a["est_cov"], axis1=1, axis2=2).copy()
+    a["gnss_available"] = np.zeros(n, bool)
+    return a
 
 
 def _plotter(result):
@@ -279,7 +441,7 @@ def _plotter(result):
 
     def plot(tmp: Path) -> list[str]:
         sc = result.scenario
-        wps = [(w["lat_deg"], w["lon_deg"]) for w in sc.data["route"]["waypoints"]]
+        wps = [(w["lat_deg"], w["lon_deg"]) for w in sc.data.get("route", {}).get("waypoints", [])]
         title = f"{sc.name} / {sc.navigator_name} / seed {sc.seed}: {result.termination}"
         plots.plot_track(tmp / "track.png", result.world_dem, result.arrays, title=title, waypoints_deg=wps)
         plots.plot_errors(tmp / "errors.png", result.arrays, title=title)
@@ -450,6 +612,10 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_validate(args)
         if args.command == "fly":
             return cmd_fly(args)
+        if args.command == "record":
+            return cmd_record(args)
+        if args.command == "replay":
+            return cmd_replay(args)
         if args.command == "bench":
             return cmd_bench(args)
         if args.command == "precompile":

@@ -37,7 +37,10 @@ class Capabilities:
     settings: its Settings class (navigators.core.settings), or None for a plug-in that takes free keyword
     arguments. needs_map: it takes the navigator's terrain map as ``dem=``. takes_rng: it draws random
     numbers and takes ``rng=`` (a numpy Generator). uses_imu_spec: it takes its INS error model from the
-    scenario's IMU (the build fills accel/gyro bias priors and bias process noise it leaves unset).
+    scenario IMU's specification (navigators.core.imu_spec.ImuSpec, through its ``apply_imu_spec``).
+    imu_bias_settings: the build fills its accel/gyro bias priors and bias process noise settings
+    (accel_bias_sigma_mps2, gyro_bias_sigma_rps, q_accel_bias_mps2, q_gyro_bias_rps) from the IMU where the
+    settings leave them unset.
     uses_map_noise: it takes the map's error model as measurement noise (map_sigma_m, map_bias_sigma_m).
     models_map_detail: it models the terrain a coarse map cannot hold (terrain_model_sigma_m 0 when the map
     is the world, terrain_detail_spacing_m from the world's refinement). required_sensors: (sensor, why)
@@ -51,6 +54,7 @@ class Capabilities:
     needs_map: bool = False
     takes_rng: bool = False
     uses_imu_spec: bool = False
+    imu_bias_settings: bool = False
     uses_map_noise: bool = False
     models_map_detail: bool = False
     required_sensors: tuple[tuple[str, str], ...] = ()

@@ -296,22 +296,6 @@ def position_loglik(xn, y, r_var, logw, ll):
 
 
 @njit(cache=True)
-def systematic_resample(w, u0):
-    """Systematic resampling indices for normalised weights w (N,) and one uniform u0 in [0, 1)."""
-    n = w.shape[0]
-    idx = np.empty(n, np.int64)
-    c = w[0]
-    j = 0
-    for i in range(n):
-        u = (u0 + i) / n
-        while u > c and j < n - 1:
-            j += 1
-            c += w[j]
-        idx[i] = j
-    return idx
-
-
-@njit(cache=True)
 def gather(xn, xl, P, idx):
     """Particles idx of (xn, xl, P), as new arrays."""
     n = idx.shape[0]

@@ -36,18 +36,22 @@ from __future__ import annotations
 
 import copy
 import math
+from collections import deque
 
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
 from filterpy.kalman import KalmanFilter
+from trn_env.navigators.core.error_states import N_EKF13
+from trn_env.navigators.core.linalg import is_positive_definite
+from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
+from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
 from trn_env.navigators.filters.ins_trn_settings import (
     INS_CAPABILITIES,
     InsTrnSettings,
 )
 from trn_env.navigators.frames import SensorFrames
-from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, quat_to_dcm
+from trn_env.navigators.inertial.strapdown import StrapdownIns
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
-from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
@@ -59,27 +63,17 @@ from trn_env.navigators.protocol import (
     Health,
 )
 from trn_env.navigators.tercom.mad import TercomBatch, TercomFix, correlate
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+FIX_HISTORY = 256     # TERCOM fixes kept in `fixes` (the newest)
 
 G0 = 9.80665
-N_ERR = 13
-_GNSS_STATES = (0, 1, 3, 4, 5)      # north, east position; NED velocity
-R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
-_EMPTY = np.zeros(0)
-_EMPTY_BOOL = np.zeros(0, np.bool_)
+N_ERR = N_EKF13
 
 
-def _is_pd(P: np.ndarray) -> bool:
-    if not np.all(np.isfinite(P)):
-        return False
-    try:
-        np.linalg.cholesky(0.5 * (P + P.T))
-        return True
-    except np.linalg.LinAlgError:
-        return False
+_is_pd = is_positive_definite
 
 
-class InsTrnNavigator:
+class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
     """Strapdown INS + baro, optionally aided by batch TERCOM fixes through a 13-state error-state KF.
 
     aiding: None (free inertial, name "ins"), "ira" (seed 000 eq 2, default of "ins_tercom") or
@@ -176,7 +170,10 @@ class InsTrnNavigator:
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
         self.batch = TercomBatch(None if aiding is None or dem is None else
                                  (self.half_cells, self.cell_m, self.remove_bias, self.dem))
-        self.fixes: list[TercomFix] = []
+        # the latest FIX_HISTORY fixes (each holds its correlation surface: a flight-long list grew without
+        # bound); n_fixes counts them all
+        self.fixes: deque[TercomFix] = deque(maxlen=FIX_HISTORY)
+        self.n_fixes = 0
         self._t_ekf = np.nan
         self._t_batch0 = np.nan
         self._last_f_b = np.array([0.0, 0.0, -G0])
@@ -222,10 +219,12 @@ class InsTrnNavigator:
         P[12, 12] = self.sig_bg**2
         self.kf.x = np.zeros((N_ERR, 1))
         self.kf.P = P
+        self._yaw_prev = math.nan
         self._P_good = P.copy()
         self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
         self.batch.clear()
-        self.fixes = []
+        self.fixes = deque(maxlen=FIX_HISTORY)
+        self.n_fixes = 0
         self.integrity.reset()
         self._integrity_extra = {}
         self._set_search(self.nominal_half_cells)
@@ -251,7 +250,7 @@ class InsTrnNavigator:
             if self._fused_ok(frames, t):
                 self._fused_segment(frames, t)
                 return self.estimate()
-        t_g = gnss[0] if gnss is not None else _EMPTY
+        t_g = gnss[0] if gnss is not None else np.zeros(0)
         g = 0
         a = 0
         while a < n:  # split the chunk at fix and GNSS times so that each is applied when it falls due
@@ -270,361 +269,6 @@ class InsTrnNavigator:
                 g += 1
             a = b
         return self.estimate()
-
-    # ------------------------------------------------------------------ GNSS
-    def _gnss_fixes(self, frames: SensorFrames):
-        """(t, lat, lon, v_ned) of the frame's valid GNSS fixes in time order, or None."""
-        gf = frames.gnss
-        if not self.use_gnss or gf is None or gf.t_s.shape[0] == 0:
-            return None
-        v = np.asarray(gf.v_ned_mps, float).reshape(-1, 3)
-        ok = (np.asarray(gf.valid, bool) & np.isfinite(gf.t_s) & np.isfinite(gf.lat_rad)
-              & np.isfinite(gf.lon_rad) & np.all(np.isfinite(v), axis=1))
-        nbad = int(ok.shape[0] - ok.sum())
-        if nbad:
-            self._count_skip(float(frames.t_start_s), "gnss_invalid", nbad, f"{nbad} GNSS fixes invalid")
-        if not ok.any():
-            return None
-        order = np.argsort(gf.t_s[ok], kind="stable")
-        return (np.asarray(gf.t_s, float)[ok][order], np.asarray(gf.lat_rad, float)[ok][order],
-                np.asarray(gf.lon_rad, float)[ok][order], v[ok][order])
-
-    def _gnss_check_loss(self, t_now: float) -> None:
-        if self._gnss_up and t_now - self._t_gnss > self.gnss_timeout_s:
-            self._gnss_up = False
-            on = "the INS and TRN" if self.aiding is not None else "the INS alone"
-            self.health.events.append(
-                (self._t_gnss, f"GNSS lost: no valid fix after t = {self._t_gnss:.2f} s (navigating on "
-                               f"{on})"))
-            if self.aiding is None:
-                self.health.status = "free_inertial"
-
-    def _gnss_update(self, gnss, i: int) -> None:
-        """Loosely coupled GNSS update with fix i (module docstring)."""
-        t_g, lat_g, lon_g, v_g = gnss[0][i], gnss[1][i], gnss[2][i], gnss[3][i]
-        st = self.ins.state
-        lat, lon, h = float(st[0]), float(st[1]), float(st[2])
-        z = np.empty((5, 1))
-        z[0, 0] = (lat - lat_g) * (meridian_radius_m(lat) + h)     # INS minus GNSS, north (m)
-        z[1, 0] = (lon - lon_g) * (prime_vertical_radius_m(lat) + h) * math.cos(lat)
-        z[2:, 0] = st[3:6] - v_g
-        H = np.zeros((5, N_ERR))
-        for r, c in enumerate(_GNSS_STATES):
-            H[r, c] = 1.0
-        Rm = np.diag([self.gnss_sigma_h_m**2] * 2 + [self.gnss_sigma_v_mps**2] * 3)
-        S = H @ self.kf.P @ H.T + Rm
-        try:
-            d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])
-        except np.linalg.LinAlgError:
-            d2 = math.nan
-        if not math.isfinite(d2) or d2 > self.gnss_gate_chi2:
-            self._count_skip(t_g, "gnss_gated", 1, f"GNSS fix failed the chi-square gate ({d2:.1f})")
-            return
-        saved = copy.deepcopy((self.kf.x, self.kf.P))
-        self.kf.update(z, R=Rm, H=H)
-        dx = self.kf.x.ravel()
-        P = self.kf.P
-        floor2 = self.gnss_correlated_sigma_m**2
-        if floor2 > 0.0 and np.all(np.isfinite(P)):
-            d = np.ones(N_ERR)
-            for k in (0, 1):
-                if 0.0 < P[k, k] < floor2:
-                    d[k] = math.sqrt(floor2 / P[k, k])
-            P = self.kf.P = P * d[:, None] * d[None, :]
-        if not (_is_pd(P) and np.all(np.isfinite(dx))):
-            self.kf.x, self.kf.P = saved
-            self._count_skip(t_g, "covariance_not_pd", 1,
-                             "GNSS fix skipped: covariance not positive definite")
-            return
-        self.ins.correct(dx[0:3], dx[3:6], dx[6:9])
-        self.ins.accel_bias_b += dx[9:12]
-        self.ins.gyro_bias_b[2] += dx[12]
-        self.kf.x[:] = 0.0
-        self._P_good[:] = self.kf.P
-        if not self._gnss_up:
-            self.health.events.append((float(t_g), "GNSS fixes used" if self._t_gnss == -math.inf else
-                                       f"GNSS recovered: fixes used again after {t_g - self._t_gnss:.1f} s"))
-        self._gnss_up = True
-        self._t_gnss = float(t_g)
-        if self.aiding is not None:    # a TERCOM batch is collected with one rigid INS error: restart it
-            self.batch.clear()
-            self._t_batch0 = float(t_g)
-        self.health.ok = True
-        self.health.status = "ok"
-
-    # ------------------------------------------------------------------ internals
-    def _fused_ok(self, frames: SensorFrames, t: np.ndarray) -> bool:
-        """The common frame - no fix falls due inside it, the INS height is initialised, and the aiding (if
-        any) is the IRA with a closest-point formula of the kernels - runs as one kernel call."""
-        if not self.fused:
-            return False
-        if self.init_height_from_baro and not self._height_initialised and frames.baro is not None:
-            return False
-        if self.aiding is None:
-            return True
-        return (self.aiding == "ira" and self.dp_min_m <= 0.0 and self.formula in kern.FORMULA_CODES
-                and float(t[-1]) < self._t_batch0 + self.fix_period_s - 1e-9)
-
-    def _fused_segment(self, frames: SensorFrames, t: np.ndarray) -> None:
-        """_segment(frames, 0, n) as one numba call (navigators.filters._ekf_kernels.fused_segment)."""
-        imu = frames.imu
-        n = t.shape[0]
-        ins = self.ins
-        baro = frames.baro
-        if baro is not None:  # (tau_baro_s is always set here: validated positive)
-            tb, hb_raw, vb_raw = baro.t_s, baro.h_baro_m, baro.valid
-        else:
-            tb, hb_raw, vb_raw = _EMPTY, _EMPTY, _EMPTY_BOOL
-        nb = tb.shape[0]
-        if self._hist.shape[0] < n:
-            self._hist = np.empty((max(n, 16), 10))
-        if self._bbuf.shape[0] < nb:
-            self._bbuf = np.empty(max(nb, 16))
-            self._vbuf = np.empty(max(nb, 16), np.bool_)
-        ira = frames.ira if self.aiding == "ira" else None
-        collect = ira is not None and ira.t_s.shape[0] > 0
-        if collect:
-            ts, rng_m, theta, iv = ira.t_s, ira.range_m, ira.look_angle_rad, ira.valid
-            if self._rows.shape[0] < ts.shape[0]:
-                self._rows = np.empty((max(ts.shape[0], 64), 6))
-        else:
-            ts = rng_m = theta = _EMPTY
-            iv = _EMPTY_BOOL
-        if not np.isfinite(self._t_ekf):
-            self._t_ekf = float(t[-1])
-        if self._Q is None:
-            self._Q = self._process_noise(self.dt_ekf)
-            self.kf.Q = self._Q
-        P = self.kf.P
-        if not (P.flags.c_contiguous and P.dtype == np.float64):
-            P = self.kf.P = np.ascontiguousarray(P, dtype=float)
-        tau = 1e30 if ins.tau_baro_s is None else float(ins.tau_baro_s)
-        bad, n_baro_bad, n_steps, pd, m, n_ret, n_nan = kern.fused_segment(
-            ins.state, ins.prev_imu, ins.baro_state, t, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid,
-            tb, hb_raw, vb_raw, self.baro_geopotential, self._vbuf[:nb], self._bbuf[:nb],
-            ins.accel_bias_b, ins.gyro_bias_b, tau, GRAVITY_MODELS[ins.gravity_model],
-            ins.imu_samples == "interval", self._hist[:n], P, self._Q, self._last_f_b, float(self._t_ekf),
-            self.dt_ekf, collect, ts, rng_m, theta, iv, self.ira_decimation,
-            kern.FORMULA_CODES.get(self.formula, 1), self._rows)
-        t0 = float(t[0])
-        if n_baro_bad:
-            self._count_skip(t0, "baro_invalid", n_baro_bad, "baro samples invalid")
-        ins.bad_imu_samples += int(bad)
-        ins.t_s = float(t[-1])
-        if bad:
-            self._count_skip(t0, "imu_invalid", bad, "IMU samples invalid (held previous)")
-        if n_steps > 0:
-            if not pd:
-                if np.all(np.isfinite(P)):
-                    w, V = np.linalg.eigh(0.5 * (P + P.T))
-                    self.kf.P = (V * np.clip(w, 1e-12, None)) @ V.T
-                else:
-                    self.kf.P = self._P_good.copy()
-                self._count_skip(float(t[-1]), "covariance_not_pd", 1, "covariance repaired after prediction")
-            self._t_ekf += n_steps * self.dt_ekf
-        self._P_good[:] = self.kf.P
-        self.kf.x[:] = 0.0
-        if n_ret:
-            self._count_skip(t0, "altimeter_no_return", n_ret,
-                             f"{n_ret} altimeter samples without a valid return")
-        if n_nan:
-            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
-        if m:
-            self.batch.add_rows(self._rows[:m].copy())
-
-    def _baro(self, frames: SensorFrames):
-        """(t, geometric height, usable mask, all usable) of the frame's baro samples, computed once per
-        frame; None without a baro frame."""
-        baro = frames.baro
-        if baro is None:
-            return None
-        if self._baro_cache is not None and self._baro_cache[0] is baro:
-            return self._baro_cache[1]
-        tb, hb_raw = baro.t_s, baro.h_baro_m
-        n = hb_raw.shape[0]
-        vb = np.empty(n, np.bool_)
-        hb = np.empty(n)
-        all_ok = kern.baro_prepare(baro.valid, hb_raw, self.baro_geopotential, vb, hb)
-        out = (tb, hb, vb, bool(all_ok), hb_raw)
-        self._baro_cache = (baro, out)
-        return out
-
-    def _segment(self, frames: SensorFrames, a: int, b: int) -> None:
-        imu = frames.imu
-        if a == 0 and b == imu.t_s.shape[0]:
-            t_seg, f_seg, w_seg, ok_seg = imu.t_s, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid
-        else:
-            t_seg, f_seg = imu.t_s[a:b], imu.f_b_mps2[a:b]
-            w_seg, ok_seg = imu.omega_ib_b_rps[a:b], imu.valid[a:b]
-        bad0 = self.ins.bad_imu_samples
-        tb = hb = vb = None
-        baro = self._baro(frames)
-        if baro is not None:
-            tb, hb, vb, vb_all, _ = baro
-            if self.init_height_from_baro and not self._height_initialised and (vb_all or vb.any()):
-                # vertical channel initialised from the first baro height: a height error left to the baro
-                # loop would tilt the INS velocity while it converges, and a vertical velocity error dv_d
-                # moves every IRA closest point along track by about R dv_d / V (the zero-Doppler plane).
-                self.ins.state[2] = float(hb[np.argmax(vb)])
-                self._height_initialised = True
-            if not vb_all:
-                in_seg = (tb > (imu.t_s[a - 1] if a > 0 else -np.inf)) & (tb <= imu.t_s[b - 1])
-                nb = int((in_seg & ~vb).sum())
-                if nb:
-                    self._count_skip(float(imu.t_s[a]), "baro_invalid", nb, "baro samples invalid")
-        hist = self.ins.propagate(t_seg, f_seg, w_seg, ok_seg, tb, hb, vb)
-        nbad = self.ins.bad_imu_samples - bad0
-        if nbad:
-            self._count_skip(float(imu.t_s[a]), "imu_invalid", nbad, "IMU samples invalid (held previous)")
-        kern.last_good_row(ok_seg, f_seg, self._last_f_b)
-        self._predict_to(float(t_seg[-1]), t_seg, f_seg, hist)
-        if self.aiding is not None:
-            self._collect(frames, t_seg, hist)
-
-    def _process_noise(self, dt: float) -> np.ndarray:
-        Q = np.zeros((N_ERR, N_ERR))
-        Q[3:6, 3:6] = np.eye(3) * self.q_acc * dt
-        Q[6:9, 6:9] = np.eye(3) * self.q_gyr * dt
-        Q[9:12, 9:12] = np.eye(3) * (0.01 * self.sig_ba) ** 2 * dt / 3600.0
-        Q[12, 12] = (0.01 * self.sig_bg) ** 2 * dt / 3600.0
-        Q[2, 2] = 0.01 * dt  # baro noise entering through the loop
-        return Q
-
-    def _predict_to(self, t_end: float, t_imu: np.ndarray, f_b: np.ndarray, hist: np.ndarray) -> None:
-        """Propagate the error covariance in steps of 1/ekf_rate_hz up to t_end along the INS history
-        (_ekf_kernels.predict_covariance: F, Phi = I + F dt + (F dt)^2/2, P = Phi P Phi^T + Q)."""
-        if not np.isfinite(self._t_ekf):
-            self._t_ekf = t_end
-        n_steps = int(np.floor((t_end - self._t_ekf) / self.dt_ekf + 1e-9))
-        dt = self.dt_ekf
-        if self._Q is None:
-            self._Q = self._process_noise(dt)
-            self.kf.Q = self._Q
-        if n_steps > 0:
-            P = self.kf.P
-            if not (P.flags.c_contiguous and P.dtype == np.float64):
-                P = self.kf.P = np.ascontiguousarray(P, dtype=float)
-            kern.predict_covariance(P, self._Q, t_imu, f_b, hist, self.ins.state, self._last_f_b,
-                                    self.ins.accel_bias_b, self._t_ekf, dt, n_steps,
-                                    float(self.ins.tau_baro_s))
-            if not kern.is_positive_definite(P):
-                if np.all(np.isfinite(P)):
-                    w, V = np.linalg.eigh(0.5 * (P + P.T))
-                    self.kf.P = (V * np.clip(w, 1e-12, None)) @ V.T
-                else:
-                    self.kf.P = self._P_good.copy()
-                self._count_skip(t_end, "covariance_not_pd", 1, "covariance repaired after prediction")
-            self._t_ekf += n_steps * dt
-        self._P_good[:] = self.kf.P
-        self.kf.x[:] = 0.0
-
-    def _collect(self, frames: SensorFrames, t_imu: np.ndarray, hist: np.ndarray) -> None:
-        if self.aiding == "ira" and self.dp_min_m <= 0.0 and self.formula in kern.FORMULA_CODES:
-            self._collect_ira_fast(frames, t_imu, hist)
-        else:
-            self._collect_general(frames, t_imu, hist)
-
-    def _collect_ira_fast(self, frames: SensorFrames, t_imu: np.ndarray, hist: np.ndarray) -> None:
-        """_collect_general's IRA path ("conventional"/"proposed", no dp selection) in one numba call."""
-        src = frames.ira
-        if src is None:
-            return
-        ts = src.t_s
-        n = ts.shape[0]
-        if n == 0:
-            return
-        baro = self._baro(frames)
-        have_baro = False
-        tb = hb = _EMPTY
-        if baro is not None:
-            t_b, _, bv, bv_all, h_raw = baro
-            if bv_all and bv.size:
-                tb, hb, have_baro = t_b, h_raw, True
-            elif bv.any():
-                tb, hb, have_baro = t_b[bv], h_raw[bv], True
-        if self._rows.shape[0] < n:
-            self._rows = np.empty((max(n, 64), 6))
-        m, n_bad, n_nan = kern.collect_ira(
-            float(t_imu[0]), float(t_imu[-1]), t_imu, hist, ts, src.range_m, src.look_angle_rad, src.valid,
-            self.ira_decimation, tb, hb, have_baro, self.baro_geopotential, kern.FORMULA_CODES[self.formula],
-            self._rows)
-        t0 = float(t_imu[0])
-        if n_bad:
-            self._count_skip(t0, "altimeter_no_return", n_bad,
-                             f"{n_bad} altimeter samples without a valid return")
-        if n_nan:
-            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
-        if m:
-            self.batch.add_rows(self._rows[:m].copy())
-
-    def _collect_general(self, frames: SensorFrames, t_imu: np.ndarray, hist: np.ndarray) -> None:
-        t0, t1 = float(t_imu[0]), float(t_imu[-1])
-        baro = frames.baro
-        if self.aiding == "ira":
-            src = frames.ira
-            if src is None:
-                return
-            rng_m, theta = src.range_m, src.look_angle_rad
-        else:
-            src = frames.radar_altimeter
-            if src is None:
-                return
-            rng_m, theta = src.range_m, np.zeros_like(src.range_m)
-        ts = np.asarray(src.t_s, float)
-        sel = (ts >= t0) & (ts <= t1)
-        if self.aiding == "ira" and self.ira_decimation > 1:
-            idx = np.nonzero(sel)[0]
-            keep = np.zeros_like(sel)
-            keep[idx[:: self.ira_decimation]] = True
-            sel = keep
-        if not sel.any():
-            return
-        ok = sel & src.valid & np.isfinite(rng_m) & np.isfinite(theta) & (rng_m > 0)
-        nbad = int((sel & ~ok).sum())
-        if nbad:
-            self._count_skip(
-                t0, "altimeter_no_return", nbad, f"{nbad} altimeter samples without a valid return"
-            )
-        if not ok.any():
-            return
-        ts_ok = ts[ok]
-        k = np.clip(np.searchsorted(t_imu, ts_ok), 0, t_imu.size - 1)
-        st = hist[k]
-        good_state = np.all(np.isfinite(st), axis=1)
-        st, ts_ok = st[good_state], ts_ok[good_state]
-        R = rng_m[ok][good_state]
-        th = theta[ok][good_state]
-        if st.shape[0] == 0:
-            return
-        # baro height at the sample times (fall back to the baro-damped INS height)
-        h_ref = st[:, 2].copy()
-        if baro is not None:
-            bv = baro.valid & np.isfinite(baro.h_baro_m)
-            if bv.sum() >= 1:
-                h_ref = np.interp(ts_ok, baro.t_s[bv], baro.h_baro_m[bv])
-                if self.baro_geopotential:
-                    h_ref = R0_GEOPOTENTIAL_M * h_ref / (R0_GEOPOTENTIAL_M - h_ref)
-        if self.aiding == "ira":
-            C = np.stack([quat_to_dcm(q) for q in st[:, 6:10]])
-            p = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.formula, C_bn=C)
-            if self.dp_min_m > 0.0:  # seed 000 Table 3: keep samples where the formulas differ by > dp
-                pa, pb = (
-                    closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=f, C_bn=C)
-                    for f in ("proposed", self.dp_reference_formula)
-                )
-                dp = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])  # eqs 37-39
-                keep = dp > self.dp_min_m
-                p, st, h_ref, ts_ok = p[keep], st[keep], h_ref[keep], ts_ok[keep]
-            nan = ~np.all(np.isfinite(p), axis=1)
-            if nan.any():
-                self._count_skip(
-                    t0, "ira_geometry", int(nan.sum()), "IRA samples with no closest-point solution"
-                )
-            h_meas = h_ref - np.abs(p[:, 2])  # seed 000 eq 2: h_baro - |p_alt|
-            self.batch.add(ts_ok, st[:, 0], st[:, 1], h_meas, p[:, 0], p[:, 1])
-        else:
-            h_meas = h_ref - R  # seed 000 eq 1
-            self.batch.add(ts_ok, st[:, 0], st[:, 1], h_meas)
 
     def _fix(self, t_s: float) -> None:
         s = self.batch.samples
@@ -650,6 +294,7 @@ class InsTrnNavigator:
             accumulator=acc,
         )
         self.fixes.append(fix)
+        self.n_fixes += 1
         if not fix.valid:
             self._count_skip(t_s, f"tercom_{fix.reason}", 1, f"TERCOM fix rejected: {fix.reason}")
             if fix.reason == "edge":      # the best match lies beyond the search window: a failed test

@@ -100,6 +100,6 @@ def _tercom_warm_up(rate_hz: float) -> dict:
     return {"fix_period_s": 2.0 / rate_hz, "min_samples": 1}
 
 
-INS_CAPABILITIES = Capabilities(settings=InsTrnSettings)
-INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=True,
+INS_CAPABILITIES = Capabilities(settings=InsTrnSettings, uses_imu_spec=True)
+INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=True, uses_imu_spec=True,
                                        warm_up_settings=_tercom_warm_up)

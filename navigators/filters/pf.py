@@ -16,7 +16,7 @@ is INS + the weighted mean.
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
   altimeter: the shortest in-cone return under the particle's heading (ra_cone_ranges). Log-weights,
   normalised by their maximum; log p(z | past) by logsumexp.
-- Resampling: systematic (navigators.filters.resampling) when the effective sample size falls below
+- Resampling: systematic (navigators.core.resampling) when the effective sample size falls below
   ess_threshold * M, then a kernel jitter against sample impoverishment at Gordon et al.'s (1993) roughening
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
   jitter keeps the cloud's mean and covariance (`_regularise`); Gordon's jitter adds its variance at each
@@ -37,8 +37,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, equivalent_walk_density, rss
+from trn_env.navigators.core.resampling import systematic_kernel
 from trn_env.navigators.filters._pf_kernels import map_heights_interp, propagate_particles
-from trn_env.navigators.filters.resampling import systematic_kernel
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
 from trn_env.navigators.filters.terrain_filter_settings import PF_CAPABILITIES, PfSettings
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
@@ -50,6 +51,7 @@ from trn_env.navigators.measurements.terrain_models import (
 )
 from trn_env.navigators.protocol import EXTRA_ESS
 
+PF_MEMORY_S = 60.0  # memory over which the error sources the particles do not carry are matched
 N_STATE = 6
 
 
@@ -112,6 +114,22 @@ class ParticleFilter(InsRiddenFilter):
         self._v_prev = None
 
     # ------------------------------------------------------------------------------------ belief
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """Take the error model from the IMU's specification (navigators.core.imu_spec), each figure a floor
+        over the tuned setting. The particles carry position, velocity and heading offsets, so the
+        acceleration errors enter as an equivalent velocity random walk matching them at PF_MEMORY_S: the
+        body-fixed specific-force error (accelerometer bias, instability, misalignment x g), the tilt the
+        horizontal gyro biases build over that memory (g sigma_bg T) and a 90 deg turn's gyro misalignment
+        (g x tilt), with the velocity random walk; the heading's random walk matches the z gyro bias and a
+        90 deg turn's scale factor at the same memory, with the angle random walk."""
+        a = rss(spec.body_accel_sigma_mps2, spec.tilt_accel_rate_sigma_mps3 * PF_MEMORY_S,
+                G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
+        self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S),
+                                         spec.accel_noise_density_mps2_rthz))
+        r_psi = rss(spec.gyro_bias_sigma_rps, spec.turn_heading_sigma_rad(0.5 * math.pi) / PF_MEMORY_S)
+        self.s_psi = max(self.s_psi, rss(equivalent_walk_density(r_psi, PF_MEMORY_S),
+                                         spec.gyro_noise_density_rps_rthz))
+
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
         self._init_cov = np.array(cov9, float)
         M = self.M

@@ -12,19 +12,12 @@ nothing per cell but one multiply-add.
   accelerometer bias b (constant in the body frame, so R b in NED turns with the heading, R the INS's
   body-to-NED matrix's horizontal block) and the heading error eps (INS yaw minus true yaw, which turns
   every velocity change the INS integrates: v gains eps (dv_e, -dv_n)); a Gaussian (mean, covariance, and
-  its covariance with the grid's position and vertical offset) outside the grid. Measured on the default
-  flight (30 runs, free INS, 3 min straight): the variance across runs of the velocity error's
-  increments over a lag tau is q tau + s_a^2 tau^2 with q = 1e-6 m^2/s^3 (its 1 s figure) and s_a =
-  6.2e-4 (north), 7.5e-4 m/s^2 (east) - a constant of each run (the initial 0.05 mrad tilt times g and
-  the 50 ug accelerometer bias, 6.9e-4 in quadrature), no random walk of the acceleration (the
-  increments grow as tau^2 from 10 s to 100 s). Before, a 0.01 m/s/sqrt(s) random walk of v stood in for
-  all this: at the filter's memory of 10-60 s it is 10-20 times the measured increments, so the velocity's
-  and the along-track position's covariances were too large (velocity NEES 1.55 of 2, along-track
-  position 0.85 of 1; ANEES 1.85, 100 runs); a constant NED acceleration alone fixed the 3 min straight
-  flight (ANEES 2.06) but not the turns of the 8 min default flight (5.4 m RMS against 4.8 m: the bias
-  turns with the aircraft, and a 1 mrad heading error turns a 90 degree turn's 120 m/s velocity change
-  into 0.12 m/s of velocity error); with the lowered random walk and no acceleration v cannot follow the
-  run's acceleration (ANEES 2.34, 69 % of the epochs inside). Priors: v, t and eps from the initial
+  its covariance with the grid's position and vertical offset) outside the grid. Its process noise and
+  b's prior come from the IMU's specification (apply_imu_spec, navigators.core.imu_spec): the tilt
+  acceleration's growth from the horizontal gyro biases, the heading's from the z gyro bias, the
+  accelerometer instability's drive on b, and per rad turned the gyro misalignment and scale factor; the
+  velocity's random walk is a floor (velocity_noise_mps_per_sqrt_s; the measurements that chose this
+  model: docs/validation/navigators.md). Priors: v, t and eps from the initial
   estimate's velocity, roll/pitch and yaw variances, b from accel_bias_sigma_mps2. A terrain or GNSS
   update leaves p(u | dn, de, b) unchanged, so u follows the grid's posterior moments by the Gaussian
   regression (`_velocity_from_position`, exact for a Gaussian belief: tests/test_terrain_filter_linear.py
@@ -69,6 +62,7 @@ import math
 import numpy as np
 import trn_env.navigators.filters._pmf_kernels as kern
 from scipy import ndimage
+from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, equivalent_walk_density
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
 from trn_env.navigators.filters.terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
@@ -80,6 +74,8 @@ from trn_env.navigators.measurements.terrain_models import (
 )
 
 G0 = 9.80665
+PMF_MEMORY_S = 120.0        # the memory over which carried-as-constant error rates are matched (imu_spec)
+TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
 N_U = 7                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error)
 LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
 
@@ -136,6 +132,28 @@ class PointMassFilter(InsRiddenFilter):
         self._le = (math.log(self.outlier_prob) + self.log_outlier_density if self.outlier_prob > 0
                     else -np.inf)
 
+    # ------------------------------------------------------------------------------------ IMU specification
+    _imu_noise: tuple = ()  # q tilt acceleration, q accel bias, q heading, per-rad-turned tilt, heading
+    _yaw_prev = math.nan
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """Take the error model of u = (v, t, b, eps) from the IMU's specification (navigators.core.imu_spec),
+        each figure a floor over the tuned setting: b's prior the body-fixed horizontal specific-force error
+        (bias, instability, misalignment x g), v's random walk the velocity random walk; and as process noise
+        the accelerometer instability's drive on b (2 sigma^2 / tau), the tilt acceleration's growth from the
+        horizontal gyro biases (g sigma_bg) and the heading's from the z gyro bias as random walks matching
+        them at PMF_MEMORY_S, and per rad turned the gyro misalignment (g x tilt on t) and scale factor (eps)
+        over TURN_REFERENCE_RAD."""
+        self.accel_bias_sigma = max(self.accel_bias_sigma, spec.body_accel_sigma_mps2)
+        self.velocity_noise = max(self.velocity_noise, spec.accel_noise_density_mps2_rthz)
+        self._imu_noise = (
+            equivalent_walk_density(spec.tilt_accel_rate_sigma_mps3, PMF_MEMORY_S) ** 2,
+            2.0 * spec.accel_bias_instability_mps2**2 / spec.accel_bias_tau_s,
+            equivalent_walk_density(spec.gyro_bias_sigma_rps, PMF_MEMORY_S) ** 2,
+            (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
+            spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
+        )
+
     # ------------------------------------------------------------------------------------ belief
     def _set_geometry(self, centre_n: float, centre_e: float, spacing: float) -> None:
         n = self.n
@@ -165,6 +183,7 @@ class PointMassFilter(InsRiddenFilter):
         self.C_uz = np.zeros((N_U, 3))
         if velocity is None:
             self._v_ins_prev = None
+            self._yaw_prev = math.nan
             self.u_mean = np.zeros(N_U)
             self.C_uu = self._u_prior_cov(cov9)
             self.C_uz[:2, :2] = np.array(cov9[3:5, 0:2], float)
@@ -228,6 +247,19 @@ class PointMassFilter(InsRiddenFilter):
             C_uu = F @ self.C_uu @ F.T
             C_uu[0, 0] += self.velocity_noise ** 2 * dt
             C_uu[1, 1] += self.velocity_noise ** 2 * dt
+            if self._imu_noise:  # the IMU specification's sources (apply_imu_spec)
+                turn = 0.0
+                if st is not None and np.all(np.isfinite(st[6:10])):
+                    yaw = math.atan2(R[1, 0], R[0, 0])
+                    if math.isfinite(self._yaw_prev):
+                        turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
+                    self._yaw_prev = yaw
+                q_t, q_b, q_eps, turn_t2, turn_h2 = self._imu_noise
+                C_uu[2, 2] += q_t * dt + turn_t2 * turn
+                C_uu[3, 3] += q_t * dt + turn_t2 * turn
+                C_uu[4, 4] += q_b * dt
+                C_uu[5, 5] += q_b * dt
+                C_uu[6, 6] += q_eps * dt + turn_h2 * turn
             self.C_uu = 0.5 * (C_uu + C_uu.T)
             self.P_b += self.vertical_noise ** 2 * dt
             self._t_belief = t_s

@@ -119,4 +119,5 @@ class RbpfSettings(Settings):
 
 
 CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=True, uses_imu_spec=True,
+                            imu_bias_settings=True,
                             uses_map_noise=True, models_map_detail=True)

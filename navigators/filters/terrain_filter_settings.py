@@ -126,5 +126,6 @@ class PfSettings(TerrainFilterSettings):
         return []
 
 
-PMF_CAPABILITIES = Capabilities(settings=PmfSettings, needs_map=True, uses_map_noise=True)
-PF_CAPABILITIES = Capabilities(settings=PfSettings, needs_map=True, takes_rng=True, uses_map_noise=True)
+PMF_CAPABILITIES = Capabilities(settings=PmfSettings, needs_map=True, uses_map_noise=True, uses_imu_spec=True)
+PF_CAPABILITIES = Capabilities(settings=PfSettings, needs_map=True, takes_rng=True, uses_map_noise=True,
+                               uses_imu_spec=True)

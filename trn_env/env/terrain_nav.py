@@ -8,35 +8,33 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 from gymnasium.utils import EzPickle
 from gymnasium.vector import AutoresetMode
 
 import trn_env.scenario.build as components
+from trn_env.env import task
 from trn_env.env.route_info import route_information
+
+# the task's constants, spaces, action check, rewards and episode ends (shared with TerrainNavFast-v0)
+from trn_env.env.task import (  # noqa: F401 - re-exported under this module's names
+    ACTION_MODES,
+    FAILURE_REASONS,
+    G0_MPS2,
+    N_OBS,
+    N_ROUTES,
+    N_TERRAIN_FEATURES,
+    OBS_HIGH,
+    OBS_LOW,
+    REWARD_MODES,
+    ROUTE_FEATURELESS_MAX_KM,
+    ROUTE_OFFSET_FRACTIONS,
+    TERMINATING_REASONS,
+    TRUNCATING_REASONS,
+)
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
 from trn_env.terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
-
-G0_MPS2 = 9.80665
-N_TERRAIN_FEATURES = 6
-REWARD_MODES = ("arrival", "progress")
-ACTION_MODES = ("turn", "bearing", "pursuit")
-# candidate routes of the route-information observation: constant offsets from the goal's bearing, as
-# fractions of bearing_offset_max_deg (the pursuit action that flies each)
-ROUTE_OFFSET_FRACTIONS = (-1.0, -0.5, 0.0, 0.5, 1.0)
-N_ROUTES = len(ROUTE_OFFSET_FRACTIONS)
-ROUTE_FEATURELESS_MAX_KM = 50.0
-
-# Observation bounds per element (the clip applied to every observation), see the class docstring's table.
-OBS_LOW = np.array([-300.0, -300.0, 0.0, -1.0, -1.0, 0.0, -10.0, 0.0, 0.0, 0.0, 0.0,
-                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -1.0, 0.0]
-                   + [0.0] * (2 * N_ROUTES), np.float32)
-OBS_HIGH = np.array([300.0, 300.0, 450.0, 1.0, 1.0, 5.0, 20.0, 10.0, 8.0, 8.0, 8.0,
-                     4.1, 4.1, 4.1, 4.1, 4.1, 4.1, 1.0, 1.0, 1.0, 1.0, 2.0]
-                    + [4.1] * N_ROUTES + [ROUTE_FEATURELESS_MAX_KM] * N_ROUTES, np.float32)
-N_OBS = OBS_LOW.size
 
 
 class TerrainNavEnv(gym.Env, EzPickle):
@@ -314,11 +312,10 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self.held_out_radius_m = float(held_out_radius_m)
         self.min_goal_distance_m = float(min_goal_distance_m)
 
-        dpsi = min(math.radians(turn_rate_max_dps) * self.decision_interval_s, math.pi / 3)
-        dagl = climb_rate_max_mps * self.decision_interval_s
-        self.action_limits = np.array([dpsi, dagl])          # rad, m per decision step
-        self.action_space = spaces.Box(low=-1.0, high=1.0, shape=(2,), dtype=np.float32)
-        self.observation_space = spaces.Box(low=OBS_LOW, high=OBS_HIGH, dtype=np.float32)
+        self.action_limits = task.action_limits(self.decision_interval_s, turn_rate_max_dps,
+                                                climb_rate_max_mps)          # rad, m per decision step
+        self.action_space = task.action_space()
+        self.observation_space = task.observation_space()
 
         self._dems = components.build_terrain(d, sc.extras, spawn_rngs(sc.seed)["map"])
         self._info_map = components.terrain_information_map(self._dems[1], info_sigma_m, info_window_m)
@@ -548,31 +545,14 @@ class TerrainNavEnv(gym.Env, EzPickle):
         return self._obs(), self._info(None)
 
     def _check_action(self, action) -> np.ndarray:
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"action must be an array of 2 numbers (track change, AGL change), got "
-                             f"{action!r}") from None
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"action must have shape {self.action_space.shape} (track change, AGL change), "
-                             f"got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be finite, got {a.tolist()}")
-        lo = self.action_space.low.astype(np.float64)
-        hi = self.action_space.high.astype(np.float64)
-        tol = 1e-6 * np.maximum(1.0, np.abs(hi))
-        names = ("track change (fraction of the turn limit)", "AGL change (fraction of the climb limit)")
-        for i in range(2):
-            if a[i] < lo[i] - tol[i] or a[i] > hi[i] + tol[i]:
-                raise ValueError(f"action[{i}] {names[i]} = {a[i]:.6g} is outside the action space "
-                                 f"[{lo[i]:.6g}, {hi[i]:.6g}]")
-        return np.clip(a, lo, hi)
+        return task.check_actions(action, self.action_space.shape, self.action_space.low,
+                                  self.action_space.high)
 
     def _bearing_offset_limit_rad(self, d_m: float) -> float:
         """Largest offset from the goal's bearing that the aircraft can hold at distance d_m: flying at an
         offset phi turns the bearing at v sin(phi) / d, which the turn rate must keep up with."""
         omega = self.action_limits[0] / self.decision_interval_s
-        return min(self.bearing_offset_max_rad, math.asin(min(1.0, d_m * omega / self.tas_mps)))
+        return float(task.bearing_offset_limit_rad(d_m, omega, self.tas_mps, self.bearing_offset_max_rad))
 
     def _apply_action(self, a: np.ndarray) -> None:
         """The action (in [-1, 1]) -> new commanded track and height above ground (see Action Space)."""
@@ -636,9 +616,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                                    sigma_before)
         info["reward_terms"] = terms
         reward = float(sum(terms.values()))
-        terminated = reason in ("arrived", "goal", "terrain_collision", "off_map", "diverged",
-                                "fuel_exhausted", "engine_failure")
-        truncated = reason == "time_limit"
+        terminated = reason in TERMINATING_REASONS
+        truncated = reason in TRUNCATING_REASONS
         if terminated or truncated:
             self._needs_reset = True
         return self._obs(), reward, bool(terminated), bool(truncated), info
@@ -646,32 +625,25 @@ class TerrainNavEnv(gym.Env, EzPickle):
     def _reward_terms(self, info: dict, reason: str | None, d_before: float, d_est_before: float,
                       dt_s: float, sigma_before_m: float = 0.0) -> dict[str, float]:
         if self.reward_mode == "progress":
-            terms = {"progress": (d_before - info["true_distance_to_goal_m"]) / 1000.0,
-                     "error": -self.error_weight * info["true_horizontal_error_m"] / 1000.0,
-                     "goal": self.goal_bonus if reason == "goal" else 0.0,
-                     "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0}
-            return terms
-        d_est = info["estimated_distance_to_goal_m"]
-        # potential-based shaping (Ng, Harada & Russell 1999): F = gamma * Phi(s') - Phi(s) with
-        # Phi = -progress_weight * estimated distance (km)
-        terms = {"progress": self.progress_weight * (d_est_before - self.shaping_gamma * d_est) / 1000.0,
-                 "time": -self.time_cost_per_s * dt_s, "arrival": 0.0, "miss": 0.0,
-                 "collision": -self.collision_penalty if reason == "terrain_collision" else 0.0,
-                 "failure": -self.failure_penalty if reason in ("off_map", "diverged", "fuel_exhausted",
-                                                               "engine_failure") else 0.0}
-        if self.sigma_shaping_weight > 0.0:
-            # potential-based shaping on the reported horizontal sigma (Ng, Harada & Russell 1999), with
-            # Phi = 0 at the episode's end (any end) so that an episode's terms sum to w * sigma_h(start)
-            w = self.sigma_shaping_weight / 1000.0
-            phi_after = 0.0 if reason is not None else -w * self._sigma_h_m()
-            terms["sigma"] = self.shaping_gamma * phi_after + w * sigma_before_m
+            terms = task.progress_reward_terms(
+                d_before, info["true_distance_to_goal_m"], info["true_horizontal_error_m"], reason == "goal",
+                reason == "terrain_collision", error_weight=self.error_weight, goal_bonus=self.goal_bonus,
+                collision_penalty=self.collision_penalty)
+            return {k: float(v) for k, v in terms.items()}
         if reason == "arrived":
             # flying the last goal_radius_m on the estimate ends at truth + (goal - estimate): its miss is
             # the true horizontal navigation error
             info["true_miss_m"] = info["true_horizontal_error_m"]
-            terms["arrival"] = self.goal_bonus
-            terms["miss"] = -self.miss_weight * info["true_miss_m"] / 1000.0
-        return terms
+        terms = task.arrival_reward_terms(
+            d_est_before, info["estimated_distance_to_goal_m"], dt_s, sigma_before_m,
+            self._sigma_h_m() if self.sigma_shaping_weight > 0.0 else 0.0, reason is not None,
+            reason == "arrived", reason == "terrain_collision", reason in FAILURE_REASONS,
+            info["true_horizontal_error_m"], progress_weight=self.progress_weight,
+            shaping_gamma=self.shaping_gamma, time_cost_per_s=self.time_cost_per_s,
+            collision_penalty=self.collision_penalty, failure_penalty=self.failure_penalty,
+            goal_bonus=self.goal_bonus, miss_weight=self.miss_weight,
+            sigma_shaping_weight=self.sigma_shaping_weight)
+        return {k: float(v) for k, v in terms.items()}
 
     def render(self):
         if self.render_mode != "rgb_array":

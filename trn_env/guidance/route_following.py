@@ -191,16 +191,36 @@ class Turn:
 class Guidance:
     """Flies a Route leg by leg from supplied estimates, returning AutopilotTargets.
 
-    tas_mps: commanded true airspeed; bank_limit_rad: passed to the autopilot and used for the turn radius;
-    k_per_m and chi_inf_rad: the straight-line vector-field gains (approach angle far from the leg chi_inf,
-    slope k at the leg); k_orbit: the orbit vector-field gain (turns); turn_lead_s: feed-forward of the
-    turns, the autopilot's track-error -> turn-rate time constant (5 s in aircraft/kingair's autopilot: it
-    commands turn rate = track error / 5 s), so the orbit command leads the circle's tangent by
-    turn_lead_s * V_ground / R and the aircraft turns at the circle's rate without a standing offset (0 = no
-    feed-forward); turn_bank_fraction: turns are planned at this fraction of the bank limit (margin for
-    roll-in and gusts); wind_tau_s: time constant of the wind estimate's low-pass filter; vertical: "step"
-    (each leg flies the altitude of its end waypoint) or "linear" (interpolated along the leg when both
-    ends use the same reference).
+    Parameters
+    ----------
+    route : Route
+        The waypoints to fly.
+    tas_mps : float
+        Commanded true airspeed, m/s.
+    bank_limit_rad : float
+        Bank limit passed to the autopilot and used for the turn radius, rad (at most 60 deg).
+    k_per_m, chi_inf_rad : float
+        The straight-line vector-field gains: slope k at the leg (1/m) and approach angle far from the leg
+        (rad, at most pi/2).
+    vertical : {"step", "linear"}
+        Each leg flies the altitude of its end waypoint ("step"), or one interpolated along the leg when
+        both ends use the same reference ("linear").
+    k_orbit : float
+        The orbit vector-field gain (turns).
+    turn_lead_s : float
+        Feed-forward of the turns, s in [0, 60): the autopilot's track-error -> turn-rate time constant (5 s
+        in the King Air's autopilot), so the orbit command leads the circle's tangent by
+        turn_lead_s * V_ground / R and the aircraft turns at the circle's rate without a standing offset
+        (0 = no feed-forward).
+    wind_tau_s : float
+        Time constant of the wind estimate's low-pass filter, s.
+    turn_bank_fraction : float
+        Turns are planned at this fraction of the bank limit, in [0.3, 1] (margin for roll-in and gusts).
+
+    Raises
+    ------
+    ValueError
+        Naming the argument that is out of range.
     """
 
     def __init__(self, route: Route, *, tas_mps: float = 85.0, bank_limit_rad: float = math.radians(25.0),
@@ -268,8 +288,16 @@ class Guidance:
         return self._leg_state_ne(ne, self.leg)
 
     def turn_radius_m(self) -> float:
-        """Radius of the ground-track circle flyable at turn_bank_fraction of the bank limit at the turn's
-        largest ground speed TAS + |wind|: R = V^2 / (g tan(turn_bank_fraction * bank_limit))."""
+        """Radius of the ground-track circle flyable at turn_bank_fraction of the bank limit.
+
+        R = V^2 / (g tan(turn_bank_fraction * bank_limit)) at the turn's largest ground speed
+        V = TAS + ``|wind|``.
+
+        Returns
+        -------
+        float
+            The radius, m.
+        """
         # the wind estimate is capped at 0.6 TAS (a bad heading estimate must not blow the circle up)
         v = self.tas_mps + min(math.hypot(self._wind_n, self._wind_e), 0.6 * self.tas_mps)
         return v * v / (G_MPS2 * math.tan(self.turn_bank_fraction * self.bank_limit_rad))

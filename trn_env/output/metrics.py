@@ -169,7 +169,21 @@ METRIC_KEYS = (
 
 
 def navigation_metrics(arrays: dict[str, np.ndarray], settings: MetricSettings | None = None) -> dict:
-    """Every metric of METRIC_KEYS for one run's log arrays (see the module docstring)."""
+    """Every metric of METRIC_KEYS for one run's log arrays (definitions in the module docstring).
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        The run's log arrays: ``t_s`` (s), ``err_ned_m`` (N x 3, estimate minus truth, m), ``est_cov`` or
+        ``est_cov_diag`` (m^2), ``nav_ok`` (health flags).
+    settings : MetricSettings, optional
+        Thresholds of convergence and track loss (defaults: MetricSettings()).
+
+    Returns
+    -------
+    dict
+        One value per key of METRIC_KEYS (units in the key names; see the outputs reference).
+    """
     s = settings or MetricSettings()
     t = np.asarray(arrays["t_s"], float)
     err = np.asarray(arrays["err_ned_m"], float).reshape(-1, 3)

@@ -1,4 +1,8 @@
-"""Run outputs: summary.json, the time-series log (log.npz + timeline.csv), events, and plots.
+"""Run outputs: summary.json, the time-series log (log/ or log.npz, + timeline.csv), events, and plots.
+
+`trn-env fly` and `trn-env replay` hand over `log_dir`, a sensor log (trn_env.logs) already streamed to
+disk during the run: it is moved in as `log/` (Parquet tables, read with trn_env.logs.read_log or
+pandas.read_parquet) instead of writing `log.npz` from the arrays in memory.
 
 Everything is written atomically: the files go into a temporary directory next to the target, and only
 when all of them are complete is that directory renamed onto the target (or, if the target already holds
@@ -164,10 +168,11 @@ def clean_partial_leftovers(parent: Path, stale_after_s: float = 3600.0) -> list
 
 def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
               events: list[tuple[float, str, str]] | None = None,
-              plot: Callable[[Path], list[str]] | None = None) -> Path:
+              plot: Callable[[Path], list[str]] | None = None, log_dir: Path | None = None) -> Path:
     """Write a complete run directory atomically; returns the directory.
 
     `plot(tmp_dir)` may add figures; it returns their file names (listed in summary['files']).
+    `log_dir`: a finished log folder moved in as `log/` (then no log.npz is written).
     """
     out_dir = Path(out_dir)
     parent = out_dir.resolve().parent
@@ -178,8 +183,12 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)          # mkdtemp makes it private; the run directory should not be
     try:
-        files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
-        write_log_npz(tmp / "log.npz", arrays)
+        if log_dir is not None:
+            files = ["summary.json", "log", "timeline.csv", "events.csv"]
+            os.replace(log_dir, tmp / "log")
+        else:
+            files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
+            write_log_npz(tmp / "log.npz", arrays)
         write_timeline_csv(tmp / "timeline.csv", arrays)
         write_events_csv(tmp / "events.csv", events or [])
         if plot is not None:
@@ -206,4 +215,6 @@ def _commit(tmp: Path, out_dir: Path) -> None:
         stale.unlink()   # the old run's summary must not vouch for a mix of old and new files
     names = sorted(p.name for p in tmp.iterdir())
     for name in [n for n in names if n != "summary.json"] + ["summary.json"]:
+        if (tmp / name).is_dir() and (out_dir / name).is_dir():
+            shutil.rmtree(out_dir / name)            # a previous run's log/ (os.replace needs it gone)
         os.replace(tmp / name, out_dir / name)

@@ -319,6 +319,19 @@ def sensor_configs(d: dict) -> dict:
     return {name: dict(cfg) for name, cfg in d["sensors"].items()}
 
 
+def sensor_lever_arms(d: dict) -> dict:
+    """{sensor: lever_arm_b_m} of the scenario's ranging sensors (radar altimeter, IRA), body FRD m."""
+    from trn_env.sensors import suite
+    arms = {}
+    for name in ("radar_altimeter", "ira"):
+        value = d["sensors"].get(name)
+        if value is None or value is False:
+            continue
+        cfg = suite._make_config(name, True if value == {} else value)
+        arms[name] = [float(x) for x in cfg.lever_arm_b_m]
+    return arms
+
+
 def build_sensors(d: dict, seed: np.random.SeedSequence):
     """trn_env.sensors.suite.SensorSuite of the scenario's sensors, one random stream per sensor."""
     from trn_env.sensors.suite import SensorSuite
@@ -341,28 +354,35 @@ def _sensor_problems(d: dict) -> list[str]:
 
 # -------------------------------------------------------------------------------------------- navigator
 
-def imu_bias_settings(imu: dict | None, epoch_s: float = 1.0) -> dict:
-    """The bias model a navigator should assume for the scenario's IMU (1 sigma per axis, its grade and
-    overrides, trn_env.sensors.imu.ImuConfig): accel_bias_sigma_mps2 and gyro_bias_sigma_rps, the root sum
-    square of the turn-on bias and the bias instability; q_accel_bias_mps2 and q_gyro_bias_rps, the
-    instability's Gauss-Markov drive over one filter epoch of epoch_s seconds, sigma sqrt(1 - exp(-2 epoch_s
-    / tau)) (0 for the navigation grade, whose biases are constant over a run). Empty without an IMU or for
-    a table that does not validate (the sensors check reports that)."""
+def imu_spec(imu: dict | None):
+    """The scenario IMU's error specification as the navigators take it (navigators.core.imu_spec.ImuSpec,
+    from trn_env.sensors.imu.ImuConfig: its grade and overrides); None without an IMU or for a table that
+    does not validate (the sensors check reports that)."""
+    from trn_env.navigators.core.imu_spec import ImuSpec
     from trn_env.sensors.imu import ImuConfig
     if imu is None or imu is False:
-        return {}
+        return None
     try:
         cfg = ImuConfig.from_mapping(dict(imu))
     except (ValueError, TypeError):
+        return None
+    return ImuSpec.from_object(cfg)
+
+
+def imu_bias_settings(imu: dict | None, epoch_s: float = 1.0) -> dict:
+    """The bias model a navigator should assume for the scenario's IMU (1 sigma per axis, its grade and
+    overrides, imu_spec): accel_bias_sigma_mps2 and gyro_bias_sigma_rps, the root sum square of the turn-on
+    bias and the bias instability; q_accel_bias_mps2 and q_gyro_bias_rps, the instability's Gauss-Markov
+    drive over one filter epoch of epoch_s seconds, sigma sqrt(1 - exp(-2 epoch_s / tau)) (0 for the
+    navigation grade, whose biases are constant over a run). Empty without an IMU or for a table that does
+    not validate (the sensors check reports that)."""
+    spec = imu_spec(imu)
+    if spec is None:
         return {}
-
-    def drive(sigma: float, tau_s: float) -> float:
-        return float(sigma * math.sqrt(-math.expm1(-2.0 * epoch_s / tau_s)))
-
-    return {"accel_bias_sigma_mps2": math.hypot(cfg.accel_bias_mps2, cfg.accel_bias_instability_mps2),
-            "gyro_bias_sigma_rps": math.hypot(cfg.gyro_bias_rps, cfg.gyro_bias_instability_rps),
-            "q_accel_bias_mps2": drive(cfg.accel_bias_instability_mps2, cfg.accel_bias_tau_s),
-            "q_gyro_bias_rps": drive(cfg.gyro_bias_instability_rps, cfg.gyro_bias_tau_s)}
+    return {"accel_bias_sigma_mps2": spec.accel_bias_sigma_mps2,
+            "gyro_bias_sigma_rps": spec.gyro_bias_sigma_rps,
+            "q_accel_bias_mps2": spec.accel_bias_drive(epoch_s),
+            "q_gyro_bias_rps": spec.gyro_bias_drive(epoch_s)}
 
 
 def _epoch_s(settings: dict) -> float:
@@ -379,7 +399,7 @@ def navigator_settings(d: dict, map_dem) -> dict:
     """The keyword settings registry.create gets for the scenario's navigator: its [navigator.settings] and,
     by its declared capabilities (navigators.core.capabilities), the map as dem= (needs_map, and any plug-in
     that declares no settings class, as before capabilities), the bias priors and bias process noise from the
-    IMU (uses_imu_spec: imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
+    IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
     terrain_detail_spacing_m from the world's refinement (models_map_detail), each unless the settings give
     it."""
@@ -388,7 +408,7 @@ def navigator_settings(d: dict, map_dem) -> dict:
     settings = dict(d["navigator"]["settings"])
     if caps.needs_map or caps.settings is None:
         settings.setdefault("dem", map_dem)
-    if caps.uses_imu_spec:
+    if caps.imu_bias_settings:
         for key, val in imu_bias_settings(d["sensors"].get("imu"), _epoch_s(settings)).items():
             settings.setdefault(key, val)
     if caps.uses_map_noise:
@@ -407,9 +427,16 @@ def navigator_settings(d: dict, map_dem) -> dict:
 
 def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     """navigators.registry.create(name, rng=<the scenario's navigator stream>, **navigator_settings(d,
-    map_dem)); the rng reaches only navigators that declare takes_rng."""
+    map_dem)); the rng reaches only navigators that declare takes_rng. A navigator that declares
+    uses_imu_spec and has `apply_imu_spec` then takes its INS error model from the scenario IMU's
+    specification (navigators.core.imu_spec)."""
     from trn_env.navigators import registry
-    return registry.create(d["navigator"]["name"], rng=rng, **navigator_settings(d, map_dem))
+    name = d["navigator"]["name"]
+    navigator = registry.create(name, rng=rng, **navigator_settings(d, map_dem))
+    spec = imu_spec(d["sensors"].get("imu")) if registry.capabilities(name).uses_imu_spec else None
+    if spec is not None and hasattr(navigator, "apply_imu_spec"):
+        navigator.apply_imu_spec(spec)
+    return navigator
 
 
 def _navigator_requirements(d: dict, the_map) -> list[str]:

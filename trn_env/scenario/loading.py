@@ -153,7 +153,29 @@ def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
 
 def load_scenario(name_or_path: str | Path = "default", *, check_components: bool = True,
                   **overrides: Any) -> Scenario:
-    """Read, override (seed=, duration_s=, navigator=) and validate a scenario. Raises ScenarioError."""
+    """Read, override and validate a scenario.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        A built-in scenario name (``trn-env scenarios`` lists them) or a TOML file's path.
+    check_components : bool
+        Also build what validation cannot judge from the file alone (DEMs load, the start trims, the
+        navigator accepts its settings); False checks the file against the schema only.
+    **overrides
+        ``seed=`` (int), ``duration_s=`` (float, s) and ``navigator=`` (a navigator name or reference),
+        applied before validation as ``trn-env fly --seed/--duration/--navigator`` do.
+
+    Returns
+    -------
+    Scenario
+        The validated scenario.
+
+    Raises
+    ------
+    ScenarioError
+        Listing every problem, each with its field path.
+    """
     data, source = read_scenario_file(name_or_path)
     data = apply_overrides(data, **overrides)
     base = Path(name_or_path).resolve().parent if source == str(Path(name_or_path)) else None

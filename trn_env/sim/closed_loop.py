@@ -137,6 +137,9 @@ class ClosedLoop:
     `self.pipelined` says which). The results are the same bit for bit either way. Close a pipelined loop
     when done with it (`run()` does; `close()` or `with ClosedLoop(...) as loop:` otherwise).
 
+    `log_sink` (a trn_env.logs.writer.LogWriter) streams the log to disk as the flight goes (SimLog):
+    the frames from the estimation stage, the ticks from here; the caller commits it after `result()`.
+
     Latency (scenario `[navigator] latency_updates`): guidance flies interval k on the estimate at the end
     of interval k - 1 - latency, dead-reckoned (with latency 1 the estimate of interval k - 1 is still being
     computed while interval k is flown). `self.estimate` is the newest estimate collected; `sync()` waits
@@ -145,7 +148,7 @@ class ClosedLoop:
 
     def __init__(self, scenario: Scenario, *, commander: Commander | None = None, dems=None,
                  log_sensors: bool = True, progress: Callable[[float, float], None] | None = None,
-                 pipeline: bool = False):
+                 pipeline: bool = False, log_sink=None):
         self.scenario = scenario
         d = scenario.data
         self.seeds = spawn_seeds(scenario.seed)
@@ -199,7 +202,8 @@ class ClosedLoop:
         self.navigator_fixes = 0
         self.termination: str | None = None
         self.route_miss: str | None = None      # why the route was not followed (route_not_followed)
-        self.log = SimLog()
+        self.log_sink = log_sink
+        self.log = SimLog(sink=log_sink)
         # wall time per stage: flight core (recording and conversion), sensors, navigator, guidance between
         # navigator updates, waiting for a pipelined stage's output, the rest (termination checks, logging,
         # guidance after an update). Pipelined, the sensors and navigator times are the worker's.
@@ -219,7 +223,8 @@ class ClosedLoop:
         inline = InlineNavStage(sensors, navigator, self.world_dem, self.outages, log_sensors,
                                 self.planner if self._plans is not None else None, monitors=monitors,
                                 map_dem=self.map_dem,
-                                map_schedule=self._map_schedule(scenario))
+                                map_schedule=self._map_schedule(scenario), frame_sink=log_sink,
+                                lever_arms=components.sensor_lever_arms(d))
         self.pipelined = bool(pipeline and self.latency_updates >= 1 and fork_available())
         self._stage = inline
         if self.pipelined:
@@ -256,6 +261,8 @@ class ClosedLoop:
             return
         for frames in self._stage.logged_frames():
             self.log.add_frames(frames)
+        if self.log_sink is not None:
+            self._stage.finish_frames()
 
     def __enter__(self) -> ClosedLoop:
         return self
@@ -597,7 +604,29 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
 
 
 def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:
-    """Load, validate and fly a scenario (overrides: seed=, duration_s=, navigator=); pipelined where it
-    can be (ClosedLoop's `pipeline`), with the same results either way."""
+    """Load, validate and fly a scenario in closed loop.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        A built-in scenario name or a TOML file's path.
+    progress : callable, optional
+        Called as ``progress(t_s, total_s)`` as the flight goes.
+    pipeline : bool
+        Run the sensors and the navigator in a second process one update behind the flight where the
+        scenario allows it; the results are the same bits either way.
+    **overrides
+        ``seed=``, ``duration_s=`` (s) and ``navigator=``, as ``load_scenario`` takes them.
+
+    Returns
+    -------
+    RunResult
+        ``.summary`` (the ``summary.json`` fields) and ``.arrays`` (the time-series log).
+
+    Raises
+    ------
+    ScenarioError
+        When the scenario is invalid (every problem, by field path), before anything flies.
+    """
     scenario = load_scenario(name_or_path, **overrides)
     return ClosedLoop(scenario, progress=progress, pipeline=pipeline).run()

@@ -1,5 +1,11 @@
-"""The closed loop's in-memory log: per-update truth rows and estimates, full-rate sensor frames, events;
-assembled into arrays once at the end of a run (`SimLog.arrays`)."""
+"""The closed loop's log: per-update truth rows and estimates, full-rate sensor frames, events; assembled into
+arrays once at the end of a run (`SimLog.arrays`).
+
+In memory by default. Given a `sink` (trn_env.logs.writer.LogWriter, handed down by the stage above: sim
+does not import logs), the frames go to the sink as they come and the tick rows every `flush_ticks` ticks,
+so the memory of a run stays flat whatever its length; `arrays()` then reads the ticks back from the sink
+and leaves the sensor arrays on disk (trn_env.logs.read_log reads them).
+"""
 
 from __future__ import annotations
 
@@ -37,6 +43,8 @@ class SimLog:
     est_rows: list[tuple] = field(default_factory=list)
     frames: list[SensorFrames] = field(default_factory=list)
     events: list[tuple[float, str, str]] = field(default_factory=list)
+    sink: object = None          # a LogWriter: write_frames, write_ticks, read_ticks (module docstring)
+    flush_ticks: int = 600
 
     def add_tick(self, truth: TruthChunk, i: int, est: Estimate) -> None:
         v, w = truth.v_ned_mps, truth.wind_ned_mps
@@ -49,9 +57,41 @@ class SimLog:
                               np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
                               float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
                               bool(est.health.ok), str(est.health.status)))
+        if self.sink is not None and len(self.truth_rows) >= self.flush_ticks:
+            self.flush()
 
     def add_frames(self, frames: SensorFrames) -> None:
-        self.frames.append(frames)
+        if self.sink is not None:
+            self.sink.write_frames(frames)
+        else:
+            self.frames.append(frames)
+
+    def _columns(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The buffered ticks: truth rows (n, 16) in _TRUTH_ROW order and the estimate columns
+        (t_s, lat_rad, lon_rad, h_m, v_n_mps, v_e_mps, v_d_mps, roll_rad, pitch_rad, yaw_rad, cov_i_j,
+        nav_ok, nav_status_code)."""
+        rows = np.array(self.truth_rows, float).reshape(-1, len(_TRUTH_ROW))
+        n = len(self.est_rows)
+        cols = list(zip(*self.est_rows, strict=True)) if n else [[]] * 11
+        est = {name: np.array(cols[i], float) for i, name in enumerate(("t_s", "lat_rad", "lon_rad", "h_m"))}
+        v = np.array(cols[4], float).reshape(n, 3)
+        est |= {"v_n_mps": v[:, 0].copy(), "v_e_mps": v[:, 1].copy(), "v_d_mps": v[:, 2].copy()}
+        for i, name in enumerate(("roll_rad", "pitch_rad", "yaw_rad")):
+            est[name] = np.array(cols[5 + i], float)
+        cov = np.array(cols[8], float).reshape(n, 9, 9)
+        est |= {f"cov_{i}_{j}": cov[:, i, j].copy() for i in range(9) for j in range(9)}
+        est["nav_ok"] = np.array(cols[9], bool)
+        est["nav_status_code"] = np.array([NAV_STATUS_CODES.index(x) if x in NAV_STATUS_CODES
+                                           else len(NAV_STATUS_CODES) for x in cols[10]], np.int8)
+        return rows, est
+
+    def flush(self) -> None:
+        """Hand the buffered ticks to the sink."""
+        if self.sink is not None and self.truth_rows:
+            rows, est = self._columns()
+            self.sink.write_ticks(rows, est)
+            self.truth_rows.clear()
+            self.est_rows.clear()
 
     def sensor_arrays(self) -> dict[str, np.ndarray]:
         """sensor_<sensor>_<field>: every logged frame's arrays, concatenated per sensor and field."""
@@ -70,7 +110,12 @@ class SimLog:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
         position), gnss_available, nav_ok, and sensor_<sensor>_<field> at the sensors' own rates."""
         out: dict[str, np.ndarray] = {}
-        rows = np.array(self.truth_rows, float).reshape(-1, len(_TRUTH_ROW))
+        if self.sink is not None:
+            self.flush()
+            rows, est = self.sink.read_ticks()
+        else:
+            rows, est = self._columns()
+        n = rows.shape[0]
         out["t_s"] = rows[:, 0].copy()
         col = 1
         for name in _TRUTH_LOGGED:
@@ -79,14 +124,18 @@ class SimLog:
             col += width
         h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
         out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
-        cols = list(zip(*self.est_rows, strict=True)) if self.est_rows else [[]] * 11
-        names = ("est_t_s", "est_lat_rad", "est_lon_rad", "est_h_m", "est_v_ned_mps", "est_roll_rad",
-                 "est_pitch_rad", "est_yaw_rad", "est_cov", "nav_ok", "nav_status")
-        for name, col in zip(names, cols, strict=True):
-            out[name] = np.array(col)
-        status = out.pop("nav_status")
-        out["nav_status_code"] = np.array([NAV_STATUS_CODES.index(x) if x in NAV_STATUS_CODES
-                                           else len(NAV_STATUS_CODES) for x in status], np.int8)
+        if not est:
+            est = self._columns()[1]
+        for name, key in (("est_t_s", "t_s"), ("est_lat_rad", "lat_rad"), ("est_lon_rad", "lon_rad"),
+                          ("est_h_m", "h_m")):
+            out[name] = est[key]
+        out["est_v_ned_mps"] = np.column_stack([est["v_n_mps"], est["v_e_mps"], est["v_d_mps"]]).reshape(n, 3)
+        for name in ("roll_rad", "pitch_rad", "yaw_rad"):
+            out[f"est_{name}"] = est[name]
+        out["est_cov"] = np.stack([est[f"cov_{i}_{j}"] for i in range(9) for j in range(9)],
+                                  axis=-1).reshape(n, 9, 9)
+        out["nav_ok"] = est["nav_ok"].astype(bool)
+        out["nav_status_code"] = est["nav_status_code"].astype(np.int8)
         out["est_cov_diag"] = np.diagonal(out["est_cov"], axis1=1, axis2=2).copy()
         out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
                                        out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])

@@ -62,6 +62,12 @@ def gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
     return frames
 
 
+def _fix_count(navigator) -> int:
+    """The navigator's TERCOM fixes so far (`n_fixes`, else the length of its `fixes`)."""
+    n = getattr(navigator, "n_fixes", None)
+    return int(n) if n is not None else len(getattr(navigator, "fixes", ()))
+
+
 @dataclass
 class NavOutput:
     """One update's result: the estimate at the interval's end, the guidance plan made on it (None without a
@@ -88,8 +94,12 @@ class InlineNavStage:
 
     def __init__(self, sensors, navigator, world_dem, outages: list[dict], log_sensors: bool,
                  planner: IntervalPlanner | None = None, monitors: dict | None = None, map_dem=None,
-                 map_schedule: list | None = None):
-        """monitors: {name: monitor} run after the navigator on the same frames and its estimate;
+                 map_schedule: list | None = None, frame_sink=None, lever_arms: dict | None = None):
+        """lever_arms: {sensor: body-FRD offset from the IMU, m}: the navigator gets the ranging sensors'
+        measurements transferred to the IMU's point (navigators.measurements.lever_arm; the monitors and
+        the log get them as measured); frame_sink: an object whose `write_frames(frames)` takes each
+        interval's frames instead of the in-memory list (a trn_env.logs LogWriter; `finish_frames` closes
+        it); monitors: {name: monitor} run after the navigator on the same frames and its estimate;
         map_schedule: [(t_from_s, heights)] of a time-dependent navigator's map `map_dem`: the heights are
         swapped in (terrain.map_error.set_heights) before the first update interval that reaches t_from_s,
         in this process, so the navigator, the monitors and the route's guidance all meet them."""
@@ -104,6 +114,9 @@ class InlineNavStage:
         self.log_sensors = bool(log_sensors)
         self._out: NavOutput | None = None
         self._frames: list[SensorFrames] = []
+        self.frame_sink = frame_sink
+        from trn_env.navigators.measurements.lever_arm import has_lever_arms
+        self.lever_arms = dict(lever_arms) if has_lever_arms(lever_arms) else None
 
     def process(self, chunk: TruthChunk, plan_steps0: int | None = None) -> NavOutput:
         clock = time.perf_counter
@@ -117,7 +130,11 @@ class InlineNavStage:
         t0 = clock()
         frames = gate_gnss(self.sensors.sample(chunk, self.world_dem), self.outages)
         t1 = clock()
-        est = self.navigator.update(frames)
+        if self.lever_arms is not None:
+            from trn_env.navigators.measurements.lever_arm import compensate_frames
+            est = self.navigator.update(compensate_frames(frames, self.lever_arms))
+        else:
+            est = self.navigator.update(frames)
         t2 = clock()
         mon_out = None
         if self.monitors:
@@ -128,19 +145,25 @@ class InlineNavStage:
                 events += [(t_ev, name, msg) for t_ev, msg in out.events]
         t_mon = clock() - t2
         t2 = clock()
-        if self.log_sensors:
+        if self.frame_sink is not None:
+            self.frame_sink.write_frames(frames)
+        elif self.log_sensors:
             self._frames.append(frames)
         plan = None
         finite = math.isfinite(est.lat_rad) and math.isfinite(est.lon_rad) and math.isfinite(est.h_m)
         if self.planner is not None and plan_steps0 is not None and finite:   # (else the run ends on it)
             plan = self.planner.plan(est, plan_steps0)
-        return NavOutput(est, plan, t1 - t0, t2 - t1, clock() - t2, len(getattr(self.navigator, "fixes", ())),
+        return NavOutput(est, plan, t1 - t0, t2 - t1, clock() - t2, _fix_count(self.navigator),
                          mon_out, events, t_mon)
 
     def logged_frames(self) -> list[SensorFrames]:
         """The frames of every update so far not yet handed over, in order (empty unless log_sensors)."""
         frames, self._frames = self._frames, []
         return frames
+
+    def finish_frames(self) -> dict:
+        """Close the frame sink's tables (rows per table; {} without a sink)."""
+        return self.frame_sink.close_frames() if self.frame_sink is not None else {}
 
     @property
     def busy(self) -> bool:
@@ -170,7 +193,7 @@ def fork_available() -> bool:
             and not multiprocessing.current_process().daemon)
 
 
-_QUIT, _FRAMES = b"Q", b"F"     # the worker's one-byte requests; anything longer is a truth chunk
+_QUIT, _FRAMES, _FINISH = b"Q", b"F", b"E"   # the worker's one-byte requests; longer: a truth chunk
 
 
 def _serve(conn, parent_end, stage: InlineNavStage) -> None:
@@ -188,6 +211,8 @@ def _serve(conn, parent_end, stage: InlineNavStage) -> None:
         try:
             if msg == _FRAMES:                    # requested once at the end
                 reply = ("ok", stage.logged_frames())
+            elif msg == _FINISH:                  # the frame sink's tables closed, once at the end
+                reply = ("ok", stage.finish_frames())
             else:
                 chunk, plan_steps0 = chunk_from_buffer(bytearray(msg))   # (a private, writable copy)
                 reply = ("ok", stage.process(chunk, plan_steps0 if plan_steps0 >= 0 else None))
@@ -253,6 +278,13 @@ class ProcessNavStage:
         if self._process is None:
             return []
         self._send(_FRAMES)
+        return self.collect()
+
+    def finish_frames(self) -> dict:
+        """Close the worker's frame sink (collect first); {} once closed."""
+        if self._process is None:
+            return {}
+        self._send(_FINISH)
         return self.collect()
 
     def close(self) -> None:

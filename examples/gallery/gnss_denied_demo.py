@@ -1,6 +1,11 @@
-"""GNSS-denied demonstration: INS alone drifts, INS + IRA TERCOM stays bounded, on the same flight.
+"""GNSS denied: INS alone against INS + TERCOM
+===========================================
 
-    python scripts/gnss_denied_demo.py --minutes 20 --grade tactical --out out/gnss_denied
+GNSS-denied demonstration: INS alone drifts, INS + IRA TERCOM stays bounded, on the same flight.
+
+Run it as::
+
+    python examples/gallery/gnss_denied_demo.py --minutes 20 --grade tactical --out out/gnss_denied
 
 The King Air (trn_env.flight.core) flies a square circuit over the jacksboro DEM; GNSS is lost at t = 0 (the
 navigators start from a GNSS-quality estimate, 3 m / 0.05 m/s, and never see GNSS again). The same sensor

@@ -1,6 +1,11 @@
-"""Fly the King Air along a three-waypoint route in wind, guided on the truth, and print a summary.
+"""Fly a route in wind (flight core and guidance only)
+===================================================
 
-    python scripts/fly_route.py [--wind-from-deg 270] [--wind-mps 15] [--turbulence light] [--seed 1]
+Fly the King Air along a three-waypoint route in wind, guided on the truth, and print a summary.
+
+Run it as::
+
+    python examples/gallery/fly_route.py [--wind-from-deg 270] [--wind-mps 15] [--turbulence light] [--seed 1]
 
 A thin example of the flight core (trn_env.flight), wind and guidance (trn_env.guidance);
 the closed loop with sensors and navigators is `trn-env fly`.

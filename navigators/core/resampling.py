@@ -1,4 +1,5 @@
-"""Particle resampling: systematic resampling (numba) with a required numpy Generator, and the ESS.
+"""Particle resampling, the one module the particle filters (pf, rbpf) share: systematic resampling (numba)
+with a required numpy Generator, and the effective sample size.
 
 `systematic_indices(weights, rng)` draws one uniform u ~ U[0, 1/M) from `rng` and returns the indexes
 i_k = min{i : cumsum(w)_i > u + k/M}, k = 0..M-1 (Kitagawa 1996): every particle of weight w is copied
@@ -37,6 +38,14 @@ def systematic_indices(weights: np.ndarray, rng: np.random.Generator) -> np.ndar
         raise ValueError("weights must be a non-empty 1-D array of finite non-negative numbers, not all 0")
     out = np.empty(w.shape[0], np.int64)
     systematic_kernel(w, float(rng.random()), out)
+    return out
+
+
+def systematic_indices_u0(weights: np.ndarray, u0: float) -> np.ndarray:
+    """Systematic resampling indexes (int64) of finite non-negative weights for the uniform u0 in [0, 1)
+    the caller drew from its Generator (no checks: the filters' hot path)."""
+    out = np.empty(weights.shape[0], np.int64)
+    systematic_kernel(np.ascontiguousarray(weights, dtype=np.float64), u0, out)
     return out
 
 

@@ -1,0 +1,168 @@
+"""The acquisition epoch of the acquisition-and-tracking navigator (seed 001): the predicted terrain SNR
+that defers a search over flat terrain, and the serial search (acquisition.py) around the dead-reckoned
+transect start, its plausibility check against the velocity bias' sigma and the lock it starts.
+
+A mixin of AcqTrackNavigator (navigator.py), which owns the state these methods read and write.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from trn_env.navigators.acquisition_tracking import acquisition
+from trn_env.navigators.acquisition_tracking.buffers import (
+    _mean,
+    _nanmean,
+    _quad2,
+    _rot_diag,
+)
+from trn_env.navigators.acquisition_tracking.correlation import (
+    replica_heights,
+)
+from trn_env.navigators.acquisition_tracking.integrity import (
+    a_priori_sigma_m,
+)
+from trn_env.navigators.acquisition_tracking.profile import (
+    Sample,
+)
+
+
+class AcquisitionStep:
+    """The acquisition epoch of the acquisition-and-tracking navigator (seed 001); a mixin."""
+
+    def _predicted_snr(self) -> float:
+        """Terrain SNR (dB) of the map along the dead-reckoned transect against the a-priori noise alone."""
+        cfg = self.config
+        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = self._arrays()
+        heights, lat0, lon0, dlat, dlon = self._grid
+        n = dt.size
+        h_p = np.empty(n)
+        replica_heights(
+            heights,
+            lat0,
+            lon0,
+            dlat,
+            dlon,
+            self.p0[0],
+            self.p0[1],
+            dt,
+            m_v,
+            m_psi,
+            self.b_v,
+            self.b_psi,
+            r_n,
+            r_e,
+            self._interp,
+            np.empty(n),
+            np.empty(n),
+            h_p,
+        )
+        ok = valid & np.isfinite(h_p)
+        if ok.sum() < self._n_min:
+            return -math.inf
+        r_mean = _nanmean(rng)
+        sig0 = a_priori_sigma_m(r_mean, cfg.ra_noise_const_m, cfg.ra_noise_fraction, cfg.map_sigma_m)
+        var_h = float(np.var(h_p[ok]))
+        return 10.0 * math.log10(var_h / sig0**2) if var_h > 0 else -math.inf
+
+    def _acquire(self, s: Sample) -> bool:
+        cfg = self.config
+        t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = self._arrays()
+        sig = self._sigma_h()
+        half = min(max(cfg.acquisition_position_half_m, 3.0 * sig), 2.0 * cfg.acquisition_position_half_m)
+        w0 = time.perf_counter()
+        res = acquisition.serial_search(
+            self._grid,
+            self.p0[0],
+            self.p0[1],
+            dt,
+            m_v,
+            m_psi,
+            self.b_v,
+            self.b_psi,
+            r_n,
+            r_e,
+            d,
+            valid,
+            position_half_m=half,
+            position_bin_m=cfg.acquisition_position_bin_m,
+            speed_half_mps=cfg.acquisition_speed_half_mps,
+            speed_bin_mps=cfg.acquisition_speed_bin_mps,
+            heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
+            heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
+            cost=self._cost,
+            remove_bias=cfg.remove_bias,
+            interp=self._interp,
+            n_min=self._n_min,
+            distinct_ratio=cfg.acquisition_distinct_ratio,
+            exclusion_m=cfg.acquisition_exclusion_m,
+        )
+        self.acquisition_s = time.perf_counter() - w0
+        self.acquisition_total_s += self.acquisition_s
+        self.acquisitions += 1
+        if not res.distinct:
+            self.health.events.append(
+                (
+                    s.t_s,
+                    f"acq_track: acquisition failed: {res.reason} ({res.n_hypotheses} cells)",
+                )
+            )
+            self._set_lock(
+                "acquiring",
+                s.t_s,
+                "lost" if self.need_acquisition else "acquiring",
+                f"acquisition: {res.reason}; retry with the next transect",
+            )
+            return False
+        if self._ne_frame:  # the acquired velocity against the filter's velocity bias: a false acquisition
+            # (a side minimum over weak terrain) moves it far beyond its sigma; R: one bin as 1 sigma
+            dv_ne = self._ne_change(res.b_v - self.b_v, res.b_psi_rad - self.b_psi, m_v, m_psi)
+            psi_c = _mean(m_psi)
+            v_c = max(_mean(m_v), 1.0)
+            R_acq = _rot_diag(
+                psi_c,
+                cfg.acquisition_speed_bin_mps**2,
+                (v_c * math.radians(cfg.acquisition_heading_bin_deg)) ** 2,
+            )
+            nis_v = _quad2(dv_ne, self.X[2:, 2:] + R_acq)
+            e_acq = self.e_ne + dv_ne
+            if nis_v > cfg.fix_gate_nis or math.hypot(e_acq[0], e_acq[1]) > cfg.max_speed_bias_mps:
+                self.health.events.append(
+                    (
+                        s.t_s,
+                        f"acq_track: acquisition rejected: its velocity change {math.hypot(*dv_ne):.1f} m/s "
+                        f"has NIS {nis_v:.1f} (gate {cfg.fix_gate_nis:g}) against the velocity bias' sigma, "
+                        f"bias {math.hypot(*e_acq):.1f} m/s (limit {cfg.max_speed_bias_mps:g})",
+                    )
+                )
+                self._set_lock(
+                    "acquiring",
+                    s.t_s,
+                    "lost" if self.need_acquisition else "acquiring",
+                    "acquisition: implausible velocity; retry with the next transect",
+                )
+                return False
+        self.p0 = (self.p0[0] + res.dn_m / r_n, self.p0[1] + res.de_m / r_e)
+        self.b_v, self.b_psi = res.b_v, res.b_psi_rad
+        if self._ne_frame:  # the acquired speed / track references as the north/east bias
+            self._fold_references(res.b_v, res.b_psi_rad, m_v, m_psi)
+        b = cfg.acquisition_position_bin_m
+        self.P = np.eye(2) * (b * b + self.sigma_floor_m**2)
+        self.Pc = self.P.copy()
+        self._set_centroid_cov(self.Pc)
+        self.need_acquisition = False
+        self.acq_failures = 0
+        self.bad_epochs = 0
+        self.pull_in = cfg.transect_samples
+        self.health.events.append(
+            (
+                s.t_s,
+                f"acq_track: acquired dn={res.dn_m:+.0f} m de={res.de_m:+.0f} m "
+                f"b_v={res.b_v:+.2f} m/s b_psi={math.degrees(res.b_psi_rad):+.2f} deg "
+                f"({res.n_hypotheses} cells)",
+            )
+        )
+        self.lock_state = "tracking"
+        return True

@@ -1,0 +1,3 @@
+"""Parts the navigators compose instead of rewriting: named error-state indexes, the IMU specification
+record and its INS error model, the map record the terrain kernels take, the resampler, the
+integrity-recovery policy and the INS + GNSS block."""

@@ -1,0 +1,127 @@
+"""The IMU's error specification as the navigators see it, and the INS error model it parameterises.
+
+`ImuSpec` is a record of the sensor's error budget (SI, 1 sigma per axis): turn-on biases, bias
+instabilities (first-order Gauss-Markov: sigma, correlation time), noise densities (velocity and angle
+random walk), scale factors and misalignments. The simulator converts its IMU configuration into one
+(trn_env.scenario.build.imu_spec; the navigators never import the sensor models), and every navigator's
+`settings_from_imu(spec, epoch_s)` turns it into the settings of its own error model, whatever its state
+size:
+
+- the states a filter carries get the spec's priors and drives: a bias state's prior is the root sum square
+  of the turn-on bias and the instability, its process noise the instability's Gauss-Markov drive
+  sigma sqrt(1 - exp(-2 dt / tau)) over a step dt (Titterton & Weston 2004, sec. 12.6; seed 002 eq 22's Q);
+  the velocity and attitude get the noise densities (q = N^2 per second);
+- an error source a filter does not carry as a state enters as an equivalent random walk of the state it
+  drives: a rate error r constant over the filter's memory T moves that state by r t, variance sigma_r^2 t^2,
+  which a random walk of density q = sigma_r^2 T matches at t = T (and bounds from above before it). The
+  sources: the horizontal specific-force error that is constant in the body frame (accelerometer bias and
+  misalignment times g: `body_accel_sigma_mps2`), the tilt the horizontal gyro biases build (the
+  acceleration error's rate g sigma_bg: `tilt_accel_rate_sigma_mps3`), the heading error the z gyro bias
+  builds, and in turns the gyro scale factor (heading) and misalignment (tilt) times the angle turned.
+
+A filter's own tuned values stay floors: the spec raises a setting, never lowers it below the value the
+filter was tuned with on the navigation grade, so the navigation grade keeps its behaviour.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+G0_MPS2 = 9.80665
+
+
+@dataclass(frozen=True)
+class ImuSpec:
+    """An IMU's error budget (SI, 1 sigma per axis).
+
+    Attributes: accel_bias_mps2 (turn-on bias), accel_bias_instability_mps2 and accel_bias_tau_s
+    (Gauss-Markov), accel_noise_density_mps2_rthz (velocity random walk), accel_scale_factor_ppm,
+    accel_misalignment_rad; the gyro's likewise in rad/s, rad/s/sqrt(Hz) and rad.
+    """
+
+    accel_bias_mps2: float = 0.0
+    accel_bias_instability_mps2: float = 0.0
+    accel_bias_tau_s: float = 3600.0
+    accel_noise_density_mps2_rthz: float = 0.0
+    accel_scale_factor_ppm: float = 0.0
+    accel_misalignment_rad: float = 0.0
+    gyro_bias_rps: float = 0.0
+    gyro_bias_instability_rps: float = 0.0
+    gyro_bias_tau_s: float = 3600.0
+    gyro_noise_density_rps_rthz: float = 0.0
+    gyro_scale_factor_ppm: float = 0.0
+    gyro_misalignment_rad: float = 0.0
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"ImuSpec.{f.name} must be a finite number >= 0, got {v!r}")
+        for name in ("accel_bias_tau_s", "gyro_bias_tau_s"):
+            if getattr(self, name) <= 0.0:
+                raise ValueError(f"ImuSpec.{name} must be > 0, got {getattr(self, name)!r}")
+
+    @classmethod
+    def from_object(cls, obj) -> ImuSpec:
+        """From any object (or mapping) with these attribute names (e.g. the simulator's IMU config)."""
+        get = obj.get if isinstance(obj, dict) else (lambda k, d: getattr(obj, k, d))
+        return cls(**{f.name: float(get(f.name, f.default)) for f in fields(cls)})
+
+    # ---------------------------------------------------------------- biases carried as states
+    @property
+    def accel_bias_sigma_mps2(self) -> float:
+        """Prior of an accelerometer-bias state: turn-on bias and instability, root sum square."""
+        return math.hypot(self.accel_bias_mps2, self.accel_bias_instability_mps2)
+
+    @property
+    def gyro_bias_sigma_rps(self) -> float:
+        """Prior of a gyro-bias state: turn-on bias and instability, root sum square."""
+        return math.hypot(self.gyro_bias_rps, self.gyro_bias_instability_rps)
+
+    def accel_bias_drive(self, dt_s: float) -> float:
+        """The accelerometer instability's Gauss-Markov drive over dt_s (1 sigma, m/s^2)."""
+        return gm_drive(self.accel_bias_instability_mps2, self.accel_bias_tau_s, dt_s)
+
+    def gyro_bias_drive(self, dt_s: float) -> float:
+        """The gyro instability's Gauss-Markov drive over dt_s (1 sigma, rad/s)."""
+        return gm_drive(self.gyro_bias_instability_rps, self.gyro_bias_tau_s, dt_s)
+
+    # ---------------------------------------------------------------- error sources as rates
+    @property
+    def body_accel_sigma_mps2(self) -> float:
+        """Horizontal specific-force error constant in the body frame (m/s^2, per axis): the accelerometer
+        bias (turn-on and instability) and the misalignment's share of gravity, root sum square."""
+        return math.hypot(self.accel_bias_sigma_mps2, G0_MPS2 * self.accel_misalignment_rad)
+
+    @property
+    def tilt_accel_rate_sigma_mps3(self) -> float:
+        """Rate of the acceleration error the horizontal gyro biases build through the tilt (g sigma_bg)."""
+        return G0_MPS2 * self.gyro_bias_sigma_rps
+
+    def turn_heading_sigma_rad(self, turn_rad: float) -> float:
+        """Heading error a turn of turn_rad builds through the gyro scale factor (rad)."""
+        return self.gyro_scale_factor_ppm * 1e-6 * abs(turn_rad)
+
+    def turn_tilt_sigma_rad(self, turn_rad: float) -> float:
+        """Tilt a turn of turn_rad builds through the gyro misalignment (rad)."""
+        return self.gyro_misalignment_rad * abs(turn_rad)
+
+
+def gm_drive(sigma: float, tau_s: float, dt_s: float) -> float:
+    """A first-order Gauss-Markov process' drive over dt_s: sigma sqrt(1 - exp(-2 dt / tau))."""
+    return float(sigma * math.sqrt(-math.expm1(-2.0 * dt_s / tau_s)))
+
+
+def equivalent_walk_density(rate_sigma: float, memory_s: float) -> float:
+    """Density (per sqrt(s)) of the random walk that matches a constant rate of sigma rate_sigma at
+    memory_s: q = sigma^2 T (see the module docstring); returned as sqrt(q)."""
+    return float(rate_sigma * math.sqrt(memory_s))
+
+
+def rss(*values: float) -> float:
+    """Root sum square."""
+    return float(math.sqrt(sum(v * v for v in values)))
+
+
+__all__ = ["G0_MPS2", "ImuSpec", "equivalent_walk_density", "gm_drive", "rss"]

@@ -1,0 +1,104 @@
+"""The GNSS update of the INS + TERCOM error-state EKF (seed 000; loosely coupled, our addition).
+
+Each valid GNSS fix updates the 15-state error filter with its north and east position and NED velocity
+(states 0, 1, 3, 4, 5; R from gnss_sigma_h_m and gnss_sigma_v_mps, gated at gnss_gate_chi2 on 5 dof),
+and the correction is fed back into the INS. A loss longer than gnss_timeout_s is reported once in Health.
+
+A mixin of InsTrnNavigator (ins_trn_ekf.py), which owns the state these methods read and write.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+from trn_env.navigators.core.error_states import GNSS_STATES, N_EKF13
+from trn_env.navigators.core.linalg import is_positive_definite
+from trn_env.navigators.frames import SensorFrames
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+
+class InsTrnGnss:
+    """The GNSS update of InsTrnNavigator; a mixin."""
+
+    # ------------------------------------------------------------------ GNSS
+    def _gnss_fixes(self, frames: SensorFrames):
+        """(t, lat, lon, v_ned) of the frame's valid GNSS fixes in time order, or None."""
+        gf = frames.gnss
+        if not self.use_gnss or gf is None or gf.t_s.shape[0] == 0:
+            return None
+        v = np.asarray(gf.v_ned_mps, float).reshape(-1, 3)
+        ok = (np.asarray(gf.valid, bool) & np.isfinite(gf.t_s) & np.isfinite(gf.lat_rad)
+              & np.isfinite(gf.lon_rad) & np.all(np.isfinite(v), axis=1))
+        nbad = int(ok.shape[0] - ok.sum())
+        if nbad:
+            self._count_skip(float(frames.t_start_s), "gnss_invalid", nbad, f"{nbad} GNSS fixes invalid")
+        if not ok.any():
+            return None
+        order = np.argsort(gf.t_s[ok], kind="stable")
+        return (np.asarray(gf.t_s, float)[ok][order], np.asarray(gf.lat_rad, float)[ok][order],
+                np.asarray(gf.lon_rad, float)[ok][order], v[ok][order])
+
+    def _gnss_check_loss(self, t_now: float) -> None:
+        if self._gnss_up and t_now - self._t_gnss > self.gnss_timeout_s:
+            self._gnss_up = False
+            on = "the INS and TRN" if self.aiding is not None else "the INS alone"
+            self.health.events.append(
+                (self._t_gnss, f"GNSS lost: no valid fix after t = {self._t_gnss:.2f} s (navigating on "
+                               f"{on})"))
+            if self.aiding is None:
+                self.health.status = "free_inertial"
+
+    def _gnss_update(self, gnss, i: int) -> None:
+        """Loosely coupled GNSS update with fix i (module docstring)."""
+        t_g, lat_g, lon_g, v_g = gnss[0][i], gnss[1][i], gnss[2][i], gnss[3][i]
+        st = self.ins.state
+        lat, lon, h = float(st[0]), float(st[1]), float(st[2])
+        z = np.empty((5, 1))
+        z[0, 0] = (lat - lat_g) * (meridian_radius_m(lat) + h)     # INS minus GNSS, north (m)
+        z[1, 0] = (lon - lon_g) * (prime_vertical_radius_m(lat) + h) * math.cos(lat)
+        z[2:, 0] = st[3:6] - v_g
+        H = np.zeros((5, N_EKF13))
+        for r, c in enumerate(GNSS_STATES):
+            H[r, c] = 1.0
+        Rm = np.diag([self.gnss_sigma_h_m**2] * 2 + [self.gnss_sigma_v_mps**2] * 3)
+        S = H @ self.kf.P @ H.T + Rm
+        try:
+            d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])
+        except np.linalg.LinAlgError:
+            d2 = math.nan
+        if not math.isfinite(d2) or d2 > self.gnss_gate_chi2:
+            self._count_skip(t_g, "gnss_gated", 1, f"GNSS fix failed the chi-square gate ({d2:.1f})")
+            return
+        saved = copy.deepcopy((self.kf.x, self.kf.P))
+        self.kf.update(z, R=Rm, H=H)
+        dx = self.kf.x.ravel()
+        P = self.kf.P
+        floor2 = self.gnss_correlated_sigma_m**2
+        if floor2 > 0.0 and np.all(np.isfinite(P)):
+            d = np.ones(N_EKF13)
+            for k in (0, 1):
+                if 0.0 < P[k, k] < floor2:
+                    d[k] = math.sqrt(floor2 / P[k, k])
+            P = self.kf.P = P * d[:, None] * d[None, :]
+        if not (is_positive_definite(P) and np.all(np.isfinite(dx))):
+            self.kf.x, self.kf.P = saved
+            self._count_skip(t_g, "covariance_not_pd", 1,
+                             "GNSS fix skipped: covariance not positive definite")
+            return
+        self.ins.correct(dx[0:3], dx[3:6], dx[6:9])
+        self.ins.accel_bias_b += dx[9:12]
+        self.ins.gyro_bias_b[2] += dx[12]
+        self.kf.x[:] = 0.0
+        self._P_good[:] = self.kf.P
+        if not self._gnss_up:
+            self.health.events.append((float(t_g), "GNSS fixes used" if self._t_gnss == -math.inf else
+                                       f"GNSS recovered: fixes used again after {t_g - self._t_gnss:.1f} s"))
+        self._gnss_up = True
+        self._t_gnss = float(t_g)
+        if self.aiding is not None:    # a TERCOM batch is collected with one rigid INS error: restart it
+            self.batch.clear()
+            self._t_batch0 = float(t_g)
+        self.health.ok = True
+        self.health.status = "ok"

@@ -1,0 +1,170 @@
+"""The particle cloud's maintenance in the Rao-Blackwellized particle filter (seed 002): the GNSS update
+(position moves the cloud onto the Kalman posterior of its moments, a square-root update; the velocity
+updates each particle's Kalman part), normalisation and ESS-triggered systematic resampling, the hand-over
+from the acquisition cloud to n_particles, the integrity test on each update's NIS and the re-spread it
+asks for, and the feedback of the weighted mean error into the INS.
+
+A mixin of RaoBlackwellizedPF (rbpf.py), which owns the state these methods read and write.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import trn_env.navigators.filters._rbpf_kernels as kern
+from trn_env.navigators.core.resampling import systematic_indices_u0
+from trn_env.navigators.filters.terrain_filter import capped_nis
+from trn_env.navigators.protocol import (
+    EXTRA_ESS,
+)
+
+
+class RbpfCloud:
+    """The cloud's GNSS update, resampling, integrity and feedback of RaoBlackwellizedPF; a mixin."""
+
+    @staticmethod
+    def _ess(logw: np.ndarray) -> float:
+        fin = np.isfinite(logw)
+        if not fin.any():
+            return 0.0
+        w = np.exp(logw[fin] - np.max(logw[fin]))
+        return float(w.sum() ** 2 / np.sum(w * w))
+
+    def _integrity_test(self, te: float, nis: float, dof: int) -> None:
+        """Feed the innovation test; on entering "degraded" re-spread the particles' positions (logged)."""
+        verdict = self.integrity.add(te, capped_nis(self.integrity, nis, dof), dof)
+        self._integrity_extra = verdict.extra()
+        if verdict.changed:
+            self.health.events.append((float(te), verdict.message))
+        if verdict.degraded:
+            self.health.status, self.health.ok = "degraded", False
+            self._since_recovery += 1
+            # again, twice as wide, when a whole window after the last re-spread is still out of band
+            if verdict.changed or self._since_recovery >= self.integrity.window:
+                self._since_recovery = 0
+                self._streak = min(self._streak + 1, 4)
+                self.recoveries += 1
+                self._respread(te)
+        elif verdict.changed:
+            self._streak = 0
+            self.health.status, self.health.ok = "acquiring", True
+
+    def _respread(self, te: float) -> None:
+        """Resample by weight, then N(0, recovery_sigma_m^2) on every particle's horizontal position."""
+        w = self._weights()
+        idx = systematic_indices_u0(w, float(self.rng.random()))
+        self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
+        sig = self.recovery_sigma_m * 2.0 ** (self._streak - 1)
+        self.xn[:, :2] += self.rng.standard_normal((self.n, 2)) * sig
+        if self.recovery_reset_kalman:
+            # the Kalman parts' velocity and attitude share the position's failed test: back to the prior
+            # spread (plus the cloud's), so the cloud re-converges without inheriting their overconfidence
+            c = kern.moments(self.xn, self.xl, self.P, np.full(self.n, 1.0 / self.n))[1][3:9, 3:9]
+            blk = c + self.P0[:6, :6]
+            self.P[:, :6, :6] = blk
+            self.P[:, :6, 6:] = 0.0
+            self.P[:, 6:, :6] = 0.0
+        self.logw = np.full(self.n, -math.log(self.n))
+        self._cov9 = self._covariance9()
+        self.health.events.append((float(te), f"recovery: {self.n} particles re-spread, horizontal 1-sigma "
+                                               f"+{sig:.0f} m"))
+
+    def _gnss_update(self, te, gnss, lat, lon, h, v, sc, ll) -> None:
+        """GNSS position: a linear-Gaussian measurement of x^n. Weighting the cloud by it cannot represent a
+        2 m fix on a 50 m cloud (about one particle in 1,000 lies in the posterior's 1-sigma box), so the
+        cloud is moved instead: the weighted mean m and covariance Pc are fused with the fix by a Kalman
+        update (m', P') and every particle is mapped x -> m' + L' L^-1 (x - m) (L, L' Cholesky factors of Pc,
+        P'), keeping its weight: the weighted cloud then has exactly the posterior's first two moments, its
+        shape otherwise kept (an ensemble square-root update). The receiver's error has a white part
+        (gnss_pos_sigma_m) and a slowly drifting one (gnss_pos_bias_sigma_m, constant over a fix's
+        neighbours): the update uses their sum and P' is kept above the drift's variance, so ten fixes do not
+        claim to beat the receiver's own bias. GNSS velocity: each particle's Kalman update (eqs 9-12)."""
+        _, glat, glon, gh, gv = gnss
+        y = np.array([(lat - glat) * sc[0], (lon - glon) * sc[1], h - gh])
+        self._gnss_cloud_update(y)
+        H = np.zeros((self.n, 3, 12))
+        H[:, 0, 0] = H[:, 1, 1] = H[:, 2, 2] = 1.0
+        e = np.broadcast_to(v - gv, (self.n, 3)).copy()
+        kern.linear_update(self.xl, self.P, H, e, self.gnss_vel_var, self.logw, np.ones(self.n, bool), ll)
+
+    def _gnss_cloud_update(self, y: np.ndarray) -> None:
+        w = self._weights()
+        m = w @ self.xn
+        d = self.xn - m
+        Pc = (d * w[:, None]).T @ d
+        Rg = np.diag(self.gnss_pos_var + self.gnss_bias_var)
+        try:
+            L = np.linalg.cholesky(Pc + 1e-9 * np.eye(3))
+            K = Pc @ np.linalg.inv(Pc + Rg)
+        except np.linalg.LinAlgError:
+            return
+        m_new = m + K @ (y - m)
+        P_new = (np.eye(3) - K) @ Pc
+        P_new = 0.5 * (P_new + P_new.T)
+        # the receiver's drift is common to consecutive fixes: no position better than it
+        # (never wider than the cloud before the fix)
+        floor = np.sqrt(np.minimum(self.gnss_bias_var, np.diag(Pc)))
+        sd = np.sqrt(np.clip(np.diag(P_new), 1e-12, None))
+        f = np.maximum(floor / sd, 1.0)
+        P_new = P_new * f[:, None] * f[None, :]
+        try:
+            L_new = np.linalg.cholesky(P_new + 1e-9 * np.eye(3))
+        except np.linalg.LinAlgError:
+            return
+        A = L_new @ np.linalg.inv(L)
+        self.xn = m_new + d @ A.T
+
+    def _normalise_resample(self, te, logw_prev) -> None:
+        fin = np.isfinite(self.logw)
+        if not fin.any():
+            self.health.skip(te, "weights_underflow", "all particle weights vanished: cloud re-initialised")
+            self.health.status, self.health.ok = "degraded", True
+            self._init_cloud()
+            self.xn += 0.0
+            self._extra[EXTRA_ESS] = 0.0
+            return
+        m = np.max(self.logw[fin])
+        w = np.where(fin, np.exp(self.logw - m), 0.0)
+        w /= w.sum()
+        ess = 1.0 / float(np.sum(w * w))
+        self._extra[EXTRA_ESS] = ess
+        if ess < self.ess_threshold * self.n:
+            idx = systematic_indices_u0(w, float(self.rng.random()))
+            self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
+            self.logw = np.full(self.n, -math.log(self.n))
+            self.resamples += 1
+        else:
+            self.logw = np.log(np.where(w > 0, w, 1e-300))
+
+    def _handover(self) -> None:
+        """Acquisition over: the cloud of acquisition_particles is resampled (systematic, by weight) down to
+        n_particles once its horizontal spread is below acquisition_spread_m (see the class docstring)."""
+        if self.n <= self.n_particles:
+            return
+        c = kern.moments(self.xn, self.xl, self.P, self._weights())[1]
+        if math.sqrt(max(c[0, 0] + c[1, 1], 0.0)) >= max(self.acquisition_spread_m, 1e-9):
+            return
+        cw = np.cumsum(self._weights())
+        u = (float(self.rng.random()) + np.arange(self.n_particles)) / self.n_particles
+        idx = np.minimum(np.searchsorted(cw, u * cw[-1], side="left"), self.n - 1).astype(np.int64)
+        self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
+        self.n = self.n_particles
+        self.logw = np.full(self.n, -math.log(self.n))
+
+    def _weights(self) -> np.ndarray:
+        m = np.max(self.logw)
+        w = np.exp(self.logw - m)
+        return w / w.sum()
+
+    def _feedback(self) -> None:
+        """Correct the INS by the weighted mean error and subtract it from the particles (an exact change of
+        the linearisation point of the error model)."""
+        w = self._weights()
+        mu, _ = kern.moments(self.xn, self.xl, self.P, w)
+        if not np.all(np.isfinite(mu)):
+            return
+        self.ins.correct(np.array([mu[0], mu[1], -mu[2]]), mu[3:6], mu[6:9])
+        self.ins.accel_bias_b -= mu[9:12]
+        self.ins.gyro_bias_b -= mu[12:15]
+        kern.shift(self.xn, self.xl, mu)

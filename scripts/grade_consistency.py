@@ -1,0 +1,142 @@
+"""Horizontal consistency of every navigator on each IMU grade over Monte Carlo seeds of the default route.
+
+One JSBSim flight of the default scenario is flown once on the free INS (filter_statistics.record_flight);
+each seed regenerates the real sensor suite with the grade's IMU (trn_env.sensors, the seed's own noise,
+turn-on biases and bias instabilities), the initial estimate's error and the world's fractal detail, and
+runs each navigator open-loop on those frames, built as a scenario builds it (trn_env.scenario.build.
+build_navigator: the IMU's specification reaches the navigators that declare they use it). GNSS is denied
+from t = 0.
+
+    PYTHONPATH=$PWD python scripts/grade_consistency.py [--grades navigation tactical consumer]
+        [--navigators ins ins_tercom pmf pf rbpf] [--seeds 20] [--duration 300] [--out FILE]
+
+Per navigator and grade, over the epochs after --from-s (15 s):
+- ANEES: the horizontal NEES e' P^-1 e (2 dof) pooled over runs and epochs, thinned to decorrelated epochs
+  (filter_statistics.pooled_nees_figures: every k-th epoch, k the lag where the NEES autocorrelation about
+  the per-epoch mean falls below 0.1), with the two-sided 95 % chi-square bounds of that many samples;
+- inside_3sigma: the fraction of all epochs with NEES <= 9 (the error inside the 3-sigma ellipse: 98.9 %
+  for a consistent filter);
+- rms_m: horizontal RMS error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pickle
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import filter_statistics as fs  # noqa: E402
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
+
+import trn_env.scenario.build as components  # noqa: E402
+
+INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
+
+
+def scenario_for(d: dict, name: str, grade: str) -> dict:
+    """The default scenario's data with the grade's IMU and the navigator (its settings as the default's)."""
+    settings = {"remove_bias": True} if name == "ins_tercom" else {}
+    return {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
+            "navigator": {"name": name, "settings": settings}}
+
+
+def run_seed(d: dict, names: list[str], grade: str, seed: int, flight, world_detail: str = "redraw") -> dict:
+    """{navigator: run} of every navigator on one seed's sensor frames (the grade's IMU)."""
+    _, chunks, world, the_map, truth0 = flight
+    dd = scenario_for(d, names[0], grade)
+    w = fs.run_world(dd, world, seed, world_detail)
+    frames = fs.sensor_frames(dd, chunks, w, seed)
+    init = fs.initial_estimate(dd, truth0, seed, float(dd["initial_errors"]["position_ned_m"][0]))
+    return {name: run_one(scenario_for(d, name, grade), frames, chunks, the_map, init, seed)
+            for name in names}
+
+
+def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
+    nav = components.build_navigator(dd, the_map, np.random.default_rng([seed, 29]))
+    nav.reset(init)
+    t, err, cov, status = [], [], [], []
+    w0 = time.perf_counter()
+    for fr, ch in zip(frames, chunks, strict=True):
+        est = nav.update(fr)
+        i = len(ch.t_s) - 1
+        lat, lon = float(ch.lat_rad[i]), float(ch.lon_rad[i])
+        r_n = meridian_radius_m(lat) + float(ch.h_msl_m[i])
+        r_e = (prime_vertical_radius_m(lat) + float(ch.h_msl_m[i])) * math.cos(lat)
+        t.append(est.t_s)
+        err.append(((est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e))
+        cov.append(est.covariance[:2, :2].copy())
+        status.append(est.health.status)
+    return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "status": status,
+            "wall_s": time.perf_counter() - w0}
+
+
+def figures(runs: list[dict], t_from_s: float) -> dict:
+    sel = runs[0]["t"] >= t_from_s
+    E = np.array([r["err"][sel] for r in runs])
+    P = np.array([r["cov"][sel] for r in runs])
+    nees = np.einsum("rti,rtij,rtj->rt", E, np.linalg.inv(P), E)
+    out = {"runs": len(runs), "epochs": int(sel.sum()),
+           "rms_m": float(np.sqrt(np.mean(np.sum(E ** 2, axis=2)))),
+           "inside_3sigma": float(np.mean(nees <= INSIDE_NEES)),
+           "run_inside_3sigma_min": float(np.min(np.mean(nees <= INSIDE_NEES, axis=1))),
+           "wall_s_per_run": float(np.mean([r["wall_s"] for r in runs]))}
+    if len(runs) >= 2:
+        p = fs.pooled_nees_figures(nees)
+        out.update(anees=p["anees_thinned"], bounds_95=p["bounds_95_thinned"],
+                   thinning=p["thinning_epochs"], anees_all_epochs=p["anees_pooled"],
+                   runs_t_interval_95=p["runs_time_average_t_interval_95"])
+        lo, hi = p["bounds_95_thinned"]
+        out["consistent"] = bool(lo <= p["anees_thinned"] <= hi and out["inside_3sigma"] >= 0.9)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--grades", nargs="+", default=["navigation", "tactical", "consumer"])
+    ap.add_argument("--navigators", nargs="+", default=["ins", "ins_tercom", "pmf", "pf", "rbpf"])
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--seed0", type=int, default=1000)
+    ap.add_argument("--duration", type=float, default=300.0)
+    ap.add_argument("--from-s", type=float, default=15.0)
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--flight-cache", default=None,
+                    help="pickle of the recorded flight: read if it exists (same duration), else written")
+    a = ap.parse_args(argv)
+    cache = Path(a.flight_cache) if a.flight_cache else None
+    if cache is not None and cache.exists():
+        duration_s, flight = pickle.loads(cache.read_bytes())
+        if duration_s != a.duration:
+            raise SystemExit(f"{cache}: recorded for {duration_s} s, not {a.duration} s")
+    else:
+        flight = fs.record_flight(duration_s=a.duration)
+        if cache is not None:
+            cache.write_bytes(pickle.dumps((a.duration, flight)))
+    d = flight[0]
+    result = {"duration_s": a.duration, "seeds": a.seeds, "seed0": a.seed0, "from_s": a.from_s, "figures": {}}
+    for grade in a.grades:
+        runs = {name: [] for name in a.navigators}
+        for s in range(a.seeds):
+            for name, run in run_seed(d, a.navigators, grade, a.seed0 + s, flight).items():
+                runs[name].append(run)
+        for name in a.navigators:
+            f = figures(runs[name], a.from_s)
+            result["figures"][f"{name}/{grade}"] = f
+            print(json.dumps({f"{name}/{grade}": f}), flush=True)
+        if a.out:
+            Path(a.out).write_text(json.dumps(result, indent=1))
+    if a.out:
+        Path(a.out).write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

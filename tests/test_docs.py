@@ -1,0 +1,144 @@
+"""The documentation: generated references cover every CLI option, scenario field, navigator setting and
+output field; the site builds with Sphinx with warnings as errors and its internal links resolve."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import re
+import subprocess
+import sys
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+
+
+def _reference():
+    path = DOCS / "_ext" / "trn_reference.py"
+    if not path.is_file():
+        pytest.skip("docs/ is not in this checkout")
+    spec = importlib.util.spec_from_file_location("trn_reference", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_cli_reference_lists_every_subcommand_and_option():
+    ref = _reference()
+    page = ref.cli_markdown()
+    parser = ref.cli_parser()
+    subs = ref._subparsers(parser)
+    assert len(subs) >= 8
+    for name, sub in subs.items():
+        assert f"## `trn-env {name}`" in page, name
+        for action in sub._actions:
+            if action.dest == "help":
+                continue
+            for opt in action.option_strings or [action.dest]:
+                assert f"`{opt}" in page, f"trn-env {name} {opt} missing from the CLI reference"
+    assert isinstance(parser, argparse.ArgumentParser)
+
+
+def test_scenario_reference_lists_every_schema_field_with_a_meaning():
+    ref = _reference()
+    page = ref.scenario_markdown()
+    fields = ref.scenario_fields()
+    assert len(fields) > 100
+    for row in fields:
+        assert f"| `{row['path']}` |" in page, row["path"]
+    # an independent walk of the schema file: every property name appears somewhere in the page
+    schema = json.loads((ROOT / "trn_env" / "scenario" / "schema.json").read_text())
+
+    def names(node):
+        if isinstance(node, dict):
+            for k, v in node.get("properties", {}).items():
+                yield k
+                yield from names(v)
+            for v in node.values():
+                if isinstance(v, (dict, list)):
+                    yield from names(v)
+        elif isinstance(node, list):
+            for v in node:
+                yield from names(v)
+
+    missing = sorted({n for n in names(schema) if not re.search(rf"[.`]{re.escape(n)}` \|", page)})
+    assert missing == [], missing
+    undescribed = [row["path"] for row in fields if not row["description"]]
+    assert undescribed == [], f"schema fields without a description: {undescribed}"
+
+
+def test_settings_reference_lists_every_navigator_and_monitor_setting():
+    import inspect
+
+    from trn_env.navigators import registry
+
+    ref = _reference()
+    page = ref.settings_markdown()
+    for name in registry.available():
+        assert f"## navigator `{name}`" in page, name
+    for name in registry.available_monitors():
+        assert f"## monitor `{name}`" in page, name
+    # the pmf's constructor is the independent source: each of its keyword settings must be in the page
+    from trn_env.navigators.filters.pmf import PointMassFilter
+
+    for p in inspect.signature(PointMassFilter).parameters.values():
+        if p.kind is p.KEYWORD_ONLY or (p.kind is p.POSITIONAL_OR_KEYWORD and p.name not in ("self", "dem")):
+            if p.name in ("rng",):
+                continue
+            assert f"| `{p.name}` |" in page, f"pmf setting {p.name} missing from the settings reference"
+
+
+def test_every_summary_field_of_a_real_flight_is_documented(tmp_path):
+    from trn_env import cli
+    from trn_env.output.fields import SUMMARY_FIELDS, undocumented
+
+    out = tmp_path / "run"
+    assert cli.main(["fly", "--duration", "12", "--no-plots", "--quiet", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert undocumented(summary, SUMMARY_FIELDS) == []
+    page = _reference().outputs_markdown()
+    for key in summary:
+        if key in SUMMARY_FIELDS:
+            assert f"| `{key}` |" in page
+
+
+class _Links(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.links: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        for k, v in attrs:
+            if (tag, k) in (("a", "href"), ("img", "src")) and v:
+                self.links.append(v)
+
+
+@pytest.mark.slow
+def test_docs_build_with_warnings_as_errors_and_internal_links_resolve(tmp_path):
+    pytest.importorskip("sphinx")
+    out = tmp_path / "html"
+    proc = subprocess.run([sys.executable, "-m", "sphinx", "-E", "-W", "--keep-going", "-q", "-b", "html",
+                           "-d", str(tmp_path / "doctrees"), str(DOCS), str(out)],
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    pages = list(out.rglob("*.html"))
+    assert len(pages) > 20
+    broken = []
+    for page in pages:
+        parser = _Links()
+        parser.feed(page.read_text(encoding="utf-8"))
+        for link in parser.links:
+            if re.match(r"^[a-z]+:", link) or link.startswith("#"):
+                continue
+            target = (page.parent / link.split("#")[0]).resolve()
+            if link.split("#")[0] and not target.exists():
+                broken.append(f"{page.relative_to(out)} -> {link}")
+    assert broken == [], broken[:20]
+    for name in ("reference/cli.html", "reference/scenario.html", "reference/settings.html",
+                 "reference/outputs.html", "reference/env.html", "gallery/index.html"):
+        assert (out / name).is_file(), name

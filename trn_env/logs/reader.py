@@ -1,0 +1,301 @@
+"""Reading a sensor log (trn_env.logs.format) back: validated, and converted to trn-env's conventions.
+
+    log = read_log("flight.trnlog")     # LogError naming the file and the fix if anything is wrong
+    log.metadata                        # dict (metadata.json)
+    log.table("gnss")                   # pandas DataFrame of a table as stored
+    for frames in log.frames(): ...     # navigators.frames.SensorFrames per update interval, in the
+                                        # navigators' conventions: IMU rates, heights above the map's MSL
+    log.truth()                         # DataFrame, heights above MSL, or None
+
+`read_log` checks what a navigator would otherwise meet silently: a log from a newer format version, a
+recording that did not finish, a truncated or corrupt table, a table whose row count disagrees with the
+metadata, missing columns, time that does not increase, a sample outside its interval, NaN in a sample
+marked valid, and an IMU sample convention or height datum that is not stated.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from trn_env.logs.format import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    HEIGHT_REFERENCES,
+    IMU_INCREMENT_COLUMNS,
+    IMU_SAMPLE_CONVENTIONS,
+    METADATA_FILE,
+    SENSOR_COLUMNS,
+    SENSORS,
+    TRUTH_COLUMNS,
+    LogError,
+)
+from trn_env.navigators import frames as nf
+from trn_env.navigators.protocol import Estimate, Health
+
+_FRAME_CLASSES = {"imu": nf.ImuFrame, "baro": nf.BaroFrame, "radar_altimeter": nf.RadarAltimeterFrame,
+                  "ira": nf.IraFrame, "gnss": nf.GnssFrame, "air_data": nf.AirDataFrame,
+                  "heading": nf.HeadingFrame}
+
+
+def geoid_offset_m(metadata: dict, where: str = "metadata.json") -> float:
+    """N (m) to subtract from the log's heights to get heights above MSL: 0 for an MSL log."""
+    datum = metadata.get("height_datum")
+    if not isinstance(datum, dict) or datum.get("reference") not in HEIGHT_REFERENCES:
+        raise LogError(f"{where}: height_datum is not stated: give {{\"reference\": \"msl\"}} (heights above "
+                       "the map's MSL) or {\"reference\": \"ellipsoid\", \"geoid_offset_m\": N} (WGS84 "
+                       "ellipsoid heights, N the geoid's height above the ellipsoid here)")
+    if datum["reference"] == "msl":
+        return 0.0
+    if "geoid_model" in datum and "geoid_offset_m" not in datum:
+        raise LogError(f"{where}: height_datum.geoid_model {datum['geoid_model']!r}: "
+                       "geoid models by name are "
+                       "not supported (no geoid grid ships with trn-env); give geoid_offset_m, the geoid "
+                       "height above the ellipsoid over the log's area, in metres")
+    n = datum.get("geoid_offset_m")
+    if not isinstance(n, (int, float)) or isinstance(n, bool) or not math.isfinite(n) or abs(n) > 150.0:
+        raise LogError(f"{where}: height_datum.geoid_offset_m must be a finite number of metres within "
+                       f"+-150 (ellipsoid heights need it), got {n!r}")
+    return float(n)
+
+
+def _open_table(path: Path) -> pa.Table:
+    try:
+        return pq.read_table(path)
+    except (pa.ArrowInvalid, pa.ArrowIOError, OSError, ValueError) as exc:
+        raise LogError(f"log table {path}: corrupt or truncated Parquet file ({exc}); record it again or "
+                       "restore the file") from exc
+
+
+def _check_column(name: str, col: str, a: np.ndarray, valid: np.ndarray | None) -> None:
+    bad = ~np.isfinite(a) if valid is None else (~np.isfinite(a) & valid)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        why = "" if valid is None else " in a sample marked valid"
+        raise LogError(f"log table {name}: column {col} is NaN or infinite{why} at row {i} (mark the sample "
+                       "valid = false, or drop it)")
+
+
+class SensorLog:
+    """A validated log on disk (see the module docstring)."""
+
+    def __init__(self, path: Path, metadata: dict):
+        self.path = Path(path)
+        self.metadata = metadata
+        self.sensors = tuple(s for s in SENSORS if s in metadata.get("tables", {}))
+        self.geoid_offset_m = geoid_offset_m(metadata, f"log {self.path}: {METADATA_FILE}")
+        self._cache: dict[str, pa.Table] = {}
+
+    # --------------------------------------------------------------------------------- tables
+    def has(self, name: str) -> bool:
+        return name in self.metadata.get("tables", {})
+
+    def arrow(self, name: str) -> pa.Table:
+        if not self.has(name):
+            raise LogError(f"log {self.path}: has no {name} table")
+        if name not in self._cache:
+            self._cache[name] = _open_table(self.path / f"{name}.parquet")
+        return self._cache[name]
+
+    def table(self, name: str) -> pd.DataFrame:
+        """A table as stored (pandas)."""
+        return self.arrow(name).to_pandas()
+
+    def column(self, name: str, col: str) -> np.ndarray:
+        return self.arrow(name).column(col).to_numpy()
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.metadata["tables"].get("frames", 0))
+
+    # --------------------------------------------------------------------------------- frames
+    def _sensor_columns(self, s: str) -> dict[str, np.ndarray]:
+        """A sensor's columns in the navigators' conventions (IMU rates, heights above MSL)."""
+        t = self.arrow(s)
+        cols = {c: t.column(c).to_numpy() for c in t.column_names}
+        if s == "imu" and self.metadata.get("imu_sample") == "increment":
+            ts = cols["t_s"]
+            dt = np.diff(ts)
+            dt = np.concatenate([[np.median(dt) if dt.size else 0.0], dt])
+            for inc, rate, _ in IMU_INCREMENT_COLUMNS:
+                cols[rate] = cols.pop(inc) / dt
+        if s == "gnss" and self.geoid_offset_m:
+            cols["h_m"] = cols["h_m"] - self.geoid_offset_m
+        return cols
+
+    def frames(self):
+        """SensorFrames per update interval, in order (a generator)."""
+        fr = self.arrow("frames")
+        t0, t1 = fr.column("t_start_s").to_numpy(), fr.column("t_end_s").to_numpy()
+        present = {s: fr.column(f"{s}_present").to_numpy() for s in SENSORS}
+        data = {}
+        for s in self.sensors:
+            cols = self._sensor_columns(s)
+            bounds = np.searchsorted(cols["frame"], np.arange(len(t0) + 1), side="left")
+            data[s] = (cols, bounds)
+        for k in range(len(t0)):
+            out = nf.SensorFrames(float(t0[k]), float(t1[k]))
+            for s in SENSORS:
+                if not present[s][k]:
+                    continue
+                if s in data:
+                    cols, b = data[s]
+                    setattr(out, s, _frame(s, cols, int(b[k]), int(b[k + 1])))
+                else:
+                    setattr(out, s, _frame(s, None, 0, 0))
+            yield out
+
+    # ---------------------------------------------------------------------------------- truth
+    def truth(self) -> pd.DataFrame | None:
+        """The truth table with heights above the map's MSL, or None."""
+        if not self.has("truth"):
+            return None
+        df = self.table("truth")
+        if self.geoid_offset_m:
+            df["h_m"] = df["h_m"] - self.geoid_offset_m
+        return df
+
+    def estimates(self) -> pd.DataFrame | None:
+        return self.table("estimates") if self.has("estimates") else None
+
+    def initial_estimate(self) -> Estimate | None:
+        """The initial estimate stated in the metadata (heights converted to MSL), or None."""
+        ie = self.metadata.get("initial_estimate")
+        if ie is None:
+            return None
+        try:
+            cov = np.array(ie["covariance"], float).reshape(9, 9)
+            return Estimate(float(ie["t_s"]), float(ie["lat_rad"]), float(ie["lon_rad"]),
+                            float(ie["h_m"]) - self.geoid_offset_m, np.array(ie["v_ned_mps"], float),
+                            float(ie["roll_rad"]), float(ie["pitch_rad"]), float(ie["yaw_rad"]), cov,
+                            Health())
+        except (KeyError, TypeError, ValueError) as exc:
+            raise LogError(f"log {self.path}: {METADATA_FILE}: initial_estimate is malformed "
+                           f"({exc})") from exc
+
+
+def _frame(s: str, cols: dict | None, i0: int, i1: int):
+    cls = _FRAME_CLASSES[s]
+    if cols is None:
+        empty = np.empty(0)
+        kw = {"t_s": empty, "valid": np.empty(0, bool)}
+        for _, fld, comp, _ in SENSOR_COLUMNS[s]:
+            kw[fld] = np.empty((0, 3)) if comp is not None else empty
+        return cls(**kw)
+    kw = {"t_s": cols["t_s"][i0:i1], "valid": cols["valid"][i0:i1]}
+    vectors: dict[str, list] = {}
+    for col, fld, comp, _ in SENSOR_COLUMNS[s]:
+        if comp is None:
+            kw[fld] = cols[col][i0:i1]
+        else:
+            vectors.setdefault(fld, []).append(cols[col][i0:i1])
+    for fld, parts in vectors.items():
+        kw[fld] = np.column_stack(parts)
+    return cls(**kw)
+
+
+def read_metadata(path: Path) -> dict:
+    path = Path(path)
+    if not path.exists():
+        raise LogError(f"log {path}: no such folder")
+    if not path.is_dir():
+        raise LogError(f"log {path}: not a folder (a trn-env log is a folder of Parquet tables with a "
+                       f"{METADATA_FILE})")
+    mfile = path / METADATA_FILE
+    if not mfile.is_file():
+        raise LogError(f"log {path}: no {METADATA_FILE}: not a trn-env log, or a recording that did not "
+                       "finish")
+    try:
+        meta = json.loads(mfile.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise LogError(f"log {mfile}: corrupt or truncated ({exc})") from exc
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+        got = meta.get("format") if isinstance(meta, dict) else None
+        raise LogError(f"log {mfile}: not a {FORMAT_NAME} (format = {got!r})")
+    v = meta.get("format_version")
+    if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+        raise LogError(f"log {mfile}: format_version must be a positive whole number, got {v!r}")
+    if v > FORMAT_VERSION:
+        raise LogError(f"log {mfile}: written in format version {v}, newer than this trn-env reads (up to "
+                       f"{FORMAT_VERSION}); upgrade trn-env to read it")
+    if meta.get("complete") is not True:
+        raise LogError(f"log {mfile}: the recording did not finish (complete is not true): truncated log")
+    tables = meta.get("tables")
+    if not isinstance(tables, dict) or ("frames" not in tables and any(s in tables for s in SENSORS)):
+        raise LogError(f"log {mfile}: tables must list each table's row count, the frames table among them "
+                       "when the log holds sensor tables")
+    return meta
+
+
+def read_log(path: Path | str, *, check: bool = True) -> SensorLog:
+    """Open and validate a log folder (LogError naming the file and the fix)."""
+    path = Path(path)
+    meta = read_metadata(path)
+    log = SensorLog(path, meta)
+    if "imu" in log.sensors and meta.get("imu_sample") not in IMU_SAMPLE_CONVENTIONS:
+        raise LogError(f"log {path / METADATA_FILE}: imu_sample is not stated: one of "
+                       f"{', '.join(IMU_SAMPLE_CONVENTIONS)} (docs/guide/logs.md says what each means)")
+    for name, rows in meta["tables"].items():
+        f = path / f"{name}.parquet"
+        if not f.is_file():
+            raise LogError(f"log {path}: table {f.name} is missing (the metadata lists it): truncated log")
+        try:
+            n = pq.ParquetFile(f).metadata.num_rows
+        except (pa.ArrowInvalid, pa.ArrowIOError, OSError, ValueError) as exc:
+            raise LogError(f"log table {f}: corrupt or truncated Parquet file ({exc})") from exc
+        if n != rows:
+            raise LogError(f"log table {f}: {n} rows, the metadata says {rows}: truncated or replaced")
+    if check:
+        _check_contents(log)
+    return log
+
+
+def _required(log: SensorLog, name: str, cols: list[str]) -> None:
+    have = set(log.arrow(name).column_names)
+    missing = [c for c in cols if c not in have]
+    if missing:
+        raise LogError(f"log table {log.path / (name + '.parquet')}: missing column(s) {', '.join(missing)}")
+
+
+def _check_contents(log: SensorLog) -> None:
+    n_frames = log.n_frames
+    if not log.has("frames"):
+        return
+    _required(log, "frames", ["frame", "t_start_s", "t_end_s"] + [f"{s}_present" for s in SENSORS])
+    t0, t1 = log.column("frames", "t_start_s"), log.column("frames", "t_end_s")
+    _check_column("frames", "t_start_s", t0, None)
+    _check_column("frames", "t_end_s", t1, None)
+    if np.any(t1 < t0) or np.any(t0[1:] < t1[:-1]) or np.any(np.diff(log.column("frames", "frame")) != 1):
+        raise LogError(f"log table {log.path / 'frames.parquet'}: frames must follow each other in time "
+                       "(frame k+1 starting at or after frame k ends, t_end_s >= t_start_s, frame = 0, 1, "
+                       "...)")
+    for s in log.sensors:
+        imu_inc = s == "imu" and log.metadata.get("imu_sample") == "increment"
+        cols = [c for c, _, _, _ in SENSOR_COLUMNS[s]]
+        if imu_inc:
+            cols = [inc for inc, _, _ in IMU_INCREMENT_COLUMNS]
+        _required(log, s, ["frame", "t_s", "valid"] + cols)
+        t = log.column(s, "t_s")
+        _check_column(s, "t_s", t, None)
+        if np.any(np.diff(t) <= 0.0):
+            i = int(np.flatnonzero(np.diff(t) <= 0.0)[0])
+            raise LogError(f"log table {log.path / (s + '.parquet')}: t_s does not increase at row {i + 1} "
+                           f"({t[i]!r} then {t[i + 1]!r} s)")
+        k = log.column(s, "frame")
+        if k.size and (np.any(np.diff(k) < 0) or k[0] < 0 or k[-1] >= n_frames):
+            raise LogError(f"log table {log.path / (s + '.parquet')}: frame must be non-decreasing within "
+                           f"0 .. {n_frames - 1}")
+        valid = log.column(s, "valid").astype(bool)
+        for c in cols:
+            _check_column(s, c, log.column(s, c), valid)
+    if log.has("truth"):
+        _required(log, "truth", [c for c, _ in TRUTH_COLUMNS])
+        t = log.column("truth", "t_s")
+        if np.any(np.diff(t) <= 0.0):
+            raise LogError(f"log table {log.path / 'truth.parquet'}: t_s must increase")
