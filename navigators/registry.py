@@ -207,6 +207,11 @@ def monitor_sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds
     return _needs("monitor", name, monitor_capabilities(name), settings)
 
 
+def monitor_settings_class(name: str) -> type | None:
+    """The Settings class of a registered monitor (None for a plug-in without one)."""
+    return monitor_capabilities(name).settings
+
+
 def create_monitor(name: str, **settings):
     """A new monitor by name (it runs beside a navigator: `monitor.update(frames, estimate)`)."""
     return _call("monitor", name, _entry(_MONITORS, "monitor", name), dict(settings))

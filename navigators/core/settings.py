@@ -393,6 +393,18 @@ def table_rows(cls) -> list[dict[str, str]]:
              "range": range_text(f), "meaning": f.spec.doc} for f in settings_fields(cls)]
 
 
+def settings_rows(cls) -> list[dict[str, Any]] | None:
+    """The rows of `table_rows` with the raw default value (not its text) and the doc under "doc" as well as
+    "meaning"; None when `cls` is not a Settings class (a plug-in without one)."""
+    if not (isinstance(cls, type) and issubclass(cls, Settings)):
+        return None
+    rows = table_rows(cls)
+    for row, f in zip(rows, settings_fields(cls), strict=True):
+        row["default"] = f.default
+        row["doc"] = row["meaning"]
+    return rows
+
+
 def markdown_table(cls) -> str:
     """`table_rows(cls)` as a Markdown table."""
     cols = ("name", "type", "unit", "default", "range", "meaning")

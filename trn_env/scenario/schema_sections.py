@@ -12,9 +12,10 @@ editors and the docs, and tests/test_settings.py checks the file is up to date.
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterator
 from typing import Any
 
-from trn_env.navigators.core.settings import json_schema
+from trn_env.navigators.core.settings import json_schema, table_rows
 
 # a navigator that needs the map may be given another one than terrain.map's (a DEM name or file)
 _RUNTIME = {"dem": {"type": "string", "description": "the navigator's map, a DEM name or file (default: "
@@ -77,3 +78,21 @@ def with_generated_sections(schema: dict[str, Any]) -> dict[str, Any]:
     nav["properties"]["settings"] = {"type": "object", "description": NAVIGATOR_SETTINGS_DESCRIPTION}
     nav["allOf"] = navigator_branches()
     return out
+
+
+def settings_tables() -> Iterator[tuple[str, type, list[dict[str, str]]]]:
+    """(scenario section, Settings class, rows) for every registered navigator and monitor with a Settings
+    class and every sensor: the docs' settings tables, each row name, type, unit, default, range, meaning
+    (navigators.core.settings.table_rows)."""
+    from trn_env.navigators import registry
+    from trn_env.sensors.suite import SENSOR_MODELS
+    for name in registry.available():
+        cls = registry.settings_class(name)
+        if cls is not None:
+            yield f"navigator.settings ({name})", cls, table_rows(cls)
+    for name in registry.available_monitors():
+        cls = registry.monitor_settings_class(name)
+        if cls is not None:
+            yield f"monitors.{name}", cls, table_rows(cls)
+    for name, model in SENSOR_MODELS.items():
+        yield f"sensors.{name}", model.config_cls, table_rows(model.config_cls)
