@@ -80,6 +80,8 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "fuel_remaining_kg": Field("kg", "fuel on board at the end"),
     "constant_fuel": Field("flag", "whether the fuel (and the mass) was held constant"),
     "truth_source": Field("", "where the true motion came from: jsbsim or kinematic"),
+    "unused_sensors": Field("", "fitted sensors that neither the navigator nor a monitor reads (their "
+                                "declared sensor needs)"),
     "files": Field("", "the files written to the run folder"),
     "status_ok_fraction": Field("", "time share of rows whose health status is 'ok'"),
     "status_ok_misleading_fraction": Field("", "share of the 'ok' time with the north or east error outside "

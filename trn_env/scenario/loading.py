@@ -12,15 +12,18 @@ before any flight starts and reports EVERY problem, each prefixed with the field
 1. the JSON schema (types, ranges, required keys, unknown keys);
 2. semantic checks that need the data: exactly one altitude per waypoint, GNSS outages ordered, the
    DEM files readable, the initial position and every waypoint inside the true terrain and the
-   navigator's map, the navigator name known, the component settings accepted by their components.
+   navigator's map, the navigator name known, every sensor the navigator and the monitors require
+   (their declared capabilities) fitted, the component settings accepted by their components.
 
 Problems are raised together as one `ScenarioError` whose `.problems` is the list of messages.
 
 Why a schema plus a generic pass rather than a typed model of the whole file: the schema already states
-every field's type and range in one place that several components extend at once; the finite-number walk
-closes the NaN/infinity class for every present and future numeric field (free-form settings tables
-included) without restating them, and each component validates its own settings in its constructor, so
-`registry.create` and the Python API get the same checks as a scenario file.
+every field's type and range in one place that several components extend at once; its `sensors.*`,
+`monitors.*` and `navigator.settings` sections are generated from the components' declared settings
+(navigators.core.settings, trn_env.scenario.schema_sections), which the components also validate in their
+constructors, so `registry.create` and the Python API get the same checks as a scenario file; the
+finite-number walk closes the NaN/infinity class for every present and future numeric field without
+restating them.
 """
 
 from __future__ import annotations
