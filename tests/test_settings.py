@@ -294,3 +294,18 @@ def test_schema_file_up_to_date():
     branches = {b["if"]["properties"]["name"]["const"] for b in schema["properties"]["navigator"]["allOf"]}
     assert branches == set(BUILTIN_NAVIGATORS)
     assert set(schema["properties"]["sensors"]["properties"]) == set(SENSOR_MODELS)
+
+
+def test_replay_refuses_a_log_without_a_required_sensor():
+    from types import SimpleNamespace
+
+    from trn_env.logs.format import LogError
+    from trn_env.logs.replay import check_sensors
+    log = SimpleNamespace(path="x.trnlog", sensors=("imu", "baro", "gnss"))
+    d = {"navigator": {"name": "pmf", "settings": {}}, "monitors": {"dem_integrity": {}}}
+    with pytest.raises(LogError, match=r"navigator 'pmf' needs sensor\(s\) the log does not hold: ira"):
+        check_sensors(None, "pmf", log, d)
+    log.sensors = ("imu", "ira")
+    with pytest.raises(LogError, match="monitor 'dem_integrity' needs sensor.*radar_altimeter"):
+        check_sensors(None, "pmf", log, d)
+    check_sensors(None, "pmf", log, {"navigator": {"name": "pmf", "settings": {}}})
