@@ -142,7 +142,7 @@ def test_component_settings_rejected_at_their_field():
     with pytest.raises(ScenarioError) as exc:
         validate(data, source="test")
     probs = exc.value.problems       # every problem at once, each at its field, no class name
-    assert any(p.startswith("sensors.imu.gyro_bias_rps: must be >= 0") for p in probs), probs
+    assert any(p.startswith("sensors.imu.gyro_bias_rps: ") for p in probs), probs
     assert any(p.startswith("sensors.imu.no_such: unknown") for p in probs), probs
     assert not any("ImuConfig" in p for p in probs), probs
 

@@ -234,12 +234,10 @@ class Settings:
 
     def __post_init__(self):
         problems: list[tuple[str, str]] = []
-        bad: set[str] = set()
         for f in settings_fields(type(self)):
             value, probs = _coerce(f, getattr(self, f.name))
             if probs:
                 problems += probs
-                bad.add(f.name)
             else:
                 object.__setattr__(self, f.name, value)
         if not problems:
