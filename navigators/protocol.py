@@ -47,6 +47,9 @@ class Health:
     # reason -> count of measurements skipped so far
     skipped: dict[str, int] = field(default_factory=dict)
     events: list[tuple[float, str]] = field(default_factory=list)  # (t_s, message) since the last update
+    # why the navigator's covariance is known not to bound its error in this configuration ("" for none
+    # known), e.g. an IMU grade beyond its error model's validity (navigators.core.imu_spec)
+    consistency_warning: str = ""
 
     def skip(self, t_s: float, reason: str, message: str | None = None) -> None:
         self.skipped[reason] = self.skipped.get(reason, 0) + 1

@@ -21,7 +21,11 @@ a class registered without `capabilities` gets its class attribute `capabilities
 
 Settings: every navigator and monitor with a Settings class validates them in its constructor and raises
 one `SettingsError` (a `ValueError`) naming every bad setting, unknown names refused against the list of
-known ones; `create` prefixes the navigator's name. For a plug-in without a Settings class the keyword
+known ones; `create` prefixes the navigator's name. `integrity_risk` (per epoch, in (0, 1), default 1e-3)
+and `map_horizontal_sigma_m` (the map's horizontal error per axis, m, default 0) are taken here for every
+navigator (`PublishedIntegritySettings`, reported together with the navigator's own problems): the risk its
+published horizontal protection level is computed for and the map error it covers
+(navigators.integrity.protection_level). For a plug-in without a Settings class the keyword
 arguments are checked against its factory's signature. A navigator that `takes_rng` gets the scenario's
 `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its run bit for
 bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
@@ -37,7 +41,7 @@ from typing import Any
 import numpy as np
 from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES as ACQ_TRACK_CAPABILITIES
 from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
-from trn_env.navigators.core.settings import SettingsError, unknown_message
+from trn_env.navigators.core.settings import Settings, SettingsError, setting, unknown_message
 from trn_env.navigators.filters.ins_trn_settings import (
     INS_CAPABILITIES,
     INS_TERCOM_CAPABILITIES,
@@ -47,6 +51,20 @@ from trn_env.navigators.filters.ins_trn_settings import (
 from trn_env.navigators.filters.rbpf_settings import CAPABILITIES as RBPF_CAPABILITIES
 from trn_env.navigators.filters.terrain_filter_settings import PF_CAPABILITIES, PMF_CAPABILITIES
 from trn_env.navigators.integrity.dem_monitor_settings import CAPABILITIES as DEM_INTEGRITY_CAPABILITIES
+
+
+@dataclass(frozen=True)
+class PublishedIntegritySettings(Settings):
+    """The settings `create` takes for every navigator: its published protection level's risk and the map's
+    horizontal error it covers (navigators.integrity.protection_level.configure)."""
+
+    integrity_risk: float = setting(1e-3, "per-epoch integrity risk of the published horizontal protection "
+                                          "level", "1", gt=0.0, lt=1.0)
+    map_horizontal_sigma_m: float = setting(0.0, "the map's horizontal error per axis the protection level "
+                                                 "covers (a scenario: its accuracy class)", "m", ge=0.0)
+
+
+PUBLISHED_INTEGRITY_KEYS = ("integrity_risk", "map_horizontal_sigma_m")
 
 
 @dataclass(frozen=True)
@@ -120,7 +138,8 @@ def sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
 def _needs(kind: str, name: str, caps: Capabilities, settings: dict | None) -> SensorNeeds:
     if caps.settings is None:
         return caps.sensor_needs(None)
-    given = {k: v for k, v in (settings or {}).items() if k not in ("dem", "rng", "name")}
+    skip = ("dem", "rng", "name") + (PUBLISHED_INTEGRITY_KEYS if kind == "navigator" else ())
+    given = {k: v for k, v in (settings or {}).items() if k not in skip}
     try:
         return caps.sensor_needs(caps.settings.from_mapping(given))
     except SettingsError as exc:
@@ -134,7 +153,22 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
     kwargs = dict(settings)
     if entry.capabilities.takes_rng:
         kwargs["rng"] = rng
-    return _call("navigator", name, entry, kwargs)
+    published = {k: kwargs.pop(k) for k in PUBLISHED_INTEGRITY_KEYS if k in kwargs}
+    problems = []
+    try:
+        pl = PublishedIntegritySettings.from_mapping(published)
+    except SettingsError as exc:
+        problems, pl = exc.problems, None
+    try:
+        nav = _call("navigator", name, entry, kwargs)
+    except SettingsError as exc:
+        raise SettingsError(exc.problems + problems, owner=exc.owner) from None
+    if problems:
+        raise SettingsError(problems, owner=f"navigator {name!r}")
+    if hasattr(nav, "integrity_risk"):
+        from trn_env.navigators.integrity.protection_level import configure
+        configure(nav, pl.integrity_risk, pl.map_horizontal_sigma_m)
+    return nav
 
 
 def register(name: str, factory: Callable[..., object], takes_rng: bool = False,

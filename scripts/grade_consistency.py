@@ -76,7 +76,7 @@ def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
         cov.append(est.covariance[:2, :2].copy())
         status.append(est.health.status)
     return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "status": status,
-            "wall_s": time.perf_counter() - w0}
+            "warning": getattr(est.health, "consistency_warning", ""), "wall_s": time.perf_counter() - w0}
 
 
 def figures(runs: list[dict], t_from_s: float) -> dict:
@@ -88,7 +88,8 @@ def figures(runs: list[dict], t_from_s: float) -> dict:
            "rms_m": float(np.sqrt(np.mean(np.sum(E ** 2, axis=2)))),
            "inside_3sigma": float(np.mean(nees <= INSIDE_NEES)),
            "run_inside_3sigma_min": float(np.min(np.mean(nees <= INSIDE_NEES, axis=1))),
-           "wall_s_per_run": float(np.mean([r["wall_s"] for r in runs]))}
+           "wall_s_per_run": float(np.mean([r["wall_s"] for r in runs])),
+           "health_consistency_warning": runs[0].get("warning", "")}
     if len(runs) >= 2:
         p = fs.pooled_nees_figures(nees)
         out.update(anees=p["anees_thinned"], bounds_95=p["bounds_95_thinned"],

@@ -17,9 +17,15 @@ _EDGE = 1e-9
 @njit(cache=True, fastmath=False, error_model="numpy")
 def bilinear(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
     """Bilinear height (m) at (lat, lon) in radians; NaN outside the grid or next to a void."""
+    return bilinear_at_index(heights, (lat - lat0) / dlat, (lon - lon0) / dlon)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def bilinear_at_index(heights, fi, fj) -> float:
+    """Bilinear height (m) at fractional grid indices (fi along latitude, fj along longitude): the one
+    bilinear formula of the project (bilinear_batch writes it out, see there); NaN outside the grid or next
+    to a void (a point on a grid line next to a void is evaluated in the valid neighbour, _edge_retry)."""
     n_lat, n_lon = heights.shape
-    fi = (lat - lat0) / dlat
-    fj = (lon - lon0) / dlon
     if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
         return np.nan
     i = min(max(int(fi), 0), n_lat - 2)

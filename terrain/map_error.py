@@ -4,7 +4,11 @@
     bias_m                 constant vertical offset
     tilt_n, tilt_e         vertical ramp, metres per metre of north / east displacement from the grid centre
     random_sigma_m         spatially correlated random vertical error, standard deviation
-    correlation_length_m   its correlation length L: covariance sigma^2 exp(-d^2 / (2 L^2))
+    correlation_length_m   its correlation length L (m): finite, > 0 and, where the error is drawn, no
+                           longer than the map is across
+    correlation_function   "gaussian": covariance sigma^2 exp(-d^2 / (2 L^2)) (smooth error), or
+                           "exponential": sigma^2 exp(-d / L) (first-order Gauss-Markov along any line: the
+                           model fitted to DEM error correlograms); `correlation(d_m, L, function)`
     shift_n_m, shift_e_m   horizontal shift: a feature at true position p appears at p + shift in the map
     spacing_arcsec         coarser post spacing (area-averaged like a real DEM product); None keeps the grid
 
@@ -12,7 +16,14 @@ Accuracy classes (`ACCURACY_CLASSES`) turn published 90 % figures into a random 
 horizontal error) -> per-axis sigma_h = CE90 / 2.1460; LE90 (linear vertical error) -> sigma_v = LE90 /
 1.6449 (Gaussian). A realisation draws the shift from N(0, sigma_h^2) per axis and splits the vertical
 variance between a bias (fraction `bias_fraction` of the variance, drawn once) and correlated random error.
-The split and the correlation length (default 500 m) are modelling assumptions, not from the sources.
+The split is a modelling assumption, not from the sources. Each class carries its default correlation
+(`AccuracyClass.correlation_length_m`, exponential) with its source in `correlation_source`: the one
+published measurement used is Ehlschlaeger & Shortridge (1996, "Modeling elevation uncertainty in
+geographical analyses", Proc. Spatial Data Handling; NCGIA): the error of a USGS 1-degree (3 arcsec) DEM
+against 7.5-minute DEMs stayed correlated to 3,210 m, an exponential correlogram's practical range (3 L),
+so L = 1,070 m for the 3 arcsec products (SRTM, CartoDEM, ASTER, DTED-1); DTED-0 and DTED-2 scale it by their
+post spacing (an assumption). The DEM integrity monitor reads the same model
+(navigators.integrity.dem_monitor, `correlation_length_m`), so its test keeps its false-alarm rate.
 """
 
 from __future__ import annotations
@@ -24,8 +35,43 @@ from scipy import ndimage
 from trn_env.terrain import geodesy, kernels
 from trn_env.terrain.dem import Dem
 
+CORRELATION_FUNCTIONS = ("gaussian", "exponential")
 CE90_PER_SIGMA = 2.1460  # circular normal: P(r < 2.146 sigma) = 0.90
 LE90_PER_SIGMA = 1.6449  # normal: P(|z| < 1.6449 sigma) = 0.90
+
+
+def check_correlation_length(value, name: str = "correlation_length_m", allow_zero: bool = False) -> float:
+    """float(value) if it is a finite length > 0 m (>= 0 with allow_zero: 0 = uncorrelated), else ValueError
+    naming the setting."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be a finite length in m, got {value!r}") from None
+    if isinstance(value, bool) or not np.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
+        raise ValueError(f"{name}: must be a finite length {'>=' if allow_zero else '>'} 0 m, got {value!r}")
+    return v
+
+
+def correlation(d_m, correlation_length_m: float, function: str = "exponential"):
+    """Correlation of the random map error at horizontal distance d_m (m): exp(-d / L) ("exponential") or
+    exp(-d^2 / (2 L^2)) ("gaussian"); L = 0 means uncorrelated (1 at d = 0, else 0)."""
+    d = np.abs(np.asarray(d_m, float))
+    if correlation_length_m == 0.0:
+        return (d == 0.0).astype(float)
+    if function == "exponential":
+        return np.exp(-d / correlation_length_m)
+    if function == "gaussian":
+        return np.exp(-0.5 * (d / correlation_length_m) ** 2)
+    raise ValueError(f"correlation_function: must be one of {CORRELATION_FUNCTIONS}, got {function!r}")
+
+
+def check_fits(dem: Dem, correlation_length_m: float, name: str = "correlation_length_m") -> None:
+    """ValueError naming the setting if the correlation length is longer than the map is across."""
+    dn, de = dem.spacing_m
+    across = max((dem.heights_m.shape[0] - 1) * dn, (dem.heights_m.shape[1] - 1) * de)
+    if correlation_length_m > across:
+        raise ValueError(f"{name}: {correlation_length_m:g} m is longer than the map {dem.name!r} is across "
+                         f"({across:.0f} m)")
 
 
 @dataclass(frozen=True)
@@ -40,14 +86,15 @@ class MapErrorModel:
     shift_n_m: float = 0.0
     shift_e_m: float = 0.0
     spacing_arcsec: float | None = None
+    correlation_function: str = "gaussian"
 
     def __post_init__(self):
         if not (self.random_sigma_m >= 0.0):
             raise ValueError(f"MapErrorModel.random_sigma_m must be >= 0, got {self.random_sigma_m}")
-        if not (self.correlation_length_m > 0.0):
-            raise ValueError(
-                f"MapErrorModel.correlation_length_m must be > 0, got {self.correlation_length_m}"
-            )
+        check_correlation_length(self.correlation_length_m)
+        if self.correlation_function not in CORRELATION_FUNCTIONS:
+            raise ValueError(f"correlation_function: must be one of {CORRELATION_FUNCTIONS}, got "
+                             f"{self.correlation_function!r}")
         if self.spacing_arcsec is not None and not (self.spacing_arcsec > 0.0):
             raise ValueError(f"MapErrorModel.spacing_arcsec must be > 0, got {self.spacing_arcsec}")
 
@@ -60,6 +107,8 @@ class AccuracyClass:
     ce90_m: float
     le90_m: float
     source: str
+    correlation_length_m: float = 1070.0
+    correlation_source: str = ""
 
     @property
     def sigma_h_m(self) -> float:
@@ -70,11 +119,16 @@ class AccuracyClass:
         return self.le90_m / LE90_PER_SIGMA
 
 
+_E3 = ("Ehlschlaeger & Shortridge 1996 (NCGIA): USGS 1-degree (3 arcsec) DEM error correlated to 3,210 m = "
+       "3 L of an exponential correlogram")
+
 ACCURACY_CLASSES = {
     # seed 003 Table 1 (Digital Elevation Models and their Accuracies): post spacing, CEP and LEP at 90 %
-    "srtm": AccuracyClass(3.0, 15.0, 16.0, "seed 003 Table 1: SRTM, 3 arcsec, CE 15 m 90 %, LE 16 m 90 %"),
+    "srtm": AccuracyClass(3.0, 15.0, 16.0, "seed 003 Table 1: SRTM, 3 arcsec, CE 15 m 90 %, LE 16 m 90 %",
+                          1070.0, _E3),
     "cartodem": AccuracyClass(
-        3.0, 15.0, 8.0, "seed 003 Table 1: CartoDEM30 (hilly), 3 arcsec, CE 15 m 90 %, LE 8 m 90 %"
+        3.0, 15.0, 8.0, "seed 003 Table 1: CartoDEM30 (hilly), 3 arcsec, CE 15 m 90 %, LE 8 m 90 %",
+        1070.0, _E3,
     ),
     "aster": AccuracyClass(
         3.0,
@@ -82,19 +136,26 @@ ACCURACY_CLASSES = {
         17.0,
         "seed 003 Table 1: Aster-USGS, 3 arcsec, CE 17 m 90 %, LE 'TBD' in the table; "
         "LE90 17 m assumed here (of the order of the published ASTER GDEM validation)",
+        1070.0,
+        _E3,
     ),
     # DTED levels: spacing and absolute accuracies of the DTED specification (MIL-PRF-89020B), not in the
     # seeds; seed 003 reports DTED-1 absolute disparities ~ N(0, 18.9^2) m, consistent with LE90 30 m.
     "dted0": AccuracyClass(
-        30.0, 50.0, 30.0, "DTED level 0 (MIL-PRF-89020B): 30 arcsec, CE90 50 m, LE90 30 m"
+        30.0, 50.0, 30.0, "DTED level 0 (MIL-PRF-89020B): 30 arcsec, CE90 50 m, LE90 30 m", 10700.0,
+        "assumption: the 3 arcsec figure (" + _E3 + ") times the post-spacing ratio 10",
     ),
     "dted1": AccuracyClass(
         3.0,
         50.0,
         30.0,
         "DTED level 1 (MIL-PRF-89020B): 3 arcsec, CE90 50 m, LE90 30 m; seed 003: disparity sigma 18.9 m",
+        1070.0,
+        _E3,
     ),
-    "dted2": AccuracyClass(1.0, 23.0, 18.0, "DTED level 2 (MIL-PRF-89020B): 1 arcsec, CE90 23 m, LE90 18 m"),
+    "dted2": AccuracyClass(1.0, 23.0, 18.0, "DTED level 2 (MIL-PRF-89020B): 1 arcsec, CE90 23 m, LE90 18 m",
+                           357.0, "assumption: the 3 arcsec figure (" + _E3 + ") times the post-spacing "
+                           "ratio 1/3"),
 }
 
 
@@ -102,9 +163,11 @@ def model_for_class(
     name: str,
     seed: int | np.random.Generator = 0,
     bias_fraction: float = 0.5,
-    correlation_length_m: float = 500.0,
+    correlation_length_m: float | None = None,
+    correlation_function: str = "exponential",
 ) -> MapErrorModel:
-    """A random MapErrorModel realising accuracy class `name` (see ACCURACY_CLASSES and the module doc)."""
+    """A random MapErrorModel realising accuracy class `name` (see ACCURACY_CLASSES and the module doc);
+    correlation_length_m None: the class's default (exponential, with its source)."""
     key = name.strip().lower()
     if key not in ACCURACY_CLASSES:
         raise ValueError(f"unknown DEM accuracy class {name!r}; choose from {sorted(ACCURACY_CLASSES)}")
@@ -118,7 +181,9 @@ def model_for_class(
     return MapErrorModel(
         bias_m=float(rng.normal(0.0, sigma_b)),
         random_sigma_m=float(sigma_r),
-        correlation_length_m=correlation_length_m,
+        correlation_length_m=(cls.correlation_length_m if correlation_length_m is None
+                              else correlation_length_m),
+        correlation_function=correlation_function,
         shift_n_m=float(shift[0]),
         shift_e_m=float(shift[1]),
         spacing_arcsec=cls.spacing_arcsec,
@@ -126,15 +191,22 @@ def model_for_class(
 
 
 def correlated_field(
-    shape, dy_m: float, dx_m: float, sigma_m: float, correlation_length_m: float, rng: np.random.Generator
+    shape, dy_m: float, dx_m: float, sigma_m: float, correlation_length_m: float, rng: np.random.Generator,
+    function: str = "gaussian",
 ) -> np.ndarray:
-    """Gaussian field with covariance sigma^2 exp(-d^2 / (2 L^2)) (white noise smoothed by a Gaussian of
-    standard deviation L / sqrt(2) in the Fourier domain), scaled to the sample standard deviation sigma."""
+    """Gaussian field with covariance sigma^2 exp(-d^2 / (2 L^2)) ("gaussian": white noise smoothed by a
+    Gaussian of standard deviation L / sqrt(2) in the Fourier domain) or sigma^2 exp(-d / L) ("exponential":
+    its 2-D spectrum (1 + (2 pi f L)^2)^(-3/2), amplitude gain the square root), scaled to the sample
+    standard deviation sigma."""
     ny, nx = shape
     fy = np.fft.fftfreq(ny, d=dy_m)
     fx = np.fft.rfftfreq(nx, d=dx_m)
-    s = correlation_length_m / np.sqrt(2.0)
-    gain = np.exp(-2.0 * np.pi**2 * s**2 * (fy[:, None] ** 2 + fx[None, :] ** 2))
+    f2 = fy[:, None] ** 2 + fx[None, :] ** 2
+    if function == "exponential":
+        gain = (1.0 + (2.0 * np.pi * correlation_length_m) ** 2 * f2) ** -0.75
+    else:
+        s = correlation_length_m / np.sqrt(2.0)
+        gain = np.exp(-2.0 * np.pi**2 * s**2 * f2)
     field = np.fft.irfft2(np.fft.rfft2(rng.standard_normal(shape)) * gain, s=shape)
     field -= field.mean()
     sd = field.std()
@@ -195,8 +267,10 @@ def apply(
     east = (lo - lon_c) * r_e
     h += model.bias_m + model.tilt_n * north + model.tilt_e * east
     if model.random_sigma_m > 0.0:
+        check_fits(out, model.correlation_length_m)
         dy, dx = out.spacing_m
-        h += correlated_field(h.shape, dy, dx, model.random_sigma_m, model.correlation_length_m, rng)
+        h += correlated_field(h.shape, dy, dx, model.random_sigma_m, model.correlation_length_m, rng,
+                              model.correlation_function)
     return Dem(h, out.lat0_rad, out.lon0_rad, out.dlat_rad, out.dlon_rad, name or f"{dem.name}[map]")
 
 

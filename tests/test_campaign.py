@@ -141,15 +141,16 @@ def test_report_pngs_and_self_contained_html(flown, tmp_path):
     assert cli.main(["report", str(flown), "--out", str(tmp_path / "rep")]) == 0
     rep = tmp_path / "rep"
     pngs = sorted(p.name for p in rep.glob("*.png"))
-    assert pngs == ["cdf_horizontal_error.png", "envelope_horizontal_error.png"]
+    assert pngs == ["cdf_horizontal_error.png", "envelope_horizontal_error.png", "stanford.png"]
     page = (rep / "report.html").read_text()
     blobs = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)
-    assert len(blobs) == 2
+    assert len(blobs) == 3
     for b, name in zip(blobs, pngs, strict=True):
         assert base64.b64decode(b) == (rep / name).read_bytes()
     assert "ins_tercom | -" in page and "<img" in page and "src='http" not in page
     stats = json.loads((rep / "summary.json").read_text())
     assert stats["ins | -"]["runs"] == 2
+    assert stats["ins | -"]["pl_epochs.sum"] > 0         # protection-level epochs pooled over the runs
 
 
 # ------------------------------------------------------------------------------------------- Ray
@@ -318,7 +319,7 @@ def test_a_swept_campaign_has_sweep_columns_and_a_metric_versus_sweep_plot(tmp_p
         [{"wind.layers.0.speed_mps": 0.0}, {"wind.layers.0.speed_mps": 15.0}]
     rep = write_report(tmp_path / "out")
     assert (rep / "sweep_wind_layers_0_speed_mps.png").stat().st_size > 10_000
-    assert (rep / "report.html").read_text().count("data:image/png;base64,") == 3
+    assert (rep / "report.html").read_text().count("data:image/png;base64,") == 4   # + Stanford diagrams
 
 
 def test_report_and_check_refuse_bad_folders_and_baselines(tmp_path, capsys):

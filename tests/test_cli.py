@@ -70,17 +70,33 @@ def test_fly_writes_summary_log_and_plots(flown):
     assert not list(out.parent.glob(".run.partial-*"))
 
 
-def test_fly_rerun_into_existing_dir_replaces_summary(flown, tmp_path):
+def test_fly_rerun_into_existing_dir_refused_or_replaced_whole(flown, tmp_path, capsys):
+    """A run folder holds one run: a non-empty --out is refused before flying; --overwrite replaces the
+    previous run's folder as a whole (its plots do not survive beside a --no-plots run's summary)."""
     _, out = flown
     target = tmp_path / "run"
     shutil.copytree(out, target)
     (target / "stale.txt").write_text("x")
-    code = cli.main(["fly", str(SCEN / "default_short.toml"), "--out", str(target), "--quiet",
-                     "--duration", "5", "--seed", "4", "--no-plots"])
-    assert code == 0
+    args = ["fly", str(SCEN / "default_short.toml"), "--out", str(target), "--quiet", "--duration", "5",
+            "--seed", "4", "--no-plots"]
+    before = sorted(p.name for p in target.iterdir())
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not empty" in err and "--overwrite" in err
+    assert sorted(p.name for p in target.iterdir()) == before
+    assert cli.main([*args, "--overwrite"]) == 0
     summary = json.loads((target / "summary.json").read_text())
     assert summary["seed"] == 4 and summary["sim_time_s"] == pytest.approx(5.0)
-    assert np.load(target / "log.npz")["t_s"].shape[0] == 6
+    assert len(pd.read_csv(target / "timeline.csv")) == 6
+    assert sorted(p.name for p in target.iterdir()) == sorted(summary["files"])
+    assert not (target / "track.png").exists() and not (target / "stale.txt").exists()
+    assert not list(tmp_path.glob(".run.partial-*"))
+    # a non-empty folder that holds no run is refused even with --overwrite
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "mine.txt").write_text("keep")
+    assert cli.main(["fly", "--out", str(other), "--overwrite", "--quiet", "--duration", "5"]) == 2
+    assert "no previous run" in capsys.readouterr().err and (other / "mine.txt").read_text() == "keep"
 
 
 def test_bad_scenario_exits_nonzero_lists_problems_writes_nothing(tmp_path, capsys):
@@ -143,7 +159,7 @@ def test_interrupted_while_writing_leaves_no_summary(tmp_path, monkeypatch):
     out.mkdir()
     (out / "summary.json").write_text("{}")
     monkeypatch.setattr(output, "write_timeline_csv", boom)
-    code, _ = _fly(tmp_path)
+    code, _ = _fly(tmp_path, "--overwrite")
     assert code == 130
     assert (out / "summary.json").read_text() == "{}"          # untouched: nothing was moved in
     assert not (out / "log.npz").exists()
@@ -205,9 +221,32 @@ def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsy
     env_mod = types.ModuleType("fake_env")
     env_mod.benchmark = lambda quick=False: {"env_sim_seconds_per_wall_second": 9.0}
     monkeypatch.setitem(sys.modules, "trn_env.bench.env", env_mod)
-    assert cli.main(["bench", "--quick"]) == 0
+    assert cli.main(["bench", "--quick", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["jsbsim_steps_per_s"] == 1.0 and out["quick_seen"] is True
     assert "broken component" in out["trn_env.terrain.bench.error"]
     assert out["trn_env.bench.sensors.error"] == "no benchmark() function"
     assert out["closed_loop_ratio"] == 0.25 and out["env_sim_seconds_per_wall_second"] == 9.0
+    # without --json: the table, figure beside its reference and their ratio
+    monkeypatch.setattr(bench, "run_all", lambda quick: {
+        "flight_steps_per_s": 30000.0, "jsbsim_steps_per_s": 60000.0, "x.error": "broken component"})
+    assert cli.main(["bench", "--quick"]) == 0
+    text = capsys.readouterr().out
+    row = next(line for line in text.splitlines() if "flight_steps_per_s" in line)
+    assert "30,000" in row and "60,000" in row and "0.5" in row and "bare JSBSim" in row
+    assert "broken component" in text
+
+
+def test_bench_rows_pair_figures_with_references():
+    from trn_env.bench.table import bench_rows
+    rows = bench_rows({"closed_loop_steps_per_s": 20000.0,
+                       "closed_loop_jsbsim_reference_steps_per_s": 50000.0,
+                       "closed_loop_ratio": 0.41, "bilinear_lookups_per_s": 3.0e7,
+                       "numpy_bilinear_lookups_per_s": 1.0e7, "sensor_time_fraction": 0.12,
+                       "closed_loop_ratio_by_segment": [0.4, 0.41, 0.42], "x.error": "boom"})
+    by = {r[0]: r for r in rows}
+    assert by["closed_loop_steps_per_s"][4] == "0.41"          # the benchmark's own ratio (segment median)
+    assert by["bilinear_lookups_per_s"][4] == "3"               # computed: figure / reference
+    assert by["sensor_time_fraction"][1:] == ("0.12", "", "", "")
+    assert "closed_loop_jsbsim_reference_steps_per_s" not in by and "closed_loop_ratio_by_segment" not in by
+    assert by["x.error"][1] == "boom"

@@ -261,6 +261,7 @@ def _chi2_mean_bounds(n: int, dof: int, p: float) -> tuple[float, float]:
     return chi2.ppf((1 - p) / 2, dof * n) / n, chi2.ppf((1 + p) / 2, dof * n) / n
 
 
+@pytest.mark.slow
 def test_rbpf_consistent_on_the_coarse_map():
     """The default route as built in (the 3" map against the 30 m world, GNSS for 10 s then denied), 8 seeds
     x 240 s: the horizontal NEES at every 45th epoch after 15 s (the runs' NEES autocorrelation falls below
@@ -298,6 +299,7 @@ def _default_route_run(seed: int, map_is_world: bool, every: int) -> tuple[list[
     return _horizontal_nees(res, 15.0, every), res.summary["horizontal_error_rms_m"]
 
 
+@pytest.mark.slow
 def test_rbpf_consistent_when_the_map_is_the_world():
     """Where the filter's measurement model is the truth's (map = the ~24 m world, no map error to model):
     the default route in JSBSim, GNSS for 10 s then denied, 8 seeds x 240 s, bias priors from the scenario's

@@ -30,6 +30,8 @@ DURATION_S = 120.0
 SIGMA0_M = 30.0
 T_FROM_S = 20.0
 THIN_S = 10.0
+pytestmark = pytest.mark.slow        # a Monte Carlo over RUNS flights: the slow group (pytest -m slow)
+
 RUNS = 8
 
 

@@ -1,11 +1,12 @@
 """The `trn-env` command line: fly a scenario, list scenarios, validate one, run the benchmarks.
 
-    trn-env fly [SCENARIO] [--seed N] [--out DIR] [--navigator NAME] [--duration S] [--no-plots]
+    trn-env --version
+    trn-env fly [SCENARIO] [--seed N] [--out DIR [--overwrite]] [--navigator NAME] [--duration S] [--no-plots]
     trn-env record SCENARIO --out LOG [--seed N] [--navigator NAME] [--duration S] [--set PATH=VALUE]
     trn-env replay LOG [--navigator NAME] [--monitor NAME] [--map DEM] [--out DIR] [--no-plots]
     trn-env scenarios
     trn-env validate SCENARIO
-    trn-env bench [--quick]
+    trn-env bench [--quick] [--json]
     trn-env precompile [--workers N]
     trn-env campaign FILE [--out DIR] [--workers N] [--backend local|ray] [--address ADDR] [--resume]
                      [--check BASELINE.json] [--write-baseline BASELINE.json]
@@ -14,28 +15,87 @@
                  --no-climb-limit] --out route.toml
 
 Exit status: 0 success, 1 regression gate failed (`campaign --check`), 2 invalid input (every problem
-printed, nothing written), 130 interrupted (Ctrl-C at any point: a one-line message, no traceback).
+printed, nothing written), 130 interrupted (Ctrl-C at any point: a one-line message, no traceback), 143
+terminated (SIGTERM, handled as Ctrl-C is: partial outputs removed, one line).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import sys
 from pathlib import Path
+
+from trn_env import __version__
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the signal lands so it unwinds as Ctrl-C does (partial outputs removed)."""
+
+
+def _interrupt_exit(exc: BaseException) -> tuple[int, str]:
+    """(exit status, word) of an interrupt: 143 'terminated' for SIGTERM, 130 'interrupted' for Ctrl-C."""
+    return (143, "terminated") if isinstance(exc, Terminated) else (130, "interrupted")
+
+
+def _install_sigterm() -> None:
+    """SIGTERM in this process raises Terminated; a process forked from it (the estimation worker, a pool
+    worker) keeps the default action, so stopping a worker stays a plain kill."""
+    main_pid = os.getpid()
+
+    def on_sigterm(signum, frame):
+        if os.getpid() != main_pid:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        raise Terminated
+
+    try:
+        signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:            # not the main thread (main() called from a thread): leave it alone
+        pass
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose epilog may be a function, called only when the help is shown (the navigator
+    list needs the registry, which is not imported for a plain run)."""
+
+    def format_help(self) -> str:
+        if callable(self.epilog):
+            self.epilog = self.epilog()
+        return super().format_help()
+
+
+def _navigators_epilog() -> str:
+    try:
+        from trn_env.navigators import registry
+        names = ", ".join(registry.available())
+        monitors = ", ".join(registry.available_monitors())
+    except Exception as exc:  # noqa: BLE001 - the help must show even if a plug-in is broken
+        return f"navigators: (the registry could not be read: {exc})"
+    return (f"navigators (--navigator NAME): {names}; or package.module:Name of a plug-in. "
+            f"Monitors ([monitors] in a scenario): {monitors}.")
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="trn-env",
                                 description="Closed-loop terrain-referenced-navigation test range.")
-    sub = p.add_subparsers(dest="command", required=True)
-    fly = sub.add_parser("fly", help="fly a scenario in closed loop and write summary, log and plots")
+    p.add_argument("--version", action="version", version=f"trn-env {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    fly = sub.add_parser("fly", help="fly a scenario in closed loop and write summary, log and plots",
+                         epilog=_navigators_epilog)
     fly.add_argument("scenario", nargs="?", default="default",
                      help="built-in name or TOML path (default: default)")
     fly.add_argument("--seed", type=int, default=None, help="override the scenario seed")
     fly.add_argument("--out", type=Path, default=None,
                      help="output directory (default runs/<scenario>-<time>)")
-    fly.add_argument("--navigator", default=None, help="override the navigator (e.g. ins, ins_tercom)")
+    fly.add_argument("--overwrite", action="store_true",
+                     help="replace the --out folder of a previous run as a whole (without it a non-empty "
+                          "--out is refused before flying)")
+    fly.add_argument("--navigator", default=None,
+                     help="override the navigator (the names are listed below)")
     fly.add_argument("--duration", type=float, default=None, help="override the time limit, seconds")
     fly.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     fly.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
@@ -71,8 +131,10 @@ def _parser() -> argparse.ArgumentParser:
     pre = sub.add_parser("precompile", help="compile the numba kernels of every built-in navigator once, "
                                             "on all cores (after an install; later runs load the cache)")
     pre.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    bench = sub.add_parser("bench", help="print throughput figures as one JSON object")
+    bench = sub.add_parser("bench", help="print throughput figures, each beside its same-run reference")
     bench.add_argument("--quick", action="store_true", help="shorter measurements (less precise)")
+    bench.add_argument("--json", action="store_true",
+                       help="print the figures as one JSON object instead of the table")
     camp = sub.add_parser("campaign", help="fly a Monte Carlo campaign (seeds x navigators x sweeps)")
     camp.add_argument("file", type=Path, help="campaign TOML file")
     camp.add_argument("--out", type=Path, default=None,
@@ -187,23 +249,10 @@ def _summary_table(summary: dict, out_dir: Path):
     return table
 
 
-def out_dir_problem(out: Path) -> str | None:
-    """Why the run folder `out` could not be written (checked before flying, nothing created), or None."""
-    import os
-    if out.exists() and not out.is_dir():
-        return f"--out {out}: exists and is not a directory"
-    if out.is_dir():
-        return None if os.access(out, os.W_OK | os.X_OK) else f"--out {out}: the folder is not writable"
-    parent = out.absolute().parent
-    while not parent.exists():
-        if parent.parent == parent:
-            break
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"--out {out}: cannot create it, {parent} is not a directory"
-    if not os.access(parent, os.W_OK | os.X_OK):
-        return f"--out {out}: cannot create it, {parent} is not writable"
-    return None
+def out_dir_problem(out: Path, overwrite: bool = False) -> str | None:
+    """Why the run folder `out` could not be written (checked before flying, nothing left behind), or None."""
+    from trn_env.output.run_folder import target_problem
+    return target_problem(out, overwrite)
 
 
 def cmd_fly(args) -> int:
@@ -221,7 +270,7 @@ def cmd_fly(args) -> int:
         _print_problems(err)
         return 2
     if args.out is not None:
-        problem = out_dir_problem(args.out)
+        problem = out_dir_problem(args.out, args.overwrite)
         if problem is not None:
             print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
             return 2
@@ -281,26 +330,36 @@ def cmd_fly(args) -> int:
         if loop.termination != "time_limit":       # the run ended before the limit: the bar ends full
             bar.total = bar.n
             bar.refresh()
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         if bar is not None:
             bar.close()
-        print("interrupted: nothing written", file=sys.stderr)
+        code, word = _interrupt_exit(exc)
+        print(f"{word}: nothing written", file=sys.stderr)
         if writer is not None:
             writer.abort()
-        return 130
+        return code
     finally:
         if loop is not None:
             loop.close()
     bar.close()
     plot = None if args.no_plots else _plotter(result)
+    from trn_env.scenario.resolved import resolved_toml
+    command = _command_line(args)
+    result.summary["trn_env_version"] = __version__
+    result.summary["command_line"] = command
     try:
         writer.write_events(result.events)
         log_path = writer.commit({"termination": result.termination, "recorded_summary": result.summary})
         writer = None
-        write_run(out_dir, result.summary, result.arrays, result.events, plot=plot, log_dir=log_path)
-    except KeyboardInterrupt:
-        print("interrupted while writing: no summary written", file=sys.stderr)
-        return 130
+        write_run(out_dir, result.summary, result.arrays, result.events, plot=plot, log_dir=log_path,
+                  overwrite=args.overwrite, extra_files={"scenario.toml": resolved_toml(scenario, command)})
+    except KeyboardInterrupt as exc:
+        code, word = _interrupt_exit(exc)
+        print(f"{word} while writing: no summary written", file=sys.stderr)
+        return code
+    except OSError as exc:             # the folder changed under us since the check before the flight
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     finally:
         if writer is not None:
             writer.abort()
@@ -309,6 +368,12 @@ def cmd_fly(args) -> int:
             shutil.rmtree(log_path, ignore_errors=True)
     console.print(_summary_table(result.summary, out_dir))
     return 0
+
+
+def _command_line(args) -> str:
+    """The command as typed (shell-quoted), for summary.json and the resolved scenario's header."""
+    import shlex
+    return shlex.join(["trn-env", *getattr(args, "argv", sys.argv[1:])])
 
 
 def _log_writer(out_dir: Path):
@@ -461,9 +526,43 @@ def cmd_precompile(args) -> int:
     return 0
 
 
+class _stdout_to_stderr:
+    """Send this process's standard output (Python's and the C++ libraries' file descriptor 1) to standard
+    error for the block, so `trn-env bench --json` prints nothing but the JSON on standard output."""
+
+    def __enter__(self):
+        import contextlib
+        sys.stdout.flush()
+        self._saved = None
+        try:
+            self._saved = os.dup(1)
+            os.dup2(2, 1)
+        except OSError:
+            self._saved = None
+        self._redirect = contextlib.redirect_stdout(sys.stderr)
+        self._redirect.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self._redirect.__exit__(*exc)
+        sys.stdout.flush()
+        if self._saved is not None:
+            os.dup2(self._saved, 1)
+            os.close(self._saved)
+        return False
+
+
 def cmd_bench(args) -> int:
     from trn_env.bench.runner import run_all
-    print(json.dumps(run_all(quick=args.quick), indent=2))
+    with _stdout_to_stderr():      # JSBSim's banners and any component's prints stay out of the JSON/table
+        results = run_all(quick=args.quick)
+    if args.json:
+        print(json.dumps(results, indent=2))
+        return 0
+    from rich.console import Console
+
+    from trn_env.bench.table import bench_table
+    Console(width=max(Console().width, 140)).print(bench_table(results))
     return 0
 
 
@@ -488,7 +587,7 @@ def cmd_campaign(args) -> int:
 
     from trn_env.campaign.driver import default_out_dir
     out_dir = args.out or default_out_dir(campaign.name)
-    console = Console(width=max(Console().width, 150))     # the summary table is wide
+    console = Console()
     try:
         stats = run_campaign(campaign, out_dir, backend=backend, resume=args.resume, progress=not args.quiet)
     except CampaignError as err:
@@ -498,10 +597,11 @@ def cmd_campaign(args) -> int:
     except BackendError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"interrupted: the finished runs' rows are in {out_dir}/runs (continue with --resume)",
+    except KeyboardInterrupt as exc:
+        code, word = _interrupt_exit(exc)
+        print(f"{word}: the finished runs' rows are in {out_dir}/runs (continue with --resume)",
               file=sys.stderr)
-        return 130
+        return code
     return _campaign_outcome(campaign, out_dir, stats, baseline, args, console)
 
 
@@ -600,12 +700,41 @@ def cmd_plan(args) -> int:
           f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "
           f"(straight {straight.featureless_m / 1000:.2f} km), "
           f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
+    print(_plan_reason(route, straight, d, config))
     return 0
 
 
+def _plan_reason(route, straight, d: dict, config) -> str:
+    """Why the planned route is longer than the straight line: each one's featureless flight, the expected
+    horizontal error at the end of its longest featureless stretch (where the navigator must find the
+    terrain again) and at the goal (trn_env.guidance.goal_error, with the scenario's IMU)."""
+    from trn_env.guidance.goal_error import expected_goal_error_m
+    from trn_env.scenario.build import imu_bias_settings
+    imu = imu_bias_settings((d.get("sensors") or {}).get("imu"))
+    b_a, b_g = imu.get("accel_bias_sigma_mps2", 0.0), imu.get("gyro_bias_sigma_rps", 0.0)
+    tas = float(d["route"]["tas_mps"])
+
+    def err(featureless_m: float) -> float:
+        return expected_goal_error_m(featureless_m, tas, b_a, b_g, sigma_fix_m=config.informative_crlb_m)
+
+    def describe(r) -> str:
+        return (f"{r.featureless_m / 1000:.1f} km of featureless terrain (longest stretch "
+                f"{r.longest_featureless_m / 1000:.1f} km: about {err(r.longest_featureless_m):.0f} m "
+                f"expected error at its end; last {r.final_featureless_m / 1000:.1f} km before the goal: "
+                f"about {err(r.final_featureless_m):.0f} m at the goal)")
+
+    model = "(INS drift over featureless flight with the scenario's IMU, trn_env.guidance.goal_error)"
+    if route.length_m <= straight.length_m * 1.001:
+        return f"why: the straight line is already the best route: {describe(straight)} {model}"
+    return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: the straight line crosses "
+            f"{describe(straight)}; the planned route {describe(route)} {model}")
+
+
 def main(argv: list[str] | None = None) -> int:
+    _install_sigterm()
     try:
         args = _parser().parse_args(argv)
+        args.argv = list(sys.argv[1:] if argv is None else argv)
         if args.command == "scenarios":
             return cmd_scenarios()
         if args.command == "validate":
@@ -627,26 +756,29 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "plan":
             return cmd_plan(args)
         return 2
-    except KeyboardInterrupt:       # during the imports, the scenario's loading, a benchmark
-        print("interrupted: nothing written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:       # during the imports, the scenario's loading, a benchmark
+        code, word = _interrupt_exit(exc)
+        print(f"{word}: nothing written", file=sys.stderr)
+        return code
     except SystemError as exc:
         # Ctrl-C inside a numba dispatcher (e.g. while it unpickles a cached kernel) surfaces as "returned a
         # result with an exception set", caused by the KeyboardInterrupt
-        if not _caused_by_interrupt(exc):
+        cause = _caused_by_interrupt(exc)
+        if cause is None:
             raise
-        print("interrupted: nothing written", file=sys.stderr)
-        return 130
+        code, word = _interrupt_exit(cause)
+        print(f"{word}: nothing written", file=sys.stderr)
+        return code
 
 
-def _caused_by_interrupt(exc: BaseException) -> bool:
+def _caused_by_interrupt(exc: BaseException) -> KeyboardInterrupt | None:
     seen = set()
     while exc is not None and id(exc) not in seen:
         if isinstance(exc, KeyboardInterrupt):
-            return True
+            return exc
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
-    return False
+    return None
 
 
 if __name__ == "__main__":

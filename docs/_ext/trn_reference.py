@@ -140,9 +140,43 @@ def _range_of(node: dict) -> str:
     return ", ".join(parts)
 
 
+_MINIMAL_SCENARIO = {
+    "name": "minimal",
+    "initial": {"lat_deg": 36.49, "lon_deg": -84.37, "h_agl_m": 1500.0},
+    "route": {"waypoints": [{"lat_deg": 36.49, "lon_deg": -84.37, "h_agl_m": 1500.0},
+                            {"lat_deg": 36.60, "lon_deg": -84.30, "h_agl_m": 1500.0}]},
+    "terrain": {}, "sensors": {}, "navigator": {"name": "ins"},
+}
+
+
+def scenario_defaults() -> dict[str, object]:
+    """The value the loader fills in for every field a minimal scenario leaves out, by dotted path."""
+    import copy
+
+    from trn_env.scenario import loading
+    fill = getattr(loading, "_fill_defaults", None)
+    if fill is None:
+        return {}
+    filled = fill(copy.deepcopy(_MINIMAL_SCENARIO))
+    out: dict[str, object] = {}
+
+    def flat(node, given, path):
+        if isinstance(node, dict):
+            for k, v in node.items():
+                sub_given = given.get(k) if isinstance(given, dict) else None
+                full = f"{path}.{k}" if path else k
+                if isinstance(v, dict):
+                    flat(v, sub_given if isinstance(sub_given, dict) else {}, full)
+                elif sub_given is None:
+                    out[full] = v
+    flat(filled, _MINIMAL_SCENARIO, "")
+    return out
+
+
 def scenario_fields() -> list[dict]:
     """Every field of the scenario schema by dotted path (`[]` marks the items of an array of tables)."""
     schema = scenario_schema()
+    defaults = scenario_defaults()
     rows: list[dict] = []
 
     def walk(node: dict, path: str) -> None:
@@ -160,13 +194,21 @@ def scenario_fields() -> list[dict]:
                 if "properties" in items:
                     walk(items, path + "[]")
             return
+        required = set(node.get("required", []))
         for name, sub in props.items():
             sub_r = _resolve(sub, schema)
             full = f"{path}.{name}" if path else name
             unit = sub_r.get("x-unit", unit_of(name))
-            rows.append({"path": full, "type": _type_of(sub_r), "unit": unit,
-                         "default": sub_r.get("default"), "range": _range_of(sub_r),
-                         "description": sub_r.get("description", "")})
+            if "default" in sub_r:
+                default = f"`{json.dumps(sub_r['default'])}`"
+            elif name in required:
+                default = "required"
+            elif full in defaults and not isinstance(defaults[full], dict):
+                default = f"`{json.dumps(defaults[full], default=str)}`"
+            else:
+                default = ""
+            rows.append({"path": full, "type": _type_of(sub_r), "unit": unit, "default": default,
+                         "range": _range_of(sub_r), "description": sub_r.get("description", "")})
             walk(sub_r, full)
 
     walk(schema, "")
@@ -177,21 +219,32 @@ def scenario_markdown() -> str:
     schema = scenario_schema()
     out = ["# Scenario file", "", _cell(schema.get("description", "")), "",
            "Generated from `trn_env/scenario/schema.json`, the schema every scenario is validated against "
-           "(`trn-env validate FILE` lists every problem with its field path). A path with `[]` is a field "
-           "of each table in an array of tables (`[[route.waypoints]]`). Units follow the field's name "
-           "(`_m` metres, `_s` seconds, `_deg` degrees, `_mps` m/s). The navigator's, monitors' and sensors' "
-           "own settings are listed on the [settings reference](settings.md).", ""]
+           "(`trn-env validate FILE` lists every problem with its field path), and from the loader, which "
+           "fills the defaults shown. A path with `[]` is a field of each table in an array of tables "
+           "(`[[route.waypoints]]`). Units follow the field's name (`_m` metres, `_s` seconds, `_deg` "
+           "degrees, `_mps` m/s). The navigator's, monitors' and sensors' own settings are listed on the "
+           "[settings reference](settings.md).", ""]
+    header = ["| field | type | unit | default | range | meaning |", "|---|---|---|---|---|---|"]
+    rows = scenario_fields()
+    tops = {r["path"].split(".")[0].split("[")[0] for r in rows if "." in r["path"] or "[" in r["path"]}
+    scalars = [r for r in rows if r["path"] not in tops and "." not in r["path"] and "[" not in r["path"]]
+    out += ["## Top level", ""] + header
+    out += [_row(r) for r in scalars]
     section = None
-    for row in scenario_fields():
+    for row in rows:
+        if row in scalars:
+            continue
         top = row["path"].split(".")[0].split("[")[0]
         if top != section:
             section = top
-            out += ["", f"## `{section}`", "", "| field | type | unit | default | range | meaning |",
-                    "|---|---|---|---|---|---|"]
-        default = "" if row["default"] is None else f"`{json.dumps(row['default'])}`"
-        out.append(f"| `{row['path']}` | {_cell(row['type'])} | {row['unit']} | {default} | "
-                   f"{_cell(row['range'])} | {_cell(row['description'])} |")
+            out += ["", f"## `[{section}]`", ""] + header
+        out.append(_row(row))
     return "\n".join(out) + "\n"
+
+
+def _row(row: dict) -> str:
+    return (f"| `{row['path']}` | {_cell(row['type'])} | {row['unit']} | {row['default']} | "
+            f"{_cell(row['range'])} | {_cell(row['description'])} |")
 
 
 # ----------------------------------------------------------------------------------------------- settings
@@ -298,10 +351,9 @@ def env_markdown() -> str:
     parts = []
     for env_id in sorted(i for i in gymnasium.registry if i.startswith("trn_env/")):
         spec = gymnasium.registry[env_id]
-        entry = spec.entry_point if isinstance(spec.entry_point, str) else (
-            f"{spec.entry_point.__module__}:{spec.entry_point.__qualname__}")
-        if entry is None:
-            entry = spec.vector_entry_point
+        entry = spec.entry_point if spec.entry_point is not None else spec.vector_entry_point
+        if not isinstance(entry, str):
+            entry = f"{entry.__module__}:{entry.__qualname__}"
         module, _, name = str(entry).partition(":")
         import importlib
         cls = getattr(importlib.import_module(module), name)

@@ -18,7 +18,8 @@ from trn_env.sim import run_scenario
 result = run_scenario("default", seed=1, duration_s=120.0, pipeline=False)
 summary = result.summary
 print(f"termination: {summary['termination']}")
-print(f"horizontal RMS error: {summary['horizontal_error_rms_m']:.1f} m over {summary['sim_time_s']:.0f} s")
+rms_m, sim_s = summary["horizontal_error_rms_m"], summary["sim_time_s"]
+print(f"horizontal RMS error: {rms_m:.1f} m over {sim_s:.0f} s")
 
 # %%
 # The horizontal error against the navigator's 3-sigma bound
@@ -32,7 +33,8 @@ sigma_h = np.sqrt(a["est_cov_diag"][:, 0] + a["est_cov_diag"][:, 1])
 fig, ax = plt.subplots(figsize=(7, 3.5))
 ax.plot(t, e_h, label="horizontal error")
 ax.plot(t, 3 * sigma_h, "--", label="3 sigma (navigator)")
-ax.axvspan(t[~a["gnss_available"].astype(bool)][0], t[-1], color="0.9", zorder=0, label="GNSS denied")
+t_denied = t[~a["gnss_available"].astype(bool)][0]
+ax.axvspan(t_denied, t[-1], color="0.9", zorder=0, label="GNSS denied")
 ax.set_xlabel("time since start (s)")
 ax.set_ylabel("metres")
 ax.legend()

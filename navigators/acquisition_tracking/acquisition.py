@@ -29,6 +29,7 @@ from trn_env.navigators.acquisition_tracking.correlation import (
     profile_cost,
     replica_offsets,
 )
+from trn_env.terrain.kernels import bilinear_at_index
 
 
 @njit(cache=True)
@@ -80,7 +81,7 @@ def search_kernel(
                     if interp == INTERP_BILINEAR:
                         fj_s = (lon_s - lon0) / dlon
                         for k in range(n):
-                            h_w[k] = _bilinear_index(heights, n_lat, n_lon, fi_s + fi_w[k], fj_s + fj_w[k])
+                            h_w[k] = bilinear_at_index(heights, fi_s + fi_w[k], fj_s + fj_w[k])
                     else:
                         for k in range(n):
                             h_w[k] = _map_height(
@@ -165,7 +166,7 @@ def bounded_search_kernel(
                     abandoned = False
                     for kk in range(n):
                         k = perm[kk]
-                        if inside:  # _bilinear_index's arithmetic without its range checks
+                        if inside:  # bilinear_at_index's arithmetic without its range checks
                             f = fj_s + fj_w[k]
                             jj = int(f)
                             v = f - jj
@@ -176,7 +177,7 @@ def bounded_search_kernel(
                             hb = h10 + v * (heights[ii + 1, jj + 1] - h10)
                             h = ha + u_w[k] * (hb - ha)
                         elif interp == INTERP_BILINEAR:
-                            h = _bilinear_index(heights, n_lat, n_lon, fi_s + fi_w[k], fj_s + fj_w[k])
+                            h = bilinear_at_index(heights, fi_s + fi_w[k], fj_s + fj_w[k])
                         else:
                             h = _map_height(
                                 heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k], lon_s + dlon_w[k], interp
@@ -209,24 +210,6 @@ def bounded_search_kernel(
 def centre_out(m: int) -> np.ndarray:
     """Indices 0..m-1 ordered by distance from the centre index (the prior first)."""
     return np.argsort(np.abs(np.arange(m) - m // 2), kind="stable").astype(np.int64)
-
-
-@njit(cache=True)
-def _bilinear_index(heights, n_lat, n_lon, fi, fj):
-    """Bilinear height at fractional grid indices (terrain.kernels.bilinear's arithmetic without its
-    lat/lon division; NaN outside the grid or next to a void - the sample then drops out)."""
-    if not (fi >= -1e-9 and fj >= -1e-9 and fi <= n_lat - 1 + 1e-9 and fj <= n_lon - 1 + 1e-9):
-        return np.nan
-    i = min(max(int(fi), 0), n_lat - 2)
-    j = min(max(int(fj), 0), n_lon - 2)
-    u = fi - i
-    v = fj - j
-    h00 = heights[i, j]
-    h01 = heights[i, j + 1]
-    a = h00 + v * (h01 - h00)
-    h10 = heights[i + 1, j]
-    b = h10 + v * (heights[i + 1, j + 1] - h10)
-    return a + u * (b - a)
 
 
 @dataclass

@@ -32,6 +32,7 @@ difference, V-shaped), since discriminator (3.5) on a parabola maps x -> -x and 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -43,6 +44,77 @@ from trn_env.navigators.acquisition_tracking.correlation import (
     replica_offsets,
 )
 from trn_env.navigators.acquisition_tracking.tracking import DISC_THESIS
+
+
+class LoopSettings(NamedTuple):
+    """track_loops' settings, fixed by the navigator's configuration (AcqTrackConfig): the correlation
+    (cost, remove_bias, interp, n_min), which loops run and in what order, the V analysis (n_side points,
+    symmetry_max, break_iteration, discriminator, bias mitigation), the correlation functions' reach f_r (m)
+    and the sample period (s), and per loop (speed m/s, heading rad, position m) its reach, first-stage
+    spacings (widest first) and threshold, second-stage spacing and threshold."""
+
+    cost: int
+    remove_bias: bool
+    interp: int
+    n_min: int
+    aided: bool
+    position_loops: bool
+    speed_first: bool
+    n_side: int
+    symmetry_max: float
+    break_iteration: int
+    discriminator: int
+    mitigation: int
+    f_r: float
+    sample_period_s: float
+    speed_reach: float
+    speed_desc: np.ndarray
+    speed_threshold_1: float
+    speed_spacing_2: float
+    speed_threshold_2: float
+    heading_desc: np.ndarray
+    heading_threshold_1: float
+    heading_spacing_2: float
+    heading_threshold_2: float
+    position_reach: float
+    position_desc: np.ndarray
+    position_threshold_1: float
+    position_spacing_2: float
+    position_threshold_2: float
+
+
+class TransectRecord(NamedTuple):
+    """One epoch's transect for track_loops: its start (lat_s, lon_s rad), sample times from the start dt (s),
+    aiding speed m_v (m/s) and track m_psi (rad), references b_v, b_psi, radii r_n, r_e_cos (m), measured
+    terrain heights d (m) and their validity, the aiding's mean speed and track, beam offsets o_n, o_e (m)."""
+
+    lat_s: float
+    lon_s: float
+    dt: np.ndarray
+    m_v: np.ndarray
+    m_psi: np.ndarray
+    b_v: float
+    b_psi: float
+    r_n: float
+    r_e_cos: float
+    d: np.ndarray
+    valid: np.ndarray
+    mean_m_v: float
+    mean_m_psi: float
+    o_n: np.ndarray
+    o_e: np.ndarray
+
+
+class LoopOutputs(NamedTuple):
+    """track_loops' outputs, allocated by the caller: iterations (4,), locked (4,), ran (4,), V shapes (4, 6),
+    the prompt replica's map heights (n,)."""
+
+    its: np.ndarray
+    locked: np.ndarray
+    ran: np.ndarray
+    shapes: np.ndarray
+    h_prompt: np.ndarray
+
 
 MITIGATION_NONE = 0
 MITIGATION_NCS = 1
@@ -551,15 +623,7 @@ def _put_shape(out, k, v_shape, bw, m_off, m_cost, sl, sr):
 
 
 @njit(cache=True)
-def track_loops(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
-    cost, remove_bias, interp, n_min, aided, position_loops, speed_first, mean_m_v, mean_m_psi,
-    n_side, symmetry_max, break_iteration, discriminator, mitigation, f_r, sample_period_s,
-    speed_reach, speed_desc, speed_threshold_1, speed_spacing_2, speed_threshold_2,
-    heading_desc, heading_threshold_1, heading_spacing_2, heading_threshold_2,
-    position_reach, position_desc, position_threshold_1, position_spacing_2, position_threshold_2,
-    out_its, out_locked, out_ran, out_shapes, out_h_prompt, o_n, o_e,
-):  # fmt: skip
+def track_loops(grid, transect, settings, out):
     """All of one tracking epoch's loops in one call (navigator.py's order): aided, the start-point loops
     along and across the track at the references, then the speed and heading loops (loop_epoch; speed first
     unless speed_first is False); unaided the loops first and the start-point loops after them. Then the
@@ -570,7 +634,20 @@ def track_loops(
     functions' reach at the far end (m). Loop k (0 speed, 1 heading, 2 along, 3 across): out_its[2k: 2k + 2]
     the two stages' iterations (speed and heading), out_locked[k], out_ran[k], out_shapes[k] = (v_shape,
     bandwidth, min_offset, min_cost, slope_left, slope_right). Returns (b_v, b_psi, lat_p, lon_p, speed
-    spacing, heading spacing): the references and start point the loops found."""
+    spacing, heading spacing): the references and start point the loops found.
+
+    Records (numba tuples): grid = the map's (heights, lat0, lon0, dlat, dlon) (terrain.Dem.grid);
+    transect = TransectRecord; settings = LoopSettings (fixed by the navigator's config); out = LoopOutputs
+    (arrays the caller allocates)."""
+    heights, lat0, lon0, dlat, dlon = grid
+    (lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid, mean_m_v, mean_m_psi, o_n,
+     o_e) = transect
+    (cost, remove_bias, interp, n_min, aided, position_loops, speed_first, n_side, symmetry_max,
+     break_iteration, discriminator, mitigation, f_r, sample_period_s, speed_reach, speed_desc,
+     speed_threshold_1, speed_spacing_2, speed_threshold_2, heading_desc, heading_threshold_1,
+     heading_spacing_2, heading_threshold_2, position_reach, position_desc, position_threshold_1,
+     position_spacing_2, position_threshold_2) = settings
+    out_its, out_locked, out_ran, out_shapes, out_h_prompt = out
     n = dt.shape[0]
     for k in range(4):
         out_ran[k] = False

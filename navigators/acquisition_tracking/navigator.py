@@ -95,7 +95,9 @@ from trn_env.navigators.acquisition_tracking.profile import (
 )
 from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES, AcqTrackConfig
 from trn_env.navigators.acquisition_tracking.tracking_step import TrackingStep
+from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
@@ -117,17 +119,14 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
     """
 
     capabilities = CAPABILITIES
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(self, dem=None, settings: AcqTrackConfig | None = None, name: str = "acq_track",
                  **overrides):
         self.config = self.settings = cfg = AcqTrackConfig.build(settings, overrides)
         self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
-        if dem is None:
-            raise ValueError("dem: the navigator's terrain map is required")
-        if isinstance(dem, str):
-            from trn_env import terrain
-
-            dem = terrain.load(dem)
+        dem = load_map(dem, "acq_track")
         self.dem = dem
         self.name = name
         self._grid = dem.grid
@@ -161,11 +160,9 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         )
         # loop_kernel.track_loops' settings (fixed by the config) and its preallocated outputs
         f_r = cfg.scf_offset_cells * self.map_resolution_m
-        self._loop_args = (
+        self._loop_settings = loop_kernel.LoopSettings(
             self._cost, bool(cfg.remove_bias), self._interp, self._n_min, bool(cfg.aiding),
             bool(cfg.position_loops), cfg.loop_order == "speed_first",
-        )  # fmt: skip
-        self._loop_settings = (
             int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), self._disc,
             loop_kernel.MITIGATIONS[cfg.bias_mitigation], float(f_r), float(cfg.sample_period_s),
             max(f_r / (cfg.transect_samples * cfg.sample_period_s), float(self._speed_set.max())),
@@ -494,6 +491,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
                 }
             )
         extra.update(self._integrity_extra)
+        pl.publish(extra, pl.gaussian_hpl(P, pl.filter_risk(self)), self)   # protection_level
         h = Health(
             ok=self.health.ok,
             status=self.health.status,

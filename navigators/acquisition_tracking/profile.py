@@ -18,13 +18,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-
-R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
-
-
-def geometric_height_m(h_geopotential_m):
-    """Geometric height from ISA geopotential (pressure) altitude, h = r0 H / (r0 - H)."""
-    return R0_GEOPOTENTIAL_M * h_geopotential_m / (R0_GEOPOTENTIAL_M - h_geopotential_m)
+from trn_env.navigators.measurements.baro import geometric_height_m  # noqa: F401 (re-exported)
 
 
 def plumb_height_m(range_m, roll_rad, pitch_rad, beamwidth_deg: float):

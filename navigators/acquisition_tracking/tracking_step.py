@@ -69,14 +69,17 @@ class TrackingStep:
         # fix, and the speed and heading loops then stretch and turn the shifted replica. Unaided the speed
         # and heading are the loops' own fast estimates, so they go first and the shift follows them. All of
         # it (adaptivity blocks, both stages, bias mitigation) and the prompt's map heights in one numba call.
-        heights, lat0, lon0, dlat, dlon = self._track_grid(rng)
+        grid = self._track_grid(rng)
+        heights, lat0, lon0, dlat, dlon = grid
         h_p = np.empty(dt.size)
         its, locks, ran, shp = self._loop_out
-        b_v, b_psi, lat_p, lon_p, sp_v, sp_psi = loop_kernel.track_loops(
-            heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, b_v0, b_psi0, r_n, r_e,
-            d, valid, *self._loop_args, _mean(m_v), _mean(m_psi), *self._loop_settings,
-            its, locks, ran, shp, h_p, o_n, o_e,
+        transect = loop_kernel.TransectRecord(
+            self.p0[0], self.p0[1], dt, m_v, m_psi, b_v0, b_psi0, r_n, r_e, d, valid, _mean(m_v),
+            _mean(m_psi), o_n, o_e,
         )  # fmt: skip
+        b_v, b_psi, lat_p, lon_p, sp_v, sp_psi = loop_kernel.track_loops(
+            tuple(grid), transect, self._loop_settings, loop_kernel.LoopOutputs(its, locks, ran, shp, h_p)
+        )
         p_s = (lat_p, lon_p)
         # the kernel's small outputs as Python lists: per-element numpy indexing costs more than tolist
         self.iterations = its.tolist()

@@ -19,6 +19,10 @@ size:
   acceleration error's rate g sigma_bg: `tilt_accel_rate_sigma_mps3`), the heading error the z gyro bias
   builds, and in turns the gyro scale factor (heading) and misalignment (tilt) times the angle turned.
 
+Beyond SMALL_ANGLE_LIMIT_RAD of attitude error over a filter's memory the small-angle models and the
+equivalent walks no longer describe the INS error: `consistency_warning` says so, and the navigator reports
+it in Health.consistency_warning (measured: the consumer grade, docs/validation/navigators.md).
+
 A filter's own tuned values stay floors: the spec raises a setting, never lowers it below the value the
 filter was tuned with on the navigation grade, so the navigation grade keeps its behaviour.
 """
@@ -29,6 +33,9 @@ import math
 from dataclasses import dataclass, fields
 
 G0_MPS2 = 9.80665
+# attitude error (rad) the gyro biases may build over a filter's memory before its small-angle error model
+# and the equivalent random walks stop describing the INS error (0.57 deg)
+SMALL_ANGLE_LIMIT_RAD = 0.01
 
 
 @dataclass(frozen=True)
@@ -108,6 +115,19 @@ class ImuSpec:
         return self.gyro_misalignment_rad * abs(turn_rad)
 
 
+def consistency_warning(spec: ImuSpec, memory_s: float, who: str) -> str:
+    """Why `who`'s covariance cannot be trusted on this IMU ("" when nothing is known): the attitude error
+    its gyro biases build over the filter's memory beyond SMALL_ANGLE_LIMIT_RAD."""
+    att = spec.gyro_bias_sigma_rps * memory_s
+    if att <= SMALL_ANGLE_LIMIT_RAD:
+        return ""
+    bias_deg_h = math.degrees(spec.gyro_bias_sigma_rps) * 3600.0
+    return (f"{who}: the IMU's gyro bias ({bias_deg_h:.3g} deg/h) builds {math.degrees(att):.2g} deg of "
+            f"attitude error over the filter's {memory_s:g} s memory, beyond its small-angle error model "
+            f"({math.degrees(SMALL_ANGLE_LIMIT_RAD):.2g} deg): the covariance does not bound the error "
+            "(docs/validation/navigators.md)")
+
+
 def gm_drive(sigma: float, tau_s: float, dt_s: float) -> float:
     """A first-order Gauss-Markov process' drive over dt_s: sigma sqrt(1 - exp(-2 dt / tau))."""
     return float(sigma * math.sqrt(-math.expm1(-2.0 * dt_s / tau_s)))
@@ -124,4 +144,5 @@ def rss(*values: float) -> float:
     return float(math.sqrt(sum(v * v for v in values)))
 
 
-__all__ = ["G0_MPS2", "ImuSpec", "equivalent_walk_density", "gm_drive", "rss"]
+__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "ImuSpec", "consistency_warning", "equivalent_walk_density",
+           "gm_drive", "rss"]

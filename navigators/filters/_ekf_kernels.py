@@ -18,11 +18,11 @@ import math
 import numpy as np
 from numba import njit
 from trn_env.navigators.inertial.strapdown import propagate_chunk, quat_to_dcm
+from trn_env.navigators.measurements.baro import geometric_height_kernel
 from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
 
 N_ERR = 13
 G0 = 9.80665
-R0_GEOPOTENTIAL_M = 6356766.0
 FORMULA_CODES = {"conventional": 0, "proposed": 1}
 
 
@@ -267,7 +267,7 @@ def collect_ira(t0, t1, t_imu, hist, ts, rng_m, theta, valid, decimation, tb, hb
         if have_baro:
             h_ref = interp_one(t, tb, hb)
             if geopotential:
-                h_ref = R0_GEOPOTENTIAL_M * h_ref / (R0_GEOPOTENTIAL_M - h_ref)
+                h_ref = geometric_height_kernel(h_ref)
         else:
             h_ref = hist[k, 2]
         C = quat_to_dcm(hist[k, 6:10])
@@ -313,7 +313,7 @@ def baro_prepare(valid, h_baro_m, geopotential, usable, h_geometric):
         ok = valid[i] and np.isfinite(hb)
         usable[i] = ok
         all_ok = all_ok and ok
-        h_geometric[i] = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb) if geopotential else hb
+        h_geometric[i] = geometric_height_kernel(hb) if geopotential else hb
     return all_ok
 
 

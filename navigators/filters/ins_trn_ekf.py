@@ -40,9 +40,10 @@ from collections import deque
 
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
-from filterpy.kalman import KalmanFilter
-from trn_env.navigators.core.error_states import N_EKF13
+from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, N_EKF13
 from trn_env.navigators.core.linalg import is_positive_definite
+from trn_env.navigators.core.maps import load_map
+from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
 from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
 from trn_env.navigators.filters.ins_trn_settings import (
@@ -51,6 +52,7 @@ from trn_env.navigators.filters.ins_trn_settings import (
 )
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import StrapdownIns
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
@@ -108,6 +110,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
     """
 
     capabilities = INS_CAPABILITIES
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(self, dem=None, settings: InsTrnSettings | None = None, name: str | None = None,
                  **overrides):
@@ -118,15 +122,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         if dem is not None and not isinstance(dem, str) and not hasattr(dem, "grid"):
             raise ValueError(f"dem must be a terrain.Dem or a DEM name or file path, got {dem!r}")
         if aiding is not None:
-            if dem is None:
-                raise ValueError("dem: the navigator's terrain map is required when aiding is set")
-            if isinstance(dem, str):
-                from trn_env import terrain
-
-                try:
-                    dem = terrain.load(dem)
-                except (OSError, ValueError) as exc:
-                    raise ValueError(f"dem: cannot load the navigator's map {dem!r}: {exc}") from exc
+            dem = load_map(dem, "ins_tercom (aiding is set)")
         self.name = name or ("ins" if aiding is None else "ins_tercom")
         self.aiding = aiding
         self.dem = dem
@@ -165,7 +161,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.nominal_half_cells = self.half_cells
         self.recovery_sigma_m = s.recovery_sigma_m
         self._update_extra: dict = {}
-        self.kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
+        self._fault_allowance_m = 0.0       # the last accepted TERCOM fix's (protection_level)
+        self._kf = None                     # filterpy's KalmanFilter, made at first use (see kf)
         self.health = Health()
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
         self.batch = TercomBatch(None if aiding is None or dem is None else
@@ -186,6 +183,15 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.fused = True  # False: the step-by-step path (same numbers; kept for tests and fixes)
 
     # ------------------------------------------------------------------ protocol
+    @property
+    def kf(self):
+        """The filterpy KalmanFilter holding the error state and covariance. Made at first use: filterpy
+        imports scipy.stats (about a second), which checking a scenario's settings does not need."""
+        if self._kf is None:
+            from filterpy.kalman import KalmanFilter
+            self._kf = KalmanFilter(dim_x=N_ERR, dim_z=2)
+        return self._kf
+
     def reset(self, initial: Estimate) -> None:
         values = [initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.roll_rad,
                   initial.pitch_rad, initial.yaw_rad, *np.ravel(np.asarray(initial.v_ned_mps, float))]
@@ -215,8 +221,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
                                  f"eigenvalue {w.min():.3g})")
             cov = (V * np.maximum(w, 1e-10)) @ V.T
         P[:9, :9] = cov
-        P[9:12, 9:12] = np.eye(3) * self.sig_ba**2
-        P[12, 12] = self.sig_bg**2
+        P[ACC_BIAS, ACC_BIAS] = np.eye(3) * self.sig_ba**2
+        P[BGZ, BGZ] = self.sig_bg**2
         self.kf.x = np.zeros((N_ERR, 1))
         self.kf.P = P
         self._yaw_prev = math.nan
@@ -226,9 +232,11 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.fixes = deque(maxlen=FIX_HISTORY)
         self.n_fixes = 0
         self.integrity.reset()
+        self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m, repeat=False, cap_nis=False)
         self._integrity_extra = {}
         self._set_search(self.nominal_half_cells)
         self._update_extra = {}
+        self._fault_allowance_m = 0.0
         self._t_ekf = float(initial.t_s)
         self._t_batch0 = float(initial.t_s)
         self._height_initialised = False
@@ -311,6 +319,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         if gated:
             self._count_skip(t_s, "tercom_gated", 1, f"TERCOM fix failed the chi-square gate ({d2:.1f})")
             return
+        self._fault_allowance_m = pl.fault_allowance_m(self.kf.P[:2, :2], S, self.gate_chi2)
         saved = copy.deepcopy((self.kf.x, self.kf.P))
         self.kf.update(z, R=Rm, H=H)
         dx = self.kf.x.ravel()
@@ -318,9 +327,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             self.kf.x, self.kf.P = saved
             self._count_skip(t_s, "covariance_not_pd", 1, "fix skipped: covariance not positive definite")
             return
-        self.ins.correct(dx[0:3], dx[3:6], dx[6:9])
-        self.ins.accel_bias_b += dx[9:12]
-        self.ins.gyro_bias_b[2] += dx[12]
+        self._feed_back(dx)
         self.kf.x[:] = 0.0
         if not self.integrity.degraded:
             self.health.ok, self.health.status = True, "ok"
@@ -348,22 +355,25 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self._integrity_test(t_s, d2, 2)
 
     def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
-        """Feed the innovation test; on entering "degraded" recover (covariance inflation, wider search)."""
-        verdict = self.integrity.add(t_s, nis, dof)
+        """Feed the innovation test through the shared recovery policy (navigators.core.recovery, once per
+        entry into "degraded", uncapped NIS); on a recovery inflate the covariance and widen the search."""
+        decision = self._recovery.add(t_s, nis, dof)
+        verdict = decision.verdict
         self._integrity_extra = verdict.extra()
         if not verdict.changed:
             return
         self.health.events.append((t_s, verdict.message))
         if verdict.degraded:
             self.health.ok, self.health.status = False, "degraded"
-            P = self.kf.P
-            P[0, 0] += self.recovery_sigma_m**2
-            P[1, 1] += self.recovery_sigma_m**2
-            self._P_good[:] = P
-            self._set_search(self.recovery_half_cells)
-            self.health.events.append((t_s, f"recovery: horizontal covariance inflated by "
-                                            f"({self.recovery_sigma_m:.0f} m)^2, TERCOM search widened to "
-                                            f"+-{self.half_cells} cells"))
+            if decision.recover:
+                P = self.kf.P
+                P[0, 0] += decision.sigma_m**2
+                P[1, 1] += decision.sigma_m**2
+                self._P_good[:] = P
+                self._set_search(self.recovery_half_cells)
+                self.health.events.append((t_s, f"recovery: horizontal covariance inflated by "
+                                                f"({decision.sigma_m:.0f} m)^2, TERCOM search widened to "
+                                                f"+-{self.half_cells} cells"))
         else:
             self.health.ok, self.health.status = True, "ok"
             self._set_search(self.nominal_half_cells)
@@ -402,11 +412,14 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             )
         extra.update(self._update_extra)
         extra.update(self._integrity_extra)
+        # HPL: the Gaussian bound of P plus the last accepted fix's fault allowance (protection_level)
+        pl.publish(extra, pl.gaussian_hpl(P[:2, :2], pl.filter_risk(self)) + self._fault_allowance_m, self)
         health = Health(
             ok=self.health.ok,
             status=self.health.status,
             skipped=dict(self.health.skipped),
             events=list(self.health.events),
+            consistency_warning=self._consistency_warning,
         )
         return Estimate(
             t_s=self.ins.t_s,

@@ -13,7 +13,7 @@ import copy
 import math
 
 import numpy as np
-from trn_env.navigators.core.error_states import GNSS_STATES, N_EKF13
+from trn_env.navigators.core.error_states import ACC_BIAS, ATT, BGZ, GNSS_STATES, N_EKF13, POS, VEL
 from trn_env.navigators.core.linalg import is_positive_definite
 from trn_env.navigators.frames import SensorFrames
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
@@ -87,9 +87,7 @@ class InsTrnGnss:
             self._count_skip(t_g, "covariance_not_pd", 1,
                              "GNSS fix skipped: covariance not positive definite")
             return
-        self.ins.correct(dx[0:3], dx[3:6], dx[6:9])
-        self.ins.accel_bias_b += dx[9:12]
-        self.ins.gyro_bias_b[2] += dx[12]
+        self._feed_back(dx)
         self.kf.x[:] = 0.0
         self._P_good[:] = self.kf.P
         if not self._gnss_up:
@@ -102,3 +100,10 @@ class InsTrnGnss:
             self._t_batch0 = float(t_g)
         self.health.ok = True
         self.health.status = "ok"
+
+    def _feed_back(self, dx: np.ndarray) -> None:
+        """Correct the INS by the filter's error estimate dx (navigators.core.error_states: position,
+        velocity, attitude, accelerometer biases, z-gyro bias); the caller zeroes the state."""
+        self.ins.correct(dx[POS], dx[VEL], dx[ATT])
+        self.ins.accel_bias_b += dx[ACC_BIAS]
+        self.ins.gyro_bias_b[2] += dx[BGZ]

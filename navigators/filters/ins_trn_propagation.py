@@ -17,12 +17,12 @@ import math
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
 from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, N_EKF13, PSID, PSIE, PSIN, VEL
-from trn_env.navigators.core.imu_spec import ImuSpec, equivalent_walk_density
+from trn_env.navigators.core.imu_spec import ImuSpec, consistency_warning, equivalent_walk_density
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, quat_to_dcm
+from trn_env.navigators.measurements.baro import geometric_height_m
 from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
 
-R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 _EMPTY = np.zeros(0)
 _EMPTY_BOOL = np.zeros(0, np.bool_)
 # the memory over which the error sources the 13 states do not carry (the x / y gyro biases) are matched by
@@ -185,6 +185,7 @@ class InsTrnPropagation:
     _turn_tilt2 = 0.0  # tilt variance per rad turned (gyro misalignment)
     _turn_heading2 = 0.0  # heading variance per rad turned (gyro scale factor)
     _yaw_prev = math.nan
+    _consistency_warning = ""
 
     def apply_imu_spec(self, spec: ImuSpec) -> None:
         """Take the error model from the IMU's specification (navigators.core.imu_spec), each figure a floor
@@ -202,6 +203,7 @@ class InsTrnPropagation:
         self._q_bg_walk = 2.0 * spec.gyro_bias_instability_rps**2 / spec.gyro_bias_tau_s
         self._turn_tilt2 = spec.turn_tilt_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
         self._turn_heading2 = spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
+        self._consistency_warning = consistency_warning(spec, EKF_MEMORY_S, self.name)
         self._Q = None
 
     def _turn_noise(self) -> None:
@@ -333,7 +335,7 @@ class InsTrnPropagation:
             if bv.sum() >= 1:
                 h_ref = np.interp(ts_ok, baro.t_s[bv], baro.h_baro_m[bv])
                 if self.baro_geopotential:
-                    h_ref = R0_GEOPOTENTIAL_M * h_ref / (R0_GEOPOTENTIAL_M - h_ref)
+                    h_ref = geometric_height_m(h_ref)
         if self.aiding == "ira":
             C = np.stack([quat_to_dcm(q) for q in st[:, 6:10]])
             p = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.formula, C_bn=C)

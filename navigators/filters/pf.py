@@ -37,7 +37,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, equivalent_walk_density, rss
+from trn_env.navigators.core.imu_spec import (
+    G0_MPS2,
+    ImuSpec,
+    consistency_warning,
+    equivalent_walk_density,
+    rss,
+)
 from trn_env.navigators.core.resampling import systematic_kernel
 from trn_env.navigators.filters._pf_kernels import map_heights_interp, propagate_particles
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
@@ -129,6 +135,7 @@ class ParticleFilter(InsRiddenFilter):
         r_psi = rss(spec.gyro_bias_sigma_rps, spec.turn_heading_sigma_rad(0.5 * math.pi) / PF_MEMORY_S)
         self.s_psi = max(self.s_psi, rss(equivalent_walk_density(r_psi, PF_MEMORY_S),
                                          spec.gyro_noise_density_rps_rthz))
+        self._consistency_warning = consistency_warning(spec, PF_MEMORY_S, self.name)
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
         self._init_cov = np.array(cov9, float)
@@ -180,6 +187,10 @@ class ParticleFilter(InsRiddenFilter):
     def _weights(self) -> np.ndarray:
         w = np.exp(self.logw - self.logw.max())
         return w / w.sum()
+
+    def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """The particles' horizontal errors and weights (no pad)."""
+        return self.dn, self.de, self._weights(), 0.0
 
     def _apply_loglik_b(self, t_s: float, ll: np.ndarray, what: str, gam_resid: np.ndarray, gam: np.ndarray,
                         S: float) -> tuple[float, float] | None:

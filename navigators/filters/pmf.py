@@ -62,10 +62,11 @@ import math
 import numpy as np
 import trn_env.navigators.filters._pmf_kernels as kern
 from scipy import ndimage
-from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, equivalent_walk_density
+from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
 from trn_env.navigators.filters.terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
@@ -153,6 +154,7 @@ class PointMassFilter(InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
+        self._consistency_warning = consistency_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
     def _set_geometry(self, centre_n: float, centre_e: float, spacing: float) -> None:
@@ -325,6 +327,12 @@ class PointMassFilter(InsRiddenFilter):
     def _weights(self) -> np.ndarray:
         w = np.exp(self.logw - self.logw.max())
         return w / w.sum()
+
+    def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """The cells' centres and masses; pad: a cell's half diagonal plus the Gaussian bound of the process
+        noise not yet convolved into the grid (navigators.integrity.protection_level)."""
+        pad = 0.5 * math.sqrt(2.0) * self.spacing + pl.gaussian_hpl(self._q_pending, risk)
+        return self.dn_flat, self.de_flat, np.exp(self.logw - self.logw.max()), pad
 
     def _apply_loglik(self, t_s: float, ll: np.ndarray, what: str) -> float | None:
         """logw += ll; returns log p(z | past) or None (skipped: every cell underflowed)."""

@@ -54,7 +54,7 @@ At run time it never raises: a NaN or invalid IRA sample is skipped, particles w
 return (off the map) get zero weight; if every weight vanishes the cloud is re-initialised around the INS
 with the prior spread; each is counted in Health (status "degraded") with an event.
 Integrity (navigators.integrity.InnovationMonitor): each IRA update's NIS (2 dof; a sample every particle
-rejects counts as infinite; capped as terrain_filter.capped_nis) enters a window of integrity_window
+rejects counts as infinite; capped as navigators.core.recovery.capped_nis) enters a window of integrity_window
 updates; when the sum leaves its chi-square band (probability integrity_alpha) Health says "degraded" (ok
 False) and the particles' positions are re-spread (resampled, then N(0, recovery_sigma_m^2) added
 horizontally), both logged; a whole window still out of band after a re-spread re-spreads again, twice as
@@ -71,6 +71,8 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._rbpf_kernels as kern
+from trn_env.navigators.core.maps import load_map
+from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.core.settings import SettingsError
 from trn_env.navigators.filters.rbpf_cloud import RbpfCloud
 from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
@@ -78,6 +80,7 @@ from trn_env.navigators.filters.rbpf_settings import CAPABILITIES, MAX_PARTICLES
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.error_model_15 import transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements import ira_seed002 as ira_model
 from trn_env.navigators.protocol import (
@@ -135,18 +138,13 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
     """
 
     capabilities = CAPABILITIES
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     def __init__(self, dem=None, rng: np.random.Generator | None = None, settings: RbpfSettings | None = None,
                  name: str = "rbpf", **overrides):
         s = self.settings = RbpfSettings.build(settings, overrides)
-        if dem is None:
-            raise ValueError("dem: the RBPF needs the navigator's terrain map")
-        if isinstance(dem, str):
-            from trn_env import terrain
-
-            dem = terrain.load(dem)
-        if not hasattr(dem, "grid"):
-            raise ValueError(f"dem must be a terrain.Dem or a map name, got {type(dem).__name__}")
+        dem = load_map(dem, "the RBPF")
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
         self.name = name
@@ -225,7 +223,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         self._init_cloud()
         self.health = Health(status="acquiring", ok=True)
         self.integrity.reset()
-        self.recoveries = self._streak = self._since_recovery = 0
+        self.recoveries = 0
+        self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m)
         self._integrity_extra: dict = {}
         self._t_next = float(initial.t_s) + self.trn_period_s
         self._t_gnss_next = float(initial.t_s)
@@ -413,6 +412,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
             self._gnss_now = gnss is not None
             updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
         if gnss is not None:
+            if ll.shape[0] != self.n:       # the IRA update re-initialised the cloud (another size)
+                ll = np.empty(self.n)
             self._gnss_update(te, gnss, lat, lon, h, v, sc, ll)
             updated = True
         if updated:
@@ -448,7 +449,10 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
+        risk = pl.filter_risk(self)      # the cloud's mass radius (navigators.integrity.protection_level)
+        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), self)
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
+                        consistency_warning=self._consistency_warning,
                         events=list(self.health.events))
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
                         v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,

@@ -13,15 +13,26 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._rbpf_kernels as kern
+from trn_env.navigators.core.imu_spec import ImuSpec, consistency_warning
 from trn_env.navigators.core.resampling import systematic_indices_u0
-from trn_env.navigators.filters.terrain_filter import capped_nis
 from trn_env.navigators.protocol import (
     EXTRA_ESS,
 )
 
+RBPF_MEMORY_S = 60.0  # the memory over which the gyro biases' attitude error is checked (imu_spec)
+
 
 class RbpfCloud:
     """The cloud's GNSS update, resampling, integrity and feedback of RaoBlackwellizedPF; a mixin."""
+
+    _consistency_warning = ""
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """The IMU's specification (navigators.core.imu_spec): the bias priors and drives reach the RBPF as
+        settings (trn_env's build_navigator, registry.IMU_AWARE); here only its validity: beyond the
+        small-angle limit over RBPF_MEMORY_S Health.consistency_warning says the covariance cannot be
+        trusted."""
+        self._consistency_warning = consistency_warning(spec, RBPF_MEMORY_S, "rbpf")
 
     @staticmethod
     def _ess(logw: np.ndarray) -> float:
@@ -32,22 +43,19 @@ class RbpfCloud:
         return float(w.sum() ** 2 / np.sum(w * w))
 
     def _integrity_test(self, te: float, nis: float, dof: int) -> None:
-        """Feed the innovation test; on entering "degraded" re-spread the particles' positions (logged)."""
-        verdict = self.integrity.add(te, capped_nis(self.integrity, nis, dof), dof)
+        """Feed the innovation test through the shared recovery policy (navigators.core.recovery); on a
+        recovery re-spread the particles' positions (logged)."""
+        decision = self._recovery.add(te, nis, dof)
+        verdict = decision.verdict
         self._integrity_extra = verdict.extra()
         if verdict.changed:
             self.health.events.append((float(te), verdict.message))
         if verdict.degraded:
             self.health.status, self.health.ok = "degraded", False
-            self._since_recovery += 1
-            # again, twice as wide, when a whole window after the last re-spread is still out of band
-            if verdict.changed or self._since_recovery >= self.integrity.window:
-                self._since_recovery = 0
-                self._streak = min(self._streak + 1, 4)
-                self.recoveries += 1
+            if decision.recover:
+                self.recoveries = self._recovery.recoveries
                 self._respread(te)
         elif verdict.changed:
-            self._streak = 0
             self.health.status, self.health.ok = "acquiring", True
 
     def _respread(self, te: float) -> None:
@@ -55,7 +63,7 @@ class RbpfCloud:
         w = self._weights()
         idx = systematic_indices_u0(w, float(self.rng.random()))
         self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
-        sig = self.recovery_sigma_m * 2.0 ** (self._streak - 1)
+        sig = self._recovery.sigma_now_m
         self.xn[:, :2] += self.rng.standard_normal((self.n, 2)) * sig
         if self.recovery_reset_kalman:
             # the Kalman parts' velocity and attitude share the position's failed test: back to the prior

@@ -21,12 +21,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from trn_env.navigators.core.maps import load_map
+from trn_env.navigators.core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
 from trn_env.navigators.filters.terrain_filter_settings import (
     TerrainFilterSettings,
 )
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
+from trn_env.navigators.measurements.baro import geometric_height_m
 from trn_env.navigators.measurements.terrain_models import IRA_FORMULA_CODES, radii_m
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
@@ -39,20 +43,15 @@ from trn_env.navigators.protocol import (
     Health,
 )
 
-R0_GEOPOTENTIAL_M = 6356766.0  # US Standard Atmosphere 1976 Earth radius for geopotential height
 G0 = 9.80665
 MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^3 x recovery_sigma_m
 
 
-def capped_nis(monitor: InnovationMonitor, nis: float, dof: int) -> float:
-    """The NIS an update adds to the innovation test: at most (just above) its one-update 1 - alpha/2
-    chi-square quantile. The heavy-tailed likelihood takes one bad sample without harm, so one alone must not
-    flag the filter; two such in a window do, and so does a run of them (a bias, a shifted map)."""
-    hi = monitor.band(dof)[1] * (1.0 + 1e-6)
-    return min(float(nis), hi) if math.isfinite(float(nis)) else hi
 
 
 class InsRiddenFilter:
+    _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
+
     """Base of the terrain filters (see the module docstring). Settings common to both (SI, 1 sigma):
 
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. aiding: "ira" (default),
@@ -99,19 +98,15 @@ class InsRiddenFilter:
     """
 
     name = "terrain_filter"
+    integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
+    map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
     settings_class: type[TerrainFilterSettings] = TerrainFilterSettings
 
     def __init__(self, dem=None, settings: TerrainFilterSettings | None = None, name: str | None = None,
                  **overrides):
         s = self.settings = self.settings_class.build(settings, overrides)
-        if dem is None:
-            raise ValueError("dem: the navigator's terrain map is required")
-        if isinstance(dem, str):
-            from trn_env import terrain
-            dem = terrain.load(dem)
-        if not hasattr(dem, "grid"):
-            raise ValueError(f"dem must be a terrain.Dem or a map name, got {type(dem).__name__}")
+        dem = load_map(dem, "the terrain filter")
         self.dem = dem
         self.aiding = s.aiding
         self.measurement_rate_hz = s.measurement_rate_hz
@@ -179,7 +174,9 @@ class InsRiddenFilter:
         self._p_att = self._p_att0.copy()
         self._n_underflow = 0
         self.integrity.reset()
-        self.recoveries = self._streak = self._since_recovery = 0
+        self.recoveries = 0
+        self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m,
+                                           max_doublings=MAX_RECOVERY_DOUBLINGS)
         self._init_cov9 = cov.copy()
         self._init_belief(cov)
 
@@ -216,7 +213,7 @@ class InsRiddenFilter:
             hb = np.asarray(baro.h_baro_m, float)
             vb = np.asarray(baro.valid, bool) & np.isfinite(hb)
             if self.baro_geopotential:
-                hb = R0_GEOPOTENTIAL_M * hb / (R0_GEOPOTENTIAL_M - hb)
+                hb = geometric_height_m(hb)
             nbad = int((~vb).sum())
             if nbad:
                 self._count_skip(float(tb[0]), "baro_invalid", nbad, f"{nbad} baro samples invalid")
@@ -338,28 +335,24 @@ class InsRiddenFilter:
         self._integrity_test(t_s, nis, int(innov.shape[0]))
 
     def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
-        """Feed the innovation test; on entering "degraded" re-spread the belief (`_recover`), logged."""
-        verdict = self.integrity.add(t_s, capped_nis(self.integrity, nis, dof), dof)
+        """Feed the innovation test through the shared recovery policy (navigators.core.recovery); on a
+        recovery re-spread the belief (`_recover`), logged."""
+        decision = self._recovery.add(t_s, nis, dof)
+        verdict = decision.verdict
         self.extra.update(verdict.extra())
         if verdict.changed:
             self.health.events.append((float(t_s), verdict.message))
         if verdict.degraded:
             self.health.ok, self.health.status = False, "degraded"
-            self._since_recovery += 1
-            # again (wider) when a whole window of updates after the last re-spread is still out of band: the
-            # belief may have settled where the bad data put it
-            if verdict.changed or self._since_recovery >= self.integrity.window:
-                self._since_recovery = 0
-                self._streak = min(self._streak + 1, MAX_RECOVERY_DOUBLINGS)
-                self.recoveries += 1
+            if decision.recover:
+                self.recoveries = self._recovery.recoveries
                 self.health.events.append((float(t_s), "recovery: " + self._recover(t_s)))
         elif verdict.changed:
-            self._streak = 0
             self.health.ok, self.health.status = True, "acquiring"
 
     def _recovery_sigma_now_m(self) -> float:
         """recovery_sigma_m, doubled for each re-spread in a row that did not bring the test back in band."""
-        return self.recovery_sigma_m * 2.0 ** max(self._streak - 1, 0)
+        return self._recovery.sigma_now_m
 
     def _recovery_cov9(self) -> tuple[np.ndarray, np.ndarray]:
         """(mean over [dn, de, b, dvn, dve, dpsi], 9 x 9 covariance) to re-spread the belief with: the
@@ -420,10 +413,17 @@ class InsRiddenFilter:
             yaw = math.atan2(math.sin(yaw + mean[5]), math.cos(yaw + mean[5]))
         b = float(mean[2]) if np.isfinite(mean[2]) else 0.0
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
-                        events=list(self.health.events))
+                        events=list(self.health.events), consistency_warning=self._consistency_warning)
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
-                        health=health, extra=dict(self.extra))
+                        health=health, extra=self._with_protection_level(dict(self.extra)))
+
+    def _with_protection_level(self, extra: dict) -> dict:
+        """extra with the belief's HPL (navigators.integrity.protection_level: the mass radius of the points
+        of `_pl_points` plus their pad) for the navigator's integrity_risk."""
+        risk = pl.filter_risk(self)
+        dn, de, w, pad = self._pl_points(risk)
+        return pl.publish(extra, pl.particle_hpl(dn, de, w, risk, pad), self)
 
     # ------------------------------------------------------------------------------------ subclass API
     def _init_belief(self, cov9: np.ndarray) -> None:
@@ -439,6 +439,10 @@ class InsRiddenFilter:
         raise NotImplementedError
 
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(north, east, weights, pad_m) of the belief's horizontal points for the protection level."""
         raise NotImplementedError
 
     def _recover(self, t_s: float) -> str:

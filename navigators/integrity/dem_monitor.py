@@ -29,27 +29,37 @@ sensor's specification) and the height source's variance (GNSS vertical sigma, o
 down variance and its horizontal covariance through the map's slope). With independent Gaussian
 disparities T is chi-square with N degrees of freedom, so the threshold may be given as a false-alarm
 probability instead: threshold = chi2.ppf(1 - P_fa, N) (96.0 for 1e-4 at N = 50, the paper's pair). The
-chi-square design needs independent disparities: choose `sample_period_s` so that consecutive epochs are
-further apart than the map error's correlation length (scripts/integrity_statistics.py measures what
-correlated errors do to the false-alarm rate).
+chi-square design needs independent disparities. A real map's error is correlated along the track: with
+`correlation_length_m` > 0 (the map error model's, terrain.map_error; the scenario fills it in) the plain
+variant tests the whitened statistic T_w = p' Sigma^-1 p of the window instead (Sigma from the model's
+correlation function at the epochs' own distances, its bias share `map_bias_fraction`, the white
+radar-altimeter and GNSS variances, and the navigator's position variance as common to the window when it
+is the height source: navigators.integrity.correlated_disparity). T_w is chi-square with N dof for any
+spacing, so the threshold and P_fa keep their chi-square design; the price is detection (a correlated map
+error and a bias look alike over a window): docs/validation/integrity.md measures both.
 
 Eq 5's x_hat values are correlated from epoch to epoch, so T_KF is not chi-square with N dof; given a
-false-alarm probability the "kalman" variant's threshold is the quantile of the moment-matched scaled
-chi-square g chi2(h) of T_KF under no fault (steady-state filter, constant sigma; Satterthwaite), and an
-explicit threshold (default 96, as in the paper) is used as it is.
+false-alarm probability the "kalman" variant's threshold is the exact quantile of T_KF's generalised
+chi-square under no fault (`kalman_threshold`), and an explicit threshold (default 96, as in the paper) is
+used as it is. docs/validation/integrity.md shows which readings of eq 5 were tried and that none
+reproduces the paper's claims.
 
 Source codes in the output: SOURCE_GNSS = 0 (GNSS fix within `gnss_max_age_s`), SOURCE_NAVIGATOR = 1.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from numba import njit
+from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.integrity.correlated_disparity import whitened_statistic
 from trn_env.navigators.integrity.dem_monitor_settings import (  # noqa: F401 - re-exported
     CAPABILITIES,
+    CORRELATION_CODES,
     DEFAULT_N,
     DEFAULT_THRESHOLD,
     VARIANTS,
@@ -109,13 +119,15 @@ def kalman_statistic_moments(n: int, process_ratio: float) -> tuple[float, float
     return n * v / p, var
 
 
+@functools.lru_cache(maxsize=32)
 def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: float) -> float:
-    """Threshold of T_KF for a false-alarm probability: the quantile of g chi2(h) matched to the mean and
-    variance of kalman_statistic_moments (g = var / (2 mean), h = 2 mean^2 / var)."""
-    from scipy.stats import chi2
-    mean, var = kalman_statistic_moments(n, process_ratio)
-    g, h = var / (2.0 * mean), 2.0 * mean * mean / var
-    return float(g * chi2.isf(false_alarm_probability, h))
+    """Threshold of T_KF (eq 5 as the monitor computes it) for a false-alarm probability: the exact quantile
+    of the generalised chi-square T_KF is under no fault with white disparities (its quadratic form from
+    correlated_disparity.kalman_reading("rw_posterior"), the filter in steady state; Imhof's integral takes
+    seconds, so it is cached)."""
+    from trn_env.navigators.integrity.correlated_disparity import gchi2_isf, kalman_reading
+    M = kalman_reading("rw_posterior", int(n), 150, float(process_ratio))
+    return gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))
 
 
 class MonitorOutput:
@@ -162,7 +174,8 @@ def _radii(lat):
 def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
                   dlat, dlon, cfg, state, out):
     """Pick the frame's monitor epochs (one valid radar-altimeter sample per period) and their positions:
-    rows [t, lat, lon, h, measured range, nadir map height, height-source variance, source] into `out`;
+    rows [t, lat, lon, h, measured range, nadir map height, height-source variance, source, map slope north,
+    east (navigator source only)] into `out`;
     returns their number. The position is the GNSS fix nearest in time (within cfg[7]) moved to the sample
     time with its velocity, else the navigator's estimate dead-reckoned to it.
 
@@ -219,6 +232,11 @@ def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heig
                                                                                   * math.cos(lat_t))
             if gn == gn and ge == ge:
                 var_pos += gn * gn * est[7] + 2.0 * gn * ge * est[8] + ge * ge * est[9]
+                out[m, 8] = gn
+                out[m, 9] = ge
+            else:
+                out[m, 8] = 0.0
+                out[m, 9] = 0.0
         out[m, 0] = t
         out[m, 1] = lat_t
         out[m, 2] = lon_t
@@ -227,24 +245,38 @@ def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heig
         out[m, 5] = h_map
         out[m, 6] = var_pos
         out[m, 7] = src
+        if src == 0:
+            out[m, 8] = 0.0
+            out[m, 9] = 0.0
         m += 1
         state[0] = (math.floor(t / period + 1e-9) + 1.0) * period
     return m
 
 
 @njit(cache=True)
-def _statistic_kernel(rows, r_map, cfg, state, ring, out):
+def _est_terms(est):
+    """[P_dd, -, -, P_nn, P_ne, P_ee] of the navigator's estimate for the whitened statistic's ring."""
+    return np.array([est[10], 0.0, 0.0, est[7], est[8], est[9]])
+
+
+@njit(cache=True)
+def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
     """Eqs 1-5 over the epochs `rows` (_epoch_kernel's); r_map: the map's predicted radar-altimeter range
     at each epoch (beam model "cone") or an empty array (nadir: eq 2's map height under the position).
     Writes [t, p, s, sigma, T, alarm, source] into `out`.
     state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 2): the terms
-    p^2/sigma^2 and x^2/P."""
+    p^2/sigma^2 and x^2/P; wring (N, 10): the ring of correlated_disparity.whitened_statistic (used when
+    cfg[16] > 0: a correlated map error); est_terms: the navigator's [P_dd, -, -, P_nn, P_ne, P_ee] for it."""
     n_win = int(cfg[0])
     sig_map2 = cfg[3] * cfg[3]
     kalman = cfg[8] > 0.5
     q_ratio = cfg[9]
     thr = cfg[10]
     cone = r_map.shape[0] > 0
+    corr_len = cfg[16]
+    whiten = corr_len > 0.0 and not kalman
+    sig_b2 = cfg[18] * sig_map2
+    sig_r2 = sig_map2 - sig_b2
     m = 0
     for i in range(rows.shape[0]):
         r = rows[i, 4]
@@ -276,11 +308,23 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, out):
         pos = int(state[2])
         ring[pos, 0] = p * p / var                     # eq 4 term
         ring[pos, 1] = state[4] * state[4] / state[5]  # eq 5 term
+        wring[pos, 0] = p
+        wring[pos, 1] = rows[i, 1]
+        wring[pos, 2] = rows[i, 2]
+        nav_src = rows[i, 7] > 0.5                     # the navigator's height: common to the window
+        wring[pos, 3] = sig_ra * sig_ra + (0.0 if nav_src else rows[i, 6])
+        for c9 in range(6):                            # P_dd, g_n, g_e, P_nn, P_ne, P_ee (navigator only)
+            wring[pos, 4 + c9] = est_terms[c9] if nav_src else 0.0
+        if nav_src:
+            wring[pos, 5] = rows[i, 8]                 # the map's slope under the epoch
+            wring[pos, 6] = rows[i, 9]
         state[2] = (pos + 1) % n_win
         state[1] += 1
         col = 1 if kalman else 0
         tot = np.nan
-        if state[1] >= n_win:
+        if state[1] >= n_win and whiten:               # p' Sigma^-1 p: chi2(N) under the map's model
+            tot = whitened_statistic(wring, int(state[2]), n_win, sig_r2, sig_b2, corr_len, int(cfg[17]))
+        elif state[1] >= n_win:
             tot = 0.0
             for k2 in range(n_win):
                 tot += ring[k2, col]
@@ -337,7 +381,7 @@ def kalman_terms(p, var, q_ratio):
 
 @njit(cache=True)
 def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
-                   dlat, dlon, cfg, state, ring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max,
+                   dlat, dlon, cfg, state, ring, wring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max,
                    blk_lb, blk_id):
     """One monitor update in one call: the epochs (_epoch_kernel), with the beam model the map's own
     radar-altimeter return at each (terrain.queries' exact cone search, the body down axis of the estimate's
@@ -347,7 +391,7 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     if m == 0:
         return 0
     if not cone:
-        return _statistic_kernel(rows[:m], rows[:0, 0], cfg, state, ring, out)
+        return _statistic_kernel(rows[:m], rows[:0, 0], cfg, state, ring, wring, _est_terms(est), out)
     cr, sr = math.cos(est[11]), math.sin(est[11])
     cp, sp = math.cos(est[12]), math.sin(est[12])
     cy, sy = math.cos(est[13]), math.sin(est[13])
@@ -379,7 +423,7 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan
-    return _statistic_kernel(rows[:m], rng, cfg, state, ring, out)
+    return _statistic_kernel(rows[:m], rng, cfg, state, ring, wring, _est_terms(est), out)
 
 
 _EMPTY = np.zeros(0)
@@ -399,12 +443,11 @@ class DemIntegrityMonitor:
     _NONE = np.zeros((0, 7))
 
     def __init__(self, dem=None, settings: DemMonitorConfig | None = None, **overrides):
-        if dem is None:
-            raise ValueError("dem: the navigator's terrain map is required by the DEM integrity monitor")
-        if isinstance(dem, str):
-            from trn_env import terrain
-            dem = terrain.load(dem)
+        dem = load_map(dem, "the DEM integrity monitor")
         self.config = self.settings = DemMonitorConfig.build(settings, overrides)
+        if self.config.correlation_length_m > 0.0:
+            from trn_env.terrain.map_error import check_fits
+            check_fits(dem, self.config.correlation_length_m)
         self.dem = dem
         c = self.config
         self.threshold = c.effective_threshold
@@ -413,9 +456,11 @@ class DemIntegrityMonitor:
                               c.gnss_vertical_sigma_m, c.gnss_max_age_s,
                               1.0 if c.variant == "kalman" else 0.0,
                               c.kf_process_ratio, self.threshold, 0.0, 0.0, 0.0,
-                              math.radians(c.beam_half_angle_deg), c.max_range_m], float)
+                              math.radians(c.beam_half_angle_deg), c.max_range_m,
+                              c.correlation_length_m, CORRELATION_CODES[c.correlation_function],
+                              c.map_bias_fraction], float)
         self._est = np.zeros(14)
-        self._rows = np.empty((64, 8))
+        self._rows = np.empty((64, 10))
         self._out = np.empty((64, 7))
         self._half_beam = math.radians(c.beam_half_angle_deg)
         self.reset()
@@ -423,6 +468,7 @@ class DemIntegrityMonitor:
     def reset(self) -> None:
         self._state = np.array([-np.inf, 0.0, 0.0, np.nan, 0.0, 1.0, 0.0])
         self._ring = np.zeros((int(self.config.n_window), 2))
+        self._wring = np.zeros((int(self.config.n_window), 10))
         self._alarm = False
 
     def update(self, frames: SensorFrames, estimate: Estimate) -> MonitorOutput:
@@ -444,7 +490,7 @@ class DemIntegrityMonitor:
         n = ra.t_s.shape[0]
         if self._out.shape[0] < n:
             self._out = np.empty((n, 7))
-            self._rows = np.empty((n, 8))
+            self._rows = np.empty((n, 10))
         heights, lat0, lon0, dlat, dlon = self.dem.grid
         cone = self._half_beam > 0.0
         if cone:        # the map's search tables (cached on the Dem, rebuilt when its heights change)
@@ -454,8 +500,8 @@ class DemIntegrityMonitor:
             bs, bmax, bmin, h_min, h_max, cell_m = _NO_TABLES
             lb, ids = _EMPTY, _EMPTY_I
         m = _update_kernel(ra.t_s, ra.range_m, ra.valid, *gargs, e, heights, lat0, lon0, dlat, dlon,
-                           self._cfg, self._state, self._ring, self._rows, self._out, cone, cell_m, bs, bmax,
-                           bmin, h_min, h_max, lb, ids)
+                           self._cfg, self._state, self._ring, self._wring, self._rows, self._out, cone,
+                           cell_m, bs, bmax, bmin, h_min, h_max, lb, ids)
         if m == 0:
             return MonitorOutput(self._NONE, self.threshold, [])
         rows = self._out[:m].copy()

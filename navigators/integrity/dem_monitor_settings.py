@@ -15,6 +15,7 @@ from trn_env.navigators.core.settings import Settings, setting
 DEFAULT_N = 50            # seed 003 section III: N = 50 consecutive measurements
 DEFAULT_THRESHOLD = 96.0  # seed 003 section III: "the statistic threshold is found to be 96"
 VARIANTS = ("plain", "kalman")
+CORRELATION_CODES = {"exponential": 0, "gaussian": 1}   # correlated_disparity.whitened_statistic's func codes
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,13 @@ class DemMonitorConfig(Settings):
     beam_half_angle_deg: float = setting(0.0, "> 0: compare with the map's own return in this cone", "deg",
                                          ge=0.0, lt=90.0)
     max_range_m: float = setting(5000.0, "radar altimeter maximum range", "m", gt=0.0)
+    correlation_length_m: float = setting(0.0, "the map error's correlation length (0: white, seed 003's "
+                                               "eq 4 as is)", "m", ge=0.0)
+    correlation_function: str = setting("exponential", "the map error's correlation function "
+                                                       "(terrain.map_error.correlation)",
+                                        choices=tuple(CORRELATION_CODES))
+    map_bias_fraction: float = setting(0.0, "share of the map variance common to the whole window", "1",
+                                       ge=0.0, le=1.0)
 
     def check(self) -> list[tuple[str, str]]:
         from trn_env.navigators.integrity.dem_monitor import class_sigma_m

@@ -70,35 +70,8 @@ _NO_WARM_START = np.zeros(0)  # _ira_batch's "no hints"
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ira_one(
-    heights,
-    grid,
-    h_min,
-    h_max,
-    cell_m,
-    lat,
-    lon,
-    ha,
-    v,
-    C,
-    sin_w,
-    max_range,
-    buf_s,
-    buf_f,
-    buf_t,
-    buf_r,
-    buf_z,
-    stack,
-    hmax_blocks,
-    bslope,
-    g_glob,
-    out,
-    qc,
-    buf_h,
-    buf_q,
-    hint_lat,
-    hint_lon,
-):
+def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, max_range, hint_lat,
+             hint_lon):
     """Closest in-window zero-Doppler terrain point; writes (valid, range, lat, lon, h) into out[0:5].
 
     (hint_lat, hint_lon): a terrain point near the expected return (rad; NaN: none), e.g. the previous
@@ -115,7 +88,13 @@ def _ira_one(
        bisected (split where the chord crosses a grid line, so that the pieces are smooth or meet at one
        kink, and the bound from the cells' slope and twist on r'' applies); 3) polish of the location by
        three-point steps. qc (>= 16): scratch for the per-query constants; buf_*: per-sample scratch.
-       Uses nothing from other queries, so a batch gives the same bits as single queries."""
+       Uses nothing from other queries, so a batch gives the same bits as single queries.
+
+    Records: tables = (h_min, h_max, hmax_blocks, bslope, g_glob) of the DEM (shared._ira_tables);
+    scratch = (buf_s, buf_f, buf_t, buf_r, buf_z, stack, out, qc, buf_h, buf_q) (_ira_batch's views of the
+    workspace)."""
+    h_min, h_max, hmax_blocks, bslope, g_glob = tables
+    buf_s, buf_f, buf_t, buf_r, buf_z, stack, out, qc, buf_h, buf_q = scratch
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
@@ -509,6 +488,8 @@ def _ira_batch(
     qc = work[5, 8:24]
     buf_h = work[6, :n_max]
     buf_q = work[7, :n_max]
+    tables = (h_min, h_max, hmax_blocks, bslope, g_glob)
+    scratch = (buf_s, buf_f, buf_t, buf_r, buf_z, stack, out, qc, buf_h, buf_q)
     chain = warm.shape[0] == 2
     hint_lat = warm[0] if chain else np.nan
     hint_lon = warm[1] if chain else np.nan
@@ -517,35 +498,8 @@ def _ira_batch(
             valid[k] = False
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
-        _ira_one(
-            heights,
-            grid,
-            h_min,
-            h_max,
-            cell_m,
-            lat[k],
-            lon[k],
-            h[k],
-            v_ned[k],
-            C_bn[k],
-            sin_w,
-            max_range,
-            buf_s,
-            buf_f,
-            buf_t,
-            buf_r,
-            buf_z,
-            stack,
-            hmax_blocks,
-            bslope,
-            g_glob,
-            out,
-            qc,
-            buf_h,
-            buf_q,
-            hint_lat,
-            hint_lon,
-        )
+        _ira_one(heights, grid, tables, scratch, cell_m, lat[k], lon[k], h[k], v_ned[k], C_bn[k], sin_w,
+                 max_range, hint_lat, hint_lon)
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
         lat_out[k] = out[2]

@@ -10,6 +10,20 @@
   (falls back to gymnasium's AsyncVectorEnv when sb3 is not installed: subproc_vec_env_kind says which),
   basin_route scenario, 1 s decisions, INS navigator; subproc_vec_env_sim_seconds_per_wall_second (both envs
   together) beside the same bare-JSBSim reference (one process: the machine has 2 cores);
+- env_route_*: TerrainNav-v0 at the route benchmark's settings (trn_env.env.route_task, basin terrain,
+  pursuit actions, 30 s decisions, random actions, resets included): env_route_agent_steps_per_s (wall;
+  guidance once per navigator update, the env's default) beside env_route_agent_steps_per_s_before (guidance
+  at the scenario's 10 Hz, the env before rates were matched to the decision), measured interleaved, median
+  of the repeats; the same as CPU figures (env_route_cpu_*, this process's CPU time: the shared machine's
+  load moves wall figures more); env_route_speedup (after / before, CPU);
+  env_route_pipelined_agent_steps_per_s (`pipeline=True`: sensors and navigator in a second process;
+  wall); env_route_sim_seconds_per_wall_second
+  beside env_gym_jsbsim_reference_sim_seconds_per_wall_second, a bare JSBSim gymnasium loop of the same
+  aircraft and step in the style of gymnasium-jsbsim (0.2 s agent steps: four control properties written by
+  name, run() per step, 17 state properties read by name, a reward from them), measured right before and
+  after (the faster kept), and their ratio env_route_ratio_to_gym_jsbsim; env_construct_first_s (the first
+  env of the process: terrain, map, numba caches), env_construct_second_s (the next one) and env_reset_s
+  (median reset).
 - planner_40km_route_s: one `TerrainInformationPlanner.plan` of a corner-to-corner route on the bundled DEM
   (straight distance planner_route_straight_km >= 40 km; numba compiled beforehand; the climb limit on,
   planner_climb_gradient; the whole plan: search, string pulling, turn thinning), beside the cost-map build
@@ -76,6 +90,136 @@ def env_figures(quick: bool = False, n_steps: int | None = None, decision_interv
         "env_decision_interval_s": env.decision_interval_s,
         "env_steps_measured": n_steps,
         "env_sim_seconds_measured": sim_s,
+    }
+
+
+_GYM_OBS = ("position/lat-geod-rad", "position/long-gc-rad", "position/h-sl-ft", "attitude/phi-rad",
+            "attitude/theta-rad", "attitude/psi-rad", "velocities/u-fps", "velocities/v-fps",
+            "velocities/w-fps", "velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec",
+            "fcs/left-aileron-pos-rad", "fcs/elevator-pos-rad", "fcs/rudder-pos-rad", "velocities/h-dot-fps",
+            "accelerations/n-pilot-z-norm")
+_GYM_ACT = ("fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm", "fcs/rudder-cmd-norm", "fcs/throttle-cmd-norm")
+
+
+def _gym_jsbsim_sim_s_per_wall_s(wall_s: float = 2.0, agent_step_s: float = 0.2) -> float:
+    """Simulated seconds per wall second of a bare JSBSim gymnasium loop (gymnasium-jsbsim's shape: per agent
+    step write the controls by property name, run() for agent_step_s, read the state by name, reward from
+    it) on the default scenario's aircraft and step; episodes of 60 s, reset by run_ic()."""
+    import gymnasium as gym
+
+    import trn_env.scenario.build as components
+    from trn_env.scenario.loading import load_scenario
+
+    sc = load_scenario("default")
+    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
+    fdm = components.build_flight(sc.data, world, np.random.default_rng(0)).fdm
+    dt = float(sc.data["aircraft"]["dt_s"])
+    n_run = max(1, int(round(agent_step_s / dt)))
+
+    class BareJsbsimEnv(gym.Env):
+        observation_space = gym.spaces.Box(-np.inf, np.inf, (len(_GYM_OBS),), np.float32)
+        action_space = gym.spaces.Box(-1.0, 1.0, (len(_GYM_ACT),), np.float32)
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            fdm.reset_to_initial_conditions(0)
+            self.t = 0.0
+            return self._obs(), {}
+
+        def _obs(self):
+            return np.array([fdm.get_property_value(p) for p in _GYM_OBS], np.float32)
+
+        def step(self, action):
+            for p, a in zip(_GYM_ACT, action, strict=True):
+                fdm.set_property_value(p, float(a) if p != "fcs/throttle-cmd-norm" else 0.8)
+            for _ in range(n_run):
+                fdm.run()
+            self.t += n_run * dt
+            obs = self._obs()
+            reward = -abs(float(obs[3])) - abs(float(obs[15])) * 1e-3
+            return obs, reward, False, self.t >= 60.0, {}
+
+    env = BareJsbsimEnv()
+    env.reset(seed=0)
+    act = np.zeros(len(_GYM_ACT), np.float32)     # controls centred: the aircraft flies on from its trim
+    sim = 0.0
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < wall_s:
+        _, _, _, trunc, _ = env.step(act)
+        sim += n_run * dt
+        if trunc:
+            env.reset()
+    return sim / (time.perf_counter() - t0)
+
+
+def route_env_figures(quick: bool = False) -> dict:
+    """TerrainNav-v0 at the route benchmark's settings: after (guidance once per navigator update) and before
+    (guidance at 10 Hz) interleaved, pipelined, construction and reset, beside a bare JSBSim gym loop."""
+    from trn_env.env.route_task import env_kwargs
+    from trn_env.env.terrain_nav import TerrainNavEnv
+
+    kw = env_kwargs("basin")
+    t0 = time.perf_counter()
+    after = TerrainNavEnv(**kw)
+    t_first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    before = TerrainNavEnv(**kw, guidance_rate_hz=10.0)
+    t_second = time.perf_counter() - t0
+    piped = TerrainNavEnv(**kw, pipeline=True)
+    envs = {"after": after, "before": before, "pipelined": piped}
+    rng = np.random.default_rng(0)
+    n_steps, reps = (4, 2) if quick else (10, 4)
+    wall = {k: [] for k in envs}
+    cpu = {k: [] for k in envs}
+    sims = {k: 0.0 for k in envs}
+    walls = {k: 0.0 for k in envs}
+    resets = []
+    for e in envs.values():                  # warm-up (numba caches, first flight), not timed
+        e.reset(seed=0)
+        e.step(np.zeros(2, np.float32))
+    ref0 = _gym_jsbsim_sim_s_per_wall_s(1.0 if quick else 3.0)
+    for rep in range(reps):
+        for k, e in envs.items():
+            c0, w0 = time.process_time(), time.perf_counter()
+            e.reset(seed=100 + rep)
+            resets.append(time.perf_counter() - w0)
+            sim = 0.0
+            for _ in range(n_steps):
+                tb = e._loop.t_s
+                _, _, term, trunc, _ = e.step(rng.uniform(-1, 1, 2).astype(np.float32))
+                sim += e._loop.t_s - tb
+                if term or trunc:
+                    t1 = time.perf_counter()
+                    e.reset()
+                    resets.append(time.perf_counter() - t1)
+            w = time.perf_counter() - w0
+            wall[k].append(n_steps / w)
+            cpu[k].append(n_steps / (time.process_time() - c0))
+            sims[k] += sim
+            walls[k] += w
+    for e in envs.values():
+        e.close()
+    ref = max(ref0, _gym_jsbsim_sim_s_per_wall_s(1.0 if quick else 3.0))
+    med = {k: float(np.median(v)) for k, v in wall.items()}
+    med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
+    sim_rate = sims["after"] / walls["after"]
+    return {
+        "env_route_agent_steps_per_s": med["after"],
+        "env_route_agent_steps_per_s_before": med["before"],
+        "env_route_pipelined_agent_steps_per_s": med["pipelined"],
+        "env_route_cpu_agent_steps_per_s": med_cpu["after"],
+        "env_route_cpu_agent_steps_per_s_before": med_cpu["before"],
+        "env_route_speedup": med_cpu["after"] / med_cpu["before"],
+        "env_route_pipelined_speedup_wall": med["pipelined"] / med["before"],
+        "env_route_sim_seconds_per_wall_second": sim_rate,
+        "env_route_pipelined_sim_seconds_per_wall_second": sims["pipelined"] / walls["pipelined"],
+        "env_gym_jsbsim_reference_sim_seconds_per_wall_second": ref,
+        "env_route_ratio_to_gym_jsbsim": sim_rate / ref,
+        "env_route_pipelined_ratio_to_gym_jsbsim": sims["pipelined"] / walls["pipelined"] / ref,
+        "env_construct_first_s": t_first,
+        "env_construct_second_s": t_second,
+        "env_reset_s": float(np.median(resets)),
+        "env_route_steps_measured": n_steps * reps,
     }
 
 
@@ -223,7 +367,7 @@ def planner_figures(quick: bool = False) -> dict:
 
 def benchmark(quick: bool = False) -> dict:
     out = {}
-    for fn in (env_figures, subproc_figures, planner_figures):
+    for fn in (env_figures, route_env_figures, subproc_figures, planner_figures):
         out.update(fn(quick))
     return out
 

@@ -3,11 +3,17 @@
 Ray is an optional extra (`pip install "trn-env[ray]"`) imported only here and only when this backend is
 used. `address=None` (and no RAY_ADDRESS) starts a local instance with `workers` CPUs; otherwise it joins
 the cluster at `address` ("host:port" of the head's GCS, "ray://host:port" for Ray Client, or "auto").
-The address is probed with a plain TCP connect first, so an unreachable one fails within seconds.
+The address is checked before anything is flown, so every bad address fails within seconds with one line
+(BackendError): a plain TCP connect first (nothing listening), then Ray itself connects in a short-lived
+child process with a hard time limit (`probe_with_ray`): a port held by another program (where Ray's own
+client would wait for minutes), a raylet's port instead of the head's, a cluster that requires token
+authentication (RAY_AUTH_MODE=token), and `ray://` without Ray Client (`ray[client]`) each get their own
+one-line message. Ray's console noise of a failed connection goes to a log file, named in the message.
 
 - The DEMs go into the object store once (`ray.put`); each task gets the reference, not a copy.
 - Worker death is retried by Ray (`max_retries`); a run's own exception is caught inside the task and
-  comes back as its row (so it is never retried).
+  comes back as its row (so it is never retried). Each attempt counts itself in Ray's key-value store
+  (keyed by campaign hash and run id), so a row flown again after a node died says `attempts = 2`.
 - At most 2 x cluster CPUs tasks are in flight; rows are taken with `ray.wait` as they finish and handed
   to the driver, which writes them, so a large campaign never holds everything in the driver.
 """
@@ -51,15 +57,150 @@ def probe_address(address: str, timeout_s: float = 3.0) -> None:
     if not host:
         raise BackendError(f"--address {address!r}: not HOST:PORT or ray://HOST:PORT")
     try:
-        with socket.create_connection((host, port), timeout=timeout_s):
-            pass
+        with socket.create_connection((host, port), timeout=timeout_s) as conn:
+            speaks_grpc = _speaks_http2(conn, timeout_s)
     except OSError as exc:
         raise BackendError(f"--address {address}: no Ray cluster reachable at {host}:{port} ({exc}); "
                            "start one with `ray start --head` or check the address") from None
+    if not speaks_grpc:
+        raise BackendError(f"--address {address}: {host}:{port} is held by a program that is not Ray (it "
+                           "does not answer gRPC); check the address `ray start --head` printed")
+
+
+# HTTP/2 client connection preface and an empty SETTINGS frame (RFC 9113 sec. 3.4, 6.5)
+_H2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + b"\x00\x00\x00\x04\x00\x00\x00\x00\x00"
+
+
+def _speaks_http2(conn: socket.socket, timeout_s: float) -> bool:
+    """Whether the server on `conn` answers the HTTP/2 preface with a SETTINGS frame, as every gRPC server
+    (Ray's GCS, its client server) does; a program that is not Ray answers otherwise or not at all."""
+    try:
+        conn.settimeout(timeout_s)
+        conn.sendall(_H2_PREFACE)
+        head = b""
+        while len(head) < 9:
+            chunk = conn.recv(9 - len(head))
+            if not chunk:
+                return False
+            head += chunk
+    except OSError:
+        return False
+    return head[3] == 0x04           # frame type SETTINGS
+
+
+RAY_DOCS = "docs/guide/ray.md"
+PROBE_TIMEOUT_S = 12.0
+
+_PROBE = """
+import sys
+address = sys.argv[1]
+try:                 # the head's GCS directly (about a second): its nodes and their CPUs
+    from ray._raylet import GcsClient
+except ImportError:
+    GcsClient = None
+if GcsClient is not None and not address.startswith("ray://"):
+    nodes = GcsClient(address=address).get_all_node_info(timeout=5)
+    cpus = sum(int(dict(n.resources_total).get("CPU", 0)) for n in nodes.values() if n.state == 0)
+else:                # Ray Client, or a Ray without that class: a whole connection
+    import ray
+    ray.init(address=address, include_dashboard=False, log_to_driver=False, logging_level="error")
+    cpus = int(ray.cluster_resources().get("CPU", 0))
+    ray.shutdown()
+print("CPU", cpus, flush=True)
+"""
+
+
+def classify_failure(address: str, text: str) -> str:
+    """The one-line reason of a failed Ray connection from Ray's output `text`."""
+    low = text.lower()
+    if "unauthenticated" in low or "auth_token" in low or "authentication" in low:
+        return (f"--address {address}: the Ray cluster requires token authentication: set "
+                "RAY_AUTH_MODE=token and give the cluster's token (RAY_AUTH_TOKEN, or the file "
+                f"~/.ray/auth_token of the node that started it) on this machine (see {RAY_DOCS})")
+    if "ray[client]" in low or "ray client" in low and "install" in low or "no module named 'grpc'" in low:
+        return (f"--address {address}: ray:// needs Ray Client: {INSTALL_HINT} (the extra includes "
+                "ray[client])")
+    if "version mismatch" in low or "version" in low and "does not match" in low:
+        return f"--address {address}: the cluster runs another Ray or Python version than this machine"
+    if "rpcerror" in low or "raylet" in low and ("gcs" not in low or "timed out" in low):
+        return (f"--address {address}: that port is not a Ray head's GCS (a raylet's port?); give the head's "
+                "address as `ray start --head` printed it (default port 6379)")
+    return (f"--address {address}: no Ray cluster answered there (a port held by another program, or a Ray "
+            "node that is not the head); check the address `ray start --head` printed")
+
+
+_FATAL_MARKS = ("unauthenticated", "invalidauthtoken", "authenticationerror")
+
+
+def probe_with_ray(address: str, timeout_s: float = PROBE_TIMEOUT_S) -> int:
+    """Connect to `address` with Ray in a child process, stopped after `timeout_s` or as soon as its output
+    shows a failure Ray would only retry (an authentication refusal); returns the cluster's CPU count, or
+    raises BackendError with one line (Ray's own output kept in a log file)."""
+    import subprocess
+    import sys
+    import tempfile
+    import threading
+    import time
+    proc = subprocess.Popen([sys.executable, "-c", _PROBE, address], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env={**os.environ, "RAY_ADDRESS": ""})
+    lines: list[str] = []
+    fatal = threading.Event()
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.append(line)
+            if any(m in line.lower() for m in _FATAL_MARKS):
+                fatal.set()
+        fatal.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    fatal.wait(timeout_s)
+    timed_out = proc.poll() is None and not any(m in "".join(lines).lower() for m in _FATAL_MARKS)
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait()
+    reader.join(2.0)
+    time.sleep(0)
+    out = "".join(lines)
+    for line in lines:
+        if line.startswith("CPU ") and proc.returncode == 0:
+            return int(line.split()[1])
+    with tempfile.NamedTemporaryFile("w", prefix="trn-env-ray-connect-", suffix=".log", delete=False) as f:
+        f.write(out)
+    why = classify_failure(address, out)
+    if timed_out:
+        why += f" (Ray did not connect within {timeout_s:.0f} s)"
+    raise BackendError(f"{why}; Ray's output: {f.name}")
+
+
+def _attempt_number(key: str) -> int:
+    """This attempt's number (1, 2, ...) of the run `key`, counted in Ray's internal key-value store: Ray
+    retries a task whose worker or node died by running it again, and each run counts itself."""
+    try:
+        from ray.experimental.internal_kv import _internal_kv_get, _internal_kv_put
+        prev = _internal_kv_get(key.encode(), namespace="trn_env_attempts")
+        n = int(prev.decode()) + 1 if prev else 1
+        _internal_kv_put(key.encode(), str(n).encode(), overwrite=True, namespace="trn_env_attempts")
+        return n
+    except Exception:  # noqa: BLE001 - the count is a record, never a reason to fail the run
+        return 1
+
+
+def _local_version() -> str:
+    import trn_env
+    return str(trn_env.__version__)
+
+
+def _worker_version() -> str:
+    return _local_version()
 
 
 def _fly(task: RunTask, dems: dict[str, Any]) -> tuple[dict, bytes | None]:
-    return fly_run(task, dems)
+    attempt = _attempt_number(f"{task.campaign_hash}:{task.run_id}")
+    row, log = fly_run(task, dems)
+    row["attempts"] = max(int(row.get("attempts", 1)), attempt)
+    return row, log
 
 
 class RayBackend:
@@ -79,8 +220,15 @@ class RayBackend:
     def preflight(self) -> None:
         """The checks that need no connection: Ray importable, the address reachable (BackendError)."""
         self.ray = import_ray()
+        if self.address and self.address.startswith("ray://"):
+            import importlib.util
+            if importlib.util.find_spec("grpc") is None:
+                raise BackendError(f"--address {self.address}: ray:// needs Ray Client (ray[client], which "
+                                   f"brings grpcio): {INSTALL_HINT}")
         if self.address:
             probe_address(self.address, self.connect_timeout_s)
+            if self.address not in ("auto", "local"):
+                probe_with_ray(self.address)
 
     def __enter__(self) -> RayBackend:
         """Import Ray, probe the address, connect (or start a local instance)."""
@@ -89,12 +237,40 @@ class RayBackend:
         if ray.is_initialized():       # the caller's session (e.g. a test's or a notebook's)
             return self
         kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "ignore_reinit_error": True}
-        if self.address:
-            ray.init(address=self.address, **kw)
-        else:
-            ray.init(num_cpus=self.workers, **kw)
+        try:
+            if self.address:
+                ray.init(address=self.address, **kw)
+            else:
+                # address="local": a new instance even when a cluster runs on this machine (`ray start`),
+                # which a bare ray.init() would join - and refuse, since num_cpus is given
+                ray.init(address="local", num_cpus=self.workers, **kw)
+        except (ConnectionError, ValueError, RuntimeError, TimeoutError) as exc:
+            raise BackendError(classify_failure(self.address or "(local instance)", str(exc))) from None
         self._started = True
+        if self.address:
+            self._check_workers()
         return self
+
+    def _check_workers(self) -> None:
+        """One task on the cluster imports trn_env: a cluster whose nodes lack it (or run another version)
+        is named in one line before any run is handed out, instead of every run failing after retries."""
+        ray = self.ray
+        ref = ray.remote(num_cpus=0, max_retries=0)(_worker_version).remote()
+        try:
+            theirs = ray.get(ref, timeout=120)
+        except Exception as exc:  # noqa: BLE001 - any failure here means the runs could not start
+            self.__exit__(None, None, None)
+            text = str(exc)
+            if "No module named" in text:
+                raise BackendError(f"--address {self.address}: trn-env is not installed where the cluster's "
+                                   "workers run; install the same version on every node (pip install "
+                                   f"\"trn-env[ray]=={_local_version()}\"), see {RAY_DOCS}") from None
+            raise BackendError(f"--address {self.address}: a test task failed on the cluster: "
+                               f"{text.splitlines()[-1] if text else type(exc).__name__}") from None
+        if theirs != _local_version():
+            import warnings
+            warnings.warn(f"the cluster's workers run trn-env {theirs}, this machine {_local_version()}: "
+                          "rows may differ from a local run", stacklevel=2)
 
     def __exit__(self, *exc) -> None:
         if self._started and self.ray is not None:
@@ -134,4 +310,5 @@ class RayBackend:
                 except ray.exceptions.RayError as exc:   # the worker died on every retry
                     row, log = died_row(task, f"Ray task failed after {self.max_retries} retries: "
                                               f"{type(exc).__name__}: {exc}"), None
+                    row["attempts"] = self.max_retries + 1
                 on_result(row, log)

@@ -26,7 +26,8 @@ from trn_env.output.metrics import METRIC_KEYS
 MANIFEST = "campaign.json"
 _INT_COLUMNS = ("run_index", "variant_index", "seed_index", "seed", "attempts", "jsbsim_steps", "pid")
 _BOOL_COLUMNS = ("track_lost",)
-_LIST_COLUMNS = ("series_t_s", "series_err_h_m", "series_err_v_m", "series_sigma_h_m")
+_LIST_COLUMNS = ("series_t_s", "series_err_h_m", "series_err_v_m", "series_sigma_h_m", "series_hpl_m",
+                 "series_nav_ok")
 
 
 def _write_atomic(path: Path, write) -> None:

@@ -24,7 +24,7 @@ import numpy as np
 
 from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
 
-SERIES_KEYS = ("t_s", "err_h_m", "err_v_m", "sigma_h_m")
+SERIES_KEYS = ("t_s", "err_h_m", "err_v_m", "sigma_h_m", "hpl_m", "nav_ok")
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,9 @@ def _base_row(task: RunTask) -> dict:
         "scenario_hash": "", "navigator": task.navigator_label,
         "navigator_name": str(task.data["navigator"]["name"]),
         "sweep_json": json.dumps(task.sweep, sort_keys=True), "replay_command": task.replay_command,
+        "navigator_settings_json": json.dumps(task.data["navigator"].get("settings", {}), sort_keys=True,
+                                              default=str),
+        "gnss_outages_json": json.dumps((task.data.get("gnss") or {}).get("outages", []), sort_keys=True),
         "termination": "error", "error": None, "attempts": task.attempt,
         "wall_time_s": float("nan"), "sim_time_s": float("nan"), "distance_flown_m": float("nan"),
         "jsbsim_steps": 0, "host": socket.gethostname(), "pid": os.getpid(),

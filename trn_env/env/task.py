@@ -93,8 +93,9 @@ def check_actions(action, shape: tuple[int, ...], low: np.ndarray, high: np.ndar
         idx = tuple(np.argwhere(out)[0].tolist())
         k = idx[-1]
         where = f"action{list(idx)}" if len(idx) > 1 else f"action[{k}]"
+        lo_i, hi_i = np.broadcast_to(lo, a.shape)[idx], np.broadcast_to(hi, a.shape)[idx]
         raise ValueError(f"{where} {ACTION_NAMES[k]} = {a[idx]:.6g} is outside the action space "
-                         f"[{lo[k]:.6g}, {hi[k]:.6g}]")
+                         f"[{lo_i:.6g}, {hi_i:.6g}]")
     return np.clip(a, lo, hi)
 
 

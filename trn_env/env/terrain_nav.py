@@ -48,7 +48,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     small, and flying low over rough terrain helps the TRN but risks the terrain when the estimate is
     wrong. Every `step` flies `decision_interval_s` seconds of the full closed loop (flight 100 Hz,
     sensors, navigator updates at the scenario's `navigator.rate_hz`, 1 Hz by default, guidance targets
-    at 10 Hz), rounded to whole navigator updates. Any registered navigator name works (`navigator=`).
+    at `guidance_rate_hz`, by default once per navigator update), rounded to whole navigator updates.
+    Any registered navigator name works (`navigator=`).
 
     ## Action Space
     `Box(-1, 1, shape=(2,), dtype=float32)`, each a fraction of what the aircraft can do in one step:
@@ -72,7 +73,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     capture the arrival circle instead of orbiting the goal.
 
     `action_mode="pursuit"` (the coarsest: a whole route family per action): the same two targets, but the
-    offset is HELD relative to the goal's bearing from the estimate at every guidance tick (10 Hz), not
+    offset is HELD relative to the goal's bearing from the estimate at every guidance tick (1 Hz), not
     only at the decision: the commanded track is `bearing(estimate -> goal) + a0 * limit(d)` (limit as
     above, from the estimate's distance d at that tick) all through the step, so a constant action flies a
     logarithmic spiral into the goal, d / cos(offset) long (+41 % at 45 deg), and the aircraft's autopilot
@@ -200,7 +201,14 @@ class TerrainNavEnv(gym.Env, EzPickle):
     turn_rate_max_dps=3.0, info_offset_m=3000.0, info_sigma_m=5.0, info_window_m=2000.0,
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
-    bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0)`.
+    bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0, guidance_rate_hz=None,
+    pipeline=False)`.
+    `guidance_rate_hz`: how often guidance re-computes the autopilot targets from the (dead-reckoned)
+    estimate; None = once per navigator update (the scenario's `[guidance] rate_hz` is replaced; it must be
+    a whole multiple of the navigator's rate). The autopilot itself runs inside JSBSim at every step.
+    `pipeline=True` runs the sensors and the navigator in a second process while the flight goes on
+    (`ClosedLoop(pipeline=True)`: the same episode bit for bit, fewer wall seconds per step when a second
+    core is free; a worker process is forked at each reset, so keep it off inside vectorised trainers).
     `scenario` is a built-in name, a TOML path or a `Scenario`; `goal_deg=(lat, lon)` defaults to the
     route's last waypoint. The terrain (and the map's error draw) is built once per env from the
     scenario seed; each episode's flight, sensor and navigator randomness comes from the reset seed.
@@ -208,6 +216,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (rates matched to the decision): guidance re-computes the targets once per navigator update
+      instead of at the scenario's 10 Hz (`guidance_rate_hz`); `pipeline`.
     - v0 (coarse decisions): `action_mode="pursuit"`; route-information observations 22-31 (the
       observation grows from 22 to 32 elements); `sigma_shaping_weight`.
     - v0 (normalised goal): observation elements 19-21 (goal bearing and distance relative to the
@@ -233,7 +243,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  held_out_goals_deg=None, held_out_radius_m: float = 2000.0,
                  min_goal_distance_m: float = 5000.0, shaping_gamma: float = 1.0,
                  action_mode: str = "turn", bearing_offset_max_deg: float = 90.0,
-                 sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0):
+                 sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0,
+                 guidance_rate_hz: float | None = None, pipeline: bool = False):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -241,7 +252,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           climb_rate_max_mps, turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m,
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
-                          bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m)
+                          bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m,
+                          guidance_rate_hz, pipeline)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -282,6 +294,10 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if isinstance(scenario, Scenario) and navigator is not None:
             sc = sc.with_overrides(navigator=navigator)
         sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
+        sc = _with_guidance_rate(sc, guidance_rate_hz)
+        if not isinstance(pipeline, bool):
+            raise ValueError(f"pipeline must be a bool, got {pipeline!r}")
+        self.pipeline = pipeline
         self.scenario = sc
         d = sc.data
         rate_hz = float(d["navigator"]["rate_hz"])      # one loop tick = one navigator update
@@ -535,7 +551,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
             self._agl_cmd_m = float(init["h_msl_m"]) - components.map_height(self._dems[1], lat0, lon0)
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m, self.agl_min_m, self.agl_max_m))
         self._offset_frac = 0.0
-        self._loop = ClosedLoop(sc, commander=self._commander, dems=self._dems, log_sensors=self.log_sensors)
+        self._loop = ClosedLoop(sc, commander=self._commander, dems=self._dems, log_sensors=self.log_sensors,
+                                pipeline=self.pipeline)
         self._needs_reset = False
         self._distance_flown_m = 0.0
         self._d_est_start_m = self._estimated_distance_m()
@@ -658,6 +675,27 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if loop is not None:
             loop.close()
         self._needs_reset = True
+
+
+def _with_guidance_rate(sc: Scenario, guidance_rate_hz: float | None) -> Scenario:
+    """The scenario with `[guidance] rate_hz` set to the env's guidance rate: None = the navigator's update
+    rate (one command per update: the pursuit action re-aims from each new estimate, and every other action
+    holds its command for the whole decision), re-validated so that a rate the loop cannot fly (not a whole
+    multiple of the navigator's rate, or above the flight's step rate) is a ValueError naming the field."""
+    from trn_env.scenario.loading import validate
+
+    d = sc.data
+    rate = float(d["navigator"]["rate_hz"]) if guidance_rate_hz is None else guidance_rate_hz
+    if guidance_rate_hz is not None:
+        _check_number("guidance_rate_hz", guidance_rate_hz, positive=True)
+    if float(d["guidance"]["rate_hz"]) == float(rate):
+        return sc
+    data = copy.deepcopy(d)
+    data["guidance"]["rate_hz"] = float(rate)
+    try:
+        return validate(data, source=sc.source)
+    except ValueError as err:
+        raise ValueError(f"guidance_rate_hz = {rate!r}: {err}") from None
 
 
 def _check_number(name: str, v, positive: bool) -> None:

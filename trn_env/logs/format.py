@@ -84,6 +84,7 @@ ESTIMATE_COLUMNS = ([("t_s", "s"), ("lat_rad", "rad"), ("lon_rad", "rad"), ("h_m
                      ("v_e_mps", "m/s"), ("v_d_mps", "m/s"), ("roll_rad", "rad"), ("pitch_rad", "rad"),
                      ("yaw_rad", "rad")]
                     + [(f"cov_{i}_{j}", "SI^2") for i in range(9) for j in range(9)]
+                    + [("hpl_m", "m")]
                     + [("nav_ok", "bool"), ("nav_status_code", "index into NAV_STATUS_CODES")])
 
 IMU_SAMPLE_CONVENTIONS = ("rate", "increment")

@@ -151,6 +151,47 @@ class SensorLog:
                     setattr(out, s, _frame(s, None, 0, 0))
             yield out
 
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The log as the arrays `log.npz` held (trn_env.sim.SimLog.arrays' names): sensor_<sensor>_<field>
+        per sensor field (the navigators' conventions), and, when the log holds them, the estimates as
+        est_t_s, est_lat_rad, ..., est_cov (n, 9, 9), nav_ok, nav_status_code and the truth as t_s,
+        true_lat_rad, true_lon_rad, true_h_msl_m, true_v_ned_mps, ... (what e.g.
+        navigators.integrity.dem_monitor.replay_log reads)."""
+        out: dict[str, np.ndarray] = {}
+        for s in self.sensors:
+            cols = self._sensor_columns(s)
+            out[f"sensor_{s}_t_s"] = cols["t_s"]
+            vec: dict[str, list] = {}
+            for col, fld, comp, _ in SENSOR_COLUMNS[s]:
+                if comp is None:
+                    out[f"sensor_{s}_{fld}"] = cols[col]
+                else:
+                    vec.setdefault(fld, []).append(cols[col])
+            for fld, parts in vec.items():
+                out[f"sensor_{s}_{fld}"] = np.column_stack(parts)
+            out[f"sensor_{s}_valid"] = cols["valid"].astype(bool)
+        est = self.estimates()
+        if est is not None:
+            out["est_t_s"] = est["t_s"].to_numpy()
+            for c in ("lat_rad", "lon_rad", "h_m", "roll_rad", "pitch_rad", "yaw_rad"):
+                out[f"est_{c}"] = est[c].to_numpy()
+            out["est_v_ned_mps"] = est[["v_n_mps", "v_e_mps", "v_d_mps"]].to_numpy()
+            out["est_cov"] = est[[f"cov_{i}_{j}" for i in range(9) for j in range(9)]].to_numpy().reshape(
+                -1, 9, 9)
+            out["nav_ok"] = est["nav_ok"].to_numpy().astype(bool)
+            out["nav_status_code"] = est["nav_status_code"].to_numpy()
+        truth = self.truth()
+        if truth is not None:
+            out["t_s"] = truth["t_s"].to_numpy()
+            out["true_lat_rad"] = truth["lat_rad"].to_numpy()
+            out["true_lon_rad"] = truth["lon_rad"].to_numpy()
+            out["true_h_msl_m"] = truth["h_m"].to_numpy()
+            out["true_v_ned_mps"] = truth[["v_n_mps", "v_e_mps", "v_d_mps"]].to_numpy()
+            for c in ("roll_rad", "pitch_rad", "yaw_rad", "tas_mps", "alpha_rad", "beta_rad"):
+                if c in truth:
+                    out[f"true_{c}"] = truth[c].to_numpy()
+        return out
+
     # ---------------------------------------------------------------------------------- truth
     def truth(self) -> pd.DataFrame | None:
         """The truth table with heights above the map's MSL, or None."""

@@ -27,6 +27,7 @@ import numpy as np
 
 from trn_env.logs.format import LogError
 from trn_env.logs.reader import SensorLog, read_log
+from trn_env.navigators.integrity.protection_level import EXTRA_PROTECTION_LEVEL
 from trn_env.navigators.protocol import Estimate, Health
 from trn_env.scenario.loading import Scenario
 from trn_env.sim.closed_loop import perturbed_estimate, spawn_rngs, summarise
@@ -115,7 +116,9 @@ def _initial(log: SensorLog, d: dict) -> Estimate:
     if truth is None:
         raise LogError(f"log {log.path}: states neither an initial_estimate nor truth to start from")
     t0 = float(log.column("frames", "t_start_s")[0])
-    i = int(np.clip(np.searchsorted(truth["t_s"].to_numpy(), t0), 0, len(truth) - 1))
+    # the last truth row before the first frame (the first IMU sample covers the interval ending at its
+    # time, so the estimate starts at or before it: the closed loop's t = 0 before samples from 0.01)
+    i = int(np.clip(np.searchsorted(truth["t_s"].to_numpy(), t0, side="left") - 1, 0, len(truth) - 1))
     row = truth.iloc[i]
 
     class _Row:   # the attributes perturbed_estimate reads, one row
@@ -246,6 +249,7 @@ def estimate_columns(ests: list[Estimate]) -> dict[str, np.ndarray]:
         "est_pitch_rad": np.array([e.pitch_rad for e in ests]),
         "est_yaw_rad": np.array([e.yaw_rad for e in ests]),
         "est_cov": np.array([e.covariance for e in ests], float).reshape(-1, 9, 9),
+        "est_hpl_m": np.array([float(e.extra.get(EXTRA_PROTECTION_LEVEL, np.nan)) for e in ests]),
         "nav_ok": np.array([e.health.ok for e in ests], bool),
         "nav_status_code": np.array([NAV_STATUS_CODES.index(e.health.status) if e.health.status in
                                      NAV_STATUS_CODES else len(NAV_STATUS_CODES) for e in ests], np.int8),
@@ -332,7 +336,8 @@ def write_result_log(writer, res: ReplayResult) -> Path:
            "v_n_mps": v[:, 0].copy(), "v_e_mps": v[:, 1].copy(), "v_d_mps": v[:, 2].copy(),
            "roll_rad": a["est_roll_rad"], "pitch_rad": a["est_pitch_rad"], "yaw_rad": a["est_yaw_rad"]}
     est |= {f"cov_{i}_{j}": a["est_cov"][:, i, j].copy() for i in range(9) for j in range(9)}
-    est |= {"nav_ok": a["nav_ok"], "nav_status_code": a["nav_status_code"]}
+    est |= {"hpl_m": np.asarray(a.get("est_hpl_m", np.full(len(a["est_t_s"]), np.nan)), float),
+            "nav_ok": a["nav_ok"], "nav_status_code": a["nav_status_code"]}
     if not res.has_truth:
         truth[:, 0] = a["est_t_s"]
     writer.write_ticks(truth, est)

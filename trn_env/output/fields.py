@@ -41,6 +41,20 @@ METRIC_FIELDS: dict[str, Field] = {
     "fraction_healthy": Field("", "fraction of time the navigator reported itself healthy"),
     "misleading_information_time_s": Field("s", "time the navigator reported healthy while the error was "
                                                 "outside its 3 sigma"),
+    "pl_epochs": Field("", "logged rows where the navigator is healthy and publishes a horizontal protection "
+                           "level (HPL, navigators.integrity.protection_level)"),
+    "pl_misleading_epochs": Field("", "of those, rows with the horizontal error above the HPL (misleading "
+                                      "information)"),
+    "pl_misleading_rate": Field("", "pl_misleading_epochs / pl_epochs (per epoch; compare with the "
+                                    "integrity risk)"),
+    "pl_misleading_rate_upper95": Field("", "its one-sided 95 % Clopper-Pearson upper bound (rows counted as "
+                                            "independent)"),
+    "pl_hazardous_epochs": Field("", "healthy rows with the error above the alert limit while the HPL is not "
+                                     "(hazardously misleading)"),
+    "pl_hazardous_rate": Field("", "pl_hazardous_epochs / pl_epochs"),
+    "pl_availability": Field("", "share of all rows that are healthy with the HPL at most the alert limit "
+                                 "(metrics.alert_limit_m, default 185.2 m)"),
+    "hpl_median_m": Field("m", "median HPL over the healthy rows"),
 }
 
 SUMMARY_FIELDS: dict[str, Field] = {
@@ -113,7 +127,8 @@ CAMPAIGN_ROW_FIELDS: dict[str, Field] = {
     "jsbsim_version": Field("", "JSBSim version of the worker"),
     "numpy_version": Field("", "numpy version of the worker"),
     "python_version": Field("", "Python version of the worker"),
-    "series_": Field("", "a time series of the run (t_s in s, err_h_m / err_v_m / sigma_h_m in m), as lists"),
+    "series_": Field("", "a time series of the run (t_s in s, err_h_m / err_v_m / sigma_h_m / hpl_m in m, "
+                         "nav_ok 0/1), as lists"),
 } | {k: SUMMARY_FIELDS[k] for k in ("termination", "wall_time_s", "sim_time_s", "distance_flown_m",
                                     "jsbsim_steps")} | METRIC_FIELDS
 

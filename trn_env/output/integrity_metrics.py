@@ -83,3 +83,50 @@ def flag_before_error(t_s: np.ndarray, err_ned_m: np.ndarray, cov_diag: np.ndarr
     else:
         first = t_flag <= t_err
     return {"t_flag_s": t_flag, "t_error_outside_s": t_err, "flag_first": first}
+
+
+# ------------------------------------------------------------------------------------ protection levels
+
+PL_METRIC_KEYS = ("pl_epochs", "pl_misleading_epochs", "pl_misleading_rate", "pl_misleading_rate_upper95",
+                  "pl_hazardous_epochs", "pl_hazardous_rate", "pl_availability", "hpl_median_m")
+
+
+def clopper_pearson_upper(k: int, n: int, confidence: float = 0.95) -> float:
+    """One-sided Clopper-Pearson upper bound of a binomial proportion with k successes in n trials (NaN for
+    n = 0)."""
+    from scipy.stats import beta
+    if n <= 0:
+        return float("nan")
+    return 1.0 if k >= n else float(beta.ppf(confidence, k + 1, n - k))
+
+
+def protection_level_metrics(err_h_m: np.ndarray, hpl_m: np.ndarray, healthy: np.ndarray,
+                             alert_limit_m: float) -> dict:
+    """Per-epoch integrity of a navigator's horizontal protection level (one epoch per logged row):
+
+    pl_epochs: rows where the navigator says it is healthy and publishes a finite HPL;
+    pl_misleading_epochs / _rate: of those, rows with horizontal error > HPL (misleading information), and
+    pl_misleading_rate_upper95 its one-sided 95 % Clopper-Pearson bound (rows are not independent: the
+    bound counts them as if they were);
+    pl_hazardous_epochs / _rate: healthy rows with error > alert limit while HPL <= alert limit (hazardously
+    misleading), over pl_epochs;
+    pl_availability: share of all rows that are healthy with HPL <= alert limit; hpl_median_m."""
+    from trn_env.navigators.integrity.protection_level import check_alert_limit
+    al = check_alert_limit(alert_limit_m)
+    e = np.asarray(err_h_m, float)
+    h = np.asarray(hpl_m, float)
+    ok = np.asarray(healthy, bool) & np.isfinite(h) & np.isfinite(e)
+    n = int(ok.sum())
+    mi = int(np.count_nonzero(ok & (e > h)))
+    hmi = int(np.count_nonzero(ok & (e > al) & (h <= al)))
+    nan = float("nan")
+    return {
+        "pl_epochs": n,
+        "pl_misleading_epochs": mi,
+        "pl_misleading_rate": mi / n if n else nan,
+        "pl_misleading_rate_upper95": clopper_pearson_upper(mi, n),
+        "pl_hazardous_epochs": hmi,
+        "pl_hazardous_rate": hmi / n if n else nan,
+        "pl_availability": float(np.mean(ok & (h <= al))) if e.size else nan,
+        "hpl_median_m": float(np.median(h[ok])) if n else nan,
+    }

@@ -26,6 +26,9 @@ Definitions (horizontal error e_h = |(e_n, e_e)|, vertical error e_v = -e_d, i.e
   start of the excursion + min_s) and the total time spent in such excursions.
 - fraction healthy: time with nav_ok / total time.
 - misleading-information time: time when the navigator reports healthy while outside 3 sigma.
+- protection levels (`est_hpl_m`, navigators.integrity.protection_level): per-row misleading-information
+  rate (e_h > HPL while healthy) with its Clopper-Pearson bound, hazardous rate against the alert limit,
+  availability (trn_env.output.integrity_metrics.protection_level_metrics).
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from trn_env.output.integrity_metrics import PL_METRIC_KEYS, protection_level_metrics
 
 
 @dataclass(frozen=True)
@@ -44,12 +49,16 @@ class MetricSettings:
     track_loss_threshold_m: float = 250.0    # track loss: horizontal error above this, m ...
     track_loss_k_sigma: float = 5.0          # ... or above k * sigma_h (0 disables the sigma test)
     track_loss_min_s: float = 10.0           # ... for at least this long, s
+    alert_limit_m: float = 185.2             # horizontal alert limit of the protection-level metrics, m
 
     def __post_init__(self):
         for name, value in asdict(self).items():
             if not (isinstance(value, (int, float)) and math.isfinite(value)) or isinstance(value, bool):
                 raise ValueError(f"metrics.{name}: must be a finite number (got {value!r})")
-            if value < 0 or (name != "track_loss_k_sigma" and name != "track_loss_min_s" and value == 0):
+            if name == "alert_limit_m":
+                from trn_env.navigators.integrity.protection_level import check_alert_limit
+                check_alert_limit(value, "metrics.alert_limit_m")
+            elif value < 0 or (name != "track_loss_k_sigma" and name != "track_loss_min_s" and value == 0):
                 raise ValueError(f"metrics.{name}: must be positive (got {value!r})")
 
 
@@ -165,7 +174,7 @@ METRIC_KEYS = (
     "anees", "anees_lower_95", "anees_upper_95", "anees_inside_bounds", "fraction_within_3sigma",
     "time_to_converge_s", "track_lost", "track_loss_time_s", "track_lost_duration_s", "fraction_healthy",
     "misleading_information_time_s",
-)
+) + PL_METRIC_KEYS
 
 
 def navigation_metrics(arrays: dict[str, np.ndarray], settings: MetricSettings | None = None) -> dict:
@@ -229,14 +238,19 @@ def navigation_metrics(arrays: dict[str, np.ndarray], settings: MetricSettings |
         "track_lost_duration_s": loss_total,
         "fraction_healthy": time_fraction(t, nav_ok) if n > 1 else (float(nav_ok[0]) if n else nan),
         "misleading_information_time_s": time_where(t, nav_ok & ~within),
-    }
+    } | protection_level_metrics(e_h, np.asarray(arrays.get("est_hpl_m", np.full(n, np.nan)), float), nav_ok,
+                                 s.alert_limit_m)
 
 
 def horizontal_series(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The per-row series a campaign keeps for its report: t_s, e_h, e_v (up positive), sigma_h, metres."""
+    """The per-row series a campaign keeps for its report: t_s, e_h, e_v (up positive), sigma_h, the
+    horizontal protection level (NaN where none), metres; nav_ok as 0/1."""
     err = np.asarray(arrays["err_ned_m"], float).reshape(-1, 3)
     cd = np.asarray(arrays["est_cov_diag"], float)
+    n = err.shape[0]
     return {
+        "hpl_m": np.asarray(arrays.get("est_hpl_m", np.full(n, np.nan)), float),
+        "nav_ok": np.asarray(arrays.get("nav_ok", np.ones(n, bool)), float),
         "t_s": np.asarray(arrays["t_s"], float),
         "err_h_m": np.hypot(err[:, 0], err[:, 1]),
         "err_v_m": -err[:, 2],

@@ -5,11 +5,14 @@ disk during the run: it is moved in as `log/` (Parquet tables, read with trn_env
 pandas.read_parquet) instead of writing `log.npz` from the arrays in memory.
 
 Everything is written atomically: the files go into a temporary directory next to the target, and only
-when all of them are complete is that directory renamed onto the target (or, if the target already holds
-files, each file is moved in with os.replace, summary.json last). A Ctrl-C or a kill therefore leaves
-either a complete run directory or no summary.json at all - never a half-written file. The temporary
-directory is named `.NAME.partial-<pid>-<random>`; a run that was killed while writing leaves one behind,
-and the next run writing into the same parent folder removes every such leftover whose process is gone.
+when all of them are complete is that directory renamed onto the target. A run folder holds one run only:
+a target that already holds a previous run is replaced as a whole (`overwrite=True`: the old folder is
+renamed aside, the new one renamed into place, then the old one removed), never mixed with the new files;
+a non-empty target is refused without `overwrite`, and a non-empty folder that holds no run (no
+summary.json) is refused always. A Ctrl-C, SIGTERM or a kill therefore leaves either the complete new run
+directory or the previous one untouched - never a half-written file. The temporary directory is named
+`.NAME.partial-<pid>-<random>`; a run that was killed while writing leaves one behind, and the next run
+writing into the same parent folder removes every such leftover whose process is gone.
 """
 
 from __future__ import annotations
@@ -166,15 +169,68 @@ def clean_partial_leftovers(parent: Path, stale_after_s: float = 3600.0) -> list
     return removed
 
 
+def target_problem(out_dir: Path | str, overwrite: bool = False) -> str | None:
+    """Why `out_dir` cannot take a new run (checked before a flight; nothing is created), or None.
+
+    An absent or empty folder is fine; a folder holding a previous run (a summary.json) is fine with
+    `overwrite`; any other non-empty folder, or a file, is refused. The folder (or its nearest existing
+    parent) must accept a new directory: a probe directory is made there and removed at once, which catches
+    what permission bits do not (read-only or pseudo file systems such as /proc).
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        return f"--out {out_dir}: exists and is not a directory"
+    if out_dir.is_dir():
+        try:
+            names = sorted(p.name for p in out_dir.iterdir())
+        except OSError as exc:
+            return f"--out {out_dir}: cannot read the folder ({exc.strerror or exc})"
+        if names and not overwrite:
+            return (f"--out {out_dir}: the folder is not empty (it holds {', '.join(names[:3])}"
+                    f"{', ...' if len(names) > 3 else ''}); give another folder, or --overwrite to replace "
+                    "a previous run's folder as a whole")
+        if names and "summary.json" not in names:
+            return (f"--out {out_dir}: the folder is not empty and holds no previous run (no summary.json); "
+                    "--overwrite replaces only a run folder")
+    parent = out_dir.absolute().parent
+    while not parent.exists() and parent.parent != parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"--out {out_dir}: cannot create it, {parent} is not a directory"
+    try:
+        probe = tempfile.mkdtemp(prefix=f".{out_dir.name}.probe-", dir=parent)
+    except OSError as exc:
+        return f"--out {out_dir}: cannot create it in {parent} ({exc.strerror or exc})"
+    os.rmdir(probe)
+    missing = out_dir.absolute().parent
+    if missing != parent:
+        try:          # the missing parents: creatable? (made and removed again, deepest first)
+            missing.mkdir(parents=True)
+        except OSError as exc:
+            return f"--out {out_dir}: cannot create {missing} ({exc.strerror or exc})"
+        q = missing
+        while q != parent:
+            q.rmdir()
+            q = q.parent
+    return None
+
+
 def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
               events: list[tuple[float, str, str]] | None = None,
-              plot: Callable[[Path], list[str]] | None = None, log_dir: Path | None = None) -> Path:
+              plot: Callable[[Path], list[str]] | None = None, log_dir: Path | None = None,
+              overwrite: bool = False, extra_files: dict[str, str] | None = None) -> Path:
     """Write a complete run directory atomically; returns the directory.
 
     `plot(tmp_dir)` may add figures; it returns their file names (listed in summary['files']).
     `log_dir`: a finished log folder moved in as `log/` (then no log.npz is written).
+    `extra_files`: name -> text of further files (e.g. the resolved scenario.toml). `overwrite`: replace a
+    folder that holds a previous run as a whole (see the module docstring); without it a non-empty
+    `out_dir` raises FileExistsError before anything is written.
     """
     out_dir = Path(out_dir)
+    problem = target_problem(out_dir, overwrite)
+    if problem is not None:
+        raise FileExistsError(problem) if out_dir.is_dir() else OSError(problem)
     parent = out_dir.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
     clean_partial_leftovers(parent)
@@ -189,6 +245,9 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
         else:
             files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
             write_log_npz(tmp / "log.npz", arrays)
+        for name, text in (extra_files or {}).items():
+            (tmp / name).write_text(text, encoding="utf-8")
+            files.append(name)
         write_timeline_csv(tmp / "timeline.csv", arrays)
         write_events_csv(tmp / "events.csv", events or [])
         if plot is not None:
@@ -204,17 +263,16 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
 
 
 def _commit(tmp: Path, out_dir: Path) -> None:
-    """Move the finished files into place; summary.json goes last so its presence means 'complete'."""
-    if not out_dir.exists():
-        os.replace(tmp, out_dir)
+    """Put the finished folder in place: a rename onto an absent or empty target; over a previous run, the
+    old folder is renamed aside first and removed after the new one is in place (a kill between the two
+    renames leaves the old run under `.NAME.partial-<pid>-old`, cleaned like any leftover)."""
+    try:
+        os.replace(tmp, out_dir)          # absent, or an empty directory: one atomic rename
         return
-    if not out_dir.is_dir():
-        raise NotADirectoryError(f"--out {out_dir} exists and is not a directory")
-    stale = out_dir / "summary.json"
-    if stale.exists():
-        stale.unlink()   # the old run's summary must not vouch for a mix of old and new files
-    names = sorted(p.name for p in tmp.iterdir())
-    for name in [n for n in names if n != "summary.json"] + ["summary.json"]:
-        if (tmp / name).is_dir() and (out_dir / name).is_dir():
-            shutil.rmtree(out_dir / name)            # a previous run's log/ (os.replace needs it gone)
-        os.replace(tmp / name, out_dir / name)
+    except OSError:
+        if not out_dir.is_dir():
+            raise
+    aside = out_dir.parent / f".{out_dir.name}{PARTIAL_MARK}{os.getpid()}-old"
+    os.replace(out_dir, aside)
+    os.replace(tmp, out_dir)
+    shutil.rmtree(aside, ignore_errors=True)

@@ -312,6 +312,21 @@ def build_flight(d: dict, world, rng: np.random.Generator):
                       atmosphere=build_atmosphere(d), constant_fuel=bool(d["aircraft"]["constant_fuel"]))
 
 
+def trim_problems(d: dict, world) -> list[str]:
+    """The flight's own trim at the initial condition (JSBSim, tens of milliseconds), so a start the flight
+    would refuse (an airspeed below stall, a height the aircraft cannot hold level) is a validation problem
+    before any flight. An initial condition that is itself invalid is reported by its own check."""
+    from trn_env.flight.core import TrimError
+    try:
+        build_flight(d, world, np.random.default_rng(0))
+    except TrimError as exc:
+        return [f"initial: {exc} (check initial.tas_mps against the aircraft's speed range and the initial "
+                "height)"]
+    except (ValueError, TypeError, KeyError):
+        return []
+    return []
+
+
 # ----------------------------------------------------------------------------------------------- sensors
 
 def sensor_configs(d: dict) -> dict:
@@ -402,8 +417,10 @@ def navigator_settings(d: dict, map_dem) -> dict:
     IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
     terrain_detail_spacing_m from the world's refinement (models_map_detail), each unless the settings give
-    it."""
+    it. Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level
+    covers it)."""
     from trn_env.navigators import registry
+    from trn_env.terrain import map_error
     caps = registry.capabilities(d["navigator"]["name"])
     settings = dict(d["navigator"]["settings"])
     if caps.needs_map or caps.settings is None:
@@ -411,6 +428,9 @@ def navigator_settings(d: dict, map_dem) -> dict:
     if caps.imu_bias_settings:
         for key, val in imu_bias_settings(d["sensors"].get("imu"), _epoch_s(settings)).items():
             settings.setdefault(key, val)
+    preset = str((d["terrain"]["map"].get("error_model") or {}).get("preset", "")).strip().lower()
+    if preset in map_error.ACCURACY_CLASSES:   # the protection level covers the map's horizontal error
+        settings.setdefault("map_horizontal_sigma_m", map_error.ACCURACY_CLASSES[preset].sigma_h_m)
     if caps.uses_map_noise:
         for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
             settings.setdefault(key, val)
@@ -474,6 +494,27 @@ def unused_sensors(d: dict) -> list[str]:
 
 # -------------------------------------------------------------------------------------------- monitors
 
+def monitor_map_settings(error_model: dict | None) -> dict:
+    """The DEM monitor's map model from the scenario's map error model (terrain.map_error): sigma_m (the
+    vertical sigma: random and bias parts together), map_bias_fraction, correlation_length_m and
+    correlation_function; empty without a random vertical error (the monitor keeps seed 003's model)."""
+    from trn_env.terrain import map_error
+    s = dict(error_model or {})
+    noise = map_noise_settings(s)
+    sig_r, sig_b = noise["map_sigma_m"], noise["map_bias_sigma_m"]
+    if not sig_r > 0.0:
+        return {}
+    preset = str(s.get("preset", "")).strip().lower()
+    cls = map_error.ACCURACY_CLASSES.get(preset)
+    length = s.get("correlation_length_m", cls.correlation_length_m if cls else
+                   map_error.MapErrorModel().correlation_length_m)
+    func = s.get("correlation_function",
+                 "exponential" if cls else map_error.MapErrorModel().correlation_function)
+    total = math.hypot(sig_r, sig_b)
+    return {"sigma_m": total, "map_bias_fraction": (sig_b / total) ** 2,
+            "correlation_length_m": float(length), "correlation_function": func}
+
+
 def monitor_settings(d: dict, name: str) -> dict:
     """A monitor's settings: the scenario's [monitors.<name>] table, with the sensor figures it needs
     filled from the scenario's sensors where not given (dem_integrity: the radar altimeter's noise and
@@ -489,6 +530,8 @@ def monitor_settings(d: dict, name: str) -> dict:
             settings.setdefault("lever_arm_m", float(cfg.lever_arm_b_m[2]))   # FRD z: below the GNSS antenna
             settings.setdefault("beam_half_angle_deg", 0.5 * float(cfg.beamwidth_deg))
             settings.setdefault("max_range_m", float(cfg.max_range_m))
+        for key, val in monitor_map_settings(d["terrain"]["map"].get("error_model")).items():
+            settings.setdefault(key, val)
         gn = d["sensors"].get("gnss")
         if gn is not None:
             cfg = suite._make_config("gnss", True if gn == {} else dict(gn))
@@ -563,6 +606,8 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
             checks.append(("", lambda: _navigator_requirements(d, the_map)))
     if world is not None and not blocked("initial", "aircraft", "terrain.world") and not is_kinematic(d):
         checks.append(("initial", lambda: _initial_condition(d, world)))
+        if not blocked("wind", "atmosphere"):
+            checks.append(("", lambda: trim_problems(d, world)))
     if world is not None and not blocked("initial", "truth", "wind", "atmosphere", "terrain.world",
                                          "aircraft.dt_s"):
         checks.append(("", lambda: _truth_problems(d, world)))

@@ -382,12 +382,32 @@ def _altitude_problems(d: dict) -> list[str]:
     return problems
 
 
+def _window(o: dict) -> str:
+    return f"[{o['start_s']:g}, {o['end_s']:g}) s" if "end_s" in o else f"[{o['start_s']:g} s, end of flight)"
+
+
 def _gnss_problems(d: dict) -> list[str]:
+    """Each outage window [start_s, end_s) non-empty; the windows in time order and disjoint (touching is
+    fine), none after an open window (no end_s: GNSS never returns). Overlaps are refused rather than merged
+    so the file says what is flown."""
     problems = []
-    for i, o in enumerate(d["gnss"]["outages"]):
+    outages = d["gnss"]["outages"]
+    for i, o in enumerate(outages):
         if "end_s" in o and o["end_s"] <= o["start_s"]:
             problems.append(f"gnss.outages[{i}].end_s: must be after start_s "
                             f"({o['end_s']} <= {o['start_s']})")
+    for i in range(1, len(outages)):
+        prev, o = outages[i - 1], outages[i]
+        if o["start_s"] < prev["start_s"]:
+            problems.append(f"gnss.outages[{i}].start_s: the outages must be in time order ({_window(o)} "
+                            f"starts before gnss.outages[{i - 1}] {_window(prev)})")
+        elif "end_s" not in prev:
+            problems.append(f"gnss.outages[{i}]: {_window(o)} lies inside the open outage "
+                            f"gnss.outages[{i - 1}] {_window(prev)} (no end_s: GNSS never returns); "
+                            f"remove it or give gnss.outages[{i - 1}] an end_s")
+        elif o["start_s"] < prev["end_s"]:
+            problems.append(f"gnss.outages[{i}]: {_window(o)} overlaps gnss.outages[{i - 1}] "
+                            f"{_window(prev)}; give one window from the first start to the last end instead")
     return problems
 
 

@@ -61,8 +61,10 @@ def navigator_branches() -> list[dict]:
         cls = registry.settings_class(name)
         if cls is None:
             continue
-        node = json_schema(cls, f"settings of navigator {name!r} ({cls.__module__}.{cls.__name__})",
-                           _RUNTIME if registry.capabilities(name).needs_map else None)
+        extra = dict(json_schema(registry.PublishedIntegritySettings)["properties"])   # every navigator's
+        if registry.capabilities(name).needs_map:
+            extra.update(_RUNTIME)
+        node = json_schema(cls, f"settings of navigator {name!r} ({cls.__module__}.{cls.__name__})", extra)
         branches.append({"if": {"properties": {"name": {"const": name}}, "required": ["name"]},
                          "then": {"properties": {"settings": node}}})
     return branches

@@ -16,6 +16,7 @@ import numpy as np
 import trn_env.scenario.build as components
 from trn_env.flight.truth import TruthChunk
 from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.integrity.protection_level import EXTRA_PROTECTION_LEVEL
 from trn_env.navigators.protocol import Estimate
 from trn_env.sim.nav_stage import gnss_available_mask
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
@@ -56,7 +57,8 @@ class SimLog:
         self.est_rows.append((float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
                               np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
                               float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
-                              bool(est.health.ok), str(est.health.status)))
+                              bool(est.health.ok), str(est.health.status),
+                              float(est.extra.get(EXTRA_PROTECTION_LEVEL, np.nan))))
         if self.sink is not None and len(self.truth_rows) >= self.flush_ticks:
             self.flush()
 
@@ -69,10 +71,10 @@ class SimLog:
     def _columns(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """The buffered ticks: truth rows (n, 16) in _TRUTH_ROW order and the estimate columns
         (t_s, lat_rad, lon_rad, h_m, v_n_mps, v_e_mps, v_d_mps, roll_rad, pitch_rad, yaw_rad, cov_i_j,
-        nav_ok, nav_status_code)."""
+        nav_ok, nav_status_code, hpl_m)."""
         rows = np.array(self.truth_rows, float).reshape(-1, len(_TRUTH_ROW))
         n = len(self.est_rows)
-        cols = list(zip(*self.est_rows, strict=True)) if n else [[]] * 11
+        cols = list(zip(*self.est_rows, strict=True)) if n else [[]] * 12
         est = {name: np.array(cols[i], float) for i, name in enumerate(("t_s", "lat_rad", "lon_rad", "h_m"))}
         v = np.array(cols[4], float).reshape(n, 3)
         est |= {"v_n_mps": v[:, 0].copy(), "v_e_mps": v[:, 1].copy(), "v_d_mps": v[:, 2].copy()}
@@ -83,6 +85,7 @@ class SimLog:
         est["nav_ok"] = np.array(cols[9], bool)
         est["nav_status_code"] = np.array([NAV_STATUS_CODES.index(x) if x in NAV_STATUS_CODES
                                            else len(NAV_STATUS_CODES) for x in cols[10]], np.int8)
+        est["hpl_m"] = np.array(cols[11], float)
         return rows, est
 
     def flush(self) -> None:
@@ -108,7 +111,8 @@ class SimLog:
 
     def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
-        position), gnss_available, nav_ok, and sensor_<sensor>_<field> at the sensors' own rates."""
+        position), gnss_available, nav_ok, est_hpl_m (the navigator's horizontal protection level, NaN
+        where it published none), and sensor_<sensor>_<field> at the sensors' own rates."""
         out: dict[str, np.ndarray] = {}
         if self.sink is not None:
             self.flush()
@@ -136,6 +140,7 @@ class SimLog:
                                   axis=-1).reshape(n, 9, 9)
         out["nav_ok"] = est["nav_ok"].astype(bool)
         out["nav_status_code"] = est["nav_status_code"].astype(np.int8)
+        out["est_hpl_m"] = np.asarray(est["hpl_m"], float) if "hpl_m" in est else np.full(n, np.nan)
         out["est_cov_diag"] = np.diagonal(out["est_cov"], axis1=1, axis2=2).copy()
         out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
                                        out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])

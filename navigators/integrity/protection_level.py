@@ -1,0 +1,177 @@
+"""Horizontal protection levels (HPL) every terrain navigator publishes with its estimate.
+
+A protection level is a radius about the published horizontal position that the true position lies inside
+with probability at least 1 - integrity_risk per epoch, as the navigator's own belief states it:
+
+- grid and particle filters (pmf, pf, rbpf): the radius about the belief's weighted mean outside which the
+  belief holds at most `integrity_risk` of its probability mass (`weighted_mass_radius`, a numba kernel over
+  the points and their weights; `weighted_mass_radius_reference` is its plain numpy twin), plus a pad for
+  what the points do not resolve (a point-mass cell's half diagonal, process noise not yet convolved);
+- Gaussian filters (ins_tercom, acq_track): `gaussian_hpl`, the radius r with P(|e| > r) <= integrity_risk
+  for a zero-mean Gaussian horizontal error with covariance P: r = sigma_major sqrt(-2 ln risk),
+  sigma_major^2 the largest eigenvalue of P's horizontal block (exact for a circular error; an elliptical
+  one is dominated by the circle of its major axis, |A z| <= ||A|| |z|), plus the EKF's fault allowance
+  (`fault_allowance_m`): the largest shift an undetected faulty position fix can make, a fix just inside
+  the innovation gate d^2 <= gamma moving the state by K b with b' S^-1 b <= gamma, i.e.
+  sqrt(gamma lambda_max(P S^-1 P)) for the fix's prior horizontal covariance P and innovation covariance S.
+
+The HPL is published under one `Estimate.extra` key, EXTRA_PROTECTION_LEVEL, with the risk it was computed
+for under EXTRA_INTEGRITY_RISK; the closed loop logs it (est_hpl_m) and trn_env.output.integrity_metrics
+turns logs into misleading-information rates, availability and Stanford diagrams. Certification practice
+(RTCA DO-229 for GNSS) is the model: misleading information = error above the HPL while the navigator says
+it is healthy; hazardously misleading = error above the alert limit while the HPL is below it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+EXTRA_PROTECTION_LEVEL = "hpl_m"          # float: horizontal protection level, m (NaN: none yet)
+EXTRA_INTEGRITY_RISK = "integrity_risk"   # float: the per-epoch integrity risk the HPL is computed for
+DEFAULT_INTEGRITY_RISK = 1e-3             # per epoch: measurable here (1e5 epochs resolve it)
+
+
+def check_integrity_risk(value, name: str = "integrity_risk") -> float:
+    """float(value) if it lies in (0, 1), else ValueError naming the setting."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be a probability in (0, 1), got {value!r}") from None
+    if isinstance(value, bool) or not (0.0 < v < 1.0):
+        raise ValueError(f"{name}: must be a probability in (0, 1) per epoch, got {value!r}")
+    return v
+
+
+def check_alert_limit(value, name: str = "alert_limit_m") -> float:
+    """float(value) if it is a finite number >= 0 (m), else ValueError naming the setting."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be a finite distance >= 0 m, got {value!r}") from None
+    if isinstance(value, bool) or not (math.isfinite(v) and v >= 0.0):
+        raise ValueError(f"{name}: must be a finite distance >= 0 m, got {value!r}")
+    return v
+
+
+@njit(cache=True)
+def weighted_mass_radius(dn_m, de_m, w, risk):
+    """Radius (m) about the weighted mean of the points (dn_m, de_m) with weights w (any positive scale)
+    outside which at most `risk` of the total weight lies; NaN for no finite positive weight."""
+    n = dn_m.shape[0]
+    tot = 0.0
+    mn = 0.0
+    me = 0.0
+    for i in range(n):
+        wi = w[i]
+        if wi > 0.0 and dn_m[i] == dn_m[i] and de_m[i] == de_m[i]:
+            tot += wi
+            mn += wi * dn_m[i]
+            me += wi * de_m[i]
+    if not tot > 0.0:
+        return np.nan
+    mn /= tot
+    me /= tot
+    d = np.empty(n)
+    for i in range(n):
+        if w[i] > 0.0 and dn_m[i] == dn_m[i] and de_m[i] == de_m[i]:
+            d[i] = math.hypot(dn_m[i] - mn, de_m[i] - me)
+        else:
+            d[i] = -1.0
+    order = np.argsort(d)
+    need = (1.0 - risk) * tot
+    cum = 0.0
+    for k in range(n):
+        i = order[k]
+        if d[i] < 0.0:
+            continue
+        cum += w[i]
+        if cum >= need * (1.0 - 1e-12):
+            return d[i]
+    return d[order[n - 1]]
+
+
+def weighted_mass_radius_reference(dn_m, de_m, w, risk) -> float:
+    """Plain numpy twin of weighted_mass_radius (for tests): the smallest point distance r about the weighted
+    mean with the weight of the points farther than r at most risk * total."""
+    dn_m, de_m, w = (np.asarray(x, float) for x in (dn_m, de_m, w))
+    ok = (w > 0) & np.isfinite(dn_m) & np.isfinite(de_m)
+    if not ok.any():
+        return float("nan")
+    dn_m, de_m, w = dn_m[ok], de_m[ok], w[ok]
+    mn, me = np.average(dn_m, weights=w), np.average(de_m, weights=w)
+    d = np.hypot(dn_m - mn, de_m - me)
+    for r in np.sort(d):
+        if w[d > r].sum() <= risk * w.sum() * (1 + 1e-9):
+            return float(r)
+    return float(d.max())
+
+
+def gaussian_hpl(cov_ne: np.ndarray, risk: float) -> float:
+    """sigma_major sqrt(-2 ln risk): P(|e| > HPL) <= risk for e ~ N(0, cov_ne) (2 x 2, m^2); NaN if the
+    covariance is not finite."""
+    c = np.asarray(cov_ne, float)[:2, :2]
+    if not np.all(np.isfinite(c)):
+        return float("nan")
+    a, b, d = c[0, 0], 0.5 * (c[0, 1] + c[1, 0]), c[1, 1]
+    lam = 0.5 * (a + d) + math.sqrt(max(0.25 * (a - d) ** 2 + b * b, 0.0))
+    return math.sqrt(max(lam, 0.0)) * math.sqrt(-2.0 * math.log(risk))
+
+
+def fault_allowance_m(cov_prior_ne: np.ndarray, s_innov: np.ndarray, gate_chi2: float) -> float:
+    """Largest horizontal shift (m) a position fix inside the innovation gate can make: sqrt(gamma
+    lambda_max(P S^-1 P)) (module docstring); P the prior horizontal covariance, S the fix's innovation
+    covariance (2 x 2, m^2), gamma the gate's chi-square threshold."""
+    P = np.asarray(cov_prior_ne, float)[:2, :2]
+    S = np.asarray(s_innov, float)[:2, :2]
+    if not (np.all(np.isfinite(P)) and np.all(np.isfinite(S))) or not math.isfinite(gate_chi2):
+        return float("nan")
+    M = P @ np.linalg.solve(S, P)
+    lam = float(np.max(np.linalg.eigvalsh(0.5 * (M + M.T))))
+    return math.sqrt(max(gate_chi2, 0.0) * max(lam, 0.0))
+
+
+def particle_hpl(dn_m, de_m, w, risk: float, pad_m: float = 0.0) -> float:
+    """weighted_mass_radius of the points plus pad_m (m)."""
+    r = weighted_mass_radius(np.ascontiguousarray(dn_m, dtype=np.float64),
+                             np.ascontiguousarray(de_m, dtype=np.float64),
+                             np.ascontiguousarray(w, dtype=np.float64), float(risk))
+    return float(r) + float(pad_m)
+
+
+def configure(navigator, integrity_risk=DEFAULT_INTEGRITY_RISK, map_horizontal_sigma_m=0.0) -> None:
+    """Set a navigator's integrity_risk and map_horizontal_sigma_m (validated, ValueError naming the
+    setting); navigators.registry.create does it for every navigator."""
+    navigator.integrity_risk = check_integrity_risk(integrity_risk)
+    try:
+        sh = float(map_horizontal_sigma_m)
+    except (TypeError, ValueError):
+        sh = float("nan")
+    if not (math.isfinite(sh) and sh >= 0.0):
+        raise ValueError(f"map_horizontal_sigma_m: must be a finite sigma >= 0 m, got "
+                         f"{map_horizontal_sigma_m!r}")
+    navigator.map_horizontal_sigma_m = sh
+
+
+def filter_risk(navigator) -> float:
+    """The share of the navigator's integrity risk its filter's HPL is computed for: all of it, or half when
+    the map's horizontal error takes the other half (union bound, `publish`)."""
+    risk = float(getattr(navigator, "integrity_risk", DEFAULT_INTEGRITY_RISK))
+    return 0.5 * risk if getattr(navigator, "map_horizontal_sigma_m", 0.0) > 0.0 else risk
+
+
+def publish(extra: dict, filter_hpl_m: float, navigator) -> dict:
+    """Put the navigator's HPL and its risk into an Estimate.extra dict (returned): the filter's HPL
+    (computed at filter_risk) plus, when the map has a horizontal error of sigma map_horizontal_sigma_m per
+    axis (its accuracy class's CE90 / 2.146; a map shifted by s moves every terrain fix by s, and the
+    filter's belief cannot see it), the Gaussian bound of that error at the other half of the risk."""
+    risk = float(getattr(navigator, "integrity_risk", DEFAULT_INTEGRITY_RISK))
+    sh = float(getattr(navigator, "map_horizontal_sigma_m", 0.0))
+    hpl = float(filter_hpl_m)
+    if sh > 0.0:
+        hpl += gaussian_hpl(np.eye(2) * sh * sh, 0.5 * risk)
+    extra[EXTRA_PROTECTION_LEVEL] = hpl
+    extra[EXTRA_INTEGRITY_RISK] = risk
+    return extra

@@ -1,0 +1,67 @@
+"""Calibrate the fast tier (TerrainNavFast-v0) against the full JSBSim loop (TerrainNav-v0) on the reference
+routes of trn_env.env.fast.calibration: the true horizontal error at the goal, mean and 90th percentile over
+seeds, per route, in both tiers, with the same navigator family (the scenario's INS + batch TERCOM).
+
+    python scripts/calibrate_fast_tier.py --seeds 12 --out out/fast_calibration      # both tiers
+    python scripts/calibrate_fast_tier.py --tier full --seeds 12 --out DIR            # only the full loop
+    python scripts/calibrate_fast_tier.py --tier fast --seeds 12 --out DIR            # fast tier vs saved full
+
+Writes DIR/full_<route>.json, DIR/fast_<route>.json (per-seed errors) and DIR/table.md; prints the table.
+The full-loop results are reused from DIR when present (--tier fast), so the fast tier can be re-run alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    from trn_env.env.fast.calibration import REFERENCE_ROUTES, compare, fly_fast, fly_full
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=int, default=12, help="episode seeds 0..N-1 per route (default 12)")
+    p.add_argument("--routes", nargs="*", default=None, help="route names (default: all)")
+    p.add_argument("--tier", choices=("both", "full", "fast"), default="both")
+    p.add_argument("--out", type=Path, default=Path("out/fast_calibration"))
+    args = p.parse_args(argv)
+    if args.seeds < 1:
+        print("--seeds must be >= 1", file=sys.stderr)
+        return 2
+    known = {r.name: r for r in REFERENCE_ROUTES}
+    names = args.routes or list(known)
+    bad = [n for n in names if n not in known]
+    if bad:
+        print(f"--routes: unknown {bad}; known: {sorted(known)}", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    seeds = list(range(args.seeds))
+    rows = []
+    for name in names:
+        r = known[name]
+        for tier, fn in (("full", fly_full), ("fast", fly_fast)):
+            path = args.out / f"{tier}_{name}.json"
+            if args.tier in (tier, "both") and not (tier == "full" and args.tier == "fast" and path.exists()):
+                res = fn(r, seeds)
+                path.write_text(json.dumps({"route": name, "seeds": seeds, **res}, indent=1))
+                print(f"{tier} {name}: {res['wall_s']:.1f} s", file=sys.stderr, flush=True)
+        fp, qp = args.out / f"full_{name}.json", args.out / f"fast_{name}.json"
+        if fp.exists() and qp.exists():
+            c = compare(json.loads(fp.read_text()), json.loads(qp.read_text()))
+            rows.append((r, c))
+    lines = ["| route | kind | terrain | seeds | full mean / p90 (m) | fast mean / p90 (m) | mean diff | p90 diff |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r, c in rows:
+        lines.append(f"| {r.name} | {r.kind} | {r.scenario} | {c['full']['n']} | {c['full']['mean_m']:.1f} / "
+                     f"{c['full']['p90_m']:.1f} | {c['fast']['mean_m']:.1f} / {c['fast']['p90_m']:.1f} | "
+                     f"{100 * c['mean_rel']:+.0f} % | {100 * c['p90_rel']:+.0f} % |")
+    table = "\n".join(lines)
+    (args.out / "table.md").write_text(table + "\n")
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

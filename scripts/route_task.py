@@ -1,0 +1,169 @@
+"""The reference route task (docs/guide/route_task.md): train PPO, then evaluate straight, planner, random and
+PPO in both env tiers on the same held-out goals and seeds.
+
+    python scripts/route_task.py all --out out/route_task                  # train (30 min budget), evaluate
+    python scripts/route_task.py train --out out/route_task --minutes 30     # RLlib PPO, fast tier if present
+    python scripts/route_task.py evaluate --out out/route_task --seeds 10    # needs OUT/checkpoints/final
+    python scripts/route_task.py all --out /tmp/rt --iterations 1 --seeds 1 --max-episode-s 60   # tiny
+
+train: RLlib PPO (the `rllib` extra) on the task (trn_env.env.route_task: terrain `--terrain`, start and
+goal regions, training goals outside the held-out radius) on TerrainNavFast-v0 when it is registered, else on
+TerrainNav-v0 (`--tier`); stops after `--iterations` or when `--minutes` of wall time are used, whichever
+comes first; writes OUT/checkpoints/ (iter_N, final), OUT/history.json and OUT/learning_curve.png.
+evaluate: the trained policy (OUT/checkpoints/final, or `--checkpoint`) and the baselines on the env's five
+held-out goals x `--seeds` evaluation seeds (route_task.EVAL_SEEDS) in each tier of `--tiers` (the fast
+tier only when registered); writes OUT/rows.json (one row per episode), OUT/summary.json (the table's
+figures, the paired comparisons, the transfer gap and the issue's target check) and OUT/table.md, and prints
+the table. Bad arguments: a message and exit 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def parse(argv):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("command", choices=("train", "evaluate", "all"))
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--terrain", default="basin")
+    p.add_argument("--tier", choices=("auto", "fast", "full"), default="auto", help="tier to train on")
+    p.add_argument("--iterations", type=int, default=1000, help="training iterations at most")
+    p.add_argument("--minutes", type=float, default=30.0, help="training wall-time budget")
+    p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
+    p.add_argument("--num-cpus", type=int, default=2, help="CPUs of the local Ray instance")
+    p.add_argument("--env-runners", type=int, default=1)
+    p.add_argument("--envs-per-runner", type=int, default=None,
+                   help="sub-envs per EnvRunner (default: 64 on the fast tier, 1 on the full tier)")
+    p.add_argument("--train-batch-size", type=int, default=None,
+                   help="env steps per iteration (default: 2048 fast tier, 64 full tier)")
+    p.add_argument("--minibatch-size", type=int, default=None)
+    p.add_argument("--epochs", type=int, default=10)
+    p.add_argument("--hidden", default="64,64")
+    p.add_argument("--lr", type=float, default=3e-4)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--checkpoint", type=Path, default=None, help="checkpoint to evaluate")
+    p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
+    p.add_argument("--tiers", default="full,fast", help="tiers to evaluate in (comma separated)")
+    p.add_argument("--max-episode-s", type=float, default=None, help="override the task's episode length")
+    return p.parse_args(argv)
+
+
+def _check(args) -> dict:
+    from trn_env.env import route_task
+
+    kw = route_task.env_kwargs(args.terrain)            # ValueError naming the terrain
+    if args.max_episode_s is not None:
+        if not args.max_episode_s > 0:
+            raise ValueError(f"--max-episode-s must be > 0, got {args.max_episode_s}")
+        kw["max_episode_s"] = float(args.max_episode_s)
+    for name in ("iterations", "seeds", "epochs", "env_runners"):
+        if getattr(args, name) < (0 if name == "env_runners" else 1):
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    if not args.minutes > 0:
+        raise ValueError(f"--minutes must be > 0, got {args.minutes}")
+    for t in args.tiers.split(","):
+        if t not in ("full", "fast"):
+            raise ValueError(f"--tiers: each must be full or fast, got {t!r}")
+    try:
+        args.hidden_t = tuple(int(h) for h in args.hidden.split(","))
+    except ValueError:
+        raise ValueError(f"--hidden must be comma-separated widths, got {args.hidden!r}") from None
+    if args.command == "evaluate":
+        ck = args.checkpoint or args.out / "checkpoints" / "final"
+        if not ck.is_dir():
+            raise ValueError(f"no checkpoint at {ck} (run `train` first, or give --checkpoint)")
+    return kw
+
+
+def train(args, kw: dict) -> None:
+    import gymnasium as gym
+
+    from trn_env.campaign.route_task import plot_learning_curve
+    from trn_env.env.rllib import FAST_ID
+    from trn_env.env.rllib_train import ppo_config, train
+
+    tier = args.tier if args.tier != "auto" else ("fast" if FAST_ID in gym.registry else "full")
+    envs = args.envs_per_runner or (64 if tier == "fast" else 1)
+    batch = args.train_batch_size or (2048 if tier == "fast" else 64)
+    mini = args.minibatch_size or min(256 if tier == "fast" else 32, batch)
+    cfg = ppo_config(tier, kw, seed=args.seed, num_env_runners=args.env_runners,
+                     num_envs_per_env_runner=envs, hidden=args.hidden_t, train_batch_size=batch,
+                     minibatch_size=mini, num_epochs=args.epochs, lr=args.lr)
+
+    def show(row):
+        print(f"[train {tier}] iter {row['iteration']}: {row['env_steps']:.0f} steps, {row['episodes']:.0f} "
+              f"episodes, return {row['episode_return_mean']:.2f}, {row['wall_s']:.0f} s", flush=True)
+
+    algo, history = train(cfg, args.iterations, args.out / "checkpoints", 10, show, 60.0 * args.minutes)
+    algo.stop()
+    (args.out / "history.json").write_text(json.dumps(
+        {"tier": tier, "terrain": args.terrain, "env": kw, "envs_per_runner": envs, "env_runners":
+         args.env_runners, "train_batch_size": batch, "minibatch_size": mini, "epochs": args.epochs,
+         "hidden": list(args.hidden_t), "lr": args.lr, "seed": args.seed, "history": history}, indent=1))
+    plot_learning_curve(args.out / "learning_curve.png", history,
+                        f"PPO on {tier} tier, {args.terrain} ({history[-1]['wall_s'] / 60:.1f} min)")
+
+
+def evaluate(args, kw: dict) -> dict:
+    import gymnasium as gym
+
+    from trn_env.campaign import route_task as rt
+    from trn_env.env import route_task
+    from trn_env.env.rllib import FAST_ID
+
+    ck = (args.checkpoint or args.out / "checkpoints" / "final").resolve()
+    policies = [{"label": "straight", "kind": "straight"},
+                {"label": "planner", "kind": "planner", "config": {"weight": 3.0}},
+                {"label": "random", "kind": "random"},
+                {"label": "ppo", "kind": "rllib", "checkpoint": str(ck)}]
+    tiers = [t for t in args.tiers.split(",") if t == "full" or FAST_ID in gym.registry]
+    seeds = list(route_task.EVAL_SEEDS[:args.seeds]) if args.seeds <= len(route_task.EVAL_SEEDS) else \
+        [route_task.EVAL_SEEDS[0] + k for k in range(args.seeds)]
+    overrides = {"max_episode_s": kw["max_episode_s"]}
+    rows = rt.evaluate(policies, args.terrain, seeds, tiers, overrides)
+    summary = rt.summarise(rows)
+    summary["target"] = rt.target_check(summary)
+    summary["tiers_evaluated"] = tiers
+    summary["seeds"] = seeds
+    text = rt.table(summary)
+    (args.out / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
+    (args.out / "table.md").write_text(text)
+    print(text)
+    print("target (full tier):", json.dumps(summary["target"]))
+    return summary
+
+
+def main(argv=None) -> int:
+    args = parse(sys.argv[1:] if argv is None else argv)
+    from trn_env.env.rllib import RLlibNotInstalled, require_rllib
+
+    try:
+        require_rllib()
+        kw = _check(args)
+    except (RLlibNotInstalled, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    import ray
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.address:
+        ray.init(address=args.address, include_dashboard=False, log_to_driver=False)
+    else:
+        ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False)
+    try:
+        if args.command in ("train", "all"):
+            train(args, kw)
+        if args.command in ("evaluate", "all"):
+            evaluate(args, kw)
+    finally:
+        ray.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

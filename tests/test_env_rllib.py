@@ -1,0 +1,112 @@
+"""RLlib glue (trn_env.env.rllib, trn_env.env.rllib_train, scripts/train_rllib.py): registration of the env
+tiers, the one-line error without the extra, and a few PPO iterations on a local 2-CPU Ray instance."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import trn_env  # noqa: F401  (registers the gymnasium ids)
+from trn_env.env import rllib as glue
+from trn_env.env.route_task import env_kwargs
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("train_rllib", ROOT / "scripts" / "train_rllib.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_without_the_extra_the_error_is_one_line_with_the_install_command(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "ray.rllib", None)        # import ray.rllib -> ImportError
+    with pytest.raises(glue.RLlibNotInstalled) as exc:
+        glue.require_rllib()
+    assert "pip install 'trn-env[rllib]'" in str(exc.value) and "\n" not in str(exc.value)
+    with pytest.raises(glue.RLlibNotInstalled):
+        glue.register_rllib_envs()
+    assert _script().main(["--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "pip install 'trn-env[rllib]'" in err
+    assert not (tmp_path / "o").exists()                         # nothing written
+
+
+def test_bad_arguments_exit_2_naming_them(tmp_path, capsys):
+    pytest.importorskip("ray.rllib")
+    s = _script()
+    assert s.main(["--out", str(tmp_path / "o"), "--terrain", "moon"]) == 2
+    assert "terrain" in capsys.readouterr().err
+    assert s.main(["--out", str(tmp_path / "o"), "--iterations", "0"]) == 2
+    assert "--iterations" in capsys.readouterr().err
+
+
+def test_both_tiers_registered_and_observations_scaled():
+    pytest.importorskip("ray.rllib")
+    from ray.tune.registry import ENV_CREATOR, _global_registry
+
+    names = glue.register_rllib_envs()
+    assert names["full"] == "trn_env/TerrainNav-v0"
+    assert ("fast" in names) == ("trn_env/TerrainNavFast-v0" in gym.registry)
+    for name in names.values():
+        assert _global_registry.contains(ENV_CREATOR, name)
+    kw = env_kwargs("basin")
+    env = _global_registry.get(ENV_CREATOR, names["full"])({**kw, "worker_index": 1, "num_workers": 1})
+    obs, _ = env.reset(seed=3)
+    raw = env.unwrapped._obs()
+    lo, hi = env.unwrapped.observation_space.low, env.unwrapped.observation_space.high
+    assert np.all(np.abs(obs) <= 1.0 + 1e-6)
+    np.testing.assert_allclose(obs, -1.0 + 2.0 * (raw - lo) / (hi - lo), atol=1e-5)   # by the bounds
+    env.close()
+    if "fast" in names:
+        venv = glue.make_fast_env({**kw, "num_envs": 3})
+        o, _ = venv.reset(seed=0)
+        assert o.shape[0] == 3 and np.all(np.abs(o) <= 1.0 + 1e-6)
+        venv.close()
+    with pytest.raises(ValueError, match="tier"):
+        glue.rllib_env_settings("medium")
+
+
+@pytest.mark.slow
+def test_ppo_trains_a_few_iterations_on_a_local_two_cpu_ray(tmp_path):
+    pytest.importorskip("ray.rllib")
+    import ray
+    import torch
+
+    from trn_env.env.rllib_train import evaluate_module, module_from_checkpoint, ppo_config, train
+
+    kw = env_kwargs("basin")
+    kw["max_episode_s"] = 90.0          # 3 decisions of 30 s: episodes end (time limit) within an iteration
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)   # never another's
+    try:
+        cfg = ppo_config("full", kw, num_env_runners=1, hidden=(8,), train_batch_size=12, minibatch_size=6,
+                         num_epochs=2, lr=1e-3)
+        algo = cfg.build_algo()
+        before = [p.detach().clone() for p in algo.get_module().parameters()]
+        algo, history = train(algo, 2, tmp_path / "ckpt", checkpoint_every=1)
+        module = algo.get_module()
+        after = [p.detach().clone() for p in module.parameters()]
+        assert len(history) == 2 and history[-1]["env_steps"] >= 24
+        assert history[-1]["episodes"] >= 4                   # 24 steps of 3-step episodes: >= 4 finished
+        assert math.isfinite(history[-1]["episode_return_mean"])
+        changed = max(float((a - b).abs().max()) for a, b in zip(after, before, strict=True))
+        assert changed > 1e-6                                  # the policy's weights moved
+        assert (tmp_path / "ckpt" / "iter_1").is_dir() and (tmp_path / "ckpt" / "final").is_dir()
+        restored = module_from_checkpoint(tmp_path / "ckpt" / "final").state_dict()
+        trained = module.state_dict()
+        assert trained and set(trained) <= set(restored)   # the acting part (restored: + value function)
+        for k, v in trained.items():
+            assert torch.equal(restored[k], v), k
+        goal = tuple(env_kwargs("basin")["goal_region_deg"][::2])
+        rows = evaluate_module(module, kw, [goal], [1000])
+        assert len(rows) == 1 and rows[0]["termination"] is not None and rows[0]["steps"] >= 1
+        algo.stop()
+    finally:
+        ray.shutdown()

@@ -1,0 +1,293 @@
+"""Sensor logs (trn_env.logs): record -> replay bit for bit, fly's streamed log, the builder's and the
+reader's bad-input errors, the CLI's exit codes, and an independently generated log replayed by the
+navigators (tests/log_reference_flight.py)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from trn_env import cli
+from trn_env.logs import FORMAT_VERSION, LogError, read_log
+from trn_env.logs.builder import LogBuilder
+from trn_env.logs.record import record
+from trn_env.logs.replay import replay
+from trn_env.scenario.overrides import load_scenario_with
+from trn_env.sim.closed_loop import ClosedLoop
+
+sys.path.insert(0, str(Path(__file__).parent))
+import log_reference_flight as ref  # noqa: E402
+
+SCEN = Path(__file__).parent / "scenarios"
+EST_COLS = (["t_s", "lat_rad", "lon_rad", "h_m", "v_n_mps", "v_e_mps", "v_d_mps", "roll_rad", "pitch_rad",
+             "yaw_rad"] + [f"cov_{i}_{j}" for i in range(9) for j in range(9)])
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A 12 s pf flight (the particle filter draws from the seed's navigator stream) with an IRA lever
+    arm, recorded pipelined; and the same flight without a log sink, in memory."""
+    tmp = tmp_path_factory.mktemp("rec")
+    sc = load_scenario_with(SCEN / "default_short.toml", [("sensors.ira.lever_arm_b_m", [0.5, 0.3, 1.2])],
+                            navigator="pf", duration_s=12.0, seed=5)
+    result, path = record(sc, tmp / "pf.trnlog", pipeline=True)
+    plain = ClosedLoop(sc, pipeline=False).run()
+    return sc, result, path, plain
+
+
+def test_replay_reproduces_the_recorded_flight_bit_for_bit(recorded):
+    sc, result, path, plain = recorded
+    log = read_log(path)
+    assert log.metadata["format_version"] == FORMAT_VERSION and log.metadata["lever_arms_m"]["ira"] == [
+        0.5, 0.3, 1.2]
+    rec = log.estimates()
+    rep = replay(path)                                   # the log's own navigator, settings and seed
+    a = rep.arrays
+    idx = np.searchsorted(a["est_t_s"], rec["t_s"].to_numpy())
+    assert np.array_equal(a["est_t_s"][idx], rec["t_s"].to_numpy())
+    got = {"t_s": a["est_t_s"], "lat_rad": a["est_lat_rad"], "lon_rad": a["est_lon_rad"], "h_m": a["est_h_m"],
+           "v_n_mps": a["est_v_ned_mps"][:, 0], "v_e_mps": a["est_v_ned_mps"][:, 1],
+           "v_d_mps": a["est_v_ned_mps"][:, 2], "roll_rad": a["est_roll_rad"],
+           "pitch_rad": a["est_pitch_rad"],
+           "yaw_rad": a["est_yaw_rad"]} | {f"cov_{i}_{j}": a["est_cov"][:, i, j] for i in range(9) for j in
+                                           range(9)}
+    for c in EST_COLS:
+        assert np.array_equal(got[c][idx], rec[c].to_numpy()), c
+    assert rep.summary["horizontal_error_rms_m"] == result.summary["horizontal_error_rms_m"]
+    # a different navigator runs on the same frames (open loop)
+    other = replay(path, "ins_tercom")
+    assert other.summary["navigator"] == "ins_tercom" and other.summary["horizontal_error_rms_m"] < 100.0
+
+
+def test_streamed_log_equals_the_in_memory_one(recorded):
+    """The run's arrays are the same with the log streamed to disk; the sensor arrays log.npz held are
+    read back from the log (SensorLog.arrays) bit for bit."""
+    _, result, path, plain = recorded
+    for k, v in plain.arrays.items():
+        if not k.startswith("sensor_"):
+            assert np.array_equal(v, result.arrays[k], equal_nan=True), k
+    back = read_log(path).arrays()
+    sensor_keys = [k for k in plain.arrays if k.startswith("sensor_")]
+    assert sensor_keys and set(sensor_keys) <= set(back)
+    for k in sensor_keys:
+        assert np.array_equal(plain.arrays[k], back[k], equal_nan=True), k
+    # pandas and numpy read the tables as they are
+    imu = pd.read_parquet(path / "imu.parquet")
+    assert list(imu.columns[:3]) == ["frame", "t_s", "f_x_mps2"] and np.all(np.diff(imu["t_s"]) > 0)
+
+
+def test_fly_writes_a_replayable_log_folder(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert cli.main(["fly", str(SCEN / "default_short.toml"), "--out", str(out), "--quiet", "--duration", "4",
+                     "--no-plots"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert "log" in summary["files"] and not (out / "log.npz").exists()
+    log = read_log(out / "log")
+    assert log.n_frames == 4 and len(log.truth()) == 5            # t = 0 and each 1 s update
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]     # no partial folder left
+    rep = tmp_path / "replayed"
+    assert cli.main(["replay", str(out / "log"), "--out", str(rep), "--no-plots"]) == 0
+    s2 = json.loads((rep / "summary.json").read_text())
+    assert s2["horizontal_error_rms_m"] == pytest.approx(summary["horizontal_error_rms_m"], rel=0, abs=0)
+    assert pd.read_parquet(rep / "log" / "estimates.parquet").shape[0] == 5
+    capsys.readouterr()
+
+
+# ---------------------------------------------------------------------------------------------- bad input
+
+def _builder(**kw):
+    args = dict(map="jacksboro", imu_sample="rate", height_datum={"reference": "msl"},
+                lever_arms_m={"radar_altimeter": [0.0, 0.0, 0.0]}, sensors={"imu": {"rate_hz": 100.0}})
+    return LogBuilder(**(args | kw))
+
+
+def _imu(n=300, dt=0.01):
+    t = 0.01 + dt * np.arange(n)
+    return {"t_s": t, "f_x_mps2": np.zeros(n), "f_y_mps2": np.zeros(n), "f_z_mps2": np.full(n, -9.8),
+            "omega_x_rps": np.zeros(n), "omega_y_rps": np.zeros(n), "omega_z_rps": np.zeros(n)}
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda: _builder(height_datum={}), "height_datum is not stated"),
+    (lambda: _builder(height_datum={"reference": "ellipsoid"}), "geoid_offset_m"),
+    (lambda: _builder(height_datum={"reference": "ellipsoid", "geoid_model": "EGM96"}), "geoid models"),
+    (lambda: _builder(imu_sample=None).add("imu", _imu()), "IMU sample convention is not stated"),
+    (lambda: _builder(imu_sample="averaged"), "imu_sample must be one of"),
+    (lambda: _builder(lever_arms_m={}).add("radar_altimeter", {"t_s": [1.0], "range_m": [100.0]}),
+     "lever arm is not stated"),
+    (lambda: _builder().add("imu", {k: v for k, v in _imu().items() if k != "f_y_mps2"}),
+     "missing column 'f_y'"),
+    (lambda: _builder().add("imu", {**{k: v for k, v in _imu().items() if k != "f_x_mps2"},
+                                    "f_x": np.zeros(300)}), "column 'f_x' has no unit"),
+    (lambda: _builder().add("imu", {**{k: v for k, v in _imu().items() if k != "f_x_mps2"},
+                                    "f_x": np.zeros(300)}, units={"f_x": "furlongs"}),
+     "unknown unit 'furlongs'"),
+    (lambda: _builder().add("imu", _imu() | {"t_s": np.r_[0.01 * np.arange(1, 150),
+                                                          0.01 * np.arange(148, 299)]}),
+     "time must increase"),
+    (lambda: _builder().add("imu", _imu() | {"f_z_mps2": np.r_[np.full(10, -9.8), np.nan,
+                                                               np.full(289, -9.8)]}),
+     "NaN or infinite at row 10"),
+    (lambda: _builder().add("imu", _imu() | {"t_s": np.r_[0.01 * np.arange(1, 151),
+                                                          2.0 + 0.01 * np.arange(150)]}),
+     "a gap of"),
+    (lambda: _builder().add("imu", _imu(dt=0.02)), "stated rate_hz 100"),
+    (lambda: _builder().add("lidar", {}), "unknown sensor 'lidar'"),
+], ids=["datum", "geoid-offset", "geoid-model", "imu-convention", "imu-convention-word", "lever-arm",
+        "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "rate", "sensor"])
+def test_builder_refuses_bad_input_with_the_field(make, words):
+    with pytest.raises(LogError, match=words):
+        make()
+
+
+def test_builder_converts_units_and_nan_in_invalid_samples_is_allowed(tmp_path):
+    b = _builder()
+    imu = pd.DataFrame(_imu())
+    imu = imu.rename(columns={"omega_z_rps": "omega_z"})
+    imu["omega_z"] = 3600.0          # deg/h
+    b.add("imu", imu, units={"omega_z": "deg/h"})
+    ra = {"t_s": [0.5, 1.0, 1.5], "range_ft": [1000.0, np.nan, 1010.0],
+          "valid": np.array([True, False, True])}
+    b.add("radar_altimeter", ra)
+    with pytest.raises(LogError, match="no initial estimate"):
+        b.write(tmp_path / "x")
+    assert not (tmp_path / "x").exists() and not list(tmp_path.iterdir())
+    b.add_truth({"t_s": [0.0, 4.0], "lat_deg": [36.5, 36.5], "lon_deg": [-84.3, -84.3], "h_m": [2000.0] * 2,
+                 "v_n_mps": [0.0] * 2, "v_e_mps": [0.0] * 2, "v_d_mps": [0.0] * 2, "roll_rad": [0.0] * 2,
+                 "pitch_rad": [0.0] * 2, "yaw_rad": [0.0] * 2})
+    log = read_log(b.write(tmp_path / "x"))
+    imu_back = log.table("imu")
+    assert np.allclose(imu_back["omega_z_rps"], np.radians(1.0) / 1.0)          # 3600 deg/h = 1 deg/s
+    ra_back = log.table("radar_altimeter")
+    assert ra_back["range_m"].iloc[0] == pytest.approx(304.8) and np.isnan(ra_back["range_m"].iloc[1])
+    assert log.truth()["lat_rad"].iloc[0] == pytest.approx(np.radians(36.5))
+    assert log.n_frames == 3                                      # 0.01 .. 3.00 s in 1 s intervals
+
+
+@pytest.fixture(scope="module")
+def small_log(tmp_path_factory):
+    b = _builder()
+    b.add("imu", _imu())
+    b.add_truth({"t_s": [0.0, 4.0], "lat_deg": [36.5, 36.5], "lon_deg": [-84.3, -84.3], "h_m": [2000.0] * 2,
+                 "v_n_mps": [0.0] * 2, "v_e_mps": [0.0] * 2, "v_d_mps": [0.0] * 2, "roll_rad": [0.0] * 2,
+                 "pitch_rad": [0.0] * 2, "yaw_rad": [0.0] * 2})
+    return b.write(tmp_path_factory.mktemp("small") / "small")
+
+
+def _damaged(small_log, tmp_path, how):
+    p = tmp_path / "damaged"
+    shutil.copytree(small_log, p)
+    meta = json.loads((p / "metadata.json").read_text())
+    if how == "newer":
+        meta["format_version"] = FORMAT_VERSION + 1
+    elif how == "incomplete":
+        meta["complete"] = False
+    elif how == "count":
+        meta["tables"]["imu"] += 1
+    elif how == "no-convention":
+        meta.pop("imu_sample")
+    elif how == "truncated":
+        data = (p / "imu.parquet").read_bytes()
+        (p / "imu.parquet").write_bytes(data[: len(data) // 2])
+    elif how == "corrupt-json":
+        (p / "metadata.json").write_text('{"format": "trn-env sensor log", "format_ver')
+        return p
+    elif how == "missing-table":
+        (p / "frames.parquet").unlink()
+    (p / "metadata.json").write_text(json.dumps(meta))
+    return p
+
+
+@pytest.mark.parametrize("how, words", [
+    ("newer", "newer than this trn-env reads"), ("incomplete", "did not finish"),
+    ("count", "rows, the metadata"),
+    ("no-convention", "imu_sample is not stated"), ("truncated", "corrupt or truncated"),
+    ("corrupt-json", "corrupt or truncated"), ("missing-table", "is missing"),
+])
+def test_reader_refuses_damaged_logs(small_log, tmp_path, how, words):
+    with pytest.raises(LogError, match=words):
+        read_log(_damaged(small_log, tmp_path, how))
+
+
+def test_cli_bad_input_exits_2_and_writes_nothing(small_log, tmp_path, capsys):
+    bad = _damaged(small_log, tmp_path, "newer")
+    out = tmp_path / "out"
+    assert cli.main(["replay", str(bad), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "newer" in err and "Traceback" not in err and not out.exists()
+    # a navigator that needs a sensor the log lacks (acq_track: the radar altimeter and the barometer)
+    assert cli.main(["replay", str(small_log), "--navigator", "acq_track", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "'acq_track' needs" in err and "radar_altimeter" in err and not out.exists()
+    assert cli.main(["replay", str(tmp_path / "nowhere"), "--out", str(out)]) == 2
+    assert "no such folder" in capsys.readouterr().err
+    # record refuses a non-empty --out before flying
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "x").write_text("x")
+    assert cli.main(["record", str(SCEN / "default_short.toml"), "--out", str(busy), "--quiet"]) == 2
+    assert "not an empty folder" in capsys.readouterr().err
+    assert sorted(p.name for p in busy.iterdir()) == ["x"]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+# ------------------------------------------------------------------------------- an independent log
+
+@pytest.fixture(scope="module")
+def independent(tmp_path_factory):
+    return ref.build(tmp_path_factory.mktemp("ind") / "ind.trnlog", duration_s=150.0)
+
+
+def _check(summary, rms_max_m):
+    """Accuracy and consistency of one replay: horizontal RMS below its bound, each of north and east
+    inside 3 sigma at >= 85 % of the 1 Hz epochs (a consistent filter: 99.7 %; the margin covers the
+    epochs' correlation over a single 150 s flight), ANEES below 3x its 3-dof ideal."""
+    assert summary["termination"] == "completed"
+    assert summary["horizontal_error_rms_m"] < rms_max_m, summary["horizontal_error_rms_m"]
+    assert summary["fraction_within_3sigma"] >= 0.85, summary["fraction_within_3sigma"]
+    assert summary["anees"] < 9.0, summary["anees"]
+
+
+def test_independent_log_pmf_and_the_datum_and_lever_arms_matter(independent, tmp_path):
+    """pmf on the independent log: accurate and consistent; read as MSL heights (the geoid offset
+    ignored: 31 m), it is not; without the lever arms its vertical error grows."""
+    good = replay(independent, "pmf").summary
+    _check(good, 10.0)
+    wrong = tmp_path / "msl"
+    shutil.copytree(independent, wrong)
+    meta = json.loads((wrong / "metadata.json").read_text())
+    meta["height_datum"] = {"reference": "msl"}
+    (wrong / "metadata.json").write_text(json.dumps(meta))
+    bad = replay(wrong, "pmf").summary
+    assert bad["horizontal_error_rms_m"] > 3.0 * good["horizontal_error_rms_m"]
+    meta["height_datum"] = {"reference": "ellipsoid", "geoid_offset_m": ref.GEOID_N_M}
+    meta["lever_arms_m"] = {"ira": [0.0, 0.0, 0.0], "radar_altimeter": [0.0, 0.0, 0.0]}
+    (wrong / "metadata.json").write_text(json.dumps(meta))
+    no_arm = replay(wrong, "pmf").summary
+    assert no_arm["vertical_error_rms_m"] > good["vertical_error_rms_m"] + 0.3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("navigator, rms_max_m", [("ins", 20.0), ("ins_tercom", 15.0), ("pf", 15.0),
+                                                  ("rbpf", 10.0)])
+def test_independent_log_each_navigator(independent, navigator, rms_max_m):
+    _check(replay(independent, navigator).summary, rms_max_m)
+
+
+def test_independent_log_reads_in_the_navigators_conventions(independent):
+    """The reader turns the log's increments into rates and its ellipsoid heights into MSL ones."""
+    log = read_log(independent)
+    frames = next(log.frames())
+    raw = log.table("imu")
+    n = frames.imu.t_s.shape[0]
+    assert np.allclose(frames.imu.f_b_mps2[1:, 0], raw["dv_x_mps"].to_numpy()[1:n] / 0.01, rtol=1e-9)
+    truth = log.truth()
+    assert np.allclose(truth["h_m"].to_numpy(), pq.read_table(independent / "truth.parquet").column(
+        "h_m").to_numpy() - ref.GEOID_N_M)

@@ -1,0 +1,134 @@
+"""Horizontal protection levels (navigators.integrity.protection_level) against independent computations,
+their metrics (trn_env.output.integrity_metrics) against direct counting, bad settings by name, and one
+short closed-loop flight that carries the HPL into the log, summary.json's figures and the report."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import binom
+from trn_env.navigators import registry
+from trn_env.navigators.integrity import protection_level as pl
+
+from trn_env.output.integrity_metrics import clopper_pearson_upper, protection_level_metrics
+from trn_env.output.metrics import MetricSettings
+
+
+def test_mass_radius_kernel_matches_reference_and_covers_the_mass():
+    rng = np.random.default_rng(0)
+    for trial in range(30):
+        n = int(rng.integers(5, 400))
+        dn, de = rng.normal(0, 30, n), rng.normal(10, 50, n)
+        w = rng.exponential(1.0, n) * (rng.random(n) > 0.1)
+        risk = float(rng.choice([1e-3, 0.01, 0.1, 0.3]))
+        r = pl.weighted_mass_radius(dn, de, w, risk)
+        assert r == pytest.approx(pl.weighted_mass_radius_reference(dn, de, w, risk), abs=1e-9), trial
+        mn, me = np.average(dn, weights=w), np.average(de, weights=w)
+        d = np.hypot(dn - mn, de - me)
+        assert w[d > r + 1e-6].sum() <= risk * w.sum() * (1 + 1e-9)  # at most the risk outside
+        assert w[d >= r - 1e-6].sum() > risk * w.sum() * (1 - 1e-9)  # the smallest such point radius
+    assert math.isnan(pl.weighted_mass_radius(np.zeros(3), np.zeros(3), np.zeros(3), 0.01))
+
+
+def test_gaussian_bound_holds_for_elliptical_errors():
+    """P(|e| > HPL) <= risk for e ~ N(0, P): 400,000 draws of an elongated, rotated P; the exceedances stay
+    below the 99.9 % binomial quantile at the risk, and the bound is exact (equality) for a circular P."""
+    rng = np.random.default_rng(1)
+    a = np.radians(30.0)
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    P = R @ np.diag([40.0**2, 8.0**2]) @ R.T
+    risk = 1e-3
+    h = pl.gaussian_hpl(P, risk)
+    n = 400_000
+    e = rng.standard_normal((n, 2)) @ np.linalg.cholesky(P).T
+    k = int(np.count_nonzero(np.hypot(e[:, 0], e[:, 1]) > h))
+    assert k <= binom.ppf(0.999, n, risk)
+    hc = pl.gaussian_hpl(np.eye(2) * 25.0**2, risk)
+    assert math.exp(-0.5 * (hc / 25.0) ** 2) == pytest.approx(risk, rel=1e-12)
+
+
+def test_fault_allowance_is_the_largest_shift_inside_the_gate():
+    """sqrt(gamma lambda_max(P S^-1 P)) = max |K b| over the gate ellipse b' S^-1 b = gamma (brute force over
+    directions), K = P S^-1 the position gain of a direct position fix."""
+    P = np.array([[900.0, 200.0], [200.0, 400.0]])
+    S = P + np.eye(2) * 100.0
+    gamma = 18.4
+    K = P @ np.linalg.inv(S)
+    L = np.linalg.cholesky(S)
+    th = np.linspace(0, 2 * np.pi, 20001)
+    b = (L @ np.stack([np.cos(th), np.sin(th)])) * math.sqrt(gamma)
+    brute = float(np.max(np.hypot(*(K @ b))))
+    assert pl.fault_allowance_m(P, S, gamma) == pytest.approx(brute, rel=1e-6)
+
+
+def test_publish_adds_the_maps_horizontal_error_at_half_the_risk():
+    nav = type("Nav", (), {})()
+    pl.configure(nav, integrity_risk=1e-3, map_horizontal_sigma_m=0.0)
+    assert pl.filter_risk(nav) == 1e-3
+    assert pl.publish({}, 20.0, nav)[pl.EXTRA_PROTECTION_LEVEL] == 20.0
+    pl.configure(nav, integrity_risk=1e-3, map_horizontal_sigma_m=23.3)
+    assert pl.filter_risk(nav) == 5e-4
+    out = pl.publish({}, 20.0, nav)
+    assert out[pl.EXTRA_PROTECTION_LEVEL] == pytest.approx(20.0 + 23.3 * math.sqrt(-2 * math.log(5e-4)))
+    assert out[pl.EXTRA_INTEGRITY_RISK] == 1e-3
+
+
+def test_bad_integrity_settings_named():
+    for bad in (0.0, 1.0, -0.1, 1.5, float("nan"), "x", True):
+        with pytest.raises(ValueError, match="integrity_risk"):
+            pl.check_integrity_risk(bad)
+    for bad in (-1.0, float("nan"), float("inf"), "far"):
+        with pytest.raises(ValueError, match="alert_limit_m"):
+            pl.check_alert_limit(bad)
+    with pytest.raises(ValueError, match="metrics.alert_limit_m"):
+        MetricSettings(alert_limit_m=-5.0)
+    with pytest.raises(ValueError, match="integrity_risk"):
+        registry.create("ins", integrity_risk=2.0)
+    with pytest.raises(ValueError, match="map_horizontal_sigma_m"):
+        registry.create("ins", map_horizontal_sigma_m=-3.0)
+    with pytest.raises(ValueError, match="alert_limit_m"):
+        protection_level_metrics(np.zeros(3), np.zeros(3), np.ones(3, bool), -1.0)
+    nav = registry.create("ins", integrity_risk=1e-4)
+    assert nav.integrity_risk == 1e-4
+
+
+def test_protection_level_metrics_count_directly():
+    rng = np.random.default_rng(3)
+    n = 5000
+    e = rng.exponential(20.0, n)
+    h = rng.uniform(10, 300, n)
+    h[::97] = np.nan
+    ok = rng.random(n) > 0.2
+    m = protection_level_metrics(e, h, ok, 185.2)
+    use = ok & np.isfinite(h)
+    assert m["pl_epochs"] == int(use.sum())
+    assert m["pl_misleading_epochs"] == sum(1 for a, b, c in zip(e, h, use, strict=True) if c and a > b)
+    assert m["pl_hazardous_epochs"] == int(np.sum(use & (e > 185.2) & (h <= 185.2)))
+    assert m["pl_availability"] == pytest.approx(np.mean(use & (h <= 185.2)))
+    k, nn = m["pl_misleading_epochs"], m["pl_epochs"]
+    assert m["pl_misleading_rate_upper95"] == pytest.approx(clopper_pearson_upper(k, nn))
+    # Clopper-Pearson: the one-sided bound p_u has P(X <= k | p_u) = 0.05
+    assert binom.cdf(k, nn, m["pl_misleading_rate_upper95"]) == pytest.approx(0.05, rel=1e-6)
+
+
+def test_closed_loop_flight_logs_the_protection_level(tmp_path):
+    """A 40 s INS + TERCOM flight (tests/scenarios/default_short.toml): every logged row after the first
+    fix carries a finite HPL, summary.json's pl_* figures agree with the log, and the campaign report's
+    Stanford diagram draws from the same series."""
+    from trn_env.sim.closed_loop import run_scenario
+    r = run_scenario("tests/scenarios/default_short.toml", duration_s=40.0)
+    a = r.arrays
+    h = a["est_hpl_m"]
+    assert h.shape == a["t_s"].shape and np.isfinite(h[5:]).all() and (h[5:] > 0).all()
+    e = np.hypot(a["err_ned_m"][:, 0], a["err_ned_m"][:, 1])
+    m = protection_level_metrics(e, h, a["nav_ok"], 185.2)
+    for k in ("pl_epochs", "pl_misleading_epochs", "pl_availability"):
+        assert r.summary[k] == pytest.approx(m[k])
+    import pandas as pd
+
+    from trn_env.campaign.report import stanford_plot
+    df = pd.DataFrame([{"navigator": "ins_tercom", "series_err_h_m": e, "series_hpl_m": h,
+                        "series_nav_ok": a["nav_ok"].astype(float)}])
+    assert stanford_plot(tmp_path / "s.png", df, 185.2) and (tmp_path / "s.png").stat().st_size > 1000

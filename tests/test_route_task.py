@@ -1,0 +1,125 @@
+"""The reference route task (trn_env.env.route_task, trn_env.campaign.route_task, scripts/route_task.py):
+the paired statistics against independent computations, the evaluation rows of the baselines, and the whole
+command (train + evaluate) at a tiny size."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import binomtest
+
+from trn_env.campaign import route_task as rt
+from trn_env.env import route_task
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_sign_test_matches_scipy_binomial():
+    for wins, losses in ((0, 0), (5, 0), (7, 3), (12, 12), (2, 9), (20, 5)):
+        p = rt.sign_test_p(wins, losses)
+        if wins + losses == 0:
+            assert math.isnan(p)
+            continue
+        ref = binomtest(wins, wins + losses, 0.5, alternative="greater").pvalue
+        assert p == pytest.approx(ref, rel=1e-12)
+
+
+def _rows(miss_a, miss_b, tier="full"):
+    rows = []
+    for k, (a, b) in enumerate(zip(miss_a, miss_b, strict=True)):
+        for lab, m in (("ppo", a), ("straight", b)):
+            rows.append({"tier": tier, "policy": lab, "goal_index": k % 5, "seed": k,
+                         "arrived": math.isfinite(m), "true_miss_m": m, "extra_distance_fraction": 0.1,
+                         "collision": False, "return": 1.0})
+    return rows
+
+
+def test_paired_comparison_uses_only_pairs_where_both_arrived_and_its_interval_covers():
+    rng = np.random.default_rng(5)
+    b = rng.uniform(200.0, 400.0, 40)
+    a = 0.6 * b + rng.normal(0.0, 10.0, 40)              # 40 % better, paired
+    a[3] = math.nan                                        # a did not arrive: the pair is dropped
+    c = rt.paired(_rows(a, b), "full", "ppo", "straight")
+    keep = np.isfinite(a)
+    assert c["n_pairs"] == 39 and c["n_compared"] == 40
+    assert c["mean_a_m"] == pytest.approx(a[keep].mean()) and c["mean_b_m"] == pytest.approx(b[keep].mean())
+    assert c["improvement"] == pytest.approx(1.0 - a[keep].mean() / b[keep].mean())
+    lo, hi = c["improvement_ci95"]
+    assert lo < c["improvement"] < hi and hi - lo < 0.1
+    assert c["wins"] == int(np.sum(a[keep] < b[keep])) and c["sign_test_p"] < 1e-6
+    s = rt.summarise(_rows(a, b))
+    assert s["policies"]["full/ppo"]["success"] == pytest.approx(39 / 40)
+    assert s["policies"]["full/ppo"]["miss_p90_m"] == pytest.approx(np.percentile(a[keep], 90))
+    t = rt.target_check(s)
+    assert t["beats_straight_by_30pct"] and t["sign_test_p_below_0_01"]
+    assert not t["within_20pct_of_planner"]                # no planner evaluated
+    assert "ppo vs straight" in rt.table(s)
+
+
+def test_task_settings_and_bad_terrain():
+    kw = route_task.env_kwargs("basin")
+    assert kw["action_mode"] == "pursuit" and kw["decision_interval_s"] == 30.0
+    assert json.loads(json.dumps(kw)) == kw                # plain JSON types
+    assert not set(route_task.EVAL_SEEDS) & set(range(route_task.TRAIN_SEED_BASE, 1000))
+    with pytest.raises(ValueError, match="terrain"):
+        route_task.env_kwargs("moon")
+
+
+def test_baselines_fly_the_held_out_goals_in_the_full_tier():
+    pols = [{"label": "straight", "kind": "straight"}, {"label": "random", "kind": "random"}]
+    rows = rt.evaluate_full(pols, "basin", [1000], env_overrides={"max_episode_s": 60.0})
+    assert len(rows) == 2 * 5                               # 2 policies x 5 held-out goals x 1 seed
+    assert {r["goal_index"] for r in rows} == set(range(5))
+    for r in rows:
+        assert r["termination"] in ("time_limit", "arrived", "terrain_collision", "off_map", "diverged")
+        assert r["distance_flown_m"] > 1000.0               # 60 s at ~85 m/s
+    with pytest.raises(ValueError, match="kind"):
+        rt.evaluate_full([{"kind": "teleport"}], "basin", [1000])
+
+
+def test_baselines_fly_the_same_goals_and_seeds_in_the_fast_tier():
+    import gymnasium as gym
+
+    if "trn_env/TerrainNavFast-v0" not in gym.registry:
+        pytest.skip("the fast tier is not installed")
+    pols = [{"label": "straight", "kind": "straight"}, {"label": "planner", "kind": "planner"},
+            {"label": "random", "kind": "random"}]
+    rows = rt.evaluate_fast(pols, "basin", [1000, 1001])
+    assert len(rows) == 3 * 5 * 2
+    assert {(r["goal_index"], r["seed"]) for r in rows if r["policy"] == "planner"} == \
+        {(g, s) for g in range(5) for s in (1000, 1001)}
+    s = rt.summarise(rows)
+    for lab in ("straight", "planner", "random"):
+        assert s["policies"][f"fast/{lab}"]["success"] > 0.5          # full-length episodes arrive
+    # the straight line flies (nearly) the straight distance; the random policy wanders further
+    assert abs(s["policies"]["fast/straight"]["extra_distance_mean"]) < 0.05
+    again = rt.evaluate_fast(pols[:1], "basin", [1000, 1001])             # one seed, one episode
+    assert [r["true_miss_m"] for r in again] == [r["true_miss_m"] for r in rows if r["policy"] == "straight"]
+
+
+@pytest.mark.slow
+def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
+    pytest.importorskip("ray.rllib")
+    spec = importlib.util.spec_from_file_location("route_task_script", ROOT / "scripts" / "route_task.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "rt"
+    assert mod.main(["all", "--out", str(out), "--iterations", "1", "--seeds", "1", "--max-episode-s", "60",
+                     "--train-batch-size", "8", "--minibatch-size", "4", "--epochs", "1",
+                     "--hidden", "8", "--envs-per-runner", "2"]) == 0
+    for f in ("history.json", "learning_curve.png", "rows.json", "summary.json", "table.md"):
+        assert (out / f).is_file(), f
+    rows = json.loads((out / "rows.json").read_text())
+    full = [r for r in rows if r["tier"] == "full"]
+    assert {r["policy"] for r in full} == {"straight", "planner", "random", "ppo"}
+    assert len(full) == 4 * 5
+    fast = [r for r in rows if r["tier"] == "fast"]
+    assert len(fast) == 4 * 5 and {r["policy"] for r in fast} == {r["policy"] for r in full}
+    summary = json.loads((out / "summary.json").read_text())
+    assert "target" in summary and "full/ppo" in summary["policies"]
+    assert mod.main(["evaluate", "--out", str(tmp_path / "none")]) == 2          # no checkpoint: exit 2

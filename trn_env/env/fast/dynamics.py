@@ -1,0 +1,234 @@
+"""The fast tier's flight: N point-mass (3-DOF) King Airs with their guidance, sensors and navigator, one
+numba call per decision.
+
+Per aircraft, every `dt_s` (1 s, trn_env.env.fast.vector_env.DT_S) of a decision:
+
+- guidance on the ESTIMATE (as TerrainNav-v0): in pursuit mode the commanded track is the goal's bearing
+  from the estimate plus the held offset (a fraction of asin(d omega / v), trn_env.env.task); the height
+  above ground is flown on the estimated height minus the MAP under the estimate;
+- the autopilot's laws (aircraft/kingair/Systems/kingair_autopilot.xml, figures in
+  trn_env.env.fast.envelope): turn-rate command = track error x 0.2 1/s -> coordinated bank
+  atan(V psi_dot / g0) limited to the measured bank limit, reached with the measured first-order bank time
+  constant; heading rate g0 tan(bank) / V (a coordinated turn); vertical-speed command = 0.15 1/s x height
+  error limited to the measured climb and descent rates, its target moving at most 1.5 m/s^2;
+- constant true airspeed; ground velocity = air velocity + wind: the scenario's wind layers (linear in
+  altitude between layers, constant beyond) plus turbulence as a first-order Gauss-Markov gust per
+  horizontal axis (std and correlation time in trn_env.env.fast.vector_env.TURBULENCE);
+- position on the WGS84 ellipsoid (meridian and prime-vertical radii at the aircraft);
+- navigator (trn_env.env.fast.navigator): INS error and covariance propagation every step, a 1 Hz sample
+  of the terrain height under the TRUE position (the WORLD DEM) into the TERCOM profile, GNSS updates
+  before the outage, a TERCOM fix every fix_period_s;
+- episode ends: terrain collision (true height below the WORLD terrain), off the map (world or map
+  lookup NaN), arrival (estimated distance to the goal within the goal radius; in "progress" mode the
+  true distance), the time limit.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit, prange
+
+from trn_env.env.fast import navigator as nv
+from trn_env.env.fast import rng as frng
+from trn_env.env.fast.state import (
+    AGL_CMD,
+    ARRIVED,
+    BANK,
+    BARO,
+    COLLISION,
+    DIST_FLOWN,
+    END,
+    EP_E,
+    EP_N,
+    GOAL,
+    GOAL_LAT,
+    GOAL_LON,
+    GUST_E,
+    GUST_N,
+    LAT,
+    LON,
+    N_PROF,
+    NEXT_SAMPLE_T,
+    OFF_MAP,
+    OFFSET_FRAC,
+    PSI,
+    T_LAST_FIX,
+    TIME_LIMIT,
+    TRK_CMD,
+    VS,
+    VS_TGT,
+    H,
+    T,
+)
+from trn_env.terrain import kernels
+
+G0_MPS2 = 9.80665
+WGS84_A_M = 6378137.0
+WGS84_E2 = 6.69437999014e-3
+
+# flight parameter vector (float64), built by the vector env
+(FP_DT, FP_TAS, FP_BANK_MAX, FP_BANK_TAU, FP_CLIMB, FP_DESCENT, FP_TRACK_GAIN, FP_HEIGHT_GAIN, FP_VS_ACCEL,
+ FP_TURB_SIGMA, FP_TURB_TAU, FP_GOAL_RADIUS, FP_MAX_EP, FP_OMEGA, FP_OFFSET_MAX, FP_PURSUIT, FP_ARRIVAL,
+ FP_SAMPLE_DT) = range(18)
+N_FLIGHT_PARAMS = 18
+
+
+@njit(cache=True)
+def radii_m(lat):
+    """(meridian, prime-vertical) radii of curvature (m) of the WGS84 ellipsoid at latitude lat (rad)."""
+    s = math.sin(lat)
+    w = 1.0 - WGS84_E2 * s * s
+    return WGS84_A_M * (1.0 - WGS84_E2) / (w * math.sqrt(w)), WGS84_A_M / math.sqrt(w)
+
+
+@njit(cache=True)
+def estimate_latlon(X, i):
+    """Aircraft i's estimated latitude and longitude (rad): truth plus its navigation error."""
+    lat = X[i, LAT]
+    rm, rn = radii_m(lat)
+    h = X[i, H]
+    return lat + X[i, EP_N] / (rm + h), X[i, LON] + X[i, EP_E] / ((rn + h) * math.cos(lat))
+
+
+@njit(cache=True)
+def offset_to_goal(X, i, lat, lon):
+    """North/east (m) from (lat, lon) to aircraft i's goal in the local level frame there."""
+    rm, rn = radii_m(lat)
+    return (X[i, GOAL_LAT] - lat) * rm, (X[i, GOAL_LON] - lon) * rn * math.cos(lat)
+
+
+@njit(cache=True)
+def wind_at(h, wind_alt, wind_n, wind_e):
+    """Steady wind (north, east m/s, the air's motion) at height h (m): linear between layers."""
+    n = wind_alt.size
+    if n == 0:
+        return 0.0, 0.0
+    if h <= wind_alt[0]:
+        return wind_n[0], wind_e[0]
+    for k in range(1, n):
+        if h <= wind_alt[k]:
+            f = (h - wind_alt[k - 1]) / (wind_alt[k] - wind_alt[k - 1])
+            return (wind_n[k - 1] + f * (wind_n[k] - wind_n[k - 1]),
+                    wind_e[k - 1] + f * (wind_e[k] - wind_e[k - 1]))
+    return wind_n[n - 1], wind_e[n - 1]
+
+
+@njit(cache=True)
+def _wrap(a):
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+@njit(cache=True, parallel=True)
+def fly_decision(X, state, active, n_sub, prof_meas, prof_lat, prof_lon, world, w_lat0, w_lon0, w_dlat,
+                 w_dlon, mapg, m_lat0, m_lon0, m_dlat, m_dlon, fp, nav, wind_alt, wind_n, wind_e, diff):
+    """Fly every active aircraft n_sub steps of fp[FP_DT] s (or to its episode's end, X[:, END] != 0); the
+    aircraft are independent (each writes only its own rows), spread over the cores; diff is (N, profile)
+    scratch."""
+    dt = fp[FP_DT]
+    v = fp[FP_TAS]
+    tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])
+    turb_a = math.exp(-dt / fp[FP_TURB_TAU])
+    turb_b = fp[FP_TURB_SIGMA] * math.sqrt(1.0 - turb_a * turb_a)
+    vrw = math.sqrt(nav[nv.NP_Q_V] * dt)
+    for i in prange(X.shape[0]):
+        if not active[i] or X[i, END] != 0.0:
+            continue
+        for _ in range(n_sub):
+            lat = X[i, LAT]
+            lon = X[i, LON]
+            h = X[i, H]
+            lat_e, lon_e = estimate_latlon(X, i)
+            # ---- guidance on the estimate
+            gn, ge = offset_to_goal(X, i, lat_e, lon_e)
+            if fp[FP_PURSUIT] > 0.5:
+                d = math.hypot(gn, ge)
+                lim = min(fp[FP_OFFSET_MAX], math.asin(min(1.0, d * fp[FP_OMEGA] / v)))
+                X[i, TRK_CMD] = _wrap(math.atan2(ge, gn) + X[i, OFFSET_FRAC] * lim)
+            h_map_e = kernels.bilinear(mapg, m_lat0, m_lon0, m_dlat, m_dlon, lat_e, lon_e)
+            if h_map_e != h_map_e:
+                X[i, END] = OFF_MAP
+                break
+            # ---- lateral: ground track hold
+            wn, we = wind_at(h, wind_alt, wind_n, wind_e)
+            wn += X[i, GUST_N]
+            we += X[i, GUST_E]
+            psi = X[i, PSI]
+            vgn = v * math.cos(psi) + wn
+            vge = v * math.sin(psi) + we
+            err = _wrap(X[i, TRK_CMD] - math.atan2(vge, vgn))
+            bank_cmd = math.atan(v * err * fp[FP_TRACK_GAIN] / G0_MPS2)
+            bank_cmd = min(fp[FP_BANK_MAX], max(-fp[FP_BANK_MAX], bank_cmd))
+            X[i, BANK] += (bank_cmd - X[i, BANK]) * tau_b
+            X[i, PSI] = _wrap(psi + G0_MPS2 * math.tan(X[i, BANK]) / v * dt)
+            # ---- vertical: height above the map under the estimate
+            agl_e = h + X[i, BARO] - h_map_e
+            vs_raw = fp[FP_HEIGHT_GAIN] * (X[i, AGL_CMD] - agl_e)
+            vs_raw = min(fp[FP_CLIMB], max(-fp[FP_DESCENT], vs_raw))
+            dv = vs_raw - X[i, VS_TGT]
+            lim_dv = fp[FP_VS_ACCEL] * dt
+            X[i, VS_TGT] += min(lim_dv, max(-lim_dv, dv))
+            X[i, VS] = X[i, VS_TGT]
+            # ---- position (trapezoid on the ground velocity)
+            psi1 = X[i, PSI]
+            vgn = 0.5 * (vgn + v * math.cos(psi1) + wn)
+            vge = 0.5 * (vge + v * math.sin(psi1) + we)
+            rm, rn = radii_m(lat)
+            X[i, LAT] = lat + vgn * dt / (rm + h)
+            X[i, LON] = lon + vge * dt / ((rn + h) * math.cos(lat))
+            X[i, H] = h + X[i, VS] * dt
+            X[i, DIST_FLOWN] += math.hypot(vgn, vge) * dt
+            g_n, g_e = frng.normal_pair(state, i)
+            X[i, GUST_N] = turb_a * X[i, GUST_N] + turb_b * g_n
+            X[i, GUST_E] = turb_a * X[i, GUST_E] + turb_b * g_e
+            # ---- navigator
+            w_n, w_e = frng.normal_pair(state, i)
+            f_turn = G0_MPS2 * math.tan(X[i, BANK])         # centripetal specific force, right of the heading
+            nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
+            X[i, T] += dt
+            nv.covariance_step(X, i, dt, nav[nv.NP_Q_V], nav[nv.NP_Q_A])
+            t = X[i, T]
+            h_world = kernels.bilinear(world, w_lat0, w_lon0, w_dlat, w_dlon, X[i, LAT], X[i, LON])
+            if h_world != h_world:
+                X[i, END] = OFF_MAP
+                break
+            if t >= X[i, NEXT_SAMPLE_T] - 1e-9:
+                X[i, NEXT_SAMPLE_T] += fp[FP_SAMPLE_DT]
+                if t <= nav[nv.NP_GNSS_UNTIL]:
+                    s = nav[nv.NP_GNSS_SIGMA]
+                    g_n, g_e = frng.normal_pair(state, i)
+                    nv.position_update(X, i, X[i, EP_N] + s * g_n, X[i, EP_E] + s * g_e, s * s, 0.0)
+                    X[i, T_LAST_FIX] = t
+                    X[i, N_PROF] = 0.0
+                elif nav[nv.NP_TERCOM] > 0.5:
+                    k = int(X[i, N_PROF])
+                    if k < prof_meas.shape[1]:
+                        lat_e, lon_e = estimate_latlon(X, i)
+                        w_n = nav[nv.NP_PROFILE_NOISE] * frng.normal(state, i)
+                        prof_meas[i, k] = h_world + X[i, BARO] + w_n
+                        prof_lat[i, k] = lat_e
+                        prof_lon[i, k] = lon_e
+                        X[i, N_PROF] = k + 1
+                    if t - X[i, T_LAST_FIX] >= nav[nv.NP_FIX_PERIOD] - 1e-9:
+                        rm_e, rn_e = radii_m(lat_e)
+                        nv.tercom_fix(X, i, prof_meas, prof_lat, prof_lon, mapg, m_lat0, m_lon0, m_dlat, m_dlon,
+                                      nav, rm_e + X[i, H], (rn_e + X[i, H]) * math.cos(lat_e), diff[i])
+                        X[i, T_LAST_FIX] = t
+            # ---- episode ends
+            if X[i, H] - h_world < 0.0:
+                X[i, END] = COLLISION
+                break
+            if fp[FP_ARRIVAL] > 0.5:
+                lat_e, lon_e = estimate_latlon(X, i)
+                gn, ge = offset_to_goal(X, i, lat_e, lon_e)
+                if math.hypot(gn, ge) <= fp[FP_GOAL_RADIUS]:
+                    X[i, END] = ARRIVED
+                    break
+            else:
+                gn, ge = offset_to_goal(X, i, X[i, LAT], X[i, LON])
+                if math.hypot(gn, ge) <= fp[FP_GOAL_RADIUS]:
+                    X[i, END] = GOAL
+                    break
+            if t >= fp[FP_MAX_EP] - 1e-6:
+                X[i, END] = TIME_LIMIT
+                break

@@ -1,0 +1,109 @@
+"""The King Air's point-mass envelope for the fast tier, measured once from our JSBSim aircraft.
+
+Every figure the fast tier's 3-DOF aircraft (trn_env.env.fast.dynamics) uses to stand in for the JSBSim
+King Air with its autopilot (aircraft/kingair, Systems/kingair_autopilot.xml) is in `KINGAIR_ENVELOPE`.
+How each was measured (`measure_envelope`, which regenerates them; `python -m trn_env.env.fast.envelope`):
+one JSBSim flight at 1,500 m MSL and 85 m/s true airspeed in calm air, autopilot in track hold and altitude
+hold at the 25 deg bank limit and 7.5 m/s climb limit (the autopilot's defaults, the ones TerrainNav-v0
+flies), sampled every 0.1 s:
+
+- a 90 deg track change: the largest bank (bank_max_rad), the steady turn rate at it
+  (turn_rate_max_rps) and the bank's first-order time constant (bank_tau_s: the time to reach 63 % of the
+  steady bank);
+- a +400 m altitude step: the steady climb rate (climb_rate_max_mps, the median vertical speed while the
+  altitude error exceeds 100 m) and then a -400 m step: the steady descent rate (descent_rate_max_mps);
+- the autopilot's own laws, read from the XML (not measured): turn-rate command = track error / 5 s
+  (track_gain_per_s), vertical-speed command = 0.15 1/s x height error (height_gain_per_s), the
+  vertical-speed target's rate limit 1.5 m/s^2 (vs_accel_max_mps2).
+
+The fast tier holds the true airspeed constant (the autopilot's TAS hold keeps it within ~1 m/s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """Point-mass envelope (SI units). See the module docstring for how each figure was measured."""
+
+    tas_mps: float
+    bank_max_rad: float
+    turn_rate_max_rps: float
+    bank_tau_s: float
+    climb_rate_max_mps: float
+    descent_rate_max_mps: float
+    track_gain_per_s: float
+    height_gain_per_s: float
+    vs_accel_max_mps2: float
+
+
+# Measured with measure_envelope() (JSBSim 1.3 King Air, see the module docstring); the command and the
+# output are in docs/validation/fast_tier.md.
+KINGAIR_ENVELOPE = Envelope(
+    tas_mps=85.0,
+    bank_max_rad=0.4545,           # 26.0 deg (the 25 deg limit plus the roll loop's overshoot)
+    turn_rate_max_rps=0.05578,     # 3.20 deg/s
+    bank_tau_s=1.0,
+    climb_rate_max_mps=7.56,
+    descent_rate_max_mps=7.45,
+    track_gain_per_s=0.2,
+    height_gain_per_s=0.15,
+    vs_accel_max_mps2=1.5,
+)
+
+
+def measure_envelope(tas_mps: float = 85.0, h_msl_m: float = 1500.0) -> dict:
+    """Fly the JSBSim King Air through a 90 deg track change and +-400 m altitude steps (calm air) and return
+    the envelope's figures (see the module docstring) as a dict of floats."""
+    from trn_env.flight.core import AutopilotTargets, Flight, InitialCondition, LateralMode, VerticalMode
+
+    lat0, lon0 = math.radians(36.5), math.radians(-84.3)
+    fl = Flight(InitialCondition(lat0, lon0, h_msl_m, tas_mps, 0.0), dt_s=0.01, constant_fuel=True)
+
+    def fly(targets, seconds):
+        fl.set_targets(targets)
+        rows = []
+        for _ in range(int(round(seconds / 0.1))):
+            c = fl.advance(10)
+            v = c.v_ned_mps[-1]
+            rows.append((c.t_s[-1], c.roll_rad[-1], math.atan2(v[1], v[0]), c.h_msl_m[-1], -v[2],
+                         c.tas_mps[-1]))
+        return np.array(rows)
+
+    level = AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=0.0,
+                             vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m, tas_cmd_mps=tas_mps)
+    fly(level, 20.0)
+    turn = fly(AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=math.pi / 2,
+                                vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m,
+                                tas_cmd_mps=tas_mps), 60.0)
+    bank = turn[:, 1]
+    bank_max = float(np.max(np.abs(bank)))
+    track = np.unwrap(turn[:, 2])
+    rate = np.gradient(track, turn[:, 0])
+    steady = np.abs(bank) > 0.95 * bank_max
+    i63 = int(np.argmax(np.abs(bank) >= 0.63 * bank_max))
+    climb = fly(AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=math.pi / 2,
+                                 vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m + 400.0,
+                                 tas_cmd_mps=tas_mps), 120.0)
+    up = climb[:, 3] < h_msl_m + 300.0
+    descent = fly(AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=math.pi / 2,
+                                   vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m,
+                                   tas_cmd_mps=tas_mps), 120.0)
+    down = descent[:, 3] > h_msl_m + 100.0
+    return {"tas_mps": float(np.median(turn[:, 5])), "bank_max_rad": bank_max,
+            "turn_rate_max_rps": float(np.median(np.abs(rate[steady]))),
+            "bank_tau_s": float(turn[i63, 0] - turn[0, 0]),
+            "climb_rate_max_mps": float(np.median(climb[up, 4][5:])),
+            "descent_rate_max_mps": float(-np.median(descent[down, 4][5:])),
+            "tas_range_mps": [float(np.min(np.r_[turn[:, 5], climb[:, 5], descent[:, 5]])),
+                              float(np.max(np.r_[turn[:, 5], climb[:, 5], descent[:, 5]]))]}
+
+
+if __name__ == "__main__":  # pragma: no cover - regenerates the figures
+    import json
+    print(json.dumps({"measured": measure_envelope(), "stated": asdict(KINGAIR_ENVELOPE)}, indent=1))

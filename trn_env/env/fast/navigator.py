@@ -1,0 +1,280 @@
+"""The fast tier's navigator: an INS error process and a batch TERCOM fix with a Kalman filter, per aircraft.
+
+The family the fast tier models is the project's "ins_tercom" (navigators.filters.ins_trn_ekf: INS + batch
+TERCOM + error-state Kalman filter, seed 000 section 4.3) and its unaided "ins" (no fixes). Reduced to what
+sets the horizontal error at the goal:
+
+- INS error (estimate minus truth), north and east independently: position error p, velocity error v,
+  acceleration error a = b_a + g0 (psi0 + b_g t) - c (accelerometer turn-on bias b_a, initial tilt psi0,
+  tilt rate from the gyro bias b_g, drawn per episode from the IMU grade; c the filter's fed-back
+  compensation), plus the heading error's share, psi_z x f (the horizontal specific force, the centripetal
+  acceleration of a turn, rotated by the heading error psi_z = psi_z0 + b_gz t, which the filter does not
+  estimate), plus the accelerometer's white noise (velocity random walk). Schuler feedback is left out
+  (its 84 min period is long against an episode). The vertical channel is the barometer's: a constant height
+  error per episode.
+- GNSS while available (the scenario's outage start): a position update at 1 Hz with its horizontal sigma.
+- TERCOM (seed 000 eq 2, with the per-profile mean removed when the scenario's `remove_bias` is set): the
+  profile of measured terrain heights (baro height minus radar height: true terrain + baro error + noise,
+  1 Hz) along the INS-indicated track over `fix_period_s`, correlated with the MAP over +-half_cells x
+  cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point, then
+  +-40 m at 20 m and +-10 m at the cell size on every point); the best offset is the fix, z = INS - matched position, noise fix_sigma_m, chi-square
+  gated (2 dof) against the filter's covariance, as the full navigator does.
+- Kalman filter over (p, v, a) per axis with one shared covariance (the axes see the same dynamics and
+  measurement noise): F the constant-acceleration transition, process noise from the IMU grade (velocity
+  random walk; the tilt-rate ramp as a random walk of a), feedback form (the estimated errors are removed
+  from the INS after each update).
+
+Health: a fix rejected by the gate counts; `nav_ok` is False after `unhealthy_rejects` rejections in a row
+(the full navigator's integrity monitor has more states; the fast tier never reports "diverged").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from trn_env.env.fast import rng as frng
+from trn_env.env.fast.state import (
+    BA_E,
+    BA_N,
+    BARO,
+    BG_E,
+    BG_N,
+    BG_Z,
+    CA_E,
+    CA_N,
+    EP_E,
+    EP_N,
+    EV_E,
+    EV_N,
+    N_FIXES,
+    N_PROF,
+    P00,
+    P01,
+    P02,
+    P11,
+    P12,
+    P22,
+    REJECTS,
+    TILT_E,
+    TILT_N,
+    YAW0,
+    T,
+)
+from trn_env.terrain import kernels
+
+G0_MPS2 = 9.80665
+COARSE_STEP_M = 50.0       # TERCOM's first search stage: grid step over the whole window
+COARSE_STRIDE = 4          # ... on every 4th profile point (1 Hz profile: 4 s apart)
+MODELLED_NAVIGATORS = ("ins", "ins_tercom")
+
+# navigator parameter vector (float64), built by navigator_params()
+(NP_TERCOM, NP_FIX_PERIOD, NP_HALF_WINDOW, NP_CELL, NP_FIX_SIGMA, NP_GATE, NP_REMOVE_BIAS, NP_PROFILE_NOISE,
+ NP_Q_V, NP_Q_A, NP_GNSS_UNTIL, NP_GNSS_SIGMA, NP_UNHEALTHY, NP_MIN_SAMPLES) = range(14)
+N_NAV_PARAMS = 14
+
+
+def navigator_params(name: str, settings: dict, imu: dict, gnss_until_s: float, ira_noise_m: float,
+                     ira_rate_hz: float) -> np.ndarray:
+    """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
+    navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
+    fields), GNSS availability (s) and IRA noise (m) and rate (Hz): the 1 Hz profile sample is the mean of
+    a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz)."""
+    if name not in MODELLED_NAVIGATORS:
+        raise ValueError(f"navigator {name!r} is not modelled by the fast tier; it models: "
+                         f"{', '.join(MODELLED_NAVIGATORS)}")
+    p = np.zeros(N_NAV_PARAMS)
+    p[NP_TERCOM] = 1.0 if name == "ins_tercom" else 0.0
+    p[NP_FIX_PERIOD] = float(settings.get("fix_period_s", 40.0))
+    p[NP_HALF_WINDOW] = float(settings.get("half_cells", 50)) * float(settings.get("cell_m", 5.0))
+    p[NP_CELL] = float(settings.get("cell_m", 5.0))
+    p[NP_FIX_SIGMA] = float(settings.get("fix_sigma_m", 10.0))
+    p[NP_GATE] = float(settings.get("gate_chi2", 18.42))
+    p[NP_REMOVE_BIAS] = 1.0 if settings.get("remove_bias", False) else 0.0
+    p[NP_PROFILE_NOISE] = ira_noise_m / math.sqrt(max(ira_rate_hz, 1.0))
+    p[NP_Q_V] = float(imu["accel_noise_density_mps2_rthz"]) ** 2
+    # the tilt-rate ramp g0 b_g t as a random walk of the acceleration error matching its variance at 100 s
+    p[NP_Q_A] = (G0_MPS2 * float(imu["gyro_bias_rps"])) ** 2 * 100.0 + float(
+        imu.get("accel_bias_instability_mps2", 0.0)) ** 2 / max(float(imu.get("accel_bias_tau_s", 3600.0)), 1.0)
+    p[NP_GNSS_UNTIL] = float(gnss_until_s)
+    p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
+    p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
+    p[NP_MIN_SAMPLES] = 5.0
+    return p
+
+
+@njit(cache=True)
+def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e):
+    """Propagate aircraft i's INS error (truth) by dt seconds; noise_n, noise_e are the step's velocity
+    random-walk increments (m/s) from the white accelerometer noise, drawn by the caller; f_n, f_e the
+    horizontal specific force (m/s^2) the heading error rotates."""
+    t = X[i, T]
+    yaw = X[i, YAW0] + X[i, BG_Z] * t
+    a_n = X[i, BA_N] + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t) - X[i, CA_N] - yaw * f_e
+    a_e = X[i, BA_E] + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t) - X[i, CA_E] + yaw * f_n
+    X[i, EP_N] += X[i, EV_N] * dt + 0.5 * a_n * dt * dt
+    X[i, EP_E] += X[i, EV_E] * dt + 0.5 * a_e * dt * dt
+    X[i, EV_N] += a_n * dt + noise_n
+    X[i, EV_E] += a_e * dt + noise_e
+
+
+@njit(cache=True)
+def covariance_step(X, i, dt, q_v, q_a):
+    """P <- F P F^T + Q for F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]] (symmetric, stored in 6 columns)."""
+    p00, p01, p02, p11, p12, p22 = X[i, P00], X[i, P01], X[i, P02], X[i, P11], X[i, P12], X[i, P22]
+    h = 0.5 * dt * dt
+    # A = F P
+    a00 = p00 + dt * p01 + h * p02
+    a01 = p01 + dt * p11 + h * p12
+    a02 = p02 + dt * p12 + h * p22
+    a11 = p11 + dt * p12
+    a12 = p12 + dt * p22
+    a10 = p01 + dt * p02
+    a20 = p02
+    a21 = p12
+    # F P F^T
+    X[i, P00] = a00 + dt * a01 + h * a02 + q_v * dt ** 3 / 3.0
+    X[i, P01] = a10 + dt * a11 + h * a12 + q_v * dt * dt / 2.0
+    X[i, P02] = a20 + dt * a21 + h * p22
+    X[i, P11] = a11 + dt * a12 + q_v * dt
+    X[i, P12] = a21 + dt * p22
+    X[i, P22] = p22 + q_a * dt
+
+
+@njit(cache=True)
+def position_update(X, i, z_n, z_e, r_var, gate_chi2):
+    """Kalman update of aircraft i with a horizontal position-error measurement z = INS - reference (m),
+    noise variance r_var, chi-square gate (2 dof; <= 0: no gate). Feedback form: the estimated errors are
+    removed from the INS. Returns True when accepted."""
+    s = X[i, P00] + r_var
+    if gate_chi2 > 0.0 and (z_n * z_n + z_e * z_e) / s > gate_chi2:
+        return False
+    k0 = X[i, P00] / s
+    k1 = X[i, P01] / s
+    k2 = X[i, P02] / s
+    X[i, EP_N] -= k0 * z_n
+    X[i, EP_E] -= k0 * z_e
+    X[i, EV_N] -= k1 * z_n
+    X[i, EV_E] -= k1 * z_e
+    X[i, CA_N] += k2 * z_n
+    X[i, CA_E] += k2 * z_e
+    p00, p01, p02 = X[i, P00], X[i, P01], X[i, P02]
+    X[i, P00] = p00 - k0 * p00
+    X[i, P01] = p01 - k0 * p01
+    X[i, P02] = p02 - k0 * p02
+    X[i, P11] = X[i, P11] - k1 * p01
+    X[i, P12] = X[i, P12] - k1 * p02
+    X[i, P22] = X[i, P22] - k2 * p02
+    return True
+
+
+@njit(cache=True)
+def _profile_mad(meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, lon0, dlat, dlon, remove_bias,
+                 diff):
+    """Mean absolute difference of the profile (every stride-th of its n points) against the map shifted by
+    (off_lat, off_lon) rad, with the mean difference removed when remove_bias; +inf when any point falls off
+    the map."""
+    s = 0.0
+    m_used = 0
+    for k in range(0, n, stride):
+        m = kernels.bilinear(heights, lat0, lon0, dlat, dlon, plat[k] + off_lat, plon[k] + off_lon)
+        if m != m:
+            return np.inf
+        diff[m_used] = meas[k] - m
+        s += diff[m_used]
+        m_used += 1
+    mean = s / m_used if remove_bias else 0.0
+    mad = 0.0
+    for k in range(m_used):
+        mad += abs(diff[k] - mean)
+    return mad / m_used
+
+
+@njit(cache=True)
+def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_window_m, cell_m, remove_bias,
+                  m_per_rad_lat, m_per_rad_lon, diff):
+    """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
+    positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
+    in 50 m steps on every COARSE_STRIDE-th profile point, then +-40 m in 20 m steps and +-10 m in cell_m
+    steps around the best on every point. Returns (dn, de, mad)."""
+    best_n = 0.0
+    best_e = 0.0
+    best = np.inf
+    steps = (COARSE_STEP_M, 20.0, cell_m)
+    spans = (half_window_m, 40.0, 10.0)
+    for stage in range(3):
+        step = steps[stage]
+        stride = COARSE_STRIDE if stage == 0 else 1
+        span = min(spans[stage], half_window_m)
+        k = int(span / step + 1e-9)
+        cn = best_n
+        ce = best_e
+        if stage > 0:
+            best = np.inf          # compare the fine stages on the whole profile
+        for a in range(-k, k + 1):
+            on = cn + a * step
+            if abs(on) > half_window_m + 1e-9:
+                continue
+            for b in range(-k, k + 1):
+                oe = ce + b * step
+                if abs(oe) > half_window_m + 1e-9:
+                    continue
+                mad = _profile_mad(meas, plat, plon, n, stride, on / m_per_rad_lat, oe / m_per_rad_lon, heights,
+                                   lat0, lon0, dlat, dlon, remove_bias, diff)
+                if mad < best:
+                    best = mad
+                    best_n = on
+                    best_e = oe
+    return best_n, best_e, best
+
+
+@njit(cache=True)
+def tercom_fix(X, i, prof_meas, prof_lat, prof_lon, heights, lat0, lon0, dlat, dlon, nav, m_per_rad_lat,
+               m_per_rad_lon, diff):
+    """Aircraft i's TERCOM fix from its profile (rows of prof_*), fused by the Kalman filter; the profile is
+    then restarted. Returns True when the fix was accepted."""
+    n = int(X[i, N_PROF])
+    X[i, N_PROF] = 0.0
+    if n < nav[NP_MIN_SAMPLES]:
+        return False
+    dn, de, mad = tercom_offset(prof_meas[i], prof_lat[i], prof_lon[i], n, heights, lat0, lon0, dlat, dlon,
+                                nav[NP_HALF_WINDOW], nav[NP_CELL], nav[NP_REMOVE_BIAS] > 0.5, m_per_rad_lat,
+                                m_per_rad_lon, diff)
+    if not math.isfinite(mad):
+        return False
+    # the map matches where the INS path is shifted by (dn, de): truth = INS + offset, z = INS - matched
+    ok = position_update(X, i, -dn, -de, nav[NP_FIX_SIGMA] ** 2, nav[NP_GATE])
+    X[i, N_FIXES] += 1.0
+    X[i, REJECTS] = 0.0 if ok else X[i, REJECTS] + 1.0
+    return ok
+
+
+@njit(cache=True)
+def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw):
+    """Episode draws of aircraft i's navigation errors and inertial error sources, and the filter's prior."""
+    X[i, EP_N] = sig_pos * frng.normal(state, i)
+    X[i, EP_E] = sig_pos * frng.normal(state, i)
+    X[i, EV_N] = sig_vel * frng.normal(state, i)
+    X[i, EV_E] = sig_vel * frng.normal(state, i)
+    X[i, TILT_N] = sig_tilt * frng.normal(state, i)
+    X[i, TILT_E] = sig_tilt * frng.normal(state, i)
+    X[i, BA_N] = ba * frng.normal(state, i)
+    X[i, BA_E] = ba * frng.normal(state, i)
+    X[i, BG_N] = bg * frng.normal(state, i)
+    X[i, BG_E] = bg * frng.normal(state, i)
+    X[i, BARO] = baro_sigma * frng.normal(state, i)
+    X[i, YAW0] = sig_yaw * frng.normal(state, i)
+    X[i, BG_Z] = bg * frng.normal(state, i)
+    X[i, CA_N] = 0.0
+    X[i, CA_E] = 0.0
+    X[i, P00] = sig_pos * sig_pos
+    X[i, P01] = 0.0
+    X[i, P02] = 0.0
+    X[i, P11] = sig_vel * sig_vel
+    X[i, P12] = 0.0
+    X[i, P22] = ba * ba + (G0_MPS2 * sig_tilt) ** 2
+    X[i, N_PROF] = 0.0
+    X[i, REJECTS] = 0.0
+    X[i, N_FIXES] = 0.0

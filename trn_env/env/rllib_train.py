@@ -1,0 +1,163 @@
+"""PPO on Ray RLlib over either env tier: configuration, the training loop with checkpoints, evaluation.
+
+    config = ppo_config("full", env_kwargs("basin"), num_env_runners=2)
+    algo, history = train(config, iterations=50, checkpoint_dir="out/ckpt")
+    rows = evaluate_module(algo.get_module(), env_kwargs("basin"), goals_deg, seeds=[1000, 1001])
+
+The training loop is RLlib's (`Algorithm.train()`, one iteration = sampling `train_batch_size` env steps on
+the EnvRunners, then `num_epochs` passes of minibatch SGD on the Learner); on a cluster the EnvRunners spread
+over its nodes (`ray.init(address=...)` before building, scripts/train_rllib.py `--address`). The history
+rows carry what a learning curve needs: iteration, env steps and episodes so far, the mean episode return of
+the iteration's finished episodes, wall seconds. Evaluation flies the module's mean action (deterministic)
+in a local full-fidelity env on given goals and episode seeds; one row per episode with the termination,
+the true miss at arrival and the distance flown.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trn_env.env.rllib import (
+    FAST_ID,
+    FULL_ID,
+    deterministic_action,
+    make_full_env,
+    register_rllib_envs,
+    require_rllib,
+    rllib_env_settings,
+)
+
+# how long an iteration waits for its EnvRunners' samples (s): a JSBSim runner on a loaded machine can take
+# minutes for a batch, and RLlib's default (60 s) would train on whatever arrived
+SAMPLE_TIMEOUT_S = 3600.0
+
+
+def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: int = 1,
+               num_envs_per_env_runner: int = 1, hidden: tuple[int, ...] = (64, 64),
+               train_batch_size: int = 256, minibatch_size: int = 64, num_epochs: int = 10,
+               lr: float = 3e-4, gamma: float = 0.99):
+    """An RLlib PPOConfig (new API stack, torch) for an env tier ("full" or "fast") with env_config (the env's
+    keyword arguments). ValueError naming the argument on bad input; RLlibNotInstalled without the extra."""
+    require_rllib()
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+
+    names = register_rllib_envs()
+    if tier not in ("full", "fast"):
+        raise ValueError(f"tier must be 'full' or 'fast', got {tier!r}")
+    if tier not in names:
+        raise ValueError(f"tier 'fast': {FAST_ID} is not registered in this installation")
+    for name, v in (("num_env_runners", num_env_runners),
+                    ("num_envs_per_env_runner", num_envs_per_env_runner),
+                    ("train_batch_size", train_batch_size), ("minibatch_size", minibatch_size),
+                    ("num_epochs", num_epochs)):
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < (0 if name == "num_env_runners"
+                                                                               else 1):
+            raise ValueError(f"{name} must be a whole number >= {0 if name == 'num_env_runners' else 1}, "
+                             f"got {v!r}")
+    if minibatch_size > train_batch_size:
+        raise ValueError(f"minibatch_size ({minibatch_size}) must not exceed train_batch_size "
+                         f"({train_batch_size})")
+    if not hidden or any(not isinstance(h, (int, np.integer)) or h < 1 for h in hidden):
+        raise ValueError(f"hidden must be layer widths >= 1, got {hidden!r}")
+    return (
+        PPOConfig()
+        .environment(names[tier], env_config=dict(env_config))
+        .env_runners(num_env_runners=int(num_env_runners),
+                     num_envs_per_env_runner=int(num_envs_per_env_runner), num_cpus_per_env_runner=1,
+                     create_local_env_runner=int(num_env_runners) == 0, sample_timeout_s=SAMPLE_TIMEOUT_S,
+                     **rllib_env_settings(tier))
+        .learners(num_learners=0)
+        .training(train_batch_size_per_learner=int(train_batch_size), minibatch_size=int(minibatch_size),
+                  num_epochs=int(num_epochs), lr=float(lr), gamma=float(gamma), lambda_=0.95)
+        .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=[int(h) for h in hidden],
+                                                   fcnet_activation="tanh", vf_share_layers=False))
+        .debugging(seed=int(seed))
+        .reporting(metrics_num_episodes_for_smoothing=20)
+    )
+
+
+def _metric(result: dict, key: str, default=math.nan):
+    v = result.get("env_runners", {}).get(key, default)
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return default
+
+
+def train(config, iterations: int, checkpoint_dir: str | Path | None = None, checkpoint_every: int = 10,
+          progress=None, max_wall_s: float | None = None) -> tuple[Any, list[dict]]:
+    """Build the algorithm from `config` (or take an Algorithm already built) and run `iterations` training
+    iterations; a checkpoint
+    (`Algorithm.save_to_path`) every `checkpoint_every` iterations and at the end into checkpoint_dir/iter_N
+    (checkpoint_dir/final at the end; the end is `iterations`, or the first iteration that ends after
+    max_wall_s of wall time). Returns (algorithm, history rows). progress(row) is called per row."""
+    if not isinstance(iterations, int) or iterations < 1:
+        raise ValueError(f"iterations must be a whole number >= 1, got {iterations!r}")
+    algo = config if hasattr(config, "train") else config.build_algo()
+    history = []
+    t0 = time.perf_counter()
+    ckpt = Path(checkpoint_dir) if checkpoint_dir is not None else None
+    for it in range(1, iterations + 1):
+        res = algo.train()
+        row = {"iteration": it, "env_steps": _metric(res, "num_env_steps_sampled_lifetime"),
+               "episodes": _metric(res, "num_episodes_lifetime", 0.0),
+               "episode_return_mean": _metric(res, "episode_return_mean"),
+               "episode_len_mean": _metric(res, "episode_len_mean"),
+               "wall_s": time.perf_counter() - t0}
+        history.append(row)
+        if progress is not None:
+            progress(row)
+        last = it == iterations or (max_wall_s is not None and row["wall_s"] >= max_wall_s)
+        if ckpt is not None and (it % max(1, checkpoint_every) == 0 or last):
+            algo.save_to_path(str((ckpt / ("final" if last else f"iter_{it}")).resolve()))
+        if last:
+            break
+    return algo, history
+
+
+def module_from_checkpoint(path: str | Path):
+    """The trained RLModule (default policy) of a checkpoint written by `train`."""
+    require_rllib()
+    from ray.rllib.core.rl_module.rl_module import RLModule
+
+    p = Path(path) / "learner_group" / "learner" / "rl_module" / "default_policy"
+    if not p.is_dir():
+        raise ValueError(f"checkpoint {path}: no RLModule at {p} (not a checkpoint written by train())")
+    return RLModule.from_checkpoint(str(p))
+
+
+def evaluate_module(module, env_config: dict, goals_deg, seeds,
+                    scale_observations: bool = True) -> list[dict]:
+    """Fly the module's mean action on every (goal, seed) pair in a local TerrainNav-v0 built from
+    env_config; one row per episode: goal_index, goal_deg, seed, termination, arrived, true_miss_m (NaN if it
+    did not arrive), distance_flown_m, return, steps."""
+    env = make_full_env({**env_config, "scale_observations": scale_observations})
+    rows = []
+    try:
+        for gi, g in enumerate(goals_deg):
+            for s in seeds:
+                obs, _ = env.reset(seed=int(s), options={"goal_deg": tuple(g)})
+                ret, n, done, info = 0.0, 0, False, {}
+                while not done:
+                    obs, r, term, trunc, info = env.step(deterministic_action(module, obs))
+                    ret += float(r)
+                    n += 1
+                    done = term or trunc
+                rows.append({"goal_index": gi, "goal_deg": list(g), "seed": int(s),
+                             "termination": info.get("termination"),
+                             "arrived": info.get("termination") == "arrived",
+                             "true_miss_m": float(info.get("true_miss_m", math.nan)),
+                             "distance_flown_m": float(info.get("distance_flown_m", math.nan)),
+                             "return": ret, "steps": n})
+    finally:
+        env.close()
+    return rows
+
+
+__all__ = ["FULL_ID", "FAST_ID", "ppo_config", "train", "module_from_checkpoint", "evaluate_module"]

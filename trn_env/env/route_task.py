@@ -1,0 +1,76 @@
+"""The reference route task: the settings that every tier, trainer and baseline of the route benchmark share.
+
+    from trn_env.env.route_task import env_kwargs, EVAL_SEEDS
+    env = gymnasium.make("trn_env/TerrainNav-v0", **env_kwargs("basin"))
+
+A GNSS-denied King Air flies from a start drawn in the terrain's start region to a goal drawn in its goal
+region (at least `min_goal_distance_m` apart, never within `held_out_radius_m` of a held-out goal) with the
+route benchmark's coarse decisions (`action_mode="pursuit"`, 30 s decisions, +-45 deg offsets from the goal's
+bearing, height above ground in [agl_min_m, agl_max_m]); the episode ends when the navigator's ESTIMATE is
+within `goal_radius_m` of the goal, and the TRUE miss there (the true horizontal navigation error) is what the
+task scores. Evaluation: the env's five held-out goals of the goal region (`env.held_out_goals_deg`) times
+`EVAL_SEEDS` (episode seeds disjoint from every training seed: training seeds are `TRAIN_SEED_BASE + k`).
+The terrains (docs/guide/route_task.md):
+
+- `basin`: synthetic rolling hills (rms 60 m) with a flat basin of 6 km radius between the start region
+  (south) and the goal region (north); the straight route dead-reckons ~12 km over the basin.
+- `jacksboro`: the bundled real DEM (rough almost everywhere), south-west to north-east.
+
+The budget of the reference run (`TRAIN_BUDGET`) is the issue's: 30 minutes of training on 2 cores.
+"""
+
+from __future__ import annotations
+
+import copy
+
+TERRAINS: dict[str, dict] = {
+    # start south of the basin, goals just past its north rim (basin centre 36.635 N, radius ~6 km)
+    "basin": dict(
+        scenario="basin_route",
+        agl_m=600.0,
+        env=dict(
+            agl_min_m=300.0, agl_max_m=900.0,      # action 0 holds 600 m, the straight line's height
+            start_region_deg=(36.515, 36.54, -84.16, -84.105),
+            goal_region_deg=(36.70, 36.735, -84.20, -84.065),
+            held_out_radius_m=1500.0,
+        ),
+    ),
+    # the real DEM (rough almost everywhere): south-west to north-east
+    "jacksboro": dict(
+        scenario="default",
+        agl_m=1000.0,
+        env=dict(
+            agl_min_m=500.0, agl_max_m=1500.0,
+            start_region_deg=(36.47, 36.50, -84.39, -84.35),
+            goal_region_deg=(36.64, 36.70, -84.22, -84.12),
+            held_out_radius_m=1500.0,
+        ),
+    ),
+}
+ENV_COMMON: dict = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0,
+                        action_mode="pursuit", bearing_offset_max_deg=45.0, failure_penalty=20.0,
+                        sigma_shaping_weight=0.0)
+# episode seeds of the evaluation (held-out goals x these seeds); training seeds start at TRAIN_SEED_BASE
+EVAL_SEEDS: tuple[int, ...] = tuple(range(1000, 1010))
+TRAIN_SEED_BASE = 0
+TRAIN_BUDGET = {"wall_s": 1800.0, "cores": 2}
+GYM_IDS = {"full": "trn_env/TerrainNav-v0", "fast": "trn_env/TerrainNavFast-v0"}
+
+
+def env_kwargs(terrain: str) -> dict:
+    """TerrainNav-v0 keyword arguments of the task on a terrain (plain JSON types: a worker process or a
+    Ray actor can rebuild exactly this env from them). ValueError naming the terrain if unknown."""
+    if terrain not in TERRAINS:
+        raise ValueError(f"terrain must be one of {sorted(TERRAINS)}, got {terrain!r}")
+    t = TERRAINS[terrain]
+    kw = {"scenario": t["scenario"], **copy.deepcopy(ENV_COMMON), **copy.deepcopy(t["env"])}
+    for k in ("start_region_deg", "goal_region_deg"):
+        kw[k] = list(kw[k])
+    return kw
+
+
+def straight_agl_m(terrain: str) -> float:
+    """The height above ground (m) that the straight-line and planner baselines fly on a terrain."""
+    if terrain not in TERRAINS:
+        raise ValueError(f"terrain must be one of {sorted(TERRAINS)}, got {terrain!r}")
+    return float(TERRAINS[terrain]["agl_m"])
