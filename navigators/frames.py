@@ -139,3 +139,50 @@ class SensorFrames:
     air_data: AirDataFrame | None = None
     heading: HeadingFrame | None = None
     extra: dict = field(default_factory=dict)
+
+
+def imu_gap_s(t_s: np.ndarray, t_prev_s: float = float("nan"), factor: float = 1.5) -> float:
+    """Seconds of IMU data missing in a frame: the sum of the sample intervals longer than `factor` times
+    the frame's median interval, including the one from `t_prev_s` (the last sample before the frame; NaN:
+    none) to its first sample. A navigator counts a positive value in its Health ("imu_gap"): the INS
+    integrates across the gap in one long step."""
+    t = np.asarray(t_s, float)
+    if t.shape[0] == 0:
+        return 0.0
+    if np.isfinite(t_prev_s) and t_prev_s < t[0]:
+        t = np.concatenate(([float(t_prev_s)], t))
+    d = np.diff(t)
+    if d.shape[0] < 2:
+        return 0.0
+    nominal = float(np.median(d))
+    long = d[d > factor * nominal]
+    return float(np.sum(long - nominal)) if long.shape[0] else 0.0
+
+
+def frame_defects(frames: SensorFrames, sensors: tuple[str, ...], last_t_s: dict[str, float],
+                  factor: float = 1.5) -> list[tuple[float, str, str]]:
+    """(t_s, reason, message) of the frame's defects in the named sensors: samples marked valid whose values
+    are not finite ("invalid_sample") and gaps in a sensor's samples longer than `factor` times its median
+    interval ("sample_gap", imu_gap_s). `last_t_s` (sensor -> last sample time seen) is updated in place,
+    so a gap across frames is found too. For navigators to count in their Health."""
+    out: list[tuple[float, str, str]] = []
+    for name in sensors:
+        fr = getattr(frames, name, None)
+        if fr is None or fr.t_s.shape[0] == 0:
+            continue
+        t = np.asarray(fr.t_s, float)
+        valid = np.asarray(fr.valid, bool)
+        bad = np.zeros(t.shape[0], bool)
+        for f in fields(fr):
+            v = getattr(fr, f.name)
+            if f.name not in ("t_s", "valid") and isinstance(v, np.ndarray) and v.dtype.kind == "f":
+                bad |= ~np.isfinite(v.reshape(t.shape[0], -1)).all(axis=1)
+        bad &= valid
+        if bad.any():
+            out.append((float(t[np.argmax(bad)]), "invalid_sample",
+                        f"{name}: {int(bad.sum())} samples marked valid are not finite"))
+        gap = imu_gap_s(t, last_t_s.get(name, float("nan")), factor)
+        if gap > 0.0:
+            out.append((float(t[0]), "sample_gap", f"{name}: {gap:.2f} s of samples missing"))
+        last_t_s[name] = float(t[-1])
+    return out

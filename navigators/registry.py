@@ -1,56 +1,72 @@
-"""Navigator registry: `create(name, **settings)` and `available()`.
+"""Navigator and monitor registry: `create(name, **settings)`, `available()`, plug-ins.
 
-"ins"          strapdown INS + barometer, no terrain aiding (navigators.filters.InsTrnNavigator)
-"acq_track"    the GPS-inspired acquisition-and-tracking TRN of seed 001
-               (navigators.acquisition_tracking.AcqTrackNavigator; settings: AcqTrackConfig's fields)
-"ins_tercom"   INS + batch TERCOM (IRA by default, aiding="radar_altimeter" for eq 1) + 13-state EKF;
-               needs dem= (terrain.Dem or a name/path for terrain.load); formula="proposed" | ...
-"rbpf"         seed 002's IRA-aided Rao-Blackwellized particle filter (navigators.filters.rbpf); needs dem=,
-               takes rng=
-"pmf"          point-mass filter over the INS horizontal position error (navigators.filters.pmf); dem=
-"pf"           SIR particle filter over the INS error state (navigators.filters.pf); dem=, rng=
+A navigator (or monitor) name is one of
 
-Monitors run beside a navigator on the same frames and its estimate (`create_monitor(name, **settings)`,
-`available_monitors()`): "dem_integrity" is the terrain-database integrity monitor of seed 003
-(navigators.integrity.dem_monitor; needs dem=, the navigator's map).
+- a built-in: "ins" (strapdown INS + barometer, no terrain aiding), "ins_tercom" (INS + batch TERCOM + EKF,
+  seed 000), "acq_track" (seed 001's acquisition-and-tracking TRN), "pmf" (point-mass filter), "pf" (SIR
+  particle filter), "rbpf" (seed 002's IRA-aided Rao-Blackwellized particle filter); monitor
+  "dem_integrity" (seed 003's terrain-database integrity monitor);
+- an installed plug-in: an entry point of an installed distribution in the group `trn_env.navigators`
+  (monitors: `trn_env.monitors`), e.g. in the plug-in's pyproject.toml::
 
-Each entry is a factory and its declared `Capabilities` (navigators.core.capabilities: its Settings class,
-whether it needs the map or takes an rng, uses the IMU's specification or the map's error model, the
-sensors it requires and those it can use). A built-in navigator is registered the same way a plug-in is;
-a class registered without `capabilities` gets its class attribute `capabilities`, else `Capabilities()`.
+      [project.entry-points."trn_env.navigators"]
+      sitan = "sitan_navigator:SitanNavigator"
 
-Settings: every navigator and monitor with a Settings class validates them in its constructor and raises
-one `SettingsError` (a `ValueError`) naming every bad setting, unknown names refused against the list of
-known ones; `create` prefixes the navigator's name. `integrity_risk` (per epoch, in (0, 1), default 1e-3)
-and `map_horizontal_sigma_m` (the map's horizontal error per axis, m, default 0) are taken here for every
-navigator (`PublishedIntegritySettings`, reported together with the navigator's own problems): the risk its
-published horizontal protection level is computed for and the map error it covers
-(navigators.integrity.protection_level). For a plug-in without a Settings class the keyword
-arguments are checked against its factory's signature. A navigator that `takes_rng` gets the scenario's
-`navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes its run bit for
-bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
+  The built-ins are declared the same way in trn-env's own pyproject.toml (`navigators.builtin`);
+- a reference `package.module:Name` to any importable class or factory (no installation needed in this
+  process; other processes need to import it too: see docs/guide/own_navigator.md);
+- a name given to `register(name, factory)` in this process (it does not reach spawned or Ray workers).
+
+The factory (a class or a callable) is called with the settings as keyword arguments and must return an
+object with `reset(initial: Estimate)` and `update(frames: SensorFrames) -> Estimate` (navigators.protocol);
+a monitor's with `update(frames, estimate)`. A factory with an `rng` parameter (particle filters) gets the
+scenario's `navigator` random stream as `rng=` (a `numpy.random.Generator`), so one scenario seed fixes
+its run bit for bit; `create(..., rng=None)` leaves it to the navigator's own documented default.
+
+`integrity_risk` (per epoch, in (0, 1), default 1e-3) and `map_horizontal_sigma_m` (the map's horizontal
+error per axis, m, default 0) are taken here for every navigator: the risk its published horizontal
+protection level is computed for and the map error it covers (navigators.integrity.protection_level).
+
+Each navigator and monitor declares what it needs as `Capabilities` (navigators.core.capabilities: its
+Settings class, whether it needs the map or takes an rng, uses the IMU's specification or the map's error
+model, the sensors it requires and those it can use): the factory's `capabilities` attribute, or
+`register(..., capabilities=)`; a plug-in without one gets `Capabilities(takes_rng=<it has an rng
+parameter>)`. Nothing is inferred from a navigator's name.
+
+Settings: a navigator or monitor with a Settings class (navigators.core.settings) validates them in its
+constructor and raises one `SettingsError` (a `ValueError`) naming every bad setting, unknown names refused
+against the list of known ones; `create` prefixes the component's name and reports the published-integrity
+settings' problems (`PublishedIntegritySettings`) in the same error. For a plug-in without a Settings class
+the keyword arguments are checked against its factory's signature. A plug-in that cannot be imported, or
+whose object is not a navigator, raises `PluginError` (a ValueError) naming the plug-in, the module and the
+error or what it lacks.
 """
 
 from __future__ import annotations
 
+import importlib
 import inspect
+import re
+import sys
+import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from importlib import metadata
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES as ACQ_TRACK_CAPABILITIES
+from trn_env.navigators.builtin import BUILTIN_MONITORS, BUILTIN_NAVIGATORS
 from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
 from trn_env.navigators.core.settings import Settings, SettingsError, setting, unknown_message
-from trn_env.navigators.filters.ins_trn_settings import (
-    INS_CAPABILITIES,
-    INS_TERCOM_CAPABILITIES,
-    InsTercomSettings,
-    InsTrnSettings,
-)
-from trn_env.navigators.filters.rbpf_settings import CAPABILITIES as RBPF_CAPABILITIES
-from trn_env.navigators.filters.terrain_filter_settings import PF_CAPABILITIES, PMF_CAPABILITIES
-from trn_env.navigators.integrity.dem_monitor_settings import CAPABILITIES as DEM_INTEGRITY_CAPABILITIES
+from trn_env.navigators.integrity.protection_level import configure
+
+NAVIGATOR_GROUP = "trn_env.navigators"
+MONITOR_GROUP = "trn_env.monitors"
+_REFERENCE = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
+# what each kind must provide: method name -> how the message describes it
+_NEEDS = {"navigator": {"reset": "reset(initial: Estimate)",
+                        "update": "update(frames: SensorFrames) -> Estimate"},
+          "monitor": {"update": "update(frames: SensorFrames, estimate: Estimate) -> MonitorOutput"}}
+
 
 
 @dataclass(frozen=True)
@@ -67,75 +83,327 @@ class PublishedIntegritySettings(Settings):
 PUBLISHED_INTEGRITY_KEYS = ("integrity_risk", "map_horizontal_sigma_m")
 
 
-@dataclass(frozen=True)
-class Entry:
-    """A registered navigator or monitor: its factory (keyword settings) and capabilities."""
+class PluginError(ValueError):
+    """A navigator or monitor plug-in that cannot be used: not importable, not found, or not a navigator."""
 
+
+@dataclass
+class Plugin:
+    """One resolved navigator or monitor: where it came from and its factory.
+
+    kind: "navigator" or "monitor"; origin: "built-in", "entry point", "reference" or "registered";
+    reference: "module:attribute" (None for a registered factory); distribution: "name version" of the
+    installed package declaring the entry point (None otherwise)."""
+
+    name: str
+    kind: str
+    origin: str
     factory: Callable[..., object]
-    capabilities: Capabilities
+    reference: str | None = None
+    distribution: str | None = None
+    takes_rng: bool = False
+    extra: dict = field(default_factory=dict)
+    capabilities: Capabilities = field(default_factory=Capabilities)
+
+    @property
+    def module(self) -> str | None:
+        return None if self.reference is None else self.reference.split(":", 1)[0]
 
 
-_NAVIGATORS: dict[str, Entry] = {}
-_MONITORS: dict[str, Entry] = {}
+_REGISTERED: dict[str, dict[str, tuple[Callable[..., object], Capabilities]]] = {"navigator": {},
+                                                                                   "monitor": {}}
+_CACHE: dict[tuple[str, str], Plugin] = {}
+_ENTRY_POINTS: dict[str, dict[str, list]] = {}
 
 
-def _entry(table: dict[str, Entry], kind: str, name: str) -> Entry:
-    if name not in table:
-        raise ValueError(f"unknown {kind} {name!r}; available: {sorted(table)}")
-    return table[name]
+def refresh() -> None:
+    """Forget the entry points and plug-ins looked up so far (after installing a package in this process)."""
+    _CACHE.clear()
+    _ENTRY_POINTS.clear()
+    importlib.invalidate_caches()
+
+
+def _entry_points(kind: str) -> dict[str, list]:
+    """name -> [EntryPoint, ...] of the kind's group over the installed distributions."""
+    if kind not in _ENTRY_POINTS:
+        table: dict[str, list] = {}
+        group = NAVIGATOR_GROUP if kind == "navigator" else MONITOR_GROUP
+        seen = set()
+        for ep in metadata.entry_points(group=group):
+            dist = getattr(ep, "dist", None)
+            key = (ep.name, ep.value, getattr(dist, "name", None))
+            if key in seen:            # the same distribution seen twice on sys.path
+                continue
+            seen.add(key)
+            table.setdefault(ep.name, []).append(ep)
+        _ENTRY_POINTS[kind] = table
+    return _ENTRY_POINTS[kind]
+
+
+def _builtins(kind: str) -> dict[str, str]:
+    return BUILTIN_NAVIGATORS if kind == "navigator" else BUILTIN_MONITORS
+
+
+def _names(kind: str) -> list[str]:
+    return sorted(set(_builtins(kind)) | set(_entry_points(kind)) | set(_REGISTERED[kind]))
+
+
+def available() -> list[str]:
+    """Navigator names accepted by create() besides `module:Name` references: built-in, installed and
+    registered ones."""
+    return _names("navigator")
+
+
+def available_monitors() -> list[str]:
+    """Monitor names accepted by create_monitor() besides `module:Name` references."""
+    return _names("monitor")
+
+
+def is_reference(name: str) -> bool:
+    """True for a `package.module:Name` reference."""
+    return isinstance(name, str) and _REFERENCE.match(name) is not None
+
+
+def load_reference(reference: str, what: str) -> object:
+    """The object `module:attribute` names, imported; PluginError naming the module and the error."""
+    module_name, _, attr = reference.partition(":")
+    try:
+        obj = importlib.import_module(module_name)
+    except BaseException as exc:  # noqa: BLE001 - any failure of a user's module is reported, not raised through
+        if isinstance(exc, KeyboardInterrupt):
+            raise
+        where = _where(exc)
+        raise PluginError(f"{what}: cannot import module {module_name!r}: {type(exc).__name__}: {exc}"
+                          f"{where}") from exc
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise PluginError(f"{what}: module {module_name!r} has no attribute {attr!r}")
+        obj = getattr(obj, part)
+    return obj
+
+
+def _where(exc: BaseException) -> str:
+    """' (at file:line)' of the innermost frame of a plug-in import failure, when it has one."""
+    tb = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith("<frozen")]
+    if not tb or tb[-1].filename == __file__:
+        return ""
+    frame = tb[-1]
+    return f" (at {frame.filename}:{frame.lineno})"
+
+
+def lacks(obj: object, kind: str) -> list[str]:
+    """What `obj` (a class or an instance) lacks to be a `kind` ("navigator" or "monitor"): the missing
+    methods as signatures; empty when it has them all."""
+    return [sig for meth, sig in _NEEDS[kind].items() if not callable(getattr(obj, meth, None))]
+
+
+def _check_factory(obj: object, what: str, kind: str) -> Callable[..., object]:
+    if inspect.ismodule(obj) or not callable(obj):
+        raise PluginError(f"{what} is not a {kind}: it is {_describe(obj)}, not a class or a factory "
+                          f"returning an object with {' and '.join(_NEEDS[kind].values())}")
+    if inspect.isclass(obj):
+        missing = lacks(obj, kind)
+        if missing:
+            raise PluginError(f"{what} is not a {kind}: class {obj.__qualname__} lacks {', '.join(missing)}")
+    return obj
+
+
+def _describe(obj: object) -> str:
+    if inspect.ismodule(obj):
+        return f"module {obj.__name__!r}"
+    return f"a {type(obj).__name__} ({obj!r:.60})"
 
 
 def _caps_of(factory, capabilities: Capabilities | None, takes_rng: bool) -> Capabilities:
+    """The declared capabilities: given, else the factory's `capabilities` attribute, else
+    Capabilities(takes_rng=...)."""
     if capabilities is not None:
         return capabilities
     caps = getattr(factory, "capabilities", None)
-    if isinstance(caps, Capabilities):
-        return caps
-    return Capabilities(takes_rng=takes_rng)
+    return caps if isinstance(caps, Capabilities) else Capabilities(takes_rng=takes_rng)
 
 
-def _call(kind: str, name: str, entry: Entry, kwargs: dict[str, Any]):
-    """factory(**kwargs) with the settings problems reported under the component's name."""
-    if entry.capabilities.settings is None:      # a plug-in taking free keyword arguments
+def _takes_rng(factory: Callable[..., object]) -> bool:
+    try:
+        params = inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        return False
+    return "rng" in params
+
+
+def _dist_label(ep) -> str | None:
+    dist = getattr(ep, "dist", None)
+    return None if dist is None else f"{dist.name} {dist.version}"
+
+
+def resolve(name: str, kind: str = "navigator") -> Plugin:
+    """The navigator (kind="navigator") or monitor (kind="monitor") called `name`, its factory loaded.
+
+    Raises ValueError for an unknown name and PluginError (a ValueError) for a plug-in that cannot be
+    imported or is not a navigator/monitor."""
+    if kind not in _NEEDS:
+        raise ValueError(f"kind must be 'navigator' or 'monitor', got {kind!r}")
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"{kind} name must be a non-empty string, got {name!r}")
+    key = (kind, name)
+    if key in _CACHE:
+        return _CACHE[key]
+    if name in _REGISTERED[kind]:
+        factory, caps = _REGISTERED[kind][name]
+        return Plugin(name, kind, "registered", factory, takes_rng=caps.takes_rng,
+                      capabilities=caps)   # not cached: re-registrable
+    eps = _entry_points(kind)
+    if name in _builtins(kind):
+        ref = _builtins(kind)[name]
+        own = [ep for ep in eps.get(name, []) if ep.value.replace(" ", "") != ref]
+        if own:
+            raise PluginError(f"{kind} {name!r}: the entry point of {_dist_label(own[0])} ({own[0].value}) "
+                              f"takes the name of a built-in {kind}; rename it")
+        plugin = _load(name, kind, "built-in", ref, f"built-in {kind} {name!r} ({ref})", None)
+    elif name in eps:
+        found = eps[name]
+        if len({ep.value for ep in found}) > 1:
+            raise PluginError(f"{kind} {name!r}: declared by several installed packages ("
+                              + "; ".join(f"{_dist_label(ep)}: {ep.value}" for ep in found)
+                              + "); uninstall one or use a module:Name reference")
+        ep = found[0]
+        dist = _dist_label(ep)
+        what = f"{kind} plug-in {name!r} (entry point {ep.value!r} of {dist or 'an installed package'})"
+        plugin = _load(name, kind, "entry point", ep.value.replace(" ", ""), what, dist)
+    elif is_reference(name):
+        plugin = _load(name, kind, "reference", name, f"{kind} plug-in {name!r}", None)
+    else:
+        hint = "" if ":" in name else "; or a plug-in as package.module:Name"
+        raise ValueError(f"unknown {kind} {name!r}; available: {_names(kind)}{hint}")
+    _CACHE[key] = plugin
+    return plugin
+
+
+def _load(name: str, kind: str, origin: str, ref: str, what: str, dist: str | None) -> Plugin:
+    factory = _check_factory(load_reference(ref, what), what, kind)
+    caps = _caps_of(factory, None, _takes_rng(factory))
+    return Plugin(name, kind, origin, factory, reference=ref, distribution=dist, takes_rng=caps.takes_rng,
+                  capabilities=caps)
+
+
+def _call(plugin: Plugin, settings: dict) -> object:
+    owner = f"{plugin.kind} {plugin.name!r}"
+    if plugin.capabilities.settings is None:      # a plug-in taking free keyword arguments
         try:
-            sig = inspect.signature(entry.factory)
+            sig = inspect.signature(plugin.factory)
         except (TypeError, ValueError):
             sig = None
         if sig is not None and not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
             known = [p for p in sig.parameters if p not in ("rng", "dem")]
-            bad = [(k, unknown_message(k, known)) for k in kwargs if k not in sig.parameters]
+            bad = [(k, unknown_message(k, known)) for k in settings if k not in sig.parameters]
             if bad:
-                raise SettingsError(bad, owner=f"{kind} {name!r}")
+                raise SettingsError(bad, owner=owner)
     try:
-        return entry.factory(**kwargs)
+        obj = plugin.factory(**settings)
     except SettingsError as exc:
-        raise SettingsError(exc.problems, owner=f"{kind} {name!r}") from None
+        raise SettingsError(exc.problems, owner=owner) from None
+    missing = lacks(obj, plugin.kind)
+    if missing:
+        raise PluginError(f"{plugin.kind} {plugin.name!r}: its factory returned {_describe(obj)}, which is "
+                          f"not a {plugin.kind}: it lacks {', '.join(missing)}")
+    return obj
 
 
-# ------------------------------------------------------------------------------------------ navigators
+def create(name: str, rng: np.random.Generator | None = None, **settings):
+    """A new navigator by name or `module:Name` reference with its settings (keyword arguments of its
+    factory); `rng` reaches only factories with an `rng` parameter (or registered with takes_rng=True)."""
+    plugin = resolve(name, "navigator")
+    # every navigator's published protection level is for this per-epoch risk (protection_level); its
+    # problems are reported with the navigator's own
+    published = {k: settings.pop(k) for k in PUBLISHED_INTEGRITY_KEYS if k in settings}
+    problems: list[tuple[str, str]] = []
+    try:
+        pl = PublishedIntegritySettings.from_mapping(published)
+    except SettingsError as exc:
+        problems, pl = exc.problems, None
+    if plugin.capabilities.takes_rng:
+        settings["rng"] = rng
+    try:
+        nav = _call(plugin, settings)
+    except SettingsError as exc:
+        raise SettingsError(exc.problems + problems, owner=exc.owner) from None
+    if problems:
+        raise SettingsError(problems, owner=f"navigator {name!r}")
+    if hasattr(nav, "integrity_risk"):
+        configure(nav, pl.integrity_risk, pl.map_horizontal_sigma_m)
+    return nav
 
-def available() -> list[str]:
-    """Names accepted by create()."""
-    return sorted(_NAVIGATORS)
+
+def create_monitor(name: str, **settings):
+    """A new monitor by name or reference (it runs beside a navigator: `monitor.update(frames, estimate)`)."""
+    return _call(resolve(name, "monitor"), settings)
+
+
+def register(name: str, factory: Callable[..., object], takes_rng: bool = False,
+             capabilities: Capabilities | None = None) -> None:
+    """Add a navigator factory in this process only (a class or a callable taking the settings as keyword
+    arguments) with its capabilities (default: the factory's `capabilities` attribute, else
+    `Capabilities(takes_rng=...)`). Processes that do not run this call (spawned or Ray workers,
+    `replay_command`) do not know the name: prefer an entry point or a `module:Name` reference."""
+    _REGISTERED["navigator"][name] = (factory, _caps_of(factory, capabilities, bool(takes_rng)))
+    _CACHE.pop(("navigator", name), None)
+
+
+def register_monitor(name: str, factory: Callable[..., object],
+                     capabilities: Capabilities | None = None) -> None:
+    """Add a monitor factory in this process only (keyword settings; `dem=` is the navigator's map) with its
+    capabilities."""
+    _REGISTERED["monitor"][name] = (factory, _caps_of(factory, capabilities, False))
+    _CACHE.pop(("monitor", name), None)
+
+
+def unregister(name: str, kind: str = "navigator") -> None:
+    """Forget a name given to register() / register_monitor() (no-op for other names)."""
+    _REGISTERED[kind].pop(name, None)
+    _CACHE.pop((kind, name), None)
+
+
+def plugin_modules() -> list[str]:
+    """Top-level modules of the plug-ins resolved so far in this process that no installed distribution
+    provides (`module:Name` references to a module on sys.path only): what a Ray worker on another node or
+    with another working directory cannot import unless it is shipped (`runtime_env={"py_modules": ...}`)."""
+    provided = metadata.packages_distributions()
+    out = []
+    for plugin in _CACHE.values():
+        if plugin.origin != "reference" or plugin.module is None:
+            continue
+        top = plugin.module.split(".")[0]
+        if top not in provided and top in sys.modules and top not in out:
+            out.append(top)
+    return out
+
+
+def settings_class(name: str, kind: str = "navigator"):
+    """The class whose settings a navigator (or monitor) takes: its declared Settings class
+    (capabilities.settings), else its factory's `settings_class` when it names one, else the factory."""
+    plugin = resolve(name, kind)
+    if plugin.capabilities.settings is not None:
+        return plugin.capabilities.settings
+    return getattr(plugin.factory, "settings_class", None) or plugin.factory
+
+
+def monitor_settings_class(name: str):
+    """settings_class(name, "monitor")."""
+    return settings_class(name, "monitor")
 
 
 def capabilities(name: str) -> Capabilities:
-    """The declared capabilities of a registered navigator."""
-    return _entry(_NAVIGATORS, "navigator", name).capabilities
+    """The declared capabilities of navigator `name` (a name or a `module:Name` reference)."""
+    return resolve(name, "navigator").capabilities
 
 
-def settings_class(name: str) -> type | None:
-    """The Settings class of a registered navigator (None for a plug-in without one)."""
-    return capabilities(name).settings
+def monitor_capabilities(name: str) -> Capabilities:
+    """The declared capabilities of monitor `name`."""
+    return resolve(name, "monitor").capabilities
 
 
-def sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
-    """The sensors navigator `name` requires and can use with `settings` (a mapping; runtime arguments such
-    as dem= and rng= are ignored). Raises SettingsError for settings it refuses."""
-    return _needs("navigator", name, capabilities(name), settings)
-
-
-def _needs(kind: str, name: str, caps: Capabilities, settings: dict | None) -> SensorNeeds:
+def _needs(kind: str, name: str, settings: dict | None) -> SensorNeeds:
+    caps = resolve(name, kind).capabilities
     if caps.settings is None:
         return caps.sensor_needs(None)
     skip = ("dem", "rng", "name") + (PUBLISHED_INTEGRITY_KEYS if kind == "navigator" else ())
@@ -146,115 +414,13 @@ def _needs(kind: str, name: str, caps: Capabilities, settings: dict | None) -> S
         raise SettingsError(exc.problems, owner=f"{kind} {name!r}") from None
 
 
-def create(name: str, rng: np.random.Generator | None = None, **settings):
-    """A new navigator by name with its settings (keyword arguments of its class); `rng` reaches only the
-    navigators whose capabilities say takes_rng. Bad settings: one SettingsError (ValueError) naming each."""
-    entry = _entry(_NAVIGATORS, "navigator", name)
-    kwargs = dict(settings)
-    if entry.capabilities.takes_rng:
-        kwargs["rng"] = rng
-    published = {k: kwargs.pop(k) for k in PUBLISHED_INTEGRITY_KEYS if k in kwargs}
-    problems = []
-    try:
-        pl = PublishedIntegritySettings.from_mapping(published)
-    except SettingsError as exc:
-        problems, pl = exc.problems, None
-    try:
-        nav = _call("navigator", name, entry, kwargs)
-    except SettingsError as exc:
-        raise SettingsError(exc.problems + problems, owner=exc.owner) from None
-    if problems:
-        raise SettingsError(problems, owner=f"navigator {name!r}")
-    if hasattr(nav, "integrity_risk"):
-        from trn_env.navigators.integrity.protection_level import configure
-        configure(nav, pl.integrity_risk, pl.map_horizontal_sigma_m)
-    return nav
-
-
-def register(name: str, factory: Callable[..., object], takes_rng: bool = False,
-             capabilities: Capabilities | None = None) -> None:
-    """Add a navigator factory (a class or a callable taking the settings as keyword arguments) with its
-    capabilities (default: the factory's `capabilities` attribute, else `Capabilities(takes_rng=...)`)."""
-    _NAVIGATORS[name] = Entry(factory, _caps_of(factory, capabilities, takes_rng))
-
-
-def _ins(dem=None, name: str | None = None, **kw):
-    from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
-    if kw.get("aiding") is not None:
-        raise SettingsError([("aiding", "the free-inertial 'ins' takes no terrain aiding (use "
-                                        "'ins_tercom')")])
-    return InsTrnNavigator(dem=dem, settings=InsTrnSettings.from_mapping(kw), name=name)
-
-
-def _ins_tercom(dem=None, name: str | None = None, **kw):
-    from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
-    return InsTrnNavigator(dem=dem, settings=InsTercomSettings.from_mapping(kw), name=name)
-
-
-def _acq_track(**kw):
-    from trn_env.navigators.acquisition_tracking import AcqTrackNavigator
-    return AcqTrackNavigator(**kw)
-
-
-def _pmf(**kw):
-    from trn_env.navigators.filters.pmf import PointMassFilter
-    return PointMassFilter(**kw)
-
-
-def _pf(**kw):
-    from trn_env.navigators.filters.pf import ParticleFilter
-    return ParticleFilter(**kw)
-
-
-def _rbpf(**kw):
-    from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
-    return RaoBlackwellizedPF(**kw)
-
-
-register("ins", _ins, capabilities=INS_CAPABILITIES)
-register("ins_tercom", _ins_tercom, capabilities=INS_TERCOM_CAPABILITIES)
-register("acq_track", _acq_track, capabilities=ACQ_TRACK_CAPABILITIES)
-register("pmf", _pmf, capabilities=PMF_CAPABILITIES)
-register("pf", _pf, capabilities=PF_CAPABILITIES)
-register("rbpf", _rbpf, capabilities=RBPF_CAPABILITIES)
-
-
-# ------------------------------------------------------------------------------------------ monitors
-
-def _dem_integrity(**kw):
-    from trn_env.navigators.integrity.dem_monitor import DemIntegrityMonitor
-    return DemIntegrityMonitor(**kw)
-
-
-def available_monitors() -> list[str]:
-    """Names accepted by create_monitor()."""
-    return sorted(_MONITORS)
-
-
-def monitor_capabilities(name: str) -> Capabilities:
-    """The declared capabilities of a registered monitor."""
-    return _entry(_MONITORS, "monitor", name).capabilities
+def sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
+    """The sensors navigator `name` requires and can use with `settings` (a mapping; runtime arguments such
+    as dem= and rng= are ignored), from its declared capabilities, without building it. Raises
+    SettingsError for settings it refuses."""
+    return _needs("navigator", name, settings)
 
 
 def monitor_sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
     """The sensors monitor `name` requires and can use with `settings` (see sensor_needs)."""
-    return _needs("monitor", name, monitor_capabilities(name), settings)
-
-
-def monitor_settings_class(name: str) -> type | None:
-    """The Settings class of a registered monitor (None for a plug-in without one)."""
-    return monitor_capabilities(name).settings
-
-
-def create_monitor(name: str, **settings):
-    """A new monitor by name (it runs beside a navigator: `monitor.update(frames, estimate)`)."""
-    return _call("monitor", name, _entry(_MONITORS, "monitor", name), dict(settings))
-
-
-def register_monitor(name: str, factory: Callable[..., object],
-                     capabilities: Capabilities | None = None) -> None:
-    """Add a monitor factory (keyword settings; `dem=` is the navigator's map) with its capabilities."""
-    _MONITORS[name] = Entry(factory, _caps_of(factory, capabilities, False))
-
-
-register_monitor("dem_integrity", _dem_integrity, capabilities=DEM_INTEGRITY_CAPABILITIES)
+    return _needs("monitor", name, settings)

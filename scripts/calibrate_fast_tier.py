@@ -2,9 +2,12 @@
 routes of trn_env.env.fast.calibration: the true horizontal error at the goal, mean and 90th percentile over
 seeds, per route, in both tiers, with the same navigator family (the scenario's INS + batch TERCOM).
 
-    python scripts/calibrate_fast_tier.py --seeds 12 --out out/fast_calibration      # both tiers
-    python scripts/calibrate_fast_tier.py --tier full --seeds 12 --out DIR            # only the full loop
-    python scripts/calibrate_fast_tier.py --tier fast --seeds 12 --out DIR            # fast tier vs saved full
+    python scripts/calibrate_fast_tier.py --seeds 32 --out out/fast_calibration      # both tiers
+    python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out DIR            # only the full loop
+    python scripts/calibrate_fast_tier.py --tier fast --out DIR                       # fast vs saved full
+
+The full loop flies seeds 0..--seeds-1, the fast tier 0..--fast-seeds-1 (default 256, FAST_SEEDS: its
+statistics then carry little sampling noise next to the full loop's).
 
 Writes DIR/full_<route>.json, DIR/fast_<route>.json (per-seed errors) and DIR/table.md; prints the table.
 The full-loop results are reused from DIR when present (--tier fast), so the fast tier can be re-run alone.
@@ -22,13 +25,22 @@ def main(argv=None) -> int:
     from trn_env.env.fast.calibration import REFERENCE_ROUTES, compare, fly_fast, fly_full
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, default=12, help="episode seeds 0..N-1 per route (default 12)")
+    p.add_argument("--seeds", type=int, default=32, help="full-loop seeds 0..N-1 per route (default 32)")
+    p.add_argument(
+        "--fast-seeds",
+        type=int,
+        default=None,
+        help="fast-tier seeds 0..N-1 per route (default: calibration.FAST_SEEDS, 256)",
+    )
     p.add_argument("--routes", nargs="*", default=None, help="route names (default: all)")
     p.add_argument("--tier", choices=("both", "full", "fast"), default="both")
     p.add_argument("--out", type=Path, default=Path("out/fast_calibration"))
     args = p.parse_args(argv)
-    if args.seeds < 1:
-        print("--seeds must be >= 1", file=sys.stderr)
+    from trn_env.env.fast.calibration import FAST_SEEDS
+
+    fast_n = FAST_SEEDS if args.fast_seeds is None else args.fast_seeds
+    if args.seeds < 1 or fast_n < 1:
+        print("--seeds and --fast-seeds must be >= 1", file=sys.stderr)
         return 2
     known = {r.name: r for r in REFERENCE_ROUTES}
     names = args.routes or list(known)
@@ -37,26 +49,33 @@ def main(argv=None) -> int:
         print(f"--routes: unknown {bad}; known: {sorted(known)}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    seeds = list(range(args.seeds))
+    seeds = {"full": list(range(args.seeds)), "fast": list(range(fast_n))}
     rows = []
     for name in names:
         r = known[name]
         for tier, fn in (("full", fly_full), ("fast", fly_fast)):
             path = args.out / f"{tier}_{name}.json"
             if args.tier in (tier, "both") and not (tier == "full" and args.tier == "fast" and path.exists()):
-                res = fn(r, seeds)
-                path.write_text(json.dumps({"route": name, "seeds": seeds, **res}, indent=1))
+                res = fn(r, seeds[tier])
+                path.write_text(json.dumps({"route": name, "seeds": seeds[tier], **res}, indent=1))
                 print(f"{tier} {name}: {res['wall_s']:.1f} s", file=sys.stderr, flush=True)
         fp, qp = args.out / f"full_{name}.json", args.out / f"fast_{name}.json"
         if fp.exists() and qp.exists():
             c = compare(json.loads(fp.read_text()), json.loads(qp.read_text()))
             rows.append((r, c))
-    lines = ["| route | kind | terrain | seeds | full mean / p90 (m) | fast mean / p90 (m) | mean diff | p90 diff |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| route | kind | terrain | seeds full / fast | full mean / p90 (m) | fast mean / p90 (m) "
+        "| mean diff "
+        "| p90 diff |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r, c in rows:
-        lines.append(f"| {r.name} | {r.kind} | {r.scenario} | {c['full']['n']} | {c['full']['mean_m']:.1f} / "
-                     f"{c['full']['p90_m']:.1f} | {c['fast']['mean_m']:.1f} / {c['fast']['p90_m']:.1f} | "
-                     f"{100 * c['mean_rel']:+.0f} % | {100 * c['p90_rel']:+.0f} % |")
+        lines.append(
+            f"| {r.name} | {r.kind} | {r.scenario} | {c['full']['n']} / {c['fast']['n']} | "
+            f"{c['full']['mean_m']:.1f} / "
+            f"{c['full']['p90_m']:.1f} | {c['fast']['mean_m']:.1f} / {c['fast']['p90_m']:.1f} | "
+            f"{100 * c['mean_rel']:+.0f} % | {100 * c['p90_rel']:+.0f} % |"
+        )
     table = "\n".join(lines)
     (args.out / "table.md").write_text(table + "\n")
     print(table)

@@ -22,6 +22,7 @@ Per navigator and grade, over the epochs after --from-s (15 s):
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import math
 import pickle
@@ -42,9 +43,13 @@ import trn_env.scenario.build as components  # noqa: E402
 INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
 
 
+SETTINGS: dict = {}  # --set name=value: navigator settings on top of the defaults
+
+
 def scenario_for(d: dict, name: str, grade: str) -> dict:
     """The default scenario's data with the grade's IMU and the navigator (its settings as the default's)."""
     settings = {"remove_bias": True} if name == "ins_tercom" else {}
+    settings.update(SETTINGS.get(name, {}))
     return {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
             "navigator": {"name": name, "settings": settings}}
 
@@ -79,18 +84,29 @@ def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
             "warning": getattr(est.health, "consistency_warning", ""), "wall_s": time.perf_counter() - w0}
 
 
-def figures(runs: list[dict], t_from_s: float) -> dict:
+def run_nees(runs: list[dict], t_from_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(NEES (runs x epochs), squared horizontal error) after t_from_s."""
     sel = runs[0]["t"] >= t_from_s
     E = np.array([r["err"][sel] for r in runs])
     P = np.array([r["cov"][sel] for r in runs])
-    nees = np.einsum("rti,rtij,rtj->rt", E, np.linalg.inv(P), E)
-    out = {"runs": len(runs), "epochs": int(sel.sum()),
-           "rms_m": float(np.sqrt(np.mean(np.sum(E ** 2, axis=2)))),
+    return np.einsum("rti,rtij,rtj->rt", E, np.linalg.inv(P), E), np.sum(E ** 2, axis=2)
+
+
+def figures(runs: list[dict], t_from_s: float) -> dict:
+    nees, e2 = run_nees(runs, t_from_s)
+    return nees_summary(nees, e2, runs)
+
+
+def nees_summary(nees: np.ndarray, e2: np.ndarray, runs: list[dict] | None = None) -> dict:
+    """The figures of the module docstring from the runs' NEES and squared errors (runs x epochs)."""
+    runs = runs or []
+    out = {"runs": int(nees.shape[0]), "epochs": int(nees.shape[1]),
+           "rms_m": float(np.sqrt(np.mean(e2))),
            "inside_3sigma": float(np.mean(nees <= INSIDE_NEES)),
            "run_inside_3sigma_min": float(np.min(np.mean(nees <= INSIDE_NEES, axis=1))),
-           "wall_s_per_run": float(np.mean([r["wall_s"] for r in runs])),
-           "health_consistency_warning": runs[0].get("warning", "")}
-    if len(runs) >= 2:
+           "wall_s_per_run": float(np.mean([r["wall_s"] for r in runs])) if runs else float("nan"),
+           "health_consistency_warning": runs[0].get("warning", "") if runs else ""}
+    if nees.shape[0] >= 2:
         p = fs.pooled_nees_figures(nees)
         out.update(anees=p["anees_thinned"], bounds_95=p["bounds_95_thinned"],
                    thinning=p["thinning_epochs"], anees_all_epochs=p["anees_pooled"],
@@ -111,7 +127,32 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None)
     ap.add_argument("--flight-cache", default=None,
                     help="pickle of the recorded flight: read if it exists (same duration), else written")
+    ap.add_argument("--merge", nargs="+", default=None,
+                    help="pool the runs of these --out files (same duration) instead of running")
+    ap.add_argument("--set", dest="settings", action="append", default=[],
+                    help="navigator.setting=value (a Python literal), e.g. pmf.span_sigmas=6")
     a = ap.parse_args(argv)
+    for item in a.settings:
+        key, _, value = item.partition("=")
+        nav, _, setting = key.partition(".")
+        SETTINGS.setdefault(nav, {})[setting] = ast.literal_eval(value)
+    if a.merge:
+        pooled: dict = {}
+        warn: dict = {}
+        for path in a.merge:
+            for key, f in json.loads(Path(path).read_text())["figures"].items():
+                pooled.setdefault(key, []).append(f["raw"])
+                warn[key] = f.get("health_consistency_warning", "")
+        merged = {}
+        for key, parts in pooled.items():
+            m = min(len(p["nees"][0]) for p in parts)
+            nees = np.concatenate([np.asarray(p["nees"])[:, :m] for p in parts])
+            e2 = np.concatenate([np.asarray(p["e2"])[:, :m] for p in parts])
+            merged[key] = {**nees_summary(nees, e2), "health_consistency_warning": warn[key]}
+            print(json.dumps({key: merged[key]}), flush=True)
+        if a.out:
+            Path(a.out).write_text(json.dumps({"merged": a.merge, "figures": merged}, indent=1))
+        return 0
     cache = Path(a.flight_cache) if a.flight_cache else None
     if cache is not None and cache.exists():
         duration_s, flight = pickle.loads(cache.read_bytes())
@@ -130,8 +171,10 @@ def main(argv=None) -> int:
                 runs[name].append(run)
         for name in a.navigators:
             f = figures(runs[name], a.from_s)
+            nees, e2 = run_nees(runs[name], a.from_s)
+            f["raw"] = {"nees": nees.tolist(), "e2": e2.tolist()}
             result["figures"][f"{name}/{grade}"] = f
-            print(json.dumps({f"{name}/{grade}": f}), flush=True)
+            print(json.dumps({f"{name}/{grade}": {k: v for k, v in f.items() if k != "raw"}}), flush=True)
         if a.out:
             Path(a.out).write_text(json.dumps(result, indent=1))
     if a.out:

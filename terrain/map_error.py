@@ -31,7 +31,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 from trn_env.terrain import geodesy, kernels
 from trn_env.terrain.dem import Dem
 
@@ -221,6 +220,7 @@ def _coarsen(dem: Dem, spacing_arcsec: float) -> Dem:
         return dem
     size = (max(1, int(round(r_i))), max(1, int(round(r_j))))
     h = dem.heights_m
+    from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
     smooth = ndimage.uniform_filter(np.nan_to_num(h, nan=0.0), size=size, mode="nearest")
     weight = ndimage.uniform_filter(np.isfinite(h).astype(float), size=size, mode="nearest")
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -22,7 +22,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 from trn_env.terrain import geodesy
 from trn_env.terrain.dem import Dem
 
@@ -37,6 +36,7 @@ def _window_posts(dem: Dem, window_m: float) -> tuple[int, int]:
 def _window_sum(a: np.ndarray, size) -> np.ndarray:
     """Sum over a window (NaN where the window touches a void)."""
     valid = np.isfinite(a)
+    from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
     mean = ndimage.uniform_filter(np.where(valid, a, 0.0), size=size, mode="nearest")
     frac = ndimage.uniform_filter(valid.astype(float), size=size, mode="nearest")
     out = mean * size[0] * size[1]

@@ -1,4 +1,4 @@
-"""acq_track's position fix (session 2 of issue 18): the start-point loops against a brute-force numpy
+"""acq_track's position fix: the start-point loops against a brute-force numpy
 search, the fix fed back into the position output (an initial start error is removed, and without the loops
 it is not), the centroid pivot, GNSS placing the transect start, and the closed-loop regression flight with
 an honest innovation covariance (mean NIS inside chi-square bounds computed here) and an honest position
@@ -154,7 +154,7 @@ def test_short_flight_innovations_and_covariance_are_honest(short_flight):
 
 def test_short_flight_fix_beats_dead_reckoned_start(short_flight):
     """The same flight without the start-point loops (the previous design: only speed and heading tracked,
-    the transect start dead-reckoned) is less accurate after GNSS is lost (session 2: 21.1 against 16.0 m
+    the transect start dead-reckoned) is less accurate after GNSS is lost (21.1 against 16.0 m
     RMS, seed 0, footprint replicas). Compared in that design's speed_track reference frame: the "ne" frame's
     filter estimates the velocity bias from the fixes either way."""
     res, _, _ = _fly_short(reference_frame="speed_track")

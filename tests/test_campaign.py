@@ -158,7 +158,8 @@ def test_report_pngs_and_self_contained_html(flown, tmp_path):
 @pytest.fixture(scope="module")
 def ray_session():
     ray = pytest.importorskip("ray", reason="the ray extra is installed in CI (pip install -e .[ray])")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    # address="local": a new instance even when a cluster (`ray start`) runs on this machine
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
 

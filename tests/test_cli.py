@@ -221,6 +221,7 @@ def test_bench_collects_components_and_survives_a_failing_one(monkeypatch, capsy
     env_mod = types.ModuleType("fake_env")
     env_mod.benchmark = lambda quick=False: {"env_sim_seconds_per_wall_second": 9.0}
     monkeypatch.setitem(sys.modules, "trn_env.bench.env", env_mod)
+    monkeypatch.setitem(sys.modules, "trn_env.bench.fast_env", good)     # its real run costs ~1 min
     assert cli.main(["bench", "--quick", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["jsbsim_steps_per_s"] == 1.0 and out["quick_seen"] is True

@@ -147,6 +147,26 @@ def test_kalman_reading_matches_the_monitors_filter():
         cd.kalman_reading("smoothed", N, burn, 0.01)
 
 
+def test_innovation_variant_of_the_monitor_is_the_innovation_reading():
+    """variant "kalman_innovation": the monitor's statistic over a window = kalman_reading("innovation") as
+    a quadratic form of the same disparities (the filter started at steady state 100 epochs earlier)."""
+    rng = np.random.default_rng(6)
+    burn, N = 100, 50
+    n = burn + N
+    p = rng.standard_normal(n) * 18.9
+    lat, lon = _track(n, 85.0)
+    rows = np.zeros((n, 10))
+    rows[:, 0] = np.arange(n, dtype=float)
+    rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4] = lat, lon, 900.0, 600.0
+    rows[:, 5] = 300.0 - p
+    mon = dm.DemIntegrityMonitor(dem=_flat_dem(), variant="kalman_innovation", kf_process_ratio=0.1)
+    out = np.empty((n, 7))
+    dm._statistic_kernel(rows, rows[:0, 0], mon._cfg, mon._state, mon._ring, mon._wring,
+                         dm._est_terms(np.zeros(14)), out)
+    z = p / 18.9
+    assert out[-1, 4] == pytest.approx(z @ cd.kalman_reading("innovation", N, burn, 0.1) @ z, rel=1e-6)
+
+
 def test_map_correlation_settings_rejected_by_name():
     for bad in (-10.0, float("nan"), 0.0, "long"):
         with pytest.raises(ValueError, match="correlation_length_m"):

@@ -88,7 +88,9 @@ def test_fly_writes_a_replayable_log_folder(tmp_path, capsys):
     assert cli.main(["fly", str(SCEN / "default_short.toml"), "--out", str(out), "--quiet", "--duration", "4",
                      "--no-plots"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert "log" in summary["files"] and not (out / "log.npz").exists()
+    assert "log" in summary["files"] and "log.npz" in summary["files"]
+    npz = np.load(out / "log.npz")          # the per-update arrays; the sensor arrays are in log/
+    assert "err_ned_m" in npz and not [k for k in npz.files if k.startswith("sensor_")]
     log = read_log(out / "log")
     assert log.n_frames == 4 and len(log.truth()) == 5            # t = 0 and each 1 s update
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]     # no partial folder left
@@ -98,6 +100,12 @@ def test_fly_writes_a_replayable_log_folder(tmp_path, capsys):
     assert s2["horizontal_error_rms_m"] == pytest.approx(summary["horizontal_error_rms_m"], rel=0, abs=0)
     assert pd.read_parquet(rep / "log" / "estimates.parquet").shape[0] == 5
     capsys.readouterr()
+    # trn-env record of the same flight writes the same log (the estimates to the last bit)
+    assert cli.main(["record", str(SCEN / "default_short.toml"), "--out", str(tmp_path / "rec"), "--quiet",
+                     "--duration", "4"]) == 0
+    assert "recorded" in capsys.readouterr().out
+    a, b = read_log(tmp_path / "rec").estimates(), log.estimates()
+    assert a.equals(b) and read_log(tmp_path / "rec").table("imu").equals(log.table("imu"))
 
 
 # ---------------------------------------------------------------------------------------------- bad input
@@ -291,3 +299,35 @@ def test_independent_log_reads_in_the_navigators_conventions(independent):
     truth = log.truth()
     assert np.allclose(truth["h_m"].to_numpy(), pq.read_table(independent / "truth.parquet").column(
         "h_m").to_numpy() - ref.GEOID_N_M)
+
+
+def test_a_campaign_replays_logs_across_navigators_and_seeds(independent, tmp_path, capsys):
+    """`logs = [...]` in a campaign file: every (log, navigator, sweep point) at every navigator seed, one
+    row each; pmf is deterministic (equal rows over seeds), pf draws from the seed; a row's replay_command
+    gives its numbers again."""
+    import shlex
+
+    from trn_env.campaign.rows import read_rows
+    camp = tmp_path / "logs.toml"
+    camp.write_text(f'name = "log_replay"\nlogs = ["{independent}"]\nseeds = [1, 2]\n'
+                    'navigators = ["pmf", { name = "pf", label = "pf_small", '
+                    'settings = { n_particles = 2000 } }]\n')
+    out = tmp_path / "camp"
+    assert cli.main(["campaign", str(camp), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    df = read_rows(out)
+    assert len(df) == 4 and set(df["termination"]) == {"completed"}
+    pmf = df[df["navigator"] == "pmf"]["horizontal_error_rms_m"].to_numpy()
+    pf = df[df["navigator"] == "pf_small"]["horizontal_error_rms_m"].to_numpy()
+    assert pmf[0] == pmf[1] and pf[0] != pf[1] and np.all(np.r_[pmf, pf] < 15.0)
+    row = df[df["navigator"] == "pf_small"].iloc[0]
+    argv = shlex.split(row["replay_command"])
+    assert argv[:2] == ["trn-env", "replay"]
+    assert cli.main(argv[1:] + ["--out", str(tmp_path / "one"), "--no-plots"]) == 0
+    one = json.loads((tmp_path / "one" / "summary.json").read_text())
+    assert one["horizontal_error_rms_m"] == row["horizontal_error_rms_m"]
+    bad = tmp_path / "bad.toml"
+    bad.write_text('logs = ["nowhere.trnlog"]\nnavigators = ["pmf", "acq_track"]\n'
+                   '[[sweeps]]\npath = "wind.layers.0.speed_mps"\nvalues = [1.0]\n')
+    assert cli.main(["campaign", str(bad), "--out", str(tmp_path / "c2"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "logs[0] (nowhere.trnlog)" in err and "sweeps[0].path" in err and not (tmp_path / "c2").exists()

@@ -1,4 +1,4 @@
-"""The parts of the RBPF fixed in session 2 of issue 17, each against an independent computation:
+"""The parts of the RBPF, each against an independent computation:
 
 - the time update's fast path for the constant bias states (unit rows of the transition) against eqs 5-8
   and 13-15 written out in numpy;
@@ -266,10 +266,8 @@ def test_rbpf_consistent_on_the_coarse_map():
     """The default route as built in (the 3" map against the 30 m world, GNSS for 10 s then denied), 8 seeds
     x 240 s: the horizontal NEES at every 45th epoch after 15 s (the runs' NEES autocorrelation falls below
     0.1 at 43-58 s on this map, scripts/rbpf_consistency.py) lies inside the two-sided 95 % chi-square
-    bounds for that many 2-dof samples (issue 17's criterion). Measured 2.13 against [1.47, 2.60] (every
-    15th epoch: 2.06 against [1.67, 2.36]), session 10's calibrated map noise and look-angle gate; with the
-    flat-ground map noise (session 9) the filter was conservative here, 1.71 over 60 seeds of the whole
-    route (now 1.89, README "RBPF"), and before the basin-jump test overconfident (2.3-4.4)."""
+    bounds for that many 2-dof samples (issue 17's criterion); the measured figures and their history:
+    docs/validation/navigators.md (RBPF)."""
     _assert_default_route_consistent(map_is_world=False, every=45, max_rms_m=12.0)
 
 
@@ -305,12 +303,8 @@ def test_rbpf_consistent_when_the_map_is_the_world():
     the default route in JSBSim, GNSS for 10 s then denied, 8 seeds x 240 s, bias priors from the scenario's
     navigation-grade IMU. The horizontal NEES at every 15th epoch after 15 s (the runs' NEES autocorrelation
     falls below 0.1 at ~15 s here, scripts/rbpf_consistency.py --map-is-world) lies inside the two-sided 95 %
-    chi-square bounds for that many 2-dof samples (issue 17's criterion). Measured 2.13 against [1.67, 2.36]
-    (session 9's defaults: horizontal q_pos 0.25, integrity_alpha 1e-4; session 7: 1.70, inside the 99 %
-    bounds [1.57, 2.48] then tested, not the 95 %); with Table 1's vertical-velocity and position process
-    noise (before session 7) 1.38, conservative, and over the whole
-    route heavy-tailed (runs' NEES up to 10, README "RBPF"). Before the map-spacing search step
-    (search_step_for) seed 7 alone averaged 9.5 over the route."""
+    chi-square bounds for that many 2-dof samples (issue 17's criterion); the measured figures and their
+    history: docs/validation/navigators.md (RBPF)."""
     _assert_default_route_consistent(map_is_world=True, every=15, max_rms_m=10.0)
 
 

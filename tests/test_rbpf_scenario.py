@@ -14,10 +14,9 @@ SCEN = Path(__file__).parent / "scenarios"
 
 
 def test_rbpf_short_bounds():
-    """Measured (seed 0, session 9 of issue 17): horizontal RMS 3.85 m (max 31 m at the start, the
-    1-sigma-50 m prior), final 3.5 m, vertical RMS 1.46 m, no re-spread by the innovation test (recovery on,
-    the defaults window 3, alpha 1e-4; session 2: 3.8 / 2.8 / 1.5 m at alpha 0.01). Before GNSS moved the
-    cloud instead of weighting it: 10.8 m with 3 re-spreads (4.97 m with the recovery off)."""
+    """Measured (seed 0): horizontal RMS 3.85 m (max 31 m at the start, the 1-sigma-50 m prior), final
+    3.5 m, vertical RMS 1.46 m, no re-spread by the innovation test (its history:
+    docs/validation/navigators.md)."""
     res = ClosedLoop(load_scenario(SCEN / "rbpf_short.toml")).run()
     a = res.arrays
     assert res.termination == "completed"

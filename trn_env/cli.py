@@ -5,6 +5,7 @@
     trn-env record SCENARIO --out LOG [--seed N] [--navigator NAME] [--duration S] [--set PATH=VALUE]
     trn-env replay LOG [--navigator NAME] [--monitor NAME] [--map DEM] [--out DIR] [--no-plots]
     trn-env scenarios
+    trn-env navigators [NAME ...] [--json]
     trn-env validate SCENARIO
     trn-env bench [--quick] [--json]
     trn-env precompile [--workers N]
@@ -125,7 +126,18 @@ def _parser() -> argparse.ArgumentParser:
                       help="the navigator's map: a DEM path or bundled name (default: the log's map)")
     rep_.add_argument("--out", type=Path, default=None, help="run folder (default runs/replay-<log>-<time>)")
     rep_.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    rep_.add_argument("--overwrite", action="store_true",
+                      help="replace a run folder --out that holds a previous run, as a whole")
+    rep_.add_argument("--seed", type=int, default=None,
+                      help="the navigator's random stream (default: the log's seed)")
+    rep_.add_argument("--set", action="append", default=[], metavar="navigator.settings.NAME=VALUE",
+                      help="a navigator setting, VALUE a TOML literal (repeatable)")
     sub.add_parser("scenarios", help="list the built-in scenarios")
+    navs = sub.add_parser("navigators", help="list the built-in and installed navigators and monitors with "
+                                             "their settings (name, type, unit, default, meaning)")
+    navs.add_argument("names", nargs="*", metavar="NAME",
+                      help="only these (names or package.module:Name references; default: all)")
+    navs.add_argument("--json", action="store_true", help="one JSON object instead of tables")
     val = sub.add_parser("validate", help="check a scenario file and list every problem")
     val.add_argument("scenario")
     pre = sub.add_parser("precompile", help="compile the numba kernels of every built-in navigator once, "
@@ -187,6 +199,53 @@ def cmd_scenarios() -> int:
     for name, desc in rows:
         print(f"{name:<{width}}  {desc}")
     return 0
+
+
+def cmd_navigators(args) -> int:
+    """Every navigator and monitor (or the NAMEs given) with its origin and settings; a plug-in that cannot
+    be loaded is reported (exit 2) and the others are still listed."""
+    from trn_env.navigators import catalogue, registry
+    wanted = [(n, None) for n in args.names] or (
+        [(n, "navigator") for n in registry.available()]
+        + [(n, "monitor") for n in registry.available_monitors()])
+    entries, errors = [], []
+    for name, kind in wanted:
+        plugin, err = None, None
+        for k in ([kind] if kind else ["navigator", "monitor"]):
+            try:
+                plugin = registry.resolve(name, k)
+                break
+            except registry.PluginError as exc:
+                err = str(exc)
+                break
+            except ValueError as exc:
+                err = err or str(exc)
+        if plugin is None:
+            errors.append(err)
+            continue
+        origin = {"built-in": "built-in", "registered": "registered in this process",
+                  "reference": f"reference {plugin.reference}"}.get(
+            plugin.origin, f"plug-in {plugin.distribution or ''} ({plugin.reference})".replace("  ", " "))
+        entries.append({"name": name, "kind": plugin.kind, "origin": origin,
+                        "summary": catalogue.summary_of(plugin.factory),
+                        "settings": [s.as_dict() for s in catalogue.settings_of(plugin.factory)]})
+    if args.json:
+        print(json.dumps({"plugins": entries, "errors": errors}, indent=2))
+    else:
+        from rich.console import Console
+        from rich.table import Table
+        console = Console(width=max(Console().width, 140))
+        for e in entries:
+            table = Table(title=f"{e['kind']} {e['name']}  [{e['origin']}]\n{e['summary']}",
+                          title_justify="left")
+            for col in ("setting", "type", "unit", "default", "meaning"):
+                table.add_column(col, overflow="fold")
+            for s in e["settings"]:
+                table.add_row(s["name"], s["type"], s["unit"], s["default"], s["meaning"])
+            console.print(table)
+    for err in errors:
+        print(f"error: {err}", file=sys.stderr)
+    return 2 if errors else 0
 
 
 def cmd_validate(args) -> int:
@@ -295,7 +354,7 @@ def cmd_fly(args) -> int:
     from trn_env.sim.closed_loop import spawn_rngs
     from trn_env.sim.warm_up import warm_up
 
-    loop = writer = log_path = None
+    loop = writer = log_path = result = None
     try:
         # the terrain once (the same map stream as the loop's own), the kernels compiled (first run) or
         # loaded from numba's cache before the flight, so neither stalls the progress bar nor counts in the
@@ -335,12 +394,12 @@ def cmd_fly(args) -> int:
             bar.close()
         code, word = _interrupt_exit(exc)
         print(f"{word}: nothing written", file=sys.stderr)
-        if writer is not None:
-            writer.abort()
         return code
     finally:
         if loop is not None:
-            loop.close()
+            loop.close()              # (the worker stops writing frames before the log is removed)
+        if writer is not None and result is None:
+            writer.abort()
     bar.close()
     plot = None if args.no_plots else _plotter(result)
     from trn_env.scenario.resolved import resolved_toml
@@ -444,12 +503,26 @@ def cmd_replay(args) -> int:
     from trn_env.logs.replay import replay, write_result_log
     from trn_env.output.run_folder import default_out_dir, write_run
     if args.out is not None:
-        problem = out_dir_problem(args.out)
+        problem = out_dir_problem(args.out, args.overwrite)
         if problem is not None:
             print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
             return 2
+    from trn_env.scenario.overrides import parse_assignment
+    settings = {}
+    for text in args.set:
+        try:
+            path, value = parse_assignment(text)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        if not path.startswith("navigator.settings.") or path.count(".") != 2:
+            print(f"error: --set {text!r}: replay sets navigator settings only "
+                  "(navigator.settings.NAME=VALUE)", file=sys.stderr)
+            return 2
+        settings[path.split(".", 2)[2]] = value
     try:
-        res = replay(args.log, args.navigator, monitors=args.monitor, map_path=args.map)
+        res = replay(args.log, args.navigator, settings=settings or None, monitors=args.monitor,
+                     map_path=args.map, seed=args.seed)
     except (LogError, ValueError) as exc:
         print(f"error: {exc} (nothing written)", file=sys.stderr)
         return 2
@@ -464,7 +537,8 @@ def cmd_replay(args) -> int:
         writer = _log_writer(out_dir)
         log_path = write_result_log(writer, res)
         writer = None
-        write_run(out_dir, res.summary, arrays, res.events, plot=plot, log_dir=log_path)
+        write_run(out_dir, res.summary, arrays, res.events, plot=plot, log_dir=log_path,
+                  overwrite=args.overwrite)
     except KeyboardInterrupt:
         print("interrupted while writing: no summary written", file=sys.stderr)
         return 130
@@ -739,6 +813,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_scenarios()
         if args.command == "validate":
             return cmd_validate(args)
+        if args.command == "navigators":
+            return cmd_navigators(args)
         if args.command == "fly":
             return cmd_fly(args)
         if args.command == "record":

@@ -40,25 +40,9 @@ class AcquisitionStep:
         n = dt.size
         h_p = np.empty(n)
         replica_heights(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            self.p0[0],
-            self.p0[1],
-            dt,
-            m_v,
-            m_psi,
-            self.b_v,
-            self.b_psi,
-            r_n,
-            r_e,
-            self._interp,
-            np.empty(n),
-            np.empty(n),
-            h_p,
-        )
+            heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi,
+            r_n, r_e, self._interp, np.empty(n), np.empty(n), h_p,
+        )  # fmt: skip
         ok = valid & np.isfinite(h_p)
         if ok.sum() < self._n_min:
             return -math.inf
@@ -74,18 +58,7 @@ class AcquisitionStep:
         half = min(max(cfg.acquisition_position_half_m, 3.0 * sig), 2.0 * cfg.acquisition_position_half_m)
         w0 = time.perf_counter()
         res = acquisition.serial_search(
-            self._grid,
-            self.p0[0],
-            self.p0[1],
-            dt,
-            m_v,
-            m_psi,
-            self.b_v,
-            self.b_psi,
-            r_n,
-            r_e,
-            d,
-            valid,
+            self._grid, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi, r_n, r_e, d, valid,
             position_half_m=half,
             position_bin_m=cfg.acquisition_position_bin_m,
             speed_half_mps=cfg.acquisition_speed_half_mps,

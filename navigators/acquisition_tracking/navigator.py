@@ -96,7 +96,7 @@ from trn_env.navigators.acquisition_tracking.profile import (
 from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES, AcqTrackConfig
 from trn_env.navigators.acquisition_tracking.tracking_step import TrackingStep
 from trn_env.navigators.core.maps import load_map
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, frame_defects
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.protocol import (
@@ -110,6 +110,9 @@ from trn_env.navigators.protocol import (
     Health,
 )
 
+# the sensors whose NaN-but-valid samples and gaps update() counts in its Health
+_DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu", "gnss")
+
 
 class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingStep):
     """Acquisition-and-tracking TRN (seed 001); settings are AcqTrackConfig's fields (see settings.py).
@@ -119,6 +122,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
     """
 
     capabilities = CAPABILITIES
+    settings_class = AcqTrackConfig          # what `trn-env navigators` lists as its settings
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
@@ -265,6 +269,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
 
     def reset(self, initial: Estimate) -> None:
         self._reset_state()
+        self._last_sample_t: dict[str, float] = {}       # frame_defects' memory: gaps across frames
         cfg = self.config
         v = np.asarray(initial.v_ned_mps, float)
         speed, track = speed_track(v[:2])
@@ -302,6 +307,8 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
+        for t_s, reason, message in frame_defects(frames, _DEFECT_SENSORS, self._last_sample_t):
+            self.health.skip(t_s, reason, message)
         try:
             self._ingest(frames)
             self._samples(frames)

@@ -28,13 +28,13 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
   SOURCE_DEFAULTS below.
 - lock: a loop that hits the 101-iteration break flags the epoch 'degraded' but keeps its estimate; out of
   lock (V-shape flag, SNR < snr_min_db, false lock) lost_after_epochs times in a row is 'lost'.
-- reference_frame (session 3): "ne" (default for both sources) keeps the aiding's error as one north/east
+- reference_frame: "ne" (default for both sources) keeps the aiding's error as one north/east
   velocity bias e_ne (an INS's velocity error; with air data the wind), estimated with the transect
   centroid by a 4-state filter from the position fixes, its random walk aiding_bias_walk_mps_per_sqrt_s
   (INS 0.03, air data 0.05); an acquisition whose velocity change has an NIS above fix_gate_nis against
   e_ne's sigma is rejected. "speed_track" is the thesis' one reference per loop (b_v, b_psi), which a
   north/east error turns into a ramp in every turn (navigator.py).
-- replica_model "return" (session 3, the built-in scenario's): the roll correction formula of spec
+- replica_model "return" (the built-in scenario's): the roll correction formula of spec
   section 8 read as a ray: the measured height uses the off-nadir angle of the return predicted on the map
   at the navigator's position and attitude, and the replica samples the map where that return lies
   (beam.py). "footprint" and "plumb" keep the point below the aircraft.

@@ -71,6 +71,21 @@ def _set_skew(F, r0, c0, v0, v1, v2, sign):
     F[r0 + 2, c0 + 2] = 0.0
 
 
+@njit(cache=True, forceinline=True)
+def sparse_left_matmul(A, B, out):
+    """out = A B (square), summing over the nonzero entries of A only (the error model's F and Phi are
+    sparse); the same order of operations as the dense product's row-wise axpy."""
+    n = A.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = 0.0
+        for m in range(n):
+            aim = A[i, m]
+            if aim != 0.0:
+                for j in range(n):
+                    out[i, j] += aim * B[m, j]
+
+
 @njit(cache=True)
 def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b, t_ekf0, dt, n_steps, tau):
     """Propagate P (13, 13, in place) over n_steps EKF steps of dt seconds after t_ekf0 along the INS history.
@@ -127,26 +142,13 @@ def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b
                 F[3 + i, 9 + j] = C[i, j]
             F[6 + i, 12] = -C[i, 2]
         # Phi = I + F dt + (F dt)^2 / 2 (row-wise axpy over the nonzeros of F: F is sparse)
+        sparse_left_matmul(F, F, T)
         for i in range(N_ERR):
-            for j in range(N_ERR):
-                T[i, j] = 0.0
-            for m in range(N_ERR):
-                fim = F[i, m]
-                if fim != 0.0:
-                    for j in range(N_ERR):
-                        T[i, j] += fim * F[m, j]
             for j in range(N_ERR):
                 Phi[i, j] = F[i, j] * dt + 0.5 * T[i, j] * dt * dt
             Phi[i, i] += 1.0
         # P = Phi P Phi^T + Q = Phi (Phi P)^T + Q (P symmetric), both products over the nonzeros of Phi
-        for i in range(N_ERR):
-            for j in range(N_ERR):
-                T[i, j] = 0.0
-            for m in range(N_ERR):
-                pim = Phi[i, m]
-                if pim != 0.0:
-                    for j in range(N_ERR):
-                        T[i, j] += pim * P[m, j]
+        sparse_left_matmul(Phi, P, T)
         for i in range(N_ERR):
             for j in range(N_ERR):
                 U[i, j] = Q[i, j]

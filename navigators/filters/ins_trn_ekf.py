@@ -11,7 +11,9 @@ Error state (13, computed minus true, feedback form - corrected into the INS and
 Propagation at 50 Hz (seed 000 Table 2) with the psi-angle error model: d(dr) = dv;
 d(dv) = f^n x psi + C_bn b_a - (2 w_ie + w_en) x dv + dg (dg = -g/R dr_h, +2g/R dr_d; the vertical is the
 baro-damped channel of navigators.inertial); d(psi) = -w_in x psi - C_bn [0, 0, b_gz]. Measurement: the TERCOM
-fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (Table 2), chi-square gated.
+fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (Table 2), chi-square gated;
+the batch's rigid shift is the error at its mean sample time, so H also takes the velocity error times the
+lag to the fix (-lag on states 3, 4).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS.
 
@@ -40,7 +42,7 @@ from collections import deque
 
 import numpy as np
 import trn_env.navigators.filters._ekf_kernels as kern
-from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, N_EKF13
+from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from trn_env.navigators.core.linalg import is_positive_definite
 from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
@@ -50,7 +52,7 @@ from trn_env.navigators.filters.ins_trn_settings import (
     INS_CAPABILITIES,
     InsTrnSettings,
 )
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.strapdown import StrapdownIns
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
@@ -66,7 +68,7 @@ from trn_env.navigators.protocol import (
 )
 from trn_env.navigators.tercom.mad import TercomBatch, TercomFix, correlate
 
-FIX_HISTORY = 256     # TERCOM fixes kept in `fixes` (the newest)
+FIX_HISTORY = 64      # TERCOM fixes kept in `fixes` (the newest)
 
 G0 = 9.80665
 N_ERR = N_EKF13
@@ -110,6 +112,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
     """
 
     capabilities = INS_CAPABILITIES
+    settings_class = InsTrnSettings          # what `trn-env navigators` lists as its settings
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
@@ -249,9 +252,12 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         imu = frames.imu
         if imu is None or imu.t_s.size == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
-            return self.estimate()
+            return self.estimate().extrapolated(frames.t_end_s)
         t = np.asarray(imu.t_s, float)
         n = t.size
+        gap_s = imu_gap_s(t, self.ins.t_s)
+        if gap_s > 0.0:
+            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         gnss = self._gnss_fixes(frames)
         if gnss is None:
             self._gnss_check_loss(float(t[-1]))
@@ -310,7 +316,11 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             return
         z = -np.array([[fix.dn_m], [fix.de_m]])  # INS minus matched position
         H = np.zeros((2, N_ERR))
-        H[0, 0] = H[1, 1] = 1.0
+        H[0, DRN] = H[1, DRE] = 1.0
+        # the batch's rigid shift is the INS error at the batch's mean sample time, not at the fix's: the
+        # error then was the present one less the velocity error times the lag
+        lag_s = t_s - float(np.mean(s[:, 0]))
+        H[0, DVN] = H[1, DVE] = -lag_s
         Rm = np.eye(2) * self.fix_sigma_m**2
         S = H @ self.kf.P @ H.T + Rm
         d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])

@@ -16,7 +16,7 @@ import numpy as np
 from trn_env.navigators.core.error_states import ACC_BIAS, ATT, BGZ, GNSS_STATES, N_EKF13, POS, VEL
 from trn_env.navigators.core.linalg import is_positive_definite
 from trn_env.navigators.frames import SensorFrames
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.navigators.measurements import gnss as gnss_model
 
 
 class InsTrnGnss:
@@ -53,16 +53,8 @@ class InsTrnGnss:
     def _gnss_update(self, gnss, i: int) -> None:
         """Loosely coupled GNSS update with fix i (module docstring)."""
         t_g, lat_g, lon_g, v_g = gnss[0][i], gnss[1][i], gnss[2][i], gnss[3][i]
-        st = self.ins.state
-        lat, lon, h = float(st[0]), float(st[1]), float(st[2])
-        z = np.empty((5, 1))
-        z[0, 0] = (lat - lat_g) * (meridian_radius_m(lat) + h)     # INS minus GNSS, north (m)
-        z[1, 0] = (lon - lon_g) * (prime_vertical_radius_m(lat) + h) * math.cos(lat)
-        z[2:, 0] = st[3:6] - v_g
-        H = np.zeros((5, N_EKF13))
-        for r, c in enumerate(GNSS_STATES):
-            H[r, c] = 1.0
-        Rm = np.diag([self.gnss_sigma_h_m**2] * 2 + [self.gnss_sigma_v_mps**2] * 3)
+        z, H, Rm = gnss_model.position_velocity(self.ins.state, lat_g, lon_g, v_g, self.gnss_sigma_h_m,
+                                                self.gnss_sigma_v_mps, N_EKF13, GNSS_STATES)
         S = H @ self.kf.P @ H.T + Rm
         try:
             d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])

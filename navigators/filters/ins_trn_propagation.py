@@ -27,7 +27,7 @@ _EMPTY = np.zeros(0)
 _EMPTY_BOOL = np.zeros(0, np.bool_)
 # the memory over which the error sources the 13 states do not carry (the x / y gyro biases) are matched by
 # an equivalent random walk of the tilt (navigators.core.imu_spec): a GNSS-denied stretch of a flight
-EKF_MEMORY_S = 300.0
+EKF_MEMORY_S = 200.0
 # a turn of this angle builds the full scale-factor / misalignment error (the per-step share of a 90 deg turn)
 TURN_REFERENCE_RAD = 0.5 * math.pi
 

@@ -57,7 +57,7 @@ from trn_env.navigators.measurements.terrain_models import (
 )
 from trn_env.navigators.protocol import EXTRA_ESS
 
-PF_MEMORY_S = 60.0  # memory over which the error sources the particles do not carry are matched
+PF_MEMORY_S = 120.0  # memory over which the error sources the particles do not carry are matched
 N_STATE = 6
 
 

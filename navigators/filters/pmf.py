@@ -61,7 +61,6 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._pmf_kernels as kern
-from scipy import ndimage
 from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
 from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
 from trn_env.navigators.filters.terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
@@ -75,7 +74,7 @@ from trn_env.navigators.measurements.terrain_models import (
 )
 
 G0 = 9.80665
-PMF_MEMORY_S = 120.0        # the memory over which carried-as-constant error rates are matched (imu_spec)
+PMF_MEMORY_S = 240.0        # the memory over which carried-as-constant error rates are matched (imu_spec)
 TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
 N_U = 7                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error)
 LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
@@ -490,6 +489,7 @@ class PointMassFilter(InsRiddenFilter):
         fi = (self.axis_n - cn_old) / d_old + c_old
         fj = (self.axis_e - ce_old) / d_old + c_old
         FI, FJ = np.meshgrid(fi, fj, indexing="ij")
+        from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
         lw = ndimage.map_coordinates(old_lw, [FI, FJ], order=1, mode="constant", cval=LOG_FLOOR)
         b = ndimage.map_coordinates(old_b, [FI, FJ], order=1, mode="nearest")
         lw = lw.ravel()
@@ -529,6 +529,7 @@ class PointMassFilter(InsRiddenFilter):
     def _after_frame(self, t_end: float) -> None:
         super()._after_frame(t_end)
         d = self.logw.reshape(self.n, self.n)
+        from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
         peaks = (d == ndimage.maximum_filter(d, size=3, mode="constant", cval=-np.inf)) & (d > math.log(0.01))
         vals = np.sort(d[peaks])[::-1]
         self.extra["pmf_modes"] = int(vals.size)

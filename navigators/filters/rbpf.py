@@ -77,7 +77,7 @@ from trn_env.navigators.core.settings import SettingsError
 from trn_env.navigators.filters.rbpf_cloud import RbpfCloud
 from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
 from trn_env.navigators.filters.rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.error_model_15 import transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from trn_env.navigators.integrity import protection_level as pl
@@ -138,6 +138,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
     """
 
     capabilities = CAPABILITIES
+    settings_class = RbpfSettings            # what `trn-env navigators` lists as its settings
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
@@ -290,8 +291,11 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         imu = frames.imu
         if imu is None or imu.t_s.shape[0] == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
-            return self.estimate()
+            return self.estimate().extrapolated(frames.t_end_s)
         t = np.asarray(imu.t_s, float)
+        gap_s = imu_gap_s(t, self.ins.t_s)
+        if gap_s > 0.0:
+            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         f_b = np.asarray(imu.f_b_mps2, float)
         w_b = np.asarray(imu.omega_ib_b_rps, float)
         ok = np.asarray(imu.valid, bool)

@@ -13,26 +13,18 @@ import math
 
 import numpy as np
 import trn_env.navigators.filters._rbpf_kernels as kern
-from trn_env.navigators.core.imu_spec import ImuSpec, consistency_warning
 from trn_env.navigators.core.resampling import systematic_indices_u0
 from trn_env.navigators.protocol import (
     EXTRA_ESS,
 )
 
-RBPF_MEMORY_S = 60.0  # the memory over which the gyro biases' attitude error is checked (imu_spec)
-
 
 class RbpfCloud:
     """The cloud's GNSS update, resampling, integrity and feedback of RaoBlackwellizedPF; a mixin."""
 
+    # the RBPF's IMU error model reaches it as bias settings (registry.IMU_AWARE); no grade is known to be
+    # beyond it (its Kalman parts carry every gyro bias and the look angle observes the attitude)
     _consistency_warning = ""
-
-    def apply_imu_spec(self, spec: ImuSpec) -> None:
-        """The IMU's specification (navigators.core.imu_spec): the bias priors and drives reach the RBPF as
-        settings (trn_env's build_navigator, registry.IMU_AWARE); here only its validity: beyond the
-        small-angle limit over RBPF_MEMORY_S Health.consistency_warning says the covariance cannot be
-        trusted."""
-        self._consistency_warning = consistency_warning(spec, RBPF_MEMORY_S, "rbpf")
 
     @staticmethod
     def _ess(logw: np.ndarray) -> float:

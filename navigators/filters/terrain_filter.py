@@ -26,7 +26,7 @@ from trn_env.navigators.core.recovery import IntegrityRecovery, capped_nis  # no
 from trn_env.navigators.filters.terrain_filter_settings import (
     TerrainFilterSettings,
 )
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
@@ -185,8 +185,11 @@ class InsRiddenFilter:
         imu = frames.imu
         if imu is None or imu.t_s.shape[0] == 0:
             self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
-            return self.estimate()
+            return self.estimate().extrapolated(frames.t_end_s)
         t_imu = np.ascontiguousarray(imu.t_s, float)
+        gap_s = imu_gap_s(t_imu, self.ins.t_s)
+        if gap_s > 0.0:
+            self.health.skip(float(t_imu[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         hist = self._propagate_ins(frames, t_imu)
         events = self._events(frames, t_imu)
         for t_s, kind, payload, k in events:

@@ -15,6 +15,11 @@ Per monitor epoch (one radar-altimeter sample every `sample_period_s`):
     T      = sum over the last N epochs of p^2 / sigma^2           eq 4
     T_KF   = sum over the last N epochs of x_hat^2 / P             eq 5 (variant "kalman": x_hat, P from
                                                                    a scalar Kalman filter of the disparity)
+    T_KI   = sum over the last N epochs of nu^2 / S                eq 5 read on the same filter's
+                                                                   innovations nu = p - x_hat_prior, S =
+                                                                   P_prior + sigma^2 (variant
+                                                                   "kalman_innovation": the reading that
+                                                                   reproduces the paper's claims)
 
 Beam model: a pulse radar altimeter reports the shortest range inside its beam, not the height above the
 ground under the aircraft; over rough terrain at 600 m above ground that is 20-40 m less, which eq 2 with
@@ -120,13 +125,14 @@ def kalman_statistic_moments(n: int, process_ratio: float) -> tuple[float, float
 
 
 @functools.lru_cache(maxsize=32)
-def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: float) -> float:
+def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: float,
+                     reading: str = "rw_posterior") -> float:
     """Threshold of T_KF (eq 5 as the monitor computes it) for a false-alarm probability: the exact quantile
     of the generalised chi-square T_KF is under no fault with white disparities (its quadratic form from
-    correlated_disparity.kalman_reading("rw_posterior"), the filter in steady state; Imhof's integral takes
-    seconds, so it is cached)."""
+    correlated_disparity.kalman_reading(reading): "rw_posterior" for variant "kalman", "innovation" for
+    "kalman_innovation"; the filter in steady state; Imhof's integral takes seconds, so it is cached)."""
     from trn_env.navigators.integrity.correlated_disparity import gchi2_isf, kalman_reading
-    M = kalman_reading("rw_posterior", int(n), 150, float(process_ratio))
+    M = kalman_reading(reading, int(n), 150, float(process_ratio))
     return gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))
 
 
@@ -264,12 +270,13 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
     """Eqs 1-5 over the epochs `rows` (_epoch_kernel's); r_map: the map's predicted radar-altimeter range
     at each epoch (beam model "cone") or an empty array (nadir: eq 2's map height under the position).
     Writes [t, p, s, sigma, T, alarm, source] into `out`.
-    state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 2): the terms
-    p^2/sigma^2 and x^2/P; wring (N, 10): the ring of correlated_disparity.whitened_statistic (used when
-    cfg[16] > 0: a correlated map error); est_terms: the navigator's [P_dd, -, -, P_nn, P_ne, P_ee] for it."""
+    state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 3): the
+    terms p^2/sigma^2, x^2/P and nu^2/S; wring (N, 10): the ring of correlated_disparity.whitened_statistic
+    (used when cfg[16] > 0: a correlated map error); est_terms: the navigator's [P_dd, -, -, P_nn, P_ne,
+    P_ee] for it."""
     n_win = int(cfg[0])
     sig_map2 = cfg[3] * cfg[3]
-    kalman = cfg[8] > 0.5
+    kalman = cfg[8] > 0.5                              # 1: eq 5 on x_hat, 2: on the innovations
     q_ratio = cfg[9]
     thr = cfg[10]
     cone = r_map.shape[0] > 0
@@ -302,12 +309,14 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
             state[4] = 0.0
             state[5] = pp * var / (pp + var)
         p_prior = state[5] + q_ratio * var
+        innov_term = (p - state[4]) ** 2 / (p_prior + var)   # eq 5 read on the innovations (before update)
         k = p_prior / (p_prior + var)
         state[4] += k * (p - state[4])
         state[5] = (1.0 - k) * p_prior
         pos = int(state[2])
         ring[pos, 0] = p * p / var                     # eq 4 term
         ring[pos, 1] = state[4] * state[4] / state[5]  # eq 5 term
+        ring[pos, 2] = innov_term                      # eq 5, innovation reading
         wring[pos, 0] = p
         wring[pos, 1] = rows[i, 1]
         wring[pos, 2] = rows[i, 2]
@@ -320,7 +329,7 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
             wring[pos, 6] = rows[i, 9]
         state[2] = (pos + 1) % n_win
         state[1] += 1
-        col = 1 if kalman else 0
+        col = int(cfg[8])
         tot = np.nan
         if state[1] >= n_win and whiten:               # p' Sigma^-1 p: chi2(N) under the map's model
             tot = whitened_statistic(wring, int(state[2]), n_win, sig_r2, sig_b2, corr_len, int(cfg[17]))
@@ -440,6 +449,7 @@ class DemIntegrityMonitor:
 
     name = "dem_integrity"
     capabilities = CAPABILITIES
+    settings_class = DemMonitorConfig        # what `trn-env navigators` lists as its settings
     _NONE = np.zeros((0, 7))
 
     def __init__(self, dem=None, settings: DemMonitorConfig | None = None, **overrides):
@@ -454,7 +464,7 @@ class DemIntegrityMonitor:
         self._cfg = np.array([c.n_window, c.sample_period_s, c.lever_arm_m, c.map_sigma_m,
                               c.radar_altimeter_noise_const_m, c.radar_altimeter_noise_fraction,
                               c.gnss_vertical_sigma_m, c.gnss_max_age_s,
-                              1.0 if c.variant == "kalman" else 0.0,
+                              float(VARIANTS.index(c.variant)),
                               c.kf_process_ratio, self.threshold, 0.0, 0.0, 0.0,
                               math.radians(c.beam_half_angle_deg), c.max_range_m,
                               c.correlation_length_m, CORRELATION_CODES[c.correlation_function],
@@ -467,7 +477,7 @@ class DemIntegrityMonitor:
 
     def reset(self) -> None:
         self._state = np.array([-np.inf, 0.0, 0.0, np.nan, 0.0, 1.0, 0.0])
-        self._ring = np.zeros((int(self.config.n_window), 2))
+        self._ring = np.zeros((int(self.config.n_window), 3))
         self._wring = np.zeros((int(self.config.n_window), 10))
         self._alarm = False
 
@@ -552,7 +562,8 @@ def alarm_summary(arrays: dict[str, np.ndarray]) -> dict:
 
 
 def replay_log(monitor: DemIntegrityMonitor, log: dict, period_s: float = 1.0) -> dict[str, np.ndarray]:
-    """Run a monitor over a recorded flight: `log` holds arrays named as trn_env's log.npz
+    """Run a monitor over a recorded flight: `log` holds arrays named as a run's `result.arrays` (on disk:
+    trn_env.logs.read_log(run / "log").arrays(), the sensor log's tables under these names)
     (sensor_radar_altimeter_{t_s, range_m, valid}, sensor_gnss_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, valid}
     if GNSS was recorded, and the estimates est_{t_s, lat_rad, lon_rad, h_m, v_ned_mps, roll_rad, pitch_rad,
     yaw_rad, cov}). The samples are handed over in intervals (a, b] of period_s (the closed loop's update

@@ -14,7 +14,7 @@ from trn_env.navigators.core.settings import Settings, setting
 
 DEFAULT_N = 50            # seed 003 section III: N = 50 consecutive measurements
 DEFAULT_THRESHOLD = 96.0  # seed 003 section III: "the statistic threshold is found to be 96"
-VARIANTS = ("plain", "kalman")
+VARIANTS = ("plain", "kalman", "kalman_innovation")
 CORRELATION_CODES = {"exponential": 0, "gaussian": 1}   # correlated_disparity.whitened_statistic's func codes
 
 
@@ -31,7 +31,8 @@ class DemMonitorConfig(Settings):
                                                     "1", gt=0.0, lt=1.0)
     map_class: str = setting("dted1", "map error class whose disparity sigma the statistic assumes")
     sigma_m: float | None = setting(None, "disparity sigma overriding the class's", "m", gt=0.0)
-    variant: str = setting("plain", "statistic: 'plain' (eq 4) or 'kalman' (eq 5)", choices=VARIANTS)
+    variant: str = setting("plain", "statistic: 'plain' (eq 4), 'kalman' (eq 5 on the filter's estimate) or "
+                                    "'kalman_innovation' (eq 5 on its innovations)", choices=VARIANTS)
     sample_period_s: float = setting(1.0, "one radar-altimeter sample per period", "s", gt=0.0)
     lever_arm_m: float = setting(0.0, "eq 1's l_ar: GNSS antenna above the radar altimeter", "m")
     radar_altimeter_noise_const_m: float = setting(0.0, "radar-altimeter noise, constant part", "m", ge=0.0)
@@ -76,8 +77,10 @@ class DemMonitorConfig(Settings):
             return float(self.threshold)
         if self.false_alarm_probability is None:
             return DEFAULT_THRESHOLD
-        if self.variant == "kalman":
-            return kalman_threshold(self.false_alarm_probability, int(self.n_window), self.kf_process_ratio)
+        if self.variant != "plain":
+            reading = "rw_posterior" if self.variant == "kalman" else "innovation"
+            return kalman_threshold(self.false_alarm_probability, int(self.n_window), self.kf_process_ratio,
+                                    reading)
         return chi2_threshold(self.false_alarm_probability, int(self.n_window))
 
 

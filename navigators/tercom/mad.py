@@ -108,21 +108,7 @@ def correlate(
     n = 2 * half + 1
     empty = np.full((n, n), np.inf)
     if ok.sum() < 2:
-        return TercomFix(
-            t_s,
-            False,
-            "no_samples",
-            np.nan,
-            np.nan,
-            np.nan,
-            np.nan,
-            np.nan,
-            np.nan,
-            False,
-            int(ok.sum()),
-            empty,
-            cell_m,
-        )
+        return _unusable_fix(t_s, "no_samples", int(ok.sum()), empty, cell_m)
     lat, lon, hm, dn, de = lat[ok], lon[ok], hm[ok], dn[ok], de[ok]
     lat_c = float(np.mean(lat)) if lat_ref_rad is None else float(lat_ref_rad)
     r_ns = meridian_radius_m(lat_c)
@@ -159,25 +145,17 @@ def _surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, hm, d_lat_cell, d_lo
     )
 
 
+def _unusable_fix(t_s, reason: str, n_samples: int, surface: np.ndarray, cell_m: float) -> TercomFix:
+    """A fix that cannot be used (valid False, NaN correction and quality) for `reason`."""
+    nan = np.nan
+    return TercomFix(t_s, False, reason, nan, nan, nan, nan, nan, nan, False, n_samples, surface, cell_m)
+
+
 def _fix_from_surface(t_s, surf, n_samples, half, cell_m, r_ns, r_ew, exclusion_cells) -> TercomFix:
     """The fix of a MAD surface: its smallest cell, the quality and edge tests (correlate's second half)."""
     n = 2 * half + 1
     if not np.isfinite(surf).any():
-        return TercomFix(
-            t_s,
-            False,
-            "off_map",
-            np.nan,
-            np.nan,
-            np.nan,
-            np.nan,
-            np.nan,
-            np.nan,
-            False,
-            int(n_samples),
-            surf,
-            cell_m,
-        )
+        return _unusable_fix(t_s, "off_map", int(n_samples), surf, cell_m)
     ia, ib = np.unravel_index(int(np.argmin(surf)), surf.shape)
     best = float(surf[ia, ib])
     second = _second_minimum(surf, ia, ib, exclusion_cells)

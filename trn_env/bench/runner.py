@@ -1,7 +1,8 @@
 """`trn-env bench`: throughput figures from one run, each beside its reference measured in the same run.
 
 Collects the component benchmarks (trn_env.bench.flight, trn_env.terrain.bench, trn_env.bench.sensors,
-trn_env.bench.navigators, trn_env.bench.env - the env, a 2-env SubprocVecEnv and the route planner: each a
+trn_env.bench.navigators, trn_env.bench.env - the env, a 2-env SubprocVecEnv and the route planner -,
+trn_env.bench.fast_env - TerrainNavFast-v0 at N = 256 beside TerrainNav-v0 and bare JSBSim: each a
 `benchmark(...) -> dict`) and adds the closed-loop figures measured here:
 
 - closed_loop_steps_per_s: JSBSim steps per wall second of the full default-scenario loop (flight,
@@ -134,7 +135,7 @@ def run_all(quick: bool = False) -> dict:
     for module in ("trn_env.bench.flight", "trn_env.terrain.bench", "trn_env.bench.sensors",
                    "trn_env.bench.navigators", "trn_env.bench.campaign", "trn_env.bench.acq_track",
                    "trn_env.bench.rbpf", "trn_env.bench.filters", "trn_env.bench.integrity",
-                   "trn_env.bench.env"):
+                   "trn_env.bench.env", "trn_env.bench.fast_env"):
         out.update(_component(module, quick))
     for name, fn in (("closed_loop", closed_loop_benchmark),):
         try:

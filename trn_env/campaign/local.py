@@ -99,6 +99,14 @@ class LocalBackend:
                     inflight.clear()
                     pool.shutdown(wait=False, cancel_futures=True)
                     pool = self._pool(dems)
+        except KeyboardInterrupt:
+            # Ctrl-C reaches the workers too (the terminal signals the process group), SIGTERM to the
+            # driver alone does not: stop them, rather than wait for the runs in flight to finish
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                if proc.is_alive():
+                    proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
 

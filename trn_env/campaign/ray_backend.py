@@ -16,6 +16,14 @@ one-line message. Ray's console noise of a failed connection goes to a log file,
   (keyed by campaign hash and run id), so a row flown again after a node died says `attempts = 2`.
 - At most 2 x cluster CPUs tasks are in flight; rows are taken with `ray.wait` as they finish and handed
   to the driver, which writes them, so a large campaign never holds everything in the driver.
+- Plug-in navigators and monitors: an installed plug-in (an entry point of a package installed in the
+  workers' Python environment, as on a local instance that shares this interpreter) is found by the workers
+  as in the driver. A `package.module:Name` reference to a module that no installed distribution provides
+  is shipped to the workers in the job's runtime environment (`ray.init(runtime_env={"py_modules": [...]})`,
+  `plugin_runtime_env`) when this backend connects or starts the instance; a session the caller initialised
+  keeps its own runtime_env (pass the module there). On a cluster whose nodes lack an installed plug-in,
+  install it on the nodes, or connect with your own runtime_env (e.g. `ray.init(address=...,
+  runtime_env={"pip": ["./my_plugin"]})`) before the campaign.
 """
 
 from __future__ import annotations
@@ -196,6 +204,20 @@ def _worker_version() -> str:
     return _local_version()
 
 
+def plugin_runtime_env() -> dict[str, Any] | None:
+    """Ray's runtime_env shipping the plug-in modules the driver resolved that no installed distribution
+    provides (navigators.registry.plugin_modules), or None when there are none."""
+    import sys
+
+    from trn_env.navigators.registry import plugin_modules
+    paths = []
+    for name in plugin_modules():
+        mod = sys.modules[name]
+        # a package's folder, or a single-file module's .py (Ray's per-task runtime_env takes paths)
+        paths.append(list(mod.__path__)[0] if hasattr(mod, "__path__") else mod.__file__)
+    return {"py_modules": paths} if paths else None
+
+
 def _fly(task: RunTask, dems: dict[str, Any]) -> tuple[dict, bytes | None]:
     attempt = _attempt_number(f"{task.campaign_hash}:{task.run_id}")
     row, log = fly_run(task, dems)
@@ -237,6 +259,9 @@ class RayBackend:
         if ray.is_initialized():       # the caller's session (e.g. a test's or a notebook's)
             return self
         kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "ignore_reinit_error": True}
+        runtime_env = plugin_runtime_env()      # the campaign's plug-ins were resolved when it was loaded
+        if runtime_env is not None:
+            kw["runtime_env"] = runtime_env
         try:
             if self.address:
                 ray.init(address=self.address, **kw)

@@ -111,6 +111,9 @@ def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, by
     if getattr(task, "kind", "flight") == "episode":
         from trn_env.campaign.episodes import fly_episode
         return fly_episode(task, dems)
+    if getattr(task, "kind", "flight") == "replay":       # a log campaign (trn_env.campaign.log_replay)
+        from trn_env.campaign.log_replay import replay_run
+        return replay_run(task)
     from trn_env.scenario.loading import Scenario
     from trn_env.sim.closed_loop import ClosedLoop
 

@@ -252,6 +252,9 @@ def load_campaign(path: str | Path) -> Campaign:
         raise CampaignError(source, [f"file: cannot read: {exc}"]) from None
     except tomllib.TOMLDecodeError as exc:
         raise CampaignError(source, [f"file: not valid TOML: {exc}"]) from None
+    if "logs" in data:                  # a campaign over sensor logs (trn_env.campaign.log_replay)
+        from trn_env.campaign.log_replay import load_log_campaign
+        return load_log_campaign(path, data, raw)
     problems = _schema_problems(data)
     if problems:
         raise CampaignError(source, problems)

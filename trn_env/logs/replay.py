@@ -160,17 +160,21 @@ def check_sensors(navigator, name: str, log: SensorLog, d: dict | None = None) -
 
 
 def replay(log: SensorLog | Path | str, navigator: str | None = None, *, settings: dict | None = None,
-           monitors: list[str] | None = None, map_path: str | None = None, progress=None) -> ReplayResult:
+           monitors: list[str] | None = None, map_path: str | None = None, seed: int | None = None,
+           progress=None) -> ReplayResult:
     """Run `navigator` (default: the log's) over the log; LogError/ValueError on bad input, before
-    anything runs."""
+    anything runs. `settings` update the navigator's; `seed` replaces the log's seed for the navigator's
+    random stream (the map errors and the initial estimate keep the log's)."""
     from trn_env.scenario.build import build_monitors, build_navigator
+    seed_override = seed
     if not isinstance(log, SensorLog):
         log = read_log(log)
     d = scenario_of(log, navigator, settings, monitors)
     world, the_map, schedule = build_maps(log, d, map_path)
     seed = int(d.get("seed", log.metadata.get("seed", 0)))
+    nav_seed = seed if seed_override is None else int(seed_override)
     try:
-        nav = build_navigator(d, the_map, spawn_rngs(seed)["navigator"])
+        nav = build_navigator(d, the_map, spawn_rngs(nav_seed)["navigator"])
         mons = build_monitors(d, the_map)
     except (ValueError, TypeError, KeyError) as exc:
         raise LogError(f"navigator {d['navigator']['name']!r}: {exc}") from exc
@@ -208,7 +212,7 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
             progress(k + 1, n)
     wall = time.perf_counter() - wall0
     sc = Scenario(name=str(log.metadata.get("scenario_name", log.path.name)), source=str(log.path), data=d,
-                  seed=seed, duration_s=float(log.column("frames", "t_end_s")[-1]) if n else 0.0)
+                  seed=nav_seed, duration_s=float(log.column("frames", "t_end_s")[-1]) if n else 0.0)
     arrays, has_truth = replay_arrays(log, ests, world, d)
     summary = {"scenario": sc.name, "seed": seed, "navigator": sc.navigator_name, "replay_of": str(log.path),
                "frames": n, "termination": termination, "wall_time_s": wall}

@@ -72,8 +72,14 @@ def write_metadata(path: Path, metadata: dict) -> None:
     path.write_text(json.dumps(_json_safe(metadata), indent=1) + "\n", encoding="utf-8")
 
 
+# a table's buffer is written as a row group when it holds chunk_rows rows, MAX_BUFFER_BYTES of values or
+# MAX_PIECES appended pieces (a sparse table's small per-interval arrays, each with its own overhead)
+MAX_BUFFER_BYTES = 4 << 20
+MAX_PIECES = 256
+
+
 class _Table:
-    """One Parquet table written in row groups of at most chunk_rows rows."""
+    """One Parquet table written in row groups (at most chunk_rows rows; see MAX_BUFFER_BYTES)."""
 
     def __init__(self, path: Path, schema: pa.Schema, chunk_rows: int):
         self.path = path
@@ -81,6 +87,8 @@ class _Table:
         self.chunk_rows = chunk_rows
         self.parts: dict[str, list[np.ndarray]] = {f.name: [] for f in schema}
         self.buffered = 0
+        self.buffered_bytes = 0
+        self.pieces = 0
         self.rows = 0
         self.writer: pq.ParquetWriter | None = None
 
@@ -90,8 +98,11 @@ class _Table:
             v = cols[name]
             n = v.shape[0] if n is None else n
             self.parts[name].append(v)
+            self.buffered_bytes += v.nbytes if v.dtype != object else 64 * len(v)
         self.buffered += n or 0
-        if self.buffered >= self.chunk_rows:
+        self.pieces += 1
+        if (self.buffered >= self.chunk_rows or self.buffered_bytes >= MAX_BUFFER_BYTES
+                or self.pieces >= MAX_PIECES):
             self.flush()
 
     def flush(self) -> None:
@@ -105,7 +116,7 @@ class _Table:
         self.writer.write_table(table)
         self.rows += table.num_rows
         self.parts = {f.name: [] for f in self.schema}
-        self.buffered = 0
+        self.buffered = self.buffered_bytes = self.pieces = 0
 
     def close(self) -> int:
         self.flush()

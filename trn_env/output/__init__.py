@@ -1,6 +1,6 @@
 """Output stage: run folders written atomically, logs, plots.
 
-run_folder  `write_run` (summary.json, log.npz, timeline.csv, events.csv, plots; all or nothing)
+run_folder  `write_run` (summary.json, log/, log.npz, timeline.csv, events.csv, plots; all or nothing)
 plots       track over the terrain, errors against time with the filter's bounds
 """
 

@@ -97,6 +97,8 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "unused_sensors": Field("", "fitted sensors that neither the navigator nor a monitor reads (their "
                                 "declared sensor needs)"),
     "files": Field("", "the files written to the run folder"),
+    "trn_env_version": Field("", "the trn-env version that flew the run"),
+    "command_line": Field("", "the command as typed (shell-quoted); scenario.toml's header repeats it"),
     "status_ok_fraction": Field("", "time share of rows whose health status is 'ok'"),
     "status_ok_misleading_fraction": Field("", "share of the 'ok' time with the north or east error outside "
                                                "k sigma"),
@@ -119,6 +121,9 @@ CAMPAIGN_ROW_FIELDS: dict[str, Field] = {
     "sweep_json": Field("", "the run's sweep values as JSON (dotted path -> value)"),
     "sweep.": Field("", "one column per swept dotted path, holding the run's value"),
     "replay_command": Field("", "a `trn-env fly` command that flies this run alone"),
+    "navigator_settings_json": Field("", "the navigator's settings as flown, as JSON (shown in the report)"),
+    "gnss_outages_json": Field("", "the run's GNSS outage windows (gnss.outages) as JSON (the report shades "
+                                   "them)"),
     "error": Field("", "the error message of a run that failed (termination 'error'), else empty"),
     "attempts": Field("", "how many times the run was started (retries included)"),
     "host": Field("", "host name of the worker that flew the run"),

@@ -2,7 +2,8 @@
 
 `trn-env fly` and `trn-env replay` hand over `log_dir`, a sensor log (trn_env.logs) already streamed to
 disk during the run: it is moved in as `log/` (Parquet tables, read with trn_env.logs.read_log or
-pandas.read_parquet) instead of writing `log.npz` from the arrays in memory.
+pandas.read_parquet). `log.npz` then holds the per-update arrays only (truth, estimates, errors, monitors);
+the full-rate sensor arrays it held before are in `log/` (`read_log(run / "log").arrays()`).
 
 Everything is written atomically: the files go into a temporary directory next to the target, and only
 when all of them are complete is that directory renamed onto the target. A run folder holds one run only:
@@ -222,7 +223,7 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
     """Write a complete run directory atomically; returns the directory.
 
     `plot(tmp_dir)` may add figures; it returns their file names (listed in summary['files']).
-    `log_dir`: a finished log folder moved in as `log/` (then no log.npz is written).
+    `log_dir`: a finished log folder moved in as `log/` (beside log.npz of `arrays`).
     `extra_files`: name -> text of further files (e.g. the resolved scenario.toml). `overwrite`: replace a
     folder that holds a previous run as a whole (see the module docstring); without it a non-empty
     `out_dir` raises FileExistsError before anything is written.
@@ -239,12 +240,11 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)          # mkdtemp makes it private; the run directory should not be
     try:
+        files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
+        write_log_npz(tmp / "log.npz", arrays)
         if log_dir is not None:
-            files = ["summary.json", "log", "timeline.csv", "events.csv"]
+            files.insert(2, "log")
             os.replace(log_dir, tmp / "log")
-        else:
-            files = ["summary.json", "log.npz", "timeline.csv", "events.csv"]
-            write_log_npz(tmp / "log.npz", arrays)
         for name, text in (extra_files or {}).items():
             (tmp / name).write_text(text, encoding="utf-8")
             files.append(name)

@@ -515,27 +515,21 @@ def _fuel_problems(d: dict) -> list[str]:
 
 
 def _navigator_problems(d: dict) -> list[str]:
+    """navigator.name: a built-in, an installed plug-in (entry point) or an importable `module:Name`
+    reference to a navigator; monitors.<name> likewise for monitors (navigators.registry.resolve)."""
+    from trn_env.navigators import registry
+    problems = []
     try:
-        from trn_env.navigators import registry
-    except ImportError as exc:
-        return [f"navigator.name: navigators.registry is not available ({exc})"]
-    names = _registry_names(registry)
-    name = d["navigator"]["name"]
-    if names is not None and name not in names:
-        return [f"navigator.name: unknown navigator {name!r} (known: {', '.join(sorted(names))})"]
-    return []
-
-
-def _registry_names(registry) -> list[str] | None:
-    for attr in ("names", "available", "list_navigators"):
-        fn = getattr(registry, attr, None)
-        if callable(fn):
-            return list(fn())
-    for attr in ("NAVIGATORS", "REGISTRY", "_REGISTRY"):
-        table = getattr(registry, attr, None)
-        if isinstance(table, dict):
-            return list(table)
-    return None
+        registry.resolve(d["navigator"]["name"], "navigator")
+    except ValueError as exc:
+        problems.append(f"navigator.name: {exc}")
+    mons = d.get("monitors")
+    for name in sorted(mons) if isinstance(mons, dict) else ():
+        try:
+            registry.resolve(name, "monitor")
+        except ValueError as exc:
+            problems.append(f"monitors.{name}: {exc}")
+    return problems
 
 
 def _load_dem(value: str, fill_voids: bool):

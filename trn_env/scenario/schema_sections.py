@@ -15,7 +15,11 @@ import copy
 from collections.abc import Iterator
 from typing import Any
 
-from trn_env.navigators.core.settings import json_schema, table_rows
+from trn_env.navigators.core.settings import Settings, json_schema, table_rows
+
+
+def _declared(cls) -> bool:
+    return isinstance(cls, type) and issubclass(cls, Settings)
 
 # a navigator that needs the map may be given another one than terrain.map's (a DEM name or file)
 _RUNTIME = {"dem": {"type": "string", "description": "the navigator's map, a DEM name or file (default: "
@@ -48,7 +52,7 @@ def monitor_sections() -> dict[str, dict]:
     out = {}
     for name in registry.available_monitors():
         cls = registry.monitor_capabilities(name).settings
-        if cls is not None:
+        if _declared(cls):
             out[name] = json_schema(cls, f"settings of monitor {name!r} ({cls.__module__}.{cls.__name__})")
     return out
 
@@ -59,7 +63,7 @@ def navigator_branches() -> list[dict]:
     branches = []
     for name in registry.available():
         cls = registry.settings_class(name)
-        if cls is None:
+        if not _declared(cls):
             continue
         extra = dict(json_schema(registry.PublishedIntegritySettings)["properties"])   # every navigator's
         if registry.capabilities(name).needs_map:
@@ -90,11 +94,11 @@ def settings_tables() -> Iterator[tuple[str, type, list[dict[str, str]]]]:
     from trn_env.sensors.suite import SENSOR_MODELS
     for name in registry.available():
         cls = registry.settings_class(name)
-        if cls is not None:
+        if _declared(cls):
             yield f"navigator.settings ({name})", cls, table_rows(cls)
     for name in registry.available_monitors():
         cls = registry.monitor_settings_class(name)
-        if cls is not None:
+        if _declared(cls):
             yield f"monitors.{name}", cls, table_rows(cls)
     for name, model in SENSOR_MODELS.items():
         yield f"sensors.{name}", model.config_cls, table_rows(model.config_cls)

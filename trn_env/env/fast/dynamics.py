@@ -68,9 +68,26 @@ WGS84_A_M = 6378137.0
 WGS84_E2 = 6.69437999014e-3
 
 # flight parameter vector (float64), built by the vector env
-(FP_DT, FP_TAS, FP_BANK_MAX, FP_BANK_TAU, FP_CLIMB, FP_DESCENT, FP_TRACK_GAIN, FP_HEIGHT_GAIN, FP_VS_ACCEL,
- FP_TURB_SIGMA, FP_TURB_TAU, FP_GOAL_RADIUS, FP_MAX_EP, FP_OMEGA, FP_OFFSET_MAX, FP_PURSUIT, FP_ARRIVAL,
- FP_SAMPLE_DT) = range(18)
+(
+    FP_DT,
+    FP_TAS,
+    FP_BANK_MAX,
+    FP_BANK_TAU,
+    FP_CLIMB,
+    FP_DESCENT,
+    FP_TRACK_GAIN,
+    FP_HEIGHT_GAIN,
+    FP_VS_ACCEL,
+    FP_TURB_SIGMA,
+    FP_TURB_TAU,
+    FP_GOAL_RADIUS,
+    FP_MAX_EP,
+    FP_OMEGA,
+    FP_OFFSET_MAX,
+    FP_PURSUIT,
+    FP_ARRIVAL,
+    FP_SAMPLE_DT,
+) = range(18)
 N_FLIGHT_PARAMS = 18
 
 
@@ -109,8 +126,10 @@ def wind_at(h, wind_alt, wind_n, wind_e):
     for k in range(1, n):
         if h <= wind_alt[k]:
             f = (h - wind_alt[k - 1]) / (wind_alt[k] - wind_alt[k - 1])
-            return (wind_n[k - 1] + f * (wind_n[k] - wind_n[k - 1]),
-                    wind_e[k - 1] + f * (wind_e[k] - wind_e[k - 1]))
+            return (
+                wind_n[k - 1] + f * (wind_n[k] - wind_n[k - 1]),
+                wind_e[k - 1] + f * (wind_e[k] - wind_e[k - 1]),
+            )
     return wind_n[n - 1], wind_e[n - 1]
 
 
@@ -120,8 +139,31 @@ def _wrap(a):
 
 
 @njit(cache=True, parallel=True)
-def fly_decision(X, state, active, n_sub, prof_meas, prof_lat, prof_lon, world, w_lat0, w_lon0, w_dlat,
-                 w_dlon, mapg, m_lat0, m_lon0, m_dlat, m_dlon, fp, nav, wind_alt, wind_n, wind_e, diff):
+def fly_decision(
+    X,
+    state,
+    active,
+    n_sub,
+    prof_meas,
+    prof_lat,
+    prof_lon,
+    world,
+    w_lat0,
+    w_lon0,
+    w_dlat,
+    w_dlon,
+    mapg,
+    m_lat0,
+    m_lon0,
+    m_dlat,
+    m_dlon,
+    fp,
+    nav,
+    wind_alt,
+    wind_n,
+    wind_e,
+    diff,
+):
     """Fly every active aircraft n_sub steps of fp[FP_DT] s (or to its episode's end, X[:, END] != 0); the
     aircraft are independent (each writes only its own rows), spread over the cores; diff is (N, profile)
     scratch."""
@@ -131,6 +173,7 @@ def fly_decision(X, state, active, n_sub, prof_meas, prof_lat, prof_lon, world, 
     turb_a = math.exp(-dt / fp[FP_TURB_TAU])
     turb_b = fp[FP_TURB_SIGMA] * math.sqrt(1.0 - turb_a * turb_a)
     vrw = math.sqrt(nav[nv.NP_Q_V] * dt)
+    sin_off_max = math.sin(min(fp[FP_OFFSET_MAX], 0.5 * math.pi))
     for i in prange(X.shape[0]):
         if not active[i] or X[i, END] != 0.0:
             continue
@@ -143,7 +186,8 @@ def fly_decision(X, state, active, n_sub, prof_meas, prof_lat, prof_lon, world, 
             gn, ge = offset_to_goal(X, i, lat_e, lon_e)
             if fp[FP_PURSUIT] > 0.5:
                 d = math.hypot(gn, ge)
-                lim = min(fp[FP_OFFSET_MAX], math.asin(min(1.0, d * fp[FP_OMEGA] / v)))
+                x = d * fp[FP_OMEGA] / v
+                lim = min(fp[FP_OFFSET_MAX], 0.5 * math.pi) if x >= sin_off_max else math.asin(x)
                 X[i, TRK_CMD] = _wrap(math.atan2(ge, gn) + X[i, OFFSET_FRAC] * lim)
             h_map_e = kernels.bilinear(mapg, m_lat0, m_lon0, m_dlat, m_dlon, lat_e, lon_e)
             if h_map_e != h_map_e:
@@ -183,10 +227,15 @@ def fly_decision(X, state, active, n_sub, prof_meas, prof_lat, prof_lon, world, 
             X[i, GUST_E] = turb_a * X[i, GUST_E] + turb_b * g_e
             # ---- navigator
             w_n, w_e = frng.normal_pair(state, i)
-            f_turn = G0_MPS2 * math.tan(X[i, BANK])         # centripetal specific force, right of the heading
+            f_turn = G0_MPS2 * math.tan(X[i, BANK])  # centripetal specific force, right of the heading
             nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
+            k_t = int(X[i, T] + 0.5)
+            if k_t % nv.BI_STEP_S == 0:
+                b0, b1 = frng.normal_pair(state, i)
+                b2, b3 = frng.normal_pair(state, i)
+                nv.bias_instability_step(X, i, float(nv.BI_STEP_S), nav, b0, b1, b2, b3)
             X[i, T] += dt
-            nv.covariance_step(X, i, dt, nav[nv.NP_Q_V], nav[nv.NP_Q_A])
+            nv.covariance_step(X, i, dt, nav[nv.NP_QF_V], nav[nv.NP_Q_A])
             t = X[i, T]
             h_world = kernels.bilinear(world, w_lat0, w_lon0, w_dlat, w_dlon, X[i, LAT], X[i, LON])
             if h_world != h_world:
@@ -211,8 +260,22 @@ def fly_decision(X, state, active, n_sub, prof_meas, prof_lat, prof_lon, world, 
                         X[i, N_PROF] = k + 1
                     if t - X[i, T_LAST_FIX] >= nav[nv.NP_FIX_PERIOD] - 1e-9:
                         rm_e, rn_e = radii_m(lat_e)
-                        nv.tercom_fix(X, i, prof_meas, prof_lat, prof_lon, mapg, m_lat0, m_lon0, m_dlat, m_dlon,
-                                      nav, rm_e + X[i, H], (rn_e + X[i, H]) * math.cos(lat_e), diff[i])
+                        nv.tercom_fix(
+                            X,
+                            i,
+                            prof_meas,
+                            prof_lat,
+                            prof_lon,
+                            mapg,
+                            m_lat0,
+                            m_lon0,
+                            m_dlat,
+                            m_dlon,
+                            nav,
+                            rm_e + X[i, H],
+                            (rn_e + X[i, H]) * math.cos(lat_e),
+                            diff[i],
+                        )
                         X[i, T_LAST_FIX] = t
             # ---- episode ends
             if X[i, H] - h_world < 0.0:

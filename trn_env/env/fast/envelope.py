@@ -46,8 +46,8 @@ class Envelope:
 # output are in docs/validation/fast_tier.md.
 KINGAIR_ENVELOPE = Envelope(
     tas_mps=85.0,
-    bank_max_rad=0.4545,           # 26.0 deg (the 25 deg limit plus the roll loop's overshoot)
-    turn_rate_max_rps=0.05578,     # 3.20 deg/s
+    bank_max_rad=0.4545,  # 26.0 deg (the 25 deg limit plus the roll loop's overshoot)
+    turn_rate_max_rps=0.05578,  # 3.20 deg/s
     bank_tau_s=1.0,
     climb_rate_max_mps=7.56,
     descent_rate_max_mps=7.45,
@@ -71,39 +71,72 @@ def measure_envelope(tas_mps: float = 85.0, h_msl_m: float = 1500.0) -> dict:
         for _ in range(int(round(seconds / 0.1))):
             c = fl.advance(10)
             v = c.v_ned_mps[-1]
-            rows.append((c.t_s[-1], c.roll_rad[-1], math.atan2(v[1], v[0]), c.h_msl_m[-1], -v[2],
-                         c.tas_mps[-1]))
+            rows.append(
+                (c.t_s[-1], c.roll_rad[-1], math.atan2(v[1], v[0]), c.h_msl_m[-1], -v[2], c.tas_mps[-1])
+            )
         return np.array(rows)
 
-    level = AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=0.0,
-                             vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m, tas_cmd_mps=tas_mps)
+    level = AutopilotTargets(
+        lateral_mode=LateralMode.TRACK,
+        track_cmd_rad=0.0,
+        vertical_mode=VerticalMode.ALTITUDE_MSL,
+        altitude_cmd_m=h_msl_m,
+        tas_cmd_mps=tas_mps,
+    )
     fly(level, 20.0)
-    turn = fly(AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=math.pi / 2,
-                                vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m,
-                                tas_cmd_mps=tas_mps), 60.0)
+    turn = fly(
+        AutopilotTargets(
+            lateral_mode=LateralMode.TRACK,
+            track_cmd_rad=math.pi / 2,
+            vertical_mode=VerticalMode.ALTITUDE_MSL,
+            altitude_cmd_m=h_msl_m,
+            tas_cmd_mps=tas_mps,
+        ),
+        60.0,
+    )
     bank = turn[:, 1]
     bank_max = float(np.max(np.abs(bank)))
     track = np.unwrap(turn[:, 2])
     rate = np.gradient(track, turn[:, 0])
     steady = np.abs(bank) > 0.95 * bank_max
     i63 = int(np.argmax(np.abs(bank) >= 0.63 * bank_max))
-    climb = fly(AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=math.pi / 2,
-                                 vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m + 400.0,
-                                 tas_cmd_mps=tas_mps), 120.0)
+    climb = fly(
+        AutopilotTargets(
+            lateral_mode=LateralMode.TRACK,
+            track_cmd_rad=math.pi / 2,
+            vertical_mode=VerticalMode.ALTITUDE_MSL,
+            altitude_cmd_m=h_msl_m + 400.0,
+            tas_cmd_mps=tas_mps,
+        ),
+        120.0,
+    )
     up = climb[:, 3] < h_msl_m + 300.0
-    descent = fly(AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=math.pi / 2,
-                                   vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_msl_m,
-                                   tas_cmd_mps=tas_mps), 120.0)
+    descent = fly(
+        AutopilotTargets(
+            lateral_mode=LateralMode.TRACK,
+            track_cmd_rad=math.pi / 2,
+            vertical_mode=VerticalMode.ALTITUDE_MSL,
+            altitude_cmd_m=h_msl_m,
+            tas_cmd_mps=tas_mps,
+        ),
+        120.0,
+    )
     down = descent[:, 3] > h_msl_m + 100.0
-    return {"tas_mps": float(np.median(turn[:, 5])), "bank_max_rad": bank_max,
-            "turn_rate_max_rps": float(np.median(np.abs(rate[steady]))),
-            "bank_tau_s": float(turn[i63, 0] - turn[0, 0]),
-            "climb_rate_max_mps": float(np.median(climb[up, 4][5:])),
-            "descent_rate_max_mps": float(-np.median(descent[down, 4][5:])),
-            "tas_range_mps": [float(np.min(np.r_[turn[:, 5], climb[:, 5], descent[:, 5]])),
-                              float(np.max(np.r_[turn[:, 5], climb[:, 5], descent[:, 5]]))]}
+    return {
+        "tas_mps": float(np.median(turn[:, 5])),
+        "bank_max_rad": bank_max,
+        "turn_rate_max_rps": float(np.median(np.abs(rate[steady]))),
+        "bank_tau_s": float(turn[i63, 0] - turn[0, 0]),
+        "climb_rate_max_mps": float(np.median(climb[up, 4][5:])),
+        "descent_rate_max_mps": float(-np.median(descent[down, 4][5:])),
+        "tas_range_mps": [
+            float(np.min(np.r_[turn[:, 5], climb[:, 5], descent[:, 5]])),
+            float(np.max(np.r_[turn[:, 5], climb[:, 5], descent[:, 5]])),
+        ],
+    }
 
 
 if __name__ == "__main__":  # pragma: no cover - regenerates the figures
     import json
+
     print(json.dumps({"measured": measure_envelope(), "stated": asdict(KINGAIR_ENVELOPE)}, indent=1))

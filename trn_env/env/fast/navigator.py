@@ -17,12 +17,14 @@ sets the horizontal error at the goal:
   profile of measured terrain heights (baro height minus radar height: true terrain + baro error + noise,
   1 Hz) along the INS-indicated track over `fix_period_s`, correlated with the MAP over +-half_cells x
   cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point, then
-  +-40 m at 20 m and +-10 m at the cell size on every point); the best offset is the fix, z = INS - matched position, noise fix_sigma_m, chi-square
+  +-40 m at 20 m and +-10 m at the cell size on every point); the best offset is the fix,
+  z = INS - matched position, noise fix_sigma_m, chi-square
   gated (2 dof) against the filter's covariance, as the full navigator does.
 - Kalman filter over (p, v, a) per axis with one shared covariance (the axes see the same dynamics and
-  measurement noise): F the constant-acceleration transition, process noise from the IMU grade (velocity
-  random walk; the tilt-rate ramp as a random walk of a), feedback form (the estimated errors are removed
-  from the INS after each update).
+  measurement noise): F the constant-acceleration transition, process noise from the navigator's settings
+  as the full navigator's filter takes them (accel_noise_mps2_rthz: velocity random walk;
+  g0 x gyro_noise_rps_rthz: the random walk of a, through the tilt), feedback form (the estimated errors
+  are removed from the INS after each update).
 
 Health: a fix rejected by the gate counts; `nav_ok` is False after `unhealthy_rejects` rejections in a row
 (the full navigator's integrity monitor has more states; the fast tier never reports "diverged").
@@ -43,6 +45,10 @@ from trn_env.env.fast.state import (
     BG_E,
     BG_N,
     BG_Z,
+    BI_A_E,
+    BI_A_N,
+    BI_G_E,
+    BI_G_N,
     CA_E,
     CA_N,
     EP_E,
@@ -59,6 +65,8 @@ from trn_env.env.fast.state import (
     P22,
     REJECTS,
     TILT_E,
+    TILT_GM_E,
+    TILT_GM_N,
     TILT_N,
     YAW0,
     T,
@@ -66,25 +74,50 @@ from trn_env.env.fast.state import (
 from trn_env.terrain import kernels
 
 G0_MPS2 = 9.80665
-COARSE_STEP_M = 50.0       # TERCOM's first search stage: grid step over the whole window
-COARSE_STRIDE = 4          # ... on every 4th profile point (1 Hz profile: 4 s apart)
+COARSE_STEP_M = 50.0  # TERCOM's first search stage: grid step over the whole window
+BI_STEP_S = 10  # bias instabilities advance every 10 s
+COARSE_STRIDE = 4  # ... on every 4th profile point (1 Hz profile: 4 s apart)
 MODELLED_NAVIGATORS = ("ins", "ins_tercom")
 
 # navigator parameter vector (float64), built by navigator_params()
-(NP_TERCOM, NP_FIX_PERIOD, NP_HALF_WINDOW, NP_CELL, NP_FIX_SIGMA, NP_GATE, NP_REMOVE_BIAS, NP_PROFILE_NOISE,
- NP_Q_V, NP_Q_A, NP_GNSS_UNTIL, NP_GNSS_SIGMA, NP_UNHEALTHY, NP_MIN_SAMPLES) = range(14)
-N_NAV_PARAMS = 14
+(
+    NP_TERCOM,
+    NP_FIX_PERIOD,
+    NP_HALF_WINDOW,
+    NP_CELL,
+    NP_FIX_SIGMA,
+    NP_GATE,
+    NP_REMOVE_BIAS,
+    NP_PROFILE_NOISE,
+    NP_Q_V,
+    NP_Q_A,
+    NP_GNSS_UNTIL,
+    NP_GNSS_SIGMA,
+    NP_UNHEALTHY,
+    NP_MIN_SAMPLES,
+    NP_COARSE_STEP,
+    NP_COARSE_STRIDE,
+    NP_QF_V,
+    NP_BI_A,
+    NP_TAU_A,
+    NP_BI_G,
+    NP_TAU_G,
+) = range(21)
+N_NAV_PARAMS = 21
 
 
-def navigator_params(name: str, settings: dict, imu: dict, gnss_until_s: float, ira_noise_m: float,
-                     ira_rate_hz: float) -> np.ndarray:
+def navigator_params(
+    name: str, settings: dict, imu: dict, gnss_until_s: float, ira_noise_m: float, ira_rate_hz: float
+) -> np.ndarray:
     """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
     navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
     fields), GNSS availability (s) and IRA noise (m) and rate (Hz): the 1 Hz profile sample is the mean of
     a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz)."""
     if name not in MODELLED_NAVIGATORS:
-        raise ValueError(f"navigator {name!r} is not modelled by the fast tier; it models: "
-                         f"{', '.join(MODELLED_NAVIGATORS)}")
+        raise ValueError(
+            f"navigator {name!r} is not modelled by the fast tier; it models: "
+            f"{', '.join(MODELLED_NAVIGATORS)}"
+        )
     p = np.zeros(N_NAV_PARAMS)
     p[NP_TERCOM] = 1.0 if name == "ins_tercom" else 0.0
     p[NP_FIX_PERIOD] = float(settings.get("fix_period_s", 40.0))
@@ -94,14 +127,22 @@ def navigator_params(name: str, settings: dict, imu: dict, gnss_until_s: float, 
     p[NP_GATE] = float(settings.get("gate_chi2", 18.42))
     p[NP_REMOVE_BIAS] = 1.0 if settings.get("remove_bias", False) else 0.0
     p[NP_PROFILE_NOISE] = ira_noise_m / math.sqrt(max(ira_rate_hz, 1.0))
+    # truth: the IMU's velocity random walk; the filter's process noise: the navigator's own settings, as
+    # the full navigator's filter takes them (velocity random walk, and the angle random walk that drives its
+    # tilt states, here g0 x that as the random walk of the acceleration error)
     p[NP_Q_V] = float(imu["accel_noise_density_mps2_rthz"]) ** 2
-    # the tilt-rate ramp g0 b_g t as a random walk of the acceleration error matching its variance at 100 s
-    p[NP_Q_A] = (G0_MPS2 * float(imu["gyro_bias_rps"])) ** 2 * 100.0 + float(
-        imu.get("accel_bias_instability_mps2", 0.0)) ** 2 / max(float(imu.get("accel_bias_tau_s", 3600.0)), 1.0)
+    p[NP_QF_V] = float(settings.get("accel_noise_mps2_rthz", 10e-6 * G0_MPS2)) ** 2
+    p[NP_Q_A] = (G0_MPS2 * float(settings.get("gyro_noise_rps_rthz", math.radians(0.005) / 60.0))) ** 2
+    p[NP_BI_A] = float(imu.get("accel_bias_instability_mps2", 0.0))
+    p[NP_TAU_A] = float(imu.get("accel_bias_tau_s", 3600.0))
+    p[NP_BI_G] = float(imu.get("gyro_bias_instability_rps", 0.0))
+    p[NP_TAU_G] = float(imu.get("gyro_bias_tau_s", 3600.0))
     p[NP_GNSS_UNTIL] = float(gnss_until_s)
     p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
     p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
     p[NP_MIN_SAMPLES] = 5.0
+    p[NP_COARSE_STEP] = COARSE_STEP_M
+    p[NP_COARSE_STRIDE] = COARSE_STRIDE
     return p
 
 
@@ -112,12 +153,40 @@ def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e):
     horizontal specific force (m/s^2) the heading error rotates."""
     t = X[i, T]
     yaw = X[i, YAW0] + X[i, BG_Z] * t
-    a_n = X[i, BA_N] + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t) - X[i, CA_N] - yaw * f_e
-    a_e = X[i, BA_E] + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t) - X[i, CA_E] + yaw * f_n
+    a_n = (
+        X[i, BA_N]
+        + X[i, BI_A_N]
+        + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t + X[i, TILT_GM_N])
+        - X[i, CA_N]
+        - yaw * f_e
+    )
+    a_e = (
+        X[i, BA_E]
+        + X[i, BI_A_E]
+        + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t + X[i, TILT_GM_E])
+        - X[i, CA_E]
+        + yaw * f_n
+    )
     X[i, EP_N] += X[i, EV_N] * dt + 0.5 * a_n * dt * dt
     X[i, EP_E] += X[i, EV_E] * dt + 0.5 * a_e * dt * dt
     X[i, EV_N] += a_n * dt + noise_n
     X[i, EV_E] += a_e * dt + noise_e
+    X[i, TILT_GM_N] += X[i, BI_G_N] * dt
+    X[i, TILT_GM_E] += X[i, BI_G_E] * dt
+
+
+@njit(cache=True)
+def bias_instability_step(X, i, dt, nav, w0, w1, w2, w3):
+    """Advance aircraft i's bias instabilities (first-order Gauss-Markov, exact over dt seconds, with the
+    IMU grade's std and correlation time) by dt; w0..w3 standard normals."""
+    fa = math.exp(-dt / nav[NP_TAU_A])
+    fg = math.exp(-dt / nav[NP_TAU_G])
+    sa = nav[NP_BI_A] * math.sqrt(1.0 - fa * fa)
+    sg = nav[NP_BI_G] * math.sqrt(1.0 - fg * fg)
+    X[i, BI_A_N] = fa * X[i, BI_A_N] + sa * w0
+    X[i, BI_A_E] = fa * X[i, BI_A_E] + sa * w1
+    X[i, BI_G_N] = fg * X[i, BI_G_N] + sg * w2
+    X[i, BI_G_E] = fg * X[i, BI_G_E] + sg * w3
 
 
 @njit(cache=True)
@@ -135,7 +204,7 @@ def covariance_step(X, i, dt, q_v, q_a):
     a20 = p02
     a21 = p12
     # F P F^T
-    X[i, P00] = a00 + dt * a01 + h * a02 + q_v * dt ** 3 / 3.0
+    X[i, P00] = a00 + dt * a01 + h * a02 + q_v * dt**3 / 3.0
     X[i, P01] = a10 + dt * a11 + h * a12 + q_v * dt * dt / 2.0
     X[i, P02] = a20 + dt * a21 + h * p22
     X[i, P11] = a11 + dt * a12 + q_v * dt
@@ -171,8 +240,9 @@ def position_update(X, i, z_n, z_e, r_var, gate_chi2):
 
 
 @njit(cache=True)
-def _profile_mad(meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, lon0, dlat, dlon, remove_bias,
-                 diff):
+def _profile_mad(
+    meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, lon0, dlat, dlon, remove_bias, diff
+):
     """Mean absolute difference of the profile (every stride-th of its n points) against the map shifted by
     (off_lat, off_lon) rad, with the mean difference removed when remove_bias; +inf when any point falls off
     the map."""
@@ -193,26 +263,43 @@ def _profile_mad(meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, l
 
 
 @njit(cache=True)
-def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_window_m, cell_m, remove_bias,
-                  m_per_rad_lat, m_per_rad_lon, diff):
+def tercom_offset(
+    meas,
+    plat,
+    plon,
+    n,
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    half_window_m,
+    cell_m,
+    remove_bias,
+    m_per_rad_lat,
+    m_per_rad_lon,
+    diff,
+    coarse_step_m,
+    coarse_stride,
+):
     """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
     positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
-    in 50 m steps on every COARSE_STRIDE-th profile point, then +-40 m in 20 m steps and +-10 m in cell_m
-    steps around the best on every point. Returns (dn, de, mad)."""
+    in coarse_step_m steps on every coarse_stride-th profile point, then +-40 m in 20 m steps and +-10 m in
+    cell_m steps around the best on every point. Returns (dn, de, mad)."""
     best_n = 0.0
     best_e = 0.0
     best = np.inf
-    steps = (COARSE_STEP_M, 20.0, cell_m)
+    steps = (coarse_step_m, 20.0, cell_m)
     spans = (half_window_m, 40.0, 10.0)
     for stage in range(3):
         step = steps[stage]
-        stride = COARSE_STRIDE if stage == 0 else 1
+        stride = coarse_stride if stage == 0 else 1
         span = min(spans[stage], half_window_m)
         k = int(span / step + 1e-9)
         cn = best_n
         ce = best_e
         if stage > 0:
-            best = np.inf          # compare the fine stages on the whole profile
+            best = np.inf  # compare the fine stages on the whole profile
         for a in range(-k, k + 1):
             on = cn + a * step
             if abs(on) > half_window_m + 1e-9:
@@ -221,8 +308,22 @@ def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_win
                 oe = ce + b * step
                 if abs(oe) > half_window_m + 1e-9:
                     continue
-                mad = _profile_mad(meas, plat, plon, n, stride, on / m_per_rad_lat, oe / m_per_rad_lon, heights,
-                                   lat0, lon0, dlat, dlon, remove_bias, diff)
+                mad = _profile_mad(
+                    meas,
+                    plat,
+                    plon,
+                    n,
+                    stride,
+                    on / m_per_rad_lat,
+                    oe / m_per_rad_lon,
+                    heights,
+                    lat0,
+                    lon0,
+                    dlat,
+                    dlon,
+                    remove_bias,
+                    diff,
+                )
                 if mad < best:
                     best = mad
                     best_n = on
@@ -231,17 +332,47 @@ def tercom_offset(meas, plat, plon, n, heights, lat0, lon0, dlat, dlon, half_win
 
 
 @njit(cache=True)
-def tercom_fix(X, i, prof_meas, prof_lat, prof_lon, heights, lat0, lon0, dlat, dlon, nav, m_per_rad_lat,
-               m_per_rad_lon, diff):
+def tercom_fix(
+    X,
+    i,
+    prof_meas,
+    prof_lat,
+    prof_lon,
+    heights,
+    lat0,
+    lon0,
+    dlat,
+    dlon,
+    nav,
+    m_per_rad_lat,
+    m_per_rad_lon,
+    diff,
+):
     """Aircraft i's TERCOM fix from its profile (rows of prof_*), fused by the Kalman filter; the profile is
     then restarted. Returns True when the fix was accepted."""
     n = int(X[i, N_PROF])
     X[i, N_PROF] = 0.0
     if n < nav[NP_MIN_SAMPLES]:
         return False
-    dn, de, mad = tercom_offset(prof_meas[i], prof_lat[i], prof_lon[i], n, heights, lat0, lon0, dlat, dlon,
-                                nav[NP_HALF_WINDOW], nav[NP_CELL], nav[NP_REMOVE_BIAS] > 0.5, m_per_rad_lat,
-                                m_per_rad_lon, diff)
+    dn, de, mad = tercom_offset(
+        prof_meas[i],
+        prof_lat[i],
+        prof_lon[i],
+        n,
+        heights,
+        lat0,
+        lon0,
+        dlat,
+        dlon,
+        nav[NP_HALF_WINDOW],
+        nav[NP_CELL],
+        nav[NP_REMOVE_BIAS] > 0.5,
+        m_per_rad_lat,
+        m_per_rad_lon,
+        diff,
+        nav[NP_COARSE_STEP],
+        int(nav[NP_COARSE_STRIDE]),
+    )
     if not math.isfinite(mad):
         return False
     # the map matches where the INS path is shifted by (dn, de): truth = INS + offset, z = INS - matched
@@ -267,6 +398,12 @@ def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_si
     X[i, BARO] = baro_sigma * frng.normal(state, i)
     X[i, YAW0] = sig_yaw * frng.normal(state, i)
     X[i, BG_Z] = bg * frng.normal(state, i)
+    X[i, BI_A_N] = 0.0
+    X[i, BI_A_E] = 0.0
+    X[i, BI_G_N] = 0.0
+    X[i, BI_G_E] = 0.0
+    X[i, TILT_GM_N] = 0.0
+    X[i, TILT_GM_E] = 0.0
     X[i, CA_N] = 0.0
     X[i, CA_E] = 0.0
     X[i, P00] = sig_pos * sig_pos

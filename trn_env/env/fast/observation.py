@@ -34,8 +34,17 @@ from trn_env.env.fast.state import (
 from trn_env.terrain import kernels
 
 # observation parameter vector
-(OP_INFO_OFFSET, OP_MAX_EP, OP_TAS, OP_BARO_SIGMA, OP_UNHEALTHY, OP_GOAL_RADIUS, OP_OMEGA, OP_INFORMATIVE,
- OP_NO_INFO) = range(9)
+(
+    OP_INFO_OFFSET,
+    OP_MAX_EP,
+    OP_TAS,
+    OP_BARO_SIGMA,
+    OP_UNHEALTHY,
+    OP_GOAL_RADIUS,
+    OP_OMEGA,
+    OP_INFORMATIVE,
+    OP_NO_INFO,
+) = range(9)
 N_OBS_PARAMS = 9
 # bearings of the terrain-information samples from the commanded track (trn_env.scenario.build
 # INFO_BEARINGS_RAD; NaN = at the estimate)
@@ -50,14 +59,38 @@ def _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon, lat, lon, no_info):
 
 
 @njit(cache=True, parallel=True)
-def observe(X, mask, out, mapg, m_lat0, m_lon0, m_dlat, m_dlon, info, i_lat0, i_lon0, i_dlat, i_dlon, op,
-            route_offsets, bearings, obs_low, obs_high, wind_alt, wind_n, wind_e):
+def observe(
+    X,
+    mask,
+    out,
+    mapg,
+    m_lat0,
+    m_lon0,
+    m_dlat,
+    m_dlon,
+    info,
+    i_lat0,
+    i_lon0,
+    i_dlat,
+    i_dlon,
+    op,
+    route_offsets,
+    bearings,
+    obs_low,
+    obs_high,
+    wind_alt,
+    wind_n,
+    wind_e,
+):
     """Write the observation (float32, N x 32) of every aircraft with mask[i] into out[i]."""
     n_routes = route_offsets.size
     max_off = 0.0
     for k in range(n_routes):
         max_off = max(max_off, abs(route_offsets[k]))
     cap = int(math.ceil(ROUTE_POINTS / max(math.cos(max_off), 0.2))) + 2
+    sin_abs = np.abs(np.sin(route_offsets))
+    cos_off = np.cos(route_offsets)
+    sin_off = np.sin(route_offsets)
     no_info = op[OP_NO_INFO]
     for i in prange(X.shape[0]):
         if not mask[i]:
@@ -91,9 +124,16 @@ def observe(X, mask, out, mapg, m_lat0, m_lon0, m_dlat, m_dlon, info, i_lat0, i_
                 c = _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon, lat_e, lon_e, no_info)
             else:
                 b = trk + bearings[k]
-                c = _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon,
-                             lat_e + op[OP_INFO_OFFSET] * math.cos(b) / m_lat,
-                             lon_e + op[OP_INFO_OFFSET] * math.sin(b) / m_lon, no_info)
+                c = _info_at(
+                    info,
+                    i_lat0,
+                    i_lon0,
+                    i_dlat,
+                    i_dlon,
+                    lat_e + op[OP_INFO_OFFSET] * math.cos(b) / m_lat,
+                    lon_e + op[OP_INFO_OFFSET] * math.sin(b) / m_lon,
+                    no_info,
+                )
             o[11 + k] = math.log10(1.0 + max(c, 0.0))
         o[17] = X[i, T] / op[OP_MAX_EP]
         o[18] = 1.0 if X[i, REJECTS] < op[OP_UNHEALTHY] else 0.0
@@ -116,14 +156,25 @@ def observe(X, mask, out, mapg, m_lat0, m_lon0, m_dlat, m_dlon, info, i_lat0, i_
                 dd = math.hypot(rn_, re_)
                 seg = 0.0
                 if dd > op[OP_GOAL_RADIUS]:
-                    lim = math.asin(min(1.0, dd * op[OP_OMEGA] / op[OP_TAS]))
-                    phi = min(lim, max(-lim, route_offsets[k]))
-                    brg = math.atan2(re_, rn_) + phi
+                    # the goal's bearing (ux, uy) turned by the offset, cut to asin(d omega / v) near the goal
+                    ux = rn_ / dd
+                    uy = re_ / dd
+                    x = dd * op[OP_OMEGA] / op[OP_TAS]
+                    if x >= sin_abs[k]:
+                        cphi = cos_off[k]
+                        sphi = sin_off[k]
+                    else:
+                        phi = math.copysign(math.asin(x), route_offsets[k])
+                        cphi = math.cos(phi)
+                        sphi = math.sin(phi)
                     seg = min(step, dd)
-                    pn += seg * math.cos(brg)
-                    pe += seg * math.sin(brg)
-                c = _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon, lat_e + pn / m_lat, lon_e + pe / m_lon,
-                             no_info)
+                    pn += seg * (ux * cphi - uy * sphi)
+                    pe += seg * (uy * cphi + ux * sphi)
+                elif j > 0:
+                    break  # arrived: the remaining points repeat this one and change neither figure
+                c = _info_at(
+                    info, i_lat0, i_lon0, i_dlat, i_dlon, lat_e + pn / m_lat, lon_e + pe / m_lon, no_info
+                )
                 if seg > 0.0 or j == 0:
                     total += math.log10(1.0 + max(c, 0.0))
                     count += 1

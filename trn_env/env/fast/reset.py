@@ -41,8 +41,30 @@ def _draw(state, i, region, k):
 
 
 @njit(cache=True)
-def reset_aircraft(X, state, mask, start_rad, goal_rad, regions, held, held_r, min_goal_d, h_agl_init,
-                   h_msl_init, ip, world, w_lat0, w_lon0, w_dlat, w_dlon, mapg, m_lat0, m_lon0, m_dlat, m_dlon):
+def reset_aircraft(
+    X,
+    state,
+    mask,
+    start_rad,
+    goal_rad,
+    regions,
+    held,
+    held_r,
+    min_goal_d,
+    h_agl_init,
+    h_msl_init,
+    ip,
+    world,
+    w_lat0,
+    w_lon0,
+    w_dlat,
+    w_dlon,
+    mapg,
+    m_lat0,
+    m_lon0,
+    m_dlat,
+    m_dlon,
+):
     """New episodes for every sub-env with mask[i]; returns per sub-env 0, or 1 when no goal was found."""
     n = X.shape[0]
     status = np.zeros(n, np.int64)
@@ -90,7 +112,17 @@ def reset_aircraft(X, state, mask, start_rad, goal_rad, regions, held, held_r, m
             X[i, S.H] = h_world + h_agl_init
             agl = h_agl_init
         X[i, S.AGL_CMD] = min(ip[IP_AGL_MAX], max(ip[IP_AGL_MIN], agl))
-        nv.draw_initial_errors(X, i, state, ip[IP_SIG_POS], ip[IP_SIG_VEL], ip[IP_SIG_TILT], ip[IP_BA],
-                               ip[IP_BG], ip[IP_BARO], ip[IP_SIG_YAW])
+        nv.draw_initial_errors(
+            X,
+            i,
+            state,
+            ip[IP_SIG_POS],
+            ip[IP_SIG_VEL],
+            ip[IP_SIG_TILT],
+            ip[IP_BA],
+            ip[IP_BG],
+            ip[IP_BARO],
+            ip[IP_SIG_YAW],
+        )
         X[i, S.NEXT_SAMPLE_T] = 1.0
     return status

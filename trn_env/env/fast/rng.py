@@ -54,4 +54,6 @@ def normal_pair(state, i):
 
 def seed_states(seeds) -> np.ndarray:
     """uint64 states from integer seeds (SeedSequence-hashed, so nearby seeds give unrelated streams)."""
-    return np.array([np.random.SeedSequence(int(s)).generate_state(1, np.uint64)[0] for s in seeds], np.uint64)
+    return np.array(
+        [np.random.SeedSequence(int(s)).generate_state(1, np.uint64)[0] for s in seeds], np.uint64
+    )

@@ -25,7 +25,10 @@ T_LAST_FIX, N_PROF, REJECTS, N_FIXES, NEXT_SAMPLE_T = range(33, 38)
 GOAL_LAT, GOAL_LON, D_EST_START, END, START_LAT, START_LON = range(38, 44)
 # heading error (truth, rad) at the start and its drift rate (the z gyro's bias, rad/s)
 YAW0, BG_Z = 44, 45
-N_STATE = 46
+# bias instabilities (truth, first-order Gauss-Markov): accelerometer (m/s^2), gyro (rad/s) and the tilt it
+# has integrated (rad), north and east
+BI_A_N, BI_A_E, BI_G_N, BI_G_E, TILT_GM_N, TILT_GM_E = range(46, 52)
+N_STATE = 52
 
 # END codes (0 = running); names in END_NAMES
 END_NAMES = ("", "arrived", "terrain_collision", "off_map", "time_limit", "goal", "diverged")

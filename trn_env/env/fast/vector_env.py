@@ -1,7 +1,8 @@
-"""TerrainNavFast-v0: TerrainNav-v0's task for N point-mass aircraft per process, a native gymnasium VectorEnv.
+"""TerrainNavFast-v0: TerrainNav-v0's task for N point-mass aircraft per process, a gymnasium VectorEnv.
 
-    envs = gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=256, vectorization_mode="vector_entry_point",
-                              scenario="basin_route", action_mode="pursuit", decision_interval_s=30.0)
+    envs = gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=256,
+                              vectorization_mode="vector_entry_point", scenario="basin_route",
+                              action_mode="pursuit", decision_interval_s=30.0)
 
 Same observation space, action space (turn, bearing, pursuit), reward terms and episode ends as
 TerrainNavEnv (trn_env.env.terrain_nav: its docstring holds the tables; both import trn_env.env.task), so a
@@ -64,8 +65,8 @@ from trn_env.sim.closed_loop import spawn_rngs
 # medium-altitude intensities at exceedance 1e-2, 1e-3, 1e-5) and the Dryden length scale 533 m
 TURBULENCE_SIGMA_MPS = {"light": 1.5, "moderate": 3.0, "severe": 6.0}
 TURBULENCE_LENGTH_M = 533.0
-DT_S = 1.0                       # flight step (s); the navigator samples terrain at 1 Hz
-BARO_SIGMA_M = 10.0              # the barometer's height error (1 sigma), navigators' baro_bias_sigma_m
+DT_S = 1.0  # flight step (s); the navigator samples terrain at 1 Hz
+BARO_SIGMA_M = 10.0  # the barometer's height error (1 sigma), navigators' baro_bias_sigma_m
 BYTES_PER_ENV_BASE = 8 * (S.N_STATE + 40 + 8)
 
 
@@ -74,41 +75,85 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP, "render_fps": 1 / 30.0}
 
-    def __init__(self, num_envs: int = 1, scenario: str | Scenario = "default", render_mode: str | None = None,
-                 decision_interval_s: float = 5.0, max_episode_s: float = 300.0, navigator: str | None = None,
-                 goal_deg=None, goal_radius_m: float = 1000.0, reward_mode: str = "arrival",
-                 error_weight: float = 1.0, goal_bonus: float = 10.0, collision_penalty: float = 100.0,
-                 failure_penalty: float = 100.0, miss_weight: float = 20.0, time_cost_per_s: float = 0.01,
-                 progress_weight: float = 1.0, agl_min_m: float = 300.0, agl_max_m: float = 3000.0,
-                 climb_rate_max_mps: float = 5.0, turn_rate_max_dps: float = 3.0, info_offset_m: float = 3000.0,
-                 info_sigma_m: float = 5.0, info_window_m: float = 2000.0, goal_region_deg=None,
-                 start_region_deg=None, held_out_goals_deg=None, held_out_radius_m: float = 2000.0,
-                 min_goal_distance_m: float = 5000.0, shaping_gamma: float = 1.0, action_mode: str = "turn",
-                 bearing_offset_max_deg: float = 90.0, sigma_shaping_weight: float = 0.0,
-                 informative_crlb_m: float = 5.0):
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | Scenario = "default",
+        render_mode: str | None = None,
+        decision_interval_s: float = 5.0,
+        max_episode_s: float = 300.0,
+        navigator: str | None = None,
+        goal_deg=None,
+        goal_radius_m: float = 1000.0,
+        reward_mode: str = "arrival",
+        error_weight: float = 1.0,
+        goal_bonus: float = 10.0,
+        collision_penalty: float = 100.0,
+        failure_penalty: float = 100.0,
+        miss_weight: float = 20.0,
+        time_cost_per_s: float = 0.01,
+        progress_weight: float = 1.0,
+        agl_min_m: float = 300.0,
+        agl_max_m: float = 3000.0,
+        climb_rate_max_mps: float = 5.0,
+        turn_rate_max_dps: float = 3.0,
+        info_offset_m: float = 3000.0,
+        info_sigma_m: float = 5.0,
+        info_window_m: float = 2000.0,
+        goal_region_deg=None,
+        start_region_deg=None,
+        held_out_goals_deg=None,
+        held_out_radius_m: float = 2000.0,
+        min_goal_distance_m: float = 5000.0,
+        shaping_gamma: float = 1.0,
+        action_mode: str = "turn",
+        bearing_offset_max_deg: float = 90.0,
+        sigma_shaping_weight: float = 0.0,
+        informative_crlb_m: float = 5.0,
+    ):
         n = _check_num_envs(num_envs, decision_interval_s)
-        _check_memory(n, 42)           # before any per-aircraft array (the default 40 s TERCOM profile)
+        _check_memory(n, 42)  # before any per-aircraft array (the default 40 s TERCOM profile)
         if render_mode is not None:
-            raise ValueError(f"render_mode must be None (TerrainNavFast-v0 does not render), got {render_mode!r}")
+            raise ValueError(
+                f"render_mode must be None (TerrainNavFast-v0 does not render), got {render_mode!r}"
+            )
         if reward_mode not in task.REWARD_MODES:
             raise ValueError(f"reward_mode must be one of {task.REWARD_MODES}, got {reward_mode!r}")
         if action_mode not in task.ACTION_MODES:
             raise ValueError(f"action_mode must be one of {task.ACTION_MODES}, got {action_mode!r}")
         if navigator is not None and navigator not in nv.MODELLED_NAVIGATORS:
-            raise ValueError(f"navigator {navigator!r} is not modelled by the fast tier; it models: "
-                             f"{', '.join(nv.MODELLED_NAVIGATORS)} (TerrainNav-v0 runs any registered navigator)")
-        for name, v in (("decision_interval_s", decision_interval_s), ("max_episode_s", max_episode_s),
-                        ("goal_radius_m", goal_radius_m), ("climb_rate_max_mps", climb_rate_max_mps),
-                        ("turn_rate_max_dps", turn_rate_max_dps), ("info_offset_m", info_offset_m),
-                        ("info_sigma_m", info_sigma_m), ("info_window_m", info_window_m),
-                        ("agl_min_m", agl_min_m), ("agl_max_m", agl_max_m), ("held_out_radius_m", held_out_radius_m),
-                        ("min_goal_distance_m", min_goal_distance_m), ("informative_crlb_m", informative_crlb_m),
-                        ("bearing_offset_max_deg", bearing_offset_max_deg), ("shaping_gamma", shaping_gamma)):
+            raise ValueError(
+                f"navigator {navigator!r} is not modelled by the fast tier; it models: "
+                f"{', '.join(nv.MODELLED_NAVIGATORS)} (TerrainNav-v0 runs any registered navigator)"
+            )
+        for name, v in (
+            ("decision_interval_s", decision_interval_s),
+            ("max_episode_s", max_episode_s),
+            ("goal_radius_m", goal_radius_m),
+            ("climb_rate_max_mps", climb_rate_max_mps),
+            ("turn_rate_max_dps", turn_rate_max_dps),
+            ("info_offset_m", info_offset_m),
+            ("info_sigma_m", info_sigma_m),
+            ("info_window_m", info_window_m),
+            ("agl_min_m", agl_min_m),
+            ("agl_max_m", agl_max_m),
+            ("held_out_radius_m", held_out_radius_m),
+            ("min_goal_distance_m", min_goal_distance_m),
+            ("informative_crlb_m", informative_crlb_m),
+            ("bearing_offset_max_deg", bearing_offset_max_deg),
+            ("shaping_gamma", shaping_gamma),
+        ):
             _check_number(name, v, positive=True)
-        for name, v in (("error_weight", error_weight), ("goal_bonus", goal_bonus),
-                        ("collision_penalty", collision_penalty), ("failure_penalty", failure_penalty),
-                        ("miss_weight", miss_weight), ("time_cost_per_s", time_cost_per_s),
-                        ("progress_weight", progress_weight), ("sigma_shaping_weight", sigma_shaping_weight)):
+        for name, v in (
+            ("error_weight", error_weight),
+            ("goal_bonus", goal_bonus),
+            ("collision_penalty", collision_penalty),
+            ("failure_penalty", failure_penalty),
+            ("miss_weight", miss_weight),
+            ("time_cost_per_s", time_cost_per_s),
+            ("progress_weight", progress_weight),
+            ("sigma_shaping_weight", sigma_shaping_weight),
+        ):
             _check_number(name, v, positive=False)
         if bearing_offset_max_deg > 180.0:
             raise ValueError(f"bearing_offset_max_deg must be in (0, 180], got {bearing_offset_max_deg!r}")
@@ -117,15 +162,18 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         if not 0 < agl_min_m < agl_max_m:
             raise ValueError(f"need 0 < agl_min_m < agl_max_m, got {agl_min_m}, {agl_max_m}")
         if not isinstance(scenario, (str, Scenario)):
-            raise ValueError(f"scenario must be a built-in name, a TOML path or a Scenario, got "
-                             f"{type(scenario).__name__}")
+            raise ValueError(
+                f"scenario must be a built-in name, a TOML path or a Scenario, got {type(scenario).__name__}"
+            )
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, navigator=navigator)
         if isinstance(scenario, Scenario) and navigator is not None:
             sc = sc.with_overrides(navigator=navigator)
         nav_name = sc.navigator_name
         if nav_name not in nv.MODELLED_NAVIGATORS:
-            raise ValueError(f"navigator {nav_name!r} (scenario {sc.name!r}) is not modelled by the fast tier; it "
-                             f"models: {', '.join(nv.MODELLED_NAVIGATORS)}; pass navigator=")
+            raise ValueError(
+                f"navigator {nav_name!r} (scenario {sc.name!r}) is not modelled by the fast tier; it "
+                f"models: {', '.join(nv.MODELLED_NAVIGATORS)}; pass navigator="
+            )
         self.scenario = sc
         d = sc.data
         self.num_envs = n
@@ -137,16 +185,24 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.decision_interval_s}
         self.max_episode_s = float(max_episode_s)
         self.reward_mode, self.action_mode = reward_mode, action_mode
-        self._weights = dict(progress_weight=float(progress_weight), shaping_gamma=float(shaping_gamma),
-                             time_cost_per_s=float(time_cost_per_s), collision_penalty=float(collision_penalty),
-                             failure_penalty=float(failure_penalty), goal_bonus=float(goal_bonus),
-                             miss_weight=float(miss_weight), sigma_shaping_weight=float(sigma_shaping_weight))
+        self._weights = dict(
+            progress_weight=float(progress_weight),
+            shaping_gamma=float(shaping_gamma),
+            time_cost_per_s=float(time_cost_per_s),
+            collision_penalty=float(collision_penalty),
+            failure_penalty=float(failure_penalty),
+            goal_bonus=float(goal_bonus),
+            miss_weight=float(miss_weight),
+            sigma_shaping_weight=float(sigma_shaping_weight),
+        )
         self.error_weight = float(error_weight)
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
         self.tas_mps = float(d["route"]["tas_mps"])
         self.bearing_offset_max_rad = math.radians(float(bearing_offset_max_deg))
-        self.action_limits = task.action_limits(self.decision_interval_s, turn_rate_max_dps, climb_rate_max_mps)
+        self.action_limits = task.action_limits(
+            self.decision_interval_s, turn_rate_max_dps, climb_rate_max_mps
+        )
         self.single_action_space = task.action_space()
         self.single_observation_space = task.observation_space()
         self.action_space = batch_space(self.single_action_space, n)
@@ -161,10 +217,13 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self.start_region_deg = self._check_region("start_region_deg", start_region_deg)
         if held_out_goals_deg is None and self.goal_region_deg is not None:
             la0, la1, lo0, lo1 = self.goal_region_deg
-            held_out_goals_deg = [(la0 + fa * (la1 - la0), lo0 + fo * (lo1 - lo0))
-                                  for fa, fo in ((0.25, 0.25), (0.25, 0.75), (0.5, 0.5), (0.75, 0.25),
-                                                 (0.75, 0.75))]
-        self.held_out_goals_deg = [self._check_point("held_out_goals_deg", g) for g in (held_out_goals_deg or [])]
+            held_out_goals_deg = [
+                (la0 + fa * (la1 - la0), lo0 + fo * (lo1 - lo0))
+                for fa, fo in ((0.25, 0.25), (0.25, 0.75), (0.5, 0.5), (0.75, 0.25), (0.75, 0.75))
+            ]
+        self.held_out_goals_deg = [
+            self._check_point("held_out_goals_deg", g) for g in (held_out_goals_deg or [])
+        ]
         wp_last = d["route"]["waypoints"][-1]
         g = goal_deg if goal_deg is not None else (wp_last["lat_deg"], wp_last["lon_deg"])
         self._fixed_goal_deg = self._check_point("goal_deg", g)
@@ -176,14 +235,19 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         # kernel parameters
         env_ = KINGAIR_ENVELOPE
         wind = d["wind"]
-        layers = sorted((float(la["altitude_m"]), float(la["direction_from_deg"]), float(la["speed_mps"]))
-                        for la in wind["layers"])
+        layers = sorted(
+            (float(la["altitude_m"]), float(la["direction_from_deg"]), float(la["speed_mps"]))
+            for la in wind["layers"]
+        )
         self._wind_alt = np.array([la[0] for la in layers])
         self._wind_n = np.array([-la[2] * math.cos(math.radians(la[1])) for la in layers])
         self._wind_e = np.array([-la[2] * math.sin(math.radians(la[1])) for la in layers])
         turb = dict(wind.get("turbulence") or {})
-        sigma_t = 0.0 if turb.get("model", "none") == "none" else TURBULENCE_SIGMA_MPS.get(
-            turb.get("severity", "light"), 1.5)
+        sigma_t = (
+            0.0
+            if turb.get("model", "none") == "none"
+            else TURBULENCE_SIGMA_MPS.get(turb.get("severity", "light"), 1.5)
+        )
         fp = np.zeros(dyn.N_FLIGHT_PARAMS)
         fp[dyn.FP_DT] = DT_S
         fp[dyn.FP_TAS] = self.tas_mps
@@ -207,21 +271,40 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         from dataclasses import asdict
 
         from trn_env.sensors.imu import ImuConfig
+
         imu = asdict(ImuConfig.from_mapping(dict(d["sensors"].get("imu") or {})))
         outages = (d.get("gnss") or {}).get("outages") or []
-        gnss_until = (min(float(o["start_s"]) for o in outages) if outages else math.inf) \
-            if "gnss" in d["sensors"] else 0.0
+        gnss_until = (
+            (min(float(o["start_s"]) for o in outages) if outages else math.inf)
+            if "gnss" in d["sensors"]
+            else 0.0
+        )
         ira = dict(d["sensors"].get("ira") or {})
-        self._nav = nv.navigator_params(nav_name, dict(d["navigator"].get("settings") or {}), imu, gnss_until,
-                                        float(ira.get("range_noise_m", 3.5)), float(ira.get("rate_hz", 50.0)))
+        self._nav = nv.navigator_params(
+            nav_name,
+            dict(d["navigator"].get("settings") or {}),
+            imu,
+            gnss_until,
+            float(ira.get("range_noise_m", 3.5)),
+            float(ira.get("rate_hz", 50.0)),
+        )
         ie = d.get("initial_errors") or {}
         pos = ie.get("position_ned_m", [30.0, 30.0, 15.0])
         vel = ie.get("velocity_ned_mps", [0.1, 0.1, 0.1])
         att = ie.get("attitude_mrad", [0.05, 0.05, 1.0])
-        self._init_params = np.array([
-            float(np.hypot(pos[0], pos[1]) / math.sqrt(2.0)), float(np.hypot(vel[0], vel[1]) / math.sqrt(2.0)),
-            float(np.hypot(att[0], att[1]) / math.sqrt(2.0)) * 1e-3, float(imu["accel_bias_mps2"]),
-            float(imu["gyro_bias_rps"]), BARO_SIGMA_M, self.agl_min_m, self.agl_max_m, float(att[2]) * 1e-3])
+        self._init_params = np.array(
+            [
+                float(np.hypot(pos[0], pos[1]) / math.sqrt(2.0)),
+                float(np.hypot(vel[0], vel[1]) / math.sqrt(2.0)),
+                float(np.hypot(att[0], att[1]) / math.sqrt(2.0)) * 1e-3,
+                float(imu["accel_bias_mps2"]),
+                float(imu["gyro_bias_rps"]),
+                BARO_SIGMA_M,
+                self.agl_min_m,
+                self.agl_max_m,
+                float(att[2]) * 1e-3,
+            ]
+        )
         op = np.zeros(ob.N_OBS_PARAMS)
         op[ob.OP_INFO_OFFSET] = float(info_offset_m)
         op[ob.OP_MAX_EP] = self.max_episode_s
@@ -269,8 +352,9 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         try:
             la0, la1, lo0, lo1 = (float(x) for x in r)
         except (TypeError, ValueError):
-            raise ValueError(f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, "
-                             f"got {r!r}") from None
+            raise ValueError(
+                f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, got {r!r}"
+            ) from None
         if not (la0 < la1 and lo0 < lo1):
             raise ValueError(f"{name} needs lat_min < lat_max and lon_min < lon_max, got {r!r}")
         for p in ((la0, lo0), (la0, lo1), (la1, lo0), (la1, lo1)):
@@ -283,8 +367,10 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         if a.shape == (2,):
             a = np.tile(a, (self.num_envs, 1))
         if a.shape != (self.num_envs, 2):
-            raise ValueError(f"options[{name!r}] must be (lat_deg, lon_deg) or an array of shape "
-                             f"({self.num_envs}, 2), got shape {a.shape}")
+            raise ValueError(
+                f"options[{name!r}] must be (lat_deg, lon_deg) or an array of shape "
+                f"({self.num_envs}, 2), got shape {a.shape}"
+            )
         for i in range(self.num_envs):
             if not np.all(np.isnan(a[i])):
                 self._check_point(f"options[{name!r}][{i}]", a[i])
@@ -297,8 +383,9 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
     def _est_latlon(self):
         X = self._X
         rm, rn = _radii(X[:, S.LAT])
-        return X[:, S.LAT] + X[:, S.EP_N] / (rm + X[:, S.H]), \
-            X[:, S.LON] + X[:, S.EP_E] / ((rn + X[:, S.H]) * np.cos(X[:, S.LAT]))
+        return X[:, S.LAT] + X[:, S.EP_N] / (rm + X[:, S.H]), X[:, S.LON] + X[:, S.EP_E] / (
+            (rn + X[:, S.H]) * np.cos(X[:, S.LAT])
+        )
 
     def _goal_offset(self, lat, lon):
         rm, rn = _radii(lat)
@@ -315,8 +402,29 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
 
     def _observe(self, mask):
         (_, _, _, _, _), (mh, m0, m1, m2, m3), (ih, i0, i1, i2, i3) = self._grids()
-        ob.observe(self._X, mask, self._obs, mh, m0, m1, m2, m3, ih, i0, i1, i2, i3, self._op, self._route_offsets,
-                   ob.INFO_BEARINGS_RAD, task.OBS_LOW, task.OBS_HIGH, self._wind_alt, self._wind_n, self._wind_e)
+        ob.observe(
+            self._X,
+            mask,
+            self._obs,
+            mh,
+            m0,
+            m1,
+            m2,
+            m3,
+            ih,
+            i0,
+            i1,
+            i2,
+            i3,
+            self._op,
+            self._route_offsets,
+            ob.INFO_BEARINGS_RAD,
+            task.OBS_LOW,
+            task.OBS_HIGH,
+            self._wind_alt,
+            self._wind_n,
+            self._wind_e,
+        )
 
     def _reset_envs(self, mask, start_rad=None, goal_rad=None):
         n = self.num_envs
@@ -326,16 +434,40 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             start_rad = np.where(np.isnan(start_rad), np.radians(self._init_start_deg), start_rad)
         if self.goal_region_deg is None:
             goal_rad = np.where(np.isnan(goal_rad), np.radians(self._fixed_goal_deg), goal_rad)
-        regions = np.radians(np.array([self.start_region_deg or (np.nan,) * 4,
-                                       self.goal_region_deg or (np.nan,) * 4], float))
+        regions = np.radians(
+            np.array([self.start_region_deg or (np.nan,) * 4, self.goal_region_deg or (np.nan,) * 4], float)
+        )
         held = np.radians(np.array(self.held_out_goals_deg, float).reshape(-1, 2))
         (wh, w0, w1, w2, w3), (mh, m0, m1, m2, m3), _ = self._grids()
-        status = rs.reset_aircraft(self._X, self._rng, mask, start_rad, goal_rad, regions, held,
-                                   self.held_out_radius_m, self.min_goal_distance_m, self._h_agl_init_m,
-                                   self._h_msl_init_m, self._init_params, wh, w0, w1, w2, w3, mh, m0, m1, m2, m3)
+        status = rs.reset_aircraft(
+            self._X,
+            self._rng,
+            mask,
+            start_rad,
+            goal_rad,
+            regions,
+            held,
+            self.held_out_radius_m,
+            self.min_goal_distance_m,
+            self._h_agl_init_m,
+            self._h_msl_init_m,
+            self._init_params,
+            wh,
+            w0,
+            w1,
+            w2,
+            w3,
+            mh,
+            m0,
+            m1,
+            m2,
+            m3,
+        )
         if np.any(status[mask] != 0):
-            raise ValueError("goal_region_deg: no goal found in 1000 draws at least min_goal_distance_m from the "
-                             "start and outside held_out_radius_m of the held-out goals")
+            raise ValueError(
+                "goal_region_deg: no goal found in 1000 draws at least min_goal_distance_m from the "
+                "start and outside held_out_radius_m of the held-out goals"
+            )
         d_est = self._d_est()
         self._X[mask, S.D_EST_START] = d_est[mask]
         self._X[mask, S.NEXT_SAMPLE_T] = 1.0
@@ -354,8 +486,9 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         options = dict(options or {})
         unknown = set(options) - {"goal_deg", "start_deg", "reset_mask"}
         if unknown:
-            raise ValueError(f"reset options: unknown keys {sorted(unknown)}; known: goal_deg, start_deg, "
-                             f"reset_mask")
+            raise ValueError(
+                f"reset options: unknown keys {sorted(unknown)}; known: goal_deg, start_deg, reset_mask"
+            )
         mask = np.ones(n, bool)
         if "reset_mask" in options:
             mask = np.asarray(options["reset_mask"])
@@ -374,8 +507,12 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         if self._needs_reset:
             raise gym.error.ResetNeeded("Cannot call step() before calling reset()")
         n = self.num_envs
-        a = task.check_actions(actions, (n, 2), np.tile(self.single_action_space.low, (n, 1)),
-                               np.tile(self.single_action_space.high, (n, 1)))
+        a = task.check_actions(
+            actions,
+            (n, 2),
+            np.tile(self.single_action_space.low, (n, 1)),
+            np.tile(self.single_action_space.high, (n, 1)),
+        )
         X = self._X
         auto = self._autoreset.copy()
         live = ~auto
@@ -383,9 +520,31 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         d_est0, d_true0, sig0, t0 = self._d_est(), self._d_true(), self._sigma_h(), X[:, S.T].copy()
         X[live, S.END] = 0.0
         (wh, w0, w1, w2, w3), (mh, m0, m1, m2, m3), _ = self._grids()
-        dyn.fly_decision(X, self._rng, live, self.n_sub, self._prof[0], self._prof[1], self._prof[2], wh, w0, w1,
-                         w2, w3, mh, m0, m1, m2, m3, self._fp, self._nav, self._wind_alt, self._wind_n, self._wind_e,
-                         self._diff)
+        dyn.fly_decision(
+            X,
+            self._rng,
+            live,
+            self.n_sub,
+            self._prof[0],
+            self._prof[1],
+            self._prof[2],
+            wh,
+            w0,
+            w1,
+            w2,
+            w3,
+            mh,
+            m0,
+            m1,
+            m2,
+            m3,
+            self._fp,
+            self._nav,
+            self._wind_alt,
+            self._wind_n,
+            self._wind_e,
+            self._diff,
+        )
         end = np.where(live, X[:, S.END], 0.0).astype(int)
         reasons = np.array(S.END_NAMES, dtype=object)[end]
         reasons[end == 0] = None
@@ -396,16 +555,34 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         ended = end != 0
         err_h = info["true_horizontal_error_m"]
         if self.reward_mode == "progress":
-            terms = task.progress_reward_terms(d_true0, info["true_distance_to_goal_m"], err_h,
-                                               end == S.GOAL, end == S.COLLISION, error_weight=self.error_weight,
-                                               goal_bonus=self._weights["goal_bonus"],
-                                               collision_penalty=self._weights["collision_penalty"])
+            terms = task.progress_reward_terms(
+                d_true0,
+                info["true_distance_to_goal_m"],
+                err_h,
+                end == S.GOAL,
+                end == S.COLLISION,
+                error_weight=self.error_weight,
+                goal_bonus=self._weights["goal_bonus"],
+                collision_penalty=self._weights["collision_penalty"],
+            )
         else:
             failed = (end == S.OFF_MAP) | (end == S.DIVERGED)
-            terms = task.arrival_reward_terms(d_est0, info["estimated_distance_to_goal_m"], X[:, S.T] - t0, sig0,
-                                              self._sigma_h(), ended, end == S.ARRIVED, end == S.COLLISION, failed,
-                                              err_h, **self._weights)
-        terms = {k: np.where(live, np.broadcast_to(v, (n,)), 0.0).astype(np.float64) for k, v in terms.items()}
+            terms = task.arrival_reward_terms(
+                d_est0,
+                info["estimated_distance_to_goal_m"],
+                X[:, S.T] - t0,
+                sig0,
+                self._sigma_h(),
+                ended,
+                end == S.ARRIVED,
+                end == S.COLLISION,
+                failed,
+                err_h,
+                **self._weights,
+            )
+        terms = {
+            k: np.where(live, np.broadcast_to(v, (n,)), 0.0).astype(np.float64) for k, v in terms.items()
+        }
         rewards = np.sum(list(terms.values()), axis=0)
         info["reward_terms"] = terms
         arrived = end == S.ARRIVED
@@ -418,8 +595,11 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         done = terminated | truncated
         if done.any():
             now = time.perf_counter()
-            info["episode"] = {"r": np.where(done, self._ep_return, 0.0), "l": np.where(done, self._ep_len, 0),
-                               "t": np.where(done, now - self._ep_t0, 0.0)}
+            info["episode"] = {
+                "r": np.where(done, self._ep_return, 0.0),
+                "l": np.where(done, self._ep_len, 0),
+                "t": np.where(done, now - self._ep_t0, 0.0),
+            }
             info["_episode"] = done
         self._autoreset = done
         return self._obs.copy(), rewards, terminated, truncated, info
@@ -439,7 +619,9 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         else:
             dn, de = self._goal_offset(*self._est_latlon())
             omega = self.action_limits[0] / self.decision_interval_s
-            lim = task.bearing_offset_limit_rad(np.hypot(dn, de), omega, self.tas_mps, self.bearing_offset_max_rad)
+            lim = task.bearing_offset_limit_rad(
+                np.hypot(dn, de), omega, self.tas_mps, self.bearing_offset_max_rad
+            )
             want = np.arctan2(de, dn) + a[:, 0] * lim
             dd = np.arctan2(np.sin(want - trk), np.cos(want - trk))
             trk = trk + np.clip(dd, -dpsi, dpsi)
@@ -502,7 +684,7 @@ def _check_num_envs(num_envs, decision_interval_s) -> int:
 def _available_memory_bytes() -> int:
     try:
         return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):   # pragma: no cover - non-POSIX
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
         return 1 << 62
 
 
@@ -511,8 +693,10 @@ def _check_memory(n: int, n_prof: int) -> None:
     need = n * (BYTES_PER_ENV_BASE + 8 * 3 * n_prof + 4 * task.N_OBS)
     avail = _available_memory_bytes()
     if need > avail // 2:
-        raise ValueError(f"num_envs={n} needs {need / 1e9:.3g} GB for its per-aircraft arrays, more than half "
-                         f"of the {avail / 1e9:.3g} GB available; use fewer sub-envs")
+        raise ValueError(
+            f"num_envs={n} needs {need / 1e9:.3g} GB for its per-aircraft arrays, more than half "
+            f"of the {avail / 1e9:.3g} GB available; use fewer sub-envs"
+        )
 
 
 __all__ = ["TerrainNavFastVectorEnv"]

@@ -1,0 +1,249 @@
+"""Campaigns over sensor logs: replay a set of logs across navigators, settings and navigator seeds.
+
+    name = "my_logs"
+    logs = ["flights/a.trnlog", "flights/b.trnlog"]   # paths relative to this file
+    navigators = ["pmf", { name = "rbpf", label = "rbpf_1k", settings = { n_particles = 1000 } }]
+    seeds = [0, 1]               # optional: the navigators' random stream (default: each log's own seed)
+
+    [[sweeps]]                   # optional, navigator settings only: navigator.settings.<name>
+    path = "navigator.settings.integrity_alpha"
+    values = [1e-4, 1e-3]
+
+A variant is one (log, navigator, sweep point) and flies every seed; one row per run, with the flight
+campaigns' columns (the log's name as `scenario`, its path as `scenario_source`) and every metric when the
+log holds truth. The rows' `replay_command` is the `trn-env replay` command that gives the same numbers.
+Every log is read and validated, every navigator built on it, before any run (CampaignError listing
+every problem by field).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import shlex
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from trn_env.campaign.spec import CampaignError, NavigatorChoice, grid_values, is_number
+from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
+
+_KEYS = {"name", "description", "logs", "navigators", "seeds", "sweeps", "metrics"}
+
+
+@dataclass
+class LogVariant:
+    index: int
+    log_ref: str
+    log_path: str
+    log_name: str
+    navigator: NavigatorChoice
+    sweep: dict
+    settings: dict
+
+
+@dataclass(frozen=True)
+class LogReplayTask:
+    campaign: str
+    campaign_hash: str
+    run_id: str
+    run_index: int
+    variant_index: int
+    seed_index: int
+    seed: int | None
+    log_path: str
+    log_name: str
+    navigator_label: str
+    navigator_name: str
+    settings: dict
+    sweep: dict
+    metric_settings: dict
+    replay_command: str
+    attempt: int = 1
+    kind: str = "replay"
+
+
+@dataclass
+class LogCampaign:
+    name: str
+    source: str
+    description: str
+    hash: str
+    text: str
+    seeds: list
+    variants: list[LogVariant]
+    sweep_paths: list[str]
+    metric_settings: MetricSettings
+    keep_logs: bool = False
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.seeds) * len(self.variants)
+
+    def run_id(self, variant_index: int, seed_index: int) -> str:
+        return f"v{variant_index:03d}-s{seed_index:04d}"
+
+    def tasks(self, skip: set[str]):
+        from dataclasses import asdict
+        index = 0
+        for si, seed in enumerate(self.seeds):
+            for v in self.variants:
+                rid = self.run_id(v.index, si)
+                if rid not in skip:
+                    argv = ["trn-env", "replay", v.log_path, "--navigator", v.navigator.name]
+                    if seed is not None:
+                        argv += ["--seed", str(seed)]
+                    argv += [f"--set=navigator.settings.{k}={_toml(val)}" for k, val in v.settings.items()]
+                    yield LogReplayTask(self.name, self.hash, rid, index, v.index, si, seed, v.log_path,
+                                        v.log_name, v.navigator.label, v.navigator.name, dict(v.settings),
+                                        dict(v.sweep), asdict(self.metric_settings), shlex.join(argv))
+                index += 1
+
+
+def _toml(v: Any) -> str:
+    from trn_env.scenario.overrides import toml_value
+    return toml_value(v)
+
+
+def load_log_campaign(path: Path, data: dict, raw: bytes) -> LogCampaign:
+    """Validate a `logs = [...]` campaign (module docstring); CampaignError with every problem."""
+    from trn_env.logs import LogError, read_log
+    from trn_env.logs.replay import build_maps, check_sensors, scenario_of
+    source = str(path)
+    problems = [f"{k}: unknown key (allowed with logs: {', '.join(sorted(_KEYS))})" for k in sorted(data)
+                if k not in _KEYS]
+    logs = data.get("logs")
+    if not isinstance(logs, list) or not logs or not all(isinstance(x, str) and x for x in logs):
+        problems.append("logs: a non-empty list of log folders (paths relative to the campaign file)")
+        logs = []
+    navs_raw = data.get("navigators")
+    navs: list[NavigatorChoice] = []
+    if not isinstance(navs_raw, list) or not navs_raw:
+        problems.append("navigators: a non-empty list of navigator names or {name, label, settings} tables")
+        navs_raw = []
+    for i, n in enumerate(navs_raw):
+        if isinstance(n, str) and n:
+            navs.append(NavigatorChoice(n, n, {}))
+        elif (isinstance(n, dict) and isinstance(n.get("name"), str)
+              and set(n) <= {"name", "label", "settings"} and isinstance(n.get("settings", {}), dict)):
+            navs.append(NavigatorChoice(str(n.get("label", n["name"])), n["name"],
+                                        dict(n.get("settings", {}))))
+        else:
+            problems.append(f"navigators[{i}]: a name or a table with name (and label, settings)")
+    labels = [n.label for n in navs]
+    problems += [f"navigators[{i}]: label {lab!r} is used twice" for i, lab in enumerate(labels)
+                 if labels.index(lab) != i]
+    seeds = data.get("seeds", [None])
+    if not isinstance(seeds, list) or not seeds or not all(
+            s is None or (isinstance(s, int) and not isinstance(s, bool) and s >= 0) for s in seeds):
+        problems.append("seeds: a list of navigator seeds >= 0 (default: each log's own seed)")
+        seeds = [None]
+    sweeps = data.get("sweeps", [])
+    paths, values = [], []
+    for j, s in enumerate(sweeps if isinstance(sweeps, list) else []):
+        p = s.get("path") if isinstance(s, dict) else None
+        if not isinstance(p, str) or not p.startswith("navigator.settings.") or p.count(".") != 2:
+            problems.append(f"sweeps[{j}].path: a log campaign sweeps navigator settings only "
+                            "(navigator.settings.<name>)")
+            continue
+        vals = s.get("values") if "values" in s else (
+            grid_values(s["grid"]) if isinstance(s.get("grid"), dict) else None)
+        if not isinstance(vals, list) or not vals:
+            problems.append(f"sweeps[{j}]: give values = [...] or grid = {{start, stop, num}}")
+            continue
+        paths.append(p)
+        values.append(vals)
+    try:
+        metric_settings = MetricSettings(**data.get("metrics", {}))
+    except (TypeError, ValueError) as exc:
+        problems.append(f"metrics: {exc}")
+        metric_settings = MetricSettings()
+    base = path.resolve().parent
+    opened = []
+    for i, ref in enumerate(logs):
+        p = Path(ref) if Path(ref).is_absolute() else base / ref
+        try:
+            opened.append((ref, p, read_log(p)))
+        except LogError as exc:
+            problems.append(f"logs[{i}] ({ref}): {exc}")
+    variants: list[LogVariant] = []
+    from trn_env.scenario.build import build_navigator
+    for ref, p, log in opened:
+        try:
+            the_map = build_maps(log, scenario_of(log, None, None, None), None)[1]
+        except (LogError, ValueError, KeyError) as exc:
+            problems.append(f"logs ({ref}): its map: {exc}")
+            continue
+        for ni, nav in enumerate(navs):
+            for combo in itertools.product(*[list(v) for v in values]):
+                sweep = dict(zip(paths, combo, strict=True))
+                settings = {**nav.settings, **{k.split(".", 2)[2]: v for k, v in sweep.items()}}
+                d = scenario_of(log, nav.name, settings, None)
+                try:
+                    navigator = build_navigator(d, the_map, None)
+                    check_sensors(navigator, nav.name, log)
+                except (ValueError, TypeError, KeyError, LogError) as exc:
+                    msg = f"navigators[{ni}] ({nav.label}) on {ref}: {exc}"
+                    if msg not in problems:
+                        problems.append(msg)
+                    continue
+                variants.append(LogVariant(len(variants), ref, str(p), log.path.name, nav, sweep, settings))
+    if problems:
+        raise CampaignError(source, problems)
+    h = hashlib.sha256(raw)
+    for _, p, _ in opened:
+        h.update((p / "metadata.json").read_bytes())
+    return LogCampaign(name=str(data.get("name", path.stem)), source=source,
+                       description=str(data.get("description", "")), hash=h.hexdigest(),
+                       text=raw.decode("utf-8"), seeds=list(seeds), variants=variants, sweep_paths=paths,
+                       metric_settings=metric_settings)
+
+
+def replay_run(task: LogReplayTask) -> tuple[dict, None]:
+    """One replay as a campaign row (never raises on the run's own failure: termination 'error')."""
+    import json
+    import os
+    import socket
+
+    from trn_env.campaign.runs import SERIES_KEYS, versions
+    from trn_env.logs.replay import replay
+    row = {"campaign": task.campaign, "campaign_hash": task.campaign_hash, "run_id": task.run_id,
+           "run_index": task.run_index, "variant_index": task.variant_index, "seed_index": task.seed_index,
+           "seed": -1 if task.seed is None else int(task.seed), "scenario": task.log_name,
+           "scenario_source": task.log_path, "scenario_hash": "", "navigator": task.navigator_label,
+           "navigator_name": task.navigator_name, "sweep_json": json.dumps(task.sweep, sort_keys=True),
+           "replay_command": task.replay_command, "termination": "error", "error": None,
+           "attempts": task.attempt, "wall_time_s": float("nan"), "sim_time_s": float("nan"),
+           "distance_flown_m": float("nan"), "jsbsim_steps": 0, "host": socket.gethostname(),
+           "pid": os.getpid()} | versions()
+    for k in METRIC_KEYS:
+        row[k] = float("nan") if k != "track_lost" else False
+    for k in SERIES_KEYS:
+        row[f"series_{k}"] = []
+    for p, v in task.sweep.items():
+        row[f"sweep.{p}"] = v
+    wall0 = time.perf_counter()
+    try:
+        res = replay(task.log_path, task.navigator_name, settings=copy.deepcopy(task.settings),
+                     seed=task.seed)
+    except Exception as exc:  # noqa: BLE001 - a run's failure is its row
+        row["error"] = f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=6)}"
+        row["wall_time_s"] = time.perf_counter() - wall0
+        return row, None
+    row["termination"] = res.termination
+    row["wall_time_s"] = time.perf_counter() - wall0
+    s = res.summary
+    row["sim_time_s"] = float(s.get("sim_time_s", float("nan")))
+    row["distance_flown_m"] = float(s.get("distance_flown_m", float("nan")))
+    if res.has_truth:
+        row.update(navigation_metrics(res.arrays, MetricSettings(**task.metric_settings)))
+        for k, v in horizontal_series(res.arrays).items():
+            row[f"series_{k}"] = v.tolist()
+    return row, None
+
+
+__all__ = ["LogCampaign", "LogReplayTask", "is_number", "load_log_campaign", "replay_run"]
