@@ -309,8 +309,8 @@ class ParticleFilter(InsRiddenFilter):
             P = self._P
             pn = np.ascontiguousarray(P[:, 0])
             pe = np.ascontiguousarray(P[:, 1])
-            n_nan = map_heights_interp(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn,
-                                       self.de, pn, pe, self.map_cubic, self._hmap)
+            n_nan = map_heights_interp(self._map_record(), lat, lon, r_lat, r_lon, self.dn, self.de, pn, pe,
+                                       self._hmap)
             resid = (h - self.b - P[:, 2]) - self._hmap        # seed 000 eq 2 under each particle
             # one variance for the cloud, at its mean closest point: the particles' points differ by metres
             # at ranges of km, which changes sigma_R (p_d / R) and sigma_theta |p_h| by < 1e-3 relative
