@@ -507,11 +507,17 @@ def _check_sensors(report: CheckReport, nav, rec: FlightRecord, name: str) -> No
         if any(a.lat_rad != b.lat_rad or a.h_m != b.h_m for a, b in zip(base, outs, strict=True)):
             used.append(s)
     report.info["sensors_used"] = used
-    need = getattr(nav, "required_sensors", None)
-    if need is None:
-        return
+    from trn_env.navigators import registry
     from trn_env.scenario.build import navigator_sensor_problems
-    for sensor, _why in need():
+    try:     # the declared needs (capabilities), else the navigator's own required_sensors()
+        need = list(registry.sensor_needs(name, rec.data["navigator"].get("settings") or {}).required.items())
+    except ValueError:
+        need = []
+    if not need and callable(getattr(nav, "required_sensors", None)):
+        need = list(nav.required_sensors())
+    if not need:
+        return
+    for sensor, _why in need:
         d = copy.deepcopy(rec.data)
         d["navigator"]["name"] = name
         d["sensors"].pop(sensor, None)
