@@ -284,7 +284,7 @@ def test_independent_log_pmf_and_the_datum_and_lever_arms_matter(independent, tm
 
 @pytest.mark.slow
 @pytest.mark.parametrize("navigator, rms_max_m", [("ins", 20.0), ("ins_tercom", 15.0), ("pf", 15.0),
-                                                  ("rbpf", 10.0)])
+                                                  ("rbpf", 10.0), ("acq_track", 30.0)])
 def test_independent_log_each_navigator(independent, navigator, rms_max_m):
     _check(replay(independent, navigator).summary, rms_max_m)
 
