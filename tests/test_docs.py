@@ -107,6 +107,28 @@ def test_settings_reference_lists_every_navigator_and_monitor_setting():
         assert f"| `{name}` |" in page, f"pmf setting {name} missing from the settings reference"
 
 
+def test_settings_reference_has_every_field_of_every_settings_class():
+    import dataclasses
+
+    from trn_env.navigators import registry
+
+    from trn_env.sensors.suite import SENSOR_MODELS
+
+    page = _reference().settings_markdown()
+    classes = [(f"navigator `{n}`", registry.settings_class(n)) for n in registry.available()]
+    classes += [(f"monitor `{n}`", registry.monitor_settings_class(n)) for n in registry.available_monitors()]
+    classes += [(f"sensor `{n}`", m.config_cls) for n, m in SENSOR_MODELS.items()]
+    assert len(classes) >= 14
+    for title, cls in classes:
+        assert f"## {title}" in page, title
+        if cls is None or not dataclasses.is_dataclass(cls):
+            continue
+        section = page.split(f"## {title}", 1)[1].split("\n## ", 1)[0]
+        for f in dataclasses.fields(cls):
+            if not f.name.startswith("_"):
+                assert f"| `{f.name}` |" in section, f"{title}: setting {f.name} missing from the reference"
+
+
 def test_every_summary_field_of_a_real_flight_is_documented(tmp_path):
     from trn_env import cli
     from trn_env.output.fields import SUMMARY_FIELDS, undocumented

@@ -111,7 +111,7 @@ from trn_env.navigators.protocol import (
 )
 
 # the sensors whose NaN-but-valid samples and gaps update() counts in its Health
-_DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu", "gnss")
+_DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu")   # GNSS outages are no defect
 
 
 class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingStep):

@@ -45,13 +45,24 @@ def sensor_sections() -> dict[str, dict]:
     return out
 
 
+def _loadable(get):
+    """get() - a plug-in's settings class - or None when the plug-in cannot be loaded: an installed plug-in
+    that fails to import must not break every scenario; one that names it gets the plug-in's error from the
+    navigator.name / monitors.<name> check."""
+    from trn_env.navigators.registry import PluginError
+    try:
+        return get()
+    except PluginError:
+        return None
+
+
 def monitor_sections() -> dict[str, dict]:
     """{monitor name: JSON schema of its [monitors.<name>] table} of the registered monitors that declare a
     Settings class."""
     from trn_env.navigators import registry
     out = {}
     for name in registry.available_monitors():
-        cls = registry.monitor_capabilities(name).settings
+        cls = _loadable(lambda n=name: registry.monitor_capabilities(n).settings)
         if _declared(cls):
             out[name] = json_schema(cls, f"settings of monitor {name!r} ({cls.__module__}.{cls.__name__})")
     return out
@@ -62,7 +73,7 @@ def navigator_branches() -> list[dict]:
     from trn_env.navigators import registry
     branches = []
     for name in registry.available():
-        cls = registry.settings_class(name)
+        cls = _loadable(lambda n=name: registry.settings_class(n))
         if not _declared(cls):
             continue
         extra = dict(json_schema(registry.PublishedIntegritySettings)["properties"])   # every navigator's
@@ -93,11 +104,11 @@ def settings_tables() -> Iterator[tuple[str, type, list[dict[str, str]]]]:
     from trn_env.navigators import registry
     from trn_env.sensors.suite import SENSOR_MODELS
     for name in registry.available():
-        cls = registry.settings_class(name)
+        cls = _loadable(lambda n=name: registry.settings_class(n))
         if _declared(cls):
             yield f"navigator.settings ({name})", cls, table_rows(cls)
     for name in registry.available_monitors():
-        cls = registry.monitor_settings_class(name)
+        cls = _loadable(lambda n=name: registry.monitor_settings_class(n))
         if _declared(cls):
             yield f"monitors.{name}", cls, table_rows(cls)
     for name, model in SENSOR_MODELS.items():

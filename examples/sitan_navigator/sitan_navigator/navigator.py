@@ -50,6 +50,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 import numpy as np
+from trn_env.navigators.core.capabilities import Capabilities
 from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.error_model_15 import noise_input_matrix, transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns
@@ -132,6 +133,14 @@ class SitanNavigator:
 
     name = "sitan"
     settings_class = SitanSettings
+    # what trn-env reads before building it: the map as dem=, the scenario IMU's specification
+    # (apply_imu_spec), the sensors it needs (a scenario without them is refused) and those it uses
+    capabilities = Capabilities(
+        needs_map=True, uses_imu_spec=True,
+        required_sensors=(("imu", "SITAN corrects a strapdown INS"),
+                          ("radar_altimeter", "SITAN's measurement is the radar altimeter's range over the "
+                                              "map")),
+        optional_sensors=("baro", "gnss"))
 
     def __init__(self, dem=None, **settings):
         if dem is None:
@@ -184,11 +193,10 @@ class SitanNavigator:
         imu["accel_bias_walk"] = 2.0 * spec.accel_bias_instability_mps2 ** 2 / max(spec.accel_bias_tau_s, 1.0)
         imu["gyro_bias_walk"] = 2.0 * spec.gyro_bias_instability_rps ** 2 / max(spec.gyro_bias_tau_s, 1.0)
 
-    @staticmethod
-    def required_sensors() -> list[tuple[str, str]]:
-        """(sensor name, why) of every sensor SITAN needs."""
-        return [("imu", "SITAN corrects a strapdown INS"),
-                ("radar_altimeter", "SITAN's measurement is the radar altimeter's range over the map")]
+    @classmethod
+    def required_sensors(cls) -> list[tuple[str, str]]:
+        """(sensor name, why) of every sensor SITAN needs (its capabilities' required_sensors)."""
+        return list(cls.capabilities.required_sensors)
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
