@@ -286,6 +286,13 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             else 0.0
         )
         ira = dict(d["sensors"].get("ira") or {})
+        from trn_env.navigators import registry
+
+        spec = (
+            components.imu_spec(d["sensors"].get("imu"))
+            if registry.capabilities(nav_name).uses_imu_spec
+            else None
+        )
         self._nav = nv.navigator_params(
             nav_name,
             dict(d["navigator"].get("settings") or {}),
@@ -293,6 +300,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             gnss_until,
             float(ira.get("range_noise_m", 3.5)),
             float(ira.get("rate_hz", 50.0)),
+            spec,
         )
         ie = d.get("initial_errors") or {}
         pos = ie.get("position_ned_m", [30.0, 30.0, 15.0])
@@ -309,6 +317,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
                 self.agl_min_m,
                 self.agl_max_m,
                 float(att[2]) * 1e-3,
+                float(self._nav[nv.NP_SIG_BA_PRIOR]),
             ]
         )
         op = np.zeros(ob.N_OBS_PARAMS)
