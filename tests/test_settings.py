@@ -184,6 +184,12 @@ def test_plugin_without_settings_class_checked_against_its_signature():
         def __init__(self, dem=None, gain: float = 1.0):
             self.gain = gain
 
+        def reset(self, initial):           # a navigator: the registry refuses an object without these
+            pass
+
+        def update(self, frames):
+            return None
+
     registry.register("test_settings_plugin", Plugin)
     try:
         assert registry.create("test_settings_plugin", gain=2.0).gain == 2.0
@@ -192,7 +198,7 @@ def test_plugin_without_settings_class_checked_against_its_signature():
             registry.create("test_settings_plugin", gian=2.0)
         assert registry.capabilities("test_settings_plugin") == Capabilities()
     finally:
-        registry._NAVIGATORS.pop("test_settings_plugin")
+        registry.unregister("test_settings_plugin")
 
 
 def test_free_inertial_refuses_aiding():
