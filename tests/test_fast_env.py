@@ -120,6 +120,17 @@ def test_autoreset_next_step_and_episode_statistics():
     obs, r, te, tr, info = e.step(np.zeros((3, 2), np.float32))
     np.testing.assert_array_equal(info["t_s"], 30.0)
     e.close()
+    # or gymnasium's own wrapper records them, given episode_statistics=False
+    from gymnasium.wrappers.vector import RecordEpisodeStatistics
+
+    w = RecordEpisodeStatistics(
+        TerrainNavFastVectorEnv(num_envs=3, episode_statistics=False, **{**BASIN, "max_episode_s": 90.0})
+    )
+    w.reset(seed=0)
+    for _ in range(3):
+        _, _, _, _, info = w.step(np.zeros((3, 2), np.float32))
+    np.testing.assert_allclose(info["episode"]["r"], rewards, atol=1e-6)
+    w.close()
 
 
 def test_arrival_reward_and_true_miss():
@@ -307,7 +318,7 @@ def test_turn_and_bearing_modes_and_progress_reward():
     e = TerrainNavFastVectorEnv(num_envs=2, **{**kw, "action_mode": "bearing"})
     e.reset(seed=0)
     u = e.unwrapped
-    for _ in range(8):                            # bearing +1: the track turns right of the goal's bearing
+    for _ in range(8):  # bearing +1: the track turns right of the goal's bearing
         e.step(np.array([[1.0, 0.0], [0.0, 0.0]], np.float32))
     dn, de = u._goal_offset(*u._est_latlon())
     rel = np.angle(np.exp(1j * (u._X[:, S.TRK_CMD] - np.arctan2(de, dn))))

@@ -184,7 +184,7 @@ def test_plugin_without_settings_class_checked_against_its_signature():
         def __init__(self, dem=None, gain: float = 1.0):
             self.gain = gain
 
-        def reset(self, initial):           # a navigator: the registry refuses an object without these
+        def reset(self, initial):
             pass
 
         def update(self, frames):

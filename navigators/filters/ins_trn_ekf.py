@@ -15,7 +15,11 @@ fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (T
 the batch's rigid shift is the error at its mean sample time, so H also takes the velocity error times the
 lag to the fix (-lag on states 3, 4).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
-back into the INS at every fix, so the next batch is collected with the compensated INS.
+back into the INS at every fix, so the next batch is collected with the compensated INS. The error
+model's priors and noise come from the IMU's specification where it gives more than the settings
+(apply_imu_spec in ins_trn_propagation.py, navigators.core.imu_spec: bias priors and Gauss-Markov walks,
+the x / y gyro biases the 13 states do not carry as a tilt random walk, turns' misalignment and scale
+factor).
 
 GNSS (loosely coupled, every valid fix of SensorFrames.gnss, at its own time): z = INS - GNSS, north and
 east position (m) and NED velocity (m/s), H selects states 0, 1, 3, 4, 5, R = diag(gnss_sigma_h_m^2 x 2,

@@ -10,7 +10,9 @@ is INS + the weighted mean.
 
 - Propagation (navigators.filters._pf_kernels.propagate_particles): the INS error dynamics between
   measurement epochs - position from velocity, velocity from the heading error turning the specific force
-  and the Schuler term - plus process noise drawn from the filter's Generator.
+  and the Schuler term - plus process noise drawn from the filter's Generator; its densities come from the
+  IMU's specification where it gives more than the tuned floors (apply_imu_spec, navigators.core.imu_spec:
+  the acceleration errors the particles do not carry as an equivalent velocity random walk).
 - Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
   or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira_points_batch), one map lookup
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
@@ -296,8 +298,8 @@ class ParticleFilter(InsRiddenFilter):
             P = self._P
             pn = np.ascontiguousarray(P[:, 0])
             pe = np.ascontiguousarray(P[:, 1])
-            n_nan = map_heights_interp(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn,
-                                       self.de, pn, pe, self.map_cubic, self._hmap)
+            n_nan = map_heights_interp(self._map_record(), lat, lon, r_lat, r_lon, self.dn, self.de, pn, pe,
+                                       self._hmap)
             resid = (h - self.b - P[:, 2]) - self._hmap        # seed 000 eq 2 under each particle
             # one variance for the cloud, at its mean closest point: the particles' points differ by metres
             # at ranges of km, which changes sigma_R (p_d / R) and sigma_theta |p_h| by < 1e-3 relative

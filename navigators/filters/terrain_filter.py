@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.core.maps import load_map
+from trn_env.navigators.core.maps import MapRecord, load_map, map_record
 from trn_env.navigators.core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
 from trn_env.navigators.filters.terrain_filter_settings import (
     TerrainFilterSettings,
@@ -352,6 +352,13 @@ class InsRiddenFilter:
                 self.health.events.append((float(t_s), "recovery: " + self._recover(t_s)))
         elif verdict.changed:
             self.health.ok, self.health.status = True, "acquiring"
+
+    def _map_record(self) -> MapRecord:
+        """The map and its interpolation as the kernels take it (navigators.core.maps.MapRecord)."""
+        rec = getattr(self, "_map_rec", None)
+        if rec is None:
+            rec = self._map_rec = map_record(self.grid, self.map_cubic)
+        return rec
 
     def _recovery_sigma_now_m(self) -> float:
         """recovery_sigma_m, doubled for each re-spread in a row that did not bring the test back in band."""

@@ -468,14 +468,29 @@ def _navigator_requirements(d: dict, the_map) -> list[str]:
 
 
 def navigator_sensor_problems(d: dict, navigator) -> list[str]:
-    """A transect longer than the flight (a navigator's `required_duration_s()`, if it has one): refused
-    before the flight. (The sensors a navigator requires are checked from its declared capabilities by the
-    scenario loader, before any component is built.)"""
+    """The sensors the navigator requires that the scenario does not fit, each as 'sensors.<name>: ...'
+    (its declared capabilities, navigators.registry.sensor_needs; for a plug-in that declares none, its
+    `required_sensors()` if it has one), and a transect longer than the flight (a navigator's
+    `required_duration_s()`): refused before the flight. (The scenario loader checks the declared sensors
+    before any component is built; this also serves an undeclared plug-in and trn_env.testing.)"""
+    from trn_env.navigators import registry
+    from trn_env.scenario.loading import fitted_sensors
+    name = d["navigator"]["name"]
+    try:
+        need = list(registry.sensor_needs(name, d["navigator"]["settings"]).required.items())
+    except ValueError:
+        need = []
+    if not need and callable(getattr(navigator, "required_sensors", None)):
+        need = list(navigator.required_sensors())
+    fitted = fitted_sensors(d)
+    problems = [f"sensors.{sensor}: navigator {name!r} needs this sensor ({why}); add a [sensors.{sensor}] "
+                "table" for sensor, why in need if sensor not in fitted]
     dur = getattr(navigator, "required_duration_s", None)
     if dur is not None and dur() > float(d["duration_s"]):
-        return [f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, more than "
-                f"the scenario's duration_s = {d['duration_s']:g} s (more samples than the route provides)"]
-    return []
+        problems.append(f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, "
+                        f"more than the scenario's duration_s = {d['duration_s']:g} s (more samples than the "
+                        "route provides)")
+    return problems
 
 
 def unused_sensors(d: dict) -> list[str]:
