@@ -149,8 +149,13 @@ def _names(kind: str) -> list[str]:
 
 
 def available() -> list[str]:
-    """Navigator names accepted by create() besides `module:Name` references: built-in, installed and
-    registered ones."""
+    """Navigator names accepted by ``create`` besides ``module:Name`` references.
+
+    Returns
+    -------
+    list of str
+        The built-in, installed (entry point) and registered names, sorted.
+    """
     return _names("navigator")
 
 
@@ -310,8 +315,31 @@ def _call(plugin: Plugin, settings: dict) -> object:
 
 
 def create(name: str, rng: np.random.Generator | None = None, **settings):
-    """A new navigator by name or `module:Name` reference with its settings (keyword arguments of its
-    factory); `rng` reaches only factories with an `rng` parameter (or registered with takes_rng=True)."""
+    """A new navigator by name or ``module:Name`` reference, with its settings.
+
+    Parameters
+    ----------
+    name : str
+        A built-in name (``ins``, ``ins_tercom``, ``pmf``, ``pf``, ``rbpf``, ``acq_track``), an installed
+        plug-in's entry-point name (group ``trn_env.navigators``) or a ``package.module:Name`` reference.
+    rng : numpy.random.Generator, optional
+        Reaches only navigators that declare ``takes_rng`` (particle filters); one seed then fixes the run.
+    **settings
+        The navigator's settings (the settings reference lists them with unit, range and default), plus
+        ``integrity_risk`` and ``map_horizontal_sigma_m`` for the published protection level; a map is
+        ``dem=`` (a ``Dem`` or a DEM name or path).
+
+    Returns
+    -------
+    object
+        A navigator: ``reset(initial_estimate)`` then ``update(frames) -> Estimate``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name (listing the known ones), a plug-in that fails to import or is not a
+        navigator, or bad settings (every problem at once, each naming its setting).
+    """
     plugin = resolve(name, "navigator")
     # every navigator's published protection level is for this per-epoch risk (protection_level); its
     # problems are reported with the navigator's own
@@ -335,16 +363,48 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
 
 
 def create_monitor(name: str, **settings):
-    """A new monitor by name or reference (it runs beside a navigator: `monitor.update(frames, estimate)`)."""
+    """A new monitor by name or reference; it runs beside a navigator as ``monitor.update(frames, estimate)``.
+
+    Parameters
+    ----------
+    name : str
+        ``dem_integrity``, an installed plug-in's entry-point name (group ``trn_env.monitors``) or a
+        ``package.module:Name`` reference.
+    **settings
+        The monitor's settings; ``dem=`` is the navigator's map.
+
+    Returns
+    -------
+    object
+        The monitor.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name or bad settings (each naming its setting).
+    """
     return _call(resolve(name, "monitor"), settings)
 
 
 def register(name: str, factory: Callable[..., object], takes_rng: bool = False,
              capabilities: Capabilities | None = None) -> None:
-    """Add a navigator factory in this process only (a class or a callable taking the settings as keyword
-    arguments) with its capabilities (default: the factory's `capabilities` attribute, else
-    `Capabilities(takes_rng=...)`). Processes that do not run this call (spawned or Ray workers,
-    `replay_command`) do not know the name: prefer an entry point or a `module:Name` reference."""
+    """Add a navigator factory under a name, in this process only.
+
+    Processes that do not run this call (spawned or Ray workers, a row's ``replay_command``) do not know
+    the name: prefer an entry point or a ``module:Name`` reference (the own-navigator guide).
+
+    Parameters
+    ----------
+    name : str
+        The name ``create`` will accept.
+    factory : callable
+        A class or a callable taking the settings as keyword arguments.
+    takes_rng : bool
+        The factory takes ``rng=`` (used when ``capabilities`` is not given).
+    capabilities : Capabilities, optional
+        What the navigator needs (map, rng, IMU specification, required and optional sensors); default:
+        the factory's ``capabilities`` attribute, else ``Capabilities(takes_rng=takes_rng)``.
+    """
     _REGISTERED["navigator"][name] = (factory, _caps_of(factory, capabilities, bool(takes_rng)))
     _CACHE.pop(("navigator", name), None)
 

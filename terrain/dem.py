@@ -26,7 +26,25 @@ def _coords(name: str, value) -> np.ndarray:
 
 @dataclass
 class Dem:
-    """Geodetic elevation grid; see the module docstring for the layout. Angles in radians, heights in m."""
+    """Geodetic elevation grid (the module docstring gives the layout).
+
+    Parameters
+    ----------
+    heights_m : ndarray
+        Heights above MSL, m, shape (n_lat, n_lon) with at least 2 x 2 posts, south row first, west column
+        first; NaN marks a void.
+    lat0_rad, lon0_rad : float
+        Latitude and longitude of post (0, 0), rad.
+    dlat_rad, dlon_rad : float
+        Post spacing, rad (positive).
+    name : str
+        A label for messages.
+
+    Raises
+    ------
+    ValueError
+        Naming the field that is malformed (shape, spacing, a grid beyond the poles, no valid height).
+    """
 
     heights_m: np.ndarray
     lat0_rad: float

@@ -91,11 +91,34 @@ def _check_finite(owner: str, name: str, value) -> float:
 
 @dataclass(frozen=True)
 class InitialCondition:
-    """Where and how the flight starts (SI). heading_rad is the true heading; flaps is normalised 0..1;
-    fuel_fraction scales every tank to that fraction of its capacity; fuel_kg is the total fuel on board
-    (kg, > 0, shared between the tanks in proportion to their capacity; at most their total capacity, which
-    Flight checks); give at most one of the two (None and None = the tanks as in the aircraft file, full for
-    the King Air); gamma_rad is the initial flight-path angle (0 = level)."""
+    """Where and how the flight starts.
+
+    Parameters
+    ----------
+    lat_rad, lon_rad : float
+        Start position (WGS84), rad.
+    h_msl_m : float
+        Start height above MSL, m (above -500 m).
+    tas_mps : float
+        True airspeed, m/s (> 0; the aircraft must trim there).
+    heading_rad : float
+        True heading, rad.
+    flaps : float
+        Flap setting, normalised 0..1.
+    fuel_fraction : float, optional
+        Every tank at this fraction of its capacity, 0..1.
+    gamma_rad : float
+        Initial flight-path angle, rad (0 = level).
+    fuel_kg : float, optional
+        Total fuel on board, kg (> 0, shared between the tanks in proportion to their capacity, at most
+        their total capacity); give at most one of fuel_fraction and fuel_kg (neither: the tanks as in the
+        aircraft file, full for the King Air).
+
+    Raises
+    ------
+    ValueError
+        Naming the field that is not finite or out of range.
+    """
 
     lat_rad: float
     lon_rad: float
@@ -384,15 +407,34 @@ def _record_state_wind(n: int, run, buf: np.ndarray, start: int, getters) -> int
 class Flight:
     """One JSBSim flight: loads the aircraft, applies and trims the initial condition, advances in chunks.
 
-    aircraft: folder name under the aircraft data (ValueError if unknown); dt_s: JSBSim step; wind: a
-    WindConfig (default calm); seed: JSBSim's random seed (turbulence), same seed -> identical truth;
-    terrain_elevation_m: terrain height under the aircraft at the start (WGS84, m); targets: autopilot
-    targets to engage after trim (default: hold the trimmed track, altitude and TAS); atmosphere: the day's
-    trn_env.flight.Atmosphere (temperature offset, sea-level pressure; default standard), set in JSBSim
-    before the trim and used for the truth's p_static_pa / T_static_K; constant_fuel: keep the tanks'
-    contents fixed for the whole flight (JSBSim's own `propulsion/fuel_freeze`: the engines run, no fuel is
-    drawn, so the mass stays that of the start) - for soak and campaign flights longer than the fuel lasts.
-    A flight whose engines stop (fuel exhausted, or cut off) flies on as a glider; `engine_stop()` says so.
+    A flight whose engines stop (fuel exhausted, or cut off) flies on as a glider; ``engine_stop()`` says so.
+
+    Parameters
+    ----------
+    ic : InitialCondition
+        Where and how the flight starts.
+    aircraft : str
+        Folder name under the aircraft data (``kingair``).
+    dt_s : float
+        JSBSim's integration step, s.
+    wind : WindConfig, optional
+        Wind layers, turbulence and gusts (default calm).
+    seed : int
+        JSBSim's random seed (turbulence): the same seed gives the same truth.
+    terrain_elevation_m : float
+        Terrain height under the aircraft at the start, m.
+    targets : AutopilotTargets, optional
+        Autopilot targets engaged after the trim (default: hold the trimmed track, altitude and TAS).
+    atmosphere : Atmosphere, optional
+        The day's temperature offset and sea-level pressure (default standard), set before the trim.
+    constant_fuel : bool
+        Keep the tanks' contents (and the mass) fixed for the whole flight (JSBSim's fuel freeze), for
+        flights longer than the fuel lasts.
+
+    Raises
+    ------
+    ValueError
+        For an unknown aircraft or a bad argument, naming it; when the start cannot be trimmed.
     """
 
     def __init__(self, ic: InitialCondition, *, aircraft: str = "kingair", dt_s: float = 0.01,

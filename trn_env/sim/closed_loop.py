@@ -130,6 +130,24 @@ Commander = Callable[[Estimate, float], object]
 class ClosedLoop:
     """One closed-loop flight of a validated scenario, advanced one navigator update interval at a time.
 
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario (``load_scenario``).
+    commander : callable, optional
+        ``commander(estimate, t_s) -> AutopilotTargets`` replaces the scenario's route guidance.
+    dems : tuple of Dem, optional
+        ``(world, map)`` already built, to reuse terrain between flights.
+    log_sensors : bool
+        Keep the full-rate sensor frames in the log.
+    progress : callable, optional
+        Called as ``progress(t_s, total_s)``.
+    pipeline : bool
+        Run sensors and navigator in a second process (same bits; see below).
+
+    Notes
+    -----
+
     `commander(estimate, t_s) -> AutopilotTargets` replaces the scenario's route guidance (the gymnasium
     env uses this); `dems=(world, map)` reuses already-built terrain. `pipeline=True` runs the sensors and
     the navigator in a second process while the loop flies the next interval (nav_stage.ProcessNavStage);
