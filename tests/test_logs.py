@@ -64,6 +64,10 @@ def test_replay_reproduces_the_recorded_flight_bit_for_bit(recorded):
     # a different navigator runs on the same frames (open loop)
     other = replay(path, "ins_tercom")
     assert other.summary["navigator"] == "ins_tercom" and other.summary["horizontal_error_rms_m"] < 100.0
+    # the summary names the log's sensors the navigator does not read: the free INS reads no terrain sensor
+    ins = replay(path, "ins")
+    assert "ira" in ins.summary["unused_sensors"] and "ira" not in rep.summary["unused_sensors"]
+    assert "imu" not in ins.summary["unused_sensors"]
 
 
 def test_streamed_log_equals_the_in_memory_one(recorded):

@@ -159,6 +159,20 @@ def check_sensors(navigator, name: str, log: SensorLog, d: dict | None = None) -
                            + f" (the log holds: {', '.join(log.sensors) or 'none'})")
 
 
+def unused_in_log(d: dict, sensors) -> list[str]:
+    """The log's sensors that neither the navigator nor a monitor of `d` reads (by their declared sensor
+    needs); empty when a component's needs cannot be read."""
+    from trn_env.navigators import registry
+    try:
+        nav = d.get("navigator") or {}
+        used = set(registry.sensor_needs(nav["name"], nav.get("settings") or {}).used)
+        for mon, settings in (d.get("monitors") or {}).items():
+            used |= set(registry.monitor_sensor_needs(mon, settings or {}).used)
+    except (KeyError, ValueError):
+        return []
+    return sorted(set(sensors) - used)
+
+
 def replay(log: SensorLog | Path | str, navigator: str | None = None, *, settings: dict | None = None,
            monitors: list[str] | None = None, map_path: str | None = None, seed: int | None = None,
            progress=None) -> ReplayResult:
@@ -221,6 +235,7 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
                                                                             "frames": n}
     summary["truth_in_log"] = has_truth
     summary["sensors_in_log"] = list(log.sensors)
+    summary["unused_sensors"] = unused_in_log(d, log.sensors)
     if mons:
         from trn_env.navigators.integrity.dem_monitor import alarm_summary, concatenate
         summary["monitors"] = {}

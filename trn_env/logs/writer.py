@@ -187,6 +187,9 @@ class LogWriter:
         clean_partial_leftovers(parent)
         self.tmp = Path(tempfile.mkdtemp(prefix=f".{self.out_dir.name}{PARTIAL_MARK}{os.getpid()}-",
                                          dir=parent))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(self.tmp, 0o777 & ~umask)     # mkdtemp makes it private; a log folder is not
         self.metadata = dict(metadata)
         self.chunk_rows = int(chunk_rows)
         self._owner_pid = os.getpid()
