@@ -99,7 +99,7 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "files": Field("", "the files written to the run folder"),
     "replay_of": Field("", "replay: the sensor log the navigator ran on"),
     "frames": Field("", "replay: the number of frame intervals fed to the navigator"),
-    "truth_in_log": Field("flag", "replay: whether the log holds truth (then the error metrics are computed)"),
+    "truth_in_log": Field("flag", "replay: whether the log holds truth (then errors are computed)"),
     "sensors_in_log": Field("", "replay: the sensors the log holds"),
     "trn_env_version": Field("", "the trn-env version that flew the run"),
     "command_line": Field("", "the command as typed (shell-quoted); scenario.toml's header repeats it"),
