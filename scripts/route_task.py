@@ -151,17 +151,17 @@ def main(argv=None) -> int:
     import ray
 
     args.out.mkdir(parents=True, exist_ok=True)
-    if args.address:
-        ray.init(address=args.address, include_dashboard=False, log_to_driver=False)
-    else:
-        ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False)
-    try:
-        if args.command in ("train", "all"):
+    if args.command in ("train", "all"):             # (evaluation needs no Ray: it loads the module alone)
+        if args.address:
+            ray.init(address=args.address, include_dashboard=False, log_to_driver=False)
+        else:
+            ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False)
+        try:
             train(args, kw)
-        if args.command in ("evaluate", "all"):
-            evaluate(args, kw)
-    finally:
-        ray.shutdown()
+        finally:
+            ray.shutdown()
+    if args.command in ("evaluate", "all"):
+        evaluate(args, kw)
     return 0
 
 

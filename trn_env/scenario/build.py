@@ -453,7 +453,7 @@ def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
     from trn_env.navigators import registry
     name = d["navigator"]["name"]
     navigator = registry.create(name, rng=rng, **navigator_settings(d, map_dem))
-    spec = imu_spec(d["sensors"].get("imu")) if registry.capabilities(name).uses_imu_spec else None
+    spec = imu_spec(d.get("sensors", {}).get("imu")) if registry.capabilities(name).uses_imu_spec else None
     if spec is not None and hasattr(navigator, "apply_imu_spec"):
         navigator.apply_imu_spec(spec)
     return navigator
