@@ -16,9 +16,9 @@ actions from a fixed seed, autoresets included):
 - fast_env_agent_steps_per_cpu_s: the same steps per CPU second of the process (all threads), which on a
   machine shared with other work tells what the tier costs; fast_env_load_average_1min the machine's load
   when measured (a 2-core machine is saturated at 2), fast_env_threads numba's thread count; the same
-  two figures with the kernels on one thread (fast_env_agent_steps_per_s_one_thread,
-  fast_env_agent_steps_per_cpu_s_one_thread: on a busy machine the one-thread CPU figure is the closest to
-  what one idle core gives);
+  two figures with numba limited to one thread (fast_env_agent_steps_per_s_one_thread,
+  fast_env_agent_steps_per_cpu_s_one_thread; the fast tier's kernels are single-threaded, so these match the
+  first two unless a kernel is made parallel);
 - fast_env_sim_seconds_per_wall_second: simulated aircraft-seconds per wall second of the fast tier;
 - fast_env_ms_per_vector_step: wall time of one step of all sub-envs (median run);
 - fast_env_build_s: constructing the vector env (terrain, information map) and its first reset.

@@ -138,7 +138,7 @@ def _wrap(a):
     return math.atan2(math.sin(a), math.cos(a))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def fly_decision(
     X,
     state,
@@ -165,8 +165,9 @@ def fly_decision(
     diff,
 ):
     """Fly every active aircraft n_sub steps of fp[FP_DT] s (or to its episode's end, X[:, END] != 0); the
-    aircraft are independent (each writes only its own rows), spread over the cores; diff is (N, profile)
-    scratch."""
+    aircraft are independent (each writes only its own rows); one thread (prange marks the loop that could
+    be spread over cores: with numba's parallel=True two threads were slower here, the per-aircraft work
+    being uneven); diff is (N, profile) scratch."""
     dt = fp[FP_DT]
     v = fp[FP_TAS]
     tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])
