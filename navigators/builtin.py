@@ -9,12 +9,20 @@ the two agree).
 Where an entry point names a class, the class is the factory: `registry.create(name, **settings)` calls
 it with the settings as keyword arguments. "ins" and "ins_tercom" are one class (`InsTrnNavigator`) with
 different `aiding`, so they are factory functions here; `settings_class` tells `trn-env navigators` whose
-settings to list and `fixed_settings` which of them the factory sets itself.
+settings to list, `fixed_settings` which of them the factory sets itself, and `capabilities` what each
+declares (navigators.core.capabilities).
 """
 
 from __future__ import annotations
 
+from trn_env.navigators.core.settings import SettingsError
 from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
+from trn_env.navigators.filters.ins_trn_settings import (
+    INS_CAPABILITIES,
+    INS_TERCOM_CAPABILITIES,
+    InsTercomSettings,
+    InsTrnSettings,
+)
 
 # name -> "module:attribute", the same strings as pyproject.toml's [project.entry-points.*] tables
 BUILTIN_NAVIGATORS: dict[str, str] = {
@@ -33,19 +41,22 @@ BUILTIN_MONITORS: dict[str, str] = {
 def ins(**settings) -> InsTrnNavigator:
     """Strapdown INS + barometer (+ GNSS while available), no terrain aiding: InsTrnNavigator(aiding=None)."""
     if "aiding" in settings:
-        raise ValueError("aiding: navigator 'ins' has no terrain aiding (use 'ins_tercom' for TERCOM fixes)")
+        raise SettingsError([("aiding", "navigator 'ins' has no terrain aiding (use 'ins_tercom' for TERCOM "
+                                        "fixes)")])
     return InsTrnNavigator(aiding=None, **settings)
 
 
-ins.settings_class = InsTrnNavigator
+ins.settings_class = InsTrnSettings
 ins.fixed_settings = {"aiding": None}
+ins.capabilities = INS_CAPABILITIES
 
 
 def ins_tercom(**settings) -> InsTrnNavigator:
     """INS + batch TERCOM fixes + EKF (seed 000): InsTrnNavigator with aiding="ira" unless the settings say
     aiding="radar_altimeter" (seed 000 eq 1)."""
-    return InsTrnNavigator(**{"aiding": "ira", **settings})
+    dem, name = settings.pop("dem", None), settings.pop("name", None)
+    return InsTrnNavigator(dem=dem, settings=InsTercomSettings.from_mapping(settings), name=name)
 
 
-ins_tercom.settings_class = InsTrnNavigator
-ins_tercom.setting_defaults = {"aiding": "ira"}
+ins_tercom.settings_class = InsTercomSettings
+ins_tercom.capabilities = INS_TERCOM_CAPABILITIES

@@ -27,9 +27,19 @@ its run bit for bit; `create(..., rng=None)` leaves it to the navigator's own do
 error per axis, m, default 0) are taken here for every navigator: the risk its published horizontal
 protection level is computed for and the map error it covers (navigators.integrity.protection_level).
 
-Every navigator validates its settings in its constructor and raises `ValueError` naming the setting. A
-plug-in that cannot be imported, or whose object is not a navigator, raises `PluginError` (a ValueError)
-naming the plug-in, the module and the error or what it lacks.
+Each navigator and monitor declares what it needs as `Capabilities` (navigators.core.capabilities: its
+Settings class, whether it needs the map or takes an rng, uses the IMU's specification or the map's error
+model, the sensors it requires and those it can use): the factory's `capabilities` attribute, or
+`register(..., capabilities=)`; a plug-in without one gets `Capabilities(takes_rng=<it has an rng
+parameter>)`. Nothing is inferred from a navigator's name.
+
+Settings: a navigator or monitor with a Settings class (navigators.core.settings) validates them in its
+constructor and raises one `SettingsError` (a `ValueError`) naming every bad setting, unknown names refused
+against the list of known ones; `create` prefixes the component's name and reports the published-integrity
+settings' problems (`PublishedIntegritySettings`) in the same error. For a plug-in without a Settings class
+the keyword arguments are checked against its factory's signature. A plug-in that cannot be imported, or
+whose object is not a navigator, raises `PluginError` (a ValueError) naming the plug-in, the module and the
+error or what it lacks.
 """
 
 from __future__ import annotations
@@ -45,6 +55,8 @@ from importlib import metadata
 
 import numpy as np
 from trn_env.navigators.builtin import BUILTIN_MONITORS, BUILTIN_NAVIGATORS
+from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
+from trn_env.navigators.core.settings import Settings, SettingsError, setting, unknown_message
 from trn_env.navigators.integrity.protection_level import configure
 
 NAVIGATOR_GROUP = "trn_env.navigators"
@@ -55,18 +67,20 @@ _NEEDS = {"navigator": {"reset": "reset(initial: Estimate)",
                         "update": "update(frames: SensorFrames) -> Estimate"},
           "monitor": {"update": "update(frames: SensorFrames, estimate: Estimate) -> MonitorOutput"}}
 
-# navigators that take the map's error as measurement noise: trn_env's build_navigator fills their
-# map_sigma_m / map_bias_sigma_m from the scenario's map error model when the settings do not give them
-MAP_NOISE_AWARE: set[str] = {"pmf", "pf", "rbpf"}
-# navigators that model the interpolation error of a coarse map (terrain_model_sigma_m, default "auto": from
-# the map's spectrum): build_navigator gives them 0 when the scenario's map is the world itself, else
-# terrain_detail_spacing_m (the calibration's finest terrain) from the world's refinement spacing
-MAP_IS_WORLD_AWARE: set[str] = {"rbpf"}
-# navigators whose bias priors (accel_bias_sigma_mps2, gyro_bias_sigma_rps) and bias process noise
-# (q_accel_bias_mps2, q_gyro_bias_rps per epoch) build_navigator fills from the scenario's IMU error model
-# (its turn-on bias and bias instability, trn_env.scenario.build.imu_bias_settings) when the settings do not
-# give them
-IMU_AWARE: set[str] = {"rbpf"}
+
+
+@dataclass(frozen=True)
+class PublishedIntegritySettings(Settings):
+    """The settings `create` takes for every navigator: its published protection level's risk and the map's
+    horizontal error it covers (navigators.integrity.protection_level.configure)."""
+
+    integrity_risk: float = setting(1e-3, "per-epoch integrity risk of the published horizontal protection "
+                                          "level", "1", gt=0.0, lt=1.0)
+    map_horizontal_sigma_m: float = setting(0.0, "the map's horizontal error per axis the protection level "
+                                                 "covers (a scenario: its accuracy class)", "m", ge=0.0)
+
+
+PUBLISHED_INTEGRITY_KEYS = ("integrity_risk", "map_horizontal_sigma_m")
 
 
 class PluginError(ValueError):
@@ -89,13 +103,15 @@ class Plugin:
     distribution: str | None = None
     takes_rng: bool = False
     extra: dict = field(default_factory=dict)
+    capabilities: Capabilities = field(default_factory=Capabilities)
 
     @property
     def module(self) -> str | None:
         return None if self.reference is None else self.reference.split(":", 1)[0]
 
 
-_REGISTERED: dict[str, dict[str, tuple[Callable[..., object], bool]]] = {"navigator": {}, "monitor": {}}
+_REGISTERED: dict[str, dict[str, tuple[Callable[..., object], Capabilities]]] = {"navigator": {},
+                                                                                   "monitor": {}}
 _CACHE: dict[tuple[str, str], Plugin] = {}
 _ENTRY_POINTS: dict[str, dict[str, list]] = {}
 
@@ -198,6 +214,15 @@ def _describe(obj: object) -> str:
     return f"a {type(obj).__name__} ({obj!r:.60})"
 
 
+def _caps_of(factory, capabilities: Capabilities | None, takes_rng: bool) -> Capabilities:
+    """The declared capabilities: given, else the factory's `capabilities` attribute, else
+    Capabilities(takes_rng=...)."""
+    if capabilities is not None:
+        return capabilities
+    caps = getattr(factory, "capabilities", None)
+    return caps if isinstance(caps, Capabilities) else Capabilities(takes_rng=takes_rng)
+
+
 def _takes_rng(factory: Callable[..., object]) -> bool:
     try:
         params = inspect.signature(factory).parameters
@@ -224,8 +249,9 @@ def resolve(name: str, kind: str = "navigator") -> Plugin:
     if key in _CACHE:
         return _CACHE[key]
     if name in _REGISTERED[kind]:
-        factory, takes_rng = _REGISTERED[kind][name]
-        return Plugin(name, kind, "registered", factory, takes_rng=takes_rng)   # not cached: re-registrable
+        factory, caps = _REGISTERED[kind][name]
+        return Plugin(name, kind, "registered", factory, takes_rng=caps.takes_rng,
+                      capabilities=caps)   # not cached: re-registrable
     eps = _entry_points(kind)
     if name in _builtins(kind):
         ref = _builtins(kind)[name]
@@ -255,19 +281,27 @@ def resolve(name: str, kind: str = "navigator") -> Plugin:
 
 def _load(name: str, kind: str, origin: str, ref: str, what: str, dist: str | None) -> Plugin:
     factory = _check_factory(load_reference(ref, what), what, kind)
-    return Plugin(name, kind, origin, factory, reference=ref, distribution=dist,
-                  takes_rng=_takes_rng(factory))
+    caps = _caps_of(factory, None, _takes_rng(factory))
+    return Plugin(name, kind, origin, factory, reference=ref, distribution=dist, takes_rng=caps.takes_rng,
+                  capabilities=caps)
 
 
 def _call(plugin: Plugin, settings: dict) -> object:
+    owner = f"{plugin.kind} {plugin.name!r}"
+    if plugin.capabilities.settings is None:      # a plug-in taking free keyword arguments
+        try:
+            sig = inspect.signature(plugin.factory)
+        except (TypeError, ValueError):
+            sig = None
+        if sig is not None and not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+            known = [p for p in sig.parameters if p not in ("rng", "dem")]
+            bad = [(k, unknown_message(k, known)) for k in settings if k not in sig.parameters]
+            if bad:
+                raise SettingsError(bad, owner=owner)
     try:
         obj = plugin.factory(**settings)
-    except TypeError as exc:
-        m = re.search(r"unexpected keyword argument '(\w+)'", str(exc))
-        if m:
-            raise ValueError(f"{plugin.kind} {plugin.name!r}: bad settings: unknown setting '{m.group(1)}'"
-                             ) from exc
-        raise ValueError(f"{plugin.kind} {plugin.name!r}: bad settings {sorted(settings)}: {exc}") from exc
+    except SettingsError as exc:
+        raise SettingsError(exc.problems, owner=owner) from None
     missing = lacks(obj, plugin.kind)
     if missing:
         raise PluginError(f"{plugin.kind} {plugin.name!r}: its factory returned {_describe(obj)}, which is "
@@ -279,15 +313,24 @@ def create(name: str, rng: np.random.Generator | None = None, **settings):
     """A new navigator by name or `module:Name` reference with its settings (keyword arguments of its
     factory); `rng` reaches only factories with an `rng` parameter (or registered with takes_rng=True)."""
     plugin = resolve(name, "navigator")
-    # every navigator's published protection level is for this per-epoch risk (protection_level)
-    pl_settings = {k: settings.pop(k) for k in ("integrity_risk", "map_horizontal_sigma_m") if k in settings}
-    probe = type("_Probe", (), {})()
-    configure(probe, **pl_settings)            # bad values fail before the navigator is built
-    if plugin.takes_rng:
+    # every navigator's published protection level is for this per-epoch risk (protection_level); its
+    # problems are reported with the navigator's own
+    published = {k: settings.pop(k) for k in PUBLISHED_INTEGRITY_KEYS if k in settings}
+    problems: list[tuple[str, str]] = []
+    try:
+        pl = PublishedIntegritySettings.from_mapping(published)
+    except SettingsError as exc:
+        problems, pl = exc.problems, None
+    if plugin.capabilities.takes_rng:
         settings["rng"] = rng
-    nav = _call(plugin, settings)
+    try:
+        nav = _call(plugin, settings)
+    except SettingsError as exc:
+        raise SettingsError(exc.problems + problems, owner=exc.owner) from None
+    if problems:
+        raise SettingsError(problems, owner=f"navigator {name!r}")
     if hasattr(nav, "integrity_risk"):
-        configure(nav, **pl_settings)
+        configure(nav, pl.integrity_risk, pl.map_horizontal_sigma_m)
     return nav
 
 
@@ -296,17 +339,21 @@ def create_monitor(name: str, **settings):
     return _call(resolve(name, "monitor"), settings)
 
 
-def register(name: str, factory: Callable[..., object], takes_rng: bool = False) -> None:
+def register(name: str, factory: Callable[..., object], takes_rng: bool = False,
+             capabilities: Capabilities | None = None) -> None:
     """Add a navigator factory in this process only (a class or a callable taking the settings as keyword
-    arguments). Processes that do not run this call (spawned or Ray workers, `replay_command`) do not know
-    the name: prefer an entry point or a `module:Name` reference."""
-    _REGISTERED["navigator"][name] = (factory, bool(takes_rng))
+    arguments) with its capabilities (default: the factory's `capabilities` attribute, else
+    `Capabilities(takes_rng=...)`). Processes that do not run this call (spawned or Ray workers,
+    `replay_command`) do not know the name: prefer an entry point or a `module:Name` reference."""
+    _REGISTERED["navigator"][name] = (factory, _caps_of(factory, capabilities, bool(takes_rng)))
     _CACHE.pop(("navigator", name), None)
 
 
-def register_monitor(name: str, factory: Callable[..., object]) -> None:
-    """Add a monitor factory in this process only (keyword settings; `dem=` is the navigator's map)."""
-    _REGISTERED["monitor"][name] = (factory, False)
+def register_monitor(name: str, factory: Callable[..., object],
+                     capabilities: Capabilities | None = None) -> None:
+    """Add a monitor factory in this process only (keyword settings; `dem=` is the navigator's map) with its
+    capabilities."""
+    _REGISTERED["monitor"][name] = (factory, _caps_of(factory, capabilities, False))
     _CACHE.pop(("monitor", name), None)
 
 
@@ -332,12 +379,48 @@ def plugin_modules() -> list[str]:
 
 
 def settings_class(name: str, kind: str = "navigator"):
-    """The class whose settings a navigator (or monitor) takes: its factory's `settings_class` when it
-    names one (a factory function, a class with a settings dataclass), else the factory itself."""
-    factory = resolve(name, kind).factory
-    return getattr(factory, "settings_class", None) or factory
+    """The class whose settings a navigator (or monitor) takes: its declared Settings class
+    (capabilities.settings), else its factory's `settings_class` when it names one, else the factory."""
+    plugin = resolve(name, kind)
+    if plugin.capabilities.settings is not None:
+        return plugin.capabilities.settings
+    return getattr(plugin.factory, "settings_class", None) or plugin.factory
 
 
 def monitor_settings_class(name: str):
     """settings_class(name, "monitor")."""
     return settings_class(name, "monitor")
+
+
+def capabilities(name: str) -> Capabilities:
+    """The declared capabilities of navigator `name` (a name or a `module:Name` reference)."""
+    return resolve(name, "navigator").capabilities
+
+
+def monitor_capabilities(name: str) -> Capabilities:
+    """The declared capabilities of monitor `name`."""
+    return resolve(name, "monitor").capabilities
+
+
+def _needs(kind: str, name: str, settings: dict | None) -> SensorNeeds:
+    caps = resolve(name, kind).capabilities
+    if caps.settings is None:
+        return caps.sensor_needs(None)
+    skip = ("dem", "rng", "name") + (PUBLISHED_INTEGRITY_KEYS if kind == "navigator" else ())
+    given = {k: v for k, v in (settings or {}).items() if k not in skip}
+    try:
+        return caps.sensor_needs(caps.settings.from_mapping(given))
+    except SettingsError as exc:
+        raise SettingsError(exc.problems, owner=f"{kind} {name!r}") from None
+
+
+def sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
+    """The sensors navigator `name` requires and can use with `settings` (a mapping; runtime arguments such
+    as dem= and rng= are ignored), from its declared capabilities, without building it. Raises
+    SettingsError for settings it refuses."""
+    return _needs("navigator", name, settings)
+
+
+def monitor_sensor_needs(name: str, settings: dict | None = None) -> SensorNeeds:
+    """The sensors monitor `name` requires and can use with `settings` (see sensor_needs)."""
+    return _needs("monitor", name, settings)

@@ -53,6 +53,7 @@ def main(argv=None) -> int:
     ap.add_argument("--alert-limit-m", type=float, default=185.2)
     ap.add_argument("--navigators", default=",".join(SCENARIOS))
     ap.add_argument("--out", default="pl_campaign")
+    ap.add_argument("--seed0", type=int, default=1000, help="first scenario seed")
     args = ap.parse_args(argv)
     from trn_env.navigators.integrity.protection_level import check_alert_limit
 
@@ -70,14 +71,14 @@ def main(argv=None) -> int:
             for c in CONDITIONS:
                 if time.perf_counter() - t0 >= args.budget_s:
                     break
-                e, h, ok, term = fly(n, c, 1000 + seed, args.duration_s)
+                e, h, ok, term = fly(n, c, args.seed0 + seed, args.duration_s)
                 d = data[(n, c)]
                 d["e"].append(e)
                 d["h"].append(h)
                 d["ok"].append(ok)
                 d["flights"] += 1
                 d["terminations"].append(term)
-                print(f"{time.perf_counter() - t0:7.0f} s {n} {c} seed {1000 + seed}: {term}, "
+                print(f"{time.perf_counter() - t0:7.0f} s {n} {c} seed {args.seed0 + seed}: {term}, "
                       f"{int(np.sum(ok & (e > h)))} MI of {int(np.sum(ok & np.isfinite(h)))}", flush=True)
                 res = {}
                 for (nn, cc), dd in data.items():

@@ -5,9 +5,9 @@ Truth and perfect IMU from tests/nav_reference_trajectory.py (ECEF, J2 gravity).
 increments over each 0.01 s interval (Simpson's rule over the instantaneous specific force and rate at the
 interval's ends and middle) plus navigation-grade white noise and a constant bias. IRA: the closest terrain
 point on the zero-Doppler line (brute force over the plane's directions, 1 deg then 0.02 deg), from the IRA
-antenna (lever arm r_ira from the IMU).
-Radar altimeter: the nadir range from its antenna (r_ra). Baro: geopotential height of the true MSL height
-(ISA pressure altitude in still ISA air) + a bias + noise. GNSS: ellipsoid heights, 1 Hz, first 30 s.
+antenna (lever arm r_ira from the IMU). Radar altimeter: the nadir range from its antenna (r_ra). Baro:
+geopotential height of the true MSL height (ISA pressure altitude in still ISA air) + a bias + noise.
+GNSS: ellipsoid heights, 1 Hz, first 30 s. Air data (still air) and compass heading at 10 Hz.
 """
 
 from __future__ import annotations
@@ -122,14 +122,23 @@ def flight(duration_s: float = 150.0, seed: int = 7) -> dict:
             "v_n_mps": v[kg, 0] + rng.normal(0, 0.05, kg.size),
             "v_e_mps": v[kg, 1] + rng.normal(0, 0.05, kg.size),
             "v_d_mps": v[kg, 2] + rng.normal(0, 0.05, kg.size)}
+    # air data (still air: the air-relative velocity is the ground velocity) and compass heading, 10 Hz
+    v_b = np.einsum("nji,nj->ni", C[kb], v[kb])          # body-frame velocity, C_bn^T v_ned
+    tas = np.linalg.norm(v_b, axis=1)
+    air = {"t_s": t[kb], "tas_mps": tas + rng.normal(0, 0.5, kb.size),
+           "alpha_rad": np.arctan2(v_b[:, 2], v_b[:, 0]) + rng.normal(0, 0.002, kb.size),
+           "beta_rad": np.arcsin(v_b[:, 1] / tas) + rng.normal(0, 0.002, kb.size)}
+    heading = {"t_s": t[kb], "heading_deg": np.degrees(np.angle(np.exp(1j * yaw[kb])))
+               + rng.normal(0, 0.2, kb.size) + rng.normal(0, 0.3)}
     truth = {"t_s": t, "lat_rad": lat, "lon_rad": lon, "h_m": h + GEOID_N_M, "v_n_mps": v[:, 0],
              "v_e_mps": v[:, 1], "v_d_mps": v[:, 2], "roll_rad": roll, "pitch_rad": pitch, "yaw_rad": yaw}
-    return {"imu": imu, "ira": ira, "radar_altimeter": ra, "baro": baro, "gnss": gnss, "truth": truth,
-            "h_msl_m": h}
+    return {"imu": imu, "ira": ira, "radar_altimeter": ra, "baro": baro, "gnss": gnss, "air_data": air,
+            "heading": heading, "truth": truth, "h_msl_m": h}
 
 
 SENSORS = {"imu": {"grade": "navigation", "rate_hz": 100.0}, "ira": {"rate_hz": 10.0},
-           "radar_altimeter": {"rate_hz": 10.0}, "baro": {"rate_hz": 10.0}, "gnss": {"rate_hz": 1.0}}
+           "radar_altimeter": {"rate_hz": 10.0}, "baro": {"rate_hz": 10.0}, "gnss": {"rate_hz": 1.0},
+           "air_data": {"rate_hz": 10.0}, "heading": {"rate_hz": 10.0}}
 
 
 def build(out, duration_s: float = 150.0, seed: int = 7, navigator: str = "ins_tercom"):
@@ -144,7 +153,7 @@ def build(out, duration_s: float = 150.0, seed: int = 7, navigator: str = "ins_t
                    navigator={"name": navigator, "settings": {}}, seed=seed,
                    initial_errors={"position_ned_m": [30.0, 30.0, 15.0], "velocity_ned_mps": [0.1, 0.1, 0.1],
                                    "attitude_mrad": [0.05, 0.05, 1.0]})
-    for s in ("imu", "ira", "radar_altimeter", "baro", "gnss"):
+    for s in ("imu", "ira", "radar_altimeter", "baro", "gnss", "air_data", "heading"):
         b.add(s, pd.DataFrame(fl[s]))
     b.add_truth(pd.DataFrame(fl["truth"]))
     return b.write(out)

@@ -48,7 +48,8 @@ def test_sitan_plugin_passes(sitan_installed):
     report = check_navigator("sitan", verbose=False)
     assert report.ok, str(report)
     assert {"radar_altimeter", "imu"} <= set(report.info["sensors_used"])
-    assert "robust off the map" in report.checks and "declared sensors enforced" in report.checks
+    assert "robust off the map" in report.checks
+    assert "declared sensors enforced (2 required)" in report.checks
 
 
 # ------------------------------------------------------------------------------------------ the checker fails

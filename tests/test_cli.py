@@ -70,7 +70,7 @@ def test_fly_writes_summary_log_and_plots(flown):
     assert not list(out.parent.glob(".run.partial-*"))
 
 
-def test_fly_rerun_into_existing_dir_refused_or_replaced_whole(flown, tmp_path, capsys):
+def test_fly_rerun_into_existing_dir_refused_or_replaced_whole(flown, tmp_path, capsys, monkeypatch):
     """A run folder holds one run: a non-empty --out is refused before flying; --overwrite replaces the
     previous run's folder as a whole (its plots do not survive beside a --no-plots run's summary)."""
     _, out = flown
@@ -97,6 +97,10 @@ def test_fly_rerun_into_existing_dir_refused_or_replaced_whole(flown, tmp_path, 
     (other / "mine.txt").write_text("keep")
     assert cli.main(["fly", "--out", str(other), "--overwrite", "--quiet", "--duration", "5"]) == 2
     assert "no previous run" in capsys.readouterr().err and (other / "mine.txt").read_text() == "keep"
+    # nor the current folder (or one holding it), whatever it holds
+    monkeypatch.chdir(target)
+    assert cli.main(["fly", "--out", ".", "--overwrite", "--quiet", "--duration", "5"]) == 2
+    assert "current folder" in capsys.readouterr().err and (target / "summary.json").exists()
 
 
 def test_bad_scenario_exits_nonzero_lists_problems_writes_nothing(tmp_path, capsys):

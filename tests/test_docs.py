@@ -4,6 +4,7 @@ output field; the site builds with Sphinx with warnings as errors and its intern
 from __future__ import annotations
 
 import argparse
+import copy
 import importlib.util
 import json
 import re
@@ -66,15 +67,27 @@ def test_scenario_reference_lists_every_schema_field_with_a_meaning():
             for v in node:
                 yield from names(v)
 
-    missing = sorted({n for n in names(schema) if not re.search(rf"[.`]{re.escape(n)}` \|", page)})
+    # the sections generated from the components' settings (sensors.*, monitors.*, navigator.settings per
+    # navigator) are listed on the settings reference instead
+    generated = copy.deepcopy(schema)
+    generated_props = generated["properties"]
+    tables = (list(generated_props.pop("sensors")["properties"].values())
+              + list(generated_props.pop("monitors")["properties"].values())
+              + [b["then"]["properties"]["settings"] for b in generated_props["navigator"].pop("allOf", [])])
+    # a table's keys besides its component's settings: preset switches and the navigator's runtime map and
+    # published-integrity arguments (on the scenario and navigators pages)
+    extras = {"grade", "noise_free", "dem", "integrity_risk", "map_horizontal_sigma_m"}
+    settings_names = {k for t in tables for k in t["properties"]} - extras
+    missing = sorted({n for n in names(generated) if not re.search(rf"[.`]{re.escape(n)}` \|", page)})
+    assert missing == [], missing
+    settings_page = ref.settings_markdown()
+    missing = sorted(n for n in settings_names if f"| `{n}` |" not in settings_page)
     assert missing == [], missing
     undescribed = [row["path"] for row in fields if not row["description"]]
     assert undescribed == [], f"schema fields without a description: {undescribed}"
 
 
 def test_settings_reference_lists_every_navigator_and_monitor_setting():
-    import inspect
-
     from trn_env.navigators import registry
 
     ref = _reference()
@@ -83,14 +96,37 @@ def test_settings_reference_lists_every_navigator_and_monitor_setting():
         assert f"## navigator `{name}`" in page, name
     for name in registry.available_monitors():
         assert f"## monitor `{name}`" in page, name
-    # the pmf's constructor is the independent source: each of its keyword settings must be in the page
-    from trn_env.navigators.filters.pmf import PointMassFilter
+    # the pmf's code is the independent source: every setting its constructors read (`s.<name>` with
+    # s = self.settings, in pmf.py and its base terrain_filter.py) must be in the page
+    read = set()
+    for mod in ("pmf", "terrain_filter"):
+        text = (ROOT / "navigators" / "filters" / f"{mod}.py").read_text()
+        read |= set(re.findall(r"\bs\.([a-z][a-z0-9_]*)\b", text))
+    assert len(read) > 20, sorted(read)
+    for name in sorted(read):
+        assert f"| `{name}` |" in page, f"pmf setting {name} missing from the settings reference"
 
-    for p in inspect.signature(PointMassFilter).parameters.values():
-        if p.kind is p.KEYWORD_ONLY or (p.kind is p.POSITIONAL_OR_KEYWORD and p.name not in ("self", "dem")):
-            if p.name in ("rng",):
-                continue
-            assert f"| `{p.name}` |" in page, f"pmf setting {p.name} missing from the settings reference"
+
+def test_settings_reference_has_every_field_of_every_settings_class():
+    import dataclasses
+
+    from trn_env.navigators import registry
+
+    from trn_env.sensors.suite import SENSOR_MODELS
+
+    page = _reference().settings_markdown()
+    classes = [(f"navigator `{n}`", registry.settings_class(n)) for n in registry.available()]
+    classes += [(f"monitor `{n}`", registry.monitor_settings_class(n)) for n in registry.available_monitors()]
+    classes += [(f"sensor `{n}`", m.config_cls) for n, m in SENSOR_MODELS.items()]
+    assert len(classes) >= 14
+    for title, cls in classes:
+        assert f"## {title}" in page, title
+        if cls is None or not dataclasses.is_dataclass(cls):
+            continue
+        section = page.split(f"## {title}", 1)[1].split("\n## ", 1)[0]
+        for f in dataclasses.fields(cls):
+            if not f.name.startswith("_"):
+                assert f"| `{f.name}` |" in section, f"{title}: setting {f.name} missing from the reference"
 
 
 def test_every_summary_field_of_a_real_flight_is_documented(tmp_path):

@@ -120,6 +120,17 @@ def test_autoreset_next_step_and_episode_statistics():
     obs, r, te, tr, info = e.step(np.zeros((3, 2), np.float32))
     np.testing.assert_array_equal(info["t_s"], 30.0)
     e.close()
+    # or gymnasium's own wrapper records them, given episode_statistics=False
+    from gymnasium.wrappers.vector import RecordEpisodeStatistics
+
+    w = RecordEpisodeStatistics(
+        TerrainNavFastVectorEnv(num_envs=3, episode_statistics=False, **{**BASIN, "max_episode_s": 90.0})
+    )
+    w.reset(seed=0)
+    for _ in range(3):
+        _, _, _, _, info = w.step(np.zeros((3, 2), np.float32))
+    np.testing.assert_allclose(info["episode"]["r"], rewards, atol=1e-6)
+    w.close()
 
 
 def test_arrival_reward_and_true_miss():
@@ -286,4 +297,46 @@ def test_information_observations_match_the_full_tiers_functions():
         # threshold (the two tiers' local frames differ by metres) may flip, changing a run by one step
         step_km = max(200.0, math.hypot(dn[i], de[i]) / 24) / 1000.0
         np.testing.assert_allclose(obs[i, 27:32], np.minimum(featureless, 50.0), atol=step_km + 0.05)
+    e.close()
+
+
+def test_turn_and_bearing_modes_and_progress_reward():
+    """The action modes move the commanded track and height as TerrainNav-v0's do (Action Space table);
+    the "progress" reward's terms add up and its episode ends on the TRUE position."""
+    from trn_env.env.fast import state as S
+
+    kw = {**BASIN, "decision_interval_s": 10.0}
+    e = TerrainNavFastVectorEnv(num_envs=2, **{**kw, "action_mode": "turn"})
+    e.reset(seed=0)
+    u = e.unwrapped
+    trk0, agl0 = u._X[:, S.TRK_CMD].copy(), u._X[:, S.AGL_CMD].copy()
+    e.step(np.array([[1.0, 1.0], [-0.5, -1.0]], np.float32))
+    dpsi, dagl = u.action_limits
+    np.testing.assert_allclose(u._X[:, S.TRK_CMD], np.angle(np.exp(1j * (trk0 + [dpsi, -0.5 * dpsi]))))
+    np.testing.assert_allclose(u._X[:, S.AGL_CMD], np.clip(agl0 + [dagl, -dagl], 300.0, 900.0))
+    e.close()
+    e = TerrainNavFastVectorEnv(num_envs=2, **{**kw, "action_mode": "bearing"})
+    e.reset(seed=0)
+    u = e.unwrapped
+    for _ in range(8):  # bearing +1: the track turns right of the goal's bearing
+        e.step(np.array([[1.0, 0.0], [0.0, 0.0]], np.float32))
+    dn, de = u._goal_offset(*u._est_latlon())
+    rel = np.angle(np.exp(1j * (u._X[:, S.TRK_CMD] - np.arctan2(de, dn))))
+    assert rel[0] > np.radians(30.0) and abs(rel[1]) < np.radians(5.0)
+    e.close()
+    e = TerrainNavFastVectorEnv(num_envs=2, **{**kw, "reward_mode": "progress", "max_episode_s": 600.0})
+    e.reset(seed=0)
+    ended = np.zeros(2, bool)
+    for _ in range(60):
+        obs, r, te, tr, info = e.step(np.zeros((2, 2), np.float32))
+        np.testing.assert_allclose(np.sum(list(info["reward_terms"].values()), axis=0), r, atol=1e-9)
+        assert set(info["reward_terms"]) == {"progress", "error", "goal", "collision"}
+        for i in np.flatnonzero(te & ~ended):
+            assert info["termination"][i] == "goal"
+            assert info["true_distance_to_goal_m"][i] <= 500.0
+            assert info["reward_terms"]["goal"][i] == 10.0
+        ended |= te | tr
+        if ended.all():
+            break
+    assert ended.all()
     e.close()

@@ -234,6 +234,10 @@ def test_cli_bad_input_exits_2_and_writes_nothing(small_log, tmp_path, capsys):
     assert cli.main(["replay", str(small_log), "--navigator", "acq_track", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "'acq_track' needs" in err and "radar_altimeter" in err and not out.exists()
+    # pmf declares the IRA: refused on an IMU-only log
+    assert cli.main(["replay", str(small_log), "--navigator", "pmf", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "'pmf' needs" in err and "ira" in err and not out.exists()
     assert cli.main(["replay", str(tmp_path / "nowhere"), "--out", str(out)]) == 2
     assert "no such folder" in capsys.readouterr().err
     # record refuses a non-empty --out before flying
@@ -284,7 +288,7 @@ def test_independent_log_pmf_and_the_datum_and_lever_arms_matter(independent, tm
 
 @pytest.mark.slow
 @pytest.mark.parametrize("navigator, rms_max_m", [("ins", 20.0), ("ins_tercom", 15.0), ("pf", 15.0),
-                                                  ("rbpf", 10.0)])
+                                                  ("rbpf", 10.0), ("acq_track", 30.0)])
 def test_independent_log_each_navigator(independent, navigator, rms_max_m):
     _check(replay(independent, navigator).summary, rms_max_m)
 

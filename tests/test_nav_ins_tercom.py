@@ -198,7 +198,7 @@ def test_registry_and_settings_errors():
         registry.create("ins_tercom")
     with pytest.raises(ValueError, match="formula"):
         registry.create("ins_tercom", dem=DEM, formula="magic")
-    with pytest.raises(ValueError, match="bad settings"):
+    with pytest.raises(ValueError, match="navigator 'ins': colour: unknown setting; known: accel_bias_mps2"):
         registry.create("ins", colour="red")
 
 

@@ -348,7 +348,7 @@ def test_scenario_gives_the_map_error_and_map_is_world():
 
 
 def test_scenario_gives_the_imu_bias_model():
-    """build_navigator (registry.IMU_AWARE): the bias priors are the RSS of the IMU's turn-on bias and
+    """build_navigator (imu_bias_settings capability): the priors are the RSS of the IMU's turn-on bias and
     instability, and the biases' process noise per epoch is the instability's first-order Gauss-Markov drive
     over the filter's epoch, sigma sqrt(1 - exp(-2 T / tau)): zero for the navigation grade (constant
     biases; Table 1's 1e-7 random walk made the gyro bias's sigma 70x the IMU's in 300 s), and for the

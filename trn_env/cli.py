@@ -41,9 +41,10 @@ def _interrupt_exit(exc: BaseException) -> tuple[int, str]:
     return (143, "terminated") if isinstance(exc, Terminated) else (130, "interrupted")
 
 
-def _install_sigterm() -> None:
+def _install_sigterm():
     """SIGTERM in this process raises Terminated; a process forked from it (the estimation worker, a pool
-    worker) keeps the default action, so stopping a worker stays a plain kill."""
+    worker) keeps the default action, so stopping a worker stays a plain kill. Returns the handler it
+    replaced (main() puts it back), or None if it could not install one."""
     main_pid = os.getpid()
 
     def on_sigterm(signum, frame):
@@ -54,9 +55,9 @@ def _install_sigterm() -> None:
         raise Terminated
 
     try:
-        signal.signal(signal.SIGTERM, on_sigterm)
+        return signal.signal(signal.SIGTERM, on_sigterm)
     except ValueError:            # not the main thread (main() called from a thread): leave it alone
-        pass
+        return None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -662,6 +663,8 @@ def cmd_campaign(args) -> int:
     from trn_env.campaign.driver import default_out_dir
     out_dir = args.out or default_out_dir(campaign.name)
     console = Console()
+    if not console.is_terminal:            # a pipe or a CI log: rich would assume 80 columns
+        console = Console(width=100)
     try:
         stats = run_campaign(campaign, out_dir, backend=backend, resume=args.resume, progress=not args.quiet)
     except CampaignError as err:
@@ -805,7 +808,15 @@ def _plan_reason(route, straight, d: dict, config) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    _install_sigterm()
+    previous = _install_sigterm()
+    try:
+        return _main(argv)
+    finally:                   # a caller's own SIGTERM handling (a test runner, a notebook) is restored
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         args = _parser().parse_args(argv)
         args.argv = list(sys.argv[1:] if argv is None else argv)

@@ -19,8 +19,9 @@ with what to fix:
   `Health` (`Health.skip`) - the no-return and off-map cases for navigators that use the altimeters;
 - determinism: the same settings and seed give the same estimates, bit for bit;
 - settings: an unknown setting, and NaN or a string for each numeric setting, raise ValueError naming it;
-- declared sensors: a scenario without a sensor the navigator declares it requires
-  (`required_sensors()`) is refused before it flies, naming the sensor.
+- declared sensors: a scenario without a sensor the navigator declares it requires (its Capabilities,
+  navigators.core.capabilities) is refused before it flies, naming the sensor; sensors that change its
+  estimate but are not declared are listed in the info.
 
 As information it reports the navigator's speed (simulated seconds per wall second on the flight) and its
 position NEES on the flight (3 for a consistent filter; Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4).
@@ -345,7 +346,7 @@ def _check(name_or_factory, settings: dict, kind: str | None, seed: int, duratio
     if kind == "navigator":
         _check_outputs(report, outs, frames, "recorded flight")
         report.info.update(_nees(outs, rec))
-        _check_sensors(report, nav, rec, name)
+        _check_sensors(report, nav, rec, name, settings)
         _check_adversarial(report, lambda: _build(name, settings, rec, seed, kind), rec, kind, beside)
         _check_determinism(report, lambda: _build(name, settings, rec, seed, kind), rec, outs, kind, beside)
     else:
@@ -490,7 +491,7 @@ def _check_determinism(report: CheckReport, make, rec: FlightRecord, outs: list,
     report.checks.append("determinism")
 
 
-def _check_sensors(report: CheckReport, nav, rec: FlightRecord, name: str) -> None:
+def _check_sensors(report: CheckReport, nav, rec: FlightRecord, name: str, settings: dict) -> None:
     """Which sensors change the estimate (info), and declared required sensors refused when absent."""
     k = min(15, len(rec.frames))
     base = _run(nav, rec, rec.frames[:k])
@@ -507,19 +508,25 @@ def _check_sensors(report: CheckReport, nav, rec: FlightRecord, name: str) -> No
         if any(a.lat_rad != b.lat_rad or a.h_m != b.h_m for a, b in zip(base, outs, strict=True)):
             used.append(s)
     report.info["sensors_used"] = used
-    need = getattr(nav, "required_sensors", None)
-    if need is None:
+    from trn_env.scenario.loading import _sensor_need_problems
+    try:
+        required = registry.sensor_needs(name, settings).required
+    except ValueError as exc:
+        report.fail("sensors", f"its declared sensor needs cannot be read: {exc}",
+                    "declare Capabilities(required_sensors=..., optional_sensors=...) on the class")
         return
-    from trn_env.scenario.build import navigator_sensor_problems
-    for sensor, _why in need():
+    for sensor in required:
         d = copy.deepcopy(rec.data)
-        d["navigator"]["name"] = name
+        d["navigator"] = {**d["navigator"], "name": name, "settings": dict(settings)}
         d["sensors"].pop(sensor, None)
-        if not any(sensor in p for p in navigator_sensor_problems(d, nav)):
+        if not any(p.startswith(f"sensors.{sensor}:") for p in _sensor_need_problems(d)):
             report.fail("sensors", f"a scenario without {sensor} (declared required) is not refused",
-                        "return (sensor, why) pairs from required_sensors()")
+                        "declare it in Capabilities.required_sensors (navigators.core.capabilities)")
             return
-    report.checks.append("declared sensors enforced")
+    undeclared = [s for s in used if s not in registry.sensor_needs(name, settings).used]
+    if undeclared:
+        report.info["used_but_not_declared"] = undeclared
+    report.checks.append(f"declared sensors enforced ({len(required)} required)")
 
 
 def _check_bad_settings(report: CheckReport, plugin, name: str, settings: dict, rec: FlightRecord, seed: int,

@@ -293,6 +293,9 @@ def settings_sections() -> list[tuple[str, str, list[dict]]]:
     for name in registry.available_monitors():
         cls = registry.monitor_settings_class(name) if hasattr(registry, "monitor_settings_class") else None
         sections.append(("monitor", name, _settings_rows(cls) if cls is not None else []))
+    from trn_env.sensors.suite import SENSOR_MODELS
+    for name, model in SENSOR_MODELS.items():
+        sections.append(("sensor", name, _settings_rows(model.config_cls)))
     return sections
 
 

@@ -93,7 +93,7 @@ from trn_env.navigators.acquisition_tracking.profile import (
     Sample,
     Transect,
 )
-from trn_env.navigators.acquisition_tracking.settings import AcqTrackConfig
+from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES, AcqTrackConfig
 from trn_env.navigators.acquisition_tracking.tracking_step import TrackingStep
 from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.frames import SensorFrames, frame_defects
@@ -111,7 +111,7 @@ from trn_env.navigators.protocol import (
 )
 
 # the sensors whose NaN-but-valid samples and gaps update() counts in its Health
-_DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu", "gnss")
+_DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu")   # GNSS outages are no defect
 
 
 class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingStep):
@@ -121,15 +121,14 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
     sensors its settings need (the scenario check refuses a scenario without them before the flight).
     """
 
+    capabilities = CAPABILITIES
     settings_class = AcqTrackConfig          # what `trn-env navigators` lists as its settings
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
-    def __init__(self, dem=None, name: str = "acq_track", **settings):
-        unknown = sorted(set(settings) - set(AcqTrackConfig.names()))
-        if unknown:
-            raise ValueError(f"unknown acq_track setting(s) {unknown}; known: {list(AcqTrackConfig.names())}")
-        self.config = cfg = AcqTrackConfig(**settings)
+    def __init__(self, dem=None, settings: AcqTrackConfig | None = None, name: str = "acq_track",
+                 **overrides):
+        self.config = self.settings = cfg = AcqTrackConfig.build(settings, overrides)
         self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
         dem = load_map(dem, "acq_track")
         self.dem = dem
@@ -207,19 +206,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
     # ------------------------------------------------------------------ requirements
     def required_sensors(self) -> list[tuple[str, str]]:
         """(sensor name, why) of every sensor these settings need."""
-        need = [
-            ("radar_altimeter", "the terrain profile is barometric height - radar-altimeter range"),
-            ("baro", "the terrain profile is barometric height - radar-altimeter range"),
-        ]
-        if self.config.aiding:
-            if self.config.aiding_source == "air_data":
-                need += [
-                    ("air_data", "aiding = true with aiding_source = 'air_data' needs the true airspeed"),
-                    ("heading", "aiding = true with aiding_source = 'air_data' needs the compass heading"),
-                ]
-            else:
-                need += [("imu", "aiding = true with aiding_source = 'ins' needs the IMU")]
-        return need
+        return list(self.config.sensor_needs().required.items())
 
     def required_duration_s(self) -> float:
         """Flight time one full transect takes (s): a scenario shorter than this gives no transect."""

@@ -1,4 +1,4 @@
-"""AcqTrackConfig: every setting of the acquisition-and-tracking TRN, checked in __post_init__.
+"""AcqTrackConfig: every setting of the acquisition-and-tracking TRN (navigators.core.settings fields).
 
 Defaults are the thesis' radar-altimeter-run loop parameters (seed 001 ch. 5; spec section 4's table).
 The choices the thesis leaves open (spec section 8) are settings here, each with our default:
@@ -43,10 +43,11 @@ The choices the thesis leaves open (spec section 8) are settings here, each with
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-import numpy as np
 from trn_env.navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
+from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
+from trn_env.navigators.core.settings import Settings, setting
 
 AIDING_SOURCES = ("air_data", "ins")
 # Defaults that depend on aiding_source (a setting given as null / None takes these):
@@ -78,231 +79,151 @@ REFERENCE_FRAMES = ("speed_track", "ne")
 LOOP_ORDERS = ("speed_first", "heading_first")
 BIAS_MITIGATIONS = ("ncs", "els", "none")
 DISCRIMINATOR_NAMES = ("thesis", "v_fit")
-
-
-def _finite(name: str, value, lo: float | None = None, hi: float | None = None, strict_lo: bool = False):
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float, np.integer, np.floating))
-        or not math.isfinite(float(value))
-    ):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    v = float(value)
-    if lo is not None and (v <= lo if strict_lo else v < lo):
-        raise ValueError(f"{name} must be {'>' if strict_lo else '>='} {lo:g}, got {value!r}")
-    if hi is not None and v > hi:
-        raise ValueError(f"{name} must be <= {hi:g}, got {value!r}")
-    return v
-
-
-def _spacing_set(name: str, value) -> tuple[float, ...]:
-    try:
-        vals = tuple(float(x) for x in value)
-    except TypeError as exc:
-        raise ValueError(f"{name} must be a list of positive spacings, got {value!r}") from exc
-    if not vals:
-        raise ValueError(f"{name} must not be empty")
-    for x in vals:
-        if not (math.isfinite(x) and x > 0):
-            raise ValueError(f"{name} must hold finite spacings > 0, got {value!r}")
-    return vals
+REPLICA_MODELS = ("plumb", "footprint", "return")
 
 
 @dataclass(frozen=True)
-class AcqTrackConfig:
+class AcqTrackConfig(Settings):
     """Settings (units in the names). See the module docstring for the choices of spec section 8."""
 
-    transect_samples: int = 25  # N (thesis: 25, also 50; useful 15-40)
-    sample_period_s: float = 1.0  # t between transect samples
-    correlation: str = "mad"  # "mad" | "pearson" | "msd"
-    remove_bias: bool = True  # MAD of the mean-removed difference (baro / map vertical bias)
-    interpolation: str = "bilinear"  # "bilinear" | "bicubic" map heights at replica samples
-    replica_model: str = "plumb"  # "plumb" | "footprint": the map as the pulse altimeter sees it
-    min_valid_fraction: float = 0.6  # of the N samples needed to correlate
-    aiding: bool = True  # chapter 4's aided loops (False: constant speed and heading)
-    aiding_source: str = "air_data"  # "air_data" (TAS + compass) | "ins" (strapdown INS velocity)
-    reference_gain: float | None = None  # aided: fraction of each epoch's loop correction taken into b
-    reference_frame: str | None = None  # aided: "speed_track" (b_v, b_psi) | "ne" (a north/east bias)
-    aiding_bias_walk_mps_per_sqrt_s: float | None = None  # "ne": the velocity bias' walk (None: by source)
-    aiding_interval_mean: bool = True  # air data: the air vector's mean over each sample interval
-    air_vector_sideslip: bool = True  # air data: the air vector points along heading + sideslip
-    wind_estimation: bool = True  # wind triangle, predicted through heading changes
-    wind_gain: float = 0.01  # per tracked sample, low-pass of the wind estimate (GNSS: 0.2)
-    loop_order: str = "speed_first"
-    speed_spacings_mps: tuple = (0.48, 0.96, 1.44, 1.92, 2.4)
-    speed_threshold_mps: float = 0.005
-    speed_narrow_spacing_mps: float = 0.24
-    speed_narrow_threshold_mps: float = 0.002
-    heading_spacings_deg: tuple = (1.0, 2.0, 3.0, 4.0, 5.0)
-    heading_threshold_deg: float = 0.03
-    heading_narrow_spacing_deg: float = 0.5
-    heading_narrow_threshold_deg: float = 0.003
-    break_iteration: int = 101
-    position_loops: bool = True  # start-point loops along / across the track (ours; tracking.py)
-    position_spacings_cells: tuple = (0.25, 0.5, 0.75, 1.0, 1.25)  # 1st stage, x the map resolution
-    position_threshold_m: float = 0.5
-    position_narrow_spacing_cells: float = 0.125  # 2nd stage (bias_mitigation "ncs")
-    position_narrow_threshold_m: float = 0.2
-    discriminator: str = "thesis"  # "thesis": s (E - L) / (E + L); "v_fit": floor removed (tracking.py)
-    bias_mitigation: str = "ncs"  # "ncs": fixed narrow 2nd stage; "els": + ELS; "none": 1st stage only
-    scf_offset_cells: float = 2.0  # f: the SCF/HCF reach f R_db at the transect's far end
-    scf_points: int = 10  # correlation-function points on each side of the prompt
-    symmetry_ratio_max: float = 2.0
-    acquisition_speed_half_mps: float = 10.0
-    acquisition_speed_bin_mps: float = 1.0
-    acquisition_heading_half_deg: float = 10.0
-    acquisition_heading_bin_deg: float = 1.0
-    acquisition_position_half_m: float = 500.0
-    acquisition_position_bin_m: float = 50.0
-    acquisition_distinct_ratio: float = 0.9
-    acquisition_exclusion_m: float = 200.0
-    acquire_above_sigma_m: float = 100.0  # transect start sigma above which tracking needs an acquisition
-    snr_min_db: float = 5.0
-    map_sigma_m: float = 5.0  # map height error (1 sigma) in the a-priori noise
-    ra_noise_const_m: float = 0.6  # radar-altimeter noise model (1 sigma = const + fraction * R)
-    ra_noise_fraction: float = 0.02
-    false_lock_sigma_factor: float = 3.0  # residual sigma above this times the a-priori sigma: false lock
-    max_speed_bias_mps: float | None = None  # aided: |b_v| beyond is a false lock (None: by source)
-    max_heading_bias_deg: float | None = None
-    lost_after_epochs: int = 5  # consecutive out-of-lock epochs before "lost" (re-acquire)
-    output_average_length: int | None = None
-    output_average_speed_tol_mps: float = 0.5
-    output_average_heading_tol_deg: float = 0.5
-    roll_compensation: bool = True
-    beamwidth_deg: float = 17.0
-    aiding_speed_sigma_mps: float | None = None  # dead reckoning on the aiding alone (None: by source)
-    aiding_heading_sigma_deg: float | None = None
-    unaided_speed_sigma_mps: float = 5.0
-    unaided_heading_sigma_deg: float = 5.0
-    gnss_sigma_m: float = 3.0
-    position_sigma_floor_m: float | None = None  # None: half the map's post spacing
-    fix_sigma_scale: float = 1.25  # calibration of the centroid fix's sigma (navigator.py; NIS check)
-    fix_gate_nis: float = 13.8  # a fix with NIS (2 dof) above this is rejected as a false lock (p = 0.001)
-    fix_overlap: float | None = None  # epochs sharing one fix's information (None: N / 2)
-    aiding_walk_m_per_sqrt_s: float | None = None  # dead-reckoning random walk (None: by source)
-    baro_geopotential: bool = True
-    baro_bias_sigma_m: float = 10.0
-    integrity_window: int = 3  # in-lock epochs in the innovation test's window (InnovationMonitor)
-    integrity_alpha: float = 0.01  # probability outside its chi-square band
+    transect_samples: int = setting(25, "N (thesis: 25, also 50; useful 15-40)", ge=5, le=500)
+    sample_period_s: float = setting(1.0, "t between transect samples", "s", gt=0.0)
+    correlation: str = setting("mad", "'mad' | 'pearson' | 'msd'", choices=tuple(COSTS))
+    remove_bias: bool = setting(True, "MAD of the mean-removed difference (baro / map vertical bias)")
+    interpolation: str = setting("bilinear", "'bilinear' | 'bicubic' map heights at replica samples",
+        choices=tuple(INTERPOLATIONS))
+    replica_model: str = setting("plumb", "'plumb' | 'footprint': the map as the pulse altimeter sees it",
+        choices=REPLICA_MODELS)
+    min_valid_fraction: float = setting(0.6, "of the N samples needed to correlate", "1", gt=0.0, le=1.0)
+    aiding: bool = setting(True, "chapter 4's aided loops (False: constant speed and heading)")
+    aiding_source: str = setting("air_data", "'air_data' (TAS + compass) | 'ins' (strapdown INS velocity)",
+        choices=AIDING_SOURCES)
+    reference_gain: float | None = setting(
+        None, "aided: fraction of each epoch's loop correction taken into b", "1", gt=0.0, le=1.0)
+    reference_frame: str | None = setting(
+        None, "aided: 'speed_track' (b_v, b_psi) | 'ne' (a north/east bias)", choices=REFERENCE_FRAMES)
+    aiding_bias_walk_mps_per_sqrt_s: float | None = setting(
+        None, "'ne': the velocity bias' walk (None: by source)", "m/s/sqrt(s)", ge=0.0)
+    aiding_interval_mean: bool = setting(True, "air data: the air vector mean over each sample interval")
+    air_vector_sideslip: bool = setting(True, "air data: the air vector points along heading + sideslip")
+    wind_estimation: bool = setting(True, "wind triangle, predicted through heading changes")
+    wind_gain: float = setting(0.01, "per tracked sample, low-pass of the wind estimate (GNSS: 0.2)",
+        "1", ge=0.0, le=1.0)
+    loop_order: str = setting("speed_first", "loop order: speed loops first or heading loops first",
+        choices=LOOP_ORDERS)
+    speed_spacings_mps: tuple[float, ...] = setting(
+        (0.48, 0.96, 1.44, 1.92, 2.4), "1st-stage speed correlator spacings (adaptive)", "m/s", gt=0.0,
+        min_length=1)
+    speed_threshold_mps: float = setting(0.005, "1st-stage speed lock threshold on |eps|", "m/s", gt=0.0)
+    speed_narrow_spacing_mps: float = setting(0.24, "2nd-stage (narrow) speed spacing", "m/s", gt=0.0)
+    speed_narrow_threshold_mps: float = setting(0.002, "2nd-stage speed lock threshold", "m/s", gt=0.0)
+    heading_spacings_deg: tuple[float, ...] = setting(
+        (1.0, 2.0, 3.0, 4.0, 5.0), "1st-stage heading correlator spacings (adaptive)", "deg", gt=0.0,
+        min_length=1)
+    heading_threshold_deg: float = setting(0.03, "1st-stage heading lock threshold", "deg", gt=0.0)
+    heading_narrow_spacing_deg: float = setting(0.5, "2nd-stage (narrow) heading spacing", "deg", gt=0.0)
+    heading_narrow_threshold_deg: float = setting(0.003, "2nd-stage heading lock threshold", "deg", gt=0.0)
+    break_iteration: int = setting(101, "loop iterations after which an epoch is flagged degraded", ge=2)
+    position_loops: bool = setting(True, "start-point loops along / across the track (ours; tracking.py)")
+    position_spacings_cells: tuple[float, ...] = setting(
+        (0.25, 0.5, 0.75, 1.0, 1.25), "1st stage, x the map resolution", "cells", gt=0.0, min_length=1)
+    position_threshold_m: float = setting(0.5, "1st-stage start-point lock threshold", "m", gt=0.0)
+    position_narrow_spacing_cells: float = setting(0.125, "2nd stage (bias_mitigation 'ncs')",
+        "cells", gt=0.0)
+    position_narrow_threshold_m: float = setting(0.2, "2nd-stage start-point lock threshold", "m", gt=0.0)
+    discriminator: str = setting(
+        "thesis", "'thesis': s (E - L) / (E + L); 'v_fit': floor removed (tracking.py)",
+        choices=DISCRIMINATOR_NAMES)
+    bias_mitigation: str = setting(
+        "ncs", "'ncs': fixed narrow 2nd stage; 'els': + ELS; 'none': 1st stage only",
+        choices=BIAS_MITIGATIONS)
+    scf_offset_cells: float = setting(2.0, "f: the SCF/HCF reach f R_db at the transect's far end",
+        "cells", gt=0.0)
+    scf_points: int = setting(10, "correlation-function points on each side of the prompt", ge=2)
+    symmetry_ratio_max: float = setting(
+        2.0, "symmetry-ratio threshold of the adaptivity block (spec section 8)", "1", ge=1.0)
+    acquisition_speed_half_mps: float = setting(10.0, "acquisition grid half-span in speed", "m/s", gt=0.0)
+    acquisition_speed_bin_mps: float = setting(1.0, "acquisition grid speed bin", "m/s", gt=0.0)
+    acquisition_heading_half_deg: float = setting(10.0, "acquisition grid half-span in heading",
+        "deg", gt=0.0)
+    acquisition_heading_bin_deg: float = setting(1.0, "acquisition grid heading bin", "deg", gt=0.0)
+    acquisition_position_half_m: float = setting(500.0, "acquisition grid half-span in position", "m", gt=0.0)
+    acquisition_position_bin_m: float = setting(50.0, "acquisition grid position bin", "m", gt=0.0)
+    acquisition_distinct_ratio: float = setting(
+        0.9, "a minimum is distinct below this times the best cost farther than the exclusion", "1", gt=0.0)
+    acquisition_exclusion_m: float = setting(
+        200.0, "distance beyond which a competing acquisition minimum counts", "m", ge=0.0)
+    acquire_above_sigma_m: float = setting(
+        100.0, "transect start sigma above which tracking needs an acquisition", "m", ge=0.0)
+    snr_min_db: float = setting(5.0, "correlation SNR below which the loop is out of lock", "dB")
+    map_sigma_m: float = setting(5.0, "map height error (1 sigma) in the a-priori noise", "m", ge=0.0)
+    ra_noise_const_m: float = setting(0.6, "radar-altimeter noise model (1 sigma = const + fraction * R)",
+        "m", ge=0.0)
+    ra_noise_fraction: float = setting(0.02, "radar-altimeter noise proportional to range", "1", ge=0.0)
+    false_lock_sigma_factor: float = setting(
+        3.0, "residual sigma above this times the a-priori sigma: false lock", gt=0.0)
+    max_speed_bias_mps: float | None = setting(None, "aided: |b_v| beyond is a false lock (None: by source)",
+        "m/s", gt=0.0)
+    max_heading_bias_deg: float | None = setting(
+        None, "aided: |b_psi| beyond is a false lock (None: by source)", "deg", gt=0.0)
+    lost_after_epochs: int = setting(5, "consecutive out-of-lock epochs before 'lost' (re-acquire)", ge=1)
+    output_average_length: int | None = setting(
+        None, "moving-average length of the output (None: ceil(N / 2))", ge=1)
+    output_average_speed_tol_mps: float = setting(0.5, "speed agreement under which the moving average runs",
+        "m/s", gt=0.0)
+    output_average_heading_tol_deg: float = setting(
+        0.5, "heading agreement under which the moving average runs", "deg", gt=0.0)
+    roll_compensation: bool = setting(True, "plumb height from the slant range through roll and pitch")
+    beamwidth_deg: float = setting(17.0, "radar altimeter beamwidth", "deg", gt=0.0, lt=90.0)
+    aiding_speed_sigma_mps: float | None = setting(
+        None, "dead reckoning on the aiding alone (None: by source)", "m/s", gt=0.0)
+    aiding_heading_sigma_deg: float | None = setting(
+        None, "dead-reckoning heading error on the aiding alone (None: by source)", "deg", gt=0.0)
+    unaided_speed_sigma_mps: float = setting(5.0, "speed error of the unaided loops", "m/s", gt=0.0)
+    unaided_heading_sigma_deg: float = setting(5.0, "heading error of the unaided loops", "deg", gt=0.0)
+    gnss_sigma_m: float = setting(3.0, "GNSS position noise per axis", "m", gt=0.0)
+    position_sigma_floor_m: float | None = setting(None, "None: half the map's post spacing", "m", gt=0.0)
+    fix_sigma_scale: float = setting(
+        1.25, "calibration of the centroid fix's sigma (navigator.py; NIS check)", gt=0.0)
+    fix_gate_nis: float = setting(
+        13.8, "a fix with NIS (2 dof) above this is rejected as a false lock (p = 0.001)", gt=0.0)
+    fix_overlap: float | None = setting(None, "epochs sharing one fix's information (None: N / 2)", ge=1.0)
+    aiding_walk_m_per_sqrt_s: float | None = setting(None, "dead-reckoning random walk (None: by source)",
+        "m/sqrt(s)", ge=0.0)
+    baro_geopotential: bool = setting(True, "convert the baro geopotential height to geometric")
+    baro_bias_sigma_m: float = setting(10.0, "prior of the barometric height bias", "m", ge=0.0)
+    integrity_window: int = setting(3, "in-lock epochs in the innovation test's window (InnovationMonitor)",
+        ge=1)
+    integrity_alpha: float = setting(0.01, "probability outside its chi-square band", "1", gt=0.0, lt=1.0)
 
-    def __post_init__(self):
-        src = self.aiding_source if self.aiding_source in AIDING_SOURCES else "air_data"
+    def resolve(self) -> None:
         for name, by_source in SOURCE_DEFAULTS.items():
             if getattr(self, name) is None:
-                object.__setattr__(self, name, by_source[src])
-        n = self.transect_samples
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 5 <= int(n) <= 500:
-            raise ValueError(f"transect_samples must be a whole number in [5, 500], got {n!r}")
-        _finite("sample_period_s", self.sample_period_s, 0.0, strict_lo=True)
-        for name, options in (
-            ("correlation", tuple(COSTS)),
-            ("interpolation", tuple(INTERPOLATIONS)),
-            ("aiding_source", AIDING_SOURCES),
-            ("loop_order", LOOP_ORDERS),
-            ("bias_mitigation", BIAS_MITIGATIONS),
-            ("discriminator", DISCRIMINATOR_NAMES),
-            ("replica_model", ("plumb", "footprint", "return")),
-            ("reference_frame", REFERENCE_FRAMES),
-        ):
-            if getattr(self, name) not in options:
-                raise ValueError(f"{name} must be one of {list(options)}, got {getattr(self, name)!r}")
-        for name in (
-            "remove_bias",
-            "aiding",
-            "wind_estimation",
-            "roll_compensation",
-            "baro_geopotential",
-            "aiding_interval_mean",
-            "air_vector_sideslip",
-            "position_loops",
-        ):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
-        _finite("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0, strict_lo=True)
-        _finite("wind_gain", self.wind_gain, 0.0, 1.0)
-        _finite("reference_gain", self.reference_gain, 0.0, 1.0, strict_lo=True)
-        object.__setattr__(
-            self,
-            "position_spacings_cells",
-            _spacing_set("position_spacings_cells", self.position_spacings_cells),
-        )
-        object.__setattr__(
-            self, "speed_spacings_mps", _spacing_set("speed_spacings_mps", self.speed_spacings_mps)
-        )
-        object.__setattr__(
-            self, "heading_spacings_deg", _spacing_set("heading_spacings_deg", self.heading_spacings_deg)
-        )
-        for name in (
-            "speed_threshold_mps",
-            "speed_narrow_spacing_mps",
-            "speed_narrow_threshold_mps",
-            "heading_threshold_deg",
-            "heading_narrow_spacing_deg",
-            "heading_narrow_threshold_deg",
-            "position_threshold_m",
-            "position_narrow_spacing_cells",
-            "position_narrow_threshold_m",
-            "scf_offset_cells",
-            "symmetry_ratio_max",
-            "acquisition_speed_bin_mps",
-            "acquisition_heading_bin_deg",
-            "acquisition_position_bin_m",
-            "acquisition_distinct_ratio",
-            "beamwidth_deg",
-            "false_lock_sigma_factor",
-            "max_speed_bias_mps",
-            "max_heading_bias_deg",
-            "output_average_speed_tol_mps",
-            "output_average_heading_tol_deg",
-            "gnss_sigma_m",
-            "aiding_speed_sigma_mps",
-            "aiding_heading_sigma_deg",
-            "unaided_speed_sigma_mps",
-            "unaided_heading_sigma_deg",
-            "fix_sigma_scale",
-            "fix_gate_nis",
-        ):
-            _finite(name, getattr(self, name), 0.0, strict_lo=True)
+                object.__setattr__(self, name, by_source[self.aiding_source])
+
+    def check(self) -> list[tuple[str, str]]:
+        problems = []
         for name, bin_name in (
             ("acquisition_speed_half_mps", "acquisition_speed_bin_mps"),
             ("acquisition_heading_half_deg", "acquisition_heading_bin_deg"),
             ("acquisition_position_half_m", "acquisition_position_bin_m"),
         ):
-            half = _finite(name, getattr(self, name), 0.0, strict_lo=True)
-            if getattr(self, bin_name) > 2.0 * half:
-                raise ValueError(
-                    f"{name}: the interval +-{half:g} is empty at {bin_name} = "
-                    f"{getattr(self, bin_name):g} (fewer than two bins)"
-                )
-        for name in (
-            "acquisition_exclusion_m",
-            "acquire_above_sigma_m",
-            "map_sigma_m",
-            "ra_noise_const_m",
-            "ra_noise_fraction",
-            "baro_bias_sigma_m",
-        ):
-            _finite(name, getattr(self, name), 0.0)
-        _finite("snr_min_db", self.snr_min_db)
-        if self.symmetry_ratio_max < 1.0:
-            raise ValueError(
-                f"symmetry_ratio_max must be >= 1 (a ratio of slopes), got {self.symmetry_ratio_max!r}"
-            )
-        if self.beamwidth_deg >= 90.0:
-            raise ValueError(f"beamwidth_deg must lie in (0, 90) deg, got {self.beamwidth_deg!r}")
-        for name, lo in (("break_iteration", 2), ("scf_points", 2), ("lost_after_epochs", 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) < lo:
-                raise ValueError(f"{name} must be a whole number >= {lo}, got {v!r}")
-        L = self.output_average_length
-        if L is not None and (isinstance(L, bool) or not isinstance(L, (int, np.integer)) or int(L) < 1):
-            raise ValueError(f"output_average_length must be a whole number >= 1 or null, got {L!r}")
-        if self.fix_overlap is not None:
-            _finite("fix_overlap", self.fix_overlap, 1.0)
-        _finite("aiding_walk_m_per_sqrt_s", self.aiding_walk_m_per_sqrt_s, 0.0)
-        _finite("aiding_bias_walk_mps_per_sqrt_s", self.aiding_bias_walk_mps_per_sqrt_s, 0.0)
-        if self.position_sigma_floor_m is not None:
-            _finite("position_sigma_floor_m", self.position_sigma_floor_m, 0.0, strict_lo=True)
+            half, width = getattr(self, name), getattr(self, bin_name)
+            if width > 2.0 * half:
+                problems.append((name, f"the interval +-{half:g} is empty at {bin_name} = {width:g} (fewer "
+                                       "than two bins)"))
+        return problems
+
+    def sensor_needs(self) -> SensorNeeds:
+        why = "the terrain profile is barometric height - radar-altimeter range"
+        need = {"radar_altimeter": why, "baro": why}
+        if self.aiding:
+            if self.aiding_source == "air_data":
+                need["air_data"] = "aiding = true with aiding_source = 'air_data' needs the true airspeed"
+                need["heading"] = "aiding = true with aiding_source = 'air_data' needs the compass heading"
+            else:
+                need["imu"] = "aiding = true with aiding_source = 'ins' needs the IMU"
+        return SensorNeeds(need, ("gnss",))
 
     @property
     def average_length(self) -> int:
@@ -315,6 +236,5 @@ class AcqTrackConfig:
     def transect_duration_s(self) -> float:
         return (self.transect_samples - 1) * self.sample_period_s
 
-    @classmethod
-    def names(cls) -> tuple[str, ...]:
-        return tuple(f.name for f in fields(cls))
+
+CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True)

@@ -124,8 +124,8 @@ def consistency_warning(spec: ImuSpec, memory_s: float, who: str) -> str:
     bias_deg_h = math.degrees(spec.gyro_bias_sigma_rps) * 3600.0
     return (f"{who}: the IMU's gyro bias ({bias_deg_h:.3g} deg/h) builds {math.degrees(att):.2g} deg of "
             f"attitude error over the filter's {memory_s:g} s memory, beyond its small-angle error model "
-            f"({math.degrees(SMALL_ANGLE_LIMIT_RAD):.2g} deg): the covariance does not bound the error "
-            "(docs/validation/navigators.md)")
+            f"({math.degrees(SMALL_ANGLE_LIMIT_RAD):.2g} deg): its covariance is not calibrated for this IMU "
+            "(measured: docs/validation/navigators.md)")
 
 
 def gm_drive(sigma: float, tau_s: float, dt_s: float) -> float:

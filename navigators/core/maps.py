@@ -1,6 +1,46 @@
-"""The navigator's map: where a navigator or monitor gets its terrain.Dem from its `dem` setting."""
+"""The navigator's map: where a navigator or monitor gets its terrain.Dem from its `dem` setting, and the
+record the terrain kernels take it as.
+
+`MapRecord(heights, lat0, lon0, dlat, dlon, cubic)`: the grid of terrain.Dem.grid (heights[i, j] the post at
+lat0 + i dlat, lon0 + j dlon, rad) and the interpolation (bicubic when cubic, else bilinear), passed to numba
+kernels as one tuple; `map_height(record, lat, lon)` is the height (m) there (terrain.kernels), NaN off the
+map.
+"""
 
 from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+from trn_env.terrain.kernels import bicubic, bilinear
+
+
+class MapRecord(NamedTuple):
+    """The map's grid and interpolation as one kernel argument (see the module docstring)."""
+
+    heights: np.ndarray
+    lat0: float
+    lon0: float
+    dlat: float
+    dlon: float
+    cubic: bool
+
+
+def map_record(dem_or_grid, cubic: bool) -> MapRecord:
+    """The MapRecord of a terrain.Dem (or its grid tuple) with the interpolation."""
+    grid = getattr(dem_or_grid, "grid", dem_or_grid)
+    heights, lat0, lon0, dlat, dlon = grid
+    return MapRecord(heights, float(lat0), float(lon0), float(dlat), float(dlon), bool(cubic))
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def map_height(record, lat, lon):
+    """Height (m) of the record's map at (lat, lon) rad by its interpolation; NaN off the map."""
+    heights, lat0, lon0, dlat, dlon, cubic = record
+    if cubic:
+        return bicubic(heights, lat0, lon0, dlat, dlon, lat, lon)
+    return bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
 
 
 def load_map(dem, who: str = "the navigator"):
@@ -22,4 +62,4 @@ def load_map(dem, who: str = "the navigator"):
     return dem
 
 
-__all__ = ["load_map"]
+__all__ = ["MapRecord", "load_map", "map_height", "map_record"]

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 from numba import njit
+from trn_env.navigators.core.maps import map_height
 from trn_env.navigators.measurements.terrain_models import LOG_2PI
-from trn_env.terrain.kernels import bicubic, bilinear
 
 NEGLIGIBLE = -60.0   # log-weight below which a cell's weight (< 1e-26) is left out of sums of weights
 
@@ -135,8 +135,8 @@ def bias_update(bias, resid, gain):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn, de, pn, pe, h_meas, S, gain,
-                    lg, le, floor, logw, bias, gam, out, cubic):
+def ira_update_pass(rec, lat, lon, r_lat, r_lon, dn, de, pn, pe, h_meas, S, gain, lg, le, floor, logw, bias,
+                    gam, out):
     """One IRA terrain update of the whole grid, fused (one map lookup per cell): the predicted terrain
     height map(cell + p) + bias (the map bicubic if cubic, else bilinear: terrain.kernels), the heavy-tailed
     log-likelihood (measurements.robust_ll_one inlined, its constants hoisted; variance S),
@@ -158,8 +158,7 @@ def ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn,
     for k in range(m):
         la = lat + (dn[k] + pn) / r_lat
         lo = lon + (de[k] + pe) / r_lon
-        h = bicubic(heights, lat0, lon0, dlat, dlon, la, lo) if cubic else bilinear(heights, lat0, lon0, dlat,
-                                                                                     dlon, la, lo)
+        h = map_height(rec, la, lo)
         lw = logw[k]
         w0 = math.exp(lw) if lw > NEGLIGIBLE else 0.0
         s0 += w0

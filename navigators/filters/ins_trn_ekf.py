@@ -15,7 +15,11 @@ fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (T
 the batch's rigid shift is the error at its mean sample time, so H also takes the velocity error times the
 lag to the fix (-lag on states 3, 4).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
-back into the INS at every fix, so the next batch is collected with the compensated INS.
+back into the INS at every fix, so the next batch is collected with the compensated INS. The error
+model's priors and noise come from the IMU's specification where it gives more than the settings
+(apply_imu_spec in ins_trn_propagation.py, navigators.core.imu_spec: bias priors and Gauss-Markov walks,
+the x / y gyro biases the 13 states do not carry as a tilt random walk, turns' misalignment and scale
+factor).
 
 GNSS (loosely coupled, every valid fix of SensorFrames.gnss, at its own time): z = INS - GNSS, north and
 east position (m) and NED velocity (m/s), H selects states 0, 1, 3, 4, 5, R = diag(gnss_sigma_h_m^2 x 2,
@@ -48,11 +52,14 @@ from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
 from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
 from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
+from trn_env.navigators.filters.ins_trn_settings import (
+    INS_CAPABILITIES,
+    InsTrnSettings,
+)
 from trn_env.navigators.frames import SensorFrames, imu_gap_s
-from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns
+from trn_env.navigators.inertial.strapdown import StrapdownIns
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
-from trn_env.navigators.measurements.ira_closest_point import FORMULAS
 from trn_env.navigators.protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
@@ -69,25 +76,6 @@ FIX_HISTORY = 64      # TERCOM fixes kept in `fixes` (the newest)
 
 G0 = 9.80665
 N_ERR = N_EKF13
-CHI2_2DOF_99_99 = 18.42
-CHI2_5DOF_99_99 = 25.74
-
-
-def _check_number(key: str, val, positive: bool) -> None:
-    """A finite real number (> 0 with positive, else >= 0); ValueError naming the setting."""
-    if isinstance(val, (bool, np.bool_)) or not isinstance(val, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{key} must be a number, got {val!r}")
-    if not (math.isfinite(val) and (val > 0 if positive else val >= 0)):
-        raise ValueError(f"{key} must be a finite number {'> 0' if positive else '>= 0'}, got {val!r}")
-
-
-def _check_count(key: str, val) -> None:
-    """A whole number >= 1; ValueError naming the setting."""
-    ok = isinstance(val, (int, np.integer)) and not isinstance(val, (bool, np.bool_))
-    if isinstance(val, (float, np.floating)) and math.isfinite(val) and val == int(val):
-        ok = True
-    if not ok or val < 1:
-        raise ValueError(f"{key} must be a whole number >= 1, got {val!r}")
 
 
 _is_pd = is_positive_definite
@@ -127,75 +115,15 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
     numbers, to round-off).
     """
 
+    capabilities = INS_CAPABILITIES
+    settings_class = InsTrnSettings          # what `trn-env navigators` lists as its settings
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
-    def __init__(
-        self,
-        aiding: str | None = None,
-        dem=None,
-        formula: str = "proposed",
-        fix_period_s: float = 40.0,
-        half_cells: int = 50,
-        cell_m: float = 5.0,
-        fix_sigma_m: float = 10.0,
-        ekf_rate_hz: float = 50.0,
-        gravity_model: str = "j2",
-        tau_baro_s: float = 30.0,
-        accel_bias_mps2: float = 50e-6 * G0,
-        accel_noise_mps2_rthz: float = 10e-6 * G0,
-        gyro_bias_rps: float = np.radians(0.005) / 3600,
-        gyro_noise_rps_rthz: float = np.radians(0.005) / 60,
-        ira_decimation: int = 1,
-        gate_chi2: float = CHI2_2DOF_99_99,
-        min_samples: int = 20,
-        dp_min_m: float = 0.0,
-        dp_reference_formula: str = "conventional",
-        imu_samples: str = "interval",
-        baro_geopotential: bool = True,
-        remove_bias: bool = False,
-        init_height_from_baro: bool = True,
-        baro_bias_sigma_m: float = 10.0,
-        use_gnss: bool = True,
-        gnss_sigma_h_m: float = 2.0,
-        gnss_sigma_v_mps: float = 0.1,
-        gnss_correlated_sigma_m: float = 1.5,
-        gnss_gate_chi2: float = CHI2_5DOF_99_99,
-        gnss_timeout_s: float = 2.5,
-        integrity_window: int = 3,
-        integrity_alpha: float = 0.01,
-        recovery_half_cells: int | None = None,
-        recovery_sigma_m: float = 100.0,
-        name: str | None = None,
-    ):
-        if aiding not in (None, "ira", "radar_altimeter"):
-            raise ValueError(f"aiding must be None, 'ira' or 'radar_altimeter', got {aiding!r}")
-        if formula not in FORMULAS:
-            raise ValueError(f"formula must be one of {FORMULAS}, got {formula!r}")
-        if dp_reference_formula not in FORMULAS:
-            raise ValueError(f"dp_reference_formula must be one of {FORMULAS}, got {dp_reference_formula!r}")
-        if gravity_model not in GRAVITY_MODELS:
-            raise ValueError(f"gravity_model must be one of {sorted(GRAVITY_MODELS)}, got {gravity_model!r}")
-        if imu_samples not in ("interval", "instant"):
-            raise ValueError(f"imu_samples must be 'interval' or 'instant', got {imu_samples!r}")
-        for key, val in (("fix_period_s", fix_period_s), ("cell_m", cell_m), ("fix_sigma_m", fix_sigma_m),
-                         ("ekf_rate_hz", ekf_rate_hz), ("tau_baro_s", tau_baro_s), ("gate_chi2", gate_chi2),
-                         ("gnss_sigma_h_m", gnss_sigma_h_m), ("gnss_sigma_v_mps", gnss_sigma_v_mps),
-                         ("gnss_gate_chi2", gnss_gate_chi2), ("gnss_timeout_s", gnss_timeout_s)):
-            _check_number(key, val, positive=True)
-        for key, val in (("accel_bias_mps2", accel_bias_mps2),
-                         ("accel_noise_mps2_rthz", accel_noise_mps2_rthz),
-                         ("gyro_bias_rps", gyro_bias_rps), ("gyro_noise_rps_rthz", gyro_noise_rps_rthz),
-                         ("dp_min_m", dp_min_m), ("baro_bias_sigma_m", baro_bias_sigma_m),
-                         ("gnss_correlated_sigma_m", gnss_correlated_sigma_m)):
-            _check_number(key, val, positive=False)
-        for key, val in (("half_cells", half_cells), ("ira_decimation", ira_decimation),
-                         ("min_samples", min_samples)):
-            _check_count(key, val)
-        for key, val in (("baro_geopotential", baro_geopotential), ("remove_bias", remove_bias),
-                         ("init_height_from_baro", init_height_from_baro), ("use_gnss", use_gnss)):
-            if not isinstance(val, (bool, np.bool_)):
-                raise ValueError(f"{key} must be true or false, got {val!r}")
+    def __init__(self, dem=None, settings: InsTrnSettings | None = None, name: str | None = None,
+                 **overrides):
+        s = self.settings = InsTrnSettings.build(settings, overrides)
+        aiding = s.aiding
         if name is not None and not (isinstance(name, str) and name):
             raise ValueError(f"name must be a non-empty string, got {name!r}")
         if dem is not None and not isinstance(dem, str) and not hasattr(dem, "grid"):
@@ -205,46 +133,40 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
         self.name = name or ("ins" if aiding is None else "ins_tercom")
         self.aiding = aiding
         self.dem = dem
-        self.formula = formula
-        self.fix_period_s = float(fix_period_s)
-        self.half_cells = int(half_cells)
-        self.cell_m = float(cell_m)
-        self.fix_sigma_m = float(fix_sigma_m)
-        self.dt_ekf = 1.0 / float(ekf_rate_hz)
-        self.ins = StrapdownIns(gravity_model, tau_baro_s, imu_samples)
-        self.sig_ba = float(accel_bias_mps2)
-        self.q_acc = float(accel_noise_mps2_rthz) ** 2
-        self.sig_bg = float(gyro_bias_rps)
-        self.q_gyr = float(gyro_noise_rps_rthz) ** 2
-        self.ira_decimation = int(ira_decimation)
-        self.gate_chi2 = float(gate_chi2)
-        self.min_samples = int(min_samples)
-        self.dp_min_m = float(dp_min_m)
-        self.dp_reference_formula = dp_reference_formula
-        self.baro_geopotential = bool(baro_geopotential)
-        self.remove_bias = bool(remove_bias)
-        self.init_height_from_baro = bool(init_height_from_baro)
-        self.baro_bias_sigma_m = float(baro_bias_sigma_m)
-        self.use_gnss = bool(use_gnss)
-        self.gnss_sigma_h_m = float(gnss_sigma_h_m)
-        self.gnss_sigma_v_mps = float(gnss_sigma_v_mps)
-        self.gnss_correlated_sigma_m = float(gnss_correlated_sigma_m)
-        self.gnss_gate_chi2 = float(gnss_gate_chi2)
-        self.gnss_timeout_s = float(gnss_timeout_s)
+        self.formula = s.formula
+        self.fix_period_s = s.fix_period_s
+        self.half_cells = s.half_cells
+        self.cell_m = s.cell_m
+        self.fix_sigma_m = s.fix_sigma_m
+        self.dt_ekf = 1.0 / s.ekf_rate_hz
+        self.ins = StrapdownIns(s.gravity_model, s.tau_baro_s, s.imu_samples)
+        self.sig_ba = s.accel_bias_mps2
+        self.q_acc = s.accel_noise_mps2_rthz ** 2
+        self.sig_bg = s.gyro_bias_rps
+        self.q_gyr = s.gyro_noise_rps_rthz ** 2
+        self.ira_decimation = s.ira_decimation
+        self.gate_chi2 = s.gate_chi2
+        self.min_samples = s.min_samples
+        self.dp_min_m = s.dp_min_m
+        self.dp_reference_formula = s.dp_reference_formula
+        self.baro_geopotential = s.baro_geopotential
+        self.remove_bias = s.remove_bias
+        self.init_height_from_baro = s.init_height_from_baro
+        self.baro_bias_sigma_m = s.baro_bias_sigma_m
+        self.use_gnss = s.use_gnss
+        self.gnss_sigma_h_m = s.gnss_sigma_h_m
+        self.gnss_sigma_v_mps = s.gnss_sigma_v_mps
+        self.gnss_correlated_sigma_m = s.gnss_correlated_sigma_m
+        self.gnss_gate_chi2 = s.gnss_gate_chi2
+        self.gnss_timeout_s = s.gnss_timeout_s
         self._t_gnss = -math.inf        # time of the last GNSS fix used
         self._gnss_up = False           # GNSS fixes arriving (loss reported once gnss_timeout_s passes)
         self._height_initialised = False
-        self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
+        self.integrity = InnovationMonitor(s.integrity_window, s.integrity_alpha)
         self._integrity_extra: dict = {}
-        rh = 2 * self.half_cells if recovery_half_cells is None else recovery_half_cells
-        if isinstance(rh, bool) or not isinstance(rh, (int, np.integer)) or rh < self.half_cells:
-            raise ValueError(f"recovery_half_cells must be an integer >= half_cells ({self.half_cells}), "
-                             f"got {recovery_half_cells!r}")
-        self.recovery_half_cells = int(rh)
+        self.recovery_half_cells = s.recovery_half_cells
         self.nominal_half_cells = self.half_cells
-        if not (math.isfinite(recovery_sigma_m) and recovery_sigma_m >= 0.0):
-            raise ValueError(f"recovery_sigma_m must be a finite number >= 0, got {recovery_sigma_m!r}")
-        self.recovery_sigma_m = float(recovery_sigma_m)
+        self.recovery_sigma_m = s.recovery_sigma_m
         self._update_extra: dict = {}
         self._fault_allowance_m = 0.0       # the last accepted TERCOM fix's (protection_level)
         self._kf = None                     # filterpy's KalmanFilter, made at first use (see kf)

@@ -10,7 +10,9 @@ is INS + the weighted mean.
 
 - Propagation (navigators.filters._pf_kernels.propagate_particles): the INS error dynamics between
   measurement epochs - position from velocity, velocity from the heading error turning the specific force
-  and the Schuler term - plus process noise drawn from the filter's Generator.
+  and the Schuler term - plus process noise drawn from the filter's Generator; its densities come from the
+  IMU's specification where it gives more than the tuned floors (apply_imu_spec, navigators.core.imu_spec:
+  the acceleration errors the particles do not carry as an equivalent velocity random walk).
 - Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
   or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira_points_batch), one map lookup
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
@@ -46,7 +48,8 @@ from trn_env.navigators.core.imu_spec import (
 )
 from trn_env.navigators.core.resampling import systematic_kernel
 from trn_env.navigators.filters._pf_kernels import map_heights_interp, propagate_particles
-from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
+from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
+from trn_env.navigators.filters.terrain_filter_settings import PF_CAPABILITIES, PfSettings
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
 from trn_env.navigators.measurements.terrain_models import (
     ira_points_batch,
@@ -56,7 +59,6 @@ from trn_env.navigators.measurements.terrain_models import (
 )
 from trn_env.navigators.protocol import EXTRA_ESS
 
-BYTES_PER_PARTICLE = 8 * 30
 PF_MEMORY_S = 120.0  # memory over which the error sources the particles do not carry are matched
 N_STATE = 6
 
@@ -87,35 +89,22 @@ class ParticleFilter(InsRiddenFilter):
 
     name = "pf"
 
-    def __init__(self, dem=None, n_particles: int = 10_000, ess_threshold: float = 0.5,
-                 roughening: float = 0.1,
-                 position_noise_m_per_sqrt_s: float = 0.1, velocity_noise_mps_per_sqrt_s: float = 0.02,
-                 heading_noise_rad_per_sqrt_s: float = 2e-5, max_memory_mb: float = 2048.0,
-                 rng: np.random.Generator | None = None, **settings):
-        if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)) or n_particles < 2:
-            raise ValueError(f"n_particles must be an integer >= 2, got {n_particles!r}")
-        mem = check_positive("max_memory_mb", max_memory_mb)
-        need_mb = float(n_particles) * BYTES_PER_PARTICLE / 2**20
-        if need_mb > mem:
-            raise ValueError(f"n_particles {n_particles} needs about {need_mb:.0f} MB, more than "
-                             f"max_memory_mb "
-                             f"{mem:g}")
-        try:
-            thr = float(ess_threshold)
-        except (TypeError, ValueError):
-            raise ValueError(f"ess_threshold must be a number in (0, 1], got {ess_threshold!r}") from None
-        if not (0.0 < thr <= 1.0):
-            raise ValueError(f"ess_threshold must be in (0, 1], got {ess_threshold!r}")
-        self.ess_threshold = thr
-        self.roughening = check_positive("roughening", roughening, True)
-        self.s_pos = check_positive("position_noise_m_per_sqrt_s", position_noise_m_per_sqrt_s, True)
-        self.s_vel = check_positive("velocity_noise_mps_per_sqrt_s", velocity_noise_mps_per_sqrt_s, True)
-        self.s_psi = check_positive("heading_noise_rad_per_sqrt_s", heading_noise_rad_per_sqrt_s, True)
+    settings_class = PfSettings
+    capabilities = PF_CAPABILITIES
+
+    def __init__(self, dem=None, rng: np.random.Generator | None = None, settings: PfSettings | None = None,
+                 name: str | None = None, **overrides):
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
-        super().__init__(dem=dem, **settings)
+        super().__init__(dem=dem, settings=settings, name=name, **overrides)
+        s = self.settings
+        self.ess_threshold = s.ess_threshold
+        self.roughening = s.roughening
+        self.s_pos = s.position_noise_m_per_sqrt_s
+        self.s_vel = s.velocity_noise_mps_per_sqrt_s
+        self.s_psi = s.heading_noise_rad_per_sqrt_s
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.M = int(n_particles)
+        self.M = s.n_particles
         M = self.M
         self.dn = np.zeros(M)
         self.de = np.zeros(M)
@@ -309,8 +298,8 @@ class ParticleFilter(InsRiddenFilter):
             P = self._P
             pn = np.ascontiguousarray(P[:, 0])
             pe = np.ascontiguousarray(P[:, 1])
-            n_nan = map_heights_interp(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn,
-                                       self.de, pn, pe, self.map_cubic, self._hmap)
+            n_nan = map_heights_interp(self._map_record(), lat, lon, r_lat, r_lon, self.dn, self.de, pn, pe,
+                                       self._hmap)
             resid = (h - self.b - P[:, 2]) - self._hmap        # seed 000 eq 2 under each particle
             # one variance for the cloud, at its mean closest point: the particles' points differ by metres
             # at ranges of km, which changes sigma_R (p_d / R) and sigma_theta |p_h| by < 1e-3 relative

@@ -62,7 +62,8 @@ import math
 import numpy as np
 import trn_env.navigators.filters._pmf_kernels as kern
 from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
-from trn_env.navigators.filters.terrain_filter import InsRiddenFilter, check_positive
+from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
+from trn_env.navigators.filters.terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
 from trn_env.navigators.inertial.strapdown import quat_to_dcm
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.measurements.terrain_models import (
@@ -77,7 +78,6 @@ PMF_MEMORY_S = 240.0        # the memory over which carried-as-constant error ra
 TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
 N_U = 7                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error)
 LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
-BYTES_PER_CELL = 8 * 16     # float64 arrays held or made per cell in an update
 
 
 def _kernel_1d(var_cells: float) -> np.ndarray:
@@ -110,29 +110,19 @@ class PointMassFilter(InsRiddenFilter):
 
     name = "pmf"
 
-    def __init__(self, dem=None, grid_size: int = 200, spacing_min_m: float = 2.0,
-                 spacing_max_m: float = 100.0,
-                 span_sigmas: float = 5.0, position_noise_m_per_sqrt_s: float = 0.1,
-                 velocity_noise_mps_per_sqrt_s: float = 0.001, accel_bias_sigma_mps2: float = 50e-6 * 9.80665,
-                 max_memory_mb: float = 2048.0, **settings):
-        if isinstance(grid_size, bool) or not isinstance(grid_size, (int, np.integer)) or grid_size < 3:
-            raise ValueError(f"grid_size must be an integer >= 3, got {grid_size!r}")
-        mem = check_positive("max_memory_mb", max_memory_mb)
-        need_mb = float(grid_size) ** 2 * BYTES_PER_CELL / 2**20
-        if need_mb > mem:
-            raise ValueError(f"grid_size {grid_size} needs about {need_mb:.0f} MB, more than max_memory_mb "
-                             f"{mem:g}")
-        self.spacing_min_m = check_positive("spacing_min_m", spacing_min_m)
-        self.spacing_max_m = check_positive("spacing_max_m", spacing_max_m)
-        if self.spacing_max_m < self.spacing_min_m:
-            raise ValueError(f"spacing_max_m ({spacing_max_m}) must be >= spacing_min_m ({spacing_min_m})")
-        self.span_sigmas = check_positive("span_sigmas", span_sigmas)
-        self.position_noise = check_positive("position_noise_m_per_sqrt_s", position_noise_m_per_sqrt_s, True)
-        self.velocity_noise = check_positive("velocity_noise_mps_per_sqrt_s", velocity_noise_mps_per_sqrt_s,
-                                             True)
-        self.accel_bias_sigma = check_positive("accel_bias_sigma_mps2", accel_bias_sigma_mps2, True)
-        super().__init__(dem=dem, **settings)
-        self.n = int(grid_size)
+    settings_class = PmfSettings
+    capabilities = PMF_CAPABILITIES
+
+    def __init__(self, dem=None, settings: PmfSettings | None = None, name: str | None = None, **overrides):
+        super().__init__(dem=dem, settings=settings, name=name, **overrides)
+        s = self.settings
+        self.spacing_min_m = s.spacing_min_m
+        self.spacing_max_m = s.spacing_max_m
+        self.span_sigmas = s.span_sigmas
+        self.position_noise = s.position_noise_m_per_sqrt_s
+        self.velocity_noise = s.velocity_noise_mps_per_sqrt_s
+        self.accel_bias_sigma = s.accel_bias_sigma_mps2
+        self.n = s.grid_size
         self._ira_p = np.empty((1, 3))
         self._zero1 = np.zeros(1)
         self._zero12 = np.zeros((1, 2))
@@ -387,10 +377,9 @@ class PointMassFilter(InsRiddenFilter):
             S = self.P_b + float(self.ira_variance(range_m, p[2], math.hypot(p[0], p[1])))
             saved = (self.logw.copy(), self.bias.copy())
             o = self._out
-            kern.ira_update_pass(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, self.dn_flat,
-                                 self.de_flat, float(p[0]), float(p[1]), h_meas, S, self.P_b / S,
-                                 self._lg, self._le, LOG_FLOOR, self.logw, self.bias, self._work[0], o,
-                                 self.map_cubic)
+            kern.ira_update_pass(self._map_record(), lat, lon, r_lat, r_lon, self.dn_flat, self.de_flat,
+                                 float(p[0]), float(p[1]), h_meas, S, self.P_b / S, self._lg, self._le,
+                                 LOG_FLOOR, self.logw, self.bias, self._work[0], o)
             n_nan = int(o[3])
             if n_nan == m or not np.isfinite(o[4]):
                 self.logw, self.bias = saved

@@ -73,8 +73,10 @@ import numpy as np
 import trn_env.navigators.filters._rbpf_kernels as kern
 from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.core.recovery import IntegrityRecovery
+from trn_env.navigators.core.settings import SettingsError
 from trn_env.navigators.filters.rbpf_cloud import RbpfCloud
 from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
+from trn_env.navigators.filters.rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
 from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.error_model_15 import transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
@@ -87,27 +89,7 @@ from trn_env.navigators.protocol import (
 )
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-MAX_PARTICLES = 200_000       # 12 x 12 covariance per particle: 230 MB at this count
 _BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
-
-
-def _positive(name: str, value, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a number, got {value!r}") from exc
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
-    return v
-
-
-def _triple(name: str, value, allow_zero: bool = True) -> np.ndarray:
-    arr = np.asarray(value, float).ravel()
-    if arr.shape != (3,):
-        raise ValueError(f"{name} must have three entries, got {value!r}")
-    for i, v in enumerate(arr):
-        _positive(f"{name}[{i}]", v, allow_zero)
-    return arr
 
 
 def table1_covariance() -> np.ndarray:
@@ -155,195 +137,81 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
     innovation test and its recovery, see the module docstring).
     """
 
+    capabilities = CAPABILITIES
+    settings_class = RbpfSettings            # what `trn-env navigators` lists as its settings
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
-    def __init__(
-        self,
-        dem=None,
-        rng: np.random.Generator | None = None,
-        n_particles: int = 1000,
-        acquisition_particles: int = 5000,
-        ess_threshold: float = 0.5,
-        trn_rate_hz: float = 1.0,
-        error_model_rate_hz: float = 50.0,
-        range_sigma_m: float = 3.5,
-        look_angle_sigma_deg: float = 0.1,
-        half_window_deg: float = 45.0,
-        window_edge_margin_deg: float = 1.0,
-        window_edge_range: bool = True,
-        theta_velocity_rows: bool = True,
-        ambiguity_gap_m: float = 3.0,
-        ambiguity_weight: float = 0.5,
-        ambiguity_probability: float = 0.05,
-        prior_from_initial: bool = True,
-        theta_linearity_sigmas: float = 3.0,
-        theta_collapse_ess: float = 0.01,
-        theta_gate_sigmas: float = 3.0,
-        max_range_m: float = 10000.0,
-        search_step_m="auto",
-        init_pos_sigma_m=(50.0, 50.0, 20.0),
-        init_vel_sigma_mps=(0.7071067811865476, 0.7071067811865476, 0.5),   # Table 1: 1/sqrt(2)
-        init_att_sigma_deg=(0.1, 0.1, 0.1),
-        accel_bias_sigma_mps2: float = 1e-4,
-        gyro_bias_sigma_rps: float = 1e-6,
-        q_pos_m=(0.25, 0.25, 0.5),
-        q_vel_mps=(1e-4, 1e-2),
-        q_att_rad: float = 1e-6,
-        q_accel_bias_mps2: float = 1e-7,
-        q_gyro_bias_rps: float = 1e-7,
-        gnss_pos_sigma_m=(1.0, 2.0),
-        gnss_pos_bias_sigma_m=(1.5, 3.0),
-        gnss_vel_sigma_mps: float = 0.1,
-        imu_samples: str = "interval",
-        gravity_gradient: bool = True,
-        acquisition_spread_m: float = 10.0,
-        map_sigma_m: float = 0.0,
-        map_bias_sigma_m: float = 0.0,
-        terrain_model_sigma_m="auto",
-        map_noise_model: str = "calibrated",
-        terrain_detail_spacing_m="auto",
-        integrity_window: int = 3,
-        integrity_alpha: float = 1e-4,
-        recovery_sigma_m: float = 100.0,
-        recovery_reset_kalman: bool = True,
-        name: str = "rbpf",
-    ):
+    def __init__(self, dem=None, rng: np.random.Generator | None = None, settings: RbpfSettings | None = None,
+                 name: str = "rbpf", **overrides):
+        s = self.settings = RbpfSettings.build(settings, overrides)
         dem = load_map(dem, "the RBPF")
-        if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)):
-            raise ValueError(f"n_particles must be an integer, got {n_particles!r}")
-        if not 2 <= int(n_particles) <= MAX_PARTICLES:
-            raise ValueError(f"n_particles must lie in [2, {MAX_PARTICLES}] "
-                             f"({_BYTES_PER_PARTICLE} bytes each), got {n_particles}")
-        e = _positive("ess_threshold", ess_threshold)
-        if not 0.0 < e <= 1.0:
-            raise ValueError(f"ess_threshold must lie in (0, 1], got {ess_threshold!r}")
-        if imu_samples not in ("interval", "instant"):
-            raise ValueError(f"imu_samples must be 'interval' or 'instant', got {imu_samples!r}")
-        hw = _positive("half_window_deg", half_window_deg)
-        if not hw < 90.0:
-            raise ValueError(f"half_window_deg must lie in (0, 90), got {half_window_deg!r}")
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
         self.name = name
         self.dem = dem
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.n_particles = int(n_particles)
-        na = acquisition_particles
-        if isinstance(na, bool) or not isinstance(na, (int, np.integer)):
-            raise ValueError(f"acquisition_particles must be an integer, got {acquisition_particles!r}")
-        if not (na == 0 or self.n_particles <= int(na) <= MAX_PARTICLES):
-            raise ValueError(f"acquisition_particles must be 0 (off) or in [n_particles, {MAX_PARTICLES}], "
-                             f"got {acquisition_particles}")
-        self.n_acquisition = max(int(acquisition_particles), self.n_particles)
+        self.n_particles = s.n_particles
+        self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
-        self.ess_threshold = e
-        self.trn_period_s = 1.0 / _positive("trn_rate_hz", trn_rate_hz)
-        self.dt_err = 1.0 / _positive("error_model_rate_hz", error_model_rate_hz)
+        self.ess_threshold = s.ess_threshold
+        self.trn_period_s = 1.0 / s.trn_rate_hz
+        self.dt_err = 1.0 / s.error_model_rate_hz
         # the sensor's own noise; the map's errors are added per epoch (_r_var_now, map_noise_variances)
-        self.r_var = np.array([_positive("range_sigma_m", range_sigma_m) ** 2,
-                               math.radians(_positive("look_angle_sigma_deg", look_angle_sigma_deg)) ** 2])
+        self.r_var = np.array([s.range_sigma_m ** 2, math.radians(s.look_angle_sigma_deg) ** 2])
         # the map's vertical error (its error class, as the scenario's map error model states it) and the
         # terrain the map cannot hold between its posts (interpolation error): measurement noise the filter
         # knows about (ira_seed002.map_noise_variances)
-        self.map_sigma_m = _positive("map_sigma_m", map_sigma_m, True)
-        self.map_bias_sigma_m = _positive("map_bias_sigma_m", map_bias_sigma_m, True)
-        if isinstance(terrain_model_sigma_m, str):
-            if terrain_model_sigma_m != "auto":
-                raise ValueError("terrain_model_sigma_m must be 'auto' or a number >= 0 (m), "
-                                 f"got {terrain_model_sigma_m!r}")
-            self.terrain_model_sigma_m = ira_model.interpolation_sigma_m(dem)
-        else:
-            self.terrain_model_sigma_m = _positive("terrain_model_sigma_m", terrain_model_sigma_m, True)
-        if map_noise_model not in ("calibrated", "flat_ground"):
-            raise ValueError("map_noise_model must be 'calibrated' or 'flat_ground', "
-                             f"got {map_noise_model!r}")
-        self.map_noise_model = map_noise_model
-        if isinstance(terrain_detail_spacing_m, str):
-            if terrain_detail_spacing_m != "auto":
-                raise ValueError("terrain_detail_spacing_m must be 'auto' or a number > 0 (m), "
-                                 f"got {terrain_detail_spacing_m!r}")
-            self.terrain_detail_spacing_m = float(min(dem.spacing_m)) / 3.0
-        else:
-            self.terrain_detail_spacing_m = _positive("terrain_detail_spacing_m", terrain_detail_spacing_m)
+        self.map_sigma_m = s.map_sigma_m
+        self.map_bias_sigma_m = s.map_bias_sigma_m
+        self.terrain_model_sigma_m = (ira_model.interpolation_sigma_m(dem)
+                                      if s.terrain_model_sigma_m == "auto" else s.terrain_model_sigma_m)
+        self.map_noise_model = s.map_noise_model
+        detail = s.terrain_detail_spacing_m
+        self.terrain_detail_spacing_m = float(min(dem.spacing_m)) / 3.0 if detail == "auto" else detail
         # the calibration refines a <= 16 km square of the map to this spacing: finer than the posts, and
         # not so fine that the refinement's memory (~40 bytes per post) runs away
         if not 5.0 <= self.terrain_detail_spacing_m < min(dem.spacing_m):
-            raise ValueError(f"terrain_detail_spacing_m must lie in [5, {min(dem.spacing_m):.1f}) m (finer "
-                             f"than the map's posts), got {terrain_detail_spacing_m!r}")
+            raise SettingsError([("terrain_detail_spacing_m", f"must lie in [5, {min(dem.spacing_m):.1f}) m "
+                                  f"(finer than the map's posts), got {s.terrain_detail_spacing_m!r}")])
         self._terrain_factors = None       # map_noise_calibration's, computed at the first IRA update
-        self.half_window_rad = math.radians(hw)
-        em = _positive("window_edge_margin_deg", window_edge_margin_deg, True)
-        if not em < hw:
-            raise ValueError("window_edge_margin_deg must lie in [0, half_window_deg), "
-                             f"got {window_edge_margin_deg!r}")
-        self.edge_margin_rad = math.radians(em)
-        self.window_edge_range = bool(window_edge_range)
-        self.theta_velocity_rows = bool(theta_velocity_rows)
-        self.ambiguity_gap_m = _positive("ambiguity_gap_m", ambiguity_gap_m, True)
-        aw = _positive("ambiguity_weight", ambiguity_weight, True)
-        if not aw <= 1.0:
-            raise ValueError(f"ambiguity_weight must lie in [0, 1], got {ambiguity_weight!r}")
-        self.ambiguity_weight = aw
-        ap = _positive("ambiguity_probability", ambiguity_probability, True)
-        if not ap <= 1.0:
-            raise ValueError(f"ambiguity_probability must lie in [0, 1], got {ambiguity_probability!r}")
-        self.ambiguity_probability = ap
-        self.prior_from_initial = bool(prior_from_initial)
-        self.theta_linearity_sigmas = _positive("theta_linearity_sigmas", theta_linearity_sigmas, True)
-        ce = _positive("theta_collapse_ess", theta_collapse_ess, True)
-        if not ce < 1.0:
-            raise ValueError(f"theta_collapse_ess must lie in [0, 1), got {theta_collapse_ess!r}")
-        self.theta_collapse_ess = ce
-        self.theta_gate_sigmas = _positive("theta_gate_sigmas", theta_gate_sigmas, True)
-        self.max_range_m = _positive("max_range_m", max_range_m)
-        if isinstance(search_step_m, str):
-            if search_step_m != "auto":
-                raise ValueError(f"search_step_m must be 'auto' or a number > 0 (m), got {search_step_m!r}")
-            self.search_step_m = ira_model.search_step_for(dem)
-        else:
-            self.search_step_m = _positive("search_step_m", search_step_m)
-        self.init_pos_sigma = _triple("init_pos_sigma_m", init_pos_sigma_m, False)
-        sv = _triple("init_vel_sigma_mps", init_vel_sigma_mps)
-        sa = np.radians(_triple("init_att_sigma_deg", init_att_sigma_deg))
-        sba = _positive("accel_bias_sigma_mps2", accel_bias_sigma_mps2, True)
-        sbg = _positive("gyro_bias_sigma_rps", gyro_bias_sigma_rps, True)
-        self.P0_settings = np.diag(np.r_[sv, sa, [sba] * 3, [sbg] * 3] ** 2)
+        self.half_window_rad = math.radians(s.half_window_deg)
+        self.edge_margin_rad = math.radians(s.window_edge_margin_deg)
+        self.window_edge_range = s.window_edge_range
+        self.theta_velocity_rows = s.theta_velocity_rows
+        self.ambiguity_gap_m = s.ambiguity_gap_m
+        self.ambiguity_weight = s.ambiguity_weight
+        self.ambiguity_probability = s.ambiguity_probability
+        self.prior_from_initial = s.prior_from_initial
+        self.theta_linearity_sigmas = s.theta_linearity_sigmas
+        self.theta_collapse_ess = s.theta_collapse_ess
+        self.theta_gate_sigmas = s.theta_gate_sigmas
+        self.max_range_m = s.max_range_m
+        self.search_step_m = (ira_model.search_step_for(dem) if s.search_step_m == "auto"
+                              else s.search_step_m)
+        self.init_pos_sigma = np.array(s.init_pos_sigma_m)
+        sv = np.array(s.init_vel_sigma_mps)
+        sa = np.radians(np.array(s.init_att_sigma_deg))
+        self.P0_settings = np.diag(np.r_[sv, sa, [s.accel_bias_sigma_mps2] * 3,
+                                         [s.gyro_bias_sigma_rps] * 3] ** 2)
         self.P0 = self.P0_settings.copy()
         self.init_pos_sigma_settings = self.init_pos_sigma.copy()
-        self.qn_var = _triple("q_pos_m", q_pos_m, False) ** 2
-        qv = np.asarray(q_vel_mps, float).ravel()
-        if qv.shape != (2,):
-            raise ValueError(f"q_vel_mps must have two entries (horizontal, vertical), got {q_vel_mps!r}")
-        for i, v in enumerate(qv):
-            _positive(f"q_vel_mps[{i}]", v, True)
-        self.ql_var = np.r_[qv[0], qv[0], qv[1], [_positive("q_att_rad", q_att_rad, True)] * 3,
-                            [_positive("q_accel_bias_mps2", q_accel_bias_mps2, True)] * 3,
-                            [_positive("q_gyro_bias_rps", q_gyro_bias_rps, True)] * 3] ** 2
-        gp = np.asarray(gnss_pos_sigma_m, float).ravel()
-        if gp.shape != (2,):
-            raise ValueError("gnss_pos_sigma_m must have two entries (horizontal, vertical), "
-                             f"got {gnss_pos_sigma_m!r}")
-        for i, v in enumerate(gp):
-            _positive(f"gnss_pos_sigma_m[{i}]", v)
+        self.qn_var = np.array(s.q_pos_m) ** 2
+        qv = s.q_vel_mps
+        self.ql_var = np.r_[qv[0], qv[0], qv[1], [s.q_att_rad] * 3, [s.q_accel_bias_mps2] * 3,
+                            [s.q_gyro_bias_rps] * 3] ** 2
+        gp = s.gnss_pos_sigma_m
         self.gnss_pos_var = np.array([gp[0], gp[0], gp[1]]) ** 2
-        gb = np.asarray(gnss_pos_bias_sigma_m, float).ravel()
-        if gb.shape != (2,):
-            raise ValueError("gnss_pos_bias_sigma_m must have two entries (horizontal, vertical), "
-                             f"got {gnss_pos_bias_sigma_m!r}")
-        for i, v in enumerate(gb):
-            _positive(f"gnss_pos_bias_sigma_m[{i}]", v, True)
+        gb = s.gnss_pos_bias_sigma_m
         self.gnss_bias_var = np.array([gb[0], gb[0], gb[1]]) ** 2
-        self.gnss_vel_var = np.full(3, _positive("gnss_vel_sigma_mps", gnss_vel_sigma_mps)) ** 2
-        self.gravity_gradient = bool(gravity_gradient)
-        self.acquisition_spread_m = _positive("acquisition_spread_m", acquisition_spread_m, True)
-        self.ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=imu_samples)
-        self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
-        self.recovery_sigma_m = _positive("recovery_sigma_m", recovery_sigma_m, True)
+        self.gnss_vel_var = np.full(3, s.gnss_vel_sigma_mps) ** 2
+        self.gravity_gradient = s.gravity_gradient
+        self.acquisition_spread_m = s.acquisition_spread_m
+        self.ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=s.imu_samples)
+        self.integrity = InnovationMonitor(s.integrity_window, s.integrity_alpha)
+        self.recovery_sigma_m = s.recovery_sigma_m
         self.recoveries = 0
-        if not isinstance(recovery_reset_kalman, (bool, np.bool_)):
-            raise ValueError(f"recovery_reset_kalman must be true or false, got {recovery_reset_kalman!r}")
-        self.recovery_reset_kalman = bool(recovery_reset_kalman)
+        self.recovery_reset_kalman = s.recovery_reset_kalman
         # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
         self.health = Health()
         self._reset_done = False

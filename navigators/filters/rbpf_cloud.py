@@ -22,7 +22,7 @@ from trn_env.navigators.protocol import (
 class RbpfCloud:
     """The cloud's GNSS update, resampling, integrity and feedback of RaoBlackwellizedPF; a mixin."""
 
-    # the RBPF's IMU error model reaches it as bias settings (registry.IMU_AWARE); no grade is known to be
+    # the RBPF's IMU error model reaches it as bias settings (imu_bias_settings); no grade is known to be
     # beyond it (its Kalman parts carry every gyro bias and the look angle observes the attitude)
     _consistency_warning = ""
 

@@ -21,10 +21,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.core.maps import load_map
+from trn_env.navigators.core.maps import MapRecord, load_map, map_record
 from trn_env.navigators.core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
+from trn_env.navigators.filters.terrain_filter_settings import (
+    TerrainFilterSettings,
+)
 from trn_env.navigators.frames import SensorFrames, imu_gap_s
-from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, StrapdownIns, euler_from_C_bn, quat_to_dcm
+from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from trn_env.navigators.integrity import protection_level as pl
 from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
 from trn_env.navigators.measurements.baro import geometric_height_m
@@ -41,20 +44,9 @@ from trn_env.navigators.protocol import (
 )
 
 G0 = 9.80665
-AIDING = ("ira", "radar_altimeter", "both")
-MAP_INTERPOLATION = ("bicubic", "bilinear")
 MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^3 x recovery_sigma_m
 
 
-def check_positive(name: str, value, allow_zero: bool = False) -> float:
-    """float(value), or ValueError naming the setting if it is not a finite positive (or >= 0) number."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
-        raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
-    return v
 
 
 class InsRiddenFilter:
@@ -109,69 +101,41 @@ class InsRiddenFilter:
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
 
-    def __init__(self, dem=None, aiding: str = "ira", measurement_rate_hz: float = 1.0,
-                 ira_formula: str = "proposed", ira_range_sigma_m: float = 3.5,
-                 ira_look_angle_sigma_deg: float = 0.1, ra_sigma_m: float = 2.0,
-                 ra_half_beam_deg: float = 10.0,
-                 ra_cone_rings: int = 2, map_sigma_m: float = 0.0, map_bias_sigma_m: float = 0.0,
-                 terrain_model_sigma_m: float = 2.5, map_interpolation: str = "bicubic",
-                 outlier_prob: float = 0.02,
-                 outlier_width_m: float = 500.0,
-                 gnss_sigma_m: float = 2.0, gnss_vertical_sigma_m: float = 4.0,
-                 gnss_velocity_sigma_mps: float = 0.05, baro_bias_sigma_m: float = 10.0,
-                 vertical_noise_m_per_sqrt_s: float = 0.3, converged_sigma_m: float = 50.0,
-                 accel_noise_mps2_rthz: float = 10e-6 * G0 * 10.0, gyro_noise_rps_rthz: float = 1e-6,
-                 gravity_model: str = "j2", tau_baro_s: float = 30.0, imu_samples: str = "interval",
-                 baro_geopotential: bool = True, integrity_window: int = 3, integrity_alpha: float = 1e-4,
-                 recovery_sigma_m: float = 100.0, name: str | None = None):
+    settings_class: type[TerrainFilterSettings] = TerrainFilterSettings
+
+    def __init__(self, dem=None, settings: TerrainFilterSettings | None = None, name: str | None = None,
+                 **overrides):
+        s = self.settings = self.settings_class.build(settings, overrides)
         dem = load_map(dem, "the terrain filter")
-        if aiding not in AIDING:
-            raise ValueError(f"aiding must be one of {AIDING}, got {aiding!r}")
-        if ira_formula not in IRA_FORMULA_CODES:
-            raise ValueError(f"ira_formula must be one of {tuple(IRA_FORMULA_CODES)}, got {ira_formula!r}")
         self.dem = dem
-        self.aiding = aiding
-        self.measurement_rate_hz = check_positive("measurement_rate_hz", measurement_rate_hz)
-        self.ira_formula = ira_formula
-        self.ira_code = IRA_FORMULA_CODES[ira_formula]
-        self.ira_range_sigma_m = check_positive("ira_range_sigma_m", ira_range_sigma_m, True)
-        self.ira_look_angle_sigma_rad = math.radians(
-            check_positive("ira_look_angle_sigma_deg", ira_look_angle_sigma_deg, True))
-        self.ra_sigma_m = check_positive("ra_sigma_m", ra_sigma_m, True)
-        hb = check_positive("ra_half_beam_deg", ra_half_beam_deg)
-        if hb >= 60.0:
-            raise ValueError(f"ra_half_beam_deg must be in (0, 60), got {ra_half_beam_deg!r}")
-        self.ra_half_beam_rad = math.radians(hb)
-        if not isinstance(ra_cone_rings, (int, np.integer)) or not 0 <= int(ra_cone_rings) <= 16:
-            raise ValueError(f"ra_cone_rings must be an integer in [0, 16], got {ra_cone_rings!r}")
-        self.ra_cone_rings = int(ra_cone_rings)
-        self.map_sigma_m = check_positive("map_sigma_m", map_sigma_m, True)
-        self.map_bias_sigma_m = check_positive("map_bias_sigma_m", map_bias_sigma_m, True)
-        self.terrain_model_sigma_m = check_positive("terrain_model_sigma_m", terrain_model_sigma_m, True)
-        if map_interpolation not in MAP_INTERPOLATION:
-            raise ValueError(f"map_interpolation must be one of {MAP_INTERPOLATION}, "
-                             f"got {map_interpolation!r}")
-        self.map_interpolation = map_interpolation
-        self.map_cubic = map_interpolation == "bicubic"
-        op = check_positive("outlier_prob", outlier_prob, True)
-        if op >= 1.0:
-            raise ValueError(f"outlier_prob must be in [0, 1), got {outlier_prob!r}")
-        self.outlier_prob = op
-        self.log_outlier_density = -math.log(check_positive("outlier_width_m", outlier_width_m))
-        self.gnss_sigma_m = check_positive("gnss_sigma_m", gnss_sigma_m)
-        self.gnss_vertical_sigma_m = check_positive("gnss_vertical_sigma_m", gnss_vertical_sigma_m)
-        self.gnss_velocity_sigma_mps = check_positive("gnss_velocity_sigma_mps", gnss_velocity_sigma_mps)
-        self.baro_bias_sigma_m = check_positive("baro_bias_sigma_m", baro_bias_sigma_m, True)
-        self.vertical_noise = check_positive("vertical_noise_m_per_sqrt_s", vertical_noise_m_per_sqrt_s, True)
-        self.converged_sigma_m = check_positive("converged_sigma_m", converged_sigma_m)
-        self.q_acc = check_positive("accel_noise_mps2_rthz", accel_noise_mps2_rthz, True) ** 2
-        self.q_gyr = check_positive("gyro_noise_rps_rthz", gyro_noise_rps_rthz, True) ** 2
-        if gravity_model not in GRAVITY_MODELS:
-            raise ValueError(f"gravity_model must be one of {list(GRAVITY_MODELS)}, got {gravity_model!r}")
-        self.ins = StrapdownIns(gravity_model, check_positive("tau_baro_s", tau_baro_s), imu_samples)
-        self.baro_geopotential = bool(baro_geopotential)
-        self.integrity = InnovationMonitor(integrity_window, integrity_alpha)
-        self.recovery_sigma_m = check_positive("recovery_sigma_m", recovery_sigma_m, True)
+        self.aiding = s.aiding
+        self.measurement_rate_hz = s.measurement_rate_hz
+        self.ira_formula = s.ira_formula
+        self.ira_code = IRA_FORMULA_CODES[s.ira_formula]
+        self.ira_range_sigma_m = s.ira_range_sigma_m
+        self.ira_look_angle_sigma_rad = math.radians(s.ira_look_angle_sigma_deg)
+        self.ra_sigma_m = s.ra_sigma_m
+        self.ra_half_beam_rad = math.radians(s.ra_half_beam_deg)
+        self.ra_cone_rings = s.ra_cone_rings
+        self.map_sigma_m = s.map_sigma_m
+        self.map_bias_sigma_m = s.map_bias_sigma_m
+        self.terrain_model_sigma_m = s.terrain_model_sigma_m
+        self.map_interpolation = s.map_interpolation
+        self.map_cubic = s.map_interpolation == "bicubic"
+        self.outlier_prob = s.outlier_prob
+        self.log_outlier_density = -math.log(s.outlier_width_m)
+        self.gnss_sigma_m = s.gnss_sigma_m
+        self.gnss_vertical_sigma_m = s.gnss_vertical_sigma_m
+        self.gnss_velocity_sigma_mps = s.gnss_velocity_sigma_mps
+        self.baro_bias_sigma_m = s.baro_bias_sigma_m
+        self.vertical_noise = s.vertical_noise_m_per_sqrt_s
+        self.converged_sigma_m = s.converged_sigma_m
+        self.q_acc = s.accel_noise_mps2_rthz ** 2
+        self.q_gyr = s.gyro_noise_rps_rthz ** 2
+        self.ins = StrapdownIns(s.gravity_model, s.tau_baro_s, s.imu_samples)
+        self.baro_geopotential = s.baro_geopotential
+        self.integrity = InnovationMonitor(s.integrity_window, s.integrity_alpha)
+        self.recovery_sigma_m = s.recovery_sigma_m
         self.recoveries = 0
         self._streak = 0
         self._since_recovery = 0
@@ -388,6 +352,13 @@ class InsRiddenFilter:
                 self.health.events.append((float(t_s), "recovery: " + self._recover(t_s)))
         elif verdict.changed:
             self.health.ok, self.health.status = True, "acquiring"
+
+    def _map_record(self) -> MapRecord:
+        """The map and its interpolation as the kernels take it (navigators.core.maps.MapRecord)."""
+        rec = getattr(self, "_map_rec", None)
+        if rec is None:
+            rec = self._map_rec = map_record(self.grid, self.map_cubic)
+        return rec
 
     def _recovery_sigma_now_m(self) -> float:
         """recovery_sigma_m, doubled for each re-spread in a row that did not bring the test back in band."""

@@ -56,13 +56,20 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, fields
 
 import numpy as np
 from numba import njit
 from trn_env.navigators.core.maps import load_map
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.integrity.correlated_disparity import whitened_statistic
+from trn_env.navigators.integrity.dem_monitor_settings import (  # noqa: F401 - re-exported
+    CAPABILITIES,
+    CORRELATION_CODES,
+    DEFAULT_N,
+    DEFAULT_THRESHOLD,
+    VARIANTS,
+    DemMonitorConfig,
+)
 from trn_env.navigators.protocol import Estimate
 from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
 from trn_env.terrain.kernels import bilinear
@@ -73,12 +80,8 @@ SOURCE_GNSS = 0
 SOURCE_NAVIGATOR = 1
 SOURCE_NAMES = ("gnss", "navigator")
 
-DEFAULT_N = 50            # seed 003 section III: N = 50 consecutive measurements
-DEFAULT_THRESHOLD = 96.0  # seed 003 section III: "the statistic threshold is found to be 96"
 DTED1_DISPARITY_SIGMA_M = 18.9      # seed 003 section III: absolute disparities ~ N(0, 18.9^2), DTED-1
 DTED1_SUCCESSIVE_SIGMA_M = 13.0     # seed 003 section III: successive disparities ~ N(0, 13.0^2)
-VARIANTS = ("plain", "kalman", "kalman_innovation")
-CORRELATION_CODES = {"exponential": 0, "gaussian": 1}   # whitened_statistic's func codes
 
 
 def class_sigma_m(map_class: str) -> float:
@@ -131,109 +134,6 @@ def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: floa
     from trn_env.navigators.integrity.correlated_disparity import gchi2_isf, kalman_reading
     M = kalman_reading(reading, int(n), 150, float(process_ratio))
     return gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))
-
-
-def _finite(name: str, value, positive: bool = False, nonneg: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
-    if positive and not v > 0.0:
-        raise ValueError(f"{name}: must be > 0, got {value!r}")
-    if nonneg and not v >= 0.0:
-        raise ValueError(f"{name}: must be >= 0, got {value!r}")
-    return v
-
-
-@dataclass(frozen=True)
-class DemMonitorConfig:
-    """Settings of the DEM integrity monitor (SI). Give at most one of `threshold` and
-    `false_alarm_probability` (neither: the paper's 96); `sigma_m` overrides the class's sigma."""
-
-    n_window: int = DEFAULT_N
-    threshold: float | None = None
-    false_alarm_probability: float | None = None
-    map_class: str = "dted1"
-    sigma_m: float | None = None
-    variant: str = "plain"
-    sample_period_s: float = 1.0
-    lever_arm_m: float = 0.0                       # eq 1's l_ar: GNSS antenna above the radar altimeter
-    radar_altimeter_noise_const_m: float = 0.0
-    radar_altimeter_noise_fraction: float = 0.0
-    gnss_vertical_sigma_m: float = 0.0
-    gnss_max_age_s: float = 1.0
-    kf_process_ratio: float = 0.01                 # eq 5 filter: random-walk variance per epoch / sigma^2
-    beam_half_angle_deg: float = 0.0               # > 0: compare with the map's own return in this cone
-    max_range_m: float = 5000.0
-    correlation_length_m: float = 0.0              # the map error's (m); 0: white, seed 003's eq 4 as is
-    correlation_function: str = "exponential"      # terrain.map_error.correlation
-    map_bias_fraction: float = 0.0                 # share of the map variance common to the whole window
-
-    def __post_init__(self):
-        n = self.n_window
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
-            raise ValueError(f"n_window: must be an integer >= 2 (N consecutive disparities), got {n!r}")
-        if n > 100_000:
-            raise ValueError(f"n_window: {n} is absurdly large (at most 100000)")
-        if self.threshold is not None and self.false_alarm_probability is not None:
-            raise ValueError("threshold, false_alarm_probability: give at most one of them")
-        if self.threshold is not None:
-            _finite("threshold", self.threshold, positive=True)
-        if self.false_alarm_probability is not None:
-            p = _finite("false_alarm_probability", self.false_alarm_probability)
-            if not 0.0 < p < 1.0:
-                raise ValueError(f"false_alarm_probability: must lie in (0, 1), got {p!r}")
-        class_sigma_m(self.map_class)
-        if self.sigma_m is not None:
-            _finite("sigma_m", self.sigma_m, positive=True)
-        if self.variant not in VARIANTS:
-            raise ValueError(f"variant: must be one of {VARIANTS}, got {self.variant!r}")
-        _finite("sample_period_s", self.sample_period_s, positive=True)
-        _finite("lever_arm_m", self.lever_arm_m)
-        for name in ("radar_altimeter_noise_const_m", "radar_altimeter_noise_fraction",
-                     "gnss_vertical_sigma_m"):
-            _finite(name, getattr(self, name), nonneg=True)
-        _finite("gnss_max_age_s", self.gnss_max_age_s, positive=True)
-        _finite("kf_process_ratio", self.kf_process_ratio, positive=True)
-        b = _finite("beam_half_angle_deg", self.beam_half_angle_deg, nonneg=True)
-        if not b < 90.0:
-            raise ValueError(f"beam_half_angle_deg: must lie in [0, 90) deg, got {b!r}")
-        _finite("max_range_m", self.max_range_m, positive=True)
-        from trn_env.terrain.map_error import check_correlation_length
-        check_correlation_length(self.correlation_length_m, allow_zero=True)
-        if self.correlation_function not in CORRELATION_CODES:
-            raise ValueError(f"correlation_function: must be one of {tuple(CORRELATION_CODES)}, got "
-                             f"{self.correlation_function!r}")
-        f = _finite("map_bias_fraction", self.map_bias_fraction)
-        if not 0.0 <= f <= 1.0:
-            raise ValueError(f"map_bias_fraction: must lie in [0, 1], got {self.map_bias_fraction!r}")
-
-    @classmethod
-    def from_mapping(cls, settings: dict) -> DemMonitorConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(settings) - known)
-        if unknown:
-            raise ValueError(f"{unknown[0]}: unknown setting of dem_integrity "
-                             f"(known: {', '.join(sorted(known))})")
-        return cls(**settings)
-
-    @property
-    def map_sigma_m(self) -> float:
-        return float(self.sigma_m) if self.sigma_m is not None else class_sigma_m(self.map_class)
-
-    @property
-    def effective_threshold(self) -> float:
-        if self.threshold is not None:
-            return float(self.threshold)
-        if self.false_alarm_probability is None:
-            return DEFAULT_THRESHOLD
-        if self.variant != "plain":
-            reading = "rw_posterior" if self.variant == "kalman" else "innovation"
-            return kalman_threshold(self.false_alarm_probability, int(self.n_window), self.kf_process_ratio,
-                                    reading)
-        return chi2_threshold(self.false_alarm_probability, int(self.n_window))
 
 
 class MonitorOutput:
@@ -548,12 +448,13 @@ class DemIntegrityMonitor:
     skipped without it) and uses frames.gnss while fixes are there."""
 
     name = "dem_integrity"
+    capabilities = CAPABILITIES
     settings_class = DemMonitorConfig        # what `trn-env navigators` lists as its settings
     _NONE = np.zeros((0, 7))
 
-    def __init__(self, dem=None, **settings):
+    def __init__(self, dem=None, settings: DemMonitorConfig | None = None, **overrides):
         dem = load_map(dem, "the DEM integrity monitor")
-        self.config = DemMonitorConfig.from_mapping(settings)
+        self.config = self.settings = DemMonitorConfig.build(settings, overrides)
         if self.config.correlation_length_m > 0.0:
             from trn_env.terrain.map_error import check_fits
             check_fits(dem, self.config.correlation_length_m)

@@ -72,8 +72,8 @@ def _memory(name: str, settings: dict, dems, n_frames: int = 40) -> dict:
     gc.collect()
     tracemalloc.start()
     base = tracemalloc.get_traced_memory()[0]
-    nav = registry.create(name, dem=dems[1], rng=np.random.default_rng(0), **settings) if name in ("pf",) \
-        else registry.create(name, dem=dems[1], **settings)
+    # the rng reaches only a navigator whose capabilities say takes_rng
+    nav = registry.create(name, dem=dems[1], rng=np.random.default_rng(0), **settings)
     nav.reset(init)
     held = []
     for k, fr in enumerate(frames):

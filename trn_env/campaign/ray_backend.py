@@ -13,7 +13,8 @@ one-line message. Ray's console noise of a failed connection goes to a log file,
 - The DEMs go into the object store once (`ray.put`); each task gets the reference, not a copy.
 - Worker death is retried by Ray (`max_retries`); a run's own exception is caught inside the task and
   comes back as its row (so it is never retried). Each attempt counts itself in Ray's key-value store
-  (keyed by campaign hash and run id), so a row flown again after a node died says `attempts = 2`.
+  (keyed by this `run` call, campaign hash and run id), so a row flown again after a node died says
+  `attempts = 2`.
 - At most 2 x cluster CPUs tasks are in flight; rows are taken with `ray.wait` as they finish and handed
   to the driver, which writes them, so a large campaign never holds everything in the driver.
 - Plug-in navigators and monitors: an installed plug-in (an entry point of a package installed in the
@@ -218,8 +219,10 @@ def plugin_runtime_env() -> dict[str, Any] | None:
     return {"py_modules": paths} if paths else None
 
 
-def _fly(task: RunTask, dems: dict[str, Any]) -> tuple[dict, bytes | None]:
-    attempt = _attempt_number(f"{task.campaign_hash}:{task.run_id}")
+def _fly(task: RunTask, dems: dict[str, Any], run_key: str = "") -> tuple[dict, bytes | None]:
+    """fly_run on a Ray worker; `run_key` (one per RayBackend.run call) scopes the attempt count, so a
+    campaign flown again on the same long-lived cluster starts counting from 1."""
+    attempt = _attempt_number(f"{run_key}:{task.campaign_hash}:{task.run_id}")
     row, log = fly_run(task, dems)
     row["attempts"] = max(int(row.get("attempts", 1)), attempt)
     return row, log
@@ -314,6 +317,8 @@ class RayBackend:
             raise RuntimeError("RayBackend.run outside `with RayBackend(...)`")
         dems_ref = ray.put(dems)
         remote = ray.remote(num_cpus=1, max_retries=self.max_retries, retry_exceptions=False)(_fly)
+        import uuid
+        run_key = uuid.uuid4().hex[:16]
         window = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
         it = iter(tasks)
         inflight: dict = {}
@@ -324,7 +329,7 @@ class RayBackend:
                 if task is None:
                     exhausted = True
                     break
-                inflight[remote.remote(task, dems_ref)] = task
+                inflight[remote.remote(task, dems_ref, run_key)] = task
             if not inflight:
                 break
             ready, _ = ray.wait(list(inflight), num_returns=1)

@@ -10,8 +10,9 @@ record   `record(scenario, out)`: fly closed loop and stream the log
 replay   `replay(log, navigator=...)`: run navigators (and monitors) open loop over a log's frames
 """
 
+from trn_env.logs.builder import LogBuilder
 from trn_env.logs.format import FORMAT_VERSION, LogError
 from trn_env.logs.reader import SensorLog, read_log
 from trn_env.logs.writer import LogWriter
 
-__all__ = ["FORMAT_VERSION", "LogError", "LogWriter", "SensorLog", "read_log"]
+__all__ = ["FORMAT_VERSION", "LogBuilder", "LogError", "LogWriter", "SensorLog", "read_log"]

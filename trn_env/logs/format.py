@@ -38,9 +38,12 @@ Conventions (stated here once; the reader converts a log to them, the builder ch
   Barometric altitude is pressure altitude (ISA) whatever the datum.
 - Lever arms (``lever_arms_m``): body-FRD offsets (m) of the radar altimeter's and the IRA's antennas from
   the IMU, whose point the navigation position refers to.
-- Estimates: covariance over the error state [north_m, east_m, down_m, v_n, v_e, v_d, roll, pitch, yaw]
-  (navigators.protocol.Estimate); the attitude block is the covariance of small rotation errors about the
-  NED axes as Euler-angle errors (roll, pitch, yaw), rad^2.
+- Estimates: covariance over the error state [north_m, east_m, down_m, v_n, v_e, v_d, then three
+  attitude angles] (navigators.protocol.Estimate, which names them roll, pitch, yaw). The attitude block
+  is the covariance (rad^2) of the small-angle attitude error about the NED axes (the error-state filters'
+  psi: C_true = (I + [psi x]) C_computed): its down component is the heading (yaw) error; the north and
+  east components are tilts, equal to the roll and pitch errors only when flying north (in general they
+  are those errors rotated by the heading).
 """
 
 from __future__ import annotations

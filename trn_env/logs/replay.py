@@ -132,15 +132,31 @@ def _initial(log: SensorLog, d: dict) -> Estimate:
     return perturbed_estimate(_Row, 0, sigmas, spawn_rngs(int(d.get("seed", 0)))["initial_errors"])
 
 
-def check_sensors(navigator, name: str, log: SensorLog) -> None:
-    need = getattr(navigator, "required_sensors", None)
-    if need is None:
-        return
-    missing = [(s, why) for s, why in need() if s not in log.sensors]
-    if missing:
-        raise LogError(f"log {log.path}: navigator {name!r} needs sensor(s) the log does not hold: "
-                       + "; ".join(f"{s} ({why})" for s, why in missing)
-                       + f" (the log holds: {', '.join(log.sensors) or 'none'})")
+def check_sensors(navigator, name: str, log: SensorLog, d: dict | None = None) -> None:
+    """Refuse a log that lacks a sensor the navigator or a monitor of `d` requires (their declared
+    capabilities, navigators.registry.sensor_needs; a navigator the registry does not know is asked its
+    `required_sensors()` if it has one)."""
+    from trn_env.navigators import registry
+    d = d or {}
+    users = []
+    try:
+        needs = registry.sensor_needs(name, (d.get("navigator") or {}).get("settings") or {})
+        users.append((f"navigator {name!r}", list(needs.required.items())))
+    except ValueError:
+        need = getattr(navigator, "required_sensors", None)
+        users.append((f"navigator {name!r}", list(need()) if need is not None else []))
+    for mon, settings in (d.get("monitors") or {}).items():
+        try:
+            needs = registry.monitor_sensor_needs(mon, settings or {})
+        except ValueError:
+            continue
+        users.append((f"monitor {mon!r}", list(needs.required.items())))
+    for who, need in users:
+        missing = [(s, why) for s, why in need if s not in log.sensors]
+        if missing:
+            raise LogError(f"log {log.path}: {who} needs sensor(s) the log does not hold: "
+                           + "; ".join(f"{s} ({why})" for s, why in missing)
+                           + f" (the log holds: {', '.join(log.sensors) or 'none'})")
 
 
 def replay(log: SensorLog | Path | str, navigator: str | None = None, *, settings: dict | None = None,
@@ -162,7 +178,7 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
         mons = build_monitors(d, the_map)
     except (ValueError, TypeError, KeyError) as exc:
         raise LogError(f"navigator {d['navigator']['name']!r}: {exc}") from exc
-    check_sensors(nav, d["navigator"]["name"], log)
+    check_sensors(nav, d["navigator"]["name"], log, d)
     initial = _initial(log, d)
     nav.reset(initial)
     ests: list[Estimate] = [initial]

@@ -94,6 +94,8 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "fuel_remaining_kg": Field("kg", "fuel on board at the end"),
     "constant_fuel": Field("flag", "whether the fuel (and the mass) was held constant"),
     "truth_source": Field("", "where the true motion came from: jsbsim or kinematic"),
+    "unused_sensors": Field("", "fitted sensors that neither the navigator nor a monitor reads (their "
+                                "declared sensor needs)"),
     "files": Field("", "the files written to the run folder"),
     "trn_env_version": Field("", "the trn-env version that flew the run"),
     "command_line": Field("", "the command as typed (shell-quoted); scenario.toml's header repeats it"),

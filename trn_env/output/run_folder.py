@@ -182,6 +182,9 @@ def target_problem(out_dir: Path | str, overwrite: bool = False) -> str | None:
     if out_dir.exists() and not out_dir.is_dir():
         return f"--out {out_dir}: exists and is not a directory"
     if out_dir.is_dir():
+        here = Path.cwd().resolve()
+        if out_dir.resolve() == here or out_dir.resolve() in here.parents:
+            return f"--out {out_dir}: is the current folder or holds it; give a folder for the run"
         try:
             names = sorted(p.name for p in out_dir.iterdir())
         except OSError as exc:

@@ -354,11 +354,14 @@ def build_sensors(d: dict, seed: np.random.SeedSequence):
 
 
 def _sensor_problems(d: dict) -> list[str]:
+    from trn_env.navigators.core.settings import SettingsError
     from trn_env.sensors import suite
     problems = []
     for name, cfg in d["sensors"].items():
         try:
             suite._make_config(name, dict(cfg))
+        except SettingsError as exc:
+            problems += exc.at(f"sensors.{name}")
         except (ValueError, TypeError) as exc:
             problems.append(f"sensors.{name}: {exc}")
     return problems
@@ -407,40 +410,51 @@ def _epoch_s(settings: dict) -> float:
     return 1.0 / rate if math.isfinite(rate) and rate > 0 else 1.0
 
 
-def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
-    """navigators.registry.create(name, dem=<the navigator's map>, rng=<the scenario's navigator stream>,
-    **settings); the rng reaches only navigators that draw random numbers. Navigators in
-    registry.MAP_NOISE_AWARE also get map_sigma_m / map_bias_sigma_m from the map error model
-    (map_noise_settings), those in registry.IMU_AWARE their bias priors and bias process noise from the IMU
-    (imu_bias_settings), those in registry.MAP_IS_WORLD_AWARE terrain_model_sigma_m = 0 when the map is the
-    world, else terrain_detail_spacing_m from the world's refinement, unless the settings give them. Every
-    navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level covers it)."""
+def navigator_settings(d: dict, map_dem) -> dict:
+    """The keyword settings registry.create gets for the scenario's navigator: its [navigator.settings] and,
+    by its declared capabilities (navigators.core.capabilities), the map as dem= (needs_map, and any plug-in
+    that declares no settings class, as before capabilities), the bias priors and bias process noise from the
+    IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
+    (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
+    terrain_detail_spacing_m from the world's refinement (models_map_detail), each unless the settings give
+    it. Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level
+    covers it)."""
     from trn_env.navigators import registry
     from trn_env.terrain import map_error
+    caps = registry.capabilities(d["navigator"]["name"])
     settings = dict(d["navigator"]["settings"])
-    settings.setdefault("dem", map_dem)
-    if d["navigator"]["name"] in getattr(registry, "IMU_AWARE", ()):
+    if caps.needs_map or caps.settings is None:
+        settings.setdefault("dem", map_dem)
+    if caps.imu_bias_settings:
         for key, val in imu_bias_settings(d["sensors"].get("imu"), _epoch_s(settings)).items():
             settings.setdefault(key, val)
     preset = str((d["terrain"]["map"].get("error_model") or {}).get("preset", "")).strip().lower()
     if preset in map_error.ACCURACY_CLASSES:   # the protection level covers the map's horizontal error
         settings.setdefault("map_horizontal_sigma_m", map_error.ACCURACY_CLASSES[preset].sigma_h_m)
-    if d["navigator"]["name"] in getattr(registry, "MAP_NOISE_AWARE", ()):
+    if caps.uses_map_noise:
         for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
             settings.setdefault(key, val)
-    if (d["navigator"]["name"] in getattr(registry, "MAP_IS_WORLD_AWARE", ())
-            and d["terrain"]["map"].get("dem", "world") == "world"):
+    if caps.models_map_detail and d["terrain"]["map"].get("dem", "world") == "world":
         settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
-    elif d["navigator"]["name"] in getattr(registry, "MAP_IS_WORLD_AWARE", ()):
+    elif caps.models_map_detail:
         refinement = d["terrain"]["world"].get("refinement") or {}
         spacing = refinement.get("spacing_m")
         # the finest terrain below the map's posts is the world's (where it is finer than the posts)
         if spacing is not None and 5.0 <= float(spacing) < min(getattr(map_dem, "spacing_m", (0.0,))):
             settings.setdefault("terrain_detail_spacing_m", float(spacing))
-    navigator = registry.create(d["navigator"]["name"], rng=rng, **settings)
-    spec = imu_spec(d["sensors"].get("imu"))
+    return settings
+
+
+def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
+    """navigators.registry.create(name, rng=<the scenario's navigator stream>, **navigator_settings(d,
+    map_dem)); the rng reaches only navigators that declare takes_rng. A navigator that declares
+    uses_imu_spec and has `apply_imu_spec` then takes its INS error model from the scenario IMU's
+    specification (navigators.core.imu_spec)."""
+    from trn_env.navigators import registry
+    name = d["navigator"]["name"]
+    navigator = registry.create(name, rng=rng, **navigator_settings(d, map_dem))
+    spec = imu_spec(d.get("sensors", {}).get("imu")) if registry.capabilities(name).uses_imu_spec else None
     if spec is not None and hasattr(navigator, "apply_imu_spec"):
-        # the navigator's INS error model from the IMU's specification (navigators.core.imu_spec)
         navigator.apply_imu_spec(spec)
     return navigator
 
@@ -454,22 +468,43 @@ def _navigator_requirements(d: dict, the_map) -> list[str]:
 
 
 def navigator_sensor_problems(d: dict, navigator) -> list[str]:
-    """The sensors a navigator's settings need (its `required_sensors()`, if it has one) that the scenario
-    does not fit, each as 'sensors.<name>: ...', and a transect longer than the flight (its
-    `required_duration_s()`): refused before the flight."""
-    need = getattr(navigator, "required_sensors", None)
-    if need is None:
-        return []
-    fitted = {n for n, cfg in d["sensors"].items() if cfg is not None and cfg is not False}
+    """The sensors the navigator requires that the scenario does not fit, each as 'sensors.<name>: ...'
+    (its declared capabilities, navigators.registry.sensor_needs; for a plug-in that declares none, its
+    `required_sensors()` if it has one), and a transect longer than the flight (a navigator's
+    `required_duration_s()`): refused before the flight. (The scenario loader checks the declared sensors
+    before any component is built; this also serves an undeclared plug-in and trn_env.testing.)"""
+    from trn_env.navigators import registry
+    from trn_env.scenario.loading import fitted_sensors
     name = d["navigator"]["name"]
+    try:
+        need = list(registry.sensor_needs(name, d["navigator"]["settings"]).required.items())
+    except ValueError:
+        need = []
+    if not need and callable(getattr(navigator, "required_sensors", None)):
+        need = list(navigator.required_sensors())
+    fitted = fitted_sensors(d)
     problems = [f"sensors.{sensor}: navigator {name!r} needs this sensor ({why}); add a [sensors.{sensor}] "
-                "table" for sensor, why in need() if sensor not in fitted]
+                "table" for sensor, why in need if sensor not in fitted]
     dur = getattr(navigator, "required_duration_s", None)
     if dur is not None and dur() > float(d["duration_s"]):
         problems.append(f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, "
                         f"more than the scenario's duration_s = {d['duration_s']:g} s (more samples than the "
                         "route provides)")
     return problems
+
+
+def unused_sensors(d: dict) -> list[str]:
+    """The fitted sensors that neither the navigator nor any monitor reads (by their declared sensor needs);
+    summary.json lists them. Empty when a component's needs cannot be read."""
+    from trn_env.navigators import registry
+    from trn_env.scenario.loading import fitted_sensors
+    try:
+        used = set(registry.sensor_needs(d["navigator"]["name"], d["navigator"]["settings"]).used)
+        for name, settings in (d.get("monitors") or {}).items():
+            used |= set(registry.monitor_sensor_needs(name, settings).used)
+    except ValueError:
+        return []
+    return sorted(fitted_sensors(d) - used)
 
 
 # -------------------------------------------------------------------------------------------- monitors
@@ -529,14 +564,19 @@ def build_monitors(d: dict, map_dem) -> dict:
 
 def _monitor_problems(d: dict, map_dem) -> list[str]:
     from trn_env.navigators import registry
+    from trn_env.navigators.core.settings import SettingsError
+    from trn_env.scenario.loading import fitted_sensors
     problems = []
     for name in sorted(d.get("monitors", {})):
-        if name == "dem_integrity" and "radar_altimeter" not in d["sensors"]:
-            continue                              # reported by the loader's integrity check
         try:
+            needs = registry.monitor_sensor_needs(name, d["monitors"][name])
+            if set(needs.required) - fitted_sensors(d):
+                continue                          # reported by the loader's sensor check
             registry.create_monitor(name, dem=map_dem, **monitor_settings(d, name))
+        except SettingsError as exc:
+            problems += exc.at(f"monitors.{name}")
         except (ValueError, TypeError) as exc:
-            problems.append(f"monitors.{name}.{exc}")
+            problems.append(f"monitors.{name}: {exc}")
     return problems
 
 
@@ -548,6 +588,7 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
     `known`: problems found already; a component whose fields (by path prefix) are among them is skipped.
     `tolerant`: the data failed the schema, so a component tripping over malformed data is skipped too.
     """
+    from trn_env.navigators.core.settings import SettingsError
     known = list(known or [])
 
     def blocked(*prefixes: str) -> bool:
@@ -596,7 +637,10 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
         except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as exc:
             if tolerant and not isinstance(exc, ValueError):
                 continue
-            problems.append(_attribute(d, path, exc))
+            if isinstance(exc, SettingsError) and path:
+                problems += exc.at(path)          # every bad setting at its own field path
+            else:
+                problems.append(_attribute(d, path, exc))
     return problems
 
 
@@ -607,13 +651,9 @@ def _attribute(d: dict, path: str, exc: Exception) -> str:
     import re
     msg = str(exc)
     if path == "navigator.settings":
-        keys = list(d["navigator"]["settings"])
-        m = re.search(r"unknown setting '(\w+)'", msg)
-        if m:
+        m = re.match(r"(\w+)\b", msg)     # a runtime argument's own error (dem: ...) names it first
+        if m and m.group(1) in d["navigator"]["settings"]:
             return f"navigator.settings.{m.group(1)}: {msg}"
-        for key in sorted(keys, key=len, reverse=True):
-            if re.match(rf"(\w+\.)?{re.escape(key)}\b", msg):
-                return f"navigator.settings.{key}: {msg}"
         return f"navigator.settings: {msg}"
     if path == "initial":
         m = re.match(r"InitialCondition\.(\w+)", msg)

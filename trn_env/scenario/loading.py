@@ -12,15 +12,18 @@ before any flight starts and reports EVERY problem, each prefixed with the field
 1. the JSON schema (types, ranges, required keys, unknown keys);
 2. semantic checks that need the data: exactly one altitude per waypoint, GNSS outages ordered, the
    DEM files readable, the initial position and every waypoint inside the true terrain and the
-   navigator's map, the navigator name known, the component settings accepted by their components.
+   navigator's map, the navigator name known, every sensor the navigator and the monitors require
+   (their declared capabilities) fitted, the component settings accepted by their components.
 
 Problems are raised together as one `ScenarioError` whose `.problems` is the list of messages.
 
 Why a schema plus a generic pass rather than a typed model of the whole file: the schema already states
-every field's type and range in one place that several components extend at once; the finite-number walk
-closes the NaN/infinity class for every present and future numeric field (free-form settings tables
-included) without restating them, and each component validates its own settings in its constructor, so
-`registry.create` and the Python API get the same checks as a scenario file.
+every field's type and range in one place that several components extend at once; its `sensors.*`,
+`monitors.*` and `navigator.settings` sections are generated from the components' declared settings
+(navigators.core.settings, trn_env.scenario.schema_sections), which the components also validate in their
+constructors, so `registry.create` and the Python API get the same checks as a scenario file; the
+finite-number walk closes the NaN/infinity class for every present and future numeric field without
+restating them.
 """
 
 from __future__ import annotations
@@ -115,8 +118,11 @@ def list_scenarios() -> list[tuple[str, str]]:
 
 @lru_cache(maxsize=1)
 def schema() -> dict:
-    """The scenario JSON schema (trn_env/scenario/schema.json)."""
-    return json.loads((Path(__file__).with_name("schema.json")).read_text(encoding="utf-8"))
+    """The scenario JSON schema: trn_env/scenario/schema.json with the sections generated from the
+    components' Settings classes (trn_env.scenario.schema_sections) in place."""
+    from trn_env.scenario.schema_sections import with_generated_sections
+    return with_generated_sections(json.loads((Path(__file__).with_name("schema.json")).read_text(
+        encoding="utf-8")))
 
 
 def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
@@ -342,8 +348,8 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
     tolerant = bool(prior)
     problems: list[str] = []
     checks = [_altitude_problems, _gnss_problems, _wind_problems, _rate_problems, _aircraft_problems,
-              _navigator_problems, _integrity_problems, lambda dd: _terrain_problems(dd, base_dir, extras),
-              lambda dd: _ceiling_problems(dd, extras)]
+              _navigator_problems, _integrity_problems, _sensor_need_problems,
+              lambda dd: _terrain_problems(dd, base_dir, extras), lambda dd: _ceiling_problems(dd, extras)]
     for check in checks:
         try:
             problems += check(d)
@@ -413,10 +419,39 @@ def _integrity_problems(d: dict) -> list[str]:
         if isinstance(t, (int, float)) and t >= d["duration_s"]:
             problems.append(f"terrain.map.faults[{i}].start_s: {t} s is not before the scenario's end "
                             f"(duration_s = {d['duration_s']} s)")
-    mons = d["monitors"]
-    if isinstance(mons, dict) and "dem_integrity" in mons and "radar_altimeter" not in d["sensors"]:
-        problems.append("monitors.dem_integrity: needs a radar altimeter (add a [sensors.radar_altimeter] "
-                        "table); seed 003 eq 1 synthesises the terrain height from it")
+    return problems
+
+
+def fitted_sensors(d: dict) -> set[str]:
+    """The sensors a scenario fits (its [sensors.*] tables that are not false or null)."""
+    sensors = d.get("sensors") if isinstance(d.get("sensors"), dict) else {}
+    return {n for n, cfg in sensors.items() if cfg is not None and cfg is not False}
+
+
+def _sensor_need_problems(d: dict) -> list[str]:
+    """Every sensor the navigator or a monitor requires (its declared capabilities, with its settings) that
+    the scenario does not fit, as 'sensors.<name>: ...': refused before anything runs. A component whose
+    settings are refused is left to the settings check."""
+    from trn_env.navigators import registry
+    from trn_env.navigators.core.settings import SettingsError
+    fitted = fitted_sensors(d)
+    problems = []
+    nav_settings = d["navigator"]["settings"] if isinstance(d["navigator"]["settings"], dict) else {}
+    users = [("navigator", d["navigator"]["name"], lambda n: registry.sensor_needs(n, nav_settings))]
+    mons = d["monitors"] if isinstance(d["monitors"], dict) else {}
+    for name in sorted(mons):
+        users.append(("monitor", name, lambda n: registry.monitor_sensor_needs(
+            n, mons[n] if isinstance(mons[n], dict) else {})))
+    for kind, name, needs_of in users:
+        try:
+            needs = needs_of(name)
+        except (SettingsError, ValueError, TypeError):
+            continue
+        for sensor, why in needs.required.items():
+            if sensor not in fitted:
+                where = "navigator.name" if kind == "navigator" else f"monitors.{name}"
+                problems.append(f"sensors.{sensor}: {kind} {name!r} needs this sensor ({why}); add a "
+                                f"[sensors.{sensor}] table or choose another {kind} ({where})")
     return problems
 
 

@@ -13,13 +13,12 @@ import numpy as np
 from numba import njit
 
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.core.settings import setting
 from trn_env.navigators.frames import AirDataFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
-    check_nonneg,
-    check_positive,
     no_sample_due,
     sample_steps,
     trusted_frame,
@@ -30,19 +29,13 @@ from trn_env.sensors.common import (
 class AirDataConfig(MappingConfig):
     """Air-data computer; 1 sigma; biases drawn once per run."""
 
-    rate_hz: float = 10.0
-    tas_bias_mps: float = 1.0
-    tas_noise_mps: float = 0.5
-    alpha_bias_deg: float = 0.3
-    alpha_noise_deg: float = 0.2
-    beta_bias_deg: float = 0.3
-    beta_noise_deg: float = 0.2
-
-    def __post_init__(self):
-        check_positive("AirDataConfig", "rate_hz", self.rate_hz)
-        for name in ("tas_bias_mps", "tas_noise_mps", "alpha_bias_deg", "alpha_noise_deg", "beta_bias_deg",
-                     "beta_noise_deg"):
-            check_nonneg("AirDataConfig", name, getattr(self, name))
+    rate_hz: float = setting(10.0, "samples per second", "Hz", gt=0.0)
+    tas_bias_mps: float = setting(1.0, "true-airspeed bias (drawn once per run)", "m/s", ge=0.0)
+    tas_noise_mps: float = setting(0.5, "true-airspeed white noise", "m/s", ge=0.0)
+    alpha_bias_deg: float = setting(0.3, "angle-of-attack bias", "deg", ge=0.0)
+    alpha_noise_deg: float = setting(0.2, "angle-of-attack white noise", "deg", ge=0.0)
+    beta_bias_deg: float = setting(0.3, "sideslip bias", "deg", ge=0.0)
+    beta_noise_deg: float = setting(0.2, "sideslip white noise", "deg", ge=0.0)
 
     @classmethod
     def noise_free(cls, **overrides: Any) -> AirDataConfig:

@@ -17,11 +17,10 @@ import numpy as np
 from numba import njit
 
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.core.settings import setting
 from trn_env.navigators.frames import BaroFrame
 from trn_env.sensors.common import (
     MappingConfig,
-    check_nonneg,
-    check_positive,
     sample_steps,
     trusted_frame,
 )
@@ -81,15 +80,10 @@ def isa_pressure_altitude_m(p_pa):
 class BaroConfig(MappingConfig):
     """Barometric altimeter. Sigmas are 1 sigma."""
 
-    rate_hz: float = 10.0
-    bias_m: float = 10.0       # constant per run, drawn N(0, bias^2)
-    noise_m: float = 0.5       # white noise per sample
-    lag_tau_s: float = 0.2     # first-order lag time constant; 0 = none
-
-    def __post_init__(self):
-        check_positive("BaroConfig", "rate_hz", self.rate_hz)
-        for name in ("bias_m", "noise_m", "lag_tau_s"):
-            check_nonneg("BaroConfig", name, getattr(self, name))
+    rate_hz: float = setting(10.0, "samples per second", "Hz", gt=0.0)
+    bias_m: float = setting(10.0, "constant bias, drawn N(0, bias^2) per run", "m", ge=0.0)
+    noise_m: float = setting(0.5, "white noise per sample", "m", ge=0.0)
+    lag_tau_s: float = setting(0.2, "first-order lag time constant (0: none)", "s", ge=0.0)
 
     @classmethod
     def noise_free(cls, **overrides: Any) -> BaroConfig:

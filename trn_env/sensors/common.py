@@ -1,4 +1,4 @@
-"""Shared machinery of the sensor models: config validation, absolute-time sampling, error recursions.
+"""Shared machinery of the sensor models: the configs' base, absolute-time sampling, error recursions.
 
 Sampling rule: a sensor at `rate_hz` owns the time grid k / rate_hz (k integer). Truth step i is a sample
 when its grid index floor(t_i * rate_hz) differs from the previous step's, i.e. the first truth step at or
@@ -14,49 +14,16 @@ bit-for-bit the same output as sampling it in one call.
 from __future__ import annotations
 
 import math
-from dataclasses import fields, replace
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 
+from trn_env.navigators.core.settings import Settings, SettingsError
 from trn_env.terrain.geodesy import C_en, ecef_to_lla, lla_to_ecef
 
 _GRID_EPS = 1e-6   # tolerance, in grid periods, for "on the grid" (t_s is a float multiple of the step)
-
-
-def check_nonneg(cls_name: str, name: str, value: float) -> None:
-    if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= 0):
-        raise ValueError(f"{cls_name}.{name} must be a finite number >= 0, got {value!r}")
-
-
-def check_positive(cls_name: str, name: str, value: float) -> None:
-    if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"{cls_name}.{name} must be a finite number > 0, got {value!r}")
-
-
-def check_vector3(cls_name: str, name: str, value) -> tuple[float, float, float]:
-    try:
-        v = tuple(float(x) for x in value)
-    except TypeError as exc:
-        raise ValueError(f"{cls_name}.{name} must be 3 numbers (metres, body FRD), got {value!r}") from exc
-    if len(v) != 3 or not all(math.isfinite(x) for x in v):
-        raise ValueError(f"{cls_name}.{name} must be 3 finite numbers (metres, body FRD), got {value!r}")
-    return v
-
-
-def config_from_mapping(cls, mapping: dict[str, Any] | None, base=None):
-    """Build config dataclass `cls` from a mapping; unknown keys raise ValueError naming them.
-
-    `base` (an instance) supplies the defaults; without it the dataclass defaults apply.
-    """
-    mapping = dict(mapping or {})
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(mapping) - known)
-    if unknown:
-        raise ValueError(f"{cls.__name__}: unknown field(s) {', '.join(unknown)}; "
-                         f"known: {', '.join(sorted(known))}")
-    return replace(base, **mapping) if base is not None else cls(**mapping)
 
 
 def initial_grid_index(t0_s: float, rate_hz: float) -> int:
@@ -178,17 +145,27 @@ def ned_vectors_kernel(lat0, lon0, h0, lat1, lon1, h1):
     return out
 
 
-class MappingConfig:
-    """Mixin for sensor config dataclasses: `from_mapping` builds one from a scenario table, where the key
-    `noise_free = true` starts from the class's `noise_free()` configuration and the other keys override it.
-    Unknown keys and bad values raise ValueError naming the field (config_from_mapping)."""
+@dataclass(frozen=True)
+class MappingConfig(Settings):
+    """Base of the sensor configs (navigators.core.settings fields): `from_mapping` builds one from a
+    scenario table, where the key `noise_free = true` starts from the class's `noise_free()` configuration
+    and the other keys override it. Unknown keys and bad values raise one SettingsError (a ValueError) naming
+    every field."""
 
     @classmethod
-    def from_mapping(cls, mapping: dict | None):
+    def from_mapping(cls, mapping: dict | None = None, base=None):
         mapping = dict(mapping or {})
-        if mapping.pop("noise_free", False):
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping)
+        noise_free = mapping.pop("noise_free", False)
+        if not isinstance(noise_free, bool):
+            raise SettingsError([("noise_free", f"must be true or false, got {noise_free!r}")])
+        if noise_free:
+            base = cls.noise_free()
+        return super().from_mapping(mapping, base)
+
+    @classmethod
+    def noise_free(cls, **overrides: Any):
+        """The configuration without errors (each sensor defines it)."""
+        raise NotImplementedError
 
 
 class TimeGridState(NamedTuple):

@@ -14,14 +14,13 @@ import numpy as np
 from numba import njit
 
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.core.settings import setting
 from trn_env.navigators.frames import GnssFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     EMPTY_F3,
     MappingConfig,
-    check_nonneg,
-    check_positive,
     gm_coefficients,
     no_sample_due,
     sample_steps,
@@ -34,16 +33,15 @@ def _check_outages(value) -> tuple[tuple[float, float], ...]:
     try:
         windows = tuple((float(a), float(b)) for a, b in value)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"GnssConfig.outages must be a list of (t_start_s, t_end_s) pairs, "
-                         f"got {value!r}") from exc
+        raise ValueError(f"must be a list of (t_start_s, t_end_s) pairs, got {value!r}") from exc
     for i, (a, b) in enumerate(windows):
         if not (np.isfinite(a) and np.isfinite(b)):
-            raise ValueError(f"GnssConfig.outages[{i}] = {(a, b)} must be finite times")
+            raise ValueError(f"[{i}] = {(a, b)} must be finite times")
         if not b > a:
-            raise ValueError(f"GnssConfig.outages[{i}] = {(a, b)} runs backwards or is empty "
+            raise ValueError(f"[{i}] = {(a, b)} runs backwards or is empty "
                              "(t_end <= t_start)")
         if i and a < windows[i - 1][1]:
-            raise ValueError(f"GnssConfig.outages[{i}] = {(a, b)} overlaps or precedes outages[{i - 1}] = "
+            raise ValueError(f"[{i}] = {(a, b)} overlaps or precedes outages[{i - 1}] = "
                              f"{windows[i - 1]} (windows must be sorted and disjoint)")
     return windows
 
@@ -52,22 +50,23 @@ def _check_outages(value) -> tuple[tuple[float, float], ...]:
 class GnssConfig(MappingConfig):
     """GNSS fix model, SI, 1 sigma per axis."""
 
-    rate_hz: float = 1.0
-    horizontal_noise_m: float = 1.0        # white, per north/east axis
-    vertical_noise_m: float = 2.0          # white, down axis
-    horizontal_drift_m: float = 1.5        # Gauss-Markov std, per north/east axis
-    vertical_drift_m: float = 3.0          # Gauss-Markov std, down axis
-    drift_tau_s: float = 300.0             # Gauss-Markov correlation time
-    velocity_noise_mps: float = 0.05       # white, per NED axis
-    outages: tuple[tuple[float, float], ...] = ()   # sorted, disjoint [t_start_s, t_end_s) windows
+    rate_hz: float = setting(1.0, "fixes per second", "Hz", gt=0.0)
+    horizontal_noise_m: float = setting(1.0, "white position noise per north/east axis", "m", ge=0.0)
+    vertical_noise_m: float = setting(2.0, "white position noise, down axis", "m", ge=0.0)
+    horizontal_drift_m: float = setting(1.5, "Gauss-Markov position error std per north/east axis", "m",
+                                        ge=0.0)
+    vertical_drift_m: float = setting(3.0, "Gauss-Markov position error std, down axis", "m", ge=0.0)
+    drift_tau_s: float = setting(300.0, "Gauss-Markov correlation time", "s", gt=0.0)
+    velocity_noise_mps: float = setting(0.05, "white velocity noise per NED axis", "m/s", ge=0.0)
+    outages: tuple[tuple[float, float], ...] = setting((), "sorted, disjoint [t_start_s, t_end_s) windows "
+                                                           "without fixes", "s")
 
-    def __post_init__(self):
-        check_positive("GnssConfig", "rate_hz", self.rate_hz)
-        check_positive("GnssConfig", "drift_tau_s", self.drift_tau_s)
-        for name in ("horizontal_noise_m", "vertical_noise_m", "horizontal_drift_m", "vertical_drift_m",
-                     "velocity_noise_mps"):
-            check_nonneg("GnssConfig", name, getattr(self, name))
-        object.__setattr__(self, "outages", _check_outages(self.outages))
+    def check(self) -> list[tuple[str, str]]:
+        try:
+            object.__setattr__(self, "outages", _check_outages(self.outages))
+        except ValueError as exc:
+            return [("outages", str(exc))]
+        return []
 
     @classmethod
     def noise_free(cls, **overrides: Any) -> GnssConfig:

@@ -15,13 +15,12 @@ import numpy as np
 from numba import njit
 
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.core.settings import setting
 from trn_env.navigators.frames import HeadingFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
-    check_nonneg,
-    check_positive,
     no_sample_due,
     sample_steps,
     trusted_frame,
@@ -32,15 +31,10 @@ from trn_env.sensors.common import (
 class HeadingConfig(MappingConfig):
     """Compass model, degrees, 1 sigma."""
 
-    rate_hz: float = 10.0
-    bias_deg: float = 0.3          # constant deviation A
-    deviation_deg: float = 0.2     # heading-dependent deviation coefficients B, C, D, E
-    noise_deg: float = 0.2         # white noise per sample
-
-    def __post_init__(self):
-        check_positive("HeadingConfig", "rate_hz", self.rate_hz)
-        for name in ("bias_deg", "deviation_deg", "noise_deg"):
-            check_nonneg("HeadingConfig", name, getattr(self, name))
+    rate_hz: float = setting(10.0, "samples per second", "Hz", gt=0.0)
+    bias_deg: float = setting(0.3, "constant deviation A", "deg", ge=0.0)
+    deviation_deg: float = setting(0.2, "heading-dependent deviation coefficients B, C, D, E", "deg", ge=0.0)
+    noise_deg: float = setting(0.2, "white noise per sample", "deg", ge=0.0)
 
     @classmethod
     def noise_free(cls, **overrides: Any) -> HeadingConfig:

@@ -37,11 +37,9 @@ import numpy as np
 from numba import njit
 
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.core.settings import Settings, SettingsError, setting
 from trn_env.navigators.frames import ImuFrame
 from trn_env.sensors.common import (
-    check_nonneg,
-    check_positive,
-    config_from_mapping,
     gm_coefficients,
     sample_steps,
     trusted_frame,
@@ -62,41 +60,38 @@ _ERROR_FIELDS = (
 
 
 @dataclass(frozen=True)
-class ImuConfig:
+class ImuConfig(Settings):
     """IMU error model, SI, sigmas per axis (1 sigma). Defaults: navigation grade (seed 000 Table 2)."""
 
-    rate_hz: float = 100.0
-    accel_bias_mps2: float = 50.0 * UG_MPS2                 # turn-on bias, drawn once per run
-    accel_bias_instability_mps2: float = 0.0                # Gauss-Markov std
-    accel_bias_tau_s: float = 3600.0                        # Gauss-Markov correlation time
-    accel_noise_density_mps2_rthz: float = 10.0 * UG_MPS2   # velocity random walk, (m/s^2)/sqrt(Hz)
-    accel_scale_factor_ppm: float = 0.0
-    accel_misalignment_rad: float = 0.0
-    accel_quantum_mps: float = 0.0                          # velocity-increment quantum; 0 = none
-    gyro_bias_rps: float = 0.005 * DEG_PER_H_RPS
-    gyro_bias_instability_rps: float = 0.0
-    gyro_bias_tau_s: float = 3600.0
-    gyro_noise_density_rps_rthz: float = 0.005 * DEG_PER_RTH_RPS_RTHZ   # angle random walk, rad/sqrt(s)
-    gyro_scale_factor_ppm: float = 0.0
-    gyro_misalignment_rad: float = 0.0
-    gyro_quantum_rad: float = 0.0                           # angle-increment quantum; 0 = none
-    sampling: str = "interval"                              # "interval" means or "instant" values
-
-
-    def __post_init__(self):
-        check_positive("ImuConfig", "rate_hz", self.rate_hz)
-        check_positive("ImuConfig", "accel_bias_tau_s", self.accel_bias_tau_s)
-        check_positive("ImuConfig", "gyro_bias_tau_s", self.gyro_bias_tau_s)
-        for name in _ERROR_FIELDS:
-            check_nonneg("ImuConfig", name, getattr(self, name))
-        if self.sampling not in ("interval", "instant"):
-            raise ValueError(f"ImuConfig.sampling must be 'interval' or 'instant', got {self.sampling!r}")
+    rate_hz: float = setting(100.0, "samples per second", "Hz", gt=0.0)
+    accel_bias_mps2: float = setting(50.0 * UG_MPS2, "accelerometer turn-on bias, drawn once per run",
+                                     "m/s^2", ge=0.0)
+    accel_bias_instability_mps2: float = setting(0.0, "accelerometer bias instability (Gauss-Markov std)",
+                                                 "m/s^2", ge=0.0)
+    accel_bias_tau_s: float = setting(3600.0, "accelerometer bias correlation time", "s", gt=0.0)
+    accel_noise_density_mps2_rthz: float = setting(10.0 * UG_MPS2, "velocity random walk",
+                                                   "m/s^2/sqrt(Hz)", ge=0.0)
+    accel_scale_factor_ppm: float = setting(0.0, "accelerometer scale-factor error", "ppm", ge=0.0)
+    accel_misalignment_rad: float = setting(0.0, "accelerometer axis misalignment", "rad", ge=0.0)
+    accel_quantum_mps: float = setting(0.0, "velocity-increment quantum (0: none)", "m/s", ge=0.0)
+    gyro_bias_rps: float = setting(0.005 * DEG_PER_H_RPS, "gyro turn-on bias, drawn once per run", "rad/s",
+                                   ge=0.0)
+    gyro_bias_instability_rps: float = setting(0.0, "gyro bias instability (Gauss-Markov std)", "rad/s",
+                                               ge=0.0)
+    gyro_bias_tau_s: float = setting(3600.0, "gyro bias correlation time", "s", gt=0.0)
+    gyro_noise_density_rps_rthz: float = setting(0.005 * DEG_PER_RTH_RPS_RTHZ, "angle random walk",
+                                                 "rad/sqrt(s)", ge=0.0)
+    gyro_scale_factor_ppm: float = setting(0.0, "gyro scale-factor error", "ppm", ge=0.0)
+    gyro_misalignment_rad: float = setting(0.0, "gyro axis misalignment", "rad", ge=0.0)
+    gyro_quantum_rad: float = setting(0.0, "angle-increment quantum (0: none)", "rad", ge=0.0)
+    sampling: str = setting("interval", "samples are interval means or instant values",
+                            choices=("interval", "instant"))
 
     @classmethod
     def grade(cls, name: str, **overrides: Any) -> ImuConfig:
         """Preset "navigation", "tactical" or "consumer", with field overrides."""
         if name not in IMU_GRADES:
-            raise ValueError(f"ImuConfig.grade: unknown grade {name!r}; known: {', '.join(IMU_GRADES)}")
+            raise SettingsError([("grade", f"unknown grade {name!r}; known: {', '.join(GRADE_NAMES)}")])
         return replace(IMU_GRADES[name], **overrides)
 
     @classmethod
@@ -105,13 +100,26 @@ class ImuConfig:
         return replace(cls(**{k: 0.0 for k in _ERROR_FIELDS}), **overrides)
 
     @classmethod
-    def from_mapping(cls, mapping: dict[str, Any] | None) -> ImuConfig:
-        """From a scenario mapping; optional key "grade" picks the preset the other keys override."""
+    def from_mapping(cls, mapping: dict[str, Any] | None = None, base: ImuConfig | None = None) -> ImuConfig:
+        """From a scenario mapping; optional key "grade" picks the preset the other keys override. Every
+        problem (the grade's and the fields') is reported at once."""
         mapping = dict(mapping or {})
         grade = mapping.pop("grade", "navigation")
+        problems = []
         if grade == "noise_free":
-            return config_from_mapping(cls, mapping, cls.noise_free())
-        return config_from_mapping(cls, mapping, cls.grade(grade))
+            base = cls.noise_free()
+        elif isinstance(grade, str) and grade in IMU_GRADES:
+            base = IMU_GRADES[grade]
+        else:
+            problems.append(("grade", f"unknown grade {grade!r}; known: {', '.join(GRADE_NAMES)}"))
+            base = IMU_GRADES["navigation"]
+        try:
+            cfg = super().from_mapping(mapping, base)
+        except SettingsError as exc:
+            problems += exc.problems
+        if problems:
+            raise SettingsError(problems)
+        return cfg
 
 
 IMU_GRADES: dict[str, ImuConfig] = {
@@ -141,6 +149,7 @@ IMU_GRADES: dict[str, ImuConfig] = {
         accel_quantum_mps=1e-3, gyro_quantum_rad=1e-5,
     ),
 }
+GRADE_NAMES = (*IMU_GRADES, "noise_free")
 
 _OFF_DIAG = np.array([[0, 1], [0, 2], [1, 0], [1, 2], [2, 0], [2, 1]])
 

@@ -32,15 +32,13 @@ import numpy as np
 from numba import njit
 
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.core.settings import setting
 from trn_env.navigators.frames import IraFrame
 from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
     antenna_positions,
-    check_nonneg,
-    check_positive,
-    check_vector3,
     ned_vectors_kernel,
     no_sample_due,
     sample_steps,
@@ -55,33 +53,24 @@ LOOK_ANGLE_METHODS = ("range_difference", "exact")
 class IraConfig(MappingConfig):
     """IRA model. Baselines and ranges in metres, angles in degrees, sigmas 1 sigma."""
 
-    rate_hz: float = 50.0
-    baseline_left_m: float = 0.25          # L1 (our choice; seed 000 gives no value)
-    baseline_right_m: float = 0.25         # L2
-    range_noise_m: float = 3.5
-    look_angle_noise_deg: float = 0.1
-    half_window_deg: float = 45.0          # angular window of the zero-Doppler line searched (terrain query)
-    max_range_m: float = 10000.0
-    look_angle_method: str = "range_difference"
-    lever_arm_b_m: tuple[float, float, float] = (0.0, 0.0, 0.0)   # centre antenna, body FRD
+    rate_hz: float = setting(50.0, "samples per second (seed 000 Table 2)", "Hz", gt=0.0)
+    baseline_left_m: float = setting(0.25, "L1, centre to left antenna (ours; seed 000 gives none)", "m",
+                                     gt=0.0)
+    baseline_right_m: float = setting(0.25, "L2, centre to right antenna", "m", gt=0.0)
+    range_noise_m: float = setting(3.5, "range noise sigma_R (seed 002 Table 1)", "m", ge=0.0)
+    look_angle_noise_deg: float = setting(0.1, "look-angle noise sigma_theta (seed 002 Table 1)", "deg",
+                                          ge=0.0)
+    half_window_deg: float = setting(45.0, "angular window of the zero-Doppler line searched", "deg", gt=0.0,
+                                     lt=90.0)
+    max_range_m: float = setting(10000.0, "maximum range (no return beyond)", "m", gt=0.0)
+    look_angle_method: str = setting("range_difference", "how the look angle is formed from the three "
+                                                         "ranges", choices=LOOK_ANGLE_METHODS)
+    lever_arm_b_m: tuple[float, float, float] = setting(
+        (0.0, 0.0, 0.0), "centre antenna offset from the IMU, body FRD", "m", length=3)
 
-    def __post_init__(self):
-        name = "IraConfig"
-        check_positive(name, "rate_hz", self.rate_hz)
-        check_positive(name, "baseline_left_m", self.baseline_left_m)
-        check_positive(name, "baseline_right_m", self.baseline_right_m)
-        check_positive(name, "max_range_m", self.max_range_m)
-        check_nonneg(name, "range_noise_m", self.range_noise_m)
-        check_nonneg(name, "look_angle_noise_deg", self.look_angle_noise_deg)
-        hw = self.half_window_deg
-        if not (isinstance(hw, (int, float, np.floating)) and 0.0 < hw < 90.0):
-            raise ValueError(f"IraConfig.half_window_deg must lie in (0, 90) deg, got {hw!r}")
-        if self.look_angle_method not in LOOK_ANGLE_METHODS:
-            raise ValueError(f"IraConfig.look_angle_method must be one of {LOOK_ANGLE_METHODS}, "
-                             f"got {self.look_angle_method!r}")
-        object.__setattr__(self, "lever_arm_b_m", check_vector3(name, "lever_arm_b_m", self.lever_arm_b_m))
+    def resolve(self) -> None:
         # derived constants of the per-chunk hot path (not fields: eq, hash and replace ignore them)
-        object.__setattr__(self, "_half_window_rad", float(np.deg2rad(hw)))
+        object.__setattr__(self, "_half_window_rad", float(np.deg2rad(self.half_window_deg)))
         object.__setattr__(self, "_look_angle_noise_rad", float(np.deg2rad(self.look_angle_noise_deg)))
         object.__setattr__(self, "_method_index", LOOK_ANGLE_METHODS.index(self.look_angle_method))
         object.__setattr__(self, "_has_lever_arm", any(x != 0.0 for x in self.lever_arm_b_m))

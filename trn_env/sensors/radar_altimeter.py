@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from trn_env.flight.truth import TruthChunk
+from trn_env.navigators.core.settings import setting
 from trn_env.navigators.frames import RadarAltimeterFrame
 from trn_env.sensors.common import (
     EMPTY_B,
@@ -23,9 +24,6 @@ from trn_env.sensors.common import (
     MappingConfig,
     TimeGridState,
     antenna_positions,
-    check_nonneg,
-    check_positive,
-    check_vector3,
     no_sample_due,
     sample_steps,
     trusted_frame,
@@ -37,23 +35,14 @@ from trn_env.terrain import queries
 class RadarAltimeterConfig(MappingConfig):
     """Radar altimeter; beamwidth is the full cone angle (deg), lever arm in body FRD metres."""
 
-    rate_hz: float = 20.0
-    beamwidth_deg: float = 17.0
-    max_range_m: float = 5000.0
-    noise_const_m: float = 0.6
-    noise_fraction: float = 0.02
-    lever_arm_b_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    def __post_init__(self):
-        check_positive("RadarAltimeterConfig", "rate_hz", self.rate_hz)
-        check_positive("RadarAltimeterConfig", "max_range_m", self.max_range_m)
-        check_nonneg("RadarAltimeterConfig", "noise_const_m", self.noise_const_m)
-        check_nonneg("RadarAltimeterConfig", "noise_fraction", self.noise_fraction)
-        bw = self.beamwidth_deg
-        if not (isinstance(bw, (int, float, np.floating)) and 0.0 < bw < 90.0):
-            raise ValueError(f"RadarAltimeterConfig.beamwidth_deg must lie in (0, 90) deg, got {bw!r}")
-        object.__setattr__(self, "lever_arm_b_m",
-                           check_vector3("RadarAltimeterConfig", "lever_arm_b_m", self.lever_arm_b_m))
+    rate_hz: float = setting(20.0, "samples per second", "Hz", gt=0.0)
+    beamwidth_deg: float = setting(17.0, "full cone angle of the beam", "deg", gt=0.0, lt=90.0)
+    max_range_m: float = setting(5000.0, "maximum range (no return beyond)", "m", gt=0.0)
+    noise_const_m: float = setting(0.6, "range noise, constant part (1 sigma = const + fraction x R)", "m",
+                                   ge=0.0)
+    noise_fraction: float = setting(0.02, "range noise, fraction of the range", "1", ge=0.0)
+    lever_arm_b_m: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "antenna offset from the IMU, body "
+                                                                         "FRD", "m", length=3)
 
     @classmethod
     def noise_free(cls, **overrides: Any) -> RadarAltimeterConfig:

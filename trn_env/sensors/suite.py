@@ -56,7 +56,7 @@ def _make_config(name: str, value: Any):
         return value
     if isinstance(value, dict):
         return model.config_cls.from_mapping(value)
-    raise ValueError(f"sensors.{name}: expected a {model.config_cls.__name__}, a mapping, true or null; "
+    raise ValueError(f"sensors.{name}: expected a table of settings, true or null; "
                      f"got {type(value).__name__}")
 
 

@@ -533,6 +533,8 @@ class ClosedLoop:
         summary["fuel_remaining_kg"] = round(self.flight.fuel_kg, 3)
         summary["constant_fuel"] = self.flight.constant_fuel
         summary["truth_source"] = self.scenario.data.get("truth", {}).get("source", "jsbsim")
+        # fitted sensors that neither the navigator nor a monitor reads (their declared sensor needs)
+        summary["unused_sensors"] = components.unused_sensors(self.scenario.data)
         events = sorted(self.log.events, key=lambda ev: ev[0])   # (stable: same-time events keep their order)
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
                          self.jsbsim_steps, arrays, events, summary, self.world_dem)

@@ -5,7 +5,8 @@ an install spends its first seconds compiling; later runs load the cache in well
 as it is, that compile sits inside the flight: the progress bar stalls at the first simulated second and
 the real-time factor counts it. `warm_up` flies a copy of the scenario for three navigator updates first
 (one process, the same terrain objects, its own aircraft trim and random streams): GNSS (if fitted) in the
-first update, none after it, a TERCOM fix (if the navigator has one) due at the third. Every kernel the
+first update, none after it, and the navigator's declared warm-up settings (capabilities.warm_up_settings:
+e.g. a TERCOM fix due at the third update). Every kernel the
 flight will call - sensors, terrain queries, mechanisation, covariance propagation on the GNSS-aided and
 the fused GNSS-denied paths, the fix's correlation - is compiled or loaded then, and only those: a kernel
 the scenario does not use is never compiled. The flight itself is untouched (its objects and random
@@ -38,9 +39,10 @@ def warm_up_scenario(scenario: Scenario) -> Scenario:
     rate = float(d["navigator"]["rate_hz"])
     d["duration_s"] = 3.0 / rate
     settings = d["navigator"].setdefault("settings", {})
-    if d["navigator"]["name"] in ("ins_tercom",):
-        settings["fix_period_s"] = 2.0 / rate    # after the last GNSS fix (first update): due at the third
-        settings["min_samples"] = 1
+    from trn_env.navigators import registry
+    warm = registry.capabilities(d["navigator"]["name"]).warm_up_settings
+    if warm is not None:                        # e.g. a TERCOM fix due at the third update
+        settings.update(warm(rate))
     d["gnss"]["outages"] = [{"start_s": 1.5 / rate}]
     return Scenario(name=f"{scenario.name}[warm-up]", source=scenario.source, data=d,
                     description=scenario.description, seed=scenario.seed, duration_s=d["duration_s"],

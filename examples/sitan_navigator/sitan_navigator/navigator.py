@@ -50,6 +50,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 import numpy as np
+from trn_env.navigators.core.capabilities import Capabilities
 from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.error_model_15 import noise_input_matrix, transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns
@@ -132,6 +133,14 @@ class SitanNavigator:
 
     name = "sitan"
     settings_class = SitanSettings
+    # what trn-env reads before building it: the map as dem=, the scenario IMU's specification
+    # (apply_imu_spec), the sensors it needs (a scenario without them is refused) and those it uses
+    capabilities = Capabilities(
+        needs_map=True, uses_imu_spec=True,
+        required_sensors=(("imu", "SITAN corrects a strapdown INS"),
+                          ("radar_altimeter", "SITAN's measurement is the radar altimeter's range over the "
+                                              "map")),
+        optional_sensors=("baro", "gnss"))
 
     def __init__(self, dem=None, **settings):
         if dem is None:
@@ -162,12 +171,32 @@ class SitanNavigator:
         self._clr = 0.0
         self._phi_clr = 1.0
         self.last_nis = math.nan
+        # the INS error model's figures: the settings, raised by the scenario's IMU (apply_imu_spec)
+        self._imu = {"accel_noise_mps2_rthz": s.accel_noise_mps2_rthz,
+                     "gyro_noise_rps_rthz": s.gyro_noise_rps_rthz,
+                     "accel_bias_sigma_mps2": s.accel_bias_sigma_mps2,
+                     "gyro_bias_sigma_rps": s.gyro_bias_sigma_rps,
+                     "accel_bias_walk": 0.0, "gyro_bias_walk": 0.0}
 
-    @staticmethod
-    def required_sensors() -> list[tuple[str, str]]:
-        """(sensor name, why) of every sensor SITAN needs."""
-        return [("imu", "SITAN corrects a strapdown INS"),
-                ("radar_altimeter", "SITAN's measurement is the radar altimeter's range over the map")]
+    def apply_imu_spec(self, spec) -> None:
+        """Take the INS error model from the IMU's specification (navigators.core.imu_spec.ImuSpec; trn-env's
+        scenario builder calls this with the scenario's IMU before `reset`): noise densities and bias priors
+        (root sum square of turn-on bias and instability) raise the settings, never lower them; the bias
+        instabilities drive the bias states as random walks of density 2 sigma^2 / tau."""
+        imu = self._imu
+        imu["accel_noise_mps2_rthz"] = max(imu["accel_noise_mps2_rthz"], spec.accel_noise_density_mps2_rthz)
+        imu["gyro_noise_rps_rthz"] = max(imu["gyro_noise_rps_rthz"], spec.gyro_noise_density_rps_rthz)
+        imu["accel_bias_sigma_mps2"] = max(imu["accel_bias_sigma_mps2"],
+                                           math.hypot(spec.accel_bias_mps2, spec.accel_bias_instability_mps2))
+        imu["gyro_bias_sigma_rps"] = max(imu["gyro_bias_sigma_rps"],
+                                         math.hypot(spec.gyro_bias_rps, spec.gyro_bias_instability_rps))
+        imu["accel_bias_walk"] = 2.0 * spec.accel_bias_instability_mps2 ** 2 / max(spec.accel_bias_tau_s, 1.0)
+        imu["gyro_bias_walk"] = 2.0 * spec.gyro_bias_instability_rps ** 2 / max(spec.gyro_bias_tau_s, 1.0)
+
+    @classmethod
+    def required_sensors(cls) -> list[tuple[str, str]]:
+        """(sensor name, why) of every sensor SITAN needs (its capabilities' required_sensors)."""
+        return list(cls.capabilities.required_sensors)
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
@@ -178,8 +207,8 @@ class SitanNavigator:
         c = np.asarray(initial.covariance, float)[:9, :9]
         flip = np.diag([1.0, 1.0, -1.0, 1, 1, 1, 1, 1, 1])          # down -> up for the position
         P[:9, :9] = flip @ (0.5 * (c + c.T)) @ flip
-        P[9:12, 9:12] = np.eye(3) * s.accel_bias_sigma_mps2 ** 2
-        P[12:15, 12:15] = np.eye(3) * s.gyro_bias_sigma_rps ** 2
+        P[9:12, 9:12] = np.eye(3) * self._imu["accel_bias_sigma_mps2"] ** 2
+        P[12:15, 12:15] = np.eye(3) * self._imu["gyro_bias_sigma_rps"] ** 2
         P[15, 15] = s.baro_bias_sigma_m ** 2
         P[16, 16] = s.clearance_sigma_m ** 2
         self.P = P
@@ -244,12 +273,16 @@ class SitanNavigator:
                 self._phi = phi @ self._phi
         s = self.settings
         G = noise_input_matrix(self.ins.C_bn)
-        q = np.array([s.accel_noise_mps2_rthz ** 2] * 3 + [s.gyro_noise_rps_rthz ** 2] * 3)
+        imu = self._imu
+        q = np.array([imu["accel_noise_mps2_rthz"] ** 2] * 3 + [imu["gyro_noise_rps_rthz"] ** 2] * 3)
         span = n * max(dt_imu, 1e-6)
         self._q_acc[:15, :15] += (G * q) @ G.T * span
         self._q_acc[0, 0] += s.position_walk_m_per_sqrt_s ** 2 * span
         self._q_acc[1, 1] += s.position_walk_m_per_sqrt_s ** 2 * span
         self._q_acc[15, 15] += s.baro_bias_walk_m_per_sqrt_s ** 2 * span
+        for i in range(3):                # bias instabilities as random walks (Gauss-Markov, span << tau)
+            self._q_acc[9 + i, 9 + i] += imu["accel_bias_walk"] * span
+            self._q_acc[12 + i, 12 + i] += imu["gyro_bias_walk"] * span
         decay = math.exp(-span / s.clearance_tau_s)
         self._phi_clr *= decay
         self._clr *= decay

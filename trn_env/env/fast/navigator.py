@@ -26,8 +26,10 @@ sets the horizontal error at the goal:
   g0 x gyro_noise_rps_rthz: the random walk of a, through the tilt), feedback form (the estimated errors
   are removed from the INS after each update).
 
-Health: a fix rejected by the gate counts; `nav_ok` is False after `unhealthy_rejects` rejections in a row
-(the full navigator's integrity monitor has more states; the fast tier never reports "diverged").
+Health: a fix rejected by the gate counts; `nav_ok` is False after `integrity_window` rejections in a row,
+and then, as the full navigator does after a failed integrity test, the horizontal variance grows by
+recovery_sigma_m^2 and the search widens to recovery_half_cells until a fix is accepted (the full
+navigator's innovation monitor is a windowed test; the fast tier never reports "diverged").
 """
 
 from __future__ import annotations
@@ -102,12 +104,21 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_TAU_A,
     NP_BI_G,
     NP_TAU_G,
-) = range(21)
-N_NAV_PARAMS = 21
+    NP_SIG_BA_PRIOR,
+    NP_RECOVERY_SIGMA,
+    NP_RECOVERY_WINDOW,
+) = range(24)
+N_NAV_PARAMS = 24
 
 
 def navigator_params(
-    name: str, settings: dict, imu: dict, gnss_until_s: float, ira_noise_m: float, ira_rate_hz: float
+    name: str,
+    settings: dict,
+    imu: dict,
+    gnss_until_s: float,
+    ira_noise_m: float,
+    ira_rate_hz: float,
+    imu_spec=None,
 ) -> np.ndarray:
     """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
     navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
@@ -131,8 +142,28 @@ def navigator_params(
     # the full navigator's filter takes them (velocity random walk, and the angle random walk that drives its
     # tilt states, here g0 x that as the random walk of the acceleration error)
     p[NP_Q_V] = float(imu["accel_noise_density_mps2_rthz"]) ** 2
-    p[NP_QF_V] = float(settings.get("accel_noise_mps2_rthz", 10e-6 * G0_MPS2)) ** 2
-    p[NP_Q_A] = (G0_MPS2 * float(settings.get("gyro_noise_rps_rthz", math.radians(0.005) / 60.0))) ** 2
+    q_acc = float(settings.get("accel_noise_mps2_rthz", 10e-6 * G0_MPS2)) ** 2
+    q_gyr = float(settings.get("gyro_noise_rps_rthz", math.radians(0.005) / 60.0)) ** 2
+    q_tilt = q_ba_walk = 0.0
+    sig_ba = float(settings.get("accel_bias_mps2", 50e-6 * G0_MPS2))
+    if imu_spec is not None:
+        # a navigator that takes its error model from the IMU's specification (its apply_imu_spec,
+        # navigators.filters.ins_trn_propagation): each figure a floor over the setting, the x / y gyro
+        # biases as a tilt random walk matching them at EKF_MEMORY_S, the accelerometer bias instability's
+        # Gauss-Markov drive as a random walk
+        from trn_env.navigators.filters.ins_trn_propagation import EKF_MEMORY_S
+
+        q_acc = max(q_acc, imu_spec.accel_noise_density_mps2_rthz**2)
+        q_gyr = max(q_gyr, imu_spec.gyro_noise_density_rps_rthz**2)
+        q_tilt = imu_spec.gyro_bias_sigma_rps**2 * EKF_MEMORY_S
+        q_ba_walk = 2.0 * imu_spec.accel_bias_instability_mps2**2 / imu_spec.accel_bias_tau_s
+        sig_ba = max(sig_ba, imu_spec.body_accel_sigma_mps2)
+    p[NP_QF_V] = q_acc
+    p[NP_Q_A] = G0_MPS2**2 * (q_gyr + q_tilt) + q_ba_walk
+    p[NP_SIG_BA_PRIOR] = sig_ba
+    p[NP_RECOVERY_SIGMA] = float(settings.get("recovery_sigma_m", 100.0))
+    half = float(settings.get("half_cells", 50))
+    p[NP_RECOVERY_WINDOW] = float(settings.get("recovery_half_cells") or 2 * half) / half
     p[NP_BI_A] = float(imu.get("accel_bias_instability_mps2", 0.0))
     p[NP_TAU_A] = float(imu.get("accel_bias_tau_s", 3600.0))
     p[NP_BI_G] = float(imu.get("gyro_bias_instability_rps", 0.0))
@@ -364,7 +395,7 @@ def tercom_fix(
         lon0,
         dlat,
         dlon,
-        nav[NP_HALF_WINDOW],
+        nav[NP_HALF_WINDOW] * (nav[NP_RECOVERY_WINDOW] if X[i, REJECTS] >= nav[NP_UNHEALTHY] else 1.0),
         nav[NP_CELL],
         nav[NP_REMOVE_BIAS] > 0.5,
         m_per_rad_lat,
@@ -379,11 +410,15 @@ def tercom_fix(
     ok = position_update(X, i, -dn, -de, nav[NP_FIX_SIGMA] ** 2, nav[NP_GATE])
     X[i, N_FIXES] += 1.0
     X[i, REJECTS] = 0.0 if ok else X[i, REJECTS] + 1.0
+    if X[i, REJECTS] == nav[NP_UNHEALTHY]:
+        # recovery (as the full navigator's after a failed test): the horizontal sigma grows by
+        # recovery_sigma_m and the search widens to recovery_half_cells until a fix is accepted
+        X[i, P00] += nav[NP_RECOVERY_SIGMA] ** 2
     return ok
 
 
 @njit(cache=True)
-def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw):
+def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw, sig_ba_prior):
     """Episode draws of aircraft i's navigation errors and inertial error sources, and the filter's prior."""
     X[i, EP_N] = sig_pos * frng.normal(state, i)
     X[i, EP_E] = sig_pos * frng.normal(state, i)
@@ -411,7 +446,7 @@ def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_si
     X[i, P02] = 0.0
     X[i, P11] = sig_vel * sig_vel
     X[i, P12] = 0.0
-    X[i, P22] = ba * ba + (G0_MPS2 * sig_tilt) ** 2
+    X[i, P22] = sig_ba_prior * sig_ba_prior + (G0_MPS2 * sig_tilt) ** 2
     X[i, N_PROF] = 0.0
     X[i, REJECTS] = 0.0
     X[i, N_FIXES] = 0.0

@@ -23,8 +23,19 @@ from trn_env.env.fast.dynamics import radii_m
 from trn_env.terrain import kernels
 
 # init parameter vector: sig_pos, sig_vel, sig_tilt, accel bias, gyro bias, baro sigma, agl_min, agl_max,
-# sig_yaw
-IP_SIG_POS, IP_SIG_VEL, IP_SIG_TILT, IP_BA, IP_BG, IP_BARO, IP_AGL_MIN, IP_AGL_MAX, IP_SIG_YAW = range(9)
+# sig_yaw, the filter's accelerometer-bias prior
+(
+    IP_SIG_POS,
+    IP_SIG_VEL,
+    IP_SIG_TILT,
+    IP_BA,
+    IP_BG,
+    IP_BARO,
+    IP_AGL_MIN,
+    IP_AGL_MAX,
+    IP_SIG_YAW,
+    IP_SIG_BA_PRIOR,
+) = range(10)
 
 
 @njit(cache=True)
@@ -123,6 +134,7 @@ def reset_aircraft(
             ip[IP_BG],
             ip[IP_BARO],
             ip[IP_SIG_YAW],
+            ip[IP_SIG_BA_PRIOR],
         )
         X[i, S.NEXT_SAMPLE_T] = 1.0
     return status

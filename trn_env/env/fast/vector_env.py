@@ -23,7 +23,8 @@ keys TerrainNav-v0 reports (`t_s`, `true_error_ned_m`, `true_horizontal_error_m`
 `true_distance_to_goal_m`, `estimated_distance_to_goal_m`, `sigma_ned_m`, `nav_ok`, `nav_status`,
 `goal_deg`, `start_deg`, `distance_flown_m`, `termination`, `reward_terms`), `true_miss_m` with its mask
 `_true_miss_m`, and episode statistics `episode` = {"r": return, "l": decisions, "t": wall s} with
-`_episode` where an episode ended (gymnasium's RecordEpisodeStatistics convention).
+`_episode` where an episode ended (gymnasium's RecordEpisodeStatistics convention; `episode_statistics=False`
+leaves them out, for code that wraps the env in that wrapper, which refuses an existing `episode` key).
 
 Randomness: each sub-env owns a SplitMix64 stream (trn_env.env.fast.rng); a sub-env's seed fixes its
 episodes bit for bit whatever N and whatever the other sub-envs do. The terrain (and the map's error draw)
@@ -33,7 +34,8 @@ Arguments: TerrainNavEnv's (scenario, decision_interval_s, max_episode_s, naviga
 goal_radius_m, reward_mode, the reward weights, agl_min_m, agl_max_m, climb_rate_max_mps,
 turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m, goal_region_deg, start_region_deg,
 held_out_goals_deg, held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
-bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m) plus num_envs; render_mode must be None.
+bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m) plus num_envs and episode_statistics;
+render_mode must be None.
 `navigator` must be one the fast tier models ("ins", "ins_tercom"; ValueError listing them otherwise).
 """
 
@@ -110,8 +112,12 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         bearing_offset_max_deg: float = 90.0,
         sigma_shaping_weight: float = 0.0,
         informative_crlb_m: float = 5.0,
+        episode_statistics: bool = True,
     ):
         n = _check_num_envs(num_envs, decision_interval_s)
+        if not isinstance(episode_statistics, bool):
+            raise ValueError(f"episode_statistics must be a bool, got {episode_statistics!r}")
+        self.episode_statistics = episode_statistics
         _check_memory(n, 42)  # before any per-aircraft array (the default 40 s TERCOM profile)
         if render_mode is not None:
             raise ValueError(
@@ -280,6 +286,13 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             else 0.0
         )
         ira = dict(d["sensors"].get("ira") or {})
+        from trn_env.navigators import registry
+
+        spec = (
+            components.imu_spec(d["sensors"].get("imu"))
+            if registry.capabilities(nav_name).uses_imu_spec
+            else None
+        )
         self._nav = nv.navigator_params(
             nav_name,
             dict(d["navigator"].get("settings") or {}),
@@ -287,6 +300,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             gnss_until,
             float(ira.get("range_noise_m", 3.5)),
             float(ira.get("rate_hz", 50.0)),
+            spec,
         )
         ie = d.get("initial_errors") or {}
         pos = ie.get("position_ned_m", [30.0, 30.0, 15.0])
@@ -303,6 +317,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
                 self.agl_min_m,
                 self.agl_max_m,
                 float(att[2]) * 1e-3,
+                float(self._nav[nv.NP_SIG_BA_PRIOR]),
             ]
         )
         op = np.zeros(ob.N_OBS_PARAMS)
@@ -593,7 +608,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self._ep_return[live] += rewards[live]
         self._ep_len[live] += 1
         done = terminated | truncated
-        if done.any():
+        if done.any() and self.episode_statistics:
             now = time.perf_counter()
             info["episode"] = {
                 "r": np.where(done, self._ep_return, 0.0),

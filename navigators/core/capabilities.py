@@ -1,0 +1,71 @@
+"""What a navigator or monitor declares about itself, read by the registry and the simulator.
+
+A component class carries ``capabilities = Capabilities(...)``; a plug-in registered without one gets
+`Capabilities()` (no map, no rng, no sensors declared). Nothing is inferred from the component's name:
+the simulator gives a map to a component that `needs_map`, the scenario's navigator random stream to one
+that `takes_rng`, its IMU's error specification to one that `uses_imu_spec`, and refuses a scenario, log or
+env that lacks one of the `required` sensors before anything runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+SENSOR_NAMES = ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading")
+
+
+@dataclass(frozen=True)
+class SensorNeeds:
+    """The sensors a component needs with these settings: `required` {sensor: why}, `optional` the ones it
+    uses when fitted."""
+
+    required: dict[str, str] = field(default_factory=dict)
+    optional: tuple[str, ...] = ()
+
+    @property
+    def used(self) -> tuple[str, ...]:
+        """Every sensor the component reads (required first)."""
+        return tuple(self.required) + tuple(s for s in self.optional if s not in self.required)
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """A navigator's or monitor's declarations.
+
+    settings: its Settings class (navigators.core.settings), or None for a plug-in that takes free keyword
+    arguments. needs_map: it takes the navigator's terrain map as ``dem=``. takes_rng: it draws random
+    numbers and takes ``rng=`` (a numpy Generator). uses_imu_spec: it takes its INS error model from the
+    scenario IMU's specification (navigators.core.imu_spec.ImuSpec, through its ``apply_imu_spec``).
+    imu_bias_settings: the build fills its accel/gyro bias priors and bias process noise settings
+    (accel_bias_sigma_mps2, gyro_bias_sigma_rps, q_accel_bias_mps2, q_gyro_bias_rps) from the IMU where the
+    settings leave them unset.
+    uses_map_noise: it takes the map's error model as measurement noise (map_sigma_m, map_bias_sigma_m).
+    models_map_detail: it models the terrain a coarse map cannot hold (terrain_model_sigma_m 0 when the map
+    is the world, terrain_detail_spacing_m from the world's refinement). required_sensors: (sensor, why)
+    pairs needed whatever the settings; optional_sensors: those it uses when fitted. A Settings class may
+    refine both with a ``sensor_needs()`` method (sensors that depend on settings, e.g. the aiding source).
+    warm_up_settings: rate_hz -> settings that make a three-update warm-up flight reach every kernel the
+    component calls (e.g. a TERCOM fix due at the third update), or None.
+    """
+
+    settings: type | None = None
+    needs_map: bool = False
+    takes_rng: bool = False
+    uses_imu_spec: bool = False
+    imu_bias_settings: bool = False
+    uses_map_noise: bool = False
+    models_map_detail: bool = False
+    required_sensors: tuple[tuple[str, str], ...] = ()
+    optional_sensors: tuple[str, ...] = ()
+    warm_up_settings: Callable[[float], dict[str, Any]] | None = None
+
+    def sensor_needs(self, settings: Any = None) -> SensorNeeds:
+        """The sensors needed with `settings` (a Settings instance, or None for the defaults)."""
+        if settings is None and self.settings is not None:
+            settings = self.settings()
+        refine = getattr(settings, "sensor_needs", None)
+        if callable(refine):
+            return refine()
+        return SensorNeeds(dict(self.required_sensors), tuple(self.optional_sensors))
