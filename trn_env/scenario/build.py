@@ -426,7 +426,7 @@ def navigator_settings(d: dict, map_dem) -> dict:
     if caps.needs_map or caps.settings is None:
         settings.setdefault("dem", map_dem)
     if caps.imu_bias_settings:
-        for key, val in imu_bias_settings(d["sensors"].get("imu"), _epoch_s(settings)).items():
+        for key, val in imu_bias_settings(d.get("sensors", {}).get("imu"), _epoch_s(settings)).items():
             settings.setdefault(key, val)
     preset = str((d["terrain"]["map"].get("error_model") or {}).get("preset", "")).strip().lower()
     if preset in map_error.ACCURACY_CLASSES:   # the protection level covers the map's horizontal error
