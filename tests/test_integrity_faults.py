@@ -140,7 +140,7 @@ def test_scenario_with_faults_and_monitor_validates():
     ({"monitors.dem_integrity.threshold": None,
       "monitors.dem_integrity.false_alarm_probability": 1.5},
      "monitors.dem_integrity.false_alarm_probability"),
-    ({"sensors.radar_altimeter": None}, "monitors.dem_integrity: needs a radar altimeter"),
+    ({"sensors.radar_altimeter": None}, "sensors.radar_altimeter: monitor 'dem_integrity' needs this sensor"),
 ])
 def test_bad_scenario_names_the_field(changes, field):
     problems = _problems(_scenario_data(**changes))

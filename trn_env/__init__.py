@@ -8,6 +8,24 @@ made.
 __version__ = "0.1.0"
 
 
+def _source_tree_subpackages() -> None:
+    """In a source checkout, terrain/, navigators/ and aircraft/ sit beside trn_env/ (the design's layout)
+    and only an install maps them to trn_env.terrain, trn_env.navigators and trn_env.aircraft. When this
+    package is imported from the checkout itself (``python -m trn_env.cli`` or a worker process started in
+    the repository's root, where the current folder comes first on sys.path), search the checkout's root for
+    those subpackages too, so the source tree imports the same modules an install does."""
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    root = here.parent
+    if not (here / "terrain").is_dir() and all((root / sub / "__init__.py").is_file()
+                                               for sub in ("terrain", "navigators")):
+        __path__.append(str(root))  # noqa: F821 - the package's own search path
+
+
+_source_tree_subpackages()
+
+
 def _register_envs() -> None:
     try:
         import gymnasium
