@@ -242,6 +242,10 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     assert len(route["waypoints"]) >= 3 and (tmp_path / "route.png").stat().st_size > 10_000
     why = capsys.readouterr().out.strip().splitlines()[-1]       # why the route is longer than the line
     assert why.startswith("why +") and "the straight line crosses" in why and "expected error" in why
+    # over the Jacksboro DEM neither route crosses featureless terrain: the reason given is the grid, not it
+    assert main(["plan", "default", "--goal", "36.66", "-84.18", "--out", str(tmp_path / "j.toml")]) == 0
+    why = capsys.readouterr().out.strip().splitlines()[-1]
+    assert why.startswith("why +") and "not featureless terrain" in why and "planning grid" in why
     bad = tmp_path / "bad.toml"
     for args, msg in (
         (["--goal", "37.9", "-84.13"], "off the map"),

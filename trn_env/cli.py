@@ -803,6 +803,12 @@ def _plan_reason(route, straight, d: dict, config) -> str:
     model = "(INS drift over featureless flight with the scenario's IMU, trn_env.guidance.goal_error)"
     if route.length_m <= straight.length_m * 1.001:
         return f"why: the straight line is already the best route: {describe(straight)} {model}"
+    if straight.featureless_m <= route.featureless_m + 0.5 * config.cell_m:
+        return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: not featureless terrain (the "
+                f"straight line crosses {straight.featureless_m / 1000:.1f} km of it, the planned route "
+                f"{route.featureless_m / 1000:.1f} km); the extra distance comes from the planning grid "
+                f"({config.cell_m:.0f} m cells, 8 directions) and the climb limit: try a smaller --cell or "
+                f"--no-climb-limit")
     return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: the straight line crosses "
             f"{describe(straight)}; the planned route {describe(route)} {model}")
 
