@@ -15,9 +15,9 @@ declares (navigators.core.capabilities).
 
 from __future__ import annotations
 
-from trn_env.navigators.core.settings import SettingsError
-from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator
-from trn_env.navigators.filters.ins_trn_settings import (
+from .core.settings import SettingsError
+from .filters.ins_trn_ekf import InsTrnNavigator
+from .filters.ins_trn_settings import (
     INS_CAPABILITIES,
     INS_TERCOM_CAPABILITIES,
     InsTercomSettings,

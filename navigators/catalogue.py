@@ -97,7 +97,7 @@ def _declared_rows(factory) -> list[SettingDoc] | None:
     """The rows of the declarative settings system (navigators.core.settings.settings_rows), when it is
     present and knows the factory."""
     try:
-        from trn_env.navigators.core import settings as core_settings
+        from .core import settings as core_settings
     except ImportError:
         return None
     rows_of = getattr(core_settings, "settings_rows", None)

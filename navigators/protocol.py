@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-from trn_env.navigators.frames import SensorFrames
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+from ..terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from .frames import SensorFrames
 
 # Estimate.extra keys that every terrain-aided navigator fills after each terrain measurement update, so the
 # integrity monitors and the metrics read them the same way whatever the navigator (absent: no update yet).

@@ -54,10 +54,11 @@ from dataclasses import dataclass, field
 from importlib import metadata
 
 import numpy as np
-from trn_env.navigators.builtin import BUILTIN_MONITORS, BUILTIN_NAVIGATORS
-from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
-from trn_env.navigators.core.settings import Settings, SettingsError, setting, unknown_message
-from trn_env.navigators.integrity.protection_level import configure
+
+from .builtin import BUILTIN_MONITORS, BUILTIN_NAVIGATORS
+from .core.capabilities import Capabilities, SensorNeeds
+from .core.settings import Settings, SettingsError, setting, unknown_message
+from .integrity.protection_level import configure
 
 NAVIGATOR_GROUP = "trn_env.navigators"
 MONITOR_GROUP = "trn_env.monitors"

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from trn_env.terrain.dem import Dem
-from trn_env.terrain.loaders import DemLoadError
+from .dem import Dem
+from .loaders import DemLoadError
 
 BUNDLED = ("jacksboro",)
 
@@ -45,7 +45,7 @@ def load(name_or_path, fill_voids: bool = False) -> Dem:
     ValueError
         For an unknown name, a file that does not load, or a DEM without valid heights.
     """
-    from trn_env.terrain import loaders
+    from . import loaders
 
     if not isinstance(name_or_path, (str, Path)) and not hasattr(name_or_path, "__fspath__"):
         raise ValueError(f"terrain.load: give a DEM name (e.g. 'jacksboro', 'synthetic:rolling') or a file "
@@ -55,7 +55,7 @@ def load(name_or_path, fill_voids: bool = False) -> Dem:
         if key.lower() in ("jacksboro", "jacksboro_fault", "default"):
             return loaders.load_jacksboro(fill_voids)
         if key.lower().startswith("synthetic:"):
-            from trn_env.terrain import synthetic
+            from . import synthetic
 
             return synthetic.from_preset(key.split(":", 1)[1])
     return loaders.load_path(Path(name_or_path), fill_voids)

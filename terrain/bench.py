@@ -20,8 +20,9 @@ import json
 import time
 
 import numpy as np
-from trn_env.terrain import geodesy, kernels, queries
-from trn_env.terrain.dem import Dem
+
+from . import geodesy, kernels, queries
+from .dem import Dem
 
 
 def _numpy_bilinear(heights, lat0, lon0, dlat, dlon, lat, lon):
@@ -112,7 +113,7 @@ def benchmark(
 ) -> dict:
     """Throughput figures (see the module docstring) on `dem` (default: the bundled jacksboro DEM)."""
     if dem is None:
-        from trn_env.terrain import load
+        from . import load
 
         dem = load("jacksboro")
     heights, lat0, lon0, dlat, dlon = dem.grid
@@ -131,7 +132,7 @@ def benchmark(
         raise RuntimeError("benchmark: numba and numpy bilinear disagree")
     ira, ra = _query_rates(dem, n_queries, half_beamwidth_rad, half_window_rad, repeats, 1500.0)
     ira5, ra5 = _query_rates(dem, n_queries, half_beamwidth_rad, half_window_rad, repeats, 5000.0)
-    from trn_env.terrain import refine
+    from . import refine
 
     lat_c, lon_c = dem.center_rad
     dn_m, de_m = dem.extent_m

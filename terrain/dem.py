@@ -11,7 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from trn_env.terrain import geodesy, kernels
+
+from . import geodesy, kernels
 
 _METHODS = ("bilinear", "bicubic")
 

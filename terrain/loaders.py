@@ -16,7 +16,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from trn_env.terrain.dem import Dem
+
+from .dem import Dem
 
 RASTER_SUFFIXES = (".tif", ".tiff", ".gtiff", ".hgt", ".dt0", ".dt1", ".dt2")
 NPZ_SUFFIXES = (".npz",)

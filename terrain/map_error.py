@@ -31,8 +31,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from trn_env.terrain import geodesy, kernels
-from trn_env.terrain.dem import Dem
+
+from . import geodesy, kernels
+from .dem import Dem
 
 CORRELATION_FUNCTIONS = ("gaussian", "exponential")
 CE90_PER_SIGMA = 2.1460  # circular normal: P(r < 2.146 sigma) = 0.90

@@ -22,8 +22,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from trn_env.terrain import geodesy
-from trn_env.terrain.dem import Dem
+
+from . import geodesy
+from .dem import Dem
 
 
 def _window_posts(dem: Dem, window_m: float) -> tuple[int, int]:

@@ -15,8 +15,9 @@ Memory: one float64 array of the refined grid plus FFT work space (~4 x that); 3
 from __future__ import annotations
 
 import numpy as np
-from trn_env.terrain import geodesy, kernels, spectrum
-from trn_env.terrain.dem import Dem
+
+from . import geodesy, kernels, spectrum
+from .dem import Dem
 
 
 def fit_dem_spectrum(dem: Dem, band=(0.1, 0.5)):
@@ -24,7 +25,7 @@ def fit_dem_spectrum(dem: Dem, band=(0.1, 0.5)):
     dn, de = dem.spacing_m
     z = dem.heights_m
     if not np.isfinite(z).all():
-        from trn_env.terrain.loaders import fill_voids
+        from .loaders import fill_voids
 
         z = fill_voids(z, dem.name)
     f, p = spectrum.radial_psd(z, dn, de)

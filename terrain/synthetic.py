@@ -21,8 +21,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from trn_env.terrain import geodesy
-from trn_env.terrain.dem import Dem
+
+from . import geodesy
+from .dem import Dem
 
 
 @dataclass(frozen=True)

@@ -157,3 +157,17 @@ def test_nothing_installs_under_a_generic_top_level_name():
 
         spec = importlib.util.find_spec(generic)
         assert spec is None or "trn_env" not in str(spec.origin), f"{generic} still importable from trn-env"
+
+
+def test_terrain_and_navigators_import_no_trn_env_name():
+    """terrain/ and navigators/ reach each other by relative imports only, so neither names the simulator's
+    package: they import the same whether installed as trn_env.* or read from the checkout."""
+    bad = []
+    for top in ("terrain", "navigators"):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                names = ([node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0
+                         else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+                bad += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
+                        if n.split(".")[0] == "trn_env"]
+    assert bad == [], bad[:10]

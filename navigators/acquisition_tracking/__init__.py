@@ -16,7 +16,7 @@ from the map, and dead-reckons the position from what it tracks. One module per 
     navigator.py     AcqTrackNavigator behind navigators.protocol.Navigator (registered as "acq_track")
 """
 
-from trn_env.navigators.acquisition_tracking.navigator import AcqTrackNavigator
-from trn_env.navigators.acquisition_tracking.settings import AcqTrackConfig
+from .navigator import AcqTrackNavigator
+from .settings import AcqTrackConfig
 
 __all__ = ["AcqTrackConfig", "AcqTrackNavigator"]

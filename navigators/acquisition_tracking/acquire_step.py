@@ -11,20 +11,21 @@ import math
 import time
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking import acquisition
-from trn_env.navigators.acquisition_tracking.buffers import (
+
+from . import acquisition
+from .buffers import (
     _mean,
     _nanmean,
     _quad2,
     _rot_diag,
 )
-from trn_env.navigators.acquisition_tracking.correlation import (
+from .correlation import (
     replica_heights,
 )
-from trn_env.navigators.acquisition_tracking.integrity import (
+from .integrity import (
     a_priori_sigma_m,
 )
-from trn_env.navigators.acquisition_tracking.profile import (
+from .profile import (
     Sample,
 )
 

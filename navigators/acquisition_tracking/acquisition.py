@@ -21,7 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from trn_env.navigators.acquisition_tracking.correlation import (
+
+from ...terrain.kernels import bilinear_at_index
+from .correlation import (
     COST_MAD,
     COST_PEARSON,
     INTERP_BILINEAR,
@@ -29,7 +31,6 @@ from trn_env.navigators.acquisition_tracking.correlation import (
     profile_cost,
     replica_offsets,
 )
-from trn_env.terrain.kernels import bilinear_at_index
 
 
 @njit(cache=True)
@@ -338,11 +339,11 @@ def serial_search_reference(
     exclusion_m=200.0,
 ) -> AcquisitionResult:
     """Brute-force numpy twin of serial_search (bilinear; for tests on small grids)."""
-    from trn_env.navigators.acquisition_tracking.correlation import (
+    from ...terrain.kernels import bilinear_batch
+    from .correlation import (
         profile_cost_reference,
         replica_positions_reference,
     )
-    from trn_env.terrain.kernels import bilinear_batch
 
     heights, lat0, lon0, dlat, dlon = grid
     dn = hypothesis_grid(position_half_m, position_bin_m)

@@ -29,9 +29,10 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.navigators.acquisition_tracking.correlation import _map_height, replica_offsets, slope_sums
-from trn_env.terrain.queries.radar_altimeter import _ra_batch
-from trn_env.terrain.queries.shared import _ra_tables, _ra_workspace
+
+from ...terrain.queries.radar_altimeter import _ra_batch
+from ...terrain.queries.shared import _ra_tables, _ra_workspace
+from .correlation import _map_height, replica_offsets, slope_sums
 
 
 def _ray_work(dem) -> dict:

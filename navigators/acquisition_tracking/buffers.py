@@ -7,7 +7,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking.aiding import (
+
+from .aiding import (
     lsq_rate,
     sample_at,
 )

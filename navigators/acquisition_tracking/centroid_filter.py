@@ -13,22 +13,23 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking import filter_kernels
-from trn_env.navigators.acquisition_tracking.aiding import (
+
+from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from . import filter_kernels
+from .aiding import (
     ground_vector,
     speed_track,
     wrap_rad,
 )
-from trn_env.navigators.acquisition_tracking.buffers import (
+from .buffers import (
     _rot_diag,
 )
-from trn_env.navigators.acquisition_tracking.correlation import (
+from .correlation import (
     replica_offsets,
 )
-from trn_env.navigators.acquisition_tracking.profile import (
+from .profile import (
     Sample,
 )
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 
 class CentroidFilter:

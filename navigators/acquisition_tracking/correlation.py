@@ -32,7 +32,8 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.kernels import bicubic, bilinear, bilinear_with_gradient
+
+from ...terrain.kernels import bicubic, bilinear, bilinear_with_gradient
 
 COST_MAD = 0
 COST_PEARSON = 1

@@ -11,23 +11,24 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking import beam, filter_kernels
-from trn_env.navigators.acquisition_tracking.aiding import (
+
+from ..frames import SensorFrames
+from . import beam, filter_kernels
+from .aiding import (
     air_vector_sum,
     coordinated_turn_roll_rad,
     ground_vector,
     speed_track,
     wrap_rad,
 )
-from trn_env.navigators.acquisition_tracking.buffers import (
+from .buffers import (
     _TURN_RATE_WINDOW_S,
 )
-from trn_env.navigators.acquisition_tracking.profile import (
+from .profile import (
     Sample,
     geometric_height_m,
     plumb_height_m,
 )
-from trn_env.navigators.frames import SensorFrames
 
 
 class SensorIntake:

@@ -39,15 +39,16 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.navigators.acquisition_tracking.beam import replica_heights_at, replica_points
-from trn_env.navigators.acquisition_tracking.correlation import (
+
+from .beam import replica_heights_at, replica_points
+from .correlation import (
     COST_MSD,
     map_heights,
     profile_cost,
     replica_offsets,
 )
-from trn_env.navigators.acquisition_tracking.loop_records import LoopOutputs, LoopSettings, TransectRecord  # noqa: F401
-from trn_env.navigators.acquisition_tracking.tracking import DISC_THESIS
+from .loop_records import LoopOutputs, LoopSettings, TransectRecord  # noqa: F401
+from .tracking import DISC_THESIS
 
 MITIGATION_NONE = 0
 MITIGATION_NCS = 1

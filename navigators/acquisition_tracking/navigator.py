@@ -65,41 +65,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking import loop_kernel, tracking
-from trn_env.navigators.acquisition_tracking.acquire_step import AcquisitionStep
-from trn_env.navigators.acquisition_tracking.aiding import (
-    WindEstimator,
-    ground_vector,
-    speed_track,
-    wrap_rad,
-)
-from trn_env.navigators.acquisition_tracking.buffers import (
-    _det2,
-    _Offsets,
-    _quad2,
-    _rot_diag,
-    _Tail,
-)
-from trn_env.navigators.acquisition_tracking.centroid_filter import CentroidFilter
-from trn_env.navigators.acquisition_tracking.correlation import (
-    COSTS,
-    INTERPOLATIONS,
-)
-from trn_env.navigators.acquisition_tracking.intake import SensorIntake
-from trn_env.navigators.acquisition_tracking.integrity import (
-    OutputAverage,
-)
-from trn_env.navigators.acquisition_tracking.profile import (
-    Sample,
-    Transect,
-)
-from trn_env.navigators.acquisition_tracking.settings import CAPABILITIES, AcqTrackConfig
-from trn_env.navigators.acquisition_tracking.tracking_step import TrackingStep
-from trn_env.navigators.core.maps import load_map
-from trn_env.navigators.frames import SensorFrames, frame_defects
-from trn_env.navigators.integrity import protection_level as pl
-from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
-from trn_env.navigators.protocol import (
+
+from ..core.maps import load_map
+from ..frames import SensorFrames, frame_defects
+from ..integrity import protection_level as pl
+from ..integrity.innovation_monitor import InnovationMonitor
+from ..protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -109,6 +80,36 @@ from trn_env.navigators.protocol import (
     Estimate,
     Health,
 )
+from . import loop_kernel, tracking
+from .acquire_step import AcquisitionStep
+from .aiding import (
+    WindEstimator,
+    ground_vector,
+    speed_track,
+    wrap_rad,
+)
+from .buffers import (
+    _det2,
+    _Offsets,
+    _quad2,
+    _rot_diag,
+    _Tail,
+)
+from .centroid_filter import CentroidFilter
+from .correlation import (
+    COSTS,
+    INTERPOLATIONS,
+)
+from .intake import SensorIntake
+from .integrity import (
+    OutputAverage,
+)
+from .profile import (
+    Sample,
+    Transect,
+)
+from .settings import CAPABILITIES, AcqTrackConfig
+from .tracking_step import TrackingStep
 
 # the sensors whose NaN-but-valid samples and gaps update() counts in its Health
 _DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu")   # GNSS outages are no defect
@@ -137,7 +138,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._footprint = None
         self._return_model = cfg.replica_model == "return"
         if cfg.replica_model == "footprint":
-            from trn_env.navigators.acquisition_tracking.footprint import FootprintMaps
+            from .footprint import FootprintMaps
 
             self._footprint = FootprintMaps(dem, cfg.beamwidth_deg)
         sn, se = dem.spacing_m
@@ -191,7 +192,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._bias_walk2 = float(cfg.aiding_bias_walk_mps_per_sqrt_s) ** 2
         self.ins = None
         if cfg.aiding and cfg.aiding_source == "ins":
-            from trn_env.navigators.inertial.strapdown import StrapdownIns
+            from ..inertial.strapdown import StrapdownIns
 
             self.ins = StrapdownIns("j2", 30.0, "interval")
         # estimate()'s covariance entries that are constant (baro bias, vertical speed, attitude)

@@ -18,7 +18,8 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from trn_env.navigators.measurements.baro import geometric_height_m  # noqa: F401 (re-exported)
+
+from ..measurements.baro import geometric_height_m  # noqa: F401 (re-exported)
 
 
 def plumb_height_m(range_m, roll_rad, pitch_rad, beamwidth_deg: float):

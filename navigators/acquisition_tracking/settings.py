@@ -45,9 +45,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from trn_env.navigators.acquisition_tracking.correlation import COSTS, INTERPOLATIONS
-from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
-from trn_env.navigators.core.settings import Settings, setting
+from ..core.capabilities import Capabilities, SensorNeeds
+from ..core.settings import Settings, setting
+from .correlation import COSTS, INTERPOLATIONS
 
 AIDING_SOURCES = ("air_data", "ins")
 # Defaults that depend on aiding_source (a setting given as null / None takes these):

@@ -11,11 +11,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.acquisition_tracking import beam, filter_kernels, loop_kernel, tracking
-from trn_env.navigators.acquisition_tracking.aiding import (
+
+from . import beam, filter_kernels, loop_kernel, tracking
+from .aiding import (
     wrap_rad,
 )
-from trn_env.navigators.acquisition_tracking.buffers import (
+from .buffers import (
     _MAD_VARIANCE_FACTOR,
     _inv2,
     _mean,
@@ -24,12 +25,12 @@ from trn_env.navigators.acquisition_tracking.buffers import (
     _quad2,
     _rot_diag,
 )
-from trn_env.navigators.acquisition_tracking.integrity import (
+from .integrity import (
     a_priori_sigma_m,
     false_lock,
     terrain_snr_db,
 )
-from trn_env.navigators.acquisition_tracking.profile import (
+from .profile import (
     Sample,
 )
 

@@ -13,7 +13,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.kernels import bicubic, bilinear
+
+from ...terrain.kernels import bicubic, bilinear
 
 
 class MapRecord(NamedTuple):
@@ -51,7 +52,7 @@ def load_map(dem, who: str = "the navigator"):
     if dem is None:
         raise ValueError(f"dem: the navigator's terrain map is required by {who}")
     if isinstance(dem, str):
-        from trn_env import terrain
+        from ... import terrain
 
         try:
             dem = terrain.load(dem)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor, Verdict
+from ..integrity.innovation_monitor import InnovationMonitor, Verdict
 
 
 def capped_nis(monitor: InnovationMonitor, nis: float, dof: int) -> float:

@@ -9,8 +9,8 @@ resampling    systematic resampling (numba) with a required Generator, effective
 _pf_kernels   the particle filter's propagation kernel
 """
 
-from trn_env.navigators.filters.ins_trn_ekf import InsTrnNavigator, initial_covariance
-from trn_env.navigators.filters.pf import ParticleFilter
-from trn_env.navigators.filters.pmf import PointMassFilter
+from .ins_trn_ekf import InsTrnNavigator, initial_covariance
+from .pf import ParticleFilter
+from .pmf import PointMassFilter
 
 __all__ = ["InsTrnNavigator", "ParticleFilter", "PointMassFilter", "initial_covariance"]

@@ -17,9 +17,10 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.navigators.inertial.strapdown import propagate_chunk, quat_to_dcm
-from trn_env.navigators.measurements.baro import geometric_height_kernel
-from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
+
+from ...terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
+from ..inertial.strapdown import propagate_chunk, quat_to_dcm
+from ..measurements.baro import geometric_height_kernel
 
 N_ERR = 13
 G0 = 9.80665

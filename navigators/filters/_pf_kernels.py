@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 from numba import njit
-from trn_env.navigators.core.maps import map_height
+
+from ..core.maps import map_height
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

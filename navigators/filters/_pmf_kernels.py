@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.navigators.core.maps import map_height
-from trn_env.navigators.measurements.terrain_models import LOG_2PI
+
+from ..core.maps import map_height
+from ..measurements.terrain_models import LOG_2PI
 
 NEGLIGIBLE = -60.0   # log-weight below which a cell's weight (< 1e-26) is left out of sums of weights
 

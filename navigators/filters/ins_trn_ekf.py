@@ -45,22 +45,16 @@ import math
 from collections import deque
 
 import numpy as np
-import trn_env.navigators.filters._ekf_kernels as kern
-from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
-from trn_env.navigators.core.linalg import is_positive_definite
-from trn_env.navigators.core.maps import load_map
-from trn_env.navigators.core.recovery import IntegrityRecovery
-from trn_env.navigators.filters.ins_trn_gnss import InsTrnGnss
-from trn_env.navigators.filters.ins_trn_propagation import InsTrnPropagation
-from trn_env.navigators.filters.ins_trn_settings import (
-    INS_CAPABILITIES,
-    InsTrnSettings,
-)
-from trn_env.navigators.frames import SensorFrames, imu_gap_s
-from trn_env.navigators.inertial.strapdown import StrapdownIns
-from trn_env.navigators.integrity import protection_level as pl
-from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
-from trn_env.navigators.protocol import (
+
+from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
+from ..core.linalg import is_positive_definite
+from ..core.maps import load_map
+from ..core.recovery import IntegrityRecovery
+from ..frames import SensorFrames, imu_gap_s
+from ..inertial.strapdown import StrapdownIns
+from ..integrity import protection_level as pl
+from ..integrity.innovation_monitor import InnovationMonitor
+from ..protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -70,7 +64,14 @@ from trn_env.navigators.protocol import (
     Estimate,
     Health,
 )
-from trn_env.navigators.tercom.mad import TercomBatch, TercomFix, correlate
+from ..tercom.mad import TercomBatch, TercomFix, correlate
+from . import _ekf_kernels as kern
+from .ins_trn_gnss import InsTrnGnss
+from .ins_trn_propagation import InsTrnPropagation
+from .ins_trn_settings import (
+    INS_CAPABILITIES,
+    InsTrnSettings,
+)
 
 FIX_HISTORY = 64      # TERCOM fixes kept in `fixes` (the newest)
 

@@ -13,10 +13,11 @@ import copy
 import math
 
 import numpy as np
-from trn_env.navigators.core.error_states import ACC_BIAS, ATT, BGZ, GNSS_STATES, N_EKF13, POS, VEL
-from trn_env.navigators.core.linalg import is_positive_definite
-from trn_env.navigators.frames import SensorFrames
-from trn_env.navigators.measurements import gnss as gnss_model
+
+from ..core.error_states import ACC_BIAS, ATT, BGZ, GNSS_STATES, N_EKF13, POS, VEL
+from ..core.linalg import is_positive_definite
+from ..frames import SensorFrames
+from ..measurements import gnss as gnss_model
 
 
 class InsTrnGnss:

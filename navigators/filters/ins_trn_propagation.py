@@ -15,13 +15,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trn_env.navigators.filters._ekf_kernels as kern
-from trn_env.navigators.core.error_states import ACC_BIAS, BGZ, N_EKF13, PSID, PSIE, PSIN, VEL
-from trn_env.navigators.core.imu_spec import ImuSpec, consistency_warning, equivalent_walk_density
-from trn_env.navigators.frames import SensorFrames
-from trn_env.navigators.inertial.strapdown import GRAVITY_MODELS, quat_to_dcm
-from trn_env.navigators.measurements.baro import geometric_height_m
-from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
+
+from ..core.error_states import ACC_BIAS, BGZ, N_EKF13, PSID, PSIE, PSIN, VEL
+from ..core.imu_spec import ImuSpec, consistency_warning, equivalent_walk_density
+from ..frames import SensorFrames
+from ..inertial.strapdown import GRAVITY_MODELS, quat_to_dcm
+from ..measurements.baro import geometric_height_m
+from ..measurements.ira_closest_point import closest_point_ned
+from . import _ekf_kernels as kern
 
 _EMPTY = np.zeros(0)
 _EMPTY_BOOL = np.zeros(0, np.bool_)

@@ -39,25 +39,26 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.core.imu_spec import (
+
+from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
     consistency_warning,
     equivalent_walk_density,
     rss,
 )
-from trn_env.navigators.core.resampling import systematic_kernel
-from trn_env.navigators.filters._pf_kernels import map_heights_interp, propagate_particles
-from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
-from trn_env.navigators.filters.terrain_filter_settings import PF_CAPABILITIES, PfSettings
-from trn_env.navigators.inertial.strapdown import quat_to_dcm
-from trn_env.navigators.measurements.terrain_models import (
+from ..core.resampling import systematic_kernel
+from ..inertial.strapdown import quat_to_dcm
+from ..measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
     radii_m,
     robust_log_likelihood,
 )
-from trn_env.navigators.protocol import EXTRA_ESS
+from ..protocol import EXTRA_ESS
+from ._pf_kernels import map_heights_interp, propagate_particles
+from .terrain_filter import InsRiddenFilter
+from .terrain_filter_settings import PF_CAPABILITIES, PfSettings
 
 PF_MEMORY_S = 120.0  # memory over which the error sources the particles do not carry are matched
 N_STATE = 6

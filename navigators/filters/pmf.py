@@ -60,18 +60,19 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trn_env.navigators.filters._pmf_kernels as kern
-from trn_env.navigators.core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
-from trn_env.navigators.filters.terrain_filter import InsRiddenFilter
-from trn_env.navigators.filters.terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
-from trn_env.navigators.inertial.strapdown import quat_to_dcm
-from trn_env.navigators.integrity import protection_level as pl
-from trn_env.navigators.measurements.terrain_models import (
+
+from ..core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
+from ..inertial.strapdown import quat_to_dcm
+from ..integrity import protection_level as pl
+from ..measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
     radii_m,
     robust_log_likelihood,
 )
+from . import _pmf_kernels as kern
+from .terrain_filter import InsRiddenFilter
+from .terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
 
 G0 = 9.80665
 PMF_MEMORY_S = 240.0        # the memory over which carried-as-constant error rates are matched (imu_spec)

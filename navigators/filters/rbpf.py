@@ -70,24 +70,25 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trn_env.navigators.filters._rbpf_kernels as kern
-from trn_env.navigators.core.maps import load_map
-from trn_env.navigators.core.recovery import IntegrityRecovery
-from trn_env.navigators.core.settings import SettingsError
-from trn_env.navigators.filters.rbpf_cloud import RbpfCloud
-from trn_env.navigators.filters.rbpf_ira_update import RbpfIraUpdate
-from trn_env.navigators.filters.rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
-from trn_env.navigators.frames import SensorFrames, imu_gap_s
-from trn_env.navigators.inertial.error_model_15 import transition_over_history
-from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
-from trn_env.navigators.integrity import protection_level as pl
-from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
-from trn_env.navigators.measurements import ira_seed002 as ira_model
-from trn_env.navigators.protocol import (
+
+from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ..core.maps import load_map
+from ..core.recovery import IntegrityRecovery
+from ..core.settings import SettingsError
+from ..frames import SensorFrames, imu_gap_s
+from ..inertial.error_model_15 import transition_over_history
+from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from ..integrity import protection_level as pl
+from ..integrity.innovation_monitor import InnovationMonitor
+from ..measurements import ira_seed002 as ira_model
+from ..protocol import (
     Estimate,
     Health,
 )
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from . import _rbpf_kernels as kern
+from .rbpf_cloud import RbpfCloud
+from .rbpf_ira_update import RbpfIraUpdate
+from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
 
 _BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
 

@@ -12,11 +12,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trn_env.navigators.filters._rbpf_kernels as kern
-from trn_env.navigators.core.resampling import systematic_indices_u0
-from trn_env.navigators.protocol import (
+
+from ..core.resampling import systematic_indices_u0
+from ..protocol import (
     EXTRA_ESS,
 )
+from . import _rbpf_kernels as kern
 
 
 class RbpfCloud:

@@ -17,10 +17,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trn_env.navigators.filters._rbpf_kernels as kern
 from scipy.special import erfc as _erfc
-from trn_env.navigators.measurements import ira_seed002 as ira_model
-from trn_env.navigators.protocol import (
+
+from ..measurements import ira_seed002 as ira_model
+from ..protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -28,6 +28,7 @@ from trn_env.navigators.protocol import (
     EXTRA_NIS,
     EXTRA_NIS_DOF,
 )
+from . import _rbpf_kernels as kern
 
 OUTLIER_SIGMA = 10.0  # an IRA sample farther than this from every particle's prediction is rejected
 REINIT_AFTER_REJECTS = 3  # consecutive rejections that re-initialise the cloud around the INS

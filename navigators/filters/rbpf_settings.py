@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
-from trn_env.navigators.core.settings import Settings, setting
+from ..core.capabilities import Capabilities, SensorNeeds
+from ..core.settings import Settings, setting
 
 MAX_PARTICLES = 200_000       # 12 x 12 covariance per particle: 230 MB at this count
 INV_SQRT2 = 0.7071067811865476

@@ -21,18 +21,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.navigators.core.maps import MapRecord, load_map, map_record
-from trn_env.navigators.core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
-from trn_env.navigators.filters.terrain_filter_settings import (
-    TerrainFilterSettings,
-)
-from trn_env.navigators.frames import SensorFrames, imu_gap_s
-from trn_env.navigators.inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
-from trn_env.navigators.integrity import protection_level as pl
-from trn_env.navigators.integrity.innovation_monitor import InnovationMonitor
-from trn_env.navigators.measurements.baro import geometric_height_m
-from trn_env.navigators.measurements.terrain_models import IRA_FORMULA_CODES, radii_m
-from trn_env.navigators.protocol import (
+
+from ..core.maps import MapRecord, load_map, map_record
+from ..core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
+from ..frames import SensorFrames, imu_gap_s
+from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
+from ..integrity import protection_level as pl
+from ..integrity.innovation_monitor import InnovationMonitor
+from ..measurements.baro import geometric_height_m
+from ..measurements.terrain_models import IRA_FORMULA_CODES, radii_m
+from ..protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
     EXTRA_LOG_LIKELIHOOD,
@@ -41,6 +39,9 @@ from trn_env.navigators.protocol import (
     EXTRA_NIS_DOF,
     Estimate,
     Health,
+)
+from .terrain_filter_settings import (
+    TerrainFilterSettings,
 )
 
 G0 = 9.80665

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trn_env.navigators.core.capabilities import Capabilities, SensorNeeds
-from trn_env.navigators.core.settings import Settings, setting
+from ..core.capabilities import Capabilities, SensorNeeds
+from ..core.settings import Settings, setting
 
 G0 = 9.80665
 AIDING = ("ira", "radar_altimeter", "both")

@@ -3,7 +3,7 @@
 strapdown  `StrapdownIns` (NED mechanisation, WGS84 + J2 gravity, baro-damped vertical channel)
 """
 
-from trn_env.navigators.inertial.strapdown import (
+from .strapdown import (
     GRAVITY_MODELS,
     StrapdownIns,
     gravity_ned,

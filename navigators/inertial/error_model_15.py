@@ -27,8 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from trn_env.navigators.inertial.strapdown import gravity_ned, quat_to_dcm
-from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
+
+from ...terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
+from .strapdown import gravity_ned, quat_to_dcm
 
 N_ERR15 = 15
 I_POS, I_VEL, I_ATT, I_BA, I_BG = 0, 3, 6, 9, 12

@@ -36,7 +36,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2, WGS84_F
+
+from ...terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2, WGS84_F
 
 GRAVITY_MODELS = {"somigliana": 0, "j2": 1}
 
@@ -366,7 +367,7 @@ class StrapdownIns:
         pitch_rad: float,
         yaw_rad: float,
     ) -> None:
-        from trn_env.terrain.geodesy import euler_to_C_bn
+        from ...terrain.geodesy import euler_to_C_bn
 
         self.state = np.empty(N_STATE)
         self.state[:3] = (lat_rad, lon_rad, h_m)
@@ -435,7 +436,7 @@ class StrapdownIns:
     def correct(self, d_ned_m=None, dv_ned_mps=None, dpsi_ned_rad=None) -> None:
         """Subtract estimated errors: position error (m, NED), velocity error (m/s), attitude error (rad,
         small rotation of the computed navigation frame: C_true = (I + [psi x]) C_computed)."""
-        from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+        from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
         lat, h = self.state[0], self.state[2]
         if d_ned_m is not None:

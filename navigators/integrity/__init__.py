@@ -4,6 +4,6 @@ dem_monitor          `DemIntegrityMonitor`: the terrain-database integrity monit
 innovation_monitor   `InnovationMonitor`: sliding-window normalised innovation statistic for any navigator
 """
 
-from trn_env.navigators.integrity.dem_monitor import DemIntegrityMonitor, DemMonitorConfig, MonitorOutput
+from .dem_monitor import DemIntegrityMonitor, DemMonitorConfig, MonitorOutput
 
 __all__ = ["DemIntegrityMonitor", "DemMonitorConfig", "MonitorOutput"]

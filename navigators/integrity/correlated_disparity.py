@@ -103,7 +103,7 @@ def window_covariance(d_m: np.ndarray, sig_r: float, corr_len_m: float, function
                       white_var: float | np.ndarray = 0.0, sig_b: float = 0.0,
                       common_sigma: float | np.ndarray = 0.0) -> np.ndarray:
     """Sigma of the module docstring for epochs at along-track positions d_m (m), numpy (for studies)."""
-    from trn_env.terrain.map_error import correlation
+    from ...terrain.map_error import correlation
     d = np.asarray(d_m, float)
     D = np.abs(d[:, None] - d[None, :])
     c = np.broadcast_to(np.asarray(common_sigma, float), d.shape)

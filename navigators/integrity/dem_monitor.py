@@ -59,10 +59,16 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.navigators.core.maps import load_map
-from trn_env.navigators.frames import SensorFrames
-from trn_env.navigators.integrity.correlated_disparity import whitened_statistic
-from trn_env.navigators.integrity.dem_monitor_settings import (  # noqa: F401 - re-exported
+
+from ...terrain.geodesy import WGS84_A_M, WGS84_E2
+from ...terrain.kernels import bilinear
+from ...terrain.queries.radar_altimeter import _ra_batch
+from ...terrain.queries.shared import _ra_tables, _ra_workspace
+from ..core.maps import load_map
+from ..frames import SensorFrames
+from ..protocol import Estimate
+from .correlated_disparity import whitened_statistic
+from .dem_monitor_settings import (  # noqa: F401 - re-exported
     CAPABILITIES,
     CORRELATION_CODES,
     DEFAULT_N,
@@ -70,11 +76,6 @@ from trn_env.navigators.integrity.dem_monitor_settings import (  # noqa: F401 - 
     VARIANTS,
     DemMonitorConfig,
 )
-from trn_env.navigators.protocol import Estimate
-from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
-from trn_env.terrain.kernels import bilinear
-from trn_env.terrain.queries.radar_altimeter import _ra_batch
-from trn_env.terrain.queries.shared import _ra_tables, _ra_workspace
 
 SOURCE_GNSS = 0
 SOURCE_NAVIGATOR = 1
@@ -87,7 +88,7 @@ DTED1_SUCCESSIVE_SIGMA_M = 13.0     # seed 003 section III: successive dispariti
 def class_sigma_m(map_class: str) -> float:
     """Disparity sigma (m) of a map error class: seed 003's 18.9 m for DTED-1, else LE90 / 1.6449 of
     terrain.map_error.ACCURACY_CLASSES."""
-    from trn_env.terrain.map_error import ACCURACY_CLASSES
+    from ...terrain.map_error import ACCURACY_CLASSES
     key = str(map_class).strip().lower()
     if key == "dted1":
         return DTED1_DISPARITY_SIGMA_M
@@ -131,7 +132,7 @@ def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: floa
     of the generalised chi-square T_KF is under no fault with white disparities (its quadratic form from
     correlated_disparity.kalman_reading(reading): "rw_posterior" for variant "kalman", "innovation" for
     "kalman_innovation"; the filter in steady state; Imhof's integral takes seconds, so it is cached)."""
-    from trn_env.navigators.integrity.correlated_disparity import gchi2_isf, kalman_reading
+    from .correlated_disparity import gchi2_isf, kalman_reading
     M = kalman_reading(reading, int(n), 150, float(process_ratio))
     return gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))
 
@@ -456,7 +457,7 @@ class DemIntegrityMonitor:
         dem = load_map(dem, "the DEM integrity monitor")
         self.config = self.settings = DemMonitorConfig.build(settings, overrides)
         if self.config.correlation_length_m > 0.0:
-            from trn_env.terrain.map_error import check_fits
+            from ...terrain.map_error import check_fits
             check_fits(dem, self.config.correlation_length_m)
         self.dem = dem
         c = self.config
@@ -569,8 +570,8 @@ def replay_log(monitor: DemIntegrityMonitor, log: dict, period_s: float = 1.0) -
     yaw_rad, cov}). The samples are handed over in intervals (a, b] of period_s (the closed loop's update
     intervals at its default 1 Hz), each with the first estimate at or after b; returns `concatenate` of
     the outputs."""
-    from trn_env.navigators.frames import GnssFrame, RadarAltimeterFrame
-    from trn_env.navigators.protocol import Health
+    from ..frames import GnssFrame, RadarAltimeterFrame
+    from ..protocol import Health
     monitor.reset()
     t_ra = np.asarray(log["sensor_radar_altimeter_t_s"], float)
     has_g = "sensor_gnss_t_s" in log

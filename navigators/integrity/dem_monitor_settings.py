@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trn_env.navigators.core.capabilities import Capabilities
-from trn_env.navigators.core.settings import Settings, setting
+from ..core.capabilities import Capabilities
+from ..core.settings import Settings, setting
 
 DEFAULT_N = 50            # seed 003 section III: N = 50 consecutive measurements
 DEFAULT_THRESHOLD = 96.0  # seed 003 section III: "the statistic threshold is found to be 96"
@@ -54,7 +54,7 @@ class DemMonitorConfig(Settings):
                                        ge=0.0, le=1.0)
 
     def check(self) -> list[tuple[str, str]]:
-        from trn_env.navigators.integrity.dem_monitor import class_sigma_m
+        from .dem_monitor import class_sigma_m
         problems = []
         if self.threshold is not None and self.false_alarm_probability is not None:
             problems.append(("false_alarm_probability", "give at most one of threshold and "
@@ -67,12 +67,12 @@ class DemMonitorConfig(Settings):
 
     @property
     def map_sigma_m(self) -> float:
-        from trn_env.navigators.integrity.dem_monitor import class_sigma_m
+        from .dem_monitor import class_sigma_m
         return float(self.sigma_m) if self.sigma_m is not None else class_sigma_m(self.map_class)
 
     @property
     def effective_threshold(self) -> float:
-        from trn_env.navigators.integrity.dem_monitor import chi2_threshold, kalman_threshold
+        from .dem_monitor import chi2_threshold, kalman_threshold
         if self.threshold is not None:
             return float(self.threshold)
         if self.false_alarm_probability is None:

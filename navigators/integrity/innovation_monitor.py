@@ -32,7 +32,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-from trn_env.navigators.protocol import EXTRA_INTEGRITY_BAND, EXTRA_INTEGRITY_DOF, EXTRA_INTEGRITY_STATISTIC
+from ..protocol import EXTRA_INTEGRITY_BAND, EXTRA_INTEGRITY_DOF, EXTRA_INTEGRITY_STATISTIC
 
 _BANDS: dict[tuple[float, int], tuple[float, float]] = {}   # (alpha, dof) -> band, shared
 

@@ -11,12 +11,12 @@ terrain_models     the same over many hypotheses of one epoch (numba), map heigh
                    the radar altimeter's shortest in-cone return, the heavy-tailed terrain likelihood
 """
 
-from trn_env.navigators.measurements.ira_closest_point import (
+from .ira_closest_point import (
     FORMULAS,
     closest_point_ned,
     effective_look_angle,
 )
-from trn_env.navigators.measurements.terrain_models import (
+from .terrain_models import (
     IRA_FORMULA_CODES,
     ira_points_batch,
     map_heights_at_offsets,

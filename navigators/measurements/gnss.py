@@ -12,7 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
+from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 
 def position_velocity(ins_state: np.ndarray, lat_g: float, lon_g: float, v_g_ned, sigma_h_m: float,

@@ -32,7 +32,8 @@ Departures from the printed equations (documented, deliberate):
 from __future__ import annotations
 
 import numpy as np
-from trn_env.terrain.geodesy import euler_to_C_bn
+
+from ...terrain.geodesy import euler_to_C_bn
 
 FORMULAS = ("simple", "attitude", "conventional", "proposed")
 

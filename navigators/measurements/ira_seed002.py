@@ -42,8 +42,9 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
-from trn_env.terrain.kernels import bilinear_with_gradient
+
+from ...terrain.geodesy import WGS84_A_M, WGS84_E2
+from ...terrain.kernels import bilinear_with_gradient
 
 _GOLD = 0.6180339887498949
 
@@ -468,7 +469,7 @@ def interpolation_sigma_m(dem) -> float:
     hit = _INTERP_CACHE.get(key)
     if hit is not None:
         return hit
-    from trn_env.terrain.refine import fit_dem_spectrum
+    from ...terrain.refine import fit_dem_spectrum
 
     try:
         c, beta, f_n = fit_dem_spectrum(dem)
@@ -517,8 +518,8 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n
     hit = _CALIBRATION_CACHE.get(key)
     if hit is not None:
         return hit
-    from trn_env.terrain.geodesy import euler_to_C_bn
-    from trn_env.terrain.refine import refine
+    from ...terrain.geodesy import euler_to_C_bn
+    from ...terrain.refine import refine
 
     sigma_h = interpolation_sigma_m(dem)
     la0, la1, lo0, lo1 = dem.bounds

@@ -18,7 +18,8 @@ hundreds of metres of range. `compensate_frames` returns new frames; the input i
 from __future__ import annotations
 
 import numpy as np
-from trn_env.navigators.frames import IraFrame, RadarAltimeterFrame, SensorFrames
+
+from ..frames import IraFrame, RadarAltimeterFrame, SensorFrames
 
 
 def _arm(arms: dict, name: str) -> np.ndarray | None:

@@ -29,8 +29,9 @@ import math
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from trn_env.terrain.kernels import bilinear
+
+from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ...terrain.kernels import bilinear
 
 IRA_FORMULA_CODES = {"conventional": 0, "proposed": 1}
 LOG_2PI = math.log(2.0 * math.pi)
@@ -277,7 +278,7 @@ def robust_log_likelihood(residual_m, var_m2, outlier_prob, log_outlier_density,
 def ira_points_reference(range_m: float, theta_rad: float, C_bn: np.ndarray, v_ned: np.ndarray,
                          dpsi: np.ndarray, dv_ne: np.ndarray, formula: str) -> np.ndarray:
     """ira_points_batch through the single-query formulas (navigators.measurements.closest_point_ned)."""
-    from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
+    from .ira_closest_point import closest_point_ned
     m = max(len(dpsi), len(dv_ne))
     dpsi = np.broadcast_to(dpsi, (m,))
     dv = np.broadcast_to(dv_ne, (m, 2))

@@ -3,7 +3,7 @@
 mad  `TercomBatch`, `TercomFix`, `correlate`, `mad_surface`, `MadAccumulator`, `TERCOM_THREADS`
 """
 
-from trn_env.navigators.tercom.mad import (
+from .mad import (
     TERCOM_THREADS,
     MadAccumulator,
     TercomBatch,

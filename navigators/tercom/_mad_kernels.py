@@ -16,7 +16,8 @@ import threading
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.kernels import _EDGE, bilinear
+
+from ...terrain.kernels import _EDGE, bilinear
 
 _CHUNK = 8  # samples whose tables _mad_surface_void_free builds at once (their rows stay in L1)
 # Threads of one MAD surface: a fix is a burst of work (~10 ms for the default scenario's), and in the

@@ -19,7 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from trn_env.navigators.tercom._mad_kernels import (  # noqa: F401  (re-exported: tests, bench)
+
+from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ._mad_kernels import (  # noqa: F401  (re-exported: tests, bench)
     PARALLEL_MIN_LOOKUPS,
     TERCOM_THREADS,
     _block_void_free,
@@ -31,7 +33,6 @@ from trn_env.navigators.tercom._mad_kernels import (  # noqa: F401  (re-exported
     mad_surface,
     mad_surface_reference,
 )
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 
 @dataclass

@@ -14,10 +14,10 @@ independent of the other queries in its call unless ira_return's warm_start chai
 `from terrain import queries; queries.ira_return(dem, ...)`.
 """
 
-from trn_env.terrain.queries.ira import COARSE_STEP_M, _ira_box_max, ira_return
-from trn_env.terrain.queries.radar_altimeter import N_SAMP, _cell_min, radar_altimeter_return
-from trn_env.terrain.queries.raycast import ray_cast
-from trn_env.terrain.queries.shared import (
+from .ira import COARSE_STEP_M, _ira_box_max, ira_return
+from .radar_altimeter import N_SAMP, _cell_min, radar_altimeter_return
+from .raycast import ray_cast
+from .shared import (
     BLOCK_POSTS,
     IRA_BLOCK_POSTS,
     IRA_HEIGHT_BLOCK_CELLS,

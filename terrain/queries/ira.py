@@ -41,8 +41,9 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.kernels import bilinear
-from trn_env.terrain.queries.ira_bounds import (  # noqa: F401
+
+from ..kernels import bilinear
+from .ira_bounds import (  # noqa: F401
     _ira_box_max,
     _ira_cell_slope_twist,
     _ira_eval,
@@ -52,7 +53,7 @@ from trn_env.terrain.queries.ira_bounds import (  # noqa: F401
     _sort_candidates,
     _zd_point,
 )
-from trn_env.terrain.queries.shared import (
+from .shared import (
     _INF,
     IRA_HEIGHT_BLOCK_CELLS,
     TerrainReturn,

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.kernels import bilinear
-from trn_env.terrain.queries.shared import (
+
+from ..kernels import bilinear
+from .shared import (
     _INF,
     IRA_BLOCK_POSTS,
     _ned,

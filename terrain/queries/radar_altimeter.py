@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.kernels import bilinear
-from trn_env.terrain.queries.raycast import _ray_hit
-from trn_env.terrain.queries.shared import (
+
+from ..kernels import bilinear
+from .raycast import _ray_hit
+from .shared import (
     _INF,
     TerrainReturn,
     _check_positive,

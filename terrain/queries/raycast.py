@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from trn_env.terrain.kernels import bilinear
-from trn_env.terrain.queries.shared import (
+
+from ..kernels import bilinear
+from .shared import (
     TerrainReturn,
     _cell_m,
     _check_positive,

@@ -33,8 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from trn_env.terrain import geodesy, kernels
-from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
+
+from .. import geodesy, kernels
+from ..geodesy import WGS84_A_M, WGS84_E2
 
 _INF = np.inf
 BLOCK_POSTS = 8  # block size of the height bounds used to prune the searches
