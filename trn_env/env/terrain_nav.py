@@ -244,7 +244,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  min_goal_distance_m: float = 5000.0, shaping_gamma: float = 1.0,
                  action_mode: str = "turn", bearing_offset_max_deg: float = 90.0,
                  sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0,
-                 guidance_rate_hz: float | None = None, pipeline: bool = False):
+                 guidance_rate_hz: float | None = None, pipeline: bool = False,
+                 flight_dt_s: float | None = None):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -253,7 +254,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
                           bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m,
-                          guidance_rate_hz, pipeline)
+                          guidance_rate_hz, pipeline, flight_dt_s)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -294,7 +295,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if isinstance(scenario, Scenario) and navigator is not None:
             sc = sc.with_overrides(navigator=navigator)
         sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
-        sc = _with_guidance_rate(sc, guidance_rate_hz)
+        sc = _with_rates(sc, guidance_rate_hz, flight_dt_s)
         if not isinstance(pipeline, bool):
             raise ValueError(f"pipeline must be a bool, got {pipeline!r}")
         self.pipeline = pipeline
@@ -677,25 +678,43 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._needs_reset = True
 
 
-def _with_guidance_rate(sc: Scenario, guidance_rate_hz: float | None) -> Scenario:
-    """The scenario with `[guidance] rate_hz` set to the env's guidance rate: None = the navigator's update
-    rate (one command per update: the pursuit action re-aims from each new estimate, and every other action
-    holds its command for the whole decision), re-validated so that a rate the loop cannot fly (not a whole
-    multiple of the navigator's rate, or above the flight's step rate) is a ValueError naming the field."""
+def _with_rates(sc: Scenario, guidance_rate_hz: float | None, flight_dt_s: float | None) -> Scenario:
+    """The scenario with `[guidance] rate_hz` set to the env's guidance rate (None = the navigator's update
+    rate: one command per update, so the pursuit action re-aims from each new estimate and every other
+    action holds its command for the whole decision) and, given `flight_dt_s`, JSBSim's step
+    `[aircraft] dt_s` replaced, the IMU's rate lowered to the step rate when it was faster (an integrating
+    IMU: its samples are the interval means of the truth rows, sensors.imu); re-validated, so that a rate
+    the loop cannot fly (a guidance rate not a whole multiple of the navigator's, a step that does not
+    divide the guidance tick, another sensor faster than the step) is a ValueError naming the field."""
     from trn_env.scenario.loading import validate
 
     d = sc.data
     rate = float(d["navigator"]["rate_hz"]) if guidance_rate_hz is None else guidance_rate_hz
     if guidance_rate_hz is not None:
         _check_number("guidance_rate_hz", guidance_rate_hz, positive=True)
-    if float(d["guidance"]["rate_hz"]) == float(rate):
+    if flight_dt_s is not None:
+        _check_number("flight_dt_s", flight_dt_s, positive=True)
+        if flight_dt_s > 0.05:
+            raise ValueError(f"flight_dt_s must be within (0, 0.05] s, got {flight_dt_s!r}")
+    same_dt = flight_dt_s is None or float(d["aircraft"]["dt_s"]) == float(flight_dt_s)
+    if float(d["guidance"]["rate_hz"]) == float(rate) and same_dt:
         return sc
     data = copy.deepcopy(d)
     data["guidance"]["rate_hz"] = float(rate)
+    what = f"guidance_rate_hz = {rate!r}"
+    if not same_dt:
+        data["aircraft"]["dt_s"] = float(flight_dt_s)
+        imu = data.get("sensors", {}).get("imu")
+        if isinstance(imu, dict):
+            from trn_env.sensors.imu import ImuConfig
+            imu_rate = float(imu.get("rate_hz", ImuConfig().rate_hz))
+            if imu_rate * float(flight_dt_s) > 1.0 + 1e-9:
+                imu["rate_hz"] = 1.0 / float(flight_dt_s)
+        what += f", flight_dt_s = {flight_dt_s!r}"
     try:
         return validate(data, source=sc.source)
     except ValueError as err:
-        raise ValueError(f"guidance_rate_hz = {rate!r}: {err}") from None
+        raise ValueError(f"{what}: {err}") from None
 
 
 def _check_number(name: str, v, positive: bool) -> None:
