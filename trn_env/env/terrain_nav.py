@@ -202,7 +202,14 @@ class TerrainNavEnv(gym.Env, EzPickle):
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
     bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0, guidance_rate_hz=None,
-    pipeline=False)`.
+    pipeline=False, flight_dt_s=None)`.
+    `flight_dt_s`: JSBSim's integration step (s, at most 0.05; None = the scenario's `[aircraft] dt_s`,
+    0.01 in the built-in scenarios). The IMU's rate is lowered to the step rate when it was faster (an
+    integrating IMU: each sample is the mean over its interval of the truth rows); any other sensor faster
+    than the step, or a step that does not divide the guidance tick, is a ValueError naming `flight_dt_s`.
+    The route task (`trn_env.env.route_task`) flies 0.02 s: half the JSBSim work of 0.01 s; JSBSim's step
+    error is first order, so its trajectory departs about three times as far from a 0.005 s one as
+    0.01 s's does (tens of metres in a climb's transient; docs/validation/route_task.md).
     `guidance_rate_hz`: how often guidance re-computes the autopilot targets from the (dead-reckoned)
     estimate; None = once per navigator update (the scenario's `[guidance] rate_hz` is replaced; it must be
     a whole multiple of the navigator's rate). The autopilot itself runs inside JSBSim at every step.
@@ -216,6 +223,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (JSBSim's step): `flight_dt_s`.
     - v0 (rates matched to the decision): guidance re-computes the targets once per navigator update
       instead of at the scenario's 10 Hz (`guidance_rate_hz`); `pipeline`.
     - v0 (coarse decisions): `action_mode="pursuit"`; route-information observations 22-31 (the
