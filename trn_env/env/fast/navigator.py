@@ -53,12 +53,16 @@ from trn_env.env.fast.state import (
     BI_G_N,
     CA_E,
     CA_N,
+    DEGRADED,
     EP_E,
     EP_N,
     EV_E,
     EV_N,
+    MAX_WINDOW,
     N_FIXES,
+    N_NIS,
     N_PROF,
+    NIS0,
     P00,
     P01,
     P02,
@@ -107,8 +111,12 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_SIG_BA_PRIOR,
     NP_RECOVERY_SIGMA,
     NP_RECOVERY_WINDOW,
-) = range(24)
-N_NAV_PARAMS = 24
+    NP_SAMPLE_DT,
+    NP_GNSS_SIGMA_V,
+    NP_GNSS_FLOOR,
+    NP_BAND0,  # NP_BAND0 + k - 1: the innovation test's upper limit over k NIS values (2k dof)
+) = range(28)
+N_NAV_PARAMS = NP_BAND0 + MAX_WINDOW
 
 
 def navigator_params(
@@ -119,11 +127,13 @@ def navigator_params(
     ira_noise_m: float,
     ira_rate_hz: float,
     imu_spec=None,
+    sample_dt_s: float = 1.0,
 ) -> np.ndarray:
     """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
     navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
     fields), GNSS availability (s) and IRA noise (m) and rate (Hz): the 1 Hz profile sample is the mean of
-    a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz)."""
+    a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz); sample_dt_s the profile's
+    sample interval (s). The innovation test's window (integrity_window) is at most MAX_WINDOW fixes."""
     if name not in MODELLED_NAVIGATORS:
         raise ValueError(
             f"navigator {name!r} is not modelled by the fast tier; it models: "
@@ -170,7 +180,21 @@ def navigator_params(
     p[NP_TAU_G] = float(imu.get("gyro_bias_tau_s", 3600.0))
     p[NP_GNSS_UNTIL] = float(gnss_until_s)
     p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
-    p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
+    window = int(settings.get("integrity_window", 3))
+    if not 1 <= window <= MAX_WINDOW:
+        raise ValueError(
+            f"navigator.settings.integrity_window: the fast tier models windows of 1 to {MAX_WINDOW} fixes, "
+            f"got {window!r}"
+        )
+    p[NP_UNHEALTHY] = float(window)
+    from scipy.stats import chi2
+
+    alpha = float(settings.get("integrity_alpha", 0.01))
+    for k in range(1, MAX_WINDOW + 1):
+        p[NP_BAND0 + k - 1] = float(chi2.isf(0.5 * alpha, 2 * k))
+    p[NP_SAMPLE_DT] = float(sample_dt_s)
+    p[NP_GNSS_SIGMA_V] = float(settings.get("gnss_sigma_v_mps", 0.1))
+    p[NP_GNSS_FLOOR] = float(settings.get("gnss_correlated_sigma_m", 1.5))
     p[NP_MIN_SAMPLES] = 5.0
     p[NP_COARSE_STEP] = COARSE_STEP_M
     p[NP_COARSE_STRIDE] = COARSE_STRIDE
@@ -244,30 +268,80 @@ def covariance_step(X, i, dt, q_v, q_a):
 
 
 @njit(cache=True)
-def position_update(X, i, z_n, z_e, r_var, gate_chi2):
-    """Kalman update of aircraft i with a horizontal position-error measurement z = INS - reference (m),
-    noise variance r_var, chi-square gate (2 dof; <= 0: no gate). Feedback form: the estimated errors are
-    removed from the INS. Returns True when accepted."""
-    s = X[i, P00] + r_var
-    if gate_chi2 > 0.0 and (z_n * z_n + z_e * z_e) / s > gate_chi2:
-        return False
-    k0 = X[i, P00] / s
-    k1 = X[i, P01] / s
-    k2 = X[i, P02] / s
+def measurement_update(X, i, z_n, z_e, h0, h1, r_var):
+    """Kalman update of aircraft i with a horizontal measurement z = h0 p + h1 v + noise per axis (m; north
+    and east share the covariance), noise variance r_var. Feedback form: the estimated errors are removed
+    from the INS."""
+    p00, p01, p02, p11, p12, p22 = X[i, P00], X[i, P01], X[i, P02], X[i, P11], X[i, P12], X[i, P22]
+    c0 = h0 * p00 + h1 * p01  # P H^T
+    c1 = h0 * p01 + h1 * p11
+    c2 = h0 * p02 + h1 * p12
+    s = h0 * c0 + h1 * c1 + r_var
+    k0 = c0 / s
+    k1 = c1 / s
+    k2 = c2 / s
     X[i, EP_N] -= k0 * z_n
     X[i, EP_E] -= k0 * z_e
     X[i, EV_N] -= k1 * z_n
     X[i, EV_E] -= k1 * z_e
     X[i, CA_N] += k2 * z_n
     X[i, CA_E] += k2 * z_e
-    p00, p01, p02 = X[i, P00], X[i, P01], X[i, P02]
-    X[i, P00] = p00 - k0 * p00
-    X[i, P01] = p01 - k0 * p01
-    X[i, P02] = p02 - k0 * p02
-    X[i, P11] = X[i, P11] - k1 * p01
-    X[i, P12] = X[i, P12] - k1 * p02
-    X[i, P22] = X[i, P22] - k2 * p02
+    X[i, P00] = p00 - k0 * c0
+    X[i, P01] = p01 - k0 * c1
+    X[i, P02] = p02 - k0 * c2
+    X[i, P11] = p11 - k1 * c1
+    X[i, P12] = p12 - k1 * c2
+    X[i, P22] = p22 - k2 * c2
+
+
+@njit(cache=True)
+def position_update(X, i, z_n, z_e, r_var, gate_chi2):
+    """Kalman update of aircraft i with a horizontal position-error measurement z = INS - reference (m),
+    noise variance r_var, chi-square gate (2 dof; <= 0: no gate). Returns True when accepted."""
+    s = X[i, P00] + r_var
+    if gate_chi2 > 0.0 and (z_n * z_n + z_e * z_e) / s > gate_chi2:
+        return False
+    measurement_update(X, i, z_n, z_e, 1.0, 0.0, r_var)
     return True
+
+
+@njit(cache=True)
+def gnss_update(X, i, z_n, z_e, zv_n, zv_e, nav):
+    """GNSS update of aircraft i (as the full navigator's, navigators.filters.ins_trn_gnss): position
+    z = INS - GNSS (m) with gnss_sigma_h_m, velocity zv (m/s) with gnss_sigma_v_mps, then the position
+    sigma held at or above gnss_correlated_sigma_m (congruence D P D: the receiver's slowly wandering error
+    that white 1 Hz updates would average away)."""
+    s_h = nav[NP_GNSS_SIGMA]
+    s_v = nav[NP_GNSS_SIGMA_V]
+    measurement_update(X, i, z_n, z_e, 1.0, 0.0, s_h * s_h)
+    measurement_update(X, i, zv_n, zv_e, 0.0, 1.0, s_v * s_v)
+    floor = nav[NP_GNSS_FLOOR]
+    if X[i, P00] < floor * floor:
+        d = floor / math.sqrt(max(X[i, P00], 1e-30))
+        X[i, P00] = floor * floor
+        X[i, P01] *= d
+        X[i, P02] *= d
+
+
+@njit(cache=True)
+def integrity_add(X, i, nav, nis):
+    """Add a TERCOM fix's NIS (2 dof; +inf for a failed fix) to aircraft i's innovation test (the sum over the
+    last integrity_window fixes against its chi-square upper limit, navigators.integrity.innovation_monitor)
+    and recover as the full navigator does (navigators.core.recovery, once per entry): entering "degraded"
+    inflates the position variance by recovery_sigma_m^2 and widens the search (tercom_fix) until the test
+    is back in band."""
+    w = int(nav[NP_UNHEALTHY])
+    k = int(X[i, N_NIS])
+    X[i, NIS0 + k % w] = nis
+    X[i, N_NIS] = k + 1
+    m = min(k + 1, w)
+    stat = 0.0
+    for j in range(m):
+        stat += X[i, NIS0 + j]
+    degraded = stat > nav[NP_BAND0 + m - 1]
+    if degraded and X[i, DEGRADED] < 0.5:
+        X[i, P00] += nav[NP_RECOVERY_SIGMA] ** 2
+    X[i, DEGRADED] = 1.0 if degraded else 0.0
 
 
 @njit(cache=True)
@@ -385,6 +459,7 @@ def tercom_fix(
     X[i, N_PROF] = 0.0
     if n < nav[NP_MIN_SAMPLES]:
         return False
+    half_m = nav[NP_HALF_WINDOW] * (nav[NP_RECOVERY_WINDOW] if X[i, DEGRADED] > 0.5 else 1.0)
     dn, de, mad = tercom_offset(
         prof_meas[i],
         prof_lat[i],
@@ -395,7 +470,7 @@ def tercom_fix(
         lon0,
         dlat,
         dlon,
-        nav[NP_HALF_WINDOW] * (nav[NP_RECOVERY_WINDOW] if X[i, REJECTS] >= nav[NP_UNHEALTHY] else 1.0),
+        half_m,
         nav[NP_CELL],
         nav[NP_REMOVE_BIAS] > 0.5,
         m_per_rad_lat,
@@ -406,14 +481,24 @@ def tercom_fix(
     )
     if not math.isfinite(mad):
         return False
-    # the map matches where the INS path is shifted by (dn, de): truth = INS + offset, z = INS - matched
-    ok = position_update(X, i, -dn, -de, nav[NP_FIX_SIGMA] ** 2, nav[NP_GATE])
     X[i, N_FIXES] += 1.0
+    ok = False
+    if abs(dn) >= half_m - 1e-6 or abs(de) >= half_m - 1e-6:
+        # the best match on the search window's edge (the true offset may lie outside): a failed fix
+        nis = np.inf
+    else:
+        # the map matches where the INS path is shifted by (dn, de): truth = INS + offset, z = INS - matched;
+        # the rigid shift is the INS error at the batch's mean sample time, lag before the fix:
+        # z = p - lag v (the full navigator's H)
+        lag = 0.5 * (n - 1) * nav[NP_SAMPLE_DT]
+        r_var = nav[NP_FIX_SIGMA] ** 2
+        s = X[i, P00] - 2.0 * lag * X[i, P01] + lag * lag * X[i, P11] + r_var
+        nis = (dn * dn + de * de) / s
+        if nis <= nav[NP_GATE]:
+            measurement_update(X, i, -dn, -de, 1.0, -lag, r_var)
+            ok = True
     X[i, REJECTS] = 0.0 if ok else X[i, REJECTS] + 1.0
-    if X[i, REJECTS] == nav[NP_UNHEALTHY]:
-        # recovery (as the full navigator's after a failed test): the horizontal sigma grows by
-        # recovery_sigma_m and the search widens to recovery_half_cells until a fix is accepted
-        X[i, P00] += nav[NP_RECOVERY_SIGMA] ** 2
+    integrity_add(X, i, nav, nis)
     return ok
 
 
@@ -450,3 +535,7 @@ def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_si
     X[i, N_PROF] = 0.0
     X[i, REJECTS] = 0.0
     X[i, N_FIXES] = 0.0
+    X[i, N_NIS] = 0.0
+    X[i, DEGRADED] = 0.0
+    for j in range(MAX_WINDOW):
+        X[i, NIS0 + j] = 0.0

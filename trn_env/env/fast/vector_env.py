@@ -301,6 +301,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             float(ira.get("range_noise_m", 3.5)),
             float(ira.get("rate_hz", 50.0)),
             spec,
+            sample_dt_s=float(fp[dyn.FP_SAMPLE_DT]),
         )
         ie = d.get("initial_errors") or {}
         pos = ie.get("position_ned_m", [30.0, 30.0, 15.0])
@@ -650,7 +651,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         rm, rn = _radii(X[:, S.LAT])
         err = np.stack([X[:, S.EP_N], X[:, S.EP_E], -X[:, S.BARO]], axis=1)
         sig_h = np.sqrt(np.maximum(X[:, S.P00], 0.0))
-        ok = X[:, S.REJECTS] < self._nav[nv.NP_UNHEALTHY]
+        ok = X[:, S.DEGRADED] < 0.5
         return {
             "t_s": X[:, S.T].copy(),
             "true_error_ned_m": err,
