@@ -165,11 +165,12 @@ def fly_decision(
     wind_n,
     wind_e,
     diff,
+    tables,
 ):
     """Fly every active aircraft n_sub steps of fp[FP_DT] s (or to its episode's end, X[:, END] != 0); the
     aircraft are independent (each writes only its own rows); one thread (prange marks the loop that could
     be spread over cores: with numba's parallel=True two threads were slower here, the per-aircraft work
-    being uneven); diff is (N, profile) scratch."""
+    being uneven); diff (N, 3, profile) and tables (N, 4, candidates, profile) are TERCOM's scratch."""
     dt = fp[FP_DT]
     v = fp[FP_TAS]
     tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])
@@ -288,6 +289,7 @@ def fly_decision(
                             rm_e + X[i, H],
                             (rn_e + X[i, H]) * math.cos(lat_e),
                             diff[i],
+                            tables[i],
                         )
                         X[i, T_LAST_FIX] = t
             # ---- episode ends

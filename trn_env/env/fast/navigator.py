@@ -201,6 +201,13 @@ def navigator_params(
     return p
 
 
+def tercom_table_rows(nav: np.ndarray) -> int:
+    """Candidates per axis of the widest TERCOM search stage (tercom_offset's tables): the coarse stage over
+    the recovery window, or the fine stages' 5."""
+    widest_m = nav[NP_HALF_WINDOW] * max(nav[NP_RECOVERY_WINDOW], 1.0)
+    return max(2 * int(widest_m / nav[NP_COARSE_STEP] + 1e-9) + 1, 5)
+
+
 @njit(cache=True)
 def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e):
     """Propagate aircraft i's INS error (truth) by dt seconds; noise_n, noise_e are the step's velocity
@@ -345,20 +352,51 @@ def integrity_add(X, i, nav, nis):
 
 
 @njit(cache=True)
-def _profile_mad(
-    meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, lon0, dlat, dlon, remove_bias, diff
-):
-    """Mean absolute difference of the profile (every stride-th of its n points) against the map shifted by
-    (off_lat, off_lon) rad, with the mean difference removed when remove_bias; +inf when any point falls off
-    the map."""
+def _axis_table(f, n, stride, offsets, n_off, size, cell_idx, frac):
+    """Grid cell and fraction of every used profile point (f: fractional indices along one map axis, every
+    stride-th of n) shifted by each of n_off offsets (cells): cell_idx[o, kk], frac[o, kk]; -1 where the
+    point falls off the grid (kernels.bilinear_at_index's bounds)."""
+    for o in range(n_off):
+        kk = 0
+        for k in range(0, n, stride):
+            x = f[k] + offsets[o]
+            if not (x >= -kernels._EDGE and x <= size - 1 + kernels._EDGE):
+                cell_idx[o, kk] = -1.0
+            else:
+                c = min(max(int(x), 0), size - 2)
+                cell_idx[o, kk] = c
+                frac[o, kk] = x - c
+            kk += 1
+
+
+@njit(cache=True)
+def _candidate_mad(meas, n, stride, heights, ii, uu, jj, vv, remove_bias, diff):
+    """Mean absolute difference (mean-removed when remove_bias) of the profile's used points against the
+    map at the cells and fractions (ii, uu) x (jj, vv) of one shifted candidate (kernels.bilinear_at_index's
+    formula, its void retry included); +inf when a point falls off the map or on a void."""
     s = 0.0
     m_used = 0
     for k in range(0, n, stride):
-        m = kernels.bilinear(heights, lat0, lon0, dlat, dlon, plat[k] + off_lat, plon[k] + off_lon)
-        if m != m:
+        if ii[m_used] < 0.0 or jj[m_used] < 0.0:
             return np.inf
-        diff[m_used] = meas[k] - m
-        s += diff[m_used]
+        i = int(ii[m_used])
+        j = int(jj[m_used])
+        u = uu[m_used]
+        v = vv[m_used]
+        h00 = heights[i, j]
+        h01 = heights[i, j + 1]
+        h10 = heights[i + 1, j]
+        h11 = heights[i + 1, j + 1]
+        x = h00 + v * (h01 - h00)
+        y = h10 + v * (h11 - h10)
+        m = x + u * (y - x)
+        if m != m:
+            m = kernels._edge_retry(heights, i, j, u, v)
+            if m != m:
+                return np.inf
+        d = meas[k] - m
+        diff[m_used] = d
+        s += d
         m_used += 1
     mean = s / m_used if remove_bias else 0.0
     mad = 0.0
@@ -383,14 +421,32 @@ def tercom_offset(
     remove_bias,
     m_per_rad_lat,
     m_per_rad_lon,
-    diff,
+    scratch,
     coarse_step_m,
     coarse_stride,
+    tables,
 ):
     """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
     positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
     in coarse_step_m steps on every coarse_stride-th profile point, then +-40 m in 20 m steps and +-10 m in
-    cell_m steps around the best on every point. Returns (dn, de, mad)."""
+    cell_m steps around the best on every point. Each stage's candidates form a north x east lattice, so the
+    map cell and fraction of every point under every north and every east shift are tabulated once
+    (_axis_table) and a candidate's bilinear look-ups only read them. scratch: (3, >= n) work rows;
+    tables: (4, >= candidates per axis, >= points used) work tables. Returns (dn, de, mad)."""
+    diff = scratch[0]
+    fi = scratch[1]
+    fj = scratch[2]
+    for k in range(n):  # the profile's points as fractional map indices, once per fix
+        fi[k] = (plat[k] - lat0) / dlat
+        fj[k] = (plon[k] - lon0) / dlon
+    cells_per_m_n = 1.0 / (m_per_rad_lat * dlat)
+    cells_per_m_e = 1.0 / (m_per_rad_lon * dlon)
+    n_lat, n_lon = heights.shape
+    max_off = tables.shape[1]
+    off_n = np.empty(max_off)
+    off_e = np.empty(max_off)
+    val_n = np.empty(max_off)
+    val_e = np.empty(max_off)
     best_n = 0.0
     best_e = 0.0
     best = np.inf
@@ -400,39 +456,37 @@ def tercom_offset(
         step = steps[stage]
         stride = coarse_stride if stage == 0 else 1
         span = min(spans[stage], half_window_m)
-        k = int(span / step + 1e-9)
+        k = min(int(span / step + 1e-9), (max_off - 1) // 2)
+        na = 0
+        nb = 0
+        for a in range(-k, k + 1):
+            on = best_n + a * step
+            if abs(on) <= half_window_m + 1e-9:
+                val_n[na] = on
+                off_n[na] = on * cells_per_m_n
+                na += 1
+            oe = best_e + a * step
+            if abs(oe) <= half_window_m + 1e-9:
+                val_e[nb] = oe
+                off_e[nb] = oe * cells_per_m_e
+                nb += 1
+        _axis_table(fi, n, stride, off_n, na, n_lat, tables[0], tables[1])
+        _axis_table(fj, n, stride, off_e, nb, n_lon, tables[2], tables[3])
+        best = np.inf  # each stage compares its candidates on its own points
         cn = best_n
         ce = best_e
-        if stage > 0:
-            best = np.inf  # compare the fine stages on the whole profile
-        for a in range(-k, k + 1):
-            on = cn + a * step
-            if abs(on) > half_window_m + 1e-9:
-                continue
-            for b in range(-k, k + 1):
-                oe = ce + b * step
-                if abs(oe) > half_window_m + 1e-9:
-                    continue
-                mad = _profile_mad(
-                    meas,
-                    plat,
-                    plon,
-                    n,
-                    stride,
-                    on / m_per_rad_lat,
-                    oe / m_per_rad_lon,
-                    heights,
-                    lat0,
-                    lon0,
-                    dlat,
-                    dlon,
-                    remove_bias,
-                    diff,
+        for a in range(na):
+            for b in range(nb):
+                mad = _candidate_mad(
+                    meas, n, stride, heights, tables[0, a], tables[1, a], tables[2, b], tables[3, b],
+                    remove_bias, diff,
                 )
                 if mad < best:
                     best = mad
-                    best_n = on
-                    best_e = oe
+                    cn = val_n[a]
+                    ce = val_e[b]
+        best_n = cn
+        best_e = ce
     return best_n, best_e, best
 
 
@@ -452,6 +506,7 @@ def tercom_fix(
     m_per_rad_lat,
     m_per_rad_lon,
     diff,
+    tables,
 ):
     """Aircraft i's TERCOM fix from its profile (rows of prof_*), fused by the Kalman filter; the profile is
     then restarted. Returns True when the fix was accepted."""
@@ -478,6 +533,7 @@ def tercom_fix(
         diff,
         nav[NP_COARSE_STEP],
         int(nav[NP_COARSE_STRIDE]),
+        tables,
     )
     if not math.isfinite(mad):
         return False
