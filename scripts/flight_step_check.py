@@ -104,7 +104,8 @@ def routes(dts: list[float], seeds: int, out: Path | None) -> None:
             d = y - x
             half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / math.sqrt(len(d))
             line += (f" | {dt} s: {y.mean():7.1f} / {np.percentile(y, 90):7.1f}, "
-                     f"ratio {y.mean() / x.mean():.2f}, diff {d.mean():+.1f} [{d.mean() - half:+.1f}, {d.mean() + half:+.1f}], "
+                     f"ratio {y.mean() / x.mean():.2f}, diff {d.mean():+.1f} "
+                     f"[{d.mean() - half:+.1f}, {d.mean() + half:+.1f}], "
                      f"p {stats.ttest_rel(y, x).pvalue:.2f} / {stats.wilcoxon(y, x).pvalue:.2f}, arrived "
                      f"{res[dt][name]['terminations'].count('arrived')} vs "
                      f"{res[base][name]['terminations'].count('arrived')}")
