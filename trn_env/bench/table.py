@@ -32,6 +32,11 @@ PAIRS: list[tuple[str, str, str | None, str]] = [
     ("planner_astar_s", "planner_reference_scipy_dijkstra_s", None, "scipy Dijkstra"),
     ("filters_ins_tercom_sim_s_per_wall_s", "filters_bare_jsbsim_sim_s_per_wall_s", None, "bare JSBSim"),
     ("campaign_ray_mean_run_wall_s", "campaign_local_mean_run_wall_s", None, "local process pool"),
+    ("campaign_ray_runs_per_min", "campaign_local_runs_per_min", "campaign_ray_vs_local",
+     "local process pool (Ray's actors warm)"),
+    ("campaign_ray_cold_runs_per_min", "campaign_ray_tasks_cold_runs_per_min", None,
+     "Ray tasks, both from a fresh instance"),
+    ("campaign_ray_first_row_s", "campaign_ray_tasks_first_row_s", None, "Ray tasks, first row"),
 ]
 
 
