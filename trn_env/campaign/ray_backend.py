@@ -219,10 +219,15 @@ def plugin_runtime_env() -> dict[str, Any] | None:
     return {"py_modules": paths} if paths else None
 
 
+def attempt_key(run_key: str, task: RunTask) -> str:
+    """The key under which a run's attempts are counted (one `run_key` per RayBackend.run call)."""
+    return f"{run_key}:{task.campaign_hash}:{task.run_id}"
+
+
 def _fly(task: RunTask, dems: dict[str, Any], run_key: str = "") -> tuple[dict, bytes | None]:
     """fly_run on a Ray worker; `run_key` (one per RayBackend.run call) scopes the attempt count, so a
     campaign flown again on the same long-lived cluster starts counting from 1."""
-    attempt = _attempt_number(f"{run_key}:{task.campaign_hash}:{task.run_id}")
+    attempt = _attempt_number(attempt_key(run_key, task))
     row, log = fly_run(task, dems)
     row["attempts"] = max(int(row.get("attempts", 1)), attempt)
     return row, log

@@ -83,11 +83,12 @@ def warm_run(task: RunTask) -> float:
 class WarmPool:
     """`n` WarmWorker actors on the connected Ray session (module docstring); `close()` kills them."""
 
-    def __init__(self, ray, n: int, max_retries: int = 3):
+    def __init__(self, ray, n: int, max_retries: int = 3, worker_cls: type = WarmWorker):
         self.ray = ray
         self.n = int(n)
         self.max_retries = int(max_retries)
-        self._cls = ray.remote(num_cpus=1, max_restarts=0, max_task_retries=0)(WarmWorker)
+        # Ray does not restart a dead actor or retry its calls: the pool does both (module docstring)
+        self._cls = ray.remote(num_cpus=1, max_restarts=0, max_task_retries=0)(worker_cls)
         self.actors: list = []
         self.timings: list[dict] = []          # prepare()'s figures of the last run call, per actor
 

@@ -243,7 +243,8 @@ class LogWriter:
                 self._table(self._tick_tables, "estimates", ESTIMATES_SCHEMA).append(est)
 
     def read_ticks(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Every tick written so far, read back (closes the tick tables)."""
+        """Every tick written so far, read back (closes the tick tables): the truth rows (n, 16) and the
+        estimate columns, the covariance columns as one array "cov" (n, 9, 9)."""
         for name in ("truth", "estimates"):
             t = self._tick_tables.pop(name, None)
             if t is not None:
@@ -257,7 +258,15 @@ class LogWriter:
         for i, c in enumerate(TRUTH_ROW_COLUMNS):
             rows[:, i] = _read_column(truth, c)
         es = pq.ParquetFile(self.tmp / "estimates.parquet")
-        return rows, {c: _read_column(es, c).copy() for c in es.schema_arrow.names}
+        cov = np.empty((rows.shape[0], 9, 9))
+        est = {"cov": cov}
+        for c in es.schema_arrow.names:
+            if c.startswith("cov_"):
+                i, j = (int(x) for x in c[4:].split("_"))
+                cov[:, i, j] = _read_column(es, c)
+            else:
+                est[c] = _read_column(es, c).copy()
+        return rows, est
 
     def write_events(self, events) -> None:
         if not events:
