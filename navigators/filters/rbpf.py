@@ -231,6 +231,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         self._t_next = float(initial.t_s) + self.trn_period_s
         self._t_gnss_next = float(initial.t_s)
         self._Phi = np.eye(15)
+        self._pl_B = None          # eq 5's position rows of B at the last time update (_mixture_hpl)
         self._last_row = None          # INS row and specific force carried into the next chunk
         self._extra: dict = {}
         self._cov9 = self._covariance9()
@@ -404,6 +405,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         Phi = self._Phi * T[:, None] / T[None, :]
         self._Phi = np.eye(15)
         w = self.rng.standard_normal((self.n, 3))
+        self._pl_B = Phi[:2, 3:].copy()     # position rows of eq 5's B, for the HPL's mixture (estimate)
         nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var, self.ql_var,
                                 w)
         if nbad:
@@ -442,6 +444,20 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         return C * s[:, None] * s[None, :]
 
     # ------------------------------------------------------------------ output
+    def _mixture_hpl(self, risk: float) -> float:
+        """HPL of the marginal position posterior (navigators.integrity.protection_level.mixture_hpl):
+        particle k is N(xn_k, B P_k B' + Q^n) horizontally (eq 5's spread with its own Kalman covariance);
+        before the first time update the particles are points."""
+        B = getattr(self, "_pl_B", None)
+        n = self.xn.shape[0]
+        if B is None or B.shape[1] != self.P.shape[1]:
+            cov = np.zeros((n, 2, 2))
+        else:
+            cov = np.einsum("ij,kjl,ml->kim", B, self.P, B)
+            cov[:, 0, 0] += self.qn_var[0]
+            cov[:, 1, 1] += self.qn_var[1]
+        return pl.mixture_hpl(self.xn[:, 0], self.xn[:, 1], cov, self._weights(), risk)
+
     def estimate(self) -> Estimate:
         st = self.ins.state
         roll, pitch, yaw = euler_from_C_bn(quat_to_dcm(st[6:10]))
@@ -454,8 +470,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
-        risk = pl.filter_risk(self)      # the cloud's mass radius (navigators.integrity.protection_level)
-        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), self)
+        pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
                         consistency_warning=self._consistency_warning,
                         events=list(self.health.events))
