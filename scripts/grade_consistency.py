@@ -169,16 +169,19 @@ def main(argv=None) -> int:
         for s in range(a.seeds):
             for name, run in run_seed(d, a.navigators, grade, a.seed0 + s, flight).items():
                 runs[name].append(run)
-        for name in a.navigators:
-            f = figures(runs[name], a.from_s)
-            nees, e2 = run_nees(runs[name], a.from_s)
-            f["raw"] = {"nees": nees.tolist(), "e2": e2.tolist()}
-            result["figures"][f"{name}/{grade}"] = f
-            print(json.dumps({f"{name}/{grade}": {k: v for k, v in f.items() if k != "raw"}}), flush=True)
-        if a.out:
-            Path(a.out).write_text(json.dumps(result, indent=1))
-    if a.out:
-        Path(a.out).write_text(json.dumps(result, indent=1))
+            last = s == a.seeds - 1
+            if a.out or last:   # after every seed: a campaign stopped early keeps the runs it finished
+                result["seeds_done"] = {**result.get("seeds_done", {}), grade: s + 1}
+                for name in a.navigators:
+                    f = figures(runs[name], a.from_s)
+                    nees, e2 = run_nees(runs[name], a.from_s)
+                    f["raw"] = {"nees": nees.tolist(), "e2": e2.tolist()}
+                    result["figures"][f"{name}/{grade}"] = f
+                    if last:
+                        print(json.dumps({f"{name}/{grade}": {k: v for k, v in f.items() if k != "raw"}}),
+                              flush=True)
+                if a.out:
+                    Path(a.out).write_text(json.dumps(result, indent=1))
     return 0
 
 
