@@ -21,7 +21,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from trn_env.navigators.core.imu_spec import ImuSpec, equivalent_walk_density, gm_drive
+from trn_env.navigators.core.imu_spec import (
+    ImuSpec,
+    equivalent_ramp_walk_density,
+    equivalent_walk_density,
+    gm_drive,
+)
 
 from trn_env.scenario.build import build_navigator, imu_spec
 from trn_env.scenario.loading import load_scenario
@@ -52,6 +57,8 @@ def test_imu_spec_from_the_scenario_grade():
     assert gm_drive(2.0, 100.0, 1.0) == pytest.approx(2.0 * math.sqrt(1.0 - math.exp(-0.02)))
     # a constant rate r over T and the walk q = r^2 T have the same variance at T
     assert equivalent_walk_density(3.0, 50.0) ** 2 * 50.0 == pytest.approx((3.0 * 50.0) ** 2)
+    # a ramp 3 t moves the state by 1.5 t^2: the walk matches its variance at T
+    assert equivalent_ramp_walk_density(3.0, 50.0) ** 2 * 50.0 == pytest.approx((1.5 * 50.0**2) ** 2)
     with pytest.raises(ValueError, match="gyro_bias_tau_s"):
         ImuSpec(gyro_bias_tau_s=0.0)
     with pytest.raises(ValueError, match="accel_bias_mps2"):
@@ -94,11 +101,13 @@ def test_build_navigator_applies_the_grade(name):
         assert math.sqrt(t.P0_settings[6, 6]) == pytest.approx(g * math.sqrt(1e-6 + 1e-8 + 0.25e-6))
         assert t._turn_att_var[0] > 0.0 == n._turn_att_var[0]
     else:
-        # e_ne's walk: 0.03 m/s/sqrt(s) tuned; tactical (1.12 mg + g 1.04 deg/h x 120 s) sqrt(120 s)
-        tilt_accel = g * math.hypot(1.0, 0.3) * math.pi / 180 / 3600 * 120
-        a = math.hypot(g * math.sqrt(1e-6 + 1e-8 + 0.25e-6), tilt_accel)
+        # e_ne's walk: 0.03 m/s/sqrt(s) tuned; tactical: 1.12 mg constant (q = a^2 T), the tilt ramp
+        # g 1.04 deg/h t (q = slope^2 T^3 / 4) and the velocity random walk, T = 120 s
+        a = g * math.sqrt(1e-6 + 1e-8 + 0.25e-6)
+        slope = g * math.hypot(1.0, 0.3) * math.pi / 180 / 3600
+        q = a**2 * 120 + slope**2 * 120**3 / 4 + (100e-6 * g) ** 2
         assert math.sqrt(n._bias_walk2) == pytest.approx(0.03)
-        assert math.sqrt(t._bias_walk2) == pytest.approx(math.hypot(a * math.sqrt(120.0), 100e-6 * g))
+        assert t._bias_walk2 == pytest.approx(q)
 
 
 def _chi2_mean_bounds(n: int, p: float) -> tuple[float, float]:

@@ -67,7 +67,13 @@ import math
 
 import numpy as np
 
-from ..core.imu_spec import ImuSpec, consistency_warning, equivalent_walk_density, rss
+from ..core.imu_spec import (
+    ImuSpec,
+    consistency_warning,
+    equivalent_ramp_walk_density,
+    equivalent_walk_density,
+    rss,
+)
 from ..core.maps import load_map
 from ..frames import SensorFrames, frame_defects
 from ..integrity import protection_level as pl
@@ -217,13 +223,14 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         """With the INS as aiding (aiding_source "ins", reference_frame "ne"), e_ne is the INS's north/east
         velocity error: its random walk takes at least what the IMU's specification makes that error grow by
         (navigators.core.imu_spec; a floor over aiding_bias_walk_mps_per_sqrt_s): the body-fixed horizontal
-        specific-force error (accelerometer bias, instability, misalignment x g) and the acceleration the
-        horizontal gyro biases' tilt builds over ACQ_MEMORY_S (g sigma_bg T), as a walk matching them at that
-        memory, with the velocity random walk. Air-data aiding does not use the IMU: nothing changes."""
+        specific-force error (accelerometer bias, instability, misalignment x g), a constant acceleration, and
+        the acceleration the horizontal gyro biases' tilt builds, a ramp g sigma_bg t, as walks matching them
+        at ACQ_MEMORY_S, with the velocity random walk. Air-data aiding does not use the IMU: no change."""
         if self.ins is None or not self._ne_frame:
             return
-        a = rss(spec.body_accel_sigma_mps2, spec.tilt_accel_rate_sigma_mps3 * ACQ_MEMORY_S)
-        walk = rss(equivalent_walk_density(a, ACQ_MEMORY_S), spec.accel_noise_density_mps2_rthz)
+        walk = rss(equivalent_walk_density(spec.body_accel_sigma_mps2, ACQ_MEMORY_S),
+                   equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, ACQ_MEMORY_S),
+                   spec.accel_noise_density_mps2_rthz)
         self._bias_walk2 = max(self._bias_walk2, walk**2)
         self._consistency_warning = consistency_warning(spec, ACQ_MEMORY_S, self.name)
 

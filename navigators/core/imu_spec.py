@@ -13,7 +13,10 @@ size:
   the velocity and attitude get the noise densities (q = N^2 per second);
 - an error source a filter does not carry as a state enters as an equivalent random walk of the state it
   drives: a rate error r constant over the filter's memory T moves that state by r t, variance sigma_r^2 t^2,
-  which a random walk of density q = sigma_r^2 T matches at t = T (and bounds from above before it). The
+  which a random walk of density q = sigma_r^2 T matches at t = T (and bounds from above before it); a rate
+  that itself grows as a ramp (the acceleration a velocity state gets from the tilt of a constant gyro bias,
+  g sigma_bg t) moves the state by sigma t^2 / 2, matched at T by q = sigma^2 T^3 / 4 (a quarter of the
+  constant-rate walk of the ramp's value at T: `equivalent_ramp_walk_density`). The
   sources: the horizontal specific-force error that is constant in the body frame (accelerometer bias and
   misalignment times g: `body_accel_sigma_mps2`), the tilt the horizontal gyro biases build (the
   acceleration error's rate g sigma_bg: `tilt_accel_rate_sigma_mps3`), the heading error the z gyro bias
@@ -139,10 +142,18 @@ def equivalent_walk_density(rate_sigma: float, memory_s: float) -> float:
     return float(rate_sigma * math.sqrt(memory_s))
 
 
+def equivalent_ramp_walk_density(slope_sigma: float, memory_s: float) -> float:
+    """Density (per sqrt(s)) of the random walk that matches a ramp - a rate growing as slope_sigma t, e.g.
+    the acceleration the tilt of a constant gyro bias builds, g sigma_bg t - at memory_s: the ramp moves the
+    state by slope t^2 / 2, variance slope^2 t^4 / 4, which q t matches at t = T for q = slope^2 T^3 / 4;
+    returned as sqrt(q) = slope T sqrt(T) / 2 (half the constant-rate walk of the ramp's value at T)."""
+    return float(0.5 * slope_sigma * memory_s * math.sqrt(memory_s))
+
+
 def rss(*values: float) -> float:
     """Root sum square."""
     return float(math.sqrt(sum(v * v for v in values)))
 
 
-__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "ImuSpec", "consistency_warning", "equivalent_walk_density",
-           "gm_drive", "rss"]
+__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "ImuSpec", "consistency_warning",
+           "equivalent_ramp_walk_density", "equivalent_walk_density", "gm_drive", "rss"]
