@@ -3,9 +3,10 @@
 `ImuSpec` is a record of the sensor's error budget (SI, 1 sigma per axis): turn-on biases, bias
 instabilities (first-order Gauss-Markov: sigma, correlation time), noise densities (velocity and angle
 random walk), scale factors and misalignments. The simulator converts its IMU configuration into one
-(trn_env.scenario.build.imu_spec; the navigators never import the sensor models), and every navigator's
-`settings_from_imu(spec, epoch_s)` turns it into the settings of its own error model, whatever its state
-size:
+(trn_env.scenario.build.imu_spec; the navigators never import the sensor models), and every navigator that
+declares `uses_imu_spec` turns it into its own error model in `apply_imu_spec(spec)`, whatever its state
+size (the EKF's 13 states, the PMF's Gaussian velocity-tilt-bias-heading offset, the PF's particles, the
+RBPF's Kalman parts, acq_track's velocity bias with the INS as aiding):
 
 - the states a filter carries get the spec's priors and drives: a bias state's prior is the root sum square
   of the turn-on bias and the instability, its process noise the instability's Gauss-Markov drive
