@@ -21,7 +21,10 @@ RBPF's Kalman parts, acq_track's velocity bias with the INS as aiding):
   sources: the horizontal specific-force error that is constant in the body frame (accelerometer bias and
   misalignment times g: `body_accel_sigma_mps2`), the tilt the horizontal gyro biases build (the
   acceleration error's rate g sigma_bg: `tilt_accel_rate_sigma_mps3`), the heading error the z gyro bias
-  builds, and in turns the gyro scale factor (heading) and misalignment (tilt) times the angle turned.
+  builds, and in turns the gyro scale factor (heading) and misalignment (tilt) times the angle turned;
+- the vertical specific-force error (z bias and scale factor x g) moves a baro-damped INS height by a
+  transient of the loop (`baro_loop_height_rate_sigma_mps`), which the terrain filters' vertical offset
+  walk takes in root sum square with its tuned value (`vertical_offset_walk_density`).
 
 Beyond SMALL_ANGLE_LIMIT_RAD of attitude error over a filter's memory the small-angle models and the
 equivalent walks no longer describe the INS error: `consistency_warning` says so, and the navigator reports
@@ -40,6 +43,9 @@ G0_MPS2 = 9.80665
 # attitude error (rad) the gyro biases may build over a filter's memory before its small-angle error model
 # and the equivalent random walks stop describing the INS error (0.57 deg)
 SMALL_ANGLE_LIMIT_RAD = 0.01
+# memory of a terrain filter's vertical offset: every terrain sample measures it, so its posterior follows the
+# last 10-30 s (the lags over which the filters' tuned vertical walk was measured, terrain_filter's docstring)
+VERTICAL_OFFSET_MEMORY_S = 20.0
 
 
 @dataclass(frozen=True)
@@ -110,6 +116,21 @@ class ImuSpec:
         """Rate of the acceleration error the horizontal gyro biases build through the tilt (g sigma_bg)."""
         return G0_MPS2 * self.gyro_bias_sigma_rps
 
+    @property
+    def vertical_accel_sigma_mps2(self) -> float:
+        """Vertical specific-force error (m/s^2): the z accelerometer's bias (turn-on and instability) and its
+        scale factor times gravity, root sum square."""
+        return math.hypot(self.accel_bias_sigma_mps2, self.accel_scale_factor_ppm * 1e-6 * G0_MPS2)
+
+    def baro_loop_height_rate_sigma_mps(self, tau_baro_s: float) -> float:
+        """Largest rate (m/s) of the height error the vertical specific-force error a drives through a
+        baro-damped vertical channel of third order with its triple pole at 1 / tau (gains 3 / tau,
+        3 / tau^2, 1 / tau^3; navigators.inertial.strapdown): h(s) / a(s) = s / (s + 1 / tau)^3, so a step a
+        gives h(t) = a t^2 exp(-t / tau) / 2, a transient of 0.27 a tau^2 at t = 2 tau that the loop's
+        bias integrator then removes; its rate peaks at t = (2 - sqrt 2) tau at 0.2306 a tau."""
+        x = 2.0 - math.sqrt(2.0)
+        return float(self.vertical_accel_sigma_mps2 * tau_baro_s * x * math.exp(-x) * (1.0 - 0.5 * x))
+
     def turn_heading_sigma_rad(self, turn_rad: float) -> float:
         """Heading error a turn of turn_rad builds through the gyro scale factor (rad)."""
         return self.gyro_scale_factor_ppm * 1e-6 * abs(turn_rad)
@@ -130,6 +151,16 @@ def consistency_warning(spec: ImuSpec, memory_s: float, who: str) -> str:
             f"attitude error over the filter's {memory_s:g} s memory, beyond its small-angle error model "
             f"({math.degrees(SMALL_ANGLE_LIMIT_RAD):.2g} deg): its covariance is not calibrated for this IMU "
             "(measured: docs/validation/navigators.md)")
+
+
+def vertical_offset_walk_density(spec: ImuSpec, tau_baro_s: float | None) -> float:
+    """Random walk (m/sqrt(s)) of an INS-ridden terrain filter's vertical offset (INS height minus true) that
+    the IMU adds to the baro-slaved INS height's own wander: the baro loop's transient at its largest rate
+    (ImuSpec.baro_loop_height_rate_sigma_mps) as a constant rate over VERTICAL_OFFSET_MEMORY_S; 0 without
+    a baro loop."""
+    if tau_baro_s is None:
+        return 0.0
+    return equivalent_walk_density(spec.baro_loop_height_rate_sigma_mps(tau_baro_s), VERTICAL_OFFSET_MEMORY_S)
 
 
 def gm_drive(sigma: float, tau_s: float, dt_s: float) -> float:
@@ -156,5 +187,6 @@ def rss(*values: float) -> float:
     return float(math.sqrt(sum(v * v for v in values)))
 
 
-__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "ImuSpec", "consistency_warning",
-           "equivalent_ramp_walk_density", "equivalent_walk_density", "gm_drive", "rss"]
+__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "VERTICAL_OFFSET_MEMORY_S", "ImuSpec", "consistency_warning",
+           "equivalent_ramp_walk_density", "equivalent_walk_density", "gm_drive", "rss",
+           "vertical_offset_walk_density"]

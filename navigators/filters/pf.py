@@ -47,6 +47,7 @@ from ..core.imu_spec import (
     equivalent_ramp_walk_density,
     equivalent_walk_density,
     rss,
+    vertical_offset_walk_density,
 )
 from ..core.resampling import systematic_kernel
 from ..inertial.strapdown import quat_to_dcm
@@ -140,6 +141,9 @@ class ParticleFilter(InsRiddenFilter):
         r_psi = rss(spec.gyro_bias_sigma_rps, spec.turn_heading_sigma_rad(0.5 * math.pi) / PF_MEMORY_S)
         self.s_psi = max(self.s_psi, rss(equivalent_walk_density(r_psi, PF_MEMORY_S),
                                          spec.gyro_noise_density_rps_rthz))
+        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
+        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
+        self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = consistency_warning(spec, PF_MEMORY_S, self.name)
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
