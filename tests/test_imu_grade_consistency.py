@@ -22,10 +22,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from trn_env.navigators.core.imu_spec import (
+    VERTICAL_OFFSET_MEMORY_S,
     ImuSpec,
     equivalent_ramp_walk_density,
     equivalent_walk_density,
     gm_drive,
+    vertical_offset_walk_density,
 )
 
 from trn_env.scenario.build import build_navigator, imu_spec
@@ -65,6 +67,30 @@ def test_imu_spec_from_the_scenario_grade():
         ImuSpec(accel_bias_mps2=math.nan)
 
 
+def test_baro_loop_height_rate_against_the_loop_integrated():
+    """The baro loop's transient rate (ImuSpec.baro_loop_height_rate_sigma_mps) against the third-order
+    vertical channel integrated step by step (gains 3 / tau, 3 / tau^2, 1 / tau^3, as
+    navigators.inertial.strapdown): height error e_h' = e_v - k1 e_h, e_v' = a - k2 e_h - e_b,
+    e_b' = k3 e_h, for a step a of vertical specific-force error."""
+    spec = imu_spec({"grade": "tactical"})
+    a, tau, dt = spec.vertical_accel_sigma_mps2, 30.0, 0.001
+    k1, k2, k3 = 3.0 / tau, 3.0 / tau**2, 1.0 / tau**3
+    e_h = e_v = e_b = 0.0
+    rates, heights = [], []
+    for _ in range(int(300.0 / dt)):
+        de_h = e_v - k1 * e_h
+        e_v += (a - k2 * e_h - e_b) * dt
+        e_b += k3 * e_h * dt
+        e_h += de_h * dt
+        rates.append(de_h)
+        heights.append(e_h)
+    assert max(rates) == pytest.approx(spec.baro_loop_height_rate_sigma_mps(tau), rel=2e-3)
+    assert max(heights) == pytest.approx(2.0 * a * tau**2 * math.exp(-2.0), rel=2e-3)   # at t = 2 tau
+    # tactical: 1 mg bias + 0.1 mg instability + 300 ppm x g -> 0.071 m/s; the vertical-offset walk over 20 s
+    assert vertical_offset_walk_density(spec, tau) == pytest.approx(
+        spec.baro_loop_height_rate_sigma_mps(tau) * math.sqrt(VERTICAL_OFFSET_MEMORY_S))
+
+
 @pytest.mark.parametrize("name", ["ins_tercom", "pmf", "pf", "rbpf", "acq_track"])
 def test_build_navigator_applies_the_grade(name):
     """The tactical grade raises the navigator's error model above the navigation grade's; a navigation-grade
@@ -86,10 +112,12 @@ def test_build_navigator_applies_the_grade(name):
         assert t.sig_bg > 100 * n.sig_bg and t._q_tilt > 100 * n._q_tilt
         assert t._turn_tilt2 > 0.0 and n._turn_tilt2 == 0.0
     elif name == "pmf":
+        assert t.vertical_noise > 1.4 * n.vertical_noise and n.vertical_noise == pytest.approx(0.3, rel=1e-2)
         assert t.accel_bias_sigma > 20 * n.accel_bias_sigma
         assert t._imu_noise[0] > 100 * n._imu_noise[0] and t._imu_noise[3] > 0.0 == n._imu_noise[3]
     elif name == "pf":
         assert t.s_vel > 2 * n.s_vel and t.s_psi > n.s_psi
+        assert t.vertical_noise > 1.4 * n.vertical_noise
     elif name == "rbpf":
         # per 1 s TRN epoch: velocity noise = the velocity random walk (tactical 100 ug/sqrt(Hz)), attitude
         # noise = the angle random walk (0.07 deg/sqrt(h)); the navigation grade's 10 ug/sqrt(Hz) stays
