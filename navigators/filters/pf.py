@@ -49,6 +49,7 @@ from ..core.imu_spec import (
 )
 from ..core.resampling import systematic_kernel
 from ..inertial.strapdown import quat_to_dcm
+from ..measurements import gnss as gnss_model
 from ..measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
@@ -346,10 +347,9 @@ class ParticleFilter(InsRiddenFilter):
 
     def _gnss_update(self, t_s, st, payload) -> None:
         lat, lon, h, v = payload
-        gn, ge = self.gnss_offset_m(st, lat, lon)
-        s2 = self.gnss_sigma_m ** 2
+        gn, ge = gnss_model.predict(st, lat, lon)
         sv2 = self.gnss_vertical_sigma_m ** 2
-        ll = -0.5 * ((gn - self.dn) ** 2 + (ge - self.de) ** 2) / s2
+        ll = gnss_model.likelihood(gn, ge, self.dn, self.de, self.gnss_sigma_m)
         z_b = float(st[2]) - h            # INS minus GNSS height = b + noise
         S_b = sv2 + self.P_b
         ll -= 0.5 * (z_b - self.b) ** 2 / S_b

@@ -64,6 +64,7 @@ import numpy as np
 from ..core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
 from ..inertial.strapdown import quat_to_dcm
 from ..integrity import protection_level as pl
+from ..measurements import gnss as gnss_model
 from ..measurements.terrain_models import (
     ira_points_batch,
     ra_cone_ranges,
@@ -433,9 +434,10 @@ class PointMassFilter(InsRiddenFilter):
         lat, lon, h, v = payload
         self._apply_process_noise()
         prior = self._position_moments()
-        gn, ge = self.gnss_offset_m(st, lat, lon)
+        gn, ge = gnss_model.predict(st, lat, lon)
         s2 = self.gnss_sigma_m ** 2
-        ll = -0.5 * ((gn - self.dn_flat) ** 2 + (ge - self.de_flat) ** 2) / s2 - math.log(2 * math.pi * s2)
+        ll = (gnss_model.likelihood(gn, ge, self.dn_flat, self.de_flat, self.gnss_sigma_m)
+              - math.log(2 * math.pi * s2))
         if self._apply_loglik(t_s, ll, "GNSS update") is None:
             return
         z_b = float(st[2]) - h      # INS minus GNSS height = b + noise

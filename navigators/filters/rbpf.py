@@ -72,10 +72,11 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
 from ..core.recovery import IntegrityRecovery
 from ..core.settings import SettingsError
-from ..frames import SensorFrames, imu_gap_s
+from ..frames import SensorFrames
 from ..inertial.error_model_15 import transition_over_history
 from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from ..integrity import protection_level as pl
@@ -101,7 +102,7 @@ def table1_covariance() -> np.ndarray:
                          np.radians([0.1, 0.1, 0.1])] ** 2)
 
 
-class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
+class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     """Seed 002's IRA-aided RBPF; see the module docstring. Settings (SI, 1 sigma):
 
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. rng: numpy Generator
@@ -289,14 +290,10 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         if not self._reset_done:
             raise RuntimeError("RaoBlackwellizedPF.update before reset")
         self.health.events = []
-        imu = frames.imu
-        if imu is None or imu.t_s.shape[0] == 0:
-            self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
+        t = self._imu_times(frames)
+        if t is None:
             return self.estimate().extrapolated(frames.t_end_s)
-        t = np.asarray(imu.t_s, float)
-        gap_s = imu_gap_s(t, self.ins.t_s)
-        if gap_s > 0.0:
-            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
+        imu = frames.imu
         f_b = np.asarray(imu.f_b_mps2, float)
         w_b = np.asarray(imu.omega_ib_b_rps, float)
         ok = np.asarray(imu.valid, bool)
@@ -320,12 +317,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         out = []
         ira = frames.ira
         t_last = float(t[-1])
-        gn = frames.gnss
-        if gn is not None and gn.t_s.shape[0]:
-            gv = (np.asarray(gn.valid, bool) & np.all(np.isfinite(gn.v_ned_mps), axis=1)
-                  & np.isfinite(gn.lat_rad))
-        else:
-            gv = None
+        gnss = gnss_fixes(frames.gnss, need_height=True, need_velocity=True)   # (navigators.core.ins_gnss)
         if ira is not None and ira.t_s.shape[0]:
             ts = np.asarray(ira.t_s, float)
             good = np.asarray(ira.valid, bool) & np.isfinite(ira.range_m) & np.isfinite(ira.look_angle_rad)
@@ -341,36 +333,19 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
                 if i >= ts.shape[0] or ts[i] > t_last + 1e-9:
                     break
                 te = float(ts[i])
-                g = self._gnss_at(gn, gv, te)
+                g = None if gnss is None else gnss.nearest(te)
                 out.append((te, (float(ira.range_m[i]), float(ira.look_angle_rad[i])), g))
                 self._t_next = te + self.trn_period_s
-        if not out and gv is not None and gv.any():  # no usable IRA sample: GNSS epochs alone
-            ts = np.asarray(gn.t_s, float)
-            for i in np.flatnonzero(gv):
-                te = float(ts[i])
+        if not out and gnss is not None and gnss.n:  # no usable IRA sample: GNSS epochs alone
+            for te in gnss.t_s:
+                te = float(te)
                 if te + 1e-9 >= self._t_next and te <= t_last + 1e-9:
-                    out.append((te, None, self._gnss_at(gn, gv, te)))
+                    out.append((te, None, gnss.nearest(te)))
                     self._t_next = te + self.trn_period_s
         return out
 
-    @staticmethod
-    def _gnss_at(gn, gv, te):
-        if gv is None or not gv.any():
-            return None
-        ts = np.asarray(gn.t_s, float)
-        idx = np.flatnonzero(gv)
-        j = idx[np.argmin(np.abs(ts[idx] - te))]
-        if abs(ts[j] - te) > 0.5:
-            return None
-        return (float(ts[j]), float(gn.lat_rad[j]), float(gn.lon_rad[j]), float(gn.h_m[j]),
-                np.asarray(gn.v_ned_mps[j], float).copy())
-
     def _propagate(self, t, f_b, w_b, ok) -> None:
-        bad0 = self.ins.bad_imu_samples
-        hist = self.ins.propagate(t, f_b, w_b, ok)
-        if self.ins.bad_imu_samples > bad0:
-            self.health.skip(float(t[0]), "imu_invalid",
-                             f"{self.ins.bad_imu_samples - bad0} IMU samples invalid (held previous)")
+        hist = self._strapdown(t, f_b, w_b, ok)      # (navigators.core.ins_gnss)
         # error-model transition over this stretch at the error model's rate (eq 16 discretised)
         dt_imu = (float(t[-1] - t[0]) / (t.shape[0] - 1)) if t.shape[0] > 1 else self.dt_err
         stride = max(int(round(self.dt_err / max(dt_imu, 1e-6))), 1)

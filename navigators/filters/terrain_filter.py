@@ -22,9 +22,10 @@ import math
 
 import numpy as np
 
+from ..core.ins_gnss import InsGnssBlock, gnss_fixes, velocity_into_ins
 from ..core.maps import MapRecord, load_map, map_record
 from ..core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
-from ..frames import SensorFrames, imu_gap_s
+from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
@@ -50,7 +51,7 @@ MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^
 
 
 
-class InsRiddenFilter:
+class InsRiddenFilter(InsGnssBlock):
     _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
 
     """Base of the terrain filters (see the module docstring). Settings common to both (SI, 1 sigma):
@@ -183,14 +184,9 @@ class InsRiddenFilter:
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
-        imu = frames.imu
-        if imu is None or imu.t_s.shape[0] == 0:
-            self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
+        t_imu = self._imu_times(frames)
+        if t_imu is None:
             return self.estimate().extrapolated(frames.t_end_s)
-        t_imu = np.ascontiguousarray(imu.t_s, float)
-        gap_s = imu_gap_s(t_imu, self.ins.t_s)
-        if gap_s > 0.0:
-            self.health.skip(float(t_imu[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         hist = self._propagate_ins(frames, t_imu)
         events = self._events(frames, t_imu)
         for t_s, kind, payload, k in events:
@@ -224,13 +220,7 @@ class InsRiddenFilter:
             if not self._height_initialised and vb.any():
                 self.ins.state[2] = float(hb[np.argmax(vb)])
                 self._height_initialised = True
-        bad0 = self.ins.bad_imu_samples
-        hist = self.ins.propagate(t_imu, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid, tb, hb, vb)
-        nbad = self.ins.bad_imu_samples - bad0
-        if nbad:
-            self._count_skip(float(t_imu[0]), "imu_invalid", nbad,
-                             f"{nbad} IMU samples invalid (held previous)")
-        return hist
+        return self._strapdown(t_imu, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid, tb, hb, vb)
 
     def _events(self, frames: SensorFrames, t_imu: np.ndarray) -> list:
         """(t, kind, payload, index of the INS history row) of the frame's measurements, in time order."""
@@ -261,14 +251,10 @@ class InsRiddenFilter:
         if n_bad:
             self._count_skip(frames.t_start_s, "terrain_sample_invalid", n_bad,
                              f"{n_bad} altimeter samples invalid or without a return (skipped)")
-        g = frames.gnss
-        if g is not None and g.t_s.shape[0]:
-            pos_ok = (np.asarray(g.valid, bool) & np.isfinite(g.lat_rad) & np.isfinite(g.lon_rad)
-                      & np.isfinite(g.h_m))
-            for i in np.nonzero(pos_ok)[0]:
-                v = np.asarray(g.v_ned_mps[i], float)
-                ev.append((float(g.t_s[i]), "gnss",
-                           (float(g.lat_rad[i]), float(g.lon_rad[i]), float(g.h_m[i]), v)))
+        g = gnss_fixes(frames.gnss, need_height=True, need_velocity=False)
+        for i in range(0 if g is None else g.n):
+            ev.append((float(g.t_s[i]), "gnss", (float(g.lat_rad[i]), float(g.lon_rad[i]), float(g.h_m[i]),
+                                                 g.v_ned_mps[i])))
         ev.sort(key=lambda e: e[0])
         out = []
         for t_s, kind, payload in ev:
@@ -305,23 +291,9 @@ class InsRiddenFilter:
         self._p_att += self.q_gyr * dt
 
     def _gnss_velocity_ins(self, v_gnss: np.ndarray, carried: tuple[int, ...]) -> None:
-        """GNSS velocity into the INS velocity for the axes the filter does not carry (scalar Kalman update
-        per axis with the INS velocity error model's variance)."""
-        if not np.all(np.isfinite(v_gnss)):
-            return
-        r = self.gnss_velocity_sigma_mps ** 2
-        for a in range(3):
-            if a in carried:
-                continue
-            k = self._p_vel[a] / (self._p_vel[a] + r)
-            self.ins.state[3 + a] += k * (v_gnss[a] - self.ins.state[3 + a])
-            self._p_vel[a] *= (1.0 - k)
-
-    @staticmethod
-    def gnss_offset_m(st: np.ndarray, lat: float, lon: float) -> tuple[float, float]:
-        """GNSS position minus the INS position at the same time, north and east (m; seed 000 eq 2)."""
-        r_lat, r_lon = radii_m(float(st[0]), float(st[2]))
-        return (lat - float(st[0])) * r_lat, (lon - float(st[1])) * r_lon
+        """GNSS velocity into the INS velocity for the axes the filter does not carry
+        (navigators.core.ins_gnss.velocity_into_ins)."""
+        velocity_into_ins(self.ins.state, self._p_vel, v_gnss, self.gnss_velocity_sigma_mps ** 2, carried)
 
     def _set_update_extra(self, t_s: float, innovation, S, log_lik: float) -> None:
         innov = np.atleast_1d(np.asarray(innovation, float))
@@ -374,11 +346,6 @@ class InsRiddenFilter:
         if np.trace(ch) > np.trace(c9[:2, :2]):
             c9[:2, :2] = ch
         return np.nan_to_num(mean), c9
-
-    def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
-        """n samples skipped for `reason` (Health.skipped counts samples; one event says so)."""
-        self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)
-        self.health.events.append((float(t_s), message))
 
     def _degrade(self, t_s: float, reason: str, message: str) -> None:
         self.health.skip(t_s, reason, message)
