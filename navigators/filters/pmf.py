@@ -35,7 +35,7 @@ nothing per cell but one multiply-add.
   velocity (seed 000 eqs 14-36, shared by all cells: the PMF does not carry attitude or velocity
   hypotheses), one map lookup per cell, the heavy-tailed likelihood (measurements.robust_ll_one) with
   variance S = P_b + sensor + map noise and the per-cell bias update, fused in one numba pass over the
-  cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through measurements.ra_cone_ranges).
+  cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through measurements.radar_altimeter).
 - GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its horizontal
   velocity into the velocity offset (its vertical velocity into the INS).
 - Re-gridding after an update, from the posterior's spread: the half-span follows span_sigmas times its
@@ -65,12 +65,8 @@ from ..core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_wa
 from ..inertial.strapdown import quat_to_dcm
 from ..integrity import protection_level as pl
 from ..measurements import gnss as gnss_model
-from ..measurements.terrain_models import (
-    ira_points_batch,
-    ra_cone_ranges,
-    radii_m,
-    robust_log_likelihood,
-)
+from ..measurements import ira, radar_altimeter
+from ..measurements.terrain_models import radii_m
 from . import _pmf_kernels as kern
 from .terrain_filter import InsRiddenFilter
 from .terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
@@ -365,11 +361,10 @@ class PointMassFilter(InsRiddenFilter):
         prior = self._position_moments()
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
-        heights, lat0, lon0, dlat, dlon = self.grid
         m = self.n * self.n
         C = quat_to_dcm(st[6:10])
         if kind == "ira":
-            nb = ira_points_batch(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self._zero1,
+            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self._zero1,
                                   self._zero12, self.ira_code, self._ira_p)
             if nb:
                 self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
@@ -399,9 +394,9 @@ class PointMassFilter(InsRiddenFilter):
         else:
             var = self.ra_variance()
             rng_pred = np.empty(m)
-            n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h,
-                                   self.dn_flat, self.de_flat, self.bias, C, self._zero1,
-                                   self.ra_half_beam_rad, self.ra_cone_rings, 12, rng_pred)
+            n_nan = radar_altimeter.predict(self._map_record(bilinear=True), lat, lon, r_lat, r_lon, h,
+                                            self.dn_flat, self.de_flat, self.bias, C, self._zero1,
+                                            self.ra_half_beam_rad, self.ra_cone_rings, 12, rng_pred)
             if n_nan == m:
                 self._degrade(t_s, "grid_off_map", "altimeter update skipped: the whole grid is off the map")
                 return
@@ -410,7 +405,7 @@ class PointMassFilter(InsRiddenFilter):
             resid = h_meas - pred
             S = self.P_b + var
             ll = np.empty(m)
-            robust_log_likelihood(resid, np.array([S]), self.outlier_prob, self.log_outlier_density, ll)
+            radar_altimeter.likelihood(resid, np.array([S]), self.outlier_prob, self.log_outlier_density, ll)
             pred_mean, pred_var = kern.predicted_moments(self.logw, pred)
             with np.errstate(invalid="ignore", over="ignore"):
                 gauss = self._lg - 0.5 * (resid * resid / S + math.log(S) + math.log(2 * math.pi))

@@ -29,8 +29,10 @@ from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
+from ..measurements import ira, radar_altimeter
 from ..measurements.baro import geometric_height_m
-from ..measurements.terrain_models import IRA_FORMULA_CODES, radii_m
+from ..measurements.ira import IRA_FORMULA_CODES
+from ..measurements.terrain_models import radii_m
 from ..protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
@@ -274,12 +276,11 @@ class InsRiddenFilter(InsGnssBlock):
 
     def ira_variance(self, range_m: float, p_d_m, p_h_m) -> np.ndarray:
         """Measured terrain height variance (m^2) of an IRA sample whose closest point is at (p_h, p_d)."""
-        sr, st = self.ira_range_sigma_m, self.ira_look_angle_sigma_rad
-        return ((sr * p_d_m / range_m) ** 2 + (st * p_h_m) ** 2 + self.map_sigma_m ** 2
-                + self.terrain_model_sigma_m ** 2)
+        return ira.variance(range_m, p_d_m, p_h_m, self.ira_range_sigma_m, self.ira_look_angle_sigma_rad,
+                            self.map_sigma_m, self.terrain_model_sigma_m)
 
     def ra_variance(self) -> float:
-        return self.ra_sigma_m ** 2 + self.map_sigma_m ** 2 + self.terrain_model_sigma_m ** 2
+        return radar_altimeter.variance(self.ra_sigma_m, self.map_sigma_m, self.terrain_model_sigma_m)
 
     def bias_prior_var(self) -> float:
         return self.baro_bias_sigma_m ** 2 + self.map_bias_sigma_m ** 2
@@ -326,11 +327,14 @@ class InsRiddenFilter(InsGnssBlock):
         elif verdict.changed:
             self.health.ok, self.health.status = True, "acquiring"
 
-    def _map_record(self) -> MapRecord:
-        """The map and its interpolation as the kernels take it (navigators.core.maps.MapRecord)."""
-        rec = getattr(self, "_map_rec", None)
+    def _map_record(self, bilinear: bool = False) -> MapRecord:
+        """The map and its interpolation as the kernels take it (navigators.core.maps.MapRecord): the
+        map_interpolation setting's, or bilinear (the radar altimeter's cone model reads the map so)."""
+        key = "_map_rec_bilinear" if bilinear else "_map_rec"
+        rec = getattr(self, key, None)
         if rec is None:
-            rec = self._map_rec = map_record(self.grid, self.map_cubic)
+            rec = map_record(self.grid, self.map_cubic and not bilinear)
+            setattr(self, key, rec)
         return rec
 
     def _recovery_sigma_now_m(self) -> float:
