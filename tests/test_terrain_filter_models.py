@@ -17,7 +17,7 @@ from trn_env.navigators.core.resampling import (
     systematic_kernel,
 )
 from trn_env.navigators.filters import _pmf_kernels as pk
-from trn_env.navigators.filters.pmf import _kernel_1d
+from trn_env.navigators.filters.pmf_grid import _kernel_1d
 from trn_env.navigators.measurements import ira, radar_altimeter
 from trn_env.navigators.measurements.ira import IRA_FORMULA_CODES
 from trn_env.navigators.measurements.terrain_models import (
@@ -229,7 +229,7 @@ def test_no_map_is_refused(name):
 def test_pmf_diagonal_convolution_adds_the_north_east_covariance(sign):
     """_pmf_kernels.convolve_diagonal on a point mass: the grid's covariance grows by var [[1, s], [s, 1]]
     (brute-force moments with numpy), the mass and a constant vertical offset stay put."""
-    from trn_env.navigators.filters.pmf import _kernel_1d
+    from trn_env.navigators.filters.pmf_grid import _kernel_1d
     n = 41
     x = np.full(n * n, -700.0)
     x[(n // 2) * n + n // 2] = 0.0
