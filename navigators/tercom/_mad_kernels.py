@@ -96,6 +96,12 @@ def _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, span_lat, sp
     return True
 
 
+@njit(cache=True, inline="always")
+def _rows_of(g, ri, ru, a, i_lo):
+    """The two interpolated map rows (ga, gb) bracketing replica row a and its weight u between them."""
+    return g[ri[a] - i_lo], g[ri[a] + 1 - i_lo], ru[a]
+
+
 @njit(cache=True, error_model="numpy")
 def _mad_surface_separable(
     heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
@@ -152,9 +158,7 @@ def _mad_surface_separable(
                 for a in range(n):
                     if not rok[a]:
                         continue
-                    ga = g[ri[a] - i_lo]
-                    gb = g[ri[a] + 1 - i_lo]
-                    u = ru[a]
+                    ga, gb, u = _rows_of(g, ri, ru, a, i_lo)
                     acc_a = acc[a]
                     s_a = ssum[a]
                     if not remove_bias:
@@ -173,9 +177,7 @@ def _mad_surface_separable(
             for a in range(n):
                 if not rok[a]:
                     continue
-                ga = g[ri[a] - i_lo]
-                gb = g[ri[a] + 1 - i_lo]
-                u = ru[a]
+                ga, gb, u = _rows_of(g, ri, ru, a, i_lo)
                 chk = 0.0
                 for b in range(n):  # bilinear's r = a + u (b - a)
                     x = ga[b]
