@@ -77,12 +77,11 @@ class ParticleFilter(InsRiddenFilter):
 
     Settings (besides InsRiddenFilter's): n_particles (default 10,000), ess_threshold (in (0, 1]: resample
     when ESS < ess_threshold * n_particles), roughening (>= 0, Gordon's K setting the jitter's scale, see
-    the module docstring; default 0.1; at 0.02 clouds impoverished: NEES 4.9-6.8 over 40 runs),
-    position_noise_m_per_sqrt_s (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s
-    (default 0.02: the particles' velocity offsets need the diversity, learnt only through the weights and
-    resampling; with 0.01 a 0.9 position walk stood in, and 100 runs of scripts/filter_statistics.py had 69 %
-    of the epochs' ANEES in band against 100 % now), heading_noise_rad_per_sqrt_s (process noise),
-    max_memory_mb, rng.
+    the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
+    (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
+    velocity offsets need the diversity, learnt only through the weights and resampling),
+    heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
+    docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
 
     name = "pf"
@@ -261,7 +260,7 @@ class ParticleFilter(InsRiddenFilter):
         cloud's covariance. h is Gordon et al.'s roughening scale for this cloud, roughening M^(-1/d) times
         a Gaussian cloud's span in sigmas (~7.8 at M = 10,000). Gordon's own jitter adds that variance on top
         (h^2 Sigma at every resampling, ~3 % at the defaults): a process noise the INS error does not have,
-        which left the reported covariance larger than the error (NEES 1.7 against 2)."""
+        which leaves the reported covariance larger than the error."""
         M = self.M
         X = np.stack([self.dn, self.de, self.b, self.dv[:, 0], self.dv[:, 1], self.dpsi], axis=1)
         mean = X.mean(axis=0)

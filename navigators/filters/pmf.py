@@ -83,14 +83,13 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
     Settings (besides InsRiddenFilter's): grid_size n (cells per side, default 200), spacing_min_m,
     spacing_max_m (bounds of the cell spacing), span_sigmas (grid half-span in posterior sigmas),
     position_noise_m_per_sqrt_s (process noise: horizontal position random walk of the INS error, default
-    0.1: the INS error's second differences on the default flight have no white part above 1e-3 m at 1 s,
-    so this is a floor, not a model of the drift - the velocity and acceleration offsets carry that; 1.0,
-    the default before the velocity offset, stood in for the drift), velocity_noise_mps_per_sqrt_s
-    (random walk of the velocity offset, default 0.001: the white part of the INS velocity error's
-    increments on the default flight, 1e-6 m^2/s^2 per s), accel_bias_sigma_mps2 (1 sigma per body axis
+    0.1: a floor, not a model of the drift - the velocity and acceleration offsets carry that),
+    velocity_noise_mps_per_sqrt_s (random walk of the velocity offset, default 0.001: the white part of
+    the INS velocity error's increments), accel_bias_sigma_mps2 (1 sigma per body axis
     of the accelerometers' turn-on bias, default 50 ug: the scenario IMU's navigation grade, seed 000
     Table 2; the tilt and heading errors' priors come from the initial estimate), max_memory_mb
-    (refuses a grid larger than that), measurement_rate_hz (terrain samples per second).
+    (refuses a grid larger than that), measurement_rate_hz (terrain samples per second). The measurements
+    behind the defaults: docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
 
     name = "pmf"

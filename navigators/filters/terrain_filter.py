@@ -54,53 +54,41 @@ MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^
 
 
 class InsRiddenFilter(InsGnssBlock):
-    _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
-
     """Base of the terrain filters (see the module docstring). Settings common to both (SI, 1 sigma):
 
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. aiding: "ira" (default),
     "radar_altimeter" or "both". measurement_rate_hz: terrain samples used per second (the sensors sample
-    faster; every 1/rate s the next valid sample is taken). Default 1 Hz (seed 002's TRN rate): on the
-    default flight (scripts/filter_statistics.py "rate", 10 runs) the PMF's horizontal RMS is 7.9 m at 1 Hz,
-    7.1 m at 2 Hz and 5.8 m at 5 Hz, for 1.5 and 2.8 times the navigator's time. ira_formula: "proposed"
-    (seed 000 eqs 14-36, default: its closest point follows the attitude and the velocity; in a 20 m/s
-    crosswind at 5,600 m with map = world the PF's RMS is 2.4 m with it against 16.6 m with the conventional
-    one for a precise IRA, 6.3 m against 8.0 m at Table 1's noise: scripts/ira_model_comparison.py, README)
-    or "conventional" (eqs 9-13). ira_range_sigma_m, ira_look_angle_sigma_deg:
-    the IRA's noise (seed 002 Table 1). ra_sigma_m, ra_half_beam_deg, ra_cone_rings: the radar altimeter's
-    noise, half beamwidth and the rings of its cone model (0: the axis ray only). map_sigma_m: the map's
-    random vertical error (its accuracy class); map_bias_sigma_m: its vertical bias; terrain_model_sigma_m:
-    terrain between the map's posts, default 2.5 m: on the default flight the world (the 3" DEM with 30 m
-    fractal detail) differs from the bicubic map by 2.3 m RMS, and the measured terrain height at the true
-    position scatters by 3.9-4.5 m about the map with the IRA's 3.5 m range noise in it, so 2.5-3 m is
-    honest (4 m, the earlier default, left the NEES at 1.6 against 2). vertical_noise_m_per_sqrt_s: random
-    walk of the vertical offset b, default 0.3: the baro-slaved INS height wanders by +-2 m over a minute
-    (baro lag and the loop's dynamics in climbs), the same in every run over the same flight; with 0.05 b
-    could not follow, and on a cross slope the height error became a cross-track error of ~3 m shared by
-    all runs. Measured on the default flight (10 runs, the INS height minus the truth): its increments'
-    variance grows by 0.10 m^2/s over lags of 10-30 s (the filters' memory; 0.013 m^2 at 1 s: a smooth
-    wander), so sqrt(0.1) = 0.3; 0.5 made b (and through it the position) looser than it is.
-    map_interpolation: "bicubic" (default: Catmull-Rom, terrain.kernels.bicubic, a C1 surface through
-    the posts) or "bilinear": how the IRA update reads the map between its posts. On the default flight
-    the two differ by 1.5 m RMS, an error that is the same in every run over the same ground, which the
-    white terrain_model_sigma_m cannot describe.
-    outlier_prob, outlier_width_m: the heavy tail of the likelihood.
-    gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise. baro_bias_sigma_m: prior
-    of the baro height's bias. converged_sigma_m: Health says "acquiring" while the horizontal 1-sigma is
-    above it. Vertical channel: gravity_model, tau_baro_s, imu_samples, baro_geopotential as in
-    navigators.filters.InsTrnNavigator; the INS height starts at the first baro height.
-    Integrity (navigators.integrity.InnovationMonitor, default integrity_alpha 1e-4: with
-    terrain_model_sigma_m 2.5 m, 0.01 raised a false alarm, and a re-spread of 100 m, in 6 of 30 default
-    flights of 3 min): every terrain update's NIS (an update every cell or
-    particle rejects counts as infinite; each enters capped, see `capped_nis`) goes into a sliding window of
-    integrity_window updates; when its sum leaves the chi-square band of probability integrity_alpha,
-    Health says "degraded" (ok False) and the filter recovers (`_recover`: the belief is re-spread around
-    its mean with recovery_sigma_m added to the horizontal 1-sigma, at least the initial spread), each step
-    an event; if a whole window after a re-spread is still out of band it re-spreads again, twice as wide
-    (up to 8 x recovery_sigma_m); back in band, the status follows the belief's spread again
-    ("acquiring", then "ok").
+    faster; every 1/rate s the next valid sample is taken; default 1 Hz, seed 002's TRN rate). ira_formula:
+    "proposed" (seed 000 eqs 14-36, default: its closest point follows the attitude and the velocity) or
+    "conventional" (eqs 9-13). ira_range_sigma_m, ira_look_angle_sigma_deg: the IRA's noise (seed 002
+    Table 1). ra_sigma_m, ra_half_beam_deg, ra_cone_rings: the radar altimeter's noise, half beamwidth and
+    the rings of its cone model (0: the axis ray only). map_sigma_m: the map's random vertical error (its
+    accuracy class); map_bias_sigma_m: its vertical bias; terrain_model_sigma_m: terrain between the map's
+    posts (default 2.5 m: the world's detail the map does not hold, with interpolation).
+    vertical_noise_m_per_sqrt_s: random walk of the vertical offset b (default 0.3: the baro-slaved INS
+    height's wander over the filters' memory, the same in every run over the same flight, which b must
+    follow or a cross slope turns it into a cross-track error). map_interpolation: "bicubic" (default:
+    Catmull-Rom, terrain.kernels.bicubic, a C1 surface through the posts) or "bilinear": how the IRA update
+    reads the map between its posts (the two differ by an error that is the same in every run over the same
+    ground, which the white terrain_model_sigma_m cannot describe). outlier_prob, outlier_width_m: the heavy
+    tail of the likelihood. gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise.
+    baro_bias_sigma_m: prior of the baro height's bias. converged_sigma_m: Health says "acquiring" while the
+    horizontal 1-sigma is above it. Vertical channel: gravity_model, tau_baro_s, imu_samples,
+    baro_geopotential as in navigators.filters.InsTrnNavigator; the INS height starts at the first baro
+    height. The measurements behind the defaults: docs/validation/navigators.md ("Terrain filters: measured
+    grounds of the defaults").
+
+    Integrity (navigators.integrity.InnovationMonitor, default integrity_alpha 1e-4): every terrain update's
+    NIS (an update every cell or particle rejects counts as infinite; each enters capped, see `capped_nis`)
+    goes into a sliding window of integrity_window updates; when its sum leaves the chi-square band of
+    probability integrity_alpha, Health says "degraded" (ok False) and the filter recovers (`_recover`: the
+    belief is re-spread around its mean with recovery_sigma_m added to the horizontal 1-sigma, at least the
+    initial spread), each step an event; if a whole window after a re-spread is still out of band it
+    re-spreads again, twice as wide (up to 8 x recovery_sigma_m); back in band, the status follows the
+    belief's spread again ("acquiring", then "ok").
     """
 
+    _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
     name = "terrain_filter"
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
