@@ -57,12 +57,16 @@ def test_build_navigator_applies_the_grade(name):
     """The tactical grade raises the navigator's error model above the navigation grade's; a navigation-grade
     scenario keeps the tuned figures (they are floors)."""
     sc = load_scenario("default", navigator=name)
-    d = sc.data
+    import dataclasses
+
     from trn_env import terrain
+    from trn_env.scenario.sections import SensorsSection
     dem = terrain.load("jacksboro")
     navs = {}
     for grade in ("navigation", "tactical"):
-        dd = {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}}}
+        tables = {**sc.sensors.tables.to_dict(), "imu": {"grade": grade}}
+        sensors = SensorsSection.from_mapping(tables, "sensors", [])
+        dd = dataclasses.replace(sc.sections, sensors=sensors)
         navs[grade] = build_navigator(dd, dem, np.random.default_rng(0))
     n, t = navs["navigation"], navs["tactical"]
     if name == "ins_tercom":
