@@ -118,7 +118,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         if not isinstance(episode_statistics, bool):
             raise ValueError(f"episode_statistics must be a bool, got {episode_statistics!r}")
         self.episode_statistics = episode_statistics
-        _check_memory(n, 42)  # before any per-aircraft array (the default 40 s TERCOM profile)
+        _check_memory(n, 42, 21)  # before any per-aircraft array (the default 40 s TERCOM profile)
         if render_mode is not None:
             raise ValueError(
                 f"render_mode must be None (TerrainNavFast-v0 does not render), got {render_mode!r}"
@@ -301,6 +301,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             float(ira.range_noise_m),
             float(ira.rate_hz),
             spec,
+            sample_dt_s=float(fp[dyn.FP_SAMPLE_DT]),
         )
         ie = sc.initial_errors
         pos = ie.position_ned_m
@@ -335,12 +336,13 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
 
         # per-aircraft arrays
         n_prof = int(math.ceil(self._nav[nv.NP_FIX_PERIOD])) + 2
-        _check_memory(n, n_prof)
+        _check_memory(n, n_prof, nv.tercom_table_rows(self._nav))
         self._X = np.zeros((n, S.N_STATE))
         self._X[:, S.END] = S.TIME_LIMIT
         self._rng = frng.seed_states(np.random.SeedSequence().generate_state(n, np.uint32))
         self._prof = np.zeros((3, n, n_prof))
-        self._diff = np.zeros((n, n_prof))
+        self._diff = np.zeros((n, 3, n_prof))
+        self._tables = np.zeros((n, 4, nv.tercom_table_rows(self._nav), n_prof))
         self._obs = np.zeros((n, task.N_OBS), np.float32)
         self._autoreset = np.zeros(n, bool)
         self._needs_reset = True
@@ -559,6 +561,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             self._wind_n,
             self._wind_e,
             self._diff,
+            self._tables,
         )
         end = np.where(live, X[:, S.END], 0.0).astype(int)
         reasons = np.array(S.END_NAMES, dtype=object)[end]
@@ -650,7 +653,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         rm, rn = _radii(X[:, S.LAT])
         err = np.stack([X[:, S.EP_N], X[:, S.EP_E], -X[:, S.BARO]], axis=1)
         sig_h = np.sqrt(np.maximum(X[:, S.P00], 0.0))
-        ok = X[:, S.REJECTS] < self._nav[nv.NP_UNHEALTHY]
+        ok = X[:, S.DEGRADED] < 0.5
         return {
             "t_s": X[:, S.T].copy(),
             "true_error_ned_m": err,
@@ -703,9 +706,9 @@ def _available_memory_bytes() -> int:
         return 1 << 62
 
 
-def _check_memory(n: int, n_prof: int) -> None:
+def _check_memory(n: int, n_prof: int, table_rows: int) -> None:
     """ValueError when the per-aircraft arrays of n sub-envs would not fit in half the available memory."""
-    need = n * (BYTES_PER_ENV_BASE + 8 * 3 * n_prof + 4 * task.N_OBS)
+    need = n * (BYTES_PER_ENV_BASE + 8 * (6 + 4 * table_rows) * n_prof + 4 * task.N_OBS)
     avail = _available_memory_bytes()
     if need > avail // 2:
         raise ValueError(
