@@ -51,13 +51,13 @@ def _bare_jsbsim_sim_s_per_wall_s(n_steps: int) -> float:
     from trn_env.scenario.loading import load_scenario
 
     sc = load_scenario("default")
-    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
-    fl = components.build_flight(sc.data, world, np.random.default_rng(0))
+    world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+    fl = components.build_flight(sc, world, np.random.default_rng(0))
     run = fl.fdm.run
     t0 = time.perf_counter()
     for _ in range(n_steps):
         run()
-    return n_steps * float(sc.data["aircraft"]["dt_s"]) / (time.perf_counter() - t0)
+    return n_steps * float(sc.aircraft.dt_s) / (time.perf_counter() - t0)
 
 
 def env_figures(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
@@ -111,9 +111,9 @@ def _gym_jsbsim_sim_s_per_wall_s(wall_s: float = 2.0, agent_step_s: float = 0.2)
     from trn_env.scenario.loading import load_scenario
 
     sc = load_scenario("default")
-    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
-    fdm = components.build_flight(sc.data, world, np.random.default_rng(0)).fdm
-    dt = float(sc.data["aircraft"]["dt_s"])
+    world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+    fdm = components.build_flight(sc, world, np.random.default_rng(0)).fdm
+    dt = float(sc.aircraft.dt_s)
     n_run = max(1, int(round(agent_step_s / dt)))
 
     class BareJsbsimEnv(gym.Env):
