@@ -36,6 +36,11 @@ PAIRS: list[tuple[str, str, str | None, str]] = [
     ("fast_env_agent_steps_per_cpu_s", "fast_env_bare_jsbsim_agent_steps_per_s", None,
      "bare JSBSim run() loop, 30 s decisions/s"),
     ("campaign_ray_mean_run_wall_s", "campaign_local_mean_run_wall_s", None, "local process pool"),
+    ("campaign_ray_runs_per_min", "campaign_local_runs_per_min", "campaign_ray_vs_local",
+     "local process pool (Ray's actors warm)"),
+    ("campaign_ray_cold_runs_per_min", "campaign_ray_tasks_cold_runs_per_min", None,
+     "Ray tasks, both from a fresh instance"),
+    ("campaign_ray_first_row_s", "campaign_ray_tasks_first_row_s", None, "Ray tasks, first row"),
 ]
 
 
