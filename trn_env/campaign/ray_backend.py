@@ -10,11 +10,15 @@ client would wait for minutes), a raylet's port instead of the head's, a cluster
 authentication (RAY_AUTH_MODE=token), and `ray://` without Ray Client (`ray[client]`) each get their own
 one-line message. Ray's console noise of a failed connection goes to a log file, named in the message.
 
-- The DEMs go into the object store once (`ray.put`); each task gets the reference, not a copy.
-- Worker death is retried by Ray (`max_retries`); a run's own exception is caught inside the task and
-  comes back as its row (so it is never retried). Each attempt counts itself in Ray's key-value store
-  (keyed by this `run` call, campaign hash and run id), so a row flown again after a node died says
-  `attempts = 2`.
+- The runs fly on warm actors, one per CPU (trn_env.campaign.ray_pool: each imports the packages and loads
+  the campaign's kernels once); `warm=False` flies them as plain Ray tasks instead.
+- The DEMs go into the object store once (`ray.put`); each actor or task gets the reference, not a copy.
+- Worker death is retried (by the pool, or by Ray for tasks: `max_retries`); a run's own exception is
+  caught inside the worker and comes back as its row (so it is never retried). Each attempt counts itself in
+  Ray's key-value store (keyed by this `run` call, campaign hash and run id), so a row flown again after a
+  node died says `attempts = 2`.
+- Before anything is flown, one task compares the code the workers import with this process's
+  (`package_identity`): a local instance whose workers would fly other code is refused.
 - At most 2 x cluster CPUs tasks are in flight; rows are taken with `ray.wait` as they finish and handed
   to the driver, which writes them, so a large campaign never holds everything in the driver.
 - Plug-in navigators and monitors: an installed plug-in (an entry point of a package installed in the
@@ -310,6 +314,9 @@ class RayBackend:
                 ray.init(address="local", num_cpus=self.workers, **kw)
         except (ConnectionError, ValueError, RuntimeError, TimeoutError) as exc:
             raise BackendError(classify_failure(self.address or "(local instance)", str(exc))) from None
+        except Exception as exc:  # noqa: BLE001 - Ray's own start-up failure (e.g. its raylet timed out)
+            line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise BackendError(f"--backend ray: Ray did not start ({line})") from None
         self._started = True
         self._check_workers()
         return self
