@@ -165,9 +165,11 @@ def _differences(a: list[dict], b: list[dict]) -> list[str]:
             continue
         for k in ("termination", "horizontal_error_rms_m", "series_err_h_m"):
             if r[k] != ref[k]:
+                why = str(r["error"]).strip().splitlines()[-1][:200] if r["error"] else None
                 out.append(f"{r['run_id']} {k}: {_first_difference(ref[k], r[k])} (termination "
-                           f"{r['termination']}, attempts {r['attempts']}, error {str(r['error'])[:200]!r})")
-    return out
+                           f"{r['termination']}, attempts {r['attempts']}, error {why!r})")
+                break                                    # one line per run
+    return out if len(out) <= 8 else out[:8] + [f"... and {len(out) - 8} more"]
 
 
 def _first_difference(a, b) -> str:

@@ -278,6 +278,7 @@ class RayBackend:
         self.max_retries = int(max_retries)
         self.connect_timeout_s = float(connect_timeout_s)
         self.warm = bool(warm)
+        package_identity()        # this process's code, read now: near when its modules were imported
         self._pool = None
         self._started = False
         self.ray = None
