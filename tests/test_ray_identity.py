@@ -40,7 +40,8 @@ def test_workers_flying_other_code_are_refused(tmp_path, monkeypatch):
     assert str(other / "trn_env") in msg and package_identity()[1] in msg and "\n" not in msg
     assert not ray.is_initialized()          # the instance it started is shut down
     # the same code copied elsewhere is the same code: accepted
-    shutil.rmtree(other)
-    _copy_checkout(other)
+    same = tmp_path / "same_checkout"
+    _copy_checkout(same)
+    monkeypatch.chdir(same)
     with RayBackend(workers=1) as backend:
         assert backend.describe().startswith("Ray (local instance), 1 CPU(s)")
