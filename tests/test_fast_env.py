@@ -177,7 +177,7 @@ def test_navigation_error_grows_over_featureless_and_shrinks_with_terrain_fixes(
     e.close()
 
 
-@pytest.mark.parametrize("name", cal.QUICK_ROUTES)
+@pytest.mark.parametrize("name", [r.name for r in cal.REFERENCE_ROUTES])
 def test_calibrated_against_recorded_full_loop(name):
     """The fast tier's true error at the goal (mean, 90th percentile over FAST_SEEDS seeds) within 25 % of
     the full JSBSim loop's over 32 seeds, recorded by scripts/calibrate_fast_tier.py
@@ -193,8 +193,6 @@ def test_calibrated_against_recorded_full_loop(name):
 def test_calibrated_against_full_loop_live(name):
     """Both tiers flown now on every reference route: the full loop over 32 seeds, the fast tier over
     FAST_SEEDS."""
-    if name in cal.KNOWN_MISSES:
-        pytest.xfail(cal.KNOWN_MISSES[name])
     r = cal.route_by_name(name)
     c = cal.compare(cal.fly_full(r, range(32)), cal.fly_fast(r, range(cal.FAST_SEEDS)))
     assert abs(c["mean_rel"]) <= 0.25 and abs(c["p90_rel"]) <= 0.25, c

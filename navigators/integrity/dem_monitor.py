@@ -452,8 +452,8 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     la = np.empty(m)
     lo = np.empty(m)
     hh = np.empty(m)
-    _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax, bmin,
-              h_min, h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
+    _ra_batch((heights, lat0, lon0, dlat, dlon, False), cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax,
+              bmin, h_min, h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan

@@ -104,6 +104,24 @@ def _base_row(task: RunTask) -> dict:
     return row
 
 
+def task_scenario(task: RunTask, dems: dict[str, Any] | None = None):
+    """The run's own Scenario (a copy of the variant's data with the run's seed; its DEMs from `dems`, else
+    from the table set_dems filled)."""
+    from trn_env.scenario.loading import Scenario
+    table = _DEMS if dems is None else dems
+    data = copy.deepcopy(task.data)      # the run's own: tasks of one variant share their data
+    data["seed"] = int(task.seed)
+    extras: dict[str, Any] = {}
+    wk, mk = task.dem_keys
+    if wk is not None and wk in table:
+        extras["world_dem_raw"] = table[wk]
+    if mk is not None and mk in table:
+        extras["map_dem_raw"] = table[mk]
+    return Scenario(name=task.scenario_name, source=task.scenario_source, data=data,
+                    description=str(data.get("description", "")), seed=int(task.seed),
+                    duration_s=float(data["duration_s"]), extras=extras)
+
+
 def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, bytes | None]:
     """Fly one run; returns (row, the compressed log.npz bytes if the campaign keeps logs). Never raises
     on the run's own failure: the row carries termination 'error' and the message. An env-episode task
@@ -114,23 +132,11 @@ def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, by
     if getattr(task, "kind", "flight") == "replay":       # a log campaign (trn_env.campaign.log_replay)
         from trn_env.campaign.log_replay import replay_run
         return replay_run(task)
-    from trn_env.scenario.loading import Scenario
     from trn_env.sim.closed_loop import ClosedLoop
 
     row = _base_row(task)
-    table = _DEMS if dems is None else dems
-    data = copy.deepcopy(task.data)      # the run's own: tasks of one variant share their data
-    data["seed"] = int(task.seed)
-    row["scenario_hash"] = scenario_hash(data)
-    extras: dict[str, Any] = {}
-    wk, mk = task.dem_keys
-    if wk is not None and wk in table:
-        extras["world_dem_raw"] = table[wk]
-    if mk is not None and mk in table:
-        extras["map_dem_raw"] = table[mk]
-    scenario = Scenario(name=task.scenario_name, source=task.scenario_source, data=data,
-                        description=str(data.get("description", "")), seed=int(task.seed),
-                        duration_s=float(data["duration_s"]), extras=extras)
+    scenario = task_scenario(task, dems)
+    row["scenario_hash"] = scenario_hash(scenario.data)
     wall0 = time.perf_counter()
     try:
         loop = ClosedLoop(scenario, pipeline=False)

@@ -16,8 +16,8 @@ Per aircraft, every `dt_s` (1 s, trn_env.env.fast.vector_env.DT_S) of a decision
   horizontal axis (std and correlation time in trn_env.env.fast.vector_env.TURBULENCE);
 - position on the WGS84 ellipsoid (meridian and prime-vertical radii at the aircraft);
 - navigator (trn_env.env.fast.navigator): INS error and covariance propagation every step, a 1 Hz sample
-  of the terrain height under the TRUE position (the WORLD DEM) into the TERCOM profile, GNSS updates
-  before the outage, a TERCOM fix every fix_period_s;
+  of the terrain height under the TRUE position (the WORLD DEM) into the TERCOM profile, GNSS position and
+  velocity updates before the outage, a TERCOM fix every fix_period_s;
 - episode ends: terrain collision (true height below the WORLD terrain), off the map (world or map
   lookup NaN), arrival (estimated distance to the goal within the goal radius; in "progress" mode the
   true distance), the time limit.
@@ -41,6 +41,8 @@ from trn_env.env.fast.state import (
     END,
     EP_E,
     EP_N,
+    EV_E,
+    EV_N,
     GOAL,
     GOAL_LAT,
     GOAL_LON,
@@ -89,6 +91,7 @@ WGS84_E2 = 6.69437999014e-3
     FP_SAMPLE_DT,
 ) = range(18)
 N_FLIGHT_PARAMS = 18
+CHUNK_AIRCRAFT = 8  # aircraft per chunk a thread takes from the parallel loops (numba.parallel_chunksize)
 
 
 @njit(cache=True)
@@ -138,7 +141,7 @@ def _wrap(a):
     return math.atan2(math.sin(a), math.cos(a))
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def fly_decision(
     X,
     state,
@@ -163,11 +166,14 @@ def fly_decision(
     wind_n,
     wind_e,
     diff,
+    tables,
 ):
     """Fly every active aircraft n_sub steps of fp[FP_DT] s (or to its episode's end, X[:, END] != 0); the
-    aircraft are independent (each writes only its own rows); one thread (prange marks the loop that could
-    be spread over cores: with numba's parallel=True two threads were slower here, the per-aircraft work
-    being uneven); diff is (N, profile) scratch."""
+    aircraft are independent (each writes only its own rows and draws from its own random stream), so the
+    loop over them is spread over numba's threads (call it inside numba.parallel_chunksize(CHUNK_AIRCRAFT):
+    the work per aircraft is uneven - a TERCOM fix costs tens of steps - and small chunks taken in turn keep
+    both cores busy, also when one of them is taken by another process); diff (N, 3, profile) and tables
+    (N, 4, candidates, profile) are TERCOM's scratch."""
     dt = fp[FP_DT]
     v = fp[FP_TAS]
     tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])
@@ -246,8 +252,18 @@ def fly_decision(
                 X[i, NEXT_SAMPLE_T] += fp[FP_SAMPLE_DT]
                 if t <= nav[nv.NP_GNSS_UNTIL]:
                     s = nav[nv.NP_GNSS_SIGMA]
+                    sv = nav[nv.NP_GNSS_SIGMA_V]
                     g_n, g_e = frng.normal_pair(state, i)
-                    nv.position_update(X, i, X[i, EP_N] + s * g_n, X[i, EP_E] + s * g_e, s * s, 0.0)
+                    gv_n, gv_e = frng.normal_pair(state, i)
+                    nv.gnss_update(
+                        X,
+                        i,
+                        X[i, EP_N] + s * g_n,
+                        X[i, EP_E] + s * g_e,
+                        X[i, EV_N] + sv * gv_n,
+                        X[i, EV_E] + sv * gv_e,
+                        nav,
+                    )
                     X[i, T_LAST_FIX] = t
                     X[i, N_PROF] = 0.0
                 elif nav[nv.NP_TERCOM] > 0.5:
@@ -276,6 +292,7 @@ def fly_decision(
                             rm_e + X[i, H],
                             (rn_e + X[i, H]) * math.cos(lat_e),
                             diff[i],
+                            tables[i],
                         )
                         X[i, T_LAST_FIX] = t
             # ---- episode ends

@@ -12,24 +12,28 @@ sets the horizontal error at the goal:
   estimate), plus the accelerometer's white noise (velocity random walk). Schuler feedback is left out
   (its 84 min period is long against an episode). The vertical channel is the barometer's: a constant height
   error per episode.
-- GNSS while available (the scenario's outage start): a position update at 1 Hz with its horizontal sigma.
+- GNSS while available (the scenario's outage start): position and velocity updates at 1 Hz with the
+  navigator's sigmas, the position sigma floored at gnss_correlated_sigma_m (as the full navigator's).
 - TERCOM (seed 000 eq 2, with the per-profile mean removed when the scenario's `remove_bias` is set): the
   profile of measured terrain heights (baro height minus radar height: true terrain + baro error + noise,
   1 Hz) along the INS-indicated track over `fix_period_s`, correlated with the MAP over +-half_cells x
-  cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point, then
-  +-40 m at 20 m and +-10 m at the cell size on every point); the best offset is the fix,
-  z = INS - matched position, noise fix_sigma_m, chi-square
-  gated (2 dof) against the filter's covariance, as the full navigator does.
+  cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point - a wider,
+  recovery window at 100 m, then +-100 m at 50 m -, then +-40 m at 20 m and +-10 m at the cell size on
+  every point); a best offset on the window's edge is a failed fix; otherwise it is the fix,
+  z = INS - matched position at the profile's mean time (z = p - lag v), noise fix_sigma_m, chi-square
+  gated (2 dof) against the filter's covariance, as the full navigator does (navigators.filters.ins_trn_ekf).
 - Kalman filter over (p, v, a) per axis with one shared covariance (the axes see the same dynamics and
   measurement noise): F the constant-acceleration transition, process noise from the navigator's settings
   as the full navigator's filter takes them (accel_noise_mps2_rthz: velocity random walk;
   g0 x gyro_noise_rps_rthz: the random walk of a, through the tilt), feedback form (the estimated errors
   are removed from the INS after each update).
 
-Health: a fix rejected by the gate counts; `nav_ok` is False after `integrity_window` rejections in a row,
-and then, as the full navigator does after a failed integrity test, the horizontal variance grows by
-recovery_sigma_m^2 and the search widens to recovery_half_cells until a fix is accepted (the full
-navigator's innovation monitor is a windowed test; the fast tier never reports "diverged").
+Health, as the full navigator's (navigators.integrity.innovation_monitor, navigators.core.recovery): every
+fix's NIS (accepted or gated; +inf for an edge fix) enters a test of the sum over the last
+integrity_window fixes against its chi-square upper limit (probability integrity_alpha / 2 above it).
+Entering "degraded" (`nav_ok` False) inflates the position variance by recovery_sigma_m^2 once and widens
+the search to recovery_half_cells until the test is back in band. The fast tier never reports
+"diverged".
 """
 
 from __future__ import annotations
@@ -53,12 +57,16 @@ from trn_env.env.fast.state import (
     BI_G_N,
     CA_E,
     CA_N,
+    DEGRADED,
     EP_E,
     EP_N,
     EV_E,
     EV_N,
+    MAX_WINDOW,
     N_FIXES,
+    N_NIS,
     N_PROF,
+    NIS0,
     P00,
     P01,
     P02,
@@ -79,6 +87,7 @@ G0_MPS2 = 9.80665
 COARSE_STEP_M = 50.0  # TERCOM's first search stage: grid step over the whole window
 BI_STEP_S = 10  # bias instabilities advance every 10 s
 COARSE_STRIDE = 4  # ... on every 4th profile point (1 Hz profile: 4 s apart)
+COARSE_STEPS = 5  # ... in at most this many steps each way from the centre (wider windows: longer steps)
 MODELLED_NAVIGATORS = ("ins", "ins_tercom")
 
 # navigator parameter vector (float64), built by navigator_params()
@@ -107,8 +116,12 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_SIG_BA_PRIOR,
     NP_RECOVERY_SIGMA,
     NP_RECOVERY_WINDOW,
-) = range(24)
-N_NAV_PARAMS = 24
+    NP_SAMPLE_DT,
+    NP_GNSS_SIGMA_V,
+    NP_GNSS_FLOOR,
+    NP_BAND0,  # NP_BAND0 + k - 1: the innovation test's upper limit over k NIS values (2k dof)
+) = range(28)
+N_NAV_PARAMS = NP_BAND0 + MAX_WINDOW
 
 
 def navigator_params(
@@ -119,11 +132,13 @@ def navigator_params(
     ira_noise_m: float,
     ira_rate_hz: float,
     imu_spec=None,
+    sample_dt_s: float = 1.0,
 ) -> np.ndarray:
     """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
     navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
     fields), GNSS availability (s) and IRA noise (m) and rate (Hz): the 1 Hz profile sample is the mean of
-    a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz)."""
+    a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz); sample_dt_s the profile's
+    sample interval (s). The innovation test's window (integrity_window) is at most MAX_WINDOW fixes."""
     if name not in MODELLED_NAVIGATORS:
         raise ValueError(
             f"navigator {name!r} is not modelled by the fast tier; it models: "
@@ -170,11 +185,31 @@ def navigator_params(
     p[NP_TAU_G] = float(imu.get("gyro_bias_tau_s", 3600.0))
     p[NP_GNSS_UNTIL] = float(gnss_until_s)
     p[NP_GNSS_SIGMA] = float(settings.get("gnss_sigma_h_m", 2.0))
-    p[NP_UNHEALTHY] = float(settings.get("integrity_window", 3))
+    window = int(settings.get("integrity_window", 3))
+    if not 1 <= window <= MAX_WINDOW:
+        raise ValueError(
+            f"navigator.settings.integrity_window: the fast tier models windows of 1 to {MAX_WINDOW} fixes, "
+            f"got {window!r}"
+        )
+    p[NP_UNHEALTHY] = float(window)
+    from scipy.stats import chi2
+
+    alpha = float(settings.get("integrity_alpha", 0.01))
+    for k in range(1, MAX_WINDOW + 1):
+        p[NP_BAND0 + k - 1] = float(chi2.isf(0.5 * alpha, 2 * k))
+    p[NP_SAMPLE_DT] = float(sample_dt_s)
+    p[NP_GNSS_SIGMA_V] = float(settings.get("gnss_sigma_v_mps", 0.1))
+    p[NP_GNSS_FLOOR] = float(settings.get("gnss_correlated_sigma_m", 1.5))
     p[NP_MIN_SAMPLES] = 5.0
     p[NP_COARSE_STEP] = COARSE_STEP_M
     p[NP_COARSE_STRIDE] = COARSE_STRIDE
     return p
+
+
+def tercom_table_rows(nav: np.ndarray) -> int:
+    """Candidates per axis of the widest TERCOM search stage (tercom_offset's tables): the coarse stage's
+    2 COARSE_STEPS + 1 (at most), or the fine stages' 5."""
+    return max(2 * COARSE_STEPS + 1, 5)
 
 
 @njit(cache=True)
@@ -244,47 +279,128 @@ def covariance_step(X, i, dt, q_v, q_a):
 
 
 @njit(cache=True)
-def position_update(X, i, z_n, z_e, r_var, gate_chi2):
-    """Kalman update of aircraft i with a horizontal position-error measurement z = INS - reference (m),
-    noise variance r_var, chi-square gate (2 dof; <= 0: no gate). Feedback form: the estimated errors are
-    removed from the INS. Returns True when accepted."""
-    s = X[i, P00] + r_var
-    if gate_chi2 > 0.0 and (z_n * z_n + z_e * z_e) / s > gate_chi2:
-        return False
-    k0 = X[i, P00] / s
-    k1 = X[i, P01] / s
-    k2 = X[i, P02] / s
+def measurement_update(X, i, z_n, z_e, h0, h1, r_var):
+    """Kalman update of aircraft i with a horizontal measurement z = h0 p + h1 v + noise per axis (m; north
+    and east share the covariance), noise variance r_var. Feedback form: the estimated errors are removed
+    from the INS."""
+    p00, p01, p02, p11, p12, p22 = X[i, P00], X[i, P01], X[i, P02], X[i, P11], X[i, P12], X[i, P22]
+    c0 = h0 * p00 + h1 * p01  # P H^T
+    c1 = h0 * p01 + h1 * p11
+    c2 = h0 * p02 + h1 * p12
+    s = h0 * c0 + h1 * c1 + r_var
+    k0 = c0 / s
+    k1 = c1 / s
+    k2 = c2 / s
     X[i, EP_N] -= k0 * z_n
     X[i, EP_E] -= k0 * z_e
     X[i, EV_N] -= k1 * z_n
     X[i, EV_E] -= k1 * z_e
     X[i, CA_N] += k2 * z_n
     X[i, CA_E] += k2 * z_e
-    p00, p01, p02 = X[i, P00], X[i, P01], X[i, P02]
-    X[i, P00] = p00 - k0 * p00
-    X[i, P01] = p01 - k0 * p01
-    X[i, P02] = p02 - k0 * p02
-    X[i, P11] = X[i, P11] - k1 * p01
-    X[i, P12] = X[i, P12] - k1 * p02
-    X[i, P22] = X[i, P22] - k2 * p02
+    X[i, P00] = p00 - k0 * c0
+    X[i, P01] = p01 - k0 * c1
+    X[i, P02] = p02 - k0 * c2
+    X[i, P11] = p11 - k1 * c1
+    X[i, P12] = p12 - k1 * c2
+    X[i, P22] = p22 - k2 * c2
+
+
+@njit(cache=True)
+def position_update(X, i, z_n, z_e, r_var, gate_chi2):
+    """Kalman update of aircraft i with a horizontal position-error measurement z = INS - reference (m),
+    noise variance r_var, chi-square gate (2 dof; <= 0: no gate). Returns True when accepted."""
+    s = X[i, P00] + r_var
+    if gate_chi2 > 0.0 and (z_n * z_n + z_e * z_e) / s > gate_chi2:
+        return False
+    measurement_update(X, i, z_n, z_e, 1.0, 0.0, r_var)
     return True
 
 
 @njit(cache=True)
-def _profile_mad(
-    meas, plat, plon, n, stride, off_lat, off_lon, heights, lat0, lon0, dlat, dlon, remove_bias, diff
-):
-    """Mean absolute difference of the profile (every stride-th of its n points) against the map shifted by
-    (off_lat, off_lon) rad, with the mean difference removed when remove_bias; +inf when any point falls off
-    the map."""
+def gnss_update(X, i, z_n, z_e, zv_n, zv_e, nav):
+    """GNSS update of aircraft i (as the full navigator's, navigators.filters.ins_trn_gnss): position
+    z = INS - GNSS (m) with gnss_sigma_h_m, velocity zv (m/s) with gnss_sigma_v_mps, then the position
+    sigma held at or above gnss_correlated_sigma_m (congruence D P D: the receiver's slowly wandering error
+    that white 1 Hz updates would average away)."""
+    s_h = nav[NP_GNSS_SIGMA]
+    s_v = nav[NP_GNSS_SIGMA_V]
+    measurement_update(X, i, z_n, z_e, 1.0, 0.0, s_h * s_h)
+    measurement_update(X, i, zv_n, zv_e, 0.0, 1.0, s_v * s_v)
+    floor = nav[NP_GNSS_FLOOR]
+    if X[i, P00] < floor * floor:
+        d = floor / math.sqrt(max(X[i, P00], 1e-30))
+        X[i, P00] = floor * floor
+        X[i, P01] *= d
+        X[i, P02] *= d
+
+
+@njit(cache=True)
+def integrity_add(X, i, nav, nis):
+    """Add a TERCOM fix's NIS (2 dof; +inf for a failed fix) to aircraft i's innovation test (the sum over the
+    last integrity_window fixes against its chi-square upper limit, navigators.integrity.innovation_monitor)
+    and recover as the full navigator does (navigators.core.recovery, once per entry): entering "degraded"
+    inflates the position variance by recovery_sigma_m^2 and widens the search (tercom_fix) until the test
+    is back in band."""
+    w = int(nav[NP_UNHEALTHY])
+    k = int(X[i, N_NIS])
+    X[i, NIS0 + k % w] = nis
+    X[i, N_NIS] = k + 1
+    m = min(k + 1, w)
+    stat = 0.0
+    for j in range(m):
+        stat += X[i, NIS0 + j]
+    degraded = stat > nav[NP_BAND0 + m - 1]
+    if degraded and X[i, DEGRADED] < 0.5:
+        X[i, P00] += nav[NP_RECOVERY_SIGMA] ** 2
+    X[i, DEGRADED] = 1.0 if degraded else 0.0
+
+
+@njit(cache=True)
+def _axis_table(f, n, stride, offsets, n_off, size, cell_idx, frac):
+    """Grid cell and fraction of every used profile point (f: fractional indices along one map axis, every
+    stride-th of n) shifted by each of n_off offsets (cells): cell_idx[o, kk], frac[o, kk]; -1 where the
+    point falls off the grid (kernels.bilinear_at_index's bounds)."""
+    for o in range(n_off):
+        kk = 0
+        for k in range(0, n, stride):
+            x = f[k] + offsets[o]
+            if not (x >= -kernels._EDGE and x <= size - 1 + kernels._EDGE):
+                cell_idx[o, kk] = -1.0
+            else:
+                c = min(max(int(x), 0), size - 2)
+                cell_idx[o, kk] = c
+                frac[o, kk] = x - c
+            kk += 1
+
+
+@njit(cache=True)
+def _candidate_mad(meas, n, stride, heights, ii, uu, jj, vv, remove_bias, diff):
+    """Mean absolute difference (mean-removed when remove_bias) of the profile's used points against the
+    map at the cells and fractions (ii, uu) x (jj, vv) of one shifted candidate (kernels.bilinear_at_index's
+    formula, its void retry included); +inf when a point falls off the map or on a void."""
     s = 0.0
     m_used = 0
     for k in range(0, n, stride):
-        m = kernels.bilinear(heights, lat0, lon0, dlat, dlon, plat[k] + off_lat, plon[k] + off_lon)
-        if m != m:
+        if ii[m_used] < 0.0 or jj[m_used] < 0.0:
             return np.inf
-        diff[m_used] = meas[k] - m
-        s += diff[m_used]
+        i = int(ii[m_used])
+        j = int(jj[m_used])
+        u = uu[m_used]
+        v = vv[m_used]
+        h00 = heights[i, j]
+        h01 = heights[i, j + 1]
+        h10 = heights[i + 1, j]
+        h11 = heights[i + 1, j + 1]
+        x = h00 + v * (h01 - h00)
+        y = h10 + v * (h11 - h10)
+        m = x + u * (y - x)
+        if m != m:
+            m = kernels._edge_retry(heights, i, j, u, v)
+            if m != m:
+                return np.inf
+        d = meas[k] - m
+        diff[m_used] = d
+        s += d
         m_used += 1
     mean = s / m_used if remove_bias else 0.0
     mad = 0.0
@@ -309,56 +425,80 @@ def tercom_offset(
     remove_bias,
     m_per_rad_lat,
     m_per_rad_lon,
-    diff,
+    scratch,
     coarse_step_m,
     coarse_stride,
+    tables,
 ):
     """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
     positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
-    in coarse_step_m steps on every coarse_stride-th profile point, then +-40 m in 20 m steps and +-10 m in
-    cell_m steps around the best on every point. Returns (dn, de, mad)."""
+    in coarse_step_m steps (a window wider than COARSE_STEPS of them: in COARSE_STEPS longer steps, then
+    +-one of those in coarse_step_m steps around the best) on every coarse_stride-th profile point, then
+    +-40 m in 20 m steps and +-10 m in cell_m steps around the best on every point. Each stage's
+    candidates form a north x east lattice, so the map cell and fraction of every point under every north
+    and every east shift are tabulated once (_axis_table) and a candidate's bilinear look-ups only read
+    them. scratch: (3, >= n) work rows; tables: (4, >= candidates per axis, >= points used) work tables.
+    Returns (dn, de, mad)."""
+    diff = scratch[0]
+    fi = scratch[1]
+    fj = scratch[2]
+    for k in range(n):  # the profile's points as fractional map indices, once per fix
+        fi[k] = (plat[k] - lat0) / dlat
+        fj[k] = (plon[k] - lon0) / dlon
+    cells_per_m_n = 1.0 / (m_per_rad_lat * dlat)
+    cells_per_m_e = 1.0 / (m_per_rad_lon * dlon)
+    n_lat, n_lon = heights.shape
+    max_off = tables.shape[1]
+    off_n = np.empty(max_off)
+    off_e = np.empty(max_off)
+    val_n = np.empty(max_off)
+    val_e = np.empty(max_off)
     best_n = 0.0
     best_e = 0.0
     best = np.inf
-    steps = (coarse_step_m, 20.0, cell_m)
-    spans = (half_window_m, 40.0, 10.0)
-    for stage in range(3):
+    # the coarse stage spans the window in at most COARSE_STEPS steps each way; a wider window (recovery's)
+    # gets a middle stage at coarse_step_m around the coarse best
+    step0 = max(coarse_step_m, half_window_m / COARSE_STEPS)
+    steps = (step0, coarse_step_m, 20.0, cell_m)
+    spans = (half_window_m, step0, 40.0, 10.0)
+    strides = (coarse_stride, coarse_stride, 1, 1)
+    for stage in range(4):
+        if stage == 1 and step0 <= coarse_step_m + 1e-9:
+            continue
         step = steps[stage]
-        stride = coarse_stride if stage == 0 else 1
+        stride = strides[stage]
         span = min(spans[stage], half_window_m)
-        k = int(span / step + 1e-9)
+        k = min(int(span / step + 1e-9), (max_off - 1) // 2)
+        na = 0
+        nb = 0
+        for a in range(-k, k + 1):
+            on = best_n + a * step
+            if abs(on) <= half_window_m + 1e-9:
+                val_n[na] = on
+                off_n[na] = on * cells_per_m_n
+                na += 1
+            oe = best_e + a * step
+            if abs(oe) <= half_window_m + 1e-9:
+                val_e[nb] = oe
+                off_e[nb] = oe * cells_per_m_e
+                nb += 1
+        _axis_table(fi, n, stride, off_n, na, n_lat, tables[0], tables[1])
+        _axis_table(fj, n, stride, off_e, nb, n_lon, tables[2], tables[3])
+        best = np.inf  # each stage compares its candidates on its own points
         cn = best_n
         ce = best_e
-        if stage > 0:
-            best = np.inf  # compare the fine stages on the whole profile
-        for a in range(-k, k + 1):
-            on = cn + a * step
-            if abs(on) > half_window_m + 1e-9:
-                continue
-            for b in range(-k, k + 1):
-                oe = ce + b * step
-                if abs(oe) > half_window_m + 1e-9:
-                    continue
-                mad = _profile_mad(
-                    meas,
-                    plat,
-                    plon,
-                    n,
-                    stride,
-                    on / m_per_rad_lat,
-                    oe / m_per_rad_lon,
-                    heights,
-                    lat0,
-                    lon0,
-                    dlat,
-                    dlon,
-                    remove_bias,
-                    diff,
+        for a in range(na):
+            for b in range(nb):
+                mad = _candidate_mad(
+                    meas, n, stride, heights, tables[0, a], tables[1, a], tables[2, b], tables[3, b],
+                    remove_bias, diff,
                 )
                 if mad < best:
                     best = mad
-                    best_n = on
-                    best_e = oe
+                    cn = val_n[a]
+                    ce = val_e[b]
+        best_n = cn
+        best_e = ce
     return best_n, best_e, best
 
 
@@ -378,6 +518,7 @@ def tercom_fix(
     m_per_rad_lat,
     m_per_rad_lon,
     diff,
+    tables,
 ):
     """Aircraft i's TERCOM fix from its profile (rows of prof_*), fused by the Kalman filter; the profile is
     then restarted. Returns True when the fix was accepted."""
@@ -385,6 +526,7 @@ def tercom_fix(
     X[i, N_PROF] = 0.0
     if n < nav[NP_MIN_SAMPLES]:
         return False
+    half_m = nav[NP_HALF_WINDOW] * (nav[NP_RECOVERY_WINDOW] if X[i, DEGRADED] > 0.5 else 1.0)
     dn, de, mad = tercom_offset(
         prof_meas[i],
         prof_lat[i],
@@ -395,7 +537,7 @@ def tercom_fix(
         lon0,
         dlat,
         dlon,
-        nav[NP_HALF_WINDOW] * (nav[NP_RECOVERY_WINDOW] if X[i, REJECTS] >= nav[NP_UNHEALTHY] else 1.0),
+        half_m,
         nav[NP_CELL],
         nav[NP_REMOVE_BIAS] > 0.5,
         m_per_rad_lat,
@@ -403,17 +545,28 @@ def tercom_fix(
         diff,
         nav[NP_COARSE_STEP],
         int(nav[NP_COARSE_STRIDE]),
+        tables,
     )
     if not math.isfinite(mad):
         return False
-    # the map matches where the INS path is shifted by (dn, de): truth = INS + offset, z = INS - matched
-    ok = position_update(X, i, -dn, -de, nav[NP_FIX_SIGMA] ** 2, nav[NP_GATE])
     X[i, N_FIXES] += 1.0
+    ok = False
+    if abs(dn) >= half_m - 1e-6 or abs(de) >= half_m - 1e-6:
+        # the best match on the search window's edge (the true offset may lie outside): a failed fix
+        nis = np.inf
+    else:
+        # the map matches where the INS path is shifted by (dn, de): truth = INS + offset, z = INS - matched;
+        # the rigid shift is the INS error at the batch's mean sample time, lag before the fix:
+        # z = p - lag v (the full navigator's H)
+        lag = 0.5 * (n - 1) * nav[NP_SAMPLE_DT]
+        r_var = nav[NP_FIX_SIGMA] ** 2
+        s = X[i, P00] - 2.0 * lag * X[i, P01] + lag * lag * X[i, P11] + r_var
+        nis = (dn * dn + de * de) / s
+        if nis <= nav[NP_GATE]:
+            measurement_update(X, i, -dn, -de, 1.0, -lag, r_var)
+            ok = True
     X[i, REJECTS] = 0.0 if ok else X[i, REJECTS] + 1.0
-    if X[i, REJECTS] == nav[NP_UNHEALTHY]:
-        # recovery (as the full navigator's after a failed test): the horizontal sigma grows by
-        # recovery_sigma_m and the search widens to recovery_half_cells until a fix is accepted
-        X[i, P00] += nav[NP_RECOVERY_SIGMA] ** 2
+    integrity_add(X, i, nav, nis)
     return ok
 
 
@@ -450,3 +603,7 @@ def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_si
     X[i, N_PROF] = 0.0
     X[i, REJECTS] = 0.0
     X[i, N_FIXES] = 0.0
+    X[i, N_NIS] = 0.0
+    X[i, DEGRADED] = 0.0
+    for j in range(MAX_WINDOW):
+        X[i, NIS0 + j] = 0.0

@@ -20,13 +20,13 @@ from trn_env.env.fast.state import (
     AGL_CMD,
     BARO,
     D_EST_START,
+    DEGRADED,
     EV_E,
     EV_N,
     GUST_E,
     GUST_N,
     P00,
     PSI,
-    REJECTS,
     TRK_CMD,
     H,
     T,
@@ -58,7 +58,7 @@ def _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon, lat, lon, no_info):
     return c if c == c else no_info
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def observe(
     X,
     mask,
@@ -136,7 +136,7 @@ def observe(
                 )
             o[11 + k] = math.log10(1.0 + max(c, 0.0))
         o[17] = X[i, T] / op[OP_MAX_EP]
-        o[18] = 1.0 if X[i, REJECTS] < op[OP_UNHEALTHY] else 0.0
+        o[18] = 1.0 if X[i, DEGRADED] < 0.5 else 0.0
         rel = math.atan2(de, dn) - trk
         o[19] = math.sin(rel)
         o[20] = math.cos(rel)

@@ -28,7 +28,12 @@ YAW0, BG_Z = 44, 45
 # bias instabilities (truth, first-order Gauss-Markov): accelerometer (m/s^2), gyro (rad/s) and the tilt it
 # has integrated (rad), north and east
 BI_A_N, BI_A_E, BI_G_N, BI_G_E, TILT_GM_N, TILT_GM_E = range(46, 52)
-N_STATE = 52
+# the innovation test (navigators.integrity.innovation_monitor): the last NIS values (a ring of up to
+# MAX_WINDOW), how many were added this episode, and whether the test is out of band ("degraded")
+MAX_WINDOW = 8
+NIS0 = 52
+N_NIS, DEGRADED = 60, 61
+N_STATE = 62
 
 # END codes (0 = running); names in END_NAMES
 END_NAMES = ("", "arrived", "terrain_collision", "off_map", "time_limit", "goal", "diverged")
