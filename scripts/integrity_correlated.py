@@ -269,6 +269,8 @@ def part_denied(rng, tests_white: int, tests_corr: int, n_det: int) -> dict:
                      "radar_altimeter_sigma_m": SIG_RA, "monitor_taus_s": [tau_h, tau_v]}}
     for L in DENIED_LENGTHS_M:
         n_tests = tests_white if L == 0.0 else tests_corr
+        if n_tests <= 0:
+            continue
         k = {"matched": 0, "constant": 0, "today": 0, "glrt_combined": 0}
         done = 0
         while done < n_tests:
