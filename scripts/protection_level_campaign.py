@@ -198,8 +198,8 @@ def main(argv=None) -> int:
         fl = f"{m['flights']} ({m['flights_with_mi']})" if "flights" in m else "all"
         rate = m["pl_misleading_rate"]
         print(f"| {nav} | {cond} | {fl} | {m['all_epochs']} / {m['pl_epochs']} | "
-              f"{m['pl_misleading_epochs']} | {rate:.2g} (≤ {m['pl_misleading_rate_upper95']:.2g}) | {m['pl_hazardous_epochs']} | "
-              f"{m['pl_availability']:.3f} | {m['hpl_median_m']:.1f} |")
+              f"{m['pl_misleading_epochs']} | {rate:.2g} (≤ {m['pl_misleading_rate_upper95']:.2g}) | "
+              f"{m['pl_hazardous_epochs']} | {m['pl_availability']:.3f} | {m['hpl_median_m']:.1f} |")
     return 0
 
 
