@@ -166,3 +166,22 @@ def test_tactical_grade_consistency():
             problems.append(f"{n}: thinned ANEES {anees:.2f} ({thin.size} samples, every {k} epochs) against "
                             f"[{lo:.2f}, {hi:.2f}], {100 * inside:.0f} % of epochs inside 3 sigma")
     assert not problems, problems
+
+
+@pytest.mark.parametrize("name", ["ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"])
+def test_consumer_grade_is_flagged_beyond_the_small_angle_model(name):
+    """The consumer grade's 100 deg/h gyro bias builds more than 0.57 deg of attitude error over every
+    navigator's memory: Health says its covariance is not calibrated there; on the tactical grade it says
+    nothing (measured consistency of each cell: docs/validation/navigators.md)."""
+    from trn_env import terrain
+    d = load_scenario("default", navigator="ins_tercom").data
+    dem = terrain.load("jacksboro")
+    settings = {"aiding_source": "ins"} if name == "acq_track" else {}
+    warnings = {}
+    for grade in ("tactical", "consumer"):
+        dd = {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
+              "navigator": {"name": name, "settings": settings}}
+        nav = build_navigator(dd, dem, np.random.default_rng(0))
+        warnings[grade] = nav._consistency_warning
+    assert warnings["tactical"] == ""
+    assert "not calibrated" in warnings["consumer"] and name in warnings["consumer"]
