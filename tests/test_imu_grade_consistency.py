@@ -95,15 +95,15 @@ def test_baro_loop_height_rate_against_the_loop_integrated():
 def test_build_navigator_applies_the_grade(name):
     """The tactical grade raises the navigator's error model above the navigation grade's; a navigation-grade
     scenario keeps the tuned figures (they are floors)."""
-    sc = load_scenario("default", navigator="ins_tercom")
-    d = sc.data
+    sc = load_scenario("default", navigator=name)
     from trn_env import terrain
     dem = terrain.load("jacksboro")
     settings = {"aiding_source": "ins"} if name == "acq_track" else {}
     navs = {}
     for grade in ("navigation", "tactical"):
-        dd = {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
-              "navigator": {"name": name, "settings": settings}}
+        fields = {"sensors.imu.grade": grade}
+        fields.update({f"navigator.settings.{k}": v for k, v in settings.items()})
+        dd = sc.with_fields(fields).sections
         navs[grade] = build_navigator(dd, dem, np.random.default_rng(0))
     n, t = navs["navigation"], navs["tactical"]
     g = 9.80665

@@ -94,7 +94,6 @@ from .aiding import (
     WindEstimator,
     ground_vector,
     speed_track,
-    wrap_rad,
 )
 from .buffers import (
     _det2,
@@ -167,30 +166,10 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._walk2 = float(walk) ** 2
         self._speed_set = np.array(cfg.speed_spacings_mps)
         self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
-        self._position_set = np.array(cfg.position_spacings_cells) * self.map_resolution_m
-        # the loops' spacing sets widest first, and the start-point loops' reach (m), fixed by the settings
-        self._speed_desc = np.sort(self._speed_set)[::-1].copy()
-        self._heading_desc = np.sort(self._heading_set)[::-1].copy()
-        self._position_desc = np.sort(self._position_set)[::-1].copy()
-        self._position_reach = float(
-            max(cfg.scf_offset_cells * self.map_resolution_m, float(self._position_set.max()))
-        )
         # loop_kernel.track_loops' settings (fixed by the config) and its preallocated outputs
-        f_r = cfg.scf_offset_cells * self.map_resolution_m
-        self._loop_settings = loop_kernel.LoopSettings(
-            self._cost, bool(cfg.remove_bias), self._interp, self._n_min, bool(cfg.aiding),
-            bool(cfg.position_loops), cfg.loop_order == "speed_first",
-            int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), self._disc,
-            loop_kernel.MITIGATIONS[cfg.bias_mitigation], float(f_r), float(cfg.sample_period_s),
-            max(f_r / (cfg.transect_samples * cfg.sample_period_s), float(self._speed_set.max())),
-            self._speed_desc, float(cfg.speed_threshold_mps), float(cfg.speed_narrow_spacing_mps),
-            float(cfg.speed_narrow_threshold_mps), self._heading_desc,
-            math.radians(cfg.heading_threshold_deg), math.radians(cfg.heading_narrow_spacing_deg),
-            math.radians(cfg.heading_narrow_threshold_deg),
-            self._position_reach, self._position_desc, float(cfg.position_threshold_m),
-            float(cfg.position_narrow_spacing_cells * self.map_resolution_m),
-            float(cfg.position_narrow_threshold_m),
-        )  # fmt: skip
+        self._loop_settings = loop_kernel.LoopSettings.from_config(
+            cfg, self.map_resolution_m, self._cost, self._interp, self._n_min, self._disc,
+            loop_kernel.MITIGATIONS[cfg.bias_mitigation])
         self._loop_out = (np.zeros(4, np.int64), np.zeros(4, bool), np.zeros(4, bool), np.zeros((4, 6)))
         self.wind = WindEstimator(cfg.wind_gain)
         self.average = OutputAverage(
@@ -347,10 +326,6 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             self.health.skip(frames.t_end_s, "numerical", f"acq_track: epoch skipped ({exc})")
         return self.estimate(frames.t_end_s)
 
-    # ------------------------------------------------------------------ sensor intake
-
-    # ------------------------------------------------------------------ epochs
-
     def _set_status(self, t: float, status: str, reason: str) -> None:
         if status != self.health.status:
             self.health.events.append((t, f"acq_track: {self.health.status} -> {status}: {reason}"))
@@ -434,54 +409,6 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
     def _set_lock(self, lock: str, t: float, status: str, reason: str) -> None:
         self.lock_state = lock
         self._set_status(t, status, reason)
-
-    def _finish(self, s: Sample) -> None:
-        """Newest position from the replica; output speed/track through the moving average."""
-        _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
-        dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
-        self.pos = (self.p0[0] + dla[-1], self.p0[1] + dlo[-1])
-        self.t_pos = s.t_s
-        cv, cp = self._corrected(s)
-        v, psi = cv + self.b_v, cp + self.b_psi  # _aided_speed, _aided_track
-        if self.lock_state == "tracking":
-            if self.config.aiding:  # average the references: the aiding carries ramps without lag
-                ref_v, ref_psi = self.b_v, self.b_psi
-                if self._ne_frame:  # the NE bias as the newest sample's speed / track reference
-                    ref_v, ref_psi = cv - s.m_v + self.b_v, float(wrap_rad(cp - s.m_psi)) + self.b_psi
-                ab_v, ab_psi = self.average.push(ref_v, ref_psi)
-                self.out_speed, self.out_track = s.m_v + ab_v, float(wrap_rad(s.m_psi + ab_psi))
-            else:
-                self.out_speed, self.out_track = self.average.push(v, psi)
-            if (
-                self.config.aiding
-                and self.config.aiding_source == "air_data"
-                and self.config.wind_estimation
-                and not self._ne_frame
-                and math.isfinite(s.tas_mps)
-            ):
-                self.wind.update(ground_vector(v, psi), s.tas_mps, s.heading_rad)
-                # the references keep the ground vector the loops found (the wind took over part of it)
-                m_v2, m_psi2 = self.wind.predict(s.tas_mps, s.heading_rad)
-                self.b_v += s.m_v - m_v2
-                self.b_psi += float(wrap_rad(s.m_psi - m_psi2))
-                tr = self.transect.samples
-                tr[-1] = Sample(
-                    s.t_s,
-                    s.d_m,
-                    s.valid,
-                    s.range_m,
-                    m_v2,
-                    m_psi2,
-                    s.tas_mps,
-                    s.heading_rad,
-                    s.gnss_lat,
-                    s.gnss_lon,
-                    s.gnss_v_ne,
-                    s.roll_rad,
-                )
-        else:
-            self.average.reset()
-            self.out_speed, self.out_track = v, float(wrap_rad(psi))
 
     # ------------------------------------------------------------------ output
     def estimate(self, t_s: float | None = None) -> Estimate:
