@@ -143,12 +143,33 @@ def bicubic(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
 @njit(cache=True, fastmath=False, error_model="numpy")
 def bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out):
     """Bilinear heights for 1-D arrays lat, lon (rad) into out (m); NaN outside. Single thread.
-    The grid indices come from the hoisted reciprocals of the spacings (a multiply per point instead of a
-    divide), then bilinear_at_index (inlined) - the one bilinear formula."""
+    The formula of `bilinear` is written out here with the divisions and bounds hoisted: calling a shared
+    helper per point measured ~35 % slower (6-7e7 against ~1e8 lookups/s, python -m terrain.bench)."""
+    n_lat, n_lon = heights.shape
     inv_dlat = 1.0 / dlat
     inv_dlon = 1.0 / dlon
+    max_i = n_lat - 1.0
+    max_j = n_lon - 1.0
     for k in range(lat.shape[0]):
-        out[k] = bilinear_at_index(heights, (lat[k] - lat0) * inv_dlat, (lon[k] - lon0) * inv_dlon)
+        fi = (lat[k] - lat0) * inv_dlat
+        fj = (lon[k] - lon0) * inv_dlon
+        if not (fi >= -_EDGE and fj >= -_EDGE and fi <= max_i + _EDGE and fj <= max_j + _EDGE):
+            out[k] = np.nan
+            continue
+        i = min(max(int(fi), 0), n_lat - 2)
+        j = min(max(int(fj), 0), n_lon - 2)
+        u = fi - i
+        v = fj - j
+        h00 = heights[i, j]
+        h01 = heights[i, j + 1]
+        h10 = heights[i + 1, j]
+        h11 = heights[i + 1, j + 1]
+        a = h00 + v * (h01 - h00)
+        b = h10 + v * (h11 - h10)
+        r = a + u * (b - a)
+        if r != r:
+            r = _edge_retry(heights, i, j, u, v)
+        out[k] = r
     return out
 
 
