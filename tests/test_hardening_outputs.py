@@ -47,8 +47,8 @@ def test_run_folder_holds_the_resolved_scenario_and_replays_from_it(tmp_path, ca
     data, _ = read_scenario_file(run / "scenario.toml")
     assert data["seed"] == 5 and data["navigator"]["name"] == "ins" and data["duration_s"] == 8.0
     assert data["wind"]["layers"][0]["speed_mps"] == 7.5
-    assert load_scenario(run / "scenario.toml").data == load_scenario(
-        SCEN / "default_short.toml", seed=5, navigator="ins", duration_s=8.0).data | {
+    assert load_scenario(run / "scenario.toml").to_dict() == load_scenario(
+        SCEN / "default_short.toml", seed=5, navigator="ins", duration_s=8.0).to_dict() | {
         "wind": data["wind"]}
     replay = tmp_path / "replay"
     capsys.readouterr()

@@ -291,9 +291,10 @@ def _default_route_run(seed: int, map_is_world: bool, every: int) -> tuple[list[
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("default", duration_s=240.0, seed=seed, navigator="rbpf")
+    data = sc.to_dict()
     if map_is_world:
-        sc.data["terrain"]["map"] = {"dem": "world"}
-    res = ClosedLoop(validate(sc.data, source="default"), pipeline=False).run()
+        data["terrain"]["map"] = {"dem": "world"}
+    res = ClosedLoop(validate(data, source="default"), pipeline=False).run()
     return _horizontal_nees(res, 15.0, every), res.summary["horizontal_error_rms_m"]
 
 
@@ -332,7 +333,7 @@ def test_scenario_gives_the_map_error_and_map_is_world():
     from trn_env.scenario.build import build_navigator
     from trn_env.scenario.loading import load_scenario
 
-    d = load_scenario("default", navigator="rbpf").data
+    d = load_scenario("default", navigator="rbpf")
     nav = build_navigator(d, terrain.load("jacksboro"))
     assert 2.0 < nav.terrain_model_sigma_m < 4.0 and nav.map_sigma_m == 0.0
     assert nav.terrain_detail_spacing_m == 30.0          # the world's refinement
@@ -357,7 +358,7 @@ def test_scenario_gives_the_imu_bias_model():
     from trn_env.scenario.loading import load_scenario
 
     dem = terrain.load("jacksboro")
-    d = load_scenario("default", navigator="rbpf").data
+    d = load_scenario("default", navigator="rbpf")
     nav = build_navigator(d, dem)
     ug, deg_h = 9.80665e-6, math.radians(1.0) / 3600.0
     assert nav.ql_var[6:12] == pytest.approx(np.zeros(6), abs=0.0)
@@ -401,7 +402,7 @@ def test_search_step_finds_the_sensors_closest_point_on_a_fine_map():
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("default", duration_s=60.0, seed=7, navigator="rbpf")
-    world = ClosedLoop(validate(sc.data, source="default"), pipeline=False).world_dem
+    world = ClosedLoop(validate(sc.to_dict(), source="default"), pipeline=False).world_dem
     step = ira_model.search_step_for(world)
     assert 10.0 < step < 20.0
     heights, lat0, lon0, dlat, dlon = world.grid

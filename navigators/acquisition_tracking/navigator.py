@@ -39,7 +39,8 @@ sigmas. Vertical: the barometer's bias.
 reference_frame "ne" (the default): the aiding of every transect sample is corrected by one north/east
 velocity bias e_ne (_aid_arrays; an INS's velocity error, or the wind with air data), the loops run around
 b = 0, and the centroid filter has four states (centroid north/east, e_ne north/east): the fix updates
-both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s, the output is the centroid plus the lever to the
+both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s (with the INS as aiding at least as the IMU's
+specification makes its velocity error grow: apply_imu_spec), the output is the centroid plus the lever to the
 newest sample, and out of lock the dead-reckoned sigma grows on e_ne's. replica_model "return": each
 sample's measured height and map point come from the ray of its predicted shortest return (beam.py;
 _return_height), and the loops get the samples' offsets.
@@ -66,6 +67,13 @@ import math
 
 import numpy as np
 
+from ..core.imu_spec import (
+    ImuSpec,
+    consistency_warning,
+    equivalent_ramp_walk_density,
+    equivalent_walk_density,
+    rss,
+)
 from ..core.maps import load_map
 from ..frames import SensorFrames, frame_defects
 from ..integrity import protection_level as pl
@@ -112,6 +120,10 @@ from .tracking_step import TrackingStep
 
 # the sensors whose NaN-but-valid samples and gaps update() counts in its Health
 _DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu")   # GNSS outages are no defect
+
+
+# memory over which e_ne's walk matches the INS aiding's velocity-error rates (navigators.core.imu_spec)
+ACQ_MEMORY_S = 120.0
 
 
 class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingStep):
@@ -182,6 +194,24 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._C0[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
         self.health = Health(status="acquiring")
         self._reset_state()
+
+    # ------------------------------------------------------------------ IMU specification
+    _consistency_warning = ""
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """With the INS as aiding (aiding_source "ins", reference_frame "ne"), e_ne is the INS's north/east
+        velocity error: its random walk takes at least what the IMU's specification makes that error grow by
+        (navigators.core.imu_spec; a floor over aiding_bias_walk_mps_per_sqrt_s): the body-fixed horizontal
+        specific-force error (accelerometer bias, instability, misalignment x g), a constant acceleration, and
+        the acceleration the horizontal gyro biases' tilt builds, a ramp g sigma_bg t, as walks matching them
+        at ACQ_MEMORY_S, with the velocity random walk. Air-data aiding does not use the IMU: no change."""
+        if self.ins is None or not self._ne_frame:
+            return
+        walk = rss(equivalent_walk_density(spec.body_accel_sigma_mps2, ACQ_MEMORY_S),
+                   equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, ACQ_MEMORY_S),
+                   spec.accel_noise_density_mps2_rthz)
+        self._bias_walk2 = max(self._bias_walk2, walk**2)
+        self._consistency_warning = consistency_warning(spec, ACQ_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------ requirements
     def required_sensors(self) -> list[tuple[str, str]]:
@@ -432,6 +462,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             status=self.health.status,
             skipped=dict(self.health.skipped),
             events=list(self.health.events),
+            consistency_warning=self._consistency_warning,
         )
         return Estimate(
             t_s=t,

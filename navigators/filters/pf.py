@@ -44,8 +44,10 @@ from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
     consistency_warning,
+    equivalent_ramp_walk_density,
     equivalent_walk_density,
     rss,
+    vertical_offset_walk_density,
 )
 from ..core.resampling import systematic_kernel
 from ..inertial.strapdown import quat_to_dcm
@@ -123,17 +125,21 @@ class ParticleFilter(InsRiddenFilter):
         """Take the error model from the IMU's specification (navigators.core.imu_spec), each figure a floor
         over the tuned setting. The particles carry position, velocity and heading offsets, so the
         acceleration errors enter as an equivalent velocity random walk matching them at PF_MEMORY_S: the
-        body-fixed specific-force error (accelerometer bias, instability, misalignment x g), the tilt the
-        horizontal gyro biases build over that memory (g sigma_bg T) and a 90 deg turn's gyro misalignment
-        (g x tilt), with the velocity random walk; the heading's random walk matches the z gyro bias and a
-        90 deg turn's scale factor at the same memory, with the angle random walk."""
-        a = rss(spec.body_accel_sigma_mps2, spec.tilt_accel_rate_sigma_mps3 * PF_MEMORY_S,
-                G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
-        self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S),
+        body-fixed specific-force error (accelerometer bias, instability, misalignment x g) and a 90 deg
+        turn's gyro misalignment (g x tilt) as constant accelerations, the tilt the horizontal gyro biases
+        build as a ramp (g sigma_bg t: equivalent_ramp_walk_density), with the velocity random walk; the
+        heading's random walk matches the z gyro bias and a 90 deg turn's scale factor at the same memory,
+        with the angle random walk."""
+        a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
+        tilt = equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, PF_MEMORY_S)
+        self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S), tilt,
                                          spec.accel_noise_density_mps2_rthz))
         r_psi = rss(spec.gyro_bias_sigma_rps, spec.turn_heading_sigma_rad(0.5 * math.pi) / PF_MEMORY_S)
         self.s_psi = max(self.s_psi, rss(equivalent_walk_density(r_psi, PF_MEMORY_S),
                                          spec.gyro_noise_density_rps_rthz))
+        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
+        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
+        self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = consistency_warning(spec, PF_MEMORY_S, self.name)
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:

@@ -61,7 +61,14 @@ import math
 
 import numpy as np
 
-from ..core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
+from ..core.imu_spec import (
+    G0_MPS2,
+    ImuSpec,
+    consistency_warning,
+    equivalent_walk_density,
+    rss,
+    vertical_offset_walk_density,
+)
 from ..inertial.strapdown import quat_to_dcm
 from ..measurements import gnss as gnss_model
 from ..measurements import ira, radar_altimeter
@@ -137,6 +144,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
+        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
+        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
+        self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = consistency_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief

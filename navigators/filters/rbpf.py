@@ -72,6 +72,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ..core.imu_spec import ImuSpec
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
 from ..core.recovery import IntegrityRecovery
@@ -92,6 +93,7 @@ from .rbpf_ira_update import RbpfIraUpdate
 from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
 
 _BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
+TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
 
 
 def table1_covariance() -> np.ndarray:
@@ -218,8 +220,50 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self.health = Health()
         self._reset_done = False
 
+    # ------------------------------------------------------------------ IMU specification
+    _turn_att_var = np.zeros(3)  # attitude variance per rad turned (n, e: gyro misalignment; d: scale factor)
+    _yaw_prev = math.nan
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """The Kalman parts' process noise and accelerometer-bias prior from the IMU's specification
+        (navigators.core.imu_spec), each a floor over the setting: per TRN epoch T the velocity noise the
+        velocity random walk N_a sqrt(T) and the attitude noise the angle random walk N_g sqrt(T) (Q of white
+        specific-force and rate noise over T, Titterton & Weston 2004 sec. 12.6; seed 002 Table 1 gives
+        these per epoch), the x / y accelerometer-bias prior the body-fixed horizontal specific-force error
+        (bias, instability and misalignment x g: in level flight the misalignment reads gravity as a
+        constant body-frame bias), and per rad turned the gyro misalignment (tilt) and scale factor (heading)
+        over TURN_REFERENCE_RAD, as the EKF and PMF take them. The bias priors and drives themselves arrive
+        as settings (trn_env's imu_bias_settings)."""
+        root_t = math.sqrt(self.trn_period_s)
+        q = np.sqrt(self.ql_var)
+        q[0:3] = np.maximum(q[0:3], spec.accel_noise_density_mps2_rthz * root_t)
+        q[3:6] = np.maximum(q[3:6], spec.gyro_noise_density_rps_rthz * root_t)
+        self.ql_var = q ** 2
+        for i in (6, 7):
+            self.P0_settings[i, i] = max(self.P0_settings[i, i], spec.body_accel_sigma_mps2 ** 2)
+        tilt2, heading2 = spec.turn_tilt_sigma_rad(1.0) ** 2, spec.turn_heading_sigma_rad(1.0) ** 2
+        self._turn_att_var = np.array([tilt2, tilt2, heading2]) * TURN_REFERENCE_RAD
+
+    def _epoch_ql_var(self) -> np.ndarray:
+        """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
+        since the last epoch builds (apply_imu_spec)."""
+        if not self._turn_att_var.any():
+            return self.ql_var
+        C = quat_to_dcm(self.ins.state[6:10])
+        yaw = math.atan2(C[1, 0], C[0, 0])
+        turn = 0.0
+        if math.isfinite(self._yaw_prev):
+            turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
+        self._yaw_prev = yaw
+        if turn == 0.0:
+            return self.ql_var
+        ql = self.ql_var.copy()
+        ql[3:6] += self._turn_att_var * turn
+        return ql
+
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
+        self._yaw_prev = math.nan
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)
@@ -232,6 +276,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._t_next = float(initial.t_s) + self.trn_period_s
         self._t_gnss_next = float(initial.t_s)
         self._Phi = np.eye(15)
+        self._pl_B = None          # eq 5's position rows of B at the last time update (_mixture_hpl)
         self._last_row = None          # INS row and specific force carried into the next chunk
         self._extra: dict = {}
         self._cov9 = self._covariance9()
@@ -334,8 +379,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         Phi = self._Phi * T[:, None] / T[None, :]
         self._Phi = np.eye(15)
         w = self.rng.standard_normal((self.n, 3))
-        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var, self.ql_var,
-                                w)
+        self._pl_B = Phi[:2, 3:].copy()     # position rows of eq 5's B, for the HPL's mixture (estimate)
+        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var,
+                                self._epoch_ql_var(), w)
         if nbad:
             self.health.skip(te, "time_update_not_pd", f"{nbad} particles: N not positive definite")
         logw_prev = self.logw.copy()
@@ -372,6 +418,20 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         return C * s[:, None] * s[None, :]
 
     # ------------------------------------------------------------------ output
+    def _mixture_hpl(self, risk: float) -> float:
+        """HPL of the marginal position posterior (navigators.integrity.protection_level.mixture_hpl):
+        particle k is N(xn_k, B P_k B' + Q^n) horizontally (eq 5's spread with its own Kalman covariance);
+        before the first time update the particles are points."""
+        B = getattr(self, "_pl_B", None)
+        n = self.xn.shape[0]
+        if B is None or B.shape[1] != self.P.shape[1]:
+            cov = np.zeros((n, 2, 2))
+        else:
+            cov = np.einsum("ij,kjl,ml->kim", B, self.P, B)
+            cov[:, 0, 0] += self.qn_var[0]
+            cov[:, 1, 1] += self.qn_var[1]
+        return pl.mixture_hpl(self.xn[:, 0], self.xn[:, 1], cov, self._weights(), risk)
+
     def estimate(self) -> Estimate:
         st = self.ins.state
         roll, pitch, yaw = euler_from_C_bn(quat_to_dcm(st[6:10]))
@@ -384,8 +444,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
-        risk = pl.filter_risk(self)      # the cloud's mass radius (navigators.integrity.protection_level)
-        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), self)
+        pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
                         consistency_warning=self._consistency_warning,
                         events=list(self.health.events))
