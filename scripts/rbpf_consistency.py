@@ -1,6 +1,6 @@
 """The RBPF on the default route (3" Jacksboro map against the 30 m fractal world, GNSS fused for 10 s then
 denied): accuracy and consistency over Monte Carlo seeds, with the innovation test's recovery on (the
-default, integrity_alpha 1e-4; 0.01 before session 9) and/or off (integrity_alpha 1e-12).
+default, integrity_alpha 1e-4; 0.01 before) and/or off (integrity_alpha 1e-12).
 
     PYTHONPATH=$PWD python scripts/rbpf_consistency.py [--seeds 0 1 2] [--duration 600] [--workers 2]
         [--alphas 1e-4 1e-12] [--set n_particles=2000 ...] [--map-is-world]

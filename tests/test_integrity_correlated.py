@@ -63,16 +63,24 @@ def test_whitened_kernel_against_numpy():
     white = rng.uniform(50, 150, n)
     g = rng.normal(0.0, 0.1, (n, 2))
     P = np.array([[400.0, 50.0], [50.0, 300.0]])
-    ring = np.zeros((n, 10))
+    ring = np.zeros((n, 11))
     ring[:, 0], ring[:, 1], ring[:, 2], ring[:, 3] = p, lat, lon, white
     ring[:, 4], ring[:, 5], ring[:, 6] = 16.0, g[:, 0], g[:, 1]
     ring[:, 7], ring[:, 8], ring[:, 9] = P[0, 0], P[0, 1], P[1, 1]
+    ring[:, 10] = t = 100.0 + np.arange(n) * 1.0
     start = 13
     rolled = np.roll(ring, start, axis=0)            # oldest epoch at row `start`
-    T = cd.whitened_statistic(rolled, start, n, 0.5 * 18.9**2, 0.5 * 18.9**2, 500.0, 0)
-    S = cd.window_covariance(d, 18.9 * math.sqrt(0.5), 500.0, "exponential", white, 18.9 * math.sqrt(0.5))
-    S += 16.0 + g @ P @ g.T
-    assert T == pytest.approx(p @ np.linalg.solve(S, p), rel=1e-8)
+    S0 = cd.window_covariance(d, 18.9 * math.sqrt(0.5), 500.0, "exponential", white, 18.9 * math.sqrt(0.5))
+    dt = np.abs(t[:, None] - t[None, :])
+    for tau_h, tau_v in ((0.0, 0.0), (120.0, 300.0)):
+        T, Tb = cd.whitened_statistic(rolled, start, n, 0.5 * 18.9**2, 0.5 * 18.9**2, 500.0, 0, tau_h, tau_v)
+        rh = np.exp(-dt / tau_h) if tau_h > 0 else 1.0
+        rv = np.exp(-dt / tau_v) if tau_v > 0 else 1.0
+        S = S0 + 16.0 * rv + (g @ P @ g.T) * rh
+        assert T == pytest.approx(p @ np.linalg.solve(S, p), rel=1e-8)
+        one = np.ones(n)
+        si1 = np.linalg.solve(S, one)
+        assert Tb == pytest.approx((si1 @ p) ** 2 / (one @ si1), rel=1e-8)
 
 
 def test_whitened_false_alarm_rate_at_design():

@@ -219,10 +219,15 @@ def plugin_runtime_env() -> dict[str, Any] | None:
     return {"py_modules": paths} if paths else None
 
 
+def attempt_key(run_key: str, task: RunTask) -> str:
+    """The key under which a run's attempts are counted (one `run_key` per RayBackend.run call)."""
+    return f"{run_key}:{task.campaign_hash}:{task.run_id}"
+
+
 def _fly(task: RunTask, dems: dict[str, Any], run_key: str = "") -> tuple[dict, bytes | None]:
     """fly_run on a Ray worker; `run_key` (one per RayBackend.run call) scopes the attempt count, so a
     campaign flown again on the same long-lived cluster starts counting from 1."""
-    attempt = _attempt_number(f"{run_key}:{task.campaign_hash}:{task.run_id}")
+    attempt = _attempt_number(attempt_key(run_key, task))
     row, log = fly_run(task, dems)
     row["attempts"] = max(int(row.get("attempts", 1)), attempt)
     return row, log
@@ -232,13 +237,15 @@ class RayBackend:
     name = "ray"
 
     def __init__(self, address: str | None = None, workers: int | None = None, max_retries: int = 3,
-                 connect_timeout_s: float = 3.0):
+                 connect_timeout_s: float = 3.0, warm: bool = True):
         if workers is not None and (not isinstance(workers, int) or workers < 1):
             raise ValueError(f"--workers: must be a whole number >= 1 (got {workers!r})")
         self.address = address or os.environ.get("RAY_ADDRESS") or None
         self.workers = workers
         self.max_retries = int(max_retries)
         self.connect_timeout_s = float(connect_timeout_s)
+        self.warm = bool(warm)
+        self._pool = None
         self._started = False
         self.ray = None
 
@@ -301,6 +308,9 @@ class RayBackend:
                           "rows may differ from a local run", stacklevel=2)
 
     def __exit__(self, *exc) -> None:
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None
         if self._started and self.ray is not None:
             self.ray.shutdown()
             self._started = False
@@ -308,13 +318,21 @@ class RayBackend:
     def describe(self) -> str:
         cpus = int(self.ray.cluster_resources().get("CPU", 0)) if self.ray else 0
         where = self.address or "local instance"
-        return f"Ray ({where}), {cpus} CPU(s)"
+        how = "warm actors, one per CPU" if self.warm else "tasks"
+        return f"Ray ({where}), {cpus} CPU(s), {how}"
 
     def run(self, tasks: Iterable[RunTask], dems: dict[str, Any],
             on_result: Callable[[dict, bytes | None], None]) -> None:
         ray = self.ray
         if ray is None:
             raise RuntimeError("RayBackend.run outside `with RayBackend(...)`")
+        if self.warm:
+            if self._pool is None:
+                from trn_env.campaign.ray_pool import WarmPool
+                cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+                self._pool = WarmPool(ray, min(cpus, self.workers or cpus), self.max_retries)
+            self._pool.run(tasks, dems, on_result)
+            return
         dems_ref = ray.put(dems)
         remote = ray.remote(num_cpus=1, max_retries=self.max_retries, retry_exceptions=False)(_fly)
         import uuid

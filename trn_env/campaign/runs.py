@@ -104,6 +104,23 @@ def _base_row(task: RunTask) -> dict:
     return row
 
 
+def task_scenario(task: RunTask, dems: dict[str, Any] | None = None):
+    """The run's own Scenario (the variant's typed sections with the run's seed; its DEMs from `dems`, else
+    from the table set_dems filled)."""
+    from trn_env.scenario.loading import Scenario
+    table = _DEMS if dems is None else dems
+    sections = replace(task.sections, seed=int(task.seed))
+    extras: dict[str, Any] = {}
+    wk, mk = task.dem_keys
+    if wk is not None and wk in table:
+        extras["world_dem_raw"] = table[wk]
+    if mk is not None and mk in table:
+        extras["map_dem_raw"] = table[mk]
+    return Scenario(name=task.scenario_name, source=task.scenario_source, sections=sections,
+                    description=str(sections.description), seed=int(task.seed),
+                    duration_s=float(sections.duration_s), extras=extras)
+
+
 def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, bytes | None]:
     """Fly one run; returns (row, the compressed log.npz bytes if the campaign keeps logs). Never raises
     on the run's own failure: the row carries termination 'error' and the message. An env-episode task
@@ -114,22 +131,11 @@ def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, by
     if getattr(task, "kind", "flight") == "replay":       # a log campaign (trn_env.campaign.log_replay)
         from trn_env.campaign.log_replay import replay_run
         return replay_run(task)
-    from trn_env.scenario.loading import Scenario
     from trn_env.sim.closed_loop import ClosedLoop
 
     row = _base_row(task)
-    table = _DEMS if dems is None else dems
-    sections = replace(task.sections, seed=int(task.seed))
-    row["scenario_hash"] = scenario_hash(sections.to_dict())
-    extras: dict[str, Any] = {}
-    wk, mk = task.dem_keys
-    if wk is not None and wk in table:
-        extras["world_dem_raw"] = table[wk]
-    if mk is not None and mk in table:
-        extras["map_dem_raw"] = table[mk]
-    scenario = Scenario(name=task.scenario_name, source=task.scenario_source, sections=sections,
-                        description=str(sections.description), seed=int(task.seed),
-                        duration_s=float(sections.duration_s), extras=extras)
+    scenario = task_scenario(task, dems)
+    row["scenario_hash"] = scenario_hash(scenario.sections.to_dict())
     wall0 = time.perf_counter()
     try:
         loop = ClosedLoop(scenario, pipeline=False)

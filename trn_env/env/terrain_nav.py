@@ -202,7 +202,14 @@ class TerrainNavEnv(gym.Env, EzPickle):
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
     bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0, guidance_rate_hz=None,
-    pipeline=False)`.
+    pipeline=False, flight_dt_s=None)`.
+    `flight_dt_s`: JSBSim's integration step (s, at most 0.05; None = the scenario's `[aircraft] dt_s`,
+    0.01 in the built-in scenarios). The IMU's rate is lowered to the step rate when it was faster (an
+    integrating IMU: each sample is the mean over its interval of the truth rows); any other sensor faster
+    than the step, or a step that does not divide the guidance tick, is a ValueError naming `flight_dt_s`.
+    The route task (`trn_env.env.route_task`) flies 0.02 s: half the JSBSim work of 0.01 s; JSBSim's step
+    error is first order, so its trajectory departs about three times as far from a 0.005 s one as
+    0.01 s's does (tens of metres in a climb's transient; docs/validation/route_task.md).
     `guidance_rate_hz`: how often guidance re-computes the autopilot targets from the (dead-reckoned)
     estimate; None = once per navigator update (the scenario's `[guidance] rate_hz` is replaced; it must be
     a whole multiple of the navigator's rate). The autopilot itself runs inside JSBSim at every step.
@@ -216,6 +223,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (JSBSim's step): `flight_dt_s`.
     - v0 (rates matched to the decision): guidance re-computes the targets once per navigator update
       instead of at the scenario's 10 Hz (`guidance_rate_hz`); `pipeline`.
     - v0 (coarse decisions): `action_mode="pursuit"`; route-information observations 22-31 (the
@@ -244,7 +252,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  min_goal_distance_m: float = 5000.0, shaping_gamma: float = 1.0,
                  action_mode: str = "turn", bearing_offset_max_deg: float = 90.0,
                  sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0,
-                 guidance_rate_hz: float | None = None, pipeline: bool = False):
+                 guidance_rate_hz: float | None = None, pipeline: bool = False,
+                 flight_dt_s: float | None = None):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -253,7 +262,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
                           bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m,
-                          guidance_rate_hz, pipeline)
+                          guidance_rate_hz, pipeline, flight_dt_s)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -294,7 +303,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if isinstance(scenario, Scenario) and navigator is not None:
             sc = sc.with_overrides(navigator=navigator)
         sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
-        sc = _with_guidance_rate(sc, guidance_rate_hz)
+        sc = _with_rates(sc, guidance_rate_hz, flight_dt_s)
         if not isinstance(pipeline, bool):
             raise ValueError(f"pipeline must be a bool, got {pipeline!r}")
         self.pipeline = pipeline
@@ -675,20 +684,36 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._needs_reset = True
 
 
-def _with_guidance_rate(sc: Scenario, guidance_rate_hz: float | None) -> Scenario:
-    """The scenario with `[guidance] rate_hz` set to the env's guidance rate: None = the navigator's update
-    rate (one command per update: the pursuit action re-aims from each new estimate, and every other action
-    holds its command for the whole decision), re-validated so that a rate the loop cannot fly (not a whole
-    multiple of the navigator's rate, or above the flight's step rate) is a ValueError naming the field."""
+def _with_rates(sc: Scenario, guidance_rate_hz: float | None, flight_dt_s: float | None) -> Scenario:
+    """The scenario with `[guidance] rate_hz` set to the env's guidance rate (None = the navigator's update
+    rate: one command per update, so the pursuit action re-aims from each new estimate and every other
+    action holds its command for the whole decision) and, given `flight_dt_s`, JSBSim's step
+    `[aircraft] dt_s` replaced, the IMU's rate lowered to the step rate when it was faster (an integrating
+    IMU: its samples are the interval means of the truth rows, sensors.imu); re-validated, so that a rate
+    the loop cannot fly (a guidance rate not a whole multiple of the navigator's, a step that does not
+    divide the guidance tick, another sensor faster than the step) is a ValueError naming the field."""
     rate = float(sc.navigator.rate_hz) if guidance_rate_hz is None else guidance_rate_hz
     if guidance_rate_hz is not None:
         _check_number("guidance_rate_hz", guidance_rate_hz, positive=True)
-    if float(sc.guidance.rate_hz) == float(rate):
+    if flight_dt_s is not None:
+        _check_number("flight_dt_s", flight_dt_s, positive=True)
+        if flight_dt_s > 0.05:
+            raise ValueError(f"flight_dt_s must be within (0, 0.05] s, got {flight_dt_s!r}")
+    same_dt = flight_dt_s is None or float(sc.aircraft.dt_s) == float(flight_dt_s)
+    if float(sc.guidance.rate_hz) == float(rate) and same_dt:
         return sc
+    fields: dict = {"guidance.rate_hz": float(rate)}
+    what = f"guidance_rate_hz = {rate!r}"
+    if not same_dt:
+        fields["aircraft.dt_s"] = float(flight_dt_s)
+        imu = sc.sensors.imu
+        if imu is not None and float(imu.rate_hz) * float(flight_dt_s) > 1.0 + 1e-9:
+            fields["sensors.imu.rate_hz"] = 1.0 / float(flight_dt_s)
+        what += f", flight_dt_s = {flight_dt_s!r}"
     try:
-        return sc.with_fields({"guidance.rate_hz": float(rate)})
+        return sc.with_fields(fields)
     except ValueError as err:
-        raise ValueError(f"guidance_rate_hz = {rate!r}: {err}") from None
+        raise ValueError(f"{what}: {err}") from None
 
 
 def _check_number(name: str, v, positive: bool) -> None:

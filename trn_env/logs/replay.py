@@ -254,11 +254,13 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
 
 
 def _snapshot(est: Estimate) -> Estimate:
-    """The numbers of an estimate (a navigator may reuse its arrays between updates)."""
+    """The numbers of an estimate (a navigator may reuse its arrays between updates), with its protection
+    level."""
     return Estimate(float(est.t_s), float(est.lat_rad), float(est.lon_rad), float(est.h_m),
                     np.array(est.v_ned_mps, float), float(est.roll_rad), float(est.pitch_rad),
                     float(est.yaw_rad), np.array(est.covariance[:9, :9], float),
-                    Health(bool(est.health.ok), str(est.health.status), dict(est.health.skipped)))
+                    Health(bool(est.health.ok), str(est.health.status), dict(est.health.skipped)),
+                    extra={k: float(v) for k, v in est.extra.items() if k == EXTRA_PROTECTION_LEVEL})
 
 
 def estimate_columns(ests: list[Estimate]) -> dict[str, np.ndarray]:

@@ -136,8 +136,11 @@ class SimLog:
         out["est_v_ned_mps"] = np.column_stack([est["v_n_mps"], est["v_e_mps"], est["v_d_mps"]]).reshape(n, 3)
         for name in ("roll_rad", "pitch_rad", "yaw_rad"):
             out[f"est_{name}"] = est[name]
-        out["est_cov"] = np.stack([est[f"cov_{i}_{j}"] for i in range(9) for j in range(9)],
-                                  axis=-1).reshape(n, 9, 9)
+        if "cov" in est:              # read back from the sink as one array (LogWriter.read_ticks)
+            out["est_cov"] = est.pop("cov")
+        else:
+            out["est_cov"] = np.stack([est[f"cov_{i}_{j}"] for i in range(9) for j in range(9)],
+                                      axis=-1).reshape(n, 9, 9)
         out["nav_ok"] = est["nav_ok"].astype(bool)
         out["nav_status_code"] = est["nav_status_code"].astype(np.int8)
         out["est_hpl_m"] = np.asarray(est["hpl_m"], float) if "hpl_m" in est else np.full(n, np.nan)

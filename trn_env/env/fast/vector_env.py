@@ -14,6 +14,12 @@ and collision) and its map DEM (navigator, guidance, observation), built exactly
 them. Every decision is one numba call over all aircraft (`dynamics.fly_decision`) and one for the
 observations (`observation.observe`); resets are one call over the sub-envs being reset.
 
+Threads: the two per-decision calls spread the aircraft over numba's threads (`numba.set_num_threads`;
+default: one per core) in chunks of dynamics.CHUNK_AIRCRAFT taken in turn. Importing the package sets
+OMP_WAIT_POLICY=PASSIVE unless the environment sets it: with OpenMP's default spinning, a thread waiting at
+the end of a call burns its core, which on a machine shared with other processes costs more than the second
+thread gains.
+
 Vector API: `reset(seed=None | int | list, options=None)` seeds sub-env i with seed + i (or seeds[i]);
 options `goal_deg` / `start_deg` ((lat, lon), or an (N, 2) array, NaN rows drawn as usual) and
 `reset_mask` (reset only these sub-envs). `step(actions)` with actions of shape (N, 2). Autoreset per
@@ -46,6 +52,7 @@ import os
 import time
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
@@ -419,29 +426,30 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
 
     def _observe(self, mask):
         (_, _, _, _, _), (mh, m0, m1, m2, m3), (ih, i0, i1, i2, i3) = self._grids()
-        ob.observe(
-            self._X,
-            mask,
-            self._obs,
-            mh,
-            m0,
-            m1,
-            m2,
-            m3,
-            ih,
-            i0,
-            i1,
-            i2,
-            i3,
-            self._op,
-            self._route_offsets,
-            ob.INFO_BEARINGS_RAD,
-            task.OBS_LOW,
-            task.OBS_HIGH,
-            self._wind_alt,
-            self._wind_n,
-            self._wind_e,
-        )
+        with numba.parallel_chunksize(dyn.CHUNK_AIRCRAFT):
+            ob.observe(
+                self._X,
+                mask,
+                self._obs,
+                mh,
+                m0,
+                m1,
+                m2,
+                m3,
+                ih,
+                i0,
+                i1,
+                i2,
+                i3,
+                self._op,
+                self._route_offsets,
+                ob.INFO_BEARINGS_RAD,
+                task.OBS_LOW,
+                task.OBS_HIGH,
+                self._wind_alt,
+                self._wind_n,
+                self._wind_e,
+            )
 
     def _reset_envs(self, mask, start_rad=None, goal_rad=None):
         n = self.num_envs
@@ -537,32 +545,33 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         d_est0, d_true0, sig0, t0 = self._d_est(), self._d_true(), self._sigma_h(), X[:, S.T].copy()
         X[live, S.END] = 0.0
         (wh, w0, w1, w2, w3), (mh, m0, m1, m2, m3), _ = self._grids()
-        dyn.fly_decision(
-            X,
-            self._rng,
-            live,
-            self.n_sub,
-            self._prof[0],
-            self._prof[1],
-            self._prof[2],
-            wh,
-            w0,
-            w1,
-            w2,
-            w3,
-            mh,
-            m0,
-            m1,
-            m2,
-            m3,
-            self._fp,
-            self._nav,
-            self._wind_alt,
-            self._wind_n,
-            self._wind_e,
-            self._diff,
-            self._tables,
-        )
+        with numba.parallel_chunksize(dyn.CHUNK_AIRCRAFT):
+            dyn.fly_decision(
+                X,
+                self._rng,
+                live,
+                self.n_sub,
+                self._prof[0],
+                self._prof[1],
+                self._prof[2],
+                wh,
+                w0,
+                w1,
+                w2,
+                w3,
+                mh,
+                m0,
+                m1,
+                m2,
+                m3,
+                self._fp,
+                self._nav,
+                self._wind_alt,
+                self._wind_n,
+                self._wind_e,
+                self._diff,
+                self._tables,
+            )
         end = np.where(live, X[:, S.END], 0.0).astype(int)
         reasons = np.array(S.END_NAMES, dtype=object)[end]
         reasons[end == 0] = None
