@@ -95,7 +95,7 @@ def test_baro_loop_height_rate_against_the_loop_integrated():
 def test_build_navigator_applies_the_grade(name):
     """The tactical grade raises the navigator's error model above the navigation grade's; a navigation-grade
     scenario keeps the tuned figures (they are floors)."""
-    sc = load_scenario("default", navigator=name)
+    sc = load_scenario("acq_track" if name == "acq_track" else "default", navigator=name)
     from trn_env import terrain
     dem = terrain.load("jacksboro")
     settings = {"aiding_source": "ins"} if name == "acq_track" else {}
