@@ -103,15 +103,16 @@ def run_job(out: str, condition: str, seed: int, duration_s: float, navs: list[s
 
 
 def load_epochs(out: Path, nav: str, condition: str):
-    """(e, h, healthy) of the counted epochs (GNSS lost) of every saved flight, and the flight count."""
+    """(e, h, healthy) of the counted epochs (GNSS lost) of every saved flight, the flight count and the
+    number of flights with a misleading epoch."""
     files = sorted((out / "epochs" / nav / condition).glob("s*.npz"))
     if not files:
         return None
     zs = [np.load(f) for f in files]
     d = [z["denied"] for z in zs]
-    return (np.concatenate([z["e"][m] for z, m in zip(zs, d, strict=True)]),
-            np.concatenate([z["h"][m] for z, m in zip(zs, d, strict=True)]),
-            np.concatenate([z["ok"][m] for z, m in zip(zs, d, strict=True)]), len(files))
+    e, h, ok = ([z[k][m] for z, m in zip(zs, d, strict=True)] for k in ("e", "h", "ok"))
+    n_mi = sum(int(np.any(o & np.isfinite(hh) & (ee > hh))) for ee, hh, o in zip(e, h, ok, strict=True))
+    return np.concatenate(e), np.concatenate(h), np.concatenate(ok), len(files), n_mi
 
 
 def report(out: Path, navs: list[str], al: float, risk: float) -> dict:
@@ -128,8 +129,9 @@ def report(out: Path, navs: list[str], al: float, risk: float) -> dict:
             got = load_epochs(out, nav, c)
             if got is None:
                 continue
-            e, h, ok, nf = got
-            m = protection_level_metrics(e, h, ok, al) | {"flights": nf, "all_epochs": int(e.size)}
+            e, h, ok, nf, n_mi = got
+            m = protection_level_metrics(e, h, ok, al) | {"flights": nf, "flights_with_mi": n_mi,
+                                                           "all_epochs": int(e.size)}
             m["meets_risk"] = bool(m["pl_misleading_rate_upper95"] <= risk)
             res[f"{nav}/{c}"] = m
             pooled.append((e, h, ok))
@@ -188,10 +190,16 @@ def main(argv=None) -> int:
                 for fut in done:
                     print(f"{time.perf_counter() - t0:7.0f} s", *fut.result(), sep="\n", flush=True)
     doc = report(out, navs, al, risk)
+    print("| navigator | condition | flights (with MI) | epochs counted / healthy with HPL | MI epochs | "
+          "MI rate (upper 95 %) | HMI | availability | median HPL (m) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for k, m in doc["results"].items():
-        print(f"{k}: {m['pl_misleading_epochs']} MI / {m['pl_epochs']} (upper95 "
-              f"{m['pl_misleading_rate_upper95']:.2e}), HMI {m['pl_hazardous_epochs']}, availability "
-              f"{m['pl_availability']:.3f}, HPL median {m['hpl_median_m']:.1f} m")
+        nav, cond = k.split("/")
+        fl = f"{m['flights']} ({m['flights_with_mi']})" if "flights" in m else "all"
+        rate = m["pl_misleading_rate"]
+        print(f"| {nav} | {cond} | {fl} | {m['all_epochs']} / {m['pl_epochs']} | "
+              f"{m['pl_misleading_epochs']} | {rate:.2g} (≤ {m['pl_misleading_rate_upper95']:.2g}) | "
+              f"{m['pl_hazardous_epochs']} | {m['pl_availability']:.3f} | {m['hpl_median_m']:.1f} |")
     return 0
 
 

@@ -134,6 +134,18 @@ def test_building_reports_every_problem_by_field_path():
         assert got.count(path) == 1, (path, exc.value.problems)
 
 
+def test_component_checks_run_beside_a_refused_setting():
+    """A navigator setting refused while the sections are built does not hide the other components'
+    problems: the start the aircraft cannot trim is reported with it."""
+    data = load_scenario("default", check_components=False).to_dict()
+    data["navigator"]["settings"] = {"half_cells": 0}
+    data["initial"]["tas_mps"] = 30.0
+    with pytest.raises(ScenarioError) as exc:
+        validate(data, source="test")
+    got = [p.split(": ", 1)[0] for p in exc.value.problems]
+    assert "navigator.settings.half_cells" in got and "initial" in got, exc.value.problems
+
+
 def test_edits_of_a_validated_scenario():
     sc = load_scenario("default", check_components=False)
     nav = sc.navigator.with_settings(fix_period_s=20.0)

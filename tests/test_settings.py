@@ -169,7 +169,8 @@ def test_capabilities_are_declared_not_guessed_from_names():
     assert not hasattr(registry, "MAP_NOISE_AWARE") and not hasattr(registry, "IMU_AWARE")
     caps = {n: registry.capabilities(n) for n in BUILTIN_NAVIGATORS}
     assert {n for n, c in caps.items() if c.takes_rng} == {"pf", "rbpf"}
-    assert {n for n, c in caps.items() if c.uses_imu_spec} == {"ins", "ins_tercom", "pf", "pmf", "rbpf"}
+    assert {n for n, c in caps.items() if c.uses_imu_spec} == {"acq_track", "ins", "ins_tercom", "pf", "pmf",
+                                                                "rbpf"}
     assert {n for n, c in caps.items() if c.imu_bias_settings} == {"rbpf"}
     assert {n for n, c in caps.items() if c.needs_map} == {"acq_track", "ins_tercom", "pf", "pmf", "rbpf"}
     assert caps["ins_tercom"].warm_up_settings(1.0) == {"fix_period_s": 2.0, "min_samples": 1}

@@ -411,15 +411,14 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
         except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError):
             if not tolerant:
                 raise
-    sections = None
+    sections, section_problems = None, []
     try:
-        sections = from_sections_dict(d)
-    except SectionsError as exc:
-        known = tuple(p.split(": ", 1)[0] for p in prior + problems)
-        problems += [p for p in exc.problems if not p.split(": ", 1)[0].startswith(known or ("\0",))]
+        sections = from_sections_dict(d, problems=section_problems)
     except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError):
         if not tolerant:
             raise
+    known = tuple(p.split(": ", 1)[0] for p in prior + problems)
+    problems += [p for p in section_problems if not p.split(": ", 1)[0].startswith(known or ("\0",))]
     if check_components and sections is not None:
         problems += _component_problems(sections, extras, prior + problems, tolerant)
     extras["_sections"] = sections

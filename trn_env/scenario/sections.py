@@ -584,20 +584,26 @@ _SIMPLE = {"aircraft": AircraftSection, "truth": TruthSection, "initial": Initia
 _TOP_KEYS = ("name", "description", "seed", "duration_s", *_SIMPLE, "sensors", "navigator", "monitors")
 
 
-def from_dict(d: Mapping[str, Any], *, partial: bool = False) -> ScenarioSections:
+def from_dict(d: Mapping[str, Any], *, partial: bool = False,
+              problems: list[str] | None = None) -> ScenarioSections:
     """The typed sections of a validated scenario dict (the loader's, defaults filled in).
 
     `partial`: the dict is the part of a scenario a sensor log carries (trn_env.logs.replay: terrain,
     sensors, navigator, monitors, GNSS outages, initial errors); absent tables get their defaults, and
     `initial` and `route`, which have none, are None.
 
+    `problems`: a list to which the problems are added instead of raising; the sections are then built as
+    far as they go (a sensor or navigator whose settings are refused has no Settings object), so the
+    validator can still hand the other components their settings.
+
     Raises
     ------
     SectionsError
         Every problem at once, each 'field.path: message' (a setting a component's Settings class refuses,
-        a table that is not a table).
+        a table that is not a table); not when `problems` is given.
     """
-    problems: list[str] = []
+    collect = problems is not None
+    problems = problems if collect else []
     for key in d:
         if key not in _TOP_KEYS:
             problems.append(f"{key}: unknown key (allowed here: {', '.join(sorted(_TOP_KEYS))})")
@@ -618,7 +624,7 @@ def from_dict(d: Mapping[str, Any], *, partial: bool = False) -> ScenarioSection
     mons = d.get("monitors") or {}
     kw["monitors"] = tuple(MonitorSection(name=str(n), settings=Table(s if isinstance(s, Mapping) else {}))
                            for n, s in mons.items())
-    if problems:
+    if problems and not collect:
         raise SectionsError(problems)
     return ScenarioSections(**kw)
 
