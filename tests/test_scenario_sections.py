@@ -77,11 +77,22 @@ def test_round_trip_of_every_optional_table():
     assert sc.atmosphere.delta_T_K == 15.0 and sc.wind.gusts[0].direction == (1.0, 0.0, 0.0)
     assert sc.wind.turbulence.severity == 3
     assert sc.terrain.map.faults[0].kind == "bias" and sc.terrain.map.faults[0].start_s == 20.0
-    assert sc.terrain.map.error_model["preset"] == "dted1"
+    assert sc.terrain.map.error_model.preset == "dted1" and sc.terrain.map.error_model.bias_fraction == 0.3
+    assert sc.terrain.map.error_model.random_sigma_m is None
     assert sc.gnss.outages[0].end_s == 50.0 and sc.gnss.outages[1].end_s is None
     assert sc.limits.max_horizontal_error_m == 800.0 and sc.aircraft.fuel_kg == 900.0
     assert sc.sections.monitor("dem_integrity").settings["n_window"] == 40
     assert sc.initial_errors.position_ned_m == (10, 10, 5)
+
+
+def test_an_empty_error_model_is_no_error_model():
+    """`error_model = {}` leaves the map as published, as the table did before the sections (no draw)."""
+    from trn_env.scenario.sections import MapErrorModel
+    assert not MapErrorModel() and MapErrorModel(bias_m=0.0)
+    data = load_scenario("default", check_components=False).to_dict()
+    data["terrain"]["map"]["error_model"] = {}
+    sc = validate(data, source="test", check_components=False)
+    assert sc.to_dict()["terrain"]["map"]["error_model"] == {} and not sc.terrain.map.error_model
 
 
 def test_sections_are_typed_and_frozen():

@@ -113,12 +113,19 @@ def map_error_model(settings: dict, rng: np.random.Generator):
     return replace(model, **kw)
 
 
-def map_noise_settings(settings: dict | None) -> dict:
+def _table(error_model) -> dict:
+    """The error model as a mapping: the scenario's MapErrorModel section, a mapping, or None (empty)."""
+    if error_model is None:
+        return {}
+    return error_model.to_dict() if hasattr(error_model, "to_dict") else dict(error_model)
+
+
+def map_noise_settings(settings) -> dict:
     """{map_sigma_m, map_bias_sigma_m} a navigator should assume for the scenario's map error model (1 sigma,
     m): its accuracy class's vertical sigma split by bias_fraction (terrain.map_error.model_for_class), or
     the explicit random_sigma_m and |bias_m|; zeros without an error model."""
     from trn_env.terrain import map_error
-    s = dict(settings or {})
+    s = _table(settings)
     random_m, bias_m = 0.0, 0.0
     preset = s.get("preset")
     if preset is not None and str(preset).strip().lower() in map_error.ACCURACY_CLASSES:
@@ -420,7 +427,7 @@ def navigator_settings(sc, map_dem) -> dict:
         for key, val in imu_bias_settings(sc.sensors.imu, _epoch_s(settings)).items():
             settings.setdefault(key, val)
     error_model = sc.terrain.map.error_model
-    preset = str((error_model or {}).get("preset", "")).strip().lower()
+    preset = str((error_model.preset if error_model is not None else None) or "").strip().lower()
     if preset in map_error.ACCURACY_CLASSES:   # the protection level covers the map's horizontal error
         settings.setdefault("map_horizontal_sigma_m", map_error.ACCURACY_CLASSES[preset].sigma_h_m)
     if caps.uses_map_noise:
@@ -499,12 +506,12 @@ def unused_sensors(sc) -> list[str]:
 
 # -------------------------------------------------------------------------------------------- monitors
 
-def monitor_map_settings(error_model: dict | None) -> dict:
+def monitor_map_settings(error_model) -> dict:
     """The DEM monitor's map model from the scenario's map error model (terrain.map_error): sigma_m (the
     vertical sigma: random and bias parts together), map_bias_fraction, correlation_length_m and
     correlation_function; empty without a random vertical error (the monitor keeps seed 003's model)."""
     from trn_env.terrain import map_error
-    s = dict(error_model or {})
+    s = _table(error_model)
     noise = map_noise_settings(s)
     sig_r, sig_b = noise["map_sigma_m"], noise["map_bias_sigma_m"]
     if not sig_r > 0.0:

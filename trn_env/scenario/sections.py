@@ -340,13 +340,35 @@ class MapFault(Section):
 
 
 @dataclass(frozen=True)
+class MapErrorModel(Section):
+    """[terrain.map.error_model] (terrain.map_error.MapErrorModel): a preset accuracy class drawn from the
+    seed and/or explicit fields that set or override it (None: not given)."""
+
+    preset: str | None = None                  # DEM accuracy class: srtm, cartodem, aster, dted0/1/2
+    bias_fraction: float | None = None         # with a preset: share of the vertical variance as one bias
+    bias_m: float | None = None                # constant vertical offset, m
+    tilt_n: float | None = None                # vertical ramp, m per m north of the grid centre
+    tilt_e: float | None = None                # vertical ramp, m per m east of the grid centre
+    random_sigma_m: float | None = None        # correlated random vertical error, 1 sigma, m
+    correlation_length_m: float | None = None  # its correlation length, m
+    correlation_function: str | None = None    # its covariance (terrain.map_error.correlation)
+    shift_n_m: float | None = None             # horizontal shift north, m
+    shift_e_m: float | None = None             # horizontal shift east, m
+    spacing_arcsec: float | None = None        # coarser (area-averaged) post spacing, arcsec
+
+    def __bool__(self) -> bool:
+        """False for an empty table: no error model (the map is its DEM as published)."""
+        return bool(self.to_dict())
+
+
+@dataclass(frozen=True)
 class MapSection(Section):
     """[terrain.map]: the navigator's terrain database ("world" = the true terrain, unrefined), its error
     model (terrain.map_error: a preset accuracy class and/or MapErrorModel fields) and regional faults."""
 
     dem: str = "world"
     fill_voids: bool | None = None
-    error_model: Table | None = None
+    error_model: MapErrorModel | None = None
     faults: tuple[MapFault, ...] = ()
 
     @property
