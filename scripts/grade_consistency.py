@@ -39,6 +39,7 @@ import filter_statistics as fs  # noqa: E402
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
 
 import trn_env.scenario.build as components  # noqa: E402
+from trn_env.scenario.sections import from_dict  # noqa: E402
 
 INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
 
@@ -46,27 +47,43 @@ INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
 SETTINGS: dict = {}  # --set name=value: navigator settings on top of the defaults
 
 
+# per navigator: settings on top of its defaults, and the sensors it needs beyond the default scenario's. The
+# acq_track flies as in its regression scenario (tests/scenarios/acq_track_short.toml): a 17 deg radar
+# altimeter, air data and compass, the returns' replica, the INS as its aiding (so the IMU grade reaches it)
+NAV_SETTINGS: dict = {"ins_tercom": {"remove_bias": True},
+                      "acq_track": {"aiding_source": "ins", "replica_model": "return"}}
+EXTRA_SENSORS: dict = {"acq_track": {"radar_altimeter": {"beamwidth_deg": 17.0}, "air_data": {},
+                                     "heading": {}}}
+
+
 def scenario_for(d: dict, name: str, grade: str) -> dict:
-    """The default scenario's data with the grade's IMU and the navigator (its settings as the default's)."""
-    settings = {"remove_bias": True} if name == "ins_tercom" else {}
-    settings.update(SETTINGS.get(name, {}))
-    return {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
+    """The default scenario's data with the grade's IMU and the navigator (its settings as the default's but
+    NAV_SETTINGS and --set; its sensors with EXTRA_SENSORS)."""
+    settings = {**NAV_SETTINGS.get(name, {}), **SETTINGS.get(name, {})}
+    return {**d, "sensors": {**d["sensors"], **EXTRA_SENSORS.get(name, {}), "imu": {"grade": grade}},
             "navigator": {"name": name, "settings": settings}}
 
 
 def run_seed(d: dict, names: list[str], grade: str, seed: int, flight, world_detail: str = "redraw") -> dict:
-    """{navigator: run} of every navigator on one seed's sensor frames (the grade's IMU)."""
+    """{navigator: run} of every navigator on one seed's sensor frames (the grade's IMU). Navigators that
+    need more sensors (EXTRA_SENSORS) get frames of their own suite (same seed; the others' frames do not
+    depend on them)."""
     _, chunks, world, the_map, truth0 = flight
     dd = scenario_for(d, names[0], grade)
     w = fs.run_world(dd, world, seed, world_detail)
-    frames = fs.sensor_frames(dd, chunks, w, seed)
     init = fs.initial_estimate(dd, truth0, seed, float(dd["initial_errors"]["position_ned_m"][0]))
-    return {name: run_one(scenario_for(d, name, grade), frames, chunks, the_map, init, seed)
-            for name in names}
+    frames: dict = {}
+    out = {}
+    for name in names:
+        key = tuple(sorted(EXTRA_SENSORS.get(name, {})))
+        if key not in frames:
+            frames[key] = fs.sensor_frames(scenario_for(d, name, grade), chunks, w, seed)
+        out[name] = run_one(scenario_for(d, name, grade), frames[key], chunks, the_map, init, seed)
+    return out
 
 
 def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
-    nav = components.build_navigator(dd, the_map, np.random.default_rng([seed, 29]))
+    nav = components.build_navigator(from_dict(dd), the_map, np.random.default_rng([seed, 29]))
     nav.reset(init)
     t, err, cov, status = [], [], [], []
     w0 = time.perf_counter()
@@ -169,16 +186,19 @@ def main(argv=None) -> int:
         for s in range(a.seeds):
             for name, run in run_seed(d, a.navigators, grade, a.seed0 + s, flight).items():
                 runs[name].append(run)
-        for name in a.navigators:
-            f = figures(runs[name], a.from_s)
-            nees, e2 = run_nees(runs[name], a.from_s)
-            f["raw"] = {"nees": nees.tolist(), "e2": e2.tolist()}
-            result["figures"][f"{name}/{grade}"] = f
-            print(json.dumps({f"{name}/{grade}": {k: v for k, v in f.items() if k != "raw"}}), flush=True)
-        if a.out:
-            Path(a.out).write_text(json.dumps(result, indent=1))
-    if a.out:
-        Path(a.out).write_text(json.dumps(result, indent=1))
+            last = s == a.seeds - 1
+            if a.out or last:   # after every seed: a campaign stopped early keeps the runs it finished
+                result["seeds_done"] = {**result.get("seeds_done", {}), grade: s + 1}
+                for name in a.navigators:
+                    f = figures(runs[name], a.from_s)
+                    nees, e2 = run_nees(runs[name], a.from_s)
+                    f["raw"] = {"nees": nees.tolist(), "e2": e2.tolist()}
+                    result["figures"][f"{name}/{grade}"] = f
+                    if last:
+                        print(json.dumps({f"{name}/{grade}": {k: v for k, v in f.items() if k != "raw"}}),
+                              flush=True)
+                if a.out:
+                    Path(a.out).write_text(json.dumps(result, indent=1))
     return 0
 
 

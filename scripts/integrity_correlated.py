@@ -38,9 +38,11 @@ import time
 import warnings
 
 import numpy as np
+from numba import njit
 from scipy.linalg import solve_triangular
 from scipy.stats import beta, chi2
 from trn_env.navigators.integrity import correlated_disparity as cd
+from trn_env.navigators.integrity.correlated_disparity import whitened_statistic
 
 N = 50
 THR = 96.0
@@ -53,6 +55,12 @@ BIASES_M = (20.0, 40.0, 60.0, 100.0)
 RAMP_M_PER_EPOCH = 2.0
 WHITE_VAR = SIG_RA**2 + SIG_G**2
 THR_MEAN = float(chi2.isf(1e-4, 1))       # the whitened mean test's threshold (15.1)
+THR_W2, THR_M2 = float(chi2.isf(0.5e-4, N)), float(chi2.isf(0.5e-4, 1))   # the two sharing 1e-4
+# GNSS denied: the navigator's error (horizontal sigma per axis m, its time constant s, vertical sigma m,
+# its time constant s); the map's correlation lengths (0: white) and the one of the detection study
+DENIED_NAV = (30.0, 120.0, 5.0, 300.0)
+DENIED_LENGTHS_M = (0.0, 100.0, 500.0, 2000.0)
+DENIED_DETECTION_L_M = 1070.0
 
 
 def upper95(k: int, n: int) -> float:
@@ -107,7 +115,7 @@ def part_pfa(rng, tests_white: int, tests_corr: int) -> dict:
         n_tests = tests_white if L == 0.0 else tests_corr
         chol = np.linalg.cholesky(sigma_window(L))
         pred96, thr_exact = exact_threshold(L)
-        k4 = kw = kx = km = 0
+        k4 = kw = kx = km = kc = 0
         done = 0
         while done < n_tests:
             m = min(50_000, n_tests - done)
@@ -117,6 +125,7 @@ def part_pfa(rng, tests_white: int, tests_corr: int) -> dict:
             k4 += int(np.count_nonzero(t4 > THR))
             kw += int(np.count_nonzero(tw > THR))
             kx += int(np.count_nonzero(t4 > thr_exact))
+            kc += int(np.count_nonzero((tw > THR_W2) | (tm > THR_M2)))
             done += m
         out[f"L{int(L)}m"] = {
             "tests": n_tests, "design_pfa": float(chi2.sf(THR, N)),
@@ -127,6 +136,8 @@ def part_pfa(rng, tests_white: int, tests_corr: int) -> dict:
                                     "upper95": upper95(kx, n_tests)},
             "whitened_mean_test": {"threshold": THR_MEAN, "pfa": km / n_tests,
                                    "upper95": upper95(km, n_tests)},
+            "whitened_plus_glrt": {"thresholds": [THR_W2, THR_M2], "pfa": kc / n_tests,
+                                   "upper95": upper95(kc, n_tests)},
         }
         print(f"pfa L={L:.0f} m: {json.dumps(out[f'L{int(L)}m'])}", flush=True)
     return out
@@ -139,8 +150,8 @@ def delays(S: np.ndarray, thr: float) -> dict:
     first = np.where(any_hit, np.argmax(hit, axis=1) + 1, np.inf)
     m = S.shape[0]
     missed = int(np.count_nonzero(~any_hit))
-    med = float(np.percentile(first, 50)) if missed <= m // 2 else None
-    p95 = float(np.percentile(first, 95)) if missed <= m * 0.05 else None
+    med = float(np.percentile(first, 50)) if 2 * missed < m else None
+    p95 = float(np.percentile(first, 95)) if missed < m * 0.05 else None
     return {"p_md_50": missed / m, "p_md_50_upper95": upper95(missed, m), "median_delay": med,
             "p95_delay": p95}
 
@@ -165,7 +176,9 @@ def part_detection(rng, n_seq: int) -> dict:
             rows[f"{kind}_{size:g}"] = {"eq4_at_96 (today)": delays(t4, THR),
                                         "whitened_at_96": delays(tw, THR),
                                         "eq4_exact_threshold": delays(t4, thr_exact),
-                                        "whitened_mean_test": delays(tm, THR_MEAN)}
+                                        "whitened_mean_test": delays(tm, THR_MEAN),
+                                        "whitened_plus_glrt": delays(np.maximum(tw / THR_W2, tm / THR_M2),
+                                                                     1.0)}
         out[f"L{int(L)}m"] = {"sequences": n_seq, "eq4_exact_threshold": thr_exact, "cases": rows}
         print(f"detection L={L:.0f} m: {json.dumps(rows)}", flush=True)
     return out
@@ -184,87 +197,126 @@ def _gm(rng, m: int, k: int, sigma: float, tau_epochs: float) -> np.ndarray:
     return sigma * x
 
 
-def part_denied(rng, n_tests: int, n_det: int) -> dict:
-    """See the module docstring; windows of epochs N before and after a fault onset along random tracks."""
+@njit(cache=True)
+def _whiten_batch(rings, sig_r2, sig_b2, corr_len_m, tau_h_s, tau_v_s, out):
+    """The monitor's own kernel (correlated_disparity.whitened_statistic) over windows rings (m, N, 11):
+    out[k] = (T_w, T_b)."""
+    for k in range(rings.shape[0]):
+        a, b = whitened_statistic(rings[k], 0, rings.shape[1], sig_r2, sig_b2, corr_len_m, 0, tau_h_s,
+                                  tau_v_s)
+        out[k, 0] = a
+        out[k, 1] = b
+
+
+def part_denied(rng, tests_white: int, tests_corr: int, n_det: int) -> dict:
+    """See the module docstring: the monitor's kernel over windows along random straight tracks over the
+    Jacksboro slopes, map error white (tests_white windows) and at each correlation length (tests_corr)."""
+    from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+
     from trn_env import terrain
     dem = terrain.load("jacksboro")
     h = dem.heights_m
     dn_m, de_m = dem.spacing_m
     gy, gx = np.gradient(h, dn_m, de_m)               # slope north (rows: latitude up) and east
-    L = 1070.0
-    sig_hn, tau_h, sig_v, tau_v = 30.0, 120.0, 5.0, 300.0
-    P_hh = sig_hn**2
+    sig_hn, tau_h, sig_v, tau_v = DENIED_NAV
     ny, nx = h.shape
     span = 2 * N * SPACING_M
+    lat0, lon0 = dem.center_rad
+    rn, re = meridian_radius_m(lat0), prime_vertical_radius_m(lat0) * math.cos(lat0)
+    thr_w2, thr_b2 = float(chi2.isf(0.5e-4, N)), float(chi2.isf(0.5e-4, 1))   # with the GLRT: 1e-4 shared
 
-    def tracks(m):
-        """(g_n, g_e) (m, 2N) along random straight tracks inside the map."""
+    def tracks(m, k):
+        """(g_n, g_e, ok, rings) along m random straight tracks of k epochs inside the map."""
         psi = rng.uniform(0, 2 * np.pi, m)
         margin_n, margin_e = span / dn_m + 2, span / de_m + 2
         i0 = rng.uniform(margin_n, ny - 1 - margin_n, m)
         j0 = rng.uniform(margin_e, nx - 1 - margin_e, m)
-        s = np.arange(2 * N) * SPACING_M
-        ii = np.clip(np.rint(i0[:, None] + np.cos(psi)[:, None] * s / dn_m), 0, ny - 1).astype(int)
-        jj = np.clip(np.rint(j0[:, None] + np.sin(psi)[:, None] * s / de_m), 0, nx - 1).astype(int)
+        s_m = np.arange(k) * SPACING_M
+        ii = np.clip(np.rint(i0[:, None] + np.cos(psi)[:, None] * s_m / dn_m), 0, ny - 1).astype(int)
+        jj = np.clip(np.rint(j0[:, None] + np.sin(psi)[:, None] * s_m / de_m), 0, nx - 1).astype(int)
         g_n, g_e = gy[ii, jj], gx[ii, jj]
         ok = np.isfinite(g_n).all(axis=1) & np.isfinite(g_e).all(axis=1)
-        return np.nan_to_num(g_n), np.nan_to_num(g_e), ok
+        rings = np.zeros((m, k, 11))
+        rings[:, :, 1] = lat0 + np.cos(psi)[:, None] * s_m / rn
+        rings[:, :, 2] = lon0 + np.sin(psi)[:, None] * s_m / re
+        rings[:, :, 3] = SIG_RA**2
+        rings[:, :, 4] = sig_v**2
+        rings[:, :, 5], rings[:, :, 6] = np.nan_to_num(g_n), np.nan_to_num(g_e)
+        rings[:, :, 7] = rings[:, :, 9] = sig_hn**2
+        rings[:, :, 10] = np.arange(k) * SPACING_M / 85.0     # one epoch per second at 85 m/s
+        return ok, rings
 
-    def disparities(m, k, g_n, g_e):
-        e_n = _gm(rng, m, k, sig_hn, tau_h)
-        e_e = _gm(rng, m, k, sig_hn, tau_h)
+    def disparities(rings, L):
+        m, k = rings.shape[:2]
+        e_n, e_e = _gm(rng, m, k, sig_hn, tau_h), _gm(rng, m, k, sig_hn, tau_h)
         e_v = _gm(rng, m, k, sig_v, tau_v)
-        a = math.exp(-SPACING_M / L)
-        x = _gm(rng, m, k, 1.0, 1.0 / -math.log(a)) * SIG_MAP
+        x = (_gm(rng, m, k, 1.0, L / SPACING_M) if L > 0 else rng.standard_normal((m, k))) * SIG_MAP
         # the disparity seen with the navigator's position: its height error and the map's slope under its
         # horizontal error, the map error, the radar altimeter's noise
-        return x + e_v + g_n[:, :k] * e_n + g_e[:, :k] * e_e + SIG_RA * rng.standard_normal((m, k))
+        return x + e_v + rings[:, :, 5] * e_n + rings[:, :, 6] * e_e + SIG_RA * rng.standard_normal((m, k))
 
-    def whitened(p, g_n, g_e):
-        """p' Sigma^-1 p per row (windows of N), Sigma per row from its slopes (batched Cholesky)."""
-        d = np.arange(N) * SPACING_M
-        base = cd.window_covariance(d, SIG_MAP, L, "exponential", SIG_RA**2) + sig_v**2
-        S = base[None] + P_hh * (g_n[:, :, None] * g_n[:, None, :] + g_e[:, :, None] * g_e[:, None, :])
-        C = np.linalg.cholesky(S)
-        y = np.linalg.solve(C, p[:, :, None])[:, :, 0]
-        return np.sum(y * y, axis=1)
+    def stats(rings, L, taus):
+        out = np.empty((rings.shape[0], 2))
+        _whiten_batch(rings, SIG_MAP**2, 0.0, L, taus[0], taus[1], out)
+        return out
 
-    k_fa = done = 0
-    k_today = 0
-    while done < n_tests:
-        m = min(5000, n_tests - done)
-        g_n, g_e, ok = tracks(m)
-        p = disparities(m, N, g_n, g_e)[ok]
-        gn, ge = g_n[ok, :N], g_e[ok, :N]
-        tw = whitened(p, gn, ge)
-        var_today = SIG_MAP**2 + SIG_RA**2 + sig_v**2 + P_hh * (gn**2 + ge**2)
-        t4 = np.sum(p * p / var_today, axis=1)
-        k_fa += int(np.count_nonzero(tw > THR))
-        k_today += int(np.count_nonzero(t4 > THR))
-        done += int(ok.sum())
-    out = {"tests": done, "whitened_at_96": {"pfa": k_fa / done, "upper95": upper95(k_fa, done)},
-           "eq4_at_96 (today)": {"pfa": k_today / done, "upper95": upper95(k_today, done)}}
-    print(f"denied pfa: {json.dumps(out)}", flush=True)
+    def eq4(rings):
+        var_today = SIG_MAP**2 + SIG_RA**2 + sig_v**2 + sig_hn**2 * (rings[:, :, 5]**2 + rings[:, :, 6]**2)
+        return np.sum(rings[:, :, 0] ** 2 / var_today, axis=1)
+
+    out = {"model": {"map_sigma_m": SIG_MAP, "nav_horizontal_sigma_m": sig_hn, "nav_horizontal_tau_s": tau_h,
+                     "nav_vertical_sigma_m": sig_v, "nav_vertical_tau_s": tau_v,
+                     "radar_altimeter_sigma_m": SIG_RA, "monitor_taus_s": [tau_h, tau_v]}}
+    for L in DENIED_LENGTHS_M:
+        n_tests = tests_white if L == 0.0 else tests_corr
+        if n_tests <= 0:
+            continue
+        k = {"matched": 0, "constant": 0, "today": 0, "glrt_combined": 0}
+        done = 0
+        while done < n_tests:
+            m = min(20_000, n_tests - done)
+            ok, rings = tracks(m, N)
+            rings = rings[ok]
+            rings[:, :, 0] = disparities(rings, L)
+            tw = stats(rings, L, (tau_h, tau_v))
+            tc = stats(rings, L, (0.0, 0.0))
+            k["matched"] += int(np.count_nonzero(tw[:, 0] > THR))
+            k["constant"] += int(np.count_nonzero(tc[:, 0] > THR))
+            k["today"] += int(np.count_nonzero(eq4(rings) > THR))
+            k["glrt_combined"] += int(np.count_nonzero((tw[:, 0] > thr_w2) | (tw[:, 1] > thr_b2)))
+            done += rings.shape[0]
+        res = {"tests": done}
+        for key, name in (("matched", "whitened_at_96 (the monitor, time constants of the navigator)"),
+                          ("constant", "whitened_at_96, navigator error constant over the window (before)"),
+                          ("today", "eq4_at_96 (today)"),
+                          ("glrt_combined", "whitened + bias GLRT, 0.5e-4 each")):
+            res[name] = {"pfa": k[key] / done, "upper95": upper95(k[key], done)}
+        out[f"L{int(L)}m"] = res
+        print(f"denied pfa L={L:.0f} m: {json.dumps(res)}", flush=True)
+    if n_det <= 0:
+        return out
+    L = DENIED_DETECTION_L_M
     det = {}
     for kind, size in [("bias", b) for b in BIASES_M] + [("ramp", RAMP_M_PER_EPOCH)]:
-        g_n, g_e, ok = tracks(n_det)
-        p = disparities(n_det, 2 * N, g_n, g_e)[ok]
-        g_n, g_e = g_n[ok], g_e[ok]
-        p[:, N:] += fault_profile(kind, size)
-        S = np.empty((p.shape[0], N))
-        S4 = np.empty((p.shape[0], N))
-        for k in range(N):
-            sl = slice(k + 1, k + 1 + N)
-            S[:, k] = whitened(p[:, sl], g_n[:, sl], g_e[:, sl])
-            var_today = SIG_MAP**2 + SIG_RA**2 + sig_v**2 + P_hh * (g_n[:, sl]**2 + g_e[:, sl]**2)
-            S4[:, k] = np.sum(p[:, sl] ** 2 / var_today, axis=1)
-        det[f"{kind}_{size:g}"] = {"whitened_at_96": delays(S, THR), "eq4_at_96 (today)": delays(S4, THR),
-                                   "sequences": int(p.shape[0])}
-        print(f"denied detection {kind} {size:g}: {json.dumps(det[f'{kind}_{size:g}'])}", flush=True)
-    out["detection"] = det
-    out["model"] = {"map_sigma_m": SIG_MAP, "map_correlation_length_m": L, "nav_horizontal_sigma_m": sig_hn,
-                    "nav_horizontal_tau_s": tau_h, "nav_vertical_sigma_m": sig_v, "nav_vertical_tau_s": tau_v,
-                    "radar_altimeter_sigma_m": SIG_RA}
+        ok, rings = tracks(n_det, 2 * N)
+        rings = rings[ok]
+        rings[:, :, 0] = disparities(rings, L)
+        rings[:, N:, 0] += fault_profile(kind, size)
+        m = rings.shape[0]
+        S = np.empty((m, N))
+        Sc = np.empty((m, N))
+        S4 = np.empty((m, N))
+        for j in range(N):
+            win = np.ascontiguousarray(rings[:, j + 1:j + 1 + N])
+            t = stats(win, L, (tau_h, tau_v))
+            S[:, j] = t[:, 0]
+            Sc[:, j] = np.maximum(t[:, 0] / thr_w2, t[:, 1] / thr_b2)
+            S4[:, j] = eq4(win)
+        det[f"{kind}_{size:g}"] = {"whitened_at_96": delays(S, THR), "whitened_plus_glrt": delays(Sc, 1.0),
+                                   "eq4_at_96 (today)": delays(S4, THR), "sequences": int(m)}
+        print(f"denied detection L={L:.0f} m {kind} {size:g}: {json.dumps(det[f'{kind}_{size:g}'])}",
+              flush=True)
+    out["detection"] = {"map_correlation_length_m": L, "cases": det}
     return out
 
 
@@ -366,7 +418,7 @@ def main(argv=None) -> int:
     if "detection" in parts:
         out["detection"] = part_detection(rng, args.sequences)
     if "denied" in parts:
-        out["denied"] = part_denied(rng, args.tests_correlated, args.sequences // 4)
+        out["denied"] = part_denied(rng, args.tests, args.tests_correlated, args.sequences // 4)
     if "kalman" in parts:
         out["kalman"] = part_kalman(rng, args.kalman_mc)
     if "kalman_onset" in parts:

@@ -7,7 +7,8 @@ The flight: the default scenario with `aircraft.constant_fuel = true`, its route
 until the route outlasts the flight, time limit HOURS. A thread samples the resident memory (VmRSS) of this
 process and of its children (the estimation stage's worker) every 5 s; printed: the peak of each and of
 their sum, and a line per sample in OUT.rss.csv (wall s, sim s, parent RSS, children RSS, total PSS MB;
-PSS counts the pages the forked worker shares with its parent once).
+PSS counts the pages the forked worker shares with its parent once; then each process's own peak so far,
+VmHWM, which catches a peak between two samples).
 """
 
 from __future__ import annotations
@@ -25,6 +26,18 @@ def _rss_mb(pid: int) -> float:
         with open(f"/proc/{pid}/status") as f:
             for line in f:
                 if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
+def _hwm_mb(pid: int) -> float:
+    """The process's peak resident memory so far (VmHWM): catches peaks between two samples."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
                     return int(line.split()[1]) / 1024.0
     except OSError:
         pass
@@ -82,7 +95,8 @@ def main() -> None:
         while not stop.is_set():
             kids = _children(me)
             samples.append((time.perf_counter() - t0, sim_t[0], _rss_mb(me), sum(_rss_mb(c) for c in kids),
-                            _pss_mb(me) + sum(_pss_mb(c) for c in kids)))
+                            _pss_mb(me) + sum(_pss_mb(c) for c in kids), _hwm_mb(me),
+                            max((_hwm_mb(c) for c in kids), default=0.0)))
             stop.wait(5.0)
 
     th = threading.Thread(target=sample, daemon=True)
@@ -104,8 +118,10 @@ def main() -> None:
         res, _ = record(sc, args.out, progress=progress)
     stop.set()
     th.join()
+    hwm_parent = _hwm_mb(os.getpid())              # exact: the kernel's own peak of this process
+    hwm_worker = max(s[6] for s in samples)        # the worker's own peak, as of its last sample
     with open(str(args.out) + ".rss.csv", "w") as f:
-        f.write("wall_s,sim_s,parent_rss_mb,children_rss_mb,total_pss_mb\n")
+        f.write("wall_s,sim_s,parent_rss_mb,children_rss_mb,total_pss_mb,parent_hwm_mb,worker_hwm_mb\n")
         for s in samples:
             f.write(",".join(f"{x:.1f}" for x in s) + "\n")
     peak_p = max(s[2] for s in samples)
@@ -117,7 +133,8 @@ def main() -> None:
           f"sim {res.sim_time_s:.0f} s, wall {time.perf_counter() - t0:.0f} s; "
           f"peak RSS parent {peak_p:.0f} MB, "
           f"worker {peak_c:.0f} MB; peak PSS of both {peak_sum:.0f} MB; peak PSS up to sim hour: "
-          + ", ".join(f"{h:g} h {v:.0f} MB" for h, v in at.items()))
+          + ", ".join(f"{h:g} h {v:.0f} MB" for h, v in at.items())
+          + f"; peak RSS (VmHWM) parent {hwm_parent:.0f} MB, worker {hwm_worker:.0f} MB")
 
 
 if __name__ == "__main__":

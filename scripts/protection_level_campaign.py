@@ -1,119 +1,206 @@
-"""Protection levels of the terrain navigators in closed loop: misleading-information (MI) rate, hazardous
-MI rate against an alert limit, availability, and a Stanford diagram per navigator.
+"""Protection levels of the terrain navigators over recorded flights: misleading-information (MI) rate,
+hazardous MI rate against an alert limit, availability, and a Stanford diagram per navigator.
 
-    python scripts/protection_level_campaign.py --budget-s 3000 --out pl_campaign   # round-robin flights
+    python scripts/protection_level_campaign.py --budget-s 4000 --workers 2 --out pl_campaign
+    python scripts/protection_level_campaign.py --report-only --out pl_campaign
 
-Each navigator flies its regression scenario (tests/scenarios/<nav>_short.toml; ins_tercom: default_short)
-along the default scenario's route (~45 km, 600 m above ground; --duration-s at most), under two map
-conditions: "as_published" (the scenario's own map: the real 3"
-DEM against a world refined to 30 m) and "dted1_correlated" (that map plus the DTED-1 class's error model
-drawn per seed: bias, horizontal shift, correlated random vertical error). Flights go round-robin over
-navigators x conditions x seeds until the wall-time budget is spent; every epoch (logged row, 1 Hz) where
-the navigator is healthy and publishes an HPL counts. Writes OUT/pl_campaign.json (pooled figures with
-one-sided 95 % Clopper-Pearson bounds) and OUT/stanford.png.
+(Run it from the repository root with PYTHONPATH=. so the worktree's trn_env is the one imported.)
+
+Each flight is recorded once (trn_env.logs.record, the INS flying the route, every sensor the navigators
+read) and replayed open loop through every navigator (trn_env.logs.replay): the flight dynamics and the
+sensors are paid once per flight instead of once per navigator. A flight is `--duration-s` long, GNSS lost
+at 10 s, over a 66 km loop inside the area the Jacksboro DEM and the synthetic "rolling" terrain share
+(the start leg rotates with the seed). Conditions (8): terrain (jacksboro: the real 3" DEM against a world
+refined to 30 m; rolling: the synthetic preset, same refinement) x IMU grade (navigation, tactical) x map
+class (as_published: the map is the DEM the world was refined from; dted1: that map plus the DTED-1
+class's error model drawn per seed - bias, horizontal shift, spatially correlated vertical error).
+
+Counted epochs: the replay's rows (navigator rate) after GNSS is lost where the navigator says it is healthy
+and publishes a finite HPL. Per (navigator, condition) and pooled per navigator: MI epochs, rate and its
+one-sided 95 % Clopper-Pearson bound (rows of one flight are correlated: the bound counts them as
+independent), hazardous MI against the alert limit, availability. Jobs (condition, seed) run round-robin in
+`--workers` processes until `--budget-s` is spent; each saves OUT/epochs/<nav>/<condition>/s<seed>.npz, so
+a run resumes where it stopped and `--navigators` can add a navigator to flights already recorded. Writes
+OUT/pl_campaign.json and OUT/stanford.png.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 
 import numpy as np
 
-SCENARIOS = {"ins_tercom": "default_short", "pmf": "pmf_short", "pf": "pf_short", "rbpf": "rbpf_short",
-             "acq_track": "acq_track_short"}
-CONDITIONS = ("as_published", "dted1_correlated")
-# the default scenario's route (600 m above ground, ~45 km): longer flights than the short scenarios' own
-ROUTE = [(36.490, -84.370), (36.640, -84.340), (36.640, -84.200), (36.520, -84.160)]
+NAVIGATORS = {"ins_tercom": {"remove_bias": True}, "pmf": {"grid_size": 200}, "pf": {"n_particles": 10000},
+              "acq_track": {"transect_samples": 25, "replica_model": "return", "aiding_source": "ins"},
+              "rbpf": {}}
+TERRAINS = {"jacksboro": "jacksboro", "rolling": "synthetic:rolling"}
+GRADES = ("navigation", "tactical")
+MAPS = ("as_published", "dted1")
+CONDITIONS = [f"{t}-{g}-{m}" for t in TERRAINS for g in GRADES for m in MAPS]
+# a loop inside both DEMs (jacksboro: lat 36.447-36.733, lon -84.413 to -84.078; rolling: 36.500-36.771,
+# -84.300 to -83.965), ~3 km from the shared area's edges
+LOOP = [(36.53, -84.27), (36.70, -84.27), (36.70, -84.11), (36.53, -84.11)]
+GNSS_LOST_S = 10.0
 
 
-def fly(nav: str, condition: str, seed: int, duration_s: float):
-    from trn_env.scenario.loading import read_scenario_file, validate
-    from trn_env.sim.closed_loop import ClosedLoop
-    data, _ = read_scenario_file(f"tests/scenarios/{SCENARIOS[nav]}.toml")
-    data["seed"] = seed
-    data["duration_s"] = duration_s
-    data["route"]["waypoints"] = [{"lat_deg": a, "lon_deg": b, "h_agl_m": 600.0} for a, b in ROUTE]
-    if condition == "dted1_correlated":
-        data["terrain"]["map"]["dem"] = "jacksboro"
+def scenario_data(condition: str, seed: int, duration_s: float) -> dict:
+    """The recording scenario of one flight (acq_track_short's sensors, the INS as navigator)."""
+    from trn_env.scenario.loading import read_scenario_file
+    terrain, grade, map_class = condition.split("-")
+    data, _ = read_scenario_file("tests/scenarios/acq_track_short.toml")
+    k = seed % len(LOOP)
+    pts = LOOP[k:] + LOOP[:k] + LOOP[k:k + 1]
+    (la0, lo0), (la1, lo1) = pts[0], pts[1]
+    heading = float(np.degrees(np.arctan2((lo1 - lo0) * np.cos(np.radians(la0)), la1 - la0))) % 360.0
+    data.update(name=f"pl_{condition}_{seed}", seed=seed, duration_s=duration_s)
+    data["initial"].update(lat_deg=la0, lon_deg=lo0, h_agl_m=600.0, heading_deg=heading)
+    data["route"]["waypoints"] = [{"lat_deg": a, "lon_deg": b, "h_agl_m": 600.0} for a, b in pts]
+    data["terrain"]["world"]["dem"] = TERRAINS[terrain]
+    data["terrain"]["map"] = {"dem": TERRAINS[terrain]}
+    if map_class == "dted1":
         data["terrain"]["map"]["error_model"] = {"preset": "dted1"}
-    sc = validate(data, source="protection_level_campaign")
-    r = ClosedLoop(sc, pipeline=True).run()
-    a = r.arrays
-    e = np.hypot(a["err_ned_m"][:, 0], a["err_ned_m"][:, 1])
-    return e, np.asarray(a["est_hpl_m"], float), np.asarray(a["nav_ok"], bool), r.termination
+    data["sensors"]["imu"] = {"grade": grade}
+    data["gnss"] = {"outages": [{"start_s": GNSS_LOST_S}]}
+    data["navigator"] = {"name": "ins", "settings": {}}
+    return data
+
+
+def run_job(out: str, condition: str, seed: int, duration_s: float, navs: list[str]) -> list[str]:
+    """Record one flight (unless recorded) and replay it through the navigators not yet saved."""
+    from trn_env.logs.record import record
+    from trn_env.logs.replay import replay
+    from trn_env.scenario.loading import validate
+    out_p = Path(out)
+    log_dir = out_p / "logs" / condition / f"s{seed}"
+    lines = []
+    if not (log_dir / "metadata.json").exists():
+        t0 = time.perf_counter()
+        sc = validate(scenario_data(condition, seed, duration_s), source="protection_level_campaign")
+        r, _ = record(sc, log_dir)
+        lines.append(f"record {condition} s{seed}: {r.termination}, {time.perf_counter() - t0:.1f} s")
+    for nav in navs:
+        f = out_p / "epochs" / nav / condition / f"s{seed}.npz"
+        if f.exists():
+            continue
+        t0 = time.perf_counter()
+        rr = replay(log_dir, nav, settings=NAVIGATORS[nav])
+        a = rr.arrays
+        e = np.hypot(a["err_ned_m"][:, 0], a["err_ned_m"][:, 1])
+        h = np.asarray(a["est_hpl_m"], float)
+        ok = np.asarray(a["nav_ok"], bool)
+        denied = ~np.asarray(a["gnss_available"], bool)
+        f.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(f, t=a["t_s"], e=e, h=h, ok=ok, denied=denied)
+        c = ok & denied & np.isfinite(h)
+        lines.append(f"  {nav} {condition} s{seed}: {rr.termination}, {int(np.sum(c & (e > h)))} MI of "
+                     f"{int(c.sum())}, {time.perf_counter() - t0:.1f} s")
+    return lines
+
+
+def load_epochs(out: Path, nav: str, condition: str):
+    """(e, h, healthy) of the counted epochs (GNSS lost) of every saved flight, the flight count and the
+    number of flights with a misleading epoch."""
+    files = sorted((out / "epochs" / nav / condition).glob("s*.npz"))
+    if not files:
+        return None
+    zs = [np.load(f) for f in files]
+    d = [z["denied"] for z in zs]
+    e, h, ok = ([z[k][m] for z, m in zip(zs, d, strict=True)] for k in ("e", "h", "ok"))
+    n_mi = sum(int(np.any(o & np.isfinite(hh) & (ee > hh))) for ee, hh, o in zip(e, h, ok, strict=True))
+    return np.concatenate(e), np.concatenate(h), np.concatenate(ok), len(files), n_mi
+
+
+def report(out: Path, navs: list[str], al: float, risk: float) -> dict:
+    """OUT/pl_campaign.json and OUT/stanford.png from the saved epochs."""
+    import pandas as pd
+
+    from trn_env.campaign.report import stanford_plot
+    from trn_env.output.integrity_metrics import protection_level_metrics
+    res: dict = {}
+    rows = []
+    for nav in navs:
+        pooled = []
+        for c in CONDITIONS:
+            got = load_epochs(out, nav, c)
+            if got is None:
+                continue
+            e, h, ok, nf, n_mi = got
+            m = protection_level_metrics(e, h, ok, al) | {"flights": nf, "flights_with_mi": n_mi,
+                                                           "all_epochs": int(e.size)}
+            m["meets_risk"] = bool(m["pl_misleading_rate_upper95"] <= risk)
+            res[f"{nav}/{c}"] = m
+            pooled.append((e, h, ok))
+        if pooled:
+            e, h, ok = (np.concatenate([p[i] for p in pooled]) for i in range(3))
+            m = protection_level_metrics(e, h, ok, al) | {"all_epochs": int(e.size)}
+            m["meets_risk"] = bool(m["pl_misleading_rate_upper95"] <= risk)
+            res[f"{nav}/all"] = m
+            rows.append({"navigator": nav, "series_err_h_m": e, "series_hpl_m": h,
+                         "series_nav_ok": ok.astype(float)})
+    doc = {"alert_limit_m": al, "integrity_risk": risk, "conditions": CONDITIONS, "results": res}
+    (out / "pl_campaign.json").write_text(json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
+    if rows:
+        stanford_plot(out / "stanford.png", pd.DataFrame(rows), al)
+    return doc
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--budget-s", type=float, default=3000.0, help="wall-time budget (s)")
-    ap.add_argument("--duration-s", type=float, default=600.0, help="flight length limit (s)")
-    ap.add_argument("--alert-limit-m", type=float, default=185.2)
-    ap.add_argument("--navigators", default=",".join(SCENARIOS))
-    ap.add_argument("--out", default="pl_campaign")
+    ap.add_argument("--budget-s", type=float, default=3600.0, help="wall-time budget for new jobs (s)")
+    ap.add_argument("--duration-s", type=float, default=400.0, help="flight length (s)")
+    ap.add_argument("--seeds", type=int, default=40, help="flights per condition")
     ap.add_argument("--seed0", type=int, default=1000, help="first scenario seed")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--alert-limit-m", type=float, default=185.2)
+    ap.add_argument("--integrity-risk", type=float, default=1e-3)
+    ap.add_argument("--navigators", default=",".join(NAVIGATORS))
+    ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--replay-only", action="store_true", help="only flights already recorded")
+    ap.add_argument("--out", default="pl_campaign")
     args = ap.parse_args(argv)
-    from trn_env.navigators.integrity.protection_level import check_alert_limit
-
-    from trn_env.output.integrity_metrics import clopper_pearson_upper, protection_level_metrics
+    from trn_env.navigators.integrity.protection_level import check_alert_limit, check_integrity_risk
     al = check_alert_limit(args.alert_limit_m, "--alert-limit-m")
+    risk = check_integrity_risk(args.integrity_risk, "--integrity-risk")
+    navs = [n.strip() for n in args.navigators.split(",") if n.strip()]
+    bad = [n for n in navs if n not in NAVIGATORS]
+    if bad:
+        ap.error(f"--navigators: unknown {bad}; choose from {sorted(NAVIGATORS)}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    navs = [n.strip() for n in args.navigators.split(",") if n.strip()]
-    data = {(n, c): {"e": [], "h": [], "ok": [], "flights": 0, "terminations": []} for n in navs
-            for c in CONDITIONS}
-    t0 = time.perf_counter()
-    seed = 0
-    while time.perf_counter() - t0 < args.budget_s:
-        for n in navs:
-            for c in CONDITIONS:
-                if time.perf_counter() - t0 >= args.budget_s:
+    if not args.report_only:
+        os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+        jobs = [(c, args.seed0 + s) for s in range(args.seeds) for c in CONDITIONS]
+        if args.replay_only:
+            jobs = [(c, s) for c, s in jobs if (out / "logs" / c / f"s{s}" / "metadata.json").exists()]
+        t0 = time.perf_counter()
+        with ProcessPoolExecutor(args.workers) as pool:
+            running = set()
+            while jobs or running:
+                while jobs and len(running) < args.workers and time.perf_counter() - t0 < args.budget_s:
+                    c, s = jobs.pop(0)
+                    running.add(pool.submit(run_job, str(out), c, s, args.duration_s, navs))
+                if not running:
                     break
-                e, h, ok, term = fly(n, c, args.seed0 + seed, args.duration_s)
-                d = data[(n, c)]
-                d["e"].append(e)
-                d["h"].append(h)
-                d["ok"].append(ok)
-                d["flights"] += 1
-                d["terminations"].append(term)
-                print(f"{time.perf_counter() - t0:7.0f} s {n} {c} seed {args.seed0 + seed}: {term}, "
-                      f"{int(np.sum(ok & (e > h)))} MI of {int(np.sum(ok & np.isfinite(h)))}", flush=True)
-                res = {}
-                for (nn, cc), dd in data.items():
-                    if not dd["flights"]:
-                        continue
-                    E, H, OK = (np.concatenate(dd[k]) for k in ("e", "h", "ok"))
-                    m = protection_level_metrics(E, H, OK, al)
-                    m.update(flights=dd["flights"], terminations=dd["terminations"],
-                             pl_misleading_rate_upper95=clopper_pearson_upper(m["pl_misleading_epochs"],
-                                                                               m["pl_epochs"]))
-                    res[f"{nn}/{cc}"] = m
-                    np.savez(out / f"{nn}_{cc}.npz", e=E, h=H, ok=OK)
-                (out / "pl_campaign.json").write_text(json.dumps(
-                    {"alert_limit_m": al, "duration_s": args.duration_s, "results": res,
-                     "wall_s": time.perf_counter() - t0}, indent=1, default=float) + "\n", encoding="utf-8")
-        seed += 1
-    stanford(out, navs, al)
+                done, running = wait(running, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    print(f"{time.perf_counter() - t0:7.0f} s", *fut.result(), sep="\n", flush=True)
+    doc = report(out, navs, al, risk)
+    print("| navigator | condition | flights (with MI) | epochs counted / healthy with HPL | MI epochs | "
+          "MI rate (upper 95 %) | HMI | availability | median HPL (m) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for k, m in doc["results"].items():
+        nav, cond = k.split("/")
+        fl = f"{m['flights']} ({m['flights_with_mi']})" if "flights" in m else "all"
+        rate = m["pl_misleading_rate"]
+        print(f"| {nav} | {cond} | {fl} | {m['all_epochs']} / {m['pl_epochs']} | "
+              f"{m['pl_misleading_epochs']} | {rate:.2g} (≤ {m['pl_misleading_rate_upper95']:.2g}) | "
+              f"{m['pl_hazardous_epochs']} | {m['pl_availability']:.3f} | {m['hpl_median_m']:.1f} |")
     return 0
-
-
-def stanford(out: Path, navs: list[str], al: float) -> None:
-    """OUT/stanford.png from the saved epochs (both conditions pooled per navigator)."""
-    import pandas as pd
-
-    from trn_env.campaign.report import stanford_plot
-    rows = []
-    for n in navs:
-        for c in CONDITIONS:
-            p = out / f"{n}_{c}.npz"
-            if p.exists():
-                z = np.load(p)
-                rows.append({"navigator": n, "series_err_h_m": z["e"], "series_hpl_m": z["h"],
-                             "series_nav_ok": z["ok"].astype(float)})
-    if rows:
-        stanford_plot(out / "stanford.png", pd.DataFrame(rows), al)
 
 
 if __name__ == "__main__":

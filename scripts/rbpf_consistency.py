@@ -1,6 +1,6 @@
 """The RBPF on the default route (3" Jacksboro map against the 30 m fractal world, GNSS fused for 10 s then
 denied): accuracy and consistency over Monte Carlo seeds, with the innovation test's recovery on (the
-default, integrity_alpha 1e-4; 0.01 before session 9) and/or off (integrity_alpha 1e-12).
+default, integrity_alpha 1e-4; 0.01 before) and/or off (integrity_alpha 1e-12).
 
     PYTHONPATH=$PWD python scripts/rbpf_consistency.py [--seeds 0 1 2] [--duration 600] [--workers 2]
         [--alphas 1e-4 1e-12] [--set n_particles=2000 ...] [--map-is-world]
@@ -37,10 +37,11 @@ def one_run(args) -> dict:
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("default", duration_s=duration_s, seed=seed, navigator="rbpf")
-    sc.data["navigator"]["settings"] = {"integrity_alpha": alpha, **settings}
+    data = sc.to_dict()
+    data["navigator"]["settings"] = {"integrity_alpha": alpha, **settings}
     if map_is_world:
-        sc.data["terrain"]["map"] = {"dem": "world"}
-    res = ClosedLoop(validate(sc.data, source="default"), pipeline=False).run()
+        data["terrain"]["map"] = {"dem": "world"}
+    res = ClosedLoop(validate(data, source="default"), pipeline=False).run()
     a = res.arrays
     e, cov, t = a["err_ned_m"], a["est_cov"], a["t_s"]
     sel = np.flatnonzero(t >= CONVERGED_AFTER_S)

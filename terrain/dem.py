@@ -104,6 +104,11 @@ class Dem:
         """(heights_m, lat0_rad, lon0_rad, dlat_rad, dlon_rad) for numba kernels."""
         return self.heights_m, self.lat0_rad, self.lon0_rad, self.dlat_rad, self.dlon_rad
 
+    def record(self, cubic: bool = False) -> kernels.MapRecord:
+        """The grid and its interpolation (bicubic when cubic, else bilinear) as one kernel argument."""
+        return kernels.MapRecord(self.heights_m, float(self.lat0_rad), float(self.lon0_rad),
+                                 float(self.dlat_rad), float(self.dlon_rad), bool(cubic))
+
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         """(lat_min, lat_max, lon_min, lon_max) of the outermost posts, radians."""

@@ -2,10 +2,18 @@
 
 Grid convention (shared by every kernel): `heights[i, j]` is the elevation (m above MSL) of the post at
 latitude `lat0 + i * dlat` and longitude `lon0 + j * dlon` (radians); row 0 is the southmost row. NaN marks
-a void. Every lookup outside the grid (or touching a void) returns NaN - the hot path never raises.
+a void. Every lookup outside the grid (or touching a void) returns NaN - the hot path never raises; the
+grid's bounds are its outermost posts (heights.shape from the origin).
+
+`MapRecord(heights, lat0, lon0, dlat, dlon, cubic)` is that grid with its interpolation (bicubic when cubic,
+else bilinear) as one kernel argument (numba passes it as a tuple; `Dem.record(cubic)` builds it);
+`map_height(record, lat, lon)` reads it. The interpolation primitives below (bilinear, bicubic and their
+batch forms) take the grid's five values: they are what a record dispatches to.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -267,3 +275,23 @@ def block_slopes(heights, block, dn_m, de_m):
                             gj = d
             out[bi, bj] = np.sqrt(gi * gi / (dn_m * dn_m) + gj * gj / (de_m * de_m))
     return out
+
+
+class MapRecord(NamedTuple):
+    """A map's grid and interpolation as one kernel argument (see the module docstring)."""
+
+    heights: np.ndarray
+    lat0: float
+    lon0: float
+    dlat: float
+    dlon: float
+    cubic: bool
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def map_height(record, lat, lon):
+    """Height (m) of the record's map at (lat, lon) rad by its interpolation; NaN off the map."""
+    heights, lat0, lon0, dlat, dlon, cubic = record
+    if cubic:
+        return bicubic(heights, lat0, lon0, dlat, dlon, lat, lon)
+    return bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)

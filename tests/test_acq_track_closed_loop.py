@@ -39,7 +39,7 @@ def test_acq_track_short_bounds_beside_ins_tercom(acq):
     """GNSS lost at 10 s, 100 s of terrain tracking, INS-aided, N = 25. Measured (seeds 0 / 1): acq_track
     16.0 / 20.6 m RMS after 30 s, max 31.2 / 73.7 m (the initial error before GNSS), final 27.4 / 28.3 m,
     100 % of epochs within 3 sigma and health ok after 30 s; INS + TERCOM on the same flight (seed 0) 19.3 m
-    RMS. (Last session's design, air data, no start-point loops: 85 / 97 m RMS, 174 / 167 m max.)"""
+    RMS."""
     a = acq.arrays
     assert acq.termination in ("time_limit", "completed")
     e = _h_err(acq)

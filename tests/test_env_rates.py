@@ -10,22 +10,29 @@ import pytest
 
 from trn_env.env.route_task import FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
 from trn_env.env.terrain_nav import TerrainNavEnv
-from trn_env.flight.core import AutopilotTargets, Flight, InitialCondition, LateralMode, SpeedMode, VerticalMode
+from trn_env.flight.core import (
+    AutopilotTargets,
+    Flight,
+    InitialCondition,
+    LateralMode,
+    SpeedMode,
+    VerticalMode,
+)
 
 SMALL = dict(decision_interval_s=2.0, max_episode_s=8.0, navigator="ins")
 
 
 def test_flight_dt_sets_jsbsim_step_and_imu_rate_and_halves_the_steps():
     e = TerrainNavEnv("basin_route", flight_dt_s=0.02, **SMALL)
-    d = e.scenario.data
-    assert d["aircraft"]["dt_s"] == 0.02
-    assert d["sensors"]["imu"]["rate_hz"] == pytest.approx(50.0)      # lowered from 100 Hz to the step rate
-    assert d["guidance"]["rate_hz"] == d["navigator"]["rate_hz"]       # once per navigator update
+    sc = e.scenario
+    assert sc.aircraft.dt_s == 0.02
+    assert sc.sensors.imu.rate_hz == pytest.approx(50.0)               # lowered from 100 Hz to the step rate
+    assert sc.guidance.rate_hz == sc.navigator.rate_hz                 # once per navigator update
     e.reset(seed=3)
     e.step(np.zeros(2, np.float32))
     assert e._loop.jsbsim_steps == 100                                 # 2 s at 50 Hz
     ref = TerrainNavEnv("basin_route", **SMALL)                        # the scenario's own 100 Hz step
-    assert ref.scenario.data["aircraft"]["dt_s"] == 0.01
+    assert ref.scenario.aircraft.dt_s == 0.01
     ref.reset(seed=3)
     ref.step(np.zeros(2, np.float32))
     assert ref._loop.jsbsim_steps == 200

@@ -1,18 +1,16 @@
 """Every navigator takes its INS error model from the IMU's specification (navigators.core.imu_spec) and is
 consistent on the tactical grade.
 
-The statistical check (slow): one recorded JSBSim flight of the default route (120 s, GNSS denied from
-t = 0), RUNS seeds each with its own sensor noise, IMU biases, initial error and world detail
-(scripts/grade_consistency.py), every navigator built as a scenario builds it. The runs are independent, so
-the mean of each run's time-averaged horizontal NEES after 15 s (2 dof) must not be significantly above 2
-(overconfidence, the failure the IMU-specification model removes): the lower end of its one-sided 99 % t
-interval (RUNS - 1 degrees of freedom; about 4 % false alarms for the four navigators together) must not
-exceed 2; and at least 90 % of all epochs must have NEES <= 9 (the 3-sigma ellipse). The particle filters'
-per-run NEES is heavy-tailed and the EKF's TERCOM fix noise deliberately pessimistic, so the two-sided
-thinned chi-square check needs more runs than a test affords: it is measured over 20 seeds in
-docs/validation/navigators.md (with the PMF 5 % above its upper bound there). Without the
-IMU-specification error model ins_tercom, pmf and pf were at ANEES 13-20 with 34-57 % of epochs inside
-(3 seeds x 150 s).
+The statistical check (slow): one recorded JSBSim flight of the default route (DURATION_S, GNSS denied from
+t = 0), RUNS seeds (SEED0...) each with its own sensor noise, IMU biases, initial error and world detail
+(scripts/grade_consistency.py), every navigator built as a scenario builds it (the acq_track as in its
+regression scenario, with the INS as its aiding). Per navigator, over the epochs after 15 s: the horizontal
+NEES (2 dof) thinned to decorrelated epochs (scripts/filter_statistics.pooled_nees_figures: every k-th
+epoch, k the lag where the NEES autocorrelation falls below 0.1) has its mean inside the two-sided 99 %
+chi-square bounds of that many samples, chi2.ppf([0.005, 0.995], 2 n) / n, computed here (about 1 % false
+alarms per navigator), and at least 90 % of all epochs have NEES <= 9 (the 3-sigma ellipse). A navigator
+whose covariance is known to overstate its error on this route (CONSERVATIVE: the cause and the 20-seed
+figure are in docs/validation/navigators.md) is held to the upper bound only: it must not be overconfident.
 """
 
 from __future__ import annotations
@@ -23,15 +21,30 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from trn_env.navigators.core.imu_spec import ImuSpec, equivalent_walk_density, gm_drive
+from trn_env.navigators.core.imu_spec import (
+    VERTICAL_OFFSET_MEMORY_S,
+    ImuSpec,
+    equivalent_ramp_walk_density,
+    equivalent_walk_density,
+    gm_drive,
+    vertical_offset_walk_density,
+)
 
 from trn_env.scenario.build import build_navigator, imu_spec
 from trn_env.scenario.loading import load_scenario
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 
-RUNS = 8
-DURATION_S = 120.0
+RUNS = 10
+SEED0 = 2000
+DURATION_S = 150.0
+NAVIGATORS = ["ins", "ins_tercom", "pmf", "pf", "acq_track"]
+# covariance known to overstate the error on this route, whatever the IMU (docs/validation/navigators.md;
+# measured so on the navigation grade as well: not from the IMU's error model)
+CONSERVATIVE = {
+    "ins_tercom": "the TERCOM fix's noise (10 m, seed 000 Table 2) is larger than the fixes' error",
+    "acq_track": "its dead-reckoning walk (2 m/sqrt(s) with an INS) is calibrated on the fixes' NIS",
+}
 
 
 def test_imu_spec_from_the_scenario_grade():
@@ -46,34 +59,93 @@ def test_imu_spec_from_the_scenario_grade():
     assert gm_drive(2.0, 100.0, 1.0) == pytest.approx(2.0 * math.sqrt(1.0 - math.exp(-0.02)))
     # a constant rate r over T and the walk q = r^2 T have the same variance at T
     assert equivalent_walk_density(3.0, 50.0) ** 2 * 50.0 == pytest.approx((3.0 * 50.0) ** 2)
+    # a ramp 3 t moves the state by 1.5 t^2: the walk matches its variance at T
+    assert equivalent_ramp_walk_density(3.0, 50.0) ** 2 * 50.0 == pytest.approx((1.5 * 50.0**2) ** 2)
     with pytest.raises(ValueError, match="gyro_bias_tau_s"):
         ImuSpec(gyro_bias_tau_s=0.0)
     with pytest.raises(ValueError, match="accel_bias_mps2"):
         ImuSpec(accel_bias_mps2=math.nan)
 
 
-@pytest.mark.parametrize("name", ["ins_tercom", "pmf", "pf"])
+def _sections(name: str, grade: str):
+    """The default scenario's typed sections with the grade's IMU and navigator `name` (acq_track with the INS
+    as its aiding; the sensors are not checked against the navigator: only its construction is tested)."""
+    from trn_env.scenario.sections import from_dict
+    d = load_scenario("default", navigator="ins_tercom").to_dict()
+    settings = {"aiding_source": "ins"} if name == "acq_track" else {}
+    return from_dict({**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
+                      "navigator": {"name": name, "settings": settings}})
+
+
+def test_baro_loop_height_rate_against_the_loop_integrated():
+    """The baro loop's transient rate (ImuSpec.baro_loop_height_rate_sigma_mps) against the third-order
+    vertical channel integrated step by step (gains 3 / tau, 3 / tau^2, 1 / tau^3, as
+    navigators.inertial.strapdown): height error e_h' = e_v - k1 e_h, e_v' = a - k2 e_h - e_b,
+    e_b' = k3 e_h, for a step a of vertical specific-force error."""
+    spec = imu_spec({"grade": "tactical"})
+    a, tau, dt = spec.vertical_accel_sigma_mps2, 30.0, 0.001
+    k1, k2, k3 = 3.0 / tau, 3.0 / tau**2, 1.0 / tau**3
+    e_h = e_v = e_b = 0.0
+    rates, heights = [], []
+    for _ in range(int(300.0 / dt)):
+        de_h = e_v - k1 * e_h
+        e_v += (a - k2 * e_h - e_b) * dt
+        e_b += k3 * e_h * dt
+        e_h += de_h * dt
+        rates.append(de_h)
+        heights.append(e_h)
+    assert max(rates) == pytest.approx(spec.baro_loop_height_rate_sigma_mps(tau), rel=2e-3)
+    assert max(heights) == pytest.approx(2.0 * a * tau**2 * math.exp(-2.0), rel=2e-3)   # at t = 2 tau
+    # tactical: 1 mg bias + 0.1 mg instability + 300 ppm x g -> 0.071 m/s; the vertical-offset walk over 20 s
+    assert vertical_offset_walk_density(spec, tau) == pytest.approx(
+        spec.baro_loop_height_rate_sigma_mps(tau) * math.sqrt(VERTICAL_OFFSET_MEMORY_S))
+
+
+@pytest.mark.parametrize("name", ["ins_tercom", "pmf", "pf", "rbpf", "acq_track"])
 def test_build_navigator_applies_the_grade(name):
     """The tactical grade raises the navigator's error model above the navigation grade's; a navigation-grade
     scenario keeps the tuned figures (they are floors)."""
-    sc = load_scenario("default", navigator=name)
-    d = sc.data
     from trn_env import terrain
     dem = terrain.load("jacksboro")
-    navs = {}
-    for grade in ("navigation", "tactical"):
-        dd = {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}}}
-        navs[grade] = build_navigator(dd, dem, np.random.default_rng(0))
+    navs = {grade: build_navigator(_sections(name, grade), dem, np.random.default_rng(0))
+            for grade in ("navigation", "tactical")}
     n, t = navs["navigation"], navs["tactical"]
+    g = 9.80665
     if name == "ins_tercom":
-        assert n.sig_ba == pytest.approx(50e-6 * 9.80665) and t.sig_ba > 20 * n.sig_ba
+        assert n.sig_ba == pytest.approx(50e-6 * g) and t.sig_ba > 20 * n.sig_ba
         assert t.sig_bg > 100 * n.sig_bg and t._q_tilt > 100 * n._q_tilt
         assert t._turn_tilt2 > 0.0 and n._turn_tilt2 == 0.0
     elif name == "pmf":
+        assert t.vertical_noise > 1.4 * n.vertical_noise and n.vertical_noise == pytest.approx(0.3, rel=1e-2)
         assert t.accel_bias_sigma > 20 * n.accel_bias_sigma
         assert t._imu_noise[0] > 100 * n._imu_noise[0] and t._imu_noise[3] > 0.0 == n._imu_noise[3]
-    else:
+    elif name == "pf":
         assert t.s_vel > 2 * n.s_vel and t.s_psi > n.s_psi
+        assert t.vertical_noise > 1.4 * n.vertical_noise
+    elif name == "rbpf":
+        # per 1 s TRN epoch: velocity noise = the velocity random walk (tactical 100 ug/sqrt(Hz)), attitude
+        # noise = the angle random walk (0.07 deg/sqrt(h)); the navigation grade's 10 ug/sqrt(Hz) stays
+        # under the 1e-4 m/s setting
+        assert math.sqrt(n.ql_var[0]) == pytest.approx(1e-4)
+        assert math.sqrt(t.ql_var[0]) == pytest.approx(100e-6 * g)
+        assert math.sqrt(t.ql_var[3]) == pytest.approx(0.07 * math.pi / 180 / 60)
+        # x / y accelerometer-bias prior: bias, instability and misalignment x g (1, 0.1 mg, 0.5 mrad)
+        assert math.sqrt(t.P0_settings[6, 6]) == pytest.approx(g * math.sqrt(1e-6 + 1e-8 + 0.25e-6))
+        assert t._turn_att_var[0] > 0.0 == n._turn_att_var[0]
+    else:
+        # e_ne's walk: 0.03 m/s/sqrt(s) tuned; tactical: 1.12 mg constant (q = a^2 T), the tilt ramp
+        # g 1.04 deg/h t (q = slope^2 T^3 / 4) and the velocity random walk, T = 120 s
+        a = g * math.sqrt(1e-6 + 1e-8 + 0.25e-6)
+        slope = g * math.hypot(1.0, 0.3) * math.pi / 180 / 3600
+        q = a**2 * 120 + slope**2 * 120**3 / 4 + (100e-6 * g) ** 2
+        assert math.sqrt(n._bias_walk2) == pytest.approx(0.03)
+        assert t._bias_walk2 == pytest.approx(q)
+
+
+def _chi2_mean_bounds(n: int, p: float) -> tuple[float, float]:
+    """Two-sided probability-p bounds on the mean of n independent chi2(2) samples."""
+    from scipy.stats import chi2
+    return chi2.ppf((1 - p) / 2, 2 * n) / n, chi2.ppf((1 + p) / 2, 2 * n) / n
 
 
 @pytest.mark.slow
@@ -81,21 +153,34 @@ def test_tactical_grade_consistency():
     import filter_statistics as fs
     import grade_consistency as gc
     flight = fs.record_flight(duration_s=DURATION_S)
-    names = ["ins", "ins_tercom", "pmf", "pf"]
-    runs = {n: [] for n in names}
+    runs = {n: [] for n in NAVIGATORS}
     for s in range(RUNS):
-        for n, run in gc.run_seed(flight[0], names, "tactical", 2000 + s, flight).items():
+        for n, run in gc.run_seed(flight[0], NAVIGATORS, "tactical", SEED0 + s, flight).items():
             runs[n].append(run)
-    from scipy import stats
-
     problems = []
-    for n in names:
-        f = gc.figures(runs[n], 15.0)
+    for n in NAVIGATORS:
         nees, _ = gc.run_nees(runs[n], 15.0)
-        means = nees.mean(axis=1)
-        lo = means.mean() - stats.t.ppf(0.99, RUNS - 1) * means.std(ddof=1) / math.sqrt(RUNS)
-        if not (lo <= 2.0 and f["inside_3sigma"] >= 0.9):
-            problems.append(f"{n}: runs' mean NEES {means.mean():.2f}, one-sided 99 % lower end {lo:.2f} "
-                            f"(thinned ANEES {f['anees']:.2f}, bounds {f['bounds_95']}), "
-                            f"{100 * f['inside_3sigma']:.0f} % inside 3 sigma")
+        k = fs.pooled_nees_figures(nees)["thinning_epochs"]
+        thin = nees[:, ::k]
+        anees = float(thin.mean())
+        lo, hi = _chi2_mean_bounds(thin.size, 0.99)
+        inside = float(np.mean(nees <= 9.0))
+        ok = anees <= hi if n in CONSERVATIVE else lo <= anees <= hi
+        if not (ok and inside >= 0.9):
+            problems.append(f"{n}: thinned ANEES {anees:.2f} ({thin.size} samples, every {k} epochs) against "
+                            f"[{lo:.2f}, {hi:.2f}], {100 * inside:.0f} % of epochs inside 3 sigma")
     assert not problems, problems
+
+
+@pytest.mark.parametrize("name", ["ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"])
+def test_consumer_grade_is_flagged_beyond_the_small_angle_model(name):
+    """The consumer grade's 100 deg/h gyro bias builds more than 0.57 deg of attitude error over every
+    navigator's memory: Health says its covariance is not calibrated there; on the tactical grade it says
+    nothing (measured consistency of each cell: docs/validation/navigators.md)."""
+    from trn_env import terrain
+    dem = terrain.load("jacksboro")
+    navs = {grade: build_navigator(_sections(name, grade), dem, np.random.default_rng(0))
+            for grade in ("tactical", "consumer")}
+    warnings = {grade: nav._consistency_warning for grade, nav in navs.items()}
+    assert warnings["tactical"] == ""
+    assert "not calibrated" in warnings["consumer"] and name in warnings["consumer"]

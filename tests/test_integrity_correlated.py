@@ -63,16 +63,24 @@ def test_whitened_kernel_against_numpy():
     white = rng.uniform(50, 150, n)
     g = rng.normal(0.0, 0.1, (n, 2))
     P = np.array([[400.0, 50.0], [50.0, 300.0]])
-    ring = np.zeros((n, 10))
+    ring = np.zeros((n, 11))
     ring[:, 0], ring[:, 1], ring[:, 2], ring[:, 3] = p, lat, lon, white
     ring[:, 4], ring[:, 5], ring[:, 6] = 16.0, g[:, 0], g[:, 1]
     ring[:, 7], ring[:, 8], ring[:, 9] = P[0, 0], P[0, 1], P[1, 1]
+    ring[:, 10] = t = 100.0 + np.arange(n) * 1.0
     start = 13
     rolled = np.roll(ring, start, axis=0)            # oldest epoch at row `start`
-    T = cd.whitened_statistic(rolled, start, n, 0.5 * 18.9**2, 0.5 * 18.9**2, 500.0, 0)
-    S = cd.window_covariance(d, 18.9 * math.sqrt(0.5), 500.0, "exponential", white, 18.9 * math.sqrt(0.5))
-    S += 16.0 + g @ P @ g.T
-    assert T == pytest.approx(p @ np.linalg.solve(S, p), rel=1e-8)
+    S0 = cd.window_covariance(d, 18.9 * math.sqrt(0.5), 500.0, "exponential", white, 18.9 * math.sqrt(0.5))
+    dt = np.abs(t[:, None] - t[None, :])
+    for tau_h, tau_v in ((0.0, 0.0), (120.0, 300.0)):
+        T, Tb = cd.whitened_statistic(rolled, start, n, 0.5 * 18.9**2, 0.5 * 18.9**2, 500.0, 0, tau_h, tau_v)
+        rh = np.exp(-dt / tau_h) if tau_h > 0 else 1.0
+        rv = np.exp(-dt / tau_v) if tau_v > 0 else 1.0
+        S = S0 + 16.0 * rv + (g @ P @ g.T) * rh
+        assert T == pytest.approx(p @ np.linalg.solve(S, p), rel=1e-8)
+        one = np.ones(n)
+        si1 = np.linalg.solve(S, one)
+        assert Tb == pytest.approx((si1 @ p) ** 2 / (one @ si1), rel=1e-8)
 
 
 def test_whitened_false_alarm_rate_at_design():
@@ -132,6 +140,108 @@ def test_monitor_statistic_kernel_whitens_the_window():
             assert out[-1, 4] == pytest.approx(w @ np.linalg.solve(S, w), rel=1e-6)
         else:
             assert out[-1, 4] == pytest.approx(np.sum(w * w) / (18.9**2 + 25.0 + 4.0), rel=1e-9)
+
+
+def _denied_rows(rng, n, slope=(0.08, -0.05)):
+    """Monitor epochs along a track with the navigator as the height source (source 1) over a map slope."""
+    lat, lon = _track(n, 85.0)
+    p = rng.standard_normal(n) * 20.0
+    rows = np.zeros((n, 10))
+    rows[:, 0] = np.arange(n, dtype=float)
+    rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4] = lat, lon, 900.0, 600.0
+    rows[:, 5] = 300.0 - p
+    rows[:, 7] = 1.0
+    rows[:, 8], rows[:, 9] = slope
+    return rows, p, lat
+
+
+def test_denied_path_whitens_the_navigators_correlated_error():
+    """GNSS denied (the navigator's position, source 1), white map: the monitor's kernel whitens the window
+    with the navigator's error Gauss-Markov in time (time constants from the settings) through the map's
+    slope, p' Sigma^-1 p by numpy; and with the bias GLRT on, an alarm comes from T_b alone when only it
+    passes its chi2(1) threshold."""
+    rng = np.random.default_rng(8)
+    n = 60
+    rows, p, lat = _denied_rows(rng, n)
+    est = np.zeros(14)
+    est[7], est[8], est[9], est[10] = 900.0, 100.0, 400.0, 25.0     # P_nn, P_ne, P_ee, P_dd of the navigator
+    g = np.array([0.08, -0.05])
+    P = np.array([[900.0, 100.0], [100.0, 400.0]])
+    for tau_h, tau_v in ((0.0, 0.0), (120.0, 300.0)):
+        mon = dm.DemIntegrityMonitor(dem=_flat_dem(), radar_altimeter_noise_const_m=5.0,
+                                     navigator_error_time_constant_s=tau_h,
+                                     navigator_height_time_constant_s=tau_v)
+        out = np.empty((n, 7))
+        dm._statistic_kernel(rows, rows[:0, 0], mon._cfg, mon._state, mon._ring, mon._wring,
+                             dm._est_terms(est), out)
+        w = p[-50:]
+        dt = np.abs(np.subtract.outer(np.arange(50.0), np.arange(50.0)))
+        rh = np.exp(-dt / tau_h) if tau_h else 1.0
+        rv = np.exp(-dt / tau_v) if tau_v else 1.0
+        S = np.eye(50) * (18.9**2 + 25.0) + 25.0 * rv + (g @ P @ g) * rh
+        assert out[-1, 4] == pytest.approx(w @ np.linalg.solve(S, w), rel=1e-6)
+    # a bias of 3 sigma of the window mean: T_b far above chi2(1)'s 1e-4 threshold, T_w below 96
+    rows2, _, _ = _denied_rows(np.random.default_rng(9), n, slope=(0.0, 0.0))
+    rows2[:, 5] = 300.0 - 0.3 * rng.standard_normal(n) - 12.0
+    outs = {}
+    for pfa_b in (0.0, 1e-4):
+        mon = dm.DemIntegrityMonitor(dem=_flat_dem(), radar_altimeter_noise_const_m=5.0,
+                                     map_bias_fraction=0.0, bias_glrt_false_alarm_probability=pfa_b)
+        out = np.empty((n, 7))
+        dm._statistic_kernel(rows2, rows2[:0, 0], mon._cfg, mon._state, mon._ring, mon._wring,
+                             dm._est_terms(np.zeros(14)), out)
+        outs[pfa_b] = out[-1]
+        assert mon.bias_threshold == (pytest.approx(chi2.isf(1e-4, 1)) if pfa_b else 0.0)
+    assert outs[0.0][4] < 96.0 and outs[0.0][5] == 0.0
+    assert outs[1e-4][5] == 1.0
+
+
+def test_bias_glrt_setting_declared_and_checked():
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="bias_glrt_false_alarm_probability"):
+            dm.DemIntegrityMonitor(dem=_flat_dem(), bias_glrt_false_alarm_probability=bad)
+    for name in ("navigator_error_time_constant_s", "navigator_height_time_constant_s"):
+        with pytest.raises(ValueError, match=name):
+            dm.DemIntegrityMonitor(dem=_flat_dem(), **{name: -1.0})
+
+
+@pytest.mark.slow
+def test_denied_path_false_alarm_rate():
+    """100,000 fault-free GNSS-denied windows through the monitor's kernel (whitened_statistic): map error
+    18.9 m exponential at 1,070 m, the navigator's horizontal error 30 m per axis Gauss-Markov at 120 s and
+    vertical 5 m at 300 s, through a map slope drawn per epoch (0.1 rms per axis); the monitor given those
+    time constants. Alarms at the 1e-2 and 1e-3 chi2(50) thresholds inside their 99.9 % binomial bands."""
+    rng = np.random.default_rng(21)
+    n, N, L, batch = 100_000, 50, 1070.0, 10_000
+
+    def gm(m, k, sigma, tau):
+        a = math.exp(-1.0 / tau)
+        x = np.empty((m, k))
+        x[:, 0] = rng.standard_normal(m)
+        w = rng.standard_normal((m, k))
+        for j in range(1, k):
+            x[:, j] = a * x[:, j - 1] + math.sqrt(1 - a * a) * w[:, j]
+        return sigma * x
+
+    lat, lon = _track(N, 85.0)
+    T = []
+    for _ in range(n // batch):
+        rings = np.zeros((batch, N, 11))
+        rings[:, :, 1], rings[:, :, 2], rings[:, :, 3], rings[:, :, 4] = lat, lon, 12.6**2, 25.0
+        g = rng.normal(0.0, 0.1, (batch, N, 2))
+        rings[:, :, 5], rings[:, :, 6] = g[..., 0], g[..., 1]
+        rings[:, :, 7] = rings[:, :, 9] = 900.0
+        rings[:, :, 10] = np.arange(N, dtype=float)
+        rings[:, :, 0] = (gm(batch, N, 18.9, L / 85.0) + gm(batch, N, 5.0, 300.0)
+                          + g[..., 0] * gm(batch, N, 30.0, 120.0) + g[..., 1] * gm(batch, N, 30.0, 120.0)
+                          + 12.6 * rng.standard_normal((batch, N)))
+        T += [cd.whitened_statistic(rings[k], 0, N, 18.9**2, 0.0, L, 0, 120.0, 300.0)[0]
+              for k in range(batch)]
+    T = np.asarray(T)
+    for pfa in (1e-2, 1e-3):
+        k = int(np.count_nonzero(T > chi2.isf(pfa, N)))
+        lo, hi = binom.ppf([0.0005, 0.9995], n, pfa)
+        assert lo <= k <= hi, (pfa, k, lo, hi)
 
 
 def test_kalman_reading_matches_the_monitors_filter():

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from trn_env.navigators.core.maps import map_record
 from trn_env.navigators.filters import _ekf_kernels as kern
 from trn_env.navigators.inertial.strapdown import quat_from_C_bn, quat_to_dcm
 from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
@@ -50,15 +51,17 @@ def test_mad_surface_is_bit_identical_to_per_lookup_reference(dem, remove_bias, 
         heights[i, j] = np.nan
         args = (lat0 + i * dlat + 150.0 / 6.37e6, lon0 + j * dlon, 30.0)   # 90-210 m north of the void
     lat, lon, hm, d_lat, d_lon = _batch(dem, rng, 40, *args)
-    fast = mad_surface(heights, lat0, lon0, dlat, dlon, lat, lon, hm, d_lat, d_lon, 12, remove_bias)
-    ref = mad_surface_reference(heights, lat0, lon0, dlat, dlon, lat, lon, hm, d_lat, d_lon, 12, remove_bias)
+    rec = map_record((heights, lat0, lon0, dlat, dlon), False)
+    fast = mad_surface(rec, lat, lon, hm, d_lat, d_lon, 12, remove_bias)
+    ref = mad_surface_reference(rec, lat, lon, hm, d_lat, d_lon, 12, remove_bias)
     assert np.array_equal(fast, ref)
     if where != "inside":
         assert np.isinf(ref).any() and np.isfinite(ref).any()   # the case really straddles the edge / void
 
 
 def _takes_void_free_path(heights, lat0, lon0, dlat, dlon, lat, lon, d_lat, d_lon, half):
-    return _block_void_free(heights, lat0, lon0, dlat, dlon, lat, lon, half * abs(d_lat), half * abs(d_lon))
+    return _block_void_free(map_record((heights, lat0, lon0, dlat, dlon), False), lat, lon, half * abs(d_lat),
+                            half * abs(d_lon))
 
 
 def _fast_and_reference(*args):
@@ -76,8 +79,8 @@ def test_mad_surface_void_free_path_any_size_matches_reference(dem, remove_bias,
     mid = (0.5 * (lat_min + lat_max), 0.5 * (lon_min + lon_max))
     lat, lon, hm, d_lat, d_lon = _batch(dem, rng, m, mid[0], mid[1], 900.0)
     assert _takes_void_free_path(heights, lat0, lon0, dlat, dlon, lat, lon, d_lat, d_lon, half)
-    grid = (heights, lat0, lon0, dlat, dlon)
-    fast, ref = _fast_and_reference(*grid, lat, lon, hm, d_lat, d_lon, half, remove_bias)
+    fast, ref = _fast_and_reference(map_record((heights, lat0, lon0, dlat, dlon), False), lat, lon, hm, d_lat,
+                                    d_lon, half, remove_bias)
     assert fast.shape == (2 * half + 1, 2 * half + 1)
     assert np.isfinite(ref).all()
     assert np.array_equal(fast, ref)
@@ -93,7 +96,7 @@ def test_mad_surface_split_over_threads_is_bit_identical(dem, remove_bias, threa
     lat_min, lat_max, lon_min, lon_max = dem.bounds
     mid = (0.5 * (lat_min + lat_max), 0.5 * (lon_min + lon_max))
     lat, lon, hm, d_lat, d_lon = _batch(dem, rng, 29, mid[0] + 2e-4, mid[1] - 3e-4, 1100.0)
-    args = (heights, lat0, lon0, dlat, dlon, lat, lon, hm, d_lat, d_lon, 12, remove_bias)
+    args = (dem.record(), lat, lon, hm, d_lat, d_lon, 12, remove_bias)
     split = mad_surface(*args, threads=threads)
     assert np.isfinite(split).all()
     assert np.array_equal(split, mad_surface_reference(*args))
@@ -124,8 +127,8 @@ def test_mad_surface_void_free_path_edge_cases_match_reference(dem, remove_bias,
         ne = (lat_max - 40.0 / 6.37e6, lon_max - 40.0 / 5.1e6)
         lat, lon, hm, d_lat, d_lon = _batch(dem, rng, 23, ne[0], ne[1], 30.0)
     assert _takes_void_free_path(heights, lat0, lon0, dlat, dlon, lat, lon, d_lat, d_lon, half)
-    grid = (heights, lat0, lon0, dlat, dlon)
-    fast, ref = _fast_and_reference(*grid, lat, lon, hm, d_lat, d_lon, half, remove_bias)
+    fast, ref = _fast_and_reference(map_record((heights, lat0, lon0, dlat, dlon), False), lat, lon, hm, d_lat,
+                                    d_lon, half, remove_bias)
     assert np.array_equal(fast, ref)
     if case == "one_sample_off_map":
         assert np.isinf(ref).all()
@@ -342,7 +345,7 @@ def test_accumulated_surface_is_bit_identical_to_the_reference(dem, remove_bias,
     ok = np.isfinite(hm)
     lat_k = lat[ok] + dn[ok] / acc.r_ns
     lon_k = lon[ok] + de[ok] / acc.r_ew
-    ref = mad_surface_reference(grid[0], lat0, lon0, dlat, dlon, lat_k, lon_k, hm[ok], acc.dlat_cell,
+    ref = mad_surface_reference(map_record(grid, False), lat_k, lon_k, hm[ok], acc.dlat_cell,
                                 acc.dlon_cell, half, remove_bias)
     assert acc.void_free is (where != "void")                # the void makes it fall back
     surf = acc.surface(threads=threads)

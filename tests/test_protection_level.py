@@ -49,6 +49,82 @@ def test_gaussian_bound_holds_for_elliptical_errors():
     assert math.exp(-0.5 * (hc / 25.0) ** 2) == pytest.approx(risk, rel=1e-12)
 
 
+def _mixture_draws(rng, mu, cov, w, n):
+    k = rng.choice(len(w), size=n, p=w / w.sum())
+    L = np.linalg.cholesky(cov + np.eye(2) * 1e-12)
+    z = rng.standard_normal((n, 2))
+    return mu[k] + np.einsum("kij,kj->ki", L[k], z)
+
+
+@pytest.mark.parametrize("case", ["cloud", "few_wide", "elongated"])
+def test_mixture_hpl_against_monte_carlo_of_the_mixture(case):
+    """The rbpf's HPL (mixture_hpl) against brute-force sampling of its Gaussian mixture: 1,000,000 draws;
+    the draws beyond the HPL stay below the 99.9 % binomial quantile at the risk (it is an upper bound of the
+    tail), and the HPL is not loose: at most 1.35 x the Monte Carlo (1 - risk) radius. Cases: a 1,000-point
+    cloud whose components are narrower than its spread, a few wide components, elongated rotated ones."""
+    rng = np.random.default_rng({"cloud": 3, "few_wide": 4, "elongated": 5}[case])
+    risk = 1e-3
+    if case == "cloud":
+        K = 1000
+        mu = rng.normal(0.0, 25.0, (K, 2))
+        cov = np.broadcast_to(np.eye(2) * 12.0**2, (K, 2, 2)).copy()
+    elif case == "few_wide":
+        K = 5
+        mu = rng.normal(0.0, 40.0, (K, 2))
+        cov = np.array([np.eye(2) * s**2 for s in rng.uniform(10.0, 60.0, K)])
+    else:
+        K = 200
+        mu = rng.normal(0.0, 15.0, (K, 2))
+        cov = np.empty((K, 2, 2))
+        for k in range(K):
+            a = rng.uniform(0, np.pi)
+            R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+            cov[k] = R @ np.diag([rng.uniform(20, 50) ** 2, rng.uniform(2, 10) ** 2]) @ R.T
+    w = rng.exponential(1.0, K)
+    h = pl.mixture_hpl(mu[:, 0], mu[:, 1], cov, w, risk)
+    n = 1_000_000
+    x = _mixture_draws(rng, mu, cov, w, n)
+    r = np.hypot(x[:, 0], x[:, 1])
+    k = int(np.count_nonzero(r > h))
+    assert k <= binom.ppf(0.999, n, risk), (case, k, h)
+    assert h <= 1.35 * float(np.quantile(r, 1.0 - risk)), (case, h, np.quantile(r, 1.0 - risk))
+    # points (zero covariance): the kernel is the weighted mass radius about the origin
+    d = np.hypot(mu[:, 0], mu[:, 1])
+    hp = pl.mixture_hpl(mu[:, 0], mu[:, 1], np.zeros((K, 2, 2)), w, 0.05)
+    assert w[d > hp + 1e-6].sum() <= 0.05 * w.sum() and w[d >= hp - 1e-3].sum() > 0.05 * w.sum()
+
+
+def test_rbpf_hpl_is_its_mixture_not_its_points():
+    """rbpf's published HPL: the mixture of its particles with their own Kalman covariances through eq 5's B
+    (checked by sampling that mixture, 400,000 draws) and wider than the points' mass radius alone."""
+    from trn_env.navigators.measurements.ira_seed002 import predict_ira
+    from trn_env.terrain.geodesy import euler_to_C_bn
+
+    from tests.test_rbpf import _frames, _initial
+    from trn_env import terrain
+
+    dem = terrain.load("jacksboro")
+    e0 = _initial(dem)
+    r0 = predict_ira(dem, [e0.lat_rad], [e0.lon_rad], [e0.h_m], e0.v_ned_mps,
+                     euler_to_C_bn(0.0, 0.0, e0.yaw_rad))[0, 0]
+    nav = registry.create("rbpf", dem=dem, rng=np.random.default_rng(11), n_particles=300)
+    nav.reset(e0)
+    for k in range(5):
+        est = nav.update(_frames(float(k), 1.0, rng_m=r0 + 3.0 * k, theta=0.001))
+    h = est.extra[pl.EXTRA_PROTECTION_LEVEL]
+    risk = est.extra[pl.EXTRA_INTEGRITY_RISK]
+    B, P, xn, w = nav._pl_B, nav.P, nav.xn, nav._weights()
+    cov = np.array([B @ P[k] @ B.T + np.diag(nav.qn_var[:2]) for k in range(xn.shape[0])])   # independent
+    assert np.all(np.linalg.eigvalsh(cov)[:, 0] > 0.0)
+    rng = np.random.default_rng(12)
+    n = 400_000
+    x = _mixture_draws(rng, xn[:, :2].copy(), cov, w, n)
+    k = int(np.count_nonzero(np.hypot(x[:, 0], x[:, 1]) > h))
+    assert k <= binom.ppf(0.999, n, risk), (k, h)
+    points = pl.mixture_hpl(xn[:, 0], xn[:, 1], np.zeros_like(cov), w, risk)
+    assert h > points, (h, points)
+
+
 def test_fault_allowance_is_the_largest_shift_inside_the_gate():
     """sqrt(gamma lambda_max(P S^-1 P)) = max |K b| over the gate ellipse b' S^-1 b = gamma (brute force over
     directions), K = P S^-1 the position gain of a direct position fix."""

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from trn_env.navigators import registry
+from trn_env.navigators.core.maps import map_record
 from trn_env.navigators.core.resampling import (
     effective_sample_size,
     systematic_indices,
@@ -16,13 +17,10 @@ from trn_env.navigators.core.resampling import (
     systematic_kernel,
 )
 from trn_env.navigators.filters import _pmf_kernels as pk
-from trn_env.navigators.filters.pmf import _kernel_1d
+from trn_env.navigators.filters.pmf_grid import _kernel_1d
+from trn_env.navigators.measurements import ira, radar_altimeter
+from trn_env.navigators.measurements.ira import IRA_FORMULA_CODES
 from trn_env.navigators.measurements.terrain_models import (
-    IRA_FORMULA_CODES,
-    ira_points_batch,
-    ira_points_reference,
-    map_heights_at_offsets,
-    ra_cone_ranges,
     radii_m,
     robust_log_likelihood,
     robust_log_likelihood_reference,
@@ -39,7 +37,7 @@ def dem():
 
 
 @pytest.mark.parametrize("formula", ["proposed", "conventional"])
-def test_ira_points_batch_matches_the_single_query_formulas(formula):
+def test_ira_closest_points_match_the_single_query_formulas(formula):
     rng = np.random.default_rng(3)
     for _ in range(6):
         C = euler_to_C_bn(rng.normal(0, 0.2), rng.normal(0, 0.1), rng.uniform(-3, 3))
@@ -49,40 +47,41 @@ def test_ira_points_batch_matches_the_single_query_formulas(formula):
         dv = rng.normal(0, 2, (m, 2))
         theta = rng.normal(0, 0.3)
         out = np.empty((m, 3))
-        n_bad = ira_points_batch(1500.0, theta, C, v, dpsi, dv, IRA_FORMULA_CODES[formula], out)
-        ref = ira_points_reference(1500.0, theta, C, v, dpsi, dv, formula)
+        n_bad = ira.closest_points(1500.0, theta, C, v, dpsi, dv, IRA_FORMULA_CODES[formula], out)
+        ref = ira.closest_points_reference(1500.0, theta, C, v, dpsi, dv, formula)
         assert n_bad == int(np.isnan(ref[:, 0]).sum())
         np.testing.assert_array_equal(np.isnan(out), np.isnan(ref))
         ok = np.isfinite(ref[:, 0])
         np.testing.assert_allclose(out[ok], ref[ok], atol=1e-8)
     # a shared hypothesis (length-1 arrays) is the reference's single row
     out1 = np.empty((1, 3))
-    ira_points_batch(1500.0, 0.1, C, v, np.zeros(1), np.zeros((1, 2)), 1, out1)
-    ref1 = ira_points_reference(1500.0, 0.1, C, v, np.zeros(1), np.zeros((1, 2)), "proposed")
+    ira.closest_points(1500.0, 0.1, C, v, np.zeros(1), np.zeros((1, 2)), 1, out1)
+    ref1 = ira.closest_points_reference(1500.0, 0.1, C, v, np.zeros(1), np.zeros((1, 2)), "proposed")
     np.testing.assert_allclose(out1, ref1, atol=1e-8)
 
 
-def test_map_heights_at_offsets_matches_dem_height(dem):
+@pytest.mark.parametrize("cubic", [False, True])
+def test_ira_predicted_heights_match_dem_height(dem, cubic):
     lat, lon = dem.center_rad
     r_lat, r_lon = radii_m(lat, 2000.0)
     rng = np.random.default_rng(0)
     dn, de = rng.uniform(-3000, 3000, 400), rng.uniform(-3000, 3000, 400)
     pn, pe = rng.uniform(-500, 500, 400), rng.uniform(-500, 500, 400)
     out = np.empty(400)
-    h, lat0, lon0, dlat, dlon = dem.grid
-    assert map_heights_at_offsets(h, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, dn, de, pn, pe, out) == 0
-    ref = dem.height(lat + (dn + pn) / r_lat, lon + (de + pe) / r_lon)
+    rec = map_record(dem, cubic)
+    assert ira.predict(rec, lat, lon, r_lat, r_lon, dn, de, pn, pe, out) == 0
+    method = "bicubic" if cubic else "bilinear"
+    ref = dem.height(lat + (dn + pn) / r_lat, lon + (de + pe) / r_lon, method=method)
     np.testing.assert_allclose(out, ref, rtol=0, atol=1e-9)
     # shared shift, and off the map -> NaN counted
     far = np.array([0.0, 1e6])
     out2 = np.empty(2)
-    n = map_heights_at_offsets(h, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, far, far, np.zeros(1),
-                               np.zeros(1), out2)
-    assert n == 1 and np.isnan(out2[1]) and out2[0] == pytest.approx(dem.height(lat, lon))
+    n = ira.predict(rec, lat, lon, r_lat, r_lon, far, far, np.zeros(1), np.zeros(1), out2)
+    assert n == 1 and np.isnan(out2[1]) and out2[0] == pytest.approx(dem.height(lat, lon, method=method))
 
 
 @pytest.mark.parametrize("roll_deg", [0.0, 5.0, 25.0])
-def test_ra_cone_ranges_against_the_exact_search(dem, roll_deg):
+def test_radar_altimeter_predict_against_the_exact_search(dem, roll_deg):
     """Sampled cone vs terrain.queries.radar_altimeter_return (branch and bound, exact): never shorter than
     the exact shortest in-cone range (every sample is a real in-cone terrain point) and within 1 % of it;
     banked past the half beamwidth the nadir leaves the cone and the range is a slant one."""
@@ -98,12 +97,11 @@ def test_ra_cone_ranges_against_the_exact_search(dem, roll_deg):
     C = euler_to_C_bn(math.radians(roll_deg), 0.02, 0.4)
     half = math.radians(10.0)
     exact = queries.radar_altimeter_return(dem, lat, lon, h_ant, np.broadcast_to(C, (m, 3, 3)), half)
-    h, lat0, lon0, dlat, dlon = dem.grid
     out = np.empty(m)
     # each hypothesis at its own antenna height: reference at h_ant[0], dh = h_ant[0] - h_ant[k]
     dh = h_ant[0] - h_ant
-    ra_cone_ranges(h, lat0, lon0, dlat, dlon, lat_c, lon_c, r_lat, r_lon, float(h_ant[0]), dn, de, dh, C,
-                   np.zeros(1), half, 4, 16, out)
+    radar_altimeter.predict(map_record(dem, False), lat_c, lon_c, r_lat, r_lon, float(h_ant[0]), dn, de, dh,
+                            C, np.zeros(1), half, 4, 16, out)
     ok = exact.valid & np.isfinite(out)
     assert ok.sum() >= 0.9 * m
     assert np.all(out[ok] >= exact.range_m[ok] * (1 - 2e-4) - 0.05)
@@ -231,7 +229,7 @@ def test_no_map_is_refused(name):
 def test_pmf_diagonal_convolution_adds_the_north_east_covariance(sign):
     """_pmf_kernels.convolve_diagonal on a point mass: the grid's covariance grows by var [[1, s], [s, 1]]
     (brute-force moments with numpy), the mass and a constant vertical offset stay put."""
-    from trn_env.navigators.filters.pmf import _kernel_1d
+    from trn_env.navigators.filters.pmf_grid import _kernel_1d
     n = 41
     x = np.full(n * n, -700.0)
     x[(n // 2) * n + n // 2] = 0.0

@@ -33,6 +33,21 @@ from .correlation import (
 )
 
 
+@njit(cache=True, inline="always")
+def _work_arrays(n):
+    """The search kernels' per-sample scratch: offsets (rad), offsets in grid-index units, heights (m)."""
+    return np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+
+
+@njit(cache=True, inline="always")
+def _replica_height(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, fi, fj, dlat_k, dlon_k, interp):
+    """Map height (m) of a replica sample: at grid index (fi, fj) when bilinear, else at (lat_s + dlat_k,
+    lon_s + dlon_k) by the interpolation `interp`."""
+    if interp == INTERP_BILINEAR:
+        return bilinear_at_index(heights, fi, fj)
+    return _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_k, lon_s + dlon_k, interp)
+
+
 @njit(cache=True)
 def search_kernel(
     heights,
@@ -62,12 +77,7 @@ def search_kernel(
     """out[i, j, a, b] = cost of the replica starting dn_grid[i] north, de_grid[j] east of (lat_c, lon_c)
     with references bv_grid[a] (m/s) and bpsi_grid[b] (rad)."""
     n = dt.shape[0]
-    n_lat, n_lon = heights.shape
-    dlat_w = np.empty(n)
-    dlon_w = np.empty(n)
-    fi_w = np.empty(n)
-    fj_w = np.empty(n)
-    h_w = np.empty(n)
+    dlat_w, dlon_w, fi_w, fj_w, h_w = _work_arrays(n)
     for a in range(bv_grid.shape[0]):
         for b in range(bpsi_grid.shape[0]):
             replica_offsets(dt, m_v, m_psi, bv_grid[a], bpsi_grid[b], r_n, r_e_cos, dlat_w, dlon_w)
@@ -79,15 +89,10 @@ def search_kernel(
                 fi_s = (lat_s - lat0) / dlat
                 for j in range(de_grid.shape[0]):
                     lon_s = lon_c + de_grid[j] / r_e_cos
-                    if interp == INTERP_BILINEAR:
-                        fj_s = (lon_s - lon0) / dlon
-                        for k in range(n):
-                            h_w[k] = bilinear_at_index(heights, fi_s + fi_w[k], fj_s + fj_w[k])
-                    else:
-                        for k in range(n):
-                            h_w[k] = _map_height(
-                                heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k], lon_s + dlon_w[k], interp
-                            )
+                    fj_s = (lon_s - lon0) / dlon
+                    for k in range(n):
+                        h_w[k] = _replica_height(heights, lat0, lon0, dlat, dlon, lat_s, lon_s,
+                                                 fi_s + fi_w[k], fj_s + fj_w[k], dlat_w[k], dlon_w[k], interp)
                     out[i, j, a, b] = profile_cost(d, valid, h_w, cost, remove_bias, n_min)
 
 
@@ -112,11 +117,7 @@ def bounded_search_kernel(
     hands _decide its transpose)."""
     n = dt.shape[0]
     n_lat, n_lon = heights.shape
-    dlat_w = np.empty(n)
-    dlon_w = np.empty(n)
-    fi_w = np.empty(n)
-    fj_w = np.empty(n)
-    h_w = np.empty(n)
+    dlat_w, dlon_w, fi_w, fj_w, h_w = _work_arrays(n)
     row_w = np.empty(n, np.int64)
     u_w = np.empty(n)
     nv = 0
@@ -177,12 +178,11 @@ def bounded_search_kernel(
                             ha = h00 + v * (heights[ii, jj + 1] - h00)
                             hb = h10 + v * (heights[ii + 1, jj + 1] - h10)
                             h = ha + u_w[k] * (hb - ha)
-                        elif interp == INTERP_BILINEAR:
+                        elif interp == INTERP_BILINEAR:   # (not _replica_height: a call keeps the loop small)
                             h = bilinear_at_index(heights, fi_s + fi_w[k], fj_s + fj_w[k])
                         else:
-                            h = _map_height(
-                                heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k], lon_s + dlon_w[k], interp
-                            )
+                            h = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k],
+                                            lon_s + dlon_w[k], interp)
                         h_w[k] = h
                         if bounded and valid[k] and h == h:
                             r = d[k] - h
@@ -238,6 +238,14 @@ def hypothesis_grid(half: float, bin_: float) -> np.ndarray:
     return np.arange(-k, k + 1, dtype=float) * bin_
 
 
+def _hypotheses(position_half_m, position_bin_m, speed_half_mps, speed_bin_mps, b_v0, heading_half_rad,
+                heading_bin_rad, b_psi0):
+    """The serial search's hypothesis grids: north and east offsets (m), speed and heading references."""
+    dn = hypothesis_grid(position_half_m, position_bin_m)
+    return (dn, dn.copy(), b_v0 + hypothesis_grid(speed_half_mps, speed_bin_mps),
+            b_psi0 + hypothesis_grid(heading_half_rad, heading_bin_rad))
+
+
 def serial_search(
     grid,
     lat_c: float,
@@ -267,10 +275,8 @@ def serial_search(
 ) -> AcquisitionResult:
     """Search the hypothesis grid around start (lat_c, lon_c) and references (b_v0, b_psi0)."""
     heights, lat0, lon0, dlat, dlon = grid
-    dn = hypothesis_grid(position_half_m, position_bin_m)
-    de = dn.copy()
-    bv = b_v0 + hypothesis_grid(speed_half_mps, speed_bin_mps)
-    bp = b_psi0 + hypothesis_grid(heading_half_rad, heading_bin_rad)
+    dn, de, bv, bp = _hypotheses(position_half_m, position_bin_m, speed_half_mps, speed_bin_mps, b_v0,
+                                 heading_half_rad, heading_bin_rad, b_psi0)
     out_abij = np.empty((bv.size, bp.size, dn.size, de.size))
     bounded_search_kernel(
         heights, lat0, lon0, dlat, dlon, float(lat_c), float(lon_c), dn, de,
@@ -346,10 +352,8 @@ def serial_search_reference(
     )
 
     heights, lat0, lon0, dlat, dlon = grid
-    dn = hypothesis_grid(position_half_m, position_bin_m)
-    de = dn.copy()
-    bv = b_v0 + hypothesis_grid(speed_half_mps, speed_bin_mps)
-    bp = b_psi0 + hypothesis_grid(heading_half_rad, heading_bin_rad)
+    dn, de, bv, bp = _hypotheses(position_half_m, position_bin_m, speed_half_mps, speed_bin_mps, b_v0,
+                                 heading_half_rad, heading_bin_rad, b_psi0)
     out = np.empty((dn.size, de.size, bv.size, bp.size))
     h = np.empty(dt.size)
     for i, n_ in enumerate(dn):

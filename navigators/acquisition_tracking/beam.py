@@ -40,11 +40,10 @@ def _ray_work(dem) -> dict:
     work = getattr(dem, "_acq_track_ray_work", None)
     if work is not None and work["heights"] is dem.heights_m:
         return work
-    heights, lat0, lon0, dlat, dlon = dem.grid
     bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(dem)
     work = {
         "heights": dem.heights_m,
-        "grid": (heights, lat0, lon0, dlat, dlon, cell_m),
+        "grid": (dem.record(), cell_m),
         "tables": (bs, bmax, bmin, h_min, h_max),
         "pos": np.zeros((3, 1)),
         "C": np.zeros((1, 3, 3)),

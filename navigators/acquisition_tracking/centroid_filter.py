@@ -206,3 +206,51 @@ class CentroidFilter:
         t, d, valid, dt, m_v, m_psi, rng = self._aid_arrays()
         r_n, r_e = self._radii(self.p0[0], self.h_m)
         return t, d, valid, dt, m_v, m_psi, rng, r_n, r_e
+
+    def _finish(self, s: Sample) -> None:
+        """Newest position from the replica; output speed/track through the moving average."""
+        _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
+        dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
+        self.pos = (self.p0[0] + dla[-1], self.p0[1] + dlo[-1])
+        self.t_pos = s.t_s
+        cv, cp = self._corrected(s)
+        v, psi = cv + self.b_v, cp + self.b_psi  # _aided_speed, _aided_track
+        if self.lock_state == "tracking":
+            if self.config.aiding:  # average the references: the aiding carries ramps without lag
+                ref_v, ref_psi = self.b_v, self.b_psi
+                if self._ne_frame:  # the NE bias as the newest sample's speed / track reference
+                    ref_v, ref_psi = cv - s.m_v + self.b_v, float(wrap_rad(cp - s.m_psi)) + self.b_psi
+                ab_v, ab_psi = self.average.push(ref_v, ref_psi)
+                self.out_speed, self.out_track = s.m_v + ab_v, float(wrap_rad(s.m_psi + ab_psi))
+            else:
+                self.out_speed, self.out_track = self.average.push(v, psi)
+            if (
+                self.config.aiding
+                and self.config.aiding_source == "air_data"
+                and self.config.wind_estimation
+                and not self._ne_frame
+                and math.isfinite(s.tas_mps)
+            ):
+                self.wind.update(ground_vector(v, psi), s.tas_mps, s.heading_rad)
+                # the references keep the ground vector the loops found (the wind took over part of it)
+                m_v2, m_psi2 = self.wind.predict(s.tas_mps, s.heading_rad)
+                self.b_v += s.m_v - m_v2
+                self.b_psi += float(wrap_rad(s.m_psi - m_psi2))
+                tr = self.transect.samples
+                tr[-1] = Sample(
+                    s.t_s,
+                    s.d_m,
+                    s.valid,
+                    s.range_m,
+                    m_v2,
+                    m_psi2,
+                    s.tas_mps,
+                    s.heading_rad,
+                    s.gnss_lat,
+                    s.gnss_lon,
+                    s.gnss_v_ne,
+                    s.roll_rad,
+                )
+        else:
+            self.average.reset()
+            self.out_speed, self.out_track = v, float(wrap_rad(psi))

@@ -168,6 +168,15 @@ def _eps(he, hl, hp, spacing, discriminator):
     return eps
 
 
+@njit(cache=True, inline="always")
+def _advance(x, he, hl, hp, spacing, threshold, discriminator):
+    """One early-late iteration of a stage from finite early and late costs: (x moved by the
+    discriminator's step, locked: the step was below threshold)."""
+    eps = _eps(he, hl, hp, spacing, discriminator)
+    x += eps
+    return x, abs(eps) < threshold
+
+
 @njit(cache=True)
 def _stage(
     heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
@@ -187,9 +196,8 @@ def _stage(
         hp = 0.0 if discriminator == DISC_THESIS else _cost_x(
             *g, d, valid, cost, remove_bias, interp, n_min, which, x, w
         )  # fmt: skip
-        eps = _eps(he, hl, hp, spacing, discriminator)
-        x += eps
-        if abs(eps) < threshold:
+        x, locked = _advance(x, he, hl, hp, spacing, threshold, discriminator)
+        if locked:
             return x, it, True
         it += 1
     return x, it, False
@@ -497,18 +505,18 @@ def _shift_stage(
          u_n, u_e, r_n, r_e_cos)  # fmt: skip
     x = x0
     it = 1
+    locked = False
     while it < break_iteration:
         he = _shift_cost_pre(*g, x - spacing, w)
         hl = _shift_cost_pre(*g, x + spacing, w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
         hp = 0.0 if discriminator == DISC_THESIS else _shift_cost_pre(*g, x, w)
-        eps = _eps(he, hl, hp, spacing, discriminator)
-        x += eps
-        if abs(eps) < threshold:
-            return x, it, True
+        x, locked = _advance(x, he, hl, hp, spacing, threshold, discriminator)
+        if locked:
+            break
         it += 1
-    return x, it, False
+    return x, it, locked
 
 
 @njit(cache=True)

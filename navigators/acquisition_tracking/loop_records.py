@@ -4,6 +4,7 @@ as tuples; track_loops unpacks them."""
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -44,6 +45,33 @@ class LoopSettings(NamedTuple):
     position_threshold_1: float
     position_spacing_2: float
     position_threshold_2: float
+
+    @classmethod
+    def from_config(cls, cfg, map_resolution_m: float, cost: int, interp: int, n_min: int, discriminator: int,
+                    mitigation: int) -> LoopSettings:
+        """The settings of an AcqTrackConfig on a map of map_resolution_m posts: the spacing sets widest
+        first, the speed loop's reach (f_r over the transect's duration, at least the widest spacing) and the
+        start-point loops' (f_r = scf_offset_cells posts, at least the widest position spacing)."""
+        speed_set = np.array(cfg.speed_spacings_mps)
+        heading_set = np.radians(np.array(cfg.heading_spacings_deg))
+        position_set = np.array(cfg.position_spacings_cells) * map_resolution_m
+        f_r = cfg.scf_offset_cells * map_resolution_m
+        return cls(
+            cost, bool(cfg.remove_bias), interp, n_min, bool(cfg.aiding),
+            bool(cfg.position_loops), cfg.loop_order == "speed_first",
+            int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), discriminator,
+            mitigation, float(f_r), float(cfg.sample_period_s),
+            max(f_r / (cfg.transect_samples * cfg.sample_period_s), float(speed_set.max())),
+            np.sort(speed_set)[::-1].copy(), float(cfg.speed_threshold_mps),
+            float(cfg.speed_narrow_spacing_mps), float(cfg.speed_narrow_threshold_mps),
+            np.sort(heading_set)[::-1].copy(),
+            math.radians(cfg.heading_threshold_deg), math.radians(cfg.heading_narrow_spacing_deg),
+            math.radians(cfg.heading_narrow_threshold_deg),
+            float(max(cfg.scf_offset_cells * map_resolution_m, float(position_set.max()))),
+            np.sort(position_set)[::-1].copy(), float(cfg.position_threshold_m),
+            float(cfg.position_narrow_spacing_cells * map_resolution_m),
+            float(cfg.position_narrow_threshold_m),
+        )  # fmt: skip
 
 
 class TransectRecord(NamedTuple):

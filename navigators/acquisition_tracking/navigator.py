@@ -39,7 +39,8 @@ sigmas. Vertical: the barometer's bias.
 reference_frame "ne" (the default): the aiding of every transect sample is corrected by one north/east
 velocity bias e_ne (_aid_arrays; an INS's velocity error, or the wind with air data), the loops run around
 b = 0, and the centroid filter has four states (centroid north/east, e_ne north/east): the fix updates
-both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s, the output is the centroid plus the lever to the
+both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s (with the INS as aiding at least as the IMU's
+specification makes its velocity error grow: apply_imu_spec), the output is the centroid plus the lever to the
 newest sample, and out of lock the dead-reckoned sigma grows on e_ne's. replica_model "return": each
 sample's measured height and map point come from the ray of its predicted shortest return (beam.py;
 _return_height), and the loops get the samples' offsets.
@@ -66,6 +67,13 @@ import math
 
 import numpy as np
 
+from ..core.imu_spec import (
+    ImuSpec,
+    consistency_warning,
+    equivalent_ramp_walk_density,
+    equivalent_walk_density,
+    rss,
+)
 from ..core.maps import load_map
 from ..frames import SensorFrames, frame_defects
 from ..integrity import protection_level as pl
@@ -86,7 +94,6 @@ from .aiding import (
     WindEstimator,
     ground_vector,
     speed_track,
-    wrap_rad,
 )
 from .buffers import (
     _det2,
@@ -113,6 +120,10 @@ from .tracking_step import TrackingStep
 
 # the sensors whose NaN-but-valid samples and gaps update() counts in its Health
 _DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu")   # GNSS outages are no defect
+
+
+# memory over which e_ne's walk matches the INS aiding's velocity-error rates (navigators.core.imu_spec)
+ACQ_MEMORY_S = 120.0
 
 
 class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingStep):
@@ -155,30 +166,10 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._walk2 = float(walk) ** 2
         self._speed_set = np.array(cfg.speed_spacings_mps)
         self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
-        self._position_set = np.array(cfg.position_spacings_cells) * self.map_resolution_m
-        # the loops' spacing sets widest first, and the start-point loops' reach (m), fixed by the settings
-        self._speed_desc = np.sort(self._speed_set)[::-1].copy()
-        self._heading_desc = np.sort(self._heading_set)[::-1].copy()
-        self._position_desc = np.sort(self._position_set)[::-1].copy()
-        self._position_reach = float(
-            max(cfg.scf_offset_cells * self.map_resolution_m, float(self._position_set.max()))
-        )
         # loop_kernel.track_loops' settings (fixed by the config) and its preallocated outputs
-        f_r = cfg.scf_offset_cells * self.map_resolution_m
-        self._loop_settings = loop_kernel.LoopSettings(
-            self._cost, bool(cfg.remove_bias), self._interp, self._n_min, bool(cfg.aiding),
-            bool(cfg.position_loops), cfg.loop_order == "speed_first",
-            int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), self._disc,
-            loop_kernel.MITIGATIONS[cfg.bias_mitigation], float(f_r), float(cfg.sample_period_s),
-            max(f_r / (cfg.transect_samples * cfg.sample_period_s), float(self._speed_set.max())),
-            self._speed_desc, float(cfg.speed_threshold_mps), float(cfg.speed_narrow_spacing_mps),
-            float(cfg.speed_narrow_threshold_mps), self._heading_desc,
-            math.radians(cfg.heading_threshold_deg), math.radians(cfg.heading_narrow_spacing_deg),
-            math.radians(cfg.heading_narrow_threshold_deg),
-            self._position_reach, self._position_desc, float(cfg.position_threshold_m),
-            float(cfg.position_narrow_spacing_cells * self.map_resolution_m),
-            float(cfg.position_narrow_threshold_m),
-        )  # fmt: skip
+        self._loop_settings = loop_kernel.LoopSettings.from_config(
+            cfg, self.map_resolution_m, self._cost, self._interp, self._n_min, self._disc,
+            loop_kernel.MITIGATIONS[cfg.bias_mitigation])
         self._loop_out = (np.zeros(4, np.int64), np.zeros(4, bool), np.zeros(4, bool), np.zeros((4, 6)))
         self.wind = WindEstimator(cfg.wind_gain)
         self.average = OutputAverage(
@@ -203,6 +194,24 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._C0[8, 8] = math.radians(cfg.aiding_heading_sigma_deg) ** 2
         self.health = Health(status="acquiring")
         self._reset_state()
+
+    # ------------------------------------------------------------------ IMU specification
+    _consistency_warning = ""
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """With the INS as aiding (aiding_source "ins", reference_frame "ne"), e_ne is the INS's north/east
+        velocity error: its random walk takes at least what the IMU's specification makes that error grow by
+        (navigators.core.imu_spec; a floor over aiding_bias_walk_mps_per_sqrt_s): the body-fixed horizontal
+        specific-force error (accelerometer bias, instability, misalignment x g), a constant acceleration, and
+        the acceleration the horizontal gyro biases' tilt builds, a ramp g sigma_bg t, as walks matching them
+        at ACQ_MEMORY_S, with the velocity random walk. Air-data aiding does not use the IMU: no change."""
+        if self.ins is None or not self._ne_frame:
+            return
+        walk = rss(equivalent_walk_density(spec.body_accel_sigma_mps2, ACQ_MEMORY_S),
+                   equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, ACQ_MEMORY_S),
+                   spec.accel_noise_density_mps2_rthz)
+        self._bias_walk2 = max(self._bias_walk2, walk**2)
+        self._consistency_warning = consistency_warning(spec, ACQ_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------ requirements
     def required_sensors(self) -> list[tuple[str, str]]:
@@ -317,10 +326,6 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             self.health.skip(frames.t_end_s, "numerical", f"acq_track: epoch skipped ({exc})")
         return self.estimate(frames.t_end_s)
 
-    # ------------------------------------------------------------------ sensor intake
-
-    # ------------------------------------------------------------------ epochs
-
     def _set_status(self, t: float, status: str, reason: str) -> None:
         if status != self.health.status:
             self.health.events.append((t, f"acq_track: {self.health.status} -> {status}: {reason}"))
@@ -405,54 +410,6 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self.lock_state = lock
         self._set_status(t, status, reason)
 
-    def _finish(self, s: Sample) -> None:
-        """Newest position from the replica; output speed/track through the moving average."""
-        _, _, _, dt, m_v, m_psi, _ = self._aid_arrays()
-        dla, dlo = self._offsets(dt, m_v, m_psi, self.b_v, self.b_psi, self.p0[0])
-        self.pos = (self.p0[0] + dla[-1], self.p0[1] + dlo[-1])
-        self.t_pos = s.t_s
-        cv, cp = self._corrected(s)
-        v, psi = cv + self.b_v, cp + self.b_psi  # _aided_speed, _aided_track
-        if self.lock_state == "tracking":
-            if self.config.aiding:  # average the references: the aiding carries ramps without lag
-                ref_v, ref_psi = self.b_v, self.b_psi
-                if self._ne_frame:  # the NE bias as the newest sample's speed / track reference
-                    ref_v, ref_psi = cv - s.m_v + self.b_v, float(wrap_rad(cp - s.m_psi)) + self.b_psi
-                ab_v, ab_psi = self.average.push(ref_v, ref_psi)
-                self.out_speed, self.out_track = s.m_v + ab_v, float(wrap_rad(s.m_psi + ab_psi))
-            else:
-                self.out_speed, self.out_track = self.average.push(v, psi)
-            if (
-                self.config.aiding
-                and self.config.aiding_source == "air_data"
-                and self.config.wind_estimation
-                and not self._ne_frame
-                and math.isfinite(s.tas_mps)
-            ):
-                self.wind.update(ground_vector(v, psi), s.tas_mps, s.heading_rad)
-                # the references keep the ground vector the loops found (the wind took over part of it)
-                m_v2, m_psi2 = self.wind.predict(s.tas_mps, s.heading_rad)
-                self.b_v += s.m_v - m_v2
-                self.b_psi += float(wrap_rad(s.m_psi - m_psi2))
-                tr = self.transect.samples
-                tr[-1] = Sample(
-                    s.t_s,
-                    s.d_m,
-                    s.valid,
-                    s.range_m,
-                    m_v2,
-                    m_psi2,
-                    s.tas_mps,
-                    s.heading_rad,
-                    s.gnss_lat,
-                    s.gnss_lon,
-                    s.gnss_v_ne,
-                    s.roll_rad,
-                )
-        else:
-            self.average.reset()
-            self.out_speed, self.out_track = v, float(wrap_rad(psi))
-
     # ------------------------------------------------------------------ output
     def estimate(self, t_s: float | None = None) -> Estimate:
         t = float(self.t_pos if t_s is None else t_s)
@@ -505,6 +462,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             status=self.health.status,
             skipped=dict(self.health.skipped),
             events=list(self.health.events),
+            consistency_warning=self._consistency_warning,
         )
         return Estimate(
             t_s=t,

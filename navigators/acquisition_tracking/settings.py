@@ -237,4 +237,4 @@ class AcqTrackConfig(Settings):
         return (self.transect_samples - 1) * self.sample_period_s
 
 
-CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True)
+CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True)

@@ -137,25 +137,9 @@ class TrackingStep:
         # the fix's covariance: the terrain information along / across the track at the fit
         psi = self._aided_track(s)
         i_al, i_cr = beam.information_at(
-            heights,
-            lat0,
-            lon0,
-            dlat,
-            dlon,
-            p_s[0],
-            p_s[1],
-            dt,
-            m_v,
-            m_psi,
-            b_v,
-            b_psi,
-            r_n,
-            r_e,
-            o_n,
-            o_e,
-            valid,
-            psi,
-        )
+            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e,
+            valid, psi,
+        )  # fmt: skip
         sig_res = max(res_sigma if math.isfinite(res_sigma) else 0.0, sig0)
         k2 = cfg.fix_sigma_scale**2 * _MAD_VARIANCE_FACTOR * sig_res**2
         q_map = self.map_resolution_m**2 / 12.0  # the map's quantisation of the fix

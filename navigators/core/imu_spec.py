@@ -3,9 +3,10 @@
 `ImuSpec` is a record of the sensor's error budget (SI, 1 sigma per axis): turn-on biases, bias
 instabilities (first-order Gauss-Markov: sigma, correlation time), noise densities (velocity and angle
 random walk), scale factors and misalignments. The simulator converts its IMU configuration into one
-(trn_env.scenario.build.imu_spec; the navigators never import the sensor models), and every navigator's
-`settings_from_imu(spec, epoch_s)` turns it into the settings of its own error model, whatever its state
-size:
+(trn_env.scenario.build.imu_spec; the navigators never import the sensor models), and every navigator that
+declares `uses_imu_spec` turns it into its own error model in `apply_imu_spec(spec)`, whatever its state
+size (the EKF's 13 states, the PMF's Gaussian velocity-tilt-bias-heading offset, the PF's particles, the
+RBPF's Kalman parts, acq_track's velocity bias with the INS as aiding):
 
 - the states a filter carries get the spec's priors and drives: a bias state's prior is the root sum square
   of the turn-on bias and the instability, its process noise the instability's Gauss-Markov drive
@@ -13,11 +14,17 @@ size:
   the velocity and attitude get the noise densities (q = N^2 per second);
 - an error source a filter does not carry as a state enters as an equivalent random walk of the state it
   drives: a rate error r constant over the filter's memory T moves that state by r t, variance sigma_r^2 t^2,
-  which a random walk of density q = sigma_r^2 T matches at t = T (and bounds from above before it). The
+  which a random walk of density q = sigma_r^2 T matches at t = T (and bounds from above before it); a rate
+  that itself grows as a ramp (the acceleration a velocity state gets from the tilt of a constant gyro bias,
+  g sigma_bg t) moves the state by sigma t^2 / 2, matched at T by q = sigma^2 T^3 / 4 (a quarter of the
+  constant-rate walk of the ramp's value at T: `equivalent_ramp_walk_density`). The
   sources: the horizontal specific-force error that is constant in the body frame (accelerometer bias and
   misalignment times g: `body_accel_sigma_mps2`), the tilt the horizontal gyro biases build (the
   acceleration error's rate g sigma_bg: `tilt_accel_rate_sigma_mps3`), the heading error the z gyro bias
-  builds, and in turns the gyro scale factor (heading) and misalignment (tilt) times the angle turned.
+  builds, and in turns the gyro scale factor (heading) and misalignment (tilt) times the angle turned;
+- the vertical specific-force error (z bias and scale factor x g) moves a baro-damped INS height by a
+  transient of the loop (`baro_loop_height_rate_sigma_mps`), which the terrain filters' vertical offset
+  walk takes in root sum square with its tuned value (`vertical_offset_walk_density`).
 
 Beyond SMALL_ANGLE_LIMIT_RAD of attitude error over a filter's memory the small-angle models and the
 equivalent walks no longer describe the INS error: `consistency_warning` says so, and the navigator reports
@@ -36,6 +43,9 @@ G0_MPS2 = 9.80665
 # attitude error (rad) the gyro biases may build over a filter's memory before its small-angle error model
 # and the equivalent random walks stop describing the INS error (0.57 deg)
 SMALL_ANGLE_LIMIT_RAD = 0.01
+# memory of a terrain filter's vertical offset: every terrain sample measures it, so its posterior follows the
+# last 10-30 s (the lags over which the filters' tuned vertical walk was measured, terrain_filter's docstring)
+VERTICAL_OFFSET_MEMORY_S = 20.0
 
 
 @dataclass(frozen=True)
@@ -106,6 +116,21 @@ class ImuSpec:
         """Rate of the acceleration error the horizontal gyro biases build through the tilt (g sigma_bg)."""
         return G0_MPS2 * self.gyro_bias_sigma_rps
 
+    @property
+    def vertical_accel_sigma_mps2(self) -> float:
+        """Vertical specific-force error (m/s^2): the z accelerometer's bias (turn-on and instability) and its
+        scale factor times gravity, root sum square."""
+        return math.hypot(self.accel_bias_sigma_mps2, self.accel_scale_factor_ppm * 1e-6 * G0_MPS2)
+
+    def baro_loop_height_rate_sigma_mps(self, tau_baro_s: float) -> float:
+        """Largest rate (m/s) of the height error the vertical specific-force error a drives through a
+        baro-damped vertical channel of third order with its triple pole at 1 / tau (gains 3 / tau,
+        3 / tau^2, 1 / tau^3; navigators.inertial.strapdown): h(s) / a(s) = s / (s + 1 / tau)^3, so a step a
+        gives h(t) = a t^2 exp(-t / tau) / 2, a transient of 0.27 a tau^2 at t = 2 tau that the loop's
+        bias integrator then removes; its rate peaks at t = (2 - sqrt 2) tau at 0.2306 a tau."""
+        x = 2.0 - math.sqrt(2.0)
+        return float(self.vertical_accel_sigma_mps2 * tau_baro_s * x * math.exp(-x) * (1.0 - 0.5 * x))
+
     def turn_heading_sigma_rad(self, turn_rad: float) -> float:
         """Heading error a turn of turn_rad builds through the gyro scale factor (rad)."""
         return self.gyro_scale_factor_ppm * 1e-6 * abs(turn_rad)
@@ -128,6 +153,16 @@ def consistency_warning(spec: ImuSpec, memory_s: float, who: str) -> str:
             "(measured: docs/validation/navigators.md)")
 
 
+def vertical_offset_walk_density(spec: ImuSpec, tau_baro_s: float | None) -> float:
+    """Random walk (m/sqrt(s)) of an INS-ridden terrain filter's vertical offset (INS height minus true) that
+    the IMU adds to the baro-slaved INS height's own wander: the baro loop's transient at its largest rate
+    (ImuSpec.baro_loop_height_rate_sigma_mps) as a constant rate over VERTICAL_OFFSET_MEMORY_S; 0 without
+    a baro loop."""
+    if tau_baro_s is None:
+        return 0.0
+    return equivalent_walk_density(spec.baro_loop_height_rate_sigma_mps(tau_baro_s), VERTICAL_OFFSET_MEMORY_S)
+
+
 def gm_drive(sigma: float, tau_s: float, dt_s: float) -> float:
     """A first-order Gauss-Markov process' drive over dt_s: sigma sqrt(1 - exp(-2 dt / tau))."""
     return float(sigma * math.sqrt(-math.expm1(-2.0 * dt_s / tau_s)))
@@ -139,10 +174,19 @@ def equivalent_walk_density(rate_sigma: float, memory_s: float) -> float:
     return float(rate_sigma * math.sqrt(memory_s))
 
 
+def equivalent_ramp_walk_density(slope_sigma: float, memory_s: float) -> float:
+    """Density (per sqrt(s)) of the random walk that matches a ramp - a rate growing as slope_sigma t, e.g.
+    the acceleration the tilt of a constant gyro bias builds, g sigma_bg t - at memory_s: the ramp moves the
+    state by slope t^2 / 2, variance slope^2 t^4 / 4, which q t matches at t = T for q = slope^2 T^3 / 4;
+    returned as sqrt(q) = slope T sqrt(T) / 2 (half the constant-rate walk of the ramp's value at T)."""
+    return float(0.5 * slope_sigma * memory_s * math.sqrt(memory_s))
+
+
 def rss(*values: float) -> float:
     """Root sum square."""
     return float(math.sqrt(sum(v * v for v in values)))
 
 
-__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "ImuSpec", "consistency_warning", "equivalent_walk_density",
-           "gm_drive", "rss"]
+__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "VERTICAL_OFFSET_MEMORY_S", "ImuSpec", "consistency_warning",
+           "equivalent_ramp_walk_density", "equivalent_walk_density", "gm_drive", "rss",
+           "vertical_offset_walk_density"]

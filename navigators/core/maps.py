@@ -1,31 +1,16 @@
 """The navigator's map: where a navigator or monitor gets its terrain.Dem from its `dem` setting, and the
 record the terrain kernels take it as.
 
-`MapRecord(heights, lat0, lon0, dlat, dlon, cubic)`: the grid of terrain.Dem.grid (heights[i, j] the post at
-lat0 + i dlat, lon0 + j dlon, rad) and the interpolation (bicubic when cubic, else bilinear), passed to numba
-kernels as one tuple; `map_height(record, lat, lon)` is the height (m) there (terrain.kernels), NaN off the
-map.
+`MapRecord(heights, lat0, lon0, dlat, dlon, cubic)` (terrain.kernels, re-exported here): the grid of
+terrain.Dem.grid (heights[i, j] the post at lat0 + i dlat, lon0 + j dlon, rad; its bounds the outermost
+posts) and the interpolation (bicubic when cubic, else bilinear), passed to numba kernels as one tuple;
+`map_height(record, lat, lon)` is the height (m) there, NaN off the map. `map_record(dem_or_grid, cubic)`
+builds one.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
-import numpy as np
-from numba import njit
-
-from ...terrain.kernels import bicubic, bilinear
-
-
-class MapRecord(NamedTuple):
-    """The map's grid and interpolation as one kernel argument (see the module docstring)."""
-
-    heights: np.ndarray
-    lat0: float
-    lon0: float
-    dlat: float
-    dlon: float
-    cubic: bool
+from ...terrain.kernels import MapRecord, map_height  # noqa: F401 (the record and its reader, re-exported)
 
 
 def map_record(dem_or_grid, cubic: bool) -> MapRecord:
@@ -33,15 +18,6 @@ def map_record(dem_or_grid, cubic: bool) -> MapRecord:
     grid = getattr(dem_or_grid, "grid", dem_or_grid)
     heights, lat0, lon0, dlat, dlon = grid
     return MapRecord(heights, float(lat0), float(lon0), float(dlat), float(dlon), bool(cubic))
-
-
-@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
-def map_height(record, lat, lon):
-    """Height (m) of the record's map at (lat, lon) rad by its interpolation; NaN off the map."""
-    heights, lat0, lon0, dlat, dlon, cubic = record
-    if cubic:
-        return bicubic(heights, lat0, lon0, dlat, dlon, lat, lon)
-    return bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
 
 
 def load_map(dem, who: str = "the navigator"):

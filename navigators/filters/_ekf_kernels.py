@@ -59,6 +59,21 @@ def interp_one(x, xp, fp):
     return r
 
 
+@njit(cache=True, inline="always")
+def _history_row(t_imu, hist, t):
+    """(k, finite): the INS history row of the IMU sample at searchsorted(t_imu, t) (clipped to the last)
+    and whether its 10 values are finite."""
+    n = t_imu.shape[0]
+    k = np.searchsorted(t_imu, t)
+    if k > n - 1:
+        k = n - 1
+    ok = True
+    for j in range(10):
+        if not np.isfinite(hist[k, j]):
+            ok = False
+    return k, ok
+
+
 @njit(cache=True)
 def _set_skew(F, r0, c0, v0, v1, v2, sign):
     F[r0, c0] = 0.0
@@ -95,7 +110,6 @@ def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b
     `hist` (ins_state if that row is not finite), the specific force f_b minus the accelerometer bias
     estimate (last_f_b if the sample is not finite). Error model in ins_trn_ekf's docstring.
     """
-    n = t_imu.shape[0]
     F = np.zeros((N_ERR, N_ERR))
     F[0, 3] = 1.0
     F[1, 4] = 1.0
@@ -107,13 +121,7 @@ def predict_covariance(P, Q, t_imu, f_b, hist, ins_state, last_f_b, accel_bias_b
     st = np.empty(10)
     fb = np.empty(3)
     for s in range(1, n_steps + 1):
-        k = np.searchsorted(t_imu, t_ekf0 + dt * s)
-        if k > n - 1:
-            k = n - 1
-        ok = True
-        for j in range(10):
-            if not np.isfinite(hist[k, j]):
-                ok = False
+        k, ok = _history_row(t_imu, hist, t_ekf0 + dt * s)
         for j in range(10):
             st[j] = hist[k, j] if ok else ins_state[j]
         okf = np.isfinite(f_b[k, 0]) and np.isfinite(f_b[k, 1]) and np.isfinite(f_b[k, 2])
@@ -239,7 +247,6 @@ def collect_ira(t0, t1, t_imu, hist, ts, rng_m, theta, valid, decimation, tb, hb
     out (>= n samples, 6): t, INS lat, INS lon, h_meas = h_ref - |p_d| (seed 000 eq 2), p_n, p_e.
     Returns (rows written, samples without a valid return, rows with no closest-point solution).
     """
-    n_imu = t_imu.shape[0]
     m = 0
     n_bad = 0
     n_nan = 0
@@ -258,13 +265,7 @@ def collect_ira(t0, t1, t_imu, hist, ts, rng_m, theta, valid, decimation, tb, hb
         if not (valid[i] and np.isfinite(R) and np.isfinite(th) and R > 0.0):
             n_bad += 1
             continue
-        k = np.searchsorted(t_imu, t)
-        if k > n_imu - 1:
-            k = n_imu - 1
-        good = True
-        for j in range(10):
-            if not np.isfinite(hist[k, j]):
-                good = False
+        k, good = _history_row(t_imu, hist, t)
         if not good:
             continue
         if have_baro:

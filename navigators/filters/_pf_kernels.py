@@ -6,8 +6,6 @@ import math
 
 from numba import njit
 
-from ..core.maps import map_height
-
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def propagate_particles(dn, de, b, dv, dpsi, dt, f_n, f_e, g_over_r, s_pos, s_vel, s_psi, s_b, z):
@@ -33,20 +31,3 @@ def propagate_particles(dn, de, b, dv, dpsi, dt, f_n, f_e, g_over_r, s_pos, s_ve
         dv[k, 1] = ve1
         b[k] += s_b * sq * z[k, 2]
         dpsi[k] += s_psi * sq * z[k, 5]
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def map_heights_interp(rec, lat_ref, lon_ref, r_lat_m, r_lon_m, dn_m, de_m, shift_n_m, shift_e_m, out):
-    """Map height (m) at the reference + (dn_m[k] + shift_n_m[k], de_m[k] + shift_e_m[k]) for every particle
-    k, by the map record's interpolation (navigators.core.maps.MapRecord: bicubic or bilinear) -
-    measurements.map_heights_at_offsets with the interpolation chosen. r_lat_m, r_lon_m: metres per radian
-    at the reference. NaN off the map; returns the NaN count."""
-    n_nan = 0
-    for k in range(dn_m.shape[0]):
-        la = lat_ref + (dn_m[k] + shift_n_m[k]) / r_lat_m
-        lo = lon_ref + (de_m[k] + shift_e_m[k]) / r_lon_m
-        h = map_height(rec, la, lo)
-        out[k] = h
-        if h != h:
-            n_nan += 1
-    return n_nan

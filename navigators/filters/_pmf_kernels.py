@@ -268,6 +268,25 @@ def _unpack_moments(logw, bias, work, row, m, floor):
     return sv / s if s > 0.0 else 0.0
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _convolve_along(work, src, dst, kern, n, di, dj):
+    """Rows dst..dst+2 of work = rows src..src+2 (n x n grids, row-major) convolved with kern (odd length)
+    along the grid direction (di, dj): cell (i, j) from (i + di s, j + dj s), s = -L/2..L/2 - (0, 1) east,
+    (1, 0) north, (1, +-1) the diagonals; zero beyond the grid's edge."""
+    L = kern.shape[0]
+    h = L // 2
+    for a in range(3):
+        for i in range(n):
+            for j in range(n):
+                acc = 0.0
+                for q in range(L):
+                    ii = i + di * (q - h)
+                    jj = j + dj * (q - h)
+                    if 0 <= ii < n and 0 <= jj < n:
+                        acc += kern[q] * work[src + a, ii * n + jj]
+                work[dst + a, i * n + j] = acc
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def convolve_separable(logw, bias, n, kern_n, kern_e, work, floor):
     """The prediction's convolution of a Rao-Blackwellised grid: the density w = exp(logw) (n * n, rows
@@ -279,28 +298,8 @@ def convolve_separable(logw, bias, n, kern_n, kern_e, work, floor):
     maximum of 0 and floored. work: scratch (6, n * n)."""
     m = n * n
     _pack_moments(logw, bias, work, m, floor)
-    L = kern_e.shape[0]
-    h = L // 2
-    for a in range(3):          # along east (j), into rows 3..5
-        for i in range(n):
-            for j in range(n):
-                acc = 0.0
-                for q in range(L):
-                    jj = j + q - h
-                    if 0 <= jj < n:
-                        acc += kern_e[q] * work[a, i * n + jj]
-                work[3 + a, i * n + j] = acc
-    L = kern_n.shape[0]
-    h = L // 2
-    for a in range(3):          # along north (i), back into rows 0..2
-        for i in range(n):
-            for j in range(n):
-                acc = 0.0
-                for q in range(L):
-                    ii = i + q - h
-                    if 0 <= ii < n:
-                        acc += kern_n[q] * work[3 + a, ii * n + j]
-                work[a, i * n + j] = acc
+    _convolve_along(work, 0, 3, kern_e, n, 0, 1)     # along east (j), into rows 3..5
+    _convolve_along(work, 3, 0, kern_n, n, 1, 0)     # along north (i), back into rows 0..2
     return _unpack_moments(logw, bias, work, 0, m, floor)
 
 
@@ -314,16 +313,5 @@ def convolve_diagonal(logw, bias, n, kern, sign, work, floor):
     spread returned as convolve_separable does; logw renormalised and floored. work: scratch (6, n * n)."""
     m = n * n
     _pack_moments(logw, bias, work, m, floor)
-    L = kern.shape[0]
-    h = L // 2
-    for a in range(3):
-        for i in range(n):
-            for j in range(n):
-                acc = 0.0
-                for q in range(L):
-                    ii = i + q - h
-                    jj = j + sign * (q - h)
-                    if 0 <= ii < n and 0 <= jj < n:
-                        acc += kern[q] * work[a, ii * n + jj]
-                work[3 + a, i * n + j] = acc
+    _convolve_along(work, 0, 3, kern, n, 1, sign)
     return _unpack_moments(logw, bias, work, 3, m, floor)

@@ -189,6 +189,17 @@ def time_update(xn, xl, P, Phi, qn_var, ql_var, w):
     return bad
 
 
+@njit(cache=True, inline="always")
+def _mul_ab(A, B, out, n, m, p, transpose_b):
+    """out[:n, :m] = A[:n, :p] B[:p, :m] (transpose_b: A B[:m, :p]^T), each sum in index order."""
+    for i in range(n):
+        for a in range(m):
+            s = 0.0
+            for j in range(p):
+                s += A[i, j] * (B[a, j] if transpose_b else B[j, a])
+            out[i, a] = s
+
+
 @njit(cache=True)
 def linear_update(xl, P, H, e, r_var, logw, ok, ll):
     """Kalman update of each particle's linear part with its own H (N, m, 12) and innovation e (N, m)
@@ -216,18 +227,9 @@ def linear_update(xl, P, H, e, r_var, logw, ok, ll):
             for j in range(NL):
                 s -= Hk[a, j] * xl[k, j]
             nu[a] = s
-        for i in range(NL):
-            for a in range(m):
-                s = 0.0
-                for j in range(NL):
-                    s += Pk[i, j] * Hk[a, j]
-                PHt[i, a] = s
+        _mul_ab(Pk, Hk, PHt, NL, m, NL, True)       # P H^T
+        _mul_ab(Hk, PHt, S, m, m, NL, False)        # S = H P H^T + R
         for a in range(m):
-            for b in range(m):
-                s = 0.0
-                for j in range(NL):
-                    s += Hk[a, j] * PHt[j, b]
-                S[a, b] = s
             S[a, a] += r_var[a]
         # S^-1 and log det (m <= 3: explicit)
         if m == 1:
@@ -259,12 +261,7 @@ def linear_update(xl, P, H, e, r_var, logw, ok, ll):
         ll[k] = lk
         logw[k] += lk
         # eq 10-11: K = P H^T S^-1, xl += K nu, P -= K S K^T (= K H P)
-        for i in range(NL):
-            for a in range(m):
-                s = 0.0
-                for b in range(m):
-                    s += PHt[i, b] * Si[b, a]
-                K[i, a] = s
+        _mul_ab(PHt, Si, K, NL, m, m, False)
         for i in range(NL):
             s = 0.0
             for a in range(m):

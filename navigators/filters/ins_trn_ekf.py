@@ -47,10 +47,11 @@ from collections import deque
 import numpy as np
 
 from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
+from ..core.ins_gnss import InsGnssBlock
 from ..core.linalg import is_positive_definite
 from ..core.maps import load_map
 from ..core.recovery import IntegrityRecovery
-from ..frames import SensorFrames, imu_gap_s
+from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns
 from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
@@ -82,7 +83,7 @@ N_ERR = N_EKF13
 _is_pd = is_positive_definite
 
 
-class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
+class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
     """Strapdown INS + baro, optionally aided by batch TERCOM fixes through a 13-state error-state KF.
 
     aiding: None (free inertial, name "ins"), "ira" (seed 000 eq 2, default of "ins_tercom") or
@@ -254,22 +255,17 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
         self._baro_cache = None
-        imu = frames.imu
-        if imu is None or imu.t_s.size == 0:
-            self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
+        t = self._imu_times(frames)
+        if t is None:
             return self.estimate().extrapolated(frames.t_end_s)
-        t = np.asarray(imu.t_s, float)
         n = t.size
-        gap_s = imu_gap_s(t, self.ins.t_s)
-        if gap_s > 0.0:
-            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         gnss = self._gnss_fixes(frames)
         if gnss is None:
             self._gnss_check_loss(float(t[-1]))
             if self._fused_ok(frames, t):
                 self._fused_segment(frames, t)
                 return self.estimate()
-        t_g = gnss[0] if gnss is not None else np.zeros(0)
+        t_g = gnss.t_s if gnss is not None else np.zeros(0)
         g = 0
         a = 0
         while a < n:  # split the chunk at fix and GNSS times so that each is applied when it falls due
@@ -394,10 +390,6 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss):
             self._set_search(self.nominal_half_cells)
             self.health.events.append(
                 (t_s, f"recovery ended: TERCOM search back to +-{self.half_cells} cells"))
-
-    def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
-        self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)
-        self.health.events.append((float(t_s), message))
 
     # ------------------------------------------------------------------ output
     def estimate(self) -> Estimate:

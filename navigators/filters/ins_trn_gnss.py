@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from ..core.error_states import ACC_BIAS, ATT, BGZ, GNSS_STATES, N_EKF13, POS, VEL
+from ..core.ins_gnss import GnssFixes, gnss_fixes
 from ..core.linalg import is_positive_definite
 from ..frames import SensorFrames
 from ..measurements import gnss as gnss_model
@@ -24,22 +25,17 @@ class InsTrnGnss:
     """The GNSS update of InsTrnNavigator; a mixin."""
 
     # ------------------------------------------------------------------ GNSS
-    def _gnss_fixes(self, frames: SensorFrames):
-        """(t, lat, lon, v_ned) of the frame's valid GNSS fixes in time order, or None."""
-        gf = frames.gnss
-        if not self.use_gnss or gf is None or gf.t_s.shape[0] == 0:
+    def _gnss_fixes(self, frames: SensorFrames) -> GnssFixes | None:
+        """The frame's valid GNSS fixes in time order (navigators.core.ins_gnss), or None."""
+        if not self.use_gnss:
             return None
-        v = np.asarray(gf.v_ned_mps, float).reshape(-1, 3)
-        ok = (np.asarray(gf.valid, bool) & np.isfinite(gf.t_s) & np.isfinite(gf.lat_rad)
-              & np.isfinite(gf.lon_rad) & np.all(np.isfinite(v), axis=1))
-        nbad = int(ok.shape[0] - ok.sum())
-        if nbad:
-            self._count_skip(float(frames.t_start_s), "gnss_invalid", nbad, f"{nbad} GNSS fixes invalid")
-        if not ok.any():
+        fixes = gnss_fixes(frames.gnss, need_height=False, need_velocity=True)
+        if fixes is None:
             return None
-        order = np.argsort(gf.t_s[ok], kind="stable")
-        return (np.asarray(gf.t_s, float)[ok][order], np.asarray(gf.lat_rad, float)[ok][order],
-                np.asarray(gf.lon_rad, float)[ok][order], v[ok][order])
+        if fixes.n_invalid:
+            self._count_skip(float(frames.t_start_s), "gnss_invalid", fixes.n_invalid,
+                             f"{fixes.n_invalid} GNSS fixes invalid")
+        return fixes if fixes.n else None
 
     def _gnss_check_loss(self, t_now: float) -> None:
         if self._gnss_up and t_now - self._t_gnss > self.gnss_timeout_s:
@@ -51,9 +47,9 @@ class InsTrnGnss:
             if self.aiding is None:
                 self.health.status = "free_inertial"
 
-    def _gnss_update(self, gnss, i: int) -> None:
+    def _gnss_update(self, gnss: GnssFixes, i: int) -> None:
         """Loosely coupled GNSS update with fix i (module docstring)."""
-        t_g, lat_g, lon_g, v_g = gnss[0][i], gnss[1][i], gnss[2][i], gnss[3][i]
+        t_g, lat_g, lon_g, v_g = gnss.t_s[i], gnss.lat_rad[i], gnss.lon_rad[i], gnss.v_ned_mps[i]
         z, H, Rm = gnss_model.position_velocity(self.ins.state, lat_g, lon_g, v_g, self.gnss_sigma_h_m,
                                                 self.gnss_sigma_v_mps, N_EKF13, GNSS_STATES)
         S = H @ self.kf.P @ H.T + Rm

@@ -96,7 +96,7 @@ class InsTrnPropagation:
         ins.bad_imu_samples += int(bad)
         ins.t_s = float(t[-1])
         if bad:
-            self._count_skip(t0, "imu_invalid", bad, "IMU samples invalid (held previous)")
+            self._count_skip(t0, "imu_invalid", bad, f"{bad} IMU samples invalid (held previous)")
         if n_steps > 0:
             if not pd:
                 if np.all(np.isfinite(P)):
@@ -141,7 +141,6 @@ class InsTrnPropagation:
         else:
             t_seg, f_seg = imu.t_s[a:b], imu.f_b_mps2[a:b]
             w_seg, ok_seg = imu.omega_ib_b_rps[a:b], imu.valid[a:b]
-        bad0 = self.ins.bad_imu_samples
         tb = hb = vb = None
         baro = self._baro(frames)
         if baro is not None:
@@ -157,10 +156,7 @@ class InsTrnPropagation:
                 nb = int((in_seg & ~vb).sum())
                 if nb:
                     self._count_skip(float(imu.t_s[a]), "baro_invalid", nb, "baro samples invalid")
-        hist = self.ins.propagate(t_seg, f_seg, w_seg, ok_seg, tb, hb, vb)
-        nbad = self.ins.bad_imu_samples - bad0
-        if nbad:
-            self._count_skip(float(imu.t_s[a]), "imu_invalid", nbad, "IMU samples invalid (held previous)")
+        hist = self._strapdown(t_seg, f_seg, w_seg, ok_seg, tb, hb, vb)   # (navigators.core.ins_gnss)
         kern.last_good_row(ok_seg, f_seg, self._last_f_b)
         self._predict_to(float(t_seg[-1]), t_seg, f_seg, hist)
         if self.aiding is not None:

@@ -14,10 +14,10 @@ is INS + the weighted mean.
   IMU's specification where it gives more than the tuned floors (apply_imu_spec, navigators.core.imu_spec:
   the acceleration errors the particles do not carry as an equivalent velocity random walk).
 - Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
-  or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira_points_batch), one map lookup
+  or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira.closest_points), one map lookup
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
-  altimeter: the shortest in-cone return under the particle's heading (ra_cone_ranges). Log-weights,
-  normalised by their maximum; log p(z | past) by logsumexp.
+  altimeter: the shortest in-cone return under the particle's heading (measurements.radar_altimeter.
+  predict). Log-weights, normalised by their maximum; log p(z | past) by logsumexp.
 - Resampling: systematic (navigators.core.resampling) when the effective sample size falls below
   ess_threshold * M, then a kernel jitter against sample impoverishment at Gordon et al.'s (1993) roughening
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
@@ -44,19 +44,18 @@ from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
     consistency_warning,
+    equivalent_ramp_walk_density,
     equivalent_walk_density,
     rss,
+    vertical_offset_walk_density,
 )
 from ..core.resampling import systematic_kernel
 from ..inertial.strapdown import quat_to_dcm
-from ..measurements.terrain_models import (
-    ira_points_batch,
-    ra_cone_ranges,
-    radii_m,
-    robust_log_likelihood,
-)
+from ..measurements import gnss as gnss_model
+from ..measurements import ira, radar_altimeter
+from ..measurements.terrain_models import radii_m
 from ..protocol import EXTRA_ESS
-from ._pf_kernels import map_heights_interp, propagate_particles
+from ._pf_kernels import propagate_particles
 from .terrain_filter import InsRiddenFilter
 from .terrain_filter_settings import PF_CAPABILITIES, PfSettings
 
@@ -80,12 +79,11 @@ class ParticleFilter(InsRiddenFilter):
 
     Settings (besides InsRiddenFilter's): n_particles (default 10,000), ess_threshold (in (0, 1]: resample
     when ESS < ess_threshold * n_particles), roughening (>= 0, Gordon's K setting the jitter's scale, see
-    the module docstring; default 0.1; at 0.02 clouds impoverished: NEES 4.9-6.8 over 40 runs),
-    position_noise_m_per_sqrt_s (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s
-    (default 0.02: the particles' velocity offsets need the diversity, learnt only through the weights and
-    resampling; with 0.01 a 0.9 position walk stood in, and 100 runs of scripts/filter_statistics.py had 69 %
-    of the epochs' ANEES in band against 100 % now), heading_noise_rad_per_sqrt_s (process noise),
-    max_memory_mb, rng.
+    the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
+    (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
+    velocity offsets need the diversity, learnt only through the weights and resampling),
+    heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
+    docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
 
     name = "pf"
@@ -127,17 +125,21 @@ class ParticleFilter(InsRiddenFilter):
         """Take the error model from the IMU's specification (navigators.core.imu_spec), each figure a floor
         over the tuned setting. The particles carry position, velocity and heading offsets, so the
         acceleration errors enter as an equivalent velocity random walk matching them at PF_MEMORY_S: the
-        body-fixed specific-force error (accelerometer bias, instability, misalignment x g), the tilt the
-        horizontal gyro biases build over that memory (g sigma_bg T) and a 90 deg turn's gyro misalignment
-        (g x tilt), with the velocity random walk; the heading's random walk matches the z gyro bias and a
-        90 deg turn's scale factor at the same memory, with the angle random walk."""
-        a = rss(spec.body_accel_sigma_mps2, spec.tilt_accel_rate_sigma_mps3 * PF_MEMORY_S,
-                G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
-        self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S),
+        body-fixed specific-force error (accelerometer bias, instability, misalignment x g) and a 90 deg
+        turn's gyro misalignment (g x tilt) as constant accelerations, the tilt the horizontal gyro biases
+        build as a ramp (g sigma_bg t: equivalent_ramp_walk_density), with the velocity random walk; the
+        heading's random walk matches the z gyro bias and a 90 deg turn's scale factor at the same memory,
+        with the angle random walk."""
+        a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
+        tilt = equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, PF_MEMORY_S)
+        self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S), tilt,
                                          spec.accel_noise_density_mps2_rthz))
         r_psi = rss(spec.gyro_bias_sigma_rps, spec.turn_heading_sigma_rad(0.5 * math.pi) / PF_MEMORY_S)
         self.s_psi = max(self.s_psi, rss(equivalent_walk_density(r_psi, PF_MEMORY_S),
                                          spec.gyro_noise_density_rps_rthz))
+        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
+        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
+        self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = consistency_warning(spec, PF_MEMORY_S, self.name)
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
@@ -264,7 +266,7 @@ class ParticleFilter(InsRiddenFilter):
         cloud's covariance. h is Gordon et al.'s roughening scale for this cloud, roughening M^(-1/d) times
         a Gaussian cloud's span in sigmas (~7.8 at M = 10,000). Gordon's own jitter adds that variance on top
         (h^2 Sigma at every resampling, ~3 % at the defaults): a process noise the INS error does not have,
-        which left the reported covariance larger than the error (NEES 1.7 against 2)."""
+        which leaves the reported covariance larger than the error."""
         M = self.M
         X = np.stack([self.dn, self.de, self.b, self.dv[:, 0], self.dv[:, 1], self.dpsi], axis=1)
         mean = X.mean(axis=0)
@@ -287,11 +289,10 @@ class ParticleFilter(InsRiddenFilter):
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
-        heights, lat0, lon0, dlat, dlon = self.grid
         C = quat_to_dcm(st[6:10])
         M = self.M
         if kind == "ira":
-            nb = ira_points_batch(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self.dpsi, self.dv,
+            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self.dpsi, self.dv,
                                   self.ira_code, self._P)
             if nb == M:
                 self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
@@ -299,8 +300,8 @@ class ParticleFilter(InsRiddenFilter):
             P = self._P
             pn = np.ascontiguousarray(P[:, 0])
             pe = np.ascontiguousarray(P[:, 1])
-            n_nan = map_heights_interp(self._map_record(), lat, lon, r_lat, r_lon, self.dn, self.de, pn, pe,
-                                       self._hmap)
+            n_nan = ira.predict(self._map_record(), lat, lon, r_lat, r_lon, self.dn, self.de, pn, pe,
+                                self._hmap)
             resid = (h - self.b - P[:, 2]) - self._hmap        # seed 000 eq 2 under each particle
             # one variance for the cloud, at its mean closest point: the particles' points differ by metres
             # at ranges of km, which changes sigma_R (p_d / R) and sigma_theta |p_h| by < 1e-3 relative
@@ -308,17 +309,16 @@ class ParticleFilter(InsRiddenFilter):
             p0 = P[k0] if np.all(np.isfinite(P[k0])) else np.nanmean(P, axis=0)
             var = np.array([float(self.ira_variance(range_m, p0[2], math.hypot(p0[0], p0[1]))) + self.P_b])
         else:
-            n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h, self.dn,
-                                   self.de,
-                                   self.b, C, self.dpsi, self.ra_half_beam_rad, self.ra_cone_rings, 12,
-                                   self._hmap)
+            n_nan = radar_altimeter.predict(self._map_record(bilinear=True), lat, lon, r_lat, r_lon, h,
+                                            self.dn, self.de, self.b, C, self.dpsi, self.ra_half_beam_rad,
+                                            self.ra_cone_rings, 12, self._hmap)
             resid = self._hmap - range_m      # predicted minus measured range = measured - predicted height
             var = np.array([self.ra_variance() + self.P_b])
         if n_nan == M:
             self._degrade(t_s, "cloud_off_map", f"{kind} update skipped: every particle is off the map")
             return
-        robust_log_likelihood(resid, np.ascontiguousarray(var), self.outlier_prob, self.log_outlier_density,
-                              self._ll)
+        ira.likelihood(resid, np.ascontiguousarray(var), self.outlier_prob, self.log_outlier_density,
+                       self._ll)  # (the terrain sensors' shared likelihood: radar_altimeter.likelihood too)
         w0 = self._weights()
         ok = np.isfinite(resid)
         wm = w0[ok].sum()
@@ -346,10 +346,9 @@ class ParticleFilter(InsRiddenFilter):
 
     def _gnss_update(self, t_s, st, payload) -> None:
         lat, lon, h, v = payload
-        gn, ge = self.gnss_offset_m(st, lat, lon)
-        s2 = self.gnss_sigma_m ** 2
+        gn, ge = gnss_model.predict(st, lat, lon)
         sv2 = self.gnss_vertical_sigma_m ** 2
-        ll = -0.5 * ((gn - self.dn) ** 2 + (ge - self.de) ** 2) / s2
+        ll = gnss_model.likelihood(gn, ge, self.dn, self.de, self.gnss_sigma_m)
         z_b = float(st[2]) - h            # INS minus GNSS height = b + noise
         S_b = sv2 + self.P_b
         ll -= 0.5 * (z_b - self.b) ** 2 / S_b

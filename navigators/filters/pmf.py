@@ -35,7 +35,7 @@ nothing per cell but one multiply-add.
   velocity (seed 000 eqs 14-36, shared by all cells: the PMF does not carry attitude or velocity
   hypotheses), one map lookup per cell, the heavy-tailed likelihood (measurements.robust_ll_one) with
   variance S = P_b + sensor + map noise and the per-cell bias update, fused in one numba pass over the
-  cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through measurements.ra_cone_ranges).
+  cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through measurements.radar_altimeter).
 - GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its horizontal
   velocity into the velocity offset (its vertical velocity into the INS).
 - Re-gridding after an update, from the posterior's spread: the half-span follows span_sigmas times its
@@ -61,16 +61,20 @@ import math
 
 import numpy as np
 
-from ..core.imu_spec import G0_MPS2, ImuSpec, consistency_warning, equivalent_walk_density
-from ..inertial.strapdown import quat_to_dcm
-from ..integrity import protection_level as pl
-from ..measurements.terrain_models import (
-    ira_points_batch,
-    ra_cone_ranges,
-    radii_m,
-    robust_log_likelihood,
+from ..core.imu_spec import (
+    G0_MPS2,
+    ImuSpec,
+    consistency_warning,
+    equivalent_walk_density,
+    rss,
+    vertical_offset_walk_density,
 )
+from ..inertial.strapdown import quat_to_dcm
+from ..measurements import gnss as gnss_model
+from ..measurements import ira, radar_altimeter
+from ..measurements.terrain_models import radii_m
 from . import _pmf_kernels as kern
+from .pmf_grid import LOG_FLOOR, PmfGrid
 from .terrain_filter import InsRiddenFilter
 from .terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
 
@@ -78,35 +82,21 @@ G0 = 9.80665
 PMF_MEMORY_S = 240.0        # the memory over which carried-as-constant error rates are matched (imu_spec)
 TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
 N_U = 7                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error)
-LOG_FLOOR = -700.0          # log-density floor relative to the peak (exp underflows below ~ -745)
 
 
-def _kernel_1d(var_cells: float) -> np.ndarray:
-    """Normalised 1-D kernel whose variance is var_cells (in cells^2)."""
-    if var_cells <= 2.0 / 3.0:
-        p = 0.5 * var_cells
-        return np.array([p, 1.0 - 2.0 * p, p])
-    s = math.sqrt(var_cells)
-    half = int(math.ceil(4.0 * s))
-    x = np.arange(-half, half + 1, dtype=float)
-    k = np.exp(-0.5 * x * x / var_cells)
-    return k / k.sum()
-
-
-class PointMassFilter(InsRiddenFilter):
+class PointMassFilter(PmfGrid, InsRiddenFilter):
     """Point-mass filter over the INS horizontal position error (see the module docstring).
 
     Settings (besides InsRiddenFilter's): grid_size n (cells per side, default 200), spacing_min_m,
     spacing_max_m (bounds of the cell spacing), span_sigmas (grid half-span in posterior sigmas),
     position_noise_m_per_sqrt_s (process noise: horizontal position random walk of the INS error, default
-    0.1: the INS error's second differences on the default flight have no white part above 1e-3 m at 1 s,
-    so this is a floor, not a model of the drift - the velocity and acceleration offsets carry that; 1.0,
-    the default before the velocity offset, stood in for the drift), velocity_noise_mps_per_sqrt_s
-    (random walk of the velocity offset, default 0.001: the white part of the INS velocity error's
-    increments on the default flight, 1e-6 m^2/s^2 per s), accel_bias_sigma_mps2 (1 sigma per body axis
+    0.1: a floor, not a model of the drift - the velocity and acceleration offsets carry that),
+    velocity_noise_mps_per_sqrt_s (random walk of the velocity offset, default 0.001: the white part of
+    the INS velocity error's increments), accel_bias_sigma_mps2 (1 sigma per body axis
     of the accelerometers' turn-on bias, default 50 ug: the scenario IMU's navigation grade, seed 000
     Table 2; the tilt and heading errors' priors come from the initial estimate), max_memory_mb
-    (refuses a grid larger than that), measurement_rate_hz (terrain samples per second).
+    (refuses a grid larger than that), measurement_rate_hz (terrain samples per second). The measurements
+    behind the defaults: docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
 
     name = "pmf"
@@ -154,17 +144,12 @@ class PointMassFilter(InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
+        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
+        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
+        self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = consistency_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
-    def _set_geometry(self, centre_n: float, centre_e: float, spacing: float) -> None:
-        n = self.n
-        self.centre_n, self.centre_e, self.spacing = float(centre_n), float(centre_e), float(spacing)
-        ax = (np.arange(n) - 0.5 * (n - 1)) * spacing
-        self.axis_n = centre_n + ax
-        self.axis_e = centre_e + ax
-        self.dn_flat = np.ascontiguousarray(np.repeat(self.axis_n, n))
-        self.de_flat = np.ascontiguousarray(np.tile(self.axis_e, n))
 
     def _u_prior_cov(self, cov9: np.ndarray) -> np.ndarray:
         """Prior covariance of u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading
@@ -267,35 +252,6 @@ class PointMassFilter(InsRiddenFilter):
             self._t_belief = t_s
             self._moments_cache = None
 
-    def _apply_process_noise(self) -> None:
-        """The accumulated process noise as a convolution of exact covariance before every update: a
-        separable pass for the diagonal less the north-east covariance's size, a pass along the grid's
-        diagonal for the covariance (the heading error couples the north and east velocity errors: dropping
-        it missed a Kalman filter's mean by 0.09 sigma in a turn with a 10 mrad heading sigma,
-        tests/test_terrain_filter_linear.py). Before every update, not once it reaches some fraction of a
-        cell: noise held back is added after the update instead of before it, so the update does not narrow
-        it and the reported
-        covariance is too large (on the default flight the pending noise held back until half a cell^2
-        averaged 0.9 m^2 along-track against a 14 m^2 posterior: ANEES 1.85 -> 1.90, 100 runs)."""
-        q = self._q_pending / self.spacing ** 2
-        # Q = diag(q_nn - |c|, q_ee - |c|) + |c| [[1, sign c], [sign c, 1]]: the north-east covariance c as a
-        # pass along the grid's diagonal (as much of it as the diagonal leaves room for)
-        c = float(np.clip(q[0, 1], -min(max(q[0, 0], 0.0), max(q[1, 1], 0.0)),
-                          min(max(q[0, 0], 0.0), max(q[1, 1], 0.0))))
-        var_cells = np.clip(np.diag(q) - abs(c), 0.0, None)
-        if var_cells.max() <= 0.0 and c == 0.0:
-            return
-        spread = 0.0
-        if var_cells.max() > 0.0:
-            spread += kern.convolve_separable(self.logw, self.bias, self.n, _kernel_1d(var_cells[0]),
-                                              _kernel_1d(var_cells[1]), self._work, LOG_FLOOR)
-        if abs(c) > 1e-6:
-            spread += kern.convolve_diagonal(self.logw, self.bias, self.n, _kernel_1d(abs(c)),
-                                             1 if c > 0.0 else -1, self._work, LOG_FLOOR)
-        self.P_b += spread
-        self._moments_cache = None
-        self._q_pending = np.zeros((2, 2))
-
     def _velocity_from_position(self, prior: tuple, post: tuple) -> None:
         """The velocity and acceleration offsets u after an update of the grid (terrain or GNSS position and
         height): p(u | z), z = (dn, de, b), is the prior's Gaussian regression u = u_mean + G (z - z_mean),
@@ -315,60 +271,16 @@ class PointMassFilter(InsRiddenFilter):
         self.C_uz = G @ c1
         self._moments_cache = None
 
-    def _position_moments(self) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and covariance of z = (dn, de, b) over the grid (b: the cells' means and P_b)."""
-        mean, cov = self._moments()
-        c = cov[:3, :3].copy()
-        xb = np.empty(2)
-        kern.grid_cross_moments(self.logw, self.dn_flat, self.de_flat, self.bias, xb)
-        c[2, :2] = c[:2, 2] = xb
-        return mean[:3].copy(), c
-
-    def _weights(self) -> np.ndarray:
-        w = np.exp(self.logw - self.logw.max())
-        return w / w.sum()
-
-    def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """The cells' centres and masses; pad: a cell's half diagonal plus the Gaussian bound of the process
-        noise not yet convolved into the grid (navigators.integrity.protection_level)."""
-        pad = 0.5 * math.sqrt(2.0) * self.spacing + pl.gaussian_hpl(self._q_pending, risk)
-        return self.dn_flat, self.de_flat, np.exp(self.logw - self.logw.max()), pad
-
-    def _apply_loglik(self, t_s: float, ll: np.ndarray, what: str) -> float | None:
-        """logw += ll; returns log p(z | past) or None (skipped: every cell underflowed)."""
-        log_lik, mx = kern.apply_log_likelihood(self.logw, ll, LOG_FLOOR)
-        if not np.isfinite(mx):
-            self._underflow(t_s, what)
-            return None
-        self._n_underflow = 0
-        self._moments_cache = None
-        return float(log_lik)
-
-    def _underflow(self, t_s: float, what: str) -> None:
-        self._n_underflow += 1
-        self._degrade(t_s, "likelihood_underflow", f"{what}: every cell's likelihood underflowed "
-                      f"(update skipped, {self._n_underflow} in a row)")
-        if self._n_underflow >= 10:
-            self._reinitialise(t_s)
-
-    def _reinitialise(self, t_s: float) -> None:
-        mean, cov = self._moments()
-        c9 = np.zeros((9, 9))
-        c9[:2, :2] = np.eye(2) * max(1000.0**2, cov[0, 0], cov[1, 1])
-        self._init_belief(c9, (float(mean[0]), float(mean[1])), velocity=(self.u_mean, self.C_uu))
-        self._degrade(t_s, "reinitialised", "grid re-initialised wide (1 km) after repeated underflows")
-
     # ------------------------------------------------------------------------------------ updates
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
         self._apply_process_noise()
         prior = self._position_moments()
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
-        heights, lat0, lon0, dlat, dlon = self.grid
         m = self.n * self.n
         C = quat_to_dcm(st[6:10])
         if kind == "ira":
-            nb = ira_points_batch(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self._zero1,
+            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self._zero1,
                                   self._zero12, self.ira_code, self._ira_p)
             if nb:
                 self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
@@ -398,9 +310,9 @@ class PointMassFilter(InsRiddenFilter):
         else:
             var = self.ra_variance()
             rng_pred = np.empty(m)
-            n_nan = ra_cone_ranges(heights, lat0, lon0, dlat, dlon, lat, lon, r_lat, r_lon, h,
-                                   self.dn_flat, self.de_flat, self.bias, C, self._zero1,
-                                   self.ra_half_beam_rad, self.ra_cone_rings, 12, rng_pred)
+            n_nan = radar_altimeter.predict(self._map_record(bilinear=True), lat, lon, r_lat, r_lon, h,
+                                            self.dn_flat, self.de_flat, self.bias, C, self._zero1,
+                                            self.ra_half_beam_rad, self.ra_cone_rings, 12, rng_pred)
             if n_nan == m:
                 self._degrade(t_s, "grid_off_map", "altimeter update skipped: the whole grid is off the map")
                 return
@@ -409,7 +321,7 @@ class PointMassFilter(InsRiddenFilter):
             resid = h_meas - pred
             S = self.P_b + var
             ll = np.empty(m)
-            robust_log_likelihood(resid, np.array([S]), self.outlier_prob, self.log_outlier_density, ll)
+            radar_altimeter.likelihood(resid, np.array([S]), self.outlier_prob, self.log_outlier_density, ll)
             pred_mean, pred_var = kern.predicted_moments(self.logw, pred)
             with np.errstate(invalid="ignore", over="ignore"):
                 gauss = self._lg - 0.5 * (resid * resid / S + math.log(S) + math.log(2 * math.pi))
@@ -433,9 +345,10 @@ class PointMassFilter(InsRiddenFilter):
         lat, lon, h, v = payload
         self._apply_process_noise()
         prior = self._position_moments()
-        gn, ge = self.gnss_offset_m(st, lat, lon)
+        gn, ge = gnss_model.predict(st, lat, lon)
         s2 = self.gnss_sigma_m ** 2
-        ll = -0.5 * ((gn - self.dn_flat) ** 2 + (ge - self.de_flat) ** 2) / s2 - math.log(2 * math.pi * s2)
+        ll = (gnss_model.likelihood(gn, ge, self.dn_flat, self.de_flat, self.gnss_sigma_m)
+              - math.log(2 * math.pi * s2))
         if self._apply_loglik(t_s, ll, "GNSS update") is None:
             return
         z_b = float(st[2]) - h      # INS minus GNSS height = b + noise
@@ -472,31 +385,6 @@ class PointMassFilter(InsRiddenFilter):
             self._set_geometry(self.centre_n + dx[0], self.centre_e + dx[1], self.spacing)
         self._moments_cache = None
 
-    def _regrid(self) -> None:
-        mean, cov = self._moments()
-        sig = math.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 1e-12))
-        d_des = min(max(2.0 * self.span_sigmas * sig / (self.n - 1), self.spacing_min_m), self.spacing_max_m)
-        d_new = min(max(d_des, 0.5 * self.spacing), 2.0 * self.spacing)
-        off = max(abs(mean[0] - self.centre_n), abs(mean[1] - self.centre_e))
-        far = off > (self.n - 1) * self.spacing / 8
-        if not far and 0.8 <= d_new / self.spacing <= 1.25:
-            return
-        old_lw = self.logw.reshape(self.n, self.n)
-        old_b = self.bias.reshape(self.n, self.n)
-        c_old = 0.5 * (self.n - 1)
-        cn_old, ce_old, d_old = self.centre_n, self.centre_e, self.spacing
-        self._set_geometry(float(mean[0]), float(mean[1]), d_new)
-        fi = (self.axis_n - cn_old) / d_old + c_old
-        fj = (self.axis_e - ce_old) / d_old + c_old
-        FI, FJ = np.meshgrid(fi, fj, indexing="ij")
-        from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
-        lw = ndimage.map_coordinates(old_lw, [FI, FJ], order=1, mode="constant", cval=LOG_FLOOR)
-        b = ndimage.map_coordinates(old_b, [FI, FJ], order=1, mode="nearest")
-        lw = lw.ravel()
-        self.logw = np.maximum(lw - lw.max(), LOG_FLOOR)
-        self.bias = np.ascontiguousarray(b.ravel())
-        self._moments_cache = None
-
     def _recover(self, t_s: float) -> str:
         """The grid re-spread around its mean (spacing from the widened spread; the vertical offset kept)."""
         mean, c9 = self._recovery_cov9()
@@ -507,32 +395,3 @@ class PointMassFilter(InsRiddenFilter):
         self.bias[:] = mean[2]
         return (f"grid re-spread around its mean, 1-sigma {math.sqrt(0.5 * np.trace(c9[:2, :2])):.0f} m, "
                 f"spacing {self.spacing:.1f} m")
-
-    # ------------------------------------------------------------------------------------ output
-    def _moments(self) -> tuple[np.ndarray, np.ndarray]:
-        if self._moments_cache is None:
-            o = np.empty(7)
-            kern.grid_moments(self.logw, self.dn_flat, self.de_flat, self.bias, o)
-            c = np.array([[o[2], o[3]], [o[3], o[4]]]) + np.eye(2) * self.spacing ** 2 / 12.0
-            self._moments_cache = (o[0], o[1], c, o[5], self.P_b + o[6])
-        mn, me, c, mb, vb = self._moments_cache
-        mean = np.array([mn, me, mb, self.u_mean[0], self.u_mean[1], np.nan])
-        cov = np.full((6, 6), np.nan)
-        cov[:2, :2] = c + self._q_pending
-        cov[2, :2] = cov[:2, 2] = 0.0
-        cov[2, 2] = vb
-        cov[3:5, 3:5] = self.C_uu[:2, :2]
-        cov[3:5, 0:3] = self.C_uz[:2]
-        cov[0:3, 3:5] = self.C_uz[:2].T
-        return mean, cov
-
-    def _after_frame(self, t_end: float) -> None:
-        super()._after_frame(t_end)
-        d = self.logw.reshape(self.n, self.n)
-        from scipy import ndimage  # at first use: importing scipy.ndimage costs about a second
-        peaks = (d == ndimage.maximum_filter(d, size=3, mode="constant", cval=-np.inf)) & (d > math.log(0.01))
-        vals = np.sort(d[peaks])[::-1]
-        self.extra["pmf_modes"] = int(vals.size)
-        self.extra["multimodality"] = float(math.exp(vals[1] - vals[0])) if vals.size > 1 else 0.0
-        self.extra["pmf_spacing_m"] = self.spacing
-        self.extra["pmf_grid_n"] = self.n

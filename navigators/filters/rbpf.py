@@ -72,10 +72,12 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ..core.imu_spec import ImuSpec, consistency_warning
+from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
 from ..core.recovery import IntegrityRecovery
 from ..core.settings import SettingsError
-from ..frames import SensorFrames, imu_gap_s
+from ..frames import SensorFrames
 from ..inertial.error_model_15 import transition_over_history
 from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from ..integrity import protection_level as pl
@@ -91,6 +93,10 @@ from .rbpf_ira_update import RbpfIraUpdate
 from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
 
 _BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
+TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
+# attitude-error memory of the small-angle check (imu_spec.consistency_warning): the time the gyro biases
+# build attitude error before the look angle has observed them (acquisition on the default route ~100 s)
+RBPF_MEMORY_S = 120.0
 
 
 def table1_covariance() -> np.ndarray:
@@ -101,7 +107,7 @@ def table1_covariance() -> np.ndarray:
                          np.radians([0.1, 0.1, 0.1])] ** 2)
 
 
-class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
+class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     """Seed 002's IRA-aided RBPF; see the module docstring. Settings (SI, 1 sigma):
 
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. rng: numpy Generator
@@ -217,8 +223,53 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         self.health = Health()
         self._reset_done = False
 
+    # ------------------------------------------------------------------ IMU specification
+    _turn_att_var = np.zeros(3)  # attitude variance per rad turned (n, e: gyro misalignment; d: scale factor)
+    _yaw_prev = math.nan
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """The Kalman parts' process noise and accelerometer-bias prior from the IMU's specification
+        (navigators.core.imu_spec), each a floor over the setting: per TRN epoch T the velocity noise the
+        velocity random walk N_a sqrt(T) and the attitude noise the angle random walk N_g sqrt(T) (Q of white
+        specific-force and rate noise over T, Titterton & Weston 2004 sec. 12.6; seed 002 Table 1 gives
+        these per epoch), the x / y accelerometer-bias prior the body-fixed horizontal specific-force error
+        (bias, instability and misalignment x g: in level flight the misalignment reads gravity as a
+        constant body-frame bias), and per rad turned the gyro misalignment (tilt) and scale factor (heading)
+        over TURN_REFERENCE_RAD, as the EKF and PMF take them. The bias priors and drives themselves arrive
+        as settings (trn_env's imu_bias_settings). Its 15-state model is a small-angle one (eqs 16-22): a
+        grade whose gyro biases build more than imu_spec.SMALL_ANGLE_LIMIT_RAD over RBPF_MEMORY_S sets the
+        Health warning."""
+        root_t = math.sqrt(self.trn_period_s)
+        q = np.sqrt(self.ql_var)
+        q[0:3] = np.maximum(q[0:3], spec.accel_noise_density_mps2_rthz * root_t)
+        q[3:6] = np.maximum(q[3:6], spec.gyro_noise_density_rps_rthz * root_t)
+        self.ql_var = q ** 2
+        for i in (6, 7):
+            self.P0_settings[i, i] = max(self.P0_settings[i, i], spec.body_accel_sigma_mps2 ** 2)
+        tilt2, heading2 = spec.turn_tilt_sigma_rad(1.0) ** 2, spec.turn_heading_sigma_rad(1.0) ** 2
+        self._turn_att_var = np.array([tilt2, tilt2, heading2]) * TURN_REFERENCE_RAD
+        self._consistency_warning = consistency_warning(spec, RBPF_MEMORY_S, self.name)
+
+    def _epoch_ql_var(self) -> np.ndarray:
+        """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
+        since the last epoch builds (apply_imu_spec)."""
+        if not self._turn_att_var.any():
+            return self.ql_var
+        C = quat_to_dcm(self.ins.state[6:10])
+        yaw = math.atan2(C[1, 0], C[0, 0])
+        turn = 0.0
+        if math.isfinite(self._yaw_prev):
+            turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
+        self._yaw_prev = yaw
+        if turn == 0.0:
+            return self.ql_var
+        ql = self.ql_var.copy()
+        ql[3:6] += self._turn_att_var * turn
+        return ql
+
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
+        self._yaw_prev = math.nan
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)
@@ -231,6 +282,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         self._t_next = float(initial.t_s) + self.trn_period_s
         self._t_gnss_next = float(initial.t_s)
         self._Phi = np.eye(15)
+        self._pl_B = None          # eq 5's position rows of B at the last time update (_mixture_hpl)
         self._last_row = None          # INS row and specific force carried into the next chunk
         self._extra: dict = {}
         self._cov9 = self._covariance9()
@@ -240,63 +292,14 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         self.resamples = 0
         self._reset_done = True
 
-    def _set_prior(self, initial: Estimate) -> None:
-        """The cloud's and the Kalman parts' initial spread. prior_from_initial (default) and a 9 x 9
-        initial.covariance (NED position m, velocity m/s, attitude rad, as every navigator's reset reads it):
-        position sigmas from its diagonal (floored at 0.1 m), P0's velocity-attitude block from it (cross
-        terms kept), the bias priors from the settings - as the EKF, PMF and PF start. Otherwise (or without
-        a covariance) Table 1's priors, the init_* settings. On the default route the scenario's initial
-        errors are 0.05 mrad of tilt and 0.1 m/s, against Table 1's 1.75 mrad and 0.71 m/s: starting from
-        Table 1 there leaves the filter's velocity and attitude sigmas several times its errors."""
-        self.init_pos_sigma = self.init_pos_sigma_settings.copy()
-        self.P0 = self.P0_settings.copy()
-        cov = getattr(initial, "covariance", None)
-        if not self.prior_from_initial or cov is None:
-            return
-        c = np.asarray(cov, float)
-        if c.shape != (9, 9):
-            raise ValueError(f"initial.covariance must be 9 x 9 (position, velocity, attitude),"
-                             f" not {c.shape}")
-        if not np.all(np.isfinite(c)):
-            raise ValueError("initial.covariance must be finite (prior_from_initial)")
-        if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12):
-            raise ValueError("initial.covariance must be symmetric (prior_from_initial)")
-        w_min = float(np.linalg.eigvalsh(c).min())
-        if w_min < -1e-9 * max(1.0, float(np.abs(c).max())):
-            raise ValueError("initial.covariance must be positive semi-definite (it has a negative "
-                             f"eigenvalue {w_min:.3g})")
-        d = np.diag(c)
-        if np.any(np.sqrt(d[6:9]) > 0.1):
-            raise ValueError("initial.covariance (a scenario's initial_errors.attitude_mrad): attitude sigma "
-                             "above 0.1 rad (100 mrad), outside the error model's small-angle range "
-                             "(prior_from_initial; set prior_from_initial=false and init_att_sigma_deg "
-                             "instead)")
-        self.init_pos_sigma = np.maximum(np.sqrt(d[:3]), 0.1)
-        blk = c[3:9, 3:9].copy()
-        blk[np.diag_indices(6)] = np.maximum(np.diag(blk), 1e-12)
-        P0 = self.P0_settings.copy()
-        P0[:6, :6] = blk          # the Kalman parts' velocity and attitude are NED, as initial's
-        self.P0 = P0
-
-    def _init_cloud(self) -> None:
-        n = self.n = self.n_acquisition
-        self.xn = self.rng.standard_normal((n, 3)) * self.init_pos_sigma
-        self.xl = np.zeros((n, 12))
-        self.P = np.broadcast_to(self.P0, (n, 12, 12)).copy()
-        self.logw = np.full(n, -math.log(n))
-
     def update(self, frames: SensorFrames) -> Estimate:
         if not self._reset_done:
             raise RuntimeError("RaoBlackwellizedPF.update before reset")
         self.health.events = []
-        imu = frames.imu
-        if imu is None or imu.t_s.shape[0] == 0:
-            self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
+        t = self._imu_times(frames)
+        if t is None:
             return self.estimate().extrapolated(frames.t_end_s)
-        t = np.asarray(imu.t_s, float)
-        gap_s = imu_gap_s(t, self.ins.t_s)
-        if gap_s > 0.0:
-            self.health.skip(float(t[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
+        imu = frames.imu
         f_b = np.asarray(imu.f_b_mps2, float)
         w_b = np.asarray(imu.omega_ib_b_rps, float)
         ok = np.asarray(imu.valid, bool)
@@ -320,12 +323,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         out = []
         ira = frames.ira
         t_last = float(t[-1])
-        gn = frames.gnss
-        if gn is not None and gn.t_s.shape[0]:
-            gv = (np.asarray(gn.valid, bool) & np.all(np.isfinite(gn.v_ned_mps), axis=1)
-                  & np.isfinite(gn.lat_rad))
-        else:
-            gv = None
+        gnss = gnss_fixes(frames.gnss, need_height=True, need_velocity=True)   # (navigators.core.ins_gnss)
         if ira is not None and ira.t_s.shape[0]:
             ts = np.asarray(ira.t_s, float)
             good = np.asarray(ira.valid, bool) & np.isfinite(ira.range_m) & np.isfinite(ira.look_angle_rad)
@@ -341,36 +339,19 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
                 if i >= ts.shape[0] or ts[i] > t_last + 1e-9:
                     break
                 te = float(ts[i])
-                g = self._gnss_at(gn, gv, te)
+                g = None if gnss is None else gnss.nearest(te)
                 out.append((te, (float(ira.range_m[i]), float(ira.look_angle_rad[i])), g))
                 self._t_next = te + self.trn_period_s
-        if not out and gv is not None and gv.any():  # no usable IRA sample: GNSS epochs alone
-            ts = np.asarray(gn.t_s, float)
-            for i in np.flatnonzero(gv):
-                te = float(ts[i])
+        if not out and gnss is not None and gnss.n:  # no usable IRA sample: GNSS epochs alone
+            for te in gnss.t_s:
+                te = float(te)
                 if te + 1e-9 >= self._t_next and te <= t_last + 1e-9:
-                    out.append((te, None, self._gnss_at(gn, gv, te)))
+                    out.append((te, None, gnss.nearest(te)))
                     self._t_next = te + self.trn_period_s
         return out
 
-    @staticmethod
-    def _gnss_at(gn, gv, te):
-        if gv is None or not gv.any():
-            return None
-        ts = np.asarray(gn.t_s, float)
-        idx = np.flatnonzero(gv)
-        j = idx[np.argmin(np.abs(ts[idx] - te))]
-        if abs(ts[j] - te) > 0.5:
-            return None
-        return (float(ts[j]), float(gn.lat_rad[j]), float(gn.lon_rad[j]), float(gn.h_m[j]),
-                np.asarray(gn.v_ned_mps[j], float).copy())
-
     def _propagate(self, t, f_b, w_b, ok) -> None:
-        bad0 = self.ins.bad_imu_samples
-        hist = self.ins.propagate(t, f_b, w_b, ok)
-        if self.ins.bad_imu_samples > bad0:
-            self.health.skip(float(t[0]), "imu_invalid",
-                             f"{self.ins.bad_imu_samples - bad0} IMU samples invalid (held previous)")
+        hist = self._strapdown(t, f_b, w_b, ok)      # (navigators.core.ins_gnss)
         # error-model transition over this stretch at the error model's rate (eq 16 discretised)
         dt_imu = (float(t[-1] - t[0]) / (t.shape[0] - 1)) if t.shape[0] > 1 else self.dt_err
         stride = max(int(round(self.dt_err / max(dt_imu, 1e-6))), 1)
@@ -404,8 +385,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         Phi = self._Phi * T[:, None] / T[None, :]
         self._Phi = np.eye(15)
         w = self.rng.standard_normal((self.n, 3))
-        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var, self.ql_var,
-                                w)
+        self._pl_B = Phi[:2, 3:].copy()     # position rows of eq 5's B, for the HPL's mixture (estimate)
+        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var,
+                                self._epoch_ql_var(), w)
         if nbad:
             self.health.skip(te, "time_update_not_pd", f"{nbad} particles: N not positive definite")
         logw_prev = self.logw.copy()
@@ -442,6 +424,20 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
         return C * s[:, None] * s[None, :]
 
     # ------------------------------------------------------------------ output
+    def _mixture_hpl(self, risk: float) -> float:
+        """HPL of the marginal position posterior (navigators.integrity.protection_level.mixture_hpl):
+        particle k is N(xn_k, B P_k B' + Q^n) horizontally (eq 5's spread with its own Kalman covariance);
+        before the first time update the particles are points."""
+        B = getattr(self, "_pl_B", None)
+        n = self.xn.shape[0]
+        if B is None or B.shape[1] != self.P.shape[1]:
+            cov = np.zeros((n, 2, 2))
+        else:
+            cov = np.einsum("ij,kjl,ml->kim", B, self.P, B)
+            cov[:, 0, 0] += self.qn_var[0]
+            cov[:, 1, 1] += self.qn_var[1]
+        return pl.mixture_hpl(self.xn[:, 0], self.xn[:, 1], cov, self._weights(), risk)
+
     def estimate(self) -> Estimate:
         st = self.ins.state
         roll, pitch, yaw = euler_from_C_bn(quat_to_dcm(st[6:10]))
@@ -454,8 +450,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud):
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
-        risk = pl.filter_risk(self)      # the cloud's mass radius (navigators.integrity.protection_level)
-        pl.publish(extra, pl.particle_hpl(self.xn[:, 0], self.xn[:, 1], self._weights(), risk), self)
+        pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
         health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
                         consistency_warning=self._consistency_warning,
                         events=list(self.health.events))

@@ -1,8 +1,8 @@
-"""The particle cloud's maintenance in the Rao-Blackwellized particle filter (seed 002): the GNSS update
-(position moves the cloud onto the Kalman posterior of its moments, a square-root update; the velocity
-updates each particle's Kalman part), normalisation and ESS-triggered systematic resampling, the hand-over
-from the acquisition cloud to n_particles, the integrity test on each update's NIS and the re-spread it
-asks for, and the feedback of the weighted mean error into the INS.
+"""The particle cloud's maintenance in the Rao-Blackwellized particle filter (seed 002): its prior and
+initial draw, the GNSS update (position moves the cloud onto the Kalman posterior of its moments, a
+square-root update; the velocity updates each particle's Kalman part), normalisation and ESS-triggered
+systematic resampling, the hand-over from the acquisition cloud to n_particles, the integrity test on each
+update's NIS and the re-spread it asks for, and the feedback of the weighted mean error into the INS.
 
 A mixin of RaoBlackwellizedPF (rbpf.py), which owns the state these methods read and write.
 """
@@ -16,16 +16,61 @@ import numpy as np
 from ..core.resampling import systematic_indices_u0
 from ..protocol import (
     EXTRA_ESS,
+    Estimate,
 )
 from . import _rbpf_kernels as kern
 
 
 class RbpfCloud:
-    """The cloud's GNSS update, resampling, integrity and feedback of RaoBlackwellizedPF; a mixin."""
+    """The cloud's prior, GNSS update, resampling, integrity and feedback of RaoBlackwellizedPF; a mixin."""
 
-    # the RBPF's IMU error model reaches it as bias settings (imu_bias_settings); no grade is known to be
-    # beyond it (its Kalman parts carry every gyro bias and the look angle observes the attitude)
+    # set by RaoBlackwellizedPF.apply_imu_spec for a grade beyond its small-angle error model
     _consistency_warning = ""
+
+    def _set_prior(self, initial: Estimate) -> None:
+        """The cloud's and the Kalman parts' initial spread. prior_from_initial (default) and a 9 x 9
+        initial.covariance (NED position m, velocity m/s, attitude rad, as every navigator's reset reads it):
+        position sigmas from its diagonal (floored at 0.1 m), P0's velocity-attitude block from it (cross
+        terms kept), the bias priors from the settings - as the EKF, PMF and PF start. Otherwise (or without
+        a covariance) Table 1's priors, the init_* settings. On the default route the scenario's initial
+        errors are 0.05 mrad of tilt and 0.1 m/s, against Table 1's 1.75 mrad and 0.71 m/s: starting from
+        Table 1 there leaves the filter's velocity and attitude sigmas several times its errors."""
+        self.init_pos_sigma = self.init_pos_sigma_settings.copy()
+        self.P0 = self.P0_settings.copy()
+        cov = getattr(initial, "covariance", None)
+        if not self.prior_from_initial or cov is None:
+            return
+        c = np.asarray(cov, float)
+        if c.shape != (9, 9):
+            raise ValueError(f"initial.covariance must be 9 x 9 (position, velocity, attitude),"
+                             f" not {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError("initial.covariance must be finite (prior_from_initial)")
+        if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12):
+            raise ValueError("initial.covariance must be symmetric (prior_from_initial)")
+        w_min = float(np.linalg.eigvalsh(c).min())
+        if w_min < -1e-9 * max(1.0, float(np.abs(c).max())):
+            raise ValueError("initial.covariance must be positive semi-definite (it has a negative "
+                             f"eigenvalue {w_min:.3g})")
+        d = np.diag(c)
+        if np.any(np.sqrt(d[6:9]) > 0.1):
+            raise ValueError("initial.covariance (a scenario's initial_errors.attitude_mrad): attitude sigma "
+                             "above 0.1 rad (100 mrad), outside the error model's small-angle range "
+                             "(prior_from_initial; set prior_from_initial=false and init_att_sigma_deg "
+                             "instead)")
+        self.init_pos_sigma = np.maximum(np.sqrt(d[:3]), 0.1)
+        blk = c[3:9, 3:9].copy()
+        blk[np.diag_indices(6)] = np.maximum(np.diag(blk), 1e-12)
+        P0 = self.P0_settings.copy()
+        P0[:6, :6] = blk          # the Kalman parts' velocity and attitude are NED, as initial's
+        self.P0 = P0
+
+    def _init_cloud(self) -> None:
+        n = self.n = self.n_acquisition
+        self.xn = self.rng.standard_normal((n, 3)) * self.init_pos_sigma
+        self.xl = np.zeros((n, 12))
+        self.P = np.broadcast_to(self.P0, (n, 12, 12)).copy()
+        self.logw = np.full(n, -math.log(n))
 
     @staticmethod
     def _ess(logw: np.ndarray) -> float:

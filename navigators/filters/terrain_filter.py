@@ -22,14 +22,17 @@ import math
 
 import numpy as np
 
+from ..core.ins_gnss import InsGnssBlock, gnss_fixes, velocity_into_ins
 from ..core.maps import MapRecord, load_map, map_record
 from ..core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
-from ..frames import SensorFrames, imu_gap_s
+from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
+from ..measurements import ira, radar_altimeter
 from ..measurements.baro import geometric_height_m
-from ..measurements.terrain_models import IRA_FORMULA_CODES, radii_m
+from ..measurements.ira import IRA_FORMULA_CODES
+from ..measurements.terrain_models import radii_m
 from ..protocol import (
     EXTRA_INNOVATION,
     EXTRA_INNOVATION_COV,
@@ -50,54 +53,42 @@ MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^
 
 
 
-class InsRiddenFilter:
-    _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
-
+class InsRiddenFilter(InsGnssBlock):
     """Base of the terrain filters (see the module docstring). Settings common to both (SI, 1 sigma):
 
     dem: the navigator's map (terrain.Dem or a name for terrain.load), required. aiding: "ira" (default),
     "radar_altimeter" or "both". measurement_rate_hz: terrain samples used per second (the sensors sample
-    faster; every 1/rate s the next valid sample is taken). Default 1 Hz (seed 002's TRN rate): on the
-    default flight (scripts/filter_statistics.py "rate", 10 runs) the PMF's horizontal RMS is 7.9 m at 1 Hz,
-    7.1 m at 2 Hz and 5.8 m at 5 Hz, for 1.5 and 2.8 times the navigator's time. ira_formula: "proposed"
-    (seed 000 eqs 14-36, default: its closest point follows the attitude and the velocity; in a 20 m/s
-    crosswind at 5,600 m with map = world the PF's RMS is 2.4 m with it against 16.6 m with the conventional
-    one for a precise IRA, 6.3 m against 8.0 m at Table 1's noise: scripts/ira_model_comparison.py, README)
-    or "conventional" (eqs 9-13). ira_range_sigma_m, ira_look_angle_sigma_deg:
-    the IRA's noise (seed 002 Table 1). ra_sigma_m, ra_half_beam_deg, ra_cone_rings: the radar altimeter's
-    noise, half beamwidth and the rings of its cone model (0: the axis ray only). map_sigma_m: the map's
-    random vertical error (its accuracy class); map_bias_sigma_m: its vertical bias; terrain_model_sigma_m:
-    terrain between the map's posts, default 2.5 m: on the default flight the world (the 3" DEM with 30 m
-    fractal detail) differs from the bicubic map by 2.3 m RMS, and the measured terrain height at the true
-    position scatters by 3.9-4.5 m about the map with the IRA's 3.5 m range noise in it, so 2.5-3 m is
-    honest (4 m, the earlier default, left the NEES at 1.6 against 2). vertical_noise_m_per_sqrt_s: random
-    walk of the vertical offset b, default 0.3: the baro-slaved INS height wanders by +-2 m over a minute
-    (baro lag and the loop's dynamics in climbs), the same in every run over the same flight; with 0.05 b
-    could not follow, and on a cross slope the height error became a cross-track error of ~3 m shared by
-    all runs. Measured on the default flight (10 runs, the INS height minus the truth): its increments'
-    variance grows by 0.10 m^2/s over lags of 10-30 s (the filters' memory; 0.013 m^2 at 1 s: a smooth
-    wander), so sqrt(0.1) = 0.3; 0.5 made b (and through it the position) looser than it is.
-    map_interpolation: "bicubic" (default: Catmull-Rom, terrain.kernels.bicubic, a C1 surface through
-    the posts) or "bilinear": how the IRA update reads the map between its posts. On the default flight
-    the two differ by 1.5 m RMS, an error that is the same in every run over the same ground, which the
-    white terrain_model_sigma_m cannot describe.
-    outlier_prob, outlier_width_m: the heavy tail of the likelihood.
-    gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise. baro_bias_sigma_m: prior
-    of the baro height's bias. converged_sigma_m: Health says "acquiring" while the horizontal 1-sigma is
-    above it. Vertical channel: gravity_model, tau_baro_s, imu_samples, baro_geopotential as in
-    navigators.filters.InsTrnNavigator; the INS height starts at the first baro height.
-    Integrity (navigators.integrity.InnovationMonitor, default integrity_alpha 1e-4: with
-    terrain_model_sigma_m 2.5 m, 0.01 raised a false alarm, and a re-spread of 100 m, in 6 of 30 default
-    flights of 3 min): every terrain update's NIS (an update every cell or
-    particle rejects counts as infinite; each enters capped, see `capped_nis`) goes into a sliding window of
-    integrity_window updates; when its sum leaves the chi-square band of probability integrity_alpha,
-    Health says "degraded" (ok False) and the filter recovers (`_recover`: the belief is re-spread around
-    its mean with recovery_sigma_m added to the horizontal 1-sigma, at least the initial spread), each step
-    an event; if a whole window after a re-spread is still out of band it re-spreads again, twice as wide
-    (up to 8 x recovery_sigma_m); back in band, the status follows the belief's spread again
-    ("acquiring", then "ok").
+    faster; every 1/rate s the next valid sample is taken; default 1 Hz, seed 002's TRN rate). ira_formula:
+    "proposed" (seed 000 eqs 14-36, default: its closest point follows the attitude and the velocity) or
+    "conventional" (eqs 9-13). ira_range_sigma_m, ira_look_angle_sigma_deg: the IRA's noise (seed 002
+    Table 1). ra_sigma_m, ra_half_beam_deg, ra_cone_rings: the radar altimeter's noise, half beamwidth and
+    the rings of its cone model (0: the axis ray only). map_sigma_m: the map's random vertical error (its
+    accuracy class); map_bias_sigma_m: its vertical bias; terrain_model_sigma_m: terrain between the map's
+    posts (default 2.5 m: the world's detail the map does not hold, with interpolation).
+    vertical_noise_m_per_sqrt_s: random walk of the vertical offset b (default 0.3: the baro-slaved INS
+    height's wander over the filters' memory, the same in every run over the same flight, which b must
+    follow or a cross slope turns it into a cross-track error). map_interpolation: "bicubic" (default:
+    Catmull-Rom, terrain.kernels.bicubic, a C1 surface through the posts) or "bilinear": how the IRA update
+    reads the map between its posts (the two differ by an error that is the same in every run over the same
+    ground, which the white terrain_model_sigma_m cannot describe). outlier_prob, outlier_width_m: the heavy
+    tail of the likelihood. gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise.
+    baro_bias_sigma_m: prior of the baro height's bias. converged_sigma_m: Health says "acquiring" while the
+    horizontal 1-sigma is above it. Vertical channel: gravity_model, tau_baro_s, imu_samples,
+    baro_geopotential as in navigators.filters.InsTrnNavigator; the INS height starts at the first baro
+    height. The measurements behind the defaults: docs/validation/navigators.md ("Terrain filters: measured
+    grounds of the defaults").
+
+    Integrity (navigators.integrity.InnovationMonitor, default integrity_alpha 1e-4): every terrain update's
+    NIS (an update every cell or particle rejects counts as infinite; each enters capped, see `capped_nis`)
+    goes into a sliding window of integrity_window updates; when its sum leaves the chi-square band of
+    probability integrity_alpha, Health says "degraded" (ok False) and the filter recovers (`_recover`: the
+    belief is re-spread around its mean with recovery_sigma_m added to the horizontal 1-sigma, at least the
+    initial spread), each step an event; if a whole window after a re-spread is still out of band it
+    re-spreads again, twice as wide (up to 8 x recovery_sigma_m); back in band, the status follows the
+    belief's spread again ("acquiring", then "ok").
     """
 
+    _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
     name = "terrain_filter"
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
@@ -183,14 +174,9 @@ class InsRiddenFilter:
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
-        imu = frames.imu
-        if imu is None or imu.t_s.shape[0] == 0:
-            self.health.skip(frames.t_end_s, "no_imu", "no IMU samples in the frame")
+        t_imu = self._imu_times(frames)
+        if t_imu is None:
             return self.estimate().extrapolated(frames.t_end_s)
-        t_imu = np.ascontiguousarray(imu.t_s, float)
-        gap_s = imu_gap_s(t_imu, self.ins.t_s)
-        if gap_s > 0.0:
-            self.health.skip(float(t_imu[0]), "imu_gap", f"{gap_s:.2f} s of IMU samples missing")
         hist = self._propagate_ins(frames, t_imu)
         events = self._events(frames, t_imu)
         for t_s, kind, payload, k in events:
@@ -224,13 +210,7 @@ class InsRiddenFilter:
             if not self._height_initialised and vb.any():
                 self.ins.state[2] = float(hb[np.argmax(vb)])
                 self._height_initialised = True
-        bad0 = self.ins.bad_imu_samples
-        hist = self.ins.propagate(t_imu, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid, tb, hb, vb)
-        nbad = self.ins.bad_imu_samples - bad0
-        if nbad:
-            self._count_skip(float(t_imu[0]), "imu_invalid", nbad,
-                             f"{nbad} IMU samples invalid (held previous)")
-        return hist
+        return self._strapdown(t_imu, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid, tb, hb, vb)
 
     def _events(self, frames: SensorFrames, t_imu: np.ndarray) -> list:
         """(t, kind, payload, index of the INS history row) of the frame's measurements, in time order."""
@@ -261,14 +241,10 @@ class InsRiddenFilter:
         if n_bad:
             self._count_skip(frames.t_start_s, "terrain_sample_invalid", n_bad,
                              f"{n_bad} altimeter samples invalid or without a return (skipped)")
-        g = frames.gnss
-        if g is not None and g.t_s.shape[0]:
-            pos_ok = (np.asarray(g.valid, bool) & np.isfinite(g.lat_rad) & np.isfinite(g.lon_rad)
-                      & np.isfinite(g.h_m))
-            for i in np.nonzero(pos_ok)[0]:
-                v = np.asarray(g.v_ned_mps[i], float)
-                ev.append((float(g.t_s[i]), "gnss",
-                           (float(g.lat_rad[i]), float(g.lon_rad[i]), float(g.h_m[i]), v)))
+        g = gnss_fixes(frames.gnss, need_height=True, need_velocity=False)
+        for i in range(0 if g is None else g.n):
+            ev.append((float(g.t_s[i]), "gnss", (float(g.lat_rad[i]), float(g.lon_rad[i]), float(g.h_m[i]),
+                                                 g.v_ned_mps[i])))
         ev.sort(key=lambda e: e[0])
         out = []
         for t_s, kind, payload in ev:
@@ -288,12 +264,11 @@ class InsRiddenFilter:
 
     def ira_variance(self, range_m: float, p_d_m, p_h_m) -> np.ndarray:
         """Measured terrain height variance (m^2) of an IRA sample whose closest point is at (p_h, p_d)."""
-        sr, st = self.ira_range_sigma_m, self.ira_look_angle_sigma_rad
-        return ((sr * p_d_m / range_m) ** 2 + (st * p_h_m) ** 2 + self.map_sigma_m ** 2
-                + self.terrain_model_sigma_m ** 2)
+        return ira.variance(range_m, p_d_m, p_h_m, self.ira_range_sigma_m, self.ira_look_angle_sigma_rad,
+                            self.map_sigma_m, self.terrain_model_sigma_m)
 
     def ra_variance(self) -> float:
-        return self.ra_sigma_m ** 2 + self.map_sigma_m ** 2 + self.terrain_model_sigma_m ** 2
+        return radar_altimeter.variance(self.ra_sigma_m, self.map_sigma_m, self.terrain_model_sigma_m)
 
     def bias_prior_var(self) -> float:
         return self.baro_bias_sigma_m ** 2 + self.map_bias_sigma_m ** 2
@@ -305,23 +280,9 @@ class InsRiddenFilter:
         self._p_att += self.q_gyr * dt
 
     def _gnss_velocity_ins(self, v_gnss: np.ndarray, carried: tuple[int, ...]) -> None:
-        """GNSS velocity into the INS velocity for the axes the filter does not carry (scalar Kalman update
-        per axis with the INS velocity error model's variance)."""
-        if not np.all(np.isfinite(v_gnss)):
-            return
-        r = self.gnss_velocity_sigma_mps ** 2
-        for a in range(3):
-            if a in carried:
-                continue
-            k = self._p_vel[a] / (self._p_vel[a] + r)
-            self.ins.state[3 + a] += k * (v_gnss[a] - self.ins.state[3 + a])
-            self._p_vel[a] *= (1.0 - k)
-
-    @staticmethod
-    def gnss_offset_m(st: np.ndarray, lat: float, lon: float) -> tuple[float, float]:
-        """GNSS position minus the INS position at the same time, north and east (m; seed 000 eq 2)."""
-        r_lat, r_lon = radii_m(float(st[0]), float(st[2]))
-        return (lat - float(st[0])) * r_lat, (lon - float(st[1])) * r_lon
+        """GNSS velocity into the INS velocity for the axes the filter does not carry
+        (navigators.core.ins_gnss.velocity_into_ins)."""
+        velocity_into_ins(self.ins.state, self._p_vel, v_gnss, self.gnss_velocity_sigma_mps ** 2, carried)
 
     def _set_update_extra(self, t_s: float, innovation, S, log_lik: float) -> None:
         innov = np.atleast_1d(np.asarray(innovation, float))
@@ -354,11 +315,14 @@ class InsRiddenFilter:
         elif verdict.changed:
             self.health.ok, self.health.status = True, "acquiring"
 
-    def _map_record(self) -> MapRecord:
-        """The map and its interpolation as the kernels take it (navigators.core.maps.MapRecord)."""
-        rec = getattr(self, "_map_rec", None)
+    def _map_record(self, bilinear: bool = False) -> MapRecord:
+        """The map and its interpolation as the kernels take it (navigators.core.maps.MapRecord): the
+        map_interpolation setting's, or bilinear (the radar altimeter's cone model reads the map so)."""
+        key = "_map_rec_bilinear" if bilinear else "_map_rec"
+        rec = getattr(self, key, None)
         if rec is None:
-            rec = self._map_rec = map_record(self.grid, self.map_cubic)
+            rec = map_record(self.grid, self.map_cubic and not bilinear)
+            setattr(self, key, rec)
         return rec
 
     def _recovery_sigma_now_m(self) -> float:
@@ -374,11 +338,6 @@ class InsRiddenFilter:
         if np.trace(ch) > np.trace(c9[:2, :2]):
             c9[:2, :2] = ch
         return np.nan_to_num(mean), c9
-
-    def _count_skip(self, t_s: float, reason: str, n: int, message: str) -> None:
-        """n samples skipped for `reason` (Health.skipped counts samples; one event says so)."""
-        self.health.skipped[reason] = self.health.skipped.get(reason, 0) + int(n)
-        self.health.events.append((float(t_s), message))
 
     def _degrade(self, t_s: float, reason: str, message: str) -> None:
         self.health.skip(t_s, reason, message)

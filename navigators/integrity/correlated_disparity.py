@@ -37,14 +37,19 @@ from numba import njit
 
 
 @njit(cache=True)
-def whitened_statistic(ring, start, n, sig_r2, sig_b2, corr_len_m, func):
+def whitened_statistic(ring, start, n, sig_r2, sig_b2, corr_len_m, func, tau_h_s=0.0, tau_v_s=0.0):
     """p' Sigma^-1 p over the n epochs of a ring buffer (oldest at row `start`, wrapping), Sigma as in the
     module docstring; func 0: exponential, 1: Gaussian correlation. ring columns: p (m), lat, lon (rad),
     white variance (m^2), then the navigator's height-source terms (zero for GNSS epochs): its down variance
-    P_dd, the map's slope g_n, g_e and its horizontal covariance P_nn, P_ne, P_ee; their common part is
-    sqrt(P_dd,i P_dd,j) + g_i' (P_i + P_j) / 2 g_j (the navigator's error is nearly constant over a window,
-    the slope under it is not). Distances through the WGS84 meridian / prime-vertical radii at the first
-    epoch. NaN if Sigma is not positive definite."""
+    P_dd, the map's slope g_n, g_e and its horizontal covariance P_nn, P_ne, P_ee; then the epoch's time (s).
+    The navigator's error between epochs i and j: rho_v sqrt(P_dd,i P_dd,j) + rho_h g_i' (P_i + P_j) / 2 g_j,
+    its vertical and horizontal errors first-order Gauss-Markov in time, rho = exp(-|t_i - t_j| / tau) with
+    tau = tau_v_s, tau_h_s (0: constant over the window, rho = 1); the slope under it changes from epoch to
+    epoch. Distances through the WGS84 meridian / prime-vertical radii at the first epoch.
+
+    Returns (T_w, T_b): T_w = p' Sigma^-1 p (chi2(N) without a fault) and T_b = (1' Sigma^-1 p)^2 /
+    (1' Sigma^-1 1), the generalised likelihood-ratio test of a bias common to the window (chi2(1));
+    NaN, NaN if Sigma is not positive definite."""
     m = ring.shape[0]
     S = np.empty((n, n))
     v = np.empty(n)
@@ -66,11 +71,14 @@ def whitened_statistic(ring, start, n, sig_r2, sig_b2, corr_len_m, func):
                 rho = math.exp(-d / corr_len_m)
             else:
                 rho = math.exp(-0.5 * (d / corr_len_m) ** 2)
-            pnn = 0.5 * (ring[ii, 7] + ring[jj, 7])
-            pne = 0.5 * (ring[ii, 8] + ring[jj, 8])
-            pee = 0.5 * (ring[ii, 9] + ring[jj, 9])
+            dt = abs(ring[ii, 10] - ring[jj, 10])
+            rho_h = math.exp(-dt / tau_h_s) if tau_h_s > 0.0 else 1.0
+            rho_v = math.exp(-dt / tau_v_s) if tau_v_s > 0.0 else 1.0
+            pnn = 0.5 * (ring[ii, 7] + ring[jj, 7]) * rho_h
+            pne = 0.5 * (ring[ii, 8] + ring[jj, 8]) * rho_h
+            pee = 0.5 * (ring[ii, 9] + ring[jj, 9]) * rho_h
             gi_n, gi_e, gj_n, gj_e = ring[ii, 5], ring[ii, 6], ring[jj, 5], ring[jj, 6]
-            c = (sig_r2 * rho + sig_b2 + math.sqrt(ring[ii, 4] * ring[jj, 4])
+            c = (sig_r2 * rho + sig_b2 + rho_v * math.sqrt(ring[ii, 4] * ring[jj, 4])
                  + gi_n * (pnn * gj_n + pne * gj_e) + gi_e * (pne * gj_n + pee * gj_e))
             if i == j:
                 c += ring[ii, 3]
@@ -82,21 +90,29 @@ def whitened_statistic(ring, start, n, sig_r2, sig_b2, corr_len_m, func):
         for k in range(j):
             s -= S[j, k] * S[j, k]
         if not s > 0.0:
-            return np.nan
+            return np.nan, np.nan
         S[j, j] = math.sqrt(s)
         for i in range(j + 1, n):
             t = S[i, j]
             for k in range(j):
                 t -= S[i, k] * S[j, k]
             S[i, j] = t / S[j, j]
+    u = np.empty(n)
     tot = 0.0
+    uy = 0.0
+    uu = 0.0
     for i in range(n):
         t = v[i]
+        t1 = 1.0
         for k in range(i):
             t -= S[i, k] * v[k]
+            t1 -= S[i, k] * u[k]
         v[i] = t / S[i, i]
+        u[i] = t1 / S[i, i]
         tot += v[i] * v[i]
-    return tot
+        uy += u[i] * v[i]
+        uu += u[i] * u[i]
+    return tot, uy * uy / uu
 
 
 def window_covariance(d_m: np.ndarray, sig_r: float, corr_len_m: float, function: str = "exponential",

@@ -38,10 +38,24 @@ chi-square design needs independent disparities. A real map's error is correlate
 `correlation_length_m` > 0 (the map error model's, terrain.map_error; the scenario fills it in) the plain
 variant tests the whitened statistic T_w = p' Sigma^-1 p of the window instead (Sigma from the model's
 correlation function at the epochs' own distances, its bias share `map_bias_fraction`, the white
-radar-altimeter and GNSS variances, and the navigator's position variance as common to the window when it
-is the height source: navigators.integrity.correlated_disparity). T_w is chi-square with N dof for any
-spacing, so the threshold and P_fa keep their chi-square design; the price is detection (a correlated map
-error and a bias look alike over a window): docs/validation/integrity.md measures both.
+radar-altimeter and GNSS variances, and the navigator's position error when it is the height source:
+navigators.integrity.correlated_disparity). T_w is chi-square with N dof for any spacing, so the threshold
+and P_fa keep their chi-square design; the price is detection (a correlated map error and a bias look alike
+over a window): docs/validation/integrity.md measures both.
+
+GNSS denied, the height and position come from the navigator, whose error is correlated across the window:
+its horizontal error reaches every disparity through the map's slope under that epoch, and the same error
+(not an independent one per epoch) lies under the whole window. Whenever the window holds such an epoch the
+plain variant whitens (even with a white map), the navigator's error taken as first-order Gauss-Markov in
+time with `navigator_error_time_constant_s` (horizontal) and `navigator_height_time_constant_s` (0: constant
+over the window); eq 4's per-epoch sum would treat the window's 50 slope terms as independent.
+
+Option `bias_glrt_false_alarm_probability` > 0 adds the generalised likelihood-ratio test of a bias common
+to the window on the whitened disparities, T_b = (1' Sigma^-1 p)^2 / (1' Sigma^-1 1), chi-square with 1 dof,
+with its own threshold chi2.isf(P_fa_b, 1); an alarm is T_w > threshold or T_b > its threshold (the
+combined false-alarm probability is at most the sum). A bias spends all its energy in the one direction
+T_b looks at, so it is found sooner than by T_w's N dof when the map error is white or short-correlated;
+under long correlation a bias and the map's own slow error look alike to both.
 
 Eq 5's x_hat values are correlated from epoch to epoch, so T_KF is not chi-square with N dof; given a
 false-alarm probability the "kalman" variant's threshold is the exact quantile of T_KF's generalised
@@ -272,9 +286,10 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
     at each epoch (beam model "cone") or an empty array (nadir: eq 2's map height under the position).
     Writes [t, p, s, sigma, T, alarm, source] into `out`.
     state: [next epoch time, count, ring position, last p, kf x, kf P, alarm seen]; ring (N, 3): the
-    terms p^2/sigma^2, x^2/P and nu^2/S; wring (N, 10): the ring of correlated_disparity.whitened_statistic
-    (used when cfg[16] > 0: a correlated map error); est_terms: the navigator's [P_dd, -, -, P_nn, P_ne,
-    P_ee] for it."""
+    terms p^2/sigma^2, x^2/P and nu^2/S; wring (N, 11): the ring of correlated_disparity.whitened_statistic
+    (used when cfg[16] > 0: a correlated map error, when the window holds an epoch whose position came from
+    the navigator - its error is correlated across the window - or when the bias GLRT is on, cfg[21] > 0,
+    an alarm also when T_b > cfg[21]); est_terms: the navigator's [P_dd, -, -, P_nn, P_ne, P_ee] for it."""
     n_win = int(cfg[0])
     sig_map2 = cfg[3] * cfg[3]
     kalman = cfg[8] > 0.5                              # 1: eq 5 on x_hat, 2: on the innovations
@@ -282,7 +297,7 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
     thr = cfg[10]
     cone = r_map.shape[0] > 0
     corr_len = cfg[16]
-    whiten = corr_len > 0.0 and not kalman
+    whiten = (corr_len > 0.0 or cfg[21] > 0.0) and not kalman
     sig_b2 = cfg[18] * sig_map2
     sig_r2 = sig_map2 - sig_b2
     m = 0
@@ -328,12 +343,21 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
         if nav_src:
             wring[pos, 5] = rows[i, 8]                 # the map's slope under the epoch
             wring[pos, 6] = rows[i, 9]
+        wring[pos, 10] = rows[i, 0]
         state[2] = (pos + 1) % n_win
         state[1] += 1
         col = int(cfg[8])
         tot = np.nan
-        if state[1] >= n_win and whiten:               # p' Sigma^-1 p: chi2(N) under the map's model
-            tot = whitened_statistic(wring, int(state[2]), n_win, sig_r2, sig_b2, corr_len, int(cfg[17]))
+        t_bias = 0.0
+        nav_in_window = False
+        if state[1] >= n_win and not kalman and not whiten:
+            for k2 in range(n_win):
+                if wring[k2, 4] > 0.0 or wring[k2, 7] > 0.0 or wring[k2, 9] > 0.0:
+                    nav_in_window = True
+                    break
+        if state[1] >= n_win and (whiten or nav_in_window):   # p' Sigma^-1 p: chi2(N) under the model
+            tot, t_bias = whitened_statistic(wring, int(state[2]), n_win, sig_r2, sig_b2, corr_len,
+                                             int(cfg[17]), cfg[19], cfg[20])
         elif state[1] >= n_win:
             tot = 0.0
             for k2 in range(n_win):
@@ -343,7 +367,7 @@ def _statistic_kernel(rows, r_map, cfg, state, ring, wring, est_terms, out):
         out[m, 2] = s
         out[m, 3] = math.sqrt(var)
         out[m, 4] = tot
-        out[m, 5] = 1.0 if tot > thr else 0.0
+        out[m, 5] = 1.0 if tot > thr or (cfg[21] > 0.0 and t_bias > cfg[21]) else 0.0
         if out[m, 5] > 0.0:
             state[6] = 1.0                             # an alarm epoch in this update
         out[m, 6] = rows[i, 7]
@@ -428,8 +452,8 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
     la = np.empty(m)
     lo = np.empty(m)
     hh = np.empty(m)
-    _ra_batch(heights, lat0, lon0, dlat, dlon, cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax, bmin,
-              h_min, h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
+    _ra_batch((heights, lat0, lon0, dlat, dlon, False), cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax,
+              bmin, h_min, h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan
@@ -462,6 +486,9 @@ class DemIntegrityMonitor:
         self.dem = dem
         c = self.config
         self.threshold = c.effective_threshold
+        # the bias GLRT's chi2(1) threshold (0: off)
+        self.bias_threshold = (chi2_threshold(c.bias_glrt_false_alarm_probability, 1)
+                               if c.bias_glrt_false_alarm_probability > 0.0 else 0.0)
         self._cfg = np.array([c.n_window, c.sample_period_s, c.lever_arm_m, c.map_sigma_m,
                               c.radar_altimeter_noise_const_m, c.radar_altimeter_noise_fraction,
                               c.gnss_vertical_sigma_m, c.gnss_max_age_s,
@@ -469,7 +496,8 @@ class DemIntegrityMonitor:
                               c.kf_process_ratio, self.threshold, 0.0, 0.0, 0.0,
                               math.radians(c.beam_half_angle_deg), c.max_range_m,
                               c.correlation_length_m, CORRELATION_CODES[c.correlation_function],
-                              c.map_bias_fraction], float)
+                              c.map_bias_fraction, c.navigator_error_time_constant_s,
+                              c.navigator_height_time_constant_s, self.bias_threshold], float)
         self._est = np.zeros(14)
         self._rows = np.empty((64, 10))
         self._out = np.empty((64, 7))
@@ -479,7 +507,7 @@ class DemIntegrityMonitor:
     def reset(self) -> None:
         self._state = np.array([-np.inf, 0.0, 0.0, np.nan, 0.0, 1.0, 0.0])
         self._ring = np.zeros((int(self.config.n_window), 3))
-        self._wring = np.zeros((int(self.config.n_window), 10))
+        self._wring = np.zeros((int(self.config.n_window), 11))
         self._alarm = False
 
     def update(self, frames: SensorFrames, estimate: Estimate) -> MonitorOutput:

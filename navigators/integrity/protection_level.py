@@ -3,10 +3,16 @@
 A protection level is a radius about the published horizontal position that the true position lies inside
 with probability at least 1 - integrity_risk per epoch, as the navigator's own belief states it:
 
-- grid and particle filters (pmf, pf, rbpf): the radius about the belief's weighted mean outside which the
+- grid and particle filters (pmf, pf): the radius about the belief's weighted mean outside which the
   belief holds at most `integrity_risk` of its probability mass (`weighted_mass_radius`, a numba kernel over
   the points and their weights; `weighted_mass_radius_reference` is its plain numpy twin), plus a pad for
   what the points do not resolve (a point-mass cell's half diagonal, process noise not yet convolved);
+- the Rao-Blackwellized particle filter (rbpf): its marginal position posterior is a Gaussian mixture, each
+  particle the Gaussian its position was drawn from at the last time update (seed 002 eq 5: its own Kalman
+  covariance P reaching the position through the error model's B, N_k = B P_k B' + Q^n), weighted by the
+  particle's weight; `mixture_mass_radius` bounds that mixture's mass outside a radius about the published
+  position from above (numba; tests check it against Monte Carlo draws of the mixture). A point cloud's
+  mass radius alone (1,000 points for a 1e-3 tail) ignores that spread and is too tight;
 - Gaussian filters (ins_tercom, acq_track): `gaussian_hpl`, the radius r with P(|e| > r) <= integrity_risk
   for a zero-mean Gaussian horizontal error with covariance P: r = sigma_major sqrt(-2 ln risk),
   sigma_major^2 the largest eigenvalue of P's horizontal block (exact for a circular error; an elliptical
@@ -139,6 +145,66 @@ def particle_hpl(dn_m, de_m, w, risk: float, pad_m: float = 0.0) -> float:
                              np.ascontiguousarray(de_m, dtype=np.float64),
                              np.ascontiguousarray(w, dtype=np.float64), float(risk))
     return float(r) + float(pad_m)
+
+
+@njit(cache=True)
+def mixture_mass_radius(dn_m, de_m, var_major_m2, w, risk):
+    """Radius r (m) about the origin (the published position) with sum_k w_k T_k(r) <= risk sum_k w_k for
+    the Gaussian mixture sum_k w_k N((dn_k, de_k), C_k), var_major_m2[k] = lambda_max(C_k) (m^2):
+    T_k(r) = exp(-max(r - d_k, 0)^2 / (2 lambda_k)) bounds P(|x_k| > r) from above (|x_k| <= d_k + |y_k|,
+    d_k = |mean_k|, and P(|y_k| > s) <= exp(-s^2 / (2 lambda_k)) for y_k ~ N(0, C_k), exact for a circular
+    C_k); a component with lambda_k = 0 is a point (T_k = 1 if d_k > r, else 0). Bisection on the
+    decreasing sum; NaN for no finite positive weight."""
+    n = dn_m.shape[0]
+    tot = 0.0
+    hi = 0.0
+    big = math.sqrt(-2.0 * math.log(risk))
+    for k in range(n):
+        if w[k] > 0.0 and dn_m[k] == dn_m[k] and de_m[k] == de_m[k] and var_major_m2[k] == var_major_m2[k]:
+            tot += w[k]
+            r_k = math.hypot(dn_m[k], de_m[k]) + math.sqrt(max(var_major_m2[k], 0.0)) * big
+            if r_k > hi:
+                hi = r_k
+    if not tot > 0.0:
+        return np.nan
+    lo = 0.0
+    target = risk * tot
+    for _ in range(60):
+        r = 0.5 * (lo + hi)
+        tail = 0.0
+        for k in range(n):
+            wk = w[k]
+            if not (wk > 0.0 and dn_m[k] == dn_m[k] and de_m[k] == de_m[k]
+                    and var_major_m2[k] == var_major_m2[k]):
+                continue
+            dk = math.hypot(dn_m[k], de_m[k])
+            if dk > r:
+                tail += wk
+            elif var_major_m2[k] > 0.0:
+                tail += wk * math.exp(-0.5 * (r - dk) ** 2 / var_major_m2[k])
+        if tail <= target:
+            hi = r
+        else:
+            lo = r
+        if hi - lo <= 1e-6 * max(hi, 1.0):
+            break
+    return hi
+
+
+def major_variances(cov_ne: np.ndarray) -> np.ndarray:
+    """lambda_max of each 2 x 2 block of cov_ne (K, 2, 2), m^2."""
+    c = np.asarray(cov_ne, float)
+    a, d = c[:, 0, 0], c[:, 1, 1]
+    b = 0.5 * (c[:, 0, 1] + c[:, 1, 0])
+    return 0.5 * (a + d) + np.sqrt(np.maximum(0.25 * (a - d) ** 2 + b * b, 0.0))
+
+
+def mixture_hpl(dn_m, de_m, cov_ne, w, risk: float) -> float:
+    """mixture_mass_radius of the mixture sum_k w_k N((dn_k, de_k), cov_ne[k]) (cov_ne (K, 2, 2), m^2)."""
+    return float(mixture_mass_radius(np.ascontiguousarray(dn_m, dtype=np.float64),
+                                     np.ascontiguousarray(de_m, dtype=np.float64),
+                                     np.ascontiguousarray(major_variances(cov_ne), dtype=np.float64),
+                                     np.ascontiguousarray(w, dtype=np.float64), float(risk)))
 
 
 def configure(navigator, integrity_risk=DEFAULT_INTEGRITY_RISK, map_horizontal_sigma_m=0.0) -> None:

@@ -78,10 +78,11 @@ N_OUT = 11
 
 
 @njit(cache=True)
-def _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+def _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
              vx, vy, vz, un, ue, C, sin_w, max_range, sv, t_guess):
     """Terrain point on the plane v . p = 0 at across-track coordinate sv (m): returns (f, t, x, y, z) with f
     the range if it lies in the look window (else inf; no point: t NaN)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (read bilinearly)
     wn = -ue
     we = un
     vh = np.sqrt(vx * vx + vy * vy)
@@ -118,15 +119,15 @@ def _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, im
 
 
 @njit(cache=True)
-def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+def _golden(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
             vx, vy, vz, un, ue, C, sin_w, max_range, a, b, t_guess, iters):
     """Golden-section minimum of the in-window range over s in [a, b]: (f, s, t, x, y, z) of the lowest
     point evaluated (a minimum on the look window's edge is approached from inside)."""
     c1 = b - _GOLD * (b - a)
     c2 = a + _GOLD * (b - a)
-    f1, t1, x1, y1, z1 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+    f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
                                   vx, vy, vz, un, ue, C, sin_w, max_range, c1, t_guess)
-    f2, t2, x2, y2, z2 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+    f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
                                   vx, vy, vz, un, ue, C, sin_w, max_range, c2, t_guess)
     if f1 <= f2:
         fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
@@ -141,8 +142,8 @@ def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh
             c1 = b - _GOLD * (b - a)
             if t1 == t1:
                 tg = t1
-            f1, t1, x1, y1, z1 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm,
-                                          imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c1, tg)
+            f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc, vx, vy, vz, un, ue,
+                                          C, sin_w, max_range, c1, tg)
             if f1 < fb:
                 fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
         else:
@@ -152,8 +153,8 @@ def _golden(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm, imh
             c2 = a + _GOLD * (b - a)
             if t2 == t2:
                 tg = t2
-            f2, t2, x2, y2, z2 = _zd_eval(heights, lat0, lon0, dlat, dlon, lat, lon, ha, s_, c_, m, n, dm,
-                                          imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range, c2, tg)
+            f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc, vx, vy, vz, un, ue,
+                                          C, sin_w, max_range, c2, tg)
             if f2 < fb:
                 fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
     return fb, sb, tb, xb, yb, zb
@@ -169,13 +170,14 @@ RUNNER_UP_SEPARATION_M = 67.5   # 1.5 scan steps of 45 m: another basin, or a fl
 
 
 @njit(cache=True)
-def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
+def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
               n_golden, lat_c, lon_c, s_lo, bin_hmax, sep_m, out):
     """Seed 002 eqs 23-26 for hypotheses k (antenna lat[k], lon[k] rad, h[k] m), the epoch's v_ned (3,) and
     C_bn (3, 3). out (n, N_OUT): R, theta, x_b, y_b, z_b, dR/dtheta_zdl, dR/dpsi_zdl (m/rad), s* (m across
     track), valid (1/0), and the range and look angle of the coarse scan's best sample farther than sep_m
     across track from the minimum (another basin or a flat minimum's far side; NaN: none in the window).
     d_ang <= 0 skips the eq 24 differences."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (read bilinearly)
     vhs = np.sqrt(v_ned[0] ** 2 + v_ned[1] ** 2)
     elev = np.arctan2(-v_ned[2], vhs)
     azim = np.arctan2(v_ned[1], v_ned[0])
@@ -223,7 +225,7 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
                         if dzb > 0.0 and sv * sv + dzb * dzb > best * best:
                             i += 1
                             continue
-                f, t, _, _, _ = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh,
+                f, t, _, _, _ = _zd_eval(rec, la, lo, ha, s_, c_, m, n, dm, imh,
                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, sv, tg)
                 if t == t:
                     tg = t
@@ -251,18 +253,18 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
                 i += 1
         if not best < np.inf:
             continue
-        f, sm, t, x, y, z = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
+        f, sm, t, x, y, z = _golden(rec, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
                                     vx, vy, vz, un, ue, C, sin_w, max_range, s_best - ds_m, s_best + ds_m,
                                     t_best, n_golden)
         if best2 < best + 0.3 * ds_m:  # a second basin nearly as low: refine it too, keep the lower
-            f2, sm2, t2, x2, y2, z2 = _golden(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm,
+            f2, sm2, t2, x2, y2, z2 = _golden(rec, la, lo, ha, s_, c_, m, n, dm,
                                               imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range,
                                               s_best2 - ds_m, s_best2 + ds_m, t_best2, n_golden)
             if f2 < f:
                 f, sm, t, x, y, z = f2, sm2, t2, x2, y2, z2
                 best, s_best, t_best = best2, s_best2, t_best2
         if not f < best:  # refinement left the window (a window-edge minimum): keep the coarse sample
-            f, t, x, y, z = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
+            f, t, x, y, z = _zd_eval(rec, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
                                      vx, vy, vz, un, ue, C, sin_w, max_range, s_best, t_best)
             sm = s_best
         # the coarse scan's best sample farther than sep_m across track from the minimum (range, look
@@ -272,7 +274,7 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
         else:
             so, to = s_r2, t_r2
         if r2 < np.inf:
-            fo, _, xo, yo, zo = _zd_eval(heights, lat0, lon0, dlat, dlon, la, lo, ha, s_, c_, m, n, dm, imh,
+            fo, _, xo, yo, zo = _zd_eval(rec, la, lo, ha, s_, c_, m, n, dm, imh,
                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, so, to)
             if fo < np.inf:
                 byo = C[0, 1] * xo + C[1, 1] * yo + C[2, 1] * zo
@@ -315,11 +317,12 @@ def zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v_ned, C, sin_w, max
 
 
 @njit(cache=True)
-def strip_bounds(heights, lat0, lon0, dlat, dlon, lat_c, lon_c, h_c, un, ue, s_lo, ds, nb, s_half, t_half):
+def strip_bounds(rec, lat_c, lon_c, h_c, un, ue, s_lo, ds, nb, s_half, t_half):
     """Highest terrain post near each across-track bin [s_lo + b ds, s_lo + (b + 1) ds) of the strip
     |along-track| <= t_half around the cloud centre's ZDL direction (u = (un, ue) along, w = (-ue, un)
     across). Every bilinear height in a cell is at most its highest corner post, so dilating each post by the
     cell diagonal makes the bins upper bounds of the terrain (-inf: no post)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (read bilinearly)
     out = np.full(nb, -np.inf)
     s_, c_, m, n, _ = _consts(lat_c)
     dn = (m + h_c) * dlat
@@ -419,7 +422,7 @@ def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float 
     lat = np.ascontiguousarray(lat_rad, float).ravel()
     lon = np.ascontiguousarray(lon_rad, float).ravel()
     h = np.ascontiguousarray(h_m, float).ravel()
-    heights, lat0, lon0, dlat, dlon = dem.grid
+    rec = dem.record()          # the map record (terrain.kernels.MapRecord), read bilinearly by the search
     out = np.empty((lat.shape[0], N_OUT))
     # every closest point lies within its range of the antenna, and the range is at most the range to the ZDL
     # point under the antenna (~AGL / cos(gamma)): bound the terrain over that margin (with 50 % spare)
@@ -446,9 +449,8 @@ def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float 
         t_half = spread_t + margin * abs(v[2]) / vh + 50.0
         s_lo = -s_half
         nb = int(np.ceil(2.0 * s_half / ds_m)) + 1
-        bins = strip_bounds(heights, lat0, lon0, dlat, dlon, lat_c, lon_c, h_c, un, ue, s_lo, float(ds_m), nb,
-                            s_half, t_half)
-    zdl_batch(heights, lat0, lon0, dlat, dlon, lat, lon, h, v, np.ascontiguousarray(C_bn, float),
+        bins = strip_bounds(rec, lat_c, lon_c, h_c, un, ue, s_lo, float(ds_m), nb, s_half, t_half)
+    zdl_batch(rec, lat, lon, h, v, np.ascontiguousarray(C_bn, float),
               float(np.sin(half_window_rad)), float(max_range_m), h_max, float(ds_m), float(d_ang_rad),
               int(n_golden), lat_c, lon_c, s_lo, bins, float(runner_up_separation_m), out)
     return out

@@ -29,10 +29,11 @@ PARALLEL_MIN_LOOKUPS = 2_000_000   # below this a thread's start-up (~0.1 ms) is
 
 @njit(cache=True, error_model="numpy")
 def mad_surface_reference(
-    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
+    rec, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
 ):
     """mad_surface by one terrain.kernels.bilinear lookup per (cell, sample): the plain definition, kept as
     the reference the fast kernel is tested against."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (terrain.kernels.MapRecord)
     n = 2 * half + 1
     m = lat_k.shape[0]
     out = np.empty((n, n))
@@ -75,8 +76,9 @@ def _axis_cells(x0, step, n, origin, spacing, n_posts, idx, frac, ok):
 
 
 @njit(cache=True, error_model="numpy")
-def _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, span_lat, span_lon):
+def _block_void_free(rec, lat_k, lon_k, span_lat, span_lon):
     """True if the DEM posts around every sample +- the shift spans hold no NaN (no lookup can be void)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (terrain.kernels.MapRecord)
     n_lat, n_lon = heights.shape
     lat_lo = lat_hi = lat_k[0]
     lon_lo = lon_hi = lon_k[0]
@@ -96,9 +98,15 @@ def _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, span_lat, sp
     return True
 
 
+@njit(cache=True, inline="always")
+def _rows_of(g, ri, ru, a, i_lo):
+    """The two interpolated map rows (ga, gb) bracketing replica row a and its weight u between them."""
+    return g[ri[a] - i_lo], g[ri[a] + 1 - i_lo], ru[a]
+
+
 @njit(cache=True, error_model="numpy")
 def _mad_surface_separable(
-    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
+    rec, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias
 ):
     """mad_surface's general path (any voids): same numbers as mad_surface_reference (one bilinear lookup
     per cell and sample), computed separably:
@@ -106,6 +114,7 @@ def _mad_surface_separable(
     row and east shift, then each cell needs one interpolation along latitude - the same operations in the
     same order, so the surface is bit-identical. Points that the bilinear would retry at a void edge go
     through terrain.kernels.bilinear itself."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (terrain.kernels.MapRecord)
     n = 2 * half + 1
     m = lat_k.shape[0]
     n_lat, n_lon = heights.shape
@@ -121,7 +130,7 @@ def _mad_surface_separable(
     tmp = np.empty(n)
     col_ok = np.ones(n, np.bool_)
     n_pass = 2 if remove_bias else 1
-    void_free = _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, half * abs(dlat_cell),
+    void_free = _block_void_free(rec, lat_k, lon_k, half * abs(dlat_cell),
                                  half * abs(dlon_cell))
     for pss in range(n_pass):
         for k in range(m):
@@ -152,9 +161,7 @@ def _mad_surface_separable(
                 for a in range(n):
                     if not rok[a]:
                         continue
-                    ga = g[ri[a] - i_lo]
-                    gb = g[ri[a] + 1 - i_lo]
-                    u = ru[a]
+                    ga, gb, u = _rows_of(g, ri, ru, a, i_lo)
                     acc_a = acc[a]
                     s_a = ssum[a]
                     if not remove_bias:
@@ -173,9 +180,7 @@ def _mad_surface_separable(
             for a in range(n):
                 if not rok[a]:
                     continue
-                ga = g[ri[a] - i_lo]
-                gb = g[ri[a] + 1 - i_lo]
-                u = ru[a]
+                ga, gb, u = _rows_of(g, ri, ru, a, i_lo)
                 chk = 0.0
                 for b in range(n):  # bilinear's r = a + u (b - a)
                     x = ga[b]
@@ -225,13 +230,14 @@ def _axis_fractions(x0, offsets, n, origin, spacing, n_posts, idx, frac, ok):
 
 
 @njit(cache=True, error_model="numpy")
-def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b, nb, span,
+def _chunk_tables(rec, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b, nb, span,
                   ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok):
     """Per sample k0 + kk (kk < kc): the along-longitude interpolation of every DEM row the north shifts
     touch, g[kk, rr, b] = bilinear's a/b term for east shift b (flat, row stride nb), its row-to-row
     difference dg (bilinear's b - a), and per north shift a the flat offset of its row (row_off), fraction
     u (row_u) and validity (row_in); n north shifts (lat_off), n_b east shifts padded to nb (lon_off).
     row_ok / col_ok are and-ed with this sample's validity."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (terrain.kernels.MapRecord)
     n_lat, n_lon = heights.shape
     unb = np.uint64(nb)
     one = np.uint32(1)
@@ -277,7 +283,7 @@ def _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, k_begin, k_end, lat_off, lon_off,
+def _mad_rows_pass(rec, lat_k, lon_k, h_meas_k, k_begin, k_end, lat_off, lon_off,
                    n_b, mode, mean_in, acc_io, row_ok, col_ok):
     """One pass of the MAD surface's rows over samples k_begin <= k < k_end, added to acc (flat, row stride
     len(lon_off)): mode 0 adds |d|, mode 1 adds d, mode 2 adds |d - mean| (d = h_meas - map height at the
@@ -287,6 +293,7 @@ def _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, k_be
     each cell's sum stays in a register across the four and LLVM vectorises across cells. Per cell the
     operations and their order over k are those of mad_surface_reference, so any split of the rows or of
     the samples (in order) gives the same bits. Releases the GIL."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (terrain.kernels.MapRecord)
     K = _CHUNK
     n = lat_off.shape[0]
     nb = lon_off.shape[0]
@@ -309,7 +316,7 @@ def _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, k_be
     unb = np.uint64(nb)
     for k0 in range(k_begin, k_end, K):
         kc = min(K, k_end - k0)
-        _chunk_tables(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b,
+        _chunk_tables(rec, lat_k, lon_k, k0, kc, lat_off, lon_off, n, n_b,
                       nb, span, ri, row_off, row_u, row_in, g, dg, cj, cv, cok, row_ok, col_ok)
         for a in range(n):
             ao = np.uint64(a) * unb
@@ -391,7 +398,7 @@ def _mad_rows_finish(acc, m, n_b, row_ok, col_ok, out):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _mad_rows_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, lat_off, lon_off, n_b,
+def _mad_rows_void_free(rec, lat_k, lon_k, h_meas_k, lat_off, lon_off, n_b,
                         remove_bias, out):
     """Rows of the MAD surface when no lookup can touch a void: out[a, b] for the north shifts lat_off[a]
     (rad) and east shifts lon_off[b], b < n_b: the passes of _mad_rows_pass over every sample (with
@@ -404,15 +411,15 @@ def _mad_rows_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k,
     row_ok = np.ones(n, np.bool_)
     col_ok = np.ones(n_b, np.bool_)
     if remove_bias:
-        _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
+        _mad_rows_pass(rec, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
                        1, mean, acc, row_ok, col_ok)
         for q in range(n * nb):
             mean[q] = acc[q] / m  # the reference's mean = s / m
             acc[q] = 0.0
-        _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
+        _mad_rows_pass(rec, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
                        2, mean, acc, row_ok, col_ok)
     else:
-        _mad_rows_pass(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
+        _mad_rows_pass(rec, lat_k, lon_k, h_meas_k, 0, m, lat_off, lon_off, n_b,
                        0, mean, acc, row_ok, col_ok)
     _mad_rows_finish(acc, m, n_b, row_ok, col_ok, out)
 
@@ -441,14 +448,14 @@ def _in_bands(n_rows: int, threads: int, band) -> None:
         w.join()
 
 
-def _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell,
+def _mad_surface_void_free(rec, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell,
                            half, remove_bias, threads: int = 1):
     """mad_surface when no lookup can touch a void: _mad_rows_void_free over all north shifts, split into
     `threads` bands of rows computed at the same time (the kernel releases the GIL; same bits either way)."""
     n = 2 * half + 1
     lat_off, lon_off = _shift_offsets(half, dlat_cell, dlon_cell)
     out = np.empty((n, n))
-    args = (heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k)
+    args = (rec, lat_k, lon_k, h_meas_k)
 
     def band(a0: int, a1: int, _i: int) -> None:
         _mad_rows_void_free(*args, lat_off[a0:a1], lon_off, n, remove_bias, out[a0:a1])
@@ -458,7 +465,7 @@ def _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas
 
 
 def mad_surface(
-    heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias,
+    rec, lat_k, lon_k, h_meas_k, dlat_cell, dlon_cell, half, remove_bias,
     threads: int | None = None,
 ):
     """MAD surface (2 half + 1, 2 half + 1), rows = north shifts j, columns = east shifts i (seed 000 eq 1/2).
@@ -470,15 +477,15 @@ def mad_surface(
     for a surface of more than PARALLEL_MIN_LOOKUPS lookups, else 1), else the separable
     _mad_surface_separable."""
     if lat_k.shape[0] == 0:
-        return _mad_surface_separable(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
+        return _mad_surface_separable(rec, lat_k, lon_k, h_meas_k, dlat_cell,
                                       dlon_cell, half, remove_bias)
-    void_free = _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, half * abs(dlat_cell),
+    void_free = _block_void_free(rec, lat_k, lon_k, half * abs(dlat_cell),
                                  half * abs(dlon_cell))
     if void_free:
         if threads is None:
             lookups = lat_k.shape[0] * (2 * half + 1) ** 2
             threads = TERCOM_THREADS if lookups > PARALLEL_MIN_LOOKUPS else 1
-        return _mad_surface_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
+        return _mad_surface_void_free(rec, lat_k, lon_k, h_meas_k, dlat_cell,
                                       dlon_cell, half, remove_bias, threads)
-    return _mad_surface_separable(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, h_meas_k, dlat_cell,
+    return _mad_surface_separable(rec, lat_k, lon_k, h_meas_k, dlat_cell,
                                   dlon_cell, half, remove_bias)

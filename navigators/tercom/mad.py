@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ..core.maps import map_record
 from ._mad_kernels import (  # noqa: F401  (re-exported: tests, bench)
     PARALLEL_MIN_LOOKUPS,
     TERCOM_THREADS,
@@ -99,7 +100,7 @@ def correlate(
     """
     if hasattr(grid, "grid"):
         grid = grid.grid
-    heights, lat0, lon0, dlat, dlon = grid
+    rec = map_record(grid, False)       # the map record (bilinear: TERCOM's MAD, seed 000 eq 1/2)
     lat = np.asarray(lat_rad, float)
     lon = np.asarray(lon_rad, float)
     hm = np.asarray(h_meas_m, float)
@@ -124,18 +125,13 @@ def correlate(
             raise ValueError("correlate: the accumulator was not fed these samples with these settings")
         surf = accumulator.surface()
     else:
-        surf = _surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, hm, d_lat_cell, d_lon_cell, half,
-                        remove_bias)
+        surf = _surface(rec, lat_k, lon_k, hm, d_lat_cell, d_lon_cell, half, remove_bias)
     return _fix_from_surface(t_s, surf, lat.size, half, cell_m, r_ns, r_ew, exclusion_cells)
 
 
-def _surface(heights, lat0, lon0, dlat, dlon, lat_k, lon_k, hm, d_lat_cell, d_lon_cell, half, remove_bias):
+def _surface(rec, lat_k, lon_k, hm, d_lat_cell, d_lon_cell, half, remove_bias):
     return mad_surface(
-        heights,
-        float(lat0),
-        float(lon0),
-        float(dlat),
-        float(dlon),
+        rec,
         np.ascontiguousarray(lat_k),
         np.ascontiguousarray(lon_k),
         np.ascontiguousarray(hm),
@@ -207,6 +203,7 @@ class MadAccumulator:
         if hasattr(grid, "grid"):
             grid = grid.grid
         self.grid = tuple(grid)
+        self.rec = map_record(self.grid, False)
         self.half, self.cell_m, self.remove_bias = int(half), float(cell_m), bool(remove_bias)
         self.lat_ref_rad = float(lat_ref_rad)
         self.r_ns = meridian_radius_m(self.lat_ref_rad)
@@ -235,26 +232,24 @@ class MadAccumulator:
         self._parts.append(part)
         if not self.void_free:
             return
-        heights, lat0, lon0, dlat, dlon = self.grid
         lat_k, lon_k, h_k = (np.ascontiguousarray(r) for r in part)
-        if not _block_void_free(heights, lat0, lon0, dlat, dlon, lat_k, lon_k,
-                                self.half * abs(self.dlat_cell), self.half * abs(self.dlon_cell)):
+        if not _block_void_free(self.rec, lat_k, lon_k, self.half * abs(self.dlat_cell),
+                                self.half * abs(self.dlon_cell)):
             self.void_free = False
             return
-        _mad_rows_pass(heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_k, 0,
-                       lat_k.shape[0], self.lat_off, self.lon_off, 2 * self.half + 1,
-                       1 if self.remove_bias else 0, self._acc, self._acc, self._row_ok, self._col_ok)
+        _mad_rows_pass(self.rec, lat_k, lon_k, h_k, 0, lat_k.shape[0], self.lat_off, self.lon_off,
+                       2 * self.half + 1, 1 if self.remove_bias else 0, self._acc, self._acc, self._row_ok,
+                       self._col_ok)
 
     def surface(self, threads: int | None = None) -> np.ndarray:
         """The MAD surface of every sample added (rows north shifts, columns east shifts), as mad_surface."""
         n = 2 * self.half + 1
-        heights, lat0, lon0, dlat, dlon = self.grid
         samples = np.concatenate(self._parts, axis=1) if self._parts else np.zeros((3, 0))
         lat_k, lon_k, h_k = (np.ascontiguousarray(r) for r in samples)
         m = lat_k.shape[0]
         if not self.void_free or m == 0:
-            return mad_surface(heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_k,
-                               self.dlat_cell, self.dlon_cell, self.half, self.remove_bias, threads)
+            return mad_surface(self.rec, lat_k, lon_k, h_k, self.dlat_cell, self.dlon_cell, self.half,
+                               self.remove_bias, threads)
         out = np.empty((n, n))
         if not self.remove_bias:
             _mad_rows_finish(self._acc, m, n, self._row_ok, self._col_ok, out)
@@ -266,7 +261,7 @@ class MadAccumulator:
             threads = TERCOM_THREADS if m * n * n > PARALLEL_MIN_LOOKUPS else 1
         row_ok = self._row_ok.copy()
         col_oks = [self._col_ok.copy() for _ in range(max(1, int(threads)))]   # per band: no shared writes
-        args = (heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_k, 0, m)
+        args = (self.rec, lat_k, lon_k, h_k, 0, m)
 
         def band(a0: int, a1: int, i: int) -> None:
             _mad_rows_pass(*args, self.lat_off[a0:a1], self.lon_off, n, 2, mean[a0 * nb:a1 * nb],

@@ -446,11 +446,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ira_batch(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
+    rec,
     cell_m,
     lat,
     lon,
@@ -477,6 +473,7 @@ def _ira_batch(
     work (8, >= n_max) and stack (>= 64, 12): scratch space, contents irrelevant. warm: (lat, lon) of the
     first query's hint, each later query's hint the previous valid return (warm_start of ira_return); an
     empty array: no hints."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
     sin_w = np.sin(half_window)
     grid = (lat0, lon0, dlat, dlon)
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
@@ -549,15 +546,10 @@ def ira_return(
     v = _stack("v_ned", v_ned, n, (3,))
     C = _stack("C_bn", C_bn, n, (3, 3))
     valid, rng, la, lo, hh = _outputs(n)
-    heights, lat0, lon0, dlat, dlon = dem.grid
     hmax_blocks, bslope, h_min, h_max, g_glob, cell_m = _ira_tables(dem)
     work, stack = _ira_workspace(2 * int(np.ceil(float(max_range_m) / cell_m)) + 9)
     _ira_batch(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
+        dem.record(),
         cell_m,
         lat,
         lon,

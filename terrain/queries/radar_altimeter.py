@@ -449,11 +449,7 @@ def _ra_bnb(
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ra_batch(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
+    rec,
     cell_m,
     lat,
     lon,
@@ -476,6 +472,7 @@ def _ra_batch(
 ):
     """The radar-altimeter query of every antenna state; h_min/h_max: the DEM's finite height range,
     blk_lb (bmax.size,) and blk_id (bmax.size,) int64: scratch space (overwritten before it is read)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
     out = np.empty(5)
@@ -510,14 +507,9 @@ def radar_altimeter_return(
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     C = _stack("C_bn", C_bn, lat.shape[0], (3, 3))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
-    heights, lat0, lon0, dlat, dlon = dem.grid
     bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(dem)
     _ra_batch(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
+        dem.record(),
         cell_m,
         lat,
         lon,

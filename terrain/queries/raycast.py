@@ -108,11 +108,7 @@ def _ray_hit(heights, grid, h_min, h_max, cell_m, lat, lon, ha, cv, dx, dy, dz, 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ray_cast_batch(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
+    rec,
     cell_m,
     lat,
     lon,
@@ -128,6 +124,7 @@ def _ray_cast_batch(
     h_out,
 ):
     """The ray cast of every origin (see ray_cast); h_min/h_max: the DEM's finite height range."""
+    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
     grid = (lat0, lon0, dlat, dlon)
     for k in range(lat.shape[0]):
         valid[k] = False
@@ -162,13 +159,8 @@ def ray_cast(dem, lat_rad, lon_rad, h_m, dir_ned, max_range_m: float = 20000.0) 
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     dirs = _stack("dir_ned", dir_ned, lat.shape[0], (3,))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
-    heights, lat0, lon0, dlat, dlon = dem.grid
     _ray_cast_batch(
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
+        dem.record(),
         _cell_m(dem),
         lat,
         lon,

@@ -54,13 +54,13 @@ def _bare_jsbsim_sim_s_per_wall_s(n_steps: int) -> float:
     from trn_env.scenario.loading import load_scenario
 
     sc = load_scenario("default")
-    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
-    fl = components.build_flight(sc.data, world, np.random.default_rng(0))
+    world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+    fl = components.build_flight(sc, world, np.random.default_rng(0))
     run = fl.fdm.run
     t0 = time.perf_counter()
     for _ in range(n_steps):
         run()
-    return n_steps * float(sc.data["aircraft"]["dt_s"]) / (time.perf_counter() - t0)
+    return n_steps * float(sc.aircraft.dt_s) / (time.perf_counter() - t0)
 
 
 def env_figures(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
@@ -141,12 +141,11 @@ def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: 
         from trn_env.scenario.loading import load_scenario
 
         sc = load_scenario("default")
-        data = sc.data
         if dt_s is not None:
-            data = {**data, "aircraft": {**data["aircraft"], "dt_s": float(dt_s)}}
-        world = components.build_terrain(data, sc.extras, np.random.default_rng(0))[0]
-        fdm = components.build_flight(data, world, np.random.default_rng(0)).fdm
-        dt = float(data["aircraft"]["dt_s"])
+            sc = sc.with_fields({"aircraft.dt_s": float(dt_s)})
+        world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+        fdm = components.build_flight(sc, world, np.random.default_rng(0)).fdm
+        dt = float(sc.aircraft.dt_s)
     n_run = max(1, int(round(agent_step_s / dt)))
 
     class BareJsbsimEnv(gym.Env):
@@ -258,7 +257,7 @@ def route_env_figures(quick: bool = False) -> dict:
         "env_route_speedup": med_cpu["after"] / med_cpu["before"],
         "env_route_speedup_wall": med["after"] / med["before"],
         "env_route_pipelined_speedup_wall": med["pipelined"] / med["before"],
-        "env_route_flight_dt_s": after.scenario.data["aircraft"]["dt_s"],
+        "env_route_flight_dt_s": after.scenario.aircraft.dt_s,
         "env_route_sim_seconds_per_wall_second": sim_rate,
         "env_route_sim_seconds_per_cpu_second": sim_rate_cpu,
         "env_route_pipelined_sim_seconds_per_wall_second": sims["pipelined"] / walls["pipelined"],

@@ -8,7 +8,8 @@ actions from a fixed seed, autoresets included):
 
 - fast_env_agent_steps_per_s: sub-env steps per wall second of TerrainNavFast-v0 with
   fast_env_num_envs = 256 sub-envs in one process (the median of fast_env_runs timed runs of
-  fast_env_steps_per_run vector steps each, after a warm-up step; numba compiled beforehand), single thread;
+  fast_env_steps_per_run vector steps each, after a warm-up step; numba compiled beforehand), on numba's
+  default threads (fast_env_threads, one per core; fast_env_threading_layer);
 - fast_env_full_tier_agent_steps_per_s: TerrainNav-v0 (the full JSBSim loop) at the same settings, one env,
   episode resets included, env construction excluded; fast_env_ratio_to_full_tier their ratio;
 - fast_env_bare_jsbsim_agent_steps_per_s: a bare JSBSim `fdm.run()` loop of the same aircraft (one
@@ -17,8 +18,8 @@ actions from a fixed seed, autoresets included):
   machine shared with other work tells what the tier costs; fast_env_load_average_1min the machine's load
   when measured (a 2-core machine is saturated at 2), fast_env_threads numba's thread count; the same
   two figures with numba limited to one thread (fast_env_agent_steps_per_s_one_thread,
-  fast_env_agent_steps_per_cpu_s_one_thread; the fast tier's kernels are single-threaded, so these match the
-  first two unless a kernel is made parallel);
+  fast_env_agent_steps_per_cpu_s_one_thread): on an idle machine the threads' wall figure approaches
+  fast_env_threads times the one-thread figure, while the CPU figures stay alike (what the threads cost);
 - fast_env_sim_seconds_per_wall_second: simulated aircraft-seconds per wall second of the fast tier;
 - fast_env_ms_per_vector_step: wall time of one step of all sub-envs (median run);
 - fast_env_build_s: constructing the vector env (terrain, information map) and its first reset.
@@ -76,6 +77,7 @@ def fast_figures(num_envs: int = 256, runs: int = 5, steps_per_run: int = 20) ->
         "fast_env_agent_steps_per_cpu_s": float(np.median(cpu_rates)),
         "fast_env_load_average_1min": float(os.getloadavg()[0]),
         "fast_env_threads": numba.get_num_threads(),
+        "fast_env_threading_layer": _threading_layer(),
         "fast_env_agent_steps_per_s_by_run": [round(r, 1) for r in rates],
         "fast_env_sim_seconds_per_wall_second": float(sim_rates[k]),
         "fast_env_ms_per_vector_step": float(ms[k]),
@@ -85,6 +87,15 @@ def fast_figures(num_envs: int = 256, runs: int = 5, steps_per_run: int = 20) ->
         "fast_env_build_s": build,
         "fast_env_decision_interval_s": env.decision_interval_s,
     }
+
+
+def _threading_layer() -> str:
+    import numba
+
+    try:
+        return str(numba.threading_layer())
+    except ValueError:  # no parallel kernel has run
+        return ""
 
 
 def full_figures(n_steps: int) -> dict:

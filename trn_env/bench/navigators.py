@@ -25,7 +25,6 @@ def _default_fix_inputs(n_samples: int, half_cells: int) -> tuple:
     """mad_surface arguments of a fix like the default scenario's: the bundled jacksboro DEM, n_samples
     IRA samples along a 4 km straight leg across its middle, 5 m cells, bias removed."""
     dem = terrain.load("jacksboro")
-    heights, lat0, lon0, dlat, dlon = dem.grid
     lat_min, lat_max, lon_min, lon_max = dem.bounds
     lat_c = 0.5 * (lat_min + lat_max)
     r_ns = meridian_radius_m(lat_c)
@@ -34,8 +33,7 @@ def _default_fix_inputs(n_samples: int, half_cells: int) -> tuple:
     lat_k = lat_c + s_m * np.cos(0.5) / r_ns
     lon_k = 0.5 * (lon_min + lon_max) + s_m * np.sin(0.5) / r_ew
     h_meas = dem.height(lat_k, lon_k) + 3.0 + np.random.default_rng(1).normal(0.0, 2.0, n_samples)
-    return (heights, float(lat0), float(lon0), float(dlat), float(dlon), lat_k, lon_k, h_meas,
-            5.0 / r_ns, 5.0 / r_ew, half_cells, True)
+    return (dem.record(), lat_k, lon_k, h_meas, 5.0 / r_ns, 5.0 / r_ew, half_cells, True)
 
 
 def benchmark(

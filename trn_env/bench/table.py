@@ -31,7 +31,16 @@ PAIRS: list[tuple[str, str, str | None, str]] = [
      "acq_track_closed_loop_ratio", "bare JSBSim"),
     ("planner_astar_s", "planner_reference_scipy_dijkstra_s", None, "scipy Dijkstra"),
     ("filters_ins_tercom_sim_s_per_wall_s", "filters_bare_jsbsim_sim_s_per_wall_s", None, "bare JSBSim"),
+    ("fast_env_agent_steps_per_s", "fast_env_full_tier_agent_steps_per_s", "fast_env_ratio_to_full_tier",
+     "TerrainNav-v0 agent steps/s (full JSBSim loop)"),
+    ("fast_env_agent_steps_per_cpu_s", "fast_env_bare_jsbsim_agent_steps_per_s", None,
+     "bare JSBSim run() loop, 30 s decisions/s"),
     ("campaign_ray_mean_run_wall_s", "campaign_local_mean_run_wall_s", None, "local process pool"),
+    ("campaign_ray_runs_per_min", "campaign_local_runs_per_min", "campaign_ray_vs_local",
+     "local process pool (Ray's actors warm)"),
+    ("campaign_ray_cold_runs_per_min", "campaign_ray_tasks_cold_runs_per_min", None,
+     "Ray tasks, both from a fresh instance"),
+    ("campaign_ray_first_row_s", "campaign_ray_tasks_first_row_s", None, "Ray tasks, first row"),
 ]
 
 

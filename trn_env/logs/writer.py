@@ -171,6 +171,11 @@ def frame_columns(sensor: str, fr, k: int, increment: bool = False) -> dict[str,
     return cols
 
 
+def _read_column(pf: pq.ParquetFile, name: str) -> np.ndarray:
+    """One column of a Parquet file as a numpy array (it may share Arrow's buffer: copy to keep it)."""
+    return pf.read(columns=[name]).column(name).to_numpy()
+
+
 class LogWriter:
     """A sensor log being written (module docstring). `metadata`: the log's metadata (format, units and
     version are added); `chunk_rows`: rows per Parquet row group (the memory bound per table)."""
@@ -238,17 +243,30 @@ class LogWriter:
                 self._table(self._tick_tables, "estimates", ESTIMATES_SCHEMA).append(est)
 
     def read_ticks(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Every tick written so far, read back (closes the tick tables)."""
+        """Every tick written so far, read back (closes the tick tables): the truth rows (n, 16) and the
+        estimate columns, the covariance columns as one array "cov" (n, 9, 9)."""
         for name in ("truth", "estimates"):
             t = self._tick_tables.pop(name, None)
             if t is not None:
                 self.counts[name] = t.close()
         if not self.counts.get("truth"):
             return np.empty((0, len(TRUTH_ROW_COLUMNS))), {}
-        tr = pq.read_table(self.tmp / "truth.parquet")
-        rows = np.column_stack([tr.column(c).to_numpy() for c in TRUTH_ROW_COLUMNS])
-        es = pq.read_table(self.tmp / "estimates.parquet")
-        return rows, {c: es.column(c).to_numpy() for c in es.column_names}
+        # one column at a time, each copied out of Arrow's memory: the read-back then needs the result's
+        # own arrays plus one column, not a whole table beside them (Arrow's allocator keeps what it freed)
+        truth = pq.ParquetFile(self.tmp / "truth.parquet")
+        rows = np.empty((truth.metadata.num_rows, len(TRUTH_ROW_COLUMNS)))
+        for i, c in enumerate(TRUTH_ROW_COLUMNS):
+            rows[:, i] = _read_column(truth, c)
+        es = pq.ParquetFile(self.tmp / "estimates.parquet")
+        cov = np.empty((rows.shape[0], 9, 9))
+        est = {"cov": cov}
+        for c in es.schema_arrow.names:
+            if c.startswith("cov_"):
+                i, j = (int(x) for x in c[4:].split("_"))
+                cov[:, i, j] = _read_column(es, c)
+            else:
+                est[c] = _read_column(es, c).copy()
+        return rows, est
 
     def write_events(self, events) -> None:
         if not events:

@@ -109,7 +109,7 @@ class SimLog:
                         parts.setdefault(f"sensor_{name}_{k}", []).append(v)
         return {k: np.concatenate(v) for k, v in parts.items()}
 
-    def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
+    def arrays(self, world_dem, outages) -> dict[str, np.ndarray]:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
         position), gnss_available, nav_ok, est_hpl_m (the navigator's horizontal protection level, NaN
         where it published none), and sensor_<sensor>_<field> at the sensors' own rates."""
@@ -136,8 +136,11 @@ class SimLog:
         out["est_v_ned_mps"] = np.column_stack([est["v_n_mps"], est["v_e_mps"], est["v_d_mps"]]).reshape(n, 3)
         for name in ("roll_rad", "pitch_rad", "yaw_rad"):
             out[f"est_{name}"] = est[name]
-        out["est_cov"] = np.stack([est[f"cov_{i}_{j}"] for i in range(9) for j in range(9)],
-                                  axis=-1).reshape(n, 9, 9)
+        if "cov" in est:              # read back from the sink as one array (LogWriter.read_ticks)
+            out["est_cov"] = est.pop("cov")
+        else:
+            out["est_cov"] = np.stack([est[f"cov_{i}_{j}"] for i in range(9) for j in range(9)],
+                                      axis=-1).reshape(n, 9, 9)
         out["nav_ok"] = est["nav_ok"].astype(bool)
         out["nav_status_code"] = est["nav_status_code"].astype(np.int8)
         out["est_hpl_m"] = np.asarray(est["hpl_m"], float) if "hpl_m" in est else np.full(n, np.nan)

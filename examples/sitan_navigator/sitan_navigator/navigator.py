@@ -29,7 +29,7 @@ discretised along the INS history.
 Measurements, each at its own sample time:
 
 - radar altimeter: predicted range r(x) = the shortest return inside the beam cone around the body down
-  axis from the INS position on the map (navigators.measurements.terrain_models.ra_cone_ranges, as the
+  axis from the INS position on the map (navigators.measurements.radar_altimeter.predict, as the
   pmf's model); H = dr/d(position) by central differences over +-d north, east and up, d = max(half a map
   post, the horizontal 1-sigma, capped at `slope_baseline_max_m`): SITAN's slope taken over the region
   the position is uncertain in (its "stochastic linearisation"), not a single post pair. Noise: the
@@ -51,10 +51,11 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 from trn_env.navigators.core.capabilities import Capabilities
+from trn_env.navigators.core.maps import map_record
 from trn_env.navigators.frames import SensorFrames, imu_gap_s
 from trn_env.navigators.inertial.error_model_15 import noise_input_matrix, transition_over_history
 from trn_env.navigators.inertial.strapdown import StrapdownIns
-from trn_env.navigators.measurements.terrain_models import ra_cone_ranges
+from trn_env.navigators.measurements import radar_altimeter
 from trn_env.navigators.protocol import Estimate, Health
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
@@ -388,10 +389,9 @@ class SitanNavigator:
         st = self.ins.state
         r_lat, r_lon = self._metric()
         out = np.empty(7)
-        heights, lat0, lon0, dlat, dlon = self.grid
-        ra_cone_ranges(heights, lat0, lon0, dlat, dlon, st[0], st[1], r_lat, r_lon, st[2], dn, de, dh,
-                       self.ins.C_bn, np.zeros(1), math.radians(s.ra_half_beam_deg), int(s.ra_cone_rings), 8,
-                       out)
+        radar_altimeter.predict(map_record(self.grid, cubic=False), st[0], st[1], r_lat, r_lon, st[2], dn, de,
+                                dh, self.ins.C_bn, np.zeros(1), math.radians(s.ra_half_beam_deg),
+                                int(s.ra_cone_rings), 8, out)
         if not np.all(np.isfinite(out)):
             self.health.skip(t, "ra_off_map", "radar altimeter: no map return under the INS position")
             return

@@ -5,3 +5,9 @@ Modules: envelope (the King Air's measured point-mass envelope), state (per-airc
 batch TERCOM, Kalman filter), observation, reset, vector_env (the env), calibration (reference routes against
 the full JSBSim loop). User guide: docs/guide/fast_tier.md.
 """
+
+import os
+
+# numba's OpenMP threads wait passively at the end of a parallel call (vector_env's docstring, "Threads"),
+# unless the environment says otherwise; set before any kernel starts the OpenMP layer
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

@@ -91,6 +91,7 @@ WGS84_E2 = 6.69437999014e-3
     FP_SAMPLE_DT,
 ) = range(18)
 N_FLIGHT_PARAMS = 18
+CHUNK_AIRCRAFT = 8  # aircraft per chunk a thread takes from the parallel loops (numba.parallel_chunksize)
 
 
 @njit(cache=True)
@@ -140,7 +141,7 @@ def _wrap(a):
     return math.atan2(math.sin(a), math.cos(a))
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def fly_decision(
     X,
     state,
@@ -168,9 +169,11 @@ def fly_decision(
     tables,
 ):
     """Fly every active aircraft n_sub steps of fp[FP_DT] s (or to its episode's end, X[:, END] != 0); the
-    aircraft are independent (each writes only its own rows); one thread (prange marks the loop that could
-    be spread over cores: with numba's parallel=True two threads were slower here, the per-aircraft work
-    being uneven); diff (N, 3, profile) and tables (N, 4, candidates, profile) are TERCOM's scratch."""
+    aircraft are independent (each writes only its own rows and draws from its own random stream), so the
+    loop over them is spread over numba's threads (call it inside numba.parallel_chunksize(CHUNK_AIRCRAFT):
+    the work per aircraft is uneven - a TERCOM fix costs tens of steps - and small chunks taken in turn keep
+    both cores busy, also when one of them is taken by another process); diff (N, 3, profile) and tables
+    (N, 4, candidates, profile) are TERCOM's scratch."""
     dt = fp[FP_DT]
     v = fp[FP_TAS]
     tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])

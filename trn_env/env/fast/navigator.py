@@ -12,24 +12,28 @@ sets the horizontal error at the goal:
   estimate), plus the accelerometer's white noise (velocity random walk). Schuler feedback is left out
   (its 84 min period is long against an episode). The vertical channel is the barometer's: a constant height
   error per episode.
-- GNSS while available (the scenario's outage start): a position update at 1 Hz with its horizontal sigma.
+- GNSS while available (the scenario's outage start): position and velocity updates at 1 Hz with the
+  navigator's sigmas, the position sigma floored at gnss_correlated_sigma_m (as the full navigator's).
 - TERCOM (seed 000 eq 2, with the per-profile mean removed when the scenario's `remove_bias` is set): the
   profile of measured terrain heights (baro height minus radar height: true terrain + baro error + noise,
   1 Hz) along the INS-indicated track over `fix_period_s`, correlated with the MAP over +-half_cells x
-  cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point, then
-  +-40 m at 20 m and +-10 m at the cell size on every point); the best offset is the fix,
-  z = INS - matched position, noise fix_sigma_m, chi-square
-  gated (2 dof) against the filter's covariance, as the full navigator does.
+  cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point - a wider,
+  recovery window at 100 m, then +-100 m at 50 m -, then +-40 m at 20 m and +-10 m at the cell size on
+  every point); a best offset on the window's edge is a failed fix; otherwise it is the fix,
+  z = INS - matched position at the profile's mean time (z = p - lag v), noise fix_sigma_m, chi-square
+  gated (2 dof) against the filter's covariance, as the full navigator does (navigators.filters.ins_trn_ekf).
 - Kalman filter over (p, v, a) per axis with one shared covariance (the axes see the same dynamics and
   measurement noise): F the constant-acceleration transition, process noise from the navigator's settings
   as the full navigator's filter takes them (accel_noise_mps2_rthz: velocity random walk;
   g0 x gyro_noise_rps_rthz: the random walk of a, through the tilt), feedback form (the estimated errors
   are removed from the INS after each update).
 
-Health: a fix rejected by the gate counts; `nav_ok` is False after `integrity_window` rejections in a row,
-and then, as the full navigator does after a failed integrity test, the horizontal variance grows by
-recovery_sigma_m^2 and the search widens to recovery_half_cells until a fix is accepted (the full
-navigator's innovation monitor is a windowed test; the fast tier never reports "diverged").
+Health, as the full navigator's (navigators.integrity.innovation_monitor, navigators.core.recovery): every
+fix's NIS (accepted or gated; +inf for an edge fix) enters a test of the sum over the last
+integrity_window fixes against its chi-square upper limit (probability integrity_alpha / 2 above it).
+Entering "degraded" (`nav_ok` False) inflates the position variance by recovery_sigma_m^2 once and widens
+the search to recovery_half_cells until the test is back in band. The fast tier never reports
+"diverged".
 """
 
 from __future__ import annotations
@@ -83,6 +87,7 @@ G0_MPS2 = 9.80665
 COARSE_STEP_M = 50.0  # TERCOM's first search stage: grid step over the whole window
 BI_STEP_S = 10  # bias instabilities advance every 10 s
 COARSE_STRIDE = 4  # ... on every 4th profile point (1 Hz profile: 4 s apart)
+COARSE_STEPS = 5  # ... in at most this many steps each way from the centre (wider windows: longer steps)
 MODELLED_NAVIGATORS = ("ins", "ins_tercom")
 
 # navigator parameter vector (float64), built by navigator_params()
@@ -202,10 +207,9 @@ def navigator_params(
 
 
 def tercom_table_rows(nav: np.ndarray) -> int:
-    """Candidates per axis of the widest TERCOM search stage (tercom_offset's tables): the coarse stage over
-    the recovery window, or the fine stages' 5."""
-    widest_m = nav[NP_HALF_WINDOW] * max(nav[NP_RECOVERY_WINDOW], 1.0)
-    return max(2 * int(widest_m / nav[NP_COARSE_STEP] + 1e-9) + 1, 5)
+    """Candidates per axis of the widest TERCOM search stage (tercom_offset's tables): the coarse stage's
+    2 COARSE_STEPS + 1 (at most), or the fine stages' 5."""
+    return max(2 * COARSE_STEPS + 1, 5)
 
 
 @njit(cache=True)
@@ -428,11 +432,13 @@ def tercom_offset(
 ):
     """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
     positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
-    in coarse_step_m steps on every coarse_stride-th profile point, then +-40 m in 20 m steps and +-10 m in
-    cell_m steps around the best on every point. Each stage's candidates form a north x east lattice, so the
-    map cell and fraction of every point under every north and every east shift are tabulated once
-    (_axis_table) and a candidate's bilinear look-ups only read them. scratch: (3, >= n) work rows;
-    tables: (4, >= candidates per axis, >= points used) work tables. Returns (dn, de, mad)."""
+    in coarse_step_m steps (a window wider than COARSE_STEPS of them: in COARSE_STEPS longer steps, then
+    +-one of those in coarse_step_m steps around the best) on every coarse_stride-th profile point, then
+    +-40 m in 20 m steps and +-10 m in cell_m steps around the best on every point. Each stage's
+    candidates form a north x east lattice, so the map cell and fraction of every point under every north
+    and every east shift are tabulated once (_axis_table) and a candidate's bilinear look-ups only read
+    them. scratch: (3, >= n) work rows; tables: (4, >= candidates per axis, >= points used) work tables.
+    Returns (dn, de, mad)."""
     diff = scratch[0]
     fi = scratch[1]
     fj = scratch[2]
@@ -450,11 +456,17 @@ def tercom_offset(
     best_n = 0.0
     best_e = 0.0
     best = np.inf
-    steps = (coarse_step_m, 20.0, cell_m)
-    spans = (half_window_m, 40.0, 10.0)
-    for stage in range(3):
+    # the coarse stage spans the window in at most COARSE_STEPS steps each way; a wider window (recovery's)
+    # gets a middle stage at coarse_step_m around the coarse best
+    step0 = max(coarse_step_m, half_window_m / COARSE_STEPS)
+    steps = (step0, coarse_step_m, 20.0, cell_m)
+    spans = (half_window_m, step0, 40.0, 10.0)
+    strides = (coarse_stride, coarse_stride, 1, 1)
+    for stage in range(4):
+        if stage == 1 and step0 <= coarse_step_m + 1e-9:
+            continue
         step = steps[stage]
-        stride = coarse_stride if stage == 0 else 1
+        stride = strides[stage]
         span = min(spans[stage], half_window_m)
         k = min(int(span / step + 1e-9), (max_off - 1) // 2)
         na = 0

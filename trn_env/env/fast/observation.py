@@ -58,7 +58,7 @@ def _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon, lat, lon, no_info):
     return c if c == c else no_info
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def observe(
     X,
     mask,
