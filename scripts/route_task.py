@@ -53,6 +53,9 @@ def parse(argv):
     p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
     p.add_argument("--tiers", default="full,fast", help="tiers to evaluate in (comma separated)")
     p.add_argument("--max-episode-s", type=float, default=None, help="override the task's episode length")
+    p.add_argument("--torch-threads", type=int, default=None,
+                   help="torch/OpenMP threads per process (default: torch's own; 1 on a shared machine: "
+                        "the learner's SGD then does not spin on busy cores)")
     p.add_argument("--policies", default="straight,planner,random,ppo",
                    help="policies to evaluate (comma separated, of straight, planner, random, ppo)")
     p.add_argument("--merge-rows", type=Path, nargs="*", default=[],
@@ -81,6 +84,8 @@ def _check(args) -> dict:
         args.hidden_t = tuple(int(h) for h in args.hidden.split(","))
     except ValueError:
         raise ValueError(f"--hidden must be comma-separated widths, got {args.hidden!r}") from None
+    if args.torch_threads is not None and args.torch_threads < 1:
+        raise ValueError(f"--torch-threads must be >= 1, got {args.torch_threads}")
     args.policies_t = tuple(x.strip() for x in args.policies.split(",") if x.strip())
     bad = [x for x in args.policies_t if x not in POLICIES]
     if bad or not args.policies_t:
@@ -178,6 +183,13 @@ def main(argv=None) -> int:
     except (RLlibNotInstalled, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if args.torch_threads is not None:      # before Ray starts: its workers inherit the environment
+        import os
+
+        import torch
+        for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ[var] = str(args.torch_threads)
+        torch.set_num_threads(args.torch_threads)
     import ray
 
     args.out.mkdir(parents=True, exist_ok=True)

@@ -61,6 +61,24 @@ def test_paired_comparison_uses_only_pairs_where_both_arrived_and_its_interval_c
     assert "ppo vs straight" in rt.table(s)
 
 
+def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsys):
+    pytest.importorskip("ray.rllib")
+    spec = importlib.util.spec_from_file_location("route_task_script", ROOT / "scripts" / "route_task.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "o"
+    base = ["evaluate", "--out", str(out), "--policies", "straight"]
+    assert mod.main([*base[:3], "--policies", "straight,teleport"]) == 2
+    assert "--policies" in capsys.readouterr().err
+    assert mod.main([*base, "--torch-threads", "0"]) == 2
+    assert "--torch-threads" in capsys.readouterr().err
+    (tmp_path / "bad.json").write_text("{}")
+    assert mod.main([*base, "--merge-rows", str(tmp_path / "bad.json")]) == 2
+    assert "--merge-rows" in capsys.readouterr().err
+    assert mod.main([*base, "--merge-rows", str(tmp_path / "missing.json")]) == 2
+    assert not out.exists()                                  # nothing written
+
+
 def test_task_settings_and_bad_terrain():
     kw = route_task.env_kwargs("basin")
     assert kw["action_mode"] == "pursuit" and kw["decision_interval_s"] == 30.0
