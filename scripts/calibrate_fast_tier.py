@@ -11,6 +11,12 @@ statistics then carry little sampling noise next to the full loop's).
 
 Writes DIR/full_<route>.json, DIR/fast_<route>.json (per-seed errors) and DIR/table.md; prints the table.
 The full-loop results are reused from DIR when present (--tier fast), so the fast tier can be re-run alone.
+
+    python scripts/calibrate_fast_tier.py --policies planner,straight --policy-seeds 10 --tier fast --out DIR
+
+flies the route task's baselines instead (trn_env.campaign.route_task: basin terrain, its 5 held-out goals x
+seeds 1000..1000+N-1) in the tier(s) asked for: DIR/policies_<tier>.json (per-episode rows) and
+DIR/policies.md (mean, median, p90 and max true miss per policy and tier).
 """
 
 from __future__ import annotations
@@ -35,7 +41,12 @@ def main(argv=None) -> int:
     p.add_argument("--routes", nargs="*", default=None, help="route names (default: all)")
     p.add_argument("--tier", choices=("both", "full", "fast"), default="both")
     p.add_argument("--out", type=Path, default=Path("out/fast_calibration"))
+    p.add_argument("--policies", default=None,
+                   help="comma-separated route-task baselines (straight, planner) to fly, not the routes")
+    p.add_argument("--policy-seeds", type=int, default=10, help="seeds per held-out goal with --policies")
     args = p.parse_args(argv)
+    if args.policies is not None:
+        return _policies(args)
     from trn_env.env.fast.calibration import FAST_SEEDS
 
     fast_n = FAST_SEEDS if args.fast_seeds is None else args.fast_seeds
@@ -78,6 +89,38 @@ def main(argv=None) -> int:
         )
     table = "\n".join(lines)
     (args.out / "table.md").write_text(table + "\n")
+    print(table)
+    return 0
+
+
+def _policies(args) -> int:
+    import numpy as np
+
+    from trn_env.campaign import route_task as rt
+
+    known = {"straight": {"label": "straight", "kind": "straight"},
+             "planner": {"label": "planner", "kind": "planner", "config": {"weight": 3.0}}}
+    names = [n for n in args.policies.split(",") if n]
+    bad = [n for n in names if n not in known]
+    if bad or not names or args.policy_seeds < 1:
+        print(f"--policies: each one of {sorted(known)}, --policy-seeds >= 1; got {args.policies!r}, "
+              f"{args.policy_seeds}", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    tiers = ("full", "fast") if args.tier == "both" else (args.tier,)
+    seeds = list(range(1000, 1000 + args.policy_seeds))
+    lines = ["| policy | tier | episodes | arrived | mean (m) | median (m) | p90 (m) | max (m) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for tier in tiers:
+        rows = rt.evaluate([known[n] for n in names], "basin", seeds, (tier,))
+        (args.out / f"policies_{tier}.json").write_text(json.dumps(rows, indent=1, default=str))
+        for n in names:
+            m = np.array([r["true_miss_m"] for r in rows if r["policy"] == n], float)
+            a = m[np.isfinite(m)]
+            lines.append(f"| {n} | {tier} | {m.size} | {a.size} | {a.mean():.1f} | {np.median(a):.1f} | "
+                         f"{np.percentile(a, 90):.1f} | {a.max():.0f} |")
+    table = "\n".join(lines)
+    (args.out / "policies.md").write_text(table + "\n")
     print(table)
     return 0
 

@@ -54,6 +54,7 @@ from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  
 
 import trn_env.scenario.build as components  # noqa: E402
 from trn_env.scenario.loading import load_scenario  # noqa: E402
+from trn_env.scenario.sections import from_dict  # noqa: E402
 from trn_env.sim.closed_loop import ClosedLoop, perturbed_estimate  # noqa: E402
 from trn_env.sim.nav_stage import gate_gnss  # noqa: E402
 
@@ -66,10 +67,10 @@ def record_flight(scenario: str = "default", duration_s: float = 180.0, wind_mps
     the free INS."""
     sc = load_scenario(scenario, navigator="ins", duration_s=duration_s + 2.0, seed=seed)
     if wind_mps is not None:
-        sc.data["wind"]["layers"] = [
+        sc = sc.with_fields({"wind.layers": [
             {"altitude_m": 0.0, "direction_from_deg": 270.0, "speed_mps": wind_mps},
-            {"altitude_m": 6000.0, "direction_from_deg": 270.0, "speed_mps": wind_mps}]
-        sc.data["wind"]["turbulence"] = {"model": "none"}
+            {"altitude_m": 6000.0, "direction_from_deg": 270.0, "speed_mps": wind_mps}],
+            "wind.turbulence": {"model": "none"}})
     chunks = []
     with ClosedLoop(sc, pipeline=False, log_sensors=False) as loop:
         truth0 = copy.deepcopy(loop.last_truth)
@@ -83,12 +84,12 @@ def record_flight(scenario: str = "default", duration_s: float = 180.0, wind_mps
         while loop.termination is None and loop.t_s < duration_s:
             loop.tick()
         loop.sync()
-        return sc.data, chunks, loop.world_dem, loop.map_dem, truth0
+        return sc.to_dict(), chunks, loop.world_dem, loop.map_dem, truth0
 
 
 def sensor_frames(d: dict, chunks, world, seed: int, outages=({"start_s": 0.0},)):
     """The real sensor suite's frames of every chunk, with a run's own noise seed; GNSS gated."""
-    suite = components.build_sensors(d, np.random.SeedSequence([seed, 17]))
+    suite = components.build_sensors(from_dict(d), np.random.SeedSequence([seed, 17]))
     return [gate_gnss(suite.sample(c, world), list(outages)) for c in chunks]
 
 

@@ -39,6 +39,7 @@ import filter_statistics as fs  # noqa: E402
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
 
 import trn_env.scenario.build as components  # noqa: E402
+from trn_env.scenario.sections import from_dict  # noqa: E402
 
 INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
 
@@ -82,7 +83,7 @@ def run_seed(d: dict, names: list[str], grade: str, seed: int, flight, world_det
 
 
 def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
-    nav = components.build_navigator(dd, the_map, np.random.default_rng([seed, 29]))
+    nav = components.build_navigator(from_dict(dd), the_map, np.random.default_rng([seed, 29]))
     nav.reset(init)
     t, err, cov, status = [], [], [], []
     w0 = time.perf_counter()

@@ -56,7 +56,7 @@ def _fly(seed: int, faults: list[dict], outage: bool = False) -> dict:
     loop = ClosedLoop(sc, pipeline=True)
     r = loop.run()
     a = r.arrays
-    settings = monitor_settings(r.scenario.data, "dem_integrity")
+    settings = monitor_settings(r.scenario, "dem_integrity")
     white = {k: v for k, v in settings.items()
              if k not in ("correlation_length_m", "correlation_function", "map_bias_fraction", "sigma_m")}
     today = None

@@ -218,7 +218,7 @@ def closed_loop(seeds: int) -> dict:
                 tta.append(float(a_t[np.argmax(hit)] - t_in))
             # the Kalman-filtered statistic on the same flight's log (the map here is the faulted one: static)
             kf = create_monitor("dem_integrity", dem=loop.map_dem,
-                                **{**monitor_settings(r.scenario.data, "dem_integrity"), "variant": "kalman"})
+                                **{**monitor_settings(r.scenario, "dem_integrity"), "variant": "kalman"})
             rep = dm.replay_log(kf, r.arrays)
             hk = rep["alarm"] & (rep["t_s"] >= t_in)
             det_kf.append(bool(hk.any()))

@@ -105,7 +105,7 @@ def record(d: dict):
     by the closed loop on the free INS (with a JSBSim truth guidance then follows the route; a kinematic
     truth does not care)."""
     sc = validate(d, source="ira_crosswind")
-    rec = copy.deepcopy(sc.data)
+    rec = sc.to_dict()
     rec["navigator"] = {"name": "ins"}
     chunks = []
     rec_sc = validate(rec, source="ira_crosswind_recording")
@@ -154,9 +154,8 @@ def geometry(world, chunks, ira_cfg: IraConfig) -> dict:
 
 def run_pf(sc, the_map, frames, chunks, initial, seed: int) -> np.ndarray:
     """Horizontal errors (m, one per second) of the scenario's navigator on the given frames."""
-    nav_cfg = sc.data["navigator"]
-    nav = registry.create(nav_cfg["name"], dem=the_map, rng=np.random.default_rng([seed, 29]),
-                          **nav_cfg["settings"])
+    nav = registry.create(sc.navigator.name, dem=the_map, rng=np.random.default_rng([seed, 29]),
+                          **sc.navigator.table.to_dict())
     nav.reset(initial)
     err = []
     for fr, ch in zip(frames, chunks, strict=True):
@@ -183,9 +182,9 @@ def compare(runs: int = 10, seed0: int = 500, log=print, t_from_s: float = T_FRO
     wall = time.time()
     for r in range(runs):
         seed = seed0 + r
-        suite = components.build_sensors(sc.data, np.random.SeedSequence([seed, 17]))
+        suite = components.build_sensors(sc, np.random.SeedSequence([seed, 17]))
         frames = [suite.sample(c, world) for c in chunks]
-        init = perturbed_estimate(truth0, 0, sc.data["initial_errors"], np.random.default_rng([seed, 23]))
+        init = perturbed_estimate(truth0, 0, sc.initial_errors, np.random.default_rng([seed, 23]))
         for f, s in scs.items():
             err = run_pf(s, the_map, frames, chunks, init, seed)
             sq = np.sum(err[sel] ** 2, axis=1)
@@ -195,9 +194,9 @@ def compare(runs: int = 10, seed0: int = 500, log=print, t_from_s: float = T_FRO
             log(f"  run {r + 1}/{runs}: proposed {per_run['proposed'][-1]:.2f} m, "
                 f"conventional {per_run['conventional'][-1]:.2f} m")
     out = {"conditions": {**{k: v for k, v in conditions.items()}, "runs": runs,
-                          "airspeed_mps": float(sc.data["initial"]["tas_mps"]), "crosswind_mps": WIND_MPS,
+                          "airspeed_mps": float(sc.initial.tas_mps), "crosswind_mps": WIND_MPS,
                           "t_from_s": t_from_s},
-           "geometry": geometry(world, chunks, IraConfig.from_mapping(sc.data["sensors"]["ira"])),
+           "geometry": geometry(world, chunks, sc.sensors.ira),
            "wall_s": time.time() - wall}
     for f in scs:
         out[f] = {"horizontal_rms_m": float(np.sqrt(np.mean(np.concatenate(e2[f])))),

@@ -37,10 +37,11 @@ def one_run(args) -> dict:
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("default", duration_s=duration_s, seed=seed, navigator="rbpf")
-    sc.data["navigator"]["settings"] = {"integrity_alpha": alpha, **settings}
+    data = sc.to_dict()
+    data["navigator"]["settings"] = {"integrity_alpha": alpha, **settings}
     if map_is_world:
-        sc.data["terrain"]["map"] = {"dem": "world"}
-    res = ClosedLoop(validate(sc.data, source="default"), pipeline=False).run()
+        data["terrain"]["map"] = {"dem": "world"}
+    res = ClosedLoop(validate(data, source="default"), pipeline=False).run()
     a = res.arrays
     e, cov, t = a["err_ned_m"], a["est_cov"], a["t_s"]
     sel = np.flatnonzero(t >= CONVERGED_AFTER_S)

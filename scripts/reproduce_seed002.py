@@ -46,6 +46,7 @@ import trn_env.scenario.build as components
 from trn_env import terrain
 from trn_env.flight.kinematic import KinematicTruth
 from trn_env.scenario.loading import load_scenario
+from trn_env.scenario.sections import from_dict
 from trn_env.sensors.imu import ImuConfig, sample_imu
 from trn_env.sensors.ira import IraConfig, sample_ira
 
@@ -87,7 +88,7 @@ def scenario_data(duration_s: float, profile: str = "straight") -> dict:
     scenario's own leg)."""
     if profile not in PROFILES:
         raise ValueError(f"profile must be one of {sorted(PROFILES)}, got {profile!r}")
-    d = load_scenario(SCENARIO, duration_s=duration_s).data
+    d = load_scenario(SCENARIO, duration_s=duration_s).to_dict()
     d["truth"]["segments"] = [dict(m) for m in PROFILES[profile]]
     e = d["initial_errors"]
     got = (e["position_ned_m"], e["velocity_ned_mps"], np.asarray(e["attitude_mrad"]) * 1e-3)
@@ -104,13 +105,13 @@ def table1_initial_errors(rng: np.random.Generator) -> np.ndarray:
 def kinematic_truth(duration_s: float, dem, profile: str = "straight") -> KinematicTruth:
     """The seed002 scenario's kinematic truth (trn_env.scenario.build.build_kinematic_truth) over `dem`,
     with the motion profile PROFILES[profile]."""
-    return components.build_kinematic_truth(scenario_data(duration_s, profile), dem)
+    return components.build_kinematic_truth(from_dict(scenario_data(duration_s, profile)), dem)
 
 
 def sensor_configs(d: dict) -> tuple[ImuConfig, IraConfig]:
     """The scenario's IMU and IRA settings."""
-    cfg = components.sensor_configs(d)
-    return ImuConfig.from_mapping(cfg["imu"]), IraConfig.from_mapping(cfg["ira"])
+    cfg = components.sensor_configs(from_dict(d))
+    return cfg["imu"], cfg["ira"]
 
 
 def initial_estimate(truth, err) -> Estimate:

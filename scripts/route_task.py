@@ -4,6 +4,8 @@ PPO in both env tiers on the same held-out goals and seeds.
     python scripts/route_task.py all --out out/route_task                  # train (30 min budget), evaluate
     python scripts/route_task.py train --out out/route_task --minutes 30     # RLlib PPO, fast tier if present
     python scripts/route_task.py evaluate --out out/route_task --seeds 10    # needs OUT/checkpoints/final
+    python scripts/route_task.py evaluate --out out/b --policies straight,planner,random   # no checkpoint
+    python scripts/route_task.py evaluate --out out/route_task --policies ppo --merge-rows out/b/rows.json
     python scripts/route_task.py all --out /tmp/rt --iterations 1 --seeds 1 --max-episode-s 60   # tiny
 
 train: RLlib PPO (the `rllib` extra) on the task (trn_env.env.route_task: terrain `--terrain`, start and
@@ -23,6 +25,8 @@ import argparse
 import json
 import sys
 from pathlib import Path
+
+POLICIES = ("straight", "planner", "random", "ppo")
 
 
 def parse(argv):
@@ -49,6 +53,11 @@ def parse(argv):
     p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
     p.add_argument("--tiers", default="full,fast", help="tiers to evaluate in (comma separated)")
     p.add_argument("--max-episode-s", type=float, default=None, help="override the task's episode length")
+    p.add_argument("--policies", default="straight,planner,random,ppo",
+                   help="policies to evaluate (comma separated, of straight, planner, random, ppo)")
+    p.add_argument("--merge-rows", type=Path, nargs="*", default=[],
+                   help="rows.json files of earlier evaluations (same terrain and seeds) to summarise with "
+                        "this one's; this run's rows replace theirs for the same tier, policy, goal and seed")
     return p.parse_args(argv)
 
 
@@ -72,7 +81,22 @@ def _check(args) -> dict:
         args.hidden_t = tuple(int(h) for h in args.hidden.split(","))
     except ValueError:
         raise ValueError(f"--hidden must be comma-separated widths, got {args.hidden!r}") from None
-    if args.command == "evaluate":
+    args.policies_t = tuple(x.strip() for x in args.policies.split(",") if x.strip())
+    bad = [x for x in args.policies_t if x not in POLICIES]
+    if bad or not args.policies_t:
+        raise ValueError(f"--policies: each must be one of {', '.join(POLICIES)}, got {args.policies!r}")
+    for f in args.merge_rows:
+        if not f.is_file():
+            raise ValueError(f"--merge-rows: no file {f}")
+        try:
+            rows = json.loads(f.read_text())
+            keys = {"tier", "policy", "goal_index", "seed"}
+            ok = isinstance(rows, list) and all(keys <= set(r) for r in rows)
+        except (json.JSONDecodeError, TypeError):
+            ok = False
+        if not ok:
+            raise ValueError(f"--merge-rows: {f} is not a rows.json written by `evaluate`")
+    if args.command == "evaluate" and "ppo" in args.policies_t:
         ck = args.checkpoint or args.out / "checkpoints" / "final"
         if not ck.is_dir():
             raise ValueError(f"no checkpoint at {ck} (run `train` first, or give --checkpoint)")
@@ -96,7 +120,8 @@ def train(args, kw: dict) -> None:
 
     def show(row):
         print(f"[train {tier}] iter {row['iteration']}: {row['env_steps']:.0f} steps, {row['episodes']:.0f} "
-              f"episodes, return {row['episode_return_mean']:.2f}, {row['wall_s']:.0f} s", flush=True)
+              f"episodes, return {row['episode_return_mean']:.2f}, {row['wall_s']:.0f} s wall, "
+              f"{row['driver_cpu_s'] + row['env_runner_cpu_s']:.0f} s CPU", flush=True)
 
     algo, history = train(cfg, args.iterations, args.out / "checkpoints", 10, show, 60.0 * args.minutes)
     algo.stop()
@@ -116,15 +141,20 @@ def evaluate(args, kw: dict) -> dict:
     from trn_env.env.rllib import FAST_ID
 
     ck = (args.checkpoint or args.out / "checkpoints" / "final").resolve()
-    policies = [{"label": "straight", "kind": "straight"},
-                {"label": "planner", "kind": "planner", "config": {"weight": 3.0}},
-                {"label": "random", "kind": "random"},
-                {"label": "ppo", "kind": "rllib", "checkpoint": str(ck)}]
+    specs = {"straight": {"label": "straight", "kind": "straight"},
+             "planner": {"label": "planner", "kind": "planner", "config": {"weight": 3.0}},
+             "random": {"label": "random", "kind": "random"},
+             "ppo": {"label": "ppo", "kind": "rllib", "checkpoint": str(ck)}}
+    policies = [specs[p] for p in args.policies_t]
     tiers = [t for t in args.tiers.split(",") if t == "full" or FAST_ID in gym.registry]
     seeds = list(route_task.EVAL_SEEDS[:args.seeds]) if args.seeds <= len(route_task.EVAL_SEEDS) else \
         [route_task.EVAL_SEEDS[0] + k for k in range(args.seeds)]
     overrides = {"max_episode_s": kw["max_episode_s"]}
     rows = rt.evaluate(policies, args.terrain, seeds, tiers, overrides)
+    mine = {(r["tier"], r["policy"], r["goal_index"], r["seed"]) for r in rows}
+    for f in args.merge_rows:
+        rows += [r for r in json.loads(f.read_text())
+                 if (r["tier"], r["policy"], r["goal_index"], r["seed"]) not in mine]
     summary = rt.summarise(rows)
     summary["target"] = rt.target_check(summary)
     summary["tiers_evaluated"] = tiers

@@ -131,13 +131,12 @@ def _scenario(atmosphere: dict | None):
 
 def _baro_error_m(sc) -> tuple[float, float, float]:
     """(mean baro - true height, true height, expected error from the independent model) over 2 s."""
-    d = sc.data
     world = sc.extras["world_dem_raw"]
-    flight = components.build_flight(d, world, np.random.default_rng(0))
+    flight = components.build_flight(sc, world, np.random.default_rng(0))
     c = flight.advance(200)
     frame, _ = sample_baro(c, None, np.random.default_rng(0), BaroConfig.noise_free())
     h_true = c.h_msl_m[-1]
-    atm = d.get("atmosphere", {})
+    atm = sc.atmosphere.to_dict() if sc.atmosphere is not None else {}
     p = _hydrostatic_p_pa(h_true, atm.get("delta_T_K", 0.0), atm.get("p_sl_pa", 101325.0))
     return float(frame.h_baro_m[-1] - h_true), float(h_true), _isa_pressure_altitude_m(p) - h_true
 

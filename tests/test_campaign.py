@@ -260,12 +260,12 @@ def test_sweeps_expand_by_dotted_path_as_a_grid(tmp_path):
                             'grid = { start = 0.001, stop = 0.003, num = 3 }\n')
     c = load_campaign(p)
     assert c.seeds == [3, 4] and len(c.variants) == 6 and c.n_runs == 12
-    got = {(v.data["wind"]["layers"][0]["speed_mps"], v.data["navigator"]["settings"]["accel_bias_mps2"])
+    got = {(v.sections.wind.layers[0].speed_mps, v.sections.navigator.settings.accel_bias_mps2)
            for v in c.variants}
     assert got == {(s, b) for s in (2.0, 6.0) for b in (0.001, 0.002, 0.003)}
     # the other wind layer and the file's other settings are untouched
-    assert all(v.data["wind"]["layers"][1]["speed_mps"] == 9.0 for v in c.variants)
-    assert all(v.data["navigator"]["settings"]["gyro_bias_rps"] == pytest.approx(4.84813681109536e-06)
+    assert all(v.sections.wind.layers[1].speed_mps == 9.0 for v in c.variants)
+    assert all(v.sections.navigator.table["gyro_bias_rps"] == pytest.approx(4.84813681109536e-06)
                for v in c.variants)
 
 

@@ -136,13 +136,12 @@ def test_observation_and_reward_match_independent_computation():
 
 def test_collision_penalty_and_termination():
     """Level at 800 m MSL toward a 996 m summit 2.8 km north: terminated with the collision penalty."""
-    import copy
 
     from trn_env.flight.core import AutopilotTargets, LateralMode, VerticalMode
     from trn_env.scenario.loading import load_scenario, validate
 
     sc = load_scenario("default", navigator="ins")
-    data = copy.deepcopy(sc.data)
+    data = sc.to_dict()
     data["initial"] = {"lat_deg": 36.5408, "lon_deg": -84.2725, "h_msl_m": 800.0, "tas_mps": 85.0,
                        "heading_deg": 0.0}
     data["route"]["waypoints"] = [{"lat_deg": 36.5408, "lon_deg": -84.2725, "h_msl_m": 800.0},

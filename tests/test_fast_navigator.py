@@ -142,3 +142,10 @@ def test_tercom_beyond_the_window_ends_on_its_edge(basin_map):
     assert abs(dn) >= 250.0 - 1e-6 or abs(de) >= 250.0 - 1e-6, (dn, de)
     dn, de, _ = _search(grid, nav, meas, plat, plon, m_lat, m_lon, 500.0)  # the recovery window holds it
     assert abs(dn - 420.0) <= 5.0 and abs(de) <= 5.0, (dn, de)
+
+
+@pytest.mark.parametrize("window", [0, 9])
+def test_innovation_window_the_fast_tier_cannot_hold_is_refused(window):
+    imu = {"accel_noise_density_mps2_rthz": 1e-4}
+    with pytest.raises(ValueError, match=r"integrity_window: the fast tier models windows of 1 to 8"):
+        nv.navigator_params("ins_tercom", {"integrity_window": window}, imu, 10.0, 3.5, 50.0)

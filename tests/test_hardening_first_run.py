@@ -44,7 +44,7 @@ def test_warm_up_leaves_the_flight_bit_for_bit():
     data["terrain"]["world"].pop("refinement")
     sc = validate(data, source="test")
     plain = ClosedLoop(sc).run()
-    dems = build_terrain(sc.data, sc.extras, spawn_rngs(sc.seed)["map"])
+    dems = build_terrain(sc, sc.extras, spawn_rngs(sc.seed)["map"])
     assert warm_up(sc, dems) > 0.0
     warmed = ClosedLoop(sc, dems=dems).run()
     assert plain.arrays.keys() == warmed.arrays.keys()

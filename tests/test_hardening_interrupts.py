@@ -73,8 +73,11 @@ _CLOSE_WHILE_BUSY = """
 import sys, time
 from trn_env.scenario.loading import load_scenario
 from trn_env.sim.closed_loop import ClosedLoop
+import dataclasses
 sc = load_scenario(sys.argv[1], duration_s=30.0)
-sc.data["terrain"]["world"].pop("refinement", None)
+world = dataclasses.replace(sc.terrain.world, refinement=None)
+sc = dataclasses.replace(sc, sections=dataclasses.replace(
+    sc.sections, terrain=dataclasses.replace(sc.terrain, world=world)))
 for _ in range(2):
     loop = ClosedLoop(sc, pipeline=True)
     assert loop.pipelined

@@ -47,8 +47,8 @@ def test_run_folder_holds_the_resolved_scenario_and_replays_from_it(tmp_path, ca
     data, _ = read_scenario_file(run / "scenario.toml")
     assert data["seed"] == 5 and data["navigator"]["name"] == "ins" and data["duration_s"] == 8.0
     assert data["wind"]["layers"][0]["speed_mps"] == 7.5
-    assert load_scenario(run / "scenario.toml").data == load_scenario(
-        SCEN / "default_short.toml", seed=5, navigator="ins", duration_s=8.0).data | {
+    assert load_scenario(run / "scenario.toml").to_dict() == load_scenario(
+        SCEN / "default_short.toml", seed=5, navigator="ins", duration_s=8.0).to_dict() | {
         "wind": data["wind"]}
     replay = tmp_path / "replay"
     capsys.readouterr()
@@ -132,7 +132,9 @@ def test_sigterm_mid_flight_is_handled_like_ctrl_c(tmp_path):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, head + err
     assert "Traceback" not in err and err.strip().splitlines()[-1] == "terminated: nothing written", err
-    assert len(err.strip().splitlines()) == 1
+    # besides the progress bar (it may have drawn before the signal landed), the one line
+    messages = [ln for ln in err.strip().splitlines() if not ln.startswith("fly default:")]
+    assert len(messages) == 1, err
     assert sorted(p.name for p in tmp_path.iterdir()) == []     # no run folder, no .run.partial-* left
 
 

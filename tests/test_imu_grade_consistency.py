@@ -67,6 +67,16 @@ def test_imu_spec_from_the_scenario_grade():
         ImuSpec(accel_bias_mps2=math.nan)
 
 
+def _sections(name: str, grade: str):
+    """The default scenario's typed sections with the grade's IMU and navigator `name` (acq_track with the INS
+    as its aiding; the sensors are not checked against the navigator: only its construction is tested)."""
+    from trn_env.scenario.sections import from_dict
+    d = load_scenario("default", navigator="ins_tercom").to_dict()
+    settings = {"aiding_source": "ins"} if name == "acq_track" else {}
+    return from_dict({**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
+                      "navigator": {"name": name, "settings": settings}})
+
+
 def test_baro_loop_height_rate_against_the_loop_integrated():
     """The baro loop's transient rate (ImuSpec.baro_loop_height_rate_sigma_mps) against the third-order
     vertical channel integrated step by step (gains 3 / tau, 3 / tau^2, 1 / tau^3, as
@@ -95,16 +105,10 @@ def test_baro_loop_height_rate_against_the_loop_integrated():
 def test_build_navigator_applies_the_grade(name):
     """The tactical grade raises the navigator's error model above the navigation grade's; a navigation-grade
     scenario keeps the tuned figures (they are floors)."""
-    sc = load_scenario("default", navigator="ins_tercom")
-    d = sc.data
     from trn_env import terrain
     dem = terrain.load("jacksboro")
-    settings = {"aiding_source": "ins"} if name == "acq_track" else {}
-    navs = {}
-    for grade in ("navigation", "tactical"):
-        dd = {**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
-              "navigator": {"name": name, "settings": settings}}
-        navs[grade] = build_navigator(dd, dem, np.random.default_rng(0))
+    navs = {grade: build_navigator(_sections(name, grade), dem, np.random.default_rng(0))
+            for grade in ("navigation", "tactical")}
     n, t = navs["navigation"], navs["tactical"]
     g = 9.80665
     if name == "ins_tercom":
@@ -166,3 +170,17 @@ def test_tactical_grade_consistency():
             problems.append(f"{n}: thinned ANEES {anees:.2f} ({thin.size} samples, every {k} epochs) against "
                             f"[{lo:.2f}, {hi:.2f}], {100 * inside:.0f} % of epochs inside 3 sigma")
     assert not problems, problems
+
+
+@pytest.mark.parametrize("name", ["ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"])
+def test_consumer_grade_is_flagged_beyond_the_small_angle_model(name):
+    """The consumer grade's 100 deg/h gyro bias builds more than 0.57 deg of attitude error over every
+    navigator's memory: Health says its covariance is not calibrated there; on the tactical grade it says
+    nothing (measured consistency of each cell: docs/validation/navigators.md)."""
+    from trn_env import terrain
+    dem = terrain.load("jacksboro")
+    navs = {grade: build_navigator(_sections(name, grade), dem, np.random.default_rng(0))
+            for grade in ("tactical", "consumer")}
+    warnings = {grade: nav._consistency_warning for grade, nav in navs.items()}
+    assert warnings["tactical"] == ""
+    assert "not calibrated" in warnings["consumer"] and name in warnings["consumer"]

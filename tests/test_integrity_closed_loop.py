@@ -39,7 +39,7 @@ def faulted():
 
 def _entry_time(sc, res) -> float:
     """First logged time the true position is inside the fault's rectangle (from the scenario's numbers)."""
-    f = sc.data["terrain"]["map"]["faults"][0]
+    f = sc.terrain.map.faults[0].to_dict()
     a = res.arrays
     inside = []
     for lat, lon in zip(a["true_lat_rad"], a["true_lon_rad"], strict=True):
@@ -83,9 +83,9 @@ def test_no_alarm_without_the_fault_and_pipelined_equals_inline(faulted):
         if k.startswith("monitor_"):
             assert np.array_equal(v, inline.arrays[k], equal_nan=True), k
     # the monitor on the run's log (as on a real flight's), with the map as it is after the fault appeared
-    mon = create_monitor("dem_integrity", dem=loop.map_dem, **monitor_settings(sc.data, "dem_integrity"))
+    mon = create_monitor("dem_integrity", dem=loop.map_dem, **monitor_settings(sc, "dem_integrity"))
     replay = replay_log(mon, inline.arrays)
-    after = replay["t_s"] >= sc.data["terrain"]["map"]["faults"][0]["start_s"]
+    after = replay["t_s"] >= sc.terrain.map.faults[0].start_s
     np.testing.assert_array_equal(replay["disparity_m"][after],
                                   inline.arrays["monitor_dem_integrity_disparity_m"][after])
 

@@ -127,7 +127,7 @@ def _problems(data) -> list[str]:
 
 def test_scenario_with_faults_and_monitor_validates():
     sc = validate(_scenario_data(), source="test")
-    assert sc.data["monitors"]["dem_integrity"]["n_window"] == 50
+    assert sc.sections.monitor("dem_integrity").settings["n_window"] == 50
 
 
 @pytest.mark.parametrize("changes, field", [

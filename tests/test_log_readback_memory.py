@@ -10,10 +10,10 @@ import tracemalloc
 
 import numpy as np
 import pyarrow as pa
+from trn_env.terrain import Dem
 
 from trn_env.logs.writer import LogWriter
 from trn_env.sim.log import SimLog
-from trn_env.terrain import Dem
 
 
 def _log(tmp_path, n: int) -> SimLog:

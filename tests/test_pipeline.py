@@ -111,8 +111,7 @@ def test_a_killed_worker_gives_a_clear_error():
 
 
 def test_without_latency_the_loop_runs_inline():
-    sc = _scenario(3.0, navigator="ins")
-    sc.data["navigator"]["latency_updates"] = 0
+    sc = _scenario(3.0, navigator="ins").with_fields({"navigator.latency_updates": 0})
     with ClosedLoop(sc, pipeline=True) as loop:
         assert not loop.pipelined and loop.navigator is not None
 

@@ -188,13 +188,13 @@ def test_route_toml_is_accepted_by_a_scenario(basin, tmp_path):
 
     s_lat, s_lon, g_lat, g_lon = _start_goal(basin, fs=(0.1, 0.5))
     sc = load_scenario("basin_route")
-    s_lat, s_lon = math.radians(sc.data["initial"]["lat_deg"]), math.radians(sc.data["initial"]["lon_deg"])
+    s_lat, s_lon = math.radians(sc.initial.lat_deg), math.radians(sc.initial.lon_deg)
     r = TerrainInformationPlanner(basin).plan(s_lat, s_lon, g_lat, g_lon)
     table = tomllib.loads(r.toml(85.0))["route"]
-    data = dict(sc.data)
+    data = sc.to_dict()
     data["route"] = table
     checked = validate(data, source="planned")
-    assert len(checked.data["route"]["waypoints"]) == len(r.waypoints_deg)
+    assert len(checked.route.waypoints) == len(r.waypoints_deg)
 
 
 def test_forty_km_route_on_the_bundled_dem():

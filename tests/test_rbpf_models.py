@@ -291,9 +291,10 @@ def _default_route_run(seed: int, map_is_world: bool, every: int) -> tuple[list[
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("default", duration_s=240.0, seed=seed, navigator="rbpf")
+    data = sc.to_dict()
     if map_is_world:
-        sc.data["terrain"]["map"] = {"dem": "world"}
-    res = ClosedLoop(validate(sc.data, source="default"), pipeline=False).run()
+        data["terrain"]["map"] = {"dem": "world"}
+    res = ClosedLoop(validate(data, source="default"), pipeline=False).run()
     return _horizontal_nees(res, 15.0, every), res.summary["horizontal_error_rms_m"]
 
 
@@ -331,16 +332,17 @@ def test_scenario_gives_the_map_error_and_map_is_world():
     accuracy class's error reaches map_sigma_m / map_bias_sigma_m."""
     from trn_env.scenario.build import build_navigator
     from trn_env.scenario.loading import load_scenario
+    from trn_env.scenario.sections import from_dict
 
-    d = load_scenario("default", navigator="rbpf").data
-    nav = build_navigator(d, terrain.load("jacksboro"))
+    d = load_scenario("default", navigator="rbpf").to_dict()
+    nav = build_navigator(from_dict(d), terrain.load("jacksboro"))
     assert 2.0 < nav.terrain_model_sigma_m < 4.0 and nav.map_sigma_m == 0.0
     assert nav.terrain_detail_spacing_m == 30.0          # the world's refinement
     del d["terrain"]["world"]["refinement"]
-    nav = build_navigator(d, terrain.load("jacksboro"))
+    nav = build_navigator(from_dict(d), terrain.load("jacksboro"))
     assert nav.terrain_detail_spacing_m == pytest.approx(min(nav.dem.spacing_m) / 3.0)
     d["terrain"]["map"] = {"dem": "world", "error_model": {"preset": "srtm"}}
-    nav = build_navigator(d, terrain.load("jacksboro"))
+    nav = build_navigator(from_dict(d), terrain.load("jacksboro"))
     sig_v = 16.0 / 1.6449
     assert nav.terrain_model_sigma_m == 0.0
     assert nav.map_sigma_m == pytest.approx(sig_v * math.sqrt(0.5))
@@ -355,10 +357,11 @@ def test_scenario_gives_the_imu_bias_model():
     tactical grade (0.1 mg / 0.3 deg/h, tau 300 s) at 1 Hz and at 0.5 Hz."""
     from trn_env.scenario.build import build_navigator
     from trn_env.scenario.loading import load_scenario
+    from trn_env.scenario.sections import from_dict
 
     dem = terrain.load("jacksboro")
-    d = load_scenario("default", navigator="rbpf").data
-    nav = build_navigator(d, dem)
+    d = load_scenario("default", navigator="rbpf").to_dict()
+    nav = build_navigator(from_dict(d), dem)
     ug, deg_h = 9.80665e-6, math.radians(1.0) / 3600.0
     assert nav.ql_var[6:12] == pytest.approx(np.zeros(6), abs=0.0)
     assert np.sqrt(nav.P0[6, 6]) == pytest.approx(50.0 * ug) and np.sqrt(nav.P0[9, 9]) == pytest.approx(
@@ -366,7 +369,7 @@ def test_scenario_gives_the_imu_bias_model():
     for rate_hz in (1.0, 0.5):
         d["sensors"]["imu"] = {"grade": "tactical"}
         d["navigator"]["settings"] = {"trn_rate_hz": rate_hz}
-        nav = build_navigator(d, dem)
+        nav = build_navigator(from_dict(d), dem)
         T = 1.0 / rate_hz
         q_a = 100.0 * ug * math.sqrt(1.0 - math.exp(-2.0 * T / 300.0))
         q_g = 0.3 * deg_h * math.sqrt(1.0 - math.exp(-2.0 * T / 300.0))
@@ -401,7 +404,7 @@ def test_search_step_finds_the_sensors_closest_point_on_a_fine_map():
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("default", duration_s=60.0, seed=7, navigator="rbpf")
-    world = ClosedLoop(validate(sc.data, source="default"), pipeline=False).world_dem
+    world = ClosedLoop(validate(sc.to_dict(), source="default"), pipeline=False).world_dem
     step = ira_model.search_step_for(world)
     assert 10.0 < step < 20.0
     heights, lat0, lon0, dlat, dlon = world.grid

@@ -38,18 +38,17 @@ def test_builtins_listed_with_descriptions():
 def test_builtin_scenarios_validate(name):
     sc = load_scenario(name)
     assert sc.name == name
-    assert sc.data["initial_errors"]["position_ned_m"] == [30.0, 30.0, 15.0]  # seed 000 Table 2 default
+    assert sc.initial_errors.position_ned_m == (30.0, 30.0, 15.0)  # seed 000 Table 2 default
     assert sc.duration_s > 0
 
 
 def test_default_scenario_content_matches_issue():
     sc = load_scenario("default")
-    d = sc.data
-    assert d["terrain"]["world"]["dem"] == "jacksboro"
-    assert d["navigator"]["name"] == "ins_tercom"
-    assert {"imu", "baro", "ira"} <= set(d["sensors"])
-    assert all(abs(w["h_agl_m"] - 1500.0) < 1e-9 for w in d["route"]["waypoints"])
-    assert d["gnss"]["outages"][0]["start_s"] < 60.0 and "end_s" not in d["gnss"]["outages"][0]
+    assert sc.terrain.world.dem == "jacksboro"
+    assert sc.navigator.name == "ins_tercom"
+    assert {"imu", "baro", "ira"} <= set(sc.sensors.fitted)
+    assert all(abs(w.h_agl_m - 1500.0) < 1e-9 for w in sc.route.waypoints)
+    assert sc.gnss.outages[0].start_s < 60.0 and sc.gnss.outages[0].end_s is None
 
 
 def test_regression_scenarios_validate():
@@ -195,7 +194,7 @@ def test_relative_dem_path_resolved_against_scenario_file(tmp_path):
     (tmp_path / "sc.toml").write_text(text)
     assert tomllib.loads(text)["terrain"]["world"]["dem"] == "copy.npz"
     sc = load_scenario(tmp_path / "sc.toml")
-    assert Path(sc.data["terrain"]["world"]["dem"]).resolve() == (tmp_path / "copy.npz").resolve()
+    assert Path(sc.terrain.world.dem).resolve() == (tmp_path / "copy.npz").resolve()
 
 
 def _to_toml(data: dict) -> str:

@@ -169,7 +169,8 @@ def test_capabilities_are_declared_not_guessed_from_names():
     assert not hasattr(registry, "MAP_NOISE_AWARE") and not hasattr(registry, "IMU_AWARE")
     caps = {n: registry.capabilities(n) for n in BUILTIN_NAVIGATORS}
     assert {n for n, c in caps.items() if c.takes_rng} == {"pf", "rbpf"}
-    assert {n for n, c in caps.items() if c.uses_imu_spec} == {"ins", "ins_tercom", "pf", "pmf", "rbpf"}
+    assert {n for n, c in caps.items() if c.uses_imu_spec} == {"acq_track", "ins", "ins_tercom", "pf", "pmf",
+                                                                "rbpf"}
     assert {n for n, c in caps.items() if c.imu_bias_settings} == {"rbpf"}
     assert {n for n, c in caps.items() if c.needs_map} == {"acq_track", "ins_tercom", "pf", "pmf", "rbpf"}
     assert caps["ins_tercom"].warm_up_settings(1.0) == {"fix_period_s": 2.0, "min_samples": 1}
@@ -210,7 +211,7 @@ def test_free_inertial_refuses_aiding():
 
 @pytest.fixture(scope="module")
 def default_data():
-    return load_scenario("default", check_components=False).data
+    return load_scenario("default", check_components=False).to_dict()
 
 
 def _problems(data) -> list[str]:
@@ -281,14 +282,15 @@ def test_env_refuses_a_navigator_without_its_sensor():
 
 
 def test_unused_sensors_and_warm_up_settings(default_data):
-    assert build.unused_sensors(default_data) == ["air_data"]       # ins_tercom reads no air data
     from trn_env.scenario.loading import Scenario
     from trn_env.sim.warm_up import warm_up_scenario
-    sc = Scenario("x", "x", copy.deepcopy(default_data))
-    assert warm_up_scenario(sc).data["navigator"]["settings"]["min_samples"] == 1
+    sc = Scenario.from_dict(copy.deepcopy(default_data))
+    assert build.unused_sensors(sc) == ["air_data"]       # ins_tercom reads no air data
+    assert warm_up_scenario(sc).navigator.table["min_samples"] == 1
+    assert warm_up_scenario(sc).navigator.settings.min_samples == 1
     d = copy.deepcopy(default_data)
     d["navigator"] = {**d["navigator"], "name": "pmf", "settings": {}}
-    assert warm_up_scenario(Scenario("x", "x", d)).data["navigator"]["settings"] == {}
+    assert warm_up_scenario(Scenario.from_dict(d)).navigator.table == {}
 
 
 def test_schema_file_up_to_date():
@@ -307,11 +309,12 @@ def test_replay_refuses_a_log_without_a_required_sensor():
 
     from trn_env.logs.format import LogError
     from trn_env.logs.replay import check_sensors
+    from trn_env.scenario.sections import MonitorSection, NavigatorSection
     log = SimpleNamespace(path="x.trnlog", sensors=("imu", "baro", "gnss"))
-    d = {"navigator": {"name": "pmf", "settings": {}}, "monitors": {"dem_integrity": {}}}
+    d = SimpleNamespace(navigator=NavigatorSection.of("pmf"), monitors=(MonitorSection("dem_integrity"),))
     with pytest.raises(LogError, match=r"navigator 'pmf' needs sensor\(s\) the log does not hold: ira"):
         check_sensors(None, "pmf", log, d)
     log.sensors = ("imu", "ira")
     with pytest.raises(LogError, match="monitor 'dem_integrity' needs sensor.*radar_altimeter"):
         check_sensors(None, "pmf", log, d)
-    check_sensors(None, "pmf", log, {"navigator": {"name": "pmf", "settings": {}}})
+    check_sensors(None, "pmf", log, SimpleNamespace(navigator=NavigatorSection.of("pmf"), monitors=()))

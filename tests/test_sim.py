@@ -151,9 +151,9 @@ def test_guidance_flies_on_estimate_and_follows_route(short_run):
     # first leg of the default route is ~8 deg true; after 20 s the ground track is on it
     v = a["true_v_ned_mps"][-50:]
     track_deg = np.degrees(np.arctan2(v[:, 1], v[:, 0]))
-    wp0, wp1 = loop.scenario.data["route"]["waypoints"][:2]
-    leg = ned_vector_between(math.radians(wp0["lat_deg"]), math.radians(wp0["lon_deg"]), 0.0,
-                             math.radians(wp1["lat_deg"]), math.radians(wp1["lon_deg"]), 0.0)[0]
+    wp0, wp1 = loop.scenario.route.waypoints[:2]
+    leg = ned_vector_between(math.radians(wp0.lat_deg), math.radians(wp0.lon_deg), 0.0,
+                             math.radians(wp1.lat_deg), math.radians(wp1.lon_deg), 0.0)[0]
     leg_deg = math.degrees(math.atan2(leg[1], leg[0]))
     assert abs(np.mean(track_deg) - leg_deg) < 5.0
     # AGL hold at ~1500 m above the terrain

@@ -113,20 +113,22 @@ def test_pf_replay_is_bit_for_bit_under_one_seed(pf_flight):
 
 
 def test_build_navigator_hands_the_scenario_stream_and_the_map_noise(pf_flight):
+    from trn_env.scenario.sections import from_dict
     loop = pf_flight[3]
-    d = {"navigator": {"name": "pf", "settings": {"n_particles": 100}},
-         "terrain": {"map": {"error_model": {"preset": "srtm", "bias_fraction": 0.5}}}}
+    d = loop.scenario.to_dict()
+    d["navigator"] = {"name": "pf", "settings": {"n_particles": 100}}
+    d["terrain"]["map"]["error_model"] = {"preset": "srtm", "bias_fraction": 0.5}
     rng = np.random.default_rng(0)
-    nav = components.build_navigator(d, loop.map_dem, rng)
+    nav = components.build_navigator(from_dict(d), loop.map_dem, rng)
     assert nav.rng is rng
     sig_v = map_error.ACCURACY_CLASSES["srtm"].sigma_v_m
     assert nav.map_sigma_m == pytest.approx(sig_v * math.sqrt(0.5))
     assert nav.map_bias_sigma_m == pytest.approx(sig_v * math.sqrt(0.5))
     d["navigator"]["settings"]["map_sigma_m"] = 1.5          # an explicit setting wins
-    assert components.build_navigator(d, loop.map_dem, rng).map_sigma_m == 1.5
-    d["terrain"]["map"]["error_model"] = None
-    nav = components.build_navigator({"navigator": {"name": "pmf", "settings": {"grid_size": 11}},
-                                      "terrain": {"map": {}}}, loop.map_dem)
+    assert components.build_navigator(from_dict(d), loop.map_dem, rng).map_sigma_m == 1.5
+    del d["terrain"]["map"]["error_model"]
+    d["navigator"] = {"name": "pmf", "settings": {"grid_size": 11}}
+    nav = components.build_navigator(from_dict(d), loop.map_dem)
     assert nav.map_sigma_m == 0.0
 
 

@@ -67,8 +67,8 @@ def test_ins_follows_the_scenario_kinematic_truth():
     (tests/test_kinematic_truth.py: < 0.2 m and < 4 mm/s over 150 s), wind included: the ground velocity is
     the airspeed along the heading plus the wind."""
     sc = validate(_manoeuvring_scenario(), source="kinematic-test")
-    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
-    flight = components.build_flight(sc.data, world, np.random.default_rng(0))
+    world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+    flight = components.build_flight(sc, world, np.random.default_rng(0))
     first = flight.snapshot()
     chunks = [first]
     for _ in range(150):

@@ -364,7 +364,7 @@ def cmd_fly(args) -> int:
             print(f"preparing {scenario.name}: terrain, then the numba kernels it uses (compiled on the "
                   "first run only, about half a minute on an idle 2-core machine; cached afterwards) ...",
                   file=sys.stderr, flush=True)
-        dems = build_terrain(scenario.data, scenario.extras, spawn_rngs(scenario.seed)["map"])
+        dems = build_terrain(scenario, scenario.extras, spawn_rngs(scenario.seed)["map"])
         try:
             warm_s = warm_up(scenario, dems)
             writer = _log_writer(out_dir)
@@ -581,7 +581,7 @@ def _plotter(result):
 
     def plot(tmp: Path) -> list[str]:
         sc = result.scenario
-        wps = [(w["lat_deg"], w["lon_deg"]) for w in sc.data.get("route", {}).get("waypoints", [])]
+        wps = [(w.lat_deg, w.lon_deg) for w in (sc.route.waypoints if sc.route is not None else ())]
         title = f"{sc.name} / {sc.navigator_name} / seed {sc.seed}: {result.termination}"
         plots.plot_track(tmp / "track.png", result.world_dem, result.arrays, title=title, waypoints_deg=wps)
         plots.plot_errors(tmp / "errors.png", result.arrays, title=title)
@@ -737,16 +737,16 @@ def cmd_plan(args) -> int:
     import trn_env.scenario.build as components
     from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner, plot_route
     from trn_env.sim.closed_loop import spawn_rngs
-    d = scenario.data
+    sc = scenario
     try:
         if not all(math.isfinite(v) for v in args.goal):
             raise ValueError(f"--goal must be finite latitude and longitude, got {args.goal}")
         config = PlannerConfig(weight=args.weight, max_featureless_m=args.max_featureless, agl_m=args.agl,
-                               cell_m=args.cell, tas_mps=float(d["route"]["tas_mps"]),
+                               cell_m=args.cell, tas_mps=float(sc.route.tas_mps),
                                climb_rate_mps=None if args.no_climb_limit else args.climb_rate)
-        _, the_map = components.build_terrain(d, scenario.extras, spawn_rngs(scenario.seed)["map"])
+        _, the_map = components.build_terrain(sc, scenario.extras, spawn_rngs(scenario.seed)["map"])
         planner = TerrainInformationPlanner(the_map, config)
-        s_lat, s_lon = math.radians(d["initial"]["lat_deg"]), math.radians(d["initial"]["lon_deg"])
+        s_lat, s_lon = math.radians(sc.initial.lat_deg), math.radians(sc.initial.lon_deg)
         g_lat, g_lon = math.radians(args.goal[0]), math.radians(args.goal[1])
         route = planner.plan(s_lat, s_lon, g_lat, g_lon)
         straight = TerrainInformationPlanner(the_map, PlannerConfig(
@@ -760,12 +760,12 @@ def cmd_plan(args) -> int:
         return 2
     out = args.out
     plot_path = args.plot or out.with_suffix(".png")
-    header = (f"route for scenario {scenario.name!r} from ({d['initial']['lat_deg']}, "
-              f"{d['initial']['lon_deg']}) "
+    header = (f"route for scenario {scenario.name!r} from ({sc.initial.lat_deg}, "
+              f"{sc.initial.lon_deg}) "
               f"to ({args.goal[0]}, {args.goal[1]}) deg\n"
               f"trn-env plan {args.scenario} --goal {args.goal[0]} {args.goal[1]} --weight {args.weight:g}"
               + (f" --max-featureless {args.max_featureless:g}" if args.max_featureless else ""))
-    text = route.toml(float(d["route"]["tas_mps"]), header=header)
+    text = route.toml(float(sc.route.tas_mps), header=header)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
     tmp.write_text(text, encoding="utf-8")
@@ -777,19 +777,19 @@ def cmd_plan(args) -> int:
           f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "
           f"(straight {straight.featureless_m / 1000:.2f} km), "
           f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
-    print(_plan_reason(route, straight, d, config))
+    print(_plan_reason(route, straight, sc, config))
     return 0
 
 
-def _plan_reason(route, straight, d: dict, config) -> str:
+def _plan_reason(route, straight, sc, config) -> str:
     """Why the planned route is longer than the straight line: each one's featureless flight, the expected
     horizontal error at the end of its longest featureless stretch (where the navigator must find the
     terrain again) and at the goal (trn_env.guidance.goal_error, with the scenario's IMU)."""
     from trn_env.guidance.goal_error import expected_goal_error_m
     from trn_env.scenario.build import imu_bias_settings
-    imu = imu_bias_settings((d.get("sensors") or {}).get("imu"))
+    imu = imu_bias_settings(sc.sensors.imu)
     b_a, b_g = imu.get("accel_bias_sigma_mps2", 0.0), imu.get("gyro_bias_sigma_rps", 0.0)
-    tas = float(d["route"]["tas_mps"])
+    tas = float(sc.route.tas_mps)
 
     def err(featureless_m: float) -> float:
         return expected_goal_error_m(featureless_m, tas, b_a, b_g, sigma_fix_m=config.informative_crlb_m)

@@ -43,6 +43,7 @@ import numpy as np
 from trn_env.navigators import registry
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.protocol import Estimate, Health
+from trn_env.scenario.sections import ScenarioSections
 
 SENSORS = ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading")
 _FLIGHTS: dict[tuple, FlightRecord] = {}
@@ -53,12 +54,13 @@ _TRACE: dict[int, tuple[int, int]] = {}     # id(estimate) -> (skips so far, eve
 @dataclass
 class FlightRecord:
     """A recorded flight: its frames (one per navigator update), the initial estimate, the truth at the end
-    of each update (t_s, lat_rad, lon_rad, h_m arrays), the scenario data and the navigator's map."""
+    of each update (t_s, lat_rad, lon_rad, h_m arrays), the scenario's typed sections and the navigator's
+    map."""
 
     frames: list[SensorFrames]
     initial: Estimate
     truth: dict[str, np.ndarray]
-    data: dict
+    scenario: ScenarioSections
     map_dem: object
     wall_s: float
 
@@ -125,7 +127,7 @@ def recorded_flight(duration_s: float = 30.0, seed: int = 0, scenario: str = "de
         loop.close()
     rows = np.array(loop.log.truth_rows, float)
     truth = {"t_s": rows[1:, 0], "lat_rad": rows[1:, 1], "lon_rad": rows[1:, 2], "h_m": rows[1:, 3]}
-    rec = FlightRecord(list(loop.log.frames), initial, truth, sc.data, loop.map_dem,
+    rec = FlightRecord(list(loop.log.frames), initial, truth, sc.sections, loop.map_dem,
                        time.perf_counter() - wall0)
     _FLIGHTS[key] = rec
     return rec
@@ -227,9 +229,17 @@ def _build(factory_name: str, settings: dict, rec: FlightRecord, seed: int, kind
     from trn_env.scenario import build
     if kind == "monitor":
         return registry.create_monitor(factory_name, **{"dem": rec.map_dem, **settings})
-    d = copy.deepcopy(rec.data)
-    d["navigator"] = {**d["navigator"], "name": factory_name, "settings": dict(settings)}
-    return build.build_navigator(d, rec.map_dem, np.random.default_rng(seed))
+    return build.build_navigator(_with_navigator(rec.scenario, factory_name, settings), rec.map_dem,
+                                 np.random.default_rng(seed))
+
+
+def _with_navigator(sc: ScenarioSections, name: str, settings: dict) -> ScenarioSections:
+    """The recorded flight's scenario flown by navigator `name` with `settings` (refused settings are kept
+    as written: building the navigator reports them)."""
+    from trn_env.scenario.sections import NavigatorSection
+    nav = NavigatorSection.of(name, settings, rate_hz=sc.navigator.rate_hz,
+                              latency_updates=sc.navigator.latency_updates, strict=False)
+    return replace(sc, navigator=nav)
 
 
 def _run(nav, rec: FlightRecord, frames: list[SensorFrames], initial: Estimate | None = None,
@@ -516,10 +526,9 @@ def _check_sensors(report: CheckReport, nav, rec: FlightRecord, name: str, setti
                     "declare Capabilities(required_sensors=..., optional_sensors=...) on the class")
         return
     for sensor in required:
-        d = copy.deepcopy(rec.data)
-        d["navigator"] = {**d["navigator"], "name": name, "settings": dict(settings)}
-        d["sensors"].pop(sensor, None)
-        if not any(p.startswith(f"sensors.{sensor}:") for p in _sensor_need_problems(d)):
+        sc = _with_navigator(rec.scenario, name, settings)
+        sc = replace(sc, sensors=sc.sensors.without(sensor))
+        if not any(p.startswith(f"sensors.{sensor}:") for p in _sensor_need_problems(sc.to_dict())):
             report.fail("sensors", f"a scenario without {sensor} (declared required) is not refused",
                         "declare it in Capabilities.required_sensors (navigators.core.capabilities)")
             return

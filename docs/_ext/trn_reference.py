@@ -239,7 +239,35 @@ def scenario_markdown() -> str:
             section = top
             out += ["", f"## `[{section}]`", ""] + header
         out.append(_row(row))
-    return "\n".join(out) + "\n"
+    return "\n".join(out + [""] + scenario_sections_markdown()) + "\n"
+
+
+def scenario_sections_markdown() -> list[str]:
+    """The typed sections a validated scenario is read through (trn_env.scenario.sections), one row per
+    table: its attribute on `Scenario` and its class."""
+    import typing
+
+    from trn_env.scenario import sections as secs
+    hints = typing.get_type_hints(secs.ScenarioSections)
+    out = ["## In Python", "",
+           "`load_scenario` returns a `Scenario` whose tables are typed, frozen sections "
+           "(`trn_env.scenario.sections`), the fields named as the keys above; `scenario.to_dict()` gives "
+           "the validated dict back ([scenarios guide](../guide/scenarios.md)).", "",
+           "| table | attribute | class | holds |", "|---|---|---|---|"]
+    for name, tp in hints.items():
+        if typing.get_origin(tp) is tuple:
+            cls = typing.get_args(tp)[0]
+            shown = f"tuple of `{cls.__name__}`"
+        else:
+            args = [a for a in typing.get_args(tp) if a is not type(None)]
+            cls = args[0] if args else tp
+            shown = f"`{getattr(cls, '__name__', str(cls))}`" + (" or None" if args else "")
+        if not isinstance(cls, type) or cls.__module__ != secs.__name__:
+            continue
+        doc = " ".join((cls.__doc__ or "").strip().split("\n\n")[0].split())
+        doc = _cell(doc.split("]: ", 1)[1] if doc.startswith("[") and "]: " in doc else doc)
+        out.append(f"| `[{name}]` | `scenario.{name}` | {shown} | {doc} |")
+    return out
 
 
 def _row(row: dict) -> str:

@@ -178,9 +178,11 @@ def bounded_search_kernel(
                             ha = h00 + v * (heights[ii, jj + 1] - h00)
                             hb = h10 + v * (heights[ii + 1, jj + 1] - h10)
                             h = ha + u_w[k] * (hb - ha)
+                        elif interp == INTERP_BILINEAR:   # (not _replica_height: a call keeps the loop small)
+                            h = bilinear_at_index(heights, fi_s + fi_w[k], fj_s + fj_w[k])
                         else:
-                            h = _replica_height(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, fi_s + fi_w[k],
-                                                fj_s + fj_w[k], dlat_w[k], dlon_w[k], interp)
+                            h = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k],
+                                            lon_s + dlon_w[k], interp)
                         h_w[k] = h
                         if bounded and valid[k] and h == h:
                             r = d[k] - h

@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ...terrain.kernels import bicubic, bilinear, bilinear_with_gradient
+from ...terrain.kernels import bicubic, bilinear, bilinear_with_gradient, map_height
 
 COST_MAD = 0
 COST_PEARSON = 1
@@ -73,9 +73,9 @@ def replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_out, dlon_out
 
 @njit(cache=True)
 def _map_height(heights, lat0, lon0, dlat, dlon, lat, lon, interp):
-    if interp == INTERP_BICUBIC:
-        return bicubic(heights, lat0, lon0, dlat, dlon, lat, lon)
-    return bilinear(heights, lat0, lon0, dlat, dlon, lat, lon)
+    """Map height (m) at (lat, lon) by the interpolation code interp: terrain.kernels.map_height on the grid
+    as a record."""
+    return map_height((heights, lat0, lon0, dlat, dlon, interp == INTERP_BICUBIC), lat, lon)
 
 
 @njit(cache=True)

@@ -72,7 +72,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from ..core.imu_spec import ImuSpec
+from ..core.imu_spec import ImuSpec, consistency_warning
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
 from ..core.recovery import IntegrityRecovery
@@ -94,6 +94,9 @@ from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
 
 _BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
 TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
+# attitude-error memory of the small-angle check (imu_spec.consistency_warning): the time the gyro biases
+# build attitude error before the look angle has observed them (acquisition on the default route ~100 s)
+RBPF_MEMORY_S = 120.0
 
 
 def table1_covariance() -> np.ndarray:
@@ -233,7 +236,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         (bias, instability and misalignment x g: in level flight the misalignment reads gravity as a
         constant body-frame bias), and per rad turned the gyro misalignment (tilt) and scale factor (heading)
         over TURN_REFERENCE_RAD, as the EKF and PMF take them. The bias priors and drives themselves arrive
-        as settings (trn_env's imu_bias_settings)."""
+        as settings (trn_env's imu_bias_settings). Its 15-state model is a small-angle one (eqs 16-22): a
+        grade whose gyro biases build more than imu_spec.SMALL_ANGLE_LIMIT_RAD over RBPF_MEMORY_S sets the
+        Health warning."""
         root_t = math.sqrt(self.trn_period_s)
         q = np.sqrt(self.ql_var)
         q[0:3] = np.maximum(q[0:3], spec.accel_noise_density_mps2_rthz * root_t)
@@ -243,6 +248,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             self.P0_settings[i, i] = max(self.P0_settings[i, i], spec.body_accel_sigma_mps2 ** 2)
         tilt2, heading2 = spec.turn_tilt_sigma_rad(1.0) ** 2, spec.turn_heading_sigma_rad(1.0) ** 2
         self._turn_att_var = np.array([tilt2, tilt2, heading2]) * TURN_REFERENCE_RAD
+        self._consistency_warning = consistency_warning(spec, RBPF_MEMORY_S, self.name)
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn

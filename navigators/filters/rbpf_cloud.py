@@ -24,8 +24,7 @@ from . import _rbpf_kernels as kern
 class RbpfCloud:
     """The cloud's prior, GNSS update, resampling, integrity and feedback of RaoBlackwellizedPF; a mixin."""
 
-    # the RBPF's IMU error model reaches it as bias settings (imu_bias_settings); no grade is known to be
-    # beyond it (its Kalman parts carry every gyro bias and the look angle observes the attitude)
+    # set by RaoBlackwellizedPF.apply_imu_spec for a grade beyond its small-angle error model
     _consistency_warning = ""
 
     def _set_prior(self, initial: Estimate) -> None:

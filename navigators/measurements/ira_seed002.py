@@ -135,29 +135,28 @@ def _golden(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
         fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
     tg = t_guess
     for _ in range(iters):
-        left = f1 <= f2          # the minimum lies in [a, c2]: drop (c2, b], probe left of c1
-        if left:
+        if f1 <= f2:
             b = c2
             c2 = c1
             f2 = f1
-            c = b - _GOLD * (b - a)
-            t_prev = t1
-        else:                    # in [c1, b]: drop [a, c1), probe right of c2
+            c1 = b - _GOLD * (b - a)
+            if t1 == t1:
+                tg = t1
+            f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc, vx, vy, vz, un, ue,
+                                          C, sin_w, max_range, c1, tg)
+            if f1 < fb:
+                fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
+        else:
             a = c1
             c1 = c2
             f1 = f2
-            c = a + _GOLD * (b - a)
-            t_prev = t2
-        if t_prev == t_prev:
-            tg = t_prev
-        f, t, x, y, z = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
-                                 vx, vy, vz, un, ue, C, sin_w, max_range, c, tg)
-        if left:
-            c1, f1, t1 = c, f, t
-        else:
-            c2, f2, t2 = c, f, t
-        if f < fb:
-            fb, sb, tb, xb, yb, zb = f, c, t, x, y, z
+            c2 = a + _GOLD * (b - a)
+            if t2 == t2:
+                tg = t2
+            f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc, vx, vy, vz, un, ue,
+                                          C, sin_w, max_range, c2, tg)
+            if f2 < fb:
+                fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
     return fb, sb, tb, xb, yb, zb
 
 

@@ -72,3 +72,12 @@ def robust_log_likelihood_reference(residual_m, var_m2, outlier_prob, log_outlie
         a = np.log1p(-outlier_prob) - 0.5 * (r * r / s + np.log(s) + LOG_2PI)
         le = np.log(outlier_prob) + log_outlier_density
         return np.where(np.isnan(r), le, np.logaddexp(a, le))
+
+
+def ra_cone_ranges(heights, lat0, lon0, dlat, dlon, *args):
+    """The former loose-grid entry of the radar altimeter's cone model, kept for plug-ins written against
+    it (the sitan example as installed before): radar_altimeter.predict on the bilinear map record."""
+    from ...terrain.kernels import MapRecord
+    from .radar_altimeter import predict
+
+    return predict(MapRecord(heights, float(lat0), float(lon0), float(dlat), float(dlon), False), *args)

@@ -84,18 +84,15 @@ def _recorded_window(sc, warm_s: float, steps: int):
 def _loop_figures(navigator: str, warm_s: float, sim_s: float, record: bool = False) -> dict:
     from trn_env.bench.runner import bare_jsbsim_steps_per_s
     from trn_env.scenario import build as components
-    from trn_env.scenario.loading import load_scenario, validate
+    from trn_env.scenario.loading import load_scenario
     from trn_env.sim.closed_loop import ClosedLoop
 
     sc = load_scenario("acq_track", navigator=navigator, duration_s=warm_s + sim_s + 5.0)
     if navigator == "acq_track":
-        data = dict(sc.data)
         # N = 25 on top of the scenario's own settings (footprint replicas, INS aiding): the built-in flight
-        settings = dict(data["navigator"].get("settings") or {}, transect_samples=25)
-        data["navigator"] = dict(data["navigator"], settings=settings)
-        sc = validate(data, source=sc.source)
+        sc = sc.with_fields({"navigator.settings.transect_samples": 25})
     with ClosedLoop(sc, log_sensors=False, pipeline=False) as loop:
-        ref = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
+        ref = components.build_flight(sc, loop.world_dem, np.random.default_rng(0))
         while loop.termination is None and loop.t_s < warm_s - 1e-6:
             loop.tick()
         steps_timed = int(round(sim_s / loop.dt_s))

@@ -83,7 +83,7 @@ def benchmark(quick: bool = False) -> dict:
         out["campaign_ray.skipped"] = "quick: starting Ray alone takes 10-15 s (run trn-env bench)"
         return out
     try:
-        from trn_env.campaign.ray_backend import RayBackend, import_ray
+        from trn_env.campaign.ray_backend import import_ray
         import_ray()
     except ImportError as exc:       # BackendError is a ValueError, not this: only a broken install
         out["campaign_ray.error"] = str(exc)
@@ -91,6 +91,17 @@ def benchmark(quick: bool = False) -> dict:
     except ValueError as exc:
         out["campaign_ray.error"] = str(exc)
         return out
+    try:
+        _ray_figures(out, todo, dems, serial, t_serial, t_local, workers)
+    except ValueError as exc:        # BackendError: e.g. the workers import another trn-env than this one
+        out["campaign_ray.error"] = str(exc)
+    return out
+
+
+def _ray_figures(out: dict, todo: list, dems: dict, serial: list[dict], t_serial: float, t_local: float,
+                 workers: int) -> None:
+    from trn_env.campaign.ray_backend import RayBackend
+    n_runs = len(todo)
     # Ray tasks (warm=False): a fresh instance, the campaign flown cold (new worker processes)
     t0 = time.perf_counter()
     with RayBackend(workers=workers, warm=False) as ray_backend:
@@ -121,7 +132,6 @@ def benchmark(quick: bool = False) -> dict:
     if diff:
         out["campaign_ray_differences"] = diff
     out["campaign_ray_mean_run_wall_s"] = _mean_wall(warm["rows"])
-    return out
 
 
 def _timed(backend, todo: list, dems: dict) -> dict:
@@ -155,9 +165,11 @@ def _differences(a: list[dict], b: list[dict]) -> list[str]:
             continue
         for k in ("termination", "horizontal_error_rms_m", "series_err_h_m"):
             if r[k] != ref[k]:
+                why = str(r["error"]).strip().splitlines()[-1][:200] if r["error"] else None
                 out.append(f"{r['run_id']} {k}: {_first_difference(ref[k], r[k])} (termination "
-                           f"{r['termination']}, attempts {r['attempts']}, error {str(r['error'])[:200]!r})")
-    return out
+                           f"{r['termination']}, attempts {r['attempts']}, error {why!r})")
+                break                                    # one line per run
+    return out if len(out) <= 8 else out[:8] + [f"... and {len(out) - 8} more"]
 
 
 def _first_difference(a, b) -> str:

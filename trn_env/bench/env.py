@@ -11,19 +11,22 @@
   basin_route scenario, 1 s decisions, INS navigator; subproc_vec_env_sim_seconds_per_wall_second (both envs
   together) beside the same bare-JSBSim reference (one process: the machine has 2 cores);
 - env_route_*: TerrainNav-v0 at the route benchmark's settings (trn_env.env.route_task, basin terrain,
-  pursuit actions, 30 s decisions, random actions, resets included): env_route_agent_steps_per_s (wall;
-  guidance once per navigator update, the env's default) beside env_route_agent_steps_per_s_before (guidance
-  at the scenario's 10 Hz, the env before rates were matched to the decision), measured interleaved, median
-  of the repeats; the same as CPU figures (env_route_cpu_*, this process's CPU time: the shared machine's
-  load moves wall figures more); env_route_speedup (after / before, CPU);
+  pursuit actions, 30 s decisions, JSBSim at 50 Hz (flight_dt_s 0.02), guidance once per navigator update;
+  random actions, resets included): env_route_agent_steps_per_s (wall) beside
+  env_route_agent_steps_per_s_before (the same env with the rates it had before: guidance at the scenario's
+  10 Hz and JSBSim at its 100 Hz, BEFORE_RATES), measured interleaved, median of the repeats; the same as CPU
+  figures (env_route_cpu_*, this process's CPU time: the shared machine's load moves wall figures more);
+  env_route_speedup (after / before, CPU; env_route_speedup_wall the wall ratio);
   env_route_pipelined_agent_steps_per_s (`pipeline=True`: sensors and navigator in a second process;
-  wall); env_route_sim_seconds_per_wall_second
-  beside env_gym_jsbsim_reference_sim_seconds_per_wall_second, a bare JSBSim gymnasium loop of the same
-  aircraft and step in the style of gymnasium-jsbsim (0.2 s agent steps: four control properties written by
-  name, run() per step, 17 state properties read by name, a reward from them), measured right before and
-  after (the faster kept), and their ratio env_route_ratio_to_gym_jsbsim; env_construct_first_s (the first
-  env of the process: terrain, map, numba caches), env_construct_second_s (the next one) and env_reset_s
-  (median reset).
+  wall); env_route_sim_seconds_per_wall_second (and per CPU second) beside two bare JSBSim gymnasium loops
+  in the style of gymnasium-jsbsim (0.2 s agent steps: four control properties written by name, run() per
+  JSBSim step, 17 state properties read by name, a reward from them), each measured right before and
+  after (the faster kept): env_gym_jsbsim_reference_* flies the default scenario's King Air, wind and
+  turbulence at its 100 Hz step, env_gym_jsbsim_c172p_* gymnasium-jsbsim's own default (the Cessna 172P
+  shipped with JSBSim at 60 Hz, calm air); their ratios env_route_ratio_to_gym_jsbsim(_c172p) (wall) and
+  env_route_cpu_ratio_to_gym_jsbsim(_c172p) (CPU); env_construct_first_s (the first env of the process:
+  terrain, map, numba caches), env_construct_second_s (the next one) and env_reset_s (median reset);
+  load_average_1min (the machine's load during the measurement).
 - planner_40km_route_s: one `TerrainInformationPlanner.plan` of a corner-to-corner route on the bundled DEM
   (straight distance planner_route_straight_km >= 40 km; numba compiled beforehand; the climb limit on,
   planner_climb_gradient; the whole plan: search, string pulling, turn thinning), beside the cost-map build
@@ -51,13 +54,13 @@ def _bare_jsbsim_sim_s_per_wall_s(n_steps: int) -> float:
     from trn_env.scenario.loading import load_scenario
 
     sc = load_scenario("default")
-    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
-    fl = components.build_flight(sc.data, world, np.random.default_rng(0))
+    world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+    fl = components.build_flight(sc, world, np.random.default_rng(0))
     run = fl.fdm.run
     t0 = time.perf_counter()
     for _ in range(n_steps):
         run()
-    return n_steps * float(sc.data["aircraft"]["dt_s"]) / (time.perf_counter() - t0)
+    return n_steps * float(sc.aircraft.dt_s) / (time.perf_counter() - t0)
 
 
 def env_figures(quick: bool = False, n_steps: int | None = None, decision_interval_s: float = 5.0) -> dict:
@@ -101,19 +104,48 @@ _GYM_OBS = ("position/lat-geod-rad", "position/long-gc-rad", "position/h-sl-ft",
 _GYM_ACT = ("fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm", "fcs/rudder-cmd-norm", "fcs/throttle-cmd-norm")
 
 
-def _gym_jsbsim_sim_s_per_wall_s(wall_s: float = 2.0, agent_step_s: float = 0.2) -> float:
-    """Simulated seconds per wall second of a bare JSBSim gymnasium loop (gymnasium-jsbsim's shape: per agent
-    step write the controls by property name, run() for agent_step_s, read the state by name, reward from
-    it) on the default scenario's aircraft and step; episodes of 60 s, reset by run_ic()."""
+def _c172p_fdm(dt_s: float):
+    """gymnasium-jsbsim's default aircraft and start: the Cessna 172P shipped with JSBSim, trimmed at 5,000 ft
+    and 120 ft/s near Bath (its initial conditions), engine running, calm air."""
+    import jsbsim
+
+    fdm = jsbsim.FGFDMExec(None)
+    fdm.set_debug_level(0)
+    fdm.load_model("c172p")
+    fdm.set_dt(dt_s)
+    for name, v in {"ic/h-sl-ft": 5000.0, "ic/terrain-elevation-ft": 1e-8, "ic/long-gc-deg": -2.3273,
+                    "ic/lat-geod-deg": 51.3781, "ic/u-fps": 120.0, "ic/v-fps": 0.0, "ic/w-fps": 0.0,
+                    "ic/p-rad_sec": 0.0, "ic/q-rad_sec": 0.0, "ic/r-rad_sec": 0.0, "ic/roc-fpm": 0.0,
+                    "ic/psi-true-deg": 100.0}.items():
+        fdm[name] = v
+    fdm.run_ic()
+    fdm["propulsion/set-running"] = -1
+    fdm["fcs/mixture-cmd-norm"] = 0.8
+    return fdm
+
+
+def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: str = "kingair",
+                      dt_s: float | None = None) -> tuple[float, float]:
+    """(simulated seconds per wall second, per CPU second) of a bare JSBSim gymnasium loop in
+    gymnasium-jsbsim's shape: per agent step write the controls by property name, run() for agent_step_s,
+    read the state by name, reward from it; episodes of 60 s, reset by run_ic(). aircraft "kingair": the
+    default scenario's aircraft, wind and turbulence at JSBSim step dt_s (default: the scenario's);
+    "c172p": gymnasium-jsbsim's own default, the Cessna 172P at 60 Hz (dt_s default 1/60) in calm air."""
     import gymnasium as gym
 
-    import trn_env.scenario.build as components
-    from trn_env.scenario.loading import load_scenario
+    if aircraft == "c172p":
+        dt = 1.0 / 60.0 if dt_s is None else float(dt_s)
+        fdm = _c172p_fdm(dt)
+    else:
+        import trn_env.scenario.build as components
+        from trn_env.scenario.loading import load_scenario
 
-    sc = load_scenario("default")
-    world = components.build_terrain(sc.data, sc.extras, np.random.default_rng(0))[0]
-    fdm = components.build_flight(sc.data, world, np.random.default_rng(0)).fdm
-    dt = float(sc.data["aircraft"]["dt_s"])
+        sc = load_scenario("default")
+        if dt_s is not None:
+            sc = sc.with_fields({"aircraft.dt_s": float(dt_s)})
+        world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+        fdm = components.build_flight(sc, world, np.random.default_rng(0)).fdm
+        dt = float(sc.aircraft.dt_s)
     n_run = max(1, int(round(agent_step_s / dt)))
 
     class BareJsbsimEnv(gym.Env):
@@ -143,18 +175,23 @@ def _gym_jsbsim_sim_s_per_wall_s(wall_s: float = 2.0, agent_step_s: float = 0.2)
     env.reset(seed=0)
     act = np.zeros(len(_GYM_ACT), np.float32)     # controls centred: the aircraft flies on from its trim
     sim = 0.0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     while time.perf_counter() - t0 < wall_s:
         _, _, _, trunc, _ = env.step(act)
         sim += n_run * dt
         if trunc:
             env.reset()
-    return sim / (time.perf_counter() - t0)
+    return sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
+
+
+# the env before issue 34's rate changes: guidance at the scenario's 10 Hz, JSBSim at its 100 Hz
+BEFORE_RATES = {"guidance_rate_hz": 10.0, "flight_dt_s": 0.01}
 
 
 def route_env_figures(quick: bool = False) -> dict:
-    """TerrainNav-v0 at the route benchmark's settings: after (guidance once per navigator update) and before
-    (guidance at 10 Hz) interleaved, pipelined, construction and reset, beside a bare JSBSim gym loop."""
+    """TerrainNav-v0 at the route benchmark's settings (trn_env.env.route_task: JSBSim at 50 Hz, guidance once
+    per navigator update) and with the rates of before (BEFORE_RATES) interleaved, pipelined, construction and
+    reset, beside bare JSBSim gym loops (King Air at 100 Hz, gymnasium-jsbsim's Cessna 172P at 60 Hz)."""
     from trn_env.env.route_task import env_kwargs
     from trn_env.env.terrain_nav import TerrainNavEnv
 
@@ -163,7 +200,7 @@ def route_env_figures(quick: bool = False) -> dict:
     after = TerrainNavEnv(**kw)
     t_first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    before = TerrainNavEnv(**kw, guidance_rate_hz=10.0)
+    before = TerrainNavEnv(**{**kw, **BEFORE_RATES})
     t_second = time.perf_counter() - t0
     piped = TerrainNavEnv(**kw, pipeline=True)
     envs = {"after": after, "before": before, "pipelined": piped}
@@ -173,11 +210,13 @@ def route_env_figures(quick: bool = False) -> dict:
     cpu = {k: [] for k in envs}
     sims = {k: 0.0 for k in envs}
     walls = {k: 0.0 for k in envs}
+    cpus = {k: 0.0 for k in envs}
     resets = []
     for e in envs.values():                  # warm-up (numba caches, first flight), not timed
         e.reset(seed=0)
         e.step(np.zeros(2, np.float32))
-    ref0 = _gym_jsbsim_sim_s_per_wall_s(1.0 if quick else 3.0)
+    ref_s = 1.0 if quick else 3.0
+    refs = [_gym_jsbsim_rates(ref_s), _gym_jsbsim_rates(ref_s, aircraft="c172p")]
     for rep in range(reps):
         for k, e in envs.items():
             c0, w0 = time.process_time(), time.perf_counter()
@@ -192,17 +231,23 @@ def route_env_figures(quick: bool = False) -> dict:
                     t1 = time.perf_counter()
                     e.reset()
                     resets.append(time.perf_counter() - t1)
-            w = time.perf_counter() - w0
+            w, c = time.perf_counter() - w0, time.process_time() - c0
             wall[k].append(n_steps / w)
-            cpu[k].append(n_steps / (time.process_time() - c0))
+            cpu[k].append(n_steps / c)
             sims[k] += sim
             walls[k] += w
+            cpus[k] += c
     for e in envs.values():
         e.close()
-    ref = max(ref0, _gym_jsbsim_sim_s_per_wall_s(1.0 if quick else 3.0))
+    refs += [_gym_jsbsim_rates(ref_s), _gym_jsbsim_rates(ref_s, aircraft="c172p")]
+    ka_wall = max(refs[0][0], refs[2][0])
+    ka_cpu = max(refs[0][1], refs[2][1])
+    c172_wall = max(refs[1][0], refs[3][0])
+    c172_cpu = max(refs[1][1], refs[3][1])
     med = {k: float(np.median(v)) for k, v in wall.items()}
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
     sim_rate = sims["after"] / walls["after"]
+    sim_rate_cpu = sims["after"] / cpus["after"]
     return {
         "env_route_agent_steps_per_s": med["after"],
         "env_route_agent_steps_per_s_before": med["before"],
@@ -210,17 +255,35 @@ def route_env_figures(quick: bool = False) -> dict:
         "env_route_cpu_agent_steps_per_s": med_cpu["after"],
         "env_route_cpu_agent_steps_per_s_before": med_cpu["before"],
         "env_route_speedup": med_cpu["after"] / med_cpu["before"],
+        "env_route_speedup_wall": med["after"] / med["before"],
         "env_route_pipelined_speedup_wall": med["pipelined"] / med["before"],
+        "env_route_flight_dt_s": after.scenario.aircraft.dt_s,
         "env_route_sim_seconds_per_wall_second": sim_rate,
+        "env_route_sim_seconds_per_cpu_second": sim_rate_cpu,
         "env_route_pipelined_sim_seconds_per_wall_second": sims["pipelined"] / walls["pipelined"],
-        "env_gym_jsbsim_reference_sim_seconds_per_wall_second": ref,
-        "env_route_ratio_to_gym_jsbsim": sim_rate / ref,
-        "env_route_pipelined_ratio_to_gym_jsbsim": sims["pipelined"] / walls["pipelined"] / ref,
+        "env_gym_jsbsim_reference_sim_seconds_per_wall_second": ka_wall,
+        "env_gym_jsbsim_reference_sim_seconds_per_cpu_second": ka_cpu,
+        "env_route_ratio_to_gym_jsbsim": sim_rate / ka_wall,
+        "env_route_cpu_ratio_to_gym_jsbsim": sim_rate_cpu / ka_cpu,
+        "env_route_pipelined_ratio_to_gym_jsbsim": sims["pipelined"] / walls["pipelined"] / ka_wall,
+        "env_gym_jsbsim_c172p_sim_seconds_per_wall_second": c172_wall,
+        "env_gym_jsbsim_c172p_sim_seconds_per_cpu_second": c172_cpu,
+        "env_route_ratio_to_gym_jsbsim_c172p": sim_rate / c172_wall,
+        "env_route_cpu_ratio_to_gym_jsbsim_c172p": sim_rate_cpu / c172_cpu,
         "env_construct_first_s": t_first,
         "env_construct_second_s": t_second,
         "env_reset_s": float(np.median(resets)),
         "env_route_steps_measured": n_steps * reps,
+        "load_average_1min": _load_average(),
     }
+
+
+def _load_average() -> float:
+    try:
+        import os
+        return float(os.getloadavg()[0])
+    except (OSError, AttributeError):
+        return math.nan
 
 
 def subproc_figures(quick: bool = False, n_steps: int | None = None) -> dict:

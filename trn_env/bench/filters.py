@@ -14,6 +14,7 @@ frames inline (`filters_<name>_peak_mb`), and what it still holds after 20 and a
 from __future__ import annotations
 
 import copy
+import dataclasses
 import gc
 import time
 import tracemalloc
@@ -28,10 +29,12 @@ def _loop_rate(name: str, settings: dict, warm_s: float, sim_s: float,
     from trn_env.bench.runner import bare_jsbsim_steps_per_s
     from trn_env.scenario import build as components
     from trn_env.scenario.loading import load_scenario
+    from trn_env.scenario.sections import NavigatorSection
     from trn_env.sim.closed_loop import ClosedLoop
-
     sc = load_scenario("default", navigator=name, duration_s=warm_s + sim_s + 10.0)
-    sc.data["navigator"]["settings"] = dict(settings)
+    nav = NavigatorSection.of(name, settings, rate_hz=sc.navigator.rate_hz,
+                              latency_updates=sc.navigator.latency_updates)
+    sc = dataclasses.replace(sc, sections=dataclasses.replace(sc.sections, navigator=nav))
     with ClosedLoop(sc, pipeline=True, log_sensors=False, dems=dems) as loop:
         dems = (loop.world_dem, loop.map_dem)
         while loop.t_s < warm_s and loop.termination is None:
@@ -43,7 +46,7 @@ def _loop_rate(name: str, settings: dict, warm_s: float, sim_s: float,
             loop.tick()
         loop.sync()
         rate = (loop.t_s - t_start) / (time.perf_counter() - w0)
-        ref = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
+        ref = components.build_flight(sc, loop.world_dem, np.random.default_rng(0))
         steps = int(round(sim_s / loop.dt_s))
         bare = bare_jsbsim_steps_per_s(ref.fdm, steps) * loop.dt_s
     return rate, bare, dems

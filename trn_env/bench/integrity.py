@@ -14,14 +14,11 @@ WARM_S = 45.0
 
 
 def _loop_figures(sim_s: float, pipeline: bool, segments: int = 3) -> dict:
-    from trn_env.scenario.loading import read_scenario_file, validate
+    from trn_env.scenario.overrides import load_scenario_with
     from trn_env.sim.closed_loop import ClosedLoop
 
-    data, _ = read_scenario_file("default")
-    data["sensors"]["radar_altimeter"] = {}
-    data["monitors"] = {"dem_integrity": {}}
-    data["duration_s"] = WARM_S + sim_s + 20.0
-    sc = validate(data, source="bench.integrity")
+    sc = load_scenario_with("default", [("sensors.radar_altimeter", {}), ("monitors", {"dem_integrity": {}})],
+                            duration_s=WARM_S + sim_s + 20.0)
     fractions, walls, mons, navs, updates = [], 0.0, 0.0, 0.0, 0
     with ClosedLoop(sc, log_sensors=False, pipeline=pipeline) as loop:
         while loop.t_s < WARM_S - 1e-9:

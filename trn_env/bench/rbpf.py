@@ -37,7 +37,7 @@ def _loop_rate(navigator: str, warm_s: float, sim_s: float, pipeline: bool = Tru
         sim = (loop.jsbsim_steps - s0) * loop.dt_s
         import trn_env.scenario.build as components
 
-        ref = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
+        ref = components.build_flight(sc, loop.world_dem, np.random.default_rng(0))
         n = int(round(sim / loop.dt_s))
         bare = bare_jsbsim_steps_per_s(ref.fdm, n) * loop.dt_s
         return sim / wall, bare

@@ -82,7 +82,7 @@ def _closed_loop_figures(quick: bool, scenario: str, sim_s: float | None, pipeli
     with ClosedLoop(sc, log_sensors=True, pipeline=pipeline) as loop:
         # bare reference: a second flight at the same (trimmed) initial condition, run() only
         import trn_env.scenario.build as components
-        ref_flight = components.build_flight(sc.data, loop.world_dem, np.random.default_rng(0))
+        ref_flight = components.build_flight(sc, loop.world_dem, np.random.default_rng(0))
         # warm-up (numba dispatch, first sensor, navigator and fix calls), not timed
         for _ in range(int(round(warm_s / (loop.steps_per_tick * loop.dt_s)))):
             loop.tick()

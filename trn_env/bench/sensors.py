@@ -51,17 +51,16 @@ def benchmark(n_chunks: int = 30, chunk_steps: int = 100, repeats: int = 3,
     from trn_env.sim.closed_loop import spawn_rngs
 
     sc = load_scenario(scenario)
-    d = sc.data
     rngs = spawn_rngs(sc.seed)
-    world, _ = components.build_terrain(d, sc.extras, rngs["map"])
-    scenario_sensors = components.sensor_configs(d)
-    warm = components.build_flight(d, world, np.random.default_rng(0)).advance(20)
+    world, _ = components.build_terrain(sc, sc.extras, rngs["map"])
+    scenario_sensors = components.sensor_configs(sc)
+    warm = components.build_flight(sc, world, np.random.default_rng(0)).advance(20)
     for cfg in (scenario_sensors, ALL_SENSORS):       # compile / load every kernel once
         SensorSuite.from_config(cfg, 0).sample(warm, world)
 
     flight_s, chunks = [], None
     for _ in range(repeats):
-        f_s, chunks = _record(components.build_flight(d, world, np.random.default_rng(0)), n_chunks,
+        f_s, chunks = _record(components.build_flight(sc, world, np.random.default_rng(0)), n_chunks,
                               chunk_steps)
         flight_s.append(f_s)
     fl = min(flight_s) / n_chunks

@@ -67,7 +67,8 @@ def tasks(campaign: Campaign, skip: set[str]) -> Iterator[RunTask]:
                     campaign=campaign.name, campaign_hash=campaign.hash, run_id=run_id, run_index=index,
                     variant_index=v.index, seed_index=si, seed=int(seed), scenario_name=v.scenario_name,
                     scenario_source=v.scenario_source, navigator_label=v.navigator.label, sweep=dict(v.sweep),
-                    data=v.data, dem_keys=v.dem_keys, metric_settings=settings, keep_logs=campaign.keep_logs,
+                    sections=v.sections, dem_keys=v.dem_keys, metric_settings=settings,
+                    keep_logs=campaign.keep_logs,
                     replay_command=shlex.join(replay_argv(v, int(seed))))
             index += 1
 

@@ -182,8 +182,8 @@ def load_log_campaign(path: Path, data: dict, raw: bytes) -> LogCampaign:
             for combo in itertools.product(*[list(v) for v in values]):
                 sweep = dict(zip(paths, combo, strict=True))
                 settings = {**nav.settings, **{k.split(".", 2)[2]: v for k, v in sweep.items()}}
-                d = scenario_of(log, nav.name, settings, None)
                 try:
+                    d = scenario_of(log, nav.name, settings, None)
                     navigator = build_navigator(d, the_map, None)
                     check_sensors(navigator, nav.name, log)
                 except (ValueError, TypeError, KeyError, LogError) as exc:

@@ -10,11 +10,15 @@ client would wait for minutes), a raylet's port instead of the head's, a cluster
 authentication (RAY_AUTH_MODE=token), and `ray://` without Ray Client (`ray[client]`) each get their own
 one-line message. Ray's console noise of a failed connection goes to a log file, named in the message.
 
-- The DEMs go into the object store once (`ray.put`); each task gets the reference, not a copy.
-- Worker death is retried by Ray (`max_retries`); a run's own exception is caught inside the task and
-  comes back as its row (so it is never retried). Each attempt counts itself in Ray's key-value store
-  (keyed by this `run` call, campaign hash and run id), so a row flown again after a node died says
-  `attempts = 2`.
+- The runs fly on warm actors, one per CPU (trn_env.campaign.ray_pool: each imports the packages and loads
+  the campaign's kernels once); `warm=False` flies them as plain Ray tasks instead.
+- The DEMs go into the object store once (`ray.put`); each actor or task gets the reference, not a copy.
+- Worker death is retried (by the pool, or by Ray for tasks: `max_retries`); a run's own exception is
+  caught inside the worker and comes back as its row (so it is never retried). Each attempt counts itself in
+  Ray's key-value store (keyed by this `run` call, campaign hash and run id), so a row flown again after a
+  node died says `attempts = 2`.
+- Before anything is flown, one task compares the code the workers import with this process's
+  (`package_identity`): a local instance whose workers would fly other code is refused.
 - At most 2 x cluster CPUs tasks are in flight; rows are taken with `ray.wait` as they finish and handed
   to the driver, which writes them, so a large campaign never holds everything in the driver.
 - Plug-in navigators and monitors: an installed plug-in (an entry point of a package installed in the
@@ -29,6 +33,7 @@ one-line message. Ray's console noise of a failed connection goes to a log file,
 
 from __future__ import annotations
 
+import functools
 import os
 import socket
 from collections.abc import Callable, Iterable
@@ -201,8 +206,36 @@ def _local_version() -> str:
     return str(trn_env.__version__)
 
 
-def _worker_version() -> str:
-    return _local_version()
+_SUBPACKAGES = ("terrain", "navigators", "aircraft")
+
+
+@functools.lru_cache(maxsize=1)
+def package_identity() -> tuple[str, str, str]:
+    """(version, the folder trn_env is imported from, sha256 of its code: the .py and .xml files of trn_env
+    and of the folders it ships as trn_env.terrain, .navigators, .aircraft). Two processes with the same
+    digest fly the same code, wherever each imports it from (a source checkout, an installed copy)."""
+    import hashlib
+    import importlib
+    from pathlib import Path
+
+    import trn_env
+    top = Path(trn_env.__file__).parent
+    roots = [("trn_env", top)] + [(f"trn_env.{s}", Path(list(importlib.import_module(f"trn_env.{s}")
+                                                                   .__path__)[0])) for s in _SUBPACKAGES]
+    digest = hashlib.sha256()
+    for name, root in roots:
+        for p in sorted(root.rglob("*")):
+            rel = p.relative_to(root)
+            if (name == "trn_env" and rel.parts[0] in _SUBPACKAGES) or "__pycache__" in rel.parts \
+                    or p.suffix not in (".py", ".xml") or not p.is_file():
+                continue
+            digest.update(f"{name}/{rel.as_posix()}\0".encode())
+            digest.update(p.read_bytes())
+    return str(trn_env.__version__), str(top), digest.hexdigest()
+
+
+def _worker_version() -> tuple[str, str, str]:
+    return package_identity()
 
 
 def plugin_runtime_env() -> dict[str, Any] | None:
@@ -245,6 +278,7 @@ class RayBackend:
         self.max_retries = int(max_retries)
         self.connect_timeout_s = float(connect_timeout_s)
         self.warm = bool(warm)
+        package_identity()        # this process's code, read now: near when its modules were imported
         self._pool = None
         self._started = False
         self.ray = None
@@ -281,14 +315,18 @@ class RayBackend:
                 ray.init(address="local", num_cpus=self.workers, **kw)
         except (ConnectionError, ValueError, RuntimeError, TimeoutError) as exc:
             raise BackendError(classify_failure(self.address or "(local instance)", str(exc))) from None
+        except Exception as exc:  # noqa: BLE001 - Ray's own start-up failure (e.g. its raylet timed out)
+            line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise BackendError(f"--backend ray: Ray did not start ({line})") from None
         self._started = True
-        if self.address:
-            self._check_workers()
+        self._check_workers()
         return self
 
     def _check_workers(self) -> None:
-        """One task on the cluster imports trn_env: a cluster whose nodes lack it (or run another version)
-        is named in one line before any run is handed out, instead of every run failing after retries."""
+        """One task imports trn_env where the runs will fly: a cluster whose nodes lack it is named in one
+        line before any run is handed out, instead of every run failing after retries; workers flying
+        other code than this process (package_identity: another version, or a source checkout that
+        shadows the installed package) are refused on a local instance, warned about on a cluster."""
         ray = self.ray
         ref = ray.remote(num_cpus=0, max_retries=0)(_worker_version).remote()
         try:
@@ -302,10 +340,20 @@ class RayBackend:
                                    f"\"trn-env[ray]=={_local_version()}\"), see {RAY_DOCS}") from None
             raise BackendError(f"--address {self.address}: a test task failed on the cluster: "
                                f"{text.splitlines()[-1] if text else type(exc).__name__}") from None
-        if theirs != _local_version():
-            import warnings
-            warnings.warn(f"the cluster's workers run trn-env {theirs}, this machine {_local_version()}: "
-                          "rows may differ from a local run", stacklevel=2)
+        ours = package_identity()
+        if tuple(theirs) == ours or tuple(theirs)[2] == ours[2]:
+            return
+        where = (f"the Ray workers import trn-env {theirs[0]} from {theirs[1]}, this process {ours[0]} from "
+                 f"{ours[1]}")
+        if not self.address:
+            # a local instance's workers start in this process's working folder, which comes first on their
+            # path: a source checkout of another version there shadows the installed package
+            self.__exit__(None, None, None)
+            raise BackendError(f"--backend ray: {where}, and their code differs: the rows would not be "
+                               "this version's; run the campaign from another folder (or install the "
+                               f"checkout you are in: pip install -e .), see {RAY_DOCS}")
+        import warnings
+        warnings.warn(f"{where}, and their code differs: rows may differ from a local run", stacklevel=2)
 
     def __exit__(self, *exc) -> None:
         if self._pool is not None:

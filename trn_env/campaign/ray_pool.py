@@ -55,7 +55,7 @@ class WarmWorker:
             self.dems_id = dems_id
         t1 = time.perf_counter()
         key = None if warm_task is None or getattr(warm_task, "kind", "flight") != "flight" else (
-            str(warm_task.data["navigator"]["name"]), warm_task.scenario_name, warm_task.dem_keys)
+            str(warm_task.sections.navigator.name), warm_task.scenario_name, warm_task.dem_keys)
         if key is not None and key not in self.warmed:
             warm_run(warm_task)
             self.warmed.add(key)
@@ -75,7 +75,7 @@ def warm_run(task: RunTask) -> float:
     from trn_env.sim.closed_loop import spawn_rngs
     from trn_env.sim.warm_up import warm_up
     scenario = task_scenario(task)
-    dems = build_terrain(scenario.data, scenario.extras, spawn_rngs(scenario.seed)["map"])
+    dems = build_terrain(scenario.sections, scenario.extras, spawn_rngs(scenario.seed)["map"])
     with quiet_stdout():
         return warm_up(scenario, dems, parallel=False)
 

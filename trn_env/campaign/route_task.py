@@ -133,7 +133,7 @@ def evaluate_fast(policies: list[dict], terrain: str, seeds, env_overrides: dict
     rows = []
     for p in pols:
         venv = gym.make_vec(FAST_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                            **{k: v for k, v in kw.items() if k not in ("guidance_rate_hz", "pipeline")})
+                            **route_task.fast_tier_kwargs(kw))
         obs, info0 = venv.reset(seed=[s for _, _, s in pairs],
                                 options={"goal_deg": np.array([g for _, g, _ in pairs])})
         views, pol_objs = [], []

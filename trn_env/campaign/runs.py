@@ -8,7 +8,6 @@ gives the same bits as `trn-env fly` pipelined or not (trn_env.sim.closed_loop).
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import io
 import json
@@ -23,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
+from trn_env.scenario.sections import ScenarioSections
 
 SERIES_KEYS = ("t_s", "err_h_m", "err_v_m", "sigma_h_m", "hpl_m", "nav_ok")
 
@@ -42,7 +42,7 @@ class RunTask:
     scenario_source: str
     navigator_label: str
     sweep: dict
-    data: dict                      # validated scenario data, defaults filled
+    sections: ScenarioSections      # the validated scenario's typed sections (seed: the variant's)
     dem_keys: tuple
     metric_settings: dict
     keep_logs: bool
@@ -85,11 +85,11 @@ def _base_row(task: RunTask) -> dict:
         "run_index": task.run_index, "variant_index": task.variant_index, "seed_index": task.seed_index,
         "seed": task.seed, "scenario": task.scenario_name, "scenario_source": task.scenario_source,
         "scenario_hash": "", "navigator": task.navigator_label,
-        "navigator_name": str(task.data["navigator"]["name"]),
+        "navigator_name": str(task.sections.navigator.name),
         "sweep_json": json.dumps(task.sweep, sort_keys=True), "replay_command": task.replay_command,
-        "navigator_settings_json": json.dumps(task.data["navigator"].get("settings", {}), sort_keys=True,
+        "navigator_settings_json": json.dumps(task.sections.navigator.table.to_dict(), sort_keys=True,
                                               default=str),
-        "gnss_outages_json": json.dumps((task.data.get("gnss") or {}).get("outages", []), sort_keys=True),
+        "gnss_outages_json": json.dumps([o.to_dict() for o in task.sections.gnss.outages], sort_keys=True),
         "termination": "error", "error": None, "attempts": task.attempt,
         "wall_time_s": float("nan"), "sim_time_s": float("nan"), "distance_flown_m": float("nan"),
         "jsbsim_steps": 0, "host": socket.gethostname(), "pid": os.getpid(),
@@ -105,21 +105,20 @@ def _base_row(task: RunTask) -> dict:
 
 
 def task_scenario(task: RunTask, dems: dict[str, Any] | None = None):
-    """The run's own Scenario (a copy of the variant's data with the run's seed; its DEMs from `dems`, else
+    """The run's own Scenario (the variant's typed sections with the run's seed; its DEMs from `dems`, else
     from the table set_dems filled)."""
     from trn_env.scenario.loading import Scenario
     table = _DEMS if dems is None else dems
-    data = copy.deepcopy(task.data)      # the run's own: tasks of one variant share their data
-    data["seed"] = int(task.seed)
+    sections = replace(task.sections, seed=int(task.seed))
     extras: dict[str, Any] = {}
     wk, mk = task.dem_keys
     if wk is not None and wk in table:
         extras["world_dem_raw"] = table[wk]
     if mk is not None and mk in table:
         extras["map_dem_raw"] = table[mk]
-    return Scenario(name=task.scenario_name, source=task.scenario_source, data=data,
-                    description=str(data.get("description", "")), seed=int(task.seed),
-                    duration_s=float(data["duration_s"]), extras=extras)
+    return Scenario(name=task.scenario_name, source=task.scenario_source, sections=sections,
+                    description=str(sections.description), seed=int(task.seed),
+                    duration_s=float(sections.duration_s), extras=extras)
 
 
 def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, bytes | None]:
@@ -136,7 +135,7 @@ def fly_run(task: RunTask, dems: dict[str, Any] | None = None) -> tuple[dict, by
 
     row = _base_row(task)
     scenario = task_scenario(task, dems)
-    row["scenario_hash"] = scenario_hash(scenario.data)
+    row["scenario_hash"] = scenario_hash(scenario.sections.to_dict())
     wall0 = time.perf_counter()
     try:
         loop = ClosedLoop(scenario, pipeline=False)
@@ -173,8 +172,6 @@ def died_row(task: RunTask, why: str) -> dict:
         from trn_env.campaign.episodes import died_episode_row
         return died_episode_row(task, why)
     row = _base_row(task)
-    data = dict(task.data)
-    data["seed"] = int(task.seed)
-    row["scenario_hash"] = scenario_hash(data)
+    row["scenario_hash"] = scenario_hash(replace(task.sections, seed=int(task.seed)).to_dict())
     row["error"] = why
     return row

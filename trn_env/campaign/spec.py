@@ -53,6 +53,7 @@ from trn_env.scenario.loading import (
     validate,
 )
 from trn_env.scenario.overrides import apply_fields, toml_value
+from trn_env.scenario.sections import ScenarioSections
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -127,7 +128,7 @@ class Variant:
     scenario_source: str          # the path or built-in name `trn-env fly` takes
     navigator: NavigatorChoice
     sweep: dict[str, Any]         # dotted path -> value
-    data: dict                    # the validated scenario data (defaults filled), seed not yet set
+    sections: ScenarioSections    # the validated scenario's typed sections, seed not yet set
     scenario_name: str
     assignments: list[tuple[str, Any]]
     overrides: dict[str, Any]
@@ -344,15 +345,15 @@ def load_campaign(path: str | Path) -> Campaign:
                     continue
                 label = nav.label if nav is not None else sc.navigator_name
                 choice = nav if nav is not None else NavigatorChoice(label, None, None)
-                world_key = _dem_key(sc.data, "world")
-                map_key = _dem_key(sc.data, "map")
+                world_key = _dem_key(sc, "world")
+                map_key = _dem_key(sc, "map")
                 for key, raw_dem in ((world_key, sc.extras.get("world_dem_raw")),
                                      (map_key, sc.extras.get("map_dem_raw"))):
                     if key is not None and raw_dem is not None:
                         dem_cache.setdefault(key, raw_dem)
                 variants.append(Variant(
                     index=len(variants), scenario_ref=ref, scenario_source=src, navigator=choice,
-                    sweep=sweep, data=sc.data, scenario_name=sc.name, assignments=assignments,
+                    sweep=sweep, sections=sc.sections, scenario_name=sc.name, assignments=assignments,
                     overrides=overrides, dem_keys=(world_key, map_key)))
     if problems:
         raise CampaignError(source, problems)
@@ -365,13 +366,13 @@ def load_campaign(path: str | Path) -> Campaign:
                     metric_settings=metric_settings, extra={"dems": dem_cache})
 
 
-def _dem_key(d: dict, which: str) -> str | None:
+def _dem_key(sc, which: str) -> str | None:
     """Key of the raw (unrefined, error-free) DEM a variant loads: its spec and void filling."""
-    cfg = d["terrain"][which]
-    if which == "map" and cfg.get("dem", "world") == "world":
+    cfg = getattr(sc.terrain, which)
+    if which == "map" and cfg.is_world:
         return None
-    fill = bool(cfg.get("fill_voids", d["terrain"]["world"].get("fill_voids", False)))
-    return json.dumps([str(cfg["dem"]), fill])
+    fill = bool(sc.terrain.world.fill_voids if cfg.fill_voids is None else cfg.fill_voids)
+    return json.dumps([str(cfg.dem), fill])
 
 
 def replay_argv(variant: Variant, seed: int) -> list[str]:

@@ -67,11 +67,15 @@ def make_full_env(env_config=None) -> gym.Env:
 
 def make_fast_env(env_config=None) -> gym.vector.VectorEnv:
     """TerrainNavFast-v0 (a native VectorEnv of env_config['num_envs'] aircraft) from an RLlib env_config,
-    observations rescaled to [-1, 1]. ValueError if the fast tier is not registered."""
+    observations rescaled to [-1, 1]; the full tier's own settings (route_task.FULL_TIER_ONLY, e.g. JSBSim's
+    step) are dropped, so one env_config serves both tiers. ValueError if the fast tier is not registered."""
     if FAST_ID not in gym.registry:
         raise ValueError(f"{FAST_ID} is not registered (import trn_env; the fast tier may not be installed)")
+    from trn_env.env.route_task import fast_tier_kwargs
+
     kwargs, scale, num_envs = _env_kwargs(env_config)
-    venv = gym.make_vec(FAST_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    venv = gym.make_vec(FAST_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                        **fast_tier_kwargs(kwargs))
     if scale:
         from gymnasium.wrappers.vector import RescaleObservation
         venv = RescaleObservation(venv, np.float32(-1.0), np.float32(1.0))

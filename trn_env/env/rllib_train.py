@@ -96,12 +96,15 @@ def train(config, iterations: int, checkpoint_dir: str | Path | None = None, che
     iterations; a checkpoint
     (`Algorithm.save_to_path`) every `checkpoint_every` iterations and at the end into checkpoint_dir/iter_N
     (checkpoint_dir/final at the end; the end is `iterations`, or the first iteration that ends after
-    max_wall_s of wall time). Returns (algorithm, history rows). progress(row) is called per row."""
+    max_wall_s of wall time). Returns (algorithm, history rows: iteration, env steps, episodes, mean return
+    and length, wall_s, driver_cpu_s and env_runner_cpu_s, the CPU seconds the run got). progress(row) is
+    called per row."""
     if not isinstance(iterations, int) or iterations < 1:
         raise ValueError(f"iterations must be a whole number >= 1, got {iterations!r}")
     algo = config if hasattr(config, "train") else config.build_algo()
     history = []
     t0 = time.perf_counter()
+    c0 = time.process_time()
     ckpt = Path(checkpoint_dir) if checkpoint_dir is not None else None
     for it in range(1, iterations + 1):
         res = algo.train()
@@ -109,7 +112,9 @@ def train(config, iterations: int, checkpoint_dir: str | Path | None = None, che
                "episodes": _metric(res, "num_episodes_lifetime", 0.0),
                "episode_return_mean": _metric(res, "episode_return_mean"),
                "episode_len_mean": _metric(res, "episode_len_mean"),
-               "wall_s": time.perf_counter() - t0}
+               "wall_s": time.perf_counter() - t0,
+               "driver_cpu_s": time.process_time() - c0,        # this process: learner (+ local sampling)
+               "env_runner_cpu_s": _env_runner_cpu_s(algo)}     # remote EnvRunners' processes, in total
         history.append(row)
         if progress is not None:
             progress(row)
@@ -119,6 +124,18 @@ def train(config, iterations: int, checkpoint_dir: str | Path | None = None, che
         if last:
             break
     return algo, history
+
+
+def _env_runner_cpu_s(algo) -> float:
+    """CPU seconds used so far by the algorithm's remote EnvRunner processes (0 without remote runners; NaN
+    if they cannot be asked): on a shared machine the wall budget buys less CPU, and this says how much."""
+    group = getattr(algo, "env_runner_group", None)
+    if group is None or group.num_remote_env_runners() == 0:
+        return 0.0
+    try:
+        return float(sum(group.foreach_env_runner(lambda r: time.process_time(), local_env_runner=False)))
+    except Exception:               # a runner that died or a group API that changed: unknown, not zero
+        return math.nan
 
 
 def module_from_checkpoint(path: str | Path):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import math
 from typing import Any
 
@@ -202,7 +202,14 @@ class TerrainNavEnv(gym.Env, EzPickle):
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
     bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0, guidance_rate_hz=None,
-    pipeline=False)`.
+    pipeline=False, flight_dt_s=None)`.
+    `flight_dt_s`: JSBSim's integration step (s, at most 0.05; None = the scenario's `[aircraft] dt_s`,
+    0.01 in the built-in scenarios). The IMU's rate is lowered to the step rate when it was faster (an
+    integrating IMU: each sample is the mean over its interval of the truth rows); any other sensor faster
+    than the step, or a step that does not divide the guidance tick, is a ValueError naming `flight_dt_s`.
+    The route task (`trn_env.env.route_task`) flies 0.02 s: half the JSBSim work of 0.01 s; JSBSim's step
+    error is first order, so its trajectory departs about three times as far from a 0.005 s one as
+    0.01 s's does (tens of metres in a climb's transient; docs/validation/route_task.md).
     `guidance_rate_hz`: how often guidance re-computes the autopilot targets from the (dead-reckoned)
     estimate; None = once per navigator update (the scenario's `[guidance] rate_hz` is replaced; it must be
     a whole multiple of the navigator's rate). The autopilot itself runs inside JSBSim at every step.
@@ -216,6 +223,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (JSBSim's step): `flight_dt_s`.
     - v0 (rates matched to the decision): guidance re-computes the targets once per navigator update
       instead of at the scenario's 10 Hz (`guidance_rate_hz`); `pipeline`.
     - v0 (coarse decisions): `action_mode="pursuit"`; route-information observations 22-31 (the
@@ -244,7 +252,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  min_goal_distance_m: float = 5000.0, shaping_gamma: float = 1.0,
                  action_mode: str = "turn", bearing_offset_max_deg: float = 90.0,
                  sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0,
-                 guidance_rate_hz: float | None = None, pipeline: bool = False):
+                 guidance_rate_hz: float | None = None, pipeline: bool = False,
+                 flight_dt_s: float | None = None):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -253,7 +262,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
                           bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m,
-                          guidance_rate_hz, pipeline)
+                          guidance_rate_hz, pipeline, flight_dt_s)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -294,13 +303,12 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if isinstance(scenario, Scenario) and navigator is not None:
             sc = sc.with_overrides(navigator=navigator)
         sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
-        sc = _with_guidance_rate(sc, guidance_rate_hz)
+        sc = _with_rates(sc, guidance_rate_hz, flight_dt_s)
         if not isinstance(pipeline, bool):
             raise ValueError(f"pipeline must be a bool, got {pipeline!r}")
         self.pipeline = pipeline
         self.scenario = sc
-        d = sc.data
-        rate_hz = float(d["navigator"]["rate_hz"])      # one loop tick = one navigator update
+        rate_hz = float(sc.navigator.rate_hz)      # one loop tick = one navigator update
         self.ticks_per_decision = max(1, int(round(decision_interval_s * rate_hz)))
         self.decision_interval_s = self.ticks_per_decision / rate_hz
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.decision_interval_s}
@@ -322,7 +330,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._route_offsets_rad = np.array(ROUTE_OFFSET_FRACTIONS) * self.bearing_offset_max_rad
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
-        self.tas_mps = float(d["route"]["tas_mps"])
+        self.tas_mps = float(sc.route.tas_mps)
         self.info_offset_m = float(info_offset_m)
         self.log_sensors = bool(log_sensors)
         self.held_out_radius_m = float(held_out_radius_m)
@@ -333,7 +341,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self.action_space = task.action_space()
         self.observation_space = task.observation_space()
 
-        self._dems = components.build_terrain(d, sc.extras, spawn_rngs(sc.seed)["map"])
+        self._dems = components.build_terrain(sc, sc.extras, spawn_rngs(sc.seed)["map"])
         self._info_map = components.terrain_information_map(self._dems[1], info_sigma_m, info_window_m)
         self.goal_region_deg = self._check_region("goal_region_deg", goal_region_deg)
         self.start_region_deg = self._check_region("start_region_deg", start_region_deg)
@@ -344,13 +352,12 @@ class TerrainNavEnv(gym.Env, EzPickle):
                                                  (0.75, 0.75))]
         self.held_out_goals_deg = [self._check_point("held_out_goals_deg", g)
                                    for g in (held_out_goals_deg or [])]
-        wp_last = d["route"]["waypoints"][-1]
-        g = goal_deg if goal_deg is not None else (wp_last["lat_deg"], wp_last["lon_deg"])
+        wp_last = sc.route.waypoints[-1]
+        g = goal_deg if goal_deg is not None else (wp_last.lat_deg, wp_last.lon_deg)
         g = self._check_point("goal_deg", g)
         self._fixed_goal_deg = g
         self.goal_lat_rad, self.goal_lon_rad = math.radians(g[0]), math.radians(g[1])
-        init = d["initial"]
-        self.start_deg = (float(init["lat_deg"]), float(init["lon_deg"]))
+        self.start_deg = (float(sc.initial.lat_deg), float(sc.initial.lon_deg))
         self._loop: ClosedLoop | None = None
         self._needs_reset = True
         self._track_cmd_rad = 0.0
@@ -498,13 +505,13 @@ class TerrainNavEnv(gym.Env, EzPickle):
         return True
 
     def _episode_endpoints(self, options: dict) -> tuple[tuple[float, float], tuple[float, float]]:
-        init = self.scenario.data["initial"]
+        init = self.scenario.initial
         if "start_deg" in options:
             start = self._check_point("options['start_deg']", options["start_deg"])
         elif self.start_region_deg is not None:
             start = self._draw_region(self.start_region_deg)
         else:
-            start = (float(init["lat_deg"]), float(init["lon_deg"]))
+            start = (float(init.lat_deg), float(init.lon_deg))
         if "goal_deg" in options:
             return start, self._check_point("options['goal_deg']", options["goal_deg"])
         if self.goal_region_deg is None:
@@ -534,21 +541,21 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self.start_deg = start
         ep_seed = int(self.np_random.integers(0, 2**31 - 1))
         sc = self.scenario
-        data = sc.data
+        sections = sc.sections
         lat0, lon0 = math.radians(start[0]), math.radians(start[1])
         gn, ge = self._offset_to_goal(lat0, lon0)
         self._track_cmd_rad = math.atan2(ge, gn)
-        if start != (float(data["initial"]["lat_deg"]), float(data["initial"]["lon_deg"])):
-            data = dict(data)
-            data["initial"] = dict(copy.deepcopy(sc.data["initial"]), lat_deg=start[0], lon_deg=start[1],
-                                   heading_deg=math.degrees(self._track_cmd_rad) % 360.0)
-        sc = Scenario(name=sc.name, source=sc.source, data=data, description=sc.description, seed=ep_seed,
-                      duration_s=sc.duration_s, extras=sc.extras)
-        init = data["initial"]
-        if "h_agl_m" in init:
-            self._agl_cmd_m = float(init["h_agl_m"])
+        if start != (float(sections.initial.lat_deg), float(sections.initial.lon_deg)):
+            initial = dataclasses.replace(sections.initial, lat_deg=start[0], lon_deg=start[1],
+                                          heading_deg=math.degrees(self._track_cmd_rad) % 360.0)
+            sections = dataclasses.replace(sections, initial=initial)
+        sc = Scenario(name=sc.name, source=sc.source, sections=sections, description=sc.description,
+                      seed=ep_seed, duration_s=sc.duration_s, extras=sc.extras)
+        init = sections.initial
+        if init.h_agl_m is not None:
+            self._agl_cmd_m = float(init.h_agl_m)
         else:
-            self._agl_cmd_m = float(init["h_msl_m"]) - components.map_height(self._dems[1], lat0, lon0)
+            self._agl_cmd_m = float(init.h_msl_m) - components.map_height(self._dems[1], lat0, lon0)
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m, self.agl_min_m, self.agl_max_m))
         self._offset_frac = 0.0
         self._loop = ClosedLoop(sc, commander=self._commander, dems=self._dems, log_sensors=self.log_sensors,
@@ -677,25 +684,36 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self._needs_reset = True
 
 
-def _with_guidance_rate(sc: Scenario, guidance_rate_hz: float | None) -> Scenario:
-    """The scenario with `[guidance] rate_hz` set to the env's guidance rate: None = the navigator's update
-    rate (one command per update: the pursuit action re-aims from each new estimate, and every other action
-    holds its command for the whole decision), re-validated so that a rate the loop cannot fly (not a whole
-    multiple of the navigator's rate, or above the flight's step rate) is a ValueError naming the field."""
-    from trn_env.scenario.loading import validate
-
-    d = sc.data
-    rate = float(d["navigator"]["rate_hz"]) if guidance_rate_hz is None else guidance_rate_hz
+def _with_rates(sc: Scenario, guidance_rate_hz: float | None, flight_dt_s: float | None) -> Scenario:
+    """The scenario with `[guidance] rate_hz` set to the env's guidance rate (None = the navigator's update
+    rate: one command per update, so the pursuit action re-aims from each new estimate and every other
+    action holds its command for the whole decision) and, given `flight_dt_s`, JSBSim's step
+    `[aircraft] dt_s` replaced, the IMU's rate lowered to the step rate when it was faster (an integrating
+    IMU: its samples are the interval means of the truth rows, sensors.imu); re-validated, so that a rate
+    the loop cannot fly (a guidance rate not a whole multiple of the navigator's, a step that does not
+    divide the guidance tick, another sensor faster than the step) is a ValueError naming the field."""
+    rate = float(sc.navigator.rate_hz) if guidance_rate_hz is None else guidance_rate_hz
     if guidance_rate_hz is not None:
         _check_number("guidance_rate_hz", guidance_rate_hz, positive=True)
-    if float(d["guidance"]["rate_hz"]) == float(rate):
+    if flight_dt_s is not None:
+        _check_number("flight_dt_s", flight_dt_s, positive=True)
+        if flight_dt_s > 0.05:
+            raise ValueError(f"flight_dt_s must be within (0, 0.05] s, got {flight_dt_s!r}")
+    same_dt = flight_dt_s is None or float(sc.aircraft.dt_s) == float(flight_dt_s)
+    if float(sc.guidance.rate_hz) == float(rate) and same_dt:
         return sc
-    data = copy.deepcopy(d)
-    data["guidance"]["rate_hz"] = float(rate)
+    fields: dict = {"guidance.rate_hz": float(rate)}
+    what = f"guidance_rate_hz = {rate!r}"
+    if not same_dt:
+        fields["aircraft.dt_s"] = float(flight_dt_s)
+        imu = sc.sensors.imu
+        if imu is not None and float(imu.rate_hz) * float(flight_dt_s) > 1.0 + 1e-9:
+            fields["sensors.imu.rate_hz"] = 1.0 / float(flight_dt_s)
+        what += f", flight_dt_s = {flight_dt_s!r}"
     try:
-        return validate(data, source=sc.source)
+        return sc.with_fields(fields)
     except ValueError as err:
-        raise ValueError(f"guidance_rate_hz = {rate!r}: {err}") from None
+        raise ValueError(f"{what}: {err}") from None
 
 
 def _check_number(name: str, v, positive: bool) -> None:

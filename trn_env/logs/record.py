@@ -29,12 +29,12 @@ def estimate_metadata(est: Estimate) -> dict:
             "covariance": np.asarray(est.covariance, float)[:9, :9].reshape(-1).tolist()}
 
 
-def sensor_metadata(d: dict) -> tuple[dict, dict]:
-    """({sensor: its resolved config as a mapping}, {sensor: lever arm, body FRD m}) of a scenario."""
-    from trn_env.sensors import suite
+def sensor_metadata(sc) -> tuple[dict, dict]:
+    """({sensor: its resolved config as a mapping}, {sensor: lever arm, body FRD m}) of a scenario (its
+    `sensors` section, in the order of its tables)."""
     configs, arms = {}, {}
-    for name, value in d["sensors"].items():
-        cfg = suite._make_config(name, True if value == {} else value)
+    for name in sc.sensors.tables:
+        cfg = getattr(sc.sensors, name)
         if cfg is None:
             continue
         configs[name] = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)
@@ -46,25 +46,24 @@ def sensor_metadata(d: dict) -> tuple[dict, dict]:
 
 def recording_metadata(scenario: Scenario, initial: Estimate) -> dict:
     import trn_env
-    d = scenario.data
-    configs, arms = sensor_metadata(d)
+    configs, arms = sensor_metadata(scenario)
     return {
         "source": "trn-env record",
         "trn_env_version": trn_env.__version__,
         "scenario_name": scenario.name,
         "scenario_source": scenario.source,
         "seed": int(scenario.seed),
-        "scenario": d,
-        "navigator": {"name": scenario.navigator_name, "settings": d["navigator"].get("settings", {})},
-        "update_rate_hz": float(d["navigator"]["rate_hz"]),
+        "scenario": scenario.to_dict(),
+        "navigator": {"name": scenario.navigator_name, "settings": scenario.navigator.table.to_dict()},
+        "update_rate_hz": float(scenario.navigator.rate_hz),
         "imu_sample": "rate",
         "height_datum": {"reference": "msl"},
         "lever_arms_m": arms,
-        "map": {"from": "scenario", "terrain": d["terrain"],
+        "map": {"from": "scenario", "terrain": scenario.terrain.to_dict(),
                 "note": "the scenario's map (terrain.map, with its error model drawn from the seed's map "
                         "stream), as the navigator flew it"},
         "sensors": configs,
-        "gnss_outages": list(d["gnss"]["outages"]),
+        "gnss_outages": [o.to_dict() for o in scenario.gnss.outages],
         "initial_estimate": estimate_metadata(initial),
     }
 

@@ -30,6 +30,8 @@ from trn_env.logs.reader import SensorLog, read_log
 from trn_env.navigators.integrity.protection_level import EXTRA_PROTECTION_LEVEL
 from trn_env.navigators.protocol import Estimate, Health
 from trn_env.scenario.loading import Scenario
+from trn_env.scenario.sections import ScenarioSections, SectionsError
+from trn_env.scenario.sections import from_dict as from_sections_dict
 from trn_env.sim.closed_loop import perturbed_estimate, spawn_rngs, summarise
 from trn_env.sim.log import NAV_STATUS_CODES, error_ned_m
 from trn_env.sim.nav_stage import gnss_available_mask
@@ -62,35 +64,39 @@ def _load_dem(value: str):
 
 
 def scenario_of(log: SensorLog, navigator: str | None, settings: dict | None,
-                monitors: list[str] | None) -> dict:
-    """The scenario sections the builders need (terrain, sensors, navigator, monitors, gnss), from the
-    log's resolved scenario (recorded) or its metadata (built)."""
+                monitors: list[str] | None) -> ScenarioSections:
+    """The scenario sections the builders need (terrain, sensors, navigator, monitors, gnss, initial
+    errors; trn_env.scenario.sections.from_dict with partial=True), from the log's resolved scenario
+    (recorded) or its metadata (built), with the replay's navigator, settings and monitors. LogError for
+    settings or sensor tables their components refuse."""
     meta = log.metadata
     if "scenario" in meta:
-        d = copy.deepcopy(meta["scenario"])
+        base = copy.deepcopy(meta["scenario"])
     else:
-        d = {"name": log.path.name, "seed": int(meta.get("seed", 0)), "duration_s": 0.0,
-             "terrain": {"world": {"dem": meta["map"]["dem"]}, "map": {"dem": "world"}},
-             "sensors": {k: dict(v) for k, v in meta.get("sensors", {}).items()},
-             "navigator": copy.deepcopy(meta.get("navigator") or {"name": "ins", "settings": {}}),
-             "monitors": {}, "gnss": {"outages": []}, "initial_errors": DEFAULT_INITIAL_ERRORS}
-    d.setdefault("monitors", {})
-    nav = d.setdefault("navigator", {"name": "ins", "settings": {}})
-    nav.setdefault("settings", {})
-    if navigator is not None and navigator != nav.get("name"):
-        nav["name"], nav["settings"] = navigator, {}
-    if settings:
-        nav["settings"] = {**nav["settings"], **settings}
-    for name in monitors or []:
-        d["monitors"].setdefault(name, {})
+        base = {"name": log.path.name, "seed": int(meta.get("seed", 0)), "duration_s": 0.0,
+                "terrain": {"world": {"dem": meta["map"]["dem"]}, "map": {"dem": "world"}},
+                "sensors": {k: dict(v) for k, v in meta.get("sensors", {}).items()},
+                "navigator": copy.deepcopy(meta.get("navigator") or {"name": "ins", "settings": {}}),
+                "monitors": {}, "gnss": {"outages": []}, "initial_errors": DEFAULT_INITIAL_ERRORS}
+    nav_table = dict(base.get("navigator") or {"name": "ins"})
+    nav_settings = dict(nav_table.get("settings") or {})
+    if navigator is not None and navigator != nav_table.get("name"):
+        nav_table["name"], nav_settings = navigator, {}
+    nav_table["settings"] = {**nav_settings, **(settings or {})}
+    base["navigator"] = nav_table
+    base["monitors"] = {**(base.get("monitors") or {}),
+                        **{name: {} for name in monitors or [] if name not in (base.get("monitors") or {})}}
     # the sensors the log holds are the ones fitted (a builder's log may carry more configs than tables)
-    d["sensors"] = {s: cfg for s, cfg in d.get("sensors", {}).items() if s in log.sensors}
-    for s in log.sensors:
-        d["sensors"].setdefault(s, {})
-    return d
+    tables = base.get("sensors") or {}
+    base["sensors"] = {s: cfg for s, cfg in tables.items() if s in log.sensors} | {
+        s: {} for s in log.sensors if s not in tables}
+    try:
+        return from_sections_dict(base, partial=True)
+    except SectionsError as exc:
+        raise LogError(f"log {log.path}: {'; '.join(exc.problems)}") from None
 
 
-def build_maps(log: SensorLog, d: dict, map_path: str | None):
+def build_maps(log: SensorLog, d: ScenarioSections, map_path: str | None):
     """(world DEM for the truth's height above ground, navigator's map)."""
     if map_path is not None:
         the_map = _load_dem(map_path)
@@ -98,17 +104,17 @@ def build_maps(log: SensorLog, d: dict, map_path: str | None):
     if "scenario" in log.metadata:
         from trn_env.scenario.build import build_terrain
         extras: dict = {}
-        world, the_map = build_terrain(d, extras, spawn_rngs(int(d["seed"]))["map"])
+        world, the_map = build_terrain(d, extras, spawn_rngs(int(d.seed))["map"])
         schedule = extras.get("map_fault_schedule") or []
         if schedule:
             from trn_env.terrain.map_error import set_heights
             set_heights(the_map, extras["map_fault_heights0"])
         return world, the_map, list(schedule)
-    the_map = _load_dem(d["terrain"]["world"]["dem"])
+    the_map = _load_dem(d.terrain.world.dem)
     return the_map, the_map, []
 
 
-def _initial(log: SensorLog, d: dict) -> Estimate:
+def _initial(log: SensorLog, d: ScenarioSections) -> Estimate:
     est = log.initial_estimate()
     if est is not None:
         return est
@@ -128,29 +134,28 @@ def _initial(log: SensorLog, d: dict) -> Estimate:
         v_ned_mps = np.array([[row["v_n_mps"], row["v_e_mps"], row["v_d_mps"]]])
         roll_rad, pitch_rad, yaw_rad = np.array([row["roll_rad"]]), np.array([row["pitch_rad"]]), np.array(
             [row["yaw_rad"]])
-    sigmas = d.get("initial_errors") or DEFAULT_INITIAL_ERRORS
-    return perturbed_estimate(_Row, 0, sigmas, spawn_rngs(int(d.get("seed", 0)))["initial_errors"])
+    return perturbed_estimate(_Row, 0, d.initial_errors, spawn_rngs(int(d.seed))["initial_errors"])
 
 
-def check_sensors(navigator, name: str, log: SensorLog, d: dict | None = None) -> None:
-    """Refuse a log that lacks a sensor the navigator or a monitor of `d` requires (their declared
-    capabilities, navigators.registry.sensor_needs; a navigator the registry does not know is asked its
-    `required_sensors()` if it has one)."""
+def check_sensors(navigator, name: str, log: SensorLog, d: ScenarioSections | None = None) -> None:
+    """Refuse a log that lacks a sensor the navigator or a monitor of the scenario `d` (its sections)
+    requires (their declared capabilities, navigators.registry.sensor_needs; a navigator the registry does
+    not know is asked its `required_sensors()` if it has one). Without `d`: the navigator's default
+    settings and no monitors."""
     from trn_env.navigators import registry
-    d = d or {}
     users = []
     try:
-        needs = registry.sensor_needs(name, (d.get("navigator") or {}).get("settings") or {})
+        needs = registry.sensor_needs(name, {} if d is None else d.navigator.table.to_dict())
         users.append((f"navigator {name!r}", list(needs.required.items())))
     except ValueError:
         need = getattr(navigator, "required_sensors", None)
         users.append((f"navigator {name!r}", list(need()) if need is not None else []))
-    for mon, settings in (d.get("monitors") or {}).items():
+    for mon in () if d is None else d.monitors:
         try:
-            needs = registry.monitor_sensor_needs(mon, settings or {})
+            needs = registry.monitor_sensor_needs(mon.name, mon.settings.to_dict())
         except ValueError:
             continue
-        users.append((f"monitor {mon!r}", list(needs.required.items())))
+        users.append((f"monitor {mon.name!r}", list(needs.required.items())))
     for who, need in users:
         missing = [(s, why) for s, why in need if s not in log.sensors]
         if missing:
@@ -159,16 +164,15 @@ def check_sensors(navigator, name: str, log: SensorLog, d: dict | None = None) -
                            + f" (the log holds: {', '.join(log.sensors) or 'none'})")
 
 
-def unused_in_log(d: dict, sensors) -> list[str]:
-    """The log's sensors that neither the navigator nor a monitor of `d` reads (by their declared sensor
-    needs); empty when a component's needs cannot be read."""
+def unused_in_log(d: ScenarioSections, sensors) -> list[str]:
+    """The log's sensors that neither the navigator nor a monitor of the scenario `d` (its sections) reads
+    (by their declared sensor needs); empty when a component's needs cannot be read."""
     from trn_env.navigators import registry
     try:
-        nav = d.get("navigator") or {}
-        used = set(registry.sensor_needs(nav["name"], nav.get("settings") or {}).used)
-        for mon, settings in (d.get("monitors") or {}).items():
-            used |= set(registry.monitor_sensor_needs(mon, settings or {}).used)
-    except (KeyError, ValueError):
+        used = set(registry.sensor_needs(d.navigator.name, d.navigator.table.to_dict()).used)
+        for mon in d.monitors:
+            used |= set(registry.monitor_sensor_needs(mon.name, mon.settings.to_dict()).used)
+    except ValueError:
         return []
     return sorted(set(sensors) - used)
 
@@ -185,14 +189,14 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
         log = read_log(log)
     d = scenario_of(log, navigator, settings, monitors)
     world, the_map, schedule = build_maps(log, d, map_path)
-    seed = int(d.get("seed", log.metadata.get("seed", 0)))
+    seed = int(d.seed if d.seed is not None else log.metadata.get("seed", 0))
     nav_seed = seed if seed_override is None else int(seed_override)
     try:
         nav = build_navigator(d, the_map, spawn_rngs(nav_seed)["navigator"])
         mons = build_monitors(d, the_map)
     except (ValueError, TypeError, KeyError) as exc:
-        raise LogError(f"navigator {d['navigator']['name']!r}: {exc}") from exc
-    check_sensors(nav, d["navigator"]["name"], log, d)
+        raise LogError(f"navigator {d.navigator.name!r}: {exc}") from exc
+    check_sensors(nav, d.navigator.name, log, d)
     initial = _initial(log, d)
     nav.reset(initial)
     ests: list[Estimate] = [initial]
@@ -225,8 +229,9 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
         if progress is not None:
             progress(k + 1, n)
     wall = time.perf_counter() - wall0
-    sc = Scenario(name=str(log.metadata.get("scenario_name", log.path.name)), source=str(log.path), data=d,
-                  seed=nav_seed, duration_s=float(log.column("frames", "t_end_s")[-1]) if n else 0.0)
+    sc = Scenario(name=str(log.metadata.get("scenario_name", log.path.name)), source=str(log.path),
+                  sections=d, seed=nav_seed,
+                  duration_s=float(log.column("frames", "t_end_s")[-1]) if n else 0.0)
     arrays, has_truth = replay_arrays(log, ests, world, d)
     summary = {"scenario": sc.name, "seed": seed, "navigator": sc.navigator_name, "replay_of": str(log.path),
                "frames": n, "termination": termination, "wall_time_s": wall}
@@ -277,7 +282,7 @@ def estimate_columns(ests: list[Estimate]) -> dict[str, np.ndarray]:
     }
 
 
-def replay_arrays(log: SensorLog, ests: list[Estimate], world, d: dict) -> tuple[dict, bool]:
+def replay_arrays(log: SensorLog, ests: list[Estimate], world, d: ScenarioSections) -> tuple[dict, bool]:
     est = estimate_columns(ests)
     truth = log.truth()
     t_est = est["est_t_s"]
@@ -367,6 +372,6 @@ def write_result_log(writer, res: ReplayResult) -> Path:
     return writer.commit({"source": "trn-env replay", "trn_env_version": trn_env.__version__,
                           "replay_of": str(res.summary.get("replay_of")), "navigator": {
                               "name": res.scenario.navigator_name,
-                              "settings": res.scenario.data["navigator"].get("settings", {})},
+                              "settings": res.scenario.navigator.table.to_dict()},
                           "height_datum": {"reference": "msl"}, "truth_in_log": res.has_truth,
                           "termination": res.termination})

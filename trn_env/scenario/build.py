@@ -1,8 +1,10 @@
-"""Scenario data -> the components of a run (terrain, flight, wind, sensors, navigator, guidance).
+"""A scenario's typed sections -> the components of a run (terrain, flight, wind, sensors, navigator,
+guidance).
 
-The one place that knows both the scenario file's layout and the component constructors. `check` builds
-each component's configuration from the scenario and turns every rejection into a problem at the field
-path, so a scenario is fully checked before the flight starts.
+The one place that knows both the scenario's sections (trn_env.scenario.sections) and the component
+constructors. Every builder takes `sc`: a trn_env.scenario.Scenario or its ScenarioSections (the same
+section attributes). `check` builds each component from the scenario and turns every rejection into a
+problem at the field path, so a scenario is fully checked before the flight starts.
 """
 
 from __future__ import annotations
@@ -27,20 +29,20 @@ def _load_dem(value: str, fill_voids: bool):
     return terrain.load(value, fill_voids=fill_voids)
 
 
-def build_terrain(d: dict, extras: dict, rng: np.random.Generator):
+def build_terrain(sc, extras: dict, rng: np.random.Generator):
     """(world DEM, navigator's map DEM) for the scenario; map errors drawn from `rng`."""
-    wcfg = d["terrain"]["world"]
-    world = extras.get("world_dem_raw") or _load_dem(wcfg["dem"], bool(wcfg.get("fill_voids", False)))
-    if wcfg.get("refinement"):
-        world = refine_dem(world, wcfg["refinement"], rng)
-    mcfg = d["terrain"]["map"]
-    if mcfg.get("dem", "world") == "world":
+    wcfg = sc.terrain.world
+    world = extras.get("world_dem_raw") or _load_dem(wcfg.dem, bool(wcfg.fill_voids))
+    if wcfg.refinement is not None:
+        world = refine_dem(world, wcfg.refinement.to_dict(), rng)
+    mcfg = sc.terrain.map
+    if mcfg.is_world:
         base = world
     else:
-        base = extras.get("map_dem_raw") or _load_dem(mcfg["dem"], bool(mcfg.get("fill_voids", False)))
-    err = mcfg.get("error_model")
-    the_map = apply_map_errors(base, err, rng) if err else base
-    faults = map_faults(d)
+        base = extras.get("map_dem_raw") or _load_dem(mcfg.dem, bool(mcfg.fill_voids))
+    err = mcfg.error_model
+    the_map = apply_map_errors(base, err.to_dict(), rng) if err else base
+    faults = map_faults(sc)
     extras["map_faults"] = [f.describe() for f in faults]
     extras["map_fault_schedule"] = []
     if faults:
@@ -54,24 +56,24 @@ def build_terrain(d: dict, extras: dict, rng: np.random.Generator):
     return world, the_map
 
 
-def map_faults(d: dict) -> list:
+def map_faults(sc) -> list:
     """terrain.map_error.MapFault of each [[terrain.map.faults]] entry (source_dem loaded)."""
     from trn_env.terrain.map_error import MapFault
     out = []
-    for f in d["terrain"]["map"].get("faults", []):
-        kw = dict(f)
+    for f in sc.terrain.map.faults:
+        kw = f.to_dict()
         if "source_dem" in kw:
             kw["source_dem"] = _load_dem(kw["source_dem"], True)
         out.append(MapFault(**kw))
     return out
 
 
-def _fault_problems(d: dict, the_map) -> list[str]:
+def _fault_problems(sc, the_map) -> list[str]:
     from trn_env.terrain.map_error import MapFault, check_fault
     problems = []
-    for i, f in enumerate(d["terrain"]["map"].get("faults", [])):
+    for i, f in enumerate(sc.terrain.map.faults):
         try:
-            kw = dict(f)
+            kw = f.to_dict()
             if "source_dem" in kw:
                 kw["source_dem"] = _load_dem(kw["source_dem"], True)
             fault = MapFault(**kw)
@@ -111,12 +113,19 @@ def map_error_model(settings: dict, rng: np.random.Generator):
     return replace(model, **kw)
 
 
-def map_noise_settings(settings: dict | None) -> dict:
+def _table(error_model) -> dict:
+    """The error model as a mapping: the scenario's MapErrorModel section, a mapping, or None (empty)."""
+    if error_model is None:
+        return {}
+    return error_model.to_dict() if hasattr(error_model, "to_dict") else dict(error_model)
+
+
+def map_noise_settings(settings) -> dict:
     """{map_sigma_m, map_bias_sigma_m} a navigator should assume for the scenario's map error model (1 sigma,
     m): its accuracy class's vertical sigma split by bias_fraction (terrain.map_error.model_for_class), or
     the explicit random_sigma_m and |bias_m|; zeros without an error model."""
     from trn_env.terrain import map_error
-    s = dict(settings or {})
+    s = _table(settings)
     random_m, bias_m = 0.0, 0.0
     preset = s.get("preset")
     if preset is not None and str(preset).strip().lower() in map_error.ACCURACY_CLASSES:
@@ -184,36 +193,36 @@ def map_height(dem, lat_rad: float, lon_rad: float) -> float:
 
 # ------------------------------------------------------------------------------------------ flight, wind
 
-def build_wind(d: dict):
-    """trn_env.flight.wind.WindConfig from the scenario's [wind] table."""
+def build_wind(sc):
+    """trn_env.flight.wind.WindConfig from the scenario's [wind] section."""
     from trn_env.flight.wind import CosineGust, Turbulence, WindConfig
-    w = d["wind"]
-    layers = [(lay["altitude_m"], lay["direction_from_deg"], lay["speed_mps"]) for lay in w["layers"]]
-    t = dict(w.get("turbulence") or {})
-    turb = Turbulence(model=t.get("model", "none"), severity=t.get("severity", "light"),
-                      windspeed_at_20ft_mps=t.get("windspeed_at_20ft_mps"))
+    w = sc.wind
+    layers = [(lay.altitude_m, lay.direction_from_deg, lay.speed_mps) for lay in w.layers]
+    t = w.turbulence
+    turb = Turbulence(model=t.model, severity="light" if t.severity is None else t.severity,
+                      windspeed_at_20ft_mps=t.windspeed_at_20ft_mps)
     gusts = []
-    for g in w.get("gusts", []):
-        g = dict(g)
+    for g in w.gusts:
+        g = g.to_dict()
         if "direction" in g:
             g["direction"] = tuple(g["direction"])
         gusts.append(CosineGust(**g))
     return WindConfig(layers=layers, turbulence=turb, gusts=gusts)
 
 
-def build_atmosphere(d: dict):
-    """trn_env.flight.Atmosphere of the scenario's optional [atmosphere] table (absent: standard)."""
+def build_atmosphere(sc):
+    """trn_env.flight.Atmosphere of the scenario's optional [atmosphere] section (absent: standard)."""
     from trn_env.flight.atmosphere import Atmosphere
-    return Atmosphere.from_mapping(d.get("atmosphere"))
+    return Atmosphere.from_mapping(None if sc.atmosphere is None else sc.atmosphere.to_dict())
 
 
-def initial_h_msl_m(d: dict, world) -> float:
+def initial_h_msl_m(sc, world) -> float:
     """Initial height above MSL: h_msl_m, or h_agl_m above the TRUE terrain at the start."""
-    init = d["initial"]
-    if "h_msl_m" in init:
-        return float(init["h_msl_m"])
-    h_ground = map_height(world, math.radians(init["lat_deg"]), math.radians(init["lon_deg"]))
-    return float(init["h_agl_m"]) + h_ground
+    init = sc.initial
+    if init.h_msl_m is not None:
+        return float(init.h_msl_m)
+    h_ground = map_height(world, math.radians(init.lat_deg), math.radians(init.lon_deg))
+    return float(init.h_agl_m) + h_ground
 
 
 @contextlib.contextmanager
@@ -236,50 +245,52 @@ def quiet_stdout():
         os.close(devnull)
 
 
-def is_kinematic(d: dict) -> bool:
+def is_kinematic(sc) -> bool:
     """The scenario's truth is the prescribed motion profile ([truth] source = "kinematic")."""
-    return (d.get("truth") or {}).get("source", "jsbsim") == "kinematic"
+    return sc.truth.is_kinematic
 
 
-def build_kinematic_truth(d: dict, world):
+def build_kinematic_truth(sc, world):
     """trn_env.flight.kinematic.KinematicTruth of a kinematic scenario: [initial]'s position, height and
     heading, [truth]'s speed (default initial.tas_mps) and segments, [wind]'s steady wind at the initial
     height (held constant), [atmosphere], one row per aircraft.dt_s."""
     from trn_env.flight.kinematic import KinematicTruth, Segment
-    init, t = d["initial"], d["truth"]
+    init, t = sc.initial, sc.truth
     segments = []
-    for i, m in enumerate(t.get("segments") or []):
+    for i, m in enumerate(t.segments or ()):
         try:
-            segments.append(Segment.from_mapping(dict(m)))
+            segments.append(Segment.from_mapping(m.to_dict()))
         except ValueError as exc:
             raise ValueError(f"segments[{i}]: {exc}") from None
     if not segments:
         raise ValueError("segments: a kinematic truth needs at least one segment")
-    h0 = initial_h_msl_m(d, world)
-    return KinematicTruth(math.radians(init["lat_deg"]), math.radians(init["lon_deg"]), h0,
-                          float(t.get("speed_mps", init["tas_mps"])), math.radians(init["heading_deg"]),
-                          segments, rate_hz=1.0 / float(d["aircraft"]["dt_s"]), terrain=world,
-                          wind_ned_mps=build_wind(d).steady_wind_ned_mps(h0), atmosphere=build_atmosphere(d))
+    h0 = initial_h_msl_m(sc, world)
+    speed_mps = init.tas_mps if t.speed_mps is None else t.speed_mps
+    return KinematicTruth(math.radians(init.lat_deg), math.radians(init.lon_deg), h0,
+                          float(speed_mps), math.radians(init.heading_deg),
+                          segments, rate_hz=1.0 / float(sc.aircraft.dt_s), terrain=world,
+                          wind_ned_mps=build_wind(sc).steady_wind_ned_mps(h0),
+                          atmosphere=build_atmosphere(sc))
 
 
-def _truth_problems(d: dict, world) -> list[str]:
+def _truth_problems(sc, world) -> list[str]:
     """[truth] fields against the source: a kinematic profile that cannot be built, or one asked to fly
     turbulence or gusts (it holds one steady wind); kinematic-only fields on a JSBSim truth."""
     import re
-    t = d.get("truth") or {}
-    if not is_kinematic(d):
+    t = sc.truth
+    if not is_kinematic(sc):
         return [f"truth.{k}: only used with truth.source = \"kinematic\" (the source is "
-                f"{t.get('source', 'jsbsim')!r})" for k in ("speed_mps", "segments") if k in t]
+                f"{t.source!r})" for k in ("speed_mps", "segments") if getattr(t, k) is not None]
     problems = []
-    w = d["wind"]
-    if (w.get("turbulence") or {}).get("model", "none") != "none":
+    w = sc.wind
+    if w.turbulence.model != "none":
         problems.append("wind.turbulence: the kinematic truth holds a steady wind; turbulence needs "
                         "truth.source = \"jsbsim\" (set wind.turbulence.model = \"none\")")
-    if w.get("gusts"):
+    if w.gusts:
         problems.append("wind.gusts: the kinematic truth holds a steady wind; gusts need "
                         "truth.source = \"jsbsim\"")
     try:
-        build_kinematic_truth(d, world)
+        build_kinematic_truth(sc, world)
     except ValueError as exc:
         msg = str(exc)
         m = re.match(r"segments\[(\d+)\]: Segment\.(\w+)", msg)
@@ -294,31 +305,31 @@ def _truth_problems(d: dict, world) -> list[str]:
     return problems
 
 
-def build_flight(d: dict, world, rng: np.random.Generator):
+def build_flight(sc, world, rng: np.random.Generator):
     """trn_env.flight.Flight at the scenario's initial condition, trimmed, with its wind and a JSBSim seed;
     for [truth] source = "kinematic" a trn_env.flight.kinematic.KinematicFlight of the prescribed profile
     (rng unused)."""
-    if is_kinematic(d):
+    if is_kinematic(sc):
         from trn_env.flight.kinematic import KinematicFlight
-        return KinematicFlight(build_kinematic_truth(d, world))
+        return KinematicFlight(build_kinematic_truth(sc, world))
     from trn_env.flight.core import Flight
-    init = d["initial"]
-    lat, lon = math.radians(init["lat_deg"]), math.radians(init["lon_deg"])
-    ic = _initial_condition(d, world)
+    init = sc.initial
+    lat, lon = math.radians(init.lat_deg), math.radians(init.lon_deg)
+    ic = _initial_condition(sc, world)
     seed = int(rng.integers(0, 2**31 - 1))
     with quiet_stdout():
-        return Flight(ic, aircraft=d["aircraft"]["name"], dt_s=float(d["aircraft"]["dt_s"]),
-                      wind=build_wind(d), seed=seed, terrain_elevation_m=map_height(world, lat, lon),
-                      atmosphere=build_atmosphere(d), constant_fuel=bool(d["aircraft"]["constant_fuel"]))
+        return Flight(ic, aircraft=sc.aircraft.name, dt_s=float(sc.aircraft.dt_s),
+                      wind=build_wind(sc), seed=seed, terrain_elevation_m=map_height(world, lat, lon),
+                      atmosphere=build_atmosphere(sc), constant_fuel=bool(sc.aircraft.constant_fuel))
 
 
-def trim_problems(d: dict, world) -> list[str]:
+def trim_problems(sc, world) -> list[str]:
     """The flight's own trim at the initial condition (JSBSim, tens of milliseconds), so a start the flight
     would refuse (an airspeed below stall, a height the aircraft cannot hold level) is a validation problem
     before any flight. An initial condition that is itself invalid is reported by its own check."""
     from trn_env.flight.core import TrimError
     try:
-        build_flight(d, world, np.random.default_rng(0))
+        build_flight(sc, world, np.random.default_rng(0))
     except TrimError as exc:
         return [f"initial: {exc} (check initial.tas_mps against the aircraft's speed range and the initial "
                 "height)"]
@@ -329,54 +340,41 @@ def trim_problems(d: dict, world) -> list[str]:
 
 # ----------------------------------------------------------------------------------------------- sensors
 
-def sensor_configs(d: dict) -> dict:
-    """{sensor name: config mapping} of the scenario's [sensors.*] tables (absent = not fitted)."""
-    return {name: dict(cfg) for name, cfg in d["sensors"].items()}
+def sensor_configs(sc) -> dict:
+    """{sensor name: config} of the scenario's fitted sensors (each sensor's Settings class, e.g.
+    trn_env.sensors.imu.ImuConfig; absent = not fitted)."""
+    return sc.sensors.configs()
 
 
-def sensor_lever_arms(d: dict) -> dict:
+def sensor_lever_arms(sc) -> dict:
     """{sensor: lever_arm_b_m} of the scenario's ranging sensors (radar altimeter, IRA), body FRD m."""
-    from trn_env.sensors import suite
     arms = {}
     for name in ("radar_altimeter", "ira"):
-        value = d["sensors"].get(name)
-        if value is None or value is False:
-            continue
-        cfg = suite._make_config(name, True if value == {} else value)
-        arms[name] = [float(x) for x in cfg.lever_arm_b_m]
+        cfg = getattr(sc.sensors, name)
+        if cfg is not None:
+            arms[name] = [float(x) for x in cfg.lever_arm_b_m]
     return arms
 
 
-def build_sensors(d: dict, seed: np.random.SeedSequence):
+def build_sensors(sc, seed: np.random.SeedSequence):
     """trn_env.sensors.suite.SensorSuite of the scenario's sensors, one random stream per sensor."""
     from trn_env.sensors.suite import SensorSuite
-    return SensorSuite.from_config(sensor_configs(d), seed)
-
-
-def _sensor_problems(d: dict) -> list[str]:
-    from trn_env.navigators.core.settings import SettingsError
-    from trn_env.sensors import suite
-    problems = []
-    for name, cfg in d["sensors"].items():
-        try:
-            suite._make_config(name, dict(cfg))
-        except SettingsError as exc:
-            problems += exc.at(f"sensors.{name}")
-        except (ValueError, TypeError) as exc:
-            problems.append(f"sensors.{name}: {exc}")
-    return problems
+    return SensorSuite.from_config(sensor_configs(sc), seed)
 
 
 # -------------------------------------------------------------------------------------------- navigator
 
-def imu_spec(imu: dict | None):
+def imu_spec(imu):
     """The scenario IMU's error specification as the navigators take it (navigators.core.imu_spec.ImuSpec,
-    from trn_env.sensors.imu.ImuConfig: its grade and overrides); None without an IMU or for a table that
-    does not validate (the sensors check reports that)."""
+    from trn_env.sensors.imu.ImuConfig: its grade and overrides); `imu` is an ImuConfig (the scenario's
+    `sensors.imu`) or an [sensors.imu] table; None without an IMU or for a table that does not validate
+    (the sensors check reports that)."""
     from trn_env.navigators.core.imu_spec import ImuSpec
     from trn_env.sensors.imu import ImuConfig
     if imu is None or imu is False:
         return None
+    if isinstance(imu, ImuConfig):
+        return ImuSpec.from_object(imu)
     try:
         cfg = ImuConfig.from_mapping(dict(imu))
     except (ValueError, TypeError):
@@ -384,7 +382,7 @@ def imu_spec(imu: dict | None):
     return ImuSpec.from_object(cfg)
 
 
-def imu_bias_settings(imu: dict | None, epoch_s: float = 1.0) -> dict:
+def imu_bias_settings(imu, epoch_s: float = 1.0) -> dict:
     """The bias model a navigator should assume for the scenario's IMU (1 sigma per axis, its grade and
     overrides, imu_spec): accel_bias_sigma_mps2 and gyro_bias_sigma_rps, the root sum square of the turn-on
     bias and the bias instability; q_accel_bias_mps2 and q_gyro_bias_rps, the instability's Gauss-Markov
@@ -410,7 +408,7 @@ def _epoch_s(settings: dict) -> float:
     return 1.0 / rate if math.isfinite(rate) and rate > 0 else 1.0
 
 
-def navigator_settings(d: dict, map_dem) -> dict:
+def navigator_settings(sc, map_dem) -> dict:
     """The keyword settings registry.create gets for the scenario's navigator: its [navigator.settings] and,
     by its declared capabilities (navigators.core.capabilities), the map as dem= (needs_map, and any plug-in
     that declares no settings class, as before capabilities), the bias priors and bias process noise from the
@@ -421,100 +419,99 @@ def navigator_settings(d: dict, map_dem) -> dict:
     covers it)."""
     from trn_env.navigators import registry
     from trn_env.terrain import map_error
-    caps = registry.capabilities(d["navigator"]["name"])
-    settings = dict(d["navigator"]["settings"])
+    caps = registry.capabilities(sc.navigator.name)
+    settings = sc.navigator.table.to_dict()
     if caps.needs_map or caps.settings is None:
         settings.setdefault("dem", map_dem)
     if caps.imu_bias_settings:
-        for key, val in imu_bias_settings(d.get("sensors", {}).get("imu"), _epoch_s(settings)).items():
+        for key, val in imu_bias_settings(sc.sensors.imu, _epoch_s(settings)).items():
             settings.setdefault(key, val)
-    preset = str((d["terrain"]["map"].get("error_model") or {}).get("preset", "")).strip().lower()
+    error_model = sc.terrain.map.error_model
+    preset = str((error_model.preset if error_model is not None else None) or "").strip().lower()
     if preset in map_error.ACCURACY_CLASSES:   # the protection level covers the map's horizontal error
         settings.setdefault("map_horizontal_sigma_m", map_error.ACCURACY_CLASSES[preset].sigma_h_m)
     if caps.uses_map_noise:
-        for key, val in map_noise_settings(d["terrain"]["map"].get("error_model")).items():
+        for key, val in map_noise_settings(error_model).items():
             settings.setdefault(key, val)
-    if caps.models_map_detail and d["terrain"]["map"].get("dem", "world") == "world":
+    if caps.models_map_detail and sc.terrain.map.is_world:
         settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
     elif caps.models_map_detail:
-        refinement = d["terrain"]["world"].get("refinement") or {}
-        spacing = refinement.get("spacing_m")
+        refinement = sc.terrain.world.refinement
+        spacing = None if refinement is None else refinement.spacing_m
         # the finest terrain below the map's posts is the world's (where it is finer than the posts)
         if spacing is not None and 5.0 <= float(spacing) < min(getattr(map_dem, "spacing_m", (0.0,))):
             settings.setdefault("terrain_detail_spacing_m", float(spacing))
     return settings
 
 
-def build_navigator(d: dict, map_dem, rng: np.random.Generator | None = None):
-    """navigators.registry.create(name, rng=<the scenario's navigator stream>, **navigator_settings(d,
+def build_navigator(sc, map_dem, rng: np.random.Generator | None = None):
+    """navigators.registry.create(name, rng=<the scenario's navigator stream>, **navigator_settings(sc,
     map_dem)); the rng reaches only navigators that declare takes_rng. A navigator that declares
     uses_imu_spec and has `apply_imu_spec` then takes its INS error model from the scenario IMU's
     specification (navigators.core.imu_spec)."""
     from trn_env.navigators import registry
-    name = d["navigator"]["name"]
-    navigator = registry.create(name, rng=rng, **navigator_settings(d, map_dem))
-    spec = imu_spec(d.get("sensors", {}).get("imu")) if registry.capabilities(name).uses_imu_spec else None
+    name = sc.navigator.name
+    navigator = registry.create(name, rng=rng, **navigator_settings(sc, map_dem))
+    spec = imu_spec(sc.sensors.imu) if registry.capabilities(name).uses_imu_spec else None
     if spec is not None and hasattr(navigator, "apply_imu_spec"):
         navigator.apply_imu_spec(spec)
     return navigator
 
 
-def _navigator_requirements(d: dict, the_map) -> list[str]:
+def _navigator_requirements(sc, the_map) -> list[str]:
     try:
-        navigator = build_navigator(d, the_map)
+        navigator = build_navigator(sc, the_map)
     except (ValueError, TypeError):
         return []          # the navigator.settings check reports it
-    return navigator_sensor_problems(d, navigator)
+    return navigator_sensor_problems(sc, navigator)
 
 
-def navigator_sensor_problems(d: dict, navigator) -> list[str]:
+def navigator_sensor_problems(sc, navigator) -> list[str]:
     """The sensors the navigator requires that the scenario does not fit, each as 'sensors.<name>: ...'
     (its declared capabilities, navigators.registry.sensor_needs; for a plug-in that declares none, its
     `required_sensors()` if it has one), and a transect longer than the flight (a navigator's
     `required_duration_s()`): refused before the flight. (The scenario loader checks the declared sensors
     before any component is built; this also serves an undeclared plug-in and trn_env.testing.)"""
     from trn_env.navigators import registry
-    from trn_env.scenario.loading import fitted_sensors
-    name = d["navigator"]["name"]
+    name = sc.navigator.name
     try:
-        need = list(registry.sensor_needs(name, d["navigator"]["settings"]).required.items())
+        need = list(registry.sensor_needs(name, sc.navigator.table.to_dict()).required.items())
     except ValueError:
         need = []
     if not need and callable(getattr(navigator, "required_sensors", None)):
         need = list(navigator.required_sensors())
-    fitted = fitted_sensors(d)
+    fitted = set(sc.sensors.fitted)
     problems = [f"sensors.{sensor}: navigator {name!r} needs this sensor ({why}); add a [sensors.{sensor}] "
                 "table" for sensor, why in need if sensor not in fitted]
     dur = getattr(navigator, "required_duration_s", None)
-    if dur is not None and dur() > float(d["duration_s"]):
+    if dur is not None and dur() > float(sc.duration_s):
         problems.append(f"navigator.settings.transect_samples: one transect takes {dur():g} s of flight, "
-                        f"more than the scenario's duration_s = {d['duration_s']:g} s (more samples than the "
+                        f"more than the scenario's duration_s = {sc.duration_s:g} s (more samples than the "
                         "route provides)")
     return problems
 
 
-def unused_sensors(d: dict) -> list[str]:
+def unused_sensors(sc) -> list[str]:
     """The fitted sensors that neither the navigator nor any monitor reads (by their declared sensor needs);
     summary.json lists them. Empty when a component's needs cannot be read."""
     from trn_env.navigators import registry
-    from trn_env.scenario.loading import fitted_sensors
     try:
-        used = set(registry.sensor_needs(d["navigator"]["name"], d["navigator"]["settings"]).used)
-        for name, settings in (d.get("monitors") or {}).items():
-            used |= set(registry.monitor_sensor_needs(name, settings).used)
+        used = set(registry.sensor_needs(sc.navigator.name, sc.navigator.table.to_dict()).used)
+        for mon in sc.monitors:
+            used |= set(registry.monitor_sensor_needs(mon.name, mon.settings.to_dict()).used)
     except ValueError:
         return []
-    return sorted(fitted_sensors(d) - used)
+    return sorted(set(sc.sensors.fitted) - used)
 
 
 # -------------------------------------------------------------------------------------------- monitors
 
-def monitor_map_settings(error_model: dict | None) -> dict:
+def monitor_map_settings(error_model) -> dict:
     """The DEM monitor's map model from the scenario's map error model (terrain.map_error): sigma_m (the
     vertical sigma: random and bias parts together), map_bias_fraction, correlation_length_m and
     correlation_function; empty without a random vertical error (the monitor keeps seed 003's model)."""
     from trn_env.terrain import map_error
-    s = dict(error_model or {})
+    s = _table(error_model)
     noise = map_noise_settings(s)
     sig_r, sig_b = noise["map_sigma_m"], noise["map_bias_sigma_m"]
     if not sig_r > 0.0:
@@ -530,49 +527,45 @@ def monitor_map_settings(error_model: dict | None) -> dict:
             "correlation_length_m": float(length), "correlation_function": func}
 
 
-def monitor_settings(d: dict, name: str) -> dict:
+def monitor_settings(sc, name: str) -> dict:
     """A monitor's settings: the scenario's [monitors.<name>] table, with the sensor figures it needs
     filled from the scenario's sensors where not given (dem_integrity: the radar altimeter's noise and
     lever arm, the GNSS vertical sigma)."""
-    settings = dict(d["monitors"][name])
+    settings = sc.monitor(name).settings.to_dict()
     if name == "dem_integrity":
-        from trn_env.sensors import suite
-        ra = d["sensors"].get("radar_altimeter")
-        if ra is not None:
-            cfg = suite._make_config("radar_altimeter", True if ra == {} else dict(ra))
+        cfg = sc.sensors.radar_altimeter
+        if cfg is not None:
             settings.setdefault("radar_altimeter_noise_const_m", float(cfg.noise_const_m))
             settings.setdefault("radar_altimeter_noise_fraction", float(cfg.noise_fraction))
             settings.setdefault("lever_arm_m", float(cfg.lever_arm_b_m[2]))   # FRD z: below the GNSS antenna
             settings.setdefault("beam_half_angle_deg", 0.5 * float(cfg.beamwidth_deg))
             settings.setdefault("max_range_m", float(cfg.max_range_m))
-        for key, val in monitor_map_settings(d["terrain"]["map"].get("error_model")).items():
+        for key, val in monitor_map_settings(sc.terrain.map.error_model).items():
             settings.setdefault(key, val)
-        gn = d["sensors"].get("gnss")
-        if gn is not None:
-            cfg = suite._make_config("gnss", True if gn == {} else dict(gn))
+        cfg = sc.sensors.gnss
+        if cfg is not None:
             settings.setdefault("gnss_vertical_sigma_m", float(math.hypot(cfg.vertical_noise_m,
                                                                            cfg.vertical_drift_m)))
     return settings
 
 
-def build_monitors(d: dict, map_dem) -> dict:
+def build_monitors(sc, map_dem) -> dict:
     """{name: monitor} of the scenario's [monitors.*] tables, each on the navigator's map."""
     from trn_env.navigators import registry
-    return {name: registry.create_monitor(name, dem=map_dem, **monitor_settings(d, name))
-            for name in sorted(d.get("monitors", {}))}
+    return {name: registry.create_monitor(name, dem=map_dem, **monitor_settings(sc, name))
+            for name in sorted(m.name for m in sc.monitors)}
 
 
-def _monitor_problems(d: dict, map_dem) -> list[str]:
+def _monitor_problems(sc, map_dem) -> list[str]:
     from trn_env.navigators import registry
     from trn_env.navigators.core.settings import SettingsError
-    from trn_env.scenario.loading import fitted_sensors
     problems = []
-    for name in sorted(d.get("monitors", {})):
+    for name in sorted(m.name for m in sc.monitors):
         try:
-            needs = registry.monitor_sensor_needs(name, d["monitors"][name])
-            if set(needs.required) - fitted_sensors(d):
+            needs = registry.monitor_sensor_needs(name, sc.monitor(name).settings.to_dict())
+            if set(needs.required) - set(sc.sensors.fitted):
                 continue                          # reported by the loader's sensor check
-            registry.create_monitor(name, dem=map_dem, **monitor_settings(d, name))
+            registry.create_monitor(name, dem=map_dem, **monitor_settings(sc, name))
         except SettingsError as exc:
             problems += exc.at(f"monitors.{name}")
         except (ValueError, TypeError) as exc:
@@ -582,8 +575,9 @@ def _monitor_problems(d: dict, map_dem) -> list[str]:
 
 # ------------------------------------------------------------------------------------ component checks
 
-def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool = False) -> list[str]:
-    """Hand each component its scenario settings; every rejection becomes 'field.path: message'.
+def check(sc, extras: dict, known: list[str] | None = None, tolerant: bool = False) -> list[str]:
+    """Hand each component its scenario settings; every rejection becomes 'field.path: message'. `sc`: the
+    scenario's typed sections (the sensors' own settings were checked when they were built).
 
     `known`: problems found already; a component whose fields (by path prefix) are among them is skipped.
     `tolerant`: the data failed the schema, so a component tripping over malformed data is skipped too.
@@ -598,36 +592,34 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
     the_map = extras.get("map_dem_raw") or world
     checks = []
     if not blocked("wind"):
-        checks.append(("wind", lambda: build_wind(d)))
+        checks.append(("wind", lambda: build_wind(sc)))
     if not blocked("atmosphere"):
-        checks.append(("atmosphere", lambda: build_atmosphere(d)))
-    if not blocked("sensors"):
-        checks.append(("", lambda: _sensor_problems(d)))
-    err = d["terrain"]["map"].get("error_model")
+        checks.append(("atmosphere", lambda: build_atmosphere(sc)))
+    err = sc.terrain.map.error_model
     if err and the_map is not None and not blocked("terrain.map"):
         checks.append(("terrain.map.error_model",
-                       lambda: apply_map_errors(the_map, err, np.random.default_rng(0))))
-    refinement = d["terrain"]["world"].get("refinement")
-    if refinement and world is not None and not blocked("terrain.world"):
+                       lambda: apply_map_errors(the_map, err.to_dict(), np.random.default_rng(0))))
+    refinement = sc.terrain.world.refinement
+    if refinement is not None and world is not None and not blocked("terrain.world"):
         checks.append(("terrain.world.refinement",
-                       lambda: refine_dem(world, refinement, np.random.default_rng(0))))
-    if the_map is not None and d["terrain"]["map"].get("faults") and not blocked("terrain.map"):
-        checks.append(("", lambda: _fault_problems(d, the_map)))
-    if the_map is not None and d.get("monitors") and not blocked("monitors", "sensors"):
-        checks.append(("", lambda: _monitor_problems(d, the_map)))
+                       lambda: refine_dem(world, refinement.to_dict(), np.random.default_rng(0))))
+    if the_map is not None and sc.terrain.map.faults and not blocked("terrain.map"):
+        checks.append(("", lambda: _fault_problems(sc, the_map)))
+    if the_map is not None and sc.monitors and not blocked("monitors", "sensors"):
+        checks.append(("", lambda: _monitor_problems(sc, the_map)))
     if the_map is not None and not blocked("navigator", "terrain"):
-        checks.append(("navigator.settings", lambda: build_navigator(d, the_map)))
+        checks.append(("navigator.settings", lambda: build_navigator(sc, the_map)))
         if not blocked("sensors"):
-            checks.append(("", lambda: _navigator_requirements(d, the_map)))
-    if world is not None and not blocked("initial", "aircraft", "terrain.world") and not is_kinematic(d):
-        checks.append(("initial", lambda: _initial_condition(d, world)))
+            checks.append(("", lambda: _navigator_requirements(sc, the_map)))
+    if world is not None and not blocked("initial", "aircraft", "terrain.world") and not is_kinematic(sc):
+        checks.append(("initial", lambda: _initial_condition(sc, world)))
         if not blocked("wind", "atmosphere"):
-            checks.append(("", lambda: trim_problems(d, world)))
+            checks.append(("", lambda: trim_problems(sc, world)))
     if world is not None and not blocked("initial", "truth", "wind", "atmosphere", "terrain.world",
                                          "aircraft.dt_s"):
-        checks.append(("", lambda: _truth_problems(d, world)))
+        checks.append(("", lambda: _truth_problems(sc, world)))
     if not blocked("route"):
-        checks.append(("route", lambda: build_guidance(d, the_map)))
+        checks.append(("route", lambda: build_guidance(sc, the_map)))
     problems: list[str] = []
     for path, fn in checks:
         try:
@@ -640,11 +632,11 @@ def check(d: dict, extras: dict, known: list[str] | None = None, tolerant: bool 
             if isinstance(exc, SettingsError) and path:
                 problems += exc.at(path)          # every bad setting at its own field path
             else:
-                problems.append(_attribute(d, path, exc))
+                problems.append(_attribute(sc, path, exc))
     return problems
 
 
-def _attribute(d: dict, path: str, exc: Exception) -> str:
+def _attribute(sc, path: str, exc: Exception) -> str:
     """'field.path: message' for a component's rejection, at the setting the message names when it names
     one: navigator.settings.<name>, aircraft.settings.<name>, or initial.<field> (a component's message
     starts with, or quotes, the setting's name)."""
@@ -652,17 +644,17 @@ def _attribute(d: dict, path: str, exc: Exception) -> str:
     msg = str(exc)
     if path == "navigator.settings":
         m = re.match(r"(\w+)\b", msg)     # a runtime argument's own error (dem: ...) names it first
-        if m and m.group(1) in d["navigator"]["settings"]:
+        if m and m.group(1) in sc.navigator.table:
             return f"navigator.settings.{m.group(1)}: {msg}"
         return f"navigator.settings: {msg}"
     if path == "initial":
         m = re.match(r"InitialCondition\.(\w+)", msg)
         name = m.group(1) if m else None
-        if name in d["aircraft"]["settings"]:
+        if name in sc.aircraft.settings:
             return f"aircraft.settings.{name}: {msg}"
         fields = {"lat_rad": "lat_deg", "lon_rad": "lon_deg", "heading_rad": "heading_deg",
                   "tas_mps": "tas_mps",
-                  "h_msl_m": "h_msl_m" if "h_msl_m" in d["initial"] else "h_agl_m"}
+                  "h_msl_m": "h_msl_m" if sc.initial.h_msl_m is not None else "h_agl_m"}
         if name in fields:
             return f"initial.{fields[name]}: {msg}"
         m = re.search(r"unexpected keyword argument '(\w+)'", msg)
@@ -672,17 +664,17 @@ def _attribute(d: dict, path: str, exc: Exception) -> str:
     return f"{path}: {msg}"
 
 
-def _initial_condition(d: dict, world):
+def _initial_condition(sc, world):
     from trn_env.flight.core import InitialCondition
-    init = d["initial"]
-    return InitialCondition(lat_rad=math.radians(init["lat_deg"]), lon_rad=math.radians(init["lon_deg"]),
-                            h_msl_m=initial_h_msl_m(d, world), tas_mps=float(init["tas_mps"]),
-                            heading_rad=math.radians(init["heading_deg"]), **_fuel_kw(d),
-                            **d["aircraft"]["settings"])
+    init = sc.initial
+    return InitialCondition(lat_rad=math.radians(init.lat_deg), lon_rad=math.radians(init.lon_deg),
+                            h_msl_m=initial_h_msl_m(sc, world), tas_mps=float(init.tas_mps),
+                            heading_rad=math.radians(init.heading_deg), **_fuel_kw(sc),
+                            **sc.aircraft.settings.to_dict())
 
 
-def _fuel_kw(d: dict) -> dict:
-    fuel_kg = d["aircraft"].get("fuel_kg")
+def _fuel_kw(sc) -> dict:
+    fuel_kg = sc.aircraft.fuel_kg
     return {} if fuel_kg is None else {"fuel_kg": float(fuel_kg)}
 
 
@@ -696,20 +688,20 @@ def track_agl_targets(track_rad: float, agl_m: float, tas_mps: float):
                             agl_cmd_m=float(agl_m), speed_mode=SpeedMode.TAS, tas_cmd_mps=float(tas_mps))
 
 
-def build_route(d: dict):
+def build_route(sc):
     """trn_env.guidance.Route of the scenario's waypoints (h_msl_m -> alt_ref msl, h_agl_m -> agl)."""
     from trn_env.guidance.route_following import Route, Waypoint
     wps = []
-    for w in d["route"]["waypoints"]:
-        ref, alt = ("agl", w["h_agl_m"]) if "h_agl_m" in w else ("msl", w["h_msl_m"])
-        wps.append(Waypoint.from_deg(w["lat_deg"], w["lon_deg"], float(alt), ref))
+    for w in sc.route.waypoints:
+        ref, alt = w.altitude
+        wps.append(Waypoint.from_deg(w.lat_deg, w.lon_deg, float(alt), ref))
     return Route(wps)
 
 
-def build_guidance(d: dict, map_dem=None):
+def build_guidance(sc, map_dem=None):
     """trn_env.guidance.Guidance flying the scenario's route at route.tas_mps (route.settings: kwargs)."""
     from trn_env.guidance.route_following import Guidance
-    return Guidance(build_route(d), tas_mps=float(d["route"]["tas_mps"]), **d["route"]["settings"])
+    return Guidance(build_route(sc), tas_mps=float(sc.route.tas_mps), **sc.route.settings.to_dict())
 
 
 def guidance_complete(guidance) -> bool:

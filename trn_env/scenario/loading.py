@@ -15,15 +15,17 @@ before any flight starts and reports EVERY problem, each prefixed with the field
    navigator's map, the navigator name known, every sensor the navigator and the monitors require
    (their declared capabilities) fitted, the component settings accepted by their components.
 
-Problems are raised together as one `ScenarioError` whose `.problems` is the list of messages.
+Problems are raised together as one `ScenarioError` whose `.problems` is the list of messages. A valid
+dict then becomes the `Scenario`'s typed sections (trn_env.scenario.sections.from_dict): from here on no
+component reads the dict.
 
-Why a schema plus a generic pass rather than a typed model of the whole file: the schema already states
-every field's type and range in one place that several components extend at once; its `sensors.*`,
-`monitors.*` and `navigator.settings` sections are generated from the components' declared settings
+Why the schema checks the dict rather than the typed sections doing it all: the schema states every field's
+type and range in one place that several components extend at once; its `sensors.*`, `monitors.*` and
+`navigator.settings` sections are generated from the components' declared settings
 (navigators.core.settings, trn_env.scenario.schema_sections), which the components also validate in their
 constructors, so `registry.create` and the Python API get the same checks as a scenario file; the
 finite-number walk closes the NaN/infinity class for every present and future numeric field without
-restating them.
+restating them. The sections are built once all of that holds.
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+
+from trn_env.scenario.sections import ScenarioSections, SectionsError
+from trn_env.scenario.sections import from_dict as from_sections_dict
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -70,26 +75,76 @@ class ScenarioError(ValueError):
         super().__init__(f"scenario {source}: {len(self.problems)} problem(s)\n{lines}")
 
 
+_SECTION_NAMES = ("aircraft", "truth", "initial", "initial_errors", "route", "wind", "atmosphere", "terrain",
+                  "sensors", "gnss", "navigator", "monitors", "guidance", "limits")
+
+
 @dataclass
 class Scenario:
-    """A validated scenario. `data`: the parsed TOML with defaults filled in; the rest are shortcuts."""
+    """A validated scenario: its typed sections (trn_env.scenario.sections) and how it is being run.
+
+    ``scenario.route.waypoints[0].lat_deg``, ``scenario.sensors.imu`` (an ImuConfig),
+    ``scenario.navigator.settings`` (the navigator's Settings object) ...: every section of the file is an
+    attribute (`sections` holds them). `seed` and `duration_s` are the run's (the file's unless a caller runs
+    it otherwise, e.g. an env episode's seed); `extras` holds what is not part of the file (loaded DEMs).
+    `to_dict()` gives the scenario back as the validated dict (what the resolved scenario.toml is written
+    from)."""
 
     name: str
     source: str
-    data: dict[str, Any]
+    sections: ScenarioSections
     description: str = ""
     seed: int = DEFAULT_SEED
     duration_s: float = DEFAULT_DURATION_S
     extras: dict[str, Any] = field(default_factory=dict)   # not part of the file (e.g. loaded DEMs)
 
+    @classmethod
+    def from_dict(cls, data: dict, *, name: str | None = None, source: str = "<dict>",
+                  seed: int | None = None, duration_s: float | None = None,
+                  extras: dict[str, Any] | None = None) -> Scenario:
+        """A Scenario of an already validated dict (a `to_dict()` edited by code that keeps it valid, such
+        as a warm-up or an episode's start) without validating it again; `validate` checks a dict."""
+        try:
+            secs = from_sections_dict(data)
+        except SectionsError as exc:
+            raise ScenarioError(source, exc.problems) from None
+        return cls(name=secs.name if name is None else name, source=source, sections=secs,
+                   description=secs.description, seed=int(secs.seed if seed is None else seed),
+                   duration_s=float(secs.duration_s if duration_s is None else duration_s),
+                   extras={} if extras is None else extras)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scenario as the validated dict (defaults filled in): a copy the caller may edit."""
+        return self.sections.to_dict()
+
     @property
     def navigator_name(self) -> str:
-        return str(self.data["navigator"]["name"])
+        return str(self.sections.navigator.name)
+
+    def monitor(self, name: str):
+        """The [monitors.<name>] section (trn_env.scenario.sections.MonitorSection), None if absent."""
+        return self.sections.monitor(name)
 
     def with_overrides(self, **overrides: Any) -> Scenario:
         """A re-validated copy with `seed`, `duration_s` or `navigator` replaced (None = keep)."""
-        data = apply_overrides(self.data, **overrides)
+        data = apply_overrides(self.to_dict(), **overrides)
         return validate(data, source=self.source)
+
+    def with_fields(self, assignments: dict[str, Any]) -> Scenario:
+        """A re-validated copy with fields set by dotted path (``{"guidance.rate_hz": 5.0}``, as
+        ``trn-env fly --set`` and campaign sweeps set them: trn_env.scenario.overrides)."""
+        from trn_env.scenario.overrides import apply_fields
+        data = apply_fields(self.to_dict(), list(assignments.items()))
+        return validate(data, source=self.source)
+
+
+def _section_property(key: str) -> property:
+    return property(lambda self: getattr(self.sections, key),
+                    doc=f"The scenario's [{key}] section (trn_env.scenario.sections).")
+
+
+for _key in _SECTION_NAMES:
+    setattr(Scenario, _key, _section_property(_key))
 
 
 # ----------------------------------------------------------------------------------------------- files
@@ -356,8 +411,17 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
         except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError):
             if not tolerant:
                 raise
-    if check_components:
-        problems += _component_problems(d, extras, prior + problems, tolerant)
+    sections, section_problems = None, []
+    try:
+        sections = from_sections_dict(d, problems=section_problems)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError):
+        if not tolerant:
+            raise
+    known = tuple(p.split(": ", 1)[0] for p in prior + problems)
+    problems += [p for p in section_problems if not p.split(": ", 1)[0].startswith(known or ("\0",))]
+    if check_components and sections is not None:
+        problems += _component_problems(sections, extras, prior + problems, tolerant)
+    extras["_sections"] = sections
     return problems
 
 
@@ -609,16 +673,18 @@ def _ceiling_problems(d: dict, extras: dict) -> list[str]:
     return problems
 
 
-def _component_problems(d: dict, extras: dict, known: list[str], tolerant: bool) -> list[str]:
+def _component_problems(sections: ScenarioSections, extras: dict, known: list[str],
+                        tolerant: bool) -> list[str]:
     """Hand each component its settings; whatever it rejects becomes a problem at that field. Components
     whose fields already have a problem are not built (no duplicate or follow-on messages)."""
     import trn_env.scenario.build as components
-    return components.check(d, extras, known, tolerant)
+    return components.check(sections, extras, known, tolerant)
 
 
 def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None,
              check_components: bool = True) -> Scenario:
-    """Validate a parsed scenario (schema, then semantics); raise ScenarioError listing every problem."""
+    """Validate a parsed scenario (schema, then semantics) and build its typed sections
+    (trn_env.scenario.sections.from_dict); raise ScenarioError listing every problem."""
     problems = nonfinite_problems(data)
     bad_paths = tuple(p.split(": ", 1)[0] for p in problems)
     problems += [p for p in schema_problems(data) if not p.split(": ", 1)[0].startswith(bad_paths or ("\0",))]
@@ -630,7 +696,8 @@ def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None
             raise
         raise ScenarioError(source, problems) from None
     problems += _semantic_problems(d, base_dir, check_components, extras, prior=problems)
+    sections = extras.pop("_sections", None)
     if problems:
         raise ScenarioError(source, problems)
-    return Scenario(name=d["name"], source=source, data=d, description=d["description"], seed=int(d["seed"]),
-                    duration_s=float(d["duration_s"]), extras=extras)
+    return Scenario(name=sections.name, source=source, sections=sections, description=sections.description,
+                    seed=int(sections.seed), duration_s=float(sections.duration_s), extras=extras)

@@ -1,9 +1,9 @@
 """The resolved scenario as a TOML file: what a run actually flew, so the run replays from its folder alone.
 
-`resolved_toml(scenario)` writes the validated scenario's data (command-line overrides such as `--seed`,
-`--navigator`, `--duration` and `--set` applied, every default filled in, DEM paths made absolute) as a
-TOML document that `load_scenario` reads back into the same data: `trn-env fly RUN/scenario.toml` flies the
-same run bit for bit (the seed is in the file).
+`resolved_toml(scenario)` writes the validated scenario (its typed sections' `to_dict()`: command-line
+overrides such as `--seed`, `--navigator`, `--duration` and `--set` applied, every default filled in, DEM
+paths made absolute) as a TOML document that `load_scenario` reads back into the same scenario:
+`trn-env fly RUN/scenario.toml` flies the same run bit for bit (the seed is in the file).
 
 Tables are written as `[table]` / `[[array.of.tables]]` sections; a list that mixes tables with other values,
 and an empty table, are written inline. Floats use `repr`, which round-trips exactly.
@@ -62,4 +62,4 @@ def resolved_toml(scenario, command_line: str = "") -> str:
               f"and defaults filled in.\nSource: {scenario.source}\n"
               + (f"Command: {command_line}\n" if command_line else "")
               + "Replay: trn-env fly scenario.toml --out OTHER_FOLDER")
-    return dumps(scenario.data, header)
+    return dumps(scenario.to_dict(), header)

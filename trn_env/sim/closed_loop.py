@@ -44,7 +44,7 @@ import math
 import time
 import warnings
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,15 +82,19 @@ def spawn_rngs(seed: int) -> dict[str, np.random.Generator]:
     return {name: np.random.default_rng(s) for name, s in spawn_seeds(seed).items()}
 
 
-def perturbed_estimate(truth: TruthChunk, i: int, sigmas: dict[str, list[float]],
-                       rng: np.random.Generator) -> Estimate:
-    """Initial estimate = truth at row i + Gaussian errors with the scenario's 1-sigma values.
+def perturbed_estimate(truth: TruthChunk, i: int, sigmas, rng: np.random.Generator) -> Estimate:
+    """Initial estimate = truth at row i + Gaussian errors with the scenario's 1-sigma values (`sigmas`: the
+    scenario's `initial_errors` section, trn_env.scenario.sections.InitialErrorsSection, or a mapping with
+    the same keys).
 
     Covariance = diag(sigma^2) over [n, e, d, vn, ve, vd, roll, pitch, yaw] (seed 000 Table 2 defaults).
     """
-    s_pos = np.asarray(sigmas["position_ned_m"], float)
-    s_vel = np.asarray(sigmas["velocity_ned_mps"], float)
-    s_att = 1e-3 * np.asarray(sigmas["attitude_mrad"], float)
+    if isinstance(sigmas, Mapping):
+        from trn_env.scenario.sections import InitialErrorsSection
+        sigmas = InitialErrorsSection(**sigmas)
+    s_pos = np.asarray(sigmas.position_ned_m, float)
+    s_vel = np.asarray(sigmas.velocity_ned_mps, float)
+    s_att = 1e-3 * np.asarray(sigmas.attitude_mrad, float)
     e = rng.standard_normal(9) * np.concatenate([s_pos, s_vel, s_att])
     lat, lon, h = float(truth.lat_rad[i]), float(truth.lon_rad[i]), float(truth.h_msl_m[i])
     r_n = meridian_radius_m(lat) + h
@@ -167,36 +171,35 @@ class ClosedLoop:
     def __init__(self, scenario: Scenario, *, commander: Commander | None = None, dems=None,
                  log_sensors: bool = True, progress: Callable[[float, float], None] | None = None,
                  pipeline: bool = False, log_sink=None):
-        self.scenario = scenario
-        d = scenario.data
+        self.scenario = sc = scenario
         self.seeds = spawn_seeds(scenario.seed)
         self.rngs = {name: np.random.default_rng(s) for name, s in self.seeds.items()}
         if dems is None:
-            dems = components.build_terrain(d, scenario.extras, self.rngs["map"])
+            dems = components.build_terrain(sc, scenario.extras, self.rngs["map"])
         self.world_dem, self.map_dem = dems
-        self.dt_s = float(d["aircraft"]["dt_s"])
-        nav_rate_hz = float(d["navigator"]["rate_hz"])
-        self.latency_updates = int(d["navigator"].get("latency_updates", 1))
+        self.dt_s = float(sc.aircraft.dt_s)
+        nav_rate_hz = float(sc.navigator.rate_hz)
+        self.latency_updates = int(sc.navigator.latency_updates)
         # JSBSim steps per guidance tick, guidance ticks per navigator update (validated whole numbers)
-        self.steps_per_guidance_tick = int(round(1.0 / (d["guidance"]["rate_hz"] * self.dt_s)))
-        self.guidance_ticks_per_tick = int(round(d["guidance"]["rate_hz"] / nav_rate_hz))
+        self.steps_per_guidance_tick = int(round(1.0 / (sc.guidance.rate_hz * self.dt_s)))
+        self.guidance_ticks_per_tick = int(round(sc.guidance.rate_hz / nav_rate_hz))
         self.steps_per_tick = self.steps_per_guidance_tick * self.guidance_ticks_per_tick
-        self.log_every = max(1, int(round(nav_rate_hz / d["guidance"]["log_rate_hz"])))
+        self.log_every = max(1, int(round(nav_rate_hz / sc.guidance.log_rate_hz)))
         self.duration_s = float(scenario.duration_s)
-        self.outages = list(d["gnss"]["outages"])
-        self.max_sigma_h_m = float(d["limits"]["max_horizontal_sigma_m"])
-        self.max_err_h_m = d["limits"].get("max_horizontal_error_m")
+        self.outages = list(sc.gnss.outages)
+        self.max_sigma_h_m = float(sc.limits.max_horizontal_sigma_m)
+        self.max_err_h_m = sc.limits.max_horizontal_error_m
         self.log_sensors = log_sensors
         self.progress = progress
 
-        self.flight = components.build_flight(d, self.world_dem, self.rngs["flight"])
-        sensors = components.build_sensors(d, self.seeds["sensors"])
-        navigator = components.build_navigator(d, self.map_dem, self.rngs["navigator"])
-        monitors = components.build_monitors(d, self.map_dem)
+        self.flight = components.build_flight(sc, self.world_dem, self.rngs["flight"])
+        sensors = components.build_sensors(sc, self.seeds["sensors"])
+        navigator = components.build_navigator(sc, self.map_dem, self.rngs["navigator"])
+        monitors = components.build_monitors(sc, self.map_dem)
         self.monitor_outputs: dict[str, list] = {name: [] for name in monitors}
         self.commander = commander
         if commander is None:
-            guidance = components.build_guidance(d, self.map_dem)
+            guidance = components.build_guidance(sc, self.map_dem)
             command, complete = guidance.command, (lambda: components.guidance_complete(guidance))
         else:
             guidance, command, complete = None, commander, (lambda: False)
@@ -210,7 +213,7 @@ class ClosedLoop:
         self._complete = False          # the route was complete after the commands of the interval flown
 
         truth0 = self.flight.snapshot()
-        self.estimate = perturbed_estimate(truth0, 0, d["initial_errors"], self.rngs["initial_errors"])
+        self.estimate = perturbed_estimate(truth0, 0, sc.initial_errors, self.rngs["initial_errors"])
         navigator.reset(self.estimate)
         self.guidance_estimate = self.estimate       # the estimate guidance flies on (dead-reckoned)
         self.t_s = float(truth0.t_s[0])
@@ -242,7 +245,7 @@ class ClosedLoop:
                                 self.planner if self._plans is not None else None, monitors=monitors,
                                 map_dem=self.map_dem,
                                 map_schedule=self._map_schedule(scenario), frame_sink=log_sink,
-                                lever_arms=components.sensor_lever_arms(d))
+                                lever_arms=components.sensor_lever_arms(sc))
         self.pipelined = bool(pipeline and self.latency_updates >= 1 and fork_available())
         self._stage = inline
         if self.pipelined:
@@ -431,12 +434,12 @@ class ClosedLoop:
             return
         t0, t1 = float(chunk.t_s[0]) - 0.5 * self.dt_s, float(chunk.t_s[-1]) + 0.5 * self.dt_s
         for i, o in enumerate(self.outages):
-            if t0 <= o["start_s"] < t1:
-                self.log.events.append((float(o["start_s"]), "gnss",
+            if t0 <= o.start_s < t1:
+                self.log.events.append((float(o.start_s), "gnss",
                                         f"GNSS outage begins (gnss.outages[{i}]): no fixes reach the "
                                         "navigator"))
-            if t0 <= o.get("end_s", math.inf) < t1:
-                self.log.events.append((float(o["end_s"]), "gnss", f"GNSS outage ends (gnss.outages[{i}]):"
+            if o.end_s is not None and t0 <= o.end_s < t1:
+                self.log.events.append((float(o.end_s), "gnss", f"GNSS outage ends (gnss.outages[{i}]):"
                                         " fixes reach the navigator again"))
 
     def _end(self, reason: str) -> str:
@@ -455,15 +458,15 @@ class ClosedLoop:
         route but the aircraft is not at the last waypoint's height (it could not climb or descend to it)."""
         if self.commander is not None:
             return "completed"
-        wp = self.scenario.data["route"]["waypoints"][-1]
+        wp = self.scenario.route.waypoints[-1]
         lat, lon, h = float(chunk.lat_rad[-1]), float(chunk.lon_rad[-1]), float(chunk.h_msl_m[-1])
-        if "h_agl_m" in wp:
+        if wp.h_agl_m is not None:
             ground = float(self.world_dem.height(lat, lon))
-            have, want, ref = h - ground, float(wp["h_agl_m"]), "above ground"
+            have, want, ref = h - ground, float(wp.h_agl_m), "above ground"
         else:
-            have, want, ref = h, float(wp["h_msl_m"]), "MSL"
+            have, want, ref = h, float(wp.h_msl_m), "MSL"
         if math.isfinite(have) and abs(have - want) > ROUTE_ALTITUDE_TOLERANCE_M:
-            n = len(self.scenario.data["route"]["waypoints"])
+            n = len(self.scenario.route.waypoints)
             self.route_miss = (f"the route ended with the aircraft at {have:.0f} m {ref}, the last waypoint "
                                f"(route.waypoints[{n - 1}]) asks for {want:.0f} m: it could not follow the "
                                f"route's heights (tolerance {ROUTE_ALTITUDE_TOLERANCE_M:.0f} m)")
@@ -550,9 +553,9 @@ class ClosedLoop:
         summary["navigator_latency_updates"] = self.latency_updates
         summary["fuel_remaining_kg"] = round(self.flight.fuel_kg, 3)
         summary["constant_fuel"] = self.flight.constant_fuel
-        summary["truth_source"] = self.scenario.data.get("truth", {}).get("source", "jsbsim")
+        summary["truth_source"] = self.scenario.truth.source
         # fitted sensors that neither the navigator nor a monitor reads (their declared sensor needs)
-        summary["unused_sensors"] = components.unused_sensors(self.scenario.data)
+        summary["unused_sensors"] = components.unused_sensors(self.scenario)
         events = sorted(self.log.events, key=lambda ev: ev[0])   # (stable: same-time events keep their order)
         return RunResult(self.scenario, summary["termination"], summary["sim_time_s"], wall_time_s,
                          self.jsbsim_steps, arrays, events, summary, self.world_dem)

@@ -109,7 +109,7 @@ class SimLog:
                         parts.setdefault(f"sensor_{name}_{k}", []).append(v)
         return {k: np.concatenate(v) for k, v in parts.items()}
 
-    def arrays(self, world_dem, outages: list[dict]) -> dict[str, np.ndarray]:
+    def arrays(self, world_dem, outages) -> dict[str, np.ndarray]:
         """Every logged quantity as arrays: t_s, true_*, est_*, err_ned_m (estimate - truth, NED at the true
         position), gnss_available, nav_ok, est_hpl_m (the navigator's horizontal protection level, NaN
         where it published none), and sensor_<sensor>_<field> at the sensors' own rates."""

@@ -22,6 +22,7 @@ import signal
 import sys
 import time
 import traceback
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,24 +33,38 @@ from trn_env.navigators.protocol import Estimate
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 
 
-def gnss_available_mask(t_s: np.ndarray, outages: list[dict]) -> np.ndarray:
-    """True where GNSS fixes reach the navigator: outside every [start_s, end_s) outage."""
-    ok = np.ones(np.shape(t_s), bool)
+def outage_windows(outages) -> list[tuple[float, float]]:
+    """[(start_s, end_s)] of GNSS outages given as the scenario's `gnss.outages` sections
+    (trn_env.scenario.sections.Outage) or as {start_s, end_s} mappings (a log's metadata); an outage
+    without end_s lasts for the rest of the flight (end_s = inf)."""
+    out = []
     for o in outages:
-        end = o.get("end_s", math.inf)
-        ok &= ~((t_s >= o["start_s"]) & (t_s < end))
+        if isinstance(o, Mapping):
+            out.append((o["start_s"], o.get("end_s", math.inf)))
+        else:
+            out.append((o.start_s, math.inf if o.end_s is None else o.end_s))
+    return out
+
+
+def gnss_available_mask(t_s: np.ndarray, outages) -> np.ndarray:
+    """True where GNSS fixes reach the navigator: outside every [start_s, end_s) outage (`outages` as
+    outage_windows takes them)."""
+    ok = np.ones(np.shape(t_s), bool)
+    for start, end in outage_windows(outages):
+        ok &= ~((t_s >= start) & (t_s < end))
     return ok
 
 
-def gate_gnss(frames: SensorFrames, outages: list[dict]) -> SensorFrames:
+def gate_gnss(frames: SensorFrames, outages) -> SensorFrames:
     """The frames with the GNSS fixes inside an outage removed (frames.gnss None if none is left)."""
     g = frames.gnss
     if g is None or not outages or g.t_s.shape[0] == 0:
         return frames
+    windows = outage_windows(outages)
     t_first, t_last = float(g.t_s[0]), float(g.t_s[-1])
-    if all(t_last < o["start_s"] or t_first >= o.get("end_s", math.inf) for o in outages):
+    if all(t_last < start or t_first >= end for start, end in windows):
         return frames                                   # no outage touches this frame
-    if any(t_first >= o["start_s"] and t_last < o.get("end_s", math.inf) for o in outages):
+    if any(t_first >= start and t_last < end for start, end in windows):
         frames.gnss = None                              # the whole frame is inside one outage
         return frames
     keep = gnss_available_mask(g.t_s, outages)

@@ -39,7 +39,7 @@ def warm_job(job: tuple[str, str], parallel: bool = False) -> tuple[str, str, fl
     name, navigator = job
     t0 = time.perf_counter()
     scenario = load_scenario(name, navigator=navigator)
-    dems = build_terrain(scenario.data, scenario.extras, spawn_rngs(scenario.seed)["map"])
+    dems = build_terrain(scenario, scenario.extras, spawn_rngs(scenario.seed)["map"])
     with quiet_stdout():
         warm_up(scenario, dems, parallel=parallel)
     return name, navigator, time.perf_counter() - t0

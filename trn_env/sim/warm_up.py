@@ -22,7 +22,7 @@ cannot do is compiled by the flight as before) and it never touches the flight's
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import math
 import os
 import sys
@@ -35,17 +35,18 @@ from trn_env.scenario.loading import Scenario
 
 def warm_up_scenario(scenario: Scenario) -> Scenario:
     """The three-update copy of `scenario` that warm_up flies (module docstring)."""
-    d = copy.deepcopy(scenario.data)
-    rate = float(d["navigator"]["rate_hz"])
-    d["duration_s"] = 3.0 / rate
-    settings = d["navigator"].setdefault("settings", {})
     from trn_env.navigators import registry
-    warm = registry.capabilities(d["navigator"]["name"]).warm_up_settings
+    from trn_env.scenario.sections import GnssSection, Outage
+    sc = scenario.sections
+    rate = float(sc.navigator.rate_hz)
+    navigator = sc.navigator
+    warm = registry.capabilities(navigator.name).warm_up_settings
     if warm is not None:                        # e.g. a TERCOM fix due at the third update
-        settings.update(warm(rate))
-    d["gnss"]["outages"] = [{"start_s": 1.5 / rate}]
-    return Scenario(name=f"{scenario.name}[warm-up]", source=scenario.source, data=d,
-                    description=scenario.description, seed=scenario.seed, duration_s=d["duration_s"],
+        navigator = navigator.with_settings(**warm(rate))
+    sections = dataclasses.replace(sc, duration_s=3.0 / rate, navigator=navigator,
+                                   gnss=GnssSection(outages=(Outage(start_s=1.5 / rate),)))
+    return Scenario(name=f"{scenario.name}[warm-up]", source=scenario.source, sections=sections,
+                    description=scenario.description, seed=scenario.seed, duration_s=sections.duration_s,
                     extras=scenario.extras)
 
 
@@ -62,17 +63,18 @@ def warm_navigator(scenario: Scenario, map_dem) -> None:
     from trn_env.navigators.protocol import Estimate
     from trn_env.scenario import build
     from trn_env.terrain.geodesy import meridian_radius_m
-    d = warm_up_scenario(scenario).data
-    nav = build.build_navigator(d, map_dem, np.random.default_rng(0))
-    lat = math.radians(d["initial"]["lat_deg"])
-    lon = math.radians(d["initial"]["lon_deg"])
+    sc = warm_up_scenario(scenario)
+    nav = build.build_navigator(sc, map_dem, np.random.default_rng(0))
+    init = sc.initial
+    lat = math.radians(init.lat_deg)
+    lon = math.radians(init.lon_deg)
     ground = build.map_height(map_dem, lat, lon)
-    h = float(d["initial"].get("h_msl_m", (ground if math.isfinite(ground) else 0.0)
-                               + d["initial"].get("h_agl_m", 1000.0)))
-    v = float(d["initial"]["tas_mps"])
+    h = float(init.h_msl_m if init.h_msl_m is not None else
+              (ground if math.isfinite(ground) else 0.0) + (1000.0 if init.h_agl_m is None else init.h_agl_m))
+    v = float(init.tas_mps)
     cov = np.diag([30.0, 30.0, 15.0, 0.1, 0.1, 0.1, 5e-5, 5e-5, 1e-3]) ** 2
     nav.reset(Estimate(0.0, lat, lon, h, np.array([v, 0.0, 0.0]), 0.0, 0.0, 0.0, cov))
-    sensors = d["sensors"]
+    sensors = sc.sensors.fitted
     r_n = meridian_radius_m(lat) + h
     for k in range(3):
         t = k + np.arange(1, 101) * 0.01

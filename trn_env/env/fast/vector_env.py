@@ -188,7 +188,6 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
                 f"models: {', '.join(nv.MODELLED_NAVIGATORS)}; pass navigator="
             )
         self.scenario = sc
-        d = sc.data
         self.num_envs = n
         self.render_mode = None
         self.navigator = nav_name
@@ -211,7 +210,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self.error_weight = float(error_weight)
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
-        self.tas_mps = float(d["route"]["tas_mps"])
+        self.tas_mps = float(sc.route.tas_mps)
         self.bearing_offset_max_rad = math.radians(float(bearing_offset_max_deg))
         self.action_limits = task.action_limits(
             self.decision_interval_s, turn_rate_max_dps, climb_rate_max_mps
@@ -222,7 +221,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, n)
 
         # terrain exactly as TerrainNav-v0 builds it (world: truth; map: navigator, guidance, observations)
-        self._world, self._map = components.build_terrain(d, sc.extras, spawn_rngs(sc.seed)["map"])
+        self._world, self._map = components.build_terrain(sc, sc.extras, spawn_rngs(sc.seed)["map"])
         self._info_map = components.terrain_information_map(self._map, info_sigma_m, info_window_m)
         self.held_out_radius_m = float(held_out_radius_m)
         self.min_goal_distance_m = float(min_goal_distance_m)
@@ -237,29 +236,29 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self.held_out_goals_deg = [
             self._check_point("held_out_goals_deg", g) for g in (held_out_goals_deg or [])
         ]
-        wp_last = d["route"]["waypoints"][-1]
-        g = goal_deg if goal_deg is not None else (wp_last["lat_deg"], wp_last["lon_deg"])
+        wp_last = sc.route.waypoints[-1]
+        g = goal_deg if goal_deg is not None else (wp_last.lat_deg, wp_last.lon_deg)
         self._fixed_goal_deg = self._check_point("goal_deg", g)
-        init = d["initial"]
-        self._init_start_deg = (float(init["lat_deg"]), float(init["lon_deg"]))
-        self._h_agl_init_m = float(init.get("h_agl_m", 0.0))
-        self._h_msl_init_m = float(init["h_msl_m"]) if "h_agl_m" not in init else math.nan
+        init = sc.initial
+        self._init_start_deg = (float(init.lat_deg), float(init.lon_deg))
+        self._h_agl_init_m = float(0.0 if init.h_agl_m is None else init.h_agl_m)
+        self._h_msl_init_m = float(init.h_msl_m) if init.h_agl_m is None else math.nan
 
         # kernel parameters
         env_ = KINGAIR_ENVELOPE
-        wind = d["wind"]
+        wind = sc.wind
         layers = sorted(
-            (float(la["altitude_m"]), float(la["direction_from_deg"]), float(la["speed_mps"]))
-            for la in wind["layers"]
+            (float(la.altitude_m), float(la.direction_from_deg), float(la.speed_mps))
+            for la in wind.layers
         )
         self._wind_alt = np.array([la[0] for la in layers])
         self._wind_n = np.array([-la[2] * math.cos(math.radians(la[1])) for la in layers])
         self._wind_e = np.array([-la[2] * math.sin(math.radians(la[1])) for la in layers])
-        turb = dict(wind.get("turbulence") or {})
+        turb = wind.turbulence
         sigma_t = (
             0.0
-            if turb.get("model", "none") == "none"
-            else TURBULENCE_SIGMA_MPS.get(turb.get("severity", "light"), 1.5)
+            if turb.model == "none"
+            else TURBULENCE_SIGMA_MPS.get("light" if turb.severity is None else turb.severity, 1.5)
         )
         fp = np.zeros(dyn.N_FLIGHT_PARAMS)
         fp[dyn.FP_DT] = DT_S
@@ -285,35 +284,36 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
 
         from trn_env.sensors.imu import ImuConfig
 
-        imu = asdict(ImuConfig.from_mapping(dict(d["sensors"].get("imu") or {})))
-        outages = (d.get("gnss") or {}).get("outages") or []
+        imu = asdict(sc.sensors.imu if sc.sensors.imu is not None else ImuConfig())
+        outages = sc.gnss.outages
         gnss_until = (
-            (min(float(o["start_s"]) for o in outages) if outages else math.inf)
-            if "gnss" in d["sensors"]
+            (min(float(o.start_s) for o in outages) if outages else math.inf)
+            if sc.sensors.gnss is not None
             else 0.0
         )
-        ira = dict(d["sensors"].get("ira") or {})
         from trn_env.navigators import registry
+        from trn_env.sensors.ira import IraConfig
 
+        ira = sc.sensors.ira if sc.sensors.ira is not None else IraConfig()
         spec = (
-            components.imu_spec(d["sensors"].get("imu"))
+            components.imu_spec(sc.sensors.imu)
             if registry.capabilities(nav_name).uses_imu_spec
             else None
         )
         self._nav = nv.navigator_params(
             nav_name,
-            dict(d["navigator"].get("settings") or {}),
+            sc.navigator.table.to_dict(),
             imu,
             gnss_until,
-            float(ira.get("range_noise_m", 3.5)),
-            float(ira.get("rate_hz", 50.0)),
+            float(ira.range_noise_m),
+            float(ira.rate_hz),
             spec,
             sample_dt_s=float(fp[dyn.FP_SAMPLE_DT]),
         )
-        ie = d.get("initial_errors") or {}
-        pos = ie.get("position_ned_m", [30.0, 30.0, 15.0])
-        vel = ie.get("velocity_ned_mps", [0.1, 0.1, 0.1])
-        att = ie.get("attitude_mrad", [0.05, 0.05, 1.0])
+        ie = sc.initial_errors
+        pos = ie.position_ned_m
+        vel = ie.velocity_ned_mps
+        att = ie.attitude_mrad
         self._init_params = np.array(
             [
                 float(np.hypot(pos[0], pos[1]) / math.sqrt(2.0)),
