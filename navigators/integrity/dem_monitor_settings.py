@@ -53,15 +53,15 @@ class DemMonitorConfig(Settings):
     map_bias_fraction: float = setting(0.0, "share of the map variance common to the whole window", "1",
                                        ge=0.0, le=1.0)
     navigator_error_time_constant_s: float = setting(
-        0.0, "GNSS denied: the navigator's horizontal position error as first-order Gauss-Markov in time with "
-             "this time constant, its correlation between a window's epochs (0: constant over the window)",
+        0.0, "GNSS denied: the navigator's horizontal position error as first-order Gauss-Markov in time "
+             "with this time constant, correlated between a window's epochs (0: constant over the window)",
         "s", ge=0.0)
     navigator_height_time_constant_s: float = setting(
         0.0, "GNSS denied: the same for the navigator's height error (0: constant over the window)", "s",
         ge=0.0)
     bias_glrt_false_alarm_probability: float = setting(
-        0.0, "> 0: also alarm on the whitened bias GLRT (1' Sigma^-1 p)^2 / (1' Sigma^-1 1), chi2(1), at this "
-             "false-alarm probability per test (0: off)", "1", ge=0.0, lt=1.0)
+        0.0, "> 0: also alarm on the whitened bias GLRT (1' Sigma^-1 p)^2 / (1' Sigma^-1 1), chi2(1), at "
+             "this false-alarm probability per test (0: off)", "1", ge=0.0, lt=1.0)
 
     def check(self) -> list[tuple[str, str]]:
         from .dem_monitor import class_sigma_m

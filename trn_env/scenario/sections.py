@@ -20,6 +20,9 @@ navigator's and monitors' tables as written) are `Table`: a read-only mapping.
 
 Problems found while building (a setting a component's Settings class refuses beyond what the schema says)
 are raised together as one `SectionsError` whose `.problems` are 'field.path: message' strings.
+
+The module is one data model, a declaration per table of the file, read together; it runs a little over
+the project's ~600 lines for that reason rather than splitting the model across files.
 """
 
 from __future__ import annotations
