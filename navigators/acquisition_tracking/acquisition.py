@@ -33,13 +33,13 @@ from .correlation import (
 )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _work_arrays(n):
     """The search kernels' per-sample scratch: offsets (rad), offsets in grid-index units, heights (m)."""
     return np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _replica_height(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, fi, fj, dlat_k, dlon_k, interp):
     """Map height (m) of a replica sample: at grid index (fi, fj) when bilinear, else at (lat_s + dlat_k,
     lon_s + dlon_k) by the interpolation `interp`."""

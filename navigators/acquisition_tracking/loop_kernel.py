@@ -168,7 +168,7 @@ def _eps(he, hl, hp, spacing, discriminator):
     return eps
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _advance(x, he, hl, hp, spacing, threshold, discriminator):
     """One early-late iteration of a stage from finite early and late costs: (x moved by the
     discriminator's step, locked: the step was below threshold)."""

@@ -59,7 +59,7 @@ def interp_one(x, xp, fp):
     return r
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _history_row(t_imu, hist, t):
     """(k, finite): the INS history row of the IMU sample at searchsorted(t_imu, t) (clipped to the last)
     and whether its 10 values are finite."""

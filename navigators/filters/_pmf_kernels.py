@@ -268,7 +268,7 @@ def _unpack_moments(logw, bias, work, row, m, floor):
     return sv / s if s > 0.0 else 0.0
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def _convolve_along(work, src, dst, kern, n, di, dj):
     """Rows dst..dst+2 of work = rows src..src+2 (n x n grids, row-major) convolved with kern (odd length)
     along the grid direction (di, dj): cell (i, j) from (i + di s, j + dj s), s = -L/2..L/2 - (0, 1) east,

@@ -189,7 +189,7 @@ def time_update(xn, xl, P, Phi, qn_var, ql_var, w):
     return bad
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _mul_ab(A, B, out, n, m, p, transpose_b):
     """out[:n, :m] = A[:n, :p] B[:p, :m] (transpose_b: A B[:m, :p]^T), each sum in index order."""
     for i in range(n):

@@ -98,7 +98,7 @@ def _block_void_free(rec, lat_k, lon_k, span_lat, span_lon):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _rows_of(g, ri, ru, a, i_lo):
     """The two interpolated map rows (ga, gb) bracketing replica row a and its weight u between them."""
     return g[ri[a] - i_lo], g[ri[a] + 1 - i_lo], ru[a]
