@@ -99,9 +99,16 @@ def test_dead_actors_runs_are_flown_elsewhere_and_counted(ray_session, tmp_path)
             assert "actor died" in row["error"]
             continue
         _assert_same_run(row, serial[run_id])
-        assert row["attempts"] == (2 if run_id == DIE_ONCE else 1), run_id
-    pid = {n: int(_internal_kv_get(f"{DIE_ONCE}:{n}".encode(), namespace="test_ray_pool")) for n in (1, 2)}
-    assert pid[1] != pid[2] and rows[DIE_ONCE]["pid"] == pid[2]      # flown again in another process
+        # a healthy run that had finished on an actor whose process died before its reply left is flown
+        # again and counted, as on a node lost mid-reply: 1 or 2 attempts; DIE_ONCE at least 2
+        if run_id == DIE_ONCE:
+            assert row["attempts"] >= 2, run_id
+        else:
+            assert row["attempts"] in (1, 2), run_id
+    n_last = rows[DIE_ONCE]["attempts"]
+    pid = {n: int(_internal_kv_get(f"{DIE_ONCE}:{n}".encode(), namespace="test_ray_pool"))
+           for n in (1, n_last)}
+    assert pid[1] != pid[n_last] and rows[DIE_ONCE]["pid"] == pid[n_last]     # flown again in another process
     assert live == 2                          # every dead actor was replaced
 
 
