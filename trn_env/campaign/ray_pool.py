@@ -9,13 +9,15 @@ the object store once and flies `trn_env.sim.warm_up`'s three-update copy of the
 kernels that run uses are loaded before the first row); from then on it only flies runs (`fly_run`, the
 same function as every backend, so the rows are the same bit for bit).
 
-Scheduling: each live actor has at most two runs queued (one flying, the next one waiting, so the hand-over
-is hidden behind a flight); a row is taken as soon as it is ready. An actor that dies (its process killed,
-its node lost) loses the runs it held: the pool starts a replacement actor and hands those runs to the next
-free actor, each run up to `max_retries` times more. Every attempt counts itself in Ray's key-value store
-(`ray_backend._attempt_number`), so the row of a run flown again says `attempts = 2`, and a run that killed
-its actor on every attempt gets an error row with `attempts = max_retries + 1`. A run's own exception is a
-row (fly_run catches it), never a retry. The actors are killed when the backend closes (Ctrl-C included).
+Scheduling: each live actor has at most two runs queued (one flying, the next one waiting, so the hand-over is
+hidden behind a flight); a row is taken as soon as it is ready. An actor that dies (its process killed, its
+node lost) loses the runs it held: the pool starts a replacement actor and hands those runs to the next free
+actor. The run it was flying (its earliest one: an actor flies in order) is handed on up to `max_retries`
+times more; the run queued behind it never started, so the loss does not count against it. Every attempt
+counts itself in Ray's key-value store (`ray_backend._attempt_number`), so the row of a run flown again says
+`attempts = 2`, and a run that killed its actor on every attempt gets an error row with `attempts =
+max_retries + 1`. A run's own exception is a row (fly_run catches it), never a retry. The actors are killed
+when the backend closes (Ctrl-C included).
 """
 
 from __future__ import annotations
@@ -115,7 +117,9 @@ class WarmPool:
         self.timings = []
         starting = {actor.prepare.remote(dems_id, dems_ref, first): actor for actor in self.actors}
         idle: deque = deque()                   # live actors with a free slot (one entry per free slot)
-        held: dict = {}                         # fly ref -> (actor, task)
+        held: dict = {}                         # fly ref -> (actor, task, submission number)
+        submitted = 0
+        flying_when_died: dict = {}             # dead actor -> submission number of the run it was flying
         todo: deque[RunTask] = deque([first])   # runs handed back by a dead actor come first
         lost: dict[str, int] = {}               # run id -> times its actor died under it
         exhausted = False
@@ -143,7 +147,8 @@ class WarmPool:
                     todo.append(task)
                 actor = idle.popleft()
                 task = todo.popleft()
-                held[actor.fly.remote(task, run_key)] = (actor, task)
+                held[actor.fly.remote(task, run_key)] = (actor, task, submitted)
+                submitted += 1
             if not held and not starting and exhausted and not todo:
                 break
             ready, _ = ray.wait(list(held) + list(starting), num_returns=1)
@@ -159,10 +164,19 @@ class WarmPool:
                     self.timings.append({"error": f"{type(exc).__name__}: {exc}"})
                 idle.extend([actor, actor])
                 continue
-            actor, task = held.pop(ref)
+            actor, task, number = held.pop(ref)
             try:
                 row, log = ray.get(ref)
             except ray.exceptions.RayActorError as exc:    # the actor died: its runs go elsewhere
+                if actor not in flying_when_died:
+                    # an actor flies its runs in order: the earliest one it still held was flying, the
+                    # one queued behind it never started and is handed on without counting against it
+                    flying_when_died[actor] = min([number] + [n for a, _, n in held.values() if a is actor])
+                if number != flying_when_died[actor]:
+                    todo.appendleft(task)
+                    if actor in self.actors:
+                        replace(actor)
+                    continue
                 n_lost = lost[task.run_id] = lost.get(task.run_id, 0) + 1
                 if n_lost <= self.max_retries:
                     todo.appendleft(task)
