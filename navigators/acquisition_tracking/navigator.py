@@ -77,6 +77,7 @@ from ..core.imu_spec import (
 from ..core.maps import load_map
 from ..frames import SensorFrames, frame_defects
 from ..integrity import protection_level as pl
+from ..integrity.consistency_check import ConsistencyCheck
 from ..integrity.innovation_monitor import InnovationMonitor
 from ..protocol import (
     EXTRA_INNOVATION,
@@ -142,6 +143,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
                  **overrides):
         self.config = self.settings = cfg = AcqTrackConfig.build(settings, overrides)
         self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
+        self.consistency = ConsistencyCheck()   # long-window NIS test (navigators.integrity)
         dem = load_map(dem, "acq_track")
         self.dem = dem
         self.name = name
@@ -265,6 +267,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self.acquisition_total_s = 0.0
         self.last_innovation = None
         self.integrity.reset()
+        self.consistency.reset()
         self._integrity_extra: dict = {}
         self.t_epoch = math.nan
         self.next_k = None
@@ -457,12 +460,14 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             )
         extra.update(self._integrity_extra)
         pl.publish(extra, pl.gaussian_hpl(P, pl.filter_risk(self)), self)   # protection_level
+        ok, status, warning = self.consistency.apply(self.health.ok, self.health.status,
+                                                     self._consistency_warning)
         h = Health(
-            ok=self.health.ok,
-            status=self.health.status,
+            ok=ok,
+            status=status,
             skipped=dict(self.health.skipped),
             events=list(self.health.events),
-            consistency_warning=self._consistency_warning,
+            consistency_warning=warning,
         )
         return Estimate(
             t_s=t,
