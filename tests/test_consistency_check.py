@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 from scipy.stats import binom, chi2
-
 from trn_env.navigators.integrity.consistency_check import (
     STATUS_INCONSISTENT,
     ConsistencyCheck,
@@ -102,13 +101,23 @@ def _pmf_windows(noise_scale: float, runs: int, seed: int) -> tuple[int, list[fl
     windows of updates each, ranges noise_scale x 3.5 m; the flag read from the published Health after the
     last update (the second window, after the first's convergence), and each run's S at the second
     window's first update."""
+    from test_terrain_filter_linear import (
+        COMMON,
+        G_E,
+        G_N,
+        H0,
+        H_ANT,
+        SIGMA_R,
+        initial,
+        ins_state,
+        planar_dem,
+    )
     from trn_env.navigators.filters.pmf import PointMassFilter
     from trn_env.navigators.protocol import EXTRA_INNOVATION_COV
-    from test_terrain_filter_linear import COMMON, G_E, G_N, H0, H_ANT, SIGMA_R, initial, ins_state, planar_dem
     dem = planar_dem()
     flags, s_first = 0, []
     rng = np.random.default_rng(seed)
-    for r in range(runs):
+    for _ in range(runs):
         nav = PointMassFilter(dem, grid_size=81, span_sigmas=4.5, position_noise_m_per_sqrt_s=0.5, **COMMON)
         nav.reset(initial(40.0))
         w = nav._recovery.consistency.window

@@ -72,6 +72,11 @@ class InsRiddenFilter(InsGnssBlock):
     reads the map between its posts (the two differ by an error that is the same in every run over the same
     ground, which the white terrain_model_sigma_m cannot describe). outlier_prob, outlier_width_m: the heavy
     tail of the likelihood. gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise.
+    gnss_drift_sigma_m: the receiver's horizontal drift (a Gauss-Markov error far slower than the fixes, the
+    same in every fix of a run): fixes that share it cannot average it away, so after each GNSS update the
+    belief's north and east variances are widened to at least its square (`_gnss_drift_deficit`; the
+    posterior of a position seen through N fixes x + d + w_k is sigma_d^2 + sigma_w^2 / N, never below
+    sigma_d^2); 0 (default) treats fixes as independent. A scenario fills it from its GNSS sensor.
     baro_bias_sigma_m: prior of the baro height's bias. converged_sigma_m: Health says "acquiring" while the
     horizontal 1-sigma is above it. Vertical channel: gravity_model, tau_baro_s, imu_samples,
     baro_geopotential as in navigators.filters.InsTrnNavigator; the INS height starts at the first baro
@@ -118,6 +123,7 @@ class InsRiddenFilter(InsGnssBlock):
         self.log_outlier_density = -math.log(s.outlier_width_m)
         self.gnss_sigma_m = s.gnss_sigma_m
         self.gnss_vertical_sigma_m = s.gnss_vertical_sigma_m
+        self.gnss_drift_sigma_m = s.gnss_drift_sigma_m
         self.gnss_velocity_sigma_mps = s.gnss_velocity_sigma_mps
         self.baro_bias_sigma_m = s.baro_bias_sigma_m
         self.vertical_noise = s.vertical_noise_m_per_sqrt_s
@@ -409,6 +415,15 @@ class InsRiddenFilter(InsGnssBlock):
 
     def _gnss_update(self, t_s, st, payload) -> None:
         raise NotImplementedError
+
+    def _gnss_drift_deficit(self) -> np.ndarray:
+        """(north, east) variance (m^2) the belief lacks after a GNSS update to cover the receiver's drift:
+        max(0, gnss_drift_sigma_m^2 - its variance) per axis (see the class docstring)."""
+        if not self.gnss_drift_sigma_m > 0.0:
+            return np.zeros(2)
+        _, cov = self._moments()
+        var = np.nan_to_num(np.diag(cov)[:2], nan=0.0)
+        return np.clip(self.gnss_drift_sigma_m ** 2 - var, 0.0, None)
 
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError

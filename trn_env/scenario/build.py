@@ -408,13 +408,22 @@ def _epoch_s(settings: dict) -> float:
     return 1.0 / rate if math.isfinite(rate) and rate > 0 else 1.0
 
 
+def _settings_fields(settings_class) -> set[str]:
+    """Names of a navigator settings dataclass's fields (empty for none or not a dataclass)."""
+    import dataclasses
+    if settings_class is None or not dataclasses.is_dataclass(settings_class):
+        return set()
+    return {f.name for f in dataclasses.fields(settings_class)}
+
+
 def navigator_settings(sc, map_dem) -> dict:
     """The keyword settings registry.create gets for the scenario's navigator: its [navigator.settings] and,
     by its declared capabilities (navigators.core.capabilities), the map as dem= (needs_map, and any plug-in
     that declares no settings class, as before capabilities), the bias priors and bias process noise from the
     IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
-    terrain_detail_spacing_m from the world's refinement (models_map_detail), each unless the settings give
+    terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m from the
+    GNSS sensor's horizontal drift (navigators that declare that setting), each unless the settings give
     it. Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level
     covers it)."""
     from trn_env.navigators import registry
@@ -433,6 +442,9 @@ def navigator_settings(sc, map_dem) -> dict:
     if caps.uses_map_noise:
         for key, val in map_noise_settings(error_model).items():
             settings.setdefault(key, val)
+    gnss = sc.sensors.gnss
+    if gnss is not None and "gnss_drift_sigma_m" in _settings_fields(caps.settings):
+        settings.setdefault("gnss_drift_sigma_m", float(gnss.horizontal_drift_m))   # the receiver's drift
     if caps.models_map_detail and sc.terrain.map.is_world:
         settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
     elif caps.models_map_detail:
