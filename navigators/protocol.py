@@ -41,7 +41,9 @@ class Health:
 
     status words: "ok", "acquiring", "degraded", "diverged", and "lost" (the acquisition-and-tracking
     TRN: out of lock for several epochs in a row, dead-reckoning on its aiding until a new acquisition;
-    its state machine is acquiring -> ok <-> degraded -> lost -> acquiring, each transition an event)."""
+    its state machine is acquiring -> ok <-> degraded -> lost -> acquiring, each transition an event), and
+    "inconsistent" (ok False: the long-window innovation test, navigators.integrity.consistency_check, finds
+    the innovations persistently larger than the covariance says; consistency_warning holds its message)."""
 
     ok: bool = True
     status: str = "ok"                                   # short word: ok, acquiring, degraded, diverged, ...
