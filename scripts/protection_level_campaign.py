@@ -95,7 +95,8 @@ def run_job(out: str, condition: str, seed: int, duration_s: float, navs: list[s
         ok = np.asarray(a["nav_ok"], bool)
         denied = ~np.asarray(a["gnss_available"], bool)
         f.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(f, t=a["t_s"], e=e, h=h, ok=ok, denied=denied, status=a["nav_status_code"])
+        np.savez(f, t=a["t_s"], e=e, h=h, ok=ok, denied=denied, status=a["nav_status_code"],
+                 err_ned_m=np.asarray(a["err_ned_m"], np.float32))
         c = ok & denied & np.isfinite(h)
         lines.append(f"  {nav} {condition} s{seed}: {rr.termination}, {int(np.sum(c & (e > h)))} MI of "
                      f"{int(c.sum())}, {time.perf_counter() - t0:.1f} s")
