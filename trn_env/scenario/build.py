@@ -539,12 +539,36 @@ def monitor_map_settings(error_model) -> dict:
             "correlation_length_m": float(length), "correlation_function": func}
 
 
+def monitor_navigator_settings(navigator: str) -> dict:
+    """The DEM monitor's model of the navigator's error when the navigator is its height and position source
+    (GNSS denied; the monitor uses it only on navigator-sourced epochs): navigator_error_time_constant_s and
+    navigator_height_time_constant_s from the navigator's declared error_time_constant_s and
+    height_time_constant_s (navigators.core.capabilities), each only where declared (> 0); empty for a
+    navigator that declares none (the monitor keeps its error constant over the window)."""
+    from trn_env.navigators import registry
+    try:
+        caps = registry.capabilities(navigator)
+    except (KeyError, ValueError):
+        return {}
+    out = {}
+    tau_h = float(getattr(caps, "error_time_constant_s", 0.0))
+    tau_v = float(getattr(caps, "height_time_constant_s", 0.0))
+    if tau_h > 0.0:
+        out["navigator_error_time_constant_s"] = tau_h
+    if tau_v > 0.0:
+        out["navigator_height_time_constant_s"] = tau_v
+    return out
+
+
 def monitor_settings(sc, name: str) -> dict:
     """A monitor's settings: the scenario's [monitors.<name>] table, with the sensor figures it needs
     filled from the scenario's sensors where not given (dem_integrity: the radar altimeter's noise and
-    lever arm, the GNSS vertical sigma)."""
+    lever arm, the GNSS vertical sigma, and the navigator's error time constants its GNSS-denied path
+    models, from the navigator's declared capabilities where it declares them)."""
     settings = sc.monitor(name).settings.to_dict()
     if name == "dem_integrity":
+        for key, val in monitor_navigator_settings(sc.navigator.name).items():
+            settings.setdefault(key, val)
         cfg = sc.sensors.radar_altimeter
         if cfg is not None:
             settings.setdefault("radar_altimeter_noise_const_m", float(cfg.noise_const_m))
