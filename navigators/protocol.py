@@ -35,6 +35,14 @@ EXTRA_INTEGRITY_DOF = "integrity_dof"              # int: its chi-square degrees
 EXTRA_INTEGRITY_BAND = "integrity_band"            # (lower, upper): its chi-square band at integrity_alpha
 
 
+def update_extra(innovation, innovation_cov, nis, nis_dof, log_likelihood, t_s) -> dict:
+    """The Estimate.extra entries of one terrain measurement update under the EXTRA_* keys above (innovation,
+    its covariance S, NIS, its degrees of freedom, log-likelihood, measurement time), as every terrain-aided
+    navigator publishes them. The values are stored as given."""
+    return {EXTRA_INNOVATION: innovation, EXTRA_INNOVATION_COV: innovation_cov, EXTRA_NIS: nis,
+            EXTRA_NIS_DOF: nis_dof, EXTRA_LOG_LIKELIHOOD: log_likelihood, EXTRA_MEASUREMENT_TIME: t_s}
+
+
 @dataclass
 class Health:
     """Navigator health: ok is False when the estimate should not be trusted (diverged, lost lock).

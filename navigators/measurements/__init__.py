@@ -17,6 +17,7 @@ gnss               GNSS position and velocity fix against the INS: `residual`, `
 baro               the barometric altimeter: geopotential (pressure) altitude to geometric height
 lever_arm          lever arms of the ranging antennas transferred to the IMU point
 terrain_models     what the terrain sensors share: the radii at a reference, the heavy-tailed likelihood
+sampling           the terrain samples a filter takes from a frame (valid returns, at most one per interval)
 """
 
 from .ira_closest_point import (
