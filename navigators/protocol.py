@@ -64,6 +64,12 @@ class Health:
         self.skipped[reason] = self.skipped.get(reason, 0) + 1
         self.events.append((float(t_s), message or reason))
 
+    def snapshot(self, consistency_warning: str = "") -> Health:
+        """A copy for an Estimate (its own skipped counts and event list), with the navigator's
+        consistency warning."""
+        return Health(ok=self.ok, status=self.status, skipped=dict(self.skipped), events=list(self.events),
+                      consistency_warning=consistency_warning)
+
 
 @dataclass
 class Estimate:

@@ -374,13 +374,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             extra.update(update_extra(innov.copy(), S.copy(), nis, 2, log_lik, float(te)))
         extra.update(self._integrity_extra)
         pl.publish(extra, pl.gaussian_hpl(P, pl.filter_risk(self)), self)   # protection_level
-        h = Health(
-            ok=self.health.ok,
-            status=self.health.status,
-            skipped=dict(self.health.skipped),
-            events=list(self.health.events),
-            consistency_warning=self._consistency_warning,
-        )
+        h = self.health.snapshot(self._consistency_warning)
         return Estimate(
             t_s=t,
             lat_rad=float(lat),

@@ -380,13 +380,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         extra.update(self._integrity_extra)
         # HPL: the Gaussian bound of P plus the last accepted fix's fault allowance (protection_level)
         pl.publish(extra, pl.gaussian_hpl(P[:2, :2], pl.filter_risk(self)) + self._fault_allowance_m, self)
-        health = Health(
-            ok=self.health.ok,
-            status=self.health.status,
-            skipped=dict(self.health.skipped),
-            events=list(self.health.events),
-            consistency_warning=self._consistency_warning,
-        )
+        health = self.health.snapshot(self._consistency_warning)
         return Estimate(
             t_s=self.ins.t_s,
             lat_rad=float(st[0]),

@@ -334,8 +334,7 @@ class InsRiddenFilter(InsGnssBlock):
         if np.isfinite(mean[5]):
             yaw = math.atan2(math.sin(yaw + mean[5]), math.cos(yaw + mean[5]))
         b = float(mean[2]) if np.isfinite(mean[2]) else 0.0
-        health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
-                        events=list(self.health.events), consistency_warning=self._consistency_warning)
+        health = self.health.snapshot(self._consistency_warning)
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
                         health=health, extra=self._with_protection_level(dict(self.extra)))
