@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from trn_env.output.chunked import covariance_blocks
 from trn_env.output.integrity_metrics import PL_METRIC_KEYS, protection_level_metrics
 
 
@@ -196,10 +197,8 @@ def navigation_metrics(arrays: dict[str, np.ndarray], settings: MetricSettings |
     s = settings or MetricSettings()
     t = np.asarray(arrays["t_s"], float)
     err = np.asarray(arrays["err_ned_m"], float).reshape(-1, 3)
-    if "est_cov" in arrays:
-        cov = np.asarray(arrays["est_cov"], float)
-        cov_pos = cov[:, :3, :3]
-        cov_diag = np.diagonal(cov, axis1=1, axis2=2)
+    if "est_cov" in arrays:          # an array, or ChunkedRows read a chunk at a time (output.chunked)
+        cov_pos, cov_diag = covariance_blocks(arrays["est_cov"], 3)
     else:
         cov_diag = np.asarray(arrays["est_cov_diag"], float)
         cov_pos = np.zeros((len(t), 3, 3))
