@@ -266,28 +266,26 @@ class LogWriter:
             if est is not None:
                 self._table(self._tick_tables, "estimates", ESTIMATES_SCHEMA).append(est)
 
-    def read_ticks(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Every tick written so far, read back (closes the tick tables): the truth rows (n, 16) and the
-        estimate columns, the covariance columns as one (n, 9, 9) ChunkedRows "cov" (`covariance_rows`:
-        read from disk a row group at a time by whoever needs them)."""
+    def read_ticks(self) -> tuple[list[np.ndarray], dict]:
+        """Every tick written so far, read back (closes the tick tables): the truth columns (a list in
+        TRUTH_ROW_COLUMNS order) and the estimate columns, the covariance columns as one (n, 9, 9)
+        ChunkedRows "cov" (`covariance_rows`: read from disk a row group at a time by whoever needs them)."""
         for name in ("truth", "estimates"):
             t = self._tick_tables.pop(name, None)
             if t is not None:
                 self.counts[name] = t.close()
         if not self.counts.get("truth"):
-            return np.empty((0, len(TRUTH_ROW_COLUMNS))), {}
+            return [np.empty(0) for _ in TRUTH_ROW_COLUMNS], {}
         # one column at a time, each copied out of Arrow's memory: the read-back then needs the result's
         # own arrays plus one column, not a whole table beside them (Arrow's allocator keeps what it freed)
         truth = pq.ParquetFile(self.tmp / "truth.parquet")
-        rows = np.empty((truth.metadata.num_rows, len(TRUTH_ROW_COLUMNS)))
-        for i, c in enumerate(TRUTH_ROW_COLUMNS):
-            rows[:, i] = _read_column(truth, c)
+        cols = [_read_column(truth, c).copy() for c in TRUTH_ROW_COLUMNS]
         es = pq.ParquetFile(self.tmp / "estimates.parquet")
         est = {"cov": covariance_rows(self.tmp / "estimates.parquet")}
         for c in es.schema_arrow.names:
             if not c.startswith("cov_"):
                 est[c] = _read_column(es, c).copy()
-        return rows, est
+        return cols, est
 
     def write_events(self, events) -> None:
         if not events:

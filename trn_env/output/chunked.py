@@ -4,7 +4,7 @@ A streamed run (trn_env.sim.log.SimLog with a sink) ends with every update row o
 per-row quantity, the estimate's 9 x 9 covariance (648 bytes a row, two thirds of a row's arrays), is handed
 on as a `ChunkedRows`: an array-like of known shape whose rows are read back in the log's row groups. The
 consumers that must see the whole flight (the summary's metrics, `log.npz`) walk it a chunk at a time
-(`iter_chunks`, `covariance_blocks`, `write_npz`), so the end of a long run does not hold it whole;
+(`iter_chunks`, `diagonals`, `write_npz`), so the end of a long run does not hold it whole;
 anything else gets the ordinary array through `numpy.asarray` (`__array__`), the same values bit for bit.
 """
 
@@ -84,29 +84,35 @@ def diagonals(cov) -> np.ndarray:
     return out
 
 
-def covariance_blocks(cov, k: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """(the leading k x k blocks (n, k, k), the diagonals (n, m)) of an (n, m, m) covariance array or
-    ChunkedRows; an ordinary array gives views, a ChunkedRows new arrays of the same values."""
-    if not isinstance(cov, ChunkedRows):
-        cov = np.asarray(cov, float)
-        return cov[:, :k, :k], np.diagonal(cov, axis1=1, axis2=2)
-    lead = np.empty((cov.shape[0], k, k), cov.dtype)
-    for start, block in cov.chunks():
-        lead[start:start + block.shape[0]] = block[:, :k, :k]
-    return lead, diagonals(cov)
+# rows per piece written to an npz member: about 1 MB (numpy's own writer copies up to 16 MB at once)
+NPZ_PIECE_BYTES = 1 << 20
+
+
+def _npz_member(f, value) -> None:
+    """One `.npy` member as numpy's `format.write_array` writes it (version 1.0 header, C order), its rows
+    in pieces of about NPZ_PIECE_BYTES; object and non-contiguous arrays through numpy's own writer."""
+    if isinstance(value, ChunkedRows):
+        header = {"descr": np.lib.format.dtype_to_descr(value.dtype), "fortran_order": False,
+                  "shape": value.shape}
+        pieces = (block for _, block in value.chunks())
+    else:
+        arr = np.asanyarray(value)
+        if arr.dtype.hasobject or arr.ndim == 0 or not arr.flags.c_contiguous:
+            np.lib.format.write_array(f, arr, allow_pickle=True)
+            return
+        header = np.lib.format.header_data_from_array_1_0(arr)
+        step = max(1, NPZ_PIECE_BYTES // max(1, arr[:1].nbytes))
+        pieces = (arr[s:s + step] for s in range(0, arr.shape[0], step))
+    np.lib.format.write_array_header_1_0(f, header)
+    for block in pieces:
+        if block.size:
+            f.write(memoryview(np.ascontiguousarray(block)).cast("B"))
 
 
 def write_npz(path, arrays: dict) -> None:
-    """`numpy.savez_compressed(path, **arrays)`, a ChunkedRows written a chunk at a time: the same archive
-    (members `NAME.npy`, deflated, version 1.0 headers as numpy writes them), read by `numpy.load`."""
+    """`numpy.savez_compressed(path, **arrays)` in bounded pieces: the same archive (members `NAME.npy`,
+    deflated, the same .npy bytes), read by `numpy.load`; a ChunkedRows is written a chunk at a time."""
     with zipfile.ZipFile(path, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as zf:
         for name, value in arrays.items():
             with zf.open(name + ".npy", "w", force_zip64=True) as f:
-                if not isinstance(value, ChunkedRows):
-                    np.lib.format.write_array(f, np.asanyarray(value), allow_pickle=True)
-                    continue
-                header = {"descr": np.lib.format.dtype_to_descr(value.dtype), "fortran_order": False,
-                          "shape": value.shape}
-                np.lib.format.write_array_header_1_0(f, header)
-                for _, block in value.chunks():
-                    f.write(np.ascontiguousarray(block, value.dtype).tobytes("C"))
+                _npz_member(f, value)

@@ -119,16 +119,19 @@ class SimLog:
         out: dict[str, np.ndarray] = {}
         if self.sink is not None:
             self.flush()
-            rows, est = self.sink.read_ticks()
+            truth, est = self.sink.read_ticks()          # (columns read back one at a time)
         else:
             rows, est = self._columns()
-        n = rows.shape[0]
-        out["t_s"] = rows[:, 0].copy()
+            truth = [rows[:, i].copy() for i in range(len(_TRUTH_ROW))]
+            del rows
+        n = truth[0].shape[0]
+        out["t_s"] = truth[0]
         col = 1
         for name in _TRUTH_LOGGED:
             width = 3 if name in ("v_ned_mps", "wind_ned_mps") else 1
-            out[f"true_{name}"] = rows[:, col:col + width].copy() if width == 3 else rows[:, col].copy()
+            out[f"true_{name}"] = np.column_stack(truth[col:col + width]) if width == 3 else truth[col]
             col += width
+        del truth
         h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
         out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
         if not est:
