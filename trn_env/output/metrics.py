@@ -199,8 +199,12 @@ def navigation_metrics(arrays: dict[str, np.ndarray], settings: MetricSettings |
     err = np.asarray(arrays["err_ned_m"], float).reshape(-1, 3)
     if "est_cov" in arrays:          # an array, or ChunkedRows read a chunk at a time (output.chunked)
         cov = arrays["est_cov"]
-        cov_diag = diagonals(cov) if isinstance(cov, ChunkedRows) else np.diagonal(
-            np.asarray(cov, float), axis1=1, axis2=2)
+        if not isinstance(cov, ChunkedRows):
+            cov_diag = np.diagonal(np.asarray(cov, float), axis1=1, axis2=2)
+        elif "est_cov_diag" in arrays:     # (a streamed run's arrays hold the diagonal: SimLog.arrays)
+            cov_diag = np.asarray(arrays["est_cov_diag"], float)
+        else:
+            cov_diag = diagonals(cov)
         nees = np.empty(err.shape[0])       # (row by row: the same values whatever the chunks)
         for start, block in iter_chunks(cov):
             block = np.asarray(block, float)
