@@ -94,13 +94,13 @@ def main(argv=None) -> int:
             continue
         rho_h = autocorrelation(runs, (0, 1), args.max_lag_s)
         rho_v = autocorrelation(runs, (2,), args.max_lag_s)
-        res[nav_dir.name] = {"runs": len(runs), "rows": int(sum(r.shape[0] for r in runs)),
-                             "tau_horizontal_s": fit_tau(rho_h), "tau_vertical_s": fit_tau(rho_v),
-                             "rho_horizontal_10_30_60": [float(rho_h[i]) for i in (10, 30, 60)
-                                                         if i < rho_h.size],
-                             "rho_vertical_10_30_60": [float(rho_v[i]) for i in (10, 30, 60) if i < rho_v.size]}
-        m = res[nav_dir.name]
-        print(f"{nav_dir.name}: {m['runs']} series, {m['rows']} rows: tau horizontal {m['tau_horizontal_s']:.0f} s "
+        lags = [k for k in (10, 30, 60) if k < rho_h.size]
+        res[nav_dir.name] = m = {"runs": len(runs), "rows": int(sum(r.shape[0] for r in runs)),
+                                 "tau_horizontal_s": fit_tau(rho_h), "tau_vertical_s": fit_tau(rho_v),
+                                 "rho_horizontal_10_30_60": [float(rho_h[k]) for k in lags],
+                                 "rho_vertical_10_30_60": [float(rho_v[k]) for k in lags]}
+        print(f"{nav_dir.name}: {m['runs']} series, {m['rows']} rows: tau horizontal "
+              f"{m['tau_horizontal_s']:.0f} s "
               f"(rho at 10/30/60 s {np.round(m['rho_horizontal_10_30_60'], 2).tolist()}), vertical "
               f"{m['tau_vertical_s']:.0f} s (rho {np.round(m['rho_vertical_10_30_60'], 2).tolist()})")
     (out / "error_time_constants.json").write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")

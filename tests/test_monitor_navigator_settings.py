@@ -5,9 +5,9 @@ from the navigator's declared capabilities, unless the monitor's table gives the
 from __future__ import annotations
 
 import pytest
-
 from trn_env.navigators import registry
 from trn_env.navigators.integrity import dem_monitor as dm
+
 from trn_env.scenario.build import monitor_settings
 from trn_env.scenario.loading import read_scenario_file, validate
 
@@ -18,6 +18,7 @@ TAU_KEYS = {"navigator_error_time_constant_s": "error_time_constant_s",
 def _scenario(navigator: str, monitor_extra: dict | None = None):
     data, _ = read_scenario_file("tests/scenarios/integrity_short.toml")
     data["navigator"] = {"name": navigator, "settings": {}}
+    data["sensors"].update(air_data={}, heading={})      # acq_track's aiding
     data["monitors"]["dem_integrity"].update(monitor_extra or {})
     return validate(data, source="test")
 
