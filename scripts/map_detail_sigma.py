@@ -15,10 +15,11 @@ import numpy as np
 
 
 def main() -> int:
-    from trn_env import terrain
     from trn_env.navigators.measurements.ira_seed002 import interpolation_sigma_m
-    from trn_env.scenario.build import world_height
     from trn_env.terrain.refine import refine
+
+    from trn_env import terrain
+    from trn_env.scenario.build import world_height
     for name in ("jacksboro", "synthetic:rolling"):
         m = terrain.load(name)
         for seed in (1, 2):
