@@ -239,4 +239,4 @@ class AcqTrackConfig(Settings):
 
 # error time constants: GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
 CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True,
-                            error_time_constant_s=70.0, height_time_constant_s=1700.0)
+                            error_time_constant_s=80.0, height_time_constant_s=3900.0)

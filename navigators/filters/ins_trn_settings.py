@@ -108,7 +108,7 @@ INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=Tru
                                        # GM fits to its GNSS-denied error
                                        # (scripts/navigator_error_time_constants.py; its baro-slaved
                                        # height error is near constant over a window)
-                                       error_time_constant_s=45.0, height_time_constant_s=4000.0)
+                                       error_time_constant_s=40.0, height_time_constant_s=6700.0)
 
 
 def initial_covariance(
