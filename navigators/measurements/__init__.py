@@ -14,7 +14,8 @@ ira_closest_point  seed 000's closest-point formulas for single samples: (R, the
 ira_seed002        seed 002's zero-Doppler search and its linearisation (behind ira.predict_seed002)
 gnss               GNSS position and velocity fix against the INS: `residual`, `jacobian`, `noise` (EKF);
                    `predict`, `likelihood` (grid and particle filters)
-baro               the barometric altimeter: geopotential (pressure) altitude to geometric height
+baro               the barometric altimeter: geopotential (pressure) altitude to geometric height, `predict`
+                   (the reading of a height hypothesis with a bias), `likelihood`
 lever_arm          lever arms of the ranging antennas transferred to the IMU point
 terrain_models     what the terrain sensors share: the radii at a reference, the heavy-tailed likelihood
 """
