@@ -237,11 +237,11 @@ def _cell_min(cell, ax, ay, az, k, n_samp):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_patch(heights, grid, lat, lon, ha, cv, i, j, cell):
+def _ra_patch(rec, lat, lon, ha, cv, i, j, cell):
     """Grid cell (i, j) (rows i, i + 1, columns j, j + 1) as the bilinear patch A + u B + v C + u v D in the
     antenna's NED frame (u east along the row, v north): cell[0:12] = A, B, C, D. The exact map of the
     bilinear surface differs from this patch by the curvature terms' variation inside a cell (< 1 mm)."""
-    lat0, lon0, dlat, dlon = grid
+    heights, lat0, lon0, dlat, dlon, _ = rec
     dphi0 = lat0 + i * dlat - lat
     dlam0 = lon0 + j * dlon - lon
     x00, y00, z00 = _ned(dphi0, dlam0, heights[i, j], ha, cv)
@@ -297,7 +297,7 @@ def _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ra_bnb(
-    heights, grid, h_min, h_max, cell_m, lat, lon, ha, ax, ay, az, cosb, sinb, max_range, bs, bmax, bmin,
+    rec, h_min, h_max, cell_m, lat, lon, ha, ax, ay, az, cosb, sinb, max_range, bs, bmax, bmin,
     blk_lb, blk_id, cell, out,
 ):
     """Closest terrain point in the beam cone by best-first branch and bound over DEM blocks; writes
@@ -309,15 +309,15 @@ def _ra_bnb(
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
+    heights, lat0, lon0, dlat, dlon, _ = rec
     n_lat, n_lon = heights.shape
-    lat0, lon0, dlat, dlon = grid
     cv = _consts(lat)
     _, c, m, n, _ = cv
     k = cosb * cosb
     best2 = max_range * max_range
     best_i = np.nan
     best_j = np.nan
-    t_ax = _ray_hit(heights, grid, h_min, h_max, cell_m, lat, lon, ha, cv, ax, ay, az, 0.0, max_range)
+    t_ax = _ray_hit(rec, h_min, h_max, cell_m, lat, lon, ha, cv, ax, ay, az, 0.0, max_range)
     if t_ax == t_ax:
         best2 = t_ax * t_ax
         dphi, dlam, _ = _geo_of_ned(t_ax * ax, t_ax * ay, t_ax * az, ha, cv)
@@ -418,7 +418,7 @@ def _ra_bnb(
                 if _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
                     continue
                 inside = _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb)
-                _ra_patch(heights, grid, lat, lon, ha, cv, i, j, cell)
+                _ra_patch(rec, lat, lon, ha, cv, i, j, cell)
                 gx = cell[0] + 0.5 * cell[3] + 0.5 * cell[6] + 0.25 * cell[9]
                 gy = cell[1] + 0.5 * cell[4] + 0.5 * cell[7] + 0.25 * cell[10]
                 gz = cell[2] + 0.5 * cell[5] + 0.5 * cell[8] + 0.25 * cell[11]
@@ -477,7 +477,6 @@ def _ra_batch(
     sinb = np.sin(half_beam)
     out = np.empty(5)
     cell = np.empty(12 + 17)
-    grid = (lat0, lon0, dlat, dlon)
     for k in range(lat.shape[0]):
         ax, ay, az = C_bn[k, 0, 2], C_bn[k, 1, 2], C_bn[k, 2, 2]
         nrm = np.sqrt(ax * ax + ay * ay + az * az)
@@ -486,7 +485,7 @@ def _ra_batch(
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
         _ra_bnb(
-            heights, grid, h_min, h_max, cell_m, lat[k], lon[k], h[k], ax / nrm, ay / nrm, az / nrm, cosb,
+            rec, h_min, h_max, cell_m, lat[k], lon[k], h[k], ax / nrm, ay / nrm, az / nrm, cosb,
             sinb, max_range, bs, bmax, bmin, blk_lb, blk_id, cell, out,
         )
         valid[k] = out[0] > 0.5
