@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..kernels import bilinear
+from ..kernels import bilinear, bilinear_cell, cell_index
 from .shared import (
     _INF,
     IRA_BLOCK_POSTS,
@@ -52,24 +52,13 @@ def _zd_point(rec, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
         east = sv * wy + tt * uhy
         dphi = north * imh
         dlam = east * inhc
-        # bilinear height and its t-derivative (terrain.kernels.bilinear's cell choice and formula)
+        # bilinear height and its t-derivative (terrain.kernels: cell_index, bilinear_cell)
         fi = fi0 + tt * dfi
         fj = fj0 + tt * dfj
-        if not (fi >= -1e-9 and fj >= -1e-9 and fi <= n_lat - 1 + 1e-9 and fj <= n_lon - 1 + 1e-9):
+        i, j, u, v = cell_index(n_lat, n_lon, fi, fj)
+        if i < 0:
             return np.nan, x, y, z, dphi, dlam, np.nan
-        i = min(max(int(fi), 0), n_lat - 2)
-        j = min(max(int(fj), 0), n_lon - 2)
-        u = fi - i
-        v = fj - j
-        h00 = heights[i, j]
-        h01 = heights[i, j + 1]
-        h10 = heights[i + 1, j]
-        h11 = heights[i + 1, j + 1]
-        ea = h01 - h00
-        eb = h11 - h10
-        ha_ = h00 + v * ea
-        hb_ = h10 + v * eb
-        hp = ha_ + u * (hb_ - ha_)
+        hp, ha_, hb_, ea, eb = bilinear_cell(heights, i, j, u, v)
         if hp != hp:
             hp = bilinear(rec[0], rec[1], rec[2], rec[3], rec[4], lat + dphi, lon + dlam)
             if hp != hp:
