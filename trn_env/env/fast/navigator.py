@@ -376,8 +376,8 @@ def _axis_table(f, n, stride, offsets, n_off, size, cell_idx, frac):
 @njit(cache=True)
 def _candidate_mad(meas, n, stride, heights, ii, uu, jj, vv, remove_bias, diff):
     """Mean absolute difference (mean-removed when remove_bias) of the profile's used points against the
-    map at the cells and fractions (ii, uu) x (jj, vv) of one shifted candidate (kernels.bilinear_cell,
-    formula, its void retry included); +inf when a point falls off the map or on a void."""
+    map at the cells and fractions (ii, uu) x (jj, vv) of one shifted candidate (kernels.bilinear_cell
+    and its void retry); +inf when a point falls off the map or on a void."""
     s = 0.0
     m_used = 0
     for k in range(0, n, stride):
