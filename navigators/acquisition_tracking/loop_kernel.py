@@ -28,7 +28,7 @@ that does not converge keeps the NCS estimate.
 MSD (correlation.py) is a parabola at its minimum; the loops correlate with its square root (the RMS
 difference, V-shaped), since discriminator (3.5) on a parabola maps x -> -x and never locks.
 
-The module is the one concept "the tracking loops' numba kernels" (about 650 lines): the speed / heading
+The module is the one concept "the tracking loops' numba kernels": the speed / heading
 loop and the start-point loop share the correlation functions, V analysis and ELS here, and track_loops
 runs them all in one compiled call; its records are in loop_records.py.
 """
