@@ -73,7 +73,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ...terrain.geodesy import WGS84_A_M, WGS84_E2
+from ...terrain.geodesy import radii_m
 from ...terrain.kernels import map_height
 from ...terrain.queries.radar_altimeter import _ra_batch
 from ...terrain.queries.shared import _ra_tables, _ra_workspace
@@ -137,13 +137,6 @@ class MonitorOutput:
 
 
 @njit(cache=True)
-def _radii(lat):
-    s = math.sin(lat)
-    w = 1.0 - WGS84_E2 * s * s
-    return WGS84_A_M * (1.0 - WGS84_E2) / (w * math.sqrt(w)), WGS84_A_M / math.sqrt(w)
-
-
-@njit(cache=True)
 def _epoch_kernel(ra, gnss, est, rec, cfg, state, out):
     """Pick the frame's monitor epochs (one valid radar-altimeter sample per period) and their positions:
     rows [t, lat, lon, h, measured range, nadir map height, height-source variance, source, map slope north,
@@ -192,7 +185,7 @@ def _epoch_kernel(ra, gnss, est, rec, cfg, state, out):
             src = 1
         if not (vn == vn and ve == ve and vd == vd):
             vn = ve = vd = 0.0
-        rn, re = _radii(lat)
+        rn, re = radii_m(lat)
         lat_t = lat + vn * dt / (rn + h)
         lon_t = lon + ve * dt / ((re + h) * math.cos(lat))
         h_t = h - vd * dt

@@ -445,35 +445,17 @@ def _ira_one(rec, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, max_range,
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ira_batch(
-    rec,
-    cell_m,
-    lat,
-    lon,
-    h,
-    v_ned,
-    C_bn,
-    half_window,
-    max_range,
-    hmax_blocks,
-    bslope,
-    h_min,
-    h_max,
-    g_glob,
-    work,
-    stack,
-    valid,
-    rng,
-    lat_out,
-    lon_out,
-    h_out,
-    warm,
-):
-    """IRA queries k = 0..n-1 (see ira_return); hmax_blocks, bslope, h_min, h_max, g_glob: see _ira_tables;
-    work (8, >= n_max) and stack (>= 64, 12): scratch space, contents irrelevant. warm: (lat, lon) of the
-    first query's hint, each later query's hint the previous valid return (warm_start of ira_return); an
-    empty array: no hints."""
-    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
+def _ira_batch(rec, cell_m, queries, half_window, max_range, map_tables, workspace, outs, warm):
+    """IRA queries k = 0..n-1 (see ira_return) on the map record rec (read bilinearly), records (numba
+    tuples): queries = (lat, lon, h, v_ned, C_bn); map_tables = (hmax_blocks, bslope, h_min, h_max, g_glob):
+    see _ira_tables; workspace = (work (8, >= n_max), stack (>= 64, 12)): scratch space, contents
+    irrelevant; outs = (valid, rng, lat_out, lon_out, h_out). warm: (lat, lon) of the first query's hint,
+    each later query's hint the previous valid return (warm_start of ira_return); an empty array: no
+    hints."""
+    lat, lon, h, v_ned, C_bn = queries
+    hmax_blocks, bslope, h_min, h_max, g_glob = map_tables
+    work, stack = workspace
+    valid, rng, lat_out, lon_out, h_out = outs
     sin_w = np.sin(half_window)
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
     buf_s = work[0, :n_max]
@@ -545,30 +527,8 @@ def ira_return(
     v = _stack("v_ned", v_ned, n, (3,))
     C = _stack("C_bn", C_bn, n, (3, 3))
     valid, rng, la, lo, hh = _outputs(n)
-    hmax_blocks, bslope, h_min, h_max, g_glob, cell_m = _ira_tables(dem)
-    work, stack = _ira_workspace(2 * int(np.ceil(float(max_range_m) / cell_m)) + 9)
-    _ira_batch(
-        dem.record(),
-        cell_m,
-        lat,
-        lon,
-        h,
-        v,
-        C,
-        float(half_window_rad),
-        float(max_range_m),
-        hmax_blocks,
-        bslope,
-        h_min,
-        h_max,
-        g_glob,
-        work,
-        stack,
-        valid,
-        rng,
-        la,
-        lo,
-        hh,
-        warm,
-    )
+    *map_tables, cell_m = _ira_tables(dem)
+    workspace = _ira_workspace(2 * int(np.ceil(float(max_range_m) / cell_m)) + 9)
+    _ira_batch(dem.record(), cell_m, (lat, lon, h, v, C), float(half_window_rad), float(max_range_m),
+               tuple(map_tables), workspace, (valid, rng, la, lo, hh), warm)
     return TerrainReturn(valid, rng, la, lo, hh)
