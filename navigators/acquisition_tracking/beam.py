@@ -84,8 +84,8 @@ def predicted_ray(
     C[0, 1, 2] = cr * sp * sy - sr * cy
     C[0, 2, 2] = cr * cp
     _ra_batch(
-        *work["grid"], pos[0], pos[1], pos[2], C, math.radians(0.5 * beamwidth_deg), float(max_range_m),
-        *work["tables"], *_ra_workspace(work["tables"][1].size), work["valid"], *outs,
+        *work["grid"], (pos[0], pos[1], pos[2], C), math.radians(0.5 * beamwidth_deg), float(max_range_m),
+        work["tables"], _ra_workspace(work["tables"][1].size), (work["valid"], *outs),
     )  # fmt: skip
     if not bool(work["valid"][0]):
         return None

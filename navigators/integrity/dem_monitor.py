@@ -401,8 +401,8 @@ def _update_kernel(ra, gnss, est, rec, mon, tables):
     la = np.empty(m)
     lo = np.empty(m)
     hh = np.empty(m)
-    _ra_batch(rec, cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax, bmin, h_min, h_max, blk_lb, blk_id,
-              valid, rng, la, lo, hh)
+    _ra_batch(rec, cell_m, (lat, lon, h, C), cfg[14], cfg[15], (bs, bmax, bmin, h_min, h_max),
+              (blk_lb, blk_id), (valid, rng, la, lo, hh))
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan

@@ -448,31 +448,16 @@ def _ra_bnb(
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_batch(
-    rec,
-    cell_m,
-    lat,
-    lon,
-    h,
-    C_bn,
-    half_beam,
-    max_range,
-    bs,
-    bmax,
-    bmin,
-    h_min,
-    h_max,
-    blk_lb,
-    blk_id,
-    valid,
-    rng,
-    lat_out,
-    lon_out,
-    h_out,
-):
-    """The radar-altimeter query of every antenna state; h_min/h_max: the DEM's finite height range,
-    blk_lb (bmax.size,) and blk_id (bmax.size,) int64: scratch space (overwritten before it is read)."""
-    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
+def _ra_batch(rec, cell_m, queries, half_beam, max_range, map_tables, workspace, outs):
+    """The radar-altimeter query of every antenna state on the map record rec (read bilinearly); records
+    (numba tuples): queries = (lat, lon, h, C_bn); map_tables = (bs, bmax, bmin, h_min, h_max) of
+    _ra_tables (h_min/h_max: the DEM's finite height range); workspace = (blk_lb (bmax.size,), blk_id
+    (bmax.size,) int64): scratch space (overwritten before it is read); outs = (valid, rng, lat_out,
+    lon_out, h_out)."""
+    lat, lon, h, C_bn = queries
+    bs, bmax, bmin, h_min, h_max = map_tables
+    blk_lb, blk_id = workspace
+    valid, rng, lat_out, lon_out, h_out = outs
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
     out = np.empty(5)
@@ -506,26 +491,7 @@ def radar_altimeter_return(
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     C = _stack("C_bn", C_bn, lat.shape[0], (3, 3))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
-    bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(dem)
-    _ra_batch(
-        dem.record(),
-        cell_m,
-        lat,
-        lon,
-        h,
-        C,
-        float(half_beamwidth_rad),
-        float(max_range_m),
-        bs,
-        bmax,
-        bmin,
-        h_min,
-        h_max,
-        *_ra_workspace(bmax.size),
-        valid,
-        rng,
-        la,
-        lo,
-        hh,
-    )
+    *map_tables, cell_m = _ra_tables(dem)
+    _ra_batch(dem.record(), cell_m, (lat, lon, h, C), float(half_beamwidth_rad), float(max_range_m),
+              tuple(map_tables), _ra_workspace(map_tables[1].size), (valid, rng, la, lo, hh))
     return TerrainReturn(valid, rng, la, lo, hh)

@@ -107,24 +107,14 @@ def _ray_hit(rec, h_min, h_max, cell_m, lat, lon, ha, cv, dx, dy, dz, t_from, t_
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ray_cast_batch(
-    rec,
-    cell_m,
-    lat,
-    lon,
-    h,
-    dirs,
-    max_range,
-    h_min,
-    h_max,
-    valid,
-    rng,
-    lat_out,
-    lon_out,
-    h_out,
-):
-    """The ray cast of every origin (see ray_cast); h_min/h_max: the DEM's finite height range."""
-    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
+def _ray_cast_batch(rec, cell_m, queries, max_range, height_range, outs):
+    """The ray cast of every origin (see ray_cast) on the map record rec (read bilinearly); records (numba
+    tuples): queries = (lat, lon, h, dirs); height_range = (h_min, h_max): the DEM's finite height range;
+    outs = (valid, rng, lat_out, lon_out, h_out)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec
+    lat, lon, h, dirs = queries
+    h_min, h_max = height_range
+    valid, rng, lat_out, lon_out, h_out = outs
     for k in range(lat.shape[0]):
         valid[k] = False
         rng[k] = np.nan
@@ -158,19 +148,6 @@ def ray_cast(dem, lat_rad, lon_rad, h_m, dir_ned, max_range_m: float = 20000.0) 
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     dirs = _stack("dir_ned", dir_ned, lat.shape[0], (3,))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
-    _ray_cast_batch(
-        dem.record(),
-        _cell_m(dem),
-        lat,
-        lon,
-        h,
-        dirs,
-        float(max_range_m),
-        *_height_range(dem),
-        valid,
-        rng,
-        la,
-        lo,
-        hh,
-    )
+    _ray_cast_batch(dem.record(), _cell_m(dem), (lat, lon, h, dirs), float(max_range_m),
+                    tuple(_height_range(dem)), (valid, rng, la, lo, hh))
     return TerrainReturn(valid, rng, la, lo, hh)
