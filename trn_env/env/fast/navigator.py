@@ -525,39 +525,20 @@ def tercom_fix(X, i, prof, rec, nav, m_per_rad, work):
 
 
 @njit(cache=True)
-def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw, sig_ba_prior):
-    """Episode draws of aircraft i's navigation errors and inertial error sources, and the filter's prior."""
-    X[i, EP_N] = sig_pos * frng.normal(state, i)
-    X[i, EP_E] = sig_pos * frng.normal(state, i)
-    X[i, EV_N] = sig_vel * frng.normal(state, i)
-    X[i, EV_E] = sig_vel * frng.normal(state, i)
-    X[i, TILT_N] = sig_tilt * frng.normal(state, i)
-    X[i, TILT_E] = sig_tilt * frng.normal(state, i)
-    X[i, BA_N] = ba * frng.normal(state, i)
-    X[i, BA_E] = ba * frng.normal(state, i)
-    X[i, BG_N] = bg * frng.normal(state, i)
-    X[i, BG_E] = bg * frng.normal(state, i)
-    X[i, BARO] = baro_sigma * frng.normal(state, i)
-    X[i, YAW0] = sig_yaw * frng.normal(state, i)
-    X[i, BG_Z] = bg * frng.normal(state, i)
-    X[i, BI_A_N] = 0.0
-    X[i, BI_A_E] = 0.0
-    X[i, BI_G_N] = 0.0
-    X[i, BI_G_E] = 0.0
-    X[i, TILT_GM_N] = 0.0
-    X[i, TILT_GM_E] = 0.0
-    X[i, CA_N] = 0.0
-    X[i, CA_E] = 0.0
+def draw_initial_errors(X, i, state, sig):
+    """Episode draws of aircraft i's navigation errors and inertial error sources, and the filter's prior;
+    sig = (sig_pos m, sig_vel m/s, sig_tilt rad, ba m/s^2, bg rad/s, baro_sigma m, sig_yaw rad,
+    sig_ba_prior m/s^2) (reset.IP_*). The draws are taken in the order of `drawn` (one normal each)."""
+    sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw, sig_ba_prior = sig
+    drawn = (EP_N, EP_E, EV_N, EV_E, TILT_N, TILT_E, BA_N, BA_E, BG_N, BG_E, BARO, YAW0, BG_Z)
+    scale = (sig_pos, sig_pos, sig_vel, sig_vel, sig_tilt, sig_tilt, ba, ba, bg, bg, baro_sigma, sig_yaw, bg)
+    for k in range(len(drawn)):
+        X[i, drawn[k]] = scale[k] * frng.normal(state, i)
+    for c in (BI_A_N, BI_A_E, BI_G_N, BI_G_E, TILT_GM_N, TILT_GM_E, CA_N, CA_E, P01, P02, P12, N_PROF,
+              REJECTS, N_FIXES, N_NIS, DEGRADED):
+        X[i, c] = 0.0
     X[i, P00] = sig_pos * sig_pos
-    X[i, P01] = 0.0
-    X[i, P02] = 0.0
     X[i, P11] = sig_vel * sig_vel
-    X[i, P12] = 0.0
     X[i, P22] = sig_ba_prior * sig_ba_prior + (G0_MPS2 * sig_tilt) ** 2
-    X[i, N_PROF] = 0.0
-    X[i, REJECTS] = 0.0
-    X[i, N_FIXES] = 0.0
-    X[i, N_NIS] = 0.0
-    X[i, DEGRADED] = 0.0
     for j in range(MAX_WINDOW):
         X[i, NIS0 + j] = 0.0

@@ -117,18 +117,8 @@ def reset_aircraft(
             X[i, S.H] = h_world + h_agl_init
             agl = h_agl_init
         X[i, S.AGL_CMD] = min(ip[IP_AGL_MAX], max(ip[IP_AGL_MIN], agl))
-        nv.draw_initial_errors(
-            X,
-            i,
-            state,
-            ip[IP_SIG_POS],
-            ip[IP_SIG_VEL],
-            ip[IP_SIG_TILT],
-            ip[IP_BA],
-            ip[IP_BG],
-            ip[IP_BARO],
-            ip[IP_SIG_YAW],
-            ip[IP_SIG_BA_PRIOR],
-        )
+        sig = (ip[IP_SIG_POS], ip[IP_SIG_VEL], ip[IP_SIG_TILT], ip[IP_BA], ip[IP_BG], ip[IP_BARO],
+               ip[IP_SIG_YAW], ip[IP_SIG_BA_PRIOR])
+        nv.draw_initial_errors(X, i, state, sig)
         X[i, S.NEXT_SAMPLE_T] = 1.0
     return status
