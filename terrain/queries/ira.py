@@ -59,6 +59,7 @@ from .shared import (
     TerrainReturn,
     _check_positive,
     _consts,
+    _insert_sorted,
     _ira_tables,
     _ira_workspace,
     _outputs,
@@ -275,15 +276,7 @@ def _ira_one(rec, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, max_range,
         n_c += 1
     if n_c <= 64:
         for ci in range(1, n_c):  # insertion sort: the usual few tens of candidates
-            lbh = buf_h[ci]
-            q = buf_q[ci]
-            row = ci
-            while row > 0 and buf_h[row - 1] > lbh:
-                buf_h[row] = buf_h[row - 1]
-                buf_q[row] = buf_q[row - 1]
-                row -= 1
-            buf_h[row] = lbh
-            buf_q[row] = q
+            _insert_sorted(buf_h, buf_q, ci, buf_h[ci], buf_q[ci])
     else:  # no first best (nothing at s = 0 nor at the boresight): hundreds of candidates
         _sort_candidates(buf_h, buf_q, n_c)
     n_st = 0

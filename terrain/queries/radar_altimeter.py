@@ -28,6 +28,7 @@ from .shared import (
     _check_positive,
     _consts,
     _geo_of_ned,
+    _insert_sorted,
     _ned,
     _outputs,
     _positions,
@@ -369,14 +370,7 @@ def _ra_bnb(
             cz, rad = _sphere_curved(cx, cy, ha - 0.5 * (hx + hmn), rad, m + ha)
             if _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
                 continue
-            # insertion into the list sorted by lower bound
-            q = nb
-            while q > 0 and blk_lb[q - 1] > lb2:
-                blk_lb[q] = blk_lb[q - 1]
-                blk_id[q] = blk_id[q - 1]
-                q -= 1
-            blk_lb[q] = lb2
-            blk_id[q] = bi * nbj + bj
+            _insert_sorted(blk_lb, blk_id, nb, lb2, bi * nbj + bj)  # the list sorted by lower bound
             nb += 1
     # cells of the surviving blocks, blocks best first: box bound, cone test, then the projection bound
     # |P| >= P.g >= min over the corners of P_corner.g (g: unit vector to the cell centre; P.g is bilinear

@@ -83,6 +83,19 @@ def _ned(dphi, dlam, hp, ha, cv):
     return x, y, z
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def _insert_sorted(keys, ids, n, key, ident):
+    """Insert (key, ident) into keys[:n], ids[:n] kept ascending by key (after the equal keys): the
+    searches' candidate lists; keys[:n + 1], ids[:n + 1] hold the list afterwards."""
+    q = n
+    while q > 0 and keys[q - 1] > key:
+        keys[q] = keys[q - 1]
+        ids[q] = ids[q - 1]
+        q -= 1
+    keys[q] = key
+    ids[q] = ident
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _geo_of_ned(x, y, z, ha, cv):
     """Inverse of _ned: (dphi, dlam, h_p) of the NED point (x, y, z) by fixed-point iteration."""
