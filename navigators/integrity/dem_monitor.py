@@ -386,15 +386,10 @@ def _update_kernel(ra, gnss, est, rec, mon, tables):
         lat[i] = rows[i, 1]
         lon[i] = rows[i, 2]
         h[i] = rows[i, 3] - cfg[2]
-        # body-to-NED DCM, yaw-pitch-roll (only its third column, the beam axis, is used by the search)
-        C[i, 0, 0] = cp * cy
-        C[i, 0, 1] = sr * sp * cy - cr * sy
+        # the beam axis: the third column of the body-to-NED DCM (3-2-1, terrain.geodesy.euler_to_C_bn), the
+        # only part the search reads (the other entries stay unset)
         C[i, 0, 2] = cr * sp * cy + sr * sy
-        C[i, 1, 0] = cp * sy
-        C[i, 1, 1] = sr * sp * sy + cr * cy
         C[i, 1, 2] = cr * sp * sy - sr * cy
-        C[i, 2, 0] = -sp
-        C[i, 2, 1] = sr * cp
         C[i, 2, 2] = cr * cp
     valid = np.zeros(m, np.bool_)
     rng = np.empty(m)
