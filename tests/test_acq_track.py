@@ -164,7 +164,6 @@ def test_acquisition_recovers_speed_heading_start_within_one_bin(dem):
         heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
         cost=0,
         remove_bias=True,
-        interp=0,
         n_min=10,
         distinct_ratio=cfg.acquisition_distinct_ratio,
         exclusion_m=cfg.acquisition_exclusion_m,
