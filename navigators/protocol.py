@@ -35,6 +35,14 @@ EXTRA_INTEGRITY_DOF = "integrity_dof"              # int: its chi-square degrees
 EXTRA_INTEGRITY_BAND = "integrity_band"            # (lower, upper): its chi-square band at integrity_alpha
 
 
+def update_extra(innovation, innovation_cov, nis, nis_dof, log_likelihood, t_s) -> dict:
+    """The Estimate.extra entries of one terrain measurement update under the EXTRA_* keys above (innovation,
+    its covariance S, NIS, its degrees of freedom, log-likelihood, measurement time), as every terrain-aided
+    navigator publishes them. The values are stored as given."""
+    return {EXTRA_INNOVATION: innovation, EXTRA_INNOVATION_COV: innovation_cov, EXTRA_NIS: nis,
+            EXTRA_NIS_DOF: nis_dof, EXTRA_LOG_LIKELIHOOD: log_likelihood, EXTRA_MEASUREMENT_TIME: t_s}
+
+
 @dataclass
 class Health:
     """Navigator health: ok is False when the estimate should not be trusted (diverged, lost lock).
@@ -55,6 +63,12 @@ class Health:
     def skip(self, t_s: float, reason: str, message: str | None = None) -> None:
         self.skipped[reason] = self.skipped.get(reason, 0) + 1
         self.events.append((float(t_s), message or reason))
+
+    def snapshot(self, consistency_warning: str = "") -> Health:
+        """A copy for an Estimate (its own skipped counts and event list), with the navigator's
+        consistency warning."""
+        return Health(ok=self.ok, status=self.status, skipped=dict(self.skipped), events=list(self.events),
+                      consistency_warning=consistency_warning)
 
 
 @dataclass
