@@ -38,9 +38,11 @@ from trn_env.logs.format import (
     LogError,
     units,
 )
+from trn_env.output.chunked import ChunkedRows
 from trn_env.output.run_folder import PARTIAL_MARK, clean_partial_leftovers
 
-NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost")   # = sim.log's
+# = sim.log's
+NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost", "inconsistent")
 
 # truth table columns, in trn_env.sim.log's _TRUTH_ROW order
 TRUTH_ROW_COLUMNS = ("t_s", "lat_rad", "lon_rad", "h_m", "v_n_mps", "v_e_mps", "v_d_mps", "roll_rad",
@@ -176,6 +178,29 @@ def _read_column(pf: pq.ParquetFile, name: str) -> np.ndarray:
     return pf.read(columns=[name]).column(name).to_numpy()
 
 
+COV_COLUMNS = tuple(f"cov_{i}_{j}" for i in range(9) for j in range(9))
+
+
+def covariance_rows(path: Path) -> ChunkedRows:
+    """The estimates table's covariance columns as an (n, 9, 9) ChunkedRows read a row group at a time
+    (one group's 81 columns in memory at once). The file is opened here and read through that handle, so
+    the log folder may be renamed (committed, moved into a run folder) while the array is in use."""
+    pf = pq.ParquetFile(pa.OSFile(str(path)))
+    sizes = [pf.metadata.row_group(g).num_rows for g in range(pf.metadata.num_row_groups)]
+
+    def chunks():
+        start = 0
+        for g, k in enumerate(sizes):
+            block = np.empty((k, 9, 9))
+            flat = block.reshape(k, 81)
+            for m, c in enumerate(COV_COLUMNS):
+                flat[:, m] = pf.read_row_group(g, columns=[c]).column(0).to_numpy()
+            yield start, block
+            start += k
+
+    return ChunkedRows((sum(sizes), 9, 9), np.float64, chunks)
+
+
 class LogWriter:
     """A sensor log being written (module docstring). `metadata`: the log's metadata (format, units and
     version are added); `chunk_rows`: rows per Parquet row group (the memory bound per table)."""
@@ -242,31 +267,26 @@ class LogWriter:
             if est is not None:
                 self._table(self._tick_tables, "estimates", ESTIMATES_SCHEMA).append(est)
 
-    def read_ticks(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Every tick written so far, read back (closes the tick tables): the truth rows (n, 16) and the
-        estimate columns, the covariance columns as one array "cov" (n, 9, 9)."""
+    def read_ticks(self) -> tuple[list[np.ndarray], dict]:
+        """Every tick written so far, read back (closes the tick tables): the truth columns (a list in
+        TRUTH_ROW_COLUMNS order) and the estimate columns, the covariance columns as one (n, 9, 9)
+        ChunkedRows "cov" (`covariance_rows`: read from disk a row group at a time by whoever needs them)."""
         for name in ("truth", "estimates"):
             t = self._tick_tables.pop(name, None)
             if t is not None:
                 self.counts[name] = t.close()
         if not self.counts.get("truth"):
-            return np.empty((0, len(TRUTH_ROW_COLUMNS))), {}
+            return [np.empty(0) for _ in TRUTH_ROW_COLUMNS], {}
         # one column at a time, each copied out of Arrow's memory: the read-back then needs the result's
         # own arrays plus one column, not a whole table beside them (Arrow's allocator keeps what it freed)
         truth = pq.ParquetFile(self.tmp / "truth.parquet")
-        rows = np.empty((truth.metadata.num_rows, len(TRUTH_ROW_COLUMNS)))
-        for i, c in enumerate(TRUTH_ROW_COLUMNS):
-            rows[:, i] = _read_column(truth, c)
+        cols = [_read_column(truth, c).copy() for c in TRUTH_ROW_COLUMNS]
         es = pq.ParquetFile(self.tmp / "estimates.parquet")
-        cov = np.empty((rows.shape[0], 9, 9))
-        est = {"cov": cov}
+        est = {"cov": covariance_rows(self.tmp / "estimates.parquet")}
         for c in es.schema_arrow.names:
-            if c.startswith("cov_"):
-                i, j = (int(x) for x in c[4:].split("_"))
-                cov[:, i, j] = _read_column(es, c)
-            else:
+            if not c.startswith("cov_"):
                 est[c] = _read_column(es, c).copy()
-        return rows, est
+        return cols, est
 
     def write_events(self, events) -> None:
         if not events:

@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from trn_env.output.chunked import ChunkedRows, diagonals, iter_chunks
 from trn_env.output.integrity_metrics import PL_METRIC_KEYS, protection_level_metrics
 
 
@@ -196,22 +197,31 @@ def navigation_metrics(arrays: dict[str, np.ndarray], settings: MetricSettings |
     s = settings or MetricSettings()
     t = np.asarray(arrays["t_s"], float)
     err = np.asarray(arrays["err_ned_m"], float).reshape(-1, 3)
-    if "est_cov" in arrays:
-        cov = np.asarray(arrays["est_cov"], float)
-        cov_pos = cov[:, :3, :3]
-        cov_diag = np.diagonal(cov, axis1=1, axis2=2)
+    if "est_cov" in arrays:          # an array, or ChunkedRows read a chunk at a time (output.chunked)
+        cov = arrays["est_cov"]
+        if not isinstance(cov, ChunkedRows):
+            cov_diag = np.diagonal(np.asarray(cov, float), axis1=1, axis2=2)
+        elif "est_cov_diag" in arrays:     # (a streamed run's arrays hold the diagonal: SimLog.arrays)
+            cov_diag = np.asarray(arrays["est_cov_diag"], float)
+        else:
+            cov_diag = diagonals(cov)
+        nees = np.empty(err.shape[0])       # (row by row: the same values whatever the chunks)
+        for start, block in iter_chunks(cov):
+            block = np.asarray(block, float)
+            rows = slice(start, start + block.shape[0])
+            nees[rows] = position_nees(err[rows], block[:, :3, :3])
     else:
         cov_diag = np.asarray(arrays["est_cov_diag"], float)
         cov_pos = np.zeros((len(t), 3, 3))
         for k in range(3):
             cov_pos[:, k, k] = cov_diag[:, k]
+        nees = position_nees(err, cov_pos)
     nav_ok = np.asarray(arrays.get("nav_ok", np.ones(len(t), bool)), bool)
     e_h = np.hypot(err[:, 0], err[:, 1])
     e_v = -err[:, 2]
     sig_h = np.sqrt(np.clip(cov_diag[:, 0], 0, None) + np.clip(cov_diag[:, 1], 0, None))
     nan = float("nan")
     n = int(t.size)
-    nees = position_nees(err, cov_pos)
     finite = nees[np.isfinite(nees)]
     lo, hi = anees_bounds(finite.size)
     anees = float(finite.mean()) if finite.size else nan

@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from trn_env.output.chunked import write_npz
+
 # The columns of timeline.csv (a subset of the log arrays, one row per logged tick).
 TIMELINE_COLUMNS = [
     "t_s", "true_lat_deg", "true_lon_deg", "true_h_msl_m", "true_h_agl_m", "true_yaw_deg", "tas_mps",
@@ -77,8 +79,9 @@ def write_summary(path: Path, summary: dict) -> None:
 
 
 def write_log_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """`numpy.savez_compressed`; an on-disk ChunkedRows (a streamed run's est_cov) goes a chunk at a time."""
     with open(path, "wb") as f:
-        np.savez_compressed(f, **arrays)
+        write_npz(f, arrays)
 
 
 def timeline_table(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

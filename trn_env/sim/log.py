@@ -4,7 +4,9 @@ arrays once at the end of a run (`SimLog.arrays`).
 In memory by default. Given a `sink` (trn_env.logs.writer.LogWriter, handed down by the stage above: sim
 does not import logs), the frames go to the sink as they come and the tick rows every `flush_ticks` ticks,
 so the memory of a run stays flat whatever its length; `arrays()` then reads the ticks back from the sink
-and leaves the sensor arrays on disk (trn_env.logs.read_log reads them).
+and leaves the sensor arrays on disk (trn_env.logs.read_log reads them), and `est_cov` too: it is a
+trn_env.output.chunked.ChunkedRows read from the log a row group at a time by the consumers that walk the
+whole flight (the metrics, log.npz), so the end of a long run does not hold the 9 x 9 covariances whole.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from trn_env.flight.truth import TruthChunk
 from trn_env.navigators.frames import SensorFrames
 from trn_env.navigators.integrity.protection_level import EXTRA_PROTECTION_LEVEL
 from trn_env.navigators.protocol import Estimate
+from trn_env.output.chunked import diagonals
 from trn_env.sim.nav_stage import gnss_available_mask
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
@@ -29,7 +32,7 @@ _TRUTH_ROW = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "v_n", "v_e", "v_d", "roll
 
 
 # nav_status_code in the arrays: the index of the estimate's Health.status here (len: any other word)
-NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost")
+NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost", "inconsistent")
 
 
 @dataclass
@@ -116,16 +119,19 @@ class SimLog:
         out: dict[str, np.ndarray] = {}
         if self.sink is not None:
             self.flush()
-            rows, est = self.sink.read_ticks()
+            truth, est = self.sink.read_ticks()          # (columns read back one at a time)
         else:
             rows, est = self._columns()
-        n = rows.shape[0]
-        out["t_s"] = rows[:, 0].copy()
+            truth = [rows[:, i].copy() for i in range(len(_TRUTH_ROW))]
+            del rows
+        n = truth[0].shape[0]
+        out["t_s"] = truth[0]
         col = 1
         for name in _TRUTH_LOGGED:
             width = 3 if name in ("v_ned_mps", "wind_ned_mps") else 1
-            out[f"true_{name}"] = rows[:, col:col + width].copy() if width == 3 else rows[:, col].copy()
+            out[f"true_{name}"] = np.column_stack(truth[col:col + width]) if width == 3 else truth[col]
             col += width
+        del truth
         h_ground = components.world_height(world_dem, out["true_lat_rad"], out["true_lon_rad"])
         out["true_h_agl_m"] = out["true_h_msl_m"] - h_ground
         if not est:
@@ -136,7 +142,7 @@ class SimLog:
         out["est_v_ned_mps"] = np.column_stack([est["v_n_mps"], est["v_e_mps"], est["v_d_mps"]]).reshape(n, 3)
         for name in ("roll_rad", "pitch_rad", "yaw_rad"):
             out[f"est_{name}"] = est[name]
-        if "cov" in est:              # read back from the sink as one array (LogWriter.read_ticks)
+        if "cov" in est:              # from the sink: read from disk in chunks (LogWriter.read_ticks)
             out["est_cov"] = est.pop("cov")
         else:
             out["est_cov"] = np.stack([est[f"cov_{i}_{j}"] for i in range(9) for j in range(9)],
@@ -144,7 +150,7 @@ class SimLog:
         out["nav_ok"] = est["nav_ok"].astype(bool)
         out["nav_status_code"] = est["nav_status_code"].astype(np.int8)
         out["est_hpl_m"] = np.asarray(est["hpl_m"], float) if "hpl_m" in est else np.full(n, np.nan)
-        out["est_cov_diag"] = np.diagonal(out["est_cov"], axis1=1, axis2=2).copy()
+        out["est_cov_diag"] = diagonals(out["est_cov"])
         out["err_ned_m"] = error_ned_m(out["true_lat_rad"], out["true_lon_rad"], out["true_h_msl_m"],
                                        out["est_lat_rad"], out["est_lon_rad"], out["est_h_m"])
         out["gnss_available"] = gnss_available_mask(out["t_s"], outages)
