@@ -154,6 +154,8 @@ def imu_gap_s(t_s: np.ndarray, t_prev_s: float = float("nan"), factor: float = 1
     d = np.diff(t)
     if d.shape[0] < 2:
         return 0.0
+    if d.max() <= factor * d.min():     # no interval can exceed factor x the median (>= the shortest)
+        return 0.0
     nominal = float(np.median(d))
     long = d[d > factor * nominal]
     return float(np.sum(long - nominal)) if long.shape[0] else 0.0

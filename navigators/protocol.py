@@ -35,13 +35,23 @@ EXTRA_INTEGRITY_DOF = "integrity_dof"              # int: its chi-square degrees
 EXTRA_INTEGRITY_BAND = "integrity_band"            # (lower, upper): its chi-square band at integrity_alpha
 
 
+def update_extra(innovation, innovation_cov, nis, nis_dof, log_likelihood, t_s) -> dict:
+    """The Estimate.extra entries of one terrain measurement update under the EXTRA_* keys above (innovation,
+    its covariance S, NIS, its degrees of freedom, log-likelihood, measurement time), as every terrain-aided
+    navigator publishes them. The values are stored as given."""
+    return {EXTRA_INNOVATION: innovation, EXTRA_INNOVATION_COV: innovation_cov, EXTRA_NIS: nis,
+            EXTRA_NIS_DOF: nis_dof, EXTRA_LOG_LIKELIHOOD: log_likelihood, EXTRA_MEASUREMENT_TIME: t_s}
+
+
 @dataclass
 class Health:
     """Navigator health: ok is False when the estimate should not be trusted (diverged, lost lock).
 
     status words: "ok", "acquiring", "degraded", "diverged", and "lost" (the acquisition-and-tracking
     TRN: out of lock for several epochs in a row, dead-reckoning on its aiding until a new acquisition;
-    its state machine is acquiring -> ok <-> degraded -> lost -> acquiring, each transition an event)."""
+    its state machine is acquiring -> ok <-> degraded -> lost -> acquiring, each transition an event), and
+    "inconsistent" (ok False: the long-window innovation test, navigators.integrity.consistency_check, finds
+    the innovations persistently larger than the covariance says; consistency_warning holds its message)."""
 
     ok: bool = True
     status: str = "ok"                                   # short word: ok, acquiring, degraded, diverged, ...
@@ -55,6 +65,16 @@ class Health:
     def skip(self, t_s: float, reason: str, message: str | None = None) -> None:
         self.skipped[reason] = self.skipped.get(reason, 0) + 1
         self.events.append((float(t_s), message or reason))
+
+    def snapshot(self, consistency_warning: str = "", check=None) -> Health:
+        """A copy for an Estimate (its own skipped counts and event list), with the navigator's
+        consistency warning; `check` (a navigators.integrity.consistency_check.ConsistencyCheck, or None)
+        withdraws ok and sets status "inconsistent" with its message while it flags the navigator."""
+        ok, status, warning = self.ok, self.status, consistency_warning
+        if check is not None:
+            ok, status, warning = check.apply(ok, status, warning)
+        return Health(ok=ok, status=status, skipped=dict(self.skipped), events=list(self.events),
+                      consistency_warning=warning)
 
 
 @dataclass

@@ -1,5 +1,7 @@
-"""TerrainNav-v0's rates: JSBSim's step (flight_dt_s) and the guidance rate, their checks, and the King Air's
-trajectory at 50 Hz and 100 Hz steps against 200 Hz (independent runs of the flight core)."""
+"""TerrainNav-v0's rates: JSBSim's step (flight_dt_s), the guidance rate and the scenario's sensor and filter
+rates (scenario_fields, the route task's TASK_RATES), their checks, the goal geometry kernel against the ECEF
+rotation, and the King Air's trajectory at 50 Hz and 100 Hz steps against 200 Hz (independent runs of the
+flight core)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from trn_env.env.route_task import FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
+from navigators.frames import imu_gap_s
+from trn_env.env.env_settings import goal_offset_ne
+from trn_env.env.route_task import FULL_TIER_ONLY, TASK_RATES, env_kwargs, fast_tier_kwargs
 from trn_env.env.terrain_nav import TerrainNavEnv
 from trn_env.flight.core import (
     AutopilotTargets,
@@ -78,9 +82,71 @@ def test_bad_rates_name_the_argument(kw, field):
 def test_route_task_flies_50_hz_and_the_fast_tier_drops_full_tier_settings():
     kw = env_kwargs("basin")
     assert kw["flight_dt_s"] == 0.02
+    assert kw["scenario_fields"] == TASK_RATES and kw["scenario_fields"] is not TASK_RATES   # a copy
+    e = TerrainNavEnv(**{**kw, "max_episode_s": 8.0})
+    assert e.scenario.sensors.ira.rate_hz == TASK_RATES["sensors.ira.rate_hz"]
+    assert e.scenario.navigator.settings.ekf_rate_hz == TASK_RATES["navigator.settings.ekf_rate_hz"]
+    e.close()
     fast = fast_tier_kwargs({**kw, "guidance_rate_hz": 1.0, "pipeline": False})
     assert not set(FULL_TIER_ONLY) & set(fast)
     assert {k: v for k, v in kw.items() if k not in FULL_TIER_ONLY} == fast
+
+
+def test_scenario_fields_set_the_scenario_and_bad_ones_name_the_field():
+    e = TerrainNavEnv("basin_route", scenario_fields={"sensors.ira.rate_hz": 25.0}, log_sensors=True, **SMALL)
+    assert e.scenario.sensors.ira.rate_hz == 25.0
+    assert TerrainNavEnv("basin_route", **SMALL).scenario.sensors.ira.rate_hz == 50.0      # the scenario's
+    e.reset(seed=1)
+    e.step(np.zeros(2, np.float32))                 # 2 s: two 1 s navigator updates of 25 IRA samples each
+    e._loop.sync()
+    assert [f.ira.t_s.shape[0] for f in e._loop._stage.logged_frames()] == [25, 25]
+    e.close()
+    for bad, words in (({"sensors.foo.rate_hz": 3.0}, ("scenario_fields", "sensors.foo")),
+                       ({"sensors.ira.rate_hz": -1.0}, ("scenario_fields", "sensors.ira.rate_hz")),
+                       ([("sensors.ira.rate_hz", 10.0)], ("scenario_fields",)),
+                       ({3: 10.0}, ("scenario_fields",))):
+        with pytest.raises(ValueError) as err:
+            TerrainNavEnv("basin_route", scenario_fields=bad, **SMALL)
+        assert all(w in str(err.value) for w in words), str(err.value)
+
+
+def test_goal_offset_kernel_is_the_ecef_rotation():
+    """goal_offset_ne against numpy: C_en(lat, lon)^T (r_goal - r) with both points through lla_to_ecef, on
+    random pairs 1-60 km apart at random heights; and against the small-offset form (latlon_to_ned_offset)
+    within 0.2 % for pairs within 2 km."""
+    from trn_env.terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
+
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        lat, lon = math.radians(rng.uniform(-60, 60)), math.radians(rng.uniform(-180, 180))
+        h = rng.uniform(0, 4000)
+        glat = lat + rng.uniform(-1, 1) * 60e3 / 6.4e6
+        glon = lon + rng.uniform(-1, 1) * 60e3 / 6.4e6
+        want = C_en(lat, lon).T @ (np.array(lla_to_ecef(glat, glon, h)) - np.array(lla_to_ecef(lat, lon, h)))
+        got = goal_offset_ne(lat, lon, h, glat, glon)
+        assert abs(got[0] - want[0]) < 1e-6 and abs(got[1] - want[1]) < 1e-6
+        glat, glon = lat + (glat - lat) / 30, lon + (glon - lon) / 30
+        near = goal_offset_ne(lat, lon, h, glat, glon)
+        approx = latlon_to_ned_offset(lat, lon, h, glat, glon)
+        assert math.hypot(near[0] - approx[0], near[1] - approx[1]) < 2e-3 * math.hypot(*approx) + 0.01
+
+
+def test_imu_gap_skips_the_median_only_where_no_interval_can_be_long():
+    """imu_gap_s against its definition (intervals longer than 1.5 x the median, less the median) computed
+    directly, on regular, jittered and gapped sample times."""
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        n = int(rng.integers(3, 60))
+        d = np.full(n, 0.02) * rng.uniform(0.7, 1.3, n) ** rng.integers(0, 2)
+        if rng.random() < 0.5:
+            d[rng.integers(0, n)] *= rng.uniform(1.0, 5.0)
+        t = 10.0 + np.cumsum(d)
+        prev = float(t[0] - rng.uniform(0.01, 0.1)) if rng.random() < 0.5 else float("nan")
+        tt = np.concatenate(([prev], t)) if math.isfinite(prev) else t
+        dd = np.diff(tt)
+        med = np.median(dd)
+        want = float(np.sum(dd[dd > 1.5 * med] - med))
+        assert imu_gap_s(t, prev) == pytest.approx(want, abs=1e-12)
 
 
 def _fly(dt_s: float, duration_s: int) -> np.ndarray:

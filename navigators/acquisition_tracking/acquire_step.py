@@ -2,6 +2,9 @@
 that defers a search over flat terrain, and the serial search (acquisition.py) around the dead-reckoned
 transect start, its plausibility check against the velocity bias' sigma and the lock it starts.
 
+`_acquisition_epoch` decides when a search is due (a large dead-reckoned sigma, a back-off after failed
+searches, the SNR deferral).
+
 A mixin of AcqTrackNavigator (navigator.py), which owns the state these methods read and write.
 """
 
@@ -140,3 +143,47 @@ class AcquisitionStep:
         )
         self.lock_state = "tracking"
         return True
+
+    def _acquisition_epoch(self, s: Sample) -> bool:
+        """The acquisition part of an epoch on a full transect: a serial search when one is due (after a
+        back-off, and not over terrain whose predicted SNR is below snr_min_db). True when the epoch ends
+        here (waiting, deferred or no distinct minimum found); False when tracking follows."""
+        cfg = self.config
+        # a transect placed by GNSS goes straight to tracking; otherwise a large sigma asks for a search
+        # a serial search only when the dead-reckoned start is too uncertain for the loops' pull-in range:
+        # after a loss of lock with a small sigma the loops re-lock from the dead-reckoned state (the
+        # integrity checks decide), so a low-SNR stretch does not leave the tracker searching to the end
+        acq_due = (
+            self.need_acquisition or (self.lock_state in ("filling", "acquiring") and not self._anchored)
+        ) and self._sigma_h() > cfg.acquire_above_sigma_m
+        if not acq_due:
+            return False
+        if self.acq_wait > 0:
+            self.acq_wait -= 1
+            return True
+        snr_pred = self._predicted_snr()
+        if not snr_pred >= cfg.snr_min_db:  # integrity prediction: no search over flat terrain
+            if not self._deferred:
+                self.health.events.append(
+                    (
+                        s.t_s,
+                        f"acq_track: predicted terrain SNR {snr_pred:.1f} dB < "
+                        f"{cfg.snr_min_db:g} dB: acquisition deferred",
+                    )
+                )
+            self._deferred = True
+            self.snr_db = snr_pred
+            self._set_lock(
+                self.lock_state if self.lock_state == "lost" else "acquiring",
+                s.t_s,
+                "lost" if self.need_acquisition else "acquiring",
+                f"predicted terrain SNR {snr_pred:.1f} dB < {cfg.snr_min_db:g} dB: acquisition deferred",
+            )
+            return True
+        self._deferred = False
+        if not self._acquire(s):
+            # retry with the next transect, backing off to every 4th after repeated failures
+            self.acq_failures += 1
+            self.acq_wait = (cfg.transect_samples - 1) * min(2 ** (self.acq_failures - 1), 4)
+            return True
+        return False

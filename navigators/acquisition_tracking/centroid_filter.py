@@ -3,7 +3,8 @@
 The centroid's covariance Pc (2 states, north/east m) or, with reference_frame "ne", X (4 states: centroid
 north/east, the aiding's velocity bias e_ne north/east): prediction per sample on the references' sigmas
 and the aiding's random walk, GNSS epochs, and the replica geometry (offsets of each sample from the
-transect's start along the aided and referenced velocity, on the local radii of curvature).
+transect's start along the aided and referenced velocity, on the local radii of curvature), and the floor
+the IMU's specification puts under e_ne's walk when the INS is the aiding (apply_imu_spec).
 
 A mixin of AcqTrackNavigator (navigator.py), which owns the state these methods read and write.
 """
@@ -15,6 +16,13 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ..core.imu_spec import (
+    ImuSpec,
+    consistency_warning,
+    equivalent_ramp_walk_density,
+    equivalent_walk_density,
+    rss,
+)
 from . import filter_kernels
 from .aiding import (
     ground_vector,
@@ -30,6 +38,9 @@ from .correlation import (
 from .profile import (
     Sample,
 )
+
+# memory over which e_ne's walk matches the INS aiding's velocity-error rates (navigators.core.imu_spec)
+ACQ_MEMORY_S = 120.0
 
 
 class CentroidFilter:
@@ -254,3 +265,20 @@ class CentroidFilter:
         else:
             self.average.reset()
             self.out_speed, self.out_track = v, float(wrap_rad(psi))
+
+    _consistency_warning = ""
+
+    def apply_imu_spec(self, spec: ImuSpec) -> None:
+        """With the INS as aiding (aiding_source "ins", reference_frame "ne"), e_ne is the INS's north/east
+        velocity error: its random walk takes at least what the IMU's specification makes that error grow by
+        (navigators.core.imu_spec; a floor over aiding_bias_walk_mps_per_sqrt_s): the body-fixed horizontal
+        specific-force error (accelerometer bias, instability, misalignment x g), a constant acceleration, and
+        the acceleration the horizontal gyro biases' tilt builds, a ramp g sigma_bg t, as walks matching them
+        at ACQ_MEMORY_S, with the velocity random walk. Air-data aiding does not use the IMU: no change."""
+        if self.ins is None or not self._ne_frame:
+            return
+        walk = rss(equivalent_walk_density(spec.body_accel_sigma_mps2, ACQ_MEMORY_S),
+                   equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, ACQ_MEMORY_S),
+                   spec.accel_noise_density_mps2_rthz)
+        self._bias_walk2 = max(self._bias_walk2, walk**2)
+        self._consistency_warning = consistency_warning(spec, ACQ_MEMORY_S, self.name)

@@ -67,27 +67,12 @@ import math
 
 import numpy as np
 
-from ..core.imu_spec import (
-    ImuSpec,
-    consistency_warning,
-    equivalent_ramp_walk_density,
-    equivalent_walk_density,
-    rss,
-)
 from ..core.maps import load_map
 from ..frames import SensorFrames, frame_defects
 from ..integrity import protection_level as pl
+from ..integrity.consistency_check import ConsistencyCheck
 from ..integrity.innovation_monitor import InnovationMonitor
-from ..protocol import (
-    EXTRA_INNOVATION,
-    EXTRA_INNOVATION_COV,
-    EXTRA_LOG_LIKELIHOOD,
-    EXTRA_MEASUREMENT_TIME,
-    EXTRA_NIS,
-    EXTRA_NIS_DOF,
-    Estimate,
-    Health,
-)
+from ..protocol import Estimate, Health, update_extra
 from . import loop_kernel, tracking
 from .acquire_step import AcquisitionStep
 from .aiding import (
@@ -122,10 +107,6 @@ from .tracking_step import TrackingStep
 _DEFECT_SENSORS = ("radar_altimeter", "baro", "air_data", "heading", "imu")   # GNSS outages are no defect
 
 
-# memory over which e_ne's walk matches the INS aiding's velocity-error rates (navigators.core.imu_spec)
-ACQ_MEMORY_S = 120.0
-
-
 class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingStep):
     """Acquisition-and-tracking TRN (seed 001); settings are AcqTrackConfig's fields (see settings.py).
 
@@ -142,6 +123,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
                  **overrides):
         self.config = self.settings = cfg = AcqTrackConfig.build(settings, overrides)
         self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
+        self.consistency = ConsistencyCheck()   # long-window NIS test (navigators.integrity)
         dem = load_map(dem, "acq_track")
         self.dem = dem
         self.name = name
@@ -195,24 +177,6 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self.health = Health(status="acquiring")
         self._reset_state()
 
-    # ------------------------------------------------------------------ IMU specification
-    _consistency_warning = ""
-
-    def apply_imu_spec(self, spec: ImuSpec) -> None:
-        """With the INS as aiding (aiding_source "ins", reference_frame "ne"), e_ne is the INS's north/east
-        velocity error: its random walk takes at least what the IMU's specification makes that error grow by
-        (navigators.core.imu_spec; a floor over aiding_bias_walk_mps_per_sqrt_s): the body-fixed horizontal
-        specific-force error (accelerometer bias, instability, misalignment x g), a constant acceleration, and
-        the acceleration the horizontal gyro biases' tilt builds, a ramp g sigma_bg t, as walks matching them
-        at ACQ_MEMORY_S, with the velocity random walk. Air-data aiding does not use the IMU: no change."""
-        if self.ins is None or not self._ne_frame:
-            return
-        walk = rss(equivalent_walk_density(spec.body_accel_sigma_mps2, ACQ_MEMORY_S),
-                   equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, ACQ_MEMORY_S),
-                   spec.accel_noise_density_mps2_rthz)
-        self._bias_walk2 = max(self._bias_walk2, walk**2)
-        self._consistency_warning = consistency_warning(spec, ACQ_MEMORY_S, self.name)
-
     # ------------------------------------------------------------------ requirements
     def required_sensors(self) -> list[tuple[str, str]]:
         """(sensor name, why) of every sensor these settings need."""
@@ -265,6 +229,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self.acquisition_total_s = 0.0
         self.last_innovation = None
         self.integrity.reset()
+        self.consistency.reset()
         self._integrity_extra: dict = {}
         self.t_epoch = math.nan
         self.next_k = None
@@ -338,7 +303,6 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         return math.sqrt(max(self.P[0, 0] + self.P[1, 1], 0.0))
 
     def _epoch(self, s: Sample, have_gnss: bool) -> None:
-        cfg = self.config
         tr = self.transect
         prev = tr.samples[-1] if len(tr) else None
         # the start point for this epoch: drop the oldest sample when full
@@ -364,45 +328,9 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             self._set_lock("filling", s.t_s, "acquiring", "transect filling")
             self._finish(s)
             return
-        # a transect placed by GNSS goes straight to tracking; otherwise a large sigma asks for a search
-        # a serial search only when the dead-reckoned start is too uncertain for the loops' pull-in range:
-        # after a loss of lock with a small sigma the loops re-lock from the dead-reckoned state (the
-        # integrity checks decide), so a low-SNR stretch does not leave the tracker searching to the end
-        acq_due = (
-            self.need_acquisition or (self.lock_state in ("filling", "acquiring") and not self._anchored)
-        ) and self._sigma_h() > cfg.acquire_above_sigma_m
-        if acq_due:
-            if self.acq_wait > 0:
-                self.acq_wait -= 1
-                self._finish(s)
-                return
-            snr_pred = self._predicted_snr()
-            if not snr_pred >= cfg.snr_min_db:  # integrity prediction: no search over flat terrain
-                if not self._deferred:
-                    self.health.events.append(
-                        (
-                            s.t_s,
-                            f"acq_track: predicted terrain SNR {snr_pred:.1f} dB < "
-                            f"{cfg.snr_min_db:g} dB: acquisition deferred",
-                        )
-                    )
-                self._deferred = True
-                self.snr_db = snr_pred
-                self._set_lock(
-                    self.lock_state if self.lock_state == "lost" else "acquiring",
-                    s.t_s,
-                    "lost" if self.need_acquisition else "acquiring",
-                    f"predicted terrain SNR {snr_pred:.1f} dB < {cfg.snr_min_db:g} dB: acquisition deferred",
-                )
-                self._finish(s)
-                return
-            self._deferred = False
-            if not self._acquire(s):
-                # retry with the next transect, backing off to every 4th after repeated failures
-                self.acq_failures += 1
-                self.acq_wait = (cfg.transect_samples - 1) * min(2 ** (self.acq_failures - 1), 4)
-                self._finish(s)
-                return
+        if self._acquisition_epoch(s):     # a search due and not done or not found (acquire_step)
+            self._finish(s)
+            return
         self._track(s)
         self._finish(s)
 
@@ -445,25 +373,11 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         if self.last_innovation is not None:
             te, innov, S = self.last_innovation
             nis = _quad2(innov, S)
-            extra.update(
-                {
-                    EXTRA_INNOVATION: innov.copy(),
-                    EXTRA_INNOVATION_COV: S.copy(),
-                    EXTRA_NIS: nis,
-                    EXTRA_NIS_DOF: 2,
-                    EXTRA_MEASUREMENT_TIME: float(te),
-                    EXTRA_LOG_LIKELIHOOD: float(-0.5 * (nis + math.log((2 * math.pi) ** 2 * _det2(S)))),
-                }
-            )
+            log_lik = float(-0.5 * (nis + math.log((2 * math.pi) ** 2 * _det2(S))))
+            extra.update(update_extra(innov.copy(), S.copy(), nis, 2, log_lik, float(te)))
         extra.update(self._integrity_extra)
         pl.publish(extra, pl.gaussian_hpl(P, pl.filter_risk(self)), self)   # protection_level
-        h = Health(
-            ok=self.health.ok,
-            status=self.health.status,
-            skipped=dict(self.health.skipped),
-            events=list(self.health.events),
-            consistency_warning=self._consistency_warning,
-        )
+        h = self.health.snapshot(self._consistency_warning, self.consistency)
         return Estimate(
             t_s=t,
             lat_rad=float(lat),

@@ -289,6 +289,12 @@ class Settings:
     def as_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
+    def copy_to(self, obj: Any, names: str) -> None:
+        """Set ``obj.<name>`` to this object's setting of that name, for each of the space-separated
+        `names`: the settings a component reads as its own attributes, copied in one statement."""
+        for name in names.split():
+            setattr(obj, name, getattr(self, name))
+
 
 def _order(cls, path: str) -> int:
     name = path.split("[", 1)[0]

@@ -48,31 +48,21 @@ import numpy as np
 
 from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from ..core.ins_gnss import InsGnssBlock
-from ..core.linalg import is_positive_definite
+from ..core.linalg import floored_psd, is_positive_definite
 from ..core.maps import load_map
 from ..core.recovery import IntegrityRecovery
 from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns
 from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
-from ..protocol import (
-    EXTRA_INNOVATION,
-    EXTRA_INNOVATION_COV,
-    EXTRA_LOG_LIKELIHOOD,
-    EXTRA_MEASUREMENT_TIME,
-    EXTRA_NIS,
-    EXTRA_NIS_DOF,
-    Estimate,
-    Health,
-)
+from ..protocol import Estimate, Health, update_extra
 from ..tercom.mad import TercomBatch, TercomFix, correlate
 from . import _ekf_kernels as kern
 from .ins_trn_gnss import InsTrnGnss
 from .ins_trn_propagation import InsTrnPropagation
-from .ins_trn_settings import (
-    INS_CAPABILITIES,
-    InsTrnSettings,
-)
+from .ins_trn_settings import INS_CAPABILITIES, InsTrnSettings, initial_covariance
+
+__all__ = ["InsTrnNavigator", "initial_covariance"]   # initial_covariance: re-exported
 
 FIX_HISTORY = 64      # TERCOM fixes kept in `fixes` (the newest)
 
@@ -135,40 +125,23 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.name = name or ("ins" if aiding is None else "ins_tercom")
         self.aiding = aiding
         self.dem = dem
-        self.formula = s.formula
-        self.fix_period_s = s.fix_period_s
-        self.half_cells = s.half_cells
-        self.cell_m = s.cell_m
-        self.fix_sigma_m = s.fix_sigma_m
         self.dt_ekf = 1.0 / s.ekf_rate_hz
         self.ins = StrapdownIns(s.gravity_model, s.tau_baro_s, s.imu_samples)
         self.sig_ba = s.accel_bias_mps2
         self.q_acc = s.accel_noise_mps2_rthz ** 2
         self.sig_bg = s.gyro_bias_rps
         self.q_gyr = s.gyro_noise_rps_rthz ** 2
-        self.ira_decimation = s.ira_decimation
-        self.gate_chi2 = s.gate_chi2
-        self.min_samples = s.min_samples
-        self.dp_min_m = s.dp_min_m
-        self.dp_reference_formula = s.dp_reference_formula
-        self.baro_geopotential = s.baro_geopotential
-        self.remove_bias = s.remove_bias
-        self.init_height_from_baro = s.init_height_from_baro
-        self.baro_bias_sigma_m = s.baro_bias_sigma_m
-        self.use_gnss = s.use_gnss
-        self.gnss_sigma_h_m = s.gnss_sigma_h_m
-        self.gnss_sigma_v_mps = s.gnss_sigma_v_mps
-        self.gnss_correlated_sigma_m = s.gnss_correlated_sigma_m
-        self.gnss_gate_chi2 = s.gnss_gate_chi2
-        self.gnss_timeout_s = s.gnss_timeout_s
+        s.copy_to(self, "formula fix_period_s half_cells cell_m fix_sigma_m ira_decimation gate_chi2 "
+                  "min_samples dp_min_m dp_reference_formula baro_geopotential remove_bias "
+                  "init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m gnss_sigma_v_mps "
+                  "gnss_correlated_sigma_m gnss_gate_chi2 gnss_timeout_s recovery_half_cells "
+                  "recovery_sigma_m")
         self._t_gnss = -math.inf        # time of the last GNSS fix used
         self._gnss_up = False           # GNSS fixes arriving (loss reported once gnss_timeout_s passes)
         self._height_initialised = False
         self.integrity = InnovationMonitor(s.integrity_window, s.integrity_alpha)
         self._integrity_extra: dict = {}
-        self.recovery_half_cells = s.recovery_half_cells
         self.nominal_half_cells = self.half_cells
-        self.recovery_sigma_m = s.recovery_sigma_m
         self._update_extra: dict = {}
         self._fault_allowance_m = 0.0       # the last accepted TERCOM fix's (protection_level)
         self._kf = None                     # filterpy's KalmanFilter, made at first use (see kf)
@@ -221,15 +194,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         cov = np.asarray(initial.covariance, float)
         if cov.shape != (9, 9) or not np.all(np.isfinite(cov)):
             raise ValueError("initial.covariance must be a finite 9 x 9 matrix")
-        if not _is_pd(cov):
-            # a perfectly known start (zero sigmas) is positive semi-definite: floor its eigenvalues so the
-            # filter's algebra stays defined; a negative eigenvalue is an error
-            w, V = np.linalg.eigh(0.5 * (cov + cov.T))
-            if w.min() < -1e-9 * max(1.0, float(np.abs(w).max())):
-                raise ValueError("initial.covariance must be positive semi-definite (it has a negative "
-                                 f"eigenvalue {w.min():.3g})")
-            cov = (V * np.maximum(w, 1e-10)) @ V.T
-        P[:9, :9] = cov
+        P[:9, :9] = floored_psd(cov, "initial.covariance")
         P[ACC_BIAS, ACC_BIAS] = np.eye(3) * self.sig_ba**2
         P[BGZ, BGZ] = self.sig_bg**2
         self.kf.x = np.zeros((N_ERR, 1))
@@ -355,14 +320,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
     def _record_innovation(self, t_s: float, z: np.ndarray, S: np.ndarray, d2: float) -> None:
         """The fix's innovation under the protocol's EXTRA_* keys; the innovation test and its recovery."""
         sign, logdet = np.linalg.slogdet(2.0 * np.pi * S)
-        self._update_extra = {
-            EXTRA_INNOVATION: z.ravel().copy(),
-            EXTRA_INNOVATION_COV: S.copy(),
-            EXTRA_NIS: d2,
-            EXTRA_NIS_DOF: 2,
-            EXTRA_LOG_LIKELIHOOD: float(-0.5 * (d2 + logdet)) if sign > 0 else float("nan"),
-            EXTRA_MEASUREMENT_TIME: float(t_s),
-        }
+        log_lik = float(-0.5 * (d2 + logdet)) if sign > 0 else float("nan")
+        self._update_extra = update_extra(z.ravel().copy(), S.copy(), d2, 2, log_lik, float(t_s))
         self._integrity_test(t_s, d2, 2)
 
     def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
@@ -421,13 +380,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         extra.update(self._integrity_extra)
         # HPL: the Gaussian bound of P plus the last accepted fix's fault allowance (protection_level)
         pl.publish(extra, pl.gaussian_hpl(P[:2, :2], pl.filter_risk(self)) + self._fault_allowance_m, self)
-        health = Health(
-            ok=self.health.ok,
-            status=self.health.status,
-            skipped=dict(self.health.skipped),
-            events=list(self.health.events),
-            consistency_warning=self._consistency_warning,
-        )
+        health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
         return Estimate(
             t_s=self.ins.t_s,
             lat_rad=float(st[0]),
@@ -441,18 +394,3 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
             health=health,
             extra=extra,
         )
-
-
-def initial_covariance(
-    sigma_ne_m: float = 30.0,
-    sigma_d_m: float = 15.0,
-    sigma_v_mps: float = 0.1,
-    sigma_tilt_rad: float = 0.05e-3,
-    sigma_yaw_rad: float = 1e-3,
-) -> np.ndarray:
-    """9 x 9 initial covariance; defaults are seed 000 Table 2's initial errors."""
-    return np.diag(
-        [sigma_ne_m**2, sigma_ne_m**2, sigma_d_m**2]
-        + [sigma_v_mps**2] * 3
-        + [sigma_tilt_rad**2, sigma_tilt_rad**2, sigma_yaw_rad**2]
-    )

@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..core.capabilities import Capabilities, SensorNeeds
 from ..core.settings import Settings, setting
 
@@ -103,3 +105,18 @@ def _tercom_warm_up(rate_hz: float) -> dict:
 INS_CAPABILITIES = Capabilities(settings=InsTrnSettings, uses_imu_spec=True)
 INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=True, uses_imu_spec=True,
                                        warm_up_settings=_tercom_warm_up)
+
+
+def initial_covariance(
+    sigma_ne_m: float = 30.0,
+    sigma_d_m: float = 15.0,
+    sigma_v_mps: float = 0.1,
+    sigma_tilt_rad: float = 0.05e-3,
+    sigma_yaw_rad: float = 1e-3,
+) -> np.ndarray:
+    """9 x 9 initial covariance; defaults are seed 000 Table 2's initial errors."""
+    return np.diag(
+        [sigma_ne_m**2, sigma_ne_m**2, sigma_d_m**2]
+        + [sigma_v_mps**2] * 3
+        + [sigma_tilt_rad**2, sigma_tilt_rad**2, sigma_yaw_rad**2]
+    )

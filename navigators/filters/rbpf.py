@@ -83,6 +83,7 @@ from ..inertial.strapdown import StrapdownIns, euler_from_C_bn, quat_to_dcm
 from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
 from ..measurements import ira_seed002 as ira_model
+from ..measurements.sampling import ira_epochs
 from ..protocol import (
     Estimate,
     Health,
@@ -90,21 +91,13 @@ from ..protocol import (
 from . import _rbpf_kernels as kern
 from .rbpf_cloud import RbpfCloud
 from .rbpf_ira_update import RbpfIraUpdate
-from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings
+from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings, table1_covariance
 
 _BYTES_PER_PARTICLE = 8 * (3 + 12 + 144) * 3
 TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
 # attitude-error memory of the small-angle check (imu_spec.consistency_warning): the time the gyro biases
 # build attitude error before the look angle has observed them (acquisition on the default route ~100 s)
 RBPF_MEMORY_S = 120.0
-
-
-def table1_covariance() -> np.ndarray:
-    """Seed 002 Table 1's initial distribution as a 9 x 9 covariance (NED position m, velocity m/s, attitude
-    rad; diagonal): position (50, 50, 20) m, velocity (1/sqrt 2, 1/sqrt 2, 0.5) m/s, attitude 0.1 deg - the
-    RBPF's init_* defaults, for an Estimate that states them (prior_from_initial)."""
-    return np.diag(np.r_[50.0, 50.0, 20.0, 1 / math.sqrt(2), 1 / math.sqrt(2), 0.5,
-                         np.radians([0.1, 0.1, 0.1])] ** 2)
 
 
 class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
@@ -158,10 +151,13 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self.name = name
         self.dem = dem
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.n_particles = s.n_particles
+        s.copy_to(self, "n_particles ess_threshold map_sigma_m map_bias_sigma_m map_noise_model "
+                        "window_edge_range theta_velocity_rows ambiguity_gap_m ambiguity_weight "
+                        "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
+                        "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
+                        "recovery_sigma_m recovery_reset_kalman")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
-        self.ess_threshold = s.ess_threshold
         self.trn_period_s = 1.0 / s.trn_rate_hz
         self.dt_err = 1.0 / s.error_model_rate_hz
         # the sensor's own noise; the map's errors are added per epoch (_r_var_now, map_noise_variances)
@@ -169,11 +165,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         # the map's vertical error (its error class, as the scenario's map error model states it) and the
         # terrain the map cannot hold between its posts (interpolation error): measurement noise the filter
         # knows about (ira_seed002.map_noise_variances)
-        self.map_sigma_m = s.map_sigma_m
-        self.map_bias_sigma_m = s.map_bias_sigma_m
         self.terrain_model_sigma_m = (ira_model.interpolation_sigma_m(dem)
                                       if s.terrain_model_sigma_m == "auto" else s.terrain_model_sigma_m)
-        self.map_noise_model = s.map_noise_model
         detail = s.terrain_detail_spacing_m
         self.terrain_detail_spacing_m = float(min(dem.spacing_m)) / 3.0 if detail == "auto" else detail
         # the calibration refines a <= 16 km square of the map to this spacing: finer than the posts, and
@@ -184,16 +177,6 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._terrain_factors = None       # map_noise_calibration's, computed at the first IRA update
         self.half_window_rad = math.radians(s.half_window_deg)
         self.edge_margin_rad = math.radians(s.window_edge_margin_deg)
-        self.window_edge_range = s.window_edge_range
-        self.theta_velocity_rows = s.theta_velocity_rows
-        self.ambiguity_gap_m = s.ambiguity_gap_m
-        self.ambiguity_weight = s.ambiguity_weight
-        self.ambiguity_probability = s.ambiguity_probability
-        self.prior_from_initial = s.prior_from_initial
-        self.theta_linearity_sigmas = s.theta_linearity_sigmas
-        self.theta_collapse_ess = s.theta_collapse_ess
-        self.theta_gate_sigmas = s.theta_gate_sigmas
-        self.max_range_m = s.max_range_m
         self.search_step_m = (ira_model.search_step_for(dem) if s.search_step_m == "auto"
                               else s.search_step_m)
         self.init_pos_sigma = np.array(s.init_pos_sigma_m)
@@ -212,13 +195,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         gb = s.gnss_pos_bias_sigma_m
         self.gnss_bias_var = np.array([gb[0], gb[0], gb[1]]) ** 2
         self.gnss_vel_var = np.full(3, s.gnss_vel_sigma_mps) ** 2
-        self.gravity_gradient = s.gravity_gradient
-        self.acquisition_spread_m = s.acquisition_spread_m
         self.ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=s.imu_samples)
         self.integrity = InnovationMonitor(s.integrity_window, s.integrity_alpha)
-        self.recovery_sigma_m = s.recovery_sigma_m
         self.recoveries = 0
-        self.recovery_reset_kalman = s.recovery_reset_kalman
         # log N at OUTLIER_SIGMA for the inflated-at-most-100x variances (2 dof): the rejection floor
         self.health = Health()
         self._reset_done = False
@@ -319,35 +298,13 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     # ------------------------------------------------------------------ internals
     def _epochs_in(self, frames: SensorFrames, t: np.ndarray) -> list:
         """(time, (R, theta) or None, gnss tuple or None) of the TRN epochs falling in this frame: the
-        first valid IRA sample at or after each due time (GNSS: the fix nearest it, while available)."""
-        out = []
-        ira = frames.ira
-        t_last = float(t[-1])
+        first valid IRA sample at or after each due time (GNSS: the fix nearest it, while available;
+        navigators.measurements.sampling.ira_epochs)."""
         gnss = gnss_fixes(frames.gnss, need_height=True, need_velocity=True)   # (navigators.core.ins_gnss)
-        if ira is not None and ira.t_s.shape[0]:
-            ts = np.asarray(ira.t_s, float)
-            good = np.asarray(ira.valid, bool) & np.isfinite(ira.range_m) & np.isfinite(ira.look_angle_rad)
-            n_bad = int((~good).sum())
-            if n_bad:
-                self.health.skip(float(ts[0]), "ira_invalid", f"{n_bad} IRA samples invalid or NaN")
-                self.health.skipped["ira_invalid"] += n_bad - 1
-            i = 0
-            while True:
-                i = int(np.searchsorted(ts, self._t_next - 1e-9, side="left"))
-                while i < ts.shape[0] and not good[i]:
-                    i += 1
-                if i >= ts.shape[0] or ts[i] > t_last + 1e-9:
-                    break
-                te = float(ts[i])
-                g = None if gnss is None else gnss.nearest(te)
-                out.append((te, (float(ira.range_m[i]), float(ira.look_angle_rad[i])), g))
-                self._t_next = te + self.trn_period_s
-        if not out and gnss is not None and gnss.n:  # no usable IRA sample: GNSS epochs alone
-            for te in gnss.t_s:
-                te = float(te)
-                if te + 1e-9 >= self._t_next and te <= t_last + 1e-9:
-                    out.append((te, None, gnss.nearest(te)))
-                    self._t_next = te + self.trn_period_s
+        out, self._t_next, n_bad = ira_epochs(frames.ira, gnss, float(t[-1]), self._t_next, self.trn_period_s)
+        if n_bad:
+            self.health.skip(float(frames.ira.t_s[0]), "ira_invalid", f"{n_bad} IRA samples invalid or NaN")
+            self.health.skipped["ira_invalid"] += n_bad - 1
         return out
 
     def _propagate(self, t, f_b, w_b, ok) -> None:
@@ -424,20 +381,6 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         return C * s[:, None] * s[None, :]
 
     # ------------------------------------------------------------------ output
-    def _mixture_hpl(self, risk: float) -> float:
-        """HPL of the marginal position posterior (navigators.integrity.protection_level.mixture_hpl):
-        particle k is N(xn_k, B P_k B' + Q^n) horizontally (eq 5's spread with its own Kalman covariance);
-        before the first time update the particles are points."""
-        B = getattr(self, "_pl_B", None)
-        n = self.xn.shape[0]
-        if B is None or B.shape[1] != self.P.shape[1]:
-            cov = np.zeros((n, 2, 2))
-        else:
-            cov = np.einsum("ij,kjl,ml->kim", B, self.P, B)
-            cov[:, 0, 0] += self.qn_var[0]
-            cov[:, 1, 1] += self.qn_var[1]
-        return pl.mixture_hpl(self.xn[:, 0], self.xn[:, 1], cov, self._weights(), risk)
-
     def estimate(self) -> Estimate:
         st = self.ins.state
         roll, pitch, yaw = euler_from_C_bn(quat_to_dcm(st[6:10]))
@@ -451,9 +394,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
         pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
-        health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
-                        consistency_warning=self._consistency_warning,
-                        events=list(self.health.events))
+        health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
                         v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
                         covariance=self._cov9.copy(), health=health, extra=extra)

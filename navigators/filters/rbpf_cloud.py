@@ -2,7 +2,8 @@
 initial draw, the GNSS update (position moves the cloud onto the Kalman posterior of its moments, a
 square-root update; the velocity updates each particle's Kalman part), normalisation and ESS-triggered
 systematic resampling, the hand-over from the acquisition cloud to n_particles, the integrity test on each
-update's NIS and the re-spread it asks for, and the feedback of the weighted mean error into the INS.
+update's NIS and the re-spread it asks for, the feedback of the weighted mean error into the INS, and the
+cloud's protection level (the mixture of its particles' Gaussians).
 
 A mixin of RaoBlackwellizedPF (rbpf.py), which owns the state these methods read and write.
 """
@@ -14,6 +15,7 @@ import math
 import numpy as np
 
 from ..core.resampling import systematic_indices_u0
+from ..integrity import protection_level as pl
 from ..protocol import (
     EXTRA_ESS,
     Estimate,
@@ -214,3 +216,17 @@ class RbpfCloud:
         self.ins.accel_bias_b -= mu[9:12]
         self.ins.gyro_bias_b -= mu[12:15]
         kern.shift(self.xn, self.xl, mu)
+
+    def _mixture_hpl(self, risk: float) -> float:
+        """HPL of the marginal position posterior (navigators.integrity.protection_level.mixture_hpl):
+        particle k is N(xn_k, B P_k B' + Q^n) horizontally (eq 5's spread with its own Kalman covariance);
+        before the first time update the particles are points."""
+        B = getattr(self, "_pl_B", None)
+        n = self.xn.shape[0]
+        if B is None or B.shape[1] != self.P.shape[1]:
+            cov = np.zeros((n, 2, 2))
+        else:
+            cov = np.einsum("ij,kjl,ml->kim", B, self.P, B)
+            cov[:, 0, 0] += self.qn_var[0]
+            cov[:, 1, 1] += self.qn_var[1]
+        return pl.mixture_hpl(self.xn[:, 0], self.xn[:, 1], cov, self._weights(), risk)

@@ -20,14 +20,7 @@ import numpy as np
 from scipy.special import erfc as _erfc
 
 from ..measurements import ira_seed002 as ira_model
-from ..protocol import (
-    EXTRA_INNOVATION,
-    EXTRA_INNOVATION_COV,
-    EXTRA_LOG_LIKELIHOOD,
-    EXTRA_MEASUREMENT_TIME,
-    EXTRA_NIS,
-    EXTRA_NIS_DOF,
-)
+from ..protocol import update_extra
 from . import _rbpf_kernels as kern
 
 OUTLIER_SIGMA = 10.0  # an IRA sample farther than this from every particle's prediction is rejected
@@ -173,8 +166,7 @@ class RbpfIraUpdate:
             nis = float(nu @ np.linalg.solve(S, nu))
         except np.linalg.LinAlgError:
             nis = float("nan")
-        self._extra = {EXTRA_INNOVATION: nu, EXTRA_INNOVATION_COV: S, EXTRA_NIS: nis, EXTRA_NIS_DOF: dims,
-                       EXTRA_LOG_LIKELIHOOD: float(lse - lse_prev), EXTRA_MEASUREMENT_TIME: te}
+        self._extra = update_extra(nu, S, nis, dims, float(lse - lse_prev), te)
         self._integrity_test(te, nis, dims)
         return True
 

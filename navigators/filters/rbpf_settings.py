@@ -8,7 +8,10 @@ horizontal-position process noise, the acquisition cloud, the look-angle gates).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from ..core.capabilities import Capabilities, SensorNeeds
 from ..core.settings import Settings, setting
@@ -121,3 +124,11 @@ class RbpfSettings(Settings):
 CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=True, uses_imu_spec=True,
                             imu_bias_settings=True,
                             uses_map_noise=True, models_map_detail=True)
+
+
+def table1_covariance() -> np.ndarray:
+    """Seed 002 Table 1's initial distribution as a 9 x 9 covariance (NED position m, velocity m/s, attitude
+    rad; diagonal): position (50, 50, 20) m, velocity (1/sqrt 2, 1/sqrt 2, 0.5) m/s, attitude 0.1 deg - the
+    RBPF's init_* defaults, for an Estimate that states them (prior_from_initial)."""
+    return np.diag(np.r_[50.0, 50.0, 20.0, 1 / math.sqrt(2), 1 / math.sqrt(2), 0.5,
+                         np.radians([0.1, 0.1, 0.1])] ** 2)

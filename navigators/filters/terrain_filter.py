@@ -32,17 +32,9 @@ from ..integrity.innovation_monitor import InnovationMonitor
 from ..measurements import ira, radar_altimeter
 from ..measurements.baro import geometric_height_m
 from ..measurements.ira import IRA_FORMULA_CODES
+from ..measurements.sampling import terrain_samples
 from ..measurements.terrain_models import radii_m
-from ..protocol import (
-    EXTRA_INNOVATION,
-    EXTRA_INNOVATION_COV,
-    EXTRA_LOG_LIKELIHOOD,
-    EXTRA_MEASUREMENT_TIME,
-    EXTRA_NIS,
-    EXTRA_NIS_DOF,
-    Estimate,
-    Health,
-)
+from ..protocol import Estimate, Health, update_extra
 from .terrain_filter_settings import (
     TerrainFilterSettings,
 )
@@ -72,6 +64,11 @@ class InsRiddenFilter(InsGnssBlock):
     reads the map between its posts (the two differ by an error that is the same in every run over the same
     ground, which the white terrain_model_sigma_m cannot describe). outlier_prob, outlier_width_m: the heavy
     tail of the likelihood. gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise.
+    gnss_drift_sigma_m: the receiver's horizontal drift (a Gauss-Markov error far slower than the fixes, the
+    same in every fix of a run): fixes that share it cannot average it away, so after each GNSS update the
+    belief's north and east variances are widened to at least its square (`_gnss_drift_deficit`; the
+    posterior of a position seen through N fixes x + d + w_k is sigma_d^2 + sigma_w^2 / N, never below
+    sigma_d^2); 0 (default) treats fixes as independent. A scenario fills it from its GNSS sensor.
     baro_bias_sigma_m: prior of the baro height's bias. converged_sigma_m: Health says "acquiring" while the
     horizontal 1-sigma is above it. Vertical channel: gravity_model, tau_baro_s, imu_samples,
     baro_geopotential as in navigators.filters.InsTrnNavigator; the INS height starts at the first baro
@@ -100,34 +97,21 @@ class InsRiddenFilter(InsGnssBlock):
         s = self.settings = self.settings_class.build(settings, overrides)
         dem = load_map(dem, "the terrain filter")
         self.dem = dem
-        self.aiding = s.aiding
-        self.measurement_rate_hz = s.measurement_rate_hz
-        self.ira_formula = s.ira_formula
+        s.copy_to(self, "aiding measurement_rate_hz ira_formula ira_range_sigma_m ra_sigma_m ra_cone_rings "
+                        "map_sigma_m map_bias_sigma_m terrain_model_sigma_m map_interpolation outlier_prob "
+                        "gnss_sigma_m gnss_vertical_sigma_m gnss_drift_sigma_m gnss_velocity_sigma_mps "
+                        "baro_bias_sigma_m "
+                        "converged_sigma_m baro_geopotential recovery_sigma_m")
         self.ira_code = IRA_FORMULA_CODES[s.ira_formula]
-        self.ira_range_sigma_m = s.ira_range_sigma_m
         self.ira_look_angle_sigma_rad = math.radians(s.ira_look_angle_sigma_deg)
-        self.ra_sigma_m = s.ra_sigma_m
         self.ra_half_beam_rad = math.radians(s.ra_half_beam_deg)
-        self.ra_cone_rings = s.ra_cone_rings
-        self.map_sigma_m = s.map_sigma_m
-        self.map_bias_sigma_m = s.map_bias_sigma_m
-        self.terrain_model_sigma_m = s.terrain_model_sigma_m
-        self.map_interpolation = s.map_interpolation
         self.map_cubic = s.map_interpolation == "bicubic"
-        self.outlier_prob = s.outlier_prob
         self.log_outlier_density = -math.log(s.outlier_width_m)
-        self.gnss_sigma_m = s.gnss_sigma_m
-        self.gnss_vertical_sigma_m = s.gnss_vertical_sigma_m
-        self.gnss_velocity_sigma_mps = s.gnss_velocity_sigma_mps
-        self.baro_bias_sigma_m = s.baro_bias_sigma_m
         self.vertical_noise = s.vertical_noise_m_per_sqrt_s
-        self.converged_sigma_m = s.converged_sigma_m
         self.q_acc = s.accel_noise_mps2_rthz ** 2
         self.q_gyr = s.gyro_noise_rps_rthz ** 2
         self.ins = StrapdownIns(s.gravity_model, s.tau_baro_s, s.imu_samples)
-        self.baro_geopotential = s.baro_geopotential
         self.integrity = InnovationMonitor(s.integrity_window, s.integrity_alpha)
-        self.recovery_sigma_m = s.recovery_sigma_m
         self.recoveries = 0
         self._streak = 0
         self._since_recovery = 0
@@ -214,30 +198,9 @@ class InsRiddenFilter(InsGnssBlock):
 
     def _events(self, frames: SensorFrames, t_imu: np.ndarray) -> list:
         """(t, kind, payload, index of the INS history row) of the frame's measurements, in time order."""
-        ev = []
         n_imu = t_imu.shape[0]
-        dt_meas = 1.0 / self.measurement_rate_hz
-        sources = []
-        if self.aiding in ("ira", "both") and frames.ira is not None:
-            f = frames.ira
-            sources.append(("ira", f.t_s, f.valid, f.range_m, f.look_angle_rad))
-        if self.aiding in ("radar_altimeter", "both") and frames.radar_altimeter is not None:
-            f = frames.radar_altimeter
-            sources.append(("radar_altimeter", f.t_s, f.valid, f.range_m, np.zeros_like(f.range_m)))
-        t_next = self._t_next_meas
-        n_bad = 0
-        cand = []
-        for kind, ts, valid, rng_m, th in sources:
-            ok = np.asarray(valid, bool) & np.isfinite(rng_m) & np.isfinite(th) & (rng_m > 0.0)
-            n_bad += int((~ok).sum())
-            for i in np.nonzero(ok)[0]:
-                cand.append((float(ts[i]), kind, (float(rng_m[i]), float(th[i]))))
-        cand.sort(key=lambda c: c[0])
-        for t_s, kind, payload in cand:   # at most one terrain sample per 1/measurement_rate_hz
-            if t_s >= t_next - 1e-9:
-                ev.append((t_s, kind, payload))
-                t_next = t_s + dt_meas
-        self._t_next_meas = t_next
+        ev, self._t_next_meas, n_bad = terrain_samples(frames, self.aiding, self.measurement_rate_hz,
+                                                       self._t_next_meas)
         if n_bad:
             self._count_skip(frames.t_start_s, "terrain_sample_invalid", n_bad,
                              f"{n_bad} altimeter samples invalid or without a return (skipped)")
@@ -291,12 +254,7 @@ class InsRiddenFilter(InsGnssBlock):
             nis = float(innov @ np.linalg.solve(S, innov))
         except np.linalg.LinAlgError:
             nis = math.nan
-        self.extra[EXTRA_INNOVATION] = innov
-        self.extra[EXTRA_INNOVATION_COV] = S
-        self.extra[EXTRA_NIS] = nis
-        self.extra[EXTRA_NIS_DOF] = int(innov.shape[0])
-        self.extra[EXTRA_LOG_LIKELIHOOD] = float(log_lik)
-        self.extra[EXTRA_MEASUREMENT_TIME] = float(t_s)
+        self.extra.update(update_extra(innov, S, nis, int(innov.shape[0]), float(log_lik), float(t_s)))
         self._integrity_test(t_s, nis, int(innov.shape[0]))
 
     def _integrity_test(self, t_s: float, nis: float, dof: int) -> None:
@@ -382,8 +340,7 @@ class InsRiddenFilter(InsGnssBlock):
         if np.isfinite(mean[5]):
             yaw = math.atan2(math.sin(yaw + mean[5]), math.cos(yaw + mean[5]))
         b = float(mean[2]) if np.isfinite(mean[2]) else 0.0
-        health = Health(ok=self.health.ok, status=self.health.status, skipped=dict(self.health.skipped),
-                        events=list(self.health.events), consistency_warning=self._consistency_warning)
+        health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
                         health=health, extra=self._with_protection_level(dict(self.extra)))
@@ -407,6 +364,15 @@ class InsRiddenFilter(InsGnssBlock):
 
     def _gnss_update(self, t_s, st, payload) -> None:
         raise NotImplementedError
+
+    def _gnss_drift_deficit(self) -> np.ndarray:
+        """(north, east) variance (m^2) the belief lacks after a GNSS update to cover the receiver's drift:
+        max(0, gnss_drift_sigma_m^2 - its variance) per axis (see the class docstring)."""
+        if not self.gnss_drift_sigma_m > 0.0:
+            return np.zeros(2)
+        _, cov = self._moments()
+        var = np.nan_to_num(np.diag(cov)[:2], nan=0.0)
+        return np.clip(self.gnss_drift_sigma_m ** 2 - var, 0.0, None)
 
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError

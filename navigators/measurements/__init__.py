@@ -12,11 +12,13 @@ ira                the IRA with the seeds' variants: seed 000's closest points o
 ira_closest_point  seed 000's closest-point formulas for single samples: (R, theta) + attitude + velocity ->
                    the return's position relative to the antenna (eqs 3-13, 14-36)
 ira_seed002        seed 002's zero-Doppler search and its linearisation (behind ira.predict_seed002)
+ira_map_noise      the map's height errors as IRA noise (seed 002: flat-ground model, its calibration per map)
 gnss               GNSS position and velocity fix against the INS: `residual`, `jacobian`, `noise` (EKF);
                    `predict`, `likelihood` (grid and particle filters)
 baro               the barometric altimeter: geopotential (pressure) altitude to geometric height
 lever_arm          lever arms of the ranging antennas transferred to the IMU point
 terrain_models     what the terrain sensors share: the radii at a reference, the heavy-tailed likelihood
+sampling           the terrain samples a filter takes from a frame (valid returns, at most one per interval)
 """
 
 from .ira_closest_point import (

@@ -16,9 +16,15 @@ The terrains (docs/guide/route_task.md):
   (south) and the goal region (north); the straight route dead-reckons ~12 km over the basin.
 - `jacksboro`: the bundled real DEM (rough almost everywhere), south-west to north-east.
 
-The full-fidelity tier flies JSBSim at 50 Hz (`flight_dt_s = 0.02`; the IMU samples at the step rate, the
-IRA at its 50 Hz): the King Air's trajectory departs from the 100 Hz one by as much as the 100 Hz one departs
-from 200 Hz (docs/validation/route_task.md), at half the cost. The budget of the reference run
+The full-fidelity tier flies JSBSim at 50 Hz (`flight_dt_s = 0.02`; the IMU samples at the step rate): the
+King Air's trajectory departs from the 100 Hz one by as much as the 100 Hz one departs from 200 Hz
+(docs/validation/route_task.md), at half the cost. Its IRA samples the terrain at 10 Hz (8.5 m apart at
+85 m/s; the scenarios' 50 Hz gives 1.7 m, well inside one 5 m TERCOM cell), the navigator propagates its
+error covariance at 10 Hz and publishes an estimate every 2 s (15 per decision; arrival is judged at each,
+every 170 m of flight inside a 500 m circle), guidance re-aims at 1 Hz on it dead-reckoned (`TASK_RATES`,
+`guidance_rate_hz`): the TERCOM correlation, the IRA's terrain queries and the covariance steps cost a
+fifth, the per-update work half, and the task's misses stay within the paired noise of the scenario's
+rates (docs/validation/env_speed.md). The budget of the reference run
 (`TRAIN_BUDGET`) is the issue's: 30 minutes of training on 2 cores.
 """
 
@@ -50,12 +56,17 @@ TERRAINS: dict[str, dict] = {
         ),
     ),
 }
+# the full tier's sensor, filter and navigator rates matched to 30 s decisions (docs/validation/env_speed.md):
+# IRA samples and covariance steps at 10 Hz, an estimate every 2 s (logged at each), guidance at 1 Hz
+TASK_RATES: dict = {"sensors.ira.rate_hz": 10.0, "navigator.settings.ekf_rate_hz": 10.0,
+                    "navigator.rate_hz": 0.5, "guidance.log_rate_hz": 0.5}
 ENV_COMMON: dict = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0,
                         action_mode="pursuit", bearing_offset_max_deg=45.0, failure_penalty=20.0,
-                        sigma_shaping_weight=0.0, flight_dt_s=0.02)
-# settings only the full-fidelity tier has (JSBSim's step, the guidance rate, the pipelined nav stage): a
-# fast-tier env is built from the same keyword arguments without them
-FULL_TIER_ONLY: tuple[str, ...] = ("flight_dt_s", "guidance_rate_hz", "pipeline")
+                        sigma_shaping_weight=0.0, flight_dt_s=0.02, guidance_rate_hz=1.0,
+                        scenario_fields=TASK_RATES)
+# settings only the full-fidelity tier has (JSBSim's step, the guidance rate, the pipelined nav stage, the
+# scenario's sensor and filter rates): a fast-tier env is built from the same keyword arguments without them
+FULL_TIER_ONLY: tuple[str, ...] = ("flight_dt_s", "guidance_rate_hz", "pipeline", "scenario_fields")
 # episode seeds of the evaluation (held-out goals x these seeds); training seeds start at TRAIN_SEED_BASE
 EVAL_SEEDS: tuple[int, ...] = tuple(range(1000, 1010))
 TRAIN_SEED_BASE = 0

@@ -1,4 +1,11 @@
-"""Gymnasium environment: route decisions for terrain-referenced navigation, in closed loop."""
+"""Gymnasium environment: route decisions for terrain-referenced navigation, in closed loop.
+
+The module is longer than the style's ~600 lines because about 240 of them are the env's documentation (the
+class docstring: gymnasium's Description / spaces / rewards / arguments tables, which `help(env)` and the
+docs' reference page show); the code is one concept, the env's episode and step. Its parts that are not
+(the scenario from the constructor's arguments, the goal geometry) live in trn_env.env.env_settings; the
+task's spaces, rewards and ends in trn_env.env.task; the route information in trn_env.env.route_info.
+"""
 
 from __future__ import annotations
 
@@ -14,6 +21,14 @@ from gymnasium.vector import AutoresetMode
 
 import trn_env.scenario.build as components
 from trn_env.env import task
+from trn_env.env.env_settings import (  # noqa: F401 - _check_number: TerrainNavFast-v0's argument checks
+    ALTITUDE_CMD_M,
+    BANK_LIMIT_RAD,
+    _check_number,
+    goal_offset_ne,
+    with_fields,
+    with_rates,
+)
 from trn_env.env.route_info import route_information
 
 # the task's constants, spaces, action check, rewards and episode ends (shared with TerrainNavFast-v0)
@@ -32,9 +47,10 @@ from trn_env.env.task import (  # noqa: F401 - re-exported under this module's n
     TERMINATING_REASONS,
     TRUNCATING_REASONS,
 )
+from trn_env.flight.core import AutopilotTargets, LateralMode, SpeedMode, VerticalMode
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
-from trn_env.terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
+from trn_env.terrain.geodesy import latlon_to_ned_offset
 
 
 class TerrainNavEnv(gym.Env, EzPickle):
@@ -253,7 +269,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  action_mode: str = "turn", bearing_offset_max_deg: float = 90.0,
                  sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0,
                  guidance_rate_hz: float | None = None, pipeline: bool = False,
-                 flight_dt_s: float | None = None):
+                 flight_dt_s: float | None = None, scenario_fields: dict | None = None):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -262,7 +278,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
                           bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m,
-                          guidance_rate_hz, pipeline, flight_dt_s)
+                          guidance_rate_hz, pipeline, flight_dt_s, scenario_fields)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -303,7 +319,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if isinstance(scenario, Scenario) and navigator is not None:
             sc = sc.with_overrides(navigator=navigator)
         sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
-        sc = _with_rates(sc, guidance_rate_hz, flight_dt_s)
+        sc = with_fields(sc, scenario_fields)
+        sc = with_rates(sc, guidance_rate_hz, flight_dt_s)
         if not isinstance(pipeline, bool):
             raise ValueError(f"pipeline must be a bool, got {pipeline!r}")
         self.pipeline = pipeline
@@ -413,15 +430,19 @@ class TerrainNavEnv(gym.Env, EzPickle):
             limit = self._bearing_offset_limit_rad(math.hypot(dn, de))
             track = math.atan2(de, dn) + self._offset_frac * limit
             self._track_cmd_rad = math.atan2(math.sin(track), math.cos(track))
-        return components.track_agl_targets(self._track_cmd_rad, self._agl_cmd_m, self.tas_mps)
+        track = self._track_cmd_rad
+        if not math.isfinite(track):              # (the validating constructor names it)
+            return components.track_agl_targets(track, self._agl_cmd_m, self.tas_mps)
+        # the targets of components.track_agl_targets from values known to be valid (finite track, AGL
+        # within [agl_min_m, agl_max_m], the route's TAS), without re-validating them at every tick
+        return AutopilotTargets.trusted(LateralMode.TRACK, track, track, BANK_LIMIT_RAD,
+                                        VerticalMode.HEIGHT_AGL, ALTITUDE_CMD_M, self._agl_cmd_m, 0.0,
+                                        SpeedMode.TAS, self.tas_mps)
 
     def _offset_to_goal(self, lat, lon, h=0.0) -> tuple[float, float]:
         """North/east (m) of the goal in the local level frame at (lat, lon, h), exact through ECEF (the goal
         is tens of km away: no small-offset approximation), the goal taken at the same height."""
-        r0 = np.array(lla_to_ecef(lat, lon, h))
-        r1 = np.array(lla_to_ecef(self.goal_lat_rad, self.goal_lon_rad, h))
-        d_ned = C_en(lat, lon).T @ (r1 - r0)
-        return float(d_ned[0]), float(d_ned[1])
+        return goal_offset_ne(float(lat), float(lon), float(h), self.goal_lat_rad, self.goal_lon_rad)
 
     def _estimated_distance_m(self) -> float:
         est = self._loop.estimate
@@ -682,45 +703,3 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if loop is not None:
             loop.close()
         self._needs_reset = True
-
-
-def _with_rates(sc: Scenario, guidance_rate_hz: float | None, flight_dt_s: float | None) -> Scenario:
-    """The scenario with `[guidance] rate_hz` set to the env's guidance rate (None = the navigator's update
-    rate: one command per update, so the pursuit action re-aims from each new estimate and every other
-    action holds its command for the whole decision) and, given `flight_dt_s`, JSBSim's step
-    `[aircraft] dt_s` replaced, the IMU's rate lowered to the step rate when it was faster (an integrating
-    IMU: its samples are the interval means of the truth rows, sensors.imu); re-validated, so that a rate
-    the loop cannot fly (a guidance rate not a whole multiple of the navigator's, a step that does not
-    divide the guidance tick, another sensor faster than the step) is a ValueError naming the field."""
-    rate = float(sc.navigator.rate_hz) if guidance_rate_hz is None else guidance_rate_hz
-    if guidance_rate_hz is not None:
-        _check_number("guidance_rate_hz", guidance_rate_hz, positive=True)
-    if flight_dt_s is not None:
-        _check_number("flight_dt_s", flight_dt_s, positive=True)
-        if flight_dt_s > 0.05:
-            raise ValueError(f"flight_dt_s must be within (0, 0.05] s, got {flight_dt_s!r}")
-    same_dt = flight_dt_s is None or float(sc.aircraft.dt_s) == float(flight_dt_s)
-    if float(sc.guidance.rate_hz) == float(rate) and same_dt:
-        return sc
-    fields: dict = {"guidance.rate_hz": float(rate)}
-    what = f"guidance_rate_hz = {rate!r}"
-    if not same_dt:
-        fields["aircraft.dt_s"] = float(flight_dt_s)
-        imu = sc.sensors.imu
-        if imu is not None and float(imu.rate_hz) * float(flight_dt_s) > 1.0 + 1e-9:
-            fields["sensors.imu.rate_hz"] = 1.0 / float(flight_dt_s)
-        what += f", flight_dt_s = {flight_dt_s!r}"
-    try:
-        return sc.with_fields(fields)
-    except ValueError as err:
-        raise ValueError(f"{what}: {err}") from None
-
-
-def _check_number(name: str, v, positive: bool) -> None:
-    number = isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool)
-    if not number or not math.isfinite(v):
-        raise ValueError(f"{name} must be a finite number, got {v!r} ({type(v).__name__})")
-    if positive and v <= 0:
-        raise ValueError(f"{name} must be > 0, got {v!r}")
-    if not positive and v < 0:
-        raise ValueError(f"{name} must be >= 0, got {v!r}")

@@ -1,6 +1,9 @@
 """Flight stage: the JSBSim flight core and what it flies through.
 
-core           `Flight` (trim, autopilot targets, chunked truth), `InitialCondition`, autopilot modes
+core           `Flight` (trim, autopilot targets, chunked truth)
+initial        `InitialCondition`: where and how the flight starts
+autopilot      the autopilot's modes and `AutopilotTargets`
+raw_record     the per-step JSBSim record and its numba conversion to SI truth
 truth          `TruthChunk`: the true flight in SI units, one array per quantity
 wind           altitude wind layers, Milspec/Tustin turbulence, 1-cosine gusts (`WindConfig`)
 atmosphere     the non-standard day JSBSim flies in and the barometer feels (`Atmosphere`)

@@ -29,23 +29,41 @@ row's altitude. The IMU is at the centre of gravity: f_b = (total non-gravitatio
 from __future__ import annotations
 
 import math
-import struct
-from dataclasses import dataclass, fields
-from enum import IntEnum
 
 import jsbsim
 import numpy as np
-from numba import njit
 
 from trn_env.flight.aircraft_data import KG_PER_LB, fuel_tanks_kg, new_fdm
-from trn_env.flight.atmosphere import JSBSIM_P_SL_PA, Atmosphere, static_p_T
-from trn_env.flight.truth import SCALAR_FIELDS, VECTOR_FIELDS, TruthChunk
+from trn_env.flight.atmosphere import Atmosphere
+from trn_env.flight.autopilot import (
+    AP_PROPERTIES,
+    AutopilotTargets,
+    LateralMode,
+    SpeedMode,
+    VerticalMode,
+)
+from trn_env.flight.initial import InitialCondition, _check_finite
+from trn_env.flight.raw_record import (
+    _N_STATE,
+    _NAN_NAMES,
+    _RECORDED,
+    _S_ROWS,
+    _V_ROWS,
+    M_PER_FT,
+    _convert_raw,
+    _record_state,
+    _record_state_wind,
+    _std_atmosphere,
+)
+from trn_env.flight.truth import TruthChunk
 from trn_env.flight.wind import FT_PER_M, WindConfig
-from trn_env.terrain.geodesy import OMEGA_EARTH_RPS
 
-M_PER_FT = 0.3048
 PSF_TO_PA = 47.88025898033584
 RANKINE_TO_K = 5.0 / 9.0
+
+# re-exported: the flight's public names stay importable from trn_env.flight.core
+__all__ = ["AP_PROPERTIES", "AutopilotTargets", "Flight", "FlightDiverged", "InitialCondition", "LateralMode",
+           "SpeedMode", "TrimError", "VerticalMode", "_std_atmosphere"]
 
 
 class TrimError(RuntimeError):
@@ -59,349 +77,6 @@ class FlightDiverged(RuntimeError):
         super().__init__(message)
         self.quantity = quantity
         self.t_s = t_s
-
-
-class LateralMode(IntEnum):
-    WINGS_LEVEL = 0
-    HEADING = 1
-    TRACK = 2
-
-
-class VerticalMode(IntEnum):
-    PITCH_HOLD = 0
-    ALTITUDE_MSL = 1
-    HEIGHT_AGL = 2
-    VERTICAL_SPEED = 3
-
-
-class SpeedMode(IntEnum):
-    MANUAL = 0
-    TAS = 1
-
-
-def _check_finite(owner: str, name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{owner}.{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{owner}.{name} must be finite, got {value!r}")
-    return v
-
-
-@dataclass(frozen=True)
-class InitialCondition:
-    """Where and how the flight starts.
-
-    Parameters
-    ----------
-    lat_rad, lon_rad : float
-        Start position (WGS84), rad.
-    h_msl_m : float
-        Start height above MSL, m (above -500 m).
-    tas_mps : float
-        True airspeed, m/s (> 0; the aircraft must trim there).
-    heading_rad : float
-        True heading, rad.
-    flaps : float
-        Flap setting, normalised 0..1.
-    fuel_fraction : float, optional
-        Every tank at this fraction of its capacity, 0..1.
-    gamma_rad : float
-        Initial flight-path angle, rad (0 = level).
-    fuel_kg : float, optional
-        Total fuel on board, kg (> 0, shared between the tanks in proportion to their capacity, at most
-        their total capacity); give at most one of fuel_fraction and fuel_kg (neither: the tanks as in the
-        aircraft file, full for the King Air).
-
-    Raises
-    ------
-    ValueError
-        Naming the field that is not finite or out of range.
-    """
-
-    lat_rad: float
-    lon_rad: float
-    h_msl_m: float
-    tas_mps: float
-    heading_rad: float = 0.0
-    flaps: float = 0.0
-    fuel_fraction: float | None = None
-    gamma_rad: float = 0.0
-    fuel_kg: float | None = None
-
-    def __post_init__(self):
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if v is None and f.name in ("fuel_fraction", "fuel_kg"):
-                continue
-            _check_finite("InitialCondition", f.name, v)
-        if not -math.pi / 2 <= self.lat_rad <= math.pi / 2:
-            raise ValueError(f"InitialCondition.lat_rad must be within +-pi/2, got {self.lat_rad}")
-        if self.tas_mps <= 0.0:
-            raise ValueError(f"InitialCondition.tas_mps must be > 0, got {self.tas_mps}")
-        if self.h_msl_m < -500.0:
-            raise ValueError(f"InitialCondition.h_msl_m must be above -500 m, got {self.h_msl_m}")
-        if not 0.0 <= self.flaps <= 1.0:
-            raise ValueError(f"InitialCondition.flaps must be within 0..1, got {self.flaps}")
-        if self.fuel_fraction is not None and not 0.0 <= self.fuel_fraction <= 1.0:
-            raise ValueError(f"InitialCondition.fuel_fraction must be within 0..1, got {self.fuel_fraction}")
-        if self.fuel_kg is not None and not self.fuel_kg > 0.0:
-            raise ValueError(f"InitialCondition.fuel_kg must be > 0 (no fuel, no flight), got {self.fuel_kg}")
-        if self.fuel_kg is not None and self.fuel_fraction is not None:
-            raise ValueError("InitialCondition.fuel_kg: give fuel_kg or fuel_fraction, not both")
-        if abs(self.gamma_rad) > math.radians(30.0):
-            raise ValueError(f"InitialCondition.gamma_rad must be within +-30 deg, got {self.gamma_rad}")
-
-
-@dataclass
-class AutopilotTargets:
-    """Targets for the aircraft's JSBSim autopilot (all SI; angles true, radians).
-
-    lateral_mode: 0 wings level, 1 heading hold (heading_cmd_rad), 2 ground-track hold (track_cmd_rad);
-    vertical_mode: 0 pitch hold, 1 altitude MSL (altitude_cmd_m), 2 height above ground (agl_cmd_m),
-    3 vertical speed (vs_cmd_mps, up positive); speed_mode: 0 manual throttle, 1 TAS hold (tas_cmd_mps).
-    """
-
-    lateral_mode: LateralMode = LateralMode.TRACK
-    heading_cmd_rad: float = 0.0
-    track_cmd_rad: float = 0.0
-    bank_limit_rad: float = math.radians(25.0)
-    vertical_mode: VerticalMode = VerticalMode.ALTITUDE_MSL
-    altitude_cmd_m: float = 1500.0
-    agl_cmd_m: float = 300.0
-    vs_cmd_mps: float = 0.0
-    speed_mode: SpeedMode = SpeedMode.TAS
-    tas_cmd_mps: float = 85.0
-    engage: bool = True
-
-    def __post_init__(self):
-        for name, enum in (("lateral_mode", LateralMode), ("vertical_mode", VerticalMode),
-                           ("speed_mode", SpeedMode)):
-            v = getattr(self, name)
-            try:
-                setattr(self, name, enum(v))
-            except ValueError:
-                raise ValueError(f"AutopilotTargets.{name} must be one of "
-                                 f"{[int(m) for m in enum]}, got {v!r}") from None
-        for name in ("heading_cmd_rad", "track_cmd_rad", "bank_limit_rad", "altitude_cmd_m", "agl_cmd_m",
-                     "vs_cmd_mps", "tas_cmd_mps"):
-            _check_finite("AutopilotTargets", name, getattr(self, name))
-        if not 0.0 < self.bank_limit_rad <= math.radians(60.0):
-            raise ValueError(f"AutopilotTargets.bank_limit_rad must be within (0, 60 deg], "
-                             f"got {self.bank_limit_rad}")
-        if self.tas_cmd_mps <= 0.0:
-            raise ValueError(f"AutopilotTargets.tas_cmd_mps must be > 0, got {self.tas_cmd_mps}")
-        if self.agl_cmd_m <= 0.0:
-            raise ValueError(f"AutopilotTargets.agl_cmd_m must be > 0, got {self.agl_cmd_m}")
-
-    @classmethod
-    def trusted(cls, lateral_mode: LateralMode, heading_cmd_rad: float, track_cmd_rad: float,
-                bank_limit_rad: float, vertical_mode: VerticalMode, altitude_cmd_m: float, agl_cmd_m: float,
-                vs_cmd_mps: float, speed_mode: SpeedMode, tas_cmd_mps: float,
-                engage: bool = True) -> AutopilotTargets:
-        """Targets from values the caller has already checked (enum modes, finite floats within the limits
-        of __post_init__), without re-validating them: the guidance loop's per-tick constructor."""
-        t = cls.__new__(cls)
-        t.__dict__.update(lateral_mode=lateral_mode, heading_cmd_rad=heading_cmd_rad,
-                          track_cmd_rad=track_cmd_rad, bank_limit_rad=bank_limit_rad,
-                          vertical_mode=vertical_mode, altitude_cmd_m=altitude_cmd_m, agl_cmd_m=agl_cmd_m,
-                          vs_cmd_mps=vs_cmd_mps, speed_mode=speed_mode, tas_cmd_mps=tas_cmd_mps,
-                          engage=engage)
-        return t
-
-    def __reduce__(self):
-        # plain numbers, the modes found again by value: the closed loop's second process sends ten targets
-        # per update, and an enum's constructor is slow to unpickle
-        return (_targets_from_values, (int(self.lateral_mode), self.heading_cmd_rad, self.track_cmd_rad,
-                                       self.bank_limit_rad, int(self.vertical_mode), self.altitude_cmd_m,
-                                       self.agl_cmd_m, self.vs_cmd_mps, int(self.speed_mode),
-                                       self.tas_cmd_mps, self.engage))
-
-    def property_values(self) -> tuple[float, ...]:
-        """The ap/* values in AP_PROPERTIES order."""
-        return (float(self.lateral_mode), float(self.heading_cmd_rad), float(self.track_cmd_rad),
-                float(self.bank_limit_rad), float(self.vertical_mode), float(self.altitude_cmd_m),
-                float(self.agl_cmd_m), float(self.vs_cmd_mps), float(self.speed_mode),
-                float(self.tas_cmd_mps), 1.0 if self.engage else 0.0)
-
-    def properties(self) -> dict[str, float]:
-        """The ap/* property values these targets write."""
-        return {
-            "ap/lateral-mode": float(self.lateral_mode),
-            "ap/heading-cmd-rad": float(self.heading_cmd_rad),
-            "ap/track-cmd-rad": float(self.track_cmd_rad),
-            "ap/bank-limit-rad": float(self.bank_limit_rad),
-            "ap/vertical-mode": float(self.vertical_mode),
-            "ap/altitude-cmd-m": float(self.altitude_cmd_m),
-            "ap/agl-cmd-m": float(self.agl_cmd_m),
-            "ap/vs-cmd-mps": float(self.vs_cmd_mps),
-            "ap/speed-mode": float(self.speed_mode),
-            "ap/tas-cmd-mps": float(self.tas_cmd_mps),
-            "ap/engage": 1.0 if self.engage else 0.0,
-        }
-
-
-AP_PROPERTIES = ("ap/lateral-mode", "ap/heading-cmd-rad", "ap/track-cmd-rad", "ap/bank-limit-rad",
-                 "ap/vertical-mode", "ap/altitude-cmd-m", "ap/agl-cmd-m", "ap/vs-cmd-mps", "ap/speed-mode",
-                 "ap/tas-cmd-mps", "ap/engage")
-
-
-# Properties copied every step, in buffer-column order (JSBSim units; converted after the loop). The three
-# total-wind columns are read only when turbulence or gusts are configured; otherwise the wind is the steady
-# wind this module wrote. Pressure and temperature are not read: they are the flight's atmosphere (the model
-# JSBSim flies in, atmosphere.static_p_T) evaluated at each row's own position (tests check it against
-# atmosphere/P-psf, T-R).
-_MODES_BY_VALUE = tuple({int(m): m for m in enum} for enum in (LateralMode, VerticalMode, SpeedMode))
-
-
-def _targets_from_values(lateral, heading, track, bank, vertical, altitude, agl, vs, speed, tas, engage):
-    """AutopilotTargets.__reduce__'s inverse."""
-    lat_modes, vert_modes, speed_modes = _MODES_BY_VALUE
-    return AutopilotTargets.trusted(lat_modes[lateral], heading, track, bank, vert_modes[vertical], altitude,
-                                    agl, vs, speed_modes[speed], tas, engage)
-
-
-_RECORDED = (
-    "position/lat-geod-rad",                 # 0
-    "position/long-gc-rad",                  # 1
-    "position/geod-alt-ft",                  # 2
-    "velocities/v-north-fps",                # 3
-    "velocities/v-east-fps",                 # 4
-    "velocities/v-down-fps",                 # 5
-    "attitude/phi-rad",                      # 6
-    "attitude/theta-rad",                    # 7
-    "attitude/psi-rad",                      # 8
-    "velocities/pi-rad_sec",                 # 9  body rates relative to inertial space
-    "velocities/qi-rad_sec",                 # 10
-    "velocities/ri-rad_sec",                 # 11
-    "forces/fbx-total-lbs",                  # 12 total non-gravitational force, body x; f_b = force / mass
-    "forces/fby-total-lbs",                  # 13 (accelerations/N{x,y,z} disagree with JSBSim's velocity
-    "forces/fbz-total-lbs",                  # 14 history by up to 0.7 m/s^2 in turns: test_nav_ins_jsbsim)
-    "inertia/mass-slugs",                    # 15 per step: fuel burn moves f_b by ~1 micro-g per second
-    "atmosphere/total-wind-north-fps",       # 16 (only with turbulence or gusts)
-    "atmosphere/total-wind-east-fps",        # 17
-    "atmosphere/total-wind-down-fps",        # 18
-)
-_N_STATE = 16
-_NAN_NAMES = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps[north]", "v_ned_mps[east]", "v_ned_mps[down]",
-              "roll_rad", "pitch_rad", "yaw_rad",
-              "omega_ib_b_rps[x]", "omega_ib_b_rps[y]", "omega_ib_b_rps[z]",
-              "f_b_mps2[x]", "f_b_mps2[y]", "f_b_mps2[z]", "mass",
-              "wind_ned_mps[north]", "wind_ned_mps[east]", "wind_ned_mps[down]")
-
-# Rows of the converted scalar block (one row per field) and of the vector block (5, 3, n): the layout of
-# TruthChunk.from_blocks.
-(_S_T, _S_LAT, _S_LON, _S_H, _S_ROLL, _S_PITCH, _S_YAW, _S_TAS, _S_ALPHA, _S_BETA, _S_P, _S_TK,
- _S_AGL) = (SCALAR_FIELDS.index(k) for k in (
-    "t_s", "lat_rad", "lon_rad", "h_msl_m", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps", "alpha_rad",
-    "beta_rad", "p_static_pa", "T_static_K", "h_agl_m"))
-_S_ROWS = len(SCALAR_FIELDS)
-_V_V, _V_WIB, _V_WEB, _V_F, _V_WIND = (VECTOR_FIELDS.index(k) for k in (
-    "v_ned_mps", "omega_ib_b_rps", "omega_eb_b_rps", "f_b_mps2", "wind_ned_mps"))
-_V_ROWS = len(VECTOR_FIELDS)
-
-
-@njit(cache=True)
-def _std_atmosphere(lat_rad, lon_rad, h_m):  # pragma: no cover - compiled
-    """(p_static_pa, T_static_K) of JSBSim's default standard atmosphere at a geodetic position."""
-    return static_p_T(lat_rad, lon_rad, h_m, 0.0, JSBSIM_P_SL_PA)
-
-
-@njit(cache=True)
-def _convert_raw(raw, n, ncol, row_wind, row_terrain_m, first_step, dt_s, delta_T_K,
-                 p_sl_pa, s, vb, c):  # pragma: no cover - compiled
-    """The first n steps of recorded JSBSim values (flat float64 buffer, ncol per step) -> SI fields written
-    into the preallocated scalar block s (_S_ROWS, n), vector block vb (_V_ROWS, 3, n) and C_bn c (n, 3, 3),
-    in one pass. row_wind (n, 3): the steady wind written for each step (used when the total wind is not
-    recorded); row_terrain_m (n,): the terrain elevation JSBSim had at each step. Returns the index of the
-    first non-finite raw value, or -1. No Python objects."""
-    bad = -1
-    for k in range(n * ncol):
-        if not np.isfinite(raw[k]):
-            bad = k
-            break
-    for i in range(n):
-        o = i * ncol
-        lat, lon, h = raw[o], raw[o + 1], raw[o + 2] * M_PER_FT
-        s[_S_T, i] = (first_step + i) * dt_s
-        s[_S_LAT, i] = lat
-        s[_S_LON, i] = lon
-        s[_S_H, i] = h
-        s[_S_AGL, i] = h - row_terrain_m[i]
-        for k in range(3):
-            vb[_V_V, k, i] = raw[o + 3 + k] * M_PER_FT
-            vb[_V_WIB, k, i] = raw[o + 9 + k]
-        if ncol > _N_STATE:
-            for k in range(3):
-                vb[_V_WIND, k, i] = raw[o + 16 + k] * M_PER_FT
-        else:
-            for k in range(3):
-                vb[_V_WIND, k, i] = row_wind[i, k]
-        ph, th, ps = raw[o + 6], raw[o + 7], raw[o + 8]
-        if ps > np.pi:
-            ps -= 2.0 * np.pi          # JSBSim gives [0, 2 pi); ours is (-pi, pi]
-        s[_S_ROLL, i], s[_S_PITCH, i], s[_S_YAW, i] = ph, th, ps
-        cr, sr, cp, sp, cy, sy = np.cos(ph), np.sin(ph), np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
-        # 3-2-1 body (FRD) -> NED, as terrain.geodesy.euler_to_C_bn
-        c[i, 0, 0] = cp * cy
-        c[i, 0, 1] = sr * sp * cy - cr * sy
-        c[i, 0, 2] = cr * sp * cy + sr * sy
-        c[i, 1, 0] = cp * sy
-        c[i, 1, 1] = sr * sp * sy + cr * cy
-        c[i, 1, 2] = cr * sp * sy - sr * cy
-        c[i, 2, 0] = -sp
-        c[i, 2, 1] = sr * cp
-        c[i, 2, 2] = cr * cp
-        # Earth rate in NED at the geodetic latitude, into body axes: omega_eb = omega_ib - C_nb omega_ie^n
-        wn = OMEGA_EARTH_RPS * np.cos(lat)
-        wd = -OMEGA_EARTH_RPS * np.sin(lat)
-        for k in range(3):
-            vb[_V_WEB, k, i] = raw[o + 9 + k] - (c[i, 0, k] * wn + c[i, 2, k] * wd)
-        for k in range(3):       # lbf / slug = ft/s^2
-            vb[_V_F, k, i] = raw[o + 12 + k] * M_PER_FT / raw[o + 15]
-        # air-relative velocity in body axes: C_nb (v - wind)
-        an = vb[_V_V, 0, i] - vb[_V_WIND, 0, i]
-        ae = vb[_V_V, 1, i] - vb[_V_WIND, 1, i]
-        ad = vb[_V_V, 2, i] - vb[_V_WIND, 2, i]
-        u = c[i, 0, 0] * an + c[i, 1, 0] * ae + c[i, 2, 0] * ad
-        v = c[i, 0, 1] * an + c[i, 1, 1] * ae + c[i, 2, 1] * ad
-        w = c[i, 0, 2] * an + c[i, 1, 2] * ae + c[i, 2, 2] * ad
-        s[_S_TAS, i] = np.sqrt(u * u + v * v + w * w)
-        s[_S_ALPHA, i] = np.arctan2(w, u)
-        s[_S_BETA, i] = np.arctan2(v, np.sqrt(u * u + w * w))
-        s[_S_P, i], s[_S_TK, i] = static_p_T(lat, lon, h, delta_T_K, p_sl_pa)
-    return bad
-
-
-_PACK_STATE = struct.Struct(f"{_N_STATE}d").pack_into
-_PACK_STATE_WIND = struct.Struct(f"{len(_RECORDED)}d").pack_into
-
-
-def _record_state(n: int, run, buf: np.ndarray, start: int, getters) -> int:
-    """The hot loop: run() and copy the 16 cached state nodes' values into buf (float64) from byte
-    `start` on, nothing else; returns the next offset. The getters are bound to locals and their values
-    packed straight into the preallocated buffer by one struct call (no tuple, no list, no resizing)."""
-    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15) = getters
-    pack = _PACK_STATE
-    step = 8 * _N_STATE
-    for offset in range(start, start + n * step, step):
-        run()
-        pack(buf, offset, g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(),
-             g13(), g14(), g15())
-    return start + n * step
-
-
-def _record_state_wind(n: int, run, buf: np.ndarray, start: int, getters) -> int:
-    """As _record_state, plus the three total-wind nodes (turbulence or gusts configured)."""
-    (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15, g16, g17, g18) = getters
-    pack = _PACK_STATE_WIND
-    step = 8 * len(_RECORDED)
-    for offset in range(start, start + n * step, step):
-        run()
-        pack(buf, offset, g0(), g1(), g2(), g3(), g4(), g5(), g6(), g7(), g8(), g9(), g10(), g11(), g12(),
-             g13(), g14(), g15(), g16(), g17(), g18())
-    return start + n * step
 
 
 class Flight:

@@ -1,8 +1,11 @@
 """Scenario stage: scenario files, their validation, and the components built from them.
 
-loading   read a TOML scenario (built-in name or path), validate it (every problem by field path), `Scenario`
-sections  the validated scenario as typed, frozen sections (`Scenario.route`, `.sensors.imu`, ...), to_dict
-build     the flight, sensors, maps, navigator and guidance a scenario's sections describe
+loading     read a TOML scenario (built-in name or path), `Scenario`
+validation  check it completely (every problem by field path), the schema with its generated sections
+sections    the validated scenario as typed, frozen sections (`Scenario.route`, `.sensors.imu`, ...), to_dict
+build       the flight, sensors and guidance a scenario's sections describe, the components' checks
+maps        the true terrain and the navigator's map (errors, faults, information map)
+navigation  the navigator's and monitors' settings and construction
 schema.json  the scenario JSON schema; builtin/  the built-in scenario files
 """
 

@@ -1,6 +1,7 @@
 """Simulation stage: the multi-rate closed loop flight -> sensors -> navigator -> guidance -> flight.
 
-closed_loop    `ClosedLoop`, `run_scenario`, termination, the run's summary
+closed_loop    `ClosedLoop`, `run_scenario`, termination
+summary        the run's summary (summary.json)
 nav_stage      the estimation stage (inline, or a second process one update behind the flight)
 interval_plan  the guidance commands of one update interval
 log            `SimLog`, the in-memory log of a run

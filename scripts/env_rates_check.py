@@ -1,0 +1,150 @@
+"""TerrainNav-v0's rates and the task's miss: the calibration routes flown under several env settings, paired.
+
+    python scripts/env_rates_check.py --config base='{"flight_dt_s": 0.02}' \
+        --config task='{"flight_dt_s": 0.02, "scenario_fields": {"sensors.ira.rate_hz": 10.0}}' \
+        --seeds 16 [--first-seed 0] [--routes basin_west ...] [--out DIR]
+
+Each `--config NAME=JSON` is a set of TerrainNav-v0 keyword arguments added to the fast tier's calibration
+routes' own (trn_env.env.fast.calibration.REFERENCE_ROUTES: informative, featureless and mixed routes on both
+terrains, a constant action each); every configuration flies the same routes with the same episode seeds
+first_seed .. first_seed + seeds - 1 (`--routes`: only the routes named). Prints, per route, the first
+configuration's mean / 90th percentile of the true miss (the true horizontal navigation error at arrival, else
+at the episode's end) and, for every other one, its mean / p90, the paired difference of the misses with its
+95 % t interval, the paired t and Wilcoxon p values, the arrivals, and the CPU seconds per decision. With
+`--out DIR` each configuration's per-seed results are written to DIR/rates_<NAME>.json and read back from
+there by a later call with the same name, seeds and settings (so a configuration can be added without flying
+the others again).
+Bad arguments: a message and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def fly(settings: dict, seeds: int, routes: list[str] | None = None, first_seed: int = 0) -> dict:
+    """Per route (all, or those named): the true miss per seed (m), the terminations, CPU seconds per
+    decision."""
+    from trn_env.env.fast.calibration import REFERENCE_ROUTES, env_kwargs
+    from trn_env.env.terrain_nav import TerrainNavEnv
+
+    res = {}
+    for route in REFERENCE_ROUTES:
+        if routes is not None and route.name not in routes:
+            continue
+        env = TerrainNavEnv(**{**env_kwargs(route), **settings})
+        a = np.asarray(route.action, np.float32)
+        errs, ends, n = [], [], 0
+        c0 = time.process_time()
+        for s in range(first_seed, first_seed + seeds):
+            env.reset(seed=s, options={"start_deg": route.start_deg})
+            while True:
+                _, _, term, trunc, info = env.step(a)
+                n += 1
+                if term or trunc:
+                    break
+            errs.append(float(info.get("true_miss_m", info["true_horizontal_error_m"])))
+            ends.append(info["termination"])
+        env.close()
+        res[route.name] = {"errors_m": errs, "terminations": ends,
+                           "cpu_s_per_decision": (time.process_time() - c0) / n}
+    return res
+
+
+def compare(configs: dict[str, dict], seeds: int, out: Path | None, routes: list[str] | None = None,
+            first_seed: int = 0) -> None:
+    from scipy import stats
+
+    res: dict[str, dict] = {}
+    key = {"seeds": seeds, "first_seed": first_seed, "only_routes": routes}
+    for name, settings in configs.items():
+        path = None if out is None else out / f"rates_{name}.json"
+        if path is not None and path.exists():
+            old = json.loads(path.read_text())
+            if old.get("settings") == settings and all(old.get(k, 0 if k == "first_seed" else None) == v
+                                                      for k, v in key.items()):
+                res[name] = old["routes"]
+                continue
+        res[name] = fly(settings, seeds, routes, first_seed)
+        if path is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps({"settings": settings, **key, "routes": res[name]}, indent=1))
+    names = list(configs)
+    base = names[0]
+    for route in res[base]:
+        x = np.array(res[base][route]["errors_m"])
+        b = res[base][route]
+        print(f"{route:22s} {base}: {x.mean():7.1f} / {np.percentile(x, 90):7.1f} m, arrived "
+              f"{b['terminations'].count('arrived')}/{seeds}, {1e3 * b['cpu_s_per_decision']:.0f} ms "
+              "CPU/decision")
+        for name in names[1:]:
+            r = res[name][route]
+            y = np.array(r["errors_m"])
+            d = y - x
+            half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / math.sqrt(len(d))
+            same = bool(np.all(d == 0.0))
+            p_t = 1.0 if same else stats.ttest_rel(y, x).pvalue
+            p_w = 1.0 if same else stats.wilcoxon(y, x).pvalue
+            print(f"{'':22s} {name}: {y.mean():7.1f} / {np.percentile(y, 90):7.1f} m, ratio "
+                  f"{y.mean() / x.mean():.2f}, diff {d.mean():+.1f} [{d.mean() - half:+.1f}, "
+                  f"{d.mean() + half:+.1f}], p {p_t:.2f} (t) / {p_w:.2f} (Wilcoxon), arrived "
+                  f"{r['terminations'].count('arrived')}/{seeds}, {1e3 * r['cpu_s_per_decision']:.0f} ms "
+                  "CPU/decision")
+
+
+def _config(text: str) -> tuple[str, dict]:
+    name, sep, js = text.partition("=")
+    if not sep or not name.isidentifier():
+        raise ValueError(f"--config must be NAME=JSON with NAME an identifier, got {text!r}")
+    try:
+        settings = json.loads(js)
+    except json.JSONDecodeError as err:
+        raise ValueError(f"--config {name}: not JSON ({err})") from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"--config {name}: must be a JSON object of TerrainNav-v0 arguments, got {js!r}")
+    return name, settings
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--config", action="append", default=[], metavar="NAME=JSON")
+    p.add_argument("--seeds", type=int, default=16)
+    p.add_argument("--first-seed", type=int, default=0)
+    p.add_argument("--routes", nargs="+", default=None, metavar="ROUTE")
+    p.add_argument("--out", type=Path, default=None)
+    args = p.parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        configs = dict(_config(c) for c in args.config)
+        if len(configs) < 2 or len(configs) != len(args.config):
+            raise ValueError(f"give two or more --config with distinct names, got {args.config}")
+        if args.seeds < 2:
+            raise ValueError(f"--seeds must be >= 2 (paired statistics), got {args.seeds}")
+        if args.first_seed < 0:
+            raise ValueError(f"--first-seed must be >= 0, got {args.first_seed}")
+        from trn_env.env.fast.calibration import REFERENCE_ROUTES, env_kwargs
+        from trn_env.env.terrain_nav import TerrainNavEnv
+        known = [r.name for r in REFERENCE_ROUTES]
+        unknown = sorted(set(args.routes or []) - set(known))
+        if unknown:
+            raise ValueError(f"--routes: unknown {unknown}; known: {known}")
+        for name, settings in configs.items():     # every configuration builds before anything flies
+            try:
+                TerrainNavEnv(**{**env_kwargs(REFERENCE_ROUTES[0]), **settings}).close()
+            except (TypeError, ValueError) as err:
+                raise ValueError(f"--config {name}: {err}") from None
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    compare(configs, args.seeds, args.out, args.routes, args.first_seed)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,81 @@
+"""Shared parts of the subcommands: interrupts and SIGTERM (exit 130 / 143), problem printing, the run
+folder check, the command line as typed, and standard output sent to standard error."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from pathlib import Path
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the signal lands so it unwinds as Ctrl-C does (partial outputs removed)."""
+
+
+def _interrupt_exit(exc: BaseException) -> tuple[int, str]:
+    """(exit status, word) of an interrupt: 143 'terminated' for SIGTERM, 130 'interrupted' for Ctrl-C."""
+    return (143, "terminated") if isinstance(exc, Terminated) else (130, "interrupted")
+
+
+def _install_sigterm():
+    """SIGTERM in this process raises Terminated; a process forked from it (the estimation worker, a pool
+    worker) keeps the default action, so stopping a worker stays a plain kill. Returns the handler it
+    replaced (main() puts it back), or None if it could not install one."""
+    main_pid = os.getpid()
+
+    def on_sigterm(signum, frame):
+        if os.getpid() != main_pid:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        raise Terminated
+
+    try:
+        return signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:            # not the main thread (main() called from a thread): leave it alone
+        return None
+
+
+def _print_problems(err) -> None:
+    print(f"error: scenario {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
+    for prob in err.problems:
+        print(f"  - {prob}", file=sys.stderr)
+
+
+def out_dir_problem(out: Path, overwrite: bool = False) -> str | None:
+    """Why the run folder `out` could not be written (checked before flying, nothing left behind), or None."""
+    from trn_env.output.run_folder import target_problem
+    return target_problem(out, overwrite)
+
+
+def _command_line(args) -> str:
+    """The command as typed (shell-quoted), for summary.json and the resolved scenario's header."""
+    import shlex
+    return shlex.join(["trn-env", *getattr(args, "argv", sys.argv[1:])])
+
+
+class _stdout_to_stderr:
+    """Send this process's standard output (Python's and the C++ libraries' file descriptor 1) to standard
+    error for the block, so `trn-env bench --json` prints nothing but the JSON on standard output."""
+
+    def __enter__(self):
+        import contextlib
+        sys.stdout.flush()
+        self._saved = None
+        try:
+            self._saved = os.dup(1)
+            os.dup2(2, 1)
+        except OSError:
+            self._saved = None
+        self._redirect = contextlib.redirect_stdout(sys.stderr)
+        self._redirect.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self._redirect.__exit__(*exc)
+        sys.stdout.flush()
+        if self._saved is not None:
+            os.dup2(self._saved, 1)
+            os.close(self._saved)
+        return False

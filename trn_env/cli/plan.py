@@ -1,0 +1,97 @@
+"""`trn-env plan`: a route from the scenario's start to a goal over the map's terrain information, written
+as a [route] table and a plot, with why it differs from the straight line."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from trn_env.cli.common import _print_problems
+
+
+def cmd_plan(args) -> int:
+    import math
+
+    from trn_env.scenario.loading import ScenarioError, load_scenario
+    try:
+        scenario = load_scenario(args.scenario)
+    except ScenarioError as err:
+        _print_problems(err)
+        return 2
+    import trn_env.scenario.build as components
+    from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner, plot_route
+    from trn_env.sim.closed_loop import spawn_rngs
+    sc = scenario
+    try:
+        if not all(math.isfinite(v) for v in args.goal):
+            raise ValueError(f"--goal must be finite latitude and longitude, got {args.goal}")
+        config = PlannerConfig(weight=args.weight, max_featureless_m=args.max_featureless, agl_m=args.agl,
+                               cell_m=args.cell, tas_mps=float(sc.route.tas_mps),
+                               climb_rate_mps=None if args.no_climb_limit else args.climb_rate)
+        _, the_map = components.build_terrain(sc, scenario.extras, spawn_rngs(scenario.seed)["map"])
+        planner = TerrainInformationPlanner(the_map, config)
+        s_lat, s_lon = math.radians(sc.initial.lat_deg), math.radians(sc.initial.lon_deg)
+        g_lat, g_lon = math.radians(args.goal[0]), math.radians(args.goal[1])
+        route = planner.plan(s_lat, s_lon, g_lat, g_lon)
+        straight = TerrainInformationPlanner(the_map, PlannerConfig(
+            weight=0.0, cell_m=args.cell, agl_m=args.agl, climb_rate_mps=None)).plan(s_lat, s_lon, g_lat,
+                                                                                      g_lon)
+    except ValueError as err:
+        msg = str(err).replace("PlannerConfig.weight", "--weight").replace(
+            "PlannerConfig.max_featureless_m", "--max-featureless").replace(
+            "PlannerConfig.agl_m", "--agl").replace("PlannerConfig.climb_rate_mps", "--climb-rate")
+        print(f"error: {msg}", file=sys.stderr)
+        return 2
+    out = args.out
+    plot_path = args.plot or out.with_suffix(".png")
+    header = (f"route for scenario {scenario.name!r} from ({sc.initial.lat_deg}, "
+              f"{sc.initial.lon_deg}) "
+              f"to ({args.goal[0]}, {args.goal[1]}) deg\n"
+              f"trn-env plan {args.scenario} --goal {args.goal[0]} {args.goal[1]} --weight {args.weight:g}"
+              + (f" --max-featureless {args.max_featureless:g}" if args.max_featureless else ""))
+    text = route.toml(float(sc.route.tas_mps), header=header)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, out)                          # never a partial or empty file
+    plot_route(plot_path, planner, {f"planned (weight {args.weight:g})": route, "straight": straight},
+               title=f"{scenario.name}: route over the map's terrain information")
+    print(f"{out}: {len(route.waypoints_deg)} waypoints, {route.length_m / 1000:.2f} km "
+          f"(straight {route.straight_length_m / 1000:.2f} km, "
+          f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "
+          f"(straight {straight.featureless_m / 1000:.2f} km), "
+          f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
+    print(_plan_reason(route, straight, sc, config))
+    return 0
+
+
+def _plan_reason(route, straight, sc, config) -> str:
+    """Why the planned route is longer than the straight line: each one's featureless flight, the expected
+    horizontal error at the end of its longest featureless stretch (where the navigator must find the
+    terrain again) and at the goal (trn_env.guidance.goal_error, with the scenario's IMU)."""
+    from trn_env.guidance.goal_error import expected_goal_error_m
+    from trn_env.scenario.build import imu_bias_settings
+    imu = imu_bias_settings(sc.sensors.imu)
+    b_a, b_g = imu.get("accel_bias_sigma_mps2", 0.0), imu.get("gyro_bias_sigma_rps", 0.0)
+    tas = float(sc.route.tas_mps)
+
+    def err(featureless_m: float) -> float:
+        return expected_goal_error_m(featureless_m, tas, b_a, b_g, sigma_fix_m=config.informative_crlb_m)
+
+    def describe(r) -> str:
+        return (f"{r.featureless_m / 1000:.1f} km of featureless terrain (longest stretch "
+                f"{r.longest_featureless_m / 1000:.1f} km: about {err(r.longest_featureless_m):.0f} m "
+                f"expected error at its end; last {r.final_featureless_m / 1000:.1f} km before the goal: "
+                f"about {err(r.final_featureless_m):.0f} m at the goal)")
+
+    model = "(INS drift over featureless flight with the scenario's IMU, trn_env.guidance.goal_error)"
+    if route.length_m <= straight.length_m * 1.001:
+        return f"why: the straight line is already the best route: {describe(straight)} {model}"
+    if straight.featureless_m <= route.featureless_m + 0.5 * config.cell_m:
+        return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: not featureless terrain (the "
+                f"straight line crosses {straight.featureless_m / 1000:.1f} km of it, the planned route "
+                f"{route.featureless_m / 1000:.1f} km); the extra distance comes from the planning grid "
+                f"({config.cell_m:.0f} m cells, 8 directions) and the climb limit: try a smaller --cell or "
+                f"--no-climb-limit")
+    return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: the straight line crosses "
+            f"{describe(straight)}; the planned route {describe(route)} {model}")
