@@ -49,7 +49,9 @@ class Health:
 
     status words: "ok", "acquiring", "degraded", "diverged", and "lost" (the acquisition-and-tracking
     TRN: out of lock for several epochs in a row, dead-reckoning on its aiding until a new acquisition;
-    its state machine is acquiring -> ok <-> degraded -> lost -> acquiring, each transition an event)."""
+    its state machine is acquiring -> ok <-> degraded -> lost -> acquiring, each transition an event), and
+    "inconsistent" (ok False: the long-window innovation test, navigators.integrity.consistency_check, finds
+    the innovations persistently larger than the covariance says; consistency_warning holds its message)."""
 
     ok: bool = True
     status: str = "ok"                                   # short word: ok, acquiring, degraded, diverged, ...
@@ -64,11 +66,15 @@ class Health:
         self.skipped[reason] = self.skipped.get(reason, 0) + 1
         self.events.append((float(t_s), message or reason))
 
-    def snapshot(self, consistency_warning: str = "") -> Health:
+    def snapshot(self, consistency_warning: str = "", check=None) -> Health:
         """A copy for an Estimate (its own skipped counts and event list), with the navigator's
-        consistency warning."""
-        return Health(ok=self.ok, status=self.status, skipped=dict(self.skipped), events=list(self.events),
-                      consistency_warning=consistency_warning)
+        consistency warning; `check` (a navigators.integrity.consistency_check.ConsistencyCheck, or None)
+        withdraws ok and sets status "inconsistent" with its message while it flags the navigator."""
+        ok, status, warning = self.ok, self.status, consistency_warning
+        if check is not None:
+            ok, status, warning = check.apply(ok, status, warning)
+        return Health(ok=ok, status=status, skipped=dict(self.skipped), events=list(self.events),
+                      consistency_warning=warning)
 
 
 @dataclass

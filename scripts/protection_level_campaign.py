@@ -95,7 +95,8 @@ def run_job(out: str, condition: str, seed: int, duration_s: float, navs: list[s
         ok = np.asarray(a["nav_ok"], bool)
         denied = ~np.asarray(a["gnss_available"], bool)
         f.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(f, t=a["t_s"], e=e, h=h, ok=ok, denied=denied)
+        np.savez(f, t=a["t_s"], e=e, h=h, ok=ok, denied=denied, status=a["nav_status_code"],
+                 err_ned_m=np.asarray(a["err_ned_m"], np.float32))
         c = ok & denied & np.isfinite(h)
         lines.append(f"  {nav} {condition} s{seed}: {rr.termination}, {int(np.sum(c & (e > h)))} MI of "
                      f"{int(c.sum())}, {time.perf_counter() - t0:.1f} s")
@@ -111,8 +112,19 @@ def load_epochs(out: Path, nav: str, condition: str):
     zs = [np.load(f) for f in files]
     d = [z["denied"] for z in zs]
     e, h, ok = ([z[k][m] for z, m in zip(zs, d, strict=True)] for k in ("e", "h", "ok"))
+    st = [z["status"][m] if "status" in z else np.zeros(m.sum(), np.int8) for z, m in zip(zs, d, strict=True)]
     n_mi = sum(int(np.any(o & np.isfinite(hh) & (ee > hh))) for ee, hh, o in zip(e, h, ok, strict=True))
-    return np.concatenate(e), np.concatenate(h), np.concatenate(ok), len(files), n_mi
+    return (np.concatenate(e), np.concatenate(h), np.concatenate(ok), len(files), n_mi,
+            np.concatenate(st))
+
+
+def flagged_figures(e, h, status) -> dict:
+    """Epochs the run-time consistency check flagged ("inconsistent", navigators.integrity) and how many of
+    them had the error above the HPL (misleading had the navigator stayed healthy)."""
+    from trn_env.sim.log import NAV_STATUS_CODES
+    flag = status == NAV_STATUS_CODES.index("inconsistent")
+    return {"inconsistent_epochs": int(flag.sum()),
+            "inconsistent_error_above_hpl": int(np.sum(flag & np.isfinite(h) & (e > h)))}
 
 
 def report(out: Path, navs: list[str], al: float, risk: float) -> dict:
@@ -129,15 +141,16 @@ def report(out: Path, navs: list[str], al: float, risk: float) -> dict:
             got = load_epochs(out, nav, c)
             if got is None:
                 continue
-            e, h, ok, nf, n_mi = got
-            m = protection_level_metrics(e, h, ok, al) | {"flights": nf, "flights_with_mi": n_mi,
-                                                           "all_epochs": int(e.size)}
+            e, h, ok, nf, n_mi, st = got
+            m = protection_level_metrics(e, h, ok, al) | flagged_figures(e, h, st)
+            m |= {"flights": nf, "flights_with_mi": n_mi, "all_epochs": int(e.size)}
             m["meets_risk"] = bool(m["pl_misleading_rate_upper95"] <= risk)
             res[f"{nav}/{c}"] = m
-            pooled.append((e, h, ok))
+            pooled.append((e, h, ok, st))
         if pooled:
-            e, h, ok = (np.concatenate([p[i] for p in pooled]) for i in range(3))
-            m = protection_level_metrics(e, h, ok, al) | {"all_epochs": int(e.size)}
+            e, h, ok, st = (np.concatenate([p[i] for p in pooled]) for i in range(4))
+            m = protection_level_metrics(e, h, ok, al) | flagged_figures(e, h, st)
+            m["all_epochs"] = int(e.size)
             m["meets_risk"] = bool(m["pl_misleading_rate_upper95"] <= risk)
             res[f"{nav}/all"] = m
             rows.append({"navigator": nav, "series_err_h_m": e, "series_hpl_m": h,
@@ -191,15 +204,16 @@ def main(argv=None) -> int:
                     print(f"{time.perf_counter() - t0:7.0f} s", *fut.result(), sep="\n", flush=True)
     doc = report(out, navs, al, risk)
     print("| navigator | condition | flights (with MI) | epochs counted / healthy with HPL | MI epochs | "
-          "MI rate (upper 95 %) | HMI | availability | median HPL (m) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "MI rate (upper 95 %) | HMI | availability | median HPL (m) | flagged inconsistent (error > HPL) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for k, m in doc["results"].items():
         nav, cond = k.split("/")
         fl = f"{m['flights']} ({m['flights_with_mi']})" if "flights" in m else "all"
         rate = m["pl_misleading_rate"]
         print(f"| {nav} | {cond} | {fl} | {m['all_epochs']} / {m['pl_epochs']} | "
               f"{m['pl_misleading_epochs']} | {rate:.2g} (≤ {m['pl_misleading_rate_upper95']:.2g}) | "
-              f"{m['pl_hazardous_epochs']} | {m['pl_availability']:.3f} | {m['hpl_median_m']:.1f} |")
+              f"{m['pl_hazardous_epochs']} | {m['pl_availability']:.3f} | {m['hpl_median_m']:.1f} | "
+              f"{m['inconsistent_epochs']} ({m['inconsistent_error_above_hpl']}) |")
     return 0
 
 

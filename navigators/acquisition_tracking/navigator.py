@@ -70,6 +70,7 @@ import numpy as np
 from ..core.maps import load_map
 from ..frames import SensorFrames, frame_defects
 from ..integrity import protection_level as pl
+from ..integrity.consistency_check import ConsistencyCheck
 from ..integrity.innovation_monitor import InnovationMonitor
 from ..protocol import Estimate, Health, update_extra
 from . import loop_kernel, tracking
@@ -122,6 +123,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
                  **overrides):
         self.config = self.settings = cfg = AcqTrackConfig.build(settings, overrides)
         self.integrity = InnovationMonitor(cfg.integrity_window, cfg.integrity_alpha)
+        self.consistency = ConsistencyCheck()   # long-window NIS test (navigators.integrity)
         dem = load_map(dem, "acq_track")
         self.dem = dem
         self.name = name
@@ -227,6 +229,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self.acquisition_total_s = 0.0
         self.last_innovation = None
         self.integrity.reset()
+        self.consistency.reset()
         self._integrity_extra: dict = {}
         self.t_epoch = math.nan
         self.next_k = None
@@ -374,7 +377,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
             extra.update(update_extra(innov.copy(), S.copy(), nis, 2, log_lik, float(te)))
         extra.update(self._integrity_extra)
         pl.publish(extra, pl.gaussian_hpl(P, pl.filter_risk(self)), self)   # protection_level
-        h = self.health.snapshot(self._consistency_warning)
+        h = self.health.snapshot(self._consistency_warning, self.consistency)
         return Estimate(
             t_s=t,
             lat_rad=float(lat),

@@ -206,6 +206,7 @@ class TrackingStep:
         self.sigma_v, self.sigma_psi = sv
         self.last_innovation = (s.t_s, r_ne, S)
         verdict = self.integrity.add(s.t_s, nis, 2)
+        self.consistency.add(nis, 2)
         self._integrity_extra = verdict.extra()
         if verdict.changed:
             self.health.events.append((s.t_s, f"acq_track: {verdict.message}"))

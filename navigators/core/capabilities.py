@@ -48,6 +48,11 @@ class Capabilities:
     refine both with a ``sensor_needs()`` method (sensors that depend on settings, e.g. the aiding source).
     warm_up_settings: rate_hz -> settings that make a three-update warm-up flight reach every kernel the
     component calls (e.g. a TERCOM fix due at the third update), or None.
+    error_time_constant_s, height_time_constant_s: first-order Gauss-Markov time constants (s) of its
+    horizontal and vertical position error with GNSS denied (0: not declared); the build gives them to the
+    DEM integrity monitor, whose GNSS-denied path correlates the navigator's error across its window with
+    them (navigators.integrity.dem_monitor). Fitted to the navigator's error over recorded flights
+    (scripts/navigator_error_time_constants.py; docs/validation/integrity.md).
     """
 
     settings: type | None = None
@@ -60,6 +65,8 @@ class Capabilities:
     required_sensors: tuple[tuple[str, str], ...] = ()
     optional_sensors: tuple[str, ...] = ()
     warm_up_settings: Callable[[float], dict[str, Any]] | None = None
+    error_time_constant_s: float = 0.0
+    height_time_constant_s: float = 0.0
 
     def sensor_needs(self, settings: Any = None) -> SensorNeeds:
         """The sensors needed with `settings` (a Settings instance, or None for the defaults)."""

@@ -14,6 +14,11 @@ sliding window against its chi-square band). `IntegrityRecovery.add` feeds it an
 With `cap_nis` an update adds at most (just above) its one-update 1 - alpha/2 chi-square quantile
 (`capped_nis`): the heavy-tailed likelihoods take one bad sample without harm, so one alone must not flag
 the filter; two such in a window do, and so does a run of them (a bias, a shifted map).
+
+Every NIS (uncapped) also enters the long-window covariance-consistency check `consistency`
+(navigators.integrity.consistency_check): a navigator whose innovations are mildly but persistently too
+large for its covariance is flagged "inconsistent" there; the navigator passes its Health through
+`consistency.apply` when it publishes. A new IntegrityRecovery (each navigator reset) starts it empty.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..integrity.consistency_check import ConsistencyCheck
 from ..integrity.innovation_monitor import InnovationMonitor, Verdict
 
 
@@ -64,6 +70,7 @@ class IntegrityRecovery:
         self.repeat = bool(repeat)
         self.cap_nis = bool(cap_nis)
         self.max_doublings = int(max_doublings)
+        self.consistency = ConsistencyCheck()
         self.reset()
 
     def reset(self) -> None:
@@ -80,6 +87,7 @@ class IntegrityRecovery:
     def add(self, t_s: float, nis: float, dof: int) -> RecoveryDecision:
         """Feed one update's NIS (dof degrees of freedom) and decide."""
         value = capped_nis(self.monitor, nis, dof) if self.cap_nis else nis
+        self.consistency.add(nis, dof)
         verdict = self.monitor.add(t_s, value, dof)
         recover = False
         if verdict.degraded:

@@ -380,7 +380,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         extra.update(self._integrity_extra)
         # HPL: the Gaussian bound of P plus the last accepted fix's fault allowance (protection_level)
         pl.publish(extra, pl.gaussian_hpl(P[:2, :2], pl.filter_risk(self)) + self._fault_allowance_m, self)
-        health = self.health.snapshot(self._consistency_warning)
+        health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
         return Estimate(
             t_s=self.ins.t_s,
             lat_rad=float(st[0]),

@@ -360,6 +360,11 @@ class ParticleFilter(InsRiddenFilter):
         out = self._apply_loglik(t_s, ll, "GNSS update", self.b + K_b * (z_b - self.b))
         if out is not None:
             self.P_b *= (1.0 - K_b)
+            deficit = self._gnss_drift_deficit()       # the receiver drift the fixes share (terrain_filter)
+            if deficit.max() > 0.0:
+                self.dn += math.sqrt(deficit[0]) * self.rng.standard_normal(self.M)
+                self.de += math.sqrt(deficit[1]) * self.rng.standard_normal(self.M)
+                self._moments_cache = None
         if out is not None and self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
 

@@ -360,6 +360,8 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         self._velocity_from_position(prior, self._position_moments())
         self._gnss_velocity(st, v)
         self._gnss_velocity_ins(v, carried=(0, 1))
+        # the receiver drift the fixes share: convolved in with the next process noise (terrain_filter)
+        self._q_pending = self._q_pending + np.diag(self._gnss_drift_deficit())
         if self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
         self._regrid()

@@ -394,7 +394,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
         pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
-        health = self.health.snapshot(self._consistency_warning)
+        health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
                         v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
                         covariance=self._cov9.copy(), health=health, extra=extra)

@@ -64,6 +64,11 @@ class InsRiddenFilter(InsGnssBlock):
     reads the map between its posts (the two differ by an error that is the same in every run over the same
     ground, which the white terrain_model_sigma_m cannot describe). outlier_prob, outlier_width_m: the heavy
     tail of the likelihood. gnss_sigma_m, gnss_vertical_sigma_m, gnss_velocity_sigma_mps: GNSS fix noise.
+    gnss_drift_sigma_m: the receiver's horizontal drift (a Gauss-Markov error far slower than the fixes, the
+    same in every fix of a run): fixes that share it cannot average it away, so after each GNSS update the
+    belief's north and east variances are widened to at least its square (`_gnss_drift_deficit`; the
+    posterior of a position seen through N fixes x + d + w_k is sigma_d^2 + sigma_w^2 / N, never below
+    sigma_d^2); 0 (default) treats fixes as independent. A scenario fills it from its GNSS sensor.
     baro_bias_sigma_m: prior of the baro height's bias. converged_sigma_m: Health says "acquiring" while the
     horizontal 1-sigma is above it. Vertical channel: gravity_model, tau_baro_s, imu_samples,
     baro_geopotential as in navigators.filters.InsTrnNavigator; the INS height starts at the first baro
@@ -94,7 +99,8 @@ class InsRiddenFilter(InsGnssBlock):
         self.dem = dem
         s.copy_to(self, "aiding measurement_rate_hz ira_formula ira_range_sigma_m ra_sigma_m ra_cone_rings "
                         "map_sigma_m map_bias_sigma_m terrain_model_sigma_m map_interpolation outlier_prob "
-                        "gnss_sigma_m gnss_vertical_sigma_m gnss_velocity_sigma_mps baro_bias_sigma_m "
+                        "gnss_sigma_m gnss_vertical_sigma_m gnss_drift_sigma_m gnss_velocity_sigma_mps "
+                        "baro_bias_sigma_m "
                         "converged_sigma_m baro_geopotential recovery_sigma_m")
         self.ira_code = IRA_FORMULA_CODES[s.ira_formula]
         self.ira_look_angle_sigma_rad = math.radians(s.ira_look_angle_sigma_deg)
@@ -334,7 +340,7 @@ class InsRiddenFilter(InsGnssBlock):
         if np.isfinite(mean[5]):
             yaw = math.atan2(math.sin(yaw + mean[5]), math.cos(yaw + mean[5]))
         b = float(mean[2]) if np.isfinite(mean[2]) else 0.0
-        health = self.health.snapshot(self._consistency_warning)
+        health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
                         health=health, extra=self._with_protection_level(dict(self.extra)))
@@ -358,6 +364,15 @@ class InsRiddenFilter(InsGnssBlock):
 
     def _gnss_update(self, t_s, st, payload) -> None:
         raise NotImplementedError
+
+    def _gnss_drift_deficit(self) -> np.ndarray:
+        """(north, east) variance (m^2) the belief lacks after a GNSS update to cover the receiver's drift:
+        max(0, gnss_drift_sigma_m^2 - its variance) per axis (see the class docstring)."""
+        if not self.gnss_drift_sigma_m > 0.0:
+            return np.zeros(2)
+        _, cov = self._moments()
+        var = np.nan_to_num(np.diag(cov)[:2], nan=0.0)
+        return np.clip(self.gnss_drift_sigma_m ** 2 - var, 0.0, None)
 
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError

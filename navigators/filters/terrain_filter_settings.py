@@ -45,6 +45,9 @@ class TerrainFilterSettings(Settings):
     outlier_prob: float = setting(0.02, "weight of the likelihood's heavy tail", "1", ge=0.0, lt=1.0)
     outlier_width_m: float = setting(500.0, "width of the heavy tail's uniform density", "m", gt=0.0)
     gnss_sigma_m: float = setting(2.0, "GNSS horizontal position noise per axis", "m", gt=0.0)
+    gnss_drift_sigma_m: float = setting(0.0, "GNSS horizontal error common to successive fixes (receiver "
+                                        "drift) per axis: no run of fixes narrows the belief below it", "m",
+                                        ge=0.0)
     gnss_vertical_sigma_m: float = setting(4.0, "GNSS vertical position noise", "m", gt=0.0)
     gnss_velocity_sigma_mps: float = setting(0.05, "GNSS velocity noise per axis", "m/s", gt=0.0)
     baro_bias_sigma_m: float = setting(10.0, "prior of the barometric height's bias", "m", ge=0.0)

@@ -96,6 +96,12 @@ def scenario_of(log: SensorLog, navigator: str | None, settings: dict | None,
         raise LogError(f"log {log.path}: {'; '.join(exc.problems)}") from None
 
 
+# the last fault-free (world, map) built, keyed by the log's terrain: replaying several navigators over one
+# log pays the world's refinement and the map's error draw once (maps with a fault schedule are never kept:
+# the replay changes their heights)
+_LAST_MAPS: dict = {}
+
+
 def build_maps(log: SensorLog, d: ScenarioSections, map_path: str | None):
     """(world DEM for the truth's height above ground, navigator's map)."""
     if map_path is not None:
@@ -103,12 +109,19 @@ def build_maps(log: SensorLog, d: ScenarioSections, map_path: str | None):
         return the_map, the_map, []
     if "scenario" in log.metadata:
         from trn_env.scenario.build import build_terrain
+        key = (str(log.path), int(d.seed), repr(d.terrain))
+        if key in _LAST_MAPS:
+            world, the_map = _LAST_MAPS[key]
+            return world, the_map, []
         extras: dict = {}
         world, the_map = build_terrain(d, extras, spawn_rngs(int(d.seed))["map"])
         schedule = extras.get("map_fault_schedule") or []
         if schedule:
             from trn_env.terrain.map_error import set_heights
             set_heights(the_map, extras["map_fault_heights0"])
+        else:
+            _LAST_MAPS.clear()
+            _LAST_MAPS[key] = (world, the_map)
         return world, the_map, list(schedule)
     the_map = _load_dem(d.terrain.world.dem)
     return the_map, the_map, []

@@ -41,7 +41,8 @@ from trn_env.logs.format import (
 from trn_env.output.chunked import ChunkedRows
 from trn_env.output.run_folder import PARTIAL_MARK, clean_partial_leftovers
 
-NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost")   # = sim.log's
+# = sim.log's
+NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost", "inconsistent")
 
 # truth table columns, in trn_env.sim.log's _TRUTH_ROW order
 TRUTH_ROW_COLUMNS = ("t_s", "lat_rad", "lon_rad", "h_m", "v_n_mps", "v_e_mps", "v_d_mps", "roll_rad",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 HEALTHY_STATUSES = ("ok",)
-FLAG_STATUSES = ("degraded", "diverged", "lost")      # the navigator says it should not be trusted
+FLAG_STATUSES = ("degraded", "diverged", "lost", "inconsistent")   # the navigator says: do not trust it
 # the log's nav_status_code values (trn_env.sim.log.NAV_STATUS_CODES): 0 is "ok"
 HEALTHY_CODE = 0
 
@@ -21,7 +21,7 @@ def _flagged(status: np.ndarray) -> np.ndarray:
     """Rows whose status is one of FLAG_STATUSES (words or the log's nav_status_code)."""
     st = np.asarray(status)
     if st.dtype.kind in "iu":
-        return np.isin(st, [2, 3, 5])          # trn_env.sim.log.NAV_STATUS_CODES indexes of FLAG_STATUSES
+        return np.isin(st, [2, 3, 5, 6])       # trn_env.sim.log.NAV_STATUS_CODES indexes of FLAG_STATUSES
     return np.isin(st.astype(str), FLAG_STATUSES)
 
 

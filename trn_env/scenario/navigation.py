@@ -57,13 +57,22 @@ def _epoch_s(settings: dict) -> float:
     return 1.0 / rate if math.isfinite(rate) and rate > 0 else 1.0
 
 
+def _settings_fields(settings_class) -> set[str]:
+    """Names of a navigator settings dataclass's fields (empty for none or not a dataclass)."""
+    import dataclasses
+    if settings_class is None or not dataclasses.is_dataclass(settings_class):
+        return set()
+    return {f.name for f in dataclasses.fields(settings_class)}
+
+
 def navigator_settings(sc, map_dem) -> dict:
     """The keyword settings registry.create gets for the scenario's navigator: its [navigator.settings] and,
     by its declared capabilities (navigators.core.capabilities), the map as dem= (needs_map, and any plug-in
     that declares no settings class, as before capabilities), the bias priors and bias process noise from the
     IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
-    terrain_detail_spacing_m from the world's refinement (models_map_detail), each unless the settings give
+    terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m from the
+    GNSS sensor's horizontal drift (navigators that declare that setting), each unless the settings give
     it. Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level
     covers it)."""
     from trn_env.navigators import registry
@@ -82,6 +91,9 @@ def navigator_settings(sc, map_dem) -> dict:
     if caps.uses_map_noise:
         for key, val in map_noise_settings(error_model).items():
             settings.setdefault(key, val)
+    gnss = sc.sensors.gnss
+    if gnss is not None and "gnss_drift_sigma_m" in _settings_fields(caps.settings):
+        settings.setdefault("gnss_drift_sigma_m", float(gnss.horizontal_drift_m))   # the receiver's drift
     if caps.models_map_detail and sc.terrain.map.is_world:
         settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
     elif caps.models_map_detail:
@@ -174,12 +186,36 @@ def monitor_map_settings(error_model) -> dict:
             "correlation_length_m": float(length), "correlation_function": func}
 
 
+def monitor_navigator_settings(navigator: str) -> dict:
+    """The DEM monitor's model of the navigator's error when the navigator is its height and position source
+    (GNSS denied; the monitor uses it only on navigator-sourced epochs): navigator_error_time_constant_s and
+    navigator_height_time_constant_s from the navigator's declared error_time_constant_s and
+    height_time_constant_s (navigators.core.capabilities), each only where declared (> 0); empty for a
+    navigator that declares none (the monitor keeps its error constant over the window)."""
+    from trn_env.navigators import registry
+    try:
+        caps = registry.capabilities(navigator)
+    except (KeyError, ValueError):
+        return {}
+    out = {}
+    tau_h = float(getattr(caps, "error_time_constant_s", 0.0))
+    tau_v = float(getattr(caps, "height_time_constant_s", 0.0))
+    if tau_h > 0.0:
+        out["navigator_error_time_constant_s"] = tau_h
+    if tau_v > 0.0:
+        out["navigator_height_time_constant_s"] = tau_v
+    return out
+
+
 def monitor_settings(sc, name: str) -> dict:
     """A monitor's settings: the scenario's [monitors.<name>] table, with the sensor figures it needs
     filled from the scenario's sensors where not given (dem_integrity: the radar altimeter's noise and
-    lever arm, the GNSS vertical sigma)."""
+    lever arm, the GNSS vertical sigma, and the navigator's error time constants its GNSS-denied path
+    models, from the navigator's declared capabilities where it declares them)."""
     settings = sc.monitor(name).settings.to_dict()
     if name == "dem_integrity":
+        for key, val in monitor_navigator_settings(sc.navigator.name).items():
+            settings.setdefault(key, val)
         cfg = sc.sensors.radar_altimeter
         if cfg is not None:
             settings.setdefault("radar_altimeter_noise_const_m", float(cfg.noise_const_m))

@@ -32,7 +32,7 @@ _TRUTH_ROW = ("t_s", "lat_rad", "lon_rad", "h_msl_m", "v_n", "v_e", "v_d", "roll
 
 
 # nav_status_code in the arrays: the index of the estimate's Health.status here (len: any other word)
-NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost")
+NAV_STATUS_CODES = ("ok", "acquiring", "degraded", "diverged", "free_inertial", "lost", "inconsistent")
 
 
 @dataclass
