@@ -191,3 +191,29 @@ def test_50_hz_trajectory_error_is_first_order_and_bounded():
     assert h50 < 4.0 * h100 + 2.0 and v50 < 4.0 * v100 + 2.0
     assert h50 < 80.0 and v50 < 60.0
     assert h100 > 1.0 and h50 > h100                     # the comparison sees the step at all
+
+
+def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
+    """scripts/env_rates_check.py: every bad argument is a one-line error and exit 2, nothing flown or
+    written (the configurations are built before anything flies)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "env_rates_check.py"
+    spec = importlib.util.spec_from_file_location("env_rates_check", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ok = 'a={"flight_dt_s": 0.02}'
+    out = tmp_path / "out"
+    for argv, words in (([ok], "two or more"),
+                        ([ok, 'b={"flight_dt_s": '], "not JSON"),
+                        ([ok, "b=[1]"], "JSON object"),
+                        ([ok, 'b={"flight_dt_s": 0.06}'], "flight_dt_s"),
+                        ([ok, 'b={"no_such_argument": 1}'], "no_such_argument"),
+                        ([ok, 'b={"scenario_fields": {"sensors.foo.rate_hz": 1.0}}'], "sensors.foo"),
+                        ([ok, ok.replace("a=", "b="), "--routes", "nowhere"], "nowhere")):
+        args = [x for c in argv[:2] for x in ("--config", c)] + argv[2:] + ["--seeds", "2", "--out", str(out)]
+        assert mod.main(args) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and words in err, err
+    assert not out.exists()
