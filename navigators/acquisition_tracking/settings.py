@@ -237,4 +237,6 @@ class AcqTrackConfig(Settings):
         return (self.transect_samples - 1) * self.sample_period_s
 
 
-CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True)
+# error time constants: GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
+CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True,
+                            error_time_constant_s=70.0, height_time_constant_s=1700.0)

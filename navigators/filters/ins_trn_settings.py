@@ -104,7 +104,11 @@ def _tercom_warm_up(rate_hz: float) -> dict:
 
 INS_CAPABILITIES = Capabilities(settings=InsTrnSettings, uses_imu_spec=True)
 INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=True, uses_imu_spec=True,
-                                       warm_up_settings=_tercom_warm_up)
+                                       warm_up_settings=_tercom_warm_up,
+                                       # GM fits to its GNSS-denied error
+                                       # (scripts/navigator_error_time_constants.py; its baro-slaved
+                                       # height error is near constant over a window)
+                                       error_time_constant_s=45.0, height_time_constant_s=4000.0)
 
 
 def initial_covariance(

@@ -123,7 +123,9 @@ class RbpfSettings(Settings):
 
 CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=True, uses_imu_spec=True,
                             imu_bias_settings=True,
-                            uses_map_noise=True, models_map_detail=True)
+                            uses_map_noise=True, models_map_detail=True,
+                            # GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
+                            error_time_constant_s=400.0, height_time_constant_s=140.0)
 
 
 def table1_covariance() -> np.ndarray:

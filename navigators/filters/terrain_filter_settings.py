@@ -129,6 +129,9 @@ class PfSettings(TerrainFilterSettings):
         return []
 
 
-PMF_CAPABILITIES = Capabilities(settings=PmfSettings, needs_map=True, uses_map_noise=True, uses_imu_spec=True)
+# error time constants: GM fits to the GNSS-denied error (scripts/navigator_error_time_constants.py,
+# docs/validation/integrity.md section 6.3)
+PMF_CAPABILITIES = Capabilities(settings=PmfSettings, needs_map=True, uses_map_noise=True, uses_imu_spec=True,
+                                error_time_constant_s=70.0, height_time_constant_s=210.0)
 PF_CAPABILITIES = Capabilities(settings=PfSettings, needs_map=True, takes_rng=True, uses_map_noise=True,
-                               uses_imu_spec=True)
+                               uses_imu_spec=True, error_time_constant_s=90.0, height_time_constant_s=200.0)
