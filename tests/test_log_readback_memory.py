@@ -107,7 +107,7 @@ def test_end_of_run_memory_grows_by_less_than_a_covariance_per_row(tmp_path, dem
     """The peak of the end of the run, for 8,000 and 32,000 rows (row groups of 6,000 estimate rows in both):
     what each further row adds is less than its 9 x 9 covariance (648 bytes). Holding the covariances whole
     (the earlier end of run) adds ~1,600 B a row (its arrays ~970 B, their temporaries the rest); here
-    ~440 B (the ~320 B of the other arrays and their temporaries)."""
+    ~480 B (the ~320 B of the other arrays and their temporaries)."""
     peaks = {}
     for n in (8_000, 32_000):
         _, numpy_peak, arrow_peak = _end_of_run(tmp_path / str(n), _log(tmp_path / str(n), n), dem)
