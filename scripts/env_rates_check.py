@@ -10,7 +10,8 @@ terrains, a constant action each); every configuration flies the same routes wit
 first_seed .. first_seed + seeds - 1 (`--routes`: only the routes named). Prints, per route, the first
 configuration's mean / 90th percentile of the true miss (the true horizontal navigation error at arrival, else
 at the episode's end) and, for every other one, its mean / p90, the paired difference of the misses with its
-95 % t interval, the paired t and Wilcoxon p values, the arrivals, and the CPU seconds per decision. With
+95 % t interval, the paired t and Wilcoxon p values, the arrivals, the CPU seconds per decision, and the
+mean paired difference of the true horizontal error after each decision. With
 `--out DIR` each configuration's per-seed results are written to DIR/rates_<NAME>.json and read back from
 there by a later call with the same name, seeds and settings (so a configuration can be added without flying
 the others again).
@@ -41,19 +42,21 @@ def fly(settings: dict, seeds: int, routes: list[str] | None = None, first_seed:
             continue
         env = TerrainNavEnv(**{**env_kwargs(route), **settings})
         a = np.asarray(route.action, np.float32)
-        errs, ends, n = [], [], 0
+        errs, ends, by_decision, n = [], [], [], 0
         c0 = time.process_time()
         for s in range(first_seed, first_seed + seeds):
             env.reset(seed=s, options={"start_deg": route.start_deg})
+            by_decision.append([])
             while True:
                 _, _, term, trunc, info = env.step(a)
+                by_decision[-1].append(float(info["true_horizontal_error_m"]))
                 n += 1
                 if term or trunc:
                     break
             errs.append(float(info.get("true_miss_m", info["true_horizontal_error_m"])))
             ends.append(info["termination"])
         env.close()
-        res[route.name] = {"errors_m": errs, "terminations": ends,
+        res[route.name] = {"errors_m": errs, "terminations": ends, "errors_by_decision_m": by_decision,
                            "cpu_s_per_decision": (time.process_time() - c0) / n}
     return res
 
@@ -97,6 +100,22 @@ def compare(configs: dict[str, dict], seeds: int, out: Path | None, routes: list
                   f"{d.mean() + half:+.1f}], p {p_t:.2f} (t) / {p_w:.2f} (Wilcoxon), arrived "
                   f"{r['terminations'].count('arrived')}/{seeds}, {1e3 * r['cpu_s_per_decision']:.0f} ms "
                   "CPU/decision")
+            if "errors_by_decision_m" in r and "errors_by_decision_m" in b:
+                print(f"{'':22s} {name} - {base}, mean true horizontal error after decision 1, 2, ...: "
+                      + " ".join(f"{v:+.1f}" for v in _by_decision_difference(b, r)))
+
+
+def _by_decision_difference(base: dict, other: dict, n_max: int = 16) -> list[float]:
+    """Mean over seeds of the paired difference of the true horizontal error after each decision (seeds
+    whose episodes both reached that decision)."""
+    out = []
+    for k in range(n_max):
+        pairs = zip(base["errors_by_decision_m"], other["errors_by_decision_m"], strict=True)
+        d = [o[k] - b[k] for b, o in pairs if len(b) > k and len(o) > k]
+        if not d:
+            break
+        out.append(float(np.mean(d)))
+    return out
 
 
 def _config(text: str) -> tuple[str, dict]:
