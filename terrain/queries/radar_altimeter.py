@@ -272,13 +272,22 @@ def _sphere_curved(cx, cy, cz_flat, rad, mh):
     return cz_flat + 0.5 * d2 / mh, rad + 4e-4 * np.sqrt(d2)
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def _sphere_seen(cx, cy, cz, rad):
+    """(dc, q) of the sphere (centre c NED from the apex, radius rad): its centre's distance dc and
+    q = rad / dc, the sine of its angular radius; q = NaN when the sphere holds the apex (rad >= dc)."""
+    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
+    if rad >= dc:
+        return dc, np.nan
+    return dc, rad / dc
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
     """True when the sphere (centre c NED, radius rad) lies entirely outside the cone around a."""
-    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
-    if rad >= dc:
+    dc, q = _sphere_seen(cx, cy, cz, rad)
+    if q != q:
         return False
-    q = rad / dc
     # angle(c, a) > half beam + asin(q)  <=>  cos(angle) < cos(half beam + asin(q))
     return cx * ax + cy * ay + cz * az < dc * (cosb * np.sqrt(1.0 - q * q) - sinb * q)
 
@@ -286,11 +295,8 @@ def _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
     """True when the sphere (centre c NED, radius rad) lies entirely inside the cone around a."""
-    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
-    if rad >= dc:
-        return False
-    q = rad / dc
-    if q >= sinb:
+    dc, q = _sphere_seen(cx, cy, cz, rad)
+    if not (q < sinb):  # the sphere holds the apex (q NaN) or is wider than the half beam
         return False
     # angle(c, a) < half beam - asin(q)
     return cx * ax + cy * ay + cz * az > dc * (cosb * np.sqrt(1.0 - q * q) + sinb * q)
