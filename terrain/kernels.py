@@ -143,8 +143,8 @@ def bicubic(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
 @njit(cache=True, fastmath=False, error_model="numpy")
 def bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out):
     """Bilinear heights for 1-D arrays lat, lon (rad) into out (m); NaN outside. Single thread.
-    The formula of `bilinear` is written out here with the divisions and bounds hoisted: calling a shared
-    helper per point measured ~35 % slower (6-7e7 against ~1e8 lookups/s, python -m terrain.bench)."""
+    The formula of `bilinear` is written out here with the divisions and bounds hoisted: a shared helper
+    called per point is slower (the figure: docs/validation/benchmarks.md)."""
     n_lat, n_lon = heights.shape
     inv_dlat = 1.0 / dlat
     inv_dlon = 1.0 / dlon

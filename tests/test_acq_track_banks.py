@@ -1,7 +1,7 @@
 """Seed 001's aided tracker in 25 deg banks (issue 18): a short fixed-seed version of
-scripts/reproduce_seed001.py's main flight (the README quotes its 8-seed figures). The first 240 s of the
-weaving lawnmower (S-turns every 3 km, banks of 15-25 deg) flown once, then replayed with the tracker's
-"return" replicas, with and without roll compensation."""
+scripts/reproduce_seed001.py's main flight (its 8-seed figures: docs/validation/seed001.md). The first 240 s
+of the weaving lawnmower (S-turns every 3 km, banks of 15-25 deg) flown once, then replayed with the
+tracker's "return" replicas, with and without roll compensation."""
 
 from __future__ import annotations
 
