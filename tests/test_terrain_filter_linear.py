@@ -111,6 +111,12 @@ def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     mean, cov = nav._moments()
     xk, Pk = k.x.ravel(), k.P
     sig = np.sqrt(np.diag(Pk))
+    scale_pv = np.sqrt(np.outer(np.diag(Pk)[0:2], np.diag(Pk)[3:5]))
+    print(f"PMF vs KF (straight): means off by {np.max(np.abs(mean[:3] - xk[:3]) / sig[:3]):.4f} sigma "
+          f"(position, vertical), {np.max(np.abs(mean[3:5] - xk[3:5]) / sig[3:5]):.4f} (velocity), "
+          f"{np.max(np.abs(nav.u_mean[2:] - xk[5:10]) / sig[5:10]):.4f} (acceleration, heading); variances "
+          f"{np.max(np.abs(np.diag(cov)[:5] / np.diag(Pk)[:5] - 1)):.4f} relative; position-velocity "
+          f"correlations {np.max(np.abs(cov[0:2, 3:5] - Pk[0:2, 3:5]) / scale_pv):.4f}")
     # velocity and acceleration get the wider margin: the grid's prediction adds the growth from u as a
     # convolution of exact variance, not as the stretch it is (the figures behind these margins:
     # docs/validation/terrain_filters.md, regression tests' bounds)
@@ -222,6 +228,8 @@ def test_pmf_matches_the_kalman_filter_in_a_turn():
     mean, cov = nav._moments()
     xk, Pk = k.x.ravel(), k.P
     sig = np.sqrt(np.diag(Pk))
+    print(f"PMF vs KF (turn): means off by {np.max(np.abs(mean[:5] - xk[:5]) / sig[:5]):.4f} sigma, "
+          f"velocity variances {np.max(np.abs(np.diag(cov)[3:5] / np.diag(Pk)[3:5] - 1)):.4f} relative")
     assert np.all(np.abs(mean[:5] - xk[:5]) < 0.01 * sig[:5]), (mean[:5], xk, sig)
     assert np.all(np.abs(nav.u_mean[2:] - xk[5:10]) < 0.01 * sig[5:10]), (nav.u_mean, xk[5:10])
     np.testing.assert_allclose(np.diag(cov)[:5], np.diag(Pk)[:5], rtol=0.025)
