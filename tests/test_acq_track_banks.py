@@ -46,6 +46,11 @@ def test_aided_tracker_keeps_lock_in_banks_without_drift(flight):
     assert np.mean(r["tracking"][m]) >= 0.8
     assert np.mean(r["tracking"][banked]) >= 0.75
     e = r["err_m"][m]
+    n = e.size
+    print(f"\nin lock {np.mean(r['tracking'][m]):.2f} after 40 s, {np.mean(r['tracking'][banked]):.2f} "
+          f"of the {banked.sum()} banked epochs; RMS {np.sqrt(np.mean(e**2)):.1f} m, max {e.max():.1f} m, "
+          f"{100 * np.mean(r['err_m'][m] <= 3.0 * r['sigma_m'][m]):.0f} % within 3 sigma; mean error "
+          f"{np.mean(e[n // 3 : 2 * n // 3]):.1f} m middle third, {np.mean(e[2 * n // 3 :]):.1f} m last")
     assert float(np.sqrt(np.mean(e**2))) < 45.0 and float(e.max()) < 90.0
     assert np.mean(r["err_m"][m] <= 3.0 * r["sigma_m"][m]) >= 0.95
     # no drift: the last third no worse than the middle third by more than the fix's noise
@@ -62,6 +67,8 @@ def test_roll_compensation_improves_the_banked_flight(flight):
     def rms(r):
         return float(np.sqrt(np.mean(r["err_m"][m] ** 2)))
 
+    print(f"\nRMS {rms(runs['on']):.1f} m with roll compensation, {rms(runs['off']):.1f} m without; in lock "
+          f"{np.mean(runs['on']['tracking'][m]):.2f} against {np.mean(runs['off']['tracking'][m]):.2f}")
     assert rms(runs["on"]) < 0.8 * rms(runs["off"])
     assert np.mean(runs["on"]["tracking"][m]) > np.mean(runs["off"]["tracking"][m])
     assert math.isfinite(rms(runs["off"]))

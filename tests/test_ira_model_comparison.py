@@ -40,6 +40,9 @@ def test_the_crosswind_is_what_the_comparison_says(result):
 def test_proposed_model_clearly_beats_the_conventional_one_in_the_pf(result):
     # the figures behind these bounds (this test's 2 runs, the 10-run script):
     # docs/validation/terrain_filters.md
+    print(f"\nPF horizontal RMS: proposed {result['proposed']['horizontal_rms_m']:.2f} m, conventional "
+          f"{result['conventional']['horizontal_rms_m']:.2f} m, "
+          f"ratio {result['ratio_conventional_over_proposed']:.2f}")
     assert result["runs_conventional_worse"] == 2, result
     assert result["ratio_conventional_over_proposed"] > 2.0, result
     assert result["proposed"]["horizontal_rms_m"] < 6.0, result

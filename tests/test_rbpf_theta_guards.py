@@ -112,6 +112,8 @@ def test_theta_collapse_guard_keeps_the_cloud(dem):
         repro.run_open_loop(nav, repro.kinematic_truth(duration, dem, "turns"), dem, duration, seed)
         res[label] = seen | {"collapses": nav.health.skipped.get("ira_theta_collapse", 0)}
     # the figures behind these margins: docs/validation/seed002.md (regression tests' bounds)
+    print(f"\ncollapse guard: ESS {res['off']['ess']:.1f} without, {res['guard']['ess']:.0f} with "
+          f"(of 1,000), smallest horizontal eigenvalue {res['guard']['eig_min_m2']:.1f} m^2")
     assert res["off"]["ess"] < 10.0 and res["off"]["collapses"] == 0, res
     assert res["guard"]["ess"] > 100.0 and res["guard"]["collapses"] >= 1, res
     assert res["guard"]["eig_min_m2"] > 1.0, res
@@ -191,4 +193,6 @@ def test_theta_gate_rejects_a_biased_look_angle(dem):
     err_clean, sk_clean = _straight_run_with_biased_look_angle(dem, 3.0, 0.0)
     assert sk_gate.get("ira_theta_gated", 0) >= 1 and "ira_theta_gated" not in sk_off, (sk_gate, sk_off)
     assert sk_clean.get("ira_theta_gated", 0) <= 2, sk_clean
+    print(f"\nbiased look angle: max error {err_gate:.1f} m with the gate, {err_off:.1f} m without, "
+          f"clean run {err_clean:.1f} m")
     assert err_gate < 15.0 < 20.0 < err_off, (err_gate, err_off, err_clean)

@@ -46,5 +46,6 @@ def test_rbpf_meets_seed002_position_and_velocity(results):
 
 def test_plain_pf_does_worse(results):
     # the figures behind the 1.5x margin: docs/validation/seed002.md (regression tests' bounds)
+    print(f"\nseed 002 repro: rbpf {results['rbpf']}; pf15 {results['pf15']}")
     assert results["pf15"]["pos3d_rms_m"] > 1.5 * results["rbpf"]["pos3d_rms_m"], results
     assert results["pf15"]["vel_rms_mps"] > results["rbpf"]["vel_rms_mps"], results
