@@ -91,7 +91,7 @@ def test_end_of_run_keeps_the_covariances_on_disk(tmp_path, dem):
     # of a bounded size whatever the flight's length: the writer's last buffers (truth and estimates, each
     # at most MAX_BUFFER_BYTES, joined when their tables close) and one row group's covariances read back
     # (at most MAX_BUFFER_BYTES of estimate rows). The earlier end of run held the covariances whole and,
-    # before that, whole Arrow tables as well: numpy 22.2 MB + Arrow 31.8 MB for 20,000 rows
+    # before that, whole Arrow tables as well (the figures: docs/validation/logs.md)
     assert held < 45 * column
     bound = held + 40 * column + 3 * MAX_BUFFER_BYTES
     assert numpy_peak + arrow_peak < bound, (numpy_peak, arrow_peak, held)
@@ -105,9 +105,8 @@ def test_end_of_run_keeps_the_covariances_on_disk(tmp_path, dem):
 
 def test_end_of_run_memory_grows_by_less_than_a_covariance_per_row(tmp_path, dem):
     """The peak of the end of the run, for 8,000 and 32,000 rows (row groups of 6,000 estimate rows in both):
-    what each further row adds is less than its 9 x 9 covariance (648 bytes). Holding the covariances whole
-    (the earlier end of run) adds ~1,600 B a row (its arrays ~970 B, their temporaries the rest); here
-    ~440 B (the ~320 B of the other arrays and their temporaries)."""
+    what each further row adds is less than its 9 x 9 covariance (648 bytes), which holding the covariances
+    whole (the earlier end of run) would exceed. The figures, printed with -s: docs/validation/logs.md."""
     peaks = {}
     for n in (8_000, 32_000):
         _, numpy_peak, arrow_peak = _end_of_run(tmp_path / str(n), _log(tmp_path / str(n), n), dem)
