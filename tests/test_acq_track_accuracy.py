@@ -54,8 +54,9 @@ def test_shift_loop_finds_the_start_offset_of_a_brute_force_search(dem):
     grid = dem.grid
     offs = np.linspace(-120.0, 120.0, 481)
     vals = np.empty(offs.size)
-    common = (lat_s, lon_s, dts, zeros, zeros, 80.0, track, r_n, r_e, d, valid, 0, True, 0, 5)
-    loop_kernel.shift_correlation_function(*grid, *common, u_al[0], u_al[1], offs, vals)
+    common = (dem.record(), lat_s, lon_s, correlation.Motion(dts, zeros, zeros, r_n, r_e), 80.0, track,
+              correlation.Profile(d, valid, 0, True, 5))
+    loop_kernel.shift_correlation_function(*common, u_al[0], u_al[1], offs, vals)
     h = np.empty(n)
     ref = np.empty(offs.size)
     for k, x in enumerate(offs):
@@ -69,8 +70,9 @@ def test_shift_loop_finds_the_start_offset_of_a_brute_force_search(dem):
     # the navigator's start-point loop: +-166 m function, 1st stage at the adaptive spacing, 2nd at 10.4 m
     res = float(np.mean(dem.spacing_m))
     x2, locked, v_shape, *_ = loop_kernel.shift_loop_epoch(
-        *grid, *common, u_al[0], u_al[1], 2.0 * res, 10, np.array([1.25, 1.0, 0.75, 0.5, 0.25]) * res, 2.0,
-        0.5, 0.125 * res, 0.2, 101, tracking.DISC_THESIS, True, np.zeros(dts.size), np.zeros(dts.size),
+        *common, u_al[0], u_al[1], (2.0 * res, np.array([1.25, 1.0, 0.75, 0.5, 0.25]) * res, 0.5,
+        0.125 * res, 0.2), (10, 2.0, 101, tracking.DISC_THESIS, loop_kernel.MITIGATION_NCS),
+        np.zeros(dts.size), np.zeros(dts.size),
     )  # fmt: skip
     assert locked and v_shape
     assert abs(x2 - x_bf) < 3.0  # on the brute-force minimum (the cross offset raises it, not moves it)

@@ -1,7 +1,7 @@
 """TerrainNav-v0's rates: JSBSim's step (flight_dt_s), the guidance rate and the scenario's sensor and filter
-rates (scenario_fields, the route task's TASK_RATES), their checks, the goal geometry kernel against the ECEF
-rotation, and the King Air's trajectory at 50 Hz and 100 Hz steps against 200 Hz (independent runs of the
-flight core)."""
+rates (scenario_fields, the route task's opt-in DECISION_RATES), their checks, the goal geometry kernel
+against the ECEF rotation, and the King Air's trajectory at 50 Hz and 100 Hz steps against 200 Hz
+(independent runs of the flight core)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 
 from navigators.frames import imu_gap_s
 from trn_env.env.env_settings import goal_offset_ne
-from trn_env.env.route_task import FULL_TIER_ONLY, TASK_RATES, env_kwargs, fast_tier_kwargs
+from trn_env.env.route_task import DECISION_RATES, FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
 from trn_env.env.terrain_nav import TerrainNavEnv
 from trn_env.flight.core import (
     AutopilotTargets,
@@ -81,12 +81,19 @@ def test_bad_rates_name_the_argument(kw, field):
 
 def test_route_task_flies_50_hz_and_the_fast_tier_drops_full_tier_settings():
     kw = env_kwargs("basin")
-    assert kw["flight_dt_s"] == 0.02
-    assert kw["scenario_fields"] == TASK_RATES and kw["scenario_fields"] is not TASK_RATES   # a copy
-    e = TerrainNavEnv(**{**kw, "max_episode_s": 8.0})
-    assert e.scenario.sensors.ira.rate_hz == TASK_RATES["sensors.ira.rate_hz"]
-    assert e.scenario.navigator.settings.ekf_rate_hz == TASK_RATES["navigator.settings.ekf_rate_hz"]
+    assert kw["flight_dt_s"] == 0.02 and "scenario_fields" not in kw          # the scenario's own rates
+    rated = env_kwargs("basin", decision_rates=True)
+    assert rated["scenario_fields"] == DECISION_RATES["scenario_fields"]
+    assert rated["scenario_fields"] is not DECISION_RATES["scenario_fields"]      # a copy
+    e = TerrainNavEnv(**{**rated, "max_episode_s": 8.0})
+    sc = e.scenario
+    assert (sc.sensors.ira.rate_hz, sc.navigator.settings.ekf_rate_hz, sc.navigator.rate_hz,
+            sc.guidance.rate_hz) == (10.0, 10.0, 0.5, 1.0)
+    assert e.ticks_per_decision == 15 and e.decision_interval_s == 30.0
     e.close()
+    with pytest.raises(ValueError, match="decision_rates"):
+        env_kwargs("basin", decision_rates="yes")
+    assert not set(FULL_TIER_ONLY) & set(fast_tier_kwargs(rated))
     fast = fast_tier_kwargs({**kw, "guidance_rate_hz": 1.0, "pipeline": False})
     assert not set(FULL_TIER_ONLY) & set(fast)
     assert {k: v for k, v in kw.items() if k not in FULL_TIER_ONLY} == fast
@@ -184,3 +191,29 @@ def test_50_hz_trajectory_error_is_first_order_and_bounded():
     assert h50 < 4.0 * h100 + 2.0 and v50 < 4.0 * v100 + 2.0
     assert h50 < 80.0 and v50 < 60.0
     assert h100 > 1.0 and h50 > h100                     # the comparison sees the step at all
+
+
+def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
+    """scripts/env_rates_check.py: every bad argument is a one-line error and exit 2, nothing flown or
+    written (the configurations are built before anything flies)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "env_rates_check.py"
+    spec = importlib.util.spec_from_file_location("env_rates_check", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ok = 'a={"flight_dt_s": 0.02}'
+    out = tmp_path / "out"
+    for argv, words in (([ok], "two or more"),
+                        ([ok, 'b={"flight_dt_s": '], "not JSON"),
+                        ([ok, "b=[1]"], "JSON object"),
+                        ([ok, 'b={"flight_dt_s": 0.06}'], "flight_dt_s"),
+                        ([ok, 'b={"no_such_argument": 1}'], "no_such_argument"),
+                        ([ok, 'b={"scenario_fields": {"sensors.foo.rate_hz": 1.0}}'], "sensors.foo"),
+                        ([ok, ok.replace("a=", "b="), "--routes", "nowhere"], "nowhere")):
+        args = [x for c in argv[:2] for x in ("--config", c)] + argv[2:] + ["--seeds", "2", "--out", str(out)]
+        assert mod.main(args) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and words in err, err
+    assert not out.exists()

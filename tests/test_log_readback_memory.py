@@ -135,3 +135,18 @@ def test_streamed_end_of_run_equals_the_in_memory_one(tmp_path, dem):
     assert za.namelist() == zb.namelist()
     for name in zb.namelist():
         assert za.read(name) == zb.read(name), name           # the same .npy bytes (header and data)
+
+
+@pytest.mark.parametrize("preset", [None, "mimalloc"])
+def test_trn_env_chooses_arrow_s_system_pool_unless_told_otherwise(preset):
+    """Importing trn_env before pyarrow's first allocation selects Arrow's system allocator (mimalloc, the
+    default, keeps what a long run's read-back freed); ARROW_DEFAULT_MEMORY_POOL, when set, wins."""
+    import os
+    import subprocess
+    import sys
+    env = {k: v for k, v in os.environ.items() if k != "ARROW_DEFAULT_MEMORY_POOL"}
+    if preset:
+        env["ARROW_DEFAULT_MEMORY_POOL"] = preset
+    code = "import trn_env, pyarrow as pa; print(pa.default_memory_pool().backend_name)"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == (preset or "system"), out
