@@ -67,7 +67,8 @@ def _gyro_rotation_rate(w_ib, dt_s):
     normalises it (FGPropagate, simulation/integrator/position/rotational = 1): q + dt/2 q*(0, w), which is a
     rotation by 2 atan(|w| dt / 2) about w, not by |w| dt. The shortfall, (|w| dt)^3 / 12 per step, is a tilt
     of ~5e-7 rad per roll manoeuvre at 100 Hz (~0.5 micro-g of horizontal specific force): fed the raw rates,
-    the exact rotation-vector INS drifts 0.9-1.2 m from the truth in 10 min; fed this, ~0.02 m."""
+    the exact rotation-vector INS drifts about a metre from the truth in 10 min, fed this a few centimetres
+    (the figures: docs/validation/ins.md)."""
     n = np.linalg.norm(w_ib, axis=1, keepdims=True)
     a = n * dt_s
     return w_ib * np.where(a > 0.0, 2.0 * np.arctan(0.5 * a) / np.where(a > 0.0, a, 1.0), 1.0)
