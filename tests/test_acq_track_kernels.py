@@ -286,7 +286,8 @@ def test_els_reduces_the_early_late_bias_on_a_skewed_terrain_correlation(dem):
     assert n_cases >= 12
     mean = {k: float(np.mean(v)) for k, v in errs.items()}
     med = {k: float(np.median(v)) for k, v in errs.items()}
-    # measured (seed 7): 14 cases, mean |error| none 0.31, ncs 0.27, els 0.14 m/s (medians 0.28 / 0.27 / 0.12)
+    # the figures behind this margin: docs/validation/seed001.md (regression tests' bounds)
+    print(f"\n{n_cases} cases; mean |error| (m/s) {mean}; median {med}")
     assert mean["els"] < 0.75 * mean["none"] and med["els"] < 0.75 * med["none"]
 
 

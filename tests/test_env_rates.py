@@ -175,8 +175,8 @@ def _fly(dt_s: float, duration_s: int) -> np.ndarray:
 def test_50_hz_trajectory_error_is_first_order_and_bounded():
     """JSBSim's step error, both steps judged against 200 Hz (90 s, a 45 deg turn and a 200 m climb, ~7.6 km
     flown): first order in the step, so the 50 Hz trajectory departs about 3x as far as the 100 Hz one
-    ((0.02 - 0.005) / (0.01 - 0.005); measured 51 m / 35 m against 18 m / 12 m, horizontal / height, most
-    of it in the climb's transient); bounded here with margins: at most 4x, and below 80 m / 60 m."""
+    ((0.02 - 0.005) / (0.01 - 0.005); the figures: docs/validation/route_task.md, most of it in the climb's
+    transient); bounded here with margins: at most 4x, and below 80 m / 60 m."""
     t = 90
     x200, x100, x50 = _fly(0.005, t), _fly(0.01, t), _fly(0.02, t)
 

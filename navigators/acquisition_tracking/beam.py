@@ -17,10 +17,9 @@ replica then samples the plain map at each sample's position + o (its offsets ro
 heading). Over level ground and a tilt beyond half the beam this is the thesis' correction, R cos(tilt -
 beam / 2), moved to the point it belongs to; inside the half beam over rough ground it is the footprint
 effect (replica_model "footprint" models that by a grey dilation at the point below the aircraft). The ray
-direction barely depends on the position error: on the reproduction's flight the measured-minus-replica
-height residual is 13-14 m RMS at the true position and with 30 m of position error, 13-15 m with 60 m,
-against 17-20 m for the footprint dilation at the point below the aircraft (scratch study on seed 0,
-README). Without roll_compensation the prediction uses a level attitude (roll = pitch = 0).
+direction barely depends on the position error, so predicting it at the estimate is enough (the residuals
+with and without position error: docs/validation/seed001.md). Without roll_compensation the prediction
+uses a level attitude (roll = pitch = 0).
 """
 
 from __future__ import annotations

@@ -500,8 +500,9 @@ def ira_return(
     warm_start: None (default) searches every query on its own, so a batch gives the same bits as single
     calls. A (lat_rad, lon_rad) pair, a terrain point near the first query's return ((nan, nan) if none is
     known), makes the queries a sequence: each search starts from that point, then from the previous valid
-    return. Along a flight (samples metres apart) that saves ~2 % of the search; the results are the same
-    to the search's tolerance (5 mm in range), not bit for bit. NaN: no point; an infinite one is refused."""
+    return. Along a flight (samples metres apart) that saves part of the search
+    (docs/validation/benchmarks.md); the results are the same to the search's tolerance (5 mm in range),
+    not bit for bit. NaN: no point; an infinite one is refused."""
     if not (0.0 < half_window_rad < np.pi / 2):
         raise ValueError(f"half_window_rad must be in (0, pi/2), got {half_window_rad}")
     _check_positive("max_range_m", max_range_m)
