@@ -90,8 +90,7 @@ def test_end_of_run_keeps_the_covariances_on_disk(tmp_path, dem):
     # the result's own arrays (40 columns; the covariances alone are 81) plus temporaries of 40 columns and
     # of a bounded size whatever the flight's length: the writer's last buffers (truth and estimates, each
     # at most MAX_BUFFER_BYTES, joined when their tables close) and one row group's covariances read back
-    # (at most MAX_BUFFER_BYTES of estimate rows). The earlier end of run held the covariances whole and,
-    # before that, whole Arrow tables as well: numpy 22.2 MB + Arrow 31.8 MB for 20,000 rows
+    # (at most MAX_BUFFER_BYTES of estimate rows); the earlier ends of run: docs/validation/logs.md
     assert held < 45 * column
     bound = held + 40 * column + 3 * MAX_BUFFER_BYTES
     assert numpy_peak + arrow_peak < bound, (numpy_peak, arrow_peak, held)
