@@ -2,17 +2,20 @@
 
     python scripts/env_rates_check.py --config base='{"flight_dt_s": 0.02}' \
         --config task='{"flight_dt_s": 0.02, "scenario_fields": {"sensors.ira.rate_hz": 10.0}}' \
-        --seeds 16 [--out DIR]
+        --seeds 16 [--first-seed 0] [--routes basin_west ...] [--out DIR]
 
 Each `--config NAME=JSON` is a set of TerrainNav-v0 keyword arguments added to the fast tier's calibration
 routes' own (trn_env.env.fast.calibration.REFERENCE_ROUTES: informative, featureless and mixed routes on both
 terrains, a constant action each); every configuration flies the same routes with the same episode seeds
-0 .. seeds - 1. Prints, per route, the first configuration's mean / 90th percentile of the true miss (the true
-horizontal navigation error at arrival, else at the episode's end) and, for every other one, its mean / p90,
-the paired difference of the misses with its 95 % t interval, the paired t and Wilcoxon p values, the
-arrivals, and the CPU seconds per decision. With `--out DIR` each configuration's per-seed results are written
-to DIR/rates_<NAME>.json and read back from there by a later call with the same name, seeds and settings
-(so a configuration can be added without flying the others again). Bad arguments: a message and exit 2.
+first_seed .. first_seed + seeds - 1 (`--routes`: only the routes named). Prints, per route, the first
+configuration's mean / 90th percentile of the true miss (the true horizontal navigation error at arrival, else
+at the episode's end) and, for every other one, its mean / p90, the paired difference of the misses with its
+95 % t interval, the paired t and Wilcoxon p values, the arrivals, the CPU seconds per decision, and the
+mean paired difference of the true horizontal error after each decision. With
+`--out DIR` each configuration's per-seed results are written to DIR/rates_<NAME>.json and read back from
+there by a later call with the same name, seeds and settings (so a configuration can be added without flying
+the others again).
+Bad arguments: a message and exit 2.
 """
 
 from __future__ import annotations
@@ -27,47 +30,55 @@ from pathlib import Path
 import numpy as np
 
 
-def fly(settings: dict, seeds: int) -> dict:
-    """Per route: the true miss per seed (m), the terminations, CPU seconds per decision."""
+def fly(settings: dict, seeds: int, routes: list[str] | None = None, first_seed: int = 0) -> dict:
+    """Per route (all, or those named): the true miss per seed (m), the terminations, CPU seconds per
+    decision."""
     from trn_env.env.fast.calibration import REFERENCE_ROUTES, env_kwargs
     from trn_env.env.terrain_nav import TerrainNavEnv
 
     res = {}
     for route in REFERENCE_ROUTES:
+        if routes is not None and route.name not in routes:
+            continue
         env = TerrainNavEnv(**{**env_kwargs(route), **settings})
         a = np.asarray(route.action, np.float32)
-        errs, ends, n = [], [], 0
+        errs, ends, by_decision, n = [], [], [], 0
         c0 = time.process_time()
-        for s in range(seeds):
+        for s in range(first_seed, first_seed + seeds):
             env.reset(seed=s, options={"start_deg": route.start_deg})
+            by_decision.append([])
             while True:
                 _, _, term, trunc, info = env.step(a)
+                by_decision[-1].append(float(info["true_horizontal_error_m"]))
                 n += 1
                 if term or trunc:
                     break
             errs.append(float(info.get("true_miss_m", info["true_horizontal_error_m"])))
             ends.append(info["termination"])
         env.close()
-        res[route.name] = {"errors_m": errs, "terminations": ends,
+        res[route.name] = {"errors_m": errs, "terminations": ends, "errors_by_decision_m": by_decision,
                            "cpu_s_per_decision": (time.process_time() - c0) / n}
     return res
 
 
-def compare(configs: dict[str, dict], seeds: int, out: Path | None) -> None:
+def compare(configs: dict[str, dict], seeds: int, out: Path | None, routes: list[str] | None = None,
+            first_seed: int = 0) -> None:
     from scipy import stats
 
     res: dict[str, dict] = {}
+    key = {"seeds": seeds, "first_seed": first_seed, "only_routes": routes}
     for name, settings in configs.items():
         path = None if out is None else out / f"rates_{name}.json"
         if path is not None and path.exists():
             old = json.loads(path.read_text())
-            if old.get("settings") == settings and old.get("seeds") == seeds:
+            if old.get("settings") == settings and all(old.get(k, 0 if k == "first_seed" else None) == v
+                                                      for k, v in key.items()):
                 res[name] = old["routes"]
                 continue
-        res[name] = fly(settings, seeds)
+        res[name] = fly(settings, seeds, routes, first_seed)
         if path is not None:
             out.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps({"settings": settings, "seeds": seeds, "routes": res[name]}, indent=1))
+            path.write_text(json.dumps({"settings": settings, **key, "routes": res[name]}, indent=1))
     names = list(configs)
     base = names[0]
     for route in res[base]:
@@ -89,6 +100,22 @@ def compare(configs: dict[str, dict], seeds: int, out: Path | None) -> None:
                   f"{d.mean() + half:+.1f}], p {p_t:.2f} (t) / {p_w:.2f} (Wilcoxon), arrived "
                   f"{r['terminations'].count('arrived')}/{seeds}, {1e3 * r['cpu_s_per_decision']:.0f} ms "
                   "CPU/decision")
+            if "errors_by_decision_m" in r and "errors_by_decision_m" in b:
+                print(f"{'':22s} {name} - {base}, mean true horizontal error after decision 1, 2, ...: "
+                      + " ".join(f"{v:+.1f}" for v in _by_decision_difference(b, r)))
+
+
+def _by_decision_difference(base: dict, other: dict, n_max: int = 16) -> list[float]:
+    """Mean over seeds of the paired difference of the true horizontal error after each decision (seeds
+    whose episodes both reached that decision)."""
+    out = []
+    for k in range(n_max):
+        pairs = zip(base["errors_by_decision_m"], other["errors_by_decision_m"], strict=True)
+        d = [o[k] - b[k] for b, o in pairs if len(b) > k and len(o) > k]
+        if not d:
+            break
+        out.append(float(np.mean(d)))
+    return out
 
 
 def _config(text: str) -> tuple[str, dict]:
@@ -108,6 +135,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--config", action="append", default=[], metavar="NAME=JSON")
     p.add_argument("--seeds", type=int, default=16)
+    p.add_argument("--first-seed", type=int, default=0)
+    p.add_argument("--routes", nargs="+", default=None, metavar="ROUTE")
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
     try:
@@ -116,8 +145,14 @@ def main(argv=None) -> int:
             raise ValueError(f"give two or more --config with distinct names, got {args.config}")
         if args.seeds < 2:
             raise ValueError(f"--seeds must be >= 2 (paired statistics), got {args.seeds}")
+        if args.first_seed < 0:
+            raise ValueError(f"--first-seed must be >= 0, got {args.first_seed}")
         from trn_env.env.fast.calibration import REFERENCE_ROUTES, env_kwargs
         from trn_env.env.terrain_nav import TerrainNavEnv
+        known = [r.name for r in REFERENCE_ROUTES]
+        unknown = sorted(set(args.routes or []) - set(known))
+        if unknown:
+            raise ValueError(f"--routes: unknown {unknown}; known: {known}")
         for name, settings in configs.items():     # every configuration builds before anything flies
             try:
                 TerrainNavEnv(**{**env_kwargs(REFERENCE_ROUTES[0]), **settings}).close()
@@ -126,7 +161,7 @@ def main(argv=None) -> int:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    compare(configs, args.seeds, args.out)
+    compare(configs, args.seeds, args.out, args.routes, args.first_seed)
     return 0
 
 

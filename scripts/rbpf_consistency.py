@@ -6,7 +6,8 @@ default, integrity_alpha 1e-4; 0.01 before) and/or off (integrity_alpha 1e-12).
         [--alphas 1e-4 1e-12] [--set n_particles=2000 ...] [--map-is-world]
 
 --map-is-world gives the navigator the 30 m world itself as its map (no map error: the filter's
-measurement model is then the truth's; issue 17's consistency criterion holds there, README "RBPF").
+measurement model is then the truth's; issue 17's consistency criterion holds there:
+docs/validation/seed002.md).
 
 Per run: horizontal RMS, final and max error, re-spreads, time-averaged horizontal NEES (2 dof) after 15 s.
 Over the seeds (issue 17's criterion: the Monte-Carlo-averaged NEES after convergence inside its 95 %

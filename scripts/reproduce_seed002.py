@@ -62,18 +62,17 @@ PROFILES = {
              + [{"kind": "turn", "duration_s": 30.0, "bank_deg": b, "transition_s": 6.0}
                 for b in (-40.0, 40.0, -40.0, 40.0)],
 }
-# Two departures from Table 1 in the filter's settings for this flight (README "Seed 002 reproduction"):
+# Two departures from Table 1 in the filter's settings for this flight (their measurements:
+# docs/validation/seed002.md, "Two departures from Table 1"):
 # - acquisition tempering: the IRA variances are inflated while the cloud is wider than 5 m (the filter's
-#   default 10 m suits the 3" map against a finer world, where the converged cloud is wider). On the turning
-#   flight, 5 seeds that locked a wrong roll at 10 m (attitude RMS 0.165 deg, NEES 64) gave 0.114 deg,
-#   NEES 11;
+#   default 10 m suits the 3" map against a finer world, where the converged cloud is wider; at 10 m some
+#   seeds of the turning flight locked a wrong roll);
 # - position process noise 1.0 m per epoch (Table 1: 0.5). At 0.5 every particle's Kalman part reads its own
 #   sampled position steps as velocity information (eq 6's L (z - F^n x^l)), which resampling then keeps
-#   from one ancestor: over 40 runs the attitude NEES was 7.8 against [2.29, 3.81] and the horizontal NEES
-#   4.5; at 1.0 they are 2.5 and 1.3, and the RMS is lower too (--table1-noise runs Table 1's 0.5).
+#   from one ancestor, and the filter is overconfident (--table1-noise runs Table 1's 0.5).
 FILTER_SETTINGS = {"acquisition_spread_m": 5.0, "q_pos_m": (1.0, 1.0, 1.0)}
 # Table 1's process noise where the filter's defaults depart from it (rbpf module docstring: horizontal
-# position 0.25 m and vertical velocity 1e-2 m/s per epoch, measured on the King Air route)
+# position 0.25 m and vertical velocity 1e-2 m/s per epoch, set on the King Air route)
 # and the bias random walks Table 1 gives (1e-7 per epoch), where the scenario's IMU, whose biases are
 # constant over a run, gives the filter 0 (trn_env.scenario.build.imu_bias_settings)
 TABLE1_NOISE = {"q_pos_m": (0.5, 0.5, 0.5), "q_vel_mps": (1e-4, 1e-4), "q_accel_bias_mps2": 1e-7,

@@ -25,7 +25,7 @@ goal region, scenario basin_route - and the bundled real DEM, scenario default):
    the straight line, collisions, mean return) and OUT/route_benchmark.png (errors, error against extra
    distance, and the training curve).
 
-The learning setup (documented in TerrainNavEnv's docstring; measured in the README's route-planning
+The learning setup (documented in TerrainNavEnv's docstring; measured in docs/guide/planning.md's benchmark
 section). Coarse decisions: `action_mode="pursuit"` with `decision_interval_s` 30 (an action is an offset
 from the goal's bearing, HELD from the estimate at every guidance tick, so a constant action flies a log
 spiral into the goal; +-45 deg, `bearing_offset_max_deg`, at most +41 % distance; and a height above ground
@@ -36,10 +36,10 @@ routes from the estimate to the goal, MAP only), which lets one network generali
 episode instead of memorising routes; every element mapped to [-1, 1] by its bounds
 (trn_env.env.sb3_features.BoundsScaledExtractor). Rewards: the arrival task's (progress potential with
 `shaping_gamma` 1, time cost, +10 at arrival - 20 per km of TRUE miss, failure penalty 20);
-`sigma_shaping_weight` (the potential on the navigator's reported sigma) is available and 0 here (see the
-README for the comparison). PPO: n_steps 128 per env x 2 envs (~28 episodes per update), batch 64, 10
-epochs, gamma 0.99, GAE lambda 0.95, learning rate 3e-4, ent_coef 0, log_std_init -0.7 (an action std of
-0.5: +-22 deg about the straight line, which explores both ways round the basin), net 64-64.
+`sigma_shaping_weight` (the potential on the navigator's reported sigma) is available and 0 here (see
+docs/guide/planning.md for the comparison). PPO: n_steps 128 per env x 2 envs (~28 episodes per update),
+batch 64, 10 epochs, gamma 0.99, GAE lambda 0.95, learning rate 3e-4, ent_coef 0, log_std_init -0.7 (an
+action std of 0.5: +-22 deg about the straight line, which explores both ways round the basin), net 64-64.
 Untrained and trained networks share the same initial weights (seed 0).
 """
 

@@ -33,6 +33,15 @@ def prime_vertical_radius_m(lat_rad: float) -> float:
     return WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * s * s)
 
 
+@njit(cache=True, fastmath=False, forceinline=True)
+def radii_m(lat_rad: float) -> tuple[float, float]:
+    """(meridian, prime-vertical) radii of curvature (m) at latitude lat_rad: meridian_radius_m's and
+    prime_vertical_radius_m's formulas sharing one sin, for kernels that need both."""
+    s = np.sin(lat_rad)
+    w = 1.0 - WGS84_E2 * s * s
+    return WGS84_A_M * (1.0 - WGS84_E2) / (w * np.sqrt(w)), WGS84_A_M / np.sqrt(w)
+
+
 @njit(cache=True, fastmath=False)
 def ned_offset_to_latlon(lat_rad: float, lon_rad: float, h_m: float, dn_m: float, de_m: float):
     """Add a small north/east displacement (metres) to a geodetic position (seed 000 eq 2)."""

@@ -5,6 +5,10 @@ latitude `lat0 + i * dlat` and longitude `lon0 + j * dlon` (radians); row 0 is t
 a void. Every lookup outside the grid (or touching a void) returns NaN - the hot path never raises; the
 grid's bounds are its outermost posts (heights.shape from the origin).
 
+The bilinear formula is written once, `bilinear_cell` (with `cell_index`, the cell and fractions of a point
+in grid-index units): every bilinear lookup of the project (the kernels here, the terrain queries' in-cell
+Newton steps, the fast tier's TERCOM) calls it, LLVM-inlined (forceinline).
+
 `MapRecord(heights, lat0, lon0, dlat, dlon, cubic)` is that grid with its interpolation (bicubic when cubic,
 else bilinear) as one kernel argument (numba passes it as a tuple; `Dem.record(cubic)` builds it);
 `map_height(record, lat, lon)` reads it. The interpolation primitives below (bilinear, bicubic and their
@@ -22,6 +26,35 @@ from numba import njit
 _EDGE = 1e-9
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def cell_index(n_lat, n_lon, fi, fj):
+    """(i, j, u, v): the cell (i, j) of an n_lat x n_lon grid holding the point at fractional grid indices
+    (fi along latitude, fj along longitude) and the point's fractions u, v in it; i = -1 outside the grid
+    (beyond 1e-9 post of its outermost posts). A point on the last row or column belongs to the cell
+    before it (u or v = 1)."""
+    if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
+        return -1, -1, np.nan, np.nan
+    i = min(max(int(fi), 0), n_lat - 2)
+    j = min(max(int(fj), 0), n_lon - 2)
+    return i, j, fi - i, fj - j
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def bilinear_cell(heights, i, j, u, v):
+    """The bilinear formula in cell (i, j) at fractions (u along latitude, v along longitude): (height m,
+    a = row i's height at v, b = row i + 1's, ea = h[i, j + 1] - h[i, j], eb = h[i + 1, j + 1] - h[i + 1, j])
+    - the terms the gradient needs too: dh/du = b - a, dh/dv = ea + u (eb - ea). NaN next to a void."""
+    h00 = heights[i, j]
+    h01 = heights[i, j + 1]
+    h10 = heights[i + 1, j]
+    h11 = heights[i + 1, j + 1]
+    ea = h01 - h00
+    eb = h11 - h10
+    a = h00 + v * ea
+    b = h10 + v * eb
+    return a + u * (b - a), a, b, ea, eb
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def bilinear(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
     """Bilinear height (m) at (lat, lon) in radians; NaN outside the grid or next to a void."""
@@ -31,22 +64,13 @@ def bilinear(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
 @njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
 def bilinear_at_index(heights, fi, fj) -> float:
     """Bilinear height (m) at fractional grid indices (fi along latitude, fj along longitude): the one
-    bilinear formula of the project (bilinear_batch writes it out, see there); NaN outside the grid or next
+    bilinear lookup of the project (its formula: bilinear_cell); NaN outside the grid or next
     to a void (a point on a grid line next to a void is evaluated in the valid neighbour, _edge_retry)."""
     n_lat, n_lon = heights.shape
-    if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
+    i, j, u, v = cell_index(n_lat, n_lon, fi, fj)
+    if i < 0:
         return np.nan
-    i = min(max(int(fi), 0), n_lat - 2)
-    j = min(max(int(fj), 0), n_lon - 2)
-    u = fi - i
-    v = fj - j
-    h00 = heights[i, j]
-    h01 = heights[i, j + 1]
-    h10 = heights[i + 1, j]
-    h11 = heights[i + 1, j + 1]
-    a = h00 + v * (h01 - h00)
-    b = h10 + v * (h11 - h10)
-    r = a + u * (b - a)
+    r = bilinear_cell(heights, i, j, u, v)[0]
     if r != r:
         return _edge_retry(heights, i, j, u, v)
     return r
@@ -86,23 +110,11 @@ def _edge_retry(heights, i, j, u, v):
 def bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, lat, lon):
     """(h_m, dh/dlat, dh/dlon) of the bilinear surface, derivatives in m/rad; NaNs outside the grid."""
     n_lat, n_lon = heights.shape
-    fi = (lat - lat0) / dlat
-    fj = (lon - lon0) / dlon
-    if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
+    i, j, u, v = cell_index(n_lat, n_lon, (lat - lat0) / dlat, (lon - lon0) / dlon)
+    if i < 0:
         return np.nan, np.nan, np.nan
-    i = min(max(int(fi), 0), n_lat - 2)
-    j = min(max(int(fj), 0), n_lon - 2)
-    u = fi - i
-    v = fj - j
-    h00 = heights[i, j]
-    h01 = heights[i, j + 1]
-    h10 = heights[i + 1, j]
-    h11 = heights[i + 1, j + 1]
-    a = h00 + v * (h01 - h00)
-    b = h10 + v * (h11 - h10)
-    dh_du = b - a
-    dh_dv = (h01 - h00) + u * ((h11 - h10) - (h01 - h00))
-    return a + u * (b - a), dh_du / dlat, dh_dv / dlon
+    h, a, b, ea, eb = bilinear_cell(heights, i, j, u, v)
+    return h, (b - a) / dlat, (ea + u * (eb - ea)) / dlon
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -121,14 +133,11 @@ def _cubic_weights(t):
 def bicubic(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
     """Bicubic (Catmull-Rom) height (m); edge posts are replicated beyond the border; NaN outside."""
     n_lat, n_lon = heights.shape
-    fi = (lat - lat0) / dlat
-    fj = (lon - lon0) / dlon
-    if not (fi >= -_EDGE and fj >= -_EDGE and fi <= n_lat - 1 + _EDGE and fj <= n_lon - 1 + _EDGE):
+    i, j, u, v = cell_index(n_lat, n_lon, (lat - lat0) / dlat, (lon - lon0) / dlon)
+    if i < 0:
         return np.nan
-    i = min(max(int(fi), 0), n_lat - 2)
-    j = min(max(int(fj), 0), n_lon - 2)
-    wu = _cubic_weights(fi - i)
-    wv = _cubic_weights(fj - j)
+    wu = _cubic_weights(u)
+    wv = _cubic_weights(v)
     acc = 0.0
     for a in range(4):
         ii = min(max(i - 1 + a, 0), n_lat - 1)
@@ -142,31 +151,18 @@ def bicubic(heights, lat0, lon0, dlat, dlon, lat, lon) -> float:
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def bilinear_batch(heights, lat0, lon0, dlat, dlon, lat, lon, out):
-    """Bilinear heights for 1-D arrays lat, lon (rad) into out (m); NaN outside. Single thread.
-    The formula of `bilinear` is written out here with the divisions and bounds hoisted: calling a shared
-    helper per point measured ~35 % slower (6-7e7 against ~1e8 lookups/s, python -m terrain.bench)."""
+    """Bilinear heights for 1-D arrays lat, lon (rad) into out (m); NaN outside. Single thread. The
+    divisions are hoisted (multiplication by the inverse spacings, so a point's result can differ from
+    `bilinear`'s in the last bit)."""
     n_lat, n_lon = heights.shape
     inv_dlat = 1.0 / dlat
     inv_dlon = 1.0 / dlon
-    max_i = n_lat - 1.0
-    max_j = n_lon - 1.0
     for k in range(lat.shape[0]):
-        fi = (lat[k] - lat0) * inv_dlat
-        fj = (lon[k] - lon0) * inv_dlon
-        if not (fi >= -_EDGE and fj >= -_EDGE and fi <= max_i + _EDGE and fj <= max_j + _EDGE):
+        i, j, u, v = cell_index(n_lat, n_lon, (lat[k] - lat0) * inv_dlat, (lon[k] - lon0) * inv_dlon)
+        if i < 0:
             out[k] = np.nan
             continue
-        i = min(max(int(fi), 0), n_lat - 2)
-        j = min(max(int(fj), 0), n_lon - 2)
-        u = fi - i
-        v = fj - j
-        h00 = heights[i, j]
-        h01 = heights[i, j + 1]
-        h10 = heights[i + 1, j]
-        h11 = heights[i + 1, j + 1]
-        a = h00 + v * (h01 - h00)
-        b = h10 + v * (h11 - h10)
-        r = a + u * (b - a)
+        r = bilinear_cell(heights, i, j, u, v)[0]
         if r != r:
             r = _edge_retry(heights, i, j, u, v)
         out[k] = r

@@ -95,7 +95,7 @@ def test_serial_search_kernel_matches_brute_force(dem):
         exclusion_m=60.0,
     )
     fast = acquisition.serial_search(
-        dem.grid,
+        dem.record(),
         LAT0 + 30.0 / r_n,
         LON0,
         dts,
@@ -109,12 +109,11 @@ def test_serial_search_kernel_matches_brute_force(dem):
         valid,
         cost=0,
         remove_bias=True,
-        interp=0,
         n_min=5,
         **kw,
     )
     ref = acquisition.serial_search_reference(
-        dem.grid,
+        dem.record(),
         LAT0 + 30.0 / r_n,
         LON0,
         dts,
@@ -145,7 +144,7 @@ def test_acquisition_recovers_speed_heading_start_within_one_bin(dem):
     d, dts, r_n, r_e = _profile(dem, LAT0, LON0, n, v_true, psi_true)
     lat_c, lon_c = LAT0 + 320.0 / r_n, LON0 - 410.0 / r_e
     res = acquisition.serial_search(
-        dem.grid,
+        dem.record(),
         lat_c,
         lon_c,
         dts,
@@ -165,7 +164,6 @@ def test_acquisition_recovers_speed_heading_start_within_one_bin(dem):
         heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
         cost=0,
         remove_bias=True,
-        interp=0,
         n_min=10,
         distinct_ratio=cfg.acquisition_distinct_ratio,
         exclusion_m=cfg.acquisition_exclusion_m,
@@ -231,9 +229,9 @@ def test_early_late_stage_is_the_discriminator_by_hand(dem):
         return float(np.mean(np.abs(r - r.mean())))
 
     out = loop_kernel.loop_epoch(
-        *dem.grid, LAT0, LON0, dts, zeros, zeros, 81.5, math.radians(30.0), r_n, r_e, d, valid, 0, True, 0, 5,
-        0, 3.68, 10, np.array([2.4, 1.92, 1.44, 0.96, 0.48]), 2.0, 0.005, 0.24, 0.002, 101,
-        tracking.DISC_THESIS, loop_kernel.MITIGATION_NONE, zeros, zeros,
+        dem.record(), LAT0, LON0, correlation.Motion(dts, zeros, zeros, r_n, r_e), 81.5, math.radians(30.0),
+        correlation.Profile(d, valid, 0, True, 5), 0, (3.68, np.array([2.4, 1.92, 1.44, 0.96, 0.48]), 0.005,
+        0.24, 0.002), (10, 2.0, 101, tracking.DISC_THESIS, loop_kernel.MITIGATION_NONE), zeros, zeros,
     )  # fmt: skip
     x, it, locked, s = out[0], out[1], out[4], out[11]
     xr, itr, lockr = 81.5, 101, False

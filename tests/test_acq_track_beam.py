@@ -14,7 +14,7 @@ import pytest
 from acq_track_helpers import frames_for, horizontal_error_m, initial_estimate, trajectory
 from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, beam, loop_kernel
 from trn_env.navigators.acquisition_tracking.correlation import (
-    INTERP_BILINEAR,
+    Profile,
     profile_cost,
     replica_positions_reference,
 )
@@ -82,7 +82,6 @@ def test_replica_points_and_the_basis_form_agree_with_numpy(dem):
     m_psi = np.cumsum(rng.normal(0, 0.02, n)) + 0.6
     o_n, o_e = rng.normal(0, 150.0, n), rng.normal(0, 150.0, n)
     r_n, r_e = _radii(LAT0, H_MSL)
-    heights, lat0, lon0, dlat, dlon = dem.grid
     for b_v, b_psi in ((0.0, 0.0), (1.5, 0.03), (-2.0, -0.05)):
         dla, dlo = np.empty(n), np.empty(n)
         beam.replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e, dla, dlo)
@@ -99,14 +98,10 @@ def test_replica_points_and_the_basis_form_agree_with_numpy(dem):
         basis[2] += o_e
         w = np.empty((3, n))
         c_basis = loop_kernel.basis_cost(
-            heights, lat0, lon0, dlat, dlon, LAT0, LON0, basis, b_v, b_psi, r_n, r_e, d, valid, 0, True,
-            INTERP_BILINEAR, 5, w,
-        )  # fmt: skip
+            dem.record(), LAT0, LON0, basis, b_v, b_psi, r_n, r_e, Profile(d, valid, 0, True, 5), w
+        )
         h_p = np.empty(n)
-        beam.replica_heights_at(
-            heights, lat0, lon0, dlat, dlon, LAT0, LON0, dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e,
-            INTERP_BILINEAR, h_p,
-        )  # fmt: skip
+        beam.replica_heights_at(dem.record(), LAT0, LON0, dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e, h_p)
         assert c_basis == pytest.approx(profile_cost(d, valid, h_p, 0, True, 5), rel=1e-9)
 
 

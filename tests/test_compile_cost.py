@@ -1,6 +1,6 @@
 """What keeps the first run's compile short (issue 21 section 2): no numba IR inlining, and one
 specialisation where integer constants are passed to a kernel. (Compile times themselves are figures in
-README, measured by scripts, never asserted.)"""
+docs/guide/first_flight.md, measured by scripts, never asserted.)"""
 
 from __future__ import annotations
 

@@ -97,11 +97,14 @@ def test_settings_reference_lists_every_navigator_and_monitor_setting():
     for name in registry.available_monitors():
         assert f"## monitor `{name}`" in page, name
     # the pmf's code is the independent source: every setting its constructors read (`s.<name>` with
-    # s = self.settings, in pmf.py and its base terrain_filter.py) must be in the page
+    # s = self.settings, and the names `s.copy_to(self, "a b ...")` copies, in pmf.py and its base
+    # terrain_filter.py) must be in the page
     read = set()
     for mod in ("pmf", "terrain_filter"):
         text = (ROOT / "navigators" / "filters" / f"{mod}.py").read_text()
-        read |= set(re.findall(r"\bs\.([a-z][a-z0-9_]*)\b", text))
+        read |= set(re.findall(r"\bs\.([a-z][a-z0-9_]*)\b", text)) - {"copy_to"}
+        for call in re.findall(r"\bs\.copy_to\(self,((?:\s*\"[^\"]*\")+)\)", text):
+            read |= set(" ".join(re.findall(r'"([^"]*)"', call)).split())
     assert len(read) > 20, sorted(read)
     for name in sorted(read):
         assert f"| `{name}` |" in page, f"pmf setting {name} missing from the settings reference"

@@ -1,5 +1,7 @@
-"""TerrainNav-v0's rates: JSBSim's step (flight_dt_s) and the guidance rate, their checks, and the King Air's
-trajectory at 50 Hz and 100 Hz steps against 200 Hz (independent runs of the flight core)."""
+"""TerrainNav-v0's rates: JSBSim's step (flight_dt_s), the guidance rate and the scenario's sensor and filter
+rates (scenario_fields, the route task's opt-in DECISION_RATES), their checks, the goal geometry kernel
+against the ECEF rotation, and the King Air's trajectory at 50 Hz and 100 Hz steps against 200 Hz
+(independent runs of the flight core)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from trn_env.env.route_task import FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
+from navigators.frames import imu_gap_s
+from trn_env.env.env_settings import goal_offset_ne
+from trn_env.env.route_task import DECISION_RATES, FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
 from trn_env.env.terrain_nav import TerrainNavEnv
 from trn_env.flight.core import (
     AutopilotTargets,
@@ -77,10 +81,79 @@ def test_bad_rates_name_the_argument(kw, field):
 
 def test_route_task_flies_50_hz_and_the_fast_tier_drops_full_tier_settings():
     kw = env_kwargs("basin")
-    assert kw["flight_dt_s"] == 0.02
+    assert kw["flight_dt_s"] == 0.02 and "scenario_fields" not in kw          # the scenario's own rates
+    rated = env_kwargs("basin", decision_rates=True)
+    assert rated["scenario_fields"] == DECISION_RATES["scenario_fields"]
+    assert rated["scenario_fields"] is not DECISION_RATES["scenario_fields"]      # a copy
+    e = TerrainNavEnv(**{**rated, "max_episode_s": 8.0})
+    sc = e.scenario
+    assert (sc.sensors.ira.rate_hz, sc.navigator.settings.ekf_rate_hz, sc.navigator.rate_hz,
+            sc.guidance.rate_hz) == (10.0, 10.0, 0.5, 1.0)
+    assert e.ticks_per_decision == 15 and e.decision_interval_s == 30.0
+    e.close()
+    with pytest.raises(ValueError, match="decision_rates"):
+        env_kwargs("basin", decision_rates="yes")
+    assert not set(FULL_TIER_ONLY) & set(fast_tier_kwargs(rated))
     fast = fast_tier_kwargs({**kw, "guidance_rate_hz": 1.0, "pipeline": False})
     assert not set(FULL_TIER_ONLY) & set(fast)
     assert {k: v for k, v in kw.items() if k not in FULL_TIER_ONLY} == fast
+
+
+def test_scenario_fields_set_the_scenario_and_bad_ones_name_the_field():
+    e = TerrainNavEnv("basin_route", scenario_fields={"sensors.ira.rate_hz": 25.0}, log_sensors=True, **SMALL)
+    assert e.scenario.sensors.ira.rate_hz == 25.0
+    assert TerrainNavEnv("basin_route", **SMALL).scenario.sensors.ira.rate_hz == 50.0      # the scenario's
+    e.reset(seed=1)
+    e.step(np.zeros(2, np.float32))                 # 2 s: two 1 s navigator updates of 25 IRA samples each
+    e._loop.sync()
+    assert [f.ira.t_s.shape[0] for f in e._loop._stage.logged_frames()] == [25, 25]
+    e.close()
+    for bad, words in (({"sensors.foo.rate_hz": 3.0}, ("scenario_fields", "sensors.foo")),
+                       ({"sensors.ira.rate_hz": -1.0}, ("scenario_fields", "sensors.ira.rate_hz")),
+                       ([("sensors.ira.rate_hz", 10.0)], ("scenario_fields",)),
+                       ({3: 10.0}, ("scenario_fields",))):
+        with pytest.raises(ValueError) as err:
+            TerrainNavEnv("basin_route", scenario_fields=bad, **SMALL)
+        assert all(w in str(err.value) for w in words), str(err.value)
+
+
+def test_goal_offset_kernel_is_the_ecef_rotation():
+    """goal_offset_ne against numpy: C_en(lat, lon)^T (r_goal - r) with both points through lla_to_ecef, on
+    random pairs 1-60 km apart at random heights; and against the small-offset form (latlon_to_ned_offset)
+    within 0.2 % for pairs within 2 km."""
+    from trn_env.terrain.geodesy import C_en, latlon_to_ned_offset, lla_to_ecef
+
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        lat, lon = math.radians(rng.uniform(-60, 60)), math.radians(rng.uniform(-180, 180))
+        h = rng.uniform(0, 4000)
+        glat = lat + rng.uniform(-1, 1) * 60e3 / 6.4e6
+        glon = lon + rng.uniform(-1, 1) * 60e3 / 6.4e6
+        want = C_en(lat, lon).T @ (np.array(lla_to_ecef(glat, glon, h)) - np.array(lla_to_ecef(lat, lon, h)))
+        got = goal_offset_ne(lat, lon, h, glat, glon)
+        assert abs(got[0] - want[0]) < 1e-6 and abs(got[1] - want[1]) < 1e-6
+        glat, glon = lat + (glat - lat) / 30, lon + (glon - lon) / 30
+        near = goal_offset_ne(lat, lon, h, glat, glon)
+        approx = latlon_to_ned_offset(lat, lon, h, glat, glon)
+        assert math.hypot(near[0] - approx[0], near[1] - approx[1]) < 2e-3 * math.hypot(*approx) + 0.01
+
+
+def test_imu_gap_skips_the_median_only_where_no_interval_can_be_long():
+    """imu_gap_s against its definition (intervals longer than 1.5 x the median, less the median) computed
+    directly, on regular, jittered and gapped sample times."""
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        n = int(rng.integers(3, 60))
+        d = np.full(n, 0.02) * rng.uniform(0.7, 1.3, n) ** rng.integers(0, 2)
+        if rng.random() < 0.5:
+            d[rng.integers(0, n)] *= rng.uniform(1.0, 5.0)
+        t = 10.0 + np.cumsum(d)
+        prev = float(t[0] - rng.uniform(0.01, 0.1)) if rng.random() < 0.5 else float("nan")
+        tt = np.concatenate(([prev], t)) if math.isfinite(prev) else t
+        dd = np.diff(tt)
+        med = np.median(dd)
+        want = float(np.sum(dd[dd > 1.5 * med] - med))
+        assert imu_gap_s(t, prev) == pytest.approx(want, abs=1e-12)
 
 
 def _fly(dt_s: float, duration_s: int) -> np.ndarray:
@@ -102,8 +175,8 @@ def _fly(dt_s: float, duration_s: int) -> np.ndarray:
 def test_50_hz_trajectory_error_is_first_order_and_bounded():
     """JSBSim's step error, both steps judged against 200 Hz (90 s, a 45 deg turn and a 200 m climb, ~7.6 km
     flown): first order in the step, so the 50 Hz trajectory departs about 3x as far as the 100 Hz one
-    ((0.02 - 0.005) / (0.01 - 0.005); measured 51 m / 35 m against 18 m / 12 m, horizontal / height, most
-    of it in the climb's transient); bounded here with margins: at most 4x, and below 80 m / 60 m."""
+    ((0.02 - 0.005) / (0.01 - 0.005); the figures: docs/validation/route_task.md, most of it in the climb's
+    transient); bounded here with margins: at most 4x, and below 80 m / 60 m."""
     t = 90
     x200, x100, x50 = _fly(0.005, t), _fly(0.01, t), _fly(0.02, t)
 
@@ -118,3 +191,29 @@ def test_50_hz_trajectory_error_is_first_order_and_bounded():
     assert h50 < 4.0 * h100 + 2.0 and v50 < 4.0 * v100 + 2.0
     assert h50 < 80.0 and v50 < 60.0
     assert h100 > 1.0 and h50 > h100                     # the comparison sees the step at all
+
+
+def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
+    """scripts/env_rates_check.py: every bad argument is a one-line error and exit 2, nothing flown or
+    written (the configurations are built before anything flies)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "env_rates_check.py"
+    spec = importlib.util.spec_from_file_location("env_rates_check", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ok = 'a={"flight_dt_s": 0.02}'
+    out = tmp_path / "out"
+    for argv, words in (([ok], "two or more"),
+                        ([ok, 'b={"flight_dt_s": '], "not JSON"),
+                        ([ok, "b=[1]"], "JSON object"),
+                        ([ok, 'b={"flight_dt_s": 0.06}'], "flight_dt_s"),
+                        ([ok, 'b={"no_such_argument": 1}'], "no_such_argument"),
+                        ([ok, 'b={"scenario_fields": {"sensors.foo.rate_hz": 1.0}}'], "sensors.foo"),
+                        ([ok, ok.replace("a=", "b="), "--routes", "nowhere"], "nowhere")):
+        args = [x for c in argv[:2] for x in ("--config", c)] + argv[2:] + ["--seeds", "2", "--out", str(out)]
+        assert mod.main(args) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and words in err, err
+    assert not out.exists()

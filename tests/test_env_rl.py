@@ -117,8 +117,9 @@ def _rss_mb() -> float:
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/statm"), reason="needs /proc (Linux) to read the RSS")
 def test_memory_flat_over_resets():
-    """200 resets here (1,000 for the README's figure, the same check): the RSS after a warm-up stays flat
-    (keeping every reset's flight alive, ~0.4 MB each as measured, would show as ~64 MB)."""
+    """200 resets here (1,000 for the figure in docs/guide/planning.md, the same check): the RSS after a
+    warm-up stays flat (keeping every reset's flight alive would show as tens of MB; the per-reset figure:
+    docs/validation/route_task.md, regression tests' bounds)."""
     e = TerrainNavEnv(**SMALL)
     for k in range(40):  # warm-up: allocator pools, numba dispatch
         e.reset(seed=k)

@@ -81,7 +81,7 @@ def test_innovation_test_and_recovery_follow_the_full_navigators():
 @pytest.fixture(scope="module")
 def basin_map():
     e = TerrainNavFastVectorEnv(num_envs=1, **BASIN)
-    grid = e._grids()[1]
+    grid = e._records()[1]
     nav = e._nav.copy()
     e.close()
     return grid, nav
@@ -90,7 +90,7 @@ def basin_map():
 def _profile(grid, lat_start, lon_start, shift_n_m, shift_e_m, n=40, step_m=85.0):
     """A northbound profile: INS-indicated points, and the map heights at the TRUE points, the indicated
     ones shifted by (shift_n_m, shift_e_m)."""
-    h, lat0, lon0, dlat, dlon = grid
+    h, lat0, lon0, dlat, dlon, _ = grid
     m_lat = 6_371_000.0
     m_lon = m_lat * math.cos(lat_start)
     plat = lat_start + np.arange(n) * step_m / m_lat
@@ -103,12 +103,12 @@ def _profile(grid, lat_start, lon_start, shift_n_m, shift_e_m, n=40, step_m=85.0
 def _search(grid, nav, meas, plat, plon, m_lat, m_lon, half_m):
     n = meas.size
     rows = nv.tercom_table_rows(nav)
-    return nv.tercom_offset(meas, plat, plon, n, *grid, half_m, 5.0, True, m_lat, m_lon, np.zeros((3, n)),
-                            nv.COARSE_STEP_M, nv.COARSE_STRIDE, np.zeros((4, rows, n)))
+    return nv.tercom_offset((meas, plat, plon), n, grid, half_m, 5.0, True, (m_lat, m_lon),
+                            (np.zeros((3, n)), np.zeros((4, rows, n))), (nv.COARSE_STEP_M, nv.COARSE_STRIDE))
 
 
 def _direct_mad(grid, meas, plat, plon, dn, de, m_lat, m_lon, stride):
-    h, lat0, lon0, dlat, dlon = grid
+    h, lat0, lon0, dlat, dlon, _ = grid
     d = np.array([meas[k] - kernels.bilinear(h, lat0, lon0, dlat, dlon, plat[k] + dn / m_lat,
                                              plon[k] + de / m_lon) for k in range(0, meas.size, stride)])
     return float(np.mean(np.abs(d - d.mean())))

@@ -39,8 +39,8 @@ RUNS = 10
 SEED0 = 2000
 DURATION_S = 150.0
 NAVIGATORS = ["ins", "ins_tercom", "pmf", "pf", "acq_track"]
-# covariance known to overstate the error on this route, whatever the IMU (docs/validation/navigators.md;
-# measured so on the navigation grade as well: not from the IMU's error model)
+# covariance known to overstate the error on this route, whatever the IMU (so on the navigation grade as
+# well: not from the IMU's error model; docs/validation/navigators.md)
 CONSERVATIVE = {
     "ins_tercom": "the TERCOM fix's noise (10 m, seed 000 Table 2) is larger than the fixes' error",
     "acq_track": "its dead-reckoning walk (2 m/sqrt(s) with an INS) is calibrated on the fixes' NIS",

@@ -90,8 +90,7 @@ def test_end_of_run_keeps_the_covariances_on_disk(tmp_path, dem):
     # the result's own arrays (40 columns; the covariances alone are 81) plus temporaries of 40 columns and
     # of a bounded size whatever the flight's length: the writer's last buffers (truth and estimates, each
     # at most MAX_BUFFER_BYTES, joined when their tables close) and one row group's covariances read back
-    # (at most MAX_BUFFER_BYTES of estimate rows). The earlier end of run held the covariances whole and,
-    # before that, whole Arrow tables as well: numpy 22.2 MB + Arrow 31.8 MB for 20,000 rows
+    # (at most MAX_BUFFER_BYTES of estimate rows); the earlier ends of run: docs/validation/logs.md
     assert held < 45 * column
     bound = held + 40 * column + 3 * MAX_BUFFER_BYTES
     assert numpy_peak + arrow_peak < bound, (numpy_peak, arrow_peak, held)
@@ -107,7 +106,7 @@ def test_end_of_run_memory_grows_by_less_than_a_covariance_per_row(tmp_path, dem
     """The peak of the end of the run, for 8,000 and 32,000 rows (row groups of 6,000 estimate rows in both):
     what each further row adds is less than its 9 x 9 covariance (648 bytes). Holding the covariances whole
     (the earlier end of run) adds ~1,600 B a row (its arrays ~970 B, their temporaries the rest); here
-    ~440 B (the ~320 B of the other arrays and their temporaries)."""
+    ~480 B (the ~320 B of the other arrays and their temporaries)."""
     peaks = {}
     for n in (8_000, 32_000):
         _, numpy_peak, arrow_peak = _end_of_run(tmp_path / str(n), _log(tmp_path / str(n), n), dem)
@@ -136,3 +135,18 @@ def test_streamed_end_of_run_equals_the_in_memory_one(tmp_path, dem):
     assert za.namelist() == zb.namelist()
     for name in zb.namelist():
         assert za.read(name) == zb.read(name), name           # the same .npy bytes (header and data)
+
+
+@pytest.mark.parametrize("preset", [None, "mimalloc"])
+def test_trn_env_chooses_arrow_s_system_pool_unless_told_otherwise(preset):
+    """Importing trn_env before pyarrow's first allocation selects Arrow's system allocator (mimalloc, the
+    default, keeps what a long run's read-back freed); ARROW_DEFAULT_MEMORY_POOL, when set, wins."""
+    import os
+    import subprocess
+    import sys
+    env = {k: v for k, v in os.environ.items() if k != "ARROW_DEFAULT_MEMORY_POOL"}
+    if preset:
+        env["ARROW_DEFAULT_MEMORY_POOL"] = preset
+    code = "import trn_env, pyarrow as pa; print(pa.default_memory_pool().backend_name)"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == (preset or "system"), out

@@ -166,14 +166,14 @@ def test_biased_ranges_flag_recover_and_return(dem, name):
     after = t_end > BIAS_END_S + WINDOW + 3.0
     assert np.mean(status[after] == "degraded") < 0.2, status
     # "ok" again within the last 15 s: re-acquiring a cloud re-spread over hundreds of metres is chaotic in
-    # the particles' draws, and the rbpf's status waits for a spread under 30 m (rng 11: "ok" at 71 s, a
-    # second re-spread at 74 s, 2.6 m off at the end with a 36 m spread; over rng seeds 0-7, 7 end "ok")
+    # the particles' draws, and the rbpf's status waits for a spread under 30 m (the figures per rng seed:
+    # docs/validation/integrity.md, regression tests' bounds)
     assert "ok" in status[t_end > t_end[-1] - 15.0], status
     assert status[-1] != "degraded", status
     _band_is_chi_square(ests[-1])
-    # re-converged: 35 m for rbpf and pf; 45 m for the pmf, which with the INS's measured process noise (a
+    # re-converged: 35 m for rbpf and pf; 45 m for the pmf, which with the INS's process noise model (a
     # 0.1 m/sqrt(s) floor and a velocity offset instead of a 1.0 m/sqrt(s) random walk) leaves a
-    # neighbouring mode of the re-spread grid more slowly: 37 m here (25 m with the random walk)
+    # neighbouring mode of the re-spread grid more slowly (the figures: docs/validation/integrity.md)
     assert _horizontal_error_m(ests[-1], truth) < (45.0 if name == "pmf" else 35.0)
 
 

@@ -169,7 +169,7 @@ def test_basin_jump_probability_is_calibrated(map_and_world, map_world_states):
     states whose world look angle lies nearer the map's runner-up than the map's minimum. Their count over
     all states, and over the states the filter treats as safe (p <= 0.05, the default ambiguity_probability)
     and as ambiguous (p > 0.05), each lies within 3 sigma of the sum of the probabilities (a sum of
-    independent Bernoullis: variance sum p (1 - p)). Measured: 47 against 49.8 over all."""
+    independent Bernoullis: variance sum p (1 - p)). The counts: docs/validation/seed002.md (map noise)."""
     dem = map_and_world[0]
     A = map_world_states
     p = _jump_probabilities(dem, A[:, 2])
@@ -192,11 +192,11 @@ def test_look_angle_map_noise_matches_map_against_world(map_and_world, map_world
     (basin- jump probability <= 0.05, and inside the filter's 3-sigma gate of the calibrated variance plus
     the sensor's): its RMS lies between 0.6 and 1.25 times the calibrated model's sqrt(f_theta sigma_h /
     3R) (map_noise_calibration over the map's centre, other realisations than this region's world, as the
-    filter computes it; measured 0.83x, 381 of 383 states inside the gate), and over all of them (no gate)
-    between 0.5 and 0.85 times the flat-ground model's (0.66x: 0.95 deg against 1.43 deg); the range's
-    standard deviation between 0.6 and 1.4 times the calibrated sqrt(f_R) sigma_h (0.83x) and between 0.5
-    and 0.95 times sigma_h (0.73x: the closest point is a minimum over the map's errors; the world's is
-    also ~2 m nearer on average, which the vertical state takes)."""
+    filter computes it), and over all of them (no gate) between 0.5 and 0.85 times the flat-ground model's;
+    the range's standard deviation between 0.6 and 1.4 times the calibrated sqrt(f_R) sigma_h and between
+    0.5 and 0.95 times sigma_h (the closest point is a minimum over the map's errors; the world's is also
+    nearer on average, which the vertical state takes). The ratios these bands were set on:
+    docs/validation/seed002.md (map noise)."""
     dem = map_and_world[0]
     A = map_world_states
     sig = ira_model.interpolation_sigma_m(dem)
@@ -222,15 +222,15 @@ def test_look_angle_map_noise_matches_map_against_world(map_and_world, map_world
 
 def test_map_noise_calibration(dem):
     """map_noise_calibration on the 3" map (24 m detail, three realisations): the flat-ground model is an
-    upper bound (factors below 1, measured 0.78 and 0.72; 0.56 for the look angle gated at 3 sigma), the
-    result depends on the map's content, not the
-    object (a reloaded map hits the cache), and the variances combine as stated: with no terrain part the
-    map's own sigma takes the flat-ground values, with factors (1, 1) the flat-ground model of the RSS."""
+    upper bound (factors below 1; their values: docs/validation/seed002.md), the result depends on the map's
+    content, not the object (a reloaded map hits the cache), and the variances combine as stated: with no
+    terrain part the map's own sigma takes the flat-ground values, with factors (1, 1) the flat-ground model
+    of the RSS."""
     f_r, f_th = ira_model.map_noise_calibration(dem, 30.0)
     assert 0.4 < f_r < 0.95 and 0.4 < f_th < 0.95, (f_r, f_th)
     assert ira_model.map_noise_calibration(terrain.load("jacksboro"), 30.0) == (f_r, f_th)
     # the look angle's heavy tail: gated at 3 sigma (as the filter's theta_gate_sigmas) the rest's variance
-    # is smaller (measured 0.56 against 0.72), the range's unchanged
+    # is smaller, the range's unchanged
     sens = math.radians(0.1) ** 2
     f_r_g, f_th_g = ira_model.map_noise_calibration(dem, 30.0, gate_sigmas=3.0, theta_sensor_var=sens)
     assert f_r_g == f_r and 0.5 * f_th < f_th_g < 0.95 * f_th, (f_th, f_th_g)
@@ -266,8 +266,8 @@ def test_rbpf_consistent_on_the_coarse_map():
     """The default route as built in (the 3" map against the 30 m world, GNSS for 10 s then denied), 8 seeds
     x 240 s: the horizontal NEES at every 45th epoch after 15 s (the runs' NEES autocorrelation falls below
     0.1 at 43-58 s on this map, scripts/rbpf_consistency.py) lies inside the two-sided 95 % chi-square
-    bounds for that many 2-dof samples (issue 17's criterion); the measured figures and their history:
-    docs/validation/navigators.md (RBPF)."""
+    bounds for that many 2-dof samples (issue 17's criterion); the figures: docs/validation/navigators.md
+    (RBPF)."""
     _assert_default_route_consistent(map_is_world=False, every=45, max_rms_m=12.0)
 
 
@@ -308,8 +308,8 @@ def test_rbpf_consistent_when_the_map_is_the_world():
     the default route in JSBSim, GNSS for 10 s then denied, 8 seeds x 240 s, bias priors from the scenario's
     navigation-grade IMU. The horizontal NEES at every 15th epoch after 15 s (the runs' NEES autocorrelation
     falls below 0.1 at ~15 s here, scripts/rbpf_consistency.py --map-is-world) lies inside the two-sided 95 %
-    chi-square bounds for that many 2-dof samples (issue 17's criterion); the measured figures and their
-    history: docs/validation/navigators.md (RBPF)."""
+    chi-square bounds for that many 2-dof samples (issue 17's criterion); the figures:
+    docs/validation/navigators.md (RBPF)."""
     _assert_default_route_consistent(map_is_world=True, every=15, max_rms_m=10.0)
 
 
@@ -401,9 +401,9 @@ def test_search_step_finds_the_sensors_closest_point_on_a_fine_map():
     """On the default scenario's world (the 3" DEM refined with fractal detail to ~24 m posts) as the map,
     eq 23's coarse scan at the step search_step_for gives (0.6 of the smaller post spacing) puts the look
     angle within a small part of the sensor's 0.1 deg noise of the exact search's (terrain.queries.ira_return,
-    what the IRA measures) at 80 random states 1,500 m above the terrain: RMS below 0.02 deg (measured
-    0.0008). The old fixed 45 m step misses the minimum there (measured 0.14 deg RMS; on the default route's
-    seed 7 at the true states 0.19 deg with outliers of 2 deg), which the filter took for 0.1-deg data."""
+    what the IRA measures) at 80 random states 1,500 m above the terrain: RMS below 0.02 deg. The old fixed
+    45 m step misses the minimum on such a map, which the filter took for 0.1-deg data (the figures before
+    and after: docs/validation/seed002.md, the search step)."""
     from trn_env.scenario.loading import load_scenario, validate
     from trn_env.sim.closed_loop import ClosedLoop
 

@@ -14,9 +14,9 @@ SCEN = Path(__file__).parent / "scenarios"
 
 
 def test_rbpf_short_bounds():
-    """Measured (seed 0): horizontal RMS 3.85 m (max 31 m at the start, the 1-sigma-50 m prior), final
-    3.5 m, vertical RMS 1.46 m, no re-spread by the innovation test (its history:
-    docs/validation/navigators.md)."""
+    """tests/scenarios/rbpf_short.toml: horizontal RMS, final and last-30-s errors and vertical RMS bounded,
+    no re-spread by the innovation test. The figures the bounds were set on: docs/validation/seed002.md
+    (regression tests' bounds); their history: docs/validation/navigators.md."""
     res = ClosedLoop(load_scenario(SCEN / "rbpf_short.toml")).run()
     a = res.arrays
     assert res.termination == "completed"

@@ -130,3 +130,27 @@ def test_jacksboro_is_the_bundled_real_dem():
     crest = np.array([h[r - 3 : r + 4, c].max() for r, c in zip(rows, cols, strict=True)])
     beside = np.array([0.5 * (h[r - 15, c] + h[r + 15, c]) for r, c in zip(rows, cols, strict=True)])
     assert np.mean(crest - beside) > 80.0
+
+
+def test_bilinear_cell_is_the_formula_written_out_and_radii_pair_the_two_radii():
+    """kernels.bilinear_cell against the bilinear formula written out in numpy over random cells and
+    fractions (height and the gradient terms), cell_index against the cell choice by hand (inside, on the
+    last post, outside), and geodesy.radii_m against meridian_radius_m / prime_vertical_radius_m."""
+    rng = np.random.default_rng(4)
+    h = rng.normal(400.0, 80.0, (9, 11))
+    for _ in range(50):
+        i, j = int(rng.integers(0, 8)), int(rng.integers(0, 10))
+        u, v = rng.random(), rng.random()
+        got, a, b, ea, eb = kernels.bilinear_cell(h, i, j, u, v)
+        ref = (1 - u) * (1 - v) * h[i, j] + (1 - u) * v * h[i, j + 1] + u * (1 - v) * h[i + 1, j] \
+            + u * v * h[i + 1, j + 1]
+        assert got == pytest.approx(ref, rel=1e-12)
+        dref_du = (1 - v) * (h[i + 1, j] - h[i, j]) + v * (h[i + 1, j + 1] - h[i, j + 1])
+        dref_dv = (1 - u) * (h[i, j + 1] - h[i, j]) + u * (h[i + 1, j + 1] - h[i + 1, j])
+        assert b - a == pytest.approx(dref_du, rel=1e-9, abs=1e-9)
+        assert ea + u * (eb - ea) == pytest.approx(dref_dv, rel=1e-9, abs=1e-9)
+    assert kernels.cell_index(9, 11, 3.25, 7.5) == (3, 7, 0.25, 0.5)
+    assert kernels.cell_index(9, 11, 8.0, 10.0) == (7, 9, 1.0, 1.0)  # the last post: the cell before it
+    assert kernels.cell_index(9, 11, -0.01, 2.0)[0] == -1 and kernels.cell_index(9, 11, 2.0, 10.01)[0] == -1
+    for lat in np.radians([-80.0, -12.5, 0.0, 36.4, 89.0]):
+        assert geodesy.radii_m(lat) == (geodesy.meridian_radius_m(lat), geodesy.prime_vertical_radius_m(lat))

@@ -26,6 +26,21 @@ def _source_tree_subpackages() -> None:
 _source_tree_subpackages()
 
 
+def _arrow_memory_pool() -> None:
+    """Arrow's memory pool for this process: the system allocator unless ARROW_DEFAULT_MEMORY_POOL names
+    another (pyarrow reads the variable once, when it is imported, so this holds only where trn_env is
+    imported before pyarrow, as in the CLI and the scripts). pyarrow's default backend, mimalloc, keeps what
+    it freed: reading a long run's log back at its end (trn_env.logs.writer.read_ticks) left the process
+    holding about three times the bytes it read; the system allocator returns them (figures and command in
+    docs/validation/logs.md)."""
+    import os
+
+    os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
+
+
+_arrow_memory_pool()
+
+
 def _register_envs() -> None:
     try:
         import gymnasium

@@ -40,12 +40,11 @@ class AcquisitionStep:
         """Terrain SNR (dB) of the map along the dead-reckoned transect against the a-priori noise alone."""
         cfg = self.config
         t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = self._arrays()
-        heights, lat0, lon0, dlat, dlon = self._grid
         n = dt.size
         h_p = np.empty(n)
         replica_heights(
-            heights, lat0, lon0, dlat, dlon, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi,
-            r_n, r_e, self._interp, np.empty(n), np.empty(n), h_p,
+            self._map, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi, r_n, r_e, np.empty(n),
+            np.empty(n), h_p,
         )  # fmt: skip
         ok = valid & np.isfinite(h_p)
         if ok.sum() < self._n_min:
@@ -62,7 +61,7 @@ class AcquisitionStep:
         half = min(max(cfg.acquisition_position_half_m, 3.0 * sig), 2.0 * cfg.acquisition_position_half_m)
         w0 = time.perf_counter()
         res = acquisition.serial_search(
-            self._grid, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi, r_n, r_e, d, valid,
+            self._map, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi, r_n, r_e, d, valid,
             position_half_m=half,
             position_bin_m=cfg.acquisition_position_bin_m,
             speed_half_mps=cfg.acquisition_speed_half_mps,
@@ -71,7 +70,6 @@ class AcquisitionStep:
             heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
             cost=self._cost,
             remove_bias=cfg.remove_bias,
-            interp=self._interp,
             n_min=self._n_min,
             distinct_ratio=cfg.acquisition_distinct_ratio,
             exclusion_m=cfg.acquisition_exclusion_m,

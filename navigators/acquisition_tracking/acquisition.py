@@ -12,6 +12,10 @@ Distinct minimum (the thesis gives no test; our choice, spec section 8): for eac
 cost over speed and heading forms a position surface; the acquisition is accepted when its minimum is below
 `distinct_ratio` times the best cost found farther than `exclusion_m` from it. Otherwise it reports no
 distinct minimum and the navigator retries with the next transect.
+
+Kernel records (numba tuples): the map (terrain.kernels.MapRecord), the transect's motion
+(correlation.Motion), the measured profile with its cost (correlation.Profile) and the hypothesis grids
+(dn_grid, de_grid m, bv_grid m/s, bpsi_grid rad).
 """
 
 from __future__ import annotations
@@ -22,14 +26,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ...terrain.kernels import bilinear_at_index
+from ...terrain.kernels import bilinear_at_index, map_height
 from .correlation import (
     COST_MAD,
     COST_PEARSON,
-    INTERP_BILINEAR,
-    _map_height,
-    profile_cost,
+    Motion,
+    Profile,
     replica_offsets,
+    score,
 )
 
 
@@ -40,42 +44,22 @@ def _work_arrays(n):
 
 
 @njit(cache=True, forceinline=True)
-def _replica_height(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, fi, fj, dlat_k, dlon_k, interp):
-    """Map height (m) of a replica sample: at grid index (fi, fj) when bilinear, else at (lat_s + dlat_k,
-    lon_s + dlon_k) by the interpolation `interp`."""
-    if interp == INTERP_BILINEAR:
-        return bilinear_at_index(heights, fi, fj)
-    return _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_k, lon_s + dlon_k, interp)
+def _replica_height(rec, lat_s, lon_s, fi, fj, dlat_k, dlon_k):
+    """Map height (m) of a replica sample on the map record rec: at grid index (fi, fj) when bilinear, else
+    at (lat_s + dlat_k, lon_s + dlon_k) by its interpolation."""
+    if not rec[5]:
+        return bilinear_at_index(rec[0], fi, fj)
+    return map_height(rec, lat_s + dlat_k, lon_s + dlon_k)
 
 
 @njit(cache=True)
-def search_kernel(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
-    lat_c,
-    lon_c,
-    dn_grid,
-    de_grid,
-    dt,
-    m_v,
-    m_psi,
-    bv_grid,
-    bpsi_grid,
-    r_n,
-    r_e_cos,
-    d,
-    valid,
-    cost,
-    remove_bias,
-    interp,
-    n_min,
-    out,
-):
+def search_kernel(rec, lat_c, lon_c, hyp, motion, prof, out):
     """out[i, j, a, b] = cost of the replica starting dn_grid[i] north, de_grid[j] east of (lat_c, lon_c)
-    with references bv_grid[a] (m/s) and bpsi_grid[b] (rad)."""
+    with references bv_grid[a] (m/s) and bpsi_grid[b] (rad); hyp = (dn_grid, de_grid, bv_grid, bpsi_grid),
+    motion a correlation.Motion, prof a correlation.Profile, rec the map (MapRecord)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec
+    dn_grid, de_grid, bv_grid, bpsi_grid = hyp
+    dt, m_v, m_psi, r_n, r_e_cos = motion
     n = dt.shape[0]
     dlat_w, dlon_w, fi_w, fj_w, h_w = _work_arrays(n)
     for a in range(bv_grid.shape[0]):
@@ -91,16 +75,13 @@ def search_kernel(
                     lon_s = lon_c + de_grid[j] / r_e_cos
                     fj_s = (lon_s - lon0) / dlon
                     for k in range(n):
-                        h_w[k] = _replica_height(heights, lat0, lon0, dlat, dlon, lat_s, lon_s,
-                                                 fi_s + fi_w[k], fj_s + fj_w[k], dlat_w[k], dlon_w[k], interp)
-                    out[i, j, a, b] = profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+                        h_w[k] = _replica_height(rec, lat_s, lon_s, fi_s + fi_w[k], fj_s + fj_w[k], dlat_w[k],
+                                                 dlon_w[k])
+                    out[i, j, a, b] = score(prof, h_w)
 
 
 @njit(cache=True)
-def bounded_search_kernel(
-    heights, lat0, lon0, dlat, dlon, lat_c, lon_c, dn_grid, de_grid, dt, m_v, m_psi, bv_grid, bpsi_grid,
-    a_order, b_order, r_n, r_e_cos, d, valid, cost, remove_bias, interp, n_min, distinct_ratio, best0, out,
-):  # fmt: skip
+def bounded_search_kernel(rec, lat_c, lon_c, hyp, a_order, b_order, motion, prof, distinct_ratio, best0, out):
     """search_kernel with early abandonment; the search's outcome (best cell, its cost, distinct or not)
     is the exhaustive one.
 
@@ -115,6 +96,10 @@ def bounded_search_kernel(
     a_order / b_order: the order the speed / heading hypotheses are visited (centre first, so tau falls
     early). out is indexed [speed, heading, north, east] (written in the loops' order; serial_search
     hands _decide its transpose)."""
+    heights, lat0, lon0, dlat, dlon, cubic = rec
+    dn_grid, de_grid, bv_grid, bpsi_grid = hyp
+    dt, m_v, m_psi, r_n, r_e_cos = motion
+    d, valid, cost, remove_bias, n_min = prof
     n = dt.shape[0]
     n_lat, n_lon = heights.shape
     dlat_w, dlon_w, fi_w, fj_w, h_w = _work_arrays(n)
@@ -151,7 +136,7 @@ def bounded_search_kernel(
                 lat_s = lat_c + dn_grid[i] / r_n
                 fi_s = (lat_s - lat0) / dlat
                 # the whole replica's rows inside the grid: row index and weight once per sample
-                rows_in = interp == INTERP_BILINEAR and fi_s + fi_lo >= 0.0 and fi_s + fi_hi < n_lat - 1
+                rows_in = not cubic and fi_s + fi_lo >= 0.0 and fi_s + fi_hi < n_lat - 1
                 if rows_in:
                     for k in range(n):
                         f = fi_s + fi_w[k]
@@ -178,11 +163,10 @@ def bounded_search_kernel(
                             ha = h00 + v * (heights[ii, jj + 1] - h00)
                             hb = h10 + v * (heights[ii + 1, jj + 1] - h10)
                             h = ha + u_w[k] * (hb - ha)
-                        elif interp == INTERP_BILINEAR:   # (not _replica_height: a call keeps the loop small)
+                        elif not cubic:   # (not _replica_height: a call keeps the loop small)
                             h = bilinear_at_index(heights, fi_s + fi_w[k], fj_s + fj_w[k])
                         else:
-                            h = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[k],
-                                            lon_s + dlon_w[k], interp)
+                            h = map_height(rec, lat_s + dlat_w[k], lon_s + dlon_w[k])
                         h_w[k] = h
                         if bounded and valid[k] and h == h:
                             r = d[k] - h
@@ -202,7 +186,7 @@ def bounded_search_kernel(
                     if abandoned:
                         out[a, b, i, j] = lb / nv
                         continue
-                    c = profile_cost(d, valid, h_w, cost, remove_bias, n_min)
+                    c = score(prof, h_w)
                     out[a, b, i, j] = c
                     if c < best:
                         best = c
@@ -247,7 +231,7 @@ def _hypotheses(position_half_m, position_bin_m, speed_half_mps, speed_bin_mps, 
 
 
 def serial_search(
-    grid,
+    rec,
     lat_c: float,
     lon_c: float,
     dt: np.ndarray,
@@ -268,22 +252,22 @@ def serial_search(
     heading_bin_rad: float,
     cost: int,
     remove_bias: bool,
-    interp: int,
     n_min: int,
     distinct_ratio: float,
     exclusion_m: float,
 ) -> AcquisitionResult:
-    """Search the hypothesis grid around start (lat_c, lon_c) and references (b_v0, b_psi0)."""
-    heights, lat0, lon0, dlat, dlon = grid
+    """Search the hypothesis grid around start (lat_c, lon_c) and references (b_v0, b_psi0) on the map
+    record rec (terrain.kernels.MapRecord: its interpolation is the search's)."""
     dn, de, bv, bp = _hypotheses(position_half_m, position_bin_m, speed_half_mps, speed_bin_mps, b_v0,
                                  heading_half_rad, heading_bin_rad, b_psi0)
     out_abij = np.empty((bv.size, bp.size, dn.size, de.size))
+    motion = Motion(np.ascontiguousarray(dt, float), np.ascontiguousarray(m_v, float),
+                    np.ascontiguousarray(m_psi, float), float(r_n), float(r_e_cos))
+    prof = Profile(np.ascontiguousarray(d, float), np.ascontiguousarray(valid, np.bool_), int(cost),
+                   bool(remove_bias), int(n_min))
     bounded_search_kernel(
-        heights, lat0, lon0, dlat, dlon, float(lat_c), float(lon_c), dn, de,
-        np.ascontiguousarray(dt, float), np.ascontiguousarray(m_v, float), np.ascontiguousarray(m_psi, float),
-        bv, bp, centre_out(bv.size), centre_out(bp.size), float(r_n), float(r_e_cos),
-        np.ascontiguousarray(d, float), np.ascontiguousarray(valid, np.bool_), int(cost), bool(remove_bias),
-        int(interp), int(n_min), float(distinct_ratio), np.inf, out_abij,
+        rec, float(lat_c), float(lon_c), (dn, de, bv, bp), centre_out(bv.size), centre_out(bp.size), motion,
+        prof, float(distinct_ratio), np.inf, out_abij,
     )  # fmt: skip
     out = out_abij.transpose(2, 3, 0, 1)
     return _decide(out, dn, de, bv, bp, distinct_ratio, exclusion_m)
@@ -319,7 +303,7 @@ def _decide(out, dn, de, bv, bp, distinct_ratio, exclusion_m) -> AcquisitionResu
 
 
 def serial_search_reference(
-    grid,
+    rec,
     lat_c,
     lon_c,
     dt,
@@ -344,14 +328,15 @@ def serial_search_reference(
     distinct_ratio=0.8,
     exclusion_m=200.0,
 ) -> AcquisitionResult:
-    """Brute-force numpy twin of serial_search (bilinear; for tests on small grids)."""
+    """Brute-force numpy twin of serial_search (bilinear, whatever rec's interpolation; for tests on small
+    grids)."""
     from ...terrain.kernels import bilinear_batch
     from .correlation import (
         profile_cost_reference,
         replica_positions_reference,
     )
 
-    heights, lat0, lon0, dlat, dlon = grid
+    heights, lat0, lon0, dlat, dlon, _ = rec
     dn, de, bv, bp = _hypotheses(position_half_m, position_bin_m, speed_half_mps, speed_bin_mps, b_v0,
                                  heading_half_rad, heading_bin_rad, b_psi0)
     out = np.empty((dn.size, de.size, bv.size, bp.size))

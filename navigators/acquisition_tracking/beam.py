@@ -17,10 +17,9 @@ replica then samples the plain map at each sample's position + o (its offsets ro
 heading). Over level ground and a tilt beyond half the beam this is the thesis' correction, R cos(tilt -
 beam / 2), moved to the point it belongs to; inside the half beam over rough ground it is the footprint
 effect (replica_model "footprint" models that by a grey dilation at the point below the aircraft). The ray
-direction barely depends on the position error: on the reproduction's flight the measured-minus-replica
-height residual is 13-14 m RMS at the true position and with 30 m of position error, 13-15 m with 60 m,
-against 17-20 m for the footprint dilation at the point below the aircraft (scratch study on seed 0,
-README). Without roll_compensation the prediction uses a level attitude (roll = pitch = 0).
+direction barely depends on the position error, so predicting it at the estimate is enough (the residuals
+with and without position error: docs/validation/seed001.md). Without roll_compensation the prediction
+uses a level attitude (roll = pitch = 0).
 """
 
 from __future__ import annotations
@@ -30,9 +29,10 @@ import math
 import numpy as np
 from numba import njit
 
+from ...terrain.kernels import map_height
 from ...terrain.queries.radar_altimeter import _ra_batch
 from ...terrain.queries.shared import _ra_tables, _ra_workspace
-from .correlation import _map_height, replica_offsets, slope_sums
+from .correlation import replica_offsets, slope_sums
 
 
 def _ray_work(dem) -> dict:
@@ -83,8 +83,8 @@ def predicted_ray(
     C[0, 1, 2] = cr * sp * sy - sr * cy
     C[0, 2, 2] = cr * cp
     _ra_batch(
-        *work["grid"], pos[0], pos[1], pos[2], C, math.radians(0.5 * beamwidth_deg), float(max_range_m),
-        *work["tables"], *_ra_workspace(work["tables"][1].size), work["valid"], *outs,
+        *work["grid"], (pos[0], pos[1], pos[2], C), math.radians(0.5 * beamwidth_deg), float(max_range_m),
+        work["tables"], _ra_workspace(work["tables"][1].size), (work["valid"], *outs),
     )  # fmt: skip
     if not bool(work["valid"][0]):
         return None
@@ -119,28 +119,23 @@ def replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dlat_out,
 
 
 @njit(cache=True)
-def replica_heights_at(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e,
-    interp, h_out,
-):  # fmt: skip
-    """correlation.replica_heights with the beam offsets: map heights (m) at the replica's map points."""
+def replica_heights_at(rec, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, h_out):
+    """correlation.replica_heights with the beam offsets: heights (m) of the map record rec at the replica's
+    map points."""
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
     replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
     for i in range(n):
-        h_out[i] = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dla[i], lon_s + dlo[i], interp)
+        h_out[i] = map_height(rec, lat_s + dla[i], lon_s + dlo[i])
 
 
 @njit(cache=True)
-def information_at(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e,
-    valid, track_rad,
-):  # fmt: skip
+def information_at(rec, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, valid, track_rad):
     """correlation.along_cross_information at the replica's map points (beam offsets included): the sums
     of the squared along-track and cross-track map slopes over the valid samples (dimensionless)."""
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
     replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
-    return slope_sums(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, valid, r_n, r_e_cos, track_rad)
+    return slope_sums(rec, lat_s, lon_s, dla, dlo, valid, r_n, r_e_cos, track_rad)

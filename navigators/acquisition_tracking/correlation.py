@@ -23,12 +23,15 @@ on a parabola maps x -> -x and never locks. A replica sample off the map (NaN
 height) or a measured sample that dropped out is left out of the sums; fewer than n_min samples left gives
 inf (no correlation).
 
-The replica positions and the costs have plain numpy `*_reference` twins: the tests' brute force.
+The map travels as one record (terrain.kernels.MapRecord: grid + interpolation, `Dem.record(cubic)`); the
+navigator's `interpolation` setting is the record's `cubic` flag. The replica positions and the costs have
+plain numpy `*_reference` twins: the tests' brute force.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -42,6 +45,30 @@ COSTS = {"mad": COST_MAD, "pearson": COST_PEARSON, "msd": COST_MSD}
 INTERP_BILINEAR = 0
 INTERP_BICUBIC = 1
 INTERPOLATIONS = {"bilinear": INTERP_BILINEAR, "bicubic": INTERP_BICUBIC}
+
+
+class Profile(NamedTuple):
+    """The measured profile and how a replica is scored against it (profile_cost's arguments but the
+    replica's heights): measured terrain heights d (m), their validity, the cost code (COSTS), remove_bias
+    and the fewest usable samples n_min. numba passes it as a tuple."""
+
+    d: np.ndarray
+    valid: np.ndarray
+    cost: int
+    remove_bias: bool
+    n_min: int
+
+
+class Motion(NamedTuple):
+    """A transect's motion for replica_offsets: sample times from the previous sample dt (s), aiding speed
+    m_v (m/s) and track m_psi (rad) per sample, meridian radius + h r_n and (prime vertical radius + h)
+    cos(lat) r_e_cos at its start (m). numba passes it as a tuple."""
+
+    dt: np.ndarray
+    m_v: np.ndarray
+    m_psi: np.ndarray
+    r_n: float
+    r_e_cos: float
 
 
 @njit(cache=True)
@@ -69,13 +96,6 @@ def replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_out, dlon_out
         dlat_out[i] = dn / r_n
         dlon_out[i] = de / r_e_cos
     return dn, de
-
-
-@njit(cache=True)
-def _map_height(heights, lat0, lon0, dlat, dlon, lat, lon, interp):
-    """Map height (m) at (lat, lon) by the interpolation code interp: terrain.kernels.map_height on the grid
-    as a record."""
-    return map_height((heights, lat0, lon0, dlat, dlon, interp == INTERP_BICUBIC), lat, lon)
 
 
 @njit(cache=True)
@@ -122,11 +142,19 @@ def profile_cost(d, valid, h, cost, remove_bias, n_min):
     return acc / m
 
 
+@njit(cache=True, forceinline=True)
+def score(prof, h):
+    """profile_cost of the replica heights h (m) against the Profile record prof."""
+    d, valid, cost, remove_bias, n_min = prof
+    return profile_cost(d, valid, h, cost, remove_bias, n_min)
+
+
 @njit(cache=True)
-def map_heights(heights, lat0, lon0, dlat, dlon, lat, lon, interp, h_out):
-    """h_out[i] = the map height at (lat[i], lon[i]) (rad): the interpolation chosen once, outside the loop
-    (a branch per sample costs the loops' replicas about 1.7x)."""
-    if interp == INTERP_BICUBIC:
+def map_heights(rec, lat, lon, h_out):
+    """h_out[i] = the height (m) of the map record rec at (lat[i], lon[i]) (rad): the interpolation chosen
+    once, outside the loop (a branch per sample costs the loops' replicas about 1.7x)."""
+    heights, lat0, lon0, dlat, dlon, cubic = rec
+    if cubic:
         for i in range(lat.shape[0]):
             h_out[i] = bicubic(heights, lat0, lon0, dlat, dlon, lat[i], lon[i])
     else:
@@ -136,11 +164,7 @@ def map_heights(heights, lat0, lon0, dlat, dlon, lat, lon, interp, h_out):
 
 @njit(cache=True)
 def replica_heights(
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
+    rec,
     lat_s,
     lon_s,
     dt,
@@ -150,21 +174,23 @@ def replica_heights(
     b_psi,
     r_n,
     r_e_cos,
-    interp,
     dlat_w,
     dlon_w,
     h_out,
 ):
-    """Map heights (m) of the replica from start (lat_s, lon_s) with references (b_v, b_psi) into h_out."""
+    """Map heights (m) of the replica from start (lat_s, lon_s) with references (b_v, b_psi) into h_out, on
+    the map record rec."""
     replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
     for i in range(dt.shape[0]):
-        h_out[i] = _map_height(heights, lat0, lon0, dlat, dlon, lat_s + dlat_w[i], lon_s + dlon_w[i], interp)
+        h_out[i] = map_height(rec, lat_s + dlat_w[i], lon_s + dlon_w[i])
 
 
 @njit(cache=True)
-def slope_sums(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, valid, r_n, r_e_cos, track_rad):
+def slope_sums(rec, lat_s, lon_s, dla, dlo, valid, r_n, r_e_cos, track_rad):
     """(sum of squared along-track, cross-track map slopes) at the points (lat_s + dla, lon_s + dlo) of the
-    valid samples (bilinear gradient; dimensionless)."""
+    valid samples (the bilinear gradient of the map record rec's grid, whatever its interpolation;
+    dimensionless)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec
     ca = math.cos(track_rad)
     sa = math.sin(track_rad)
     s_al = 0.0
@@ -187,18 +213,14 @@ def slope_sums(heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, valid, r
 
 
 @njit(cache=True)
-def along_cross_information(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, valid, track_rad
-):
+def along_cross_information(rec, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, valid, track_rad):
     """(sum of squared along-track, cross-track map slopes) over the replica's valid samples (bilinear
     gradient; 1/m^2 x m^2 = dimensionless): the terrain information a match has in each direction."""
     n = dt.shape[0]
     dlat_w = np.empty(n)
     dlon_w = np.empty(n)
     replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
-    return slope_sums(
-        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dlat_w, dlon_w, valid, r_n, r_e_cos, track_rad
-    )
+    return slope_sums(rec, lat_s, lon_s, dlat_w, dlon_w, valid, r_n, r_e_cos, track_rad)
 
 
 # --------------------------------------------------------------------------------------- references

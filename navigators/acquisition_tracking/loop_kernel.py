@@ -28,7 +28,7 @@ that does not converge keeps the NCS estimate.
 MSD (correlation.py) is a parabola at its minimum; the loops correlate with its square root (the RMS
 difference, V-shaped), since discriminator (3.5) on a parabola maps x -> -x and never locks.
 
-The module is the one concept "the tracking loops' numba kernels" (about 650 lines): the speed / heading
+The module is the one concept "the tracking loops' numba kernels": the speed / heading
 loop and the start-point loop share the correlation functions, V analysis and ELS here, and track_loops
 runs them all in one compiled call; its records are in loop_records.py.
 """
@@ -44,8 +44,8 @@ from .beam import replica_heights_at, replica_points
 from .correlation import (
     COST_MSD,
     map_heights,
-    profile_cost,
     replica_offsets,
+    score,
 )
 from .loop_records import LoopOutputs, LoopSettings, TransectRecord  # noqa: F401
 from .tracking import DISC_THESIS
@@ -88,11 +88,9 @@ def replica_basis(dt, m_v, m_psi, basis):
 
 
 @njit(cache=True)
-def basis_cost(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, w,
-):  # fmt: skip
-    """Cost of the replica (b_v, b_psi) from a replica_basis; w: (3, N) work rows (lat, lon, map height)."""
+def basis_cost(rec, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos, prof, w):
+    """Cost of the replica (b_v, b_psi) from a replica_basis on the map record rec against the profile prof
+    (correlation.Profile); w: (3, N) work rows (lat, lon, map height)."""
     cb = math.cos(b_psi)
     sb = math.sin(b_psi)
     la, lo, h = w[0], w[1], w[2]
@@ -101,56 +99,43 @@ def basis_cost(
         sn = basis[2, i] + b_v * basis[3, i]
         la[i] = lat_s + (cb * cn - sb * sn) / r_n
         lo[i] = lon_s + (sb * cn + cb * sn) / r_e_cos
-    map_heights(heights, lat0, lon0, dlat, dlon, la, lo, interp, h)
-    return profile_cost(d, valid, h, cost, remove_bias, n_min)
+    map_heights(rec, la, lo, h)
+    return score(prof, h)
 
 
 @njit(cache=True)
-def _cost_x(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x, w,
-):  # fmt: skip
-    """Tracking cost of the replica with the loop's quantity at x (b_v for which 0, b_psi for 1)."""
+def _cost_x(rec, rep, prof, which, x, w):
+    """Tracking cost of the replica with the loop's quantity at x (b_v for which 0, b_psi for 1); rep: the
+    replica record (lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)."""
+    lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos = rep
     bv = x if which == 0 else b_v
     bp = x if which == 1 else b_psi
-    c = basis_cost(
-        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, bv, bp, r_n, r_e_cos,
-        d, valid, cost, remove_bias, interp, n_min, w,
-    )  # fmt: skip
-    if cost == COST_MSD:
+    c = basis_cost(rec, lat_s, lon_s, basis, bv, bp, r_n, r_e_cos, prof, w)
+    if prof[2] == COST_MSD:
         return math.sqrt(c)
     return c
 
 
 @njit(cache=True)
-def _scf(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, w,
-):  # fmt: skip
+def _scf(rec, rep, prof, which, x0, offsets, out, w):
     """out[k] = the loops' cost (_cost_x) with the loop's quantity at x0 + offsets[k]."""
     for k in range(offsets.shape[0]):
-        out[k] = _cost_x(
-            heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-            d, valid, cost, remove_bias, interp, n_min, which, x0 + offsets[k], w,
-        )  # fmt: skip
+        out[k] = _cost_x(rec, rep, prof, which, x0 + offsets[k], w)
 
 
 @njit(cache=True)
-def correlation_function(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, offsets, out,
-):  # fmt: skip
+def correlation_function(rec, lat_s, lon_s, motion, b_v, b_psi, prof, which, offsets, out):
     """The SCF (which = 0: offsets added to b_v, m/s) or HCF (which = 1: offsets added to b_psi, rad) of
-    the replica at (b_v, b_psi), as the loops see it: out[k] = the cost at offsets[k] (spec section 2; MSD
-    as its square root, module docstring)."""
+    the replica at (b_v, b_psi) from (lat_s, lon_s) with the transect's motion (correlation.Motion), as the
+    loops see it: out[k] = the cost at offsets[k] (spec section 2; MSD as its square root, module
+    docstring)."""
+    dt, m_v, m_psi, r_n, r_e_cos = motion
     n = dt.shape[0]
     basis = np.empty((4, n))
     replica_basis(dt, m_v, m_psi, basis)
     x0 = b_v if which == 0 else b_psi
-    _scf(
-        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-        d, valid, cost, remove_bias, interp, n_min, which, x0, offsets, out, np.empty((3, n)),
-    )  # fmt: skip
+    rep = (lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
+    _scf(rec, rep, prof, which, x0, offsets, out, np.empty((3, n)))
 
 
 @njit(cache=True)
@@ -178,24 +163,17 @@ def _advance(x, he, hl, hp, spacing, threshold, discriminator):
 
 
 @njit(cache=True)
-def _stage(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold, break_iteration,
-    discriminator, w,
-):  # fmt: skip
+def _stage(rec, rep, prof, which, x0, spacing, threshold, break_iteration, discriminator, w):
     """One early-late stage from x0 (discriminator eq 3.5, or v_fit; tracking.py): (x, iterations, locked).
     A replica off the map (inf cost early or late) ends the stage out of lock at the last finite x."""
     x = x0
     it = 1
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
     while it < break_iteration:
-        he = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x - spacing, w)
-        hl = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x + spacing, w)
+        he = _cost_x(rec, rep, prof, which, x - spacing, w)
+        hl = _cost_x(rec, rep, prof, which, x + spacing, w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
-        hp = 0.0 if discriminator == DISC_THESIS else _cost_x(
-            *g, d, valid, cost, remove_bias, interp, n_min, which, x, w
-        )  # fmt: skip
+        hp = 0.0 if discriminator == DISC_THESIS else _cost_x(rec, rep, prof, which, x, w)
         x, locked = _advance(x, he, hl, hp, spacing, threshold, discriminator)
         if locked:
             return x, it, True
@@ -215,26 +193,19 @@ def els_intersection(x1, y1, x2, y2, x3, y3, x4, y4):
 
 
 @njit(cache=True)
-def _els_step(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, x, step, outer, max_steps, w,
-):  # fmt: skip
+def _els_step(rec, rep, prof, which, x, step, outer, max_steps, w):
     """The prompt's tracking error T = x - x* from four correlators placed around x (module docstring);
     (T, ok)."""
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
-    hp = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x, w)
+    hp = _cost_x(rec, rep, prof, which, x, w)
     inner = np.empty(2)
     for side in range(2):  # 0: early (x - ...), 1: late (x + ...)
         sgn = -1.0 if side == 0 else 1.0
         xi = x + sgn * step
-        e = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, xi, w)
+        e = _cost_x(rec, rep, prof, which, xi, w)
         j = 1
         if e < hp:  # the minimum lies beyond this correlator: step outward while the cost falls
             while j < max_steps:
-                e2 = _cost_x(
-                    *g, d, valid, cost, remove_bias, interp, n_min, which, x + sgn * (j + 1) * step,
-                    w,
-                )  # fmt: skip
+                e2 = _cost_x(rec, rep, prof, which, x + sgn * (j + 1) * step, w)
                 j += 1
                 if not (e2 < e):
                     break
@@ -244,10 +215,10 @@ def _els_step(
     x3 = x + inner[1]
     x1 = x - max(outer, inner[0] + step)
     x4 = x + max(outer, inner[1] + step)
-    y1 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x1, w)
-    y2 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x2, w)
-    y3 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x3, w)
-    y4 = _cost_x(*g, d, valid, cost, remove_bias, interp, n_min, which, x4, w)
+    y1 = _cost_x(rec, rep, prof, which, x1, w)
+    y2 = _cost_x(rec, rep, prof, which, x2, w)
+    y3 = _cost_x(rec, rep, prof, which, x3, w)
+    y4 = _cost_x(rec, rep, prof, which, x4, w)
     if not (np.isfinite(y1) and np.isfinite(y2) and np.isfinite(y3) and np.isfinite(y4)):
         return 0.0, False
     xs, a1, a2 = els_intersection(x1, y1, x2, y2, x3, y3, x4, y4)
@@ -384,15 +355,18 @@ def choose_spacing_kernel(offsets, values, bandwidth, min_offset, spacings_desc,
 
 
 @njit(cache=True)
-def loop_epoch(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos,
-    d, valid, cost, remove_bias, interp, n_min, which, reach, n_side, spacings_desc, symmetry_max,
-    threshold_1, spacing_2, threshold_2, break_iteration, discriminator, mitigation, o_n, o_e,
-):  # fmt: skip
-    """One loop's epoch (module docstring). Returns (x, it_1, it_2, it_els, locked, v_shape, bandwidth,
-    min_offset, min_cost, slope_left, slope_right, spacing_1, els_applied). o_n, o_e: the beam offsets
-    of the samples' map points (m, replica frame; beam.py), added to the basis' P and R rows so that they
-    turn with b_psi."""
+def loop_epoch(rec, lat_s, lon_s, motion, b_v, b_psi, prof, which, loop, vset, o_n, o_e):
+    """One loop's epoch (module docstring) on the map record rec, from (lat_s, lon_s) with the transect's
+    motion (correlation.Motion) and references (b_v, b_psi), against the profile prof
+    (correlation.Profile). loop = (reach, spacings_desc, threshold_1, spacing_2, threshold_2): the loop's
+    reach, first-stage spacings (widest first) and threshold, second-stage spacing and threshold; vset =
+    (n_side, symmetry_max, break_iteration, discriminator, mitigation): the V analysis and stages. Returns
+    (x, it_1, it_2, it_els, locked, v_shape, bandwidth, min_offset, min_cost, slope_left, slope_right,
+    spacing_1, els_applied). o_n, o_e: the beam offsets of the samples' map points (m, replica frame;
+    beam.py), added to the basis' P and R rows so that they turn with b_psi."""
+    dt, m_v, m_psi, r_n, r_e_cos = motion
+    reach, spacings_desc, threshold_1, spacing_2, threshold_2 = loop
+    n_side, symmetry_max, break_iteration, discriminator, mitigation = vset
     n = dt.shape[0]
     w = np.empty((3, n))
     basis = np.empty((4, n))
@@ -400,25 +374,21 @@ def loop_epoch(
     for i in range(n):
         basis[0, i] += o_n[i]
         basis[2, i] += o_e[i]
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
+    rep = (lat_s, lon_s, basis, b_v, b_psi, r_n, r_e_cos)
     x0 = b_v if which == 0 else b_psi
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
     vals = np.empty(offs.shape[0])
-    _scf(*g, d, valid, cost, remove_bias, interp, n_min, which, x0, offs, vals, w)
+    _scf(rec, rep, prof, which, x0, offs, vals, w)
     v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
     spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
-    x, it1, locked = _stage(
-        *g, d, valid, cost, remove_bias, interp, n_min, which, x0, spacing, threshold_1, break_iteration,
-        discriminator, w,
-    )  # fmt: skip
+    x, it1, locked = _stage(rec, rep, prof, which, x0, spacing, threshold_1, break_iteration, discriminator,
+                            w)
     it2 = 0
     it_els = 0
     els_applied = False
     if mitigation != MITIGATION_NONE:
-        x2, it2, lock2 = _stage(
-            *g, d, valid, cost, remove_bias, interp, n_min, which, x, spacing_2, threshold_2,
-            break_iteration, discriminator, w,
-        )  # fmt: skip
+        x2, it2, lock2 = _stage(rec, rep, prof, which, x, spacing_2, threshold_2, break_iteration,
+                                discriminator, w)
         if np.isfinite(x2):
             x = x2
         locked = locked and lock2
@@ -428,10 +398,7 @@ def loop_epoch(
         max_steps = max(int(math.ceil(reach / spacing_2)), 2)
         it = 1
         while it < break_iteration:
-            t_err, ok = _els_step(
-                *g, d, valid, cost, remove_bias, interp, n_min, which, xe, spacing_2, outer, max_steps,
-                w,
-            )  # fmt: skip
+            t_err, ok = _els_step(rec, rep, prof, which, xe, spacing_2, outer, max_steps, w)
             if not ok:
                 break
             xe -= t_err
@@ -449,69 +416,52 @@ def loop_epoch(
 
 
 @njit(cache=True)
-def _shift_cost_pre(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-    u_n, u_e, r_n, r_e_cos, x, w,
-):  # fmt: skip
+def _shift_cost_pre(rec, srep, prof, x, w):
     """Cost of the replica with its start moved x metres along (u_n, u_e), from the replica's offsets
     dla, dlo (rad) computed once: the shift moves the start only, so the offsets (references fixed) are the
-    same for every x."""
+    same for every x. srep: the shifted replica's record (lat_s, lon_s, dla, dlo, u_n, u_e, r_n, r_e_cos)."""
+    lat_s, lon_s, dla, dlo, u_n, u_e, r_n, r_e_cos = srep
     ls = lat_s + x * u_n / r_n
     lo_s = lon_s + x * u_e / r_e_cos
     la, lo, h = w[0], w[1], w[2]
     for i in range(dla.shape[0]):
         la[i] = ls + dla[i]
         lo[i] = lo_s + dlo[i]
-    map_heights(heights, lat0, lon0, dlat, dlon, la, lo, interp, h)
-    return profile_cost(d, valid, h, cost, remove_bias, n_min)
+    map_heights(rec, la, lo, h)
+    return score(prof, h)
 
 
 @njit(cache=True)
-def _shift_function(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-    u_n, u_e, r_n, r_e_cos, offsets, out, w,
-):  # fmt: skip
+def _shift_function(rec, srep, prof, offsets, out, w):
     for k in range(offsets.shape[0]):
-        out[k] = _shift_cost_pre(
-            heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp,
-            n_min, u_n, u_e, r_n, r_e_cos, offsets[k], w,
-        )  # fmt: skip
+        out[k] = _shift_cost_pre(rec, srep, prof, offsets[k], w)
 
 
 @njit(cache=True)
-def shift_correlation_function(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
-    cost, remove_bias, interp, n_min, u_n, u_e, offsets, out,
-):  # fmt: skip
+def shift_correlation_function(rec, lat_s, lon_s, motion, b_v, b_psi, prof, u_n, u_e, offsets, out):
     """out[k] = cost of the replica (b_v, b_psi) with its start moved offsets[k] metres along (u_n, u_e)
-    (the start-point loops' correlation function)."""
+    (the start-point loops' correlation function; records as loop_epoch's)."""
+    dt, m_v, m_psi, r_n, r_e_cos = motion
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
     replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dla, dlo)
-    _shift_function(
-        heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-        u_n, u_e, r_n, r_e_cos, offsets, out, np.empty((3, n)),
-    )  # fmt: skip
+    srep = (lat_s, lon_s, dla, dlo, u_n, u_e, r_n, r_e_cos)
+    _shift_function(rec, srep, prof, offsets, out, np.empty((3, n)))
 
 
 @njit(cache=True)
-def _shift_stage(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-    u_n, u_e, r_n, r_e_cos, x0, spacing, threshold, break_iteration, discriminator, w,
-):  # fmt: skip
+def _shift_stage(rec, srep, prof, x0, spacing, threshold, break_iteration, discriminator, w):
     """One stage of a start-point loop from shift x0 (m), as _stage: (x, iterations, locked)."""
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-         u_n, u_e, r_n, r_e_cos)  # fmt: skip
     x = x0
     it = 1
     locked = False
     while it < break_iteration:
-        he = _shift_cost_pre(*g, x - spacing, w)
-        hl = _shift_cost_pre(*g, x + spacing, w)
+        he = _shift_cost_pre(rec, srep, prof, x - spacing, w)
+        hl = _shift_cost_pre(rec, srep, prof, x + spacing, w)
         if not (np.isfinite(he) and np.isfinite(hl)):
             return x, it, False
-        hp = 0.0 if discriminator == DISC_THESIS else _shift_cost_pre(*g, x, w)
+        hp = 0.0 if discriminator == DISC_THESIS else _shift_cost_pre(rec, srep, prof, x, w)
         x, locked = _advance(x, he, hl, hp, spacing, threshold, discriminator)
         if locked:
             break
@@ -520,31 +470,32 @@ def _shift_stage(
 
 
 @njit(cache=True)
-def shift_loop_epoch(
-    heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid,
-    cost, remove_bias, interp, n_min, u_n, u_e, reach, n_side, spacings_desc, symmetry_max, threshold_1,
-    spacing_2, threshold_2, break_iteration, discriminator, narrow, o_n, o_e,
-):  # fmt: skip
-    """One start-point loop's epoch along (u_n, u_e) in one call: the shift correlation function at
-    2 n_side + 1 offsets in [-reach, reach] m, its V-shape, the spacing choice, the first stage from 0 and
-    (narrow) the second stage at spacing_2. Returns (x m, locked, v_shape, bandwidth, min_offset, min_cost,
-    slope_left, slope_right); x = 0, unlocked when the loop ran off the map or beyond the function's reach.
-    o_n, o_e: the samples' beam offsets (m, replica frame; beam.py)."""
+def shift_loop_epoch(rec, lat_s, lon_s, motion, b_v, b_psi, prof, u_n, u_e, loop, vset, o_n, o_e):
+    """One start-point loop's epoch along (u_n, u_e) in one call (records as loop_epoch's, loop's quantities
+    in m): the shift correlation function at 2 n_side + 1 offsets in [-reach, reach] m, its V-shape, the
+    spacing choice, the first stage from 0 and (mitigation "ncs" only) the second stage at spacing_2.
+    Returns (x m, locked, v_shape, bandwidth, min_offset, min_cost, slope_left, slope_right); x = 0,
+    unlocked when the loop ran off the map or beyond the function's reach. o_n, o_e: the samples' beam
+    offsets (m, replica frame; beam.py)."""
+    dt, m_v, m_psi, r_n, r_e_cos = motion
+    reach, spacings_desc, threshold_1, spacing_2, threshold_2 = loop
+    n_side, symmetry_max, break_iteration, discriminator, mitigation = vset
+    narrow = mitigation == MITIGATION_NCS
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
     w = np.empty((3, n))
     replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dla, dlo)
-    g = (heights, lat0, lon0, dlat, dlon, lat_s, lon_s, dla, dlo, d, valid, cost, remove_bias, interp, n_min,
-         u_n, u_e, r_n, r_e_cos)  # fmt: skip
+    srep = (lat_s, lon_s, dla, dlo, u_n, u_e, r_n, r_e_cos)
     offs = np.linspace(-reach, reach, 2 * n_side + 1)
     vals = np.empty(offs.shape[0])
-    _shift_function(*g, offs, vals, w)
+    _shift_function(rec, srep, prof, offs, vals, w)
     v_shape, bw, m_off, m_cost, sl, sr = analyse_v_kernel(offs, vals, 2, 0.05)
     spacing, _ = choose_spacing_kernel(offs, vals, bw, m_off, spacings_desc, symmetry_max)
-    x, _, locked = _shift_stage(*g, 0.0, spacing, threshold_1, break_iteration, discriminator, w)
+    x, _, locked = _shift_stage(rec, srep, prof, 0.0, spacing, threshold_1, break_iteration, discriminator, w)
     if narrow:
-        x2, _, lock2 = _shift_stage(*g, x, spacing_2, threshold_2, break_iteration, discriminator, w)
+        x2, _, lock2 = _shift_stage(rec, srep, prof, x, spacing_2, threshold_2, break_iteration,
+                                    discriminator, w)
         if np.isfinite(x2):
             x = x2
         locked = locked and lock2
@@ -565,7 +516,7 @@ def _put_shape(out, k, v_shape, bw, m_off, m_cost, sl, sr):
 
 
 @njit(cache=True)
-def track_loops(grid, transect, settings, out):
+def track_loops(rec, transect, settings, out):
     """All of one tracking epoch's loops in one call (navigator.py's order): aided, the start-point loops
     along and across the track at the references, then the speed and heading loops (loop_epoch; speed first
     unless speed_first is False); unaided the loops first and the start-point loops after them. Then the
@@ -578,19 +529,21 @@ def track_loops(grid, transect, settings, out):
     bandwidth, min_offset, min_cost, slope_left, slope_right). Returns (b_v, b_psi, lat_p, lon_p, speed
     spacing, heading spacing): the references and start point the loops found.
 
-    Records (numba tuples): grid = the map's (heights, lat0, lon0, dlat, dlon) (terrain.Dem.grid);
+    Records (numba tuples): rec = the map and its interpolation (terrain.kernels.MapRecord);
     transect = TransectRecord; settings = LoopSettings (fixed by the navigator's config); out = LoopOutputs
     (arrays the caller allocates)."""
-    heights, lat0, lon0, dlat, dlon = grid
     (lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d, valid, mean_m_v, mean_m_psi, o_n,
      o_e) = transect
-    (cost, remove_bias, interp, n_min, aided, position_loops, speed_first, n_side, symmetry_max,
+    (cost, remove_bias, n_min, aided, position_loops, speed_first, n_side, symmetry_max,
      break_iteration, discriminator, mitigation, f_r, sample_period_s, speed_reach, speed_desc,
      speed_threshold_1, speed_spacing_2, speed_threshold_2, heading_desc, heading_threshold_1,
      heading_spacing_2, heading_threshold_2, position_reach, position_desc, position_threshold_1,
      position_spacing_2, position_threshold_2) = settings
     out_its, out_locked, out_ran, out_shapes, out_h_prompt = out
     n = dt.shape[0]
+    prof = (d, valid, cost, remove_bias, n_min)
+    motion = (dt, m_v, m_psi, r_n, r_e_cos)
+    vset = (n_side, symmetry_max, break_iteration, discriminator, mitigation)
     for k in range(4):
         out_ran[k] = False
         out_locked[k] = False
@@ -605,24 +558,16 @@ def track_loops(grid, transect, settings, out):
                 which = 0 if (j == 0) == speed_first else 1
                 if which == 0:
                     reach = speed_reach
-                    r = loop_epoch(
-                        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
-                        r_e_cos, d, valid, cost, remove_bias, interp, n_min, 0, reach, n_side, speed_desc,
-                        symmetry_max, speed_threshold_1, speed_spacing_2, speed_threshold_2, break_iteration,
-                        discriminator, mitigation, o_n, o_e,
-                    )  # fmt: skip
+                    loop = (reach, speed_desc, speed_threshold_1, speed_spacing_2, speed_threshold_2)
+                    r = loop_epoch(rec, lat_p, lon_p, motion, b_v, b_psi, prof, 0, loop, vset, o_n, o_e)
                     b_v = r[0]
                     sp_v = r[11]
                 else:  # spec section 2: 2 sin(eps / 2) v t N = f R_db
                     v = max(mean_m_v + b_v, 1.0)
                     reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * sample_period_s * n)))
                     reach = max(reach, heading_desc[0])
-                    r = loop_epoch(
-                        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n,
-                        r_e_cos, d, valid, cost, remove_bias, interp, n_min, 1, reach, n_side, heading_desc,
-                        symmetry_max, heading_threshold_1, heading_spacing_2, heading_threshold_2,
-                        break_iteration, discriminator, mitigation, o_n, o_e,
-                    )  # fmt: skip
+                    loop = (reach, heading_desc, heading_threshold_1, heading_spacing_2, heading_threshold_2)
+                    r = loop_epoch(rec, lat_p, lon_p, motion, b_v, b_psi, prof, 1, loop, vset, o_n, o_e)
                     b_psi = r[0] if aided else math.atan2(math.sin(r[0]), math.cos(r[0]))
                     sp_psi = r[11]
                 _x, it1, it2, _it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, _sp, _els = r
@@ -637,23 +582,16 @@ def track_loops(grid, transect, settings, out):
         psi_c = mean_m_psi + b_psi if aided else b_psi
         c = math.cos(psi_c)
         sn = math.sin(psi_c)
+        loop = (position_reach, position_desc, position_threshold_1, position_spacing_2, position_threshold_2)
         for j in range(2):
             u_n = c if j == 0 else -sn
             u_e = sn if j == 0 else c
-            r2 = shift_loop_epoch(
-                heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, d,
-                valid, cost, remove_bias, interp, n_min, u_n, u_e, position_reach, n_side, position_desc,
-                symmetry_max, position_threshold_1, position_spacing_2, position_threshold_2,
-                break_iteration, discriminator, mitigation == MITIGATION_NCS, o_n, o_e,
-            )  # fmt: skip
+            r2 = shift_loop_epoch(rec, lat_p, lon_p, motion, b_v, b_psi, prof, u_n, u_e, loop, vset, o_n, o_e)
             x, locked, v_shape, bw, m_off, m_cost, sl, sr = r2
             lat_p = lat_p + x * u_n / r_n
             lon_p = lon_p + x * u_e / r_e_cos
             out_locked[2 + j] = locked
             out_ran[2 + j] = True
             _put_shape(out_shapes, 2 + j, v_shape, bw, m_off, m_cost, sl, sr)
-    replica_heights_at(
-        heights, lat0, lon0, dlat, dlon, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e,
-        interp, out_h_prompt,
-    )  # fmt: skip
+    replica_heights_at(rec, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, out_h_prompt)
     return b_v, b_psi, lat_p, lon_p, sp_v, sp_psi

@@ -12,14 +12,14 @@ import numpy as np
 
 class LoopSettings(NamedTuple):
     """track_loops' settings, fixed by the navigator's configuration (AcqTrackConfig): the correlation
-    (cost, remove_bias, interp, n_min), which loops run and in what order, the V analysis (n_side points,
+    (cost, remove_bias, n_min; the interpolation is the map record's), which loops run and in what order,
+    the V analysis (n_side points,
     symmetry_max, break_iteration, discriminator, bias mitigation), the correlation functions' reach f_r (m)
     and the sample period (s), and per loop (speed m/s, heading rad, position m) its reach, first-stage
     spacings (widest first) and threshold, second-stage spacing and threshold."""
 
     cost: int
     remove_bias: bool
-    interp: int
     n_min: int
     aided: bool
     position_loops: bool
@@ -47,7 +47,7 @@ class LoopSettings(NamedTuple):
     position_threshold_2: float
 
     @classmethod
-    def from_config(cls, cfg, map_resolution_m: float, cost: int, interp: int, n_min: int, discriminator: int,
+    def from_config(cls, cfg, map_resolution_m: float, cost: int, n_min: int, discriminator: int,
                     mitigation: int) -> LoopSettings:
         """The settings of an AcqTrackConfig on a map of map_resolution_m posts: the spacing sets widest
         first, the speed loop's reach (f_r over the transect's duration, at least the widest spacing) and the
@@ -57,7 +57,7 @@ class LoopSettings(NamedTuple):
         position_set = np.array(cfg.position_spacings_cells) * map_resolution_m
         f_r = cfg.scf_offset_cells * map_resolution_m
         return cls(
-            cost, bool(cfg.remove_bias), interp, n_min, bool(cfg.aiding),
+            cost, bool(cfg.remove_bias), n_min, bool(cfg.aiding),
             bool(cfg.position_loops), cfg.loop_order == "speed_first",
             int(cfg.scf_points), float(cfg.symmetry_ratio_max), int(cfg.break_iteration), discriminator,
             mitigation, float(f_r), float(cfg.sample_period_s),

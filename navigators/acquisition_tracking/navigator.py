@@ -90,7 +90,6 @@ from .buffers import (
 from .centroid_filter import CentroidFilter
 from .correlation import (
     COSTS,
-    INTERPOLATIONS,
 )
 from .intake import SensorIntake
 from .integrity import (
@@ -127,7 +126,8 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         dem = load_map(dem, "acq_track")
         self.dem = dem
         self.name = name
-        self._grid = dem.grid
+        # the map and the configured interpolation as one kernel record (terrain.kernels.MapRecord)
+        self._map = dem.record(cubic=cfg.interpolation == "bicubic")
         self._footprint = None
         self._return_model = cfg.replica_model == "return"
         if cfg.replica_model == "footprint":
@@ -138,7 +138,6 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self.map_resolution_m = float(0.5 * (sn + se))
         self.sigma_floor_m = float(cfg.position_sigma_floor_m or 0.5 * self.map_resolution_m)
         self._cost = COSTS[cfg.correlation]
-        self._interp = INTERPOLATIONS[cfg.interpolation]
         self._disc = tracking.DISCRIMINATORS[cfg.discriminator]
         self._n_min = max(3, int(math.ceil(cfg.min_valid_fraction * cfg.transect_samples)))
         self._fix_overlap = float(
@@ -150,7 +149,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._heading_set = np.radians(np.array(cfg.heading_spacings_deg))
         # loop_kernel.track_loops' settings (fixed by the config) and its preallocated outputs
         self._loop_settings = loop_kernel.LoopSettings.from_config(
-            cfg, self.map_resolution_m, self._cost, self._interp, self._n_min, self._disc,
+            cfg, self.map_resolution_m, self._cost, self._n_min, self._disc,
             loop_kernel.MITIGATIONS[cfg.bias_mitigation])
         self._loop_out = (np.zeros(4, np.int64), np.zeros(4, bool), np.zeros(4, bool), np.zeros((4, 6)))
         self.wind = WindEstimator(cfg.wind_gain)

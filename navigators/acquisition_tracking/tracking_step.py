@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from ...terrain.kernels import MapRecord
 from . import beam, filter_kernels, loop_kernel, tracking
 from .aiding import (
     wrap_rad,
@@ -38,18 +39,18 @@ from .profile import (
 class TrackingStep:
     """The tracking epoch of the acquisition-and-tracking navigator (seed 001); a mixin."""
 
-    def _track_grid(self, rng: np.ndarray):
-        """The map grid the loops correlate with: the plain map, or its footprint dilation at the transect's
-        median range (replica_model)."""
+    def _track_map(self, rng: np.ndarray) -> MapRecord:
+        """The map record the loops correlate with: the plain map, or its footprint dilation at the
+        transect's median range (replica_model), with the configured interpolation."""
         if self._footprint is None:
-            return self._grid
+            return self._map
         key = getattr(self, "_track_grid_key", None)
         if key is not None and key[0] is rng:  # the same transect (its arrays are cached): the same grid
             return key[1]
         ok = np.isfinite(rng)
-        grid = self._footprint.grid(_median(rng[ok]) if ok.any() else math.nan)
-        self._track_grid_key = (rng, grid)
-        return grid
+        rec = MapRecord(*self._footprint.grid(_median(rng[ok]) if ok.any() else math.nan), self._map.cubic)
+        self._track_grid_key = (rng, rec)
+        return rec
 
     def _track(self, s: Sample) -> None:
         cfg = self.config
@@ -70,8 +71,7 @@ class TrackingStep:
         # fix, and the speed and heading loops then stretch and turn the shifted replica. Unaided the speed
         # and heading are the loops' own fast estimates, so they go first and the shift follows them. All of
         # it (adaptivity blocks, both stages, bias mitigation) and the prompt's map heights in one numba call.
-        grid = self._track_grid(rng)
-        heights, lat0, lon0, dlat, dlon = grid
+        rec = self._track_map(rng)
         h_p = np.empty(dt.size)
         its, locks, ran, shp = self._loop_out
         transect = loop_kernel.TransectRecord(
@@ -79,7 +79,7 @@ class TrackingStep:
             _mean(m_psi), o_n, o_e,
         )  # fmt: skip
         b_v, b_psi, lat_p, lon_p, sp_v, sp_psi = loop_kernel.track_loops(
-            tuple(grid), transect, self._loop_settings, loop_kernel.LoopOutputs(its, locks, ran, shp, h_p)
+            rec, transect, self._loop_settings, loop_kernel.LoopOutputs(its, locks, ran, shp, h_p)
         )
         p_s = (lat_p, lon_p)
         # the kernel's small outputs as Python lists: per-element numpy indexing costs more than tolist
@@ -137,9 +137,8 @@ class TrackingStep:
         # the fix's covariance: the terrain information along / across the track at the fit
         psi = self._aided_track(s)
         i_al, i_cr = beam.information_at(
-            heights, lat0, lon0, dlat, dlon, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e,
-            valid, psi,
-        )  # fmt: skip
+            rec, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e, valid, psi
+        )
         sig_res = max(res_sigma if math.isfinite(res_sigma) else 0.0, sig0)
         k2 = cfg.fix_sigma_scale**2 * _MAD_VARIANCE_FACTOR * sig_res**2
         q_map = self.map_resolution_m**2 / 12.0  # the map's quantisation of the fix

@@ -44,7 +44,7 @@ G0_MPS2 = 9.80665
 # and the equivalent random walks stop describing the INS error (0.57 deg)
 SMALL_ANGLE_LIMIT_RAD = 0.01
 # memory of a terrain filter's vertical offset: every terrain sample measures it, so its posterior follows the
-# last 10-30 s (the lags over which the filters' tuned vertical walk was measured, terrain_filter's docstring)
+# last 10-30 s (the lags over which the filters' vertical walk was set: docs/validation/navigators.md)
 VERTICAL_OFFSET_MEMORY_S = 20.0
 
 

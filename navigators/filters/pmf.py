@@ -52,7 +52,7 @@ the fixed update keys (navigators.protocol) and "multimodality" (density of the 
 maximum of the grid over the highest: 0 for one mode, 1 for two equal ones) and "pmf_modes" (local maxima
 above 1 % of the peak), "pmf_spacing_m", "pmf_grid_n".
 
-Default IRA model: "proposed" (seed 000's); measured against "conventional" in scripts/filter_statistics.py.
+Default IRA model: "proposed" (seed 000's); the comparison with "conventional": docs/validation/navigators.md.
 """
 
 from __future__ import annotations

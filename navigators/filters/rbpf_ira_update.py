@@ -114,9 +114,9 @@ class RbpfIraUpdate:
             nu = y - ybar
             if dims == 2 and gate and not nu[1] ** 2 <= self.theta_gate_sigmas ** 2 * S[1, 1]:
                 # a look angle beyond the gate of the mixture's predictive spread: the map's error at the
-                # closest point is heavy-tailed (kurtosis 17 at random states on the 3" map, 1 % of the
-                # samples beyond 3 sigma holding a quarter of the variance), which a Gaussian update would
-                # read as position and attitude; the range alone (map_noise_calibration trims the same)
+                # closest point is heavy-tailed (a few samples beyond 3 sigma hold much of the variance:
+                # docs/validation/seed002.md), which a Gaussian update would read as position and attitude;
+                # the range alone (map_noise_calibration trims the same)
                 dims = 1
                 sk["ira_theta_gated"] = sk.get("ira_theta_gated", 0) + 1
                 continue

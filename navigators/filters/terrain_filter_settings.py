@@ -2,8 +2,8 @@
 
 `TerrainFilterSettings` holds what both share (terrain_filter.InsRiddenFilter: sensors' noise, the map's
 error, the vertical channel, GNSS, integrity); `PmfSettings` and `PfSettings` add each filter's belief. The
-meaning and the measured grounds of each default are in terrain_filter.InsRiddenFilter's, pmf's and pf's
-docstrings.
+meaning of each default is in terrain_filter.InsRiddenFilter's, pmf's and pf's docstrings; the measurements
+behind them in docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
 """
 
 from __future__ import annotations

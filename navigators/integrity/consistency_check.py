@@ -16,11 +16,12 @@ flagged with probability alpha at most). Each NIS enters capped at its single-up
 at `cap_alpha` (the heavy-tailed filters take an outlier without harm, one alone must not flag them); the
 cap only lowers the sum, so the false-flag probability stays at most alpha.
 
-What the flag does to the navigator's Health (`apply`): ok = False, status = "inconsistent" and
-consistency_warning = the test's message, for every estimate published while the window is over its
-bound. A consumer therefore reads it as "do not trust the position or its protection level now"; the
-protection-level campaign (docs/validation/integrity.md section 6) counts flagged epochs as not healthy,
-as certification counts an alerted epoch. The check never changes the estimate itself.
+What the flag does to the navigator's Health (`apply`): ok = False, status = "inconsistent" (unless the
+navigator already names a fault: degraded, acquiring, diverged or lost stay) and consistency_warning = the
+test's message, for every estimate published while the window is over its bound. A consumer therefore reads it
+as "do not trust the position or its protection level now"; the protection-level campaign
+(docs/validation/integrity.md section 6) counts flagged epochs as not healthy, as certification counts an
+alerted epoch. The check never changes the estimate itself.
 """
 
 from __future__ import annotations
@@ -113,10 +114,12 @@ class ConsistencyCheck:
 
     def apply(self, ok: bool, status: str, warning: str) -> tuple[bool, str, str]:
         """(ok, status, consistency_warning) of the Health to publish: unchanged unless flagged, else
-        (False, "inconsistent", the message, after any static warning)."""
+        (False, status, the message after any static warning), where status is "inconsistent" if the
+        navigator's own word was "ok", and its own word (acquiring, degraded, diverged, lost: a fault it
+        has already named, and ok already withdrawn) otherwise."""
         if not self.inconsistent:
             return ok, status, warning
-        keep = status if status in ("diverged", "lost") else STATUS_INCONSISTENT
+        keep = STATUS_INCONSISTENT if status == "ok" else status
         return False, keep, (warning + "; " if warning else "") + self.message
 
 

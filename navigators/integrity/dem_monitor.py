@@ -68,14 +68,13 @@ Source codes in the output: SOURCE_GNSS = 0 (GNSS fix within `gnss_max_age_s`), 
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 from numba import njit
 
-from ...terrain.geodesy import WGS84_A_M, WGS84_E2
-from ...terrain.kernels import bilinear
+from ...terrain.geodesy import radii_m
+from ...terrain.kernels import map_height
 from ...terrain.queries.radar_altimeter import _ra_batch
 from ...terrain.queries.shared import _ra_tables, _ra_workspace
 from ..core.maps import load_map
@@ -90,66 +89,19 @@ from .dem_monitor_settings import (  # noqa: F401 - re-exported
     VARIANTS,
     DemMonitorConfig,
 )
+from .dem_monitor_thresholds import (  # noqa: F401 - re-exported
+    DTED1_DISPARITY_SIGMA_M,
+    DTED1_SUCCESSIVE_SIGMA_M,
+    chi2_threshold,
+    class_sigma_m,
+    kalman_statistic_moments,
+    kalman_threshold,
+    kf_steady_state,
+)
 
 SOURCE_GNSS = 0
 SOURCE_NAVIGATOR = 1
 SOURCE_NAMES = ("gnss", "navigator")
-
-DTED1_DISPARITY_SIGMA_M = 18.9      # seed 003 section III: absolute disparities ~ N(0, 18.9^2), DTED-1
-DTED1_SUCCESSIVE_SIGMA_M = 13.0     # seed 003 section III: successive disparities ~ N(0, 13.0^2)
-
-
-def class_sigma_m(map_class: str) -> float:
-    """Disparity sigma (m) of a map error class: seed 003's 18.9 m for DTED-1, else LE90 / 1.6449 of
-    terrain.map_error.ACCURACY_CLASSES."""
-    from ...terrain.map_error import ACCURACY_CLASSES
-    key = str(map_class).strip().lower()
-    if key == "dted1":
-        return DTED1_DISPARITY_SIGMA_M
-    if key not in ACCURACY_CLASSES:
-        raise ValueError(f"map_class: unknown map error class {map_class!r}; choose from "
-                         f"{sorted(ACCURACY_CLASSES)}")
-    return float(ACCURACY_CLASSES[key].sigma_v_m)
-
-
-def chi2_threshold(false_alarm_probability: float, n: int) -> float:
-    """chi2.ppf(1 - P_fa, n): the eq 4 threshold for a false-alarm probability per test."""
-    from scipy.stats import chi2
-    return float(chi2.isf(false_alarm_probability, n))
-
-
-def kf_steady_state(q_var: float, r_var: float) -> tuple[float, float]:
-    """(gain K, posterior variance P) of the steady-state scalar random-walk Kalman filter (eq 5's filter):
-    P- = P + q, K = P- / (P- + r), P = (1 - K) P-."""
-    p_prior = 0.5 * (q_var + math.sqrt(q_var * q_var + 4.0 * q_var * r_var))
-    k = p_prior / (p_prior + r_var)
-    return k, (1.0 - k) * p_prior
-
-
-def kalman_statistic_moments(n: int, process_ratio: float) -> tuple[float, float]:
-    """(mean, variance) of T_KF = sum_{k=1..n} x_hat_k^2 / P under no fault for the steady-state filter
-    with q = process_ratio * r: x_hat is AR(1), x_k = (1-K) x_{k-1} + K p_k, stationary variance
-    v = K r / (2 - K), lag-j covariance v (1-K)^j; E T = n v / P, Var T = 2 sum_ij cov_ij^2 / P^2."""
-    k, p = kf_steady_state(process_ratio, 1.0)
-    v = k / (2.0 - k)
-    a2 = (1.0 - k) ** 2
-    lags = np.arange(n)
-    weights = np.where(lags == 0, n, 2.0 * (n - lags))
-    var = 2.0 * v * v * float(np.sum(weights * a2 ** lags)) / (p * p)
-    return n * v / p, var
-
-
-@functools.lru_cache(maxsize=32)
-def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: float,
-                     reading: str = "rw_posterior") -> float:
-    """Threshold of T_KF (eq 5 as the monitor computes it) for a false-alarm probability: the exact quantile
-    of the generalised chi-square T_KF is under no fault with white disparities (its quadratic form from
-    correlated_disparity.kalman_reading(reading): "rw_posterior" for variant "kalman", "innovation" for
-    "kalman_innovation"; the filter in steady state; Imhof's integral takes seconds, so it is cached)."""
-    from .correlated_disparity import gchi2_isf, kalman_reading
-    M = kalman_reading(reading, int(n), 150, float(process_ratio))
-    return gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))
-
 
 class MonitorOutput:
     """One update's monitor epochs (possibly none): `rows` (m, 7) = time (s), absolute disparity p (m, eq 2),
@@ -185,24 +137,21 @@ class MonitorOutput:
 
 
 @njit(cache=True)
-def _radii(lat):
-    s = math.sin(lat)
-    w = 1.0 - WGS84_E2 * s * s
-    return WGS84_A_M * (1.0 - WGS84_E2) / (w * math.sqrt(w)), WGS84_A_M / math.sqrt(w)
-
-
-@njit(cache=True)
-def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
-                  dlat, dlon, cfg, state, out):
+def _epoch_kernel(ra, gnss, est, rec, cfg, state, out):
     """Pick the frame's monitor epochs (one valid radar-altimeter sample per period) and their positions:
     rows [t, lat, lon, h, measured range, nadir map height, height-source variance, source, map slope north,
     east (navigator source only)] into `out`;
     returns their number. The position is the GNSS fix nearest in time (within cfg[7]) moved to the sample
     time with its velocity, else the navigator's estimate dead-reckoned to it.
 
+    Records (numba tuples): ra = the radar altimeter's (t_s, range_m, valid); gnss = the fixes' (t_s,
+    lat_rad, lon_rad, h_m, v_ned_mps (n, 3), valid); rec = the map (terrain.kernels.MapRecord, bilinear).
     est: [t, lat, lon, h, vn, ve, vd, P_nn, P_ne, P_ee, P_dd] of the navigator's estimate.
     cfg: [N, period, lever arm, map sigma, ra const, ra fraction, gnss sigma, gnss max age, variant (0/1),
           kf q ratio, threshold]; state[0]: the next epoch's earliest time."""
+    t_ra, r_ra, v_ra = ra
+    t_g, lat_g, lon_g, h_g, v_g, ok_g = gnss
+    dlat = rec[3]
     period = cfg[1]
     m = 0
     n_g = t_g.shape[0]
@@ -236,21 +185,19 @@ def _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heig
             src = 1
         if not (vn == vn and ve == ve and vd == vd):
             vn = ve = vd = 0.0
-        rn, re = _radii(lat)
+        rn, re = radii_m(lat)
         lat_t = lat + vn * dt / (rn + h)
         lon_t = lon + ve * dt / ((re + h) * math.cos(lat))
         h_t = h - vd * dt
-        h_map = bilinear(heights, lat0, lon0, dlat, dlon, lat_t, lon_t)
+        h_map = map_height(rec, lat_t, lon_t)
         if not (h_map == h_map) or not (h_t == h_t):
             continue
         if src == 1:
             # the navigator's horizontal uncertainty through the map's slope (central differences)
             e = 0.5 * dlat
-            gn = (bilinear(heights, lat0, lon0, dlat, dlon, lat_t + e, lon_t)
-                  - bilinear(heights, lat0, lon0, dlat, dlon, lat_t - e, lon_t)) / (2.0 * e * rn)
-            ge = (bilinear(heights, lat0, lon0, dlat, dlon, lat_t, lon_t + e)
-                  - bilinear(heights, lat0, lon0, dlat, dlon, lat_t, lon_t - e)) / (2.0 * e * re
-                                                                                  * math.cos(lat_t))
+            gn = (map_height(rec, lat_t + e, lon_t) - map_height(rec, lat_t - e, lon_t)) / (2.0 * e * rn)
+            ge = (map_height(rec, lat_t, lon_t + e)
+                  - map_height(rec, lat_t, lon_t - e)) / (2.0 * e * re * math.cos(lat_t))
             if gn == gn and ge == ge:
                 var_pos += gn * gn * est[7] + 2.0 * gn * ge * est[8] + ge * ge * est[9]
                 out[m, 8] = gn
@@ -414,14 +361,16 @@ def kalman_terms(p, var, q_ratio):
 
 
 @njit(cache=True)
-def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0, lon0,
-                   dlat, dlon, cfg, state, ring, wring, rows, out, cone, cell_m, bs, bmax, bmin, h_min, h_max,
-                   blk_lb, blk_id):
+def _update_kernel(ra, gnss, est, rec, mon, tables):
     """One monitor update in one call: the epochs (_epoch_kernel), with the beam model the map's own
     radar-altimeter return at each (terrain.queries' exact cone search, the body down axis of the estimate's
-    roll/pitch/yaw in cfg[11:14]), then the statistic (_statistic_kernel). Returns the rows written."""
-    m = _epoch_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, heights, lat0,
-                      lon0, dlat, dlon, cfg, state, rows)
+    roll/pitch/yaw in cfg[11:14]), then the statistic (_statistic_kernel). Returns the rows written.
+    ra, gnss, est, rec: as _epoch_kernel's; mon = the monitor's (cfg, state, ring, wring, rows, out) arrays;
+    tables = (cone, cell_m, bs, bmax, bmin, h_min, h_max, blk_lb, blk_id): whether the beam model runs and
+    terrain.queries' search tables and workspace for it."""
+    cfg, state, ring, wring, rows, out = mon
+    cone, cell_m, bs, bmax, bmin, h_min, h_max, blk_lb, blk_id = tables
+    m = _epoch_kernel(ra, gnss, est, rec, cfg, state, rows)
     if m == 0:
         return 0
     if not cone:
@@ -437,23 +386,18 @@ def _update_kernel(t_ra, r_ra, v_ra, t_g, lat_g, lon_g, h_g, v_g, ok_g, est, hei
         lat[i] = rows[i, 1]
         lon[i] = rows[i, 2]
         h[i] = rows[i, 3] - cfg[2]
-        # body-to-NED DCM, yaw-pitch-roll (only its third column, the beam axis, is used by the search)
-        C[i, 0, 0] = cp * cy
-        C[i, 0, 1] = sr * sp * cy - cr * sy
+        # the beam axis: the third column of the body-to-NED DCM (3-2-1, terrain.geodesy.euler_to_C_bn), the
+        # only part the search reads (the other entries stay unset)
         C[i, 0, 2] = cr * sp * cy + sr * sy
-        C[i, 1, 0] = cp * sy
-        C[i, 1, 1] = sr * sp * sy + cr * cy
         C[i, 1, 2] = cr * sp * sy - sr * cy
-        C[i, 2, 0] = -sp
-        C[i, 2, 1] = sr * cp
         C[i, 2, 2] = cr * cp
     valid = np.zeros(m, np.bool_)
     rng = np.empty(m)
     la = np.empty(m)
     lo = np.empty(m)
     hh = np.empty(m)
-    _ra_batch((heights, lat0, lon0, dlat, dlon, False), cell_m, lat, lon, h, C, cfg[14], cfg[15], bs, bmax,
-              bmin, h_min, h_max, blk_lb, blk_id, valid, rng, la, lo, hh)
+    _ra_batch(rec, cell_m, (lat, lon, h, C), cfg[14], cfg[15], (bs, bmax, bmin, h_min, h_max),
+              (blk_lb, blk_id), (valid, rng, la, lo, hh))
     for i in range(m):
         if not valid[i]:
             rng[i] = np.nan
@@ -530,7 +474,6 @@ class DemIntegrityMonitor:
         if self._out.shape[0] < n:
             self._out = np.empty((n, 7))
             self._rows = np.empty((n, 10))
-        heights, lat0, lon0, dlat, dlon = self.dem.grid
         cone = self._half_beam > 0.0
         if cone:        # the map's search tables (cached on the Dem, rebuilt when its heights change)
             bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(self.dem)
@@ -538,9 +481,9 @@ class DemIntegrityMonitor:
         else:
             bs, bmax, bmin, h_min, h_max, cell_m = _NO_TABLES
             lb, ids = _EMPTY, _EMPTY_I
-        m = _update_kernel(ra.t_s, ra.range_m, ra.valid, *gargs, e, heights, lat0, lon0, dlat, dlon,
-                           self._cfg, self._state, self._ring, self._wring, self._rows, self._out, cone,
-                           cell_m, bs, bmax, bmin, h_min, h_max, lb, ids)
+        m = _update_kernel((ra.t_s, ra.range_m, ra.valid), gargs, e, self.dem.record(),
+                           (self._cfg, self._state, self._ring, self._wring, self._rows, self._out),
+                           (cone, cell_m, bs, bmax, bmin, h_min, h_max, lb, ids))
         if m == 0:
             return MonitorOutput(self._NONE, self.threshold, [])
         rows = self._out[:m].copy()

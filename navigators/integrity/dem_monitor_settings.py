@@ -64,7 +64,7 @@ class DemMonitorConfig(Settings):
              "this false-alarm probability per test (0: off)", "1", ge=0.0, lt=1.0)
 
     def check(self) -> list[tuple[str, str]]:
-        from .dem_monitor import class_sigma_m
+        from .dem_monitor_thresholds import class_sigma_m
         problems = []
         if self.threshold is not None and self.false_alarm_probability is not None:
             problems.append(("false_alarm_probability", "give at most one of threshold and "
@@ -77,12 +77,12 @@ class DemMonitorConfig(Settings):
 
     @property
     def map_sigma_m(self) -> float:
-        from .dem_monitor import class_sigma_m
+        from .dem_monitor_thresholds import class_sigma_m
         return float(self.sigma_m) if self.sigma_m is not None else class_sigma_m(self.map_class)
 
     @property
     def effective_threshold(self) -> float:
-        from .dem_monitor import chi2_threshold, kalman_threshold
+        from .dem_monitor_thresholds import chi2_threshold, kalman_threshold
         if self.threshold is not None:
             return float(self.threshold)
         if self.false_alarm_probability is None:

@@ -15,7 +15,8 @@ ira_seed002        seed 002's zero-Doppler search and its linearisation (behind 
 ira_map_noise      the map's height errors as IRA noise (seed 002: flat-ground model, its calibration per map)
 gnss               GNSS position and velocity fix against the INS: `residual`, `jacobian`, `noise` (EKF);
                    `predict`, `likelihood` (grid and particle filters)
-baro               the barometric altimeter: geopotential (pressure) altitude to geometric height
+baro               the barometric altimeter: geopotential (pressure) altitude to geometric height, `predict`
+                   (the reading of a height hypothesis with a bias), `likelihood`
 lever_arm          lever arms of the ranging antennas transferred to the IMU point
 terrain_models     what the terrain sensors share: the radii at a reference, the heavy-tailed likelihood
 sampling           the terrain samples a filter takes from a frame (valid returns, at most one per interval)

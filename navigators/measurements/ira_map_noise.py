@@ -57,7 +57,7 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n
                           realisations: int = 3, ambiguity_probability: float = 0.05,
                           gate_sigmas: float = 0.0, theta_sensor_var: float = 0.0) -> tuple[float, float]:
     """(range factor, look-angle factor) calibrating map_noise_variances' flat-ground model for the terrain
-    a map cannot hold between its posts (interpolation_sigma_m): each the measured variance over the model's.
+    a map cannot hold between its posts (interpolation_sigma_m): each the simulated variance over the model's.
     The map's error class is simulated, not the world: terrain.refine continues the map's own spectrum below
     its posts down to detail_spacing_m (realisations seeds 0, 1, ..., over the map's central <= 16 km
     square), and eqs 23/26 are evaluated on the refinement (its own search step) and on the map (the
@@ -69,9 +69,9 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n
     theta_gate_sigmas: the heavy tail goes to the range alone there too). Range: var(R_refined - R_map) /
     sigma_h^2 (a constant offset is the vertical state's); look angle: mean((theta_refined - theta_map)^2 3 R)
     / sigma_h. The flat-ground band is an upper bound: the closest point is the minimum of a rough R(s),
-    nearer the band's middle. On the 3" Jacksboro map with 30 m detail (~24 m posts): 0.78 and 0.72 (README
-    "RBPF"). (1, 1) when the map is too smooth (sigma_h 0) or too small to refine. Cached per map content; 2-4
-    s for the default."""
+    nearer the band's middle. The factors of the default map: docs/validation/seed002.md (map noise). (1, 1)
+    when the map is too smooth (sigma_h 0) or too small to refine. Cached per map content (a few seconds for
+    the default map)."""
     key = (_map_key(dem), float(detail_spacing_m), float(agl_m), int(n_states), int(realisations),
            float(ambiguity_probability), float(gate_sigmas), float(theta_sensor_var))
     hit = _CALIBRATION_CACHE.get(key)
@@ -136,12 +136,10 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n
 
 def search_step_for(dem) -> float:
     """The coarse scan's step along the zero-Doppler line (m) for a map: 45 m, or its smaller post spacing
-    / 1.6 where that is less (45 m for the 3" map, whose 75 m posts the step was tuned on). The scan must
-    see every basin of R(s) before the golden-section refinement, which assumes one minimum within a step.
-    On the default scenario's 24 m world the 45 m step missed the minimum and put the look angle 0.19 deg
-    RMS off the exact search's at the true states of the default route's seed 7, with outliers of 2 deg,
-    against the sensor's 0.1 deg noise; 14-15 m gives 0.04 deg there, and 0.0008 deg against 0.14 deg at
-    45 m at random states over that world (tests/test_rbpf_models.py)."""
+    / 1.6 where that is less (45 m for the 3" map, with its 75 m posts). The scan must see every basin of
+    R(s) before the golden-section refinement, which assumes one minimum within a step; a fixed 45 m step
+    misses the minimum on a finer map (the figures: docs/validation/seed002.md, the search step;
+    tests/test_rbpf_models.py checks it)."""
     s_n, s_e = dem.spacing_m
     return float(min(45.0, min(s_n, s_e) / 1.6))
 
@@ -159,11 +157,8 @@ def map_noise_variances(map_sigma_m: float, terrain_model_sigma_m: float, range_
     the map's closest point as uniform over that band, its across-track offset has variance sigma_h R / 3,
     and the look angle's error variance is sigma_h / (3 R) (rad^2). The two parts combine as independent
     height errors: range map_sigma^2 + f_R terrain_sigma^2, look angle sqrt(map_sigma^2 + (f_theta
-    terrain_sigma)^2) / (3 R) (each part's flat-ground value where the other is 0). On the default route (3"
-    map against the 24 m world, sigma_h 2.7 m at R ~ 1,500 m) the flat-ground look angle is 1.4 deg, the
-    calibrated 1.2 deg; measured at the true states, map against world, with the basin jumps taken out
-    (the RBPF's basin-jump test handles those): RMS 1.18 deg on the route, 0.95 deg in
-    tests/test_rbpf_models.py's region (README "RBPF")."""
+    terrain_sigma)^2) / (3 R) (each part's flat-ground value where the other is 0). The model's figures on
+    the default route against the map-minus-world errors: docs/validation/seed002.md (map noise)."""
     f_r, f_th = terrain_factors
     var_r = float(map_sigma_m) ** 2 + f_r * float(terrain_model_sigma_m) ** 2
     sig_th = math.hypot(float(map_sigma_m), f_th * float(terrain_model_sigma_m))

@@ -40,8 +40,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...terrain.geodesy import WGS84_A_M, WGS84_E2
 from ...terrain.kernels import bilinear_with_gradient
+from ...terrain.queries.shared import _consts, _ned
 from .ira_map_noise import (
     interpolation_sigma_m,
     map_noise_calibration,
@@ -52,36 +52,13 @@ from .ira_map_noise import (
 _GOLD = 0.6180339887498949
 
 
-@njit(cache=True)
-def _consts(lat):
-    """(sin, cos of lat, meridian radius M, prime-vertical radius N, dM/dlat) at the antenna (m)."""
-    s = np.sin(lat)
-    c = np.cos(lat)
-    w = 1.0 - WGS84_E2 * s * s
-    m = WGS84_A_M * (1.0 - WGS84_E2) / (w * np.sqrt(w))
-    n = WGS84_A_M / np.sqrt(w)
-    dm = 3.0 * m * WGS84_E2 * s * c / w
-    return s, c, m, n, dm
-
-
-@njit(cache=True)
-def _ned(dphi, dlam, hp, ha, s, c, m, n, dm):
-    """NED (m) of the point (lat_a + dphi, lon_a + dlam, hp) from the antenna at height ha: the
-    second-order expansion of the WGS84 position terrain.queries uses (its module docstring; the first-order
-    terms are seed 000 eq 2), within 1 cm of the ECEF difference inside 10 km."""
-    mh = m + ha
-    nh = n + ha
-    x = (m + hp) * dphi + 0.5 * nh * s * c * dlam * dlam + 0.5 * dm * dphi * dphi
-    y = (n + hp) * c * dlam - mh * s * dphi * dlam
-    z = (ha - hp) + 0.5 * mh * dphi * dphi + 0.5 * nh * c * c * dlam * dlam
-    return x, y, z
 (OUT_R, OUT_THETA, OUT_XB, OUT_YB, OUT_ZB, OUT_DR_DTH, OUT_DR_DPSI, OUT_S, OUT_VALID, OUT_R2,
  OUT_THETA2) = range(11)
 N_OUT = 11
 
 
 @njit(cache=True)
-def _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+def _zd_eval(rec, lat, lon, ha, cv, imh, inhc,
              vx, vy, vz, un, ue, C, sin_w, max_range, sv, t_guess):
     """Terrain point on the plane v . p = 0 at across-track coordinate sv (m): returns (f, t, x, y, z) with f
     the range if it lies in the look window (else inf; no point: t NaN)."""
@@ -99,7 +76,7 @@ def _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
         hp, gl, go = bilinear_with_gradient(heights, lat0, lon0, dlat, dlon, lat + dphi, lon + dlam)
         if hp != hp:
             return np.inf, np.nan, x, y, z
-        x, y, z = _ned(dphi, dlam, hp, ha, s_, c_, m, n, dm)
+        x, y, z = _ned(dphi, dlam, hp, ha, cv)
         g = vx * x + vy * y + vz * z
         if abs(g) < 1e-4:
             break
@@ -122,15 +99,15 @@ def _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
 
 
 @njit(cache=True)
-def _golden(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+def _golden(rec, lat, lon, ha, cv, imh, inhc,
             vx, vy, vz, un, ue, C, sin_w, max_range, a, b, t_guess, iters):
     """Golden-section minimum of the in-window range over s in [a, b]: (f, s, t, x, y, z) of the lowest
     point evaluated (a minimum on the look window's edge is approached from inside)."""
     c1 = b - _GOLD * (b - a)
     c2 = a + _GOLD * (b - a)
-    f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+    f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc,
                                   vx, vy, vz, un, ue, C, sin_w, max_range, c1, t_guess)
-    f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
+    f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc,
                                   vx, vy, vz, un, ue, C, sin_w, max_range, c2, t_guess)
     if f1 <= f2:
         fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
@@ -145,7 +122,7 @@ def _golden(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
             c1 = b - _GOLD * (b - a)
             if t1 == t1:
                 tg = t1
-            f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc, vx, vy, vz, un, ue,
+            f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc, vx, vy, vz, un, ue,
                                           C, sin_w, max_range, c1, tg)
             if f1 < fb:
                 fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
@@ -156,7 +133,7 @@ def _golden(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc,
             c2 = a + _GOLD * (b - a)
             if t2 == t2:
                 tg = t2
-            f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, s_, c_, m, n, dm, imh, inhc, vx, vy, vz, un, ue,
+            f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc, vx, vy, vz, un, ue,
                                           C, sin_w, max_range, c2, tg)
             if f2 < fb:
                 fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
@@ -196,7 +173,8 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
         ha = h[k]
         if not (la == la and lo == lo and ha == ha):
             continue
-        s_, c_, m, n, dm = _consts(la)
+        cv = _consts(la)
+        s_, c_, m, n, dm = cv
         imh = 1.0 / (m + ha)
         inhc = 1.0 / ((n + ha) * c_)
         dz_min = ha - h_max
@@ -228,7 +206,7 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
                         if dzb > 0.0 and sv * sv + dzb * dzb > best * best:
                             i += 1
                             continue
-                f, t, _, _, _ = _zd_eval(rec, la, lo, ha, s_, c_, m, n, dm, imh,
+                f, t, _, _, _ = _zd_eval(rec, la, lo, ha, cv, imh,
                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, sv, tg)
                 if t == t:
                     tg = t
@@ -256,18 +234,18 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
                 i += 1
         if not best < np.inf:
             continue
-        f, sm, t, x, y, z = _golden(rec, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
+        f, sm, t, x, y, z = _golden(rec, la, lo, ha, cv, imh, inhc,
                                     vx, vy, vz, un, ue, C, sin_w, max_range, s_best - ds_m, s_best + ds_m,
                                     t_best, n_golden)
         if best2 < best + 0.3 * ds_m:  # a second basin nearly as low: refine it too, keep the lower
-            f2, sm2, t2, x2, y2, z2 = _golden(rec, la, lo, ha, s_, c_, m, n, dm,
+            f2, sm2, t2, x2, y2, z2 = _golden(rec, la, lo, ha, cv,
                                               imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range,
                                               s_best2 - ds_m, s_best2 + ds_m, t_best2, n_golden)
             if f2 < f:
                 f, sm, t, x, y, z = f2, sm2, t2, x2, y2, z2
                 best, s_best, t_best = best2, s_best2, t_best2
         if not f < best:  # refinement left the window (a window-edge minimum): keep the coarse sample
-            f, t, x, y, z = _zd_eval(rec, la, lo, ha, s_, c_, m, n, dm, imh, inhc,
+            f, t, x, y, z = _zd_eval(rec, la, lo, ha, cv, imh, inhc,
                                      vx, vy, vz, un, ue, C, sin_w, max_range, s_best, t_best)
             sm = s_best
         # the coarse scan's best sample farther than sep_m across track from the minimum (range, look
@@ -277,7 +255,7 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
         else:
             so, to = s_r2, t_r2
         if r2 < np.inf:
-            fo, _, xo, yo, zo = _zd_eval(rec, la, lo, ha, s_, c_, m, n, dm, imh,
+            fo, _, xo, yo, zo = _zd_eval(rec, la, lo, ha, cv, imh,
                                          inhc, vx, vy, vz, un, ue, C, sin_w, max_range, so, to)
             if fo < np.inf:
                 byo = C[0, 1] * xo + C[1, 1] * yo + C[2, 1] * zo

@@ -24,7 +24,7 @@ curve point is a Newton solve in the bilinear cell (_zd_point). The per-DEM tabl
 height range: shared._ira_tables) are cached on the Dem and the scratch space is reused between calls, so a
 call costs a few microseconds on top of its queries.
 
-Kernel arguments: besides shared's grid and cv tuples, the per-query velocity terms travel as one tuple
+Kernel arguments: besides shared's map record and cv tuple, the per-query velocity terms travel as one tuple
 vel = (v_hat north, east, down, u_h north, east, |v_hat_h|) (u_h: the horizontal unit velocity), and the
 bounds' per-query constants in the scratch vector qc (see _ira_one).
 
@@ -59,6 +59,7 @@ from .shared import (
     TerrainReturn,
     _check_positive,
     _consts,
+    _insert_sorted,
     _ira_tables,
     _ira_workspace,
     _outputs,
@@ -71,7 +72,7 @@ _NO_WARM_START = np.zeros(0)  # _ira_batch's "no hints"
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, max_range, hint_lat,
+def _ira_one(rec, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, max_range, hint_lat,
              hint_lon):
     """Closest in-window zero-Doppler terrain point; writes (valid, range, lat, lon, h) into out[0:5].
 
@@ -111,7 +112,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
     uhx = vx / vh
     uhy = vy / vh
     vel = (vx, vy, vz, uhx, uhy, vh)
-    lat0, lon0, dlat, dlon = grid
+    heights, lat0, lon0, dlat, dlon, _ = rec
     cv = _consts(lat)
     s, c, m, n, _ = cv
     mh = m + ha
@@ -153,7 +154,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
     tol = 5e-3  # m: an interval must promise at least this much improvement to be searched
     tz = -(vz / vh)
     buf_s[half] = 0.0
-    f, t, r, z = _ira_eval(heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, 0.0, t0, 1e-3)
+    f, t, r, z = _ira_eval(rec, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, 0.0, t0, 1e-3)
     buf_f[half] = f
     buf_t[half] = t
     buf_r[half] = r
@@ -177,7 +178,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
             s_seed = max(drop, 0.0) * np.tan(phi)
             q_seed = min(max(half + int(np.floor(s_seed / step + 0.5)), 1), n_max - 2)
             f_seed, t_seed, r_seed, z_seed = _ira_eval(
-                heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, (q_seed - half) * step, t0,
+                rec, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, (q_seed - half) * step, t0,
                 1e-3,
             )
             if f_seed < best:
@@ -190,7 +191,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
         east_h = (hint_lon - lon) * nhc
         s_hint = east_h * uhx - north_h * uhy
         f_h, t_h, _, _ = _ira_eval(
-            heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, s_hint,
+            rec, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, s_hint,
             north_h * uhx + east_h * uhy, 1e-3,
         )
         if f_h < best:
@@ -275,15 +276,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
         n_c += 1
     if n_c <= 64:
         for ci in range(1, n_c):  # insertion sort: the usual few tens of candidates
-            lbh = buf_h[ci]
-            q = buf_q[ci]
-            row = ci
-            while row > 0 and buf_h[row - 1] > lbh:
-                buf_h[row] = buf_h[row - 1]
-                buf_q[row] = buf_q[row - 1]
-                row -= 1
-            buf_h[row] = lbh
-            buf_q[row] = q
+            _insert_sorted(buf_h, buf_q, ci, buf_h[ci], buf_q[ci])
     else:  # no first best (nothing at s = 0 nor at the boresight): hundreds of candidates
         _sort_candidates(buf_h, buf_q, n_c)
     n_st = 0
@@ -301,7 +294,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
             elif e < q_b and buf_f[e + 1] == buf_f[e + 1] and buf_t[e + 1] == buf_t[e + 1]:
                 tg = buf_t[e + 1]
             f, t, r, z = _ira_eval(
-                heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, buf_s[e], tg, 1e-3,
+                rec, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, buf_s[e], tg, 1e-3,
             )
             buf_f[e] = f
             buf_t[e] = t
@@ -357,7 +350,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
         if tg != tg:
             tg = best_t if best_t == best_t else t0
         fm, tm, rm, zm = _ira_eval(
-            heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, mid, tg, 1e-3,
+            rec, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, mid, tg, 1e-3,
         )
         n_eval += 1
         if fm < best:
@@ -423,7 +416,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
                     break
                 sv_t = centre + 0.5 * h_p * (fm - fp) / den
             f_t, t_t, _, _ = _ira_eval(
-                heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv_t, tc, 1e-4,
+                rec, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv_t, tc, 1e-4,
             )
             if trial == 0:
                 fm, tm = f_t, t_t
@@ -434,7 +427,7 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
         if moved:
             continue
         h_p *= 0.1
-    t, x, y, z, dphi, dlam, hp = _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, centre, tc, 1e-6)
+    t, x, y, z, dphi, dlam, hp = _zd_point(rec, lat, lon, ha, cv, vel, qc, centre, tc, 1e-6)
     if t != t:
         return
     out[0] = 1.0
@@ -445,37 +438,18 @@ def _ira_one(heights, grid, tables, scratch, cell_m, lat, lon, ha, v, C, sin_w, 
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ira_batch(
-    rec,
-    cell_m,
-    lat,
-    lon,
-    h,
-    v_ned,
-    C_bn,
-    half_window,
-    max_range,
-    hmax_blocks,
-    bslope,
-    h_min,
-    h_max,
-    g_glob,
-    work,
-    stack,
-    valid,
-    rng,
-    lat_out,
-    lon_out,
-    h_out,
-    warm,
-):
-    """IRA queries k = 0..n-1 (see ira_return); hmax_blocks, bslope, h_min, h_max, g_glob: see _ira_tables;
-    work (8, >= n_max) and stack (>= 64, 12): scratch space, contents irrelevant. warm: (lat, lon) of the
-    first query's hint, each later query's hint the previous valid return (warm_start of ira_return); an
-    empty array: no hints."""
-    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
+def _ira_batch(rec, cell_m, queries, half_window, max_range, map_tables, workspace, outs, warm):
+    """IRA queries k = 0..n-1 (see ira_return) on the map record rec (read bilinearly), records (numba
+    tuples): queries = (lat, lon, h, v_ned, C_bn); map_tables = (hmax_blocks, bslope, h_min, h_max, g_glob):
+    see _ira_tables; workspace = (work (8, >= n_max), stack (>= 64, 12)): scratch space, contents
+    irrelevant; outs = (valid, rng, lat_out, lon_out, h_out). warm: (lat, lon) of the first query's hint,
+    each later query's hint the previous valid return (warm_start of ira_return); an empty array: no
+    hints."""
+    lat, lon, h, v_ned, C_bn = queries
+    hmax_blocks, bslope, h_min, h_max, g_glob = map_tables
+    work, stack = workspace
+    valid, rng, lat_out, lon_out, h_out = outs
     sin_w = np.sin(half_window)
-    grid = (lat0, lon0, dlat, dlon)
     n_max = 2 * int(np.ceil(max_range / cell_m)) + 9
     buf_s = work[0, :n_max]
     buf_f = work[1, :n_max]
@@ -496,7 +470,7 @@ def _ira_batch(
             valid[k] = False
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
-        _ira_one(heights, grid, tables, scratch, cell_m, lat[k], lon[k], h[k], v_ned[k], C_bn[k], sin_w,
+        _ira_one(rec, tables, scratch, cell_m, lat[k], lon[k], h[k], v_ned[k], C_bn[k], sin_w,
                  max_range, hint_lat, hint_lon)
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
@@ -526,8 +500,9 @@ def ira_return(
     warm_start: None (default) searches every query on its own, so a batch gives the same bits as single
     calls. A (lat_rad, lon_rad) pair, a terrain point near the first query's return ((nan, nan) if none is
     known), makes the queries a sequence: each search starts from that point, then from the previous valid
-    return. Along a flight (samples metres apart) that saves ~2 % of the search; the results are the same
-    to the search's tolerance (5 mm in range), not bit for bit. NaN: no point; an infinite one is refused."""
+    return. Along a flight (samples metres apart) that saves part of the search
+    (docs/validation/benchmarks.md); the results are the same to the search's tolerance (5 mm in range),
+    not bit for bit. NaN: no point; an infinite one is refused."""
     if not (0.0 < half_window_rad < np.pi / 2):
         raise ValueError(f"half_window_rad must be in (0, pi/2), got {half_window_rad}")
     _check_positive("max_range_m", max_range_m)
@@ -546,30 +521,8 @@ def ira_return(
     v = _stack("v_ned", v_ned, n, (3,))
     C = _stack("C_bn", C_bn, n, (3, 3))
     valid, rng, la, lo, hh = _outputs(n)
-    hmax_blocks, bslope, h_min, h_max, g_glob, cell_m = _ira_tables(dem)
-    work, stack = _ira_workspace(2 * int(np.ceil(float(max_range_m) / cell_m)) + 9)
-    _ira_batch(
-        dem.record(),
-        cell_m,
-        lat,
-        lon,
-        h,
-        v,
-        C,
-        float(half_window_rad),
-        float(max_range_m),
-        hmax_blocks,
-        bslope,
-        h_min,
-        h_max,
-        g_glob,
-        work,
-        stack,
-        valid,
-        rng,
-        la,
-        lo,
-        hh,
-        warm,
-    )
+    *map_tables, cell_m = _ira_tables(dem)
+    workspace = _ira_workspace(2 * int(np.ceil(float(max_range_m) / cell_m)) + 9)
+    _ira_batch(dem.record(), cell_m, (lat, lon, h, v, C), float(half_window_rad), float(max_range_m),
+               tuple(map_tables), workspace, (valid, rng, la, lo, hh), warm)
     return TerrainReturn(valid, rng, la, lo, hh)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..kernels import bilinear
+from ..kernels import bilinear, bilinear_cell, cell_index
 from .shared import (
     _INF,
     IRA_BLOCK_POSTS,
@@ -22,7 +22,7 @@ from .shared import (
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
-def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
+def _zd_point(rec, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
     """Terrain point on the zero-Doppler plane at across-track nominal coordinate sv (m).
 
     Nominal horizontal coordinates (north, east) = sv * w_h + t * u_h, w_h = right-perpendicular of the
@@ -31,6 +31,7 @@ def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
     once one is known (bisection when a step leaves it). vel: (v_hat north, east, down, u_h north, east,
     |v_hat_h|) of _ira_one; qc: _ira_one's per-query constants.
     Returns (t, x, y, z, dphi, dlam, hp) or t = NaN."""
+    heights = rec[0]
     n_lat, n_lon = heights.shape
     vx, vy, vz, uhx, uhy, vh = vel
     wx = -uhy
@@ -51,26 +52,15 @@ def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
         east = sv * wy + tt * uhy
         dphi = north * imh
         dlam = east * inhc
-        # bilinear height and its t-derivative (terrain.kernels.bilinear's cell choice and formula)
+        # bilinear height and its t-derivative (terrain.kernels: cell_index, bilinear_cell)
         fi = fi0 + tt * dfi
         fj = fj0 + tt * dfj
-        if not (fi >= -1e-9 and fj >= -1e-9 and fi <= n_lat - 1 + 1e-9 and fj <= n_lon - 1 + 1e-9):
+        i, j, u, v = cell_index(n_lat, n_lon, fi, fj)
+        if i < 0:
             return np.nan, x, y, z, dphi, dlam, np.nan
-        i = min(max(int(fi), 0), n_lat - 2)
-        j = min(max(int(fj), 0), n_lon - 2)
-        u = fi - i
-        v = fj - j
-        h00 = heights[i, j]
-        h01 = heights[i, j + 1]
-        h10 = heights[i + 1, j]
-        h11 = heights[i + 1, j + 1]
-        ea = h01 - h00
-        eb = h11 - h10
-        ha_ = h00 + v * ea
-        hb_ = h10 + v * eb
-        hp = ha_ + u * (hb_ - ha_)
+        hp, ha_, hb_, ea, eb = bilinear_cell(heights, i, j, u, v)
         if hp != hp:
-            hp = bilinear(heights, grid[0], grid[1], grid[2], grid[3], lat + dphi, lon + dlam)
+            hp = bilinear(rec[0], rec[1], rec[2], rec[3], rec[4], lat + dphi, lon + dlam)
             if hp != hp:
                 return np.nan, x, y, z, dphi, dlam, hp
         x, y, z = _ned(dphi, dlam, hp, ha, cv)
@@ -99,10 +89,10 @@ def _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
-def _ira_eval(heights, grid, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv, t_guess, tol):
+def _ira_eval(rec, lat, lon, ha, cv, vel, C, qc, sin_w, max_range, sv, t_guess, tol):
     """(f, t, r, z) at across-track coordinate sv: f = range if the point is inside the look-angle window
     (else inf), t its along-track coordinate, r the raw range (inf: no point), z its NED down (m)."""
-    t, x, y, z, dphi, dlam, hp = _zd_point(heights, grid, lat, lon, ha, cv, vel, qc, sv, t_guess, tol)
+    t, x, y, z, dphi, dlam, hp = _zd_point(rec, lat, lon, ha, cv, vel, qc, sv, t_guess, tol)
     if t != t:
         return _INF, t_guess, _INF, np.nan
     r = np.sqrt(x * x + y * y + z * z)

@@ -28,6 +28,7 @@ from .shared import (
     _check_positive,
     _consts,
     _geo_of_ned,
+    _insert_sorted,
     _ned,
     _outputs,
     _positions,
@@ -237,11 +238,11 @@ def _cell_min(cell, ax, ay, az, k, n_samp):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_patch(heights, grid, lat, lon, ha, cv, i, j, cell):
+def _ra_patch(rec, lat, lon, ha, cv, i, j, cell):
     """Grid cell (i, j) (rows i, i + 1, columns j, j + 1) as the bilinear patch A + u B + v C + u v D in the
     antenna's NED frame (u east along the row, v north): cell[0:12] = A, B, C, D. The exact map of the
     bilinear surface differs from this patch by the curvature terms' variation inside a cell (< 1 mm)."""
-    lat0, lon0, dlat, dlon = grid
+    heights, lat0, lon0, dlat, dlon, _ = rec
     dphi0 = lat0 + i * dlat - lat
     dlam0 = lon0 + j * dlon - lon
     x00, y00, z00 = _ned(dphi0, dlam0, heights[i, j], ha, cv)
@@ -271,13 +272,22 @@ def _sphere_curved(cx, cy, cz_flat, rad, mh):
     return cz_flat + 0.5 * d2 / mh, rad + 4e-4 * np.sqrt(d2)
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def _sphere_seen(cx, cy, cz, rad):
+    """(dc, q) of the sphere (centre c NED from the apex, radius rad): its centre's distance dc and
+    q = rad / dc, the sine of its angular radius; q = NaN when the sphere holds the apex (rad >= dc)."""
+    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
+    if rad >= dc:
+        return dc, np.nan
+    return dc, rad / dc
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
     """True when the sphere (centre c NED, radius rad) lies entirely outside the cone around a."""
-    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
-    if rad >= dc:
+    dc, q = _sphere_seen(cx, cy, cz, rad)
+    if q != q:
         return False
-    q = rad / dc
     # angle(c, a) > half beam + asin(q)  <=>  cos(angle) < cos(half beam + asin(q))
     return cx * ax + cy * ay + cz * az < dc * (cosb * np.sqrt(1.0 - q * q) - sinb * q)
 
@@ -285,11 +295,8 @@ def _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
     """True when the sphere (centre c NED, radius rad) lies entirely inside the cone around a."""
-    dc = np.sqrt(cx * cx + cy * cy + cz * cz)
-    if rad >= dc:
-        return False
-    q = rad / dc
-    if q >= sinb:
+    dc, q = _sphere_seen(cx, cy, cz, rad)
+    if not (q < sinb):  # the sphere holds the apex (q NaN) or is wider than the half beam
         return False
     # angle(c, a) < half beam - asin(q)
     return cx * ax + cy * ay + cz * az > dc * (cosb * np.sqrt(1.0 - q * q) + sinb * q)
@@ -297,7 +304,7 @@ def _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _ra_bnb(
-    heights, grid, h_min, h_max, cell_m, lat, lon, ha, ax, ay, az, cosb, sinb, max_range, bs, bmax, bmin,
+    rec, h_min, h_max, cell_m, lat, lon, ha, ax, ay, az, cosb, sinb, max_range, bs, bmax, bmin,
     blk_lb, blk_id, cell, out,
 ):
     """Closest terrain point in the beam cone by best-first branch and bound over DEM blocks; writes
@@ -309,15 +316,15 @@ def _ra_bnb(
     out[0] = 0.0
     for q in range(1, 5):
         out[q] = np.nan
+    heights, lat0, lon0, dlat, dlon, _ = rec
     n_lat, n_lon = heights.shape
-    lat0, lon0, dlat, dlon = grid
     cv = _consts(lat)
     _, c, m, n, _ = cv
     k = cosb * cosb
     best2 = max_range * max_range
     best_i = np.nan
     best_j = np.nan
-    t_ax = _ray_hit(heights, grid, h_min, h_max, cell_m, lat, lon, ha, cv, ax, ay, az, 0.0, max_range)
+    t_ax = _ray_hit(rec, h_min, h_max, cell_m, lat, lon, ha, cv, ax, ay, az, 0.0, max_range)
     if t_ax == t_ax:
         best2 = t_ax * t_ax
         dphi, dlam, _ = _geo_of_ned(t_ax * ax, t_ax * ay, t_ax * az, ha, cv)
@@ -369,14 +376,7 @@ def _ra_bnb(
             cz, rad = _sphere_curved(cx, cy, ha - 0.5 * (hx + hmn), rad, m + ha)
             if _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
                 continue
-            # insertion into the list sorted by lower bound
-            q = nb
-            while q > 0 and blk_lb[q - 1] > lb2:
-                blk_lb[q] = blk_lb[q - 1]
-                blk_id[q] = blk_id[q - 1]
-                q -= 1
-            blk_lb[q] = lb2
-            blk_id[q] = bi * nbj + bj
+            _insert_sorted(blk_lb, blk_id, nb, lb2, bi * nbj + bj)  # the list sorted by lower bound
             nb += 1
     # cells of the surviving blocks, blocks best first: box bound, cone test, then the projection bound
     # |P| >= P.g >= min over the corners of P_corner.g (g: unit vector to the cell centre; P.g is bilinear
@@ -418,7 +418,7 @@ def _ra_bnb(
                 if _outside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
                     continue
                 inside = _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb)
-                _ra_patch(heights, grid, lat, lon, ha, cv, i, j, cell)
+                _ra_patch(rec, lat, lon, ha, cv, i, j, cell)
                 gx = cell[0] + 0.5 * cell[3] + 0.5 * cell[6] + 0.25 * cell[9]
                 gy = cell[1] + 0.5 * cell[4] + 0.5 * cell[7] + 0.25 * cell[10]
                 gz = cell[2] + 0.5 * cell[5] + 0.5 * cell[8] + 0.25 * cell[11]
@@ -448,36 +448,20 @@ def _ra_bnb(
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_batch(
-    rec,
-    cell_m,
-    lat,
-    lon,
-    h,
-    C_bn,
-    half_beam,
-    max_range,
-    bs,
-    bmax,
-    bmin,
-    h_min,
-    h_max,
-    blk_lb,
-    blk_id,
-    valid,
-    rng,
-    lat_out,
-    lon_out,
-    h_out,
-):
-    """The radar-altimeter query of every antenna state; h_min/h_max: the DEM's finite height range,
-    blk_lb (bmax.size,) and blk_id (bmax.size,) int64: scratch space (overwritten before it is read)."""
-    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
+def _ra_batch(rec, cell_m, queries, half_beam, max_range, map_tables, workspace, outs):
+    """The radar-altimeter query of every antenna state on the map record rec (read bilinearly); records
+    (numba tuples): queries = (lat, lon, h, C_bn); map_tables = (bs, bmax, bmin, h_min, h_max) of
+    _ra_tables (h_min/h_max: the DEM's finite height range); workspace = (blk_lb (bmax.size,), blk_id
+    (bmax.size,) int64): scratch space (overwritten before it is read); outs = (valid, rng, lat_out,
+    lon_out, h_out)."""
+    lat, lon, h, C_bn = queries
+    bs, bmax, bmin, h_min, h_max = map_tables
+    blk_lb, blk_id = workspace
+    valid, rng, lat_out, lon_out, h_out = outs
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
     out = np.empty(5)
     cell = np.empty(12 + 17)
-    grid = (lat0, lon0, dlat, dlon)
     for k in range(lat.shape[0]):
         ax, ay, az = C_bn[k, 0, 2], C_bn[k, 1, 2], C_bn[k, 2, 2]
         nrm = np.sqrt(ax * ax + ay * ay + az * az)
@@ -486,7 +470,7 @@ def _ra_batch(
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
         _ra_bnb(
-            heights, grid, h_min, h_max, cell_m, lat[k], lon[k], h[k], ax / nrm, ay / nrm, az / nrm, cosb,
+            rec, h_min, h_max, cell_m, lat[k], lon[k], h[k], ax / nrm, ay / nrm, az / nrm, cosb,
             sinb, max_range, bs, bmax, bmin, blk_lb, blk_id, cell, out,
         )
         valid[k] = out[0] > 0.5
@@ -507,26 +491,7 @@ def radar_altimeter_return(
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     C = _stack("C_bn", C_bn, lat.shape[0], (3, 3))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
-    bs, bmax, bmin, h_min, h_max, cell_m = _ra_tables(dem)
-    _ra_batch(
-        dem.record(),
-        cell_m,
-        lat,
-        lon,
-        h,
-        C,
-        float(half_beamwidth_rad),
-        float(max_range_m),
-        bs,
-        bmax,
-        bmin,
-        h_min,
-        h_max,
-        *_ra_workspace(bmax.size),
-        valid,
-        rng,
-        la,
-        lo,
-        hh,
-    )
+    *map_tables, cell_m = _ra_tables(dem)
+    _ra_batch(dem.record(), cell_m, (lat, lon, h, C), float(half_beamwidth_rad), float(max_range_m),
+              tuple(map_tables), _ra_workspace(map_tables[1].size), (valid, rng, la, lo, hh))
     return TerrainReturn(valid, rng, la, lo, hh)

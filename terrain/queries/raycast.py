@@ -28,22 +28,22 @@ from .shared import (
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _g_ray(heights, grid, lat, lon, ha, cv, dx, dy, dz, t):
+def _g_ray(rec, lat, lon, ha, cv, dx, dy, dz, t):
     """Height of the ray point at parameter t above the terrain (m); NaN off-grid."""
     dphi, dlam, hp = _geo_of_ned(t * dx, t * dy, t * dz, ha, cv)
-    ht = bilinear(heights, grid[0], grid[1], grid[2], grid[3], lat + dphi, lon + dlam)
+    ht = bilinear(rec[0], rec[1], rec[2], rec[3], rec[4], lat + dphi, lon + dlam)
     return hp - ht
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _refine_root(heights, grid, lat, lon, ha, cv, dx, dy, dz, ta, ga, tb, gb):
+def _refine_root(rec, lat, lon, ha, cv, dx, dy, dz, ta, ga, tb, gb):
     """Illinois regula falsi on g(t) with g(ta) >= 0 > g(tb); returns t of the crossing."""
     side = 0
     for _ in range(60):
         tm = (ta * gb - tb * ga) / (gb - ga)
         if not (tm > ta and tm < tb):
             tm = 0.5 * (ta + tb)
-        gm = _g_ray(heights, grid, lat, lon, ha, cv, dx, dy, dz, tm)
+        gm = _g_ray(rec, lat, lon, ha, cv, dx, dy, dz, tm)
         if gm != gm:
             return 0.5 * (ta + tb)
         if gm >= 0.0:
@@ -62,7 +62,7 @@ def _refine_root(heights, grid, lat, lon, ha, cv, dx, dy, dz, ta, ga, tb, gb):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ray_hit(heights, grid, h_min, h_max, cell_m, lat, lon, ha, cv, dx, dy, dz, t_from, t_to):
+def _ray_hit(rec, h_min, h_max, cell_m, lat, lon, ha, cv, dx, dy, dz, t_from, t_to):
     """First crossing of the ray (unit NED direction dx, dy, dz) into the terrain for t in [t_from, t_to].
 
     Marches half a post horizontally per step, starting no earlier than the depth of the highest post.
@@ -81,21 +81,21 @@ def _ray_hit(heights, grid, h_min, h_max, cell_m, lat, lon, ha, cv, dx, dy, dz, 
         if step > 0.25 * slab:
             step = max(0.25 * slab, 0.01)
     t_a = t0
-    g_a = _g_ray(heights, grid, lat, lon, ha, cv, dx, dy, dz, t_a)
+    g_a = _g_ray(rec, lat, lon, ha, cv, dx, dy, dz, t_a)
     if g_a == g_a and g_a < 0.0:
         if t_a <= 1e-9:
             return 0.0  # the ray starts under the terrain
         # started below the surface (should not happen from the h_max depth): back off to the origin
         t_a = t_from
-        g_a = _g_ray(heights, grid, lat, lon, ha, cv, dx, dy, dz, t_a)
+        g_a = _g_ray(rec, lat, lon, ha, cv, dx, dy, dz, t_a)
         if g_a == g_a and g_a < 0.0:
             return t_a
     while t_a < t_to:
         t_b = min(t_a + step, t_to)
-        g_b = _g_ray(heights, grid, lat, lon, ha, cv, dx, dy, dz, t_b)
+        g_b = _g_ray(rec, lat, lon, ha, cv, dx, dy, dz, t_b)
         if g_a == g_a and g_b == g_b and g_b < 0.0:
             return _refine_root(
-                heights, grid, lat, lon, ha, cv, dx, dy, dz, t_a, g_a, t_b, g_b
+                rec, lat, lon, ha, cv, dx, dy, dz, t_a, g_a, t_b, g_b
             )
         if g_b == g_b and dz > 0.0:
             # ray point already below the lowest post and still descending: nothing further to hit
@@ -107,25 +107,14 @@ def _ray_hit(heights, grid, h_min, h_max, cell_m, lat, lon, ha, cv, dx, dy, dz, 
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ray_cast_batch(
-    rec,
-    cell_m,
-    lat,
-    lon,
-    h,
-    dirs,
-    max_range,
-    h_min,
-    h_max,
-    valid,
-    rng,
-    lat_out,
-    lon_out,
-    h_out,
-):
-    """The ray cast of every origin (see ray_cast); h_min/h_max: the DEM's finite height range."""
-    heights, lat0, lon0, dlat, dlon, _ = rec   # the grid (terrain.kernels.MapRecord; bilinear)
-    grid = (lat0, lon0, dlat, dlon)
+def _ray_cast_batch(rec, cell_m, queries, max_range, height_range, outs):
+    """The ray cast of every origin (see ray_cast) on the map record rec (read bilinearly); records (numba
+    tuples): queries = (lat, lon, h, dirs); height_range = (h_min, h_max): the DEM's finite height range;
+    outs = (valid, rng, lat_out, lon_out, h_out)."""
+    heights, lat0, lon0, dlat, dlon, _ = rec
+    lat, lon, h, dirs = queries
+    h_min, h_max = height_range
+    valid, rng, lat_out, lon_out, h_out = outs
     for k in range(lat.shape[0]):
         valid[k] = False
         rng[k] = np.nan
@@ -141,7 +130,7 @@ def _ray_cast_batch(
         dz /= norm
         cv = _consts(lat[k])
         t = _ray_hit(
-            heights, grid, h_min, h_max, cell_m, lat[k], lon[k], h[k], cv, dx, dy, dz, 0.0, max_range
+            rec, h_min, h_max, cell_m, lat[k], lon[k], h[k], cv, dx, dy, dz, 0.0, max_range
         )
         if t == t:
             dphi, dlam, hp = _geo_of_ned(t * dx, t * dy, t * dz, h[k], cv)
@@ -159,19 +148,6 @@ def ray_cast(dem, lat_rad, lon_rad, h_m, dir_ned, max_range_m: float = 20000.0) 
     lat, lon, h = _positions(lat_rad, lon_rad, h_m)
     dirs = _stack("dir_ned", dir_ned, lat.shape[0], (3,))
     valid, rng, la, lo, hh = _outputs(lat.shape[0])
-    _ray_cast_batch(
-        dem.record(),
-        _cell_m(dem),
-        lat,
-        lon,
-        h,
-        dirs,
-        float(max_range_m),
-        *_height_range(dem),
-        valid,
-        rng,
-        la,
-        lo,
-        hh,
-    )
+    _ray_cast_batch(dem.record(), _cell_m(dem), (lat, lon, h, dirs), float(max_range_m),
+                    tuple(_height_range(dem)), (valid, rng, la, lo, hh))
     return TerrainReturn(valid, rng, la, lo, hh)

@@ -14,11 +14,11 @@ drop and 1-3 m of horizontal bending at 5 km). The neglected third-order terms a
 _ned is this map, _geo_of_ned its inverse (three fixed-point steps), ned_of_points / look_angle_rad its
 public face.
 
-Kernel arguments. The kernels inside a search take the grid's scalars as one tuple grid = (lat0, lon0,
-dlat, dlon) (rad; Dem.grid without the heights) and the curvature constants at the antenna as cv = (sin phi,
-cos phi, M, N, dM/dphi) (_consts): plain tuples of floats, unpacked where used, the same bits and speed as
-the explicit arguments they replace. The _*_batch kernels that Python calls keep the explicit scalars and
-build the tuples themselves: numba types a tuple argument on a slower path at every call from Python.
+Kernel arguments. Every kernel, the _*_batch ones Python calls and those inside a search, takes the map
+as one record rec (terrain.kernels.MapRecord: heights, lat0, lon0, dlat, dlon rad, cubic; the queries
+read it bilinearly whatever its flag) and the curvature constants at the antenna as cv = (sin phi, cos phi,
+M, N, dM/dphi) (_consts): tuples unpacked where used, the same bits as the explicit arguments they
+replace.
 
 Per-DEM tables (block maxima and slopes, the finite height range; _ra_tables, _ira_tables) are built on
 the first query and cached on the Dem, keyed by its heights array (do not change heights_m afterwards), and
@@ -81,6 +81,19 @@ def _ned(dphi, dlam, hp, ha, cv):
     y = (n + hp) * c * dlam - mh * s * dphi * dlam
     z = (ha - hp) + 0.5 * mh * dphi * dphi + 0.5 * nh * c * c * dlam * dlam
     return x, y, z
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", forceinline=True)
+def _insert_sorted(keys, ids, n, key, ident):
+    """Insert (key, ident) into keys[:n], ids[:n] kept ascending by key (after the equal keys): the
+    searches' candidate lists; keys[:n + 1], ids[:n + 1] hold the list afterwards."""
+    q = n
+    while q > 0 and keys[q - 1] > key:
+        keys[q] = keys[q - 1]
+        ids[q] = ids[q - 1]
+        q -= 1
+    keys[q] = key
+    ids[q] = ident
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

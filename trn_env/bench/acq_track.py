@@ -155,13 +155,12 @@ def _acquisition_figures(repeats: int = 3) -> dict:
         heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
         cost=0,
         remove_bias=True,
-        interp=0,
         n_min=15,
         distinct_ratio=cfg.acquisition_distinct_ratio,
         exclusion_m=cfg.acquisition_exclusion_m,
     )
     args = (
-        dem.grid,
+        dem.record(),
         lat + 320.0 / r_n,
         lon - 410.0 / r_e,
         dt,
@@ -190,8 +189,9 @@ def _acquisition_figures(repeats: int = 3) -> dict:
         math.radians(cfg.acquisition_heading_half_deg), math.radians(cfg.acquisition_heading_bin_deg)
     )
     full = np.empty((dn.size, dn.size, bv.size, bp.size))
-    ex_args = (heights, lat0, lon0, dlat, dlon, args[1], args[2], dn, dn.copy(), dt, zeros, zeros, bv, bp)
-    ex_tail = (r_n, r_e, d, np.ones(n, bool), 0, True, 0, 15, full)
+    ex_args = (dem.record(), args[1], args[2], (dn, dn.copy(), bv, bp),
+               correlation.Motion(dt, zeros, zeros, r_n, r_e))
+    ex_tail = (correlation.Profile(d, np.ones(n, bool), 0, True, 15), full)
     acquisition.search_kernel(*ex_args, *ex_tail)
     ex_times = []
     for _ in range(repeats):

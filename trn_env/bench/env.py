@@ -11,14 +11,14 @@
   basin_route scenario, 1 s decisions, INS navigator; subproc_vec_env_sim_seconds_per_wall_second (both envs
   together) beside the same bare-JSBSim reference (one process: the machine has 2 cores);
 - env_route_*: TerrainNav-v0 at the route benchmark's settings (trn_env.env.route_task, basin terrain,
-  pursuit actions, 30 s decisions, JSBSim at 50 Hz (flight_dt_s 0.02), guidance once per navigator update,
-  the IRA and the navigator's covariance propagation at 10 Hz (route_task.TASK_RATES); random actions,
-  resets included): env_route_agent_steps_per_s (wall) beside env_route_agent_steps_per_s_before (the same
-  env with the rates it had before: guidance at the scenario's 10 Hz, JSBSim at its 100 Hz, the scenario's
-  50 Hz IRA and covariance steps, BEFORE_RATES), measured interleaved, median of the repeats; the same as CPU
+  pursuit actions, 30 s decisions, JSBSim at 50 Hz (flight_dt_s 0.02), guidance once per navigator update;
+  random actions, resets included): env_route_agent_steps_per_s (wall) beside
+  env_route_agent_steps_per_s_before (the same env with the rates it had before: guidance at the scenario's
+  10 Hz and JSBSim at its 100 Hz, BEFORE_RATES), measured interleaved, median of the repeats; the same as CPU
   figures (env_route_cpu_*, this process's CPU time: the shared machine's load moves wall figures more);
-  env_route_cpu_agent_steps_per_s_scenario_sensor_rates the task's env with the scenario's sensor and filter
-  rates (what TASK_RATES buys);
+  env_route_decision_rates_* the same figures with the task's opt-in DECISION_RATES (IRA and covariance
+  steps at 10 Hz, an estimate every 2 s, guidance at 1 Hz; `env_kwargs("basin", decision_rates=True)`),
+  its speedup over "before" and its ratios to the King Air gym loop;
   env_route_speedup (after / before, CPU; env_route_speedup_wall the wall ratio);
   env_route_pipelined_agent_steps_per_s (`pipeline=True`: sensors and navigator in a second process;
   wall); env_route_sim_seconds_per_wall_second (and per CPU second) beside two bare JSBSim gymnasium loops
@@ -187,11 +187,8 @@ def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: 
     return sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
 
 
-# the env before issue 34's rate changes: guidance at the scenario's 10 Hz, JSBSim at its 100 Hz, the
-# scenario's sensor and filter rates (IRA 50 Hz, covariance propagation 50 Hz)
-BEFORE_RATES = {"guidance_rate_hz": 10.0, "flight_dt_s": 0.01, "scenario_fields": None}
-# the task's rates but the scenario's sensor and filter rates (what route_task.TASK_RATES buys on its own)
-SCENARIO_SENSOR_RATES = {"scenario_fields": None}
+# the env before issue 34's rate changes: guidance at the scenario's 10 Hz, JSBSim at its 100 Hz
+BEFORE_RATES = {"guidance_rate_hz": 10.0, "flight_dt_s": 0.01}
 
 
 def route_env_figures(quick: bool = False) -> dict:
@@ -209,8 +206,8 @@ def route_env_figures(quick: bool = False) -> dict:
     before = TerrainNavEnv(**{**kw, **BEFORE_RATES})
     t_second = time.perf_counter() - t0
     piped = TerrainNavEnv(**kw, pipeline=True)
-    sensor_rates = TerrainNavEnv(**{**kw, **SCENARIO_SENSOR_RATES})
-    envs = {"after": after, "before": before, "pipelined": piped, "scenario_sensor_rates": sensor_rates}
+    rated = TerrainNavEnv(**env_kwargs("basin", decision_rates=True))
+    envs = {"after": after, "before": before, "pipelined": piped, "decision_rates": rated}
     rng = np.random.default_rng(0)
     n_steps, reps = (4, 2) if quick else (10, 4)
     wall = {k: [] for k in envs}
@@ -255,14 +252,23 @@ def route_env_figures(quick: bool = False) -> dict:
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
     sim_rate = sims["after"] / walls["after"]
     sim_rate_cpu = sims["after"] / cpus["after"]
+    rated_wall = sims["decision_rates"] / walls["decision_rates"]
+    rated_cpu = sims["decision_rates"] / cpus["decision_rates"]
     return {
         "env_route_agent_steps_per_s": med["after"],
         "env_route_agent_steps_per_s_before": med["before"],
         "env_route_pipelined_agent_steps_per_s": med["pipelined"],
         "env_route_cpu_agent_steps_per_s": med_cpu["after"],
         "env_route_cpu_agent_steps_per_s_before": med_cpu["before"],
-        "env_route_cpu_agent_steps_per_s_scenario_sensor_rates": med_cpu["scenario_sensor_rates"],
         "env_route_speedup": med_cpu["after"] / med_cpu["before"],
+        "env_route_decision_rates_agent_steps_per_s": med["decision_rates"],
+        "env_route_decision_rates_cpu_agent_steps_per_s": med_cpu["decision_rates"],
+        "env_route_decision_rates_speedup": med_cpu["decision_rates"] / med_cpu["before"],
+        "env_route_decision_rates_speedup_wall": med["decision_rates"] / med["before"],
+        "env_route_decision_rates_sim_seconds_per_wall_second": rated_wall,
+        "env_route_decision_rates_sim_seconds_per_cpu_second": rated_cpu,
+        "env_route_decision_rates_ratio_to_gym_jsbsim": rated_wall / ka_wall,
+        "env_route_decision_rates_cpu_ratio_to_gym_jsbsim": rated_cpu / ka_cpu,
         "env_route_speedup_wall": med["after"] / med["before"],
         "env_route_pipelined_speedup_wall": med["pipelined"] / med["before"],
         "env_route_flight_dt_s": after.scenario.aircraft.dt_s,

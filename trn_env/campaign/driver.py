@@ -58,19 +58,13 @@ def tasks(campaign: Campaign, skip: set[str]) -> Iterator[RunTask]:
     seeds), made lazily."""
     import shlex
     settings = asdict(campaign.metric_settings)
-    index = 0
-    for si, seed in enumerate(campaign.seeds):
-        for v in campaign.variants:
-            run_id = campaign.run_id(v.index, si)
-            if run_id not in skip:
-                yield RunTask(
-                    campaign=campaign.name, campaign_hash=campaign.hash, run_id=run_id, run_index=index,
-                    variant_index=v.index, seed_index=si, seed=int(seed), scenario_name=v.scenario_name,
-                    scenario_source=v.scenario_source, navigator_label=v.navigator.label, sweep=dict(v.sweep),
-                    sections=v.sections, dem_keys=v.dem_keys, metric_settings=settings,
-                    keep_logs=campaign.keep_logs,
-                    replay_command=shlex.join(replay_argv(v, int(seed))))
-            index += 1
+    for index, si, seed, v, run_id in campaign.pending_runs(skip):
+        yield RunTask(
+            campaign=campaign.name, campaign_hash=campaign.hash, run_id=run_id, run_index=index,
+            variant_index=v.index, seed_index=si, seed=int(seed), scenario_name=v.scenario_name,
+            scenario_source=v.scenario_source, navigator_label=v.navigator.label, sweep=dict(v.sweep),
+            sections=v.sections, dem_keys=v.dem_keys, metric_settings=settings, keep_logs=campaign.keep_logs,
+            replay_command=shlex.join(replay_argv(v, int(seed))))
 
 
 def make_backend(name: str, workers: int | None = None, address: str | None = None):

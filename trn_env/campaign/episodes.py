@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from trn_env.campaign.spec import CampaignError, draw_seeds
+from trn_env.campaign.spec import CampaignError, SeedMajorRuns, draw_seeds
 
 POLICY_KINDS = ("straight", "planner", "sb3", "random")
 # columns of an episode row (besides the run bookkeeping ones); floats are NaN where they do not apply
@@ -86,7 +86,7 @@ class EpisodeTask:
 
 
 @dataclass
-class EpisodeCampaign:
+class EpisodeCampaign(SeedMajorRuns):
     """A validated episode campaign; runs through `trn_env.campaign.driver.run_campaign` as a Campaign."""
 
     name: str
@@ -100,25 +100,12 @@ class EpisodeCampaign:
     sweep_paths: list[str] = field(default_factory=list)
     extra: dict = field(default_factory=dict)
 
-    @property
-    def n_runs(self) -> int:
-        return len(self.seeds) * len(self.variants)
-
-    def run_id(self, variant_index: int, seed_index: int) -> str:
-        return f"v{variant_index:03d}-s{seed_index:04d}"
-
     def tasks(self, skip: set[str]):
         """The campaign's episodes not in `skip`, seed-major, made lazily."""
-        index = 0
-        for si, seed in enumerate(self.seeds):
-            for v in self.variants:
-                run_id = self.run_id(v.index, si)
-                if run_id not in skip:
-                    yield EpisodeTask(campaign=self.name, campaign_hash=self.hash, run_id=run_id,
-                                      run_index=index, variant_index=v.index, seed_index=si, seed=int(seed),
-                                      policy_label=v.label, policy=v.policy, env=self.env,
-                                      goal_deg=v.goal_deg)
-                index += 1
+        for index, si, seed, v, run_id in self.pending_runs(skip):
+            yield EpisodeTask(campaign=self.name, campaign_hash=self.hash, run_id=run_id, run_index=index,
+                              variant_index=v.index, seed_index=si, seed=int(seed), policy_label=v.label,
+                              policy=v.policy, env=self.env, goal_deg=v.goal_deg)
 
 
 def _check_policy(i: int, p: Any) -> dict:

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from trn_env.campaign.spec import CampaignError, NavigatorChoice, grid_values, is_number
+from trn_env.campaign.spec import CampaignError, NavigatorChoice, SeedMajorRuns, grid_values, is_number
 from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
 
 _KEYS = {"name", "description", "logs", "navigators", "seeds", "sweeps", "metrics"}
@@ -67,7 +67,7 @@ class LogReplayTask:
 
 
 @dataclass
-class LogCampaign:
+class LogCampaign(SeedMajorRuns):
     name: str
     source: str
     description: str
@@ -80,28 +80,17 @@ class LogCampaign:
     keep_logs: bool = False
     extra: dict = field(default_factory=dict)
 
-    @property
-    def n_runs(self) -> int:
-        return len(self.seeds) * len(self.variants)
-
-    def run_id(self, variant_index: int, seed_index: int) -> str:
-        return f"v{variant_index:03d}-s{seed_index:04d}"
-
     def tasks(self, skip: set[str]):
+        """The campaign's replays not in `skip`, seed-major, made lazily."""
         from dataclasses import asdict
-        index = 0
-        for si, seed in enumerate(self.seeds):
-            for v in self.variants:
-                rid = self.run_id(v.index, si)
-                if rid not in skip:
-                    argv = ["trn-env", "replay", v.log_path, "--navigator", v.navigator.name]
-                    if seed is not None:
-                        argv += ["--seed", str(seed)]
-                    argv += [f"--set=navigator.settings.{k}={_toml(val)}" for k, val in v.settings.items()]
-                    yield LogReplayTask(self.name, self.hash, rid, index, v.index, si, seed, v.log_path,
-                                        v.log_name, v.navigator.label, v.navigator.name, dict(v.settings),
-                                        dict(v.sweep), asdict(self.metric_settings), shlex.join(argv))
-                index += 1
+        for index, si, seed, v, rid in self.pending_runs(skip):
+            argv = ["trn-env", "replay", v.log_path, "--navigator", v.navigator.name]
+            if seed is not None:
+                argv += ["--seed", str(seed)]
+            argv += [f"--set=navigator.settings.{k}={_toml(val)}" for k, val in v.settings.items()]
+            yield LogReplayTask(self.name, self.hash, rid, index, v.index, si, seed, v.log_path, v.log_name,
+                                v.navigator.label, v.navigator.name, dict(v.settings), dict(v.sweep),
+                                asdict(self.metric_settings), shlex.join(argv))
 
 
 def _toml(v: Any) -> str:

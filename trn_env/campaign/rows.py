@@ -71,7 +71,7 @@ def row_table(row: dict[str, Any]) -> pa.Table:
 def write_row(out_dir: Path, row: dict[str, Any]) -> Path:
     path = Path(out_dir) / "runs" / f"{row['run_id']}.parquet"
     table = row_table(row)
-    # one row: column statistics and dictionaries buy nothing and cost ~25 % of the write
+    # one row: column statistics and dictionaries buy nothing and cost time (docs/validation/benchmarks.md)
     _write_atomic(path, lambda tmp: pq.write_table(table, tmp, write_statistics=False, use_dictionary=False))
     return path
 

@@ -136,8 +136,31 @@ class Variant:
     dems: tuple[Any, Any] = (None, None)
 
 
+class SeedMajorRuns:
+    """The run numbering every campaign kind shares (a mixin of dataclasses with `seeds` and `variants`,
+    each variant with its `index`): a run is one (variant, seed), numbered seed-major."""
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.seeds) * len(self.variants)
+
+    def run_id(self, variant_index: int, seed_index: int) -> str:
+        return f"v{variant_index:03d}-s{seed_index:04d}"
+
+    def pending_runs(self, skip: set[str]):
+        """(run_index, seed_index, seed, variant, run_id) of the runs whose id is not in `skip`, seed-major,
+        made lazily; run_index counts the skipped runs too."""
+        index = 0
+        for si, seed in enumerate(self.seeds):
+            for v in self.variants:
+                run_id = self.run_id(v.index, si)
+                if run_id not in skip:
+                    yield index, si, seed, v, run_id
+                index += 1
+
+
 @dataclass
-class Campaign:
+class Campaign(SeedMajorRuns):
     name: str
     source: str
     description: str
@@ -149,13 +172,6 @@ class Campaign:
     keep_logs: bool
     metric_settings: MetricSettings
     extra: dict = field(default_factory=dict)
-
-    @property
-    def n_runs(self) -> int:
-        return len(self.seeds) * len(self.variants)
-
-    def run_id(self, variant_index: int, seed_index: int) -> str:
-        return f"v{variant_index:03d}-s{seed_index:04d}"
 
 
 def draw_seeds(root_seed: int, n: int) -> list[int]:

@@ -1,7 +1,7 @@
 """TerrainNav-v0's scenario from its constructor arguments, and the goal geometry its steps use.
 
 - `with_fields`: the scenario with `scenario_fields` set (dotted paths, `Scenario.with_fields`), e.g. the
-  route task's sensor and filter rates (trn_env.env.route_task.TASK_RATES);
+  route task's opt-in decision rates (trn_env.env.route_task.DECISION_RATES);
 - `with_rates`: the guidance rate and JSBSim's step (`guidance_rate_hz`, `flight_dt_s`), the IMU lowered to
   the step rate;
 - `goal_offset_ne`: north / east of the goal in the local level frame, exact through ECEF (a compiled kernel:

@@ -18,31 +18,38 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 import trn_env.scenario.build as components
 from trn_env.terrain.geodesy import ned_offset_to_latlon
 
 
+@njit(cache=True)
 def pursuit_paths_ne(dn_m: float, de_m: float, offsets_rad: np.ndarray, goal_radius_m: float,
-                     omega_rps: float, tas_mps: float, step_m: float, max_points: int = 64) -> np.ndarray:
+                     omega_rps: float, tas_mps: float, step_m: float,
+                     max_points: int = 64) -> np.ndarray:  # pragma: no cover - compiled
     """Points (K, n, 2) north/east m from the estimate (the goal at (dn_m, de_m)) of the constant-offset
     pursuit paths, one per offset (rad, + = right of the goal's bearing); a path's points stop changing
-    once it is within goal_radius_m of the goal (it has arrived)."""
-    offsets = np.asarray(offsets_rad, float)
-    k = offsets.size
-    pos = np.zeros((k, 2))
+    once it is within goal_radius_m of the goal (it has arrived). A compiled kernel: the env asks for it
+    at every decision."""
+    k = offsets_rad.shape[0]
     out = np.empty((k, max_points, 2))
-    goal = np.array([dn_m, de_m], float)
-    for j in range(max_points):
-        rel = goal[None, :] - pos
-        d = np.hypot(rel[:, 0], rel[:, 1])
-        live = d > goal_radius_m
-        limit = np.arcsin(np.minimum(1.0, d * omega_rps / tas_mps))
-        phi = np.clip(offsets, -limit, limit)
-        brg = np.arctan2(rel[:, 1], rel[:, 0]) + phi
-        step = np.where(live, np.minimum(step_m, d), 0.0)
-        pos = pos + step[:, None] * np.stack([np.cos(brg), np.sin(brg)], axis=1)
-        out[:, j] = pos
+    for i in range(k):
+        pn = 0.0
+        pe = 0.0
+        for j in range(max_points):
+            rn = dn_m - pn
+            re = de_m - pe
+            d = np.hypot(rn, re)
+            if d > goal_radius_m:
+                limit = np.arcsin(min(1.0, d * omega_rps / tas_mps))
+                phi = min(max(offsets_rad[i], -limit), limit)
+                brg = np.arctan2(re, rn) + phi
+                step = min(step_m, d)
+                pn = pn + step * np.cos(brg)
+                pe = pe + step * np.sin(brg)
+            out[i, j, 0] = pn
+            out[i, j, 1] = pe
     return out
 
 
@@ -55,7 +62,8 @@ def route_information(info_map, lat_rad: float, lon_rad: float, dn_m: float, de_
     d = math.hypot(dn_m, de_m)
     step = max(200.0, d / n_points)
     cap = int(math.ceil(n_points / max(math.cos(float(np.max(np.abs(offsets_rad)))), 0.2))) + 2
-    pts = pursuit_paths_ne(dn_m, de_m, offsets_rad, goal_radius_m, omega_rps, tas_mps, step, cap)
+    pts = pursuit_paths_ne(float(dn_m), float(de_m), np.ascontiguousarray(offsets_rad, float),
+                           float(goal_radius_m), float(omega_rps), float(tas_mps), float(step), cap)
     k, n, _ = pts.shape
     lat, lon = ned_offset_to_latlon(lat_rad, lon_rad, 0.0, pts[..., 0].ravel(), pts[..., 1].ravel())
     crlb = components.world_height(info_map, lat, lon).reshape(k, n)

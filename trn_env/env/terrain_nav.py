@@ -1,6 +1,6 @@
 """Gymnasium environment: route decisions for terrain-referenced navigation, in closed loop.
 
-The module is longer than the style's ~600 lines because about 240 of them are the env's documentation (the
+The module is longer than the style's ~600 lines because about 250 of them are the env's documentation (the
 class docstring: gymnasium's Description / spaces / rewards / arguments tables, which `help(env)` and the
 docs' reference page show); the code is one concept, the env's episode and step. Its parts that are not
 (the scenario from the constructor's arguments, the goal geometry) live in trn_env.env.env_settings; the
@@ -218,7 +218,12 @@ class TerrainNavEnv(gym.Env, EzPickle):
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
     bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0, guidance_rate_hz=None,
-    pipeline=False, flight_dt_s=None)`.
+    pipeline=False, flight_dt_s=None, scenario_fields=None)`.
+    `scenario_fields`: scenario fields set for every episode by dotted path (`Scenario.with_fields`, as
+    `trn-env fly --set`), e.g. `{"sensors.ira.rate_hz": 10.0, "navigator.rate_hz": 0.5}`; applied before
+    `guidance_rate_hz` and `flight_dt_s`; anything the scenario's schema rejects is a ValueError naming
+    `scenario_fields` and the field. The route task's opt-in `DECISION_RATES` use it
+    (trn_env.env.route_task; what they cost in accuracy: docs/validation/env_speed.md).
     `flight_dt_s`: JSBSim's integration step (s, at most 0.05; None = the scenario's `[aircraft] dt_s`,
     0.01 in the built-in scenarios). The IMU's rate is lowered to the step rate when it was faster (an
     integrating IMU: each sample is the mean over its interval of the truth rows); any other sensor faster
@@ -239,6 +244,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (scenario fields): `scenario_fields`; the per-update goal geometry and the route information's
+      pursuit paths are compiled kernels (the same episodes to rounding).
     - v0 (JSBSim's step): `flight_dt_s`.
     - v0 (rates matched to the decision): guidance re-computes the targets once per navigator update
       instead of at the scenario's 10 Hz (`guidance_rate_hz`); `pipeline`.

@@ -175,7 +175,7 @@ def frame_columns(sensor: str, fr, k: int, increment: bool = False) -> dict[str,
 
 def _read_column(pf: pq.ParquetFile, name: str) -> np.ndarray:
     """One column of a Parquet file as a numpy array (it may share Arrow's buffer: copy to keep it)."""
-    return pf.read(columns=[name]).column(name).to_numpy()
+    return pf.read(columns=[name], use_threads=False).column(name).to_numpy()
 
 
 COV_COLUMNS = tuple(f"cov_{i}_{j}" for i in range(9) for j in range(9))

@@ -19,7 +19,7 @@ referenced while the zero-Doppler line is velocity referenced (the point of seed
 Noise: sigma_R = 3.5 m, sigma_theta = 0.1 deg (seed 002 Table 1); rate 50 Hz (seed 000 Table 2).
 
 Search: each sample's closest-point search starts from the previous sample's return (carried in IraState
-across chunks), which saves ~2 % of the search on the default flight; the returns agree with
+across chunks), which saves part of the search (docs/validation/benchmarks.md); the returns agree with
 independent searches to the search's 5 mm range tolerance.
 """
 

@@ -1,7 +1,7 @@
 """The fast tier's flight: N point-mass (3-DOF) King Airs with their guidance, sensors and navigator, one
 numba call per decision.
 
-Per aircraft, every `dt_s` (1 s, trn_env.env.fast.vector_env.DT_S) of a decision:
+Per aircraft, every `dt_s` (1 s, trn_env.env.fast.kernel_params.DT_S) of a decision:
 
 - guidance on the ESTIMATE (as TerrainNav-v0): in pursuit mode the commanded track is the goal's bearing
   from the estimate plus the held offset (a fraction of asin(d omega / v), trn_env.env.task); the height
@@ -13,7 +13,7 @@ Per aircraft, every `dt_s` (1 s, trn_env.env.fast.vector_env.DT_S) of a decision
   error limited to the measured climb and descent rates, its target moving at most 1.5 m/s^2;
 - constant true airspeed; ground velocity = air velocity + wind: the scenario's wind layers (linear in
   altitude between layers, constant beyond) plus turbulence as a first-order Gauss-Markov gust per
-  horizontal axis (std and correlation time in trn_env.env.fast.vector_env.TURBULENCE);
+  horizontal axis (std and correlation time in trn_env.env.fast.kernel_params.TURBULENCE_*);
 - position on the WGS84 ellipsoid (meridian and prime-vertical radii at the aircraft);
 - navigator (trn_env.env.fast.navigator): INS error and covariance propagation every step, a 1 Hz sample
   of the terrain height under the TRUE position (the WORLD DEM) into the TERCOM profile, GNSS position and
@@ -147,33 +147,27 @@ def fly_decision(
     state,
     active,
     n_sub,
-    prof_meas,
-    prof_lat,
-    prof_lon,
+    prof,
     world,
-    w_lat0,
-    w_lon0,
-    w_dlat,
-    w_dlon,
-    mapg,
-    m_lat0,
-    m_lon0,
-    m_dlat,
-    m_dlon,
+    mapr,
     fp,
     nav,
-    wind_alt,
-    wind_n,
-    wind_e,
-    diff,
-    tables,
+    wind,
+    scratch,
 ):
     """Fly every active aircraft n_sub steps of fp[FP_DT] s (or to its episode's end, X[:, END] != 0); the
     aircraft are independent (each writes only its own rows and draws from its own random stream), so the
     loop over them is spread over numba's threads (call it inside numba.parallel_chunksize(CHUNK_AIRCRAFT):
     the work per aircraft is uneven - a TERCOM fix costs tens of steps - and small chunks taken in turn keep
-    both cores busy, also when one of them is taken by another process); diff (N, 3, profile) and tables
-    (N, 4, candidates, profile) are TERCOM's scratch."""
+    both cores busy, also when one of them is taken by another process).
+
+    Records (numba tuples): prof = the TERCOM profiles' (measured heights, latitudes, longitudes) rows (N,
+    profile); world, mapr = the world and map DEMs (terrain.kernels.MapRecord, bilinear); wind = the wind
+    layers' (altitudes m, north, east m/s); scratch = TERCOM's (diff (N, 3, profile), tables (N, 4,
+    candidates, profile))."""
+    prof_meas, prof_lat, prof_lon = prof
+    wind_alt, wind_n, wind_e = wind
+    diff, tables = scratch
     dt = fp[FP_DT]
     v = fp[FP_TAS]
     tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])
@@ -196,7 +190,7 @@ def fly_decision(
                 x = d * fp[FP_OMEGA] / v
                 lim = min(fp[FP_OFFSET_MAX], 0.5 * math.pi) if x >= sin_off_max else math.asin(x)
                 X[i, TRK_CMD] = _wrap(math.atan2(ge, gn) + X[i, OFFSET_FRAC] * lim)
-            h_map_e = kernels.bilinear(mapg, m_lat0, m_lon0, m_dlat, m_dlon, lat_e, lon_e)
+            h_map_e = kernels.map_height(mapr, lat_e, lon_e)
             if h_map_e != h_map_e:
                 X[i, END] = OFF_MAP
                 break
@@ -244,7 +238,7 @@ def fly_decision(
             X[i, T] += dt
             nv.covariance_step(X, i, dt, nav[nv.NP_QF_V], nav[nv.NP_Q_A])
             t = X[i, T]
-            h_world = kernels.bilinear(world, w_lat0, w_lon0, w_dlat, w_dlon, X[i, LAT], X[i, LON])
+            h_world = kernels.map_height(world, X[i, LAT], X[i, LON])
             if h_world != h_world:
                 X[i, END] = OFF_MAP
                 break
@@ -278,21 +272,8 @@ def fly_decision(
                     if t - X[i, T_LAST_FIX] >= nav[nv.NP_FIX_PERIOD] - 1e-9:
                         rm_e, rn_e = radii_m(lat_e)
                         nv.tercom_fix(
-                            X,
-                            i,
-                            prof_meas,
-                            prof_lat,
-                            prof_lon,
-                            mapg,
-                            m_lat0,
-                            m_lon0,
-                            m_dlat,
-                            m_dlon,
-                            nav,
-                            rm_e + X[i, H],
-                            (rn_e + X[i, H]) * math.cos(lat_e),
-                            diff[i],
-                            tables[i],
+                            X, i, prof, mapr, nav, (rm_e + X[i, H], (rn_e + X[i, H]) * math.cos(lat_e)),
+                            (diff[i], tables[i]),
                         )
                         X[i, T_LAST_FIX] = t
             # ---- episode ends

@@ -376,8 +376,8 @@ def _axis_table(f, n, stride, offsets, n_off, size, cell_idx, frac):
 @njit(cache=True)
 def _candidate_mad(meas, n, stride, heights, ii, uu, jj, vv, remove_bias, diff):
     """Mean absolute difference (mean-removed when remove_bias) of the profile's used points against the
-    map at the cells and fractions (ii, uu) x (jj, vv) of one shifted candidate (kernels.bilinear_at_index's
-    formula, its void retry included); +inf when a point falls off the map or on a void."""
+    map at the cells and fractions (ii, uu) x (jj, vv) of one shifted candidate (kernels.bilinear_cell
+    and its void retry); +inf when a point falls off the map or on a void."""
     s = 0.0
     m_used = 0
     for k in range(0, n, stride):
@@ -387,13 +387,7 @@ def _candidate_mad(meas, n, stride, heights, ii, uu, jj, vv, remove_bias, diff):
         j = int(jj[m_used])
         u = uu[m_used]
         v = vv[m_used]
-        h00 = heights[i, j]
-        h01 = heights[i, j + 1]
-        h10 = heights[i + 1, j]
-        h11 = heights[i + 1, j + 1]
-        x = h00 + v * (h01 - h00)
-        y = h10 + v * (h11 - h10)
-        m = x + u * (y - x)
+        m = kernels.bilinear_cell(heights, i, j, u, v)[0]
         if m != m:
             m = kernels._edge_retry(heights, i, j, u, v)
             if m != m:
@@ -410,26 +404,7 @@ def _candidate_mad(meas, n, stride, heights, ii, uu, jj, vv, remove_bias, diff):
 
 
 @njit(cache=True)
-def tercom_offset(
-    meas,
-    plat,
-    plon,
-    n,
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
-    half_window_m,
-    cell_m,
-    remove_bias,
-    m_per_rad_lat,
-    m_per_rad_lon,
-    scratch,
-    coarse_step_m,
-    coarse_stride,
-    tables,
-):
+def tercom_offset(profile, n, rec, half_window_m, cell_m, remove_bias, m_per_rad, work, coarse):
     """Best north/east offset (m) of the profile (measured terrain heights `meas` at the INS-indicated
     positions plat, plon; n points) against the map over +-half_window_m, coarse to fine: the whole window
     in coarse_step_m steps (a window wider than COARSE_STEPS of them: in COARSE_STEPS longer steps, then
@@ -437,8 +412,17 @@ def tercom_offset(
     +-40 m in 20 m steps and +-10 m in cell_m steps around the best on every point. Each stage's
     candidates form a north x east lattice, so the map cell and fraction of every point under every north
     and every east shift are tabulated once (_axis_table) and a candidate's bilinear look-ups only read
-    them. scratch: (3, >= n) work rows; tables: (4, >= candidates per axis, >= points used) work tables.
-    Returns (dn, de, mad)."""
+    them.
+
+    Records (numba tuples): profile = (meas, plat, plon); rec = the map (terrain.kernels.MapRecord,
+    bilinear); m_per_rad = (m_per_rad_lat, m_per_rad_lon) (m/rad at the profile); work = (scratch (3, >= n)
+    work rows, tables (4, >= candidates per axis, >= points used) work tables); coarse = (coarse_step_m,
+    coarse_stride). Returns (dn, de, mad)."""
+    meas, plat, plon = profile
+    heights, lat0, lon0, dlat, dlon, _ = rec
+    m_per_rad_lat, m_per_rad_lon = m_per_rad
+    scratch, tables = work
+    coarse_step_m, coarse_stride = coarse
     diff = scratch[0]
     fi = scratch[1]
     fj = scratch[2]
@@ -503,49 +487,19 @@ def tercom_offset(
 
 
 @njit(cache=True)
-def tercom_fix(
-    X,
-    i,
-    prof_meas,
-    prof_lat,
-    prof_lon,
-    heights,
-    lat0,
-    lon0,
-    dlat,
-    dlon,
-    nav,
-    m_per_rad_lat,
-    m_per_rad_lon,
-    diff,
-    tables,
-):
-    """Aircraft i's TERCOM fix from its profile (rows of prof_*), fused by the Kalman filter; the profile is
-    then restarted. Returns True when the fix was accepted."""
+def tercom_fix(X, i, prof, rec, nav, m_per_rad, work):
+    """Aircraft i's TERCOM fix from its profile (row i of prof = (measured heights, latitudes, longitudes)),
+    fused by the Kalman filter; the profile is then restarted. rec, m_per_rad: as tercom_offset's; work =
+    aircraft i's (diff, tables) scratch. Returns True when the fix was accepted."""
+    prof_meas, prof_lat, prof_lon = prof
     n = int(X[i, N_PROF])
     X[i, N_PROF] = 0.0
     if n < nav[NP_MIN_SAMPLES]:
         return False
     half_m = nav[NP_HALF_WINDOW] * (nav[NP_RECOVERY_WINDOW] if X[i, DEGRADED] > 0.5 else 1.0)
     dn, de, mad = tercom_offset(
-        prof_meas[i],
-        prof_lat[i],
-        prof_lon[i],
-        n,
-        heights,
-        lat0,
-        lon0,
-        dlat,
-        dlon,
-        half_m,
-        nav[NP_CELL],
-        nav[NP_REMOVE_BIAS] > 0.5,
-        m_per_rad_lat,
-        m_per_rad_lon,
-        diff,
-        nav[NP_COARSE_STEP],
-        int(nav[NP_COARSE_STRIDE]),
-        tables,
+        (prof_meas[i], prof_lat[i], prof_lon[i]), n, rec, half_m, nav[NP_CELL], nav[NP_REMOVE_BIAS] > 0.5,
+        m_per_rad, work, (nav[NP_COARSE_STEP], int(nav[NP_COARSE_STRIDE])),
     )
     if not math.isfinite(mad):
         return False
@@ -571,39 +525,20 @@ def tercom_fix(
 
 
 @njit(cache=True)
-def draw_initial_errors(X, i, state, sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw, sig_ba_prior):
-    """Episode draws of aircraft i's navigation errors and inertial error sources, and the filter's prior."""
-    X[i, EP_N] = sig_pos * frng.normal(state, i)
-    X[i, EP_E] = sig_pos * frng.normal(state, i)
-    X[i, EV_N] = sig_vel * frng.normal(state, i)
-    X[i, EV_E] = sig_vel * frng.normal(state, i)
-    X[i, TILT_N] = sig_tilt * frng.normal(state, i)
-    X[i, TILT_E] = sig_tilt * frng.normal(state, i)
-    X[i, BA_N] = ba * frng.normal(state, i)
-    X[i, BA_E] = ba * frng.normal(state, i)
-    X[i, BG_N] = bg * frng.normal(state, i)
-    X[i, BG_E] = bg * frng.normal(state, i)
-    X[i, BARO] = baro_sigma * frng.normal(state, i)
-    X[i, YAW0] = sig_yaw * frng.normal(state, i)
-    X[i, BG_Z] = bg * frng.normal(state, i)
-    X[i, BI_A_N] = 0.0
-    X[i, BI_A_E] = 0.0
-    X[i, BI_G_N] = 0.0
-    X[i, BI_G_E] = 0.0
-    X[i, TILT_GM_N] = 0.0
-    X[i, TILT_GM_E] = 0.0
-    X[i, CA_N] = 0.0
-    X[i, CA_E] = 0.0
+def draw_initial_errors(X, i, state, sig):
+    """Episode draws of aircraft i's navigation errors and inertial error sources, and the filter's prior;
+    sig = (sig_pos m, sig_vel m/s, sig_tilt rad, ba m/s^2, bg rad/s, baro_sigma m, sig_yaw rad,
+    sig_ba_prior m/s^2) (reset.IP_*). The draws are taken in the order of `drawn` (one normal each)."""
+    sig_pos, sig_vel, sig_tilt, ba, bg, baro_sigma, sig_yaw, sig_ba_prior = sig
+    drawn = (EP_N, EP_E, EV_N, EV_E, TILT_N, TILT_E, BA_N, BA_E, BG_N, BG_E, BARO, YAW0, BG_Z)
+    scale = (sig_pos, sig_pos, sig_vel, sig_vel, sig_tilt, sig_tilt, ba, ba, bg, bg, baro_sigma, sig_yaw, bg)
+    for k in range(len(drawn)):
+        X[i, drawn[k]] = scale[k] * frng.normal(state, i)
+    for c in (BI_A_N, BI_A_E, BI_G_N, BI_G_E, TILT_GM_N, TILT_GM_E, CA_N, CA_E, P01, P02, P12, N_PROF,
+              REJECTS, N_FIXES, N_NIS, DEGRADED):
+        X[i, c] = 0.0
     X[i, P00] = sig_pos * sig_pos
-    X[i, P01] = 0.0
-    X[i, P02] = 0.0
     X[i, P11] = sig_vel * sig_vel
-    X[i, P12] = 0.0
     X[i, P22] = sig_ba_prior * sig_ba_prior + (G0_MPS2 * sig_tilt) ** 2
-    X[i, N_PROF] = 0.0
-    X[i, REJECTS] = 0.0
-    X[i, N_FIXES] = 0.0
-    X[i, N_NIS] = 0.0
-    X[i, DEGRADED] = 0.0
     for j in range(MAX_WINDOW):
         X[i, NIS0 + j] = 0.0

@@ -53,8 +53,8 @@ ROUTE_POINTS = 24
 
 
 @njit(cache=True)
-def _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon, lat, lon, no_info):
-    c = kernels.bilinear(info, i_lat0, i_lon0, i_dlat, i_dlon, lat, lon)
+def _info_at(info, lat, lon, no_info):
+    c = kernels.map_height(info, lat, lon)
     return c if c == c else no_info
 
 
@@ -63,26 +63,21 @@ def observe(
     X,
     mask,
     out,
-    mapg,
-    m_lat0,
-    m_lon0,
-    m_dlat,
-    m_dlon,
+    mapr,
     info,
-    i_lat0,
-    i_lon0,
-    i_dlat,
-    i_dlon,
     op,
     route_offsets,
     bearings,
-    obs_low,
-    obs_high,
-    wind_alt,
-    wind_n,
-    wind_e,
+    bounds,
+    wind,
 ):
-    """Write the observation (float32, N x 32) of every aircraft with mask[i] into out[i]."""
+    """Write the observation (float32, N x 32) of every aircraft with mask[i] into out[i].
+
+    Records (numba tuples): mapr, info = the map DEM and the information map (terrain.kernels.MapRecord,
+    bilinear); bounds = the observation's (low, high) per element; wind = the wind layers' (altitudes m,
+    north, east m/s)."""
+    obs_low, obs_high = bounds
+    wind_alt, wind_n, wind_e = wind
     n_routes = route_offsets.size
     max_off = 0.0
     for k in range(n_routes):
@@ -112,7 +107,7 @@ def observe(
         vn = op[OP_TAS] * math.cos(X[i, PSI]) + wn + X[i, GUST_N] + X[i, EV_N]
         ve = op[OP_TAS] * math.sin(X[i, PSI]) + we + X[i, GUST_E] + X[i, EV_E]
         o[5] = math.hypot(vn, ve) / 100.0
-        hm = kernels.bilinear(mapg, m_lat0, m_lon0, m_dlat, m_dlon, lat_e, lon_e)
+        hm = kernels.map_height(mapr, lat_e, lon_e)
         o[6] = (X[i, H] + X[i, BARO] - hm) / 1000.0 if hm == hm else 0.0
         o[7] = X[i, AGL_CMD] / 1000.0
         s_h = math.sqrt(max(X[i, P00], 0.0))
@@ -121,15 +116,11 @@ def observe(
         o[10] = math.log10(1.0 + op[OP_BARO_SIGMA])
         for k in range(bearings.size):
             if bearings[k] != bearings[k]:
-                c = _info_at(info, i_lat0, i_lon0, i_dlat, i_dlon, lat_e, lon_e, no_info)
+                c = _info_at(info, lat_e, lon_e, no_info)
             else:
                 b = trk + bearings[k]
                 c = _info_at(
                     info,
-                    i_lat0,
-                    i_lon0,
-                    i_dlat,
-                    i_dlon,
                     lat_e + op[OP_INFO_OFFSET] * math.cos(b) / m_lat,
                     lon_e + op[OP_INFO_OFFSET] * math.sin(b) / m_lon,
                     no_info,
@@ -173,7 +164,7 @@ def observe(
                 elif j > 0:
                     break  # arrived: the remaining points repeat this one and change neither figure
                 c = _info_at(
-                    info, i_lat0, i_lon0, i_dlat, i_dlon, lat_e + pn / m_lat, lon_e + pe / m_lon, no_info
+                    info, lat_e + pn / m_lat, lon_e + pe / m_lon, no_info
                 )
                 if seg > 0.0 or j == 0:
                     total += math.log10(1.0 + max(c, 0.0))

@@ -58,25 +58,19 @@ def reset_aircraft(
     mask,
     start_rad,
     goal_rad,
-    regions,
-    held,
-    held_r,
-    min_goal_d,
-    h_agl_init,
-    h_msl_init,
-    ip,
+    draws,
+    init,
     world,
-    w_lat0,
-    w_lon0,
-    w_dlat,
-    w_dlon,
-    mapg,
-    m_lat0,
-    m_lon0,
-    m_dlat,
-    m_dlon,
+    mapr,
 ):
-    """New episodes for every sub-env with mask[i]; returns per sub-env 0, or 1 when no goal was found."""
+    """New episodes for every sub-env with mask[i]; returns per sub-env 0, or 1 when no goal was found.
+
+    Records (numba tuples): draws = (regions (2, 4) rad: start and goal regions, held (k, 2) rad: held-out
+    goals, held_r m: their radius, min_goal_d m: the shortest start-goal distance); init = (h_agl_init m,
+    h_msl_init m (NaN: fly h_agl_init above the world), ip: the initial-error parameters); world, mapr =
+    the world and map DEMs (terrain.kernels.MapRecord, bilinear)."""
+    regions, held, held_r, min_goal_d = draws
+    h_agl_init, h_msl_init, ip = init
     n = X.shape[0]
     status = np.zeros(n, np.int64)
     for i in range(n):
@@ -114,8 +108,8 @@ def reset_aircraft(
         brg = math.atan2((glon - lon) * rn * math.cos(lat), (glat - lat) * rm)
         X[i, S.PSI] = brg
         X[i, S.TRK_CMD] = brg
-        h_world = kernels.bilinear(world, w_lat0, w_lon0, w_dlat, w_dlon, lat, lon)
-        h_map = kernels.bilinear(mapg, m_lat0, m_lon0, m_dlat, m_dlon, lat, lon)
+        h_world = kernels.map_height(world, lat, lon)
+        h_map = kernels.map_height(mapr, lat, lon)
         if h_msl_init == h_msl_init:
             X[i, S.H] = h_msl_init
             agl = h_msl_init - h_map
@@ -123,18 +117,8 @@ def reset_aircraft(
             X[i, S.H] = h_world + h_agl_init
             agl = h_agl_init
         X[i, S.AGL_CMD] = min(ip[IP_AGL_MAX], max(ip[IP_AGL_MIN], agl))
-        nv.draw_initial_errors(
-            X,
-            i,
-            state,
-            ip[IP_SIG_POS],
-            ip[IP_SIG_VEL],
-            ip[IP_SIG_TILT],
-            ip[IP_BA],
-            ip[IP_BG],
-            ip[IP_BARO],
-            ip[IP_SIG_YAW],
-            ip[IP_SIG_BA_PRIOR],
-        )
+        sig = (ip[IP_SIG_POS], ip[IP_SIG_VEL], ip[IP_SIG_TILT], ip[IP_BA], ip[IP_BG], ip[IP_BARO],
+               ip[IP_SIG_YAW], ip[IP_SIG_BA_PRIOR])
+        nv.draw_initial_errors(X, i, state, sig)
         X[i, S.NEXT_SAMPLE_T] = 1.0
     return status

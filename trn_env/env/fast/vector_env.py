@@ -65,17 +65,17 @@ from trn_env.env.fast import observation as ob
 from trn_env.env.fast import reset as rs
 from trn_env.env.fast import rng as frng
 from trn_env.env.fast import state as S
-from trn_env.env.fast.envelope import KINGAIR_ENVELOPE
+from trn_env.env.fast.kernel_params import (  # noqa: F401 - re-exported
+    BARO_SIGMA_M,
+    DT_S,
+    TURBULENCE_LENGTH_M,
+    TURBULENCE_SIGMA_MPS,
+    build_kernel_params,
+)
 from trn_env.env.terrain_nav import _check_number
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.closed_loop import spawn_rngs
 
-# turbulence as a first-order Gauss-Markov gust per horizontal axis: std (m/s) by severity (MIL-F-8785C's
-# medium-altitude intensities at exceedance 1e-2, 1e-3, 1e-5) and the Dryden length scale 533 m
-TURBULENCE_SIGMA_MPS = {"light": 1.5, "moderate": 3.0, "severe": 6.0}
-TURBULENCE_LENGTH_M = 533.0
-DT_S = 1.0  # flight step (s); the navigator samples terrain at 1 Hz
-BARO_SIGMA_M = 10.0  # the barometer's height error (1 sigma), navigators' baro_bias_sigma_m
 BYTES_PER_ENV_BASE = 8 * (S.N_STATE + 40 + 8)
 
 
@@ -244,102 +244,10 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self._h_agl_init_m = float(0.0 if init.h_agl_m is None else init.h_agl_m)
         self._h_msl_init_m = float(init.h_msl_m) if init.h_agl_m is None else math.nan
 
-        # kernel parameters
-        env_ = KINGAIR_ENVELOPE
-        wind = sc.wind
-        layers = sorted(
-            (float(la.altitude_m), float(la.direction_from_deg), float(la.speed_mps))
-            for la in wind.layers
-        )
-        self._wind_alt = np.array([la[0] for la in layers])
-        self._wind_n = np.array([-la[2] * math.cos(math.radians(la[1])) for la in layers])
-        self._wind_e = np.array([-la[2] * math.sin(math.radians(la[1])) for la in layers])
-        turb = wind.turbulence
-        sigma_t = (
-            0.0
-            if turb.model == "none"
-            else TURBULENCE_SIGMA_MPS.get("light" if turb.severity is None else turb.severity, 1.5)
-        )
-        fp = np.zeros(dyn.N_FLIGHT_PARAMS)
-        fp[dyn.FP_DT] = DT_S
-        fp[dyn.FP_TAS] = self.tas_mps
-        fp[dyn.FP_BANK_MAX] = env_.bank_max_rad
-        fp[dyn.FP_BANK_TAU] = env_.bank_tau_s
-        fp[dyn.FP_CLIMB] = env_.climb_rate_max_mps
-        fp[dyn.FP_DESCENT] = env_.descent_rate_max_mps
-        fp[dyn.FP_TRACK_GAIN] = env_.track_gain_per_s
-        fp[dyn.FP_HEIGHT_GAIN] = env_.height_gain_per_s
-        fp[dyn.FP_VS_ACCEL] = env_.vs_accel_max_mps2
-        fp[dyn.FP_TURB_SIGMA] = sigma_t
-        fp[dyn.FP_TURB_TAU] = TURBULENCE_LENGTH_M / self.tas_mps
-        fp[dyn.FP_GOAL_RADIUS] = self.goal_radius_m
-        fp[dyn.FP_MAX_EP] = self.max_episode_s
-        fp[dyn.FP_OMEGA] = self.action_limits[0] / self.decision_interval_s
-        fp[dyn.FP_OFFSET_MAX] = self.bearing_offset_max_rad
-        fp[dyn.FP_PURSUIT] = 1.0 if action_mode == "pursuit" else 0.0
-        fp[dyn.FP_ARRIVAL] = 1.0 if reward_mode == "arrival" else 0.0
-        fp[dyn.FP_SAMPLE_DT] = 1.0
-        self._fp = fp
-        from dataclasses import asdict
-
-        from trn_env.sensors.imu import ImuConfig
-
-        imu = asdict(sc.sensors.imu if sc.sensors.imu is not None else ImuConfig())
-        outages = sc.gnss.outages
-        gnss_until = (
-            (min(float(o.start_s) for o in outages) if outages else math.inf)
-            if sc.sensors.gnss is not None
-            else 0.0
-        )
-        from trn_env.navigators import registry
-        from trn_env.sensors.ira import IraConfig
-
-        ira = sc.sensors.ira if sc.sensors.ira is not None else IraConfig()
-        spec = (
-            components.imu_spec(sc.sensors.imu)
-            if registry.capabilities(nav_name).uses_imu_spec
-            else None
-        )
-        self._nav = nv.navigator_params(
-            nav_name,
-            sc.navigator.table.to_dict(),
-            imu,
-            gnss_until,
-            float(ira.range_noise_m),
-            float(ira.rate_hz),
-            spec,
-            sample_dt_s=float(fp[dyn.FP_SAMPLE_DT]),
-        )
-        ie = sc.initial_errors
-        pos = ie.position_ned_m
-        vel = ie.velocity_ned_mps
-        att = ie.attitude_mrad
-        self._init_params = np.array(
-            [
-                float(np.hypot(pos[0], pos[1]) / math.sqrt(2.0)),
-                float(np.hypot(vel[0], vel[1]) / math.sqrt(2.0)),
-                float(np.hypot(att[0], att[1]) / math.sqrt(2.0)) * 1e-3,
-                float(imu["accel_bias_mps2"]),
-                float(imu["gyro_bias_rps"]),
-                BARO_SIGMA_M,
-                self.agl_min_m,
-                self.agl_max_m,
-                float(att[2]) * 1e-3,
-                float(self._nav[nv.NP_SIG_BA_PRIOR]),
-            ]
-        )
-        op = np.zeros(ob.N_OBS_PARAMS)
-        op[ob.OP_INFO_OFFSET] = float(info_offset_m)
-        op[ob.OP_MAX_EP] = self.max_episode_s
-        op[ob.OP_TAS] = self.tas_mps
-        op[ob.OP_BARO_SIGMA] = BARO_SIGMA_M
-        op[ob.OP_UNHEALTHY] = self._nav[nv.NP_UNHEALTHY]
-        op[ob.OP_GOAL_RADIUS] = self.goal_radius_m
-        op[ob.OP_OMEGA] = fp[dyn.FP_OMEGA]
-        op[ob.OP_INFORMATIVE] = float(informative_crlb_m)
-        op[ob.OP_NO_INFO] = components.NO_INFORMATION_SIGMA_M
-        self._op = op
-        self._route_offsets = np.array(task.ROUTE_OFFSET_FRACTIONS) * self.bearing_offset_max_rad
+        # the kernels' parameter arrays and records (kernel_params.py)
+        kp = build_kernel_params(self, sc, float(info_offset_m), float(informative_crlb_m))
+        self._wind, self._fp, self._nav = kp.wind, kp.fp, kp.nav
+        self._init_params, self._op, self._route_offsets = kp.init_params, kp.op, kp.route_offsets
 
         # per-aircraft arrays
         n_prof = int(math.ceil(self._nav[nv.NP_FIX_PERIOD])) + 2
@@ -401,8 +309,9 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         return np.radians(a)
 
     # ---------------------------------------------------------------------------------------- state
-    def _grids(self):
-        return self._world.grid, self._map.grid, self._info_map.grid
+    def _records(self):
+        """The world DEM, the map DEM and the information map as kernel records (bilinear)."""
+        return self._world.record(), self._map.record(), self._info_map.record()
 
     def _est_latlon(self):
         X = self._X
@@ -425,30 +334,11 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         return np.sqrt(2.0 * np.maximum(self._X[:, S.P00], 0.0))
 
     def _observe(self, mask):
-        (_, _, _, _, _), (mh, m0, m1, m2, m3), (ih, i0, i1, i2, i3) = self._grids()
+        _, map_rec, info_rec = self._records()
         with numba.parallel_chunksize(dyn.CHUNK_AIRCRAFT):
             ob.observe(
-                self._X,
-                mask,
-                self._obs,
-                mh,
-                m0,
-                m1,
-                m2,
-                m3,
-                ih,
-                i0,
-                i1,
-                i2,
-                i3,
-                self._op,
-                self._route_offsets,
-                ob.INFO_BEARINGS_RAD,
-                task.OBS_LOW,
-                task.OBS_HIGH,
-                self._wind_alt,
-                self._wind_n,
-                self._wind_e,
+                self._X, mask, self._obs, map_rec, info_rec, self._op, self._route_offsets,
+                ob.INFO_BEARINGS_RAD, (task.OBS_LOW, task.OBS_HIGH), self._wind,
             )
 
     def _reset_envs(self, mask, start_rad=None, goal_rad=None):
@@ -463,30 +353,11 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             np.array([self.start_region_deg or (np.nan,) * 4, self.goal_region_deg or (np.nan,) * 4], float)
         )
         held = np.radians(np.array(self.held_out_goals_deg, float).reshape(-1, 2))
-        (wh, w0, w1, w2, w3), (mh, m0, m1, m2, m3), _ = self._grids()
+        world_rec, map_rec, _ = self._records()
         status = rs.reset_aircraft(
-            self._X,
-            self._rng,
-            mask,
-            start_rad,
-            goal_rad,
-            regions,
-            held,
-            self.held_out_radius_m,
-            self.min_goal_distance_m,
-            self._h_agl_init_m,
-            self._h_msl_init_m,
-            self._init_params,
-            wh,
-            w0,
-            w1,
-            w2,
-            w3,
-            mh,
-            m0,
-            m1,
-            m2,
-            m3,
+            self._X, self._rng, mask, start_rad, goal_rad,
+            (regions, held, self.held_out_radius_m, self.min_goal_distance_m),
+            (self._h_agl_init_m, self._h_msl_init_m, self._init_params), world_rec, map_rec,
         )
         if np.any(status[mask] != 0):
             raise ValueError(
@@ -544,33 +415,11 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self._apply_actions(a, live)
         d_est0, d_true0, sig0, t0 = self._d_est(), self._d_true(), self._sigma_h(), X[:, S.T].copy()
         X[live, S.END] = 0.0
-        (wh, w0, w1, w2, w3), (mh, m0, m1, m2, m3), _ = self._grids()
+        world_rec, map_rec, _ = self._records()
         with numba.parallel_chunksize(dyn.CHUNK_AIRCRAFT):
             dyn.fly_decision(
-                X,
-                self._rng,
-                live,
-                self.n_sub,
-                self._prof[0],
-                self._prof[1],
-                self._prof[2],
-                wh,
-                w0,
-                w1,
-                w2,
-                w3,
-                mh,
-                m0,
-                m1,
-                m2,
-                m3,
-                self._fp,
-                self._nav,
-                self._wind_alt,
-                self._wind_n,
-                self._wind_e,
-                self._diff,
-                self._tables,
+                X, self._rng, live, self.n_sub, (self._prof[0], self._prof[1], self._prof[2]), world_rec,
+                map_rec, self._fp, self._nav, self._wind, (self._diff, self._tables),
             )
         end = np.where(live, X[:, S.END], 0.0).astype(int)
         reasons = np.array(S.END_NAMES, dtype=object)[end]
