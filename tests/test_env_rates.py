@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 import pytest
+from trn_env.navigators.frames import imu_gap_s
 
-from navigators.frames import imu_gap_s
 from trn_env.env.env_settings import goal_offset_ne
 from trn_env.env.route_task import DECISION_RATES, FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
 from trn_env.env.terrain_nav import TerrainNavEnv

@@ -171,3 +171,18 @@ def test_terrain_and_navigators_import_no_trn_env_name():
                 bad += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
                         if n.split(".")[0] == "trn_env"]
     assert bad == [], bad[:10]
+
+
+def test_no_code_imports_the_folders_by_their_bare_names():
+    """tests/, scripts/, examples/ and trn_env/ import the mapped folders as trn_env.navigators,
+    trn_env.terrain and trn_env.aircraft: the bare names only resolve when the checkout's root happens to
+    head sys.path (`python -m pytest` from the root), never in an installed package (CI runs `pytest`)."""
+    bad = []
+    for top in ("tests", "scripts", "examples", "trn_env"):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                names = ([node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0
+                         else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+                bad += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
+                        if n.split(".")[0] in ("navigators", "terrain", "aircraft")]
+    assert bad == [], bad[:10]
