@@ -24,41 +24,18 @@ import argparse
 import json
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 
 def fly(settings: dict, seeds: int, routes: list[str] | None = None, first_seed: int = 0) -> dict:
-    """Per route (all, or those named): the true miss per seed (m), the terminations, CPU seconds per
-    decision."""
-    from trn_env.env.fast.calibration import REFERENCE_ROUTES, env_kwargs
-    from trn_env.env.terrain_nav import TerrainNavEnv
+    """Per route (all, or those named): the true miss per seed (m), the terminations, the error at each
+    decision, CPU seconds per decision (trn_env.env.fast.calibration.fly_full)."""
+    from trn_env.env.fast.calibration import REFERENCE_ROUTES, fly_full
 
-    res = {}
-    for route in REFERENCE_ROUTES:
-        if routes is not None and route.name not in routes:
-            continue
-        env = TerrainNavEnv(**{**env_kwargs(route), **settings})
-        a = np.asarray(route.action, np.float32)
-        errs, ends, by_decision, n = [], [], [], 0
-        c0 = time.process_time()
-        for s in range(first_seed, first_seed + seeds):
-            env.reset(seed=s, options={"start_deg": route.start_deg})
-            by_decision.append([])
-            while True:
-                _, _, term, trunc, info = env.step(a)
-                by_decision[-1].append(float(info["true_horizontal_error_m"]))
-                n += 1
-                if term or trunc:
-                    break
-            errs.append(float(info.get("true_miss_m", info["true_horizontal_error_m"])))
-            ends.append(info["termination"])
-        env.close()
-        res[route.name] = {"errors_m": errs, "terminations": ends, "errors_by_decision_m": by_decision,
-                           "cpu_s_per_decision": (time.process_time() - c0) / n}
-    return res
+    return {route.name: fly_full(route, range(first_seed, first_seed + seeds), settings)
+            for route in REFERENCE_ROUTES if routes is None or route.name in routes}
 
 
 def compare(configs: dict[str, dict], seeds: int, out: Path | None, routes: list[str] | None = None,

@@ -18,7 +18,6 @@ import argparse
 import json
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -69,29 +68,12 @@ def trajectory(duration_s: int) -> None:
 def routes(dts: list[float], seeds: int, out: Path | None) -> None:
     from scipy import stats
 
-    from trn_env.env.fast.calibration import REFERENCE_ROUTES, env_kwargs
-    from trn_env.env.terrain_nav import TerrainNavEnv
+    from trn_env.env.fast.calibration import REFERENCE_ROUTES, fly_full
 
     res: dict[float, dict] = {}
     for dt in dts:
-        res[dt] = {}
-        for route in REFERENCE_ROUTES:
-            env = TerrainNavEnv(**env_kwargs(route), flight_dt_s=dt)
-            a = np.asarray(route.action, np.float32)
-            errs, ends, n = [], [], 0
-            c0 = time.process_time()
-            for s in range(seeds):
-                env.reset(seed=s, options={"start_deg": route.start_deg})
-                while True:
-                    _, _, term, trunc, info = env.step(a)
-                    n += 1
-                    if term or trunc:
-                        break
-                errs.append(float(info.get("true_miss_m", info["true_horizontal_error_m"])))
-                ends.append(info["termination"])
-            env.close()
-            res[dt][route.name] = {"errors_m": errs, "terminations": ends,
-                                   "cpu_s_per_decision": (time.process_time() - c0) / n}
+        res[dt] = {route.name: fly_full(route, range(seeds), {"flight_dt_s": dt})
+                   for route in REFERENCE_ROUTES}
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
             (out / f"routes_{dt}.json").write_text(json.dumps(res[dt], indent=1))

@@ -124,25 +124,31 @@ def _end_error(info: dict) -> float:
     return float(info.get("true_miss_m", info["true_horizontal_error_m"]))
 
 
-def fly_full(route: ReferenceRoute, seeds) -> dict:
-    """The route in TerrainNav-v0 (full JSBSim loop) once per seed: per-seed true error at the goal (m),
-    terminations, wall time."""
+def fly_full(route: ReferenceRoute, seeds, settings: dict | None = None) -> dict:
+    """The route in TerrainNav-v0 (full JSBSim loop) once per seed, with `settings` (constructor arguments)
+    over the route's own: per-seed true error at the goal (m), terminations, the true horizontal error at
+    each decision (m), wall time (construction included) and CPU seconds per decision."""
     from trn_env.env.terrain_nav import TerrainNavEnv
 
     t0 = time.perf_counter()
-    env = TerrainNavEnv(**env_kwargs(route))
-    errors, ends = [], []
+    env = TerrainNavEnv(**{**env_kwargs(route), **(settings or {})})
+    c0 = time.process_time()                  # per decision: the episodes' CPU, not the env's construction
+    errors, ends, by_decision, n = [], [], [], 0
     a = np.asarray(route.action, np.float32)
     for s in seeds:
         env.reset(seed=int(s), options={"start_deg": route.start_deg})
+        by_decision.append([])
         while True:
             _, _, term, trunc, info = env.step(a)
+            by_decision[-1].append(float(info["true_horizontal_error_m"]))
+            n += 1
             if term or trunc:
                 break
         errors.append(_end_error(info))
         ends.append(info["termination"])
     env.close()
-    return {"errors_m": errors, "terminations": ends, "wall_s": time.perf_counter() - t0}
+    return {"errors_m": errors, "terminations": ends, "errors_by_decision_m": by_decision,
+            "wall_s": time.perf_counter() - t0, "cpu_s_per_decision": (time.process_time() - c0) / max(n, 1)}
 
 
 def fly_fast(route: ReferenceRoute, seeds) -> dict:
