@@ -71,10 +71,12 @@ def navigator_settings(sc, map_dem) -> dict:
     that declares no settings class, as before capabilities), the bias priors and bias process noise from the
     IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
-    terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m from the
-    GNSS sensor's horizontal drift (navigators that declare that setting), each unless the settings give
-    it. Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level
-    covers it)."""
+    terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m (pmf, pf)
+    or gnss_pos_bias_sigma_m (rbpf: horizontal, vertical) from the GNSS sensor's drift, and
+    map_correlation_length_m / map_correlation_function from the map error model's random part
+    (monitor_map_settings; navigators that declare those settings), each unless the settings give it.
+    Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level covers
+    it)."""
     from trn_env.navigators import registry
     from trn_env.terrain import map_error
     caps = registry.capabilities(sc.navigator.name)
@@ -91,9 +93,18 @@ def navigator_settings(sc, map_dem) -> dict:
     if caps.uses_map_noise:
         for key, val in map_noise_settings(error_model).items():
             settings.setdefault(key, val)
+    fields = _settings_fields(caps.settings)
+    if "map_correlation_length_m" in fields:   # the map's random error correlated along the ground
+        corr = monitor_map_settings(error_model)
+        if corr:
+            settings.setdefault("map_correlation_length_m", corr["correlation_length_m"])
+            settings.setdefault("map_correlation_function", corr["correlation_function"])
     gnss = sc.sensors.gnss
-    if gnss is not None and "gnss_drift_sigma_m" in _settings_fields(caps.settings):
+    if gnss is not None and "gnss_drift_sigma_m" in fields:
         settings.setdefault("gnss_drift_sigma_m", float(gnss.horizontal_drift_m))   # the receiver's drift
+    if gnss is not None and "gnss_pos_bias_sigma_m" in fields:    # rbpf: the drift as a floor (h, v)
+        settings.setdefault("gnss_pos_bias_sigma_m", (float(gnss.horizontal_drift_m),
+                                                      float(gnss.vertical_drift_m)))
     if caps.models_map_detail and sc.terrain.map.is_world:
         settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
     elif caps.models_map_detail:
