@@ -74,8 +74,8 @@ def _rbpf_horizontal_nees(bias_sigma_m: float, seed: int) -> float:
     for k in range(RUNS):
         nav = RaoBlackwellizedPF(dem, rng=np.random.default_rng(seed * 100 + k), n_particles=4000,
                                  acquisition_particles=0, gnss_pos_sigma_m=(SIGMA_W, 2.0),
-                                 gnss_pos_bias_sigma_m=(bias_sigma_m, 3.0), init_pos_sigma_m=(10.0, 10.0, 5.0),
-                                 prior_from_initial=False)
+                                 gnss_pos_bias_sigma_m=(bias_sigma_m, 3.0),
+                                 init_pos_sigma_m=(10.0, 10.0, 5.0), prior_from_initial=False)
         nav.reset(initial(10.0))
         true_ne = rng.normal(0.0, 10.0, 2)
         drift = rng.normal(0.0, SIGMA_D, 2)
