@@ -122,12 +122,44 @@ def build_navigator(sc, map_dem, rng: np.random.Generator | None = None):
     uses_imu_spec and has `apply_imu_spec` then takes its INS error model from the scenario IMU's
     specification (navigators.core.imu_spec)."""
     from trn_env.navigators import registry
+    from trn_env.navigators.integrity import protection_level as pl
     name = sc.navigator.name
     navigator = registry.create(name, rng=rng, **navigator_settings(sc, map_dem))
-    spec = imu_spec(sc.sensors.imu) if registry.capabilities(name).uses_imu_spec else None
+    caps = registry.capabilities(name)
+    spec = imu_spec(sc.sensors.imu) if caps.uses_imu_spec else None
     if spec is not None and hasattr(navigator, "apply_imu_spec"):
         navigator.apply_imu_spec(spec)
+    pl.set_condition(navigator, pl_condition(sc), tuple(caps.pl_validated))
     return navigator
+
+
+def pl_condition(sc) -> str:
+    """The scenario's condition as protection levels were validated on (navigators.core.capabilities,
+    pl_validated): "<IMU grade>/<map class>". Grade: the first of the presets "navigation", "tactical" whose
+    every error term (trn_env.sensors.imu) the scenario IMU's does not exceed, else "beyond_tactical" (or
+    "no_imu"). Map class: "world" (the map is the world), "as_published" (no error model), the accuracy
+    class's name for a preset error model without explicit overrides, else "custom_error_model"."""
+    from trn_env.sensors.imu import _ERROR_FIELDS, IMU_GRADES, ImuConfig
+    imu = sc.sensors.imu
+    grade = "no_imu"
+    if isinstance(imu, ImuConfig):
+        grade = "beyond_tactical"
+        for g in ("navigation", "tactical"):
+            ref = IMU_GRADES[g]
+            if all(float(getattr(imu, f)) <= float(getattr(ref, f)) for f in _ERROR_FIELDS):
+                grade = g
+                break
+    m = sc.terrain.map
+    table = _table(m.error_model)
+    if m.is_world:
+        map_class = "world"
+    elif not table:
+        map_class = "as_published"
+    elif set(table) - {"preset"} == set() and table.get("preset"):
+        map_class = str(table["preset"]).strip().lower()
+    else:
+        map_class = "custom_error_model"
+    return f"{grade}/{map_class}"
 
 
 def _navigator_requirements(sc, the_map) -> list[str]:
