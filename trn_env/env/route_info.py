@@ -24,30 +24,49 @@ import trn_env.scenario.build as components
 from trn_env.terrain.geodesy import ned_offset_to_latlon
 
 
+@njit(cache=True, forceinline=True)
+def pursuit_step(rn_m: float, re_m: float, d_m: float, turn, omega_rps: float, tas_mps: float,
+                 step_m: float):  # pragma: no cover - compiled
+    """One step of a constant-offset pursuit path from a point (rn_m, re_m) m short of the goal (d_m its
+    distance, > 0): (north, east, length) m of the step. turn = (phi, |sin phi|, cos phi, sin phi) of the
+    offset phi (rad, + = right of the goal's bearing), computed once per path. The step is min(step_m, d_m)
+    along the goal's unit bearing rotated by phi, with the offset cut near the goal to what the turn rate
+    holds, asin(d omega / v) (the env's pursuit action)."""
+    phi0, sin_abs, cphi, sphi = turn
+    ux = rn_m / d_m
+    uy = re_m / d_m
+    x = d_m * omega_rps / tas_mps
+    if not x >= sin_abs:   # (NaN x too)
+        phi = math.copysign(math.asin(x), phi0)
+        cphi = math.cos(phi)
+        sphi = math.sin(phi)
+    seg = min(step_m, d_m)
+    return seg * (ux * cphi - uy * sphi), seg * (uy * cphi + ux * sphi), seg
+
+
 @njit(cache=True)
 def pursuit_paths_ne(dn_m: float, de_m: float, offsets_rad: np.ndarray, goal_radius_m: float,
                      omega_rps: float, tas_mps: float, step_m: float,
                      max_points: int = 64) -> np.ndarray:  # pragma: no cover - compiled
     """Points (K, n, 2) north/east m from the estimate (the goal at (dn_m, de_m)) of the constant-offset
-    pursuit paths, one per offset (rad, + = right of the goal's bearing); a path's points stop changing
-    once it is within goal_radius_m of the goal (it has arrived). A compiled kernel: the env asks for it
-    at every decision."""
+    pursuit paths, one per offset (rad, + = right of the goal's bearing; |offset| <= 90 deg), marched by
+    pursuit_step; a path's points stop changing once it is within goal_radius_m of the goal (it has
+    arrived). A compiled kernel: the env asks for it at every decision."""
     k = offsets_rad.shape[0]
     out = np.empty((k, max_points, 2))
     for i in range(k):
+        phi = offsets_rad[i]
+        turn = (phi, abs(math.sin(phi)), math.cos(phi), math.sin(phi))
         pn = 0.0
         pe = 0.0
         for j in range(max_points):
             rn = dn_m - pn
             re = de_m - pe
-            d = np.hypot(rn, re)
+            d = math.hypot(rn, re)
             if d > goal_radius_m:
-                limit = np.arcsin(min(1.0, d * omega_rps / tas_mps))
-                phi = min(max(offsets_rad[i], -limit), limit)
-                brg = np.arctan2(re, rn) + phi
-                step = min(step_m, d)
-                pn = pn + step * np.cos(brg)
-                pe = pe + step * np.sin(brg)
+                step_n, step_e, _ = pursuit_step(rn, re, d, turn, omega_rps, tas_mps, step_m)
+                pn += step_n
+                pe += step_e
             out[i, j, 0] = pn
             out[i, j, 1] = pe
     return out
@@ -82,4 +101,4 @@ def route_information(info_map, lat_rad: float, lon_rad: float, dn_m: float, de_
     return mean, featureless / 1000.0
 
 
-__all__ = ["pursuit_paths_ne", "route_information"]
+__all__ = ["pursuit_paths_ne", "pursuit_step", "route_information"]

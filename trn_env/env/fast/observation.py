@@ -5,7 +5,7 @@ map's terrain-information map), element for element as TerrainNavEnv._obs does, 
 simplifications: offsets from the estimate to the goal and to the sampled points use the local level frame
 with the ellipsoid's radii at the estimate (TerrainNav-v0 goes through ECEF; the two differ by well under
 0.1 % over the tens of km of a route), and the candidate pursuit paths of elements 22-31 are marched as in
-trn_env.env.route_info.pursuit_paths_ne.
+trn_env.env.route_info.pursuit_paths_ne (both step with its pursuit_step).
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from trn_env.env.fast.state import (
     H,
     T,
 )
+from trn_env.env.route_info import pursuit_step
 from trn_env.terrain import kernels
 
 # observation parameter vector
@@ -135,6 +136,7 @@ def observe(
         # route information along the candidate pursuit paths (trn_env.env.route_info)
         step = max(200.0, d / ROUTE_POINTS)
         for k in range(n_routes):
+            turn = (route_offsets[k], sin_abs[k], cos_off[k], sin_off[k])
             pn = 0.0
             pe = 0.0
             total = 0.0
@@ -147,20 +149,9 @@ def observe(
                 dd = math.hypot(rn_, re_)
                 seg = 0.0
                 if dd > op[OP_GOAL_RADIUS]:
-                    # the goal's bearing (ux, uy) turned by the offset, cut to asin(d omega / v) near the goal
-                    ux = rn_ / dd
-                    uy = re_ / dd
-                    x = dd * op[OP_OMEGA] / op[OP_TAS]
-                    if x >= sin_abs[k]:
-                        cphi = cos_off[k]
-                        sphi = sin_off[k]
-                    else:
-                        phi = math.copysign(math.asin(x), route_offsets[k])
-                        cphi = math.cos(phi)
-                        sphi = math.sin(phi)
-                    seg = min(step, dd)
-                    pn += seg * (ux * cphi - uy * sphi)
-                    pe += seg * (uy * cphi + ux * sphi)
+                    step_n, step_e, seg = pursuit_step(rn_, re_, dd, turn, op[OP_OMEGA], op[OP_TAS], step)
+                    pn += step_n
+                    pe += step_e
                 elif j > 0:
                     break  # arrived: the remaining points repeat this one and change neither figure
                 c = _info_at(
