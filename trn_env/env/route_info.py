@@ -25,23 +25,29 @@ from trn_env.terrain.geodesy import ned_offset_to_latlon
 
 
 @njit(cache=True, forceinline=True)
-def pursuit_step(rn_m: float, re_m: float, d_m: float, turn, omega_rps: float, tas_mps: float,
-                 step_m: float):  # pragma: no cover - compiled
-    """One step of a constant-offset pursuit path from a point (rn_m, re_m) m short of the goal (d_m its
-    distance, > 0): (north, east, length) m of the step. turn = (phi, |sin phi|, cos phi, sin phi) of the
-    offset phi (rad, + = right of the goal's bearing), computed once per path. The step is min(step_m, d_m)
-    along the goal's unit bearing rotated by phi, with the offset cut near the goal to what the turn rate
-    holds, asin(d omega / v) (the env's pursuit action)."""
+def pursuit_step(pn_m: float, pe_m: float, dn_m: float, de_m: float, turn, path):  # pragma: no cover
+    """One step of a constant-offset pursuit path: from the point (pn_m, pe_m) to (north, east, step length)
+    m, all in the frame where the goal is at (dn_m, de_m). turn = (phi, |sin phi|, cos phi, sin phi) of the
+    offset phi (rad, + = right of the goal's bearing, |phi| <= 90 deg), computed once per path; path =
+    (goal radius m, turn rate omega rad/s, true airspeed v m/s, step m). The step is min(step, d) along the
+    goal's unit bearing rotated by phi, the offset cut near the goal to what the turn rate holds,
+    asin(d omega / v) (the env's pursuit action); within the goal radius the point stays (length 0)."""
+    goal_radius_m, omega_rps, tas_mps, step_m = path
+    rn = dn_m - pn_m
+    re = de_m - pe_m
+    d = math.hypot(rn, re)
+    if not d > goal_radius_m:
+        return pn_m, pe_m, 0.0
     phi0, sin_abs, cphi, sphi = turn
-    ux = rn_m / d_m
-    uy = re_m / d_m
-    x = d_m * omega_rps / tas_mps
+    ux = rn / d
+    uy = re / d
+    x = d * omega_rps / tas_mps
     if not x >= sin_abs:   # (NaN x too)
         phi = math.copysign(math.asin(x), phi0)
         cphi = math.cos(phi)
         sphi = math.sin(phi)
-    seg = min(step_m, d_m)
-    return seg * (ux * cphi - uy * sphi), seg * (uy * cphi + ux * sphi), seg
+    seg = min(step_m, d)
+    return pn_m + seg * (ux * cphi - uy * sphi), pe_m + seg * (uy * cphi + ux * sphi), seg
 
 
 @njit(cache=True)
@@ -52,21 +58,14 @@ def pursuit_paths_ne(dn_m: float, de_m: float, offsets_rad: np.ndarray, goal_rad
     pursuit paths, one per offset (rad, + = right of the goal's bearing; |offset| <= 90 deg), marched by
     pursuit_step; a path's points stop changing once it is within goal_radius_m of the goal (it has
     arrived). A compiled kernel: the env asks for it at every decision."""
-    k = offsets_rad.shape[0]
-    out = np.empty((k, max_points, 2))
-    for i in range(k):
+    path = (goal_radius_m, omega_rps, tas_mps, step_m)
+    out = np.empty((offsets_rad.shape[0], max_points, 2))
+    for i in range(offsets_rad.shape[0]):
         phi = offsets_rad[i]
         turn = (phi, abs(math.sin(phi)), math.cos(phi), math.sin(phi))
-        pn = 0.0
-        pe = 0.0
+        pn = pe = 0.0
         for j in range(max_points):
-            rn = dn_m - pn
-            re = de_m - pe
-            d = math.hypot(rn, re)
-            if d > goal_radius_m:
-                step_n, step_e, _ = pursuit_step(rn, re, d, turn, omega_rps, tas_mps, step_m)
-                pn += step_n
-                pe += step_e
+            pn, pe, _ = pursuit_step(pn, pe, dn_m, de_m, turn, path)
             out[i, j, 0] = pn
             out[i, j, 1] = pe
     return out

@@ -134,7 +134,7 @@ def observe(
         o[20] = math.cos(rel)
         o[21] = d / max(X[i, D_EST_START], 1.0)
         # route information along the candidate pursuit paths (trn_env.env.route_info)
-        step = max(200.0, d / ROUTE_POINTS)
+        path = (op[OP_GOAL_RADIUS], op[OP_OMEGA], op[OP_TAS], max(200.0, d / ROUTE_POINTS))
         for k in range(n_routes):
             turn = (route_offsets[k], sin_abs[k], cos_off[k], sin_off[k])
             pn = 0.0
@@ -144,15 +144,8 @@ def observe(
             run = 0.0
             longest = 0.0
             for j in range(cap):
-                rn_ = dn - pn
-                re_ = de - pe
-                dd = math.hypot(rn_, re_)
-                seg = 0.0
-                if dd > op[OP_GOAL_RADIUS]:
-                    step_n, step_e, seg = pursuit_step(rn_, re_, dd, turn, op[OP_OMEGA], op[OP_TAS], step)
-                    pn += step_n
-                    pe += step_e
-                elif j > 0:
+                pn, pe, seg = pursuit_step(pn, pe, dn, de, turn, path)
+                if seg == 0.0 and j > 0:
                     break  # arrived: the remaining points repeat this one and change neither figure
                 c = _info_at(
                     info, lat_e + pn / m_lat, lon_e + pe / m_lon, no_info
