@@ -108,13 +108,7 @@ class InsTrnPropagation:
             self._t_ekf += n_steps * self.dt_ekf
         self._P_good[:] = self.kf.P
         self.kf.x[:] = 0.0
-        if n_ret:
-            self._count_skip(t0, "altimeter_no_return", n_ret,
-                             f"{n_ret} altimeter samples without a valid return")
-        if n_nan:
-            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
-        if m:
-            self.batch.add_rows(self._rows[:m].copy())
+        self._add_collected(t0, n_ret, n_nan, m)
         self._turn_noise()
 
     def _baro(self, frames: SensorFrames):
@@ -277,12 +271,16 @@ class InsTrnPropagation:
             float(t_imu[0]), float(t_imu[-1]), t_imu, hist, ts, src.range_m, src.look_angle_rad, src.valid,
             self.ira_decimation, tb, hb, have_baro, self.baro_geopotential, kern.FORMULA_CODES[self.formula],
             self._rows)
-        t0 = float(t_imu[0])
-        if n_bad:
-            self._count_skip(t0, "altimeter_no_return", n_bad,
-                             f"{n_bad} altimeter samples without a valid return")
-        if n_nan:
-            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
+        self._add_collected(float(t_imu[0]), n_bad, n_nan, m)
+
+    def _add_collected(self, t0: float, n_no_return: int, n_no_solution: int, m: int) -> None:
+        """Count a frame's altimeter samples without a return and IRA samples without a closest-point
+        solution (skips at t0 s), and queue the m measurement rows collected in self._rows."""
+        if n_no_return:
+            self._count_skip(t0, "altimeter_no_return", n_no_return,
+                             f"{n_no_return} altimeter samples without a valid return")
+        if n_no_solution:
+            self._count_skip(t0, "ira_geometry", n_no_solution, "IRA samples with no closest-point solution")
         if m:
             self.batch.add_rows(self._rows[:m].copy())
 
