@@ -84,12 +84,13 @@ class InsTrnPropagation:
             P = self.kf.P = np.ascontiguousarray(P, dtype=float)
         tau = 1e30 if ins.tau_baro_s is None else float(ins.tau_baro_s)
         bad, n_baro_bad, n_steps, pd, m, n_ret, n_nan = kern.fused_segment(
-            ins.state, ins.prev_imu, ins.baro_state, t, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid,
-            tb, hb_raw, vb_raw, self.baro_geopotential, self._vbuf[:nb], self._bbuf[:nb],
-            ins.accel_bias_b, ins.gyro_bias_b, tau, GRAVITY_MODELS[ins.gravity_model],
-            ins.imu_samples == "interval", self._hist[:n], P, self._Q, self._last_f_b, float(self._t_ekf),
-            self.dt_ekf, collect, ts, rng_m, theta, iv, self.ira_decimation,
-            kern.FORMULA_CODES.get(self.formula, 1), self._rows)
+            (ins.state, ins.prev_imu, ins.baro_state), (t, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid),
+            (tb, hb_raw, vb_raw),
+            (ins.accel_bias_b, ins.gyro_bias_b, tau, GRAVITY_MODELS[ins.gravity_model],
+             ins.imu_samples == "interval"),
+            (P, self._Q, self._last_f_b, float(self._t_ekf), self.dt_ekf), (ts, rng_m, theta, iv),
+            (collect, self.ira_decimation, kern.FORMULA_CODES.get(self.formula, 1), self.baro_geopotential),
+            (self._vbuf[:nb], self._bbuf[:nb], self._hist[:n], self._rows))
         t0 = float(t[0])
         if n_baro_bad:
             self._count_skip(t0, "baro_invalid", n_baro_bad, "baro samples invalid")
@@ -268,9 +269,9 @@ class InsTrnPropagation:
         if self._rows.shape[0] < n:
             self._rows = np.empty((max(n, 64), 6))
         m, n_bad, n_nan = kern.collect_ira(
-            float(t_imu[0]), float(t_imu[-1]), t_imu, hist, ts, src.range_m, src.look_angle_rad, src.valid,
-            self.ira_decimation, tb, hb, have_baro, self.baro_geopotential, kern.FORMULA_CODES[self.formula],
-            self._rows)
+            float(t_imu[0]), float(t_imu[-1]), t_imu, hist, (ts, src.range_m, src.look_angle_rad, src.valid),
+            self.ira_decimation, (tb, hb, have_baro, self.baro_geopotential),
+            kern.FORMULA_CODES[self.formula], self._rows)
         self._add_collected(float(t_imu[0]), n_bad, n_nan, m)
 
     def _add_collected(self, t0: float, n_no_return: int, n_no_solution: int, m: int) -> None:
