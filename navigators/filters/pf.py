@@ -97,8 +97,7 @@ class ParticleFilter(InsRiddenFilter):
             raise ValueError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
         super().__init__(dem=dem, settings=settings, name=name, **overrides)
         s = self.settings
-        self.ess_threshold = s.ess_threshold
-        self.roughening = s.roughening
+        s.copy_to(self, "ess_threshold roughening")
         self.s_pos = s.position_noise_m_per_sqrt_s
         self.s_vel = s.velocity_noise_mps_per_sqrt_s
         self.s_psi = s.heading_noise_rad_per_sqrt_s

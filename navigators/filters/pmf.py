@@ -107,9 +107,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
     def __init__(self, dem=None, settings: PmfSettings | None = None, name: str | None = None, **overrides):
         super().__init__(dem=dem, settings=settings, name=name, **overrides)
         s = self.settings
-        self.spacing_min_m = s.spacing_min_m
-        self.spacing_max_m = s.spacing_max_m
-        self.span_sigmas = s.span_sigmas
+        s.copy_to(self, "spacing_min_m spacing_max_m span_sigmas")
         self.position_noise = s.position_noise_m_per_sqrt_s
         self.velocity_noise = s.velocity_noise_mps_per_sqrt_s
         self.accel_bias_sigma = s.accel_bias_sigma_mps2
