@@ -554,6 +554,9 @@ class ClosedLoop:
         summary["fuel_remaining_kg"] = round(self.flight.fuel_kg, 3)
         summary["constant_fuel"] = self.flight.constant_fuel
         summary["truth_source"] = self.scenario.truth.source
+        from trn_env.navigators.integrity.protection_level import EXTRA_PL_NOT_VALIDATED
+        if EXTRA_PL_NOT_VALIDATED in self.estimate.extra:    # the navigator's word on its HPL's validity
+            summary["pl_not_validated"] = str(self.estimate.extra[EXTRA_PL_NOT_VALIDATED])
         # fitted sensors that neither the navigator nor a monitor reads (their declared sensor needs)
         summary["unused_sensors"] = components.unused_sensors(self.scenario)
         events = sorted(self.log.events, key=lambda ev: ev[0])   # (stable: same-time events keep their order)
