@@ -154,32 +154,61 @@ def verdict(anees: float, lo: float, hi: float, inside_3sigma: float) -> str:
     return "conservative" if anees < lo else "inside"
 
 
+GRADES = ("navigation", "tactical", "consumer")
+NAMES = ("ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track")
+
+
 def table(paths: list[str]) -> str:
-    """The markdown grid of docs/validation/navigators.md from --out files (figures recomputed from their
-    runs' NEES; rows in grade, navigator order)."""
+    """The markdown grids of docs/validation/navigators.md and docs/guide/navigators.md from --out files
+    (figures recomputed from their runs' NEES; rows in grade, navigator order)."""
     figs: dict = {}
     for path in paths:
         for key, f in json.loads(Path(path).read_text())["figures"].items():
             nees, e2 = np.asarray(f["raw"]["nees"]), np.asarray(f["raw"]["e2"])
             figs[key] = {**nees_summary(nees, e2),
                          "health_consistency_warning": f.get("health_consistency_warning")}
+    return validation_table(figs) + "\n\n" + guide_table(figs)
+
+
+def _num(x: float) -> str:
+    return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.2f}"
+
+
+def guide_table(figs: dict) -> str:
+    """The guide's grid: per navigator and grade the verdict and the all-epoch ANEES (and the share inside
+    3 sigma when under 90 %)."""
+    rows = ["| navigator | " + " | ".join(GRADES) + " |", "|---" * (len(GRADES) + 1) + "|"]
+    for n in NAMES:
+        cells = []
+        for g in GRADES:
+            f = figs.get(f"{n}/{g}")
+            if f is None or "verdict" not in f:
+                cells.append("not run")
+                continue
+            c = f"{f['verdict']} ({_num(f['anees_all_epochs'])})"
+            if f["inside_3sigma"] < 0.9:
+                c += f", {100 * f['inside_3sigma']:.0f} % inside 3σ"
+            cells.append(c)
+        rows.append(f"| `{n}` | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def validation_table(figs: dict) -> str:
+    """The validation page's grid (see table)."""
     rows = ["| grade | navigator | runs | ANEES (all epochs) | 95 % bounds (thinned samples) | first-phase "
             "thinned ANEES | epochs inside 3σ | horizontal RMS | verdict | Health warns |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
 
-    def num(x: float) -> str:
-        return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.2f}"
-
-    for g in ("navigation", "tactical", "consumer"):
-        for n in ("ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"):
+    for g in GRADES:
+        for n in NAMES:
             f = figs.get(f"{n}/{g}")
             if f is None or "bounds_95" not in f:
                 continue
             lo, hi = f["bounds_95"]
             rms = f["rms_m"]
             warns = "yes" if f.get("health_consistency_warning") else "no"
-            rows.append(f"| {g} | {n} | {f['runs']} | {num(f['anees_all_epochs'])} | [{lo:.2f}, {hi:.2f}] "
-                        f"({f['thinned_samples']}) | {num(f['anees'])} | {100 * f['inside_3sigma']:.1f} % | "
+            rows.append(f"| {g} | {n} | {f['runs']} | {_num(f['anees_all_epochs'])} | [{lo:.2f}, {hi:.2f}] "
+                        f"({f['thinned_samples']}) | {_num(f['anees'])} | {100 * f['inside_3sigma']:.1f} % | "
                         f"{f'{rms:,.0f}' if rms >= 100 else f'{rms:.1f}'} m | {f['verdict']} | {warns} |")
     return "\n".join(rows)
 
