@@ -116,7 +116,13 @@ def run_nees(runs: list[dict], t_from_s: float) -> tuple[np.ndarray, np.ndarray]
     sel = runs[0]["t"] >= t_from_s
     E = np.array([r["err"][sel] for r in runs])
     P = np.array([r["cov"][sel] for r in runs])
-    return np.einsum("rti,rtij,rtj->rt", E, np.linalg.inv(P), E), np.sum(E ** 2, axis=2)
+    det = P[..., 0, 0] * P[..., 1, 1] - P[..., 0, 1] * P[..., 1, 0]
+    good = np.isfinite(det) & (det > 0.0) & (P[..., 0, 0] > 0.0)
+    Pi = np.zeros_like(P)      # a covariance that is not positive definite (a diverged filter): NEES inf
+    Pi[good] = np.linalg.inv(P[good])
+    nees = np.einsum("rti,rtij,rtj->rt", E, Pi, E)
+    nees[~good] = np.inf
+    return nees, np.sum(E ** 2, axis=2)
 
 
 def figures(runs: list[dict], t_from_s: float) -> dict:
@@ -252,6 +258,7 @@ def main(argv=None) -> int:
             e2 = np.concatenate([np.asarray(p["e2"])[:, :m] for p in parts])
             merged[key] = {**nees_summary(nees, e2), "health_consistency_warning": warn[key]}
             print(json.dumps({key: merged[key]}), flush=True)
+            merged[key]["raw"] = {"nees": nees.tolist(), "e2": e2.tolist()}
         if a.out:
             Path(a.out).write_text(json.dumps({"merged": a.merge, "figures": merged}, indent=1))
         return 0
