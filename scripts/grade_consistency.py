@@ -199,6 +199,19 @@ def guide_table(figs: dict) -> str:
     return "\n".join(rows)
 
 
+def health_now(name: str, grade: str) -> str:
+    """What Health.consistency_warning states for navigator `name` on the preset `grade` with this code: the
+    measured direction (navigators.core.measured_consistency) and/or the small-angle warning (checked at
+    120 s, the shortest of the navigators' memories), or "no"."""
+    from trn_env.navigators.core.imu_spec import consistency_warning
+    from trn_env.navigators.core.measured_consistency import measured_direction
+
+    from trn_env.scenario.navigation import imu_spec
+    parts = ["small-angle"] if consistency_warning(imu_spec({"grade": grade}), 120.0, name) else []
+    parts += [d for d in (measured_direction(name, grade),) if d]
+    return ", ".join(parts) or "no"
+
+
 def validation_table(figs: dict) -> str:
     """The validation page's grid (see table)."""
     rows = ["| grade | navigator | runs | ANEES (all epochs) | 95 % bounds (thinned samples) | first-phase "
@@ -212,7 +225,7 @@ def validation_table(figs: dict) -> str:
                 continue
             lo, hi = f["bounds_95"]
             rms = f["rms_m"]
-            warns = "yes" if f.get("health_consistency_warning") else "no"
+            warns = health_now(n, g)
             rows.append(f"| {g} | {n} | {f['runs']} | {_num(f['anees_all_epochs'])} | [{lo:.2f}, {hi:.2f}] "
                         f"({f['thinned_samples']}) | {_num(f['anees'])} | {100 * f['inside_3sigma']:.1f} % | "
                         f"{f'{rms:,.0f}' if rms >= 100 else f'{rms:.1f}'} m | {f['verdict']} | {warns} |")
