@@ -1,10 +1,10 @@
 """Every navigator takes its INS error model from the IMU's specification (navigators.core.imu_spec), says in
 Health where its covariance is known not to describe its error, and is consistent on the tactical grade.
 
-The statistical check (slow): one recorded JSBSim flight of the whole default route (DURATION_S is longer than
-the route: the flight ends with it at 473 s, its two turns included; GNSS denied from t = 0), RUNS seeds (SEED0...) each with its own sensor noise, IMU
-biases, initial error and world detail (scripts/grade_consistency.py), every navigator built as a scenario
-builds it (the acq_track as in its regression scenario, with the INS as its aiding). Per navigator, over the
+The statistical check (slow): one recorded JSBSim flight of the whole default route (DURATION_S is longer
+than the route: the flight ends with it at 473 s, its two turns included; GNSS denied from t = 0), RUNS
+seeds (SEED0...) each with its own sensor noise, IMU biases, initial error and world detail
+(scripts/grade_consistency.py), every navigator built as a scenario builds it (the acq_track as in its regression scenario, with the INS as its aiding). Per navigator, over the
 epochs after 15 s: the horizontal NEES (2 dof) averaged over all epochs of all runs lies inside the
 two-sided 99 % chi-square bounds of the decorrelated sample count, chi2.ppf([0.005, 0.995], 2 n) / n
 computed here, n the runs times the epochs left when thinned to every k-th (k the lag where the NEES
