@@ -4,8 +4,9 @@ Health where its covariance is known not to describe its error, and is consisten
 The statistical check (slow): one recorded JSBSim flight of the whole default route (DURATION_S is longer
 than the route: the flight ends with it at 473 s, its two turns included; GNSS denied from t = 0), RUNS
 seeds (SEED0...) each with its own sensor noise, IMU biases, initial error and world detail
-(scripts/grade_consistency.py), every navigator built as a scenario builds it (the acq_track as in its regression scenario, with the INS as its aiding). Per navigator, over the
-epochs after 15 s: the horizontal NEES (2 dof) averaged over all epochs of all runs lies inside the
+(scripts/grade_consistency.py), every navigator built as a scenario builds it (the acq_track as in its
+regression scenario, with the INS as its aiding). Per navigator, over the epochs after 15 s: the horizontal
+NEES (2 dof) averaged over all epochs of all runs lies inside the
 two-sided 99 % chi-square bounds of the decorrelated sample count, chi2.ppf([0.005, 0.995], 2 n) / n
 computed here, n the runs times the epochs left when thinned to every k-th (k the lag where the NEES
 autocorrelation falls below 0.1: scripts/filter_statistics.pooled_nees_figures; the all-epoch mean averages
