@@ -56,31 +56,10 @@ from pathlib import Path
 
 import numpy as np
 
-TERRAINS = {
-    # start south of the basin, goals just past its north rim (basin centre 36.635 N, radius ~6 km)
-    "basin": dict(
-        scenario="basin_route",
-        agl_m=600.0,
-        env=dict(
-            agl_min_m=300.0, agl_max_m=900.0,      # action 0 holds 600 m, the straight line's height
-            start_region_deg=(36.515, 36.54, -84.16, -84.105),
-            goal_region_deg=(36.70, 36.735, -84.20, -84.065),
-            held_out_radius_m=1500.0,
-        ),
-    ),
-    # the real DEM (rough almost everywhere): south-west to north-east
-    "jacksboro": dict(
-        scenario="default",
-        agl_m=1000.0,
-        env=dict(
-            agl_min_m=500.0, agl_max_m=1500.0,
-            start_region_deg=(36.47, 36.50, -84.39, -84.35),
-            goal_region_deg=(36.64, 36.70, -84.22, -84.12),
-            held_out_radius_m=1500.0,
-        ),
-    ),
-}
+from trn_env.env.route_task import TERRAINS  # the terrains' scenarios, heights and regions
+
 GAMMA = 0.99
+# the route task's settings (trn_env.env.route_task.ENV_COMMON) at JSBSim's default step
 ENV_COMMON = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0, action_mode="pursuit",
                   bearing_offset_max_deg=45.0, failure_penalty=20.0, sigma_shaping_weight=0.0)
 PPO_SETTINGS = dict(n_steps=128, batch_size=64, n_epochs=10, gamma=GAMMA, gae_lambda=0.95,

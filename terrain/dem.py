@@ -25,6 +25,24 @@ def _coords(name: str, value) -> np.ndarray:
     return raw.astype(np.float64, copy=False)
 
 
+def _query_points(what: str, method: str, lat_rad, lon_rad) -> tuple[tuple, np.ndarray, np.ndarray]:
+    """(broadcast shape, flat contiguous lat, lon) of a lookup's coordinates; ValueError naming the bad
+    argument of Dem.<what>."""
+    if method not in _METHODS:
+        raise ValueError(f"Dem.{what}: method must be one of {_METHODS}, got {method!r}")
+    lat, lon = np.broadcast_arrays(_coords("lat_rad", lat_rad), _coords("lon_rad", lon_rad))
+    return lat.shape, np.ascontiguousarray(lat).ravel(), np.ascontiguousarray(lon).ravel()
+
+
+def _radii(lat_rad: np.ndarray, h_m=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(meridian, prime-vertical) radii of curvature (m) at lat_rad, each plus h_m (numpy; the scalar
+    kernel is terrain.geodesy.radii_m)."""
+    s = np.sin(lat_rad)
+    w = 1.0 - geodesy.WGS84_E2 * s * s
+    return (geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w)) + h_m,
+            geodesy.WGS84_A_M / np.sqrt(w) + h_m)
+
+
 @dataclass
 class Dem:
     """Geodetic elevation grid (the module docstring gives the layout).
@@ -165,11 +183,7 @@ class Dem:
     # ----------------------------------------------------------------- lookups
     def height(self, lat_rad, lon_rad, method: str = "bilinear"):
         """Height (m above MSL) at (lat, lon) radians; scalars or arrays; NaN off-grid or over voids."""
-        if method not in _METHODS:
-            raise ValueError(f"Dem.height: method must be one of {_METHODS}, got {method!r}")
-        lat, lon = np.broadcast_arrays(_coords("lat_rad", lat_rad), _coords("lon_rad", lon_rad))
-        flat_lat = np.ascontiguousarray(lat).ravel()
-        flat_lon = np.ascontiguousarray(lon).ravel()
+        shape, flat_lat, flat_lon = _query_points("height", method, lat_rad, lon_rad)
         out = np.empty(flat_lat.shape[0])
         kernel = kernels.bilinear_batch if method == "bilinear" else kernels.bicubic_batch
         kernel(
@@ -182,19 +196,13 @@ class Dem:
             flat_lon,
             out,
         )
-        if lat.ndim == 0:
+        if len(shape) == 0:
             return float(out[0])
-        return out.reshape(lat.shape)
+        return out.reshape(shape)
 
     def gradient(self, lat_rad, lon_rad, method: str = "bilinear"):
         """(dh_dn, dh_de): terrain slope along north and east (m/m) at (lat, lon); NaN outside."""
-        if method not in _METHODS:
-            raise ValueError(f"Dem.gradient: method must be one of {_METHODS}, got {method!r}")
-        lat, lon = np.broadcast_arrays(
-            np.asarray(lat_rad, dtype=np.float64), np.asarray(lon_rad, dtype=np.float64)
-        )
-        flat_lat = np.ascontiguousarray(lat).ravel()
-        flat_lon = np.ascontiguousarray(lon).ravel()
+        shape, flat_lat, flat_lon = _query_points("gradient", method, lat_rad, lon_rad)
         g_lat = np.empty(flat_lat.shape[0])
         g_lon = np.empty(flat_lat.shape[0])
         kernel = kernels.gradient_batch if method == "bilinear" else kernels.bicubic_gradient_batch
@@ -209,33 +217,24 @@ class Dem:
             g_lat,
             g_lon,
         )
-        s = np.sin(flat_lat)
-        w = 1.0 - geodesy.WGS84_E2 * s * s
-        r_n = geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w))
-        r_e = geodesy.WGS84_A_M / np.sqrt(w)
+        r_n, r_e = _radii(flat_lat)
         dh_dn = g_lat / r_n
         dh_de = g_lon / (r_e * np.cos(flat_lat))
-        if lat.ndim == 0:
+        if len(shape) == 0:
             return float(dh_dn[0]), float(dh_de[0])
-        return dh_dn.reshape(lat.shape), dh_de.reshape(lat.shape)
+        return dh_dn.reshape(shape), dh_de.reshape(shape)
 
     # ----------------------------------------------------------------- displacements
     def offset_to_latlon(self, lat_rad, lon_rad, dn_m, de_m, h_m=0.0):
         """Add north/east displacements (m) to positions (seed 000 eq 2); returns (lat, lon) radians."""
         lat = np.asarray(lat_rad, dtype=np.float64)
-        s = np.sin(lat)
-        w = 1.0 - geodesy.WGS84_E2 * s * s
-        r_n = geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w)) + h_m
-        r_e = geodesy.WGS84_A_M / np.sqrt(w) + h_m
+        r_n, r_e = _radii(lat, h_m)
         return lat + np.asarray(dn_m) / r_n, np.asarray(lon_rad) + np.asarray(de_m) / (r_e * np.cos(lat))
 
     def latlon_to_offset(self, lat0_rad, lon0_rad, lat_rad, lon_rad, h_m=0.0):
         """North/east displacement (m) from (lat0, lon0) to (lat, lon) (small-offset seed 000 eq 2)."""
         lat0 = np.asarray(lat0_rad, dtype=np.float64)
-        s = np.sin(lat0)
-        w = 1.0 - geodesy.WGS84_E2 * s * s
-        r_n = geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w)) + h_m
-        r_e = geodesy.WGS84_A_M / np.sqrt(w) + h_m
+        r_n, r_e = _radii(lat0, h_m)
         return (np.asarray(lat_rad) - lat0) * r_n, (np.asarray(lon_rad) - lon0_rad) * r_e * np.cos(lat0)
 
     def latlon_of_offset_from_center(self, dn_m, de_m):

@@ -14,6 +14,7 @@ import pytest
 from acq_track_helpers import frames_for, horizontal_error_m, initial_estimate, trajectory
 from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, beam, loop_kernel
 from trn_env.navigators.acquisition_tracking.correlation import (
+    Motion,
     Profile,
     profile_cost,
     replica_positions_reference,
@@ -101,7 +102,8 @@ def test_replica_points_and_the_basis_form_agree_with_numpy(dem):
             dem.record(), LAT0, LON0, basis, b_v, b_psi, r_n, r_e, Profile(d, valid, 0, True, 5), w
         )
         h_p = np.empty(n)
-        beam.replica_heights_at(dem.record(), LAT0, LON0, dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e, h_p)
+        motion = Motion(dt, m_v, m_psi, r_n, r_e)
+        beam.replica_heights_at(dem.record(), LAT0, LON0, motion, b_v, b_psi, o_n, o_e, h_p)
         assert c_basis == pytest.approx(profile_cost(d, valid, h_p, 0, True, 5), rel=1e-9)
 
 

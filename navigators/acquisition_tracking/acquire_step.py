@@ -23,6 +23,7 @@ from .buffers import (
     _rot_diag,
 )
 from .correlation import (
+    Motion,
     replica_heights,
 )
 from .integrity import (
@@ -42,10 +43,8 @@ class AcquisitionStep:
         t, d, valid, dt, m_v, m_psi, rng, r_n, r_e = self._arrays()
         n = dt.size
         h_p = np.empty(n)
-        replica_heights(
-            self._map, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi, r_n, r_e, np.empty(n),
-            np.empty(n), h_p,
-        )  # fmt: skip
+        replica_heights(self._map, self.p0[0], self.p0[1], Motion(dt, m_v, m_psi, r_n, r_e), self.b_v,
+                        self.b_psi, np.empty(n), np.empty(n), h_p)
         ok = valid & np.isfinite(h_p)
         if ok.sum() < self._n_min:
             return -math.inf

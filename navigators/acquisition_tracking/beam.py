@@ -119,9 +119,10 @@ def replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, dlat_out,
 
 
 @njit(cache=True)
-def replica_heights_at(rec, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, h_out):
+def replica_heights_at(rec, lat_s, lon_s, motion, b_v, b_psi, o_n, o_e, h_out):
     """correlation.replica_heights with the beam offsets: heights (m) of the map record rec at the replica's
-    map points."""
+    map points (motion: correlation.Motion)."""
+    dt, m_v, m_psi, r_n, r_e_cos = motion
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)
@@ -131,9 +132,11 @@ def replica_heights_at(rec, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_c
 
 
 @njit(cache=True)
-def information_at(rec, lat_s, lon_s, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, valid, track_rad):
-    """correlation.along_cross_information at the replica's map points (beam offsets included): the sums
-    of the squared along-track and cross-track map slopes over the valid samples (dimensionless)."""
+def information_at(rec, lat_s, lon_s, motion, b_v, b_psi, o_n, o_e, valid, track_rad):
+    """correlation.along_cross_information at the replica's map points (beam offsets included; motion:
+    correlation.Motion): the sums of the squared along-track and cross-track map slopes over the valid
+    samples (dimensionless)."""
+    dt, m_v, m_psi, r_n, r_e_cos = motion
     n = dt.shape[0]
     dla = np.empty(n)
     dlo = np.empty(n)

@@ -163,23 +163,10 @@ def map_heights(rec, lat, lon, h_out):
 
 
 @njit(cache=True)
-def replica_heights(
-    rec,
-    lat_s,
-    lon_s,
-    dt,
-    m_v,
-    m_psi,
-    b_v,
-    b_psi,
-    r_n,
-    r_e_cos,
-    dlat_w,
-    dlon_w,
-    h_out,
-):
-    """Map heights (m) of the replica from start (lat_s, lon_s) with references (b_v, b_psi) into h_out, on
-    the map record rec."""
+def replica_heights(rec, lat_s, lon_s, motion, b_v, b_psi, dlat_w, dlon_w, h_out):
+    """Map heights (m) of the replica from start (lat_s, lon_s) with the transect's motion (Motion) and
+    references (b_v, b_psi) into h_out, on the map record rec; dlat_w, dlon_w: scratch (the offsets)."""
+    dt, m_v, m_psi, r_n, r_e_cos = motion
     replica_offsets(dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, dlat_w, dlon_w)
     for i in range(dt.shape[0]):
         h_out[i] = map_height(rec, lat_s + dlat_w[i], lon_s + dlon_w[i])

@@ -593,5 +593,5 @@ def track_loops(rec, transect, settings, out):
             out_locked[2 + j] = locked
             out_ran[2 + j] = True
             _put_shape(out_shapes, 2 + j, v_shape, bw, m_off, m_cost, sl, sr)
-    replica_heights_at(rec, lat_p, lon_p, dt, m_v, m_psi, b_v, b_psi, r_n, r_e_cos, o_n, o_e, out_h_prompt)
+    replica_heights_at(rec, lat_p, lon_p, motion, b_v, b_psi, o_n, o_e, out_h_prompt)
     return b_v, b_psi, lat_p, lon_p, sp_v, sp_psi

@@ -26,6 +26,7 @@ from .buffers import (
     _quad2,
     _rot_diag,
 )
+from .correlation import Motion
 from .integrity import (
     a_priori_sigma_m,
     false_lock,
@@ -137,7 +138,7 @@ class TrackingStep:
         # the fix's covariance: the terrain information along / across the track at the fit
         psi = self._aided_track(s)
         i_al, i_cr = beam.information_at(
-            rec, p_s[0], p_s[1], dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e, valid, psi
+            rec, p_s[0], p_s[1], Motion(dt, m_v, m_psi, r_n, r_e), b_v, b_psi, o_n, o_e, valid, psi
         )
         sig_res = max(res_sigma if math.isfinite(res_sigma) else 0.0, sig0)
         k2 = cfg.fix_sigma_scale**2 * _MAD_VARIANCE_FACTOR * sig_res**2

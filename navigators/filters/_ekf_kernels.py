@@ -238,15 +238,17 @@ def closest_point_one(R, theta, v0, v1, v2, C, formula, out):
 
 
 @njit(cache=True)
-def collect_ira(t0, t1, t_imu, hist, ts, rng_m, theta, valid, decimation, tb, hb, have_baro, geopotential,
-                formula, out):
+def collect_ira(t0, t1, t_imu, hist, ira, decimation, baro_ref, formula, out):
     """TERCOM batch rows of the IRA samples with t0 <= t <= t1 (every `decimation`-th of them).
 
-    tb, hb: valid baro times and heights (interpolated at the sample times when have_baro, else the INS
-    height is the reference); geopotential: convert the baro height to geometric (US 1976 r0).
+    Records (numba tuples): ira = (ts, rng_m, theta, valid) the IRA samples; baro_ref = (tb, hb, have_baro,
+    geopotential): valid baro times and heights (interpolated at the sample times when have_baro, else the
+    INS height is the reference), geopotential: convert the baro height to geometric (US 1976 r0).
     out (>= n samples, 6): t, INS lat, INS lon, h_meas = h_ref - |p_d| (seed 000 eq 2), p_n, p_e.
     Returns (rows written, samples without a valid return, rows with no closest-point solution).
     """
+    ts, rng_m, theta, valid = ira
+    tb, hb, have_baro, geopotential = baro_ref
     m = 0
     n_bad = 0
     n_nan = 0
@@ -322,16 +324,27 @@ def baro_prepare(valid, h_baro_m, geopotential, usable, h_geometric):
 
 
 @njit(cache=True)
-def fused_segment(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, h_baro_raw, baro_valid,
-                  geopotential, baro_usable, h_baro_geo, accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model,
-                  interval_samples, hist, P, Q, last_f_b, t_ekf0, dt_ekf, collect, ts, rng_m, theta,
-                  ira_valid, decimation, formula, rows):
+def fused_segment(ins, imu, baro, mech, cov, ira, aiding, work):
     """One whole frame of navigators.filters.ins_trn_ekf's segment work in one call (no fix inside the frame):
     baro_prepare, ins.propagate_chunk, last_good_row, predict_covariance, is_positive_definite and (when
     collect) collect_ira - the same kernels, in the same order, as the step-by-step path.
 
+    Records (numba tuples): ins, imu, mech as in propagate_chunk; baro = (t_baro, h_baro_raw, baro_valid)
+    the frame's baro samples (ISA pressure altitude when geopotential); cov = (P, Q, last_f_b, t_ekf0,
+    dt_ekf) the covariance (P in place), its process noise per EKF step, the last good specific force
+    (in place), the EKF time and step; ira = (ts, rng_m, theta, valid) the IRA samples; aiding = (collect,
+    decimation, formula, geopotential) (collect_ira's settings); work = (baro_usable, h_baro_geo, hist,
+    rows) scratch and output arrays (hist: the INS state after each IMU sample, rows: collect_ira's).
+
     Returns (bad IMU samples, invalid baro samples, EKF steps, covariance PD, rows, no-returns, no-solution).
     """
+    ins_state = ins[0]
+    t, f_b, w_b, imu_ok = imu
+    t_baro, h_baro_raw, baro_valid = baro
+    accel_bias_b, _, tau_baro_s, _, _ = mech
+    P, Q, last_f_b, t_ekf0, dt_ekf = cov
+    collect, decimation, formula, geopotential = aiding
+    baro_usable, h_baro_geo, hist, rows = work
     n_b = t_baro.shape[0]
     all_ok = baro_prepare(baro_valid, h_baro_raw, geopotential, baro_usable, h_baro_geo)
     n_baro_bad = 0
@@ -339,9 +352,7 @@ def fused_segment(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, 
         for i in range(n_b):
             if t_baro[i] <= t[t.shape[0] - 1] and not baro_usable[i]:
                 n_baro_bad += 1
-    bad = propagate_chunk(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, h_baro_geo,
-                          baro_usable, accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model, interval_samples,
-                          hist)
+    bad = propagate_chunk(ins, imu, (t_baro, h_baro_geo, baro_usable), mech, hist)
     last_good_row(imu_ok, f_b, last_f_b)
     n_steps = int(np.floor((t[t.shape[0] - 1] - t_ekf0) / dt_ekf + 1e-9))
     pd = True
@@ -353,9 +364,8 @@ def fused_segment(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, 
     if collect:
         have_baro = n_b > 0
         if all_ok:
-            m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ts, rng_m, theta, ira_valid,
-                                          decimation, t_baro, h_baro_raw, have_baro, geopotential, formula,
-                                          rows)
+            m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ira, decimation,
+                                          (t_baro, h_baro_raw, have_baro, geopotential), formula, rows)
         else:
             k = 0
             tb = np.empty(n_b)
@@ -365,6 +375,6 @@ def fused_segment(ins_state, prev_imu, baro_state, t, f_b, w_b, imu_ok, t_baro, 
                     tb[k] = t_baro[i]
                     hb[k] = h_baro_raw[i]
                     k += 1
-            m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ts, rng_m, theta, ira_valid,
-                                          decimation, tb[:k], hb[:k], k > 0, geopotential, formula, rows)
+            m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ira, decimation,
+                                          (tb[:k], hb[:k], k > 0, geopotential), formula, rows)
     return bad, n_baro_bad, n_steps, pd, m, n_ret, n_nan

@@ -84,12 +84,13 @@ class InsTrnPropagation:
             P = self.kf.P = np.ascontiguousarray(P, dtype=float)
         tau = 1e30 if ins.tau_baro_s is None else float(ins.tau_baro_s)
         bad, n_baro_bad, n_steps, pd, m, n_ret, n_nan = kern.fused_segment(
-            ins.state, ins.prev_imu, ins.baro_state, t, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid,
-            tb, hb_raw, vb_raw, self.baro_geopotential, self._vbuf[:nb], self._bbuf[:nb],
-            ins.accel_bias_b, ins.gyro_bias_b, tau, GRAVITY_MODELS[ins.gravity_model],
-            ins.imu_samples == "interval", self._hist[:n], P, self._Q, self._last_f_b, float(self._t_ekf),
-            self.dt_ekf, collect, ts, rng_m, theta, iv, self.ira_decimation,
-            kern.FORMULA_CODES.get(self.formula, 1), self._rows)
+            (ins.state, ins.prev_imu, ins.baro_state), (t, imu.f_b_mps2, imu.omega_ib_b_rps, imu.valid),
+            (tb, hb_raw, vb_raw),
+            (ins.accel_bias_b, ins.gyro_bias_b, tau, GRAVITY_MODELS[ins.gravity_model],
+             ins.imu_samples == "interval"),
+            (P, self._Q, self._last_f_b, float(self._t_ekf), self.dt_ekf), (ts, rng_m, theta, iv),
+            (collect, self.ira_decimation, kern.FORMULA_CODES.get(self.formula, 1), self.baro_geopotential),
+            (self._vbuf[:nb], self._bbuf[:nb], self._hist[:n], self._rows))
         t0 = float(t[0])
         if n_baro_bad:
             self._count_skip(t0, "baro_invalid", n_baro_bad, "baro samples invalid")
@@ -108,13 +109,7 @@ class InsTrnPropagation:
             self._t_ekf += n_steps * self.dt_ekf
         self._P_good[:] = self.kf.P
         self.kf.x[:] = 0.0
-        if n_ret:
-            self._count_skip(t0, "altimeter_no_return", n_ret,
-                             f"{n_ret} altimeter samples without a valid return")
-        if n_nan:
-            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
-        if m:
-            self.batch.add_rows(self._rows[:m].copy())
+        self._add_collected(t0, n_ret, n_nan, m)
         self._turn_noise()
 
     def _baro(self, frames: SensorFrames):
@@ -274,15 +269,19 @@ class InsTrnPropagation:
         if self._rows.shape[0] < n:
             self._rows = np.empty((max(n, 64), 6))
         m, n_bad, n_nan = kern.collect_ira(
-            float(t_imu[0]), float(t_imu[-1]), t_imu, hist, ts, src.range_m, src.look_angle_rad, src.valid,
-            self.ira_decimation, tb, hb, have_baro, self.baro_geopotential, kern.FORMULA_CODES[self.formula],
-            self._rows)
-        t0 = float(t_imu[0])
-        if n_bad:
-            self._count_skip(t0, "altimeter_no_return", n_bad,
-                             f"{n_bad} altimeter samples without a valid return")
-        if n_nan:
-            self._count_skip(t0, "ira_geometry", n_nan, "IRA samples with no closest-point solution")
+            float(t_imu[0]), float(t_imu[-1]), t_imu, hist, (ts, src.range_m, src.look_angle_rad, src.valid),
+            self.ira_decimation, (tb, hb, have_baro, self.baro_geopotential),
+            kern.FORMULA_CODES[self.formula], self._rows)
+        self._add_collected(float(t_imu[0]), n_bad, n_nan, m)
+
+    def _add_collected(self, t0: float, n_no_return: int, n_no_solution: int, m: int) -> None:
+        """Count a frame's altimeter samples without a return and IRA samples without a closest-point
+        solution (skips at t0 s), and queue the m measurement rows collected in self._rows."""
+        if n_no_return:
+            self._count_skip(t0, "altimeter_no_return", n_no_return,
+                             f"{n_no_return} altimeter samples without a valid return")
+        if n_no_solution:
+            self._count_skip(t0, "ira_geometry", n_no_solution, "IRA samples with no closest-point solution")
         if m:
             self.batch.add_rows(self._rows[:m].copy())
 

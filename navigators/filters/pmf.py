@@ -107,9 +107,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
     def __init__(self, dem=None, settings: PmfSettings | None = None, name: str | None = None, **overrides):
         super().__init__(dem=dem, settings=settings, name=name, **overrides)
         s = self.settings
-        self.spacing_min_m = s.spacing_min_m
-        self.spacing_max_m = s.spacing_max_m
-        self.span_sigmas = s.span_sigmas
+        s.copy_to(self, "spacing_min_m spacing_max_m span_sigmas")
         self.position_noise = s.position_noise_m_per_sqrt_s
         self.velocity_noise = s.velocity_noise_mps_per_sqrt_s
         self.accel_bias_sigma = s.accel_bias_sigma_mps2
@@ -248,7 +246,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
                 C_uu[5, 5] += q_b * dt
                 C_uu[6, 6] += q_eps * dt + turn_h2 * turn
             self.C_uu = 0.5 * (C_uu + C_uu.T)
-            self.P_b += self.vertical_noise ** 2 * dt
+            self.P_b += self._offset_process_var(dt, st)
             self._t_belief = t_s
             self._moments_cache = None
 
@@ -352,10 +350,16 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         if self._apply_loglik(t_s, ll, "GNSS update") is None:
             return
         z_b = float(st[2]) - h      # INS minus GNSS height = b + noise
-        S = self.P_b + self.gnss_vertical_sigma_m ** 2
-        K = self.P_b / S
-        self.bias += K * (z_b - self.bias)
-        self.P_b *= (1.0 - K)
+        p_h, p_m = self._gnss_offset_split()    # the map's part of b is not seen by GNSS (terrain_filter)
+        if p_m > 0.0:
+            K = p_h / (p_h + self.gnss_vertical_sigma_m ** 2)
+            self.bias += K * (z_b - self.bias)
+            self.P_b = p_h * (1.0 - K) + p_m
+        else:
+            S = self.P_b + self.gnss_vertical_sigma_m ** 2
+            K = self.P_b / S
+            self.bias += K * (z_b - self.bias)
+            self.P_b *= (1.0 - K)
         self._moments_cache = None
         self._velocity_from_position(prior, self._position_moments())
         self._gnss_velocity(st, v)

@@ -166,35 +166,24 @@ def _rates(lat, h, vn, ve):
 
 
 @njit(cache=True)
-def propagate_chunk(
-    state,
-    prev_imu,
-    baro_state,
-    t_imu,
-    f_b,
-    w_b,
-    imu_ok,
-    t_baro,
-    h_baro,
-    baro_ok,
-    accel_bias_b,
-    gyro_bias_b,
-    tau_baro_s,
-    gravity_model,
-    interval_samples,
-    out,
-):
-    """Advance the INS over IMU samples t_imu[k] (k = 0..n-1).
+def propagate_chunk(ins, imu, baro, mech, out):
+    """Advance the INS over IMU samples t_imu[k] (k = 0..n-1). Records (numba tuples):
 
-    state (10,): lat, lon, h, vn, ve, vd, q_bn (w, x, y, z); updated in place.
-    prev_imu (7,): t, f_b (3), w_b (3) of the previous sample; updated in place. After a reset it holds the
-    reset time with NaN samples, so the first sample's step starts at the state's own time (t NaN as well:
-    no time yet, the first sample only sets it).
-    baro_state (3,): last baro time, last baro height (NaN: none), vertical accel correction; in place.
-    accel_bias_b, gyro_bias_b (3,): subtracted from the samples.
-    interval_samples: True if each sample is the mean over the step ending at its time (JSBSim's f_b).
+    ins = (state, prev_imu, baro_state), updated in place: state (10,) lat, lon, h, vn, ve, vd, q_bn (w, x,
+    y, z); prev_imu (7,) t, f_b (3), w_b (3) of the previous sample (after a reset: the reset time with NaN
+    samples, so the first sample's step starts at the state's own time; t NaN as well: no time yet, the
+    first sample only sets it); baro_state (3,) last baro time, last baro height (NaN: none), vertical
+    accel correction.
+    imu = (t_imu, f_b, w_b, imu_ok) the samples; baro = (t_baro, h_baro, baro_ok) the baro samples.
+    mech = (accel_bias_b, gyro_bias_b (3,) subtracted from the samples, tau_baro_s the baro loop's time
+    constant, gravity_model, interval_samples: True if each sample is the mean over the step ending at its
+    time (JSBSim's f_b)).
     out (n, 10): state after each sample. Returns the number of replaced (invalid) IMU samples.
     """
+    state, prev_imu, baro_state = ins
+    t_imu, f_b, w_b, imu_ok = imu
+    t_baro, h_baro, baro_ok = baro
+    accel_bias_b, gyro_bias_b, tau_baro_s, gravity_model, interval_samples = mech
     n = t_imu.shape[0]
     nb = t_baro.shape[0]
     jb = 0
@@ -402,21 +391,11 @@ class StrapdownIns:
         out = np.empty((n, N_STATE))
         tau = 1e30 if self.tau_baro_s is None else float(self.tau_baro_s)
         bad = propagate_chunk(
-            self.state,
-            self.prev_imu,
-            self.baro_state,
-            t_imu,
-            np.ascontiguousarray(f_b_mps2, float),
-            np.ascontiguousarray(omega_ib_b_rps, float),
-            ok,
-            t_baro,
-            h_baro_m,
-            baro_valid,
-            self.accel_bias_b,
-            self.gyro_bias_b,
-            tau,
-            GRAVITY_MODELS[self.gravity_model],
-            self.imu_samples == "interval",
+            (self.state, self.prev_imu, self.baro_state),
+            (t_imu, np.ascontiguousarray(f_b_mps2, float), np.ascontiguousarray(omega_ib_b_rps, float), ok),
+            (t_baro, h_baro_m, baro_valid),
+            (self.accel_bias_b, self.gyro_bias_b, tau, GRAVITY_MODELS[self.gravity_model],
+             self.imu_samples == "interval"),
             out,
         )
         self.bad_imu_samples += int(bad)

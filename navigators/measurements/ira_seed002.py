@@ -58,11 +58,16 @@ N_OUT = 11
 
 
 @njit(cache=True)
-def _zd_eval(rec, lat, lon, ha, cv, imh, inhc,
-             vx, vy, vz, un, ue, C, sin_w, max_range, sv, t_guess):
+def _zd_eval(rec, ant, zdl, look, sv, t_guess):
     """Terrain point on the plane v . p = 0 at across-track coordinate sv (m): returns (f, t, x, y, z) with f
-    the range if it lies in the look window (else inf; no point: t NaN)."""
+    the range if it lies in the look window (else inf; no point: t NaN). Records (tuples): ant = (lat, lon
+    rad, h_a m, cv, 1 / (M + h_a), 1 / ((N + h_a) cos lat)) the antenna and its curvature constants (cv:
+    terrain.queries.shared._consts); zdl = (vx, vy, vz, un, ue) the ZDL plane's unit normal (NED) and the
+    horizontal along-track unit vector (_direction); look = (C_bn, sin of the half window, max range m)."""
     heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (read bilinearly)
+    lat, lon, ha, cv, imh, inhc = ant
+    vx, vy, vz, un, ue = zdl
+    C, sin_w, max_range = look
     wn = -ue
     we = un
     vh = np.sqrt(vx * vx + vy * vy)
@@ -99,44 +104,39 @@ def _zd_eval(rec, lat, lon, ha, cv, imh, inhc,
 
 
 @njit(cache=True)
-def _golden(rec, lat, lon, ha, cv, imh, inhc,
-            vx, vy, vz, un, ue, C, sin_w, max_range, a, b, t_guess, iters):
+def _golden(rec, ant, zdl, look, a, b, t_guess, iters):
     """Golden-section minimum of the in-window range over s in [a, b]: (f, s, t, x, y, z) of the lowest
-    point evaluated (a minimum on the look window's edge is approached from inside)."""
+    point evaluated (a minimum on the look window's edge is approached from inside). Each step drops the
+    bracket's side beyond the higher inner point and probes one new point on the kept side, its Newton
+    solve started from the along-track coordinate last found on that side (records: _zd_eval)."""
     c1 = b - _GOLD * (b - a)
     c2 = a + _GOLD * (b - a)
-    f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc,
-                                  vx, vy, vz, un, ue, C, sin_w, max_range, c1, t_guess)
-    f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc,
-                                  vx, vy, vz, un, ue, C, sin_w, max_range, c2, t_guess)
+    f1, t1, x1, y1, z1 = _zd_eval(rec, ant, zdl, look, c1, t_guess)
+    f2, t2, x2, y2, z2 = _zd_eval(rec, ant, zdl, look, c2, t_guess)
     if f1 <= f2:
         fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
     else:
         fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
     tg = t_guess
     for _ in range(iters):
-        if f1 <= f2:
-            b = c2
-            c2 = c1
-            f2 = f1
-            c1 = b - _GOLD * (b - a)
-            if t1 == t1:
-                tg = t1
-            f1, t1, x1, y1, z1 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc, vx, vy, vz, un, ue,
-                                          C, sin_w, max_range, c1, tg)
-            if f1 < fb:
-                fb, sb, tb, xb, yb, zb = f1, c1, t1, x1, y1, z1
+        lower = f1 <= f2   # the minimum lies in [a, c2]: probe a new lower inner point
+        if lower:
+            b, c2, f2 = c2, c1, f1
+            c1 = c = b - _GOLD * (b - a)
+            t_side = t1
         else:
-            a = c1
-            c1 = c2
-            f1 = f2
-            c2 = a + _GOLD * (b - a)
-            if t2 == t2:
-                tg = t2
-            f2, t2, x2, y2, z2 = _zd_eval(rec, lat, lon, ha, cv, imh, inhc, vx, vy, vz, un, ue,
-                                          C, sin_w, max_range, c2, tg)
-            if f2 < fb:
-                fb, sb, tb, xb, yb, zb = f2, c2, t2, x2, y2, z2
+            a, c1, f1 = c1, c2, f2
+            c2 = c = a + _GOLD * (b - a)
+            t_side = t2
+        if t_side == t_side:
+            tg = t_side
+        f, t, x, y, z = _zd_eval(rec, ant, zdl, look, c, tg)
+        if lower:
+            f1, t1 = f, t
+        else:
+            f2, t2 = f, t
+        if f < fb:
+            fb, sb, tb, xb, yb, zb = f, c, t, x, y, z
     return fb, sb, tb, xb, yb, zb
 
 
@@ -150,18 +150,24 @@ RUNNER_UP_SEPARATION_M = 67.5   # 1.5 scan steps of 45 m: another basin, or a fl
 
 
 @njit(cache=True)
-def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
-              n_golden, lat_c, lon_c, s_lo, bin_hmax, sep_m, out):
-    """Seed 002 eqs 23-26 for hypotheses k (antenna lat[k], lon[k] rad, h[k] m), the epoch's v_ned (3,) and
-    C_bn (3, 3). out (n, N_OUT): R, theta, x_b, y_b, z_b, dR/dtheta_zdl, dR/dpsi_zdl (m/rad), s* (m across
-    track), valid (1/0), and the range and look angle of the coarse scan's best sample farther than sep_m
-    across track from the minimum (another basin or a flat minimum's far side; NaN: none in the window).
-    d_ang <= 0 skips the eq 24 differences."""
+def zdl_batch(rec, lat, lon, h, v_ned, look, scan, strip, out):
+    """Seed 002 eqs 23-26 for hypotheses k (antenna lat[k], lon[k] rad, h[k] m) and the epoch's v_ned (3,).
+    Records (tuples): look = (C_bn (3, 3), sin of the half window, max range m); scan = (h_max m the highest
+    terrain near the cloud, ds_m the coarse step, d_ang rad (<= 0 skips the eq 24 differences), n_golden
+    refinement steps, sep_m the runner-up's separation); strip = (lat_c, lon_c rad, s_lo m, bin_hmax m) the
+    strip bins of strip_bounds (empty: none). out (n, N_OUT): R, theta, x_b, y_b, z_b, dR/dtheta_zdl,
+    dR/dpsi_zdl (m/rad), s* (m across track), valid (1/0), and the range and look angle of the coarse scan's
+    best sample farther than sep_m across track from the minimum (another basin or a flat minimum's far
+    side; NaN: none in the window)."""
     heights, lat0, lon0, dlat, dlon, _ = rec   # the map record's grid (read bilinearly)
+    C, sin_w, max_range = look
+    h_max, ds_m, d_ang, n_golden, sep_m = scan
+    lat_c, lon_c, s_lo, bin_hmax = strip
     vhs = np.sqrt(v_ned[0] ** 2 + v_ned[1] ** 2)
     elev = np.arctan2(-v_ned[2], vhs)
     azim = np.arctan2(v_ned[1], v_ned[0])
-    vx, vy, vz, un, ue = _direction(elev, azim)
+    zdl = _direction(elev, azim)
+    vx, vy, vz, un, ue = zdl
     nb = bin_hmax.shape[0]
     sc, cc, mc, nc, _ = _consts(lat_c)
     for k in range(lat.shape[0]):
@@ -177,6 +183,7 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
         s_, c_, m, n, dm = cv
         imh = 1.0 / (m + ha)
         inhc = 1.0 / ((n + ha) * c_)
+        ant = (la, lo, ha, cv, imh, inhc)
         dz_min = ha - h_max
         if dz_min < 0.0:
             dz_min = 0.0
@@ -206,8 +213,7 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
                         if dzb > 0.0 and sv * sv + dzb * dzb > best * best:
                             i += 1
                             continue
-                f, t, _, _, _ = _zd_eval(rec, la, lo, ha, cv, imh,
-                                         inhc, vx, vy, vz, un, ue, C, sin_w, max_range, sv, tg)
+                f, t, _, _, _ = _zd_eval(rec, ant, zdl, look, sv, tg)
                 if t == t:
                     tg = t
                 if f < best:
@@ -234,19 +240,15 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
                 i += 1
         if not best < np.inf:
             continue
-        f, sm, t, x, y, z = _golden(rec, la, lo, ha, cv, imh, inhc,
-                                    vx, vy, vz, un, ue, C, sin_w, max_range, s_best - ds_m, s_best + ds_m,
-                                    t_best, n_golden)
+        f, sm, t, x, y, z = _golden(rec, ant, zdl, look, s_best - ds_m, s_best + ds_m, t_best, n_golden)
         if best2 < best + 0.3 * ds_m:  # a second basin nearly as low: refine it too, keep the lower
-            f2, sm2, t2, x2, y2, z2 = _golden(rec, la, lo, ha, cv,
-                                              imh, inhc, vx, vy, vz, un, ue, C, sin_w, max_range,
-                                              s_best2 - ds_m, s_best2 + ds_m, t_best2, n_golden)
+            f2, sm2, t2, x2, y2, z2 = _golden(rec, ant, zdl, look, s_best2 - ds_m, s_best2 + ds_m, t_best2,
+                                              n_golden)
             if f2 < f:
                 f, sm, t, x, y, z = f2, sm2, t2, x2, y2, z2
                 best, s_best, t_best = best2, s_best2, t_best2
         if not f < best:  # refinement left the window (a window-edge minimum): keep the coarse sample
-            f, t, x, y, z = _zd_eval(rec, la, lo, ha, cv, imh, inhc,
-                                     vx, vy, vz, un, ue, C, sin_w, max_range, s_best, t_best)
+            f, t, x, y, z = _zd_eval(rec, ant, zdl, look, s_best, t_best)
             sm = s_best
         # the coarse scan's best sample farther than sep_m across track from the minimum (range, look
         # angle): another basin, or the far side of a flat one - how near the closest point is to jumping
@@ -255,8 +257,7 @@ def zdl_batch(rec, lat, lon, h, v_ned, C, sin_w, max_range, h_max, ds_m, d_ang,
         else:
             so, to = s_r2, t_r2
         if r2 < np.inf:
-            fo, _, xo, yo, zo = _zd_eval(rec, la, lo, ha, cv, imh,
-                                         inhc, vx, vy, vz, un, ue, C, sin_w, max_range, so, to)
+            fo, _, xo, yo, zo = _zd_eval(rec, ant, zdl, look, so, to)
             if fo < np.inf:
                 byo = C[0, 1] * xo + C[1, 1] * yo + C[2, 1] * zo
                 out[k, OUT_R2] = fo
@@ -431,9 +432,9 @@ def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float 
         s_lo = -s_half
         nb = int(np.ceil(2.0 * s_half / ds_m)) + 1
         bins = strip_bounds(rec, lat_c, lon_c, h_c, un, ue, s_lo, float(ds_m), nb, s_half, t_half)
-    zdl_batch(rec, lat, lon, h, v, np.ascontiguousarray(C_bn, float),
-              float(np.sin(half_window_rad)), float(max_range_m), h_max, float(ds_m), float(d_ang_rad),
-              int(n_golden), lat_c, lon_c, s_lo, bins, float(runner_up_separation_m), out)
+    look = (np.ascontiguousarray(C_bn, float), float(np.sin(half_window_rad)), float(max_range_m))
+    scan = (h_max, float(ds_m), float(d_ang_rad), int(n_golden), float(runner_up_separation_m))
+    zdl_batch(rec, lat, lon, h, v, look, scan, (lat_c, lon_c, s_lo, bins), out)
     return out
 
 

@@ -303,12 +303,11 @@ def _inside_cone(cx, cy, cz, rad, ax, ay, az, cosb, sinb):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _ra_bnb(
-    rec, h_min, h_max, cell_m, lat, lon, ha, ax, ay, az, cosb, sinb, max_range, bs, bmax, bmin,
-    blk_lb, blk_id, cell, out,
-):
+def _ra_bnb(rec, map_tables, cell_m, ant, beam, workspace, cell, out):
     """Closest terrain point in the beam cone by best-first branch and bound over DEM blocks; writes
-    (valid, range, lat, lon, h) into out[0:5]. blk_lb, blk_id, cell: scratch arrays.
+    (valid, range, lat, lon, h) into out[0:5]. Records (numba tuples): map_tables as in _ra_batch; ant =
+    (lat, lon rad, h m) the antenna; beam = (ax, ay, az) the unit beam axis (NED), cos and sin of the half
+    beam, max range m; workspace = (blk_lb, blk_id) and cell: scratch arrays.
 
     Incumbent: the beam-axis ray hit. Block lower bound: distance to its box (horizontal rectangle x
     [-, block max height]); blocks whose bounding sphere misses the cone are pruned. Surviving cells (own
@@ -317,6 +316,10 @@ def _ra_bnb(
     for q in range(1, 5):
         out[q] = np.nan
     heights, lat0, lon0, dlat, dlon, _ = rec
+    bs, bmax, bmin, h_min, h_max = map_tables
+    lat, lon, ha = ant
+    ax, ay, az, cosb, sinb, max_range = beam
+    blk_lb, blk_id = workspace
     n_lat, n_lon = heights.shape
     cv = _consts(lat)
     _, c, m, n, _ = cv
@@ -455,8 +458,6 @@ def _ra_batch(rec, cell_m, queries, half_beam, max_range, map_tables, workspace,
     (bmax.size,) int64): scratch space (overwritten before it is read); outs = (valid, rng, lat_out,
     lon_out, h_out)."""
     lat, lon, h, C_bn = queries
-    bs, bmax, bmin, h_min, h_max = map_tables
-    blk_lb, blk_id = workspace
     valid, rng, lat_out, lon_out, h_out = outs
     cosb = np.cos(half_beam)
     sinb = np.sin(half_beam)
@@ -469,10 +470,8 @@ def _ra_batch(rec, cell_m, queries, half_beam, max_range, map_tables, workspace,
             valid[k] = False
             rng[k] = lat_out[k] = lon_out[k] = h_out[k] = np.nan
             continue
-        _ra_bnb(
-            rec, h_min, h_max, cell_m, lat[k], lon[k], h[k], ax / nrm, ay / nrm, az / nrm, cosb,
-            sinb, max_range, bs, bmax, bmin, blk_lb, blk_id, cell, out,
-        )
+        _ra_bnb(rec, map_tables, cell_m, (lat[k], lon[k], h[k]),
+                (ax / nrm, ay / nrm, az / nrm, cosb, sinb, max_range), workspace, cell, out)
         valid[k] = out[0] > 0.5
         rng[k] = out[1]
         lat_out[k] = out[2]

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from trn_env.campaign.spec import CampaignError, SeedMajorRuns, draw_seeds
+from trn_env.campaign.spec import CampaignError, RunKey, SeedMajorRuns, draw_seeds
 
 POLICY_KINDS = ("straight", "planner", "sb3", "random")
 # columns of an episode row (besides the run bookkeeping ones); floats are NaN where they do not apply
@@ -67,16 +67,9 @@ class PolicyVariant:
 
 
 @dataclass(frozen=True)
-class EpisodeTask:
+class EpisodeTask(RunKey):
     """Everything a worker needs to fly one episode (picklable, small)."""
 
-    campaign: str
-    campaign_hash: str
-    run_id: str
-    run_index: int
-    variant_index: int
-    seed_index: int
-    seed: int
     policy_label: str
     policy: dict
     env: dict
@@ -89,12 +82,6 @@ class EpisodeTask:
 class EpisodeCampaign(SeedMajorRuns):
     """A validated episode campaign; runs through `trn_env.campaign.driver.run_campaign` as a Campaign."""
 
-    name: str
-    source: str
-    description: str
-    hash: str
-    text: str
-    seeds: list[int]
     env: dict
     variants: list[PolicyVariant]
     sweep_paths: list[str] = field(default_factory=list)

@@ -28,7 +28,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from trn_env.campaign.spec import CampaignError, NavigatorChoice, SeedMajorRuns, grid_values, is_number
+from trn_env.campaign.spec import (
+    CampaignError,
+    NavigatorChoice,
+    RunKey,
+    SeedMajorRuns,
+    grid_values,
+    is_number,
+)
 from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
 
 _KEYS = {"name", "description", "logs", "navigators", "seeds", "sweeps", "metrics"}
@@ -46,14 +53,7 @@ class LogVariant:
 
 
 @dataclass(frozen=True)
-class LogReplayTask:
-    campaign: str
-    campaign_hash: str
-    run_id: str
-    run_index: int
-    variant_index: int
-    seed_index: int
-    seed: int | None
+class LogReplayTask(RunKey):
     log_path: str
     log_name: str
     navigator_label: str
@@ -68,12 +68,6 @@ class LogReplayTask:
 
 @dataclass
 class LogCampaign(SeedMajorRuns):
-    name: str
-    source: str
-    description: str
-    hash: str
-    text: str
-    seeds: list
     variants: list[LogVariant]
     sweep_paths: list[str]
     metric_settings: MetricSettings

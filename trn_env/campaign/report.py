@@ -114,9 +114,7 @@ def cdf_plot(path: Path, df) -> None:
     ax.set_title("CDF of the horizontal error, all runs")
     ax.grid(alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(plt, fig, path)
 
 
 def stanford_plot(path: Path, df, alert_limit_m: float) -> bool:
@@ -151,9 +149,7 @@ def stanford_plot(path: Path, df, alert_limit_m: float) -> bool:
         ax.set_xlabel("horizontal error (m)")
         ax.set_ylabel("horizontal protection level (m)")
         fig.colorbar(hist[3], ax=ax, label="epochs")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(plt, fig, path)
     return True
 
 
@@ -182,9 +178,21 @@ def envelope(series_t: list, series_v: list) -> tuple[np.ndarray, np.ndarray, np
     return grid[keep], q[0], q[1], q[2]
 
 
-def _legend_labels(ax) -> list[str]:
+def _save(plt, fig, path: Path) -> None:
+    """Lay the figure out, write it to path (110 dpi) and close it."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _finish(plt, fig, ax, path: Path) -> list[str]:
+    """Grid and legend on ax, then _save; returns the legend's labels."""
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
     leg = ax.get_legend()
-    return [t.get_text() for t in leg.get_texts()] if leg is not None else []
+    labels = [t.get_text() for t in leg.get_texts()] if leg is not None else []
+    _save(plt, fig, path)
+    return labels
 
 
 def envelope_plot(path: Path, df) -> list[str]:
@@ -212,13 +220,7 @@ def envelope_plot(path: Path, df) -> list[str]:
     ax.set_xlabel("time since start (s)")
     ax.set_ylabel("horizontal error (m)")
     ax.set_title("Horizontal error over time across runs")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    labels = _legend_labels(ax)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return labels
+    return _finish(plt, fig, ax, path)
 
 
 def sweep_plot(path: Path, df, sweep_path: str, metric: str = "horizontal_error_rms_m") -> list[str]:
@@ -264,13 +266,7 @@ def sweep_plot(path: Path, df, sweep_path: str, metric: str = "horizontal_error_
     ax.set_ylabel(f"{metric.replace('_', ' ').removesuffix(' ' + unit)} ({unit})")
     fig.suptitle(f"Horizontal error RMS versus {describe_path(sweep_path).lower()}", fontsize=11)
     ax.set_title(sweep_path, fontsize=8, family="monospace", color="0.3")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    labels = _legend_labels(ax)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return labels
+    return _finish(plt, fig, ax, path)
 
 
 _TABLE_COLS = [

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from trn_env.campaign.spec import RunKey
 from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
 from trn_env.scenario.sections import ScenarioSections
 
@@ -28,16 +29,9 @@ SERIES_KEYS = ("t_s", "err_h_m", "err_v_m", "sigma_h_m", "hpl_m", "nav_ok")
 
 
 @dataclass(frozen=True)
-class RunTask:
+class RunTask(RunKey):
     """Everything a worker needs to fly one run (the DEMs travel separately, once per worker)."""
 
-    campaign: str
-    campaign_hash: str
-    run_id: str
-    run_index: int
-    variant_index: int
-    seed_index: int
-    seed: int
     scenario_name: str
     scenario_source: str
     navigator_label: str

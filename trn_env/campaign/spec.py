@@ -136,9 +136,32 @@ class Variant:
     dems: tuple[Any, Any] = (None, None)
 
 
+@dataclass(frozen=True)
+class RunKey:
+    """The fields every kind of worker task (runs.RunTask, episodes.EpisodeTask, log_replay.LogReplayTask)
+    starts with: the campaign (name, hash) and which of its runs the task is (None seed: the log's own)."""
+
+    campaign: str
+    campaign_hash: str
+    run_id: str
+    run_index: int
+    variant_index: int
+    seed_index: int
+    seed: int | None
+
+
+@dataclass
 class SeedMajorRuns:
-    """The run numbering every campaign kind shares (a mixin of dataclasses with `seeds` and `variants`,
-    each variant with its `index`): a run is one (variant, seed), numbered seed-major."""
+    """The fields and the run numbering every campaign kind shares (Campaign, EpisodeCampaign,
+    LogCampaign; each adds `variants`, every variant with its `index`): a run is one (variant, seed),
+    numbered seed-major."""
+
+    name: str
+    source: str
+    description: str
+    hash: str                     # sha256 of the campaign file and the files it names
+    text: str
+    seeds: list
 
     @property
     def n_runs(self) -> int:
@@ -161,12 +184,6 @@ class SeedMajorRuns:
 
 @dataclass
 class Campaign(SeedMajorRuns):
-    name: str
-    source: str
-    description: str
-    hash: str                     # sha256 of the campaign file and the scenario files it names
-    text: str
-    seeds: list[int]
     variants: list[Variant]
     sweep_paths: list[str]
     keep_logs: bool

@@ -6,7 +6,7 @@
   the step rate;
 - `goal_offset_ne`: north / east of the goal in the local level frame, exact through ECEF (a compiled kernel:
   the env asks for it at every navigator update);
-- `_check_number`: the numeric argument check shared with TerrainNavFast-v0.
+- `_check_number`, `check_point`, `check_region`: the argument checks shared with TerrainNavFast-v0.
 """
 
 from __future__ import annotations
@@ -94,3 +94,35 @@ def _check_number(name: str, v, positive: bool) -> None:
         raise ValueError(f"{name} must be > 0, got {v!r}")
     if not positive and v < 0:
         raise ValueError(f"{name} must be >= 0, got {v!r}")
+
+
+def check_point(name: str, p, dems) -> tuple[float, float]:
+    """The argument `name`, a (lat_deg, lon_deg) pair, as two floats (deg); ValueError naming it unless both
+    are finite and inside every DEM of dems = (the terrain, the navigator's map)."""
+    try:
+        lat, lon = (float(x) for x in p)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a (lat_deg, lon_deg) pair of numbers, got {p!r}") from None
+    if not (math.isfinite(lat) and math.isfinite(lon)):
+        raise ValueError(f"{name} must be finite, got {p!r}")
+    for which, dem in zip(("terrain", "navigator's map"), dems, strict=True):
+        if not dem.contains(math.radians(lat), math.radians(lon)):
+            raise ValueError(f"{name} {(lat, lon)} is outside the {which} {dem.name!r}")
+    return lat, lon
+
+
+def check_region(name: str, r, dems) -> tuple[float, float, float, float] | None:
+    """The argument `name`, None or (lat_min, lat_max, lon_min, lon_max) deg, as four floats; ValueError
+    naming it unless it is ordered and its corners pass check_point."""
+    if r is None:
+        return None
+    try:
+        la0, la1, lo0, lo1 = (float(x) for x in r)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, "
+                         f"got {r!r}") from None
+    if not (la0 < la1 and lo0 < lo1):
+        raise ValueError(f"{name} needs lat_min < lat_max and lon_min < lon_max, got {r!r}")
+    for p in ((la0, lo0), (la0, lo1), (la1, lo0), (la1, lo1)):
+        check_point(f"{name} corner", p, dems)
+    return la0, la1, lo0, lo1

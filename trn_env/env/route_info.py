@@ -24,30 +24,48 @@ import trn_env.scenario.build as components
 from trn_env.terrain.geodesy import ned_offset_to_latlon
 
 
+@njit(cache=True, forceinline=True)
+def pursuit_step(pn_m: float, pe_m: float, dn_m: float, de_m: float, turn, path):  # pragma: no cover
+    """One step of a constant-offset pursuit path: from the point (pn_m, pe_m) to (north, east, step length)
+    m, all in the frame where the goal is at (dn_m, de_m). turn = (phi, |sin phi|, cos phi, sin phi) of the
+    offset phi (rad, + = right of the goal's bearing, |phi| <= 90 deg), computed once per path; path =
+    (goal radius m, turn rate omega rad/s, true airspeed v m/s, step m). The step is min(step, d) along the
+    goal's unit bearing rotated by phi, the offset cut near the goal to what the turn rate holds,
+    asin(d omega / v) (the env's pursuit action); within the goal radius the point stays (length 0)."""
+    goal_radius_m, omega_rps, tas_mps, step_m = path
+    rn = dn_m - pn_m
+    re = de_m - pe_m
+    d = math.hypot(rn, re)
+    if not d > goal_radius_m:
+        return pn_m, pe_m, 0.0
+    phi0, sin_abs, cphi, sphi = turn
+    ux = rn / d
+    uy = re / d
+    x = d * omega_rps / tas_mps
+    if not x >= sin_abs:   # (NaN x too)
+        phi = math.copysign(math.asin(x), phi0)
+        cphi = math.cos(phi)
+        sphi = math.sin(phi)
+    seg = min(step_m, d)
+    return pn_m + seg * (ux * cphi - uy * sphi), pe_m + seg * (uy * cphi + ux * sphi), seg
+
+
 @njit(cache=True)
 def pursuit_paths_ne(dn_m: float, de_m: float, offsets_rad: np.ndarray, goal_radius_m: float,
                      omega_rps: float, tas_mps: float, step_m: float,
                      max_points: int = 64) -> np.ndarray:  # pragma: no cover - compiled
     """Points (K, n, 2) north/east m from the estimate (the goal at (dn_m, de_m)) of the constant-offset
-    pursuit paths, one per offset (rad, + = right of the goal's bearing); a path's points stop changing
-    once it is within goal_radius_m of the goal (it has arrived). A compiled kernel: the env asks for it
-    at every decision."""
-    k = offsets_rad.shape[0]
-    out = np.empty((k, max_points, 2))
-    for i in range(k):
-        pn = 0.0
-        pe = 0.0
+    pursuit paths, one per offset (rad, + = right of the goal's bearing; |offset| <= 90 deg), marched by
+    pursuit_step; a path's points stop changing once it is within goal_radius_m of the goal (it has
+    arrived). A compiled kernel: the env asks for it at every decision."""
+    path = (goal_radius_m, omega_rps, tas_mps, step_m)
+    out = np.empty((offsets_rad.shape[0], max_points, 2))
+    for i in range(offsets_rad.shape[0]):
+        phi = offsets_rad[i]
+        turn = (phi, abs(math.sin(phi)), math.cos(phi), math.sin(phi))
+        pn = pe = 0.0
         for j in range(max_points):
-            rn = dn_m - pn
-            re = de_m - pe
-            d = np.hypot(rn, re)
-            if d > goal_radius_m:
-                limit = np.arcsin(min(1.0, d * omega_rps / tas_mps))
-                phi = min(max(offsets_rad[i], -limit), limit)
-                brg = np.arctan2(re, rn) + phi
-                step = min(step_m, d)
-                pn = pn + step * np.cos(brg)
-                pe = pe + step * np.sin(brg)
+            pn, pe, _ = pursuit_step(pn, pe, dn_m, de_m, turn, path)
             out[i, j, 0] = pn
             out[i, j, 1] = pe
     return out
@@ -82,4 +100,4 @@ def route_information(info_map, lat_rad: float, lon_rad: float, dn_m: float, de_
     return mean, featureless / 1000.0
 
 
-__all__ = ["pursuit_paths_ne", "route_information"]
+__all__ = ["pursuit_paths_ne", "pursuit_step", "route_information"]

@@ -25,6 +25,8 @@ from trn_env.env.env_settings import (  # noqa: F401 - _check_number: TerrainNav
     ALTITUDE_CMD_M,
     BANK_LIMIT_RAD,
     _check_number,
+    check_point,
+    check_region,
     goal_offset_ne,
     with_fields,
     with_rates,
@@ -395,31 +397,10 @@ class TerrainNavEnv(gym.Env, EzPickle):
 
     # ---------------------------------------------------------------------------------------- checks
     def _check_point(self, name: str, p) -> tuple[float, float]:
-        try:
-            lat, lon = (float(x) for x in p)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a (lat_deg, lon_deg) pair of numbers, got {p!r}") from None
-        if not (math.isfinite(lat) and math.isfinite(lon)):
-            raise ValueError(f"{name} must be finite, got {p!r}")
-        for k, dem in enumerate(self._dems):
-            if not dem.contains(math.radians(lat), math.radians(lon)):
-                which = ("terrain", "navigator's map")[k]
-                raise ValueError(f"{name} {(lat, lon)} is outside the {which} {dem.name!r}")
-        return lat, lon
+        return check_point(name, p, self._dems)
 
     def _check_region(self, name: str, r):
-        if r is None:
-            return None
-        try:
-            la0, la1, lo0, lo1 = (float(x) for x in r)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, "
-                             f"got {r!r}") from None
-        if not (la0 < la1 and lo0 < lo1):
-            raise ValueError(f"{name} needs lat_min < lat_max and lon_min < lon_max, got {r!r}")
-        for p in ((la0, lo0), (la0, lo1), (la1, lo0), (la1, lo1)):
-            self._check_point(f"{name} corner", p)
-        return la0, la1, lo0, lo1
+        return check_region(name, r, self._dems)
 
     # ---------------------------------------------------------------------------------------- helpers
     @property

@@ -55,7 +55,7 @@ from trn_env.flight.raw_record import (
     _record_state_wind,
     _std_atmosphere,
 )
-from trn_env.flight.truth import TruthChunk
+from trn_env.flight.truth import StepClock, TruthChunk
 from trn_env.flight.wind import FT_PER_M, WindConfig
 
 PSF_TO_PA = 47.88025898033584
@@ -79,7 +79,7 @@ class FlightDiverged(RuntimeError):
         self.t_s = t_s
 
 
-class Flight:
+class Flight(StepClock):
     """One JSBSim flight: loads the aircraft, applies and trims the initial condition, advances in chunks.
 
     A flight whose engines stop (fuel exhausted, or cut off) flies on as a glider; ``engine_stop()`` says so.
@@ -355,15 +355,6 @@ class Flight:
             self._steady_wind_t = w_ned
 
     # ---------------------------------------------------------------------------------------- stepping
-    @property
-    def t_s(self) -> float:
-        """Time since the start of the flight (s)."""
-        return self._steps * self.dt_s
-
-    @property
-    def steps(self) -> int:
-        return self._steps
-
     def snapshot(self) -> TruthChunk:
         """The current state as a one-row TruthChunk (no step taken)."""
         return self._convert(np.array([g() for g in self._getters]), self._steps)

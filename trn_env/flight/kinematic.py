@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from trn_env.flight.atmosphere import Atmosphere, static_p_T
-from trn_env.flight.truth import TruthChunk
+from trn_env.flight.truth import StepClock, TruthChunk
 from trn_env.navigators.inertial.strapdown import gravity_ned
 from trn_env.terrain.geodesy import OMEGA_EARTH_RPS, WGS84_A_M, WGS84_E2
 
@@ -273,7 +273,7 @@ def heading_for_track(track_rad: float, speed_mps: float, wind_ned_mps) -> float
     return track_rad - math.asin(cross / speed_mps)
 
 
-class KinematicFlight:
+class KinematicFlight(StepClock):
     """A KinematicTruth behind the part of trn_env.flight.Flight's interface the closed loop uses.
 
     Steps are the profile's rows (dt_s = 1 / its rate); snapshot() is the state at t = 0 before any step.
@@ -292,14 +292,6 @@ class KinematicFlight:
         self._last = truth.advance(1)
         self._targets = None
         self._terrain_elevation_m = math.nan
-
-    @property
-    def t_s(self) -> float:
-        return self._steps * self.dt_s
-
-    @property
-    def steps(self) -> int:
-        return self._steps
 
     @property
     def fuel_kg(self) -> float:

@@ -137,6 +137,24 @@ class _BlockTruthChunk(TruthChunk):
         return (_from_fields, ({f.name: getattr(self, f.name) for f in fields(self)},))
 
 
+class StepClock:
+    """The flight time both flights (trn_env.flight.core.Flight, kinematic.KinematicFlight) report: _steps
+    steps of dt_s seconds taken since the start."""
+
+    _steps: int
+    dt_s: float
+
+    @property
+    def t_s(self) -> float:
+        """Time since the start of the flight (s)."""
+        return self._steps * self.dt_s
+
+    @property
+    def steps(self) -> int:
+        """Steps taken since the start of the flight."""
+        return self._steps
+
+
 def _from_fields(values: dict) -> TruthChunk:
     return TruthChunk(**values)
 

@@ -6,8 +6,8 @@ Defaults follow the thesis appendix's airspeed indicator class (+-3 kt = 1.5 m/s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -19,8 +19,7 @@ from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
-    no_sample_due,
-    sample_steps,
+    due_samples,
     trusted_frame,
 )
 
@@ -37,10 +36,8 @@ class AirDataConfig(MappingConfig):
     beta_bias_deg: float = setting(0.3, "sideslip bias", "deg", ge=0.0)
     beta_noise_deg: float = setting(0.2, "sideslip white noise", "deg", ge=0.0)
 
-    @classmethod
-    def noise_free(cls, **overrides: Any) -> AirDataConfig:
-        return replace(cls(tas_bias_mps=0.0, tas_noise_mps=0.0, alpha_bias_deg=0.0, alpha_noise_deg=0.0,
-                           beta_bias_deg=0.0, beta_noise_deg=0.0), **overrides)
+    ERROR_FIELDS = ("tas_bias_mps", "tas_noise_mps", "alpha_bias_deg", "alpha_noise_deg", "beta_bias_deg",
+                    "beta_noise_deg")   # zero in noise_free()
 
 
 
@@ -77,12 +74,10 @@ def _air_kernel(idx, tas, alpha, beta, w, bias, sigma):
 def sample_air_data(truth: TruthChunk, terrain, rng: np.random.Generator, config: AirDataConfig,
                     state: AirDataState | None = None) -> tuple[AirDataFrame, AirDataState]:
     """Air-data samples over the chunk (terrain unused)."""
-    if state is None:
-        state = AirDataState.initial(config, rng)
-    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+    state, idx, last_k = due_samples(truth, config, rng, state, AirDataState)
+    if idx is None:
         return trusted_frame(AirDataFrame, t_s=EMPTY_F, tas_mps=EMPTY_F, alpha_rad=EMPTY_F, beta_rad=EMPTY_F,
                              valid=EMPTY_B), state
-    idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 3))
     out, valid = _air_kernel(idx, truth.tas_mps, truth.alpha_rad, truth.beta_rad, w, state.bias, state.sigma)
     frame = trusted_frame(AirDataFrame, t_s=truth.t_s[idx], tas_mps=out[0], alpha_rad=out[1], beta_rad=out[2],

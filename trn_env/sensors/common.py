@@ -14,8 +14,8 @@ bit-for-bit the same output as sampling it in one call.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, NamedTuple
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -37,6 +37,18 @@ def no_sample_due(t_s: np.ndarray, rate_hz: float, last_k: int | None) -> bool:
     carry last_k unchanged. Same floating-point expression as _grid_indices."""
     n = t_s.shape[0]
     return last_k is not None and (n == 0 or math.floor(float(t_s[n - 1]) * rate_hz + _GRID_EPS) <= last_k)
+
+
+def due_samples(truth, config, rng: np.random.Generator, state, state_cls):
+    """The start of a sampling call of a sensor whose errors need no update between samples: (state,
+    indices of the chunk's sampled truth steps, grid index to carry). The state is state_cls.initial(config,
+    rng) on the first call (its draws come first); indices None when no sample is due (state unchanged)."""
+    if state is None:
+        state = state_cls.initial(config, rng)
+    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+        return state, None, state.last_k
+    idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
+    return state, idx, last_k
 
 
 def trusted_frame(cls, **values):
@@ -162,10 +174,15 @@ class MappingConfig(Settings):
             base = cls.noise_free()
         return super().from_mapping(mapping, base)
 
+    ERROR_FIELDS: ClassVar[tuple[str, ...]] = ()   # each sensor's error settings, zero in noise_free()
+
     @classmethod
     def noise_free(cls, **overrides: Any):
-        """The configuration without errors (each sensor defines it)."""
-        raise NotImplementedError
+        """The configuration without errors: the defaults with every ERROR_FIELDS setting 0, then
+        `overrides`."""
+        if not cls.ERROR_FIELDS:
+            raise NotImplementedError(f"{cls.__name__} declares no ERROR_FIELDS")
+        return replace(cls(**{name: 0.0 for name in cls.ERROR_FIELDS}), **overrides)
 
 
 class TimeGridState(NamedTuple):

@@ -7,8 +7,8 @@ invalid (values NaN): the situation TRN exists for.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -21,9 +21,8 @@ from trn_env.sensors.common import (
     EMPTY_F,
     EMPTY_F3,
     MappingConfig,
+    due_samples,
     gm_coefficients,
-    no_sample_due,
-    sample_steps,
     trusted_frame,
 )
 from trn_env.terrain.geodesy import WGS84_A_M, WGS84_E2
@@ -68,10 +67,8 @@ class GnssConfig(MappingConfig):
             return [("outages", str(exc))]
         return []
 
-    @classmethod
-    def noise_free(cls, **overrides: Any) -> GnssConfig:
-        return replace(cls(horizontal_noise_m=0.0, vertical_noise_m=0.0, horizontal_drift_m=0.0,
-                           vertical_drift_m=0.0, velocity_noise_mps=0.0), **overrides)
+    ERROR_FIELDS = ("horizontal_noise_m", "vertical_noise_m", "horizontal_drift_m", "vertical_drift_m",
+                    "velocity_noise_mps")   # zero in noise_free()
 
 
     def available(self, t_s: np.ndarray) -> np.ndarray:
@@ -140,12 +137,10 @@ def _gnss_kernel(idx, t_s, lat, lon, h, v_ned, w, params, drift0, outages):
 def sample_gnss(truth: TruthChunk, terrain, rng: np.random.Generator, config: GnssConfig,
                 state: GnssState | None = None) -> tuple[GnssFrame, GnssState]:
     """GNSS fixes over the chunk (terrain unused); invalid (NaN) inside outage windows."""
-    if state is None:
-        state = GnssState.initial(config, rng)
-    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+    state, idx, last_k = due_samples(truth, config, rng, state, GnssState)
+    if idx is None:
         return trusted_frame(GnssFrame, t_s=EMPTY_F, lat_rad=EMPTY_F, lon_rad=EMPTY_F, h_m=EMPTY_F,
                              v_ned_mps=EMPTY_F3, valid=EMPTY_B), state
-    idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 9))
     t, lat, lon, h, v, valid, drift = _gnss_kernel(
         idx, truth.t_s, truth.lat_rad, truth.lon_rad, truth.h_msl_m, truth.v_ned_mps, w, state.params,

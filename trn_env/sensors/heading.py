@@ -8,8 +8,8 @@ A with `bias_deg`, B-E with `deviation_deg`) plus white noise. Defaults (0.3, 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -21,8 +21,7 @@ from trn_env.sensors.common import (
     EMPTY_B,
     EMPTY_F,
     MappingConfig,
-    no_sample_due,
-    sample_steps,
+    due_samples,
     trusted_frame,
 )
 
@@ -36,9 +35,7 @@ class HeadingConfig(MappingConfig):
     deviation_deg: float = setting(0.2, "heading-dependent deviation coefficients B, C, D, E", "deg", ge=0.0)
     noise_deg: float = setting(0.2, "white noise per sample", "deg", ge=0.0)
 
-    @classmethod
-    def noise_free(cls, **overrides: Any) -> HeadingConfig:
-        return replace(cls(bias_deg=0.0, deviation_deg=0.0, noise_deg=0.0), **overrides)
+    ERROR_FIELDS = ("bias_deg", "deviation_deg", "noise_deg")   # zero in noise_free()
 
 
 
@@ -79,11 +76,9 @@ def _heading_kernel(idx, yaw, w, coef, noise_rad):
 def sample_heading(truth: TruthChunk, terrain, rng: np.random.Generator, config: HeadingConfig,
                    state: HeadingState | None = None) -> tuple[HeadingFrame, HeadingState]:
     """Heading samples over the chunk (terrain unused)."""
-    if state is None:
-        state = HeadingState.initial(config, rng)
-    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+    state, idx, last_k = due_samples(truth, config, rng, state, HeadingState)
+    if idx is None:
         return trusted_frame(HeadingFrame, t_s=EMPTY_F, heading_rad=EMPTY_F, valid=EMPTY_B), state
-    idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal(idx.shape[0])
     out, valid = _heading_kernel(idx, truth.yaw_rad, w, state.coefficients_rad, state.noise_rad)
     frame = trusted_frame(HeadingFrame, t_s=truth.t_s[idx], heading_rad=out, valid=valid)

@@ -25,8 +25,8 @@ independent searches to the search's 5 mm range tolerance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -39,9 +39,8 @@ from trn_env.sensors.common import (
     EMPTY_F,
     MappingConfig,
     antenna_positions,
+    due_samples,
     ned_vectors_kernel,
-    no_sample_due,
-    sample_steps,
     trusted_frame,
 )
 from trn_env.terrain import queries
@@ -75,9 +74,7 @@ class IraConfig(MappingConfig):
         object.__setattr__(self, "_method_index", LOOK_ANGLE_METHODS.index(self.look_angle_method))
         object.__setattr__(self, "_has_lever_arm", any(x != 0.0 for x in self.lever_arm_b_m))
 
-    @classmethod
-    def noise_free(cls, **overrides: Any) -> IraConfig:
-        return replace(cls(range_noise_m=0.0, look_angle_noise_deg=0.0), **overrides)
+    ERROR_FIELDS = ("range_noise_m", "look_angle_noise_deg")   # zero in noise_free()
 
 
 class IraState(NamedTuple):
@@ -172,12 +169,10 @@ def _ira_kernel(lat, lon, h, q_valid, q_lat, q_lon, q_h, C_bn, l1, l2, method, m
 def sample_ira(truth: TruthChunk, terrain, rng: np.random.Generator, config: IraConfig,
                state: IraState | None = None) -> tuple[IraFrame, IraState]:
     """IRA samples (R, theta) over the chunk against the true terrain `terrain` (a terrain.Dem)."""
-    if state is None:
-        state = IraState.initial(config, rng)
-    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+    state, idx, last_k = due_samples(truth, config, rng, state, IraState)
+    if idx is None:
         return trusted_frame(IraFrame, t_s=EMPTY_F, range_m=EMPTY_F, look_angle_rad=EMPTY_F,
                              valid=EMPTY_B), state
-    idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal((idx.shape[0], 2))
     if idx.shape[0] == 0:
         return trusted_frame(IraFrame, t_s=EMPTY_F, range_m=EMPTY_F, look_angle_rad=EMPTY_F,

@@ -9,8 +9,7 @@ sigma = noise_const_m + noise_fraction * range (default 0.6 m + 2 %, the thesis'
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -24,8 +23,7 @@ from trn_env.sensors.common import (
     MappingConfig,
     TimeGridState,
     antenna_positions,
-    no_sample_due,
-    sample_steps,
+    due_samples,
     trusted_frame,
 )
 from trn_env.terrain import queries
@@ -44,9 +42,7 @@ class RadarAltimeterConfig(MappingConfig):
     lever_arm_b_m: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "antenna offset from the IMU, body "
                                                                          "FRD", "m", length=3)
 
-    @classmethod
-    def noise_free(cls, **overrides: Any) -> RadarAltimeterConfig:
-        return replace(cls(noise_const_m=0.0, noise_fraction=0.0), **overrides)
+    ERROR_FIELDS = ("noise_const_m", "noise_fraction")   # zero in noise_free()
 
 
 RadarAltimeterState = TimeGridState   # white errors only: the sample grid is all it carries
@@ -69,11 +65,9 @@ def sample_radar_altimeter(truth: TruthChunk, terrain, rng: np.random.Generator,
                            state: RadarAltimeterState | None = None
                            ) -> tuple[RadarAltimeterFrame, RadarAltimeterState]:
     """Radar-altimeter ranges over the chunk against the true terrain `terrain` (a terrain.Dem)."""
-    if state is None:
-        state = RadarAltimeterState.initial(config, rng)
-    elif no_sample_due(truth.t_s, config.rate_hz, state.last_k):
+    state, idx, last_k = due_samples(truth, config, rng, state, RadarAltimeterState)
+    if idx is None:
         return trusted_frame(RadarAltimeterFrame, t_s=EMPTY_F, range_m=EMPTY_F, valid=EMPTY_B), state
-    idx, last_k = sample_steps(truth.t_s, config.rate_hz, state.last_k)
     w = rng.standard_normal(idx.shape[0])
     t = truth.t_s[idx]
     if idx.shape[0] == 0:

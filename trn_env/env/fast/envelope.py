@@ -76,51 +76,22 @@ def measure_envelope(tas_mps: float = 85.0, h_msl_m: float = 1500.0) -> dict:
             )
         return np.array(rows)
 
-    level = AutopilotTargets(
-        lateral_mode=LateralMode.TRACK,
-        track_cmd_rad=0.0,
-        vertical_mode=VerticalMode.ALTITUDE_MSL,
-        altitude_cmd_m=h_msl_m,
-        tas_cmd_mps=tas_mps,
-    )
-    fly(level, 20.0)
-    turn = fly(
-        AutopilotTargets(
-            lateral_mode=LateralMode.TRACK,
-            track_cmd_rad=math.pi / 2,
-            vertical_mode=VerticalMode.ALTITUDE_MSL,
-            altitude_cmd_m=h_msl_m,
-            tas_cmd_mps=tas_mps,
-        ),
-        60.0,
-    )
+    def hold(track_rad: float, h_cmd_m: float) -> AutopilotTargets:
+        return AutopilotTargets(lateral_mode=LateralMode.TRACK, track_cmd_rad=track_rad,
+                                vertical_mode=VerticalMode.ALTITUDE_MSL, altitude_cmd_m=h_cmd_m,
+                                tas_cmd_mps=tas_mps)
+
+    fly(hold(0.0, h_msl_m), 20.0)
+    turn = fly(hold(math.pi / 2, h_msl_m), 60.0)
     bank = turn[:, 1]
     bank_max = float(np.max(np.abs(bank)))
     track = np.unwrap(turn[:, 2])
     rate = np.gradient(track, turn[:, 0])
     steady = np.abs(bank) > 0.95 * bank_max
     i63 = int(np.argmax(np.abs(bank) >= 0.63 * bank_max))
-    climb = fly(
-        AutopilotTargets(
-            lateral_mode=LateralMode.TRACK,
-            track_cmd_rad=math.pi / 2,
-            vertical_mode=VerticalMode.ALTITUDE_MSL,
-            altitude_cmd_m=h_msl_m + 400.0,
-            tas_cmd_mps=tas_mps,
-        ),
-        120.0,
-    )
+    climb = fly(hold(math.pi / 2, h_msl_m + 400.0), 120.0)
     up = climb[:, 3] < h_msl_m + 300.0
-    descent = fly(
-        AutopilotTargets(
-            lateral_mode=LateralMode.TRACK,
-            track_cmd_rad=math.pi / 2,
-            vertical_mode=VerticalMode.ALTITUDE_MSL,
-            altitude_cmd_m=h_msl_m,
-            tas_cmd_mps=tas_mps,
-        ),
-        120.0,
-    )
+    descent = fly(hold(math.pi / 2, h_msl_m), 120.0)
     down = descent[:, 3] > h_msl_m + 100.0
     return {
         "tas_mps": float(np.median(turn[:, 5])),

@@ -5,7 +5,7 @@ map's terrain-information map), element for element as TerrainNavEnv._obs does, 
 simplifications: offsets from the estimate to the goal and to the sampled points use the local level frame
 with the ellipsoid's radii at the estimate (TerrainNav-v0 goes through ECEF; the two differ by well under
 0.1 % over the tens of km of a route), and the candidate pursuit paths of elements 22-31 are marched as in
-trn_env.env.route_info.pursuit_paths_ne.
+trn_env.env.route_info.pursuit_paths_ne (both step with its pursuit_step).
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from trn_env.env.fast.state import (
     H,
     T,
 )
+from trn_env.env.route_info import pursuit_step
 from trn_env.terrain import kernels
 
 # observation parameter vector
@@ -133,8 +134,9 @@ def observe(
         o[20] = math.cos(rel)
         o[21] = d / max(X[i, D_EST_START], 1.0)
         # route information along the candidate pursuit paths (trn_env.env.route_info)
-        step = max(200.0, d / ROUTE_POINTS)
+        path = (op[OP_GOAL_RADIUS], op[OP_OMEGA], op[OP_TAS], max(200.0, d / ROUTE_POINTS))
         for k in range(n_routes):
+            turn = (route_offsets[k], sin_abs[k], cos_off[k], sin_off[k])
             pn = 0.0
             pe = 0.0
             total = 0.0
@@ -142,26 +144,8 @@ def observe(
             run = 0.0
             longest = 0.0
             for j in range(cap):
-                rn_ = dn - pn
-                re_ = de - pe
-                dd = math.hypot(rn_, re_)
-                seg = 0.0
-                if dd > op[OP_GOAL_RADIUS]:
-                    # the goal's bearing (ux, uy) turned by the offset, cut to asin(d omega / v) near the goal
-                    ux = rn_ / dd
-                    uy = re_ / dd
-                    x = dd * op[OP_OMEGA] / op[OP_TAS]
-                    if x >= sin_abs[k]:
-                        cphi = cos_off[k]
-                        sphi = sin_off[k]
-                    else:
-                        phi = math.copysign(math.asin(x), route_offsets[k])
-                        cphi = math.cos(phi)
-                        sphi = math.sin(phi)
-                    seg = min(step, dd)
-                    pn += seg * (ux * cphi - uy * sphi)
-                    pe += seg * (uy * cphi + ux * sphi)
-                elif j > 0:
+                pn, pe, seg = pursuit_step(pn, pe, dn, de, turn, path)
+                if seg == 0.0 and j > 0:
                     break  # arrived: the remaining points repeat this one and change neither figure
                 c = _info_at(
                     info, lat_e + pn / m_lat, lon_e + pe / m_lon, no_info

@@ -59,6 +59,7 @@ from gymnasium.vector.utils import batch_space
 
 import trn_env.scenario.build as components
 from trn_env.env import task
+from trn_env.env.env_settings import _check_number, check_point, check_region
 from trn_env.env.fast import dynamics as dyn
 from trn_env.env.fast import navigator as nv
 from trn_env.env.fast import observation as ob
@@ -72,7 +73,6 @@ from trn_env.env.fast.kernel_params import (  # noqa: F401 - re-exported
     TURBULENCE_SIGMA_MPS,
     build_kernel_params,
 )
-from trn_env.env.terrain_nav import _check_number
 from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.closed_loop import spawn_rngs
 
@@ -267,31 +267,10 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
 
     # ---------------------------------------------------------------------------------------- checks
     def _check_point(self, name: str, p) -> tuple[float, float]:
-        try:
-            lat, lon = (float(x) for x in p)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a (lat_deg, lon_deg) pair of numbers, got {p!r}") from None
-        if not (math.isfinite(lat) and math.isfinite(lon)):
-            raise ValueError(f"{name} must be finite, got {p!r}")
-        for which, dem in (("terrain", self._world), ("navigator's map", self._map)):
-            if not dem.contains(math.radians(lat), math.radians(lon)):
-                raise ValueError(f"{name} {(lat, lon)} is outside the {which} {dem.name!r}")
-        return lat, lon
+        return check_point(name, p, (self._world, self._map))
 
     def _check_region(self, name: str, r):
-        if r is None:
-            return None
-        try:
-            la0, la1, lo0, lo1 = (float(x) for x in r)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"{name} must be (lat_min, lat_max, lon_min, lon_max) in degrees, got {r!r}"
-            ) from None
-        if not (la0 < la1 and lo0 < lo1):
-            raise ValueError(f"{name} needs lat_min < lat_max and lon_min < lon_max, got {r!r}")
-        for p in ((la0, lo0), (la0, lo1), (la1, lo0), (la1, lo1)):
-            self._check_point(f"{name} corner", p)
-        return la0, la1, lo0, lo1
+        return check_region(name, r, (self._world, self._map))
 
     def _points_option(self, name: str, v) -> np.ndarray:
         """An option's (lat, lon) deg as an (N, 2) rad array (NaN rows: drawn)."""
