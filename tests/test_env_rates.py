@@ -117,6 +117,22 @@ def test_scenario_fields_set_the_scenario_and_bad_ones_name_the_field():
         assert all(w in str(err.value) for w in words), str(err.value)
 
 
+def test_ira_average_reaches_the_navigators_tercom_batch():
+    """scenario_fields' navigator.settings.ira_average: the INS + TERCOM navigator's batch enters each 5
+    consecutive IRA samples as their mean (2 s of 50 Hz IRA: 100 samples, 20 batch rows; GNSS ignored, as
+    its updates restart the batch)."""
+    e = TerrainNavEnv("basin_route", scenario_fields={"navigator.settings.ira_average": 5,
+                                                      "navigator.settings.use_gnss": False},
+                      decision_interval_s=2.0, max_episode_s=8.0)
+    e.reset(seed=0)
+    nav = e._loop.navigator
+    assert nav.batch.average == 5
+    e.step(np.zeros(2, np.float32))
+    e._loop.sync()
+    assert 15 <= len(nav.batch) <= 20 and nav.batch._pending.shape[0] < 5
+    e.close()
+
+
 def test_goal_offset_kernel_is_the_ecef_rotation():
     """goal_offset_ne against numpy: C_en(lat, lon)^T (r_goal - r) with both points through lla_to_ecef, on
     random pairs 1-60 km apart at random heights; and against the small-offset form (latlon_to_ned_offset)
