@@ -227,7 +227,8 @@ def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
                         ([ok, 'b={"flight_dt_s": 0.06}'], "flight_dt_s"),
                         ([ok, 'b={"no_such_argument": 1}'], "no_such_argument"),
                         ([ok, 'b={"scenario_fields": {"sensors.foo.rate_hz": 1.0}}'], "sensors.foo"),
-                        ([ok, ok.replace("a=", "b="), "--routes", "nowhere"], "nowhere")):
+                        ([ok, ok.replace("a=", "b="), "--routes", "nowhere"], "nowhere"),
+                        ([ok, ok.replace("a=", "b="), "--cpu-repeats", "-1"], "--cpu-repeats")):
         args = [x for c in argv[:2] for x in ("--config", c)] + argv[2:] + ["--seeds", "2", "--out", str(out)]
         assert mod.main(args) == 2
         err = capsys.readouterr().err
