@@ -172,6 +172,8 @@ def main(argv=None) -> int:
     ap.add_argument("--alert-limit-m", type=float, default=185.2)
     ap.add_argument("--integrity-risk", type=float, default=1e-3)
     ap.add_argument("--navigators", default=",".join(NAVIGATORS))
+    ap.add_argument("--conditions", default="", help="comma-separated parts of condition names (e.g. "
+                    "'as_published'): only the jobs of the conditions that contain one (default: all)")
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--replay-only", action="store_true", help="only flights already recorded")
     ap.add_argument("--out", default="pl_campaign")
@@ -187,7 +189,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if not args.report_only:
         os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-        jobs = [(c, args.seed0 + s) for s in range(args.seeds) for c in CONDITIONS]
+        conds = [c for c in CONDITIONS if any(part in c for part in args.conditions.split(","))]
+        jobs = [(c, args.seed0 + s) for s in range(args.seeds) for c in conds]
         if args.replay_only:
             jobs = [(c, s) for c, s in jobs if (out / "logs" / c / f"s{s}" / "metadata.json").exists()]
         t0 = time.perf_counter()

@@ -309,14 +309,20 @@ def test_fused_and_fast_paths_match_general_path(sim_frames, decimation):
     assert navs[0].health.skipped.get("baro_invalid", 0) == 1
 
 
-@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("threads, block", [(1, 1), (2, 1), (1, 8), (2, 256)])
 @pytest.mark.parametrize("remove_bias", [False, True])
 @pytest.mark.parametrize("where", ["inside", "south_edge", "void"])
-def test_accumulated_surface_is_bit_identical_to_the_reference(dem, remove_bias, where, threads):
+def test_accumulated_surface_is_bit_identical_to_the_reference(dem, remove_bias, where, threads, block,
+                                                               monkeypatch):
     """The batch's surface summed group by group as samples come (uneven groups, NaN samples dropped, one
-    sample off the map's edge or a void near the track) equals the per-lookup reference on the same samples
-    with the same radii, and correlate() with the accumulator gives the fix correlate() computes itself."""
+    sample off the map's edge or a void near the track; summed at every group, in blocks of >= 8 samples
+    with the rest at the fix, or all at the fix: SUM_BLOCK_SAMPLES) equals the per-lookup reference on the
+    same samples with the same radii, and correlate() with the accumulator gives the fix correlate()
+    computes itself."""
+    from trn_env.navigators.tercom import mad
     from trn_env.navigators.tercom.mad import MadAccumulator, correlate
+
+    monkeypatch.setattr(mad, "SUM_BLOCK_SAMPLES", block)
 
     rng = np.random.default_rng(13)
     heights, lat0, lon0, dlat, dlon = dem.grid
@@ -347,8 +353,8 @@ def test_accumulated_surface_is_bit_identical_to_the_reference(dem, remove_bias,
     lon_k = lon[ok] + de[ok] / acc.r_ew
     ref = mad_surface_reference(map_record(grid, False), lat_k, lon_k, hm[ok], acc.dlat_cell,
                                 acc.dlon_cell, half, remove_bias)
-    assert acc.void_free is (where != "void")                # the void makes it fall back
     surf = acc.surface(threads=threads)
+    assert acc.void_free is (where != "void")                # the void makes it fall back
     assert np.array_equal(surf, ref)
     if where != "inside":
         assert np.isinf(ref).any() and np.isfinite(ref).any()

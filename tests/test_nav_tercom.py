@@ -106,3 +106,44 @@ def test_mean_removed_mad_tolerates_a_height_bias():
     assert fix.mad_min_m < 2.0
     plain = correlate(dem, t[-1], lat + off[0] / r_n, lon + off[1] / r_e, h_meas)
     assert plain.mad_min_m > 10.0
+
+
+@pytest.mark.parametrize("k", [1, 3, 5])
+def test_batch_average_enters_group_means(k):
+    """average=k: rows added in uneven chunks (one not finite: dropped for k > 1; kept as it came for k = 1,
+    the correlation drops it) enter as the means of k consecutive finite rows, the last partial group's
+    mean at finish(); shift() moves the waiting rows too; the accumulator is fed exactly the batch's
+    samples (its surface equals correlate()'s own on them)."""
+    dem = _synthetic_dem(5)
+    lat_c, lon_c = dem.center_rad
+    t, lat, lon, _, _ = _track(dem, lat_c, lon_c, 0.7, seconds=4.7, rate=10.0)
+    rng = np.random.default_rng(2)
+    rows = np.stack([t, lat, lon, rng.uniform(300, 500, t.size), rng.uniform(-50, 50, t.size),
+                     rng.uniform(-50, 50, t.size)], 1)
+    rows[7, 3] = np.nan
+    b = TercomBatch((8, 5.0, True, dem), average=k)
+    for a, e in ((0, 3), (3, 4), (4, 20), (20, t.size)):
+        b.add_rows(rows[a:e].copy())           # add_rows takes the rows as they are (shift moves them)
+    b.shift(1e-7, -2e-7)
+    b.finish()
+    good = (rows if k == 1 else rows[np.isfinite(rows).all(axis=1)]).copy()
+    good[:, 1] += 1e-7
+    good[:, 2] -= 2e-7
+    expected = np.array([good[i:i + k].mean(axis=0) for i in range(0, good.shape[0], k)])
+    np.testing.assert_allclose(b.samples, expected, rtol=1e-12, atol=1e-12)
+    assert len(b) == -(-good.shape[0] // k)
+    b2 = TercomBatch((8, 5.0, True, dem), average=k)
+    b2.add_rows(rows)
+    b2.finish()
+    s = b2.samples
+    fix = correlate(dem, 1.0, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], half=8, remove_bias=True,
+                    lat_ref_rad=b2.accumulator.lat_ref_rad, accumulator=b2.accumulator)
+    own = correlate(dem, 1.0, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], half=8, remove_bias=True,
+                    lat_ref_rad=b2.accumulator.lat_ref_rad)
+    assert np.array_equal(fix.surface_m, own.surface_m)
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5, True, "3"])
+def test_batch_average_must_be_a_positive_integer(bad):
+    with pytest.raises(ValueError, match="average"):
+        TercomBatch(average=bad)

@@ -1,8 +1,8 @@
 """The terrain filters' GNSS receiver drift (gnss_drift_sigma_m, navigators.filters.terrain_filter): fixes
 that share one drift cannot narrow the belief below it. Checked by the normalised estimation error squared
 over independent runs whose fixes carry a drawn drift plus white noise (a chi-square bound computed here),
-with the old white-fix model (drift 0) as the case that fails it; and the scenario builder filling the
-setting from the GNSS sensor."""
+with the old white-fix model (drift 0) as the case that fails it, for pmf, pf and the rbpf's floor
+(gnss_pos_bias_sigma_m); and the scenario builder filling the settings from the GNSS sensor."""
 
 from __future__ import annotations
 
@@ -61,6 +61,45 @@ def test_gnss_drift_keeps_the_belief_consistent(kind):
     assert _horizontal_nees(kind, 0.0, seed=5) > q
 
 
+def _rbpf_horizontal_nees(bias_sigma_m: float, seed: int) -> float:
+    """As _horizontal_nees for the rbpf's GNSS position update (rbpf_cloud._gnss_cloud_update, the cloud moved
+    onto the Kalman posterior of its moments): RUNS independent runs, each a cloud drawn from the prior
+    N(0, 10^2) per axis, a true offset drawn from it, FIXES fixes of it plus one drift N(0, SIGMA_D^2) per
+    axis plus white N(0, SIGMA_W^2); the filter assumes SIGMA_W white (gnss_pos_sigma_m) and the given drift
+    (gnss_pos_bias_sigma_m). NEES of the cloud's weighted mean against its weighted covariance."""
+    from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
+    dem = planar_dem()
+    rng = np.random.default_rng(seed)
+    total = 0.0
+    for k in range(RUNS):
+        nav = RaoBlackwellizedPF(dem, rng=np.random.default_rng(seed * 100 + k), n_particles=4000,
+                                 acquisition_particles=0, gnss_pos_sigma_m=(SIGMA_W, 2.0),
+                                 gnss_pos_bias_sigma_m=(bias_sigma_m, 3.0),
+                                 init_pos_sigma_m=(10.0, 10.0, 5.0), prior_from_initial=False)
+        nav.reset(initial(10.0))
+        true_ne = rng.normal(0.0, 10.0, 2)
+        drift = rng.normal(0.0, SIGMA_D, 2)
+        for _ in range(FIXES):
+            fix = true_ne + drift + rng.normal(0.0, SIGMA_W, 2)
+            nav._gnss_cloud_update(np.array([fix[0], fix[1], 0.0]))
+        w = nav._weights()
+        m = w @ nav.xn[:, :2]
+        d = nav.xn[:, :2] - m
+        P = (d * w[:, None]).T @ d
+        e = m - true_ne
+        total += float(e @ np.linalg.solve(P, e))
+    return total
+
+
+def test_rbpf_gnss_drift_floor_keeps_the_cloud_consistent():
+    # the same bound as the pmf / pf test: with the receiver's drift as the floor the NEES sum over 40 runs
+    # (2 dof each) lies below the 99.9 % chi-square(80) quantile (x 1.03, the floor against the exact
+    # sigma_d^2 + sigma_w^2 / N); without it (fixes white) it exceeds the quantile
+    q = chi2.isf(0.001, 2 * RUNS)
+    assert _rbpf_horizontal_nees(SIGMA_D, seed=5) <= 1.03 * q
+    assert _rbpf_horizontal_nees(0.0, seed=5) > q
+
+
 def test_builder_fills_gnss_drift_from_the_sensor():
     from trn_env.scenario.build import navigator_settings
     from trn_env.scenario.loading import read_scenario_file, validate
@@ -72,6 +111,10 @@ def test_builder_fills_gnss_drift_from_the_sensor():
         assert navigator_settings(sc, None)["gnss_drift_sigma_m"] == pytest.approx(expect)
     data["navigator"] = {"name": "pmf", "settings": {"gnss_drift_sigma_m": 0.5}}
     assert navigator_settings(validate(data, source="test"), None)["gnss_drift_sigma_m"] == 0.5
+    data["sensors"]["gnss"] = {"horizontal_drift_m": 2.5, "vertical_drift_m": 4.5}
+    data["navigator"] = {"name": "rbpf", "settings": {}}
+    got = navigator_settings(validate(data, source="test"), None)["gnss_pos_bias_sigma_m"]
+    assert tuple(got) == pytest.approx((2.5, 4.5))
     data["navigator"] = {"name": "acq_track", "settings": {}}
     assert "gnss_drift_sigma_m" not in navigator_settings(validate(data, source="test"), None)
 

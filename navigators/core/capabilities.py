@@ -53,6 +53,13 @@ class Capabilities:
     DEM integrity monitor, whose GNSS-denied path correlates the navigator's error across its window with
     them (navigators.integrity.dem_monitor). Fitted to the navigator's error over recorded flights
     (scripts/navigator_error_time_constants.py; docs/validation/integrity.md).
+    pl_validated: the conditions "<IMU grade>/<map class>" (grades "navigation", "tactical": the scenario
+    IMU's presets; map classes "as_published": a coarser DEM without an error model, "dted1": that DEM with
+    the DTED-1 class's error model) on which its protection level's misleading-information rate was measured
+    at or below the default integrity risk (1e-3 per epoch, one-sided 95 % Clopper-Pearson bound) on every
+    terrain tried (scripts/protection_level_campaign.py; docs/validation/integrity.md section 6.3). Under
+    any other condition it publishes Estimate.extra["pl_not_validated"] naming the condition
+    (navigators.integrity.protection_level.publish; the build sets the condition).
     """
 
     settings: type | None = None
@@ -67,6 +74,7 @@ class Capabilities:
     warm_up_settings: Callable[[float], dict[str, Any]] | None = None
     error_time_constant_s: float = 0.0
     height_time_constant_s: float = 0.0
+    pl_validated: tuple[str, ...] = ()
 
     def sensor_needs(self, settings: Any = None) -> SensorNeeds:
         """The sensors needed with `settings` (a Settings instance, or None for the defaults)."""

@@ -131,8 +131,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.q_acc = s.accel_noise_mps2_rthz ** 2
         self.sig_bg = s.gyro_bias_rps
         self.q_gyr = s.gyro_noise_rps_rthz ** 2
-        s.copy_to(self, "formula fix_period_s half_cells cell_m fix_sigma_m ira_decimation gate_chi2 "
-                  "min_samples dp_min_m dp_reference_formula baro_geopotential remove_bias "
+        s.copy_to(self, "formula fix_period_s half_cells cell_m fix_sigma_m ira_decimation ira_average "
+                  "gate_chi2 min_samples dp_min_m dp_reference_formula baro_geopotential remove_bias "
                   "init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m gnss_sigma_v_mps "
                   "gnss_correlated_sigma_m gnss_gate_chi2 gnss_timeout_s recovery_half_cells "
                   "recovery_sigma_m")
@@ -148,7 +148,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.health = Health()
         # the fix's MAD surface is summed while the batch fills (tercom.MadAccumulator), not all at the fix
         self.batch = TercomBatch(None if aiding is None or dem is None else
-                                 (self.half_cells, self.cell_m, self.remove_bias, self.dem))
+                                 (self.half_cells, self.cell_m, self.remove_bias, self.dem),
+                                 self.ira_average if aiding == "ira" else 1)
         # the latest FIX_HISTORY fixes (each holds its correlation surface: a flight-long list grew without
         # bound); n_fixes counts them all
         self.fixes: deque[TercomFix] = deque(maxlen=FIX_HISTORY)
@@ -251,6 +252,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         return self.estimate()
 
     def _fix(self, t_s: float) -> None:
+        self.batch.finish()
         s = self.batch.samples
         acc = self.batch.accumulator
         self.batch.clear()

@@ -45,6 +45,8 @@ class InsTrnSettings(Settings):
     gyro_noise_rps_rthz: float = setting(math.radians(0.005) / 60, "gyro noise density (Table 2)",
                                          "rad/s/sqrt(Hz)", ge=0.0)
     ira_decimation: int = setting(1, "use every n-th IRA sample in a batch", ge=1)
+    ira_average: int = setting(1, "enter each n consecutive IRA samples of a batch as their mean "
+                                  "(tercom.mad.TercomBatch)", ge=1)
     gate_chi2: float = setting(CHI2_2DOF_99_99, "chi-square gate of a TERCOM fix (2 dof)", gt=0.0)
     min_samples: int = setting(20, "samples a batch needs for a fix", ge=1)
     dp_min_m: float = setting(0.0, "keep IRA samples whose formulas' closest points differ by more (Table 3)",

@@ -184,7 +184,7 @@ class ParticleFilter(InsRiddenFilter):
         z = self.rng.standard_normal((self.M, N_STATE))
         propagate_particles(self.dn, self.de, self.b, self.dv, self.dpsi, dt, float(f_n), float(f_e),
                             g_over_r, self.s_pos, self.s_vel, self.s_psi, 0.0, z)
-        self.P_b += self.vertical_noise ** 2 * dt
+        self.P_b += self._offset_process_var(dt, st)
         self._t_belief = t_s
         self._moments_cache = None
 
@@ -349,16 +349,17 @@ class ParticleFilter(InsRiddenFilter):
         sv2 = self.gnss_vertical_sigma_m ** 2
         ll = gnss_model.likelihood(gn, ge, self.dn, self.de, self.gnss_sigma_m)
         z_b = float(st[2]) - h            # INS minus GNSS height = b + noise
-        S_b = sv2 + self.P_b
+        p_h, p_m = self._gnss_offset_split()    # the map's part of b is not seen by GNSS (terrain_filter)
+        S_b = sv2 + (p_h if p_m > 0.0 else self.P_b)
         ll -= 0.5 * (z_b - self.b) ** 2 / S_b
-        K_b = self.P_b / S_b
+        K_b = (p_h if p_m > 0.0 else self.P_b) / S_b
         if np.all(np.isfinite(v)):
             r2 = self.gnss_velocity_sigma_mps ** 2
             ll -= 0.5 * ((v[0] - st[3] - self.dv[:, 0]) ** 2 + (v[1] - st[4] - self.dv[:, 1]) ** 2) / r2
             self._gnss_velocity_ins(v, carried=(0, 1))
         out = self._apply_loglik(t_s, ll, "GNSS update", self.b + K_b * (z_b - self.b))
         if out is not None:
-            self.P_b *= (1.0 - K_b)
+            self.P_b = p_h * (1.0 - K_b) + p_m if p_m > 0.0 else self.P_b * (1.0 - K_b)
             deficit = self._gnss_drift_deficit()       # the receiver drift the fixes share (terrain_filter)
             if deficit.max() > 0.0:
                 self.dn += math.sqrt(deficit[0]) * self.rng.standard_normal(self.M)

@@ -246,7 +246,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
                 C_uu[5, 5] += q_b * dt
                 C_uu[6, 6] += q_eps * dt + turn_h2 * turn
             self.C_uu = 0.5 * (C_uu + C_uu.T)
-            self.P_b += self.vertical_noise ** 2 * dt
+            self.P_b += self._offset_process_var(dt, st)
             self._t_belief = t_s
             self._moments_cache = None
 
@@ -350,10 +350,16 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         if self._apply_loglik(t_s, ll, "GNSS update") is None:
             return
         z_b = float(st[2]) - h      # INS minus GNSS height = b + noise
-        S = self.P_b + self.gnss_vertical_sigma_m ** 2
-        K = self.P_b / S
-        self.bias += K * (z_b - self.bias)
-        self.P_b *= (1.0 - K)
+        p_h, p_m = self._gnss_offset_split()    # the map's part of b is not seen by GNSS (terrain_filter)
+        if p_m > 0.0:
+            K = p_h / (p_h + self.gnss_vertical_sigma_m ** 2)
+            self.bias += K * (z_b - self.bias)
+            self.P_b = p_h * (1.0 - K) + p_m
+        else:
+            S = self.P_b + self.gnss_vertical_sigma_m ** 2
+            K = self.P_b / S
+            self.bias += K * (z_b - self.bias)
+            self.P_b *= (1.0 - K)
         self._moments_cache = None
         self._velocity_from_position(prior, self._position_moments())
         self._gnss_velocity(st, v)

@@ -43,6 +43,22 @@ G0 = 9.80665
 MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^3 x recovery_sigma_m
 
 
+# sup over x > 0 of (1 - rho(x)) / x for rho(x) = exp(-x^2 / 2) (terrain.map_error's "gaussian" covariance,
+# x = distance / correlation length): attained at x ~ 1.585
+_GAUSSIAN_WALK_FACTOR = float(np.max((1.0 - np.exp(-0.5 * np.linspace(1e-3, 6.0, 60001) ** 2))
+                                     / np.linspace(1e-3, 6.0, 60001)))
+MAP_WALK_FACTORS = {"exponential": 1.0, "gaussian": _GAUSSIAN_WALK_FACTOR}
+
+
+def map_walk_variance_per_m(sigma_m: float, correlation_length_m: float, function: str = "exponential"
+                            ) -> float:
+    """Variance rate (m^2 per metre flown) of the random walk that covers a correlated map error's
+    structure function at every distance: E[(e(s + d) - e(s))^2] = 2 sigma^2 (1 - rho(d / L)) <= q d for
+    all d with q = 2 sigma^2 c / L, c = sup_x (1 - rho(x)) / x (1 for rho = exp(-x), ~0.451 for
+    exp(-x^2 / 2)). 0 when sigma or L is 0 (a white map error)."""
+    if not (sigma_m > 0.0 and correlation_length_m > 0.0):
+        return 0.0
+    return 2.0 * sigma_m ** 2 * MAP_WALK_FACTORS[function] / correlation_length_m
 
 
 class InsRiddenFilter(InsGnssBlock):
@@ -69,6 +85,18 @@ class InsRiddenFilter(InsGnssBlock):
     belief's north and east variances are widened to at least its square (`_gnss_drift_deficit`; the
     posterior of a position seen through N fixes x + d + w_k is sigma_d^2 + sigma_w^2 / N, never below
     sigma_d^2); 0 (default) treats fixes as independent. A scenario fills it from its GNSS sensor.
+    map_correlation_length_m, map_correlation_function: the map's random vertical error correlated along
+    the ground (a scenario fills them from its map error model; 0, default: white per sample). Correlated,
+    that error is common to the samples within a correlation length, so it is not sample noise that
+    averages away but a slowly wandering offset: the filter carries it in the vertical offset b (its prior
+    gains map_sigma_m^2, the samples' noise loses it) and b walks with the variance rate
+    `map_walk_variance_per_m` per metre flown, the smallest random walk whose variance over every distance
+    covers the error's structure function 2 sigma^2 (1 - rho(d / L)) (Schmidt-style augmentation of a
+    coloured measurement error into the state; a random walk in place of the Gauss-Markov reversion is the
+    conservative side). The map's part of b (its bias, and the correlated error when modelled) is invisible
+    to a GNSS height, which measures the INS height's error only: a GNSS update gains b through that part
+    only and leaves the map's variance in b (`_gnss_offset_split`), so the map's offset is not taken as
+    known when GNSS is lost.
     baro_bias_sigma_m: prior of the baro height's bias. converged_sigma_m: Health says "acquiring" while the
     horizontal 1-sigma is above it. Vertical channel: gravity_model, tau_baro_s, imu_samples,
     baro_geopotential as in navigators.filters.InsTrnNavigator; the INS height starts at the first baro
@@ -100,9 +128,11 @@ class InsRiddenFilter(InsGnssBlock):
         s.copy_to(self, "aiding measurement_rate_hz ira_formula ira_range_sigma_m ra_sigma_m ra_cone_rings "
                         "map_sigma_m map_bias_sigma_m terrain_model_sigma_m map_interpolation outlier_prob "
                         "gnss_sigma_m gnss_vertical_sigma_m gnss_drift_sigma_m gnss_velocity_sigma_mps "
-                        "baro_bias_sigma_m "
+                        "baro_bias_sigma_m map_correlation_length_m map_correlation_function "
                         "converged_sigma_m baro_geopotential recovery_sigma_m")
         self.ira_code = IRA_FORMULA_CODES[s.ira_formula]
+        self.map_walk_var_per_m = map_walk_variance_per_m(s.map_sigma_m, s.map_correlation_length_m,
+                                                          s.map_correlation_function)
         self.ira_look_angle_sigma_rad = math.radians(s.ira_look_angle_sigma_deg)
         self.ra_half_beam_rad = math.radians(s.ra_half_beam_deg)
         self.map_cubic = s.map_interpolation == "bicubic"
@@ -228,13 +258,42 @@ class InsRiddenFilter(InsGnssBlock):
     def ira_variance(self, range_m: float, p_d_m, p_h_m) -> np.ndarray:
         """Measured terrain height variance (m^2) of an IRA sample whose closest point is at (p_h, p_d)."""
         return ira.variance(range_m, p_d_m, p_h_m, self.ira_range_sigma_m, self.ira_look_angle_sigma_rad,
-                            self.map_sigma_m, self.terrain_model_sigma_m)
+                            self._map_white_sigma_m(), self.terrain_model_sigma_m)
 
     def ra_variance(self) -> float:
-        return radar_altimeter.variance(self.ra_sigma_m, self.map_sigma_m, self.terrain_model_sigma_m)
+        return radar_altimeter.variance(self.ra_sigma_m, self._map_white_sigma_m(),
+                                        self.terrain_model_sigma_m)
+
+    def _map_white_sigma_m(self) -> float:
+        """The map's random vertical error each terrain sample carries as its own noise: map_sigma_m, or 0
+        when it is correlated along the ground (map_correlation_length_m > 0: the vertical offset carries it,
+        see the class docstring)."""
+        return 0.0 if self.map_walk_var_per_m > 0.0 else self.map_sigma_m
 
     def bias_prior_var(self) -> float:
-        return self.baro_bias_sigma_m ** 2 + self.map_bias_sigma_m ** 2
+        var = self.baro_bias_sigma_m ** 2 + self.map_bias_sigma_m ** 2
+        if self.map_walk_var_per_m > 0.0:
+            var += self.map_sigma_m ** 2        # the correlated map error is part of the vertical offset
+        return var
+
+    def _offset_process_var(self, dt: float, st: np.ndarray | None) -> float:
+        """Variance (m^2) the vertical offset b gains over dt s: its random walk, plus, with a correlated
+        map error, the walk map_walk_var_per_m times the ground distance the INS flew (its horizontal speed
+        times dt; see the class docstring)."""
+        q = self.vertical_noise ** 2 * dt
+        if self.map_walk_var_per_m > 0.0 and st is not None and math.isfinite(st[3] + st[4]):
+            q += self.map_walk_var_per_m * math.hypot(float(st[3]), float(st[4])) * dt
+        return q
+
+    def _gnss_offset_split(self) -> tuple[float, float]:
+        """(P_h, P_m): the vertical offset's variance split into the INS height's part, which a GNSS height
+        sees, and the map's (its bias, and its correlated random error when modelled), which it does not:
+        P_m = map_bias_sigma_m^2 (+ map_sigma_m^2), P_h = max(P_b - P_m, 0). A GNSS height updates b with
+        the gain P_h / (P_h + r) and leaves P_b = P_h (1 - K) + P_m."""
+        p_m = self.map_bias_sigma_m ** 2
+        if self.map_walk_var_per_m > 0.0:
+            p_m += self.map_sigma_m ** 2
+        return max(self.P_b - p_m, 0.0), p_m
 
     def _grow_ins_model(self, t_s: float) -> None:
         dt = max(t_s - getattr(self, "_t_ins_model", t_s), 0.0)

@@ -16,6 +16,7 @@ from ..core.settings import Settings, setting
 G0 = 9.80665
 AIDING = ("ira", "radar_altimeter", "both")
 MAP_INTERPOLATION = ("bicubic", "bilinear")
+MAP_CORRELATION = ("exponential", "gaussian")
 IRA_FORMULAS = ("conventional", "proposed")
 GRAVITY_MODEL_NAMES = ("somigliana", "j2")
 BYTES_PER_CELL = 8 * 16     # pmf: float64 arrays held or made per cell in an update
@@ -39,6 +40,11 @@ class TerrainFilterSettings(Settings):
                                  ge=0.0)
     map_bias_sigma_m: float = setting(0.0, "map's vertical bias (a scenario: its map error model)", "m",
                                       ge=0.0)
+    map_correlation_length_m: float = setting(
+        0.0, "correlation length of the map's random vertical error along the ground (a scenario: its map "
+        "error model); 0: white per sample", "m", ge=0.0)
+    map_correlation_function: str = setting("exponential", "the map error's correlation function (a "
+                                            "scenario: its map error model)", choices=MAP_CORRELATION)
     terrain_model_sigma_m: float = setting(2.5, "terrain between the map's posts (white)", "m", ge=0.0)
     map_interpolation: str = setting("bicubic", "how the update reads the map between its posts",
                                      choices=MAP_INTERPOLATION)

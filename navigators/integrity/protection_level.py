@@ -38,6 +38,8 @@ from numba import njit
 EXTRA_PROTECTION_LEVEL = "hpl_m"          # float: horizontal protection level, m (NaN: none yet)
 EXTRA_INTEGRITY_RISK = "integrity_risk"   # float: the per-epoch integrity risk the HPL is computed for
 DEFAULT_INTEGRITY_RISK = 1e-3             # per epoch: measurable here (1e5 epochs resolve it)
+# str: "" where the navigator's HPL was validated for its condition, else why not (`set_condition`)
+EXTRA_PL_NOT_VALIDATED = "pl_not_validated"
 
 
 def check_integrity_risk(value, name: str = "integrity_risk") -> float:
@@ -221,6 +223,26 @@ def configure(navigator, integrity_risk=DEFAULT_INTEGRITY_RISK, map_horizontal_s
     navigator.map_horizontal_sigma_m = sh
 
 
+def set_condition(navigator, condition: str, validated: tuple[str, ...] = ()) -> None:
+    """State the condition a navigator runs under ("<IMU grade>/<map class>", see
+    navigators.core.capabilities.Capabilities.pl_validated) against the conditions its protection level was
+    validated on (`validated`, at DEFAULT_INTEGRITY_RISK): from then on `publish` puts
+    EXTRA_PL_NOT_VALIDATED into every estimate, "" when the condition is one of them at the default risk,
+    else a sentence naming the condition. The scenario build calls it (trn_env.scenario.navigation)."""
+    condition = str(condition)
+    risk = float(getattr(navigator, "integrity_risk", DEFAULT_INTEGRITY_RISK))
+    name = getattr(navigator, "name", type(navigator).__name__)
+    tried = ", ".join(validated) if validated else "none"
+    if condition not in validated:
+        navigator.pl_not_validated = (f"{name}: protection level not validated under {condition} (validated "
+                                      f"at {DEFAULT_INTEGRITY_RISK:g} per epoch on: {tried})")
+    elif risk != DEFAULT_INTEGRITY_RISK:
+        navigator.pl_not_validated = (f"{name}: protection level validated under {condition} at "
+                                      f"{DEFAULT_INTEGRITY_RISK:g} per epoch, not at {risk:g}")
+    else:
+        navigator.pl_not_validated = ""
+
+
 def filter_risk(navigator) -> float:
     """The share of the navigator's integrity risk its filter's HPL is computed for: all of it, or half when
     the map's horizontal error takes the other half (union bound, `publish`)."""
@@ -232,7 +254,8 @@ def publish(extra: dict, filter_hpl_m: float, navigator) -> dict:
     """Put the navigator's HPL and its risk into an Estimate.extra dict (returned): the filter's HPL
     (computed at filter_risk) plus, when the map has a horizontal error of sigma map_horizontal_sigma_m per
     axis (its accuracy class's CE90 / 2.146; a map shifted by s moves every terrain fix by s, and the
-    filter's belief cannot see it), the Gaussian bound of that error at the other half of the risk."""
+    filter's belief cannot see it), the Gaussian bound of that error at the other half of the risk; and,
+    once `set_condition` has stated the navigator's condition, EXTRA_PL_NOT_VALIDATED."""
     risk = float(getattr(navigator, "integrity_risk", DEFAULT_INTEGRITY_RISK))
     sh = float(getattr(navigator, "map_horizontal_sigma_m", 0.0))
     hpl = float(filter_hpl_m)
@@ -240,4 +263,7 @@ def publish(extra: dict, filter_hpl_m: float, navigator) -> dict:
         hpl += gaussian_hpl(np.eye(2) * sh * sh, 0.5 * risk)
     extra[EXTRA_PROTECTION_LEVEL] = hpl
     extra[EXTRA_INTEGRITY_RISK] = risk
+    statement = getattr(navigator, "pl_not_validated", None)
+    if statement is not None:
+        extra[EXTRA_PL_NOT_VALIDATED] = statement
     return extra

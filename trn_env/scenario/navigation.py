@@ -71,10 +71,12 @@ def navigator_settings(sc, map_dem) -> dict:
     that declares no settings class, as before capabilities), the bias priors and bias process noise from the
     IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
-    terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m from the
-    GNSS sensor's horizontal drift (navigators that declare that setting), each unless the settings give
-    it. Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level
-    covers it)."""
+    terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m (pmf, pf)
+    or gnss_pos_bias_sigma_m (rbpf: horizontal, vertical) from the GNSS sensor's drift, and
+    map_correlation_length_m / map_correlation_function from the map error model's random part
+    (monitor_map_settings; navigators that declare those settings), each unless the settings give it.
+    Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level covers
+    it)."""
     from trn_env.navigators import registry
     from trn_env.terrain import map_error
     caps = registry.capabilities(sc.navigator.name)
@@ -91,9 +93,18 @@ def navigator_settings(sc, map_dem) -> dict:
     if caps.uses_map_noise:
         for key, val in map_noise_settings(error_model).items():
             settings.setdefault(key, val)
+    fields = _settings_fields(caps.settings)
+    if "map_correlation_length_m" in fields:   # the map's random error correlated along the ground
+        corr = monitor_map_settings(error_model)
+        if corr:
+            settings.setdefault("map_correlation_length_m", corr["correlation_length_m"])
+            settings.setdefault("map_correlation_function", corr["correlation_function"])
     gnss = sc.sensors.gnss
-    if gnss is not None and "gnss_drift_sigma_m" in _settings_fields(caps.settings):
+    if gnss is not None and "gnss_drift_sigma_m" in fields:
         settings.setdefault("gnss_drift_sigma_m", float(gnss.horizontal_drift_m))   # the receiver's drift
+    if gnss is not None and "gnss_pos_bias_sigma_m" in fields:    # rbpf: the drift as a floor (h, v)
+        settings.setdefault("gnss_pos_bias_sigma_m", (float(gnss.horizontal_drift_m),
+                                                      float(gnss.vertical_drift_m)))
     if caps.models_map_detail and sc.terrain.map.is_world:
         settings.setdefault("terrain_model_sigma_m", 0.0)     # the map is the world: nothing unresolved
     elif caps.models_map_detail:
@@ -111,12 +122,44 @@ def build_navigator(sc, map_dem, rng: np.random.Generator | None = None):
     uses_imu_spec and has `apply_imu_spec` then takes its INS error model from the scenario IMU's
     specification (navigators.core.imu_spec)."""
     from trn_env.navigators import registry
+    from trn_env.navigators.integrity import protection_level as pl
     name = sc.navigator.name
     navigator = registry.create(name, rng=rng, **navigator_settings(sc, map_dem))
-    spec = imu_spec(sc.sensors.imu) if registry.capabilities(name).uses_imu_spec else None
+    caps = registry.capabilities(name)
+    spec = imu_spec(sc.sensors.imu) if caps.uses_imu_spec else None
     if spec is not None and hasattr(navigator, "apply_imu_spec"):
         navigator.apply_imu_spec(spec)
+    pl.set_condition(navigator, pl_condition(sc), tuple(caps.pl_validated))
     return navigator
+
+
+def pl_condition(sc) -> str:
+    """The scenario's condition as protection levels were validated on (navigators.core.capabilities,
+    pl_validated): "<IMU grade>/<map class>". Grade: the first of the presets "navigation", "tactical" whose
+    every error term (trn_env.sensors.imu) the scenario IMU's does not exceed, else "beyond_tactical" (or
+    "no_imu"). Map class: "world" (the map is the world), "as_published" (no error model), the accuracy
+    class's name for a preset error model without explicit overrides, else "custom_error_model"."""
+    from trn_env.sensors.imu import _ERROR_FIELDS, IMU_GRADES, ImuConfig
+    imu = sc.sensors.imu
+    grade = "no_imu"
+    if isinstance(imu, ImuConfig):
+        grade = "beyond_tactical"
+        for g in ("navigation", "tactical"):
+            ref = IMU_GRADES[g]
+            if all(float(getattr(imu, f)) <= float(getattr(ref, f)) for f in _ERROR_FIELDS):
+                grade = g
+                break
+    m = sc.terrain.map
+    table = _table(m.error_model)
+    if m.is_world:
+        map_class = "world"
+    elif not table:
+        map_class = "as_published"
+    elif set(table) - {"preset"} == set() and table.get("preset"):
+        map_class = str(table["preset"]).strip().lower()
+    else:
+        map_class = "custom_error_model"
+    return f"{grade}/{map_class}"
 
 
 def _navigator_requirements(sc, the_map) -> list[str]:

@@ -102,6 +102,15 @@ ENV_SETTINGS = dict(
 )
 
 
+def full_tier_settings() -> dict:
+    """The route task's full-tier-only settings (trn_env.env.route_task: ENV_COMMON's keys that are in
+    FULL_TIER_ONLY, e.g. JSBSim's step `flight_dt_s`): the full loop is calibrated against as the task flies
+    it."""
+    from trn_env.env.route_task import ENV_COMMON, FULL_TIER_ONLY
+
+    return {k: v for k, v in ENV_COMMON.items() if k in FULL_TIER_ONLY}
+
+
 def route_by_name(name: str) -> ReferenceRoute:
     for r in REFERENCE_ROUTES:
         if r.name == name:
@@ -125,13 +134,14 @@ def _end_error(info: dict) -> float:
 
 
 def fly_full(route: ReferenceRoute, seeds, settings: dict | None = None) -> dict:
-    """The route in TerrainNav-v0 (full JSBSim loop) once per seed, with `settings` (constructor arguments)
-    over the route's own: per-seed true error at the goal (m), terminations, the true horizontal error at
-    each decision (m), wall time (construction included) and CPU seconds per decision."""
+    """The route in TerrainNav-v0 (full JSBSim loop) once per seed, at the route task's full-tier settings
+    (full_tier_settings()) with `settings` (constructor arguments) over them and the route's own: per-seed
+    true error at the goal (m), terminations, the true horizontal error at each decision (m), wall time
+    (construction included) and CPU seconds per decision."""
     from trn_env.env.terrain_nav import TerrainNavEnv
 
     t0 = time.perf_counter()
-    env = TerrainNavEnv(**{**env_kwargs(route), **(settings or {})})
+    env = TerrainNavEnv(**{**env_kwargs(route), **full_tier_settings(), **(settings or {})})
     c0 = time.process_time()                  # per decision: the episodes' CPU, not the env's construction
     errors, ends, by_decision, n = [], [], [], 0
     a = np.asarray(route.action, np.float32)
@@ -203,6 +213,7 @@ __all__ = [
     "compare",
     "env_kwargs",
     "fly_fast",
+    "full_tier_settings",
     "fly_full",
     "route_by_name",
     "summary",

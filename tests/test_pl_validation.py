@@ -1,0 +1,66 @@
+"""A navigator says where its protection level is not validated (navigators.integrity.protection_level:
+set_condition, EXTRA_PL_NOT_VALIDATED): the scenario's condition (IMU grade against the presets' error
+terms, map class), the statement against the navigator's declared validated conditions, and the key in its
+estimates."""
+
+from __future__ import annotations
+
+import pytest
+from trn_env.navigators import registry
+from trn_env.navigators.integrity import protection_level as pl
+
+from trn_env.scenario.loading import read_scenario_file, validate
+from trn_env.scenario.navigation import build_navigator, pl_condition
+
+
+def _scenario(imu: dict, terrain_map: dict):
+    data, _ = read_scenario_file("tests/scenarios/acq_track_short.toml")
+    data["sensors"]["imu"] = imu
+    data["terrain"]["map"] = terrain_map
+    return validate(data, source="test")
+
+
+@pytest.mark.parametrize("imu, terrain_map, expect", [
+    ({"grade": "navigation"}, {"dem": "jacksboro"}, "navigation/as_published"),
+    ({"grade": "tactical"}, {"dem": "jacksboro", "error_model": {"preset": "dted1"}}, "tactical/dted1"),
+    # a navigation-grade IMU with one term worse than the navigation preset's is judged against tactical's
+    ({"grade": "navigation", "gyro_bias_rps": 1e-6}, {"dem": "jacksboro"}, "tactical/as_published"),
+    ({"grade": "consumer"}, {"dem": "jacksboro"}, "beyond_tactical/as_published"),
+    ({"grade": "navigation"}, {"dem": "jacksboro", "error_model": {"preset": "dted1", "bias_fraction": 1.0}},
+     "navigation/custom_error_model"),
+])
+def test_condition_of_a_scenario(imu, terrain_map, expect):
+    assert pl_condition(_scenario(imu, terrain_map)) == expect
+
+
+def test_statement_against_the_declared_conditions():
+    class Nav:
+        name = "x"
+        integrity_risk = pl.DEFAULT_INTEGRITY_RISK
+    nav = Nav()
+    extra = pl.publish({}, 10.0, nav)
+    assert pl.EXTRA_PL_NOT_VALIDATED not in extra            # no condition stated: no claim either way
+    pl.set_condition(nav, "tactical/dted1", ("navigation/as_published",))
+    msg = pl.publish({}, 10.0, nav)[pl.EXTRA_PL_NOT_VALIDATED]
+    assert "not validated" in msg and "tactical/dted1" in msg and "navigation/as_published" in msg
+    pl.set_condition(nav, "navigation/as_published", ("navigation/as_published",))
+    assert pl.publish({}, 10.0, nav)[pl.EXTRA_PL_NOT_VALIDATED] == ""
+    nav.integrity_risk = 1e-5
+    pl.set_condition(nav, "navigation/as_published", ("navigation/as_published",))
+    assert "not at 1e-05" in pl.publish({}, 10.0, nav)[pl.EXTRA_PL_NOT_VALIDATED]
+
+
+@pytest.mark.parametrize("name", ["pmf", "pf", "rbpf", "ins_tercom", "acq_track"])
+def test_built_navigator_states_its_condition(name):
+    from trn_env import terrain
+    data, _ = read_scenario_file("tests/scenarios/acq_track_short.toml")
+    data["sensors"]["imu"] = {"grade": "consumer"}
+    data["navigator"] = {"name": name, "settings": {}}
+    dem = terrain.load("jacksboro")
+    nav = build_navigator(validate(data, source="test"), dem)
+    assert nav.pl_not_validated.startswith(f"{name}: protection level not validated under "
+                                           "beyond_tactical/as_published")
+    data["sensors"]["imu"] = {"grade": "navigation"}
+    nav = build_navigator(validate(data, source="test"), dem)
+    validated = "navigation/as_published" in registry.capabilities(name).pl_validated
+    assert (nav.pl_not_validated == "") == validated
