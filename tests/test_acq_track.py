@@ -126,17 +126,10 @@ def test_acquisition_recovers_speed_heading_start_within_one_bin(dem):
         r_e,
         d,
         np.ones(n, bool),
-        position_half_m=cfg.acquisition_position_half_m,
-        position_bin_m=cfg.acquisition_position_bin_m,
-        speed_half_mps=cfg.acquisition_speed_half_mps,
-        speed_bin_mps=cfg.acquisition_speed_bin_mps,
-        heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
-        heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
         cost=0,
         remove_bias=True,
         n_min=10,
-        distinct_ratio=cfg.acquisition_distinct_ratio,
-        exclusion_m=cfg.acquisition_exclusion_m,
+        **acquisition.search_grid(cfg),
     )
     assert res.distinct
     assert res.n_hypotheses == 21 * 21 * 21 * 21
