@@ -64,11 +64,11 @@ import numpy as np
 from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
-    consistency_warning,
     equivalent_walk_density,
     rss,
     vertical_offset_walk_density,
 )
+from ..core.measured_consistency import grade_warning
 from ..inertial.strapdown import quat_to_dcm
 from ..measurements import gnss as gnss_model
 from ..measurements import ira, radar_altimeter
@@ -145,7 +145,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
-        self._consistency_warning = consistency_warning(spec, PMF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
 
