@@ -37,7 +37,6 @@ Experiments (each prints a JSON block; --only NAME runs one):
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import math
 import sys
@@ -55,8 +54,9 @@ from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  
 import trn_env.scenario.build as components  # noqa: E402
 from trn_env.scenario.loading import load_scenario  # noqa: E402
 from trn_env.scenario.sections import from_dict  # noqa: E402
-from trn_env.sim.closed_loop import ClosedLoop, perturbed_estimate  # noqa: E402
+from trn_env.sim.closed_loop import perturbed_estimate  # noqa: E402
 from trn_env.sim.nav_stage import gate_gnss  # noqa: E402
+from trn_env.testing import truth_chunks  # noqa: E402
 
 CONVERGED_M = 50.0
 
@@ -71,20 +71,8 @@ def record_flight(scenario: str = "default", duration_s: float = 180.0, wind_mps
             {"altitude_m": 0.0, "direction_from_deg": 270.0, "speed_mps": wind_mps},
             {"altitude_m": 6000.0, "direction_from_deg": 270.0, "speed_mps": wind_mps}],
             "wind.turbulence": {"model": "none"}})
-    chunks = []
-    with ClosedLoop(sc, pipeline=False, log_sensors=False) as loop:
-        truth0 = copy.deepcopy(loop.last_truth)
-        real = loop.sensors.sample
-
-        def spy(chunk, dem):
-            chunks.append(copy.deepcopy(chunk))
-            return real(chunk, dem)
-
-        loop.sensors.sample = spy
-        while loop.termination is None and loop.t_s < duration_s:
-            loop.tick()
-        loop.sync()
-        return sc.to_dict(), chunks, loop.world_dem, loop.map_dem, truth0
+    chunks, truth0, world, the_map = truth_chunks(sc, duration_s)
+    return sc.to_dict(), chunks, world, the_map, truth0
 
 
 def sensor_frames(d: dict, chunks, world, seed: int, outages=({"start_s": 0.0},)):

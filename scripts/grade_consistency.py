@@ -16,7 +16,17 @@ Per navigator and grade, over the epochs after --from-s (15 s):
   the per-epoch mean falls below 0.1), with the two-sided 95 % chi-square bounds of that many samples;
 - inside_3sigma: the fraction of all epochs with NEES <= 9 (the error inside the 3-sigma ellipse: 98.9 %
   for a consistent filter);
-- rms_m: horizontal RMS error.
+- rms_m: horizontal RMS error;
+- verdict: the ANEES over all epochs against the thinned sample count's bounds: "inside", "conservative"
+  (below) or "overconfident" (above, or fewer than 90 % of the epochs inside 3 sigma). The mean over all
+  epochs is the average of the k thinned means (one per phase of the thinning grid): each has the same
+  expectation (2 for a consistent filter) and about the thinned count's variance, and an average of k
+  such means has no larger a variance (Cauchy-Schwarz), so the thinned count's chi-square bounds hold for
+  it, while it does not depend on where the grid starts. With a long memory (k near the run's length, the
+  free INS) the first phase alone is the NEES at --from-s; "verdict_first_phase" keeps that figure's
+  verdict (the project's earlier criterion).
+
+    PYTHONPATH=$PWD python scripts/grade_consistency.py --table a.json b.json    # the docs' grid
 """
 
 from __future__ import annotations
@@ -129,8 +139,78 @@ def nees_summary(nees: np.ndarray, e2: np.ndarray, runs: list[dict] | None = Non
                    thinning=p["thinning_epochs"], anees_all_epochs=p["anees_pooled"],
                    runs_t_interval_95=p["runs_time_average_t_interval_95"])
         lo, hi = p["bounds_95_thinned"]
-        out["consistent"] = bool(lo <= p["anees_thinned"] <= hi and out["inside_3sigma"] >= 0.9)
+        out["thinned_samples"] = p["thinned_samples"]
+        out["verdict"] = verdict(p["anees_pooled"], lo, hi, out["inside_3sigma"])
+        out["verdict_first_phase"] = verdict(p["anees_thinned"], lo, hi, out["inside_3sigma"])
+        out["consistent"] = out["verdict"] == "inside"
     return out
+
+
+def verdict(anees: float, lo: float, hi: float, inside_3sigma: float) -> str:
+    """"inside", "conservative" (ANEES below its bounds) or "overconfident" (above them, or fewer than 90 %
+    of the epochs inside 3 sigma)."""
+    if anees > hi or inside_3sigma < 0.9:
+        return "overconfident"
+    return "conservative" if anees < lo else "inside"
+
+
+GRADES = ("navigation", "tactical", "consumer")
+NAMES = ("ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track")
+
+
+def table(paths: list[str]) -> str:
+    """The markdown grids of docs/validation/navigators.md and docs/guide/navigators.md from --out files
+    (figures recomputed from their runs' NEES; rows in grade, navigator order)."""
+    figs: dict = {}
+    for path in paths:
+        for key, f in json.loads(Path(path).read_text())["figures"].items():
+            nees, e2 = np.asarray(f["raw"]["nees"]), np.asarray(f["raw"]["e2"])
+            figs[key] = {**nees_summary(nees, e2),
+                         "health_consistency_warning": f.get("health_consistency_warning")}
+    return validation_table(figs) + "\n\n" + guide_table(figs)
+
+
+def _num(x: float) -> str:
+    return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.2f}"
+
+
+def guide_table(figs: dict) -> str:
+    """The guide's grid: per navigator and grade the verdict and the all-epoch ANEES (and the share inside
+    3 sigma when under 90 %)."""
+    rows = ["| navigator | " + " | ".join(GRADES) + " |", "|---" * (len(GRADES) + 1) + "|"]
+    for n in NAMES:
+        cells = []
+        for g in GRADES:
+            f = figs.get(f"{n}/{g}")
+            if f is None or "verdict" not in f:
+                cells.append("not run")
+                continue
+            c = f"{f['verdict']} ({_num(f['anees_all_epochs'])})"
+            if f["inside_3sigma"] < 0.9:
+                c += f", {100 * f['inside_3sigma']:.0f} % inside 3σ"
+            cells.append(c)
+        rows.append(f"| `{n}` | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def validation_table(figs: dict) -> str:
+    """The validation page's grid (see table)."""
+    rows = ["| grade | navigator | runs | ANEES (all epochs) | 95 % bounds (thinned samples) | first-phase "
+            "thinned ANEES | epochs inside 3σ | horizontal RMS | verdict | Health warns |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+
+    for g in GRADES:
+        for n in NAMES:
+            f = figs.get(f"{n}/{g}")
+            if f is None or "bounds_95" not in f:
+                continue
+            lo, hi = f["bounds_95"]
+            rms = f["rms_m"]
+            warns = "yes" if f.get("health_consistency_warning") else "no"
+            rows.append(f"| {g} | {n} | {f['runs']} | {_num(f['anees_all_epochs'])} | [{lo:.2f}, {hi:.2f}] "
+                        f"({f['thinned_samples']}) | {_num(f['anees'])} | {100 * f['inside_3sigma']:.1f} % | "
+                        f"{f'{rms:,.0f}' if rms >= 100 else f'{rms:.1f}'} m | {f['verdict']} | {warns} |")
+    return "\n".join(rows)
 
 
 def main(argv=None) -> int:
@@ -146,6 +226,8 @@ def main(argv=None) -> int:
                     help="pickle of the recorded flight: read if it exists (same duration), else written")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="pool the runs of these --out files (same duration) instead of running")
+    ap.add_argument("--table", nargs="+", default=None,
+                    help="print the markdown grid of these --out files instead of running")
     ap.add_argument("--set", dest="settings", action="append", default=[],
                     help="navigator.setting=value (a Python literal), e.g. pmf.span_sigmas=6")
     a = ap.parse_args(argv)
@@ -153,6 +235,9 @@ def main(argv=None) -> int:
         key, _, value = item.partition("=")
         nav, _, setting = key.partition(".")
         SETTINGS.setdefault(nav, {})[setting] = ast.literal_eval(value)
+    if a.table:
+        print(table(a.table))
+        return 0
     if a.merge:
         pooled: dict = {}
         warn: dict = {}

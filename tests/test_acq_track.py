@@ -94,40 +94,10 @@ def test_serial_search_kernel_matches_brute_force(dem):
         distinct_ratio=0.8,
         exclusion_m=60.0,
     )
-    fast = acquisition.serial_search(
-        dem.record(),
-        LAT0 + 30.0 / r_n,
-        LON0,
-        dts,
-        np.zeros(n),
-        np.zeros(n),
-        79.0,
-        math.radians(31.0),
-        r_n,
-        r_e,
-        d,
-        valid,
-        cost=0,
-        remove_bias=True,
-        n_min=5,
-        **kw,
-    )
-    ref = acquisition.serial_search_reference(
-        dem.record(),
-        LAT0 + 30.0 / r_n,
-        LON0,
-        dts,
-        np.zeros(n),
-        np.zeros(n),
-        79.0,
-        math.radians(31.0),
-        r_n,
-        r_e,
-        d,
-        valid,
-        n_min=5,
-        **kw,
-    )
+    args = (dem.record(), LAT0 + 30.0 / r_n, LON0, dts, np.zeros(n), np.zeros(n), 79.0, math.radians(31.0),
+            r_n, r_e, d, valid)
+    fast = acquisition.serial_search(*args, cost=0, remove_bias=True, n_min=5, **kw)
+    ref = acquisition.serial_search_reference(*args, n_min=5, **kw)
     assert (fast.dn_m, fast.de_m, fast.b_v, fast.b_psi_rad) == pytest.approx(
         (ref.dn_m, ref.de_m, ref.b_v, ref.b_psi_rad)
     )
@@ -156,17 +126,10 @@ def test_acquisition_recovers_speed_heading_start_within_one_bin(dem):
         r_e,
         d,
         np.ones(n, bool),
-        position_half_m=cfg.acquisition_position_half_m,
-        position_bin_m=cfg.acquisition_position_bin_m,
-        speed_half_mps=cfg.acquisition_speed_half_mps,
-        speed_bin_mps=cfg.acquisition_speed_bin_mps,
-        heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
-        heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
         cost=0,
         remove_bias=True,
         n_min=10,
-        distinct_ratio=cfg.acquisition_distinct_ratio,
-        exclusion_m=cfg.acquisition_exclusion_m,
+        **acquisition.search_grid(cfg),
     )
     assert res.distinct
     assert res.n_hypotheses == 21 * 21 * 21 * 21
