@@ -43,6 +43,16 @@ def _print_problems(err) -> None:
         print(f"  - {prob}", file=sys.stderr)
 
 
+def _discard_partial_log(writer, log_path: Path | None) -> None:
+    """After a run's log writing (finally): abort the writer if it did not finish (writer not None) and
+    remove the log folder if the run did not hand it over (log_path not None): nothing half-written stays."""
+    if writer is not None:
+        writer.abort()
+    if log_path is not None and log_path.exists():
+        import shutil
+        shutil.rmtree(log_path, ignore_errors=True)
+
+
 def out_dir_problem(out: Path, overwrite: bool = False) -> str | None:
     """Why the run folder `out` could not be written (checked before flying, nothing left behind), or None."""
     from trn_env.output.run_folder import target_problem
