@@ -37,8 +37,9 @@ def _install_sigterm():
         return None
 
 
-def _print_problems(err) -> None:
-    print(f"error: scenario {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
+def _print_problems(err, what: str = "scenario") -> None:
+    """Every problem of a ScenarioError / CampaignError (`what` names the file's kind), one a line."""
+    print(f"error: {what} {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
     for prob in err.problems:
         print(f"  - {prob}", file=sys.stderr)
 
