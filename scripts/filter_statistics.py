@@ -87,6 +87,15 @@ def initial_estimate(d: dict, truth0, seed: int, sigma_h_m: float):
     return perturbed_estimate(truth0, 0, sig, np.random.default_rng([seed, 23]))
 
 
+def error_ne(est, chunk) -> tuple[float, float]:
+    """(north, east) m of the estimate minus the truth at the chunk's last row (local radii at the truth)."""
+    i = len(chunk.t_s) - 1
+    lat, lon = float(chunk.lat_rad[i]), float(chunk.lon_rad[i])
+    r_n = meridian_radius_m(lat) + float(chunk.h_msl_m[i])
+    r_e = (prime_vertical_radius_m(lat) + float(chunk.h_msl_m[i])) * math.cos(lat)
+    return (est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e
+
+
 def run_navigator(name: str, settings: dict, initial, frames, chunks, map_dem, seed: int) -> dict:
     """Errors (estimate minus truth, N/E m), covariance diagonals and timing of one navigator run."""
     nav = registry.create(name, dem=map_dem, rng=np.random.default_rng([seed, 29]), **settings)
@@ -97,12 +106,8 @@ def run_navigator(name: str, settings: dict, initial, frames, chunks, map_dem, s
         w0 = time.perf_counter()
         est = nav.update(fr)
         wall += time.perf_counter() - w0
-        i = len(ch.t_s) - 1
-        lat, lon = float(ch.lat_rad[i]), float(ch.lon_rad[i])
-        r_n = meridian_radius_m(lat) + float(ch.h_msl_m[i])
-        r_e = (prime_vertical_radius_m(lat) + float(ch.h_msl_m[i])) * math.cos(lat)
         t.append(est.t_s)
-        err.append(((est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e))
+        err.append(error_ne(est, ch))
         cov.append(est.covariance[:2, :2].copy())
     return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "wall_s": wall,
             "recoveries": int(getattr(nav, "recoveries", 0))}
