@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import ast
 import json
-import math
 import pickle
 import sys
 import time
@@ -46,7 +45,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import filter_statistics as fs  # noqa: E402
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
 
 import trn_env.scenario.build as components  # noqa: E402
 from trn_env.scenario.sections import from_dict  # noqa: E402
@@ -99,12 +97,8 @@ def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
     w0 = time.perf_counter()
     for fr, ch in zip(frames, chunks, strict=True):
         est = nav.update(fr)
-        i = len(ch.t_s) - 1
-        lat, lon = float(ch.lat_rad[i]), float(ch.lon_rad[i])
-        r_n = meridian_radius_m(lat) + float(ch.h_msl_m[i])
-        r_e = (prime_vertical_radius_m(lat) + float(ch.h_msl_m[i])) * math.cos(lat)
         t.append(est.t_s)
-        err.append(((est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e))
+        err.append(fs.error_ne(est, ch))
         cov.append(est.covariance[:2, :2].copy())
         status.append(est.health.status)
     return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "status": status,

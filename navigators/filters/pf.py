@@ -182,8 +182,9 @@ class ParticleFilter(InsRiddenFilter):
         lat = float(st[0]) if st is not None else 0.6
         g_over_r = 9.81 / float(radii_m(lat, 0.0)[0])
         z = self.rng.standard_normal((self.M, N_STATE))
-        propagate_particles(self.dn, self.de, self.b, self.dv, self.dpsi, dt, float(f_n), float(f_e),
-                            g_over_r, self.s_pos, self.s_vel, self.s_psi, 0.0, z)
+        propagate_particles((self.dn, self.de, self.b, self.dv, self.dpsi), dt,
+                            (float(f_n), float(f_e), g_over_r),
+                            (float(self.s_pos), float(self.s_vel), float(self.s_psi), 0.0), z)
         self.P_b += self._offset_process_var(dt, st)
         self._t_belief = t_s
         self._moments_cache = None

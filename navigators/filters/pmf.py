@@ -288,9 +288,10 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             S = self.P_b + float(self.ira_variance(range_m, p[2], math.hypot(p[0], p[1])))
             saved = (self.logw.copy(), self.bias.copy())
             o = self._out
-            kern.ira_update_pass(self._map_record(), lat, lon, r_lat, r_lon, self.dn_flat, self.de_flat,
-                                 float(p[0]), float(p[1]), h_meas, S, self.P_b / S, self._lg, self._le,
-                                 LOG_FLOOR, self.logw, self.bias, self._work[0], o)
+            kern.ira_update_pass(self._map_record(), (lat, lon, r_lat, r_lon),
+                                 (self.dn_flat, self.de_flat, self.logw, self.bias),
+                                 (float(p[0]), float(p[1]), h_meas, S, self.P_b / S),
+                                 (self._lg, self._le, LOG_FLOOR), self._work[0], o)
             n_nan = int(o[3])
             if n_nan == m or not np.isfinite(o[4]):
                 self.logw, self.bias = saved
