@@ -58,8 +58,12 @@ class Health:
     # reason -> count of measurements skipped so far
     skipped: dict[str, int] = field(default_factory=dict)
     events: list[tuple[float, str]] = field(default_factory=list)  # (t_s, message) since the last update
-    # why the navigator's covariance is known not to bound its error in this configuration ("" for none
-    # known), e.g. an IMU grade beyond its error model's validity (navigators.core.imu_spec)
+    # why the navigator's covariance is known not to describe its error in this configuration ("" for none
+    # known), in either direction: known not to bound it (overconfident, e.g. an IMU grade beyond its error
+    # model's validity, navigators.core.imu_spec; or the run-time consistency check's flag, which also
+    # withdraws ok) or known to overstate it (conservative: it bounds the error, ok stays, its protection
+    # level is pessimistic); the static warnings are set at construction from the IMU grade and the
+    # measured grid (navigators.core.measured_consistency)
     consistency_warning: str = ""
 
     def skip(self, t_s: float, reason: str, message: str | None = None) -> None:

@@ -1,6 +1,7 @@
 """Calibrate the fast tier (TerrainNavFast-v0) against the full JSBSim loop (TerrainNav-v0) on the reference
 routes of trn_env.env.fast.calibration: the true horizontal error at the goal, mean and 90th percentile over
-seeds, per route, in both tiers, with the same navigator family (the scenario's INS + batch TERCOM).
+seeds, per route, in both tiers, with the same navigator family (the scenario's INS + batch TERCOM); the
+full loop at the route task's full-tier settings (calibration.full_tier_settings(): JSBSim at 50 Hz).
 
     python scripts/calibrate_fast_tier.py --seeds 32 --out out/fast_calibration      # both tiers
     python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out DIR            # only the full loop

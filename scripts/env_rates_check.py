@@ -15,6 +15,14 @@ mean paired difference of the true horizontal error after each decision. With
 `--out DIR` each configuration's per-seed results are written to DIR/rates_<NAME>.json and read back from
 there by a later call with the same name, seeds and settings (so a configuration can be added without flying
 the others again).
+
+    python scripts/env_rates_check.py --cpu-repeats 6 --config default='{}' --config avg5='{"scenario_fields":
+        {"navigator.settings.ira_average": 5}}'
+
+instead measures the CPU per 30 s decision of each configuration over the route task's own basin env
+(`route_task.env_kwargs("basin")` plus the configuration): the configurations interleaved in one process,
+each repeat 8 random pursuit decisions from a reset (seed 100 + repeat, the same actions for every
+configuration); prints the median and the repeats (ms), and each one's ratio to the first's median.
 Bad arguments: a message and exit 2.
 """
 
@@ -82,6 +90,39 @@ def compare(configs: dict[str, dict], seeds: int, out: Path | None, routes: list
                       + " ".join(f"{v:+.1f}" for v in _by_decision_difference(b, r)))
 
 
+def cpu_interleaved(configs: dict[str, dict], repeats: int, decisions: int = 8) -> dict[str, list[float]]:
+    """CPU ms per 30 s decision of each configuration (TerrainNav-v0 arguments over the route task's basin
+    env), measured interleaved: per repeat, every configuration flies the same random pursuit actions from
+    a reset with seed 100 + repeat (episodes restarted when they end)."""
+    import time
+
+    from trn_env.env.route_task import env_kwargs
+    from trn_env.env.terrain_nav import TerrainNavEnv
+
+    envs = {k: TerrainNavEnv(**{**env_kwargs("basin"), **v}) for k, v in configs.items()}
+    for e in envs.values():                       # first use (numba caches, map tables) outside the timing
+        e.reset(seed=0)
+        e.step(np.zeros(2, np.float32))
+    out: dict[str, list[float]] = {k: [] for k in envs}
+    rng = np.random.default_rng(0)
+    for rep in range(repeats):
+        actions = rng.uniform(-1.0, 1.0, (decisions, 2)).astype(np.float32)
+        for k, e in envs.items():
+            e.reset(seed=100 + rep)
+            c0 = time.process_time()
+            sim_s = 0.0
+            for a in actions:
+                t0 = e._loop.t_s
+                _, _, term, trunc, _ = e.step(a)
+                sim_s += e._loop.t_s - t0
+                if term or trunc:
+                    e.reset()
+            out[k].append(1e3 * (time.process_time() - c0) / sim_s * 30.0)
+    for e in envs.values():
+        e.close()
+    return out
+
+
 def _by_decision_difference(base: dict, other: dict, n_max: int = 16) -> list[float]:
     """Mean over seeds of the paired difference of the true horizontal error after each decision (seeds
     whose episodes both reached that decision)."""
@@ -111,6 +152,8 @@ def _config(text: str) -> tuple[str, dict]:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--config", action="append", default=[], metavar="NAME=JSON")
+    p.add_argument("--cpu-repeats", type=int, default=0,
+                   help="measure CPU per decision, interleaved, this many repeats (no routes flown)")
     p.add_argument("--seeds", type=int, default=16)
     p.add_argument("--first-seed", type=int, default=0)
     p.add_argument("--routes", nargs="+", default=None, metavar="ROUTE")
@@ -120,6 +163,8 @@ def main(argv=None) -> int:
         configs = dict(_config(c) for c in args.config)
         if len(configs) < 2 or len(configs) != len(args.config):
             raise ValueError(f"give two or more --config with distinct names, got {args.config}")
+        if args.cpu_repeats < 0:
+            raise ValueError(f"--cpu-repeats must be >= 0, got {args.cpu_repeats}")
         if args.seeds < 2:
             raise ValueError(f"--seeds must be >= 2 (paired statistics), got {args.seeds}")
         if args.first_seed < 0:
@@ -138,6 +183,13 @@ def main(argv=None) -> int:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if args.cpu_repeats:
+        res = cpu_interleaved(configs, args.cpu_repeats)
+        ref = float(np.median(res[next(iter(res))]))
+        for name, v in res.items():
+            print(f"{name:16s} median {np.median(v):6.1f} ms CPU per 30 s decision, ratio to the first "
+                  f"{ref / np.median(v):.2f}, repeats {[round(x, 1) for x in v]}")
+        return 0
     compare(configs, args.seeds, args.out, args.routes, args.first_seed)
     return 0
 

@@ -37,7 +37,6 @@ Experiments (each prints a JSON block; --only NAME runs one):
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import math
 import sys
@@ -55,8 +54,9 @@ from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  
 import trn_env.scenario.build as components  # noqa: E402
 from trn_env.scenario.loading import load_scenario  # noqa: E402
 from trn_env.scenario.sections import from_dict  # noqa: E402
-from trn_env.sim.closed_loop import ClosedLoop, perturbed_estimate  # noqa: E402
+from trn_env.sim.closed_loop import perturbed_estimate  # noqa: E402
 from trn_env.sim.nav_stage import gate_gnss  # noqa: E402
+from trn_env.testing import truth_chunks  # noqa: E402
 
 CONVERGED_M = 50.0
 
@@ -71,20 +71,8 @@ def record_flight(scenario: str = "default", duration_s: float = 180.0, wind_mps
             {"altitude_m": 0.0, "direction_from_deg": 270.0, "speed_mps": wind_mps},
             {"altitude_m": 6000.0, "direction_from_deg": 270.0, "speed_mps": wind_mps}],
             "wind.turbulence": {"model": "none"}})
-    chunks = []
-    with ClosedLoop(sc, pipeline=False, log_sensors=False) as loop:
-        truth0 = copy.deepcopy(loop.last_truth)
-        real = loop.sensors.sample
-
-        def spy(chunk, dem):
-            chunks.append(copy.deepcopy(chunk))
-            return real(chunk, dem)
-
-        loop.sensors.sample = spy
-        while loop.termination is None and loop.t_s < duration_s:
-            loop.tick()
-        loop.sync()
-        return sc.to_dict(), chunks, loop.world_dem, loop.map_dem, truth0
+    chunks, truth0, world, the_map = truth_chunks(sc, duration_s)
+    return sc.to_dict(), chunks, world, the_map, truth0
 
 
 def sensor_frames(d: dict, chunks, world, seed: int, outages=({"start_s": 0.0},)):
@@ -99,6 +87,15 @@ def initial_estimate(d: dict, truth0, seed: int, sigma_h_m: float):
     return perturbed_estimate(truth0, 0, sig, np.random.default_rng([seed, 23]))
 
 
+def error_ne(est, chunk) -> tuple[float, float]:
+    """(north, east) m of the estimate minus the truth at the chunk's last row (local radii at the truth)."""
+    i = len(chunk.t_s) - 1
+    lat, lon = float(chunk.lat_rad[i]), float(chunk.lon_rad[i])
+    r_n = meridian_radius_m(lat) + float(chunk.h_msl_m[i])
+    r_e = (prime_vertical_radius_m(lat) + float(chunk.h_msl_m[i])) * math.cos(lat)
+    return (est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e
+
+
 def run_navigator(name: str, settings: dict, initial, frames, chunks, map_dem, seed: int) -> dict:
     """Errors (estimate minus truth, N/E m), covariance diagonals and timing of one navigator run."""
     nav = registry.create(name, dem=map_dem, rng=np.random.default_rng([seed, 29]), **settings)
@@ -109,12 +106,8 @@ def run_navigator(name: str, settings: dict, initial, frames, chunks, map_dem, s
         w0 = time.perf_counter()
         est = nav.update(fr)
         wall += time.perf_counter() - w0
-        i = len(ch.t_s) - 1
-        lat, lon = float(ch.lat_rad[i]), float(ch.lon_rad[i])
-        r_n = meridian_radius_m(lat) + float(ch.h_msl_m[i])
-        r_e = (prime_vertical_radius_m(lat) + float(ch.h_msl_m[i])) * math.cos(lat)
         t.append(est.t_s)
-        err.append(((est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e))
+        err.append(error_ne(est, ch))
         cov.append(est.covariance[:2, :2].copy())
     return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "wall_s": wall,
             "recoveries": int(getattr(nav, "recoveries", 0))}

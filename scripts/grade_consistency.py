@@ -16,7 +16,17 @@ Per navigator and grade, over the epochs after --from-s (15 s):
   the per-epoch mean falls below 0.1), with the two-sided 95 % chi-square bounds of that many samples;
 - inside_3sigma: the fraction of all epochs with NEES <= 9 (the error inside the 3-sigma ellipse: 98.9 %
   for a consistent filter);
-- rms_m: horizontal RMS error.
+- rms_m: horizontal RMS error;
+- verdict: the ANEES over all epochs against the thinned sample count's bounds: "inside", "conservative"
+  (below) or "overconfident" (above, or fewer than 90 % of the epochs inside 3 sigma). The mean over all
+  epochs is the average of the k thinned means (one per phase of the thinning grid): each has the same
+  expectation (2 for a consistent filter) and about the thinned count's variance, and an average of k
+  such means has no larger a variance (Cauchy-Schwarz), so the thinned count's chi-square bounds hold for
+  it, while it does not depend on where the grid starts. With a long memory (k near the run's length, the
+  free INS) the first phase alone is the NEES at --from-s; "verdict_first_phase" keeps that figure's
+  verdict (the project's earlier criterion).
+
+    PYTHONPATH=$PWD python scripts/grade_consistency.py --table a.json b.json    # the docs' grid
 """
 
 from __future__ import annotations
@@ -24,7 +34,6 @@ from __future__ import annotations
 import argparse
 import ast
 import json
-import math
 import pickle
 import sys
 import time
@@ -36,7 +45,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import filter_statistics as fs  # noqa: E402
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
 
 import trn_env.scenario.build as components  # noqa: E402
 from trn_env.scenario.sections import from_dict  # noqa: E402
@@ -89,12 +97,8 @@ def run_one(dd: dict, frames, chunks, the_map, init, seed: int) -> dict:
     w0 = time.perf_counter()
     for fr, ch in zip(frames, chunks, strict=True):
         est = nav.update(fr)
-        i = len(ch.t_s) - 1
-        lat, lon = float(ch.lat_rad[i]), float(ch.lon_rad[i])
-        r_n = meridian_radius_m(lat) + float(ch.h_msl_m[i])
-        r_e = (prime_vertical_radius_m(lat) + float(ch.h_msl_m[i])) * math.cos(lat)
         t.append(est.t_s)
-        err.append(((est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e))
+        err.append(fs.error_ne(est, ch))
         cov.append(est.covariance[:2, :2].copy())
         status.append(est.health.status)
     return {"t": np.array(t), "err": np.array(err), "cov": np.array(cov), "status": status,
@@ -106,7 +110,13 @@ def run_nees(runs: list[dict], t_from_s: float) -> tuple[np.ndarray, np.ndarray]
     sel = runs[0]["t"] >= t_from_s
     E = np.array([r["err"][sel] for r in runs])
     P = np.array([r["cov"][sel] for r in runs])
-    return np.einsum("rti,rtij,rtj->rt", E, np.linalg.inv(P), E), np.sum(E ** 2, axis=2)
+    det = P[..., 0, 0] * P[..., 1, 1] - P[..., 0, 1] * P[..., 1, 0]
+    good = np.isfinite(det) & (det > 0.0) & (P[..., 0, 0] > 0.0)
+    Pi = np.zeros_like(P)      # a covariance that is not positive definite (a diverged filter): NEES inf
+    Pi[good] = np.linalg.inv(P[good])
+    nees = np.einsum("rti,rtij,rtj->rt", E, Pi, E)
+    nees[~good] = np.inf
+    return nees, np.sum(E ** 2, axis=2)
 
 
 def figures(runs: list[dict], t_from_s: float) -> dict:
@@ -129,8 +139,91 @@ def nees_summary(nees: np.ndarray, e2: np.ndarray, runs: list[dict] | None = Non
                    thinning=p["thinning_epochs"], anees_all_epochs=p["anees_pooled"],
                    runs_t_interval_95=p["runs_time_average_t_interval_95"])
         lo, hi = p["bounds_95_thinned"]
-        out["consistent"] = bool(lo <= p["anees_thinned"] <= hi and out["inside_3sigma"] >= 0.9)
+        out["thinned_samples"] = p["thinned_samples"]
+        out["verdict"] = verdict(p["anees_pooled"], lo, hi, out["inside_3sigma"])
+        out["verdict_first_phase"] = verdict(p["anees_thinned"], lo, hi, out["inside_3sigma"])
+        out["consistent"] = out["verdict"] == "inside"
     return out
+
+
+def verdict(anees: float, lo: float, hi: float, inside_3sigma: float) -> str:
+    """"inside", "conservative" (ANEES below its bounds) or "overconfident" (above them, or fewer than 90 %
+    of the epochs inside 3 sigma)."""
+    if anees > hi or inside_3sigma < 0.9:
+        return "overconfident"
+    return "conservative" if anees < lo else "inside"
+
+
+GRADES = ("navigation", "tactical", "consumer")
+NAMES = ("ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track")
+
+
+def table(paths: list[str]) -> str:
+    """The markdown grids of docs/validation/navigators.md and docs/guide/navigators.md from --out files
+    (figures recomputed from their runs' NEES; rows in grade, navigator order)."""
+    figs: dict = {}
+    for path in paths:
+        for key, f in json.loads(Path(path).read_text())["figures"].items():
+            nees, e2 = np.asarray(f["raw"]["nees"]), np.asarray(f["raw"]["e2"])
+            figs[key] = {**nees_summary(nees, e2),
+                         "health_consistency_warning": f.get("health_consistency_warning")}
+    return validation_table(figs) + "\n\n" + guide_table(figs)
+
+
+def _num(x: float) -> str:
+    return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.2f}"
+
+
+def guide_table(figs: dict) -> str:
+    """The guide's grid: per navigator and grade the verdict and the all-epoch ANEES (and the share inside
+    3 sigma when under 90 %)."""
+    rows = ["| navigator | " + " | ".join(GRADES) + " |", "|---" * (len(GRADES) + 1) + "|"]
+    for n in NAMES:
+        cells = []
+        for g in GRADES:
+            f = figs.get(f"{n}/{g}")
+            if f is None or "verdict" not in f:
+                cells.append("not run")
+                continue
+            c = f"{f['verdict']} ({_num(f['anees_all_epochs'])})"
+            if f["inside_3sigma"] < 0.9:
+                c += f", {100 * f['inside_3sigma']:.0f} % inside 3σ"
+            cells.append(c)
+        rows.append(f"| `{n}` | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def health_now(name: str, grade: str) -> str:
+    """What Health.consistency_warning states for navigator `name` on the preset `grade` with this code: the
+    measured direction (navigators.core.measured_consistency) and/or the small-angle warning (checked at
+    120 s, the shortest of the navigators' memories), or "no"."""
+    from trn_env.navigators.core.imu_spec import consistency_warning
+    from trn_env.navigators.core.measured_consistency import measured_direction
+
+    from trn_env.scenario.navigation import imu_spec
+    parts = ["small-angle"] if consistency_warning(imu_spec({"grade": grade}), 120.0, name) else []
+    parts += [d for d in (measured_direction(name, grade),) if d]
+    return ", ".join(parts) or "no"
+
+
+def validation_table(figs: dict) -> str:
+    """The validation page's grid (see table)."""
+    rows = ["| grade | navigator | runs | ANEES (all epochs) | 95 % bounds (thinned samples) | first-phase "
+            "thinned ANEES | epochs inside 3σ | horizontal RMS | verdict | Health warns |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+
+    for g in GRADES:
+        for n in NAMES:
+            f = figs.get(f"{n}/{g}")
+            if f is None or "bounds_95" not in f:
+                continue
+            lo, hi = f["bounds_95"]
+            rms = f["rms_m"]
+            warns = health_now(n, g)
+            rows.append(f"| {g} | {n} | {f['runs']} | {_num(f['anees_all_epochs'])} | [{lo:.2f}, {hi:.2f}] "
+                        f"({f['thinned_samples']}) | {_num(f['anees'])} | {100 * f['inside_3sigma']:.1f} % | "
+                        f"{f'{rms:,.0f}' if rms >= 100 else f'{rms:.1f}'} m | {f['verdict']} | {warns} |")
+    return "\n".join(rows)
 
 
 def main(argv=None) -> int:
@@ -146,6 +239,8 @@ def main(argv=None) -> int:
                     help="pickle of the recorded flight: read if it exists (same duration), else written")
     ap.add_argument("--merge", nargs="+", default=None,
                     help="pool the runs of these --out files (same duration) instead of running")
+    ap.add_argument("--table", nargs="+", default=None,
+                    help="print the markdown grid of these --out files instead of running")
     ap.add_argument("--set", dest="settings", action="append", default=[],
                     help="navigator.setting=value (a Python literal), e.g. pmf.span_sigmas=6")
     a = ap.parse_args(argv)
@@ -153,6 +248,9 @@ def main(argv=None) -> int:
         key, _, value = item.partition("=")
         nav, _, setting = key.partition(".")
         SETTINGS.setdefault(nav, {})[setting] = ast.literal_eval(value)
+    if a.table:
+        print(table(a.table))
+        return 0
     if a.merge:
         pooled: dict = {}
         warn: dict = {}
@@ -167,6 +265,7 @@ def main(argv=None) -> int:
             e2 = np.concatenate([np.asarray(p["e2"])[:, :m] for p in parts])
             merged[key] = {**nees_summary(nees, e2), "health_consistency_warning": warn[key]}
             print(json.dumps({key: merged[key]}), flush=True)
+            merged[key]["raw"] = {"nees": nees.tolist(), "e2": e2.tolist()}
         if a.out:
             Path(a.out).write_text(json.dumps({"merged": a.merge, "figures": merged}, indent=1))
         return 0

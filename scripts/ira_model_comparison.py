@@ -33,7 +33,6 @@ each gives at the true position with noise-free samples).
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import math
 import sys
@@ -52,7 +51,8 @@ import trn_env.scenario.build as components  # noqa: E402
 from trn_env.flight.kinematic import heading_for_track, wind_ned_from  # noqa: E402
 from trn_env.scenario.loading import validate  # noqa: E402
 from trn_env.sensors.ira import IraConfig, sample_ira  # noqa: E402
-from trn_env.sim.closed_loop import ClosedLoop, perturbed_estimate  # noqa: E402
+from trn_env.sim.closed_loop import perturbed_estimate  # noqa: E402
+from trn_env.testing import truth_chunks  # noqa: E402
 
 T_FROM_S = 30.0
 LAT0_DEG, LON0_DEG = 36.475, -84.30   # flying north across the Jacksboro DEM
@@ -107,21 +107,8 @@ def record(d: dict):
     sc = validate(d, source="ira_crosswind")
     rec = sc.to_dict()
     rec["navigator"] = {"name": "ins"}
-    chunks = []
     rec_sc = validate(rec, source="ira_crosswind_recording")
-    with ClosedLoop(rec_sc, pipeline=False, log_sensors=False) as loop:
-        truth0 = copy.deepcopy(loop.last_truth)
-        real = loop.sensors.sample
-
-        def spy(chunk, dem):
-            chunks.append(copy.deepcopy(chunk))
-            return real(chunk, dem)
-
-        loop.sensors.sample = spy
-        while loop.termination is None and loop.t_s < sc.duration_s - 1e-6:
-            loop.tick()
-        loop.sync()
-        world, the_map = loop.world_dem, loop.map_dem
+    chunks, truth0, world, the_map = truth_chunks(rec_sc, sc.duration_s - 1e-6)
     return sc, world, the_map, chunks, truth0
 
 

@@ -186,16 +186,7 @@ class Dem:
         shape, flat_lat, flat_lon = _query_points("height", method, lat_rad, lon_rad)
         out = np.empty(flat_lat.shape[0])
         kernel = kernels.bilinear_batch if method == "bilinear" else kernels.bicubic_batch
-        kernel(
-            self.heights_m,
-            self.lat0_rad,
-            self.lon0_rad,
-            self.dlat_rad,
-            self.dlon_rad,
-            flat_lat,
-            flat_lon,
-            out,
-        )
+        kernel(*self.grid, flat_lat, flat_lon, out)
         if len(shape) == 0:
             return float(out[0])
         return out.reshape(shape)
@@ -206,17 +197,7 @@ class Dem:
         g_lat = np.empty(flat_lat.shape[0])
         g_lon = np.empty(flat_lat.shape[0])
         kernel = kernels.gradient_batch if method == "bilinear" else kernels.bicubic_gradient_batch
-        kernel(
-            self.heights_m,
-            self.lat0_rad,
-            self.lon0_rad,
-            self.dlat_rad,
-            self.dlon_rad,
-            flat_lat,
-            flat_lon,
-            g_lat,
-            g_lon,
-        )
+        kernel(*self.grid, flat_lat, flat_lon, g_lat, g_lon)
         r_n, r_e = _radii(flat_lat)
         dh_dn = g_lat / r_n
         dh_de = g_lon / (r_e * np.cos(flat_lat))

@@ -18,6 +18,14 @@ from trn_env.navigators.protocol import Estimate
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 R0 = 6356766.0
+# the acq_track tests' reference point (jacksboro) and flight height
+LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
+H_MSL = 1400.0
+
+
+def radii_m(lat, h=H_MSL):
+    """(meridian radius + h, (prime-vertical radius + h) cos lat) m: the replica's lookup radii."""
+    return meridian_radius_m(lat) + h, (prime_vertical_radius_m(lat) + h) * math.cos(lat)
 
 
 def trajectory(dem, lat0, lon0, h_msl_m, speed_fn, track_fn, t_end_s, dt_s=0.05):

@@ -10,7 +10,17 @@ import math
 
 import numpy as np
 import pytest
-from acq_track_helpers import fly, frames_for, horizontal_error_m, initial_estimate, trajectory
+from acq_track_helpers import (
+    H_MSL,
+    LAT0,
+    LON0,
+    fly,
+    frames_for,
+    horizontal_error_m,
+    initial_estimate,
+    radii_m,
+    trajectory,
+)
 from trn_env.navigators import registry
 from trn_env.navigators.acquisition_tracking import (
     AcqTrackConfig,
@@ -23,12 +33,8 @@ from trn_env.navigators.acquisition_tracking import (
 from trn_env.navigators.acquisition_tracking.integrity import OutputAverage, terrain_snr_db
 from trn_env.navigators.acquisition_tracking.profile import plumb_height_m
 from trn_env.navigators.protocol import EXTRA_INNOVATION, EXTRA_MEASUREMENT_TIME, EXTRA_NIS
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 from trn_env import terrain
-
-LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
-H_MSL = 1400.0
 
 
 @pytest.fixture(scope="module")
@@ -36,13 +42,9 @@ def dem():
     return terrain.load("jacksboro")
 
 
-def _radii(lat):
-    return meridian_radius_m(lat) + H_MSL, (prime_vertical_radius_m(lat) + H_MSL) * math.cos(lat)
-
-
 def _profile(dem, lat_s, lon_s, n, speed, track, dt=1.0):
     """Noise-free measured heights of a constant-speed, constant-track transect (the DEM at the truth)."""
-    r_n, r_e = _radii(lat_s)
+    r_n, r_e = radii_m(lat_s)
     dts = np.full(n, dt)
     dts[0] = 0.0
     la, lo = correlation.replica_positions_reference(
@@ -94,40 +96,10 @@ def test_serial_search_kernel_matches_brute_force(dem):
         distinct_ratio=0.8,
         exclusion_m=60.0,
     )
-    fast = acquisition.serial_search(
-        dem.record(),
-        LAT0 + 30.0 / r_n,
-        LON0,
-        dts,
-        np.zeros(n),
-        np.zeros(n),
-        79.0,
-        math.radians(31.0),
-        r_n,
-        r_e,
-        d,
-        valid,
-        cost=0,
-        remove_bias=True,
-        n_min=5,
-        **kw,
-    )
-    ref = acquisition.serial_search_reference(
-        dem.record(),
-        LAT0 + 30.0 / r_n,
-        LON0,
-        dts,
-        np.zeros(n),
-        np.zeros(n),
-        79.0,
-        math.radians(31.0),
-        r_n,
-        r_e,
-        d,
-        valid,
-        n_min=5,
-        **kw,
-    )
+    args = (dem.record(), LAT0 + 30.0 / r_n, LON0, dts, np.zeros(n), np.zeros(n), 79.0, math.radians(31.0),
+            r_n, r_e, d, valid)
+    fast = acquisition.serial_search(*args, cost=0, remove_bias=True, n_min=5, **kw)
+    ref = acquisition.serial_search_reference(*args, n_min=5, **kw)
     assert (fast.dn_m, fast.de_m, fast.b_v, fast.b_psi_rad) == pytest.approx(
         (ref.dn_m, ref.de_m, ref.b_v, ref.b_psi_rad)
     )
@@ -156,17 +128,10 @@ def test_acquisition_recovers_speed_heading_start_within_one_bin(dem):
         r_e,
         d,
         np.ones(n, bool),
-        position_half_m=cfg.acquisition_position_half_m,
-        position_bin_m=cfg.acquisition_position_bin_m,
-        speed_half_mps=cfg.acquisition_speed_half_mps,
-        speed_bin_mps=cfg.acquisition_speed_bin_mps,
-        heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
-        heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
         cost=0,
         remove_bias=True,
         n_min=10,
-        distinct_ratio=cfg.acquisition_distinct_ratio,
-        exclusion_m=cfg.acquisition_exclusion_m,
+        **acquisition.search_grid(cfg),
     )
     assert res.distinct
     assert res.n_hypotheses == 21 * 21 * 21 * 21
@@ -420,7 +385,7 @@ def test_bad_samples_drop_out_never_crash(dem):
     # off the map: start 3 km inside the west edge flying west
     lat_min, lat_max, lon_min, _ = dem.bounds
     lat_e = 0.5 * (lat_min + lat_max)
-    lon_e = lon_min + 3000.0 / _radii(lat_e)[1]
+    lon_e = lon_min + 3000.0 / radii_m(lat_e)[1]
     traj2 = trajectory(dem, lat_e, lon_e, H_MSL, lambda t: 80.0, lambda t: math.radians(270.0), 90)
     nav2 = AcqTrackNavigator(dem=dem)
     nav2.reset(initial_estimate(traj2, H_MSL, sigma_m=20.0))

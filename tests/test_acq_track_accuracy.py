@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from acq_track_helpers import fly, horizontal_error_m, initial_estimate, trajectory
+from acq_track_helpers import H_MSL, LAT0, LON0, fly, horizontal_error_m, initial_estimate, trajectory
 from scipy.stats import chi2
 from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, correlation, loop_kernel, tracking
 from trn_env.navigators.protocol import EXTRA_MEASUREMENT_TIME, EXTRA_NIS, EXTRA_NIS_DOF
@@ -23,8 +23,6 @@ from trn_env import terrain
 from trn_env.scenario.loading import read_scenario_file, validate
 from trn_env.sim.closed_loop import ClosedLoop
 
-LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
-H_MSL = 1400.0
 SHORT = Path(__file__).parent / "scenarios" / "acq_track_short.toml"
 
 

@@ -5,18 +5,13 @@ tracker's "return" replicas, with and without roll compensation."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _scripts import load_script
 
-_SPEC = importlib.util.spec_from_file_location(
-    "reproduce_seed001", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed001.py"
-)
-repro = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(repro)
+repro = load_script("reproduce_seed001")
 
 DURATION_S = 240.0
 

@@ -11,7 +11,16 @@ import math
 
 import numpy as np
 import pytest
-from acq_track_helpers import frames_for, horizontal_error_m, initial_estimate, trajectory
+from acq_track_helpers import (
+    H_MSL,
+    LAT0,
+    LON0,
+    frames_for,
+    horizontal_error_m,
+    initial_estimate,
+    radii_m,
+    trajectory,
+)
 from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, beam, loop_kernel
 from trn_env.navigators.acquisition_tracking.correlation import (
     Motion,
@@ -19,21 +28,13 @@ from trn_env.navigators.acquisition_tracking.correlation import (
     profile_cost,
     replica_positions_reference,
 )
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 from trn_env import terrain
-
-LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
-H_MSL = 1400.0
 
 
 @pytest.fixture(scope="module")
 def dem():
     return terrain.load("jacksboro")
-
-
-def _radii(lat, h):
-    return meridian_radius_m(lat) + h, (prime_vertical_radius_m(lat) + h) * math.cos(lat)
 
 
 @pytest.mark.parametrize("roll_deg, yaw_deg", [(25.0, 0.0), (-20.0, 40.0), (5.0, 10.0)])
@@ -43,7 +44,7 @@ def test_predicted_ray_over_flat_ground_is_the_cone_edge(dem, roll_deg, yaw_deg)
     a right roll leans it left of the heading); inside the half beam it is the point below."""
     flat = dem.with_heights(np.full_like(dem.heights_m, 300.0), name="flat")
     h = 900.0
-    r_n, r_e = _radii(LAT0, h)
+    r_n, r_e = radii_m(LAT0, h)
     theta, u_n, u_e = beam.predicted_ray(
         flat, LAT0, LON0, h, math.radians(roll_deg), 0.0, math.radians(yaw_deg), 17.0, r_n, r_e
     )
@@ -82,7 +83,7 @@ def test_replica_points_and_the_basis_form_agree_with_numpy(dem):
     m_v = 80.0 + rng.normal(0, 1.0, n)
     m_psi = np.cumsum(rng.normal(0, 0.02, n)) + 0.6
     o_n, o_e = rng.normal(0, 150.0, n), rng.normal(0, 150.0, n)
-    r_n, r_e = _radii(LAT0, H_MSL)
+    r_n, r_e = radii_m(LAT0, H_MSL)
     for b_v, b_psi in ((0.0, 0.0), (1.5, 0.03), (-2.0, -0.05)):
         dla, dlo = np.empty(n), np.empty(n)
         beam.replica_points(dt, m_v, m_psi, b_v, b_psi, r_n, r_e, o_n, o_e, dla, dlo)

@@ -11,26 +11,28 @@ import math
 
 import numpy as np
 import pytest
-from acq_track_helpers import fly, horizontal_error_m, initial_estimate, trajectory
+from acq_track_helpers import (
+    H_MSL,
+    LAT0,
+    LON0,
+    fly,
+    horizontal_error_m,
+    initial_estimate,
+    radii_m,
+    trajectory,
+)
 from trn_env.navigators.acquisition_tracking import AcqTrackNavigator, acquisition, correlation, loop_kernel
 from trn_env.navigators.acquisition_tracking.footprint import FootprintMaps
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env.terrain.kernels import bilinear_batch
 
 from trn_env import terrain
 
-LAT0, LON0 = math.radians(36.50), math.radians(-84.30)
-H_MSL = 1400.0
 SPEED_SET = np.array([2.4, 1.92, 1.44, 0.96, 0.48])  # the thesis' radar-run 1st-stage set, widest first
 
 
 @pytest.fixture(scope="module")
 def dem():
     return terrain.load("jacksboro")
-
-
-def _radii(lat):
-    return meridian_radius_m(lat) + H_MSL, (prime_vertical_radius_m(lat) + H_MSL) * math.cos(lat)
 
 
 def _bf_heights(grid, lat_s, lon_s, dts, speed, track, r_n, r_e):
@@ -67,7 +69,7 @@ def test_msd_matches_brute_force_and_its_minimum_is_the_true_offset(dem):
     rng = np.random.default_rng(11)
     n = 25
     dts, z = _transect(n)
-    r_n, r_e = _radii(LAT0)
+    r_n, r_e = radii_m(LAT0)
     d = _bf_heights(dem.grid, LAT0, LON0, dts, 80.0, math.radians(30.0), r_n, r_e)
     valid = rng.random(n) > 0.2
     h = d + 4.0 * rng.standard_normal(n) + 9.0
@@ -141,7 +143,7 @@ def test_loop_kernel_matches_brute_force_and_the_discriminator_by_hand(dem):
     dts, _ = _transect(n)
     for trial in range(6):
         lat_s, lon_s = LAT0 + 0.0006 * trial, LON0 + 0.0005 * trial  # on the map (3.8 km, 2.5 km apart)
-        r_n, r_e = _radii(lat_s)
+        r_n, r_e = radii_m(lat_s)
         m_v = 80.0 + 0.5 * rng.standard_normal(n)
         m_psi = math.radians(30.0 + 20 * trial) + 0.01 * rng.standard_normal(n)
         la, lo = correlation.replica_positions_reference(lat_s, lon_s, dts, m_v, m_psi, 1.1, 0.02, r_n, r_e)
@@ -258,7 +260,7 @@ def test_els_reduces_the_early_late_bias_on_a_skewed_terrain_correlation(dem):
     for _ in range(60):
         lat_s = lat0 + dlat * heights.shape[0] * rng.uniform(0.2, 0.8)
         lon_s = lon0 + dlon * heights.shape[1] * rng.uniform(0.2, 0.8)
-        r_n, r_e = _radii(lat_s)
+        r_n, r_e = radii_m(lat_s)
         track = rng.uniform(0.0, 2.0 * math.pi)
         start = rng.choice([-1.5, -0.5, 0.5, 1.5])
         la, lo = correlation.replica_positions_reference(lat_s, lon_s, dts, z, z, 80.0, track, r_n, r_e)
@@ -324,7 +326,7 @@ def test_bounded_search_decides_as_the_exhaustive_one(dem, cost):
     for trial in range(3):  # noise-free, 3 m noise, a profile of pure noise (no terrain in it)
         lat_s = lat0 + dlat * heights.shape[0] * (0.35 + 0.15 * trial)
         lon_s = lon0 + dlon * heights.shape[1] * (0.6 - 0.1 * trial)
-        r_n, r_e = _radii(lat_s)
+        r_n, r_e = radii_m(lat_s)
         track = math.radians(33.7 + 40.0 * trial)
         d = _bf_heights(dem.grid, lat_s, lon_s, dts, 81.3, track, r_n, r_e)
         if trial == 1:

@@ -117,6 +117,22 @@ def test_scenario_fields_set_the_scenario_and_bad_ones_name_the_field():
         assert all(w in str(err.value) for w in words), str(err.value)
 
 
+def test_ira_average_reaches_the_navigators_tercom_batch():
+    """scenario_fields' navigator.settings.ira_average: the INS + TERCOM navigator's batch enters each 5
+    consecutive IRA samples as their mean (2 s of 50 Hz IRA: 100 samples, 20 batch rows; GNSS ignored, as
+    its updates restart the batch)."""
+    e = TerrainNavEnv("basin_route", scenario_fields={"navigator.settings.ira_average": 5,
+                                                      "navigator.settings.use_gnss": False},
+                      decision_interval_s=2.0, max_episode_s=8.0)
+    e.reset(seed=0)
+    nav = e._loop.navigator
+    assert nav.batch.average == 5
+    e.step(np.zeros(2, np.float32))
+    e._loop.sync()
+    assert 15 <= len(nav.batch) <= 20 and nav.batch._pending.shape[0] < 5
+    e.close()
+
+
 def test_goal_offset_kernel_is_the_ecef_rotation():
     """goal_offset_ne against numpy: C_en(lat, lon)^T (r_goal - r) with both points through lla_to_ecef, on
     random pairs 1-60 km apart at random heights; and against the small-offset form (latlon_to_ned_offset)
@@ -211,7 +227,8 @@ def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
                         ([ok, 'b={"flight_dt_s": 0.06}'], "flight_dt_s"),
                         ([ok, 'b={"no_such_argument": 1}'], "no_such_argument"),
                         ([ok, 'b={"scenario_fields": {"sensors.foo.rate_hz": 1.0}}'], "sensors.foo"),
-                        ([ok, ok.replace("a=", "b="), "--routes", "nowhere"], "nowhere")):
+                        ([ok, ok.replace("a=", "b="), "--routes", "nowhere"], "nowhere"),
+                        ([ok, ok.replace("a=", "b="), "--cpu-repeats", "-1"], "--cpu-repeats")):
         args = [x for c in argv[:2] for x in ("--config", c)] + argv[2:] + ["--seeds", "2", "--out", str(out)]
         assert mod.main(args) == 2
         err = capsys.readouterr().err

@@ -84,7 +84,7 @@ BAD_SETTINGS = [
     ("accel_noise_mps2_rthz", -1e-4), ("gyro_noise_rps_rthz", math.nan), ("accel_bias_mps2", math.inf),
     ("gate_chi2", -3.0), ("min_samples", -5), ("half_cells", 0), ("fix_period_s", 0.0),
     ("dem", 5), ("dem", "/no/such/map.tif"), ("remove_bias", "yes"), ("gnss_sigma_h_m", -1.0),
-    ("gnss_gate_chi2", math.nan), ("ira_decimation", 2.5),
+    ("gnss_gate_chi2", math.nan), ("ira_decimation", 2.5), ("ira_average", 0), ("ira_average", 1.5),
 ]
 
 

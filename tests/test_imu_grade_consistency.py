@@ -1,18 +1,22 @@
-"""Every navigator takes its INS error model from the IMU's specification (navigators.core.imu_spec) and is
-consistent on the tactical grade.
+"""Every navigator takes its INS error model from the IMU's specification (navigators.core.imu_spec), says in
+Health where its covariance is known not to describe its error, and is consistent on the tactical grade.
 
-The statistical check (slow): one recorded JSBSim flight of the default route (DURATION_S, GNSS denied from
-t = 0), RUNS seeds (SEED0...) each with its own sensor noise, IMU biases, initial error and world detail
+The statistical check (slow): one recorded JSBSim flight of the whole default route (DURATION_S is longer
+than the route: the flight ends with it at 473 s, its two turns included; GNSS denied from t = 0), RUNS
+seeds (SEED0...) each with its own sensor noise, IMU biases, initial error and world detail
 (scripts/grade_consistency.py), every navigator built as a scenario builds it (the acq_track as in its
 regression scenario, with the INS as its aiding). Per navigator, over the epochs after 15 s: the horizontal
-NEES (2 dof) thinned to decorrelated epochs (scripts/filter_statistics.pooled_nees_figures: every k-th
-epoch, k the lag where the NEES autocorrelation falls below 0.1) has its mean inside the two-sided 99 %
-chi-square bounds of that many samples, chi2.ppf([0.005, 0.995], 2 n) / n, computed here (about 1 % false
-alarms per navigator), and at least 90 % of all epochs have NEES <= 9 (the 3-sigma ellipse). A navigator
-whose covariance is known to overstate its error on this route (CONSERVATIVE: the cause and the 20-seed
-figure are in docs/validation/navigators.md) is held to the upper bound only: it must not be overconfident.
+NEES (2 dof) averaged over all epochs of all runs lies inside the
+two-sided 99 % chi-square bounds of the decorrelated sample count, chi2.ppf([0.005, 0.995], 2 n) / n
+computed here, n the runs times the epochs left when thinned to every k-th (k the lag where the NEES
+autocorrelation falls below 0.1: scripts/filter_statistics.pooled_nees_figures; the all-epoch mean averages
+the k thinned means, so its spread is at most theirs: scripts/grade_consistency.py), about 1 % false alarms
+per navigator; and at least 90 % of all epochs have NEES <= 9 (the 3-sigma ellipse). A navigator whose
+covariance the whole-route grid measured conservative on this grade
+(navigators.core.measured_consistency.MEASURED, where Health says so; docs/validation/navigators.md) is held
+to the upper bound only: it must still bound its error. The ones measured overconfident on it (NOT_CHECKED:
+the pmf, and the rbpf by a heavy tail of runs; Health says so) are not in the check.
 """
-
 from __future__ import annotations
 
 import math
@@ -29,22 +33,32 @@ from trn_env.navigators.core.imu_spec import (
     gm_drive,
     vertical_offset_walk_density,
 )
+from trn_env.navigators.core.measured_consistency import (
+    CONSERVATIVE,
+    MEASURED,
+    OVERCONFIDENT,
+    VALIDATION_PAGE,
+    grade_warning,
+    measured_direction,
+)
+from trn_env.navigators.integrity.consistency_check import ConsistencyCheck
+from trn_env.navigators.protocol import Health
 
 from trn_env.scenario.build import build_navigator, imu_spec
 from trn_env.scenario.loading import load_scenario
+from trn_env.scenario.sections import from_dict
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 
-RUNS = 10
+RUNS = 8
 SEED0 = 2000
-DURATION_S = 150.0
-NAVIGATORS = ["ins", "ins_tercom", "pmf", "pf", "acq_track"]
-# covariance known to overstate the error on this route, whatever the IMU (so on the navigation grade as
-# well: not from the IMU's error model; docs/validation/navigators.md)
-CONSERVATIVE = {
-    "ins_tercom": "the TERCOM fix's noise (10 m, seed 000 Table 2) is larger than the fixes' error",
-    "acq_track": "its dead-reckoning walk (2 m/sqrt(s) with an INS) is calibrated on the fixes' NIS",
-}
+DURATION_S = 600.0
+NAVIGATORS = ["ins", "ins_tercom", "pf", "acq_track"]
+# not in the check: measured overconfident on the tactical grade over the whole route (Health warns; the fast
+# tests check it): the pmf on average, the rbpf by a heavy tail (one run of 34 far outside for two minutes,
+# seed 2004: docs/validation/navigators.md)
+NOT_CHECKED = {"pmf": "measured overconfident on the tactical grade",
+               "rbpf": "measured overconfident on the tactical grade (a heavy tail of runs)"}
 
 
 def test_imu_spec_from_the_scenario_grade():
@@ -70,7 +84,6 @@ def test_imu_spec_from_the_scenario_grade():
 def _sections(name: str, grade: str):
     """The default scenario's typed sections with the grade's IMU and navigator `name` (acq_track with the INS
     as its aiding; the sensors are not checked against the navigator: only its construction is tested)."""
-    from trn_env.scenario.sections import from_dict
     d = load_scenario("default", navigator="ins_tercom").to_dict()
     settings = {"aiding_source": "ins"} if name == "acq_track" else {}
     return from_dict({**d, "sensors": {**d["sensors"], "imu": {"grade": grade}},
@@ -152,6 +165,8 @@ def _chi2_mean_bounds(n: int, p: float) -> tuple[float, float]:
 def test_tactical_grade_consistency():
     import filter_statistics as fs
     import grade_consistency as gc
+    assert not set(NAVIGATORS) & set(NOT_CHECKED)
+    assert all(measured_direction(n, "tactical") == OVERCONFIDENT for n in NOT_CHECKED)
     flight = fs.record_flight(duration_s=DURATION_S)
     runs = {n: [] for n in NAVIGATORS}
     for s in range(RUNS):
@@ -161,26 +176,90 @@ def test_tactical_grade_consistency():
     for n in NAVIGATORS:
         nees, _ = gc.run_nees(runs[n], 15.0)
         k = fs.pooled_nees_figures(nees)["thinning_epochs"]
-        thin = nees[:, ::k]
-        anees = float(thin.mean())
-        lo, hi = _chi2_mean_bounds(thin.size, 0.99)
+        n_thin = nees[:, ::k].size
+        anees = float(nees.mean())
+        lo, hi = _chi2_mean_bounds(n_thin, 0.99)
         inside = float(np.mean(nees <= 9.0))
-        ok = anees <= hi if n in CONSERVATIVE else lo <= anees <= hi
+        conservative = measured_direction(n, "tactical") == CONSERVATIVE
+        ok = anees <= hi if conservative else lo <= anees <= hi
         if not (ok and inside >= 0.9):
-            problems.append(f"{n}: thinned ANEES {anees:.2f} ({thin.size} samples, every {k} epochs) against "
-                            f"[{lo:.2f}, {hi:.2f}], {100 * inside:.0f} % of epochs inside 3 sigma")
+            problems.append(f"{n}: ANEES {anees:.2f} over {nees.size} epochs ({n_thin} decorrelated: k {k}) "
+                            f"against [{lo:.2f}, {hi:.2f}]{' (upper only)' if conservative else ''}, "
+                            f"{100 * inside:.0f} % of epochs inside 3 sigma")
     assert not problems, problems
 
 
 @pytest.mark.parametrize("name", ["ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"])
-def test_consumer_grade_is_flagged_beyond_the_small_angle_model(name):
-    """The consumer grade's 100 deg/h gyro bias builds more than 0.57 deg of attitude error over every
-    navigator's memory: Health says its covariance is not calibrated there; on the tactical grade it says
-    nothing (measured consistency of each cell: docs/validation/navigators.md)."""
+def test_health_warns_on_the_grades_measured_outside(name):
+    """Health.consistency_warning from construction on: on the consumer grade (its 100 deg/h gyro bias builds
+    more than 0.57 deg of attitude error over every navigator's memory) the small-angle warning; on the
+    navigation and tactical grades the measured direction's statement where the grid found the cell outside
+    (navigators.core.measured_consistency.MEASURED), nothing where it found it inside; nothing for a grade
+    with overrides (not a measured grade)."""
     from trn_env import terrain
     dem = terrain.load("jacksboro")
-    navs = {grade: build_navigator(_sections(name, grade), dem, np.random.default_rng(0))
-            for grade in ("tactical", "consumer")}
-    warnings = {grade: nav._consistency_warning for grade, nav in navs.items()}
-    assert warnings["tactical"] == ""
-    assert "not calibrated" in warnings["consumer"] and name in warnings["consumer"]
+    for grade in ("navigation", "tactical", "consumer"):
+        nav = build_navigator(_sections(name, grade), dem, np.random.default_rng(0))
+        warning = nav._consistency_warning
+        direction = measured_direction(name, grade)
+        if grade == "consumer":
+            assert "not calibrated" in warning and name in warning
+            assert f"measured {direction}" in warning if direction else "measured " not in warning
+        elif direction:
+            assert warning.startswith(f"{name}: covariance known to be {direction} on the {grade} IMU grade")
+            assert VALIDATION_PAGE in warning
+        else:
+            assert warning == "", (grade, warning)
+        # the estimate carries it; a conservative (or any static) warning withdraws nothing
+        h = nav.health.snapshot(warning, ConsistencyCheck())
+        assert h.consistency_warning == warning and h.ok == nav.health.ok
+    custom = _sections(name, "tactical")
+    custom = from_dict({**custom.to_dict(), "sensors": {**custom.to_dict()["sensors"],
+                                                        "imu": {"grade": "tactical", "gyro_bias_rps": 1e-6}}})
+    assert imu_spec(custom.sensors.imu).grade == ""
+    assert build_navigator(custom, dem, np.random.default_rng(0))._consistency_warning == ""
+
+
+def test_imu_spec_names_the_preset_it_equals():
+    assert [imu_spec({"grade": g}).grade for g in ("navigation", "tactical", "consumer")] == [
+        "navigation", "tactical", "consumer"]
+    assert imu_spec({"grade": "tactical", "accel_scale_factor_ppm": 100.0}).grade == ""
+    assert imu_spec({"grade": "noise_free"}).grade == ""
+    with pytest.raises(ValueError, match="ImuSpec.grade"):
+        ImuSpec(grade=1.0)
+
+
+def test_a_static_warning_keeps_ok_and_the_flag_withdraws_it():
+    """Health.snapshot with the run-time check: a conservative warning (ok stays True) until the check flags,
+    then ok False with the check's message after the static warning."""
+    warning = grade_warning(imu_spec({"grade": "tactical"}), 200.0, "ins_tercom")
+    assert measured_direction("ins_tercom", "tactical") == CONSERVATIVE and "conservative" in warning
+    check = ConsistencyCheck(window=2)
+    h = Health().snapshot(warning, check)
+    assert h.ok and h.status == "ok" and h.consistency_warning == warning
+    for _ in range(2):
+        check.add(1e3, 1)
+    h = Health().snapshot(warning, check)
+    assert not h.ok and h.status == "inconsistent"
+    assert h.consistency_warning.startswith(warning + "; innovations inconsistent")
+
+
+def _guide_grid() -> dict[str, dict[str, str]]:
+    """{navigator: {grade: verdict word}} of docs/guide/navigators.md's consistency table."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "navigators.md").read_text()
+    table = text.split("<!-- guide-table -->")[1].split("<!-- /guide-table -->")[0]
+    rows = [r.strip().strip("|").split("|") for r in table.strip().splitlines()[2:]]
+    grades = ("navigation", "tactical", "consumer")
+    return {cells[0].strip().strip("`"): {g: cells[i + 1].strip().split()[0] for i, g in enumerate(grades)}
+            for cells in rows}
+
+
+def test_measured_table_matches_the_guide():
+    """The cells the guide's grid reports outside (conservative / overconfident) are the ones Health warns
+    about, in the same direction, and no other."""
+    grid = _guide_grid()
+    assert set(grid) == set(MEASURED) == {"ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"}
+    for name, cells in grid.items():
+        for grade, word in cells.items():
+            assert word in ("inside", CONSERVATIVE, OVERCONFIDENT), (name, grade, word)
+            assert measured_direction(name, grade) == ("" if word == "inside" else word), (name, grade)

@@ -9,11 +9,10 @@ import math
 
 import numpy as np
 import pytest
+from _ins_truth import noise_free_ins_errors
 from trn_env.navigators.inertial.strapdown import StrapdownIns
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 from trn_env.flight.kinematic import KinematicTruth, Segment
-from trn_env.sensors.imu import ImuConfig, sample_imu
 
 SPEED_MPS = 240.0
 
@@ -25,15 +24,7 @@ def test_first_imu_sample_after_the_reset_time_leaves_no_lag(sampling):
     t0 = k.advance(1)          # the reset state (t = 0), as the closed loop's truth at reset
     rest = k.advance(1999)     # what the sensors sample: t = 0.01 ... 19.99
     assert rest.t_s[0] > t0.t_s[0]
-    imu, _ = sample_imu(rest, None, np.random.default_rng(0), ImuConfig.noise_free(sampling=sampling))
-    ins = StrapdownIns("j2", tau_baro_s=None, imu_samples=sampling)
-    ins.reset(float(t0.t_s[0]), t0.lat_rad[0], t0.lon_rad[0], t0.h_msl_m[0], t0.v_ned_mps[0], t0.roll_rad[0],
-              t0.pitch_rad[0], t0.yaw_rad[0])
-    hist = ins.propagate(imu.t_s, imu.f_b_mps2, imu.omega_ib_b_rps)
-    i = np.searchsorted(rest.t_s, imu.t_s)
-    lat, h = rest.lat_rad[i], rest.h_msl_m[i]
-    dn = (hist[:, 0] - lat) * (meridian_radius_m(lat) + h)
-    de = (hist[:, 1] - rest.lon_rad[i]) * (prime_vertical_radius_m(lat) + h) * np.cos(lat)
+    dn, de, _, _, ins = noise_free_ins_errors(rest, sampling, start=t0)
     # one dropped interval would be 2.4 m here (240 m/s x 0.01 s); the figure: docs/validation/ins.md
     print(f"INS after a mid-flight reset ({sampling}): max horizontal error {np.hypot(dn, de).max():.2e} m")
     assert np.hypot(dn, de).max() < 0.05, np.hypot(dn, de).max()

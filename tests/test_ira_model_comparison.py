@@ -4,16 +4,12 @@ figures: docs/validation/terrain_filters.md)."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
+from _scripts import load_script
 
-_SPEC = importlib.util.spec_from_file_location(
-    "ira_model_comparison", Path(__file__).resolve().parent.parent / "scripts" / "ira_model_comparison.py")
-cmp = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(cmp)
+cmp = load_script("ira_model_comparison")
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,9 @@ import math
 
 import numpy as np
 import pytest
-from trn_env.navigators.inertial.strapdown import StrapdownIns
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from _ins_truth import noise_free_ins_errors
 
 from trn_env.flight.kinematic import KinematicTruth, Segment
-from trn_env.sensors.imu import ImuConfig, sample_imu
 
 SEGMENTS = [
     Segment("straight", 20.0),
@@ -28,18 +26,8 @@ def _truth():
 
 def test_ins_follows_kinematic_truth_to_centimetres():
     _, tr = _truth()
-    imu, _ = sample_imu(tr, None, np.random.default_rng(0), ImuConfig.noise_free(sampling="instant"))
-    ins = StrapdownIns("j2", tau_baro_s=None, imu_samples="instant")
-    ins.reset(0.0, tr.lat_rad[0], tr.lon_rad[0], tr.h_msl_m[0], tr.v_ned_mps[0], tr.roll_rad[0],
-              tr.pitch_rad[0], tr.yaw_rad[0])
-    hist = ins.propagate(imu.t_s, imu.f_b_mps2, imu.omega_ib_b_rps)
-    k = np.searchsorted(tr.t_s, imu.t_s)
-    lat, h = tr.lat_rad[k], tr.h_msl_m[k]
-    dn = (hist[:, 0] - lat) * (meridian_radius_m(lat) + h)
-    de = (hist[:, 1] - tr.lon_rad[k]) * (prime_vertical_radius_m(lat) + h) * np.cos(lat)
-    dd = hist[:, 2] - h
+    dn, de, dd, dv, _ = noise_free_ins_errors(tr)
     err = np.sqrt(dn**2 + de**2 + dd**2)
-    dv = np.linalg.norm(hist[:, 3:6] - tr.v_ned_mps[k], axis=1)
     assert tr.t_s[-1] >= 149.0
     # a noise-free IMU of a consistent truth leaves only the integration's error (the figures behind these
     # margins: docs/validation/ins.md)

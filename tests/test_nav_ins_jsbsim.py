@@ -120,14 +120,19 @@ def test_ins_follows_jsbsim_with_specific_force_from_total_forces():
     assert ver.max() < 1.0, ver.max()
 
 
-def test_ins_follows_flight_core_truth_chunk():
+def _planned_truth():
+    """(flight, its truth chunks of PLAN's legs concatenated, from the start)."""
     fl = _flight()
     chunks = [fl.snapshot()]
     for i, (ts, hd, alt) in enumerate(PLAN):
         fl.set_targets(_targets(hd, alt))
         te = PLAN[i + 1][0] if i + 1 < len(PLAN) else 600
         chunks.append(fl.advance(int(round((te - ts) / fl.dt_s))))
-    tr = type(chunks[0]).concatenate(chunks)
+    return fl, type(chunks[0]).concatenate(chunks)
+
+
+def test_ins_follows_flight_core_truth_chunk():
+    fl, tr = _planned_truth()
     f_b = 0.5 * (tr.f_b_mps2 + np.concatenate([tr.f_b_mps2[:1], tr.f_b_mps2[:-1]]))
     w_ib = _gyro_rotation_rate(np.concatenate([tr.omega_ib_b_rps[:1], tr.omega_ib_b_rps[:-1]]), fl.dt_s)
     _assert_rectangular_attitude_integrator(fl.fdm)
@@ -151,13 +156,7 @@ def test_ins_on_the_noise_free_sensor_imu_follows_the_flight():
     ("interval" samples, rates scaled to JSBSim's quaternion step) -> the INS. Same bound as above."""
     from trn_env.sensors.imu import ImuConfig, sample_imu
 
-    fl = _flight()
-    chunks = [fl.snapshot()]
-    for i, (ts, hd, alt) in enumerate(PLAN):
-        fl.set_targets(_targets(hd, alt))
-        te = PLAN[i + 1][0] if i + 1 < len(PLAN) else 600
-        chunks.append(fl.advance(int(round((te - ts) / fl.dt_s))))
-    tr = type(chunks[0]).concatenate(chunks)
+    fl, tr = _planned_truth()
     frame, _ = sample_imu(tr, None, np.random.default_rng(0), ImuConfig.noise_free())
     assert np.array_equal(frame.t_s, tr.t_s)
     hor, ver = _ins_error(

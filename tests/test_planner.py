@@ -85,7 +85,8 @@ def test_astar_matches_scipy_dijkstra(seed):
     h = np.zeros_like(u)
     blocked = np.zeros(u.shape, np.bool_)
     for w in (0.0, 1.5, 6.0):
-        cost, path = astar_kernel(u, h, blocked, 480.0, 530.0, MOVES, w, False, 1, 240.0, -1.0, 1, 2, 12, 9)
+        grid = (u, h, blocked, 480.0, 530.0)
+        cost, path = astar_kernel(grid, (MOVES, w, False, 1, 240.0, -1.0), (1, 2), (12, 9))
         assert cost == pytest.approx(_scipy_cost(u, 480.0, 530.0, w, (1, 2), (12, 9)), rel=1e-9)
         assert tuple(path[0]) == (1, 2) and tuple(path[-1]) == (12, 9)
         # the path's own cost adds up to the reported cost
@@ -105,10 +106,11 @@ def test_featureless_bound_matches_the_augmented_graph():
     u[6:10, 0] = 0.0  # the gap
     h = np.zeros_like(u)
     blocked = np.zeros(u.shape, np.bool_)
+    grid = (u, h, blocked, 500.0, 500.0)
     bin_m = 250.0
     for max_m in (600.0, 1200.0, 5000.0):
         nb = int(math.floor(max_m / bin_m)) + 1
-        cost, path = astar_kernel(u, h, blocked, 500.0, 500.0, MOVES, 0.0, True, nb, bin_m, -1.0, 1, 8, 14, 8)
+        cost, path = astar_kernel(grid, (MOVES, 0.0, True, nb, bin_m, -1.0), (1, 8), (14, 8))
         ref = _scipy_cost(u, 500.0, 500.0, 0.0, (1, 8), (14, 8), bound_bins=nb, bin_m=bin_m)
         assert cost == pytest.approx(ref, rel=1e-9)
         # the stretch over featureless edges along the returned path respects the bound
@@ -119,7 +121,7 @@ def test_featureless_bound_matches_the_augmented_graph():
             run = run + L if _edge_u(u, a[0], a[1], d[0], d[1]) > 0.5 else 0.0
             longest = max(longest, run)
         assert longest <= max_m + 0.5 * bin_m
-    straight, _ = astar_kernel(u, h, blocked, 500.0, 500.0, MOVES, 0.0, False, 1, bin_m, -1.0, 1, 8, 14, 8)
+    straight, _ = astar_kernel(grid, (MOVES, 0.0, False, 1, bin_m, -1.0), (1, 8), (14, 8))
     assert straight == pytest.approx(13 * 500.0)
     assert cost == pytest.approx(straight)  # 5 km allows crossing the 2 km band straight
 

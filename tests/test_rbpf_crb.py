@@ -9,18 +9,14 @@
 - with level turns (the reproduction's default profile) the heading becomes observable: its bound falls well
   below the prior (the check can fail)."""
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _scripts import load_script
 
 from trn_env import terrain
 
-_SPEC = importlib.util.spec_from_file_location(
-    "reproduce_seed002", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed002.py")
-repro = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(repro)
+repro = load_script("reproduce_seed002")
 
 DURATION_S = 70.0
 

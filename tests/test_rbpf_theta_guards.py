@@ -12,12 +12,11 @@
   alone instead of pulling the position away, and clean data are (almost) never gated."""
 
 import dataclasses
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _scripts import load_script
 from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
 from trn_env.navigators.measurements import ira_seed002 as ira_model
 from trn_env.navigators.protocol import EXTRA_ESS
@@ -25,10 +24,7 @@ from trn_env.terrain.queries import ira_return
 
 from trn_env import terrain
 
-_SPEC = importlib.util.spec_from_file_location(
-    "reproduce_seed002", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed002.py")
-repro = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(repro)
+repro = load_script("reproduce_seed002")
 
 
 @pytest.fixture(scope="module")

@@ -4,18 +4,14 @@
 bootstrap PF with the same particles and model does worse; on the script's default profile (level flight
 with level turns, where heading is observable: tests/test_rbpf_crb.py) and its settings (FILTER_SETTINGS)."""
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _scripts import load_script
 
 from trn_env import terrain
 
-_SPEC = importlib.util.spec_from_file_location(
-    "reproduce_seed002", Path(__file__).resolve().parent.parent / "scripts" / "reproduce_seed002.py")
-repro = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(repro)
+repro = load_script("reproduce_seed002")
 
 DURATION_S = 70.0
 SEED = 2020

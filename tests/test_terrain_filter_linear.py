@@ -76,6 +76,20 @@ COMMON = dict(outlier_prob=0.0, terrain_model_sigma_m=0.0, map_sigma_m=0.0, ira_
               ira_look_angle_sigma_deg=0.1, baro_bias_sigma_m=3.0, vertical_noise_m_per_sqrt_s=0.0)
 
 
+def step_both(nav, k: KalmanFilter, t: float, R: float, st: np.ndarray) -> None:
+    """Predict the terrain filter and the KF to t (s) and update both with the IRA range R (m)."""
+    nav._predict_to(t, st)
+    k.predict()
+    nav._terrain_update(t, "ira", R, 0.0, st, None)
+    k.update(np.array([[H_ANT - R - H0]]))
+
+
+def moments_beside(nav, k: KalmanFilter):
+    """(filter mean, filter covariance, KF mean, KF covariance, KF sigmas)."""
+    mean, cov = nav._moments()
+    return mean, cov, k.x.ravel(), k.P, np.sqrt(np.diag(k.P))
+
+
 def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     dem = planar_dem()
     q = 1.0
@@ -104,13 +118,8 @@ def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     np.testing.assert_allclose(nav._moments()[1][:2, :2], cov0[:2, :2])
     for i, R in enumerate(ranges):
         t = 1.0 + i
-        nav._predict_to(t, st)
-        k.predict()
-        nav._terrain_update(t, "ira", float(R), 0.0, st, None)
-        k.update(np.array([[H_ANT - R - H0]]))
-    mean, cov = nav._moments()
-    xk, Pk = k.x.ravel(), k.P
-    sig = np.sqrt(np.diag(Pk))
+        step_both(nav, k, t, float(R), st)
+    mean, cov, xk, Pk, sig = moments_beside(nav, k)
     scale_pv = np.sqrt(np.outer(np.diag(Pk)[0:2], np.diag(Pk)[3:5]))
     print(f"PMF vs KF (straight): means off by {np.max(np.abs(mean[:3] - xk[:3]) / sig[:3]):.4f} sigma "
           f"(position, vertical), {np.max(np.abs(mean[3:5] - xk[3:5]) / sig[3:5]):.4f} (velocity), "
@@ -165,13 +174,8 @@ def test_pf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     nav._predict_to(0.0, st)
     for i, R in enumerate(ranges):
         t = dt * (1 + i)
-        nav._predict_to(t, st)
-        k.predict()
-        nav._terrain_update(t, "ira", float(R), 0.0, st, None)
-        k.update(np.array([[H_ANT - R - H0]]))
-    mean, cov = nav._moments()
-    xk, Pk = k.x.ravel(), k.P
-    sig = np.sqrt(np.diag(Pk))
+        step_both(nav, k, t, float(R), st)
+    mean, cov, xk, Pk, sig = moments_beside(nav, k)
     # Monte Carlo tolerance: the mean's error ~ sigma / sqrt(ESS) (ESS >= 0.5 M after resampling, but the
     # resamplings' own noise adds ~ sigma / sqrt(M) each: 0.06 sigma covers 20 updates with margin)
     assert np.all(np.abs(mean[:5] - xk) < 0.06 * sig + 0.05), (mean[:5], xk, sig)
@@ -221,13 +225,8 @@ def test_pmf_matches_the_kalman_filter_in_a_turn():
         F[3:5, 7:9] = Rk
         F[3:5, 9] = J
         k.F = F
-        nav._predict_to(t, st)
-        k.predict()
-        nav._terrain_update(t, "ira", float(R), 0.0, st, None)
-        k.update(np.array([[H_ANT - R - H0]]))
-    mean, cov = nav._moments()
-    xk, Pk = k.x.ravel(), k.P
-    sig = np.sqrt(np.diag(Pk))
+        step_both(nav, k, t, float(R), st)
+    mean, cov, xk, Pk, sig = moments_beside(nav, k)
     print(f"PMF vs KF (turn): means off by {np.max(np.abs(mean[:5] - xk[:5]) / sig[:5]):.4f} sigma, "
           f"velocity variances {np.max(np.abs(np.diag(cov)[3:5] / np.diag(Pk)[3:5] - 1)):.4f} relative")
     assert np.all(np.abs(mean[:5] - xk[:5]) < 0.01 * sig[:5]), (mean[:5], xk, sig)

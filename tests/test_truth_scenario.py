@@ -12,14 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _ecef import ned_between
-from trn_env.navigators.inertial.strapdown import StrapdownIns
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from _ins_truth import noise_free_ins_errors
 
 import trn_env.scenario.build as components
 from trn_env import cli
 from trn_env.flight.truth import TruthChunk
 from trn_env.scenario.loading import read_scenario_file, validate
-from trn_env.sensors.imu import ImuConfig, sample_imu
 
 BUILTIN = Path(components.__file__).parent / "builtin" / "seed002.toml"
 
@@ -84,17 +82,8 @@ def test_ins_follows_the_scenario_kinematic_truth():
     assert np.allclose(tr.v_ned_mps - air, [0.0, 20.0, 0.0], atol=1e-6)
     assert math.degrees(math.atan2(tr.v_ned_mps[0, 1], tr.v_ned_mps[0, 0])) == pytest.approx(
         math.degrees(math.atan2(20.0, 240.0)), abs=1e-6)          # crab in the first straight leg
-    imu, _ = sample_imu(tr, None, np.random.default_rng(0), ImuConfig.noise_free(sampling="instant"))
-    ins = StrapdownIns("j2", tau_baro_s=None, imu_samples="instant")
-    ins.reset(0.0, tr.lat_rad[0], tr.lon_rad[0], tr.h_msl_m[0], tr.v_ned_mps[0], tr.roll_rad[0],
-              tr.pitch_rad[0], tr.yaw_rad[0])
-    hist = ins.propagate(imu.t_s, imu.f_b_mps2, imu.omega_ib_b_rps)
-    k = np.searchsorted(tr.t_s, imu.t_s)
-    lat, h = tr.lat_rad[k], tr.h_msl_m[k]
-    dn = (hist[:, 0] - lat) * (meridian_radius_m(lat) + h)
-    de = (hist[:, 1] - tr.lon_rad[k]) * (prime_vertical_radius_m(lat) + h) * np.cos(lat)
-    err = np.sqrt(dn**2 + de**2 + (hist[:, 2] - h) ** 2)
-    dv = np.linalg.norm(hist[:, 3:6] - tr.v_ned_mps[k], axis=1)
+    dn, de, dd, dv, _ = noise_free_ins_errors(tr)
+    err = np.sqrt(dn**2 + de**2 + dd**2)
     assert err.max() < 0.2, err.max()
     assert dv.max() < 4e-3, dv.max()
     assert np.ptp(np.unwrap(tr.yaw_rad)) > math.radians(35) and np.ptp(tr.h_msl_m) > 100.0

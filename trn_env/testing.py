@@ -133,6 +133,28 @@ def recorded_flight(duration_s: float = 30.0, seed: int = 0, scenario: str = "de
     return rec
 
 
+def truth_chunks(sc, until_s: float):
+    """Fly the validated scenario sc's closed loop (no pipeline, no sensor log) until its time reaches
+    until_s (s) or it ends; returns (deep copies of the truth chunks its sensors sampled, the truth before
+    the first, world DEM, map DEM): a flight to sample again with other sensor noise or to feed other
+    navigators (the statistics scripts)."""
+    from trn_env.sim.closed_loop import ClosedLoop
+    chunks = []
+    with ClosedLoop(sc, pipeline=False, log_sensors=False) as loop:
+        truth0 = copy.deepcopy(loop.last_truth)
+        real = loop.sensors.sample
+
+        def spy(chunk, dem):
+            chunks.append(copy.deepcopy(chunk))
+            return real(chunk, dem)
+
+        loop.sensors.sample = spy
+        while loop.termination is None and loop.t_s < until_s:
+            loop.tick()
+        loop.sync()
+        return chunks, truth0, loop.world_dem, loop.map_dem
+
+
 # ------------------------------------------------------------------------------------------------ frames
 
 def _corrupt(frames: SensorFrames, how: str) -> SensorFrames:

@@ -61,17 +61,8 @@ class AcquisitionStep:
         w0 = time.perf_counter()
         res = acquisition.serial_search(
             self._map, self.p0[0], self.p0[1], dt, m_v, m_psi, self.b_v, self.b_psi, r_n, r_e, d, valid,
-            position_half_m=half,
-            position_bin_m=cfg.acquisition_position_bin_m,
-            speed_half_mps=cfg.acquisition_speed_half_mps,
-            speed_bin_mps=cfg.acquisition_speed_bin_mps,
-            heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
-            heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
-            cost=self._cost,
-            remove_bias=cfg.remove_bias,
-            n_min=self._n_min,
-            distinct_ratio=cfg.acquisition_distinct_ratio,
-            exclusion_m=cfg.acquisition_exclusion_m,
+            cost=self._cost, remove_bias=cfg.remove_bias, n_min=self._n_min,
+            **acquisition.search_grid(cfg, half),
         )
         self.acquisition_s = time.perf_counter() - w0
         self.acquisition_total_s += self.acquisition_s

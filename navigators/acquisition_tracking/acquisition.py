@@ -230,6 +230,22 @@ def _hypotheses(position_half_m, position_bin_m, speed_half_mps, speed_bin_mps, 
             b_psi0 + hypothesis_grid(heading_half_rad, heading_bin_rad))
 
 
+def search_grid(cfg, position_half_m: float | None = None) -> dict:
+    """serial_search's grid keywords from the navigator's settings cfg (AcqTrackConfig): the position,
+    speed and heading half-spans and bins (the heading's from deg to rad), distinct_ratio and exclusion_m;
+    position_half_m (m) in place of the setting's (the navigator widens it with its uncertainty)."""
+    return dict(
+        position_half_m=cfg.acquisition_position_half_m if position_half_m is None else position_half_m,
+        position_bin_m=cfg.acquisition_position_bin_m,
+        speed_half_mps=cfg.acquisition_speed_half_mps,
+        speed_bin_mps=cfg.acquisition_speed_bin_mps,
+        heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
+        heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
+        distinct_ratio=cfg.acquisition_distinct_ratio,
+        exclusion_m=cfg.acquisition_exclusion_m,
+    )
+
+
 def serial_search(
     rec,
     lat_c: float,

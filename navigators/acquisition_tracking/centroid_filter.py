@@ -18,11 +18,11 @@ import numpy as np
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from ..core.imu_spec import (
     ImuSpec,
-    consistency_warning,
     equivalent_ramp_walk_density,
     equivalent_walk_density,
     rss,
 )
+from ..core.measured_consistency import grade_warning
 from . import filter_kernels
 from .aiding import (
     ground_vector,
@@ -281,4 +281,4 @@ class CentroidFilter:
                    equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, ACQ_MEMORY_S),
                    spec.accel_noise_density_mps2_rthz)
         self._bias_walk2 = max(self._bias_walk2, walk**2)
-        self._consistency_warning = consistency_warning(spec, ACQ_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, ACQ_MEMORY_S, self.name)

@@ -54,7 +54,10 @@ class ImuSpec:
 
     Attributes: accel_bias_mps2 (turn-on bias), accel_bias_instability_mps2 and accel_bias_tau_s
     (Gauss-Markov), accel_noise_density_mps2_rthz (velocity random walk), accel_scale_factor_ppm,
-    accel_misalignment_rad; the gyro's likewise in rad/s, rad/s/sqrt(Hz) and rad.
+    accel_misalignment_rad; the gyro's likewise in rad/s, rad/s/sqrt(Hz) and rad. grade: the name of the
+    simulator's preset this specification is exactly ("navigation", "tactical", "consumer"; "" for any other:
+    a preset with overrides), which the measured consistency of each navigator is known for
+    (navigators.core.measured_consistency).
     """
 
     accel_bias_mps2: float = 0.0
@@ -69,9 +72,14 @@ class ImuSpec:
     gyro_noise_density_rps_rthz: float = 0.0
     gyro_scale_factor_ppm: float = 0.0
     gyro_misalignment_rad: float = 0.0
+    grade: str = ""
 
     def __post_init__(self):
+        if not isinstance(self.grade, str):
+            raise ValueError(f"ImuSpec.grade must be a string, got {self.grade!r}")
         for f in fields(self):
+            if f.name == "grade":
+                continue
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"ImuSpec.{f.name} must be a finite number >= 0, got {v!r}")
@@ -81,9 +89,12 @@ class ImuSpec:
 
     @classmethod
     def from_object(cls, obj) -> ImuSpec:
-        """From any object (or mapping) with these attribute names (e.g. the simulator's IMU config)."""
+        """From any object (or mapping) with these attribute names (e.g. the simulator's IMU config); `grade`
+        is read only from a mapping's string value (the caller names the preset otherwise)."""
         get = obj.get if isinstance(obj, dict) else (lambda k, d: getattr(obj, k, d))
-        return cls(**{f.name: float(get(f.name, f.default)) for f in fields(cls)})
+        grade = obj.get("grade", "") if isinstance(obj, dict) else ""
+        return cls(**{f.name: float(get(f.name, f.default)) for f in fields(cls) if f.name != "grade"},
+                   grade=grade if isinstance(grade, str) else "")
 
     # ---------------------------------------------------------------- biases carried as states
     @property

@@ -8,15 +8,19 @@ from numba import njit
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def propagate_particles(dn, de, b, dv, dpsi, dt, f_n, f_e, g_over_r, s_pos, s_vel, s_psi, s_b, z):
-    """Advance every particle's INS error state by dt (s), in place.
+def propagate_particles(particles, dt, force, noise, z):
+    """Advance every particle's INS error state by dt (s), in place. Records (numba tuples):
 
-    State (true minus INS unless said): dn, de (m), b (INS height minus true, m), dv (M, 2) horizontal
-    velocity (m/s), dpsi heading (rad). Error dynamics (psi-angle model, horizontal): a heading error turns
-    the specific force, d(dv)/dt = dpsi * (-f_e, f_n) (f_n, f_e: the INS's horizontal specific force, m/s^2,
-    NED), minus the Schuler term (g / R) (dn, de); d(dn, de)/dt = dv. Noise: z (M, 6) standard normals
+    particles = (dn, de, b, dv, dpsi), the state (true minus INS unless said): dn, de (m), b (INS height
+    minus true, m), dv (M, 2) horizontal velocity (m/s), dpsi heading (rad). force = (f_n, f_e, g_over_r).
+    Error dynamics (psi-angle model, horizontal): a heading error turns the specific force, d(dv)/dt =
+    dpsi * (-f_e, f_n) (f_n, f_e: the INS's horizontal specific force, m/s^2, NED), minus the Schuler term
+    (g / R) (dn, de); d(dn, de)/dt = dv. noise = (s_pos, s_vel, s_psi, s_b): z (M, 6) standard normals
     scaled by s_pos (m/sqrt(s)) on the position, s_vel (m/s/sqrt(s)) on the velocity, s_b (m/sqrt(s)) on
     b and s_psi (rad/sqrt(s)) on the heading."""
+    dn, de, b, dv, dpsi = particles
+    f_n, f_e, g_over_r = force
+    s_pos, s_vel, s_psi, s_b = noise
     sq = math.sqrt(dt)
     for k in range(dn.shape[0]):
         vn0 = dv[k, 0]

@@ -136,8 +136,7 @@ def bias_update(bias, resid, gain):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def ira_update_pass(rec, lat, lon, r_lat, r_lon, dn, de, pn, pe, h_meas, S, gain, lg, le, floor, logw, bias,
-                    gam, out):
+def ira_update_pass(rec, ref, grid, meas, robust, gam, out):
     """One IRA terrain update of the whole grid, fused (one map lookup per cell): the predicted terrain
     height map(cell + p) + bias (the map bicubic if cubic, else bilinear: terrain.kernels), the heavy-tailed
     log-likelihood (measurements.robust_ll_one inlined, its constants hoisted; variance S),
@@ -149,7 +148,17 @@ def ira_update_pass(rec, lat, lon, r_lat, r_lon, dn, de, pn, pe, h_meas, S, gain
     past), prior mean and variance of the predicted height (over all cells; off-map cells count as 0 -
     negligible when few), number of cells off the map, the posterior's maximum before renormalising (-inf:
     every cell underflowed - logw and bias are then garbage: the caller restores them), then
-    grid_moments' seven values of the posterior."""
+    grid_moments' seven values of the posterior.
+
+    Records (numba tuples): ref = (lat, lon rad, r_lat, r_lon m) the INS position and the radii of the map
+    lookups; grid = (dn, de m, logw, bias m) the cells' offsets, log-weights and vertical offsets (the last
+    two updated in place); meas = (pn, pe m the closest point's horizontal offset, h_meas m, S m^2 its
+    variance, gain the vertical offset's Kalman gain); robust = (lg, le, floor) the heavy-tailed
+    likelihood's log inlier / outlier terms and the log-weight floor."""
+    lat, lon, r_lat, r_lon = ref
+    dn, de, logw, bias = grid
+    pn, pe, h_meas, S, gain = meas
+    lg, le, floor = robust
     m = logw.shape[0]
     s0 = sp = spp = 0.0
     mx = -np.inf

@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 from ..core.error_states import ACC_BIAS, BGZ, N_EKF13, PSID, PSIE, PSIN, VEL
-from ..core.imu_spec import ImuSpec, consistency_warning, equivalent_walk_density
+from ..core.imu_spec import ImuSpec, equivalent_walk_density
+from ..core.measured_consistency import grade_warning
 from ..frames import SensorFrames
 from ..inertial.strapdown import GRAVITY_MODELS, quat_to_dcm
 from ..measurements.baro import geometric_height_m
@@ -195,7 +196,7 @@ class InsTrnPropagation:
         self._q_bg_walk = 2.0 * spec.gyro_bias_instability_rps**2 / spec.gyro_bias_tau_s
         self._turn_tilt2 = spec.turn_tilt_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
         self._turn_heading2 = spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
-        self._consistency_warning = consistency_warning(spec, EKF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, EKF_MEMORY_S, self.name)
         self._Q = None
 
     def _turn_noise(self) -> None:

@@ -43,12 +43,12 @@ import numpy as np
 from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
-    consistency_warning,
     equivalent_ramp_walk_density,
     equivalent_walk_density,
     rss,
     vertical_offset_walk_density,
 )
+from ..core.measured_consistency import grade_warning
 from ..core.resampling import systematic_kernel
 from ..inertial.strapdown import quat_to_dcm
 from ..measurements import gnss as gnss_model
@@ -139,7 +139,7 @@ class ParticleFilter(InsRiddenFilter):
         # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
-        self._consistency_warning = consistency_warning(spec, PF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, PF_MEMORY_S, self.name)
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
         self._init_cov = np.array(cov9, float)
@@ -182,8 +182,9 @@ class ParticleFilter(InsRiddenFilter):
         lat = float(st[0]) if st is not None else 0.6
         g_over_r = 9.81 / float(radii_m(lat, 0.0)[0])
         z = self.rng.standard_normal((self.M, N_STATE))
-        propagate_particles(self.dn, self.de, self.b, self.dv, self.dpsi, dt, float(f_n), float(f_e),
-                            g_over_r, self.s_pos, self.s_vel, self.s_psi, 0.0, z)
+        propagate_particles((self.dn, self.de, self.b, self.dv, self.dpsi), dt,
+                            (float(f_n), float(f_e), g_over_r),
+                            (float(self.s_pos), float(self.s_vel), float(self.s_psi), 0.0), z)
         self.P_b += self._offset_process_var(dt, st)
         self._t_belief = t_s
         self._moments_cache = None

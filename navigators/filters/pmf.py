@@ -64,11 +64,11 @@ import numpy as np
 from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
-    consistency_warning,
     equivalent_walk_density,
     rss,
     vertical_offset_walk_density,
 )
+from ..core.measured_consistency import grade_warning
 from ..inertial.strapdown import quat_to_dcm
 from ..measurements import gnss as gnss_model
 from ..measurements import ira, radar_altimeter
@@ -145,7 +145,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
-        self._consistency_warning = consistency_warning(spec, PMF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
 
@@ -288,9 +288,10 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             S = self.P_b + float(self.ira_variance(range_m, p[2], math.hypot(p[0], p[1])))
             saved = (self.logw.copy(), self.bias.copy())
             o = self._out
-            kern.ira_update_pass(self._map_record(), lat, lon, r_lat, r_lon, self.dn_flat, self.de_flat,
-                                 float(p[0]), float(p[1]), h_meas, S, self.P_b / S, self._lg, self._le,
-                                 LOG_FLOOR, self.logw, self.bias, self._work[0], o)
+            kern.ira_update_pass(self._map_record(), (lat, lon, r_lat, r_lon),
+                                 (self.dn_flat, self.de_flat, self.logw, self.bias),
+                                 (float(p[0]), float(p[1]), h_meas, S, self.P_b / S),
+                                 (self._lg, self._le, LOG_FLOOR), self._work[0], o)
             n_nan = int(o[3])
             if n_nan == m or not np.isfinite(o[4]):
                 self.logw, self.bias = saved

@@ -72,9 +72,10 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from ..core.imu_spec import ImuSpec, consistency_warning
+from ..core.imu_spec import ImuSpec
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
+from ..core.measured_consistency import grade_warning
 from ..core.recovery import IntegrityRecovery
 from ..core.settings import SettingsError
 from ..frames import SensorFrames
@@ -227,7 +228,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             self.P0_settings[i, i] = max(self.P0_settings[i, i], spec.body_accel_sigma_mps2 ** 2)
         tilt2, heading2 = spec.turn_tilt_sigma_rad(1.0) ** 2, spec.turn_heading_sigma_rad(1.0) ** 2
         self._turn_att_var = np.array([tilt2, tilt2, heading2]) * TURN_REFERENCE_RAD
-        self._consistency_warning = consistency_warning(spec, RBPF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, RBPF_MEMORY_S, self.name)
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn

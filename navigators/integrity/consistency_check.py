@@ -18,10 +18,12 @@ cap only lowers the sum, so the false-flag probability stays at most alpha.
 
 What the flag does to the navigator's Health (`apply`): ok = False, status = "inconsistent" (unless the
 navigator already names a fault: degraded, acquiring, diverged or lost stay) and consistency_warning = the
-test's message, for every estimate published while the window is over its bound. A consumer therefore reads it
-as "do not trust the position or its protection level now"; the protection-level campaign
-(docs/validation/integrity.md section 6) counts flagged epochs as not healthy, as certification counts an
-alerted epoch. The check never changes the estimate itself.
+test's message (after the navigator's static warning, if any), for every estimate published while the
+window is over its bound. A static warning alone (navigators.core.measured_consistency: a covariance known
+to be conservative, or known not to bound the error on that IMU grade) withdraws nothing here: only the
+flag does. A consumer therefore reads the flag as "do not trust the position or its protection level
+now"; the protection-level campaign (docs/validation/integrity.md section 6) counts flagged epochs as not
+healthy, as certification counts an alerted epoch. The check never changes the estimate itself.
 """
 
 from __future__ import annotations

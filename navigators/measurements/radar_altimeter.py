@@ -37,10 +37,14 @@ def variance(sigma_m: float, map_sigma_m: float, terrain_model_sigma_m: float) -
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _cone_ray(rec, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay, az, ux, uy, uz, wx, wy, wz, ang, ph,
-              cosb):
+def _cone_ray(rec, ant, cone, ang, ph):
     """Distance (m) to the map along the cone direction at angle ang from the axis, azimuth ph (inf if the
-    line of sight misses the map or leaves the cone)."""
+    line of sight misses the map or leaves the cone). Records (numba tuples): ant = (lat, lon rad, r_lat_m,
+    r_lon_m the radii of the map lookups, h_a m, agl m above the map at nadir) the antenna; cone = (ax, ay,
+    az the unit axis, ux, uy, uz and wx, wy, wz the orthonormal pair perpendicular to it (NED), cos of the
+    half beam)."""
+    lat_k, lon_k, r_lat_m, r_lon_m, ha, agl = ant
+    ax, ay, az, ux, uy, uz, wx, wy, wz, cosb = cone
     ca, sa = math.cos(ang), math.sin(ang)
     cph, sph = math.cos(ph), math.sin(ph)
     dx = ca * ax + sa * (cph * ux + sph * wx)
@@ -110,6 +114,8 @@ def predict(rec, lat_ref, lon_ref, r_lat_m, r_lon_m, h_ant_m, dn_m, de_m, dh_m, 
         wx = ay * uz - az * uy
         wy = az * ux - ax * uz
         wz = ax * uy - ay * ux
+        ant = (lat_k, lon_k, r_lat_m, r_lon_m, ha, agl)
+        cone = (ax, ay, az, ux, uy, uz, wx, wy, wz, cosb)
         step_a = half_beam_rad / max(n_rings, 1)
         step_p = 2.0 * math.pi / n_az
         best_a, best_p = 0.0, 0.0
@@ -118,8 +124,7 @@ def predict(rec, lat_ref, lon_ref, r_lat_m, r_lon_m, h_ant_m, dn_m, de_m, dh_m, 
             n_a = 1 if r == 0 else n_az
             for q in range(n_a):
                 ph = step_p * q
-                d = _cone_ray(rec, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay, az, ux, uy, uz, wx, wy,
-                              wz, ang, ph, cosb)
+                d = _cone_ray(rec, ant, cone, ang, ph)
                 if d < best:
                     best, best_a, best_p = d, ang, ph
         if n_rings > 0 and best < np.inf:
@@ -133,8 +138,7 @@ def predict(rec, lat_ref, lon_ref, r_lat_m, r_lon_m, h_ant_m, dn_m, de_m, dh_m, 
                         if ia == 0 and ip == 0:
                             continue
                         ph = p0 + ip * step_p
-                        d = _cone_ray(rec, lat_k, lon_k, r_lat_m, r_lon_m, ha, agl, ax, ay, az, ux, uy, uz,
-                                      wx, wy, wz, ang, ph, cosb)
+                        d = _cone_ray(rec, ant, cone, ang, ph)
                         if d < best:
                             best, best_a, best_p = d, ang, ph
         if best < np.inf:

@@ -146,19 +146,7 @@ def _acquisition_figures(repeats: int = 3) -> dict:
         lat, lon, dt, zeros, zeros, 81.3, math.radians(33.7), r_n, r_e
     )
     d = np.asarray(dem.height(la, lo), float)
-    kw = dict(
-        position_half_m=cfg.acquisition_position_half_m,
-        position_bin_m=cfg.acquisition_position_bin_m,
-        speed_half_mps=cfg.acquisition_speed_half_mps,
-        speed_bin_mps=cfg.acquisition_speed_bin_mps,
-        heading_half_rad=math.radians(cfg.acquisition_heading_half_deg),
-        heading_bin_rad=math.radians(cfg.acquisition_heading_bin_deg),
-        cost=0,
-        remove_bias=True,
-        n_min=15,
-        distinct_ratio=cfg.acquisition_distinct_ratio,
-        exclusion_m=cfg.acquisition_exclusion_m,
-    )
+    kw = dict(cost=0, remove_bias=True, n_min=15, **acquisition.search_grid(cfg))
     args = (
         dem.record(),
         lat + 320.0 / r_n,

@@ -36,7 +36,7 @@ from trn_env.campaign.spec import (
     grid_values,
     is_number,
 )
-from trn_env.output.metrics import METRIC_KEYS, MetricSettings, horizontal_series, navigation_metrics
+from trn_env.output.metrics import MetricSettings, horizontal_series, navigation_metrics
 
 _KEYS = {"name", "description", "logs", "navigators", "seeds", "sweeps", "metrics"}
 
@@ -192,7 +192,7 @@ def replay_run(task: LogReplayTask) -> tuple[dict, None]:
     import os
     import socket
 
-    from trn_env.campaign.runs import SERIES_KEYS, versions
+    from trn_env.campaign.runs import unflown, versions
     from trn_env.logs.replay import replay
     row = {"campaign": task.campaign, "campaign_hash": task.campaign_hash, "run_id": task.run_id,
            "run_index": task.run_index, "variant_index": task.variant_index, "seed_index": task.seed_index,
@@ -203,12 +203,7 @@ def replay_run(task: LogReplayTask) -> tuple[dict, None]:
            "attempts": task.attempt, "wall_time_s": float("nan"), "sim_time_s": float("nan"),
            "distance_flown_m": float("nan"), "jsbsim_steps": 0, "host": socket.gethostname(),
            "pid": os.getpid()} | versions()
-    for k in METRIC_KEYS:
-        row[k] = float("nan") if k != "track_lost" else False
-    for k in SERIES_KEYS:
-        row[f"series_{k}"] = []
-    for p, v in task.sweep.items():
-        row[f"sweep.{p}"] = v
+    unflown(row, task.sweep)
     wall0 = time.perf_counter()
     try:
         res = replay(task.log_path, task.navigator_name, settings=copy.deepcopy(task.settings),

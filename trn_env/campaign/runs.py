@@ -89,11 +89,17 @@ def _base_row(task: RunTask) -> dict:
         "jsbsim_steps": 0, "host": socket.gethostname(), "pid": os.getpid(),
     }
     row.update(versions())
+    return unflown(row, task.sweep)
+
+
+def unflown(row: dict, sweep: dict) -> dict:
+    """row (in place) with every metric NaN (track_lost False) and every series empty, as a run that has
+    not flown yet, and the sweep point's values under "sweep.<path>"; returns row."""
     for k in METRIC_KEYS:
         row[k] = float("nan") if k != "track_lost" else False
     for k in SERIES_KEYS:
         row[f"series_{k}"] = []
-    for path, v in task.sweep.items():
+    for path, v in sweep.items():
         row[f"sweep.{path}"] = v
     return row
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trn_env.cli.common import _interrupt_exit
+from trn_env.cli.common import _interrupt_exit, _print_problems
 
 
 def cmd_campaign(args) -> int:
@@ -18,9 +18,7 @@ def cmd_campaign(args) -> int:
         baseline = read_baseline(args.check) if args.check is not None else None
         campaign = load_campaign(args.file)
     except CampaignError as err:
-        print(f"error: campaign {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
-        for prob in err.problems:
-            print(f"  - {prob}", file=sys.stderr)
+        _print_problems(err, "campaign")
         return 2
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -37,10 +37,21 @@ def _install_sigterm():
         return None
 
 
-def _print_problems(err) -> None:
-    print(f"error: scenario {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
+def _print_problems(err, what: str = "scenario") -> None:
+    """Every problem of a ScenarioError / CampaignError (`what` names the file's kind), one a line."""
+    print(f"error: {what} {err.source} is invalid ({len(err.problems)} problem(s)):", file=sys.stderr)
     for prob in err.problems:
         print(f"  - {prob}", file=sys.stderr)
+
+
+def _discard_partial_log(writer, log_path: Path | None) -> None:
+    """After a run's log writing (finally): abort the writer if it did not finish (writer not None) and
+    remove the log folder if the run did not hand it over (log_path not None): nothing half-written stays."""
+    if writer is not None:
+        writer.abort()
+    if log_path is not None and log_path.exists():
+        import shutil
+        shutil.rmtree(log_path, ignore_errors=True)
 
 
 def out_dir_problem(out: Path, overwrite: bool = False) -> str | None:

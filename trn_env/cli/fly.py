@@ -8,7 +8,13 @@ import sys
 from pathlib import Path
 
 from trn_env import __version__
-from trn_env.cli.common import _command_line, _interrupt_exit, _print_problems, out_dir_problem
+from trn_env.cli.common import (
+    _command_line,
+    _discard_partial_log,
+    _interrupt_exit,
+    _print_problems,
+    out_dir_problem,
+)
 
 
 def _at_loss(summary: dict) -> str:
@@ -165,11 +171,7 @@ def cmd_fly(args) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     finally:
-        if writer is not None:
-            writer.abort()
-        if log_path is not None and log_path.exists():
-            import shutil
-            shutil.rmtree(log_path, ignore_errors=True)
+        _discard_partial_log(writer, log_path)
     console.print(_summary_table(result.summary, out_dir))
     return 0
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trn_env.cli.common import _print_problems, out_dir_problem
+from trn_env.cli.common import _discard_partial_log, _print_problems, out_dir_problem
 from trn_env.cli.fly import _log_writer, _plotter
 
 
@@ -108,11 +108,7 @@ def cmd_replay(args) -> int:
         print("interrupted while writing: no summary written", file=sys.stderr)
         return 130
     finally:
-        if writer is not None:
-            writer.abort()
-        if log_path is not None and log_path.exists():
-            import shutil
-            shutil.rmtree(log_path, ignore_errors=True)
+        _discard_partial_log(writer, log_path)
     s = res.summary
     if res.has_truth:
         print(f"replayed {args.log} with {s['navigator']}: {s['termination']}, horizontal RMS "

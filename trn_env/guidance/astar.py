@@ -93,13 +93,17 @@ def edge_featureless(u, i, j, di, dj):
 
 
 @njit(cache=True)
-def astar_kernel(
-    u, height, blocked, cell_n_m, cell_e_m, moves, weight, bounded, n_bins, bin_m, climb_max, si, sj, gi, gj
-):
+def astar_kernel(grid, search, start, goal):
     """A* over states (cell, featureless-stretch bin); returns (cost, path as (n, 2) cells; empty if none).
 
+    Records (numba tuples): grid = (u featureless measure, height m, blocked, cell_n_m, cell_e_m) per cell;
+    search = (moves, weight, bounded, n_bins, bin_m, climb_max); start, goal = (i, j) cells.
     bounded False: no featureless bound (n_bins 1). Else a state's bin is round(stretch / bin_m) and a
-    featureless edge that would take it to n_bins or beyond is not allowed."""
+    featureless edge that would take it to n_bins or beyond is not allowed. climb_max <= 0: no climb limit."""
+    u, height, blocked, cell_n_m, cell_e_m = grid
+    moves, weight, bounded, n_bins, bin_m, climb_max = search
+    si, sj = start
+    gi, gj = goal
     ni, nj = u.shape
     n_states = ni * nj * n_bins
     g = np.full(n_states, np.inf)

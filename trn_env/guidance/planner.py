@@ -371,21 +371,10 @@ class TerrainInformationPlanner:
             n_bins = int(math.floor(c.max_featureless_m / self._bin_m)) + 1
         climb = -1.0 if c.climb_gradient is None else float(c.climb_gradient)
         cost, path = astar_kernel(
-            self.grid.featureless,
-            self._height,
-            self.blocked,
-            self.grid.cell_n_m,
-            self.grid.cell_e_m,
-            MOVES,
-            float(c.weight),
-            c.max_featureless_m is not None,
-            n_bins,
-            self._bin_m,
-            climb,
-            si,
-            sj,
-            gi,
-            gj,
+            (self.grid.featureless, self._height, self.blocked, self.grid.cell_n_m, self.grid.cell_e_m),
+            (MOVES, float(c.weight), c.max_featureless_m is not None, n_bins, self._bin_m, climb),
+            (si, sj),
+            (gi, gj),
         )
         if len(path) == 0:
             bound = (

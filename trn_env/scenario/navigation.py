@@ -15,20 +15,27 @@ from trn_env.scenario.maps import _table, map_noise_settings
 
 def imu_spec(imu):
     """The scenario IMU's error specification as the navigators take it (navigators.core.imu_spec.ImuSpec,
-    from trn_env.sensors.imu.ImuConfig: its grade and overrides); `imu` is an ImuConfig (the scenario's
+    from trn_env.sensors.imu.ImuConfig: its grade and overrides; ImuSpec.grade names the preset it equals,
+    "" for a preset with overrides); `imu` is an ImuConfig (the scenario's
     `sensors.imu`) or an [sensors.imu] table; None without an IMU or for a table that does not validate
     (the sensors check reports that)."""
+    import dataclasses
+
     from trn_env.navigators.core.imu_spec import ImuSpec
-    from trn_env.sensors.imu import ImuConfig
+    from trn_env.sensors.imu import IMU_GRADES, ImuConfig
     if imu is None or imu is False:
         return None
     if isinstance(imu, ImuConfig):
-        return ImuSpec.from_object(imu)
-    try:
-        cfg = ImuConfig.from_mapping(dict(imu))
-    except (ValueError, TypeError):
-        return None
-    return ImuSpec.from_object(cfg)
+        cfg = imu
+    else:
+        try:
+            cfg = ImuConfig.from_mapping(dict(imu))
+        except (ValueError, TypeError):
+            return None
+    # the preset it is exactly (none for a preset with overrides): the grade each navigator's consistency
+    # is known for (navigators.core.measured_consistency)
+    grade = next((name for name, preset in IMU_GRADES.items() if cfg == preset), "")
+    return dataclasses.replace(ImuSpec.from_object(cfg), grade=grade)
 
 
 def imu_bias_settings(imu, epoch_s: float = 1.0) -> dict:

@@ -143,8 +143,14 @@ def _gather(idx, t_s, lat, lon, h, C_bn, v_ned):
 
 
 @njit(cache=True)
-def _ira_kernel(lat, lon, h, q_valid, q_lat, q_lon, q_h, C_bn, l1, l2, method, max_range, w, sig_r, sig_th):
-    """R and theta from the closest points q seen from antennas (lat, lon, h); noise w (n, 2)."""
+def _ira_kernel(lat, lon, h, ret, C_bn, geometry, w, noise):
+    """R and theta from the closest points seen from antennas (lat, lon, h). Records (numba tuples): ret =
+    (q_valid, q_lat, q_lon, q_h) the terrain query's closest points; geometry = (l1, l2 m the left and
+    right baselines, method the look-angle method's index, max_range m); noise = (sigma_R m, sigma_theta
+    rad) scaling the standard normals w (n, 2)."""
+    q_valid, q_lat, q_lon, q_h = ret
+    l1, l2, method, max_range = geometry
+    sig_r, sig_th = noise
     n = lat.shape[0]
     p = ned_vectors_kernel(lat, lon, h, q_lat, q_lon, q_h)
     r_out = np.empty(n)
@@ -183,9 +189,9 @@ def sample_ira(truth: TruthChunk, terrain, rng: np.random.Generator, config: Ira
         lat, lon, h = antenna_positions(lat, lon, h, C_bn, config.lever_arm_b_m)
     ret = queries.ira_return(terrain, lat, lon, h, v_ned, C_bn, config._half_window_rad, config.max_range_m,
                              warm_start=state.last_return_rad)
-    r, theta, valid = _ira_kernel(lat, lon, h, ret.valid, ret.lat_rad, ret.lon_rad, ret.h_m, C_bn,
-                                  config.baseline_left_m, config.baseline_right_m, config._method_index,
-                                  config.max_range_m, w, config.range_noise_m, config._look_angle_noise_rad)
+    geometry = (config.baseline_left_m, config.baseline_right_m, config._method_index, config.max_range_m)
+    r, theta, valid = _ira_kernel(lat, lon, h, (ret.valid, ret.lat_rad, ret.lon_rad, ret.h_m), C_bn, geometry,
+                                  w, (config.range_noise_m, config._look_angle_noise_rad))
     state = IraState(last_k, _last_valid_return(ret, state.last_return_rad))
     return trusted_frame(IraFrame, t_s=t, range_m=r, look_angle_rad=theta, valid=valid), state
 

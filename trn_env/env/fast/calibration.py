@@ -78,16 +78,17 @@ REFERENCE_ROUTES = (
         **_JACKS,
     ),
 )
-# The full JSBSim loop's true error at the goal on every reference route, seeds 0..n-1, recorded with
-# `python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out out/fast_calibration` (the same figures
-# on main of 4 and 5 Dec 2026, docs/validation/fast_tier.md): the default test compares the fast tier with
-# these; the slow test flies both tiers.
+# The full JSBSim loop's true error at the goal on every reference route, seeds 0..n-1, at the route task's
+# full-tier settings (full_tier_settings(): JSBSim at 50 Hz), recorded with
+# `python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out out/fast_calibration`
+# (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies
+# both tiers.
 FULL_LOOP_REFERENCE = {
-    "basin_straight": {"mean_m": 501.5, "p90_m": 888.1, "n": 32},
-    "basin_round": {"mean_m": 17.3, "p90_m": 29.0, "n": 32},
-    "basin_west": {"mean_m": 22.6, "p90_m": 39.5, "n": 32},
-    "jacksboro_sw_ne": {"mean_m": 6.4, "p90_m": 10.5, "n": 32},
-    "jacksboro_flat_patch": {"mean_m": 10.3, "p90_m": 14.8, "n": 32},
+    "basin_straight": {"mean_m": 521.8, "p90_m": 890.9, "n": 32},
+    "basin_round": {"mean_m": 18.0, "p90_m": 33.9, "n": 32},
+    "basin_west": {"mean_m": 21.1, "p90_m": 38.7, "n": 32},
+    "jacksboro_sw_ne": {"mean_m": 5.8, "p90_m": 10.3, "n": 32},
+    "jacksboro_flat_patch": {"mean_m": 9.5, "p90_m": 14.9, "n": 32},
 }
 # the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
 FAST_SEEDS = 256
