@@ -64,3 +64,24 @@ def test_built_navigator_states_its_condition(name):
     nav = build_navigator(validate(data, source="test"), dem)
     validated = "navigation/as_published" in registry.capabilities(name).pl_validated
     assert (nav.pl_not_validated == "") == validated
+
+
+@pytest.mark.parametrize("name", ["pmf", "pf", "rbpf", "ins_tercom", "acq_track"])
+def test_declared_conditions_are_the_campaigns(name):
+    """A navigator declares a grade/map condition validated exactly when the campaign's report on the
+    validation page (docs/validation/integrity_pl_campaign.json) bounds its misleading-information rate at or
+    below the stated risk on every terrain flown under that condition."""
+    import json
+    from pathlib import Path
+    doc = json.loads((Path(__file__).resolve().parents[1] / "docs" / "validation"
+                      / "integrity_pl_campaign.json").read_text())
+    met: dict[str, bool] = {}
+    for key, m in doc["results"].items():
+        nav, condition = key.split("/")
+        if nav != name or condition == "all":
+            continue
+        _terrain, grade, map_class = condition.split("-")
+        ok = m["pl_misleading_rate_upper95"] <= doc["integrity_risk"]
+        met[f"{grade}/{map_class}"] = met.get(f"{grade}/{map_class}", True) and ok
+    assert met, "no campaign rows for " + name
+    assert set(registry.capabilities(name).pl_validated) == {c for c, ok in met.items() if ok}
