@@ -1,13 +1,14 @@
 """The particle filter's velocity process noise from the IMU's specification (navigators.filters.pf,
-`ParticleFilter._velocity_step_var`): the acceleration error the particles do not carry grows the cloud's
-velocity sigma by sigma_acc(t) dt per step, sigma_acc(t)^2 = sigma_a^2 + (j t)^2.
+`ParticleFilter._velocity_step_var`): the acceleration error the particles do not carry, a0 + j t, adds
+2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt per step, rho the free INS's correlation of the
+velocity error with it.
 
 Checked against figures written out here from the presets' data sheets (trn_env.sensors.imu: tactical 1 mg
 bias, 0.1 mg instability, 0.5 mrad misalignment, 1 deg/h gyro bias + 0.3 deg/h instability, 100 ug/sqrt(Hz);
 the default initial tilt 0.05 mrad): a cloud propagated for 100 s without measurements (10,000 particles:
-the sample sigma's relative error ~0.7 %) has the linear growth sigma_v0 + integral of sigma_acc, which
-bounds the free INS's root-sum-square growth sqrt(sigma_v0^2 + N^2 t + sigma_a^2 t^2 + j^2 t^4 / 4); a cloud
-whose velocity is known gains only the step's own share.
+the sample sigma's relative error ~0.7 %) grows as the free INS's velocity error, sqrt(sigma_v0^2 + N^2 t +
+sigma_a^2 t^2 + j^2 t^4 / 4) (plus the steps' sigma_acc^2 dt^2); a cloud whose velocity is known gains only
+the step's own share.
 """
 from __future__ import annotations
 
@@ -66,11 +67,12 @@ def test_an_unobserved_cloud_grows_its_velocity_sigma_by_the_acceleration_error(
     for k in range(1, T + 1):
         nav._predict_to(float(k))
     sv = np.std(nav.dv, axis=0)
-    # sigma' = sigma + sigma_acc(t) dt each 1 s step (t at the step's end), the velocity random walk on top
-    expect = SIGMA_V0 + sum(math.sqrt(sigma_a**2 + (j * k) ** 2) for k in range(1, T + 1))
+    free_ins = SIGMA_V0**2 + n**2 * T + sigma_a**2 * T**2 + j**2 * T**4 / 4
+    steps = sum(sigma_a**2 + (j * k) ** 2 for k in range(1, T + 1))      # sigma_acc^2 dt^2 per 1 s step
+    expect = math.sqrt(free_ins + steps)
     assert sv == pytest.approx([expect, expect], rel=0.03)
-    free_ins = math.sqrt(SIGMA_V0**2 + n**2 * T + sigma_a**2 * T**2 + j**2 * T**4 / 4)
-    assert np.all(sv >= 0.97 * free_ins)
+    if grade == "navigation":    # not the linear sum sigma_v0 + sigma_a t (v0 and a taken fully correlated)
+        assert expect < 0.8 * (SIGMA_V0 + sigma_a * T)
 
 
 def test_a_known_velocity_gains_only_the_step_share(dem):

@@ -102,7 +102,7 @@ class ParticleFilter(InsRiddenFilter):
         self.s_vel = s.velocity_noise_mps_per_sqrt_s
         self.s_psi = s.heading_noise_rad_per_sqrt_s
         self._imu_spec: ImuSpec | None = None
-        self._accel_model: tuple[float, float, float] | None = None   # (N^2, sigma_a^2, j^2): reset
+        self._accel_model: tuple[float, float, float, float] | None = None  # set by reset
         self._t_ins0_s = 0.0
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.M = s.n_particles
@@ -151,33 +151,40 @@ class ParticleFilter(InsRiddenFilter):
         tilt0 = math.sqrt(max(0.5 * float(self._p_att0[0] + self._p_att0[1]), 0.0))   # initial tilt (rad)
         a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi),
                 G0_MPS2 * tilt0)
+        v0 = max(0.5 * float(self._p_vel0[0] + self._p_vel0[1]), 0.0)                  # initial velocity
         self._accel_model = (spec.accel_noise_density_mps2_rthz ** 2, a * a,
-                             spec.tilt_accel_rate_sigma_mps3 ** 2)
+                             spec.tilt_accel_rate_sigma_mps3 ** 2, v0)
 
     def _velocity_step_var(self, t_s: float, dt: float) -> float:
         """Variance (m^2/s^2 per axis) the particles' velocity offsets gain over dt ending at t_s.
 
         Without the IMU's specification: velocity_noise_mps_per_sqrt_s^2 dt. With it: the acceleration
-        error a the particles do not carry - sigma_acc(t)^2 = sigma_a^2 + (j t)^2, a constant part and the
-        gyro-bias tilt's ramp j = g sigma_bg, t since the reset - moves the velocity error by a dt per step,
-        correlated with the velocity error it built. Taken fully correlated with the cloud's velocity offset
-        (sigma_v, the larger axis), the velocity's sigma grows by sigma_acc dt: (sigma_v + sigma_acc dt)^2 -
-        sigma_v^2 = 2 sigma_v sigma_acc dt + sigma_acc^2 dt^2, plus the velocity random walk N^2 dt. While
-        the terrain has not told the velocity apart, sigma_v is the INS's own (sigma_v0 + sigma_acc t: the
-        free INS's velocity error growth, Titterton & Weston 2004 sec. 12.3, without Schuler's bound); once
-        it has, the growth shrinks with sigma_v. A random walk of fixed density (the equivalent walk at one
-        memory) cannot do both: fitted at a memory it is too small for an unobserved velocity and too large
-        for an observed one."""
+        error the particles do not carry, a(t) = a0 + j t (a0 ~ sigma_a, a constant; j = g sigma_bg, the
+        gyro-bias tilt's ramp; t since the reset; variance sigma_acc^2 = sigma_a^2 + sigma_j^2 t^2), moves the
+        velocity error by a dt per step, correlated with the velocity error v it built: the step adds
+        2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt, sigma_v the cloud's velocity sigma (the larger
+        axis). rho is the correlation of v and a in the free INS, which starts with an independent v0
+        (sigma_v0, the initial velocity's): cov = sigma_a^2 t + sigma_j^2 t^3 / 2, var v = sigma_v0^2 + N^2 t
+        + sigma_a^2 t^2 + sigma_j^2 t^4 / 4. An unobserved velocity (sigma_v the free INS's) thus grows
+        exactly as the free INS's velocity error (Titterton & Weston 2004, sec. 12.3, without Schuler's
+        bound), and a velocity the terrain has told apart gains less, with its smaller sigma (a Kalman
+        update that shrinks v's variance by (1 - K) shrinks its correlation with a by sqrt(1 - K), so the
+        free INS's rho bounds the filter's from above). A random walk of fixed density (the equivalent walk
+        at one memory) cannot do both: fitted at a memory it is too small for an unobserved velocity and
+        too large for an observed one."""
         model = self._accel_model
         if model is None:
             return self.s_vel * self.s_vel * dt
-        n2, a2, j2 = model
+        n2, a2, j2, v02 = model
         t = max(t_s - self._t_ins0_s, 0.0)
         w = self._weights()
         d = self.dv - w @ self.dv
         sigma_v = math.sqrt(max(float(np.max(w @ (d * d))), 0.0))
-        s_acc = math.sqrt(a2 + j2 * t * t)
-        return n2 * dt + 2.0 * sigma_v * s_acc * dt + (s_acc * dt) ** 2
+        acc2 = a2 + j2 * t * t
+        cov_free = a2 * t + 0.5 * j2 * t ** 3
+        var_free = v02 + n2 * t + a2 * t * t + 0.25 * j2 * t ** 4
+        rho = min(cov_free / math.sqrt(var_free * acc2), 1.0) if var_free * acc2 > 0.0 else 0.0
+        return n2 * dt + 2.0 * rho * sigma_v * math.sqrt(acc2) * dt + acc2 * dt * dt
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
         self._init_cov = np.array(cov9, float)
