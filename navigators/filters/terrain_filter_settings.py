@@ -121,7 +121,8 @@ class PfSettings(TerrainFilterSettings):
     roughening: float = setting(0.1, "roughening after a resample, in the cloud's spread", "1", ge=0.0)
     position_noise_m_per_sqrt_s: float = setting(0.1, "random walk of the horizontal position error",
                                                  "m/sqrt(s)", ge=0.0)
-    velocity_noise_mps_per_sqrt_s: float = setting(0.02, "random walk of the velocity offset",
+    velocity_noise_mps_per_sqrt_s: float = setting(0.02, "random walk of the velocity offset (without the "
+                                                   "IMU's specification; with it the acceleration error's)",
                                                    "m/s/sqrt(s)", ge=0.0)
     heading_noise_rad_per_sqrt_s: float = setting(2e-5, "random walk of the heading error", "rad/sqrt(s)",
                                                   ge=0.0)
