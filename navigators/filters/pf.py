@@ -102,7 +102,8 @@ class ParticleFilter(InsRiddenFilter):
         self.s_vel = s.velocity_noise_mps_per_sqrt_s
         self.s_psi = s.heading_noise_rad_per_sqrt_s
         self._imu_spec: ImuSpec | None = None
-        self._accel_model: tuple[float, float, float, float] | None = None  # set by reset
+        self._accel_model: tuple[float, float, float] | None = None   # (N^2, sigma_a^2, j^2): reset
+        self._v_obs = (0.0, 0.0)    # (time, variance) of the velocity's last observation: reset, GNSS
         self._t_ins0_s = 0.0
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.M = s.n_particles
@@ -151,39 +152,42 @@ class ParticleFilter(InsRiddenFilter):
         tilt0 = math.sqrt(max(0.5 * float(self._p_att0[0] + self._p_att0[1]), 0.0))   # initial tilt (rad)
         a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi),
                 G0_MPS2 * tilt0)
-        v0 = max(0.5 * float(self._p_vel0[0] + self._p_vel0[1]), 0.0)                  # initial velocity
         self._accel_model = (spec.accel_noise_density_mps2_rthz ** 2, a * a,
-                             spec.tilt_accel_rate_sigma_mps3 ** 2, v0)
+                             spec.tilt_accel_rate_sigma_mps3 ** 2)
+        # the velocity error's last observation: the initial estimate's (a GNSS velocity fix moves it)
+        self._v_obs = (self._t_ins0_s, max(0.5 * float(self._p_vel0[0] + self._p_vel0[1]), 0.0))
 
     def _velocity_step_var(self, t_s: float, dt: float) -> float:
         """Variance (m^2/s^2 per axis) the particles' velocity offsets gain over dt ending at t_s.
 
         Without the IMU's specification: velocity_noise_mps_per_sqrt_s^2 dt. With it: the acceleration
-        error the particles do not carry, a(t) = a0 + j t (a0 ~ sigma_a, a constant; j = g sigma_bg, the
-        gyro-bias tilt's ramp; t since the reset; variance sigma_acc^2 = sigma_a^2 + sigma_j^2 t^2), moves the
-        velocity error by a dt per step, correlated with the velocity error v it built: the step adds
-        2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt, sigma_v the cloud's velocity sigma (the larger
-        axis). rho is the correlation of v and a in the free INS, which starts with an independent v0
-        (sigma_v0, the initial velocity's): cov = sigma_a^2 t + sigma_j^2 t^3 / 2, var v = sigma_v0^2 + N^2 t
-        + sigma_a^2 t^2 + sigma_j^2 t^4 / 4. An unobserved velocity (sigma_v the free INS's) thus grows
-        exactly as the free INS's velocity error (Titterton & Weston 2004, sec. 12.3, without Schuler's
-        bound), and a velocity the terrain has told apart gains less, with its smaller sigma (a Kalman
-        update that shrinks v's variance by (1 - K) shrinks its correlation with a by sqrt(1 - K), so the
-        free INS's rho bounds the filter's from above). A random walk of fixed density (the equivalent walk
-        at one memory) cannot do both: fitted at a memory it is too small for an unobserved velocity and
-        too large for an observed one."""
+        error the particles do not carry, a(t) = a0 + j t (a0 ~ sigma_a: the body-fixed accelerometer bias,
+        instability and misalignment x g, a 90 deg turn's gyro misalignment x g, the initial tilt x g; j =
+        g sigma_bg, the gyro-bias tilt's ramp; t since the reset; sigma_acc(t)^2 = sigma_a^2 + (j t)^2), moves
+        the velocity error by a dt per step, correlated with the velocity error it built since the velocity
+        was last observed (the initial estimate, or a GNSS velocity fix: at tau = 0 with sigma sigma_o). The
+        step adds 2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt, sigma_v the cloud's velocity sigma
+        (the larger axis) and rho = sigma_acc tau / sqrt(sigma_o^2 + sigma_acc^2 tau^2) the correlation of a
+        velocity error that has drifted for tau on that acceleration from an independent start. An
+        unobserved velocity thus grows as the free INS's velocity error from its last observation
+        (sigma_o^2 + sigma_acc^2 tau^2; Titterton & Weston 2004, sec. 12.3, without Schuler's bound; the
+        ramp taken at its current value over tau, the larger side), and a
+        velocity the terrain has told apart (sigma_v smaller) gains less. A random walk of fixed density (the
+        equivalent walk at one memory) cannot do both: fitted at a memory it is too small for an unobserved
+        velocity and too large for an observed one."""
         model = self._accel_model
         if model is None:
             return self.s_vel * self.s_vel * dt
-        n2, a2, j2, v02 = model
+        n2, a2, j2 = model
         t = max(t_s - self._t_ins0_s, 0.0)
+        t_obs, var_obs = self._v_obs
+        tau = max(t_s - t_obs, 0.0)
         w = self._weights()
         d = self.dv - w @ self.dv
         sigma_v = math.sqrt(max(float(np.max(w @ (d * d))), 0.0))
         acc2 = a2 + j2 * t * t
-        cov_free = a2 * t + 0.5 * j2 * t ** 3
-        var_free = v02 + n2 * t + a2 * t * t + 0.25 * j2 * t ** 4
-        rho = min(cov_free / math.sqrt(var_free * acc2), 1.0) if var_free * acc2 > 0.0 else 0.0
+        drift = math.sqrt(acc2) * tau
+        rho = drift / math.sqrt(var_obs + drift * drift) if drift > 0.0 else 0.0
         return n2 * dt + 2.0 * rho * sigma_v * math.sqrt(acc2) * dt + acc2 * dt * dt
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
@@ -404,6 +408,7 @@ class ParticleFilter(InsRiddenFilter):
             r2 = self.gnss_velocity_sigma_mps ** 2
             ll -= 0.5 * ((v[0] - st[3] - self.dv[:, 0]) ** 2 + (v[1] - st[4] - self.dv[:, 1]) ** 2) / r2
             self._gnss_velocity_ins(v, carried=(0, 1))
+            self._v_obs = (float(t_s), r2)       # the velocity observed: its error drifts afresh from here
         out = self._apply_loglik(t_s, ll, "GNSS update", self.b + K_b * (z_b - self.b))
         if out is not None:
             self.P_b = p_h * (1.0 - K_b) + p_m if p_m > 0.0 else self.P_b * (1.0 - K_b)
