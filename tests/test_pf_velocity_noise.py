@@ -1,7 +1,7 @@
 """The particle filter's velocity process noise from the IMU's specification (navigators.filters.pf,
-`ParticleFilter._velocity_step_var`): the acceleration error the particles do not carry, a0 + j t, adds
-2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt per step, rho the correlation of the velocity error
-with it, rebuilt since the velocity was last observed (the reset, a GNSS velocity fix).
+velocity_noise_model "imu_spec", `ParticleFilter._velocity_step_var`): the acceleration error the
+particles do not carry, a0 + j t, adds 2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt per step,
+rho the free INS's correlation of the velocity error with it.
 
 Checked against figures written out here from the presets' data sheets (trn_env.sensors.imu: tactical 1 mg
 bias, 0.1 mg instability, 0.5 mrad misalignment, 1 deg/h gyro bias + 0.3 deg/h instability, 100 ug/sqrt(Hz);
@@ -16,10 +16,10 @@ import math
 
 import numpy as np
 import pytest
-
-from trn_env import terrain
 from trn_env.navigators import registry
 from trn_env.navigators.protocol import Estimate
+
+from trn_env import terrain
 from trn_env.scenario.build import imu_spec
 
 G = 9.80665
@@ -40,7 +40,8 @@ def dem():
 
 
 def _pf(dem, grade: str | None):
-    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=10_000)
+    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=10_000,
+                          velocity_noise_model="imu_spec")
     if grade is not None:
         nav.apply_imu_spec(imu_spec({"grade": grade}))
     nav.reset(_initial())
@@ -91,20 +92,11 @@ def test_without_the_specification_the_setting_is_the_walk(dem):
     assert nav._velocity_step_var(10.0, 2.0) == pytest.approx(0.02**2 * 2.0)
 
 
-def test_a_gnss_velocity_fix_restarts_the_drift(dem):
-    """After the velocity was observed (sigma_o at t_o: a GNSS velocity fix sets _v_obs) the correlation
-    rebuilds from there: rho = sigma_acc tau / sqrt(sigma_o^2 + sigma_acc^2 tau^2)."""
-    nav = _pf(dem, "navigation")
-    sigma_a, j, n = _accel_terms("navigation")
-    rng = np.random.default_rng(3)
-    nav.dv[:] = 0.05 * rng.standard_normal(nav.dv.shape)
-    sv = float(np.max(np.std(nav.dv, axis=0)))
-    nav._v_obs = (50.0, 0.05**2)
-    t, dt = 150.0, 1.0
-    acc = math.sqrt(sigma_a**2 + (j * t) ** 2)
-    rho = acc * 100.0 / math.sqrt(0.05**2 + (acc * 100.0) ** 2)
-    assert nav._velocity_step_var(t, dt) == pytest.approx(n**2 * dt + 2 * rho * sv * acc * dt + acc**2 * dt**2,
-                                                          rel=1e-3)
-    # a free INS's correlation from t = 0 (sigma_o = the initial 0.1 m/s) would be smaller here
-    rho0 = acc * t / math.sqrt(SIGMA_V0**2 + (acc * t) ** 2)
-    assert rho > rho0
+def test_the_default_walk_keeps_the_equivalent_walk(dem):
+    """velocity_noise_model "walk" (default): the specification's equivalent walk over the tuned floor, as
+    before the model existed."""
+    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=100)
+    nav.apply_imu_spec(imu_spec({"grade": "tactical"}))
+    nav.reset(_initial())
+    assert nav._accel_model is None and nav.s_vel > 0.1
+    assert nav._velocity_step_var(10.0, 1.0) == pytest.approx(nav.s_vel**2)

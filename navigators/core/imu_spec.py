@@ -31,8 +31,7 @@ equivalent walks no longer describe the INS error: `consistency_warning` says so
 it in Health.consistency_warning (measured: the consumer grade, docs/validation/navigators.md).
 
 A filter's own tuned values stay floors: the spec raises a setting, never lowers it below the value the
-filter was tuned with on the navigation grade, so the navigation grade keeps its behaviour. (Except the
-pf's velocity noise, which the specification's acceleration error replaces: navigators.filters.pf.)
+filter was tuned with on the navigation grade, so the navigation grade keeps its behaviour.
 """
 
 from __future__ import annotations

@@ -121,9 +121,12 @@ class PfSettings(TerrainFilterSettings):
     roughening: float = setting(0.1, "roughening after a resample, in the cloud's spread", "1", ge=0.0)
     position_noise_m_per_sqrt_s: float = setting(0.1, "random walk of the horizontal position error",
                                                  "m/sqrt(s)", ge=0.0)
-    velocity_noise_mps_per_sqrt_s: float = setting(0.02, "random walk of the velocity offset (without the "
-                                                   "IMU's specification; with it the acceleration error's)",
+    velocity_noise_mps_per_sqrt_s: float = setting(0.02, "random walk of the velocity offset",
                                                    "m/s/sqrt(s)", ge=0.0)
+    velocity_noise_model: str = setting("walk", "'walk': the velocity's noise is the random walk (the IMU "
+                                        "specification's equivalent walk as a floor); 'imu_spec': the "
+                                        "specification's acceleration error on the cloud's velocity",
+                                        choices=("walk", "imu_spec"))
     heading_noise_rad_per_sqrt_s: float = setting(2e-5, "random walk of the heading error", "rad/sqrt(s)",
                                                   ge=0.0)
     max_memory_mb: float = setting(2048.0, "refuse a cloud needing more memory than this", "MB", gt=0.0)
