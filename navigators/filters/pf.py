@@ -178,11 +178,12 @@ class ParticleFilter(InsRiddenFilter):
         (sigma_v0, the initial velocity's): cov = sigma_a^2 t + sigma_j^2 t^3 / 2, var v = sigma_v0^2 + N^2 t
         + sigma_a^2 t^2 + sigma_j^2 t^4 / 4. An unobserved velocity (sigma_v the free INS's) thus grows
         exactly as the free INS's velocity error (Titterton & Weston 2004, sec. 12.3, without Schuler's
-        bound), and a velocity the terrain has told apart gains less, with its smaller sigma (a Kalman
-        update that shrinks v's variance by (1 - K) shrinks its correlation with a by sqrt(1 - K), so the
-        free INS's rho bounds the filter's from above). A random walk of fixed density (the equivalent walk
-        at one memory) cannot do both: fitted at a memory it is too small for an unobserved velocity and
-        too large for an observed one."""
+        bound), and a velocity the terrain has told apart gains less, with its smaller sigma. A random walk
+        of fixed density (the equivalent walk at one memory) cannot do both: fitted at a memory it is too
+        small for an unobserved velocity and too large for an observed one. Limitation (why "walk" stays
+        the default): the growth scales with the cloud's own spread, so a cloud whose velocity spread sharp
+        fixes (GNSS) collapsed by resampling stays collapsed after them, and after an observation the
+        correlation rebuilds faster than the free INS's from the reset."""
         model = self._accel_model
         if model is None:
             return self.s_vel * self.s_vel * dt
