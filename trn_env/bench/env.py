@@ -190,8 +190,9 @@ def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: 
 # decisions each env flies before the timed repeats (90 s at 30 s decisions: past the first fix)
 WARM_UP_DECISIONS = 3
 
-# the env before issue 34's rate changes: guidance at the scenario's 10 Hz, JSBSim at its 100 Hz
-BEFORE_RATES = {"guidance_rate_hz": 10.0, "flight_dt_s": 0.01}
+# the env before issue 34's rate changes: guidance at the scenario's 10 Hz, JSBSim at its 100 Hz, the scenario's
+# own sensor and navigator rates (no scenario_fields)
+BEFORE_RATES = {"guidance_rate_hz": 10.0, "flight_dt_s": 0.01, "scenario_fields": {}}
 
 
 def route_env_figures(quick: bool = False) -> dict:
