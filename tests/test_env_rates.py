@@ -12,7 +12,13 @@ import pytest
 from trn_env.navigators.frames import imu_gap_s
 
 from trn_env.env.env_settings import goal_offset_ne
-from trn_env.env.route_task import DECISION_RATES, FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
+from trn_env.env.route_task import (
+    DECISION_RATES,
+    FULL_TIER_ONLY,
+    TASK_RATES,
+    env_kwargs,
+    fast_tier_kwargs,
+)
 from trn_env.env.terrain_nav import TerrainNavEnv
 from trn_env.flight.core import (
     AutopilotTargets,
@@ -81,7 +87,15 @@ def test_bad_rates_name_the_argument(kw, field):
 
 def test_route_task_flies_50_hz_and_the_fast_tier_drops_full_tier_settings():
     kw = env_kwargs("basin")
-    assert kw["flight_dt_s"] == 0.02 and "scenario_fields" not in kw          # the scenario's own rates
+    assert kw["flight_dt_s"] == 0.02 and kw["guidance_rate_hz"] == 1.0
+    assert kw["scenario_fields"] == TASK_RATES["scenario_fields"]
+    assert kw["scenario_fields"] is not TASK_RATES["scenario_fields"]          # a copy
+    e = TerrainNavEnv(**{**kw, "max_episode_s": 8.0})
+    sc = e.scenario
+    assert (sc.sensors.ira.rate_hz, sc.navigator.settings.ira_average, sc.navigator.settings.ekf_rate_hz,
+            sc.navigator.rate_hz, sc.guidance.rate_hz) == (50.0, 3, 10.0, 0.5, 1.0)
+    assert e.ticks_per_decision == 15
+    e.close()
     rated = env_kwargs("basin", decision_rates=True)
     assert rated["scenario_fields"] == DECISION_RATES["scenario_fields"]
     assert rated["scenario_fields"] is not DECISION_RATES["scenario_fields"]      # a copy
