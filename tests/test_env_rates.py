@@ -248,3 +248,20 @@ def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("error:") and words in err, err
     assert not out.exists()
+
+
+def test_cpu_breakdown_script_bad_arguments_exit_2(capsys):
+    """scripts/env_cpu_breakdown.py: a bad --decisions or --config is a one-line error and exit 2."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "env_cpu_breakdown.py"
+    spec = importlib.util.spec_from_file_location("env_cpu_breakdown", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for argv, words in ((["--decisions", "0"], "--decisions"), (["--config", "{"], "not JSON"),
+                        (["--config", "[1]"], "JSON object"),
+                        (["--config", '{"flight_dt_s": 0.06}', "--decisions", "1"], "flight_dt_s")):
+        assert mod.main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and words in err, err
