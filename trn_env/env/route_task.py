@@ -21,7 +21,7 @@ King Air's trajectory departs from the 100 Hz one by as much as the 100 Hz one d
 (docs/validation/route_task.md), at half the cost. Its sensor, filter and navigator rates (TASK_RATES, in
 ENV_COMMON): the IRA at its 50 Hz with each 3 consecutive samples entered into the navigator's TERCOM
 batch as their mean (`ira_average`), the navigator's covariance steps at 10 Hz, an estimate every 2 s
-(arrival judged on each), guidance re-aiming at 1 Hz on it dead-reckoned: ~1.5x the agent steps per CPU
+(arrival judged on each), guidance re-aiming at 1 Hz on it dead-reckoned: 1.3-1.5x the agent steps per CPU
 second of the scenario's own rates, with no significant change of the true miss on any calibration route
 (32 paired seeds each, the informative basin route 64; docs/validation/env_speed.md).
 `env_kwargs(terrain, decision_rates=True)` replaces them with `DECISION_RATES`: the IRA at 10 Hz (samples

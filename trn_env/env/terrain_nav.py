@@ -229,8 +229,9 @@ class TerrainNavEnv(gym.Env, EzPickle):
     `scenario_fields`: scenario fields set for every episode by dotted path (`Scenario.with_fields`, as
     `trn-env fly --set`), e.g. `{"sensors.ira.rate_hz": 10.0, "navigator.rate_hz": 0.5}`; applied before
     `guidance_rate_hz` and `flight_dt_s`; anything the scenario's schema rejects is a ValueError naming
-    `scenario_fields` and the field. The route task's opt-in `DECISION_RATES` use it
-    (trn_env.env.route_task; what they cost in accuracy: docs/validation/env_speed.md).
+    `scenario_fields` and the field. The route task's rates (`TASK_RATES`, its default) and its opt-in
+    `DECISION_RATES` use it (trn_env.env.route_task; what they cost in accuracy:
+    docs/validation/env_speed.md).
     `flight_dt_s`: JSBSim's integration step (s, at most 0.05; None = the scenario's `[aircraft] dt_s`,
     0.01 in the built-in scenarios). The IMU's rate is lowered to the step rate when it was faster (an
     integrating IMU: each sample is the mean over its interval of the truth rows); any other sensor faster
