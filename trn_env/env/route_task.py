@@ -23,7 +23,7 @@ ENV_COMMON): the IRA at its 50 Hz with each 3 consecutive samples entered into t
 batch as their mean (`ira_average`), the navigator's covariance steps at 10 Hz, an estimate every 2 s
 (arrival judged on each), guidance re-aiming at 1 Hz on it dead-reckoned: 1.3-1.5x the agent steps per CPU
 second of the scenario's own rates, with no significant change of the true miss on any calibration route
-(32 paired seeds each, the informative basin route 64; docs/validation/env_speed.md).
+(32 paired seeds each, the informative basin route 96; docs/validation/env_speed.md).
 `env_kwargs(terrain, decision_rates=True)` replaces them with `DECISION_RATES`: the IRA at 10 Hz (samples
 8.5 m apart at 85 m/s instead of 1.7 m, none averaged): cheaper still, but the informative routes' true
 miss grows by ~3-4 m (15-19 %, significant over 48 paired seeds), so it is opt-in (to train or screen on
