@@ -99,15 +99,23 @@ def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float
         if registry.capabilities(env.navigator).uses_imu_spec
         else None
     )
+    settings = sc.navigator.table.to_dict()
+    terrain_sigma_m = 0.0
+    if env.navigator == "ins_tercom" and settings.get("fix_noise", "batch") == "batch":
+        # the map's unresolved terrain, as the full navigator takes it (its batch fix covariance)
+        from trn_env.navigators.measurements.ira_map_noise import interpolation_sigma_m
+
+        terrain_sigma_m = interpolation_sigma_m(env._map)
     nav = nv.navigator_params(
         env.navigator,
-        sc.navigator.table.to_dict(),
+        settings,
         imu,
         gnss_until,
         float(ira.range_noise_m),
         float(ira.rate_hz),
         spec,
         sample_dt_s=float(fp[dyn.FP_SAMPLE_DT]),
+        terrain_sigma_m=terrain_sigma_m,
     )
     ie = sc.initial_errors
     pos = ie.position_ned_m

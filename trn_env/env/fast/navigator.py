@@ -43,6 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
+from trn_env.env.fast import fix_noise
 from trn_env.env.fast import rng as frng
 from trn_env.env.fast.state import (
     BA_E,
@@ -119,8 +120,10 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_SAMPLE_DT,
     NP_GNSS_SIGMA_V,
     NP_GNSS_FLOOR,
+    NP_FIX_NOISE,  # 1: the batch fix covariance (fix_noise "batch"), 0: fix_sigma_m per axis ("fixed")
+    NP_TERRAIN_SIGMA,  # the map's unresolved terrain (m) in the batch fix covariance
     NP_BAND0,  # NP_BAND0 + k - 1: the innovation test's upper limit over k NIS values (2k dof)
-) = range(28)
+) = range(30)
 N_NAV_PARAMS = NP_BAND0 + MAX_WINDOW
 
 
@@ -133,12 +136,15 @@ def navigator_params(
     ira_rate_hz: float,
     imu_spec=None,
     sample_dt_s: float = 1.0,
+    terrain_sigma_m: float = 0.0,
 ) -> np.ndarray:
     """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
     navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
     fields), GNSS availability (s) and IRA noise (m) and rate (Hz): the 1 Hz profile sample is the mean of
     a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz); sample_dt_s the profile's
-    sample interval (s). The innovation test's window (integrity_window) is at most MAX_WINDOW fixes."""
+    sample interval (s); terrain_sigma_m the map's unresolved terrain (m: navigators.measurements.
+    ira_map_noise.interpolation_sigma_m, used with fix_noise "batch" when terrain_model_sigma_m is "auto").
+    The innovation test's window (integrity_window) is at most MAX_WINDOW fixes."""
     if name not in MODELLED_NAVIGATORS:
         raise ValueError(
             f"navigator {name!r} is not modelled by the fast tier; it models: "
@@ -150,6 +156,12 @@ def navigator_params(
     p[NP_HALF_WINDOW] = float(settings.get("half_cells", 50)) * float(settings.get("cell_m", 5.0))
     p[NP_CELL] = float(settings.get("cell_m", 5.0))
     p[NP_FIX_SIGMA] = float(settings.get("fix_sigma_m", 10.0))
+    fix_noise_model = settings.get("fix_noise", "batch")
+    if fix_noise_model not in ("batch", "fixed"):
+        raise ValueError(f"navigator.settings.fix_noise: 'batch' or 'fixed', got {fix_noise_model!r}")
+    p[NP_FIX_NOISE] = 1.0 if fix_noise_model == "batch" else 0.0
+    ts = settings.get("terrain_model_sigma_m", "auto")
+    p[NP_TERRAIN_SIGMA] = float(terrain_sigma_m) if ts == "auto" else float(ts)
     p[NP_GATE] = float(settings.get("gate_chi2", 18.42))
     p[NP_REMOVE_BIAS] = 1.0 if settings.get("remove_bias", False) else 0.0
     p[NP_PROFILE_NOISE] = ira_noise_m / math.sqrt(max(ira_rate_hz, 1.0))
@@ -513,9 +525,21 @@ def tercom_fix(X, i, prof, rec, nav, m_per_rad, work):
         # the rigid shift is the INS error at the batch's mean sample time, lag before the fix:
         # z = p - lag v (the full navigator's H)
         lag = 0.5 * (n - 1) * nav[NP_SAMPLE_DT]
-        r_var = nav[NP_FIX_SIGMA] ** 2
-        s = X[i, P00] - 2.0 * lag * X[i, P01] + lag * lag * X[i, P11] + r_var
-        nis = (dn * dn + de * de) / s
+        s_p = X[i, P00] - 2.0 * lag * X[i, P01] + lag * lag * X[i, P11]
+        if nav[NP_FIX_NOISE] > 0.5:
+            # the batch's covariance (fix_noise.lad_fix_covariance); the gate takes it whole, the update (one
+            # covariance shared by the axes) its mean per-axis variance
+            c_nn, c_ne, c_ee = fix_noise.lad_fix_covariance(
+                (prof_meas[i], prof_lat[i], prof_lon[i]), n, rec, dn, de, m_per_rad, nav[NP_CELL],
+                nav[NP_REMOVE_BIAS] > 0.5, nav[NP_TERRAIN_SIGMA], work[0],
+            )
+            s_nn = s_p + c_nn
+            s_ee = s_p + c_ee
+            nis = (s_ee * dn * dn - 2.0 * c_ne * dn * de + s_nn * de * de) / (s_nn * s_ee - c_ne * c_ne)
+            r_var = 0.5 * (c_nn + c_ee)
+        else:
+            r_var = nav[NP_FIX_SIGMA] ** 2
+            nis = (dn * dn + de * de) / (s_p + r_var)
         if nis <= nav[NP_GATE]:
             measurement_update(X, i, -dn, -de, 1.0, -lag, r_var)
             ok = True
