@@ -79,20 +79,17 @@ REFERENCE_ROUTES = (
     ),
 )
 # The full JSBSim loop's true error at the goal on every reference route, seeds 0..n-1, at the route task's
-# full-tier settings (full_tier_settings(): JSBSim at 50 Hz, the task's TASK_RATES), recorded with
+# full-tier settings (full_tier_settings(): JSBSim at 50 Hz, the task's TASK_RATES) with ins_tercom's batch
+# TERCOM fix covariance (fix_noise "batch", which the fast tier models: fix_noise.py), recorded with
 # `python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out out/fast_calibration`
 # (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies
-# both tiers. Recorded before ins_tercom had its batch fix covariance (its TERCOM fix noise then
-# fix_sigma_m, which the fast tier models); with the batch fix covariance (fix_noise = "batch", the
-# navigator's default since) the full loop's errors are smaller and the fast tier is outside 25 % on four
-# routes (docs/validation/fast_tier.md): it does not model that covariance yet, so these were not
-# re-recorded for it.
+# both tiers.
 FULL_LOOP_REFERENCE = {
-    "basin_straight": {"mean_m": 511.9, "p90_m": 864.2, "n": 32},
-    "basin_round": {"mean_m": 16.8, "p90_m": 31.0, "n": 32},
-    "basin_west": {"mean_m": 21.9, "p90_m": 41.1, "n": 32},
-    "jacksboro_sw_ne": {"mean_m": 6.4, "p90_m": 11.4, "n": 32},
-    "jacksboro_flat_patch": {"mean_m": 10.0, "p90_m": 14.4, "n": 32},
+    "basin_straight": {"mean_m": 203.9, "p90_m": 330.9, "n": 32},
+    "basin_round": {"mean_m": 21.7, "p90_m": 35.2, "n": 32},
+    "basin_west": {"mean_m": 15.0, "p90_m": 26.6, "n": 32},
+    "jacksboro_sw_ne": {"mean_m": 4.5, "p90_m": 7.8, "n": 32},
+    "jacksboro_flat_patch": {"mean_m": 6.8, "p90_m": 10.6, "n": 32},
 }
 # the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
 FAST_SEEDS = 256
