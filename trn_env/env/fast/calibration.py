@@ -91,6 +91,13 @@ FULL_LOOP_REFERENCE = {
     "jacksboro_sw_ne": {"mean_m": 4.5, "p90_m": 7.8, "n": 32},
     "jacksboro_flat_patch": {"mean_m": 6.8, "p90_m": 10.6, "n": 32},
 }
+# Figures (route, "mean_m" or "p90_m") the fast tier does not hold within 25 % of FULL_LOOP_REFERENCE, with
+# the measured reason (docs/validation/fast_tier.md "With the batch fix covariance"); the tests expect them
+# to fail, so one that comes back into calibration is reported.
+OUT_OF_CALIBRATION = {
+    ("basin_round", "mean_m"): "arrived episodes miss 13 m in the fast tier, 24 m in the full loop",
+    ("jacksboro_flat_patch", "p90_m"): "a heavier tail in the fast tier (p95 17.2 m, full loop 11.9 m)",
+}
 # the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
 FAST_SEEDS = 256
 
@@ -210,6 +217,7 @@ __all__ = [
     "ENV_SETTINGS",
     "FAST_SEEDS",
     "FULL_LOOP_REFERENCE",
+    "OUT_OF_CALIBRATION",
     "REFERENCE_ROUTES",
     "ReferenceRoute",
     "compare",
