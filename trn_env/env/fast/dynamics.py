@@ -163,8 +163,9 @@ def fly_decision(
 
     Records (numba tuples): prof = the TERCOM profiles' (measured heights, latitudes, longitudes) rows (N,
     profile); world, mapr = the world and map DEMs (terrain.kernels.MapRecord, bilinear); wind = the wind
-    layers' (altitudes m, north, east m/s); scratch = TERCOM's (diff (N, 3, profile), tables (N, 4,
-    candidates, profile))."""
+    layers' (altitudes m, north, east m/s); scratch = TERCOM's (diff (N, 3, profile): the search's rows, then
+    the fix covariance's (navigator.tercom_fix, fix_noise.lad_fix_covariance), tables (N, 4, candidates,
+    profile))."""
     prof_meas, prof_lat, prof_lon = prof
     wind_alt, wind_n, wind_e = wind
     diff, tables = scratch
