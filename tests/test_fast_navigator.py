@@ -144,6 +144,47 @@ def test_tercom_beyond_the_window_ends_on_its_edge(basin_map):
     assert abs(dn - 420.0) <= 5.0 and abs(de) <= 5.0, (dn, de)
 
 
+@pytest.mark.parametrize("fix_noise", [0.0, 1.0])
+def test_tercom_fix_fuses_the_batch_covariance(basin_map, fix_noise):
+    """tercom_fix with fix_noise "batch" (1) fuses the fix with the batch's covariance
+    (fix_noise.lad_fix_covariance, checked against the full navigator's in test_fast_fix_noise.py): the
+    update is the Kalman update of z = p - lag v with its mean per-axis variance, computed here with numpy;
+    with "fixed" (0), with fix_sigma_m^2."""
+    from trn_env.env.fast import fix_noise as fn
+
+    grid, nav = basin_map
+    nav = nav.copy()
+    nav[nv.NP_FIX_NOISE] = fix_noise
+    nav[nv.NP_TERRAIN_SIGMA] = 2.0
+    meas, plat, plon, m_lat, m_lon = _profile(grid, math.radians(36.56), math.radians(-84.245), 35.0, -60.0)
+    meas = meas + np.random.default_rng(3).normal(0.0, 3.0, meas.size)
+    n = meas.size
+    half = nav[nv.NP_HALF_WINDOW]
+    dn, de, _ = _search(grid, nav, meas, plat, plon, m_lat, m_lon, half)
+    if fix_noise:
+        c_nn, c_ne, c_ee = fn.lad_fix_covariance((meas, plat, plon), n, grid, dn, de, (m_lat, m_lon), 5.0,
+                                                 True, 2.0, np.zeros((3, n)))
+        assert 1.0 < c_nn < 1e4 and 1.0 < c_ee < 1e4 and c_nn != c_ee  # informative, not isotropic
+        r_var = 0.5 * (c_nn + c_ee)
+        assert abs(r_var - nav[nv.NP_FIX_SIGMA] ** 2) > 10.0  # the test tells the two models apart
+    else:
+        r_var = nav[nv.NP_FIX_SIGMA] ** 2
+    P = np.diag([2500.0, 0.04, 1e-6])  # a prior that keeps the fix's NIS inside the innovation test's band
+    X = np.zeros((1, S.N_STATE))
+    _set_cov(X, 0, P)
+    X[0, S.N_PROF] = n
+    nav[nv.NP_REMOVE_BIAS] = 1.0
+    ok = nv.tercom_fix(X, 0, (meas[None], plat[None], plon[None]), grid, nav, (m_lat, m_lon),
+                       (np.zeros((3, n)), np.zeros((4, nv.tercom_table_rows(nav), n))))
+    assert ok
+    lag = 0.5 * (n - 1) * nav[nv.NP_SAMPLE_DT]
+    H = np.array([[1.0, -lag, 0.0]])
+    K = P @ H.T / (H @ P @ H.T + r_var)
+    np.testing.assert_allclose(_cov(X, 0), (np.eye(3) - K @ H) @ P, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(X[0, [S.EP_N, S.EP_E]], [K[0, 0] * dn, K[0, 0] * de], rtol=1e-9)
+    assert X[0, S.DEGRADED] == 0.0
+
+
 @pytest.mark.parametrize("window", [0, 9])
 def test_innovation_window_the_fast_tier_cannot_hold_is_refused(window):
     imu = {"accel_noise_density_mps2_rthz": 1e-4}
