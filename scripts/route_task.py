@@ -91,6 +91,19 @@ def _check(args) -> dict:
     for name in ("iterations", "seeds", "epochs", "env_runners"):
         if getattr(args, name) < (0 if name == "env_runners" else 1):
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    for name, lo, hi in (("lr", 0.0, 1.0), ("gamma", 0.0, 1.0), ("lambda_", 0.0, 1.0),
+                         ("vf_clip", 0.0, math.inf)):
+        v = getattr(args, name)
+        if not (lo < v <= hi and math.isfinite(v)):
+            raise ValueError(f"--{name.rstrip('_').replace('_', '-')} must be in ({lo}, {hi}], got {v}")
+    if not (0.0 <= args.entropy < math.inf):
+        raise ValueError(f"--entropy must be a finite number >= 0, got {args.entropy}")
+    if (args.lr_end is None) != (args.lr_decay_steps is None):
+        raise ValueError("--lr-end and --lr-decay-steps go together (both or neither)")
+    if args.lr_end is not None and not 0.0 < args.lr_end <= 1.0:
+        raise ValueError(f"--lr-end must be in (0, 1], got {args.lr_end}")
+    if args.lr_decay_steps is not None and args.lr_decay_steps < 1:
+        raise ValueError(f"--lr-decay-steps must be >= 1, got {args.lr_decay_steps}")
     for name in ("minutes", "cpu_minutes"):
         v = getattr(args, name)
         if v is not None and not (v > 0 and math.isfinite(v)):
