@@ -1,8 +1,9 @@
 """The reference route task (docs/guide/route_task.md): train PPO, then evaluate straight, planner, random and
 PPO in both env tiers on the same held-out goals and seeds.
 
-    python scripts/route_task.py all --out out/route_task                  # train (30 min budget), evaluate
-    python scripts/route_task.py train --out out/route_task --minutes 30     # RLlib PPO, fast tier if present
+    python scripts/route_task.py all --out out/route_task                  # train (3,600 CPU s), evaluate
+    python scripts/route_task.py train --out out/route_task --cpu-minutes 60  # RLlib PPO, fast tier if there
+    python scripts/route_task.py train --out out/route_task --minutes 30     # a wall-time budget instead
     python scripts/route_task.py evaluate --out out/route_task --seeds 10    # needs OUT/checkpoints/final
     python scripts/route_task.py evaluate --out out/b --policies straight,planner,random   # no checkpoint
     python scripts/route_task.py evaluate --out out/route_task --policies ppo --merge-rows out/b/rows.json
@@ -10,8 +11,11 @@ PPO in both env tiers on the same held-out goals and seeds.
 
 train: RLlib PPO (the `rllib` extra) on the task (trn_env.env.route_task: terrain `--terrain`, start and
 goal regions, training goals outside the held-out radius) on TerrainNavFast-v0 when it is registered, else on
-TerrainNav-v0 (`--tier`); stops after `--iterations` or when `--minutes` of wall time are used, whichever
-comes first; writes OUT/checkpoints/ (iter_N, final), OUT/history.json and OUT/learning_curve.png.
+TerrainNav-v0 (`--tier`); stops after `--iterations`, at the last iteration that keeps the run within
+`--cpu-minutes` of CPU time (the driver's and every EnvRunner process's, summed; default: the task's budget,
+30 minutes x 2 cores = 60 CPU minutes, route_task.TRAIN_BUDGET), or after `--minutes` of wall time (no wall
+limit unless given), whichever comes first; writes OUT/checkpoints/ (iter_N, final), OUT/history.json and
+OUT/learning_curve.png.
 evaluate: the trained policy (OUT/checkpoints/final, or `--checkpoint`) and the baselines on the env's five
 held-out goals x `--seeds` evaluation seeds (route_task.EVAL_SEEDS) in each tier of `--tiers` (the fast
 tier only when registered); writes OUT/rows.json (one row per episode), OUT/summary.json (the table's
@@ -23,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -36,7 +41,10 @@ def parse(argv):
     p.add_argument("--terrain", default="basin")
     p.add_argument("--tier", choices=("auto", "fast", "full"), default="auto", help="tier to train on")
     p.add_argument("--iterations", type=int, default=1000, help="training iterations at most")
-    p.add_argument("--minutes", type=float, default=30.0, help="training wall-time budget")
+    p.add_argument("--minutes", type=float, default=None, help="training wall-time budget (default: none)")
+    p.add_argument("--cpu-minutes", type=float, default=None,
+                   help="training CPU-time budget: the driver's and every EnvRunner's CPU minutes, summed "
+                        "(default: the task's, 60 = 30 minutes on 2 cores)")
     p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
     p.add_argument("--num-cpus", type=int, default=2, help="CPUs of the local Ray instance")
     p.add_argument("--env-runners", type=int, default=1)
@@ -48,6 +56,14 @@ def parse(argv):
     p.add_argument("--epochs", type=int, default=10)
     p.add_argument("--hidden", default="64,64")
     p.add_argument("--lr", type=float, default=3e-4)
+    p.add_argument("--lr-end", type=float, default=None,
+                   help="learning rate at the end of a linear decay over --lr-decay-steps env steps")
+    p.add_argument("--lr-decay-steps", type=int, default=None)
+    p.add_argument("--gamma", type=float, default=0.99)
+    p.add_argument("--lambda", dest="lambda_", type=float, default=0.95, help="GAE lambda")
+    p.add_argument("--entropy", type=float, default=0.0, help="entropy coefficient")
+    p.add_argument("--vf-clip", type=float, default=10.0, help="RLlib's value-loss clip")
+    p.add_argument("--activation", default="tanh", choices=("tanh", "relu"))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint", type=Path, default=None, help="checkpoint to evaluate")
     p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
@@ -75,8 +91,23 @@ def _check(args) -> dict:
     for name in ("iterations", "seeds", "epochs", "env_runners"):
         if getattr(args, name) < (0 if name == "env_runners" else 1):
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
-    if not args.minutes > 0:
-        raise ValueError(f"--minutes must be > 0, got {args.minutes}")
+    for name, lo, hi in (("lr", 0.0, 1.0), ("gamma", 0.0, 1.0), ("lambda_", 0.0, 1.0),
+                         ("vf_clip", 0.0, math.inf)):
+        v = getattr(args, name)
+        if not (lo < v <= hi and math.isfinite(v)):
+            raise ValueError(f"--{name.rstrip('_').replace('_', '-')} must be in ({lo}, {hi}], got {v}")
+    if not (0.0 <= args.entropy < math.inf):
+        raise ValueError(f"--entropy must be a finite number >= 0, got {args.entropy}")
+    if (args.lr_end is None) != (args.lr_decay_steps is None):
+        raise ValueError("--lr-end and --lr-decay-steps go together (both or neither)")
+    if args.lr_end is not None and not 0.0 < args.lr_end <= 1.0:
+        raise ValueError(f"--lr-end must be in (0, 1], got {args.lr_end}")
+    if args.lr_decay_steps is not None and args.lr_decay_steps < 1:
+        raise ValueError(f"--lr-decay-steps must be >= 1, got {args.lr_decay_steps}")
+    for name in ("minutes", "cpu_minutes"):
+        v = getattr(args, name)
+        if v is not None and not (v > 0 and math.isfinite(v)):
+            raise ValueError(f"--{name.replace('_', '-')} must be a finite number > 0, got {v}")
     for t in args.tiers.split(","):
         if t not in ("full", "fast"):
             raise ValueError(f"--tiers: each must be full or fast, got {t!r}")
@@ -112,6 +143,7 @@ def train(args, kw: dict) -> None:
     import gymnasium as gym
 
     from trn_env.campaign.route_task import plot_learning_curve
+    from trn_env.env import route_task
     from trn_env.env.rllib import FAST_ID
     from trn_env.env.rllib_train import ppo_config, train
 
@@ -119,23 +151,31 @@ def train(args, kw: dict) -> None:
     envs = args.envs_per_runner or (64 if tier == "fast" else 1)
     batch = args.train_batch_size or (2048 if tier == "fast" else 64)
     mini = args.minibatch_size or min(256 if tier == "fast" else 32, batch)
+    recipe = dict(hidden=args.hidden_t, train_batch_size=batch, minibatch_size=mini, num_epochs=args.epochs,
+                  lr=args.lr, lr_end=args.lr_end, lr_decay_steps=args.lr_decay_steps, gamma=args.gamma,
+                  lambda_=args.lambda_, entropy_coeff=args.entropy, vf_clip_param=args.vf_clip,
+                  activation=args.activation)
     cfg = ppo_config(tier, kw, seed=args.seed, num_env_runners=args.env_runners,
-                     num_envs_per_env_runner=envs, hidden=args.hidden_t, train_batch_size=batch,
-                     minibatch_size=mini, num_epochs=args.epochs, lr=args.lr)
+                     num_envs_per_env_runner=envs, **recipe)
+    cpu_s = 60.0 * args.cpu_minutes if args.cpu_minutes is not None else route_task.TRAIN_BUDGET["cpu_s"]
+    wall_s = 60.0 * args.minutes if args.minutes is not None else None
 
     def show(row):
         print(f"[train {tier}] iter {row['iteration']}: {row['env_steps']:.0f} steps, {row['episodes']:.0f} "
               f"episodes, return {row['episode_return_mean']:.2f}, {row['wall_s']:.0f} s wall, "
-              f"{row['driver_cpu_s'] + row['env_runner_cpu_s']:.0f} s CPU", flush=True)
+              f"{row['cpu_s']:.0f} s CPU", flush=True)
 
-    algo, history = train(cfg, args.iterations, args.out / "checkpoints", 10, show, 60.0 * args.minutes)
+    algo, history = train(cfg, args.iterations, args.out / "checkpoints", 10, show, wall_s, cpu_s)
     algo.stop()
     (args.out / "history.json").write_text(json.dumps(
         {"tier": tier, "terrain": args.terrain, "env": kw, "envs_per_runner": envs, "env_runners":
-         args.env_runners, "train_batch_size": batch, "minibatch_size": mini, "epochs": args.epochs,
-         "hidden": list(args.hidden_t), "lr": args.lr, "seed": args.seed, "history": history}, indent=1))
+         args.env_runners, "seed": args.seed, "budget": {"cpu_s": cpu_s, "wall_s": wall_s},
+         **{k: (list(v) if isinstance(v, tuple) else v) for k, v in recipe.items()},
+         "epochs": args.epochs, "history": history}, indent=1))
+    last = history[-1]
     plot_learning_curve(args.out / "learning_curve.png", history,
-                        f"PPO on {tier} tier, {args.terrain} ({history[-1]['wall_s'] / 60:.1f} min)")
+                        f"PPO on {tier} tier, {args.terrain} ({last['cpu_s']:.0f} CPU s, "
+                        f"{last['wall_s'] / 60:.1f} min wall)")
 
 
 def evaluate(args, kw: dict) -> dict:

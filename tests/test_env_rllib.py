@@ -110,3 +110,35 @@ def test_ppo_trains_a_few_iterations_on_a_local_two_cpu_ray(tmp_path):
         algo.stop()
     finally:
         ray.shutdown()
+
+
+@pytest.mark.slow
+def test_cpu_budget_stops_within_it_and_counts_every_process(tmp_path):
+    pytest.importorskip("ray.rllib")
+    if glue.FAST_ID not in gym.registry:
+        pytest.skip("the fast tier is not installed")
+    import ray
+
+    from trn_env.env.rllib_train import ppo_config, train
+
+    kw = env_kwargs("basin")
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)   # never another's
+    try:
+        cfg = ppo_config("fast", kw, num_env_runners=1, num_envs_per_env_runner=8, hidden=(8,),
+                         train_batch_size=64, minibatch_size=32, num_epochs=1)
+        with pytest.raises(ValueError, match="max_cpu_s"):
+            train(cfg, 2, max_cpu_s=-1.0)
+        algo = cfg.build_algo()
+        # the EnvRunner's construction alone (its own process, counted) takes more than 0.5 CPU s, so the
+        # budget ends the run after its first iteration, well before the 50 asked for
+        algo, history = train(algo, 50, tmp_path / "ckpt", checkpoint_every=10, max_cpu_s=0.5)
+        assert len(history) == 1 and (tmp_path / "ckpt" / "final").is_dir()
+        row = history[0]
+        assert row["env_runner_cpu_s"] > 0.5 and row["driver_cpu_s"] > 0.0
+        assert row["cpu_s"] == pytest.approx(row["driver_cpu_s"] + row["env_runner_cpu_s"])
+        # a generous budget: every iteration asked for runs, and the CPU count only grows
+        algo, more = train(algo, 2, max_cpu_s=1e6)
+        assert len(more) == 2 and more[1]["cpu_s"] >= more[0]["cpu_s"] > 0.0
+        algo.stop()
+    finally:
+        ray.shutdown()

@@ -76,6 +76,13 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
     assert mod.main([*base, "--merge-rows", str(tmp_path / "bad.json")]) == 2
     assert "--merge-rows" in capsys.readouterr().err
     assert mod.main([*base, "--merge-rows", str(tmp_path / "missing.json")]) == 2
+    train = ["train", "--out", str(out)]
+    for bad, name in ((["--cpu-minutes", "0"], "--cpu-minutes"), (["--cpu-minutes", "nan"], "--cpu-minutes"),
+                      (["--minutes", "-1"], "--minutes"), (["--gamma", "1.5"], "--gamma"),
+                      (["--lambda", "0"], "--lambda"), (["--entropy", "-0.1"], "--entropy"),
+                      (["--lr-end", "1e-5"], "--lr-decay-steps")):
+        assert mod.main([*train, *bad]) == 2
+        assert name in capsys.readouterr().err
     assert not out.exists()                                  # nothing written
 
 

@@ -262,10 +262,28 @@ def summarise(rows: list[dict]) -> dict:
                     c = paired(rows, tier, lab, ref)
                     if c is not None:
                         out["paired"].append(c)
+    out["per_goal"] = per_goal(rows)
     pol = out["policies"]
     for v in pol.values():
         if v["tier"] == "full" and f"fast/{v['policy']}" in pol:
             out["transfer"][v["policy"]] = v["miss_mean_m"] - pol[f"fast/{v['policy']}"]["miss_mean_m"]
+    return out
+
+
+def per_goal(rows: list[dict]) -> list[dict]:
+    """Per (tier, held-out goal, policy): episodes, arrived, mean and median true miss over the arrived
+    episodes, mean extra distance (where a policy wins or loses, goal by goal)."""
+    out = []
+    for tier, gi, lab in sorted({(r["tier"], r["goal_index"], r["policy"]) for r in rows}):
+        rs = [r for r in rows if (r["tier"], r["goal_index"], r["policy"]) == (tier, gi, lab)]
+        arr = [r for r in rs if r["arrived"]]
+        miss = np.array([r["true_miss_m"] for r in arr])
+        out.append({"tier": tier, "goal_index": int(gi), "policy": lab, "episodes": len(rs),
+                    "arrived": len(arr),
+                    "miss_mean_m": float(miss.mean()) if miss.size else math.nan,
+                    "miss_median_m": float(np.median(miss)) if miss.size else math.nan,
+                    "extra_distance_mean": float(np.mean([r["extra_distance_fraction"] for r in arr]))
+                    if arr else math.nan})
     return out
 
 
@@ -303,6 +321,20 @@ def table(summary: dict) -> str:
                      f"{c['mean_b_m']:.0f} | {100 * c['improvement']:+.0f} % "
                      f"[{100 * lo:+.0f}, {100 * hi:+.0f}] | "
                      f"{c['wins']}-{c['losses']} | {c['sign_test_p']:.3g} |")
+    goals = summary.get("per_goal", [])
+    if goals:
+        labels = list(dict.fromkeys(g["policy"] for g in goals))
+        lines += ["", "Per held-out goal: mean / median true miss (m) over the arrived episodes, arrived of "
+                  "flown, mean extra distance", "", "| tier | goal | " + " | ".join(labels) + " |",
+                  "|---|---|" + "---|" * len(labels)]
+        by = {(g["tier"], g["goal_index"], g["policy"]): g for g in goals}
+        for tier, gi in sorted({(g["tier"], g["goal_index"]) for g in goals}):
+            cells = []
+            for lab in labels:
+                g = by.get((tier, gi, lab))
+                cells.append("" if g is None else f"{g['miss_mean_m']:.0f} / {g['miss_median_m']:.0f}, "
+                             f"{g['arrived']}/{g['episodes']}, {100 * g['extra_distance_mean']:+.0f} %")
+            lines.append(f"| {tier} | {gi} | " + " | ".join(cells) + " |")
     if summary["transfer"]:
         lines += ["", "Transfer gap (mean miss, full tier minus fast tier): " + ", ".join(
             f"{k} {v:+.0f} m" for k, v in summary["transfer"].items())]
@@ -310,7 +342,8 @@ def table(summary: dict) -> str:
 
 
 def plot_learning_curve(path: str | Path, history: list[dict], title: str = "") -> None:
-    """Mean episode return against env steps (one point per training iteration) into a PNG."""
+    """Mean episode return against env steps and against the CPU seconds the run got (one point per
+    training iteration) into a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -318,12 +351,17 @@ def plot_learning_curve(path: str | Path, history: list[dict], title: str = "") 
 
     x = [h["env_steps"] for h in history]
     y = [h["episode_return_mean"] for h in history]
-    fig, ax = plt.subplots(figsize=(6, 3.5), dpi=100)
-    ax.plot(x, y, "o-")
+    cpu = [h.get("cpu_s", h.get("driver_cpu_s", math.nan) + h.get("env_runner_cpu_s", math.nan))
+           for h in history]
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 3.5), dpi=100, sharey=True)
+    ax.plot(x, y, ".-")
     ax.set_xlabel("env steps (decisions)")
     ax.set_ylabel("mean episode return")
-    ax.set_title(title or "PPO learning curve")
-    ax.grid(alpha=0.3)
+    ax2.plot(cpu, y, ".-")
+    ax2.set_xlabel("CPU s (driver + EnvRunners)")
+    for a in (ax, ax2):
+        a.grid(alpha=0.3)
+    fig.suptitle(title or "PPO learning curve")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

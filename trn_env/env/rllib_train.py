@@ -40,9 +40,14 @@ SAMPLE_TIMEOUT_S = 3600.0
 def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: int = 1,
                num_envs_per_env_runner: int = 1, hidden: tuple[int, ...] = (64, 64),
                train_batch_size: int = 256, minibatch_size: int = 64, num_epochs: int = 10,
-               lr: float = 3e-4, gamma: float = 0.99):
+               lr: float = 3e-4, gamma: float = 0.99, lambda_: float = 0.95, entropy_coeff: float = 0.0,
+               lr_end: float | None = None, lr_decay_steps: int | None = None, vf_clip_param: float = 10.0,
+               activation: str = "tanh"):
     """An RLlib PPOConfig (new API stack, torch) for an env tier ("full" or "fast") with env_config (the env's
-    keyword arguments). ValueError naming the argument on bad input; RLlibNotInstalled without the extra."""
+    keyword arguments). `lr_end` with `lr_decay_steps`: the learning rate falls linearly from `lr` to
+    `lr_end` over that many env steps, then stays (RLlib's piecewise schedule). `vf_clip_param`: RLlib's
+    clip of the value loss (in squared return units). ValueError naming the argument on bad input;
+    RLlibNotInstalled without the extra."""
     require_rllib()
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
@@ -65,6 +70,24 @@ def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: i
                          f"({train_batch_size})")
     if not hidden or any(not isinstance(h, (int, np.integer)) or h < 1 for h in hidden):
         raise ValueError(f"hidden must be layer widths >= 1, got {hidden!r}")
+    for name, v, lo, hi in (("lr", lr, 0.0, 1.0), ("gamma", gamma, 0.0, 1.0), ("lambda_", lambda_, 0.0, 1.0),
+                            ("vf_clip_param", vf_clip_param, 0.0, math.inf)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi:
+            raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {v!r}")
+    if isinstance(entropy_coeff, bool) or not isinstance(entropy_coeff, (int, float)) or not (
+            0.0 <= entropy_coeff < math.inf):
+        raise ValueError(f"entropy_coeff must be a finite number >= 0, got {entropy_coeff!r}")
+    if (lr_end is None) != (lr_decay_steps is None):
+        raise ValueError("lr_end and lr_decay_steps go together (both or neither)")
+    if lr_end is not None and (isinstance(lr_end, bool) or not isinstance(lr_end, (int, float))
+                               or not 0.0 < lr_end <= 1.0):
+        raise ValueError(f"lr_end must be a number in (0, 1], got {lr_end!r}")
+    if lr_decay_steps is not None and (isinstance(lr_decay_steps, bool) or not isinstance(
+            lr_decay_steps, (int, np.integer)) or lr_decay_steps < 1):
+        raise ValueError(f"lr_decay_steps must be a whole number >= 1, got {lr_decay_steps!r}")
+    if activation not in ("tanh", "relu"):
+        raise ValueError(f"activation must be 'tanh' or 'relu', got {activation!r}")
+    lr_arg = float(lr) if lr_end is None else [[0, float(lr)], [int(lr_decay_steps), float(lr_end)]]
     return (
         PPOConfig()
         .environment(names[tier], env_config=dict(env_config))
@@ -74,9 +97,10 @@ def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: i
                      **rllib_env_settings(tier))
         .learners(num_learners=0)
         .training(train_batch_size_per_learner=int(train_batch_size), minibatch_size=int(minibatch_size),
-                  num_epochs=int(num_epochs), lr=float(lr), gamma=float(gamma), lambda_=0.95)
+                  num_epochs=int(num_epochs), lr=lr_arg, gamma=float(gamma), lambda_=float(lambda_),
+                  entropy_coeff=float(entropy_coeff), vf_clip_param=float(vf_clip_param))
         .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=[int(h) for h in hidden],
-                                                   fcnet_activation="tanh", vf_share_layers=False))
+                                                   fcnet_activation=activation, vf_share_layers=False))
         .debugging(seed=int(seed))
         .reporting(metrics_num_episodes_for_smoothing=20)
     )
@@ -91,20 +115,34 @@ def _metric(result: dict, key: str, default=math.nan):
 
 
 def train(config, iterations: int, checkpoint_dir: str | Path | None = None, checkpoint_every: int = 10,
-          progress=None, max_wall_s: float | None = None) -> tuple[Any, list[dict]]:
+          progress=None, max_wall_s: float | None = None,
+          max_cpu_s: float | None = None) -> tuple[Any, list[dict]]:
     """Build the algorithm from `config` (or take an Algorithm already built) and run `iterations` training
-    iterations; a checkpoint
-    (`Algorithm.save_to_path`) every `checkpoint_every` iterations and at the end into checkpoint_dir/iter_N
-    (checkpoint_dir/final at the end; the end is `iterations`, or the first iteration that ends after
-    max_wall_s of wall time). Returns (algorithm, history rows: iteration, env steps, episodes, mean return
-    and length, wall_s, driver_cpu_s and env_runner_cpu_s, the CPU seconds the run got). progress(row) is
-    called per row."""
+    iterations; a checkpoint (`Algorithm.save_to_path`) every `checkpoint_every` iterations and at the end
+    into checkpoint_dir/iter_N (checkpoint_dir/final at the end).
+
+    The end is the first of: `iterations`; the first iteration that ends after `max_wall_s` of wall time;
+    the last iteration that keeps the run within `max_cpu_s` CPU seconds, i.e. the iteration after which
+    one more iteration costing what the last one did would exceed it (`cpu_s`, below). The CPU budget is
+    the one that means the same on an idle and on a shared machine: 30 minutes on 2 idle cores are at most
+    3,600 CPU seconds, and a run that stops at 3,600 CPU seconds got no more than that whatever the load.
+
+    Returns (algorithm, history rows: iteration, env steps, episodes, mean return and length, wall_s,
+    driver_cpu_s (this process since the call, the build included: the local learner, and sampling when
+    there are no remote EnvRunners), env_runner_cpu_s (the remote EnvRunner processes' CPU in total,
+    construction included) and cpu_s, their sum: the CPU seconds the run got). progress(row) is called
+    per row. The learner is local (`ppo_config` sets no remote learners), so these are every process that
+    trains."""
     if not isinstance(iterations, int) or iterations < 1:
         raise ValueError(f"iterations must be a whole number >= 1, got {iterations!r}")
+    for name, v in (("max_wall_s", max_wall_s), ("max_cpu_s", max_cpu_s)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0
+                              or not math.isfinite(v)):
+            raise ValueError(f"{name} must be a finite number > 0 or None, got {v!r}")
+    t0 = time.perf_counter()
+    c0 = time.process_time()            # (before building: the driver's share of the build counts too)
     algo = config if hasattr(config, "train") else config.build_algo()
     history = []
-    t0 = time.perf_counter()
-    c0 = time.process_time()
     ckpt = Path(checkpoint_dir) if checkpoint_dir is not None else None
     for it in range(1, iterations + 1):
         res = algo.train()
@@ -115,10 +153,16 @@ def train(config, iterations: int, checkpoint_dir: str | Path | None = None, che
                "wall_s": time.perf_counter() - t0,
                "driver_cpu_s": time.process_time() - c0,        # this process: learner (+ local sampling)
                "env_runner_cpu_s": _env_runner_cpu_s(algo)}     # remote EnvRunners' processes, in total
+        row["cpu_s"] = row["driver_cpu_s"] + row["env_runner_cpu_s"]
         history.append(row)
         if progress is not None:
             progress(row)
         last = it == iterations or (max_wall_s is not None and row["wall_s"] >= max_wall_s)
+        if max_cpu_s is not None:
+            if not math.isfinite(row["cpu_s"]):
+                raise RuntimeError("max_cpu_s: the EnvRunners' CPU time cannot be read (a runner died?)")
+            step = row["cpu_s"] - (history[-2]["cpu_s"] if len(history) > 1 else 0.0)
+            last = last or row["cpu_s"] + step > max_cpu_s
         if ckpt is not None and (it % max(1, checkpoint_every) == 0 or last):
             algo.save_to_path(str((ckpt / ("final" if last else f"iter_{it}")).resolve()))
         if last:
