@@ -6,6 +6,7 @@ full loop at the route task's full-tier settings (calibration.full_tier_settings
     python scripts/calibrate_fast_tier.py --seeds 32 --out out/fast_calibration      # both tiers
     python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out DIR            # only the full loop
     python scripts/calibrate_fast_tier.py --tier fast --out DIR                       # fast vs saved full
+    python scripts/calibrate_fast_tier.py --fix-noise batch ...     # both tiers with the batch fix covariance
 
 The full loop flies seeds 0..--seeds-1, the fast tier 0..--fast-seeds-1 (default 256, FAST_SEEDS: its
 statistics then carry little sampling noise next to the full loop's).
@@ -41,6 +42,9 @@ def main(argv=None) -> int:
     )
     p.add_argument("--routes", nargs="*", default=None, help="route names (default: all)")
     p.add_argument("--tier", choices=("both", "full", "fast"), default="both")
+    p.add_argument("--fix-noise", choices=("fixed", "batch"), default=None,
+                   help="the navigator's TERCOM fix noise in both tiers (default: the scenario's, i.e. "
+                        "ins_tercom's default)")
     p.add_argument("--out", type=Path, default=Path("out/fast_calibration"))
     p.add_argument("--policies", default=None,
                    help="comma-separated route-task baselines (straight, planner) to fly, not the routes")
@@ -68,7 +72,7 @@ def main(argv=None) -> int:
         for tier, fn in (("full", fly_full), ("fast", fly_fast)):
             path = args.out / f"{tier}_{name}.json"
             if args.tier in (tier, "both") and not (tier == "full" and args.tier == "fast" and path.exists()):
-                res = fn(r, seeds[tier])
+                res = fn(r, seeds[tier], fix_noise=args.fix_noise)
                 path.write_text(json.dumps({"route": name, "seeds": seeds[tier], **res}, indent=1))
                 print(f"{tier} {name}: {res['wall_s']:.1f} s", file=sys.stderr, flush=True)
         fp, qp = args.out / f"full_{name}.json", args.out / f"fast_{name}.json"

@@ -101,7 +101,8 @@ def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float
     )
     settings = sc.navigator.table.to_dict()
     terrain_sigma_m = 0.0
-    if env.navigator == "ins_tercom" and settings.get("fix_noise", "batch") == "batch":
+    fix_noise_model = settings.get("fix_noise", nv.ins_tercom_default("fix_noise"))
+    if env.navigator == "ins_tercom" and fix_noise_model == "batch":
         # the map's unresolved terrain, as the full navigator takes it (its batch fix covariance)
         from trn_env.navigators.measurements.ira_map_noise import interpolation_sigma_m
 

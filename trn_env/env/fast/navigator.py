@@ -127,6 +127,14 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
 N_NAV_PARAMS = NP_BAND0 + MAX_WINDOW
 
 
+def ins_tercom_default(name: str):
+    """The full navigator's default of its setting `name` (navigators.filters.ins_trn_settings), for a
+    scenario that does not set it."""
+    from trn_env.navigators.filters.ins_trn_settings import InsTrnSettings
+
+    return getattr(InsTrnSettings(), name)
+
+
 def navigator_params(
     name: str,
     settings: dict,
@@ -156,11 +164,11 @@ def navigator_params(
     p[NP_HALF_WINDOW] = float(settings.get("half_cells", 50)) * float(settings.get("cell_m", 5.0))
     p[NP_CELL] = float(settings.get("cell_m", 5.0))
     p[NP_FIX_SIGMA] = float(settings.get("fix_sigma_m", 10.0))
-    fix_noise_model = settings.get("fix_noise", "batch")
+    fix_noise_model = settings.get("fix_noise", ins_tercom_default("fix_noise"))
     if fix_noise_model not in ("batch", "fixed"):
         raise ValueError(f"navigator.settings.fix_noise: 'batch' or 'fixed', got {fix_noise_model!r}")
     p[NP_FIX_NOISE] = 1.0 if fix_noise_model == "batch" else 0.0
-    ts = settings.get("terrain_model_sigma_m", "auto")
+    ts = settings.get("terrain_model_sigma_m", ins_tercom_default("terrain_model_sigma_m"))
     p[NP_TERRAIN_SIGMA] = float(terrain_sigma_m) if ts == "auto" else float(ts)
     p[NP_GATE] = float(settings.get("gate_chi2", 18.42))
     p[NP_REMOVE_BIAS] = 1.0 if settings.get("remove_bias", False) else 0.0
