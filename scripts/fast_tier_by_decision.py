@@ -2,7 +2,7 @@
 recorded `errors_by_decision_m` (scripts/calibrate_fast_tier.py --tier full --out DIR): mean, 90th
 percentile and the episodes still flying, per decision; where along a route the tiers part.
 
-    python scripts/fast_tier_by_decision.py --out DIR --route jacksboro_sw_ne [--fast-seeds 256]
+    python scripts/fast_tier_by_decision.py --out DIR --route jacksboro_sw_ne [--fix-noise batch]
 
 Prints a markdown table. Exit 2 on an unknown route, a missing or malformed DIR/full_<route>.json.
 """
@@ -17,13 +17,14 @@ from pathlib import Path
 import numpy as np
 
 
-def fast_by_decision(name: str, n: int) -> list[list[float]]:
-    """The fast tier's true horizontal error (m) at every decision of route `name`, seeds 0..n-1."""
+def fast_by_decision(name: str, n: int, fix_noise: str | None = None) -> list[list[float]]:
+    """The fast tier's true horizontal error (m) at every decision of route `name`, seeds 0..n-1, with the
+    navigator's fix_noise (calibration.env_kwargs)."""
     from trn_env.env.fast import calibration as cal
     from trn_env.env.fast.vector_env import TerrainNavFastVectorEnv
 
     r = cal.route_by_name(name)
-    env = TerrainNavFastVectorEnv(num_envs=n, **cal.env_kwargs(r))
+    env = TerrainNavFastVectorEnv(num_envs=n, **cal.env_kwargs(r, fix_noise))
     env.reset(seed=list(range(n)), options={"start_deg": r.start_deg})
     a = np.tile(np.asarray(r.action, np.float32), (n, 1))
     by: list[list[float]] = [[] for _ in range(n)]
@@ -44,6 +45,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, required=True, help="directory of the full loop's full_<route>.json")
     p.add_argument("--route", required=True)
     p.add_argument("--fast-seeds", type=int, default=256)
+    p.add_argument("--fix-noise", choices=("fixed", "batch"), default=None,
+                   help="the fast tier's TERCOM fix noise (as the full loop's in DIR was flown)")
     args = p.parse_args(argv)
     known = [r.name for r in REFERENCE_ROUTES]
     if args.route not in known:
@@ -58,7 +61,7 @@ def main(argv=None) -> int:
     except (OSError, ValueError, KeyError) as exc:
         print(f"{path}: no full-loop errors_by_decision_m ({exc})", file=sys.stderr)
         return 2
-    fast = fast_by_decision(args.route, args.fast_seeds)
+    fast = fast_by_decision(args.route, args.fast_seeds, args.fix_noise)
     print("| decision | fast mean / p90 (m) | fast episodes | full mean / p90 (m) | full episodes |")
     print("|---|---|---|---|---|")
     for k in range(max(max(map(len, fast)), max(map(len, full)))):

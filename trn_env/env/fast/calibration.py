@@ -87,11 +87,11 @@ REFERENCE_ROUTES = (
 # both tiers.
 FIX_NOISE_MODES = ("fixed", "batch")
 FULL_LOOP_REFERENCE = {
-    "basin_straight": {"mean_m": 511.9, "p90_m": 864.2, "n": 32},
-    "basin_round": {"mean_m": 16.8, "p90_m": 31.0, "n": 32},
-    "basin_west": {"mean_m": 21.9, "p90_m": 41.1, "n": 32},
-    "jacksboro_sw_ne": {"mean_m": 6.4, "p90_m": 11.4, "n": 32},
-    "jacksboro_flat_patch": {"mean_m": 10.0, "p90_m": 14.4, "n": 32},
+    "basin_straight": {"mean_m": 408.0, "p90_m": 779.9, "n": 64},
+    "basin_round": {"mean_m": 17.7, "p90_m": 35.6, "n": 64},
+    "basin_west": {"mean_m": 20.0, "p90_m": 33.4, "n": 64},
+    "jacksboro_sw_ne": {"mean_m": 7.2, "p90_m": 13.9, "n": 64},
+    "jacksboro_flat_patch": {"mean_m": 10.0, "p90_m": 14.9, "n": 64},
 }
 FULL_LOOP_REFERENCE_BATCH = {
     "basin_straight": {"mean_m": 192.5, "p90_m": 351.3, "n": 64},
@@ -100,9 +100,13 @@ FULL_LOOP_REFERENCE_BATCH = {
     "jacksboro_sw_ne": {"mean_m": 5.2, "p90_m": 9.5, "n": 64},
     "jacksboro_flat_patch": {"mean_m": 6.6, "p90_m": 10.2, "n": 64},
 }
-# Figures (route, "mean_m" or "p90_m") the fast tier does not hold within 25 % of FULL_LOOP_REFERENCE_BATCH,
-# with the measured reason (docs/validation/fast_tier.md "With the batch fix covariance"); the tests expect
-# them to fail, so one that comes back into calibration is reported.
+# Figures (route, "mean_m" or "p90_m") the fast tier does not hold within 25 % of FULL_LOOP_REFERENCE (and
+# of FULL_LOOP_REFERENCE_BATCH), with the measured gap (docs/validation/fast_tier.md); the tests expect them
+# to fail, so one that comes back into calibration is reported.
+OUT_OF_CALIBRATION = {
+    ("jacksboro_sw_ne", "mean_m"): "-26 %: the fast tier's error is lower (-17 % on seeds 0-31)",
+    ("jacksboro_sw_ne", "p90_m"): "-34 %: the fast tier's error is lower (-21 % on seeds 0-31)",
+}
 OUT_OF_CALIBRATION_BATCH = {
     ("basin_straight", "p90_m"): "-25.1 %: at the limit (the full loop's p90 over 64 seeds: 269-472 m)",
     ("basin_round", "mean_m"): "-29 %: smaller errors mid-route and earlier arrivals than the full loop",
@@ -241,6 +245,7 @@ __all__ = [
     "FAST_SEEDS",
     "FIX_NOISE_MODES",
     "FULL_LOOP_REFERENCE_BATCH",
+    "OUT_OF_CALIBRATION",
     "OUT_OF_CALIBRATION_BATCH",
     "FULL_LOOP_REFERENCE",
     "REFERENCE_ROUTES",
