@@ -82,11 +82,9 @@ REFERENCE_ROUTES = (
 # full-tier settings (full_tier_settings(): JSBSim at 50 Hz, the task's TASK_RATES), recorded with
 # `python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out out/fast_calibration`
 # (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies
-# both tiers. Recorded before ins_tercom had its batch fix covariance (its TERCOM fix noise then
-# fix_sigma_m, which the fast tier models); with the batch fix covariance (fix_noise = "batch", the
-# navigator's default since) the full loop's errors are smaller and the fast tier is outside 25 % on four
-# routes (docs/validation/fast_tier.md): it does not model that covariance yet, so these were not
-# re-recorded for it.
+# both tiers. Recorded with ins_tercom's default fixed TERCOM fix noise (fix_sigma_m, which the fast tier
+# models); with the opt-in batch fix covariance (fix_noise = "batch") the full loop's errors are smaller and
+# the fast tier is outside 25 % on four routes (docs/validation/fast_tier.md): it does not model that option.
 FULL_LOOP_REFERENCE = {
     "basin_straight": {"mean_m": 511.9, "p90_m": 864.2, "n": 32},
     "basin_round": {"mean_m": 16.8, "p90_m": 31.0, "n": 32},
