@@ -269,6 +269,16 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         self.C_uz = G @ c1
         self._moments_cache = None
 
+    def _reference_offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(heading turn (1,), velocity offset (1, 2)) of the IRA closest point's geometry: the INS's
+        heading and velocity corrected by the velocity-heading Gaussian's means (true heading = INS yaw -
+        eps, true velocity = INS + v)."""
+        dpsi, dv = self._zero1, self._zero12
+        if np.all(np.isfinite(self.u_mean)):
+            dpsi = np.array([-self.u_mean[6]])
+            dv = self.u_mean[None, :2].copy()
+        return dpsi, dv
+
     # ------------------------------------------------------------------------------------ updates
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
         self._apply_process_noise()
@@ -278,8 +288,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         m = self.n * self.n
         C = quat_to_dcm(st[6:10])
         if kind == "ira":
-            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self._zero1,
-                                  self._zero12, self.ira_code, self._ira_p)
+            dpsi, dv_ne = self._reference_offsets()
+            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), dpsi, dv_ne,
+                                    self.ira_code, self._ira_p)
             if nb:
                 self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
                 return
