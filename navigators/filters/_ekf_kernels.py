@@ -298,6 +298,24 @@ def euler_from_quat(q):
 
 
 @njit(cache=True)
+def yaw_total_variation(hist, yaw_prev):
+    """Total variation (rad) of the yaw of the INS states hist (n, 10; quaternion in columns 6-9) from
+    yaw_prev (NaN: from the first row): the sum of |wrapped yaw step| between successive samples, i.e. the
+    integral of |yaw rate| at the IMU's rate. Non-finite rows are skipped. Returns (total, last yaw)."""
+    total = 0.0
+    prev = yaw_prev
+    for k in range(hist.shape[0]):
+        q0, q1, q2, q3 = hist[k, 6], hist[k, 7], hist[k, 8], hist[k, 9]
+        yaw = math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
+        if not np.isfinite(yaw):
+            continue
+        if np.isfinite(prev):
+            total += abs(_wrap(yaw - prev))
+        prev = yaw
+    return total, prev
+
+
+@njit(cache=True)
 def last_good_row(valid, f, out):
     """Copy into out the last row of f (n, 3) that is valid and finite; False (out untouched) if none."""
     for k in range(f.shape[0] - 1, -1, -1):

@@ -19,6 +19,7 @@ from ..core.ins_gnss import GnssFixes, gnss_fixes
 from ..core.linalg import is_positive_definite
 from ..frames import SensorFrames
 from ..measurements import gnss as gnss_model
+from . import _ekf_kernels as kern
 
 
 class InsTrnGnss:
@@ -96,3 +97,5 @@ class InsTrnGnss:
         self.ins.correct(dx[POS], dx[VEL], dx[ATT])
         self.ins.accel_bias_b += dx[ACC_BIAS]
         self.ins.gyro_bias_b[2] += dx[BGZ]
+        if math.isfinite(self._yaw_prev):  # a heading correction is not a turn (_turn_noise)
+            self._yaw_prev = kern.euler_from_quat(self.ins.state[6:10])[2]

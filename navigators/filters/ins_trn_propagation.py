@@ -111,7 +111,7 @@ class InsTrnPropagation:
         self._P_good[:] = self.kf.P
         self.kf.x[:] = 0.0
         self._add_collected(t0, n_ret, n_nan, m)
-        self._turn_noise()
+        self._turn_noise(self._hist[:n])
 
     def _baro(self, frames: SensorFrames):
         """(t, geometric height, usable mask, all usable) of the frame's baro samples, computed once per
@@ -157,7 +157,7 @@ class InsTrnPropagation:
         self._predict_to(float(t_seg[-1]), t_seg, f_seg, hist)
         if self.aiding is not None:
             self._collect(frames, t_seg, hist)
-        self._turn_noise()
+        self._turn_noise(hist)
 
     def _process_noise(self, dt: float) -> np.ndarray:
         Q = np.zeros((N_EKF13, N_EKF13))
@@ -199,15 +199,26 @@ class InsTrnPropagation:
         self._consistency_warning = grade_warning(spec, EKF_MEMORY_S, self.name)
         self._Q = None
 
-    def _turn_noise(self) -> None:
-        """Attitude variance the frame's turn builds through the gyro misalignment and scale factor: per rad
-        turned, TURN_REFERENCE_RAD times their squares (a 90 deg turn gets the whole error's variance)."""
+    def _turn_noise(self, hist: np.ndarray) -> None:
+        """Attitude variance the segment's turning builds through the gyro misalignment (tilt) and scale
+        factor (heading), added after the segment's propagation.
+
+        Both errors are a constant of the IMU times the angle turned: a turn of dpsi rad moves the heading by
+        s dpsi and the tilt by about m dpsi (navigators.core.imu_spec.turn_heading_sigma_rad,
+        turn_tilt_sigma_rad), variance sigma^2 dpsi^2. The 13 states do not carry s and m, so the error
+        enters as a random walk in the angle turned, of density sigma^2 TURN_REFERENCE_RAD per rad: it
+        matches sigma^2 dpsi^2 at dpsi = TURN_REFERENCE_RAD and bounds it from above for smaller turns (the
+        equivalent walk of navigators.core.imu_spec, with the angle in place of the time). The angle is the
+        total variation of the INS yaw at the IMU's rate (the integral of |yaw rate| over the segment's
+        samples hist: _ekf_kernels.yaw_total_variation), not the net yaw change over the navigator's frame:
+        a sum of per-frame net changes drops the back-and-forth inside each frame and so depends on the
+        frame rate, while the integral of |yaw rate| is the limit of every such sum as the frames shrink
+        and, being no smaller than the net turn over any interval, keeps the walk an upper bound of the
+        error whatever the frame rate."""
         if self._turn_tilt2 == 0.0 and self._turn_heading2 == 0.0:
             return
-        q = self.ins.state[6:10]
-        yaw = math.atan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
-        if math.isfinite(self._yaw_prev) and math.isfinite(yaw):
-            turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
+        turn, yaw = kern.yaw_total_variation(hist, self._yaw_prev)
+        if turn > 0.0:
             P = self.kf.P
             P[PSIN, PSIN] += self._turn_tilt2 * turn
             P[PSIE, PSIE] += self._turn_tilt2 * turn
