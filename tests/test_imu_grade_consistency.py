@@ -232,8 +232,8 @@ def test_imu_spec_names_the_preset_it_equals():
 def test_a_static_warning_keeps_ok_and_the_flag_withdraws_it():
     """Health.snapshot with the run-time check: a conservative warning (ok stays True) until the check flags,
     then ok False with the check's message after the static warning."""
-    warning = grade_warning(imu_spec({"grade": "tactical"}), 200.0, "ins_tercom")
-    assert measured_direction("ins_tercom", "tactical") == CONSERVATIVE and "conservative" in warning
+    warning = grade_warning(imu_spec({"grade": "navigation"}), 120.0, "pf")
+    assert measured_direction("pf", "navigation") == CONSERVATIVE and "conservative" in warning
     check = ConsistencyCheck(window=2)
     h = Health().snapshot(warning, check)
     assert h.ok and h.status == "ok" and h.consistency_warning == warning

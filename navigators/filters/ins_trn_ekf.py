@@ -11,9 +11,12 @@ Error state (13, computed minus true, feedback form - corrected into the INS and
 Propagation at 50 Hz (seed 000 Table 2) with the psi-angle error model: d(dr) = dv;
 d(dv) = f^n x psi + C_bn b_a - (2 w_ie + w_en) x dv + dg (dg = -g/R dr_h, +2g/R dr_d; the vertical is the
 baro-damped channel of navigators.inertial); d(psi) = -w_in x psi - C_bn [0, 0, b_gz]. Measurement: the TERCOM
-fix, z = -(correction) = INS - matched position (north, east), noise (10 m)^2 (Table 2), chi-square gated;
-the batch's rigid shift is the error at its mean sample time, so H also takes the velocity error times the
-lag to the fix (-lag on states 3, 4).
+fix, z = -(correction) = INS - matched position (north, east), chi-square gated; the batch's rigid shift is
+the INS error averaged over its samples, dr(t_k) = dr - dv tau_k + d(dv)/dt tau_k^2 / 2 (tau_k = t_fix -
+t_k), so H takes the velocity error times the mean lag (-lag on states 3, 4) and the acceleration error
+(f^n x psi + C_bn b_a) times half the mean squared lag (states 6-11). Its noise: fix_noise "batch" (default)
+the MAD shift's covariance from the batch's residuals, the map's slopes and the terrain the map cannot hold
+(navigators.tercom.fix_noise), "fixed" (fix_sigma_m)^2 per axis (Table 2: (10 m)^2).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS. The error
 model's priors and noise come from the IMU's specification where it gives more than the settings
@@ -46,7 +49,7 @@ from collections import deque
 
 import numpy as np
 
-from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
+from ..core.error_states import ACC_BIAS, ATT, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from ..core.ins_gnss import InsGnssBlock
 from ..core.linalg import floored_psd, is_positive_definite
 from ..core.maps import load_map
@@ -55,7 +58,9 @@ from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns
 from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
+from ..measurements.ira_map_noise import interpolation_sigma_m
 from ..protocol import Estimate, Health, update_extra
+from ..tercom.fix_noise import lad_fix_covariance
 from ..tercom.mad import TercomBatch, TercomFix, correlate
 from . import _ekf_kernels as kern
 from .ins_trn_gnss import InsTrnGnss
@@ -131,11 +136,15 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.q_acc = s.accel_noise_mps2_rthz ** 2
         self.sig_bg = s.gyro_bias_rps
         self.q_gyr = s.gyro_noise_rps_rthz ** 2
-        s.copy_to(self, "formula fix_period_s half_cells cell_m fix_sigma_m ira_decimation ira_average "
-                  "gate_chi2 min_samples dp_min_m dp_reference_formula baro_geopotential remove_bias "
-                  "init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m gnss_sigma_v_mps "
-                  "gnss_correlated_sigma_m gnss_gate_chi2 gnss_timeout_s recovery_half_cells "
-                  "recovery_sigma_m")
+        s.copy_to(self, "formula fix_period_s half_cells cell_m fix_sigma_m fix_noise ira_decimation "
+                  "ira_average gate_chi2 min_samples dp_min_m dp_reference_formula baro_geopotential "
+                  "remove_bias init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m "
+                  "gnss_sigma_v_mps gnss_correlated_sigma_m gnss_gate_chi2 gnss_timeout_s "
+                  "recovery_half_cells recovery_sigma_m")
+        self.terrain_model_sigma_m = 0.0
+        if aiding is not None and s.fix_noise == "batch":   # the map's unresolved terrain (tercom.fix_noise)
+            self.terrain_model_sigma_m = (interpolation_sigma_m(dem) if s.terrain_model_sigma_m == "auto"
+                                          else float(s.terrain_model_sigma_m))
         self._t_gnss = -math.inf        # time of the last GNSS fix used
         self._gnss_up = False           # GNSS fixes arriving (loss reported once gnss_timeout_s passes)
         self._height_initialised = False
@@ -289,7 +298,15 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         # error then was the present one less the velocity error times the lag
         lag_s = t_s - float(np.mean(s[:, 0]))
         H[0, DVN] = H[1, DVE] = -lag_s
-        Rm = np.eye(2) * self.fix_sigma_m**2
+        # ... and its acceleration error's share: half the mean squared lag times the specific-force error
+        # (f^n x psi + C_bn b_a, the error model's velocity rows), the part of the error that bends the
+        # batch's track
+        H[:, ATT.start:ACC_BIAS.stop] = 0.5 * float(np.mean((t_s - s[:, 0]) ** 2)) * self._accel_error_rows()
+        if self.fix_noise == "batch":
+            Rm = lad_fix_covariance(self.dem, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], fix.dn_m, fix.de_m,
+                                    self.cell_m, self.remove_bias, self.terrain_model_sigma_m)
+        else:
+            Rm = np.eye(2) * self.fix_sigma_m**2
         S = H @ self.kf.P @ H.T + Rm
         d2 = float((z.T @ np.linalg.solve(S, z))[0, 0])
         gated = not np.isfinite(d2) or d2 > self.gate_chi2
@@ -312,6 +329,18 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.health.events.append(
             (t_s, f"TERCOM fix dn={fix.dn_m:.1f} m de={fix.de_m:.1f} m q={fix.quality:.2f}")
         )
+
+    def _accel_error_rows(self) -> np.ndarray:
+        """(2, 6): the north / east acceleration error per unit of the attitude (psi) and accelerometer-bias
+        states, d(dv)/dt = f^n x psi + C_bn b_a (the error model of the module docstring, at the last
+        specific force)."""
+        C = kern.quat_to_dcm(self.ins.state[6:10])
+        f_n = C @ (self._last_f_b - self.ins.accel_bias_b)
+        rows = np.zeros((2, 6))
+        rows[0, 1], rows[0, 2] = -f_n[2], f_n[1]      # (f^n x psi)_n = f_e psi_d - f_d psi_e
+        rows[1, 0], rows[1, 2] = f_n[2], -f_n[0]      # (f^n x psi)_e = f_d psi_n - f_n psi_d
+        rows[:, 3:6] = C[:2, :]
+        return rows
 
     def _set_search(self, half_cells: int) -> None:
         """TERCOM search half-width (cells) of the batches started from now on."""

@@ -20,6 +20,7 @@ CHI2_2DOF_99_99 = 18.42
 CHI2_5DOF_99_99 = 25.74
 IRA_FORMULAS = ("simple", "attitude", "conventional", "proposed")
 AIDINGS = ("ira", "radar_altimeter")
+FIX_NOISE_MODELS = ("batch", "fixed")
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,12 @@ class InsTrnSettings(Settings):
     half_cells: int = setting(50, "TERCOM search half-width in cells", ge=1)
     cell_m: float = setting(5.0, "TERCOM search cell", "m", gt=0.0)
     fix_sigma_m: float = setting(10.0, "TERCOM fix noise per axis (Table 2)", "m", gt=0.0)
+    fix_noise: str = setting("batch", "TERCOM fix covariance: 'batch' (the MAD shift's from the batch's "
+                                      "residuals and map slopes, tercom.fix_noise) or 'fixed' "
+                                      "(fix_sigma_m per axis)", choices=FIX_NOISE_MODELS)
+    terrain_model_sigma_m: float | str = setting(
+        "auto", "terrain a coarse map cannot hold between posts, in the 'batch' fix covariance (auto: from "
+        "the map's spectrum)", "m", ge=0.0, also=("auto",))
     ekf_rate_hz: float = setting(50.0, "error-state propagation rate (Table 2)", "Hz", gt=0.0)
     gravity_model: str = setting("j2", "INS gravity model", choices=("somigliana", "j2"))
     tau_baro_s: float = setting(30.0, "time constant of the baro-damped vertical channel", "s", gt=0.0)
@@ -106,6 +113,7 @@ def _tercom_warm_up(rate_hz: float) -> dict:
 
 INS_CAPABILITIES = Capabilities(settings=InsTrnSettings, uses_imu_spec=True)
 INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=True, uses_imu_spec=True,
+                                       models_map_detail=True,
                                        # protection level validated on (docs/validation/integrity.md 6.3)
                                        pl_validated=("navigation/as_published", "tactical/as_published"),
                                        warm_up_settings=_tercom_warm_up,

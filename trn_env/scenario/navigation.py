@@ -118,7 +118,8 @@ def navigator_settings(sc, map_dem) -> dict:
         refinement = sc.terrain.world.refinement
         spacing = None if refinement is None else refinement.spacing_m
         # the finest terrain below the map's posts is the world's (where it is finer than the posts)
-        if spacing is not None and 5.0 <= float(spacing) < min(getattr(map_dem, "spacing_m", (0.0,))):
+        if (spacing is not None and 5.0 <= float(spacing) < min(getattr(map_dem, "spacing_m", (0.0,)))
+                and "terrain_detail_spacing_m" in fields):
             settings.setdefault("terrain_detail_spacing_m", float(spacing))
     return settings
 
