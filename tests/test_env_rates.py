@@ -12,7 +12,13 @@ import pytest
 from trn_env.navigators.frames import imu_gap_s
 
 from trn_env.env.env_settings import goal_offset_ne
-from trn_env.env.route_task import DECISION_RATES, FULL_TIER_ONLY, env_kwargs, fast_tier_kwargs
+from trn_env.env.route_task import (
+    DECISION_RATES,
+    FULL_TIER_ONLY,
+    TASK_RATES,
+    env_kwargs,
+    fast_tier_kwargs,
+)
 from trn_env.env.terrain_nav import TerrainNavEnv
 from trn_env.flight.core import (
     AutopilotTargets,
@@ -81,7 +87,15 @@ def test_bad_rates_name_the_argument(kw, field):
 
 def test_route_task_flies_50_hz_and_the_fast_tier_drops_full_tier_settings():
     kw = env_kwargs("basin")
-    assert kw["flight_dt_s"] == 0.02 and "scenario_fields" not in kw          # the scenario's own rates
+    assert kw["flight_dt_s"] == 0.02 and kw["guidance_rate_hz"] == 1.0
+    assert kw["scenario_fields"] == TASK_RATES["scenario_fields"]
+    assert kw["scenario_fields"] is not TASK_RATES["scenario_fields"]          # a copy
+    e = TerrainNavEnv(**{**kw, "max_episode_s": 8.0})
+    sc = e.scenario
+    assert (sc.sensors.ira.rate_hz, sc.navigator.settings.ira_average, sc.navigator.settings.ekf_rate_hz,
+            sc.navigator.rate_hz, sc.guidance.rate_hz) == (50.0, 3, 10.0, 0.5, 1.0)
+    assert e.ticks_per_decision == 15
+    e.close()
     rated = env_kwargs("basin", decision_rates=True)
     assert rated["scenario_fields"] == DECISION_RATES["scenario_fields"]
     assert rated["scenario_fields"] is not DECISION_RATES["scenario_fields"]      # a copy
@@ -234,3 +248,20 @@ def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("error:") and words in err, err
     assert not out.exists()
+
+
+def test_cpu_breakdown_script_bad_arguments_exit_2(capsys):
+    """scripts/env_cpu_breakdown.py: a bad --decisions or --config is a one-line error and exit 2."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "env_cpu_breakdown.py"
+    spec = importlib.util.spec_from_file_location("env_cpu_breakdown", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for argv, words in ((["--decisions", "0"], "--decisions"), (["--config", "{"], "not JSON"),
+                        (["--config", "[1]"], "JSON object"),
+                        (["--config", '{"flight_dt_s": 0.06}', "--decisions", "1"], "flight_dt_s")):
+        assert mod.main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and words in err, err

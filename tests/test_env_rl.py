@@ -239,3 +239,28 @@ def test_bad_options_name_the_option():
     with pytest.raises(ValueError, match=r"array of numbers of shape \(2,\)"):
         e.step(["left", "up"])
     e.close()
+
+
+def test_arrival_is_judged_on_each_updates_own_estimate_inline_and_pipelined():
+    """1 s decisions = one navigator update each: the episode ends at the first update whose estimate is
+    inside the circle (the step before it reported an estimate outside), and the pipelined env (navigator in a
+    second process, waiting for it only near the goal) ends the same episode at the same time with the same
+    miss."""
+    kw = dict(scenario="basin_route", navigator="ins", decision_interval_s=1.0, max_episode_s=90.0,
+              goal_radius_m=500.0)
+    runs = {}
+    for pipeline in (False, True):
+        e = TerrainNavEnv(**kw, pipeline=pipeline)
+        pol = StraightLinePolicy(e, agl_m=600.0)
+        obs, info = e.reset(seed=2, options={"start_deg": NEAR_START, "goal_deg": NEAR_GOAL})
+        d_est = [info["estimated_distance_to_goal_m"]]
+        while True:
+            obs, _, term, trunc, info = e.step(pol(obs))
+            d_est.append(info["estimated_distance_to_goal_m"])
+            if term or trunc:
+                break
+        e.close()
+        assert info["termination"] == "arrived"
+        assert d_est[-1] <= 500.0 < min(d_est[:-1])      # on time: never inside the circle before
+        runs[pipeline] = (info["t_s"], info["true_miss_m"], d_est)
+    assert runs[True] == runs[False]

@@ -12,7 +12,9 @@ is INS + the weighted mean.
   measurement epochs - position from velocity, velocity from the heading error turning the specific force
   and the Schuler term - plus process noise drawn from the filter's Generator; its densities come from the
   IMU's specification where it gives more than the tuned floors (apply_imu_spec, navigators.core.imu_spec:
-  the acceleration errors the particles do not carry as an equivalent velocity random walk).
+  the acceleration errors the particles do not carry as an equivalent velocity random walk), or with
+  velocity_noise_model "imu_spec" the velocity's noise is that acceleration error's effect on the velocity
+  the cloud holds (`_velocity_step_var`).
 - Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
   or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira.closest_points), one map lookup
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
@@ -82,6 +84,7 @@ class ParticleFilter(InsRiddenFilter):
     the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
     (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
     velocity offsets need the diversity, learnt only through the weights and resampling),
+    velocity_noise_model ("walk", default, or "imu_spec": `_velocity_step_var`),
     heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
     docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
@@ -101,6 +104,10 @@ class ParticleFilter(InsRiddenFilter):
         self.s_pos = s.position_noise_m_per_sqrt_s
         self.s_vel = s.velocity_noise_mps_per_sqrt_s
         self.s_psi = s.heading_noise_rad_per_sqrt_s
+        self._imu_spec: ImuSpec | None = None
+        self._spec_velocity = s.velocity_noise_model == "imu_spec"
+        self._accel_model: tuple[float, float, float, float] | None = None  # set by reset ("imu_spec")
+        self._t_ins0_s = 0.0
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.M = s.n_particles
         M = self.M
@@ -121,18 +128,22 @@ class ParticleFilter(InsRiddenFilter):
 
     # ------------------------------------------------------------------------------------ belief
     def apply_imu_spec(self, spec: ImuSpec) -> None:
-        """Take the error model from the IMU's specification (navigators.core.imu_spec), each figure a floor
-        over the tuned setting. The particles carry position, velocity and heading offsets, so the
-        acceleration errors enter as an equivalent velocity random walk matching them at PF_MEMORY_S: the
-        body-fixed specific-force error (accelerometer bias, instability, misalignment x g) and a 90 deg
-        turn's gyro misalignment (g x tilt) as constant accelerations, the tilt the horizontal gyro biases
-        build as a ramp (g sigma_bg t: equivalent_ramp_walk_density), with the velocity random walk; the
-        heading's random walk matches the z gyro bias and a 90 deg turn's scale factor at the same memory,
-        with the angle random walk."""
-        a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
-        tilt = equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, PF_MEMORY_S)
-        self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S), tilt,
-                                         spec.accel_noise_density_mps2_rthz))
+        """Take the error model from the IMU's specification (navigators.core.imu_spec). The particles carry
+        position, velocity and heading offsets, not the acceleration error. velocity_noise_model "walk"
+        (default): the acceleration errors enter as an equivalent velocity random walk matching them at
+        PF_MEMORY_S, a floor over the tuned setting - the body-fixed specific-force error (accelerometer
+        bias, instability, misalignment x g) and a 90 deg turn's gyro misalignment (g x tilt) as constant
+        accelerations, the tilt the horizontal gyro biases build as a ramp (g sigma_bg t:
+        equivalent_ramp_walk_density), with the velocity random walk. "imu_spec": the velocity's noise is
+        that error's effect on the velocity the cloud holds (`_velocity_step_var`, the initial tilt x g
+        added to the constant part). The heading's random walk matches the z gyro bias and a 90 deg turn's
+        scale factor at PF_MEMORY_S, with the angle random walk, as a floor over the tuned setting."""
+        self._imu_spec = spec
+        if not self._spec_velocity:
+            a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
+            tilt = equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, PF_MEMORY_S)
+            self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S), tilt,
+                                             spec.accel_noise_density_mps2_rthz))
         r_psi = rss(spec.gyro_bias_sigma_rps, spec.turn_heading_sigma_rad(0.5 * math.pi) / PF_MEMORY_S)
         self.s_psi = max(self.s_psi, rss(equivalent_walk_density(r_psi, PF_MEMORY_S),
                                          spec.gyro_noise_density_rps_rthz))
@@ -140,6 +151,52 @@ class ParticleFilter(InsRiddenFilter):
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = grade_warning(spec, PF_MEMORY_S, self.name)
+
+    def reset(self, initial) -> None:
+        super().reset(initial)
+        self._t_ins0_s = float(initial.t_s)
+        spec = self._imu_spec
+        if spec is None or not self._spec_velocity:
+            self._accel_model = None
+            return
+        tilt0 = math.sqrt(max(0.5 * float(self._p_att0[0] + self._p_att0[1]), 0.0))   # initial tilt (rad)
+        a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi),
+                G0_MPS2 * tilt0)
+        v0 = max(0.5 * float(self._p_vel0[0] + self._p_vel0[1]), 0.0)                  # initial velocity
+        self._accel_model = (spec.accel_noise_density_mps2_rthz ** 2, a * a,
+                             spec.tilt_accel_rate_sigma_mps3 ** 2, v0)
+
+    def _velocity_step_var(self, t_s: float, dt: float) -> float:
+        """Variance (m^2/s^2 per axis) the particles' velocity offsets gain over dt ending at t_s.
+
+        Without the IMU's specification: velocity_noise_mps_per_sqrt_s^2 dt. With it: the acceleration
+        error the particles do not carry, a(t) = a0 + j t (a0 ~ sigma_a, a constant; j = g sigma_bg, the
+        gyro-bias tilt's ramp; t since the reset; variance sigma_acc^2 = sigma_a^2 + sigma_j^2 t^2), moves the
+        velocity error by a dt per step, correlated with the velocity error v it built: the step adds
+        2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt, sigma_v the cloud's velocity sigma (the larger
+        axis). rho is the correlation of v and a in the free INS, which starts with an independent v0
+        (sigma_v0, the initial velocity's): cov = sigma_a^2 t + sigma_j^2 t^3 / 2, var v = sigma_v0^2 + N^2 t
+        + sigma_a^2 t^2 + sigma_j^2 t^4 / 4. An unobserved velocity (sigma_v the free INS's) thus grows
+        exactly as the free INS's velocity error (Titterton & Weston 2004, sec. 12.3, without Schuler's
+        bound), and a velocity the terrain has told apart gains less, with its smaller sigma. A random walk
+        of fixed density (the equivalent walk at one memory) cannot do both: fitted at a memory it is too
+        small for an unobserved velocity and too large for an observed one. Limitation (why "walk" stays
+        the default): the growth scales with the cloud's own spread, so a cloud whose velocity spread sharp
+        fixes (GNSS) collapsed by resampling stays collapsed after them, and after an observation the
+        correlation rebuilds faster than the free INS's from the reset."""
+        model = self._accel_model
+        if model is None:
+            return self.s_vel * self.s_vel * dt
+        n2, a2, j2, v02 = model
+        t = max(t_s - self._t_ins0_s, 0.0)
+        w = self._weights()
+        d = self.dv - w @ self.dv
+        sigma_v = math.sqrt(max(float(np.max(w @ (d * d))), 0.0))
+        acc2 = a2 + j2 * t * t
+        cov_free = a2 * t + 0.5 * j2 * t ** 3
+        var_free = v02 + n2 * t + a2 * t * t + 0.25 * j2 * t ** 4
+        rho = min(cov_free / math.sqrt(var_free * acc2), 1.0) if var_free * acc2 > 0.0 else 0.0
+        return n2 * dt + 2.0 * rho * sigma_v * math.sqrt(acc2) * dt + acc2 * dt * dt
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
         self._init_cov = np.array(cov9, float)
@@ -182,9 +239,12 @@ class ParticleFilter(InsRiddenFilter):
         lat = float(st[0]) if st is not None else 0.6
         g_over_r = 9.81 / float(radii_m(lat, 0.0)[0])
         z = self.rng.standard_normal((self.M, N_STATE))
+        s_vel = float(self.s_vel)
+        if self._accel_model is not None:      # velocity_noise_model "imu_spec"
+            s_vel = math.sqrt(self._velocity_step_var(t_s, dt) / dt)
         propagate_particles((self.dn, self.de, self.b, self.dv, self.dpsi), dt,
                             (float(f_n), float(f_e), g_over_r),
-                            (float(self.s_pos), float(self.s_vel), float(self.s_psi), 0.0), z)
+                            (float(self.s_pos), s_vel, float(self.s_psi), 0.0), z)
         self.P_b += self._offset_process_var(dt, st)
         self._t_belief = t_s
         self._moments_cache = None

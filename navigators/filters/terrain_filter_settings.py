@@ -123,6 +123,10 @@ class PfSettings(TerrainFilterSettings):
                                                  "m/sqrt(s)", ge=0.0)
     velocity_noise_mps_per_sqrt_s: float = setting(0.02, "random walk of the velocity offset",
                                                    "m/s/sqrt(s)", ge=0.0)
+    velocity_noise_model: str = setting("walk", "'walk': the velocity's noise is the random walk (the IMU "
+                                        "specification's equivalent walk as a floor); 'imu_spec': the "
+                                        "specification's acceleration error on the cloud's velocity",
+                                        choices=("walk", "imu_spec"))
     heading_noise_rad_per_sqrt_s: float = setting(2e-5, "random walk of the heading error", "rad/sqrt(s)",
                                                   ge=0.0)
     max_memory_mb: float = setting(2048.0, "refuse a cloud needing more memory than this", "MB", gt=0.0)

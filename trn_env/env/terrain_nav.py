@@ -54,6 +54,10 @@ from trn_env.scenario.loading import Scenario, load_scenario
 from trn_env.sim.closed_loop import ClosedLoop, spawn_rngs
 from trn_env.terrain.geodesy import latlon_to_ned_offset
 
+# pipelined env: within this distance (m) beyond the arrival circle (the last estimate dead-reckoned to now)
+# the flight waits for each navigator update to judge arrival on it (TerrainNavEnv._arrival_needs_sync)
+ARRIVAL_SYNC_MARGIN_M = 3000.0
+
 
 class TerrainNavEnv(gym.Env, EzPickle):
     """Fly to a goal over real terrain while a terrain-referenced navigator keeps the position estimate.
@@ -191,8 +195,9 @@ class TerrainNavEnv(gym.Env, EzPickle):
     within `held_out_radius_m` of them.
 
     ## Episode End
-    Terminated: arrival (mode "arrival": the ESTIMATED position within `goal_radius_m` of the goal;
-    `termination = "arrived"`; mode "progress": the TRUE position within `goal_radius_m`, "goal"), terrain
+    Terminated: arrival (mode "arrival": the ESTIMATED position within `goal_radius_m` of the goal, judged at
+    every navigator update on that update's estimate; `termination = "arrived"`; mode "progress": the TRUE
+    position within `goal_radius_m`, "goal"), terrain
     collision (true height above the true terrain < 0), off the map, the navigator diverged, or an engine
     stopped (fuel exhausted or engine failure; the scenario's `aircraft.constant_fuel = true` keeps the tanks
     full for long episodes). Truncated: `max_episode_s` of flight. `step` after the end without `reset`
@@ -224,8 +229,9 @@ class TerrainNavEnv(gym.Env, EzPickle):
     `scenario_fields`: scenario fields set for every episode by dotted path (`Scenario.with_fields`, as
     `trn-env fly --set`), e.g. `{"sensors.ira.rate_hz": 10.0, "navigator.rate_hz": 0.5}`; applied before
     `guidance_rate_hz` and `flight_dt_s`; anything the scenario's schema rejects is a ValueError naming
-    `scenario_fields` and the field. The route task's opt-in `DECISION_RATES` use it
-    (trn_env.env.route_task; what they cost in accuracy: docs/validation/env_speed.md).
+    `scenario_fields` and the field. The route task's rates (`TASK_RATES`, its default) and its opt-in
+    `DECISION_RATES` use it (trn_env.env.route_task; what they cost in accuracy:
+    docs/validation/env_speed.md).
     `flight_dt_s`: JSBSim's integration step (s, at most 0.05; None = the scenario's `[aircraft] dt_s`,
     0.01 in the built-in scenarios). The IMU's rate is lowered to the step rate when it was faster (an
     integrating IMU: each sample is the mean over its interval of the truth rows); any other sensor faster
@@ -246,6 +252,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (arrival on time): arrival is judged on each navigator update's own estimate (before: on the
+      previous update's, then confirmed on the current one, so arrival came up to one update late).
     - v0 (scenario fields): `scenario_fields`; the per-update goal geometry and the route information's
       pursuit paths are compiled kernels (the same episodes to rounding).
     - v0 (JSBSim's step): `flight_dt_s`.
@@ -431,6 +439,24 @@ class TerrainNavEnv(gym.Env, EzPickle):
         """North/east (m) of the goal in the local level frame at (lat, lon, h), exact through ECEF (the goal
         is tens of km away: no small-offset approximation), the goal taken at the same height."""
         return goal_offset_ne(float(lat), float(lon), float(h), self.goal_lat_rad, self.goal_lon_rad)
+
+    def _arrival_needs_sync(self) -> bool:
+        """Whether arrival is to be judged on the estimate for this time (the navigator's update of the
+        interval just flown: `ClosedLoop.sync`). Inline, that update is already computed (sync costs nothing),
+        so always: arrival is judged at every navigator update, on its own estimate. Pipelined (the update
+        still in the worker), only when the last collected estimate, dead-reckoned to now, is within
+        `goal_radius_m + ARRIVAL_SYNC_MARGIN_M` (or already inside the circle), so the flight waits for the
+        worker only near the goal; the same decisions as inline unless one update moves the estimate by
+        more than the margin."""
+        loop = self._loop
+        if not loop.pipelined:
+            return True
+        est = loop.estimate
+        if self._estimated_distance_m() <= self.goal_radius_m:
+            return True
+        ahead = est.extrapolated(loop.t_s) if est.t_s != loop.t_s else est
+        d = math.hypot(*self._offset_to_goal(ahead.lat_rad, ahead.lon_rad, ahead.h_m))
+        return d <= self.goal_radius_m + ARRIVAL_SYNC_MARGIN_M
 
     def _estimated_distance_m(self) -> float:
         est = self._loop.estimate
@@ -630,7 +656,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
             lat, lon, h = lat1, lon1, h1
             if reason is None:
                 if arrival:
-                    if self._estimated_distance_m() <= self.goal_radius_m:
+                    if self._arrival_needs_sync():
                         self._loop.sync()                # the estimate at this time decides
                         reason = self._loop.termination or (
                             "arrived" if self._estimated_distance_m() <= self.goal_radius_m else None)

@@ -79,16 +79,20 @@ REFERENCE_ROUTES = (
     ),
 )
 # The full JSBSim loop's true error at the goal on every reference route, seeds 0..n-1, at the route task's
-# full-tier settings (full_tier_settings(): JSBSim at 50 Hz), recorded with
+# full-tier settings (full_tier_settings(): JSBSim at 50 Hz, the task's TASK_RATES), recorded with
 # `python scripts/calibrate_fast_tier.py --tier full --seeds 32 --out out/fast_calibration`
 # (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies
-# both tiers.
+# both tiers. Recorded before ins_tercom had its batch fix covariance (its TERCOM fix noise then
+# fix_sigma_m, which the fast tier models); with the batch fix covariance (fix_noise = "batch", the
+# navigator's default since) the full loop's errors are smaller and the fast tier is outside 25 % on four
+# routes (docs/validation/fast_tier.md): it does not model that covariance yet, so these were not
+# re-recorded for it.
 FULL_LOOP_REFERENCE = {
-    "basin_straight": {"mean_m": 521.8, "p90_m": 890.9, "n": 32},
-    "basin_round": {"mean_m": 18.0, "p90_m": 33.9, "n": 32},
-    "basin_west": {"mean_m": 21.1, "p90_m": 38.7, "n": 32},
-    "jacksboro_sw_ne": {"mean_m": 5.8, "p90_m": 10.3, "n": 32},
-    "jacksboro_flat_patch": {"mean_m": 9.5, "p90_m": 14.9, "n": 32},
+    "basin_straight": {"mean_m": 511.9, "p90_m": 864.2, "n": 32},
+    "basin_round": {"mean_m": 16.8, "p90_m": 31.0, "n": 32},
+    "basin_west": {"mean_m": 21.9, "p90_m": 41.1, "n": 32},
+    "jacksboro_sw_ne": {"mean_m": 6.4, "p90_m": 11.4, "n": 32},
+    "jacksboro_flat_patch": {"mean_m": 10.0, "p90_m": 14.4, "n": 32},
 }
 # the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
 FAST_SEEDS = 256
@@ -105,8 +109,8 @@ ENV_SETTINGS = dict(
 
 def full_tier_settings() -> dict:
     """The route task's full-tier-only settings (trn_env.env.route_task: ENV_COMMON's keys that are in
-    FULL_TIER_ONLY, e.g. JSBSim's step `flight_dt_s`): the full loop is calibrated against as the task flies
-    it."""
+    FULL_TIER_ONLY: JSBSim's step `flight_dt_s`, the guidance rate and the scenario's sensor and navigator
+    rates): the full loop is calibrated against as the task flies it."""
     from trn_env.env.route_task import ENV_COMMON, FULL_TIER_ONLY
 
     return {k: v for k, v in ENV_COMMON.items() if k in FULL_TIER_ONLY}
