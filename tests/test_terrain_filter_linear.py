@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from filterpy.kalman import KalmanFilter
 from trn_env.navigators.filters.pf import ParticleFilter
 from trn_env.navigators.filters.pmf import PointMassFilter
@@ -235,3 +236,32 @@ def test_pmf_matches_the_kalman_filter_in_a_turn():
     np.testing.assert_allclose(np.diag(nav.C_uu)[2:], np.diag(Pk)[5:10], rtol=0.01)
     # the turn makes the heading error matter: the measurements narrow it (to 0.93 of its prior variance)
     assert Pk[9, 9] < 0.95 * var_yaw
+
+
+def test_pmf_ira_geometry_takes_its_velocity_and_heading_offsets():
+    """The IRA closest point (seed 000 eqs 14-36) from the INS attitude and velocity corrected by the means of
+    the filter's heading and velocity offsets: the same point the single-query formulas give for the true
+    heading (INS yaw - eps) and velocity (INS + v), checked against navigators.measurements.ira's reference;
+    and a 2 m/s cross-track velocity error left in would move it along track by its cross-track offset times
+    dv / V (metres here)."""
+    from trn_env.navigators.measurements import ira
+
+    nav = PointMassFilter(planar_dem(), grid_size=101, **COMMON)
+    nav.reset(initial(40.0))
+    st = ins_state()
+    st[6:] = quat_from_C_bn(euler_to_C_bn(0.2, 0.05, 0.0))       # banked: the point lies off to the side
+    nav.u_mean[:2] = (0.3, -2.0)                                   # true minus INS velocity (m/s)
+    nav.u_mean[6] = 2e-3                                           # INS yaw minus true yaw (rad)
+    range_m, theta = 2000.0, 0.35
+    C = euler_to_C_bn(0.2, 0.05, 0.0)
+    nav._terrain_update(1.0, "ira", range_m, theta, st, None)
+    p_filter = nav._ira_p[0].copy()
+    p_true = ira.closest_points_reference(range_m, theta, C, st[3:6], np.array([-2e-3]),
+                                          np.array([[0.3, -2.0]]), "proposed")[0]
+    np.testing.assert_allclose(p_filter, p_true, atol=1e-6)
+    p_ins = ira.closest_points_reference(range_m, theta, C, st[3:6], np.zeros(1), np.zeros((1, 2)),
+                                         "proposed")[0]
+    # the uncorrected geometry: along track (north) by the cross-track offset (east) times dv / V
+    expected = abs(p_ins[1]) * 2.0 / 80.0
+    assert abs(p_true[0] - p_ins[0]) == pytest.approx(expected, rel=0.1)
+    assert abs(p_true[0] - p_ins[0]) > 5.0

@@ -13,10 +13,10 @@ d(dv) = f^n x psi + C_bn b_a - (2 w_ie + w_en) x dv + dg (dg = -g/R dr_h, +2g/R 
 baro-damped channel of navigators.inertial); d(psi) = -w_in x psi - C_bn [0, 0, b_gz]. Measurement: the TERCOM
 fix, z = -(correction) = INS - matched position (north, east), chi-square gated; the batch's rigid shift is
 the INS error averaged over its samples, dr(t_k) = dr - dv tau_k + d(dv)/dt tau_k^2 / 2 (tau_k = t_fix -
-t_k), so H takes the velocity error times the mean lag (-lag on states 3, 4) and the acceleration error
-(f^n x psi + C_bn b_a) times half the mean squared lag (states 6-11). Its noise: fix_noise "batch" (default)
-the MAD shift's covariance from the batch's residuals, the map's slopes and the terrain the map cannot hold
-(navigators.tercom.fix_noise), "fixed" (fix_sigma_m)^2 per axis (Table 2: (10 m)^2).
+t_k), so H takes the velocity error times the mean lag (-lag on states 3, 4). Its noise: fix_noise "fixed"
+(default) (fix_sigma_m)^2 per axis (Table 2: (10 m)^2); "batch" (opt-in) the MAD shift's covariance from the
+batch's residuals, the map's slopes and the terrain the map cannot hold (navigators.tercom.fix_noise), with
+H also taking the acceleration error (f^n x psi + C_bn b_a) times half the mean squared lag (states 6-11).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS. The error
 model's priors and noise come from the IMU's specification where it gives more than the settings
@@ -298,11 +298,12 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         # error then was the present one less the velocity error times the lag
         lag_s = t_s - float(np.mean(s[:, 0]))
         H[0, DVN] = H[1, DVE] = -lag_s
-        # ... and its acceleration error's share: half the mean squared lag times the specific-force error
-        # (f^n x psi + C_bn b_a, the error model's velocity rows), the part of the error that bends the
-        # batch's track
-        H[:, ATT.start:ACC_BIAS.stop] = 0.5 * float(np.mean((t_s - s[:, 0]) ** 2)) * self._accel_error_rows()
         if self.fix_noise == "batch":
+            # the opt-in batch model also takes the acceleration error's share: half the mean squared lag
+            # times the specific-force error (f^n x psi + C_bn b_a, the error model's velocity rows), the
+            # part of the error that bends the batch's track
+            mean_sq_lag_s2 = float(np.mean((t_s - s[:, 0]) ** 2))
+            H[:, ATT.start:ACC_BIAS.stop] = 0.5 * mean_sq_lag_s2 * self._accel_error_rows()
             Rm = lad_fix_covariance(self.dem, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], fix.dn_m, fix.de_m,
                                     self.cell_m, self.remove_bias, self.terrain_model_sigma_m)
         else:

@@ -31,11 +31,15 @@ nothing per cell but one multiply-add.
   filters), applied before every measurement update. The per-cell vertical offsets move with their mass: a
   cell's new mean is the mean of its sources' means, and the spread of those means goes into the shared
   variance (_pmf_kernels.convolve_separable).
-- Terrain update: one IRA (or radar-altimeter) sample: its closest point p from the INS attitude and
-  velocity (seed 000 eqs 14-36, shared by all cells: the PMF does not carry attitude or velocity
-  hypotheses), one map lookup per cell, the heavy-tailed likelihood (measurements.robust_ll_one) with
-  variance S = P_b + sensor + map noise and the per-cell bias update, fused in one numba pass over the
-  cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through measurements.radar_altimeter).
+- Terrain update: one IRA (or radar-altimeter) sample: its closest point p (seed 000 eqs 14-36) from the
+  INS attitude and velocity with the heading and horizontal velocity corrected by the means of u's heading
+  and velocity offsets (`_reference_offsets`; shared by all cells: the PMF does not carry attitude or
+  velocity hypotheses, but the INS it rides on is free, and the zero-Doppler geometry turns with its
+  velocity's direction: a cross-track velocity error dv moves the closest point along track by its
+  cross-track offset times dv / V), one map lookup per cell, the heavy-tailed likelihood
+  (measurements.robust_ll_one) with variance S = P_b + sensor + map noise and the per-cell bias update,
+  fused in one numba pass over the cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through
+  measurements.radar_altimeter).
 - GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its horizontal
   velocity into the velocity offset (its vertical velocity into the INS).
 - Re-gridding after an update, from the posterior's spread: the half-span follows span_sigmas times its
@@ -269,6 +273,16 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         self.C_uz = G @ c1
         self._moments_cache = None
 
+    def _reference_offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(heading turn (1,), velocity offset (1, 2)) of the IRA closest point's geometry: the INS's
+        heading and velocity corrected by the velocity-heading Gaussian's means (true heading = INS yaw -
+        eps, true velocity = INS + v)."""
+        dpsi, dv = self._zero1, self._zero12
+        if np.all(np.isfinite(self.u_mean)):
+            dpsi = np.array([-self.u_mean[6]])
+            dv = self.u_mean[None, :2].copy()
+        return dpsi, dv
+
     # ------------------------------------------------------------------------------------ updates
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
         self._apply_process_noise()
@@ -278,8 +292,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         m = self.n * self.n
         C = quat_to_dcm(st[6:10])
         if kind == "ira":
-            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), self._zero1,
-                                  self._zero12, self.ira_code, self._ira_p)
+            dpsi, dv_ne = self._reference_offsets()
+            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), dpsi, dv_ne,
+                                    self.ira_code, self._ira_p)
             if nb:
                 self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
                 return
