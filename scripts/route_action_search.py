@@ -146,6 +146,13 @@ def search_pair(kw, full, goal, start, args, rng, search_noise, fresh_noise):
     return res
 
 
+def _int_list(name: str, text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",")]
+    except ValueError:
+        raise ValueError(f"--{name} must be comma-separated integers, got {text!r}") from None
+
+
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
     import gymnasium as gym
@@ -158,8 +165,7 @@ def main(argv=None) -> int:
 
     try:
         kw = route_task.env_kwargs(args.terrain)
-        goals_i = [int(g) for g in args.goals.split(",")]
-        seeds = [int(s) for s in args.seeds.split(",")]
+        goals_i, seeds = _int_list("goals", args.goals), _int_list("seeds", args.seeds)
         for name in ("noise", "population", "generations", "decisions"):
             if getattr(args, name) < 1:
                 raise ValueError(f"--{name} must be >= 1, got {getattr(args, name)}")
@@ -171,6 +177,13 @@ def main(argv=None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     full = TerrainNavEnv(**kw)
+    n_goals = len(full.held_out_goals_deg)
+    bad = [i for i in goals_i if not 0 <= i < n_goals]
+    if bad:
+        full.close()
+        print(f"error: --goals {bad} out of range: the env has {n_goals} held-out goals (0-{n_goals - 1})",
+              file=sys.stderr)
+        return 2
     goals = [tuple(full.held_out_goals_deg[i]) for i in goals_i]
     rng = np.random.default_rng(args.search_seed)
     search_noise = np.arange(50_000, 50_000 + args.noise)

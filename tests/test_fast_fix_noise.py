@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 import pytest
+from synthetic_terrain import wave_map
 from trn_env.navigators.tercom.fix_noise import lad_fix_covariance as full_cov
 from trn_env.terrain.dem import Dem
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
@@ -23,26 +24,12 @@ from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 from trn_env.env.fast.fix_noise import NO_INFORMATION_VAR_M2
 from trn_env.env.fast.fix_noise import lad_fix_covariance as fast_cov
 
-LAT0, LON0 = math.radians(36.4), math.radians(-84.4)
-POST_M = 30.0
-N_POSTS = 240
 M = 40
 RTOL = 2e-3
 
 
 def _map(flat: bool = False) -> Dem:
-    r_n = meridian_radius_m(LAT0)
-    r_e = prime_vertical_radius_m(LAT0) * math.cos(LAT0)
-    y, x = np.meshgrid(np.arange(N_POSTS) * POST_M, np.arange(N_POSTS) * POST_M, indexing="ij")
-    rng = np.random.default_rng(7)
-    h = np.full(y.shape, 400.0)
-    if not flat:
-        for _ in range(12):
-            k = rng.uniform(2 * math.pi / 2000.0, 2 * math.pi / 300.0)
-            a = rng.uniform(0.0, 2 * math.pi)
-            phase = rng.uniform(0.0, 2 * math.pi)
-            h += rng.uniform(10.0, 25.0) * np.sin(k * (math.cos(a) * x + math.sin(a) * y) + phase)
-    return Dem(h, LAT0, LON0, POST_M / r_n, POST_M / r_e, "synthetic")
+    return wave_map(7, flat)
 
 
 def _batches(dem: Dem, n_batches: int, seed: int):

@@ -148,3 +148,18 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert "target" in summary and "full/ppo" in summary["policies"]
     assert mod.main(["evaluate", "--out", str(tmp_path / "none")]) == 2          # no checkpoint: exit 2
+
+
+@pytest.mark.parametrize("bad, name", [(["--goals", "9"], "--goals"), (["--goals", "x"], "--goals"),
+                                       (["--seeds", "1,a"], "--seeds"), (["--elite", "1.5"], "--elite"),
+                                       (["--population", "0"], "--population")])
+def test_action_search_script_refuses_bad_arguments(tmp_path, capsys, bad, name):
+    """scripts/route_action_search.py: exit 2 naming the argument, nothing written."""
+    path = ROOT / "scripts" / "route_action_search.py"
+    spec = importlib.util.spec_from_file_location("route_action_search", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "search.json"
+    assert mod.main([*bad, "--out", str(out)]) == 2
+    assert name in capsys.readouterr().err
+    assert not out.exists()

@@ -13,14 +13,12 @@ import math
 import numpy as np
 import pytest
 from scipy import stats
+from synthetic_terrain import LAT0, LON0, wave_map
 from trn_env.navigators.tercom.fix_noise import NO_INFORMATION_VAR_M2, lad_fix_covariance
 from trn_env.navigators.tercom.mad import correlate
 from trn_env.terrain.dem import Dem
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-LAT0, LON0 = math.radians(36.4), math.radians(-84.4)
-POST_M = 30.0
-N_POSTS = 240
 M = 600
 TRIALS = 150
 NOISE_M = 25.0
@@ -28,18 +26,7 @@ SHIFT_NE_M = (35.0, -20.0)     # INS minus true position
 
 
 def _map(flat: bool = False) -> Dem:
-    r_n = meridian_radius_m(LAT0)
-    r_e = prime_vertical_radius_m(LAT0) * math.cos(LAT0)
-    y, x = np.meshgrid(np.arange(N_POSTS) * POST_M, np.arange(N_POSTS) * POST_M, indexing="ij")
-    rng = np.random.default_rng(4)
-    h = np.full(y.shape, 400.0)
-    if not flat:
-        for _ in range(12):
-            k = rng.uniform(2 * math.pi / 2000.0, 2 * math.pi / 300.0)
-            a = rng.uniform(0.0, 2 * math.pi)
-            phase = rng.uniform(0.0, 2 * math.pi)
-            h += rng.uniform(10.0, 25.0) * np.sin(k * (math.cos(a) * x + math.sin(a) * y) + phase)
-    return Dem(h, LAT0, LON0, POST_M / r_n, POST_M / r_e, "synthetic")
+    return wave_map(4, flat)
 
 
 def _batch(dem: Dem):
