@@ -24,7 +24,6 @@ import argparse
 import json
 import math
 import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -88,14 +87,10 @@ def _sequence_actions(seqs, noise):
 
 def _policy_actions(kind, full, goal, n):
     from trn_env.campaign.episodes import make_policy
+    from trn_env.campaign.route_task import goal_view
     from trn_env.env import route_task
 
-    view = types.SimpleNamespace(
-        action_mode=full.action_mode, bearing_offset_max_rad=full.bearing_offset_max_rad,
-        agl_min_m=full.agl_min_m, agl_max_m=full.agl_max_m, action_limits=full.action_limits,
-        map_dem=full.map_dem, tas_mps=full.tas_mps, goal_radius_m=full.goal_radius_m,
-        goal_lat_rad=math.radians(goal[0]), goal_lon_rad=math.radians(goal[1]),
-        observation_space=full.observation_space, action_space=full.action_space)
+    view = goal_view(full, goal)
     spec = {"kind": kind, "agl_m": route_task.straight_agl_m("basin")}
     if kind == "planner":
         spec["config"] = {"weight": 3.0}

@@ -62,6 +62,18 @@ class RLlibPolicy:
         return (a[0] if single else a), None
 
 
+def goal_view(full, goal_deg) -> types.SimpleNamespace:
+    """What a baseline policy reads of a TerrainNav-v0 `full` (its map, action limits and spaces) with the
+    goal at goal_deg (lat, lon in degrees): the fast tier's sub-envs and open-loop searches build their
+    policies on it."""
+    return types.SimpleNamespace(
+        action_mode=full.action_mode, bearing_offset_max_rad=full.bearing_offset_max_rad,
+        agl_min_m=full.agl_min_m, agl_max_m=full.agl_max_m, action_limits=full.action_limits,
+        map_dem=full.map_dem, tas_mps=full.tas_mps, goal_radius_m=full.goal_radius_m,
+        goal_lat_rad=math.radians(goal_deg[0]), goal_lon_rad=math.radians(goal_deg[1]),
+        observation_space=full.observation_space, action_space=full.action_space)
+
+
 def _check_policies(policies: list[dict]) -> list[dict]:
     labels = []
     for i, p in enumerate(policies):
@@ -139,12 +151,7 @@ def evaluate_fast(policies: list[dict], terrain: str, seeds, env_overrides: dict
         views, pol_objs = [], []
         shared = None
         for _gi, g, s in pairs:
-            view = types.SimpleNamespace(
-                action_mode=full.action_mode, bearing_offset_max_rad=full.bearing_offset_max_rad,
-                agl_min_m=full.agl_min_m, agl_max_m=full.agl_max_m, action_limits=full.action_limits,
-                map_dem=full.map_dem, tas_mps=full.tas_mps, goal_radius_m=full.goal_radius_m,
-                goal_lat_rad=math.radians(g[0]), goal_lon_rad=math.radians(g[1]),
-                observation_space=full.observation_space, action_space=full.action_space)
+            view = goal_view(full, g)
             views.append(view)
             if p["kind"] == "rllib":
                 shared = shared or _make(p, full, agl)
