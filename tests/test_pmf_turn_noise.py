@@ -22,6 +22,7 @@ from trn_env.navigators.protocol import Estimate
 from trn_env.terrain.dem import Dem
 
 sys.path.insert(0, str(Path(__file__).parent))
+from nav_reference_trajectory import imu_and_truth  # noqa: E402
 from test_ins_trn_turn_noise import (  # noqa: E402
     MISALIGN_RAD,
     SCALE_PPM,
@@ -31,7 +32,6 @@ from test_ins_trn_turn_noise import (  # noqa: E402
     _per_frame_turn,
     _yaw,
 )
-from nav_reference_trajectory import imu_and_truth  # noqa: E402
 
 TILT, HEADING = 2, 6    # the pmf's u indexes: tilt acceleration north, heading error
 

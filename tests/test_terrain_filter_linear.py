@@ -142,7 +142,8 @@ def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     assert np.all(np.abs(nav.u_mean[2:7] - xk[5:10]) < 0.02 * sig[5:10]), (nav.u_mean, xk[5:10])
     np.testing.assert_allclose(np.diag(nav.C_uu)[2:7], np.diag(Pk)[5:10], rtol=0.01)
     scale = np.sqrt(np.outer(np.diag(Pk)[5:10], np.diag(Pk)[0:2]))
-    assert np.all(np.abs(nav.C_uz[2:7, :2] - Pk[5:10, 0:2]) < 0.003 * scale), (nav.C_uz[2:7, :2], Pk[5:10, 0:2])
+    assert np.all(np.abs(nav.C_uz[2:7, :2] - Pk[5:10, 0:2]) < 0.003 * scale), (nav.C_uz[2:7, :2],
+                                                                               Pk[5:10, 0:2])
     # the one informative combination u . x = g . (dn, de) + b, known to ~1 m: a filter assuming 4.5 m of
     # noise instead of 3.5 m misses its mean by 0.12 sigma, so 0.03 sigma catches a wrong likelihood
     u = np.array([G_N, G_E, 1.0])

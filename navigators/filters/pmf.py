@@ -69,12 +69,10 @@ from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
     equivalent_walk_density,
-    rss,
-    vertical_offset_walk_density,
 )
 from ..core.measured_consistency import grade_warning
-from ..integrity import protection_level as pl
 from ..inertial.strapdown import quat_to_dcm
+from ..integrity import protection_level as pl
 from ..measurements import gnss as gnss_model
 from ..measurements import ira, radar_altimeter
 from ..measurements.terrain_models import radii_m
@@ -102,6 +100,15 @@ def baro_loop_velocity_response_s(t_s: float, tau_s: float | None) -> float:
     if tau_s is None or not t_s > 0.0:
         return 0.0
     return float((t_s + t_s * t_s / tau_s) * math.exp(-t_s / tau_s))
+
+
+def baro_loop_height_response_s2(t_s: float, tau_s: float | None) -> float:
+    """Height error (INS minus true, m) of the same loop per m/s^2 of the down specific-force error
+    (baro_loop_velocity_response_s): -t^2 exp(-t / tau) / 2, a transient of -0.27 tau^2 at t = 2 tau
+    (navigators.core.imu_spec.ImuSpec.baro_loop_height_rate_sigma_mps)."""
+    if tau_s is None or not t_s > 0.0:
+        return 0.0
+    return float(-0.5 * t_s * t_s * math.exp(-t_s / tau_s))
 
 
 class PointMassFilter(PmfGrid, InsRiddenFilter):
@@ -164,9 +171,8 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
-        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
-        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
-        self.vertical_noise = rss(self.vertical_noise, q_v)
+        # the vertical offset's walk stays the tuned baro-height wander: the IMU's baro-loop transient is
+        # carried by beta (_vertical_velocity_shift)
         self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
@@ -193,6 +199,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self._v_ins_prev = None
             self._D = np.zeros(2)        # the grid's shift per unit of the vertical specific-force error
             self._J = np.zeros(2)        # the closest point's horizontal shift per m/s of down velocity
+            self._eta = 0.0              # the vertical offset's shift per unit of it
             self.u_mean = np.zeros(N_U)
             self.C_uu = self._u_prior_cov(cov9)
             self.C_uz[:2, :2] = np.array(cov9[3:5, 0:2], float)
@@ -271,31 +278,45 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self._vertical_velocity_shift(t_s)
 
     def _vertical_velocity_shift(self, t_s: float) -> None:
-        """Move the grid with the closest points' shift the INS's vertical velocity error causes.
+        """Carry the vertical specific-force error beta = u[BETA] (down, m/s^2) into the grid and the vertical
+        offset through the baro loop's transients.
 
-        The baro-damped INS's down velocity is off by beta psi(t) (beta = u[BETA], the down specific-force
-        error, psi = baro_loop_velocity_response_s since the INS's start), and the zero-Doppler plane is
-        normal to the velocity (seed 000 eqs 9-12: its along-track axis s1 tilts by the flight-path angle),
-        so every IRA closest point computed from the INS velocity sits off by J beta psi horizontally (J the
-        closest point's horizontal derivative in the down velocity, `_J`, from the last sample): the samples
-        read the map at y = x - J psi beta, not at the INS error x. The grid carries y (D = -J psi the shift
-        per unit of beta, `_D`): as psi or J change, y moves by dD beta, a linear step like the velocity
+        The baro-damped INS's down velocity is off by beta psi(t) and its height by beta eta(t)
+        (baro_loop_velocity_response_s, baro_loop_height_response_s2; t since the INS's start).
+        (1) The zero-Doppler plane is normal to the velocity (seed 000 eqs 9-12: its along-track axis s1
+        tilts with the flight-path angle), so every IRA closest point computed from the INS velocity sits
+        off by -J psi beta horizontally (J the closest point's horizontal derivative in the down velocity,
+        `_J`, from the last sample): the samples read the map at y = x + D beta, D = -J psi, not at the INS
+        error x. The grid carries y: as psi or J change, y moves by dD beta, a linear step like the velocity
         offsets' (mean dD E[beta], pending noise dD C_bb dD' + 2 sym(dD C_by), C_uy += C_ub dD'), and the
-        output removes D beta again (`_output_moments`). beta's prior is the IMU's vertical specific-force
-        error (apply_imu_spec); 0 without a specification (then nothing moves)."""
+        output removes D beta again (`_output_moments`).
+        (2) The vertical offset b (INS height minus true) moves by d_eta beta likewise (the cells' means by
+        d_eta E[beta], P_b by d_eta^2 C_bb + 2 d_eta C_b,beta, C_ub += C_u,beta d_eta), which makes beta
+        observable through the terrain's height.
+        beta's prior is the IMU's vertical specific-force error (apply_imu_spec); 0 without a
+        specification (then nothing moves)."""
         if not self._beta_sigma > 0.0:
             return
-        D = -self._J * baro_loop_velocity_response_s(t_s - self._t_ins0, self.ins.tau_baro_s)
+        t_rel = t_s - self._t_ins0
+        D = -self._J * baro_loop_velocity_response_s(t_rel, self.ins.tau_baro_s)
+        eta = baro_loop_height_response_s2(t_rel, self.ins.tau_baro_s)
         dD = D - self._D
-        self._D = D
-        if not (np.all(np.isfinite(dD)) and np.any(dD)):
-            return
+        d_eta = eta - self._eta
+        self._D, self._eta = D, eta
         m = float(self.u_mean[BETA])
-        if m != 0.0 and math.isfinite(m):
-            self._set_geometry(self.centre_n + dD[0] * m, self.centre_e + dD[1] * m, self.spacing)
-        BC = np.outer(dD, self.C_uz[BETA, :2])
-        self._q_pending += BC + BC.T + np.outer(dD, dD) * self.C_uu[BETA, BETA]
-        self.C_uz[:, :2] += np.outer(self.C_uu[:, BETA], dD)
+        c_bb = float(self.C_uu[BETA, BETA])
+        if not math.isfinite(m):
+            return
+        if np.all(np.isfinite(dD)) and np.any(dD):
+            if m != 0.0:
+                self._set_geometry(self.centre_n + dD[0] * m, self.centre_e + dD[1] * m, self.spacing)
+            BC = np.outer(dD, self.C_uz[BETA, :2])
+            self._q_pending += BC + BC.T + np.outer(dD, dD) * c_bb
+            self.C_uz[:, :2] += np.outer(self.C_uu[:, BETA], dD)
+        if d_eta != 0.0 and math.isfinite(d_eta):
+            self.bias += d_eta * m
+            self.P_b = max(self.P_b + d_eta * d_eta * c_bb + 2.0 * d_eta * float(self.C_uz[BETA, 2]), 1e-9)
+            self.C_uz[:, 2] += self.C_uu[:, BETA] * d_eta
         self._moments_cache = None
 
     def _output_moments(self) -> tuple[np.ndarray, np.ndarray]:
