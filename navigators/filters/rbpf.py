@@ -90,6 +90,7 @@ from ..protocol import (
     Health,
 )
 from . import _rbpf_kernels as kern
+from ._ekf_kernels import yaw_total_variation
 from .rbpf_cloud import RbpfCloud
 from .rbpf_ira_update import RbpfIraUpdate
 from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings, table1_covariance
@@ -206,6 +207,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     # ------------------------------------------------------------------ IMU specification
     _turn_att_var = np.zeros(3)  # attitude variance per rad turned (n, e: gyro misalignment; d: scale factor)
     _yaw_prev = math.nan
+    _turn_pending = 0.0          # integral of |yaw rate| since the last epoch (rad)
 
     def apply_imu_spec(self, spec: ImuSpec) -> None:
         """The Kalman parts' process noise and accelerometer-bias prior from the IMU's specification
@@ -232,16 +234,10 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
-        since the last epoch builds (apply_imu_spec)."""
-        if not self._turn_att_var.any():
-            return self.ql_var
-        C = quat_to_dcm(self.ins.state[6:10])
-        yaw = math.atan2(C[1, 0], C[0, 0])
-        turn = 0.0
-        if math.isfinite(self._yaw_prev):
-            turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
-        self._yaw_prev = yaw
-        if turn == 0.0:
+        since the last epoch builds (apply_imu_spec); the angle is the integral of |yaw rate| over the IMU
+        samples (`_propagate`), not the net yaw change between epochs, so it does not depend on the rate."""
+        turn, self._turn_pending = self._turn_pending, 0.0
+        if not self._turn_att_var.any() or turn == 0.0:
             return self.ql_var
         ql = self.ql_var.copy()
         ql[3:6] += self._turn_att_var * turn
@@ -250,6 +246,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
         self._yaw_prev = math.nan
+        self._turn_pending = 0.0
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)
@@ -310,6 +307,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     def _propagate(self, t, f_b, w_b, ok) -> None:
         hist = self._strapdown(t, f_b, w_b, ok)      # (navigators.core.ins_gnss)
+        if self._turn_att_var.any():
+            turn, self._yaw_prev = yaw_total_variation(hist, self._yaw_prev)
+            self._turn_pending += turn
         # error-model transition over this stretch at the error model's rate (eq 16 discretised)
         dt_imu = (float(t[-1] - t[0]) / (t.shape[0] - 1)) if t.shape[0] > 1 else self.dt_err
         stride = max(int(round(self.dt_err / max(dt_imu, 1e-6))), 1)
