@@ -11,11 +11,14 @@ nothing per cell but one multiply-add.
   velocity offset v, the acceleration of the initial tilt t (g times the tilt, constant in NED), the
   accelerometer bias b (constant in the body frame, so R b in NED turns with the heading, R the INS's
   body-to-NED matrix's horizontal block) and the heading error eps (INS yaw minus true yaw, which turns
-  every velocity change the INS integrates: v gains eps (dv_e, -dv_n)); a Gaussian (mean, covariance, and
-  its covariance with the grid's position and vertical offset) outside the grid. Its process noise and
+  every velocity change the INS integrates: v gains eps (dv_e, -dv_n)), and the INS's down specific-force
+  error beta (u[BETA]: through the baro loop's transients it tilts every IRA closest point's geometry and
+  moves the vertical offset, `_vertical_velocity_shift`); a Gaussian (mean, covariance, and its covariance
+  with the grid's position and vertical offset) outside the grid. Its process noise and
   b's prior come from the IMU's specification (apply_imu_spec, navigators.core.imu_spec): the tilt
   acceleration's growth from the horizontal gyro biases, the heading's from the z gyro bias, the
-  accelerometer instability's drive on b, and per rad turned the gyro misalignment and scale factor; the
+  accelerometer instability's drive on b, beta's prior the vertical specific-force error, and per rad
+  turned (the integral of |yaw rate| over the IMU samples) the gyro misalignment and scale factor; the
   velocity's random walk is a floor (velocity_noise_mps_per_sqrt_s; the measurements that chose this
   model: docs/validation/navigators.md). Priors: v, t and eps from the initial
   estimate's velocity, roll/pitch and yaw variances, b from accel_bias_sigma_mps2. A terrain or GNSS
@@ -36,10 +39,11 @@ nothing per cell but one multiply-add.
   and velocity offsets (`_reference_offsets`; shared by all cells: the PMF does not carry attitude or
   velocity hypotheses, but the INS it rides on is free, and the zero-Doppler geometry turns with its
   velocity's direction: a cross-track velocity error dv moves the closest point along track by its
-  cross-track offset times dv / V), one map lookup per cell, the heavy-tailed likelihood
-  (measurements.robust_ll_one) with variance S = P_b + sensor + map noise and the per-cell bias update,
-  fused in one numba pass over the cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through
-  measurements.radar_altimeter).
+  cross-track offset times dv / V; the vertical velocity's error tilts it along track: the grid carries
+  the position the samples read, y = x + D beta, and the output x), one map lookup per cell, the
+  heavy-tailed likelihood (measurements.robust_ll_one) with variance S = P_b + sensor + map noise and the
+  per-cell bias update, fused in one numba pass over the cells (_pmf_kernels.ira_update_pass; the radar
+  altimeter goes through measurements.radar_altimeter).
 - GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its horizontal
   velocity into the velocity offset (its vertical velocity into the INS).
 - Re-gridding after an update, from the posterior's spread: the half-span follows span_sigmas times its
