@@ -22,6 +22,11 @@ point. With A = sum_k g_k g_k^T its covariance is
 
 A flat map (A singular) gives no horizontal information (NO_INFORMATION_VAR_M2), which a fixed noise would
 not say; rough terrain and long batches give a tight fix.
+
+The same linearisation says what the fix measures when the batch's error is not one rigid shift (the INS
+places each sample with its error at that sample's time): the least-squares average of the samples' errors
+weighted by the slope products, A^-1 sum_k g_k g_k^T e_k (slope_weighted_mean; the fix's H in
+navigators.filters.ins_trn_batch_error).
 """
 
 from __future__ import annotations
@@ -57,26 +62,14 @@ def lad_fix_covariance(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_f
     heights, closest-point offsets; non-finite samples are dropped, as correlate() drops them); dn_fix_m,
     de_fix_m: the fix's correction; cell_m: the search cell; remove_bias: the MAD was mean-removed (the
     residuals are then centred on their mean, else on their median)."""
-    lat, lon, hm, dn, de = (np.asarray(x, float) for x in (lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m))
-    ok = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(hm) & np.isfinite(dn) & np.isfinite(de)
     quantisation = np.eye(2) * cell_m**2 / 12.0
     no_info = np.eye(2) * NO_INFORMATION_VAR_M2
-    if ok.sum() < 3:
+    matched = _matched(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_fix_m, de_fix_m)
+    if matched is None:
         return no_info
-    lat, lon, hm, dn, de = lat[ok], lon[ok], hm[ok], dn[ok], de[ok]
-    lat_c = float(np.mean(lat))
-    r_ns = meridian_radius_m(lat_c)
-    r_ew = prime_vertical_radius_m(lat_c) * math.cos(lat_c)
-    lat_m = lat + (dn + dn_fix_m) / r_ns
-    lon_m = lon + (de + de_fix_m) / r_ew
-    h_map = dem.height(lat_m, lon_m)
-    g_n, g_e = dem.gradient(lat_m, lon_m)
-    use = np.isfinite(h_map) & np.isfinite(g_n) & np.isfinite(g_e)
-    if use.sum() < 3:
-        return no_info
-    r = hm[use] - h_map[use]
+    lat, lon, hm, h_map, g, use, lat_c, r_ns, r_ew = matched
+    r = hm - h_map
     r = r - (np.mean(r) if remove_bias else np.median(r))
-    g = np.stack([g_n[use], g_e[use]], axis=1)
     m = r.shape[0]
     # the samples' spacing along the INS track (not the closest points, which jitter across it)
     track_m = float(np.hypot(np.diff(lat[use]) * r_ns, np.diff(lon[use]) * r_ew).sum())
@@ -100,3 +93,47 @@ def lad_fix_covariance(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_f
     if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(cov)[0] <= 0.0 or cov.max() > NO_INFORMATION_VAR_M2:
         return no_info
     return cov
+
+
+def _matched(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_fix_m, de_fix_m):
+    """The batch's finite samples at the match: (lat, lon of the finite samples; measured and map heights,
+    map slopes g (m, 2: north, east) and the finite-samples mask `use` of the m samples whose map lookups
+    are finite; the batch's mean latitude and the north / east radii), or None with fewer than 3 samples."""
+    lat, lon, hm, dn, de = (np.asarray(x, float) for x in (lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m))
+    ok = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(hm) & np.isfinite(dn) & np.isfinite(de)
+    if ok.sum() < 3:
+        return None
+    lat, lon, hm, dn, de = lat[ok], lon[ok], hm[ok], dn[ok], de[ok]
+    lat_c = float(np.mean(lat))
+    r_ns = meridian_radius_m(lat_c)
+    r_ew = prime_vertical_radius_m(lat_c) * math.cos(lat_c)
+    lat_m = lat + (dn + dn_fix_m) / r_ns
+    lon_m = lon + (de + de_fix_m) / r_ew
+    h_map = dem.height(lat_m, lon_m)
+    g_n, g_e = dem.gradient(lat_m, lon_m)
+    use = np.isfinite(h_map) & np.isfinite(g_n) & np.isfinite(g_e)
+    if use.sum() < 3:
+        return None
+    g = np.stack([g_n[use], g_e[use]], axis=1)
+    return lat, lon, hm[use], h_map[use], g, use, lat_c, r_ns, r_ew
+
+
+def slope_weighted_mean(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_fix_m: float, de_fix_m: float,
+                        values: np.ndarray) -> np.ndarray | None:
+    """A^-1 sum_k g_k g_k^T values_k (2, n): the shift a least-squares match of the batch takes from
+    per-sample horizontal errors values (M, 2, n; the batch's samples in time order, as lad_fix_covariance
+    takes them), g_k the map's slope at the matched point, A = sum_k g_k g_k^T (module docstring). None when
+    the map gives no horizontal information (fewer than 3 usable samples or A singular)."""
+    matched = _matched(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_fix_m, de_fix_m)
+    if matched is None:
+        return None
+    lat, lon, hm, dn = (np.asarray(x, float) for x in (lat_rad, lon_rad, h_meas_m, dn_rel_m))
+    ok = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(hm) & np.isfinite(dn) & np.isfinite(
+        np.asarray(de_rel_m, float))
+    g, use = matched[4], matched[5]
+    v = np.asarray(values, float)[ok][use]
+    A = g.T @ g
+    if not np.all(np.isfinite(A)) or np.linalg.cond(A) > 1e12:
+        return None
+    gv = np.einsum("ki,kj,kjn->in", g, g, v)
+    return np.linalg.solve(A, gv)
