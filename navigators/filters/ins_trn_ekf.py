@@ -310,7 +310,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
             if Hw is not None:
                 H = Hw
             Rm = lad_fix_covariance(self.dem, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], fix.dn_m, fix.de_m,
-                                    self.cell_m, self.remove_bias, self.terrain_model_sigma_m)
+                                    self.cell_m, self.remove_bias, self.terrain_model_sigma_m,
+                                    self.baro_bias_sigma_m)
         else:
             Rm = np.eye(2) * self.fix_sigma_m**2
         S = H @ self.kf.P @ H.T + Rm

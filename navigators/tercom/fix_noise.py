@@ -18,7 +18,10 @@ point. With A = sum_k g_k g_k^T its covariance is
   own spectrum: navigators.measurements.ira_map_noise.interpolation_sigma_m), one height error per post
   spacing along the track, shared by the n_post samples there: the share of the map's missing detail that
   the fit absorbs into the shift, which the residuals at the match no longer show;
-- cell^2 / 12 per axis: the search grid quantises the match (a uniform error over one cell).
+- cell^2 / 12 per axis: the search grid quantises the match (a uniform error over one cell);
+- without bias removal (seed 000's plain MAD), sigma_b^2 j j^T, j = A^-1 sum_k g_k: the measured heights'
+  common bias b (the barometer's, sigma_b) moves the shift by j b, the slope-weighted mean slope of the
+  batch (a batch that climbs a slope matches a biased height profile further along it).
 
 A flat map (A singular) gives no horizontal information (NO_INFORMATION_VAR_M2), which a fixed noise would
 not say; rough terrain and long batches give a tight fix.
@@ -54,14 +57,17 @@ def post_spacing_m(dem, lat_rad: float) -> float:
 
 
 def lad_fix_covariance(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_fix_m: float, de_fix_m: float,
-                       cell_m: float, remove_bias: bool, terrain_sigma_m: float = 0.0) -> np.ndarray:
+                       cell_m: float, remove_bias: bool, terrain_sigma_m: float = 0.0,
+                       height_bias_sigma_m: float = 0.0) -> np.ndarray:
     """Covariance (2 x 2, m^2, north / east) of a TERCOM fix (see the module docstring).
 
     dem: the navigator's map (terrain.Dem: bilinear height and slope, as the MAD's lookups); lat_rad,
     lon_rad, h_meas_m, dn_rel_m, de_rel_m: the batch's samples in time order (INS positions, measured terrain
     heights, closest-point offsets; non-finite samples are dropped, as correlate() drops them); dn_fix_m,
     de_fix_m: the fix's correction; cell_m: the search cell; remove_bias: the MAD was mean-removed (the
-    residuals are then centred on their mean, else on their median)."""
+    residuals are then centred on their mean, else on their median); terrain_sigma_m: the map's unresolved
+    terrain (m, 1 sigma); height_bias_sigma_m: the measured heights' common bias (m, 1 sigma: the baro's),
+    which a MAD without bias removal absorbs into the shift."""
     quantisation = np.eye(2) * cell_m**2 / 12.0
     no_info = np.eye(2) * NO_INFORMATION_VAR_M2
     matched = _matched(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_fix_m, de_fix_m)
@@ -89,6 +95,10 @@ def lad_fix_covariance(dem, lat_rad, lon_rad, h_meas_m, dn_rel_m, de_rel_m, dn_f
     # shared by the samples there; the shift it moves the fit by has about terrain_sigma^2 n_post A^-1
     n_post = post_spacing_m(dem, lat_c) / max(spacing_m, 1e-3)
     cov = cov + LAD_EFFICIENCY_LOSS * terrain_sigma_m**2 * min(n_post, m) * A_inv
+    if not remove_bias:
+        # a common height bias b moves the shift of a match without bias removal by A^-1 sum_k g_k b
+        j = A_inv @ g.sum(axis=0)
+        cov = cov + height_bias_sigma_m**2 * np.outer(j, j)
     cov = 0.5 * (cov + cov.T) + quantisation
     if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(cov)[0] <= 0.0 or cov.max() > NO_INFORMATION_VAR_M2:
         return no_info
