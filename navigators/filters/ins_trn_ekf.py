@@ -15,8 +15,10 @@ fix, z = -(correction) = INS - matched position (north, east), chi-square gated;
 the INS error averaged over its samples, dr(t_k) = dr - dv tau_k + d(dv)/dt tau_k^2 / 2 (tau_k = t_fix -
 t_k), so H takes the velocity error times the mean lag (-lag on states 3, 4). Its noise: fix_noise "fixed"
 (default) (fix_sigma_m)^2 per axis (Table 2: (10 m)^2); "batch" (opt-in) the MAD shift's covariance from the
-batch's residuals, the map's slopes and the terrain the map cannot hold (navigators.tercom.fix_noise), with
-H also taking the acceleration error (f^n x psi + C_bn b_a) times half the mean squared lag (states 6-11).
+batch's residuals, the map's slopes, the terrain the map cannot hold and (without bias removal) the baro's
+bias (navigators.tercom.fix_noise), with H the map-slope-weighted average of each sample's INS error run back
+from the fix along the INS's specific force and attitude (navigators.filters.ins_trn_batch_error: the
+velocity error times the slope-weighted lag, the attitude and bias errors through the specific force).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS. The error
 model's priors and noise come from the IMU's specification where it gives more than the settings
