@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.error_states import BAX, BGZ, DRE, DRN, DVE, DVN, N_EKF13, PSIN
+from ..inertial.strapdown import quat_to_dcm
 
 # the kinematics log keeps one IMU sample in this many (the specific force and attitude change over
 # seconds along a batch of tens of seconds; the IMU runs at 50-100 Hz)
@@ -61,17 +62,7 @@ class BatchKinematics:
         if not ok.any():
             return
         idx, q = idx[ok], q[ok]
-        q0, q1, q2, q3 = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-        C = np.empty((idx.shape[0], 3, 3))
-        C[:, 0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-        C[:, 0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-        C[:, 0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-        C[:, 1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-        C[:, 1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-        C[:, 1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-        C[:, 2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-        C[:, 2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-        C[:, 2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+        C = np.stack([quat_to_dcm(qk) for qk in q])
         f_n = np.einsum("kij,kj->ki", C, f_b_mps2[idx] - accel_bias_b_mps2)
         rows = np.empty((idx.shape[0], _N_COLS))
         rows[:, 0] = t_s[idx]
