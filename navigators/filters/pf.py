@@ -13,9 +13,8 @@ is INS + the weighted mean.
   and the Schuler term - plus process noise drawn from the filter's Generator; its densities come from the
   IMU's specification where it gives more than the tuned floors (apply_imu_spec, navigators.core.imu_spec:
   the acceleration errors the particles do not carry as an equivalent velocity random walk), or with
-  velocity_noise_model "imu_spec" each particle carries that acceleration error as states of its own
-  (navigators.filters.pf_accel_error: the body-fixed specific-force error turned by the INS heading, the
-  tilt the gyros build) and its velocity offset integrates it.
+  velocity_noise_model "imu_spec" the velocity's noise is that acceleration error's effect on the velocity
+  the cloud holds (`_velocity_step_var`).
 - Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
   or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira.closest_points), one map lookup
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
@@ -59,7 +58,6 @@ from ..measurements import ira, radar_altimeter
 from ..measurements.terrain_models import radii_m
 from ..protocol import EXTRA_ESS
 from ._pf_kernels import propagate_particles
-from .pf_accel_error import N_ACC, AccelErrorModel, ins_heading_rad
 from .terrain_filter import InsRiddenFilter
 from .terrain_filter_settings import PF_CAPABILITIES, PfSettings
 
@@ -86,7 +84,7 @@ class ParticleFilter(InsRiddenFilter):
     the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
     (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
     velocity offsets need the diversity, learnt only through the weights and resampling),
-    velocity_noise_model ("walk", default, or "imu_spec": the carried acceleration error, `apply_imu_spec`),
+    velocity_noise_model ("walk", default, or "imu_spec": `_velocity_step_var`),
     heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
     docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
@@ -108,8 +106,9 @@ class ParticleFilter(InsRiddenFilter):
         self.s_psi = s.heading_noise_rad_per_sqrt_s
         self._imu_spec: ImuSpec | None = None
         self._spec_velocity = s.velocity_noise_model == "imu_spec"
-        self._accel_model: AccelErrorModel | None = None   # set by reset ("imu_spec" with a spec)
-        self._psi_prev: float | None = None                 # the INS heading at the last step (rad)
+        self._accel_model: tuple[float, float, float, float] | None = None  # set by reset ("imu_spec")
+        self._t_ins0_s = 0.0
+        self._t_fix_s: float | None = None   # the last GNSS velocity fix ("imu_spec", `_velocity_step_var`)
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.M = s.n_particles
         M = self.M
@@ -119,8 +118,6 @@ class ParticleFilter(InsRiddenFilter):
         self.dv = np.zeros((M, 2))
         self.dpsi = np.zeros(M)
         self.logw = np.zeros(M)
-        self.acc = np.zeros((M, N_ACC))   # the carried acceleration-error states ("imu_spec", ACC_*)
-        self._acc_ned = np.zeros((M, 2))  # each particle's acceleration error over the step (m/s^2)
         self._P = np.empty((M, 3))
         self._hmap = np.empty(M)
         self._ll = np.empty(M)
@@ -132,21 +129,18 @@ class ParticleFilter(InsRiddenFilter):
 
     # ------------------------------------------------------------------------------------ belief
     def apply_imu_spec(self, spec: ImuSpec) -> None:
-        """Take the error model from the IMU's specification (navigators.core.imu_spec).
-        velocity_noise_model "walk" (default): the particles carry position, velocity and heading offsets,
-        not the acceleration error, which enters as an equivalent velocity random walk matching it at
+        """Take the error model from the IMU's specification (navigators.core.imu_spec). The particles carry
+        position, velocity and heading offsets, not the acceleration error. velocity_noise_model "walk"
+        (default): the acceleration errors enter as an equivalent velocity random walk matching them at
         PF_MEMORY_S, a floor over the tuned setting - the body-fixed specific-force error (accelerometer
         bias, instability, misalignment x g) and a 90 deg turn's gyro misalignment (g x tilt) as constant
         accelerations, the tilt the horizontal gyro biases build as a ramp (g sigma_bg t:
-        equivalent_ramp_walk_density), with the velocity random walk. "imu_spec": the particles carry the
-        acceleration error as states (navigators.filters.pf_accel_error, drawn at the reset), and the
-        velocity's random walk is the accelerometers' noise density alone. The heading's random walk
-        matches the z gyro bias and a 90 deg turn's scale factor at PF_MEMORY_S, with the angle random walk,
-        as a floor over the tuned setting."""
+        equivalent_ramp_walk_density), with the velocity random walk. "imu_spec": the velocity's noise is
+        that error's effect on the velocity the cloud holds (`_velocity_step_var`, the initial tilt x g
+        added to the constant part). The heading's random walk matches the z gyro bias and a 90 deg turn's
+        scale factor at PF_MEMORY_S, with the angle random walk, as a floor over the tuned setting."""
         self._imu_spec = spec
-        if self._spec_velocity:
-            self.s_vel = spec.accel_noise_density_mps2_rthz
-        else:
+        if not self._spec_velocity:
             a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
             tilt = equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, PF_MEMORY_S)
             self.s_vel = max(self.s_vel, rss(equivalent_walk_density(a, PF_MEMORY_S), tilt,
@@ -161,14 +155,57 @@ class ParticleFilter(InsRiddenFilter):
 
     def reset(self, initial) -> None:
         super().reset(initial)
-        self._psi_prev = None
+        self._t_ins0_s = float(initial.t_s)
+        self._t_fix_s = None
         spec = self._imu_spec
         if spec is None or not self._spec_velocity:
             self._accel_model = None
             return
         tilt0 = math.sqrt(max(0.5 * float(self._p_att0[0] + self._p_att0[1]), 0.0))   # initial tilt (rad)
-        self._accel_model = AccelErrorModel.from_spec(spec, tilt0)
-        self.acc = self._accel_model.draw(self.rng, self.M)
+        a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi),
+                G0_MPS2 * tilt0)
+        v0 = max(0.5 * float(self._p_vel0[0] + self._p_vel0[1]), 0.0)                  # initial velocity
+        self._accel_model = (spec.accel_noise_density_mps2_rthz ** 2, a * a,
+                             spec.tilt_accel_rate_sigma_mps3 ** 2, v0)
+
+    def _velocity_step_var(self, t_s: float, dt: float) -> float:
+        """Variance (m^2/s^2 per axis) the particles' velocity offsets gain over dt ending at t_s.
+
+        Without the IMU's specification: velocity_noise_mps_per_sqrt_s^2 dt. With it: the acceleration
+        error the particles do not carry, a(t) = a0 + j t (a0 ~ sigma_a, a constant; j = g sigma_bg, the
+        gyro-bias tilt's ramp; t since the reset; variance sigma_acc^2 = sigma_a^2 + sigma_j^2 t^2), moves the
+        velocity error by a dt per step, correlated with the velocity error v it built: the step adds
+        2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt, sigma_v the cloud's velocity sigma (the larger
+        axis). rho is the correlation of v and a in the free INS, which starts with an independent v0
+        (sigma_v0, the initial velocity's): cov = sigma_a^2 t + sigma_j^2 t^3 / 2, var v = sigma_v0^2 + N^2 t
+        + sigma_a^2 t^2 + sigma_j^2 t^4 / 4. An unobserved velocity (sigma_v the free INS's) thus grows
+        exactly as the free INS's velocity error (Titterton & Weston 2004, sec. 12.3, without Schuler's
+        bound), and a velocity the terrain has told apart gains less, with its smaller sigma. A random walk
+        of fixed density (the equivalent walk at one memory) cannot do both: fitted at a memory it is too
+        small for an unobserved velocity and too large for an observed one. Limitation (why "walk" stays
+        the default): the growth scales with the cloud's own spread, so a cloud whose velocity spread sharp
+        fixes (GNSS) collapsed by resampling stays collapsed after them, and after an observation the
+        correlation rebuilds faster than the free INS's from the reset."""
+        model = self._accel_model
+        if model is None:
+            return self.s_vel * self.s_vel * dt
+        n2, a2, j2, v02 = model
+        t = max(t_s - self._t_ins0_s, 0.0)
+        w = self._weights()
+        d = self.dv - w @ self.dv
+        sigma_v = math.sqrt(max(float(np.max(w @ (d * d))), 0.0))
+        acc2 = a2 + j2 * t * t
+        if self._t_fix_s is None:
+            cov_free = a2 * t + 0.5 * j2 * t ** 3
+            var_free = v02 + n2 * t + a2 * t * t + 0.25 * j2 * t ** 4
+        else:     # since the last GNSS velocity fix at tf (v02 its posterior): the same free INS from there
+            tf = max(self._t_fix_s - self._t_ins0_s, 0.0)
+            tau = max(t - tf, 0.0)
+            ramp = tf * tau + 0.5 * tau * tau
+            cov_free = a2 * tau + j2 * t * ramp
+            var_free = v02 + n2 * tau + a2 * tau * tau + j2 * ramp * ramp
+        rho = min(cov_free / math.sqrt(var_free * acc2), 1.0) if var_free * acc2 > 0.0 else 0.0
+        return n2 * dt + 2.0 * rho * sigma_v * math.sqrt(acc2) * dt + acc2 * dt * dt
 
     def _init_belief(self, cov9: np.ndarray, mean=None) -> None:
         self._init_cov = np.array(cov9, float)
@@ -211,15 +248,12 @@ class ParticleFilter(InsRiddenFilter):
         lat = float(st[0]) if st is not None else 0.6
         g_over_r = 9.81 / float(radii_m(lat, 0.0)[0])
         z = self.rng.standard_normal((self.M, N_STATE))
-        if self._accel_model is not None:      # velocity_noise_model "imu_spec": the carried acceleration
-            psi1 = ins_heading_rad(st) if st is not None else self._psi_prev
-            psi1 = 0.0 if psi1 is None else psi1
-            psi0 = psi1 if self._psi_prev is None else self._psi_prev
-            self._accel_model.advance(self.acc, dt, psi0, psi1, self.rng, self._acc_ned)
-            self._psi_prev = psi1
+        s_vel = float(self.s_vel)
+        if self._accel_model is not None:      # velocity_noise_model "imu_spec"
+            s_vel = math.sqrt(self._velocity_step_var(t_s, dt) / dt)
         propagate_particles((self.dn, self.de, self.b, self.dv, self.dpsi), dt,
                             (float(f_n), float(f_e), g_over_r),
-                            (float(self.s_pos), float(self.s_vel), float(self.s_psi), 0.0), z, self._acc_ned)
+                            (float(self.s_pos), s_vel, float(self.s_psi), 0.0), z)
         self.P_b += self._offset_process_var(dt, st)
         self._t_belief = t_s
         self._moments_cache = None
@@ -281,7 +315,6 @@ class ParticleFilter(InsRiddenFilter):
             self._resample(w)
         return log_lik, ess
 
-
     def _resample(self, w: np.ndarray) -> None:
         systematic_kernel(w, float(self.rng.random()), self._idx)
         i = self._idx
@@ -290,8 +323,6 @@ class ParticleFilter(InsRiddenFilter):
         self.b = self.b[i]
         self.dv = np.ascontiguousarray(self.dv[i])
         self.dpsi = self.dpsi[i]
-        if self._accel_model is not None:
-            self.acc = np.ascontiguousarray(self.acc[i])
         self.logw[:] = 0.0
         self.n_resampled += 1
         if self.roughening > 0.0:
@@ -302,40 +333,26 @@ class ParticleFilter(InsRiddenFilter):
         """Kernel jitter against impoverishment that keeps the cloud's mean and covariance (Liu & West
         2001's shrinkage): x <- a x + (1 - a) mean + h N(0, Sigma), a = sqrt(1 - h^2), Sigma the resampled
         cloud's covariance. h is Gordon et al.'s roughening scale for this cloud, roughening M^(-1/d) times
-        a Gaussian cloud's span in sigmas (~7.8 at M = 10,000), d the six states the measurements see.
-        Gordon's own jitter adds that variance on top (h^2 Sigma at every resampling, ~3 % at the defaults):
-        a process noise the INS error does not have, which leaves the reported covariance larger than the
-        error. The carried acceleration error ("imu_spec") is jittered with the states, jointly (Liu and
-        West's shrinkage is for such static parameters), in units of each column's spread (its scales run
-        from 1e-7 to 1e2)."""
+        a Gaussian cloud's span in sigmas (~7.8 at M = 10,000). Gordon's own jitter adds that variance on top
+        (h^2 Sigma at every resampling, ~3 % at the defaults): a process noise the INS error does not have,
+        which leaves the reported covariance larger than the error."""
         M = self.M
-        cols = [self.dn, self.de, self.b, self.dv[:, 0], self.dv[:, 1], self.dpsi]
-        carried = self._accel_model is not None
-        X = np.column_stack(cols + [self.acc]) if carried else np.stack(cols, axis=1)
+        X = np.stack([self.dn, self.de, self.b, self.dv[:, 0], self.dv[:, 1], self.dpsi], axis=1)
         mean = X.mean(axis=0)
         D = X - mean
+        cov = D.T @ D / M
         span_sigmas = 2.0 * math.sqrt(2.0) * _erfinv_approx(1.0 - 1.0 / M)
         h = min(self.roughening * M ** (-1.0 / N_STATE) * span_sigmas, 0.5)
         a = math.sqrt(1.0 - h * h)
-        if carried:
-            scale = D.std(axis=0)
-            scale[scale <= 0.0] = 1.0
-            D = D / scale
-        cov = D.T @ D / M
         w, V = np.linalg.eigh(0.5 * (cov + cov.T))
         L = V * np.sqrt(np.clip(w, 0.0, None))
-        z = self.rng.standard_normal((M, X.shape[1]))
-        jitter = z @ L.T
-        if carried:
-            jitter *= scale
-        X = a * X + (1.0 - a) * mean + h * jitter
+        z = self.rng.standard_normal((M, N_STATE))
+        X = a * X + (1.0 - a) * mean + h * (z @ L.T)
         self.dn = np.ascontiguousarray(X[:, 0])
         self.de = np.ascontiguousarray(X[:, 1])
         self.b = np.ascontiguousarray(X[:, 2])
         self.dv = np.ascontiguousarray(X[:, 3:5])
         self.dpsi = np.ascontiguousarray(X[:, 5])
-        if carried:
-            self.acc = np.ascontiguousarray(X[:, N_STATE:N_STATE + N_ACC])
 
     # ------------------------------------------------------------------------------------ updates
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
@@ -405,9 +422,10 @@ class ParticleFilter(InsRiddenFilter):
         S_b = sv2 + (p_h if p_m > 0.0 else self.P_b)
         K_b = (p_h if p_m > 0.0 else self.P_b) / S_b
         has_v = bool(np.all(np.isfinite(v)))
-        if self._accel_model is not None:     # the carried acceleration: the ensemble update (its docstring)
+        if self._accel_model is not None:     # "imu_spec": the ensemble update (its docstring)
             ll = np.zeros(self.M)
-            self._gnss_ensemble_update(gn, ge, (float(v[0] - st[3]), float(v[1] - st[4])) if has_v else None)
+            self._gnss_ensemble_update(gn, ge, (float(v[0] - st[3]), float(v[1] - st[4])) if has_v else None,
+                                       t_s)
         else:
             ll = gnss_model.likelihood(gn, ge, self.dn, self.de, self.gnss_sigma_m)
         ll -= 0.5 * (z_b - self.b) ** 2 / S_b
@@ -427,18 +445,20 @@ class ParticleFilter(InsRiddenFilter):
         if out is not None and self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
 
-    def _gnss_ensemble_update(self, gn: float, ge: float, dv_obs: tuple[float, float] | None) -> None:
-        """The GNSS fix's horizontal position (gn, ge: the fix minus the INS, m) and velocity offset (m/s, or
-        None) by an ensemble Kalman update of the particles (Evensen 2003, perturbed observations) over
-        their joint state - position, velocity, heading and the carried acceleration error - with the
-        cloud's weighted covariance; the weights stay. The fix is linear in the state with Gaussian noise, so
-        for a Gaussian cloud this is the Bayes update, and every particle moves by the gain rather than
-        being kept or dropped: reweighting a 30 m cloud by a 2 m fix leaves a handful of particles, whose
-        spread in the states the fix does not observe (the acceleration error: no walk re-diversifies it)
-        is a few particles' jitter. A state's change is its covariance with what the fix observes, so the
-        acceleration error narrows only as far as the fix's position and velocity tell it apart."""
-        cols = [self.dn, self.de, self.dv[:, 0], self.dv[:, 1], self.dpsi, self.acc]
-        X = np.column_stack(cols)
+    def _gnss_ensemble_update(self, gn: float, ge: float, dv_obs: tuple[float, float] | None,
+                              t_s: float) -> None:
+        """velocity_noise_model "imu_spec": the GNSS fix's horizontal position (gn, ge: the fix minus the
+        INS, m) and velocity offset (m/s, or None) by an ensemble Kalman update of the particles (Evensen
+        2003, perturbed observations) over position, velocity and heading, with the cloud's weighted
+        covariance; the weights stay. The fix is linear in these states with Gaussian noise, so for a
+        Gaussian cloud this is the Bayes update, and every particle moves by the gain instead of being kept
+        or dropped: reweighting a 30 m cloud by a 2 m fix keeps a handful of particles, whose velocity spread
+        is then a few particles' jitter and whose mean velocity is theirs - the fixes' velocity is lost, and
+        this model, which grows the velocity's spread from the cloud's own (`_velocity_step_var`), would not
+        restore it. A velocity fix restarts the free INS's correlation of the velocity error with the
+        acceleration error (rho): from the fix on, the velocity error grows from the fix's posterior as the
+        free INS's grows from its initial error."""
+        X = np.column_stack([self.dn, self.de, self.dv[:, 0], self.dv[:, 1], self.dpsi])
         obs = [0, 1]
         z = [gn, ge]
         r = [self.gnss_sigma_m ** 2] * 2
@@ -449,16 +469,19 @@ class ParticleFilter(InsRiddenFilter):
         w = self._weights()
         D = X - w @ X
         P_xh = (D * w[:, None]).T @ D[:, obs]
-        S = P_xh[obs] + np.diag(r)
-        K = np.linalg.solve(S, P_xh.T).T
+        K = np.linalg.solve(P_xh[obs] + np.diag(r), P_xh.T).T
         innov = np.asarray(z) + self.rng.standard_normal((self.M, len(obs))) * np.sqrt(r) - X[:, obs]
         X += innov @ K.T
         self.dn = np.ascontiguousarray(X[:, 0])
         self.de = np.ascontiguousarray(X[:, 1])
         self.dv = np.ascontiguousarray(X[:, 2:4])
         self.dpsi = np.ascontiguousarray(X[:, 4])
-        self.acc = np.ascontiguousarray(X[:, 5:])
         self._moments_cache = None
+        if dv_obs is not None and self._accel_model is not None:
+            d = self.dv - w @ self.dv
+            n2, a2, j2, _ = self._accel_model
+            self._accel_model = (n2, a2, j2, float(np.max(w @ (d * d))))
+            self._t_fix_s = float(t_s)
 
     def _recover(self, t_s: float) -> str:
         """The cloud re-drawn around its mean with the widened horizontal covariance (initial otherwise)."""
