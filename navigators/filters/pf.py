@@ -25,7 +25,9 @@ is INS + the weighted mean.
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
   jitter keeps the cloud's mean and covariance (`_regularise`); Gordon's jitter adds its variance at each
   resampling, a process noise the INS error does not have.
-- GNSS: position, height and horizontal velocity likelihoods on the particles, vertical velocity into the INS.
+- GNSS: with velocity_noise_model "imu_spec" (default) the horizontal position and velocity by an ensemble
+  Kalman update of the particles (`_gnss_ensemble_update`), "walk" by their likelihoods; the height's
+  likelihood on the particles' vertical offsets; the vertical velocity into the INS.
 - Robustness: a NaN sample is skipped; when every particle's likelihood underflows (possible only with
   outlier_prob = 0, or a cloud entirely off the map) the update is skipped and Health says "degraded";
   ten in a row re-draw the cloud around its mean with the initial spread.
@@ -84,7 +86,8 @@ class ParticleFilter(InsRiddenFilter):
     the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
     (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
     velocity offsets need the diversity, learnt only through the weights and resampling),
-    velocity_noise_model ("walk", default, or "imu_spec": `_velocity_step_var`),
+    velocity_noise_model ("imu_spec", default: `_velocity_step_var`, GNSS by `_gnss_ensemble_update`; or
+    "walk", the random walk with the specification's equivalent walk as a floor),
     heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
     docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
@@ -182,10 +185,13 @@ class ParticleFilter(InsRiddenFilter):
         exactly as the free INS's velocity error (Titterton & Weston 2004, sec. 12.3, without Schuler's
         bound), and a velocity the terrain has told apart gains less, with its smaller sigma. A random walk
         of fixed density (the equivalent walk at one memory) cannot do both: fitted at a memory it is too
-        small for an unobserved velocity and too large for an observed one. Limitation (why "walk" stays
-        the default): the growth scales with the cloud's own spread, so a cloud whose velocity spread sharp
-        fixes (GNSS) collapsed by resampling stays collapsed after them, and after an observation the
-        correlation rebuilds faster than the free INS's from the reset."""
+        small for an unobserved velocity and too large for an observed one. The growth scales with the
+        cloud's own spread, so that spread must be the posterior's: a GNSS fix enters by the ensemble
+        update (`_gnss_ensemble_update`), not by resampling on its sharp likelihood, which left a few
+        particles' spread, and a GNSS velocity fix restarts the free INS there (its posterior velocity
+        variance as v0, t_f the fix): cov = sigma_a^2 tau + sigma_j^2 t (t_f tau + tau^2 / 2), var v = v0^2 +
+        N^2 tau + sigma_a^2 tau^2 + sigma_j^2 (t_f tau + tau^2 / 2)^2, tau = t - t_f (the ramp's acceleration
+        j t keeps its time since the reset)."""
         model = self._accel_model
         if model is None:
             return self.s_vel * self.s_vel * dt
