@@ -1,5 +1,5 @@
 """The particle filter's velocity process noise from the IMU's specification (navigators.filters.pf,
-velocity_noise_model "imu_spec", the default, `ParticleFilter._velocity_step_var`): the acceleration error
+velocity_noise_model "imu_spec", opt-in, `ParticleFilter._velocity_step_var`): the acceleration error
 the particles do not carry, a0 + j t, adds 2 rho sigma_v sigma_acc dt + sigma_acc^2 dt^2 + N^2 dt per step,
 rho the free INS's correlation of the velocity error with it (restarted at a GNSS velocity fix); and its GNSS
 update, an ensemble Kalman update of the particles (`ParticleFilter._gnss_ensemble_update`), checked
@@ -94,11 +94,10 @@ def test_without_the_specification_the_setting_is_the_walk(dem):
     assert nav._velocity_step_var(10.0, 2.0) == pytest.approx(0.02**2 * 2.0)
 
 
-def test_the_walk_keeps_the_equivalent_walk(dem):
-    """velocity_noise_model "walk" (the default before "imu_spec"): the specification's equivalent walk over
-    the tuned floor, as before the model existed."""
-    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=100,
-                          velocity_noise_model="walk")
+def test_the_default_walk_keeps_the_equivalent_walk(dem):
+    """velocity_noise_model "walk" (default): the specification's equivalent walk over the tuned floor, as
+    before the model existed."""
+    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=100)
     nav.apply_imu_spec(imu_spec({"grade": "tactical"}))
     nav.reset(_initial())
     assert nav._accel_model is None and nav.s_vel > 0.1

@@ -25,9 +25,9 @@ is INS + the weighted mean.
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
   jitter keeps the cloud's mean and covariance (`_regularise`); Gordon's jitter adds its variance at each
   resampling, a process noise the INS error does not have.
-- GNSS: with velocity_noise_model "imu_spec" (default) the horizontal position and velocity by an ensemble
-  Kalman update of the particles (`_gnss_ensemble_update`), "walk" by their likelihoods; the height's
-  likelihood on the particles' vertical offsets; the vertical velocity into the INS.
+- GNSS: the horizontal position and velocity by their likelihoods on the particles (velocity_noise_model
+  "walk", default) or by an ensemble Kalman update of the particles ("imu_spec": `_gnss_ensemble_update`);
+  the height's likelihood on the particles' vertical offsets; the vertical velocity into the INS.
 - Robustness: a NaN sample is skipped; when every particle's likelihood underflows (possible only with
   outlier_prob = 0, or a cloud entirely off the map) the update is skipped and Health says "degraded";
   ten in a row re-draw the cloud around its mean with the initial spread.
@@ -86,8 +86,8 @@ class ParticleFilter(InsRiddenFilter):
     the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
     (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
     velocity offsets need the diversity, learnt only through the weights and resampling),
-    velocity_noise_model ("imu_spec", default: `_velocity_step_var`, GNSS by `_gnss_ensemble_update`; or
-    "walk", the random walk with the specification's equivalent walk as a floor),
+    velocity_noise_model ("walk", default: the random walk, the specification's equivalent walk as a
+    floor; or "imu_spec": `_velocity_step_var`, GNSS by `_gnss_ensemble_update`),
     heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
     docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
