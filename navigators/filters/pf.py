@@ -11,10 +11,10 @@ is INS + the weighted mean.
 - Propagation (navigators.filters._pf_kernels.propagate_particles): the INS error dynamics between
   measurement epochs - position from velocity, velocity from the heading error turning the specific force
   and the Schuler term - plus process noise drawn from the filter's Generator; its densities come from the
-  IMU's specification where it gives more than the tuned floors (apply_imu_spec, navigators.core.imu_spec:
-  the acceleration errors the particles do not carry as an equivalent velocity random walk), or with
-  velocity_noise_model "imu_spec" the velocity's noise is that acceleration error's effect on the velocity
-  the cloud holds (`_velocity_step_var`).
+  IMU's specification (apply_imu_spec, navigators.core.imu_spec): with velocity_noise_model "imu_spec"
+  (default) the velocity's noise is the effect on the velocity the cloud holds of the acceleration error the
+  particles do not carry (`_velocity_step_var`); with "walk" that error enters as an equivalent velocity
+  random walk, a floor over the tuned setting.
 - Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
   or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira.closest_points), one map lookup
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
@@ -25,8 +25,8 @@ is INS + the weighted mean.
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
   jitter keeps the cloud's mean and covariance (`_regularise`); Gordon's jitter adds its variance at each
   resampling, a process noise the INS error does not have.
-- GNSS: the horizontal position and velocity by their likelihoods on the particles (velocity_noise_model
-  "walk", default) or by an ensemble Kalman update of the particles ("imu_spec": `_gnss_ensemble_update`);
+- GNSS: the horizontal position and velocity by an ensemble Kalman update of the particles
+  (velocity_noise_model "imu_spec", default: `_gnss_ensemble_update`) or by their likelihoods ("walk");
   the height's likelihood on the particles' vertical offsets; the vertical velocity into the INS.
 - Robustness: a NaN sample is skipped; when every particle's likelihood underflows (possible only with
   outlier_prob = 0, or a cloud entirely off the map) the update is skipped and Health says "degraded";
@@ -86,8 +86,8 @@ class ParticleFilter(InsRiddenFilter):
     the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
     (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
     velocity offsets need the diversity, learnt only through the weights and resampling),
-    velocity_noise_model ("walk", default: the random walk, the specification's equivalent walk as a
-    floor; or "imu_spec": `_velocity_step_var`, GNSS by `_gnss_ensemble_update`),
+    velocity_noise_model ("imu_spec", default: `_velocity_step_var`, GNSS by `_gnss_ensemble_update`; or
+    "walk": the random walk, the specification's equivalent walk as a floor),
     heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
     docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
@@ -133,13 +133,13 @@ class ParticleFilter(InsRiddenFilter):
     # ------------------------------------------------------------------------------------ belief
     def apply_imu_spec(self, spec: ImuSpec) -> None:
         """Take the error model from the IMU's specification (navigators.core.imu_spec). The particles carry
-        position, velocity and heading offsets, not the acceleration error. velocity_noise_model "walk"
-        (default): the acceleration errors enter as an equivalent velocity random walk matching them at
+        position, velocity and heading offsets, not the acceleration error. velocity_noise_model "walk":
+        the acceleration errors enter as an equivalent velocity random walk matching them at
         PF_MEMORY_S, a floor over the tuned setting - the body-fixed specific-force error (accelerometer
         bias, instability, misalignment x g) and a 90 deg turn's gyro misalignment (g x tilt) as constant
         accelerations, the tilt the horizontal gyro biases build as a ramp (g sigma_bg t:
-        equivalent_ramp_walk_density), with the velocity random walk. "imu_spec": the velocity's noise is
-        that error's effect on the velocity the cloud holds (`_velocity_step_var`, the initial tilt x g
+        equivalent_ramp_walk_density), with the velocity random walk. "imu_spec" (default): the velocity's noise
+        is that error's effect on the velocity the cloud holds (`_velocity_step_var`, the initial tilt x g
         added to the constant part). The heading's random walk matches the z gyro bias and a 90 deg turn's
         scale factor at PF_MEMORY_S, with the angle random walk, as a floor over the tuned setting."""
         self._imu_spec = spec

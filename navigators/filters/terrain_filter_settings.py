@@ -123,7 +123,7 @@ class PfSettings(TerrainFilterSettings):
                                                  "m/sqrt(s)", ge=0.0)
     velocity_noise_mps_per_sqrt_s: float = setting(0.02, "random walk of the velocity offset",
                                                    "m/s/sqrt(s)", ge=0.0)
-    velocity_noise_model: str = setting("walk", "'imu_spec': the IMU specification's acceleration error "
+    velocity_noise_model: str = setting("imu_spec", "'imu_spec': the IMU specification's acceleration error "
                                         "on the cloud's velocity, GNSS by an ensemble Kalman update; 'walk': "
                                         "the velocity's noise is the random walk (the specification's "
                                         "equivalent walk as a floor), GNSS by the particles' likelihoods",
