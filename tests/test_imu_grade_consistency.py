@@ -137,7 +137,13 @@ def test_build_navigator_applies_the_grade(name):
         assert t.accel_bias_sigma > 20 * n.accel_bias_sigma
         assert t._imu_noise[0] > 100 * n._imu_noise[0] and t._imu_noise[3] > 0.0 == n._imu_noise[3]
     elif name == "pf":
-        assert t.s_vel > 2 * n.s_vel and t.s_psi > n.s_psi
+        # default velocity_noise_model "imu_spec": the walk stays the tuned setting, the velocity's noise is
+        # the specification's acceleration error (`_velocity_step_var`)
+        assert t.s_vel == n.s_vel and t.s_psi > n.s_psi
+        # (tests/test_pf_velocity_noise.py checks the model itself); here: the grade reached the filter
+        assert n._spec_velocity and t._spec_velocity
+        assert t._imu_spec.body_accel_sigma_mps2 > 10 * n._imu_spec.body_accel_sigma_mps2 > 0.0
+        assert t._imu_spec.tilt_accel_rate_sigma_mps3 > 10 * n._imu_spec.tilt_accel_rate_sigma_mps3 > 0.0
         assert t.vertical_noise > 1.4 * n.vertical_noise
     elif name == "rbpf":
         # per 1 s TRN epoch: velocity noise = the velocity random walk (tactical 100 ug/sqrt(Hz)), attitude
@@ -236,8 +242,8 @@ def test_imu_spec_names_the_preset_it_equals():
 def test_a_static_warning_keeps_ok_and_the_flag_withdraws_it():
     """Health.snapshot with the run-time check: a conservative warning (ok stays True) until the check flags,
     then ok False with the check's message after the static warning."""
-    warning = grade_warning(imu_spec({"grade": "navigation"}), 120.0, "pf")
-    assert measured_direction("pf", "navigation") == CONSERVATIVE and "conservative" in warning
+    warning = grade_warning(imu_spec({"grade": "navigation"}), 120.0, "acq_track")
+    assert measured_direction("acq_track", "navigation") == CONSERVATIVE and "conservative" in warning
     check = ConsistencyCheck(window=2)
     h = Health().snapshot(warning, check)
     assert h.ok and h.status == "ok" and h.consistency_warning == warning

@@ -35,7 +35,7 @@ MEASURED: dict[str, dict[str, str]] = {
     "ins": {},
     "ins_tercom": {"navigation": CONSERVATIVE, "tactical": CONSERVATIVE, "consumer": OVERCONFIDENT},
     "pmf": {"consumer": OVERCONFIDENT},
-    "pf": {"navigation": CONSERVATIVE, "consumer": OVERCONFIDENT},
+    "pf": {"consumer": OVERCONFIDENT},
     "rbpf": {"tactical": OVERCONFIDENT, "consumer": OVERCONFIDENT},
     "acq_track": {"navigation": CONSERVATIVE, "consumer": OVERCONFIDENT},
 }
