@@ -94,10 +94,11 @@ def test_without_the_specification_the_setting_is_the_walk(dem):
     assert nav._velocity_step_var(10.0, 2.0) == pytest.approx(0.02**2 * 2.0)
 
 
-def test_the_default_walk_keeps_the_equivalent_walk(dem):
-    """velocity_noise_model "walk" (default): the specification's equivalent walk over the tuned floor, as
-    before the model existed."""
-    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=100)
+def test_the_walk_keeps_the_equivalent_walk(dem):
+    """velocity_noise_model "walk" (the former default): the specification's equivalent walk over the tuned
+    floor, as before the model existed."""
+    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=100,
+                          velocity_noise_model="walk")
     nav.apply_imu_spec(imu_spec({"grade": "tactical"}))
     nav.reset(_initial())
     assert nav._accel_model is None and nav.s_vel > 0.1
@@ -147,3 +148,10 @@ def test_a_velocity_fix_restarts_the_free_ins_correlation(dem):
         rho = min(cov / math.sqrt(var * acc2), 1.0)
         expect = n**2 + 2.0 * rho * sigma_v * math.sqrt(acc2) + acc2
         assert nav._velocity_step_var(t, 1.0) == pytest.approx(expect, rel=1e-9)
+
+
+def test_the_default_is_the_specification_model(dem):
+    nav = registry.create("pf", dem=dem, rng=np.random.default_rng(7), n_particles=100)
+    nav.apply_imu_spec(imu_spec({"grade": "tactical"}))
+    nav.reset(_initial())
+    assert nav._accel_model is not None and nav.s_vel == pytest.approx(0.02)

@@ -138,10 +138,10 @@ class ParticleFilter(InsRiddenFilter):
         PF_MEMORY_S, a floor over the tuned setting - the body-fixed specific-force error (accelerometer
         bias, instability, misalignment x g) and a 90 deg turn's gyro misalignment (g x tilt) as constant
         accelerations, the tilt the horizontal gyro biases build as a ramp (g sigma_bg t:
-        equivalent_ramp_walk_density), with the velocity random walk. "imu_spec" (default): the velocity's noise
-        is that error's effect on the velocity the cloud holds (`_velocity_step_var`, the initial tilt x g
-        added to the constant part). The heading's random walk matches the z gyro bias and a 90 deg turn's
-        scale factor at PF_MEMORY_S, with the angle random walk, as a floor over the tuned setting."""
+        equivalent_ramp_walk_density), with the velocity random walk. "imu_spec" (default): the velocity's
+        noise is that error's effect on the velocity the cloud holds (`_velocity_step_var`, the initial
+        tilt x g added to the constant part). The heading's random walk matches the z gyro bias and a 90 deg
+        turn's scale factor at PF_MEMORY_S, with the angle random walk, as a floor over the tuned setting."""
         self._imu_spec = spec
         if not self._spec_velocity:
             a = rss(spec.body_accel_sigma_mps2, G0_MPS2 * spec.turn_tilt_sigma_rad(0.5 * math.pi))
