@@ -90,6 +90,12 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
         assert mod.main([*sel, *bad]) == 2
         assert name in capsys.readouterr().err
     assert not out.exists()
+    ck = tmp_path / "ck"
+    for d in ("iter_10", "iter_20", "iter_30", "iter_100", "final", "iter_x"):
+        (ck / d).mkdir(parents=True)
+    assert [d.name for d in mod.checkpoints_to_select(ck, 20)] == ["iter_20", "iter_100", "final"]
+    every10 = ["iter_10", "iter_20", "iter_30", "iter_100", "final"]
+    assert [d.name for d in mod.checkpoints_to_select(ck, 10)] == every10
 
 
 def test_checkpoint_pick_prefers_success_then_the_lower_mean_miss():
@@ -200,7 +206,7 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     assert mod.main(["select", "--out", str(out), "--every", "1", "--validation-seeds", "3",
                      "--max-episode-s", "60"]) == 0
     sel = json.loads((out / "selection.json").read_text())
-    assert [Path(r["checkpoint"]).name for r in sel["rows"]] == ["iter_1", "final"]
+    assert [Path(r["checkpoint"]).name for r in sel["rows"]] == ["final"]   # one iteration: final only
     assert all(r["episodes"] == 3 for r in sel["rows"]) and sel["best"] in sel["rows"]
 
 
