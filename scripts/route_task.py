@@ -72,6 +72,9 @@ def parse(argv):
     p.add_argument("--entropy", type=float, default=0.0, help="entropy coefficient")
     p.add_argument("--vf-clip", type=float, default=10.0, help="RLlib's value-loss clip")
     p.add_argument("--activation", default="tanh", choices=("tanh", "relu"))
+    p.add_argument("--miss-weight", type=float, default=None,
+                   help="TRAINING reward only: reward per km of true miss at arrival (default: the task's, "
+                        "20); evaluation always scores the true miss with the task's reward")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint", type=Path, default=None, help="checkpoint to evaluate")
     p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
@@ -108,6 +111,8 @@ def _check(args) -> dict:
         v = getattr(args, name)
         if not (lo < v <= hi and math.isfinite(v)):
             raise ValueError(f"--{name.rstrip('_').replace('_', '-')} must be in ({lo}, {hi}], got {v}")
+    if args.miss_weight is not None and not (0.0 <= args.miss_weight < math.inf):
+        raise ValueError(f"--miss-weight must be a finite number >= 0, got {args.miss_weight}")
     if not (0.0 <= args.entropy < math.inf):
         raise ValueError(f"--entropy must be a finite number >= 0, got {args.entropy}")
     if (args.lr_end is None) != (args.lr_decay_steps is None):
@@ -210,7 +215,8 @@ def train(args, kw: dict) -> None:
                   lr=args.lr, lr_end=args.lr_end, lr_decay_steps=args.lr_decay_steps, gamma=args.gamma,
                   lambda_=args.lambda_, entropy_coeff=args.entropy, vf_clip_param=args.vf_clip,
                   activation=args.activation)
-    cfg = ppo_config(tier, kw, seed=args.seed, num_env_runners=args.env_runners,
+    train_kw = kw if args.miss_weight is None else {**kw, "miss_weight": float(args.miss_weight)}
+    cfg = ppo_config(tier, train_kw, seed=args.seed, num_env_runners=args.env_runners,
                      num_envs_per_env_runner=envs, **recipe)
     cpu_s = 60.0 * args.cpu_minutes if args.cpu_minutes is not None else route_task.TRAIN_BUDGET["cpu_s"]
     wall_s = 60.0 * args.minutes if args.minutes is not None else None
@@ -223,7 +229,7 @@ def train(args, kw: dict) -> None:
     algo, history = train(cfg, args.iterations, args.out / "checkpoints", 10, show, wall_s, cpu_s)
     algo.stop()
     (args.out / "history.json").write_text(json.dumps(
-        {"tier": tier, "terrain": args.terrain, "env": kw, "envs_per_runner": envs, "env_runners":
+        {"tier": tier, "terrain": args.terrain, "env": train_kw, "envs_per_runner": envs, "env_runners":
          args.env_runners, "seed": args.seed, "budget": {"cpu_s": cpu_s, "wall_s": wall_s},
          **{k: (list(v) if isinstance(v, tuple) else v) for k, v in recipe.items()},
          "epochs": args.epochs, "history": history}, indent=1))
