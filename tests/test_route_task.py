@@ -59,6 +59,15 @@ def test_paired_comparison_uses_only_pairs_where_both_arrived_and_its_interval_c
     assert t["beats_straight_by_30pct"] and t["sign_test_p_below_0_01"]
     assert not t["within_20pct_of_planner"]                # no planner evaluated
     assert "ppo vs straight" in rt.table(s)
+    # within 20 % of the planner needs the planner's success rate too (misses are over arrived episodes)
+    rows = _rows(a, b) + [{**r, "policy": "planner", "true_miss_m": 1.1 * r["true_miss_m"]}
+                          for r in _rows(a, b) if r["policy"] == "ppo"]
+    for r in rows:
+        if r["policy"] == "planner" and not r["arrived"]:
+            r["arrived"], r["true_miss_m"] = True, 30.0
+    t = rt.target_check(rt.summarise(rows))
+    assert not t["success_not_below_planner"] and not t["within_20pct_of_planner"]
+    assert t["ratio_to_planner"] < 1.2
 
 
 def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsys):

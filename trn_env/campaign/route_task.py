@@ -334,16 +334,21 @@ def per_goal(rows: list[dict]) -> list[dict]:
 
 def target_check(summary: dict, policy: str = "ppo") -> dict:
     """The issue's target in the full tier: `policy` beats straight by >= 30 % mean true miss (paired, sign
-    test p < 0.01) and its mean miss is within 20 % of the planner's."""
+    test p < 0.01) and its mean miss is within 20 % of the planner's with a success rate (arrived) not below
+    the planner's (the miss is over the arrived episodes: a policy that arrives less often is not within 20 %
+    however small its miss on the few it finishes)."""
     c = next((c for c in summary["paired"]
               if c["tier"] == "full" and c["a"] == policy and c["b"] == "straight"), None)
     pol = summary["policies"]
     planner = pol.get("full/planner", {}).get("miss_mean_m", math.nan)
     mine = pol.get(f"full/{policy}", {}).get("miss_mean_m", math.nan)
+    success_ok = pol.get(f"full/{policy}", {}).get("success", 0.0) >= pol.get("full/planner", {}).get(
+        "success", math.inf)
     return {"beats_straight_by_30pct": bool(c is not None and c["improvement"] >= 0.30),
             "sign_test_p_below_0_01": bool(c is not None and c["sign_test_p"] < 0.01),
             "within_20pct_of_planner": bool(math.isfinite(mine) and math.isfinite(planner)
-                                            and mine <= 1.2 * planner),
+                                            and mine <= 1.2 * planner and success_ok),
+            "success_not_below_planner": bool(success_ok),
             "improvement": None if c is None else c["improvement"],
             "sign_test_p": None if c is None else c["sign_test_p"],
             "ratio_to_planner": mine / planner if planner and math.isfinite(planner) else math.nan}
