@@ -72,6 +72,9 @@ def parse(argv):
     p.add_argument("--entropy", type=float, default=0.0, help="entropy coefficient")
     p.add_argument("--vf-clip", type=float, default=10.0, help="RLlib's value-loss clip")
     p.add_argument("--activation", default="tanh", choices=("tanh", "relu"))
+    p.add_argument("--log-std-clip", type=float, default=20.0,
+                   help="bound of the policy's log standard deviation (RLlib's log_std_clip_param; "
+                        "default 20)")
     p.add_argument("--miss-weight", type=float, default=None,
                    help="TRAINING reward only: reward per km of true miss at arrival (default: the task's, "
                         "20); evaluation always scores the true miss with the task's reward")
@@ -111,6 +114,8 @@ def _check(args) -> dict:
         v = getattr(args, name)
         if not (lo < v <= hi and math.isfinite(v)):
             raise ValueError(f"--{name.rstrip('_').replace('_', '-')} must be in ({lo}, {hi}], got {v}")
+    if not (0.0 <= args.log_std_clip < math.inf):
+        raise ValueError(f"--log-std-clip must be a finite number >= 0, got {args.log_std_clip}")
     if args.miss_weight is not None and not (0.0 <= args.miss_weight < math.inf):
         raise ValueError(f"--miss-weight must be a finite number >= 0, got {args.miss_weight}")
     if not (0.0 <= args.entropy < math.inf):
@@ -214,7 +219,7 @@ def train(args, kw: dict) -> None:
     recipe = dict(hidden=args.hidden_t, train_batch_size=batch, minibatch_size=mini, num_epochs=args.epochs,
                   lr=args.lr, lr_end=args.lr_end, lr_decay_steps=args.lr_decay_steps, gamma=args.gamma,
                   lambda_=args.lambda_, entropy_coeff=args.entropy, vf_clip_param=args.vf_clip,
-                  activation=args.activation)
+                  activation=args.activation, log_std_clip=args.log_std_clip)
     train_kw = kw if args.miss_weight is None else {**kw, "miss_weight": float(args.miss_weight)}
     cfg = ppo_config(tier, train_kw, seed=args.seed, num_env_runners=args.env_runners,
                      num_envs_per_env_runner=envs, **recipe)

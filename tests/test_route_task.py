@@ -90,6 +90,8 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
                       (["--minutes", "-1"], "--minutes"), (["--gamma", "1.5"], "--gamma"),
                       (["--lambda", "0"], "--lambda"), (["--entropy", "-0.1"], "--entropy"),
                       (["--lr-end", "1e-5"], "--lr-decay-steps"), (["--miss-weight", "-1"], "--miss-weight"),
+                      (["--log-std-clip", "-1"], "--log-std-clip"),
+                      (["--log-std-clip", "inf"], "--log-std-clip"),
                       (["--miss-weight", "inf"], "--miss-weight")):
         assert mod.main([*train, *bad]) == 2
         assert name in capsys.readouterr().err
