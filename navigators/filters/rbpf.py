@@ -72,7 +72,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from ..core.imu_spec import ImuSpec
+from ..core.imu_spec import ImuSpec, TurnExcursion
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
 from ..core.measured_consistency import grade_warning
@@ -205,7 +205,6 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     # ------------------------------------------------------------------ IMU specification
     _turn_att_var = np.zeros(3)  # attitude variance per rad turned (n, e: gyro misalignment; d: scale factor)
-    _yaw_prev = math.nan
 
     def apply_imu_spec(self, spec: ImuSpec) -> None:
         """The Kalman parts' process noise and accelerometer-bias prior from the IMU's specification
@@ -215,8 +214,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         these per epoch), the x / y accelerometer-bias prior the body-fixed horizontal specific-force error
         (bias, instability and misalignment x g: in level flight the misalignment reads gravity as a
         constant body-frame bias), and per rad turned the gyro misalignment (tilt) and scale factor (heading)
-        over TURN_REFERENCE_RAD, as the EKF and PMF take them. The bias priors and drives themselves arrive
-        as settings (trn_env's imu_bias_settings). Its 15-state model is a small-angle one (eqs 16-22): a
+        over TURN_REFERENCE_RAD (the angle: _epoch_ql_var). The bias priors and drives themselves arrive as
+        settings (trn_env's imu_bias_settings). Its 15-state model is a small-angle one (eqs 16-22): a
         grade whose gyro biases build more than imu_spec.SMALL_ANGLE_LIMIT_RAD over RBPF_MEMORY_S sets the
         Health warning."""
         root_t = math.sqrt(self.trn_period_s)
@@ -232,15 +231,13 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
-        since the last epoch builds (apply_imu_spec)."""
+        builds (apply_imu_spec), per rad of growth of the net heading change since the reset
+        (navigators.core.imu_spec.TurnExcursion: the heading's back-and-forth on a straight leg undoes its
+        own misalignment and scale-factor error)."""
         if not self._turn_att_var.any():
             return self.ql_var
         C = quat_to_dcm(self.ins.state[6:10])
-        yaw = math.atan2(C[1, 0], C[0, 0])
-        turn = 0.0
-        if math.isfinite(self._yaw_prev):
-            turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
-        self._yaw_prev = yaw
+        turn = self._turn_angle.advance(math.atan2(C[1, 0], C[0, 0]))
         if turn == 0.0:
             return self.ql_var
         ql = self.ql_var.copy()
@@ -249,7 +246,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
-        self._yaw_prev = math.nan
+        self._turn_angle = TurnExcursion()
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)
