@@ -1,24 +1,25 @@
-"""The angle the turn terms' random walk advances by (navigators.core.imu_spec.TurnExcursion) and the rbpf's
-use of it: the gyro misalignment and scale factor build an attitude error proportional to the NET heading
-change since the anchor, so a heading that wanders about a straight leg, or a turn undone by the opposite
-turn, must not add the variance of the angle travelled back and forth. Checked against headings built here:
-a monotone turn gives its whole angle, a wander its largest excursion, and at every step of a random heading
-path the walk's variance (density sigma^2 TURN_REFERENCE per rad) bounds sigma^2 (net change)^2 up to
-TURN_REFERENCE, computed independently from the path."""
+"""The angle the turn terms' random walk advances by (navigators.core.imu_spec.TurnAngle) and the rbpf's
+use of it (setting turn_angle). In the "excursion" mode: the gyro misalignment and scale factor build an
+attitude error proportional to the NET heading change since the anchor, so a heading that wanders about a
+straight leg, or a turn undone by the opposite turn, must not add the variance of the angle travelled back
+and forth. Checked against headings built here: a monotone turn gives its whole angle, a wander its largest
+excursion, and at every step of a random heading path the walk's variance (density sigma^2 TURN_REFERENCE
+per rad) bounds sigma^2 (net change)^2 up to TURN_REFERENCE, computed independently from the path; "total"
+gives the summed heading changes."""
 
 import math
 
 import numpy as np
 import pytest
 from synthetic_terrain import wave_map
-from trn_env.navigators.core.imu_spec import ImuSpec, TurnExcursion
+from trn_env.navigators.core.imu_spec import ImuSpec, TurnAngle
 from trn_env.navigators.filters.rbpf import TURN_REFERENCE_RAD, RaoBlackwellizedPF
 from trn_env.navigators.inertial.strapdown import quat_from_C_bn
 from trn_env.terrain.geodesy import euler_to_C_bn
 
 
-def _growth(yaws):
-    t = TurnExcursion()
+def _growth(yaws, mode="excursion"):
+    t = TurnAngle(mode)
     return [t.advance(float(y)) for y in yaws]
 
 
@@ -39,12 +40,16 @@ def test_a_wander_counts_its_largest_excursion_and_an_undone_turn_once():
     there_and_back = np.radians(np.r_[np.arange(0.0, 60.5, 1.0), np.arange(59.0, -0.5, -1.0)])
     assert sum(_growth(there_and_back)) == pytest.approx(math.radians(60.0), abs=1e-12)
     assert _growth([0.1, math.nan, 0.2]) == [0.0, 0.0, pytest.approx(0.1)]
+    # "total": the summed heading changes, the back-and-forth included
+    assert sum(_growth(wander, "total")) == pytest.approx(float(np.abs(np.diff(wander)).sum()), rel=1e-12)
+    with pytest.raises(ValueError, match="excursion"):
+        TurnAngle("net")
 
 
 def test_the_walk_bounds_the_net_turns_variance_up_to_the_reference():
     rng = np.random.default_rng(5)
     yaw = np.cumsum(rng.normal(0.004, 0.02, 2000))      # drifting, wandering heading, < 90 deg net
-    ex = TurnExcursion()
+    ex = TurnAngle("excursion")
     walk = 0.0
     for y in yaw:
         walk += TURN_REFERENCE_RAD * ex.advance(float(y))
@@ -55,9 +60,9 @@ def test_the_walk_bounds_the_net_turns_variance_up_to_the_reference():
 
 def test_rbpf_adds_the_turn_variance_of_the_excursion():
     spec = ImuSpec(gyro_scale_factor_ppm=150.0, gyro_misalignment_rad=5e-4)
-    nav = RaoBlackwellizedPF(dem=wave_map(0))
+    nav = RaoBlackwellizedPF(dem=wave_map(0))           # turn_angle "excursion", the default
     nav.apply_imu_spec(spec)
-    nav._turn_angle = TurnExcursion()
+    nav._turn_angle = TurnAngle(nav.turn_angle)
     yaws = math.radians(10.0) + np.radians(np.r_[np.zeros(5), [1.5, -1.0, 2.0, -2.0, 1.0], np.arange(0, 31)])
     added = np.zeros(3)
     for y in yaws:

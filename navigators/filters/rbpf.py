@@ -72,7 +72,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from ..core.imu_spec import ImuSpec, TurnExcursion
+from ..core.imu_spec import ImuSpec, TurnAngle
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
 from ..core.measured_consistency import grade_warning
@@ -135,7 +135,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     cloud's and Kalman parts' prior from reset's initial.covariance, _set_prior; False: the init_* settings);
     imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m, recovery_reset_kalman (the
-    innovation test and its recovery, see the module docstring).
+    innovation test and its recovery, see the module docstring); turn_angle ("total" | "excursion": the
+    angle the turn terms of apply_imu_spec run in, _epoch_ql_var).
     """
 
     capabilities = CAPABILITIES
@@ -156,7 +157,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                         "window_edge_range theta_velocity_rows ambiguity_gap_m ambiguity_weight "
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
-                        "recovery_sigma_m recovery_reset_kalman")
+                        "recovery_sigma_m recovery_reset_kalman turn_angle")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
         self.trn_period_s = 1.0 / s.trn_rate_hz
@@ -231,9 +232,10 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
-        builds (apply_imu_spec), per rad of growth of the net heading change since the reset
-        (navigators.core.imu_spec.TurnExcursion: the heading's back-and-forth on a straight leg undoes its
-        own misalignment and scale-factor error)."""
+        builds (apply_imu_spec), per rad of the angle turn_angle names (navigators.core.imu_spec.TurnAngle:
+        "total", the heading's change since the last epoch; "excursion", the growth of the net heading change
+        since the reset, as the heading's back-and-forth on a straight leg undoes its own misalignment and
+        scale-factor error)."""
         if not self._turn_att_var.any():
             return self.ql_var
         C = quat_to_dcm(self.ins.state[6:10])
@@ -246,7 +248,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     # ------------------------------------------------------------------ protocol
     def reset(self, initial: Estimate) -> None:
-        self._turn_angle = TurnExcursion()
+        self._turn_angle = TurnAngle(self.turn_angle)
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)
