@@ -5,7 +5,7 @@ straight leg, or a turn undone by the opposite turn, must not add the variance o
 and forth. Checked against headings built here: a monotone turn gives its whole angle, a wander its largest
 excursion, and at every step of a random heading path the walk's variance (density sigma^2 TURN_REFERENCE
 per rad) bounds sigma^2 (net change)^2 up to TURN_REFERENCE, computed independently from the path; "total"
-gives the summed heading changes."""
+(the rbpf's default) gives the summed heading changes."""
 
 import math
 
@@ -60,7 +60,7 @@ def test_the_walk_bounds_the_net_turns_variance_up_to_the_reference():
 
 def test_rbpf_adds_the_turn_variance_of_the_excursion():
     spec = ImuSpec(gyro_scale_factor_ppm=150.0, gyro_misalignment_rad=5e-4)
-    nav = RaoBlackwellizedPF(dem=wave_map(0))           # turn_angle "excursion", the default
+    nav = RaoBlackwellizedPF(dem=wave_map(0), turn_angle="excursion")
     nav.apply_imu_spec(spec)
     nav._turn_angle = TurnAngle(nav.turn_angle)
     yaws = math.radians(10.0) + np.radians(np.r_[np.zeros(5), [1.5, -1.0, 2.0, -2.0, 1.0], np.arange(0, 31)])

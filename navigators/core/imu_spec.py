@@ -213,7 +213,7 @@ class TurnAngle:
 
     MODES = ("total", "excursion")
 
-    def __init__(self, mode: str = "excursion") -> None:
+    def __init__(self, mode: str = "total") -> None:
         if mode not in self.MODES:
             raise ValueError(f"TurnAngle mode must be one of {list(self.MODES)}, got {mode!r}")
         self.mode = mode
