@@ -14,8 +14,10 @@ the k thinned means, so its spread is at most theirs: scripts/grade_consistency.
 per navigator; and at least 90 % of all epochs have NEES <= 9 (the 3-sigma ellipse). A navigator whose
 covariance the whole-route grid measured conservative on this grade
 (navigators.core.measured_consistency.MEASURED, where Health says so; docs/validation/navigators.md) is held
-to the upper bound only: it must still bound its error. The ones measured overconfident on it (NOT_CHECKED:
-the pmf, and the rbpf by a heavy tail of runs; Health says so) are not in the check.
+to the upper bound only: it must still bound its error. The one measured overconfident on it (NOT_CHECKED:
+the rbpf, by a heavy tail of runs; Health says so) is not in the check. The pmf passes it by a small margin on
+these seeds (ANEES 2.59 against the upper bound 2.62, 96 % inside 3 sigma, measured with
+scripts/grade_consistency.py on the same seeds: docs/validation/navigators.md).
 """
 from __future__ import annotations
 
@@ -53,12 +55,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 RUNS = 8
 SEED0 = 2000
 DURATION_S = 600.0
-NAVIGATORS = ["ins", "ins_tercom", "pf", "acq_track"]
+NAVIGATORS = ["ins", "ins_tercom", "pmf", "pf", "acq_track"]
 # not in the check: measured overconfident on the tactical grade over the whole route (Health warns; the fast
-# tests check it): the pmf on average, the rbpf by a heavy tail (one run of 34 far outside for two minutes,
-# seed 2004: docs/validation/navigators.md)
-NOT_CHECKED = {"pmf": "measured overconfident on the tactical grade",
-               "rbpf": "measured overconfident on the tactical grade (a heavy tail of runs)"}
+# tests check it): the rbpf by a heavy tail (one run of 34 far outside for two minutes, seed 2004:
+# docs/validation/navigators.md)
+NOT_CHECKED = {"rbpf": "measured overconfident on the tactical grade (a heavy tail of runs)"}
 
 
 def test_imu_spec_from_the_scenario_grade():
@@ -129,7 +130,10 @@ def test_build_navigator_applies_the_grade(name):
         assert t.sig_bg > 100 * n.sig_bg and t._q_tilt > 100 * n._q_tilt
         assert t._turn_tilt2 > 0.0 and n._turn_tilt2 == 0.0
     elif name == "pmf":
-        assert t.vertical_noise > 1.4 * n.vertical_noise and n.vertical_noise == pytest.approx(0.3, rel=1e-2)
+        # the baro loop's transient is carried by the vertical specific-force error beta, not the walk
+        assert t.vertical_noise == n.vertical_noise == pytest.approx(0.3, rel=1e-2)
+        assert t._beta_sigma == pytest.approx(imu_spec({"grade": "tactical"}).vertical_accel_sigma_mps2)
+        assert t._beta_sigma > 10 * n._beta_sigma > 0.0
         assert t.accel_bias_sigma > 20 * n.accel_bias_sigma
         assert t._imu_noise[0] > 100 * n._imu_noise[0] and t._imu_noise[3] > 0.0 == n._imu_noise[3]
     elif name == "pf":

@@ -93,3 +93,50 @@ def test_navigator_setting(mode):
     assert (nav.terrain_model_sigma_m > 0.0) == (mode == "batch")      # auto: the map's spectrum
     with pytest.raises(ValueError, match="fix_noise"):
         registry.create("ins_tercom", dem=_map(), fix_noise="magic")
+
+
+def test_height_bias_term_against_plain_mad_fixes():
+    """A plain MAD (no bias removal, seed 000 eq 2) on a tilted map over heights with a common bias drawn
+    per trial (N(0, 15^2) m, the barometer's) and white noise (25 m). The term is sigma_b^2 j j^T with
+    j = A^-1 sum_k g_k (computed here); over 100 trials it takes the NEES sum from far above the 99 %
+    chi-square bounds to within 40 % of their upper end. It is the least-squares (linear) sensitivity: the
+    LAD absorbs a bias the more the smaller the noise (1.2 x j at this noise, 3.5 x j without noise,
+    docs/validation/navigators.md), so the plain MAD stays somewhat overconfident; the bias-removed MAD
+    (remove_bias) has no such term."""
+    dem = _map()
+    r_n, r_e = meridian_radius_m(LAT0), prime_vertical_radius_m(LAT0) * math.cos(LAT0)
+    _, _, _, lat_ins, lon_ins = _batch(dem)
+    n_lat, n_lon = dem.heights_m.shape
+    tilt = Dem(np.asarray(dem.heights_m) + 0.02 * (np.arange(n_lat)[:, None] * 30.0 * 0.6
+                                                   + np.arange(n_lon)[None, :] * 30.0 * 0.8),
+               dem.lat0_rad, dem.lon0_rad, dem.dlat_rad, dem.dlon_rad, "tilted")
+    lat_t, lon_t = lat_ins - SHIFT_NE_M[0] / r_n, lon_ins - SHIFT_NE_M[1] / r_e
+    h_true = tilt.height(lat_t, lon_t)
+    rng = np.random.default_rng(3)
+    zeros = np.zeros(M)
+    trials, bias_sigma_m = 100, 15.0
+    nees, nees_no_bias = [], []
+    for k in range(trials):
+        h_meas = h_true + rng.normal(0.0, bias_sigma_m) + rng.normal(0.0, NOISE_M, M)
+        fix = correlate(tilt, 0.0, lat_ins, lon_ins, h_meas, zeros, zeros, half=60, cell_m=5.0,
+                        remove_bias=False)
+        assert fix.valid
+        err = np.array([fix.dn_m + SHIFT_NE_M[0], fix.de_m + SHIFT_NE_M[1]])
+        args = (tilt, lat_ins, lon_ins, h_meas, zeros, zeros, fix.dn_m, fix.de_m, 5.0, False)
+        C = lad_fix_covariance(*args, height_bias_sigma_m=bias_sigma_m)
+        C0 = lad_fix_covariance(*args)
+        if k == 0:
+            lat_c = float(np.mean(lat_ins))        # the matched points as the module places them
+            lat_m = lat_ins + fix.dn_m / meridian_radius_m(lat_c)
+            lon_m = lon_ins + fix.de_m / (prime_vertical_radius_m(lat_c) * math.cos(lat_c))
+            g = np.stack(tilt.gradient(lat_m, lon_m), 1)
+            j = np.linalg.solve(g.T @ g, g.sum(axis=0))
+            np.testing.assert_allclose(C - C0, bias_sigma_m**2 * np.outer(j, j), rtol=1e-6, atol=1e-9)
+        nees.append(err @ np.linalg.solve(C, err))
+        nees_no_bias.append(err @ np.linalg.solve(C0, err))
+    lo, hi = stats.chi2.ppf([0.005, 0.995], 2 * trials)
+    total, total0 = float(np.sum(nees)), float(np.sum(nees_no_bias))
+    print(f"\nNEES sum {total:.0f} (without the bias term {total0:.0f}) over {trials} plain-MAD fixes; 99 % "
+          f"bounds [{lo:.0f}, {hi:.0f}]")
+    assert total0 > 1.5 * hi
+    assert lo < total < 1.4 * hi

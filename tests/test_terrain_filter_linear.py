@@ -124,7 +124,7 @@ def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     scale_pv = np.sqrt(np.outer(np.diag(Pk)[0:2], np.diag(Pk)[3:5]))
     print(f"PMF vs KF (straight): means off by {np.max(np.abs(mean[:3] - xk[:3]) / sig[:3]):.4f} sigma "
           f"(position, vertical), {np.max(np.abs(mean[3:5] - xk[3:5]) / sig[3:5]):.4f} (velocity), "
-          f"{np.max(np.abs(nav.u_mean[2:] - xk[5:10]) / sig[5:10]):.4f} (acceleration, heading); variances "
+          f"{np.max(np.abs(nav.u_mean[2:7] - xk[5:10]) / sig[5:10]):.4f} (acceleration, heading); variances "
           f"{np.max(np.abs(np.diag(cov)[:5] / np.diag(Pk)[:5] - 1)):.4f} relative; position-velocity "
           f"correlations {np.max(np.abs(cov[0:2, 3:5] - Pk[0:2, 3:5]) / scale_pv):.4f}")
     # velocity and acceleration get the wider margin: the grid's prediction adds the growth from u as a
@@ -139,10 +139,11 @@ def test_pmf_matches_the_kalman_filter_on_a_linear_gaussian_problem():
     scale = np.sqrt(np.outer(np.diag(Pk)[0:2], np.diag(Pk)[3:5]))
     assert np.all(np.abs(cov[0:2, 3:5] - Pk[0:2, 3:5]) < 0.003 * scale), (cov[0:2, 3:5], Pk[0:2, 3:5])
     # the acceleration and heading offsets (not in the Estimate): means, variances, covariance with position
-    assert np.all(np.abs(nav.u_mean[2:] - xk[5:10]) < 0.02 * sig[5:10]), (nav.u_mean, xk[5:10])
-    np.testing.assert_allclose(np.diag(nav.C_uu)[2:], np.diag(Pk)[5:10], rtol=0.01)
+    assert np.all(np.abs(nav.u_mean[2:7] - xk[5:10]) < 0.02 * sig[5:10]), (nav.u_mean, xk[5:10])
+    np.testing.assert_allclose(np.diag(nav.C_uu)[2:7], np.diag(Pk)[5:10], rtol=0.01)
     scale = np.sqrt(np.outer(np.diag(Pk)[5:10], np.diag(Pk)[0:2]))
-    assert np.all(np.abs(nav.C_uz[2:, :2] - Pk[5:10, 0:2]) < 0.003 * scale), (nav.C_uz[2:, :2], Pk[5:10, 0:2])
+    assert np.all(np.abs(nav.C_uz[2:7, :2] - Pk[5:10, 0:2]) < 0.003 * scale), (nav.C_uz[2:7, :2],
+                                                                               Pk[5:10, 0:2])
     # the one informative combination u . x = g . (dn, de) + b, known to ~1 m: a filter assuming 4.5 m of
     # noise instead of 3.5 m misses its mean by 0.12 sigma, so 0.03 sigma catches a wrong likelihood
     u = np.array([G_N, G_E, 1.0])
@@ -231,9 +232,9 @@ def test_pmf_matches_the_kalman_filter_in_a_turn():
     print(f"PMF vs KF (turn): means off by {np.max(np.abs(mean[:5] - xk[:5]) / sig[:5]):.4f} sigma, "
           f"velocity variances {np.max(np.abs(np.diag(cov)[3:5] / np.diag(Pk)[3:5] - 1)):.4f} relative")
     assert np.all(np.abs(mean[:5] - xk[:5]) < 0.01 * sig[:5]), (mean[:5], xk, sig)
-    assert np.all(np.abs(nav.u_mean[2:] - xk[5:10]) < 0.01 * sig[5:10]), (nav.u_mean, xk[5:10])
+    assert np.all(np.abs(nav.u_mean[2:7] - xk[5:10]) < 0.01 * sig[5:10]), (nav.u_mean, xk[5:10])
     np.testing.assert_allclose(np.diag(cov)[:5], np.diag(Pk)[:5], rtol=0.025)
-    np.testing.assert_allclose(np.diag(nav.C_uu)[2:], np.diag(Pk)[5:10], rtol=0.01)
+    np.testing.assert_allclose(np.diag(nav.C_uu)[2:7], np.diag(Pk)[5:10], rtol=0.01)
     # the turn makes the heading error matter: the measurements narrow it (to 0.93 of its prior variance)
     assert Pk[9, 9] < 0.95 * var_yaw
 

@@ -34,7 +34,7 @@ VALIDATION_PAGE = "docs/validation/navigators.md"
 MEASURED: dict[str, dict[str, str]] = {
     "ins": {},
     "ins_tercom": {"navigation": CONSERVATIVE, "tactical": CONSERVATIVE, "consumer": OVERCONFIDENT},
-    "pmf": {"tactical": OVERCONFIDENT, "consumer": OVERCONFIDENT},
+    "pmf": {"consumer": OVERCONFIDENT},
     "pf": {"navigation": CONSERVATIVE, "consumer": OVERCONFIDENT},
     "rbpf": {"tactical": OVERCONFIDENT, "consumer": OVERCONFIDENT},
     "acq_track": {"navigation": CONSERVATIVE, "consumer": OVERCONFIDENT},

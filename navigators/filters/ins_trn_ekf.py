@@ -15,8 +15,10 @@ fix, z = -(correction) = INS - matched position (north, east), chi-square gated;
 the INS error averaged over its samples, dr(t_k) = dr - dv tau_k + d(dv)/dt tau_k^2 / 2 (tau_k = t_fix -
 t_k), so H takes the velocity error times the mean lag (-lag on states 3, 4). Its noise: fix_noise "fixed"
 (default) (fix_sigma_m)^2 per axis (Table 2: (10 m)^2); "batch" (opt-in) the MAD shift's covariance from the
-batch's residuals, the map's slopes and the terrain the map cannot hold (navigators.tercom.fix_noise), with
-H also taking the acceleration error (f^n x psi + C_bn b_a) times half the mean squared lag (states 6-11).
+batch's residuals, the map's slopes, the terrain the map cannot hold and (without bias removal) the baro's
+bias (navigators.tercom.fix_noise), with H the map-slope-weighted average of each sample's INS error run back
+from the fix along the INS's specific force and attitude (navigators.filters.ins_trn_batch_error: the
+velocity error times the slope-weighted lag, the attitude and bias errors through the specific force).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS. The error
 model's priors and noise come from the IMU's specification where it gives more than the settings
@@ -49,7 +51,7 @@ from collections import deque
 
 import numpy as np
 
-from ..core.error_states import ACC_BIAS, ATT, BGZ, DRE, DRN, DVE, DVN, N_EKF13
+from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from ..core.ins_gnss import InsGnssBlock
 from ..core.linalg import floored_psd, is_positive_definite
 from ..core.maps import load_map
@@ -60,9 +62,10 @@ from ..integrity import protection_level as pl
 from ..integrity.innovation_monitor import InnovationMonitor
 from ..measurements.ira_map_noise import interpolation_sigma_m
 from ..protocol import Estimate, Health, update_extra
-from ..tercom.fix_noise import lad_fix_covariance
+from ..tercom.fix_noise import lad_fix_covariance, slope_weighted_mean
 from ..tercom.mad import TercomBatch, TercomFix, correlate
 from . import _ekf_kernels as kern
+from .ins_trn_batch_error import BatchKinematics, sample_error_rows
 from .ins_trn_gnss import InsTrnGnss
 from .ins_trn_propagation import InsTrnPropagation
 from .ins_trn_settings import INS_CAPABILITIES, InsTrnSettings, initial_covariance
@@ -172,6 +175,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self._hist = np.empty((0, 10))
         self._bbuf = np.empty(0)
         self._vbuf = np.empty(0, np.bool_)
+        self._kinematics = BatchKinematics()   # the INS's specific force and attitude along the batch
         self.fused = True  # False: the step-by-step path (same numbers; kept for tests and fixes)
 
     # ------------------------------------------------------------------ protocol
@@ -213,6 +217,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self._P_good = P.copy()
         self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
         self.batch.clear()
+        self._kinematics.clear()
         self.fixes = deque(maxlen=FIX_HISTORY)
         self.n_fixes = 0
         self.integrity.reset()
@@ -299,13 +304,16 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         lag_s = t_s - float(np.mean(s[:, 0]))
         H[0, DVN] = H[1, DVE] = -lag_s
         if self.fix_noise == "batch":
-            # the opt-in batch model also takes the acceleration error's share: half the mean squared lag
-            # times the specific-force error (f^n x psi + C_bn b_a, the error model's velocity rows), the
-            # part of the error that bends the batch's track
-            mean_sq_lag_s2 = float(np.mean((t_s - s[:, 0]) ** 2))
-            H[:, ATT.start:ACC_BIAS.stop] = 0.5 * mean_sq_lag_s2 * self._accel_error_rows()
+            # the batch model: each sample's INS error run back from the fix along the INS's specific force
+            # and attitude, averaged with the map's slope weights the match gives them (ins_trn_batch_error)
+            M = sample_error_rows(s[:, 0], t_s, self._kinematics.since(float(s[0, 0]) - 1.0))
+            Hw = slope_weighted_mean(self.dem, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], fix.dn_m,
+                                     fix.de_m, M)
+            if Hw is not None:
+                H = Hw
             Rm = lad_fix_covariance(self.dem, s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5], fix.dn_m, fix.de_m,
-                                    self.cell_m, self.remove_bias, self.terrain_model_sigma_m)
+                                    self.cell_m, self.remove_bias, self.terrain_model_sigma_m,
+                                    self.baro_bias_sigma_m)
         else:
             Rm = np.eye(2) * self.fix_sigma_m**2
         S = H @ self.kf.P @ H.T + Rm
@@ -331,17 +339,10 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
             (t_s, f"TERCOM fix dn={fix.dn_m:.1f} m de={fix.de_m:.1f} m q={fix.quality:.2f}")
         )
 
-    def _accel_error_rows(self) -> np.ndarray:
-        """(2, 6): the north / east acceleration error per unit of the attitude (psi) and accelerometer-bias
-        states, d(dv)/dt = f^n x psi + C_bn b_a (the error model of the module docstring, at the last
-        specific force)."""
-        C = kern.quat_to_dcm(self.ins.state[6:10])
-        f_n = C @ (self._last_f_b - self.ins.accel_bias_b)
-        rows = np.zeros((2, 6))
-        rows[0, 1], rows[0, 2] = -f_n[2], f_n[1]      # (f^n x psi)_n = f_e psi_d - f_d psi_e
-        rows[1, 0], rows[1, 2] = f_n[2], -f_n[0]      # (f^n x psi)_e = f_d psi_n - f_n psi_d
-        rows[:, 3:6] = C[:2, :]
-        return rows
+    def _log_kinematics(self, t_s: np.ndarray, f_b_mps2: np.ndarray, hist: np.ndarray) -> None:
+        """Log the segment's INS specific force and attitude for the batch fix's H (batch fix noise only)."""
+        if self.aiding is not None and self.fix_noise == "batch":
+            self._kinematics.add(t_s, f_b_mps2, hist, self.ins.accel_bias_b)
 
     def _set_search(self, half_cells: int) -> None:
         """TERCOM search half-width (cells) of the batches started from now on."""

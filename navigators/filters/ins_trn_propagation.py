@@ -111,6 +111,7 @@ class InsTrnPropagation:
         self._P_good[:] = self.kf.P
         self.kf.x[:] = 0.0
         self._add_collected(t0, n_ret, n_nan, m)
+        self._log_kinematics(t, imu.f_b_mps2, self._hist[:n])
         self._turn_noise(self._hist[:n])
 
     def _baro(self, frames: SensorFrames):
@@ -157,6 +158,7 @@ class InsTrnPropagation:
         self._predict_to(float(t_seg[-1]), t_seg, f_seg, hist)
         if self.aiding is not None:
             self._collect(frames, t_seg, hist)
+        self._log_kinematics(t_seg, f_seg, hist)
         self._turn_noise(hist)
 
     def _process_noise(self, dt: float) -> np.ndarray:

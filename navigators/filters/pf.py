@@ -25,7 +25,9 @@ is INS + the weighted mean.
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
   jitter keeps the cloud's mean and covariance (`_regularise`); Gordon's jitter adds its variance at each
   resampling, a process noise the INS error does not have.
-- GNSS: position, height and horizontal velocity likelihoods on the particles, vertical velocity into the INS.
+- GNSS: the horizontal position and velocity by their likelihoods on the particles (velocity_noise_model
+  "walk", default) or by an ensemble Kalman update of the particles ("imu_spec": `_gnss_ensemble_update`);
+  the height's likelihood on the particles' vertical offsets; the vertical velocity into the INS.
 - Robustness: a NaN sample is skipped; when every particle's likelihood underflows (possible only with
   outlier_prob = 0, or a cloud entirely off the map) the update is skipped and Health says "degraded";
   ten in a row re-draw the cloud around its mean with the initial spread.
@@ -84,7 +86,8 @@ class ParticleFilter(InsRiddenFilter):
     the module docstring; default 0.1: smaller leaves the cloud impoverished), position_noise_m_per_sqrt_s
     (default 0.1, a floor as the PMF's), velocity_noise_mps_per_sqrt_s (default 0.02: the particles'
     velocity offsets need the diversity, learnt only through the weights and resampling),
-    velocity_noise_model ("walk", default, or "imu_spec": `_velocity_step_var`),
+    velocity_noise_model ("walk", default: the random walk, the specification's equivalent walk as a
+    floor; or "imu_spec": `_velocity_step_var`, GNSS by `_gnss_ensemble_update`),
     heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
     docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
@@ -108,6 +111,7 @@ class ParticleFilter(InsRiddenFilter):
         self._spec_velocity = s.velocity_noise_model == "imu_spec"
         self._accel_model: tuple[float, float, float, float] | None = None  # set by reset ("imu_spec")
         self._t_ins0_s = 0.0
+        self._t_fix_s: float | None = None   # the last GNSS velocity fix ("imu_spec", `_velocity_step_var`)
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.M = s.n_particles
         M = self.M
@@ -155,6 +159,7 @@ class ParticleFilter(InsRiddenFilter):
     def reset(self, initial) -> None:
         super().reset(initial)
         self._t_ins0_s = float(initial.t_s)
+        self._t_fix_s = None
         spec = self._imu_spec
         if spec is None or not self._spec_velocity:
             self._accel_model = None
@@ -180,10 +185,13 @@ class ParticleFilter(InsRiddenFilter):
         exactly as the free INS's velocity error (Titterton & Weston 2004, sec. 12.3, without Schuler's
         bound), and a velocity the terrain has told apart gains less, with its smaller sigma. A random walk
         of fixed density (the equivalent walk at one memory) cannot do both: fitted at a memory it is too
-        small for an unobserved velocity and too large for an observed one. Limitation (why "walk" stays
-        the default): the growth scales with the cloud's own spread, so a cloud whose velocity spread sharp
-        fixes (GNSS) collapsed by resampling stays collapsed after them, and after an observation the
-        correlation rebuilds faster than the free INS's from the reset."""
+        small for an unobserved velocity and too large for an observed one. The growth scales with the
+        cloud's own spread, so that spread must be the posterior's: a GNSS fix enters by the ensemble
+        update (`_gnss_ensemble_update`), not by resampling on its sharp likelihood, which left a few
+        particles' spread, and a GNSS velocity fix restarts the free INS there (its posterior velocity
+        variance as v0, t_f the fix): cov = sigma_a^2 tau + sigma_j^2 t (t_f tau + tau^2 / 2), var v = v0^2 +
+        N^2 tau + sigma_a^2 tau^2 + sigma_j^2 (t_f tau + tau^2 / 2)^2, tau = t - t_f (the ramp's acceleration
+        j t keeps its time since the reset)."""
         model = self._accel_model
         if model is None:
             return self.s_vel * self.s_vel * dt
@@ -193,8 +201,15 @@ class ParticleFilter(InsRiddenFilter):
         d = self.dv - w @ self.dv
         sigma_v = math.sqrt(max(float(np.max(w @ (d * d))), 0.0))
         acc2 = a2 + j2 * t * t
-        cov_free = a2 * t + 0.5 * j2 * t ** 3
-        var_free = v02 + n2 * t + a2 * t * t + 0.25 * j2 * t ** 4
+        if self._t_fix_s is None:
+            cov_free = a2 * t + 0.5 * j2 * t ** 3
+            var_free = v02 + n2 * t + a2 * t * t + 0.25 * j2 * t ** 4
+        else:     # since the last GNSS velocity fix at tf (v02 its posterior): the same free INS from there
+            tf = max(self._t_fix_s - self._t_ins0_s, 0.0)
+            tau = max(t - tf, 0.0)
+            ramp = tf * tau + 0.5 * tau * tau
+            cov_free = a2 * tau + j2 * t * ramp
+            var_free = v02 + n2 * tau + a2 * tau * tau + j2 * ramp * ramp
         rho = min(cov_free / math.sqrt(var_free * acc2), 1.0) if var_free * acc2 > 0.0 else 0.0
         return n2 * dt + 2.0 * rho * sigma_v * math.sqrt(acc2) * dt + acc2 * dt * dt
 
@@ -408,15 +423,22 @@ class ParticleFilter(InsRiddenFilter):
         lat, lon, h, v = payload
         gn, ge = gnss_model.predict(st, lat, lon)
         sv2 = self.gnss_vertical_sigma_m ** 2
-        ll = gnss_model.likelihood(gn, ge, self.dn, self.de, self.gnss_sigma_m)
         z_b = float(st[2]) - h            # INS minus GNSS height = b + noise
         p_h, p_m = self._gnss_offset_split()    # the map's part of b is not seen by GNSS (terrain_filter)
         S_b = sv2 + (p_h if p_m > 0.0 else self.P_b)
-        ll -= 0.5 * (z_b - self.b) ** 2 / S_b
         K_b = (p_h if p_m > 0.0 else self.P_b) / S_b
-        if np.all(np.isfinite(v)):
-            r2 = self.gnss_velocity_sigma_mps ** 2
-            ll -= 0.5 * ((v[0] - st[3] - self.dv[:, 0]) ** 2 + (v[1] - st[4] - self.dv[:, 1]) ** 2) / r2
+        has_v = bool(np.all(np.isfinite(v)))
+        if self._accel_model is not None:     # "imu_spec": the ensemble update (its docstring)
+            ll = np.zeros(self.M)
+            self._gnss_ensemble_update(gn, ge, (float(v[0] - st[3]), float(v[1] - st[4])) if has_v else None,
+                                       t_s)
+        else:
+            ll = gnss_model.likelihood(gn, ge, self.dn, self.de, self.gnss_sigma_m)
+        ll -= 0.5 * (z_b - self.b) ** 2 / S_b
+        if has_v:
+            if self._accel_model is None:
+                r2 = self.gnss_velocity_sigma_mps ** 2
+                ll -= 0.5 * ((v[0] - st[3] - self.dv[:, 0]) ** 2 + (v[1] - st[4] - self.dv[:, 1]) ** 2) / r2
             self._gnss_velocity_ins(v, carried=(0, 1))
         out = self._apply_loglik(t_s, ll, "GNSS update", self.b + K_b * (z_b - self.b))
         if out is not None:
@@ -428,6 +450,44 @@ class ParticleFilter(InsRiddenFilter):
                 self._moments_cache = None
         if out is not None and self.health.status == "degraded" and not self.integrity.degraded:
             self.health.status = "acquiring"
+
+    def _gnss_ensemble_update(self, gn: float, ge: float, dv_obs: tuple[float, float] | None,
+                              t_s: float) -> None:
+        """velocity_noise_model "imu_spec": the GNSS fix's horizontal position (gn, ge: the fix minus the
+        INS, m) and velocity offset (m/s, or None) by an ensemble Kalman update of the particles (Evensen
+        2003, perturbed observations) over position, velocity and heading, with the cloud's weighted
+        covariance; the weights stay. The fix is linear in these states with Gaussian noise, so for a
+        Gaussian cloud this is the Bayes update, and every particle moves by the gain instead of being kept
+        or dropped: reweighting a 30 m cloud by a 2 m fix keeps a handful of particles, whose velocity spread
+        is then a few particles' jitter and whose mean velocity is theirs - the fixes' velocity is lost, and
+        this model, which grows the velocity's spread from the cloud's own (`_velocity_step_var`), would not
+        restore it. A velocity fix restarts the free INS's correlation of the velocity error with the
+        acceleration error (rho): from the fix on, the velocity error grows from the fix's posterior as the
+        free INS's grows from its initial error."""
+        X = np.column_stack([self.dn, self.de, self.dv[:, 0], self.dv[:, 1], self.dpsi])
+        obs = [0, 1]
+        z = [gn, ge]
+        r = [self.gnss_sigma_m ** 2] * 2
+        if dv_obs is not None:
+            obs += [2, 3]
+            z += list(dv_obs)
+            r += [self.gnss_velocity_sigma_mps ** 2] * 2
+        w = self._weights()
+        D = X - w @ X
+        P_xh = (D * w[:, None]).T @ D[:, obs]
+        K = np.linalg.solve(P_xh[obs] + np.diag(r), P_xh.T).T
+        innov = np.asarray(z) + self.rng.standard_normal((self.M, len(obs))) * np.sqrt(r) - X[:, obs]
+        X += innov @ K.T
+        self.dn = np.ascontiguousarray(X[:, 0])
+        self.de = np.ascontiguousarray(X[:, 1])
+        self.dv = np.ascontiguousarray(X[:, 2:4])
+        self.dpsi = np.ascontiguousarray(X[:, 4])
+        self._moments_cache = None
+        if dv_obs is not None and self._accel_model is not None:
+            d = self.dv - w @ self.dv
+            n2, a2, j2, _ = self._accel_model
+            self._accel_model = (n2, a2, j2, float(np.max(w @ (d * d))))
+            self._t_fix_s = float(t_s)
 
     def _recover(self, t_s: float) -> str:
         """The cloud re-drawn around its mean with the widened horizontal covariance (initial otherwise)."""

@@ -11,11 +11,14 @@ nothing per cell but one multiply-add.
   velocity offset v, the acceleration of the initial tilt t (g times the tilt, constant in NED), the
   accelerometer bias b (constant in the body frame, so R b in NED turns with the heading, R the INS's
   body-to-NED matrix's horizontal block) and the heading error eps (INS yaw minus true yaw, which turns
-  every velocity change the INS integrates: v gains eps (dv_e, -dv_n)); a Gaussian (mean, covariance, and
-  its covariance with the grid's position and vertical offset) outside the grid. Its process noise and
+  every velocity change the INS integrates: v gains eps (dv_e, -dv_n)), and the INS's down specific-force
+  error beta (u[BETA]: through the baro loop's transients it tilts every IRA closest point's geometry and
+  moves the vertical offset, `_vertical_velocity_shift`); a Gaussian (mean, covariance, and its covariance
+  with the grid's position and vertical offset) outside the grid. Its process noise and
   b's prior come from the IMU's specification (apply_imu_spec, navigators.core.imu_spec): the tilt
   acceleration's growth from the horizontal gyro biases, the heading's from the z gyro bias, the
-  accelerometer instability's drive on b, and per rad turned the gyro misalignment and scale factor; the
+  accelerometer instability's drive on b, beta's prior the vertical specific-force error, and per rad
+  turned (the integral of |yaw rate| over the IMU samples) the gyro misalignment and scale factor; the
   velocity's random walk is a floor (velocity_noise_mps_per_sqrt_s; the measurements that chose this
   model: docs/validation/navigators.md). Priors: v, t and eps from the initial
   estimate's velocity, roll/pitch and yaw variances, b from accel_bias_sigma_mps2. A terrain or GNSS
@@ -36,10 +39,11 @@ nothing per cell but one multiply-add.
   and velocity offsets (`_reference_offsets`; shared by all cells: the PMF does not carry attitude or
   velocity hypotheses, but the INS it rides on is free, and the zero-Doppler geometry turns with its
   velocity's direction: a cross-track velocity error dv moves the closest point along track by its
-  cross-track offset times dv / V), one map lookup per cell, the heavy-tailed likelihood
-  (measurements.robust_ll_one) with variance S = P_b + sensor + map noise and the per-cell bias update,
-  fused in one numba pass over the cells (_pmf_kernels.ira_update_pass; the radar altimeter goes through
-  measurements.radar_altimeter).
+  cross-track offset times dv / V; the vertical velocity's error tilts it along track: the grid carries
+  the position the samples read, y = x + D beta, and the output x), one map lookup per cell, the
+  heavy-tailed likelihood (measurements.robust_ll_one) with variance S = P_b + sensor + map noise and the
+  per-cell bias update, fused in one numba pass over the cells (_pmf_kernels.ira_update_pass; the radar
+  altimeter goes through measurements.radar_altimeter).
 - GNSS: the fix's position likelihood on the grid, its height into the vertical offset, its horizontal
   velocity into the velocity offset (its vertical velocity into the INS).
 - Re-gridding after an update, from the posterior's spread: the half-span follows span_sigmas times its
@@ -69,11 +73,10 @@ from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
     equivalent_walk_density,
-    rss,
-    vertical_offset_walk_density,
 )
 from ..core.measured_consistency import grade_warning
 from ..inertial.strapdown import quat_to_dcm
+from ..integrity import protection_level as pl
 from ..measurements import gnss as gnss_model
 from ..measurements import ira, radar_altimeter
 from ..measurements.terrain_models import radii_m
@@ -85,7 +88,31 @@ from .terrain_filter_settings import PMF_CAPABILITIES, PmfSettings
 G0 = 9.80665
 PMF_MEMORY_S = 240.0        # the memory over which carried-as-constant error rates are matched (imu_spec)
 TURN_REFERENCE_RAD = 0.5 * math.pi  # a turn of this angle builds the whole scale-factor / misalignment error
-N_U = 7                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error)
+N_U = 8                     # u = (dvn, dve, tilt acceleration n, e, accelerometer bias x, y, heading error,
+#                             vertical specific-force error)
+BETA = 7                    # index in u of the vertical specific-force error
+VD_STEP_MPS = 0.05          # vertical velocity step of the closest point's finite difference (m/s)
+
+
+def baro_loop_velocity_response_s(t_s: float, tau_s: float | None) -> float:
+    """Down-velocity error (m/s) of a baro-damped INS vertical channel (triple pole at -1 / tau, gains
+    3 / tau, 3 / tau^2, 1 / tau^3: navigators.inertial.strapdown) per m/s^2 of a constant down specific-force
+    error present since t = 0: the height error is h(s) = -a / (s + 1 / tau)^3 and the velocity the loop
+    integrates is -(s + 3 / tau) h (its height takes the direct correction 3 / tau (h - h_baro)), so
+    v(t) = a (t + t^2 / tau) exp(-t / tau), a transient peaking at t = 1.618 tau at 0.840 a tau that the
+    loop's bias integrator then removes. 0 before t = 0 and without a loop."""
+    if tau_s is None or not t_s > 0.0:
+        return 0.0
+    return float((t_s + t_s * t_s / tau_s) * math.exp(-t_s / tau_s))
+
+
+def baro_loop_height_response_s2(t_s: float, tau_s: float | None) -> float:
+    """Height error (INS minus true, m) of the same loop per m/s^2 of the down specific-force error
+    (baro_loop_velocity_response_s): -t^2 exp(-t / tau) / 2, a transient of -0.27 tau^2 at t = 2 tau
+    (navigators.core.imu_spec.ImuSpec.baro_loop_height_rate_sigma_mps)."""
+    if tau_s is None or not t_s > 0.0:
+        return 0.0
+    return float(-0.5 * t_s * t_s * math.exp(-t_s / tau_s))
 
 
 class PointMassFilter(PmfGrid, InsRiddenFilter):
@@ -127,7 +154,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
 
     # ------------------------------------------------------------------------------------ IMU specification
     _imu_noise: tuple = ()  # q tilt acceleration, q accel bias, q heading, per-rad-turned tilt, heading
-    _yaw_prev = math.nan
+    _beta_sigma = 0.0       # prior of the vertical specific-force error (m/s^2; 0: not modelled)
 
     def apply_imu_spec(self, spec: ImuSpec) -> None:
         """Take the error model of u = (v, t, b, eps) from the IMU's specification (navigators.core.imu_spec),
@@ -139,6 +166,8 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         over TURN_REFERENCE_RAD."""
         self.accel_bias_sigma = max(self.accel_bias_sigma, spec.body_accel_sigma_mps2)
         self.velocity_noise = max(self.velocity_noise, spec.accel_noise_density_mps2_rthz)
+        self._tracks_turn = True
+        self._beta_sigma = spec.vertical_accel_sigma_mps2 if self.ins.tau_baro_s is not None else 0.0
         self._imu_noise = (
             equivalent_walk_density(spec.tilt_accel_rate_sigma_mps3, PMF_MEMORY_S) ** 2,
             2.0 * spec.accel_bias_instability_mps2**2 / spec.accel_bias_tau_s,
@@ -146,9 +175,8 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
-        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
-        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
-        self.vertical_noise = rss(self.vertical_noise, q_v)
+        # the vertical offset's walk stays the tuned baro-height wander: the IMU's baro-loop transient is
+        # carried by beta (_vertical_velocity_shift)
         self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
@@ -162,6 +190,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         c[2, 2] = c[3, 3] = G0 ** 2 * 0.5 * (float(cov9[6, 6]) + float(cov9[7, 7]))
         c[4, 4] = c[5, 5] = self.accel_bias_sigma ** 2
         c[6, 6] = float(cov9[8, 8])
+        c[BETA, BETA] = self._beta_sigma ** 2
         return c
 
     def _init_belief(self, cov9: np.ndarray, mean_ne=(0.0, 0.0), velocity=None) -> None:
@@ -172,7 +201,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         self.C_uz = np.zeros((N_U, 3))
         if velocity is None:
             self._v_ins_prev = None
-            self._yaw_prev = math.nan
+            self._D = np.zeros(2)        # the grid's shift per unit of the vertical specific-force error
+            self._J = np.zeros(2)        # the closest point's horizontal shift per m/s of down velocity
+            self._eta = 0.0              # the vertical offset's shift per unit of it
             self.u_mean = np.zeros(N_U)
             self.C_uu = self._u_prior_cov(cov9)
             self.C_uz[:2, :2] = np.array(cov9[3:5, 0:2], float)
@@ -237,12 +268,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             C_uu[0, 0] += self.velocity_noise ** 2 * dt
             C_uu[1, 1] += self.velocity_noise ** 2 * dt
             if self._imu_noise:  # the IMU specification's sources (apply_imu_spec)
-                turn = 0.0
-                if st is not None and np.all(np.isfinite(st[6:10])):
-                    yaw = math.atan2(R[1, 0], R[0, 0])
-                    if math.isfinite(self._yaw_prev):
-                        turn = abs((yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi)
-                    self._yaw_prev = yaw
+                turn = self._take_turn()   # integral of |yaw rate| since the last prediction (terrain_filter)
                 q_t, q_b, q_eps, turn_t2, turn_h2 = self._imu_noise
                 C_uu[2, 2] += q_t * dt + turn_t2 * turn
                 C_uu[3, 3] += q_t * dt + turn_t2 * turn
@@ -253,6 +279,77 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self.P_b += self._offset_process_var(dt, st)
             self._t_belief = t_s
             self._moments_cache = None
+            self._vertical_velocity_shift(t_s)
+
+    def _vertical_velocity_shift(self, t_s: float) -> None:
+        """Carry the vertical specific-force error beta = u[BETA] (down, m/s^2) into the grid and the vertical
+        offset through the baro loop's transients.
+
+        The baro-damped INS's down velocity is off by beta psi(t) and its height by beta eta(t)
+        (baro_loop_velocity_response_s, baro_loop_height_response_s2; t since the INS's start).
+        (1) The zero-Doppler plane is normal to the velocity (seed 000 eqs 9-12: its along-track axis s1
+        tilts with the flight-path angle), so every IRA closest point computed from the INS velocity sits
+        off by -J psi beta horizontally (J the closest point's horizontal derivative in the down velocity,
+        `_J`, from the last sample): the samples read the map at y = x + D beta, D = -J psi, not at the INS
+        error x. The grid carries y: as psi or J change, y moves by dD beta, a linear step like the velocity
+        offsets' (mean dD E[beta], pending noise dD C_bb dD' + 2 sym(dD C_by), C_uy += C_ub dD'), and the
+        output removes D beta again (`_output_moments`).
+        (2) The vertical offset b (INS height minus true) moves by d_eta beta likewise (the cells' means by
+        d_eta E[beta], P_b by d_eta^2 C_bb + 2 d_eta C_b,beta, C_ub += C_u,beta d_eta), which makes beta
+        observable through the terrain's height.
+        beta's prior is the IMU's vertical specific-force error (apply_imu_spec); 0 without a
+        specification (then nothing moves)."""
+        if not self._beta_sigma > 0.0:
+            return
+        t_rel = t_s - self._t_ins0
+        D = -self._J * baro_loop_velocity_response_s(t_rel, self.ins.tau_baro_s)
+        eta = baro_loop_height_response_s2(t_rel, self.ins.tau_baro_s)
+        dD = D - self._D
+        d_eta = eta - self._eta
+        self._D, self._eta = D, eta
+        m = float(self.u_mean[BETA])
+        c_bb = float(self.C_uu[BETA, BETA])
+        if not math.isfinite(m):
+            return
+        if np.all(np.isfinite(dD)) and np.any(dD):
+            if m != 0.0:
+                self._set_geometry(self.centre_n + dD[0] * m, self.centre_e + dD[1] * m, self.spacing)
+            BC = np.outer(dD, self.C_uz[BETA, :2])
+            self._q_pending += BC + BC.T + np.outer(dD, dD) * c_bb
+            self.C_uz[:, :2] += np.outer(self.C_uu[:, BETA], dD)
+        if d_eta != 0.0 and math.isfinite(d_eta):
+            self.bias += d_eta * m
+            self.P_b = max(self.P_b + d_eta * d_eta * c_bb + 2.0 * d_eta * float(self.C_uz[BETA, 2]), 1e-9)
+            self.C_uz[:, 2] += self.C_uu[:, BETA] * d_eta
+        self._moments_cache = None
+
+    def _output_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """The grid's moments with the closest points' vertical-velocity shift removed
+        (`_vertical_velocity_shift`): x = y - D beta, mean - D E[beta], covariance
+        + D C_bb D' - 2 sym(D C_by), its covariance with the velocity offset - C_vb D'."""
+        mean, cov = self._moments()
+        D = self._D
+        if not np.any(D):
+            return mean, cov
+        mean, cov = mean.copy(), cov.copy()
+        mean[:2] -= D * self.u_mean[BETA]
+        X = np.outer(D, self.C_uz[BETA, :2])
+        cov[:2, :2] += np.outer(D, D) * self.C_uu[BETA, BETA] - X - X.T
+        cov[3:5, 0:2] -= np.outer(self.C_uu[:2, BETA], D)
+        cov[0:2, 3:5] = cov[3:5, 0:2].T
+        return mean, cov
+
+    def _pl_points(self, risk: float):
+        """The grid's points (pmf_grid) moved by -D E[beta], the pad widened by D C_bb D'
+        (`_output_moments`)."""
+        dn, de, w, pad = super()._pl_points(risk)
+        D = self._D
+        if not np.any(D):
+            return dn, de, w, pad
+        m = float(self.u_mean[BETA])
+        q = self._q_pending + np.outer(D, D) * self.C_uu[BETA, BETA]
+        pad = 0.5 * math.sqrt(2.0) * self.spacing + pl.gaussian_hpl(q, risk)
+        return dn - D[0] * m, de - D[1] * m, w, pad
 
     def _velocity_from_position(self, prior: tuple, post: tuple) -> None:
         """The velocity and acceleration offsets u after an update of the grid (terrain or GNSS position and
@@ -285,20 +382,31 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
 
     # ------------------------------------------------------------------------------------ updates
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
-        self._apply_process_noise()
-        prior = self._position_moments()
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
         m = self.n * self.n
         C = quat_to_dcm(st[6:10])
         if kind == "ira":
             dpsi, dv_ne = self._reference_offsets()
-            nb = ira.closest_points(range_m, theta_rad, C, np.ascontiguousarray(st[3:6]), dpsi, dv_ne,
-                                    self.ira_code, self._ira_p)
+            v_ned = np.ascontiguousarray(st[3:6], dtype=float)
+            nb = ira.closest_points(range_m, theta_rad, C, v_ned, dpsi, dv_ne, self.ira_code, self._ira_p)
             if nb:
                 self.health.skip(t_s, "ira_geometry", "IRA sample with no closest-point solution")
                 return
             p = self._ira_p[0]
+            if self._beta_sigma > 0.0:   # the closest point's derivative in the down velocity
+                v_ned = v_ned.copy()
+                v_ned[2] += VD_STEP_MPS
+                p2 = np.empty((1, 3))
+                if not ira.closest_points(range_m, theta_rad, C, v_ned, dpsi, dv_ne, self.ira_code, p2):
+                    self._J = (p2[0, :2] - p[:2]) / VD_STEP_MPS
+                self._vertical_velocity_shift(t_s)
+        elif self._beta_sigma > 0.0:     # the altimeter's range does not depend on the velocity
+            self._J = np.zeros(2)
+            self._vertical_velocity_shift(t_s)
+        self._apply_process_noise()
+        prior = self._position_moments()
+        if kind == "ira":
             h_meas = h - p[2]          # seed 000 eq 2
             S = self.P_b + float(self.ira_variance(range_m, p[2], math.hypot(p[0], p[1])))
             saved = (self.logw.copy(), self.bias.copy())
@@ -361,7 +469,8 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         prior = self._position_moments()
         gn, ge = gnss_model.predict(st, lat, lon)
         s2 = self.gnss_sigma_m ** 2
-        ll = (gnss_model.likelihood(gn, ge, self.dn_flat, self.de_flat, self.gnss_sigma_m)
+        sh = self._D * self.u_mean[BETA]     # the fix sees x = y - D beta (_vertical_velocity_shift)
+        ll = (gnss_model.likelihood(gn, ge, self.dn_flat - sh[0], self.de_flat - sh[1], self.gnss_sigma_m)
               - math.log(2 * math.pi * s2))
         if self._apply_loglik(t_s, ll, "GNSS update") is None:
             return

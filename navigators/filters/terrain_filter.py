@@ -35,6 +35,7 @@ from ..measurements.ira import IRA_FORMULA_CODES
 from ..measurements.sampling import terrain_samples
 from ..measurements.terrain_models import radii_m
 from ..protocol import Estimate, Health, update_extra
+from ._ekf_kernels import yaw_total_variation
 from .terrain_filter_settings import (
     TerrainFilterSettings,
 )
@@ -173,6 +174,9 @@ class InsRiddenFilter(InsGnssBlock):
         self._t_next_meas = -np.inf
         self._height_initialised = False
         self._t_belief = float(initial.t_s)
+        self._t_ins0 = float(initial.t_s)
+        self._turn_pending = 0.0
+        self._yaw_turn_prev = math.nan
         d = np.diag(cov)
         self._p_vel0 = d[3:6].copy()
         self._p_att0 = d[6:9].copy()
@@ -193,7 +197,10 @@ class InsRiddenFilter(InsGnssBlock):
             return self.estimate().extrapolated(frames.t_end_s)
         hist = self._propagate_ins(frames, t_imu)
         events = self._events(frames, t_imu)
+        row = 0
         for t_s, kind, payload, k in events:
+            if self._tracks_turn:
+                row = self._add_turn(hist, row, k + 1)
             st = hist[k]
             if not np.all(np.isfinite(st)):
                 self.health.skip(t_s, "ins_invalid", "INS state not finite at a measurement")
@@ -204,10 +211,33 @@ class InsRiddenFilter(InsGnssBlock):
                 self._gnss_update(t_s, st, payload)
             else:
                 self._terrain_sample(t_s, kind, payload, st)
+        if self._tracks_turn:
+            self._add_turn(hist, row, hist.shape[0])
         self._after_frame(float(t_imu[-1]))
         return self.estimate()
 
     # ------------------------------------------------------------------------------------ internals
+    _tracks_turn = False    # a subclass whose process noise grows with the angle turned sets it
+    _turn_pending = 0.0
+    _yaw_turn_prev = math.nan
+    _t_ins0 = 0.0
+
+    def _add_turn(self, hist: np.ndarray, a: int, b: int) -> int:
+        """Add to the angle turned since the last prediction (`_take_turn`) the total variation of the INS
+        yaw over the history rows a..b-1 (the integral of |yaw rate| at the IMU's rate,
+        _ekf_kernels.yaw_total_variation); returns b."""
+        if b > a:
+            turn, self._yaw_turn_prev = yaw_total_variation(hist[a:b], self._yaw_turn_prev)
+            self._turn_pending += turn
+        return max(a, b)
+
+    def _take_turn(self) -> float:
+        """The angle (rad) the INS turned since the last call: the integral of |yaw rate| over the IMU
+        samples, not the net yaw change between predictions (which drops the back-and-forth between them
+        and so depends on the measurement rate)."""
+        turn, self._turn_pending = self._turn_pending, 0.0
+        return turn
+
     def _propagate_ins(self, frames: SensorFrames, t_imu: np.ndarray) -> np.ndarray:
         imu = frames.imu
         baro = frames.baro
@@ -377,7 +407,7 @@ class InsRiddenFilter(InsGnssBlock):
         """INS + the belief's mean offset; covariance: the belief's block and the INS error model's rest."""
         st = self.ins.state
         # mean over [dn, de, b, dvn, dve, dpsi]; cov_b 6 x 6 (NaN: not carried)
-        mean, cov_b = self._moments()
+        mean, cov_b = self._output_moments()
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
         C = quat_to_dcm(st[6:10])
@@ -435,6 +465,11 @@ class InsRiddenFilter(InsGnssBlock):
 
     def _moments(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
+
+    def _output_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """The moments the Estimate reports (`_moments` unless the belief's coordinates differ from the INS
+        error's)."""
+        return self._moments()
 
     def _pl_points(self, risk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """(north, east, weights, pad_m) of the belief's horizontal points for the protection level."""

@@ -123,9 +123,10 @@ class PfSettings(TerrainFilterSettings):
                                                  "m/sqrt(s)", ge=0.0)
     velocity_noise_mps_per_sqrt_s: float = setting(0.02, "random walk of the velocity offset",
                                                    "m/s/sqrt(s)", ge=0.0)
-    velocity_noise_model: str = setting("walk", "'walk': the velocity's noise is the random walk (the IMU "
-                                        "specification's equivalent walk as a floor); 'imu_spec': the "
-                                        "specification's acceleration error on the cloud's velocity",
+    velocity_noise_model: str = setting("walk", "'imu_spec': the IMU specification's acceleration error "
+                                        "on the cloud's velocity, GNSS by an ensemble Kalman update; 'walk': "
+                                        "the velocity's noise is the random walk (the specification's "
+                                        "equivalent walk as a floor), GNSS by the particles' likelihoods",
                                         choices=("walk", "imu_spec"))
     heading_noise_rad_per_sqrt_s: float = setting(2e-5, "random walk of the heading error", "rad/sqrt(s)",
                                                   ge=0.0)
