@@ -8,6 +8,7 @@ PPO in both env tiers on the same held-out goals and seeds.
     python scripts/route_task.py evaluate --out out/b --policies straight,planner,random   # no checkpoint
     python scripts/route_task.py evaluate --out out/route_task --policies ppo --merge-rows out/b/rows.json
     python scripts/route_task.py all --out /tmp/rt --iterations 1 --seeds 1 --max-episode-s 60   # tiny
+    python scripts/route_task.py select --out out/route_task --every 50      # model selection (no held-out)
 
 train: RLlib PPO (the `rllib` extra) on the task (trn_env.env.route_task: terrain `--terrain`, start and
 goal regions, training goals outside the held-out radius) on TerrainNavFast-v0 when it is registered, else on
@@ -21,6 +22,12 @@ held-out goals x `--seeds` evaluation seeds (route_task.EVAL_SEEDS) in each tier
 tier only when registered); writes OUT/rows.json (one row per episode), OUT/summary.json (the table's
 figures, the paired comparisons, the transfer gap and the issue's target check) and OUT/table.md, and prints
 the table. Bad arguments: a message and exit 2, nothing written.
+select: model selection without the held-out goals: every `--every`-th checkpoint of OUT/checkpoints (iter_N
+with N a multiple of it, and final) flies `--validation-seeds` fast-tier episodes (seeds
+route_task.VALIDATION_SEEDS, goals drawn by the env from the training distribution, never a held-out goal);
+the one with the highest success rate, then the lowest mean true miss, is the pick; writes
+OUT/selection.json (every checkpoint's figures, the pick, the CPU seconds it took) and prints them. Evaluate
+the pick with `evaluate --checkpoint`.
 """
 
 from __future__ import annotations
@@ -32,11 +39,12 @@ import sys
 from pathlib import Path
 
 POLICIES = ("straight", "planner", "random", "ppo")
+VALIDATION_SEEDS = range(100_000, 100_500)      # = route_task.VALIDATION_SEEDS (checked in _check)
 
 
 def parse(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("command", choices=("train", "evaluate", "all"))
+    p.add_argument("command", choices=("train", "evaluate", "all", "select"))
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--terrain", default="basin")
     p.add_argument("--tier", choices=("auto", "fast", "full"), default="auto", help="tier to train on")
@@ -64,6 +72,12 @@ def parse(argv):
     p.add_argument("--entropy", type=float, default=0.0, help="entropy coefficient")
     p.add_argument("--vf-clip", type=float, default=10.0, help="RLlib's value-loss clip")
     p.add_argument("--activation", default="tanh", choices=("tanh", "relu"))
+    p.add_argument("--log-std-clip", type=float, default=20.0,
+                   help="bound of the policy's log standard deviation (RLlib's log_std_clip_param; "
+                        "default 20)")
+    p.add_argument("--miss-weight", type=float, default=None,
+                   help="TRAINING reward only: reward per km of true miss at arrival (default: the task's, "
+                        "20); evaluation always scores the true miss with the task's reward")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint", type=Path, default=None, help="checkpoint to evaluate")
     p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
@@ -74,6 +88,10 @@ def parse(argv):
                         "the learner's SGD then does not spin on busy cores)")
     p.add_argument("--policies", default="straight,planner,random,ppo",
                    help="policies to evaluate (comma separated, of straight, planner, random, ppo)")
+    p.add_argument("--every", type=int, default=10,
+                   help="select: consider the checkpoints iter_N with N a multiple of this (and final)")
+    p.add_argument("--validation-seeds", type=int, default=len(VALIDATION_SEEDS),
+                   help=f"select: validation episodes per checkpoint (at most {len(VALIDATION_SEEDS)})")
     p.add_argument("--merge-rows", type=Path, nargs="*", default=[],
                    help="rows.json files of earlier evaluations (same terrain and seeds) to summarise with "
                         "this one's; this run's rows replace theirs for the same tier, policy, goal and seed")
@@ -96,6 +114,10 @@ def _check(args) -> dict:
         v = getattr(args, name)
         if not (lo < v <= hi and math.isfinite(v)):
             raise ValueError(f"--{name.rstrip('_').replace('_', '-')} must be in ({lo}, {hi}], got {v}")
+    if not (0.0 <= args.log_std_clip < math.inf):
+        raise ValueError(f"--log-std-clip must be a finite number >= 0, got {args.log_std_clip}")
+    if args.miss_weight is not None and not (0.0 <= args.miss_weight < math.inf):
+        raise ValueError(f"--miss-weight must be a finite number >= 0, got {args.miss_weight}")
     if not (0.0 <= args.entropy < math.inf):
         raise ValueError(f"--entropy must be a finite number >= 0, got {args.entropy}")
     if (args.lr_end is None) != (args.lr_decay_steps is None):
@@ -132,11 +154,54 @@ def _check(args) -> dict:
             ok = False
         if not ok:
             raise ValueError(f"--merge-rows: {f} is not a rows.json written by `evaluate`")
+    if tuple(VALIDATION_SEEDS) != route_task.VALIDATION_SEEDS:
+        raise ValueError("scripts/route_task.py's VALIDATION_SEEDS differ from the task's")
+    if args.every < 1:
+        raise ValueError(f"--every must be >= 1, got {args.every}")
+    if not 1 <= args.validation_seeds <= len(VALIDATION_SEEDS):
+        raise ValueError(f"--validation-seeds must be in [1, {len(VALIDATION_SEEDS)}], "
+                         f"got {args.validation_seeds}")
+    if args.command == "select":
+        args.select_t = checkpoints_to_select(args.out / "checkpoints", args.every)
+        if not args.select_t:
+            raise ValueError(f"no checkpoints to select from in {args.out / 'checkpoints'} "
+                             "(run `train` first)")
     if args.command == "evaluate" and "ppo" in args.policies_t:
         ck = args.checkpoint or args.out / "checkpoints" / "final"
         if not ck.is_dir():
             raise ValueError(f"no checkpoint at {ck} (run `train` first, or give --checkpoint)")
     return kw
+
+
+def checkpoints_to_select(folder: Path, every: int) -> list[Path]:
+    """iter_N (N a multiple of `every`) in iteration order, then final, of those in `folder`."""
+    if not folder.is_dir():
+        return []
+    its = sorted((int(d.name[5:]), d) for d in folder.iterdir()
+                 if d.is_dir() and d.name.startswith("iter_") and d.name[5:].isdigit())
+    out = [d for n, d in its if n % every == 0]
+    return out + ([folder / "final"] if (folder / "final").is_dir() else [])
+
+
+def select(args, kw: dict) -> dict:
+    import time
+
+    from trn_env.campaign import route_task as rt
+    from trn_env.env import route_task
+
+    cpu0, wall0 = time.process_time(), time.time()
+    seeds = list(route_task.VALIDATION_SEEDS[:args.validation_seeds])
+    res = rt.select_checkpoint(args.select_t, args.terrain, seeds, {"max_episode_s": kw["max_episode_s"]})
+    res.update(terrain=args.terrain, seeds=[seeds[0], seeds[-1]], n_seeds=len(seeds),
+               cpu_s=time.process_time() - cpu0, wall_s=time.time() - wall0)
+    lines = ["| checkpoint | success | miss mean (m) | median (m) | p90 (m) |", "|---|---|---|---|---|"]
+    for r in res["rows"]:
+        lines.append(f"| {Path(r['checkpoint']).name} | {r['success']:.3f} | {r['miss_mean_m']:.1f} | "
+                     f"{r['miss_median_m']:.1f} | {r['miss_p90_m']:.1f} |")
+    text = "\n".join(lines) + f"\n\npick: {res['best']['checkpoint']} ({res['cpu_s']:.0f} CPU s)\n"
+    (args.out / "selection.json").write_text(json.dumps(res, indent=1))
+    print(text)
+    return res
 
 
 def train(args, kw: dict) -> None:
@@ -154,8 +219,9 @@ def train(args, kw: dict) -> None:
     recipe = dict(hidden=args.hidden_t, train_batch_size=batch, minibatch_size=mini, num_epochs=args.epochs,
                   lr=args.lr, lr_end=args.lr_end, lr_decay_steps=args.lr_decay_steps, gamma=args.gamma,
                   lambda_=args.lambda_, entropy_coeff=args.entropy, vf_clip_param=args.vf_clip,
-                  activation=args.activation)
-    cfg = ppo_config(tier, kw, seed=args.seed, num_env_runners=args.env_runners,
+                  activation=args.activation, log_std_clip=args.log_std_clip)
+    train_kw = kw if args.miss_weight is None else {**kw, "miss_weight": float(args.miss_weight)}
+    cfg = ppo_config(tier, train_kw, seed=args.seed, num_env_runners=args.env_runners,
                      num_envs_per_env_runner=envs, **recipe)
     cpu_s = 60.0 * args.cpu_minutes if args.cpu_minutes is not None else route_task.TRAIN_BUDGET["cpu_s"]
     wall_s = 60.0 * args.minutes if args.minutes is not None else None
@@ -168,7 +234,7 @@ def train(args, kw: dict) -> None:
     algo, history = train(cfg, args.iterations, args.out / "checkpoints", 10, show, wall_s, cpu_s)
     algo.stop()
     (args.out / "history.json").write_text(json.dumps(
-        {"tier": tier, "terrain": args.terrain, "env": kw, "envs_per_runner": envs, "env_runners":
+        {"tier": tier, "terrain": args.terrain, "env": train_kw, "envs_per_runner": envs, "env_runners":
          args.env_runners, "seed": args.seed, "budget": {"cpu_s": cpu_s, "wall_s": wall_s},
          **{k: (list(v) if isinstance(v, tuple) else v) for k, v in recipe.items()},
          "epochs": args.epochs, "history": history}, indent=1))
@@ -244,6 +310,8 @@ def main(argv=None) -> int:
             ray.shutdown()
     if args.command in ("evaluate", "all"):
         evaluate(args, kw)
+    if args.command == "select":
+        select(args, kw)
     return 0
 
 

@@ -46,6 +46,13 @@ def test_bad_arguments_exit_2_naming_them(tmp_path, capsys):
     assert "terrain" in capsys.readouterr().err
     assert s.main(["--out", str(tmp_path / "o"), "--iterations", "0"]) == 2
     assert "--iterations" in capsys.readouterr().err
+    from trn_env.env.rllib_train import ppo_config
+
+    for bad in (-1.0, math.inf, True):
+        with pytest.raises(ValueError, match="log_std_clip"):
+            ppo_config("fast", env_kwargs("basin"), log_std_clip=bad)
+    cfg = ppo_config("fast", env_kwargs("basin"), log_std_clip=0.5)
+    assert cfg.model_config["log_std_clip_param"] == 0.5
 
 
 def test_both_tiers_registered_and_observations_scaled():

@@ -59,6 +59,15 @@ def test_paired_comparison_uses_only_pairs_where_both_arrived_and_its_interval_c
     assert t["beats_straight_by_30pct"] and t["sign_test_p_below_0_01"]
     assert not t["within_20pct_of_planner"]                # no planner evaluated
     assert "ppo vs straight" in rt.table(s)
+    # within 20 % of the planner needs the planner's success rate too (misses are over arrived episodes)
+    rows = _rows(a, b) + [{**r, "policy": "planner", "true_miss_m": 1.1 * r["true_miss_m"]}
+                          for r in _rows(a, b) if r["policy"] == "ppo"]
+    for r in rows:
+        if r["policy"] == "planner" and not r["arrived"]:
+            r["arrived"], r["true_miss_m"] = True, 30.0
+    t = rt.target_check(rt.summarise(rows))
+    assert not t["success_not_below_planner"] and not t["within_20pct_of_planner"]
+    assert t["ratio_to_planner"] < 1.2
 
 
 def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsys):
@@ -80,10 +89,35 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
     for bad, name in ((["--cpu-minutes", "0"], "--cpu-minutes"), (["--cpu-minutes", "nan"], "--cpu-minutes"),
                       (["--minutes", "-1"], "--minutes"), (["--gamma", "1.5"], "--gamma"),
                       (["--lambda", "0"], "--lambda"), (["--entropy", "-0.1"], "--entropy"),
-                      (["--lr-end", "1e-5"], "--lr-decay-steps")):
+                      (["--lr-end", "1e-5"], "--lr-decay-steps"), (["--miss-weight", "-1"], "--miss-weight"),
+                      (["--log-std-clip", "-1"], "--log-std-clip"),
+                      (["--log-std-clip", "inf"], "--log-std-clip"),
+                      (["--miss-weight", "inf"], "--miss-weight")):
         assert mod.main([*train, *bad]) == 2
         assert name in capsys.readouterr().err
     assert not out.exists()                                  # nothing written
+    sel = ["select", "--out", str(out)]
+    for bad, name in ((["--every", "0"], "--every"), (["--validation-seeds", "0"], "--validation-seeds"),
+                      (["--validation-seeds", "501"], "--validation-seeds"), ([], "no checkpoints")):
+        assert mod.main([*sel, *bad]) == 2
+        assert name in capsys.readouterr().err
+    assert not out.exists()
+    ck = tmp_path / "ck"
+    for d in ("iter_10", "iter_20", "iter_30", "iter_100", "final", "iter_x"):
+        (ck / d).mkdir(parents=True)
+    assert [d.name for d in mod.checkpoints_to_select(ck, 20)] == ["iter_20", "iter_100", "final"]
+    every10 = ["iter_10", "iter_20", "iter_30", "iter_100", "final"]
+    assert [d.name for d in mod.checkpoints_to_select(ck, 10)] == every10
+
+
+def test_checkpoint_pick_prefers_success_then_the_lower_mean_miss():
+    rows = [{"checkpoint": "a", "success": 0.98, "miss_mean_m": 10.0},
+            {"checkpoint": "b", "success": 1.0, "miss_mean_m": 30.0},
+            {"checkpoint": "c", "success": 1.0, "miss_mean_m": 20.0},
+            {"checkpoint": "d", "success": 1.0, "miss_mean_m": 20.0},
+            {"checkpoint": "e", "success": 0.0, "miss_mean_m": math.nan}]
+    assert rt.best_checkpoint(rows)["checkpoint"] == "c"
+    assert rt.best_checkpoint(rows[-1:] + rows[:1])["checkpoint"] == "a"
 
 
 def test_task_settings_and_bad_terrain():
@@ -91,6 +125,8 @@ def test_task_settings_and_bad_terrain():
     assert kw["action_mode"] == "pursuit" and kw["decision_interval_s"] == 30.0
     assert json.loads(json.dumps(kw)) == kw                # plain JSON types
     assert not set(route_task.EVAL_SEEDS) & set(range(route_task.TRAIN_SEED_BASE, 1000))
+    # model selection's seeds: neither evaluation seeds nor the trainer's reset seeds (base + sub-env index)
+    assert not set(route_task.VALIDATION_SEEDS) & (set(route_task.EVAL_SEEDS) | set(range(10_000)))
     with pytest.raises(ValueError, match="terrain"):
         route_task.env_kwargs("moon")
 
@@ -127,6 +163,37 @@ def test_baselines_fly_the_same_goals_and_seeds_in_the_fast_tier():
     assert [r["true_miss_m"] for r in again] == [r["true_miss_m"] for r in rows if r["policy"] == "straight"]
 
 
+def test_validation_episodes_draw_training_goals_never_a_held_out_one():
+    import gymnasium as gym
+
+    from trn_env.env.terrain_nav import TerrainNavEnv
+
+    if "trn_env/TerrainNavFast-v0" not in gym.registry:
+        pytest.skip("the fast tier is not installed")
+    seeds = list(route_task.VALIDATION_SEEDS[:16])
+    pols = [{"label": "straight", "kind": "straight"}]
+    rows = rt.evaluate_fast(pols, "basin", seeds, drawn_goals=True)
+    assert [r["seed"] for r in rows] == seeds and {r["goal_index"] for r in rows} == {-1}
+    kw = route_task.env_kwargs("basin")
+    la0, la1, lo0, lo1 = kw["goal_region_deg"]
+    env = TerrainNavEnv(**kw)
+    held = np.radians(np.array(env.held_out_goals_deg))
+    env.close()
+    goals = np.radians(np.array([r["goal_deg"] for r in rows]))
+    assert np.all((np.degrees(goals[:, 0]) >= la0) & (np.degrees(goals[:, 0]) <= la1))
+    assert np.all((np.degrees(goals[:, 1]) >= lo0) & (np.degrees(goals[:, 1]) <= lo1))
+    # haversine distance (sphere of 6,371 km) from each drawn goal to each held-out goal
+    dlat = goals[:, None, 0] - held[None, :, 0]
+    dlon = goals[:, None, 1] - held[None, :, 1]
+    h = np.sin(dlat / 2) ** 2 + np.cos(goals[:, None, 0]) * np.cos(held[None, :, 0]) * np.sin(dlon / 2) ** 2
+    d_m = 2 * 6_371_000.0 * np.arcsin(np.sqrt(h))
+    assert d_m.min() > 0.99 * kw["held_out_radius_m"]
+    assert len({tuple(r["goal_deg"]) for r in rows}) == len(rows)        # a goal per seed
+    again = rt.evaluate_fast(pols, "basin", seeds[:4], drawn_goals=True)   # a seed fixes goal and episode
+    assert [(r["goal_deg"], r["true_miss_m"]) for r in again] == \
+        [(r["goal_deg"], r["true_miss_m"]) for r in rows[:4]]
+
+
 @pytest.mark.slow
 def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     pytest.importorskip("ray.rllib")
@@ -148,6 +215,11 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert "target" in summary and "full/ppo" in summary["policies"]
     assert mod.main(["evaluate", "--out", str(tmp_path / "none")]) == 2          # no checkpoint: exit 2
+    assert mod.main(["select", "--out", str(out), "--every", "1", "--validation-seeds", "3",
+                     "--max-episode-s", "60"]) == 0
+    sel = json.loads((out / "selection.json").read_text())
+    assert [Path(r["checkpoint"]).name for r in sel["rows"]] == ["final"]   # one iteration: final only
+    assert all(r["episodes"] == 3 for r in sel["rows"]) and sel["best"] in sel["rows"]
 
 
 @pytest.mark.parametrize("bad, name", [(["--goals", "9"], "--goals"), (["--goals", "x"], "--goals"),

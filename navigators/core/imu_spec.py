@@ -193,11 +193,59 @@ def equivalent_ramp_walk_density(slope_sigma: float, memory_s: float) -> float:
     return float(0.5 * slope_sigma * memory_s * math.sqrt(memory_s))
 
 
+
+class TurnAngle:
+    """The angle a turn term's random walk advances by, from the heading at each epoch: "total", the change
+    of heading since the last epoch (the walk then runs in the summed angle turned), or "excursion", the
+    growth of the largest net heading change since the anchor (the filter's reset).
+
+    The gyro misalignment m and scale factor s build a tilt m dpsi and a heading error s dpsi from the net
+    heading change dpsi since the anchor (turn_tilt_sigma_rad, turn_heading_sigma_rad: a constant error of a
+    rate integrated over the angle turned), so a turn undone by the opposite turn, or the back-and-forth of
+    the heading on a straight leg, builds no error. A filter not carrying m and s enters them as a random
+    walk of density sigma^2 TURN_REFERENCE per rad; in the excursion its variance sigma^2 TURN_REFERENCE
+    max|dpsi| bounds sigma^2 dpsi^2 up to |dpsi| = TURN_REFERENCE, as the walk in the summed angle does,
+    while the heading's wander about a straight leg (on the default route 2.0 rad of summed 1 s heading
+    changes before the first turn, 0.07 rad net) adds only its largest excursion once. `advance(yaw)` takes
+    the heading (rad; the net change is unwrapped through +-pi; NaN is skipped) and returns the angle (rad,
+    >= 0); `reset()` re-anchors.
+    """
+
+    MODES = ("total", "excursion")
+
+    def __init__(self, mode: str = "total") -> None:
+        if mode not in self.MODES:
+            raise ValueError(f"TurnAngle mode must be one of {list(self.MODES)}, got {mode!r}")
+        self.mode = mode
+        self.reset()
+
+    def reset(self) -> None:
+        self._yaw_prev = math.nan
+        self._net_rad = 0.0
+        self._max_rad = 0.0
+
+    def advance(self, yaw_rad: float) -> float:
+        if not math.isfinite(yaw_rad):
+            return 0.0
+        step = 0.0
+        if math.isfinite(self._yaw_prev):
+            step = (yaw_rad - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi
+        self._yaw_prev = yaw_rad
+        if self.mode == "total":
+            return abs(step)
+        self._net_rad += step
+        grow = abs(self._net_rad) - self._max_rad
+        if grow <= 0.0:
+            return 0.0
+        self._max_rad += grow
+        return grow
+
+
 def rss(*values: float) -> float:
     """Root sum square."""
     return float(math.sqrt(sum(v * v for v in values)))
 
 
-__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "VERTICAL_OFFSET_MEMORY_S", "ImuSpec", "consistency_warning",
-           "equivalent_ramp_walk_density", "equivalent_walk_density", "gm_drive", "rss",
-           "vertical_offset_walk_density"]
+__all__ = ["G0_MPS2", "SMALL_ANGLE_LIMIT_RAD", "VERTICAL_OFFSET_MEMORY_S", "ImuSpec", "TurnAngle",
+           "consistency_warning", "equivalent_ramp_walk_density", "equivalent_walk_density", "gm_drive",
+           "rss", "vertical_offset_walk_density"]

@@ -72,7 +72,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from ..core.imu_spec import ImuSpec
+from ..core.imu_spec import ImuSpec, TurnAngle
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
 from ..core.measured_consistency import grade_warning
@@ -136,7 +136,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     cloud's and Kalman parts' prior from reset's initial.covariance, _set_prior; False: the init_* settings);
     imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m, recovery_reset_kalman (the
-    innovation test and its recovery, see the module docstring).
+    innovation test and its recovery, see the module docstring); turn_angle ("total" | "excursion": the
+    angle the turn terms of apply_imu_spec run in, _epoch_ql_var).
     """
 
     capabilities = CAPABILITIES
@@ -157,7 +158,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                         "window_edge_range theta_velocity_rows ambiguity_gap_m ambiguity_weight "
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
-                        "recovery_sigma_m recovery_reset_kalman")
+                        "recovery_sigma_m recovery_reset_kalman turn_angle")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
         self.trn_period_s = 1.0 / s.trn_rate_hz
@@ -217,8 +218,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         these per epoch), the x / y accelerometer-bias prior the body-fixed horizontal specific-force error
         (bias, instability and misalignment x g: in level flight the misalignment reads gravity as a
         constant body-frame bias), and per rad turned the gyro misalignment (tilt) and scale factor (heading)
-        over TURN_REFERENCE_RAD, as the EKF and PMF take them. The bias priors and drives themselves arrive
-        as settings (trn_env's imu_bias_settings). Its 15-state model is a small-angle one (eqs 16-22): a
+        over TURN_REFERENCE_RAD (the angle: _epoch_ql_var). The bias priors and drives themselves arrive as
+        settings (trn_env's imu_bias_settings). Its 15-state model is a small-angle one (eqs 16-22): a
         grade whose gyro biases build more than imu_spec.SMALL_ANGLE_LIMIT_RAD over RBPF_MEMORY_S sets the
         Health warning."""
         root_t = math.sqrt(self.trn_period_s)
@@ -234,10 +235,18 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
-        since the last epoch builds (apply_imu_spec); the angle is the integral of |yaw rate| over the IMU
-        samples (`_propagate`), not the net yaw change between epochs, so it does not depend on the rate."""
+        builds (apply_imu_spec), per rad of the angle turn_angle names: "total" (default), the integral of
+        |yaw rate| over the IMU samples since the last epoch (`_propagate`: it does not depend on the
+        rate); "excursion", the growth of the net heading change since the reset
+        (navigators.core.imu_spec.TurnAngle), as the heading's back-and-forth on a straight leg undoes its
+        own misalignment and scale-factor error)."""
         turn, self._turn_pending = self._turn_pending, 0.0
-        if not self._turn_att_var.any() or turn == 0.0:
+        if not self._turn_att_var.any():
+            return self.ql_var
+        if self.turn_angle == "excursion":
+            C = quat_to_dcm(self.ins.state[6:10])
+            turn = self._turn_angle.advance(math.atan2(C[1, 0], C[0, 0]))
+        if turn == 0.0:
             return self.ql_var
         ql = self.ql_var.copy()
         ql[3:6] += self._turn_att_var * turn
@@ -247,6 +256,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     def reset(self, initial: Estimate) -> None:
         self._yaw_prev = math.nan
         self._turn_pending = 0.0
+        self._turn_angle = TurnAngle(self.turn_angle)
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)

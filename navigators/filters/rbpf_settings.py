@@ -104,6 +104,9 @@ class RbpfSettings(Settings):
                                      gt=0.0, lt=1.0)
     recovery_sigma_m: float = setting(100.0, "horizontal re-spread of a recovery", "m", ge=0.0)
     recovery_reset_kalman: bool = setting(True, "a recovery also resets the Kalman parts' covariance")
+    turn_angle: str = setting("total", "angle the turn terms' attitude walk runs in: integral of |yaw "
+                              "rate| (total) or growth of the net heading change since the reset (excursion)",
+                              choices=("total", "excursion"))
 
     def check(self) -> list[tuple[str, str]]:
         problems = []

@@ -123,10 +123,14 @@ def evaluate_full(policies: list[dict], terrain: str, seeds, env_overrides: dict
     return rows
 
 
-def evaluate_fast(policies: list[dict], terrain: str, seeds, env_overrides: dict | None = None) -> list[dict]:
+def evaluate_fast(policies: list[dict], terrain: str, seeds, env_overrides: dict | None = None,
+                  drawn_goals: bool = False) -> list[dict]:
     """Every policy on every (held-out goal, seed) in TerrainNavFast-v0: one vector env with a sub-env per
-    (goal, seed), stepped until every sub-env's first episode has ended; one row per episode. ValueError if
-    the fast tier is not registered."""
+    (goal, seed), stepped until every sub-env's first episode has ended; one row per episode. With
+    `drawn_goals` the held-out goals are not flown: one sub-env per seed, its goal drawn by the env from the
+    training distribution (the goal region outside the held-out radius; rows' `goal_index` -1, `goal_deg`
+    the drawn goal) - the validation episodes of `select_checkpoint`. ValueError if the fast tier is not
+    registered."""
     import gymnasium as gym
 
     from trn_env.env.rllib import FAST_ID
@@ -139,15 +143,19 @@ def evaluate_fast(policies: list[dict], terrain: str, seeds, env_overrides: dict
     kw = {**route_task.env_kwargs(terrain), **(env_overrides or {})}
     full = TerrainNavEnv(**kw)                     # the map, limits and held-out goals the policies read
     goals = [tuple(g) for g in full.held_out_goals_deg]
-    pairs = [(gi, g, int(s)) for gi, g in enumerate(goals) for s in seeds]
+    pairs = ([(-1, None, int(s)) for s in seeds] if drawn_goals else
+             [(gi, g, int(s)) for gi, g in enumerate(goals) for s in seeds])
     n = len(pairs)
     agl = route_task.straight_agl_m(terrain)
     rows = []
     for p in pols:
         venv = gym.make_vec(FAST_ID, num_envs=n, vectorization_mode="vector_entry_point",
                             **route_task.fast_tier_kwargs(kw))
-        obs, info0 = venv.reset(seed=[s for _, _, s in pairs],
-                                options={"goal_deg": np.array([g for _, g, _ in pairs])})
+        obs, info0 = venv.reset(seed=[s for _, _, s in pairs], options=None if drawn_goals else
+                                {"goal_deg": np.array([g for _, g, _ in pairs])})
+        if drawn_goals:
+            pairs = [(-1, tuple(float(x) for x in info0["goal_deg"][i]), s)
+                     for i, (_, _, s) in enumerate(pairs)]
         views, pol_objs = [], []
         shared = None
         for _gi, g, s in pairs:
@@ -193,7 +201,8 @@ def evaluate_fast(policies: list[dict], terrain: str, seeds, env_overrides: dict
             arrived = why == "arrived"
             flown = float(inf["distance_flown_m"])
             rows.append({"tier": "fast", "policy": p["label"], "goal_index": gi, "seed": s,
-                         "termination": why, "arrived": arrived,
+                         **({"goal_deg": list(g)} if drawn_goals else {}), "termination": why,
+                         "arrived": arrived,
                          "true_miss_m": float(inf["true_miss_m"]) if arrived else math.nan,
                          "distance_flown_m": flown, "straight_distance_m": straight_m,
                          "extra_distance_fraction": (flown / max(straight_m - full.goal_radius_m, 1.0) - 1.0
@@ -214,6 +223,35 @@ def evaluate(policies: list[dict], terrain: str, seeds, tiers=("full", "fast"),
         fn = evaluate_full if t == "full" else evaluate_fast
         rows += fn(policies, terrain, seeds, env_overrides)
     return rows
+
+
+def select_checkpoint(checkpoints, terrain: str, seeds, env_overrides: dict | None = None) -> dict:
+    """Model selection without the held-out goals: every checkpoint (RLlib checkpoint folders) flies the fast
+    tier's validation episodes (`evaluate_fast(..., drawn_goals=True)` over `seeds`, which should be
+    `route_task.VALIDATION_SEEDS`: goals drawn from the training distribution, never a held-out goal, seeds
+    disjoint from the evaluation's); per checkpoint the success rate and the mean, median and 90th-percentile
+    true miss over the arrived episodes. The best: the highest success rate, then the lowest mean miss.
+    Returns {"rows": [...] per checkpoint, "best": its row}. ValueError on no checkpoints."""
+    checkpoints = [str(c) for c in checkpoints]
+    if not checkpoints:
+        raise ValueError("checkpoints: none given")
+    out = []
+    for c in checkpoints:
+        rs = evaluate_fast([{"label": "ppo", "kind": "rllib", "checkpoint": c}], terrain, seeds,
+                           env_overrides, drawn_goals=True)
+        miss = np.array([r["true_miss_m"] for r in rs if r["arrived"]])
+        out.append({"checkpoint": c, "episodes": len(rs),
+                    "success": float(np.mean([r["arrived"] for r in rs])),
+                    "miss_mean_m": float(miss.mean()) if miss.size else math.nan,
+                    "miss_median_m": float(np.median(miss)) if miss.size else math.nan,
+                    "miss_p90_m": float(np.percentile(miss, 90)) if miss.size else math.nan})
+    return {"rows": out, "best": best_checkpoint(out)}
+
+
+def best_checkpoint(rows: list[dict]) -> dict:
+    """The row with the highest "success", then the lowest finite "miss_mean_m" (the first of equals)."""
+    return min(rows, key=lambda r: (-r["success"], r["miss_mean_m"] if math.isfinite(r["miss_mean_m"])
+                                    else math.inf))
 
 
 # ------------------------------------------------------------------------------------------ statistics
@@ -296,16 +334,21 @@ def per_goal(rows: list[dict]) -> list[dict]:
 
 def target_check(summary: dict, policy: str = "ppo") -> dict:
     """The issue's target in the full tier: `policy` beats straight by >= 30 % mean true miss (paired, sign
-    test p < 0.01) and its mean miss is within 20 % of the planner's."""
+    test p < 0.01) and its mean miss is within 20 % of the planner's with a success rate (arrived) not below
+    the planner's (the miss is over the arrived episodes: a policy that arrives less often is not within 20 %
+    however small its miss on the few it finishes)."""
     c = next((c for c in summary["paired"]
               if c["tier"] == "full" and c["a"] == policy and c["b"] == "straight"), None)
     pol = summary["policies"]
     planner = pol.get("full/planner", {}).get("miss_mean_m", math.nan)
     mine = pol.get(f"full/{policy}", {}).get("miss_mean_m", math.nan)
+    success_ok = pol.get(f"full/{policy}", {}).get("success", 0.0) >= pol.get("full/planner", {}).get(
+        "success", math.inf)
     return {"beats_straight_by_30pct": bool(c is not None and c["improvement"] >= 0.30),
             "sign_test_p_below_0_01": bool(c is not None and c["sign_test_p"] < 0.01),
             "within_20pct_of_planner": bool(math.isfinite(mine) and math.isfinite(planner)
-                                            and mine <= 1.2 * planner),
+                                            and mine <= 1.2 * planner and success_ok),
+            "success_not_below_planner": bool(success_ok),
             "improvement": None if c is None else c["improvement"],
             "sign_test_p": None if c is None else c["sign_test_p"],
             "ratio_to_planner": mine / planner if planner and math.isfinite(planner) else math.nan}

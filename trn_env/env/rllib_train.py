@@ -42,6 +42,7 @@ def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: i
                train_batch_size: int = 256, minibatch_size: int = 64, num_epochs: int = 10,
                lr: float = 3e-4, gamma: float = 0.99, lambda_: float = 0.95, entropy_coeff: float = 0.0,
                lr_end: float | None = None, lr_decay_steps: int | None = None, vf_clip_param: float = 10.0,
+               log_std_clip: float = 20.0,
                activation: str = "tanh"):
     """An RLlib PPOConfig (new API stack, torch) for an env tier ("full" or "fast") with env_config (the env's
     keyword arguments). `lr_end` with `lr_decay_steps`: the learning rate falls linearly from `lr` to
@@ -77,6 +78,9 @@ def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: i
     if isinstance(entropy_coeff, bool) or not isinstance(entropy_coeff, (int, float)) or not (
             0.0 <= entropy_coeff < math.inf):
         raise ValueError(f"entropy_coeff must be a finite number >= 0, got {entropy_coeff!r}")
+    if isinstance(log_std_clip, bool) or not isinstance(log_std_clip, (int, float)) or not (
+            0.0 <= log_std_clip < math.inf):
+        raise ValueError(f"log_std_clip must be a finite number >= 0, got {log_std_clip!r}")
     if (lr_end is None) != (lr_decay_steps is None):
         raise ValueError("lr_end and lr_decay_steps go together (both or neither)")
     if lr_end is not None and (isinstance(lr_end, bool) or not isinstance(lr_end, (int, float))
@@ -100,7 +104,8 @@ def ppo_config(tier: str, env_config: dict, *, seed: int = 0, num_env_runners: i
                   num_epochs=int(num_epochs), lr=lr_arg, gamma=float(gamma), lambda_=float(lambda_),
                   entropy_coeff=float(entropy_coeff), vf_clip_param=float(vf_clip_param))
         .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=[int(h) for h in hidden],
-                                                   fcnet_activation=activation, vf_share_layers=False))
+                                                   fcnet_activation=activation, vf_share_layers=False,
+                                                   log_std_clip_param=float(log_std_clip)))
         .debugging(seed=int(seed))
         .reporting(metrics_num_episodes_for_smoothing=20)
     )
