@@ -177,8 +177,8 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
-        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss; beta
-        # carries the transient's mean, the walk stays a floor where the linear model does not hold)
+        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss;
+        # beta carries the transient, the walk stays a floor where its linear model does not hold)
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name)
