@@ -73,6 +73,8 @@ from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
     equivalent_walk_density,
+    rss,
+    vertical_offset_walk_density,
 )
 from ..core.measured_consistency import grade_warning
 from ..inertial.strapdown import quat_to_dcm
@@ -175,8 +177,10 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             (G0_MPS2 * spec.turn_tilt_sigma_rad(1.0)) ** 2 * TURN_REFERENCE_RAD,
             spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD,
         )
-        # the vertical offset's walk stays the tuned baro-height wander: the IMU's baro-loop transient is
-        # carried by beta (_vertical_velocity_shift)
+        # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss;
+        # beta carries the transient, the walk stays a floor where its linear model does not hold)
+        q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
+        self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name)
 
     # ------------------------------------------------------------------------------------ belief
@@ -397,9 +401,14 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             if self._beta_sigma > 0.0:   # the closest point's derivative in the down velocity
                 v_ned = v_ned.copy()
                 v_ned[2] += VD_STEP_MPS
-                p2 = np.empty((1, 3))
-                if not ira.closest_points(range_m, theta_rad, C, v_ned, dpsi, dv_ne, self.ira_code, p2):
-                    self._J = (p2[0, :2] - p[:2]) / VD_STEP_MPS
+                p2 = np.full((1, 3), np.nan)
+                ira.closest_points(range_m, theta_rad, C, v_ned, dpsi, dv_ne, self.ira_code, p2)
+                J = (p2[0, :2] - p[:2]) / VD_STEP_MPS
+                # the tilt moves the point by at most about R / V_h per m/s: a larger step is a change of
+                # the closest point's branch, not its derivative (the previous J kept)
+                j_max = 2.0 * range_m / max(math.hypot(v_ned[0], v_ned[1]), 1.0)
+                if np.all(np.isfinite(J)) and math.hypot(J[0], J[1]) <= j_max:
+                    self._J = J
                 self._vertical_velocity_shift(t_s)
         elif self._beta_sigma > 0.0:     # the altimeter's range does not depend on the velocity
             self._J = np.zeros(2)
