@@ -140,9 +140,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._cost = COSTS[cfg.correlation]
         self._disc = tracking.DISCRIMINATORS[cfg.discriminator]
         self._n_min = max(3, int(math.ceil(cfg.min_valid_fraction * cfg.transect_samples)))
-        self._fix_overlap = float(
-            cfg.fix_overlap if cfg.fix_overlap is not None else 0.5 * cfg.transect_samples
-        )
+        self._fix_overlap = float(cfg.fix_overlap_epochs)
         walk = cfg.aiding_walk_m_per_sqrt_s
         self._walk2 = float(walk) ** 2
         self._speed_set = np.array(cfg.speed_spacings_mps)
@@ -261,6 +259,8 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         # the velocity bias' prior: the aiding's sigma, or the initial velocity's if larger
         v_cov = 0.5 * (cov[3:5, 3:5] + cov[3:5, 3:5].T)
         self.X[2:, 2:] = np.maximum(np.eye(2) * self._bias_sigma0**2, v_cov)
+        self._init_state = (cov, v, self.t0)
+        self._start_ins_growth(*self._init_state)   # with the IMU's specification: the INS's own model
         self.out_speed, self.out_track = speed, track
         self._v0 = (speed, track)
         if not cfg.aiding:
