@@ -108,6 +108,8 @@ class CentroidFilter:
         # e_ne's sigma after the GNSS triangles: the aiding's per-sample noise through the gain-0.2 low-pass
         # (steady-state variance k / (2 - k) of the noise's); an INS is reset by GNSS, air data carries gusts
         self._set_centroid_cov(self.Pc, bias_sigma_mps=cfg.aiding_speed_sigma_mps * math.sqrt(0.2 / 1.8))
+        if self._ins_growth is not None and math.isfinite(g_speed):  # the fix reset the INS velocity: anew
+            self._ins_growth.restart(s.t_s, s.gnss_v_ne)
         self.sigma_v = 0.1
         self.sigma_psi = math.radians(0.2)
         self.bad_epochs = 0

@@ -25,7 +25,8 @@ north / east axis, t counted from the INS's start (the navigator's reset):
 
 The filter's random walk takes each sample the growth of this variance (never negative: its largest value so
 far, as a walk cannot shrink), so without fixes e_ne's variance follows Var e(t) from the prior Var e(0),
-the initial estimate's velocity covariance.
+the initial estimate's velocity covariance. A GNSS fix resets the INS's velocity (intake.py): the growth
+restarts there (`restart`), the gyro biases' tilt ramp on its clock from the start.
 """
 
 from __future__ import annotations
@@ -61,19 +62,27 @@ class InsVelocityErrorGrowth:
         self.body2 = spec.body_accel_sigma_mps2 ** 2
         self.ramp2 = spec.tilt_accel_rate_sigma_mps3 ** 2
         self.heading2 = float(heading0_rad) ** 2
-        self.v0 = np.asarray(v0_ne_mps, float)[:2].copy()
         self.t0_s = float(t0_s)
-        self.c_s = 0.0   # int cos(psi) dt (s)
-        self.s_s = 0.0   # int sin(psi) dt (s)
+        self.restart(t0_s, v0_ne_mps)
+
+    def restart(self, t_s: float, v_ne_mps) -> None:
+        """The INS's velocity reset at t_s to v_ne_mps (north, east m/s; a GNSS fix): its velocity error grows
+        anew from there on the same accelerations; the gyro biases' tilt keeps its clock from the start (its
+        ramp adds g sigma_bg (t^2 - t_r^2) / 2 after a reset at t_r)."""
+        self.t_reset_s = float(t_s)
+        self.v0 = np.asarray(v_ne_mps, float)[:2].copy()
+        self.c_s = 0.0   # int cos(psi) dt since the reset (s)
+        self.s_s = 0.0   # int sin(psi) dt since the reset (s)
         self.grown = 0.0   # the largest growth so far (m^2/s^2)
 
     def growth(self, t_s: float, v_ne_mps) -> float:
-        """Var e(t) - Var e(0) (m^2/s^2 per axis) at t_s with the heading integral so far and the velocity
-        v_ne_mps (north, east m/s)."""
-        t = max(t_s - self.t0_s, 0.0)
+        """Var e(t) - Var e(t_r) (m^2/s^2 per axis) at t_s, t_r the INS's start or last reset, with the
+        heading integral so far and the velocity v_ne_mps (north, east m/s)."""
+        t = max(t_s - self.t_reset_s, 0.0)
+        t1, tr = max(t_s - self.t0_s, 0.0), max(self.t_reset_s - self.t0_s, 0.0)
         dv = np.asarray(v_ne_mps, float)[:2] - self.v0
         return (self.noise2 * t + self.earth2 * t * t + self.body2 * (self.c_s ** 2 + self.s_s ** 2)
-                + 0.25 * self.ramp2 * t ** 4 + 0.5 * self.heading2 * float(dv @ dv))
+                + 0.25 * self.ramp2 * (t1 * t1 - tr * tr) ** 2 + 0.5 * self.heading2 * float(dv @ dv))
 
     def step(self, t_s: float, dt_s: float, psi_rad: float, v_ne_mps) -> float:
         """Advance by one sample of dt_s s ending at t_s along heading psi_rad at v_ne_mps; returns the
