@@ -17,8 +17,8 @@ from trn_env.scenario.navigation import imu_spec
 
 
 def _route(duration_s: float = 470.0, dt_s: float = 1.0):
-    """Heading (rad) and velocity (north, east m/s) of a route like the default one: north, a left turn of
-    85 deg at 170-225 s, east... as a heading profile at 100 m/s."""
+    """Heading (rad) and velocity (north, east m/s) of a route like the default one at 100 m/s: north, a turn
+    to 85 deg at 170-225 s, then to 180 deg (south) at 310-340 s."""
     t = np.arange(dt_s, duration_s + 0.5 * dt_s, dt_s)
     psi = np.interp(t, [0, 170, 225, 310, 340, 470], np.radians([0, 0, 85, 85, 180, 180]))
     v = 100.0 * np.stack([np.cos(psi), np.sin(psi)], axis=1)
@@ -43,7 +43,7 @@ def test_ins_velocity_error_growth_against_monte_carlo(grade):
     a_e = G0_MPS2 * np.hypot(tilt0, spec.turn_tilt_sigma_rad(0.5 * math.pi)) * rng.normal(size=(n, 2))
     j = spec.tilt_accel_rate_sigma_mps3 * rng.normal(size=(n, 2))
     dpsi = yaw0 * rng.normal(size=n)
-    growth = InsVelocityErrorGrowth(spec, tilt0, yaw0, v[0] * 0 + [100.0, 0.0], 0.0)
+    growth = InsVelocityErrorGrowth(spec, tilt0, yaw0, np.array([100.0, 0.0]), 0.0)
     c = np.cos(psi) * dt
     s = np.sin(psi) * dt
     C, S = np.cumsum(c), np.cumsum(s)
