@@ -44,8 +44,9 @@ both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s (with the INS as aiding and 
 apply_imu_spec: from the initial velocity covariance as the free INS's velocity error grows), the output is
 the centroid plus the lever to the newest sample, and out of lock the dead-reckoned sigma grows on e_ne's
 (with the IMU's specification the 4-state filter's own propagation, e_ne's variance growing as the free INS's
-velocity error: ins_error.py). replica_model "return": each sample's measured height and map point come from the ray of its predicted shortest return (beam.py;
-_return_height), and the loops get the samples' offsets.
+velocity error: ins_error.py). replica_model "return": each sample's measured height and map point come
+from the ray of its predicted shortest return (beam.py; _return_height), and the loops get the samples'
+offsets.
 
 Estimate.extra, besides the fixed protocol keys (innovation = the centroid fix minus its prediction, north
 and east in m, its covariance S, NIS with 2 dof, measurement time):
