@@ -47,12 +47,14 @@
 
 from __future__ import annotations
 
+import collections
 import json
 import math
 import sys
 import time
 from functools import partial
 
+import gymnasium as gym
 import numpy as np
 
 
@@ -144,78 +146,95 @@ def _asymptotic_reward(error: float, scale: float) -> float:
     return 1.0 - e / (1.0 + e)
 
 
-def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: str = "kingair",
-                      dt_s: float | None = None) -> tuple[float, float]:
-    """(simulated seconds per wall second, per CPU second) of a bare JSBSim gymnasium loop in
-    gymnasium-jsbsim's shape (its HeadingControlTask's per-step property traffic and reward, see
-    _GYM_STATE; episodes of 60 s, reset to the initial conditions). aircraft "kingair": the default
-    scenario's aircraft, wind and turbulence at JSBSim step dt_s (default 1 / GYM_JSBSIM_DT_HZ, the rate
-    gymnasium-jsbsim flies every aircraft at); "c172p": gymnasium-jsbsim's own default, the Cessna 172P
-    (dt_s default 1/60) in calm air."""
-    import collections
-
-    import gymnasium as gym
-
+def gym_reference_fdm(aircraft: str = "kingair", dt_s: float | None = None):
+    """(FGFDMExec, JSBSim step s) of the gym loop: "kingair" the default scenario's aircraft, wind and
+    turbulence; "c172p" gymnasium-jsbsim's own default, the Cessna 172P in calm air. dt_s default
+    1 / GYM_JSBSIM_DT_HZ, the rate gymnasium-jsbsim flies every aircraft at."""
     dt = 1.0 / GYM_JSBSIM_DT_HZ if dt_s is None else float(dt_s)
     if aircraft == "c172p":
-        fdm = _c172p_fdm(dt)
-    else:
-        import trn_env.scenario.build as components
-        from trn_env.scenario.loading import load_scenario
+        return _c172p_fdm(dt), dt
+    if aircraft != "kingair":
+        raise ValueError(f"aircraft must be 'kingair' or 'c172p', got {aircraft!r}")
+    import trn_env.scenario.build as components
+    from trn_env.scenario.loading import load_scenario
 
-        sc = load_scenario("default").with_fields({"aircraft.dt_s": dt})
-        world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
-        fdm = components.build_flight(sc, world, np.random.default_rng(0)).fdm
-    n_run = max(1, int(round(agent_step_s / dt)))
-    episode_steps = int(math.ceil(60.0 / (n_run * dt)))
-    state_cls = collections.namedtuple("State", [p.replace("/", "_").replace("-", "_") for p in _GYM_STATE])
+    sc = load_scenario("default").with_fields({"aircraft.dt_s": dt})
+    world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+    return components.build_flight(sc, world, np.random.default_rng(0)).fdm, dt
 
-    class BareJsbsimEnv(gym.Env):
-        observation_space = gym.spaces.Box(-np.inf, np.inf, (len(_GYM_STATE),), np.float64)
-        action_space = gym.spaces.Box(-1.0, 1.0, (len(_GYM_ACT),), np.float64)
 
-        def reset(self, *, seed=None, options=None):
-            super().reset(seed=seed)
-            fdm.reset_to_initial_conditions(0)
-            fdm["fcs/throttle-cmd-norm"] = 0.8
-            fdm["info/steps_left"] = episode_steps
-            fdm["target/track-deg"] = math.degrees(math.atan2(fdm["velocities/v-east-fps"],
-                                                              fdm["velocities/v-north-fps"])) % 360.0
-            self.target_alt_ft = fdm["position/h-sl-ft"]
-            fdm["reward/last_agent_reward"] = fdm["reward/last_assess_reward"] = 1.0
-            self._update_custom_properties()
-            return np.array(state_cls(*(fdm[p] for p in _GYM_STATE))), {}
+_GymState = collections.namedtuple("_GymState", [p.replace("/", "_").replace("-", "_") for p in _GYM_STATE])
 
-        def _update_custom_properties(self):
-            track_deg = math.degrees(math.atan2(fdm["velocities/v-east-fps"], fdm["velocities/v-north-fps"]))
-            err = (track_deg - fdm["target/track-deg"] + 180.0) % 360.0 - 180.0
-            fdm["error/track-error-deg"] = err
-            fdm["error/altitude-error-ft"] = fdm["position/h-sl-ft"] - self.target_alt_ft
-            fdm["info/steps_left"] = fdm["info/steps_left"] - 1
 
-        def step(self, action):
-            for p, a in zip(_GYM_ACT, action, strict=True):
-                fdm[p] = float(a)
-            for _ in range(n_run):
-                fdm.run()
-            self._update_custom_properties()
-            state = state_cls(*(fdm[p] for p in _GYM_STATE))
-            done = (fdm["info/steps_left"] <= 0 or fdm["reward/last_assess_reward"] < 0.0
-                    or abs(fdm["error/altitude-error-ft"]) > 1000.0)
-            reward = 0.5 * (_asymptotic_reward(state.error_altitude_error_ft, 150.0)
-                            + _asymptotic_reward(state.error_track_error_deg, 8.0))
-            fdm["reward/last_agent_reward"] = reward
-            fdm["reward/last_assess_reward"] = reward
-            return np.array(state), reward, done, False, {"reward": reward}
+class GymJsbsimReference(gym.Env):
+    """A bare JSBSim gymnasium env in the shape of gymnasium-jsbsim's HeadingControlTask (see _GYM_STATE):
+    per agent step of agent_step_s, three controls written, run() agent_step_s / dt_s times, the custom
+    properties updated, the state read into a namedtuple, the terminal test, a two-component reward,
+    two reward properties written; episodes of 60 s (or until the altitude error passes 1,000 ft), reset to
+    the initial conditions. `fdm`: a JSBSim FGFDMExec (or anything with its item access, run() and
+    reset_to_initial_conditions)."""
 
-    env = BareJsbsimEnv()
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (len(_GYM_STATE),), np.float64)
+    action_space = gym.spaces.Box(-1.0, 1.0, (len(_GYM_ACT),), np.float64)
+
+    def __init__(self, fdm, dt_s: float, agent_step_s: float = 0.2):
+        self.fdm = fdm
+        self.n_run = max(1, int(round(agent_step_s / dt_s)))
+        self.agent_step_s = self.n_run * dt_s
+        self.episode_steps = int(math.ceil(60.0 / self.agent_step_s))
+        self.target_alt_ft = 0.0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        fdm = self.fdm
+        fdm.reset_to_initial_conditions(0)
+        fdm["fcs/throttle-cmd-norm"] = 0.8
+        fdm["info/steps_left"] = self.episode_steps
+        fdm["target/track-deg"] = math.degrees(math.atan2(fdm["velocities/v-east-fps"],
+                                                          fdm["velocities/v-north-fps"])) % 360.0
+        self.target_alt_ft = fdm["position/h-sl-ft"]
+        fdm["reward/last_agent_reward"] = fdm["reward/last_assess_reward"] = 1.0
+        self._update_custom_properties()
+        return np.array(_GymState(*(fdm[p] for p in _GYM_STATE))), {}
+
+    def _update_custom_properties(self) -> None:
+        fdm = self.fdm
+        track_deg = math.degrees(math.atan2(fdm["velocities/v-east-fps"], fdm["velocities/v-north-fps"]))
+        fdm["error/track-error-deg"] = (track_deg - fdm["target/track-deg"] + 180.0) % 360.0 - 180.0
+        fdm["error/altitude-error-ft"] = fdm["position/h-sl-ft"] - self.target_alt_ft
+        fdm["info/steps_left"] = fdm["info/steps_left"] - 1
+
+    def step(self, action):
+        fdm = self.fdm
+        for p, a in zip(_GYM_ACT, action, strict=True):
+            fdm[p] = float(a)
+        for _ in range(self.n_run):
+            fdm.run()
+        self._update_custom_properties()
+        state = _GymState(*(fdm[p] for p in _GYM_STATE))
+        done = (fdm["info/steps_left"] <= 0 or fdm["reward/last_assess_reward"] < 0.0
+                or abs(fdm["error/altitude-error-ft"]) > 1000.0)
+        reward = 0.5 * (_asymptotic_reward(state.error_altitude_error_ft, 150.0)
+                        + _asymptotic_reward(state.error_track_error_deg, 8.0))
+        fdm["reward/last_agent_reward"] = reward
+        fdm["reward/last_assess_reward"] = reward
+        return np.array(state), reward, bool(done), False, {"reward": reward}
+
+
+def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: str = "kingair",
+                      dt_s: float | None = None) -> tuple[float, float]:
+    """(simulated seconds per wall second, per CPU second) of GymJsbsimReference (gymnasium-jsbsim's
+    shape) on gym_reference_fdm(aircraft, dt_s), controls centred (the aircraft flies on from its trim),
+    resets included."""
+    fdm, dt = gym_reference_fdm(aircraft, dt_s)
+    env = GymJsbsimReference(fdm, dt, agent_step_s)
     env.reset(seed=0)
-    act = np.zeros(len(_GYM_ACT))     # controls centred: the aircraft flies on from its trim
+    act = np.zeros(len(_GYM_ACT))
     sim = 0.0
     t0, c0 = time.perf_counter(), time.process_time()
     while time.perf_counter() - t0 < wall_s:
         _, _, term, _, _ = env.step(act)
-        sim += n_run * dt
+        sim += env.agent_step_s
         if term:
             env.reset()
     return sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
