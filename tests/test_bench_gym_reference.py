@@ -8,6 +8,7 @@ reward properties written), counted through a proxy around the real FGFDMExec.""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from trn_env.bench import env as bench_env
 
@@ -69,7 +70,21 @@ def test_reference_episode_ends_after_60_simulated_seconds():
 
 
 def test_reference_rejects_an_unknown_aircraft():
-    import pytest
-
     with pytest.raises(ValueError, match="aircraft"):
         bench_env.gym_reference_fdm("f16")
+
+
+def test_ratio_check_script_bad_arguments_exit_2(capsys):
+    """scripts/env_ratio_check.py: a bad --repeats or --ref-s is a one-line error and exit 2."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "env_ratio_check.py"
+    spec = importlib.util.spec_from_file_location("env_ratio_check", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for argv, words in ((["--repeats", "0"], "--repeats"), (["--ref-s", "0"], "--ref-s"),
+                        (["--ref-s", "nan"], "--ref-s")):
+        assert mod.main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and words in err, err
