@@ -52,6 +52,7 @@ from collections import deque
 import numpy as np
 
 from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
+from ..core.imu_spec import TurnAngle
 from ..core.ins_gnss import InsGnssBlock
 from ..core.linalg import floored_psd, is_positive_definite
 from ..core.maps import load_map
@@ -143,7 +144,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
                   "ira_average gate_chi2 min_samples dp_min_m dp_reference_formula baro_geopotential "
                   "remove_bias init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m "
                   "gnss_sigma_v_mps gnss_correlated_sigma_m gnss_gate_chi2 gnss_timeout_s "
-                  "recovery_half_cells recovery_sigma_m")
+                  "recovery_half_cells recovery_sigma_m turn_angle")
         self.terrain_model_sigma_m = 0.0
         if aiding is not None and s.fix_noise == "batch":   # the map's unresolved terrain (tercom.fix_noise)
             self.terrain_model_sigma_m = (interpolation_sigma_m(dem) if s.terrain_model_sigma_m == "auto"
@@ -214,6 +215,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.kf.x = np.zeros((N_ERR, 1))
         self.kf.P = P
         self._yaw_prev = math.nan
+        self._heading_net_rad = 0.0
+        self._turn_angle = TurnAngle("excursion")
         self._P_good = P.copy()
         self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
         self.batch.clear()

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from ..core.error_states import ACC_BIAS, BGZ, N_EKF13, PSID, PSIE, PSIN, VEL
-from ..core.imu_spec import ImuSpec, equivalent_walk_density
+from ..core.imu_spec import ImuSpec, TurnAngle, equivalent_walk_density
 from ..core.measured_consistency import grade_warning
 from ..frames import SensorFrames
 from ..inertial.strapdown import GRAVITY_MODELS, quat_to_dcm
@@ -180,6 +180,8 @@ class InsTrnPropagation:
     _turn_tilt2 = 0.0  # tilt variance per rad turned (gyro misalignment)
     _turn_heading2 = 0.0  # heading variance per rad turned (gyro scale factor)
     _yaw_prev = math.nan
+    _heading_net_rad = 0.0  # net heading change of the INS's turning since the reset (turn_angle "excursion")
+    _turn_angle = None  # navigators.core.imu_spec.TurnAngle (reset)
     _consistency_warning = ""
 
     def apply_imu_spec(self, spec: ImuSpec) -> None:
@@ -188,18 +190,34 @@ class InsTrnPropagation:
         error (bias, instability, misalignment x g); z-gyro-bias prior the gyro bias and instability; velocity
         and attitude noise the noise densities; the biases' random walks their instabilities' Gauss-Markov
         drives (2 sigma^2 / tau); the x / y gyro biases (not states) as a tilt random walk matching them at
-        EKF_MEMORY_S; per turn the gyro misalignment (tilt) and scale factor (heading) times the angle."""
+        tilt_memory_s; per turn the gyro misalignment (tilt) and scale factor (heading) times the angle."""
         self.sig_ba = max(self.sig_ba, spec.body_accel_sigma_mps2)
         self.sig_bg = max(self.sig_bg, spec.gyro_bias_sigma_rps)
         self.q_acc = max(self.q_acc, spec.accel_noise_density_mps2_rthz**2)
         self.q_gyr = max(self.q_gyr, spec.gyro_noise_density_rps_rthz**2)
-        self._q_tilt = equivalent_walk_density(spec.gyro_bias_sigma_rps, EKF_MEMORY_S) ** 2
+        self._q_tilt = equivalent_walk_density(spec.gyro_bias_sigma_rps, self.tilt_memory_s) ** 2
         self._q_ba_walk = 2.0 * spec.accel_bias_instability_mps2**2 / spec.accel_bias_tau_s
         self._q_bg_walk = 2.0 * spec.gyro_bias_instability_rps**2 / spec.gyro_bias_tau_s
         self._turn_tilt2 = spec.turn_tilt_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
         self._turn_heading2 = spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
         self._consistency_warning = grade_warning(spec, EKF_MEMORY_S, self.name)
         self._Q = None
+
+    @property
+    def tilt_memory_s(self) -> float:
+        """Memory (s) at which the tilt random walk matches the tilt of the x / y gyro biases: EKF_MEMORY_S
+        for the free INS; for the aided filter the fix period (at most EKF_MEMORY_S).
+
+        A constant bias b tilts the INS by b t, an acceleration error g b t (a ramp) that the aided filter
+        observes only through its TERCOM fixes: three successive fixes, fix_period_s apart, fix the
+        acceleration error as their track's second difference, the mean over the span, whose middle lies
+        one fix period before the last fix. The tilt the filter must allow for beyond its estimate is the
+        ramp's change over that period, b fix_period_s, which the equivalent walk (navigators.core.imu_spec
+        .equivalent_walk_density) matches at T = fix_period_s; matched at the free INS's EKF_MEMORY_S, the
+        walk's variance over a fix period is EKF_MEMORY_S / fix_period_s times the ramp's."""
+        if self.aiding is None:
+            return EKF_MEMORY_S
+        return min(EKF_MEMORY_S, float(self.fix_period_s))
 
     def _turn_noise(self, hist: np.ndarray) -> None:
         """Attitude variance the segment's turning builds through the gyro misalignment (tilt) and scale
@@ -220,6 +238,12 @@ class InsTrnPropagation:
         if self._turn_tilt2 == 0.0 and self._turn_heading2 == 0.0:
             return
         turn, yaw = kern.yaw_total_variation(hist, self._yaw_prev)
+        if self.turn_angle == "excursion":
+            # the net heading change of the INS's own turning (a fix's heading correction resets _yaw_prev,
+            # ins_trn_gnss._feed_back, so it is not counted), unwrapped, into the excursion's tracker
+            if math.isfinite(self._yaw_prev) and math.isfinite(yaw):
+                self._heading_net_rad += (yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi
+            turn = self._turn_angle.advance(self._heading_net_rad)
         if turn > 0.0:
             P = self.kf.P
             P[PSIN, PSIN] += self._turn_tilt2 * turn
