@@ -116,8 +116,9 @@ def _navigator_added(m, turn_angle: str) -> np.ndarray:
         for a in range(1, t.size, 100):
             b = min(a + 100, t.size)
             ones = np.ones(b - a, bool)
-            nav.update(SensorFrames(t[a - 1], t[b - 1], imu=ImuFrame(t[a:b], m["f_b"][a:b], m["w"][a:b], ones),
-                                    baro=BaroFrame(t[a:b:5], m["h"][a:b:5], ones[::5])))
+            imu = ImuFrame(t[a:b], m["f_b"][a:b], m["w"][a:b], ones)
+            baro = BaroFrame(t[a:b:5], m["h"][a:b:5], ones[::5])
+            nav.update(SensorFrames(t[a - 1], t[b - 1], imu=imu, baro=baro))
         P[key] = np.diag(nav.kf.P)[[PSIN, PSIE, PSID]].copy()
     return P["on"] - P["off"]
 

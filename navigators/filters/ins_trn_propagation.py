@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from ..core.error_states import ACC_BIAS, BGZ, N_EKF13, PSID, PSIE, PSIN, VEL
-from ..core.imu_spec import ImuSpec, TurnAngle, equivalent_walk_density
+from ..core.imu_spec import ImuSpec, equivalent_walk_density
 from ..core.measured_consistency import grade_warning
 from ..frames import SensorFrames
 from ..inertial.strapdown import GRAVITY_MODELS, quat_to_dcm

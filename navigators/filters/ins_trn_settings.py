@@ -111,8 +111,8 @@ class InsTercomSettings(InsTrnSettings):
     aiding: str | None = setting("ira", "terrain aiding: 'ira' (seed 000 eq 2) or 'radar_altimeter' (eq 1)",
                                  choices=AIDINGS)
     fix_noise: str = setting("batch", "TERCOM fix covariance: 'batch' (the MAD shift's from the batch's "
-                                      "residuals and map slopes, tercom.fix_noise) or 'fixed' (fix_sigma_m per "
-                                      "axis, Table 2)", choices=FIX_NOISE_MODELS)
+                                      "residuals and map slopes, tercom.fix_noise) or 'fixed' (fix_sigma_m "
+                                      "per axis, Table 2)", choices=FIX_NOISE_MODELS)
     turn_angle: str = setting("excursion", "angle the turn terms' attitude walk runs in (with the IMU's "
                               "specification): growth of the net heading change since the reset (excursion; "
                               "navigators.core.imu_spec.TurnAngle) or integral of |yaw rate| (total)",
