@@ -14,17 +14,18 @@ baro-damped channel of navigators.inertial); d(psi) = -w_in x psi - C_bn [0, 0, 
 fix, z = -(correction) = INS - matched position (north, east), chi-square gated; the batch's rigid shift is
 the INS error averaged over its samples, dr(t_k) = dr - dv tau_k + d(dv)/dt tau_k^2 / 2 (tau_k = t_fix -
 t_k), so H takes the velocity error times the mean lag (-lag on states 3, 4). Its noise: fix_noise "fixed"
-(default) (fix_sigma_m)^2 per axis (Table 2: (10 m)^2); "batch" (opt-in) the MAD shift's covariance from the
-batch's residuals, the map's slopes, the terrain the map cannot hold and (without bias removal) the baro's
-bias (navigators.tercom.fix_noise), with H the map-slope-weighted average of each sample's INS error run back
-from the fix along the INS's specific force and attitude (navigators.filters.ins_trn_batch_error: the
-velocity error times the slope-weighted lag, the attitude and bias errors through the specific force).
+(the free INS's settings default; ins_tercom's opt-in) (fix_sigma_m)^2 per axis (Table 2: (10 m)^2); "batch"
+(ins_tercom's default) the MAD shift's covariance from the batch's residuals, the map's slopes, the
+terrain the map cannot hold and (without bias removal) the baro's bias (navigators.tercom.fix_noise), with
+H the map-slope-weighted average of each sample's INS error run back from the fix along the INS's specific
+force and attitude (navigators.filters.ins_trn_batch_error: the velocity error times the slope-weighted lag,
+the attitude and bias errors through the specific force).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS. The error
 model's priors and noise come from the IMU's specification where it gives more than the settings
 (apply_imu_spec in ins_trn_propagation.py, navigators.core.imu_spec: bias priors and Gauss-Markov walks,
-the x / y gyro biases the 13 states do not carry as a tilt random walk, turns' misalignment and scale
-factor).
+the x / y gyro biases the 13 states do not carry as a tilt random walk matched at the fix period, turns'
+misalignment and scale factor per radian of the heading's excursion, turn_angle).
 
 GNSS (loosely coupled, every valid fix of SensorFrames.gnss, at its own time): z = INS - GNSS, north and
 east position (m) and NED velocity (m/s), H selects states 0, 1, 3, 4, 5, R = diag(gnss_sigma_h_m^2 x 2,

@@ -37,8 +37,8 @@ class InsTrnSettings(Settings):
     cell_m: float = setting(5.0, "TERCOM search cell", "m", gt=0.0)
     fix_sigma_m: float = setting(10.0, "TERCOM fix noise per axis (Table 2)", "m", gt=0.0)
     fix_noise: str = setting("fixed", "TERCOM fix covariance: 'fixed' (fix_sigma_m per axis) or 'batch' "
-                                      "(opt-in: the MAD shift's from the batch's residuals and map slopes, "
-                                      "tercom.fix_noise)", choices=FIX_NOISE_MODELS)
+                                      "(ins_tercom's default: the MAD shift's from the batch's residuals and "
+                                      "map slopes, tercom.fix_noise)", choices=FIX_NOISE_MODELS)
     terrain_model_sigma_m: float | str = setting(
         "auto", "terrain a coarse map cannot hold between posts, in the 'batch' fix covariance (auto: from "
         "the map's spectrum)", "m", ge=0.0, also=("auto",))
