@@ -247,9 +247,11 @@ def test_imu_spec_names_the_preset_it_equals():
         ImuSpec(grade=1.0)
 
 
-def test_a_static_warning_keeps_ok_and_the_flag_withdraws_it():
+def test_a_static_warning_keeps_ok_and_the_flag_withdraws_it(monkeypatch):
     """Health.snapshot with the run-time check: a conservative warning (ok stays True) until the check flags,
-    then ok False with the check's message after the static warning."""
+    then ok False with the check's message after the static warning (a conservative cell put in MEASURED
+    here: the mechanism, whichever cells are measured so today)."""
+    monkeypatch.setitem(MEASURED, "ins_tercom", {**MEASURED["ins_tercom"], "navigation": CONSERVATIVE})
     warning = grade_warning(imu_spec({"grade": "navigation"}), 200.0, "ins_tercom")
     assert measured_direction("ins_tercom", "navigation") == CONSERVATIVE and "conservative" in warning
     check = ConsistencyCheck(window=2)
