@@ -12,11 +12,17 @@ flies), sampled every 0.1 s:
   steady bank);
 - a +400 m altitude step: the steady climb rate (climb_rate_max_mps, the median vertical speed while the
   altitude error exceeds 100 m) and then a -400 m step: the steady descent rate (descent_rate_max_mps);
+- over both altitude steps: the true airspeed's trade against the vertical speed (tas_per_vs, m/s of
+  airspeed lost per m/s of climb) and its first-order lag (tas_tau_s): the least-squares fit of
+  TAS = tas_mps - tas_per_vs x VS lagged by tas_tau_s (_fit_speed_trade). The autopilot holds the true
+  airspeed by power (ap/speed-mode 1, a PI on the throttle), but in a sustained climb or descent at the
+  vertical-speed limits the throttle saturates, so the aircraft slows in the climb and speeds up in the
+  descent (its energy: the power held at the limit cannot pay for the change of height);
 - the autopilot's own laws, read from the XML (not measured): turn-rate command = track error / 5 s
   (track_gain_per_s), vertical-speed command = 0.15 1/s x height error (height_gain_per_s), the
   vertical-speed target's rate limit 1.5 m/s^2 (vs_accel_max_mps2).
 
-The fast tier holds the true airspeed constant (the autopilot's TAS hold keeps it within ~1 m/s).
+The fast tier's true airspeed is tas_mps - tas_per_vs x (its vertical speed lagged by tas_tau_s).
 """
 
 from __future__ import annotations
@@ -40,6 +46,8 @@ class Envelope:
     track_gain_per_s: float
     height_gain_per_s: float
     vs_accel_max_mps2: float
+    tas_per_vs: float
+    tas_tau_s: float
 
 
 # Measured with measure_envelope() (JSBSim 1.3 King Air, see the module docstring); the command and the
@@ -54,7 +62,38 @@ KINGAIR_ENVELOPE = Envelope(
     track_gain_per_s=0.2,
     height_gain_per_s=0.15,
     vs_accel_max_mps2=1.5,
+    tas_per_vs=0.75,  # scripts/fast_tier_speed_trade.py, pooled over the reference routes
+    tas_tau_s=2.5,
 )
+
+
+def fit_speed_trade(runs, tas_mps: float, taus_s=np.arange(1.0, 20.01, 1.0)) -> tuple[float, float]:
+    """(tas_per_vs, tas_tau_s): the least-squares fit of TAS - tas_mps = -tas_per_vs x VS_lagged over the
+    rows of every run (arrays of rows: time s, true airspeed m/s, vertical speed m/s up, evenly spaced),
+    VS_lagged the vertical speed through a first-order lag of tas_tau_s (zero at each run's start), the lag
+    taken from the grid taus_s."""
+    best = (math.inf, 0.0, 0.0)
+    for tau in taus_s:
+        num = den = 0.0
+        lagged_runs = []
+        for x in runs:
+            x = np.asarray(x, float)
+            dt = float(x[1, 0] - x[0, 0])
+            a = 1.0 - math.exp(-dt / tau)
+            lagged = np.empty(x.shape[0])
+            acc = 0.0
+            for k in range(x.shape[0]):
+                acc += a * (x[k, 2] - acc)
+                lagged[k] = acc
+            d_tas = x[:, 1] - tas_mps
+            num += float(lagged @ d_tas)
+            den += float(lagged @ lagged)
+            lagged_runs.append((lagged, d_tas))
+        gain = -num / den
+        res = sum(float(np.sum((d + gain * g) ** 2)) for g, d in lagged_runs)
+        if res < best[0]:
+            best = (res, gain, float(tau))
+    return best[1], best[2]
 
 
 def measure_envelope(tas_mps: float = 85.0, h_msl_m: float = 1500.0) -> dict:
