@@ -21,7 +21,8 @@ import numpy as np
 
 
 def fly_truth(route_name: str, seeds) -> list[np.ndarray]:
-    """Per seed the full loop's truth along the route: rows (t s, true airspeed m/s, vertical speed m/s up)."""
+    """Per seed the full loop's truth along the route: rows (t s, true airspeed m/s, vertical speed m/s
+    up)."""
     from trn_env.env.fast import calibration as cal
     from trn_env.env.terrain_nav import TerrainNavEnv
 

@@ -104,16 +104,16 @@ FULL_LOOP_REFERENCE_BATCH = {
 # of FULL_LOOP_REFERENCE_BATCH), with the measured gap (docs/validation/fast_tier.md); the tests expect them
 # to fail, so one that comes back into calibration is reported.
 OUT_OF_CALIBRATION = {
-    ("jacksboro_sw_ne", "mean_m"): "-27 %: the fast tier's error is lower (-17 % on seeds 0-31)",
-    ("jacksboro_sw_ne", "p90_m"): "-35 %: the fast tier's error is lower (-19 % on seeds 0-31)",
+    ("jacksboro_sw_ne", "p90_m"): "-30 %: the fast tier arrives after the route's last fix more often "
+                                  "(its arrival times spread half as wide as the full loop's)",
 }
 OUT_OF_CALIBRATION_BATCH = {
-    ("basin_straight", "mean_m"): "-37 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("basin_straight", "mean_m"): "-38 %: the full loop's batch fix model (slope-weighted H) misses more",
     ("basin_straight", "p90_m"): "-48 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("basin_round", "mean_m"): "-29 %: smaller errors mid-route and earlier arrivals than the full loop",
+    ("basin_round", "mean_m"): "-26 %: smaller errors mid-route and earlier arrivals than the full loop",
     ("jacksboro_sw_ne", "mean_m"): "-29 %: after each fix the fast tier's error is lower",
-    ("jacksboro_sw_ne", "p90_m"): "-35 %: after each fix the fast tier's error is lower",
-    ("jacksboro_flat_patch", "p90_m"): "+35 %: the fast tier's error grows more over the flat patch",
+    ("jacksboro_sw_ne", "p90_m"): "-33 %: after each fix the fast tier's error is lower",
+    ("jacksboro_flat_patch", "p90_m"): "+38 %: the fast tier's error grows more over the flat patch",
 }
 # the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
 FAST_SEEDS = 256

@@ -4,7 +4,8 @@ numba call per decision.
 Per aircraft, every `dt_s` (1 s, trn_env.env.fast.kernel_params.DT_S) of a decision:
 
 - guidance on the ESTIMATE (as TerrainNav-v0): in pursuit mode the commanded track is the goal's bearing
-  from the estimate plus the held offset (a fraction of asin(d omega / v), v the held airspeed, trn_env.env.task); the height
+  from the estimate plus the held offset (a fraction of asin(d omega / v), v the held airspeed,
+  trn_env.env.task); the height
   above ground is flown on the estimated height minus the MAP under the estimate;
 - the autopilot's laws (aircraft/kingair/Systems/kingair_autopilot.xml, figures in
   trn_env.env.fast.envelope): turn-rate command = track error x 0.2 1/s -> coordinated bank
@@ -13,7 +14,8 @@ Per aircraft, every `dt_s` (1 s, trn_env.env.fast.kernel_params.DT_S) of a decis
   error limited to the measured climb and descent rates, its target moving at most 1.5 m/s^2;
 - true airspeed: the held one (the scenario's) less tas_per_vs x the vertical speed, through a first-order
   lag of tas_tau_s (trn_env.env.fast.envelope: the TAS hold's throttle saturates in sustained climbs and
-  descents, so the aircraft trades speed for height); ground velocity = air velocity + wind: the scenario's wind layers (linear in
+  descents, so the aircraft trades speed for height); ground velocity = air velocity + wind: the
+  scenario's wind layers (linear in
   altitude between layers, constant beyond) plus turbulence as a first-order Gauss-Markov gust per
   horizontal axis (std and correlation time in trn_env.env.fast.kernel_params.TURBULENCE_*);
 - position on the WGS84 ellipsoid (meridian and prime-vertical radii at the aircraft);
@@ -40,6 +42,7 @@ from trn_env.env.fast.state import (
     BARO,
     COLLISION,
     DIST_FLOWN,
+    DTAS,
     END,
     EP_E,
     EP_N,
@@ -62,7 +65,6 @@ from trn_env.env.fast.state import (
     TRK_CMD,
     VS,
     VS_TGT,
-    DTAS,
     H,
     T,
 )
