@@ -14,7 +14,9 @@ Per aircraft, every `dt_s` (1 s, trn_env.env.fast.kernel_params.DT_S) of a decis
   error limited to the measured climb and descent rates, its target moving at most 1.5 m/s^2;
 - true airspeed: the held one (the scenario's) less tas_per_vs x the vertical speed, through a first-order
   lag of tas_tau_s (trn_env.env.fast.envelope: the TAS hold's throttle saturates in sustained climbs and
-  descents, so the aircraft trades speed for height); ground velocity = air velocity + wind: the
+  descents, so the aircraft trades speed for height), plus a slow wander (first-order Gauss-Markov,
+  tas_wander_mps and tas_wander_tau_s: the along-track speed variation from seed to seed that the full
+  loop shows beyond the gusts below); ground velocity = air velocity + wind: the
   scenario's wind layers (linear in
   altitude between layers, constant beyond) plus turbulence as a first-order Gauss-Markov gust per
   horizontal axis (std and correlation time in trn_env.env.fast.kernel_params.TURBULENCE_*);
@@ -61,6 +63,7 @@ from trn_env.env.fast.state import (
     OFFSET_FRAC,
     PSI,
     T_LAST_FIX,
+    TAS_WANDER,
     TIME_LIMIT,
     TRK_CMD,
     VS,
@@ -96,8 +99,10 @@ WGS84_E2 = 6.69437999014e-3
     FP_SAMPLE_DT,
     FP_TAS_PER_VS,
     FP_TAS_TAU,
-) = range(20)
-N_FLIGHT_PARAMS = 20
+    FP_WANDER_SIGMA,
+    FP_WANDER_TAU,
+) = range(22)
+N_FLIGHT_PARAMS = 22
 CHUNK_AIRCRAFT = 8  # aircraft per chunk a thread takes from the parallel loops (numba.parallel_chunksize)
 
 
@@ -179,6 +184,8 @@ def fly_decision(
     dt = fp[FP_DT]
     v0 = fp[FP_TAS]
     tau_v = 1.0 - math.exp(-dt / fp[FP_TAS_TAU])
+    wander_a = math.exp(-dt / fp[FP_WANDER_TAU])
+    wander_b = fp[FP_WANDER_SIGMA] * math.sqrt(1.0 - wander_a * wander_a)
     tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])
     turb_a = math.exp(-dt / fp[FP_TURB_TAU])
     turb_b = fp[FP_TURB_SIGMA] * math.sqrt(1.0 - turb_a * turb_a)
@@ -204,7 +211,7 @@ def fly_decision(
                 X[i, END] = OFF_MAP
                 break
             # ---- lateral: ground track hold
-            v = v0 + X[i, DTAS]
+            v = v0 + X[i, DTAS] + X[i, TAS_WANDER]
             wn, we = wind_at(h, wind_alt, wind_n, wind_e)
             wn += X[i, GUST_N]
             we += X[i, GUST_E]
@@ -225,6 +232,7 @@ def fly_decision(
             X[i, VS_TGT] += min(lim_dv, max(-lim_dv, dv))
             X[i, VS] = X[i, VS_TGT]
             X[i, DTAS] += (-fp[FP_TAS_PER_VS] * X[i, VS] - X[i, DTAS]) * tau_v
+            X[i, TAS_WANDER] = wander_a * X[i, TAS_WANDER] + wander_b * frng.normal(state, i)
             # ---- position (trapezoid on the ground velocity)
             psi1 = X[i, PSI]
             vgn = 0.5 * (vgn + v * math.cos(psi1) + wn)

@@ -36,7 +36,9 @@ N_NIS, DEGRADED = 60, 61
 # the true airspeed's departure from the held one (m/s): the speed traded against the vertical speed
 # (envelope.KINGAIR_ENVELOPE.tas_per_vs), lagged
 DTAS = 62
-N_STATE = 63
+# the true airspeed's slow wander (m/s, first-order Gauss-Markov: envelope.KINGAIR_ENVELOPE.tas_wander_mps)
+TAS_WANDER = 63
+N_STATE = 64
 
 # END codes (0 = running); names in END_NAMES
 END_NAMES = ("", "arrived", "terrain_collision", "off_map", "time_limit", "goal", "diverged")
