@@ -69,10 +69,11 @@ KINGAIR_ENVELOPE = Envelope(
     track_gain_per_s=0.2,
     height_gain_per_s=0.15,
     vs_accel_max_mps2=1.5,
-    tas_per_vs=0.73,  # scripts/fast_tier_speed_trade.py --seeds 2 (three routes), pooled
-    tas_tau_s=2.0,
-    tas_wander_mps=1.15,  # the same script, --seeds 4 (three routes)
-    tas_wander_tau_s=34.0,
+    # scripts/fast_tier_speed_trade.py --seeds 4 --routes jacksboro_sw_ne basin_west jacksboro_flat_patch
+    tas_per_vs=0.74,
+    tas_tau_s=2.5,
+    tas_wander_mps=1.28,
+    tas_wander_tau_s=37.0,
 )
 
 
