@@ -96,7 +96,7 @@ FULL_LOOP_REFERENCE = {
 FULL_LOOP_REFERENCE_BATCH = {
     "basin_straight": {"mean_m": 247.9, "p90_m": 504.3, "n": 64},
     "basin_round": {"mean_m": 22.0, "p90_m": 36.3, "n": 64},
-    "basin_west": {"mean_m": 17.0, "p90_m": 30.6, "n": 64},
+    "basin_west": {"mean_m": 18.0, "p90_m": 29.8, "n": 64},
     "jacksboro_sw_ne": {"mean_m": 5.1, "p90_m": 10.2, "n": 64},
     "jacksboro_flat_patch": {"mean_m": 6.3, "p90_m": 10.3, "n": 64},
 }
