@@ -16,9 +16,9 @@ Per aircraft, every `dt_s` (1 s, trn_env.env.fast.kernel_params.DT_S) of a decis
   lag of tas_tau_s (trn_env.env.fast.envelope: the TAS hold's throttle saturates in sustained climbs and
   descents, so the aircraft trades speed for height), plus a slow wander (first-order Gauss-Markov,
   tas_wander_mps and tas_wander_tau_s: the along-track speed variation from seed to seed that the full
-  loop shows beyond the gusts below); ground velocity = air velocity + wind: the
-  scenario's wind layers (linear in
-  altitude between layers, constant beyond) plus turbulence as a first-order Gauss-Markov gust per
+  loop shows beyond the gusts below, in light turbulence; none in calm air); ground velocity = air
+  velocity + wind: the scenario's wind layers (linear in altitude between layers, constant beyond) plus
+  turbulence as a first-order Gauss-Markov gust per
   horizontal axis (std and correlation time in trn_env.env.fast.kernel_params.TURBULENCE_*);
 - position on the WGS84 ellipsoid (meridian and prime-vertical radii at the aircraft);
 - navigator (trn_env.env.fast.navigator): INS error and covariance propagation every step, a 1 Hz sample

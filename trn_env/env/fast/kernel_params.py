@@ -88,7 +88,8 @@ def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float
     fp[dyn.FP_SAMPLE_DT] = 1.0
     fp[dyn.FP_TAS_PER_VS] = env_.tas_per_vs
     fp[dyn.FP_TAS_TAU] = env_.tas_tau_s
-    fp[dyn.FP_WANDER_SIGMA] = env_.tas_wander_mps
+    # the wander was measured in the scenarios' light turbulence: none in calm air
+    fp[dyn.FP_WANDER_SIGMA] = env_.tas_wander_mps if sigma_t > 0.0 else 0.0
     fp[dyn.FP_WANDER_TAU] = env_.tas_wander_tau_s
     imu = asdict(sc.sensors.imu if sc.sensors.imu is not None else ImuConfig())
     outages = sc.gnss.outages
