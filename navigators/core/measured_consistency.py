@@ -37,7 +37,7 @@ MEASURED: dict[str, dict[str, str]] = {
     "pmf": {"consumer": OVERCONFIDENT},
     "pf": {"consumer": OVERCONFIDENT},
     "rbpf": {"tactical": OVERCONFIDENT, "consumer": OVERCONFIDENT},
-    "acq_track": {"navigation": CONSERVATIVE, "consumer": OVERCONFIDENT},
+    "acq_track": {},
 }
 
 _MEANING = {
