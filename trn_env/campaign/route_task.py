@@ -225,33 +225,55 @@ def evaluate(policies: list[dict], terrain: str, seeds, tiers=("full", "fast"),
     return rows
 
 
-def select_checkpoint(checkpoints, terrain: str, seeds, env_overrides: dict | None = None) -> dict:
+# a validation episode "loses the fix" when it does not arrive or its true miss exceeds this (m): a kept
+# TERCOM fix ends within tens of metres, a lost one (a false fix after a featureless stretch) hundreds
+FIX_LOSS_MISS_M = 100.0
+SELECTION_RULES = ("success", "fix_loss")
+
+
+def select_checkpoint(checkpoints, terrain: str, seeds, env_overrides: dict | None = None,
+                      rule: str = "success") -> dict:
     """Model selection without the held-out goals: every checkpoint (RLlib checkpoint folders) flies the fast
     tier's validation episodes (`evaluate_fast(..., drawn_goals=True)` over `seeds`, which should be
     `route_task.VALIDATION_SEEDS`: goals drawn from the training distribution, never a held-out goal, seeds
-    disjoint from the evaluation's); per checkpoint the success rate and the mean, median and 90th-percentile
-    true miss over the arrived episodes. The best: the highest success rate, then the lowest mean miss.
-    Returns {"rows": [...] per checkpoint, "best": its row}. ValueError on no checkpoints."""
+    disjoint from the evaluation's); per checkpoint the success rate, the fix-loss rate (episodes not arrived
+    or missing by more than FIX_LOSS_MISS_M) and the mean, median and 90th-percentile true miss over the
+    arrived episodes. The best by `rule` (`best_checkpoint`). Returns {"rows": [...] per checkpoint, "best":
+    its row, "rule": rule}. ValueError on no checkpoints or an unknown rule."""
     checkpoints = [str(c) for c in checkpoints]
     if not checkpoints:
         raise ValueError("checkpoints: none given")
+    if rule not in SELECTION_RULES:
+        raise ValueError(f"rule must be one of {SELECTION_RULES}, got {rule!r}")
     out = []
     for c in checkpoints:
         rs = evaluate_fast([{"label": "ppo", "kind": "rllib", "checkpoint": c}], terrain, seeds,
                            env_overrides, drawn_goals=True)
         miss = np.array([r["true_miss_m"] for r in rs if r["arrived"]])
+        lost = sum((not r["arrived"]) or r["true_miss_m"] > FIX_LOSS_MISS_M for r in rs)
         out.append({"checkpoint": c, "episodes": len(rs),
                     "success": float(np.mean([r["arrived"] for r in rs])),
+                    "fix_loss_rate": lost / len(rs),
                     "miss_mean_m": float(miss.mean()) if miss.size else math.nan,
                     "miss_median_m": float(np.median(miss)) if miss.size else math.nan,
                     "miss_p90_m": float(np.percentile(miss, 90)) if miss.size else math.nan})
-    return {"rows": out, "best": best_checkpoint(out)}
+    return {"rows": out, "best": best_checkpoint(out, rule), "rule": rule}
 
 
-def best_checkpoint(rows: list[dict]) -> dict:
-    """The row with the highest "success", then the lowest finite "miss_mean_m" (the first of equals)."""
-    return min(rows, key=lambda r: (-r["success"], r["miss_mean_m"] if math.isfinite(r["miss_mean_m"])
-                                    else math.inf))
+def best_checkpoint(rows: list[dict], rule: str = "success") -> dict:
+    """The pick (the first of equals). Rule "success": the highest "success", then the lowest finite
+    "miss_mean_m". Rule "fix_loss": the lowest "fix_loss_rate" (not arrived, or a miss above
+    FIX_LOSS_MISS_M: the rare lost fixes that decide a mean over tens of episodes), then the lowest finite
+    "miss_mean_m"."""
+    if rule not in SELECTION_RULES:
+        raise ValueError(f"rule must be one of {SELECTION_RULES}, got {rule!r}")
+
+    def mean(r):
+        return r["miss_mean_m"] if math.isfinite(r["miss_mean_m"]) else math.inf
+
+    if rule == "fix_loss":
+        return min(rows, key=lambda r: (r["fix_loss_rate"], mean(r)))
+    return min(rows, key=lambda r: (-r["success"], mean(r)))
 
 
 # ------------------------------------------------------------------------------------------ statistics
