@@ -9,8 +9,11 @@ whether the fast tier loses it there too).
         --goal 2 --tier fast --seeds 1000-1255 --out trace_fast.json
 
 Writes OUT (one record per episode: seed, termination, true miss, and the per-decision lists) and prints
-per episode its termination, miss and the decision at which the true error first exceeded 100 m. Exit 2 on
-bad arguments (unknown policy, goal index out of range, missing checkpoint, malformed seeds).
+per episode its termination, miss and the decision at which the true error first exceeded 100 m, then the
+fix losses (not arrived, or a miss above 100 m) by the worst terrain information met along the route.
+`--sigma-scale k` (a probe of the policy, not of the env): a PPO policy sees the navigator's horizontal
+sigma (observations 8, 9) multiplied by k. Exit 2 on bad arguments (unknown policy, goal index out of
+range, missing checkpoint, malformed seeds, a sigma scale not > 0).
 """
 
 from __future__ import annotations
@@ -49,7 +52,34 @@ def _record(obs, act, info, i=None) -> dict:
             "nav_ok": bool(g("nav_ok"))}
 
 
-def trace_full(policy_spec: dict, terrain: str, goal: int, seeds: list[int]) -> list[dict]:
+INFO_BINS = ((0.0, 1.0), (1.0, 1.5), (1.5, 2.0), (2.0, math.inf))
+
+
+class SigmaScaled:
+    """A policy whose observed horizontal sigma (observations 8, 9: log10(1 + sigma m)) is multiplied by
+    `k` before it acts (how much its route depends on the tier's sigma)."""
+
+    def __init__(self, policy, k: float):
+        self.policy, self.k = policy, float(k)
+
+    def predict(self, obs, *args, **kwargs):
+        o = np.array(obs, np.float64, copy=True)
+        o[..., 8:10] = np.log10(1.0 + self.k * (10.0 ** o[..., 8:10] - 1.0))
+        return self.policy.predict(o.astype(np.float32), *args, **kwargs)
+
+
+def losses_by_info(episodes: list[dict], miss_m: float = 100.0) -> list[tuple[int, int]]:
+    """(lost, episodes) per INFO_BINS bin of the largest terrain information under the estimate over an
+    episode's decisions; lost = not arrived or a true miss above miss_m."""
+    out = []
+    for lo, hi in INFO_BINS:
+        sel = [e for e in episodes if lo <= max(d["info_here"] for d in e["decisions"]) < hi]
+        out.append((sum(e["termination"] != "arrived" or e["true_miss_m"] > miss_m for e in sel), len(sel)))
+    return out
+
+
+def trace_full(policy_spec: dict, terrain: str, goal: int, seeds: list[int], sigma_scale: float = 1.0
+               ) -> list[dict]:
     """Per-decision records of the policy on held-out goal `goal` in TerrainNav-v0, one episode per seed."""
     from trn_env.campaign.route_task import _make
     from trn_env.env import route_task
@@ -57,6 +87,8 @@ def trace_full(policy_spec: dict, terrain: str, goal: int, seeds: list[int]) -> 
 
     env = TerrainNavEnv(**route_task.env_kwargs(terrain))
     pol = _make(policy_spec, env, route_task.straight_agl_m(terrain))
+    if sigma_scale != 1.0:
+        pol = SigmaScaled(pol, sigma_scale)
     g = tuple(env.held_out_goals_deg[goal])
     out = []
     try:
@@ -80,8 +112,8 @@ def trace_full(policy_spec: dict, terrain: str, goal: int, seeds: list[int]) -> 
     return out
 
 
-def trace_fast(policy_spec: dict, terrain: str, goal: int, seeds: list[int],
-               env_overrides: dict | None = None) -> list[dict]:
+def trace_fast(policy_spec: dict, terrain: str, goal: int, seeds: list[int], sigma_scale: float = 1.0
+               ) -> list[dict]:
     """The same in TerrainNavFast-v0: one vector env, a sub-env per seed, each first episode kept."""
     import gymnasium as gym
 
@@ -96,10 +128,11 @@ def trace_fast(policy_spec: dict, terrain: str, goal: int, seeds: list[int],
     n = len(seeds)
     agl = route_task.straight_agl_m(terrain)
     venv = gym.make_vec(FAST_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        **{**route_task.fast_tier_kwargs(kw), **(env_overrides or {})})
+                        **route_task.fast_tier_kwargs(kw))
     obs, _ = venv.reset(seed=seeds, options={"goal_deg": np.array([g] * n)})
     if policy_spec["kind"] == "rllib":
         shared = _make(policy_spec, full, agl)
+        shared = SigmaScaled(shared, sigma_scale) if sigma_scale != 1.0 else shared
         pols = None
     else:
         pols = [_make(policy_spec, goal_view(full, g), agl) for _ in seeds]
@@ -137,6 +170,8 @@ def main(argv=None) -> int:
     p.add_argument("--tier", choices=("full", "fast"), required=True)
     p.add_argument("--seeds", default="1000-1009", help="e.g. 1000-1009 or 1000,1006")
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--sigma-scale", type=float, default=1.0,
+                   help="a ppo policy sees the navigator's horizontal sigma times this (a probe)")
     args = p.parse_args(argv)
     try:
         seeds = _seeds(args.seeds)
@@ -146,6 +181,9 @@ def main(argv=None) -> int:
     if not 0 <= args.goal <= 4:
         print(f"--goal must be in 0..4, got {args.goal}", file=sys.stderr)
         return 2
+    if not (args.sigma_scale > 0 and math.isfinite(args.sigma_scale)):
+        print(f"--sigma-scale must be a finite number > 0, got {args.sigma_scale}", file=sys.stderr)
+        return 2
     if args.policy == "ppo" and (args.checkpoint is None or not args.checkpoint.is_dir()):
         print(f"--checkpoint: no checkpoint folder {args.checkpoint}", file=sys.stderr)
         return 2
@@ -153,14 +191,20 @@ def main(argv=None) -> int:
             "planner": {"label": "planner", "kind": "planner", "config": {"weight": 3.0}},
             "ppo": {"label": "ppo", "kind": "rllib", "checkpoint": str(args.checkpoint)}}[args.policy]
     fn = trace_full if args.tier == "full" else trace_fast
-    eps = fn(spec, args.terrain, args.goal, seeds)
+    eps = fn(spec, args.terrain, args.goal, seeds, args.sigma_scale if args.policy == "ppo" else 1.0)
     args.out.write_text(json.dumps({"policy": args.policy, "checkpoint": str(args.checkpoint),
-                                    "goal": args.goal, "tier": args.tier, "episodes": eps}, indent=0))
+                                    "goal": args.goal, "tier": args.tier, "sigma_scale": args.sigma_scale,
+                                    "episodes": eps}, indent=0))
     for e in eps:
         errs = [d["true_err_m"] for d in e["decisions"]]
         first = next((k for k, x in enumerate(errs) if x > 100.0), None)
         print(f"seed {e['seed']}: {e['termination']}, miss {e['true_miss_m']:.1f} m, {len(errs)} decisions, "
               f"first > 100 m at decision {first}, max {max(errs):.0f} m")
+    bins = losses_by_info(eps)
+    lost = sum(x for x, _ in bins)
+    print(f"lost (not arrived or miss > 100 m): {lost} of {len(eps)} ({100 * lost / len(eps):.1f} %); by the "
+          "largest terrain information along the route " + ", ".join(
+              f"[{lo:g}, {hi:g}): {x}/{n}" for (lo, hi), (x, n) in zip(INFO_BINS, bins, strict=True)))
     return 0
 
 

@@ -260,10 +260,12 @@ def test_trace_script_matches_the_evaluation_and_refuses_bad_arguments(tmp_path,
 
     if "trn_env/TerrainNavFast-v0" not in gym.registry:
         pytest.skip("the fast tier is not installed")
-    spec = importlib.util.spec_from_file_location("route_task_trace", ROOT / "scripts" / "route_task_trace.py")
+    path = ROOT / "scripts" / "route_task_trace.py"
+    spec = importlib.util.spec_from_file_location("route_task_trace", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     for bad, name in ((["--goal", "5"], "--goal"), (["--seeds", "a-b"], "--seeds"),
+                      (["--sigma-scale", "0"], "--sigma-scale"), (["--sigma-scale", "nan"], "--sigma-scale"),
                       (["--policy", "ppo", "--checkpoint", str(tmp_path / "none")], "--checkpoint")):
         args = ["--policy", "straight", "--goal", "2", "--tier", "fast", "--out", str(tmp_path / "t.json")]
         assert mod.main([*args, *bad]) == 2
@@ -281,3 +283,17 @@ def test_trace_script_matches_the_evaluation_and_refuses_bad_arguments(tmp_path,
         t = [d["t_s"] for d in e["decisions"]]
         assert all(b > a for a, b in zip(t, t[1:], strict=False)) and all(d["offset"] == 0.0
                                                                           for d in e["decisions"])
+    # losses by the largest terrain information: counted by hand on three made-up episodes
+    def ep(term, miss, infos):
+        return {"termination": term, "true_miss_m": miss, "decisions": [{"info_here": x} for x in infos]}
+    made = [ep("arrived", 20.0, [0.5, 0.9]), ep("arrived", 300.0, [0.6, 2.5]),
+            ep("time_limit", math.nan, [1.2])]
+    assert mod.losses_by_info(made) == [(0, 1), (1, 1), (0, 0), (1, 1)]
+
+    class Echo:
+        def predict(self, obs, *a, **k):
+            return obs, None
+    o = np.zeros(32, np.float32)
+    o[8:11] = np.log10(1.0 + np.array([9.0, 99.0, 4.0]))
+    seen = mod.SigmaScaled(Echo(), 2.0).predict(o)[0]
+    assert np.allclose(10.0 ** seen[8:10] - 1.0, [18.0, 198.0], rtol=1e-5) and seen[10] == o[10]
