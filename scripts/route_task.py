@@ -28,9 +28,9 @@ with N a multiple of it, and final) flies `--validation-seeds` fast-tier episode
 route_task.VALIDATION_SEEDS, goals drawn by the env from the training distribution, never a held-out goal);
 `--rule success`: the one with the highest success rate, then the lowest mean true miss, is the pick;
 `--rule fix_loss`: the lowest fix-loss rate (episodes not arrived or missing by more than 100 m), then the
-lowest mean true miss; writes
-OUT/selection.json (every checkpoint's figures, the pick, the CPU seconds it took) and prints them. Evaluate
-the pick with `evaluate --checkpoint`.
+lowest mean true miss; writes OUT/selection.json (every checkpoint's figures, the pick, the CPU seconds it
+took) and OUT/selection.png (the figures against the iteration), and prints them. Evaluate the pick with
+`evaluate --checkpoint`.
 """
 
 from __future__ import annotations
@@ -211,6 +211,8 @@ def select(args, kw: dict) -> dict:
     text = "\n".join(lines) + (f"\n\npick ({args.rule}): {res['best']['checkpoint']} "
                                f"({res['cpu_s']:.0f} CPU s)\n")
     (args.out / "selection.json").write_text(json.dumps(res, indent=1))
+    rt.plot_selection(args.out / "selection.png", res, f"{args.out.name}: validation, {len(seeds)} fast-tier "
+                      f"episodes per checkpoint; pick ({args.rule}) {Path(res['best']['checkpoint']).name}")
     print(text)
     return res
 

@@ -237,6 +237,7 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
                      "--max-episode-s", "60", "--rule", "fix_loss"]) == 0
     sel = json.loads((out / "selection.json").read_text())
     assert sel["rule"] == "fix_loss" and sel["rows"][0]["episodes"] == 4
+    assert (out / "selection.png").is_file()
     assert sel["rows"][0]["fix_loss_rate"] >= 1.0 - sel["rows"][0]["success"]   # not arrived = lost
 
 

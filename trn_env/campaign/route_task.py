@@ -437,3 +437,36 @@ def plot_learning_curve(path: str | Path, history: list[dict], title: str = "") 
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def plot_selection(path: str | Path, selection: dict, title: str = "") -> None:
+    """The validation figures of `select_checkpoint`'s rows against the checkpoint's iteration (`iter_N`;
+    `final` after the last): fix-loss rate and success rate (left), mean and median true miss (right), the
+    pick marked; into a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = selection["rows"]
+    names = [Path(r["checkpoint"]).name for r in rows]
+    its = [int(n[5:]) if n.startswith("iter_") and n[5:].isdigit() else None for n in names]
+    last = max([i for i in its if i is not None], default=0)
+    x = [i if i is not None else last + 10 for i in its]
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 3.5), dpi=100, sharex=True)
+    ax.plot(x, [100 * r["fix_loss_rate"] for r in rows], ".-", label="fix lost (not arrived or > 100 m)")
+    ax.plot(x, [100 * (1 - r["success"]) for r in rows], ".-", label="not arrived")
+    ax.set_ylabel("% of validation episodes")
+    ax2.plot(x, [r["miss_mean_m"] for r in rows], ".-", label="mean")
+    ax2.plot(x, [r["miss_median_m"] for r in rows], ".-", label="median")
+    ax2.set_ylabel("true miss over the arrived (m)")
+    k = rows.index(selection["best"])
+    for a in (ax, ax2):
+        a.axvline(x[k], color="k", lw=0.8, ls=":")
+        a.set_xlabel("training iteration (final at the right)")
+        a.grid(alpha=0.3)
+        a.legend(fontsize=8)
+    fig.suptitle(title or f"validation ({rows[0]['episodes']} episodes per checkpoint), pick {names[k]}")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
