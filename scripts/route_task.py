@@ -9,6 +9,7 @@ PPO in both env tiers on the same held-out goals and seeds.
     python scripts/route_task.py evaluate --out out/route_task --policies ppo --merge-rows out/b/rows.json
     python scripts/route_task.py all --out /tmp/rt --iterations 1 --seeds 1 --max-episode-s 60   # tiny
     python scripts/route_task.py select --out out/route_task --every 50      # model selection (no held-out)
+    python scripts/route_task.py select --out out/rt --every 50 --rule fix_loss --validation-seeds 2000
 
 train: RLlib PPO (the `rllib` extra) on the task (trn_env.env.route_task: terrain `--terrain`, start and
 goal regions, training goals outside the held-out radius) on TerrainNavFast-v0 when it is registered, else on
@@ -25,9 +26,11 @@ the table. Bad arguments: a message and exit 2, nothing written.
 select: model selection without the held-out goals: every `--every`-th checkpoint of OUT/checkpoints (iter_N
 with N a multiple of it, and final) flies `--validation-seeds` fast-tier episodes (seeds
 route_task.VALIDATION_SEEDS, goals drawn by the env from the training distribution, never a held-out goal);
-the one with the highest success rate, then the lowest mean true miss, is the pick; writes
-OUT/selection.json (every checkpoint's figures, the pick, the CPU seconds it took) and prints them. Evaluate
-the pick with `evaluate --checkpoint`.
+`--rule success`: the one with the highest success rate, then the lowest mean true miss, is the pick;
+`--rule fix_loss`: the lowest fix-loss rate (episodes not arrived or missing by more than 100 m), then the
+lowest mean true miss; writes OUT/selection.json (every checkpoint's figures, the pick, the CPU seconds it
+took) and OUT/selection.png (the figures against the iteration), and prints them. Evaluate the pick with
+`evaluate --checkpoint`.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ import sys
 from pathlib import Path
 
 POLICIES = ("straight", "planner", "random", "ppo")
-VALIDATION_SEEDS = range(100_000, 100_500)      # = route_task.VALIDATION_SEEDS (checked in _check)
+VALIDATION_SEEDS = range(100_000, 102_000)      # = route_task.VALIDATION_SEEDS (checked in _check)
 
 
 def parse(argv):
@@ -90,8 +93,13 @@ def parse(argv):
                    help="policies to evaluate (comma separated, of straight, planner, random, ppo)")
     p.add_argument("--every", type=int, default=10,
                    help="select: consider the checkpoints iter_N with N a multiple of this (and final)")
-    p.add_argument("--validation-seeds", type=int, default=len(VALIDATION_SEEDS),
-                   help=f"select: validation episodes per checkpoint (at most {len(VALIDATION_SEEDS)})")
+    p.add_argument("--validation-seeds", type=int, default=500,
+                   help=f"select: validation episodes per checkpoint (default 500, at most "
+                        f"{len(VALIDATION_SEEDS)})")
+    p.add_argument("--rule", choices=("success", "fix_loss"), default="success",
+                   help="select: the pick's rule: the highest success rate, then the lowest mean miss "
+                        "(success), or the lowest fix-loss rate (not arrived, or a miss above 100 m), then "
+                        "the lowest mean miss (fix_loss)")
     p.add_argument("--merge-rows", type=Path, nargs="*", default=[],
                    help="rows.json files of earlier evaluations (same terrain and seeds) to summarise with "
                         "this one's; this run's rows replace theirs for the same tier, policy, goal and seed")
@@ -191,15 +199,20 @@ def select(args, kw: dict) -> dict:
 
     cpu0, wall0 = time.process_time(), time.time()
     seeds = list(route_task.VALIDATION_SEEDS[:args.validation_seeds])
-    res = rt.select_checkpoint(args.select_t, args.terrain, seeds, {"max_episode_s": kw["max_episode_s"]})
+    res = rt.select_checkpoint(args.select_t, args.terrain, seeds, {"max_episode_s": kw["max_episode_s"]},
+                               rule=args.rule)
     res.update(terrain=args.terrain, seeds=[seeds[0], seeds[-1]], n_seeds=len(seeds),
                cpu_s=time.process_time() - cpu0, wall_s=time.time() - wall0)
-    lines = ["| checkpoint | success | miss mean (m) | median (m) | p90 (m) |", "|---|---|---|---|---|"]
+    lines = ["| checkpoint | success | fix-loss rate | miss mean (m) | median (m) | p90 (m) |",
+             "|---|---|---|---|---|---|"]
     for r in res["rows"]:
-        lines.append(f"| {Path(r['checkpoint']).name} | {r['success']:.3f} | {r['miss_mean_m']:.1f} | "
-                     f"{r['miss_median_m']:.1f} | {r['miss_p90_m']:.1f} |")
-    text = "\n".join(lines) + f"\n\npick: {res['best']['checkpoint']} ({res['cpu_s']:.0f} CPU s)\n"
+        lines.append(f"| {Path(r['checkpoint']).name} | {r['success']:.3f} | {r['fix_loss_rate']:.4f} | "
+                     f"{r['miss_mean_m']:.1f} | {r['miss_median_m']:.1f} | {r['miss_p90_m']:.1f} |")
+    text = "\n".join(lines) + (f"\n\npick ({args.rule}): {res['best']['checkpoint']} "
+                               f"({res['cpu_s']:.0f} CPU s)\n")
     (args.out / "selection.json").write_text(json.dumps(res, indent=1))
+    rt.plot_selection(args.out / "selection.png", res, f"{args.out.name}: validation, {len(seeds)} fast-tier "
+                      f"episodes per checkpoint; pick ({args.rule}) {Path(res['best']['checkpoint']).name}")
     print(text)
     return res
 

@@ -98,7 +98,7 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
     assert not out.exists()                                  # nothing written
     sel = ["select", "--out", str(out)]
     for bad, name in ((["--every", "0"], "--every"), (["--validation-seeds", "0"], "--validation-seeds"),
-                      (["--validation-seeds", "501"], "--validation-seeds"), ([], "no checkpoints")):
+                      (["--validation-seeds", "2001"], "--validation-seeds"), ([], "no checkpoints")):
         assert mod.main([*sel, *bad]) == 2
         assert name in capsys.readouterr().err
     assert not out.exists()
@@ -118,6 +118,19 @@ def test_checkpoint_pick_prefers_success_then_the_lower_mean_miss():
             {"checkpoint": "e", "success": 0.0, "miss_mean_m": math.nan}]
     assert rt.best_checkpoint(rows)["checkpoint"] == "c"
     assert rt.best_checkpoint(rows[-1:] + rows[:1])["checkpoint"] == "a"
+
+
+def test_fix_loss_pick_prefers_the_fewer_lost_fixes_then_the_lower_mean_miss():
+    rows = [{"checkpoint": "a", "success": 1.0, "fix_loss_rate": 0.03, "miss_mean_m": 15.0},
+            {"checkpoint": "b", "success": 0.99, "fix_loss_rate": 0.02, "miss_mean_m": 30.0},
+            {"checkpoint": "c", "success": 0.99, "fix_loss_rate": 0.02, "miss_mean_m": 25.0},
+            {"checkpoint": "d", "success": 0.0, "fix_loss_rate": 1.0, "miss_mean_m": math.nan}]
+    assert rt.best_checkpoint(rows, "fix_loss")["checkpoint"] == "c"
+    assert rt.best_checkpoint(rows, "success")["checkpoint"] == "a"
+    with pytest.raises(ValueError, match="rule"):
+        rt.best_checkpoint(rows, "luck")
+    with pytest.raises(ValueError, match="rule"):
+        rt.select_checkpoint(["x"], "basin", [100_000], rule="luck")
 
 
 def test_task_settings_and_bad_terrain():
@@ -220,6 +233,12 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     sel = json.loads((out / "selection.json").read_text())
     assert [Path(r["checkpoint"]).name for r in sel["rows"]] == ["final"]   # one iteration: final only
     assert all(r["episodes"] == 3 for r in sel["rows"]) and sel["best"] in sel["rows"]
+    assert mod.main(["select", "--out", str(out), "--every", "1", "--validation-seeds", "4",
+                     "--max-episode-s", "60", "--rule", "fix_loss"]) == 0
+    sel = json.loads((out / "selection.json").read_text())
+    assert sel["rule"] == "fix_loss" and sel["rows"][0]["episodes"] == 4
+    assert (out / "selection.png").is_file()
+    assert sel["rows"][0]["fix_loss_rate"] >= 1.0 - sel["rows"][0]["success"]   # not arrived = lost
 
 
 @pytest.mark.parametrize("bad, name", [(["--goals", "9"], "--goals"), (["--goals", "x"], "--goals"),
@@ -235,3 +254,47 @@ def test_action_search_script_refuses_bad_arguments(tmp_path, capsys, bad, name)
     assert mod.main([*bad, "--out", str(out)]) == 2
     assert name in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_trace_script_matches_the_evaluation_and_refuses_bad_arguments(tmp_path, capsys):
+    import gymnasium as gym
+
+    if "trn_env/TerrainNavFast-v0" not in gym.registry:
+        pytest.skip("the fast tier is not installed")
+    path = ROOT / "scripts" / "route_task_trace.py"
+    spec = importlib.util.spec_from_file_location("route_task_trace", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for bad, name in ((["--goal", "5"], "--goal"), (["--seeds", "a-b"], "--seeds"),
+                      (["--sigma-scale", "0"], "--sigma-scale"), (["--sigma-scale", "nan"], "--sigma-scale"),
+                      (["--policy", "ppo", "--checkpoint", str(tmp_path / "none")], "--checkpoint")):
+        args = ["--policy", "straight", "--goal", "2", "--tier", "fast", "--out", str(tmp_path / "t.json")]
+        assert mod.main([*args, *bad]) == 2
+        assert name in capsys.readouterr().err
+    assert not (tmp_path / "t.json").exists()
+    pol = {"label": "straight", "kind": "straight"}
+    eps = mod.trace_fast(pol, "basin", 2, [1000, 1001])
+    rows = [r for r in rt.evaluate_fast([pol], "basin", [1000, 1001]) if r["goal_index"] == 2]
+    for e, r in zip(eps, rows, strict=True):          # the same episode as the evaluation's (seed, goal)
+        assert e["seed"] == r["seed"] and e["termination"] == r["termination"]
+        assert len(e["decisions"]) == r["steps"]
+        if r["arrived"]:
+            assert e["true_miss_m"] == pytest.approx(r["true_miss_m"], rel=1e-9)
+            assert e["decisions"][-1]["true_err_m"] == pytest.approx(r["true_miss_m"], rel=1e-9)
+        t = [d["t_s"] for d in e["decisions"]]
+        assert all(b > a for a, b in zip(t, t[1:], strict=False)) and all(d["offset"] == 0.0
+                                                                          for d in e["decisions"])
+    # losses by the largest terrain information: counted by hand on three made-up episodes
+    def ep(term, miss, infos):
+        return {"termination": term, "true_miss_m": miss, "decisions": [{"info_here": x} for x in infos]}
+    made = [ep("arrived", 20.0, [0.5, 0.9]), ep("arrived", 300.0, [0.6, 2.5]),
+            ep("time_limit", math.nan, [1.2])]
+    assert mod.losses_by_info(made) == [(0, 1), (1, 1), (0, 0), (1, 1)]
+
+    class Echo:
+        def predict(self, obs, *a, **k):
+            return obs, None
+    o = np.zeros(32, np.float32)
+    o[8:11] = np.log10(1.0 + np.array([9.0, 99.0, 4.0]))
+    seen = mod.SigmaScaled(Echo(), 2.0).predict(o)[0]
+    assert np.allclose(10.0 ** seen[8:10] - 1.0, [18.0, 198.0], rtol=1e-5) and seen[10] == o[10]

@@ -225,33 +225,55 @@ def evaluate(policies: list[dict], terrain: str, seeds, tiers=("full", "fast"),
     return rows
 
 
-def select_checkpoint(checkpoints, terrain: str, seeds, env_overrides: dict | None = None) -> dict:
+# a validation episode "loses the fix" when it does not arrive or its true miss exceeds this (m): a kept
+# TERCOM fix ends within tens of metres, a lost one (a false fix after a featureless stretch) hundreds
+FIX_LOSS_MISS_M = 100.0
+SELECTION_RULES = ("success", "fix_loss")
+
+
+def select_checkpoint(checkpoints, terrain: str, seeds, env_overrides: dict | None = None,
+                      rule: str = "success") -> dict:
     """Model selection without the held-out goals: every checkpoint (RLlib checkpoint folders) flies the fast
     tier's validation episodes (`evaluate_fast(..., drawn_goals=True)` over `seeds`, which should be
     `route_task.VALIDATION_SEEDS`: goals drawn from the training distribution, never a held-out goal, seeds
-    disjoint from the evaluation's); per checkpoint the success rate and the mean, median and 90th-percentile
-    true miss over the arrived episodes. The best: the highest success rate, then the lowest mean miss.
-    Returns {"rows": [...] per checkpoint, "best": its row}. ValueError on no checkpoints."""
+    disjoint from the evaluation's); per checkpoint the success rate, the fix-loss rate (episodes not arrived
+    or missing by more than FIX_LOSS_MISS_M) and the mean, median and 90th-percentile true miss over the
+    arrived episodes. The best by `rule` (`best_checkpoint`). Returns {"rows": [...] per checkpoint, "best":
+    its row, "rule": rule}. ValueError on no checkpoints or an unknown rule."""
     checkpoints = [str(c) for c in checkpoints]
     if not checkpoints:
         raise ValueError("checkpoints: none given")
+    if rule not in SELECTION_RULES:
+        raise ValueError(f"rule must be one of {SELECTION_RULES}, got {rule!r}")
     out = []
     for c in checkpoints:
         rs = evaluate_fast([{"label": "ppo", "kind": "rllib", "checkpoint": c}], terrain, seeds,
                            env_overrides, drawn_goals=True)
         miss = np.array([r["true_miss_m"] for r in rs if r["arrived"]])
+        lost = sum((not r["arrived"]) or r["true_miss_m"] > FIX_LOSS_MISS_M for r in rs)
         out.append({"checkpoint": c, "episodes": len(rs),
                     "success": float(np.mean([r["arrived"] for r in rs])),
+                    "fix_loss_rate": lost / len(rs),
                     "miss_mean_m": float(miss.mean()) if miss.size else math.nan,
                     "miss_median_m": float(np.median(miss)) if miss.size else math.nan,
                     "miss_p90_m": float(np.percentile(miss, 90)) if miss.size else math.nan})
-    return {"rows": out, "best": best_checkpoint(out)}
+    return {"rows": out, "best": best_checkpoint(out, rule), "rule": rule}
 
 
-def best_checkpoint(rows: list[dict]) -> dict:
-    """The row with the highest "success", then the lowest finite "miss_mean_m" (the first of equals)."""
-    return min(rows, key=lambda r: (-r["success"], r["miss_mean_m"] if math.isfinite(r["miss_mean_m"])
-                                    else math.inf))
+def best_checkpoint(rows: list[dict], rule: str = "success") -> dict:
+    """The pick (the first of equals). Rule "success": the highest "success", then the lowest finite
+    "miss_mean_m". Rule "fix_loss": the lowest "fix_loss_rate" (not arrived, or a miss above
+    FIX_LOSS_MISS_M: the rare lost fixes that decide a mean over tens of episodes), then the lowest finite
+    "miss_mean_m"."""
+    if rule not in SELECTION_RULES:
+        raise ValueError(f"rule must be one of {SELECTION_RULES}, got {rule!r}")
+
+    def mean(r):
+        return r["miss_mean_m"] if math.isfinite(r["miss_mean_m"]) else math.inf
+
+    if rule == "fix_loss":
+        return min(rows, key=lambda r: (r["fix_loss_rate"], mean(r)))
+    return min(rows, key=lambda r: (-r["success"], mean(r)))
 
 
 # ------------------------------------------------------------------------------------------ statistics
@@ -412,6 +434,39 @@ def plot_learning_curve(path: str | Path, history: list[dict], title: str = "") 
     for a in (ax, ax2):
         a.grid(alpha=0.3)
     fig.suptitle(title or "PPO learning curve")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_selection(path: str | Path, selection: dict, title: str = "") -> None:
+    """The validation figures of `select_checkpoint`'s rows against the checkpoint's iteration (`iter_N`;
+    `final` after the last): fix-loss rate and success rate (left), mean and median true miss (right), the
+    pick marked; into a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = selection["rows"]
+    names = [Path(r["checkpoint"]).name for r in rows]
+    its = [int(n[5:]) if n.startswith("iter_") and n[5:].isdigit() else None for n in names]
+    last = max([i for i in its if i is not None], default=0)
+    x = [i if i is not None else last + 10 for i in its]
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 3.5), dpi=100, sharex=True)
+    ax.plot(x, [100 * r["fix_loss_rate"] for r in rows], ".-", label="fix lost (not arrived or > 100 m)")
+    ax.plot(x, [100 * (1 - r["success"]) for r in rows], ".-", label="not arrived")
+    ax.set_ylabel("% of validation episodes")
+    ax2.plot(x, [r["miss_mean_m"] for r in rows], ".-", label="mean")
+    ax2.plot(x, [r["miss_median_m"] for r in rows], ".-", label="median")
+    ax2.set_ylabel("true miss over the arrived (m)")
+    k = rows.index(selection["best"])
+    for a in (ax, ax2):
+        a.axvline(x[k], color="k", lw=0.8, ls=":")
+        a.set_xlabel("training iteration (final at the right)")
+        a.grid(alpha=0.3)
+        a.legend(fontsize=8)
+    fig.suptitle(title or f"validation ({rows[0]['episodes']} episodes per checkpoint), pick {names[k]}")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

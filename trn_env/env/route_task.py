@@ -79,7 +79,7 @@ EVAL_SEEDS: tuple[int, ...] = tuple(range(1000, 1010))
 TRAIN_SEED_BASE = 0
 # episode seeds of model selection (the fast tier, goals drawn from the training distribution, never a
 # held-out goal): disjoint from EVAL_SEEDS and from the trainer's reset seeds
-VALIDATION_SEEDS: tuple[int, ...] = tuple(range(100_000, 100_500))
+VALIDATION_SEEDS: tuple[int, ...] = tuple(range(100_000, 102_000))
 # the training budget: 30 minutes on 2 cores, held as CPU seconds (what 30 minutes on 2 idle cores give at
 # most), so that a run on a shared machine is held to the same amount of computation as one on an idle machine
 TRAIN_BUDGET = {"wall_s": 1800.0, "cores": 2, "cpu_s": 3600.0}
