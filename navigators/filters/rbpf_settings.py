@@ -107,6 +107,9 @@ class RbpfSettings(Settings):
     turn_angle: str = setting("total", "angle the turn terms' attitude walk runs in: integral of |yaw "
                               "rate| (total) or growth of the net heading change since the reset (excursion)",
                               choices=("total", "excursion"))
+    regularisation: str = setting("none", "after resampling, move the copies by a Gaussian kernel of the "
+                                  "cloud's covariance at the optimal bandwidth (gaussian) or not (none)",
+                                  choices=("none", "gaussian"))
 
     def check(self) -> list[tuple[str, str]]:
         problems = []
