@@ -112,3 +112,47 @@ def test_rbpf_hand_over_regularises_at_the_smaller_clouds_bandwidth():
     z = (nav.xn - v[anc]) / (h * r / math.sqrt(3.0))
     q = float(np.sum(z * z))
     assert stats.chi2.ppf(5e-4, 3000) < q < stats.chi2.ppf(1 - 5e-4, 3000)
+
+
+def test_shrunk_kernel_keeps_the_clouds_mean_and_covariance():
+    # an equally weighted cloud (a resampled one) of a known Gaussian: after the shrunk kernel its sample mean
+    # and covariance are those before (to sampling error), and each particle moved (diversity)
+    rng = np.random.default_rng(8)
+    cov = np.array([[900.0, -200.0, 0.0], [-200.0, 400.0, 30.0], [0.0, 30.0, 50.0]])
+    n = 200_000
+    x = rng.multivariate_normal([10.0, -5.0, 2.0], cov, size=n)
+    before = x.copy()
+    h = regularisation_bandwidth(1000, 3)
+    regularise_gaussian(x, np.cov(before.T), h, rng, shrink=True)
+    sd = np.sqrt(np.diag(cov))
+    assert np.all(np.abs(x.mean(axis=0) - before.mean(axis=0)) < 4.0 * sd * h / math.sqrt(n))
+    c0, c1 = np.cov(before.T), np.cov(x.T)
+    tol = 5.0 * np.sqrt((np.outer(np.diag(cov), np.diag(cov)) + cov ** 2) / n) * h
+    assert np.all(np.abs(c1 - c0) < tol + 1e-9)
+    # the moves themselves: x - a before - (1 - a) mean ~ N(0, h^2 cov)
+    a = math.sqrt(1.0 - h * h)
+    z = (x - a * before - (1.0 - a) * before.mean(axis=0)) @ np.linalg.inv(np.linalg.cholesky(h * h * c0)).T
+    q = float(np.sum(z * z))
+    assert stats.chi2.ppf(5e-4, 3 * n) < q < stats.chi2.ppf(1 - 5e-4, 3 * n)
+    with pytest.raises(ValueError, match="shrink"):
+        regularise_gaussian(x, cov, 1.0, rng, shrink=True)
+
+
+def test_rbpf_shrunk_regularisation_keeps_the_resampled_clouds_covariance():
+    nav = RaoBlackwellizedPF(dem=wave_map(0), rng=np.random.default_rng(4), regularisation="shrunk",
+                             acquisition_particles=4000, n_particles=1000)
+    nav.n = 4000
+    nav.xl = np.zeros((nav.n, 12))
+    nav.P = np.broadcast_to(np.eye(12), (nav.n, 12, 12)).copy()
+    nav._extra = {}
+    nav.resamples = 0
+    r = 600.0
+    v = _tetrahedron_cloud(nav, r)
+    nav._normalise_resample(0.0, nav.logw.copy())
+    # the weighted cloud before: mean 0, covariance r^2 / 3 I (the tetrahedron); after: the same moments
+    n = nav.n
+    c = np.cov(nav.xn.T)
+    assert np.all(np.abs(nav.xn.mean(axis=0)) < 4.0 * r / math.sqrt(3.0 * n))
+    assert np.all(np.abs(c - r * r / 3.0 * np.eye(3)) < 5.0 * math.sqrt(2.0 / n) * r * r / 3.0)
+    assert np.unique(nav.xn[:, 0]).size == n         # every copy moved
+    assert np.min(np.linalg.norm(nav.xn[:, None, :] - v[None, :, :], axis=2)) > 0.0

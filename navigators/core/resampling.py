@@ -15,7 +15,8 @@ squared error of a Gaussian kernel estimate of a Gaussian density (MOL sec. 12.2
 the normal reference bandwidth),
 h_opt = A N^(-1/(d + 4)), A = (4 / (d + 2))^(1/(d + 4)): `regularisation_bandwidth`,
 `regularise_gaussian`. The copies' spread adds h^2 D D' to the cloud's covariance (the kernel estimate's
-variance), which is how the regularised filter keeps a resampled cloud as wide as its posterior.
+variance); with `shrink` (Liu & West 2001) the copies are first drawn towards the cloud's mean so that its
+mean and covariance are kept and only its diversity grows.
 """
 
 from __future__ import annotations
@@ -78,12 +79,24 @@ def regularisation_bandwidth(n: int, d: int) -> float:
     return (4.0 / (d + 2.0)) ** (1.0 / (d + 4.0)) * float(n) ** (-1.0 / (d + 4.0))
 
 
-def regularise_gaussian(x: np.ndarray, cov: np.ndarray, h: float, rng: np.random.Generator) -> np.ndarray:
-    """x (N, d) of resampled particles moved in place by h D eps (D D' = cov, d x d, eps ~ N(0, I) from rng);
-    returns x. A covariance that is not positive definite (a cloud collapsed onto one point, or a flat
-    direction) takes its eigen-decomposition with the negative eigenvalues clipped to 0."""
+def regularise_gaussian(x: np.ndarray, cov: np.ndarray, h: float, rng: np.random.Generator,
+                        shrink: bool = False) -> np.ndarray:
+    """x (N, d) of resampled (equally weighted) particles moved in place by h D eps (D D' = cov, d x d,
+    eps ~ N(0, I) from rng); returns x. With shrink (Liu & West 2001, "Combined parameter and state
+    estimation in simulation-based filtering", in Doucet et al. 2001, ch. 10: kernel shrinkage), each is first
+    drawn towards the cloud's mean m by a = sqrt(1 - h^2): x -> a x + (1 - a) m + h D eps, so the cloud keeps
+    its mean and covariance (a^2 cov + h^2 cov) and gains only diversity (h < 1 required). A covariance
+    that is not positive definite (a cloud collapsed onto one point, or a flat direction) takes its
+    eigen-decomposition with the negative eigenvalues clipped to 0."""
     w, v = np.linalg.eigh(0.5 * (cov + cov.T))
     D = v * np.sqrt(np.clip(w, 0.0, None))[None, :]
+    if shrink:
+        if not 0.0 <= h < 1.0:
+            raise ValueError(f"regularise_gaussian: shrink needs a bandwidth in [0, 1), got {h!r}")
+        a = np.sqrt(1.0 - h * h)
+        m = x.mean(axis=0)
+        x *= a
+        x += (1.0 - a) * m
     x += h * (rng.standard_normal(x.shape) @ D.T)
     return x
 

@@ -214,9 +214,12 @@ class RbpfCloud:
         """regularisation "gaussian": the resampled copies moved by a Gaussian kernel of the cloud's
         covariance before resampling, cov, with the optimal bandwidth for n particles in the three
         dimensions of x^n (the regularised particle filter of Musso, Oudjane & Le Gland 2001,
-        navigators.core.resampling); the Kalman parts stay their ancestors'. "none": nothing."""
-        if self.regularisation == "gaussian":
-            regularise_gaussian(self.xn, cov, regularisation_bandwidth(self.n, 3), self.rng)
+        navigators.core.resampling; the cloud's covariance grows by h^2 cov); "shrunk": the same kernel with
+        Liu & West's shrinkage towards the mean, which keeps the cloud's mean and covariance and adds only
+        diversity; the Kalman parts stay their ancestors'. "none": nothing."""
+        if self.regularisation != "none":
+            regularise_gaussian(self.xn, cov, regularisation_bandwidth(self.n, 3), self.rng,
+                                shrink=self.regularisation == "shrunk")
 
     def _weights(self) -> np.ndarray:
         m = np.max(self.logw)

@@ -108,8 +108,9 @@ class RbpfSettings(Settings):
                               "rate| (total) or growth of the net heading change since the reset (excursion)",
                               choices=("total", "excursion"))
     regularisation: str = setting("none", "after resampling, move the copies by a Gaussian kernel of the "
-                                  "cloud's covariance at the optimal bandwidth (gaussian) or not (none)",
-                                  choices=("none", "gaussian"))
+                                  "cloud's covariance at the optimal bandwidth (gaussian; shrunk: drawn "
+                                  "towards the mean first, the cloud's covariance kept) or not (none)",
+                                  choices=("none", "gaussian", "shrunk"))
 
     def check(self) -> list[tuple[str, str]]:
         problems = []
