@@ -55,6 +55,18 @@ def test_kernel_moves_have_the_scaled_covariance_and_no_mean():
     assert 1.5 < float(np.std(y[:, 0])) < 2.5
 
 
+def _acquiring_rbpf(mode: str, seed: int, **kw) -> RaoBlackwellizedPF:
+    """An rbpf with a 4,000-particle acquisition cloud (Kalman parts at the identity) to resample by hand."""
+    nav = RaoBlackwellizedPF(dem=wave_map(0), rng=np.random.default_rng(seed), regularisation=mode,
+                             acquisition_particles=4000, n_particles=1000, **kw)
+    nav.n = 4000
+    nav.xl = np.zeros((nav.n, 12))
+    nav.P = np.broadcast_to(np.eye(12), (nav.n, 12, 12)).copy()
+    nav._extra = {}
+    nav.resamples = 0
+    return nav
+
+
 def _tetrahedron_cloud(nav, r_m):
     """Weights on four particles at a regular tetrahedron's vertices (circumradius r_m), the rest ~0:
     the weighted covariance is r^2 / 3 I."""
@@ -72,13 +84,7 @@ def _tetrahedron_cloud(nav, r_m):
 
 @pytest.mark.parametrize("mode", ["gaussian", "none"])
 def test_rbpf_resampled_copies_are_moved_by_the_kernel(mode):
-    nav = RaoBlackwellizedPF(dem=wave_map(0), rng=np.random.default_rng(11), regularisation=mode,
-                             acquisition_particles=4000, n_particles=1000)
-    nav.n = 4000
-    nav.xl = np.zeros((nav.n, 12))
-    nav.P = np.broadcast_to(np.eye(12), (nav.n, 12, 12)).copy()
-    nav._extra = {}
-    nav.resamples = 0
+    nav = _acquiring_rbpf(mode, 11)
     r = 600.0
     v = _tetrahedron_cloud(nav, r)
     nav._normalise_resample(0.0, nav.logw.copy())
@@ -98,11 +104,7 @@ def test_rbpf_resampled_copies_are_moved_by_the_kernel(mode):
 
 
 def test_rbpf_hand_over_regularises_at_the_smaller_clouds_bandwidth():
-    nav = RaoBlackwellizedPF(dem=wave_map(0), rng=np.random.default_rng(3), regularisation="gaussian",
-                             acquisition_particles=4000, n_particles=1000, acquisition_spread_m=1e6)
-    nav.n = 4000
-    nav.xl = np.zeros((nav.n, 12))
-    nav.P = np.broadcast_to(np.eye(12), (nav.n, 12, 12)).copy()
+    nav = _acquiring_rbpf("gaussian", 3, acquisition_spread_m=1e6)
     r = 600.0
     v = _tetrahedron_cloud(nav, r)
     nav._handover()
@@ -139,13 +141,7 @@ def test_shrunk_kernel_keeps_the_clouds_mean_and_covariance():
 
 
 def test_rbpf_shrunk_regularisation_keeps_the_resampled_clouds_covariance():
-    nav = RaoBlackwellizedPF(dem=wave_map(0), rng=np.random.default_rng(4), regularisation="shrunk",
-                             acquisition_particles=4000, n_particles=1000)
-    nav.n = 4000
-    nav.xl = np.zeros((nav.n, 12))
-    nav.P = np.broadcast_to(np.eye(12), (nav.n, 12, 12)).copy()
-    nav._extra = {}
-    nav.resamples = 0
+    nav = _acquiring_rbpf("shrunk", 4)
     r = 600.0
     v = _tetrahedron_cloud(nav, r)
     nav._normalise_resample(0.0, nav.logw.copy())
