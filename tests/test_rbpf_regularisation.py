@@ -152,3 +152,19 @@ def test_rbpf_shrunk_regularisation_keeps_the_resampled_clouds_covariance():
     assert np.all(np.abs(c - r * r / 3.0 * np.eye(3)) < 5.0 * math.sqrt(2.0 / n) * r * r / 3.0)
     assert np.unique(nav.xn[:, 0]).size == n         # every copy moved
     assert np.min(np.linalg.norm(nav.xn[:, None, :] - v[None, :, :], axis=2)) > 0.0
+
+
+def test_rbpf_does_not_regularise_a_re_spread_cloud_until_ok():
+    from trn_env.navigators.core.recovery import IntegrityRecovery
+    from trn_env.navigators.protocol import Health
+    nav = _acquiring_rbpf("shrunk", 6)
+    nav.health = Health(status="ok", ok=True)
+    nav._recovery = IntegrityRecovery(nav.integrity, 100.0)
+    nav.xn = np.zeros((nav.n, 3))
+    nav.logw = np.full(nav.n, -math.log(nav.n))
+    nav._respread(0.0)                                   # a recovery: the cloud re-spread
+    assert nav._reacquiring
+    v = _tetrahedron_cloud(nav, 600.0)
+    nav._normalise_resample(0.0, nav.logw.copy())
+    d = np.linalg.norm(nav.xn[:, None, :] - v[None, :, :], axis=2)
+    assert np.max(d.min(axis=1)) == 0.0                  # copies left on their ancestors: no kernel

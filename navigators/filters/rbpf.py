@@ -263,6 +263,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._yaw_prev = math.nan
         self._turn_pending = 0.0
         self._turn_angle = TurnAngle(self.turn_angle)
+        self._reacquiring = False
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)
@@ -388,6 +389,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             sig = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0))
             if sig < 30.0:
                 self.health.status = "ok"
+                self._reacquiring = False
 
     def _covariance9(self) -> np.ndarray:
         w = self._weights()

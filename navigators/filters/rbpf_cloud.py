@@ -28,6 +28,7 @@ class RbpfCloud:
 
     # set by RaoBlackwellizedPF.apply_imu_spec for a grade beyond its small-angle error model
     _consistency_warning = ""
+    _reacquiring = False     # a recovery's re-spread cloud not yet back to "ok" (_regularise)
 
     def _set_prior(self, initial: Estimate) -> None:
         """The cloud's and the Kalman parts' initial spread. prior_from_initial (default) and a 9 x 9
@@ -105,6 +106,7 @@ class RbpfCloud:
         self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
         sig = self._recovery.sigma_now_m
         self.xn[:, :2] += self.rng.standard_normal((self.n, 2)) * sig
+        self._reacquiring = True       # no regularisation until "ok" again (_regularise)
         if self.recovery_reset_kalman:
             # the Kalman parts' velocity and attitude share the position's failed test: back to the prior
             # spread (plus the cloud's), so the cloud re-converges without inheriting their overconfidence
@@ -216,8 +218,12 @@ class RbpfCloud:
         dimensions of x^n (the regularised particle filter of Musso, Oudjane & Le Gland 2001,
         navigators.core.resampling; the cloud's covariance grows by h^2 cov); "shrunk": the same kernel with
         Liu & West's shrinkage towards the mean, which keeps the cloud's mean and covariance and adds only
-        diversity; the Kalman parts stay their ancestors'. "none": nothing."""
-        if self.regularisation != "none":
+        diversity; the Kalman parts stay their ancestors'. "none": nothing. Not while the cloud re-acquires
+        after a recovery's re-spread (until the status is "ok" again): the kernel of one global covariance
+        is the optimal one for a unimodal posterior (the regularised filter's assumption), and a cloud
+        re-spread over hundreds of metres of terrain holds several modes, which it would blur and, shrunk,
+        draw together."""
+        if self.regularisation != "none" and not self._reacquiring:
             regularise_gaussian(self.xn, cov, regularisation_bandwidth(self.n, 3), self.rng,
                                 shrink=self.regularisation == "shrunk")
 
