@@ -24,13 +24,16 @@
   env_route_speedup (after / before, CPU; env_route_speedup_wall the wall ratio);
   env_route_pipelined_agent_steps_per_s (`pipeline=True`: sensors and navigator in a second process;
   wall); env_route_sim_seconds_per_wall_second (and per CPU second) beside two bare JSBSim gymnasium loops
-  in the style of gymnasium-jsbsim (0.2 s agent steps: four control properties written by name, run() per
-  JSBSim step, 17 state properties read by name, a reward from them), each measured right before and
-  after (the faster kept): env_gym_jsbsim_reference_* flies the default scenario's King Air, wind and
-  turbulence at its 100 Hz step, env_gym_jsbsim_c172p_* gymnasium-jsbsim's own default (the Cessna 172P
-  shipped with JSBSim at 60 Hz, calm air); their ratios env_route_ratio_to_gym_jsbsim(_c172p) (wall) and
-  env_route_cpu_ratio_to_gym_jsbsim(_c172p) (CPU); env_construct_first_s (the first env of the process:
-  terrain, map, numba caches), env_construct_second_s (the next one) and env_reset_s (median reset);
+  in the shape of gymnasium-jsbsim's HeadingControlTask (JSBSim at its 60 Hz, 0.2 s agent steps: three
+  controls written, run() twelve times, its custom properties updated, 17 state properties read, the
+  terminal test, a two-component reward, all by property name; `_gym_jsbsim_rates`), each measured right
+  before and after (the faster kept): env_gym_jsbsim_reference_* flies the default scenario's King Air,
+  wind and turbulence at gymnasium-jsbsim's 60 Hz (the target's reference), env_gym_jsbsim_c172p_*
+  gymnasium-jsbsim's own default (the Cessna 172P shipped with JSBSim, calm air),
+  env_gym_jsbsim_reference_100hz_* the King Air at the scenario's 100 Hz (the reference of earlier
+  sessions); their ratios env_route_ratio_to_gym_jsbsim(_c172p, _100hz) (wall) and
+  env_route_cpu_ratio_to_gym_jsbsim(_c172p, _100hz) (CPU); env_construct_first_s (the first env of the
+  process: terrain, map, numba caches), env_construct_second_s (the next one) and env_reset_s (median reset);
   load_average_1min (the machine's load during the measurement).
 - planner_40km_route_s: one `TerrainInformationPlanner.plan` of a corner-to-corner route on the bundled DEM
   (straight distance planner_route_straight_km >= 40 km; numba compiled beforehand; the climb limit on,
@@ -44,12 +47,14 @@
 
 from __future__ import annotations
 
+import collections
 import json
 import math
 import sys
 import time
 from functools import partial
 
+import gymnasium as gym
 import numpy as np
 
 
@@ -101,12 +106,18 @@ def env_figures(quick: bool = False, n_steps: int | None = None, decision_interv
     }
 
 
-_GYM_OBS = ("position/lat-geod-rad", "position/long-gc-rad", "position/h-sl-ft", "attitude/phi-rad",
-            "attitude/theta-rad", "attitude/psi-rad", "velocities/u-fps", "velocities/v-fps",
-            "velocities/w-fps", "velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec",
-            "fcs/left-aileron-pos-rad", "fcs/elevator-pos-rad", "fcs/rudder-pos-rad", "velocities/h-dot-fps",
-            "accelerations/n-pilot-z-norm")
-_GYM_ACT = ("fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm", "fcs/rudder-cmd-norm", "fcs/throttle-cmd-norm")
+# gymnasium-jsbsim's HeadingControlTask (jsbgym: environment.JsbSimEnv, tasks.HeadingControlTask): JSBSim at
+# JSBSIM_DT_HZ = 60 whatever the aircraft, 5 agent steps per second; per step three controls written, run()
+# twelve times, its custom properties updated (track and altitude errors, steps left), 17 state properties
+# read (13 base + 4 task), the terminal test's three reads, two reward components, two reward properties
+# written. All by property name through FGFDMExec's item access, as its Simulation class does.
+GYM_JSBSIM_DT_HZ = 60
+_GYM_STATE = ("position/h-sl-ft", "attitude/pitch-rad", "attitude/roll-rad", "velocities/u-fps",
+              "velocities/v-fps", "velocities/w-fps", "velocities/p-rad_sec", "velocities/q-rad_sec",
+              "velocities/r-rad_sec", "fcs/left-aileron-pos-norm", "fcs/right-aileron-pos-norm",
+              "fcs/elevator-pos-norm", "fcs/rudder-pos-norm", "error/altitude-error-ft", "aero/beta-deg",
+              "error/track-error-deg", "info/steps_left")
+_GYM_ACT = ("fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm", "fcs/rudder-cmd-norm")
 
 
 def _c172p_fdm(dt_s: float):
@@ -129,68 +140,112 @@ def _c172p_fdm(dt_s: float):
     return fdm
 
 
+def _asymptotic_reward(error: float, scale: float) -> float:
+    """gymnasium-jsbsim's AsymptoticErrorComponent: 1 at zero error, toward 0 as |error| / scale grows."""
+    e = abs(error) / scale
+    return 1.0 - e / (1.0 + e)
+
+
+def gym_reference_fdm(aircraft: str = "kingair", dt_s: float | None = None):
+    """(FGFDMExec, JSBSim step s) of the gym loop: "kingair" the default scenario's aircraft, wind and
+    turbulence; "c172p" gymnasium-jsbsim's own default, the Cessna 172P in calm air. dt_s default
+    1 / GYM_JSBSIM_DT_HZ, the rate gymnasium-jsbsim flies every aircraft at."""
+    dt = 1.0 / GYM_JSBSIM_DT_HZ if dt_s is None else float(dt_s)
+    if aircraft == "c172p":
+        return _c172p_fdm(dt), dt
+    if aircraft != "kingair":
+        raise ValueError(f"aircraft must be 'kingair' or 'c172p', got {aircraft!r}")
+    import trn_env.scenario.build as components
+    from trn_env.scenario.loading import load_scenario
+
+    sc = load_scenario("default").with_fields({"aircraft.dt_s": dt})
+    world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
+    return components.build_flight(sc, world, np.random.default_rng(0)).fdm, dt
+
+
+_GymState = collections.namedtuple("_GymState", [p.replace("/", "_").replace("-", "_") for p in _GYM_STATE])
+
+
+class GymJsbsimReference(gym.Env):
+    """A bare JSBSim gymnasium env in the shape of gymnasium-jsbsim's HeadingControlTask (see _GYM_STATE):
+    per agent step of agent_step_s, three controls written, run() agent_step_s / dt_s times, the custom
+    properties updated, the state read into a namedtuple, the terminal test, a two-component reward,
+    two reward properties written; episodes of 60 s (or until the altitude error passes 1,000 ft), reset to
+    the initial conditions. `fdm`: a JSBSim FGFDMExec (or anything with its item access, run() and
+    reset_to_initial_conditions)."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (len(_GYM_STATE),), np.float64)
+    action_space = gym.spaces.Box(-1.0, 1.0, (len(_GYM_ACT),), np.float64)
+
+    def __init__(self, fdm, dt_s: float, agent_step_s: float = 0.2):
+        self.fdm = fdm
+        self.n_run = max(1, int(round(agent_step_s / dt_s)))
+        self.agent_step_s = self.n_run * dt_s
+        self.episode_steps = int(math.ceil(60.0 / self.agent_step_s))
+        self.target_alt_ft = 0.0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        fdm = self.fdm
+        fdm.reset_to_initial_conditions(0)
+        fdm["fcs/throttle-cmd-norm"] = 0.8
+        fdm["info/steps_left"] = self.episode_steps
+        fdm["target/track-deg"] = math.degrees(math.atan2(fdm["velocities/v-east-fps"],
+                                                          fdm["velocities/v-north-fps"])) % 360.0
+        self.target_alt_ft = fdm["position/h-sl-ft"]
+        fdm["reward/last_agent_reward"] = fdm["reward/last_assess_reward"] = 1.0
+        self._update_custom_properties()
+        return np.array(_GymState(*(fdm[p] for p in _GYM_STATE))), {}
+
+    def _update_custom_properties(self) -> None:
+        fdm = self.fdm
+        track_deg = math.degrees(math.atan2(fdm["velocities/v-east-fps"], fdm["velocities/v-north-fps"]))
+        fdm["error/track-error-deg"] = (track_deg - fdm["target/track-deg"] + 180.0) % 360.0 - 180.0
+        fdm["error/altitude-error-ft"] = fdm["position/h-sl-ft"] - self.target_alt_ft
+        fdm["info/steps_left"] = fdm["info/steps_left"] - 1
+
+    def step(self, action):
+        fdm = self.fdm
+        for p, a in zip(_GYM_ACT, action, strict=True):
+            fdm[p] = float(a)
+        for _ in range(self.n_run):
+            fdm.run()
+        self._update_custom_properties()
+        state = _GymState(*(fdm[p] for p in _GYM_STATE))
+        done = (fdm["info/steps_left"] <= 0 or fdm["reward/last_assess_reward"] < 0.0
+                or abs(fdm["error/altitude-error-ft"]) > 1000.0)
+        reward = 0.5 * (_asymptotic_reward(state.error_altitude_error_ft, 150.0)
+                        + _asymptotic_reward(state.error_track_error_deg, 8.0))
+        fdm["reward/last_agent_reward"] = reward
+        fdm["reward/last_assess_reward"] = reward
+        return np.array(state), reward, bool(done), False, {"reward": reward}
+
+
 def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: str = "kingair",
                       dt_s: float | None = None) -> tuple[float, float]:
-    """(simulated seconds per wall second, per CPU second) of a bare JSBSim gymnasium loop in
-    gymnasium-jsbsim's shape: per agent step write the controls by property name, run() for agent_step_s,
-    read the state by name, reward from it; episodes of 60 s, reset by run_ic(). aircraft "kingair": the
-    default scenario's aircraft, wind and turbulence at JSBSim step dt_s (default: the scenario's);
-    "c172p": gymnasium-jsbsim's own default, the Cessna 172P at 60 Hz (dt_s default 1/60) in calm air."""
-    import gymnasium as gym
-
-    if aircraft == "c172p":
-        dt = 1.0 / 60.0 if dt_s is None else float(dt_s)
-        fdm = _c172p_fdm(dt)
-    else:
-        import trn_env.scenario.build as components
-        from trn_env.scenario.loading import load_scenario
-
-        sc = load_scenario("default")
-        if dt_s is not None:
-            sc = sc.with_fields({"aircraft.dt_s": float(dt_s)})
-        world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
-        fdm = components.build_flight(sc, world, np.random.default_rng(0)).fdm
-        dt = float(sc.aircraft.dt_s)
-    n_run = max(1, int(round(agent_step_s / dt)))
-
-    class BareJsbsimEnv(gym.Env):
-        observation_space = gym.spaces.Box(-np.inf, np.inf, (len(_GYM_OBS),), np.float32)
-        action_space = gym.spaces.Box(-1.0, 1.0, (len(_GYM_ACT),), np.float32)
-
-        def reset(self, *, seed=None, options=None):
-            super().reset(seed=seed)
-            fdm.reset_to_initial_conditions(0)
-            self.t = 0.0
-            return self._obs(), {}
-
-        def _obs(self):
-            return np.array([fdm.get_property_value(p) for p in _GYM_OBS], np.float32)
-
-        def step(self, action):
-            for p, a in zip(_GYM_ACT, action, strict=True):
-                fdm.set_property_value(p, float(a) if p != "fcs/throttle-cmd-norm" else 0.8)
-            for _ in range(n_run):
-                fdm.run()
-            self.t += n_run * dt
-            obs = self._obs()
-            reward = -abs(float(obs[3])) - abs(float(obs[15])) * 1e-3
-            return obs, reward, False, self.t >= 60.0, {}
-
-    env = BareJsbsimEnv()
+    """(simulated seconds per wall second, per CPU second) of GymJsbsimReference (gymnasium-jsbsim's
+    shape) on gym_reference_fdm(aircraft, dt_s), controls centred (the aircraft flies on from its trim),
+    resets included."""
+    fdm, dt = gym_reference_fdm(aircraft, dt_s)
+    env = GymJsbsimReference(fdm, dt, agent_step_s)
     env.reset(seed=0)
-    act = np.zeros(len(_GYM_ACT), np.float32)     # controls centred: the aircraft flies on from its trim
+    act = np.zeros(len(_GYM_ACT))
     sim = 0.0
     t0, c0 = time.perf_counter(), time.process_time()
     while time.perf_counter() - t0 < wall_s:
-        _, _, _, trunc, _ = env.step(act)
-        sim += n_run * dt
-        if trunc:
+        _, _, term, _, _ = env.step(act)
+        sim += env.agent_step_s
+        if term:
             env.reset()
     return sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
 
 
 # decisions each env flies before the timed repeats (90 s at 30 s decisions: past the first fix)
 WARM_UP_DECISIONS = 3
+
+# the default scenario's JSBSim step (the King Air gym loop's continuity figure, `*_100hz`: the reference of
+# the sessions before it was set to gymnasium-jsbsim's 60 Hz)
+SCENARIO_DT_S = 0.01
 
 # the env before issue 34's rate changes: guidance at the scenario's 10 Hz, JSBSim at its 100 Hz, the
 # scenario's own sensor and navigator rates (no scenario_fields)
@@ -200,7 +255,8 @@ BEFORE_RATES = {"guidance_rate_hz": 10.0, "flight_dt_s": 0.01, "scenario_fields"
 def route_env_figures(quick: bool = False) -> dict:
     """TerrainNav-v0 at the route benchmark's settings (trn_env.env.route_task: JSBSim at 50 Hz, TASK_RATES)
     and with the rates of before (BEFORE_RATES) interleaved, pipelined, construction and
-    reset, beside bare JSBSim gym loops (King Air at 100 Hz, gymnasium-jsbsim's Cessna 172P at 60 Hz)."""
+    reset, beside bare JSBSim gym loops in gymnasium-jsbsim's shape (the King Air at 60 Hz and at the
+    scenario's 100 Hz, gymnasium-jsbsim's Cessna 172P at 60 Hz)."""
     from trn_env.env.route_task import env_kwargs
     from trn_env.env.terrain_nav import TerrainNavEnv
 
@@ -227,7 +283,8 @@ def route_env_figures(quick: bool = False) -> dict:
         for _ in range(WARM_UP_DECISIONS):   # kernels load from the cache on their first call
             e.step(np.zeros(2, np.float32))
     ref_s = 1.0 if quick else 3.0
-    refs = [_gym_jsbsim_rates(ref_s), _gym_jsbsim_rates(ref_s, aircraft="c172p")]
+    kinds = ({}, {"aircraft": "c172p"}, {"dt_s": SCENARIO_DT_S})
+    refs = [_gym_jsbsim_rates(ref_s, **k) for k in kinds]
     for rep in range(reps):
         for k, e in envs.items():
             c0, w0 = time.process_time(), time.perf_counter()
@@ -250,11 +307,10 @@ def route_env_figures(quick: bool = False) -> dict:
             cpus[k] += c
     for e in envs.values():
         e.close()
-    refs += [_gym_jsbsim_rates(ref_s), _gym_jsbsim_rates(ref_s, aircraft="c172p")]
-    ka_wall = max(refs[0][0], refs[2][0])
-    ka_cpu = max(refs[0][1], refs[2][1])
-    c172_wall = max(refs[1][0], refs[3][0])
-    c172_cpu = max(refs[1][1], refs[3][1])
+    refs += [_gym_jsbsim_rates(ref_s, **k) for k in kinds]
+    ka_wall, ka_cpu = max(refs[0][0], refs[3][0]), max(refs[0][1], refs[3][1])
+    c172_wall, c172_cpu = max(refs[1][0], refs[4][0]), max(refs[1][1], refs[4][1])
+    ka100_wall, ka100_cpu = max(refs[2][0], refs[5][0]), max(refs[2][1], refs[5][1])
     med = {k: float(np.median(v)) for k, v in wall.items()}
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
     sim_rate = sims["after"] / walls["after"]
@@ -287,6 +343,10 @@ def route_env_figures(quick: bool = False) -> dict:
         "env_route_ratio_to_gym_jsbsim": sim_rate / ka_wall,
         "env_route_cpu_ratio_to_gym_jsbsim": sim_rate_cpu / ka_cpu,
         "env_route_pipelined_ratio_to_gym_jsbsim": sims["pipelined"] / walls["pipelined"] / ka_wall,
+        "env_gym_jsbsim_reference_100hz_sim_seconds_per_wall_second": ka100_wall,
+        "env_gym_jsbsim_reference_100hz_sim_seconds_per_cpu_second": ka100_cpu,
+        "env_route_ratio_to_gym_jsbsim_100hz": sim_rate / ka100_wall,
+        "env_route_cpu_ratio_to_gym_jsbsim_100hz": sim_rate_cpu / ka100_cpu,
         "env_gym_jsbsim_c172p_sim_seconds_per_wall_second": c172_wall,
         "env_gym_jsbsim_c172p_sim_seconds_per_cpu_second": c172_cpu,
         "env_route_ratio_to_gym_jsbsim_c172p": sim_rate / c172_wall,
