@@ -56,8 +56,9 @@ RUNS = 8
 SEED0 = 2000
 DURATION_S = 600.0
 NAVIGATORS = ["ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"]
-# not in the check: a navigator measured overconfident on the tactical grade over the whole route (Health warns;
-# the fast tests check it): none since the rbpf's regularised resampling (docs/validation/navigators.md)
+# not in the check: a navigator measured overconfident on the tactical grade over the whole route (Health
+# warns; the fast tests check it): none since the rbpf's regularised resampling
+# (docs/validation/navigators.md)
 NOT_CHECKED: dict[str, str] = {}
 
 
