@@ -30,7 +30,8 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   cloud's mean first so that its mean and covariance stay (regularisation "shrunk": Musso, Oudjane & Le
   Gland 2001's regularised filter with Liu & West 2001's shrinkage; navigators.core.resampling): with the
   position's small process noise (seed 002 sec. II-A) the copies of one ancestor otherwise stay stacked,
-  and the next updates weigh a few distinct positions, whose spread falls faster than the posterior's;
+  and the next updates weigh a few distinct positions, whose spread falls faster than the posterior's (not
+  while a recovery's re-spread cloud re-acquires: RbpfCloud._regularise);
 - acquisition (our addition): the cloud starts with acquisition_particles and is resampled down to
   n_particles (Table 1's 1,000) once its horizontal spread is below acquisition_spread_m (regularised as a
   resampling), so the Kalman parts after the first sharp updates do not all descend from a few survivors;
