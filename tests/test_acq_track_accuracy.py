@@ -127,9 +127,11 @@ def short_flight():
 def test_short_flight_innovations_and_covariance_are_honest(short_flight):
     """The regression flight (INS-aided, N = 25, GNSS lost at 10 s): the centroid fix's NIS (2 dof), averaged
     over the in-lock epochs, lies inside its two-sided 99 % chi-square bounds; consecutive transects share
-    N - 1 samples, so the bounds count n / (N / 2) effectively independent epochs. The previous design's
-    NIS averaged 0.00-0.06. The position covariance covers the error: both axes within 3 sigma at >= 90 % of
-    the epochs after GNSS is lost, and the time-averaged NEES (2 dof) is below its 99 % upper bound."""
+    N - 1 samples, so the bounds count n / fix_overlap effectively independent epochs (the filter's own
+    count: N with the INS as aiding, whose fix errors' autocorrelation 1 - |k| / N sums to N). The previous
+    design's NIS averaged 0.00-0.06. The position covariance covers the error: both axes within 3 sigma at
+    >= 90 % of the epochs after GNSS is lost, and the time-averaged NEES (2 dof) is below its 99 % upper
+    bound."""
     res, ests, nav = short_flight
     seen, nis = set(), []
     for e in ests:
@@ -140,7 +142,7 @@ def test_short_flight_innovations_and_covariance_are_honest(short_flight):
             nis.append(x[EXTRA_NIS])
     n = len(nis)
     assert n >= 40
-    n_eff = n / (0.5 * nav.config.transect_samples)
+    n_eff = n / nav.config.fix_overlap_epochs
     lo, hi = chi2.ppf(0.005, 2 * n_eff) / n_eff, chi2.ppf(0.995, 2 * n_eff) / n_eff
     assert lo <= float(np.mean(nis)) <= hi, (np.mean(nis), lo, hi)
     a = res.arrays
@@ -150,7 +152,7 @@ def test_short_flight_innovations_and_covariance_are_honest(short_flight):
     inside = np.all(np.abs(e) <= 3.0 * np.sqrt(var), axis=1)
     assert np.mean(inside) >= 0.9
     nees = np.sum(e**2 / var, axis=1)
-    m = nees.size / (0.5 * nav.config.transect_samples)
+    m = nees.size / nav.config.fix_overlap_epochs
     assert float(np.mean(nees)) <= chi2.ppf(0.995, 2 * m) / m
 
 

@@ -16,12 +16,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from ..core.imu_spec import (
-    ImuSpec,
-    equivalent_ramp_walk_density,
-    equivalent_walk_density,
-    rss,
-)
+from ..core.imu_spec import ImuSpec
 from ..core.measured_consistency import grade_warning
 from . import filter_kernels
 from .aiding import (
@@ -35,11 +30,12 @@ from .buffers import (
 from .correlation import (
     replica_offsets,
 )
+from .ins_error import InsVelocityErrorGrowth
 from .profile import (
     Sample,
 )
 
-# memory over which e_ne's walk matches the INS aiding's velocity-error rates (navigators.core.imu_spec)
+# memory of the small-angle check of Health's consistency warning (navigators.core.imu_spec)
 ACQ_MEMORY_S = 120.0
 
 
@@ -112,6 +108,8 @@ class CentroidFilter:
         # e_ne's sigma after the GNSS triangles: the aiding's per-sample noise through the gain-0.2 low-pass
         # (steady-state variance k / (2 - k) of the noise's); an INS is reset by GNSS, air data carries gusts
         self._set_centroid_cov(self.Pc, bias_sigma_mps=cfg.aiding_speed_sigma_mps * math.sqrt(0.2 / 1.8))
+        if self._ins_growth is not None and math.isfinite(g_speed):  # the fix reset the INS velocity: anew
+            self._ins_growth.restart(s.t_s, s.gnss_v_ne)
         self.sigma_v = 0.1
         self.sigma_psi = math.radians(0.2)
         self.bad_epochs = 0
@@ -136,11 +134,19 @@ class CentroidFilter:
         P = self.P
         if self._ne_frame:  # the centroid moves one sample on the aiding + e_ne; e_ne's error walks
             X = self.X
-            filter_kernels.ne_predict(X, T, walk, self._bias_walk2 * T)
+            growth = self._ins_growth
+            if growth is None:
+                q_e = self._bias_walk2 * T
+            else:
+                q_e = growth.step(s.t_s, T, psi, ground_vector(v, psi))
+            filter_kernels.ne_predict(X, T, walk, q_e)
             self.Pc = X[:2, :2].copy()
-            if self.lock_state == "tracking":  # the output: the centroid + the lever to the newest sample
+            if self.lock_state == "tracking" or growth is not None:
+                # the output: the centroid + the lever to the newest sample (out of lock the 4-state filter's
+                # own propagation: e_ne's variance then grows as the INS's velocity error does)
                 self.P = self._ne_output_cov(0.5 * cfg.transect_duration_s)
-            else:  # out of lock the output is dead-reckoned from the last in-lock newest sample
+            else:  # out of lock the output is dead-reckoned from the last in-lock newest sample; e_ne's walk
+                # grows slower than a bias' ramp, so its sigma is taken as constant over each step (a bound)
                 self.P = P + _rot_diag(psi, walk, walk) + self._ne_growth(P, T)
             return
         # the aiding's errors are biases over a transect: sigma grows linearly, sqrt(P) + T sigma_v per epoch
@@ -267,18 +273,34 @@ class CentroidFilter:
             self.out_speed, self.out_track = v, float(wrap_rad(psi))
 
     _consistency_warning = ""
+    _imu_spec: ImuSpec | None = None   # apply_imu_spec's, with the INS as aiding and reference_frame "ne"
+    _ins_growth: InsVelocityErrorGrowth | None = None   # the INS velocity error's growth, set by reset
+
+    def _start_ins_growth(self, cov0: np.ndarray, v0_ne: np.ndarray, t0_s: float) -> None:
+        """At the reset, with the IMU's specification (apply_imu_spec): e_ne's prior is the initial estimate's
+        velocity covariance (the INS starts from that velocity) and its growth the INS's (ins_error.py), from
+        the initial estimate's tilt and heading sigmas (cov0: its 9 x 9 covariance)."""
+        spec = self._imu_spec
+        if spec is None:
+            self._ins_growth = None
+            return
+        tilt0 = math.sqrt(max(0.5 * float(cov0[6, 6] + cov0[7, 7]), 0.0))
+        self._ins_growth = InsVelocityErrorGrowth(spec, tilt0, math.sqrt(max(float(cov0[8, 8]), 0.0)), v0_ne,
+                                                  t0_s)
+        self.X[2:, 2:] = 0.5 * (cov0[3:5, 3:5] + cov0[3:5, 3:5].T)
 
     def apply_imu_spec(self, spec: ImuSpec) -> None:
         """With the INS as aiding (aiding_source "ins", reference_frame "ne"), e_ne is the INS's north/east
-        velocity error: its random walk takes at least what the IMU's specification makes that error grow by
-        (navigators.core.imu_spec; a floor over aiding_bias_walk_mps_per_sqrt_s): the body-fixed horizontal
-        specific-force error (accelerometer bias, instability, misalignment x g), a constant acceleration, and
-        the acceleration the horizontal gyro biases' tilt builds, a ramp g sigma_bg t, as walks matching them
-        at ACQ_MEMORY_S, with the velocity random walk. Air-data aiding does not use the IMU: no change."""
+        velocity error, and the IMU's specification gives its model in place of the walk
+        aiding_bias_walk_mps_per_sqrt_s and the prior aiding_speed_sigma_mps: from the reset on, its prior is
+        the initial estimate's velocity covariance and its variance grows as the free INS's velocity error
+        (ins_error.InsVelocityErrorGrowth: the accelerometer noise, the initial tilt's and the body-fixed
+        specific-force error's accelerations turned by the flown heading, the gyro biases' tilt ramp, the
+        initial heading error on the velocity change), and out of lock the output covariance is the 4-state
+        filter's own propagation (_propagate_cov). Air-data aiding does not use the IMU: no change."""
         if self.ins is None or not self._ne_frame:
             return
-        walk = rss(equivalent_walk_density(spec.body_accel_sigma_mps2, ACQ_MEMORY_S),
-                   equivalent_ramp_walk_density(spec.tilt_accel_rate_sigma_mps3, ACQ_MEMORY_S),
-                   spec.accel_noise_density_mps2_rthz)
-        self._bias_walk2 = max(self._bias_walk2, walk**2)
+        self._imu_spec = spec
+        if getattr(self, "_init_state", None) is not None:  # applied after a reset: from that reset on
+            self._start_ins_growth(*self._init_state)
         self._consistency_warning = grade_warning(spec, ACQ_MEMORY_S, self.name)

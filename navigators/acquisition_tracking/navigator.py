@@ -32,18 +32,21 @@ N - 1 samples, so successive NIS values are correlated.
 Covariance (north, east): the centroid filter's Pc grows per epoch by the references' sigma over one sample
 (T sigma_v along, V T sigma_psi across) plus the aiding's random walk (aiding_walk_m_per_sqrt_s^2 T), and in
 lock is updated by the fix with R = fix_sigma_scale^2 (pi/2) sigma_res^2 / (the replica's squared map slopes
-along / across) + a map post^2 / 12, its gain counting fix_overlap (N / 2) epochs per fix. The output is Pc
+along / across) + a map post^2 / 12, its gain counting fix_overlap epochs per fix (N with the INS as aiding:
+consecutive fixes share N - 1 of N samples; N / 2 with air data; settings.py). The output is Pc
 plus dead reckoning from the centroid to the newest sample; out of lock it grows linearly on the aiding's
 sigmas. Vertical: the barometer's bias.
 
 reference_frame "ne" (the default): the aiding of every transect sample is corrected by one north/east
 velocity bias e_ne (_aid_arrays; an INS's velocity error, or the wind with air data), the loops run around
 b = 0, and the centroid filter has four states (centroid north/east, e_ne north/east): the fix updates
-both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s (with the INS as aiding at least as the IMU's
-specification makes its velocity error grow: apply_imu_spec), the output is the centroid plus the lever to the
-newest sample, and out of lock the dead-reckoned sigma grows on e_ne's. replica_model "return": each
-sample's measured height and map point come from the ray of its predicted shortest return (beam.py;
-_return_height), and the loops get the samples' offsets.
+both, e_ne walks by aiding_bias_walk_mps_per_sqrt_s (with the INS as aiding and the IMU's specification,
+apply_imu_spec: from the initial velocity covariance as the free INS's velocity error grows), the output is
+the centroid plus the lever to the newest sample, and out of lock the dead-reckoned sigma grows on e_ne's
+(with the IMU's specification the 4-state filter's own propagation, e_ne's variance growing as the free INS's
+velocity error: ins_error.py). replica_model "return": each sample's measured height and map point come
+from the ray of its predicted shortest return (beam.py; _return_height), and the loops get the samples'
+offsets.
 
 Estimate.extra, besides the fixed protocol keys (innovation = the centroid fix minus its prediction, north
 and east in m, its covariance S, NIS with 2 dof, measurement time):
@@ -140,9 +143,7 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         self._cost = COSTS[cfg.correlation]
         self._disc = tracking.DISCRIMINATORS[cfg.discriminator]
         self._n_min = max(3, int(math.ceil(cfg.min_valid_fraction * cfg.transect_samples)))
-        self._fix_overlap = float(
-            cfg.fix_overlap if cfg.fix_overlap is not None else 0.5 * cfg.transect_samples
-        )
+        self._fix_overlap = float(cfg.fix_overlap_epochs)
         walk = cfg.aiding_walk_m_per_sqrt_s
         self._walk2 = float(walk) ** 2
         self._speed_set = np.array(cfg.speed_spacings_mps)
@@ -261,6 +262,8 @@ class AcqTrackNavigator(SensorIntake, CentroidFilter, AcquisitionStep, TrackingS
         # the velocity bias' prior: the aiding's sigma, or the initial velocity's if larger
         v_cov = 0.5 * (cov[3:5, 3:5] + cov[3:5, 3:5].T)
         self.X[2:, 2:] = np.maximum(np.eye(2) * self._bias_sigma0**2, v_cov)
+        self._init_state = (cov, v, self.t0)
+        self._start_ins_growth(*self._init_state)   # with the IMU's specification: the INS's own model
         self.out_speed, self.out_track = speed, track
         self._v0 = (speed, track)
         if not cfg.aiding:

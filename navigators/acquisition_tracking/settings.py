@@ -55,8 +55,15 @@ AIDING_SOURCES = ("air_data", "ins")
 #   references absorb - air data in JSBSim's light turbulence (the gusts move the ground vector by ~2 m/s per
 #   axis, invisible to air data) 1.5 m/s / 1 deg; an IRS's (strapdown INS) velocity 0.3 m/s / 0.2 deg.
 # - aiding_walk_m_per_sqrt_s: the dead reckoning's random walk on top (position variance per second): air
-#   data 2 m/s x sqrt(2 x 10 s correlation) ~ 9; an INS 2 (its slow velocity drift, which the slow
-#   references follow late; calibrated so the centroid fix's NIS averages 2 on the built-in flight).
+#   data 2 m/s x sqrt(2 x 10 s correlation) ~ 9; an INS 0: its position error is the integral of its velocity
+#   error, which reference_frame "ne" carries as e_ne (the accelerometer noise's integral, N^2 T^3 / 3 per
+#   sample, is below 1e-7 m^2 on every grade).
+# - fix_sigma_scale / fix_overlap: the centroid fix's noise. R = scale^2 (pi/2) sigma_res^2 / I: pi/2 is the
+#   MAD estimator's variance factor for Gaussian noise, and consecutive fixes share N - 1 of their N samples,
+#   so a fix's error from the samples' white noise is a moving average whose autocorrelation 1 - |k|/N sums
+#   to N: each epoch brings 1/N of a fix's information (fix_overlap N). INS: scale 1, overlap N (these
+#   derived values); air data keeps the calibration on its own walks (scale 1.25, overlap N / 2: the
+#   centroid fix's NIS averaged 2 on the built-in flight).
 # - reference_gain: the aided references are slow biases; the fraction of each epoch's loop change taken
 #   (an exponential average over ~2 / gain epochs): air data 0.1, an INS's slower drift 0.02.
 # - max_speed_bias_mps / max_heading_bias_deg: a reference beyond is a false lock: air data 15 m/s / 15 deg
@@ -68,7 +75,8 @@ AIDING_SOURCES = ("air_data", "ins")
 SOURCE_DEFAULTS = {
     "aiding_speed_sigma_mps": {"air_data": 1.5, "ins": 0.3},
     "aiding_heading_sigma_deg": {"air_data": 1.0, "ins": 0.2},
-    "aiding_walk_m_per_sqrt_s": {"air_data": 9.0, "ins": 2.0},
+    "aiding_walk_m_per_sqrt_s": {"air_data": 9.0, "ins": 0.0},
+    "fix_sigma_scale": {"air_data": 1.25, "ins": 1.0},
     "reference_gain": {"air_data": 0.1, "ins": 0.02},
     "max_speed_bias_mps": {"air_data": 15.0, "ins": 6.0},
     "max_heading_bias_deg": {"air_data": 15.0, "ins": 3.0},
@@ -183,11 +191,14 @@ class AcqTrackConfig(Settings):
     unaided_heading_sigma_deg: float = setting(5.0, "heading error of the unaided loops", "deg", gt=0.0)
     gnss_sigma_m: float = setting(3.0, "GNSS position noise per axis", "m", gt=0.0)
     position_sigma_floor_m: float | None = setting(None, "None: half the map's post spacing", "m", gt=0.0)
-    fix_sigma_scale: float = setting(
-        1.25, "calibration of the centroid fix's sigma (navigator.py; NIS check)", gt=0.0)
+    fix_sigma_scale: float | None = setting(
+        None, "the centroid fix's sigma over the MAD's (pi/2)^(1/2) sigma_res / I^(1/2) (None: by source)",
+        gt=0.0)
     fix_gate_nis: float = setting(
         13.8, "a fix with NIS (2 dof) above this is rejected as a false lock (p = 0.001)", gt=0.0)
-    fix_overlap: float | None = setting(None, "epochs sharing one fix's information (None: N / 2)", ge=1.0)
+    fix_overlap: float | None = setting(
+        None, "epochs sharing one fix's information (None: N with the INS as aiding, N / 2 with air data)",
+        ge=1.0)
     aiding_walk_m_per_sqrt_s: float | None = setting(None, "dead-reckoning random walk (None: by source)",
         "m/sqrt(s)", ge=0.0)
     baro_geopotential: bool = setting(True, "convert the baro geopotential height to geometric")
@@ -231,6 +242,14 @@ class AcqTrackConfig(Settings):
         if self.output_average_length is not None:
             return int(self.output_average_length)
         return int(math.ceil(self.transect_samples / 2))
+
+    @property
+    def fix_overlap_epochs(self) -> float:
+        """Epochs sharing one centroid fix's information: fix_overlap, or by source (SOURCE_DEFAULTS'
+        comment): N with the INS as aiding, N / 2 with air data."""
+        if self.fix_overlap is not None:
+            return float(self.fix_overlap)
+        return float(self.transect_samples) * (1.0 if self.aiding_source == "ins" else 0.5)
 
     @property
     def transect_duration_s(self) -> float:

@@ -33,11 +33,11 @@ VALIDATION_PAGE = "docs/validation/navigators.md"
 # navigator -> {IMU grade: direction} of the cells measured outside their consistency bounds
 MEASURED: dict[str, dict[str, str]] = {
     "ins": {},
-    "ins_tercom": {"navigation": CONSERVATIVE, "tactical": CONSERVATIVE, "consumer": OVERCONFIDENT},
+    "ins_tercom": {"consumer": OVERCONFIDENT},
     "pmf": {"consumer": OVERCONFIDENT},
     "pf": {"consumer": OVERCONFIDENT},
     "rbpf": {"tactical": CONSERVATIVE, "consumer": OVERCONFIDENT},
-    "acq_track": {"navigation": CONSERVATIVE, "consumer": OVERCONFIDENT},
+    "acq_track": {},
 }
 
 _MEANING = {

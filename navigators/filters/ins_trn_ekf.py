@@ -14,17 +14,18 @@ baro-damped channel of navigators.inertial); d(psi) = -w_in x psi - C_bn [0, 0, 
 fix, z = -(correction) = INS - matched position (north, east), chi-square gated; the batch's rigid shift is
 the INS error averaged over its samples, dr(t_k) = dr - dv tau_k + d(dv)/dt tau_k^2 / 2 (tau_k = t_fix -
 t_k), so H takes the velocity error times the mean lag (-lag on states 3, 4). Its noise: fix_noise "fixed"
-(default) (fix_sigma_m)^2 per axis (Table 2: (10 m)^2); "batch" (opt-in) the MAD shift's covariance from the
-batch's residuals, the map's slopes, the terrain the map cannot hold and (without bias removal) the baro's
-bias (navigators.tercom.fix_noise), with H the map-slope-weighted average of each sample's INS error run back
-from the fix along the INS's specific force and attitude (navigators.filters.ins_trn_batch_error: the
-velocity error times the slope-weighted lag, the attitude and bias errors through the specific force).
+(the free INS's settings default; ins_tercom's opt-in) (fix_sigma_m)^2 per axis (Table 2: (10 m)^2); "batch"
+(ins_tercom's default) the MAD shift's covariance from the batch's residuals, the map's slopes, the
+terrain the map cannot hold and (without bias removal) the baro's bias (navigators.tercom.fix_noise), with
+H the map-slope-weighted average of each sample's INS error run back from the fix along the INS's specific
+force and attitude (navigators.filters.ins_trn_batch_error: the velocity error times the slope-weighted lag,
+the attitude and bias errors through the specific force).
 "Velocity-error estimates fed back to compensate the TRN inputs": the estimated errors and biases are fed
 back into the INS at every fix, so the next batch is collected with the compensated INS. The error
 model's priors and noise come from the IMU's specification where it gives more than the settings
 (apply_imu_spec in ins_trn_propagation.py, navigators.core.imu_spec: bias priors and Gauss-Markov walks,
-the x / y gyro biases the 13 states do not carry as a tilt random walk, turns' misalignment and scale
-factor).
+the x / y gyro biases the 13 states do not carry as a tilt random walk matched at the fix period, turns'
+misalignment and scale factor per radian of the heading's excursion, turn_angle).
 
 GNSS (loosely coupled, every valid fix of SensorFrames.gnss, at its own time): z = INS - GNSS, north and
 east position (m) and NED velocity (m/s), H selects states 0, 1, 3, 4, 5, R = diag(gnss_sigma_h_m^2 x 2,
@@ -52,6 +53,7 @@ from collections import deque
 import numpy as np
 
 from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
+from ..core.imu_spec import TurnAngle
 from ..core.ins_gnss import InsGnssBlock
 from ..core.linalg import floored_psd, is_positive_definite
 from ..core.maps import load_map
@@ -143,7 +145,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
                   "ira_average gate_chi2 min_samples dp_min_m dp_reference_formula baro_geopotential "
                   "remove_bias init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m "
                   "gnss_sigma_v_mps gnss_correlated_sigma_m gnss_gate_chi2 gnss_timeout_s "
-                  "recovery_half_cells recovery_sigma_m")
+                  "recovery_half_cells recovery_sigma_m turn_angle")
         self.terrain_model_sigma_m = 0.0
         if aiding is not None and s.fix_noise == "batch":   # the map's unresolved terrain (tercom.fix_noise)
             self.terrain_model_sigma_m = (interpolation_sigma_m(dem) if s.terrain_model_sigma_m == "auto"
@@ -214,6 +216,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.kf.x = np.zeros((N_ERR, 1))
         self.kf.P = P
         self._yaw_prev = math.nan
+        self._heading_net_rad = 0.0
+        self._turn_angle = TurnAngle("excursion")
         self._P_good = P.copy()
         self.health = Health(status="free_inertial" if self.aiding is None else "acquiring")
         self.batch.clear()

@@ -177,9 +177,11 @@ class InsTrnPropagation:
     _q_tilt = 0.0  # (rad^2/s) tilt random walk standing in for the x / y gyro biases
     _q_ba_walk = 0.0  # (m^2/s^5) accelerometer-bias random walk (its instability's Gauss-Markov drive)
     _q_bg_walk = 0.0  # (rad^2/s^3) z-gyro-bias random walk
-    _turn_tilt2 = 0.0  # tilt variance per rad turned (gyro misalignment)
-    _turn_heading2 = 0.0  # heading variance per rad turned (gyro scale factor)
+    _turn_tilt2 = 0.0  # m^2 TURN_REFERENCE_RAD: level flight's tilt variance per rad turned (misalignment m)
+    _turn_heading2 = 0.0  # s^2 TURN_REFERENCE_RAD: level flight's heading variance per rad (scale factor s)
     _yaw_prev = math.nan
+    _heading_net_rad = 0.0  # net heading change of the INS's turning since the reset (turn_angle "excursion")
+    _turn_angle = None  # navigators.core.imu_spec.TurnAngle (reset)
     _consistency_warning = ""
 
     def apply_imu_spec(self, spec: ImuSpec) -> None:
@@ -188,12 +190,12 @@ class InsTrnPropagation:
         error (bias, instability, misalignment x g); z-gyro-bias prior the gyro bias and instability; velocity
         and attitude noise the noise densities; the biases' random walks their instabilities' Gauss-Markov
         drives (2 sigma^2 / tau); the x / y gyro biases (not states) as a tilt random walk matching them at
-        EKF_MEMORY_S; per turn the gyro misalignment (tilt) and scale factor (heading) times the angle."""
+        tilt_memory_s; per turn the gyro misalignment (tilt) and scale factor (heading) times the angle."""
         self.sig_ba = max(self.sig_ba, spec.body_accel_sigma_mps2)
         self.sig_bg = max(self.sig_bg, spec.gyro_bias_sigma_rps)
         self.q_acc = max(self.q_acc, spec.accel_noise_density_mps2_rthz**2)
         self.q_gyr = max(self.q_gyr, spec.gyro_noise_density_rps_rthz**2)
-        self._q_tilt = equivalent_walk_density(spec.gyro_bias_sigma_rps, EKF_MEMORY_S) ** 2
+        self._q_tilt = equivalent_walk_density(spec.gyro_bias_sigma_rps, self.tilt_memory_s) ** 2
         self._q_ba_walk = 2.0 * spec.accel_bias_instability_mps2**2 / spec.accel_bias_tau_s
         self._q_bg_walk = 2.0 * spec.gyro_bias_instability_rps**2 / spec.gyro_bias_tau_s
         self._turn_tilt2 = spec.turn_tilt_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
@@ -201,30 +203,71 @@ class InsTrnPropagation:
         self._consistency_warning = grade_warning(spec, EKF_MEMORY_S, self.name)
         self._Q = None
 
-    def _turn_noise(self, hist: np.ndarray) -> None:
-        """Attitude variance the segment's turning builds through the gyro misalignment (tilt) and scale
-        factor (heading), added after the segment's propagation.
+    @property
+    def tilt_memory_s(self) -> float:
+        """Memory (s) at which the tilt random walk matches the tilt of the x / y gyro biases: EKF_MEMORY_S
+        for the free INS; for the aided filter the fix period (at most EKF_MEMORY_S).
 
-        Both errors are a constant of the IMU times the angle turned: a turn of dpsi rad moves the heading by
-        s dpsi and the tilt by about m dpsi (navigators.core.imu_spec.turn_heading_sigma_rad,
-        turn_tilt_sigma_rad), variance sigma^2 dpsi^2. The 13 states do not carry s and m, so the error
-        enters as a random walk in the angle turned, of density sigma^2 TURN_REFERENCE_RAD per rad: it
-        matches sigma^2 dpsi^2 at dpsi = TURN_REFERENCE_RAD and bounds it from above for smaller turns (the
-        equivalent walk of navigators.core.imu_spec, with the angle in place of the time). The angle is the
-        total variation of the INS yaw at the IMU's rate (the integral of |yaw rate| over the segment's
-        samples hist: _ekf_kernels.yaw_total_variation), not the net yaw change over the navigator's frame:
-        a sum of per-frame net changes drops the back-and-forth inside each frame and so depends on the
-        frame rate, while the integral of |yaw rate| is the limit of every such sum as the frames shrink
-        and, being no smaller than the net turn over any interval, keeps the walk an upper bound of the
-        error whatever the frame rate."""
+        A constant bias b tilts the INS by b t, an acceleration error g b t (a ramp) that the aided filter
+        observes only through its TERCOM fixes: three successive fixes, fix_period_s apart, fix the
+        acceleration error as their track's second difference, the mean over the span, whose middle lies
+        one fix period before the last fix. The tilt the filter must allow for beyond its estimate is the
+        ramp's change over that period, b fix_period_s, which the equivalent walk (navigators.core.imu_spec
+        .equivalent_walk_density) matches at T = fix_period_s; matched at the free INS's EKF_MEMORY_S, the
+        walk's variance over a fix period is EKF_MEMORY_S / fix_period_s times the ramp's."""
+        if self.aiding is None:
+            return EKF_MEMORY_S
+        return min(EKF_MEMORY_S, float(self.fix_period_s))
+
+    def _turn_noise(self, hist: np.ndarray) -> None:
+        """Attitude variance the segment's turning builds through the gyro scale factor s and misalignment
+        m, added after the segment's propagation.
+
+        A heading change at rate r turns the body about the navigation frame's down axis, whose direction in
+        the body frame is d = C_bn^T e_down (the third row of C_bn): w_b = r d. The gyro's error
+        (S + M) w_b (S diagonal, M off-diagonal, independent entries of sigma s and m) moves the heading by
+        r d^T (S + M) d = r (sum_i s_i d_i^2 + sum_(i != j) m_ij d_i d_j), variance per rad turned
+        s^2 k + m^2 (1 - k) with k = sum_i d_i^4 ((sum_i d_i^2)^2 = 1 = k + sum_(i != j) d_i^2 d_j^2), and
+        the horizontal attitude by the rest of |(S + M) d|^2 = s^2 + 2 m^2: s^2 (1 - k) + m^2 (1 + k) over
+        the two tilt axes. Each tilt axis takes m^2 + s^2 (1 - k) / 2: the two sum to 2 m^2 + s^2 (1 - k),
+        which bounds that share (k <= 1), and either axis can carry most of it in a turn short of a full
+        circle (the body's x / y errors rotate with the heading only through the turn). Level (k = 1) the
+        heading takes the scale factor and each tilt axis the misalignment; banked by phi,
+        k = cos^4 phi + sin^4 phi and the heading takes 2 m^2 sin^2 phi cos^2 phi of the misalignment (in
+        a 24 deg bank 0.27 m^2: on the tactical preset, m = 3.3 s, three times the scale factor's share).
+        k is taken at the segment's last attitude.
+
+        The error is a constant of the IMU times the angle turned, variance sigma^2 dpsi^2, and the 13
+        states do not carry s and m, so it enters as a random walk in the angle, of density
+        sigma^2 TURN_REFERENCE_RAD per rad: it matches sigma^2 dpsi^2 at dpsi = TURN_REFERENCE_RAD and bounds
+        it from above for smaller turns (the equivalent walk of navigators.core.imu_spec, with the angle in
+        place of the time). The angle (turn_angle): "total", the total variation of the INS yaw at the IMU's
+        rate (the integral of |yaw rate| over the segment's samples hist: _ekf_kernels.yaw_total_variation;
+        not a per-frame net change, which would depend on the frame rate), which counts the heading's
+        back-and-forth on a straight leg as turning; "excursion", the growth of the largest net heading
+        change since the reset (navigators.core.imu_spec.TurnAngle): the error of a constant s and m follows
+        the net heading change, so a wander, or a turn undone, adds nothing beyond its largest excursion.
+        The net change is the INS's own turning: a fix's heading correction re-anchors _yaw_prev
+        (ins_trn_gnss._feed_back) and is not counted."""
         if self._turn_tilt2 == 0.0 and self._turn_heading2 == 0.0:
             return
         turn, yaw = kern.yaw_total_variation(hist, self._yaw_prev)
+        if self.turn_angle == "excursion":
+            if math.isfinite(self._yaw_prev) and math.isfinite(yaw):
+                self._heading_net_rad += (yaw - self._yaw_prev + math.pi) % (2.0 * math.pi) - math.pi
+            turn = self._turn_angle.advance(self._heading_net_rad)
         if turn > 0.0:
+            k = 1.0
+            ok = np.isfinite(hist[:, 6:10]).all(axis=1)
+            if ok.any():
+                d = quat_to_dcm(hist[np.flatnonzero(ok)[-1], 6:10])[2]
+                k = float(np.sum(d**4))
+            m2, s2 = self._turn_tilt2, self._turn_heading2     # (each x TURN_REFERENCE_RAD)
+            tilt = (m2 + 0.5 * s2 * (1.0 - k)) * turn
             P = self.kf.P
-            P[PSIN, PSIN] += self._turn_tilt2 * turn
-            P[PSIE, PSIE] += self._turn_tilt2 * turn
-            P[PSID, PSID] += self._turn_heading2 * turn
+            P[PSIN, PSIN] += tilt
+            P[PSIE, PSIE] += tilt
+            P[PSID, PSID] += (s2 * k + m2 * (1.0 - k)) * turn
             self._P_good[:] = P
         self._yaw_prev = yaw
 

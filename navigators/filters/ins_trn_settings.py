@@ -21,6 +21,7 @@ CHI2_5DOF_99_99 = 25.74
 IRA_FORMULAS = ("simple", "attitude", "conventional", "proposed")
 AIDINGS = ("ira", "radar_altimeter")
 FIX_NOISE_MODELS = ("batch", "fixed")
+TURN_ANGLES = ("total", "excursion")
 
 
 @dataclass(frozen=True)
@@ -36,11 +37,15 @@ class InsTrnSettings(Settings):
     cell_m: float = setting(5.0, "TERCOM search cell", "m", gt=0.0)
     fix_sigma_m: float = setting(10.0, "TERCOM fix noise per axis (Table 2)", "m", gt=0.0)
     fix_noise: str = setting("fixed", "TERCOM fix covariance: 'fixed' (fix_sigma_m per axis) or 'batch' "
-                                      "(opt-in: the MAD shift's from the batch's residuals and map slopes, "
-                                      "tercom.fix_noise)", choices=FIX_NOISE_MODELS)
+                                      "(ins_tercom's default: the MAD shift's from the batch's residuals and "
+                                      "map slopes, tercom.fix_noise)", choices=FIX_NOISE_MODELS)
     terrain_model_sigma_m: float | str = setting(
         "auto", "terrain a coarse map cannot hold between posts, in the 'batch' fix covariance (auto: from "
         "the map's spectrum)", "m", ge=0.0, also=("auto",))
+    turn_angle: str = setting("total", "angle the turn terms' attitude walk runs in (with the IMU's "
+                              "specification): integral of |yaw rate| (total) or growth of the net heading "
+                              "change since the reset (excursion; navigators.core.imu_spec.TurnAngle)",
+                              choices=TURN_ANGLES)
     ekf_rate_hz: float = setting(50.0, "error-state propagation rate (Table 2)", "Hz", gt=0.0)
     gravity_model: str = setting("j2", "INS gravity model", choices=("somigliana", "j2"))
     tau_baro_s: float = setting(30.0, "time constant of the baro-damped vertical channel", "s", gt=0.0)
@@ -100,10 +105,18 @@ class InsTrnSettings(Settings):
 
 @dataclass(frozen=True)
 class InsTercomSettings(InsTrnSettings):
-    """InsTrnSettings with the IRA aiding of `ins_tercom` by default."""
+    """InsTrnSettings with the IRA aiding of `ins_tercom` by default, its batch fix covariance and its turn
+    term in the heading's excursion (navigators.filters.ins_trn_ekf, ins_trn_propagation)."""
 
     aiding: str | None = setting("ira", "terrain aiding: 'ira' (seed 000 eq 2) or 'radar_altimeter' (eq 1)",
                                  choices=AIDINGS)
+    fix_noise: str = setting("batch", "TERCOM fix covariance: 'batch' (the MAD shift's from the batch's "
+                                      "residuals and map slopes, tercom.fix_noise) or 'fixed' (fix_sigma_m "
+                                      "per axis, Table 2)", choices=FIX_NOISE_MODELS)
+    turn_angle: str = setting("excursion", "angle the turn terms' attitude walk runs in (with the IMU's "
+                              "specification): growth of the net heading change since the reset (excursion; "
+                              "navigators.core.imu_spec.TurnAngle) or integral of |yaw rate| (total)",
+                              choices=TURN_ANGLES)
 
 
 def _tercom_warm_up(rate_hz: float) -> dict:
