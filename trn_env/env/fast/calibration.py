@@ -95,25 +95,21 @@ FULL_LOOP_REFERENCE = {
 }
 FULL_LOOP_REFERENCE_BATCH = {
     "basin_straight": {"mean_m": 247.9, "p90_m": 504.3, "n": 64},
-    "basin_round": {"mean_m": 22.0, "p90_m": 36.3, "n": 64},
-    "basin_west": {"mean_m": 17.0, "p90_m": 30.6, "n": 64},
-    "jacksboro_sw_ne": {"mean_m": 5.2, "p90_m": 9.5, "n": 64},
-    "jacksboro_flat_patch": {"mean_m": 6.6, "p90_m": 10.2, "n": 64},
+    "basin_round": {"mean_m": 20.5, "p90_m": 37.7, "n": 64},
+    "basin_west": {"mean_m": 18.0, "p90_m": 29.8, "n": 64},
+    "jacksboro_sw_ne": {"mean_m": 5.1, "p90_m": 10.2, "n": 64},
+    "jacksboro_flat_patch": {"mean_m": 6.3, "p90_m": 10.3, "n": 64},
 }
 # Figures (route, "mean_m" or "p90_m") the fast tier does not hold within 25 % of FULL_LOOP_REFERENCE (and
 # of FULL_LOOP_REFERENCE_BATCH), with the measured gap (docs/validation/fast_tier.md); the tests expect them
 # to fail, so one that comes back into calibration is reported.
-OUT_OF_CALIBRATION = {
-    ("jacksboro_sw_ne", "mean_m"): "-27 %: the fast tier's error is lower (-17 % on seeds 0-31)",
-    ("jacksboro_sw_ne", "p90_m"): "-35 %: the fast tier's error is lower (-19 % on seeds 0-31)",
-}
+OUT_OF_CALIBRATION: dict = {}
 OUT_OF_CALIBRATION_BATCH = {
     ("basin_straight", "mean_m"): "-37 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("basin_straight", "p90_m"): "-48 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("basin_round", "mean_m"): "-29 %: smaller errors mid-route and earlier arrivals than the full loop",
-    ("jacksboro_sw_ne", "mean_m"): "-29 %: after each fix the fast tier's error is lower",
-    ("jacksboro_sw_ne", "p90_m"): "-35 %: after each fix the fast tier's error is lower",
-    ("jacksboro_flat_patch", "p90_m"): "+35 %: the fast tier's error grows more over the flat patch",
+    ("basin_straight", "p90_m"): "-43 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("jacksboro_sw_ne", "p90_m"): "-30 %: after each fix the fast tier's error is lower",
+    ("jacksboro_flat_patch", "mean_m"): "+35 %: the fast tier's error grows more over the flat patch",
+    ("jacksboro_flat_patch", "p90_m"): "+50 %: the fast tier's error grows more over the flat patch",
 }
 # the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
 FAST_SEEDS = 256

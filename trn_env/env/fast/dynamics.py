@@ -4,15 +4,21 @@ numba call per decision.
 Per aircraft, every `dt_s` (1 s, trn_env.env.fast.kernel_params.DT_S) of a decision:
 
 - guidance on the ESTIMATE (as TerrainNav-v0): in pursuit mode the commanded track is the goal's bearing
-  from the estimate plus the held offset (a fraction of asin(d omega / v), trn_env.env.task); the height
+  from the estimate plus the held offset (a fraction of asin(d omega / v), v the held airspeed,
+  trn_env.env.task); the height
   above ground is flown on the estimated height minus the MAP under the estimate;
 - the autopilot's laws (aircraft/kingair/Systems/kingair_autopilot.xml, figures in
   trn_env.env.fast.envelope): turn-rate command = track error x 0.2 1/s -> coordinated bank
   atan(V psi_dot / g0) limited to the measured bank limit, reached with the measured first-order bank time
   constant; heading rate g0 tan(bank) / V (a coordinated turn); vertical-speed command = 0.15 1/s x height
   error limited to the measured climb and descent rates, its target moving at most 1.5 m/s^2;
-- constant true airspeed; ground velocity = air velocity + wind: the scenario's wind layers (linear in
-  altitude between layers, constant beyond) plus turbulence as a first-order Gauss-Markov gust per
+- true airspeed: the held one (the scenario's) less tas_per_vs x the vertical speed, through a first-order
+  lag of tas_tau_s (trn_env.env.fast.envelope: the TAS hold's throttle saturates in sustained climbs and
+  descents, so the aircraft trades speed for height), plus a slow wander (first-order Gauss-Markov,
+  tas_wander_mps and tas_wander_tau_s: the along-track speed variation from seed to seed that the full
+  loop shows beyond the gusts below, in light turbulence; none in calm air); ground velocity = air
+  velocity + wind: the scenario's wind layers (linear in altitude between layers, constant beyond) plus
+  turbulence as a first-order Gauss-Markov gust per
   horizontal axis (std and correlation time in trn_env.env.fast.kernel_params.TURBULENCE_*);
 - position on the WGS84 ellipsoid (meridian and prime-vertical radii at the aircraft);
 - navigator (trn_env.env.fast.navigator): INS error and covariance propagation every step, a 1 Hz sample
@@ -38,6 +44,7 @@ from trn_env.env.fast.state import (
     BARO,
     COLLISION,
     DIST_FLOWN,
+    DTAS,
     END,
     EP_E,
     EP_N,
@@ -56,6 +63,7 @@ from trn_env.env.fast.state import (
     OFFSET_FRAC,
     PSI,
     T_LAST_FIX,
+    TAS_WANDER,
     TIME_LIMIT,
     TRK_CMD,
     VS,
@@ -89,8 +97,12 @@ WGS84_E2 = 6.69437999014e-3
     FP_PURSUIT,
     FP_ARRIVAL,
     FP_SAMPLE_DT,
-) = range(18)
-N_FLIGHT_PARAMS = 18
+    FP_TAS_PER_VS,
+    FP_TAS_TAU,
+    FP_WANDER_SIGMA,
+    FP_WANDER_TAU,
+) = range(22)
+N_FLIGHT_PARAMS = 22
 CHUNK_AIRCRAFT = 8  # aircraft per chunk a thread takes from the parallel loops (numba.parallel_chunksize)
 
 
@@ -170,7 +182,10 @@ def fly_decision(
     wind_alt, wind_n, wind_e = wind
     diff, tables = scratch
     dt = fp[FP_DT]
-    v = fp[FP_TAS]
+    v0 = fp[FP_TAS]
+    tau_v = 1.0 - math.exp(-dt / fp[FP_TAS_TAU])
+    wander_a = math.exp(-dt / fp[FP_WANDER_TAU])
+    wander_b = fp[FP_WANDER_SIGMA] * math.sqrt(1.0 - wander_a * wander_a)
     tau_b = 1.0 - math.exp(-dt / fp[FP_BANK_TAU])
     turb_a = math.exp(-dt / fp[FP_TURB_TAU])
     turb_b = fp[FP_TURB_SIGMA] * math.sqrt(1.0 - turb_a * turb_a)
@@ -188,7 +203,7 @@ def fly_decision(
             gn, ge = offset_to_goal(X, i, lat_e, lon_e)
             if fp[FP_PURSUIT] > 0.5:
                 d = math.hypot(gn, ge)
-                x = d * fp[FP_OMEGA] / v
+                x = d * fp[FP_OMEGA] / v0
                 lim = min(fp[FP_OFFSET_MAX], 0.5 * math.pi) if x >= sin_off_max else math.asin(x)
                 X[i, TRK_CMD] = _wrap(math.atan2(ge, gn) + X[i, OFFSET_FRAC] * lim)
             h_map_e = kernels.map_height(mapr, lat_e, lon_e)
@@ -196,6 +211,7 @@ def fly_decision(
                 X[i, END] = OFF_MAP
                 break
             # ---- lateral: ground track hold
+            v = v0 + X[i, DTAS] + X[i, TAS_WANDER]
             wn, we = wind_at(h, wind_alt, wind_n, wind_e)
             wn += X[i, GUST_N]
             we += X[i, GUST_E]
@@ -215,6 +231,8 @@ def fly_decision(
             lim_dv = fp[FP_VS_ACCEL] * dt
             X[i, VS_TGT] += min(lim_dv, max(-lim_dv, dv))
             X[i, VS] = X[i, VS_TGT]
+            X[i, DTAS] += (-fp[FP_TAS_PER_VS] * X[i, VS] - X[i, DTAS]) * tau_v
+            X[i, TAS_WANDER] = wander_a * X[i, TAS_WANDER] + wander_b * frng.normal(state, i)
             # ---- position (trapezoid on the ground velocity)
             psi1 = X[i, PSI]
             vgn = 0.5 * (vgn + v * math.cos(psi1) + wn)
@@ -245,7 +263,7 @@ def fly_decision(
                 break
             if t >= X[i, NEXT_SAMPLE_T] - 1e-9:
                 X[i, NEXT_SAMPLE_T] += fp[FP_SAMPLE_DT]
-                if t <= nav[nv.NP_GNSS_UNTIL]:
+                if t < nav[nv.NP_GNSS_UNTIL] - 1e-9:  # the outage starts at its start time
                     s = nav[nv.NP_GNSS_SIGMA]
                     sv = nav[nv.NP_GNSS_SIGMA_V]
                     g_n, g_e = frng.normal_pair(state, i)

@@ -12,11 +12,22 @@ flies), sampled every 0.1 s:
   steady bank);
 - a +400 m altitude step: the steady climb rate (climb_rate_max_mps, the median vertical speed while the
   altitude error exceeds 100 m) and then a -400 m step: the steady descent rate (descent_rate_max_mps);
+- the true airspeed's trade against the vertical speed (tas_per_vs, m/s of airspeed lost per m/s of
+  climb) and its first-order lag (tas_tau_s), measured not in this calm flight but in the full loop as
+  the fast tier's reference routes fly it (turbulence, terrain following at the task's settings:
+  scripts/fast_tier_speed_trade.py): the least-squares fit of TAS = tas_mps - tas_per_vs x VS lagged by
+  tas_tau_s (fit_speed_trade). The autopilot holds the true airspeed by power (ap/speed-mode 1, a PI on
+  the throttle), but following the terrain the throttle saturates (idle in the descents), so the aircraft
+  speeds up descending and slows climbing; with it, the airspeed's slow wander (tas_wander_mps,
+  tas_wander_tau_s, a first-order Gauss-Markov process): the same script takes the full loop's horizontal
+  ground speed less that fit, its departure from the mean over the seeds at each second, and its variance
+  and integral time scale, and attributes what exceeds the fast tier's gusts (kernel_params.TURBULENCE_*,
+  along the track) to the wander (wander_from_spread);
 - the autopilot's own laws, read from the XML (not measured): turn-rate command = track error / 5 s
   (track_gain_per_s), vertical-speed command = 0.15 1/s x height error (height_gain_per_s), the
   vertical-speed target's rate limit 1.5 m/s^2 (vs_accel_max_mps2).
 
-The fast tier holds the true airspeed constant (the autopilot's TAS hold keeps it within ~1 m/s).
+The fast tier's true airspeed is tas_mps - tas_per_vs x (its vertical speed lagged by tas_tau_s).
 """
 
 from __future__ import annotations
@@ -40,6 +51,10 @@ class Envelope:
     track_gain_per_s: float
     height_gain_per_s: float
     vs_accel_max_mps2: float
+    tas_per_vs: float
+    tas_tau_s: float
+    tas_wander_mps: float
+    tas_wander_tau_s: float
 
 
 # Measured with measure_envelope() (JSBSim 1.3 King Air, see the module docstring); the command and the
@@ -54,7 +69,73 @@ KINGAIR_ENVELOPE = Envelope(
     track_gain_per_s=0.2,
     height_gain_per_s=0.15,
     vs_accel_max_mps2=1.5,
+    # scripts/fast_tier_speed_trade.py --seeds 4 --routes jacksboro_sw_ne basin_west jacksboro_flat_patch
+    tas_per_vs=0.74,
+    tas_tau_s=2.5,
+    tas_wander_mps=1.28,
+    tas_wander_tau_s=37.0,
 )
+
+
+def fit_speed_trade(runs, tas_mps: float, taus_s=None) -> tuple[float, float]:
+    """(tas_per_vs, tas_tau_s): the least-squares fit of TAS - tas_mps = -tas_per_vs x VS_lagged over the
+    rows of every run (arrays of rows: time s, true airspeed m/s, vertical speed m/s up, evenly spaced),
+    VS_lagged the vertical speed through a first-order lag of tas_tau_s (zero at each run's start), the lag
+    taken from the grid taus_s (default 0.5 to 12 s in 0.5 s steps)."""
+    if taus_s is None:
+        taus_s = np.arange(0.5, 12.01, 0.5)
+    best = (math.inf, 0.0, 0.0)
+    for tau in taus_s:
+        num = den = 0.0
+        lagged_runs = []
+        for x in runs:
+            x = np.asarray(x, float)
+            dt = float(x[1, 0] - x[0, 0])
+            a = 1.0 - math.exp(-dt / tau)
+            lagged = np.empty(x.shape[0])
+            acc = 0.0
+            for k in range(x.shape[0]):
+                acc += a * (x[k, 2] - acc)
+                lagged[k] = acc
+            d_tas = x[:, 1] - tas_mps
+            num += float(lagged @ d_tas)
+            den += float(lagged @ lagged)
+            lagged_runs.append((lagged, d_tas))
+        gain = -num / den
+        res = sum(float(np.sum((d + gain * g) ** 2)) for g, d in lagged_runs)
+        if res < best[0]:
+            best = (res, gain, float(tau))
+    return best[1], best[2]
+
+
+def seed_spread(residuals) -> tuple[float, float]:
+    """(variance m^2/s^2, integral time scale s) of a speed residual's departure from its mean over the
+    seeds at each time: residuals (seeds x times, m/s, 1 Hz, two seeds or more), the variance unbiased over
+    the seeds, the time scale 0.5 s + the sum of the autocorrelation up to its first negative lag."""
+    m = np.asarray(residuals, float)
+    n = m.shape[0]
+    dev = (m - m.mean(0)) * math.sqrt(n / (n - 1))
+    var = float(np.mean(dev * dev))
+    t_int = 0.5
+    for k in range(1, m.shape[1] // 2):
+        r = float(np.mean(dev[:, :-k] * dev[:, k:])) / var
+        if r < 0.0:
+            break
+        t_int += r
+    return var, t_int
+
+
+def wander_from_spread(var: float, t_int_s: float, gust_sigma_mps: float,
+                       gust_tau_s: float) -> tuple[float, float]:
+    """(tas_wander_mps, tas_wander_tau_s): the first-order Gauss-Markov speed process that adds to the fast
+    tier's along-track gust (std gust_sigma_mps, correlation time gust_tau_s) what the full loop's seed
+    spread (var, t_int_s: seed_spread) has beyond it: its variance and its variance x time scale (the
+    position spread it makes grows as 2 sigma^2 tau t). (0, 0) when the gust already accounts for it."""
+    dv = var - gust_sigma_mps**2
+    dvt = var * t_int_s - gust_sigma_mps**2 * gust_tau_s
+    if dv <= 0.0 or dvt <= 0.0:
+        return 0.0, 0.0
+    return math.sqrt(dv), dvt / dv
 
 
 def measure_envelope(tas_mps: float = 85.0, h_msl_m: float = 1500.0) -> dict:

@@ -86,6 +86,11 @@ def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float
     fp[dyn.FP_PURSUIT] = 1.0 if env.action_mode == "pursuit" else 0.0
     fp[dyn.FP_ARRIVAL] = 1.0 if env.reward_mode == "arrival" else 0.0
     fp[dyn.FP_SAMPLE_DT] = 1.0
+    fp[dyn.FP_TAS_PER_VS] = env_.tas_per_vs
+    fp[dyn.FP_TAS_TAU] = env_.tas_tau_s
+    # the wander was measured in the scenarios' light turbulence: none in calm air
+    fp[dyn.FP_WANDER_SIGMA] = env_.tas_wander_mps if sigma_t > 0.0 else 0.0
+    fp[dyn.FP_WANDER_TAU] = env_.tas_wander_tau_s
     imu = asdict(sc.sensors.imu if sc.sensors.imu is not None else ImuConfig())
     outages = sc.gnss.outages
     gnss_until = (

@@ -33,7 +33,12 @@ BI_A_N, BI_A_E, BI_G_N, BI_G_E, TILT_GM_N, TILT_GM_E = range(46, 52)
 MAX_WINDOW = 8
 NIS0 = 52
 N_NIS, DEGRADED = 60, 61
-N_STATE = 62
+# the true airspeed's departure from the held one (m/s): the speed traded against the vertical speed
+# (envelope.KINGAIR_ENVELOPE.tas_per_vs), lagged
+DTAS = 62
+# the true airspeed's slow wander (m/s, first-order Gauss-Markov: envelope.KINGAIR_ENVELOPE.tas_wander_mps)
+TAS_WANDER = 63
+N_STATE = 64
 
 # END codes (0 = running); names in END_NAMES
 END_NAMES = ("", "arrived", "terrain_collision", "off_map", "time_limit", "goal", "diverged")
