@@ -112,7 +112,7 @@ def _rbpf_turn_variance(m, rate_hz: float, spec: ImuSpec) -> np.ndarray:
     """Sum over the RBPF's epochs of the attitude process noise beyond its floor (rad^2, n e d)."""
     from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
     nav = RaoBlackwellizedPF(_flat_map(m), rng=np.random.default_rng(3), n_particles=50,
-                             acquisition_particles=0,
+                             acquisition_particles=0, turn_angle="total",
                              trn_rate_hz=rate_hz)
     nav.apply_imu_spec(spec)
     added = np.zeros(3)

@@ -25,10 +25,16 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   (map_noise_model "calibrated": ira_seed002.map_noise_calibration);
 - GNSS, while SensorFrames.gnss has valid fixes (rbpf_cloud.py): position moves the cloud onto the Kalman
   posterior of its moments (a square-root update), the velocity updates each particle's Kalman part;
-- systematic resampling when the effective sample size falls below ess_threshold * N;
+- systematic resampling when the effective sample size falls below ess_threshold * N, the copies then moved
+  by a Gaussian kernel of the cloud's position covariance at the optimal bandwidth, drawn towards the
+  cloud's mean first so that its mean and covariance stay (regularisation "shrunk": Musso, Oudjane & Le
+  Gland 2001's regularised filter with Liu & West 2001's shrinkage; navigators.core.resampling): with the
+  position's small process noise (seed 002 sec. II-A) the copies of one ancestor otherwise stay stacked,
+  and the next updates weigh a few distinct positions, whose spread falls faster than the posterior's (not
+  while a recovery's re-spread cloud re-acquires: RbpfCloud._regularise);
 - acquisition (our addition): the cloud starts with acquisition_particles and is resampled down to
-  n_particles (Table 1's 1,000) once its horizontal spread is below acquisition_spread_m, so the Kalman parts
-  after the first sharp updates do not all descend from a few survivors;
+  n_particles (Table 1's 1,000) once its horizontal spread is below acquisition_spread_m (regularised as a
+  resampling), so the Kalman parts after the first sharp updates do not all descend from a few survivors;
 - feedback: the weighted mean error is corrected into the INS (position, velocity, attitude, biases) and
   subtracted from every particle, so the error model stays linear about a good INS.
 
@@ -136,8 +142,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     cloud's and Kalman parts' prior from reset's initial.covariance, _set_prior; False: the init_* settings);
     imu_samples ("interval" | "instant"); gravity_gradient (error model, see
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m, recovery_reset_kalman (the
-    innovation test and its recovery, see the module docstring); turn_angle ("total" | "excursion": the
-    angle the turn terms of apply_imu_spec run in, _epoch_ql_var).
+    innovation test and its recovery, see the module docstring); turn_angle ("excursion" | "total": the
+    angle the turn terms of apply_imu_spec run in, _epoch_ql_var); regularisation ("shrunk" | "gaussian" |
+    "none": the resampled copies' kernel, module docstring and RbpfCloud._regularise).
     """
 
     capabilities = CAPABILITIES
@@ -158,7 +165,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                         "window_edge_range theta_velocity_rows ambiguity_gap_m ambiguity_weight "
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
-                        "recovery_sigma_m recovery_reset_kalman turn_angle")
+                        "recovery_sigma_m recovery_reset_kalman turn_angle regularisation")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
         self.trn_period_s = 1.0 / s.trn_rate_hz
@@ -235,11 +242,11 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
-        builds (apply_imu_spec), per rad of the angle turn_angle names: "total" (default), the integral of
-        |yaw rate| over the IMU samples since the last epoch (`_propagate`: it does not depend on the
-        rate); "excursion", the growth of the net heading change since the reset
-        (navigators.core.imu_spec.TurnAngle), as the heading's back-and-forth on a straight leg undoes its
-        own misalignment and scale-factor error)."""
+        builds (apply_imu_spec), per rad of the angle turn_angle names: "excursion" (default), the growth of
+        the net heading change since the reset (navigators.core.imu_spec.TurnAngle), as the heading's
+        back-and-forth on a straight leg undoes its own misalignment and scale-factor error; "total", the
+        integral of |yaw rate| over the IMU samples since the last epoch (`_propagate`: it does not depend
+        on the rate)."""
         turn, self._turn_pending = self._turn_pending, 0.0
         if not self._turn_att_var.any():
             return self.ql_var
@@ -257,6 +264,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._yaw_prev = math.nan
         self._turn_pending = 0.0
         self._turn_angle = TurnAngle(self.turn_angle)
+        self._reacquiring = False
         self.ins.reset(initial.t_s, initial.lat_rad, initial.lon_rad, initial.h_m, initial.v_ned_mps,
                        initial.roll_rad, initial.pitch_rad, initial.yaw_rad)
         self._set_prior(initial)
@@ -382,6 +390,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             sig = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0))
             if sig < 30.0:
                 self.health.status = "ok"
+                self._reacquiring = False
 
     def _covariance9(self) -> np.ndarray:
         w = self._weights()

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from ..core.resampling import systematic_indices_u0
+from ..core.resampling import regularisation_bandwidth, regularise_gaussian, systematic_indices_u0
 from ..integrity import protection_level as pl
 from ..protocol import (
     EXTRA_ESS,
@@ -28,6 +28,7 @@ class RbpfCloud:
 
     # set by RaoBlackwellizedPF.apply_imu_spec for a grade beyond its small-angle error model
     _consistency_warning = ""
+    _reacquiring = False     # a recovery's re-spread cloud not yet back to "ok" (_regularise)
 
     def _set_prior(self, initial: Estimate) -> None:
         """The cloud's and the Kalman parts' initial spread. prior_from_initial (default) and a 9 x 9
@@ -105,6 +106,7 @@ class RbpfCloud:
         self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
         sig = self._recovery.sigma_now_m
         self.xn[:, :2] += self.rng.standard_normal((self.n, 2)) * sig
+        self._reacquiring = True       # no regularisation until "ok" again (_regularise)
         if self.recovery_reset_kalman:
             # the Kalman parts' velocity and attitude share the position's failed test: back to the prior
             # spread (plus the cloud's), so the cloud re-converges without inheriting their overconfidence
@@ -178,8 +180,10 @@ class RbpfCloud:
         ess = 1.0 / float(np.sum(w * w))
         self._extra[EXTRA_ESS] = ess
         if ess < self.ess_threshold * self.n:
+            cov = self._cloud_cov(w)
             idx = systematic_indices_u0(w, float(self.rng.random()))
             self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
+            self._regularise(cov)
             self.logw = np.full(self.n, -math.log(self.n))
             self.resamples += 1
         else:
@@ -193,12 +197,35 @@ class RbpfCloud:
         c = kern.moments(self.xn, self.xl, self.P, self._weights())[1]
         if math.sqrt(max(c[0, 0] + c[1, 1], 0.0)) >= max(self.acquisition_spread_m, 1e-9):
             return
-        cw = np.cumsum(self._weights())
+        w = self._weights()
+        cov = self._cloud_cov(w)
+        cw = np.cumsum(w)
         u = (float(self.rng.random()) + np.arange(self.n_particles)) / self.n_particles
         idx = np.minimum(np.searchsorted(cw, u * cw[-1], side="left"), self.n - 1).astype(np.int64)
         self.xn, self.xl, self.P = kern.gather(self.xn, self.xl, self.P, idx)
         self.n = self.n_particles
+        self._regularise(cov)
         self.logw = np.full(self.n, -math.log(self.n))
+
+    def _cloud_cov(self, w: np.ndarray) -> np.ndarray:
+        """Weighted covariance (3 x 3, m^2) of the particles' positions x^n."""
+        d = self.xn - w @ self.xn
+        return (d * w[:, None]).T @ d
+
+    def _regularise(self, cov: np.ndarray) -> None:
+        """regularisation "gaussian": the resampled copies moved by a Gaussian kernel of the cloud's
+        covariance before resampling, cov, with the optimal bandwidth for n particles in the three
+        dimensions of x^n (the regularised particle filter of Musso, Oudjane & Le Gland 2001,
+        navigators.core.resampling; the cloud's covariance grows by h^2 cov); "shrunk": the same kernel with
+        Liu & West's shrinkage towards the mean, which keeps the cloud's mean and covariance and adds only
+        diversity; the Kalman parts stay their ancestors'. "none": nothing. Not while the cloud re-acquires
+        after a recovery's re-spread (until the status is "ok" again): the kernel of one global covariance
+        is the optimal one for a unimodal posterior (the regularised filter's assumption), and a cloud
+        re-spread over hundreds of metres of terrain holds several modes, which it would blur and, shrunk,
+        draw together."""
+        if self.regularisation != "none" and not self._reacquiring:
+            regularise_gaussian(self.xn, cov, regularisation_bandwidth(self.n, 3), self.rng,
+                                shrink=self.regularisation == "shrunk")
 
     def _weights(self) -> np.ndarray:
         m = np.max(self.logw)

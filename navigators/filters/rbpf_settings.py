@@ -104,9 +104,13 @@ class RbpfSettings(Settings):
                                      gt=0.0, lt=1.0)
     recovery_sigma_m: float = setting(100.0, "horizontal re-spread of a recovery", "m", ge=0.0)
     recovery_reset_kalman: bool = setting(True, "a recovery also resets the Kalman parts' covariance")
-    turn_angle: str = setting("total", "angle the turn terms' attitude walk runs in: integral of |yaw "
+    turn_angle: str = setting("excursion", "angle the turn terms' attitude walk runs in: integral of |yaw "
                               "rate| (total) or growth of the net heading change since the reset (excursion)",
                               choices=("total", "excursion"))
+    regularisation: str = setting("shrunk", "after resampling, move the copies by a Gaussian kernel of the "
+                                  "cloud's covariance at the optimal bandwidth (gaussian; shrunk: drawn "
+                                  "towards the mean first, the cloud's covariance kept) or not (none)",
+                                  choices=("none", "gaussian", "shrunk"))
 
     def check(self) -> list[tuple[str, str]]:
         problems = []
