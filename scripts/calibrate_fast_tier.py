@@ -42,9 +42,9 @@ def main(argv=None) -> int:
     )
     p.add_argument("--routes", nargs="*", default=None, help="route names (default: all)")
     p.add_argument("--tier", choices=("both", "full", "fast"), default="both")
-    p.add_argument("--fix-noise", choices=("fixed", "batch"), default=None,
-                   help="the navigator's TERCOM fix noise in both tiers (default: the scenario's, i.e. "
-                        "ins_tercom's default)")
+    p.add_argument("--fix-noise", choices=("fixed", "batch"), default="fixed",
+                   help="the navigator's TERCOM fix noise in both tiers (default: fixed, the route task's; "
+                        "batch: ins_tercom's own default)")
     p.add_argument("--out", type=Path, default=Path("out/fast_calibration"))
     p.add_argument("--policies", default=None,
                    help="comma-separated route-task baselines (straight, planner) to fly, not the routes")

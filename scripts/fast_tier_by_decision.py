@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 
-def fast_by_decision(name: str, n: int, fix_noise: str | None = None) -> list[list[float]]:
+def fast_by_decision(name: str, n: int, fix_noise: str = "fixed") -> list[list[float]]:
     """The fast tier's true horizontal error (m) at every decision of route `name`, seeds 0..n-1, with the
     navigator's fix_noise (calibration.env_kwargs)."""
     from trn_env.env.fast import calibration as cal
@@ -45,7 +45,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, required=True, help="directory of the full loop's full_<route>.json")
     p.add_argument("--route", required=True)
     p.add_argument("--fast-seeds", type=int, default=256)
-    p.add_argument("--fix-noise", choices=("fixed", "batch"), default=None,
+    p.add_argument("--fix-noise", choices=("fixed", "batch"), default="fixed",
                    help="the fast tier's TERCOM fix noise (as the full loop's in DIR was flown)")
     args = p.parse_args(argv)
     known = [r.name for r in REFERENCE_ROUTES]

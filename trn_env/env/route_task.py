@@ -58,10 +58,13 @@ TERRAINS: dict[str, dict] = {
         ),
     ),
 }
+# the full tier's navigator keeps ins_tercom's "fixed" TERCOM fix noise (the fast tier's default model and the
+# mode its calibration holds in, docs/validation/fast_tier.md; ins_tercom's own default is "batch");
 # the full tier's rates at 30 s decisions (see above): the IRA's 50 Hz samples averaged by 3 into the TERCOM
 # batch, covariance steps at 10 Hz, an estimate every 2 s (logged at each), guidance at 1 Hz
 TASK_RATES: dict = dict(guidance_rate_hz=1.0, scenario_fields={
-    "navigator.settings.ira_average": 3, "navigator.settings.ekf_rate_hz": 10.0, "navigator.rate_hz": 0.5,
+    "navigator.settings.fix_noise": "fixed", "navigator.settings.ira_average": 3,
+    "navigator.settings.ekf_rate_hz": 10.0, "navigator.rate_hz": 0.5,
     "guidance.log_rate_hz": 0.5})
 ENV_COMMON: dict = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radius_m=500.0,
                         action_mode="pursuit", bearing_offset_max_deg=45.0, failure_penalty=20.0,
@@ -69,7 +72,8 @@ ENV_COMMON: dict = dict(decision_interval_s=30.0, max_episode_s=480.0, goal_radi
 # opt-in (env_kwargs(..., decision_rates=True)), replacing TASK_RATES: the IRA itself at 10 Hz - cheaper, at
 # a measured cost in the informative routes' miss (docs/validation/env_speed.md): not the task's default
 DECISION_RATES: dict = dict(guidance_rate_hz=1.0, scenario_fields={
-    "sensors.ira.rate_hz": 10.0, "navigator.settings.ekf_rate_hz": 10.0, "navigator.rate_hz": 0.5,
+    "navigator.settings.fix_noise": "fixed", "sensors.ira.rate_hz": 10.0,
+    "navigator.settings.ekf_rate_hz": 10.0, "navigator.rate_hz": 0.5,
     "guidance.log_rate_hz": 0.5})
 # settings only the full-fidelity tier has (JSBSim's step, the guidance rate, the pipelined nav stage, the
 # scenario's sensor and filter rates): a fast-tier env is built from the same keyword arguments without them

@@ -80,8 +80,8 @@ REFERENCE_ROUTES = (
 )
 # The full JSBSim loop's true error at the goal on every reference route, seeds 0..n-1, at the route task's
 # full-tier settings (full_tier_settings(): JSBSim at 50 Hz, the task's TASK_RATES), per TERCOM fix noise of
-# the navigator (FIX_NOISE_MODES: "fixed", fix_sigma_m per axis, ins_tercom's default; "batch", the batch's
-# own covariance, which the fast tier models in fix_noise.py), recorded with
+# the navigator (FIX_NOISE_MODES: "fixed", fix_sigma_m per axis, the route task's; "batch", ins_tercom's
+# default, the batch's own covariance, which the fast tier models in fix_noise.py), recorded with
 # `python scripts/calibrate_fast_tier.py --tier full --seeds N [--fix-noise batch] --out DIR`
 # (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies
 # both tiers.
@@ -140,16 +140,14 @@ def route_by_name(name: str) -> ReferenceRoute:
     raise ValueError(f"unknown reference route {name!r}; known: {[r.name for r in REFERENCE_ROUTES]}")
 
 
-def env_kwargs(route: ReferenceRoute, fix_noise: str | None = None) -> dict:
-    """Constructor arguments (both tiers) of a route's env; fix_noise ("fixed" or "batch"): the navigator's
-    TERCOM fix noise set in the route's scenario (None: the scenario's own, by default the navigator's)."""
-    scenario = route.scenario
-    if fix_noise is not None:
-        if fix_noise not in FIX_NOISE_MODES:
-            raise ValueError(f"fix_noise: one of {FIX_NOISE_MODES}, got {fix_noise!r}")
-        from trn_env.scenario.overrides import load_scenario_with
+def env_kwargs(route: ReferenceRoute, fix_noise: str = "fixed") -> dict:
+    """Constructor arguments (both tiers) of a route's env; fix_noise ("fixed", the route task's, or "batch",
+    ins_tercom's own default): the navigator's TERCOM fix noise set in the route's scenario."""
+    if fix_noise not in FIX_NOISE_MODES:
+        raise ValueError(f"fix_noise: one of {FIX_NOISE_MODES}, got {fix_noise!r}")
+    from trn_env.scenario.overrides import load_scenario_with
 
-        scenario = load_scenario_with(route.scenario, [("navigator.settings.fix_noise", fix_noise)])
+    scenario = load_scenario_with(route.scenario, [("navigator.settings.fix_noise", fix_noise)])
     return dict(
         scenario=scenario,
         agl_min_m=route.agl_min_m,
@@ -164,7 +162,7 @@ def _end_error(info: dict) -> float:
 
 
 def fly_full(
-    route: ReferenceRoute, seeds, settings: dict | None = None, fix_noise: str | None = None
+    route: ReferenceRoute, seeds, settings: dict | None = None, fix_noise: str = "fixed"
 ) -> dict:
     """The route in TerrainNav-v0 (full JSBSim loop) once per seed, at the route task's full-tier settings
     (full_tier_settings()) with `settings` (constructor arguments) over them and the route's own: per-seed
@@ -173,7 +171,9 @@ def fly_full(
     from trn_env.env.terrain_nav import TerrainNavEnv
 
     t0 = time.perf_counter()
-    env = TerrainNavEnv(**{**env_kwargs(route, fix_noise), **full_tier_settings(), **(settings or {})})
+    tier = full_tier_settings()             # the task's scenario fields, with this run's fix noise
+    tier["scenario_fields"] = {**tier["scenario_fields"], "navigator.settings.fix_noise": fix_noise}
+    env = TerrainNavEnv(**{**env_kwargs(route, fix_noise), **tier, **(settings or {})})
     c0 = time.process_time()                  # per decision: the episodes' CPU, not the env's construction
     errors, ends, by_decision, n = [], [], [], 0
     a = np.asarray(route.action, np.float32)
@@ -193,7 +193,7 @@ def fly_full(
             "wall_s": time.perf_counter() - t0, "cpu_s_per_decision": (time.process_time() - c0) / max(n, 1)}
 
 
-def fly_fast(route: ReferenceRoute, seeds, fix_noise: str | None = None) -> dict:
+def fly_fast(route: ReferenceRoute, seeds, fix_noise: str = "fixed") -> dict:
     """The route in TerrainNavFast-v0, one sub-env per seed, all in one vector env (fix_noise: as
     env_kwargs')."""
     from trn_env.env.fast.vector_env import TerrainNavFastVectorEnv
