@@ -141,8 +141,8 @@ def test_excursion_turn_term_bounds_the_strapdown_tilt_and_total_overcounts_the_
 
 
 def test_tilt_walk_is_matched_at_the_fix_period_and_the_defaults():
-    """The x / y gyro biases' tilt walk: q = sigma_bg^2 T with T the fix period for the aided filter (at most
-    EKF_MEMORY_S), EKF_MEMORY_S for the free INS; ins_tercom's defaults are the batch fix covariance and the
+    """The x / y gyro biases' tilt walk: q = sigma_bg^2 T with T the fix period for the aided filter with the
+    batch fix covariance (at most EKF_MEMORY_S), EKF_MEMORY_S for the free INS and the fixed fix noise; ins_tercom's defaults are the batch fix covariance and the
     excursion, the free INS keeps the summed angle (its settings are shared)."""
     from synthetic_terrain import wave_map
     from trn_env.navigators.filters.ins_trn_propagation import EKF_MEMORY_S
@@ -150,7 +150,8 @@ def test_tilt_walk_is_matched_at_the_fix_period_and_the_defaults():
     spec = ImuSpec(gyro_bias_rps=5e-6, gyro_bias_instability_rps=1.5e-6)
     sig2 = 5e-6**2 + 1.5e-6**2
     cases = (("ins_tercom", {}, 40.0), ("ins_tercom", {"fix_period_s": 25.0}, 25.0),
-             ("ins_tercom", {"fix_period_s": 500.0}, EKF_MEMORY_S), ("ins", {}, EKF_MEMORY_S))
+             ("ins_tercom", {"fix_period_s": 500.0}, EKF_MEMORY_S), ("ins", {}, EKF_MEMORY_S),
+             ("ins_tercom", {"fix_noise": "fixed"}, EKF_MEMORY_S))
     for name, settings, memory_s in cases:
         nav = registry.create(name, **({"dem": wave_map(0)} if name == "ins_tercom" else {}), **settings)
         nav.apply_imu_spec(spec)

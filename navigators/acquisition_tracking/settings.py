@@ -259,5 +259,5 @@ class AcqTrackConfig(Settings):
 # error time constants: GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
 # protection level validated on: docs/validation/integrity.md section 6.3
 CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True,
-                            pl_validated=("navigation/as_published",),
+                            pl_validated=("navigation/as_published", "navigation/dted1"),
                             error_time_constant_s=80.0, height_time_constant_s=3900.0)

@@ -206,7 +206,8 @@ class InsTrnPropagation:
     @property
     def tilt_memory_s(self) -> float:
         """Memory (s) at which the tilt random walk matches the tilt of the x / y gyro biases: EKF_MEMORY_S
-        for the free INS; for the aided filter the fix period (at most EKF_MEMORY_S).
+        for the free INS and for the aided filter with the fixed (Table 2) fix noise; for the aided filter
+        with the batch fix covariance the fix period (at most EKF_MEMORY_S).
 
         A constant bias b tilts the INS by b t, an acceleration error g b t (a ramp) that the aided filter
         observes only through its TERCOM fixes: three successive fixes, fix_period_s apart, fix the
@@ -214,8 +215,12 @@ class InsTrnPropagation:
         one fix period before the last fix. The tilt the filter must allow for beyond its estimate is the
         ramp's change over that period, b fix_period_s, which the equivalent walk (navigators.core.imu_spec
         .equivalent_walk_density) matches at T = fix_period_s; matched at the free INS's EKF_MEMORY_S, the
-        walk's variance over a fix period is EKF_MEMORY_S / fix_period_s times the ramp's."""
-        if self.aiding is None:
+        walk's variance over a fix period is EKF_MEMORY_S / fix_period_s times the ramp's. That holds when
+        each fix's covariance is its own (fix_noise "batch"); the fixed noise weighs every fix alike,
+        whatever the terrain resolved, so the fixes do not fix the ramp to within it, and the fixed mode
+        keeps the free INS's memory (with the fix period there, the basin calibration route's true miss
+        grew by half: docs/validation/fast_tier.md)."""
+        if self.aiding is None or self.fix_noise != "batch":
             return EKF_MEMORY_S
         return min(EKF_MEMORY_S, float(self.fix_period_s))
 

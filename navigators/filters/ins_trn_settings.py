@@ -128,7 +128,8 @@ INS_CAPABILITIES = Capabilities(settings=InsTrnSettings, uses_imu_spec=True)
 INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=True, uses_imu_spec=True,
                                        models_map_detail=True,
                                        # protection level validated on (docs/validation/integrity.md 6.3)
-                                       pl_validated=("navigation/as_published", "tactical/as_published"),
+                                       pl_validated=("navigation/as_published", "tactical/as_published",
+                                                     "navigation/dted1", "tactical/dted1"),
                                        warm_up_settings=_tercom_warm_up,
                                        # GM fits to its GNSS-denied error
                                        # (scripts/navigator_error_time_constants.py; its baro-slaved
