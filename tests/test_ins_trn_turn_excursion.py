@@ -142,8 +142,9 @@ def test_excursion_turn_term_bounds_the_strapdown_tilt_and_total_overcounts_the_
 
 def test_tilt_walk_is_matched_at_the_fix_period_and_the_defaults():
     """The x / y gyro biases' tilt walk: q = sigma_bg^2 T with T the fix period for the aided filter with the
-    batch fix covariance (at most EKF_MEMORY_S), EKF_MEMORY_S for the free INS and the fixed fix noise; ins_tercom's defaults are the batch fix covariance and the
-    excursion, the free INS keeps the summed angle (its settings are shared)."""
+    batch fix covariance (at most EKF_MEMORY_S), EKF_MEMORY_S for the free INS and the fixed fix noise;
+    ins_tercom's defaults are the batch fix covariance and the excursion, the free INS keeps the summed angle
+    (its settings are shared)."""
     from synthetic_terrain import wave_map
     from trn_env.navigators.filters.ins_trn_propagation import EKF_MEMORY_S
 
