@@ -87,9 +87,9 @@ REFERENCE_ROUTES = (
 # both tiers.
 FIX_NOISE_MODES = ("fixed", "batch")
 FULL_LOOP_REFERENCE = {
-    "basin_straight": {"mean_m": 455.2, "p90_m": 856.5, "n": 64},
-    "basin_round": {"mean_m": 16.5, "p90_m": 29.2, "n": 64},
-    "basin_west": {"mean_m": 21.0, "p90_m": 39.7, "n": 64},
+    "basin_straight": {"mean_m": 408.0, "p90_m": 756.8, "n": 64},
+    "basin_round": {"mean_m": 17.3, "p90_m": 29.1, "n": 64},
+    "basin_west": {"mean_m": 24.6, "p90_m": 42.7, "n": 64},
     "jacksboro_sw_ne": {"mean_m": 7.2, "p90_m": 14.1, "n": 64},
     "jacksboro_flat_patch": {"mean_m": 9.9, "p90_m": 14.3, "n": 64},
 }
