@@ -94,9 +94,9 @@ FULL_LOOP_REFERENCE = {
     "jacksboro_flat_patch": {"mean_m": 9.9, "p90_m": 14.3, "n": 64},
 }
 FULL_LOOP_REFERENCE_BATCH = {
-    "basin_straight": {"mean_m": 247.9, "p90_m": 504.3, "n": 64},
-    "basin_round": {"mean_m": 20.5, "p90_m": 37.7, "n": 64},
-    "basin_west": {"mean_m": 18.0, "p90_m": 29.8, "n": 64},
+    "basin_straight": {"mean_m": 219.7, "p90_m": 434.5, "n": 64},
+    "basin_round": {"mean_m": 20.6, "p90_m": 33.0, "n": 64},
+    "basin_west": {"mean_m": 19.0, "p90_m": 31.5, "n": 64},
     "jacksboro_sw_ne": {"mean_m": 5.1, "p90_m": 10.2, "n": 64},
     "jacksboro_flat_patch": {"mean_m": 6.3, "p90_m": 10.3, "n": 64},
 }
@@ -105,8 +105,8 @@ FULL_LOOP_REFERENCE_BATCH = {
 # to fail, so one that comes back into calibration is reported.
 OUT_OF_CALIBRATION: dict = {}
 OUT_OF_CALIBRATION_BATCH = {
-    ("basin_straight", "mean_m"): "-37 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("basin_straight", "p90_m"): "-43 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("basin_straight", "mean_m"): "-29 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("basin_straight", "p90_m"): "-34 %: the full loop's batch fix model (slope-weighted H) misses more",
     ("jacksboro_sw_ne", "p90_m"): "-30 %: after each fix the fast tier's error is lower",
     ("jacksboro_flat_patch", "mean_m"): "+35 %: the fast tier's error grows more over the flat patch",
     ("jacksboro_flat_patch", "p90_m"): "+50 %: the fast tier's error grows more over the flat patch",
