@@ -134,7 +134,7 @@ CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=Tru
                             # GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
                             error_time_constant_s=520.0, height_time_constant_s=190.0,
                             # protection level validated (docs/validation/integrity.md 6.3)
-                            pl_validated=("tactical/dted1",))
+                            pl_validated=("navigation/dted1", "tactical/dted1"))
 
 
 def table1_covariance() -> np.ndarray:
