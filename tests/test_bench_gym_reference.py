@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _scripts import load_script
 
 from trn_env.bench import env as bench_env
 
@@ -76,13 +77,7 @@ def test_reference_rejects_an_unknown_aircraft():
 
 def test_ratio_check_script_bad_arguments_exit_2(capsys):
     """scripts/env_ratio_check.py: a bad --repeats or --ref-s is a one-line error and exit 2."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "scripts" / "env_ratio_check.py"
-    spec = importlib.util.spec_from_file_location("env_ratio_check", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script("env_ratio_check")
     for argv, words in ((["--repeats", "0"], "--repeats"), (["--ref-s", "0"], "--ref-s"),
                         (["--ref-s", "nan"], "--ref-s")):
         assert mod.main(argv) == 2

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from _scripts import load_script
 from trn_env.navigators.frames import imu_gap_s
 
 from trn_env.env.env_settings import goal_offset_ne
@@ -226,13 +227,7 @@ def test_50_hz_trajectory_error_is_first_order_and_bounded():
 def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
     """scripts/env_rates_check.py: every bad argument is a one-line error and exit 2, nothing flown or
     written (the configurations are built before anything flies)."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "scripts" / "env_rates_check.py"
-    spec = importlib.util.spec_from_file_location("env_rates_check", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script("env_rates_check")
     ok = 'a={"flight_dt_s": 0.02}'
     out = tmp_path / "out"
     for argv, words in (([ok], "two or more"),
@@ -252,13 +247,7 @@ def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):
 
 def test_cpu_breakdown_script_bad_arguments_exit_2(capsys):
     """scripts/env_cpu_breakdown.py: a bad --decisions or --config is a one-line error and exit 2."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "scripts" / "env_cpu_breakdown.py"
-    spec = importlib.util.spec_from_file_location("env_cpu_breakdown", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script("env_cpu_breakdown")
     for argv, words in ((["--decisions", "0"], "--decisions"), (["--config", "{"], "not JSON"),
                         (["--config", "[1]"], "JSON object"),
                         (["--config", '{"flight_dt_s": 0.06}', "--decisions", "1"], "flight_dt_s")):
