@@ -83,8 +83,11 @@ def main(argv=None) -> int:
     known = [r.name for r in REFERENCE_ROUTES]
     names = args.routes or known
     bad = [n for n in names if n not in known]
-    if bad or args.seeds < 2:
-        print(f"--routes: each one of {known} (got {bad}); --seeds >= 2", file=sys.stderr)
+    if bad:
+        print(f"error: --routes: unknown {bad}; known: {known}", file=sys.stderr)
+        return 2
+    if args.seeds < 2:
+        print(f"error: --seeds: at least 2 (the spread is over seeds), got {args.seeds}", file=sys.stderr)
         return 2
     tas0 = KINGAIR_ENVELOPE.tas_mps
     fits, pooled, by_route = {}, [], {}

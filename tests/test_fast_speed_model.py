@@ -76,3 +76,15 @@ def test_fast_aircraft_speeds_up_descending():
     descending = e.tas_mps + e.tas_per_vs * e.descent_rate_max_mps
     assert max(speeds) == pytest.approx(descending, abs=2.5)
     assert speeds[-1] < max(speeds) - 2.0
+
+
+def test_speed_trade_script_bad_arguments_exit_2(capsys):
+    """scripts/fast_tier_speed_trade.py: an unknown route or fewer than 2 seeds is a one-line error naming the
+    argument and exit 2, before anything flies."""
+    from _scripts import load_script
+
+    mod = load_script("fast_tier_speed_trade")
+    for argv, words in ((["--routes", "nowhere"], "--routes"), (["--seeds", "1"], "--seeds")):
+        assert mod.main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and words in err, err
