@@ -1,14 +1,19 @@
 """Calibration of the fast tier against the full JSBSim loop on fixed reference routes.
 
-A reference route is a terrain (scenario), a start, a goal and a constant pursuit action (the benchmark's
-settings: pursuit actions, 30 s decisions, +-45 deg offsets, 500 m arrival radius). Both tiers fly it with
+A reference route is a terrain (scenario), a start, a goal and a scripted pursuit policy (the benchmark's
+settings: pursuit actions, 30 s decisions, +-45 deg offsets, 500 m arrival radius): a constant action, or
+a fixed cycle of actions, one per decision (the weaving route: the offset saturated and reversed every
+second decision, the bang-bang steering of a PPO policy trained on the fast tier). Both tiers fly it with
 the same navigator family (the scenario's INS + batch TERCOM); the figure compared
 is the TRUE horizontal navigation error at the goal (`true_miss_m` on arrival; the true horizontal error at
 the episode's end otherwise), its mean and 90th percentile over the seeds: the full loop over tens of seeds
 (its cost), the fast tier over FAST_SEEDS, so that the comparison's sampling noise is mostly the full loop's.
 
 Routes (labels from the map's terrain information along them, observation 27-31's featureless stretch):
-informative (rough terrain all the way), featureless (a long flat stretch before the goal), mixed.
+informative (rough terrain all the way), featureless (a long flat stretch before the goal), mixed; weaving
+(informative terrain, reversed offsets). Besides the true error the flights record the navigator's
+horizontal sigma (the hypot of its north and east sigmas) and the episode's end, so that the tiers'
+covariances and arrival (time-out) rates can be compared too.
 """
 
 from __future__ import annotations
@@ -22,7 +27,9 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ReferenceRoute:
-    """One reference route: scenario, start and goal (deg), the constant pursuit action and AGL range (m)."""
+    """One reference route: scenario, start and goal (deg), the pursuit action and AGL range (m); `cycle`
+    (optional) the actions of decisions 0, 1, 2, ..., repeated, or, when `after` is given, flown once and
+    then `after` held (`action` is the cycle's first)."""
 
     name: str
     kind: str
@@ -32,6 +39,18 @@ class ReferenceRoute:
     action: tuple[float, float]
     agl_min_m: float
     agl_max_m: float
+    cycle: tuple[tuple[float, float], ...] = ()
+    after: tuple[float, float] | None = None
+
+    def action_at(self, k: int) -> np.ndarray:
+        """The action of decision k (0-based)."""
+        if not self.cycle:
+            a = self.action
+        elif self.after is not None and k >= len(self.cycle):
+            a = self.after
+        else:
+            a = self.cycle[k % len(self.cycle)]
+        return np.asarray(a, np.float32)
 
 
 _BASIN = dict(scenario="basin_route", agl_min_m=300.0, agl_max_m=900.0)
@@ -76,6 +95,28 @@ REFERENCE_ROUTES = (
         goal_deg=(36.70, -84.13),
         action=(0.0, 0.0),
         **_JACKS,
+    ),
+    # basin_west's start and goal, the offset saturated and reversed every second decision (west first):
+    # ~4-5 reversals of 90 deg in the ~11 decisions to the goal, over informative terrain
+    ReferenceRoute(
+        "basin_weave",
+        "weaving",
+        start_deg=(36.527, -84.245),
+        goal_deg=(36.716, -84.245),
+        action=(-1.0, 0.0),
+        cycle=((-1.0, 0.0), (-1.0, 0.0), (1.0, 0.0), (1.0, 0.0)),
+        **_BASIN,
+    ),
+    # the same weave for ten decisions (4 reversals, to ~1.3 km from the goal), then straight in (offset 0)
+    ReferenceRoute(
+        "basin_weave_in",
+        "weaving",
+        start_deg=(36.527, -84.245),
+        goal_deg=(36.716, -84.245),
+        action=(-1.0, 0.0),
+        cycle=((-1.0, 0.0), (-1.0, 0.0), (1.0, 0.0), (1.0, 0.0)) * 2 + ((-1.0, 0.0), (-1.0, 0.0)),
+        after=(0.0, 0.0),
+        **_BASIN,
     ),
 )
 # The full JSBSim loop's true error at the goal on every reference route, seeds 0..n-1, at the route task's
@@ -157,6 +198,11 @@ def env_kwargs(route: ReferenceRoute, fix_noise: str = "fixed") -> dict:
     )
 
 
+def _sigma_h(sigma_ned_m) -> float:
+    """The horizontal sigma (m): the hypot of the north and east sigmas."""
+    return float(math.hypot(float(sigma_ned_m[0]), float(sigma_ned_m[1])))
+
+
 def _end_error(info: dict) -> float:
     return float(info.get("true_miss_m", info["true_horizontal_error_m"]))
 
@@ -175,21 +221,25 @@ def fly_full(
     tier["scenario_fields"] = {**tier["scenario_fields"], "navigator.settings.fix_noise": fix_noise}
     env = TerrainNavEnv(**{**env_kwargs(route, fix_noise), **tier, **(settings or {})})
     c0 = time.process_time()                  # per decision: the episodes' CPU, not the env's construction
-    errors, ends, by_decision, n = [], [], [], 0
-    a = np.asarray(route.action, np.float32)
+    errors, ends, by_decision, sig_by_decision, n = [], [], [], [], 0
     for s in seeds:
         env.reset(seed=int(s), options={"start_deg": route.start_deg})
         by_decision.append([])
+        sig_by_decision.append([])
+        k = 0
         while True:
-            _, _, term, trunc, info = env.step(a)
+            _, _, term, trunc, info = env.step(route.action_at(k))
             by_decision[-1].append(float(info["true_horizontal_error_m"]))
+            sig_by_decision[-1].append(_sigma_h(info["sigma_ned_m"]))
             n += 1
+            k += 1
             if term or trunc:
                 break
         errors.append(_end_error(info))
         ends.append(info["termination"])
     env.close()
     return {"errors_m": errors, "terminations": ends, "errors_by_decision_m": by_decision,
+            "sigma_by_decision_m": sig_by_decision, "sigma_m": [r[-1] for r in sig_by_decision],
             "wall_s": time.perf_counter() - t0, "cpu_s_per_decision": (time.process_time() - c0) / max(n, 1)}
 
 
@@ -202,12 +252,19 @@ def fly_fast(route: ReferenceRoute, seeds, fix_noise: str = "fixed") -> dict:
     seeds = [int(s) for s in seeds]
     env = TerrainNavFastVectorEnv(num_envs=len(seeds), **env_kwargs(route, fix_noise))
     env.reset(seed=seeds, options={"start_deg": route.start_deg})
-    a = np.tile(np.asarray(route.action, np.float32), (len(seeds), 1))
     errors = [math.nan] * len(seeds)
+    sigmas = [math.nan] * len(seeds)
     ends: list = [None] * len(seeds)
+    by_decision: list = [[] for _ in seeds]
+    sig_by_decision: list = [[] for _ in seeds]
     done = np.zeros(len(seeds), bool)
+    k = 0
     while not done.all():
-        _, _, term, trunc, info = env.step(a)
+        _, _, term, trunc, info = env.step(np.tile(route.action_at(k), (len(seeds), 1)))
+        k += 1
+        for i in np.flatnonzero(~done):
+            by_decision[i].append(float(info["true_horizontal_error_m"][i]))
+            sig_by_decision[i].append(_sigma_h(info["sigma_ned_m"][i]))
         new = (term | trunc) & ~done
         for i in np.flatnonzero(new):
             errors[i] = (
@@ -215,10 +272,12 @@ def fly_fast(route: ReferenceRoute, seeds, fix_noise: str = "fixed") -> dict:
                 if info["termination"][i] == "arrived"
                 else float(info["true_horizontal_error_m"][i])
             )
+            sigmas[i] = sig_by_decision[i][-1]
             ends[i] = str(info["termination"][i])
         done |= new
     env.close()
-    return {"errors_m": errors, "terminations": ends, "wall_s": time.perf_counter() - t0}
+    return {"errors_m": errors, "terminations": ends, "sigma_m": sigmas, "errors_by_decision_m": by_decision,
+            "sigma_by_decision_m": sig_by_decision, "wall_s": time.perf_counter() - t0}
 
 
 def summary(errors) -> dict:

@@ -248,7 +248,10 @@ def fly_decision(
             # ---- navigator
             w_n, w_e = frng.normal_pair(state, i)
             f_turn = G0_MPS2 * math.tan(X[i, BANK])  # centripetal specific force, right of the heading
+            dpsi = _wrap(psi1 - psi)
+            nv.turn_truth_step(X, i, dpsi, X[i, BANK], psi + 0.5 * dpsi)
             nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
+            nv.turn_noise(X, i, dpsi, X[i, BANK], nav)
             k_t = int(X[i, T] + 0.5)
             if k_t % nv.BI_STEP_S == 0:
                 b0, b1 = frng.normal_pair(state, i)

@@ -139,6 +139,8 @@ def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float
             env.agl_max_m,
             float(att[2]) * 1e-3,
             float(nav[nv.NP_SIG_BA_PRIOR]),
+            float(imu.get("gyro_misalignment_rad", 0.0)),
+            float(imu.get("gyro_scale_factor_ppm", 0.0)) * 1e-6,
         ]
     )
     op = np.zeros(ob.N_OBS_PARAMS)

@@ -63,7 +63,13 @@ from trn_env.env.fast.state import (
     EP_N,
     EV_E,
     EV_N,
+    HDG_MAX,
+    HDG_NET,
     MAX_WINDOW,
+    MIS_XY,
+    MIS_XZ,
+    MIS_YZ,
+    MIS_ZY,
     N_FIXES,
     N_NIS,
     N_PROF,
@@ -75,10 +81,14 @@ from trn_env.env.fast.state import (
     P12,
     P22,
     REJECTS,
+    SF_Y,
+    SF_Z,
     TILT_E,
     TILT_GM_E,
     TILT_GM_N,
     TILT_N,
+    TURN_PSI_E,
+    TURN_PSI_N,
     YAW0,
     T,
 )
@@ -122,8 +132,10 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_GNSS_FLOOR,
     NP_FIX_NOISE,  # 1: the batch fix covariance (fix_noise "batch"), 0: fix_sigma_m per axis ("fixed")
     NP_TERRAIN_SIGMA,  # the map's unresolved terrain (m) in the batch fix covariance
+    NP_TURN_TILT2,  # the turn term's tilt variance per rad of excursion (rad^2/rad: m^2 TURN_REFERENCE_RAD)
+    NP_TURN_HEAD2,  # ... its heading variance per rad (rad^2/rad: s^2 TURN_REFERENCE_RAD)
     NP_BAND0,  # NP_BAND0 + k - 1: the innovation test's upper limit over k NIS values (2k dof)
-) = range(30)
+) = range(32)
 N_NAV_PARAMS = NP_BAND0 + MAX_WINDOW
 
 
@@ -193,6 +205,13 @@ def navigator_params(
         q_tilt = imu_spec.gyro_bias_sigma_rps**2 * EKF_MEMORY_S
         q_ba_walk = 2.0 * imu_spec.accel_bias_instability_mps2**2 / imu_spec.accel_bias_tau_s
         sig_ba = max(sig_ba, imu_spec.body_accel_sigma_mps2)
+    if imu_spec is not None:
+        # the turn terms (ins_trn_propagation.InsTrnPropagation.apply_imu_spec): per rad turned the gyro
+        # misalignment (tilt) and scale factor (heading), as variances per rad of TURN_REFERENCE_RAD
+        from trn_env.navigators.filters.ins_trn_propagation import TURN_REFERENCE_RAD
+
+        p[NP_TURN_TILT2] = imu_spec.turn_tilt_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
+        p[NP_TURN_HEAD2] = imu_spec.turn_heading_sigma_rad(1.0) ** 2 * TURN_REFERENCE_RAD
     p[NP_QF_V] = q_acc
     p[NP_Q_A] = G0_MPS2**2 * (q_gyr + q_tilt) + q_ba_walk
     p[NP_SIG_BA_PRIOR] = sig_ba
@@ -238,18 +257,20 @@ def ins_step(X, i, dt, noise_n, noise_e, f_n, f_e):
     random-walk increments (m/s) from the white accelerometer noise, drawn by the caller; f_n, f_e the
     horizontal specific force (m/s^2) the heading error rotates."""
     t = X[i, T]
+    # the turns' tilt (psi, turn_truth_step) in this function's signs: the north acceleration error is
+    # g0 psi_e, the east one -g0 psi_n
     yaw = X[i, YAW0] + X[i, BG_Z] * t
     a_n = (
         X[i, BA_N]
         + X[i, BI_A_N]
-        + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t + X[i, TILT_GM_N])
+        + G0_MPS2 * (X[i, TILT_N] + X[i, BG_N] * t + X[i, TILT_GM_N] + X[i, TURN_PSI_E])
         - X[i, CA_N]
         - yaw * f_e
     )
     a_e = (
         X[i, BA_E]
         + X[i, BI_A_E]
-        + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t + X[i, TILT_GM_E])
+        + G0_MPS2 * (X[i, TILT_E] + X[i, BG_E] * t + X[i, TILT_GM_E] - X[i, TURN_PSI_N])
         - X[i, CA_E]
         + yaw * f_n
     )
@@ -296,6 +317,51 @@ def covariance_step(X, i, dt, q_v, q_a):
     X[i, P11] = a11 + dt * a12 + q_v * dt
     X[i, P12] = a21 + dt * p22
     X[i, P22] = p22 + q_a * dt
+
+
+@njit(cache=True)
+def turn_noise(X, i, dpsi, bank, nav):
+    """The filter's turn term for aircraft i over a step that turned the heading by dpsi (rad), ending in a
+    coordinated bank `bank` (rad).
+
+    Ported from the full navigator's InsTrnPropagation._turn_noise (navigators.filters.ins_trn_propagation;
+    turn_angle "excursion", ins_tercom's default; the variances per rad from its apply_imu_spec): the gyro
+    misalignment m and scale factor s build, per rad of growth of the largest net heading change since the
+    reset (navigators.core.imu_spec.TurnAngle), a tilt variance (m^2 + s^2 (1 - k) / 2) TURN_REFERENCE_RAD
+    on each tilt axis, k = sum_i d_i^4 = cos^4 bank + sin^4 bank (d the down axis in the body frame, level
+    pitch). The fast filter's acceleration error is g0 x tilt plus the accelerometer bias, so the tilt
+    variance enters P22 times g0^2. The turn term's heading share ((s^2 k + m^2 (1 - k)) TURN_REFERENCE_RAD)
+    is left out: the filter carries no heading state (see the module docstring)."""
+    X[i, HDG_NET] += dpsi
+    grow = abs(X[i, HDG_NET]) - X[i, HDG_MAX]
+    if grow > 0.0:
+        X[i, HDG_MAX] += grow
+        c2 = math.cos(bank) ** 2
+        k = c2 * c2 + (1.0 - c2) * (1.0 - c2)
+        X[i, P22] += G0_MPS2 * G0_MPS2 * (nav[NP_TURN_TILT2] + 0.5 * nav[NP_TURN_HEAD2] * (1.0 - k)) * grow
+
+
+@njit(cache=True)
+def turn_truth_step(X, i, dpsi, bank, psi_mid):
+    """The tilt aircraft i's gyro misalignment and scale factors build (truth) over a step that turned the
+    heading by dpsi (rad) in a coordinated bank `bank` (rad, level pitch) at heading psi_mid (rad, the step's
+    mean).
+
+    The body turns about the navigation frame's down axis, in the body frame d = (0, sin bank, cos bank), at
+    the heading rate r: w_b = r d, and the gyros measure (I + S + M) w_b (trn_env.sensors.imu: S diagonal,
+    M off-diagonal). The error e = (S + M) d per rad turned, rotated to the navigation frame
+    (C_bn = R_z(psi) R_x(bank)), is the attitude error's rate, psi' = -C_bn e r; its horizontal part (the
+    tilt) turns with the heading, so the tilt a turn builds is undone by the turn back and stays bounded
+    on a full circle. Its down part (the heading, s_y sin^2 + s_z cos^2 + (m_yz + m_zy) sin cos per rad)
+    is left out: see the module docstring."""
+    sb = math.sin(bank)
+    cb = math.cos(bank)
+    e_x = X[i, MIS_XY] * sb + X[i, MIS_XZ] * cb
+    w = cb * (X[i, SF_Y] * sb + X[i, MIS_YZ] * cb) - sb * (X[i, MIS_ZY] * sb + X[i, SF_Z] * cb)
+    cp = math.cos(psi_mid)
+    sp = math.sin(psi_mid)
+    X[i, TURN_PSI_N] -= (cp * e_x - sp * w) * dpsi
+    X[i, TURN_PSI_E] -= (sp * e_x + cp * w) * dpsi
 
 
 @njit(cache=True)
@@ -572,5 +638,20 @@ def draw_initial_errors(X, i, state, sig):
     X[i, P00] = sig_pos * sig_pos
     X[i, P11] = sig_vel * sig_vel
     X[i, P22] = sig_ba_prior * sig_ba_prior + (G0_MPS2 * sig_tilt) ** 2
+    X[i, HDG_NET] = 0.0
+    X[i, HDG_MAX] = 0.0
+
+
+@njit(cache=True)
+def draw_turn_errors(X, i, state, mis_rad, sf):
+    """Episode draws of aircraft i's gyro misalignment (4 entries, sigma mis_rad) and scale factors (y, z;
+    sigma sf, a fraction), in this order, one normal each (trn_env.sensors.imu's draws), and the tilt they
+    have built, zero."""
+    drawn = (MIS_XY, MIS_XZ, MIS_YZ, MIS_ZY, SF_Y, SF_Z)
+    scale = (mis_rad, mis_rad, mis_rad, mis_rad, sf, sf)
+    for k in range(len(drawn)):
+        X[i, drawn[k]] = scale[k] * frng.normal(state, i)
+    X[i, TURN_PSI_N] = 0.0
+    X[i, TURN_PSI_E] = 0.0
     for j in range(MAX_WINDOW):
         X[i, NIS0 + j] = 0.0

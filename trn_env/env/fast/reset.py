@@ -23,7 +23,7 @@ from trn_env.env.fast.dynamics import radii_m
 from trn_env.terrain import kernels
 
 # init parameter vector: sig_pos, sig_vel, sig_tilt, accel bias, gyro bias, baro sigma, agl_min, agl_max,
-# sig_yaw, the filter's accelerometer-bias prior
+# sig_yaw, the filter's accelerometer-bias prior, the gyros' misalignment (rad) and scale factor (fraction)
 (
     IP_SIG_POS,
     IP_SIG_VEL,
@@ -35,7 +35,9 @@ from trn_env.terrain import kernels
     IP_AGL_MAX,
     IP_SIG_YAW,
     IP_SIG_BA_PRIOR,
-) = range(10)
+    IP_GYRO_MIS,
+    IP_GYRO_SF,
+) = range(12)
 
 
 @njit(cache=True)
@@ -120,5 +122,6 @@ def reset_aircraft(
         sig = (ip[IP_SIG_POS], ip[IP_SIG_VEL], ip[IP_SIG_TILT], ip[IP_BA], ip[IP_BG], ip[IP_BARO],
                ip[IP_SIG_YAW], ip[IP_SIG_BA_PRIOR])
         nv.draw_initial_errors(X, i, state, sig)
+        nv.draw_turn_errors(X, i, state, ip[IP_GYRO_MIS], ip[IP_GYRO_SF])
         X[i, S.NEXT_SAMPLE_T] = 1.0
     return status

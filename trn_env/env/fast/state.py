@@ -38,7 +38,14 @@ N_NIS, DEGRADED = 60, 61
 DTAS = 62
 # the true airspeed's slow wander (m/s, first-order Gauss-Markov: envelope.KINGAIR_ENVELOPE.tas_wander_mps)
 TAS_WANDER = 63
-N_STATE = 64
+# the filter's turn term (navigator.turn_noise): the net heading change since the reset and its largest
+# excursion (rad)
+HDG_NET, HDG_MAX = 64, 65
+# the gyros' misalignment (rad: the x gyro's to y and z, the y gyro's to z, the z gyro's to y) and scale
+# factors (y, z; per episode, truth) and the tilt (psi, rad, north and east) they have built in the turns
+# (navigator.turn_truth_step)
+MIS_XY, MIS_XZ, MIS_YZ, MIS_ZY, SF_Y, SF_Z, TURN_PSI_N, TURN_PSI_E = range(66, 74)
+N_STATE = 74
 
 # END codes (0 = running); names in END_NAMES
 END_NAMES = ("", "arrived", "terrain_collision", "off_map", "time_limit", "goal", "diverged")
