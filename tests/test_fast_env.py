@@ -184,6 +184,97 @@ def _fast_summary(name: str, fix_noise: str) -> dict:
     return cal.summary(cal.fly_fast(r, range(cal.FAST_SEEDS), fix_noise=fix_noise)["errors_m"])
 
 
+def test_route_action_cycle():
+    """A route's actions per decision: constant, a repeated cycle, or a cycle flown once and then held."""
+    flat = cal.route_by_name("basin_west")
+    assert all(np.array_equal(flat.action_at(k), flat.action) for k in range(12))
+    weave = cal.route_by_name("basin_weave")
+    offsets = [float(weave.action_at(k)[0]) for k in range(12)]
+    assert offsets == [-1.0, -1.0, 1.0, 1.0] * 3
+    weave_in = cal.route_by_name("basin_weave_in")
+    offsets = [float(weave_in.action_at(k)[0]) for k in range(14)]
+    assert offsets == [-1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 0.0, 0.0, 0.0, 0.0]
+
+
+def _turn_params():
+    """The basin scenario's navigator parameters (tactical IMU: its turn terms are non-zero)."""
+    from trn_env.env.fast import navigator as nv
+
+    e = TerrainNavFastVectorEnv(num_envs=1, **BASIN)
+    nav = e._nav.copy()
+    e.close()
+    assert nav[nv.NP_TURN_TILT2] > 0.0 and nav[nv.NP_TURN_HEAD2] > 0.0
+    return nav
+
+
+def test_turn_noise_runs_in_the_headings_excursion():
+    """The filter's turn term grows P22 by g0^2 (m^2 + s^2 (1 - k) / 2) per rad of the largest net heading
+    change's growth, the angle the full navigator's TurnAngle("excursion") returns for the same headings: a
+    weave back and forth adds only its largest excursion, a circle keeps adding."""
+    from trn_env.navigators.core.imu_spec import TurnAngle
+
+    from trn_env.env.fast import navigator as nv
+    from trn_env.env.fast import state as S
+    from trn_env.env.fast import turns
+
+    nav = _turn_params()
+    rng = np.random.default_rng(3)
+    bank = 0.4
+    c2 = math.cos(bank) ** 2
+    k = c2 * c2 + (1.0 - c2) ** 2
+    per_rad = nv.G0_MPS2**2 * (nav[nv.NP_TURN_TILT2] + 0.5 * nav[nv.NP_TURN_HEAD2] * (1.0 - k))
+    weave = np.concatenate([np.full(30, 0.05), np.full(60, -0.05), np.full(60, 0.05), np.full(30, -0.05)])
+    circle = np.full(200, 0.05)
+    for steps in (weave, circle, rng.normal(0.0, 0.05, 300)):
+        X = np.zeros((1, S.N_STATE))
+        ref = TurnAngle("excursion")
+        yaw, total = 0.3, 0.0
+        ref.advance(yaw)
+        for d in steps:
+            turns.turn_noise(X, 0, float(d), bank, nav)
+            yaw += d
+            total += ref.advance(math.atan2(math.sin(yaw), math.cos(yaw)))
+        assert X[0, S.P22] == pytest.approx(per_rad * total, rel=1e-9)
+    assert total > 0.0
+
+
+def test_turn_tilt_matches_the_rotated_gyro_error():
+    """The tilt the gyros' misalignment and scale factors build in a coordinated turn (turn_truth_step)
+    equals the integral of -C_bn (S + M) d dpsi computed with matrices (C_bn = R_z(psi) R_x(bank), d the
+    down axis in the body frame), and a full circle undoes it."""
+    from trn_env.env.fast import state as S
+    from trn_env.env.fast import turns
+
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        X = np.zeros((1, S.N_STATE))
+        mis = rng.normal(0.0, 0.5e-3, 4)
+        sf = rng.normal(0.0, 150e-6, 3)
+        X[0, [S.MIS_XY, S.MIS_XZ, S.MIS_YZ, S.MIS_ZY, S.SF_Y, S.SF_Z]] = [*mis, sf[1], sf[2]]
+        E = np.diag(sf)
+        E[0, 1], E[0, 2], E[1, 2], E[2, 1] = mis
+        E[1, 0], E[2, 0] = rng.normal(0.0, 0.5e-3, 2)       # multiply d_x = 0: no effect
+        bank, psi0, n, dpsi = rng.uniform(-0.45, 0.45), rng.uniform(-3, 3), 400, math.pi / 400
+        d_b = np.array([0.0, math.sin(bank), math.cos(bank)])
+        cb, sb = math.cos(bank), math.sin(bank)
+        rx = np.array([[1, 0, 0], [0, cb, -sb], [0, sb, cb]])
+        ref = np.zeros(3)
+        psi = psi0
+        for _ in range(n):
+            mid = psi + 0.5 * dpsi
+            rz = np.array([[math.cos(mid), -math.sin(mid), 0], [math.sin(mid), math.cos(mid), 0], [0, 0, 1]])
+            ref -= rz @ rx @ (E @ d_b) * dpsi
+            turns.turn_truth_step(X, 0, dpsi, bank, mid)
+            psi += dpsi
+        assert X[0, S.TURN_PSI_N] == pytest.approx(ref[0], rel=1e-9, abs=1e-15)
+        assert X[0, S.TURN_PSI_E] == pytest.approx(ref[1], rel=1e-9, abs=1e-15)
+        assert math.hypot(ref[0], ref[1]) > 1e-5                    # half a circle: a real tilt
+        for _ in range(n):                                          # the second half closes the circle
+            turns.turn_truth_step(X, 0, dpsi, bank, psi + 0.5 * dpsi)
+            psi += dpsi
+        assert math.hypot(X[0, S.TURN_PSI_N], X[0, S.TURN_PSI_E]) < 1e-12
+
+
 _REFERENCES = {"fixed": (cal.FULL_LOOP_REFERENCE, cal.OUT_OF_CALIBRATION),
                "batch": (cal.FULL_LOOP_REFERENCE_BATCH, cal.OUT_OF_CALIBRATION_BATCH)}
 

@@ -133,6 +133,8 @@ FULL_LOOP_REFERENCE = {
     "basin_west": {"mean_m": 24.6, "p90_m": 42.7, "n": 64},
     "jacksboro_sw_ne": {"mean_m": 7.2, "p90_m": 14.1, "n": 64},
     "jacksboro_flat_patch": {"mean_m": 9.9, "p90_m": 14.3, "n": 64},
+    "basin_weave": {"mean_m": 22.5, "p90_m": 37.9, "n": 64},
+    "basin_weave_in": {"mean_m": 18.3, "p90_m": 31.1, "n": 64},
 }
 FULL_LOOP_REFERENCE_BATCH = {
     "basin_straight": {"mean_m": 219.7, "p90_m": 434.5, "n": 64},
@@ -140,11 +142,16 @@ FULL_LOOP_REFERENCE_BATCH = {
     "basin_west": {"mean_m": 19.0, "p90_m": 31.5, "n": 64},
     "jacksboro_sw_ne": {"mean_m": 5.1, "p90_m": 10.2, "n": 64},
     "jacksboro_flat_patch": {"mean_m": 6.3, "p90_m": 10.3, "n": 64},
+    "basin_weave": {"mean_m": 57.4, "p90_m": 46.8, "n": 64},
+    "basin_weave_in": {"mean_m": 54.8, "p90_m": 41.6, "n": 64},
 }
 # Figures (route, "mean_m" or "p90_m") the fast tier does not hold within 25 % of FULL_LOOP_REFERENCE (and
 # of FULL_LOOP_REFERENCE_BATCH), with the measured gap (docs/validation/fast_tier.md); the tests expect them
 # to fail, so one that comes back into calibration is reported.
-OUT_OF_CALIBRATION: dict = {}
+OUT_OF_CALIBRATION = {
+    ("basin_round", "p90_m"): "+28 %: the turns' tilt (trn_env.env.fast.turns) raised the fast tier's spiral "
+                              "route more than the full loop's",
+}
 OUT_OF_CALIBRATION_BATCH = {
     ("basin_straight", "mean_m"): "-29 %: the full loop's batch fix model (slope-weighted H) misses more",
     ("basin_straight", "p90_m"): "-34 %: the full loop's batch fix model (slope-weighted H) misses more",

@@ -37,6 +37,7 @@ from numba import njit, prange
 
 from trn_env.env.fast import navigator as nv
 from trn_env.env.fast import rng as frng
+from trn_env.env.fast import turns
 from trn_env.env.fast.state import (
     AGL_CMD,
     ARRIVED,
@@ -249,9 +250,9 @@ def fly_decision(
             w_n, w_e = frng.normal_pair(state, i)
             f_turn = G0_MPS2 * math.tan(X[i, BANK])  # centripetal specific force, right of the heading
             dpsi = _wrap(psi1 - psi)
-            nv.turn_truth_step(X, i, dpsi, X[i, BANK], psi + 0.5 * dpsi)
+            turns.turn_truth_step(X, i, dpsi, X[i, BANK], psi + 0.5 * dpsi)
             nv.ins_step(X, i, dt, vrw * w_n, vrw * w_e, -f_turn * math.sin(psi1), f_turn * math.cos(psi1))
-            nv.turn_noise(X, i, dpsi, X[i, BANK], nav)
+            turns.turn_noise(X, i, dpsi, X[i, BANK], nav)
             k_t = int(X[i, T] + 0.5)
             if k_t % nv.BI_STEP_S == 0:
                 b0, b1 = frng.normal_pair(state, i)

@@ -9,9 +9,10 @@ sets the horizontal error at the goal:
   tilt rate from the gyro bias b_g, drawn per episode from the IMU grade; c the filter's fed-back
   compensation), plus the heading error's share, psi_z x f (the horizontal specific force, the centripetal
   acceleration of a turn, rotated by the heading error psi_z = psi_z0 + b_gz t, which the filter does not
-  estimate), plus the accelerometer's white noise (velocity random walk). Schuler feedback is left out
-  (its 84 min period is long against an episode). The vertical channel is the barometer's: a constant height
-  error per episode.
+  estimate), plus the accelerometer's white noise (velocity random walk), plus the tilt the gyros'
+  misalignment and scale factors build in turns (trn_env.env.fast.turns). Schuler feedback is left out
+  (its 84 min period is long against an episode). The vertical channel is the barometer's: a constant
+  height error per episode.
 - GNSS while available (the scenario's outage start): position and velocity updates at 1 Hz with the
   navigator's sigmas, the position sigma floored at gnss_correlated_sigma_m (as the full navigator's).
 - TERCOM (seed 000 eq 2, with the per-profile mean removed when the scenario's `remove_bias` is set): the
@@ -26,7 +27,8 @@ sets the horizontal error at the goal:
   measurement noise): F the constant-acceleration transition, process noise from the navigator's settings
   as the full navigator's filter takes them (accel_noise_mps2_rthz: velocity random walk;
   g0 x gyro_noise_rps_rthz: the random walk of a, through the tilt), feedback form (the estimated errors
-  are removed from the INS after each update).
+  are removed from the INS after each update), and the full navigator's turn term on P22
+  (trn_env.env.fast.turns).
 
 Health, as the full navigator's (navigators.integrity.innovation_monitor, navigators.core.recovery): every
 fix's NIS (accepted or gated; +inf for an edge fix) enters a test of the sum over the last
@@ -66,10 +68,6 @@ from trn_env.env.fast.state import (
     HDG_MAX,
     HDG_NET,
     MAX_WINDOW,
-    MIS_XY,
-    MIS_XZ,
-    MIS_YZ,
-    MIS_ZY,
     N_FIXES,
     N_NIS,
     N_PROF,
@@ -81,8 +79,6 @@ from trn_env.env.fast.state import (
     P12,
     P22,
     REJECTS,
-    SF_Y,
-    SF_Z,
     TILT_E,
     TILT_GM_E,
     TILT_GM_N,
@@ -317,51 +313,6 @@ def covariance_step(X, i, dt, q_v, q_a):
     X[i, P11] = a11 + dt * a12 + q_v * dt
     X[i, P12] = a21 + dt * p22
     X[i, P22] = p22 + q_a * dt
-
-
-@njit(cache=True)
-def turn_noise(X, i, dpsi, bank, nav):
-    """The filter's turn term for aircraft i over a step that turned the heading by dpsi (rad), ending in a
-    coordinated bank `bank` (rad).
-
-    Ported from the full navigator's InsTrnPropagation._turn_noise (navigators.filters.ins_trn_propagation;
-    turn_angle "excursion", ins_tercom's default; the variances per rad from its apply_imu_spec): the gyro
-    misalignment m and scale factor s build, per rad of growth of the largest net heading change since the
-    reset (navigators.core.imu_spec.TurnAngle), a tilt variance (m^2 + s^2 (1 - k) / 2) TURN_REFERENCE_RAD
-    on each tilt axis, k = sum_i d_i^4 = cos^4 bank + sin^4 bank (d the down axis in the body frame, level
-    pitch). The fast filter's acceleration error is g0 x tilt plus the accelerometer bias, so the tilt
-    variance enters P22 times g0^2. The turn term's heading share ((s^2 k + m^2 (1 - k)) TURN_REFERENCE_RAD)
-    is left out: the filter carries no heading state (see the module docstring)."""
-    X[i, HDG_NET] += dpsi
-    grow = abs(X[i, HDG_NET]) - X[i, HDG_MAX]
-    if grow > 0.0:
-        X[i, HDG_MAX] += grow
-        c2 = math.cos(bank) ** 2
-        k = c2 * c2 + (1.0 - c2) * (1.0 - c2)
-        X[i, P22] += G0_MPS2 * G0_MPS2 * (nav[NP_TURN_TILT2] + 0.5 * nav[NP_TURN_HEAD2] * (1.0 - k)) * grow
-
-
-@njit(cache=True)
-def turn_truth_step(X, i, dpsi, bank, psi_mid):
-    """The tilt aircraft i's gyro misalignment and scale factors build (truth) over a step that turned the
-    heading by dpsi (rad) in a coordinated bank `bank` (rad, level pitch) at heading psi_mid (rad, the step's
-    mean).
-
-    The body turns about the navigation frame's down axis, in the body frame d = (0, sin bank, cos bank), at
-    the heading rate r: w_b = r d, and the gyros measure (I + S + M) w_b (trn_env.sensors.imu: S diagonal,
-    M off-diagonal). The error e = (S + M) d per rad turned, rotated to the navigation frame
-    (C_bn = R_z(psi) R_x(bank)), is the attitude error's rate, psi' = -C_bn e r; its horizontal part (the
-    tilt) turns with the heading, so the tilt a turn builds is undone by the turn back and stays bounded
-    on a full circle. Its down part (the heading, s_y sin^2 + s_z cos^2 + (m_yz + m_zy) sin cos per rad)
-    is left out: see the module docstring."""
-    sb = math.sin(bank)
-    cb = math.cos(bank)
-    e_x = X[i, MIS_XY] * sb + X[i, MIS_XZ] * cb
-    w = cb * (X[i, SF_Y] * sb + X[i, MIS_YZ] * cb) - sb * (X[i, MIS_ZY] * sb + X[i, SF_Z] * cb)
-    cp = math.cos(psi_mid)
-    sp = math.sin(psi_mid)
-    X[i, TURN_PSI_N] -= (cp * e_x - sp * w) * dpsi
-    X[i, TURN_PSI_E] -= (sp * e_x + cp * w) * dpsi
 
 
 @njit(cache=True)
@@ -640,18 +591,5 @@ def draw_initial_errors(X, i, state, sig):
     X[i, P22] = sig_ba_prior * sig_ba_prior + (G0_MPS2 * sig_tilt) ** 2
     X[i, HDG_NET] = 0.0
     X[i, HDG_MAX] = 0.0
-
-
-@njit(cache=True)
-def draw_turn_errors(X, i, state, mis_rad, sf):
-    """Episode draws of aircraft i's gyro misalignment (4 entries, sigma mis_rad) and scale factors (y, z;
-    sigma sf, a fraction), in this order, one normal each (trn_env.sensors.imu's draws), and the tilt they
-    have built, zero."""
-    drawn = (MIS_XY, MIS_XZ, MIS_YZ, MIS_ZY, SF_Y, SF_Z)
-    scale = (mis_rad, mis_rad, mis_rad, mis_rad, sf, sf)
-    for k in range(len(drawn)):
-        X[i, drawn[k]] = scale[k] * frng.normal(state, i)
-    X[i, TURN_PSI_N] = 0.0
-    X[i, TURN_PSI_E] = 0.0
     for j in range(MAX_WINDOW):
         X[i, NIS0 + j] = 0.0

@@ -19,6 +19,7 @@ from numba import njit
 from trn_env.env.fast import navigator as nv
 from trn_env.env.fast import rng as frng
 from trn_env.env.fast import state as S
+from trn_env.env.fast import turns
 from trn_env.env.fast.dynamics import radii_m
 from trn_env.terrain import kernels
 
@@ -122,6 +123,6 @@ def reset_aircraft(
         sig = (ip[IP_SIG_POS], ip[IP_SIG_VEL], ip[IP_SIG_TILT], ip[IP_BA], ip[IP_BG], ip[IP_BARO],
                ip[IP_SIG_YAW], ip[IP_SIG_BA_PRIOR])
         nv.draw_initial_errors(X, i, state, sig)
-        nv.draw_turn_errors(X, i, state, ip[IP_GYRO_MIS], ip[IP_GYRO_SF])
+        turns.draw_turn_errors(X, i, state, ip[IP_GYRO_MIS], ip[IP_GYRO_SF])
         X[i, S.NEXT_SAMPLE_T] = 1.0
     return status
