@@ -11,7 +11,9 @@ full loop at the route task's full-tier settings (calibration.full_tier_settings
 The full loop flies seeds 0..--seeds-1, the fast tier 0..--fast-seeds-1 (default 256, FAST_SEEDS: its
 statistics then carry little sampling noise next to the full loop's).
 
-Writes DIR/full_<route>.json, DIR/fast_<route>.json (per-seed errors) and DIR/table.md; prints the table.
+Writes DIR/full_<route>.json, DIR/fast_<route>.json (per-seed errors, terminations, the navigator's
+horizontal sigma per decision and at the end) and DIR/table.md (mean and p90 true miss, the time-out share
+and the mean sigma at the end per tier); prints the table.
 The full-loop results are reused from DIR when present (--tier fast), so the fast tier can be re-run alone.
 
     python scripts/calibrate_fast_tier.py --policies planner,straight --policy-seeds 10 --tier fast --out DIR
@@ -77,25 +79,34 @@ def main(argv=None) -> int:
                 print(f"{tier} {name}: {res['wall_s']:.1f} s", file=sys.stderr, flush=True)
         fp, qp = args.out / f"full_{name}.json", args.out / f"fast_{name}.json"
         if fp.exists() and qp.exists():
-            c = compare(json.loads(fp.read_text()), json.loads(qp.read_text()))
-            rows.append((r, c))
+            full, fast = json.loads(fp.read_text()), json.loads(qp.read_text())
+            rows.append((r, compare(full, fast), _ends(full), _ends(fast)))
     lines = [
         "| route | kind | terrain | seeds full / fast | full mean / p90 (m) | fast mean / p90 (m) "
-        "| mean diff "
-        "| p90 diff |",
-        "|---|---|---|---|---|---|---|---|",
+        "| mean diff | p90 diff | time-outs full / fast | sigma at the end full / fast (m) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for r, c in rows:
+    for r, c, ef, eq in rows:
         lines.append(
             f"| {r.name} | {r.kind} | {r.scenario} | {c['full']['n']} / {c['fast']['n']} | "
             f"{c['full']['mean_m']:.1f} / "
             f"{c['full']['p90_m']:.1f} | {c['fast']['mean_m']:.1f} / {c['fast']['p90_m']:.1f} | "
-            f"{100 * c['mean_rel']:+.0f} % | {100 * c['p90_rel']:+.0f} % |"
+            f"{100 * c['mean_rel']:+.0f} % | {100 * c['p90_rel']:+.0f} % | {ef[0]} / {eq[0]} | "
+            f"{ef[1]} / {eq[1]} |"
         )
     table = "\n".join(lines)
     (args.out / "table.md").write_text(table + "\n")
     print(table)
     return 0
+
+
+def _ends(res: dict) -> tuple[str, str]:
+    """(time-out share, mean horizontal sigma at the end) of a tier's flights, as text ("-" when the record
+    holds no sigma)."""
+    ends = res.get("terminations") or []
+    timeouts = f"{100.0 * sum(e == 'time_limit' for e in ends) / max(len(ends), 1):.1f} %"
+    sig = res.get("sigma_m")
+    return timeouts, (f"{sum(sig) / len(sig):.1f}" if sig else "-")
 
 
 def _policies(args) -> int:

@@ -153,11 +153,14 @@ OUT_OF_CALIBRATION = {
                               "route more than the full loop's",
 }
 OUT_OF_CALIBRATION_BATCH = {
-    ("basin_straight", "mean_m"): "-29 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("basin_straight", "p90_m"): "-34 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("jacksboro_sw_ne", "p90_m"): "-30 %: after each fix the fast tier's error is lower",
-    ("jacksboro_flat_patch", "mean_m"): "+35 %: the fast tier's error grows more over the flat patch",
-    ("jacksboro_flat_patch", "p90_m"): "+50 %: the fast tier's error grows more over the flat patch",
+    ("basin_straight", "mean_m"): "-26 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("basin_straight", "p90_m"): "-38 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("jacksboro_sw_ne", "p90_m"): "-28 %: after each fix the fast tier's error is lower",
+    ("jacksboro_flat_patch", "mean_m"): "+29 %: the fast tier's error grows more over the flat patch",
+    ("jacksboro_flat_patch", "p90_m"): "+41 %: the fast tier's error grows more over the flat patch",
+    ("basin_weave", "mean_m"): "-55 %: one full-loop seed of 64 loses the track (2,069 m)",
+    ("basin_weave_in", "mean_m"): "-68 %: one full-loop seed of 64 loses the track (2,069 m)",
+    ("basin_weave_in", "p90_m"): "-31 %: the full loop's time-outs (9 %, fast 0.4 %) end with larger errors",
 }
 # the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
 FAST_SEEDS = 256
