@@ -18,8 +18,8 @@ W = 0.25
 def _fast(n: int, **kw):
     base = route_task.fast_tier_kwargs(route_task.env_kwargs("basin"))
     base["max_episode_s"] = 60.0                      # 2 decisions, then time_limit and an autoreset step
-    return gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                              **{**base, **kw})
+    return gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=n,
+                              vectorization_mode="vector_entry_point", **{**base, **kw})
 
 
 def test_helper_by_hand():
@@ -92,3 +92,19 @@ def test_bad_weights_refused_in_both_tiers(bad):
         _fast(1, action_change_weight=bad)
     with pytest.raises(ValueError, match="action_change_weight"):
         gymnasium.make("trn_env/TerrainNav-v0", **route_task.env_kwargs("basin"), action_change_weight=bad)
+
+
+def test_trace_steering_summary_by_hand():
+    from _scripts import load_script
+
+    mod = load_script("route_task_trace")
+
+    def ep(offsets):
+        return {"decisions": [{"offset": o} for o in offsets]}
+
+    # reversals: sides of |a0| >= 0.5 only (0.2 skipped): +,-,+ -> 2 ; -,- -> 0
+    st = mod.steering_summary([ep([1.0, -1.0, 0.2, 1.0]), ep([-0.6, -1.0])])
+    assert st["episodes"] == 2 and st["reversals_per_episode"] == pytest.approx(1.0)
+    assert st["saturated_share"] == pytest.approx(4 / 6)
+    # total change from a0_(-1) = 0: (1 + 2 + 1.2 + 0.8) and (0.6 + 0.4)
+    assert st["offset_change_per_episode"] == pytest.approx((5.0 + 1.0) / 2)
