@@ -5,6 +5,7 @@ bit) with w = 0; bad weights refused naming the field."""
 from __future__ import annotations
 
 import math
+import pickle
 
 import gymnasium
 import numpy as np
@@ -83,7 +84,10 @@ def test_full_tier_term_and_reset():
             prev = a0
             if term or trunc:
                 break
+    env2 = pickle.loads(pickle.dumps(env))             # EzPickle keeps the weight
+    assert env2.unwrapped.action_change_weight == W
     env.close()
+    env2.close()
 
 
 @pytest.mark.parametrize("bad", [-0.1, math.nan, math.inf, "x"])
