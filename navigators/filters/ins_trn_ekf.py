@@ -52,6 +52,7 @@ from collections import deque
 
 import numpy as np
 
+from ..core.capture import CaptureGuard, anchor_from_cov9
 from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from ..core.imu_spec import TurnAngle
 from ..core.ins_gnss import InsGnssBlock
@@ -235,6 +236,17 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self._height_initialised = False
         self._t_gnss = -math.inf
         self._gnss_up = False
+        # navigators.core.capture: the widest TERCOM search (recovery_half_cells) is what a fix can cover
+        self._capture = CaptureGuard(self.recovery_half_cells * self.cell_m, self.name,
+                                     self._capture_spec if self.aiding is not None else None, rebase=True)
+        anchor_from_cov9(self._capture, float(initial.t_s), P[:9, :9])
+
+    _capture_spec = None    # the IMU's specification (apply_imu_spec)
+
+    def apply_imu_spec(self, spec) -> None:
+        """InsTrnPropagation's, and the specification kept for the capture check (navigators.core.capture)."""
+        super().apply_imu_spec(spec)
+        self._capture_spec = spec
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
@@ -265,6 +277,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
                 self._fix(float(t[b - 1]))
             while g < t_g.shape[0] and (t_g[g] <= t[b - 1] + 1e-9 or b == n):
                 self._gnss_update(gnss, g)
+                # a GNSS fix re-anchors the capture check (navigators.core.capture)
+                anchor_from_cov9(self._capture, float(self.ins.t_s), self.kf.P[:9, :9])
                 g += 1
             a = b
         return self.estimate()
@@ -278,6 +292,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self._t_batch0 = nxt if t_s - nxt < self.fix_period_s else t_s
         if s.shape[0] < self.min_samples:
             self._count_skip(t_s, "tercom_too_few_samples", 1, f"TERCOM batch with {s.shape[0]} samples")
+            return
+        if self._capture.skips(t_s, lambda: self.kf.P[:9, :9], self.health):   # navigators.core.capture
             return
         fix = correlate(
             self.dem,
@@ -393,9 +409,13 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         roll, pitch, yaw = kern.euler_from_quat(st[6:10])
         P = self.kf.P[:9, :9].copy()
         P[2, 2] += self.baro_bias_sigma_m**2
+        suspended = self._capture.suspended   # beyond capture (navigators.core.capture)
+        P = self._capture.publish(P, float(self.ins.t_s))
         sig_h = math.sqrt(max(P[0, 0] + P[1, 1], 0.0))
         if not math.isfinite(float(st.sum())):
             self.health.ok, self.health.status = False, "diverged"
+        elif suspended:
+            self.health.ok, self.health.status = False, "degraded"
         elif self.aiding is not None and sig_h > 2000.0:
             self.health.ok, self.health.status = False, "degraded"
         elif self.integrity.degraded:
