@@ -180,3 +180,39 @@ def test_a_pmf_beyond_capture_suspends_and_publishes_the_free_ins_growth(dem):
     assert est.covariance[:2, :2] == pytest.approx(before + np.eye(2) * free, rel=1e-9)
     assert not est.health.ok and est.health.status == "degraded"
     assert est.extra["hpl_m"] > 3.0 * math.sqrt(free)
+
+
+def test_a_filter_that_estimated_its_biases_rebases_with_them():
+    """The RBPF's rebase (it feeds its bias estimates back): the growth after the suspension takes its own
+    bias variances, at most the specification's."""
+    spec = imu_spec({"grade": "consumer"})
+    c15 = np.eye(15) * 1e-8
+    c15[:2, :2] = np.eye(2) * 400.0
+    c15[12, 12] = c15[13, 13] = (0.1 * spec.gyro_bias_sigma_rps) ** 2
+    g = CaptureGuard(100.0, "test", spec, rebase=True)
+    g.anchor(0.0, P0, V0, TILT0)
+    assert g.check(100.0, c15)
+    tau = 200.0
+    expect = free_ins_position_variance_m2(spec, tau, 0.0, 1e-8, 1e-8, 1e-8,
+                                           (0.1 * spec.gyro_bias_sigma_rps) ** 2)
+    assert g.published_covariance(100.0 + tau)[0, 0] == pytest.approx(400.0 + expect)
+    # written out term by term (velocity, acceleration and tilt, gyro bias, velocity and angle random walks);
+    # the specification caps a larger variance
+    terms = (1e-8 * tau ** 2 + (1e-8 + G ** 2 * 1e-8) * tau ** 4 / 4
+             + (G * 0.1 * spec.gyro_bias_sigma_rps) ** 2 * tau ** 6 / 36
+             + spec.accel_noise_density_mps2_rthz ** 2 * tau ** 3 / 3
+             + (G * spec.gyro_noise_density_rps_rthz) ** 2 * tau ** 5 / 20)
+    assert expect == pytest.approx(terms, rel=1e-9)
+    assert free_ins_position_variance_m2(spec, tau, 0.0, 0.0, 0.0, 1.0, 1.0) == pytest.approx(
+        free_ins_position_variance_m2(spec, tau, 0.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("name", ["ins_tercom", "pmf", "pf", "rbpf"])
+def test_health_states_the_capture_check_on_the_consumer_grade(dem, name):
+    from trn_env.navigators.core.measured_consistency import CAPTURE_NOTE
+    nav = registry.create(name, dem=dem)
+    nav.apply_imu_spec(imu_spec({"grade": "consumer"}))
+    assert CAPTURE_NOTE in nav._consistency_warning and "not calibrated" in nav._consistency_warning
+    nav = registry.create(name, dem=dem)
+    nav.apply_imu_spec(imu_spec({"grade": "tactical"}))
+    assert CAPTURE_NOTE not in nav._consistency_warning

@@ -56,13 +56,17 @@ CAPTURE_SIGMAS = 3.0
 
 
 def free_ins_position_variance_m2(spec: ImuSpec, t_s: float, p0_m2: float, v0_m2ps2: float,
-                                  tilt0_rad2: float) -> float:
+                                  tilt0_rad2: float, accel_bias_m2ps4: float | None = None,
+                                  gyro_bias_rad2ps2: float | None = None) -> float:
     """Variance (m^2, per horizontal axis) of the free INS's position error t_s seconds after an anchor
     where it had position, velocity and tilt variances p0_m2, v0_m2ps2, tilt0_rad2 (see the module
-    docstring: Titterton & Weston 2004 eqs 12.20-12.21 without the Schuler loop)."""
+    docstring: Titterton & Weston 2004 eqs 12.20-12.21 without the Schuler loop). accel_bias_m2ps4,
+    gyro_bias_rad2ps2: the horizontal specific-force error's and the x / y gyro bias's variances when a filter
+    has estimated them (at most the specification's); None: the specification's."""
     t = max(float(t_s), 0.0)
-    a2 = spec.body_accel_sigma_mps2 ** 2 + G0_MPS2 ** 2 * tilt0_rad2
-    gw2 = (G0_MPS2 * spec.gyro_bias_sigma_rps) ** 2
+    a2_spec, g2_spec = spec.body_accel_sigma_mps2 ** 2, spec.gyro_bias_sigma_rps ** 2
+    a2 = (a2_spec if accel_bias_m2ps4 is None else min(accel_bias_m2ps4, a2_spec)) + G0_MPS2 ** 2 * tilt0_rad2
+    gw2 = G0_MPS2 ** 2 * (g2_spec if gyro_bias_rad2ps2 is None else min(gyro_bias_rad2ps2, g2_spec))
     return float(p0_m2 + v0_m2ps2 * t ** 2 + a2 * t ** 4 / 4.0 + gw2 * t ** 6 / 36.0
                  + spec.accel_noise_density_mps2_rthz ** 2 * t ** 3 / 3.0
                  + (G0_MPS2 * spec.gyro_noise_density_rps_rthz) ** 2 * t ** 5 / 20.0)
@@ -106,10 +110,12 @@ class CaptureGuard:
     spec : ImuSpec or None
         The IMU's specification; None (no specification) never suspends.
     rebase : bool
-        The filter corrects its INS (the EKF, the RBPF: they feed their velocity, attitude and bias
-        estimates back): at the suspension the free INS's growth restarts from the filter's own velocity and
-        tilt variances (the belief's 9 x 9 covariance), not from the anchor. False (the point-mass and
-        particle filters ride on an INS they never correct): the growth since the anchor.
+        The filter corrects its INS with its full error state (the RBPF feeds its velocity, attitude and
+        bias estimates back): at the suspension the free INS's growth restarts from the filter's own
+        velocity, tilt and bias variances (its 15 x 15 covariance: NED position, velocity, attitude,
+        accelerometer and gyro biases), not from the anchor. False (the point-mass and particle filters ride
+        on an INS they never correct; the EKF's 13 states do not carry the x / y gyro biases that drive the
+        drift): the growth since the anchor.
     """
 
     def __init__(self, capture_range_m: float, who: str, spec: ImuSpec | None = None, rebase: bool = False):
@@ -128,6 +134,7 @@ class CaptureGuard:
         self._v0 = max(float(v0_m2ps2), 0.0)
         self._tilt0 = max(float(tilt0_rad2), 0.0)
         self.suspended = False
+        self._ba2 = self._bg2 = None
         self.t_suspended_s = math.nan
         self._cov_at_suspension = np.zeros((2, 2))
         self.reason = ""
@@ -137,7 +144,7 @@ class CaptureGuard:
         if self.spec is None:
             return self._p0
         return free_ins_position_variance_m2(self.spec, t_s - self.t_anchor_s, self._p0, self._v0,
-                                             self._tilt0)
+                                             self._tilt0, self._ba2, self._bg2)
 
     def beyond(self, t_s: float) -> bool:
         """Whether both limits of the module docstring are exceeded at t_s (no state changed)."""
@@ -151,8 +158,8 @@ class CaptureGuard:
     def check(self, t_s: float, belief_cov: np.ndarray) -> bool:
         """True when the filter is (now or already) beyond capture; on the first such call it latches the
         suspension, keeping the belief's horizontal covariance now (belief_cov's first 2 x 2 block; with
-        `rebase` a 9 x 9 NED position, velocity, attitude covariance whose velocity and tilt variances
-        restart the growth) and the reason."""
+        `rebase` the 15 x 15 covariance whose velocity, tilt and bias variances restart the growth) and the
+        reason."""
         if self.suspended:
             return True
         if not self.beyond(t_s):
@@ -163,6 +170,8 @@ class CaptureGuard:
         if self.rebase:
             anchor_from_cov9(self, t_s, c)
             self._p0 = 0.0          # the position's part is the belief's, kept below
+            self._ba2 = 0.5 * float(c[9, 9] + c[10, 10])
+            self._bg2 = 0.5 * float(c[12, 12] + c[13, 13])
         self.suspended = True
         self.t_suspended_s = float(t_s)
         self._cov_at_suspension = floored_horizontal(c[:2, :2], 1e-6)
@@ -224,9 +233,10 @@ def rbpf_capture_guard(nav, initial) -> CaptureGuard:
     return g
 
 
-def rbpf_capture_skips(nav, t_s: float, gnss) -> bool:
+def rbpf_capture_skips(nav, t_s: float, gnss, covariance15) -> bool:
     """Whether the RBPF skips its epoch at t_s (beyond capture: no time update, terrain update or feedback;
-    its INS runs free and its error-model transition restarts). A GNSS fix (`gnss` not None) ends a
+    its INS runs free and its error-model transition restarts; covariance15: a callable giving the cloud's
+    15 x 15 mixture covariance, for the suspension's rebase). A GNSS fix (`gnss` not None) ends a
     suspension: the guard re-anchors at the cloud's covariance and the epoch runs."""
     g = nav._capture
     if gnss is not None:
@@ -234,7 +244,7 @@ def rbpf_capture_skips(nav, t_s: float, gnss) -> bool:
             nav.health.events.append((float(t_s), f"{nav.name}: capture: a GNSS fix ends the suspension"))
         anchor_from_cov9(g, t_s, nav._cov9)
         return False
-    if g.skips(t_s, lambda: nav._cov9, nav.health):
+    if g.skips(t_s, covariance15, nav.health):
         nav._Phi = np.eye(nav._Phi.shape[0])
         return True
     return False

@@ -58,6 +58,7 @@ from ..core.imu_spec import TurnAngle
 from ..core.ins_gnss import InsGnssBlock
 from ..core.linalg import floored_psd, is_positive_definite
 from ..core.maps import load_map
+from ..core.measured_consistency import grade_warning
 from ..core.recovery import IntegrityRecovery
 from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns
@@ -70,7 +71,7 @@ from ..tercom.mad import TercomBatch, TercomFix, correlate
 from . import _ekf_kernels as kern
 from .ins_trn_batch_error import BatchKinematics, sample_error_rows
 from .ins_trn_gnss import InsTrnGnss
-from .ins_trn_propagation import InsTrnPropagation
+from .ins_trn_propagation import EKF_MEMORY_S, InsTrnPropagation
 from .ins_trn_settings import INS_CAPABILITIES, InsTrnSettings, initial_covariance
 
 __all__ = ["InsTrnNavigator", "initial_covariance"]   # initial_covariance: re-exported
@@ -238,7 +239,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self._gnss_up = False
         # navigators.core.capture: the widest TERCOM search (recovery_half_cells) is what a fix can cover
         self._capture = CaptureGuard(self.recovery_half_cells * self.cell_m, self.name,
-                                     self._capture_spec if self.aiding is not None else None, rebase=True)
+                                     self._capture_spec if self.aiding is not None else None)
         anchor_from_cov9(self._capture, float(initial.t_s), P[:9, :9])
 
     _capture_spec = None    # the IMU's specification (apply_imu_spec)
@@ -247,6 +248,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         """InsTrnPropagation's, and the specification kept for the capture check (navigators.core.capture)."""
         super().apply_imu_spec(spec)
         self._capture_spec = spec
+        if self.aiding is not None:
+            self._consistency_warning = grade_warning(spec, EKF_MEMORY_S, self.name, capture=True)
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
@@ -293,7 +296,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         if s.shape[0] < self.min_samples:
             self._count_skip(t_s, "tercom_too_few_samples", 1, f"TERCOM batch with {s.shape[0]} samples")
             return
-        if self._capture.skips(t_s, lambda: self.kf.P[:9, :9], self.health):   # navigators.core.capture
+        if self._capture.skips(t_s, lambda: self.kf.P[:2, :2], self.health):   # navigators.core.capture
             return
         fix = correlate(
             self.dem,

@@ -155,7 +155,7 @@ class ParticleFilter(InsRiddenFilter):
         # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
-        self._consistency_warning = grade_warning(spec, PF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, PF_MEMORY_S, self.name, capture=True)
         self._capture_spec = spec
 
     def _capture_range_m(self) -> float:

@@ -239,7 +239,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             self.P0_settings[i, i] = max(self.P0_settings[i, i], spec.body_accel_sigma_mps2 ** 2)
         tilt2, heading2 = spec.turn_tilt_sigma_rad(1.0) ** 2, spec.turn_heading_sigma_rad(1.0) ** 2
         self._turn_att_var = np.array([tilt2, tilt2, heading2]) * TURN_REFERENCE_RAD
-        self._consistency_warning = grade_warning(spec, RBPF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, RBPF_MEMORY_S, self.name, capture=True)
         self._capture_spec = spec          # the capture check's (navigators.core.capture)
 
     def _epoch_ql_var(self) -> np.ndarray:
@@ -357,7 +357,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                 quat_to_dcm(st[6:10]))
 
     def _epoch(self, te: float, y_ira, gnss) -> None:
-        if rbpf_capture_skips(self, te, gnss):    # beyond capture (navigators.core.capture)
+        # beyond capture (navigators.core.capture): the epoch skipped
+        if rbpf_capture_skips(self, te, gnss,
+                              lambda: kern.moments(self.xn, self.xl, self.P, self._weights())[1]):
             return
         self.epochs += 1
         # ---- time update (eqs 5-8, 13-15) in metric position units
