@@ -116,13 +116,20 @@ class CaptureGuard:
         accelerometer and gyro biases), not from the anchor. False (the point-mass and particle filters ride
         on an INS they never correct; the EKF's 13 states do not carry the x / y gyro biases that drive the
         drift): the growth since the anchor.
+    geometry : bool
+        The filter computes its terrain samples' geometry through the free INS's attitude (the point-mass
+        and particle filters): past the small-angle limit its published horizontal covariance adds
+        `geometry_variance_m2` (see the module docstring).
     """
 
-    def __init__(self, capture_range_m: float, who: str, spec: ImuSpec | None = None, rebase: bool = False):
+    def __init__(self, capture_range_m: float, who: str, spec: ImuSpec | None = None, rebase: bool = False,
+                 geometry: bool = False):
         self.capture_range_m = float(capture_range_m)
         self.who = str(who)
         self.spec = spec
         self.rebase = bool(rebase)
+        self.geometry = bool(geometry)
+        self.range_m = 0.0      # the last terrain sample's range (the filter sets it)
         self.anchor(0.0, 0.0, 0.0, 0.0)
 
     def anchor(self, t_s: float, p0_m2: float, v0_m2ps2: float, tilt0_rad2: float) -> None:
@@ -146,6 +153,15 @@ class CaptureGuard:
         return free_ins_position_variance_m2(self.spec, t_s - self.t_anchor_s, self._p0, self._v0,
                                              self._tilt0, self._ba2, self._bg2)
 
+    def geometry_variance_m2(self, t_s: float) -> float:
+        """Variance (m^2 per horizontal axis) of the terrain samples' closest points that the free INS's
+        attitude error moves: (range_m sigma_att)^2, sigma_att the free INS's attitude sigma since the
+        anchor, once past SMALL_ANGLE_LIMIT_RAD (0 before it, or without `geometry` or a specification)."""
+        if not (self.geometry and self.spec is not None):
+            return 0.0
+        att = free_ins_tilt_sigma_rad(self.spec, t_s - self.t_anchor_s, self._tilt0)
+        return (self.range_m * att) ** 2 if att > SMALL_ANGLE_LIMIT_RAD else 0.0
+
     def beyond(self, t_s: float) -> bool:
         """Whether both limits of the module docstring are exceeded at t_s (no state changed)."""
         if self.spec is None:
@@ -167,6 +183,7 @@ class CaptureGuard:
         sig = math.sqrt(self.free_variance_m2(t_s))
         tilt = math.degrees(free_ins_tilt_sigma_rad(self.spec, t_s - self.t_anchor_s, self._tilt0))
         c = np.asarray(belief_cov, float)
+        geo = self.geometry_variance_m2(t_s)
         if self.rebase:
             anchor_from_cov9(self, t_s, c)
             self._p0 = 0.0          # the position's part is the belief's, kept below
@@ -174,7 +191,7 @@ class CaptureGuard:
             self._bg2 = 0.5 * float(c[12, 12] + c[13, 13])
         self.suspended = True
         self.t_suspended_s = float(t_s)
-        self._cov_at_suspension = floored_horizontal(c[:2, :2], 1e-6)
+        self._cov_at_suspension = floored_horizontal(c[:2, :2], 1e-6) + np.eye(2) * geo
         self.reason = (f"{self.who}: beyond capture - the IMU's free INS error since the last absolute fix "
                        f"({t_s - self.t_anchor_s:.0f} s ago: {sig:.0f} m, {tilt:.2g} deg of attitude) "
                        "exceeds "
@@ -198,13 +215,17 @@ class CaptureGuard:
 
     def publish(self, cov: np.ndarray, t_s: float, floor_m2: float = 0.0) -> np.ndarray:
         """The covariance to publish (n x n, north and east first; a copy): while suspended its horizontal
-        block is `published_covariance` and uncorrelated with the rest; the horizontal block floored
-        (floored_horizontal) in every case."""
+        block is `published_covariance` and uncorrelated with the rest, else with `geometry_variance_m2`
+        added; the horizontal block floored (floored_horizontal) in every case."""
         P = np.array(cov, float)
         if self.suspended:
             P[:2, :] = 0.0
             P[:, :2] = 0.0
             P[:2, :2] = self.published_covariance(t_s)
+        else:
+            geo = self.geometry_variance_m2(t_s)
+            if geo > 0.0:
+                P[:2, :2] += np.eye(2) * geo
         P[:2, :2] = floored_horizontal(P[:2, :2], floor_m2)
         return P
 

@@ -189,7 +189,7 @@ class InsRiddenFilter(InsGnssBlock):
         self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m,
                                            max_doublings=MAX_RECOVERY_DOUBLINGS)
         self._init_cov9 = cov.copy()
-        self._capture = CaptureGuard(self._capture_range_m(), self.name, self._capture_spec)
+        self._capture = CaptureGuard(self._capture_range_m(), self.name, self._capture_spec, geometry=True)
         anchor_from_cov9(self._capture, float(initial.t_s), cov)
         self._tilt0_var = 0.5 * float(d[6] + d[7])
         self._init_belief(cov)
@@ -329,6 +329,8 @@ class InsRiddenFilter(InsGnssBlock):
 
     def _terrain_sample(self, t_s: float, kind: str, payload, st: np.ndarray) -> None:
         rng_m, theta = payload
+        if math.isfinite(rng_m):
+            self._capture.range_m = float(rng_m)     # the closest points' lever (navigators.core.capture)
         if kind == "ira":
             var_sensor = None   # depends on the hypothesis' closest point: computed by the filter
         else:
@@ -484,10 +486,11 @@ class InsRiddenFilter(InsGnssBlock):
             yaw = math.atan2(math.sin(yaw + mean[5]), math.cos(yaw + mean[5]))
         b = float(mean[2]) if np.isfinite(mean[2]) else 0.0
         health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
+        gaussian = suspended or self._capture.geometry_variance_m2(float(self.ins.t_s)) > 0.0
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
                         health=health, extra=(pl.publish(dict(self.extra), pl.gaussian_hpl(
-                            P[:2, :2], pl.filter_risk(self)), self) if suspended
+                            P[:2, :2], pl.filter_risk(self)), self) if gaussian
                             else self._with_protection_level(dict(self.extra))))
 
     def _with_protection_level(self, extra: dict) -> dict:
