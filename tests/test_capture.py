@@ -43,9 +43,11 @@ H_M = 2000.0
 P0, V0, TILT0 = 30.0 ** 2, 0.5 ** 2, math.radians(0.1) ** 2
 
 
-def _fifteen_state(grade: str, times_s) -> tuple[np.ndarray, np.ndarray]:
+def _fifteen_state(grade: str, times_s, since_s: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(north position variance m^2, roll attitude variance rad^2) of the 15-state model at times_s (s) along
-    a level flight north at 100 m/s, from the priors P0, V0, TILT0 and the grade's specification."""
+    a level flight north at 100 m/s, from the priors P0, V0, TILT0 and the grade's specification; since_s > 0:
+    the variance of the north error's growth since since_s instead (the state augmented with a copy of its
+    north position at since_s, which the propagation leaves unchanged)."""
     spec = imu_spec({"grade": grade})
     C = np.eye(3)
     A = system_matrix(LAT, H_M, np.array([100.0, 0.0, 0.0]), np.array([0.0, 0.0, -G]), C, True)
@@ -55,11 +57,19 @@ def _fifteen_state(grade: str, times_s) -> tuple[np.ndarray, np.ndarray]:
     P = np.diag(np.r_[P0 / r ** 2, P0 / (r * math.cos(LAT)) ** 2, 0.0, [V0] * 3, [TILT0] * 3,
                       [spec.body_accel_sigma_mps2 ** 2] * 3, [spec.gyro_bias_sigma_rps ** 2] * 3])
     out_p, out_a, t = [], [], 0
+    while t < since_s:
+        P = Phi @ P @ Phi.T + Qd
+        t += 1
+    if since_s:
+        J = np.vstack([np.eye(15), np.eye(15)[:1]])      # x and the copy of its north position
+        P = J @ P @ J.T
+        Phi = np.block([[Phi, np.zeros((15, 1))], [np.zeros((1, 15)), np.ones((1, 1))]])
+        Qd = np.block([[Qd, np.zeros((15, 1))], [np.zeros((1, 16))]])
     for t_want in times_s:
         while t < t_want:
             P = Phi @ P @ Phi.T + Qd
             t += 1
-        out_p.append(P[0, 0] * r ** 2)
+        out_p.append((P[0, 0] - 2 * P[0, 15] + P[15, 15] if since_s else P[0, 0]) * r ** 2)
         out_a.append(P[6, 6])
     return np.array(out_p), np.array(out_a)
 
@@ -74,6 +84,18 @@ def test_free_ins_variance_against_the_15_state_model(grade):
     # the tilt without the Schuler loop, which bounds it: above the model's, by (w_s t)^2 / 6 ~ 9 % at 600 s
     tilt = np.array([free_ins_tilt_sigma_rad(spec, t, TILT0) for t in times])
     assert np.all(tilt >= 0.99 * np.sqrt(a15)) and tilt == pytest.approx(np.sqrt(a15), rel=0.15)
+
+
+@pytest.mark.parametrize("grade", ["tactical", "consumer"])
+def test_the_growth_since_a_time_against_the_15_state_model(grade):
+    spec = imu_spec({"grade": grade})
+    times, since = [130, 200, 350, 600], 100
+    p15, _ = _fifteen_state(grade, times, since)
+    closed = np.array([free_ins_position_variance_m2(spec, t, P0, V0, TILT0, since_s=since) for t in times])
+    assert np.sqrt(closed / p15) == pytest.approx(np.ones(len(times)), rel=0.10)
+    # far less than the error's whole variance shortly after, nearly all of it long after
+    full = free_ins_position_variance_m2(spec, 130, P0, V0, TILT0)
+    assert closed[0] < 0.5 * full
 
 
 def _first_suspension_s(grade: str, capture_range_m: float, t_max_s: int = 600) -> float:
@@ -114,8 +136,9 @@ def test_published_covariance_grows_as_the_free_ins_and_a_gnss_anchor_ends_it():
     assert g.check(100.0, belief) and g.suspended and g.t_suspended_s == 100.0
     assert g.check(101.0, np.eye(2))          # latched
     for t in (100.0, 200.0, 400.0):
-        expect = belief + np.eye(2) * free_ins_position_variance_m2(spec, t, P0, V0, TILT0)
+        expect = belief + np.eye(2) * free_ins_position_variance_m2(spec, t, P0, V0, TILT0, since_s=100.0)
         assert g.published_covariance(t) == pytest.approx(expect)
+    assert g.published_covariance(100.0) == pytest.approx(belief)
     P = g.publish(np.eye(4) * 7.0 + 0.5, 200.0)
     assert P[:2, 2:] == pytest.approx(np.zeros((2, 2))) and P[2:, 2:] == pytest.approx(np.eye(2) * 7.0 + 0.5)
     g.anchor(300.0, 25.0, 0.01, TILT0)
@@ -176,7 +199,9 @@ def test_a_pmf_beyond_capture_suspends_and_publishes_the_free_ins_growth(dem):
     nav.ins.t_s = t_first + 30.0
     nav._after_frame(t_first + 30.0)
     est = nav.estimate()
-    free = free_ins_position_variance_m2(spec, t_first + 30.0, P0, 0.5 ** 2, TILT0)
+    free = free_ins_position_variance_m2(spec, t_first + 30.0, P0, 0.5 ** 2, TILT0, since_s=t_first)
+    geo = nav._capture.geometry_variance_m2(t_first)     # no sample yet: range 0
+    assert geo == 0.0
     assert est.covariance[:2, :2] == pytest.approx(before + np.eye(2) * free, rel=1e-9)
     assert not est.health.ok and est.health.status == "degraded"
     assert est.extra["hpl_m"] > 3.0 * math.sqrt(free)

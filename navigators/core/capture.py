@@ -18,8 +18,11 @@ within a flight of the default route's length):
 When both are exceeded (`CaptureGuard.check`) the filter is "beyond capture": it suspends its terrain
 updates (latched until the next absolute fix re-anchors it), keeps its belief's mean offset as it stood, lets
 the INS run free as the free `ins` does, and publishes as its horizontal covariance its belief's at the
-suspension plus the free INS's growth since the anchor (`published_covariance`): the error then is the
-belief's error at the suspension plus the INS error's growth since (bounded by its growth since the anchor).
+suspension plus the free INS error's growth since the suspension (`published_covariance`): the error then
+is the belief's error at the suspension plus the INS error's growth since, e(t) - e(t_s), each source's
+term of the closed form below taken as its change over [t_s, t] (a filter that corrects its INS with its
+whole error state, the RBPF, restarts the growth at the suspension from its own velocity, tilt and bias
+variances: `rebase`).
 Health says so ("degraded", with the reason as an event). This trades the filter's accuracy after the
 suspension (which was, on the consumer grade, sometimes kilometres better than the free INS and sometimes
 worse: docs/validation/navigators.md) for a covariance that bounds the error.
@@ -57,19 +60,29 @@ CAPTURE_SIGMAS = 3.0
 
 def free_ins_position_variance_m2(spec: ImuSpec, t_s: float, p0_m2: float, v0_m2ps2: float,
                                   tilt0_rad2: float, accel_bias_m2ps4: float | None = None,
-                                  gyro_bias_rad2ps2: float | None = None) -> float:
+                                  gyro_bias_rad2ps2: float | None = None, since_s: float = 0.0) -> float:
     """Variance (m^2, per horizontal axis) of the free INS's position error t_s seconds after an anchor
     where it had position, velocity and tilt variances p0_m2, v0_m2ps2, tilt0_rad2 (see the module
     docstring: Titterton & Weston 2004 eqs 12.20-12.21 without the Schuler loop). accel_bias_m2ps4,
     gyro_bias_rad2ps2: the horizontal specific-force error's and the x / y gyro bias's variances when a filter
-    has estimated them (at most the specification's); None: the specification's."""
+    has estimated them (at most the specification's); None: the specification's.
+
+    since_s > 0: the variance of the error's growth from since_s to t_s after the anchor, e(t) - e(s) (what
+    a belief that held the error at s lacks at t): each constant source's term c t^k becomes c (t^k - s^k)
+    (so the position's prior drops out), the velocity random walk's N_a^2 (s (t - s)^2 + (t - s)^3 / 3)
+    and the angle random walk's g^2 N_g^2 ((t - s)^2 ((t + s)^3 - (t - s)^3) / 24 + (t - s)^5 / 20) (the
+    increments of N_a int (t - u) dB(u) and g N_g int (t - u)^2 / 2 dB(u))."""
     t = max(float(t_s), 0.0)
+    s = min(max(float(since_s), 0.0), t)
     a2_spec, g2_spec = spec.body_accel_sigma_mps2 ** 2, spec.gyro_bias_sigma_rps ** 2
     a2 = (a2_spec if accel_bias_m2ps4 is None else min(accel_bias_m2ps4, a2_spec)) + G0_MPS2 ** 2 * tilt0_rad2
     gw2 = G0_MPS2 ** 2 * (g2_spec if gyro_bias_rad2ps2 is None else min(gyro_bias_rad2ps2, g2_spec))
-    return float(p0_m2 + v0_m2ps2 * t ** 2 + a2 * t ** 4 / 4.0 + gw2 * t ** 6 / 36.0
-                 + spec.accel_noise_density_mps2_rthz ** 2 * t ** 3 / 3.0
-                 + (G0_MPS2 * spec.gyro_noise_density_rps_rthz) ** 2 * t ** 5 / 20.0)
+    d = t - s
+    na2 = spec.accel_noise_density_mps2_rthz ** 2
+    ng2 = (G0_MPS2 * spec.gyro_noise_density_rps_rthz) ** 2
+    return float((p0_m2 if s == 0.0 else 0.0) + v0_m2ps2 * d ** 2 + a2 * (t ** 2 - s ** 2) ** 2 / 4.0
+                 + gw2 * (t ** 3 - s ** 3) ** 2 / 36.0 + na2 * (s * d ** 2 + d ** 3 / 3.0)
+                 + ng2 * (d ** 2 * ((t + s) ** 3 - d ** 3) / 24.0 + d ** 5 / 20.0))
 
 
 def free_ins_tilt_sigma_rad(spec: ImuSpec, t_s: float, tilt0_rad2: float) -> float:
@@ -231,8 +244,12 @@ class CaptureGuard:
 
     def published_covariance(self, t_s: float) -> np.ndarray:
         """The horizontal covariance (2 x 2, m^2) a suspended filter publishes at t_s: its belief's at the
-        suspension plus the free INS's variance since the anchor on each axis."""
-        return self._cov_at_suspension + np.eye(2) * self.free_variance_m2(t_s)
+        suspension plus the free INS's error growth since the suspension on each axis (the belief held the
+        error then: free_ins_position_variance_m2 with since_s; with `rebase` the anchor is the
+        suspension)."""
+        growth = free_ins_position_variance_m2(self.spec, t_s - self.t_anchor_s, 0.0, self._v0, self._tilt0,
+                                               self._ba2, self._bg2, self.t_suspended_s - self.t_anchor_s)
+        return self._cov_at_suspension + np.eye(2) * growth
 
 
 def anchor_from_cov9(guard: CaptureGuard, t_s: float, cov9: np.ndarray) -> None:
