@@ -33,10 +33,10 @@ VALIDATION_PAGE = "docs/validation/navigators.md"
 # navigator -> {IMU grade: direction} of the cells measured outside their consistency bounds
 MEASURED: dict[str, dict[str, str]] = {
     "ins": {},
-    "ins_tercom": {"consumer": OVERCONFIDENT},
-    "pmf": {"consumer": OVERCONFIDENT},
-    "pf": {"consumer": OVERCONFIDENT},
-    "rbpf": {"tactical": CONSERVATIVE, "consumer": OVERCONFIDENT},
+    "ins_tercom": {},
+    "pmf": {},
+    "pf": {},
+    "rbpf": {"tactical": CONSERVATIVE},
     "acq_track": {},
 }
 
