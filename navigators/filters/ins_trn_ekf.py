@@ -114,6 +114,11 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
     position covariance is inflated by recovery_sigma_m^2 and the TERCOM search widens to
     recovery_half_cells from the next batch on (both logged); back in band, the search returns to
     half_cells and the status to "ok".
+    Capture (navigators.core.capture, with the IMU's specification): a TERCOM fix falling due when the
+    free INS's error since the last absolute fix is past the small-angle model and, at 3 sigma, past the
+    widest search (recovery_half_cells x cell_m) is skipped, and every later one until a GNSS fix; the
+    published horizontal covariance is then the EKF's at the suspension plus the free INS error's growth
+    since, Health "degraded".
     Speed: a frame with no fix due inside it and no GNSS fix runs as one numba call
     (_ekf_kernels.fused_segment); set the attribute `fused = False` for the step-by-step path (the same
     numbers, to round-off).

@@ -113,6 +113,14 @@ class InsRiddenFilter(InsGnssBlock):
     initial spread), each step an event; if a whole window after a re-spread is still out of band it
     re-spreads again, twice as wide (up to 8 x recovery_sigma_m); back in band, the status follows the
     belief's spread again ("acquiring", then "ok").
+
+    Capture (navigators.core.capture, with the IMU's specification): past the small-angle limit the
+    published horizontal covariance adds the closest points' offset the free INS's attitude error makes
+    (the INS the filter rides on is never corrected); beyond the capture range (a subclass'
+    `_capture_range_m`) as well, the filter suspends its terrain updates (its belief kept), Health
+    "degraded", and publishes its belief's covariance at the suspension plus the free INS error's growth
+    since; a GNSS fix re-spreads the belief with that covariance and resumes. A published horizontal
+    covariance is floored at `_capture_floor_m2` (never not positive definite).
     """
 
     _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
