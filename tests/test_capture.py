@@ -241,3 +241,18 @@ def test_health_states_the_capture_check_on_the_consumer_grade(dem, name):
     nav = registry.create(name, dem=dem)
     nav.apply_imu_spec(imu_spec({"grade": "tactical"}))
     assert CAPTURE_NOTE not in nav._consistency_warning
+
+
+def test_the_closest_points_geometry_variance_past_the_small_angle_limit():
+    """range x the free INS's attitude sigma (held against the 15-state model above), once past the limit."""
+    spec = imu_spec({"grade": "consumer"})
+    g = CaptureGuard(1e9, "test", spec, geometry=True)
+    g.anchor(0.0, P0, V0, TILT0)
+    g.range_m = 2000.0
+    _, a15 = _fifteen_state("consumer", [10, 100])
+    assert math.sqrt(a15[0]) < SMALL_ANGLE_LIMIT_RAD and g.geometry_variance_m2(10.0) == 0.0
+    assert math.sqrt(g.geometry_variance_m2(100.0)) == pytest.approx(2000.0 * math.sqrt(a15[1]), rel=0.05)
+    P = g.publish(np.eye(3) * 100.0, 100.0)
+    assert P[:2, :2] == pytest.approx(np.eye(2) * (100.0 + g.geometry_variance_m2(100.0)))
+    assert P[2, 2] == 100.0
+    assert CaptureGuard(1e9, "test", spec).geometry_variance_m2(100.0) == 0.0     # not a geometry filter
