@@ -256,3 +256,15 @@ def test_the_closest_points_geometry_variance_past_the_small_angle_limit():
     assert P[:2, :2] == pytest.approx(np.eye(2) * (100.0 + g.geometry_variance_m2(100.0)))
     assert P[2, 2] == 100.0
     assert CaptureGuard(1e9, "test", spec).geometry_variance_m2(100.0) == 0.0     # not a geometry filter
+
+
+def test_a_gnss_fix_ends_a_pmf_suspension(dem):
+    nav = registry.create("pmf", dem=dem, grid_size=41, spacing_max_m=5.0)
+    nav.apply_imu_spec(imu_spec({"grade": "consumer"}))
+    nav.reset(_initial())
+    t_first = _first_suspension_s("consumer", 100.0)
+    assert nav._capture_suspends(t_first, "ira") and nav._capture.suspended
+    assert nav._capture_suspends(t_first + 5.0, "ira")                  # latched
+    assert nav._capture_suspends(t_first + 10.0, "gnss") is False
+    assert not nav._capture.suspended and "ends the suspension" in nav.health.events[-1][1]
+    assert np.all(np.linalg.eigvalsh(nav._moments()[1][:2, :2]) > 0.0)
