@@ -22,17 +22,17 @@ suspension plus the free INS error's growth since the suspension (`published_cov
 is the belief's error at the suspension plus the INS error's growth since, e(t) - e(t_s), each source's
 term of the closed form below taken as its change over [t_s, t] (a filter that corrects its INS with its
 whole error state, the RBPF, restarts the growth at the suspension from its own velocity, tilt and bias
-variances: `rebase`).
-Health says so ("degraded", with the reason as an event).
+variances: `rebase`). Health says so ("degraded", with the reason as an event).
 
 Between the two limits a filter that computes its terrain samples through the free INS's attitude (the
 point-mass and particle filters, which never correct their INS) still updates, but each sample's closest
 point (seed 000 eqs 14-36) sits off by about the range times the INS's attitude error, the same for
 consecutive samples: a bias its likelihood does not describe. Its published horizontal covariance adds
 (range x the free INS's attitude sigma)^2 per axis past the small-angle limit (`geometry_variance_m2`; the
-range the last sample's), and so does its covariance at the suspension. This trades the filter's accuracy after the
-suspension (which was, on the consumer grade, sometimes kilometres better than the free INS and sometimes
-worse: docs/validation/navigators.md) for a covariance that bounds the error.
+range the last sample's), and so does its covariance at the suspension.
+
+The check trades the filter's accuracy after the suspension (it is then the free INS plus the offset it
+held) for a covariance that bounds the error (measured: docs/validation/navigators.md).
 
 The free INS's horizontal error per axis (`free_ins_position_variance_m2`) is the short-term solution of the
 INS error equations without Schuler feedback (Titterton & Weston 2004, Strapdown Inertial Navigation
