@@ -33,10 +33,10 @@ VALIDATION_PAGE = "docs/validation/navigators.md"
 # navigator -> {IMU grade: direction} of the cells measured outside their consistency bounds
 MEASURED: dict[str, dict[str, str]] = {
     "ins": {},
-    "ins_tercom": {"consumer": OVERCONFIDENT},
-    "pmf": {"consumer": OVERCONFIDENT},
-    "pf": {"consumer": OVERCONFIDENT},
-    "rbpf": {"tactical": CONSERVATIVE, "consumer": OVERCONFIDENT},
+    "ins_tercom": {},
+    "pmf": {},
+    "pf": {},
+    "rbpf": {"tactical": CONSERVATIVE},
     "acq_track": {},
 }
 
@@ -53,19 +53,27 @@ def measured_direction(who: str, grade: str) -> str:
     return MEASURED.get(who, {}).get(grade, "") if grade else ""
 
 
-def grade_warning(spec: ImuSpec, memory_s: float, who: str) -> str:
+# what a navigator with the capture check (navigators.core.capture) adds to the small-angle warning
+CAPTURE_NOTE = ("; once the free INS's error since the last absolute fix exceeds what its belief can cover "
+                "it suspends its terrain updates (Health degraded) and publishes the free INS's error growth "
+                "(navigators.core.capture)")
+
+
+def grade_warning(spec: ImuSpec, memory_s: float, who: str, capture: bool = False) -> str:
     """Health.consistency_warning of navigator `who` on this IMU: the small-angle warning
-    (imu_spec.consistency_warning over the filter's memory_s) with the measured direction appended when the
-    grade was measured, else the measured direction's statement, else ""."""
+    (imu_spec.consistency_warning over the filter's memory_s; with `capture`, a navigator that runs the
+    capture check, CAPTURE_NOTE appended) with the measured direction appended when the grade was
+    measured, else the measured direction's statement, else ""."""
     direction = measured_direction(who, spec.grade)
     small_angle = consistency_warning(spec, memory_s, who)
     if small_angle:
-        return small_angle + (f"; measured {direction} on this grade" if direction else "")
+        return (small_angle + (CAPTURE_NOTE if capture else "")
+                + (f"; measured {direction} on this grade" if direction else ""))
     if not direction:
         return ""
     return (f"{who}: covariance known to be {direction} on the {spec.grade} IMU grade "
             f"({_MEANING[direction]}; measured: {VALIDATION_PAGE})")
 
 
-__all__ = ["CONSERVATIVE", "MEASURED", "OVERCONFIDENT", "VALIDATION_PAGE", "grade_warning",
+__all__ = ["CAPTURE_NOTE", "CONSERVATIVE", "MEASURED", "OVERCONFIDENT", "VALIDATION_PAGE", "grade_warning",
            "measured_direction"]

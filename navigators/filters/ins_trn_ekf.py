@@ -52,11 +52,13 @@ from collections import deque
 
 import numpy as np
 
+from ..core.capture import CaptureGuard, anchor_from_cov9
 from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from ..core.imu_spec import TurnAngle
 from ..core.ins_gnss import InsGnssBlock
 from ..core.linalg import floored_psd, is_positive_definite
 from ..core.maps import load_map
+from ..core.measured_consistency import grade_warning
 from ..core.recovery import IntegrityRecovery
 from ..frames import SensorFrames
 from ..inertial.strapdown import StrapdownIns
@@ -69,7 +71,7 @@ from ..tercom.mad import TercomBatch, TercomFix, correlate
 from . import _ekf_kernels as kern
 from .ins_trn_batch_error import BatchKinematics, sample_error_rows
 from .ins_trn_gnss import InsTrnGnss
-from .ins_trn_propagation import InsTrnPropagation
+from .ins_trn_propagation import EKF_MEMORY_S, InsTrnPropagation
 from .ins_trn_settings import INS_CAPABILITIES, InsTrnSettings, initial_covariance
 
 __all__ = ["InsTrnNavigator", "initial_covariance"]   # initial_covariance: re-exported
@@ -112,6 +114,11 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
     position covariance is inflated by recovery_sigma_m^2 and the TERCOM search widens to
     recovery_half_cells from the next batch on (both logged); back in band, the search returns to
     half_cells and the status to "ok".
+    Capture (navigators.core.capture, with the IMU's specification): a TERCOM fix falling due when the
+    free INS's error since the last absolute fix is past the small-angle model and, at 3 sigma, past the
+    widest search (recovery_half_cells x cell_m) is skipped, and every later one until a GNSS fix; the
+    published horizontal covariance is then the EKF's at the suspension plus the free INS error's growth
+    since, Health "degraded".
     Speed: a frame with no fix due inside it and no GNSS fix runs as one numba call
     (_ekf_kernels.fused_segment); set the attribute `fused = False` for the step-by-step path (the same
     numbers, to round-off).
@@ -235,6 +242,19 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self._height_initialised = False
         self._t_gnss = -math.inf
         self._gnss_up = False
+        # navigators.core.capture: the widest TERCOM search (recovery_half_cells) is what a fix can cover
+        self._capture = CaptureGuard(self.recovery_half_cells * self.cell_m, self.name,
+                                     self._capture_spec if self.aiding is not None else None)
+        anchor_from_cov9(self._capture, float(initial.t_s), P[:9, :9])
+
+    _capture_spec = None    # the IMU's specification (apply_imu_spec)
+
+    def apply_imu_spec(self, spec) -> None:
+        """InsTrnPropagation's, and the specification kept for the capture check (navigators.core.capture)."""
+        super().apply_imu_spec(spec)
+        self._capture_spec = spec
+        if self.aiding is not None:
+            self._consistency_warning = grade_warning(spec, EKF_MEMORY_S, self.name, capture=True)
 
     def update(self, frames: SensorFrames) -> Estimate:
         self.health.events = []
@@ -265,6 +285,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
                 self._fix(float(t[b - 1]))
             while g < t_g.shape[0] and (t_g[g] <= t[b - 1] + 1e-9 or b == n):
                 self._gnss_update(gnss, g)
+                # a GNSS fix re-anchors the capture check (navigators.core.capture)
+                anchor_from_cov9(self._capture, float(self.ins.t_s), self.kf.P[:9, :9])
                 g += 1
             a = b
         return self.estimate()
@@ -278,6 +300,8 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self._t_batch0 = nxt if t_s - nxt < self.fix_period_s else t_s
         if s.shape[0] < self.min_samples:
             self._count_skip(t_s, "tercom_too_few_samples", 1, f"TERCOM batch with {s.shape[0]} samples")
+            return
+        if self._capture.skips(t_s, lambda: self.kf.P[:2, :2], self.health):   # navigators.core.capture
             return
         fix = correlate(
             self.dem,
@@ -393,9 +417,13 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         roll, pitch, yaw = kern.euler_from_quat(st[6:10])
         P = self.kf.P[:9, :9].copy()
         P[2, 2] += self.baro_bias_sigma_m**2
+        suspended = self._capture.suspended   # beyond capture (navigators.core.capture)
+        P = self._capture.publish(P, float(self.ins.t_s))
         sig_h = math.sqrt(max(P[0, 0] + P[1, 1], 0.0))
         if not math.isfinite(float(st.sum())):
             self.health.ok, self.health.status = False, "diverged"
+        elif suspended:
+            self.health.ok, self.health.status = False, "degraded"
         elif self.aiding is not None and sig_h > 2000.0:
             self.health.ok, self.health.status = False, "degraded"
         elif self.integrity.degraded:

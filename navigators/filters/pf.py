@@ -44,6 +44,7 @@ import math
 
 import numpy as np
 
+from ..core.capture import CAPTURE_SIGMAS
 from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
@@ -60,7 +61,7 @@ from ..measurements import ira, radar_altimeter
 from ..measurements.terrain_models import radii_m
 from ..protocol import EXTRA_ESS
 from ._pf_kernels import propagate_particles
-from .terrain_filter import InsRiddenFilter
+from .terrain_filter import MAX_RECOVERY_DOUBLINGS, InsRiddenFilter
 from .terrain_filter_settings import PF_CAPABILITIES, PfSettings
 
 PF_MEMORY_S = 120.0  # memory over which the error sources the particles do not carry are matched
@@ -154,7 +155,12 @@ class ParticleFilter(InsRiddenFilter):
         # the vertical offset's walk: the tuned baro-height wander and the IMU's baro-loop transient (rss)
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
-        self._consistency_warning = grade_warning(spec, PF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, PF_MEMORY_S, self.name, capture=True)
+        self._capture_spec = spec
+
+    def _capture_range_m(self) -> float:
+        """CAPTURE_SIGMAS times the widest re-spread of the recovery policy (navigators.core.capture)."""
+        return CAPTURE_SIGMAS * self.recovery_sigma_m * 2.0 ** (MAX_RECOVERY_DOUBLINGS - 1)
 
     def reset(self, initial) -> None:
         super().reset(initial)

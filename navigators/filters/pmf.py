@@ -181,7 +181,16 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         # beta carries the transient, the walk stays a floor where its linear model does not hold)
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
-        self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name, capture=True)
+        self._capture_spec = spec
+
+    def _capture_range_m(self) -> float:
+        """The grid's half-span at its largest spacing (navigators.core.capture)."""
+        return 0.5 * (self.n - 1) * self.spacing_max_m
+
+    def _capture_floor_m2(self) -> float:
+        """A cell's uniform width, d^2 / 12 per axis."""
+        return self.spacing ** 2 / 12.0
 
     # ------------------------------------------------------------------------------------ belief
 

@@ -78,6 +78,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from ..core.capture import rbpf_capture_guard, rbpf_capture_skips
 from ..core.imu_spec import ImuSpec, TurnAngle
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
@@ -238,7 +239,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             self.P0_settings[i, i] = max(self.P0_settings[i, i], spec.body_accel_sigma_mps2 ** 2)
         tilt2, heading2 = spec.turn_tilt_sigma_rad(1.0) ** 2, spec.turn_heading_sigma_rad(1.0) ** 2
         self._turn_att_var = np.array([tilt2, tilt2, heading2]) * TURN_REFERENCE_RAD
-        self._consistency_warning = grade_warning(spec, RBPF_MEMORY_S, self.name)
+        self._consistency_warning = grade_warning(spec, RBPF_MEMORY_S, self.name, capture=True)
+        self._capture_spec = spec          # the capture check's (navigators.core.capture)
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
@@ -285,6 +287,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._last_range_m = -1.0
         self.epochs = 0
         self.resamples = 0
+        self._capture = rbpf_capture_guard(self, initial)    # navigators.core.capture
         self._reset_done = True
 
     def update(self, frames: SensorFrames) -> Estimate:
@@ -354,6 +357,10 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                 quat_to_dcm(st[6:10]))
 
     def _epoch(self, te: float, y_ira, gnss) -> None:
+        # beyond capture (navigators.core.capture): the epoch skipped
+        if rbpf_capture_skips(self, te, gnss,
+                              lambda: kern.moments(self.xn, self.xl, self.P, self._weights())[1]):
+            return
         self.epochs += 1
         # ---- time update (eqs 5-8, 13-15) in metric position units
         T = np.ones(15)
@@ -413,11 +420,16 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                      gyro_bias_b_rps=self.ins.gyro_bias_b.copy(),
                      accel_bias_sigma_mps2=sig_ba,
                      position_spread_m=np.sqrt(np.clip(np.diag(self._cov9)[:3], 0, None)))
-        pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
+        if self._capture.suspended:
+            pl.publish(extra, pl.gaussian_hpl(self._capture.published_covariance(float(self.ins.t_s)),
+                                              pl.filter_risk(self)), self)
+        else:
+            pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
         health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
                         v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
-                        covariance=self._cov9.copy(), health=health, extra=extra)
+                        covariance=self._capture.publish(self._cov9, float(self.ins.t_s)), health=health,
+                        extra=extra)
 
 
 __all__ = ["MAX_PARTICLES", "RaoBlackwellizedPF", "table1_covariance"]

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from ..core.capture import CaptureGuard, anchor_from_cov9, free_ins_tilt_sigma_rad
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes, velocity_into_ins
 from ..core.maps import MapRecord, load_map, map_record
 from ..core.recovery import IntegrityRecovery, capped_nis  # noqa: F401 (re-exported)
@@ -112,6 +113,14 @@ class InsRiddenFilter(InsGnssBlock):
     initial spread), each step an event; if a whole window after a re-spread is still out of band it
     re-spreads again, twice as wide (up to 8 x recovery_sigma_m); back in band, the status follows the
     belief's spread again ("acquiring", then "ok").
+
+    Capture (navigators.core.capture, with the IMU's specification): past the small-angle limit the
+    published horizontal covariance adds the closest points' offset the free INS's attitude error makes
+    (the INS the filter rides on is never corrected); beyond the capture range (a subclass'
+    `_capture_range_m`) as well, the filter suspends its terrain updates (its belief kept), Health
+    "degraded", and publishes its belief's covariance at the suspension plus the free INS error's growth
+    since; a GNSS fix re-spreads the belief with that covariance and resumes. A published horizontal
+    covariance is floored at `_capture_floor_m2` (never not positive definite).
     """
 
     _consistency_warning = ""  # set by a subclass' apply_imu_spec (navigators.core.imu_spec)
@@ -188,6 +197,9 @@ class InsRiddenFilter(InsGnssBlock):
         self._recovery = IntegrityRecovery(self.integrity, self.recovery_sigma_m,
                                            max_doublings=MAX_RECOVERY_DOUBLINGS)
         self._init_cov9 = cov.copy()
+        self._capture = CaptureGuard(self._capture_range_m(), self.name, self._capture_spec, geometry=True)
+        anchor_from_cov9(self._capture, float(initial.t_s), cov)
+        self._tilt0_var = 0.5 * float(d[6] + d[7])
         self._init_belief(cov)
 
     def update(self, frames: SensorFrames) -> Estimate:
@@ -205,16 +217,62 @@ class InsRiddenFilter(InsGnssBlock):
             if not np.all(np.isfinite(st)):
                 self.health.skip(t_s, "ins_invalid", "INS state not finite at a measurement")
                 continue
+            if self._capture_suspends(t_s, kind):
+                continue
             self._predict_to(t_s, st)
             self._grow_ins_model(t_s)
             if kind == "gnss":
                 self._gnss_update(t_s, st, payload)
+                self._capture_anchor(t_s)
             else:
                 self._terrain_sample(t_s, kind, payload, st)
         if self._tracks_turn:
             self._add_turn(hist, row, hist.shape[0])
         self._after_frame(float(t_imu[-1]))
         return self.estimate()
+
+    # ------------------------------------------------------------------------------------ capture
+    _capture_spec = None     # the IMU's specification (a subclass' apply_imu_spec sets it)
+    _capture: CaptureGuard | None = None
+    _tilt0_var = 0.0
+
+    def _capture_range_m(self) -> float:
+        """How far (m) the belief can cover (navigators.core.capture): a subclass' grid or re-spread."""
+        raise NotImplementedError
+
+    def _capture_floor_m2(self) -> float:
+        """A variance (m^2) the horizontal covariance always holds per axis (a grid cell's, uniform)."""
+        return 0.0
+
+    def _capture_suspends(self, t_s: float, kind: str) -> bool:
+        """navigators.core.capture's check before each measurement: True when a terrain sample is to be
+        skipped (the filter is beyond capture, suspended: its belief kept as it stood, Health degraded). A
+        GNSS fix ends a suspension: the belief is re-spread around its kept mean with the published
+        covariance (`_recovery_cov9`), then updated by the fix."""
+        g = self._capture
+        self._t_capture = t_s
+        if kind == "gnss":
+            if g.suspended:
+                self._t_belief = t_s
+                self.health.events.append((float(t_s), "capture: a GNSS fix ends the suspension; "
+                                           + self._recover(t_s)))
+                g.anchor(t_s, 0.0, 0.0, 0.0)
+            return False
+        if g.skips(t_s, lambda: self._output_moments()[1][:2, :2], self.health):
+            self._grow_ins_model(t_s)
+            return True
+        return False
+
+    def _capture_anchor(self, t_s: float) -> None:
+        """After a GNSS update: the free INS's growth restarts from the belief's position and velocity
+        variances, the tilt the free INS's since the reset (a GNSS fix does not observe it here)."""
+        g = self._capture
+        if g.spec is None:
+            return
+        _, cov = self._moments()
+        d = np.nan_to_num(np.diag(cov), nan=0.0)
+        tilt = free_ins_tilt_sigma_rad(g.spec, t_s - self._t_ins0, self._tilt0_var)
+        g.anchor(t_s, 0.5 * (d[0] + d[1]), 0.5 * (d[3] + d[4]), tilt * tilt)
 
     # ------------------------------------------------------------------------------------ internals
     _tracks_turn = False    # a subclass whose process noise grows with the angle turned sets it
@@ -279,6 +337,8 @@ class InsRiddenFilter(InsGnssBlock):
 
     def _terrain_sample(self, t_s: float, kind: str, payload, st: np.ndarray) -> None:
         rng_m, theta = payload
+        if math.isfinite(rng_m):
+            self._capture.range_m = float(rng_m)     # the closest points' lever (navigators.core.capture)
         if kind == "ira":
             var_sensor = None   # depends on the hypothesis' closest point: computed by the filter
         else:
@@ -382,6 +442,8 @@ class InsRiddenFilter(InsGnssBlock):
         mean, cov = self._moments()
         c9 = self._init_cov9.copy()
         ch = np.nan_to_num(cov[:2, :2]) + np.eye(2) * self._recovery_sigma_now_m() ** 2
+        if self._capture is not None and self._capture.suspended:     # resuming at a GNSS fix
+            ch = self._capture.published_covariance(self._t_capture)
         if np.trace(ch) > np.trace(c9[:2, :2]):
             c9[:2, :2] = ch
         return np.nan_to_num(mean), c9
@@ -396,7 +458,7 @@ class InsRiddenFilter(InsGnssBlock):
         sig_h = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0))
         if not (np.all(np.isfinite(mean[:3])) and math.isfinite(sig_h)):
             self.health.ok, self.health.status = False, "diverged"
-        elif self.integrity.degraded:
+        elif self.integrity.degraded or self._capture.suspended:
             self.health.ok, self.health.status = False, "degraded"
         elif self.health.status != "degraded":
             self.health.ok = True
@@ -422,6 +484,8 @@ class InsRiddenFilter(InsGnssBlock):
         for i in carried:
             for j in carried:
                 P[idx[i], idx[j]] = cov_b[i, j]
+        suspended = self._capture.suspended   # beyond capture (navigators.core.capture)
+        P = self._capture.publish(P, float(self.ins.t_s), self._capture_floor_m2())
         dn, de = (float(mean[0]), float(mean[1])) if np.all(np.isfinite(mean[:2])) else (0.0, 0.0)
         if np.isfinite(mean[3]):
             v[0] += mean[3]
@@ -430,9 +494,12 @@ class InsRiddenFilter(InsGnssBlock):
             yaw = math.atan2(math.sin(yaw + mean[5]), math.cos(yaw + mean[5]))
         b = float(mean[2]) if np.isfinite(mean[2]) else 0.0
         health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
+        gaussian = suspended or self._capture.geometry_variance_m2(float(self.ins.t_s)) > 0.0
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
-                        health=health, extra=self._with_protection_level(dict(self.extra)))
+                        health=health, extra=(pl.publish(dict(self.extra), pl.gaussian_hpl(
+                            P[:2, :2], pl.filter_risk(self)), self) if gaussian
+                            else self._with_protection_level(dict(self.extra))))
 
     def _with_protection_level(self, extra: dict) -> dict:
         """extra with the belief's HPL (navigators.integrity.protection_level: the mass radius of the points
