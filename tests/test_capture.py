@@ -238,9 +238,19 @@ def test_health_states_the_capture_check_on_the_consumer_grade(dem, name):
     nav = registry.create(name, dem=dem)
     nav.apply_imu_spec(imu_spec({"grade": "consumer"}))
     assert CAPTURE_NOTE in nav._consistency_warning and "not calibrated" in nav._consistency_warning
-    nav = registry.create(name, dem=dem)
-    nav.apply_imu_spec(imu_spec({"grade": "tactical"}))
-    assert CAPTURE_NOTE not in nav._consistency_warning
+    assert nav._capture_spec is not None
+    for grade in ("navigation", "tactical"):
+        nav = registry.create(name, dem=dem)
+        nav.apply_imu_spec(imu_spec({"grade": grade}))
+        assert CAPTURE_NOTE not in nav._consistency_warning
+        # within its small-angle model the guard is inert, however long the flight since the last GNSS fix
+        # (the free INS's attitude on the tactical grade passes the limit after ~2,000 s)
+        assert nav._capture_spec is None
+        guard = CaptureGuard(500.0, name, nav._capture_spec)
+        assert not guard.beyond(3 * 3600.0)
+    tactical = imu_spec({"grade": "tactical"})
+    assert free_ins_tilt_sigma_rad(tactical, 3 * 3600.0, TILT0) > SMALL_ANGLE_LIMIT_RAD
+    assert CaptureGuard(500.0, name, tactical).beyond(3 * 3600.0)      # what the gate keeps out
 
 
 def test_the_closest_points_geometry_variance_past_the_small_angle_limit():

@@ -15,6 +15,13 @@ within a flight of the default route's length):
    Beyond it, a filter that lost the truth cannot find it again and its small covariance only states where
    its belief converged, true or not.
 
+The check runs only on an IMU beyond the filter's small-angle model over its memory (`capture_spec`: the
+same criterion as Health's small-angle warning, imu_spec.consistency_warning): there it is what keeps the
+covariance honest. On a better grade the filter's own error model holds over its memory, and a long
+GNSS-denied flight on which its terrain updates keep it on the truth must not be suspended because the free
+INS's error since the last GNSS fix has grown (the filters that correct their INS hold an attitude error far
+below the free INS's); there the guard is inert (no specification) and only the covariance floor applies.
+
 When both are exceeded (`CaptureGuard.check`) the filter is "beyond capture": it suspends its terrain
 updates (latched until the next absolute fix re-anchors it), keeps its belief's mean offset as it stood, lets
 the INS run free as the free `ins` does, and publishes as its horizontal covariance its belief's at the
@@ -59,7 +66,7 @@ import math
 
 import numpy as np
 
-from .imu_spec import G0_MPS2, SMALL_ANGLE_LIMIT_RAD, ImuSpec
+from .imu_spec import G0_MPS2, SMALL_ANGLE_LIMIT_RAD, ImuSpec, consistency_warning
 
 # the capture range holds when the free INS's error stays within it at this many sigmas
 CAPTURE_SIGMAS = 3.0
@@ -98,6 +105,13 @@ def free_ins_tilt_sigma_rad(spec: ImuSpec, t_s: float, tilt0_rad2: float) -> flo
     t = max(float(t_s), 0.0)
     return float(math.sqrt(tilt0_rad2 + (spec.gyro_bias_sigma_rps * t) ** 2
                            + spec.gyro_noise_density_rps_rthz ** 2 * t))
+
+
+def capture_spec(spec: ImuSpec, memory_s: float, who: str) -> ImuSpec | None:
+    """The specification a navigator's CaptureGuard runs on: `spec` when the IMU is beyond the filter's
+    small-angle model over its memory memory_s (imu_spec.consistency_warning non-empty), else None (the guard
+    inert; see the module docstring)."""
+    return spec if consistency_warning(spec, memory_s, who) else None
 
 
 def floored_horizontal(cov_m2: np.ndarray, floor_m2: float) -> np.ndarray:
@@ -295,6 +309,6 @@ def rbpf_capture_skips(nav, t_s: float, gnss, covariance15) -> bool:
     return False
 
 
-__all__ = ["CAPTURE_SIGMAS", "CaptureGuard", "anchor_from_cov9", "floored_horizontal",
+__all__ = ["CAPTURE_SIGMAS", "CaptureGuard", "anchor_from_cov9", "capture_spec", "floored_horizontal",
            "free_ins_position_variance_m2", "free_ins_tilt_sigma_rad", "rbpf_capture_guard",
            "rbpf_capture_skips"]

@@ -52,7 +52,7 @@ from collections import deque
 
 import numpy as np
 
-from ..core.capture import CaptureGuard, anchor_from_cov9
+from ..core.capture import CaptureGuard, anchor_from_cov9, capture_spec
 from ..core.error_states import ACC_BIAS, BGZ, DRE, DRN, DVE, DVN, N_EKF13
 from ..core.imu_spec import TurnAngle
 from ..core.ins_gnss import InsGnssBlock
@@ -252,7 +252,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
     def apply_imu_spec(self, spec) -> None:
         """InsTrnPropagation's, and the specification kept for the capture check (navigators.core.capture)."""
         super().apply_imu_spec(spec)
-        self._capture_spec = spec
+        self._capture_spec = capture_spec(spec, EKF_MEMORY_S, self.name)
         if self.aiding is not None:
             self._consistency_warning = grade_warning(spec, EKF_MEMORY_S, self.name, capture=True)
 

@@ -44,7 +44,7 @@ import math
 
 import numpy as np
 
-from ..core.capture import CAPTURE_SIGMAS
+from ..core.capture import CAPTURE_SIGMAS, capture_spec
 from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
@@ -156,7 +156,7 @@ class ParticleFilter(InsRiddenFilter):
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = grade_warning(spec, PF_MEMORY_S, self.name, capture=True)
-        self._capture_spec = spec
+        self._capture_spec = capture_spec(spec, PF_MEMORY_S, self.name)
 
     def _capture_range_m(self) -> float:
         """CAPTURE_SIGMAS times the widest re-spread of the recovery policy (navigators.core.capture)."""

@@ -69,6 +69,7 @@ import math
 
 import numpy as np
 
+from ..core.capture import capture_spec
 from ..core.imu_spec import (
     G0_MPS2,
     ImuSpec,
@@ -182,7 +183,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         q_v = vertical_offset_walk_density(spec, self.ins.tau_baro_s)
         self.vertical_noise = rss(self.vertical_noise, q_v)
         self._consistency_warning = grade_warning(spec, PMF_MEMORY_S, self.name, capture=True)
-        self._capture_spec = spec
+        self._capture_spec = capture_spec(spec, PMF_MEMORY_S, self.name)
 
     def _capture_range_m(self) -> float:
         """The grid's half-span at its largest spacing (navigators.core.capture)."""

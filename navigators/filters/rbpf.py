@@ -78,7 +78,7 @@ import math
 import numpy as np
 
 from ...terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
-from ..core.capture import rbpf_capture_guard, rbpf_capture_skips
+from ..core.capture import capture_spec, rbpf_capture_guard, rbpf_capture_skips
 from ..core.imu_spec import ImuSpec, TurnAngle
 from ..core.ins_gnss import InsGnssBlock, gnss_fixes
 from ..core.maps import load_map
@@ -240,7 +240,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         tilt2, heading2 = spec.turn_tilt_sigma_rad(1.0) ** 2, spec.turn_heading_sigma_rad(1.0) ** 2
         self._turn_att_var = np.array([tilt2, tilt2, heading2]) * TURN_REFERENCE_RAD
         self._consistency_warning = grade_warning(spec, RBPF_MEMORY_S, self.name, capture=True)
-        self._capture_spec = spec          # the capture check's (navigators.core.capture)
+        self._capture_spec = capture_spec(spec, RBPF_MEMORY_S, self.name)  # navigators.core.capture
 
     def _epoch_ql_var(self) -> np.ndarray:
         """The Kalman parts' process noise over this epoch: ql_var plus the attitude variance the INS's turn
