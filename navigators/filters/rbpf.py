@@ -96,6 +96,7 @@ from ..protocol import (
     Health,
 )
 from . import _rbpf_kernels as kern
+from . import rbpf_progressive as prog
 from ._ekf_kernels import yaw_total_variation
 from .rbpf_cloud import RbpfCloud
 from .rbpf_ira_update import RbpfIraUpdate
@@ -165,7 +166,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                         "window_edge_range theta_velocity_rows ambiguity_gap_m ambiguity_weight "
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
-                        "recovery_sigma_m recovery_reset_kalman turn_angle regularisation")
+                        "recovery_sigma_m recovery_reset_kalman turn_angle regularisation tempering "
+                        "progressive_correction")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
         self.trn_period_s = 1.0 / s.trn_rate_hz
@@ -373,7 +375,20 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         sc = self._metric_scale()
         if y_ira is not None:
             self._gnss_now = gnss is not None
+            self._share_left = 1.0
             updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
+            stage = 1
+            # progressive correction (rbpf_progressive): the rest of the measurement's information in further
+            # stages, the cloud resampled and regularised before each
+            while updated and self._share_left > 0.0:
+                if stage >= prog.MAX_STAGES:
+                    sk = self.health.skipped
+                    sk["ira_progressive_cap"] = sk.get("ira_progressive_cap", 0) + 1
+                    break
+                self._normalise_resample(te, logw_prev)
+                ll = np.empty(self.n)
+                self._ira_update(te, y_ira, lat, lon, h, v, C, sc, self.logw.copy(), ll, stage)
+                stage += 1
         if gnss is not None:
             if ll.shape[0] != self.n:       # the IRA update re-initialised the cloud (another size)
                 ll = np.empty(self.n)
