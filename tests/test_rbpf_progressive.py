@@ -52,9 +52,9 @@ def test_conditional_ess_fraction_by_its_definition():
 
 @pytest.mark.parametrize("shares", [(0.5, 0.5), (0.1, 0.3, 0.6), (0.02, 0.08, 0.4, 0.5)])
 def test_stages_of_one_measurement_compose_to_the_single_update(shares):
-    """Shares lambda_i summing to 1: the Kalman parts after the stages with R / lambda_i are the single update's
-    with R, and the stages' summed log predictive densities differ from the single one by a constant common
-    to the particles (the pseudo-measurements' residual)."""
+    """Shares lambda_i summing to 1: the Kalman parts after the stages with R / lambda_i are the single
+    update's with R, and the stages' summed log predictive densities differ from the single one by a constant
+    common to the particles (the pseudo-measurements' residual)."""
     rng = np.random.default_rng(5)
     n, m = 6, 2
     a = rng.standard_normal((n, 12, 12)) * 0.3

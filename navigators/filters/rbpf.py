@@ -19,6 +19,14 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   spread on a converged cloud with status "ok" (the map's look-angle error is heavy-tailed), a look angle
   not linear in the velocity over the cloud's velocity spread (theta_linearity_sigmas), or one that would
   leave fewer than theta_collapse_ess * N effective particles on a converged cloud;
+- progressive correction of that update (rbpf_progressive.py; Oudjane & Musso 2000, Musso, Oudjane & Le
+  Gland 2001 sec. 12.5): a measurement sharper than the cloud can sample is applied in stages of noise
+  R / lambda_i (shares summing to one, each the largest that keeps the conditional effective sample size
+  above ess_threshold * N), the cloud resampled and regularised between them, so that the whole
+  measurement's information is used without collapsing the cloud onto a few ancestors. The former device,
+  tempering (R inflated by (spread / acquisition_spread_m)^2 while the spread exceeds acquisition_spread_m,
+  setting tempering "spread"), discards that information, and the published covariance is then wider than
+  the error (measured: docs/validation/navigators.md); tempering "none" (default) leaves it off;
 - map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
   map_bias_sigma_m) and the terrain a coarse map cannot hold between its posts (terrain_model_sigma_m,
   "auto": from the map's spectrum; 0 when the map is the world), calibrated on the map's own error class
@@ -145,7 +153,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m, recovery_reset_kalman (the
     innovation test and its recovery, see the module docstring); turn_angle ("excursion" | "total": the
     angle the turn terms of apply_imu_spec run in, _epoch_ql_var); regularisation ("shrunk" | "gaussian" |
-    "none": the resampled copies' kernel, module docstring and RbpfCloud._regularise).
+    "none": the resampled copies' kernel, module docstring and RbpfCloud._regularise); tempering ("none" |
+    "acquisition" | "spread": when _r_var_now inflates the IRA variances), progressive_correction (the IRA
+    update in stages, rbpf_progressive).
     """
 
     capabilities = CAPABILITIES

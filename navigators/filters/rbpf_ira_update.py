@@ -86,7 +86,7 @@ class RbpfIraUpdate:
         wp = np.exp(logw_prev - logw_prev.max())
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
-        # the look angle's variance as this update uses it (tempered while acquiring): the yardstick of
+        # the look angle's variance as this update uses it (with any tempering): the yardstick of
         # the theta-velocity row's linearity (_theta_velocity_row)
         theta_var = self._r_var_now(float(np.sum(wp * np.where(ok, out[:, ira_model.OUT_R], 0.0))))[1]
         sk = self.health.skipped
@@ -101,7 +101,7 @@ class RbpfIraUpdate:
             sk["ira_theta_nonlinear"] = sk.get("ira_theta_nonlinear", 0) + 1
         H_full = H
         saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
-        # the collapse guard below is for a converged cloud (no acquisition tempering): while acquiring, a
+        # the collapse guard below is for a converged cloud: while acquiring, a
         # look angle that selects a few particles is the bootstrap's normal work
         converged = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0)) <= self.acquisition_spread_m
         # the look-angle gate only on a converged cloud the innovation test trusts: a lost or re-acquiring
@@ -302,11 +302,14 @@ class RbpfIraUpdate:
     def _r_var_now(self, range_m: float) -> np.ndarray:
         """IRA measurement variances (range m^2, look angle rad^2) at a slant range range_m: the sensor's,
         plus the map's errors (ira_seed002.map_noise_variances: map_sigma_m, terrain_model_sigma_m, and
-        map_bias_sigma_m while GNSS pins the height, which then cannot absorb a map bias). While the
-        cloud's horizontal spread exceeds acquisition_spread_m they are inflated by
-        (spread / acquisition_spread_m)^2 (at most 100x): tempering against the collapse of 1,000 particles
-        spread over 50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb their position's
-        look-angle mismatch as attitude error (our addition; 0 disables it)."""
+        map_bias_sigma_m while GNSS pins the height, which then cannot absorb a map bias). With tempering
+        "spread" they are inflated by (spread / acquisition_spread_m)^2 (at most 100x) while the cloud's
+        horizontal spread exceeds acquisition_spread_m, "acquisition" the same only while the cloud is the
+        acquisition's or re-acquires after a recovery: against the collapse of 1,000 particles spread over
+        50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb their position's look-angle
+        mismatch as attitude error. It discards the rest of the measurement's information (the published
+        covariance is then that of a filter which never had it); "none" (default) leaves the variances as
+        they are and the progressive correction (rbpf_progressive) keeps the cloud from collapsing."""
         bias = self.map_bias_sigma_m if getattr(self, "_gnss_now", False) else 0.0
         r = self.r_var + ira_model.map_noise_variances(math.hypot(self.map_sigma_m, bias),
                                                        self.terrain_model_sigma_m, range_m,
