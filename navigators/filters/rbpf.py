@@ -23,10 +23,13 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   Gland 2001 sec. 12.5): a measurement sharper than the cloud can sample is applied in stages of noise
   R / lambda_i (shares summing to one, each the largest that keeps the conditional effective sample size
   above ess_threshold * N), the cloud resampled and regularised between them, so that the whole
-  measurement's information is used without collapsing the cloud onto a few ancestors. The former device,
-  tempering (R inflated by (spread / acquisition_spread_m)^2 while the spread exceeds acquisition_spread_m,
-  setting tempering "spread"), discards that information, and the published covariance is then wider than
-  the error (measured: docs/validation/navigators.md); tempering "none" (default) leaves it off;
+  measurement's information is used without collapsing the cloud onto a few ancestors. Tempering (R
+  inflated by (spread / acquisition_spread_m)^2, RbpfIraUpdate._r_var_now) discards part of that
+  information, so the published covariance is that of a filter which never had it: it is kept for the
+  acquisition (tempering "acquisition", default: before the hand-over, and while a recovery's re-spread
+  cloud re-acquires), where the cloud is wide and multi-modal; "spread" (whenever the spread exceeds
+  acquisition_spread_m, the former default) left a converged cloud on the tactical grade tempered by 2-20x
+  and its covariance about twice its error's (measured: docs/validation/navigators.md);
 - map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
   map_bias_sigma_m) and the terrain a coarse map cannot hold between its posts (terrain_model_sigma_m,
   "auto": from the map's spectrum; 0 when the map is the world), calibrated on the map's own error class

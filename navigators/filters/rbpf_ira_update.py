@@ -307,9 +307,10 @@ class RbpfIraUpdate:
         horizontal spread exceeds acquisition_spread_m, "acquisition" the same only while the cloud is the
         acquisition's or re-acquires after a recovery: against the collapse of 1,000 particles spread over
         50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb their position's look-angle
-        mismatch as attitude error. It discards the rest of the measurement's information (the published
-        covariance is then that of a filter which never had it); "none" (default) leaves the variances as
-        they are and the progressive correction (rbpf_progressive) keeps the cloud from collapsing."""
+        mismatch as attitude error (default "acquisition"). It discards the rest of the measurement's
+        information (the published covariance is then that of a filter which never had it); "none" leaves
+        the variances as they are. Outside the tempering the progressive correction (rbpf_progressive)
+        keeps the cloud from collapsing onto a sharp likelihood."""
         bias = self.map_bias_sigma_m if getattr(self, "_gnss_now", False) else 0.0
         r = self.r_var + ira_model.map_noise_variances(math.hypot(self.map_sigma_m, bias),
                                                        self.terrain_model_sigma_m, range_m,

@@ -111,7 +111,7 @@ class RbpfSettings(Settings):
                                   "cloud's covariance at the optimal bandwidth (gaussian; shrunk: drawn "
                                   "towards the mean first, the cloud's covariance kept) or not (none)",
                                   choices=("none", "gaussian", "shrunk"))
-    tempering: str = setting("none", "when the IRA variances are inflated by (spread / "
+    tempering: str = setting("acquisition", "when the IRA variances are inflated by (spread / "
                              "acquisition_spread_m)^2: while the cloud acquires (acquisition: before the "
                              "hand-over, or re-acquiring after a recovery), whenever its spread exceeds "
                              "acquisition_spread_m (spread), or never (none)",
