@@ -110,11 +110,12 @@ def test_rbpf_sharp_first_update_keeps_its_particles_with_progressive_correction
     size before the epoch's last resampling stays above a quarter of the cloud, and both target the same
     posterior (the estimates agree within the single update's Monte Carlo error, sigma / sqrt(ESS))."""
     from test_rbpf import _frames, _initial
-    from trn_env import terrain
     from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
     from trn_env.navigators.measurements.ira_seed002 import predict_ira
     from trn_env.navigators.protocol import EXTRA_ESS
     from trn_env.terrain.geodesy import euler_to_C_bn
+
+    from trn_env import terrain
 
     dem = terrain.load("jacksboro")
     e0 = _initial(dem)

@@ -36,7 +36,7 @@ MEASURED: dict[str, dict[str, str]] = {
     "ins_tercom": {"consumer": OVERCONFIDENT},
     "pmf": {"consumer": OVERCONFIDENT},
     "pf": {"consumer": OVERCONFIDENT},
-    "rbpf": {"tactical": CONSERVATIVE, "consumer": OVERCONFIDENT},
+    "rbpf": {"navigation": CONSERVATIVE, "consumer": OVERCONFIDENT},
     "acq_track": {},
 }
 
