@@ -22,7 +22,7 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
 - progressive correction of that update (rbpf_progressive.py; Oudjane & Musso 2000, Musso, Oudjane & Le
   Gland 2001 sec. 12.5): a measurement sharper than the cloud can sample is applied in stages of noise
   R / lambda_i (shares summing to one, each the largest that keeps the conditional effective sample size
-  above ess_threshold * N), the cloud resampled and regularised between them, so that the whole
+  above ess_threshold * N), the cloud resampled (by the ESS test) and regularised between them, so the whole
   measurement's information is used without collapsing the cloud onto a few ancestors. Tempering (R
   inflated by (spread / acquisition_spread_m)^2, RbpfIraUpdate._r_var_now) discards part of that
   information, so the published covariance is that of a filter which never had it: it is kept for the
@@ -392,7 +392,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
             stage = 1
             # progressive correction (rbpf_progressive): the rest of the measurement's information in further
-            # stages, the cloud resampled and regularised before each
+            # stages, the cloud resampled and regularised before each when its ESS is below the threshold
             while updated and self._share_left > 0.0:
                 if stage >= prog.MAX_STAGES:
                     sk = self.health.skipped

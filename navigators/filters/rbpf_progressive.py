@@ -18,7 +18,8 @@ measurements' residuals are zero), so the weights after the stages are the singl
 stage's share is the largest for which the conditional effective sample size (Zhou, Johansen & Aston 2016,
 "Toward automatic model comparison: an adaptive sequential Monte Carlo approach", JCGS 25, eq 3.5:
 N (sum W_k G_k)^2 / sum W_k G_k^2, W the weights before the stage, G the stage's likelihood) keeps at least
-ess_threshold N: the filter's own resampling criterion, so one stage is one weighting and resampling cycle.
+ess_threshold N: the filter's own resampling criterion, so one stage is one weighting and resampling cycle
+(the filter resamples between stages when the effective sample size is below that threshold).
 A measurement the cloud already represents (the usual case) is one stage of share 1, the plain update.
 """
 
