@@ -137,3 +137,24 @@ def test_rbpf_sharp_first_update_keeps_its_particles_with_progressive_correction
     assert d_m < 4.0 * sd / math.sqrt(single.extra[EXTRA_ESS])
     ratio = np.trace(staged.covariance[:2, :2]) / np.trace(single.covariance[:2, :2])
     assert 0.5 < ratio < 2.0
+
+
+@pytest.mark.parametrize("mode", ["acquisition", "spread", "none"])
+def test_tempering_modes_inflate_the_ira_variances_when_they_say(mode):
+    """_r_var_now's factor (spread / acquisition_spread_m)^2 on a cloud 28.3 m wide (sqrt(400 + 400)): 8 while
+    acquiring (the acquisition cloud, or re-acquiring after a recovery) for "acquisition" and "spread", on
+    the converged cloud for "spread" only, never for "none"."""
+    from trn_env.navigators.filters.rbpf import RaoBlackwellizedPF
+
+    from trn_env import terrain
+
+    nav = RaoBlackwellizedPF(dem=terrain.load("jacksboro"), rng=np.random.default_rng(0), tempering=mode,
+                             terrain_model_sigma_m=0.0)
+    nav._cov9 = np.diag([400.0, 400.0, 1.0, 0.1, 0.1, 0.1, 1e-6, 1e-6, 1e-6])
+    base = nav.r_var
+    f = (math.sqrt(800.0) / nav.acquisition_spread_m) ** 2
+    for n, reacquiring, acquiring in ((nav.n_acquisition, False, True), (nav.n_particles, True, True),
+                                      (nav.n_particles, False, False)):
+        nav.n, nav._reacquiring = n, reacquiring
+        inflated = mode == "spread" or (mode == "acquisition" and acquiring)
+        assert nav._r_var_now(1500.0) == pytest.approx(base * (f if inflated else 1.0), rel=1e-12)
