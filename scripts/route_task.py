@@ -81,6 +81,10 @@ def parse(argv):
     p.add_argument("--miss-weight", type=float, default=None,
                    help="TRAINING reward only: reward per km of true miss at arrival (default: the task's, "
                         "20); evaluation always scores the true miss with the task's reward")
+    p.add_argument("--action-change-weight", type=float, default=None,
+                   help="TRAINING reward only: cost per unit change of the track (offset) action between "
+                        "decisions, -w |a0_t - a0_(t-1)| (default: the task's, 0); evaluation always uses "
+                        "the task's reward")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint", type=Path, default=None, help="checkpoint to evaluate")
     p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
@@ -126,6 +130,9 @@ def _check(args) -> dict:
         raise ValueError(f"--log-std-clip must be a finite number >= 0, got {args.log_std_clip}")
     if args.miss_weight is not None and not (0.0 <= args.miss_weight < math.inf):
         raise ValueError(f"--miss-weight must be a finite number >= 0, got {args.miss_weight}")
+    if args.action_change_weight is not None and not (0.0 <= args.action_change_weight < math.inf):
+        raise ValueError(f"--action-change-weight must be a finite number >= 0, "
+                         f"got {args.action_change_weight}")
     if not (0.0 <= args.entropy < math.inf):
         raise ValueError(f"--entropy must be a finite number >= 0, got {args.entropy}")
     if (args.lr_end is None) != (args.lr_decay_steps is None):
@@ -233,7 +240,11 @@ def train(args, kw: dict) -> None:
                   lr=args.lr, lr_end=args.lr_end, lr_decay_steps=args.lr_decay_steps, gamma=args.gamma,
                   lambda_=args.lambda_, entropy_coeff=args.entropy, vf_clip_param=args.vf_clip,
                   activation=args.activation, log_std_clip=args.log_std_clip)
-    train_kw = kw if args.miss_weight is None else {**kw, "miss_weight": float(args.miss_weight)}
+    train_kw = dict(kw)
+    if args.miss_weight is not None:
+        train_kw["miss_weight"] = float(args.miss_weight)
+    if args.action_change_weight is not None:
+        train_kw["action_change_weight"] = float(args.action_change_weight)
     cfg = ppo_config(tier, train_kw, seed=args.seed, num_env_runners=args.env_runners,
                      num_envs_per_env_runner=envs, **recipe)
     cpu_s = 60.0 * args.cpu_minutes if args.cpu_minutes is not None else route_task.TRAIN_BUDGET["cpu_s"]

@@ -10,7 +10,10 @@ whether the fast tier loses it there too).
 
 Writes OUT (one record per episode: seed, termination, true miss, and the per-decision lists) and prints
 per episode its termination, miss and the decision at which the true error first exceeded 100 m, then the
-fix losses (not arrived, or a miss above 100 m) by the worst terrain information met along the route.
+fix losses (not arrived, or a miss above 100 m) by the worst terrain information met along the route,
+and the steering: the share of saturated offsets (|a0| >= 0.99), offset reversals per episode (a change of
+side between decisions with |a0| >= 0.5, those in between skipped) and the mean total offset change per
+episode (sum of |a0_t - a0_(t-1)| from a0_(-1) = 0: what `action_change_weight` charges).
 `--sigma-scale k` (a probe of the policy, not of the env): a PPO policy sees the navigator's horizontal
 sigma (observations 8, 9) multiplied by k. Exit 2 on bad arguments (unknown policy, goal index out of
 range, missing checkpoint, malformed seeds, a sigma scale not > 0).
@@ -161,6 +164,21 @@ def trace_fast(policy_spec: dict, terrain: str, goal: int, seeds: list[int], sig
             for i, s in enumerate(seeds)]
 
 
+def steering_summary(episodes: list[dict], side_min: float = 0.5, saturated_min: float = 0.99) -> dict:
+    """The offsets' saturated share (|a0| >= saturated_min over all decisions), reversals per episode (sign
+    changes between successive decisions with |a0| >= side_min; smaller offsets skipped) and the mean total
+    change sum_t |a0_t - a0_(t-1)| per episode with a0_(-1) = 0."""
+    offs = [np.array([d["offset"] for d in e["decisions"]], float) for e in episodes]
+    rev, tv = [], []
+    for o in offs:
+        side = np.sign(o[np.abs(o) >= side_min])
+        rev.append(int(np.sum(side[1:] != side[:-1])))
+        tv.append(float(np.sum(np.abs(np.diff(o, prepend=0.0)))))
+    allo = np.concatenate(offs) if offs else np.zeros(0)
+    return {"episodes": len(offs), "saturated_share": float(np.mean(np.abs(allo) >= saturated_min)),
+            "reversals_per_episode": float(np.mean(rev)), "offset_change_per_episode": float(np.mean(tv))}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--policy", choices=("straight", "planner", "ppo"), required=True)
@@ -205,6 +223,10 @@ def main(argv=None) -> int:
     print(f"lost (not arrived or miss > 100 m): {lost} of {len(eps)} ({100 * lost / len(eps):.1f} %); by the "
           "largest terrain information along the route " + ", ".join(
               f"[{lo:g}, {hi:g}): {x}/{n}" for (lo, hi), (x, n) in zip(INFO_BINS, bins, strict=True)))
+    st = steering_summary(eps)
+    print(f"steering: {100 * st['saturated_share']:.1f} % of offsets saturated, "
+          f"{st['reversals_per_episode']:.2f} reversals and {st['offset_change_per_episode']:.2f} total "
+          "offset change per episode")
     return 0
 
 

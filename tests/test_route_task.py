@@ -92,7 +92,9 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
                       (["--lr-end", "1e-5"], "--lr-decay-steps"), (["--miss-weight", "-1"], "--miss-weight"),
                       (["--log-std-clip", "-1"], "--log-std-clip"),
                       (["--log-std-clip", "inf"], "--log-std-clip"),
-                      (["--miss-weight", "inf"], "--miss-weight")):
+                      (["--miss-weight", "inf"], "--miss-weight"),
+                      (["--action-change-weight", "-0.1"], "--action-change-weight"),
+                      (["--action-change-weight", "nan"], "--action-change-weight")):
         assert mod.main([*train, *bad]) == 2
         assert name in capsys.readouterr().err
     assert not out.exists()                                  # nothing written

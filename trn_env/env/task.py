@@ -128,6 +128,19 @@ def arrival_reward_terms(d_est_before_m, d_est_after_m, dt_s, sigma_before_m, si
     return terms
 
 
+def action_change_terms(offset, offset_before, *, action_change_weight: float) -> dict:
+    """The steering-change term (both reward modes): `action_change = -action_change_weight *
+    |a0_t - a0_{t-1}|` on the track component a0 of the (clipped) action, a0_{-1} = 0 at each episode's
+    start; element-wise over arrays. Only the track component: a reversal of the pursuit offset (-1 -> +1)
+    turns the aircraft across its route and back, while the height component is already rate-limited by the
+    climb limit and chooses the terrain the navigator sees. Returns {} with action_change_weight = 0 (the
+    reward and its terms exactly as without the term), else {"action_change": array}."""
+    if action_change_weight == 0.0:
+        return {}
+    return {"action_change": -action_change_weight * np.abs(np.asarray(offset, float)
+                                                            - np.asarray(offset_before, float))}
+
+
 def progress_reward_terms(d_true_before_m, d_true_after_m, true_error_h_m, reached_goal, collided, *,
                           error_weight: float, goal_bonus: float, collision_penalty: float) -> dict:
     """Reward terms of the "progress" mode: decrease of the TRUE distance to the goal (km), minus
@@ -140,6 +153,6 @@ def progress_reward_terms(d_true_before_m, d_true_after_m, true_error_h_m, reach
 
 __all__ = ["ACTION_MODES", "FAILURE_REASONS", "G0_MPS2", "N_OBS", "N_ROUTES", "N_TERRAIN_FEATURES",
            "OBS_HIGH", "OBS_LOW", "REWARD_MODES", "ROUTE_FEATURELESS_MAX_KM", "ROUTE_OFFSET_FRACTIONS",
-           "TERMINATING_REASONS", "TRUNCATING_REASONS", "action_limits", "action_space",
-           "arrival_reward_terms", "bearing_offset_limit_rad", "check_actions", "observation_space",
-           "progress_reward_terms"]
+           "TERMINATING_REASONS", "TRUNCATING_REASONS", "action_change_terms", "action_limits",
+           "action_space", "arrival_reward_terms", "bearing_offset_limit_rad", "check_actions",
+           "observation_space", "progress_reward_terms"]

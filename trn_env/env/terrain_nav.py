@@ -178,6 +178,12 @@ class TerrainNavEnv(gym.Env, EzPickle):
     `progress_km - error_weight * true_horizontal_error_km`, progress the decrease of the TRUE distance to
     the goal; `+ goal_bonus` when the TRUE position reaches the goal, `- collision_penalty` on collision.
 
+    Steering-change cost (`action_change_weight` w, default 0; either mode; a training choice, the route
+    task scores with 0): term `action_change = -w * |a0_t - a0_{t-1}|` on the track component of the
+    clipped action, a0_{-1} = 0 at each episode's start (trn_env.env.task.action_change_terms; absent from
+    the terms with w = 0). It charges offset reversals (-1 -> +1 costs 2 w), which turn the aircraft across
+    its route and back.
+
     The terms reach `info["reward_terms"]` (a dict whose values add up to the reward).
 
     ## Starting State
@@ -225,7 +231,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
     bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0, guidance_rate_hz=None,
-    pipeline=False, flight_dt_s=None, scenario_fields=None)`.
+    pipeline=False, flight_dt_s=None, scenario_fields=None, action_change_weight=0.0)`.
     `scenario_fields`: scenario fields set for every episode by dotted path (`Scenario.with_fields`, as
     `trn-env fly --set`), e.g. `{"sensors.ira.rate_hz": 10.0, "navigator.rate_hz": 0.5}`; applied before
     `guidance_rate_hz` and `flight_dt_s`; anything the scenario's schema rejects is a ValueError naming
@@ -286,7 +292,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  action_mode: str = "turn", bearing_offset_max_deg: float = 90.0,
                  sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0,
                  guidance_rate_hz: float | None = None, pipeline: bool = False,
-                 flight_dt_s: float | None = None, scenario_fields: dict | None = None):
+                 flight_dt_s: float | None = None, scenario_fields: dict | None = None,
+                 action_change_weight: float = 0.0):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -295,7 +302,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
                           bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m,
-                          guidance_rate_hz, pipeline, flight_dt_s, scenario_fields)
+                          guidance_rate_hz, pipeline, flight_dt_s, scenario_fields, action_change_weight)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -318,7 +325,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
         for name, v in (("error_weight", error_weight), ("goal_bonus", goal_bonus),
                         ("collision_penalty", collision_penalty), ("failure_penalty", failure_penalty),
                         ("miss_weight", miss_weight), ("time_cost_per_s", time_cost_per_s),
-                        ("progress_weight", progress_weight), ("sigma_shaping_weight", sigma_shaping_weight)):
+                        ("progress_weight", progress_weight), ("sigma_shaping_weight", sigma_shaping_weight),
+                        ("action_change_weight", action_change_weight)):
             _check_number(name, v, positive=False)
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
@@ -358,6 +366,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self.progress_weight = float(progress_weight)
         self.shaping_gamma = float(shaping_gamma)
         self.sigma_shaping_weight = float(sigma_shaping_weight)
+        self.action_change_weight = float(action_change_weight)
         self.informative_crlb_m = float(informative_crlb_m)
         self.action_mode = action_mode
         self.bearing_offset_max_rad = math.radians(float(bearing_offset_max_deg))
@@ -593,6 +602,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
             self._agl_cmd_m = float(init.h_msl_m) - components.map_height(self._dems[1], lat0, lon0)
         self._agl_cmd_m = float(np.clip(self._agl_cmd_m, self.agl_min_m, self.agl_max_m))
         self._offset_frac = 0.0
+        self._a0_before = 0.0                    # the previous track action (0 at the episode's start)
         self._loop = ClosedLoop(sc, commander=self._commander, dems=self._dems, log_sensors=self.log_sensors,
                                 pipeline=self.pipeline)
         self._needs_reset = False
@@ -639,7 +649,11 @@ class TerrainNavEnv(gym.Env, EzPickle):
         if self._loop is None or self._needs_reset:
             raise ResetNeeded("Cannot call env.step() before calling env.reset() (the episode has ended or "
                               "never started)")
-        self._apply_action(self._check_action(action))
+        a = self._check_action(action)
+        change = task.action_change_terms(a[0], self._a0_before,
+                                          action_change_weight=self.action_change_weight)
+        self._a0_before = float(a[0])
+        self._apply_action(a)
         lat, lon, h = self._truth_now()
         d_before = math.hypot(*self._offset_to_goal(lat, lon, h))
         d_est_before = self._estimated_distance_m()
@@ -673,6 +687,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         info = self._info(reason)
         terms = self._reward_terms(info, reason, d_before, d_est_before, self._loop.t_s - t_before,
                                    sigma_before)
+        terms.update({k: float(v) for k, v in change.items()})
         info["reward_terms"] = terms
         reward = float(sum(terms.values()))
         terminated = reason in TERMINATING_REASONS

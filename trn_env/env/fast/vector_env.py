@@ -40,7 +40,9 @@ Arguments: TerrainNavEnv's (scenario, decision_interval_s, max_episode_s, naviga
 goal_radius_m, reward_mode, the reward weights, agl_min_m, agl_max_m, climb_rate_max_mps,
 turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m, goal_region_deg, start_region_deg,
 held_out_goals_deg, held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
-bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m) plus num_envs and episode_statistics;
+bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m, action_change_weight: the previous
+track action is kept per sub-env and set to 0 when the sub-env resets, autoreset included) plus num_envs and
+episode_statistics;
 render_mode must be None.
 `navigator` must be one the fast tier models ("ins", "ins_tercom"; ValueError listing them otherwise).
 """
@@ -120,6 +122,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         sigma_shaping_weight: float = 0.0,
         informative_crlb_m: float = 5.0,
         episode_statistics: bool = True,
+        action_change_weight: float = 0.0,
     ):
         n = _check_num_envs(num_envs, decision_interval_s)
         if not isinstance(episode_statistics, bool):
@@ -166,6 +169,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             ("time_cost_per_s", time_cost_per_s),
             ("progress_weight", progress_weight),
             ("sigma_shaping_weight", sigma_shaping_weight),
+            ("action_change_weight", action_change_weight),
         ):
             _check_number(name, v, positive=False)
         if bearing_offset_max_deg > 180.0:
@@ -208,6 +212,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             sigma_shaping_weight=float(sigma_shaping_weight),
         )
         self.error_weight = float(error_weight)
+        self.action_change_weight = float(action_change_weight)
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
         self.tas_mps = float(sc.route.tas_mps)
@@ -264,6 +269,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self._ep_return = np.zeros(n)
         self._ep_len = np.zeros(n, np.int64)
         self._ep_t0 = np.zeros(n)
+        self._a0_before = np.zeros(n)  # each sub-env's previous track action (0 at its episode's start)
 
     # ---------------------------------------------------------------------------------------- checks
     def _check_point(self, name: str, p) -> tuple[float, float]:
@@ -349,6 +355,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self._ep_return[mask] = 0.0
         self._ep_len[mask] = 0
         self._ep_t0[mask] = time.perf_counter()
+        self._a0_before[mask] = 0.0
         self._observe(mask)
 
     # ---------------------------------------------------------------------------------------- API
@@ -391,6 +398,9 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         X = self._X
         auto = self._autoreset.copy()
         live = ~auto
+        change = task.action_change_terms(a[:, 0], self._a0_before,
+                                          action_change_weight=self.action_change_weight)
+        self._a0_before[live] = a[live, 0]
         self._apply_actions(a, live)
         d_est0, d_true0, sig0, t0 = self._d_est(), self._d_true(), self._sigma_h(), X[:, S.T].copy()
         X[live, S.END] = 0.0
@@ -435,6 +445,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
                 err_h,
                 **self._weights,
             )
+        terms.update(change)
         terms = {
             k: np.where(live, np.broadcast_to(v, (n,)), 0.0).astype(np.float64) for k, v in terms.items()
         }
