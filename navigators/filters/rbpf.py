@@ -19,6 +19,19 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   spread on a converged cloud with status "ok" (the map's look-angle error is heavy-tailed), a look angle
   not linear in the velocity over the cloud's velocity spread (theta_linearity_sigmas), or one that would
   leave fewer than theta_collapse_ess * N effective particles on a converged cloud;
+- progressive correction of that update (rbpf_progressive.py; Oudjane & Musso 2000, Musso, Oudjane & Le
+  Gland 2001 sec. 12.5): a measurement sharper than the cloud can sample is applied in stages of noise
+  R / lambda_i (shares summing to one, each the largest that keeps the conditional effective sample size
+  above ess_threshold * N), the cloud resampled (by the ESS test) and regularised between them, so the whole
+  measurement's information is used without collapsing the cloud onto a few ancestors. Tempering (R
+  inflated by (spread / acquisition_spread_m)^2, RbpfIraUpdate._r_var_now) discards part of that
+  information, so the published covariance is that of a filter which never had it. The default, "spread"
+  (whenever the spread exceeds acquisition_spread_m) with the update in one stage, leaves a converged cloud
+  on the tactical grade tempered by 2-20x and its covariance about twice its error's; the opt-in
+  "acquisition" (before the hand-over, and while a recovery's re-spread cloud re-acquires) with
+  progressive_correction makes it consistent there but lets the cloud narrow where a coarse map's errors
+  exceed what the likelihood covers, and its protection levels then fail on DTED level 1 (both measured:
+  docs/validation/navigators.md), so the defaults keep the spread tempering;
 - map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
   map_bias_sigma_m) and the terrain a coarse map cannot hold between its posts (terrain_model_sigma_m,
   "auto": from the map's spectrum; 0 when the map is the world), calibrated on the map's own error class
@@ -97,6 +110,7 @@ from ..protocol import (
     Health,
 )
 from . import _rbpf_kernels as kern
+from . import rbpf_progressive as prog
 from ._ekf_kernels import yaw_total_variation
 from .rbpf_cloud import RbpfCloud
 from .rbpf_ira_update import RbpfIraUpdate
@@ -145,7 +159,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     error_model_15); integrity_window, integrity_alpha, recovery_sigma_m, recovery_reset_kalman (the
     innovation test and its recovery, see the module docstring); turn_angle ("excursion" | "total": the
     angle the turn terms of apply_imu_spec run in, _epoch_ql_var); regularisation ("shrunk" | "gaussian" |
-    "none": the resampled copies' kernel, module docstring and RbpfCloud._regularise).
+    "none": the resampled copies' kernel, module docstring and RbpfCloud._regularise); tempering ("none" |
+    "acquisition" | "spread": when _r_var_now inflates the IRA variances), progressive_correction (the IRA
+    update in stages, rbpf_progressive).
     """
 
     capabilities = CAPABILITIES
@@ -166,7 +182,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                         "window_edge_range theta_velocity_rows ambiguity_gap_m ambiguity_weight "
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
-                        "recovery_sigma_m recovery_reset_kalman turn_angle regularisation")
+                        "recovery_sigma_m recovery_reset_kalman turn_angle regularisation tempering "
+                        "progressive_correction")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
         self.trn_period_s = 1.0 / s.trn_rate_hz
@@ -380,7 +397,20 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         sc = self._metric_scale()
         if y_ira is not None:
             self._gnss_now = gnss is not None
+            self._share_left = 1.0
             updated = self._ira_update(te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll)
+            stage = 1
+            # progressive correction (rbpf_progressive): the rest of the measurement's information in further
+            # stages, the cloud resampled and regularised before each when its ESS is below the threshold
+            while updated and self._share_left > 0.0:
+                if stage >= prog.MAX_STAGES:
+                    sk = self.health.skipped
+                    sk["ira_progressive_cap"] = sk.get("ira_progressive_cap", 0) + 1
+                    break
+                self._normalise_resample(te, logw_prev)
+                ll = np.empty(self.n)
+                self._ira_update(te, y_ira, lat, lon, h, v, C, sc, self.logw.copy(), ll, stage)
+                stage += 1
         if gnss is not None:
             if ll.shape[0] != self.n:       # the IRA update re-initialised the cloud (another size)
                 ll = np.empty(self.n)

@@ -22,6 +22,7 @@ from scipy.special import erfc as _erfc
 from ..measurements import ira_seed002 as ira_model
 from ..protocol import update_extra
 from . import _rbpf_kernels as kern
+from . import rbpf_progressive as prog
 
 OUTLIER_SIGMA = 10.0  # an IRA sample farther than this from every particle's prediction is rejected
 REINIT_AFTER_REJECTS = 3  # consecutive rejections that re-initialise the cloud around the INS
@@ -30,7 +31,13 @@ REINIT_AFTER_REJECTS = 3  # consecutive rejections that re-initialise the cloud 
 class RbpfIraUpdate:
     """The IRA measurement update of RaoBlackwellizedPF; a mixin."""
 
-    def _ira_update(self, te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll) -> bool:
+    _share_left = 1.0        # share of this epoch's IRA information not yet applied (rbpf_progressive)
+
+    def _ira_update(self, te, y_ira, lat, lon, h, v, C, sc, logw_prev, ll, stage: int = 0) -> bool:
+        """One stage of the IRA update (stage 0: the first, which also runs the innovation test and
+        publishes the update's Estimate.extra); True when the cloud was updated. The stage applies the share
+        rbpf_progressive.stage_share picks of what is left of the measurement's information
+        (progressive_correction; else all of it)."""
         edge = abs(y_ira[1]) > self.half_window_rad - self.edge_margin_rad
         if edge and not self.window_edge_range:
             # the return sits on the look window's edge: the window, not the terrain's minimum, fixed the
@@ -79,7 +86,7 @@ class RbpfIraUpdate:
         wp = np.exp(logw_prev - logw_prev.max())
         wp = np.where(ok, wp, 0.0)
         wp /= wp.sum()
-        # the look angle's variance as this update uses it (tempered while acquiring): the yardstick of
+        # the look angle's variance as this update uses it (with any tempering): the yardstick of
         # the theta-velocity row's linearity (_theta_velocity_row)
         theta_var = self._r_var_now(float(np.sum(wp * np.where(ok, out[:, ira_model.OUT_R], 0.0))))[1]
         sk = self.health.skipped
@@ -94,7 +101,7 @@ class RbpfIraUpdate:
             sk["ira_theta_nonlinear"] = sk.get("ira_theta_nonlinear", 0) + 1
         H_full = H
         saved = (self.xl.copy(), self.P.copy(), self.logw.copy())
-        # the collapse guard below is for a converged cloud (no acquisition tempering): while acquiring, a
+        # the collapse guard below is for a converged cloud: while acquiring, a
         # look angle that selects a few particles is the bootstrap's normal work
         converged = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0)) <= self.acquisition_spread_m
         # the look-angle gate only on a converged cloud the innovation test trusts: a lost or re-acquiring
@@ -120,7 +127,11 @@ class RbpfIraUpdate:
                 dims = 1
                 sk["ira_theta_gated"] = sk.get("ira_theta_gated", 0) + 1
                 continue
-            n_bad = kern.linear_update(self.xl, self.P, H, e, r_var, self.logw, ok, ll)
+            S0, nu_k = prog.innovations(H, self.xl, self.P, e)
+            share = self._share_left
+            if self.progressive_correction:
+                share = prog.stage_share(wp, S0, nu_k, r_var, share, self.ess_threshold)
+            n_bad = kern.linear_update(self.xl, self.P, H, e, r_var / share, self.logw, ok, ll)
             if (dims == 1 or self.theta_collapse_ess <= 0.0 or not converged
                     or self._ess(self.logw) >= self.theta_collapse_ess * self.n):
                 break
@@ -131,11 +142,17 @@ class RbpfIraUpdate:
             self.xl, self.P, self.logw = (a.copy() for a in saved)
             dims = 1
             sk["ira_theta_collapse"] = sk.get("ira_theta_collapse", 0) + 1
-        fin_ll = ll[np.isfinite(ll)]
+        # every particle's predictive density of the whole measurement (eq 9; ll holds the stage's)
+        ll_full = np.where(ok & np.isfinite(ll), prog.predictive_loglik(S0, nu_k, r_var, 1.0), -np.inf)
+        fin_ll = ll_full[np.isfinite(ll_full)]
         # log N at OUTLIER_SIGMA for the variances inflated at most 100x: the rejection floor
         ll_floor = (-0.5 * OUTLIER_SIGMA**2 - 0.5 * math.log(float(np.prod(r_var)) * 100.0 ** dims)
                     - 0.5 * dims * math.log(2 * math.pi))
         # no particle within OUTLIER_SIGMA of the measurement: in linear weights every one underflows
+        if stage > 0 and (fin_ll.size == 0 or fin_ll.max() < ll_floor):
+            self.xl, self.P, self.logw = saved
+            self._share_left = 0.0
+            return False
         if fin_ll.size == 0 or fin_ll.max() < ll_floor:
             self.xl, self.P, self.logw = saved
             self._n_rejected += 1
@@ -150,18 +167,24 @@ class RbpfIraUpdate:
             self.health.status, self.health.ok = "degraded", True
             self._integrity_test(te, math.inf, dims)
             return False
+        self._share_left = 0.0 if share >= self._share_left else self._share_left - share
+        if stage > 0:
+            return True
         self._n_rejected = 0
         if n_bad:
             sk = self.health.skipped
             sk["ira_particle_no_return"] = sk.get("ira_particle_no_return", 0) + n_bad
+        # log sum_k w_k p(y | particle k) of the whole measurement (the weights before the update)
         m = np.max(logw_prev)
-        lse_prev = m + math.log(np.sum(np.exp(logw_prev - m)))
-        fin = np.isfinite(self.logw)
+        w_all = np.exp(logw_prev - m)
+        w_all /= w_all.sum()
+        fin = np.isfinite(ll_full) & (w_all > 0.0)
         if fin.any():
-            mm = np.max(self.logw[fin])
-            lse = mm + math.log(np.sum(np.exp(self.logw[fin] - mm)))
+            mm = np.max(ll_full[fin])
+            lse = mm + math.log(np.sum(w_all[fin] * np.exp(ll_full[fin] - mm)))
         else:
             lse = -np.inf
+        lse_prev = 0.0
         try:
             nis = float(nu @ np.linalg.solve(S, nu))
         except np.linalg.LinAlgError:
@@ -279,16 +302,21 @@ class RbpfIraUpdate:
     def _r_var_now(self, range_m: float) -> np.ndarray:
         """IRA measurement variances (range m^2, look angle rad^2) at a slant range range_m: the sensor's,
         plus the map's errors (ira_seed002.map_noise_variances: map_sigma_m, terrain_model_sigma_m, and
-        map_bias_sigma_m while GNSS pins the height, which then cannot absorb a map bias). While the
-        cloud's horizontal spread exceeds acquisition_spread_m they are inflated by
-        (spread / acquisition_spread_m)^2 (at most 100x): tempering against the collapse of 1,000 particles
-        spread over 50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb their position's
-        look-angle mismatch as attitude error (our addition; 0 disables it)."""
+        map_bias_sigma_m while GNSS pins the height, which then cannot absorb a map bias). With tempering
+        "spread" they are inflated by (spread / acquisition_spread_m)^2 (at most 100x) while the cloud's
+        horizontal spread exceeds acquisition_spread_m, "acquisition" the same only while the cloud is the
+        acquisition's or re-acquires after a recovery: against the collapse of 1,000 particles spread over
+        50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb their position's look-angle
+        mismatch as attitude error (default "acquisition"). It discards the rest of the measurement's
+        information (the published covariance is then that of a filter which never had it); "none" leaves
+        the variances as they are. Outside the tempering the progressive correction (rbpf_progressive)
+        keeps the cloud from collapsing onto a sharp likelihood."""
         bias = self.map_bias_sigma_m if getattr(self, "_gnss_now", False) else 0.0
         r = self.r_var + ira_model.map_noise_variances(math.hypot(self.map_sigma_m, bias),
                                                        self.terrain_model_sigma_m, range_m,
                                                        self.terrain_factors())
-        if self.acquisition_spread_m <= 0.0:
+        if self.acquisition_spread_m <= 0.0 or self.tempering == "none" or (
+                self.tempering == "acquisition" and not (self.n > self.n_particles or self._reacquiring)):
             return r
         spread = math.sqrt(max(self._cov9[0, 0] + self._cov9[1, 1], 0.0))
         f = min(max((spread / self.acquisition_spread_m) ** 2, 1.0), 100.0)

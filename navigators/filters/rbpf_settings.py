@@ -111,6 +111,13 @@ class RbpfSettings(Settings):
                                   "cloud's covariance at the optimal bandwidth (gaussian; shrunk: drawn "
                                   "towards the mean first, the cloud's covariance kept) or not (none)",
                                   choices=("none", "gaussian", "shrunk"))
+    tempering: str = setting("spread", "when the IRA variances are inflated by (spread / "
+                             "acquisition_spread_m)^2: while the cloud acquires (acquisition: before the "
+                             "hand-over, or re-acquiring after a recovery), whenever its spread exceeds "
+                             "acquisition_spread_m (spread), or never (none)",
+                             choices=("acquisition", "spread", "none"))
+    progressive_correction: bool = setting(False, "apply each IRA update in stages that keep the effective "
+                                           "sample size above ess_threshold, resampled between them")
 
     def check(self) -> list[tuple[str, str]]:
         problems = []
