@@ -65,7 +65,7 @@ PROFILES = {
 # Two departures from Table 1 in the filter's settings for this flight (their measurements:
 # docs/validation/seed002.md, "Two departures from Table 1"):
 # - acquisition tempering: the IRA variances are inflated while the cloud is wider than 5 m (tempering
-#   "spread", the filter's default before session 47's "acquisition"; the filter's default 10 m suits the 3"
+#   "spread", the filter's default; the filter's default 10 m suits the 3"
 #   map against a finer world, where the converged cloud is wider; at 10 m some seeds of the turning flight
 #   locked a wrong roll);
 # - position process noise 1.0 m per epoch (Table 1: 0.5). At 0.5 every particle's Kalman part reads its own
