@@ -85,6 +85,10 @@ def parse(argv):
                    help="TRAINING reward only: cost per unit change of the track (offset) action between "
                         "decisions, -w |a0_t - a0_(t-1)| (default: the task's, 0); evaluation always uses "
                         "the task's reward")
+    p.add_argument("--time-limit-failure", action="store_true",
+                   help="TRAINING only: the time limit ends an episode as a failure (terminated, with the "
+                        "failure penalty) instead of truncating it, so the learner does not bootstrap past "
+                        "a time-out; evaluation always uses the task's episode ends")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint", type=Path, default=None, help="checkpoint to evaluate")
     p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
@@ -245,6 +249,8 @@ def train(args, kw: dict) -> None:
         train_kw["miss_weight"] = float(args.miss_weight)
     if args.action_change_weight is not None:
         train_kw["action_change_weight"] = float(args.action_change_weight)
+    if args.time_limit_failure:
+        train_kw["time_limit_failure"] = True
     cfg = ppo_config(tier, train_kw, seed=args.seed, num_env_runners=args.env_runners,
                      num_envs_per_env_runner=envs, **recipe)
     cpu_s = 60.0 * args.cpu_minutes if args.cpu_minutes is not None else route_task.TRAIN_BUDGET["cpu_s"]

@@ -43,6 +43,22 @@ TERMINATING_REASONS = ("arrived", "goal", "terrain_collision", "off_map", "diver
 FAILURE_REASONS = ("off_map", "diverged", "fuel_exhausted", "engine_failure")
 TRUNCATING_REASONS = ("time_limit",)
 
+
+def episode_end_reasons(time_limit_failure: bool = False) -> tuple[tuple, tuple, tuple]:
+    """(terminating, truncating, failure) episode-end reasons. By default the time limit truncates (the
+    gymnasium convention: a learner bootstraps the value of the last observation). With
+    `time_limit_failure=True` (a training choice) it ends the episode as a failure instead: terminated, with
+    `failure_penalty` in the arrival reward. The route task scores a time-out as not arrived, and the
+    observation carries the fraction of the episode time used (element 17), so the limit is part of the
+    task's state; truncated, a time-out costs a bootstrapping learner (RLlib's GAE, SB3's PPO) only the
+    extrapolated value of a state it never sees continue, and a policy learns detours that just fit the
+    limit."""
+    if not isinstance(time_limit_failure, bool):
+        raise ValueError(f"time_limit_failure must be a bool, got {time_limit_failure!r}")
+    if not time_limit_failure:
+        return TERMINATING_REASONS, TRUNCATING_REASONS, FAILURE_REASONS
+    return (TERMINATING_REASONS + TRUNCATING_REASONS, (), FAILURE_REASONS + TRUNCATING_REASONS)
+
 ACTION_NAMES = ("track change (fraction of the turn limit)", "AGL change (fraction of the climb limit)")
 
 
@@ -154,5 +170,6 @@ def progress_reward_terms(d_true_before_m, d_true_after_m, true_error_h_m, reach
 __all__ = ["ACTION_MODES", "FAILURE_REASONS", "G0_MPS2", "N_OBS", "N_ROUTES", "N_TERRAIN_FEATURES",
            "OBS_HIGH", "OBS_LOW", "REWARD_MODES", "ROUTE_FEATURELESS_MAX_KM", "ROUTE_OFFSET_FRACTIONS",
            "TERMINATING_REASONS", "TRUNCATING_REASONS", "action_change_terms", "action_limits",
+           "episode_end_reasons",
            "action_space", "arrival_reward_terms", "bearing_offset_limit_rad", "check_actions",
            "observation_space", "progress_reward_terms"]

@@ -184,6 +184,10 @@ class TerrainNavEnv(gym.Env, EzPickle):
     the terms with w = 0). It charges offset reversals (-1 -> +1 costs 2 w), which turn the aircraft across
     its route and back.
 
+    Time-outs as failures (`time_limit_failure`, default False; a training choice, the route task scores
+    with False): the time limit ends the episode terminated (not truncated), with `- failure_penalty`
+    (trn_env.env.task.episode_end_reasons says why a bootstrapping learner needs it).
+
     The terms reach `info["reward_terms"]` (a dict whose values add up to the reward).
 
     ## Starting State
@@ -206,7 +210,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     position within `goal_radius_m`, "goal"), terrain
     collision (true height above the true terrain < 0), off the map, the navigator diverged, or an engine
     stopped (fuel exhausted or engine failure; the scenario's `aircraft.constant_fuel = true` keeps the tanks
-    full for long episodes). Truncated: `max_episode_s` of flight. `step` after the end without `reset`
+    full for long episodes). Truncated: `max_episode_s` of flight (terminated, a failure, with
+    `time_limit_failure=True`). `step` after the end without `reset`
     raises `gymnasium.error.ResetNeeded`.
 
     ## Info
@@ -231,7 +236,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     log_sensors=False, goal_region_deg=None, start_region_deg=None, held_out_goals_deg=None,
     held_out_radius_m=2000.0, min_goal_distance_m=5000.0, shaping_gamma=1.0, action_mode="turn",
     bearing_offset_max_deg=90.0, sigma_shaping_weight=0.0, informative_crlb_m=5.0, guidance_rate_hz=None,
-    pipeline=False, flight_dt_s=None, scenario_fields=None, action_change_weight=0.0)`.
+    pipeline=False, flight_dt_s=None, scenario_fields=None, action_change_weight=0.0,
+    time_limit_failure=False)`.
     `scenario_fields`: scenario fields set for every episode by dotted path (`Scenario.with_fields`, as
     `trn-env fly --set`), e.g. `{"sensors.ira.rate_hz": 10.0, "navigator.rate_hz": 0.5}`; applied before
     `guidance_rate_hz` and `flight_dt_s`; anything the scenario's schema rejects is a ValueError naming
@@ -293,7 +299,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
                  sigma_shaping_weight: float = 0.0, informative_crlb_m: float = 5.0,
                  guidance_rate_hz: float | None = None, pipeline: bool = False,
                  flight_dt_s: float | None = None, scenario_fields: dict | None = None,
-                 action_change_weight: float = 0.0):
+                 action_change_weight: float = 0.0, time_limit_failure: bool = False):
         EzPickle.__init__(self, scenario, render_mode, decision_interval_s, max_episode_s, navigator,
                           goal_deg, goal_radius_m, reward_mode, error_weight, goal_bonus, collision_penalty,
                           failure_penalty, miss_weight, time_cost_per_s, progress_weight, agl_min_m,
@@ -302,7 +308,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
                           log_sensors, goal_region_deg, start_region_deg, held_out_goals_deg,
                           held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
                           bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m,
-                          guidance_rate_hz, pipeline, flight_dt_s, scenario_fields, action_change_weight)
+                          guidance_rate_hz, pipeline, flight_dt_s, scenario_fields, action_change_weight,
+                          time_limit_failure)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if reward_mode not in REWARD_MODES:
@@ -367,6 +374,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
         self.shaping_gamma = float(shaping_gamma)
         self.sigma_shaping_weight = float(sigma_shaping_weight)
         self.action_change_weight = float(action_change_weight)
+        self._terminating, self._truncating, self._failures = task.episode_end_reasons(time_limit_failure)
+        self.time_limit_failure = time_limit_failure
         self.informative_crlb_m = float(informative_crlb_m)
         self.action_mode = action_mode
         self.bearing_offset_max_rad = math.radians(float(bearing_offset_max_deg))
@@ -690,8 +699,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
         terms.update({k: float(v) for k, v in change.items()})
         info["reward_terms"] = terms
         reward = float(sum(terms.values()))
-        terminated = reason in TERMINATING_REASONS
-        truncated = reason in TRUNCATING_REASONS
+        terminated = reason in self._terminating
+        truncated = reason in self._truncating
         if terminated or truncated:
             self._needs_reset = True
         return self._obs(), reward, bool(terminated), bool(truncated), info
@@ -711,7 +720,7 @@ class TerrainNavEnv(gym.Env, EzPickle):
         terms = task.arrival_reward_terms(
             d_est_before, info["estimated_distance_to_goal_m"], dt_s, sigma_before_m,
             self._sigma_h_m() if self.sigma_shaping_weight > 0.0 else 0.0, reason is not None,
-            reason == "arrived", reason == "terrain_collision", reason in FAILURE_REASONS,
+            reason == "arrived", reason == "terrain_collision", reason in self._failures,
             info["true_horizontal_error_m"], progress_weight=self.progress_weight,
             shaping_gamma=self.shaping_gamma, time_cost_per_s=self.time_cost_per_s,
             collision_penalty=self.collision_penalty, failure_penalty=self.failure_penalty,

@@ -41,7 +41,8 @@ goal_radius_m, reward_mode, the reward weights, agl_min_m, agl_max_m, climb_rate
 turn_rate_max_dps, info_offset_m, info_sigma_m, info_window_m, goal_region_deg, start_region_deg,
 held_out_goals_deg, held_out_radius_m, min_goal_distance_m, shaping_gamma, action_mode,
 bearing_offset_max_deg, sigma_shaping_weight, informative_crlb_m, action_change_weight: the previous
-track action is kept per sub-env and set to 0 when the sub-env resets, autoreset included) plus num_envs and
+track action is kept per sub-env and set to 0 when the sub-env resets, autoreset included;
+time_limit_failure: the time limit terminates, as a failure) plus num_envs and
 episode_statistics;
 render_mode must be None.
 `navigator` must be one the fast tier models ("ins", "ins_tercom"; ValueError listing them otherwise).
@@ -123,6 +124,7 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         informative_crlb_m: float = 5.0,
         episode_statistics: bool = True,
         action_change_weight: float = 0.0,
+        time_limit_failure: bool = False,
     ):
         n = _check_num_envs(num_envs, decision_interval_s)
         if not isinstance(episode_statistics, bool):
@@ -213,6 +215,8 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         )
         self.error_weight = float(error_weight)
         self.action_change_weight = float(action_change_weight)
+        task.episode_end_reasons(time_limit_failure)  # ValueError unless a bool
+        self.time_limit_failure = time_limit_failure
         self.goal_radius_m = float(goal_radius_m)
         self.agl_min_m, self.agl_max_m = float(agl_min_m), float(agl_max_m)
         self.tas_mps = float(sc.route.tas_mps)
@@ -432,6 +436,8 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
             )
         else:
             failed = (end == S.OFF_MAP) | (end == S.DIVERGED)
+            if self.time_limit_failure:
+                failed |= end == S.TIME_LIMIT
             terms = task.arrival_reward_terms(
                 d_est0,
                 info["estimated_distance_to_goal_m"],
@@ -456,6 +462,8 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         info["_true_miss_m"] = arrived
         terminated = live & np.isin(end, (S.ARRIVED, S.COLLISION, S.OFF_MAP, S.GOAL, S.DIVERGED))
         truncated = live & (end == S.TIME_LIMIT)
+        if self.time_limit_failure:
+            terminated, truncated = terminated | truncated, np.zeros(n, bool)
         self._ep_return[live] += rewards[live]
         self._ep_len[live] += 1
         done = terminated | truncated
