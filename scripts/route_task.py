@@ -228,6 +228,19 @@ def select(args, kw: dict) -> dict:
     return res
 
 
+def training_env_kwargs(args, kw: dict) -> dict:
+    """The env's keyword arguments for training: the task's (`kw`) with the training-only choices (reward
+    weights, time-outs as failures) the command line sets; evaluation always flies `kw`."""
+    train_kw = dict(kw)
+    if args.miss_weight is not None:
+        train_kw["miss_weight"] = float(args.miss_weight)
+    if args.action_change_weight is not None:
+        train_kw["action_change_weight"] = float(args.action_change_weight)
+    if args.time_limit_failure:
+        train_kw["time_limit_failure"] = True
+    return train_kw
+
+
 def train(args, kw: dict) -> None:
     import gymnasium as gym
 
@@ -244,13 +257,7 @@ def train(args, kw: dict) -> None:
                   lr=args.lr, lr_end=args.lr_end, lr_decay_steps=args.lr_decay_steps, gamma=args.gamma,
                   lambda_=args.lambda_, entropy_coeff=args.entropy, vf_clip_param=args.vf_clip,
                   activation=args.activation, log_std_clip=args.log_std_clip)
-    train_kw = dict(kw)
-    if args.miss_weight is not None:
-        train_kw["miss_weight"] = float(args.miss_weight)
-    if args.action_change_weight is not None:
-        train_kw["action_change_weight"] = float(args.action_change_weight)
-    if args.time_limit_failure:
-        train_kw["time_limit_failure"] = True
+    train_kw = training_env_kwargs(args, kw)
     cfg = ppo_config(tier, train_kw, seed=args.seed, num_env_runners=args.env_runners,
                      num_envs_per_env_runner=envs, **recipe)
     cpu_s = 60.0 * args.cpu_minutes if args.cpu_minutes is not None else route_task.TRAIN_BUDGET["cpu_s"]
