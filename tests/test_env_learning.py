@@ -59,12 +59,13 @@ def test_bearing_action_turns_and_climbs_toward_its_targets_at_the_aircrafts_lim
     off = math.atan2(math.sin(track1 - bearing), math.cos(track1 - bearing)) / (math.pi / 2)
     env.step(np.array([off, -1.0], np.float32))
     assert env._track_cmd_rad == pytest.approx(track1, abs=1e-6)
-    # near the goal the offset is what the turn rate can hold: v sin(phi) / d = omega
+    # near the goal the offset is what the turn rate can hold: the bearing's turn v sin(phi) / d and the
+    # offset's own shrinking add up to omega (tests/test_pursuit_offset_limit.py flies it)
     omega = dpsi / env.decision_interval_s
     for d in (300.0, 500.0, 1000.0):
         phi = env._bearing_offset_limit_rad(d)
-        assert env.tas_mps * math.sin(phi) / d == pytest.approx(omega, rel=1e-9)
-    assert math.degrees(env._bearing_offset_limit_rad(500.0)) == pytest.approx(17.9, abs=0.5)
+        assert 2.0 * env.tas_mps * math.sin(phi) / d == pytest.approx(omega, rel=1e-9)
+    assert math.degrees(env._bearing_offset_limit_rad(500.0)) == pytest.approx(8.9, abs=0.5)
     with pytest.raises(ValueError, match="action_mode"):
         TerrainNavEnv(**SMALL, action_mode="heading")
     with pytest.raises(ValueError, match="bearing_offset_max_deg"):

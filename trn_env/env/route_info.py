@@ -3,8 +3,9 @@
 A candidate route is the path an aircraft flies when it holds its ground track at a fixed offset phi from
 the goal's bearing (the env's "pursuit" action with a constant action): a logarithmic spiral into the goal,
 length d / cos(phi) from distance d, with the offset cut near the goal to what the turn rate can hold,
-asin(d omega / v) (as the env does). The path is marched in the estimate's local level frame (north, east;
-flat-earth over the tens of km of a route) in steps of `step_m`, and the map's horizontal-position CRLB
+asin(d omega / (2 v)) (as the env does: trn_env.env.task.bearing_offset_limit_rad). The path is marched in
+the estimate's local level frame (north, east; flat-earth over the tens of km of a route) in steps of
+`step_m`, and the map's horizontal-position CRLB
 (`trn_env.scenario.build.terrain_information_map`) is read at each point. Two figures per route:
 
 - mean of log10(1 + CRLB / m) over its points (0 for ideal terrain, ~4 where it is featureless);
@@ -31,7 +32,7 @@ def pursuit_step(pn_m: float, pe_m: float, dn_m: float, de_m: float, turn, path)
     offset phi (rad, + = right of the goal's bearing, |phi| <= 90 deg), computed once per path; path =
     (goal radius m, turn rate omega rad/s, true airspeed v m/s, step m). The step is min(step, d) along the
     goal's unit bearing rotated by phi, the offset cut near the goal to what the turn rate holds,
-    asin(d omega / v) (the env's pursuit action); within the goal radius the point stays (length 0)."""
+    asin(d omega / (2 v)) (the env's pursuit action); within the goal radius the point stays (length 0)."""
     goal_radius_m, omega_rps, tas_mps, step_m = path
     rn = dn_m - pn_m
     re = de_m - pe_m
@@ -41,7 +42,7 @@ def pursuit_step(pn_m: float, pe_m: float, dn_m: float, de_m: float, turn, path)
     phi0, sin_abs, cphi, sphi = turn
     ux = rn / d
     uy = re / d
-    x = d * omega_rps / tas_mps
+    x = 0.5 * d * omega_rps / tas_mps         # task.bearing_offset_limit_rad
     if not x >= sin_abs:   # (NaN x too)
         phi = math.copysign(math.asin(x), phi0)
         cphi = math.cos(phi)

@@ -81,9 +81,16 @@ def action_limits(decision_interval_s: float, turn_rate_max_dps: float,
 
 def bearing_offset_limit_rad(d_m, omega_rps: float, tas_mps: float, offset_max_rad: float):
     """Largest offset (rad) from the goal's bearing the aircraft can hold at distance d_m (m; scalar or
-    array): flying at an offset phi turns the bearing at v sin(phi) / d, which the turn rate omega must keep
-    up with, so min(offset_max, asin(min(1, d omega / v)))."""
-    return np.minimum(offset_max_rad, np.arcsin(np.minimum(1.0, np.asarray(d_m) * omega_rps / tas_mps)))
+    array) turning at no more than omega: min(offset_max, asin(min(1, d omega / (2 v)))).
+
+    Holding phi(d) = asin(k d) takes two turns at once: flying at the offset turns the goal's bearing at
+    v sin(phi) / d = v k, and the offset itself shrinks as d does, at |dphi/dt| = k v cos(phi) / cos(phi)
+    = v k; the ground track turns at their sum 2 v k, so k = omega / (2 v). (With k = omega / v, the law
+    before, the final approach asked for twice omega: 4 deg/s at the route task's omega of 2 deg/s, past the
+    King Air's ~3.1 deg/s at its bank limit, and a held offset turned into an orbit of the goal that the
+    aircraft could not leave in time.)"""
+    return np.minimum(offset_max_rad,
+                      np.arcsin(np.minimum(1.0, np.asarray(d_m) * omega_rps / (2.0 * tas_mps))))
 
 
 def check_actions(action, shape: tuple[int, ...], low: np.ndarray, high: np.ndarray) -> np.ndarray:

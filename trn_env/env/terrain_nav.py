@@ -90,9 +90,11 @@ class TerrainNavEnv(gym.Env, EzPickle):
 
     the commanded track and height then move toward these targets by at most `dpsi_max` and `dagl_max` in
     the step (0 flies the straight line to the goal from where the estimate is). Near the goal the offset
-    is cut to what the aircraft can hold, asin(d omega / v) at estimated distance d, turn rate omega and
-    airspeed v (at 3 deg/s and 85 m/s: 90 deg beyond 1.6 km, 18 deg at 500 m), so that it can still
-    capture the arrival circle instead of orbiting the goal.
+    is cut to what the aircraft can hold, asin(d omega / (2 v)) at estimated distance d, turn rate omega
+    and airspeed v (at 3 deg/s and 85 m/s: 90 deg beyond 3.2 km, 8.9 deg at 500 m): holding it turns the
+    ground track at omega (the goal's bearing turns at v sin(phi) / d and the offset shrinks as fast;
+    trn_env.env.task.bearing_offset_limit_rad), so that the aircraft still captures the arrival circle
+    instead of orbiting the goal.
 
     `action_mode="pursuit"` (the coarsest: a whole route family per action): the same two targets, but the
     offset is HELD relative to the goal's bearing from the estimate at every guidance tick (1 Hz), not
@@ -264,6 +266,10 @@ class TerrainNavEnv(gym.Env, EzPickle):
     uint8 frames (`gymnasium.wrappers.RecordVideo` writes them with moviepy, the `video` extra).
 
     ## Version History
+    - v0 (a held offset that the aircraft can fly): the pursuit and bearing actions' offset limit near the
+      goal is asin(d omega / (2 v)), was asin(d omega / v), which asked for twice the turn rate in the final
+      approach (orbits of the goal and time-outs); `time_limit_failure`. Episodes that hold an offset
+      within ~3 km of the goal differ from before.
     - v0 (arrival on time): arrival is judged on each navigator update's own estimate (before: on the
       previous update's, then confirmed on the current one, so arrival came up to one update late).
     - v0 (scenario fields): `scenario_fields`; the per-update goal geometry and the route information's

@@ -4,7 +4,7 @@ numba call per decision.
 Per aircraft, every `dt_s` (1 s, trn_env.env.fast.kernel_params.DT_S) of a decision:
 
 - guidance on the ESTIMATE (as TerrainNav-v0): in pursuit mode the commanded track is the goal's bearing
-  from the estimate plus the held offset (a fraction of asin(d omega / v), v the held airspeed,
+  from the estimate plus the held offset (a fraction of asin(d omega / (2 v)), v the held airspeed,
   trn_env.env.task); the height
   above ground is flown on the estimated height minus the MAP under the estimate;
 - the autopilot's laws (aircraft/kingair/Systems/kingair_autopilot.xml, figures in
@@ -204,7 +204,7 @@ def fly_decision(
             gn, ge = offset_to_goal(X, i, lat_e, lon_e)
             if fp[FP_PURSUIT] > 0.5:
                 d = math.hypot(gn, ge)
-                x = d * fp[FP_OMEGA] / v0
+                x = 0.5 * d * fp[FP_OMEGA] / v0  # task.bearing_offset_limit_rad
                 lim = min(fp[FP_OFFSET_MAX], 0.5 * math.pi) if x >= sin_off_max else math.asin(x)
                 X[i, TRK_CMD] = _wrap(math.atan2(ge, gn) + X[i, OFFSET_FRAC] * lim)
             h_map_e = kernels.map_height(mapr, lat_e, lon_e)
