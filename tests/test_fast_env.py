@@ -303,12 +303,14 @@ def test_calibrated_against_recorded_full_loop(mode, name, figure):
 @pytest.mark.parametrize("mode", cal.FIX_NOISE_MODES)
 @pytest.mark.parametrize("name", [r.name for r in cal.REFERENCE_ROUTES])
 def test_calibrated_against_full_loop_live(name, mode):
-    """Both tiers flown now on every reference route: the full loop over 32 seeds (the weaving routes over
-    64, as recorded: their figures hang on the few episodes that circle until the time limit, 6 of 64 on
-    basin_weave_in, which 32 seeds sample too coarsely), the fast tier over FAST_SEEDS; the figures in
-    cal.OUT_OF_CALIBRATION(_BATCH) are not asserted."""
+    """Both tiers flown now on every reference route: the full loop over 32 seeds (the routes that turn,
+    basin_round and the weaving ones, over 64, as recorded: their 90th percentiles hang on a few episodes,
+    which 32 seeds sample too coarsely: basin_round's batch p90 is +23 % over 64 seeds, +27 % over the
+    first 32), the fast tier over FAST_SEEDS; the figures in cal.OUT_OF_CALIBRATION(_BATCH) are not
+    asserted."""
     r = cal.route_by_name(name)
-    full = cal.fly_full(r, range(64 if r.kind == "weaving" else 32), fix_noise=mode)
+    turning = r.action[0] != 0.0 or r.kind == "weaving"
+    full = cal.fly_full(r, range(64 if turning else 32), fix_noise=mode)
     c = cal.compare(full, cal.fly_fast(r, range(cal.FAST_SEEDS), fix_noise=mode))
     out = _REFERENCES[mode][1]
     for figure, rel in (("mean_m", c["mean_rel"]), ("p90_m", c["p90_rel"])):
