@@ -1,8 +1,9 @@
 """The pursuit action's offset limit near the goal (trn_env.env.task.bearing_offset_limit_rad) flown by an
 independent kinematic integration: a point that holds its ground track at the limited offset from the goal's
 bearing never has to turn faster than omega, and reaches the goal; the law before it (asin(d omega / v))
-needed twice omega. The limit is checked in the three places that use it: the env, the route-information
-paths and the fast tier's guidance kernel."""
+needed twice omega. The route-information paths step along the same limit, and the fast tier's guidance
+kernel (its own copy) flies a held offset into the arrival circle, which it does not with the law before;
+the full env's limit is checked in tests/test_env_learning.py."""
 
 from __future__ import annotations
 
@@ -67,3 +68,29 @@ def test_limit_values_and_the_route_paths_use_it():
         phi = math.atan2(pe, pn)
         assert seg == 10.0
         assert phi == pytest.approx(_law(dist, phi0), abs=1e-12)
+
+
+def test_fast_tier_flies_a_held_offset_into_the_arrival_circle():
+    """The fast tier's guidance kernel (its own copy of the limit) with the offset held at +1 from ~4 km
+    south of the goal: every aircraft arrives within two decisions. With the law before, the final
+    approach asks 4 deg/s of an aircraft that turns 3.2: it overshoots and circles the goal."""
+    import gymnasium
+
+    from trn_env.env.fast import calibration as cal
+
+    route = cal.route_by_name("basin_round")
+    kw = {**cal.env_kwargs(route), "max_episode_s": 150.0}
+    env = gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=16, vectorization_mode="vector_entry_point",
+                             **kw)
+    start = (route.goal_deg[0] - 0.036, route.goal_deg[1])          # ~4.0 km south
+    env.reset(seed=list(range(16)), options={"start_deg": start})
+    ends = np.full(16, None, dtype=object)
+    steps = np.zeros(16, int)
+    for k in range(5):
+        _, _, term, trunc, info = env.step(np.tile(np.array([1.0, 0.0], np.float32), (16, 1)))
+        new = (term | trunc) & (ends == None)  # noqa: E711 - element-wise over an object array
+        ends[new] = info["termination"][new]
+        steps[new] = k + 1
+    env.close()
+    assert list(ends) == ["arrived"] * 16, ends
+    assert steps.max() <= 2
