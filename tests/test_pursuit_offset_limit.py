@@ -80,8 +80,8 @@ def test_fast_tier_flies_a_held_offset_into_the_arrival_circle():
 
     route = cal.route_by_name("basin_round")
     kw = {**cal.env_kwargs(route), "max_episode_s": 150.0}
-    env = gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=16, vectorization_mode="vector_entry_point",
-                             **kw)
+    env = gymnasium.make_vec("trn_env/TerrainNavFast-v0", num_envs=16,
+                             vectorization_mode="vector_entry_point", **kw)
     start = (route.goal_deg[0] - 0.036, route.goal_deg[1])          # ~4.0 km south
     env.reset(seed=list(range(16)), options={"start_deg": start})
     ends = np.full(16, None, dtype=object)
