@@ -3,9 +3,13 @@ every aircraft, jsbgym `JsbSimEnv.JSBSIM_DT_HZ`), agent step (5 Hz) and per-step
 HeadingControlTask (`FlightTask.task_step`: 3 controls written; run() 12 times; custom properties: v-north,
 v-east, target track, altitude, steps left read, track error, altitude error, steps left written; 17 state
 properties read; the terminal test reads steps left, the assessment reward and the altitude error; 2
-reward properties written), counted through a proxy around the real FGFDMExec."""
+reward properties written), counted through a proxy around the real FGFDMExec, and the same traffic
+counted in the gymnasium-jsbsim package itself (the `bench` extra)."""
 
 from __future__ import annotations
+
+import collections
+import math
 
 import numpy as np
 import pytest
@@ -15,18 +19,24 @@ from trn_env.bench import env as bench_env
 
 
 class _Counting:
-    """Delegates to a JSBSim FGFDMExec, counting reads, writes and run() calls."""
+    """Delegates to a JSBSim FGFDMExec, counting reads, writes and run() calls (and the property names)."""
 
     def __init__(self, fdm):
         self.fdm, self.reads, self.writes, self.runs = fdm, 0, 0, 0
+        self.read_names, self.written_names = collections.Counter(), collections.Counter()
 
     def __getitem__(self, name):
         self.reads += 1
+        self.read_names[name] += 1
         return self.fdm[name]
 
     def __setitem__(self, name, value):
         self.writes += 1
+        self.written_names[name] += 1
         self.fdm[name] = value
+
+    def __getattr__(self, name):             # the rest of FGFDMExec's interface, uncounted
+        return getattr(self.fdm, name)
 
     def run(self):
         self.runs += 1
@@ -83,3 +93,49 @@ def test_ratio_check_script_bad_arguments_exit_2(capsys):
         assert mod.main(argv) == 2
         err = capsys.readouterr().err
         assert err.startswith("error:") and words in err, err
+
+
+def _count_steps(env, proxy, steps: int, n_act: int) -> None:
+    proxy.reads = proxy.writes = proxy.runs = 0
+    proxy.read_names.clear()
+    proxy.written_names.clear()
+    for _ in range(steps):
+        env.step(np.zeros(n_act, np.float32))
+
+
+def test_gymnasium_jsbsim_package_has_the_stand_ins_traffic_per_step():
+    """The package's own env, made as its users make it, counted through the same proxy: the same run()
+    calls, and the same properties read and written, name by name, as GymJsbsimReference's."""
+    pytest.importorskip("gymnasium_jsbsim")
+    import gymnasium as gym
+
+    from trn_env.scenario.build import quiet_stdout
+
+    with quiet_stdout():
+        pkg = gym.make(bench_env.GYMNASIUM_JSBSIM_ENV_ID)
+        pkg.reset(seed=0)
+    sim = pkg.unwrapped.sim
+    assert abs(sim.sim_dt - 1.0 / bench_env.GYM_JSBSIM_DT_HZ) < 1e-12
+    pkg_proxy = _Counting(sim.jsbsim)
+    sim.jsbsim = pkg_proxy
+    steps = 5
+    _count_steps(pkg, pkg_proxy, steps, 3)
+
+    fdm, dt = bench_env.gym_reference_fdm("c172p")
+    ours_proxy = _Counting(fdm)
+    ours = bench_env.GymJsbsimReference(ours_proxy, dt)
+    ours.reset(seed=0)
+    _count_steps(ours, ours_proxy, steps, 3)
+    assert pkg_proxy.runs == ours_proxy.runs == 12 * steps
+    assert pkg_proxy.read_names == ours_proxy.read_names
+    assert pkg_proxy.written_names == ours_proxy.written_names
+    pkg.close()
+
+
+def test_gymnasium_jsbsim_package_rates_are_measured_quietly(capfd):
+    """The bench's figure for the package: positive, finite, and JSBSim's banner kept off stdout (the bench
+    prints its JSON there)."""
+    pytest.importorskip("gymnasium_jsbsim")
+    rates = bench_env.gymnasium_jsbsim_package_rates(0.3)
+    assert rates is not None and all(math.isfinite(r) and r > 0 for r in rates)
+    assert "JSBSim" not in capfd.readouterr().out

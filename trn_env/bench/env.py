@@ -32,7 +32,13 @@
   gymnasium-jsbsim's own default (the Cessna 172P shipped with JSBSim, calm air),
   env_gym_jsbsim_reference_100hz_* the King Air at the scenario's 100 Hz (the reference of earlier
   sessions); their ratios env_route_ratio_to_gym_jsbsim(_c172p, _100hz) (wall) and
-  env_route_cpu_ratio_to_gym_jsbsim(_c172p, _100hz) (CPU); env_construct_first_s (the first env of the
+  env_route_cpu_ratio_to_gym_jsbsim(_c172p, _100hz) (CPU); with the `bench` extra installed, the
+  gymnasium-jsbsim package itself (its own Cessna 172P HeadingControlTask env, made with `gymnasium.make`,
+  GYMNASIUM_JSBSIM_ENV_ID; env_gymnasium_jsbsim_package names its version, None when not installed, and the
+  keys below are then absent): env_gymnasium_jsbsim_package_sim_seconds_per_wall_second (and per CPU
+  second), env_route_ratio_to_gymnasium_jsbsim_package (wall; _cpu_ the CPU ratio) and
+  env_gym_jsbsim_c172p_ratio_to_gymnasium_jsbsim_package (the stand-in loop on the same Cessna against the
+  package: above 1, the stand-in is the stricter reference); env_construct_first_s (the first env of the
   process: terrain, map, numba caches), env_construct_second_s (the next one) and env_reset_s (median reset);
   load_average_1min (the machine's load during the measurement).
 - planner_40km_route_s: one `TerrainInformationPlanner.plan` of a corner-to-corner route on the bundled DEM
@@ -240,6 +246,40 @@ def _gym_jsbsim_rates(wall_s: float = 2.0, agent_step_s: float = 0.2, aircraft: 
     return sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
 
 
+# gymnasium-jsbsim itself (PyPI `gymnasium-jsbsim`, the `bench` extra): its default env as its README makes
+# it, the HeadingControlTask on its Cessna 172P without FlightGear
+GYMNASIUM_JSBSIM_ENV_ID = "JSBSim-HeadingControlTask-Cessna172P-Shaping.STANDARD-NoFG-v0"
+
+
+def gymnasium_jsbsim_package_rates(wall_s: float = 2.0) -> tuple[float, float] | None:
+    """(simulated seconds per wall second, per CPU second) of the gymnasium-jsbsim package's own env
+    (GYMNASIUM_JSBSIM_ENV_ID, made by `gymnasium.make` as its users make it: with gymnasium's checker and
+    order wrappers), controls centred, resets included; None when the package is not installed. Its
+    JSBSim start-up banner is kept off stdout (the bench prints JSON there)."""
+    try:
+        import gymnasium_jsbsim  # noqa: F401 - registers its env ids
+    except ImportError:
+        return None
+    from trn_env.scenario.build import quiet_stdout
+
+    with quiet_stdout():
+        env = gym.make(GYMNASIUM_JSBSIM_ENV_ID)
+        env.reset(seed=0)
+    u = env.unwrapped
+    step_s = u.sim_steps_per_agent_step * u.sim.sim_dt
+    act = np.zeros(env.action_space.shape, env.action_space.dtype)
+    sim = 0.0
+    t0, c0 = time.perf_counter(), time.process_time()
+    while time.perf_counter() - t0 < wall_s:
+        _, _, term, trunc, _ = env.step(act)
+        sim += step_s
+        if term or trunc:
+            env.reset()
+    rates = sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
+    env.close()
+    return rates
+
+
 # decisions each env flies before the timed repeats (90 s at 30 s decisions: past the first fix)
 WARM_UP_DECISIONS = 3
 
@@ -285,6 +325,7 @@ def route_env_figures(quick: bool = False) -> dict:
     ref_s = 1.0 if quick else 3.0
     kinds = ({}, {"aircraft": "c172p"}, {"dt_s": SCENARIO_DT_S})
     refs = [_gym_jsbsim_rates(ref_s, **k) for k in kinds]
+    package = [gymnasium_jsbsim_package_rates(ref_s)]
     for rep in range(reps):
         for k, e in envs.items():
             c0, w0 = time.process_time(), time.perf_counter()
@@ -308,6 +349,7 @@ def route_env_figures(quick: bool = False) -> dict:
     for e in envs.values():
         e.close()
     refs += [_gym_jsbsim_rates(ref_s, **k) for k in kinds]
+    package.append(gymnasium_jsbsim_package_rates(ref_s))
     ka_wall, ka_cpu = max(refs[0][0], refs[3][0]), max(refs[0][1], refs[3][1])
     c172_wall, c172_cpu = max(refs[1][0], refs[4][0]), max(refs[1][1], refs[4][1])
     ka100_wall, ka100_cpu = max(refs[2][0], refs[5][0]), max(refs[2][1], refs[5][1])
@@ -317,7 +359,17 @@ def route_env_figures(quick: bool = False) -> dict:
     sim_rate_cpu = sims["after"] / cpus["after"]
     rated_wall = sims["decision_rates"] / walls["decision_rates"]
     rated_cpu = sims["decision_rates"] / cpus["decision_rates"]
+    pkg = {}
+    if package[0] is not None:
+        pkg_wall, pkg_cpu = max(package[0][0], package[1][0]), max(package[0][1], package[1][1])
+        pkg = {"env_gymnasium_jsbsim_package_sim_seconds_per_wall_second": pkg_wall,
+               "env_gymnasium_jsbsim_package_sim_seconds_per_cpu_second": pkg_cpu,
+               "env_route_ratio_to_gymnasium_jsbsim_package": sim_rate / pkg_wall,
+               "env_route_cpu_ratio_to_gymnasium_jsbsim_package": sim_rate_cpu / pkg_cpu,
+               "env_gym_jsbsim_c172p_ratio_to_gymnasium_jsbsim_package": c172_wall / pkg_wall}
     return {
+        **pkg,
+        "env_gymnasium_jsbsim_package": _package_version("gymnasium-jsbsim"),
         "env_route_agent_steps_per_s": med["after"],
         "env_route_agent_steps_per_s_before": med["before"],
         "env_route_pipelined_agent_steps_per_s": med["pipelined"],
@@ -357,6 +409,16 @@ def route_env_figures(quick: bool = False) -> dict:
         "env_route_steps_measured": n_steps * reps,
         "load_average_1min": _load_average(),
     }
+
+
+def _package_version(name: str) -> str | None:
+    """The installed version of a distribution, None when it is not installed."""
+    from importlib import metadata
+
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
 
 
 def _load_average() -> float:

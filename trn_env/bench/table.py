@@ -34,6 +34,8 @@ PAIRS: list[tuple[str, str, str | None, str]] = [
      "env_route_cpu_ratio_to_gym_jsbsim", "bare JSBSim gym loop, King Air 60 Hz (CPU)"),
     ("env_route_sim_seconds_per_wall_second", "env_gym_jsbsim_reference_sim_seconds_per_wall_second",
      "env_route_ratio_to_gym_jsbsim", "bare JSBSim gym loop, King Air 60 Hz"),
+    ("env_route_sim_seconds_per_wall_second", "env_gymnasium_jsbsim_package_sim_seconds_per_wall_second",
+     "env_route_ratio_to_gymnasium_jsbsim_package", "the gymnasium-jsbsim package, its Cessna 172P env"),
     ("env_route_sim_seconds_per_cpu_second", "env_gym_jsbsim_reference_100hz_sim_seconds_per_cpu_second",
      "env_route_cpu_ratio_to_gym_jsbsim_100hz", "bare JSBSim gym loop, King Air 100 Hz (CPU)"),
     ("env_route_decision_rates_sim_seconds_per_cpu_second",

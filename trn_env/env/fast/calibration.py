@@ -6,8 +6,9 @@ a fixed cycle of actions, one per decision (the weaving route: the offset satura
 second decision, the bang-bang steering of a PPO policy trained on the fast tier). Both tiers fly it with
 the same navigator family (the scenario's INS + batch TERCOM); the figure compared
 is the TRUE horizontal navigation error at the goal (`true_miss_m` on arrival; the true horizontal error at
-the episode's end otherwise), its mean and 90th percentile over the seeds: the full loop over tens of seeds
-(its cost), the fast tier over FAST_SEEDS, so that the comparison's sampling noise is mostly the full loop's.
+the episode's end otherwise), its mean and 90th percentile over the seeds, FAST_SEEDS (256) in both tiers:
+the 90th percentile of the turning routes hangs on a few episodes, which tens of seeds sample too coarsely
+(docs/validation/fast_tier.md, "The full loop over 256 seeds").
 
 Routes (labels from the map's terrain information along them, observation 27-31's featureless stretch):
 informative (rough terrain all the way), featureless (a long flat stretch before the goal), mixed; weaving
@@ -123,47 +124,64 @@ REFERENCE_ROUTES = (
 # full-tier settings (full_tier_settings(): JSBSim at 50 Hz, the task's TASK_RATES), per TERCOM fix noise of
 # the navigator (FIX_NOISE_MODES: "fixed", fix_sigma_m per axis, the route task's; "batch", ins_tercom's
 # default, the batch's own covariance, which the fast tier models in fix_noise.py), recorded with
-# `python scripts/calibrate_fast_tier.py --tier full --seeds N [--fix-noise batch] --out DIR`
-# (docs/validation/fast_tier.md): the default test compares the fast tier with these; the slow test flies
-# both tiers.
+# `python scripts/calibrate_fast_tier.py --tier full --seeds 256 [--fix-noise batch] --out DIR`
+# (docs/validation/fast_tier.md): the default test compares the fast tier, flown now, with these; "first_32"
+# holds the figures of seeds 0..31 alone, which the slow test flies again, so that a change to the full loop
+# that would leave these references stale fails there (the full loop gives the same episodes on every
+# machine of ours: its 64-seed figures of an earlier session came back to the centimetre).
 FIX_NOISE_MODES = ("fixed", "batch")
 FULL_LOOP_REFERENCE = {
-    "basin_straight": {"mean_m": 408.0, "p90_m": 756.8, "n": 64},
-    "basin_round": {"mean_m": 12.4, "p90_m": 19.6, "n": 64},
-    "basin_west": {"mean_m": 24.6, "p90_m": 42.7, "n": 64},
-    "jacksboro_sw_ne": {"mean_m": 7.2, "p90_m": 14.1, "n": 64},
-    "jacksboro_flat_patch": {"mean_m": 9.9, "p90_m": 14.3, "n": 64},
-    "basin_weave": {"mean_m": 19.1, "p90_m": 31.7, "n": 64},
-    "basin_weave_in": {"mean_m": 19.1, "p90_m": 31.7, "n": 64},
+    "basin_straight": {"mean_m": 426.31, "p90_m": 777.26, "n": 256,
+     "first_32": {"mean_m": 471.95, "p90_m": 787.62}},
+    "basin_round": {"mean_m": 13.72, "p90_m": 22.88, "n": 256,
+     "first_32": {"mean_m": 12.12, "p90_m": 21.39}},
+    "basin_west": {"mean_m": 27.18, "p90_m": 48.80, "n": 256,
+     "first_32": {"mean_m": 25.54, "p90_m": 42.71}},
+    "jacksboro_sw_ne": {"mean_m": 6.72, "p90_m": 12.29, "n": 256,
+     "first_32": {"mean_m": 6.40, "p90_m": 11.41}},
+    "jacksboro_flat_patch": {"mean_m": 9.51, "p90_m": 15.79, "n": 256,
+     "first_32": {"mean_m": 9.99, "p90_m": 14.37}},
+    "basin_weave": {"mean_m": 20.78, "p90_m": 36.57, "n": 256,
+     "first_32": {"mean_m": 19.09, "p90_m": 30.44}},
+    "basin_weave_in": {"mean_m": 20.78, "p90_m": 36.57, "n": 256,
+     "first_32": {"mean_m": 19.09, "p90_m": 30.44}},
 }
 FULL_LOOP_REFERENCE_BATCH = {
-    "basin_straight": {"mean_m": 219.7, "p90_m": 434.5, "n": 64},
-    "basin_round": {"mean_m": 9.1, "p90_m": 14.7, "n": 64},
-    "basin_west": {"mean_m": 19.0, "p90_m": 31.5, "n": 64},
-    "jacksboro_sw_ne": {"mean_m": 5.1, "p90_m": 10.2, "n": 64},
-    "jacksboro_flat_patch": {"mean_m": 6.3, "p90_m": 10.3, "n": 64},
-    "basin_weave": {"mean_m": 19.5, "p90_m": 25.4, "n": 64},
-    "basin_weave_in": {"mean_m": 19.5, "p90_m": 25.4, "n": 64},
+    "basin_straight": {"mean_m": 223.21, "p90_m": 404.16, "n": 256,
+     "first_32": {"mean_m": 236.09, "p90_m": 433.06}},
+    "basin_round": {"mean_m": 8.71, "p90_m": 14.93, "n": 256,
+     "first_32": {"mean_m": 8.48, "p90_m": 14.28}},
+    "basin_west": {"mean_m": 19.96, "p90_m": 31.57, "n": 256,
+     "first_32": {"mean_m": 19.85, "p90_m": 29.78}},
+    "jacksboro_sw_ne": {"mean_m": 4.92, "p90_m": 9.93, "n": 256,
+     "first_32": {"mean_m": 4.78, "p90_m": 8.36}},
+    "jacksboro_flat_patch": {"mean_m": 6.66, "p90_m": 11.92, "n": 256,
+     "first_32": {"mean_m": 6.74, "p90_m": 10.60}},
+    "basin_weave": {"mean_m": 25.04, "p90_m": 30.60, "n": 256,
+     "first_32": {"mean_m": 23.01, "p90_m": 24.27}},
+    "basin_weave_in": {"mean_m": 25.04, "p90_m": 30.60, "n": 256,
+     "first_32": {"mean_m": 23.01, "p90_m": 24.27}},
 }
 # Figures (route, "mean_m" or "p90_m") the fast tier does not hold within 25 % of FULL_LOOP_REFERENCE (and
 # of FULL_LOOP_REFERENCE_BATCH), with the measured gap (docs/validation/fast_tier.md); the tests expect them
 # to fail, so one that comes back into calibration is reported.
 OUT_OF_CALIBRATION = {
-    ("basin_round", "p90_m"): "+31 %: the turns' tilt (trn_env.env.fast.turns) raised the fast tier's spiral "
-                              "route more than the full loop's",
+    ("basin_weave", "mean_m"): "-26 %: the reversals' errors are lower in the fast tier (no heading share of "
+                               "the turns' gyro errors, trn_env.env.fast.turns)",
+    ("basin_weave", "p90_m"): "-27 %: the reversals' errors are lower in the fast tier",
+    ("basin_weave_in", "mean_m"): "-26 %: flies as basin_weave (arrives before its actions differ)",
+    ("basin_weave_in", "p90_m"): "-27 %: flies as basin_weave",
 }
 OUT_OF_CALIBRATION_BATCH = {
-    ("basin_straight", "mean_m"): "-26 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("basin_straight", "p90_m"): "-38 %: the full loop's batch fix model (slope-weighted H) misses more",
-    ("jacksboro_sw_ne", "p90_m"): "-28 %: after each fix the fast tier's error is lower",
-    ("jacksboro_flat_patch", "mean_m"): "+29 %: the fast tier's error grows more over the flat patch",
-    ("jacksboro_flat_patch", "p90_m"): "+41 %: the fast tier's error grows more over the flat patch",
-    ("basin_weave", "mean_m"): "-43 %: one full-loop seed of 64 loses the track (261 m)",
-    ("basin_weave", "p90_m"): "-30 %: after each fix the fast tier's error is lower",
-    ("basin_weave_in", "mean_m"): "-43 %: one full-loop seed of 64 loses the track (261 m)",
-    ("basin_weave_in", "p90_m"): "-30 %: after each fix the fast tier's error is lower",
+    ("basin_straight", "mean_m"): "-27 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("basin_straight", "p90_m"): "-33 %: the full loop's batch fix model (slope-weighted H) misses more",
+    ("jacksboro_sw_ne", "p90_m"): "-26 %: after each fix the fast tier's error is lower",
+    ("basin_weave", "mean_m"): "-56 %: the full loop loses the track on a few seeds (up to 678 m)",
+    ("basin_weave", "p90_m"): "-42 %: after each fix the fast tier's error is lower",
+    ("basin_weave_in", "mean_m"): "-56 %: flies as basin_weave",
+    ("basin_weave_in", "p90_m"): "-42 %: flies as basin_weave",
 }
-# the fast tier's seeds per route: its statistics then carry little sampling noise next to the full loop's
+# seeds per route in the fast tier, and in the recorded full loop
 FAST_SEEDS = 256
 
 ENV_SETTINGS = dict(
