@@ -262,22 +262,23 @@ def gymnasium_jsbsim_package_rates(wall_s: float = 2.0) -> tuple[float, float] |
         return None
     from trn_env.scenario.build import quiet_stdout
 
-    with quiet_stdout():
+    with quiet_stdout():                     # resets too: a new simulation would print the banner again
         env = gym.make(GYMNASIUM_JSBSIM_ENV_ID)
-        env.reset(seed=0)
-    u = env.unwrapped
-    step_s = u.sim_steps_per_agent_step * u.sim.sim_dt
-    act = np.zeros(env.action_space.shape, env.action_space.dtype)
-    sim = 0.0
-    t0, c0 = time.perf_counter(), time.process_time()
-    while time.perf_counter() - t0 < wall_s:
-        _, _, term, trunc, _ = env.step(act)
-        sim += step_s
-        if term or trunc:
-            env.reset()
-    rates = sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
-    env.close()
-    return rates
+        try:
+            env.reset(seed=0)
+            u = env.unwrapped
+            step_s = u.sim_steps_per_agent_step * u.sim.sim_dt
+            act = np.zeros(env.action_space.shape, env.action_space.dtype)
+            sim = 0.0
+            t0, c0 = time.perf_counter(), time.process_time()
+            while time.perf_counter() - t0 < wall_s:
+                _, _, term, trunc, _ = env.step(act)
+                sim += step_s
+                if term or trunc:
+                    env.reset()
+            return sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
+        finally:
+            env.close()
 
 
 # decisions each env flies before the timed repeats (90 s at 30 s decisions: past the first fix)
