@@ -139,3 +139,28 @@ def test_gymnasium_jsbsim_package_rates_are_measured_quietly(capfd):
     rates = bench_env.gymnasium_jsbsim_package_rates(0.3)
     assert rates is not None and all(math.isfinite(r) and r > 0 for r in rates)
     assert "JSBSim" not in capfd.readouterr().out
+
+
+def test_jsbsim_alone_ceiling_only_runs_the_task_envs_own_flight():
+    """The ceiling of the env's figure: bare run() calls on the route task env's own JSBSim flight (its King
+    Air at the task's 50 Hz), no property read or written, simulated time = run() calls x the flight's step."""
+    import types
+
+    from trn_env.env.route_task import env_kwargs
+    from trn_env.env.terrain_nav import TerrainNavEnv
+
+    env = TerrainNavEnv(**env_kwargs("basin"))
+    try:
+        env.reset(seed=0)
+        flight = env._loop.flight
+        assert flight.dt_s == 0.02 and abs(flight.fdm.get_delta_t() - 0.02) < 1e-12
+        proxy = _Counting(flight.fdm)
+        t0 = flight.fdm["simulation/sim-time-sec"]
+        proxy.reads = 0
+        wall, cpu = bench_env._jsbsim_alone_rates(types.SimpleNamespace(fdm=proxy, dt_s=flight.dt_s), 0.05)
+        assert proxy.runs >= 100 and proxy.runs % 100 == 0
+        assert proxy.reads == 0 and proxy.writes == 0
+        assert abs(flight.fdm["simulation/sim-time-sec"] - t0 - proxy.runs * 0.02) < 1e-6
+        assert all(math.isfinite(r) and r > 0 for r in (wall, cpu))
+    finally:
+        env.close()

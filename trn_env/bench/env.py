@@ -38,9 +38,14 @@
   keys below are then absent): env_gymnasium_jsbsim_package_sim_seconds_per_wall_second (and per CPU
   second), env_route_ratio_to_gymnasium_jsbsim_package (wall; _cpu_ the CPU ratio) and
   env_gym_jsbsim_c172p_ratio_to_gymnasium_jsbsim_package (the stand-in loop on the same Cessna against the
-  package: above 1, the stand-in is the stricter reference); env_construct_first_s (the first env of the
-  process: terrain, map, numba caches), env_construct_second_s (the next one) and env_reset_s (median reset);
-  load_average_1min (the machine's load during the measurement).
+  package: above 1, the stand-in is the stricter reference); the ceiling of the env's figure:
+  env_route_jsbsim_alone_sim_seconds_per_wall_second (and per CPU second), bare `run()` calls on the task
+  env's own JSBSim flight (its King Air at 50 Hz, wind and autopilot; nothing read or written), measured
+  right before and after the envs (the faster kept), its ratios env_route_jsbsim_alone_ratio_to_gym_jsbsim
+  and env_route_jsbsim_alone_ratio_to_gymnasium_jsbsim_package (the env's ratio if everything but JSBSim
+  cost nothing) and env_route_share_of_jsbsim_alone (the env's figure over it); env_construct_first_s (the
+  first env of the process: terrain, map, numba caches), env_construct_second_s (the next one) and
+  env_reset_s (median reset); load_average_1min (the machine's load during the measurement).
 - planner_40km_route_s: one `TerrainInformationPlanner.plan` of a corner-to-corner route on the bundled DEM
   (straight distance planner_route_straight_km >= 40 km; numba compiled beforehand; the climb limit on,
   planner_climb_gradient; the whole plan: search, string pulling, turn thinning), beside the cost-map build
@@ -327,6 +332,7 @@ def route_env_figures(quick: bool = False) -> dict:
     kinds = ({}, {"aircraft": "c172p"}, {"dt_s": SCENARIO_DT_S})
     refs = [_gym_jsbsim_rates(ref_s, **k) for k in kinds]
     package = [gymnasium_jsbsim_package_rates(ref_s)]
+    alone = [_jsbsim_alone_rates(after._loop.flight, ref_s)]   # each rep below resets it first
     for rep in range(reps):
         for k, e in envs.items():
             c0, w0 = time.process_time(), time.perf_counter()
@@ -347,10 +353,12 @@ def route_env_figures(quick: bool = False) -> dict:
             sims[k] += sim
             walls[k] += w
             cpus[k] += c
+    alone.append(_jsbsim_alone_rates(after._loop.flight, ref_s))
     for e in envs.values():
         e.close()
     refs += [_gym_jsbsim_rates(ref_s, **k) for k in kinds]
     package.append(gymnasium_jsbsim_package_rates(ref_s))
+    alone_wall, alone_cpu = max(a[0] for a in alone), max(a[1] for a in alone)
     ka_wall, ka_cpu = max(refs[0][0], refs[3][0]), max(refs[0][1], refs[3][1])
     c172_wall, c172_cpu = max(refs[1][0], refs[4][0]), max(refs[1][1], refs[4][1])
     ka100_wall, ka100_cpu = max(refs[2][0], refs[5][0]), max(refs[2][1], refs[5][1])
@@ -367,7 +375,8 @@ def route_env_figures(quick: bool = False) -> dict:
                "env_gymnasium_jsbsim_package_sim_seconds_per_cpu_second": pkg_cpu,
                "env_route_ratio_to_gymnasium_jsbsim_package": sim_rate / pkg_wall,
                "env_route_cpu_ratio_to_gymnasium_jsbsim_package": sim_rate_cpu / pkg_cpu,
-               "env_gym_jsbsim_c172p_ratio_to_gymnasium_jsbsim_package": c172_wall / pkg_wall}
+               "env_gym_jsbsim_c172p_ratio_to_gymnasium_jsbsim_package": c172_wall / pkg_wall,
+               "env_route_jsbsim_alone_ratio_to_gymnasium_jsbsim_package": alone_wall / pkg_wall}
     return {
         **pkg,
         "env_gymnasium_jsbsim_package": _package_version("gymnasium-jsbsim"),
@@ -391,6 +400,10 @@ def route_env_figures(quick: bool = False) -> dict:
         "env_route_sim_seconds_per_wall_second": sim_rate,
         "env_route_sim_seconds_per_cpu_second": sim_rate_cpu,
         "env_route_pipelined_sim_seconds_per_wall_second": sims["pipelined"] / walls["pipelined"],
+        "env_route_jsbsim_alone_sim_seconds_per_wall_second": alone_wall,
+        "env_route_jsbsim_alone_sim_seconds_per_cpu_second": alone_cpu,
+        "env_route_jsbsim_alone_ratio_to_gym_jsbsim": alone_wall / ka_wall,
+        "env_route_share_of_jsbsim_alone": sim_rate / alone_wall,
         "env_gym_jsbsim_reference_sim_seconds_per_wall_second": ka_wall,
         "env_gym_jsbsim_reference_sim_seconds_per_cpu_second": ka_cpu,
         "env_route_ratio_to_gym_jsbsim": sim_rate / ka_wall,
@@ -410,6 +423,21 @@ def route_env_figures(quick: bool = False) -> dict:
         "env_route_steps_measured": n_steps * reps,
         "load_average_1min": _load_average(),
     }
+
+
+def _jsbsim_alone_rates(flight, wall_s: float) -> tuple[float, float]:
+    """(simulated seconds per wall second, per CPU second) of bare `run()` calls on an env's own JSBSim
+    flight (its aircraft, step, wind and autopilot; nothing read or written): what the env would reach if
+    everything but JSBSim cost nothing. Advances the flight: measure only before a reset."""
+    run = flight.fdm.run
+    n = 0
+    t0, c0 = time.perf_counter(), time.process_time()
+    while time.perf_counter() - t0 < wall_s:
+        for _ in range(100):
+            run()
+        n += 100
+    sim = n * float(flight.dt_s)
+    return sim / (time.perf_counter() - t0), sim / max(time.process_time() - c0, 1e-9)
 
 
 def _package_version(name: str) -> str | None:
