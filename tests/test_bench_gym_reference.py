@@ -143,7 +143,8 @@ def test_gymnasium_jsbsim_package_rates_are_measured_quietly(capfd):
 
 def test_jsbsim_alone_ceiling_only_runs_the_task_envs_own_flight():
     """The ceiling of the env's figure: bare run() calls on the route task env's own JSBSim flight (its King
-    Air at the task's 50 Hz), no property read or written, simulated time = run() calls x the flight's step."""
+    Air at the task's 50 Hz), no property read or written, simulated time = run() calls x the flight's
+    step."""
     import types
 
     from trn_env.env.route_task import env_kwargs
