@@ -179,32 +179,43 @@ def _chi2_mean_bounds(n: int, p: float) -> tuple[float, float]:
     return chi2.ppf((1 - p) / 2, 2 * n) / n, chi2.ppf((1 + p) / 2, 2 * n) / n
 
 
-@pytest.mark.slow
-def test_tactical_grade_consistency():
-    import filter_statistics as fs
-    import grade_consistency as gc
+def test_no_navigator_left_out_of_the_tactical_check():
     assert not set(NAVIGATORS) & set(NOT_CHECKED)
     assert all(measured_direction(n, "tactical") == OVERCONFIDENT for n in NOT_CHECKED)
+
+
+@pytest.fixture(scope="module")
+def tactical_runs() -> dict:
+    """Per navigator, its RUNS runs on the one recorded flight (flown once for all the navigators' tests)."""
+    import filter_statistics as fs
+    import grade_consistency as gc
     flight = fs.record_flight(duration_s=DURATION_S)
     runs = {n: [] for n in NAVIGATORS}
     for s in range(RUNS):
         for n, run in gc.run_seed(flight[0], NAVIGATORS, "tactical", SEED0 + s, flight).items():
             runs[n].append(run)
-    problems = []
-    for n in NAVIGATORS:
-        nees, _ = gc.run_nees(runs[n], 15.0)
-        k = fs.pooled_nees_figures(nees)["thinning_epochs"]
-        n_thin = nees[:, ::k].size
-        anees = float(nees.mean())
-        lo, hi = _chi2_mean_bounds(n_thin, 0.99)
-        inside = float(np.mean(nees <= 9.0))
-        conservative = measured_direction(n, "tactical") == CONSERVATIVE
-        ok = anees <= hi if conservative else lo <= anees <= hi
-        if not (ok and inside >= 0.9):
-            problems.append(f"{n}: ANEES {anees:.2f} over {nees.size} epochs ({n_thin} decorrelated: k {k}) "
-                            f"against [{lo:.2f}, {hi:.2f}]{' (upper only)' if conservative else ''}, "
-                            f"{100 * inside:.0f} % of epochs inside 3 sigma")
-    assert not problems, problems
+    return runs
+
+
+# one test per navigator (its own verdict; the runs are shared); as a file of six slow tests pytest-xdist's
+# loadfile scheduling also starts it early, beside the other long file
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NAVIGATORS)
+def test_tactical_grade_consistency(name, tactical_runs):
+    import filter_statistics as fs
+    import grade_consistency as gc
+    nees, _ = gc.run_nees(tactical_runs[name], 15.0)
+    k = fs.pooled_nees_figures(nees)["thinning_epochs"]
+    n_thin = nees[:, ::k].size
+    anees = float(nees.mean())
+    lo, hi = _chi2_mean_bounds(n_thin, 0.99)
+    inside = float(np.mean(nees <= 9.0))
+    conservative = measured_direction(name, "tactical") == CONSERVATIVE
+    ok = anees <= hi if conservative else lo <= anees <= hi
+    assert ok and inside >= 0.9, (
+        f"{name}: ANEES {anees:.2f} over {nees.size} epochs ({n_thin} decorrelated: k {k}) "
+        f"against [{lo:.2f}, {hi:.2f}]{' (upper only)' if conservative else ''}, "
+        f"{100 * inside:.0f} % of epochs inside 3 sigma")
 
 
 @pytest.mark.parametrize("name", ["ins", "ins_tercom", "pmf", "pf", "rbpf", "acq_track"])
