@@ -163,5 +163,7 @@ def test_jsbsim_alone_ceiling_only_runs_the_task_envs_own_flight():
         assert proxy.reads == 0 and proxy.writes == 0
         assert abs(flight.fdm["simulation/sim-time-sec"] - t0 - proxy.runs * 0.02) < 1e-6
         assert all(math.isfinite(r) and r > 0 for r in (wall, cpu))
+        # the rate is the simulated seconds run over at least the 0.05 s asked for
+        assert wall <= proxy.runs * 0.02 / 0.05
     finally:
         env.close()
