@@ -8,8 +8,8 @@ PPO in both env tiers on the same held-out goals and seeds.
     python scripts/route_task.py evaluate --out out/b --policies straight,planner,random   # no checkpoint
     python scripts/route_task.py evaluate --out out/route_task --policies ppo --merge-rows out/b/rows.json
     python scripts/route_task.py all --out /tmp/rt --iterations 1 --seeds 1 --max-episode-s 60   # tiny
-    python scripts/route_task.py select --out out/route_task --every 50      # model selection (no held-out)
-    python scripts/route_task.py select --out out/rt --every 50 --rule fix_loss --validation-seeds 2000
+    python scripts/route_task.py select --out out/route_task                 # model selection (no held-out)
+    python scripts/route_task.py select --out out/rt --every 10 --rule success --validation-seeds 2000
 
 train: RLlib PPO (the `rllib` extra) on the task (trn_env.env.route_task: terrain `--terrain`, start and
 goal regions, training goals outside the held-out radius) on TerrainNavFast-v0 when it is registered, else on
@@ -23,14 +23,14 @@ held-out goals x `--seeds` evaluation seeds (route_task.EVAL_SEEDS) in each tier
 tier only when registered); writes OUT/rows.json (one row per episode), OUT/summary.json (the table's
 figures, the paired comparisons, the transfer gap and the issue's target check) and OUT/table.md, and prints
 the table. Bad arguments: a message and exit 2, nothing written.
-select: model selection without the held-out goals: every `--every`-th checkpoint of OUT/checkpoints (iter_N
-with N a multiple of it, and final) flies `--validation-seeds` fast-tier episodes (seeds
-route_task.VALIDATION_SEEDS, goals drawn by the env from the training distribution, never a held-out goal);
-`--rule success`: the one with the highest success rate, then the lowest mean true miss, is the pick;
-`--rule fix_loss`: the lowest fix-loss rate (episodes not arrived or missing by more than 100 m), then the
-lowest mean true miss; writes OUT/selection.json (every checkpoint's figures, the pick, the CPU seconds it
-took) and OUT/selection.png (the figures against the iteration), and prints them. Evaluate the pick with
-`evaluate --checkpoint`.
+select: model selection without the held-out goals: every `--every`-th (default 50) checkpoint of
+OUT/checkpoints (iter_N with N a multiple of it, and final) flies `--validation-seeds` (default all 20,000)
+fast-tier episodes (seeds route_task.VALIDATION_SEEDS, goals drawn by the env from the training distribution,
+never a held-out goal); `--rule fix_loss` (default): the lowest fix-loss rate (episodes not arrived or missing
+by more than 100 m), then the lowest mean true miss, is the pick; `--rule success`: the highest success rate,
+then the lowest mean true miss; writes OUT/selection.json (every checkpoint's figures, the pick, the CPU
+seconds it took) and OUT/selection.png (the figures against the iteration), and prints them. Evaluate the pick
+with `evaluate --checkpoint`.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ import sys
 from pathlib import Path
 
 POLICIES = ("straight", "planner", "random", "ppo")
-VALIDATION_SEEDS = range(100_000, 102_000)      # = route_task.VALIDATION_SEEDS (checked in _check)
+VALIDATION_SEEDS = range(100_000, 120_000)      # = route_task.VALIDATION_SEEDS (checked in _check)
 
 
 def parse(argv):
@@ -99,15 +99,15 @@ def parse(argv):
                         "the learner's SGD then does not spin on busy cores)")
     p.add_argument("--policies", default="straight,planner,random,ppo",
                    help="policies to evaluate (comma separated, of straight, planner, random, ppo)")
-    p.add_argument("--every", type=int, default=10,
+    p.add_argument("--every", type=int, default=50,
                    help="select: consider the checkpoints iter_N with N a multiple of this (and final)")
-    p.add_argument("--validation-seeds", type=int, default=500,
-                   help=f"select: validation episodes per checkpoint (default 500, at most "
+    p.add_argument("--validation-seeds", type=int, default=len(VALIDATION_SEEDS),
+                   help=f"select: validation episodes per checkpoint (default and at most "
                         f"{len(VALIDATION_SEEDS)})")
-    p.add_argument("--rule", choices=("success", "fix_loss"), default="success",
-                   help="select: the pick's rule: the highest success rate, then the lowest mean miss "
-                        "(success), or the lowest fix-loss rate (not arrived, or a miss above 100 m), then "
-                        "the lowest mean miss (fix_loss)")
+    p.add_argument("--rule", choices=("success", "fix_loss"), default="fix_loss",
+                   help="select: the pick's rule: the lowest fix-loss rate (not arrived, or a miss above "
+                        "100 m), then the lowest mean miss (fix_loss, default), or the highest success "
+                        "rate, then the lowest mean miss (success)")
     p.add_argument("--merge-rows", type=Path, nargs="*", default=[],
                    help="rows.json files of earlier evaluations (same terrain and seeds) to summarise with "
                         "this one's; this run's rows replace theirs for the same tier, policy, goal and seed")

@@ -100,7 +100,7 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
     assert not out.exists()                                  # nothing written
     sel = ["select", "--out", str(out)]
     for bad, name in ((["--every", "0"], "--every"), (["--validation-seeds", "0"], "--validation-seeds"),
-                      (["--validation-seeds", "2001"], "--validation-seeds"), ([], "no checkpoints")):
+                      (["--validation-seeds", "20001"], "--validation-seeds"), ([], "no checkpoints")):
         assert mod.main([*sel, *bad]) == 2
         assert name in capsys.readouterr().err
     assert not out.exists()
@@ -133,6 +133,9 @@ def test_fix_loss_pick_prefers_the_fewer_lost_fixes_then_the_lower_mean_miss():
         rt.best_checkpoint(rows, "luck")
     with pytest.raises(ValueError, match="rule"):
         rt.select_checkpoint(["x"], "basin", [100_000], rule="luck")
+    for bad in (0, 1.5):
+        with pytest.raises(ValueError, match="max_envs"):
+            rt.select_checkpoint(["x"], "basin", [100_000], max_envs=bad)
 
 
 def test_task_settings_and_bad_terrain():
@@ -241,6 +244,11 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     assert sel["rule"] == "fix_loss" and sel["rows"][0]["episodes"] == 4
     assert (out / "selection.png").is_file()
     assert sel["rows"][0]["fix_loss_rate"] >= 1.0 - sel["rows"][0]["success"]   # not arrived = lost
+    # the validation episodes flown in vector envs of 2 sub-envs give the figures of one vector env
+    seeds, final = list(route_task.VALIDATION_SEEDS[:5]), [out / "checkpoints" / "final"]
+    one, split = (rt.select_checkpoint(final, "basin", seeds, {"max_episode_s": 60.0}, "fix_loss", max_envs=m)
+                  for m in (5, 2))
+    assert split["rows"] == one["rows"] and one["rows"][0]["episodes"] == 5
 
 
 @pytest.mark.parametrize("bad, name", [(["--goals", "9"], "--goals"), (["--goals", "x"], "--goals"),

@@ -232,23 +232,30 @@ SELECTION_RULES = ("success", "fix_loss")
 
 
 def select_checkpoint(checkpoints, terrain: str, seeds, env_overrides: dict | None = None,
-                      rule: str = "success") -> dict:
+                      rule: str = "success", max_envs: int = 2000) -> dict:
     """Model selection without the held-out goals: every checkpoint (RLlib checkpoint folders) flies the fast
     tier's validation episodes (`evaluate_fast(..., drawn_goals=True)` over `seeds`, which should be
     `route_task.VALIDATION_SEEDS`: goals drawn from the training distribution, never a held-out goal, seeds
     disjoint from the evaluation's); per checkpoint the success rate, the fix-loss rate (episodes not arrived
     or missing by more than FIX_LOSS_MISS_M) and the mean, median and 90th-percentile true miss over the
-    arrived episodes. The best by `rule` (`best_checkpoint`). Returns {"rows": [...] per checkpoint, "best":
-    its row, "rule": rule}. ValueError on no checkpoints or an unknown rule."""
+    arrived episodes. The best by `rule` (`best_checkpoint`). The episodes fly in vector envs of at most
+    `max_envs` sub-envs (a seed fixes its episode whatever the vector's size). Returns {"rows": [...] per
+    checkpoint, "best": its row, "rule": rule}. ValueError on no checkpoints, an unknown rule or `max_envs`
+    below 1."""
     checkpoints = [str(c) for c in checkpoints]
+    seeds = [int(s) for s in seeds]
     if not checkpoints:
         raise ValueError("checkpoints: none given")
     if rule not in SELECTION_RULES:
         raise ValueError(f"rule must be one of {SELECTION_RULES}, got {rule!r}")
+    if not isinstance(max_envs, int) or max_envs < 1:
+        raise ValueError(f"max_envs must be a positive integer, got {max_envs!r}")
     out = []
     for c in checkpoints:
-        rs = evaluate_fast([{"label": "ppo", "kind": "rllib", "checkpoint": c}], terrain, seeds,
-                           env_overrides, drawn_goals=True)
+        rs = []
+        for k in range(0, len(seeds), max_envs):
+            rs += evaluate_fast([{"label": "ppo", "kind": "rllib", "checkpoint": c}], terrain,
+                                seeds[k:k + max_envs], env_overrides, drawn_goals=True)
         miss = np.array([r["true_miss_m"] for r in rs if r["arrived"]])
         lost = sum((not r["arrived"]) or r["true_miss_m"] > FIX_LOSS_MISS_M for r in rs)
         out.append({"checkpoint": c, "episodes": len(rs),
