@@ -1,10 +1,11 @@
 """The reference route task (docs/guide/route_task.md): train PPO, then evaluate straight, planner, random and
 PPO in both env tiers on the same held-out goals and seeds.
 
-    python scripts/route_task.py all --out out/route_task                  # train (3,600 CPU s), evaluate
+    python scripts/route_task.py all --out out/route_task           # train (3,600 CPU s), select, evaluate
     python scripts/route_task.py train --out out/route_task --cpu-minutes 60  # RLlib PPO, fast tier if there
     python scripts/route_task.py train --out out/route_task --minutes 30     # a wall-time budget instead
-    python scripts/route_task.py evaluate --out out/route_task --seeds 10    # needs OUT/checkpoints/final
+    python scripts/route_task.py evaluate --out out/route_task               # needs OUT/checkpoints/final
+    python scripts/route_task.py evaluate --out out/route_task --seeds 10    # a quick look (50 episodes)
     python scripts/route_task.py evaluate --out out/b --policies straight,planner,random   # no checkpoint
     python scripts/route_task.py evaluate --out out/route_task --policies ppo --merge-rows out/b/rows.json
     python scripts/route_task.py all --out /tmp/rt --iterations 1 --seeds 1 --max-episode-s 60   # tiny
@@ -31,6 +32,7 @@ by more than 100 m), then the lowest mean true miss, is the pick; `--rule succes
 then the lowest mean true miss; writes OUT/selection.json (every checkpoint's figures, the pick, the CPU
 seconds it took) and OUT/selection.png (the figures against the iteration), and prints them. Evaluate the pick
 with `evaluate --checkpoint`.
+all: train, select, then evaluate the pick (or `--checkpoint`, without the selection).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from pathlib import Path
 
 POLICIES = ("straight", "planner", "random", "ppo")
 VALIDATION_SEEDS = range(100_000, 120_000)      # = route_task.VALIDATION_SEEDS (checked in _check)
+EVAL_SEEDS = range(1000, 1200)                  # = route_task.EVAL_SEEDS (checked in _check)
 
 
 def parse(argv):
@@ -91,7 +94,9 @@ def parse(argv):
                         "a time-out; evaluation always uses the task's episode ends")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint", type=Path, default=None, help="checkpoint to evaluate")
-    p.add_argument("--seeds", type=int, default=10, help="evaluation seeds per held-out goal")
+    p.add_argument("--seeds", type=int, default=len(EVAL_SEEDS),
+                   help=f"evaluation seeds per held-out goal (default the task's {len(EVAL_SEEDS)}; fewer "
+                        f"for a quick look, whose means a single lost track can decide)")
     p.add_argument("--tiers", default="full,fast", help="tiers to evaluate in (comma separated)")
     p.add_argument("--max-episode-s", type=float, default=None, help="override the task's episode length")
     p.add_argument("--torch-threads", type=int, default=None,
@@ -175,6 +180,8 @@ def _check(args) -> dict:
             raise ValueError(f"--merge-rows: {f} is not a rows.json written by `evaluate`")
     if tuple(VALIDATION_SEEDS) != route_task.VALIDATION_SEEDS:
         raise ValueError("scripts/route_task.py's VALIDATION_SEEDS differ from the task's")
+    if tuple(EVAL_SEEDS) != route_task.EVAL_SEEDS:
+        raise ValueError("scripts/route_task.py's EVAL_SEEDS differ from the task's")
     if args.every < 1:
         raise ValueError(f"--every must be >= 1, got {args.every}")
     if not 1 <= args.validation_seeds <= len(VALIDATION_SEEDS):
@@ -345,6 +352,10 @@ def main(argv=None) -> int:
             train(args, kw)
         finally:
             ray.shutdown()
+    if args.command == "all" and "ppo" in args.policies_t and args.checkpoint is None:
+        # the recipe: the checkpoint model selection picks (never on the held-out goals) is the one evaluated
+        args.select_t = checkpoints_to_select(args.out / "checkpoints", args.every)
+        args.checkpoint = Path(select(args, kw)["best"]["checkpoint"])
     if args.command in ("evaluate", "all"):
         evaluate(args, kw)
     if args.command == "select":

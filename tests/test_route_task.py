@@ -221,9 +221,11 @@ def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
     out = tmp_path / "rt"
     assert mod.main(["all", "--out", str(out), "--iterations", "1", "--seeds", "1", "--max-episode-s", "60",
                      "--train-batch-size", "8", "--minibatch-size", "4", "--epochs", "1",
-                     "--hidden", "8", "--envs-per-runner", "2"]) == 0
-    for f in ("history.json", "learning_curve.png", "rows.json", "summary.json", "table.md"):
+                     "--hidden", "8", "--envs-per-runner", "2", "--validation-seeds", "2"]) == 0
+    for f in ("history.json", "learning_curve.png", "selection.json", "rows.json", "summary.json",
+              "table.md"):
         assert (out / f).is_file(), f
+    assert json.loads((out / "selection.json").read_text())["rows"][0]["episodes"] == 2   # `all` selects
     rows = json.loads((out / "rows.json").read_text())
     full = [r for r in rows if r["tier"] == "full"]
     assert {r["policy"] for r in full} == {"straight", "planner", "random", "ppo"}
