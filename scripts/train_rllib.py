@@ -73,6 +73,9 @@ def main(argv=None) -> int:
         for name in ("iterations", "eval_seeds", "checkpoint_every"):
             if getattr(args, name) < 1:
                 raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+        if args.eval_seeds > len(route_task.EVAL_SEEDS):
+            raise ValueError(f"--eval-seeds must be at most the task's {len(route_task.EVAL_SEEDS)}, "
+                             f"got {args.eval_seeds}")
         if args.evaluate_only is not None and not args.evaluate_only.is_dir():
             raise ValueError(f"--evaluate-only {args.evaluate_only}: no such checkpoint folder")
     except ValueError as err:

@@ -46,6 +46,8 @@ def test_bad_arguments_exit_2_naming_them(tmp_path, capsys):
     assert "terrain" in capsys.readouterr().err
     assert s.main(["--out", str(tmp_path / "o"), "--iterations", "0"]) == 2
     assert "--iterations" in capsys.readouterr().err
+    assert s.main(["--out", str(tmp_path / "o"), "--eval-seeds", "201"]) == 2
+    assert "--eval-seeds" in capsys.readouterr().err
     from trn_env.env.rllib_train import ppo_config
 
     for bad in (-1.0, math.inf, True):
