@@ -133,7 +133,7 @@ def test_fix_loss_pick_prefers_the_fewer_lost_fixes_then_the_lower_mean_miss():
         rt.best_checkpoint(rows, "luck")
     with pytest.raises(ValueError, match="rule"):
         rt.select_checkpoint(["x"], "basin", [100_000], rule="luck")
-    for bad in (0, 1.5):
+    for bad in (0, 1.5, True):
         with pytest.raises(ValueError, match="max_envs"):
             rt.select_checkpoint(["x"], "basin", [100_000], max_envs=bad)
 

@@ -248,7 +248,7 @@ def select_checkpoint(checkpoints, terrain: str, seeds, env_overrides: dict | No
         raise ValueError("checkpoints: none given")
     if rule not in SELECTION_RULES:
         raise ValueError(f"rule must be one of {SELECTION_RULES}, got {rule!r}")
-    if not isinstance(max_envs, int) or max_envs < 1:
+    if isinstance(max_envs, bool) or not isinstance(max_envs, int) or max_envs < 1:
         raise ValueError(f"max_envs must be a positive integer, got {max_envs!r}")
     out = []
     for c in checkpoints:

@@ -85,8 +85,8 @@ EVAL_SEEDS: tuple[int, ...] = tuple(range(1000, 1200))
 TRAIN_SEED_BASE = 0
 # episode seeds of model selection (the fast tier, goals drawn from the training distribution, never a
 # held-out goal): disjoint from EVAL_SEEDS and from the trainer's reset seeds. 20,000 of them: a policy's
-# lost fixes are ~1 % of episodes, and the lowest of twenty checkpoints' rates over 2,000 episodes each
-# (+-0.2 %) picks noise as often as skill (docs/validation/route_task.md, "Tenth session")
+# lost fixes are ~1 % of episodes, and over 2,000 episodes a rate's standard error (~0.2 %) is as large as
+# the differences between late checkpoints (docs/validation/route_task.md, "Tenth session")
 VALIDATION_SEEDS: tuple[int, ...] = tuple(range(100_000, 120_000))
 # the training budget: 30 minutes on 2 cores, held as CPU seconds (what 30 minutes on 2 idle cores give at
 # most), so that a run on a shared machine is held to the same amount of computation as one on an idle machine
