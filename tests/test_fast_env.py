@@ -303,13 +303,14 @@ def test_calibrated_against_recorded_full_loop(mode, name, figure):
 @pytest.mark.parametrize("mode", cal.FIX_NOISE_MODES)
 @pytest.mark.parametrize("name", [r.name for r in cal.REFERENCE_ROUTES])
 def test_recorded_full_loop_is_what_the_full_loop_flies_now(name, mode):
-    """The full JSBSim loop flown now over seeds 0..31 of every reference route gives the recorded figures
-    of those seeds (cal.FULL_LOOP_REFERENCE(_BATCH)[name]["first_32"]): a change to the full loop that leaves
-    the 256-seed references stale (and the default calibration test comparing the fast tier with a loop
-    that no longer exists) fails here. The full loop gives the same episodes on every machine of ours;
-    the tolerance is the references' rounding."""
-    ref = _REFERENCES[mode][0][name]["first_32"]
-    full = cal.summary(cal.fly_full(cal.route_by_name(name), range(32), fix_noise=mode)["errors_m"])
+    """The full JSBSim loop flown now over seeds 0..cal.RECHECKED_SEEDS-1 of every reference route gives the
+    recorded figures of those seeds (cal.FULL_LOOP_REFERENCE(_BATCH)[name]["first_16"]): a change to the
+    full loop that leaves the 256-seed references stale (and the default calibration test comparing the
+    fast tier with a loop that no longer exists) fails here. The full loop gives the same episodes on every
+    machine of ours; the tolerance is the references' rounding."""
+    ref = _REFERENCES[mode][0][name][f"first_{cal.RECHECKED_SEEDS}"]
+    full = cal.summary(cal.fly_full(cal.route_by_name(name), range(cal.RECHECKED_SEEDS),
+                                    fix_noise=mode)["errors_m"])
     for figure in ("mean_m", "p90_m"):
         assert full[figure] == pytest.approx(ref[figure], abs=0.006), (figure, full, ref)
 
