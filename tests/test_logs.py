@@ -87,6 +87,32 @@ def test_streamed_log_equals_the_in_memory_one(recorded):
     assert list(imu.columns[:3]) == ["frame", "t_s", "f_x_mps2"] and np.all(np.diff(imu["t_s"]) > 0)
 
 
+def test_frames_and_arrays_read_from_a_log_are_writable(recorded):
+    """pyarrow reads single-chunk numeric columns as read-only zero-copy views; the reader hands the
+    navigators writable arrays, the live loop's type, so a replay compiles no read-only specialisation of
+    their numba kernels (a second compile of each, on first use)."""
+    import dataclasses
+
+    from trn_env.logs.format import SENSORS
+    _, _, path, _ = recorded
+    log = read_log(path)
+    assert not log.arrow("imu").column("t_s").to_numpy().flags.writeable    # what pyarrow hands out
+    seen = 0
+    for frames in log.frames():
+        for s in SENSORS:
+            frame = getattr(frames, s)
+            if frame is None:
+                continue
+            for f in dataclasses.fields(frame):
+                v = getattr(frame, f.name)
+                if isinstance(v, np.ndarray) and v.size:
+                    assert v.flags.writeable, (s, f.name)
+                    seen += 1
+    assert seen > 100
+    for k, v in log.arrays().items():
+        assert v.flags.writeable, k
+
+
 def test_fly_writes_a_replayable_log_folder(tmp_path, capsys):
     out = tmp_path / "run"
     assert cli.main(["fly", str(SCEN / "default_short.toml"), "--out", str(out), "--quiet", "--duration", "4",

@@ -65,6 +65,14 @@ def geoid_offset_m(metadata: dict, where: str = "metadata.json") -> float:
     return float(n)
 
 
+def _writable(a: np.ndarray) -> np.ndarray:
+    """`a`, copied if it is read-only. pyarrow hands out read-only zero-copy views of single-chunk numeric
+    columns, and numba compiles a separate specialisation of a kernel for read-only arrays: frames read from
+    a log would compile every navigator kernel they reach a second time. Copies give them the live loop's
+    array type."""
+    return a if a.flags.writeable else a.copy()
+
+
 def _open_table(path: Path) -> pa.Table:
     try:
         return pq.read_table(path)
@@ -116,9 +124,10 @@ class SensorLog:
 
     # --------------------------------------------------------------------------------- frames
     def _sensor_columns(self, s: str) -> dict[str, np.ndarray]:
-        """A sensor's columns in the navigators' conventions (IMU rates, heights above MSL)."""
+        """A sensor's columns in the navigators' conventions (IMU rates, heights above MSL), writable (see
+        _writable)."""
         t = self.arrow(s)
-        cols = {c: t.column(c).to_numpy() for c in t.column_names}
+        cols = {c: _writable(t.column(c).to_numpy()) for c in t.column_names}
         if s == "imu" and self.metadata.get("imu_sample") == "increment":
             ts = cols["t_s"]
             dt = np.diff(ts)
@@ -156,7 +165,7 @@ class SensorLog:
         per sensor field (the navigators' conventions), and, when the log holds them, the estimates as
         est_t_s, est_lat_rad, ..., est_cov (n, 9, 9), nav_ok, nav_status_code and the truth as t_s,
         true_lat_rad, true_lon_rad, true_h_msl_m, true_v_ned_mps, ... (what e.g.
-        navigators.integrity.dem_monitor.replay_log reads)."""
+        navigators.integrity.dem_monitor.replay_log reads), all writable (_writable)."""
         out: dict[str, np.ndarray] = {}
         for s in self.sensors:
             cols = self._sensor_columns(s)
@@ -190,7 +199,7 @@ class SensorLog:
             for c in ("roll_rad", "pitch_rad", "yaw_rad", "tas_mps", "alpha_rad", "beta_rad"):
                 if c in truth:
                     out[f"true_{c}"] = truth[c].to_numpy()
-        return out
+        return {k: _writable(v) for k, v in out.items()}
 
     # ---------------------------------------------------------------------------------- truth
     def truth(self) -> pd.DataFrame | None:
