@@ -256,8 +256,18 @@ class AcqTrackConfig(Settings):
         return (self.transect_samples - 1) * self.sample_period_s
 
 
+def _warm_up(rate_hz: float) -> dict:
+    """The warm-up flight's settings (three updates, GNSS in the first): a transect of 5 samples 0.1 update
+    apart, full while GNSS places it, so the later updates track (the loops, the integrity checks and the
+    centroid fix, whatever the short transect's SNR, V-shape or innovation); lock lost after 5 epochs
+    with any sigma asks for an acquisition (the serial search)."""
+    return {"transect_samples": 5, "sample_period_s": 0.1 / rate_hz, "snr_min_db": -1e3,
+            "false_lock_sigma_factor": 1e3, "fix_gate_nis": 1e9, "acquire_above_sigma_m": 0.0}
+
+
 # error time constants: GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
 # protection level validated on: docs/validation/integrity.md section 6.3
 CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True,
+                            warm_up_settings=_warm_up,
                             pl_validated=("navigation/as_published", "navigation/dted1"),
                             error_time_constant_s=80.0, height_time_constant_s=3900.0)

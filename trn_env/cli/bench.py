@@ -9,7 +9,7 @@ from trn_env.cli.common import _stdout_to_stderr
 
 
 def cmd_precompile(args) -> int:
-    from trn_env.sim.precompile import precompile
+    from trn_env.bench.precompile import precompile
     wall_s = precompile(workers=args.workers, report=lambda line: print(line, file=sys.stderr, flush=True))
     print(f"kernels compiled and cached in {wall_s:.1f} s", file=sys.stderr)
     return 0
