@@ -3,7 +3,9 @@
 Produced by trn_env.sensors (or read from a log of a real flight) and consumed by navigators. They live
 here, not in trn_env, because navigators must run without the simulator. Units are SI; frames are
 body FRD and navigation NED unless a field name says otherwise. Every sample has a time `t_s`
-(seconds since scenario start) and a boolean `valid`; an invalid sample's values are NaN.
+(seconds since scenario start) and a boolean `valid`; an invalid sample's values are NaN. A frame's arrays
+are C-contiguous and writable: one given as a strided or read-only view (a column of a table, a read-only
+buffer) is copied when the frame is made, so a navigator's numba kernels compile for one array type.
 """
 
 from __future__ import annotations
@@ -14,11 +16,17 @@ import numpy as np
 
 
 def _check_lengths(frame) -> None:
+    """Every array field has t_s's rows; each is made C-contiguous and writable (copied only where it is
+    not: a strided slice, a read-only view), so the navigators' numba kernels see one array type whatever
+    the frames were cut from, and compile once."""
     n = frame.t_s.shape[0]
     for f in fields(frame):
         v = getattr(frame, f.name)
-        if isinstance(v, np.ndarray) and v.shape[:1] != (n,):
-            raise ValueError(f"{type(frame).__name__}.{f.name} has {v.shape[0]} rows, t_s has {n}")
+        if isinstance(v, np.ndarray):
+            if v.shape[:1] != (n,):
+                raise ValueError(f"{type(frame).__name__}.{f.name} has {v.shape[0]} rows, t_s has {n}")
+            if not (v.flags.c_contiguous and v.flags.writeable):
+                setattr(frame, f.name, np.require(v, requirements=["C", "W"]))
 
 
 @dataclass

@@ -141,6 +141,7 @@ def _is_f8_vector(a, n=None) -> bool:
         and a.dtype == np.float64
         and a.ndim == 1
         and a.flags.c_contiguous
+        and a.flags.writeable
         and (n is None or a.shape[0] == n)
     )
 
@@ -156,7 +157,13 @@ def _positions(lat_rad, lon_rad, h_m):
     lat, lon, h = np.broadcast_arrays(lat, lon, h)
     if lat.ndim != 1:
         raise ValueError(f"antenna positions must be scalars or (n,) arrays, got shape {lat.shape}")
-    return np.ascontiguousarray(lat), np.ascontiguousarray(lon), np.ascontiguousarray(h)
+    return _kernel_array(lat), _kernel_array(lon), _kernel_array(h)
+
+
+def _kernel_array(a: np.ndarray) -> np.ndarray:
+    """a as a C-contiguous, writable array (a copy only where needed): numba compiles a kernel again for
+    each new array type, and read-only arrays (broadcast_to's views, a caller's read-only data) are one."""
+    return np.require(a, requirements=["C", "W"])
 
 
 def _stack(name, arr, n, shape):
@@ -165,6 +172,7 @@ def _stack(name, arr, n, shape):
         and arr.dtype == np.float64
         and arr.shape == (n,) + shape
         and arr.flags.c_contiguous
+        and arr.flags.writeable
     ):
         return arr  # fast path: what the general path below would return
     a = np.asarray(arr, dtype=np.float64)
@@ -174,7 +182,7 @@ def _stack(name, arr, n, shape):
         raise ValueError(
             f"{name} must have shape {shape} or ({n}, {', '.join(map(str, shape))}), got {a.shape}"
         )
-    return np.ascontiguousarray(a)
+    return _kernel_array(a)
 
 
 def _outputs(n):

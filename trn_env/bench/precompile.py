@@ -8,7 +8,9 @@ built-in navigator uses, and the route task's fast tier, so that later flights, 
 (TerrainNav-v0 and TerrainNavFast-v0, RLlib's env runners included) and test runs load them from the cache.
 
 Jobs, each in its own process:
-- a scenario job is `warm_up` of one (scenario, navigator) pair (SCENARIO_JOBS). The first (the default
+- a scenario job is `warm_up` of one (scenario, navigator, overrides) (SCENARIO_JOBS; the overrides are
+  `trn-env fly --set` assignments: the INS job also flies the built-in DEM integrity monitor, with the radar
+  altimeter it needs). The first (the default
   scenario with INS + TERCOM: flight core, sensors, the exact terrain queries, the EKF and TERCOM kernels)
   runs in this process, with warm_up's own forked child compiling its navigator beside it; the other
   scenario jobs share its kernels, so they start when it is done (no kernel is compiled twice at once).
@@ -28,31 +30,35 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from functools import partial
 
-# (built-in scenario, navigator): the first runs before the others, then longest first (module docstring)
-SCENARIO_JOBS: tuple[tuple[str, str], ...] = (
-    ("default", "ins_tercom"),
-    ("acq_track", "acq_track"),
-    ("default", "rbpf"),
-    ("default", "pmf"),
-    ("default", "pf"),
-    ("default", "ins"),
+ScenarioJob = tuple[str, str, tuple[str, ...]]
+_DEM_MONITOR = ("sensors.radar_altimeter={}", "monitors.dem_integrity={}")
+# (built-in scenario, navigator, overrides): the first runs before the others, then longest first (module
+# docstring)
+SCENARIO_JOBS: tuple[ScenarioJob, ...] = (
+    ("default", "ins_tercom", ()),
+    ("acq_track", "acq_track", ()),
+    ("default", "rbpf", ()),
+    ("default", "pmf", ()),
+    ("default", "ins", _DEM_MONITOR),
+    ("default", "pf", ()),
 )
 
 
-def warm_job(job: tuple[str, str], parallel: bool = False) -> tuple[str, float]:
-    """warm_up one (scenario, navigator) pair in this process; returns (label, wall s)."""
+def warm_job(job: ScenarioJob, parallel: bool = False) -> tuple[str, float]:
+    """warm_up one (scenario, navigator, overrides) in this process; returns (label, wall s)."""
     from trn_env.scenario.build import build_terrain, quiet_stdout
-    from trn_env.scenario.loading import load_scenario
+    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
     from trn_env.sim.closed_loop import spawn_rngs
     from trn_env.sim.warm_up import warm_up
 
-    name, navigator = job
+    name, navigator, overrides = job
     t0 = time.perf_counter()
-    scenario = load_scenario(name, navigator=navigator)
+    scenario = load_scenario_with(name, [parse_assignment(a) for a in overrides], navigator=navigator)
     dems = build_terrain(scenario, scenario.extras, spawn_rngs(scenario.seed)["map"])
     with quiet_stdout():
         warm_up(scenario, dems, parallel=parallel)
-    return f"{name} / {navigator}", time.perf_counter() - t0
+    monitors = "".join(f" + {m.name}" for m in scenario.sections.monitors)
+    return f"{name} / {navigator}{monitors}", time.perf_counter() - t0
 
 
 def warm_fast_tier() -> tuple[str, float]:
@@ -104,7 +110,7 @@ EARLY_JOBS: tuple[Job, ...] = (warm_fast_tier,)
 LATER_JOBS: tuple[Job, ...] = (warm_full_tier,)
 
 
-def precompile(scenario_jobs: tuple[tuple[str, str], ...] = SCENARIO_JOBS,
+def precompile(scenario_jobs: tuple[ScenarioJob, ...] = SCENARIO_JOBS,
                early_jobs: tuple[Job, ...] = EARLY_JOBS, later_jobs: tuple[Job, ...] = LATER_JOBS,
                workers: int | None = None, report=print) -> float:
     """Run the jobs (module docstring); returns the wall seconds. `report(line)` gets one line per job."""

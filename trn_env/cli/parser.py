@@ -90,9 +90,9 @@ def _parser() -> argparse.ArgumentParser:
     navs.add_argument("--json", action="store_true", help="one JSON object instead of tables")
     val = sub.add_parser("validate", help="check a scenario file and list every problem")
     val.add_argument("scenario")
-    pre = sub.add_parser("precompile", help="compile the numba kernels of every built-in navigator and both "
-                                            "env tiers once, on all cores (after an install and on every "
-                                            "node; later runs load the cache)")
+    pre = sub.add_parser("precompile", help="compile the numba kernels of every built-in navigator, the DEM "
+                                            "monitor and both env tiers once, on all cores (after an install "
+                                            "and on every node; later runs load the cache)")
     pre.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     bench = sub.add_parser("bench", help="print throughput figures, each beside its same-run reference")
     bench.add_argument("--quick", action="store_true", help="shorter measurements (less precise)")
