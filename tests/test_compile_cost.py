@@ -54,3 +54,35 @@ def test_integer_constants_do_not_multiply_specialisations():
     fresh(P, np.eye(13) * 1e-6, t, f_b, hist, hist[0].copy(), np.zeros(3), np.zeros(3), 1.0, 0.5, 2, 100.0)
     assert np.isfinite(P).all()
     assert len(_ekf_kernels._set_skew.signatures) == 1, _ekf_kernels._set_skew.signatures
+
+
+def _prange_index_calls(tree: ast.AST) -> list[int]:
+    """Lines where a call inside a `for i in prange(...)` loop takes the bare loop index i as an argument
+    (np.int64(i) aside)."""
+    hits = []
+    for loop in ast.walk(tree):
+        if not (isinstance(loop, ast.For) and isinstance(loop.target, ast.Name)
+                and isinstance(loop.iter, ast.Call) and getattr(loop.iter.func, "id", None) == "prange"):
+            continue
+        index = loop.target.id
+        for node in (n for stmt in loop.body for n in ast.walk(stmt)):
+            if (isinstance(node, ast.Call) and getattr(node.func, "attr", None) != "int64"
+                    and any(isinstance(a, ast.Name) and a.id == index for a in node.args)):
+                hits.append(node.lineno)
+    return hits
+
+
+def test_parallel_loops_pass_their_index_to_kernels_as_int64():
+    # numba types a prange loop's index int64 but lowers the parallel loop with a uint64 index: a kernel
+    # called with the bare index compiles twice (with its callees: ~3 s of the fast tier's compile)
+    hits = []
+    for pkg in ("terrain", "navigators", "trn_env"):
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            lines = _prange_index_calls(ast.parse(path.read_text()))
+            hits += [f"{path.relative_to(ROOT)}:{line}" for line in lines]
+    assert hits == []
+
+
+def test_the_scanner_sees_a_bare_prange_index_in_a_call():
+    tree = ast.parse("for i in prange(n):\n    f(np.int64(i), x)\n    g(x, i)\n    y = a[i]\n")
+    assert _prange_index_calls(tree) == [3]
