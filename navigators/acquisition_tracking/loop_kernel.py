@@ -559,7 +559,9 @@ def track_loops(rec, transect, settings, out):
                 if which == 0:
                     reach = speed_reach
                     loop = (reach, speed_desc, speed_threshold_1, speed_spacing_2, speed_threshold_2)
-                    r = loop_epoch(rec, lat_p, lon_p, motion, b_v, b_psi, prof, 0, loop, vset, o_n, o_e)
+                    # np.int64: a bare 0 / 1 is a numba literal, which compiled loop_epoch once per loop
+                    r = loop_epoch(rec, lat_p, lon_p, motion, b_v, b_psi, prof, np.int64(0), loop, vset, o_n,
+                                   o_e)
                     b_v = r[0]
                     sp_v = r[11]
                 else:  # spec section 2: 2 sin(eps / 2) v t N = f R_db
@@ -567,7 +569,8 @@ def track_loops(rec, transect, settings, out):
                     reach = 2.0 * math.asin(min(1.0, f_r / (2.0 * v * sample_period_s * n)))
                     reach = max(reach, heading_desc[0])
                     loop = (reach, heading_desc, heading_threshold_1, heading_spacing_2, heading_threshold_2)
-                    r = loop_epoch(rec, lat_p, lon_p, motion, b_v, b_psi, prof, 1, loop, vset, o_n, o_e)
+                    r = loop_epoch(rec, lat_p, lon_p, motion, b_v, b_psi, prof, np.int64(1), loop, vset, o_n,
+                                   o_e)
                     b_psi = r[0] if aided else math.atan2(math.sin(r[0]), math.cos(r[0]))
                     sp_psi = r[11]
                 _x, it1, it2, _it_els, locked, v_shape, bw, m_off, m_cost, sl, sr, _sp, _els = r
