@@ -18,7 +18,8 @@ Jobs, each in its own process:
   do not depend on the terrain, the fast tier's navigator, the number of aircraft or the task's settings);
   it shares no kernel with the scenario jobs, so it starts at once (EARLY_JOBS), on the pool's cores the
   first job leaves idle. `warm_full_tier` does the same with TerrainNav-v0, whose flight, sensors and
-  navigator are the first job's: it compiles the env's own kernels after it (LATER_JOBS).
+  navigator are the first job's, flying the route planner's route: it compiles the env's own kernels and
+  the planner's after it (LATER_JOBS).
 Longest first: the pool takes the jobs in order.
 """
 
@@ -86,23 +87,25 @@ def warm_fast_tier() -> tuple[str, float]:
 
 
 def warm_full_tier() -> tuple[str, float]:
-    """Build the route task's TerrainNav-v0 on the basin terrain, reset it and fly one decision (the env's
-    own kernels: goal sampling, pursuit paths, observations); returns (label, wall s)."""
+    """Build the route task's TerrainNav-v0 on the basin terrain, reset it and fly one decision on the
+    terrain-information planner's route (the env's own kernels: goal sampling, pursuit paths, observations;
+    the planner's cost map and A* search, which the task's planner baseline flies in both tiers); returns
+    (label, wall s)."""
     import gymnasium as gym
-    import numpy as np
 
     from trn_env.env import route_task
+    from trn_env.env.policies import PlannerPolicy
     from trn_env.scenario.build import quiet_stdout
 
     t0 = time.perf_counter()
     with quiet_stdout():
         env = gym.make("trn_env/TerrainNav-v0", **route_task.env_kwargs("basin"))
         try:
-            env.reset(seed=0)
-            env.step(np.zeros(env.action_space.shape, env.action_space.dtype))
+            obs, _ = env.reset(seed=0)
+            env.step(PlannerPolicy(env)(obs))
         finally:
             env.close()
-    return "TerrainNav-v0 (route task)", time.perf_counter() - t0
+    return "TerrainNav-v0 (route task) and the planner", time.perf_counter() - t0
 
 
 Job = Callable[[], tuple[str, float]]
