@@ -4,16 +4,17 @@
 
 The kernels compile on their first call and are cached beside the package (numba `cache=True`). A first
 `trn-env fly` compiles only what its scenario uses (`trn_env.sim.warm_up`); this compiles what every
-built-in navigator uses, and the route task's fast tier, so that later flights, campaigns, env episodes
-(TerrainNav-v0 and TerrainNavFast-v0, RLlib's env runners included) and test runs load them from the cache.
+built-in navigator, the DEM integrity monitor, both env tiers at the route task's settings and the task's
+route planner use, so that later flights, local campaigns, env episodes (TerrainNav-v0 and
+TerrainNavFast-v0, RLlib's env runners included) and test runs load them from the cache.
 
 Jobs, each in its own process:
 - a scenario job is `warm_up` of one (scenario, navigator, overrides) (SCENARIO_JOBS; the overrides are
-  `trn-env fly --set` assignments: the INS job also flies the built-in DEM integrity monitor, with the radar
-  altimeter it needs). The first (the default
-  scenario with INS + TERCOM: flight core, sensors, the exact terrain queries, the EKF and TERCOM kernels)
-  runs in this process, with warm_up's own forked child compiling its navigator beside it; the other
-  scenario jobs share its kernels, so they start when it is done (no kernel is compiled twice at once).
+  `trn-env fly --set` assignments: the INS job also flies the DEM integrity monitor, with the radar
+  altimeter it needs). The first (the default scenario with INS + TERCOM: flight core, sensors, the exact
+  terrain queries, the EKF and TERCOM kernels) runs in this process, with warm_up's own forked child
+  compiling its navigator beside it; the other scenario jobs share its kernels, so they start when it is
+  done (no kernel is compiled twice at once).
 - the env jobs: `warm_fast_tier` builds the route task's TerrainNavFast-v0 and steps it (its kernels' types
   do not depend on the terrain, the fast tier's navigator, the number of aircraft or the task's settings);
   it shares no kernel with the scenario jobs, so it starts at once (EARLY_JOBS), on the pool's cores the
