@@ -53,7 +53,7 @@ def test_acq_track_flight_calls_nothing_its_warm_up_did_not():
         loop = ClosedLoop(sc, dems=dems, log_sensors=False, pipeline=False)
         result = loop.run()
         loop.close()
-        assert any("tracking" in str(e) or "in lock" in str(e) for e in result.events), result.events
+        assert any("acq_track: acquiring -> ok: in lock" in str(e) for e in result.events), result.events
     """)
     assert new == []
 
@@ -77,3 +77,11 @@ def test_fast_tier_kernels_do_not_depend_on_the_env_settings():
         envs.close()
     """, prefix="trn_env.env.")   # (building another terrain's DEMs is the scenario jobs' part)
     assert new == []
+
+
+def test_precompile_refuses_fewer_than_one_worker(capsys):
+    from trn_env.cli import main
+    for bad in ("0", "-2"):
+        assert main(["precompile", "--workers", bad]) == 2
+        err = capsys.readouterr().err
+        assert "--workers" in err and bad in err and "Traceback" not in err

@@ -9,6 +9,9 @@ from trn_env.cli.common import _stdout_to_stderr
 
 
 def cmd_precompile(args) -> int:
+    if args.workers is not None and args.workers < 1:
+        print(f"error: --workers: must be a whole number >= 1 (got {args.workers})", file=sys.stderr)
+        return 2
     from trn_env.bench.precompile import precompile
     wall_s = precompile(workers=args.workers, report=lambda line: print(line, file=sys.stderr, flush=True))
     print(f"kernels compiled and cached in {wall_s:.1f} s", file=sys.stderr)
