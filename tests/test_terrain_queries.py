@@ -784,3 +784,18 @@ def test_ira_box_max_bounds_the_surface_in_the_box(block):
         posts = heights[bi.min() * block:min(bi.max() * block + block, n_lat - 1) + 1,
                         bj.min() * block:min(bj.max() * block + block, n_lon - 1) + 1]
         assert got <= np.nanmax(posts)
+
+
+def test_broadcast_and_read_only_inputs_reach_the_kernels_as_writable_arrays():
+    # numba compiles a kernel again for read-only arrays: one velocity or attitude broadcast over the
+    # queries (broadcast_to's view) or a caller's read-only positions must reach it as plain arrays
+    from trn_env.terrain.queries.shared import _positions, _stack
+    v = _stack("v_ned", np.array([80.0, 5.0, 0.0]), 1, (3,))
+    C = _stack("C_bn", np.eye(3), 4, (3, 3))
+    lat = np.array([0.6, 0.61])
+    lat.flags.writeable = False
+    positions = _positions(lat, lat.copy(), np.array([900.0, 950.0]))
+    for a in (v, C, *positions):
+        assert a.flags.writeable and a.flags.c_contiguous
+    assert np.array_equal(v, [[80.0, 5.0, 0.0]]) and np.array_equal(C, np.broadcast_to(np.eye(3), (4, 3, 3)))
+    assert np.array_equal(positions[0], lat) and not np.shares_memory(positions[0], lat)
