@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _child_processes import init_local_ray
 
 from trn_env import cli
 from trn_env.campaign import load_campaign
@@ -159,9 +160,23 @@ def test_report_pngs_and_self_contained_html(flown, tmp_path):
 def ray_session():
     ray = pytest.importorskip("ray", reason="the ray extra is installed in CI (pip install -e .[ray])")
     # address="local": a new instance even when a cluster (`ray start`) runs on this machine
-    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+    init_local_ray()
     yield ray
     ray.shutdown()
+
+
+def test_ray_workers_import_the_trn_env_the_tests_import(ray_session):
+    """Ray puts the driver's working folder first on its workers' path: started from a checkout's root, the
+    workers would import its source tree instead of the installed package CI tests (and compile every
+    kernel again into the source tree's empty numba cache). init_local_ray starts Ray from tests/."""
+    import trn_env
+
+    @ray_session.remote
+    def where() -> str:
+        import trn_env as worker_trn_env
+        return worker_trn_env.__file__
+
+    assert ray_session.get(where.remote(), timeout=120) == trn_env.__file__
 
 
 def test_ray_backend_gives_the_same_runs_as_the_local_pool(flown, ray_session, tmp_path):

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from _child_processes import NEUTRAL_CWD
 from _ecef import ned_between as ned_vector_between
 
 from trn_env import cli
@@ -172,7 +173,7 @@ def test_interrupted_while_writing_leaves_no_summary(tmp_path, monkeypatch):
 def test_scenarios_command_console_script():
     exe = shutil.which("trn-env")
     cmd = [exe, "scenarios"] if exe else [sys.executable, "-m", "trn_env.cli", "scenarios"]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=NEUTRAL_CWD)
     assert res.returncode == 0, res.stderr
     lines = res.stdout.strip().splitlines()
     assert [ln.split()[0] for ln in lines] == builtin_names()

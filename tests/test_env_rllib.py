@@ -11,6 +11,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from _child_processes import init_local_ray
 
 import trn_env  # noqa: F401  (registers the gymnasium ids)
 from trn_env.env import rllib as glue
@@ -93,7 +94,7 @@ def test_ppo_trains_a_few_iterations_on_a_local_two_cpu_ray(tmp_path):
 
     kw = env_kwargs("basin")
     kw["max_episode_s"] = 90.0          # 3 decisions of 30 s: episodes end (time limit) within an iteration
-    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)   # never another's
+    init_local_ray()
     try:
         cfg = ppo_config("full", kw, num_env_runners=1, hidden=(8,), train_batch_size=12, minibatch_size=6,
                          num_epochs=2, lr=1e-3)
@@ -131,7 +132,7 @@ def test_cpu_budget_stops_within_it_and_counts_every_process(tmp_path):
     from trn_env.env.rllib_train import ppo_config, train
 
     kw = env_kwargs("basin")
-    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)   # never another's
+    init_local_ray()
     try:
         cfg = ppo_config("fast", kw, num_env_runners=1, num_envs_per_env_runner=8, hidden=(8,),
                          train_batch_size=64, minibatch_size=32, num_epochs=1)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -22,7 +21,6 @@ from trn_env.scenario.loading import ScenarioError, read_scenario_file, validate
 
 SCEN = Path(__file__).parent / "scenarios"
 SHORT = (SCEN / "default_short.toml").read_text()
-ROOT = Path(__file__).resolve().parent.parent
 DEM = terrain.load("jacksboro")
 
 
@@ -169,7 +167,7 @@ def test_cli_subprocess_nan_exit_2_no_traceback(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(SHORT.replace("duration_s = 150.0", "duration_s = inf"))
     r = subprocess.run([sys.executable, "-m", "trn_env.cli", "validate", str(p)], capture_output=True,
-                       text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+                       text=True, cwd=tmp_path, timeout=120)
     assert r.returncode == 2 and "duration_s" in r.stderr and "Traceback" not in r.stderr
 
 

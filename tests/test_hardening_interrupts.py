@@ -16,9 +16,8 @@ import pytest
 
 from trn_env.output import run_folder
 
-ROOT = Path(__file__).resolve().parent.parent
 SCEN = Path(__file__).parent / "scenarios"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}   # run in tmp_path: the children import the installed trn_env
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX signals and fork")
 

@@ -21,7 +21,6 @@ from trn_env.scenario.loading import ScenarioError, load_scenario, read_scenario
 from trn_env.sim.closed_loop import ClosedLoop
 
 SCEN = Path(__file__).parent / "scenarios"
-ROOT = Path(__file__).resolve().parent.parent
 SAME = ("horizontal_error_rms_m", "horizontal_error_final_m", "vertical_error_rms_m", "termination",
         "jsbsim_steps", "seed", "navigator", "sim_time_s", "distance_flown_m")
 
@@ -118,7 +117,7 @@ def test_gnss_outages_that_overlap_or_disorder_are_refused(outages, where, what)
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX signals")
 def test_sigterm_mid_flight_is_handled_like_ctrl_c(tmp_path):
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}     # in tmp_path: the child imports the installed trn_env
     proc = subprocess.Popen([sys.executable, "-m", "trn_env.cli", "fly", "default", "--out",
                              str(tmp_path / "run")], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from _child_processes import init_local_ray
 
 from trn_env import cli
 from trn_env.campaign import ray_backend
@@ -79,7 +80,7 @@ def test_ray_retries_are_counted_as_attempts():
     import ray
     started = not ray.is_initialized()
     if started:
-        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+        init_local_ray()
     try:
         ns: dict = {}
         exec(_ATTEMPTS, ns)

@@ -13,6 +13,7 @@ import zipfile
 import numpy as np
 import pyarrow as pa
 import pytest
+from _child_processes import NEUTRAL_CWD
 from trn_env.terrain import Dem
 
 from trn_env.logs.writer import MAX_BUFFER_BYTES, LogWriter
@@ -148,5 +149,6 @@ def test_trn_env_chooses_arrow_s_system_pool_unless_told_otherwise(preset):
     if preset:
         env["ARROW_DEFAULT_MEMORY_POOL"] = preset
     code = "import trn_env, pyarrow as pa; print(pa.default_memory_pool().backend_name)"
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
+                         cwd=NEUTRAL_CWD)
     assert out.stdout.strip() == (preset or "system"), out

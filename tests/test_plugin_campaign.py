@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _child_processes import NEUTRAL_CWD
 from sitan_support import ensure_sitan_installed
 
 from trn_env import cli
@@ -69,8 +70,9 @@ def test_replay_command_reproduces_the_row(local_run, tmp_path):
 
 
 @pytest.mark.slow
-def test_sitan_campaign_on_ray_matches_the_local_pool(local_run, tmp_path):
+def test_sitan_campaign_on_ray_matches_the_local_pool(local_run, tmp_path, monkeypatch):
     pytest.importorskip("ray", reason="the ray extra is installed in CI")
+    monkeypatch.chdir(NEUTRAL_CWD)      # Ray's workers import trn_env from where the tests do
     out = tmp_path / "ray"
     rc = cli.main(["campaign", str(_campaign(tmp_path, "sitan")), "--out", str(out), "--backend", "ray",
                    "--workers", "2", "--quiet"])
@@ -106,6 +108,7 @@ def test_unpackaged_reference_is_shipped_to_ray_workers(tmp_path, monkeypatch):
                 return self._nav.update(frames)
         """))
     monkeypatch.syspath_prepend(str(mod_dir))
+    monkeypatch.chdir(NEUTRAL_CWD)      # Ray's workers import trn_env from where the tests do
     out = tmp_path / "ray"
     rc = cli.main(["campaign", str(_campaign(tmp_path, "shipped_nav_mod:Ins")), "--out", str(out),
                    "--backend", "ray", "--workers", "2", "--quiet"])

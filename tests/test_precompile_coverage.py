@@ -13,6 +13,8 @@ import subprocess
 import sys
 import textwrap
 
+from _child_processes import NEUTRAL_CWD
+
 SIGNATURES = textwrap.dedent("""
     import json, sys
     from numba.core.registry import CPUDispatcher
@@ -33,7 +35,8 @@ SIGNATURES = textwrap.dedent("""
 def _new_signatures(body: str, prefix: str = "trn_env") -> list[str]:
     """The signatures of kernels under `prefix` that `body` adds after it sets `before`."""
     code = SIGNATURES + textwrap.dedent(body) + "\nprint(json.dumps(sorted(signatures() - before)))\n"
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
+                          cwd=NEUTRAL_CWD)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return [s for s in json.loads(proc.stdout.strip().splitlines()[-1]) if s.startswith(prefix)]
 

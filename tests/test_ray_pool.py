@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _child_processes import init_local_ray
 
 from trn_env.campaign import load_campaign
 from trn_env.campaign.ray_pool import WarmWorker
@@ -49,7 +50,7 @@ def _record_pid(run_id: str, attempt: int) -> None:
 def ray_session():
     ray = pytest.importorskip("ray", reason="the ray extra is installed in CI (pip install -e .[ray])")
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])     # the workers cannot import tests/
-    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+    init_local_ray()
     yield ray
     ray.shutdown()
 

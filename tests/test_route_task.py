@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _child_processes import NEUTRAL_CWD
 from scipy.stats import binomtest
 
 from trn_env.campaign import route_task as rt
@@ -213,8 +214,9 @@ def test_validation_episodes_draw_training_goals_never_a_held_out_one():
 
 
 @pytest.mark.slow
-def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path):
+def test_route_task_command_trains_and_evaluates_at_a_tiny_size(tmp_path, monkeypatch):
     pytest.importorskip("ray.rllib")
+    monkeypatch.chdir(NEUTRAL_CWD)      # the Ray it starts: workers import trn_env from where the tests do
     spec = importlib.util.spec_from_file_location("route_task_script", ROOT / "scripts" / "route_task.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
