@@ -39,24 +39,20 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 from scipy import stats
+from trn_env.navigators import registry
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from trn_env.navigators import registry  # noqa: E402
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
-
-import trn_env.scenario.build as components  # noqa: E402
-from trn_env.scenario.loading import load_scenario  # noqa: E402
-from trn_env.scenario.sections import from_dict  # noqa: E402
-from trn_env.sim.closed_loop import perturbed_estimate  # noqa: E402
-from trn_env.sim.nav_stage import gate_gnss  # noqa: E402
-from trn_env.testing import truth_chunks  # noqa: E402
+import trn_env.scenario.build as components
+from trn_env.scenario.loading import load_scenario
+from trn_env.scenario.sections import from_dict
+from trn_env.sim.closed_loop import perturbed_estimate
+from trn_env.sim.nav_stage import gate_gnss
+from trn_env.testing import truth_chunks
 
 CONVERGED_M = 50.0
 

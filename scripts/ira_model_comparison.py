@@ -35,24 +35,20 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from trn_env.navigators import registry
+from trn_env.navigators.measurements.ira_closest_point import closest_point_ned
+from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from trn_env.navigators import registry  # noqa: E402
-from trn_env.navigators.measurements.ira_closest_point import closest_point_ned  # noqa: E402
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m  # noqa: E402
-
-import trn_env.scenario.build as components  # noqa: E402
-from trn_env.flight.kinematic import heading_for_track, wind_ned_from  # noqa: E402
-from trn_env.scenario.loading import validate  # noqa: E402
-from trn_env.sensors.ira import IraConfig, sample_ira  # noqa: E402
-from trn_env.sim.closed_loop import perturbed_estimate  # noqa: E402
-from trn_env.testing import truth_chunks  # noqa: E402
+import trn_env.scenario.build as components
+from trn_env.flight.kinematic import heading_for_track, wind_ned_from
+from trn_env.scenario.loading import validate
+from trn_env.sensors.ira import IraConfig, sample_ira
+from trn_env.sim.closed_loop import perturbed_estimate
+from trn_env.testing import truth_chunks
 
 T_FROM_S = 30.0
 LAT0_DEG, LON0_DEG = 36.475, -84.30   # flying north across the Jacksboro DEM
