@@ -14,6 +14,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
+from _child_processes import NEUTRAL_CWD
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -163,7 +164,8 @@ def test_docs_build_with_warnings_as_errors_and_internal_links_resolve(tmp_path)
     out = tmp_path / "html"
     proc = subprocess.run([sys.executable, "-m", "sphinx", "-E", "-W", "--keep-going", "-q", "-b", "html",
                            "-d", str(tmp_path / "doctrees"), str(DOCS), str(out)],
-                          capture_output=True, text=True, timeout=1200)
+                          capture_output=True, text=True, timeout=1200,
+                          cwd=NEUTRAL_CWD)   # the gallery flies, and autodoc reads, the installed trn_env
     assert proc.returncode == 0, proc.stderr[-4000:]
     pages = list(out.rglob("*.html"))
     assert len(pages) > 20

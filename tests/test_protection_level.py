@@ -97,10 +97,10 @@ def test_mixture_hpl_against_monte_carlo_of_the_mixture(case):
 def test_rbpf_hpl_is_its_mixture_not_its_points():
     """rbpf's published HPL: the mixture of its particles with their own Kalman covariances through eq 5's B
     (checked by sampling that mixture, 400,000 draws) and wider than the points' mass radius alone."""
+    from test_rbpf import _frames, _initial
     from trn_env.navigators.measurements.ira_seed002 import predict_ira
     from trn_env.terrain.geodesy import euler_to_C_bn
 
-    from tests.test_rbpf import _frames, _initial
     from trn_env import terrain
 
     dem = terrain.load("jacksboro")
