@@ -3,7 +3,10 @@
 Heights are metres above MSL in a float64 array (n_lat, n_lon); row 0 is the southmost row, column 0 the
 westmost; NaN marks a void. Post (i, j) sits at latitude lat0_rad + i * dlat_rad and longitude
 lon0_rad + j * dlon_rad. Lookups outside the grid or over voids return NaN and never raise.
-Treat heights_m as read-only once queries have run (block height bounds are cached); use with_heights().
+heights_m is read-only (a read-only view when the array given is writable): queries cache tables derived
+from it (block height bounds), so a changed map is a new Dem (with_heights()). Read-only also gives the
+numba kernels one array type wherever a Dem comes from: Ray's object store hands its workers read-only
+arrays, and numba compiles a kernel again for each array type.
 """
 
 from __future__ import annotations
@@ -41,6 +44,14 @@ def _radii(lat_rad: np.ndarray, h_m=0.0) -> tuple[np.ndarray, np.ndarray]:
     w = 1.0 - geodesy.WGS84_E2 * s * s
     return (geodesy.WGS84_A_M * (1.0 - geodesy.WGS84_E2) / (w * np.sqrt(w)) + h_m,
             geodesy.WGS84_A_M / np.sqrt(w) + h_m)
+
+
+def _read_only(h: np.ndarray) -> np.ndarray:
+    """h, read-only: a read-only view of a writable array (the caller's array keeps its own flags)."""
+    if h.flags.writeable:
+        h = h.view()
+        h.flags.writeable = False
+    return h
 
 
 @dataclass
@@ -98,8 +109,14 @@ class Dem:
         if np.isinf(h).any():
             raise ValueError(f"Dem {self.name!r}: heights_m holds {int(np.isinf(h).sum())} infinite posts "
                              "(a void is NaN; a height must be finite)")
-        self.heights_m = h
+        self.heights_m = _read_only(h)
         self._pyramid = None
+
+    def __setstate__(self, state: dict) -> None:
+        # unpickled in-band (a spawned worker) the heights come back writable: a fresh array, ours to freeze
+        self.__dict__.update(state)
+        if self.heights_m.flags.writeable:
+            self.heights_m.flags.writeable = False
 
     # ----------------------------------------------------------------- geometry
     @property

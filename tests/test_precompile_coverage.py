@@ -13,6 +13,7 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 from _child_processes import NEUTRAL_CWD
 
 SIGNATURES = textwrap.dedent("""
@@ -88,3 +89,36 @@ def test_precompile_refuses_fewer_than_one_worker(capsys):
         assert main(["precompile", "--workers", bad]) == 2
         err = capsys.readouterr().err
         assert "--workers" in err and bad in err and "Traceback" not in err
+
+
+def test_ray_workers_read_only_maps_compile_nothing_after_the_scenario_job(tmp_path):
+    """Ray's object store hands its workers the campaign's DEMs read-only (checked here on the real store),
+    and numba compiles a kernel again for read-only arrays: after precompile's job for the default scenario,
+    a run of it as a Ray actor flies it (WarmWorker.prepare's warm-up, then the run, over DEMs from ray.get)
+    adds no signature."""
+    pytest.importorskip("ray", reason="the ray extra is installed in CI")
+    camp = tmp_path / "ray_maps.toml"
+    camp.write_text('name = "ray_maps"\nroot_seed = 1\nseeds = 1\nscenarios = ["default"]\n'
+                    'duration_s = 20.0\nnavigators = ["ins_tercom"]\n')
+    new = _new_signatures(f"""
+        import ray
+        from trn_env.bench.precompile import warm_job
+        from trn_env.campaign import load_campaign
+        from trn_env.campaign.driver import tasks
+        from trn_env.campaign.ray_pool import warm_run
+        from trn_env.campaign.runs import fly_run, set_dems
+
+        warm_job(("default", "ins_tercom", ()))
+        before = signatures()
+        campaign = load_campaign({str(camp)!r})
+        ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
+        dems = ray.get(ray.put(campaign.extra["dems"]))
+        assert dems and not any(d.heights_m.flags.writeable for d in dems.values())
+        task = next(tasks(campaign, set()))
+        set_dems(dems)
+        warm_run(task)
+        row, _ = fly_run(task)
+        assert row["termination"] == "time_limit", row["error"]
+        ray.shutdown()
+    """)
+    assert new == []

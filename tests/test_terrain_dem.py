@@ -154,3 +154,22 @@ def test_bilinear_cell_is_the_formula_written_out_and_radii_pair_the_two_radii()
     assert kernels.cell_index(9, 11, -0.01, 2.0)[0] == -1 and kernels.cell_index(9, 11, 2.0, 10.01)[0] == -1
     for lat in np.radians([-80.0, -12.5, 0.0, 36.4, 89.0]):
         assert geodesy.radii_m(lat) == (geodesy.meridian_radius_m(lat), geodesy.prime_vertical_radius_m(lat))
+
+
+def test_heights_are_read_only_and_the_callers_array_is_not():
+    """A Dem's heights are read-only (queries cache tables derived from them; a changed map is a new Dem),
+    also after a pickle round trip (a spawned worker's copy); the array given keeps its own flags."""
+    import pickle
+    given = np.arange(12.0).reshape(3, 4)
+    dem = Dem(given, 0.5, -1.7, 1e-4, 1e-4, name="t")
+    assert not dem.heights_m.flags.writeable and np.shares_memory(dem.heights_m, given)
+    with pytest.raises(ValueError, match="read-only"):
+        dem.heights_m[0, 0] = 1.0
+    given[0, 0] = 7.0                                # the caller's array is still theirs
+    assert given.flags.writeable
+    _, bmax, _ = dem.block_bounds(2)
+    back = pickle.loads(pickle.dumps(dem))
+    assert not back.heights_m.flags.writeable and np.array_equal(back.heights_m, dem.heights_m)
+    assert np.array_equal(back.block_bounds(2)[1], bmax)      # the cached bounds travel with the heights
+    changed = dem.with_heights(dem.heights_m + 1.0)
+    assert not changed.heights_m.flags.writeable and changed.heights_m[1, 1] == dem.heights_m[1, 1] + 1.0
