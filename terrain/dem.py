@@ -46,7 +46,7 @@ def _radii(lat_rad: np.ndarray, h_m=0.0) -> tuple[np.ndarray, np.ndarray]:
             geodesy.WGS84_A_M / np.sqrt(w) + h_m)
 
 
-def _read_only(h: np.ndarray) -> np.ndarray:
+def read_only_heights(h: np.ndarray) -> np.ndarray:
     """h, read-only: a read-only view of a writable array (the caller's array keeps its own flags)."""
     if h.flags.writeable:
         h = h.view()
@@ -109,7 +109,7 @@ class Dem:
         if np.isinf(h).any():
             raise ValueError(f"Dem {self.name!r}: heights_m holds {int(np.isinf(h).sum())} infinite posts "
                              "(a void is NaN; a height must be finite)")
-        self.heights_m = _read_only(h)
+        self.heights_m = read_only_heights(h)
         self._pyramid = None
 
     def __setstate__(self, state: dict) -> None:

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import geodesy, kernels
-from .dem import Dem
+from .dem import Dem, read_only_heights
 
 CORRELATION_FUNCTIONS = ("gaussian", "exponential")
 CE90_PER_SIGMA = 2.1460  # circular normal: P(r < 2.146 sigma) = 0.90
@@ -439,5 +439,5 @@ def set_heights(dem: Dem, heights_m: np.ndarray) -> None:
     h = np.ascontiguousarray(heights_m, dtype=np.float64)
     if h.shape != dem.heights_m.shape:
         raise ValueError(f"set_heights: shape {h.shape} differs from the Dem's {dem.heights_m.shape}")
-    dem.heights_m = h
+    dem.heights_m = read_only_heights(h)     # as a Dem's own: one array type for the kernels (terrain/dem.py)
     dem._pyramid = None

@@ -88,6 +88,7 @@ def test_time_dependent_map_swap_rebuilds_the_query_tables(dem):
     C = euler_to_C_bn(0.0, 0.0, 0.0)
     r0 = queries.radar_altimeter_return(base, lat, lon, h, C, math.radians(8.5), 5000.0).range_m[0]
     set_heights(base, sched[1][1])
+    assert not base.heights_m.flags.writeable     # read-only as every Dem's: the kernels' one array type
     r1 = queries.radar_altimeter_return(base, lat, lon, h, C, math.radians(8.5), 5000.0).range_m[0]
     fresh = dem.with_heights(sched[1][1].copy())
     r_fresh = queries.radar_altimeter_return(fresh, lat, lon, h, C, math.radians(8.5), 5000.0).range_m[0]
