@@ -233,6 +233,51 @@ def test_bad_input(basin):
         )
 
 
+_RAMP_LAT0, _RAMP_LON0, _RAMP_STEP_M = math.radians(36.0), math.radians(-84.0), 100.0
+_RAMP_DLAT = _RAMP_STEP_M / 6.371e6
+_RAMP_DLON = _RAMP_DLAT / math.cos(_RAMP_LAT0)
+
+
+def _ramp_dem(gradient: float, void_column: int | None = None):
+    """201 x 201 posts 100 m apart rising `gradient` m per m eastwards (and a 5 m ripple, slope < 0.02);
+    optionally one column of posts void."""
+    from trn_env.terrain.dem import Dem
+    n_m = np.arange(201)[:, None] * _RAMP_STEP_M
+    e_m = np.arange(201)[None, :] * _RAMP_STEP_M
+    h = 300.0 + gradient * e_m + 5.0 * np.sin(2 * np.pi * n_m / 2000.0) * np.cos(2 * np.pi * e_m / 1500.0)
+    if void_column is not None:
+        h[:, void_column] = np.nan
+    return Dem(h, _RAMP_LAT0, _RAMP_LON0, _RAMP_DLAT, _RAMP_DLON, "ramp")
+
+
+def _ramp_post(i: int, j: int) -> tuple[float, float]:
+    return _RAMP_LAT0 + i * _RAMP_DLAT, _RAMP_LON0 + j * _RAMP_DLON
+
+
+def test_straight_line_limits_name_the_constraint_the_line_breaks(basin):
+    """On a ramp the climb limit (5 m/s at 85 m/s: 0.0588) is broken climbing a 0.07 slope, not a 0.05 one,
+    nor descending or across it; a line over voids breaks the map's; a line across the basin breaks a
+    featureless bound shorter than the basin."""
+    for gradient, climbing in ((0.05, []), (0.07, ["climb"])):
+        dem = _ramp_dem(gradient)
+        p = TerrainInformationPlanner(dem, PlannerConfig())
+        assert p.config.climb_gradient == pytest.approx(5.0 / 85.0)
+        at = _ramp_post
+        assert p.straight_line_limits(*at(100, 30), *at(100, 170)) == climbing        # eastwards: up
+        assert p.straight_line_limits(*at(100, 170), *at(100, 30)) == []              # westwards: down
+        assert p.straight_line_limits(*at(30, 100), *at(170, 100)) == []              # along the contours
+        no_limit = TerrainInformationPlanner(dem, PlannerConfig(climb_rate_mps=None))
+        assert no_limit.straight_line_limits(*at(100, 30), *at(100, 170)) == []
+    void = TerrainInformationPlanner(_ramp_dem(0.05, void_column=100), PlannerConfig(climb_rate_mps=None))
+    assert void.straight_line_limits(*_ramp_post(100, 170), *_ramp_post(100, 30)) == ["map"]
+    assert void.straight_line_limits(*_ramp_post(30, 60), *_ramp_post(170, 60)) == []
+    s_lat, s_lon, g_lat, g_lon = _start_goal(basin)
+    bounded = TerrainInformationPlanner(basin, PlannerConfig(max_featureless_m=2000.0, climb_rate_mps=None))
+    assert bounded.straight_line_limits(s_lat, s_lon, g_lat, g_lon) == ["featureless"]
+    assert TerrainInformationPlanner(basin, PlannerConfig(climb_rate_mps=None)).straight_line_limits(
+        s_lat, s_lon, g_lat, g_lon) == []
+
+
 def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     from trn_env.cli import main
 
@@ -244,10 +289,15 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     assert len(route["waypoints"]) >= 3 and (tmp_path / "route.png").stat().st_size > 10_000
     why = capsys.readouterr().out.strip().splitlines()[-1]       # why the route is longer than the line
     assert why.startswith("why +") and "the straight line crosses" in why and "expected error" in why
-    # over the Jacksboro DEM neither route crosses featureless terrain: the reason given is the grid, not it
+    # over the Jacksboro DEM neither route crosses featureless terrain: the straight line climbs faster than
+    # the limit, which the reason names; without the limit the route is the straight line (+0.2 %)
     assert main(["plan", "default", "--goal", "36.66", "-84.18", "--out", str(tmp_path / "j.toml")]) == 0
     why = capsys.readouterr().out.strip().splitlines()[-1]
-    assert why.startswith("why +") and "not featureless terrain" in why and "planning grid" in why
+    assert why.startswith("why +") and "not featureless terrain" in why and "faster than the aircraft" in why
+    assert "gradient of 0.059" in why and "--no-climb-limit" in why
+    assert main(["plan", "default", "--goal", "36.66", "-84.18", "--no-climb-limit",
+                 "--out", str(tmp_path / "j2.toml")]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith("why: the straight line is already")
     bad = tmp_path / "bad.toml"
     for args, msg in (
         (["--goal", "37.9", "-84.13"], "off the map"),

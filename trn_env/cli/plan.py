@@ -36,6 +36,7 @@ def cmd_plan(args) -> int:
         straight = TerrainInformationPlanner(the_map, PlannerConfig(
             weight=0.0, cell_m=args.cell, agl_m=args.agl, climb_rate_mps=None)).plan(s_lat, s_lon, g_lat,
                                                                                       g_lon)
+        limits = planner.straight_line_limits(s_lat, s_lon, g_lat, g_lon)
     except ValueError as err:
         msg = str(err).replace("PlannerConfig.weight", "--weight").replace(
             "PlannerConfig.max_featureless_m", "--max-featureless").replace(
@@ -61,14 +62,16 @@ def cmd_plan(args) -> int:
           f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "
           f"(straight {straight.featureless_m / 1000:.2f} km), "
           f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
-    print(_plan_reason(route, straight, sc, config))
+    print(_plan_reason(route, straight, sc, config, limits))
     return 0
 
 
-def _plan_reason(route, straight, sc, config) -> str:
+def _plan_reason(route, straight, sc, config, limits: list[str]) -> str:
     """Why the planned route is longer than the straight line: each one's featureless flight, the expected
     horizontal error at the end of its longest featureless stretch (where the navigator must find the
-    terrain again) and at the goal (trn_env.guidance.goal_error, with the scenario's IMU)."""
+    terrain again) and at the goal (trn_env.guidance.goal_error, with the scenario's IMU); when neither
+    crosses featureless terrain, the constraint the straight line breaks (limits:
+    TerrainInformationPlanner.straight_line_limits) or else the planning grid."""
     from trn_env.guidance.goal_error import expected_goal_error_m
     from trn_env.scenario.build import imu_bias_settings
     imu = imu_bias_settings(sc.sensors.imu)
@@ -88,10 +91,18 @@ def _plan_reason(route, straight, sc, config) -> str:
     if route.length_m <= straight.length_m * 1.001:
         return f"why: the straight line is already the best route: {describe(straight)} {model}"
     if straight.featureless_m <= route.featureless_m + 0.5 * config.cell_m:
-        return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: not featureless terrain (the "
+        head = (f"why +{100 * route.extra_distance_fraction:.0f} % distance: not featureless terrain (the "
                 f"straight line crosses {straight.featureless_m / 1000:.1f} km of it, the planned route "
-                f"{route.featureless_m / 1000:.1f} km); the extra distance comes from the planning grid "
-                f"({config.cell_m:.0f} m cells, 8 directions) and the climb limit: try a smaller --cell or "
-                f"--no-climb-limit")
+                f"{route.featureless_m / 1000:.1f} km); ")
+        if "map" in limits:
+            return head + ("the straight line passes over map voids or near the map's edge, which the "
+                           "route keeps away from")
+        if "climb" in limits:
+            return head + (f"the map rises along the straight line faster than the aircraft may climb "
+                           f"(--climb-rate {config.climb_rate_mps:g} m/s at {tas:g} m/s: a gradient of "
+                           f"{config.climb_gradient:.3f}), so the route goes around the rise: "
+                           f"--no-climb-limit or a higher --climb-rate flies straighter")
+        return head + (f"the extra distance comes from the planning grid ({config.cell_m:.0f} m cells, 16 "
+                       f"directions): try a smaller --cell")
     return (f"why +{100 * route.extra_distance_fraction:.0f} % distance: the straight line crosses "
             f"{describe(straight)}; the planned route {describe(route)} {model}")

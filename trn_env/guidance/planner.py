@@ -267,9 +267,25 @@ class TerrainInformationPlanner:
         ev = self.evaluate([la0, la1], [lo0, lo1])
         if ev["cost"] > budget * (1.0 + 1e-9):
             return False
+        return not self._line_limits(la0, lo0, la1, lo1, ev, first_only=True)
+
+    def straight_line_limits(self, lat0_rad: float, lon0_rad: float, lat1_rad: float,
+                             lon1_rad: float) -> list[str]:
+        """The search's constraints that the straight line between two points (rad) breaks, in this order:
+        "featureless" (a featureless stretch longer than max_featureless_m), "map" (it passes over map
+        voids or within edge_margin_cells of the map's edge), "climb" (the map rises along it faster than
+        the climb gradient); empty when the straight line is a route the planner could fly."""
+        ev = self.evaluate([lat0_rad, lat1_rad], [lon0_rad, lon1_rad])
+        return self._line_limits(lat0_rad, lon0_rad, lat1_rad, lon1_rad, ev, first_only=False)
+
+    def _line_limits(self, la0, lo0, la1, lo1, ev: dict, first_only: bool) -> list[str]:
+        """straight_line_limits (ev: evaluate() of the line); first_only: stop at the first one found."""
         c = self.config
+        broken = []
         if c.max_featureless_m is not None and ev["longest_featureless_m"] > c.max_featureless_m:
-            return False
+            broken.append("featureless")
+            if first_only:
+                return broken
         n = max(2, int(math.ceil(ev["length_m"] / (0.25 * min(self.grid.cell_n_m, self.grid.cell_e_m)))))
         dn, de = latlon_to_ned_offset(la0, lo0, 0.0, la1, lo1)
         f = np.linspace(0.0, 1.0, n)
@@ -277,12 +293,15 @@ class TerrainInformationPlanner:
         i = np.floor((la - self.grid.lat0_rad) / self.grid.dlat_rad + 0.5).astype(int)
         j = np.floor((lo - self.grid.lon0_rad) / self.grid.dlon_rad + 0.5).astype(int)
         ni, nj = self.grid.shape
-        if np.any((i < 0) | (i >= ni) | (j < 0) | (j >= nj)) or np.any(self.blocked[i, j]):
-            return False
+        outside = (i < 0) | (i >= ni) | (j < 0) | (j >= nj)
+        if np.any(outside) or np.any(self.blocked[i, j]):
+            broken.append("map")
+            if first_only:
+                return broken
         gamma = c.climb_gradient
         if gamma is not None and not self._climb_ok(la, lo, ev["length_m"] / (n - 1), gamma):
-            return False
-        return True
+            broken.append("climb")
+        return broken
 
     def _climb_ok(self, la, lo, step_m: float, gamma: float) -> bool:
         """The map, sampled at (la, lo) every step_m and averaged over a planning cell as the search's cell
