@@ -32,6 +32,24 @@ def test_mass_radius_kernel_matches_reference_and_covers_the_mass():
     assert math.isnan(pl.weighted_mass_radius(np.zeros(3), np.zeros(3), np.zeros(3), 0.01))
 
 
+def test_mass_radius_kernel_on_a_grid_with_ties_and_far_points():
+    """A point-mass grid (61 x 61 cells of 10 m, Gaussian weights about its centre: distances tie in fours
+    and eights) against the reference; then with far points (1,000 km) that crowd every other cell into one
+    bucket of the kernel's sort, holding less and more than the risk."""
+    g = (np.arange(61) - 30) * 10.0
+    dn, de = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
+    w = np.exp(-0.5 * (dn**2 + de**2) / 80.0**2)
+    for risk in (1e-3, 0.05, 0.5):
+        assert pl.weighted_mass_radius(dn, de, w, risk) == pytest.approx(
+            pl.weighted_mass_radius_reference(dn, de, w, risk), abs=1e-9)
+    far_n, far_e = np.r_[dn, 1e6, -1e6, 0.0], np.r_[de, 0.0, 5e5, 1e6]
+    for share in (1e-6, 1e-2):               # the far points' share of the weight, below / above the risk
+        far_w = np.r_[w, np.full(3, share * w.sum() / 3)]
+        r = pl.weighted_mass_radius(far_n, far_e, far_w, 1e-3)
+        assert r == pytest.approx(pl.weighted_mass_radius_reference(far_n, far_e, far_w, 1e-3), abs=1e-9)
+        assert (r < 1e3) if share < 1e-3 else (r > 1e5)
+
+
 def test_gaussian_bound_holds_for_elliptical_errors():
     """P(|e| > HPL) <= risk for e ~ N(0, P): 400,000 draws of an elongated, rotated P; the exceedances stay
     below the 99.9 % binomial quantile at the risk, and the bound is exact (equality) for a circular P."""
