@@ -226,3 +226,14 @@ def test_closed_loop_flight_logs_the_protection_level(tmp_path):
     df = pd.DataFrame([{"navigator": "ins_tercom", "series_err_h_m": e, "series_hpl_m": h,
                         "series_nav_ok": a["nav_ok"].astype(float)}])
     assert stanford_plot(tmp_path / "s.png", df, 185.2) and (tmp_path / "s.png").stat().st_size > 1000
+
+
+def test_bench_mass_radius_figure_checks_the_kernel_against_numpy(monkeypatch):
+    from trn_env.bench.integrity import mass_radius_figures
+    figures = mass_radius_figures(quick=True)
+    assert set(figures) == {"integrity_mass_radius_40k_ms", "integrity_mass_radius_numpy_sort_40k_ms",
+                            "integrity_mass_radius_ratio_to_numpy_sort"}
+    assert all(math.isfinite(v) and v > 0 for v in figures.values())
+    monkeypatch.setattr(pl, "weighted_mass_radius", lambda dn, de, w, risk: 1.0)
+    with pytest.raises(RuntimeError, match="differs from numpy"):
+        mass_radius_figures(quick=True)

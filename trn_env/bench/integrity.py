@@ -4,6 +4,10 @@ The default scenario with a radar altimeter fitted and `[monitors.dem_integrity]
 beam model on: one exact cone query on the map per epoch) flies a warm-up, then a timed stretch, pipelined as
 `trn-env fly` runs it and inline in one process. Figures: the monitor's wall time per navigator update and per
 loop update, and their ratio `integrity_monitor_time_fraction` (target < 0.01), each from the same run.
+
+The pmf's and pf's protection level (`weighted_mass_radius`) on a point-mass filter's 200 x 200 grid (40,000
+cells, Gaussian weights about an off-grid mean): the kernel's time per call beside numpy's own sort-based
+radius of the same cells (argsort, cumulative sum, search), `integrity_mass_radius_40k_ms` and its ratio.
 """
 
 from __future__ import annotations
@@ -44,6 +48,44 @@ def _loop_figures(sim_s: float, pipeline: bool, segments: int = 3) -> dict:
             "fractions": [round(f, 5) for f in fractions], "updates": updates, "pipelined": loop.pipelined}
 
 
+def _best_ms(fn, repeats: int) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return 1e3 * best
+
+
+def mass_radius_figures(quick: bool = False, risk: float = 1e-3) -> dict:
+    """The HPL mass radius of 40,000 grid cells: the numba kernel and numpy's sort-based radius (ms per call,
+    best of the repeats), which must agree."""
+    import numpy as np
+
+    from trn_env.navigators.integrity.protection_level import weighted_mass_radius
+    g = (np.arange(200) - 99.5) * 5.0                      # 5 m cells
+    dn, de = (a.ravel().copy() for a in np.meshgrid(g, g, indexing="ij"))
+    rng = np.random.default_rng(0)
+    w = np.exp(-0.5 * (((dn - 7.3) / 60.0) ** 2 + ((de + 2.1) / 90.0) ** 2)) * rng.uniform(0.5, 1.5, dn.size)
+
+    def numpy_radius() -> float:
+        tot = w.sum()
+        d = np.hypot(dn - (w @ dn) / tot, de - (w @ de) / tot)
+        order = np.argsort(d)
+        k = int(np.searchsorted(np.cumsum(w[order]), (1.0 - risk) * tot * (1.0 - 1e-12)))
+        return float(d[order[min(k, d.size - 1)]])
+
+    kernel = float(weighted_mass_radius(dn, de, w, risk))
+    reference = numpy_radius()
+    if abs(kernel - reference) > 1e-9:
+        raise RuntimeError(f"weighted_mass_radius {kernel} m differs from numpy's {reference} m")
+    repeats = 20 if quick else 100
+    kernel_ms = _best_ms(lambda: weighted_mass_radius(dn, de, w, risk), repeats)
+    numpy_ms = _best_ms(numpy_radius, repeats)
+    return {"integrity_mass_radius_40k_ms": kernel_ms, "integrity_mass_radius_numpy_sort_40k_ms": numpy_ms,
+            "integrity_mass_radius_ratio_to_numpy_sort": kernel_ms / numpy_ms}
+
+
 def benchmark(quick: bool = False) -> dict:
     """integrity_monitor_time_fraction: the monitor's time / the closed loop's wall time (pipelined, as
     `trn-env fly`; the median of three segments), beside the loop's and the navigator's ms per update;
@@ -62,6 +104,7 @@ def benchmark(quick: bool = False) -> dict:
         "integrity_monitor_ms_per_update_inline": inline["monitor_ms_per_update"],
         "integrity_loop_ms_per_update_inline": inline["loop_ms_per_update"],
         "integrity_updates_timed": piped["updates"],
+        **mass_radius_figures(quick),
     }
 
 

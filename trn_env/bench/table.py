@@ -49,6 +49,8 @@ PAIRS: list[tuple[str, str, str | None, str]] = [
     ("acq_track_closed_loop_steps_per_s", "acq_track_jsbsim_reference_steps_per_s",
      "acq_track_closed_loop_ratio", "bare JSBSim"),
     ("planner_astar_s", "planner_reference_scipy_dijkstra_s", None, "scipy Dijkstra"),
+    ("integrity_mass_radius_40k_ms", "integrity_mass_radius_numpy_sort_40k_ms",
+     "integrity_mass_radius_ratio_to_numpy_sort", "numpy argsort + cumsum, same 40,000 cells"),
     ("filters_ins_tercom_sim_s_per_wall_s", "filters_bare_jsbsim_sim_s_per_wall_s", None, "bare JSBSim"),
     ("fast_env_agent_steps_per_s", "fast_env_full_tier_agent_steps_per_s", "fast_env_ratio_to_full_tier",
      "TerrainNav-v0 agent steps/s (full JSBSim loop)"),
