@@ -213,12 +213,21 @@ def mixture_mass_radius(dn_m, de_m, var_major_m2, w, risk):
     tot = 0.0
     hi = 0.0
     big = math.sqrt(-2.0 * math.log(risk))
+    d_k = np.empty(n)          # the finite, positively weighted components, in order, with |mean_k|
+    w_k = np.empty(n)
+    var_k = np.empty(n)
+    m = 0
     for k in range(n):
         if w[k] > 0.0 and dn_m[k] == dn_m[k] and de_m[k] == de_m[k] and var_major_m2[k] == var_major_m2[k]:
             tot += w[k]
-            r_k = math.hypot(dn_m[k], de_m[k]) + math.sqrt(max(var_major_m2[k], 0.0)) * big
+            d = math.hypot(dn_m[k], de_m[k])
+            r_k = d + math.sqrt(max(var_major_m2[k], 0.0)) * big
             if r_k > hi:
                 hi = r_k
+            d_k[m] = d
+            w_k[m] = w[k]
+            var_k[m] = var_major_m2[k]
+            m += 1
     if not tot > 0.0:
         return np.nan
     lo = 0.0
@@ -226,16 +235,11 @@ def mixture_mass_radius(dn_m, de_m, var_major_m2, w, risk):
     for _ in range(60):
         r = 0.5 * (lo + hi)
         tail = 0.0
-        for k in range(n):
-            wk = w[k]
-            if not (wk > 0.0 and dn_m[k] == dn_m[k] and de_m[k] == de_m[k]
-                    and var_major_m2[k] == var_major_m2[k]):
-                continue
-            dk = math.hypot(dn_m[k], de_m[k])
-            if dk > r:
-                tail += wk
-            elif var_major_m2[k] > 0.0:
-                tail += wk * math.exp(-0.5 * (r - dk) ** 2 / var_major_m2[k])
+        for k in range(m):
+            if d_k[k] > r:
+                tail += w_k[k]
+            elif var_k[k] > 0.0:
+                tail += w_k[k] * math.exp(-0.5 * (r - d_k[k]) ** 2 / var_k[k])
         if tail <= target:
             hi = r
         else:
