@@ -276,6 +276,9 @@ def test_straight_line_limits_name_the_constraint_the_line_breaks(basin):
     assert bounded.straight_line_limits(s_lat, s_lon, g_lat, g_lon) == ["featureless"]
     assert TerrainInformationPlanner(basin, PlannerConfig(climb_rate_mps=None)).straight_line_limits(
         s_lat, s_lon, g_lat, g_lon) == []
+    for bad in (math.nan, math.inf, "36.7"):
+        with pytest.raises(ValueError, match="goal must be finite latitude/longitude"):
+            bounded.straight_line_limits(s_lat, s_lon, bad, g_lon)
 
 
 def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):

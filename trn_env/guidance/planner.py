@@ -63,6 +63,13 @@ __all__ = ["FEATURELESS_EDGE", "MOVES", "PlannedRoute", "PlannerConfig", "RouteN
 G_MPS2 = 9.80665
 
 
+def _check_finite_point(name: str, lat_rad, lon_rad) -> None:
+    """ValueError naming the point unless both coordinates are finite numbers (rad)."""
+    for v in (lat_rad, lon_rad):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
+            raise ValueError(f"{name} must be finite latitude/longitude, got {lat_rad!r}, {lon_rad!r}")
+
+
 class RouteNotFoundError(ValueError):
     """No route meets the planner's constraints (featureless bound, climb limit, map edge margin)."""
 
@@ -214,9 +221,7 @@ class TerrainInformationPlanner:
     def check_endpoint(self, name: str, lat_rad: float, lon_rad: float) -> tuple[int, int]:
         """The planning cell of a start or goal; ValueError naming it when it is off the map or too near the
         map's edge."""
-        for v in (lat_rad, lon_rad):
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
-                raise ValueError(f"{name} must be finite latitude/longitude, got {lat_rad!r}, {lon_rad!r}")
+        _check_finite_point(name, lat_rad, lon_rad)
         deg = (math.degrees(lat_rad), math.degrees(lon_rad))
         if not self.map_dem.contains(lat_rad, lon_rad):
             b = np.degrees(self.map_dem.bounds)
@@ -274,7 +279,10 @@ class TerrainInformationPlanner:
         """The search's constraints that the straight line between two points (rad) breaks, in this order:
         "featureless" (a featureless stretch longer than max_featureless_m), "map" (it passes over map
         voids or within edge_margin_cells of the map's edge), "climb" (the map rises along it faster than
-        the climb gradient); empty when the straight line is a route the planner could fly."""
+        the climb gradient); empty when the straight line is a route the planner could fly. ValueError
+        naming the point that is not a finite latitude/longitude."""
+        _check_finite_point("start", lat0_rad, lon0_rad)
+        _check_finite_point("goal", lat1_rad, lon1_rad)
         ev = self.evaluate([lat0_rad, lat1_rad], [lon0_rad, lon1_rad])
         return self._line_limits(lat0_rad, lon0_rad, lat1_rad, lon1_rad, ev, first_only=False)
 
