@@ -180,6 +180,21 @@ def test_scenarios_command_console_script():
     assert all(len(ln.split(None, 1)) == 2 for ln in lines)
 
 
+def test_a_reader_that_closes_the_output_early_stops_nothing(tmp_path):
+    """`trn-env ... | head -1`: with the pipe's reading end closed before the command writes a byte, the
+    command finishes, writes its files and exits 0, with no traceback and no 'Exception ignored' (Python's
+    own behaviour was a BrokenPipeError traceback from `plan`, and exit 120 with a message at shutdown)."""
+    route = tmp_path / "route.toml"
+    for args in (["scenarios"], ["plan", "basin_route", "--goal", "36.716", "-84.1325", "--out", str(route)]):
+        child = subprocess.Popen([sys.executable, "-m", "trn_env.cli", *args], stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, cwd=NEUTRAL_CWD)
+        child.stdout.close()
+        err = child.stderr.read().decode()
+        assert child.wait(timeout=120) == 0, err
+        assert "Traceback" not in err and "BrokenPipe" not in err and "Exception ignored" not in err
+    assert route.stat().st_size > 0 and route.with_suffix(".png").stat().st_size > 0
+
+
 def test_validate_command(capsys, tmp_path):
     assert cli.main(["validate", "default"]) == 0
     assert "ok" in capsys.readouterr().out

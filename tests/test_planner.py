@@ -5,6 +5,7 @@ and `trn-env plan`."""
 from __future__ import annotations
 
 import math
+import shlex
 import sys
 
 import numpy as np
@@ -281,6 +282,46 @@ def test_straight_line_limits_name_the_constraint_the_line_breaks(basin):
             bounded.straight_line_limits(s_lat, s_lon, bad, g_lon)
 
 
+def test_leg_lengths_match_the_ecef_chord_and_collinear_steps_add_up():
+    """The planner's leg length against the straight chord between the two ends' ECEF positions (an
+    independent computation; the chord is shorter than the arc by L^3 / 24 R^2, 1e-6 relative at 30 km):
+    within 2e-6 in every direction and either way; and a leg split into the equal latitude/longitude steps of
+    a grid path adds up to the whole within dlat^2 / 24, the bound string pulling allows for (the
+    small-offset form taken at the leg's start made a 30 km north-east leg 6e-4 too long, a south-west one
+    6e-4 too short)."""
+    from trn_env.terrain.geodesy import lla_to_ecef, ned_offset_to_latlon
+
+    from trn_env.guidance.planner import _leg_ne_m
+
+    lat0, lon0 = math.radians(36.5), math.radians(-84.3)
+    for dist_m in (1_000.0, 10_000.0, 30_000.0):
+        for bearing_deg in range(0, 360, 45):
+            b = math.radians(bearing_deg)
+            lat1, lon1 = ned_offset_to_latlon(lat0, lon0, 0.0, dist_m * math.cos(b), dist_m * math.sin(b))
+            chord = math.dist(lla_to_ecef(lat0, lon0, 0.0), lla_to_ecef(lat1, lon1, 0.0))
+            there = math.hypot(*_leg_ne_m(lat0, lon0, lat1, lon1))
+            back = math.hypot(*_leg_ne_m(lat1, lon1, lat0, lon0))
+            assert there == pytest.approx(chord, rel=2e-6) and back == pytest.approx(chord, rel=2e-6)
+            f = np.linspace(0.0, 1.0, 61)
+            la, lo = lat0 + f * (lat1 - lat0), lon0 + f * (lon1 - lon0)
+            steps = sum(math.hypot(*_leg_ne_m(la[k], lo[k], la[k + 1], lo[k + 1])) for k in range(60))
+            assert abs(there - steps) <= there * ((lat1 - lat0) ** 2 / 24 + 1e-12)
+
+
+def test_a_straight_route_is_one_leg():
+    """Without the climb limit the straight line over the real DEM (no map voids, no featureless terrain) is
+    the best route: string pulling leaves its two ends only, at weight 0 and at the default weight."""
+    dem = terrain.load("jacksboro")
+    s_lat, s_lon, g_lat, g_lon = (math.radians(v) for v in (36.49, -84.37, 36.66, -84.18))
+    for weight in (0.0, 3.0):
+        p = TerrainInformationPlanner(dem, PlannerConfig(weight=weight, climb_rate_mps=None))
+        assert p.straight_line_limits(s_lat, s_lon, g_lat, g_lon) == []
+        route = p.plan(s_lat, s_lon, g_lat, g_lon)
+        assert np.allclose(route.waypoints_deg, [(36.49, -84.37, 600.0), (36.66, -84.18, 600.0)], rtol=0,
+                           atol=1e-12)
+        assert route.length_m == pytest.approx(route.straight_length_m, rel=1e-12)
+
+
 def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     from trn_env.cli import main
 
@@ -293,14 +334,23 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     why = capsys.readouterr().out.strip().splitlines()[-1]       # why the route is longer than the line
     assert why.startswith("why +") and "the straight line crosses" in why and "expected error" in why
     # over the Jacksboro DEM neither route crosses featureless terrain: the straight line climbs faster than
-    # the limit, which the reason names; without the limit the route is the straight line (+0.2 %)
+    # the limit, which the reason names; without the limit the route is the straight line, one leg
     assert main(["plan", "default", "--goal", "36.66", "-84.18", "--out", str(tmp_path / "j.toml")]) == 0
     why = capsys.readouterr().out.strip().splitlines()[-1]
     assert why.startswith("why +") and "not featureless terrain" in why and "faster than the aircraft" in why
     assert "gradient of 0.059" in why and "--no-climb-limit" in why
-    assert main(["plan", "default", "--goal", "36.66", "-84.18", "--no-climb-limit",
-                 "--out", str(tmp_path / "j2.toml")]) == 0
+    j2 = tmp_path / "j2.toml"
+    assert main(["plan", "default", "--goal", "36.66", "-84.18", "--no-climb-limit", "--out", str(j2)]) == 0
     assert capsys.readouterr().out.strip().splitlines()[-1].startswith("why: the straight line is already")
+    assert len(tomllib.loads(j2.read_text())["route"]["waypoints"]) == 2
+    # each file's second line is the command that plans it again, every option spelled out
+    for written, again in ((out, tmp_path / "again.toml"), (j2, tmp_path / "again2.toml")):
+        command = written.read_text().splitlines()[1].removeprefix("# ")
+        assert command.startswith("trn-env plan ") and "--agl" in command and "--cell" in command
+        assert main([*shlex.split(command)[1:], "--out", str(again)]) == 0
+        capsys.readouterr()
+        assert tomllib.loads(again.read_text()) == tomllib.loads(written.read_text())
+    assert "--no-climb-limit" in j2.read_text().splitlines()[1]
     bad = tmp_path / "bad.toml"
     for args, msg in (
         (["--goal", "37.9", "-84.13"], "off the map"),

@@ -63,7 +63,9 @@ def cli_markdown() -> str:
     out = ["# Command line (`trn-env`)", "",
            "Generated from the argument parser of `trn_env.cli`. Every command exits 0 on success, 2 on "
            "bad input (one line naming the field or file, nothing written), 130 on Ctrl-C and 143 on "
-           "SIGTERM.", ""]
+           "SIGTERM; `campaign --check` exits 1 when the gate finds a regression. A reader that closes the "
+           "output early (`trn-env campaign ... | head -1`) stops nothing: the rest of the output is "
+           "dropped and the command finishes its work and its files.", ""]
     top = [a for a in parser._actions if a.option_strings and a.dest != "help"]
     if top:
         out += ["## Global options", "", "| option | meaning |", "|---|---|"]

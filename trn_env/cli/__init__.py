@@ -17,7 +17,8 @@
 
 Exit status: 0 success, 1 regression gate failed (`campaign --check`), 2 invalid input (every problem
 printed, nothing written), 130 interrupted (Ctrl-C at any point: a one-line message, no traceback), 143
-terminated (SIGTERM, handled as Ctrl-C is: partial outputs removed, one line).
+terminated (SIGTERM, handled as Ctrl-C is: partial outputs removed, one line). A reader that closes the
+output early (`| head`) stops nothing: the rest of the output is dropped and the command finishes.
 
 One module a subcommand (or two close ones): `fly`, `record` (record, replay), `listing` (scenarios,
 navigators, validate), `campaign` (campaign, report), `bench` (bench, precompile), `plan`; `parser` builds
@@ -32,7 +33,13 @@ import sys
 
 from trn_env.cli.bench import cmd_bench, cmd_precompile
 from trn_env.cli.campaign import cmd_campaign, cmd_report
-from trn_env.cli.common import Terminated, _install_sigterm, _interrupt_exit, out_dir_problem
+from trn_env.cli.common import (
+    Terminated,
+    _install_sigterm,
+    _interrupt_exit,
+    _ReaderGoneStdout,
+    out_dir_problem,
+)
 from trn_env.cli.fly import cmd_fly
 from trn_env.cli.listing import cmd_navigators, cmd_scenarios, cmd_validate
 from trn_env.cli.parser import _parser
@@ -46,11 +53,18 @@ __all__ = ["main", "Terminated", "out_dir_problem", "cmd_bench", "cmd_campaign",
 
 def main(argv: list[str] | None = None) -> int:
     previous = _install_sigterm()
+    # the process's own standard output (not a caller's capture) survives a reader that stops early
+    wrapped = sys.stdout is sys.__stdout__ and sys.stdout is not None
+    if wrapped:
+        sys.stdout = _ReaderGoneStdout(sys.stdout)
     try:
         return _main(argv)
     finally:                   # a caller's own SIGTERM handling (a test runner, a notebook) is restored
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+        if wrapped:
+            sys.stdout.flush()             # output still buffered meets a closed pipe here, not at exit
+            sys.stdout = sys.__stdout__
 
 
 def _main(argv: list[str] | None) -> int:

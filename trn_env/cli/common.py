@@ -90,3 +90,36 @@ class _stdout_to_stderr:
             os.dup2(self._saved, 1)
             os.close(self._saved)
         return False
+
+
+class _ReaderGoneStdout:
+    """Standard output that outlives its reader: once the pipe it writes to is closed (`trn-env campaign ...
+    | head -1`), further output is dropped (file descriptor 1 goes to os.devnull, for the C++ libraries too)
+    instead of raising BrokenPipeError from the next print, so the command finishes its work and its files
+    and exits with its own status. Everything else is the wrapped stream's."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._drop()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._drop()
+
+    def _drop(self) -> None:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, self._stream.fileno())
+        finally:
+            os.close(devnull)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)

@@ -4,6 +4,7 @@ as a [route] table and a plot, with why it differs from the straight line."""
 from __future__ import annotations
 
 import os
+import shlex
 import sys
 
 from trn_env.cli.common import _print_problems
@@ -47,9 +48,7 @@ def cmd_plan(args) -> int:
     plot_path = args.plot or out.with_suffix(".png")
     header = (f"route for scenario {scenario.name!r} from ({sc.initial.lat_deg}, "
               f"{sc.initial.lon_deg}) "
-              f"to ({args.goal[0]}, {args.goal[1]}) deg\n"
-              f"trn-env plan {args.scenario} --goal {args.goal[0]} {args.goal[1]} --weight {args.weight:g}"
-              + (f" --max-featureless {args.max_featureless:g}" if args.max_featureless else ""))
+              f"to ({args.goal[0]}, {args.goal[1]}) deg\n" + _plan_command(args))
     text = route.toml(float(sc.route.tas_mps), header=header)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
@@ -64,6 +63,15 @@ def cmd_plan(args) -> int:
           f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
     print(_plan_reason(route, straight, sc, config, limits))
     return 0
+
+
+def _plan_command(args) -> str:
+    """The `trn-env plan` command that plans this route again: every planning option spelled out (repr of
+    each float, so the file's command reproduces the route bit for bit whatever the defaults become)."""
+    climb = "--no-climb-limit" if args.no_climb_limit else f"--climb-rate {args.climb_rate!r}"
+    featureless = "" if args.max_featureless is None else f" --max-featureless {args.max_featureless!r}"
+    return (f"trn-env plan {shlex.quote(str(args.scenario))} --goal {args.goal[0]!r} {args.goal[1]!r} "
+            f"--weight {args.weight!r}{featureless} --agl {args.agl!r} --cell {args.cell!r} {climb}")
 
 
 def _plan_reason(route, straight, sc, config, limits: list[str]) -> str:

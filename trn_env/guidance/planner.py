@@ -54,13 +54,25 @@ from trn_env.guidance.astar import (
 from trn_env.guidance.cost_map import InformationGrid, information_grid
 from trn_env.guidance.route_following import Route, Waypoint
 from trn_env.terrain.dem import Dem
-from trn_env.terrain.geodesy import latlon_to_ned_offset, ned_offset_to_latlon
+from trn_env.terrain.geodesy import radii_m
 
 # the search kernels (trn_env.guidance.astar) are re-exported: their names stay importable from here
 __all__ = ["FEATURELESS_EDGE", "MOVES", "PlannedRoute", "PlannerConfig", "RouteNotFoundError",
            "TerrainInformationPlanner", "astar_kernel", "edge_featureless", "plot_route"]
 
 G_MPS2 = 9.80665
+
+
+def _leg_ne_m(lat0_rad: float, lon0_rad: float, lat1_rad: float, lon1_rad: float) -> tuple[float, float]:
+    """North/east extent (m) of the leg from (lat0, lon0) to (lat1, lon1) (rad): seed 000 eq 2's small-offset
+    form with the radii and the cosine taken at the leg's mid-latitude, so a leg is as long in either
+    direction and collinear legs (the grid path's steps) add up to the leg they make to second order (within
+    dlat^2 / 24 of it, relative; dlat the leg's latitude span in rad) instead of first (the form taken at the
+    leg's start made a 1 km leg north 1.5e-5 longer than its two halves, so string pulling kept every grid
+    step of a straight line)."""
+    lat_mid = 0.5 * (lat0_rad + lat1_rad)
+    r_n, r_e = radii_m(lat_mid)
+    return (lat1_rad - lat0_rad) * r_n, (lon1_rad - lon0_rad) * r_e * math.cos(lat_mid)
 
 
 def _check_finite_point(name: str, lat_rad, lon_rad) -> None:
@@ -243,11 +255,12 @@ class TerrainInformationPlanner:
         step_m = 0.25 * min(self.grid.cell_n_m, self.grid.cell_e_m)
         ds_all, u_all = [], []
         for k in range(len(lats) - 1):
-            dn, de = latlon_to_ned_offset(lats[k], lons[k], 0.0, lats[k + 1], lons[k + 1])
+            dn, de = _leg_ne_m(lats[k], lons[k], lats[k + 1], lons[k + 1])
             d = math.hypot(dn, de)
             n = max(1, int(math.ceil(d / step_m)))
             f = (np.arange(n) + 0.5) / n
-            la, lo = ned_offset_to_latlon(lats[k], lons[k], 0.0, f * dn, f * de)
+            la = lats[k] + f * (lats[k + 1] - lats[k])     # a leg is straight in latitude/longitude
+            lo = lons[k] + f * (lons[k + 1] - lons[k])
             ds_all.append(np.full(n, d / n))
             u_all.append(self.grid.featureless_at(la, lo))
         return np.concatenate(ds_all), np.concatenate(u_all)
@@ -270,7 +283,8 @@ class TerrainInformationPlanner:
     def _segment_ok(self, la0, lo0, la1, lo1, budget: float) -> bool:
         """A straight shortcut is allowed: J no larger than `budget`, featureless bound kept, not blocked."""
         ev = self.evaluate([la0, la1], [lo0, lo1])
-        if ev["cost"] > budget * (1.0 + 1e-9):
+        # the leg's length form is within dlat^2 / 24 of the path it replaces (_leg_ne_m): allow 3x that
+        if ev["cost"] > budget * (1.0 + 1e-9 + (la1 - la0) ** 2 / 8.0):
             return False
         return not self._line_limits(la0, lo0, la1, lo1, ev, first_only=True)
 
@@ -295,9 +309,8 @@ class TerrainInformationPlanner:
             if first_only:
                 return broken
         n = max(2, int(math.ceil(ev["length_m"] / (0.25 * min(self.grid.cell_n_m, self.grid.cell_e_m)))))
-        dn, de = latlon_to_ned_offset(la0, lo0, 0.0, la1, lo1)
         f = np.linspace(0.0, 1.0, n)
-        la, lo = ned_offset_to_latlon(la0, lo0, 0.0, f * dn, f * de)
+        la, lo = la0 + f * (la1 - la0), lo0 + f * (lo1 - lo0)
         i = np.floor((la - self.grid.lat0_rad) / self.grid.dlat_rad + 0.5).astype(int)
         j = np.floor((lo - self.grid.lon0_rad) / self.grid.dlon_rad + 0.5).astype(int)
         ni, nj = self.grid.shape
@@ -360,8 +373,8 @@ class TerrainInformationPlanner:
         while changed and len(lats) > 2:
             changed = False
             for k in range(1, len(lats) - 1):
-                n0, e0 = latlon_to_ned_offset(lats[k - 1], lons[k - 1], 0.0, lats[k], lons[k])
-                n1, e1 = latlon_to_ned_offset(lats[k], lons[k], 0.0, lats[k + 1], lons[k + 1])
+                n0, e0 = _leg_ne_m(lats[k - 1], lons[k - 1], lats[k], lons[k])
+                n1, e1 = _leg_ne_m(lats[k], lons[k], lats[k + 1], lons[k + 1])
                 dchi = abs(
                     math.atan2(
                         math.sin(math.atan2(e1, n1) - math.atan2(e0, n0)),
@@ -423,7 +436,7 @@ class TerrainInformationPlanner:
             la, lo = self._string_pull(la, lo)
             la, lo = self._thin_turns(la, lo)
         ev = self.evaluate(la, lo)
-        dn, de = latlon_to_ned_offset(start_lat_rad, start_lon_rad, 0.0, goal_lat_rad, goal_lon_rad)
+        dn, de = _leg_ne_m(start_lat_rad, start_lon_rad, goal_lat_rad, goal_lon_rad)
         wps = [(math.degrees(a), math.degrees(b), float(c.agl_m)) for a, b in zip(la, lo, strict=False)]
         return PlannedRoute(
             wps,
