@@ -353,6 +353,41 @@ def test_report_and_check_refuse_bad_folders_and_baselines(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_report_never_replaces_a_folder_that_is_not_a_report(flown, tmp_path, capsys):
+    """`report --out` replaces an earlier report whole, and refuses (exit 2, the folder untouched) a folder
+    holding anything else, a file, or a place where no folder can be made: it used to delete any --out."""
+    keep = tmp_path / "mine"
+    keep.mkdir()
+    (keep / "notes.txt").write_text("mine")
+    afile = tmp_path / "a.txt"
+    afile.write_text("a file")
+    for out, msg in ((keep, "holds no previous report (no report.html)"), (afile, "is not a directory"),
+                     (afile / "rep", "is not a directory")):
+        assert cli.main(["report", str(flown), "--out", str(out)]) == 2
+        assert msg in capsys.readouterr().err
+    assert (keep / "notes.txt").read_text() == "mine" and afile.read_text() == "a file"
+    assert sorted(p.name for p in keep.iterdir()) == ["notes.txt"]
+    rep = tmp_path / "rep"
+    assert cli.main(["report", str(flown), "--out", str(rep)]) == 0
+    (rep / "stale.png").write_bytes(b"from an earlier report")
+    assert cli.main(["report", str(flown), "--out", str(rep)]) == 0
+    assert not (rep / "stale.png").exists() and (rep / "report.html").exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_write_baseline_target_is_checked_before_the_campaign_flies(tmp_path, capsys):
+    out = tmp_path / "out"
+    afile = tmp_path / "a.txt"
+    afile.write_text("a file")
+    for target, msg in ((tmp_path, "is a folder; give a file name"),
+                        (afile / "b.json", "is not a directory")):
+        assert cli.main(["campaign", str(CI), "--out", str(out), "--write-baseline", str(target)]) == 2
+        assert f"--write-baseline {target}: " in (err := capsys.readouterr().err) and msg in err
+        assert not out.exists()
+    assert cli.main(["campaign", str(CI), "--out", str(afile / "camp")]) == 2
+    assert "is not a directory" in capsys.readouterr().err
+
+
 def test_every_row_column_is_documented_in_the_outputs_reference(flown):
     """The docs' campaign-row reference is generated from trn_env.output.fields: a column a run writes but
     the table does not list would be missing from the docs."""

@@ -352,11 +352,24 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
         assert tomllib.loads(again.read_text()) == tomllib.loads(written.read_text())
     assert "--no-climb-limit" in j2.read_text().splitlines()[1]
     bad = tmp_path / "bad.toml"
+    afile = tmp_path / "a.txt"
+    afile.write_text("a file")
+    goal = ["--goal", "36.716", "-84.1325"]
     for args, msg in (
         (["--goal", "37.9", "-84.13"], "off the map"),
-        (["--goal", "36.716", "-84.1325", "--weight", "-2"], "--weight"),
+        ([*goal, "--weight", "-2"], "--weight"),
+        ([*goal, "--cell", "0"], "--cell must be a finite number > 0"),
         (["--goal", "36.64", "-84.1325", "--max-featureless", "500"], "no route found"),
+        ([*goal, "--plot", str(tmp_path)], f"--plot {tmp_path}: is a folder"),
+        ([*goal, "--plot", str(tmp_path / "p.txt")], "give a file name ending in one of"),
+        ([*goal, "--plot", str(afile / "p.png")], "is not a directory"),
+        ([*goal, "--plot", str(bad)], "give a file name ending in one of"),
     ):
         assert main(["plan", "basin_route", *args, "--out", str(bad)]) == 2
         assert msg in capsys.readouterr().err
-        assert not bad.exists()
+        assert not bad.exists() and not bad.with_suffix(".png").exists()
+    for target, msg in ((tmp_path, "is a folder; give a file name"),
+                        (afile / "r.toml", "is not a directory")):
+        assert main(["plan", "basin_route", *goal, "--out", str(target)]) == 2
+        assert f"--out {target}: " in (err := capsys.readouterr().err) and msg in err
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []

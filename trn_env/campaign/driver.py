@@ -17,6 +17,7 @@ from pathlib import Path
 from trn_env.campaign.rows import done_run_ids, read_manifest, write_log, write_manifest, write_row
 from trn_env.campaign.runs import RunTask
 from trn_env.campaign.spec import Campaign, CampaignError, replay_argv
+from trn_env.output.run_folder import creatable_problem
 
 
 def default_out_dir(name: str) -> Path:
@@ -39,6 +40,9 @@ def check_out_dir(campaign: Campaign, out_dir: Path, resume: bool) -> set[str]:
                                                   "campaign (campaign.json); choose another folder"])
         if resume and not out_dir.is_dir():
             raise CampaignError(campaign.source, [f"--resume: {out_dir} does not exist (nothing to resume)"])
+        problem = creatable_problem(out_dir, "--out") if not out_dir.is_dir() else None
+        if problem is not None:
+            raise CampaignError(campaign.source, [problem])
         return set()
     if manifest.get("campaign_hash") != campaign.hash:
         raise CampaignError(campaign.source, [

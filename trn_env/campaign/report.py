@@ -34,6 +34,7 @@ import numpy as np
 from trn_env.campaign.rows import read_manifest, read_rows
 from trn_env.campaign.stats import group_stats
 from trn_env.output.metrics import MetricSettings
+from trn_env.output.run_folder import target_problem
 
 MIN_BAND_RUNS = 20
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
@@ -352,14 +353,19 @@ def _settings_table(df) -> str:
 
 
 def write_report(campaign_dir: Path | str, out_dir: Path | str | None = None) -> Path:
-    """Write the report of a campaign folder; returns the report folder. ValueError naming the folder if it
-    is not a campaign folder or has no rows."""
+    """Write the report of a campaign folder; returns the report folder (default: campaign_dir / "report"),
+    which replaces an earlier report there as a whole. ValueError naming the folder if it is not a campaign
+    folder or has no rows, or if `out_dir` is a file, a non-empty folder that holds no earlier report (no
+    report.html: it is never replaced) or a place where no folder can be made."""
     campaign_dir = Path(campaign_dir)
     if not campaign_dir.is_dir():
         raise ValueError(f"report: {campaign_dir}: no such folder")
     manifest = read_manifest(campaign_dir)
     df = read_rows(campaign_dir)
     out_dir = Path(out_dir) if out_dir is not None else campaign_dir / "report"
+    problem = target_problem(out_dir, overwrite=True, marker="report.html", what="report")
+    if problem is not None:         # never replace a folder that is not an earlier report
+        raise ValueError(f"report: {problem}")
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
     try:
@@ -404,9 +410,13 @@ the runs themselves. Grey spans on time plots: GNSS outages.</p>
 </body></html>
 """
         (tmp / "report.html").write_text(page, encoding="utf-8")
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
+        old = None
+        if out_dir.exists():      # the earlier report aside, the new one in, then the earlier one removed
+            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+            os.replace(out_dir, old / "report")
         os.replace(tmp, out_dir)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)

@@ -9,6 +9,9 @@ import sys
 
 from trn_env.cli.common import _print_problems
 
+# the figure formats `--plot` takes (matplotlib writes each without extra software)
+PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".webp", ".eps", ".ps", ".tif", ".tiff")
+
 
 def cmd_plan(args) -> int:
     import math
@@ -21,11 +24,21 @@ def cmd_plan(args) -> int:
         return 2
     import trn_env.scenario.build as components
     from trn_env.guidance.planner import PlannerConfig, TerrainInformationPlanner, plot_route
+    from trn_env.output.run_folder import file_target_problem
     from trn_env.sim.closed_loop import spawn_rngs
     sc = scenario
+    out = args.out
+    plot_path = args.plot or out.with_suffix(".png")
     try:
         if not all(math.isfinite(v) for v in args.goal):
             raise ValueError(f"--goal must be finite latitude and longitude, got {args.goal}")
+        for problem in (file_target_problem(out, "--out"),
+                        file_target_problem(plot_path, "--plot" if args.plot else "--out (its plot)",
+                                            PLOT_SUFFIXES)):
+            if problem is not None:
+                raise ValueError(problem)
+        if out.absolute() == plot_path.absolute():
+            raise ValueError(f"--plot {plot_path}: the same file as --out")
         config = PlannerConfig(weight=args.weight, max_featureless_m=args.max_featureless, agl_m=args.agl,
                                cell_m=args.cell, tas_mps=float(sc.route.tas_mps),
                                climb_rate_mps=None if args.no_climb_limit else args.climb_rate)
@@ -41,21 +54,33 @@ def cmd_plan(args) -> int:
     except ValueError as err:
         msg = str(err).replace("PlannerConfig.weight", "--weight").replace(
             "PlannerConfig.max_featureless_m", "--max-featureless").replace(
-            "PlannerConfig.agl_m", "--agl").replace("PlannerConfig.climb_rate_mps", "--climb-rate")
+            "PlannerConfig.agl_m", "--agl").replace("PlannerConfig.climb_rate_mps", "--climb-rate").replace(
+            "PlannerConfig.cell_m", "--cell")
         print(f"error: {msg}", file=sys.stderr)
         return 2
-    out = args.out
-    plot_path = args.plot or out.with_suffix(".png")
     header = (f"route for scenario {scenario.name!r} from ({sc.initial.lat_deg}, "
               f"{sc.initial.lon_deg}) "
               f"to ({args.goal[0]}, {args.goal[1]}) deg\n" + _plan_command(args))
     text = route.toml(float(sc.route.tas_mps), header=header)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, out)                          # never a partial or empty file
-    plot_route(plot_path, planner, {f"planned (weight {args.weight:g})": route, "straight": straight},
-               title=f"{scenario.name}: route over the map's terrain information")
+    # both files are made beside their targets and renamed into place together: never a partial or empty
+    # file, nor a route without its plot
+    tmp_out = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    tmp_plot = plot_path.with_name(f".{plot_path.stem}.tmp{os.getpid()}{plot_path.suffix}")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        plot_path.parent.mkdir(parents=True, exist_ok=True)
+        tmp_out.write_text(text, encoding="utf-8")
+        plot_route(tmp_plot, planner, {f"planned (weight {args.weight:g})": route, "straight": straight},
+                   title=f"{scenario.name}: route over the map's terrain information")
+        os.replace(tmp_plot, plot_path)
+        os.replace(tmp_out, out)
+    except OSError as exc:
+        print(f"error: cannot write {exc.filename or out}: {exc.strerror or exc} (nothing written)",
+              file=sys.stderr)
+        return 2
+    finally:
+        for tmp in (tmp_out, tmp_plot):
+            tmp.unlink(missing_ok=True)
     print(f"{out}: {len(route.waypoints_deg)} waypoints, {route.length_m / 1000:.2f} km "
           f"(straight {route.straight_length_m / 1000:.2f} km, "
           f"+{100 * route.extra_distance_fraction:.1f} %), featureless {route.featureless_m / 1000:.2f} km "

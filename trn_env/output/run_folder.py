@@ -173,48 +173,73 @@ def clean_partial_leftovers(parent: Path, stale_after_s: float = 3600.0) -> list
     return removed
 
 
-def target_problem(out_dir: Path | str, overwrite: bool = False) -> str | None:
+def target_problem(out_dir: Path | str, overwrite: bool = False, *, option: str = "--out",
+                   marker: str = "summary.json", what: str = "run") -> str | None:
     """Why `out_dir` cannot take a new run (checked before a flight; nothing is created), or None.
 
     An absent or empty folder is fine; a folder holding a previous run (a summary.json) is fine with
     `overwrite`; any other non-empty folder, or a file, is refused. The folder (or its nearest existing
     parent) must accept a new directory: a probe directory is made there and removed at once, which catches
-    what permission bits do not (read-only or pseudo file systems such as /proc).
+    what permission bits do not (read-only or pseudo file systems such as /proc). `option` names the
+    setting in the message; `marker` and `what` say which file marks a folder it may replace (a campaign's
+    report folder: "report.html", "report").
     """
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        return f"--out {out_dir}: exists and is not a directory"
+        return f"{option} {out_dir}: exists and is not a directory"
     if out_dir.is_dir():
         here = Path.cwd().resolve()
         if out_dir.resolve() == here or out_dir.resolve() in here.parents:
-            return f"--out {out_dir}: is the current folder or holds it; give a folder for the run"
+            return f"{option} {out_dir}: is the current folder or holds it; give a folder for the {what}"
         try:
             names = sorted(p.name for p in out_dir.iterdir())
         except OSError as exc:
-            return f"--out {out_dir}: cannot read the folder ({exc.strerror or exc})"
+            return f"{option} {out_dir}: cannot read the folder ({exc.strerror or exc})"
         if names and not overwrite:
-            return (f"--out {out_dir}: the folder is not empty (it holds {', '.join(names[:3])}"
+            return (f"{option} {out_dir}: the folder is not empty (it holds {', '.join(names[:3])}"
                     f"{', ...' if len(names) > 3 else ''}); give another folder, or --overwrite to replace "
-                    "a previous run's folder as a whole")
-        if names and "summary.json" not in names:
-            return (f"--out {out_dir}: the folder is not empty and holds no previous run (no summary.json); "
-                    "--overwrite replaces only a run folder")
-    parent = out_dir.absolute().parent
+                    f"a previous {what}'s folder as a whole")
+        if names and marker not in names:
+            advice = "--overwrite replaces only a run folder" if what == "run" else "give another folder"
+            return (f"{option} {out_dir}: the folder is not empty and holds no previous {what} "
+                    f"(no {marker}); {advice}")
+    return creatable_problem(out_dir, option)
+
+
+def file_target_problem(path: Path | str, option: str, suffixes: tuple[str, ...] | None = None) -> str | None:
+    """Why the file `path` cannot be written (checked before the work that makes it; nothing is created),
+    or None: a folder, a suffix not in `suffixes` (lower case, with the dot; None: any), or a place where
+    no file can be made (creatable_problem). An existing file is fine: it is replaced whole."""
+    path = Path(path)
+    if path.is_dir():
+        return f"{option} {path}: is a folder; give a file name"
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        return (f"{option} {path}: give a file name ending in one of {', '.join(sorted(suffixes))}"
+                f"{'' if path.suffix else ' (it has no suffix)'}")
+    return creatable_problem(path, option)
+
+
+def creatable_problem(path: Path | str, option: str) -> str | None:
+    """Why `path` (a file or a folder) cannot be created where it is, or None: its nearest existing parent
+    must be a folder that accepts a new entry (a probe directory is made there and removed at once) and its
+    missing parents must be creatable (made and removed again). Nothing is left behind."""
+    path = Path(path)
+    parent = path.absolute().parent
     while not parent.exists() and parent.parent != parent:
         parent = parent.parent
     if not parent.is_dir():
-        return f"--out {out_dir}: cannot create it, {parent} is not a directory"
+        return f"{option} {path}: cannot create it, {parent} is not a directory"
     try:
-        probe = tempfile.mkdtemp(prefix=f".{out_dir.name}.probe-", dir=parent)
+        probe = tempfile.mkdtemp(prefix=f".{path.name}.probe-", dir=parent)
     except OSError as exc:
-        return f"--out {out_dir}: cannot create it in {parent} ({exc.strerror or exc})"
+        return f"{option} {path}: cannot create it in {parent} ({exc.strerror or exc})"
     os.rmdir(probe)
-    missing = out_dir.absolute().parent
+    missing = path.absolute().parent
     if missing != parent:
         try:          # the missing parents: creatable? (made and removed again, deepest first)
             missing.mkdir(parents=True)
         except OSError as exc:
-            return f"--out {out_dir}: cannot create {missing} ({exc.strerror or exc})"
+            return f"{option} {path}: cannot create {missing} ({exc.strerror or exc})"
         q = missing
         while q != parent:
             q.rmdir()
