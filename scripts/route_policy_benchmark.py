@@ -171,7 +171,10 @@ def evaluate(terrain_key: str, models, seeds: list[int], out_dir: Path, backend)
     campaign = episode_campaign({"name": f"route_bench_{terrain_key}", "env": env_spec(terrain_key),
                                  "policies": policy_specs(terrain_key, models), "goals_deg": "held_out",
                                  "seeds": seeds})
-    if out_dir.exists():
+    if out_dir.exists():                       # an earlier evaluation's campaign folder, never anything else
+        if not (out_dir / "campaign.json").is_file():
+            raise SystemExit(f"error: {out_dir} exists and holds no earlier evaluation (no campaign.json); "
+                             "remove it or give another --out")
         shutil.rmtree(out_dir)
     stats = run_campaign(campaign, out_dir, backend=backend, progress=False)
     rows = read_rows(out_dir).to_dict("records")
