@@ -104,6 +104,20 @@ def test_fly_rerun_into_existing_dir_refused_or_replaced_whole(flown, tmp_path, 
     assert "current folder" in capsys.readouterr().err and (target / "summary.json").exists()
 
 
+def test_fly_without_out_keeps_a_run_already_in_its_default_folder(tmp_path, monkeypatch, capsys):
+    """`trn-env fly` with no --out writes runs/<scenario>-<UTC second>: when another run already holds
+    that name (two started in the same second), this one goes to NAME-2 and says so; the other is kept."""
+    taken = tmp_path / "runs" / "default-20261206T120000Z"
+    monkeypatch.setattr(output, "default_out_dir", lambda name, now=None: taken)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["fly", "--quiet", "--no-plots", "--duration", "5", "--seed", "1"]) == 0
+    assert cli.main(["fly", "--quiet", "--no-plots", "--duration", "5", "--seed", "2"]) == 0
+    second = taken.with_name(taken.name + "-2")
+    assert second.name in "".join(capsys.readouterr().out.split())         # the table's title (wrapped)
+    seeds = [json.loads((d / "summary.json").read_text())["seed"] for d in (taken, second)]
+    assert seeds == [1, 2]
+
+
 def test_bad_scenario_exits_nonzero_lists_problems_writes_nothing(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     text = (SCEN / "default_short.toml").read_text()

@@ -5,6 +5,7 @@ estimation worker)."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -159,3 +160,33 @@ def test_ctrl_c_inside_a_numba_dispatcher_is_an_interrupt(monkeypatch, capsys):
     monkeypatch.setattr(cli, "cmd_scenarios", other_system_error)
     with pytest.raises(SystemError, match="a real bug"):
         cli.main(["scenarios"])
+
+
+def test_a_run_written_meanwhile_is_never_replaced(tmp_path):
+    """Two runs finishing into one folder (two `trn-env fly` started in the same second share
+    default_out_dir's name): the other run lands while this one is being written (its plot step here).
+    Without overwrite this run refuses and leaves the other whole; with `unique` it takes NAME-2 (then
+    NAME-3); with overwrite it replaces it, as asked. The old commit replaced the other run in every case."""
+    ns: dict = {}
+    exec(_ARRAYS, ns)
+    arrays = ns["ARRAYS"]
+    out = tmp_path / "runs" / "default-20261206T120000Z"
+
+    def other_run_lands(tmp):
+        if not out.exists():
+            run_folder.write_run(out, {"who": "other"}, arrays, [])
+        return []
+
+    def who(folder):
+        return json.loads((folder / "summary.json").read_text())["who"]
+
+    with pytest.raises(FileExistsError, match="another run was written there"):
+        run_folder.write_run(out, {"who": "this"}, arrays, [], plot=other_run_lands)
+    assert who(out) == "other"
+    second, third = out.with_name(out.name + "-2"), out.with_name(out.name + "-3")
+    assert run_folder.write_run(out, {"who": "this"}, arrays, [], plot=other_run_lands, unique=True) == second
+    assert run_folder.write_run(out, {"who": "third"}, arrays, [], unique=True) == third
+    assert [who(out), who(second), who(third)] == ["other", "this", "third"]
+    assert run_folder.write_run(out, {"who": "this"}, arrays, [], overwrite=True) == out
+    assert who(out) == "this"
+    assert [p.name for p in out.parent.iterdir() if p.name.startswith(".")] == []

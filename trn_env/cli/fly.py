@@ -79,20 +79,24 @@ def cmd_fly(args) -> int:
     except ScenarioError as err:
         _print_problems(err)
         return 2
+    from trn_env.output.run_folder import creatable_problem, default_out_dir
+    out_dir = args.out or default_out_dir(scenario.name)
     if args.out is not None:
         problem = out_dir_problem(args.out, args.overwrite)
-        if problem is not None:
-            print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
-            return 2
+    else:       # the default name may be taken by a run of the same second: write_run then picks NAME-2
+        problem = creatable_problem(out_dir, "the run folder")
+        problem = problem and f"{problem}; give --out"
+    if problem is not None:
+        print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
+        return 2
     import time
 
     from rich.console import Console
     from tqdm import tqdm
 
-    from trn_env.output.run_folder import default_out_dir, write_run
+    from trn_env.output.run_folder import write_run
     from trn_env.sim.closed_loop import ClosedLoop
 
-    out_dir = args.out or default_out_dir(scenario.name)
     console = Console()
     bar = None
 
@@ -161,8 +165,9 @@ def cmd_fly(args) -> int:
         writer.write_events(result.events)
         log_path = writer.commit({"termination": result.termination, "recorded_summary": result.summary})
         writer = None
-        write_run(out_dir, result.summary, result.arrays, result.events, plot=plot, log_dir=log_path,
-                  overwrite=args.overwrite, extra_files={"scenario.toml": resolved_toml(scenario, command)})
+        out_dir = write_run(out_dir, result.summary, result.arrays, result.events, plot=plot,
+                            log_dir=log_path, overwrite=args.overwrite, unique=args.out is None,
+                            extra_files={"scenario.toml": resolved_toml(scenario, command)})
     except KeyboardInterrupt as exc:
         code, word = _interrupt_exit(exc)
         print(f"{word} while writing: no summary written", file=sys.stderr)

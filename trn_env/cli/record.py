@@ -66,12 +66,16 @@ def cmd_record(args) -> int:
 def cmd_replay(args) -> int:
     from trn_env.logs.format import LogError
     from trn_env.logs.replay import replay, write_result_log
-    from trn_env.output.run_folder import default_out_dir, write_run
+    from trn_env.output.run_folder import creatable_problem, default_out_dir, write_run
+    out_dir = args.out or default_out_dir(f"replay-{Path(args.log).name}")
     if args.out is not None:
         problem = out_dir_problem(args.out, args.overwrite)
-        if problem is not None:
-            print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
-            return 2
+    else:       # the default name may be taken by a run of the same second: write_run then picks NAME-2
+        problem = creatable_problem(out_dir, "the run folder")
+        problem = problem and f"{problem}; give --out"
+    if problem is not None:
+        print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
+        return 2
     from trn_env.scenario.overrides import parse_assignment
     settings = {}
     for text in args.set:
@@ -94,7 +98,6 @@ def cmd_replay(args) -> int:
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)
         return 130
-    out_dir = args.out or default_out_dir(f"replay-{Path(args.log).name}")
     arrays = _with_truth_columns(res.arrays)
     plot = None if (args.no_plots or not res.has_truth) else _plotter(res)
     writer = log_path = None
@@ -102,11 +105,14 @@ def cmd_replay(args) -> int:
         writer = _log_writer(out_dir)
         log_path = write_result_log(writer, res)
         writer = None
-        write_run(out_dir, res.summary, arrays, res.events, plot=plot, log_dir=log_path,
-                  overwrite=args.overwrite)
+        out_dir = write_run(out_dir, res.summary, arrays, res.events, plot=plot, log_dir=log_path,
+                            overwrite=args.overwrite, unique=args.out is None)
     except KeyboardInterrupt:
         print("interrupted while writing: no summary written", file=sys.stderr)
         return 130
+    except OSError as exc:             # the folder changed under us since the check before the replay
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     finally:
         _discard_partial_log(writer, log_path)
     s = res.summary

@@ -13,7 +13,9 @@ a non-empty target is refused without `overwrite`, and a non-empty folder that h
 summary.json) is refused always. A Ctrl-C, SIGTERM or a kill therefore leaves either the complete new run
 directory or the previous one untouched - never a half-written file. The temporary directory is named
 `.NAME.partial-<pid>-<random>`; a run that was killed while writing leaves one behind, and the next run
-writing into the same parent folder removes every such leftover whose process is gone.
+writing into the same parent folder removes every such leftover whose process is gone. A target another
+process filled while this run was being written is never replaced unless `overwrite` was asked; with
+`unique` (the CLI's default names, one per second) the run takes the next free `NAME-2`, `NAME-3`, ...
 """
 
 from __future__ import annotations
@@ -250,17 +252,24 @@ def creatable_problem(path: Path | str, option: str) -> str | None:
 def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
               events: list[tuple[float, str, str]] | None = None,
               plot: Callable[[Path], list[str]] | None = None, log_dir: Path | None = None,
-              overwrite: bool = False, extra_files: dict[str, str] | None = None) -> Path:
-    """Write a complete run directory atomically; returns the directory.
+              overwrite: bool = False, extra_files: dict[str, str] | None = None,
+              unique: bool = False) -> Path:
+    """Write a complete run directory atomically; returns the directory written.
 
     `plot(tmp_dir)` may add figures; it returns their file names (listed in summary['files']).
     `log_dir`: a finished log folder moved in as `log/` (beside log.npz of `arrays`).
     `extra_files`: name -> text of further files (e.g. the resolved scenario.toml). `overwrite`: replace a
     folder that holds a previous run as a whole (see the module docstring); without it a non-empty
-    `out_dir` raises FileExistsError before anything is written.
+    `out_dir` raises FileExistsError before anything is written, and so does one that another process
+    filled while this run was being written (never replaced). `unique` (a name the caller chose, such as
+    default_out_dir's, not the user): a taken `out_dir` gives way to the first free `out_dir-2`, `-3`, ...
+    instead, checked when the finished folder is renamed into place, so runs started in the same second
+    each keep their own folder.
     """
     out_dir = Path(out_dir)
     problem = target_problem(out_dir, overwrite)
+    if problem is not None and unique and out_dir.is_dir():
+        problem = None                          # _commit finds the next free name
     if problem is not None:
         raise FileExistsError(problem) if out_dir.is_dir() else OSError(problem)
     parent = out_dir.resolve().parent
@@ -286,24 +295,40 @@ def write_run(out_dir: Path | str, summary: dict, arrays: dict[str, np.ndarray],
         summary = dict(summary)
         summary["files"] = files
         write_summary(tmp / "summary.json", summary)
-        _commit(tmp, out_dir)
+        out_dir = _commit(tmp, out_dir, overwrite, unique)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     return out_dir
 
 
-def _commit(tmp: Path, out_dir: Path) -> None:
-    """Put the finished folder in place: a rename onto an absent or empty target; over a previous run, the
-    old folder is renamed aside first and removed after the new one is in place (a kill between the two
-    renames leaves the old run under `.NAME.partial-<pid>-old`, cleaned like any leftover)."""
+def _commit(tmp: Path, out_dir: Path, overwrite: bool, unique: bool) -> Path:
+    """Put the finished folder in place; returns where. A rename onto an absent or empty target; a target
+    that holds a run by now: with `unique`, the first free `NAME-2`, `NAME-3`, ... (each try one atomic
+    rename); with `overwrite`, the old folder is renamed aside first and removed after the new one is in
+    place (a kill between the two renames leaves the old run under `.NAME.partial-<pid>-old`, cleaned like
+    any leftover); else FileExistsError, the other run untouched."""
     try:
         os.replace(tmp, out_dir)          # absent, or an empty directory: one atomic rename
-        return
+        return out_dir
     except OSError:
         if not out_dir.is_dir():
             raise
+    if unique:
+        for k in range(2, 10_000):
+            candidate = out_dir.with_name(f"{out_dir.name}-{k}")
+            try:
+                os.replace(tmp, candidate)
+                return candidate
+            except OSError:
+                if not candidate.is_dir():
+                    raise
+        raise FileExistsError(f"{out_dir}: no free name up to {out_dir.name}-9999")
+    if not overwrite:
+        raise FileExistsError(f"--out {out_dir}: another run was written there while this one was "
+                              "being written; give another folder")
     aside = out_dir.parent / f".{out_dir.name}{PARTIAL_MARK}{os.getpid()}-old"
     os.replace(out_dir, aside)
     os.replace(tmp, out_dir)
     shutil.rmtree(aside, ignore_errors=True)
+    return out_dir
