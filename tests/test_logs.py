@@ -367,3 +367,18 @@ def test_a_campaign_replays_logs_across_navigators_and_seeds(independent, tmp_pa
     assert cli.main(["campaign", str(bad), "--out", str(tmp_path / "c2"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "logs[0] (nowhere.trnlog)" in err and "sweeps[0].path" in err and not (tmp_path / "c2").exists()
+
+
+def test_a_log_written_meanwhile_into_the_same_path_is_kept(tmp_path):
+    """Two recordings to one --out: the one that finishes second is refused by name at its commit and the
+    first one's log stays whole (the old commit failed in rmdir with an OSError traceback)."""
+    from trn_env.logs.writer import LogWriter
+
+    out = tmp_path / "same.trnlog"
+    first, second = LogWriter(out, {"who": "first"}), LogWriter(out, {"who": "second"})
+    first.commit()
+    with pytest.raises(LogError, match="another log was written there while this one was being recorded"):
+        second.commit()
+    second.abort()
+    assert json.loads((out / "metadata.json").read_text())["who"] == "first"
+    assert [p.name for p in tmp_path.iterdir()] == ["same.trnlog"]

@@ -310,7 +310,11 @@ class LogWriter:
             "units": units(), "tables": counts, "complete": True}
         write_metadata(self.tmp / METADATA_FILE, meta)
         if self.out_dir.exists():
-            self.out_dir.rmdir()                  # (checked empty at the start)
+            try:
+                self.out_dir.rmdir()              # (checked empty at the start)
+            except OSError:                       # another log landed there meanwhile: kept, never replaced
+                raise LogError(f"log {self.out_dir}: another log was written there while this one was "
+                               "being recorded (give a new path)") from None
         os.replace(self.tmp, self.out_dir)
         return self.out_dir
 
