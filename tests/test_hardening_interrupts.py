@@ -52,7 +52,8 @@ def test_ctrl_c_during_start_up(tmp_path):
 def test_ctrl_c_mid_flight_no_worker_traceback(tmp_path):
     """SIGINT while the pipelined flight runs: exit 130, 'nothing written', and no BrokenPipeError from
     the estimation worker (it used to send on the closed pipe, and again from its error handler)."""
-    proc = _start(["fly", "default", "--out", str(tmp_path / "run")], tmp_path)   # ~5 s of flight
+    # the point-mass filter's flight lasts ~5 s (ins_tercom's now ends within a second of 'ready after')
+    proc = _start(["fly", "default", "--navigator", "pmf", "--out", str(tmp_path / "run")], tmp_path)
     err_head = ""
     t0 = time.time()
     while time.time() - t0 < 120:          # until the flight has started
@@ -60,7 +61,7 @@ def test_ctrl_c_mid_flight_no_worker_traceback(tmp_path):
         err_head += line
         if line.startswith("ready after") or not line:
             break
-    time.sleep(1.0)
+    time.sleep(0.5)
     code, err = _ctrl_c(proc)
     err = err_head + err
     assert code == 130, err

@@ -60,6 +60,18 @@ def out_dir_problem(out: Path, overwrite: bool = False) -> str | None:
     return target_problem(out, overwrite)
 
 
+def run_folder_target(args, default_name: str) -> tuple[Path, str | None]:
+    """The run folder of `fly` or `replay` (`--out`, else runs/<default_name>-<UTC second>) and why it could
+    not be written, or None. The default name may be taken by a run of the same second: write_run(unique=
+    True) then takes NAME-2, so only its place is checked here."""
+    from trn_env.output.run_folder import creatable_problem, default_out_dir
+    if args.out is not None:
+        return args.out, out_dir_problem(args.out, args.overwrite)
+    out_dir = default_out_dir(default_name)
+    problem = creatable_problem(out_dir, "the run folder")
+    return out_dir, problem and f"{problem}; give --out"
+
+
 def _command_line(args) -> str:
     """The command as typed (shell-quoted), for summary.json and the resolved scenario's header."""
     import shlex

@@ -13,7 +13,7 @@ from trn_env.cli.common import (
     _discard_partial_log,
     _interrupt_exit,
     _print_problems,
-    out_dir_problem,
+    run_folder_target,
 )
 
 
@@ -79,13 +79,7 @@ def cmd_fly(args) -> int:
     except ScenarioError as err:
         _print_problems(err)
         return 2
-    from trn_env.output.run_folder import creatable_problem, default_out_dir
-    out_dir = args.out or default_out_dir(scenario.name)
-    if args.out is not None:
-        problem = out_dir_problem(args.out, args.overwrite)
-    else:       # the default name may be taken by a run of the same second: write_run then picks NAME-2
-        problem = creatable_problem(out_dir, "the run folder")
-        problem = problem and f"{problem}; give --out"
+    out_dir, problem = run_folder_target(args, scenario.name)
     if problem is not None:
         print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
         return 2

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trn_env.cli.common import _discard_partial_log, _print_problems, out_dir_problem
+from trn_env.cli.common import _discard_partial_log, _print_problems, out_dir_problem, run_folder_target
 from trn_env.cli.fly import _log_writer, _plotter
 
 
@@ -66,13 +66,8 @@ def cmd_record(args) -> int:
 def cmd_replay(args) -> int:
     from trn_env.logs.format import LogError
     from trn_env.logs.replay import replay, write_result_log
-    from trn_env.output.run_folder import creatable_problem, default_out_dir, write_run
-    out_dir = args.out or default_out_dir(f"replay-{Path(args.log).name}")
-    if args.out is not None:
-        problem = out_dir_problem(args.out, args.overwrite)
-    else:       # the default name may be taken by a run of the same second: write_run then picks NAME-2
-        problem = creatable_problem(out_dir, "the run folder")
-        problem = problem and f"{problem}; give --out"
+    from trn_env.output.run_folder import write_run
+    out_dir, problem = run_folder_target(args, f"replay-{Path(args.log).name}")
     if problem is not None:
         print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
         return 2
