@@ -388,6 +388,29 @@ def test_write_baseline_target_is_checked_before_the_campaign_flies(tmp_path, ca
     assert "is not a directory" in capsys.readouterr().err
 
 
+def test_campaigns_without_out_each_get_a_folder_of_their_own(tmp_path, monkeypatch, capsys):
+    """Without --out a campaign writes campaigns/<name>-<UTC second>; one started in the same second gets
+    NAME-2 (the folder is made exclusively before the first run) instead of sharing the first one's."""
+    from trn_env.campaign import driver
+
+    tiny = tmp_path / "tiny.toml"
+    tiny.write_text(f'name = "tiny"\nroot_seed = 1\nseeds = 1\nduration_s = 5.0\nnavigators = ["ins"]\n'
+                    f'scenarios = ["{(CI.parent / "ci_denied_short.toml").as_posix()}"]\n')
+    monkeypatch.chdir(tmp_path)
+    fixed = Path("campaigns") / "tiny-20261206T120000Z"
+    monkeypatch.setattr(driver, "default_out_dir", lambda name: fixed)
+    for _ in range(2):
+        assert cli.main(["campaign", str(tiny), "--workers", "1", "--quiet"]) == 0
+    first = tmp_path / fixed
+    second = first.with_name(first.name + "-2")
+    assert len(read_rows(first)) == len(read_rows(second)) == 1
+    assert sorted(p.name for p in (tmp_path / "campaigns").iterdir()) == [first.name, second.name]
+    capsys.readouterr()
+    assert cli.main(["campaign", str(tiny), "--resume"]) == 2
+    assert "--resume: give the campaign's folder with --out" in capsys.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "campaigns").iterdir()) == [first.name, second.name]
+
+
 def test_every_row_column_is_documented_in_the_outputs_reference(flown):
     """The docs' campaign-row reference is generated from trn_env.output.fields: a column a run writes but
     the table does not list would be missing from the docs."""

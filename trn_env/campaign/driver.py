@@ -25,6 +25,22 @@ def default_out_dir(name: str) -> Path:
     return Path("campaigns") / f"{name}-{stamp}"
 
 
+def reserve_default_out_dir(name: str) -> Path:
+    """A new, empty folder campaigns/<name>-<UTC second>, made here so that campaigns started in the same
+    second never share one: a taken name gives way to `-2`, `-3`, ... (each an exclusive mkdir). OSError when
+    no folder can be made there."""
+    base = default_out_dir(name)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    for k in range(1, 10_000):
+        candidate = base if k == 1 else base.with_name(f"{base.name}-{k}")
+        try:
+            candidate.mkdir()
+            return candidate
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{base}: no free name up to {base.name}-9999")
+
+
 def check_out_dir(campaign: Campaign, out_dir: Path, resume: bool) -> set[str]:
     """Run ids already done in `out_dir` (empty for a new folder); CampaignError if the folder is refused."""
     out_dir = Path(out_dir)

@@ -30,12 +30,17 @@ def cmd_campaign(args) -> int:
         return 2
     from rich.console import Console
 
-    from trn_env.campaign.driver import default_out_dir
-    out_dir = args.out or default_out_dir(campaign.name)
-    console = Console()
-    if not console.is_terminal:            # a pipe or a CI log: rich would assume 80 columns
-        console = Console(width=100)
+    from trn_env.campaign.driver import reserve_default_out_dir
+    out_dir = reserved = None
     try:
+        out_dir = args.out
+        if out_dir is None:      # a folder of its own, even beside a campaign started in the same second
+            if args.resume:
+                raise CampaignError(campaign.source, ["--resume: give the campaign's folder with --out"])
+            out_dir = reserved = reserve_default_out_dir(campaign.name)
+        console = Console()
+        if not console.is_terminal:            # a pipe or a CI log: rich would assume 80 columns
+            console = Console(width=100)
         stats = run_campaign(campaign, out_dir, backend=backend, resume=args.resume, progress=not args.quiet)
     except CampaignError as err:
         for prob in err.problems:
@@ -44,11 +49,17 @@ def cmd_campaign(args) -> int:
     except BackendError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:                # the default folder could not be made
+        print(f"error: campaign folder: {exc}; give --out", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as exc:
         code, word = _interrupt_exit(exc)
         print(f"{word}: the finished runs' rows are in {out_dir}/runs (continue with --resume)",
               file=sys.stderr)
         return code
+    finally:                              # a reserved folder nothing was written into goes again
+        if reserved is not None and reserved.is_dir() and not any(reserved.iterdir()):
+            reserved.rmdir()
     return _campaign_outcome(campaign, out_dir, stats, baseline, args, console)
 
 
