@@ -178,6 +178,28 @@ def test_bad_toml_and_missing_file(tmp_path):
     with pytest.raises(ScenarioError) as exc:
         load_scenario(tmp_path / "nope.toml")
     assert exc.value.problems[0].startswith("file: no such scenario")
+    binary = tmp_path / "plot.toml"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n")
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(binary)
+    assert exc.value.problems == ["file: not a UTF-8 text file (invalid start byte at byte 0)"]
+
+
+def test_a_byte_order_mark_is_accepted_in_scenario_and_campaign_files(tmp_path):
+    """Editors on Windows save UTF-8 with a byte-order mark, which tomllib refuses ('Invalid statement at
+    line 1, column 1'): the same file without it loads to the same scenario, and a campaign file too."""
+    from importlib import resources
+
+    from trn_env.campaign import load_campaign
+
+    marked = tmp_path / "marked.toml"
+    text = (resources.files("trn_env.scenario.builtin") / "default.toml").read_bytes()
+    marked.write_bytes(b"\xef\xbb\xbf" + text)
+    assert load_scenario(marked).to_dict() == load_scenario("default").to_dict()
+    campaign = tmp_path / "c.toml"
+    campaign.write_bytes(b"\xef\xbb\xbf" + f'name = "c"\nroot_seed = 1\nseeds = 1\nnavigators = ["ins"]\n'
+                         f'scenarios = ["{marked.as_posix()}"]\n'.encode())
+    assert load_campaign(campaign).name == "c"
 
 
 def test_relative_dem_path_resolved_against_scenario_file(tmp_path):

@@ -280,9 +280,12 @@ def load_campaign(path: str | Path) -> Campaign:
         raise CampaignError(source, ["file: no such campaign file"])
     try:
         raw = path.read_bytes()
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")            # (an editor's byte-order mark is fine)
         data = tomllib.loads(text)
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
+        raise CampaignError(source, [f"file: not a UTF-8 text file ({exc.reason} at byte {exc.start})"]
+                            ) from None
+    except OSError as exc:
         raise CampaignError(source, [f"file: cannot read: {exc}"]) from None
     except tomllib.TOMLDecodeError as exc:
         raise CampaignError(source, [f"file: not valid TOML: {exc}"]) from None

@@ -186,8 +186,11 @@ def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
             raise ScenarioError(source, [f"file: no such scenario file or built-in name "
                                          f"(built-ins: {known})"])
         try:
-            text = text_path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
+            text = text_path.read_text(encoding="utf-8-sig")      # (an editor's byte-order mark is fine)
+        except UnicodeDecodeError as exc:
+            raise ScenarioError(source, [f"file: not a UTF-8 text file ({exc.reason} at byte {exc.start})"]
+                                ) from None
+        except OSError as exc:
             raise ScenarioError(source, [f"file: cannot read: {exc}"]) from exc
     try:
         data = tomllib.loads(text)
