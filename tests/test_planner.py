@@ -368,6 +368,9 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
         assert main(["plan", "basin_route", *args, "--out", str(bad)]) == 2
         assert msg in capsys.readouterr().err
         assert not bad.exists() and not bad.with_suffix(".png").exists()
+    png = tmp_path / "r.png"
+    assert main(["plan", "basin_route", *goal, "--out", str(png)]) == 2
+    assert "the plot's default name" in capsys.readouterr().err and not png.exists()
     for target, msg in ((tmp_path, "is a folder; give a file name"),
                         (afile / "r.toml", "is not a directory")):
         assert main(["plan", "basin_route", *goal, "--out", str(target)]) == 2

@@ -38,7 +38,9 @@ def cmd_plan(args) -> int:
             if problem is not None:
                 raise ValueError(problem)
         if out.absolute() == plot_path.absolute():
-            raise ValueError(f"--plot {plot_path}: the same file as --out")
+            raise ValueError(f"--plot {plot_path}: the same file as --out" if args.plot else
+                             f"--out {out}: the plot's default name ({plot_path}) is the route file's own; "
+                             "give --plot or a route file name ending in .toml")
         config = PlannerConfig(weight=args.weight, max_featureless_m=args.max_featureless, agl_m=args.agl,
                                cell_m=args.cell, tas_mps=float(sc.route.tas_mps),
                                climb_rate_mps=None if args.no_climb_limit else args.climb_rate)
