@@ -382,3 +382,14 @@ def test_a_log_written_meanwhile_into_the_same_path_is_kept(tmp_path):
     second.abort()
     assert json.loads((out / "metadata.json").read_text())["who"] == "first"
     assert [p.name for p in tmp_path.iterdir()] == ["same.trnlog"]
+
+
+def test_a_run_folder_given_as_a_log_names_its_log(tmp_path, capsys):
+    """`trn-env replay runs/X` (a fly run folder) points at `runs/X/log` instead of 'not a trn-env log'."""
+    run = tmp_path / "run"
+    (run / "log").mkdir(parents=True)
+    (run / "log" / "metadata.json").write_text("{}")
+    (run / "summary.json").write_text("{}")
+    assert cli.main(["replay", str(run), "--navigator", "pf", "--out", str(tmp_path / "out")]) == 2
+    assert f"a run folder, not a log; its log is {run / 'log'}" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

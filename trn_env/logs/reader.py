@@ -259,6 +259,8 @@ def read_metadata(path: Path) -> dict:
                        f"{METADATA_FILE})")
     mfile = path / METADATA_FILE
     if not mfile.is_file():
+        if (path / "log" / METADATA_FILE).is_file():          # a `trn-env fly` run folder
+            raise LogError(f"log {path}: a run folder, not a log; its log is {path / 'log'}")
         raise LogError(f"log {path}: no {METADATA_FILE}: not a trn-env log, or a recording that did not "
                        "finish")
     try:
