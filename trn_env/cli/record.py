@@ -67,7 +67,9 @@ def cmd_replay(args) -> int:
     from trn_env.logs.format import LogError
     from trn_env.logs.replay import replay, write_result_log
     from trn_env.output.run_folder import write_run
-    out_dir, problem = run_folder_target(args, f"replay-{Path(args.log).name}")
+    log = Path(args.log).absolute()
+    # a run folder's log/ is named after its run (runs/replay-<run>-<time>, not replay-log-<time>)
+    out_dir, problem = run_folder_target(args, f"replay-{log.parent.name if log.name == 'log' else log.name}")
     if problem is not None:
         print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
         return 2
