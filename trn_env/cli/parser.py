@@ -74,7 +74,9 @@ def _parser() -> argparse.ArgumentParser:
                       help="run this monitor beside the navigator (repeatable)")
     rep_.add_argument("--map", default=None, metavar="DEM",
                       help="the navigator's map: a DEM path or bundled name (default: the log's map)")
-    rep_.add_argument("--out", type=Path, default=None, help="run folder (default runs/replay-<log>-<time>; a run folder's log/ is named after its run)")
+    rep_.add_argument("--out", type=Path, default=None,
+                      help="run folder (default runs/replay-<log>-<time>; a run folder's log/ is named after "
+                           "its run)")
     rep_.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     rep_.add_argument("--overwrite", action="store_true",
                       help="replace a run folder --out that holds a previous run, as a whole")
