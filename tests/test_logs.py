@@ -393,3 +393,10 @@ def test_a_run_folder_given_as_a_log_names_its_log(tmp_path, capsys):
     assert cli.main(["replay", str(run), "--navigator", "pf", "--out", str(tmp_path / "out")]) == 2
     assert f"a run folder, not a log; its log is {run / 'log'}" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_replay_of_a_run_folders_log_is_named_after_the_run(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["fly", "--out", "flight1", "--duration", "5", "--no-plots", "--quiet"]) == 0
+    assert cli.main(["replay", "flight1/log", "--navigator", "ins", "--no-plots"]) == 0
+    assert [p.name.rsplit("-", 1)[0] for p in (tmp_path / "runs").iterdir()] == ["replay-flight1"]
