@@ -259,6 +259,11 @@ def _campaign(tmp_path, body: str) -> Path:
     ('seeds = 1\nsweep = []\n', "sweep: unknown key"),
     ('seeds = 1\n[[sweeps]]\npath = "x"\nvalues = [1]\ngrid = { start = 0, stop = 1, num = 2 }\n',
      "sweeps[0]: give exactly one of values or grid"),
+    # a repeated point or scenario would fly the same runs twice and pool them twice
+    ('seeds = 1\n[[sweeps]]\npath = "wind.layers.0.speed_mps"\nvalues = [5, 3.0, 5.0]\n',
+     "sweeps[0].values: 5.0 (point 2) repeats point 0"),
+    ('seeds = 1\nnavigators = ["ins"]\n[[sweeps]]\npath = "navigator.settings.accel_bias_mps2"\n'
+     'grid = { start = 0.001, stop = 0.001, num = 2 }\n', "sweeps[0].grid: 0.001 (point 1) repeats point 0"),
 ])
 def test_bad_campaign_files_exit_2_naming_the_field(tmp_path, capsys, body, expect):
     out = tmp_path / "out"
@@ -266,6 +271,17 @@ def test_bad_campaign_files_exit_2_naming_the_field(tmp_path, capsys, body, expe
     err = capsys.readouterr().err
     assert expect in err, err
     assert "Traceback" not in err and not out.exists()
+
+
+def test_a_scenario_listed_twice_is_refused(tmp_path, capsys):
+    """The same file by a relative and an absolute path: its runs would be flown and pooled twice."""
+    shutil.copy(HERE / "scenarios" / "ins_only_short.toml", tmp_path / "s.toml")
+    p = tmp_path / "c.toml"
+    absolute = (tmp_path / "s.toml").as_posix()
+    p.write_text(f'seeds = 1\nduration_s = 5.0\nscenarios = ["s.toml", "{absolute}"]\n')
+    assert cli.main(["campaign", str(p), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert f"scenarios[1] ({absolute}): the same scenario as scenarios[0]" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
 
 
 def test_sweeps_expand_by_dotted_path_as_a_grid(tmp_path):

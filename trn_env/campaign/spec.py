@@ -237,7 +237,7 @@ def _scenario_path(ref: str, base: Path) -> str:
     p = Path(ref)
     if ref in builtin_names() and not p.suffix:
         return ref
-    return str((base / p).resolve()) if not p.is_absolute() else str(p)
+    return str((base / p).resolve()) if not p.is_absolute() else str(p.resolve())
 
 
 def _dotted(problem_path: str) -> str:
@@ -254,6 +254,16 @@ def _attribute(problem: str, sweep_at: dict[str, str], nav_at: str, scen_at: str
     if field_.startswith("navigator"):
         return f"{nav_at}: {problem}"
     return f"{scen_at}: {problem}"
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """Two sweep values that make the same scenario (5 and 5.0 do; true and 1 do not)."""
+    if isinstance(a, bool) or isinstance(b, bool):
+        return type(a) is type(b) and a == b
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
 
 
 def _normalise(value: Any) -> Any:
@@ -324,11 +334,24 @@ def load_campaign(path: str | Path) -> Campaign:
             problems.append(f"sweeps[{j}].path: {p!r} has its own campaign key (seeds / navigators)")
     sweep_values = [[_normalise(v) for v in (s["values"] if "values" in s else grid_values(s["grid"]))]
                     for s in sweeps]
+    # a repeated point would fly the same runs twice and count them twice in its group's statistics
+    for j, values in enumerate(sweep_values):
+        for k, v in enumerate(values):
+            first = next(i for i, w in enumerate(values) if _same_value(v, w))
+            if first != k:
+                what = "values" if "values" in sweeps[j] else "grid"
+                problems.append(f"sweeps[{j}].{what}: {v!r} (point {k}) repeats point {first}: give each "
+                                "value once")
 
     scen_files: list[Path] = []
     scen_raw: list[tuple[str, str, dict | None]] = []
+    sources: list[str] = []
     for i, ref in enumerate(data["scenarios"]):
         src = _scenario_path(ref, base)
+        if src in sources:     # its runs would be flown twice and pooled twice in every group
+            problems.append(f"scenarios[{i}] ({ref}): the same scenario as scenarios[{sources.index(src)}]; "
+                            "list each once")
+        sources.append(src)
         try:
             d, _ = read_scenario_file(src)
             if Path(src).is_file():
