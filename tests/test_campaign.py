@@ -87,6 +87,15 @@ def test_regression_gate_fails_on_a_worse_figure_and_warns_on_a_much_better_one(
     err = capsys.readouterr().err
     assert "warning: ins_tercom | - horizontal_error_rms_m.p50 is much better" in err
     assert "regression:" not in err
+    # a group the campaign no longer flies: missing, said in words (not "nan vs baseline ... (band ±nan)")
+    data = json.loads(BASELINE.read_text())
+    data["groups"]["pmf | -"] = {"errors": {"value": 0, "better": "lower", "rel_tol": 0.0, "abs_tol": 0.0}}
+    gone = tmp_path / "gone.json"
+    gone.write_text(json.dumps(data))
+    assert cli.main(["campaign", str(CI), "--out", str(flown), "--resume", "--quiet",
+                     "--check", str(gone)]) == 1
+    err = capsys.readouterr().err
+    assert "regression: pmf | - errors: missing from this campaign (baseline 0)" in err and "nan" not in err
 
 
 def test_a_run_replays_alone_bit_for_bit_with_trn_env_fly(flown, tmp_path):

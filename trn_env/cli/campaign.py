@@ -86,6 +86,10 @@ def _campaign_outcome(campaign, out_dir: Path, stats: dict, baseline, args, cons
                   f"{c.baseline:.4g}); refresh it on purpose with --write-baseline", file=sys.stderr)
         if worse:
             for c in worse:
+                if c.verdict == "missing":     # the group or figure is not in this campaign's rows
+                    print(f"regression: {c.group} {c.figure}: missing from this campaign (baseline "
+                          f"{c.baseline:.4g})", file=sys.stderr)
+                    continue
                 print(f"regression: {c.group} {c.figure}: {c.value:.4g} vs baseline {c.baseline:.4g} "
                       f"(band ±{c.limit:.3g}): {c.verdict}", file=sys.stderr)
             status = 1
