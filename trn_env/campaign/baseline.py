@@ -146,6 +146,7 @@ def comparison_table(comps: list[Comparison], title: str):
         t.add_column(h, justify="right" if h in ("baseline", "now", "band ±") else "left")
     for c in comps:
         style = {"worse": "bold red", "better": "yellow", "missing": "bold red"}.get(c.verdict, "")
-        t.add_row(c.group, c.figure, f"{c.baseline:.3g}", f"{c.value:.3g}", f"{c.limit:.3g}", c.verdict,
-                  style=style)
+        gone = c.verdict == "missing"          # not in this campaign's rows: no value, no band
+        t.add_row(c.group, c.figure, f"{c.baseline:.3g}", "-" if gone else f"{c.value:.3g}",
+                  "-" if gone else f"{c.limit:.3g}", c.verdict, style=style)
     return t
