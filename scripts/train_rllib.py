@@ -67,12 +67,31 @@ def main(argv=None) -> int:
 
     try:
         kw = route_task.env_kwargs(args.terrain)
-        hidden = tuple(int(h) for h in args.hidden.split(","))
+        try:
+            hidden = tuple(int(h) for h in args.hidden.split(","))
+        except ValueError:
+            hidden = ()
+        if not hidden or min(hidden) < 1:
+            raise ValueError(f"--hidden must be layer widths >= 1 separated by commas (e.g. 64,64), got "
+                             f"{args.hidden!r}")
         if args.max_episode_s is not None:
             kw["max_episode_s"] = float(args.max_episode_s)
-        for name in ("iterations", "eval_seeds", "checkpoint_every"):
+        for name in ("iterations", "eval_seeds", "checkpoint_every", "envs_per_runner", "train_batch_size",
+                     "minibatch_size", "epochs"):
             if getattr(args, name) < 1:
                 raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+        if args.env_runners < 0:
+            raise ValueError(f"--env-runners must be >= 0 (0: sample in the driver), got {args.env_runners}")
+        if args.num_cpus is not None and (args.address or args.num_cpus < 1):
+            raise ValueError(f"--num-cpus must be >= 1 and only without --address, got {args.num_cpus}")
+        if not (math.isfinite(args.lr) and args.lr > 0):
+            raise ValueError(f"--lr must be a finite number > 0, got {args.lr}")
+        from trn_env.output.run_folder import creatable_problem
+        if args.out.exists() and not args.out.is_dir():
+            raise ValueError(f"--out {args.out}: exists and is not a folder")
+        problem = None if args.out.is_dir() else creatable_problem(args.out, "--out")
+        if problem is not None:
+            raise ValueError(problem)
         if args.eval_seeds > len(route_task.EVAL_SEEDS):
             raise ValueError(f"--eval-seeds must be at most the task's {len(route_task.EVAL_SEEDS)}, "
                              f"got {args.eval_seeds}")

@@ -49,6 +49,17 @@ def test_bad_arguments_exit_2_naming_them(tmp_path, capsys):
     assert "--iterations" in capsys.readouterr().err
     assert s.main(["--out", str(tmp_path / "o"), "--eval-seeds", "201"]) == 2
     assert "--eval-seeds" in capsys.readouterr().err
+    # refused before Ray starts (--num-cpus 0 crashed Ray's raylet and hung; a file as --out, a traceback
+    # after the local instance had started)
+    afile = tmp_path / "a.txt"
+    afile.write_text("a file")
+    for args, msg in ((["--num-cpus", "0"], "--num-cpus must be >= 1"), (["--hidden", "64,,64"], "--hidden"),
+                      (["--lr", "nan"], "--lr"), (["--env-runners", "-1"], "--env-runners"),
+                      (["--epochs", "0"], "--epochs"), (["--out", str(afile)], "exists and is not a folder"),
+                      (["--out", str(afile / "o")], "is not a directory")):
+        assert s.main(["--out", str(tmp_path / "o"), *args]) == 2
+        assert msg in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
     from trn_env.env.rllib_train import ppo_config
 
     for bad in (-1.0, math.inf, True):
