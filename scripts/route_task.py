@@ -128,8 +128,15 @@ def _check(args) -> dict:
             raise ValueError(f"--max-episode-s must be > 0, got {args.max_episode_s}")
         kw["max_episode_s"] = float(args.max_episode_s)
     for name in ("iterations", "seeds", "epochs", "env_runners"):
-        if getattr(args, name) < (0 if name == "env_runners" else 1):
-            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+        least = 0 if name == "env_runners" else 1
+        if getattr(args, name) < least:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= {least}, got {getattr(args, name)}")
+    if args.num_cpus < 1:
+        raise ValueError(f"--num-cpus must be >= 1, got {args.num_cpus}")
+    from trn_env.output.run_folder import folder_problem
+    problem = folder_problem(args.out, "--out")
+    if problem is not None:
+        raise ValueError(problem)
     for name, lo, hi in (("lr", 0.0, 1.0), ("gamma", 0.0, 1.0), ("lambda_", 0.0, 1.0),
                          ("vf_clip", 0.0, math.inf)):
         v = getattr(args, name)

@@ -86,10 +86,8 @@ def main(argv=None) -> int:
             raise ValueError(f"--num-cpus must be >= 1 and only without --address, got {args.num_cpus}")
         if not (math.isfinite(args.lr) and args.lr > 0):
             raise ValueError(f"--lr must be a finite number > 0, got {args.lr}")
-        from trn_env.output.run_folder import creatable_problem
-        if args.out.exists() and not args.out.is_dir():
-            raise ValueError(f"--out {args.out}: exists and is not a folder")
-        problem = None if args.out.is_dir() else creatable_problem(args.out, "--out")
+        from trn_env.output.run_folder import folder_problem
+        problem = folder_problem(args.out, "--out")
         if problem is not None:
             raise ValueError(problem)
         if args.eval_seeds > len(route_task.EVAL_SEEDS):

@@ -95,10 +95,17 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
                       (["--log-std-clip", "inf"], "--log-std-clip"),
                       (["--miss-weight", "inf"], "--miss-weight"),
                       (["--action-change-weight", "-0.1"], "--action-change-weight"),
-                      (["--action-change-weight", "nan"], "--action-change-weight")):
+                      (["--action-change-weight", "nan"], "--action-change-weight"),
+                      (["--num-cpus", "0"], "--num-cpus must be >= 1"),
+                      (["--env-runners", "-1"], "--env-runners must be >= 0")):
         assert mod.main([*train, *bad]) == 2
         assert name in capsys.readouterr().err
     assert not out.exists()                                  # nothing written
+    afile = tmp_path / "a.txt"
+    afile.write_text("a file")
+    for target, msg in ((afile, "exists and is not a folder"), (afile / "o", "is not a directory")):
+        assert mod.main(["evaluate", "--out", str(target), "--policies", "straight"]) == 2
+        assert f"--out {target}: " in (err := capsys.readouterr().err) and msg in err
     sel = ["select", "--out", str(out)]
     for bad, name in ((["--every", "0"], "--every"), (["--validation-seeds", "0"], "--validation-seeds"),
                       (["--validation-seeds", "20001"], "--validation-seeds"), ([], "no checkpoints")):

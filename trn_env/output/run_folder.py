@@ -221,6 +221,15 @@ def file_target_problem(path: Path | str, option: str, suffixes: tuple[str, ...]
     return creatable_problem(path, option)
 
 
+def folder_problem(path: Path | str, option: str) -> str | None:
+    """Why `path` cannot be used as an output folder that may already hold earlier outputs (a training
+    run's folder), or None: a file, or a place where no folder can be made (creatable_problem)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        return f"{option} {path}: exists and is not a folder"
+    return None if path.is_dir() else creatable_problem(path, option)
+
+
 def creatable_problem(path: Path | str, option: str) -> str | None:
     """Why `path` (a file or a folder) cannot be created where it is, or None: its nearest existing parent
     must be a folder that accepts a new entry (a probe directory is made there and removed at once) and its
