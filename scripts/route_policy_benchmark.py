@@ -372,6 +372,11 @@ def main(argv=None) -> int:
     if a.train_steps < 0 or a.seeds < 1 or (a.workers is not None and a.workers < 1) or a.envs < 1:
         print("error: --train-steps >= 0, --seeds >= 1, --workers >= 1, --envs >= 1", file=sys.stderr)
         return 2
+    from trn_env.output.run_folder import folder_problem
+    problem = folder_problem(a.out, "--out")
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
     a.out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     rows: list[dict] = []

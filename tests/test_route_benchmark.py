@@ -80,3 +80,16 @@ def test_paired_comparison_against_a_hand_computation(bench):
     n = 12
     tail = sum(math.comb(n, i) for i in range(0, min(w, n - w) + 1)) / 2**n
     assert c["a_better"] == w and c["sign_test_p"] == pytest.approx(min(1.0, 2 * tail))
+
+
+def test_bad_out_is_refused_before_any_work(bench, tmp_path, capsys):
+    afile = tmp_path / "a.txt"
+    afile.write_text("a file")
+    for target, msg in ((afile, "exists and is not a folder"), (afile / "o", "is not a directory")):
+        assert bench.main(["--out", str(target), "--terrains", "basin", "--train-steps", "0"]) == 2
+        assert f"--out {target}: " in (err := capsys.readouterr().err) and msg in err
+    (tmp_path / "eval" / "episodes_basin").mkdir(parents=True)
+    (tmp_path / "eval" / "episodes_basin" / "mine.txt").write_text("mine")
+    with pytest.raises(SystemExit, match="holds no earlier evaluation"):
+        bench.evaluate("basin", None, [1000], tmp_path / "eval" / "episodes_basin", None)
+    assert (tmp_path / "eval" / "episodes_basin" / "mine.txt").read_text() == "mine"
