@@ -187,7 +187,9 @@ def load_jacksboro(fill_voids: bool = False) -> Dem:
 
 # --------------------------------------------------------------------------------------------- rasters
 def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
-    """Read a GeoTIFF, DTED or SRTM .hgt file through rasterio (band 1, geographic CRS, north-up)."""
+    """Read a GeoTIFF, DTED or SRTM .hgt file through rasterio (band 1, north-up). A geographic CRS is read
+    as it is; a projected one (UTM, a national grid) is resampled onto a latitude/longitude grid
+    (_load_projected)."""
     import rasterio
     from rasterio.errors import RasterioIOError
 
@@ -207,10 +209,7 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
                 f"{path}: no coordinate reference system; need geographic lat/lon (e.g. EPSG:4326)"
             )
         if not crs.is_geographic:
-            raise DemLoadError(
-                f"{path}: CRS {crs.to_string()} is projected; only geographic latitude/longitude "
-                "grids are supported (reproject to EPSG:4326 first)"
-            )
+            return _load_projected(ds, path, fill_voids, name)
         t = ds.transform
         if abs(t.b) > 0.0 or abs(t.d) > 0.0:
             raise DemLoadError(f"{path}: rotated/sheared geotransform {tuple(t)[:6]} is not supported")
@@ -237,6 +236,48 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
         else:
             lat0 = t.f + 0.5 * t.e
         return _finish(heights, lat0, lon0, abs(t.e), t.a, name or path.stem, str(path), fill_voids)
+
+
+# metres of latitude per degree on WGS 84, as the grid spacing of a reprojected raster is chosen (the posts
+# only need to be about as far apart as the source's; the grid itself is exact in degrees)
+_M_PER_DEG_LAT = 111_320.0
+
+
+def _load_projected(ds, path: Path, fill_voids: bool, name: str | None) -> Dem:
+    """A raster in a projected CRS (UTM, a national grid), resampled bilinearly onto a WGS 84 (EPSG:4326)
+    latitude/longitude grid through GDAL's warper (rasterio.vrt.WarpedVRT): posts as far apart in metres
+    as the source's pixels (north-south; east-west at the grid's mid-latitude), covering the raster's
+    footprint; posts outside the footprint, or from the source's nodata, are voids. Heights are not
+    changed (the vertical datum stays the source's)."""
+    from rasterio.crs import CRS
+    from rasterio.enums import Resampling
+    from rasterio.transform import Affine
+    from rasterio.vrt import WarpedVRT
+    from rasterio.warp import transform_bounds
+
+    units = ds.crs.linear_units_factor[1] if ds.crs.linear_units_factor else 1.0
+    t = ds.transform
+    if abs(t.b) > 0.0 or abs(t.d) > 0.0 or t.a <= 0.0 or t.e == 0.0:
+        raise DemLoadError(f"{path}: rotated, sheared or empty geotransform {tuple(t)[:6]} is not supported")
+    res_m = min(abs(t.a), abs(t.e)) * units
+    west, south, east, north = transform_bounds(ds.crs, CRS.from_epsg(4326), *ds.bounds, densify_pts=21)
+    if not all(np.isfinite(v) for v in (west, south, east, north)) or not (west < east and south < north):
+        raise DemLoadError(f"{path}: its footprint in {ds.crs.to_string()} has no latitude/longitude extent")
+    dlat = res_m / _M_PER_DEG_LAT
+    dlon = dlat / np.cos(np.radians(0.5 * (south + north)))
+    n_lat = max(2, int(np.ceil((north - south) / dlat)))
+    n_lon = max(2, int(np.ceil((east - west) / dlon)))
+    src_nodata = ds.nodata if ds.nodata is not None and np.isfinite(ds.nodata) else None
+    if src_nodata is None and ds.dtypes[0] == "int16":
+        src_nodata = SRTM_VOID
+    with WarpedVRT(ds, crs=CRS.from_epsg(4326), transform=Affine(dlon, 0.0, west, 0.0, -dlat, north),
+                   width=n_lon, height=n_lat, resampling=Resampling.bilinear, src_nodata=src_nodata,
+                   nodata=np.nan, dtype="float64") as vrt:
+        heights = vrt.read(1)[::-1]             # north-up rows -> row 0 south
+    source = f"{path} (reprojected from {ds.crs.to_string()} to EPSG:4326, {res_m:g} m posts, bilinear)"
+    lat0 = north - (n_lat - 0.5) * dlat         # the southmost row's post (pixel centre; the grid may
+    return _finish(heights, lat0, west + 0.5 * dlon, dlat, dlon, name or path.stem, source,   # overhang)
+                   fill_voids)
 
 
 def load_path(path, fill_voids: bool = False) -> Dem:

@@ -125,8 +125,8 @@ def test_all_void_dem_is_an_error(tmp_path):
 def test_inconsistent_georeferencing(tmp_path):
     arr = np.ones((5, 5), np.float32)
     projected = tmp_path / "utm.tif"
-    _write_tif(projected, arr, from_origin(500000, 4000000, 30, 30), crs="EPSG:32616")
-    with pytest.raises(terrain.DemLoadError, match=r"utm\.tif.*projected"):
+    _write_tif(projected, arr, Affine(30.0, 5.0, 500000.0, 5.0, -30.0, 4000000.0), crs="EPSG:32616")
+    with pytest.raises(terrain.DemLoadError, match=r"utm\.tif.*rotated"):
         terrain.load(projected)
     rotated = tmp_path / "rot.tif"
     _write_tif(rotated, arr, Affine(0.001, 0.0002, 10.0, 0.0002, -0.001, 47.0))
@@ -144,3 +144,45 @@ def test_inconsistent_georeferencing(tmp_path):
     np.savez(missing, heights_m=np.ones((3, 3)))
     with pytest.raises(terrain.DemLoadError, match=r"keys\.npz.*misses"):
         terrain.load(missing)
+
+
+def test_a_projected_raster_is_resampled_onto_latitude_longitude(tmp_path):
+    """A UTM GeoTIFF of an analytic surface h(E, N): the loaded DEM, sampled at random points whose UTM
+    coordinates are transformed to latitude/longitude by PROJ (rasterio.warp.transform, independent of the
+    loader's warp), matches h there within 0.5 m (two bilinear steps on 90 m posts of a 3-4 km wavelength);
+    the posts are ~90 m apart in both directions; the source's nodata and the grid outside the rotated
+    footprint are voids, and a projected raster in feet is read in metres of post spacing."""
+    from rasterio.warp import transform
+
+    e0, n0, res, n = 740000.0, 4060000.0, 90.0, 200
+    east = e0 + res * (np.arange(n) + 0.5)
+    north = n0 - res * (np.arange(n) + 0.5)
+
+    def h(e, nn):
+        return 500.0 + 100.0 * np.sin(e / 3000.0) * np.cos(nn / 4000.0)
+
+    arr = h(*np.meshgrid(east, north)).astype(np.float64)
+    arr[100:110, 100:110] = -9999.0
+    path = tmp_path / "utm.tif"
+    _write_tif(path, arr, from_origin(e0, n0, res, res), crs="EPSG:32616", nodata=-9999.0)
+    dem = terrain.load(path)
+    lat_m = np.degrees(dem.dlat_rad) * 111_320.0
+    lon_m = np.degrees(dem.dlon_rad) * 111_320.0 * np.cos(dem.lat0_rad + 0.5 * (dem.n_lat - 1) * dem.dlat_rad)
+    assert lat_m == pytest.approx(90.0, rel=1e-9) and lon_m == pytest.approx(90.0, rel=2e-3)
+    rng = np.random.default_rng(1)
+    es = rng.uniform(e0 + 500.0, e0 + res * n - 500.0, 3000)
+    ns = rng.uniform(n0 - res * n + 500.0, n0 - 500.0, 3000)
+    near_void = (np.abs(es - (e0 + 105 * res)) < 8 * res) & (np.abs(ns - (n0 - 105 * res)) < 8 * res)
+    lon, lat = transform("EPSG:32616", "EPSG:4326", es, ns)
+    got = dem.height(np.radians(lat), np.radians(lon))
+    assert np.all(np.isfinite(got[~near_void]))
+    assert np.max(np.abs(got[~near_void] - h(es, ns)[~near_void])) < 0.5
+    lon_v, lat_v = transform("EPSG:32616", "EPSG:4326", [e0 + 105 * res], [n0 - 105 * res])
+    assert np.isnan(dem.height(np.radians(lat_v[0]), np.radians(lon_v[0])))        # the source's nodata
+    # the footprint is rotated against the latitude/longitude grid (grid convergence east of the zone's
+    # central meridian): the grid's corners beyond it are voids, far more than the source's 100 nodata posts
+    assert np.isnan(np.asarray(dem.heights_m)).mean() > 0.02
+    feet = tmp_path / "feet.tif"          # NAD83 / Tennessee (ftUS): 300 ft pixels are 91.44 m posts
+    _write_tif(feet, arr[:50, :50].astype(np.float32), from_origin(2_000_000.0, 600_000.0, 300.0, 300.0),
+               crs="EPSG:2274")
+    assert np.degrees(terrain.load(feet).dlat_rad) * 111_320.0 == pytest.approx(300 * 0.3048006, rel=1e-6)
