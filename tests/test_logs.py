@@ -180,8 +180,10 @@ def _imu(n=300, dt=0.01):
      "a gap of"),
     (lambda: _builder().add("imu", _imu(dt=0.02)), "stated rate_hz 100"),
     (lambda: _builder().add("lidar", {}), "unknown sensor 'lidar'"),
+    # a second table replaced the first without a word (chunks added one by one kept only the last)
+    (lambda: _builder().add("imu", _imu()).add("imu", _imu()), "imu: added already"),
 ], ids=["datum", "geoid-offset", "geoid-model", "imu-convention", "imu-convention-word", "lever-arm",
-        "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "rate", "sensor"])
+        "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "rate", "sensor", "twice"])
 def test_builder_refuses_bad_input_with_the_field(make, words):
     with pytest.raises(LogError, match=words):
         make()
@@ -202,7 +204,12 @@ def test_builder_converts_units_and_nan_in_invalid_samples_is_allowed(tmp_path):
     b.add_truth({"t_s": [0.0, 4.0], "lat_deg": [36.5, 36.5], "lon_deg": [-84.3, -84.3], "h_m": [2000.0] * 2,
                  "v_n_mps": [0.0] * 2, "v_e_mps": [0.0] * 2, "v_d_mps": [0.0] * 2, "roll_rad": [0.0] * 2,
                  "pitch_rad": [0.0] * 2, "yaw_rad": [0.0] * 2})
+    with pytest.raises(LogError, match="truth: added already"):
+        b.add_truth({"t_s": [0.0, 1.0], "lat_deg": [36.5] * 2, "lon_deg": [-84.3] * 2, "h_m": [2000.0] * 2,
+                     "v_n_mps": [0.0] * 2, "v_e_mps": [0.0] * 2, "v_d_mps": [0.0] * 2, "roll_rad": [0.0] * 2,
+                     "pitch_rad": [0.0] * 2, "yaw_rad": [0.0] * 2})
     log = read_log(b.write(tmp_path / "x"))
+    assert log.truth()["t_s"].iloc[-1] == 4.0                        # the first truth table, kept whole
     imu_back = log.table("imu")
     assert np.allclose(imu_back["omega_z_rps"], np.radians(1.0) / 1.0)          # 3600 deg/h = 1 deg/s
     ra_back = log.table("radar_altimeter")

@@ -162,9 +162,12 @@ class LogBuilder:
         self.truth: dict[str, np.ndarray] | None = None
 
     def add(self, sensor: str, data, units: dict | None = None) -> LogBuilder:
-        """One sensor's samples (a DataFrame or a mapping of arrays)."""
+        """One sensor's samples (a DataFrame or a mapping of arrays), once per sensor."""
         if sensor not in SENSORS:
             raise LogError(f"unknown sensor {sensor!r} (known: {', '.join(SENSORS)})")
+        if sensor in self.tables:          # a second table would silently replace the first
+            raise LogError(f"{sensor}: added already; add each sensor's samples once, as one table "
+                           "(join chunks first, e.g. pandas.concat)")
         if sensor == "imu" and self.meta["imu_sample"] is None:
             raise LogError("imu: the IMU sample convention is not stated: LogBuilder(imu_sample='rate' "
                            "(mean specific force and rate over each sample's interval) or 'increment' "
@@ -211,6 +214,8 @@ class LogBuilder:
 
     def add_truth(self, data, units: dict | None = None) -> LogBuilder:
         """The true trajectory (heights in the log's datum), for metrics after a replay."""
+        if self.truth is not None:
+            raise LogError("truth: added already; add the truth once, as one table (join chunks first)")
         cols = {}
         for col, unit in TRUTH_COLUMNS:
             cols[col] = _column("truth", data, col.rsplit("_", 1)[0], unit, units or {})
