@@ -407,3 +407,12 @@ def test_replay_of_a_run_folders_log_is_named_after_the_run(tmp_path, monkeypatc
     assert cli.main(["fly", "--out", "flight1", "--duration", "5", "--no-plots", "--quiet"]) == 0
     assert cli.main(["replay", "flight1/log", "--navigator", "ins", "--no-plots"]) == 0
     assert [p.name.rsplit("-", 1)[0] for p in (tmp_path / "runs").iterdir()] == ["replay-flight1"]
+
+
+def test_a_log_path_where_nothing_can_be_made_is_named(tmp_path):
+    """A read-only or pseudo file system (here /proc): LogError naming the log, not the temporary folder's
+    FileNotFoundError."""
+    from trn_env.logs.writer import LogWriter
+
+    with pytest.raises(LogError, match=r"log /proc/trn_env_log: cannot create it in /proc"):
+        LogWriter(Path("/proc/trn_env_log"), {})

@@ -215,8 +215,12 @@ class LogWriter:
         if self.out_dir.exists() and (not self.out_dir.is_dir() or any(self.out_dir.iterdir())):
             raise LogError(f"log {self.out_dir}: exists and is not an empty folder (give a new path)")
         clean_partial_leftovers(parent)
-        self.tmp = Path(tempfile.mkdtemp(prefix=f".{self.out_dir.name}{PARTIAL_MARK}{os.getpid()}-",
-                                         dir=parent))
+        try:
+            self.tmp = Path(tempfile.mkdtemp(prefix=f".{self.out_dir.name}{PARTIAL_MARK}{os.getpid()}-",
+                                             dir=parent))
+        except OSError as exc:            # a read-only or pseudo file system (/proc)
+            raise LogError(f"log {self.out_dir}: cannot create it in {parent} ({exc.strerror or exc})"
+                           ) from None
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(self.tmp, 0o777 & ~umask)     # mkdtemp makes it private; a log folder is not
