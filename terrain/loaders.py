@@ -275,9 +275,9 @@ def _load_projected(ds, path: Path, fill_voids: bool, name: str | None) -> Dem:
                    nodata=np.nan, dtype="float64") as vrt:
         heights = vrt.read(1)[::-1]             # north-up rows -> row 0 south
     source = f"{path} (reprojected from {ds.crs.to_string()} to EPSG:4326, {res_m:g} m posts, bilinear)"
-    lat0 = north - (n_lat - 0.5) * dlat         # the southmost row's post (pixel centre; the grid may
-    return _finish(heights, lat0, west + 0.5 * dlon, dlat, dlon, name or path.stem, source,   # overhang)
-                   fill_voids)
+    # the southmost row's post: a pixel centre (the grid may overhang the footprint by part of a post)
+    lat0 = north - (n_lat - 0.5) * dlat
+    return _finish(heights, lat0, west + 0.5 * dlon, dlat, dlon, name or path.stem, source, fill_voids)
 
 
 def load_path(path, fill_voids: bool = False) -> Dem:
