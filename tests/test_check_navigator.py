@@ -117,6 +117,26 @@ def test_checker_catches_unvalidated_settings():
         check_navigator(Faulty, raise_on_failure=True, verbose=False)
 
 
+class _NoUpdate:
+    name = "no_update"
+
+    def reset(self, initial):
+        pass
+
+
+def test_a_broken_or_missing_navigator_is_named_as_a_navigator():
+    """A navigator reference that does not resolve is reported as a navigator with its own error (it was
+    reported as a monitor: 'is not a monitor: ... lacks update(frames, estimate)'); a non-callable object is
+    a protocol problem (it was 'construction failed: int object is not callable')."""
+    for ref, words in ((f"{__name__}:_NoUpdate", "is not a navigator: class _NoUpdate lacks update(frames"),
+                       ("no_such_module_xyz:Nav", "cannot import module 'no_such_module_xyz'"),
+                       (42, "42 (int) is neither a name nor a class or factory")):
+        report = check_navigator(ref, check_settings=False, verbose=False)
+        assert report.kind == "navigator" and not report.ok
+        assert [p.check for p in report.problems] == ["protocol"] and words in report.problems[0].message
+    assert check_navigator("dem_integrity", check_settings=False, verbose=False).kind == "monitor"
+
+
 def test_checker_passes_a_correct_wrapper():
     """The same wrapper without a fault passes everything but the settings check (gain unvalidated)."""
     report = check_navigator(Faulty, check_settings=False, verbose=False)

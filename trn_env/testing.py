@@ -328,6 +328,11 @@ def _check(name_or_factory, settings: dict, kind: str | None, seed: int, duratio
     label = name_or_factory if isinstance(name_or_factory, str) else getattr(name_or_factory, "__name__",
                                                                              repr(name_or_factory))
     name = name_or_factory
+    if not isinstance(name_or_factory, str) and not callable(name_or_factory):
+        report = CheckReport(str(label), kind or "navigator")
+        report.fail("protocol", f"{name_or_factory!r} ({type(name_or_factory).__name__}) is neither a name "
+                    "nor a class or factory", "give a navigator's name, a module:Name reference or a factory")
+        return _finish(report, verbose, raise_on_failure)
     if not isinstance(name_or_factory, str):
         registry.register(_CHECK_NAME, name_or_factory, takes_rng=registry._takes_rng(name_or_factory))
         registry.register_monitor(_CHECK_NAME, name_or_factory)
@@ -337,8 +342,12 @@ def _check(name_or_factory, settings: dict, kind: str | None, seed: int, duratio
         if isinstance(name_or_factory, str):
             try:
                 registry.resolve(name, "navigator")
-            except ValueError:
-                kind = "monitor"
+            except ValueError:     # a monitor's name, or a broken navigator (then its own error is reported)
+                try:
+                    registry.resolve(name, "monitor")
+                    kind = "monitor"
+                except ValueError:
+                    pass
         elif _update_takes_estimate(name_or_factory):
             kind = "monitor"
     report = CheckReport(str(label), kind)
