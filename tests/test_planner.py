@@ -322,6 +322,15 @@ def test_a_straight_route_is_one_leg():
         assert route.length_m == pytest.approx(route.straight_length_m, rel=1e-12)
 
 
+def test_route_plot_contour_interval_is_round_and_gives_5_to_12_contours():
+    from trn_env.guidance.planner import _contour_step_m
+
+    for relief in (3.0, 14.0, 60.0, 95.0, 840.0, 2_500.0, 7_000.0):
+        step = _contour_step_m(relief)
+        mantissa = step / 10.0 ** math.floor(math.log10(step) + 1e-12)
+        assert round(mantissa, 9) in (1.0, 2.0, 5.0) and 4.8 <= relief / step <= 12.0, (relief, step)
+
+
 def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     from trn_env.cli import main
 

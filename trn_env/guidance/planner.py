@@ -451,10 +451,18 @@ class TerrainInformationPlanner:
         )
 
 
+def _contour_step_m(relief_m: float) -> float:
+    """A round contour interval (1, 2 or 5 x 10^k m) giving 5-12 contours over `relief_m`."""
+    raw = relief_m / 12.0
+    base = 10.0 ** math.floor(math.log10(raw))
+    return next(m * base for m in (1.0, 2.0, 5.0, 10.0) if m * base >= raw)
+
+
 def plot_route(
     path, planner: TerrainInformationPlanner, routes: dict[str, PlannedRoute], title: str = ""
 ) -> None:
-    """PNG of routes over the planner's information map (log10 CRLB of the cells; featureless bright)."""
+    """PNG of routes over the planner's information map (log10 CRLB of the cells; featureless bright), with
+    the cells' mean heights as contours."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -476,6 +484,17 @@ def plot_route(
         vmax=max(3.0, float(np.nanmax(crlb))),
     )
     fig.colorbar(im, ax=ax, label="log10 position CRLB of the map's terrain (m)")
+    # the cells' mean heights as contours: where the climb limit bends a route, the rise it avoids shows
+    h = g.height_m
+    if np.isfinite(h).sum() >= 4 and np.nanmax(h) - np.nanmin(h) > 1.0:
+        step = _contour_step_m(float(np.nanmax(h) - np.nanmin(h)))
+        levels = np.arange(np.ceil(np.nanmin(h) / step) * step, np.nanmax(h), step)
+        if levels.size:
+            lat_c = np.degrees(g.lat0_rad + np.arange(ni) * g.dlat_rad)
+            lon_c = np.degrees(g.lon0_rad + np.arange(nj) * g.dlon_rad)
+            cs = ax.contour(lon_c, lat_c, np.ma.masked_invalid(h), levels=levels, colors="0.35",
+                            linewidths=0.5, alpha=0.7)
+            ax.clabel(cs, levels[::2], fontsize=6, fmt="%.0f m")
     colours = ["tab:cyan", "tab:green", "tab:blue", "white"]
     for k, (name, r) in enumerate(routes.items()):
         w = np.array(r.waypoints_deg)
