@@ -23,8 +23,15 @@ ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}   # run in tmp_path: the children 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX signals and fork")
 
 
+# `trn-env ARGS` as a terminal user starts it: Ctrl-C raises KeyboardInterrupt. A test runner started in
+# the background of a shell without job control (`pytest &` in a script) ignores SIGINT, and its children
+# inherit the ignore, Python's included; the command is then started with Python's own handler restored.
+_CLI_AT_A_TERMINAL = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                      "from trn_env.cli import main; sys.exit(main(sys.argv[1:]))")
+
+
 def _start(args, tmp_path):
-    return subprocess.Popen([sys.executable, "-m", "trn_env.cli", *args], cwd=tmp_path, env=ENV,
+    return subprocess.Popen([sys.executable, "-c", _CLI_AT_A_TERMINAL, *args], cwd=tmp_path, env=ENV,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
 

@@ -118,8 +118,9 @@ def test_gnss_outages_that_overlap_or_disorder_are_refused(outages, where, what)
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX signals")
 def test_sigterm_mid_flight_is_handled_like_ctrl_c(tmp_path):
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}     # in tmp_path: the child imports the installed trn_env
-    proc = subprocess.Popen([sys.executable, "-m", "trn_env.cli", "fly", "default", "--out",
-                             str(tmp_path / "run")], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+    # the point-mass filter's flight lasts ~5 s (ins_tercom's can end within a second of 'ready after')
+    proc = subprocess.Popen([sys.executable, "-m", "trn_env.cli", "fly", "default", "--navigator", "pmf",
+                             "--out", str(tmp_path / "run")], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     head = ""
     while True:                        # until the flight has started
