@@ -58,4 +58,12 @@ def load(name_or_path, fill_voids: bool = False) -> Dem:
             from . import synthetic
 
             return synthetic.from_preset(key.split(":", 1)[1])
-    return loaders.load_path(Path(name_or_path), fill_voids)
+    path = Path(name_or_path)
+    if not path.exists() and not path.suffix and len(path.parts) == 1:
+        from .synthetic import PRESETS
+
+        raise FileNotFoundError(
+            f"{str(name_or_path)!r} is neither a bundled terrain ('jacksboro', or 'synthetic:' with one of "
+            f"{', '.join(sorted(PRESETS))}) nor a DEM file here"
+        )
+    return loaders.load_path(path, fill_voids)

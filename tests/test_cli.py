@@ -219,6 +219,22 @@ def test_validate_command(capsys, tmp_path):
     assert "initial.lat_deg:" in err and "route: required key is missing" in err
 
 
+def test_validate_takes_fly_overrides(capsys):
+    """validate checks the scenario fly would build from the same options, every problem at once."""
+    assert cli.main(["validate", "default", "--navigator", "pmf", "--seed", "7", "--duration", "30",
+                     "--set", "navigator.settings.grid_size=65"]) == 0
+    out = capsys.readouterr().out
+    assert "navigator pmf, seed 7, time limit 30 s" in out
+    assert cli.main(["validate", "default", "--navigator", "pmff", "--set", "terrain.world.dem=nodem",
+                     "--set", "wind.layers.0.speed_mps=-3"]) == 2
+    err = capsys.readouterr().err
+    assert "3 problem(s)" in err and "navigator.name: unknown navigator 'pmff'" in err
+    assert "wind.layers[0].speed_mps" in err
+    assert "terrain.world.dem" in err and "neither a bundled terrain ('jacksboro'" in err and "basin" in err
+    assert cli.main(["validate", "default", "--set", "x"]) == 2
+    assert "--set 'x': expected PATH=VALUE" in capsys.readouterr().err
+
+
 def test_bench_closed_loop_and_env_figures():
     from trn_env.bench import runner as bench
     cl = bench.closed_loop_benchmark(sim_s=3.0)

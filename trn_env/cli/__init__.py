@@ -6,7 +6,7 @@
     trn-env replay LOG [--navigator NAME] [--monitor NAME] [--map DEM] [--out DIR] [--no-plots]
     trn-env scenarios
     trn-env navigators [NAME ...] [--json]
-    trn-env validate SCENARIO
+    trn-env validate SCENARIO [--seed N] [--navigator NAME] [--duration S] [--set PATH=VALUE]
     trn-env bench [--quick] [--json]
     trn-env precompile [--workers N]
     trn-env campaign FILE [--out DIR] [--workers N] [--backend local|ray] [--address ADDR] [--resume]

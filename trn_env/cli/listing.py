@@ -66,9 +66,16 @@ def cmd_navigators(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from trn_env.scenario.loading import ScenarioError, load_scenario
+    from trn_env.scenario.loading import ScenarioError
+    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
     try:
-        sc = load_scenario(args.scenario)
+        sets = [parse_assignment(s) for s in args.set]
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        sc = load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
+                                duration_s=args.duration)
     except ScenarioError as err:
         _print_problems(err)
         return 2

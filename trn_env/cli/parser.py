@@ -90,8 +90,15 @@ def _parser() -> argparse.ArgumentParser:
     navs.add_argument("names", nargs="*", metavar="NAME",
                       help="only these (names or package.module:Name references; default: all)")
     navs.add_argument("--json", action="store_true", help="one JSON object instead of tables")
-    val = sub.add_parser("validate", help="check a scenario file and list every problem")
-    val.add_argument("scenario")
+    val = sub.add_parser("validate", help="check a scenario file and list every problem (with fly's "
+                                          "overrides: the scenario fly would build from the same options)")
+    val.add_argument("scenario", help="built-in name or TOML path")
+    val.add_argument("--seed", type=int, default=None, help="override the scenario seed (as fly's)")
+    val.add_argument("--navigator", default=None, help="override the navigator (as fly's)")
+    val.add_argument("--duration", type=float, default=None,
+                     help="override the time limit, seconds (as fly's)")
+    val.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                     help="set a scenario field by dotted path (as fly's --set)")
     pre = sub.add_parser("precompile", help="compile the numba kernels of every built-in navigator, the DEM "
                                             "monitor and both env tiers once, on all cores (after an install "
                                             "and on every node; later runs load the cache)")
