@@ -344,6 +344,16 @@ def test_num_envs_beyond_memory():
         TerrainNavFastVectorEnv(num_envs=10**12, **BASIN)
 
 
+@pytest.mark.parametrize("mode", ["gym.make", "sync", "async"])
+def test_single_env_forms_say_how_to_make_the_vector_env(mode):
+    import gymnasium as gym
+    with pytest.raises(TypeError, match=r"is a vector env .* vectorization_mode='vector_entry_point'"):
+        if mode == "gym.make":
+            gym.make("trn_env/TerrainNavFast-v0")
+        else:
+            gym.make_vec("trn_env/TerrainNavFast-v0", num_envs=2, vectorization_mode=mode)
+
+
 @pytest.mark.parametrize("nav", ["rbpf", "pmf", "pf", "acq_track", "no_such_navigator"])
 def test_navigator_not_modelled_lists_the_modelled(nav):
     with pytest.raises(ValueError, match=r"not modelled by the fast tier; it models: ins, ins_tercom"):

@@ -52,6 +52,7 @@ def _register_envs() -> None:
         # N point-mass aircraft per process (a native VectorEnv): gymnasium.make_vec(..., num_envs=N,
         # vectorization_mode="vector_entry_point")
         gymnasium.register(id="trn_env/TerrainNavFast-v0",
+                           entry_point="trn_env.env.fast.vector_env:single_env_refused",
                            vector_entry_point="trn_env.env.fast.vector_env:TerrainNavFastVectorEnv")
 
 

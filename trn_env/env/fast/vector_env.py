@@ -529,6 +529,16 @@ class TerrainNavFastVectorEnv(gym.vector.VectorEnv):
         self._needs_reset = True
 
 
+def single_env_refused(**kwargs):
+    """The entry point gymnasium.make (and make_vec's sync/async modes) reach for TerrainNavFast-v0: the tier
+    is a batch of aircraft in one process, with no single-env form; the message says how to make it."""
+    raise TypeError(
+        "trn_env/TerrainNavFast-v0 is a vector env (N aircraft in one process), not a single env: "
+        "gymnasium.make_vec('trn_env/TerrainNavFast-v0', num_envs=N, vectorization_mode='vector_entry_point')"
+        "; for one aircraft per env, trn_env/TerrainNav-v0 is the full-fidelity loop"
+    )
+
+
 def _radii(lat):
     s = np.sin(lat)
     w = 1.0 - dyn.WGS84_E2 * s * s
