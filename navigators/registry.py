@@ -52,6 +52,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 
@@ -178,7 +179,7 @@ def load_reference(reference: str, what: str) -> object:
     except BaseException as exc:  # noqa: BLE001 - any failure of a user's module is reported, not raised through
         if isinstance(exc, KeyboardInterrupt):
             raise
-        where = _where(exc)
+        where = _not_found_hint(exc, module_name) or _where(exc)
         raise PluginError(f"{what}: cannot import module {module_name!r}: {type(exc).__name__}: {exc}"
                           f"{where}") from exc
     for part in attr.split("."):
@@ -186,6 +187,20 @@ def load_reference(reference: str, what: str) -> object:
             raise PluginError(f"{what}: module {module_name!r} has no attribute {attr!r}")
         obj = getattr(obj, part)
     return obj
+
+
+def _not_found_hint(exc: BaseException, module_name: str) -> str:
+    """Where to put a module the import did not find (the module named, or one of its parents), else ""."""
+    if not isinstance(exc, ModuleNotFoundError) or not exc.name:
+        return ""
+    if module_name != exc.name and not module_name.startswith(exc.name + "."):
+        return ""            # a module the plug-in imports is missing: _where points into the plug-in
+    top = exc.name.split(".")[0]
+    local = [p for p in (Path.cwd() / f"{top}.py", Path.cwd() / top) if p.exists()]
+    if local:
+        return (f"; {local[0].name} is in the current directory, which the trn-env command does not search: "
+                f"add it to the path (PYTHONPATH=.) or install its package")
+    return "; install its package, or add the folder holding it to PYTHONPATH"
 
 
 def _where(exc: BaseException) -> str:
@@ -235,6 +250,17 @@ def _takes_rng(factory: Callable[..., object]) -> bool:
     except (TypeError, ValueError):
         return False
     return "rng" in params
+
+
+def takes_argument(name: str, argument: str, kind: str = "navigator") -> bool:
+    """Whether the factory of navigator (or monitor) `name` takes keyword `argument`: a parameter of that
+    name or **kwargs (True too when its signature cannot be read)."""
+    factory = resolve(name, kind).factory
+    try:
+        params = inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        return True
+    return argument in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
 
 
 def _dist_label(ep) -> str | None:

@@ -118,6 +118,54 @@ def test_bad_references_name_the_module_and_the_problem(plugin_dir, ref, words):
         assert w in str(err.value), (w, str(err.value))
 
 
+def test_a_module_not_found_says_where_to_put_it(tmp_path, monkeypatch):
+    """The command-line tool does not search the current directory: a module there is named with the fix;
+    elsewhere the message says to install it or add its folder to PYTHONPATH; a module the plug-in itself
+    imports that is missing is not confused with the plug-in (the plug-in's line is given)."""
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", ".", str(tmp_path))])
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "plugtest_here_nav.py").write_text("class Nav:\n    pass\n")
+    with pytest.raises(registry.PluginError, match=r"plugtest_here_nav.py is in the current directory, which "
+                                                   r"the trn-env command does not search.*PYTHONPATH=\."):
+        registry.create("plugtest_here_nav:Nav")
+    with pytest.raises(registry.PluginError, match=r"No module named 'plugtest_gone_nav'; install its "
+                                                   r"package, or add the folder holding it to PYTHONPATH"):
+        registry.create("plugtest_gone_nav:Nav")
+    other = tmp_path / "elsewhere"
+    other.mkdir()
+    (other / "plugtest_dep_nav.py").write_text("import plugtest_missing_dependency\n")
+    monkeypatch.syspath_prepend(str(other))
+    with pytest.raises(registry.PluginError) as err:
+        registry.create("plugtest_dep_nav:Nav")
+    assert "No module named 'plugtest_missing_dependency' (at " in str(err.value)
+    assert "plugtest_dep_nav.py:1" in str(err.value) and "PYTHONPATH" not in str(err.value)
+
+
+def test_a_plugin_without_settings_gets_the_map_only_when_it_takes_it(plugin_dir, tmp_path, monkeypatch):
+    """A plain class taking no arguments is built as it is (it was refused: 'dem: unknown setting'); one
+    taking dem or **kwargs gets the scenario's navigator map."""
+    from trn_env.scenario.navigation import navigator_settings
+    from trn_env.scenario.overrides import load_scenario_with
+    (tmp_path / "plugtest_plain_nav.py").write_text(textwrap.dedent("""\
+        class Plain:
+            name = "plain"
+            def reset(self, initial): ...
+            def update(self, frames): ...
+
+        class WithMap(Plain):
+            def __init__(self, dem):
+                self.dem = dem
+        """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for ref, gets_map in [("plugtest_plain_nav:Plain", False), ("plugtest_plain_nav:WithMap", True),
+                          ("plugtest_nav:PlugIns", True)]:
+        sc = load_scenario_with("default", [], navigator=ref)
+        settings = navigator_settings(sc, map_dem="the map")
+        assert ("dem" in settings) == gets_map, ref
+        if ref.endswith("Plain"):
+            assert isinstance(registry.create(ref, **settings), object)
+
+
 def test_factory_returning_a_non_navigator_is_refused(plugin_dir):
     with pytest.raises(registry.PluginError, match="lacks reset.*update"):
         registry.create("plugtest_nav:not_a_navigator_factory")

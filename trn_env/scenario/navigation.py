@@ -74,9 +74,9 @@ def _settings_fields(settings_class) -> set[str]:
 
 def navigator_settings(sc, map_dem) -> dict:
     """The keyword settings registry.create gets for the scenario's navigator: its [navigator.settings] and,
-    by its declared capabilities (navigators.core.capabilities), the map as dem= (needs_map, and any plug-in
-    that declares no settings class, as before capabilities), the bias priors and bias process noise from the
-    IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
+    by its declared capabilities (navigators.core.capabilities), the map as dem= (needs_map, and a plug-in
+    that declares no settings class when its factory takes dem or **kwargs), the bias priors and bias
+    process noise from the IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
     terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m (pmf, pf)
     or gnss_pos_bias_sigma_m (rbpf: horizontal, vertical) from the GNSS sensor's drift, and
@@ -88,7 +88,7 @@ def navigator_settings(sc, map_dem) -> dict:
     from trn_env.terrain import map_error
     caps = registry.capabilities(sc.navigator.name)
     settings = sc.navigator.table.to_dict()
-    if caps.needs_map or caps.settings is None:
+    if caps.needs_map or (caps.settings is None and registry.takes_argument(sc.navigator.name, "dem")):
         settings.setdefault("dem", map_dem)
     if caps.imu_bias_settings:
         for key, val in imu_bias_settings(sc.sensors.imu, _epoch_s(settings)).items():
