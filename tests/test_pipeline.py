@@ -5,8 +5,8 @@ from __future__ import annotations
 import copy
 import multiprocessing
 
-import numpy as np
 import pytest
+from _runs import assert_same_run
 
 import trn_env.scenario.build as components
 from trn_env.scenario.loading import read_scenario_file, validate
@@ -36,19 +36,6 @@ def _fly(sc, pipeline: bool):
     return loop.run()
 
 
-def _assert_same_run(a, b):
-    assert a.termination == b.termination
-    assert a.jsbsim_steps == b.jsbsim_steps
-    assert a.events == b.events
-    assert a.arrays.keys() == b.arrays.keys()
-    for k in a.arrays:
-        assert np.array_equal(a.arrays[k], b.arrays[k], equal_nan=True), k
-    for k, v in a.summary.items():
-        if k not in ("wall_time_s", "realtime_factor", "closed_loop_steps_per_s", "wall_time_by_stage_s",
-                     "pipelined"):
-            assert v == b.summary[k] or (v != v and b.summary[k] != b.summary[k]), k
-
-
 def test_pipelined_run_equals_the_inline_run_bit_for_bit():
     """55 s of the default scenario (GNSS fused for 10 s, a TERCOM fix at 49 s): every logged array, event and
     summary figure."""
@@ -57,7 +44,7 @@ def test_pipelined_run_equals_the_inline_run_bit_for_bit():
     assert piped.summary["pipelined"] and not inline.summary["pipelined"]
     assert any("TERCOM fix" in msg for _, _, msg in piped.events)
     assert piped.arrays["sensor_ira_range_m"].shape[0] == 55 * 50      # the worker's frames reach the log
-    _assert_same_run(inline, piped)
+    assert_same_run(inline, piped)
     assert not multiprocessing.active_children()                     # run() stopped the worker
 
 
@@ -71,7 +58,7 @@ def test_divergence_found_a_tick_late_ends_the_run_at_the_estimate_time():
     t_end = inline.arrays["t_s"][-1]
     assert t_end < 29.0 and inline.jsbsim_steps == round(t_end / 0.01)
     assert inline.events[-1] == (pytest.approx(t_end), "sim", "termination: diverged")
-    _assert_same_run(inline, piped)
+    assert_same_run(inline, piped)
 
 
 def test_a_worker_exception_is_raised_by_tick_and_the_worker_stops(monkeypatch):
@@ -141,7 +128,7 @@ def test_a_nan_estimate_ends_both_runs_at_its_time(monkeypatch):
     sc = _scenario(20.0, navigator="ins")
     inline, piped = _fly(sc, False), _fly(sc, True)
     assert inline.termination == "diverged" and inline.sim_time_s == pytest.approx(5.0)
-    _assert_same_run(inline, piped)
+    assert_same_run(inline, piped)
 
 
 def test_a_worker_that_cannot_start_leaves_the_loop_inline(monkeypatch):

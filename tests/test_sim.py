@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 from _ecef import ned_between as ned_vector_between
+from _runs import assert_same_run
 from trn_env.navigators.frames import GnssFrame, SensorFrames
 from trn_env.navigators.protocol import Estimate
 
@@ -300,3 +301,35 @@ def test_navigator_rate_must_divide_the_guidance_rate():
     data["navigator"]["latency_updates"] = 2
     with pytest.raises(ScenarioError, match="latency_updates"):
         validate(data, source="test")
+
+
+def test_run_scenario_takes_a_scenario_a_dict_and_dotted_path_sets():
+    """run_scenario flies a loaded Scenario or a dict as it flies the name (same bits); `sets` edits any field
+    as `fly --set` does, equal to editing the dict by hand; a misspelt override names the right ones."""
+    from trn_env.scenario.loading import load_scenario
+    from trn_env.sim import run_scenario
+
+    base = dict(seed=1, duration_s=3.0, navigator="ins", pipeline=False)
+    by_name = run_scenario("default", **base)
+    kw = {k: v for k, v in base.items() if k != "pipeline"}
+    by_object = run_scenario(load_scenario("default", **kw), pipeline=False)
+    assert_same_run(by_object, by_name)
+    by_set = run_scenario("default", sets={"wind.layers.0.speed_mps": 3.0, "initial.h_agl_m": 1400.0}, **base)
+    data = _data(seed=1, duration_s=3.0)
+    data["navigator"] = {"name": "ins"}
+    data["wind"]["layers"][0]["speed_mps"] = 3.0
+    data["initial"]["h_agl_m"] = 1400.0
+    by_dict = run_scenario(data, pipeline=False)
+    assert_same_run(by_set, by_dict, ignore=("scenario_source",))      # built-in 'default' / <dict>
+    assert not np.array_equal(by_set.arrays["true_h_msl_m"], by_name.arrays["true_h_msl_m"])
+    assert by_set.scenario.sections.wind.layers[0].speed_mps == 3.0
+    with pytest.raises(TypeError, match=r"unknown scenario override\(s\) 'duration': the overrides are "
+                                        r"seed=, duration_s= \(s\) and navigator=.*sets="):
+        run_scenario("default", duration=5)
+    with pytest.raises(TypeError, match="sets must be a mapping"):
+        run_scenario("default", sets=[("seed", 1)])
+    with pytest.raises(TypeError, match="a scenario is a built-in name, a TOML file's path, a Scenario or a "
+                                        "scenario dict, got int"):
+        run_scenario(3)
+    with pytest.raises(ScenarioError, match=r"wind.layers\[0\].speed_mps: -3 is less than the minimum"):
+        run_scenario("default", sets={"wind.layers.0.speed_mps": -3})

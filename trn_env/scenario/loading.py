@@ -34,6 +34,7 @@ This module reads the files and holds the `Scenario`; the checks themselves are 
 from __future__ import annotations
 
 import copy
+import os
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
@@ -171,6 +172,9 @@ def list_scenarios() -> list[tuple[str, str]]:
 
 def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
     """Parse a built-in scenario name or a TOML path into a dict; returns (data, source description)."""
+    if not isinstance(name_or_path, (str, os.PathLike)):
+        raise TypeError(f"a scenario is a built-in name, a TOML file's path, a Scenario or a scenario dict, "
+                        f"got {type(name_or_path).__name__}")
     text_path = Path(name_or_path)
     if str(name_or_path) in builtin_names() and not text_path.suffix:
         res = _builtin_dir() / f"{name_or_path}.toml"
@@ -207,8 +211,9 @@ def load_scenario(name_or_path: str | Path = "default", *, check_components: boo
 
     Parameters
     ----------
-    name_or_path : str or Path
-        A built-in scenario name (``trn-env scenarios`` lists them) or a TOML file's path.
+    name_or_path : str, Path, Scenario or dict
+        A built-in scenario name (``trn-env scenarios`` lists them), a TOML file's path, a Scenario (run
+        with other overrides) or a scenario dict.
     check_components : bool
         Also build what validation cannot judge from the file alone (DEMs load, the start trims, the
         navigator accepts its settings); False checks the file against the schema only.
@@ -226,15 +231,32 @@ def load_scenario(name_or_path: str | Path = "default", *, check_components: boo
     ScenarioError
         Listing every problem, each with its field path.
     """
-    data, source = read_scenario_file(name_or_path)
+    data, source, base = scenario_data(name_or_path)
     data = apply_overrides(data, **overrides)
-    base = Path(name_or_path).resolve().parent if source == str(Path(name_or_path)) else None
     return validate(data, source=source, base_dir=base, check_components=check_components)
 
 
+def scenario_data(scenario) -> tuple[dict, str, Path | None]:
+    """(data, source description, folder its relative paths are taken from) of a built-in name, a TOML
+    path, a Scenario (its `to_dict()`: paths already resolved) or a scenario dict (paths taken as given)."""
+    if isinstance(scenario, Scenario):
+        return scenario.to_dict(), scenario.source, None
+    if isinstance(scenario, dict):
+        return copy.deepcopy(scenario), "<dict>", None
+    data, source = read_scenario_file(scenario)
+    return data, source, Path(scenario).resolve().parent if source == str(Path(scenario)) else None
+
+
 def apply_overrides(data: dict, *, seed: int | None = None, duration_s: float | None = None,
-                    navigator: str | None = None) -> dict:
-    """A copy of `data` with the command-line overrides applied."""
+                    navigator: str | None = None, **unknown: Any) -> dict:
+    """A copy of `data` with the command-line overrides applied. TypeError for any other keyword, naming the
+    overrides and the dotted-path form for other fields."""
+    if unknown:
+        raise TypeError(
+            f"unknown scenario override(s) {', '.join(map(repr, unknown))}: the overrides are seed=, "
+            f"duration_s= (s) and navigator=; any other field by dotted path, e.g. run_scenario('default', "
+            f"sets={{'wind.layers.0.speed_mps': 12.0}})"
+        )
     data = copy.deepcopy(data)
     if seed is not None:
         data["seed"] = seed

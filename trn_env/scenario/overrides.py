@@ -13,7 +13,6 @@ import copy
 import json
 import math
 import sys
-from pathlib import Path
 from typing import Any
 
 if sys.version_info >= (3, 11):
@@ -104,16 +103,15 @@ def apply_fields(data: dict, assignments: list[tuple[str, Any]]) -> dict:
     return out
 
 
-def load_scenario_with(name_or_path: str | Path, assignments: list[tuple[str, Any]] | None = None,
-                       **overrides: Any):
+def load_scenario_with(name_or_path, assignments: list[tuple[str, Any]] | None = None, **overrides: Any):
     """`load_scenario` with dotted-path assignments applied after the seed/duration/navigator overrides
-    (the order a campaign applies them). Raises ScenarioError."""
-    from trn_env.scenario.loading import ScenarioError, apply_overrides, read_scenario_file, validate
-    data, source = read_scenario_file(name_or_path)
+    (the order a campaign applies them). `name_or_path` may also be a Scenario (its `to_dict()`, paths
+    already resolved) or a scenario dict. Raises ScenarioError."""
+    from trn_env.scenario.loading import ScenarioError, apply_overrides, scenario_data, validate
+    data, source, base = scenario_data(name_or_path)
     data = apply_overrides(data, **overrides)
     try:
         data = apply_fields(data, assignments or [])
     except ValueError as exc:
         raise ScenarioError(source, [str(exc)]) from None
-    base = Path(name_or_path).resolve().parent if source == str(Path(name_or_path)) else None
     return validate(data, source=source, base_dir=base)

@@ -564,20 +564,25 @@ class ClosedLoop:
                          self.jsbsim_steps, arrays, events, summary, self.world_dem)
 
 
-def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True, **overrides) -> RunResult:
+def run_scenario(name_or_path="default", *, sets: Mapping[str, object] | None = None, progress=None,
+                 pipeline: bool = True, **overrides) -> RunResult:
     """Load, validate and fly a scenario in closed loop.
 
     Parameters
     ----------
-    name_or_path : str or Path
-        A built-in scenario name or a TOML file's path.
+    name_or_path : str, Path, Scenario or dict
+        A built-in scenario name, a TOML file's path, a loaded Scenario or a scenario dict.
+    sets : mapping, optional
+        Scenario fields by dotted path (``{"wind.layers.0.speed_mps": 12.0}``), applied after the overrides,
+        as ``trn-env fly --set`` applies them.
     progress : callable, optional
         Called as ``progress(t_s, total_s)`` as the flight goes.
     pipeline : bool
         Run the sensors and the navigator in a second process one update behind the flight where the
         scenario allows it; the results are the same bits either way.
     **overrides
-        ``seed=``, ``duration_s=`` (s) and ``navigator=``, as ``load_scenario`` takes them.
+        ``seed=``, ``duration_s=`` (s) and ``navigator=``, as ``load_scenario`` takes them (TypeError for
+        any other name).
 
     Returns
     -------
@@ -589,5 +594,14 @@ def run_scenario(name_or_path="default", *, progress=None, pipeline: bool = True
     ScenarioError
         When the scenario is invalid (every problem, by field path), before anything flies.
     """
-    scenario = load_scenario(name_or_path, **overrides)
+    from trn_env.scenario.overrides import load_scenario_with
+
+    if sets is not None and not isinstance(sets, Mapping):
+        raise TypeError(f"sets must be a mapping of dotted paths to values, got {type(sets).__name__}")
+    if isinstance(name_or_path, Scenario) and not sets and not overrides:
+        scenario = name_or_path
+    elif not sets:
+        scenario = load_scenario(name_or_path, **overrides)
+    else:
+        scenario = load_scenario_with(name_or_path, list(sets.items()), **overrides)
     return ClosedLoop(scenario, progress=progress, pipeline=pipeline).run()
