@@ -261,6 +261,10 @@ def _campaign(tmp_path, body: str) -> Path:
      "type"),
     ('seeds = 0\n', "seeds: 0 seeds: give at least one seed"),
     ('seeds = []\n', "seeds: [] is neither"),
+    # seeds are int64 in the rows and TOML integers are 64-bit
+    ('seeds = [0, 9223372036854775808]\n', "list of distinct seeds from 0 to 9223372036854775807 (64-bit)"),
+    ('seeds = 1\nroot_seed = 9223372036854775808\n',
+     "root_seed: 9223372036854775808 is greater than the maximum of 9223372036854775807"),
     ('seeds = 1\nnavigators = ["no_such_nav"]\n',
      "navigators[0] (no_such_nav): navigator.name: unknown navigator"),
     ('seeds = 1\n[[sweeps]]\npath = "navigator.settings.no_such_setting"\nvalues = [1.0]\n',

@@ -68,6 +68,9 @@ def test_replay_reproduces_the_recorded_flight_bit_for_bit(recorded):
     ins = replay(path, "ins")
     assert "ira" in ins.summary["unused_sensors"] and "ira" not in rep.summary["unused_sensors"]
     assert "imu" not in ins.summary["unused_sensors"]
+    for bad in (-1, 2**63, 1.5, True):          # a seed is a 64-bit count, as the scenario's
+        with pytest.raises(LogError, match=r"seed: .* is not a seed from 0 to 9223372036854775807"):
+            replay(path, "ins", seed=bad)
 
 
 def test_streamed_log_equals_the_in_memory_one(recorded):

@@ -167,6 +167,9 @@ def test_overrides_revalidated():
     with pytest.raises(ScenarioError) as exc:
         load_scenario("default", navigator="nope")
     assert any(p.startswith("navigator.name:") for p in exc.value.problems)
+    assert load_scenario("default", seed=2**63 - 1, check_components=False).seed == 2**63 - 1
+    with pytest.raises(ScenarioError, match=r"seed: 9223372036854775808 is greater than the maximum"):
+        load_scenario("default", seed=2**63, check_components=False)    # TOML and Parquet hold 64 bits
 
 
 def test_bad_toml_and_missing_file(tmp_path):

@@ -61,6 +61,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 _NUMBER = {"type": "number"}
+INT64_MAX = 2**63 - 1          # seeds are int64 columns in the rows (and TOML integers are 64-bit)
 SCHEMA: dict = {
     "type": "object",
     "additionalProperties": False,
@@ -68,11 +69,12 @@ SCHEMA: dict = {
     "properties": {
         "name": {"type": "string", "minLength": 1, "pattern": "^[A-Za-z0-9_.-]+$"},
         "description": {"type": "string"},
-        "root_seed": {"type": "integer", "minimum": 0},
+        "root_seed": {"type": "integer", "minimum": 0, "maximum": INT64_MAX},
         "seeds": {"oneOf": [
             {"type": "integer", "minimum": 1, "description": "a count of seeds drawn from root_seed"},
             {"type": "array", "minItems": 1, "uniqueItems": True,
-             "items": {"type": "integer", "minimum": 0}, "description": "a list of scenario seeds"},
+             "items": {"type": "integer", "minimum": 0, "maximum": INT64_MAX},
+             "description": "a list of scenario seeds"},
         ]},
         "scenarios": {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1}},
         "duration_s": {"type": "number", "exclusiveMinimum": 0},
@@ -220,7 +222,7 @@ def _schema_problems(data: dict) -> list[str]:
                 out.append(f"seeds: {err.instance} seeds: give at least one seed (a count >= 1 or a list)")
             else:
                 out.append(f"seeds: {err.instance!r} is neither a seed count >= 1 nor a list of distinct "
-                           "seeds >= 0")
+                           f"seeds from 0 to {INT64_MAX} (64-bit)")
             continue
         if err.validator == "oneOf" and len(path) == 2 and path[0] == "sweeps":
             out.append(f"{field_path(path)}: give exactly one of values or grid")

@@ -197,6 +197,9 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
     anything runs. `settings` update the navigator's; `seed` replaces the log's seed for the navigator's
     random stream (the map errors and the initial estimate keep the log's)."""
     from trn_env.scenario.build import build_monitors, build_navigator
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                             or not 0 <= int(seed) <= 2**63 - 1):
+        raise LogError(f"seed: {seed!r} is not a seed from 0 to {2**63 - 1} (64-bit, as the scenario's)")
     seed_override = seed
     if not isinstance(log, SensorLog):
         log = read_log(log)
