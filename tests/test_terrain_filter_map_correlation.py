@@ -127,6 +127,64 @@ def test_correlated_map_model_keeps_the_position_consistent(kind):
     assert _nees(kind, 0.0, seed=11, runs=runs, samples=25) > q
 
 
+def _vertical_nees(kind: str, seed: int, runs: int, samples: int, gnss_samples: int, bias_m: float) -> float:
+    """Sum over runs of the published height's NEES after `gnss_samples` GNSS fixes (4 m vertical) then
+    `samples` 1 Hz IRA samples over planar terrain; the map's vertical error is a bias drawn from
+    N(0, bias_m^2) plus the exponential Gauss-Markov field of _nees, the INS height's error drawn from the
+    baro prior. The height's error is b_ins - b_hat (the estimate's height minus the truth's)."""
+    dem = planar_dem()
+    rng = np.random.default_rng(seed)
+    rho = math.exp(-SPEED / L_MAP)
+    total = 0.0
+    for r in range(runs):
+        kw = dict(COMMON, map_correlation_length_m=L_MAP, map_bias_sigma_m=bias_m)
+        nav = (PointMassFilter(dem, grid_size=121, spacing_min_m=0.5, velocity_noise_mps_per_sqrt_s=1e-6,
+                               accel_bias_sigma_mps2=1e-7, **kw) if kind == "pmf"
+               else ParticleFilter(dem, n_particles=4000, rng=np.random.default_rng(seed * 100 + r),
+                                   velocity_noise_mps_per_sqrt_s=1e-6, heading_noise_rad_per_sqrt_s=0.0,
+                                   **kw))
+        nav.reset(_initial(10.0))
+        x_true = rng.normal(0.0, 10.0, 2)
+        b_ins = rng.normal(0.0, SIGMA_BARO)
+        m = rng.normal(0.0, bias_m) + rng.normal(0.0, SIGMA_MAP)      # the map's bias + correlated error
+        m_corr = m
+        st = ins_state()
+        r_lat, r_lon = radii_m(LAT0, H_ANT)
+        nav._predict_to(0.0, st)
+        t = 0.0
+        for i in range(gnss_samples + samples):
+            t = 1.0 + i
+            nav._predict_to(t, st)
+            if i < gnss_samples:
+                fix = (LAT0 + (x_true[0] + rng.normal(0.0, 2.0)) / r_lat,
+                       LON0 + (x_true[1] + rng.normal(0.0, 2.0)) / r_lon,
+                       H_ANT - b_ins + rng.normal(0.0, 4.0))
+                nav._gnss_update(t, st, (*fix, np.array([SPEED, 0.0, 0.0])))
+            else:
+                z = H0 + G_N * x_true[0] + G_E * x_true[1] + b_ins - m + rng.normal(0.0, SIGMA_R)
+                nav._terrain_update(t, "ira", float(H_ANT - z), 0.0, st, None)
+            step = rho * m_corr + math.sqrt(1.0 - rho * rho) * SIGMA_MAP * rng.standard_normal()
+            m, m_corr = m - m_corr + step, step
+        est = nav.estimate()
+        err = est.h_m - (H_ANT - b_ins)
+        total += err * err / float(est.covariance[2, 2])
+    return total
+
+
+@pytest.mark.parametrize("kind", ["pmf", "pf"])
+def test_published_height_carries_the_maps_vertical_error(kind):
+    # 40 runs x 1 dof: terrain samples pin the offset b = INS error + map error, so the height keeps the
+    # map's bias and correlated error; the published variance covers them (height_error): the NEES sum lies
+    # between the chi-square(40) 0.1 % and 99.9 % quantiles, after GNSS fixes and without them (P_b alone,
+    # a few m^2 after 25 samples, put it at ~10 x the upper quantile)
+    runs = 40
+    lo, hi = chi2.ppf(0.001, runs), chi2.isf(0.001, runs)
+    for gnss_samples in (0, 5):
+        nees = _vertical_nees(kind, seed=5 + gnss_samples, runs=runs, samples=25, gnss_samples=gnss_samples,
+                              bias_m=7.0)
+        assert lo <= nees <= hi, (gnss_samples, nees, lo, hi)
+
+
 @pytest.mark.parametrize("kind", ["pmf", "pf"])
 def test_gnss_height_leaves_the_maps_part_of_the_offset(kind):
     # b = INS height error + map error; 20 GNSS heights (4 m) see the first only: the exact two-state

@@ -238,6 +238,7 @@ class ParticleFilter(InsRiddenFilter):
         # shared (the measurements are the same for all particles, so is the Kalman gain), as in the PMF
         self.b[:] = 0.0 if mean is None else float(mean[2])
         self.P_b = float(c[2, 2])
+        self._start_height_error()
         self.dv[:] = x[:, 3:5]
         self.dpsi[:] = x[:, 5]
         self.logw[:] = 0.0
@@ -266,7 +267,7 @@ class ParticleFilter(InsRiddenFilter):
         propagate_particles((self.dn, self.de, self.b, self.dv, self.dpsi), dt,
                             (float(f_n), float(f_e), g_over_r),
                             (float(self.s_pos), s_vel, float(self.s_psi), 0.0), z)
-        self.P_b += self._offset_process_var(dt, st)
+        self._grow_offset(dt, st)
         self._t_belief = t_s
         self._moments_cache = None
 
@@ -293,6 +294,7 @@ class ParticleFilter(InsRiddenFilter):
             g_mean = float(w @ gam / w.sum())
         out = self._apply_loglik(t_s, ll, what, b_new)
         if out is not None and g_mean is not None:
+            self._height.terrain(g_mean * gain, S - self.P_b)
             self.P_b *= (1.0 - g_mean * gain)
         return out
 
@@ -449,6 +451,7 @@ class ParticleFilter(InsRiddenFilter):
         out = self._apply_loglik(t_s, ll, "GNSS update", self.b + K_b * (z_b - self.b))
         if out is not None:
             self.P_b = p_h * (1.0 - K_b) + p_m if p_m > 0.0 else self.P_b * (1.0 - K_b)
+            self._height.gnss(K_b, sv2)
             deficit = self._gnss_drift_deficit()       # the receiver drift the fixes share (terrain_filter)
             if deficit.max() > 0.0:
                 self.dn += math.sqrt(deficit[0]) * self.rng.standard_normal(self.M)

@@ -239,6 +239,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         self.bias = np.zeros(self.n * self.n)
         self._work = np.empty((6, self.n * self.n))
         self.P_b = self.bias_prior_var()
+        self._start_height_error()
         self._q_pending = np.zeros((2, 2))
         self._moments_cache = None
         self._n_underflow = 0
@@ -290,7 +291,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
                 C_uu[5, 5] += q_b * dt
                 C_uu[6, 6] += q_eps * dt + turn_h2 * turn
             self.C_uu = 0.5 * (C_uu + C_uu.T)
-            self.P_b += self._offset_process_var(dt, st)
+            self._grow_offset(dt, st)
             self._t_belief = t_s
             self._moments_cache = None
             self._vertical_velocity_shift(t_s)
@@ -333,7 +334,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self.C_uz[:, :2] += np.outer(self.C_uu[:, BETA], dD)
         if d_eta != 0.0 and math.isfinite(d_eta):
             self.bias += d_eta * m
+            p_b = self.P_b
             self.P_b = max(self.P_b + d_eta * d_eta * c_bb + 2.0 * d_eta * float(self.C_uz[BETA, 2]), 1e-9)
+            self._height.widen(self.P_b - p_b)
             self.C_uz[:, 2] += self.C_uu[:, BETA] * d_eta
         self._moments_cache = None
 
@@ -446,6 +449,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self._n_underflow = 0
             log_lik, pred_mean, pred_var = float(o[0]), float(o[1]), float(o[2])
             c = np.array([[o[7], o[8]], [o[8], o[9]]]) + np.eye(2) * self.spacing ** 2 / 12.0
+            self._height.terrain(float(o[12]) * self.P_b / S, S - self.P_b)
             self.P_b *= (1.0 - float(o[12]) * self.P_b / S)   # as much as the sample is believed an inlier
             self._moments_cache = (float(o[5]), float(o[6]), c, float(o[10]), self.P_b + float(o[11]))
         else:
@@ -472,7 +476,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
                 self._integrity_test(t_s, math.inf, 1)
                 return
             kern.bias_update(self.bias, gam * resid, self.P_b / S)
-            self.P_b *= (1.0 - float(self._weights() @ gam) * self.P_b / S)
+            g_mean = float(self._weights() @ gam)
+            self._height.terrain(g_mean * self.P_b / S, var)
+            self.P_b *= (1.0 - g_mean * self.P_b / S)
             self._moments_cache = None
         self._velocity_from_position(prior, self._position_moments())
         self._set_update_extra(t_s, [h_meas - pred_mean], [[pred_var + S]], log_lik)
@@ -499,6 +505,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             K = p_h / (p_h + self.gnss_vertical_sigma_m ** 2)
             self.bias += K * (z_b - self.bias)
             self.P_b = p_h * (1.0 - K) + p_m
+            self._height.gnss(K, self.gnss_vertical_sigma_m ** 2)
         else:
             S = self.P_b + self.gnss_vertical_sigma_m ** 2
             K = self.P_b / S

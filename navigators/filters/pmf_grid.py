@@ -77,6 +77,7 @@ class PmfGrid:
             spread += kern.convolve_diagonal(self.logw, self.bias, self.n, _kernel_1d(abs(c)),
                                              1 if c > 0.0 else -1, self._work, LOG_FLOOR)
         self.P_b += spread
+        self._height.widen(spread)
         self._moments_cache = None
         self._q_pending = np.zeros((2, 2))
 

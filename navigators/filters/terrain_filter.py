@@ -37,6 +37,7 @@ from ..measurements.sampling import terrain_samples
 from ..measurements.terrain_models import radii_m
 from ..protocol import Estimate, Health, update_extra
 from ._ekf_kernels import yaw_total_variation
+from .height_error import HeightError
 from .terrain_filter_settings import (
     TerrainFilterSettings,
 )
@@ -366,14 +367,33 @@ class InsRiddenFilter(InsGnssBlock):
             var += self.map_sigma_m ** 2        # the correlated map error is part of the vertical offset
         return var
 
-    def _offset_process_var(self, dt: float, st: np.ndarray | None) -> float:
-        """Variance (m^2) the vertical offset b gains over dt s: its random walk, plus, with a correlated
+    def _grow_offset(self, dt: float, st: np.ndarray | None) -> None:
+        """The variance (m^2) the vertical offset b gains over dt s: its random walk, plus, with a correlated
         map error, the walk map_walk_var_per_m times the ground distance the INS flew (its horizontal speed
-        times dt; see the class docstring)."""
-        q = self.vertical_noise ** 2 * dt
+        times dt; see the class docstring). The height's error model (height_error) takes the first as the
+        INS's; the map's decorrelates over the distance flown."""
+        q = q_ins = self.vertical_noise ** 2 * dt
+        distance_m = 0.0
         if self.map_walk_var_per_m > 0.0 and st is not None and math.isfinite(st[3] + st[4]):
-            q += self.map_walk_var_per_m * math.hypot(float(st[3]), float(st[4])) * dt
-        return q
+            speed_mps = math.hypot(float(st[3]), float(st[4]))
+            q += self.map_walk_var_per_m * speed_mps * dt
+            distance_m = speed_mps * dt
+        self.P_b += q
+        self._height.step(q_ins, distance_m)
+
+    def _start_height_error(self) -> None:
+        """The published height's error model from the prior P_b (after `_init_belief` sets it)."""
+        var_corr = self.map_sigma_m ** 2 if self.map_walk_var_per_m > 0.0 else 0.0
+        self._height = HeightError.start(self.P_b, self.map_bias_sigma_m ** 2, var_corr,
+                                         self.map_correlation_length_m, self.map_correlation_function)
+
+    def _height_variance(self, var_down: float) -> float:
+        """The published down variance: the belief's (the cells' or particles' spread of b plus P_b) with P_b
+        replaced by the height's error variance where the map's error is modelled (height_error), never
+        below the belief's (P_b already holds the map's part after a GNSS height)."""
+        if not self._height.active:
+            return var_down
+        return var_down + max(self._height.var_e - self.P_b, 0.0)
 
     def _gnss_offset_split(self) -> tuple[float, float]:
         """(P_h, P_m): the vertical offset's variance split into the INS height's part, which a GNSS height
@@ -466,7 +486,9 @@ class InsRiddenFilter(InsGnssBlock):
 
     # ----------------------------------------------------------------------------------------- output
     def estimate(self) -> Estimate:
-        """INS + the belief's mean offset; covariance: the belief's block and the INS error model's rest."""
+        """INS + the belief's mean offset; covariance: the belief's block and the INS error model's rest, the
+        down variance the published height's error where the map's vertical error is modelled
+        (height_error)."""
         st = self.ins.state
         # mean over [dn, de, b, dvn, dve, dpsi]; cov_b 6 x 6 (NaN: not carried)
         mean, cov_b = self._output_moments()
@@ -484,6 +506,8 @@ class InsRiddenFilter(InsGnssBlock):
         for i in carried:
             for j in carried:
                 P[idx[i], idx[j]] = cov_b[i, j]
+        if 2 in carried:
+            P[2, 2] = self._height_variance(P[2, 2])
         suspended = self._capture.suspended   # beyond capture (navigators.core.capture)
         P = self._capture.publish(P, float(self.ins.t_s), self._capture_floor_m2())
         dn, de = (float(mean[0]), float(mean[1])) if np.all(np.isfinite(mean[:2])) else (0.0, 0.0)
