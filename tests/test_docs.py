@@ -215,3 +215,78 @@ def test_every_documented_command_line_parses():
                 except SystemExit:
                     bad.append(f"{path.relative_to(ROOT)}:{number}: {command}")
     assert checked >= 38 and bad == [], bad
+
+
+_SCRIPT_ARGV_CHECK = r'''
+import argparse, io, json, runpy, sys, contextlib
+
+class Parsed(Exception):
+    pass
+
+original = argparse.ArgumentParser.parse_args
+
+def parse_then_stop(self, *args, **kwargs):
+    original(self, *args, **kwargs)
+    raise Parsed
+
+argparse.ArgumentParser.parse_args = parse_then_stop
+results = []
+for path, argv in json.loads(sys.stdin.read()):
+    sys.argv = [path] + argv
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            runpy.run_path(path, run_name="__main__")
+        results.append([path, argv, "ran to the end without parsing its arguments"])
+    except Parsed:
+        results.append([path, argv, None])
+    except SystemExit as exc:
+        results.append([path, argv, f"exit {exc.code}: {err.getvalue().strip()[-300:]}"])
+    except Exception as exc:
+        results.append([path, argv, f"{type(exc).__name__}: {exc}"])
+print(json.dumps(results))
+'''
+
+
+def _documented_script_commands() -> list[tuple[str, list[str], str]]:
+    """(script path, argv, where) of every `python scripts/NAME.py ...` in the docs and the README: fenced
+    blocks (backslash continuations joined) and inline code; scripts that parse with argparse only."""
+    import shlex
+
+    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    found = []
+    for path in files:
+        text = path.read_text(encoding="utf-8")
+        blocks = re.findall(r"```[^\n]*\n(.*?)```", text, re.S)
+        lines = [ln for b in blocks for ln in b.replace("\\\n", " ").splitlines()]
+        lines += re.findall(r"`([^`\n]*python scripts/[^`\n]*)`", text)
+        for line in lines:
+            m = re.search(r"python (scripts/\w+\.py)((?:\s+[^#|;&]*)?)", line)
+            if not m:
+                continue
+            script = ROOT / m.group(1)
+            if not script.is_file() or "ArgumentParser" not in script.read_text(encoding="utf-8"):
+                continue
+            if re.search(r"\$\(|\.\.\.", m.group(2)):     # a shell substitution, an elided synopsis
+                continue
+            # an optional part [--opt V] as given, a <placeholder> as a word
+            argv = shlex.split(re.sub(r"<[^>]*>", "X", m.group(2)).replace("[", " ").replace("]", " "))
+            found.append((str(script), argv, f"{path.relative_to(ROOT)}: {line.strip()}"))
+    return found
+
+
+def test_every_documented_script_command_parses():
+    """Every `python scripts/X.py ...` the docs give is accepted by that script's own argument parser (run up
+    to its parse_args, in one child process): no option is misspelt, renamed or gone. Placeholders (OUT,
+    DIR, N) are taken as the strings they are."""
+    commands = _documented_script_commands()
+    assert len(commands) >= 40
+    unique = sorted({(s, tuple(a)): w for s, a, w in commands}.items())
+    payload = json.dumps([[s, list(a)] for (s, a), _ in unique])
+    child = subprocess.run([sys.executable, "-c", _SCRIPT_ARGV_CHECK], input=payload, capture_output=True,
+                           text=True, timeout=600, cwd=NEUTRAL_CWD)
+    assert child.returncode == 0, child.stderr[-2000:]
+    results = json.loads(child.stdout.strip().splitlines()[-1])
+    bad = [f"{where}\n    -> {problem}"
+           for ((_, _), where), (_, _, problem) in zip(unique, results, strict=True) if problem is not None]
+    assert bad == [], "\n".join(bad)
