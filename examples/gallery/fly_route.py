@@ -30,7 +30,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--wind-from-deg", type=float, default=270.0)
     ap.add_argument("--wind-mps", type=float, default=15.0)
-    ap.add_argument("--turbulence", default="none", help="none, light, moderate or severe (Milspec)")
+    ap.add_argument("--turbulence", default="none", choices=["none", "light", "moderate", "severe"],
+                    help="Milspec turbulence severity")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--tas-mps", type=float, default=85.0)
     args = ap.parse_args()
