@@ -107,7 +107,9 @@ def check_point(name: str, p, dems) -> tuple[float, float]:
         raise ValueError(f"{name} must be finite, got {p!r}")
     for which, dem in zip(("terrain", "navigator's map"), dems, strict=True):
         if not dem.contains(math.radians(lat), math.radians(lon)):
-            raise ValueError(f"{name} {(lat, lon)} is outside the {which} {dem.name!r}")
+            la0, la1, lo0, lo1 = (math.degrees(x) for x in dem.bounds)
+            raise ValueError(f"{name} {(lat, lon)} is outside the {which} {dem.name!r} (latitude "
+                             f"{la0:.4f} to {la1:.4f} deg, longitude {lo0:.4f} to {lo1:.4f} deg)")
     return lat, lon
 
 
