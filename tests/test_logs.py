@@ -185,11 +185,29 @@ def _imu(n=300, dt=0.01):
     (lambda: _builder().add("lidar", {}), "unknown sensor 'lidar'"),
     # a second table replaced the first without a word (chunks added one by one kept only the last)
     (lambda: _builder().add("imu", _imu()).add("imu", _imu()), "imu: added already"),
+    # datetimes became nanosecond counts ("the samples come every 1e+07 s"); a list had no .keys()
+    (lambda: _builder().add("imu", pd.DataFrame(_imu()).assign(t_s=lambda d: pd.to_datetime(d.t_s,
+                                                                                             unit="s"))),
+     r"column 't_s' holds dates and times \(datetime64\[ns\]\): give seconds as numbers"),
+    (lambda: _builder().add("imu", pd.DataFrame(_imu()).assign(t_s=lambda d: pd.to_timedelta(d.t_s,
+                                                                                              unit="s"))),
+     r"column 't_s' holds durations"),
+    (lambda: _builder().add("imu", [1.0, 2.0]), "imu: give a pandas DataFrame, a mapping of column names to "
+                                                "arrays or a numpy structured array, got list"),
 ], ids=["datum", "geoid-offset", "geoid-model", "imu-convention", "imu-convention-word", "lever-arm",
-        "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "rate", "sensor", "twice"])
+        "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "rate", "sensor", "twice",
+        "datetime", "timedelta", "list"])
 def test_builder_refuses_bad_input_with_the_field(make, words):
     with pytest.raises(LogError, match=words):
         make()
+
+
+def test_builder_takes_a_numpy_structured_array_as_a_dataframe(tmp_path):
+    imu = pd.DataFrame(_imu())
+    records = imu.to_records(index=False)
+    a = _builder().add("imu", imu).tables["imu"]
+    b = _builder().add("imu", records).tables["imu"]
+    assert set(a) == set(b) and all(np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
 
 
 def test_builder_converts_units_and_nan_in_invalid_samples_is_allowed(tmp_path):

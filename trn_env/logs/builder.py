@@ -67,18 +67,26 @@ def _quantities(sensor: str, imu_sample: str | None) -> list[tuple[str, str, str
 def _get(data, name: str):
     try:
         return data[name]
-    except (KeyError, IndexError, TypeError):
+    except (KeyError, IndexError, TypeError, ValueError):    # ValueError: a structured array's missing field
         return None
 
 
-def _columns_of(data) -> list[str]:
-    return [str(c) for c in (data.columns if hasattr(data, "columns") else data.keys())]
+def _columns_of(data, what: str = "data") -> list[str]:
+    if hasattr(data, "columns"):
+        return [str(c) for c in data.columns]
+    names = getattr(getattr(data, "dtype", None), "names", None)      # a numpy structured array
+    if names:
+        return list(names)
+    if not hasattr(data, "keys"):
+        raise LogError(f"{what}: give a pandas DataFrame, a mapping of column names to arrays or a numpy "
+                       f"structured array, got {type(data).__name__}")
+    return [str(c) for c in data.keys()]
 
 
 def _column(what: str, data, quantity: str, dim: str, units: dict, required: bool = True):
     """The quantity's values converted to its canonical unit (None if absent and not required)."""
     table = _UNITS[dim]
-    have = _columns_of(data)
+    have = _columns_of(data, what)
     for c in have:
         if c.startswith(quantity + "_") and c[len(quantity) + 1:] in _SUFFIX_UNIT:
             unit = _SUFFIX_UNIT[c[len(quantity) + 1:]]
@@ -102,6 +110,11 @@ def _column(what: str, data, quantity: str, dim: str, units: dict, required: boo
 
 
 def _array(what: str, col: str, v) -> np.ndarray:
+    kind = np.asarray(v).dtype.kind
+    if kind in "mM":       # numpy would give the raw nanosecond counts
+        raise LogError(f"{what}: column {col!r} holds {'durations' if kind == 'm' else 'dates and times'} "
+                       f"({np.asarray(v).dtype}): give seconds as numbers, e.g. "
+                       f"(df['time'] - df['time'].iloc[0]).dt.total_seconds()")
     try:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError) as exc:
