@@ -73,6 +73,18 @@ def test_replay_reproduces_the_recorded_flight_bit_for_bit(recorded):
             replay(path, "ins", seed=bad)
 
 
+def test_a_map_that_does_not_cover_the_log_is_refused(recorded, tmp_path, capsys):
+    """A map elsewhere ran the whole replay off its grid and said 'completed'; it is refused by name with both
+    spans, nothing written."""
+    _, _, path, _ = recorded
+    out = tmp_path / "out"
+    assert cli.main(["replay", str(path), "--navigator", "pmf", "--map", "synthetic:rolling",
+                     "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "map 'synthetic:rolling' does not cover the log's start (36." in err
+    assert "it spans latitude 36.5000 to 36.7701 deg" in err and "Traceback" not in err and not out.exists()
+
+
 def test_streamed_log_equals_the_in_memory_one(recorded):
     """The run's arrays are the same with the log streamed to disk; the sensor arrays log.npz held are
     read back from the log (SensorLog.arrays) bit for bit."""

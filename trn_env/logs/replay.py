@@ -214,6 +214,12 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
         raise LogError(f"navigator {d.navigator.name!r}: {exc}") from exc
     check_sensors(nav, d.navigator.name, log, d)
     initial = _initial(log, d)
+    if not the_map.contains(initial.lat_rad, initial.lon_rad):
+        la0, la1, lo0, lo1 = (math.degrees(x) for x in the_map.bounds)
+        lat, lon = math.degrees(initial.lat_rad), math.degrees(initial.lon_rad)
+        raise LogError(f"map {the_map.name!r} does not cover the log's start ({lat:.5f}, {lon:.5f} deg): it "
+                       f"spans latitude {la0:.4f} to {la1:.4f} deg, longitude {lo0:.4f} to {lo1:.4f} deg; "
+                       "give the map of the flown area")
     nav.reset(initial)
     ests: list[Estimate] = [initial]
     events: list = []

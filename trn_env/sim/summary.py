@@ -59,7 +59,9 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
         "horizontal_error_at_gnss_loss_m": _at_loss(e_h, denied),
         "horizontal_sigma_at_gnss_loss_m": _at_loss(sig_h, denied),
         "distance_flown_m": float(np.sum(step)),
-        "min_true_agl_m": float(np.nanmin(a["true_h_agl_m"])) if t.size else float("nan"),
+        # NaN where the world has no height under the truth (a replay over a map that does not reach there)
+        "min_true_agl_m": (float(np.nanmin(a["true_h_agl_m"])) if np.isfinite(a["true_h_agl_m"]).any()
+                           else float("nan")),
         "jsbsim_steps": int(jsbsim_steps),
         "closed_loop_steps_per_s": jsbsim_steps / wall_time_s if wall_time_s > 0 else float("nan"),
         "navigator_status": final.health.status,
