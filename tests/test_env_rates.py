@@ -132,6 +132,23 @@ def test_scenario_fields_set_the_scenario_and_bad_ones_name_the_field():
         assert all(w in str(err.value) for w in words), str(err.value)
 
 
+def test_scenario_fields_can_fit_the_sensor_a_navigator_requires():
+    """The navigator and the fields are validated together: a navigator needing a sensor the scenario lacks
+    builds when scenario_fields adds it (it was refused before the fields were applied); the same
+    navigator without the fields is refused naming the sensor."""
+    small = {**SMALL, "navigator": "acq_track", "max_episode_s": 60.0}
+    e = TerrainNavEnv("basin_route", scenario_fields={"sensors.radar_altimeter": {}, "sensors.heading": {}},
+                      **small)
+    assert e.scenario.navigator_name == "acq_track" and e.scenario.sensors.radar_altimeter is not None
+    e.reset(seed=1)
+    e.close()
+    with pytest.raises(ValueError, match=r"sensors.radar_altimeter: navigator 'acq_track' needs this sensor"):
+        TerrainNavEnv("basin_route", **small)
+    with pytest.raises(ValueError, match=r"(?s)scenario_fields: .*sensors.ira.rate_hz: -1.0"):
+        TerrainNavEnv("basin_route", scenario_fields={"sensors.ira.rate_hz": -1.0},
+                      **{**SMALL, "navigator": "pmf"})
+
+
 def test_ira_average_reaches_the_navigators_tercom_batch():
     """scenario_fields' navigator.settings.ira_average: the INS + TERCOM navigator's batch enters each 5
     consecutive IRA samples as their mean (2 s of 50 Hz IRA: 100 samples, 20 batch rows; GNSS ignored, as

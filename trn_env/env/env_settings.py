@@ -38,18 +38,22 @@ def goal_offset_ne(lat_rad: float, lon_rad: float, h_m: float, goal_lat_rad: flo
     return -sl * co * dx + -sl * so * dy + cl * dz, -so * dx + co * dy + 0.0 * dz
 
 
-def with_fields(sc: Scenario, scenario_fields: dict | None) -> Scenario:
-    """The scenario with `scenario_fields` (dotted path -> value, `Scenario.with_fields`) set; a ValueError
-    naming `scenario_fields` and the field for anything the scenario schema rejects."""
+def with_fields(sc: Scenario, scenario_fields: dict | None, navigator: str | None = None) -> Scenario:
+    """The scenario with `scenario_fields` (dotted path -> value, `Scenario.with_fields`) set, and the
+    navigator replaced first when given (validated once, together); a ValueError naming `scenario_fields`
+    and the field for anything the scenario schema rejects."""
     if scenario_fields is None:
         return sc
     if not isinstance(scenario_fields, dict) or not all(isinstance(k, str) for k in scenario_fields):
         raise ValueError(f"scenario_fields must be a dict of dotted field paths to values (e.g. "
                          f"{{'sensors.ira.rate_hz': 10.0}}), got {scenario_fields!r}")
-    if not scenario_fields:
+    if not scenario_fields and navigator is None:
         return sc
     try:
-        return sc.with_fields(dict(scenario_fields))
+        if navigator is None:
+            return sc.with_fields(dict(scenario_fields))
+        from trn_env.scenario.overrides import load_scenario_with
+        return load_scenario_with(sc, list(scenario_fields.items()), navigator=navigator)
     except ValueError as err:
         raise ValueError(f"scenario_fields: {err}") from None
 

@@ -241,7 +241,8 @@ class TerrainNavEnv(gym.Env, EzPickle):
     pipeline=False, flight_dt_s=None, scenario_fields=None, action_change_weight=0.0,
     time_limit_failure=False)`.
     `scenario_fields`: scenario fields set for every episode by dotted path (`Scenario.with_fields`, as
-    `trn-env fly --set`), e.g. `{"sensors.ira.rate_hz": 10.0, "navigator.rate_hz": 0.5}`; applied before
+    `trn-env fly --set`), e.g. `{"sensors.ira.rate_hz": 10.0, "navigator.rate_hz": 0.5}`; applied with
+    `navigator` (validated together: the fields may add a sensor the navigator requires) and before
     `guidance_rate_hz` and `flight_dt_s`; anything the scenario's schema rejects is a ValueError naming
     `scenario_fields` and the field. The route task's rates (`TASK_RATES`, its default) and its opt-in
     `DECISION_RATES` use it (trn_env.env.route_task; what they cost in accuracy:
@@ -353,11 +354,18 @@ class TerrainNavEnv(gym.Env, EzPickle):
             raise ValueError(f"log_sensors must be a bool, got {log_sensors!r}")
         if not 0 < agl_min_m < agl_max_m:
             raise ValueError(f"need 0 < agl_min_m < agl_max_m, got {agl_min_m}, {agl_max_m}")
-        sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, navigator=navigator)
-        if isinstance(scenario, Scenario) and navigator is not None:
-            sc = sc.with_overrides(navigator=navigator)
-        sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
-        sc = with_fields(sc, scenario_fields)
+        if navigator is not None and scenario_fields:
+            # one validation: the fields may fit what the navigator needs (a sensor it requires)
+            base = (scenario if isinstance(scenario, Scenario)
+                    else load_scenario(scenario, check_components=False))
+            sc = with_fields(base, scenario_fields, navigator=navigator)
+            sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
+        else:
+            sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, navigator=navigator)
+            if isinstance(scenario, Scenario) and navigator is not None:
+                sc = sc.with_overrides(navigator=navigator)
+            sc = sc.with_overrides(duration_s=float(max_episode_s) + 1.0)
+            sc = with_fields(sc, scenario_fields)
         sc = with_rates(sc, guidance_rate_hz, flight_dt_s)
         if not isinstance(pipeline, bool):
             raise ValueError(f"pipeline must be a bool, got {pipeline!r}")
