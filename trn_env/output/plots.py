@@ -111,6 +111,27 @@ def _shade_outages(ax, t: np.ndarray, available: np.ndarray) -> None:
         ax.axvspan(t[a], t[min(b, t.size) - 1], color="0.9", zorder=0)
 
 
+def _finite_max(*parts: np.ndarray) -> float:
+    vals = np.concatenate([np.abs(p[np.isfinite(p)]) for p in parts])
+    return float(np.max(vals)) if vals.size else math.nan
+
+
+def _error_ylim(ax, t: np.ndarray, e: np.ndarray, s3: np.ndarray, symmetric: bool) -> None:
+    """Y limits that show the flight, not the prior: scaled to the error and bound after the first 5 % of
+    the samples (a start tens of times wider than the converged bound flattened the rest to a line); what
+    the start reaches beyond them is written in the panel. A late peak or divergence stays in view."""
+    skip = t.size // 20
+    rest = _finite_max(e[skip:], s3[skip:])
+    if not math.isfinite(rest):
+        return
+    lim = 1.15 * min(rest, 1e5) + 1.0
+    ax.set_ylim(-lim if symmetric else 0.0, lim)
+    start = _finite_max(e[:skip], s3[:skip]) if skip else math.nan
+    if math.isfinite(start) and start > lim:
+        ax.text(0.01, 0.96, f"first {t[skip] - t[0]:.0f} s reach {start:.0f} m (off scale)",
+                transform=ax.transAxes, va="top", fontsize=7, color="0.35")
+
+
 def plot_errors(path: Path, arrays: dict[str, np.ndarray], title: str = "") -> None:
     """Navigation error against time with +-3 sigma bounds of the navigator's covariance."""
     plt = _pyplot()
@@ -134,10 +155,7 @@ def plot_errors(path: Path, arrays: dict[str, np.ndarray], title: str = "") -> N
         ax.legend(loc="upper right", fontsize=7)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-        finite = np.concatenate([np.abs(e[np.isfinite(e)]), s3[np.isfinite(s3)]])
-        if finite.size:
-            lim = 1.15 * min(float(np.max(finite)), 1e5) + 1.0
-            ax.set_ylim(-lim if symmetric else 0.0, lim)
+        _error_ylim(ax, t, e, s3, symmetric)
     axes[-1].set_xlabel("time (s); grey = GNSS not used")
     fig.suptitle(title or "navigation error")
     fig.tight_layout()
