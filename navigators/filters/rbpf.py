@@ -112,6 +112,7 @@ from ..protocol import (
 from . import _rbpf_kernels as kern
 from . import rbpf_progressive as prog
 from ._ekf_kernels import yaw_total_variation
+from .height_error import HeightError
 from .rbpf_cloud import RbpfCloud
 from .rbpf_ira_update import RbpfIraUpdate
 from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings, table1_covariance
@@ -178,7 +179,8 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self.name = name
         self.dem = dem
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        s.copy_to(self, "n_particles ess_threshold map_sigma_m map_bias_sigma_m map_noise_model "
+        s.copy_to(self, "n_particles ess_threshold map_sigma_m map_bias_sigma_m map_correlation_length_m "
+                        "map_correlation_function map_noise_model "
                         "window_edge_range theta_velocity_rows ambiguity_gap_m ambiguity_weight "
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
@@ -300,6 +302,12 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._last_row = None          # INS row and specific force carried into the next chunk
         self._extra: dict = {}
         self._cov9 = self._covariance9()
+        # the published height's error with the map's (height_error): the cloud's prior height spread is the
+        # INS's; the map's random error counts as correlated only with a correlation length
+        var_corr = self.map_sigma_m ** 2 if self.map_correlation_length_m > 0.0 else 0.0
+        self._height = HeightError(float(self._cov9[2, 2]), 0.0, 0.0, self.map_bias_sigma_m ** 2, var_corr,
+                                   self.map_correlation_length_m, self.map_correlation_function)
+        self._height_t = float(initial.t_s)
         self._n_rejected = 0
         self._last_range_m = -1.0
         self.epochs = 0
@@ -390,6 +398,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                                 self._epoch_ql_var(), w)
         if nbad:
             self.health.skip(te, "time_update_not_pd", f"{nbad} particles: N not positive definite")
+        up_var = self._height_step(te) if self._height.active else 0.0
         logw_prev = self.logw.copy()
         updated = False
         ll = np.empty(self.n)
@@ -411,11 +420,15 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                 ll = np.empty(self.n)
                 self._ira_update(te, y_ira, lat, lon, h, v, C, sc, self.logw.copy(), ll, stage)
                 stage += 1
+            if updated and self._height.active:
+                up_var = self._height_update(up_var, self._height.terrain)
         if gnss is not None:
             if ll.shape[0] != self.n:       # the IRA update re-initialised the cloud (another size)
                 ll = np.empty(self.n)
             self._gnss_update(te, gnss, lat, lon, h, v, sc, ll)
             updated = True
+            if self._height.active:
+                self._height_update(up_var, self._height.gnss)
         if updated:
             self._normalise_resample(te, logw_prev)
             self._handover()
@@ -428,6 +441,32 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
             if sig < 30.0:
                 self.health.status = "ok"
                 self._reacquiring = False
+
+    def _up_var(self) -> float:
+        return float(kern.moments(self.xn, self.xl, self.P, self._weights())[1][2, 2])
+
+    def _height_step(self, te: float) -> float:
+        """The height's error model over the time update (height_error): the cloud's height spread grown
+        about the INS, the map's correlated error decorrelated over the ground flown. Returns the spread."""
+        up_var = self._up_var()
+        self._height.widen(up_var - float(self._cov9[2, 2]))
+        st = self.ins.state
+        speed = math.hypot(float(st[3]), float(st[4])) if np.all(np.isfinite(st[3:5])) else 0.0
+        self._height.step(0.0, speed * max(te - self._height_t, 0.0))
+        self._height_t = te
+        return up_var
+
+    def _height_update(self, up_var_before: float, update) -> float:
+        """An update that narrowed the cloud's height spread from up_var_before to the current one, as the
+        scalar Kalman update that narrows it so: gain K = 1 - after / before, noise r = before * after /
+        (before - after) (height_error: a terrain sample moves the height's error by -K times the map's, a
+        GNSS height does not). Returns the spread after."""
+        after = self._up_var()
+        if 0.0 < after < up_var_before:
+            update(1.0 - after / up_var_before, up_var_before * after / (up_var_before - after))
+        elif after > up_var_before:
+            self._height.widen(after - up_var_before)
+        return after
 
     def _covariance9(self) -> np.ndarray:
         w = self._weights()
@@ -456,9 +495,13 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         else:
             pl.publish(extra, self._mixture_hpl(pl.filter_risk(self)), self)
         health = self.health.snapshot(self._consistency_warning, self._recovery.consistency)
+        cov9 = self._cov9
+        if self._height.active and self._height.var_e > cov9[2, 2]:    # the height keeps the map's error
+            cov9 = cov9.copy()
+            cov9[2, 2] = self._height.var_e
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
                         v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
-                        covariance=self._capture.publish(self._cov9, float(self.ins.t_s)), health=health,
+                        covariance=self._capture.publish(cov9, float(self.ins.t_s)), health=health,
                         extra=extra)
 
 

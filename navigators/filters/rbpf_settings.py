@@ -15,6 +15,7 @@ import numpy as np
 
 from ..core.capabilities import Capabilities, SensorNeeds
 from ..core.settings import Settings, setting
+from .terrain_filter_settings import MAP_CORRELATION
 
 MAX_PARTICLES = 200_000       # 12 x 12 covariance per particle: 230 MB at this count
 INV_SQRT2 = 0.7071067811865476
@@ -91,6 +92,11 @@ class RbpfSettings(Settings):
                                  ge=0.0)
     map_bias_sigma_m: float = setting(0.0, "map's vertical bias (a scenario: its map error model)", "m",
                                       ge=0.0)
+    map_correlation_length_m: float = setting(
+        0.0, "correlation length of the map's random vertical error along the ground, for the published "
+        "height's error (a scenario: its map error model); 0: white per sample", "m", ge=0.0)
+    map_correlation_function: str = setting("exponential", "the map error's correlation function (a "
+                                            "scenario: its map error model)", choices=MAP_CORRELATION)
     terrain_model_sigma_m: float | str = setting(
         "auto", "terrain a coarse map cannot hold between posts (auto: from the map's spectrum)", "m",
         ge=0.0, also=("auto",))
