@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from _child_processes import init_local_ray
 
@@ -446,3 +447,22 @@ def test_every_row_column_is_documented_in_the_outputs_reference(flown):
     from trn_env.output.fields import CAMPAIGN_ROW_FIELDS, undocumented
 
     assert undocumented(read_rows(flown).columns, CAMPAIGN_ROW_FIELDS) == []
+
+
+def test_report_of_string_and_table_sweeps(tmp_path, capsys):
+    """A sweep of strings (a navigator setting's choices) or of tables (a map error model) makes a string
+    column, which pandas 3 types as its own "str" dtype: the report's sweep plot crashed on it (numpy could
+    not interpret the dtype). Both are drawn as categories now."""
+    camp = _campaign(tmp_path, 'name = "words"\nseeds = 1\nnavigators = ["ins"]\n[[sweeps]]\n'
+                               'path = "navigator.settings.gravity_model"\nvalues = ["j2", "somigliana"]\n'
+                               '[[sweeps]]\npath = "terrain.map.error_model"\n'
+                               'values = [{ bias_m = 0.0 }, { bias_m = 5.0 }]\n')
+    out = tmp_path / "out"
+    assert cli.main(["campaign", str(camp), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    rows = read_rows(out)
+    assert len(rows) == 4
+    assert not pd.api.types.is_numeric_dtype(rows["sweep.navigator.settings.gravity_model"])
+    capsys.readouterr()
+    assert cli.main(["report", str(out)]) == 0, capsys.readouterr().err
+    pngs = sorted(p.name for p in (out / "report").glob("sweep_*.png"))
+    assert pngs == ["sweep_navigator_settings_gravity_model.png", "sweep_terrain_map_error_model.png"]

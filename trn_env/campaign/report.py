@@ -30,6 +30,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from pandas.api.types import is_bool_dtype, is_numeric_dtype
 
 from trn_env.campaign.rows import read_manifest, read_rows
 from trn_env.campaign.stats import group_stats
@@ -232,7 +233,8 @@ def sweep_plot(path: Path, df, sweep_path: str, metric: str = "horizontal_error_
         return []
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 4.8))
-    numeric = np.issubdtype(df[col].dtype, np.number)
+    # pandas' own dtypes (a string sweep's "str", nullable numbers) are not numpy dtypes
+    numeric = is_numeric_dtype(df[col]) and not is_bool_dtype(df[col])
     cats = sorted(df[col].astype(str).unique()) if not numeric else None
     for k, (nav, g) in enumerate(df[df["termination"] != "error"].groupby("navigator", sort=True)):
         colour, hatch = _style(k)
