@@ -2,6 +2,7 @@
 
     python scripts/axis_consistency.py                                  # pmf, pf, rbpf, ins_tercom; 4 seeds
     python scripts/axis_consistency.py --navigators pmf --seeds 8 --duration 300
+    python scripts/axis_consistency.py --detail-correlation     # the world's sub-post detail along the route
 
 Conditions: "refined" (the default scenario: the world is the 3" DEM with 30 m fractal detail, the
 navigator's map the DEM itself), "world=map" (the refinement removed: the map is the world) and "dted1"
@@ -9,7 +10,9 @@ navigator's map the DEM itself), "world=map" (the refinement removed: the map is
 the route closed loop (GNSS lost at 10 s) and prints, over the epochs after 12 s, the mean of e_i^2 / P_ii
 for each axis (1 for a consistent filter), the down error's RMS, the median published down sigma and the
 run's position ANEES (3-dof; 3 for a consistent filter). Where a figure is measured for the docs, the
-validation page quotes this command.
+validation page quotes this command. `--detail-correlation` prints instead the standard deviation of the
+refined world minus the navigator's map (bicubic) along the default route's legs, sampled every 10 m, and
+its correlation at lags of 10-400 m (mean over the legs).
 """
 
 from __future__ import annotations
@@ -42,6 +45,8 @@ def parse(argv):
     p.add_argument("--conditions", default=",".join(CONDITIONS), help=f"comma-separated, of {CONDITIONS}")
     p.add_argument("--seeds", type=_positive_int, default=4, help="seeds 0 .. N-1")
     p.add_argument("--duration", type=_positive_float, default=120.0, help="flight time, s (> 12)")
+    p.add_argument("--detail-correlation", action="store_true",
+                   help="print the world-minus-map detail's spread and correlation along the route instead")
     args = p.parse_args(argv)
     args.conditions = [c.strip() for c in args.conditions.split(",") if c.strip()]
     bad = [c for c in args.conditions if c not in CONDITIONS]
@@ -72,8 +77,39 @@ def axis_figures(arrays: dict, summary: dict, after_s: float = 12.0) -> list[flo
                    float(summary["anees"])]
 
 
+def detail_correlation(lags_m=(10, 20, 40, 60, 80, 120, 160, 240, 400), step_m: float = 10.0) -> None:
+    """World minus map (both bicubic) along the default route's legs: its spread and correlation by lag."""
+    import math
+
+    from trn_env.navigators.core.maps import map_height, map_record
+
+    from trn_env.scenario.loading import load_scenario
+    from trn_env.scenario.maps import build_terrain
+    from trn_env.sim.closed_loop import spawn_rngs
+    sc = load_scenario("default")
+    world, the_map = build_terrain(sc, {}, spawn_rngs(int(sc.seed))["map"])
+    rec_w, rec_m = map_record(world, True), map_record(the_map, True)
+    legs = []
+    wp = sc.route.waypoints
+    for a, b in zip(wp[:-1], wp[1:], strict=True):
+        la0, lo0, la1, lo1 = map(math.radians, (a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg))
+        dist = math.hypot((la1 - la0) * 6.371e6, (lo1 - lo0) * 6.371e6 * math.cos(la0))
+        f = np.linspace(0.0, 1.0, int(dist / step_m))
+        d = np.array([map_height(rec_w, la0 + x * (la1 - la0), lo0 + x * (lo1 - lo0))
+                      - map_height(rec_m, la0 + x * (la1 - la0), lo0 + x * (lo1 - lo0)) for x in f])
+        legs.append(d[np.isfinite(d)])
+    print(f"world minus map along the route: sigma {np.concatenate(legs).std():.2f} m")
+    for lag in lags_m:
+        k = int(round(lag / step_m))
+        r = np.mean([np.corrcoef(x[:-k], x[k:])[0, 1] for x in legs if x.size > k + 10])
+        print(f"  correlation at {lag:4d} m: {r:+.3f}")
+
+
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
+    if args.detail_correlation:
+        detail_correlation()
+        return 0
     from trn_env.scenario.loading import ScenarioError
     from trn_env.sim import run_scenario
     print(f"{'navigator':<12}{'condition':<11}{'NEES N':>8}{'NEES E':>8}{'NEES D':>8}{'D rms m':>9}"
