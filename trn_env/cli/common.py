@@ -54,6 +54,24 @@ def _discard_partial_log(writer, log_path: Path | None) -> None:
         shutil.rmtree(log_path, ignore_errors=True)
 
 
+def scenario_from_args(args):
+    """The scenario fly, record and validate build from their SCENARIO, --seed, --navigator, --duration and
+    --set options; None after printing every problem (the caller exits 2)."""
+    from trn_env.scenario.loading import ScenarioError
+    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
+    try:
+        sets = [parse_assignment(s) for s in args.set]
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return None
+    try:
+        return load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
+                                  duration_s=args.duration)
+    except ScenarioError as err:
+        _print_problems(err)
+        return None
+
+
 def out_dir_problem(out: Path, overwrite: bool = False) -> str | None:
     """Why the run folder `out` could not be written (checked before flying, nothing left behind), or None."""
     from trn_env.output.run_folder import target_problem

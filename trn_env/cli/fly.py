@@ -12,8 +12,8 @@ from trn_env.cli.common import (
     _command_line,
     _discard_partial_log,
     _interrupt_exit,
-    _print_problems,
     run_folder_target,
+    scenario_from_args,
 )
 
 
@@ -66,18 +66,8 @@ def _summary_table(summary: dict, out_dir: Path):
 
 
 def cmd_fly(args) -> int:
-    from trn_env.scenario.loading import ScenarioError
-    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
-    try:
-        sets = [parse_assignment(s) for s in args.set]
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    try:
-        scenario = load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
-                                      duration_s=args.duration)
-    except ScenarioError as err:
-        _print_problems(err)
+    scenario = scenario_from_args(args)
+    if scenario is None:
         return 2
     out_dir, problem = run_folder_target(args, scenario.name)
     if problem is not None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import sys
 
-from trn_env.cli.common import _print_problems
+from trn_env.cli.common import scenario_from_args
 
 
 def cmd_scenarios() -> int:
@@ -66,18 +66,8 @@ def cmd_navigators(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from trn_env.scenario.loading import ScenarioError
-    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
-    try:
-        sets = [parse_assignment(s) for s in args.set]
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    try:
-        sc = load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
-                                duration_s=args.duration)
-    except ScenarioError as err:
-        _print_problems(err)
+    sc = scenario_from_args(args)
+    if sc is None:
         return 2
     print(f"{sc.source}: ok (scenario {sc.name!r}, navigator {sc.navigator_name}, seed {sc.seed}, "
           f"time limit {sc.duration_s:g} s)")

@@ -6,23 +6,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trn_env.cli.common import _discard_partial_log, _print_problems, out_dir_problem, run_folder_target
+from trn_env.cli.common import _discard_partial_log, out_dir_problem, run_folder_target, scenario_from_args
 from trn_env.cli.fly import _log_writer, _plotter
 
 
 def cmd_record(args) -> int:
     from trn_env.logs.format import LogError
-    from trn_env.scenario.loading import ScenarioError
-    from trn_env.scenario.overrides import load_scenario_with, parse_assignment
-    try:
-        sets = [parse_assignment(s) for s in args.set]
-        scenario = load_scenario_with(args.scenario, sets, seed=args.seed, navigator=args.navigator,
-                                      duration_s=args.duration)
-    except ScenarioError as err:
-        _print_problems(err)
-        return 2
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    scenario = scenario_from_args(args)
+    if scenario is None:
         return 2
     out = args.out
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
