@@ -3,6 +3,7 @@
     python scripts/axis_consistency.py                                  # pmf, pf, rbpf, ins_tercom; 4 seeds
     python scripts/axis_consistency.py --navigators pmf --seeds 8 --duration 300
     python scripts/axis_consistency.py --detail-correlation     # the world's sub-post detail along the route
+    python scripts/axis_consistency.py --return-bias            # the IRA return's height against the map
 
 Conditions: "refined" (the default scenario: the world is the 3" DEM with 30 m fractal detail, the
 navigator's map the DEM itself), "world=map" (the refinement removed: the map is the world) and "dted1"
@@ -13,6 +14,11 @@ truth), the median published down sigma and the run's position ANEES (3-dof; 3 f
 Where a figure is measured for the docs, the validation page quotes this command. `--detail-correlation`
 prints instead the standard deviation of the refined world minus the navigator's map (bicubic) along the
 default route's legs, sampled every 10 m, and its correlation at lags of 10-400 m (mean over the legs).
+`--return-bias` flies the route (seeds as given) and queries the IRA (the scenario's settings, noise free)
+from the true state every 0.5 s after 12 s, once against the refined world and once against the world
+without its refinement, and prints the returned point's height minus the navigator's map there, read
+bicubically (the terrain filters' default) and bilinearly (what a terrain update sees with exact position
+and noise-free ranges): mean, sigma, and the world minus the bicubic map below the aircraft for reference.
 """
 
 from __future__ import annotations
@@ -47,6 +53,8 @@ def parse(argv):
     p.add_argument("--duration", type=_positive_float, default=120.0, help="flight time, s (> 12)")
     p.add_argument("--detail-correlation", action="store_true",
                    help="print the world-minus-map detail's spread and correlation along the route instead")
+    p.add_argument("--return-bias", action="store_true",
+                   help="print the IRA return's height minus the map's there (noise free, true state)")
     args = p.parse_args(argv)
     args.conditions = [c.strip() for c in args.conditions.split(",") if c.strip()]
     bad = [c for c in args.conditions if c not in CONDITIONS]
@@ -106,10 +114,63 @@ def detail_correlation(lags_m=(10, 20, 40, 60, 80, 120, 160, 240, 400), step_m: 
         print(f"  correlation at {lag:4d} m: {r:+.3f}")
 
 
+def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: float = 12.0) -> None:
+    """The IRA's returned point's height minus the navigator's map at that point, from the true state."""
+    from trn_env.navigators.core.maps import map_height, map_record
+    from trn_env.terrain.geodesy import euler_to_C_bn
+    from trn_env.terrain.queries import ira_return
+
+    from trn_env.scenario.loading import load_scenario
+    from trn_env.scenario.maps import build_terrain
+    from trn_env.sim import run_scenario
+    from trn_env.sim.closed_loop import spawn_rngs
+
+    labels = ("refined world", "world=map")
+    rows = {(w, m): [] for w in labels for m in ("bicubic", "bilinear")}
+    nadir = {w: [] for w in labels}
+    for seed in range(seeds):
+        sc = load_scenario("default", seed=seed, duration_s=duration_s)
+        a = run_scenario(sc).arrays
+        world, the_map = build_terrain(sc, {}, spawn_rngs(int(sc.seed))["map"])
+        d = sc.to_dict()
+        d["terrain"]["world"].pop("refinement", None)
+        plain_world, _ = build_terrain(load_scenario(d), {}, spawn_rngs(int(sc.seed))["map"])
+        ira = sc.sensors.ira
+        step = max(1, int(round(every_s / float(np.median(np.diff(a["t_s"]))))))
+        k = np.flatnonzero(a["t_s"] > after_s)[::step]
+        C = np.stack([euler_to_C_bn(a["true_roll_rad"][i], a["true_pitch_rad"][i], a["true_yaw_rad"][i])
+                      for i in k])
+        maps = {"bicubic": map_record(the_map, True), "bilinear": map_record(the_map, False)}
+        for label, dem in zip(labels, (world, plain_world), strict=True):
+            ret = ira_return(dem, a["true_lat_rad"][k], a["true_lon_rad"][k], a["true_h_msl_m"][k],
+                             a["true_v_ned_mps"][k], C, np.deg2rad(ira.half_window_deg), ira.max_range_m)
+            ok = ret.valid
+            for name, rec_m in maps.items():
+                points = zip(ret.lat_rad[ok], ret.lon_rad[ok], strict=True)
+                h_map = [map_height(rec_m, la, lo) for la, lo in points]
+                rows[label, name].append(ret.h_m[ok] - np.array(h_map))
+            rec_w = map_record(dem, False)       # the sensors' world surface is bilinear
+            nadir[label].append(np.array([map_height(rec_w, la, lo) - map_height(maps["bicubic"], la, lo)
+                                          for la, lo in zip(a["true_lat_rad"][k], a["true_lon_rad"][k],
+                                                            strict=True)]))
+    print(f"IRA return height minus map (noise free, true state, every {every_s:g} s after {after_s:g} s, "
+          f"{seeds} seeds x {duration_s:g} s; nadir: the world below the aircraft minus the bicubic map)")
+    print(f"{'world':<15}{'samples':>8}{'bicubic mean':>13}{'sigma':>7}{'bilinear mean':>14}{'sigma':>7}"
+          f"{'nadir mean':>11}{'sigma':>7}")
+    for label in labels:
+        x, y = np.concatenate(rows[label, "bicubic"]), np.concatenate(rows[label, "bilinear"])
+        z = np.concatenate(nadir[label])
+        print(f"{label:<15}{x.size:8d}{x.mean():+13.2f}{x.std():7.2f}{y.mean():+14.2f}{y.std():7.2f}"
+              f"{np.nanmean(z):+11.2f}{np.nanstd(z):7.2f}")
+
+
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
     if args.detail_correlation:
         detail_correlation()
+        return 0
+    if args.return_bias:
+        return_bias(args.seeds, args.duration)
         return 0
     from trn_env.scenario.loading import ScenarioError
     from trn_env.sim import run_scenario
