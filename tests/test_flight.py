@@ -4,6 +4,8 @@ wind triangle; determinism; the benchmark's figures."""
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -364,3 +366,13 @@ def test_record_then_take_equals_one_advance_bit_for_bit(turbulence):
     pieces.record(3)
     with pytest.raises(RuntimeError, match="take"):
         pieces.set_wind(WindConfig())
+
+
+def test_building_a_flight_prints_no_jsbsim_banner():
+    """JSBSim prints its start-up banner on the C-level stdout from the FGFDMExec constructor unless its
+    debug level is zero beforehand: a script that builds a Flight itself must not get it."""
+    code = ("from trn_env.flight import Flight, InitialCondition\n"
+            "Flight(InitialCondition(0.637, -1.472, 1500.0, 85.0, 0.0)).advance(10)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout == "", out.stdout

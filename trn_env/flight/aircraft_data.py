@@ -46,6 +46,9 @@ def new_fdm(aircraft: str = "kingair", dt_s: float = 0.01) -> jsbsim.FGFDMExec:
     if aircraft not in known:
         raise ValueError(f"unknown aircraft {aircraft!r}; available: {', '.join(known) or 'none'}")
     root = aircraft_root()
+    # JSBSim's debug level is one static of its base class: zero before the constructor, whose start-up
+    # banner would otherwise go to the C-level stdout of whoever builds a flight (scripts, notebooks)
+    jsbsim.FGJSBBase().debug_lvl = 0
     fdm = jsbsim.FGFDMExec(str(root), None)
     fdm.set_debug_level(0)
     fdm.set_aircraft_path(str(root))
