@@ -31,6 +31,8 @@ import json
 import sys
 from pathlib import Path
 
+from trn_env.output.run_folder import folder_problem
+
 
 def main(argv=None) -> int:
     from trn_env.env.fast.calibration import REFERENCE_ROUTES, compare, fly_fast, fly_full
@@ -54,6 +56,8 @@ def main(argv=None) -> int:
                    help="comma-separated route-task baselines (straight, planner) to fly, not the routes")
     p.add_argument("--policy-seeds", type=int, default=10, help="seeds per held-out goal with --policies")
     args = p.parse_args(argv)
+    if args.out is not None and (problem := folder_problem(args.out, "--out")):
+        p.error(problem)       # checked before the work, not after it
     if args.policies is not None:
         return _policies(args)
     from trn_env.env.fast.calibration import FAST_SEEDS

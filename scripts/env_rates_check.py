@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trn_env.output.run_folder import folder_problem
+
 
 def fly(settings: dict, seeds: int, routes: list[str] | None = None, first_seed: int = 0) -> dict:
     """Per route (all, or those named): the true miss per seed (m), the terminations, the error at each
@@ -159,6 +161,8 @@ def main(argv=None) -> int:
     p.add_argument("--routes", nargs="+", default=None, metavar="ROUTE")
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
+    if args.out is not None and (problem := folder_problem(args.out, "--out")):
+        p.error(problem)       # checked before the work, not after it
     try:
         configs = dict(_config(c) for c in args.config)
         if len(configs) < 2 or len(configs) != len(args.config):

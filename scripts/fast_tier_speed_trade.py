@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trn_env.output.run_folder import file_target_problem
+
 
 def fly_truth(route_name: str, seeds) -> list[np.ndarray]:
     """Per seed the full loop's truth along the route: rows (t s, true airspeed m/s, vertical speed m/s
@@ -80,6 +82,8 @@ def main(argv=None) -> int:
     p.add_argument("--routes", nargs="*", default=None, help="route names (default: all)")
     p.add_argument("--out", type=Path, default=None, help="write the fits (JSON) here")
     args = p.parse_args(argv)
+    if args.out is not None and (problem := file_target_problem(args.out, "--out")):
+        p.error(problem)       # checked before the work, not after it
     known = [r.name for r in REFERENCE_ROUTES]
     names = args.routes or known
     bad = [n for n in names if n not in known]

@@ -48,6 +48,7 @@ from trn_env.navigators import registry
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 import trn_env.scenario.build as components
+from trn_env.output.run_folder import file_target_problem
 from trn_env.scenario.loading import load_scenario
 from trn_env.scenario.sections import from_dict
 from trn_env.sim.closed_loop import perturbed_estimate
@@ -364,6 +365,8 @@ def main(argv=None) -> int:
                     help="the world's fractal detail drawn per run (default) or the recorded flight's")
     ap.add_argument("--out", default=None, help="write the figures as JSON here")
     args = ap.parse_args(argv)
+    if args.out is not None and (problem := file_target_problem(args.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     figures = {}
     t0 = time.time()
     if args.only in (None, "convergence"):

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trn_env.output.run_folder import folder_problem
+
 R_EARTH_M = 6.371e6
 
 
@@ -102,6 +104,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, default=16)
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
+    if args.out is not None and (problem := folder_problem(args.out, "--out")):
+        p.error(problem)       # checked before the work, not after it
     bad = None
     if args.duration_s < 1:
         bad = f"--duration-s must be >= 1, got {args.duration_s}"

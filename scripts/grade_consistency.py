@@ -46,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import filter_statistics as fs  # noqa: E402
 
 import trn_env.scenario.build as components  # noqa: E402
+from trn_env.output.run_folder import file_target_problem
 from trn_env.scenario.sections import from_dict  # noqa: E402
 
 INSIDE_NEES = 9.0  # Mahalanobis distance 3 in 2 dof
@@ -243,6 +244,8 @@ def main(argv=None) -> int:
     ap.add_argument("--set", dest="settings", action="append", default=[],
                     help="navigator.setting=value (a Python literal), e.g. pmf.span_sigmas=6")
     a = ap.parse_args(argv)
+    if a.out is not None and (problem := file_target_problem(a.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     for item in a.settings:
         key, _, value = item.partition("=")
         nav, _, setting = key.partition(".")

@@ -45,6 +45,7 @@ from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 import trn_env.scenario.build as components
 from trn_env.flight.kinematic import heading_for_track, wind_ned_from
+from trn_env.output.run_folder import file_target_problem
 from trn_env.scenario.loading import validate
 from trn_env.sensors.ira import IraConfig, sample_ira
 from trn_env.sim.closed_loop import perturbed_estimate
@@ -209,6 +210,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=500)
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
+    if a.out is not None and (problem := file_target_problem(a.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     res = compare(a.runs, a.seed, height_m=a.height, spacing_m=a.spacing, range_sigma_m=a.range_sigma,
                   look_sigma_deg=a.look_sigma, rate_hz=a.rate, model_sigma_m=a.model_sigma,
                   duration_s=a.duration, map_dem=a.map, truth=a.truth)

@@ -20,6 +20,8 @@ import threading
 import time
 from pathlib import Path
 
+from trn_env.output.run_folder import folder_problem
+
 
 def _rss_mb(pid: int) -> float:
     try:
@@ -84,6 +86,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--in-memory", action="store_true")
     args = ap.parse_args()
+    if args.out is not None and (problem := folder_problem(args.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     sc = scenario(args.hours)
     samples = []
     sim_t = [0.0]

@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trn_env.output.run_folder import folder_problem
+
 NAVIGATORS = {"ins_tercom": {"remove_bias": True}, "pmf": {"grid_size": 200}, "pf": {"n_particles": 10000},
               "acq_track": {"transect_samples": 25, "replica_model": "return", "aiding_source": "ins"},
               "rbpf": {}}
@@ -178,6 +180,8 @@ def main(argv=None) -> int:
     ap.add_argument("--replay-only", action="store_true", help="only flights already recorded")
     ap.add_argument("--out", default="pl_campaign")
     args = ap.parse_args(argv)
+    if args.out is not None and (problem := folder_problem(args.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     from trn_env.navigators.integrity.protection_level import check_alert_limit, check_integrity_risk
     al = check_alert_limit(args.alert_limit_m, "--alert-limit-m")
     risk = check_integrity_risk(args.integrity_risk, "--integrity-risk")

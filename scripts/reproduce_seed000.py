@@ -42,6 +42,7 @@ from trn_env.flight.core import (
 )
 from trn_env.flight.truth import TruthChunk
 from trn_env.flight.wind import WindConfig
+from trn_env.output.run_folder import folder_problem
 from trn_env.sensors.suite import SensorSuite
 
 CASES = {1: 0.0, 2: 5.0, 3: 10.0, 4: 15.0}  # Table 3: all data, dp > 5, 10, 15 m
@@ -184,6 +185,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--cases", default="1,2,3,4")
     ap.add_argument("--formulas", default="conventional,proposed")
     args = ap.parse_args(argv)
+    if args.out is not None and (problem := folder_problem(args.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_wall = time.time()

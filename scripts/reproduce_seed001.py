@@ -38,6 +38,7 @@ from trn_env.navigators import registry
 from trn_env.terrain.geodesy import latlon_to_ned_offset
 
 from trn_env import terrain
+from trn_env.output.run_folder import folder_problem
 from trn_env.scenario import build as components
 from trn_env.scenario.loading import read_scenario_file, validate
 from trn_env.sim.closed_loop import ClosedLoop
@@ -258,6 +259,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-plots", action="store_true")
     ap.add_argument("--replica-model", default="return", choices=("return", "footprint", "plumb"))
     args = ap.parse_args(argv)
+    if args.out is not None and (problem := folder_problem(args.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     args.out.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
     results: dict = {}

@@ -45,6 +45,7 @@ from trn_env.terrain.geodesy import euler_to_C_bn, meridian_radius_m, prime_vert
 import trn_env.scenario.build as components
 from trn_env import terrain
 from trn_env.flight.kinematic import KinematicTruth
+from trn_env.output.run_folder import folder_problem
 from trn_env.scenario.loading import load_scenario
 from trn_env.scenario.sections import from_dict
 from trn_env.sensors.imu import ImuConfig, sample_imu
@@ -490,6 +491,8 @@ def main(argv=None) -> int:
     ap.add_argument("--recovery", action="store_true",
                     help="RBPF with its innovation test's re-spreads (issue 19; seed 002's filter has none)")
     a = ap.parse_args(argv)
+    if a.out is not None and (problem := folder_problem(a.out, "--out")):
+        ap.error(problem)       # checked before the work, not after it
     alpha = 0.01 if a.recovery else 1e-12     # 1e-12: the test never flags
     # the bias priors and bias process noise from the scenario's IMU (as the seed002 scenario's
     # build_navigator gives them): Table 1's accelerometer bias 1e-4 m/s^2; Table 1 has no gyro bias, the

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trn_env.output.run_folder import file_target_problem
+
 NO_ARRIVAL_M = 2000.0
 
 
@@ -44,7 +46,10 @@ def parse(argv):
     p.add_argument("--decisions", type=int, default=16)
     p.add_argument("--fixed-height", action="store_true")
     p.add_argument("--search-seed", type=int, default=0)
-    return p.parse_args(argv)
+    args = p.parse_args(argv)
+    if args.out is not None and (problem := file_target_problem(args.out, "--out")):
+        p.error(problem)       # checked before the work, not after it
+    return args
 
 
 def _fly(kw, start, goal, noise_seeds, actions_fn, n):

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from trn_env.output.run_folder import file_target_problem
+
 
 def _seeds(text: str) -> list[int]:
     out: list[int] = []
@@ -191,6 +193,8 @@ def main(argv=None) -> int:
     p.add_argument("--sigma-scale", type=float, default=1.0,
                    help="a ppo policy sees the navigator's horizontal sigma times this (a probe)")
     args = p.parse_args(argv)
+    if args.out is not None and (problem := file_target_problem(args.out, "--out")):
+        p.error(problem)       # checked before the work, not after it
     try:
         seeds = _seeds(args.seeds)
     except ValueError:

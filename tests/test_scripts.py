@@ -52,3 +52,49 @@ def test_gnss_denied_demo_ins_drifts_and_trn_stays_bounded(tmp_path):
     # a tactical-grade INS alone drifts in 8 min without GNSS; INS + TRN stays bounded on the same flight
     assert ins["horizontal_error_final_m"] > 500.0
     assert trn["horizontal_error_final_m"] < 0.2 * ins["horizontal_error_final_m"]
+
+
+# Each script that writes --out, with what else its parser requires.
+_OUT_SCRIPTS = {
+    "calibrate_fast_tier": [], "env_rates_check": [], "fast_tier_speed_trade": [], "filter_statistics": [],
+    "flight_step_check": ["routes"], "grade_consistency": [], "ira_model_comparison": [],
+    "log_memory": ["--hours", "0.01"], "protection_level_campaign": [], "reproduce_seed000": [],
+    "reproduce_seed001": [], "reproduce_seed002": [], "route_action_search": [],
+    "route_task_trace": ["--policy", "straight", "--goal", "0", "--tier", "fast"],
+    "route_task": ["train"], "train_rllib": [], "route_policy_benchmark": [],
+}
+
+_RUN_WITH_ARGV = """
+import contextlib, io, json, runpy, sys
+results = {}
+for name, argv in json.loads(sys.stdin.read()).items():
+    sys.argv = [name + ".py"] + argv
+    err = io.StringIO()
+    code = None
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            runpy.run_path(f"scripts/{name}.py", run_name="__main__")
+        except SystemExit as exc:
+            code = exc.code
+    results[name] = [code, err.getvalue().strip().splitlines()[-1:] or [""]]
+print(json.dumps(results))
+"""
+
+
+def test_scripts_refuse_an_unwritable_out_before_their_work(tmp_path):
+    """A script whose --out cannot be written stops at once with exit code 2 and a line naming --out,
+    instead of failing after its flights (one child process runs them all)."""
+    import subprocess
+    import sys
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    bad = str(blocker / "out")               # under a file: no folder or file can be made there
+    payload = {name: argv + ["--out", bad] for name, argv in _OUT_SCRIPTS.items()
+               if (SCRIPTS / f"{name}.py").is_file()}
+    child = subprocess.run([sys.executable, "-c", _RUN_WITH_ARGV], input=json.dumps(payload), text=True,
+                           capture_output=True, timeout=300, cwd=SCRIPTS.parent)
+    assert child.returncode == 0, child.stderr[-2000:]
+    results = json.loads(child.stdout.strip().splitlines()[-1])
+    wrong = {name: r for name, r in results.items() if r[0] != 2 or "--out" not in r[1][0]}
+    assert not wrong, wrong
+    assert len(results) == len(payload) >= 15
