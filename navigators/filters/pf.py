@@ -370,6 +370,11 @@ class ParticleFilter(InsRiddenFilter):
 
     # ------------------------------------------------------------------------------------ updates
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
+        prior = self._shift_prior()
+        self._terrain_update_cloud(t_s, kind, range_m, theta_rad, st)
+        self._shift_after(kind, prior)
+
+    def _terrain_update_cloud(self, t_s, kind, range_m, theta_rad, st) -> None:
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
         r_lat, r_lon = radii_m(lat, h)
         C = quat_to_dcm(st[6:10])
@@ -428,6 +433,11 @@ class ParticleFilter(InsRiddenFilter):
             self.health.status = "acquiring"
 
     def _gnss_update(self, t_s, st, payload) -> None:
+        prior = self._shift_prior()
+        self._gnss_update_cloud(t_s, st, payload)
+        self._shift_after("gnss", prior)
+
+    def _gnss_update_cloud(self, t_s, st, payload) -> None:
         lat, lon, h, v = payload
         gn, ge = gnss_model.predict(st, lat, lon)
         sv2 = self.gnss_vertical_sigma_m ** 2

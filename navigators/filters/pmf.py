@@ -480,7 +480,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self._height.terrain(g_mean * self.P_b / S, var)
             self.P_b *= (1.0 - g_mean * self.P_b / S)
             self._moments_cache = None
-        self._velocity_from_position(prior, self._position_moments())
+        post = self._position_moments()
+        self._map_shift.terrain(prior[1], post[1])
+        self._velocity_from_position(prior, post)
         self._set_update_extra(t_s, [h_meas - pred_mean], [[pred_var + S]], log_lik)
         if n_nan:
             self.health.skip(t_s, "cells_off_map", f"{n_nan} grid cells off the map (outlier density only)")
@@ -512,7 +514,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self.bias += K * (z_b - self.bias)
             self.P_b *= (1.0 - K)
         self._moments_cache = None
-        self._velocity_from_position(prior, self._position_moments())
+        post = self._position_moments()
+        self._map_shift.gnss(prior[1], post[1])
+        self._velocity_from_position(prior, post)
         self._gnss_velocity(st, v)
         self._gnss_velocity_ins(v, carried=(0, 1))
         # the receiver drift the fixes share: convolved in with the next process noise (terrain_filter)

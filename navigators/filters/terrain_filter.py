@@ -14,6 +14,10 @@ h_INS - p_d (IRA, seed 000 eq 2) or h_INS - range (radar altimeter, eq 1); its n
 `terrain_model_sigma_m` (terrain the map does not resolve between its posts, and interpolation). The
 vertical offset (baro bias + the map's vertical bias, prior sigma sqrt(baro_bias_sigma_m^2 +
 map_bias_sigma_m^2)) is estimated with the position, so a biased baro or map does not pull the fix.
+
+What the published covariance adds to the belief's: the map's vertical error the published height keeps
+(height_error) and the share of the map's horizontal shift the position took on (map_shift): terrain
+samples pin both to the map, which the belief, relative to the map, cannot see.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from ..measurements.terrain_models import radii_m
 from ..protocol import Estimate, Health, update_extra
 from ._ekf_kernels import yaw_total_variation
 from .height_error import HeightError
+from .map_shift import MapShiftShare
 from .terrain_filter_settings import (
     TerrainFilterSettings,
 )
@@ -201,6 +206,7 @@ class InsRiddenFilter(InsGnssBlock):
         self._capture = CaptureGuard(self._capture_range_m(), self.name, self._capture_spec, geometry=True)
         anchor_from_cov9(self._capture, float(initial.t_s), cov)
         self._tilt0_var = 0.5 * float(d[6] + d[7])
+        self._map_shift = MapShiftShare()    # the INS's error is independent of the map's shift
         self._init_belief(cov)
 
     def update(self, frames: SensorFrames) -> Estimate:
@@ -488,7 +494,8 @@ class InsRiddenFilter(InsGnssBlock):
     def estimate(self) -> Estimate:
         """INS + the belief's mean offset; covariance: the belief's block and the INS error model's rest, the
         down variance the published height's error where the map's vertical error is modelled
-        (height_error)."""
+        (height_error), the horizontal block plus the share of the map's horizontal shift the estimate took
+        on where map_horizontal_sigma_m is given (map_shift)."""
         st = self.ins.state
         # mean over [dn, de, b, dvn, dve, dpsi]; cov_b 6 x 6 (NaN: not carried)
         mean, cov_b = self._output_moments()
@@ -510,6 +517,9 @@ class InsRiddenFilter(InsGnssBlock):
             P[2, 2] = self._height_variance(P[2, 2])
         suspended = self._capture.suspended   # beyond capture (navigators.core.capture)
         P = self._capture.publish(P, float(self.ins.t_s), self._capture_floor_m2())
+        hpl_cov = P[:2, :2].copy()       # the protection level bounds the map's shift apart (pl.publish)
+        if self._map_shift_sigma_m() > 0.0:
+            P[:2, :2] += self._map_shift.covariance(self._map_shift_sigma_m())
         dn, de = (float(mean[0]), float(mean[1])) if np.all(np.isfinite(mean[:2])) else (0.0, 0.0)
         if np.isfinite(mean[3]):
             v[0] += mean[3]
@@ -522,8 +532,33 @@ class InsRiddenFilter(InsGnssBlock):
         return Estimate(t_s=float(self.ins.t_s), lat_rad=lat + dn / r_lat, lon_rad=lon + de / r_lon,
                         h_m=h - b, v_ned_mps=v, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, covariance=P,
                         health=health, extra=(pl.publish(dict(self.extra), pl.gaussian_hpl(
-                            P[:2, :2], pl.filter_risk(self)), self) if gaussian
+                            hpl_cov, pl.filter_risk(self)), self) if gaussian
                             else self._with_protection_level(dict(self.extra))))
+
+    def _map_shift_sigma_m(self) -> float:
+        """The map's horizontal error per axis (m; map_horizontal_sigma_m, 0 when not given): the published
+        horizontal covariance carries the share of it the estimate took on (map_shift)."""
+        return float(getattr(self, "map_horizontal_sigma_m", 0.0))
+
+    def _shift_prior(self) -> np.ndarray | None:
+        """The belief's horizontal covariance (2 x 2, m^2) before an update, for map_shift; None when the
+        map's shift is not modelled. The moments' cache is left as it was (the update's bits unchanged)."""
+        if not self._map_shift_sigma_m() > 0.0:
+            return None
+        cache = self._moments_cache
+        cov = self._moments()[1][:2, :2]
+        self._moments_cache = cache
+        return cov
+
+    def _shift_after(self, kind: str, prior: np.ndarray | None) -> None:
+        """map_shift's step for a terrain sample or a GNSS fix (kind "gnss") whose update started from the
+        horizontal covariance `prior` (`_shift_prior`; None: nothing to do)."""
+        if prior is None:
+            return
+        cache = self._moments_cache
+        post = self._moments()[1][:2, :2]
+        self._moments_cache = cache
+        (self._map_shift.gnss if kind == "gnss" else self._map_shift.terrain)(prior, post)
 
     def _with_protection_level(self, extra: dict) -> dict:
         """extra with the belief's HPL (navigators.integrity.protection_level: the mass radius of the points

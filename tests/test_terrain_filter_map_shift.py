@@ -1,0 +1,151 @@
+"""The map's horizontal shift in the terrain filters' published position (navigators/filters/map_shift.py).
+
+A map shifted by s moves every terrain fix by s, so the estimate takes s on while the belief describes only
+the error relative to the map. Checked two ways: the share recursion against a Monte Carlo of a scalar
+Kalman filter fed terrain fixes x + s + v and GNSS fixes x + w (the exact answer for the linear case), and
+the point-mass and particle filters over curved terrain with the map shifted by a drawn s: the published
+horizontal NEES summed over runs within the chi-square bounds, far above them without the shift's share.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+from test_terrain_filter_linear import H_ANT, LAT0, LON0, SIGMA_R
+from trn_env.navigators.filters.map_shift import MapShiftShare
+from trn_env.navigators.filters.pf import ParticleFilter
+from trn_env.navigators.filters.pmf import PointMassFilter
+from trn_env.navigators.inertial.strapdown import quat_from_C_bn
+from trn_env.navigators.integrity.protection_level import configure
+from trn_env.navigators.measurements.terrain_models import radii_m
+from trn_env.navigators.protocol import Estimate
+from trn_env.terrain.dem import Dem
+from trn_env.terrain.geodesy import euler_to_C_bn
+
+SIGMA_H = 50.0 / 2.146        # the DTED-1 class's shift per axis (CE90 50 m)
+SIGMA_X0 = 30.0               # the INS's horizontal error at the start, per axis
+SPEED = 80.0                  # m/s north
+
+
+def test_share_recursion_matches_a_monte_carlo_kalman_filter():
+    # scalar Kalman filter on x (prior var p0): GNSS fixes y = x + w, then terrain fixes z = x + s + v; the
+    # error e = x_hat - x over 200,000 draws has var P + a^2 sigma_s^2, P the filter's own variance
+    rng = np.random.default_rng(3)
+    n, p0, r_gnss, r_terrain, sig_s, q = 200_000, 40.0**2, 3.0**2, 15.0**2, 20.0, 0.5
+    x = rng.normal(0.0, math.sqrt(p0), n)
+    s = rng.normal(0.0, sig_s, n)
+    x_hat, P = np.zeros(n), p0
+    share = MapShiftShare()
+    for k in range(12):
+        x = x + rng.normal(0.0, math.sqrt(q), n)       # the INS walk: truth moves, the estimate does not
+        P += q
+        gnss = k < 3
+        r = r_gnss if gnss else r_terrain
+        y = x + rng.normal(0.0, math.sqrt(r), n) + (0.0 if gnss else s)
+        K = P / (P + r)
+        x_hat = x_hat + K * (y - x_hat)
+        P_post = (1.0 - K) * P
+        update = share.gnss if gnss else share.terrain
+        update(np.eye(2) * P, np.eye(2) * P_post)
+        P = P_post
+        e = x_hat - x
+        predicted = P + float(share.covariance(sig_s)[0, 0])
+        # the sample variance of 200,000 Gaussian draws: within 1.5 % (5 sigma of its 0.3 % spread)
+        assert np.var(e) == pytest.approx(predicted, rel=0.015), (k, np.var(e), predicted)
+        assert np.cov(e, s)[0, 1] == pytest.approx(share.share[0] * sig_s**2, rel=0.05, abs=0.5)
+    assert 0.0 < share.share[0] < 1.0 and share.share[0] == share.share[1]
+
+
+def test_share_gain_is_clipped_where_a_posterior_widens():
+    share = MapShiftShare(np.array([0.5, 0.5]))
+    share.terrain(np.diag([100.0, 100.0]), np.diag([150.0, 25.0]))     # north widened: k = 0, east: 0.75
+    assert share.share[0] == 0.5 and share.share[1] == pytest.approx(0.875)
+    share.gnss(np.diag([np.nan, 100.0]), np.diag([10.0, 0.0]))         # not finite: kept; k = 1: none left
+    assert share.share[0] == 0.5 and share.share[1] == 0.0
+
+
+def _terrain_m(n_m, e_m):
+    """Curved terrain (m) at north/east metres from (LAT0, LON0): informative along both axes."""
+    return (400.0 + 60.0 * np.sin(2 * np.pi * n_m / 1500.0) + 60.0 * np.sin(2 * np.pi * e_m / 1700.0 + 0.7)
+            + 30.0 * np.sin(2 * np.pi * (n_m + e_m) / 900.0))
+
+
+def _dem(shift_n_m: float, shift_e_m: float) -> Dem:
+    """1" posts of the terrain, shifted: a feature at p appears at p + shift (terrain.map_error)."""
+    d = math.radians(1.0 / 3600.0)
+    n = 600
+    lat = LAT0 + (np.arange(n) - n / 3) * d
+    lon = LON0 + (np.arange(n) - n / 2) * d
+    r_lat, r_lon = radii_m(LAT0, H_ANT)
+    dn = (lat[:, None] - LAT0) * r_lat - shift_n_m
+    de = (lon[None, :] - LON0) * r_lon - shift_e_m
+    return Dem(_terrain_m(dn, de), lat[0], lon[0], d, d, "waves")
+
+
+def _ins(t_s: float) -> np.ndarray:
+    r_lat, _ = radii_m(LAT0, H_ANT)
+    st = np.empty(10)
+    st[:3] = (LAT0 + SPEED * t_s / r_lat, LON0, H_ANT)
+    st[3:6] = (SPEED, 0.0, 0.0)
+    st[6:] = quat_from_C_bn(euler_to_C_bn(0.0, 0.0, 0.0))
+    return st
+
+
+def _horizontal_nees(kind: str, seed: int, runs: int, gnss_fixes: int, modelled: bool) -> float:
+    """Sum over runs of the published horizontal NEES after `gnss_fixes` 1 Hz GNSS fixes (3 m) then 25 IRA
+    samples looking straight down (3.5 m), the map shifted by s ~ N(0, SIGMA_H^2) per axis, the INS's
+    error x ~ N(0, SIGMA_X0^2) per axis; `modelled`: the filter told the map's SIGMA_H."""
+    rng = np.random.default_rng(seed)
+    r_lat, r_lon = radii_m(LAT0, H_ANT)
+    total = 0.0
+    for r in range(runs):
+        s = rng.normal(0.0, SIGMA_H, 2)
+        x = rng.normal(0.0, SIGMA_X0, 2)                 # true position minus INS position (constant)
+        the_map = _dem(*s)
+        common = dict(outlier_prob=0.0, terrain_model_sigma_m=0.0, map_sigma_m=0.0, baro_bias_sigma_m=1.0,
+                      ira_range_sigma_m=SIGMA_R, ira_look_angle_sigma_deg=0.1,
+                      vertical_noise_m_per_sqrt_s=0.0, position_noise_m_per_sqrt_s=0.01,
+                      velocity_noise_mps_per_sqrt_s=1e-6)
+        nav = (PointMassFilter(the_map, grid_size=121, spacing_min_m=1.0, accel_bias_sigma_mps2=1e-7,
+                               **common)
+               if kind == "pmf" else
+               ParticleFilter(the_map, n_particles=4000, rng=np.random.default_rng(seed * 100 + r),
+                              heading_noise_rad_per_sqrt_s=0.0, **common))
+        configure(nav, map_horizontal_sigma_m=SIGMA_H if modelled else 0.0)
+        cov = np.diag([SIGMA_X0**2, SIGMA_X0**2, 1.0, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-8])
+        nav.reset(Estimate(0.0, LAT0, LON0, H_ANT, np.array([SPEED, 0.0, 0.0]), 0.0, 0.0, 0.0, cov))
+        nav._predict_to(0.0, _ins(0.0))
+        for i in range(gnss_fixes + 25):
+            t = 1.0 + i
+            st = _ins(t)
+            nav._predict_to(t, st)
+            if i < gnss_fixes:
+                fix = (st[0] + (x[0] + rng.normal(0.0, 3.0)) / r_lat,
+                       st[1] + (x[1] + rng.normal(0.0, 3.0)) / r_lon, H_ANT + rng.normal(0.0, 3.0))
+                nav._gnss_update(t, st, (*fix, np.array([SPEED, 0.0, 0.0])))
+            else:
+                n_true = SPEED * t + x[0]
+                z = float(_terrain_m(n_true, x[1])) + rng.normal(0.0, SIGMA_R)
+                nav._terrain_update(t, "ira", float(H_ANT - z), 0.0, st, None)
+        est = nav.estimate()
+        st = nav.ins.state        # the filter's own INS (these steps hand it the moving state, not the IMU)
+        err = np.array([(est.lat_rad - st[0]) * r_lat - x[0], (est.lon_rad - st[1]) * r_lon - x[1]])
+        total += float(err @ np.linalg.solve(est.covariance[:2, :2], err))
+    return total
+
+
+@pytest.mark.parametrize("kind", ["pmf", "pf"])
+def test_published_position_carries_the_maps_horizontal_shift(kind):
+    # 30 runs x 2 dof, with and without 5 GNSS fixes first: the NEES sum between the chi-square(60) 0.1 %
+    # and 99.9 % quantiles with the shift's share published; without it (the belief's covariance alone, a
+    # few m against the shift's 23 m) far above the upper one
+    runs = 30
+    lo, hi = chi2.ppf(0.001, 2 * runs), chi2.isf(0.001, 2 * runs)
+    for gnss_fixes in (0, 5):
+        nees = _horizontal_nees(kind, seed=11 + gnss_fixes, runs=runs, gnss_fixes=gnss_fixes, modelled=True)
+        assert lo <= nees <= hi, (gnss_fixes, nees, lo, hi)
+    unmodelled = _horizontal_nees(kind, seed=11, runs=runs, gnss_fixes=0, modelled=False)
+    assert unmodelled > 3.0 * hi, (unmodelled, hi)
