@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+from _child_processes import NEUTRAL_CWD
 from trn_env.terrain.geodesy import (
     OMEGA_EARTH_RPS,
     WGS84_A_M,
@@ -373,6 +374,7 @@ def test_building_a_flight_prints_no_jsbsim_banner():
     debug level is zero beforehand: a script that builds a Flight itself must not get it."""
     code = ("from trn_env.flight import Flight, InitialCondition\n"
             "Flight(InitialCondition(0.637, -1.472, 1500.0, 85.0, 0.0)).advance(10)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=NEUTRAL_CWD)       # the installed trn_env (_child_processes)
     assert out.returncode == 0, out.stderr
     assert out.stdout == "", out.stdout

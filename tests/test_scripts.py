@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+from _child_processes import NEUTRAL_CWD
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "gallery"
@@ -67,13 +68,14 @@ _OUT_SCRIPTS = {
 _RUN_WITH_ARGV = """
 import contextlib, io, json, runpy, sys
 results = {}
-for name, argv in json.loads(sys.stdin.read()).items():
+scripts, commands = json.loads(sys.stdin.read())
+for name, argv in commands.items():
     sys.argv = [name + ".py"] + argv
     err = io.StringIO()
     code = None
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
         try:
-            runpy.run_path(f"scripts/{name}.py", run_name="__main__")
+            runpy.run_path(f"{scripts}/{name}.py", run_name="__main__")
         except SystemExit as exc:
             code = exc.code
     results[name] = [code, err.getvalue().strip().splitlines()[-1:] or [""]]
@@ -91,8 +93,8 @@ def test_scripts_refuse_an_unwritable_out_before_their_work(tmp_path):
     bad = str(blocker / "out")               # under a file: no folder or file can be made there
     payload = {name: argv + ["--out", bad] for name, argv in _OUT_SCRIPTS.items()
                if (SCRIPTS / f"{name}.py").is_file()}
-    child = subprocess.run([sys.executable, "-c", _RUN_WITH_ARGV], input=json.dumps(payload), text=True,
-                           capture_output=True, timeout=300, cwd=SCRIPTS.parent)
+    child = subprocess.run([sys.executable, "-c", _RUN_WITH_ARGV], input=json.dumps([str(SCRIPTS), payload]),
+                           text=True, capture_output=True, timeout=300, cwd=NEUTRAL_CWD)  # _child_processes
     assert child.returncode == 0, child.stderr[-2000:]
     results = json.loads(child.stdout.strip().splitlines()[-1])
     wrong = {name: r for name, r in results.items() if r[0] != 2 or "--out" not in r[1][0]}
