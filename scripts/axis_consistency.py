@@ -19,7 +19,8 @@ default route's legs, sampled every 10 m, and its correlation at lags of 10-400 
 from the true state every 0.5 s after 12 s, once against the refined world and once against the world
 without its refinement, and prints the returned point's height minus the navigator's map there, read
 bicubically (the terrain filters' default) and bilinearly (what a terrain update sees with exact position
-and noise-free ranges): mean, sigma, and the world minus the bicubic map below the aircraft for reference.
+and noise-free ranges): mean, sigma, and the world minus the bicubic map below the aircraft for reference;
+then, from the same states, a 17 deg radar altimeter's closest range over the map minus over the world.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import sys
 import numpy as np
 
 CONDITIONS = ("refined", "world=map", "dted1")
+RA_BEAM_DEG = 17.0      # the radar altimeter's full beam (trn_env.sensors.radar_altimeter's default)
 
 
 def _positive_int(text: str) -> int:
@@ -121,7 +123,7 @@ def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: fl
     """The IRA's returned point's height minus the navigator's map at that point, from the true state."""
     from trn_env.navigators.core.maps import map_height, map_record
     from trn_env.terrain.geodesy import euler_to_C_bn
-    from trn_env.terrain.queries import ira_return
+    from trn_env.terrain.queries import ira_return, radar_altimeter_return
 
     from trn_env.scenario.loading import load_scenario
     from trn_env.scenario.maps import build_terrain
@@ -131,6 +133,7 @@ def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: fl
     labels = ("refined world", "world=map")
     rows = {(w, m): [] for w in labels for m in ("bicubic", "bilinear")}
     nadir = {w: [] for w in labels}
+    ra_rows = {w: [] for w in labels}
     for seed in range(seeds):
         sc = load_scenario("default", seed=seed, duration_s=duration_s)
         a = run_scenario(sc).arrays
@@ -144,6 +147,8 @@ def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: fl
         C = np.stack([euler_to_C_bn(a["true_roll_rad"][i], a["true_pitch_rad"][i], a["true_yaw_rad"][i])
                       for i in k])
         maps = {"bicubic": map_record(the_map, True), "bilinear": map_record(the_map, False)}
+        lat, lon, h = a["true_lat_rad"][k], a["true_lon_rad"][k], a["true_h_msl_m"][k]
+        ra_map = radar_altimeter_return(the_map, lat, lon, h, C, np.deg2rad(0.5 * RA_BEAM_DEG))
         for label, dem in zip(labels, (world, plain_world), strict=True):
             ret = ira_return(dem, a["true_lat_rad"][k], a["true_lon_rad"][k], a["true_h_msl_m"][k],
                              a["true_v_ned_mps"][k], C, np.deg2rad(ira.half_window_deg), ira.max_range_m)
@@ -152,6 +157,9 @@ def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: fl
                 points = zip(ret.lat_rad[ok], ret.lon_rad[ok], strict=True)
                 h_map = [map_height(rec_m, la, lo) for la, lo in points]
                 rows[label, name].append(ret.h_m[ok] - np.array(h_map))
+            ra = radar_altimeter_return(dem, lat, lon, h, C, np.deg2rad(0.5 * RA_BEAM_DEG))
+            both = ra.valid & ra_map.valid
+            ra_rows[label].append(ra_map.range_m[both] - ra.range_m[both])
             rec_w = map_record(dem, False)       # the sensors' world surface is bilinear
             nadir[label].append(np.array([map_height(rec_w, la, lo) - map_height(maps["bicubic"], la, lo)
                                           for la, lo in zip(a["true_lat_rad"][k], a["true_lon_rad"][k],
@@ -165,6 +173,12 @@ def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: fl
         z = np.concatenate(nadir[label])
         print(f"{label:<15}{x.size:8d}{x.mean():+13.2f}{x.std():7.2f}{y.mean():+14.2f}{y.std():7.2f}"
               f"{np.nanmean(z):+11.2f}{np.nanstd(z):7.2f}")
+    print(f"radar altimeter ({RA_BEAM_DEG:g} deg beam, same states): closest range over the map (bilinear, "
+          "as the terrain filters predict it) minus over the world")
+    print(f"{'world':<15}{'samples':>8}{'mean m':>9}{'sigma m':>9}")
+    for label in labels:
+        x = np.concatenate(ra_rows[label])
+        print(f"{label:<15}{x.size:8d}{x.mean():+9.2f}{x.std():9.2f}")
 
 
 def main(argv=None) -> int:
