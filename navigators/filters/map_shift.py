@@ -17,6 +17,13 @@ k = 1 - P_post / P_prior):
 - prediction (the INS walk, the grid's convolution, re-spreading the belief around its mean) leaves a:
   the estimate keeps the shift it took while e_f grows.
 
+A GNSS fix is a measurement of the position relative to the Earth, whose error holds a s: fused against the
+belief alone (the error relative to the map, a few metres after terrain samples) a fix sigma_h away would
+be an outlier to it. So before a fix the filters widen the belief by the share's covariance and set a to 0
+(terrain_filter._shift_into_belief: the share becomes the belief's own, which the fix then narrows as a
+Bayes update does), so the filters need no GNSS step of the recursion: it runs from 0 again. (`gnss`
+states it for a filter that fuses fixes without the widening.)
+
 The grid and particle updates are not linear: k is taken per axis from the belief's variance before and
 after the update, clipped to [0, 1] (a multimodal posterior can be wider than its prior). s is independent
 of e_f with variance sigma_h^2 per axis (the map's accuracy class: CE90 / 2.146), so the published

@@ -372,7 +372,7 @@ class ParticleFilter(InsRiddenFilter):
     def _terrain_update(self, t_s, kind, range_m, theta_rad, st, var_sensor) -> None:
         prior = self._shift_prior()
         self._terrain_update_cloud(t_s, kind, range_m, theta_rad, st)
-        self._shift_after(kind, prior)
+        self._shift_after(prior)
 
     def _terrain_update_cloud(self, t_s, kind, range_m, theta_rad, st) -> None:
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])
@@ -433,11 +433,11 @@ class ParticleFilter(InsRiddenFilter):
             self.health.status = "acquiring"
 
     def _gnss_update(self, t_s, st, payload) -> None:
-        prior = self._shift_prior()
-        self._gnss_update_cloud(t_s, st, payload)
-        self._shift_after("gnss", prior)
-
-    def _gnss_update_cloud(self, t_s, st, payload) -> None:
+        widen = self._shift_into_belief()      # the map shift's share, spread into the cloud (terrain_filter)
+        if widen is not None:
+            self.dn += math.sqrt(widen[0, 0]) * self.rng.standard_normal(self.M)
+            self.de += math.sqrt(widen[1, 1]) * self.rng.standard_normal(self.M)
+            self._moments_cache = None
         lat, lon, h, v = payload
         gn, ge = gnss_model.predict(st, lat, lon)
         sv2 = self.gnss_vertical_sigma_m ** 2

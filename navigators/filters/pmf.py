@@ -492,6 +492,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
 
     def _gnss_update(self, t_s, st, payload) -> None:
         lat, lon, h, v = payload
+        widen = self._shift_into_belief()      # the map shift's share, convolved in with the process noise
+        if widen is not None:
+            self._q_pending = self._q_pending + widen
         self._apply_process_noise()
         prior = self._position_moments()
         gn, ge = gnss_model.predict(st, lat, lon)
@@ -514,9 +517,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self.bias += K * (z_b - self.bias)
             self.P_b *= (1.0 - K)
         self._moments_cache = None
-        post = self._position_moments()
-        self._map_shift.gnss(prior[1], post[1])
-        self._velocity_from_position(prior, post)
+        self._velocity_from_position(prior, self._position_moments())
         self._gnss_velocity(st, v)
         self._gnss_velocity_ins(v, carried=(0, 1))
         # the receiver drift the fixes share: convolved in with the next process noise (terrain_filter)

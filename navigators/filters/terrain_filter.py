@@ -540,6 +540,19 @@ class InsRiddenFilter(InsGnssBlock):
         horizontal covariance carries the share of it the estimate took on (map_shift)."""
         return float(getattr(self, "map_horizontal_sigma_m", 0.0))
 
+    def _shift_into_belief(self) -> np.ndarray | None:
+        """Before a GNSS fix: the share of the map's shift the estimate took on, as the horizontal covariance
+        (2 x 2, m^2) to widen the belief by, or None (none taken on, or not modelled). The fix sees the
+        position relative to the Earth, whose error holds the share: fused against the belief alone (the
+        error relative to the map) a fix some sigma_h away would be an outlier to it. The share becomes the
+        belief's, so it restarts from 0 (map_shift)."""
+        sigma = self._map_shift_sigma_m()
+        if not sigma > 0.0 or not np.any(self._map_shift.share > 0.0):
+            return None
+        q = self._map_shift.covariance(sigma)
+        self._map_shift.share[:] = 0.0
+        return q
+
     def _shift_prior(self) -> np.ndarray | None:
         """The belief's horizontal covariance (2 x 2, m^2) before an update, for map_shift; None when the
         map's shift is not modelled. The moments' cache is left as it was (the update's bits unchanged)."""
@@ -550,15 +563,16 @@ class InsRiddenFilter(InsGnssBlock):
         self._moments_cache = cache
         return cov
 
-    def _shift_after(self, kind: str, prior: np.ndarray | None) -> None:
-        """map_shift's step for a terrain sample or a GNSS fix (kind "gnss") whose update started from the
-        horizontal covariance `prior` (`_shift_prior`; None: nothing to do)."""
+    def _shift_after(self, prior: np.ndarray | None) -> None:
+        """map_shift's step for a terrain sample whose update started from the horizontal covariance `prior`
+        (`_shift_prior`; None: nothing to do). (A GNSS fix needs none: `_shift_into_belief` set the share to
+        0 before it.)"""
         if prior is None:
             return
         cache = self._moments_cache
         post = self._moments()[1][:2, :2]
         self._moments_cache = cache
-        (self._map_shift.gnss if kind == "gnss" else self._map_shift.terrain)(prior, post)
+        self._map_shift.terrain(prior, post)
 
     def _with_protection_level(self, extra: dict) -> dict:
         """extra with the belief's HPL (navigators.integrity.protection_level: the mass radius of the points
