@@ -5,6 +5,7 @@
     python scripts/axis_consistency.py --conditions dted1 --seeds 16 --statistic mean
     python scripts/axis_consistency.py --detail-correlation     # the world's sub-post detail along the route
     python scripts/axis_consistency.py --return-bias            # the IRA return's height against the map
+    python scripts/axis_consistency.py --shift-share 30 --navigators pmf,pf,rbpf   # a map shifted 30 m north
 
 Conditions: "refined" (the default scenario: the world is the 3" DEM with 30 m fractal detail, the
 navigator's map the DEM itself), "world=map" (the refinement removed: the map is the world) and "dted1"
@@ -21,6 +22,11 @@ without its refinement, and prints the returned point's height minus the navigat
 bicubically (the terrain filters' default) and bilinearly (what a terrain update sees with exact position
 and noise-free ranges): mean, sigma, and the world minus the bicubic map below the aircraft for reference;
 then, from the same states, a 17 deg radar altimeter's closest range over the map minus over the world.
+`--shift-share S` flies the route (seeds as given, navigator in this process) over a map shifted S m north
+and nothing else (terrain.map_error's shift_n_m; the navigator told map_horizontal_sigma_m = S) and prints,
+at 20-s marks, the north error over S (the share of the shift the estimate has taken on: what the map shift
+share recursion of navigators.filters.map_shift should follow) beside that recursion's north share, as the
+filter publishes it (pmf, pf; "-" for a navigator without one), means over the seeds.
 """
 
 from __future__ import annotations
@@ -48,6 +54,13 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _shift_m(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value) or value == 0.0:
+        raise argparse.ArgumentTypeError(f"must be a finite shift in m other than 0, got {text}")
+    return value
+
+
 def parse(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--navigators", default="pmf,pf,rbpf,ins_tercom", help="comma-separated navigator names")
@@ -60,6 +73,9 @@ def parse(argv):
                    help="print the world-minus-map detail's spread and correlation along the route instead")
     p.add_argument("--return-bias", action="store_true",
                    help="print the IRA return's height minus the map's there (noise free, true state)")
+    p.add_argument("--shift-share", type=_shift_m, default=None, metavar="S_M",
+                   help="fly over a map shifted S_M m north: the share of it in the estimate against the "
+                        "filters' recursion")
     args = p.parse_args(argv)
     args.conditions = [c.strip() for c in args.conditions.split(",") if c.strip()]
     bad = [c for c in args.conditions if c not in CONDITIONS]
@@ -181,6 +197,47 @@ def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: fl
         print(f"{label:<15}{x.size:8d}{x.mean():+9.2f}{x.std():9.2f}")
 
 
+def shift_share(navigators: list[str], seeds: int, duration_s: float, shift_m: float) -> int:
+    """--shift-share: the share of a pure north map shift in each navigator's estimate, flown and
+    recursed (module docstring)."""
+    from trn_env.scenario.loading import ScenarioError, validate
+    from trn_env.sim.closed_loop import ClosedLoop
+
+    marks = np.arange(20.0, duration_s + 1e-9, 20.0)
+    print(f"share of a {shift_m:g} m north map shift, means over {seeds} seeds; at t = "
+          + ", ".join(f"{t:g}" for t in marks) + " s")
+    for nav in navigators:
+        flown, recursed = [], []
+        for seed in range(seeds):
+            d = scenario_dict(nav, "refined", seed, duration_s)
+            d["terrain"]["map"]["error_model"] = {"shift_n_m": shift_m, "shift_e_m": 0.0}
+            d["navigator"].setdefault("settings", {})["map_horizontal_sigma_m"] = abs(shift_m)
+            try:
+                loop = ClosedLoop(validate(d, source=f"{nav} seed {seed}"), pipeline=False)
+            except (ScenarioError, ValueError) as err:
+                print(f"error: {nav}: {err}", file=sys.stderr)
+                return 2
+            shares: list[tuple[float, float]] = []
+            update = loop.navigator.update
+
+            def recorded(frames, update=update, shares=shares, navigator=loop.navigator):
+                est = update(frames)
+                share = getattr(navigator, "_map_shift", None)
+                shares.append((est.t_s, np.nan if share is None else float(share.share[0])))
+                return est
+
+            loop.navigator.update = recorded
+            arrays = loop.run().arrays
+            t_share, a_n = np.array(shares).T
+            idx = [int(np.argmin(np.abs(arrays["t_s"] - t))) for t in marks]
+            flown.append(arrays["err_ned_m"][idx, 0] / shift_m)
+            recursed.append([a_n[int(np.argmin(np.abs(t_share - t)))] for t in marks])
+        fl, rc = np.mean(flown, axis=0), np.mean(recursed, axis=0)
+        print(f"{nav:<12}flown     " + "".join(f"{x:7.2f}" for x in fl))
+        print(f"{'':<12}recursion " + "".join("      -" if not np.isfinite(x) else f"{x:7.2f}" for x in rc))
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
     if args.detail_correlation:
@@ -189,6 +246,8 @@ def main(argv=None) -> int:
     if args.return_bias:
         return_bias(args.seeds, args.duration)
         return 0
+    if args.shift_share is not None:
+        return shift_share(args.navigators, args.seeds, args.duration, args.shift_share)
     from trn_env.scenario.loading import ScenarioError
     from trn_env.sim import run_scenario
     print(f"{'navigator':<12}{'condition':<11}{'NEES N':>8}{'NEES E':>8}{'NEES D':>8}{'D rms m':>9}"

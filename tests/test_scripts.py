@@ -100,3 +100,11 @@ def test_scripts_refuse_an_unwritable_out_before_their_work(tmp_path):
     wrong = {name: r for name, r in results.items() if r[0] != 2 or "--out" not in r[1][0]}
     assert not wrong, wrong
     assert len(results) == len(payload) >= 15
+
+
+@pytest.mark.parametrize("value", ["0", "nan", "inf", "north"])
+def test_axis_consistency_refuses_a_shift_share_that_is_no_shift(value, capsys):
+    mod = _load("axis_consistency")
+    with pytest.raises(SystemExit) as exc:
+        mod.parse(["--shift-share", value])
+    assert exc.value.code == 2 and "--shift-share" in capsys.readouterr().err
