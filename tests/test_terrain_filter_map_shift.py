@@ -62,6 +62,49 @@ def test_share_recursion_matches_a_monte_carlo_kalman_filter():
     assert 0.0 < share.share[0] < 1.0 and share.share[0] == share.share[1]
 
 
+def test_carried_share_matches_a_monte_carlo_kalman_filter_with_velocity():
+    # a position-velocity Kalman filter (x' = x + v dt, v a random walk) fed terrain fixes z = x + s + w
+    # only: part of each fix's correction goes into v and reaches x at the next predictions. The recursion
+    # with the carried state (U: v's share, moved by the filter's regression G = P_vx / P_xx at an update,
+    # into x by B = dt at a prediction) gives the error's variance and its covariances with s; the
+    # position-only rule does not (checked: it misses var(e_x) by more than 1.5 % once v carries a share)
+    rng = np.random.default_rng(5)
+    n, dt, r, sig_s, qv = 200_000, 1.0, 12.0**2, 20.0, 0.05
+    P = np.diag([15.0**2, 0.5**2])
+    X = np.stack([rng.normal(0.0, 15.0, n), rng.normal(0.0, 0.5, n)])  # true (x, v) minus the INS's
+    s = rng.normal(0.0, sig_s, n)
+    X_hat = np.zeros((2, n))
+    F = np.array([[1.0, dt], [0.0, 1.0]])
+    share = MapShiftShare(n_carried=1)
+    scalar = MapShiftShare()
+    missed = 0
+    for k in range(25):
+        X = F @ X
+        X[1] += rng.normal(0.0, math.sqrt(qv * dt), n)
+        X_hat = F @ X_hat
+        P = F @ P @ F.T + np.diag([0.0, qv * dt])
+        share.predict(np.array([[dt], [0.0]]), np.eye(1))     # v is the north velocity: B = (dt, 0)'
+        z = X[0] + s + rng.normal(0.0, math.sqrt(r), n)
+        K = P[:, 0] / (P[0, 0] + r)
+        X_hat = X_hat + K[:, None] * (z - X_hat[0])
+        P_post = P - np.outer(K, P[0])
+        G = P[1, 0] / P[0, 0]
+        share.terrain(np.eye(2) * P[0, 0], np.eye(2) * P_post[0, 0], np.array([[G, 0.0]]))
+        scalar.terrain(np.eye(2) * P[0, 0], np.eye(2) * P_post[0, 0])
+        P = P_post
+        e = X_hat - X
+        a, u = share.A[0, 0], share.U[0, 0]
+        assert np.var(e[0]) == pytest.approx(P[0, 0] + a * a * sig_s**2, rel=0.015), (k, np.var(e[0]))
+        assert np.var(e[1]) == pytest.approx(P[1, 1] + u * u * sig_s**2, rel=0.015), (k, np.var(e[1]))
+        for j, share_j in ((0, a), (1, u)):        # within 5 sigma of the sample covariance's spread
+            spread = math.sqrt(np.var(e[j]) * sig_s**2 / n)
+            assert np.cov(e[j], s)[0, 1] == pytest.approx(share_j * sig_s**2, abs=5.0 * spread), (k, j)
+        missed += abs(np.var(e[0]) / (P[0, 0] + scalar.covariance(sig_s)[0, 0]) - 1.0) > 0.015
+    # the velocity's share carries the position past the map's shift (a > 1), which the position-only rule
+    # cannot; that rule misses the error's variance at most steps
+    assert a > 1.0 and scalar.share[0] < 1.0 and missed >= 15, (a, scalar.share[0], missed)
+
+
 def test_share_gain_is_clipped_where_a_posterior_widens():
     share = MapShiftShare(np.array([0.5, 0.5]))
     share.terrain(np.diag([100.0, 100.0]), np.diag([150.0, 25.0]))     # north widened: k = 0, east: 0.75

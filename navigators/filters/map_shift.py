@@ -5,7 +5,7 @@ fix by s: terrain samples pin the position relative to the map, not to the Earth
 shows the filter the shift. The point-mass and particle filters' belief is therefore the position's error
 relative to the map; the published position's error, relative to the Earth, is
 
-    e = e_f + A s,   A = diag(a_n, a_e),
+    e = e_f + A s,   A = diag(a_n, a_e) (a 2 x 2 matrix once carried states mix the axes, below),
 
 e_f the part the belief describes (INS drift, sensor noise) and a_i in [0, 1] the share of the shift the
 estimate has taken on along each axis. Per axis, a measurement update with gain k moves the estimate by k
@@ -24,18 +24,27 @@ be an outlier to it. So before a fix the filters widen the belief by the share's
 Bayes update does), so the filters need no GNSS step of the recursion: it runs from 0 again. (`gnss`
 states it for a filter that fuses fixes without the widening.)
 
+A filter that carries other states whose means follow the position's (the point-mass filter's velocity,
+tilt, accelerometer-bias and heading offsets u, moved by the Gaussian regression on the grid's moments,
+u_mean += G dx_mean) takes part of the shift into them, and its prediction moves the position by B u_mean:
+the shift then reaches the position later through them, which a rule on the position's variance alone
+does not see (docs/validation/integrity.md, section 7.1). With U the carried states' share (u's error
+holds U s), a terrain update also moves U by G dA (dA the position's share change), and a prediction
+moves A by B U and U to F U (F u's transition): the fixed-gain error recursion of the whole linear model.
+Before a GNSS fix the widening covers both: sigma_h^2 [A; U] [A; U]'.
+
 The grid and particle updates are not linear: k is taken per axis from the belief's variance before and
-after the update, clipped to [0, 1] (a multimodal posterior can be wider than its prior). s is independent
-of e_f with variance sigma_h^2 per axis (the map's accuracy class: CE90 / 2.146), so the published
-horizontal covariance adds diag(a_n^2, a_e^2) sigma_h^2 to the belief's. Navigators hold sigma_h as
-`map_horizontal_sigma_m` (navigators.registry's published-integrity setting, which the protection level
-already bounds separately: navigators.integrity.protection_level.publish); with it 0 nothing changes.
+after the update, clipped to [0, 1] (a multimodal posterior can be wider than its prior); A's row i moves
+toward the unit row by k_i. s is independent of e_f with variance sigma_h^2 per axis (the map's accuracy
+class: CE90 / 2.146), so the published horizontal covariance adds sigma_h^2 A A' to the belief's (diag(a_n^2,
+a_e^2) sigma_h^2 without carried states). Navigators hold sigma_h as `map_horizontal_sigma_m`
+(navigators.registry's published-integrity setting, which the protection level already bounds
+separately: navigators.integrity.protection_level.publish); with it 0 nothing changes.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -47,28 +56,66 @@ def _gain(var_prior: float, var_post: float) -> float | None:
     return min(max(1.0 - var_post / var_prior, 0.0), 1.0)
 
 
-@dataclass
 class MapShiftShare:
-    """The shares (a_n, a_e) of the map's horizontal shift in the estimate (see the module)."""
+    """The share of the map's horizontal shift s (north, east) in the estimate (see the module): A (2 x 2),
+    the position's error holding A s, and U (n x 2), the filter's carried states' means holding U s (none:
+    n = 0). Built with per-axis shares `share` (A = diag(share))."""
 
-    share: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    def __init__(self, share=(0.0, 0.0), n_carried: int = 0) -> None:
+        self.A = np.diag(np.asarray(share, float))
+        self.U = np.zeros((int(n_carried), 2))
 
-    def terrain(self, cov_prior: np.ndarray, cov_post: np.ndarray) -> None:
+    @property
+    def share(self) -> np.ndarray:
+        """The per-axis shares (a_n, a_e): A's diagonal."""
+        return np.diag(self.A).copy()
+
+    def any(self) -> bool:
+        """Whether any of the shift is in the estimate."""
+        return bool(np.any(self.A != 0.0) or np.any(self.U != 0.0))
+
+    def reset(self) -> None:
+        """None of the shift in the estimate (after it has been moved into the belief)."""
+        self.A[:] = 0.0
+        self.U[:] = 0.0
+
+    def terrain(self, cov_prior: np.ndarray, cov_post: np.ndarray,
+                regression: np.ndarray | None = None) -> None:
         """A terrain update took the belief's horizontal covariance (2 x 2 or larger, m^2, north-east
-        first) from cov_prior to cov_post."""
-        self._update(cov_prior, cov_post, toward=1.0)
+        first) from cov_prior to cov_post; `regression` (n x 2): how the carried states' means moved per
+        metre of the position's mean (the filter's Gaussian regression on its position)."""
+        self._update(cov_prior, cov_post, 1.0, regression)
 
-    def gnss(self, cov_prior: np.ndarray, cov_post: np.ndarray) -> None:
+    def gnss(self, cov_prior: np.ndarray, cov_post: np.ndarray,
+             regression: np.ndarray | None = None) -> None:
         """A GNSS position update took the belief's horizontal covariance from cov_prior to cov_post."""
-        self._update(cov_prior, cov_post, toward=0.0)
+        self._update(cov_prior, cov_post, 0.0, regression)
 
-    def _update(self, cov_prior: np.ndarray, cov_post: np.ndarray, toward: float) -> None:
+    def _update(self, cov_prior, cov_post, toward: float, regression) -> None:
+        before = self.A.copy()
         for i in range(2):
             k = _gain(float(cov_prior[i, i]), float(cov_post[i, i]))
             if k is not None:
-                self.share[i] = (1.0 - k) * self.share[i] + k * toward
+                self.A[i] = (1.0 - k) * self.A[i]
+                self.A[i, i] += k * toward
+        if regression is not None and self.U.size:
+            self.U += np.asarray(regression, float) @ (self.A - before)
+
+    def predict(self, B: np.ndarray, F: np.ndarray) -> None:
+        """Prediction of a filter whose position mean moves by B u (B: 2 x n) and whose carried states'
+        mean goes to F u (n x n): the shift's share moves with them."""
+        if not np.any(self.U != 0.0):
+            return
+        self.A += B @ self.U
+        self.U = F @ self.U
 
     def covariance(self, sigma_h_m: float) -> np.ndarray:
         """The shift's part of the published horizontal covariance (2 x 2, m^2) for a shift of sigma_h_m per
-        axis."""
-        return np.diag(self.share * self.share) * float(sigma_h_m) ** 2
+        axis: sigma_h^2 A A'."""
+        return self.A @ self.A.T * float(sigma_h_m) ** 2
+
+    def carried_covariances(self, sigma_h_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """The shift's part of the carried states' covariance with the position (n x 2) and of their own
+        (n x n), m^2 and state units, for a shift of sigma_h_m per axis: sigma_h^2 U A', sigma_h^2 U U'."""
+        s2 = float(sigma_h_m) ** 2
+        return self.U @ self.A.T * s2, self.U @ self.U.T * s2

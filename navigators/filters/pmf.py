@@ -138,6 +138,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
     settings_class = PmfSettings
     capabilities = PMF_CAPABILITIES
 
+    _MAP_SHIFT_CARRIED = N_U             # u's means take part of the map's shift (map_shift)
+    _MAP_SHIFT_VELOCITY_ROWS = (0, 1)    # u's velocity offset (dvn, dve): the published velocity's
+
     def __init__(self, dem=None, settings: PmfSettings | None = None, name: str | None = None, **overrides):
         super().__init__(dem=dem, settings=settings, name=name, **overrides)
         s = self.settings
@@ -269,6 +272,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             F[0:2, 2:4] = np.eye(2) * dt
             F[0:2, 4:6] = R * dt
             F[0:2, 6] = J
+            self._map_shift.predict(B, F)   # the shift's share in u reaches the position (map_shift)
             shift = B @ self.u_mean
             if shift[0] != 0.0 or shift[1] != 0.0:
                 self._set_geometry(self.centre_n + shift[0], self.centre_e + shift[1], self.spacing)
@@ -368,24 +372,25 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         pad = 0.5 * math.sqrt(2.0) * self.spacing + pl.gaussian_hpl(q, risk)
         return dn - D[0] * m, de - D[1] * m, w, pad
 
-    def _velocity_from_position(self, prior: tuple, post: tuple) -> None:
+    def _velocity_from_position(self, prior: tuple, post: tuple) -> np.ndarray | None:
         """The velocity and acceleration offsets u after an update of the grid (terrain or GNSS position and
         height): p(u | z), z = (dn, de, b), is the prior's Gaussian regression u = u_mean + G (z - z_mean),
         G = C_uz C_zz^-1, which a measurement of z alone leaves unchanged, so the grid's posterior moments
         carry it over: u_mean += G (z+ - z-), C_uu += G (C_zz+ - C_zz-) G', C_uz = G C_zz+ (exact for a
-        Gaussian z)."""
+        Gaussian z). Returns G (N_U x 3; None: moments not finite, u left as it was)."""
         (m0, c0), (m1, c1) = prior, post
         if not (np.all(np.isfinite(c0)) and np.all(np.isfinite(c1))):
-            return
+            return None
         try:
             G = np.linalg.solve(c0, self.C_uz.T).T
         except np.linalg.LinAlgError:
-            return
+            return None
         self.u_mean = self.u_mean + G @ (m1 - m0)
         C_uu = self.C_uu + G @ (c1 - c0) @ G.T
         self.C_uu = 0.5 * (C_uu + C_uu.T)
         self.C_uz = G @ c1
         self._moments_cache = None
+        return G
 
     def _reference_offsets(self) -> tuple[np.ndarray, np.ndarray]:
         """(heading turn (1,), velocity offset (1, 2)) of the IRA closest point's geometry: the INS's
@@ -481,8 +486,8 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
             self.P_b *= (1.0 - g_mean * self.P_b / S)
             self._moments_cache = None
         post = self._position_moments()
-        self._map_shift.terrain(prior[1], post[1])
-        self._velocity_from_position(prior, post)
+        G = self._velocity_from_position(prior, post)
+        self._map_shift.terrain(prior[1], post[1], None if G is None else G[:, :2])
         self._set_update_extra(t_s, [h_meas - pred_mean], [[pred_var + S]], log_lik)
         if n_nan:
             self.health.skip(t_s, "cells_off_map", f"{n_nan} grid cells off the map (outlier density only)")
@@ -492,9 +497,15 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
 
     def _gnss_update(self, t_s, st, payload) -> None:
         lat, lon, h, v = payload
+        sigma_shift = self._map_shift_sigma_m()
+        carried = self._map_shift.carried_covariances(sigma_shift) if sigma_shift > 0.0 else None
         widen = self._shift_into_belief()      # the map shift's share, convolved in with the process noise
         if widen is not None:
             self._q_pending = self._q_pending + widen
+            c_ux, c_uu = carried               # and u's share: [A; U] sigma_h^2 [A; U]' (map_shift)
+            self.C_uz = self.C_uz.copy()
+            self.C_uz[:, :2] += c_ux
+            self.C_uu = self.C_uu + c_uu
         self._apply_process_noise()
         prior = self._position_moments()
         gn, ge = gnss_model.predict(st, lat, lon)

@@ -133,6 +133,10 @@ class InsRiddenFilter(InsGnssBlock):
     name = "terrain_filter"
     integrity_risk = pl.DEFAULT_INTEGRITY_RISK   # per epoch, for the published HPL (registry sets it)
     map_horizontal_sigma_m = 0.0                 # the map's horizontal error in the HPL (registry sets it)
+    # states besides the position whose means take part of the map's shift (map_shift: U), and which of
+    # them are the published horizontal velocity's (north, east); none here, a subclass' own
+    _MAP_SHIFT_CARRIED = 0
+    _MAP_SHIFT_VELOCITY_ROWS: tuple[int, ...] = ()
 
     settings_class: type[TerrainFilterSettings] = TerrainFilterSettings
 
@@ -206,7 +210,8 @@ class InsRiddenFilter(InsGnssBlock):
         self._capture = CaptureGuard(self._capture_range_m(), self.name, self._capture_spec, geometry=True)
         anchor_from_cov9(self._capture, float(initial.t_s), cov)
         self._tilt0_var = 0.5 * float(d[6] + d[7])
-        self._map_shift = MapShiftShare()    # the INS's error is independent of the map's shift
+        # the INS's error is independent of the map's shift
+        self._map_shift = MapShiftShare(n_carried=self._MAP_SHIFT_CARRIED)
         self._init_belief(cov)
 
     def update(self, frames: SensorFrames) -> Estimate:
@@ -518,8 +523,15 @@ class InsRiddenFilter(InsGnssBlock):
         suspended = self._capture.suspended   # beyond capture (navigators.core.capture)
         P = self._capture.publish(P, float(self.ins.t_s), self._capture_floor_m2())
         hpl_cov = P[:2, :2].copy()       # the protection level bounds the map's shift apart (pl.publish)
-        if self._map_shift_sigma_m() > 0.0:
-            P[:2, :2] += self._map_shift.covariance(self._map_shift_sigma_m())
+        sigma_shift = self._map_shift_sigma_m()
+        if sigma_shift > 0.0:
+            P[:2, :2] += self._map_shift.covariance(sigma_shift)
+            rows = list(self._MAP_SHIFT_VELOCITY_ROWS)
+            if rows and 3 in carried:       # the horizontal velocity's share (its error holds U_v s)
+                c_ux, c_uu = self._map_shift.carried_covariances(sigma_shift)
+                P[3:5, :2] += c_ux[rows]
+                P[:2, 3:5] += c_ux[rows].T
+                P[3:5, 3:5] += c_uu[np.ix_(rows, rows)]
         dn, de = (float(mean[0]), float(mean[1])) if np.all(np.isfinite(mean[:2])) else (0.0, 0.0)
         if np.isfinite(mean[3]):
             v[0] += mean[3]
@@ -547,10 +559,10 @@ class InsRiddenFilter(InsGnssBlock):
         error relative to the map) a fix some sigma_h away would be an outlier to it. The share becomes the
         belief's, so it restarts from 0 (map_shift)."""
         sigma = self._map_shift_sigma_m()
-        if not sigma > 0.0 or not np.any(self._map_shift.share > 0.0):
+        if not sigma > 0.0 or not self._map_shift.any():
             return None
         q = self._map_shift.covariance(sigma)
-        self._map_shift.share[:] = 0.0
+        self._map_shift.reset()
         return q
 
     def _shift_prior(self) -> np.ndarray | None:
