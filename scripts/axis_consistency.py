@@ -6,6 +6,7 @@
     python scripts/axis_consistency.py --detail-correlation     # the world's sub-post detail along the route
     python scripts/axis_consistency.py --return-bias            # the IRA return's height against the map
     python scripts/axis_consistency.py --shift-share 30 --navigators pmf,pf,rbpf   # a map shifted 30 m north
+    python scripts/axis_consistency.py --conditions dted1 --grade tactical      # another IMU grade
 
 Conditions: "refined" (the default scenario: the world is the 3" DEM with 30 m fractal detail, the
 navigator's map the DEM itself), "world=map" (the refinement removed: the map is the world) and "dted1"
@@ -54,6 +55,11 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _grades() -> list[str]:
+    from trn_env.sensors.imu import IMU_GRADES
+    return sorted(IMU_GRADES)
+
+
 def _shift_m(text: str) -> float:
     value = float(text)
     if not np.isfinite(value) or value == 0.0:
@@ -67,6 +73,9 @@ def parse(argv):
     p.add_argument("--conditions", default=",".join(CONDITIONS), help=f"comma-separated, of {CONDITIONS}")
     p.add_argument("--seeds", type=_positive_int, default=4, help="seeds 0 .. N-1")
     p.add_argument("--duration", type=_positive_float, default=120.0, help="flight time, s (> 12)")
+    p.add_argument("--grade", choices=_grades(), default=None,
+                   help="the IMU grade flown by the per-axis figures and --shift-share (default: the "
+                        "scenario's, navigation)")
     p.add_argument("--statistic", choices=("median", "mean"), default="median",
                    help="how the seeds' figures are combined")
     p.add_argument("--detail-correlation", action="store_true",
@@ -87,9 +96,12 @@ def parse(argv):
     return args
 
 
-def scenario_dict(navigator: str, condition: str, seed: int, duration_s: float) -> dict:
+def scenario_dict(navigator: str, condition: str, seed: int, duration_s: float,
+                  grade: str | None = None) -> dict:
     from trn_env.scenario.loading import load_scenario
     d = load_scenario("default", seed=seed, navigator=navigator, duration_s=duration_s).to_dict()
+    if grade is not None:
+        d["sensors"]["imu"]["grade"] = grade
     if condition == "world=map":
         d["terrain"]["world"].pop("refinement", None)
     elif condition == "dted1":
@@ -197,7 +209,8 @@ def return_bias(seeds: int, duration_s: float, every_s: float = 0.5, after_s: fl
         print(f"{label:<15}{x.size:8d}{x.mean():+9.2f}{x.std():9.2f}")
 
 
-def shift_share(navigators: list[str], seeds: int, duration_s: float, shift_m: float) -> int:
+def shift_share(navigators: list[str], seeds: int, duration_s: float, shift_m: float,
+                grade: str | None = None) -> int:
     """--shift-share: the share of a pure north map shift in each navigator's estimate, flown and
     recursed (module docstring)."""
     from trn_env.scenario.loading import ScenarioError, validate
@@ -209,7 +222,7 @@ def shift_share(navigators: list[str], seeds: int, duration_s: float, shift_m: f
     for nav in navigators:
         flown, recursed = [], []
         for seed in range(seeds):
-            d = scenario_dict(nav, "refined", seed, duration_s)
+            d = scenario_dict(nav, "refined", seed, duration_s, grade)
             d["terrain"]["map"]["error_model"] = {"shift_n_m": shift_m, "shift_e_m": 0.0}
             d["navigator"].setdefault("settings", {})["map_horizontal_sigma_m"] = abs(shift_m)
             try:
@@ -247,7 +260,7 @@ def main(argv=None) -> int:
         return_bias(args.seeds, args.duration)
         return 0
     if args.shift_share is not None:
-        return shift_share(args.navigators, args.seeds, args.duration, args.shift_share)
+        return shift_share(args.navigators, args.seeds, args.duration, args.shift_share, args.grade)
     from trn_env.scenario.loading import ScenarioError
     from trn_env.sim import run_scenario
     print(f"{'navigator':<12}{'condition':<11}{'NEES N':>8}{'NEES E':>8}{'NEES D':>8}{'D rms m':>9}"
@@ -258,7 +271,7 @@ def main(argv=None) -> int:
             rows = []
             for seed in range(args.seeds):
                 try:
-                    result = run_scenario(scenario_dict(nav, cond, seed, args.duration))
+                    result = run_scenario(scenario_dict(nav, cond, seed, args.duration, args.grade))
                 except ScenarioError as err:
                     print(f"error: {nav} / {cond}: {err}", file=sys.stderr)
                     return 2
