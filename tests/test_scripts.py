@@ -102,9 +102,12 @@ def test_scripts_refuse_an_unwritable_out_before_their_work(tmp_path):
     assert len(results) == len(payload) >= 15
 
 
-@pytest.mark.parametrize("value", ["0", "nan", "inf", "north"])
-def test_axis_consistency_refuses_a_shift_share_that_is_no_shift(value, capsys):
+@pytest.mark.parametrize("option, value", [("--shift-share", "0"), ("--shift-share", "nan"),
+                                           ("--shift-share", "inf"), ("--shift-share", "north"),
+                                           ("--grade", "military")])
+def test_axis_consistency_refuses_bad_options(option, value, capsys):
     mod = _load("axis_consistency")
     with pytest.raises(SystemExit) as exc:
-        mod.parse(["--shift-share", value])
-    assert exc.value.code == 2 and "--shift-share" in capsys.readouterr().err
+        mod.parse([option, value])
+    assert exc.value.code == 2 and option in capsys.readouterr().err
+    assert mod.parse(["--grade", "tactical"]).grade == "tactical"
