@@ -105,6 +105,42 @@ def test_carried_share_matches_a_monte_carlo_kalman_filter_with_velocity():
     assert a > 1.0 and scalar.share[0] < 1.0 and missed >= 15, (a, scalar.share[0], missed)
 
 
+def test_particle_mean_response_is_the_kalman_gain_on_a_linear_gaussian_update():
+    # 400,000 particles from N(0, P0), a scalar measurement y = h.x + w (variance r) reweighting them: the
+    # mean's response M = (dm/dy) H equals K h' of the Kalman update (K = P0 h' / (h P0 h' + r)) within the
+    # sample's spread; the cloud's own variance ratio gives the same on this linear case
+    from trn_env.navigators.filters.map_shift import particle_mean_response
+    rng = np.random.default_rng(8)
+    P0 = np.array([[90.0, 30.0], [30.0, 40.0]])
+    x = rng.multivariate_normal([0.0, 0.0], P0, 400_000)
+    h, r, y = np.array([0.8, -0.5]), 25.0, 12.0
+    y_hat = x @ h
+    w1 = np.exp(-0.5 * (y - y_hat) ** 2 / r)
+    score = (-(y - y_hat) / r)[:, None]                  # d log N(y; y_hat, r) / dy
+    M = particle_mean_response(x, np.ones(len(x)), w1, score, y_hat[:, None])
+    K = P0 @ h / (h @ P0 @ h + r)
+    assert M == pytest.approx(np.outer(K, h), abs=0.01)
+
+
+def test_particle_mean_response_ignores_a_narrowing_that_does_not_move_the_mean():
+    # a cloud centred on the floor of a valley (y = x_n^2 / 100, symmetric) measured at the floor: the
+    # reweighting narrows the cloud (the variance rule would take k ~ 0.8 of the shift) but no measurement
+    # offset at the floor moves its mean, so the share does not grow
+    from trn_env.navigators.filters.map_shift import particle_mean_response
+    rng = np.random.default_rng(9)
+    x = rng.normal(0.0, 10.0, (200_000, 2))
+    y_hat = x[:, 0] ** 2 / 100.0
+    r, y = 0.05, 0.0
+    w1 = np.exp(-0.5 * (y - y_hat) ** 2 / r)
+    narrowing = 1.0 - np.average(x[:, 0] ** 2, weights=w1) / np.mean(x[:, 0] ** 2)
+    M = particle_mean_response(x, np.ones(len(x)), w1, (-(y - y_hat) / r)[:, None], y_hat[:, None])
+    assert narrowing > 0.5 and np.abs(M).max() < 0.05, (narrowing, M)
+    share = MapShiftShare()
+    share.respond(M)
+    assert np.abs(share.A).max() < 0.05
+    assert particle_mean_response(x[:1], [1.0], [1.0], [[0.0]], [[0.0]]) is None     # no spread: None
+
+
 def test_share_gain_is_clipped_where_a_posterior_widens():
     share = MapShiftShare(np.array([0.5, 0.5]))
     share.terrain(np.diag([100.0, 100.0]), np.diag([150.0, 25.0]))     # north widened: k = 0, east: 0.75

@@ -33,6 +33,18 @@ holds U s), a terrain update also moves U by G dA (dA the position's share chang
 moves A by B U and U to F U (F u's transition): the fixed-gain error recursion of the whole linear model.
 Before a GNSS fix the widening covers both: sigma_h^2 [A; U] [A; U]'.
 
+A particle update is a reweighting, and its variance change need not follow its mean's response to the
+measurement (a likelihood curved over the cloud narrows it without moving its mean, so k from the variances
+overstates the gain). The Rao-Blackwellised particle filter therefore takes the mean's own response
+(`particle_mean_response`): with prior and posterior weights w, w+ and each particle's score
+g_i = d log p(y | i) / dy, the posterior mean m+ = sum w+_i x_i moves with the measurement by
+dm+/dy = sum w+_i (x_i - m+) g_i' (exact: the derivative of the weights), and the shift moves the
+measurement by H s, H = Cov(y_hat, x) P^-1 the cloud's regression of its predicted measurements on its
+position; M = (dm+/dy) H and A' = A + M (I - A) (`MapShiftShare.respond`), the fixed-gain recursion with
+K H = M, which it equals for a linear-Gaussian update. (The particle filter keeps the variance rule: with the
+mean's response its published covariance over DTED-1 maps was the less consistent: docs/validation/
+integrity.md, section 7.1.)
+
 The grid and particle updates are not linear: k is taken per axis from the belief's variance before and
 after the update, clipped to [0, 1] (a multimodal posterior can be wider than its prior); A's row i moves
 toward the unit row by k_i. s is independent of e_f with variance sigma_h^2 per axis (the map's accuracy
@@ -54,6 +66,40 @@ def _gain(var_prior: float, var_post: float) -> float | None:
     if not (math.isfinite(var_prior) and math.isfinite(var_post)) or var_prior <= 0.0 or var_post < 0.0:
         return None
     return min(max(1.0 - var_post / var_prior, 0.0), 1.0)
+
+
+def particle_mean_response(x: np.ndarray, w_prior: np.ndarray, w_post: np.ndarray, score: np.ndarray,
+                           y_hat: np.ndarray) -> np.ndarray | None:
+    """M = (dm+/dy) H (2 x 2) of a weighted-particle update (see the module): x (n, 2) the particles'
+    horizontal positions (m; any origin or sign, M is the same), w_prior, w_post (n,) their weights before
+    and after (normalised here; both 0 for a particle without a prediction), score (n, m)
+    d log p(y | particle) / dy and y_hat (n, m) their predicted measurements (any common offset). None when
+    the prior cloud's horizontal covariance is not positive definite or anything is not finite."""
+    x = np.asarray(x, float)
+    w0 = np.asarray(w_prior, float)
+    w1 = np.asarray(w_post, float)
+    if not (w0.sum() > 0.0 and w1.sum() > 0.0):
+        return None
+    w0 = w0 / w0.sum()
+    w1 = w1 / w1.sum()
+    use = (w0 > 0.0) | (w1 > 0.0)
+    x, w0, w1 = x[use], w0[use], w1[use]
+    score, y_hat = np.asarray(score, float)[use], np.asarray(y_hat, float)[use]
+    score = np.where(w1[:, None] > 0.0, score, 0.0)               # a particle the update dropped: no say
+    m1 = w1 @ x
+    dm_dy = (w1[:, None] * (x - m1)).T @ score                    # 2 x m
+    m0 = w0 @ x
+    d0 = x - m0
+    P0 = (w0[:, None] * d0).T @ d0
+    C_yx = (w0[:, None] * (y_hat - w0 @ y_hat)).T @ d0            # m x 2
+    try:
+        if np.linalg.eigvalsh(P0)[0] <= 0.0:
+            return None
+        H = np.linalg.solve(P0, C_yx.T).T
+    except np.linalg.LinAlgError:
+        return None
+    M = dm_dy @ H
+    return M if np.all(np.isfinite(M)) else None
 
 
 class MapShiftShare:
@@ -100,6 +146,11 @@ class MapShiftShare:
                 self.A[i, i] += k * toward
         if regression is not None and self.U.size:
             self.U += np.asarray(regression, float) @ (self.A - before)
+
+    def respond(self, M: np.ndarray) -> None:
+        """A terrain update whose mean moves by M (2 x 2, K H of a linear update) per metre of the map's
+        shift the measurement sees: A' = A + M (I - A) (`particle_mean_response`)."""
+        self.A = self.A + np.asarray(M, float) @ (np.eye(2) - self.A)
 
     def predict(self, B: np.ndarray, F: np.ndarray) -> None:
         """Prediction of a filter whose position mean moves by B u (B: 2 x n) and whose carried states'

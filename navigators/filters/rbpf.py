@@ -115,6 +115,7 @@ from . import _rbpf_kernels as kern
 from . import rbpf_progressive as prog
 from ._ekf_kernels import yaw_total_variation
 from .height_error import HeightError
+from .map_shift import MapShiftShare
 from .rbpf_cloud import RbpfCloud
 from .rbpf_ira_update import RbpfIraUpdate
 from .rbpf_settings import CAPABILITIES, MAX_PARTICLES, RbpfSettings, table1_covariance
@@ -304,6 +305,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._last_row = None          # INS row and specific force carried into the next chunk
         self._extra: dict = {}
         self._cov9 = self._covariance9()
+        self._map_shift = MapShiftShare()   # the INS's error is independent of the map's shift (map_shift)
         # the published height's error with the map's (height_error): the cloud's prior height spread is the
         # INS's; the map's random error counts as correlated only with a correlation length
         var_corr = self.map_sigma_m ** 2 if self.map_correlation_length_m > 0.0 else 0.0
@@ -501,6 +503,9 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         if self._height.active and self._height.var_e > cov9[2, 2]:    # the height keeps the map's error
             cov9 = cov9.copy()
             cov9[2, 2] = self._height.var_e
+        if self.map_horizontal_sigma_m > 0.0:     # and the position the share of its shift (map_shift)
+            cov9 = cov9.copy()
+            cov9[:2, :2] += self._map_shift.covariance(self.map_horizontal_sigma_m)
         return Estimate(t_s=self.ins.t_s, lat_rad=float(st[0]), lon_rad=float(st[1]), h_m=float(st[2]),
                         v_ned_mps=st[3:6].copy(), roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
                         covariance=self._capture.publish(cov9, float(self.ins.t_s)), health=health,

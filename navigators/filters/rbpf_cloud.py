@@ -144,17 +144,25 @@ class RbpfCloud:
         d = self.xn - m
         Pc = (d * w[:, None]).T @ d
         Rg = np.diag(self.gnss_pos_var + self.gnss_bias_var)
+        # the share of the map's shift the mean took on from the terrain is error relative to the Earth,
+        # which the fix sees: the prior is the cloud's spread plus its covariance, and the share restarts
+        # (map_shift; fused against the cloud alone, a fix after a long terrain segment would be an outlier)
+        Pp = Pc
+        if self.map_horizontal_sigma_m > 0.0 and self._map_shift.any():
+            Pp = Pc.copy()
+            Pp[:2, :2] += self._map_shift.covariance(self.map_horizontal_sigma_m)
+            self._map_shift.reset()
         try:
             L = np.linalg.cholesky(Pc + 1e-9 * np.eye(3))
-            K = Pc @ np.linalg.inv(Pc + Rg)
+            K = Pp @ np.linalg.inv(Pp + Rg)
         except np.linalg.LinAlgError:
             return
         m_new = m + K @ (y - m)
-        P_new = (np.eye(3) - K) @ Pc
+        P_new = (np.eye(3) - K) @ Pp
         P_new = 0.5 * (P_new + P_new.T)
         # the receiver's drift is common to consecutive fixes: no position better than it
         # (never wider than the cloud before the fix)
-        floor = np.sqrt(np.minimum(self.gnss_bias_var, np.diag(Pc)))
+        floor = np.sqrt(np.minimum(self.gnss_bias_var, np.diag(Pp)))
         sd = np.sqrt(np.clip(np.diag(P_new), 1e-12, None))
         f = np.maximum(floor / sd, 1.0)
         P_new = P_new * f[:, None] * f[None, :]

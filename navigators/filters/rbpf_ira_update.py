@@ -22,6 +22,7 @@ from scipy.special import erfc as _erfc
 from ..measurements import ira_seed002 as ira_model
 from ..protocol import update_extra
 from . import _rbpf_kernels as kern
+from . import map_shift as shift_share
 from . import rbpf_progressive as prog
 
 OUTLIER_SIGMA = 10.0  # an IRA sample farther than this from every particle's prediction is rejected
@@ -170,6 +171,8 @@ class RbpfIraUpdate:
         self._share_left = 0.0 if share >= self._share_left else self._share_left - share
         if stage > 0:
             return True
+        if self.map_horizontal_sigma_m > 0.0:     # the map's shift follows the mean's response (map_shift)
+            self._shift_response(ok & np.isfinite(ll_full), wp, ll_full, S0, nu_k, r_var)
         self._n_rejected = 0
         if n_bad:
             sk = self.health.skipped
@@ -192,6 +195,23 @@ class RbpfIraUpdate:
         self._extra = update_extra(nu, S, nis, dims, float(lse - lse_prev), te)
         self._integrity_test(te, nis, dims)
         return True
+
+    def _shift_response(self, use, wp, ll_full, S0, nu, r_var) -> None:
+        """The share of the map's horizontal shift the cloud's mean took on at this IRA update
+        (map_shift.particle_mean_response): the particles' positions xn, the weights before (wp) and after
+        the whole measurement (wp times its predictive density), each particle's score -S^-1 nu with
+        S = S0 + diag(r_var) its predictive covariance, its prediction y - nu."""
+        w0 = np.where(use, wp, 0.0)
+        lw = np.where(use, ll_full, -np.inf)
+        if not np.isfinite(lw).any():
+            return
+        w1 = w0 * np.exp(lw - np.max(lw))
+        S = S0 + np.diag(np.asarray(r_var, float))[None, :, :]
+        score = np.zeros_like(nu)
+        score[use] = -np.linalg.solve(S[use], nu[use][..., None])[..., 0]
+        M = shift_share.particle_mean_response(self.xn[:, :2], w0, w1, score, -nu)
+        if M is not None:
+            self._map_shift.respond(M)
 
     def _predict(self, lat, lon, h, v, C) -> np.ndarray:
         """eqs 23-26 on the map for hypotheses (lat, lon rad, h m): ira_seed002.predict_ira with the sensor's
