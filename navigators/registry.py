@@ -26,7 +26,8 @@ its run bit for bit; `create(..., rng=None)` leaves it to the navigator's own do
 `integrity_risk` (per epoch, in (0, 1), default 1e-3) and `map_horizontal_sigma_m` (the map's horizontal
 error per axis, m, default 0) are taken here for every navigator: the risk its published horizontal
 protection level is computed for and the map error it covers (navigators.integrity.protection_level); the
-terrain filters (pmf, pf) also publish that error's share in their covariance (navigators.filters.map_shift).
+terrain filters (pmf, pf, rbpf) also publish that error's share in their covariance
+(navigators.filters.map_shift).
 
 Each navigator and monitor declares what it needs as `Capabilities` (navigators.core.capabilities: its
 Settings class, whether it needs the map or takes an rng, uses the IMU's specification or the map's error
@@ -80,8 +81,8 @@ class PublishedIntegritySettings(Settings):
     integrity_risk: float = setting(1e-3, "per-epoch integrity risk of the published horizontal protection "
                                           "level", "1", gt=0.0, lt=1.0)
     map_horizontal_sigma_m: float = setting(0.0, "the map's horizontal error per axis the protection level "
-                                                 "covers, and pmf's and pf's covariance (a scenario: its "
-                                                 "accuracy class)", "m", ge=0.0)
+                                                 "covers, and pmf's, pf's and rbpf's covariance (a "
+                                                 "scenario: its accuracy class)", "m", ge=0.0)
 
 
 PUBLISHED_INTEGRITY_KEYS = ("integrity_risk", "map_horizontal_sigma_m")
