@@ -54,7 +54,10 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
 Estimate: the corrected INS; covariance: the mixture's 9 x 9 (position from the cloud, the rest from the
 Kalman parts, cross terms included) at the last epoch, its down variance at least the height's error
 variance where the map has a vertical error model (the IRA pins the height to the map, whose error stays
-in it: height_error, fed by `_height_update`). Estimate.extra after an IRA update: the fixed keys of
+in it: height_error, fed by `_height_update`), and its horizontal block plus the share of the map's
+horizontal shift the mean took on where map_horizontal_sigma_m is given (map_shift, from the mean's own
+response to each IRA update: `_shift_response`; a GNSS fix takes the share into its prior and restarts
+it). Estimate.extra after an IRA update: the fixed keys of
 navigators.protocol (innovation and its covariance from the mixture's predictive moments, NIS with 2 dof,
 log-likelihood log sum w p(y | particle), ESS before resampling).
 
