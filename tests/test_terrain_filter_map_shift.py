@@ -236,3 +236,68 @@ def test_published_position_carries_the_maps_horizontal_shift(kind):
         assert lo <= nees <= hi, (gnss_fixes, nees, lo, hi)
     unmodelled = _horizontal_nees(kind, seed=11, runs=10, gnss_fixes=0, modelled=False)
     assert unmodelled > 3.0 * chi2.isf(0.001, 20), unmodelled
+
+
+def test_pmf_carries_the_share_in_its_velocity_model_and_publishes_it():
+    # wiring of pmf's carried share: with a velocity prior wide enough for the regression to move u, terrain
+    # samples give u a share (U), a prediction without samples moves the position's share by B U, and the
+    # published covariance carries sigma_h^2 [A; U_v][A; U_v]' in its position and velocity blocks
+    the_map = _dem(20.0, -10.0)
+    nav = PointMassFilter(the_map, grid_size=121, spacing_min_m=1.0, outlier_prob=0.0,
+                          terrain_model_sigma_m=0.0, map_sigma_m=0.0, baro_bias_sigma_m=1.0,
+                          ira_range_sigma_m=SIGMA_R, ira_look_angle_sigma_deg=0.1,
+                          vertical_noise_m_per_sqrt_s=0.0)
+    configure(nav, map_horizontal_sigma_m=SIGMA_H)
+    cov = np.diag([SIGMA_X0**2, SIGMA_X0**2, 1.0, 0.5**2, 0.5**2, 1e-6, 1e-10, 1e-10, 1e-8])
+    nav.reset(Estimate(0.0, LAT0, LON0, H_ANT, np.array([SPEED, 0.0, 0.0]), 0.0, 0.0, 0.0, cov))
+    nav._predict_to(0.0, _ins(0.0))
+    for i in range(15):
+        t = 1.0 + i
+        st = _ins(t)
+        nav._predict_to(t, st)
+        z = float(_terrain_m(SPEED * t, 0.0))
+        nav._terrain_update(t, "ira", float(H_ANT - z), 0.0, st, None)
+    share = nav._map_shift
+    assert np.abs(share.U[:2]).max() > 0.003, share.U          # the velocity offset took part of the shift
+    A0, U0 = share.A.copy(), share.U.copy()
+    nav._predict_to(25.0, _ins(25.0))                          # 9 s without samples: x += v dt ...
+    assert np.abs(share.A - A0).max() > 0.03 and np.abs(share.A - A0 - 9.0 * U0[:2]).max() < 0.2 * np.abs(
+        9.0 * U0[:2]).max() + 1e-9, (share.A - A0, U0[:2])
+    est = nav.estimate()
+    c_ux, c_uu = share.carried_covariances(SIGMA_H)
+    belief = nav._moments()[1]
+    assert est.covariance[3:5, 3:5] - belief[3:5, 3:5] == pytest.approx(c_uu[:2, :2], rel=1e-6, abs=1e-9)
+    assert est.covariance[3:5, :2] - belief[3:5, :2] == pytest.approx(c_ux[:2], rel=1e-6, abs=1e-9)
+
+
+def test_rbpf_publishes_the_share_its_mean_took_on():
+    # wiring of rbpf's share: over a DTED-1 map (map_horizontal_sigma_m from the class) its IRA updates give
+    # the mean a share of the shift, and the published horizontal covariance is the cloud's plus
+    # sigma_h^2 A A'; the GNSS fixes before 10 s restarted it each time
+    from trn_env.navigators.filters import rbpf as rbpf_module
+
+    from trn_env.scenario.loading import load_scenario, validate
+    from trn_env.sim.closed_loop import ClosedLoop
+    seen = []
+    original = rbpf_module.RaoBlackwellizedPF._gnss_cloud_update
+
+    def spy(self, y):
+        seen.append(self._map_shift.share.copy())
+        original(self, y)
+        assert not self._map_shift.any()
+    d = load_scenario("default", seed=1, navigator="rbpf", duration_s=30.0).to_dict()
+    d["terrain"]["map"]["error_model"] = {"preset": "dted1"}
+    loop = ClosedLoop(validate(d, source="test"), pipeline=False)
+    rbpf_module.RaoBlackwellizedPF._gnss_cloud_update = spy
+    try:
+        loop.run()
+    finally:
+        rbpf_module.RaoBlackwellizedPF._gnss_cloud_update = original
+    nav = loop.navigator
+    sigma = nav.map_horizontal_sigma_m
+    assert sigma == pytest.approx(SIGMA_H, rel=0.01)
+    assert any(np.any(s > 0.0) for s in seen)                  # terrain between fixes took a share
+    assert np.max(nav._map_shift.share) > 0.02, nav._map_shift.share
+    est = nav.estimate()
+    assert est.covariance[:2, :2] - nav._cov9[:2, :2] == pytest.approx(nav._map_shift.covariance(sigma),
+                                                                       rel=1e-9, abs=1e-9)
