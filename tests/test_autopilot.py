@@ -12,7 +12,10 @@ import time
 
 import numpy as np
 import pytest
+from _scripts import load_script
 from jsbsim_helpers import FT_PER_M, engage_autopilot, fly, start_in_flight
+
+from trn_env.flight.aircraft_data import new_fdm
 
 H0_M = 1500.0
 TAS0_MPS = 85.0
@@ -173,3 +176,36 @@ def test_disengaged_autopilot_leaves_the_controls_alone() -> None:
     rec = fly(fdm, 10, ["ap/elevator-delta-norm", "ap/aileron-delta-norm", "ap/rudder-delta-norm",
                         "ap/throttle-delta-norm"])
     assert np.all(rec[-1] == 0.0)
+
+
+@pytest.mark.parametrize("dt_s", [0.005, 0.01, 0.02, 0.04])
+def test_autopilot_limits_hold_at_every_integration_step(dt_s: float) -> None:
+    """The autopilot's FCS components run at the executive's step, whatever it is: after an altitude step
+    the smoothed vertical-speed target moves at the XML's rate limit, 1.5 m/s per second (over 2 s, 3.0 m/s
+    +- one step's 1.5 dt). A step set only after the model was loaded left them at JSBSim's default 1/120 s:
+    0.625 m/s^2 at 0.02 s, 2.5 at 0.005 s."""
+    fdm = start_in_flight(H0_M, TAS0_MPS, fdm=new_fdm("kingair", dt_s))
+    assert fdm.get_delta_t() == pytest.approx(dt_s)
+    engage_autopilot(fdm, altitude_m=H0_M)
+    fly(fdm, int(round(5.0 / dt_s)), [])
+    fdm["ap/altitude-cmd-m"] = H0_M + 400.0
+    v0 = fdm["ap/vs-target-smooth-mps"]
+    fly(fdm, int(round(2.0 / dt_s)), [])
+    assert fdm["ap/vs-target-smooth-mps"] - v0 == pytest.approx(3.0, abs=1.5 * dt_s + 1e-9)
+
+
+def test_flight_converges_as_the_integration_step_shrinks() -> None:
+    """The flight core at 50 Hz flies the same manoeuvring flight (track changes and climbs, calm air) as at
+    200 Hz, within 2 m horizontally and 0.5 m in height over 240 s (scripts/flight_step_check.py's
+    schedule); with the autopilot's components on JSBSim's default step instead they parted by ~90 m and
+    ~37 m over 480 s."""
+    script = load_script("flight_step_check")
+    ref = script.fly(0.005, 240)
+    f = script.fly(0.02, 240)
+    n = min(len(f), len(ref))
+    dn = (f[:n, 0] - ref[:n, 0]) * script.R_EARTH_M
+    de = (f[:n, 1] - ref[:n, 1]) * script.R_EARTH_M * np.cos(ref[:n, 0])
+    assert n >= 240
+    assert np.max(np.hypot(dn, de)) < 2.0
+    assert np.max(np.abs(f[:n, 2] - ref[:n, 2])) < 0.5
+    assert np.ptp(ref[:, 2]) > 150.0                                          # it climbed and descended

@@ -223,8 +223,9 @@ def _fly(dt_s: float, duration_s: int) -> np.ndarray:
 def test_50_hz_trajectory_error_is_first_order_and_bounded():
     """JSBSim's step error, both steps judged against 200 Hz (90 s, a 45 deg turn and a 200 m climb, ~7.6 km
     flown): first order in the step, so the 50 Hz trajectory departs about 3x as far as the 100 Hz one
-    ((0.02 - 0.005) / (0.01 - 0.005); the figures: docs/validation/route_task.md, most of it in the climb's
-    transient); bounded here with margins: at most 4x, and below 80 m / 60 m."""
+    ((0.02 - 0.005) / (0.01 - 0.005)), between 2x and 4x here, and by less than 1 m / 0.1 m. (With the
+    autopilot's FCS components on JSBSim's default step, before December 7 2026, the departures were tens of
+    metres and came from the autopilot, not the integration: docs/validation/fast_tier.md.)"""
     t = 90
     x200, x100, x50 = _fly(0.005, t), _fly(0.01, t), _fly(0.02, t)
 
@@ -236,9 +237,9 @@ def test_50_hz_trajectory_error_is_first_order_and_bounded():
 
     h100, v100 = dev(x100, x200)
     h50, v50 = dev(x50, x200)
-    assert h50 < 4.0 * h100 + 2.0 and v50 < 4.0 * v100 + 2.0
-    assert h50 < 80.0 and v50 < 60.0
-    assert h100 > 1.0 and h50 > h100                     # the comparison sees the step at all
+    assert h100 > 0.01                                   # the comparison sees the step at all
+    assert 2.0 * h100 < h50 < 4.0 * h100
+    assert h50 < 1.0 and v50 < 0.1
 
 
 def test_rates_check_script_bad_arguments_exit_2(tmp_path, capsys):

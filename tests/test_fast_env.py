@@ -15,6 +15,7 @@ from gymnasium.utils import env_checker
 import trn_env  # noqa: F401 - registers the envs
 from trn_env.env import task
 from trn_env.env.fast import calibration as cal
+from trn_env.env.fast import navigator as nv
 from trn_env.env.fast.vector_env import TerrainNavFastVectorEnv
 
 BASIN = dict(
@@ -331,6 +332,40 @@ def test_recorded_full_loop_is_what_the_full_loop_flies_now(name, mode):
                                     fix_noise=mode)["errors_m"])
     for figure in ("mean_m", "p90_m"):
         assert full[figure] == pytest.approx(ref[figure], abs=0.006), (figure, full, ref)
+
+
+def test_the_profile_reads_the_lagged_barometer():
+    """The TERCOM profile's measured heights carry the barometer's lag as the full loop's do: two fast envs
+    whose scenarios differ only in sensors.baro.lag_tau_s (0 and 0.6 s; no IRA noise) fly the same aircraft
+    until the first fix (the profile steers nothing before it), and over the 15 profile samples of the
+    second 15-s decision their heights differ by -0.6 s x the vertical speed, which sums to -0.6 x the
+    height gained over the decision (the aircraft's own height record, Euler steps of 1 s)."""
+    from trn_env.env.fast import state as S
+    from trn_env.scenario.overrides import load_scenario_with
+
+    out = {}
+    for tau in (0.0, 0.6):
+        fields = [("sensors.baro.lag_tau_s", tau), ("sensors.ira.range_noise_m", 0.0)]
+        sc = load_scenario_with("basin_route", fields)
+        e = TerrainNavFastVectorEnv(num_envs=4, **{**BASIN, "scenario": sc, "decision_interval_s": 15.0})
+        assert e._nav[nv.NP_BARO_LAG] == tau
+        e.reset(seed=[0, 1, 2, 3])
+        a = np.zeros((4, 2), np.float32)
+        e.step(a)
+        n1, h1 = e._X[:, S.N_PROF].copy(), e._X[:, S.H].copy()
+        e.step(a)
+        out[tau] = (n1, e._X[:, S.N_PROF].copy(), h1, e._X.copy(), e._prof[0].copy())
+        e.close()
+    n1, n2, h1, X0, p0 = out[0.0]
+    X6, p6 = out[0.6][3], out[0.6][4]
+    np.testing.assert_array_equal(X0, X6)
+    assert (n2 - n1 == 15).all()
+    dh = X0[:, S.H] - h1
+    assert np.abs(dh).min() > 10.0                                   # it climbed or descended
+    for i in range(4):
+        diff = p6[i, int(n1[i]):int(n2[i])] - p0[i, int(n1[i]):int(n2[i])]
+        assert diff.sum() == pytest.approx(-0.6 * dh[i], rel=1e-9)
+        assert np.abs(diff).max() > 0.3
 
 
 def test_fix_noise_mode_is_checked():

@@ -54,6 +54,10 @@ def new_fdm(aircraft: str = "kingair", dt_s: float = 0.01) -> jsbsim.FGFDMExec:
     fdm.set_aircraft_path(str(root))
     fdm.set_engine_path(str(root / aircraft / "Engines"))
     fdm.set_systems_path(str(root / aircraft / "Systems"))
+    # before the model: each FCS component (the autopilot's rate limits, PIDs, filters) takes its step from
+    # the executive when it is built and keeps it, so a step set only afterwards would leave them running at
+    # JSBSim's default 1/120 s (at 0.02 s the 1.5 m/s^2 vertical-speed rate limit became 0.625)
+    fdm.set_dt(dt_s)
     if not fdm.load_model(aircraft):
         raise RuntimeError(f"JSBSim could not load aircraft {aircraft!r} from {root / aircraft}")
     fdm.set_dt(dt_s)

@@ -301,7 +301,8 @@ def _fly_aircraft(i, X, state, n_sub, prof, world, mapr, fp, nav, wind, scratch,
                 if k < prof_meas.shape[1]:
                     lat_e, lon_e = estimate_latlon(X, i)
                     w_n = nav[nv.NP_PROFILE_NOISE] * frng.normal(state, i)
-                    prof_meas[i, k] = h_world + X[i, BARO] + w_n
+                    # the lagged barometer reads the height tau earlier: h - tau dh/dt on a steady climb
+                    prof_meas[i, k] = h_world + X[i, BARO] - nav[nv.NP_BARO_LAG] * X[i, VS] + w_n
                     prof_lat[i, k] = lat_e
                     prof_lon[i, k] = lon_e
                     X[i, N_PROF] = k + 1

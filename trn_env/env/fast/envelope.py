@@ -61,19 +61,19 @@ class Envelope:
 # output are in docs/validation/fast_tier.md.
 KINGAIR_ENVELOPE = Envelope(
     tas_mps=85.0,
-    bank_max_rad=0.4545,  # 26.0 deg (the 25 deg limit plus the roll loop's overshoot)
-    turn_rate_max_rps=0.05578,  # 3.20 deg/s
+    bank_max_rad=0.4577,  # 26.2 deg (the 25 deg limit plus the roll loop's overshoot)
+    turn_rate_max_rps=0.05579,  # 3.20 deg/s
     bank_tau_s=1.0,
-    climb_rate_max_mps=7.56,
-    descent_rate_max_mps=7.45,
+    climb_rate_max_mps=7.54,
+    descent_rate_max_mps=7.46,
     track_gain_per_s=0.2,
     height_gain_per_s=0.15,
     vs_accel_max_mps2=1.5,
     # scripts/fast_tier_speed_trade.py --seeds 4 --routes jacksboro_sw_ne basin_west jacksboro_flat_patch
-    tas_per_vs=0.74,
-    tas_tau_s=2.5,
-    tas_wander_mps=1.28,
-    tas_wander_tau_s=37.0,
+    tas_per_vs=0.71,
+    tas_tau_s=3.0,
+    tas_wander_mps=1.48,
+    tas_wander_tau_s=40.0,
 )
 
 

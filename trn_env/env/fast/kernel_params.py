@@ -122,6 +122,7 @@ def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float
         spec,
         sample_dt_s=float(fp[dyn.FP_SAMPLE_DT]),
         terrain_sigma_m=terrain_sigma_m,
+        baro_lag_s=float(sc.sensors.baro.lag_tau_s) if sc.sensors.baro is not None else 0.0,
     )
     ie = sc.initial_errors
     pos = ie.position_ned_m

@@ -17,12 +17,14 @@ sets the horizontal error at the goal:
   navigator's sigmas, the position sigma floored at gnss_correlated_sigma_m (as the full navigator's).
 - TERCOM (seed 000 eq 2, with the per-profile mean removed when the scenario's `remove_bias` is set): the
   profile of measured terrain heights (baro height minus radar height: true terrain + baro error + noise,
-  1 Hz) along the INS-indicated track over `fix_period_s`, correlated with the MAP over +-half_cells x
-  cell_m in north and east, coarse to fine (the whole window at 50 m on every 4th profile point - a wider,
-  recovery window at 100 m, then +-100 m at 50 m -, then +-40 m at 20 m and +-10 m at the cell size on
-  every point); a best offset on the window's edge is a failed fix; otherwise it is the fix,
-  z = INS - matched position at the profile's mean time (z = p - lag v), noise fix_sigma_m, chi-square
-  gated (2 dof) against the filter's covariance, as the full navigator does (navigators.filters.ins_trn_ekf).
+  1 Hz; the barometer's first-order lag tau reads h - tau dh/dt on a climb, as the full loop's lagged
+  barometer does in its IRA heights, which removing the profile's mean leaves in) along the INS-indicated
+  track over `fix_period_s`, correlated with the MAP over +-half_cells x cell_m in north and east, coarse
+  to fine (the whole window at 50 m on every 4th profile point - a wider, recovery window at 100 m, then
+  +-100 m at 50 m -, then +-40 m at 20 m and +-10 m at the cell size on every point); a best offset on the
+  window's edge is a failed fix; otherwise it is the fix, z = INS - matched position at the profile's mean
+  time (z = p - lag v), noise fix_sigma_m, chi-square gated (2 dof) against the filter's covariance, as the
+  full navigator does (navigators.filters.ins_trn_ekf).
 - Kalman filter over (p, v, a) per axis with one shared covariance (the axes see the same dynamics and
   measurement noise): F the constant-acceleration transition, process noise from the navigator's settings
   as the full navigator's filter takes them (accel_noise_mps2_rthz: velocity random walk;
@@ -130,8 +132,9 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_TERRAIN_SIGMA,  # the map's unresolved terrain (m) in the batch fix covariance
     NP_TURN_TILT2,  # the turn term's tilt variance per rad of excursion (rad^2/rad: m^2 TURN_REFERENCE_RAD)
     NP_TURN_HEAD2,  # ... its heading variance per rad (rad^2/rad: s^2 TURN_REFERENCE_RAD)
+    NP_BARO_LAG,  # the barometer's first-order lag (s): the profile reads the height tau earlier
     NP_BAND0,  # NP_BAND0 + k - 1: the innovation test's upper limit over k NIS values (2k dof)
-) = range(32)
+) = range(33)
 N_NAV_PARAMS = NP_BAND0 + MAX_WINDOW
 
 
@@ -153,13 +156,15 @@ def navigator_params(
     imu_spec=None,
     sample_dt_s: float = 1.0,
     terrain_sigma_m: float = 0.0,
+    baro_lag_s: float = 0.0,
 ) -> np.ndarray:
     """The kernel's parameter vector for navigator `name` ("ins" or "ins_tercom") with the scenario's
     navigator settings (navigators.filters.ins_trn_ekf's names and defaults), IMU grade (trn_env.sensors.imu
     fields), GNSS availability (s) and IRA noise (m) and rate (Hz): the 1 Hz profile sample is the mean of
     a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz); sample_dt_s the profile's
     sample interval (s); terrain_sigma_m the map's unresolved terrain (m: navigators.measurements.
-    ira_map_noise.interpolation_sigma_m, used with fix_noise "batch" when terrain_model_sigma_m is "auto").
+    ira_map_noise.interpolation_sigma_m, used with fix_noise "batch" when terrain_model_sigma_m is "auto");
+    baro_lag_s the barometer's lag time constant (s: trn_env.sensors.baro's lag_tau_s).
     The innovation test's window (integrity_window) is at most MAX_WINDOW fixes."""
     if name not in MODELLED_NAVIGATORS:
         raise ValueError(
@@ -181,6 +186,7 @@ def navigator_params(
     p[NP_GATE] = float(settings.get("gate_chi2", 18.42))
     p[NP_REMOVE_BIAS] = 1.0 if settings.get("remove_bias", False) else 0.0
     p[NP_PROFILE_NOISE] = ira_noise_m / math.sqrt(max(ira_rate_hz, 1.0))
+    p[NP_BARO_LAG] = float(baro_lag_s)
     # truth: the IMU's velocity random walk; the filter's process noise: the navigator's own settings, as
     # the full navigator's filter takes them (velocity random walk, and the angle random walk that drives its
     # tilt states, here g0 x that as the random walk of the acceleration error)
