@@ -282,6 +282,9 @@ def _assert_default_route_consistent(map_is_world: bool, every: int, max_rms_m: 
         runs = list(pool.map(partial(_default_route_run, map_is_world=map_is_world, every=every), range(8)))
     nees = [x for r in runs for x in r[0]]
     lo, hi = _chi2_mean_bounds(len(nees), 2, 0.95)
+    where = "map = world" if map_is_world else "coarse map"
+    print(f"rbpf, {where}: ANEES {np.mean(nees):.2f} over {len(nees)} epochs against [{lo:.2f}, {hi:.2f}], "
+          f"RMS per run {[round(r[1], 1) for r in runs]}")
     assert lo <= np.mean(nees) <= hi, (np.mean(nees), lo, hi, len(nees), [np.mean(r[0]) for r in runs])
     assert max(r[1] for r in runs) < max_rms_m, [r[1] for r in runs]
 
@@ -299,10 +302,6 @@ def _default_route_run(seed: int, map_is_world: bool, every: int) -> tuple[list[
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known miss (issue 35): with the Kalman part's attitude noise floored "
-                   "at the navigation grade's angle random walk (apply_imu_spec: 1.45e-6 instead of the "
-                   "tuned 1e-6 rad per epoch) the ANEES is 2.40 against the upper bound 2.36 (2.13 without "
-                   "the floor); docs/validation/navigators.md")
 def test_rbpf_consistent_when_the_map_is_the_world():
     """Where the filter's measurement model is the truth's (map = the ~24 m world, no map error to model):
     the default route in JSBSim, GNSS for 10 s then denied, 8 seeds x 240 s, bias priors from the scenario's
