@@ -125,6 +125,12 @@ def test_ppo_trains_a_few_iterations_on_a_local_two_cpu_ray(tmp_path):
         assert trained and set(trained) <= set(restored)   # the acting part (restored: + value function)
         for k, v in trained.items():
             assert torch.equal(restored[k], v), k
+        # a checkpoint named relative to the working directory loads too (scripts take --out as typed)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.chdir(tmp_path)
+            relative = module_from_checkpoint(Path("ckpt") / "final").state_dict()
+        for k, v in trained.items():
+            assert torch.equal(relative[k], v), k
         goal = tuple(env_kwargs("basin")["goal_region_deg"][::2])
         rows = evaluate_module(module, kw, [goal], [1000])
         assert len(rows) == 1 and rows[0]["termination"] is not None and rows[0]["steps"] >= 1

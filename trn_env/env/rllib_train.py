@@ -192,7 +192,9 @@ def module_from_checkpoint(path: str | Path):
     require_rllib()
     from ray.rllib.core.rl_module.rl_module import RLModule
 
-    p = Path(path) / "learner_group" / "learner" / "rl_module" / "default_policy"
+    # absolute: RLlib reads the folder through pyarrow's filesystem, which takes a relative path for a URI
+    # without a scheme and fails
+    p = Path(path).resolve() / "learner_group" / "learner" / "rl_module" / "default_policy"
     if not p.is_dir():
         raise ValueError(f"checkpoint {path}: no RLModule at {p} (not a checkpoint written by train())")
     return RLModule.from_checkpoint(str(p))
