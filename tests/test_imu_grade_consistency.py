@@ -197,8 +197,6 @@ def tactical_runs() -> dict:
     return runs
 
 
-# one test per navigator (its own verdict; the runs are shared); as a file of six slow tests pytest-xdist's
-# loadfile scheduling also starts it early, beside the other long file
 # Known misses (strict: one that comes back inside is reported), with the measured figures
 TACTICAL_KNOWN_MISSES = {
     "ins_tercom": "known miss: overconfident by 3 % on these 8 hold-out runs, ANEES 2.75 against the upper "
@@ -208,6 +206,8 @@ TACTICAL_KNOWN_MISSES = {
 }
 
 
+# one test per navigator (its own verdict; the runs are shared); as a file of six slow tests pytest-xdist's
+# loadfile scheduling also starts it early, beside the other long file
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [
     pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=TACTICAL_KNOWN_MISSES[n]))
