@@ -334,9 +334,26 @@ def test_recorded_full_loop_is_what_the_full_loop_flies_now(name, mode):
         assert full[figure] == pytest.approx(ref[figure], abs=0.006), (figure, full, ref)
 
 
+@pytest.mark.parametrize("lag_s, compensated_s, left_s", [(0.6, None, 0.0), (0.6, 0.2, 0.4), (0.2, 0.0, 0.2)])
+def test_the_profile_keeps_only_the_lag_the_navigator_leaves_in(lag_s, compensated_s, left_s):
+    """The full navigator takes the barometer's lag out of its terrain heights (its baro_lag_s, which a
+    scenario sets to sensors.baro.lag_tau_s unless [navigator.settings] gives it): the fast tier's profile
+    keeps only what is left, the sensor's lag less the compensation."""
+    from trn_env.scenario.overrides import load_scenario_with
+
+    fields = [("sensors.baro.lag_tau_s", lag_s)]
+    if compensated_s is not None:
+        fields.append(("navigator.settings.baro_lag_s", compensated_s))
+    sc = load_scenario_with("basin_route", fields)
+    e = TerrainNavFastVectorEnv(num_envs=1, **{**BASIN, "scenario": sc})
+    assert e._nav[nv.NP_BARO_LAG] == pytest.approx(left_s, abs=1e-12)
+    e.close()
+
+
 def test_the_profile_reads_the_lagged_barometer():
-    """The TERCOM profile's measured heights carry the barometer's lag as the full loop's do: two fast envs
-    whose scenarios differ only in sensors.baro.lag_tau_s (0 and 0.6 s; no IRA noise) fly the same aircraft
+    """The TERCOM profile's measured heights carry the barometer's lag as the full loop's do when its
+    navigator does not take it out (navigator.settings.baro_lag_s = 0): two fast envs whose scenarios differ
+    only in sensors.baro.lag_tau_s (0 and 0.6 s; no IRA noise) fly the same aircraft
     until the first fix (the profile steers nothing before it), and over the 15 profile samples of the
     second 15-s decision their heights differ by -0.6 s x the vertical speed, which sums to -0.6 x the
     height gained over the decision (the aircraft's own height record, Euler steps of 1 s)."""
@@ -345,7 +362,8 @@ def test_the_profile_reads_the_lagged_barometer():
 
     out = {}
     for tau in (0.0, 0.6):
-        fields = [("sensors.baro.lag_tau_s", tau), ("sensors.ira.range_noise_m", 0.0)]
+        fields = [("sensors.baro.lag_tau_s", tau), ("sensors.ira.range_noise_m", 0.0),
+                  ("navigator.settings.baro_lag_s", 0.0)]
         sc = load_scenario_with("basin_route", fields)
         e = TerrainNavFastVectorEnv(num_envs=4, **{**BASIN, "scenario": sc, "decision_interval_s": 15.0})
         assert e._nav[nv.NP_BARO_LAG] == tau

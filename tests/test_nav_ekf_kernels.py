@@ -257,6 +257,52 @@ def test_baro_prepare_masks_and_converts():
     assert geo[:2].tolist() == [1.0, 2.0]
 
 
+@pytest.mark.parametrize("v_up_mps", [8.0, -6.0])
+def test_the_barometers_lag_is_taken_out_of_the_terrain_heights(v_up_mps):
+    """A steady climb (or descent) read by the simulator's lagged barometer (trn_env.sensors.baro, tau 0.2 s,
+    no noise or bias): the lag's reading trails the height by tau v once its transient has passed (the
+    first-order response to a ramp), so each batch row's height reference (its measured terrain height plus
+    the closest point's depth, navigators.measurements.ira_closest_point) is the true geometric height with
+    baro_lag_s = tau, and tau v below it with no compensation; to the sensor model's discretisation (its
+    step takes the new pressure over the whole step, so it trails by tau - dt / 2: v dt / 2 at most, 8 mm
+    at the test's 500 Hz) and a few millimetres."""
+    from trn_env.navigators.measurements.baro import geometric_height_m, geopotential_height_m
+
+    from trn_env.sensors.baro import _baro_kernel, isa_pressure_pa
+
+    tau_s, dt_s, n = 0.2, 0.002, 5000
+    t = np.arange(n) * dt_s
+    h_true = 1500.0 + v_up_mps * t                                  # geometric height (m)
+    p_pa = isa_pressure_pa(geopotential_height_m(h_true))
+    zeros = np.zeros(n)
+    h_baro, valid, _, _ = _baro_kernel(t, p_pa, np.arange(n), zeros, 0.0, 0.0, tau_s, np.nan, np.nan)
+    assert valid.all()
+    lat, lon = np.radians(36.5), np.radians(-84.3)
+    C = np.asarray(euler_to_C_bn(0.05, 0.02, 0.3)).reshape(3, 3)
+    v_ned = np.array([80.0, 25.0, -v_up_mps])
+    hist = np.empty((n, 10))
+    hist[:, 0], hist[:, 1], hist[:, 2] = lat, lon, h_true
+    hist[:, 3:6] = v_ned
+    hist[:, 6:10] = quat_from_C_bn(C)
+    R, theta = np.full(n, 900.0), np.full(n, 0.1)
+    depth = abs(closest_point_ned(R[:1], theta[:1], None, None, None, v_ned[None], formula="proposed",
+                                  C_bn=C[None])[0, 2])
+    settled = t >= 10 * tau_s
+    tol_m = abs(v_up_mps) * dt_s / 2 + 0.005
+    for lag_s, expect in ((tau_s, 0.0), (0.0, -tau_s * v_up_mps)):
+        rows = np.empty((n, 6))
+        m, n_bad, n_nan = kern.collect_ira(t[0], t[-1], t, hist, (t, R, theta, np.ones(n, bool)), 1,
+                                           (t, h_baro, True, True, lag_s), kern.FORMULA_CODES["proposed"],
+                                           rows)
+        assert (m, n_bad, n_nan) == (n, 0, 0)
+        h_ref = rows[:m, 3] + depth
+        err = (h_ref - h_true)[settled]
+        assert np.abs(err - expect).max() < tol_m, (lag_s, err.min(), err.max())
+    # the reading itself (geometric) trails by tau v: the compensation is not hiding a different error
+    trail = (geometric_height_m(h_baro) - h_true)[settled]
+    assert np.abs(trail + tau_s * v_up_mps).max() < tol_m
+
+
 @pytest.fixture(scope="module")
 def sim_frames():
     """45 s of the default scenario's sensor frames (one TERCOM fix), with some IRA no-returns and a NaN
@@ -281,13 +327,14 @@ def sim_frames():
     return loop.map_dem, e0, frames
 
 
-@pytest.mark.parametrize("decimation", [1, 3])
-def test_fused_and_fast_paths_match_general_path(sim_frames, decimation):
+@pytest.mark.parametrize("decimation, baro_lag_s", [(1, 0.0), (3, 0.0), (1, 0.2)])
+def test_fused_and_fast_paths_match_general_path(sim_frames, decimation, baro_lag_s):
     """Fused one-call frames, the step-by-step kernels and the numpy IRA collection give the same run."""
     from trn_env.navigators import registry
 
     dem, e0, frames = sim_frames
-    navs = [registry.create("ins_tercom", dem=dem, ira_decimation=decimation) for _ in range(3)]
+    navs = [registry.create("ins_tercom", dem=dem, ira_decimation=decimation, baro_lag_s=baro_lag_s)
+            for _ in range(3)]
     navs[1].fused = False                                 # step by step, kernel IRA collection
     navs[2].fused = False
     navs[2]._collect = navs[2]._collect_general          # the numpy path the kernel replaced

@@ -242,13 +242,15 @@ def collect_ira(t0, t1, t_imu, hist, ira, decimation, baro_ref, formula, out):
     """TERCOM batch rows of the IRA samples with t0 <= t <= t1 (every `decimation`-th of them).
 
     Records (numba tuples): ira = (ts, rng_m, theta, valid) the IRA samples; baro_ref = (tb, hb, have_baro,
-    geopotential): valid baro times and heights (interpolated at the sample times when have_baro, else the
-    INS height is the reference), geopotential: convert the baro height to geometric (US 1976 r0).
+    geopotential, lag_s): valid baro times and heights (interpolated at the sample times when have_baro, else
+    the INS height is the reference), geopotential: convert the baro height to geometric (US 1976 r0), lag_s:
+    the barometer's first-order lag (s), compensated with the INS's vertical velocity (a lagged reading
+    trails the height by lag x dh/dt: h_ref = baro - lag_s x v_down).
     out (>= n samples, 6): t, INS lat, INS lon, h_meas = h_ref - |p_d| (seed 000 eq 2), p_n, p_e.
     Returns (rows written, samples without a valid return, rows with no closest-point solution).
     """
     ts, rng_m, theta, valid = ira
-    tb, hb, have_baro, geopotential = baro_ref
+    tb, hb, have_baro, geopotential, lag_s = baro_ref
     m = 0
     n_bad = 0
     n_nan = 0
@@ -274,6 +276,7 @@ def collect_ira(t0, t1, t_imu, hist, ira, decimation, baro_ref, formula, out):
             h_ref = interp_one(t, tb, hb)
             if geopotential:
                 h_ref = geometric_height_kernel(h_ref)
+            h_ref -= lag_s * hist[k, 5]
         else:
             h_ref = hist[k, 2]
         C = quat_to_dcm(hist[k, 6:10])
@@ -351,8 +354,8 @@ def fused_segment(ins, imu, baro, mech, cov, ira, aiding, work):
     the frame's baro samples (ISA pressure altitude when geopotential); cov = (P, Q, last_f_b, t_ekf0,
     dt_ekf) the covariance (P in place), its process noise per EKF step, the last good specific force
     (in place), the EKF time and step; ira = (ts, rng_m, theta, valid) the IRA samples; aiding = (collect,
-    decimation, formula, geopotential) (collect_ira's settings); work = (baro_usable, h_baro_geo, hist,
-    rows) scratch and output arrays (hist: the INS state after each IMU sample, rows: collect_ira's).
+    decimation, formula, geopotential, baro_lag_s) (collect_ira's settings); work = (baro_usable, h_baro_geo,
+    hist, rows) scratch and output arrays (hist: the INS state after each IMU sample, rows: collect_ira's).
 
     Returns (bad IMU samples, invalid baro samples, EKF steps, covariance PD, rows, no-returns, no-solution).
     """
@@ -361,7 +364,7 @@ def fused_segment(ins, imu, baro, mech, cov, ira, aiding, work):
     t_baro, h_baro_raw, baro_valid = baro
     accel_bias_b, _, tau_baro_s, _, _ = mech
     P, Q, last_f_b, t_ekf0, dt_ekf = cov
-    collect, decimation, formula, geopotential = aiding
+    collect, decimation, formula, geopotential, baro_lag_s = aiding
     baro_usable, h_baro_geo, hist, rows = work
     n_b = t_baro.shape[0]
     all_ok = baro_prepare(baro_valid, h_baro_raw, geopotential, baro_usable, h_baro_geo)
@@ -383,7 +386,8 @@ def fused_segment(ins, imu, baro, mech, cov, ira, aiding, work):
         have_baro = n_b > 0
         if all_ok:
             m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ira, decimation,
-                                          (t_baro, h_baro_raw, have_baro, geopotential), formula, rows)
+                                          (t_baro, h_baro_raw, have_baro, geopotential, baro_lag_s), formula,
+                                          rows)
         else:
             k = 0
             tb = np.empty(n_b)
@@ -394,5 +398,5 @@ def fused_segment(ins, imu, baro, mech, cov, ira, aiding, work):
                     hb[k] = h_baro_raw[i]
                     k += 1
             m, n_ret, n_nan = collect_ira(t[0], t[t.shape[0] - 1], t, hist, ira, decimation,
-                                          (tb[:k], hb[:k], k > 0, geopotential), formula, rows)
+                                          (tb[:k], hb[:k], k > 0, geopotential, baro_lag_s), formula, rows)
     return bad, n_baro_bad, n_steps, pd, m, n_ret, n_nan

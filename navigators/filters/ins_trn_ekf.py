@@ -150,7 +150,7 @@ class InsTrnNavigator(InsTrnPropagation, InsTrnGnss, InsGnssBlock):
         self.q_gyr = s.gyro_noise_rps_rthz ** 2
         s.copy_to(self, "formula fix_period_s half_cells cell_m fix_sigma_m fix_noise ira_decimation "
                   "ira_average gate_chi2 min_samples dp_min_m dp_reference_formula baro_geopotential "
-                  "remove_bias init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m "
+                  "baro_lag_s remove_bias init_height_from_baro baro_bias_sigma_m use_gnss gnss_sigma_h_m "
                   "gnss_sigma_v_mps gnss_correlated_sigma_m gnss_gate_chi2 gnss_timeout_s "
                   "recovery_half_cells recovery_sigma_m turn_angle")
         self.terrain_model_sigma_m = 0.0

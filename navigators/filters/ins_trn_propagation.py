@@ -90,7 +90,8 @@ class InsTrnPropagation:
             (ins.accel_bias_b, ins.gyro_bias_b, tau, GRAVITY_MODELS[ins.gravity_model],
              ins.imu_samples == "interval"),
             (P, self._Q, self._last_f_b, float(self._t_ekf), self.dt_ekf), (ts, rng_m, theta, iv),
-            (collect, self.ira_decimation, kern.FORMULA_CODES.get(self.formula, 1), self.baro_geopotential),
+            (collect, self.ira_decimation, kern.FORMULA_CODES.get(self.formula, 1), self.baro_geopotential,
+             self.baro_lag_s),
             (self._vbuf[:nb], self._bbuf[:nb], self._hist[:n], self._rows))
         t0 = float(t[0])
         if n_baro_bad:
@@ -332,7 +333,7 @@ class InsTrnPropagation:
             self._rows = np.empty((max(n, 64), 6))
         m, n_bad, n_nan = kern.collect_ira(
             float(t_imu[0]), float(t_imu[-1]), t_imu, hist, (ts, src.range_m, src.look_angle_rad, src.valid),
-            self.ira_decimation, (tb, hb, have_baro, self.baro_geopotential),
+            self.ira_decimation, (tb, hb, have_baro, self.baro_geopotential, self.baro_lag_s),
             kern.FORMULA_CODES[self.formula], self._rows)
         self._add_collected(float(t_imu[0]), n_bad, n_nan, m)
 
@@ -394,6 +395,7 @@ class InsTrnPropagation:
                 h_ref = np.interp(ts_ok, baro.t_s[bv], baro.h_baro_m[bv])
                 if self.baro_geopotential:
                     h_ref = geometric_height_m(h_ref)
+                h_ref = h_ref - self.baro_lag_s * st[:, 5]   # the baro's lag (_ekf_kernels.collect_ira)
         if self.aiding == "ira":
             C = np.stack([quat_to_dcm(q) for q in st[:, 6:10]])
             p = closest_point_ned(R, th, None, None, None, st[:, 3:6], formula=self.formula, C_bn=C)

@@ -68,6 +68,9 @@ class InsTrnSettings(Settings):
     imu_samples: str = setting("interval", "IMU samples are interval means or instant values",
                                choices=("interval", "instant"))
     baro_geopotential: bool = setting(True, "convert the baro's geopotential height to geometric")
+    baro_lag_s: float = setting(0.0, "the barometer's first-order lag, taken out of each terrain sample's "
+                                     "height (h = baro - lag x v_down; a scenario gives its sensors.baro."
+                                     "lag_tau_s)", "s", ge=0.0)
     remove_bias: bool = setting(False, "mean-removed MAD in TERCOM")
     init_height_from_baro: bool = setting(True, "take the INS height from the first baro sample")
     baro_bias_sigma_m: float = setting(10.0, "bias of the baro height the vertical channel follows", "m",

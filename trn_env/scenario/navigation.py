@@ -79,7 +79,8 @@ def navigator_settings(sc, map_dem) -> dict:
     process noise from the IMU (imu_bias_settings), map_sigma_m / map_bias_sigma_m from the map error model
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
     terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m (pmf, pf)
-    or gnss_pos_bias_sigma_m (rbpf: horizontal, vertical) from the GNSS sensor's drift, and
+    or gnss_pos_bias_sigma_m (rbpf: horizontal, vertical) from the GNSS sensor's drift, baro_lag_s (ins,
+    ins_tercom) from the barometer's lag, and
     map_correlation_length_m / map_correlation_function from the map error model's random part
     (monitor_map_settings; navigators that declare those settings), each unless the settings give it.
     Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level covers
@@ -106,6 +107,9 @@ def navigator_settings(sc, map_dem) -> dict:
         if corr:
             settings.setdefault("map_correlation_length_m", corr["correlation_length_m"])
             settings.setdefault("map_correlation_function", corr["correlation_function"])
+    baro = sc.sensors.baro
+    if baro is not None and "baro_lag_s" in fields:       # the lag the terrain heights are corrected for
+        settings.setdefault("baro_lag_s", float(baro.lag_tau_s))
     gnss = sc.sensors.gnss
     if gnss is not None and "gnss_drift_sigma_m" in fields:
         settings.setdefault("gnss_drift_sigma_m", float(gnss.horizontal_drift_m))   # the receiver's drift

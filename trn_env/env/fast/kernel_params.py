@@ -44,6 +44,16 @@ class KernelParams:
     route_offsets: np.ndarray
 
 
+def _uncompensated_baro_lag_s(sc, settings: dict) -> float:
+    """The barometer's lag (s) left in the full navigator's terrain heights: the sensor's lag_tau_s less the
+    navigator's baro_lag_s compensation (trn_env.scenario.build.navigator_settings gives it the sensor's
+    unless [navigator.settings] sets it); 0 without a barometer."""
+    if sc.sensors.baro is None:
+        return 0.0
+    lag_s = float(sc.sensors.baro.lag_tau_s)
+    return lag_s - float(settings.get("baro_lag_s", lag_s))
+
+
 def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float) -> KernelParams:
     """The kernels' parameters of TerrainNavFastVectorEnv `env` (its task settings: tas_mps, goal_radius_m,
     max_episode_s, action_limits, decision_interval_s, bearing_offset_max_rad, action_mode, reward_mode,
@@ -122,7 +132,7 @@ def build_kernel_params(env, sc, info_offset_m: float, informative_crlb_m: float
         spec,
         sample_dt_s=float(fp[dyn.FP_SAMPLE_DT]),
         terrain_sigma_m=terrain_sigma_m,
-        baro_lag_s=float(sc.sensors.baro.lag_tau_s) if sc.sensors.baro is not None else 0.0,
+        baro_lag_s=_uncompensated_baro_lag_s(sc, settings),
     )
     ie = sc.initial_errors
     pos = ie.position_ned_m

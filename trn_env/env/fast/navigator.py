@@ -132,7 +132,7 @@ MODELLED_NAVIGATORS = ("ins", "ins_tercom")
     NP_TERRAIN_SIGMA,  # the map's unresolved terrain (m) in the batch fix covariance
     NP_TURN_TILT2,  # the turn term's tilt variance per rad of excursion (rad^2/rad: m^2 TURN_REFERENCE_RAD)
     NP_TURN_HEAD2,  # ... its heading variance per rad (rad^2/rad: s^2 TURN_REFERENCE_RAD)
-    NP_BARO_LAG,  # the barometer's first-order lag (s): the profile reads the height tau earlier
+    NP_BARO_LAG,  # the baro lag the navigator leaves in (s): the profile reads the height tau earlier
     NP_BAND0,  # NP_BAND0 + k - 1: the innovation test's upper limit over k NIS values (2k dof)
 ) = range(33)
 N_NAV_PARAMS = NP_BAND0 + MAX_WINDOW
@@ -164,7 +164,8 @@ def navigator_params(
     a second of IRA samples, so its noise is ira_noise_m / sqrt(ira_rate_hz); sample_dt_s the profile's
     sample interval (s); terrain_sigma_m the map's unresolved terrain (m: navigators.measurements.
     ira_map_noise.interpolation_sigma_m, used with fix_noise "batch" when terrain_model_sigma_m is "auto");
-    baro_lag_s the barometer's lag time constant (s: trn_env.sensors.baro's lag_tau_s).
+    baro_lag_s the barometer's lag the navigator leaves in its terrain heights (s: trn_env.sensors.baro's
+    lag_tau_s less the navigator's baro_lag_s compensation, which a scenario sets to it).
     The innovation test's window (integrity_window) is at most MAX_WINDOW fixes."""
     if name not in MODELLED_NAVIGATORS:
         raise ValueError(
