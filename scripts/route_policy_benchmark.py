@@ -107,6 +107,7 @@ def train(terrain_key: str, steps: int, out: Path, seed: int = 0, n_envs: int = 
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
 
     from trn_env.env.sb3_features import BoundsScaledExtractor
@@ -130,6 +131,7 @@ def train(terrain_key: str, steps: int, out: Path, seed: int = 0, n_envs: int = 
     venv.seed(seed)
     model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **PPO_SETTINGS,
                 policy_kwargs=dict(features_extractor_class=BoundsScaledExtractor, **POLICY_NET))
+    model.set_logger(configure(str(out), []))   # SB3's own would leave a folder in the system tmp
     untrained = out / f"ppo_{terrain_key}_untrained.zip"
     model.save(untrained)
     cb = Episodes()

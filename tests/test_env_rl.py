@@ -70,9 +70,10 @@ def test_record_video_writes_frames(tmp_path):
     assert len(videos) == 1 and videos[0].stat().st_size > 1000
 
 
-def test_ppo_trains_over_a_two_env_subproc_vec_env():
+def test_ppo_trains_over_a_two_env_subproc_vec_env(tmp_path):
     import torch
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
     torch.set_num_threads(1)  # the two env workers have the cores
@@ -88,6 +89,7 @@ def test_ppo_trains_over_a_two_env_subproc_vec_env():
         device="cpu",
         policy_kwargs=dict(net_arch=[16]),
     )
+    model.set_logger(configure(str(tmp_path), []))   # SB3's own would leave a folder in the system tmp
     before = torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach().clone()
     model.learn(total_timesteps=1536)
     after = torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach()
