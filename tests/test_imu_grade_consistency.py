@@ -198,12 +198,7 @@ def tactical_runs() -> dict:
 
 
 # Known misses (strict: one that comes back inside is reported), with the measured figures
-TACTICAL_KNOWN_MISSES = {
-    "ins_tercom": "known miss: overconfident by 3 % on these 8 hold-out runs, ANEES 2.75 against the upper "
-                  "bound 2.66 (per run 1.6-4.4); 2.65 on the flight before the autopilot's step fix of "
-                  "December 7 2026, inside by 0.6 %; pooled with seeds 1000-1023 it was inside "
-                  "(docs/validation/navigators.md)",
-}
+TACTICAL_KNOWN_MISSES: dict[str, str] = {}
 
 
 # one test per navigator (its own verdict; the runs are shared); as a file of six slow tests pytest-xdist's
@@ -223,6 +218,7 @@ def test_tactical_grade_consistency(name, tactical_runs):
     inside = float(np.mean(nees <= 9.0))
     conservative = measured_direction(name, "tactical") == CONSERVATIVE
     ok = anees <= hi if conservative else lo <= anees <= hi
+    print(f"{name}: ANEES {anees:.3f} against [{lo:.3f}, {hi:.3f}], {100 * inside:.1f} % inside 3 sigma")
     assert ok and inside >= 0.9, (
         f"{name}: ANEES {anees:.2f} over {nees.size} epochs ({n_thin} decorrelated: k {k}) "
         f"against [{lo:.2f}, {hi:.2f}]{' (upper only)' if conservative else ''}, "
