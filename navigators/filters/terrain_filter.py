@@ -149,7 +149,7 @@ class InsRiddenFilter(InsGnssBlock):
                         "map_sigma_m map_bias_sigma_m terrain_model_sigma_m map_interpolation outlier_prob "
                         "gnss_sigma_m gnss_vertical_sigma_m gnss_drift_sigma_m gnss_velocity_sigma_mps "
                         "baro_bias_sigma_m map_correlation_length_m map_correlation_function "
-                        "converged_sigma_m baro_geopotential recovery_sigma_m")
+                        "converged_sigma_m baro_geopotential baro_lag_s recovery_sigma_m")
         self.ira_code = IRA_FORMULA_CODES[s.ira_formula]
         self.map_walk_var_per_m = map_walk_variance_per_m(s.map_sigma_m, s.map_correlation_length_m,
                                                           s.map_correlation_function)
@@ -318,6 +318,11 @@ class InsRiddenFilter(InsGnssBlock):
             vb = np.asarray(baro.valid, bool) & np.isfinite(hb)
             if self.baro_geopotential:
                 hb = geometric_height_m(hb)
+            v_down = float(self.ins.state[5])
+            if self.baro_lag_s > 0.0 and math.isfinite(v_down):
+                # a first-order lag reads a steady climb lag x its rate low; the INS's down velocity at the
+                # frame's start stands for the frame's (navigators.filters._ekf_kernels.collect_ira)
+                hb = hb - self.baro_lag_s * v_down
             nbad = int((~vb).sum())
             if nbad:
                 self._count_skip(float(tb[0]), "baro_invalid", nbad, f"{nbad} baro samples invalid")

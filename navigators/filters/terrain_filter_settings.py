@@ -68,6 +68,9 @@ class TerrainFilterSettings(Settings):
     imu_samples: str = setting("interval", "IMU samples are interval means or instant values",
                                choices=("interval", "instant"))
     baro_geopotential: bool = setting(True, "convert the baro's geopotential height to geometric")
+    baro_lag_s: float = setting(0.0, "the barometer's first-order lag, taken out of the height the INS's "
+                                     "vertical channel follows (h = baro - lag x v_down; a scenario gives "
+                                     "its sensors.baro.lag_tau_s)", "s", ge=0.0)
     integrity_window: int = setting(3, "terrain updates in the innovation test's window", ge=1)
     integrity_alpha: float = setting(1e-4, "probability outside the innovation test's chi-square band", "1",
                                      gt=0.0, lt=1.0)

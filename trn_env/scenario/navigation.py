@@ -80,7 +80,7 @@ def navigator_settings(sc, map_dem) -> dict:
     (uses_map_noise: map_noise_settings), terrain_model_sigma_m = 0 when the map is the world, else
     terrain_detail_spacing_m from the world's refinement (models_map_detail), gnss_drift_sigma_m (pmf, pf)
     or gnss_pos_bias_sigma_m (rbpf: horizontal, vertical) from the GNSS sensor's drift, baro_lag_s (ins,
-    ins_tercom) from the barometer's lag, and
+    ins_tercom, pmf, pf) from the barometer's lag, and
     map_correlation_length_m / map_correlation_function from the map error model's random part
     (monitor_map_settings; navigators that declare those settings), each unless the settings give it.
     Every navigator gets map_horizontal_sigma_m from the map's accuracy class (its protection level covers
