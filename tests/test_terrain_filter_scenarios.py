@@ -138,8 +138,9 @@ def test_build_navigator_hands_the_scenario_stream_and_the_map_noise(pf_flight):
 def test_bad_data_never_crashes(pf_flight, name):
     """NaN IRA samples flagged valid, a frame without IMU, NaN IMU samples, a grid / cloud moved off the map,
     1 km outlier returns: every update returns a finite estimate, skips are counted, Health says so, and the
-    heavy-tailed likelihood keeps the outliers from moving the estimate (against the same run without them:
-    same frames, same random numbers)."""
+    outliers count for no more than missing returns would: against the same run with those frames' returns
+    missing instead (same frames, same random numbers) the estimate moves by under a tenth of its sigma (a
+    run with the returns right differs by about half a sigma: three frames' information)."""
     _, frames, init, loop = pf_flight
 
     def make():
@@ -151,11 +152,12 @@ def test_bad_data_never_crashes(pf_flight, name):
     fr = [copy.deepcopy(f) for f in frames[:30]]
     fr[2].ira.range_m[:] = np.nan                         # NaN measurements flagged valid
     fr[3].imu.f_b_mps2[5:9] = np.nan                      # NaN IMU samples
-    clean = copy.deepcopy(fr)
+    missing = copy.deepcopy(fr)
     for k in (20, 24, 27):
         fr[k].ira.range_m[:] += 1000.0                    # 1 km outliers, after convergence
+        missing[k].ira.valid[:] = False                   # ... or no returns at all
     nav, ref = make(), make()
-    for k, (f, g) in enumerate(zip(fr, clean, strict=True)):
+    for k, (f, g) in enumerate(zip(fr, missing, strict=True)):
         est = nav.update(f)
         est_ref = ref.update(g)
         assert math.isfinite(est.lat_rad) and math.isfinite(est.lon_rad) and math.isfinite(est.h_m)
@@ -168,7 +170,7 @@ def test_bad_data_never_crashes(pf_flight, name):
     r_n = 6.37e6
     d_n = (est.lat_rad - est_ref.lat_rad) * r_n
     d_e = (est.lon_rad - est_ref.lon_rad) * r_n * math.cos(est.lat_rad)
-    assert math.hypot(d_n, d_e) < 0.5 * float(np.hypot(*sig))
+    assert math.hypot(d_n, d_e) < 0.1 * float(np.hypot(*sig))
     est = nav.update(SensorFrames(fr[-1].t_end_s, fr[-1].t_end_s + 1.0))      # no IMU at all
     assert est.health.skipped.get("no_imu", 0) == 1
     # off the map: a reset 0.2 rad away puts every cell / particle off the map
