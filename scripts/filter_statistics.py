@@ -4,7 +4,8 @@ One JSBSim flight of the default scenario is flown once (navigator "ins", so the
 its truth chunks are kept and every run regenerates the real sensor suite's noise (trn_env.sensors, a new
 seed per run), the initial estimate's error and the world's fractal detail (the terrain the 3" map does not
 hold: the scenario's [terrain.world] refinement drawn again with the run's seed; --world-detail fixed keeps
-the recorded one), then runs the navigators open-loop on those frames (guidance does not react to the
+the recorded one), then runs the navigators, built as the scenario builds them (build_navigator: its IMU's
+specification, its barometer's lag), open-loop on those frames (guidance does not react to the
 estimate: the truth is the same flight for every run). GNSS is denied from t = 0.
 
     PYTHONPATH=$PWD python scripts/filter_statistics.py [--runs 100] [--duration 180] [--out DIR]
@@ -44,7 +45,6 @@ from pathlib import Path
 
 import numpy as np
 from scipy import stats
-from trn_env.navigators import registry
 from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
 
 import trn_env.scenario.build as components
@@ -93,9 +93,18 @@ def error_ne(est, chunk) -> tuple[float, float]:
     return (est.lat_rad - lat) * r_n, (est.lon_rad - lon) * r_e
 
 
-def run_navigator(name: str, settings: dict, initial, frames, chunks, map_dem, seed: int) -> dict:
-    """Errors (estimate minus truth, N/E m), covariance diagonals and timing of one navigator run."""
-    nav = registry.create(name, dem=map_dem, rng=np.random.default_rng([seed, 29]), **settings)
+def build_navigator(d: dict, name: str, settings: dict, map_dem, rng: np.random.Generator | None = None):
+    """The navigator `name` as the scenario `d` builds it with [navigator.settings] = settings
+    (trn_env.scenario.build.build_navigator: the settings the scenario's sensors and map imply, e.g. the
+    barometer's lag and the IMU's specification, unless `settings` gives them)."""
+    dd = {**d, "navigator": {"name": name, "settings": dict(settings)}}
+    return components.build_navigator(from_dict(dd), map_dem, rng)
+
+
+def run_navigator(d: dict, name: str, settings: dict, initial, frames, chunks, map_dem, seed: int) -> dict:
+    """Errors (estimate minus truth, N/E m), covariance diagonals and timing of one navigator run, the
+    navigator built as the scenario `d` builds it (build_navigator)."""
+    nav = build_navigator(d, name, settings, map_dem, np.random.default_rng([seed, 29]))
     nav.reset(initial)
     t, err, cov = [], [], []
     wall = 0.0
@@ -142,7 +151,7 @@ def monte_carlo(runs: int, duration_s: float, sigma_h_m: float, names: dict, see
         frames = sensor_frames(d, chunks, w, seed)
         init = initial_estimate(d, truth0, seed, sigma_h_m)
         for label, (name, settings) in names.items():
-            run = run_navigator(name, settings, init, frames, chunks, the_map, seed)
+            run = run_navigator(d, name, settings, init, frames, chunks, the_map, seed)
             run["name"], run["sigma0_m"] = name, sigma_h_m
             out[label].append(run)
         if log and (r + 1) % max(1, runs // 10) == 0:
@@ -294,10 +303,7 @@ def crlb_figures(res: dict, flight, t_from_s: float, settings: dict | None = Non
     out = {"t_from_s": t_from_s}
     for label, runs in res.items():
         name = runs[0].get("name", label)
-        kw_nav = dict(settings.get(label) or {})
-        if name == "pf":
-            kw_nav["rng"] = np.random.default_rng(0)
-        nav = registry.create(name, dem=the_map, **kw_nav)
+        nav = build_navigator(d, name, dict(settings.get(label) or {}), the_map, np.random.default_rng(0))
         t, lat, lon, h, plat, plon, ph = ira_track(d, chunks, world, nav.measurement_rate_hz)
         r_n = meridian_radius_m(lat) + h
         r_e = (prime_vertical_radius_m(lat) + h) * np.cos(lat)

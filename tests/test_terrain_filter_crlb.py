@@ -8,8 +8,8 @@ own process noise (position 0.1 m/sqrt(s) and a velocity offset, both filters) i
 The truth is a kinematic level flight (trn_env.flight.kinematic) at 85 m/s, ~1,500 m above the rough start of
 the default route (2 km roughness ~100 m, the 90th percentile of the Jacksboro DEM); the world is the 3"
 DEM refined to 30 m with fractal detail (drawn per run), the map the 3" DEM; real sensor models (navigation
-IMU, IRA, baro). A small fixed-seed Monte Carlo; the full figure comes from scripts/filter_statistics.py
-("crlb")."""
+IMU, IRA, baro), the filters given that IMU's specification as a scenario gives it. A small fixed-seed
+Monte Carlo; the full figure comes from scripts/filter_statistics.py ("crlb")."""
 
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ from trn_env.terrain.refine import refine
 
 from trn_env import terrain
 from trn_env.flight.kinematic import KinematicTruth, Segment
+from trn_env.scenario.navigation import imu_spec
 from trn_env.sensors.baro import BaroConfig, sample_baro
 from trn_env.sensors.imu import ImuConfig, sample_imu
 from trn_env.sensors.ira import IraConfig, sample_ira
@@ -36,6 +37,7 @@ SIGMA0_M = 30.0
 T_CONVERGED_S = 20.0
 RUNS = 3
 FILTERS = {"pmf": dict(grid_size=100), "pf": dict(n_particles=3000)}
+IMU = ImuConfig(sampling="instant")
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +58,7 @@ def _chunks():
 
 def _frames(chunks, world, seed):
     r_imu, r_ira, r_baro = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 5]).spawn(3))
-    imu_cfg, ira_cfg, baro_cfg = ImuConfig(sampling="instant"), IraConfig(), BaroConfig()
+    imu_cfg, ira_cfg, baro_cfg = IMU, IraConfig(), BaroConfig()
     si = sa = sb = None
     frames = []
     for ch in chunks:
@@ -134,6 +136,7 @@ def test_converged_rms_within_a_factor_two_of_the_track_crlb(maps):
             rng = np.random.default_rng([r, 29])
             nav = registry.create(name, dem=the_map, rng=rng, **kw) if name == "pf" else \
                 registry.create(name, dem=the_map, **kw)
+            nav.apply_imu_spec(imu_spec(IMU))      # as a scenario with this IMU builds them
             t, err = _run(nav, chunks, frames, np.random.default_rng([r, 23]))
             e2[name].append(np.sum(err[t >= T_CONVERGED_S] ** 2, axis=1))
             if r == 0:

@@ -2,8 +2,9 @@
 
 A small fixed-seed version of scripts/filter_statistics.py "nees" (100 runs of 3 min): the default
 scenario's JSBSim flight recorded once (120 s), then per run fresh sensor noise, world detail (the 30 m
-fractal terrain the 3" map lacks) and initial error (the scenario's 30 m per axis, 0.1 m/s), the default
-filters run open-loop on the frames, GNSS denied (the script's own functions).
+fractal terrain the 3" map lacks) and initial error (the scenario's 30 m per axis, 0.1 m/s), the filters
+built as the scenario builds them (its IMU's specification, its barometer's lag) run open-loop on the frames,
+GNSS denied (the script's own functions).
 
 At each epoch after T_FROM_S the NEES e' P^-1 e (2 degrees of freedom) averaged over the N runs is, for a
 consistent filter, chi2(2N) / N; the test computes its two-sided 99 % interval and asks (a) that the
@@ -68,13 +69,7 @@ def _figures(mc, name):
     return anees[thin], (lo, hi), inside, least, pooled, half
 
 
-@pytest.mark.parametrize("name", [
-    "pmf",
-    pytest.param("pf", marks=pytest.mark.xfail(strict=True, reason=(
-        "known miss: conservative from 60 s on this flight (ANEES 0.3-1.1 at 60-110 s): 2 of the 11 thinned "
-        "epochs below the lower bound 0.64 (0.31 at 100 s, 0.63 at 110 s) where the allowance is 1; before "
-        "the autopilot's step fix (December 7 2026) 1 (0.53 at 100 s); docs/validation/terrain_filters.md"))),
-])
+@pytest.mark.parametrize("name", ["pmf", "pf"])
 def test_monte_carlo_nees_inside_its_chi_square_bounds_at_every_epoch(mc, name):
     """(a): the thinned epochs' ANEES inside the 99 % interval, all but the binomial allowance."""
     anees, _, inside, least, _, _ = _figures(mc, name)
