@@ -10,11 +10,12 @@ is INS + the weighted mean.
 
 - Propagation (navigators.filters._pf_kernels.propagate_particles): the INS error dynamics between
   measurement epochs - position from velocity, velocity from the heading error turning the specific force
-  and the Schuler term - plus process noise drawn from the filter's Generator; its densities come from the
-  IMU's specification (apply_imu_spec, navigators.core.imu_spec): with velocity_noise_model "imu_spec"
-  (default) the velocity's noise is the effect on the velocity the cloud holds of the acceleration error the
-  particles do not carry (`_velocity_step_var`); with "walk" that error enters as an equivalent velocity
-  random walk, a floor over the tuned setting.
+  and the Schuler term on the position error built since the INS's alignment (not the initial error,
+  which the alignment's tilt cancels) - plus process noise drawn from the filter's Generator; its
+  densities come from the IMU's specification (apply_imu_spec, navigators.core.imu_spec): with
+  velocity_noise_model "imu_spec" (default) the velocity's noise is the effect on the velocity the cloud
+  holds of the acceleration error the particles do not carry (`_velocity_step_var`); with "walk" that error
+  enters as an equivalent velocity random walk, a floor over the tuned setting.
 - Terrain update: each particle's IRA closest point from its own heading and velocity (seed 000 eqs 14-36,
   or eqs 9-13 with ira_formula="conventional"; navigators.measurements.ira.closest_points), one map lookup
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
@@ -121,6 +122,10 @@ class ParticleFilter(InsRiddenFilter):
         self.b = np.zeros(M)
         self.dv = np.zeros((M, 2))
         self.dpsi = np.zeros(M)
+        # the part of (dn, de) the INS built since its alignment, which the Schuler term acts on
+        # (_pf_kernels.propagate_particles): 0 at a reset, carried through resampling, not jittered
+        self.sn = np.zeros(M)
+        self.se = np.zeros(M)
         self.logw = np.zeros(M)
         self._P = np.empty((M, 3))
         self._hmap = np.empty(M)
@@ -241,6 +246,13 @@ class ParticleFilter(InsRiddenFilter):
         self._start_height_error()
         self.dv[:] = x[:, 3:5]
         self.dpsi[:] = x[:, 5]
+        if mean is None:        # a reset: the INS is aligned now
+            self.sn[:] = 0.0
+            self.se[:] = 0.0
+        else:                   # a re-draw: the INS keeps its alignment, each particle the cloud's mean drift
+            w = self._weights()
+            self.sn = np.full(M, float(w @ self.sn))
+            self.se = np.full(M, float(w @ self.se))
         self.logw[:] = 0.0
         self._moments_cache = None
         self._n_underflow = 0
@@ -264,7 +276,7 @@ class ParticleFilter(InsRiddenFilter):
         s_vel = float(self.s_vel)
         if self._accel_model is not None:      # velocity_noise_model "imu_spec"
             s_vel = math.sqrt(self._velocity_step_var(t_s, dt) / dt)
-        propagate_particles((self.dn, self.de, self.b, self.dv, self.dpsi), dt,
+        propagate_particles((self.dn, self.de, self.b, self.dv, self.dpsi, self.sn, self.se), dt,
                             (float(f_n), float(f_e), g_over_r),
                             (float(self.s_pos), s_vel, float(self.s_psi), 0.0), z)
         self._grow_offset(dt, st)
@@ -337,6 +349,8 @@ class ParticleFilter(InsRiddenFilter):
         self.b = self.b[i]
         self.dv = np.ascontiguousarray(self.dv[i])
         self.dpsi = self.dpsi[i]
+        self.sn = self.sn[i]
+        self.se = self.se[i]
         self.logw[:] = 0.0
         self.n_resampled += 1
         if self.roughening > 0.0:
