@@ -21,6 +21,9 @@ is INS + the weighted mean.
   per particle, the heavy-tailed mixture likelihood (one bad return cannot kill the cloud); radar
   altimeter: the shortest in-cone return under the particle's heading (measurements.radar_altimeter.
   predict). Log-weights, normalised by their maximum; log p(z | past) by logsumexp.
+- Acquisition (opt-in, acquisition_particles): from each reset the cloud holds acquisition_particles and
+  is resampled down to n_particles once its horizontal spread is below acquisition_spread_m (`_handover`),
+  as the rbpf's; a recovery's re-spread keeps the cloud's current size.
 - Resampling: systematic (navigators.core.resampling) when the effective sample size falls below
   ess_threshold * M, then a kernel jitter against sample impoverishment at Gordon et al.'s (1993) roughening
   scale (roughening * M^(-1/d) times the cloud's span, d = 6) but with Liu & West's (2001) shrinkage, so the
@@ -90,7 +93,9 @@ class ParticleFilter(InsRiddenFilter):
     velocity offsets need the diversity, learnt only through the weights and resampling),
     velocity_noise_model ("imu_spec", default: `_velocity_step_var`, GNSS by `_gnss_ensemble_update`; or
     "walk": the random walk, the specification's equivalent walk as a floor),
-    heading_noise_rad_per_sqrt_s (process noise), max_memory_mb, rng. The measurements behind the defaults:
+    heading_noise_rad_per_sqrt_s (process noise), acquisition_particles and acquisition_spread_m (a larger
+    cloud from each reset until it has converged: `_handover`; 0, off, by default), max_memory_mb, rng. The
+    measurements behind the defaults:
     docs/validation/navigators.md ("Terrain filters: measured grounds of the defaults").
     """
 
@@ -115,8 +120,19 @@ class ParticleFilter(InsRiddenFilter):
         self._t_ins0_s = 0.0
         self._t_fix_s: float | None = None   # the last GNSS velocity fix ("imu_spec", `_velocity_step_var`)
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.M = s.n_particles
-        M = self.M
+        self.n_particles = s.n_particles
+        # a reset starts with the acquisition's cloud (_handover ends it); off: n_particles throughout
+        self.n_acquisition = max(s.acquisition_particles, s.n_particles)
+        self.acquisition_spread_m = s.acquisition_spread_m
+        self._allocate(s.n_particles)
+        self._init_cov = np.eye(9)
+        self._moments_cache = None
+        self.n_resampled = 0
+        self._v_prev = None
+
+    def _allocate(self, M: int) -> None:
+        """Particle arrays and scratch for a cloud of M particles."""
+        self.M = M
         self.dn = np.zeros(M)
         self.de = np.zeros(M)
         self.b = np.zeros(M)
@@ -131,10 +147,7 @@ class ParticleFilter(InsRiddenFilter):
         self._hmap = np.empty(M)
         self._ll = np.empty(M)
         self._idx = np.empty(M, np.int64)
-        self._init_cov = np.eye(9)
         self._moments_cache = None
-        self.n_resampled = 0
-        self._v_prev = None
 
     # ------------------------------------------------------------------------------------ belief
     def apply_imu_spec(self, spec: ImuSpec) -> None:
@@ -168,6 +181,8 @@ class ParticleFilter(InsRiddenFilter):
         return CAPTURE_SIGMAS * self.recovery_sigma_m * 2.0 ** (MAX_RECOVERY_DOUBLINGS - 1)
 
     def reset(self, initial) -> None:
+        if self.M != self.n_acquisition:
+            self._allocate(self.n_acquisition)
         super().reset(initial)
         self._t_ins0_s = float(initial.t_s)
         self._t_fix_s = None
@@ -387,6 +402,34 @@ class ParticleFilter(InsRiddenFilter):
         prior = self._shift_prior()
         self._terrain_update_cloud(t_s, kind, range_m, theta_rad, st)
         self._shift_after(prior)
+        self._handover()
+
+    def _handover(self) -> None:
+        """The acquisition over: once the acquisition's cloud (acquisition_particles) has a horizontal spread
+        below acquisition_spread_m it is resampled (systematic, by weight) down to n_particles and
+        regularised as after any resampling. A 1 km prior collapsing onto ~10 m leaves a cloud of n particles
+        few distinct ancestors, whose velocities are then a few draws of the prior's; the larger cloud keeps
+        enough of them through the collapse, and the tracking after it needs only n."""
+        if self.M <= self.n_particles:
+            return
+        w = self._weights()
+        d_n = self.dn - w @ self.dn
+        d_e = self.de - w @ self.de
+        if not math.sqrt(max(float(w @ (d_n * d_n + d_e * d_e)), 0.0)) < self.acquisition_spread_m:
+            return
+        n, m = self.n_particles, self.M
+        cw = np.cumsum(w)
+        u = (float(self.rng.random()) + np.arange(n)) / n
+        i = np.minimum(np.searchsorted(cw, u * cw[-1], side="left"), m - 1)
+        kept = (self.dn[i], self.de[i], self.b[i], self.dv[i], self.dpsi[i], self.sn[i], self.se[i])
+        self._allocate(n)
+        self.dn, self.de, self.b, self.dpsi, self.sn, self.se = (np.ascontiguousarray(x) for x in (
+            kept[0], kept[1], kept[2], kept[4], kept[5], kept[6]))
+        self.dv = np.ascontiguousarray(kept[3])
+        self.n_resampled += 1
+        if self.roughening > 0.0:
+            self._regularise()
+        self._moments_cache = None
 
     def _terrain_update_cloud(self, t_s, kind, range_m, theta_rad, st) -> None:
         lat, lon, h = float(st[0]), float(st[1]), float(st[2])

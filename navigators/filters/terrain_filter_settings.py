@@ -133,14 +133,26 @@ class PfSettings(TerrainFilterSettings):
                                         choices=("walk", "imu_spec"))
     heading_noise_rad_per_sqrt_s: float = setting(2e-5, "random walk of the heading error", "rad/sqrt(s)",
                                                   ge=0.0)
+    acquisition_particles: int = setting(0, "particles from a reset until the cloud's horizontal spread "
+                                            "falls below acquisition_spread_m, then resampled down to "
+                                            "n_particles (0: off, n_particles throughout)", ge=0)
+    acquisition_spread_m: float = setting(10.0, "horizontal spread (the root of the position covariance's "
+                                                "trace) that ends the acquisition", "m", gt=0.0)
     max_memory_mb: float = setting(2048.0, "refuse a cloud needing more memory than this", "MB", gt=0.0)
 
     def check(self) -> list[tuple[str, str]]:
-        need_mb = float(self.n_particles) * BYTES_PER_PARTICLE / 2**20
-        if need_mb > self.max_memory_mb:
-            return [("n_particles", f"{self.n_particles} needs about {need_mb:.0f} MB, more than "
-                                    f"max_memory_mb {self.max_memory_mb:g}")]
-        return []
+        problems = []
+        if 0 < self.acquisition_particles < self.n_particles:
+            problems.append(("acquisition_particles",
+                             f"0 (off) or at least n_particles ({self.n_particles}), "
+                             f"got {self.acquisition_particles}"))
+        for name in ("n_particles", "acquisition_particles"):
+            n = getattr(self, name)
+            need_mb = float(n) * BYTES_PER_PARTICLE / 2**20
+            if need_mb > self.max_memory_mb:
+                problems.append((name, f"{n} needs about {need_mb:.0f} MB, more than "
+                                       f"max_memory_mb {self.max_memory_mb:g}"))
+        return problems
 
 
 # error time constants: GM fits to the GNSS-denied error (scripts/navigator_error_time_constants.py,
