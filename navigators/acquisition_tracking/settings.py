@@ -266,7 +266,7 @@ def _warm_up(rate_hz: float) -> dict:
 
 
 # error time constants: GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
-# protection level validated on: docs/validation/integrity.md section 6.3
+# protection level validated on: docs/validation/integrity.md section 6.6
 CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True,
                             warm_up_settings=_warm_up,
                             pl_validated=("navigation/as_published", "navigation/dted1"),

@@ -57,7 +57,7 @@ class Capabilities:
     IMU's presets; map classes "as_published": a coarser DEM without an error model, "dted1": that DEM with
     the DTED-1 class's error model) on which its protection level's misleading-information rate was measured
     at or below the default integrity risk (1e-3 per epoch, one-sided 95 % Clopper-Pearson bound) on every
-    terrain tried (scripts/protection_level_campaign.py; docs/validation/integrity.md section 6.3). Under
+    terrain tried (scripts/protection_level_campaign.py; docs/validation/integrity.md section 6.6). Under
     any other condition it publishes Estimate.extra["pl_not_validated"] naming the condition
     (navigators.integrity.protection_level.publish; the build sets the condition).
     """

@@ -130,7 +130,7 @@ def _tercom_warm_up(rate_hz: float) -> dict:
 INS_CAPABILITIES = Capabilities(settings=InsTrnSettings, uses_imu_spec=True)
 INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=True, uses_imu_spec=True,
                                        models_map_detail=True,
-                                       # protection level validated on (docs/validation/integrity.md 6.3)
+                                       # protection level validated on (docs/validation/integrity.md 6.6)
                                        pl_validated=("navigation/as_published", "tactical/as_published",
                                                      "navigation/dted1", "tactical/dted1"),
                                        warm_up_settings=_tercom_warm_up,

@@ -146,8 +146,8 @@ CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=Tru
                             uses_map_noise=True, models_map_detail=True,
                             # GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
                             error_time_constant_s=520.0, height_time_constant_s=190.0,
-                            # protection level validated (docs/validation/integrity.md 6.3)
-                            pl_validated=("navigation/dted1", "tactical/dted1"))
+                            # protection level validated on no condition (docs/validation/integrity.md 6.6)
+                            pl_validated=())
 
 
 def table1_covariance() -> np.ndarray:

@@ -156,12 +156,10 @@ class PfSettings(TerrainFilterSettings):
 
 
 # error time constants: GM fits to the GNSS-denied error (scripts/navigator_error_time_constants.py,
-# docs/validation/integrity.md section 6.4); pl_validated: its section 6.3
+# docs/validation/integrity.md section 6.4); pl_validated: its section 6.6
 PMF_CAPABILITIES = Capabilities(settings=PmfSettings, needs_map=True, uses_map_noise=True, uses_imu_spec=True,
                                 error_time_constant_s=75.0, height_time_constant_s=290.0,
-                                pl_validated=("navigation/as_published", "tactical/as_published",
-                                              "tactical/dted1"))
+                                pl_validated=("navigation/as_published", "tactical/dted1"))
 PF_CAPABILITIES = Capabilities(settings=PfSettings, needs_map=True, takes_rng=True, uses_map_noise=True,
                                uses_imu_spec=True, error_time_constant_s=80.0, height_time_constant_s=280.0,
-                               pl_validated=("navigation/as_published", "tactical/as_published",
-                                             "tactical/dted1"))
+                               pl_validated=("navigation/as_published", "tactical/dted1"))
