@@ -18,10 +18,11 @@ class's error model drawn per seed - bias, horizontal shift, spatially correlate
 Counted epochs: the replay's rows (navigator rate) after GNSS is lost where the navigator says it is healthy
 and publishes a finite HPL. Per (navigator, condition) and pooled per navigator: MI epochs, rate and its
 one-sided 95 % Clopper-Pearson bound (rows of one flight are correlated: the bound counts them as
-independent), hazardous MI against the alert limit, availability. Jobs (condition, seed) run round-robin in
-`--workers` processes until `--budget-s` is spent; each saves OUT/epochs/<nav>/<condition>/s<seed>.npz, so
-a run resumes where it stopped and `--navigators` can add a navigator to flights already recorded. Writes
-OUT/pl_campaign.json and OUT/stanford.png.
+independent), hazardous MI against the alert limit, availability; and the accuracy: each flight's horizontal
+RMS error after GNSS is lost, its median and 90th percentile over the condition's flights. Jobs (condition,
+seed) run round-robin in `--workers` processes until `--budget-s` is spent; each saves
+OUT/epochs/<nav>/<condition>/s<seed>.npz, so a run resumes where it stopped and `--navigators` can add a
+navigator to flights already recorded. Writes OUT/pl_campaign.json and OUT/stanford.png.
 """
 
 from __future__ import annotations
@@ -72,8 +73,10 @@ def scenario_data(condition: str, seed: int, duration_s: float) -> dict:
     return data
 
 
-def run_job(out: str, condition: str, seed: int, duration_s: float, navs: list[str]) -> list[str]:
-    """Record one flight (unless recorded) and replay it through the navigators not yet saved."""
+def run_job(out: str, condition: str, seed: int, duration_s: float, navs: list[str],
+            extra_settings: dict | None = None) -> list[str]:
+    """Record one flight (unless recorded) and replay it through the navigators not yet saved, each with
+    NAVIGATORS' settings updated by extra_settings[nav]."""
     from trn_env.logs.record import record
     from trn_env.logs.replay import replay
     from trn_env.scenario.loading import validate
@@ -90,7 +93,7 @@ def run_job(out: str, condition: str, seed: int, duration_s: float, navs: list[s
         if f.exists():
             continue
         t0 = time.perf_counter()
-        rr = replay(log_dir, nav, settings=NAVIGATORS[nav])
+        rr = replay(log_dir, nav, settings=NAVIGATORS[nav] | (extra_settings or {}).get(nav, {}))
         a = rr.arrays
         e = np.hypot(a["err_ned_m"][:, 0], a["err_ned_m"][:, 1])
         h = np.asarray(a["est_hpl_m"], float)
@@ -120,6 +123,21 @@ def load_epochs(out: Path, nav: str, condition: str):
             np.concatenate(st))
 
 
+def accuracy_figures(out: Path, nav: str, condition: str) -> dict:
+    """Each flight's horizontal RMS error over its epochs after GNSS is lost (healthy or not): the median
+    and 90th percentile over the condition's flights, m."""
+    rms = []
+    for f in sorted((out / "epochs" / nav / condition).glob("s*.npz")):
+        z = np.load(f)
+        e = z["e"][z["denied"]]
+        if e.size:
+            rms.append(float(np.sqrt(np.mean(e * e))))
+    if not rms:
+        return {}
+    return {"horizontal_rms_median_m": float(np.median(rms)),
+            "horizontal_rms_p90_m": float(np.percentile(rms, 90))}
+
+
 def flagged_figures(e, h, status) -> dict:
     """Epochs the run-time consistency check flagged ("inconsistent", navigators.integrity) and how many of
     them had the error above the HPL (misleading had the navigator stayed healthy)."""
@@ -145,6 +163,7 @@ def report(out: Path, navs: list[str], al: float, risk: float) -> dict:
                 continue
             e, h, ok, nf, n_mi, st = got
             m = protection_level_metrics(e, h, ok, al) | flagged_figures(e, h, st)
+            m |= accuracy_figures(out, nav, c)
             m |= {"flights": nf, "flights_with_mi": n_mi, "all_epochs": int(e.size)}
             m["meets_risk"] = bool(m["pl_misleading_rate_upper95"] <= risk)
             res[f"{nav}/{c}"] = m
@@ -164,6 +183,43 @@ def report(out: Path, navs: list[str], al: float, risk: float) -> dict:
     return doc
 
 
+def accuracy_table(doc: dict) -> str:
+    """Markdown: each condition's per-flight horizontal RMS after GNSS is lost, median / 90th percentile
+    (m), one column per navigator (the report's navigators in its order)."""
+    res = doc["results"]
+    navs = list(dict.fromkeys(k.split("/")[0] for k in res))
+    lines = ["| condition | " + " | ".join(f"`{n}`" for n in navs) + " |",
+             "|---" * (len(navs) + 1) + "|"]
+    for c in doc["conditions"]:
+        cells = []
+        for n in navs:
+            m = res.get(f"{n}/{c}", {})
+            cells.append(f"{m['horizontal_rms_median_m']:.0f} / {m['horizontal_rms_p90_m']:.0f}"
+                         if "horizontal_rms_median_m" in m else "-")
+        lines.append(f"| {c.replace('-', ', ')} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def settings_argument(text: str, navs: list[str], error) -> dict:
+    """--settings parsed and checked against each navigator's declared settings (error(message) on a
+    problem, before any work)."""
+    from trn_env.navigators import registry
+    try:
+        extra = json.loads(text)
+    except json.JSONDecodeError as exc:
+        error(f"--settings: not JSON ({exc})")
+    if not isinstance(extra, dict) or not all(isinstance(v, dict) for v in extra.values()):
+        error("--settings: expected a JSON object of navigator name -> object of settings")
+    for nav, kw in extra.items():
+        if nav not in navs:
+            error(f"--settings: {nav!r} is not among --navigators {navs}")
+        try:
+            registry.capabilities(nav).settings(**(NAVIGATORS[nav] | kw))
+        except (TypeError, ValueError) as exc:
+            error(f"--settings: {nav}: {exc}")
+    return extra
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--budget-s", type=float, default=3600.0, help="wall-time budget for new jobs (s)")
@@ -176,6 +232,9 @@ def main(argv=None) -> int:
     ap.add_argument("--navigators", default=",".join(NAVIGATORS))
     ap.add_argument("--conditions", default="", help="comma-separated parts of condition names (e.g. "
                     "'as_published'): only the jobs of the conditions that contain one (default: all)")
+    ap.add_argument("--settings", default="{}", help="JSON object of navigator name -> settings that update "
+                    "its campaign settings for the replays this run makes, e.g. "
+                    "'{\"rbpf\": {\"map_error_in_height\": true}}'")
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--replay-only", action="store_true", help="only flights already recorded")
     ap.add_argument("--out", default="pl_campaign")
@@ -189,6 +248,7 @@ def main(argv=None) -> int:
     bad = [n for n in navs if n not in NAVIGATORS]
     if bad:
         ap.error(f"--navigators: unknown {bad}; choose from {sorted(NAVIGATORS)}")
+    extra = settings_argument(args.settings, navs, ap.error)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if not args.report_only:
@@ -203,7 +263,7 @@ def main(argv=None) -> int:
             while jobs or running:
                 while jobs and len(running) < args.workers and time.perf_counter() - t0 < args.budget_s:
                     c, s = jobs.pop(0)
-                    running.add(pool.submit(run_job, str(out), c, s, args.duration_s, navs))
+                    running.add(pool.submit(run_job, str(out), c, s, args.duration_s, navs, extra))
                 if not running:
                     break
                 done, running = wait(running, return_when=FIRST_COMPLETED)
@@ -221,6 +281,8 @@ def main(argv=None) -> int:
               f"{m['pl_misleading_epochs']} | {rate:.2g} (≤ {m['pl_misleading_rate_upper95']:.2g}) | "
               f"{m['pl_hazardous_epochs']} | {m['pl_availability']:.3f} | {m['hpl_median_m']:.1f} | "
               f"{m['inconsistent_epochs']} ({m['inconsistent_error_above_hpl']}) |")
+    print("\nHorizontal RMS after GNSS is lost, per flight: median / 90th percentile over the flights (m)\n")
+    print(accuracy_table(doc))
     return 0
 
 

@@ -85,3 +85,36 @@ def test_declared_conditions_are_the_campaigns(name):
         met[f"{grade}/{map_class}"] = met.get(f"{grade}/{map_class}", True) and ok
     assert met, "no campaign rows for " + name
     assert set(registry.capabilities(name).pl_validated) == {c for c, ok in met.items() if ok}
+
+
+def test_guide_accuracy_table_is_the_campaigns():
+    """The navigators guide's accuracy table is the one the campaign script makes from the report on the
+    validation page (docs/validation/integrity_pl_campaign.json), and every cell is a median over a
+    90th percentile no smaller than it."""
+    import json
+    from pathlib import Path
+
+    from _scripts import load_script
+    root = Path(__file__).resolve().parents[1]
+    doc = json.loads((root / "docs" / "validation" / "integrity_pl_campaign.json").read_text())
+    table = load_script("protection_level_campaign").accuracy_table(doc)
+    guide = (root / "docs" / "guide" / "navigators.md").read_text()
+    assert guide.split("<!-- accuracy-table -->\n")[1].split("\n<!-- /accuracy-table -->")[0] == table
+    for key, m in doc["results"].items():
+        if not key.endswith("/all"):
+            assert 0.0 < m["horizontal_rms_median_m"] <= m["horizontal_rms_p90_m"], key
+    assert len(table.splitlines()) == 2 + len(doc["conditions"])
+
+
+def test_campaign_settings_option_refuses_bad_input(tmp_path, capsys):
+    """--settings: not JSON, a navigator not flown, or a setting its navigator does not declare or refuses:
+    exit 2 naming the option, before any work (no --out folder made)."""
+    from _scripts import load_script
+    mod = load_script("protection_level_campaign")
+    for text in ("nojson", '["rbpf"]', '{"pmf": {}}', '{"rbpf": {"nosuch": 1}}',
+                 '{"rbpf": {"map_error_in_height": "x"}}'):
+        with pytest.raises(SystemExit) as exc:
+            mod.main(["--navigators", "rbpf", "--settings", text, "--out", str(tmp_path / "out")])
+        assert exc.value.code == 2
+        assert "--settings" in capsys.readouterr().err
+        assert not (tmp_path / "out").exists()

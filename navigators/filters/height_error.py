@@ -21,7 +21,7 @@ so their variances stay fixed while e's covariance with them follows the gains:
 - anything else that widens P_b about the INS (the grid's convolution, the vertical specific-force error's
   shift) adds to e as it adds to P_b.
 
-(The filter itself carries m_c as a random walk in b, terrain_filter.map_walk_variance_per_m: the smallest
+(The filter itself carries m_c as a random walk in b, `map_walk_variance_per_m`: the smallest
 walk that covers its increments; the height's error is m_c itself, whose variance a walk would overstate
 without bound.) Without a map error (both variances 0) it stays inactive and the filters publish P_b.
 """
@@ -31,7 +31,26 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 VAR_FLOOR_M2 = 1e-9
+
+# sup over x > 0 of (1 - rho(x)) / x for rho(x) = exp(-x^2 / 2) (terrain.map_error's "gaussian" covariance,
+# x = distance / correlation length): attained at x ~ 1.585
+_GAUSSIAN_WALK_FACTOR = float(np.max((1.0 - np.exp(-0.5 * np.linspace(1e-3, 6.0, 60001) ** 2))
+                                     / np.linspace(1e-3, 6.0, 60001)))
+MAP_WALK_FACTORS = {"exponential": 1.0, "gaussian": _GAUSSIAN_WALK_FACTOR}
+
+
+def map_walk_variance_per_m(sigma_m: float, correlation_length_m: float, function: str = "exponential"
+                            ) -> float:
+    """Variance rate (m^2 per metre flown) of the random walk that covers a correlated map error's
+    structure function at every distance: E[(e(s + d) - e(s))^2] = 2 sigma^2 (1 - rho(d / L)) <= q d for
+    all d with q = 2 sigma^2 c / L, c = sup_x (1 - rho(x)) / x (1 for rho = exp(-x), ~0.451 for
+    exp(-x^2 / 2)). 0 when sigma or L is 0 (a white map error)."""
+    if not (sigma_m > 0.0 and correlation_length_m > 0.0):
+        return 0.0
+    return 2.0 * sigma_m ** 2 * MAP_WALK_FACTORS[function] / correlation_length_m
 
 
 @dataclass

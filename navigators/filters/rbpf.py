@@ -35,7 +35,14 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
 - map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
   map_bias_sigma_m) and the terrain a coarse map cannot hold between its posts (terrain_model_sigma_m,
   "auto": from the map's spectrum; 0 when the map is the world), calibrated on the map's own error class
-  (map_noise_model "calibrated": ira_seed002.map_noise_calibration);
+  (map_noise_model "calibrated": ira_seed002.map_noise_calibration). The map's bias, and its random error
+  when correlated along the ground (map_correlation_length_m), are noise only while GNSS pins the height
+  with the opt-in map_error_in_height: once it no longer does, the cloud's up coordinate carries them (no
+  barometer: the up is the height above the map's terrain), widened by their variances and then walking
+  with the correlated error's rate over the ground flown (`_map_release`), as the point-mass and particle
+  filters' vertical offset does. It halves the error on DTED level 1 maps with a tactical IMU but lets two
+  flights in 66 mislead hazardously, so the default keeps the map's errors as noise (docs/validation/
+  integrity.md, section 6.7);
 - GNSS, while SensorFrames.gnss has valid fixes (rbpf_cloud.py): position moves the cloud onto the Kalman
   posterior of its moments (a square-root update), the velocity updates each particle's Kalman part;
 - systematic resampling when the effective sample size falls below ess_threshold * N, the copies then moved
@@ -117,7 +124,7 @@ from ..protocol import (
 from . import _rbpf_kernels as kern
 from . import rbpf_progressive as prog
 from ._ekf_kernels import yaw_total_variation
-from .height_error import HeightError
+from .height_error import HeightError, map_walk_variance_per_m
 from .map_shift import MapShiftShare
 from .rbpf_cloud import RbpfCloud
 from .rbpf_ira_update import RbpfIraUpdate
@@ -191,7 +198,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
                         "recovery_sigma_m recovery_reset_kalman turn_angle regularisation tempering "
-                        "progressive_correction")
+                        "progressive_correction map_error_in_height")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
         self.trn_period_s = 1.0 / s.trn_rate_hz
@@ -315,6 +322,13 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._height = HeightError(float(self._cov9[2, 2]), 0.0, 0.0, self.map_bias_sigma_m ** 2, var_corr,
                                    self.map_correlation_length_m, self.map_correlation_function)
         self._height_t = float(initial.t_s)
+        # the map's vertical errors in the cloud's up coordinate once GNSS no longer pins it (_map_release)
+        self._map_walk_var_per_m = map_walk_variance_per_m(self.map_sigma_m, self.map_correlation_length_m,
+                                                           self.map_correlation_function)
+        self._map_released = False
+        self._map_walk_t = float(initial.t_s)
+        self._t_fix_last = -math.inf
+        self._fix_interval_s = self.trn_period_s
         self._n_rejected = 0
         self._last_range_m = -1.0
         self.epochs = 0
@@ -394,6 +408,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                               lambda: kern.moments(self.xn, self.xl, self.P, self._weights())[1]):
             return
         self.epochs += 1
+        q_map = self._map_release(te, gnss)
         # ---- time update (eqs 5-8, 13-15) in metric position units
         T = np.ones(15)
         T[:3] = self._metric_scale()
@@ -401,11 +416,12 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         self._Phi = np.eye(15)
         w = self.rng.standard_normal((self.n, 3))
         self._pl_B = Phi[:2, 3:].copy()     # position rows of eq 5's B, for the HPL's mixture (estimate)
-        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), self.qn_var,
+        qn_var = self.qn_var if q_map == 0.0 else self.qn_var + np.array([0.0, 0.0, q_map])
+        nbad = kern.time_update(self.xn, self.xl, self.P, np.ascontiguousarray(Phi), qn_var,
                                 self._epoch_ql_var(), w)
         if nbad:
             self.health.skip(te, "time_update_not_pd", f"{nbad} particles: N not positive definite")
-        up_var = self._height_step(te) if self._height.active else 0.0
+        up_var = self._height_step(te, q_map) if self._height.active else 0.0
         logw_prev = self.logw.copy()
         updated = False
         ll = np.empty(self.n)
@@ -452,11 +468,51 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
     def _up_var(self) -> float:
         return float(kern.moments(self.xn, self.xl, self.P, self._weights())[1][2, 2])
 
-    def _height_step(self, te: float) -> float:
+    def _map_release(self, te: float, gnss) -> float:
+        """Up variance (m^2) the map's vertical errors add to the cloud at this epoch's time update. While
+        GNSS pins the height they are measurement noise (_r_var_now). Once no fix has come for 1.5 fix
+        intervals (at least one epoch), the up coordinate carries them instead, as the point-mass and particle
+        filters' vertical offset does (terrain_filter): the terrain samples then see the INS height's
+        error plus the map's bias and correlated error, a slowly wandering offset that successive samples
+        share and cannot average away (taken as white noise, a correlated error is counted once per sample:
+        the cloud narrows onto the map's error; tempered instead, the filter discards the terrain's shape
+        along with it). At the release the up is widened by the bias's and the correlated error's variances
+        (the map's offset there is unknown to a height GNSS pinned); afterwards it walks with the correlated
+        error's variance rate over the ground flown (height_error.map_walk_variance_per_m, Schmidt-style
+        augmentation of a coloured measurement error). 0 without a map error model or without
+        map_error_in_height (the default: the map's random error stays noise throughout, its bias while a
+        fix is at hand)."""
+        if not self.map_error_in_height:
+            return 0.0
+        if gnss is not None:
+            t_fix = float(gnss[0])
+            if math.isfinite(self._t_fix_last) and t_fix > self._t_fix_last:
+                self._fix_interval_s = t_fix - self._t_fix_last
+            self._t_fix_last = t_fix
+            self._map_released = False
+            self._map_walk_t = te
+            return 0.0
+        var_corr = self.map_sigma_m ** 2 if self.map_correlation_length_m > 0.0 else 0.0
+        var_release = self.map_bias_sigma_m ** 2 + var_corr
+        if not var_release > 0.0:
+            return 0.0
+        q = 0.0
+        if self._map_released:
+            st = self.ins.state
+            speed = math.hypot(float(st[3]), float(st[4])) if np.all(np.isfinite(st[3:5])) else 0.0
+            q = self._map_walk_var_per_m * speed * max(te - self._map_walk_t, 0.0)
+        elif te - self._t_fix_last > max(1.5 * self._fix_interval_s, self.trn_period_s):
+            self._map_released = True
+            q = var_release
+        self._map_walk_t = te
+        return q
+
+    def _height_step(self, te: float, q_map: float = 0.0) -> float:
         """The height's error model over the time update (height_error): the cloud's height spread grown
-        about the INS, the map's correlated error decorrelated over the ground flown. Returns the spread."""
+        about the INS (less q_map, the map's share the up coordinate took on: _map_release), the map's
+        correlated error decorrelated over the ground flown. Returns the spread."""
         up_var = self._up_var()
-        self._height.widen(up_var - float(self._cov9[2, 2]))
+        self._height.widen(up_var - float(self._cov9[2, 2]) - q_map)
         st = self.ins.state
         speed = math.hypot(float(st[3]), float(st[4])) if np.all(np.isfinite(st[3:5])) else 0.0
         self._height.step(0.0, speed * max(te - self._height_t, 0.0))

@@ -321,8 +321,10 @@ class RbpfIraUpdate:
 
     def _r_var_now(self, range_m: float) -> np.ndarray:
         """IRA measurement variances (range m^2, look angle rad^2) at a slant range range_m: the sensor's,
-        plus the map's errors (ira_seed002.map_noise_variances: map_sigma_m, terrain_model_sigma_m, and
-        map_bias_sigma_m while GNSS pins the height, which then cannot absorb a map bias). With tempering
+        plus the map's errors (ira_seed002.map_noise_variances: terrain_model_sigma_m, map_sigma_m, and
+        map_bias_sigma_m while GNSS pins the height, which then cannot absorb a map bias; with
+        map_error_in_height, the bias and a correlated map_sigma_m until the cloud's up coordinate takes
+        them on: RaoBlackwellizedPF._map_release). With tempering
         "spread" they are inflated by (spread / acquisition_spread_m)^2 (at most 100x) while the cloud's
         horizontal spread exceeds acquisition_spread_m, "acquisition" the same only while the cloud is the
         acquisition's or re-acquires after a recovery: against the collapse of 1,000 particles spread over
@@ -331,8 +333,14 @@ class RbpfIraUpdate:
         information (the published covariance is then that of a filter which never had it); "none" leaves
         the variances as they are. Outside the tempering the progressive correction (rbpf_progressive)
         keeps the cloud from collapsing onto a sharp likelihood."""
-        bias = self.map_bias_sigma_m if getattr(self, "_gnss_now", False) else 0.0
-        r = self.r_var + ira_model.map_noise_variances(math.hypot(self.map_sigma_m, bias),
+        if self.map_error_in_height:
+            released = getattr(self, "_map_released", False)
+            bias = 0.0 if released else self.map_bias_sigma_m
+            sigma = 0.0 if released and self.map_correlation_length_m > 0.0 else self.map_sigma_m
+        else:
+            bias = self.map_bias_sigma_m if getattr(self, "_gnss_now", False) else 0.0
+            sigma = self.map_sigma_m
+        r = self.r_var + ira_model.map_noise_variances(math.hypot(sigma, bias),
                                                        self.terrain_model_sigma_m, range_m,
                                                        self.terrain_factors())
         if self.acquisition_spread_m <= 0.0 or self.tempering == "none" or (

@@ -93,8 +93,9 @@ class RbpfSettings(Settings):
     map_bias_sigma_m: float = setting(0.0, "map's vertical bias (a scenario: its map error model)", "m",
                                       ge=0.0)
     map_correlation_length_m: float = setting(
-        0.0, "correlation length of the map's random vertical error along the ground, for the published "
-        "height's error (a scenario: its map error model); 0: white per sample", "m", ge=0.0)
+        0.0, "correlation length of the map's random vertical error along the ground: without GNSS the "
+        "cloud's height carries it as a walk, and the published height its error (a scenario: its map error "
+        "model); 0: white per sample", "m", ge=0.0)
     map_correlation_function: str = setting("exponential", "the map error's correlation function (a "
                                             "scenario: its map error model)", choices=MAP_CORRELATION)
     terrain_model_sigma_m: float | str = setting(
@@ -124,6 +125,9 @@ class RbpfSettings(Settings):
                              choices=("acquisition", "spread", "none"))
     progressive_correction: bool = setting(False, "apply each IRA update in stages that keep the effective "
                                            "sample size above ess_threshold, resampled between them")
+    map_error_in_height: bool = setting(False, "once GNSS no longer pins the height, carry the map's bias "
+                                        "and correlated vertical error in the cloud's height instead of as "
+                                        "IRA noise")
 
     def check(self) -> list[tuple[str, str]]:
         problems = []

@@ -41,7 +41,7 @@ from ..measurements.sampling import terrain_samples
 from ..measurements.terrain_models import radii_m
 from ..protocol import Estimate, Health, update_extra
 from ._ekf_kernels import yaw_total_variation
-from .height_error import HeightError
+from .height_error import MAP_WALK_FACTORS, HeightError, map_walk_variance_per_m  # noqa: F401
 from .map_shift import MapShiftShare
 from .terrain_filter_settings import (
     TerrainFilterSettings,
@@ -49,24 +49,6 @@ from .terrain_filter_settings import (
 
 G0 = 9.80665
 MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^3 x recovery_sigma_m
-
-
-# sup over x > 0 of (1 - rho(x)) / x for rho(x) = exp(-x^2 / 2) (terrain.map_error's "gaussian" covariance,
-# x = distance / correlation length): attained at x ~ 1.585
-_GAUSSIAN_WALK_FACTOR = float(np.max((1.0 - np.exp(-0.5 * np.linspace(1e-3, 6.0, 60001) ** 2))
-                                     / np.linspace(1e-3, 6.0, 60001)))
-MAP_WALK_FACTORS = {"exponential": 1.0, "gaussian": _GAUSSIAN_WALK_FACTOR}
-
-
-def map_walk_variance_per_m(sigma_m: float, correlation_length_m: float, function: str = "exponential"
-                            ) -> float:
-    """Variance rate (m^2 per metre flown) of the random walk that covers a correlated map error's
-    structure function at every distance: E[(e(s + d) - e(s))^2] = 2 sigma^2 (1 - rho(d / L)) <= q d for
-    all d with q = 2 sigma^2 c / L, c = sup_x (1 - rho(x)) / x (1 for rho = exp(-x), ~0.451 for
-    exp(-x^2 / 2)). 0 when sigma or L is 0 (a white map error)."""
-    if not (sigma_m > 0.0 and correlation_length_m > 0.0):
-        return 0.0
-    return 2.0 * sigma_m ** 2 * MAP_WALK_FACTORS[function] / correlation_length_m
 
 
 class InsRiddenFilter(InsGnssBlock):
