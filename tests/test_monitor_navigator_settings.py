@@ -4,6 +4,11 @@ from the navigator's declared capabilities, unless the monitor's table gives the
 
 from __future__ import annotations
 
+import json
+import math
+from pathlib import Path
+
+import numpy as np
 import pytest
 from trn_env.navigators import registry
 from trn_env.navigators.integrity import dem_monitor as dm
@@ -53,3 +58,41 @@ def test_bad_time_constant_named(name, bad):
     from trn_env import terrain
     with pytest.raises(ValueError, match=name):
         dm.DemIntegrityMonitor(dem=terrain.load("synthetic:rolling"), **{name: bad})
+
+
+def _two_significant(x: float) -> float:
+    return round(x, 1 - math.floor(math.log10(abs(x))))
+
+
+def test_declared_time_constants_are_the_campaigns_fits():
+    """Each terrain navigator declares the Gauss-Markov time constants fitted to its GNSS-denied error over
+    the protection-level campaign's flights (docs/validation/integrity_error_time_constants.json, written by
+    scripts/navigator_error_time_constants.py), to two significant figures."""
+    doc = json.loads((Path(__file__).resolve().parents[1] / "docs" / "validation"
+                      / "integrity_error_time_constants.json").read_text())
+    assert set(doc) == {"ins_tercom", "pmf", "pf", "rbpf", "acq_track"}
+    for name, fit in doc.items():
+        caps = registry.capabilities(name)
+        assert caps.error_time_constant_s == _two_significant(fit["tau_horizontal_s"]), name
+        assert caps.height_time_constant_s == _two_significant(fit["tau_vertical_s"]), name
+
+
+@pytest.mark.parametrize("tau_s", [8.0, 40.0, 150.0])
+def test_time_constant_fit_recovers_a_gauss_markov_process(tau_s):
+    """The script's autocorrelation and fit on simulated first-order Gauss-Markov series (the exact
+    discrete recursion x' = exp(-1 / tau) x + sqrt(1 - exp(-2 / tau)) w at 1 s, stationary start): tau
+    within 10 %."""
+    from _scripts import load_script
+    mod = load_script("navigator_error_time_constants")
+    rng = np.random.default_rng(3)
+    a = math.exp(-1.0 / tau_s)
+    runs = []
+    for _ in range(200):
+        x = np.empty((390, 3))
+        x[0] = rng.standard_normal(3)
+        w = rng.standard_normal((390, 3)) * math.sqrt(1.0 - a * a)
+        for k in range(1, 390):
+            x[k] = a * x[k - 1] + w[k]
+        runs.append(x)
+    rho = mod.autocorrelation(runs, (0, 1), 60)
+    assert mod.fit_tau(rho) == pytest.approx(tau_s, rel=0.1)

@@ -265,9 +265,10 @@ def _warm_up(rate_hz: float) -> dict:
             "false_lock_sigma_factor": 1e3, "fix_gate_nis": 1e9, "acquire_above_sigma_m": 0.0}
 
 
-# error time constants: GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
-# protection level validated on: docs/validation/integrity.md section 6.6
+# error time constants: GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py,
+# docs/validation/integrity_error_time_constants.json); protection level validated on: docs/validation/
+# integrity.md section 6.6
 CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True,
                             warm_up_settings=_warm_up,
                             pl_validated=("navigation/as_published", "navigation/dted1"),
-                            error_time_constant_s=80.0, height_time_constant_s=3900.0)
+                            error_time_constant_s=73.0, height_time_constant_s=3000.0)

@@ -135,9 +135,10 @@ INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=Tru
                                                      "navigation/dted1", "tactical/dted1"),
                                        warm_up_settings=_tercom_warm_up,
                                        # GM fits to its GNSS-denied error
-                                       # (scripts/navigator_error_time_constants.py; its baro-slaved
-                                       # height error is near constant over a window)
-                                       error_time_constant_s=40.0, height_time_constant_s=6700.0)
+                                       # (scripts/navigator_error_time_constants.py, docs/validation/
+                                       # integrity_error_time_constants.json; its baro-slaved height
+                                       # error is near constant over a window)
+                                       error_time_constant_s=69.0, height_time_constant_s=6200.0)
 
 
 def initial_covariance(

@@ -148,8 +148,9 @@ class RbpfSettings(Settings):
 CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=True, uses_imu_spec=True,
                             imu_bias_settings=True,
                             uses_map_noise=True, models_map_detail=True,
-                            # GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py)
-                            error_time_constant_s=520.0, height_time_constant_s=190.0,
+                            # GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py,
+                            # docs/validation/integrity_error_time_constants.json)
+                            error_time_constant_s=690.0, height_time_constant_s=180.0,
                             # protection level validated on no condition (docs/validation/integrity.md 6.6)
                             pl_validated=())
 

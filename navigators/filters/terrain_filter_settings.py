@@ -155,11 +155,12 @@ class PfSettings(TerrainFilterSettings):
         return problems
 
 
-# error time constants: GM fits to the GNSS-denied error (scripts/navigator_error_time_constants.py,
-# docs/validation/integrity.md section 6.4); pl_validated: its section 6.6
+# error time constants: GM fits to the GNSS-denied error over the flights of docs/validation/integrity.md
+# section 6.6 (scripts/navigator_error_time_constants.py, docs/validation/integrity_error_time_constants.json,
+# two significant figures); pl_validated: the same section
 PMF_CAPABILITIES = Capabilities(settings=PmfSettings, needs_map=True, uses_map_noise=True, uses_imu_spec=True,
-                                error_time_constant_s=75.0, height_time_constant_s=290.0,
+                                error_time_constant_s=98.0, height_time_constant_s=41.0,
                                 pl_validated=("navigation/as_published", "tactical/dted1"))
 PF_CAPABILITIES = Capabilities(settings=PfSettings, needs_map=True, takes_rng=True, uses_map_noise=True,
-                               uses_imu_spec=True, error_time_constant_s=80.0, height_time_constant_s=280.0,
+                               uses_imu_spec=True, error_time_constant_s=73.0, height_time_constant_s=41.0,
                                pl_validated=("navigation/as_published", "tactical/dted1"))
