@@ -5,8 +5,9 @@
 King Air 600 m above the real Jacksboro DEM refined to 30 m (the world); the navigator's map is the 3"
 DEM with the DTED-1 class's error model drawn per seed (terrain.map_error: vertical bias + exponentially
 correlated random error at 1,070 m, 18.24 m together, and a horizontal shift of 23 m sigma per axis); INS +
-TERCOM; the monitor (N = 50, threshold 96) takes its map model from the scenario (sigma, bias share,
-correlation: trn_env.scenario.build.monitor_map_settings) and whitens. For comparison every flight's log is
+TERCOM (`--navigator`: another terrain navigator); the monitor (N = 50, threshold 96) takes its map model
+from the scenario (sigma, bias share, correlation: trn_env.scenario.build.monitor_map_settings) and its
+navigator's declared error time constants, and whitens. For comparison every flight's log is
 replayed through the monitor without the correlation model (eq 4 as seed 003 has it, "today"). Fault-free
 flights with GNSS and GNSS-denied (from 10 s: the monitor then runs on the navigator's position and
 covariance); faulted flights over a patch entered ~70 s after the start: bias 40 / 100 m, ramp to 100 m,
@@ -32,9 +33,11 @@ FAULTS = [("bias", {"bias_m": 40.0}), ("bias", {"bias_m": 100.0}),
           ("stale", {"source_offset_n_m": -5000.0})]
 
 
-def _scenario(seed: int, faults: list[dict], outage: bool):
+def _scenario(seed: int, faults: list[dict], outage: bool, navigator: str = "ins_tercom"):
     from trn_env.scenario.loading import read_scenario_file, validate
     data, _ = read_scenario_file(ist.BASE)
+    if navigator != data["navigator"]["name"]:
+        data["navigator"] = {"name": navigator, "settings": {}}
     data["seed"] = seed
     data["duration_s"] = ist.DURATION_S
     data["terrain"]["map"]["faults"] = faults
@@ -46,13 +49,13 @@ def _scenario(seed: int, faults: list[dict], outage: bool):
     return validate(data, source="integrity_closed_loop")
 
 
-def _fly(seed: int, faults: list[dict], outage: bool = False) -> dict:
+def _fly(seed: int, faults: list[dict], outage: bool = False, navigator: str = "ins_tercom") -> dict:
     from trn_env.navigators.integrity import dem_monitor as dm
     from trn_env.navigators.registry import create_monitor
 
     from trn_env.scenario.build import monitor_settings
     from trn_env.sim.closed_loop import ClosedLoop
-    sc = _scenario(seed, faults, outage)
+    sc = _scenario(seed, faults, outage, navigator)
     loop = ClosedLoop(sc, pipeline=True)
     r = loop.run()
     a = r.arrays
@@ -69,12 +72,12 @@ def _fly(seed: int, faults: list[dict], outage: bool = False) -> dict:
                          if k in settings}}
 
 
-def fault_free(n: int, outage: bool, seed0: int) -> dict:
+def fault_free(n: int, outage: bool, seed0: int, navigator: str = "ins_tercom") -> dict:
     flights, alarm_flights, windows, alarm_windows, today_flights, today_windows = 0, 0, 0, 0, 0, 0
     stat_max = []
     nav_src = []
     for s in range(n):
-        f = _fly(seed0 + s, [], outage)
+        f = _fly(seed0 + s, [], outage, navigator)
         ok = np.isfinite(f["stat"])
         flights += 1
         windows += int(ok.sum())
@@ -94,13 +97,13 @@ def fault_free(n: int, outage: bool, seed0: int) -> dict:
             "fraction_navigator_source": nav_src}
 
 
-def faulted(n: int, seed0: int) -> dict:
+def faulted(n: int, seed0: int, navigator: str = "ins_tercom") -> dict:
     out = {}
     for kind, extra in FAULTS:
         fault = dict(ist.PATCH, kind=kind, **extra)
         det, tta, early = [], [], 0
         for s in range(n):
-            f = _fly(seed0 + s, [fault])
+            f = _fly(seed0 + s, [fault], navigator=navigator)
             t_in = ist._entry_time(f["arrays"], fault)
             hit = f["alarm"] & (f["t"] >= t_in)
             early += int(bool(np.any(f["alarm"] & (f["t"] < t_in))))
@@ -119,12 +122,23 @@ def main(argv=None) -> int:
     ap.add_argument("--fault-free", type=int, default=20)
     ap.add_argument("--denied", type=int, default=6)
     ap.add_argument("--faulted", type=int, default=3)
+    ap.add_argument("--navigator", default="ins_tercom", choices=("ins_tercom", "pmf", "pf", "rbpf"),
+                    help="the navigator beside the monitor (its declared error time constants reach the "
+                    "monitor's GNSS-denied path)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
+    for name in ("fault_free", "denied", "faulted"):
+        if getattr(args, name) < 0:
+            ap.error(f"--{name.replace('_', '-')}: must be >= 0, got {getattr(args, name)}")
+    if args.json is not None:
+        from trn_env.output.run_folder import file_target_problem
+        if problem := file_target_problem(args.json, "--json", (".json",)):
+            ap.error(problem)       # checked before the flights, not after them
     t0 = time.perf_counter()
-    out = {"fault_free": fault_free(args.fault_free, False, 500)}
-    out["fault_free_gnss_denied"] = fault_free(args.denied, True, 600)
-    out["faulted"] = faulted(args.faulted, 700)
+    out = {"navigator": args.navigator,
+           "fault_free": fault_free(args.fault_free, False, 500, args.navigator)}
+    out["fault_free_gnss_denied"] = fault_free(args.denied, True, 600, args.navigator)
+    out["faulted"] = faulted(args.faulted, 700, args.navigator)
     out["seconds"] = time.perf_counter() - t0
     print(json.dumps({k: v for k, v in out.items() if k != "faulted"}, default=float), flush=True)
     if args.json:

@@ -111,3 +111,14 @@ def test_axis_consistency_refuses_bad_options(option, value, capsys):
         mod.parse([option, value])
     assert exc.value.code == 2 and option in capsys.readouterr().err
     assert mod.parse(["--grade", "tactical"]).grade == "tactical"
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["--denied", "-1"], "--denied"), (["--faulted", "-2"], "--faulted"),
+    (["--navigator", "acq_track"], "--navigator"), (["--json", "."], "--json"),
+    (["--json", "out.txt"], "--json")])
+def test_integrity_closed_loop_refuses_bad_options_before_flying(argv, option, capsys):
+    mod = _load("integrity_closed_loop")
+    with pytest.raises(SystemExit) as exc:
+        mod.main(["--fault-free", "0", "--denied", "0", "--faulted", "0"] + argv)
+    assert exc.value.code == 2 and option in capsys.readouterr().err
