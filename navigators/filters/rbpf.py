@@ -40,9 +40,9 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   with the opt-in map_error_in_height: once it no longer does, the cloud's up coordinate carries them (no
   barometer: the up is the height above the map's terrain), widened by their variances and then walking
   with the correlated error's rate over the ground flown (`_map_release`), as the point-mass and particle
-  filters' vertical offset does. It halves the error on DTED level 1 maps with a tactical IMU but lets two
-  flights in 66 mislead hazardously, so the default keeps the map's errors as noise (docs/validation/
-  integrity.md, section 6.7);
+  filters' vertical offset does. On coarse maps with a tactical IMU it is more accurate than the default but
+  misleads hazardously where the default does not, so the default keeps the map's errors as noise
+  (measured: docs/validation/integrity.md, section 6.7);
 - GNSS, while SensorFrames.gnss has valid fixes (rbpf_cloud.py): position moves the cloud onto the Kalman
   posterior of its moments (a square-root update), the velocity updates each particle's Kalman part;
 - systematic resampling when the effective sample size falls below ess_threshold * N, the copies then moved
