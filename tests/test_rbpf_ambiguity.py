@@ -82,3 +82,16 @@ def test_filter_uses_range_alone_while_the_closest_point_can_jump(h_right, dof):
     est = nav.update(_frames(0.0, float(o[m.OUT_R]), float(o[m.OUT_THETA])))
     assert est.extra[EXTRA_NIS_DOF] == dof
     assert ("ira_theta_ambiguous" in est.health.skipped) == (dof == 1)
+
+
+def test_look_angle_off_uses_the_range_alone_without_calling_it_ambiguous():
+    # the geometry where the filter takes both (h_right 200 m: dof 2 above); look_angle=False: the range alone
+    dem, _east, _prof = _dem(300.0, 200.0)
+    o = _predict(dem)
+    nav = RaoBlackwellizedPF(dem=dem, rng=np.random.default_rng(0), n_particles=200, acquisition_particles=0,
+                             init_pos_sigma_m=(2.0, 2.0, 1.0), imu_samples="instant",
+                             prior_from_initial=False, look_angle=False)
+    nav.reset(Estimate(0.0, LAT0, LON0, H_ANT, np.array([240.0, 0.0, 0.0]), 0.0, 0.0, 0.0, np.eye(9)))
+    est = nav.update(_frames(0.0, float(o[m.OUT_R]), float(o[m.OUT_THETA])))
+    assert est.extra[EXTRA_NIS_DOF] == 1
+    assert "ira_theta_ambiguous" not in est.health.skipped

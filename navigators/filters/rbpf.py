@@ -18,7 +18,9 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
   ambiguity_probability), a look-angle innovation beyond theta_gate_sigmas of the mixture's predictive
   spread on a converged cloud with status "ok" (the map's look-angle error is heavy-tailed), a look angle
   not linear in the velocity over the cloud's velocity spread (theta_linearity_sigmas), or one that would
-  leave fewer than theta_collapse_ess * N effective particles on a converged cloud;
+  leave fewer than theta_collapse_ess * N effective particles on a converged cloud; and at every update
+  with the opt-in look_angle = false (the look angle's information, as the map-noise model states it, is
+  the one that makes the default mislead on as-published maps: docs/validation/integrity.md, section 6.7);
 - progressive correction of that update (rbpf_progressive.py; Oudjane & Musso 2000, Musso, Oudjane & Le
   Gland 2001 sec. 12.5): a measurement sharper than the cloud can sample is applied in stages of noise
   R / lambda_i (shares summing to one, each the largest that keeps the conditional effective sample size
@@ -198,7 +200,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
                         "ambiguity_probability prior_from_initial theta_linearity_sigmas theta_collapse_ess "
                         "theta_gate_sigmas max_range_m gravity_gradient acquisition_spread_m "
                         "recovery_sigma_m recovery_reset_kalman turn_angle regularisation tempering "
-                        "progressive_correction map_error_in_height")
+                        "progressive_correction map_error_in_height look_angle")
         self.n_acquisition = max(s.acquisition_particles, self.n_particles)
         self.n = self.n_particles          # the cloud's current size
         self.trn_period_s = 1.0 / s.trn_rate_hz

@@ -94,6 +94,8 @@ class RbpfIraUpdate:
         if edge:
             dims = 1
             sk["ira_window_edge"] = sk.get("ira_window_edge", 0) + 1
+        elif not self.look_angle:
+            dims = 1          # the range alone by choice (setting look_angle)
         elif dims == 1:
             sk["ira_theta_ambiguous"] = sk.get("ira_theta_ambiguous", 0) + 1
         elif self.theta_linearity_sigmas > 0.0 and not theta_curv < self.theta_linearity_sigmas * math.sqrt(

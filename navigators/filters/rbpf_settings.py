@@ -35,6 +35,8 @@ class RbpfSettings(Settings):
     error_model_rate_hz: float = setting(50.0, "steps of the 15-state error model per second", "Hz", gt=0.0)
     range_sigma_m: float = setting(3.5, "IRA range noise sigma_R (Table 1)", "m", gt=0.0)
     look_angle_sigma_deg: float = setting(0.1, "IRA look-angle noise sigma_theta (Table 1)", "deg", gt=0.0)
+    look_angle: bool = setting(True, "update on the IRA's look angle as well as its range (seed 002); false: "
+                               "the range alone")
     half_window_deg: float = setting(45.0, "half of the IRA's look window (as the sensor's)", "deg", gt=0.0,
                                      lt=90.0)
     window_edge_margin_deg: float = setting(
