@@ -55,7 +55,8 @@ def test_built_navigator_states_its_condition(name):
     from trn_env import terrain
     data, _ = read_scenario_file("tests/scenarios/acq_track_short.toml")
     data["sensors"]["imu"] = {"grade": "consumer"}
-    data["navigator"] = {"name": name, "settings": {}}
+    # the settings the campaign flew it with (its declaration's)
+    data["navigator"] = {"name": name, "settings": dict(registry.capabilities(name).pl_settings)}
     dem = terrain.load("jacksboro")
     nav = build_navigator(validate(data, source="test"), dem)
     assert nav.pl_not_validated.startswith(f"{name}: protection level not validated under "
@@ -118,3 +119,75 @@ def test_campaign_settings_option_refuses_bad_input(tmp_path, capsys):
         assert exc.value.code == 2
         assert "--settings" in capsys.readouterr().err
         assert not (tmp_path / "out").exists()
+
+
+def test_settings_other_than_the_campaigns_are_named():
+    """A navigator built with settings the campaign did not fly (ins_tercom's default remove_bias = false;
+    the campaign's true) says so under a condition its declaration covers, naming the setting; with the
+    campaign's it states nothing."""
+    from trn_env import terrain
+    data, _ = read_scenario_file("tests/scenarios/acq_track_short.toml")
+    data["sensors"]["imu"] = {"grade": "navigation"}
+    dem = terrain.load("jacksboro")
+    data["navigator"] = {"name": "ins_tercom", "settings": {"remove_bias": False}}
+    msg = build_navigator(validate(data, source="test"), dem).pl_not_validated
+    assert msg.startswith("ins_tercom: protection level not validated with remove_bias=False (validated "
+                          "with True)") and "navigation/as_published" in msg
+    data["navigator"] = {"name": "ins_tercom", "settings": {}}      # the default is not the campaign's
+    assert "remove_bias=False" in build_navigator(validate(data, source="test"), dem).pl_not_validated
+    data["navigator"] = {"name": "ins_tercom", "settings": {"remove_bias": True}}
+    assert build_navigator(validate(data, source="test"), dem).pl_not_validated == ""
+
+
+def test_rbpf_range_only_variant_states_its_own_condition():
+    """The rbpf with look_angle = false: validated on navigation/dted1 (its own campaign), not on
+    navigation/as_published; its defaults on neither; another setting beside it voids the variant."""
+    from trn_env import terrain
+    data, _ = read_scenario_file("tests/scenarios/acq_track_short.toml")
+    dem = terrain.load("jacksboro")
+    data["sensors"]["imu"] = {"grade": "navigation"}
+    data["terrain"]["map"] = {"dem": "jacksboro", "error_model": {"preset": "dted1"}}
+    data["navigator"] = {"name": "rbpf", "settings": {"look_angle": False}}
+    assert build_navigator(validate(data, source="test"), dem).pl_not_validated == ""
+    data["navigator"] = {"name": "rbpf", "settings": {"look_angle": False, "tempering": "none"}}
+    msg = build_navigator(validate(data, source="test"), dem).pl_not_validated
+    assert "tempering='none'" in msg and "look_angle=False" in msg
+    data["navigator"] = {"name": "rbpf", "settings": {}}
+    assert "not validated under navigation/dted1" in build_navigator(validate(data, source="test"),
+                                                                      dem).pl_not_validated
+    data["terrain"]["map"] = {"dem": "jacksboro"}
+    data["navigator"] = {"name": "rbpf", "settings": {"look_angle": False}}
+    msg = build_navigator(validate(data, source="test"), dem).pl_not_validated
+    assert msg.startswith("rbpf: protection level not validated under navigation/as_published")
+    assert msg.endswith("on: navigation/dted1)")
+
+
+def _met(doc: dict, name: str) -> set[str]:
+    """The grade/map conditions on which a campaign report bounds `name`'s misleading-information rate at
+    or below its integrity risk on every terrain."""
+    met: dict[str, bool] = {}
+    for key, m in doc["results"].items():
+        nav, condition = key.split("/")
+        if nav != name or condition == "all":
+            continue
+        _terrain, grade, map_class = condition.split("-")
+        ok = m["pl_misleading_rate_upper95"] <= doc["integrity_risk"]
+        met[f"{grade}/{map_class}"] = met.get(f"{grade}/{map_class}", True) and ok
+    return {c for c, ok in met.items() if ok}
+
+
+def test_declared_settings_are_the_campaign_scripts():
+    """Each navigator's declared campaign settings (pl_settings) are the ones
+    scripts/protection_level_campaign.py flies it with, and the rbpf's range-only variant's conditions are
+    what its campaign's report (docs/validation/integrity_pl_campaign_rbpf_range.json) bounds."""
+    import json
+    from pathlib import Path
+
+    from _scripts import load_script
+    script = load_script("protection_level_campaign")
+    for name, campaign in script.NAVIGATORS.items():
+        assert dict(registry.capabilities(name).pl_settings) == campaign, name
+    doc = json.loads((Path(__file__).resolve().parents[1] / "docs" / "validation"
+                      / "integrity_pl_campaign_rbpf_range.json").read_text())
+    variants = dict(registry.capabilities("rbpf").pl_variants)
+    assert set(variants[(("look_angle", False),)]) == _met(doc, "rbpf") == {"navigation/dted1"}

@@ -271,4 +271,6 @@ def _warm_up(rate_hz: float) -> dict:
 CAPABILITIES = Capabilities(settings=AcqTrackConfig, needs_map=True, uses_imu_spec=True,
                             warm_up_settings=_warm_up,
                             pl_validated=("navigation/as_published", "navigation/dted1"),
+                            pl_settings=(("transect_samples", 25), ("replica_model", "return"),
+                                         ("aiding_source", "ins")),
                             error_time_constant_s=73.0, height_time_constant_s=3000.0)

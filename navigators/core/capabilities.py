@@ -60,6 +60,11 @@ class Capabilities:
     terrain tried (scripts/protection_level_campaign.py; docs/validation/integrity.md section 6.6). Under
     any other condition it publishes Estimate.extra["pl_not_validated"] naming the condition
     (navigators.integrity.protection_level.publish; the build sets the condition).
+    pl_settings: the settings, where not the defaults, the campaign measured it with (scripts/
+    protection_level_campaign.py's NAVIGATORS; a test ties the two): pl_validated holds for a navigator
+    whose settings agree with them, and one set otherwise states which settings differ. pl_variants:
+    further (settings, conditions) pairs measured the same way, an opt-in validated on other conditions
+    (`pl_declaration`).
     """
 
     settings: type | None = None
@@ -75,6 +80,32 @@ class Capabilities:
     error_time_constant_s: float = 0.0
     height_time_constant_s: float = 0.0
     pl_validated: tuple[str, ...] = ()
+    pl_settings: tuple[tuple[str, Any], ...] = ()
+    pl_variants: tuple[tuple[tuple[tuple[str, Any], ...], tuple[str, ...]], ...] = ()
+
+    def pl_declaration(self, settings: dict[str, Any]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(validated conditions, settings that differ) for a navigator given `settings` (its user's: a
+        scenario's [navigator.settings]; the rest are the defaults): the conditions of the first of
+        pl_variants, then of the campaign's own settings (pl_settings, pl_validated), whose settings it
+        agrees with on every setting either names, and no difference; else no condition and the settings
+        that differ from the campaign's, "name=value (validated with other)" each."""
+        defaults = self.settings() if self.settings is not None else None
+
+        def value(d: dict, k: str):
+            v = d[k] if k in d else getattr(defaults, k, None)
+            return tuple(v) if isinstance(v, list) else v
+
+        def differ(campaign: dict) -> list[str]:
+            keys = sorted(set(settings) | set(campaign))
+            return [f"{k}={value(settings, k)!r} (validated with {value(campaign, k)!r})"
+                    for k in keys if value(settings, k) != value(campaign, k)]
+
+        main = dict(self.pl_settings)
+        for extra, conditions in self.pl_variants:
+            if not differ(main | dict(extra)):
+                return tuple(conditions), ()
+        diffs = differ(main)
+        return (tuple(self.pl_validated), ()) if not diffs else ((), tuple(diffs))
 
     def sensor_needs(self, settings: Any = None) -> SensorNeeds:
         """The sensors needed with `settings` (a Settings instance, or None for the defaults)."""

@@ -133,6 +133,7 @@ INS_TERCOM_CAPABILITIES = Capabilities(settings=InsTercomSettings, needs_map=Tru
                                        # protection level validated on (docs/validation/integrity.md 6.6)
                                        pl_validated=("navigation/as_published", "tactical/as_published",
                                                      "navigation/dted1", "tactical/dted1"),
+                                       pl_settings=(("remove_bias", True),),   # the campaign's
                                        warm_up_settings=_tercom_warm_up,
                                        # GM fits to its GNSS-denied error
                                        # (scripts/navigator_error_time_constants.py, docs/validation/

@@ -153,8 +153,11 @@ CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=Tru
                             # GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py,
                             # docs/validation/integrity_error_time_constants.json)
                             error_time_constant_s=690.0, height_time_constant_s=180.0,
-                            # protection level validated on no condition (docs/validation/integrity.md 6.6)
-                            pl_validated=())
+                            # protection level validated on no condition (docs/validation/integrity.md 6.6);
+                            # with look_angle=false on navigation/dted1 (6.7,
+                            # docs/validation/integrity_pl_campaign_rbpf_range.json)
+                            pl_validated=(),
+                            pl_variants=(((("look_angle", False),), ("navigation/dted1",)),))
 
 
 def table1_covariance() -> np.ndarray:

@@ -160,7 +160,9 @@ class PfSettings(TerrainFilterSettings):
 # two significant figures); pl_validated: the same section
 PMF_CAPABILITIES = Capabilities(settings=PmfSettings, needs_map=True, uses_map_noise=True, uses_imu_spec=True,
                                 error_time_constant_s=98.0, height_time_constant_s=41.0,
-                                pl_validated=("navigation/as_published", "tactical/dted1"))
+                                pl_validated=("navigation/as_published", "tactical/dted1"),
+                                pl_settings=(("grid_size", 200),))
 PF_CAPABILITIES = Capabilities(settings=PfSettings, needs_map=True, takes_rng=True, uses_map_noise=True,
                                uses_imu_spec=True, error_time_constant_s=73.0, height_time_constant_s=41.0,
-                               pl_validated=("navigation/as_published", "tactical/dted1"))
+                               pl_validated=("navigation/as_published", "tactical/dted1"),
+                               pl_settings=(("n_particles", 10_000),))

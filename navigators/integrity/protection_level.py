@@ -279,17 +279,25 @@ def configure(navigator, integrity_risk=DEFAULT_INTEGRITY_RISK, map_horizontal_s
     navigator.map_horizontal_sigma_m = sh
 
 
-def set_condition(navigator, condition: str, validated: tuple[str, ...] = ()) -> None:
+def set_condition(navigator, condition: str, validated: tuple[str, ...] = (),
+                  settings_differ: tuple[str, ...] = (), declared: tuple[str, ...] = ()) -> None:
     """State the condition a navigator runs under ("<IMU grade>/<map class>", see
     navigators.core.capabilities.Capabilities.pl_validated) against the conditions its protection level was
     validated on (`validated`, at DEFAULT_INTEGRITY_RISK): from then on `publish` puts
     EXTRA_PL_NOT_VALIDATED into every estimate, "" when the condition is one of them at the default risk,
-    else a sentence naming the condition. The scenario build calls it (trn_env.scenario.navigation)."""
+    else a sentence naming the condition. With `settings_differ` (Capabilities.pl_declaration: settings
+    other than the campaign's) the sentence names them and the conditions `declared` for the campaign's.
+    The scenario build calls it (trn_env.scenario.navigation)."""
     condition = str(condition)
     risk = float(getattr(navigator, "integrity_risk", DEFAULT_INTEGRITY_RISK))
     name = getattr(navigator, "name", type(navigator).__name__)
     tried = ", ".join(validated) if validated else "none"
-    if condition not in validated:
+    if settings_differ:
+        on = ", ".join(declared) if declared else "none"
+        navigator.pl_not_validated = (f"{name}: protection level not validated with "
+                                      f"{', '.join(settings_differ)} (with the campaign's settings, "
+                                      f"validated at {DEFAULT_INTEGRITY_RISK:g} per epoch on: {on})")
+    elif condition not in validated:
         navigator.pl_not_validated = (f"{name}: protection level not validated under {condition} (validated "
                                       f"at {DEFAULT_INTEGRITY_RISK:g} per epoch on: {tried})")
     elif risk != DEFAULT_INTEGRITY_RISK:

@@ -141,7 +141,8 @@ def build_navigator(sc, map_dem, rng: np.random.Generator | None = None):
     spec = imu_spec(sc.sensors.imu) if caps.uses_imu_spec else None
     if spec is not None and hasattr(navigator, "apply_imu_spec"):
         navigator.apply_imu_spec(spec)
-    pl.set_condition(navigator, pl_condition(sc), tuple(caps.pl_validated))
+    validated, differ = caps.pl_declaration(sc.navigator.table.to_dict())
+    pl.set_condition(navigator, pl_condition(sc), validated, differ, tuple(caps.pl_validated))
     return navigator
 
 
