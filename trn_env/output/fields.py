@@ -95,8 +95,9 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "constant_fuel": Field("flag", "whether the fuel (and the mass) was held constant"),
     "truth_source": Field("", "where the true motion came from: jsbsim or kinematic"),
     "pl_not_validated": Field("", "the navigator's statement on its protection level at the last estimate: "
-                                  "'' where validated for the scenario's IMU grade and map class, else why "
-                                  "not (navigators.integrity.protection_level.set_condition)"),
+                                  "'' where validated for the scenario's IMU grade and map class with the "
+                                  "navigator's settings, else why not "
+                                  "(navigators.integrity.protection_level.set_condition)"),
     "unused_sensors": Field("", "fitted sensors that neither the navigator nor a monitor reads (their "
                                 "declared sensor needs)"),
     "files": Field("", "the files written to the run folder"),
