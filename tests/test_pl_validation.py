@@ -76,16 +76,8 @@ def test_declared_conditions_are_the_campaigns(name):
     from pathlib import Path
     doc = json.loads((Path(__file__).resolve().parents[1] / "docs" / "validation"
                       / "integrity_pl_campaign.json").read_text())
-    met: dict[str, bool] = {}
-    for key, m in doc["results"].items():
-        nav, condition = key.split("/")
-        if nav != name or condition == "all":
-            continue
-        _terrain, grade, map_class = condition.split("-")
-        ok = m["pl_misleading_rate_upper95"] <= doc["integrity_risk"]
-        met[f"{grade}/{map_class}"] = met.get(f"{grade}/{map_class}", True) and ok
-    assert met, "no campaign rows for " + name
-    assert set(registry.capabilities(name).pl_validated) == {c for c, ok in met.items() if ok}
+    assert any(key.startswith(name + "/") for key in doc["results"]), "no campaign rows for " + name
+    assert set(registry.capabilities(name).pl_validated) == _met(doc, name)
 
 
 def test_guide_accuracy_table_is_the_campaigns():
