@@ -294,7 +294,7 @@ def set_condition(navigator, condition: str, validated: tuple[str, ...] = (),
     tried = ", ".join(validated) if validated else "none"
     if settings_differ:
         on = ", ".join(declared) if declared else "none"
-        navigator.pl_not_validated = (f"{name}: protection level not validated with "
+        navigator.pl_not_validated = (f"{name}: protection level not validated under {condition} with "
                                       f"{', '.join(settings_differ)} (with the campaign's settings, "
                                       f"validated at {DEFAULT_INTEGRITY_RISK:g} per epoch on: {on})")
     elif condition not in validated:
