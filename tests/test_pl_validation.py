@@ -132,26 +132,28 @@ def test_settings_other_than_the_campaigns_are_named():
 
 
 def test_rbpf_range_only_variant_states_its_own_condition():
-    """The rbpf with look_angle = false: validated on navigation/dted1 (its own campaign), not on
-    navigation/as_published; its defaults on neither; another setting beside it voids the variant."""
+    """The rbpf with look_angle = false: validated on navigation/as_published (its own campaign), not on
+    navigation/dted1; its defaults the other way round; another setting beside it voids the variant."""
     from trn_env import terrain
     data, _ = read_scenario_file("tests/scenarios/acq_track_short.toml")
     dem = terrain.load("jacksboro")
     data["sensors"]["imu"] = {"grade": "navigation"}
-    data["terrain"]["map"] = {"dem": "jacksboro", "error_model": {"preset": "dted1"}}
+    data["terrain"]["map"] = {"dem": "jacksboro"}
     data["navigator"] = {"name": "rbpf", "settings": {"look_angle": False}}
     assert build_navigator(validate(data, source="test"), dem).pl_not_validated == ""
     data["navigator"] = {"name": "rbpf", "settings": {"look_angle": False, "tempering": "none"}}
     msg = build_navigator(validate(data, source="test"), dem).pl_not_validated
     assert "tempering='none'" in msg and "look_angle=False" in msg
     data["navigator"] = {"name": "rbpf", "settings": {}}
-    assert "not validated under navigation/dted1" in build_navigator(validate(data, source="test"),
-                                                                      dem).pl_not_validated
-    data["terrain"]["map"] = {"dem": "jacksboro"}
-    data["navigator"] = {"name": "rbpf", "settings": {"look_angle": False}}
     msg = build_navigator(validate(data, source="test"), dem).pl_not_validated
     assert msg.startswith("rbpf: protection level not validated under navigation/as_published")
     assert msg.endswith("on: navigation/dted1)")
+    data["terrain"]["map"] = {"dem": "jacksboro", "error_model": {"preset": "dted1"}}
+    assert build_navigator(validate(data, source="test"), dem).pl_not_validated == ""
+    data["navigator"] = {"name": "rbpf", "settings": {"look_angle": False}}
+    msg = build_navigator(validate(data, source="test"), dem).pl_not_validated
+    assert msg.startswith("rbpf: protection level not validated under navigation/dted1")
+    assert msg.endswith("on: navigation/as_published)")
 
 
 def _met(doc: dict, name: str) -> set[str]:
@@ -182,4 +184,4 @@ def test_declared_settings_are_the_campaign_scripts():
     doc = json.loads((Path(__file__).resolve().parents[1] / "docs" / "validation"
                       / "integrity_pl_campaign_rbpf_range.json").read_text())
     variants = dict(registry.capabilities("rbpf").pl_variants)
-    assert set(variants[(("look_angle", False),)]) == _met(doc, "rbpf") == {"navigation/dted1"}
+    assert set(variants[(("look_angle", False),)]) == _met(doc, "rbpf") == {"navigation/as_published"}

@@ -41,7 +41,7 @@ def _fix(t: float):
 def _range_var(nav: RaoBlackwellizedPF, sigma_m: float) -> float:
     """The IRA range variance with the map's error sigma_m (m) as noise, computed from the model."""
     return float(nav.r_var[0] + ira_model.map_noise_variances(sigma_m, nav.terrain_model_sigma_m, 2000.0,
-                                                              nav.terrain_factors())[0])
+                                                              nav.terrain_factors(2000.0))[0])
 
 
 def test_release_after_gnss_then_walk(dem):

@@ -37,7 +37,9 @@ filter x^l, P (eqs 1-3). Every TRN epoch (1 Hz, Table 1):
 - map errors as measurement noise (ira_seed002.map_noise_variances): the map's error class (map_sigma_m,
   map_bias_sigma_m) and the terrain a coarse map cannot hold between its posts (terrain_model_sigma_m,
   "auto": from the map's spectrum; 0 when the map is the world), calibrated on the map's own error class
-  (map_noise_model "calibrated": ira_seed002.map_noise_calibration). The map's bias, and its random error
+  (map_noise_model "calibrated": ira_seed002.map_noise_calibration) at the flight's height above it, to the
+  octave of the sample's range (ira_seed002.calibration_height_m: the look angle's error falls with height
+  faster than the flat-ground model's 1 / R). The map's bias, and its random error
   when correlated along the ground (map_correlation_length_m), are noise only while GNSS pins the height
   with the opt-in map_error_in_height: once it no longer does, the cloud's up coordinate carries them (no
   barometer: the up is the height above the map's terrain), widened by their variances and then walking
@@ -219,7 +221,7 @@ class RaoBlackwellizedPF(RbpfIraUpdate, RbpfCloud, InsGnssBlock):
         if not 5.0 <= self.terrain_detail_spacing_m < min(dem.spacing_m):
             raise SettingsError([("terrain_detail_spacing_m", f"must lie in [5, {min(dem.spacing_m):.1f}) m "
                                   f"(finer than the map's posts), got {s.terrain_detail_spacing_m!r}")])
-        self._terrain_factors = None       # map_noise_calibration's, computed at the first IRA update
+        self._terrain_factors: dict = {}   # map_noise_calibration's per height, computed when first used
         self.half_window_rad = math.radians(s.half_window_deg)
         self.edge_margin_rad = math.radians(s.window_edge_margin_deg)
         self.search_step_m = (ira_model.search_step_for(dem) if s.search_step_m == "auto"

@@ -308,18 +308,24 @@ class RbpfIraUpdate:
         p = 0.5 * _erfc(np.maximum(gap[use], 0.0) / (2.0 * sigma_h))
         return float(np.sum(w[use] * p)) / tot
 
-    def terrain_factors(self) -> tuple[float, float]:
-        """(range, look angle) factors on the flat-ground map-noise variances of terrain_model_sigma_m:
-        ira_seed002.map_noise_calibration on this map ("calibrated", ~2 s once per map and process) or
-        (1, 1) ("flat_ground", or nothing unresolved: terrain_model_sigma_m 0)."""
-        if self._terrain_factors is None:
-            self._terrain_factors = (1.0, 1.0)
-            if self.map_noise_model == "calibrated" and self.terrain_model_sigma_m > 0.0:
-                self._terrain_factors = ira_model.map_noise_calibration(
-                    self.dem, self.terrain_detail_spacing_m,
-                    ambiguity_probability=self.ambiguity_probability, gate_sigmas=self.theta_gate_sigmas,
-                    theta_sensor_var=float(self.r_var[1]))
-        return self._terrain_factors
+    def terrain_factors(self, range_m: float) -> tuple[float, float]:
+        """(range, look angle) factors on the flat-ground map-noise variances of terrain_model_sigma_m at a
+        slant range range_m (m): ira_seed002.map_noise_calibration on this map ("calibrated") at the height
+        calibration_height_m(range_m) above it, ~2 s once per map, height and process; or (1, 1)
+        ("flat_ground", or nothing unresolved: terrain_model_sigma_m 0). The look angle's factor depends on
+        the height (its error falls with height faster than the flat-ground model's 1 / R): calibrated at
+        1,500 m and applied at 600 m it underrates the look angle's map-error variance 1.7-2x
+        (docs/validation/integrity.md, section 6.8)."""
+        if self.map_noise_model != "calibrated" or not self.terrain_model_sigma_m > 0.0:
+            return (1.0, 1.0)
+        agl_m = ira_model.calibration_height_m(range_m)
+        f = self._terrain_factors.get(agl_m)
+        if f is None:
+            f = self._terrain_factors[agl_m] = ira_model.map_noise_calibration(
+                self.dem, self.terrain_detail_spacing_m, agl_m=agl_m,
+                ambiguity_probability=self.ambiguity_probability, gate_sigmas=self.theta_gate_sigmas,
+                theta_sensor_var=float(self.r_var[1]))
+        return f
 
     def _r_var_now(self, range_m: float) -> np.ndarray:
         """IRA measurement variances (range m^2, look angle rad^2) at a slant range range_m: the sensor's,
@@ -344,7 +350,7 @@ class RbpfIraUpdate:
             sigma = self.map_sigma_m
         r = self.r_var + ira_model.map_noise_variances(math.hypot(sigma, bias),
                                                        self.terrain_model_sigma_m, range_m,
-                                                       self.terrain_factors())
+                                                       self.terrain_factors(range_m))
         if self.acquisition_spread_m <= 0.0 or self.tempering == "none" or (
                 self.tempering == "acquisition" and not (self.n > self.n_particles or self._reacquiring)):
             return r

@@ -103,7 +103,8 @@ class RbpfSettings(Settings):
     terrain_model_sigma_m: float | str = setting(
         "auto", "terrain a coarse map cannot hold between posts (auto: from the map's spectrum)", "m",
         ge=0.0, also=("auto",))
-    map_noise_model: str = setting("calibrated", "map-noise variances of the IRA measurement",
+    map_noise_model: str = setting("calibrated", "map-noise variances of the IRA measurement (calibrated: "
+                                   "on the map, at the flight's height)",
                                    choices=("calibrated", "flat_ground"))
     terrain_detail_spacing_m: float | str = setting(
         "auto", "finest terrain the map-noise calibration assumes (auto: post spacing / 3; below the "
@@ -152,12 +153,13 @@ CAPABILITIES = Capabilities(settings=RbpfSettings, needs_map=True, takes_rng=Tru
                             uses_map_noise=True, models_map_detail=True,
                             # GM fits to its GNSS-denied error (scripts/navigator_error_time_constants.py,
                             # docs/validation/integrity_error_time_constants.json)
-                            error_time_constant_s=690.0, height_time_constant_s=180.0,
-                            # protection level validated on no condition (docs/validation/integrity.md 6.6);
-                            # with look_angle=false on navigation/dted1 (6.7,
+                            error_time_constant_s=640.0, height_time_constant_s=190.0,
+                            # protection level validated on navigation/dted1 (docs/validation/integrity.md
+                            # 6.8, with the map noise calibrated at the flight's height); with
+                            # look_angle=false on navigation/as_published (6.8,
                             # docs/validation/integrity_pl_campaign_rbpf_range.json)
-                            pl_validated=(),
-                            pl_variants=(((("look_angle", False),), ("navigation/dted1",)),))
+                            pl_validated=("navigation/dted1",),
+                            pl_variants=(((("look_angle", False),), ("navigation/as_published",)),))
 
 
 def table1_covariance() -> np.ndarray:

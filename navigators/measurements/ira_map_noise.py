@@ -45,6 +45,21 @@ def interpolation_sigma_m(dem) -> float:
 
 _CALIBRATION_CACHE: dict = {}
 
+CALIBRATION_HEIGHT_M = 1500.0  # map_noise_calibration's height above the map by default (seed 002's flights)
+_CALIBRATION_OCTAVES = (-4, 2)  # calibration_height_m's range of k: 94 m to 6 km
+
+
+def calibration_height_m(range_m: float) -> float:
+    """The height above the map (m) at which a filter calibrates the map noise for a slant range range_m
+    (m): the nearest in ratio of CALIBRATION_HEIGHT_M * 2^k (k integer, 94 m to 6 km), so one calibration
+    serves every range within a factor sqrt(2) of its height (1,061-2,121 m for 1,500 m) and a flight
+    needs a new one only when its range leaves that band (each ~2 s, cached). The look angle's factor
+    varies with height (map_noise_calibration); a non-finite or non-positive range gets the default."""
+    if not (math.isfinite(range_m) and range_m > 0.0):
+        return CALIBRATION_HEIGHT_M
+    k = math.floor(math.log2(range_m / CALIBRATION_HEIGHT_M) + 0.5)
+    return CALIBRATION_HEIGHT_M * 2.0 ** min(max(k, _CALIBRATION_OCTAVES[0]), _CALIBRATION_OCTAVES[1])
+
 
 def _map_key(dem) -> tuple:
     """A content key for a map (a scenario loads a new Dem object per run)."""
@@ -53,8 +68,8 @@ def _map_key(dem) -> tuple:
     return digest, heights.shape, float(lat0), float(lon0), float(dlat), float(dlon)
 
 
-def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = 1500.0, n_states: int = 1000,
-                          realisations: int = 3, ambiguity_probability: float = 0.05,
+def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = CALIBRATION_HEIGHT_M,
+                          n_states: int = 1000, realisations: int = 3, ambiguity_probability: float = 0.05,
                           gate_sigmas: float = 0.0, theta_sensor_var: float = 0.0) -> tuple[float, float]:
     """(range factor, look-angle factor) calibrating map_noise_variances' flat-ground model for the terrain
     a map cannot hold between its posts (interpolation_sigma_m): each the simulated variance over the model's.

@@ -43,6 +43,7 @@ from numba import njit
 from ...terrain.kernels import bilinear_with_gradient
 from ...terrain.queries.shared import _consts, _ned
 from .ira_map_noise import (
+    calibration_height_m,
     interpolation_sigma_m,
     map_noise_calibration,
     map_noise_variances,
@@ -440,7 +441,8 @@ def predict_ira(dem, lat_rad, lon_rad, h_m, v_ned, C_bn, half_window_rad: float 
 
 __all__ = ["N_OUT", "OUT_DR_DPSI", "OUT_DR_DTH", "OUT_R", "OUT_R2", "OUT_S", "OUT_THETA", "OUT_THETA2",
            "OUT_VALID", "OUT_XB", "RUNNER_UP_SEPARATION_M",
-           "OUT_YB", "OUT_ZB", "cloud_height_max", "interpolation_sigma_m", "map_noise_calibration",
+           "OUT_YB", "OUT_ZB", "calibration_height_m", "cloud_height_max", "interpolation_sigma_m",
+           "map_noise_calibration",
            "map_noise_variances",
            "search_step_for",
            "measurement_rows", "predict_ira", "zdl_angle_jacobian", "zdl_batch"]
