@@ -53,8 +53,9 @@ def calibration_height_m(range_m: float) -> float:
     """The height above the map (m) at which a filter calibrates the map noise for a slant range range_m
     (m): the nearest in ratio of CALIBRATION_HEIGHT_M * 2^k (k integer, 94 m to 6 km), so one calibration
     serves every range within a factor sqrt(2) of its height (1,061-2,121 m for 1,500 m) and a flight
-    needs a new one only when its range leaves that band (each ~2 s, cached). The look angle's factor
-    varies with height (map_noise_calibration); a non-finite or non-positive range gets the default."""
+    needs a new one only when its range leaves that band (each 1.5-6 s, longer higher up; cached). The
+    look angle's factor varies with height (map_noise_calibration); a non-finite or non-positive range gets
+    the default."""
     if not (math.isfinite(range_m) and range_m > 0.0):
         return CALIBRATION_HEIGHT_M
     k = math.floor(math.log2(range_m / CALIBRATION_HEIGHT_M) + 0.5)
