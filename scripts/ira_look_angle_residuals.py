@@ -30,6 +30,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import median_abs_deviation
 
 Z_AT = ("z2_mean", "z2_median", "beyond_3_sigma", "lag1", "lag2", "lag3")
 
@@ -37,10 +38,6 @@ Z_AT = ("z2_mean", "z2_median", "beyond_3_sigma", "lag1", "lag2", "lag3")
 def _autocorrelation(z: np.ndarray, lag: int) -> float:
     x = z - z.mean()
     return float(np.sum(x[:-lag] * x[lag:]) / np.sum(x * x))
-
-
-def _robust_sigma(x: np.ndarray) -> float:
-    return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
 def residuals(path: str | Path, calibration_height_m: float | None = None) -> dict:
@@ -95,8 +92,8 @@ def residuals(path: str | Path, calibration_height_m: float | None = None) -> di
     z2 = z ** 2
     return {"log": str(log.path), "epochs": int(a.shape[0]),
             "terrain_model_sigma_m": float(nav.terrain_model_sigma_m),
-            "theta_robust_sigma_world_deg": math.degrees(_robust_sigma(a[:, 1])),
-            "theta_robust_sigma_map_deg": math.degrees(_robust_sigma(a[:, 0])),
+            "theta_robust_sigma_world_deg": math.degrees(median_abs_deviation(a[:, 1], scale="normal")),
+            "theta_robust_sigma_map_deg": math.degrees(median_abs_deviation(a[:, 0], scale="normal")),
             "theta_model_sigma_deg": math.degrees(math.sqrt(float(np.mean(a[:, 4])))),
             "z2_mean": float(np.mean(z2)), "z2_median": float(np.median(z2)),
             "beyond_3_sigma": float(np.mean(np.abs(z) > 3.0)),
