@@ -13,12 +13,13 @@ the realistic non-standard-day error (about h delta_T / T_ISA too low on a hot d
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numba import njit
+
+from trn_env.flight.checks import finite
 
 M_PER_FT = 0.3048
 PSF_TO_PA = 47.88025898033584
@@ -68,16 +69,6 @@ def static_p_T(lat_rad, lon_rad, h_m, delta_T_K, p_sl_pa):  # pragma: no cover -
     return p, t
 
 
-def _finite(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"Atmosphere.{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"Atmosphere.{name} must be finite, got {value!r}")
-    return v
-
-
 @dataclass(frozen=True)
 class Atmosphere:
     """The day's atmosphere. delta_T_K: temperature offset from ISA at every altitude (K, within +-60);
@@ -87,8 +78,8 @@ class Atmosphere:
     p_sl_pa: float = ISA_P_SL_PA
 
     def __post_init__(self):
-        dt = _finite("delta_T_K", self.delta_T_K)
-        p = _finite("p_sl_pa", self.p_sl_pa)
+        dt = finite("Atmosphere.delta_T_K", self.delta_T_K)
+        p = finite("Atmosphere.p_sl_pa", self.p_sl_pa)
         if abs(dt) > DELTA_T_LIMIT_K:
             raise ValueError(f"Atmosphere.delta_T_K must be within +-{DELTA_T_LIMIT_K:.0f} K, got {dt}")
         if not P_SL_RANGE_PA[0] <= p <= P_SL_RANGE_PA[1]:

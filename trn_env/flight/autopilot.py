@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum
 
-from trn_env.flight.initial import _check_finite
+from trn_env.flight.checks import finite
 
 
 class LateralMode(IntEnum):
@@ -60,7 +60,7 @@ class AutopilotTargets:
                                  f"{[int(m) for m in enum]}, got {v!r}") from None
         for name in ("heading_cmd_rad", "track_cmd_rad", "bank_limit_rad", "altitude_cmd_m", "agl_cmd_m",
                      "vs_cmd_mps", "tas_cmd_mps"):
-            _check_finite("AutopilotTargets", name, getattr(self, name))
+            finite(f"AutopilotTargets.{name}", getattr(self, name))
         if not 0.0 < self.bank_limit_rad <= math.radians(60.0):
             raise ValueError(f"AutopilotTargets.bank_limit_rad must be within (0, 60 deg], "
                              f"got {self.bank_limit_rad}")

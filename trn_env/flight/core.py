@@ -42,7 +42,8 @@ from trn_env.flight.autopilot import (
     SpeedMode,
     VerticalMode,
 )
-from trn_env.flight.initial import InitialCondition, _check_finite
+from trn_env.flight.checks import finite
+from trn_env.flight.initial import InitialCondition
 from trn_env.flight.raw_record import (
     _N_STATE,
     _NAN_NAMES,
@@ -118,10 +119,10 @@ class Flight(StepClock):
                  constant_fuel: bool = False):
         if not isinstance(ic, InitialCondition):
             raise ValueError(f"ic must be an InitialCondition, got {type(ic).__name__}")
-        dt_s = _check_finite("Flight", "dt_s", dt_s)
+        dt_s = finite("Flight.dt_s", dt_s)
         if not 0.0 < dt_s <= 0.05:
             raise ValueError(f"Flight.dt_s must be within (0, 0.05] s, got {dt_s}")
-        terrain_elevation_m = _check_finite("Flight", "terrain_elevation_m", terrain_elevation_m)
+        terrain_elevation_m = finite("Flight.terrain_elevation_m", terrain_elevation_m)
         if terrain_elevation_m >= ic.h_msl_m:
             raise ValueError(f"InitialCondition.h_msl_m ({ic.h_msl_m} m) is not above the terrain "
                              f"({terrain_elevation_m} m)")
@@ -309,7 +310,7 @@ class Flight(StepClock):
 
     def set_terrain_elevation(self, h_m: float) -> None:
         """Terrain height (WGS84 / MSL, m) under the aircraft, read by the autopilot's AGL hold."""
-        h_m = _check_finite("Flight", "terrain_elevation_m", h_m)
+        h_m = finite("Flight.terrain_elevation_m", h_m)
         self._terrain_elevation_m = h_m
         self._terrain_setter(h_m * FT_PER_M)
 

@@ -6,15 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-
-def _check_finite(owner: str, name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{owner}.{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{owner}.{name} must be finite, got {value!r}")
-    return v
+from trn_env.flight.checks import finite
 
 
 @dataclass(frozen=True)
@@ -63,7 +55,7 @@ class InitialCondition:
             v = getattr(self, f.name)
             if v is None and f.name in ("fuel_fraction", "fuel_kg"):
                 continue
-            _check_finite("InitialCondition", f.name, v)
+            finite(f"InitialCondition.{f.name}", v)
         if not -math.pi / 2 <= self.lat_rad <= math.pi / 2:
             raise ValueError(f"InitialCondition.lat_rad must be within +-pi/2, got {self.lat_rad}")
         if self.tas_mps <= 0.0:

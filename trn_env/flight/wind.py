@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from trn_env.flight.checks import finite
+
 FT_PER_M = 1.0 / 0.3048
 KT_TO_MPS = 1852.0 / 3600.0
 
@@ -31,16 +33,6 @@ SEVERITY_INDEX = {"none": 0, "light": 3, "moderate": 4, "severe": 6, "extreme": 
 DEFAULT_W20_MPS = {0: 0.0, 1: 15 * KT_TO_MPS, 2: 15 * KT_TO_MPS, 3: 15 * KT_TO_MPS, 4: 30 * KT_TO_MPS,
                    5: 45 * KT_TO_MPS, 6: 45 * KT_TO_MPS, 7: 45 * KT_TO_MPS}
 GUST_FRAMES = {"body": 1, "wind": 2, "ned": 3}
-
-
-def _finite(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -116,9 +108,9 @@ class WindConfig:
                     raise ValueError(f"wind.layers[{i}] must be (altitude_m, direction_from_deg, speed_mps), "
                                      f"got {lay!r}") from None
                 lay = WindLayer(alt, d, s)
-            alt = _finite(f"wind.layers[{i}].altitude_m", lay.altitude_m)
-            d = _finite(f"wind.layers[{i}].direction_from_deg", lay.direction_from_deg)
-            s = _finite(f"wind.layers[{i}].speed_mps", lay.speed_mps)
+            alt = finite(f"wind.layers[{i}].altitude_m", lay.altitude_m)
+            d = finite(f"wind.layers[{i}].direction_from_deg", lay.direction_from_deg)
+            s = finite(f"wind.layers[{i}].speed_mps", lay.speed_mps)
             if s < 0.0:
                 raise ValueError(f"wind.layers[{i}].speed_mps must be >= 0, got {s}")
             if layers and alt <= layers[-1].altitude_m:
@@ -140,7 +132,7 @@ class WindConfig:
             raise ValueError(f"wind.turbulence.severity must be one of {list(SEVERITY_INDEX)} or 0..7, "
                              f"got {t.severity!r}")
         if t.windspeed_at_20ft_mps is not None:
-            w = _finite("wind.turbulence.windspeed_at_20ft_mps", t.windspeed_at_20ft_mps)
+            w = finite("wind.turbulence.windspeed_at_20ft_mps", t.windspeed_at_20ft_mps)
             if w < 0.0:
                 raise ValueError(f"wind.turbulence.windspeed_at_20ft_mps must be >= 0, got {w}")
         gusts = tuple(self.gusts)
@@ -148,7 +140,7 @@ class WindConfig:
             if not isinstance(g, CosineGust):
                 raise ValueError(f"wind.gusts[{i}] must be a CosineGust, got {g!r}")
             for name in ("start_time_s", "magnitude_mps", "startup_s", "steady_s", "end_s"):
-                v = _finite(f"wind.gusts[{i}].{name}", getattr(g, name))
+                v = finite(f"wind.gusts[{i}].{name}", getattr(g, name))
                 if v < 0.0:
                     raise ValueError(f"wind.gusts[{i}].{name} must be >= 0, got {v}")
             if g.frame not in GUST_FRAMES:
