@@ -311,7 +311,8 @@ class RbpfIraUpdate:
     def terrain_factors(self, range_m: float) -> tuple[float, float]:
         """(range, look angle) factors on the flat-ground map-noise variances of terrain_model_sigma_m at a
         slant range range_m (m): ira_seed002.map_noise_calibration on this map ("calibrated") at the height
-        calibration_height_m(range_m) above it, 1.5-6 s once per map, height and process; or (1, 1)
+        calibration_height_m(range_m) above it, 1-6 s the first time per map and height, then read from the
+        process's and the disk's caches (navigators.core.disk_cache); or (1, 1)
         ("flat_ground", or nothing unresolved: terrain_model_sigma_m 0). The look angle's factor depends on
         the height (its error falls with height faster than the flat-ground model's 1 / R): calibrated at
         1,500 m and applied at 600 m it underrates the look angle's map-error variance 1.7-2x

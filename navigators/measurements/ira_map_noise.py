@@ -12,10 +12,16 @@ from __future__ import annotations
 
 import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 
+from ... import terrain as _terrain_package
+from ..core.disk_cache import cached_floats
+
 _INTERP_CACHE: dict = {}
+# the code a calibration depends on (its search, the map's refinement and reading): its disk cache's key
+_CODE_DIRS = (str(Path(__file__).resolve().parents[1]), str(Path(_terrain_package.__file__).resolve().parent))
 
 
 def interpolation_sigma_m(dem) -> float:
@@ -53,9 +59,9 @@ def calibration_height_m(range_m: float) -> float:
     """The height above the map (m) at which a filter calibrates the map noise for a slant range range_m
     (m): the nearest in ratio of CALIBRATION_HEIGHT_M * 2^k (k integer, 94 m to 6 km), so one calibration
     serves every range within a factor sqrt(2) of its height (1,061-2,121 m for 1,500 m) and a flight
-    needs a new one only when its range leaves that band (each 1.5-6 s, longer higher up; cached). The
-    look angle's factor varies with height (map_noise_calibration); a non-finite or non-positive range gets
-    the default."""
+    needs a new one only when its range leaves that band (each 1-6 s the first time, longer higher up; then
+    cached in the process and on disk). The look angle's factor varies with height (map_noise_calibration);
+    a non-finite or non-positive range gets the default."""
     if not (math.isfinite(range_m) and range_m > 0.0):
         return CALIBRATION_HEIGHT_M
     k = math.floor(math.log2(range_m / CALIBRATION_HEIGHT_M) + 0.5)
@@ -86,13 +92,22 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = CALIBRATI
     sigma_h^2 (a constant offset is the vertical state's); look angle: mean((theta_refined - theta_map)^2 3 R)
     / sigma_h. The flat-ground band is an upper bound: the closest point is the minimum of a rough R(s),
     nearer the band's middle. The factors of the default map: docs/validation/seed002.md (map noise). (1, 1)
-    when the map is too smooth (sigma_h 0) or too small to refine. Cached per map content (a few seconds for
-    the default map)."""
+    when the map is too smooth (sigma_h 0) or too small to refine. 1-2.5 s for the default map: cached per
+    map content in the process and on disk between processes (navigators.core.disk_cache, keyed by the code
+    that computes it)."""
     key = (_map_key(dem), float(detail_spacing_m), float(agl_m), int(n_states), int(realisations),
            float(ambiguity_probability), float(gate_sigmas), float(theta_sensor_var))
     hit = _CALIBRATION_CACHE.get(key)
-    if hit is not None:
-        return hit
+    if hit is None:
+        hit = _CALIBRATION_CACHE[key] = cached_floats(
+            "map_noise_calibration", key, 2, lambda: _calibrate(dem, *key[1:]), _CODE_DIRS)
+    return hit
+
+
+def _calibrate(dem, detail_spacing_m: float, agl_m: float, n_states: int, realisations: int,
+               ambiguity_probability: float, gate_sigmas: float,
+               theta_sensor_var: float) -> tuple[float, float]:
+    """map_noise_calibration's computation (uncached)."""
     from ...terrain.geodesy import euler_to_C_bn
     from ...terrain.refine import refine
     from .ira_seed002 import OUT_R, OUT_R2, OUT_THETA, OUT_VALID, predict_ira  # (which imports this module)
@@ -146,7 +161,6 @@ def map_noise_calibration(dem, detail_spacing_m: float, agl_m: float = CALIBRATI
         f_r = float(np.mean(var_r)) / sigma_h ** 2
         if np.isfinite(f_r) and np.isfinite(f_th) and f_r > 0.0 and f_th > 0.0:
             out = (f_r, f_th)
-    _CALIBRATION_CACHE[key] = out
     return out
 
 

@@ -1,0 +1,107 @@
+"""Numbers that cost seconds to compute and are fixed by their inputs and the code, kept on disk between
+processes (numba's `cache=True` does the same for the kernels).
+
+A `trn-env fly`, each campaign worker and each env runner is a new process: an in-process cache alone makes
+every one of them pay again for the same result (the `rbpf`'s map-noise calibration: 1-2.5 s per map and
+height). `cached_floats` keeps such a result in one small JSON file per key under `cache_dir()`:
+
+- the file's name is a hash of the caller's key and of `code_digest()`, the content of the modules that
+  compute it and the versions of numpy, scipy and numba, so editing that code or upgrading them is a miss,
+  never a stale hit;
+- a file is written whole (a temporary file renamed over it), so a reader sees all of it or none, and two
+  processes computing the same key write the same bytes;
+- anything unreadable, malformed or not finite counts as a miss (it is computed again and rewritten), and a
+  cache that cannot be written is skipped: the cache changes how long a result takes, never what it is.
+
+Where: `$TRN_ENV_CACHE_DIR` when set (an empty value turns the cache off), else the platform's user cache
+folder for "trn-env" (platformdirs; ~/.cache/trn-env on Linux).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable, Iterable
+from functools import cache
+from pathlib import Path
+
+ENV_VAR = "TRN_ENV_CACHE_DIR"
+
+
+def cache_dir() -> Path | None:
+    """The cache's folder, or None when `$TRN_ENV_CACHE_DIR` is set empty (cache off)."""
+    value = os.environ.get(ENV_VAR)
+    if value is not None:
+        return Path(value).expanduser() if value.strip() else None
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("trn-env", appauthor=False))
+
+
+@cache
+def code_digest(package_dirs: tuple[str, ...]) -> str:
+    """Hash of every .py file below package_dirs (relative path and bytes, in sorted order) and of the
+    numpy, scipy and numba versions: what a cached result was computed with."""
+    import numba
+    import numpy
+    import scipy
+
+    h = hashlib.blake2b(digest_size=16)
+    for root in package_dirs:
+        base = Path(root)
+        for path in sorted(base.rglob("*.py")):
+            h.update(path.relative_to(base).as_posix().encode())
+            h.update(path.read_bytes())
+    h.update(f"numpy {numpy.__version__} scipy {scipy.__version__} numba {numba.__version__}".encode())
+    return h.hexdigest()
+
+
+def _read(path: Path, key_text: str, size: int) -> tuple[float, ...] | None:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        values = data["values"]
+        if data["key"] != key_text or len(values) != size:
+            return None
+        out = tuple(float(v) for v in values)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return out if all(math.isfinite(v) for v in out) else None
+
+
+def _write(path: Path, key_text: str, values: tuple[float, ...]) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump({"key": key_text, "values": list(values)}, f)   # floats by repr: exact
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    except OSError:
+        pass   # a read-only or full disk: the result stands, only the next process recomputes it
+
+
+def cached_floats(namespace: str, key: tuple, size: int, compute: Callable[[], Iterable[float]],
+                  code_dirs: tuple[str, ...]) -> tuple[float, ...]:
+    """compute()'s `size` finite floats for `key` (a tuple whose repr is stable across processes: strings,
+    numbers, tuples), read from `cache_dir()/namespace` when a process computed them before with the same
+    code (code_digest of code_dirs), else computed and stored. A result that is not `size` finite floats is
+    returned as it is and not stored."""
+    folder = cache_dir()
+    if folder is None:
+        return tuple(compute())
+    key_text = repr((key, code_digest(tuple(code_dirs))))
+    name = hashlib.blake2b(key_text.encode(), digest_size=20).hexdigest()
+    path = folder / namespace / f"{name}.json"
+    hit = _read(path, key_text, size)
+    if hit is not None:
+        return hit
+    values = tuple(compute())
+    if len(values) == size and all(isinstance(v, float) and math.isfinite(v) for v in values):
+        _write(path, key_text, values)
+    return values
