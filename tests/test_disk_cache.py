@@ -132,3 +132,26 @@ def test_map_noise_calibration_is_read_back_in_a_new_process(tmp_path, monkeypat
     assert got == fresh and all(a.hex() == b.hex() for a, b in zip(got, fresh, strict=True))
     with pytest.raises(AssertionError, match="computed again"):            # other settings: a miss
         ira_map_noise.map_noise_calibration(dem, 30.0, **{**kw, "agl_m": 750.0})
+
+
+def test_dem_monitors_kalman_threshold_is_read_back_in_a_new_process(tmp_path, monkeypatch):
+    """The DEM monitor's eq 5 threshold (Imhof's integral) through the disk cache, as the calibration."""
+    from trn_env.navigators.integrity import correlated_disparity
+    from trn_env.navigators.integrity import dem_monitor_thresholds as th
+    args = (1e-3, 24, 0.01, "innovation")
+    monkeypatch.setenv(ENV_VAR, "")
+    th.kalman_threshold.cache_clear()
+    fresh = th.kalman_threshold(*args)
+    monkeypatch.setenv(ENV_VAR, str(tmp_path / "cache"))
+    th.kalman_threshold.cache_clear()                                      # a new process
+    assert th.kalman_threshold(*args) == fresh and len(_files(tmp_path / "cache")) == 1
+
+    def no_imhof(*a, **k):
+        raise AssertionError("computed again")
+
+    th.kalman_threshold.cache_clear()                                      # another new process
+    monkeypatch.setattr(correlated_disparity, "gchi2_isf", no_imhof)
+    assert th.kalman_threshold(*args).hex() == fresh.hex()
+    with pytest.raises(AssertionError, match="computed again"):
+        th.kalman_threshold(1e-3, 24, 0.01, "rw_posterior")
+    th.kalman_threshold.cache_clear()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -61,7 +62,14 @@ def kalman_threshold(false_alarm_probability: float, n: int, process_ratio: floa
     """Threshold of T_KF (eq 5 as the monitor computes it) for a false-alarm probability: the exact quantile
     of the generalised chi-square T_KF is under no fault with white disparities (its quadratic form from
     correlated_disparity.kalman_reading(reading): "rw_posterior" for variant "kalman", "innovation" for
-    "kalman_innovation"; the filter in steady state; Imhof's integral takes seconds, so it is cached)."""
+    "kalman_innovation"; the filter in steady state; Imhof's integral takes about a second, so it is cached
+    in the process and on disk: navigators.core.disk_cache)."""
+    from ..core.disk_cache import cached_floats
     from .correlated_disparity import gchi2_isf, kalman_reading
-    M = kalman_reading(reading, int(n), 150, float(process_ratio))
-    return gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))
+
+    def compute() -> tuple[float]:
+        M = kalman_reading(reading, int(n), 150, float(process_ratio))
+        return (float(gchi2_isf(float(false_alarm_probability), np.linalg.eigvalsh(M))),)
+
+    key = (float(false_alarm_probability), int(n), float(process_ratio), str(reading))
+    return cached_floats("kalman_threshold", key, 1, compute, (str(Path(__file__).resolve().parents[1]),))[0]
