@@ -58,7 +58,8 @@ _GOLD = 0.6180339887498949
 N_OUT = 11
 
 
-@njit(cache=True)
+# forceinline: LLVM inlines it into the scan and refinement loops (zdl_batch ~10 % faster, the same bits)
+@njit(cache=True, forceinline=True)
 def _zd_eval(rec, ant, zdl, look, sv, t_guess):
     """Terrain point on the plane v . p = 0 at across-track coordinate sv (m): returns (f, t, x, y, z) with f
     the range if it lies in the look window (else inf; no point: t NaN). Records (tuples): ant = (lat, lon
