@@ -338,7 +338,7 @@ class RbpfIraUpdate:
         horizontal spread exceeds acquisition_spread_m, "acquisition" the same only while the cloud is the
         acquisition's or re-acquires after a recovery: against the collapse of 1,000 particles spread over
         50 m onto a 3.5 m likelihood, where the survivors' Kalman parts absorb their position's look-angle
-        mismatch as attitude error (default "acquisition"). It discards the rest of the measurement's
+        mismatch as attitude error (default "spread"). It discards the rest of the measurement's
         information (the published covariance is then that of a filter which never had it); "none" leaves
         the variances as they are. Outside the tempering the progressive correction (rbpf_progressive)
         keeps the cloud from collapsing onto a sharp likelihood."""
