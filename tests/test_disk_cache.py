@@ -70,7 +70,8 @@ def test_corrupt_or_foreign_files_are_recomputed_and_replaced(tmp_path, monkeypa
     cached_floats("ns", ("k",), 2, Counted((1.0, 2.0)), code)
     (path,) = _files(tmp_path / "cache")
     good = path.read_text()
-    bad_contents = ["", "{not json", json.dumps({"values": [1.0, 2.0]}),
+    bad_contents = ["", "{not json", json.dumps({"values": [1.0, 2.0]}), "[1.0, 2.0]",
+                    good.replace("[1.0, 2.0]", '"12"'), good.replace("[1.0, 2.0]", "[true, 2.0]"),
                     good.replace("[1.0, 2.0]", "[1.0, NaN]"), good.replace("[1.0, 2.0]", "[1.0]"),
                     good.replace('"key": "', '"key": "x')]
     for bad in bad_contents:
@@ -98,6 +99,17 @@ def test_unwritable_disabled_or_non_finite_changes_nothing_but_the_time(tmp_path
         f = Counted((1.0, float("nan")))
         assert cached_floats("ns", ("k",), 2, f, code)[0] == 1.0 and f.calls == 1
     assert not (tmp_path / "cache").exists() and blocker.read_text() == ""
+
+
+def test_unreadable_code_means_no_cache(tmp_path, monkeypatch, code):
+    monkeypatch.setenv(ENV_VAR, str(tmp_path / "cache"))
+    missing = (str(tmp_path / "pkg"), str(tmp_path / "no_such_folder" / "x.py"))
+    bad = tmp_path / "pkg" / "unreadable.py"
+    bad.mkdir()                                                    # a "file" that cannot be read
+    for _ in range(2):
+        f = Counted((1.0,))
+        assert cached_floats("ns", ("k",), 1, f, missing) == (1.0,) and f.calls == 1
+    assert not (tmp_path / "cache").exists()
 
 
 def test_cache_dir_defaults_to_the_users_cache_folder(monkeypatch):

@@ -63,7 +63,9 @@ def _read(path: Path, key_text: str, size: int) -> tuple[float, ...] | None:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         values = data["values"]
-        if data["key"] != key_text or len(values) != size:
+        if data["key"] != key_text or not isinstance(values, list) or len(values) != size:
+            return None
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
             return None
         out = tuple(float(v) for v in values)
     except (OSError, ValueError, KeyError, TypeError):
@@ -93,9 +95,13 @@ def cached_floats(namespace: str, key: tuple, size: int, compute: Callable[[], I
     code (code_digest of code_dirs), else computed and stored. A result that is not `size` finite floats is
     returned as it is and not stored."""
     folder = cache_dir()
+    try:
+        digest = code_digest(tuple(code_dirs)) if folder is not None else ""
+    except OSError:          # the code cannot be read whole (a file removed while installing): no cache
+        folder = None
     if folder is None:
         return tuple(compute())
-    key_text = repr((key, code_digest(tuple(code_dirs))))
+    key_text = repr((key, digest))
     name = hashlib.blake2b(key_text.encode(), digest_size=20).hexdigest()
     path = folder / namespace / f"{name}.json"
     hit = _read(path, key_text, size)
