@@ -1,0 +1,84 @@
+"""The Python examples of the user guide and the README run as written.
+
+Each page's ```python blocks run in order in one namespace (a page's later block may use an earlier one's
+names), parsed and run by Sybil, in a fresh working folder. A block that cannot run as written (a sketch
+that needs your data or a Ray cluster) is marked in the page with `<!-- skip: next "why" -->`, an HTML
+comment that neither GitHub nor the docs site shows; it still has to compile.
+"""
+
+from __future__ import annotations
+
+import re
+import unittest
+from pathlib import Path
+
+import pytest
+
+sybil = pytest.importorskip("sybil")
+from sybil.parsers.myst import PythonCodeBlockParser, SkipParser  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+GUIDE = ROOT / "docs" / "guide"
+PAGES = sorted(GUIDE.glob("*.md")) + [ROOT / "README.md"]
+_SKIP = re.compile(r"<!-- skip: next (?P<reason>.*?) -->|^%\s*skip:", re.M)
+
+
+def _pages_with_python() -> list[Path]:
+    return [p for p in PAGES if p.is_file() and "```python" in p.read_text(encoding="utf-8")]
+
+
+def _record_flight_log(folder: Path) -> None:
+    """The log the logs guide reads, recorded as its first command does (shorter)."""
+    from trn_env.cli import main
+
+    assert main(["record", "default", "--out", str(folder / "flight.trnlog"), "--duration", "20"]) == 0
+
+
+# What a page's examples assume already exists in the working folder, made as the page says to make it.
+_PREPARE = {"logs.md": _record_flight_log}
+
+
+def _close_envs(namespace: dict) -> None:
+    import gymnasium
+
+    for value in list(namespace.values()):
+        if isinstance(value, (gymnasium.Env, gymnasium.vector.VectorEnv)):
+            value.close()
+
+
+def test_every_page_with_python_examples_is_checked():
+    """The guide has Python examples and each skip names its reason (a quoted string) in an HTML comment,
+    the form GitHub's README view hides too."""
+    pages = _pages_with_python()
+    if not pages:
+        pytest.skip("docs/ is not in this checkout")
+    assert {p.name for p in pages} >= {"README.md", "first_flight.md", "fast_tier.md", "own_navigator.md"}
+    for page in pages:
+        for m in _SKIP.finditer(page.read_text(encoding="utf-8")):
+            reason = m.group("reason")
+            assert reason is not None and re.fullmatch(r'"[^"]{10,}"', reason), (page.name, m.group(0))
+
+
+@pytest.mark.parametrize("page", _pages_with_python(), ids=lambda p: p.name)
+def test_python_examples_run_as_written(page, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    if page.name in _PREPARE:
+        _PREPARE[page.name](tmp_path)
+    document = sybil.Sybil(parsers=[PythonCodeBlockParser(), SkipParser()]).parse(page)
+    examples = list(document)
+    python_blocks = [e for e in examples if isinstance(e.parsed, str)]
+    assert python_blocks, page.name
+    for example in python_blocks:          # skipped or not, every block is valid Python
+        compile(example.parsed, f"{page.name}:{example.line}", "exec")
+    ran = skipped = 0
+    try:
+        for example in examples:
+            try:
+                example.evaluate()
+            except unittest.SkipTest:
+                skipped += 1
+                continue
+            ran += isinstance(example.parsed, str)
+    finally:
+        _close_envs(document.namespace)
+    assert ran + skipped == len(python_blocks), (page.name, ran, skipped)
