@@ -1,5 +1,7 @@
 """The documentation: generated references cover every CLI option, scenario field, navigator setting and
-output field; the site builds with Sphinx with warnings as errors and its internal links resolve."""
+output field; the site builds with Sphinx with warnings as errors and its internal links resolve; the
+commands it gives (`trn-env ...`, `python scripts/...`, `python -c "..."`) parse and name what exists.
+The guide's Python examples run in tests/test_docs_examples.py."""
 
 from __future__ import annotations
 
@@ -289,4 +291,50 @@ def test_every_documented_script_command_parses():
     results = json.loads(child.stdout.strip().splitlines()[-1])
     bad = [f"{where}\n    -> {problem}"
            for ((_, _), where), (_, _, problem) in zip(unique, results, strict=True) if problem is not None]
+    assert bad == [], "\n".join(bad)
+
+
+def _documented_python_c_commands() -> list[tuple[str, str]]:
+    """(source, where) of every `python -c "..."` the docs and the README give, inline or in a fenced block
+    (backslash continuations and a command broken over lines joined)."""
+    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    found = []
+    for path in files:
+        text = path.read_text(encoding="utf-8").replace("\\\n", " ")
+        for m in re.finditer(r'python -c "([^"]*)"', text):
+            source = re.sub(r"\s*\n\s*", " ", m.group(1))
+            found.append((source, f"{path.relative_to(ROOT)}: python -c \"{source[:80]}...\""))
+    return found
+
+
+def test_every_documented_python_c_command_compiles_and_its_imports_resolve():
+    """Every `python -c "..."` the docs give (the validation pages' regeneration commands) is valid Python
+    whose imports name modules and attributes that exist now: a renamed function leaves no stale command."""
+    import ast
+    import importlib
+
+    commands = _documented_python_c_commands()
+    assert len(commands) >= 5
+    bad = []
+    for source, where in commands:
+        try:
+            tree = ast.parse(source)
+        except SyntaxError as exc:
+            bad.append(f"{where}\n    -> {exc}")
+            continue
+        for node in ast.walk(tree):     # (tests/ is on the path here, as the commands that use it put it)
+            try:
+                if isinstance(node, ast.Import):
+                    for alias in node.names:
+                        importlib.import_module(alias.name)
+                elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                    module = importlib.import_module(node.module)
+                    for alias in node.names:
+                        if not hasattr(module, alias.name):
+                            try:
+                                importlib.import_module(f"{node.module}.{alias.name}")
+                            except ImportError:
+                                raise ImportError(f"{node.module} has no {alias.name}") from None
+            except ImportError as exc:
+                bad.append(f"{where}\n    -> {type(exc).__name__}: {exc}")
     assert bad == [], "\n".join(bad)
