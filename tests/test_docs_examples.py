@@ -27,15 +27,17 @@ def _pages_with_python() -> list[Path]:
     return [p for p in PAGES if p.is_file() and "```python" in p.read_text(encoding="utf-8")]
 
 
-def _record_flight_log(folder: Path) -> None:
-    """The log the logs guide reads, recorded as its first command does (shorter)."""
-    from trn_env.cli import main
+def _recorded(name: str):
+    """The log a page reads, recorded as the page's own command does (shorter)."""
+    def record(folder: Path) -> None:
+        from trn_env.cli import main
 
-    assert main(["record", "default", "--out", str(folder / "flight.trnlog"), "--duration", "20"]) == 0
+        assert main(["record", "default", "--out", str(folder / name), "--duration", "20"]) == 0
+    return record
 
 
 # What a page's examples assume already exists in the working folder, made as the page says to make it.
-_PREPARE = {"logs.md": _record_flight_log}
+_PREPARE = {"logs.md": _recorded("flight.trnlog"), "README.md": _recorded("flight.log")}
 
 
 def _close_envs(namespace: dict) -> None:
