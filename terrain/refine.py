@@ -14,6 +14,8 @@ Memory: one float64 array of the refined grid plus FFT work space (~4 x that); 3
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import geodesy, kernels, spectrum
@@ -34,23 +36,31 @@ def fit_dem_spectrum(dem: Dem, band=(0.1, 0.5)):
     return c, beta, f_nyq
 
 
-def refine(
-    dem: Dem,
-    spacing_m: float = 10.0,
-    seed: int | np.random.Generator = 0,
-    region=None,
-    max_posts: int = 40_000_000,
-    detail: bool = True,
-    name: str | None = None,
-) -> Dem:
-    """Refined copy of `dem` at about `spacing_m` (north and east), over `region` = (lat_min, lat_max,
-    lon_min, lon_max) radians (default: the whole DEM). Seeded; see the module docstring."""
+@dataclass(frozen=True)
+class RefinementPlan:
+    """The refined grid `refine` would build: its posts (radians) and the coarse region it covers."""
+
+    lat_rad: np.ndarray            # the fine posts' latitudes, south to north
+    lon_rad: np.ndarray            # ... and longitudes, west to east
+    k_lat: int                     # fine posts per coarse spacing (coarse posts are fine posts)
+    k_lon: int
+    region: tuple[float, float, float, float]     # lat_min, lat_max, lon_min, lon_max clipped to the DEM
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.lat_rad.size, self.lon_rad.size
+
+
+def refinement_plan(dem: Dem, spacing_m: float = 10.0, region=None, max_posts: int = 40_000_000
+                    ) -> RefinementPlan:
+    """The grid `refine(dem, spacing_m, region=region, max_posts=max_posts)` builds, without building it;
+    raises ValueError for the arguments `refine` refuses (a spacing not finer than the DEM's, a region
+    outside it, more than max_posts posts)."""
     if not (np.isfinite(spacing_m) and spacing_m > 0):
         raise ValueError(f"refine: spacing_m must be positive, got {spacing_m}")
     dn_c, de_c = dem.spacing_m
     if spacing_m >= min(dn_c, de_c):
         raise ValueError(f"refine: spacing_m={spacing_m} is not finer than the DEM's {min(dn_c, de_c):.1f} m")
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     lat_min, lat_max, lon_min, lon_max = dem.bounds if region is None else region
     b = dem.bounds
     lat_min, lat_max = max(lat_min, b[0]), min(lat_max, b[1])
@@ -60,8 +70,6 @@ def refine(
     # fine posts: integer subdivisions of the coarse spacing, so that coarse posts are fine posts
     k_lat = int(np.ceil(dn_c / spacing_m))
     k_lon = int(np.ceil(de_c / spacing_m))
-    dlat = dem.dlat_rad / k_lat
-    dlon = dem.dlon_rad / k_lon
     i0 = int(np.floor((lat_min - dem.lat0_rad) / dem.dlat_rad + 1e-9))
     i1 = int(np.ceil((lat_max - dem.lat0_rad) / dem.dlat_rad - 1e-9))
     j0 = int(np.floor((lon_min - dem.lon0_rad) / dem.dlon_rad + 1e-9))
@@ -74,21 +82,38 @@ def refine(
         )
     lat0 = dem.lat0_rad + i0 * dem.dlat_rad
     lon0 = dem.lon0_rad + j0 * dem.dlon_rad
-    lat = lat0 + np.arange(n_lat) * dlat
-    lon = lon0 + np.arange(n_lon) * dlon
+    return RefinementPlan(lat0 + np.arange(n_lat) * (dem.dlat_rad / k_lat),
+                          lon0 + np.arange(n_lon) * (dem.dlon_rad / k_lon), k_lat, k_lon,
+                          (lat_min, lat_max, lon_min, lon_max))
+
+
+def refine(
+    dem: Dem,
+    spacing_m: float = 10.0,
+    seed: int | np.random.Generator = 0,
+    region=None,
+    max_posts: int = 40_000_000,
+    detail: bool = True,
+    name: str | None = None,
+) -> Dem:
+    """Refined copy of `dem` at about `spacing_m` (north and east), over `region` = (lat_min, lat_max,
+    lon_min, lon_max) radians (default: the whole DEM). Seeded; see the module docstring."""
+    plan = refinement_plan(dem, spacing_m, region, max_posts)
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    lat, lon = plan.lat_rad, plan.lon_rad
+    lat0, lon0 = lat[0], lon[0]
+    dlat, dlon = dem.dlat_rad / plan.k_lat, dem.dlon_rad / plan.k_lon
     grid = dem.grid
     base = _bicubic_grid(grid, lat, lon)
     heights = base
     if detail:
-        c, beta, f_nyq_c = fit_dem_spectrum(
-            dem.subset(lat_min, lat_max, lon_min, lon_max) if region is not None else dem
-        )
+        c, beta, f_nyq_c = fit_dem_spectrum(dem.subset(*plan.region) if region is not None else dem)
         lat_c = 0.5 * (lat[0] + lat[-1])
         dy = dlat * geodesy.meridian_radius_m(lat_c)
         dx = dlon * geodesy.prime_vertical_radius_m(lat_c) * np.cos(lat_c)
-        field = _power_law_band(rng, (n_lat, n_lon), dy, dx, c, beta, f_nyq_c)
+        field = _power_law_band(rng, plan.shape, dy, dx, c, beta, f_nyq_c)
         # remove what the coarse posts see: subtract the bicubic interpolation of the coarse-post samples
-        coarse_samples = field[::k_lat, ::k_lon]
+        coarse_samples = field[::plan.k_lat, ::plan.k_lon]
         sub = Dem(coarse_samples, lat0, lon0, dem.dlat_rad, dem.dlon_rad, "detail")
         field -= _bicubic_grid(sub.grid, lat, lon)
         heights = base + field

@@ -25,7 +25,8 @@ DEM = terrain.load("jacksboro")
 
 
 def _data() -> dict:
-    """default_short without its 30 m world refinement (validation builds it: slow, and beside the point)."""
+    """default_short without its 30 m world refinement (beside the point here, and a test that builds the
+    terrain or flies is quicker without it)."""
     data, _ = read_scenario_file(SCEN / "default_short.toml")
     data = copy.deepcopy(data)
     data["terrain"]["world"].pop("refinement", None)

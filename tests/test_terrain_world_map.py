@@ -72,6 +72,61 @@ def test_refine_bad_arguments():
         refine.refine(coarse, spacing_m=1.0)
 
 
+_REFINEMENTS = [{"spacing_m": 30.0}, {"spacing_m": 200.0}, {"spacing_m": 1.0}, {"spacing_m": -5.0},
+                 {"spacing_m": 30.0, "region_deg": [36.47, 36.56, -84.40, -84.33]},
+                 {"spacing_m": 10.0, "region_deg": [36.47, 36.56, -84.40, -84.33], "detail": False},
+                 {"spacing_m": 30.0, "region_deg": [10.0, 11.0, 20.0, 21.0]},
+                 {"spacing_m": 30.0, "region_deg": [36.56, 36.47, -84.40, -84.33]},
+                 {"spacing_m": 30.0, "extent": 3}]
+
+
+@pytest.mark.parametrize("settings", _REFINEMENTS, ids=lambda s: str(s))
+def test_refinement_check_refuses_exactly_what_refining_refuses(settings):
+    """The scenario validation's check of [terrain.world.refinement] (without building the grid) raises the
+    same error as building it does, for accepted and refused settings alike; refine's plan is the grid it
+    builds."""
+    from trn_env.scenario.maps import check_refinement, refine_dem
+    coarse = terrain.load("jacksboro")
+
+    def outcome(call):
+        try:
+            return call()
+        except (ValueError, TypeError) as exc:
+            return type(exc), str(exc)
+
+    built = outcome(lambda: refine_dem(coarse, settings, np.random.default_rng(0)))
+    checked = outcome(lambda: check_refinement(coarse, settings))
+    if isinstance(built, tuple):
+        assert checked[0] is built[0] and checked[1] == built[1]
+    else:
+        assert checked is None
+        kw = {k: v for k, v in settings.items() if k in ("spacing_m",)}
+        if "region_deg" in settings:
+            kw["region"] = tuple(np.radians(settings["region_deg"]))
+        plan = refine.refinement_plan(coarse, **kw)
+        np.testing.assert_array_equal(plan.lat_rad, built.lat_rad)
+        np.testing.assert_array_equal(plan.lon_rad, built.lon_rad)
+
+
+def test_a_scenario_validates_its_refinement_without_building_it(monkeypatch):
+    """Loading a scenario checks its refinement's settings but builds no refined grid (a tenth of a second
+    and more per variant of a campaign); a bad one is still a problem at its field."""
+    from trn_env.scenario import ScenarioError, load_scenario
+    from trn_env.scenario.loading import read_scenario_file
+
+    def refuse(*a, **k):
+        raise AssertionError("the refined grid was built during validation")
+
+    monkeypatch.setattr(refine, "_power_law_band", refuse)
+    monkeypatch.setattr(refine, "_bicubic_grid", refuse)
+    sc = load_scenario("default", seed=4)
+    assert sc.terrain.world.refinement.spacing_m == 30.0
+    data, _ = read_scenario_file("default")
+    data["terrain"]["world"]["refinement"] = {"spacing_m": 500.0}
+    with pytest.raises(ScenarioError, match=r"terrain\.world\.refinement.*not finer than the DEM"):
+        load_scenario(data)
+
+
 def test_map_error_components():
     world = synthetic.generate(
         200, 200, 90.0, rms_height_m=100.0, correlation_length_m=1500.0, hurst=0.8, seed=2

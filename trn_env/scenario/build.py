@@ -27,6 +27,7 @@ from trn_env.scenario.maps import (
     _load_dem,
     apply_map_errors,
     build_terrain,
+    check_refinement,
     map_error_model,
     map_faults,
     map_height,
@@ -267,7 +268,7 @@ def check(sc, extras: dict, known: list[str] | None = None, tolerant: bool = Fal
     refinement = sc.terrain.world.refinement
     if refinement is not None and world is not None and not blocked("terrain.world"):
         checks.append(("terrain.world.refinement",
-                       lambda: refine_dem(world, refinement.to_dict(), np.random.default_rng(0))))
+                       lambda: check_refinement(world, refinement.to_dict())))
     if the_map is not None and sc.terrain.map.faults and not blocked("terrain.map"):
         checks.append(("", lambda: _fault_problems(sc, the_map)))
     if the_map is not None and sc.monitors and not blocked("monitors", "sensors"):

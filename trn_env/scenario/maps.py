@@ -76,13 +76,34 @@ def _fault_problems(sc, the_map) -> list[str]:
     return problems
 
 
-def refine_dem(dem, settings: dict, rng: np.random.Generator):
-    """The true terrain with synthetic sub-grid detail (terrain.refine.refine; region_deg in degrees)."""
-    from trn_env.terrain.refine import refine
+def _refine_kwargs(settings: dict) -> dict:
     kw = dict(settings)
     if "region_deg" in kw:
         kw["region"] = tuple(math.radians(x) for x in kw.pop("region_deg"))
-    return refine(dem, seed=rng, **kw)
+    return kw
+
+
+def refine_dem(dem, settings: dict, rng: np.random.Generator):
+    """The true terrain with synthetic sub-grid detail (terrain.refine.refine; region_deg in degrees)."""
+    from trn_env.terrain.refine import refine
+    return refine(dem, seed=rng, **_refine_kwargs(settings))
+
+
+def check_refinement(dem, settings: dict) -> None:
+    """Raise what refine_dem(dem, settings, rng) would raise, without building the refined grid (a tenth
+    of a second and up per scenario validated): the arguments, the region and the size
+    (terrain.refine.refinement_plan), and the coarse spectrum's fit that the detail continues."""
+    import inspect
+
+    from trn_env.terrain.refine import fit_dem_spectrum, refine, refinement_plan
+    kw = _refine_kwargs(settings)
+    try:
+        inspect.signature(refine).bind(dem, seed=None, **kw)
+    except TypeError as exc:                                    # a field refine does not take
+        raise TypeError(f"refine() {exc}") from None
+    plan = refinement_plan(dem, **{k: kw[k] for k in ("spacing_m", "region", "max_posts") if k in kw})
+    if kw.get("detail", True):
+        fit_dem_spectrum(dem.subset(*plan.region) if kw.get("region") is not None else dem)
 
 
 def map_error_model(settings: dict, rng: np.random.Generator):
