@@ -101,6 +101,46 @@ def test_unwritable_disabled_or_non_finite_changes_nothing_but_the_time(tmp_path
     assert not (tmp_path / "cache").exists() and blocker.read_text() == ""
 
 
+def test_entries_unused_for_a_month_are_removed_by_the_next_write(tmp_path, monkeypatch, code):
+    """A hit refreshes its entry; a new entry removes the namespace's entries untouched for MAX_UNUSED_DAYS
+    and temporary files older than a day, and nothing else (recent entries, other namespaces, other
+    files)."""
+    import os
+    import time
+
+    monkeypatch.setenv(ENV_VAR, str(tmp_path / "cache"))
+    day = 86400.0
+    now = time.time()
+
+    def entry(ns, key):
+        cached_floats(ns, key, 1, lambda: (1.0,), code)
+        made = [p for p in _files(tmp_path / "cache" / ns) if p not in seen]
+        seen.extend(made)
+        return made[0]
+
+    def age(path, days):
+        os.utime(path, (now - days * day, now - days * day))
+
+    seen = []
+    stale, recent, used = (entry("ns", (k,)) for k in ("stale", "recent", "used"))
+    elsewhere = entry("other", ("stale",))
+    for path, days in ((stale, 10), (recent, -5), (used, 10), (elsewhere, 10)):
+        age(path, disk_cache.MAX_UNUSED_DAYS + days)
+    folder = tmp_path / "cache" / "ns"
+    old_tmp, new_tmp, other = folder / ".tmp-abc.json", folder / ".tmp-def.json", folder / "notes.txt"
+    for path, days in ((old_tmp, 2.0), (new_tmp, 0.1), (other, 400.0)):
+        path.write_text("{")
+        age(path, days)
+    hit = Counted((5.0,))
+    assert cached_floats("ns", ("used",), 1, hit, code) == (1.0,) and hit.calls == 0     # a hit ...
+    assert now - used.stat().st_mtime < 60.0                                               # ... touches it
+    assert stale.exists()                                     # reading prunes nothing
+    assert cached_floats("ns", ("new",), 1, lambda: (2.0,), code) == (2.0,)            # a write prunes
+    assert not stale.exists() and not old_tmp.exists()
+    assert recent.exists() and used.exists() and new_tmp.exists() and other.exists() and elsewhere.exists()
+    assert len(_files(folder)) == 5                          # recent, used, new, the new tmp, notes.txt
+
+
 def test_unreadable_code_means_no_cache(tmp_path, monkeypatch, code):
     monkeypatch.setenv(ENV_VAR, str(tmp_path / "cache"))
     missing = (str(tmp_path / "pkg"), str(tmp_path / "no_such_folder" / "x.py"))

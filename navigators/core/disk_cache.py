@@ -11,7 +11,10 @@ height). `cached_floats` keeps such a result in one small JSON file per key unde
 - a file is written whole (a temporary file renamed over it), so a reader sees all of it or none, and two
   processes computing the same key write the same bytes;
 - anything unreadable, malformed or not finite counts as a miss (it is computed again and rewritten), and a
-  cache that cannot be written is skipped: the cache changes how long a result takes, never what it is.
+  cache that cannot be written is skipped: the cache changes how long a result takes, never what it is;
+- a hit touches its file; each new entry removes the namespace's entries unused for `MAX_UNUSED_DAYS` (those
+  of code since edited or upgraded, of maps no longer flown) and temporary files a killed writer left, so
+  the folder does not grow with every release while two installations that share it keep their entries.
 
 Where: `$TRN_ENV_CACHE_DIR` when set (an empty value turns the cache off), else the platform's user cache
 folder for "trn-env" (platformdirs; ~/.cache/trn-env on Linux).
@@ -29,6 +32,8 @@ from functools import cache
 from pathlib import Path
 
 ENV_VAR = "TRN_ENV_CACHE_DIR"
+MAX_UNUSED_DAYS = 30.0     # an entry neither read nor written for this long is removed by the next write
+_TMP_PREFIX = ".tmp-"
 
 
 def cache_dir() -> Path | None:
@@ -76,7 +81,7 @@ def _read(path: Path, key_text: str, size: int) -> tuple[float, ...] | None:
 def _write(path: Path, key_text: str, values: tuple[float, ...]) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_TMP_PREFIX, suffix=".json")
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 json.dump({"key": key_text, "values": list(values)}, f)   # floats by repr: exact
@@ -86,6 +91,28 @@ def _write(path: Path, key_text: str, values: tuple[float, ...]) -> None:
             raise
     except OSError:
         pass   # a read-only or full disk: the result stands, only the next process recomputes it
+
+
+def _prune(folder: Path, keep: Path) -> None:
+    """Remove the entries of `folder` unused for MAX_UNUSED_DAYS, and temporary files older than a day (a
+    writer killed between writing and renaming); `keep` (just written) stays. Errors are ignored: another
+    process may be pruning too."""
+    import time
+
+    now = time.time()
+    try:
+        paths = list(folder.iterdir())
+    except OSError:
+        return
+    for path in paths:
+        if path == keep or path.suffix != ".json":
+            continue
+        max_age_s = 86400.0 if path.name.startswith(_TMP_PREFIX) else MAX_UNUSED_DAYS * 86400.0
+        try:
+            if now - path.stat().st_mtime > max_age_s:
+                path.unlink()
+        except OSError:
+            pass
 
 
 def cached_floats(namespace: str, key: tuple, size: int, compute: Callable[[], Iterable[float]],
@@ -106,8 +133,13 @@ def cached_floats(namespace: str, key: tuple, size: int, compute: Callable[[], I
     path = folder / namespace / f"{name}.json"
     hit = _read(path, key_text, size)
     if hit is not None:
+        try:
+            os.utime(path)        # in use: kept by the pruning
+        except OSError:
+            pass                  # a read-only cache still serves its entries
         return hit
     values = tuple(compute())
     if len(values) == size and all(isinstance(v, float) and math.isfinite(v) for v in values):
         _write(path, key_text, values)
+        _prune(path.parent, keep=path)
     return values
