@@ -55,6 +55,19 @@ def test_gnss_denied_demo_ins_drifts_and_trn_stays_bounded(tmp_path):
     assert trn["horizontal_error_final_m"] < 0.2 * ins["horizontal_error_final_m"]
 
 
+
+def test_gallery_fly_route_completes_its_route_on_the_legs(capsys):
+    """The gallery's flight-core example (shown as code, not run by the docs build) flies its route in wind
+    and light turbulence: completed, on the legs but for the turns."""
+    import re
+
+    mod = _load("fly_route")
+    mod.main(["--turbulence", "light", "--seed", "2"])
+    out = capsys.readouterr().out
+    assert "completed in" in out and "NOT completed" not in out, out
+    assert float(re.search(r"median ([\d.]+) m", out).group(1)) < 5.0, out
+
+
 # Each script that writes --out, with what else its parser requires.
 _OUT_SCRIPTS = {
     "calibrate_fast_tier": [], "env_rates_check": [], "fast_tier_speed_trade": [], "filter_statistics": [],

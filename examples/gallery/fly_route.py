@@ -26,7 +26,7 @@ from trn_env.flight.wind import Turbulence, WindConfig
 from trn_env.guidance.route_following import Guidance, Route, Waypoint, position_from_truth
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--wind-from-deg", type=float, default=270.0)
     ap.add_argument("--wind-mps", type=float, default=15.0)
@@ -34,7 +34,7 @@ def main() -> None:
                     help="Milspec turbulence severity")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--tas-mps", type=float, default=85.0)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     lat0, lon0 = math.radians(33.2), math.radians(-98.2)
 
