@@ -186,3 +186,26 @@ def test_no_code_imports_the_folders_by_their_bare_names():
                 bad += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
                         if n.split(".")[0] in ("navigators", "terrain", "aircraft")]
     assert bad == [], bad[:10]
+
+
+def test_tomllib_is_imported_with_the_python_3_10_fallback():
+    """pyproject.toml admits Python 3.10, whose standard library has no tomllib: every import of it (the
+    package, tests, scripts, examples) sits under `if sys.version_info >= (3, 11):` with tomli (declared
+    for Python < 3.11) as the else branch."""
+    assert 'requires-python = ">=3.10"' in (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    bad = []
+    for top in ("tests", "scripts", "examples", *TOP):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            guarded = set()
+            for node in ast.walk(tree):
+                if (isinstance(node, ast.If) and "version_info" in ast.unparse(node.test)
+                        and any(isinstance(n, ast.Import) and n.names[0].name == "tomli"
+                                for n in node.orelse)):
+                    guarded |= {id(n) for n in node.body}
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno}" for node in ast.walk(tree)
+                    if isinstance(node, ast.Import) and any(a.name == "tomllib" for a in node.names)
+                    and id(node) not in guarded]
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno}" for node in ast.walk(tree)
+                    if isinstance(node, ast.ImportFrom) and node.module == "tomllib"]
+    assert bad == [], bad

@@ -13,7 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import tomllib
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 from trn_env.navigators import registry
 from trn_env.navigators.builtin import BUILTIN_MONITORS, BUILTIN_NAVIGATORS
 
