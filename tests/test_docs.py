@@ -338,3 +338,25 @@ def test_every_documented_python_c_command_compiles_and_its_imports_resolve():
             except ImportError as exc:
                 bad.append(f"{where}\n    -> {type(exc).__name__}: {exc}")
     assert bad == [], "\n".join(bad)
+
+
+# Paths the docs name that are deliberately not in this tree, with why.
+_NOT_IN_THIS_TREE = {
+    "navigators/filters/pf_accel_error.py": "a rejected experiment, named on its branch commit",
+    "examples/random_agent.py": "the gymnasium-jsbsim package's own example",
+}
+
+
+def test_every_repository_path_the_docs_name_exists():
+    """Every `tests/...`, `scripts/...`, `examples/...`, `docs/...` or package path (a file with its
+    extension) in the docs and the README names a file of this tree: a file moved or renamed leaves no
+    stale reference for a reader to chase."""
+    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    pattern = re.compile(r"\b((?:tests|scripts|examples|docs|trn_env|navigators|terrain|aircraft)/"
+                         r"[A-Za-z0-9_./-]+\.(?:py|toml|json|md|xml|yml|yaml|png|csv))\b")
+    missing = sorted({f"{path.relative_to(ROOT)}: {m}" for path in files
+                      for m in pattern.findall(path.read_text(encoding="utf-8"))
+                      if not (ROOT / m).exists() and m not in _NOT_IN_THIS_TREE})
+    assert len(files) > 20
+    assert missing == [], missing
+    assert all(not (ROOT / p).exists() for p in _NOT_IN_THIS_TREE)     # the list holds only what is absent
