@@ -360,3 +360,55 @@ def test_every_repository_path_the_docs_name_exists():
     assert len(files) > 20
     assert missing == [], missing
     assert all(not (ROOT / p).exists() for p in _NOT_IN_THIS_TREE)     # the list holds only what is absent
+
+
+# Dotted names in the docs' code spans that are not Python references, with what they are.
+_NOT_PYTHON_NAMES = {"trn_env.monitors": "the entry-point group of monitors"}
+
+
+def _is_scenario_field(name: str, schema: dict) -> bool:
+    node = schema
+    for part in name.split("."):
+        props = node.get("properties") if isinstance(node, dict) else None
+        if not props or part not in props:
+            return False
+        node = props[part]
+    return True
+
+
+def test_every_python_name_the_docs_give_resolves():
+    """Every dotted `trn_env.x.y`, `navigators.x.y` or `terrain.x.y` in a code span of the docs and the
+    README (the source tree's `navigators` and `terrain` are installed under trn_env) names a module,
+    class, function or constant that exists: a renamed or moved function leaves no stale reference.
+    Scenario field paths (`terrain.map.error_model`) are not Python names and are left out."""
+    import importlib
+
+    from trn_env.scenario.validation import schema
+
+    scenario = schema()
+    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    names: dict[str, str] = {}
+    for path in files:
+        for span in re.findall(r"`([^`\n]+)`", path.read_text(encoding="utf-8")):
+            for name in re.findall(r"(?<![\w./-])((?:trn_env|navigators|terrain)(?:\.[A-Za-z_]\w*)+)", span):
+                names.setdefault(name, str(path.relative_to(ROOT)))
+
+    def resolves(name: str) -> bool:
+        parts = (name if name.startswith("trn_env.") else f"trn_env.{name}").split(".")
+        for i in range(len(parts), 1, -1):
+            try:
+                obj = importlib.import_module(".".join(parts[:i]))
+            except ImportError:
+                continue
+            try:
+                for attr in parts[i:]:
+                    obj = getattr(obj, attr)
+            except AttributeError:
+                return False
+            return True
+        return False
+
+    assert len(names) > 100
+    bad = [f"{where}: {name}" for name, where in sorted(names.items())
+           if name not in _NOT_PYTHON_NAMES and not _is_scenario_field(name, scenario) and not resolves(name)]
+    assert bad == [], bad

@@ -5,5 +5,6 @@ innovation_monitor   `InnovationMonitor`: sliding-window normalised innovation s
 """
 
 from .dem_monitor import DemIntegrityMonitor, DemMonitorConfig, MonitorOutput
+from .innovation_monitor import InnovationMonitor
 
-__all__ = ["DemIntegrityMonitor", "DemMonitorConfig", "MonitorOutput"]
+__all__ = ["DemIntegrityMonitor", "DemMonitorConfig", "InnovationMonitor", "MonitorOutput"]
