@@ -412,3 +412,64 @@ def test_every_python_name_the_docs_give_resolves():
     bad = [f"{where}: {name}" for name, where in sorted(names.items())
            if name not in _NOT_PYTHON_NAMES and not _is_scenario_field(name, scenario) and not resolves(name)]
     assert bad == [], bad
+
+
+def test_every_documented_flight_command_names_a_valid_scenario(tmp_path, monkeypatch):
+    """Every `trn-env fly | record | validate SCENARIO ...` line in the docs and the README, with a built-in
+    scenario or a file of this tree, passes `trn-env validate` with the same --seed, --navigator,
+    --duration and --set: the command is accepted, not just parsed (a --set path that moved, a navigator
+    renamed, a value the schema refuses). Placeholders (`--navigator NAME`, `my_package.nav:...`) are
+    left out; a module a page writes out (a ```python block opening with `# NAME.py`) is put on the path."""
+    import contextlib
+    import io
+    import shlex
+
+    from trn_env.cli import main
+    from trn_env.cli.parser import _parser
+    from trn_env.scenario.loading import builtin_names
+
+    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    for path in files:                   # the modules the pages write out, for `--navigator module:Name`
+        for block in re.findall(r"```python\n(.*?)```", path.read_text(encoding="utf-8"), re.S):
+            m = re.match(r"# (\w+)\.py\n", block)
+            if m:
+                (tmp_path / f"{m.group(1)}.py").write_text(block, encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    commands = {}
+    for path in files:
+        fence = False
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            if line.strip().startswith("```"):
+                fence = not fence
+                continue
+            for part in re.split(r"&&|;", line) if fence else ():
+                command = re.sub(r"^(?:[A-Z_][A-Z0-9_]*=\S*\s+)+", "", part.strip())
+                if not command.startswith("trn-env ") or "[" in command:
+                    continue
+                words = shlex.split(command, comments=True)[1:]
+                if not words or words[0] not in ("fly", "record", "validate") or {"-h", "--help"} & {*words}:
+                    continue
+                ns = _parser().parse_args(["1" if re.fullmatch(r"[A-Z]", a) else a for a in words])
+                commands[command] = (f"{path.relative_to(ROOT)}:{number}", ns)
+    checked, bad = 0, []
+    for command, (where, ns) in sorted(commands.items()):
+        scenario = ns.scenario
+        if scenario not in builtin_names():
+            if not (ROOT / scenario).is_file():
+                continue                                         # my.toml, a user's file
+            scenario = str(ROOT / scenario)
+        if ns.navigator and (re.fullmatch(r"[A-Z_]+", ns.navigator) or ns.navigator.startswith("my_")):
+            continue                                             # a placeholder
+        argv = ["validate", scenario]
+        for option in ("seed", "navigator", "duration"):
+            if getattr(ns, option, None) is not None:
+                argv += [f"--{option}", str(getattr(ns, option))]
+        for assignment in getattr(ns, "set", None) or []:
+            argv += ["--set", assignment]
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            rc = main(argv)
+        checked += 1
+        if rc != 0:
+            bad.append(f"{where}: {command}\n    -> {err.getvalue().strip()[-400:]}")
+    assert checked >= 12 and bad == [], "\n".join(bad)
