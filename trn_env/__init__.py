@@ -32,10 +32,16 @@ def _arrow_memory_pool() -> None:
     imported before pyarrow, as in the CLI and the scripts). pyarrow's default backend, mimalloc, keeps what
     it freed: reading a long run's log back at its end (trn_env.logs.writer.read_ticks) left the process
     holding about three times the bytes it read; the system allocator returns them (figures and command in
-    docs/validation/logs.md)."""
+    docs/validation/logs.md).
+
+    pyarrow also starts jemalloc's background purging thread when it loads, whichever pool is used; it is
+    turned off too (JE_ARROW_MALLOC_CONF, unless set): with it every later fork (the warm-up's compile, the
+    pipelined navigator, a campaign's workers) forks a multi-threaded process, which Python 3.12 and newer
+    warn about. Without it jemalloc purges as it allocates; with the system pool it allocates nothing."""
     import os
 
     os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
+    os.environ.setdefault("JE_ARROW_MALLOC_CONF", "background_thread:false")
 
 
 _arrow_memory_pool()

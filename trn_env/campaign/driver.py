@@ -121,8 +121,8 @@ def run_campaign(campaign: Campaign, out_dir: Path, *, backend=None, resume: boo
                  "backend": backend.describe(), "driver_row_cpu_s": 0.0}
         bar = None
         if progress:
-            from tqdm import tqdm
-            bar = tqdm(total=todo, unit="run", desc=f"campaign {campaign.name}", mininterval=0.5)
+            from trn_env.output.progress import progress_bar
+            bar = progress_bar(total=todo, unit="run", desc=f"campaign {campaign.name}", mininterval=0.5)
         t0 = time.perf_counter()
 
         def on_result(row: dict, log_bytes: bytes | None) -> None:

@@ -76,8 +76,8 @@ def cmd_fly(args) -> int:
     import time
 
     from rich.console import Console
-    from tqdm import tqdm
 
+    from trn_env.output.progress import progress_bar
     from trn_env.output.run_folder import write_run
     from trn_env.sim.closed_loop import ClosedLoop
 
@@ -117,7 +117,7 @@ def cmd_fly(args) -> int:
             return 2
         if not args.quiet:
             print(f"ready after {warm_s:.1f} s", file=sys.stderr, flush=True)
-        bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
+        bar = progress_bar(total=round(scenario.duration_s, 1), unit="sim s", desc=f"fly {scenario.name}",
                    disable=args.quiet, mininterval=0.5,
                    bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
         wall0 = time.perf_counter()

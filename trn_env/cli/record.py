@@ -24,11 +24,10 @@ def cmd_record(args) -> int:
     if problem is not None:
         print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
         return 2
-    from tqdm import tqdm
-
     from trn_env.flight.core import TrimError
     from trn_env.logs.record import record
-    bar = tqdm(total=round(scenario.duration_s, 1), unit="sim s", desc=f"record {scenario.name}",
+    from trn_env.output.progress import progress_bar
+    bar = progress_bar(total=round(scenario.duration_s, 1), unit="sim s", desc=f"record {scenario.name}",
                disable=args.quiet, mininterval=0.5,
                bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
 
