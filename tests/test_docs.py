@@ -477,3 +477,27 @@ def test_every_documented_flight_command_names_a_valid_scenario(tmp_path, monkey
         if rc != 0:
             bad.append(f"{where}: {command}\n    -> {err.getvalue().strip()[-400:]}")
     assert checked >= 12 and bad == [], "\n".join(bad)
+
+
+def test_the_ci_workflow_example_is_sound():
+    """examples/ci/trn-env-regression.yml (shown in the CI guide): every `trn-env ...` line of its steps
+    parses, and no env value starts with `~` (GitHub does not expand it, numba takes NUMBA_CACHE_DIR
+    literally, so the kernels would land in a folder named `~` that the cache step never saves)."""
+    import shlex
+
+    yaml = pytest.importorskip("yaml")
+    from trn_env.cli.parser import _parser
+
+    path = ROOT / "examples" / "ci" / "trn-env-regression.yml"
+    if not path.is_file():
+        pytest.skip("examples/ is not in this checkout")
+    steps = yaml.safe_load(path.read_text(encoding="utf-8"))["jobs"]["gate"]["steps"]
+    envs = [(s.get("name"), k, v) for s in steps for k, v in (s.get("env") or {}).items()]
+    assert [e for e in envs if str(e[2]).startswith("~")] == []
+    commands = [line.strip() for s in steps for line in str(s.get("run", "")).splitlines()
+                if line.strip().startswith("trn-env ")]
+    assert len(commands) >= 3
+    for command in commands:
+        _parser().parse_args(shlex.split(command, comments=True)[1:])
+    assert any("NUMBA_CACHE_DIR=$HOME/" in str(s.get("run", "")) and "GITHUB_ENV" in str(s.get("run", ""))
+               for s in steps)
