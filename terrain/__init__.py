@@ -58,7 +58,7 @@ def load(name_or_path, fill_voids: bool = False) -> Dem:
             from . import synthetic
 
             return synthetic.from_preset(key.split(":", 1)[1])
-    path = Path(name_or_path)
+    path = Path(name_or_path).expanduser()
     if not path.exists() and not path.suffix and len(path.parts) == 1:
         from .synthetic import PRESETS
 

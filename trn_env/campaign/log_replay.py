@@ -148,7 +148,8 @@ def load_log_campaign(path: Path, data: dict, raw: bytes) -> LogCampaign:
     base = path.resolve().parent
     opened = []
     for i, ref in enumerate(logs):
-        p = Path(ref) if Path(ref).is_absolute() else base / ref
+        p = Path(ref).expanduser()
+        p = p if p.is_absolute() else base / p
         try:
             opened.append((ref, p, read_log(p)))
         except LogError as exc:

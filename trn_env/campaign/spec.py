@@ -236,7 +236,7 @@ def _schema_problems(data: dict) -> list[str]:
 
 
 def _scenario_path(ref: str, base: Path) -> str:
-    p = Path(ref)
+    p = Path(ref).expanduser()
     if ref in builtin_names() and not p.suffix:
         return ref
     return str((base / p).resolve()) if not p.is_absolute() else str(p.resolve())

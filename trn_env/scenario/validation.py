@@ -197,7 +197,10 @@ def _fill_defaults(data: dict) -> dict:
 
 
 def _resolve_dem_path(value: str, base_dir: Path | None) -> str:
-    """A DEM value that looks like a relative file path is taken relative to the scenario file."""
+    """A DEM value that looks like a relative file path is taken relative to the scenario file; a leading
+    `~` is the user's home folder."""
+    if value.startswith("~"):
+        return str(Path(value).expanduser())
     p = Path(value)
     if base_dir is not None and not p.is_absolute() and (p.suffix or "/" in value):
         cand = base_dir / p
@@ -422,6 +425,9 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]
     map_cfg = d["terrain"]["map"]
     if map_cfg["dem"] != "world":
         map_cfg["dem"] = _resolve_dem_path(map_cfg["dem"], base_dir)
+    for fault in map_cfg.get("faults") or []:
+        if isinstance(fault, dict) and isinstance(fault.get("source_dem"), str):
+            fault["source_dem"] = _resolve_dem_path(fault["source_dem"], base_dir)
     dems = {}
     for key, cfg in (("world", world_cfg), ("map", map_cfg)):
         if key == "map" and cfg["dem"] == "world":
