@@ -99,6 +99,9 @@ def test_settings_reference_lists_every_navigator_and_monitor_setting():
         assert f"## navigator `{name}`" in page, name
     for name in registry.available_monitors():
         assert f"## monitor `{name}`" in page, name
+    common = page.split("## every navigator", 1)[1].split("\n## ", 1)[0]    # what create takes for all
+    for name in registry.PUBLISHED_INTEGRITY_KEYS:
+        assert f"| `{name}` |" in common, name
     # the pmf's code is the independent source: every setting its constructors read (`s.<name>` with
     # s = self.settings, and the names `s.copy_to(self, "a b ...")` copies, in pmf.py and its base
     # terrain_filter.py) must be in the page

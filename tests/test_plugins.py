@@ -256,8 +256,13 @@ def test_cli_navigators_lists_builtins_and_plugins_with_settings(plugin_dir, cap
     acq = {s["name"] for s in by["acq_track"]["settings"]}
     assert {"transect_samples", "sample_period_s"} <= acq               # AcqTrackConfig's fields
     assert "aiding" not in {s["name"] for s in by["ins"]["settings"]}   # fixed by the "ins" factory
+    # the settings registry.create takes for every navigator, listed once beside them
+    assert [s["name"] for s in listing["every_navigator_settings"]] == list(registry.PUBLISHED_INTEGRITY_KEYS)
     code, out, _ = _cli(["navigators", "pmf", "dem_integrity"], capsys)
     assert code == 0 and "spacing_min_m" in out and "n_window" in out
+    assert "every navigator also takes" in out and "integrity_risk" in out
+    code, out, _ = _cli(["navigators", "dem_integrity"], capsys)
+    assert code == 0 and "every navigator also takes" not in out            # a monitor alone: not shown
 
 
 # ------------------------------------------------------------------------------------------ env

@@ -335,17 +335,26 @@ def settings_markdown() -> str:
            "`[navigator.settings]`, `[[monitors]]` and `[sensors.<name>]`; from Python they are the keyword "
            "arguments of `trn_env.navigators.registry.create(name, **settings)`. A bad value is refused "
            "with a `ValueError` naming the setting.", ""]
+    def table(rows: list[dict]) -> list[str]:
+        lines = ["| setting | type | unit | default | range | meaning |", "|---|---|---|---|---|---|"]
+        for r in rows:
+            default = "" if r.get("default") is None else f"`{r['default']!r}`"
+            lines.append(f"| `{r['name']}` | {_cell(r.get('type'))} | {_cell(r.get('unit'))} | {default} | "
+                         f"{_cell(r.get('range'))} | {_cell(r.get('doc'))} |")
+        return lines + [""]
+
+    from trn_env.navigators import registry
+    out += ["## every navigator", "",
+            "`registry.create` takes these for every navigator besides its own settings below (its published "
+            "horizontal protection level: [integrity](../guide/integrity.md)); in a scenario they go under "
+            "`[navigator.settings]` too.", ""]
+    out += table(_settings_rows(registry.PublishedIntegritySettings))
     for kind, name, rows in settings_sections():
         out += [f"## {kind} `{name}`", ""]
         if not rows:
             out += ["(no settings)", ""]
             continue
-        out += ["| setting | type | unit | default | range | meaning |", "|---|---|---|---|---|---|"]
-        for r in rows:
-            default = "" if r.get("default") is None else f"`{r['default']!r}`"
-            out.append(f"| `{r['name']}` | {_cell(r.get('type'))} | {_cell(r.get('unit'))} | {default} | "
-                       f"{_cell(r.get('range'))} | {_cell(r.get('doc'))} |")
-        out.append("")
+        out += table(rows)
     return "\n".join(out) + "\n"
 
 

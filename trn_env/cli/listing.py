@@ -46,8 +46,12 @@ def cmd_navigators(args) -> int:
         entries.append({"name": name, "kind": plugin.kind, "origin": origin,
                         "summary": catalogue.summary_of(plugin.factory),
                         "settings": [s.as_dict() for s in catalogue.settings_of(plugin.factory)]})
+    # the settings registry.create takes for every navigator besides its own (the published protection level)
+    common = ([s.as_dict() for s in catalogue.settings_of(registry.PublishedIntegritySettings)]
+              if any(e["kind"] == "navigator" for e in entries) else [])
     if args.json:
-        print(json.dumps({"plugins": entries, "errors": errors}, indent=2))
+        print(json.dumps({"plugins": entries, "every_navigator_settings": common, "errors": errors},
+                         indent=2))
     else:
         from rich.console import Console
         from rich.table import Table
@@ -58,6 +62,14 @@ def cmd_navigators(args) -> int:
             for col in ("setting", "type", "unit", "default", "meaning"):
                 table.add_column(col, overflow="fold")
             for s in e["settings"]:
+                table.add_row(s["name"], s["type"], s["unit"], s["default"], s["meaning"])
+            console.print(table)
+        if common:
+            table = Table(title="every navigator also takes (its published protection level)",
+                          title_justify="left")
+            for col in ("setting", "type", "unit", "default", "meaning"):
+                table.add_column(col, overflow="fold")
+            for s in common:
                 table.add_row(s["name"], s["type"], s["unit"], s["default"], s["meaning"])
             console.print(table)
     for err in errors:
