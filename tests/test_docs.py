@@ -22,6 +22,11 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 
 
+def _doc_pages() -> list[Path]:
+    """Every Markdown page of the docs (the build folder aside) and the README."""
+    return [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+
+
 def _reference():
     path = DOCS / "_ext" / "trn_reference.py"
     if not path.is_file():
@@ -194,12 +199,28 @@ def test_every_documented_command_line_parses():
     """Every `trn-env ...` line in a code block of the docs and the README (synopses with [...] aside) is
     accepted by the CLI's own parser: no documented option is misspelt, renamed or gone. A one-letter
     placeholder value (`--seed S`) stands for a number."""
-    import shlex
-
     from trn_env.cli.parser import _parser
 
-    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
     checked, bad = 0, []
+    for where, command, argv in _documented_cli_lines():
+        if {"--help", "-h", "--version"} & set(argv):
+            continue
+        checked += 1
+        try:
+            _parser().parse_args(argv)
+        except SystemExit:
+            bad.append(f"{where}: {command}")
+    assert checked >= 38 and bad == [], bad
+
+
+def _documented_cli_lines() -> list[tuple[str, str, list[str]]]:
+    """(page:line, command, argv) of every `trn-env ...` line in a code block of the docs and the README
+    (synopses with [...] aside; `&&` and `;` split a line; a leading VAR=value is dropped). A one-letter
+    placeholder value (`--seed S`) becomes "1"."""
+    import shlex
+
+    files = _doc_pages()
+    found = []
     for path in files:
         fence = False
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
@@ -212,14 +233,8 @@ def test_every_documented_command_line_parses():
                     continue
                 words = shlex.split(command, comments=True)[1:]
                 argv = ["1" if re.fullmatch(r"[A-Z]", a) else a for a in words]
-                if {"--help", "-h", "--version"} & set(argv):
-                    continue
-                checked += 1
-                try:
-                    _parser().parse_args(argv)
-                except SystemExit:
-                    bad.append(f"{path.relative_to(ROOT)}:{number}: {command}")
-    assert checked >= 38 and bad == [], bad
+                found.append((f"{path.relative_to(ROOT)}:{number}", command, argv))
+    return found
 
 
 _SCRIPT_ARGV_CHECK = r'''
@@ -258,7 +273,7 @@ def _documented_script_commands() -> list[tuple[str, list[str], str]]:
     blocks (backslash continuations joined) and inline code; scripts that parse with argparse only."""
     import shlex
 
-    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    files = _doc_pages()
     found = []
     for path in files:
         text = path.read_text(encoding="utf-8")
@@ -300,7 +315,7 @@ def test_every_documented_script_command_parses():
 def _documented_python_c_commands() -> list[tuple[str, str]]:
     """(source, where) of every `python -c "..."` the docs and the README give, inline or in a fenced block
     (backslash continuations and a command broken over lines joined)."""
-    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    files = _doc_pages()
     found = []
     for path in files:
         text = path.read_text(encoding="utf-8").replace("\\\n", " ")
@@ -354,7 +369,7 @@ def test_every_repository_path_the_docs_name_exists():
     """Every `tests/...`, `scripts/...`, `examples/...`, `docs/...` or package path (a file with its
     extension) in the docs and the README names a file of this tree: a file moved or renamed leaves no
     stale reference for a reader to chase."""
-    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    files = _doc_pages()
     pattern = re.compile(r"\b((?:tests|scripts|examples|docs|trn_env|navigators|terrain|aircraft)/"
                          r"[A-Za-z0-9_./-]+\.(?:py|toml|json|md|xml|yml|yaml|png|csv))\b")
     missing = sorted({f"{path.relative_to(ROOT)}: {m}" for path in files
@@ -389,7 +404,7 @@ def test_every_python_name_the_docs_give_resolves():
     from trn_env.scenario.validation import schema
 
     scenario = schema()
-    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    files = _doc_pages()
     names: dict[str, str] = {}
     for path in files:
         for span in re.findall(r"`([^`\n]+)`", path.read_text(encoding="utf-8")):
@@ -429,35 +444,21 @@ def test_every_documented_flight_command_names_a_valid_scenario(tmp_path, monkey
     left out; a module a page writes out (a ```python block opening with `# NAME.py`) is put on the path."""
     import contextlib
     import io
-    import shlex
 
     from trn_env.cli import main
     from trn_env.cli.parser import _parser
     from trn_env.scenario.loading import builtin_names
 
-    files = [p for p in sorted(DOCS.rglob("*.md")) if "_build" not in p.parts] + [ROOT / "README.md"]
+    files = _doc_pages()
     for path in files:                   # the modules the pages write out, for `--navigator module:Name`
         for block in re.findall(r"```python\n(.*?)```", path.read_text(encoding="utf-8"), re.S):
             m = re.match(r"# (\w+)\.py\n", block)
             if m:
                 (tmp_path / f"{m.group(1)}.py").write_text(block, encoding="utf-8")
     monkeypatch.syspath_prepend(str(tmp_path))
-    commands = {}
-    for path in files:
-        fence = False
-        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
-            if line.strip().startswith("```"):
-                fence = not fence
-                continue
-            for part in re.split(r"&&|;", line) if fence else ():
-                command = re.sub(r"^(?:[A-Z_][A-Z0-9_]*=\S*\s+)+", "", part.strip())
-                if not command.startswith("trn-env ") or "[" in command:
-                    continue
-                words = shlex.split(command, comments=True)[1:]
-                if not words or words[0] not in ("fly", "record", "validate") or {"-h", "--help"} & {*words}:
-                    continue
-                ns = _parser().parse_args(["1" if re.fullmatch(r"[A-Z]", a) else a for a in words])
-                commands[command] = (f"{path.relative_to(ROOT)}:{number}", ns)
+    commands = {command: (where, _parser().parse_args(argv))
+                for where, command, argv in _documented_cli_lines()
+                if argv and argv[0] in ("fly", "record", "validate") and not {"-h", "--help"} & {*argv}}
     checked, bad = 0, []
     for command, (where, ns) in sorted(commands.items()):
         scenario = ns.scenario
