@@ -116,6 +116,41 @@ def test_above_service_ceiling_refused_naming_the_field():
     assert any(p.startswith("route.waypoints[1].h_agl_m:") and "ceiling" in p for p in probs), probs
 
 
+def test_sensor_faster_than_the_truth_step_refused_at_its_field():
+    # a coarser JSBSim step leaves the IMU's default 100 Hz faster than the truth's 50 Hz steps: the flight
+    # refused it only once the first sensor frame was sampled, and `validate` passed it
+    data = _data()
+    data["aircraft"] = {"dt_s": 0.02}
+    probs = _problems(data)
+    imu = [p for p in probs if p.startswith("sensors.imu.rate_hz:")]
+    assert len(imu) == 1 and "100 Hz (the sensor's default)" in imu[0] and "50 Hz" in imu[0], probs
+    ira_rate = data["sensors"]["ira"].get("rate_hz", 50.0)
+    assert not any(p.startswith("sensors.ira") for p in probs) and ira_rate * 0.02 <= 1.0
+    data["sensors"]["imu"]["rate_hz"] = 50.0          # exactly the truth's rate: accepted
+    validate(data, source="test")
+    data["sensors"]["imu"]["rate_hz"] = 50.5
+    assert [p.split(":")[0] for p in _problems(data)] == ["sensors.imu.rate_hz"]
+
+
+def test_sensor_faster_than_the_kinematic_truth_step_refused():
+    data, _ = read_scenario_file("seed002")
+    data = copy.deepcopy(data)
+    data["aircraft"] = {**data.get("aircraft", {}), "dt_s": 0.05}
+    probs = _problems(data)
+    assert {p.split(":")[0] for p in probs} == {"sensors.imu.rate_hz", "sensors.ira.rate_hz"}, probs
+
+
+def test_cli_sensor_rate_refused_before_flying(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = cli.main(["fly", str(SCEN / "default_short.toml"), "--quiet", "--no-plots", "--out", str(out),
+                     "--set", "sensors.ira.rate_hz=1e9"])
+    err = capsys.readouterr().err
+    assert code == 2 and "sensors.ira.rate_hz: 1e+09 Hz" in err and "Traceback" not in err
+    assert not out.exists()
+    assert cli.main(["validate", "default", "--set", "aircraft.dt_s=0.02"]) == 2
+    assert "sensors.imu.rate_hz" in capsys.readouterr().err
+
+
 def test_initial_estimate_nan_refused_by_the_navigator():
     from trn_env.navigators.filters.ins_trn_ekf import initial_covariance
     from trn_env.navigators.protocol import Estimate

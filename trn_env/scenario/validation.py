@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -234,6 +235,10 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
             raise
     known = tuple(p.split(": ", 1)[0] for p in prior + problems)
     problems += [p for p in section_problems if not p.split(": ", 1)[0].startswith(known or ("\0",))]
+    if sections is not None:
+        known = tuple(p.split(": ", 1)[0] for p in prior + problems)
+        problems += [p for p in _sensor_rate_problems(sections)
+                     if not p.split(": ", 1)[0].startswith(known or ("\0",)) and "aircraft.dt_s" not in known]
     if check_components and sections is not None:
         problems += _component_problems(sections, extras, prior + problems, tolerant)
     extras["_sections"] = sections
@@ -359,6 +364,26 @@ def _rate_problems(d: dict) -> list[str]:
     if not _whole(nav / log):
         problems.append(f"guidance.log_rate_hz: {log} Hz must divide navigator.rate_hz = {nav} Hz (rows are "
                         "logged at navigator updates)")
+    return problems
+
+
+def _sensor_rate_problems(sections) -> list[str]:
+    """Every fitted sensor's rate at most the truth's step rate (1 / aircraft.dt_s, JSBSim's or the kinematic
+    profile's): a sensor samples the truth's steps (trn_env.sensors.common.sample_steps refuses a finer
+    grid during the flight; here it is found before it)."""
+    dt_s = float(sections.aircraft.dt_s)
+    truth_hz = 1.0 / dt_s
+    problems = []
+    for name, config in sections.sensors.configs().items():
+        rate_hz = getattr(config, "rate_hz", None)
+        if rate_hz is None or float(rate_hz) * dt_s <= 1.0 + 1e-6:
+            continue
+        given = sections.sensors.table(name)
+        how = "" if isinstance(given, Mapping) and "rate_hz" in given else " (the sensor's default)"
+        problems.append(f"sensors.{name}.rate_hz: {float(rate_hz):g} Hz{how} is faster than the truth's "
+                        f"{truth_hz:g} Hz steps (aircraft.dt_s = {dt_s:g} s): a sensor samples the truth's "
+                        f"steps; set sensors.{name}.rate_hz to at most {truth_hz:g} or a smaller "
+                        "aircraft.dt_s")
     return problems
 
 
