@@ -15,6 +15,7 @@ from scipy.sparse.csgraph import dijkstra
 from trn_env.terrain import metrics
 
 from trn_env import terrain
+from trn_env.guidance.astar import path_stretch_bins
 from trn_env.guidance.planner import (
     MOVES,
     PlannerConfig,
@@ -184,6 +185,55 @@ def test_basin_routes_trade_distance_for_information(basin):
     # no fillet needs more than half of an adjacent leg, or the waypoint could not be removed cheaply
     route = planned.as_route()
     assert route.n_legs == len(planned.waypoints_deg) - 1
+
+
+def test_bounded_plan_is_the_bounded_searchs_least_cost_at_any_bound(basin):
+    """The planner searches with the bound only when the unbounded route breaks it: its route's grid cost is
+    the least cost of the bounded search on the (cell, bin) states at every bound, and a bound far above
+    any route's stretch (1e308 m; 1e8 m made the states alone need ~100 GB) plans the unbounded route."""
+    s_lat, s_lon, g_lat, g_lon = _start_goal(basin)
+    free = TerrainInformationPlanner(basin, PlannerConfig(weight=0.0))
+    si, sj = free.check_endpoint("start", s_lat, s_lon)
+    gi, gj = free.check_endpoint("goal", g_lat, g_lon)
+    grid = (free.grid.featureless, free._height, free.blocked, free.grid.cell_n_m, free.grid.cell_e_m)
+    climb = free.config.climb_gradient
+    free_cost, free_path = astar_kernel(grid, (MOVES, 0.0, False, 1, free._bin_m, climb), (si, sj), (gi, gj))
+    top = path_stretch_bins(grid[0], free_path, grid[3], grid[4], free._bin_m)
+    assert top * free._bin_m > 9000.0          # the unbounded route crosses the basin
+    searched = []
+    for bound_m in (1000.0, 2000.0, 6000.0, top * free._bin_m - 1.0, top * free._bin_m, 5e4, 1e8, 1e308):
+        planner = TerrainInformationPlanner(basin, PlannerConfig(weight=0.0, max_featureless_m=bound_m))
+        calls = []
+        kernel = planner._search
+        planner._search = lambda *a, _k=kernel, _c=calls: _c.append(a[2]) or _k(*a)
+        route = planner.plan(s_lat, s_lon, g_lat, g_lon)
+        searched.append(calls)
+        if bound_m < 1e5:
+            n_bins = int(math.floor(bound_m / free._bin_m)) + 1
+            ref, _ = astar_kernel(grid, (MOVES, 0.0, True, n_bins, free._bin_m, climb), (si, sj), (gi, gj))
+        else:
+            ref = free_cost
+        d = np.diff(route.grid_path, axis=0) * np.array([free.grid.cell_n_m, free.grid.cell_e_m])
+        assert np.hypot(d[:, 0], d[:, 1]).sum() == pytest.approx(ref, rel=1e-12), bound_m   # weight 0
+    # the bounded search ran exactly where the unbounded route breaks the bound
+    assert [len(c) for c in searched] == [2, 2, 2, 2, 1, 1, 1, 1]
+
+
+def test_path_stretch_bins_counts_as_the_kernel():
+    """path_stretch_bins against an independent count on the featureless band of the test above, and
+    against the kernel: a bounded search's path stays below its n_bins."""
+    u = np.zeros((16, 12))
+    u[6:10, :] = 1.0
+    grid = (u, np.zeros_like(u), np.zeros(u.shape, np.bool_), 500.0, 500.0)
+    straight = np.array([[i, 8] for i in range(1, 15)], np.int64)
+    # edges entering, inside and leaving the band are featureless (mean u of both ends > 0.5 only when
+    # both ends are in the band): 3 edges of 500 m, bins of 250 m
+    assert path_stretch_bins(u, straight, 500.0, 500.0, 250.0) == 6
+    for nb in (2, 3, 5, 9):
+        u2 = u.copy()
+        u2[6:10, 0] = 0.0
+        _, path = astar_kernel((u2, *grid[1:]), (MOVES, 0.0, True, nb, 250.0, -1.0), (1, 8), (14, 8))
+        assert path_stretch_bins(u2, path, 500.0, 500.0, 250.0) < nb
 
 
 def test_route_toml_is_accepted_by_a_scenario(basin, tmp_path):
@@ -377,6 +427,22 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
         assert main(["plan", "basin_route", *args, "--out", str(bad)]) == 2
         assert msg in capsys.readouterr().err
         assert not bad.exists() and not bad.with_suffix(".png").exists()
+    # the route file is one the scenario accepts: a height above the ceiling is refused before writing,
+    # once per kind of problem however many waypoints share it (the file used to be written)
+    assert main(["plan", "default", "--goal", "36.66", "-84.18", "--agl", "9000", "--out", str(bad)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("error: the planned route is not one scenario 'default' can fly") and len(err) == 2
+    assert err[1].startswith("  - route.waypoints[0].h_agl_m: ") and "service ceiling" in err[1]
+    assert "--agl" in err[1] and "the same at 27 more waypoint(s)" in err[1]
+    assert not bad.exists() and not bad.with_suffix(".png").exists()
+    # a featureless bound above any route's stretch plans the unbounded route (it overflowed, or sized the
+    # search by the bound: 1e8 m asked for ~100 GB)
+    for bound in ("1e8", "1e308"):
+        unbounded = tmp_path / f"b{bound}.toml"
+        assert main(["plan", "basin_route", *goal, "--weight", "1", "--max-featureless", bound,
+                     "--out", str(unbounded)]) == 0
+        assert tomllib.loads(unbounded.read_text())["route"] == tomllib.loads(out.read_text())["route"]
+    capsys.readouterr()
     png = tmp_path / "r.png"
     assert main(["plan", "basin_route", *goal, "--out", str(png)]) == 2
     assert "the plot's default name" in capsys.readouterr().err and not png.exists()

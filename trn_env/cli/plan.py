@@ -53,6 +53,14 @@ def cmd_plan(args) -> int:
             weight=0.0, cell_m=args.cell, agl_m=args.agl, climb_rate_mps=None)).plan(s_lat, s_lon, g_lat,
                                                                                       g_lon)
         limits = planner.straight_line_limits(s_lat, s_lon, g_lat, g_lon)
+        text = route.toml(float(sc.route.tas_mps), header=_plan_header(scenario, args))
+        route_problems = _route_problems(scenario, text)
+        if route_problems:
+            print(f"error: the planned route is not one scenario {scenario.name!r} can fly "
+                  "(nothing written):", file=sys.stderr)
+            for prob in route_problems:
+                print(f"  - {prob}", file=sys.stderr)
+            return 2
     except ValueError as err:
         msg = str(err).replace("PlannerConfig.weight", "--weight").replace(
             "PlannerConfig.max_featureless_m", "--max-featureless").replace(
@@ -60,10 +68,6 @@ def cmd_plan(args) -> int:
             "PlannerConfig.cell_m", "--cell")
         print(f"error: {msg}", file=sys.stderr)
         return 2
-    header = (f"route for scenario {scenario.name!r} from ({sc.initial.lat_deg}, "
-              f"{sc.initial.lon_deg}) "
-              f"to ({args.goal[0]}, {args.goal[1]}) deg\n" + _plan_command(args))
-    text = route.toml(float(sc.route.tas_mps), header=header)
     # both files are made beside their targets and renamed into place together: never a partial or empty
     # file, nor a route without its plot
     tmp_out = out.with_name(f".{out.name}.tmp{os.getpid()}")
@@ -90,6 +94,43 @@ def cmd_plan(args) -> int:
           f"longest featureless stretch {route.longest_featureless_m / 1000:.2f} km; plot {plot_path}")
     print(_plan_reason(route, straight, sc, config, limits))
     return 0
+
+
+def _plan_header(scenario, args) -> str:
+    """The route file's header: what it plans and the command that plans it again."""
+    sc = scenario.sections
+    return (f"route for scenario {scenario.name!r} from ({sc.initial.lat_deg}, {sc.initial.lon_deg}) "
+            f"to ({args.goal[0]}, {args.goal[1]}) deg\n" + _plan_command(args))
+
+
+def _route_problems(scenario, text: str) -> list[str]:
+    """The scenario's problems with the planned [route] table in place of its own: the file is one the
+    scenario accepts as it is (a waypoint above the aircraft's service ceiling, say, from --agl), or none is
+    written. Every waypoint has the planner's height, so a problem repeated along the route is given once,
+    at its first waypoint, with how many more share it."""
+    import copy
+    import re
+
+    from trn_env.scenario.loading import ScenarioError, tomllib, validate
+    data = copy.deepcopy(scenario.to_dict())
+    data["route"] = tomllib.loads(text)["route"]
+    try:
+        validate(data, source=f"{scenario.source} with the planned route")
+    except ScenarioError as err:
+        first: dict[tuple[str, str], str] = {}
+        count: dict[tuple[str, str], int] = {}
+        for prob in err.problems:
+            m = re.match(r"route\.waypoints\[\d+\](\.\w+)?: (.*)", prob)
+            key = (m.group(1) or "", re.sub(r"\d[\d.e+-]*", "#", m.group(2))) if m else (prob, "")
+            first.setdefault(key, prob)
+            count[key] = count.get(key, 0) + 1
+        out = []
+        for key, prob in first.items():
+            more = f"; the same at {count[key] - 1} more waypoint(s)" if count[key] > 1 else ""
+            agl = " (the height is --agl above the map" if key[0] == ".h_agl_m" else ""
+            out.append(prob + (f"{agl}{more})" if agl else f" ({more[2:]})" if more else ""))
+        return out
+    return []
 
 
 def _plan_command(args) -> str:

@@ -174,6 +174,25 @@ def astar_kernel(grid, search, start, goal):
 
 
 @njit(cache=True)
+def path_stretch_bins(u, path, cell_n_m, cell_e_m, bin_m):
+    """The highest featureless-stretch bin a cell path reaches, counted as astar_kernel counts it (a
+    featureless edge takes the bin to round(bin + length / bin_m), an informative one back to 0): the path
+    is a bounded search's answer only if this is below its n_bins."""
+    b = 0
+    top = 0
+    for k in range(path.shape[0] - 1):
+        i, j = path[k, 0], path[k, 1]
+        di, dj = path[k + 1, 0] - i, path[k + 1, 1] - j
+        if edge_featureless(u, i, j, di, dj) > FEATURELESS_EDGE:
+            b = int(round(b * 1.0 + math.hypot(di * cell_n_m, dj * cell_e_m) / bin_m))
+        else:
+            b = 0
+        if b > top:
+            top = b
+    return top
+
+
+@njit(cache=True)
 def _featureless_runs(ds, feat):
     """(longest, final) featureless stretch (m) of samples with lengths ds and featureless flags feat."""
     run = 0.0

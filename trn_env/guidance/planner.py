@@ -50,6 +50,7 @@ from trn_env.guidance.astar import (
     _featureless_runs,
     astar_kernel,
     edge_featureless,
+    path_stretch_bins,
 )
 from trn_env.guidance.cost_map import InformationGrid, information_grid
 from trn_env.guidance.route_following import Route, Waypoint
@@ -397,6 +398,28 @@ class TerrainInformationPlanner:
                 break
         return lats, lons
 
+    def _search(self, start: tuple[int, int], goal: tuple[int, int], n_bins: int | None):
+        """astar_kernel on this planner's grid: (cost, cell path); n_bins None searches without the
+        featureless bound."""
+        c = self.config
+        climb = -1.0 if c.climb_gradient is None else float(c.climb_gradient)
+        try:
+            return astar_kernel(
+                (self.grid.featureless, self._height, self.blocked, self.grid.cell_n_m, self.grid.cell_e_m),
+                (MOVES, float(c.weight), n_bins is not None, 1 if n_bins is None else n_bins, self._bin_m,
+                 climb),
+                start,
+                goal,
+            )
+        except MemoryError:
+            ni, nj = self.grid.shape
+            bins = "" if n_bins is None else f" x {n_bins} featureless-stretch bins"
+            raise ValueError(
+                f"PlannerConfig.cell_m: the search over {ni} x {nj} cells{bins} needs more memory than this "
+                f"machine gives; plan with larger cells"
+                + ("" if n_bins is None else " or a shorter PlannerConfig.max_featureless_m")
+            ) from None
+
     # ------------------------------------------------------------------------------------ plan
     def plan(
         self, start_lat_rad: float, start_lon_rad: float, goal_lat_rad: float, goal_lon_rad: float
@@ -405,17 +428,16 @@ class TerrainInformationPlanner:
         c = self.config
         si, sj = self.check_endpoint("start", start_lat_rad, start_lon_rad)
         gi, gj = self.check_endpoint("goal", goal_lat_rad, goal_lon_rad)
-        if c.max_featureless_m is None:
-            n_bins = 1
-        else:
-            n_bins = int(math.floor(c.max_featureless_m / self._bin_m)) + 1
-        climb = -1.0 if c.climb_gradient is None else float(c.climb_gradient)
-        cost, path = astar_kernel(
-            (self.grid.featureless, self._height, self.blocked, self.grid.cell_n_m, self.grid.cell_e_m),
-            (MOVES, float(c.weight), c.max_featureless_m is not None, n_bins, self._bin_m, climb),
-            (si, sj),
-            (gi, gj),
-        )
+        cost, path = self._search((si, sj), (gi, gj), None)
+        if c.max_featureless_m is not None and len(path):
+            # The bound can only raise the least cost, so when the unbounded route keeps to it, it is the
+            # bounded answer too. Searched only otherwise: its states grow with the bound (cells x bins), and
+            # a bound above every route's stretch would size them by the bound alone.
+            top_bin = path_stretch_bins(self.grid.featureless, path, self.grid.cell_n_m, self.grid.cell_e_m,
+                                        self._bin_m)
+            if top_bin > c.max_featureless_m / self._bin_m:      # top_bin >= the bounded search's n_bins
+                n_bins = int(math.floor(c.max_featureless_m / self._bin_m)) + 1     # <= top_bin
+                cost, path = self._search((si, sj), (gi, gj), n_bins)
         if len(path) == 0:
             bound = (
                 ""

@@ -511,7 +511,8 @@ def _ceiling_problems(d: dict, extras: dict) -> list[str]:
         else:
             continue
         if h > ceiling:
-            problems.append(f"{path}.{key}: {h:.0f} m MSL is above the {d['aircraft']['name']}'s service "
+            height = f"{h:.0f}" if abs(h) < 1e7 else f"{h:.3g}"
+            problems.append(f"{path}.{key}: {height} m MSL is above the {d['aircraft']['name']}'s service "
                             f"ceiling ({ceiling:.0f} m): it cannot fly there")
     return problems
 
