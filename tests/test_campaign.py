@@ -467,3 +467,27 @@ def test_report_of_string_and_table_sweeps(tmp_path, capsys):
     assert cli.main(["report", str(out)]) == 0, capsys.readouterr().err
     pngs = sorted(p.name for p in (out / "report").glob("sweep_*.png"))
     assert pngs == ["sweep_navigator_settings_gravity_model.png", "sweep_terrain_map_error_model.png"]
+
+
+@pytest.mark.parametrize("backend", ["local", "ray"])
+def test_workers_beyond_the_machine_refused_before_any_process_starts(tmp_path, capsys, monkeypatch, backend):
+    """--workers above MAX_WORKERS_PER_CORE per usable core (a local pool or a new local Ray instance) is one
+    line and exit 2 with nothing started or written: a forked pool launched every worker at once (1e20
+    overflowed in it; 1000 started 1000 processes), and a Ray pool starts one actor per worker."""
+    from trn_env.campaign.local import MAX_WORKERS_PER_CORE, default_workers
+
+    if backend == "ray":
+        pytest.importorskip("ray", reason="the ray extra is installed in CI (pip install -e .[ray])")
+        monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    limit = MAX_WORKERS_PER_CORE * default_workers()
+    out = tmp_path / "out"
+    for workers in (limit + 1, 99999999999999999999):
+        rc = cli.main(["campaign", str(CI), "--backend", backend, "--workers", str(workers),
+                       "--out", str(out), "--quiet"])
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and err.startswith(f"error: --workers: {workers} is more than")
+        assert len(err.splitlines()) == 1
+        assert f"at most {limit}" in err and not out.exists()
+    if backend == "ray":
+        import ray
+        assert not ray.is_initialized()

@@ -431,7 +431,8 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     # once per kind of problem however many waypoints share it (the file used to be written)
     assert main(["plan", "default", "--goal", "36.66", "-84.18", "--agl", "9000", "--out", str(bad)]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert err[0].startswith("error: the planned route is not one scenario 'default' can fly") and len(err) == 2
+    assert err[0].startswith("error: the planned route is not one scenario 'default' can fly")
+    assert len(err) == 2
     assert err[1].startswith("  - route.waypoints[0].h_agl_m: ") and "service ceiling" in err[1]
     assert "--agl" in err[1] and "the same at 27 more waypoint(s)" in err[1]
     assert not bad.exists() and not bad.with_suffix(".png").exists()

@@ -29,12 +29,34 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+# Workers per usable core beyond which --workers is refused on this machine (the local pool, a local Ray
+# instance): each worker is a process of its own, all started at once (a forked pool launches every worker
+# at its start; a Ray pool starts one actor per worker), and the runs are CPU-bound, so workers beyond the
+# cores add memory, not speed; a typo (--workers 200 for 20) would otherwise start hundreds of processes.
+MAX_WORKERS_PER_CORE = 4
+
+
+def check_local_workers(workers: int | None) -> None:
+    """ValueError naming --workers when it is not a whole number >= 1 or exceeds MAX_WORKERS_PER_CORE per
+    usable core of this machine."""
+    if workers is None:
+        return
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"--workers: must be a whole number >= 1 (got {workers!r})")
+    cores = default_workers()
+    if workers > MAX_WORKERS_PER_CORE * cores:
+        raise ValueError(
+            f"--workers: {workers} is more than {MAX_WORKERS_PER_CORE} per usable core of this machine "
+            f"({cores} core(s), so at most {MAX_WORKERS_PER_CORE * cores}): each worker is a process started "
+            "at once and the runs are CPU-bound, so more workers add memory, not speed"
+        )
+
+
 class LocalBackend:
     name = "local"
 
     def __init__(self, workers: int | None = None, max_attempts: int = 3):
-        if workers is not None and (not isinstance(workers, int) or workers < 1):
-            raise ValueError(f"--workers: must be a whole number >= 1 (got {workers!r})")
+        check_local_workers(workers)
         self.workers = workers or default_workers()
         self.max_attempts = int(max_attempts)
 

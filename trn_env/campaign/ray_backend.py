@@ -40,6 +40,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 from urllib.parse import urlparse
 
+from trn_env.campaign.local import check_local_workers
 from trn_env.campaign.runs import RunTask, died_row, fly_run
 
 INSTALL_HINT = 'pip install "trn-env[ray]"   (or: pip install "ray>=2.9")'
@@ -271,9 +272,11 @@ class RayBackend:
 
     def __init__(self, address: str | None = None, workers: int | None = None, max_retries: int = 3,
                  connect_timeout_s: float = 3.0, warm: bool = True):
-        if workers is not None and (not isinstance(workers, int) or workers < 1):
+        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
             raise ValueError(f"--workers: must be a whole number >= 1 (got {workers!r})")
         self.address = address or os.environ.get("RAY_ADDRESS") or None
+        if self.address is None:
+            check_local_workers(workers)     # a new local instance: its workers are processes of this machine
         self.workers = workers
         self.max_retries = int(max_retries)
         self.connect_timeout_s = float(connect_timeout_s)
