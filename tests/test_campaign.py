@@ -480,6 +480,7 @@ def test_workers_beyond_the_machine_refused_before_any_process_starts(tmp_path, 
         pytest.importorskip("ray", reason="the ray extra is installed in CI (pip install -e .[ray])")
         monkeypatch.delenv("RAY_ADDRESS", raising=False)
     limit = MAX_WORKERS_PER_CORE * default_workers()
+    ray_before = backend == "ray" and __import__("ray").is_initialized()     # another test's instance
     out = tmp_path / "out"
     for workers in (limit + 1, 99999999999999999999):
         rc = cli.main(["campaign", str(CI), "--backend", backend, "--workers", str(workers),
@@ -490,4 +491,46 @@ def test_workers_beyond_the_machine_refused_before_any_process_starts(tmp_path, 
         assert f"at most {limit}" in err and not out.exists()
     if backend == "ray":
         import ray
-        assert not ray.is_initialized()
+        assert ray.is_initialized() == ray_before          # no instance started
+
+
+def test_a_campaign_of_more_than_max_runs_is_refused_before_anything_is_drawn(tmp_path, monkeypatch):
+    """The run count comes from the file alone: seeds = 1e9 used to draw a billion seeds (gigabytes, hours)
+    before a run or a refusal, and a 400,000-point grid compared its points pairwise."""
+    from trn_env.campaign import spec
+    from trn_env.campaign.spec import MAX_RUNS, CampaignError
+
+    def no_drawing(*args):
+        raise AssertionError(f"seeds drawn {args} before the size was checked")
+
+    monkeypatch.setattr(spec, "draw_seeds", no_drawing)
+    monkeypatch.setattr(spec, "grid_values", no_drawing)
+
+    scen = (CI.parent / "ci_denied_short.toml").as_posix()
+    cases = [
+        ("seeds = 1000000000\nnavigators = [\"ins\", \"pmf\"]\n", "seeds",
+         "2,000,000,000 runs (1,000,000,000 seeds x 1 scenarios x 2 navigators)"),
+        ("seeds = 3\n[[sweeps]]\npath = \"wind.layers.0.speed_mps\"\n"
+         "grid = { start = 0.0, stop = 10.0, num = 400000 }\n", "sweeps[0]",
+         "1,200,000 runs (3 seeds x 1 scenarios x 1 navigators x 400,000 points of sweeps[0])"),
+    ]
+    for body, field, runs in cases:
+        f = tmp_path / "big.toml"
+        f.write_text(f'name = "big"\nscenarios = ["{scen}"]\n{body}')
+        with pytest.raises(CampaignError) as exc:
+            load_campaign(f)
+        assert exc.value.problems == [f"{field}: the campaign asks for {runs}, more than {MAX_RUNS:,}: "
+                                      "split it into campaigns of fewer runs"]
+
+
+def test_repeated_sweep_points_found_among_numbers_booleans_and_tables(tmp_path):
+    from trn_env.campaign.spec import _repeats, _same_value
+
+    values = [1, 2.0, 1.0, True, 1, False, 0.0, True]
+    assert _repeats(values) == [(2, 0), (4, 0), (7, 3)]
+    tables = [{"a": 1}, [1, 2], {"a": 1.0}, [1.0, 2.0], "x"]
+    assert _repeats(tables) == [(2, 0), (3, 1)]
+    # against the pairwise definition, on a grid's floats
+    grid = [float(x) for x in np.round(np.linspace(0.0, 1.0, 101), 1)]
+    brute = [(k, next(i for i, w in enumerate(grid) if _same_value(v, w))) for k, v in enumerate(grid)]
+    assert _repeats(grid) == [(k, f) for k, f in brute if f != k]

@@ -193,6 +193,29 @@ class Campaign(SeedMajorRuns):
     extra: dict = field(default_factory=dict)
 
 
+# The most runs one campaign file may ask for. Counted from the file before anything is drawn, validated
+# or flown: drawing the seeds, checking the sweep points and validating every variant all grow with it, so a
+# slip (seeds = 1000000000) would otherwise spend hours and gigabytes before the first run or its refusal.
+MAX_RUNS = 1_000_000
+
+
+def _size_problems(data: dict) -> list[str]:
+    """The campaign's run count (seeds x scenarios x navigators x sweep points) above MAX_RUNS, from the
+    schema-checked file alone."""
+    seeds = len(data["seeds"]) if isinstance(data["seeds"], list) else int(data["seeds"])
+    factors = [("seeds", seeds), ("scenarios", len(data["scenarios"])),
+               ("navigators", max(1, len(data.get("navigators", []))))]
+    factors += [(f"sweeps[{j}]", len(sw["values"]) if "values" in sw else int(sw["grid"]["num"]))
+                for j, sw in enumerate(data.get("sweeps", []))]
+    runs = math.prod(n for _, n in factors)
+    if runs <= MAX_RUNS:
+        return []
+    big = max(factors, key=lambda f: f[1])[0]
+    product = " x ".join(f"{n:,} " + (f"points of {k}" if k.startswith("sweeps") else k) for k, n in factors)
+    return [f"{big}: the campaign asks for {runs:,} runs ({product}), more than {MAX_RUNS:,}: split it into "
+            "campaigns of fewer runs"]
+
+
 def draw_seeds(root_seed: int, n: int) -> list[int]:
     """n scenario seeds (63-bit, so they fit an int64 column) from one root seed via SeedSequence.spawn."""
     return [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1))
@@ -268,6 +291,24 @@ def _same_value(a: Any, b: Any) -> bool:
         return False
 
 
+def _repeats(values: list) -> list[tuple[int, int]]:
+    """(k, first) for every point k that repeats an earlier point first (as _same_value judges): through a
+    dict when the values are hashable (a grid's floats: linear in the points), pairwise otherwise."""
+    seen: dict = {}
+    out = []
+    try:
+        for k, v in enumerate(values):
+            key = (isinstance(v, bool), v)       # 5 and 5.0 share a key, true and 1 do not
+            if key in seen:
+                out.append((k, seen[key]))
+            else:
+                seen[key] = k
+        return out
+    except TypeError:                            # tables or arrays among the values
+        return [(k, first) for k, v in enumerate(values)
+                if (first := next(i for i, w in enumerate(values) if _same_value(v, w))) != k]
+
+
 def _normalise(value: Any) -> Any:
     """A sweep value as a TOML file would give it (floats stay floats, ints ints)."""
     if isinstance(value, np.generic):
@@ -304,7 +345,7 @@ def load_campaign(path: str | Path) -> Campaign:
     if "logs" in data:                  # a campaign over sensor logs (trn_env.campaign.log_replay)
         from trn_env.campaign.log_replay import load_log_campaign
         return load_log_campaign(path, data, raw)
-    problems = _schema_problems(data)
+    problems = _schema_problems(data) or _size_problems(data)
     if problems:
         raise CampaignError(source, problems)
     base = path.resolve().parent
@@ -338,12 +379,10 @@ def load_campaign(path: str | Path) -> Campaign:
                     for s in sweeps]
     # a repeated point would fly the same runs twice and count them twice in its group's statistics
     for j, values in enumerate(sweep_values):
-        for k, v in enumerate(values):
-            first = next(i for i, w in enumerate(values) if _same_value(v, w))
-            if first != k:
-                what = "values" if "values" in sweeps[j] else "grid"
-                problems.append(f"sweeps[{j}].{what}: {v!r} (point {k}) repeats point {first}: give each "
-                                "value once")
+        for k, first in _repeats(values):
+            what = "values" if "values" in sweeps[j] else "grid"
+            problems.append(f"sweeps[{j}].{what}: {values[k]!r} (point {k}) repeats point {first}: give each "
+                            "value once")
 
     scen_files: list[Path] = []
     scen_raw: list[tuple[str, str, dict | None]] = []
