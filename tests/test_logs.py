@@ -409,6 +409,36 @@ def test_a_campaign_replays_logs_across_navigators_and_seeds(independent, tmp_pa
     assert "logs[0] (nowhere.trnlog)" in err and "sweeps[0].path" in err and not (tmp_path / "c2").exists()
 
 
+def test_a_log_campaign_file_is_checked_as_a_flight_campaigns(tmp_path):
+    """A log campaign's file against its schema (the flight campaign's keys), before any log is read: a bad
+    grid was a traceback (KeyError, numpy's errors without the field; num = 1e9 tried to allocate 7 GB), a
+    repeated sweep point or seed flew its runs twice."""
+    from trn_env.campaign import load_campaign
+    from trn_env.campaign.spec import CampaignError
+
+    def problems(body: str) -> list[str]:
+        f = tmp_path / "c.toml"
+        f.write_text('name = "c"\nlogs = ["nowhere.trnlog"]\nnavigators = ["pmf"]\n' + body)
+        with pytest.raises(CampaignError) as exc:
+            load_campaign(f)
+        return exc.value.problems
+
+    sweep = '[[sweeps]]\npath = "navigator.settings.outlier_prob"\n'
+    assert problems(sweep + "grid = { start = 0.0, num = 3 }\n") == [
+        "sweeps[0].grid.stop: required key is missing"]
+    assert problems(sweep + "grid = { start = 0.0, stop = 0.1, num = -1 }\n") == [
+        "sweeps[0].grid.num: -1 is less than the minimum of 1"]
+    assert problems(sweep + 'grid = { start = 0.0, stop = 0.1, num = "x" }\n') == [
+        "sweeps[0].grid.num: 'x' is not of type 'integer'"]
+    big = problems("seeds = [0, 1]\n" + sweep + "grid = { start = 0.0, stop = 0.1, num = 1000000000 }\n")
+    assert big[0].startswith("sweeps[0]: the campaign asks for 2,000,000,000 runs (2 seeds x 1 logs x 1 "
+                             "navigators x 1,000,000,000 points of sweeps[0])")
+    assert problems("seeds = [3, 3]\n") == ["seeds: [3, 3] has non-unique elements"]
+    repeated = problems(sweep + "values = [0.01, 0.02, 0.01]\n")
+    assert "sweeps[0].values: 0.01 (point 2) repeats point 0: give each value once" in repeated
+    assert problems("bogus = 1\n")[0].startswith("bogus: unknown key")
+
+
 def test_a_log_written_meanwhile_into_the_same_path_is_kept(tmp_path):
     """Two recordings to one --out: the one that finishes second is refused by name at its commit and the
     first one's log stays whole (the old commit failed in rmdir with an OSError traceback)."""

@@ -29,16 +29,35 @@ from pathlib import Path
 from typing import Any
 
 from trn_env.campaign.spec import (
+    INT64_MAX,
+    SCHEMA,
     CampaignError,
     NavigatorChoice,
     RunKey,
     SeedMajorRuns,
+    _repeats,
+    _schema_problems,
+    _size_problems,
     grid_values,
     is_number,
 )
 from trn_env.output.metrics import MetricSettings, horizontal_series, navigation_metrics
 
-_KEYS = {"name", "description", "logs", "navigators", "seeds", "sweeps", "metrics"}
+# A log campaign's file: the flight campaign's keys (SCHEMA) with logs for scenarios, and seeds only as a list
+# of the navigators' seeds (a log's own seed when left out); sweeps set navigator settings only.
+LOG_SCHEMA: dict = {
+    "type": "object",
+    "additionalProperties": False,
+    "required": ["logs", "navigators"],
+    "properties": {
+        **{k: SCHEMA["properties"][k] for k in ("name", "description", "navigators", "sweeps", "metrics")},
+        "logs": {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1},
+                 "description": "log folders, relative to the campaign file"},
+        "seeds": {"type": "array", "minItems": 1, "uniqueItems": True,
+                  "items": {"type": "integer", "minimum": 0, "maximum": INT64_MAX},
+                  "description": "the navigators' random streams (default: each log's own seed)"},
+    },
+}
 
 
 @dataclass
@@ -97,47 +116,31 @@ def load_log_campaign(path: Path, data: dict, raw: bytes) -> LogCampaign:
     from trn_env.logs import LogError, read_log
     from trn_env.logs.replay import build_maps, check_sensors, scenario_of
     source = str(path)
-    problems = [f"{k}: unknown key (allowed with logs: {', '.join(sorted(_KEYS))})" for k in sorted(data)
-                if k not in _KEYS]
-    logs = data.get("logs")
-    if not isinstance(logs, list) or not logs or not all(isinstance(x, str) and x for x in logs):
-        problems.append("logs: a non-empty list of log folders (paths relative to the campaign file)")
-        logs = []
-    navs_raw = data.get("navigators")
-    navs: list[NavigatorChoice] = []
-    if not isinstance(navs_raw, list) or not navs_raw:
-        problems.append("navigators: a non-empty list of navigator names or {name, label, settings} tables")
-        navs_raw = []
-    for i, n in enumerate(navs_raw):
-        if isinstance(n, str) and n:
-            navs.append(NavigatorChoice(n, n, {}))
-        elif (isinstance(n, dict) and isinstance(n.get("name"), str)
-              and set(n) <= {"name", "label", "settings"} and isinstance(n.get("settings", {}), dict)):
-            navs.append(NavigatorChoice(str(n.get("label", n["name"])), n["name"],
-                                        dict(n.get("settings", {}))))
-        else:
-            problems.append(f"navigators[{i}]: a name or a table with name (and label, settings)")
+    problems = _schema_problems(data, LOG_SCHEMA) or _size_problems(data)
+    if problems:
+        raise CampaignError(source, problems)
+    logs = data["logs"]
+    navs = [NavigatorChoice(n, n, {}) if isinstance(n, str) else
+            NavigatorChoice(n.get("label", n["name"]), n["name"], dict(n.get("settings", {})))
+            for n in data["navigators"]]
     labels = [n.label for n in navs]
     problems += [f"navigators[{i}]: label {lab!r} is used twice" for i, lab in enumerate(labels)
                  if labels.index(lab) != i]
     seeds = data.get("seeds", [None])
-    if not isinstance(seeds, list) or not seeds or not all(
-            s is None or (isinstance(s, int) and not isinstance(s, bool) and s >= 0) for s in seeds):
-        problems.append("seeds: a list of navigator seeds >= 0 (default: each log's own seed)")
-        seeds = [None]
-    sweeps = data.get("sweeps", [])
     paths, values = [], []
-    for j, s in enumerate(sweeps if isinstance(sweeps, list) else []):
-        p = s.get("path") if isinstance(s, dict) else None
-        if not isinstance(p, str) or not p.startswith("navigator.settings.") or p.count(".") != 2:
+    for j, s in enumerate(data.get("sweeps", [])):
+        p = s["path"]
+        if not p.startswith("navigator.settings.") or p.count(".") != 2:
             problems.append(f"sweeps[{j}].path: a log campaign sweeps navigator settings only "
                             "(navigator.settings.<name>)")
             continue
-        vals = s.get("values") if "values" in s else (
-            grid_values(s["grid"]) if isinstance(s.get("grid"), dict) else None)
-        if not isinstance(vals, list) or not vals:
-            problems.append(f"sweeps[{j}]: give values = [...] or grid = {{start, stop, num}}")
+        if p in paths:
+            problems.append(f"sweeps[{j}].path: {p!r} is swept twice")
             continue
+        vals = list(s["values"]) if "values" in s else grid_values(s["grid"])
+        what = "values" if "values" in s else "grid"
+        problems += [f"sweeps[{j}].{what}: {vals[k]!r} (point {k}) repeats point {first}: give each value "
+                     "once" for k, first in _repeats(vals)]
         paths.append(p)
         values.append(vals)
     try:

@@ -200,10 +200,12 @@ MAX_RUNS = 1_000_000
 
 
 def _size_problems(data: dict) -> list[str]:
-    """The campaign's run count (seeds x scenarios x navigators x sweep points) above MAX_RUNS, from the
-    schema-checked file alone."""
-    seeds = len(data["seeds"]) if isinstance(data["seeds"], list) else int(data["seeds"])
-    factors = [("seeds", seeds), ("scenarios", len(data["scenarios"])),
+    """The campaign's run count (seeds x scenarios x navigators x sweep points; a log campaign's logs
+    instead of scenarios) above MAX_RUNS, from the schema-checked file alone."""
+    seeds = data.get("seeds", [None])
+    seeds = len(seeds) if isinstance(seeds, list) else int(seeds)
+    what = "logs" if "logs" in data else "scenarios"
+    factors = [("seeds", seeds), (what, len(data[what])),
                ("navigators", max(1, len(data.get("navigators", []))))]
     factors += [(f"sweeps[{j}]", len(sw["values"]) if "values" in sw else int(sw["grid"]["num"]))
                 for j, sw in enumerate(data.get("sweeps", []))]
@@ -226,8 +228,9 @@ def grid_values(g: dict) -> list[float]:
     return [float(x) for x in np.linspace(float(g["start"]), float(g["stop"]), int(g["num"]))]
 
 
-def _schema_problems(data: dict) -> list[str]:
-    v = jsonschema.Draft202012Validator(SCHEMA)
+def _schema_problems(data: dict, schema: dict | None = None) -> list[str]:
+    """Every problem of `data` against `schema` (default: the flight campaign's SCHEMA), by field path."""
+    v = jsonschema.Draft202012Validator(SCHEMA if schema is None else schema)
     out = []
     for err in sorted(v.iter_errors(data), key=lambda e: [str(p) for p in e.absolute_path]):
         path = list(err.absolute_path)
