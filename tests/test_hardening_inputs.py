@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -197,6 +198,15 @@ def test_cli_out_checked_before_flying(tmp_path, capsys):
 def test_cli_directory_as_scenario(tmp_path, capsys):
     code, err = _cli(tmp_path, "--out", str(tmp_path / "o"), scenario=str(tmp_path), capsys=capsys)
     assert code == 2 and "is a directory" in err and "no such" not in err
+
+
+def test_cli_device_or_pipe_as_scenario_is_not_called_missing(tmp_path, capsys):
+    fifo = tmp_path / "pipe.toml"
+    os.mkfifo(fifo)
+    for path in (os.devnull, str(fifo)):
+        code, err = _cli(tmp_path, "--out", str(tmp_path / "o"), scenario=path, capsys=capsys)
+        assert code == 2 and "file: not a regular file" in err and "no such" not in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_cli_subprocess_nan_exit_2_no_traceback(tmp_path):

@@ -185,6 +185,9 @@ def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
         if text_path.is_dir():
             raise ScenarioError(source, ["file: is a directory, not a scenario file (give a .toml file or a "
                                          f"built-in name: {', '.join(builtin_names())})"])
+        if text_path.exists() and not text_path.is_file():
+            raise ScenarioError(source, ["file: not a regular file (a device, a pipe or a socket): give a "
+                                         ".toml file"])
         if not text_path.is_file():
             known = ", ".join(builtin_names())
             raise ScenarioError(source, [f"file: no such scenario file or built-in name "

@@ -372,6 +372,8 @@ def _sensor_rate_problems(sections) -> list[str]:
     profile's): a sensor samples the truth's steps (trn_env.sensors.common.sample_steps refuses a finer
     grid during the flight; here it is found before it)."""
     dt_s = float(sections.aircraft.dt_s)
+    if not dt_s > 0.0:
+        return []                  # aircraft.dt_s's own problem
     truth_hz = 1.0 / dt_s
     problems = []
     for name, config in sections.sensors.configs().items():
