@@ -169,7 +169,10 @@ def gym_reference_fdm(aircraft: str = "kingair", dt_s: float | None = None):
     import trn_env.scenario.build as components
     from trn_env.scenario.loading import load_scenario
 
-    sc = load_scenario("default").with_fields({"aircraft.dt_s": dt})
+    sc = load_scenario("default")
+    # the IMU no faster than the truth's steps, as the env lowers it (its samples are not flown here)
+    imu_hz = min(float(sc.sensors.imu.rate_hz), 1.0 / dt)
+    sc = sc.with_fields({"aircraft.dt_s": dt, "sensors.imu.rate_hz": imu_hz})
     world = components.build_terrain(sc, sc.extras, np.random.default_rng(0))[0]
     return components.build_flight(sc, world, np.random.default_rng(0)).fdm, dt
 

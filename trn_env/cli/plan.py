@@ -108,14 +108,11 @@ def _route_problems(scenario, text: str) -> list[str]:
     scenario accepts as it is (a waypoint above the aircraft's service ceiling, say, from --agl), or none is
     written. Every waypoint has the planner's height, so a problem repeated along the route is given once,
     at its first waypoint, with how many more share it."""
-    import copy
     import re
 
-    from trn_env.scenario.loading import ScenarioError, tomllib, validate
-    data = copy.deepcopy(scenario.to_dict())
-    data["route"] = tomllib.loads(text)["route"]
+    from trn_env.scenario.loading import ScenarioError, tomllib
     try:
-        validate(data, source=f"{scenario.source} with the planned route")
+        scenario.with_fields({"route": tomllib.loads(text)["route"]})
     except ScenarioError as err:
         first: dict[tuple[str, str], str] = {}
         count: dict[tuple[str, str], int] = {}
