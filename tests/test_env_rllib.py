@@ -60,6 +60,25 @@ def test_bad_arguments_exit_2_naming_them(tmp_path, capsys):
         assert s.main(["--out", str(tmp_path / "o"), *args]) == 2
         assert msg in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+    # Ray's own waits, each for minutes or for ever, are refused in one line: an address where nothing
+    # listens (ray.init retried it for 5 minutes and more) and more EnvRunners than the instance has CPUs
+    # (RLlib waited for the missing actors for ever); --num-cpus as a campaign's --workers
+    import socket
+
+    import ray
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]             # closed again: nothing listens there
+    before = ray.is_initialized()
+    for args, msg in ((["--address", f"127.0.0.1:{port}"], f"no Ray cluster reachable at 127.0.0.1:{port}"),
+                      (["--env-runners", "3", "--num-cpus", "2"],
+                       "--env-runners 3 needs 3 CPUs, one per EnvRunner; the local Ray instance (--num-cpus) "
+                       "has 2"),
+                      (["--num-cpus", "100000"], "--num-cpus: 100000 is more than 4 per usable core")):
+        assert s.main(["--out", str(tmp_path / "o"), *args]) == 2
+        err = capsys.readouterr().err
+        assert msg in err, err
+        assert ray.is_initialized() == before and not (tmp_path / "o").exists()
     from trn_env.env.rllib_train import ppo_config
 
     for bad in (-1.0, math.inf, True):

@@ -36,19 +36,19 @@ def default_workers() -> int:
 MAX_WORKERS_PER_CORE = 4
 
 
-def check_local_workers(workers: int | None) -> None:
-    """ValueError naming --workers when it is not a whole number >= 1 or exceeds MAX_WORKERS_PER_CORE per
-    usable core of this machine."""
+def check_local_workers(workers: int | None, option: str = "--workers") -> None:
+    """ValueError naming `option` when `workers` is not a whole number >= 1 or exceeds MAX_WORKERS_PER_CORE
+    per usable core of this machine."""
     if workers is None:
         return
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"--workers: must be a whole number >= 1 (got {workers!r})")
+        raise ValueError(f"{option}: must be a whole number >= 1 (got {workers!r})")
     cores = default_workers()
     if workers > MAX_WORKERS_PER_CORE * cores:
         raise ValueError(
-            f"--workers: {workers} is more than {MAX_WORKERS_PER_CORE} per usable core of this machine "
+            f"{option}: {workers} is more than {MAX_WORKERS_PER_CORE} per usable core of this machine "
             f"({cores} core(s), so at most {MAX_WORKERS_PER_CORE * cores}): each worker is a process started "
-            "at once and the runs are CPU-bound, so more workers add memory, not speed"
+            "at once and the work is CPU-bound, so more workers add memory, not speed"
         )
 
 
