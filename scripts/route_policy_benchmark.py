@@ -66,7 +66,8 @@ PPO_SETTINGS = dict(n_steps=128, batch_size=64, n_epochs=10, gamma=GAMMA, gae_la
                     learning_rate=1e-3, ent_coef=0.0, clip_range=0.2, use_sde=True, sde_sample_freq=8)
 POLICY_NET = dict(net_arch=[64, 64], log_std_init=-2.0)
 POLICIES = ("straight", "planner", "ppo", "ppo_untrained", "random")
-PLANNER = {"weight": 3.0, "informative_crlb_m": 5.0}     # set from the command line
+PLANNER_DEFAULTS = {"weight": 3.0, "informative_crlb_m": 5.0}
+PLANNER = dict(PLANNER_DEFAULTS)     # set from the command line (each main() from its own arguments)
 
 
 def env_spec(terrain_key: str) -> dict:
@@ -361,9 +362,9 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=None, help="evaluation workers (default: every core)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="campaign backend of the evaluation (default local)")
-    p.add_argument("--planner-weight", type=float, default=PLANNER["weight"],
+    p.add_argument("--planner-weight", type=float, default=PLANNER_DEFAULTS["weight"],
                    help="the planner's weight (extra cost of a featureless metre)")
-    p.add_argument("--planner-informative-crlb", type=float, default=PLANNER["informative_crlb_m"],
+    p.add_argument("--planner-informative-crlb", type=float, default=PLANNER_DEFAULTS["informative_crlb_m"],
                    help="CRLB (m) at or below which the planner counts terrain as informative")
     p.add_argument("--out", type=Path, default=Path("out/route_bench"))
     p.add_argument("--reuse-models", action="store_true",
@@ -373,6 +374,18 @@ def main(argv=None) -> int:
     PLANNER.update(weight=a.planner_weight, informative_crlb_m=a.planner_informative_crlb)
     if a.train_steps < 0 or a.seeds < 1 or (a.workers is not None and a.workers < 1) or a.envs < 1:
         print("error: --train-steps >= 0, --seeds >= 1, --workers >= 1, --envs >= 1", file=sys.stderr)
+        return 2
+    # what the evaluation takes is checked before the training, which it would otherwise follow by minutes
+    from trn_env.campaign.local import check_local_workers
+    from trn_env.guidance.planner import PlannerConfig
+    try:
+        check_local_workers(a.envs, "--envs")              # SubprocVecEnv: one process per env
+        make_backend(a.backend, a.workers)
+        PlannerConfig(**PLANNER)
+    except ValueError as err:
+        msg = str(err).replace("PlannerConfig.weight", "--planner-weight").replace(
+            "PlannerConfig.informative_crlb_m", "--planner-informative-crlb")
+        print(f"error: {msg}", file=sys.stderr)
         return 2
     from trn_env.output.run_folder import folder_problem
     problem = folder_problem(a.out, "--out")

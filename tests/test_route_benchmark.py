@@ -93,3 +93,19 @@ def test_bad_out_is_refused_before_any_work(bench, tmp_path, capsys):
     with pytest.raises(SystemExit, match="holds no earlier evaluation"):
         bench.evaluate("basin", None, [1000], tmp_path / "eval" / "episodes_basin", None)
     assert (tmp_path / "eval" / "episodes_basin" / "mine.txt").read_text() == "mine"
+
+
+def test_what_the_evaluation_takes_is_refused_before_the_training(bench, tmp_path, capsys):
+    """--workers, --envs and the planner's settings were first used after the training (minutes of PPO, then
+    a traceback): each is now one line and exit 2 before anything is trained or written."""
+    from trn_env.campaign.local import MAX_WORKERS_PER_CORE, default_workers
+
+    many = str(MAX_WORKERS_PER_CORE * default_workers() + 1)
+    out = tmp_path / "o"
+    for args, msg in ((["--workers", many], f"--workers: {many} is more than"),
+                      (["--envs", many], f"--envs: {many} is more than"),
+                      (["--planner-weight", "nan"], "--planner-weight must be a finite number >= 0"),
+                      (["--planner-informative-crlb", "-1"], "--planner-informative-crlb must be")):
+        assert bench.main(["--out", str(out), "--terrains", "basin", *args]) == 2
+        assert msg in capsys.readouterr().err
+        assert not out.exists()
