@@ -349,12 +349,16 @@ def main(argv=None) -> int:
         torch.set_num_threads(args.torch_threads)
     import ray
 
-    args.out.mkdir(parents=True, exist_ok=True)
+    from trn_env.campaign.ray_backend import connect_for_env_runners
     if args.command in ("train", "all"):             # (evaluation needs no Ray: it loads the module alone)
-        if args.address:
-            ray.init(address=args.address, include_dashboard=False, log_to_driver=False)
-        else:
-            ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False)
+        try:
+            connect_for_env_runners(ray, args.address, None if args.address else args.num_cpus,
+                                    args.env_runners, log_to_driver=False)
+        except ValueError as err:
+            print(f"error: {err}", file=sys.stderr)
+            return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.command in ("train", "all"):
         try:
             train(args, kw)
         finally:

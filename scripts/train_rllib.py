@@ -50,33 +50,6 @@ def parse(argv):
     return p.parse_args(argv)
 
 
-def connect(ray, address: str | None, num_cpus: int | None, env_runners: int) -> None:
-    """Join the cluster at `address` (probed first: an unreachable or wrong address is one line within
-    seconds, where ray.init waits for minutes) or start a local instance of `num_cpus` CPUs; ValueError,
-    with Ray shut down again, when the session has fewer CPUs than the EnvRunners need (one each: RLlib
-    would wait for the missing ones for ever)."""
-    from trn_env.campaign.local import check_local_workers
-    from trn_env.campaign.ray_backend import classify_failure, probe_address, probe_with_ray
-
-    if address:
-        probe_address(address)
-        if address not in ("auto", "local"):
-            probe_with_ray(address)
-        try:
-            ray.init(address=address, include_dashboard=False)
-        except (ConnectionError, RuntimeError, TimeoutError) as exc:
-            raise ValueError(classify_failure(address, str(exc))) from None
-    else:
-        check_local_workers(num_cpus, "--num-cpus")
-        ray.init(address="local", num_cpus=num_cpus, include_dashboard=False)
-    cpus = int(ray.cluster_resources().get("CPU", 0))
-    if env_runners > cpus:
-        ray.shutdown()
-        where = f"the cluster at {address}" if address else "the local Ray instance (--num-cpus)"
-        raise ValueError(f"--env-runners {env_runners} needs {env_runners} CPUs, one per EnvRunner; "
-                         f"{where} has {cpus}")
-
-
 def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else argv)
     from trn_env.env.rllib import RLlibNotInstalled, require_rllib
@@ -128,8 +101,9 @@ def main(argv=None) -> int:
     tier = args.tier if args.tier != "auto" else ("fast" if FAST_ID in gym.registry else "full")
     import ray
 
+    from trn_env.campaign.ray_backend import connect_for_env_runners
     try:
-        connect(ray, args.address, args.num_cpus, args.env_runners)
+        connect_for_env_runners(ray, args.address, args.num_cpus, args.env_runners)
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -100,6 +100,16 @@ def test_route_task_script_refuses_bad_policies_threads_and_rows(tmp_path, capsy
                       (["--env-runners", "-1"], "--env-runners must be >= 0")):
         assert mod.main([*train, *bad]) == 2
         assert name in capsys.readouterr().err
+    # Ray's waits (trn_env.campaign.ray_backend.connect_for_env_runners): more EnvRunners than CPUs, an
+    # address where nothing listens
+    import socket
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    for bad, name in ((["--env-runners", "3", "--num-cpus", "2"], "--env-runners 3 needs 3 CPUs"),
+                      (["--address", f"127.0.0.1:{port}"], f"no Ray cluster reachable at 127.0.0.1:{port}")):
+        assert mod.main([*train, *bad]) == 2
+        assert name in capsys.readouterr().err
     assert not out.exists()                                  # nothing written
     afile = tmp_path / "a.txt"
     afile.write_text("a file")

@@ -189,6 +189,35 @@ def probe_with_ray(address: str, timeout_s: float = PROBE_TIMEOUT_S) -> int:
     raise BackendError(f"{why}; Ray's output: {f.name}")
 
 
+def connect_for_env_runners(ray, address: str | None, num_cpus: int | None, env_runners: int,
+                            **init_kw: Any) -> None:
+    """For a training script (scripts/train_rllib.py, scripts/route_task.py): join the cluster at `address`
+    (probed first: an unreachable or wrong address is one line within seconds, where ray.init waits for
+    minutes) or start a local instance of `num_cpus` CPUs (limited as a campaign's --workers); ValueError,
+    with Ray shut down again, when the session has fewer CPUs than the EnvRunners need (one each: RLlib
+    would wait for the missing ones for ever). `init_kw` goes to ray.init."""
+    from trn_env.campaign.local import check_local_workers
+
+    kw = {"include_dashboard": False, **init_kw}
+    if address:
+        probe_address(address)
+        if address not in ("auto", "local"):
+            probe_with_ray(address)
+        try:
+            ray.init(address=address, **kw)
+        except (ConnectionError, RuntimeError, TimeoutError) as exc:
+            raise ValueError(classify_failure(address, str(exc))) from None
+    else:
+        check_local_workers(num_cpus, "--num-cpus")
+        ray.init(address="local", num_cpus=num_cpus, **kw)
+    cpus = int(ray.cluster_resources().get("CPU", 0))
+    if env_runners > cpus:
+        ray.shutdown()
+        where = f"the cluster at {address}" if address else "the local Ray instance (--num-cpus)"
+        raise ValueError(f"--env-runners {env_runners} needs {env_runners} CPUs, one per EnvRunner; "
+                         f"{where} has {cpus}")
+
+
 def _attempt_number(key: str) -> int:
     """This attempt's number (1, 2, ...) of the run `key`, counted in Ray's internal key-value store: Ray
     retries a task whose worker or node died by running it again, and each run counts itself."""
