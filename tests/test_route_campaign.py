@@ -82,6 +82,7 @@ def test_random_policy_is_seeded_per_episode():
     ({"env": {"scenario": "basin_route", "goal_radius_m": -1.0}}, "goal_radius_m"),
     ({"goals_deg": [[10.0, 10.0]]}, "goals_deg[0]"),
     ({"colour": "red"}, "colour"),
+    ({"seeds": 1_000_000_000}, "seeds: the campaign asks for 2,000,000,000 episodes"),   # not drawn first
 ])
 def test_bad_episode_campaign_specs_name_the_field(patch, field):
     with pytest.raises(CampaignError, match=field.replace("[", r"\[").replace("]", r"\]")):

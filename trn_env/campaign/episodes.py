@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from trn_env.campaign.spec import CampaignError, RunKey, SeedMajorRuns, draw_seeds
+from trn_env.campaign.spec import MAX_RUNS, CampaignError, RunKey, SeedMajorRuns, draw_seeds
 
 POLICY_KINDS = ("straight", "planner", "sb3", "random")
 # columns of an episode row (besides the run bookkeeping ones); floats are NaN where they do not apply
@@ -177,6 +177,12 @@ def episode_campaign(spec: dict, source: str = "episode campaign") -> EpisodeCam
         raise CampaignError(source, [f"goals_deg / policies: {exc}"]) from None
     finally:
         env.close()
+    n_runs = (len(seeds) if isinstance(seeds, list) else seeds) * len(pols) * len(goals)
+    if n_runs > MAX_RUNS:           # counted before the seeds are drawn (spec.MAX_RUNS)
+        raise CampaignError(source, [f"seeds: the campaign asks for {n_runs:,} episodes "
+                                     f"({len(seeds) if isinstance(seeds, list) else seeds:,} seeds x "
+                                     f"{len(pols)} policies x {len(goals)} goals), more than {MAX_RUNS:,}: "
+                                     "split it into campaigns of fewer episodes"])
     seed_list = list(seeds) if isinstance(seeds, list) else draw_seeds(spec.get("root_seed", 0), seeds)
     variants = [PolicyVariant(index=k, label=p["label"], policy=p, goal_deg=(float(g[0]), float(g[1])))
                 for k, (p, g) in enumerate((p, g) for p in pols for g in goals)]
