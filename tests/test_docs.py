@@ -95,6 +95,39 @@ def test_scenario_reference_lists_every_schema_field_with_a_meaning():
     assert undescribed == [], f"schema fields without a description: {undescribed}"
 
 
+def test_campaign_reference_lists_every_key_of_both_campaign_files_with_a_meaning():
+    """The campaign file's page against an independent walk of both schemas: every key path appears in its
+    section, with a description; and the keys the loaders read (the schemas' top-level properties) are
+    exactly what they accept."""
+    from trn_env.campaign.log_replay import LOG_SCHEMA
+    from trn_env.campaign.spec import SCHEMA
+
+    page = _reference().campaign_markdown()
+    flights, logs = page.split("## Sensor logs")
+
+    def paths(node, prefix=""):
+        node = dict(node)
+        for alt in node.get("oneOf", []):
+            if "properties" in alt:
+                node = alt
+        if node.get("type") == "array" and isinstance(node.get("items"), dict):
+            yield from paths(node["items"], prefix + "[]")
+            return
+        for k, v in node.get("properties", {}).items():
+            yield f"{prefix}.{k}" if prefix else k, v
+            yield from paths(v, f"{prefix}.{k}" if prefix else k)
+
+    for schema, section in ((SCHEMA, flights), (LOG_SCHEMA, logs)):
+        found = list(paths(schema))
+        assert len(found) >= 20
+        for path, node in found:
+            row = next((ln for ln in section.splitlines() if ln.startswith(f"| `{path}` |")), None)
+            assert row is not None, path
+            assert node.get("description") and row.rstrip(" |").endswith(
+                node["description"].replace("|", "\\|")[-20:]), path
+    assert "`campaigns/<name>-<UTC time>`" in page and "1,000,000 runs" in page
+
+
 def test_settings_reference_lists_every_navigator_and_monitor_setting():
     from trn_env.navigators import registry
 

@@ -17,7 +17,7 @@ import re
 from importlib import resources
 from pathlib import Path
 
-GENERATED = ("cli", "scenario", "settings", "outputs", "env")
+GENERATED = ("cli", "scenario", "campaign", "settings", "outputs", "env")
 _SUFFIX_UNITS = (("_deg_s", "deg/s"), ("_mps2", "m/s²"), ("_mps", "m/s"), ("_rps", "rad/s"), ("_deg", "deg"),
                  ("_rad", "rad"), ("_hz", "Hz"), ("_km", "km"), ("_m2", "m²"), ("_m", "m"), ("_s", "s"),
                  ("_kg", "kg"), ("_pa", "Pa"), ("_k", "K"), ("_ft", "ft"), ("_kt", "kt"))
@@ -175,10 +175,10 @@ def scenario_defaults() -> dict[str, object]:
     return out
 
 
-def scenario_fields() -> list[dict]:
-    """Every field of the scenario schema by dotted path (`[]` marks the items of an array of tables)."""
-    schema = scenario_schema()
-    defaults = scenario_defaults()
+def schema_fields(schema: dict, defaults: dict[str, object] | None = None) -> list[dict]:
+    """Every field of a JSON schema by dotted path (`[]` marks the items of an array of tables); `defaults`:
+    the values a loader fills in, by path, where the schema gives none."""
+    defaults = defaults or {}
     rows: list[dict] = []
 
     def walk(node: dict, path: str) -> None:
@@ -192,9 +192,7 @@ def scenario_fields() -> list[dict]:
                         walk(alt, path)
                         return
             if node.get("type") == "array" and isinstance(node.get("items"), dict):
-                items = _resolve(node["items"], schema)
-                if "properties" in items:
-                    walk(items, path + "[]")
+                walk(node["items"], path + "[]")
             return
         required = set(node.get("required", []))
         for name, sub in props.items():
@@ -215,6 +213,11 @@ def scenario_fields() -> list[dict]:
 
     walk(schema, "")
     return rows
+
+
+def scenario_fields() -> list[dict]:
+    """Every field of the scenario schema by dotted path, with the loader's defaults."""
+    return schema_fields(scenario_schema(), scenario_defaults())
 
 
 def scenario_markdown() -> str:
@@ -275,6 +278,26 @@ def scenario_sections_markdown() -> list[str]:
 def _row(row: dict) -> str:
     return (f"| `{row['path']}` | {_cell(row['type'])} | {row['unit']} | {row['default']} | "
             f"{_cell(row['range'])} | {_cell(row['description'])} |")
+
+
+# ----------------------------------------------------------------------------------------------- campaign
+def campaign_markdown() -> str:
+    from trn_env.campaign.log_replay import LOG_SCHEMA
+    from trn_env.campaign.spec import MAX_RUNS, SCHEMA
+    header = ["| key | type | unit | default | range | meaning |", "|---|---|---|---|---|---|"]
+    out = ["# Campaign file", "",
+           "Generated from the JSON schemas every campaign file is checked against "
+           "(`trn_env.campaign.spec.SCHEMA`, `trn_env.campaign.log_replay.LOG_SCHEMA`); the "
+           "[campaigns guide](../guide/campaigns.md) shows them at work. Every problem is listed by its key "
+           "and `trn-env campaign` exits 2 before the first run. A file asking for more than "
+           f"{MAX_RUNS:,} runs is refused, and so is a scenario, navigator label, seed or sweep point given "
+           "twice.", "", "## Flights: `scenarios = [...]`", ""] + header
+    out += [_row(r) for r in schema_fields(SCHEMA)]
+    out += ["", "## Sensor logs: `logs = [...]`", "",
+            "A file with `logs` replays recorded logs open loop ([sensor logs](../guide/logs.md)).", ""]
+    out += header
+    out += [_row(r) for r in schema_fields(LOG_SCHEMA)]
+    return "\n".join(out) + "\n"
 
 
 # ----------------------------------------------------------------------------------------------- settings
@@ -408,8 +431,8 @@ def env_markdown() -> str:
     return head + "\n".join("#" + p if p.startswith("# ") else p for p in parts)
 
 
-PAGES = {"cli": cli_markdown, "scenario": scenario_markdown, "settings": settings_markdown,
-         "outputs": outputs_markdown, "env": env_markdown}
+PAGES = {"cli": cli_markdown, "scenario": scenario_markdown, "campaign": campaign_markdown,
+         "settings": settings_markdown, "outputs": outputs_markdown, "env": env_markdown}
 
 
 def write_pages(folder: Path) -> list[Path]:

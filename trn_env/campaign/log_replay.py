@@ -50,7 +50,13 @@ LOG_SCHEMA: dict = {
     "additionalProperties": False,
     "required": ["logs", "navigators"],
     "properties": {
-        **{k: SCHEMA["properties"][k] for k in ("name", "description", "navigators", "sweeps", "metrics")},
+        **{k: SCHEMA["properties"][k] for k in ("name", "description", "metrics")},
+        "navigators": {**SCHEMA["properties"]["navigators"],
+                       "description": "navigator names or {name, label, settings} tables, each replayed on "
+                                      "every log"},
+        "sweeps": {**SCHEMA["properties"]["sweeps"],
+                   "description": "navigator settings swept by dotted path (`navigator.settings.<name>`, one "
+                                  "every navigator listed takes); several sweeps form a grid"},
         "logs": {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1},
                  "description": "log folders, relative to the campaign file"},
         "seeds": {"type": "array", "minItems": 1, "uniqueItems": True,

@@ -62,41 +62,69 @@ else:  # pragma: no cover
 
 _NUMBER = {"type": "number"}
 INT64_MAX = 2**63 - 1          # seeds are int64 columns in the rows (and TOML integers are 64-bit)
+_METRIC_DOCS = {
+    "converge_threshold_m": "time to converge: the horizontal error below this",
+    "track_loss_threshold_m": "track loss: the horizontal error above this ...",
+    "track_loss_k_sigma": "... or above k x sigma_h (0 disables the sigma test) ...",
+    "track_loss_min_s": "... for at least this long",
+    "alert_limit_m": "the horizontal alert limit of the protection-level metrics",
+}
+# The campaign file (docs/reference/campaign.md is generated from the descriptions).
 SCHEMA: dict = {
     "type": "object",
     "additionalProperties": False,
     "required": ["scenarios", "seeds"],
     "properties": {
-        "name": {"type": "string", "minLength": 1, "pattern": "^[A-Za-z0-9_.-]+$"},
-        "description": {"type": "string"},
-        "root_seed": {"type": "integer", "minimum": 0, "maximum": INT64_MAX},
+        "name": {"type": "string", "minLength": 1, "pattern": "^[A-Za-z0-9_.-]+$",
+                 "description": "the campaign's name: its rows' `campaign` column and its default folder "
+                                "`campaigns/<name>-<UTC time>` (default: the file's name)"},
+        "description": {"type": "string", "description": "free text, kept in campaign.json"},
+        "root_seed": {"type": "integer", "minimum": 0, "maximum": INT64_MAX, "default": 0,
+                      "description": "the seed a seed count is drawn from (numpy SeedSequence.spawn)"},
         "seeds": {"oneOf": [
             {"type": "integer", "minimum": 1, "description": "a count of seeds drawn from root_seed"},
             {"type": "array", "minItems": 1, "uniqueItems": True,
              "items": {"type": "integer", "minimum": 0, "maximum": INT64_MAX},
              "description": "a list of scenario seeds"},
-        ]},
-        "scenarios": {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1}},
-        "duration_s": {"type": "number", "exclusiveMinimum": 0},
+        ], "description": "a count of seeds drawn from root_seed, or a list of distinct scenario seeds; "
+                          "seed i is the same in every variant (paired comparisons)"},
+        "scenarios": {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1},
+                      "description": "scenario files (relative to this file, ~ the home folder) or built-in "
+                                     "names, each listed once"},
+        "duration_s": {"type": "number", "exclusiveMinimum": 0,
+                       "description": "every scenario's time limit (default: each scenario's own)"},
         "navigators": {"type": "array", "minItems": 1, "items": {"oneOf": [
             {"type": "string", "minLength": 1},
             {"type": "object", "additionalProperties": False, "required": ["name"],
-             "properties": {"name": {"type": "string", "minLength": 1},
-                            "label": {"type": "string", "minLength": 1},
-                            "settings": {"type": "object"}}},
-        ]}},
-        "keep_logs": {"type": "boolean"},
+             "properties": {"name": {"type": "string", "minLength": 1,
+                                     "description": "a built-in or plug-in navigator, or module:Name"},
+                            "label": {"type": "string", "minLength": 1,
+                                      "description": "its rows' `navigator` column (default: name)"},
+                            "settings": {"type": "object",
+                                         "description": "its settings (docs/reference/settings.md)"}}},
+        ]}, "description": "navigator names or {name, label, settings} tables, each flown on every scenario "
+                           "(default: each scenario's own navigator)"},
+        "keep_logs": {"type": "boolean", "default": False,
+                      "description": "also keep each run's full log as `logs/<run_id>.npz`"},
         "metrics": {"type": "object", "additionalProperties": False,
-                    "properties": {k: _NUMBER for k in MetricSettings.__dataclass_fields__}},
-        "sweeps": {"type": "array", "items": {
+                    "description": "thresholds of the run metrics (trn_env.output.metrics.MetricSettings)",
+                    "properties": {k: {**_NUMBER, "default": f.default, "description": _METRIC_DOCS[k]}
+                                   for k, f in MetricSettings.__dataclass_fields__.items()}},
+        "sweeps": {"type": "array", "description": "scenario fields swept by dotted path; several sweeps "
+                                                   "form a grid (every combination)", "items": {
             "type": "object", "additionalProperties": False, "required": ["path"],
             "properties": {
-                "path": {"type": "string", "pattern": r"^[A-Za-z0-9_]+(\.[A-Za-z0-9_]+)*$"},
-                "values": {"type": "array", "minItems": 1},
+                "path": {"type": "string", "pattern": r"^[A-Za-z0-9_]+(\.[A-Za-z0-9_]+)*$",
+                         "description": "the field's dotted path, as `trn-env fly --set` takes it"},
+                "values": {"type": "array", "minItems": 1,
+                           "description": "the values, each once (5 and 5.0 count as one)"},
                 "grid": {"type": "object", "additionalProperties": False,
                          "required": ["start", "stop", "num"],
-                         "properties": {"start": _NUMBER, "stop": _NUMBER,
-                                        "num": {"type": "integer", "minimum": 1}}},
+                         "description": "num evenly spaced values from start to stop (numpy linspace)",
+                         "properties": {"start": {**_NUMBER, "description": "the first value"},
+                                        "stop": {**_NUMBER, "description": "the last value"},
+                                        "num": {"type": "integer", "minimum": 1,
+                                                "description": "how many values"}}},
             },
             "oneOf": [{"required": ["values"]}, {"required": ["grid"]}],
         }},
