@@ -149,3 +149,67 @@ def test_goal_error_model_terms():
         math.sqrt(2) * G_MPS2 * 1e-6 * t ** 3 / 6)
     assert expected_goal_error_m(0.0, 85.0, 1e-3, 1e-6, 5.0, 0.1) == pytest.approx(math.sqrt(2) * 5.0)
     assert expected_goal_error_m(8500.0, 85.0, 1e-3, 1e-6) > expected_goal_error_m(4250.0, 85.0, 1e-3, 1e-6)
+
+
+# ------------------------------------------------------------------------------------- a full disk
+
+def _no_space(*_args, **_kw):
+    import errno
+    raise OSError(errno.ENOSPC, "Error writing bytes to file. Detail: [errno 28] No space left on device")
+
+
+@pytest.mark.parametrize("how", ["fly", "fly --no-pipeline", "record"])
+def test_a_full_disk_during_the_flight_is_one_line_and_nothing_is_left(tmp_path, capsys, monkeypatch, how):
+    """The log streamed during a flight hits a full disk (as pyarrow reports it; the navigator's worker
+    process raises it in the pipelined loop): one line, exit 2, no partial folder (a traceback, exit 1,
+    before)."""
+    from trn_env.logs import writer
+    monkeypatch.setattr(writer._Table, "flush", _no_space)       # (inherited by the forked worker)
+    command, *opts = how.split()
+    out = tmp_path / "out"
+    args = [command, "default", "--duration", "5", "--quiet", "--out", str(out), *opts]
+    assert cli.main(args + (["--no-plots"] if command == "fly" else [])) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    what = "the log" if command == "record" else "the run's log beside"
+    assert err == [f"error: cannot write {what} {out}: No space left on device (nothing written)"], err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_when_writing_a_run_folder_a_report_or_a_campaigns_rows(tmp_path, capsys, monkeypatch):
+    from trn_env.campaign import driver
+    from trn_env.output import run_folder
+
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        m.setattr(run_folder, "write_run", _no_space)
+        assert cli.main(["fly", "default", "--duration", "5", "--quiet", "--no-plots",
+                         "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == (f"error: cannot write the run folder {out}: No space left on "
+                                               "device (nothing written)")
+    assert list(tmp_path.iterdir()) == []
+    camp = tmp_path / "camp"
+    real = driver.write_row
+    calls = []
+
+    def second_row_fails(out_dir, row):
+        calls.append(row)
+        return _no_space() if len(calls) > 1 else real(out_dir, row)
+
+    with monkeypatch.context() as m:
+        m.setattr(driver, "write_row", second_row_fails)
+        assert cli.main(["campaign", str(Path(__file__).parent / "campaigns" / "ci_small.toml"), "--out",
+                         str(camp), "--workers", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"error: cannot write the campaign {camp}: No space left on device (the finished runs' "
+                   f"rows are in {camp / 'runs'}: continue with --resume once it can be written)"), err
+    assert len(list((camp / "runs").glob("*.parquet"))) == 1
+    assert cli.main(["campaign", str(Path(__file__).parent / "campaigns" / "ci_small.toml"), "--out",
+                     str(camp), "--workers", "1", "--quiet", "--resume"]) == 0
+    assert "1 already done" in capsys.readouterr().out
+    from trn_env.campaign import report
+    with monkeypatch.context() as m:
+        m.setattr(report, "cdf_plot", _no_space)
+        assert cli.main(["report", str(camp)]) == 2
+    assert capsys.readouterr().err.strip() == (f"error: cannot write the report {camp / 'report'}: No space "
+                                               "left on device (nothing written)")
+    assert not (camp / "report").exists() and not list(camp.glob(".report*"))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trn_env.cli.common import _interrupt_exit, _print_problems
+from trn_env.cli.common import _interrupt_exit, _print_problems, write_failure
 
 
 def cmd_campaign(args) -> int:
@@ -49,8 +49,14 @@ def cmd_campaign(args) -> int:
     except BackendError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except OSError as exc:                # the default folder could not be made
-        print(f"error: campaign folder: {exc}; give --out", file=sys.stderr)
+    except OSError as exc:                # the folder could not be made, or a row written (a full disk)
+        if out_dir is not None and Path(out_dir, "campaign.json").is_file():
+            print(write_failure(exc, f"the campaign {out_dir}",
+                                f"the finished runs' rows are in {Path(out_dir, 'runs')}: continue with "
+                                "--resume once it can be written"), file=sys.stderr)
+        else:
+            print(write_failure(exc, f"the campaign folder {out_dir}") + ("; give --out" if args.out is None
+                                                                         else ""), file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         code, word = _interrupt_exit(exc)
@@ -104,6 +110,10 @@ def cmd_report(args) -> int:
         out = write_report(args.dir, args.out)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:            # e.g. a full disk (the report is made in a partial folder, removed)
+        where = args.out if args.out is not None else Path(args.dir) / "report"
+        print(write_failure(exc, f"the report {where}"), file=sys.stderr)
         return 2
     print(f"report written: {out / 'report.html'}")
     return 0

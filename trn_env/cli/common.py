@@ -54,6 +54,16 @@ def _discard_partial_log(writer, log_path: Path | None) -> None:
         shutil.rmtree(log_path, ignore_errors=True)
 
 
+def write_failure(exc: OSError, what: str, kept: str = "nothing written") -> str:
+    """The one line for an OSError while a command writes its output (a full disk, a folder removed or made
+    read-only meanwhile): `what` could not be written (the file when the error names one), the system's
+    reason without Python's or pyarrow's wrapping, and what is `kept` (the callers remove partial output)."""
+    reason = os.strerror(exc.errno) if isinstance(exc.errno, int) and exc.errno > 0 else (
+        exc.strerror or str(exc))
+    target = f"{what} ({exc.filename})" if exc.filename else what
+    return f"error: cannot write {target}: {reason} ({kept})"
+
+
 def scenario_from_args(args):
     """The scenario fly, record and validate build from their SCENARIO, --seed, --navigator, --duration and
     --set options; None after printing every problem (the caller exits 2)."""

@@ -14,6 +14,7 @@ from trn_env.cli.common import (
     _interrupt_exit,
     run_folder_target,
     scenario_from_args,
+    write_failure,
 )
 
 
@@ -134,6 +135,11 @@ def cmd_fly(args) -> int:
         code, word = _interrupt_exit(exc)
         print(f"{word}: nothing written", file=sys.stderr)
         return code
+    except OSError as exc:             # the log streamed during the flight (e.g. a full disk)
+        if bar is not None:
+            bar.close()
+        print(write_failure(exc, f"the run's log beside {out_dir}"), file=sys.stderr)
+        return 2
     finally:
         if loop is not None:
             loop.close()              # (the worker stops writing frames before the log is removed)
@@ -156,8 +162,8 @@ def cmd_fly(args) -> int:
         code, word = _interrupt_exit(exc)
         print(f"{word} while writing: no summary written", file=sys.stderr)
         return code
-    except OSError as exc:             # the folder changed under us since the check before the flight
-        print(f"error: {exc}", file=sys.stderr)
+    except OSError as exc:             # a full disk, or the folder changed since the check before the flight
+        print(write_failure(exc, f"the run folder {out_dir}"), file=sys.stderr)
         return 2
     finally:
         _discard_partial_log(writer, log_path)

@@ -6,7 +6,13 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trn_env.cli.common import _discard_partial_log, out_dir_problem, run_folder_target, scenario_from_args
+from trn_env.cli.common import (
+    _discard_partial_log,
+    out_dir_problem,
+    run_folder_target,
+    scenario_from_args,
+    write_failure,
+)
 from trn_env.cli.fly import _log_writer, _plotter
 
 
@@ -43,6 +49,10 @@ def cmd_record(args) -> int:
     except (TrimError, ValueError, LogError) as exc:
         bar.close()
         print(f"error: scenario {scenario.source}: {exc} (nothing written)", file=sys.stderr)
+        return 2
+    except OSError as exc:             # the log streamed during the flight (e.g. a full disk)
+        bar.close()
+        print(write_failure(exc, f"the log {out}"), file=sys.stderr)
         return 2
     bar.close()
     from trn_env.logs import read_log
@@ -97,8 +107,8 @@ def cmd_replay(args) -> int:
     except KeyboardInterrupt:
         print("interrupted while writing: no summary written", file=sys.stderr)
         return 130
-    except OSError as exc:             # the folder changed under us since the check before the replay
-        print(f"error: {exc}", file=sys.stderr)
+    except OSError as exc:             # a full disk, or the folder changed since the check before the replay
+        print(write_failure(exc, f"the run folder {out_dir}"), file=sys.stderr)
         return 2
     finally:
         _discard_partial_log(writer, log_path)
