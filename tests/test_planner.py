@@ -190,7 +190,8 @@ def test_basin_routes_trade_distance_for_information(basin):
 def test_bounded_plan_is_the_bounded_searchs_least_cost_at_any_bound(basin):
     """The planner searches with the bound only when the unbounded route breaks it: its route's grid cost is
     the least cost of the bounded search on the (cell, bin) states at every bound, and a bound far above
-    any route's stretch (1e308 m; 1e8 m made the states alone need ~100 GB) plans the unbounded route."""
+    any route's stretch (1e308 m overflowed; 1e8 m sized the states by the bound: a MemoryError) plans the
+    unbounded route."""
     s_lat, s_lon, g_lat, g_lon = _start_goal(basin)
     free = TerrainInformationPlanner(basin, PlannerConfig(weight=0.0))
     si, sj = free.check_endpoint("start", s_lat, s_lon)
@@ -437,7 +438,7 @@ def test_cli_plan_writes_route_and_plot_or_exits_2(tmp_path, capsys):
     assert "--agl" in err[1] and "the same at 27 more waypoint(s)" in err[1]
     assert not bad.exists() and not bad.with_suffix(".png").exists()
     # a featureless bound above any route's stretch plans the unbounded route (it overflowed, or sized the
-    # search by the bound: 1e8 m asked for ~100 GB)
+    # search by the bound: 1e8 m was a MemoryError)
     for bound in ("1e8", "1e308"):
         unbounded = tmp_path / f"b{bound}.toml"
         assert main(["plan", "basin_route", *goal, "--weight", "1", "--max-featureless", bound,
