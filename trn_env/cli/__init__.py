@@ -28,6 +28,8 @@ the argument parser and `common` holds what they share. `main` dispatches throug
 
 from __future__ import annotations
 
+import errno
+import os
 import signal
 import sys
 
@@ -98,6 +100,13 @@ def _main(argv: list[str] | None) -> int:
         code, word = _interrupt_exit(exc)
         print(f"{word}: nothing written", file=sys.stderr)
         return code
+    except OSError as exc:
+        # a path the system will not even look up (a name longer than the file system takes), wherever a
+        # command first touches it: one line; any other OSError is not bad input and keeps its traceback
+        if exc.errno not in (errno.ENAMETOOLONG, errno.ELOOP):
+            raise
+        print(f"error: {exc.filename}: {os.strerror(exc.errno)} (nothing written)", file=sys.stderr)
+        return 2
     except SystemError as exc:
         # Ctrl-C inside a numba dispatcher (e.g. while it unpickles a cached kernel) surfaces as "returned a
         # result with an exception set", caused by the KeyboardInterrupt
