@@ -196,8 +196,6 @@ def connect_for_env_runners(ray, address: str | None, num_cpus: int | None, env_
     minutes) or start a local instance of `num_cpus` CPUs (limited as a campaign's --workers); ValueError,
     with Ray shut down again, when the session has fewer CPUs than the EnvRunners need (one each: RLlib
     would wait for the missing ones for ever). `init_kw` goes to ray.init."""
-    from trn_env.campaign.local import check_local_workers
-
     kw = {"include_dashboard": False, **init_kw}
     if address:
         probe_address(address)

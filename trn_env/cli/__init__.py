@@ -105,7 +105,8 @@ def _main(argv: list[str] | None) -> int:
         # command first touches it: one line; any other OSError is not bad input and keeps its traceback
         if exc.errno not in (errno.ENAMETOOLONG, errno.ELOOP):
             raise
-        print(f"error: {exc.filename}: {os.strerror(exc.errno)} (nothing written)", file=sys.stderr)
+        print(f"error: {exc.filename or 'a path'}: {os.strerror(exc.errno)} (nothing written)",
+              file=sys.stderr)
         return 2
     except SystemError as exc:
         # Ctrl-C inside a numba dispatcher (e.g. while it unpickles a cached kernel) surfaces as "returned a
