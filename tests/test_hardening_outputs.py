@@ -215,22 +215,28 @@ def test_a_full_disk_when_writing_a_run_folder_a_report_or_a_campaigns_rows(tmp_
     assert not (camp / "report").exists() and not list(camp.glob(".report*"))
 
 
-@pytest.mark.parametrize("args", [
-    ["fly", "default", "--duration", "5", "--no-plots", "--quiet", "--out", "{L}"],
-    ["record", "default", "--duration", "5", "--quiet", "--out", "{L}"],
-    ["replay", "{L}", "--navigator", "pmf", "--out", "{tmp}/out"],
-    ["plan", "default", "--goal", "36.66", "-84.18", "--out", "{L}.toml"],
-    ["campaign", str(Path(__file__).parent / "campaigns" / "ci_small.toml"), "--quiet", "--out", "{L}"],
-    ["campaign", "{L}.toml"],
-    ["validate", "{L}.toml"],
-    ["report", "{L}"],
+@pytest.mark.parametrize("args, names", [
+    (["fly", "default", "--duration", "5", "--no-plots", "--quiet", "--out", "{L}"], "--out {L}"),
+    (["record", "default", "--duration", "5", "--quiet", "--out", "{L}"], "--out {L}"),
+    (["replay", "{L}", "--navigator", "pmf", "--out", "{tmp}/out"], "log {L}"),
+    (["replay", "{L}", "--navigator", "pmf"], "log {L}"),
+    (["plan", "default", "--goal", "36.66", "-84.18", "--out", "{L}.toml"], "--out {L}.toml"),
+    (["campaign", str(Path(__file__).parent / "campaigns" / "ci_small.toml"), "--quiet", "--out", "{L}"],
+     "--out {L}"),
+    (["campaign", "{L}.toml"], "{L}.toml"),
+    (["validate", "{L}.toml"], "{L}.toml"),
+    (["report", "{L}"], "report: {L}"),
+    (["report", "{L}", "--out", "{tmp}/report"], "report: {L}"),
 ])
-def test_a_name_longer_than_the_file_system_takes_is_one_line(tmp_path, capsys, args):
+def test_a_name_longer_than_the_file_system_takes_is_one_line(tmp_path, capsys, monkeypatch, args, names):
     """A 300-character name (NAME_MAX is 255 on Linux's file systems) as an output or an input: one line
-    and exit 2 (the lookups raised ENAMETOOLONG: a traceback, exit 1)."""
+    naming that path in its role and exit 2 (the lookups raised ENAMETOOLONG: a traceback, exit 1; an
+    input's name was blamed on the output derived from it)."""
+    monkeypatch.chdir(tmp_path)
     long_name = str(tmp_path / ("x" * 300))
     argv = [a.replace("{L}", long_name).replace("{tmp}", str(tmp_path)) for a in args]
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "File name too long" in err and "Traceback" not in err, err
+    assert names.replace("{L}", long_name) + ": File name too long" in err, err
     assert list(tmp_path.iterdir()) == []

@@ -35,7 +35,7 @@ from pandas.api.types import is_bool_dtype, is_numeric_dtype
 from trn_env.campaign.rows import read_manifest, read_rows
 from trn_env.campaign.stats import group_stats
 from trn_env.output.metrics import MetricSettings
-from trn_env.output.run_folder import target_problem
+from trn_env.output.run_folder import lookup_problem, target_problem
 
 MIN_BAND_RUNS = 20
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
@@ -360,6 +360,9 @@ def write_report(campaign_dir: Path | str, out_dir: Path | str | None = None) ->
     folder or has no rows, or if `out_dir` is a file, a non-empty folder that holds no earlier report (no
     report.html: it is never replaced) or a place where no folder can be made."""
     campaign_dir = Path(campaign_dir)
+    problem = lookup_problem(campaign_dir, "report:")
+    if problem is not None:         # a name too long to look up is the input's fault, not the output's
+        raise ValueError(problem)
     if not campaign_dir.is_dir():
         raise ValueError(f"report: {campaign_dir}: no such folder")
     manifest = read_manifest(campaign_dir)

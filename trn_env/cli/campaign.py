@@ -16,11 +16,13 @@ def cmd_campaign(args) -> int:
         backend = make_backend(args.backend, args.workers, args.address)
         backend.preflight()      # Ray importable, its address reachable: before the (slower) validation
         baseline = read_baseline(args.check) if args.check is not None else None
+        from trn_env.output.run_folder import file_target_problem, lookup_problem
         if args.write_baseline is not None:          # before the campaign, not after its last run
-            from trn_env.output.run_folder import file_target_problem
             problem = file_target_problem(args.write_baseline, "--write-baseline")
             if problem is not None:
                 raise ValueError(problem)
+        if args.out is not None and (problem := lookup_problem(args.out, "--out")) is not None:
+            raise ValueError(problem)
         campaign = load_campaign(args.file)
     except CampaignError as err:
         _print_problems(err, "campaign")

@@ -22,6 +22,10 @@ def cmd_record(args) -> int:
     if scenario is None:
         return 2
     out = args.out
+    from trn_env.output.run_folder import lookup_problem
+    if (problem := lookup_problem(out, "--out")) is not None:
+        print(f"error: {problem} (nothing flown, nothing written)", file=sys.stderr)
+        return 2
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         print(f"error: --out {out}: exists and is not an empty folder (a log is written whole into a new "
               "folder; nothing flown)", file=sys.stderr)
@@ -66,8 +70,12 @@ def cmd_record(args) -> int:
 def cmd_replay(args) -> int:
     from trn_env.logs.format import LogError
     from trn_env.logs.replay import replay, write_result_log
-    from trn_env.output.run_folder import write_run
+    from trn_env.output.run_folder import lookup_problem, write_run
     log = Path(args.log).absolute()
+    problem = lookup_problem(Path(args.log), "log")     # before the folder named after it is judged
+    if problem is not None:
+        print(f"error: {problem} (nothing replayed, nothing written)", file=sys.stderr)
+        return 2
     # a run folder's log/ is named after its run (runs/replay-<run>-<time>, not replay-log-<time>)
     out_dir, problem = run_folder_target(args, f"replay-{log.parent.name if log.name == 'log' else log.name}")
     if problem is not None:

@@ -175,7 +175,7 @@ def clean_partial_leftovers(parent: Path, stale_after_s: float = 3600.0) -> list
     return removed
 
 
-def _lookup_problem(path: Path, option: str) -> str | None:
+def lookup_problem(path: Path, option: str) -> str | None:
     """Why the system refuses to look `path` up at all (a name longer than the file system takes, a path
     beyond PATH_MAX, a loop of links), or None; an absent path, or one under a file, is left to the
     callers' own checks."""
@@ -200,7 +200,7 @@ def target_problem(out_dir: Path | str, overwrite: bool = False, *, option: str 
     report folder: "report.html", "report").
     """
     out_dir = Path(out_dir)
-    problem = _lookup_problem(out_dir, option)
+    problem = lookup_problem(out_dir, option)
     if problem is not None:
         return problem
     if out_dir.exists() and not out_dir.is_dir():
@@ -229,7 +229,7 @@ def file_target_problem(path: Path | str, option: str, suffixes: tuple[str, ...]
     or None: a folder, a suffix not in `suffixes` (lower case, with the dot; None: any), or a place where
     no file can be made (creatable_problem). An existing file is fine: it is replaced whole."""
     path = Path(path)
-    problem = _lookup_problem(path, option)
+    problem = lookup_problem(path, option)
     if problem is not None:
         return problem
     if path.is_dir():
@@ -244,7 +244,7 @@ def folder_problem(path: Path | str, option: str) -> str | None:
     """Why `path` cannot be used as an output folder that may already hold earlier outputs (a training
     run's folder), or None: a file, or a place where no folder can be made (creatable_problem)."""
     path = Path(path)
-    problem = _lookup_problem(path, option)
+    problem = lookup_problem(path, option)
     if problem is not None:
         return problem
     if path.exists() and not path.is_dir():
