@@ -288,6 +288,29 @@ def test_bad_campaign_files_exit_2_naming_the_field(tmp_path, capsys, body, expe
     assert "Traceback" not in err and not out.exists()
 
 
+def test_a_problem_shared_by_sweep_points_is_said_once(tmp_path, capsys):
+    """A sweep over a key the scenario does not have fails at every point; a range partly out of bounds
+    fails at several, each message naming its own value. Each is one line listing the points (it was a
+    line per point: a 1,000-point grid buried every other problem under 1,000 lines)."""
+    body = ('seeds = 1\n'
+            '[[sweeps]]\npath = "sensors.radar_altimeter.noise_std_m"\n'
+            'grid = { start = 0.5, stop = 5.0, num = 10 }\n'
+            '[[sweeps]]\npath = "sensors.radar_altimeter.noise_const_m"\n'
+            'values = [-1.0, 0.5, -2.0, 3.0, -4.0, -5.0, -6.0, -7.0, -8.0]\n'
+            '[[sweeps]]\npath = "wind.layers.0.speed_mps"\nvalues = [1.0, 1e9]\n')
+    assert cli.main(["campaign", str(_campaign(tmp_path, body)), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("  - ")]
+    assert lines == [
+        "  - sweeps[0] (sensors.radar_altimeter.noise_std_m, all 10 points): sensors.radar_altimeter."
+        "noise_std_m: unknown key (allowed here: beamwidth_deg, lever_arm_b_m, max_range_m, noise_const_m, "
+        "noise_fraction, noise_free, rate_hz)",
+        "  - sweeps[1].values[0, 2, 4, 5, 6, ...] (sensors.radar_altimeter.noise_const_m = -1.0, -2.0, -4.0, "
+        "-5.0, -6.0, ...; 7 points): sensors.radar_altimeter.noise_const_m: -1.0 is less than the minimum of "
+        "0.0",
+        "  - sweeps[2].values[1] (wind.layers.0.speed_mps = 1000000000.0): wind.layers[0].speed_mps: "
+        "1000000000.0 is greater than the maximum of 100"], lines
+
+
 def test_a_scenario_listed_twice_is_refused(tmp_path, capsys):
     """The same file by a relative and an absolute path: its runs would be flown and pooled twice."""
     shutil.copy(HERE / "scenarios" / "ins_only_short.toml", tmp_path / "s.toml")

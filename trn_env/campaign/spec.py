@@ -301,15 +301,29 @@ def _dotted(problem_path: str) -> str:
     return re.sub(r"\[(\d+)\]", r".\1", problem_path)
 
 
-def _attribute(problem: str, sweep_at: dict[str, str], nav_at: str, scen_at: str) -> str:
-    """Prefix a scenario problem with the campaign field that caused it."""
+def _attribute(problem: str, sweep_at: dict[str, tuple[int, int]], nav_at: str,
+               scen_at: str) -> str | tuple[int, int, str]:
+    """The campaign field that caused a scenario problem: (sweep, point, problem) for a sweep's point,
+    else the problem prefixed with the navigator or scenario entry."""
     field_ = _dotted(problem.split(":", 1)[0])
-    for path, where in sweep_at.items():
+    for path, (j, k) in sweep_at.items():
         if field_ == path or field_.startswith(path + ".") or path.startswith(field_ + "."):
-            return f"{where}: {problem}"
+            return (j, k, problem)
     if field_.startswith("navigator"):
         return f"{nav_at}: {problem}"
     return f"{scen_at}: {problem}"
+
+
+def _sweep_point_problem(j: int, path: str, values: list, points: list[int], problem: str) -> str:
+    """A problem found at one or more points of sweep j, said once: a sweep over a key the scenario does
+    not have fails at every point, and listing each would bury the other problems."""
+    if len(points) == 1:
+        return f"sweeps[{j}].values[{points[0]}] ({path} = {values[points[0]]!r}): {problem}"
+    if len(points) == len(values):
+        return f"sweeps[{j}] ({path}, all {len(values)} points): {problem}"
+    shown, more = points[:5], ", ..." if len(points) > 5 else ""
+    return (f"sweeps[{j}].values[{', '.join(map(str, shown))}{more}] ({path} = "
+            f"{', '.join(repr(values[k]) for k in shown)}{more}; {len(points)} points): {problem}")
 
 
 def _same_value(a: Any, b: Any) -> bool:
@@ -436,15 +450,28 @@ def load_campaign(path: str | Path) -> Campaign:
         raise CampaignError(source, problems)
 
     variants: list[Variant] = []
-    seen: set[str] = set()
+    # each problem once, in the order found; a sweep point's problem gathers the points that share it (the
+    # point's own value masked: "-1.0 is less than the minimum" and "-2.0 is ..." are one problem)
+    found: dict[str | tuple[int, str], tuple[str, list[int]]] = {}
+
+    def note(problem: str | tuple[int, int, str]) -> None:
+        if isinstance(problem, str):
+            found.setdefault(problem, (problem, []))
+            return
+        j, k, text = problem
+        value = re.escape(repr(sweep_values[j][k]))
+        _first, points = found.setdefault((j, re.sub(rf"(?<![\w.]){value}(?![\w.])", "<value>", text)),
+                                          (text, []))
+        if k not in points:
+            points.append(k)
+
     dem_cache: dict[str, Any] = {}
     combos = list(itertools.product(*[list(enumerate(v)) for v in sweep_values]))
     for si, (ref, src, raw_data) in enumerate(scen_raw):
         for ni, nav in enumerate(navs or [None]):
             for combo in combos:
                 sweep = {sweep_paths[j]: v for j, (_k, v) in enumerate(combo)}
-                sweep_at = {sweep_paths[j]: f"sweeps[{j}].values[{k}] ({sweep_paths[j]} = {v!r})"
-                            for j, (k, v) in enumerate(combo)}
+                sweep_at = {sweep_paths[j]: (j, k) for j, (k, _v) in enumerate(combo)}
                 overrides: dict[str, Any] = {}
                 if "duration_s" in data:
                     overrides["duration_s"] = float(data["duration_s"])
@@ -461,18 +488,15 @@ def load_campaign(path: str | Path) -> Campaign:
                     d = apply_fields(d, assignments)
                 except ValueError as exc:
                     msg = str(exc)
-                    bad = next((w for p, w in sweep_at.items() if msg.startswith(p + ":")), scen_at)
-                    problems.append(f"{bad}: {msg}")
+                    jk = next((jk for p, jk in sweep_at.items() if msg.startswith(p + ":")), None)
+                    note(f"{scen_at}: {msg}" if jk is None else (*jk, msg))
                     continue
                 bdir = Path(src).resolve().parent if Path(src).is_file() else None
                 try:
                     sc = validate(d, source=src, base_dir=bdir)
                 except ScenarioError as err:
                     for p in err.problems:
-                        msg = _attribute(p, sweep_at, nav_at, scen_at)
-                        if msg not in seen:
-                            seen.add(msg)
-                            problems.append(msg)
+                        note(_attribute(p, sweep_at, nav_at, scen_at))
                     continue
                 label = nav.label if nav is not None else sc.navigator_name
                 choice = nav if nav is not None else NavigatorChoice(label, None, None)
@@ -486,6 +510,9 @@ def load_campaign(path: str | Path) -> Campaign:
                     index=len(variants), scenario_ref=ref, scenario_source=src, navigator=choice,
                     sweep=sweep, sections=sc.sections, scenario_name=sc.name, assignments=assignments,
                     overrides=overrides, dem_keys=(world_key, map_key)))
+    problems = [text if isinstance(key, str) else
+                _sweep_point_problem(key[0], sweep_paths[key[0]], sweep_values[key[0]], sorted(points), text)
+                for key, (text, points) in found.items()]
     if problems:
         raise CampaignError(source, problems)
     for v in variants:
