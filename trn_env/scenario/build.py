@@ -190,29 +190,50 @@ def build_flight(sc, world, rng: np.random.Generator):
         from trn_env.flight.kinematic import KinematicFlight
         return KinematicFlight(build_kinematic_truth(sc, world))
     from trn_env.flight.core import Flight
+    ic, kwargs = _flight_arguments(sc, world, rng)
+    with quiet_stdout():
+        return Flight(ic, **kwargs)
+
+
+def _flight_arguments(sc, world, rng: np.random.Generator) -> tuple:
+    """(initial condition, keyword arguments) of the scenario's JSBSim Flight: all it is built from."""
     init = sc.initial
     lat, lon = math.radians(init.lat_deg), math.radians(init.lon_deg)
-    ic = _initial_condition(sc, world)
-    seed = int(rng.integers(0, 2**31 - 1))
-    with quiet_stdout():
-        return Flight(ic, aircraft=sc.aircraft.name, dt_s=float(sc.aircraft.dt_s),
-                      wind=build_wind(sc), seed=seed, terrain_elevation_m=map_height(world, lat, lon),
-                      atmosphere=build_atmosphere(sc), constant_fuel=bool(sc.aircraft.constant_fuel))
+    return _initial_condition(sc, world), dict(
+        aircraft=sc.aircraft.name, dt_s=float(sc.aircraft.dt_s), wind=build_wind(sc),
+        seed=int(rng.integers(0, 2**31 - 1)), terrain_elevation_m=map_height(world, lat, lon),
+        atmosphere=build_atmosphere(sc), constant_fuel=bool(sc.aircraft.constant_fuel))
+
+
+# trim_problems' answers by the flight's arguments (their repr): a campaign validates one scenario per
+# sweep point and navigator, and most share the initial condition, aircraft, wind and atmosphere
+_TRIM_CHECKED: dict[str, list[str]] = {}
+_TRIM_CHECKED_MAX = 1024
 
 
 def trim_problems(sc, world) -> list[str]:
     """The flight's own trim at the initial condition (JSBSim, tens of milliseconds), so a start the flight
     would refuse (an airspeed below stall, a height the aircraft cannot hold level) is a validation problem
-    before any flight. An initial condition that is itself invalid is reported by its own check."""
-    from trn_env.flight.core import TrimError
+    before any flight. An initial condition that is itself invalid is reported by its own check. The answer
+    is kept for the flight's arguments, which fix the trim (JSBSim's, from the bundled aircraft)."""
+    from trn_env.flight.core import Flight, TrimError
     try:
-        build_flight(sc, world, np.random.default_rng(0))
+        ic, kwargs = _flight_arguments(sc, world, np.random.default_rng(0))
+        key = repr((ic, sorted(kwargs.items())))
+        if key in _TRIM_CHECKED:
+            return list(_TRIM_CHECKED[key])
+        with quiet_stdout():
+            Flight(ic, **kwargs)
+        problems: list[str] = []
     except TrimError as exc:
-        return [f"initial: {exc} (check initial.tas_mps against the aircraft's speed range and the initial "
-                "height)"]
+        problems = [f"initial: {exc} (check initial.tas_mps against the aircraft's speed range and the "
+                    "initial height)"]
     except (ValueError, TypeError, KeyError):
         return []
-    return []
+    if len(_TRIM_CHECKED) >= _TRIM_CHECKED_MAX:
+        _TRIM_CHECKED.clear()
+    _TRIM_CHECKED[key] = problems
+    return list(problems)
 
 
 # ----------------------------------------------------------------------------------------------- sensors

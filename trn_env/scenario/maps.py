@@ -6,6 +6,7 @@ re-exports every name here).
 
 from __future__ import annotations
 
+import hashlib
 import math
 
 import numpy as np
@@ -103,7 +104,19 @@ def check_refinement(dem, settings: dict) -> None:
         raise TypeError(f"refine() {exc}") from None
     plan = refinement_plan(dem, **{k: kw[k] for k in ("spacing_m", "region", "max_posts") if k in kw})
     if kw.get("detail", True):
-        fit_dem_spectrum(dem.subset(*plan.region) if kw.get("region") is not None else dem)
+        coarse = dem.subset(*plan.region) if kw.get("region") is not None else dem
+        key = (hashlib.blake2b(np.ascontiguousarray(coarse.heights_m).tobytes(), digest_size=16).digest(),
+               tuple(coarse.spacing_m))
+        if key not in _SPECTRUM_FITTED:
+            fit_dem_spectrum(coarse)
+            if len(_SPECTRUM_FITTED) >= 256:
+                _SPECTRUM_FITTED.clear()
+            _SPECTRUM_FITTED.add(key)
+
+
+# the coarse grids (heights' digest, spacing) whose spectrum check_refinement has fitted: a campaign
+# validates the same terrain once per sweep point and navigator, and the fit costs tens of milliseconds
+_SPECTRUM_FITTED: set[tuple[bytes, tuple[float, float]]] = set()
 
 
 def map_error_model(settings: dict, rng: np.random.Generator):
