@@ -73,6 +73,24 @@ def test_nan_and_infinity_refused_at_their_field(path, field):
         assert not any(p.startswith("aircraft.settings") for p in probs), probs
 
 
+@pytest.mark.parametrize("path,value", [
+    ("initial.lat_deg", math.inf), ("initial.lon_deg", math.nan), ("initial.lat_deg", 95.0),
+    ("initial.lon_deg", -181.0), ("route.waypoints.1.lat_deg", -91.0), ("route.waypoints.0.lon_deg", 181.0),
+])
+def test_a_position_off_the_earth_is_one_problem_at_its_field(path, value):
+    """The schema's problem alone: it was followed by 'is outside the true terrain' and 'outside the
+    navigator map' for the same place (with 'inf' or '95.00000' as its latitude)."""
+    field = path.replace(".waypoints.1.", ".waypoints[1].").replace(".waypoints.0.", ".waypoints[0].")
+    probs = _problems(_set(_data(), path, value))
+    assert len(probs) == 1 and probs[0].startswith(f"{field}:"), probs
+
+
+def test_a_position_on_the_earth_off_the_terrain_is_outside_both_dems():
+    probs = _problems(_set(_data(), "initial.lat_deg", 40.0))
+    assert [p.split(" deg is ", 1)[1].split(" terrain.")[0] for p in probs] == [
+        "outside the true terrain", "outside the navigator map"], probs
+
+
 def test_zero_step_is_reported_not_a_crash():
     probs = _problems(_set(_data(), "aircraft.dt_s", 0.0))
     assert any(p.startswith("aircraft.dt_s:") for p in probs), probs

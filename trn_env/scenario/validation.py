@@ -446,7 +446,9 @@ def _load_dem(value: str, fill_voids: bool):
 def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]:
     """DEM files readable; the initial position and every waypoint inside the world and the map."""
     problems: list[str] = []
-    places = _places(d)
+    # a position that is no position on Earth (NaN, infinite, beyond the poles) is the schema's problem
+    places = [(path, obj) for path, obj in _places(d)
+              if -90.0 <= obj["lat_deg"] <= 90.0 and -180.0 <= obj["lon_deg"] <= 180.0]
     world_cfg = d["terrain"]["world"]
     world_cfg["dem"] = _resolve_dem_path(world_cfg["dem"], base_dir)
     map_cfg = d["terrain"]["map"]
