@@ -90,3 +90,58 @@ def test_the_spectrum_fit_is_done_once_per_coarse_grid(monkeypatch):
         with pytest.raises(ValueError, match="fewer than 3 PSD bins"):
             scenario_maps.check_refinement(terrain.load("jacksboro"), settings)
     assert fitted[-2:] == ["failed", "failed"]
+
+
+def test_a_campaign_reads_each_dem_once(tmp_path, monkeypatch):
+    """Validation reads a DEM per scenario; a campaign's variants share what the first read (the world and
+    the map of every variant are the same Dem, as its flights share them). A file that cannot be read is a
+    problem of every variant that names it, said once."""
+    from trn_env.campaign import CampaignError, load_campaign
+    from trn_env.scenario import validation
+    reads = []
+    real_load = validation._load_dem
+
+    def counting_load(value, fill_voids):
+        reads.append((value, fill_voids))
+        return real_load(value, fill_voids)
+
+    monkeypatch.setattr(validation, "_load_dem", counting_load)
+    campaign = tmp_path / "c.toml"
+    campaign.write_text('seeds = 1\nscenarios = ["default"]\nnavigators = ["ins", "pmf"]\n'
+                        '[[sweeps]]\npath = "wind.layers.0.speed_mps"\nvalues = [2.0, 4.0, 6.0]\n')
+    loaded = load_campaign(campaign)
+    assert len(loaded.variants) == 6
+    assert reads == [("jacksboro", False)]
+    worlds = {id(v.dems[0]) for v in loaded.variants}
+    assert len(worlds) == 1
+
+    reads.clear()
+    for _ in range(2):        # a scenario validated on its own reads its DEM each time (once for both)
+        load_scenario("default")
+    assert reads == [("jacksboro", False)] * 2
+
+    reads.clear()
+    campaign.write_text(f'seeds = 1\nscenarios = ["default"]\nnavigators = ["ins", "pmf"]\n'
+                        f'[[sweeps]]\npath = "terrain.map.dem"\nvalues = ["{tmp_path / "missing.tif"}"]\n')
+    with pytest.raises(CampaignError) as err:
+        load_campaign(campaign)
+    assert len(reads) == 3          # the world once; the missing map tried for each variant
+    missing = [p for p in err.value.problems if "cannot load DEM" in p]
+    assert len(missing) == 1 and missing[0].startswith("sweeps[0].values[0] (terrain.map.dem = "), missing
+
+
+def test_the_validation_cost_script_measures_both_ways(capsys):
+    """scripts/campaign_validation_cost.py (the figures in docs/validation/campaign_backends.md) on a
+    two-point sweep, and its refusals."""
+    import json
+
+    from _scripts import load_script
+    script = load_script("campaign_validation_cost")
+    assert script.main(["--points", "2", "--alone", "2"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["variants"] == 6 and row["alone_variants"] == 2
+    assert row["campaign_ms_per_variant"] > 0 and row["alone_ms_per_variant"] > 0
+    for argv, field in ((["--points", "0"], "--points"), (["--points", "2", "--alone", "7"], "--alone"),
+                        (["--path", "x.y", "--points", "2", "--alone", "1"], "--path x.y: sweeps[0]")):
+        assert script.main(argv) == 2
+        assert capsys.readouterr().err.startswith(f"error: {field}")

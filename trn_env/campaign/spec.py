@@ -466,6 +466,7 @@ def load_campaign(path: str | Path) -> Campaign:
             points.append(k)
 
     dem_cache: dict[str, Any] = {}
+    dems_loaded: dict = {}           # each DEM read once for the whole campaign (its flights share them too)
     combos = list(itertools.product(*[list(enumerate(v)) for v in sweep_values]))
     for si, (ref, src, raw_data) in enumerate(scen_raw):
         for ni, nav in enumerate(navs or [None]):
@@ -493,7 +494,7 @@ def load_campaign(path: str | Path) -> Campaign:
                     continue
                 bdir = Path(src).resolve().parent if Path(src).is_file() else None
                 try:
-                    sc = validate(d, source=src, base_dir=bdir)
+                    sc = validate(d, source=src, base_dir=bdir, dems=dems_loaded)
                 except ScenarioError as err:
                     for p in err.problems:
                         note(_attribute(p, sweep_at, nav_at, scen_at))

@@ -211,7 +211,7 @@ def _resolve_dem_path(value: str, base_dir: Path | None) -> str:
 
 
 def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, extras: dict,
-                       prior: list[str] | None = None) -> list[str]:
+                       prior: list[str] | None = None, dems: dict | None = None) -> list[str]:
     """Checks that need more than the schema. With `tolerant` (the data already failed the schema) a
     check that trips over malformed data is skipped instead of raising, so the remaining problems are
     still reported. `prior`: the schema's problems (non-empty makes the checks tolerant)."""
@@ -220,7 +220,8 @@ def _semantic_problems(d: dict, base_dir: Path | None, check_components: bool, e
     problems: list[str] = []
     checks = [_altitude_problems, _gnss_problems, _wind_problems, _rate_problems, _aircraft_problems,
               _navigator_problems, _integrity_problems, _sensor_need_problems,
-              lambda dd: _terrain_problems(dd, base_dir, extras), lambda dd: _ceiling_problems(dd, extras)]
+              lambda dd: _terrain_problems(dd, base_dir, extras, dems),
+              lambda dd: _ceiling_problems(dd, extras)]
     for check in checks:
         try:
             problems += check(d)
@@ -443,8 +444,10 @@ def _load_dem(value: str, fill_voids: bool):
     return terrain.load(value, fill_voids=fill_voids)
 
 
-def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]:
-    """DEM files readable; the initial position and every waypoint inside the world and the map."""
+def _terrain_problems(d: dict, base_dir: Path | None, extras: dict, dems_loaded: dict | None = None
+                      ) -> list[str]:
+    """DEM files readable; the initial position and every waypoint inside the world and the map.
+    `dems_loaded`: validate's `dems`."""
     problems: list[str] = []
     # a position that is no position on Earth (NaN, infinite, beyond the poles) is the schema's problem
     places = [(path, obj) for path, obj in _places(d)
@@ -458,13 +461,20 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict) -> list[str]
         if isinstance(fault, dict) and isinstance(fault.get("source_dem"), str):
             fault["source_dem"] = _resolve_dem_path(fault["source_dem"], base_dir)
     dems = {}
+    dems_loaded = {} if dems_loaded is None else dems_loaded     # a map naming the world's DEM: read once
     for key, cfg in (("world", world_cfg), ("map", map_cfg)):
         if key == "map" and cfg["dem"] == "world":
             continue
+        spec = (cfg["dem"], bool(cfg.get("fill_voids", world_cfg["fill_voids"])))
+        if spec in dems_loaded:
+            dems[key] = dems_loaded[spec]
+            continue
         try:
-            dems[key] = _load_dem(cfg["dem"], bool(cfg.get("fill_voids", world_cfg["fill_voids"])))
+            dems[key] = _load_dem(*spec)
         except Exception as exc:  # noqa: BLE001 - any loader failure is a problem to report
             problems.append(f"terrain.{key}.dem: cannot load DEM {cfg['dem']!r}: {exc}")
+            continue
+        dems_loaded[spec] = dems[key]
     extras["world_dem_raw"] = dems.get("world")
     extras["map_dem_raw"] = dems.get("map")
     region = (world_cfg.get("refinement") or {}).get("region_deg")
@@ -530,9 +540,15 @@ def _component_problems(sections: ScenarioSections, extras: dict, known: list[st
 
 
 def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None,
-             check_components: bool = True) -> Scenario:
+             check_components: bool = True, dems: dict | None = None) -> Scenario:
     """Validate a parsed scenario (schema, then semantics) and build its typed sections
-    (trn_env.scenario.sections.from_dict); raise ScenarioError listing every problem."""
+    (trn_env.scenario.sections.from_dict); raise ScenarioError listing every problem.
+
+    A DEM named by both the world and the map (with the same fill_voids) is read once, one Dem for both.
+    `dems`: DEMs loaded by earlier validations, {(the DEM as the scenario names it, resolved; fill_voids):
+    trn_env.terrain.Dem}, read and extended here: the scenarios of one campaign share one dict, so each DEM
+    is read once (and a file changed in between is not read again). Shared Dems are never modified (their
+    heights are read-only; map errors and faults make new ones)."""
     from trn_env.scenario.loading import Scenario  # (loading imports this module)
     problems = nonfinite_problems(data)
     bad_paths = tuple(p.split(": ", 1)[0] for p in problems)
@@ -544,7 +560,7 @@ def validate(data: dict, *, source: str = "<dict>", base_dir: Path | None = None
         if not problems:
             raise
         raise ScenarioError(source, problems) from None
-    problems += _semantic_problems(d, base_dir, check_components, extras, prior=problems)
+    problems += _semantic_problems(d, base_dir, check_components, extras, prior=problems, dems=dems)
     sections = extras.pop("_sections", None)
     if problems:
         raise ScenarioError(source, problems)
