@@ -9,6 +9,8 @@ import re
 import shlex
 import shutil
 import socket
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -146,6 +148,42 @@ def test_resume_refuses_a_folder_of_another_campaign(flown, tmp_path, capsys):
     # and without --resume an existing campaign folder is refused too
     assert cli.main(["campaign", str(CI), "--out", str(flown), "--quiet"]) == 2
     assert "--resume" in capsys.readouterr().err
+
+
+def test_a_folder_another_campaign_is_writing_is_refused(flown, tmp_path, capsys):
+    """Two campaigns into one folder at once (the same file resumed twice, or another file given the same
+    --out) would fly the same runs twice or mix two campaigns' rows under one manifest: while another
+    process holds the folder, a campaign is refused (exit 2, nothing written); once it lets go, the same
+    command resumes. A folder the refused campaign made is not left behind."""
+    folder = tmp_path / "copy"
+    shutil.copytree(flown, folder)
+    (folder / "runs" / "v000-s0001.parquet").unlink()
+    listing = sorted(p.name for p in (folder / "runs").iterdir())
+    fresh = tmp_path / "fresh"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, os, sys\n"
+         "fds = [os.open(p, os.O_RDONLY) for p in sys.argv[1:]]\n"
+         "[fcntl.flock(fd, fcntl.LOCK_EX) for fd in fds]\nprint('held', flush=True)\nsys.stdin.read()\n",
+         str(folder), str(tmp_path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        argv = ["campaign", str(CI), "--out", str(folder), "--resume", "--quiet", "--workers", "1"]
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.strip() == (f"error: --out {folder}: another campaign is writing into this folder now (it "
+                               "holds the folder's lock); wait for it to end (then --resume flies what it "
+                               "left), or choose another folder"), err
+        assert sorted(p.name for p in (folder / "runs").iterdir()) == listing
+        # a lock on another folder (here the parent) holds nothing of a new folder below it
+        from trn_env.campaign.driver import folder_lock
+        with folder_lock(load_campaign(CI), fresh):
+            assert fresh.is_dir()
+        assert not fresh.exists()          # made for the campaign, left empty: removed
+    finally:
+        holder.stdin.close()
+        holder.wait(timeout=30)
+    assert cli.main(["campaign", str(CI), "--out", str(folder), "--resume", "--quiet", "--workers", "1"]) == 0
+    assert sorted(p.name for p in (folder / "runs").iterdir()) == sorted(listing + ["v000-s0001.parquet"])
 
 
 def test_report_pngs_and_self_contained_html(flown, tmp_path):
@@ -298,7 +336,8 @@ def test_a_problem_shared_by_sweep_points_is_said_once(tmp_path, capsys):
             '[[sweeps]]\npath = "sensors.radar_altimeter.noise_const_m"\n'
             'values = [-1.0, 0.5, -2.0, 3.0, -4.0, -5.0, -6.0, -7.0, -8.0]\n'
             '[[sweeps]]\npath = "wind.layers.0.speed_mps"\nvalues = [1.0, 1e9]\n')
-    assert cli.main(["campaign", str(_campaign(tmp_path, body)), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    out = tmp_path / "out"
+    assert cli.main(["campaign", str(_campaign(tmp_path, body)), "--out", str(out), "--quiet"]) == 2
     lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("  - ")]
     assert lines == [
         "  - sweeps[0] (sensors.radar_altimeter.noise_std_m, all 10 points): sensors.radar_altimeter."

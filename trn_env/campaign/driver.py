@@ -8,7 +8,10 @@ backend started (Ray imported and connected); only then is the manifest written 
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
+import fcntl
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict
@@ -99,12 +102,49 @@ def make_backend(name: str, workers: int | None = None, address: str | None = No
     raise ValueError(f"--backend: unknown backend {name!r} (local or ray)")
 
 
+@contextlib.contextmanager
+def folder_lock(campaign: Campaign, out_dir: Path) -> Iterator[None]:
+    """Hold `out_dir` (made here if absent) for one campaign process: a second campaign into the same folder
+    at the same time (the same file resumed twice, or another file given the same --out) is refused with a
+    CampaignError instead of mixing its rows and manifest into this one's. An advisory lock (flock) on the
+    folder itself: the system drops it when the process ends, however it ends, and it leaves no file. A
+    folder made here and still empty afterwards is removed."""
+    out_dir = Path(out_dir)
+    made = not out_dir.exists()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out_dir, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise CampaignError(campaign.source, [
+                f"--out {out_dir}: another campaign is writing into this folder now (it holds the folder's "
+                "lock); wait for it to end (then --resume flies what it left), or choose another folder"]
+            ) from None
+        except OSError:
+            pass            # a file system without flock on folders (NFS emulates it, for writers only)
+        yield
+    finally:
+        os.close(fd)                     # releases the lock
+        if made and out_dir.is_dir() and not any(out_dir.iterdir()):
+            out_dir.rmdir()
+
+
 def run_campaign(campaign: Campaign, out_dir: Path, *, backend=None, resume: bool = False,
                  progress: bool = True, on_row: Callable[[dict], None] | None = None) -> dict:
     """Fly the campaign's missing runs into `out_dir`; returns counts and timing (`driver_row_cpu_s`: the
-    driver's CPU time writing rows). `backend`: a backend object (default: the local pool on every core)."""
+    driver's CPU time writing rows). `backend`: a backend object (default: the local pool on every core).
+    The folder is held for this process while it runs (folder_lock)."""
     out_dir = Path(out_dir)
-    done = check_out_dir(campaign, out_dir, resume)
+    check_out_dir(campaign, out_dir, resume)         # refusals before anything is made
+    with folder_lock(campaign, out_dir):
+        # again under the lock: a campaign that held the folder until now may have written into it
+        done = check_out_dir(campaign, out_dir, resume)
+        return _run_campaign(campaign, out_dir, done, backend, progress, on_row)
+
+
+def _run_campaign(campaign: Campaign, out_dir: Path, done: set[str], backend, progress: bool,
+                  on_row: Callable[[dict], None] | None) -> dict:
     if backend is None:
         backend = make_backend("local")
     todo = campaign.n_runs - len(done & {campaign.run_id(v.index, s) for v in campaign.variants
