@@ -5,6 +5,7 @@ navigators (tests/log_reference_flight.py)."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -206,9 +207,21 @@ def _imu(n=300, dt=0.01):
      r"column 't_s' holds durations"),
     (lambda: _builder().add("imu", [1.0, 2.0]), "imu: give a pandas DataFrame, a mapping of column names to "
                                                 "arrays or a numpy structured array, got list"),
+    # degrees stated as radians, a negative range: flown before, kilometres off
+    (lambda: _builder().add("gnss", {"t_s": [1.0, 2.0], "lat": [36.5, 36.5], "lon_deg": [-84.3, -84.3],
+                                     "h_m": [2000.0] * 2, "v_n_mps": [0.0] * 2, "v_e_mps": [0.0] * 2,
+                                     "v_d_mps": [0.0] * 2}, units={"lat": "rad"}),
+     r"gnss: column 'lat' = 36.5 rad at row 0 \(t = 1 s\) is not a latitude in radians"),
+    (lambda: _builder().add("radar_altimeter", {"t_s": [1.0, 2.0], "range_m": [100.0, -3.0]}),
+     r"radar_altimeter: column 'range' = -3 m at row 1 \(t = 2 s\) is not a range in metres"),
+    (lambda: _builder().add_truth({"t_s": [0.0, 4.0], "lat_rad": [36.5, 36.5], "lon_deg": [-84.3, -84.3],
+                                   "h_m": [2000.0] * 2, "v_n_mps": [0.0] * 2, "v_e_mps": [0.0] * 2,
+                                   "v_d_mps": [0.0] * 2, "roll_rad": [0.0] * 2, "pitch_rad": [0.0] * 2,
+                                   "yaw_rad": [0.0] * 2}),
+     r"truth: column 'lat' = 36.5 rad at row 0 \(t = 0 s\) is not a latitude in radians"),
 ], ids=["datum", "geoid-offset", "geoid-model", "imu-convention", "imu-convention-word", "lever-arm",
         "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "rate", "sensor", "twice",
-        "datetime", "timedelta", "list"])
+        "datetime", "timedelta", "list", "degrees-as-radians", "negative-range", "truth-degrees"])
 def test_builder_refuses_bad_input_with_the_field(make, words):
     with pytest.raises(LogError, match=words):
         make()
@@ -294,6 +307,81 @@ def _damaged(small_log, tmp_path, how):
 def test_reader_refuses_damaged_logs(small_log, tmp_path, how, words):
     with pytest.raises(LogError, match=words):
         read_log(_damaged(small_log, tmp_path, how))
+
+
+def _set_column(log: Path, table: str, column: str, change) -> None:
+    """Rewrite one column of a log's table: change(values) -> new values (any type pyarrow takes)."""
+    import pyarrow as pa
+    t = pq.read_table(log / f"{table}.parquet")
+    i = t.column_names.index(column)
+    pq.write_table(t.set_column(i, column, pa.array(change(t.column(column).to_numpy().copy()))),
+                   log / f"{table}.parquet")
+
+
+def _degrees(a):
+    return np.degrees(a)
+
+
+def _negate_one(a):
+    a[7] = -abs(a[7]) - 1.0
+    return a
+
+
+def _nan_at_3(a):
+    a[3] = np.nan
+    return a
+
+
+def _last_of_frame_4_in_5(a):
+    a[int(np.flatnonzero(a == 4)[-1])] = 5
+    return a
+
+
+@pytest.mark.parametrize("table, column, change, words", [
+    # a column of the wrong kind was read silently wrong (any non-empty text is true) or failed deep inside
+    ("baro", "h_baro_m", lambda a: a.astype(str), "column h_baro_m holds string values; the format's are "
+                                                  "numbers (float64)"),
+    ("baro", "valid", lambda a: np.where(a, "yes", "no"), "column valid holds string values; the format's "
+                                                          "are true / false (bool)"),
+    ("imu", "frame", lambda a: a + 0.5, "column frame holds double values; the format's are whole numbers"),
+    ("frames", "gnss_present", lambda a: a.astype(np.int64), "column gnss_present holds int64 values"),
+    ("estimates", "cov_0_0", lambda a: a.astype(str), "column cov_0_0 holds string values"),
+    ("truth", "h_m", lambda a: a.astype(str), "column h_m holds string values"),
+    # a unit or sign slip was flown: degrees as radians gave kilometres of error and an ANEES of millions
+    ("gnss", "lat_rad", _degrees, "gnss.parquet: column lat_rad = 36.4"),
+    ("truth", "lon_rad", _degrees, "truth.parquet: column lon_rad = -84.3"),
+    ("estimates", "lat_rad", _degrees, "estimates.parquet: column lat_rad = 36.4"),
+    ("ira", "range_m", _negate_one, "ira.parquet: column range_m = -"),
+    # NaN truth left a hole in the metrics
+    ("truth", "lat_rad", _nan_at_3,
+     "truth.parquet: column lat_rad is NaN or infinite at row 3 (drop the row)"),
+    # a sample given the next frame was handed to the navigator in the wrong interval
+    ("imu", "frame", _last_of_frame_4_in_5, "is in frame 5, whose interval is"),
+    # samples of a frame whose sensor is marked absent were dropped
+    ("frames", "baro_present", lambda a: np.r_[a[:2], False, a[3:]],
+     "baro.parquet: row 20 is in frame 2, where frames.parquet's baro_present is false"),
+], ids=["text-number", "text-flag", "float-frame", "int-flag", "text-estimate", "text-truth", "gnss-degrees",
+        "truth-degrees", "estimate-degrees", "negative-range", "nan-truth", "wrong-frame", "absent-sensor"])
+def test_reader_refuses_tables_a_navigator_would_misread(recorded, tmp_path, table, column, change, words):
+    """What a log from someone's own data can get wrong in its tables, each refused naming the table, the
+    column and the fix; the recorded log itself passes, and so did every case here before."""
+    log = tmp_path / "log"
+    shutil.copytree(recorded[2], log)
+    read_log(log)
+    _set_column(log, table, column, change)
+    with pytest.raises(LogError, match=re.escape(words)):
+        read_log(log)
+
+
+def test_an_initial_estimate_in_degrees_is_refused(recorded, tmp_path):
+    p = tmp_path / "deg"
+    shutil.copytree(recorded[2], p)
+    meta = json.loads((p / "metadata.json").read_text())
+    meta["initial_estimate"]["lat_rad"] = 36.5
+    (p / "metadata.json").write_text(json.dumps(meta))
+    words = "initial_estimate.lat_rad = 36.5 is not a latitude in radians (-pi/2 .. pi/2; degrees?)"
+    with pytest.raises(LogError, match=re.escape(words)):
+        read_log(p).initial_estimate()
 
 
 def test_cli_bad_input_exits_2_and_writes_nothing(small_log, tmp_path, capsys):

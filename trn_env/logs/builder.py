@@ -18,7 +18,9 @@ bare `<quantity>` with `units={quantity: unit}`. An optional boolean `valid` col
 Every problem raises LogError naming the sensor, the column and the fix, before anything is written:
 a missing column or unit, an unknown unit, time that is not finite or does not increase, NaN in a valid
 sample, an IMU gap (an interval over 2.5 times the median: the INS cannot bridge it), a sample rate that
-disagrees with the sensor's stated `rate_hz`, and a datum, IMU convention or ranging lever arm not stated.
+disagrees with the sensor's stated `rate_hz`, a value outside format.COLUMN_LIMITS once converted (a
+latitude in degrees stated as radians, a negative range), and a datum, IMU convention or ranging lever arm
+not stated.
 `write` goes through LogWriter (all or nothing).
 """
 
@@ -37,6 +39,7 @@ from trn_env.logs.format import (
     TRUTH_COLUMNS,
     TRUTH_OPTIONAL,
     LogError,
+    limit_violation,
 )
 from trn_env.logs.reader import geoid_offset_m
 from trn_env.logs.writer import TRUTH_ROW_COLUMNS, LogWriter
@@ -135,6 +138,16 @@ def _check_time(what: str, t: np.ndarray) -> None:
         raise LogError(f"{what}: time must increase: row {i + 1} at {t[i + 1]!r} s follows {t[i]!r} s")
 
 
+def _check_limits(what: str, col: str, v: np.ndarray, use: np.ndarray | None, t: np.ndarray) -> None:
+    """A column's values (in the log's units, after conversion) inside format.COLUMN_LIMITS: a latitude
+    stated in radians but given in degrees, a negative range."""
+    hit = limit_violation(col, v, use)
+    if hit is not None:
+        i, should = hit
+        raise LogError(f"{what}: column {col.rsplit('_', 1)[0]!r} = {float(v[i]):.10g} "
+                       f"{col.rsplit('_', 1)[1]} at row {i} (t = {t[i]:g} s) is not {should}: check its unit")
+
+
 class LogBuilder:
     """A log under construction (module docstring). `map`: the DEM the navigator should use (a path or a
     bundled name, terrain.load); `imu_sample`: "rate" or "increment"; `height_datum`: {"reference":
@@ -207,6 +220,7 @@ class LogBuilder:
                 i = int(np.flatnonzero(bad)[0])
                 raise LogError(f"{sensor}: column {c.rsplit('_', 1)[0]!r} is NaN or infinite at row {i} "
                                f"(t = {t[i]:g} s): drop the sample or mark it valid = false")
+            _check_limits(sensor, c, v, valid, t)
         dt = np.diff(t)
         med = float(np.median(dt)) if dt.size else float("nan")
         if sensor == "imu" and dt.size:
@@ -241,6 +255,7 @@ class LogBuilder:
             if not np.all(np.isfinite(v)):
                 raise LogError(f"truth: column {c.rsplit('_', 1)[0]!r} is NaN or infinite at row "
                                f"{int(np.flatnonzero(~np.isfinite(v))[0])}")
+            _check_limits("truth", c, v, None, cols["t_s"])
         self.truth = cols
         return self
 

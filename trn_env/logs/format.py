@@ -48,6 +48,10 @@ Conventions (stated here once; the reader converts a log to them, the builder ch
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 FORMAT_NAME = "trn-env sensor log"
 FORMAT_VERSION = 1
 METADATA_FILE = "metadata.json"
@@ -89,6 +93,30 @@ ESTIMATE_COLUMNS = ([("t_s", "s"), ("lat_rad", "rad"), ("lon_rad", "rad"), ("h_m
                     + [(f"cov_{i}_{j}", "SI^2") for i in range(9) for j in range(9)]
                     + [("hpl_m", "m")]
                     + [("nav_ok", "bool"), ("nav_status_code", "index into NAV_STATUS_CODES")])
+
+# where a column of these names appears (sensor, truth and estimate tables, the initial estimate), its values
+# lie in these closed ranges: a latitude beyond the poles is a unit slip (degrees in a _rad column), a
+# negative range a sign slip; the reader refuses them rather than fly them
+COLUMN_LIMITS: dict[str, tuple[float, float, str]] = {
+    "lat_rad": (-math.pi / 2, math.pi / 2, "a latitude in radians (-pi/2 .. pi/2; degrees?)"),
+    "lon_rad": (-math.pi, math.pi, "a longitude in radians (-pi .. pi; degrees?)"),
+    "range_m": (0.0, math.inf, "a range in metres (at least 0)"),
+}
+
+
+
+def limit_violation(col: str, values, use=None) -> tuple[int, str] | None:
+    """(row, what the column should hold) of the first value of a COLUMN_LIMITS column outside its range
+    (among the rows where `use`; NaN is left to the finiteness checks), or None."""
+    if col not in COLUMN_LIMITS:
+        return None
+    lo, hi, what = COLUMN_LIMITS[col]
+    a = np.asarray(values, dtype=float)
+    bad = (a < lo) | (a > hi)
+    if use is not None:
+        bad &= np.asarray(use, dtype=bool)
+    return (int(np.flatnonzero(bad)[0]), what) if bad.any() else None
+
 
 IMU_SAMPLE_CONVENTIONS = ("rate", "increment")
 HEIGHT_REFERENCES = ("msl", "ellipsoid")

@@ -9,8 +9,11 @@
 
 `read_log` checks what a navigator would otherwise meet silently: a log from a newer format version, a
 recording that did not finish, a truncated or corrupt table, a table whose row count disagrees with the
-metadata, missing columns, time that does not increase, a sample outside its interval, NaN in a sample
-marked valid, and an IMU sample convention or height datum that is not stated.
+metadata, missing columns, a column of the wrong kind (text, or floats where the format has flags or frame
+indices), time that does not increase, a sample outside its frame's interval, samples in a frame whose
+sensor is marked absent, NaN in a sample marked valid or in the truth, a latitude, longitude or range
+outside format.COLUMN_LIMITS (degrees stated as radians), and an IMU sample convention or height datum
+that is not stated.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from trn_env.logs.format import (
+    ESTIMATE_COLUMNS,
     FORMAT_NAME,
     FORMAT_VERSION,
     HEIGHT_REFERENCES,
@@ -34,7 +38,9 @@ from trn_env.logs.format import (
     SENSOR_COLUMNS,
     SENSORS,
     TRUTH_COLUMNS,
+    TRUTH_OPTIONAL,
     LogError,
+    limit_violation,
 )
 from trn_env.navigators import frames as nf
 from trn_env.navigators.protocol import Estimate, Health
@@ -81,13 +87,50 @@ def _open_table(path: Path) -> pa.Table:
                        "restore the file") from exc
 
 
-def _check_column(name: str, col: str, a: np.ndarray, valid: np.ndarray | None) -> None:
+def _check_column(name: Path | str, col: str, a: np.ndarray, valid: np.ndarray | None) -> None:
     bad = ~np.isfinite(a) if valid is None else (~np.isfinite(a) & valid)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        why = "" if valid is None else " in a sample marked valid"
-        raise LogError(f"log table {name}: column {col} is NaN or infinite{why} at row {i} (mark the sample "
-                       "valid = false, or drop it)")
+        why, fix = ("", "drop the row") if valid is None else (" in a sample marked valid",
+                                                              "mark the sample valid = false, or drop it")
+        raise LogError(f"log table {name}: column {col} is NaN or infinite{why} at row {i} ({fix})")
+
+
+def _check_limits(name: Path | str, col: str, a: np.ndarray, use: np.ndarray | None = None) -> None:
+    """The values of a column named in COLUMN_LIMITS (where `use`) inside their range."""
+    hit = limit_violation(col, a, use)
+    if hit is not None:
+        i, what = hit
+        raise LogError(f"log table {name}: column {col} = {float(a[i])!r} at row {i} is not {what}")
+
+
+_TYPE_WORDS = {"integer": "whole numbers (int64)", "number": "numbers (float64)",
+               "boolean": "true / false (bool)", "text": "text (string)"}
+
+
+def _kind(t: pa.DataType) -> str:
+    if pa.types.is_boolean(t):
+        return "boolean"
+    if pa.types.is_integer(t):
+        return "integer"
+    if pa.types.is_floating(t):
+        return "number"
+    return "text" if pa.types.is_string(t) or pa.types.is_large_string(t) else str(t)
+
+
+def _check_types(log: SensorLog, name: str, wanted: dict[str, str]) -> None:
+    """Each of the table's columns named in `wanted` holds that kind of value (a whole number also passes
+    as a number): a column of text or of floats where the format has flags or frame indices would be read
+    silently wrong (any non-empty text is true), or fail deep inside a navigator."""
+    schema = log.arrow(name).schema
+    for col, want in wanted.items():
+        if col not in schema.names:
+            continue
+        got = _kind(schema.field(col).type)
+        if got != want and not (want == "number" and got == "integer"):
+            raise LogError(f"log table {log.path / (name + '.parquet')}: column {col} holds "
+                           f"{schema.field(col).type} values; the format's are {_TYPE_WORDS[want]} "
+                           "(docs/guide/logs.md)")
 
 
 class SensorLog:
@@ -221,13 +264,19 @@ class SensorLog:
             return None
         try:
             cov = np.array(ie["covariance"], float).reshape(9, 9)
-            return Estimate(float(ie["t_s"]), float(ie["lat_rad"]), float(ie["lon_rad"]),
-                            float(ie["h_m"]) - self.geoid_offset_m, np.array(ie["v_ned_mps"], float),
-                            float(ie["roll_rad"]), float(ie["pitch_rad"]), float(ie["yaw_rad"]), cov,
-                            Health())
+            estimate = Estimate(float(ie["t_s"]), float(ie["lat_rad"]), float(ie["lon_rad"]),
+                                float(ie["h_m"]) - self.geoid_offset_m, np.array(ie["v_ned_mps"], float),
+                                float(ie["roll_rad"]), float(ie["pitch_rad"]), float(ie["yaw_rad"]), cov,
+                                Health())
         except (KeyError, TypeError, ValueError) as exc:
             raise LogError(f"log {self.path}: {METADATA_FILE}: initial_estimate is malformed "
                            f"({exc})") from exc
+        for col, value in (("lat_rad", estimate.lat_rad), ("lon_rad", estimate.lon_rad)):
+            hit = limit_violation(col, [value])
+            if hit is not None:
+                raise LogError(f"log {self.path}: {METADATA_FILE}: initial_estimate.{col} = {value!r} is not "
+                               f"{hit[1]}")
+        return estimate
 
 
 def _frame(s: str, cols: dict | None, i0: int, i1: int):
@@ -317,37 +366,78 @@ def _required(log: SensorLog, name: str, cols: list[str]) -> None:
 
 def _check_contents(log: SensorLog) -> None:
     n_frames = log.n_frames
-    if not log.has("frames"):
-        return
-    _required(log, "frames", ["frame", "t_start_s", "t_end_s"] + [f"{s}_present" for s in SENSORS])
-    t0, t1 = log.column("frames", "t_start_s"), log.column("frames", "t_end_s")
-    _check_column("frames", "t_start_s", t0, None)
-    _check_column("frames", "t_end_s", t1, None)
-    if np.any(t1 < t0) or np.any(t0[1:] < t1[:-1]) or np.any(np.diff(log.column("frames", "frame")) != 1):
-        raise LogError(f"log table {log.path / 'frames.parquet'}: frames must follow each other in time "
-                       "(frame k+1 starting at or after frame k ends, t_end_s >= t_start_s, frame = 0, 1, "
-                       "...)")
-    for s in log.sensors:
-        imu_inc = s == "imu" and log.metadata.get("imu_sample") == "increment"
-        cols = [c for c, _, _, _ in SENSOR_COLUMNS[s]]
-        if imu_inc:
-            cols = [inc for inc, _, _ in IMU_INCREMENT_COLUMNS]
-        _required(log, s, ["frame", "t_s", "valid"] + cols)
-        t = log.column(s, "t_s")
-        _check_column(s, "t_s", t, None)
-        if np.any(np.diff(t) <= 0.0):
-            i = int(np.flatnonzero(np.diff(t) <= 0.0)[0])
-            raise LogError(f"log table {log.path / (s + '.parquet')}: t_s does not increase at row {i + 1} "
-                           f"({t[i]!r} then {t[i + 1]!r} s)")
-        k = log.column(s, "frame")
-        if k.size and (np.any(np.diff(k) < 0) or k[0] < 0 or k[-1] >= n_frames):
-            raise LogError(f"log table {log.path / (s + '.parquet')}: frame must be non-decreasing within "
-                           f"0 .. {n_frames - 1}")
-        valid = log.column(s, "valid").astype(bool)
-        for c in cols:
-            _check_column(s, c, log.column(s, c), valid)
+    for name, wanted in (("truth", dict.fromkeys([c for c, _ in TRUTH_COLUMNS + TRUTH_OPTIONAL], "number")),
+                         ("estimates", {**dict.fromkeys([c for c, _ in ESTIMATE_COLUMNS], "number"),
+                                        "nav_ok": "boolean", "nav_status_code": "integer"}),
+                         ("events", {"t_s": "number", "source": "text", "message": "text"})):
+        if log.has(name):
+            _check_types(log, name, wanted)
+    if log.has("frames"):
+        _check_frames(log, n_frames)
     if log.has("truth"):
         _required(log, "truth", [c for c, _ in TRUTH_COLUMNS])
         t = log.column("truth", "t_s")
         if np.any(np.diff(t) <= 0.0):
             raise LogError(f"log table {log.path / 'truth.parquet'}: t_s must increase")
+        for c, _ in TRUTH_COLUMNS:
+            a = log.column("truth", c)
+            _check_column(log.path / "truth.parquet", c, a, None)
+            _check_limits(log.path / "truth.parquet", c, a)
+    if log.has("estimates"):
+        for c in ("lat_rad", "lon_rad"):
+            if c in log.arrow("estimates").column_names:
+                a = log.column("estimates", c)
+                _check_limits(log.path / "estimates.parquet", c, a, np.isfinite(a))
+
+
+def _check_frames(log: SensorLog, n_frames: int) -> None:
+    """The frames table and every sensor table against it: types, time, frame indices, each sample inside
+    its frame's interval, a sensor's samples only in frames that say it is present, finite valid samples
+    within COLUMN_LIMITS."""
+    _required(log, "frames", ["frame", "t_start_s", "t_end_s"] + [f"{s}_present" for s in SENSORS])
+    _check_types(log, "frames", {"frame": "integer", "t_start_s": "number", "t_end_s": "number",
+                                 **{f"{s}_present": "boolean" for s in SENSORS}})
+    t0, t1 = log.column("frames", "t_start_s"), log.column("frames", "t_end_s")
+    _check_column(log.path / "frames.parquet", "t_start_s", t0, None)
+    _check_column(log.path / "frames.parquet", "t_end_s", t1, None)
+    if np.any(t1 < t0) or np.any(t0[1:] < t1[:-1]) or np.any(np.diff(log.column("frames", "frame")) != 1):
+        raise LogError(f"log table {log.path / 'frames.parquet'}: frames must follow each other in time "
+                       "(frame k+1 starting at or after frame k ends, t_end_s >= t_start_s, frame = 0, 1, "
+                       "...)")
+    for s in log.sensors:
+        table = log.path / (s + ".parquet")
+        imu_inc = s == "imu" and log.metadata.get("imu_sample") == "increment"
+        cols = [c for c, _, _, _ in SENSOR_COLUMNS[s]]
+        if imu_inc:
+            cols = [inc for inc, _, _ in IMU_INCREMENT_COLUMNS]
+        _required(log, s, ["frame", "t_s", "valid"] + cols)
+        _check_types(log, s, {"frame": "integer", "t_s": "number", "valid": "boolean",
+                              **dict.fromkeys(cols, "number")})
+        t = log.column(s, "t_s")
+        _check_column(table, "t_s", t, None)
+        if np.any(np.diff(t) <= 0.0):
+            i = int(np.flatnonzero(np.diff(t) <= 0.0)[0])
+            raise LogError(f"log table {table}: t_s does not increase at row {i + 1} "
+                           f"({float(t[i])!r} then {float(t[i + 1])!r} s)")
+        k = log.column(s, "frame")
+        if k.size and (np.any(np.diff(k) < 0) or k[0] < 0 or k[-1] >= n_frames):
+            raise LogError(f"log table {table}: frame must be non-decreasing within 0 .. {n_frames - 1}")
+        # a sample belongs to the interval holding its time (its end included: an integrating sensor's
+        # sample closes its interval); a rounding's worth of slack either side
+        slack = 1e-9 * np.maximum(1.0, np.abs(t))
+        outside = (t < t0[k] - slack) | (t > t1[k] + slack)
+        if outside.any():
+            i = int(np.flatnonzero(outside)[0])
+            raise LogError(f"log table {table}: the sample at row {i} (t_s = {float(t[i])!r}) is in frame "
+                           f"{int(k[i])}, whose interval is [{float(t0[k[i]])!r}, {float(t1[k[i]])!r}] s: "
+                           "give each sample the frame whose interval holds its time")
+        absent = ~log.column("frames", f"{s}_present").astype(bool)[k]
+        if absent.any():
+            i = int(np.flatnonzero(absent)[0])
+            raise LogError(f"log table {table}: row {i} is in frame {int(k[i])}, where frames.parquet's "
+                           f"{s}_present is false: its samples would be dropped (set it true)")
+        valid = log.column(s, "valid")
+        for c in cols:
+            a = log.column(s, c)
+            _check_column(table, c, a, valid)
+            _check_limits(table, c, a, valid)
