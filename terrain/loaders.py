@@ -9,6 +9,12 @@ An NPZ with matplotlib's sample-data keys (elevation, dx, dy, xmin, xmax, ymin, 
 
 Voids (the raster's nodata value, SRTM/DTED -32768, NaN) become NaN, or are filled by interpolation from
 the surrounding valid posts when fill_voids=True. Every problem raises an error naming the file.
+
+Rasters: heights are the stored values times the band's scale plus its offset (GDAL's scale/offset, e.g.
+decimetres in int16), in the band's unit (metres when none is stated; feet and US survey feet converted,
+any other unit refused). A geographic CRS on the WGS 84 datum (EPSG:4326, or one PROJ maps onto it with no
+shift, e.g. NAD83) is read as it is; a projected CRS or a geographic one on another datum (NAD27, ED50)
+is resampled onto a WGS 84 latitude/longitude grid (_load_projected).
 """
 
 from __future__ import annotations
@@ -22,6 +28,12 @@ from .dem import Dem
 RASTER_SUFFIXES = (".tif", ".tiff", ".gtiff", ".hgt", ".dt0", ".dt1", ".dt2")
 NPZ_SUFFIXES = (".npz",)
 SRTM_VOID = -32768
+
+# a raster band's vertical unit (GDAL's unit type, lower case) -> metres per unit
+_VERTICAL_UNITS_M = {"": 1.0, "m": 1.0, "metre": 1.0, "meter": 1.0, "metres": 1.0, "meters": 1.0,
+                     "ft": 0.3048, "foot": 0.3048, "feet": 0.3048, "international foot": 0.3048,
+                     "us-ft": 1200.0 / 3937.0, "ftus": 1200.0 / 3937.0, "us survey foot": 1200.0 / 3937.0,
+                     "us_survey_foot": 1200.0 / 3937.0, "foot_us": 1200.0 / 3937.0}
 
 
 class DemLoadError(ValueError):
@@ -187,9 +199,10 @@ def load_jacksboro(fill_voids: bool = False) -> Dem:
 
 # --------------------------------------------------------------------------------------------- rasters
 def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
-    """Read a GeoTIFF, DTED or SRTM .hgt file through rasterio (band 1, north-up). A geographic CRS is read
-    as it is; a projected one (UTM, a national grid) is resampled onto a latitude/longitude grid
-    (_load_projected)."""
+    """Read a GeoTIFF, DTED or SRTM .hgt file through rasterio (band 1, north-up), heights in metres (the
+    band's scale, offset and unit applied). A geographic CRS on WGS 84 is read as it is; a projected one
+    (UTM, a national grid) or another datum's latitude and longitude is resampled onto a WGS 84
+    latitude/longitude grid (_load_projected)."""
     import rasterio
     from rasterio.errors import RasterioIOError
 
@@ -208,8 +221,9 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
             raise DemLoadError(
                 f"{path}: no coordinate reference system; need geographic lat/lon (e.g. EPSG:4326)"
             )
-        if not crs.is_geographic:
-            return _load_projected(ds, path, fill_voids, name)
+        scale_m, offset_m = _height_scale(ds, path)
+        if not crs.is_geographic or not _on_wgs84(ds):
+            return _load_projected(ds, path, fill_voids, name, scale_m, offset_m)
         t = ds.transform
         if abs(t.b) > 0.0 or abs(t.d) > 0.0:
             raise DemLoadError(f"{path}: rotated/sheared geotransform {tuple(t)[:6]} is not supported")
@@ -227,6 +241,7 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
             void |= raw == nodata
         if suffix in (".hgt", ".dt0", ".dt1", ".dt2") or raw.dtype == np.int16:
             void |= raw == SRTM_VOID
+        heights = heights * scale_m + offset_m
         heights[void] = np.nan
         # GDAL transforms address pixel corners; a post (pixel-is-point) sits at the pixel centre.
         lon0 = t.c + 0.5 * t.a
@@ -243,28 +258,63 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
 _M_PER_DEG_LAT = 111_320.0
 
 
-def _load_projected(ds, path: Path, fill_voids: bool, name: str | None) -> Dem:
+def _height_scale(ds, path: Path) -> tuple[float, float]:
+    """(metres per stored unit, offset in metres) of band 1: its scale and offset (GDAL's, applied to the
+    stored values) in its vertical unit."""
+    unit = (ds.units[0] or "").strip().lower() if ds.units else ""
+    if unit not in _VERTICAL_UNITS_M:
+        raise DemLoadError(f"{path}: band 1's unit {ds.units[0]!r} is not a length this loader reads "
+                           "(metres or feet); convert the heights to metres")
+    scale = ds.scales[0] if ds.scales and ds.scales[0] is not None else 1.0
+    offset = ds.offsets[0] if ds.offsets and ds.offsets[0] is not None else 0.0
+    if not (np.isfinite(scale) and scale != 0.0 and np.isfinite(offset)):
+        raise DemLoadError(f"{path}: band 1's scale {scale!r} / offset {offset!r} give no heights")
+    m = _VERTICAL_UNITS_M[unit]
+    return float(scale) * m, float(offset) * m
+
+
+def _on_wgs84(ds) -> bool:
+    """The raster's geographic CRS is WGS 84's latitude and longitude: EPSG:4326, or one PROJ transforms onto
+    it with no shift (NAD83 without a grid, WGS 84 by another name). NAD27 or ED50 move the posts by tens to
+    hundreds of metres, which a terrain match would take as navigation error."""
+    from rasterio.crs import CRS
+    from rasterio.warp import transform
+
+    if ds.crs == CRS.from_epsg(4326):
+        return True
+    west, south, east, north = ds.bounds
+    xs, ys = [west, east, 0.5 * (west + east)], [south, north, 0.5 * (south + north)]
+    lon, lat = transform(ds.crs, CRS.from_epsg(4326), xs, ys)
+    return bool(np.allclose(lon, xs, rtol=0.0, atol=1e-9) and np.allclose(lat, ys, rtol=0.0, atol=1e-9))
+
+
+def _load_projected(ds, path: Path, fill_voids: bool, name: str | None, scale_m: float = 1.0,
+                    offset_m: float = 0.0) -> Dem:
     """A raster in a projected CRS (UTM, a national grid), resampled bilinearly onto a WGS 84 (EPSG:4326)
     latitude/longitude grid through GDAL's warper (rasterio.vrt.WarpedVRT): posts as far apart in metres
     as the source's pixels (north-south; east-west at the grid's mid-latitude), covering the raster's
-    footprint; posts outside the footprint, or from the source's nodata, are voids. Heights are not
-    changed (the vertical datum stays the source's)."""
+    footprint; posts outside the footprint, or from the source's nodata, are voids. Heights are scaled to
+    metres (scale_m, offset_m: _height_scale), the vertical datum stays the source's."""
     from rasterio.crs import CRS
     from rasterio.enums import Resampling
     from rasterio.transform import Affine
     from rasterio.vrt import WarpedVRT
     from rasterio.warp import transform_bounds
 
-    units = ds.crs.linear_units_factor[1] if ds.crs.linear_units_factor else 1.0
     t = ds.transform
     if abs(t.b) > 0.0 or abs(t.d) > 0.0 or t.a <= 0.0 or t.e == 0.0:
         raise DemLoadError(f"{path}: rotated, sheared or empty geotransform {tuple(t)[:6]} is not supported")
-    res_m = min(abs(t.a), abs(t.e)) * units
     west, south, east, north = transform_bounds(ds.crs, CRS.from_epsg(4326), *ds.bounds, densify_pts=21)
     if not all(np.isfinite(v) for v in (west, south, east, north)) or not (west < east and south < north):
         raise DemLoadError(f"{path}: its footprint in {ds.crs.to_string()} has no latitude/longitude extent")
-    dlat = res_m / _M_PER_DEG_LAT
-    dlon = dlat / np.cos(np.radians(0.5 * (south + north)))
+    if ds.crs.is_geographic:          # another datum's degrees: the source's spacing, in WGS 84 degrees
+        dlat, dlon = abs(t.e), t.a
+        res_m = dlat * _M_PER_DEG_LAT
+    else:
+        units = ds.crs.linear_units_factor[1] if ds.crs.linear_units_factor else 1.0
+        res_m = min(abs(t.a), abs(t.e)) * units
+        dlat = res_m / _M_PER_DEG_LAT
+        dlon = dlat / np.cos(np.radians(0.5 * (south + north)))
     n_lat = max(2, int(np.ceil((north - south) / dlat)))
     n_lon = max(2, int(np.ceil((east - west) / dlon)))
     src_nodata = ds.nodata if ds.nodata is not None and np.isfinite(ds.nodata) else None
@@ -273,7 +323,7 @@ def _load_projected(ds, path: Path, fill_voids: bool, name: str | None) -> Dem:
     with WarpedVRT(ds, crs=CRS.from_epsg(4326), transform=Affine(dlon, 0.0, west, 0.0, -dlat, north),
                    width=n_lon, height=n_lat, resampling=Resampling.bilinear, src_nodata=src_nodata,
                    nodata=np.nan, dtype="float64") as vrt:
-        heights = vrt.read(1)[::-1]             # north-up rows -> row 0 south
+        heights = vrt.read(1)[::-1] * scale_m + offset_m      # north-up rows -> row 0 south
     source = f"{path} (reprojected from {ds.crs.to_string()} to EPSG:4326, {res_m:g} m posts, bilinear)"
     # the southmost row's post: a pixel centre (the grid may overhang the footprint by part of a post)
     lat0 = north - (n_lat - 0.5) * dlat

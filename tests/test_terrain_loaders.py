@@ -186,3 +186,75 @@ def test_a_projected_raster_is_resampled_onto_latitude_longitude(tmp_path):
     _write_tif(feet, arr[:50, :50].astype(np.float32), from_origin(2_000_000.0, 600_000.0, 300.0, 300.0),
                crs="EPSG:2274")
     assert np.degrees(terrain.load(feet).dlat_rad) * 111_320.0 == pytest.approx(300 * 0.3048006, rel=1e-6)
+
+
+def _hills(n_rows=40, n_cols=50):
+    r, c = np.mgrid[0:n_rows, 0:n_cols]
+    return 500.0 + 300.0 * np.sin(r / 6.0) * np.cos(c / 9.0) + 2.0 * r
+
+
+@pytest.mark.parametrize("dtype, stored, scale, offset, unit", [
+    ("int16", lambda h: np.round((h - 100.0) * 10.0), 0.1, 100.0, None),       # decimetres above 100 m
+    ("float32", lambda h: h / 0.3048, 1.0, 0.0, "ft"),
+    ("float32", lambda h: h / (1200.0 / 3937.0), 1.0, 0.0, "US survey foot"),
+    ("float32", lambda h: h, 1.0, 0.0, "metre"),
+], ids=["decimetres", "feet", "us-survey-feet", "metres"])
+def test_heights_are_the_bands_values_through_its_scale_offset_and_unit(tmp_path, dtype, stored, scale,
+                                                                        offset, unit):
+    """GDAL's band scale and offset (applied to the stored values) and the band's unit give metres: a
+    decimetre int16 DEM read 10x too high and a DEM in feet 3.3x too high."""
+    step = 3.0 / 3600.0
+    hills = _hills()
+    path = tmp_path / "dem.tif"
+    for crs, transform in (("EPSG:4326", from_origin(-84.4, 36.6, step, step)),
+                           ("EPSG:32616", from_origin(700_000.0, 4_050_000.0, 90.0, 90.0))):
+        _write_tif(path, stored(hills).astype(dtype), transform, crs=crs)
+        with rasterio.open(path, "r+") as ds:
+            ds.scales, ds.offsets = (scale,), (offset,)
+            if unit is not None:
+                ds.units = (unit,)
+        dem = terrain.load(path)
+        tol = 0.05 if dtype == "int16" else 1e-3
+        if crs == "EPSG:4326":
+            np.testing.assert_allclose(dem.heights_m[::-1], hills, atol=tol)
+        else:           # resampled: every post within the source's range, which it spans
+            h = np.asarray(dem.heights_m)[np.isfinite(dem.heights_m)]
+            assert hills.min() - tol <= h.min() and h.max() <= hills.max() + tol
+            assert h.max() - h.min() > 0.8 * (hills.max() - hills.min())
+
+
+def test_a_band_unit_that_is_not_a_length_is_refused(tmp_path):
+    path = tmp_path / "dem.tif"
+    _write_tif(path, _hills().astype(np.float32), from_origin(-84.4, 36.6, 0.001, 0.001))
+    with rasterio.open(path, "r+") as ds:
+        ds.units = ("furlong",)
+    with pytest.raises(loaders.DemLoadError, match="band 1's unit 'furlong' is not a length this loader"):
+        terrain.load(path)
+
+
+def test_a_geographic_raster_on_another_datum_is_moved_onto_wgs84(tmp_path):
+    """A NAD27 latitude/longitude raster was read as WGS 84: its posts ~10 m off here. Now resampled onto
+    WGS 84 through PROJ's datum shift: a plane in NAD27 coordinates, read at WGS 84 points, gives the
+    plane's value at each point's NAD27 coordinates (rasterio.warp.transform, point by point). NAD83,
+    which PROJ maps onto WGS 84 with no shift, is read as it is, post for post."""
+    from rasterio.warp import transform
+    step = 3.0 / 3600.0
+    west, north, n_rows, n_cols = -84.40, 36.60, 60, 70
+    lat = north - step * np.arange(n_rows)[:, None]
+    lon = west + step * np.arange(n_cols)[None, :]
+    plane = 800.0 + 1.0e5 * (lat - 36.55) - 0.6e5 * (lon + 84.37)      # metres; ~1 m per metre
+    grid = from_origin(west - step / 2, north + step / 2, step, step)
+    for crs in ("EPSG:4267", "EPSG:4269"):
+        _write_tif(tmp_path / f"{crs[5:]}.tif", plane.astype(np.float64), grid, crs=crs)
+    nad27, nad83 = terrain.load(tmp_path / "4267.tif"), terrain.load(tmp_path / "4269.tif")
+    rng = np.random.default_rng(3)
+    p_lat, p_lon = rng.uniform(36.56, 36.58, 20), rng.uniform(-84.38, -84.36, 20)
+    lon27, lat27 = transform("EPSG:4326", "EPSG:4267", p_lon, p_lat)
+    expected = 800.0 + 1.0e5 * (np.asarray(lat27) - 36.55) - 0.6e5 * (np.asarray(lon27) + 84.37)
+    got = nad27.height(np.radians(p_lat), np.radians(p_lon))
+    np.testing.assert_allclose(got, expected, atol=0.02)
+    as_if_wgs84 = 800.0 + 1.0e5 * (p_lat - 36.55) - 0.6e5 * (p_lon + 84.37)
+    assert np.min(np.abs(expected - as_if_wgs84)) > 2.0           # the shift matters here (~3 m)
+    assert nad83.heights_m.shape == plane.shape
+    np.testing.assert_array_equal(nad83.heights_m[::-1], plane)
+    assert np.degrees(nad83.lat0_rad) == pytest.approx(north - step * (n_rows - 1), abs=1e-12)
