@@ -28,6 +28,10 @@ from .dem import Dem
 RASTER_SUFFIXES = (".tif", ".tiff", ".gtiff", ".hgt", ".dt0", ".dt1", ".dt2")
 NPZ_SUFFIXES = (".npz",)
 SRTM_VOID = -32768
+# the most posts a raster (or the latitude/longitude grid it is resampled onto) may have: reading one takes
+# ~20 bytes a post at its peak (its stored values, the float64 heights, the void mask), so 250 M posts is
+# ~5 GB; a 1 x 1 degree tile at 1/3" (10 m) has 117 M. Larger: crop it to the flight's area first.
+MAX_RASTER_POSTS = 250_000_000
 
 # a raster band's vertical unit (GDAL's unit type, lower case) -> metres per unit
 _VERTICAL_UNITS_M = {"": 1.0, "m": 1.0, "metre": 1.0, "meter": 1.0, "metres": 1.0, "meters": 1.0,
@@ -224,6 +228,7 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
         scale_m, offset_m = _height_scale(ds, path)
         if not crs.is_geographic or not _on_wgs84(ds):
             return _load_projected(ds, path, fill_voids, name, scale_m, offset_m)
+        _check_size(path, ds.height, ds.width, "posts")
         t = ds.transform
         if abs(t.b) > 0.0 or abs(t.d) > 0.0:
             raise DemLoadError(f"{path}: rotated/sheared geotransform {tuple(t)[:6]} is not supported")
@@ -241,7 +246,11 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
             void |= raw == nodata
         if suffix in (".hgt", ".dt0", ".dt1", ".dt2") or raw.dtype == np.int16:
             void |= raw == SRTM_VOID
-        heights = heights * scale_m + offset_m
+        del raw                                                       # in place from here: memory
+        if scale_m != 1.0:
+            heights *= scale_m
+        if offset_m != 0.0:
+            heights += offset_m
         heights[void] = np.nan
         # GDAL transforms address pixel corners; a post (pixel-is-point) sits at the pixel centre.
         lon0 = t.c + 0.5 * t.a
@@ -256,6 +265,14 @@ def load_raster(path, fill_voids: bool = False, name: str | None = None) -> Dem:
 # metres of latitude per degree on WGS 84, as the grid spacing of a reprojected raster is chosen (the posts
 # only need to be about as far apart as the source's; the grid itself is exact in degrees)
 _M_PER_DEG_LAT = 111_320.0
+
+
+def _check_size(path: Path, n_rows: int, n_cols: int, what: str) -> None:
+    if n_rows * n_cols > MAX_RASTER_POSTS:
+        limit = f"MAX_RASTER_POSTS = {MAX_RASTER_POSTS / 1e6:.0f} M, ~20 bytes a post to read"
+        raise DemLoadError(f"{path}: {n_rows} x {n_cols} {what} ({n_rows * n_cols / 1e6:.0f} M) is more "
+                           f"than a DEM may have here ({limit}): crop it to the flight's area first (e.g. "
+                           "gdal_translate -projwin, or rasterio's windowed reading)")
 
 
 def _height_scale(ds, path: Path) -> tuple[float, float]:
@@ -317,13 +334,18 @@ def _load_projected(ds, path: Path, fill_voids: bool, name: str | None, scale_m:
         dlon = dlat / np.cos(np.radians(0.5 * (south + north)))
     n_lat = max(2, int(np.ceil((north - south) / dlat)))
     n_lon = max(2, int(np.ceil((east - west) / dlon)))
+    _check_size(path, n_lat, n_lon, "latitude/longitude posts to resample onto")
     src_nodata = ds.nodata if ds.nodata is not None and np.isfinite(ds.nodata) else None
     if src_nodata is None and ds.dtypes[0] == "int16":
         src_nodata = SRTM_VOID
     with WarpedVRT(ds, crs=CRS.from_epsg(4326), transform=Affine(dlon, 0.0, west, 0.0, -dlat, north),
                    width=n_lon, height=n_lat, resampling=Resampling.bilinear, src_nodata=src_nodata,
                    nodata=np.nan, dtype="float64") as vrt:
-        heights = vrt.read(1)[::-1] * scale_m + offset_m      # north-up rows -> row 0 south
+        heights = vrt.read(1)[::-1]             # north-up rows -> row 0 south
+    if scale_m != 1.0:
+        heights *= scale_m
+    if offset_m != 0.0:
+        heights += offset_m
     source = f"{path} (reprojected from {ds.crs.to_string()} to EPSG:4326, {res_m:g} m posts, bilinear)"
     # the southmost row's post: a pixel centre (the grid may overhang the footprint by part of a post)
     lat0 = north - (n_lat - 0.5) * dlat

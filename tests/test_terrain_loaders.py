@@ -258,3 +258,21 @@ def test_a_geographic_raster_on_another_datum_is_moved_onto_wgs84(tmp_path):
     assert nad83.heights_m.shape == plane.shape
     np.testing.assert_array_equal(nad83.heights_m[::-1], plane)
     assert np.degrees(nad83.lat0_rad) == pytest.approx(north - step * (n_rows - 1), abs=1e-12)
+
+
+def test_a_raster_with_more_posts_than_the_limit_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    """A national DEM given whole (30,000 x 30,000 posts) took 51 s and 19 GB to validate, and more would
+    end in the system killing the process: above MAX_RASTER_POSTS it is refused, naming its size, before
+    any post is read; the same holds for the grid a projected raster is resampled onto."""
+    monkeypatch.setattr(loaders, "MAX_RASTER_POSTS", 40 * 50 - 1)
+    geographic, projected = tmp_path / "geo.tif", tmp_path / "utm.tif"
+    _write_tif(geographic, _hills().astype(np.float32), from_origin(-84.4, 36.6, 0.001, 0.001))
+    _write_tif(projected, _hills().astype(np.float32), from_origin(700_000.0, 4_050_000.0, 90.0, 90.0),
+               crs="EPSG:32616")
+    with pytest.raises(loaders.DemLoadError, match=r"geo.tif: 40 x 50 posts \(0 M\) is more than a DEM may "
+                                                   r"have here \(MAX_RASTER_POSTS = 0 M"):
+        terrain.load(geographic)
+    with pytest.raises(loaders.DemLoadError, match="latitude/longitude posts to resample onto"):
+        terrain.load(projected)
+    monkeypatch.setattr(loaders, "MAX_RASTER_POSTS", 40 * 50)
+    assert terrain.load(geographic).heights_m.shape == (40, 50)
