@@ -494,6 +494,13 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict, dems_loaded:
                     f"{'true terrain' if key == 'world' else 'navigator map'} terrain.{key}.dem "
                     f"(lat {math.degrees(lat_min):.4f}..{math.degrees(lat_max):.4f}, "
                     f"lon {math.degrees(lon_min):.4f}..{math.degrees(lon_max):.4f} deg)")
+            elif (key == "world" and path == "initial" and not math.isfinite(float(dem.height(lat, lon)))
+                  and ("h_agl_m" in obj or d["truth"]["source"] != "kinematic")):
+                # JSBSim starts on the ground's height there, and h_agl_m is taken above it
+                fill = "" if world_cfg.get("fill_voids") else ", or set terrain.world.fill_voids = true"
+                problems.append(f"{path}: ({obj['lat_deg']:.5f}, {obj['lon_deg']:.5f}) deg is over a void of "
+                                f"the true terrain terrain.world.dem (no height there, and the flight starts "
+                                f"on the ground's height): move the start{fill}")
             elif key == "world" and "h_msl_m" in obj:
                 h_ground = float(dem.height(lat, lon))
                 if math.isfinite(h_ground) and obj["h_msl_m"] <= h_ground:
