@@ -28,3 +28,18 @@ def wave_map(seed: int, flat: bool = False) -> Dem:
             phase = rng.uniform(0.0, 2 * math.pi)
             h += rng.uniform(10.0, 25.0) * np.sin(k * (math.cos(a) * x + math.sin(a) * y) + phase)
     return Dem(h, LAT0, LON0, POST_M / r_n, POST_M / r_e, "synthetic")
+
+
+def jacksboro_with_a_void(path, lat_deg: float, lon_deg: float, half_posts: int = 5):
+    """The bundled DEM with a (2 half_posts + 1)^2-post void centred on a place, saved as our NPZ at `path`
+    (a map or world DEM file for a scenario); returns the path."""
+    from trn_env.terrain.loaders import save_npz
+
+    from trn_env import terrain
+    dem = terrain.load("jacksboro")
+    h = np.array(dem.heights_m, dtype=float)
+    r = int(round((math.radians(lat_deg) - dem.lat0_rad) / dem.dlat_rad))
+    c = int(round((math.radians(lon_deg) - dem.lon0_rad) / dem.dlon_rad))
+    h[r - half_posts:r + half_posts + 1, c - half_posts:c + half_posts + 1] = np.nan
+    save_npz(Dem(h, dem.lat0_rad, dem.lon0_rad, dem.dlat_rad, dem.dlon_rad, "jacksboro with a void"), path)
+    return path

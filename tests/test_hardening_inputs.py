@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from synthetic_terrain import jacksboro_with_a_void
 from trn_env.navigators import registry
 
 from trn_env import cli, terrain
@@ -91,24 +92,6 @@ def test_a_position_on_the_earth_off_the_terrain_is_outside_both_dems():
         "outside the true terrain", "outside the navigator map"], probs
 
 
-def _jacksboro_tif_with_a_void_at(path: Path, lat_deg: float, lon_deg: float) -> Path:
-    """The bundled DEM as a GeoTIFF (nodata -9999) with an 11 x 11 post void centred on a place."""
-    import rasterio
-    from rasterio.transform import Affine
-    h = np.asarray(DEM.heights_m)[::-1].astype(np.float32)          # row 0 north, as a GeoTIFF stores it
-    r = h.shape[0] - 1 - int(round((math.radians(lat_deg) - DEM.lat0_rad) / DEM.dlat_rad))
-    c = int(round((math.radians(lon_deg) - DEM.lon0_rad) / DEM.dlon_rad))
-    h[r - 5:r + 6, c - 5:c + 6] = -9999.0
-    dlat, dlon = math.degrees(DEM.dlat_rad), math.degrees(DEM.dlon_rad)
-    north = math.degrees(DEM.lat0_rad) + (h.shape[0] - 0.5) * dlat
-    west = math.degrees(DEM.lon0_rad) - 0.5 * dlon
-    with rasterio.open(path, "w", driver="GTiff", height=h.shape[0], width=h.shape[1], count=1,
-                       dtype="float32", crs="EPSG:4326", nodata=-9999.0,
-                       transform=Affine(dlon, 0.0, west, 0.0, -dlat, north)) as ds:
-        ds.write(h, 1)
-    return path
-
-
 @pytest.mark.parametrize("height", ["h_agl_m", "h_msl_m"])
 def test_a_start_over_a_void_of_the_true_terrain_is_one_problem_naming_the_fix(tmp_path, capsys, height):
     """Validation passed a start over a void (h_msl_m), and fly then failed on 'Flight.terrain_elevation_m
@@ -118,7 +101,7 @@ def test_a_start_over_a_void_of_the_true_terrain_is_one_problem_naming_the_fix(t
     init.pop("h_agl_m", None)
     init.pop("h_msl_m", None)
     init[height] = 1500.0 if height == "h_agl_m" else 2500.0
-    dem = str(_jacksboro_tif_with_a_void_at(tmp_path / "voids.tif", init["lat_deg"], init["lon_deg"]))
+    dem = str(jacksboro_with_a_void(tmp_path / "voids.npz", init["lat_deg"], init["lon_deg"]))
     data["terrain"]["world"]["dem"] = dem
     probs = _problems(copy.deepcopy(data))
     place = f"({init['lat_deg']:.5f}, {init['lon_deg']:.5f}) deg"

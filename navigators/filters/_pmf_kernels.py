@@ -144,11 +144,12 @@ def ira_update_pass(rec, ref, grid, meas, robust, gam, out):
     probability that the sample is an inlier under that cell (so an outlier return does not drag the vertical
     offsets: gam (n * n) receives it); and the moments. out[12]: the posterior mean of gamma.
 
-    logw must hold log-densities with maximum 0 on entry (the filter keeps it so). out (13,): log p(z |
+    logw must hold log-densities with maximum 0 on entry (the filter keeps it so). out (14,): log p(z |
     past), prior mean and variance of the predicted height (over all cells; off-map cells count as 0 -
     negligible when few), number of cells off the map, the posterior's maximum before renormalising (-inf:
     every cell underflowed - logw and bias are then garbage: the caller restores them), then
-    grid_moments' seven values of the posterior.
+    grid_moments' seven values of the posterior, the posterior mean of gamma, and the prior's probability
+    mass on cells where the map has no height (off it, or a void).
 
     Records (numba tuples): ref = (lat, lon rad, r_lat, r_lon m) the INS position and the radii of the map
     lookups; grid = (dn, de m, logw, bias m) the cells' offsets, log-weights and vertical offsets (the last
@@ -160,7 +161,7 @@ def ira_update_pass(rec, ref, grid, meas, robust, gam, out):
     pn, pe, h_meas, S, gain = meas
     lg, le, floor = robust
     m = logw.shape[0]
-    s0 = sp = spp = 0.0
+    s0 = sp = spp = s_nan = 0.0
     mx = -np.inf
     n_nan = 0
     c0 = lg - 0.5 * (math.log(S) + LOG_2PI)
@@ -174,6 +175,7 @@ def ira_update_pass(rec, ref, grid, meas, robust, gam, out):
         s0 += w0
         if h != h:
             n_nan += 1
+            s_nan += w0
             v = lw + le
             gam[k] = 0.0
         else:
@@ -204,6 +206,7 @@ def ira_update_pass(rec, ref, grid, meas, robust, gam, out):
             mx = v
     out[3] = n_nan
     out[4] = mx
+    out[13] = s_nan / s0 if s0 > 0.0 else 0.0
     if not (mx > -np.inf) or mx != mx:
         out[0] = -np.inf
         return

@@ -462,6 +462,8 @@ class ParticleFilter(InsRiddenFilter):
         if n_nan == M:
             self._degrade(t_s, "cloud_off_map", f"{kind} update skipped: every particle is off the map")
             return
+        if n_nan and self._belief_without_map(t_s, kind, float(self._weights()[~np.isfinite(resid)].sum())):
+            return
         ira.likelihood(resid, np.ascontiguousarray(var), self.outlier_prob, self.log_outlier_density,
                        self._ll)  # (the terrain sensors' shared likelihood: radar_altimeter.likelihood too)
         w0 = self._weights()

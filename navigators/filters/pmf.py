@@ -153,7 +153,7 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
         self._zero1 = np.zeros(1)
         self._zero12 = np.zeros((1, 2))
         self._moments_cache = None
-        self._out = np.empty(13)
+        self._out = np.empty(14)
         self._lg = math.log1p(-self.outlier_prob)
         self._le = (math.log(self.outlier_prob) + self.log_outlier_density if self.outlier_prob > 0
                     else -np.inf)
@@ -443,11 +443,11 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
                                  (float(p[0]), float(p[1]), h_meas, S, self.P_b / S),
                                  (self._lg, self._le, LOG_FLOOR), self._work[0], o)
             n_nan = int(o[3])
-            if n_nan == m or not np.isfinite(o[4]):
+            if n_nan == m or not np.isfinite(o[4]) or self._belief_without_map(t_s, "IRA", float(o[13])):
                 self.logw, self.bias = saved
                 if n_nan == m:
                     self._degrade(t_s, "grid_off_map", "IRA update skipped: the whole grid is off the map")
-                else:
+                elif not np.isfinite(o[4]):
                     self._underflow(t_s, "IRA update")
                     self._integrity_test(t_s, math.inf, 1)
                 return
@@ -465,6 +465,9 @@ class PointMassFilter(PmfGrid, InsRiddenFilter):
                                             self.ra_half_beam_rad, self.ra_cone_rings, 12, rng_pred)
             if n_nan == m:
                 self._degrade(t_s, "grid_off_map", "altimeter update skipped: the whole grid is off the map")
+                return
+            if n_nan and self._belief_without_map(t_s, "altimeter",
+                                                  float(self._weights()[~np.isfinite(rng_pred)].sum())):
                 return
             h_meas = h - range_m       # seed 000 eq 1: terrain height below the aircraft
             pred = h - rng_pred        # terrain height that hypothesis predicts (bias included)

@@ -49,6 +49,10 @@ from .terrain_filter_settings import (
 
 G0 = 9.80665
 MAX_RECOVERY_DOUBLINGS = 4   # consecutive re-spreads widen by 2x each, up to 2^3 x recovery_sigma_m
+# a terrain sample is skipped when the belief puts more than this probability on hypotheses whose map has
+# no height (a void of the DEM, or off it): those cannot be scored, and scoring the rest alone lets a chance
+# match far from the truth take the belief (a 1 km void under the route moved the pmf 200 m)
+MAX_MASS_WITHOUT_MAP = 0.5
 
 
 class InsRiddenFilter(InsGnssBlock):
@@ -469,6 +473,15 @@ class InsRiddenFilter(InsGnssBlock):
     def _degrade(self, t_s: float, reason: str, message: str) -> None:
         self.health.skip(t_s, reason, message)
         self.health.status = "degraded"
+
+    def _belief_without_map(self, t_s: float, kind: str, mass: float) -> bool:
+        """Skip the terrain sample (True) when `mass`, the belief's probability on hypotheses whose map has
+        no height, is above MAX_MASS_WITHOUT_MAP (counted in Health as 'belief_over_map_void')."""
+        if mass <= MAX_MASS_WITHOUT_MAP:
+            return False
+        self.health.skip(t_s, "belief_over_map_void", f"{kind} update skipped: {mass:.0%} of the belief is "
+                         "where the map has no height (a void, or off the map)")
+        return True
 
     def _after_frame(self, t_end: float) -> None:
         """Health from the belief's spread (a degraded state lasts until the next good update)."""
