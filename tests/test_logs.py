@@ -194,6 +194,9 @@ def _imu(n=300, dt=0.01):
     (lambda: _builder().add("imu", _imu() | {"t_s": np.r_[0.01 * np.arange(1, 151),
                                                           2.0 + 0.01 * np.arange(150)]}),
      "a gap of"),
+    (lambda: _builder().add("imu", _imu() | {"valid": np.r_[np.ones(100, bool), np.zeros(5, bool),
+                                                            np.ones(195, bool)]}),
+     r"imu: a gap of 0.06 s after t = 1 s .* \(or samples marked invalid\)"),
     (lambda: _builder().add("imu", _imu(dt=0.02)), "stated rate_hz 100"),
     (lambda: _builder().add("lidar", {}), "unknown sensor 'lidar'"),
     # a second table replaced the first without a word (chunks added one by one kept only the last)
@@ -220,8 +223,9 @@ def _imu(n=300, dt=0.01):
                                    "yaw_rad": [0.0] * 2}),
      r"truth: column 'lat' = 36.5 rad at row 0 \(t = 0 s\) is not a latitude in radians"),
 ], ids=["datum", "geoid-offset", "geoid-model", "imu-convention", "imu-convention-word", "lever-arm",
-        "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "rate", "sensor", "twice",
-        "datetime", "timedelta", "list", "degrees-as-radians", "negative-range", "truth-degrees"])
+        "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "imu-invalid", "rate",
+        "sensor", "twice", "datetime", "timedelta", "list", "degrees-as-radians", "negative-range",
+        "truth-degrees"])
 def test_builder_refuses_bad_input_with_the_field(make, words):
     with pytest.raises(LogError, match=words):
         make()
@@ -360,8 +364,14 @@ def _last_of_frame_4_in_5(a):
     # samples of a frame whose sensor is marked absent were dropped
     ("frames", "baro_present", lambda a: np.r_[a[:2], False, a[3:]],
      "baro.parquet: row 20 is in frame 2, where frames.parquet's baro_present is false"),
+    # IMU samples marked invalid are held over: a whole log of them flew 257 m off, "completed"
+    ("imu", "valid", lambda a: np.zeros_like(a),
+     "imu.parquet: no valid IMU sample for 12 s after t = 0.01 s"),
+    ("imu", "valid", lambda a: np.r_[a[:300], np.zeros(2, bool), a[302:]],
+     "imu.parquet: no valid IMU sample for 0.03 s after t = 3 s (median interval 0.01 s)"),
 ], ids=["text-number", "text-flag", "float-frame", "int-flag", "text-estimate", "text-truth", "gnss-degrees",
-        "truth-degrees", "estimate-degrees", "negative-range", "nan-truth", "wrong-frame", "absent-sensor"])
+        "truth-degrees", "estimate-degrees", "negative-range", "nan-truth", "wrong-frame", "absent-sensor",
+        "imu-all-invalid", "imu-invalid-stretch"])
 def test_reader_refuses_tables_a_navigator_would_misread(recorded, tmp_path, table, column, change, words):
     """What a log from someone's own data can get wrong in its tables, each refused naming the table, the
     column and the fix; the recorded log itself passes, and so did every case here before."""
@@ -371,6 +381,15 @@ def test_reader_refuses_tables_a_navigator_would_misread(recorded, tmp_path, tab
     _set_column(log, table, column, change)
     with pytest.raises(LogError, match=re.escape(words)):
         read_log(log)
+
+
+def test_one_invalid_imu_sample_is_bridged(recorded, tmp_path):
+    """One invalid sample leaves 0.02 s between valid ones, within IMU_MAX_GAP_INTERVALS (2.5) x 0.01 s,
+    as one missing sample is in the builder: accepted; two are refused (the parametrised case above)."""
+    log = tmp_path / "log"
+    shutil.copytree(recorded[2], log)
+    _set_column(log, "imu", "valid", lambda a: np.r_[a[:300], np.zeros(1, bool), a[301:]])
+    read_log(log)
 
 
 def test_an_initial_estimate_in_degrees_is_refused(recorded, tmp_path):

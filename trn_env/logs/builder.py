@@ -17,7 +17,8 @@ bare `<quantity>` with `units={quantity: unit}`. An optional boolean `valid` col
 
 Every problem raises LogError naming the sensor, the column and the fix, before anything is written:
 a missing column or unit, an unknown unit, time that is not finite or does not increase, NaN in a valid
-sample, an IMU gap (an interval over 2.5 times the median: the INS cannot bridge it), a sample rate that
+sample, an IMU gap (no valid sample for over 2.5 median intervals, the samples missing or marked invalid:
+the INS cannot bridge it), a sample rate that
 disagrees with the sensor's stated `rate_hz`, a value outside format.COLUMN_LIMITS once converted (a
 latitude in degrees stated as radians, a negative range), and a datum, IMU convention or ranging lever arm
 not stated.
@@ -39,6 +40,7 @@ from trn_env.logs.format import (
     TRUTH_COLUMNS,
     TRUTH_OPTIONAL,
     LogError,
+    imu_gap,
     limit_violation,
 )
 from trn_env.logs.reader import geoid_offset_m
@@ -223,13 +225,11 @@ class LogBuilder:
             _check_limits(sensor, c, v, valid, t)
         dt = np.diff(t)
         med = float(np.median(dt)) if dt.size else float("nan")
-        if sensor == "imu" and dt.size:
-            big = dt > 2.5 * med
-            if big.any():
-                i = int(np.flatnonzero(big)[0])
-                raise LogError(f"imu: a gap of {dt[i]:.3g} s after t = {t[i]:g} s (median interval "
-                               f"{med:.3g} s): an INS cannot bridge missing IMU samples; split the log or "
-                               "fill the gap")
+        gap = imu_gap(t, valid) if sensor == "imu" else None
+        if gap is not None:
+            raise LogError(f"imu: a gap of {gap[1]:.3g} s after t = {gap[0]:g} s (median interval "
+                           f"{gap[2]:.3g} s): an INS cannot bridge missing IMU samples (or samples marked "
+                           "invalid); split the log or fill the gap")
         rate = (self.meta["sensors"].get(sensor) or {}).get("rate_hz")
         if rate is not None and dt.size and abs(med * float(rate) - 1.0) > 0.02:
             raise LogError(f"{sensor}: the samples come every {med:.4g} s (median), the stated rate_hz "

@@ -118,6 +118,33 @@ def limit_violation(col: str, values, use=None) -> tuple[int, str] | None:
     return (int(np.flatnonzero(bad)[0]), what) if bad.any() else None
 
 
+# the longest stretch without a valid IMU sample an INS is asked to bridge, in median sample intervals
+IMU_MAX_GAP_INTERVALS = 2.5
+
+
+def imu_gap(t_s, valid) -> tuple[float, float, float] | None:
+    """(time it starts after, s; its length, s; the median sample interval, s) of the first stretch without
+    a valid IMU sample longer than IMU_MAX_GAP_INTERVALS median intervals: samples missing, or marked
+    invalid (the INS holds the last valid one across them). No valid sample at all: the whole log. None if
+    there is no such stretch."""
+    t = np.asarray(t_s, dtype=float)
+    if t.size < 2:
+        return None
+    med = float(np.median(np.diff(t)))
+    ok = np.asarray(valid, dtype=bool)
+    if not ok.any():
+        return float(t[0]), float(t[-1] - t[0]), med
+    tv = t[ok]
+    # from the log's first sample to the first valid one, between valid ones, from the last valid to the end
+    edges = np.concatenate([[t[0] - med], tv, [t[-1] + med]])
+    gaps = np.diff(edges)
+    big = np.flatnonzero(gaps > IMU_MAX_GAP_INTERVALS * med)
+    if big.size == 0:
+        return None
+    i = int(big[0])
+    return float(edges[i]), float(gaps[i]), med
+
+
 IMU_SAMPLE_CONVENTIONS = ("rate", "increment")
 HEIGHT_REFERENCES = ("msl", "ellipsoid")
 

@@ -11,7 +11,8 @@
 recording that did not finish, a truncated or corrupt table, a table whose row count disagrees with the
 metadata, missing columns, a column of the wrong kind (text, or floats where the format has flags or frame
 indices), time that does not increase, a sample outside its frame's interval, samples in a frame whose
-sensor is marked absent, NaN in a sample marked valid or in the truth, a latitude, longitude or range
+sensor is marked absent, NaN in a sample marked valid or in the truth, a stretch without a valid IMU
+sample longer than format.IMU_MAX_GAP_INTERVALS median intervals, a latitude, longitude or range
 outside format.COLUMN_LIMITS (degrees stated as radians), and an IMU sample convention or height datum
 that is not stated.
 """
@@ -40,6 +41,7 @@ from trn_env.logs.format import (
     TRUTH_COLUMNS,
     TRUTH_OPTIONAL,
     LogError,
+    imu_gap,
     limit_violation,
 )
 from trn_env.navigators import frames as nf
@@ -441,3 +443,8 @@ def _check_frames(log: SensorLog, n_frames: int) -> None:
             a = log.column(s, c)
             _check_column(table, c, a, valid)
             _check_limits(table, c, a, valid)
+        gap = imu_gap(t, valid) if s == "imu" else None
+        if gap is not None:
+            raise LogError(f"log table {table}: no valid IMU sample for {gap[1]:.3g} s after t = "
+                           f"{gap[0]:g} s (median interval {gap[2]:.3g} s): an INS cannot bridge that; split "
+                           "the log")
