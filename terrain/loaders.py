@@ -95,6 +95,9 @@ def _finish(
         )
     if not np.isfinite(heights).any():
         raise DemLoadError(f"{source}: every post is a void (nodata); no terrain in this DEM")
+    lon_east = lon0_deg + (heights.shape[1] - 1) * dlon_deg
+    if lon0_deg >= 180.0 and lon_east <= 360.0:     # 0..360 longitudes, wholly east of 180: as -180..180
+        lon0_deg -= 360.0
     if fill:
         heights = fill_voids(heights, source)
     return Dem(

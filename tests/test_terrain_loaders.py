@@ -276,3 +276,16 @@ def test_a_raster_with_more_posts_than_the_limit_is_refused_before_it_is_read(tm
         terrain.load(projected)
     monkeypatch.setattr(loaders, "MAX_RASTER_POSTS", 40 * 50)
     assert terrain.load(geographic).heights_m.shape == (40, 50)
+
+
+def test_longitudes_from_0_to_360_read_as_from_minus_180_to_180(tmp_path):
+    """A grid wholly east of 180 deg in 0..360 longitudes (some global products) is the same grid at
+    -180..180: it loaded at 275.6 deg, and every place in a scenario (-84.4) was 'outside the terrain'."""
+    step = 3.0 / 3600.0
+    for west, name in ((-84.4, "signed.tif"), (-84.4 + 360.0, "east.tif")):
+        _write_tif(tmp_path / name, _hills().astype(np.float32), from_origin(west, 36.6, step, step))
+    signed, east = terrain.load(tmp_path / "signed.tif"), terrain.load(tmp_path / "east.tif")
+    assert np.degrees(east.lon0_rad) == pytest.approx(np.degrees(signed.lon0_rad), abs=1e-9)
+    np.testing.assert_array_equal(east.heights_m, signed.heights_m)
+    lat, lon = np.radians(36.58), np.radians(-84.39)
+    assert east.height(lat, lon) == pytest.approx(signed.height(lat, lon), abs=1e-6)
