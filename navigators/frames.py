@@ -149,6 +149,22 @@ class SensorFrames:
     extra: dict = field(default_factory=dict)
 
 
+_SENSOR_FIELDS = tuple(f.name for f in fields(SensorFrames)
+                       if f.name not in ("t_start_s", "t_end_s", "extra"))
+
+
+def copy_frames(frames: SensorFrames) -> SensorFrames:
+    """A copy of `frames` whose arrays (and `extra` dict) are its own: what a reader gets when others read
+    the same frames after it (the loop's log and monitors), so a change it makes in place stays with it."""
+    out = SensorFrames(frames.t_start_s, frames.t_end_s, extra=dict(frames.extra))
+    for name in _SENSOR_FIELDS:
+        fr = getattr(frames, name)
+        if fr is not None:
+            setattr(out, name, type(fr)(**{f.name: np.array(getattr(fr, f.name), copy=True)
+                                          for f in fields(fr)}))
+    return out
+
+
 def imu_gap_s(t_s: np.ndarray, t_prev_s: float = float("nan"), factor: float = 1.5) -> float:
     """Seconds of IMU data missing in a frame: the sum of the sample intervals longer than `factor` times
     the frame's median interval, including the one from `t_prev_s` (the last sample before the frame; NaN:

@@ -125,7 +125,9 @@ class Estimate:
 
 @runtime_checkable
 class Navigator(Protocol):
-    """Any estimator that runs on SensorFrames."""
+    """Any estimator that runs on SensorFrames. `update` leaves its frames as given (the same frames may go
+    to other navigators, the monitors and the log) and returns a new Estimate whose arrays are its own (the
+    loop keeps earlier estimates): trn_env.testing.check_navigator checks both."""
 
     name: str
 

@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 from trn_env.navigators.builtin import ins as _ins
+from trn_env.navigators.frames import copy_frames
 
 from trn_env.testing import NavigatorCheckError, check_navigator, recorded_flight
 
@@ -64,13 +65,18 @@ class Faulty:
         self.gain = gain
         self.rng = rng if rng is not None else np.random.default_rng()
         self.nav = _ins(**settings)
+        self.kept = None
+        self.P = np.zeros((9, 9))
 
     def reset(self, initial):
         self.nav.reset(initial)
+        self.kept = None
 
     def update(self, frames):
         if self.fault == "raise_on_nan" and frames.imu is not None and np.isnan(frames.imu.f_b_mps2).any():
             raise ValueError("NaN in the IMU")
+        if self.fault == "frames_in_place" and frames.baro is not None:
+            frames.baro.h_baro_m += 100.0                       # a bias correction made on the input
         est = self.nav.update(frames)
         if self.fault == "asymmetric":
             est.covariance = est.covariance.copy()
@@ -84,6 +90,15 @@ class Faulty:
             est.t_s = frames.t_start_s
         elif self.fault == "random":
             est.lat_rad += 1e-9 * self.rng.standard_normal()
+        elif self.fault == "reuse_estimate":                    # one Estimate object, overwritten
+            if self.kept is None:
+                self.kept = est
+            else:
+                vars(self.kept).update(vars(est))
+            est = self.kept
+        elif self.fault == "shared_covariance":                 # the filter's own P handed out
+            self.P[:] = est.covariance
+            est.covariance = self.P
         return est
 
 
@@ -96,6 +111,48 @@ def test_checker_catches_faults(fault, check):
     assert not report.ok
     assert check in {p.check for p in report.problems}, str(report)
     assert all(p.fix for p in report.problems)
+
+
+@pytest.mark.parametrize("fault, words", [
+    ("frames_in_place",
+     "update(frames) changed its input frames in place (first at the update ending 1.01 s: baro.h_baro_m)"),
+    ("reuse_estimate",
+     "the estimate returned by update 0 changed afterwards: the same object is returned again"),
+    ("shared_covariance", "the estimate returned by update 0 changed afterwards: it shares arrays"),
+])
+def test_checker_names_inputs_changed_in_place_and_outputs_changed_afterwards(fault, words):
+    """Each was reported under a wrong diagnosis (frames and a shared covariance as 'determinism: draw random
+    numbers only from the rng=', a reused Estimate as 'estimate time 30.0 s is neither the interval's end')
+    and a navigator writing into its frames wrote into the process's recorded flight, which every later
+    check reads. Now: one contract problem naming what changed, and the recording as it was."""
+    rec = recorded_flight()
+    before = [copy_frames(fr) for fr in rec.frames]
+    report = check_navigator(Faulty, {"fault": fault}, check_settings=False, verbose=False)
+    assert [(p.check, words in p.message) for p in report.problems] == [("contract", True)], str(report)
+    for fr, was in zip(rec.frames, before, strict=True):
+        assert np.array_equal(fr.baro.h_baro_m, was.baro.h_baro_m)
+        assert np.array_equal(fr.imu.f_b_mps2, was.imu.f_b_mps2)
+
+
+class _EstimateChangingMonitor:
+    """The DEM monitor, moving the estimate it is given."""
+
+    def __init__(self, **settings):
+        from trn_env.navigators import registry
+        self.inner = registry.create_monitor("dem_integrity", **settings)
+
+    def reset(self):
+        self.inner.reset()
+
+    def update(self, frames, estimate):
+        estimate.lat_rad += 1e-6
+        return self.inner.update(frames, estimate)
+
+
+def test_checker_names_a_monitor_changing_the_estimate_it_is_given():
+    report = check_navigator(_EstimateChangingMonitor, kind="monitor", check_settings=False, verbose=False)
+    assert [p.check for p in report.problems] == ["contract"], str(report)
+    assert "update(frames, estimate) changed the navigator's estimate in place" in report.problems[0].message
 
 
 def test_checker_catches_nondeterminism():

@@ -36,12 +36,12 @@ import copy
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from trn_env.navigators import registry
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, copy_frames
 from trn_env.navigators.protocol import Estimate, Health
 from trn_env.scenario.sections import ScenarioSections
 
@@ -49,6 +49,7 @@ SENSORS = ("imu", "baro", "radar_altimeter", "ira", "gnss", "air_data", "heading
 _FLIGHTS: dict[tuple, FlightRecord] = {}
 _CHECK_NAME = "__check_navigator__"
 _TRACE: dict[int, tuple[int, int]] = {}     # id(estimate) -> (skips so far, events of that update)
+_MISUSE: dict[str, tuple] = {}              # what a check's reader changed that it must not (_run)
 
 
 @dataclass
@@ -265,23 +266,126 @@ def _with_navigator(sc: ScenarioSections, name: str, settings: dict) -> Scenario
 
 
 def _run(nav, rec: FlightRecord, frames: list[SensorFrames], initial: Estimate | None = None,
-         kind="navigator",
-         beside: list | None = None) -> list:
-    """The navigator's (or monitor's) outputs over `frames` after a reset to `initial`."""
+         kind="navigator", beside: list | None = None, update_wall_s: list | None = None) -> list:
+    """The navigator's (or monitor's) outputs over `frames` after a reset to `initial`, each as it was when
+    returned. The reader gets copies of the frames (and a monitor of the estimate), so the recording stays
+    as measured whatever it does; a change it makes to them in place, or to an output after returning it,
+    is noted in _MISUSE for _check to report once. `update_wall_s[0]` (if given) accumulates the wall
+    seconds spent in its update calls alone."""
+    clock = time.perf_counter
+    spent = 0.0
+    outs, live = [], []
     if kind == "monitor":
         if hasattr(nav, "reset"):
             nav.reset()
-        return [nav.update(fr, est) for fr, est in zip(frames, beside, strict=False)]
+        for fr, est in zip(frames, beside, strict=False):
+            given, est_given = copy_frames(fr), copy.deepcopy(est)
+            t0 = clock()
+            out = nav.update(given, est_given)
+            spent += clock() - t0
+            _note_frames_changed(given, fr, "update(frames, estimate)")
+            if not np.array_equal(_estimate_key(est_given), _estimate_key(est), equal_nan=True):
+                _MISUSE.setdefault("estimate", float(fr.t_end_s))
+            outs.append(_snapshot(out))
+            live.append(out)
+        _note_outputs_changed(outs, live, kind)
+        if update_wall_s is not None:
+            update_wall_s[0] += spent
+        return outs
     nav.reset(copy.deepcopy(initial or rec.initial))
-    outs = []
     for fr in frames:
-        est = nav.update(fr)
+        given = copy_frames(fr)
+        t0 = clock()
+        est = nav.update(given)
+        spent += clock() - t0
+        _note_frames_changed(given, fr, "update(frames)")
         # the Health a navigator returns is often its own live object: snapshot what it counted so far
         h = getattr(est, "health", None)
         est_trace = (_skips(h), len(getattr(h, "events", None) or ()))
-        outs.append(est)
-        _TRACE[id(est)] = est_trace
+        kept = _snapshot(est)
+        outs.append(kept)
+        live.append(est)
+        _TRACE[id(kept)] = est_trace
+    _note_outputs_changed(outs, live, kind)
+    if update_wall_s is not None:
+        update_wall_s[0] += spent
     return outs
+
+
+def _snapshot(out):
+    try:
+        return copy.deepcopy(out)
+    except Exception:  # noqa: BLE001 - an output that cannot be copied is checked as it is
+        return out
+
+
+def _estimate_key(o) -> np.ndarray:
+    """An Estimate's values (health aside), or a monitor output's rows, as one float array."""
+    if isinstance(o, Estimate):
+        try:
+            return np.array([o.t_s, o.lat_rad, o.lon_rad, o.h_m, *np.ravel(o.v_ned_mps), o.roll_rad,
+                             o.pitch_rad, o.yaw_rad, *np.ravel(o.covariance)], float)
+        except (TypeError, ValueError):
+            return np.array([np.nan])
+    rows = getattr(o, "rows", None)
+    try:
+        return np.asarray(rows, float).ravel()
+    except (TypeError, ValueError):
+        return np.array([np.nan])
+
+
+def _note_frames_changed(given: SensorFrames, original: SensorFrames, call: str) -> None:
+    """Note (once) which of the frames' arrays the reader changed in place (or replaced)."""
+    if "frames" in _MISUSE:
+        return
+    changed = []
+    for name in SENSORS:
+        a, b = getattr(given, name, None), getattr(original, name)
+        if (a is None) != (b is None):
+            changed.append(name)
+        elif b is not None:
+            for f in fields(b):
+                x, y = np.asarray(getattr(a, f.name, None)), getattr(b, f.name)
+                if x.shape != y.shape or not np.array_equal(x, y, equal_nan=y.dtype.kind == "f"):
+                    changed.append(f"{name}.{f.name}")
+    if changed:
+        _MISUSE["frames"] = (call, float(original.t_end_s), changed)
+
+
+def _note_outputs_changed(outs: list, live: list, kind: str) -> None:
+    """Note (once) an output that differs, after the run, from what update() returned: the same object
+    returned again, or arrays the reader keeps overwriting (its covariance held as a state it updates)."""
+    if "outputs" in _MISUSE:
+        return
+    for i, (kept, out) in enumerate(zip(outs, live, strict=True)):
+        if kept is out:
+            continue
+        if not np.array_equal(_estimate_key(kept), _estimate_key(out), equal_nan=True):
+            again = any(out is other for other in live[i + 1:])
+            _MISUSE["outputs"] = (kind, i, again)
+            return
+
+
+def _report_misuse(report: CheckReport) -> None:
+    if "frames" in _MISUSE:
+        call, t_s, changed = _MISUSE["frames"]
+        report.fail("contract", f"{call} changed its input frames in place (first at the update ending "
+                    f"{t_s:g} s: {', '.join(changed)})",
+                    "leave the frames as given: copy an array before changing it "
+                    "(np.array(frames.baro.h_baro_m)); the same frames may be given to other navigators, "
+                    "monitors and the log")
+    if "estimate" in _MISUSE:
+        report.fail("contract", "update(frames, estimate) changed the navigator's estimate in place (first "
+                    f"at the update ending {_MISUSE['estimate']:g} s)",
+                    "copy the estimate before changing it: the loop's guidance and log use it")
+    if "outputs" in _MISUSE:
+        kind, i, again = _MISUSE["outputs"]
+        what = "estimate" if kind == "navigator" else "output"
+        how = ("the same object is returned again by a later update" if again else
+               "it shares arrays the " + kind + " keeps changing (e.g. its covariance is the filter's own P)")
+        report.fail("contract", f"the {what} returned by update {i} changed afterwards: {how}",
+                    f"return a new {'Estimate' if kind == 'navigator' else 'output'} with arrays of its own "
+                    "from every update (np.array(self.P), not self.P): the loop keeps earlier estimates")
 
 
 def check_navigator(name_or_factory: str | Callable[..., object], settings: dict | None = None, *,
@@ -315,6 +419,7 @@ def check_navigator(name_or_factory: str | Callable[..., object], settings: dict
     CheckReport
     """
     _TRACE.clear()
+    _MISUSE.clear()
     try:
         return _check(name_or_factory, dict(settings or {}), kind, seed, duration_s, check_settings, verbose,
                       raise_on_failure)
@@ -374,14 +479,14 @@ def _check(name_or_factory, settings: dict, kind: str | None, seed: int, duratio
     report.checks.append("protocol")
     beside = _ins_estimates(rec) if kind == "monitor" else None
     frames = rec.frames
-    wall0 = time.perf_counter()
+    update_wall_s = [0.0]
     try:
-        outs = _run(nav, rec, frames, kind=kind, beside=beside)
+        outs = _run(nav, rec, frames, kind=kind, beside=beside, update_wall_s=update_wall_s)
     except Exception as exc:  # noqa: BLE001
         report.fail("contract", f"raised on the recorded flight: {type(exc).__name__}: {exc}",
                     "a navigator never raises on data; skip and count bad samples in Health")
         return _finish(report, verbose, raise_on_failure)
-    wall = time.perf_counter() - wall0
+    wall = update_wall_s[0]
     sim_s = float(frames[-1].t_end_s - frames[0].t_start_s)
     report.info["speed_sim_s_per_wall_s"] = round(sim_s / max(wall, 1e-9), 1)
     if kind == "navigator":
@@ -396,6 +501,8 @@ def _check(name_or_factory, settings: dict, kind: str | None, seed: int, duratio
         _check_determinism(report, lambda: _build(name, settings, rec, seed, kind), rec, outs, kind, beside)
     if check_settings:
         _check_bad_settings(report, plugin, name, settings, rec, seed, kind)
+    if not _MISUSE:
+        report.checks.append("frames and estimates left as given")
     return _finish(report, verbose, raise_on_failure)
 
 
@@ -411,6 +518,7 @@ def _update_takes_estimate(factory) -> bool:
 
 
 def _finish(report: CheckReport, verbose: bool, raise_on_failure: bool) -> CheckReport:
+    _report_misuse(report)
     if verbose:
         print(report)
     if raise_on_failure and not report.ok:
@@ -518,14 +626,8 @@ def _check_off_map(report: CheckReport, make, rec: FlightRecord) -> None:
 
 def _check_determinism(report: CheckReport, make, rec: FlightRecord, outs: list, kind: str, beside) -> None:
     again = _run(make(), rec, rec.frames, kind=kind, beside=beside)
-
-    def key(o):
-        if kind == "monitor":
-            return np.asarray(o.rows, float)
-        return np.array([o.t_s, o.lat_rad, o.lon_rad, o.h_m, *np.ravel(o.v_ned_mps), o.roll_rad, o.pitch_rad,
-                         o.yaw_rad, *np.ravel(o.covariance)], float)
     for i, (a, b) in enumerate(zip(outs, again, strict=True)):
-        if not np.array_equal(key(a), key(b), equal_nan=True):
+        if not np.array_equal(_estimate_key(a), _estimate_key(b), equal_nan=True):
             report.fail("determinism", f"a second run with the same settings and seed differs at update {i}",
                         "draw random numbers only from the rng= Generator the factory is given")
             return

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trn_env.flight.truth import TruthChunk, chunk_from_buffer, chunk_to_buffer
-from trn_env.navigators.frames import SensorFrames
+from trn_env.navigators.frames import SensorFrames, copy_frames
 from trn_env.navigators.protocol import Estimate
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 
@@ -114,7 +114,9 @@ class InlineNavStage:
         measurements transferred to the IMU's point (navigators.measurements.lever_arm; the monitors and
         the log get them as measured); frame_sink: an object whose `write_frames(frames)` takes each
         interval's frames instead of the in-memory list (a trn_env.logs LogWriter; `finish_frames` closes
-        it); monitors: {name: monitor} run after the navigator on the same frames and its estimate;
+        it); monitors: {name: monitor} run after the navigator on the same frames and its estimate. While
+        the log or a monitor reads the frames, the navigator and each monitor get a copy of their own
+        (navigators.frames.copy_frames): what one changes in place reaches no other reader.
         map_schedule: [(t_from_s, heights)] of a time-dependent navigator's map `map_dem`: the heights are
         swapped in (terrain.map_error.set_heights) before the first update interval that reaches t_from_s,
         in this process, so the navigator, the monitors and the route's guidance all meet them."""
@@ -145,17 +147,20 @@ class InlineNavStage:
         t0 = clock()
         frames = gate_gnss(self.sensors.sample(chunk, self.world_dem), self.outages)
         t1 = clock()
+        # The log and the monitors get the frames as measured: when anyone reads them after the navigator,
+        # each reader gets arrays of its own, so a change one makes in place stays with it.
+        shared = bool(self.monitors) or self.frame_sink is not None or self.log_sensors
+        nav_frames = copy_frames(frames) if shared else frames
         if self.lever_arms is not None:
             from trn_env.navigators.measurements.lever_arm import compensate_frames
-            est = self.navigator.update(compensate_frames(frames, self.lever_arms))
-        else:
-            est = self.navigator.update(frames)
+            nav_frames = compensate_frames(nav_frames, self.lever_arms)
+        est = self.navigator.update(nav_frames)
         t2 = clock()
         mon_out = None
         if self.monitors:
             mon_out = {}
             for name, mon in self.monitors.items():
-                out = mon.update(frames, est)
+                out = mon.update(copy_frames(frames), est)
                 mon_out[name] = out
                 events += [(t_ev, name, msg) for t_ev, msg in out.events]
         t_mon = clock() - t2
