@@ -324,3 +324,28 @@ def test_perfectly_known_start_is_accepted_negative_variance_refused():
     bad[0, 0] = -1.0
     with pytest.raises(ValueError, match="semi-definite"):
         nav.reset(Estimate(0.0, 0.6, -1.4, 1000.0, np.zeros(3), 0.0, 0.0, 0.0, bad))
+
+
+def test_a_place_across_the_antimeridian_of_a_dem_crossing_it_is_named_so(tmp_path):
+    """A DEM crossing 180 deg is read at longitudes beyond 180; a place on its other side (written, as the
+    schema wants, at -179.x) was only 'outside the true terrain (lon 179.9..180.1 deg)'."""
+    from trn_env.terrain.dem import Dem
+    from trn_env.terrain.loaders import save_npz
+
+    jacks = terrain.load("jacksboro")
+    across = Dem(np.array(jacks.heights_m), math.radians(-0.1), math.radians(179.9), jacks.dlat_rad,
+                 jacks.dlon_rad, "across 180")
+    data = _data()
+    data["terrain"]["world"]["dem"] = str(save_npz(across, tmp_path / "across.npz"))
+    data["terrain"]["map"]["dem"] = "world"
+    data["initial"].update(lat_deg=0.0, lon_deg=179.95)
+    data["route"]["waypoints"] = [{**wp, "lat_deg": 0.01 * k, "lon_deg": 179.96 + 0.01 * k}
+                                  for k, wp in enumerate(data["route"]["waypoints"][:2])]
+    validate(copy.deepcopy(data), source="test")                            # all on the DEM's 179.x side
+    data["route"]["waypoints"][1]["lon_deg"] = -179.97
+    probs = _problems(copy.deepcopy(data))
+    assert len(probs) == 1 and probs[0].startswith("route.waypoints[1]: (0.01000, -179.97000) deg is outside "
+                                                   "the true terrain"), probs
+    assert "the DEM crosses the antimeridian and this place lies on its other side" in probs[0]
+    data["route"]["waypoints"][1].update(lat_deg=1.0, lon_deg=179.97)       # merely off the DEM
+    assert "antimeridian" not in " ".join(_problems(copy.deepcopy(data)))

@@ -489,11 +489,16 @@ def _terrain_problems(d: dict, base_dir: Path | None, extras: dict, dems_loaded:
         for path, obj in places:
             lat, lon = math.radians(obj["lat_deg"]), math.radians(obj["lon_deg"])
             if not (lat_min <= lat <= lat_max and lon_min <= lon <= lon_max):
+                across = lat_min <= lat <= lat_max and any(lon_min <= lon + k * 2.0 * math.pi <= lon_max
+                                                           for k in (-1, 1))
                 problems.append(
                     f"{path}: ({obj['lat_deg']:.5f}, {obj['lon_deg']:.5f}) deg is outside the "
                     f"{'true terrain' if key == 'world' else 'navigator map'} terrain.{key}.dem "
                     f"(lat {math.degrees(lat_min):.4f}..{math.degrees(lat_max):.4f}, "
-                    f"lon {math.degrees(lon_min):.4f}..{math.degrees(lon_max):.4f} deg)")
+                    f"lon {math.degrees(lon_min):.4f}..{math.degrees(lon_max):.4f} deg)"
+                    + (": the DEM crosses the antimeridian and this place lies on its other side; trn-env "
+                       "does not fly across 180 deg: keep the flight on one side (a DEM cropped to it)"
+                       if across else ""))
             elif (key == "world" and path == "initial" and not math.isfinite(float(dem.height(lat, lon)))
                   and ("h_agl_m" in obj or d["truth"]["source"] != "kinematic")):
                 # JSBSim starts on the ground's height there, and h_agl_m is taken above it
