@@ -52,10 +52,21 @@ def ned_offset_to_latlon(lat_rad: float, lon_rad: float, h_m: float, dn_m: float
 
 @njit(cache=True, fastmath=False)
 def latlon_to_ned_offset(lat0_rad: float, lon0_rad: float, h_m: float, lat_rad: float, lon_rad: float):
-    """North/east displacement (metres) from (lat0, lon0) to (lat, lon), small-offset form of eq 2."""
+    """North/east displacement (metres) from (lat0, lon0) to (lat, lon), small-offset form of eq 2; the
+    longitude difference taken the short way round (across the antimeridian too)."""
     r_n = meridian_radius_m(lat0_rad) + h_m
     r_e = prime_vertical_radius_m(lat0_rad) + h_m
-    return (lat_rad - lat0_rad) * r_n, (lon_rad - lon0_rad) * r_e * np.cos(lat0_rad)
+    dlon = lon_rad - lon0_rad
+    if abs(dlon) > np.pi:
+        dlon -= 2.0 * np.pi * np.round(dlon / (2.0 * np.pi))
+    return (lat_rad - lat0_rad) * r_n, dlon * r_e * np.cos(lat0_rad)
+
+
+def lon_difference_rad(lon_rad, lon0_rad):
+    """lon - lon0 taken the short way round, in [-pi, pi] (exactly lon - lon0 where that is already
+    inside): a longitude that wrapped at the antimeridian is 2 pi away from its neighbour, not 40,000 km."""
+    d = np.asarray(lon_rad, float) - np.asarray(lon0_rad, float)
+    return np.where(np.abs(d) > np.pi, d - 2.0 * np.pi * np.round(d / (2.0 * np.pi)), d)
 
 
 @njit(cache=True, fastmath=False)

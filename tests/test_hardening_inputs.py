@@ -349,3 +349,40 @@ def test_a_place_across_the_antimeridian_of_a_dem_crossing_it_is_named_so(tmp_pa
     assert "the DEM crosses the antimeridian and this place lies on its other side" in probs[0]
     data["route"]["waypoints"][1].update(lat_deg=1.0, lon_deg=179.97)       # merely off the DEM
     assert "antimeridian" not in " ".join(_problems(copy.deepcopy(data)))
+
+
+def test_a_flight_reaching_the_antimeridian_ends_off_map_said_so_with_sound_metrics(tmp_path):
+    """The aircraft flying east across 180 deg over a DEM crossing it: JSBSim's longitude wraps to -180 and
+    the flight ends off the map. Its summary said a 40,088 km final error, an ANEES of 1e12 and a distance
+    flown as long; the error is now taken the short way round (checked against the ECEF chord), and an
+    event says why the flight ended."""
+    from trn_env.terrain.dem import Dem
+    from trn_env.terrain.geodesy import lla_to_ecef
+    from trn_env.terrain.loaders import save_npz
+
+    from trn_env.sim import error_ned_m, run_scenario
+
+    jacks = terrain.load("jacksboro")
+    across = Dem(np.array(jacks.heights_m), math.radians(-0.1), math.radians(179.9), jacks.dlat_rad,
+                 jacks.dlon_rad, "across 180")
+    data = _data()
+    data["terrain"]["world"]["dem"] = str(save_npz(across, tmp_path / "across.npz"))
+    data["terrain"]["map"]["dem"] = "world"
+    # eastbound 550 m short of 180 deg, the route back west: the turn (radius ~1.5 km) crosses it
+    data["initial"].update(lat_deg=0.0, lon_deg=179.995, heading_deg=90.0)
+    data["route"]["waypoints"] = [{**wp, "lat_deg": 0.0, "lon_deg": lon}
+                                  for wp, lon in zip(data["route"]["waypoints"][:2], (179.995, 179.95),
+                                                     strict=True)]
+    data["duration_s"] = 120.0
+    result = run_scenario(data, pipeline=False)
+    s = result.summary
+    assert s["termination"] == "off_map"
+    assert any("crossed the antimeridian" in str(e) for e in result.events), result.events
+    assert s["horizontal_error_max_m"] < 200.0 and s["distance_flown_m"] < 10_000.0, s
+
+    lat, lon = math.radians(0.01), math.radians(179.9999)
+    est_lat, est_lon = math.radians(0.0101), math.radians(-179.9998)        # ~33 m east, 11 m north
+    err = error_ned_m(np.array([lat]), np.array([lon]), np.array([1000.0]), est_lat, est_lon, 1000.0)[0]
+    chord = np.subtract(lla_to_ecef(est_lat, est_lon, 1000.0), lla_to_ecef(lat, lon, 1000.0))
+    assert math.hypot(err[0], err[1]) == pytest.approx(np.linalg.norm(chord), rel=1e-4)
+    assert err[1] > 0.0

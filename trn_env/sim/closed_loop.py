@@ -483,7 +483,15 @@ class ClosedLoop:
         agl_min, n_nan = components.min_height_above_terrain(self.world_dem, chunk.lat_rad, chunk.lon_rad,
                                                              chunk.h_msl_m)
         if n_nan:   # a step off the grid or over a void (then the other steps are judged)
-            if not np.all(components.world_contains(self.world_dem, chunk.lat_rad, chunk.lon_rad)):
+            inside = components.world_contains(self.world_dem, chunk.lat_rad, chunk.lon_rad)
+            if not np.all(inside):
+                k = int(np.argmin(inside))
+                lat, lon = chunk.lat_rad[k:k + 1], chunk.lon_rad[k:k + 1]
+                if any(components.world_contains(self.world_dem, lat, lon + turn)[0]
+                       for turn in (-2.0 * math.pi, 2.0 * math.pi)):
+                    self.log.events.append((float(chunk.t_s[k]), "sim", "the aircraft crossed the "
+                                            "antimeridian (180 deg), which trn-env does not fly across: "
+                                            "keep the flight on one side of it"))
                 return "off_map"
         if agl_min < 0.0:
             return "terrain_collision"

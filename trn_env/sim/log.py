@@ -22,7 +22,7 @@ from trn_env.navigators.integrity.protection_level import EXTRA_PROTECTION_LEVEL
 from trn_env.navigators.protocol import Estimate
 from trn_env.output.chunked import diagonals
 from trn_env.sim.nav_stage import gnss_available_mask
-from trn_env.terrain.geodesy import meridian_radius_m, prime_vertical_radius_m
+from trn_env.terrain.geodesy import lon_difference_rad, meridian_radius_m, prime_vertical_radius_m
 
 _TRUTH_LOGGED = ("lat_rad", "lon_rad", "h_msl_m", "v_ned_mps", "roll_rad", "pitch_rad", "yaw_rad", "tas_mps",
                  "alpha_rad", "beta_rad", "wind_ned_mps")
@@ -164,7 +164,7 @@ def error_ned_m(lat_rad, lon_rad, h_m, est_lat_rad, est_lon_rad, est_h_m) -> np.
     r_n = np.array([meridian_radius_m(x) for x in lat]) + h_m
     r_e = np.array([prime_vertical_radius_m(x) for x in lat]) + h_m
     dn = (np.asarray(est_lat_rad) - lat) * r_n
-    de = (np.asarray(est_lon_rad) - np.asarray(lon_rad)) * r_e * np.cos(lat)
+    de = lon_difference_rad(est_lon_rad, lon_rad) * r_e * np.cos(lat)
     dd = -(np.asarray(est_h_m) - np.asarray(h_m))
     return np.stack([dn, de, dd], axis=-1).reshape(-1, 3)
 

@@ -8,6 +8,7 @@ import numpy as np
 from trn_env.navigators.protocol import Estimate
 from trn_env.output.metrics import MetricSettings, navigation_metrics
 from trn_env.scenario.loading import Scenario
+from trn_env.terrain.geodesy import lon_difference_rad
 
 
 def _rms(x: np.ndarray) -> float:
@@ -34,7 +35,8 @@ def summarise(scenario: Scenario, termination: str, a: dict[str, np.ndarray], wa
     denied = ~a["gnss_available"].astype(bool)
     sim_time = float(t[-1] - t[0]) if t.size else 0.0
     step = np.hypot(np.diff(a["true_lat_rad"]) * 6.371e6,
-                    np.diff(a["true_lon_rad"]) * 6.371e6 * np.cos(a["true_lat_rad"][:-1]))
+                    lon_difference_rad(a["true_lon_rad"][1:], a["true_lon_rad"][:-1]) * 6.371e6
+                    * np.cos(a["true_lat_rad"][:-1]))
     within3 = (np.abs(err[:, 0]) <= 3 * sig[:, 0]) & (np.abs(err[:, 1]) <= 3 * sig[:, 1])
     out = {
         "scenario": scenario.name,
