@@ -326,9 +326,9 @@ def test_perfectly_known_start_is_accepted_negative_variance_refused():
         nav.reset(Estimate(0.0, 0.6, -1.4, 1000.0, np.zeros(3), 0.0, 0.0, 0.0, bad))
 
 
-def test_a_place_across_the_antimeridian_of_a_dem_crossing_it_is_named_so(tmp_path):
-    """A DEM crossing 180 deg is read at longitudes beyond 180; a place on its other side (written, as the
-    schema wants, at -179.x) was only 'outside the true terrain (lon 179.9..180.1 deg)'."""
+def _data_over_the_antimeridian(tmp_path) -> dict:
+    """default_short over the bundled DEM's heights moved to 0.10 S-0.19 N, 179.90-180.24 deg E (a DEM crossing
+    the antimeridian), as world and map."""
     from trn_env.terrain.dem import Dem
     from trn_env.terrain.loaders import save_npz
 
@@ -338,6 +338,13 @@ def test_a_place_across_the_antimeridian_of_a_dem_crossing_it_is_named_so(tmp_pa
     data = _data()
     data["terrain"]["world"]["dem"] = str(save_npz(across, tmp_path / "across.npz"))
     data["terrain"]["map"]["dem"] = "world"
+    return data
+
+
+def test_a_place_across_the_antimeridian_of_a_dem_crossing_it_is_named_so(tmp_path):
+    """A DEM crossing 180 deg is read at longitudes beyond 180; a place on its other side (written, as the
+    schema wants, at -179.x) was only 'outside the true terrain (lon 179.9..180.1 deg)'."""
+    data = _data_over_the_antimeridian(tmp_path)
     data["initial"].update(lat_deg=0.0, lon_deg=179.95)
     data["route"]["waypoints"] = [{**wp, "lat_deg": 0.01 * k, "lon_deg": 179.96 + 0.01 * k}
                                   for k, wp in enumerate(data["route"]["waypoints"][:2])]
@@ -356,18 +363,11 @@ def test_a_flight_reaching_the_antimeridian_ends_off_map_said_so_with_sound_metr
     the flight ends off the map. Its summary said a 40,088 km final error, an ANEES of 1e12 and a distance
     flown as long; the error is now taken the short way round (checked against the ECEF chord), and an
     event says why the flight ended."""
-    from trn_env.terrain.dem import Dem
     from trn_env.terrain.geodesy import lla_to_ecef
-    from trn_env.terrain.loaders import save_npz
 
     from trn_env.sim import error_ned_m, run_scenario
 
-    jacks = terrain.load("jacksboro")
-    across = Dem(np.array(jacks.heights_m), math.radians(-0.1), math.radians(179.9), jacks.dlat_rad,
-                 jacks.dlon_rad, "across 180")
-    data = _data()
-    data["terrain"]["world"]["dem"] = str(save_npz(across, tmp_path / "across.npz"))
-    data["terrain"]["map"]["dem"] = "world"
+    data = _data_over_the_antimeridian(tmp_path)
     # eastbound 550 m short of 180 deg, the route back west: the turn (radius ~1.5 km) crosses it
     data["initial"].update(lat_deg=0.0, lon_deg=179.995, heading_deg=90.0)
     data["route"]["waypoints"] = [{**wp, "lat_deg": 0.0, "lon_deg": lon}
