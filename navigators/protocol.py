@@ -123,6 +123,11 @@ class Estimate:
         return np.sqrt(np.clip(np.diag(self.covariance)[:3], 0.0, None))
 
 
+class NavigatorContractError(TypeError):
+    """A navigator (or monitor) returned what the protocol does not allow: the loop stops on it with this,
+    naming the navigator and the update (trn_env.testing.check_navigator finds it before a flight)."""
+
+
 @runtime_checkable
 class Navigator(Protocol):
     """Any estimator that runs on SensorFrames. `update` leaves its frames as given (the same frames may go

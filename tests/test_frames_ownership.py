@@ -65,3 +65,49 @@ def test_log_and_monitors_get_the_frames_as_measured():
     assert len(logged) == len(SEEN["navigator"]) == len(SEEN["monitor"]) >= 5
     for log_h, nav_h, mon_h in zip(logged, SEEN["navigator"], SEEN["monitor"], strict=True):
         assert np.array_equal(log_h, nav_h) and np.array_equal(log_h, mon_h)
+
+
+def test_replay_gives_the_monitors_the_frames_as_logged(tmp_path):
+    from trn_env.cli import main
+    from trn_env.logs import read_log
+    from trn_env.logs.replay import replay
+
+    log_path = tmp_path / "flight.trnlog"
+    assert main(["record", "default", "--out", str(log_path), "--duration", "6", "--quiet"]) == 0
+    for seen in SEEN.values():
+        seen.clear()
+    replay(log_path, f"{__name__}:BaroCorrectingIns", monitors=[f"{__name__}:BaroCorrectingMonitor"])
+    logged = [fr.baro.h_baro_m for fr in read_log(log_path).frames() if fr.baro is not None]
+    assert len(logged) == len(SEEN["navigator"]) == len(SEEN["monitor"]) >= 5
+    for log_h, nav_h, mon_h in zip(logged, SEEN["navigator"], SEEN["monitor"], strict=True):
+        assert np.array_equal(log_h, nav_h) and np.array_equal(log_h, mon_h)
+
+
+class ReturnsNothing(BaroCorrectingIns):
+    """A navigator whose update forgot its `return`."""
+
+    def update(self, frames):
+        self.nav.update(frames)
+
+
+def test_an_update_returning_no_estimate_is_one_line_naming_the_navigator(tmp_path, capsys):
+    """It was an AttributeError traceback from inside the loop ('NoneType' object has no attribute
+    'lat_rad'), exit 1, in fly (both stages), record and replay."""
+    from trn_env.cli import main
+
+    log_path = tmp_path / "flight.trnlog"
+    assert main(["record", "default", "--out", str(log_path), "--duration", "3", "--quiet"]) == 0
+    ref = f"{__name__}:ReturnsNothing"
+    for argv in (["fly", "default", "--out", str(tmp_path / "run")],
+                 ["fly", "default", "--no-pipeline", "--out", str(tmp_path / "run")],
+                 ["record", "default", "--out", str(tmp_path / "again.trnlog")],
+                 ["replay", str(log_path), "--out", str(tmp_path / "replayed")]):
+        argv = [*argv, "--navigator", ref] + (["--duration", "3", "--quiet"] if argv[0] != "replay" else [])
+        capsys.readouterr()
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1] == ("error: navigator 'baro_correcting_ins': update() returned NoneType, not a "
+                           "trn_env.navigators.protocol.Estimate (the update ending 1.01 s): return the "
+                           "estimate from every update; trn_env.testing.check_navigator checks the whole "
+                           "contract (nothing written)"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.trnlog"]

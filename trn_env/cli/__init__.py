@@ -117,6 +117,14 @@ def _main(argv: list[str] | None) -> int:
         code, word = _interrupt_exit(cause)
         print(f"{word}: nothing written", file=sys.stderr)
         return code
+    except Exception as exc:
+        # a plug-in's output the loop cannot use: one line and its fix (imported here: the protocol's
+        # numba imports would slow every command's start)
+        from trn_env.navigators.protocol import NavigatorContractError
+        if not isinstance(exc, NavigatorContractError):
+            raise
+        print(f"error: {exc} (nothing written)", file=sys.stderr)
+        return 2
 
 
 def _caused_by_interrupt(exc: BaseException) -> KeyboardInterrupt | None:

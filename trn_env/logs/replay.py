@@ -27,6 +27,7 @@ import numpy as np
 
 from trn_env.logs.format import LogError
 from trn_env.logs.reader import SensorLog, read_log
+from trn_env.navigators.frames import copy_frames
 from trn_env.navigators.integrity.protection_level import EXTRA_PROTECTION_LEVEL
 from trn_env.navigators.protocol import Estimate, Health
 from trn_env.scenario.loading import Scenario
@@ -34,7 +35,7 @@ from trn_env.scenario.sections import ScenarioSections, SectionsError
 from trn_env.scenario.sections import from_dict as from_sections_dict
 from trn_env.sim.closed_loop import perturbed_estimate, spawn_rngs, summarise
 from trn_env.sim.log import NAV_STATUS_CODES, error_ned_m
-from trn_env.sim.nav_stage import gnss_available_mask
+from trn_env.sim.nav_stage import gnss_available_mask, navigator_update
 
 DEFAULT_INITIAL_ERRORS = {"position_ned_m": [30.0, 30.0, 15.0], "velocity_ned_mps": [0.1, 0.1, 0.1],
                           "attitude_mrad": [0.05, 0.05, 1.0]}
@@ -237,11 +238,13 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
             set_heights(the_map, heights)
             events.append((float(t_fault), "map",
                            f"map fault appears in the navigator's map at {t_fault:g} s"))
-        est = nav.update(compensate_frames(frames, arms) if arms is not None else frames)
+        # as in the loop: while monitors read the frames too, each reader gets arrays of its own
+        nav_frames = copy_frames(frames) if mons else frames
+        est = navigator_update(nav, compensate_frames(nav_frames, arms) if arms is not None else nav_frames)
         for t_ev, msg in est.health.events:
             events.append((t_ev, "navigator", msg))
         for name, mon in mons.items():
-            out = mon.update(frames, est)
+            out = mon.update(copy_frames(frames), est)
             mon_outs[name].append(out)
             events += [(t_ev, name, msg) for t_ev, msg in out.events]
         ests.append(_snapshot(est))

@@ -29,7 +29,7 @@ import numpy as np
 
 from trn_env.flight.truth import TruthChunk, chunk_from_buffer, chunk_to_buffer
 from trn_env.navigators.frames import SensorFrames, copy_frames
-from trn_env.navigators.protocol import Estimate
+from trn_env.navigators.protocol import Estimate, NavigatorContractError
 from trn_env.sim.interval_plan import IntervalPlan, IntervalPlanner
 
 
@@ -75,6 +75,19 @@ def gate_gnss(frames: SensorFrames, outages) -> SensorFrames:
         return frames
     frames.gnss = type(g)(**{k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in vars(g).items()})
     return frames
+
+
+def navigator_update(navigator, frames: SensorFrames) -> Estimate:
+    """navigator.update(frames), refused with NavigatorContractError unless it is an Estimate (a plug-in's
+    missing `return` otherwise fails far from its cause, on an attribute of None)."""
+    est = navigator.update(frames)
+    if not isinstance(est, Estimate):
+        name = getattr(navigator, "name", type(navigator).__name__)
+        raise NavigatorContractError(
+            f"navigator {name!r}: update() returned {type(est).__name__}, not a "
+            f"trn_env.navigators.protocol.Estimate (the update ending {frames.t_end_s:g} s): return the "
+            "estimate from every update; trn_env.testing.check_navigator checks the whole contract")
+    return est
 
 
 def _fix_count(navigator) -> int:
@@ -154,7 +167,7 @@ class InlineNavStage:
         if self.lever_arms is not None:
             from trn_env.navigators.measurements.lever_arm import compensate_frames
             nav_frames = compensate_frames(nav_frames, self.lever_arms)
-        est = self.navigator.update(nav_frames)
+        est = navigator_update(self.navigator, nav_frames)
         t2 = clock()
         mon_out = None
         if self.monitors:
