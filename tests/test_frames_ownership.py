@@ -111,3 +111,29 @@ def test_an_update_returning_no_estimate_is_one_line_naming_the_navigator(tmp_pa
                            "estimate from every update; trn_env.testing.check_navigator checks the whole "
                            "contract (nothing written)"), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.trnlog"]
+
+
+class ThreeColumnMonitor(BaroCorrectingMonitor):
+    """The DEM monitor, handing back only three of its seven columns."""
+
+    def update(self, frames, estimate):
+        from trn_env.navigators.integrity.dem_monitor import MonitorOutput
+        out = self.inner.update(frames, estimate)
+        return MonitorOutput(out.rows[:, :3], out.threshold, out.events)
+
+
+def test_a_monitor_output_the_run_cannot_concatenate_stops_at_its_first_update(tmp_path, capsys):
+    """The flight was flown to its end and then lost to an IndexError traceback on concatenating the
+    monitor's rows; now the first update stops it, one line, exit 2, and check_navigator names it."""
+    from trn_env.cli import main
+    from trn_env.testing import check_navigator
+
+    argv = ["fly", "default", "--duration", "20", "--quiet", "--out", str(tmp_path / "run"),
+            "--set", f'monitors={{"{__name__}:ThreeColumnMonitor"={{}}}}']
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith(f"error: monitor '{__name__}:ThreeColumnMonitor': update() returned MonitorOutput "
+                          "(rows of shape (0, 3), events list), not a MonitorOutput with rows (m, 7)"), err
+    assert "(the update ending 1.01 s)" in err and not (tmp_path / "run").exists()
+    report = check_navigator(ThreeColumnMonitor, kind="monitor", check_settings=False, verbose=False)
+    assert [p.check for p in report.problems] == ["contract"] and "rows (m, 7)" in report.problems[0].message

@@ -327,8 +327,8 @@ def test_perfectly_known_start_is_accepted_negative_variance_refused():
 
 
 def _data_over_the_antimeridian(tmp_path) -> dict:
-    """default_short over the bundled DEM's heights moved to 0.10 S-0.19 N, 179.90-180.24 deg E (a DEM crossing
-    the antimeridian), as world and map."""
+    """default_short over the bundled DEM's heights moved to 0.10 S-0.19 N, 179.90-180.24 deg E (a DEM
+    crossing the antimeridian), as world and map."""
     from trn_env.terrain.dem import Dem
     from trn_env.terrain.loaders import save_npz
 

@@ -560,12 +560,12 @@ def _ins_estimates(rec: FlightRecord) -> list[Estimate]:
 
 
 def _check_monitor_outputs(report: CheckReport, outs: list) -> None:
+    from trn_env.navigators.integrity.dem_monitor import output_problem
     for out in outs:
-        rows, events = getattr(out, "rows", None), getattr(out, "events", None)
-        if not isinstance(rows, np.ndarray) or rows.ndim != 2 or not isinstance(events, list):
-            report.fail("contract", f"monitor update returned {type(out).__name__} without a 2-D `rows` "
-                        "array "
-                        "and an `events` list", "return navigators.integrity.dem_monitor.MonitorOutput")
+        problem = output_problem(out)
+        if problem is not None:
+            report.fail("contract", f"monitor {problem}",
+                        "return navigators.integrity.dem_monitor.MonitorOutput")
             return
     report.checks.append("monitor outputs")
 

@@ -503,6 +503,19 @@ class DemIntegrityMonitor:
         return MonitorOutput(rows, self.threshold, events)
 
 
+def output_problem(out) -> str | None:
+    """Why a monitor's update output is not a MonitorOutput's shape (rows (m, 7) of MonitorOutput.COLUMNS,
+    a threshold, an events list), or None when it is: what the loop concatenates at a run's end."""
+    rows, events = getattr(out, "rows", None), getattr(out, "events", None)
+    width = len(MonitorOutput.COLUMNS)
+    if (isinstance(rows, np.ndarray) and rows.ndim == 2 and rows.shape[1] == width
+            and isinstance(events, list) and hasattr(out, "threshold")):
+        return None
+    return (f"update() returned {type(out).__name__} (rows of shape {getattr(rows, 'shape', None)}, events "
+            f"{type(events).__name__}), not a MonitorOutput with rows (m, {width}) of "
+            f"{', '.join(MonitorOutput.COLUMNS)}, a threshold and an events list")
+
+
 def concatenate(outputs: list[MonitorOutput]) -> dict[str, np.ndarray]:
     """Arrays of a run's monitor outputs, concatenated: t_s, disparity_m, successive_m, sigma_m, statistic,
     alarm (bool), source (int8), threshold."""

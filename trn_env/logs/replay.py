@@ -35,7 +35,7 @@ from trn_env.scenario.sections import ScenarioSections, SectionsError
 from trn_env.scenario.sections import from_dict as from_sections_dict
 from trn_env.sim.closed_loop import perturbed_estimate, spawn_rngs, summarise
 from trn_env.sim.log import NAV_STATUS_CODES, error_ned_m
-from trn_env.sim.nav_stage import gnss_available_mask, navigator_update
+from trn_env.sim.nav_stage import gnss_available_mask, monitor_update, navigator_update
 
 DEFAULT_INITIAL_ERRORS = {"position_ned_m": [30.0, 30.0, 15.0], "velocity_ned_mps": [0.1, 0.1, 0.1],
                           "attitude_mrad": [0.05, 0.05, 1.0]}
@@ -244,7 +244,7 @@ def replay(log: SensorLog | Path | str, navigator: str | None = None, *, setting
         for t_ev, msg in est.health.events:
             events.append((t_ev, "navigator", msg))
         for name, mon in mons.items():
-            out = mon.update(copy_frames(frames), est)
+            out = monitor_update(mon, name, copy_frames(frames), est)
             mon_outs[name].append(out)
             events += [(t_ev, name, msg) for t_ev, msg in out.events]
         ests.append(_snapshot(est))

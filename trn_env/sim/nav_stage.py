@@ -90,6 +90,20 @@ def navigator_update(navigator, frames: SensorFrames) -> Estimate:
     return est
 
 
+def monitor_update(monitor, name: str, frames: SensorFrames, estimate: Estimate):
+    """monitor.update(frames, estimate), refused with NavigatorContractError unless it has a MonitorOutput's
+    shape (otherwise the run fails at its end, on concatenating the rows, with the whole flight lost)."""
+    from trn_env.navigators.integrity.dem_monitor import output_problem
+    out = monitor.update(frames, estimate)
+    problem = output_problem(out)
+    if problem is not None:
+        raise NavigatorContractError(
+            f"monitor {name!r}: {problem} (the update ending {frames.t_end_s:g} s): return "
+            "trn_env.navigators.integrity.dem_monitor.MonitorOutput; trn_env.testing.check_navigator "
+            "checks the whole contract")
+    return out
+
+
 def _fix_count(navigator) -> int:
     """The navigator's TERCOM fixes so far (`n_fixes`, else the length of its `fixes`)."""
     n = getattr(navigator, "n_fixes", None)
@@ -173,7 +187,7 @@ class InlineNavStage:
         if self.monitors:
             mon_out = {}
             for name, mon in self.monitors.items():
-                out = mon.update(copy_frames(frames), est)
+                out = monitor_update(mon, name, copy_frames(frames), est)
                 mon_out[name] = out
                 events += [(t_ev, name, msg) for t_ev, msg in out.events]
         t_mon = clock() - t2
