@@ -137,3 +137,28 @@ def test_a_monitor_output_the_run_cannot_concatenate_stops_at_its_first_update(t
     assert "(the update ending 1.01 s)" in err and not (tmp_path / "run").exists()
     report = check_navigator(ThreeColumnMonitor, kind="monitor", check_settings=False, verbose=False)
     assert [p.check for p in report.problems] == ["contract"] and "rows (m, 7)" in report.problems[0].message
+
+
+class ThreeByThree(BaroCorrectingIns):
+    """A navigator reporting only its position covariance."""
+
+    def update(self, frames):
+        est = self.nav.update(frames)
+        est.covariance = est.covariance[:3, :3].copy()
+        return est
+
+
+def test_an_estimate_without_the_9_by_9_covariance_is_one_line_naming_the_navigator(tmp_path, capsys):
+    """It was 'error: scenario built-in 'default': setting an array element with a sequence. The requested
+    array has an inhomogeneous shape ...': blamed on the scenario, naming neither the navigator nor the
+    covariance."""
+    from trn_env.cli import main
+
+    argv = ["fly", "default", "--duration", "3", "--quiet", "--out", str(tmp_path / "run"),
+            "--navigator", f"{__name__}:ThreeByThree"]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        "error: navigator 'baro_correcting_ins': its estimate's covariance has shape (3, 3), not the 9 x 9 "
+        "block over [north, east, down, v_n, v_e, v_d, roll, pitch, yaw] (the update ending 1.01 s): return "
+        "the estimate from every update; trn_env.testing.check_navigator checks the whole contract (nothing "
+        "written)")

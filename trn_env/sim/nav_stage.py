@@ -81,12 +81,20 @@ def navigator_update(navigator, frames: SensorFrames) -> Estimate:
     """navigator.update(frames), refused with NavigatorContractError unless it is an Estimate (a plug-in's
     missing `return` otherwise fails far from its cause, on an attribute of None)."""
     est = navigator.update(frames)
+    problem = None
+    cov_shape = np.shape(getattr(est, "covariance", None))
     if not isinstance(est, Estimate):
+        problem = f"update() returned {type(est).__name__}, not a trn_env.navigators.protocol.Estimate"
+    elif not (len(cov_shape) == 2 and cov_shape[0] == cov_shape[1] and cov_shape[0] >= 9):
+        problem = (f"its estimate's covariance has shape {cov_shape}, not the 9 x 9 block over [north, "
+                   "east, down, v_n, v_e, v_d, roll, pitch, yaw]")
+    elif np.shape(est.v_ned_mps) != (3,):
+        problem = f"its estimate's v_ned_mps has shape {np.shape(est.v_ned_mps)}, not (3,)"
+    if problem is not None:
         name = getattr(navigator, "name", type(navigator).__name__)
         raise NavigatorContractError(
-            f"navigator {name!r}: update() returned {type(est).__name__}, not a "
-            f"trn_env.navigators.protocol.Estimate (the update ending {frames.t_end_s:g} s): return the "
-            "estimate from every update; trn_env.testing.check_navigator checks the whole contract")
+            f"navigator {name!r}: {problem} (the update ending {frames.t_end_s:g} s): return the estimate "
+            "from every update; trn_env.testing.check_navigator checks the whole contract")
     return est
 
 
