@@ -222,13 +222,46 @@ def _imu(n=300, dt=0.01):
                                    "v_d_mps": [0.0] * 2, "roll_rad": [0.0] * 2, "pitch_rad": [0.0] * 2,
                                    "yaw_rad": [0.0] * 2}),
      r"truth: column 'lat' = 36.5 rad at row 0 \(t = 0 s\) is not a latitude in radians"),
+    # a time column with a unit the builder did not know was 'missing' although named t_<unit>; a count of
+    # nanoseconds stated as seconds was taken for a flight 5e10 years long
+    (lambda: _builder().add("imu", {**{k: v for k, v in _imu().items() if k != "t_s"},
+                                    "t_min": np.arange(300) / 6000.0}),
+     r"imu: column 't_min': unknown unit 'min' for a s quantity \(name it t_<unit> with one of s, ms, us, "
+     r"ns\)"),
+    (lambda: _builder().add("imu", _imu() | {"t_s": np.round((1.7e9 + _imu()["t_s"]) * 1e9)}),
+     r"imu: time t = 1.7e\+18 s at row 0 is not a time in seconds \(within \+-1e11 s; "
+     r"microseconds or nanoseconds\? name the column t_us or t_ns\)"),
 ], ids=["datum", "geoid-offset", "geoid-model", "imu-convention", "imu-convention-word", "lever-arm",
         "missing-column", "no-unit", "unknown-unit", "time", "nan", "imu-gap", "imu-invalid", "rate",
         "sensor", "twice", "datetime", "timedelta", "list", "degrees-as-radians", "negative-range",
-        "truth-degrees"])
+        "truth-degrees", "time-unit", "nanoseconds-as-seconds"])
 def test_builder_refuses_bad_input_with_the_field(make, words):
     with pytest.raises(LogError, match=words):
         make()
+
+
+def test_builder_reads_time_in_microseconds_and_nanoseconds_since_an_epoch(tmp_path):
+    """Integer microsecond and nanosecond counts since the Unix epoch (a ROS bag's stamps) give the same
+    log as seconds."""
+    truth = {"t_s": [0.0, 4.0], "lat_deg": [36.5, 36.5], "lon_deg": [-84.3, -84.3], "h_m": [2000.0] * 2,
+             "v_n_mps": [0.0] * 2, "v_e_mps": [0.0] * 2, "v_d_mps": [0.0] * 2, "roll_rad": [0.0] * 2,
+             "pitch_rad": [0.0] * 2, "yaw_rad": [0.0] * 2}
+    epoch_s = 1_700_000_000
+    logs = {}
+    for unit, per_s in (("s", 1), ("us", 10**6), ("ns", 10**9)):
+        imu, tr = _imu(), dict(truth)
+        t_imu = np.round(imu.pop("t_s") * 100).astype(np.int64)          # hundredths of a second
+        t_tr = np.round(np.asarray(tr.pop("t_s")) * 100).astype(np.int64)
+        imu[f"t_{unit}"] = (epoch_s * 100 + t_imu) * (per_s // 100) if per_s > 1 else epoch_s + t_imu / 100
+        tr[f"t_{unit}"] = (epoch_s * 100 + t_tr) * (per_s // 100) if per_s > 1 else epoch_s + t_tr / 100
+        logs[unit] = read_log(_builder().add("imu", imu).add_truth(tr).write(tmp_path / unit))
+    for unit in ("us", "ns"):              # the same to float64's resolution at 1.7e9 s (2.4e-7 s)
+        for a, b in ((logs[unit].table("imu"), logs["s"].table("imu")),
+                     (logs[unit].truth(), logs["s"].truth())):
+            np.testing.assert_allclose(a["t_s"], b["t_s"], rtol=0.0, atol=5e-7)
+            assert a.drop(columns="t_s").equals(b.drop(columns="t_s")), unit
+    assert logs["ns"].table("imu")["t_s"].iloc[0] == pytest.approx(epoch_s + 0.01, abs=1e-6)
+    assert logs["ns"].n_frames == logs["s"].n_frames == 3
 
 
 def test_builder_takes_a_numpy_structured_array_as_a_dataframe(tmp_path):

@@ -48,16 +48,16 @@ from trn_env.logs.writer import TRUTH_ROW_COLUMNS, LogWriter
 
 # dimension (the canonical unit) -> {unit name: factor to the canonical unit}
 _UNITS = {
-    "s": {"s": 1.0, "ms": 1e-3},
+    "s": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9},
     "m": {"m": 1.0, "ft": 0.3048, "km": 1000.0},
     "rad": {"rad": 1.0, "deg": math.pi / 180.0, "mrad": 1e-3},
     "m/s": {"m/s": 1.0, "mps": 1.0, "kt": 1852.0 / 3600.0, "ft/s": 0.3048, "km/h": 1.0 / 3.6},
     "m/s^2": {"m/s^2": 1.0, "mps2": 1.0, "g": 9.80665, "ft/s^2": 0.3048},
     "rad/s": {"rad/s": 1.0, "rps": 1.0, "deg/s": math.pi / 180.0, "deg/h": math.pi / 180.0 / 3600.0},
 }
-_SUFFIX_UNIT = {"s": "s", "ms": "ms", "m": "m", "ft": "ft", "km": "km", "rad": "rad", "deg": "deg",
-                "mrad": "mrad", "mps": "m/s", "kt": "kt", "mps2": "m/s^2", "g": "g", "rps": "rad/s",
-                "dps": "deg/s"}
+_SUFFIX_UNIT = {"s": "s", "ms": "ms", "us": "us", "ns": "ns", "m": "m", "ft": "ft", "km": "km", "rad": "rad",
+                "deg": "deg", "mrad": "mrad", "mps": "m/s", "kt": "kt", "mps2": "m/s^2", "g": "g",
+                "rps": "rad/s", "dps": "deg/s"}
 _RANGING = ("radar_altimeter", "ira")
 
 
@@ -108,6 +108,12 @@ def _column(what: str, data, quantity: str, dim: str, units: dict, required: boo
             raise LogError(f"{what}: column {quantity!r}: unknown unit {unit!r} for a {dim} quantity "
                            f"(known: {', '.join(table)})")
         return _array(what, quantity, _get(data, quantity)) * table[unit]
+    suffixed = [c for c in have if c.startswith(quantity + "_") and "_" not in c[len(quantity) + 1:]]
+    if suffixed:
+        unit = suffixed[0][len(quantity) + 1:]
+        raise LogError(f"{what}: column {suffixed[0]!r}: unknown unit {unit!r} for a {dim} quantity (name it "
+                       f"{quantity}_<unit> with one of "
+                       f"{', '.join(u for u, d in _SUFFIX_UNIT.items() if d in table)})")
     if required:
         raise LogError(f"{what}: missing column {quantity!r} (a {dim} quantity: name it {quantity}_<unit>, "
                        f"or {quantity!r} with units={{{quantity!r}: ...}}; columns given: {', '.join(have)})")
@@ -134,10 +140,14 @@ def _check_time(what: str, t: np.ndarray) -> None:
         raise LogError(f"{what}: no samples")
     if not np.all(np.isfinite(t)):
         raise LogError(f"{what}: time t is NaN or infinite at row {int(np.flatnonzero(~np.isfinite(t))[0])}")
+    hit = limit_violation("t_s", t)
+    if hit is not None:
+        raise LogError(f"{what}: time t = {float(t[hit[0]]):.10g} s at row {hit[0]} is not {hit[1]}")
     d = np.diff(t)
     if np.any(d <= 0.0):
         i = int(np.flatnonzero(d <= 0.0)[0])
-        raise LogError(f"{what}: time must increase: row {i + 1} at {t[i + 1]!r} s follows {t[i]!r} s")
+        raise LogError(f"{what}: time must increase: row {i + 1} at {float(t[i + 1])!r} s follows "
+                       f"{float(t[i])!r} s")
 
 
 def _check_limits(what: str, col: str, v: np.ndarray, use: np.ndarray | None, t: np.ndarray) -> None:

@@ -101,6 +101,9 @@ COLUMN_LIMITS: dict[str, tuple[float, float, str]] = {
     "lat_rad": (-math.pi / 2, math.pi / 2, "a latitude in radians (-pi/2 .. pi/2; degrees?)"),
     "lon_rad": (-math.pi, math.pi, "a longitude in radians (-pi .. pi; degrees?)"),
     "range_m": (0.0, math.inf, "a range in metres (at least 0)"),
+    # a Unix or GPS time in seconds is ~1.4e9-1.8e9; one in microseconds or nanoseconds is beyond 1e12
+    "t_s": (-1e11, 1e11, "a time in seconds (within +-1e11 s; microseconds or nanoseconds? name the column "
+                         "t_us or t_ns)"),
 }
 
 
