@@ -108,13 +108,14 @@ def _column(what: str, data, quantity: str, dim: str, units: dict, required: boo
             raise LogError(f"{what}: column {quantity!r}: unknown unit {unit!r} for a {dim} quantity "
                            f"(known: {', '.join(table)})")
         return _array(what, quantity, _get(data, quantity)) * table[unit]
-    suffixed = [c for c in have if c.startswith(quantity + "_") and "_" not in c[len(quantity) + 1:]]
-    if suffixed:
-        unit = suffixed[0][len(quantity) + 1:]
-        raise LogError(f"{what}: column {suffixed[0]!r}: unknown unit {unit!r} for a {dim} quantity (name it "
-                       f"{quantity}_<unit> with one of "
-                       f"{', '.join(u for u, d in _SUFFIX_UNIT.items() if d in table)})")
     if required:
+        # a column named as the quantity with a unit the builder does not know (t_min, lat_grad)
+        suffixed = [c for c in have if c.startswith(quantity + "_") and "_" not in c[len(quantity) + 1:]]
+        if suffixed:
+            unit = suffixed[0][len(quantity) + 1:]
+            raise LogError(f"{what}: column {suffixed[0]!r}: unknown unit {unit!r} for a {dim} quantity (name "
+                           f"it {quantity}_<unit> with one of "
+                           f"{', '.join(u for u, d in _SUFFIX_UNIT.items() if d in table)})")
         raise LogError(f"{what}: missing column {quantity!r} (a {dim} quantity: name it {quantity}_<unit>, "
                        f"or {quantity!r} with units={{{quantity!r}: ...}}; columns given: {', '.join(have)})")
     return None
