@@ -113,8 +113,8 @@ def _column(what: str, data, quantity: str, dim: str, units: dict, required: boo
         suffixed = [c for c in have if c.startswith(quantity + "_") and "_" not in c[len(quantity) + 1:]]
         if suffixed:
             unit = suffixed[0][len(quantity) + 1:]
-            raise LogError(f"{what}: column {suffixed[0]!r}: unknown unit {unit!r} for a {dim} quantity (name "
-                           f"it {quantity}_<unit> with one of "
+            raise LogError(f"{what}: column {suffixed[0]!r}: unknown unit {unit!r} for a {dim} quantity "
+                           f"(name it {quantity}_<unit> with one of "
                            f"{', '.join(u for u, d in _SUFFIX_UNIT.items() if d in table)})")
         raise LogError(f"{what}: missing column {quantity!r} (a {dim} quantity: name it {quantity}_<unit>, "
                        f"or {quantity!r} with units={{{quantity!r}: ...}}; columns given: {', '.join(have)})")
