@@ -186,6 +186,34 @@ def test_a_folder_another_campaign_is_writing_is_refused(flown, tmp_path, capsys
     assert sorted(p.name for p in (folder / "runs").iterdir()) == sorted(listing + ["v000-s0001.parquet"])
 
 
+def test_a_report_of_part_of_a_campaign_says_so_and_why(flown, tmp_path, capsys):
+    """A report made while the campaign still flew, or of one interrupted, covered part of its runs with
+    only 'report written' on the command line."""
+    folder = tmp_path / "copy"
+    shutil.copytree(flown, folder)
+    assert cli.main(["report", str(folder)]) == 0
+    assert "note:" not in capsys.readouterr().err                     # all its runs: nothing to say
+    (folder / "runs" / "v000-s0001.parquet").unlink()
+    n_runs = json.loads((folder / "campaign.json").read_text())["n_runs"]
+    source = json.loads((folder / "campaign.json").read_text())["source"]
+    assert cli.main(["report", str(folder)]) == 0
+    assert capsys.readouterr().err.strip() == (
+        f"note: the report covers {n_runs - 1} of the campaign's {n_runs} runs; the campaign did not finish: "
+        f"continue it with trn-env campaign {source} --out {folder} --resume")
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, os, sys\nfd = os.open(sys.argv[1], os.O_RDONLY)\n"
+         "fcntl.flock(fd, fcntl.LOCK_EX)\nprint('held', flush=True)\nsys.stdin.read()\n", str(folder)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        assert cli.main(["report", str(folder)]) == 0
+        assert capsys.readouterr().err.strip().endswith(
+            "runs; the campaign is still flying into this folder: report it again when it ends")
+    finally:
+        holder.stdin.close()
+        holder.wait(timeout=30)
+
+
 def test_report_pngs_and_self_contained_html(flown, tmp_path):
     assert cli.main(["report", str(flown), "--out", str(tmp_path / "rep")]) == 0
     rep = tmp_path / "rep"

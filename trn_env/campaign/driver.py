@@ -130,6 +130,24 @@ def folder_lock(campaign: Campaign, out_dir: Path) -> Iterator[None]:
             out_dir.rmdir()
 
 
+def folder_busy(out_dir: Path) -> bool:
+    """True while a campaign holds `out_dir` (folder_lock): it is still flying runs into it. False when no
+    process holds it, or on a file system without folder locks."""
+    try:
+        fd = os.open(out_dir, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)                     # (releases a lock taken here)
+    return False
+
+
 def run_campaign(campaign: Campaign, out_dir: Path, *, backend=None, resume: bool = False,
                  progress: bool = True, on_row: Callable[[dict], None] | None = None) -> dict:
     """Fly the campaign's missing runs into `out_dir`; returns counts and timing (`driver_row_cpu_s`: the

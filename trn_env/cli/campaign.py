@@ -118,4 +118,14 @@ def cmd_report(args) -> int:
         print(write_failure(exc, f"the report {where}"), file=sys.stderr)
         return 2
     print(f"report written: {out / 'report.html'}")
+    from trn_env.campaign.driver import folder_busy
+    from trn_env.campaign.rows import read_manifest, read_rows
+    manifest = read_manifest(args.dir) or {}
+    planned, have = manifest.get("n_runs"), len(read_rows(args.dir))
+    if isinstance(planned, int) and have < planned:
+        why = ("the campaign is still flying into this folder: report it again when it ends"
+               if folder_busy(Path(args.dir)) else
+               f"the campaign did not finish: continue it with trn-env campaign "
+               f"{manifest.get('source') or 'FILE'} --out {args.dir} --resume")
+        print(f"note: the report covers {have} of the campaign's {planned} runs; {why}", file=sys.stderr)
     return 0
