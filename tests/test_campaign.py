@@ -624,3 +624,12 @@ def test_repeated_sweep_points_found_among_numbers_booleans_and_tables(tmp_path)
     grid = [float(x) for x in np.round(np.linspace(0.0, 1.0, 101), 1)]
     brute = [(k, next(i for i, w in enumerate(grid) if _same_value(v, w))) for k, v in enumerate(grid)]
     assert _repeats(grid) == [(k, f) for k, f in brute if f != k]
+
+
+def test_a_campaign_file_written_as_json_is_named_so(tmp_path, capsys):
+    f = tmp_path / "campaign.json"
+    f.write_text(json.dumps({"name": "x", "seeds": 2, "scenarios": ["default"]}))
+    assert cli.main(["campaign", str(f)]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "file: not valid TOML: Invalid statement (at line 1, column 1) (it looks like JSON: a campaign file "
+        "is TOML)")

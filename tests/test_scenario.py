@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 from pathlib import Path
@@ -182,7 +183,13 @@ def test_bad_toml_and_missing_file(tmp_path):
     f.write_text("name = \n")
     with pytest.raises(ScenarioError) as exc:
         load_scenario(f)
-    assert exc.value.problems[0].startswith("file: not valid TOML")
+    assert exc.value.problems[0].startswith("file: not valid TOML") and "JSON" not in exc.value.problems[0]
+    as_json = tmp_path / "default.json"                 # the same scenario written as JSON
+    as_json.write_text(json.dumps(read_scenario_file("default")[0]))
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(as_json)
+    assert exc.value.problems[0].endswith("(it looks like JSON: a scenario file is TOML, e.g. a resolved "
+                                          "scenario.toml of a run folder)"), exc.value.problems
     with pytest.raises(ScenarioError) as exc:
         load_scenario(tmp_path / "nope.toml")
     assert exc.value.problems[0].startswith("file: no such scenario")

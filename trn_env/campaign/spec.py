@@ -386,7 +386,8 @@ def load_campaign(path: str | Path) -> Campaign:
     except OSError as exc:
         raise CampaignError(source, [f"file: cannot read: {exc}"]) from None
     except tomllib.TOMLDecodeError as exc:
-        raise CampaignError(source, [f"file: not valid TOML: {exc}"]) from None
+        hint = " (it looks like JSON: a campaign file is TOML)" if text.lstrip().startswith("{") else ""
+        raise CampaignError(source, [f"file: not valid TOML: {exc}{hint}"]) from None
     if "logs" in data:                  # a campaign over sensor logs (trn_env.campaign.log_replay)
         from trn_env.campaign.log_replay import load_log_campaign
         return load_log_campaign(path, data, raw)

@@ -202,7 +202,9 @@ def read_scenario_file(name_or_path: str | Path) -> tuple[dict, str]:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(source, [f"file: not valid TOML: {exc}"]) from exc
+        hint = (" (it looks like JSON: a scenario file is TOML, e.g. a resolved scenario.toml of a run "
+                "folder)" if text.lstrip().startswith(("{", "[{")) else "")
+        raise ScenarioError(source, [f"file: not valid TOML: {exc}{hint}"]) from exc
     if source == str(text_path):
         data.setdefault("name", text_path.stem)
     return data, source
