@@ -78,8 +78,10 @@ def gate_gnss(frames: SensorFrames, outages) -> SensorFrames:
 
 
 def navigator_update(navigator, frames: SensorFrames) -> Estimate:
-    """navigator.update(frames), refused with NavigatorContractError unless it is an Estimate (a plug-in's
-    missing `return` otherwise fails far from its cause, on an attribute of None)."""
+    """navigator.update(frames), refused with NavigatorContractError unless it is an Estimate with a square
+    covariance of at least the 9 x 9 block and three velocity components (a plug-in's missing `return` or
+    its position-only covariance otherwise fails far from its cause: on an attribute of None, or when the
+    log stacks the covariances)."""
     est = navigator.update(frames)
     problem = None
     cov_shape = np.shape(getattr(est, "covariance", None))
