@@ -633,3 +633,20 @@ def test_a_campaign_file_written_as_json_is_named_so(tmp_path, capsys):
     assert capsys.readouterr().err.strip().endswith(
         "file: not valid TOML: Invalid statement (at line 1, column 1) (it looks like JSON: a campaign file "
         "is TOML)")
+
+
+def test_a_campaign_runs_unguarded_where_the_system_has_no_folder_locks(flown, tmp_path, monkeypatch):
+    """Without fcntl (Windows), `import fcntl` at the driver's top was a ModuleNotFoundError for every
+    campaign command; now the folder is not locked there, as on a file system without folder locks."""
+    from trn_env.campaign import driver
+    monkeypatch.setattr(driver, "fcntl", None)
+    folder = tmp_path / "copy"
+    shutil.copytree(flown, folder)
+    (folder / "runs" / "v000-s0001.parquet").unlink()
+    assert not driver.folder_busy(folder)
+    assert cli.main(["campaign", str(CI), "--out", str(folder), "--resume", "--quiet", "--workers", "1"]) == 0
+    assert (folder / "runs" / "v000-s0001.parquet").is_file()
+    fresh = tmp_path / "fresh"
+    with driver.folder_lock(load_campaign(CI), fresh):
+        assert fresh.is_dir()
+    assert not fresh.exists()

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import fcntl
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -21,6 +20,11 @@ from trn_env.campaign.rows import done_run_ids, read_manifest, write_log, write_
 from trn_env.campaign.runs import RunTask
 from trn_env.campaign.spec import Campaign, CampaignError, replay_argv
 from trn_env.output.run_folder import creatable_problem
+
+try:
+    import fcntl
+except ImportError:         # Windows: no advisory folder locks; a campaign runs unguarded there, as on NFS
+    fcntl = None
 
 
 def default_out_dir(name: str) -> Path:
@@ -112,27 +116,32 @@ def folder_lock(campaign: Campaign, out_dir: Path) -> Iterator[None]:
     out_dir = Path(out_dir)
     made = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
-    fd = os.open(out_dir, os.O_RDONLY)
+    fd = None
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise CampaignError(campaign.source, [
-                f"--out {out_dir}: another campaign is writing into this folder now (it holds the folder's "
-                "lock); wait for it to end (then --resume flies what it left), or choose another folder"]
-            ) from None
-        except OSError:
-            pass            # a file system without flock on folders (NFS emulates it, for writers only)
+        if fcntl is not None:           # (Windows has none: the campaign runs unguarded there)
+            fd = os.open(out_dir, os.O_RDONLY)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise CampaignError(campaign.source, [
+                    f"--out {out_dir}: another campaign is writing into this folder now (it holds the "
+                    "folder's lock); wait for it to end (then --resume flies what it left), or choose "
+                    "another folder"]) from None
+            except OSError:
+                pass        # a file system without flock on folders (NFS emulates it, for writers only)
         yield
     finally:
-        os.close(fd)                     # releases the lock
+        if fd is not None:
+            os.close(fd)                 # releases the lock
         if made and out_dir.is_dir() and not any(out_dir.iterdir()):
             out_dir.rmdir()
 
 
 def folder_busy(out_dir: Path) -> bool:
     """True while a campaign holds `out_dir` (folder_lock): it is still flying runs into it. False when no
-    process holds it, or on a file system without folder locks."""
+    process holds it, or on a file system (or a system) without folder locks."""
+    if fcntl is None:
+        return False
     try:
         fd = os.open(out_dir, os.O_RDONLY)
     except OSError:
